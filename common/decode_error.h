@@ -1,0 +1,58 @@
+// Result type for every decoder of untrusted bytes (network, disk, files).
+// Decoders never throw across that edge and never assert on input: they
+// return a value or a DecodeError saying what was wrong and where.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <utility>
+#include <variant>
+
+namespace terrane {
+
+enum class DecodeErrorCode {
+  kTruncated,      // input ended before the format said it would
+  kBadMagic,       // not this format at all
+  kBadVersion,     // this format, a version we do not speak
+  kOverLimit,      // a size or count beyond what the format or caller allows
+  kTrailingBytes,  // valid data followed by bytes that belong to nothing
+  kInvalidValue,   // a field with a value the format forbids
+};
+
+const char* to_string(DecodeErrorCode code);
+
+struct DecodeError {
+  DecodeErrorCode code;
+  std::size_t offset = 0;     // byte offset in the input where it was noticed
+  const char* detail = "";    // static text: what exactly was wrong
+
+  std::string describe() const;  // "truncated at byte 12: run past end of box"
+};
+
+// A value or a DecodeError. Small, move-only where T is.
+template <class T>
+class [[nodiscard]] Result {
+ public:
+  Result(T value) : v_(std::move(value)) {}             // NOLINT: implicit by design
+  Result(DecodeError error) : v_(std::move(error)) {}   // NOLINT: implicit by design
+
+  bool ok() const { return v_.index() == 0; }
+  explicit operator bool() const { return ok(); }
+  T& value() & { return std::get<0>(v_); }
+  const T& value() const& { return std::get<0>(v_); }
+  T&& value() && { return std::get<0>(std::move(v_)); }
+  T& operator*() & { return value(); }
+  const T& operator*() const& { return value(); }
+  T* operator->() { return &value(); }
+  const T* operator->() const { return &value(); }
+  const DecodeError& error() const { return std::get<1>(v_); }
+
+ private:
+  std::variant<T, DecodeError> v_;
+};
+
+// For decoders that write into a caller's buffer and return nothing else.
+struct Ok {};
+using Status = Result<Ok>;
+
+}  // namespace terrane

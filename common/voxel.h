@@ -1,0 +1,85 @@
+// The Terrane voxel: a material and an occupancy, two bytes.
+//
+// Material is a 6-bit id (0..63) into the world's material table; 0 is Air.
+// Occupancy is the amount of matter around the voxel centre, quantized to a
+// byte: a non-Air byte v decodes to (v + 1) / 256, so 255 is completely full
+// and the value is exact in floating point. Air always has occupancy 0; every
+// constructor enforces that without a branch, so an invalid Air voxel can
+// never enter a grid.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string_view>
+
+namespace terrane {
+
+using Material = std::uint8_t;
+
+inline constexpr Material kAir = 0;
+inline constexpr int kMaterialBits = 6;
+inline constexpr int kMaterialCount = 1 << kMaterialBits;  // ids 0..63
+inline constexpr std::uint8_t kFullOccupancy = 255;
+
+struct Voxel {
+  Material material = kAir;
+  std::uint8_t occupancy = 0;
+
+  friend constexpr bool operator==(Voxel, Voxel) = default;
+};
+static_assert(sizeof(Voxel) == 2, "a voxel is two bytes");
+
+// Builds a voxel, forcing occupancy to 0 for Air without branching
+// (the mask is all ones for any non-zero material, zero for Air).
+// Precondition: material < kMaterialCount (our own callers; decoders validate
+// untrusted ids before they get here).
+constexpr Voxel make_voxel(Material material, std::uint8_t occupancy) {
+  const auto mask = static_cast<std::uint8_t>(-static_cast<int>(material) >> 31);
+  return Voxel{material, static_cast<std::uint8_t>(occupancy & mask)};
+}
+
+// The occupancy a material has when nothing says otherwise: full for solids,
+// zero for Air. Uniform rows and byte-RLE runs without an occupancy byte use it.
+constexpr std::uint8_t default_occupancy(Material material) {
+  return material == kAir ? 0 : kFullOccupancy;
+}
+
+constexpr Voxel solid(Material material) {
+  return make_voxel(material, default_occupancy(material));
+}
+
+constexpr bool has_default_occupancy(Voxel v) {
+  return v.occupancy == default_occupancy(v.material);
+}
+
+// Occupancy as a fraction in [0, 1]: (v + 1) / 256 for non-Air, 0 for Air.
+constexpr float occupancy_fraction(Voxel v) {
+  return v.material == kAir ? 0.0f : static_cast<float>(v.occupancy + 1) / 256.0f;
+}
+
+// The byte that best represents fraction f for a non-Air material: the
+// nearest of the 256 representable values (1/256 .. 1). f <= 0 has no non-Air
+// representation; callers writing "nothing" write Air.
+constexpr std::uint8_t occupancy_byte(float f) {
+  const float scaled = f * 256.0f - 1.0f;
+  if (scaled <= 0.0f) return 0;
+  if (scaled >= 255.0f) return 255;
+  return static_cast<std::uint8_t>(scaled + 0.5f);
+}
+
+// The article's default material table (23 entries, ids 0..22).
+inline constexpr std::array<std::string_view, 23> kDefaultMaterialNames = {
+    "Air",   "Water",     "Grass",       "Slate",     "Concrete", "Brick",
+    "Sand",  "WoodPlanks", "Rock",       "Glacier",   "Snow",     "Sandstone",
+    "Mud",   "Basalt",    "Ground",      "CrackedLava", "Asphalt", "Cobblestone",
+    "Ice",   "LeafyGrass", "Salt",       "Limestone", "Pavement"};
+
+namespace materials {
+inline constexpr Material kAir = 0, kWater = 1, kGrass = 2, kSlate = 3, kConcrete = 4,
+                          kBrick = 5, kSand = 6, kWoodPlanks = 7, kRock = 8, kGlacier = 9,
+                          kSnow = 10, kSandstone = 11, kMud = 12, kBasalt = 13, kGround = 14,
+                          kCrackedLava = 15, kAsphalt = 16, kCobblestone = 17, kIce = 18,
+                          kLeafyGrass = 19, kSalt = 20, kLimestone = 21, kPavement = 22;
+}  // namespace materials
+
+}  // namespace terrane

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Configures and builds one flavour of Terrane.
+#   scripts/build.sh release   -> build/          (optimised, -Werror in CI)
+#   scripts/build.sh asan      -> build-asan/     (address + undefined sanitizers)
+#   scripts/build.sh fuzz      -> build-fuzz/     (clang, libFuzzer targets)
+# Extra arguments go to the build tool (e.g. a target name).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+flavour=${1:-release}
+shift || true
+jobs=${TERRANE_JOBS:-$(nproc)}
+werror=${TERRANE_WERROR:-ON}
+
+case "$flavour" in
+  release)
+    dir=build
+    args=(-DCMAKE_BUILD_TYPE=Release) ;;
+  asan)
+    dir=build-asan
+    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DTERRANE_SANITIZE=address,undefined -DTERRANE_BUILD_BENCH=OFF) ;;
+  fuzz)
+    dir=build-fuzz
+    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTERRANE_BUILD_FUZZ=ON
+          -DTERRANE_BUILD_BENCH=OFF -DTERRANE_BUILD_TESTS=ON -DTERRANE_SANITIZE=address,undefined) ;;
+  *)
+    echo "build.sh: unknown flavour '$flavour' (release, asan or fuzz)" >&2
+    exit 2 ;;
+esac
+
+cmake -S . -B "$dir" -G Ninja -DTERRANE_WERROR="$werror" "${args[@]}" >/dev/null
+cmake --build "$dir" -j "$jobs" "$@"

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Installs every system package Terrane needs to build, test and run.
+# Debian 12 (bookworm), as root. Safe to run any number of times: packages
+# already present are left alone, and apt is only refreshed when something is
+# missing. README, .ci/run and docker/ all call this one script.
+set -euo pipefail
+
+packages=(
+  # toolchain
+  build-essential g++ cmake ninja-build git pkg-config ca-certificates
+  # libfuzzer targets and sanitizer runtimes
+  clang libclang-rt-14-dev
+  # libraries (see README "Dependencies")
+  libasio-dev liblz4-dev flatbuffers-compiler libflatbuffers-dev libspdlog-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libsqlite3-dev zlib1g-dev
+  # benchmark-only comparison codec
+  libzstd-dev
+  # world files and reports
+  sqlite3 python3
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+if [ "$(id -u)" -ne 0 ]; then
+  echo "install-deps: missing packages: ${missing[*]}" >&2
+  echo "install-deps: run as root (or install them yourself) and try again" >&2
+  exit 1
+fi
+
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Sets everything up and runs every test: the README's test command.
+#   1. install system packages (scripts/install-deps.sh)
+#   2. release build, unit tests
+#   3. ASan + UBSan build, unit tests
+#   4. libFuzzer targets, a bounded run each (TERRANE_FUZZ_SECONDS, default 20)
+#   5. heavy tests (large worlds, scale) on the release build; skip with
+#      TERRANE_SKIP_HEAVY=1
+# Prints each stage's wall time. Exits non-zero on the first failure.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+stage_start=0
+stage() { stage_name=$1; stage_start=$(date +%s); echo; echo "=== $stage_name"; }
+stage_done() { echo "=== $stage_name: $(( $(date +%s) - stage_start )) s"; }
+
+total_start=$(date +%s)
+ctest_jobs=${TERRANE_JOBS:-$(nproc)}
+
+stage "install dependencies"
+bash scripts/install-deps.sh
+stage_done
+
+stage "release build"
+bash scripts/build.sh release
+stage_done
+
+stage "unit tests (release)"
+ctest --test-dir build -L unit -j "$ctest_jobs" --output-on-failure
+stage_done
+
+stage "sanitizer build (address, undefined)"
+bash scripts/build.sh asan
+stage_done
+
+stage "unit tests (address, undefined)"
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  ctest --test-dir build-asan -L unit -j "$ctest_jobs" --output-on-failure
+stage_done
+
+stage "fuzz targets"
+bash scripts/build.sh fuzz
+bash scripts/fuzz.sh "${TERRANE_FUZZ_SECONDS:-20}"
+stage_done
+
+if [ "${TERRANE_SKIP_HEAVY:-0}" != 1 ]; then
+  stage "heavy tests (release)"
+  ctest --test-dir build -L heavy -j 1 --output-on-failure --no-tests=ignore
+  stage_done
+fi
+
+echo
+echo "all tests passed in $(( $(date +%s) - total_start )) s"
