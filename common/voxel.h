@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <string_view>
+#include <type_traits>
 
 namespace terrane {
 
@@ -21,13 +22,16 @@ inline constexpr int kMaterialBits = 6;
 inline constexpr int kMaterialCount = 1 << kMaterialBits;  // ids 0..63
 inline constexpr std::uint8_t kFullOccupancy = 255;
 
+// Trivial (no member initialisers) so that buffers of voxels can be copied
+// with memcpy; Voxel{} is Air.
 struct Voxel {
-  Material material = kAir;
-  std::uint8_t occupancy = 0;
+  Material material;
+  std::uint8_t occupancy;
 
   friend constexpr bool operator==(Voxel, Voxel) = default;
 };
 static_assert(sizeof(Voxel) == 2, "a voxel is two bytes");
+static_assert(std::is_trivial_v<Voxel>, "voxel buffers are copied with memcpy");
 
 // Builds a voxel, forcing occupancy to 0 for Air without branching
 // (the mask is all ones for any non-zero material, zero for Air).
