@@ -38,6 +38,10 @@
 #include <memory>
 #include <span>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "common/voxel.h"
 
 namespace terrane {
@@ -47,6 +51,23 @@ namespace row_packed_detail {
 // largest box (32), shared read-only by every box.
 extern const std::array<std::array<Voxel, 32>, kMaterialCount> kUniformRows;
 inline const Voxel* uniform_row(Material material) { return kUniformRows[material & 63].data(); }
+// Byte-row widening; the scalar path is the reference the SIMD path is tested
+// against. n is a multiple of 16 for the SSE2 path.
+inline void widen_scalar(const std::uint8_t* materials, Voxel* out, int n) {
+  for (int i = 0; i < n; ++i) out[i] = solid(materials[i]);
+}
+#if defined(__SSE2__)
+inline void widen_sse2(const std::uint8_t* materials, Voxel* out, int n) {
+  const __m128i zero = _mm_setzero_si128();
+  const __m128i ones = _mm_set1_epi8(-1);
+  for (int i = 0; i < n; i += 16) {
+    const __m128i m = _mm_loadu_si128(reinterpret_cast<const __m128i*>(materials + i));
+    const __m128i occ = _mm_andnot_si128(_mm_cmpeq_epi8(m, zero), ones);  // 255 unless Air
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i), _mm_unpacklo_epi8(m, occ));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i + 8), _mm_unpackhi_epi8(m, occ));
+  }
+}
+#endif
 // Per-size tables of all-uniform headers, for boxes that own none.
 const std::uint16_t* uniform_headers(int size, Material material);
 }  // namespace row_packed_detail
@@ -136,8 +157,15 @@ class RowPackedBox {
     Material material;  // for kUniform
   };
 
+  // Byte row -> voxels: each material with its default occupancy.
   static void widen(const std::uint8_t* materials, Voxel* out) {
-    for (int i = 0; i < N; ++i) out[i] = solid(materials[i]);
+#if defined(__SSE2__)
+    if constexpr (N % 16 == 0) {
+      row_packed_detail::widen_sse2(materials, out, N);
+      return;
+    }
+#endif
+    row_packed_detail::widen_scalar(materials, out, N);
   }
   static Classified classify(const Voxel* row);
   void read_row_into(int y, int z, Voxel* out) const;

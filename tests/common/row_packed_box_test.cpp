@@ -165,3 +165,22 @@ TEST(RowPackedBox, CloneIsIndependent) {
 
 }  // namespace
 }  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST(RowPackedBox, SimdWideningMatchesScalarReference) {
+  std::uint8_t materials[32];
+  for (int trial = 0; trial < 64; ++trial) {
+    for (int i = 0; i < 32; ++i) materials[i] = static_cast<std::uint8_t>((i * 7 + trial * 13) % 64 * ((i + trial) % 3 != 0));
+    Voxel scalar[32], simd[32];
+    row_packed_detail::widen_scalar(materials, scalar, 32);
+#if defined(__SSE2__)
+    row_packed_detail::widen_sse2(materials, simd, 32);
+#else
+    row_packed_detail::widen_scalar(materials, simd, 32);
+#endif
+    for (int i = 0; i < 32; ++i) ASSERT_EQ(simd[i], scalar[i]) << i;
+  }
+}
+}  // namespace
+}  // namespace terrane

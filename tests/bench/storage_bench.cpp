@@ -1,0 +1,211 @@
+// Storage benchmark: memory of the row-packed grid against the same content
+// unpacked, read_row and box reads over packed versus unpacked chunks (the
+// ratio is printed), and writes (single voxel, box, repeated tiny writes).
+//
+// Memory counts every byte the grid holds: row headers, row data, mips,
+// Chunk objects and the hash map (nodes and buckets, through a counting
+// allocator). "Unpacked" is the article's Memory #1: each chunk as plain
+// 2-byte-per-voxel arrays for level 0 and its three mips, plus the same
+// map. Datasets: the real regions in tests/data (VXRAW).
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "common/grid.h"
+#include "common/vxraw.h"
+
+namespace terrane {
+namespace {
+
+struct Dataset {
+  std::string name;
+  std::unique_ptr<Grid> grid;
+  std::vector<Vec3i> chunk_positions;
+  std::vector<Box> unpacked;  // level 0 of each chunk, same order
+  std::int64_t voxels = 0;
+  std::int64_t non_empty = 0;
+};
+
+Dataset& dataset(const std::string& name) {
+  static std::map<std::string, Dataset> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second;
+  Dataset d;
+  d.name = name;
+  d.grid = std::make_unique<Grid>();
+  const std::string path = std::string(TERRANE_TEST_DATA_DIR) + "/" + name + ".vxraw.gz";
+  auto file = vxraw_read_file(path, VxrawLimits{});
+  if (!file) {
+    std::fprintf(stderr, "storage bench: %s\n", file.error().message.c_str());
+    std::exit(1);
+  }
+  d.voxels = static_cast<std::int64_t>(file->box.voxel_count());
+  for (const Voxel v : file->box.voxels()) d.non_empty += v.material != kAir;
+  d.grid->write_box(file->origin, file->box);
+  d.grid->compact();
+  d.grid->for_each_chunk([&](Vec3i pos, const Chunk& c) {
+    d.chunk_positions.push_back(pos);
+    Box b;
+    c.read_level(0, b);
+    d.unpacked.push_back(std::move(b));
+  });
+  return cache.emplace(name, std::move(d)).first->second;
+}
+
+void print_memory(const std::string& name) {
+  Dataset& d = dataset(name);
+  const GridMemory m = d.grid->memory();
+  constexpr std::size_t kUnpackedChunk = 2 * (32 * 32 * 32 + 16 * 16 * 16 + 8 * 8 * 8 + 4 * 4 * 4);
+  const std::size_t unpacked = m.map_bytes + m.object_bytes + m.chunks * kUnpackedChunk;
+  const double ne = static_cast<double>(d.non_empty);
+  std::printf("%-8s voxels %lld, non-empty %lld, chunks %zu\n", name.c_str(),
+              static_cast<long long>(d.voxels), static_cast<long long>(d.non_empty), m.chunks);
+  std::printf("  memory unpacked   %10zu bytes  %.3f B/non-empty voxel\n", unpacked, static_cast<double>(unpacked) / ne);
+  std::printf("  memory row-packed %10zu bytes  %.3f B/non-empty voxel  (map %zu, objects %zu, level0 %zu, mips %zu)\n",
+              m.total(), static_cast<double>(m.total()) / ne, m.map_bytes, m.object_bytes, m.level0_bytes,
+              m.mip_bytes);
+  const double rows = static_cast<double>(m.level0_rows.uniform_rows + m.level0_rows.raw_rows + m.level0_rows.byte_rows);
+  std::printf("  level-0 rows: uniform %.1f%%, byte %.1f%%, raw %.1f%%\n",
+              100.0 * static_cast<double>(m.level0_rows.uniform_rows) / rows,
+              100.0 * static_cast<double>(m.level0_rows.byte_rows) / rows,
+              100.0 * static_cast<double>(m.level0_rows.raw_rows) / rows);
+}
+
+// Consumes a row the way meshing or physics would: touches every voxel.
+inline std::uint32_t consume(const Voxel* row) {
+  std::uint32_t s = 0;
+  for (int x = 0; x < 32; ++x) s += row[x].occupancy + row[x].material;
+  return s;
+}
+
+void BM_ReadRowPacked(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  std::vector<const Chunk*> chunks;
+  for (Vec3i p : d.chunk_positions) chunks.push_back(d.grid->find_chunk(p));
+  Chunk::Level0::Row scratch;
+  for (auto _ : state) {
+    std::uint32_t sum = 0;
+    for (const Chunk* c : chunks)
+      for (int y = 0; y < 32; ++y)
+        for (int z = 0; z < 32; ++z) sum += consume(c->read_row(y, z, scratch));
+    benchmark::DoNotOptimize(sum);
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(chunks.size()) * 32 * 32 * 32);
+}
+
+void BM_ReadRowUnpacked(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  for (auto _ : state) {
+    std::uint32_t sum = 0;
+    for (const Box& b : d.unpacked)
+      for (int y = 0; y < 32; ++y)
+        for (int z = 0; z < 32; ++z) sum += consume(b.read_row(y, z));
+    benchmark::DoNotOptimize(sum);
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(d.unpacked.size()) * 32 * 32 * 32);
+}
+
+// Whole-box read: a 48³ box at random places across chunk borders.
+void BM_ReadBox(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  std::mt19937 rng(1);
+  std::uniform_int_distribution<std::size_t> pick(0, d.chunk_positions.size() - 1);
+  Box out({48, 48, 48});
+  for (auto _ : state) {
+    const Vec3i at = chunk_origin(d.chunk_positions[pick(rng)]) + Vec3i{7, 7, 7};
+    d.grid->read_box(at, out);
+    benchmark::DoNotOptimize(out.voxels().data());
+  }
+  state.SetItemsProcessed(state.iterations() * 48 * 48 * 48);
+}
+
+void BM_WriteSingleVoxel(benchmark::State& state) {
+  Grid g;
+  g.fill(Region{{0, 0, 0}, {64, 64, 64}}, solid(materials::kRock));
+  std::mt19937 rng(2);
+  std::uniform_int_distribution<int> c(0, 63), occ(0, 255);
+  for (auto _ : state) {
+    g.set({c(rng), c(rng), c(rng)}, make_voxel(materials::kMud, static_cast<std::uint8_t>(occ(rng))));
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+
+// The article's pathological case: tiny writes that flip row classes,
+// each of which would repack the chunk without the unpack fallback.
+void BM_WriteRepeatedTiny(benchmark::State& state) {
+  Chunk chunk(materials::kRock);
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> c(0, 31);
+  int i = 0;
+  for (auto _ : state) {
+    const Voxel v = (++i & 1) ? make_voxel(materials::kMud, 100) : solid(materials::kRock);
+    chunk.set({c(rng), c(rng), c(rng)}, v);
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+
+void BM_WriteBox(benchmark::State& state) {
+  Grid g;
+  const int n = static_cast<int>(state.range(0));
+  Box src({n, n, n});
+  std::mt19937 rng(4);
+  std::uniform_int_distribution<int> occ(0, 255);
+  for (auto& v : src.voxels()) v = make_voxel(materials::kSand, static_cast<std::uint8_t>(occ(rng)));
+  int k = 0;
+  for (auto _ : state) {
+    g.write_box({(k * 13) % 64, 0, (k * 7) % 64}, src);
+    ++k;
+  }
+  state.SetItemsProcessed(state.iterations() * n * n * n);
+  state.SetBytesProcessed(state.iterations() * n * n * n * 2);
+}
+
+// Prints each packed/unpacked pair's speed ratio after the normal report.
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& r : runs)
+      if (!r.error_occurred) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
+    ConsoleReporter::ReportRuns(runs);
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    for (const char* name : {"mc-1.9", "mc-1.16"}) {
+      const auto p = times_.find(std::string("BM_ReadRowPacked/") + name);
+      const auto u = times_.find(std::string("BM_ReadRowUnpacked/") + name);
+      if (p != times_.end() && u != times_.end())
+        std::printf("read_row speed, packed / unpacked on %s: %.2fx\n", name, u->second / p->second);
+    }
+  }
+
+ private:
+  std::map<std::string, double> times_;
+};
+
+}  // namespace
+}  // namespace terrane
+
+int main(int argc, char** argv) {
+  using namespace terrane;
+  benchmark::Initialize(&argc, argv);
+  std::printf("Grid memory on real regions (tests/data):\n");
+  for (const char* name : {"mc-1.9", "mc-1.16"}) print_memory(name);
+  std::printf("\n");
+  for (const char* name : {"mc-1.9", "mc-1.16"}) {
+    benchmark::RegisterBenchmark((std::string("BM_ReadRowPacked/") + name).c_str(), BM_ReadRowPacked, std::string(name));
+    benchmark::RegisterBenchmark((std::string("BM_ReadRowUnpacked/") + name).c_str(), BM_ReadRowUnpacked, std::string(name));
+    benchmark::RegisterBenchmark((std::string("BM_ReadBox48/") + name).c_str(), BM_ReadBox, std::string(name));
+  }
+  benchmark::RegisterBenchmark("BM_WriteSingleVoxel", BM_WriteSingleVoxel);
+  benchmark::RegisterBenchmark("BM_WriteRepeatedTiny", BM_WriteRepeatedTiny);
+  benchmark::RegisterBenchmark("BM_WriteBox", BM_WriteBox)->Arg(4)->Arg(16)->Arg(48);
+  RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  benchmark::Shutdown();
+  return 0;
+}
