@@ -28,6 +28,15 @@ Voxel downsample(const Voxel children[8]) {
 
 Chunk::Chunk(Material fill) : level0_(fill), mip1_(fill), mip2_(fill), mip3_(fill) {}
 
+Chunk Chunk::from_box(const Box& box) {
+  Chunk c;
+  c.level0_.modify_rows(0, kChunkSize, 0, kChunkSize, [&](int y, int z, Voxel* row) {
+    std::copy_n(box.read_row(y, z), kChunkSize, row);
+  });
+  c.rebuild_mips();
+  return c;
+}
+
 Chunk Chunk::clone() const {
   Chunk c;
   c.level0_ = level0_.clone();

@@ -26,6 +26,14 @@ inline constexpr int kChunkSize = 32;
 inline constexpr int kChunkShift = 5;
 inline constexpr int kMipLevels = 4;  // level 0 (32³) .. level 3 (4³)
 
+// Voxel <-> chunk coordinates (floor division: negative coordinates work).
+inline Vec3i chunk_of(Vec3i voxel) { return floor_div(voxel, kChunkSize); }
+inline Vec3i local_of(Vec3i voxel) { return floor_mod(voxel, kChunkSize); }
+inline Vec3i chunk_origin(Vec3i chunk_pos) { return chunk_pos * kChunkSize; }
+inline Region chunk_region(Vec3i chunk_pos) {
+  return Region::from_min_size(chunk_origin(chunk_pos), {kChunkSize, kChunkSize, kChunkSize});
+}
+
 // The downsampling rule above, for the 8 children of one mip voxel.
 Voxel downsample(const Voxel children[8]);
 
@@ -41,6 +49,8 @@ class Chunk {
   using Level0 = RowPackedBox<32>;
 
   explicit Chunk(Material fill = kAir);
+  // A packed chunk with current mips from a 32³ box. Precondition: box is 32³.
+  static Chunk from_box(const Box& box);
   Chunk(Chunk&&) noexcept = default;
   Chunk& operator=(Chunk&&) noexcept = default;
   Chunk clone() const;

@@ -42,9 +42,6 @@ struct CountingAllocator {
   bool operator==(const CountingAllocator<U>& o) const noexcept { return counter == o.counter; }
 };
 
-inline Vec3i chunk_of(Vec3i voxel) { return floor_div(voxel, kChunkSize); }
-inline Vec3i local_of(Vec3i voxel) { return floor_mod(voxel, kChunkSize); }
-inline Vec3i chunk_origin(Vec3i chunk_pos) { return chunk_pos * kChunkSize; }
 
 struct GridMemory {
   std::size_t chunks = 0;

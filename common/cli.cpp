@@ -1,0 +1,124 @@
+#include "common/cli.h"
+
+#include <charconv>
+#include <cstdlib>
+
+namespace terrane {
+
+CommandLine::CommandLine(std::set<std::string> value_options, std::set<std::string> flag_options)
+    : value_options_(std::move(value_options)), flag_options_(std::move(flag_options)) {}
+
+std::string CommandLine::parse(int argc, char** argv, int first) {
+  for (int i = first; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a.size() > 2 && a.compare(0, 2, "--") == 0) {
+      std::string name = a.substr(2);
+      std::optional<std::string> inline_value;
+      if (auto eq = name.find('='); eq != std::string::npos) {
+        inline_value = name.substr(eq + 1);
+        name = name.substr(0, eq);
+      }
+      if (flag_options_.count(name)) {
+        if (inline_value) return "option --" + name + " takes no value";
+        flags_.insert(name);
+      } else if (value_options_.count(name)) {
+        if (inline_value) {
+          values_[name] = *inline_value;
+        } else {
+          if (i + 1 >= argc) return "option --" + name + " needs a value";
+          values_[name] = argv[++i];
+        }
+      } else {
+        return "unknown option --" + name;
+      }
+    } else {
+      positional_.push_back(a);
+    }
+  }
+  return {};
+}
+
+std::string CommandLine::get(const std::string& name, const std::string& fallback) const {
+  auto it = values_.find(name);
+  return it == values_.end() ? fallback : it->second;
+}
+
+std::int64_t CommandLine::get_int(const std::string& name, std::int64_t fallback, std::int64_t min,
+                                  std::int64_t max, std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return fallback;
+  std::int64_t v = 0;
+  const std::string& s = it->second;
+  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec != std::errc() || p != s.data() + s.size()) {
+    *error = "--" + name + ": '" + s + "' is not a whole number";
+    return fallback;
+  }
+  if (v < min || v > max) {
+    *error = "--" + name + ": " + s + " is out of range [" + std::to_string(min) + ", " + std::to_string(max) + "]";
+    return fallback;
+  }
+  return v;
+}
+
+double CommandLine::get_double(const std::string& name, double fallback, double min, double max,
+                               std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return fallback;
+  const std::string& s = it->second;
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (s.empty() || end != s.c_str() + s.size()) {
+    *error = "--" + name + ": '" + s + "' is not a number";
+    return fallback;
+  }
+  if (!(v >= min && v <= max)) {
+    *error = "--" + name + ": " + s + " is out of range [" + std::to_string(min) + ", " + std::to_string(max) + "]";
+    return fallback;
+  }
+  return v;
+}
+
+bool parse_int_list(const std::string& text, std::int32_t* out, int n) {
+  const char* p = text.data();
+  const char* end = text.data() + text.size();
+  for (int i = 0; i < n; ++i) {
+    auto [next, ec] = std::from_chars(p, end, out[i]);
+    if (ec != std::errc()) return false;
+    p = next;
+    if (i + 1 < n) {
+      if (p == end || *p != ',') return false;
+      ++p;
+    }
+  }
+  return p == end;
+}
+
+std::optional<Region> CommandLine::get_region(const std::string& name, std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return std::nullopt;
+  std::int32_t v[6];
+  if (!parse_int_list(it->second, v, 6)) {
+    *error = "--" + name + ": '" + it->second + "' is not x0,y0,z0,x1,y1,z1 (six whole numbers)";
+    return std::nullopt;
+  }
+  const Region r{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+  if (r.empty()) {
+    *error = "--" + name + ": '" + it->second + "' is empty (each of x1, y1, z1 must exceed x0, y0, z0)";
+    return std::nullopt;
+  }
+  return r;
+}
+
+std::optional<Vec3i> CommandLine::get_vec3i(const std::string& name, std::string* error) const {
+  auto it = values_.find(name);
+  if (it == values_.end()) return std::nullopt;
+  std::int32_t v[3];
+  if (!parse_int_list(it->second, v, 3)) {
+    *error = "--" + name + ": '" + it->second + "' is not x,y,z (three whole numbers)";
+    return std::nullopt;
+  }
+  return Vec3i{v[0], v[1], v[2]};
+}
+
+}  // namespace terrane

@@ -1,0 +1,120 @@
+#include "common/world.h"
+
+#include <map>
+
+namespace terrane {
+
+WorldMeta default_world_meta(std::uint64_t seed) {
+  WorldMeta m;
+  m.generator = GeneratorKind::kTerrain;
+  GeneratorParams p;
+  p.seed = seed;
+  m.generator_params = TerrainGenerator(p).to_metadata();
+  m.materials = default_material_names();
+  return m;
+}
+
+World::World(std::unique_ptr<WorldStore> store) : store_(std::move(store)) {}
+
+FileStatus World::init_generator() {
+  if (meta().generator != GeneratorKind::kTerrain) return Ok{};
+  std::string message;
+  auto gen = TerrainGenerator::from_metadata(meta().generator_params, &message);
+  if (!gen) return FileError{"world " + store_->dir() + ": generator parameters: " + message, gen.error()};
+  generator_.emplace(std::move(*gen));
+  return Ok{};
+}
+
+FileResult<std::unique_ptr<World>> World::open(const std::string& dir) {
+  auto store = WorldStore::open(dir);
+  if (!store) return store.error();
+  std::unique_ptr<World> w(new World(std::move(*store)));
+  if (auto s = w->init_generator(); !s) return s.error();
+  return w;
+}
+
+FileResult<std::unique_ptr<World>> World::create(const std::string& dir, const WorldMeta& meta) {
+  if (meta.generator == GeneratorKind::kTerrain) {
+    std::string message;
+    if (!TerrainGenerator::from_metadata(meta.generator_params, &message))
+      return FileError{"world " + dir + ": generator parameters: " + message, {}};
+  }
+  auto store = WorldStore::create(dir, meta);
+  if (!store) return store.error();
+  std::unique_ptr<World> w(new World(std::move(*store)));
+  if (auto s = w->init_generator(); !s) return s.error();
+  return w;
+}
+
+void World::generate_chunk_box(Vec3i chunk_pos, Box& out) const {
+  out.resize({kChunkSize, kChunkSize, kChunkSize});
+  const Region full = chunk_region(chunk_pos);
+  const Region inside = meta().bounds.clamp(full);
+  if (!generator_ || inside.empty()) return;
+  if (inside == full) {
+    generator_->generate(full, out);
+    return;
+  }
+  Box part;
+  generator_->generate(inside, part);
+  const Vec3i off = inside.min - full.min;
+  const Vec3i s = inside.size();
+  for (int y = 0; y < s.y; ++y)
+    for (int z = 0; z < s.z; ++z)
+      std::copy_n(part.read_row(y, z), s.x, out.write_row(off.y + y, off.z + z) + off.x);
+}
+
+Chunk World::generate_chunk(Vec3i chunk_pos) const {
+  Box box;
+  generate_chunk_box(chunk_pos, box);
+  return Chunk::from_box(box);
+}
+
+FileResult<StoredChunk> World::load_chunk(Vec3i chunk_pos) {
+  auto stored = store_->load_chunk(chunk_pos);
+  if (!stored) return stored.error();
+  if (stored->has_value()) return std::move(**stored);
+  return StoredChunk{0, generate_chunk(chunk_pos)};
+}
+
+FileStatus World::read_box(Vec3i min, Box& out) {
+  const Vec3i size = out.size();
+  if (size.x <= 0 || size.y <= 0 || size.z <= 0) return Ok{};
+  const Vec3i max = min + size;
+  const Vec3i c0 = chunk_of(min);
+  const Vec3i c1 = chunk_of(max - Vec3i{1, 1, 1});
+  for (int cy = c0.y; cy <= c1.y; ++cy)
+    for (int cz = c0.z; cz <= c1.z; ++cz)
+      for (int cx = c0.x; cx <= c1.x; ++cx) {
+        const Vec3i cp{cx, cy, cz};
+        auto chunk = load_chunk(cp);
+        if (!chunk) return chunk.error();
+        const Vec3i origin = chunk_origin(cp);
+        const Vec3i lo = max3(min, origin);
+        const Vec3i hi = min3(max, origin + Vec3i{kChunkSize, kChunkSize, kChunkSize});
+        chunk->chunk.read_box(lo - origin, out, lo - min, hi - lo);
+      }
+  return Ok{};
+}
+
+FileStatus World::write_box(Vec3i min, const Box& src) {
+  const Region target = meta().bounds.clamp(Region::from_min_size(min, src.size()));
+  if (target.empty()) return Ok{};
+  const Vec3i c0 = chunk_of(target.min);
+  const Vec3i c1 = chunk_of(target.max - Vec3i{1, 1, 1});
+  std::vector<ChunkWrite> writes;
+  for (int cy = c0.y; cy <= c1.y; ++cy)
+    for (int cz = c0.z; cz <= c1.z; ++cz)
+      for (int cx = c0.x; cx <= c1.x; ++cx) {
+        const Vec3i cp{cx, cy, cz};
+        auto chunk = load_chunk(cp);
+        if (!chunk) return chunk.error();
+        const Vec3i origin = chunk_origin(cp);
+        chunk->chunk.modify(Region{target.min - origin, target.max - origin},
+                            [&](Vec3i l, Voxel) { return src.get(l + origin - min); });
+        writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
+      }
+  return store_->save_chunks(writes);
+}
+
+}  // namespace terrane

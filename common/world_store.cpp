@@ -1,0 +1,408 @@
+#include "common/world_store.h"
+
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <charconv>
+#include <climits>
+#include <map>
+#include <filesystem>
+#include <sstream>
+
+#include "common/lz4_block.h"
+
+namespace terrane {
+
+namespace {
+
+constexpr std::uint8_t kBlobVersion = 1;
+constexpr std::uint8_t kBlobCodecByteRleLz4 = 1;
+constexpr int kChunkVoxels = kChunkSize * kChunkSize * kChunkSize;
+
+// RAII for one prepared statement use: reset on scope exit.
+struct StmtReset {
+  sqlite3_stmt* s;
+  ~StmtReset() {
+    sqlite3_reset(s);
+    sqlite3_clear_bindings(s);
+  }
+};
+
+std::string join_lines(const std::vector<std::string>& v) {
+  std::string out;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (i) out += '\n';
+    out += v[i];
+  }
+  return out;
+}
+
+std::vector<std::string> split_lines(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= s.size()) {
+    const std::size_t nl = s.find('\n', start);
+    out.push_back(s.substr(start, nl == std::string::npos ? std::string::npos : nl - start));
+    if (nl == std::string::npos) break;
+    start = nl + 1;
+  }
+  return out;
+}
+
+bool parse_ints(const std::string& s, std::int64_t* out, int n) {
+  const char* p = s.data();
+  const char* end = s.data() + s.size();
+  for (int i = 0; i < n; ++i) {
+    auto [next, ec] = std::from_chars(p, end, out[i]);
+    if (ec != std::errc()) return false;
+    p = next;
+    if (i + 1 < n) {
+      if (p == end || *p != ',') return false;
+      ++p;
+    }
+  }
+  return p == end;
+}
+
+}  // namespace
+
+bool WorldBounds::contains(Vec3i v) const {
+  if (v.y < min_y || v.y >= max_y) return false;
+  if (!bounded_xz) return true;
+  return v.x >= min_x && v.x < max_x && v.z >= min_z && v.z < max_z;
+}
+
+Region WorldBounds::clamp(const Region& r) const {
+  Region out = r;
+  out.min.y = std::max(out.min.y, min_y);
+  out.max.y = std::min(out.max.y, max_y);
+  if (bounded_xz) {
+    out.min.x = std::max(out.min.x, min_x);
+    out.max.x = std::min(out.max.x, max_x);
+    out.min.z = std::max(out.min.z, min_z);
+    out.max.z = std::min(out.max.z, max_z);
+  }
+  return out;
+}
+
+bool WorldBounds::touches_chunk(Vec3i chunk_pos) const {
+  const Vec3i o = chunk_origin(chunk_pos);
+  return !clamp(Region{o, o + Vec3i{kChunkSize, kChunkSize, kChunkSize}}).empty();
+}
+
+std::vector<std::string> default_material_names() {
+  std::vector<std::string> names(kDefaultMaterialNames.begin(), kDefaultMaterialNames.end());
+  return names;
+}
+
+std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk) {
+  Box box;
+  chunk.read_level(0, box);
+  return encode_chunk_blob(box);
+}
+
+std::vector<std::uint8_t> encode_chunk_blob(const Box& box) {
+  std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecByteRleLz4};
+  byte_rle_lz4_encode(box.voxels(), out);
+  return out;
+}
+
+Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob) {
+  if (blob.size() < 2) return DecodeError{DecodeErrorCode::kTruncated, blob.size(), "chunk blob header"};
+  if (blob[0] != kBlobVersion) return DecodeError{DecodeErrorCode::kBadVersion, 0, "chunk blob version"};
+  if (blob[1] != kBlobCodecByteRleLz4) return DecodeError{DecodeErrorCode::kInvalidValue, 1, "chunk blob codec"};
+  Box box({kChunkSize, kChunkSize, kChunkSize});
+  const Status s = byte_rle_lz4_decode(blob.subspan(2), box.voxels());
+  if (!s) {
+    DecodeError e = s.error();
+    e.offset += 2;
+    return e;
+  }
+  static_assert(kChunkVoxels == 32768);
+  return Chunk::from_box(box);
+}
+
+WorldStore::WorldStore(std::string dir, sqlite3* db) : dir_(std::move(dir)), db_(db) {}
+
+WorldStore::~WorldStore() {
+  sqlite3_finalize(load_stmt_);
+  sqlite3_finalize(save_stmt_);
+  sqlite3_close(db_);
+}
+
+FileError WorldStore::error(const std::string& what) const {
+  return FileError{"world " + dir_ + ": " + what + (db_ ? std::string(": ") + sqlite3_errmsg(db_) : ""), {}};
+}
+
+bool WorldStore::exists(const std::string& dir) {
+  std::error_code ec;
+  return std::filesystem::exists(std::filesystem::path(dir) / kWorldDatabaseName, ec);
+}
+
+namespace {
+
+FileResult<sqlite3*> open_db(const std::string& dir, bool create) {
+  const std::string path = (std::filesystem::path(dir) / kWorldDatabaseName).string();
+  sqlite3* db = nullptr;
+  const int flags = SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) | SQLITE_OPEN_NOMUTEX;
+  if (sqlite3_open_v2(path.c_str(), &db, flags, nullptr) != SQLITE_OK) {
+    std::string msg = "world " + dir + ": cannot open " + path + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
+    sqlite3_close(db);
+    return FileError{msg, {}};
+  }
+  sqlite3_busy_timeout(db, 5000);
+  // WAL + synchronous=FULL: a committed transaction survives a crash and a
+  // power loss; readers (backups, tools) never block the writer.
+  const char* setup =
+      "PRAGMA journal_mode=WAL;"
+      "PRAGMA synchronous=FULL;"
+      "PRAGMA foreign_keys=ON;";
+  char* err = nullptr;
+  if (sqlite3_exec(db, setup, nullptr, nullptr, &err) != SQLITE_OK) {
+    std::string msg = "world " + dir + ": cannot configure " + path + ": " + (err ? err : "?");
+    sqlite3_free(err);
+    sqlite3_close(db);
+    return FileError{msg, {}};
+  }
+  return db;
+}
+
+}  // namespace
+
+FileResult<std::unique_ptr<WorldStore>> WorldStore::create(const std::string& dir, const WorldMeta& meta) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return FileError{"world " + dir + ": cannot create directory: " + ec.message(), {}};
+  if (exists(dir)) return FileError{"world " + dir + ": already exists (" + kWorldDatabaseName + " present)", {}};
+  auto db = open_db(dir, true);
+  if (!db) return db.error();
+  std::unique_ptr<WorldStore> store(new WorldStore(dir, *db));
+  const char* schema =
+      "CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL) WITHOUT ROWID;"
+      "CREATE TABLE chunks(cx INTEGER NOT NULL, cy INTEGER NOT NULL, cz INTEGER NOT NULL,"
+      " revision INTEGER NOT NULL, data BLOB NOT NULL, PRIMARY KEY(cx, cy, cz)) WITHOUT ROWID;";
+  char* err = nullptr;
+  if (sqlite3_exec(store->db_, schema, nullptr, nullptr, &err) != SQLITE_OK) {
+    std::string msg = err ? err : "?";
+    sqlite3_free(err);
+    return FileError{"world " + dir + ": cannot create schema: " + msg, {}};
+  }
+  if (auto s = store->write_meta(meta); !s) return s.error();
+  if (auto s = store->load_meta(); !s) return s.error();
+  return store;
+}
+
+FileResult<std::unique_ptr<WorldStore>> WorldStore::open(const std::string& dir) {
+  if (!exists(dir)) return FileError{"world " + dir + ": no world here (" + kWorldDatabaseName + " missing)", {}};
+  auto db = open_db(dir, false);
+  if (!db) return db.error();
+  std::unique_ptr<WorldStore> store(new WorldStore(dir, *db));
+  if (auto s = store->load_meta(); !s) return s.error();
+  return store;
+}
+
+FileStatus WorldStore::write_meta(const WorldMeta& m) {
+  const std::vector<std::pair<std::string, std::string>> kv = {
+      {"format_version", std::to_string(m.format_version)},
+      {"generator", m.generator == GeneratorKind::kTerrain ? "terrain" : "none"},
+      {"generator_params", m.generator_params},
+      {"bounds_y", std::to_string(m.bounds.min_y) + "," + std::to_string(m.bounds.max_y)},
+      {"bounds_xz", m.bounds.bounded_xz ? std::to_string(m.bounds.min_x) + "," + std::to_string(m.bounds.min_z) +
+                                              "," + std::to_string(m.bounds.max_x) + "," +
+                                              std::to_string(m.bounds.max_z)
+                                        : ""},
+      {"materials", join_lines(m.materials)},
+      {"epoch", std::to_string(m.epoch)},
+  };
+  sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr);
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO meta(key, value) VALUES(?, ?)", -1, &st, nullptr) != SQLITE_OK) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return error("cannot write metadata");
+  }
+  for (const auto& [k, v] : kv) {
+    sqlite3_bind_text(st, 1, k.c_str(), -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 2, v.c_str(), -1, SQLITE_TRANSIENT);
+    if (sqlite3_step(st) != SQLITE_DONE) {
+      sqlite3_finalize(st);
+      sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+      return error("cannot write metadata key " + k);
+    }
+    sqlite3_reset(st);
+  }
+  sqlite3_finalize(st);
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return error("cannot commit metadata");
+  return Ok{};
+}
+
+FileStatus WorldStore::load_meta() {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT key, value FROM meta", -1, &st, nullptr) != SQLITE_OK)
+    return error("not a Terrane world database (no meta table)");
+  std::map<std::string, std::string> kv;
+  while (sqlite3_step(st) == SQLITE_ROW) {
+    const auto* k = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
+    const auto* v = reinterpret_cast<const char*>(sqlite3_column_text(st, 1));
+    if (k && v) kv[k] = v;
+  }
+  sqlite3_finalize(st);
+  auto need = [&](const char* key) -> const std::string* {
+    auto it = kv.find(key);
+    return it == kv.end() ? nullptr : &it->second;
+  };
+  WorldMeta m;
+  std::int64_t n[4];
+  const std::string* v = need("format_version");
+  if (!v || !parse_ints(*v, n, 1)) return FileError{"world " + dir_ + ": metadata key format_version missing or malformed", {}};
+  if (n[0] != kWorldFormatVersion)
+    return FileError{"world " + dir_ + ": format version " + *v + " is not supported (this build reads " +
+                         std::to_string(kWorldFormatVersion) + ")", {}};
+  m.format_version = static_cast<std::uint32_t>(n[0]);
+  v = need("generator");
+  if (!v || (*v != "terrain" && *v != "none"))
+    return FileError{"world " + dir_ + ": metadata key generator must be 'terrain' or 'none'", {}};
+  m.generator = *v == "terrain" ? GeneratorKind::kTerrain : GeneratorKind::kNone;
+  if ((v = need("generator_params"))) m.generator_params = *v;
+  v = need("bounds_y");
+  if (!v || !parse_ints(*v, n, 2) || n[0] >= n[1] || n[0] < INT32_MIN / 2 || n[1] > INT32_MAX / 2)
+    return FileError{"world " + dir_ + ": metadata key bounds_y missing or malformed (want min,max)", {}};
+  m.bounds.min_y = static_cast<std::int32_t>(n[0]);
+  m.bounds.max_y = static_cast<std::int32_t>(n[1]);
+  v = need("bounds_xz");
+  if (v && !v->empty()) {
+    if (!parse_ints(*v, n, 4) || n[0] >= n[2] || n[1] >= n[3])
+      return FileError{"world " + dir_ + ": metadata key bounds_xz malformed (want x0,z0,x1,z1)", {}};
+    m.bounds.bounded_xz = true;
+    m.bounds.min_x = static_cast<std::int32_t>(n[0]);
+    m.bounds.min_z = static_cast<std::int32_t>(n[1]);
+    m.bounds.max_x = static_cast<std::int32_t>(n[2]);
+    m.bounds.max_z = static_cast<std::int32_t>(n[3]);
+  }
+  if ((v = need("materials"))) m.materials = split_lines(*v);
+  if (m.materials.size() > static_cast<std::size_t>(kMaterialCount))
+    return FileError{"world " + dir_ + ": material table has more than 64 entries", {}};
+  v = need("epoch");
+  if (!v || !parse_ints(*v, n, 1) || n[0] < 0) return FileError{"world " + dir_ + ": metadata key epoch missing or malformed", {}};
+  m.epoch = static_cast<std::uint64_t>(n[0]);
+  meta_ = std::move(m);
+  return Ok{};
+}
+
+FileStatus WorldStore::set_epoch(std::uint64_t epoch) {
+  WorldMeta m = meta_;
+  m.epoch = epoch;
+  if (auto s = write_meta(m); !s) return s;
+  meta_.epoch = epoch;
+  return Ok{};
+}
+
+FileResult<std::optional<StoredChunk>> WorldStore::load_chunk(Vec3i pos) {
+  if (!load_stmt_ &&
+      sqlite3_prepare_v2(db_, "SELECT revision, data FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1,
+                         &load_stmt_, nullptr) != SQLITE_OK)
+    return error("cannot prepare chunk read");
+  StmtReset reset{load_stmt_};
+  sqlite3_bind_int(load_stmt_, 1, pos.x);
+  sqlite3_bind_int(load_stmt_, 2, pos.y);
+  sqlite3_bind_int(load_stmt_, 3, pos.z);
+  const int rc = sqlite3_step(load_stmt_);
+  if (rc == SQLITE_DONE) return std::optional<StoredChunk>{};
+  if (rc != SQLITE_ROW) return error("cannot read chunk");
+  const auto revision = static_cast<std::uint64_t>(sqlite3_column_int64(load_stmt_, 0));
+  const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(load_stmt_, 1));
+  const auto size = static_cast<std::size_t>(sqlite3_column_bytes(load_stmt_, 1));
+  auto chunk = decode_chunk_blob(std::span<const std::uint8_t>(data, data ? size : 0));
+  if (!chunk) {
+    std::ostringstream msg;
+    msg << "world " << dir_ << ": chunk (" << pos.x << ", " << pos.y << ", " << pos.z
+        << ") is damaged: " << chunk.error().describe();
+    return FileError{msg.str(), chunk.error()};
+  }
+  return std::optional<StoredChunk>{StoredChunk{revision, std::move(*chunk)}};
+}
+
+FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes) {
+  if (!save_stmt_ &&
+      sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)", -1,
+                         &save_stmt_, nullptr) != SQLITE_OK)
+    return error("cannot prepare chunk write");
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin transaction");
+  for (const ChunkWrite& w : writes) {
+    StmtReset reset{save_stmt_};
+    sqlite3_bind_int(save_stmt_, 1, w.pos.x);
+    sqlite3_bind_int(save_stmt_, 2, w.pos.y);
+    sqlite3_bind_int(save_stmt_, 3, w.pos.z);
+    sqlite3_bind_int64(save_stmt_, 4, static_cast<sqlite3_int64>(w.revision));
+    sqlite3_bind_blob(save_stmt_, 5, w.blob.data(), static_cast<int>(w.blob.size()), SQLITE_STATIC);
+    if (sqlite3_step(save_stmt_) != SQLITE_DONE) {
+      FileError e = error("cannot write chunk");
+      sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+      return e;
+    }
+  }
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
+    FileError e = error("cannot commit chunks");
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  }
+  return Ok{};
+}
+
+FileStatus WorldStore::erase_chunk(Vec3i pos) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "DELETE FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot prepare chunk delete");
+  sqlite3_bind_int(st, 1, pos.x);
+  sqlite3_bind_int(st, 2, pos.y);
+  sqlite3_bind_int(st, 3, pos.z);
+  const int rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot delete chunk");
+  return Ok{};
+}
+
+FileStatus WorldStore::for_each_chunk(
+    const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT cx, cy, cz, revision, data FROM chunks ORDER BY cx, cy, cz", -1, &st,
+                         nullptr) != SQLITE_OK)
+    return error("cannot list chunks");
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+    const Vec3i pos{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)};
+    const auto rev = static_cast<std::uint64_t>(sqlite3_column_int64(st, 3));
+    const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 4));
+    const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 4));
+    fn(pos, rev, std::span<const std::uint8_t>(data, data ? size : 0));
+  }
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot list chunks");
+  return Ok{};
+}
+
+FileResult<std::int64_t> WorldStore::stored_chunk_count() {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT count(*) FROM chunks", -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot count chunks");
+  std::int64_t n = -1;
+  if (sqlite3_step(st) == SQLITE_ROW) n = sqlite3_column_int64(st, 0);
+  sqlite3_finalize(st);
+  if (n < 0) return error("cannot count chunks");
+  return n;
+}
+
+FileResult<std::string> WorldStore::pragma(const std::string& name) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, ("PRAGMA " + name).c_str(), -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot run pragma " + name);
+  std::string out;
+  if (sqlite3_step(st) == SQLITE_ROW) {
+    const auto* t = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
+    if (t) out = t;
+  }
+  sqlite3_finalize(st);
+  return out;
+}
+
+}  // namespace terrane

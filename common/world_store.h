@@ -1,0 +1,125 @@
+// WorldStore: a world on disk. A world is a directory holding world.sqlite,
+// an embedded SQLite database in WAL mode (format: common/WORLD_FORMAT.md):
+//   - meta: format version, generator kind and parameters, bounds, material
+//     table, epoch;
+//   - chunks: one row per stored 32³ chunk: its coordinates, a revision that
+//     only ever grows, and the voxels as byte RLE + LZ4.
+// Chunks never stored are generated on demand from the metadata (see World).
+// Mips are not stored: they are rebuilt from level 0 on load.
+//
+// Errors are returned as FileError naming the world and, for chunk data,
+// the chunk's coordinates; a damaged blob never crashes the reader.
+// Thread-safety: one owner thread per WorldStore (one SQLite connection).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/chunk.h"
+#include "common/decode_error.h"
+#include "common/vxraw.h"
+
+struct sqlite3;
+struct sqlite3_stmt;
+
+namespace terrane {
+
+inline constexpr std::uint32_t kWorldFormatVersion = 1;
+inline constexpr const char* kWorldDatabaseName = "world.sqlite";
+
+// Which voxels a world may hold. Vertical range always; horizontal optional.
+struct WorldBounds {
+  std::int32_t min_y = -128;
+  std::int32_t max_y = 256;  // exclusive
+  bool bounded_xz = false;
+  std::int32_t min_x = 0, max_x = 0, min_z = 0, max_z = 0;  // exclusive max, if bounded_xz
+
+  bool contains(Vec3i voxel) const;
+  // True if any voxel of the chunk lies inside the bounds.
+  bool touches_chunk(Vec3i chunk_pos) const;
+  Region clamp(const Region& r) const;
+};
+
+enum class GeneratorKind : std::uint8_t {
+  kNone,     // nothing outside stored chunks (e.g. imported worlds)
+  kTerrain,  // TerrainGenerator with the stored parameters
+};
+
+struct WorldMeta {
+  std::uint32_t format_version = kWorldFormatVersion;
+  GeneratorKind generator = GeneratorKind::kTerrain;
+  std::string generator_params;  // TerrainGenerator::to_metadata() text
+  WorldBounds bounds;
+  std::vector<std::string> materials;  // index = material id
+  std::uint64_t epoch = 1;             // bumped by every server start
+};
+
+// The default material table, with generic names for ids the table lacks.
+std::vector<std::string> default_material_names();
+
+// Chunk blob (version 1): [version u8 = 1][codec u8 = 1: byte RLE + LZ4]
+// [LZ4 block of the byte RLE of the 32³ voxels in Box order].
+std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk);
+// The same from a 32³ box of voxels (precondition: box is 32³).
+std::vector<std::uint8_t> encode_chunk_blob(const Box& box);
+Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob);
+
+struct StoredChunk {
+  std::uint64_t revision = 0;
+  Chunk chunk;
+};
+
+struct ChunkWrite {
+  Vec3i pos;
+  std::uint64_t revision;
+  std::vector<std::uint8_t> blob;  // encode_chunk_blob output
+};
+
+class WorldStore {
+ public:
+  // Creates the directory (if needed) and a new world in it; fails if the
+  // directory already holds a world.
+  static FileResult<std::unique_ptr<WorldStore>> create(const std::string& dir, const WorldMeta& meta);
+  // Opens an existing world; fails with a clear message if there is none or
+  // its format version is not one we read.
+  static FileResult<std::unique_ptr<WorldStore>> open(const std::string& dir);
+  static bool exists(const std::string& dir);
+
+  ~WorldStore();
+  WorldStore(const WorldStore&) = delete;
+  WorldStore& operator=(const WorldStore&) = delete;
+
+  const std::string& dir() const { return dir_; }
+  const WorldMeta& meta() const { return meta_; }
+  FileStatus set_epoch(std::uint64_t epoch);
+
+  // The stored chunk, or nullopt if the chunk was never stored.
+  FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);
+  // Stores all writes in one transaction (all or nothing).
+  FileStatus save_chunks(std::span<const ChunkWrite> writes);
+  FileStatus erase_chunk(Vec3i pos);
+  // Calls fn(pos, revision, blob) for every stored chunk, in key order.
+  FileStatus for_each_chunk(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn);
+  FileResult<std::int64_t> stored_chunk_count();
+  // Runs `PRAGMA name` and returns the first column as text (tests, checks).
+  FileResult<std::string> pragma(const std::string& name);
+
+ private:
+  WorldStore(std::string dir, sqlite3* db);
+  FileStatus load_meta();
+  FileStatus write_meta(const WorldMeta& meta);
+  FileError error(const std::string& what) const;
+
+  std::string dir_;
+  sqlite3* db_ = nullptr;
+  sqlite3_stmt* load_stmt_ = nullptr;
+  sqlite3_stmt* save_stmt_ = nullptr;
+  WorldMeta meta_;
+};
+
+}  // namespace terrane
