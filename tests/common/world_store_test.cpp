@@ -1,0 +1,170 @@
+#include "common/world_store.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+
+#include <unistd.h>
+
+#include "common/world.h"
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+
+class WorldStoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = (fs::temp_directory_path() / ("terrane-store-" + std::to_string(::getpid()) + "-" +
+                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
+               .string();
+    fs::remove_all(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string dir_;
+};
+
+Chunk sample_chunk(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> mat(0, 20), occ(0, 255);
+  Box box({32, 32, 32});
+  for (int y = 0; y < 32; ++y)
+    for (int z = 0; z < 32; ++z)
+      for (int x = 0; x < 32; ++x)
+        box.set(x, y, z, y < 12 ? solid(materials::kRock)
+                                 : (y < 16 ? make_voxel(static_cast<Material>(mat(rng)), static_cast<std::uint8_t>(occ(rng)))
+                                           : Voxel{}));
+  return Chunk::from_box(box);
+}
+
+void expect_same(const Chunk& a, const Chunk& b) {
+  for (int level = 0; level < kMipLevels; ++level) {
+    Box ba, bb;
+    a.read_level(level, ba);
+    b.read_level(level, bb);
+    ASSERT_EQ(ba, bb) << "level " << level;
+  }
+}
+
+TEST_F(WorldStoreTest, CreateThenOpenKeepsMetadata) {
+  WorldMeta meta = default_world_meta(42);
+  meta.bounds.bounded_xz = true;
+  meta.bounds.min_x = -100;
+  meta.bounds.max_x = 100;
+  meta.bounds.min_z = -50;
+  meta.bounds.max_z = 60;
+  meta.epoch = 7;
+  ASSERT_TRUE(WorldStore::create(dir_, meta).ok());
+  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  const WorldMeta& m = (*store)->meta();
+  EXPECT_EQ(m.generator, GeneratorKind::kTerrain);
+  EXPECT_EQ(m.generator_params, meta.generator_params);
+  EXPECT_EQ(m.materials, meta.materials);
+  EXPECT_EQ(m.materials[1], "Water");
+  EXPECT_TRUE(m.bounds.bounded_xz);
+  EXPECT_EQ(m.bounds.max_z, 60);
+  EXPECT_EQ(m.epoch, 7u);
+}
+
+TEST_F(WorldStoreTest, CreateRefusesExistingWorldAndOpenRefusesMissingOne) {
+  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+  auto again = WorldStore::create(dir_, default_world_meta());
+  ASSERT_FALSE(again.ok());
+  EXPECT_NE(again.error().message.find("already exists"), std::string::npos);
+  auto missing = WorldStore::open(dir_ + "-nope");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().message.find("no world here"), std::string::npos);
+}
+
+TEST_F(WorldStoreTest, DurabilitySettingsAreWalAndSynchronousFull) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  EXPECT_EQ(*(*store)->pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
+}
+
+TEST_F(WorldStoreTest, ChunksRoundTripWithRevisions) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  const Chunk a = sample_chunk(1), b = sample_chunk(2);
+  std::vector<ChunkWrite> writes = {{{0, 0, 0}, 3, encode_chunk_blob(a)}, {{-5, 2, 9}, 8, encode_chunk_blob(b)}};
+  ASSERT_TRUE((*store)->save_chunks(writes).ok());
+  auto la = (*store)->load_chunk({0, 0, 0});
+  ASSERT_TRUE(la.ok());
+  ASSERT_TRUE(la->has_value());
+  EXPECT_EQ((*la)->revision, 3u);
+  expect_same((*la)->chunk, a);
+  auto lb = (*store)->load_chunk({-5, 2, 9});
+  ASSERT_TRUE(lb.ok() && lb->has_value());
+  EXPECT_EQ((*lb)->revision, 8u);
+  expect_same((*lb)->chunk, b);
+  auto none = (*store)->load_chunk({1, 1, 1});
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  EXPECT_EQ(*(*store)->stored_chunk_count(), 2);
+}
+
+TEST_F(WorldStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  std::vector<std::uint8_t> blob = encode_chunk_blob(sample_chunk(3));
+  blob.resize(blob.size() / 2);
+  std::vector<ChunkWrite> writes = {{{4, -1, 7}, 1, blob}};
+  ASSERT_TRUE((*store)->save_chunks(writes).ok());
+  auto loaded = (*store)->load_chunk({4, -1, 7});
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_NE(loaded.error().message.find("(4, -1, 7)"), std::string::npos) << loaded.error().message;
+  EXPECT_TRUE(loaded.error().decode.has_value());
+}
+
+TEST(ChunkBlob, RejectsEveryTruncationAndBadHeader) {
+  const std::vector<std::uint8_t> blob = encode_chunk_blob(sample_chunk(4));
+  ASSERT_TRUE(decode_chunk_blob(blob).ok());
+  for (std::size_t n = 0; n < blob.size(); ++n)
+    EXPECT_FALSE(decode_chunk_blob(std::span(blob.data(), n)).ok()) << "prefix " << n;
+  std::vector<std::uint8_t> bad = blob;
+  bad[0] = 9;
+  EXPECT_EQ(decode_chunk_blob(bad).error().code, DecodeErrorCode::kBadVersion);
+}
+
+TEST_F(WorldStoreTest, WorldGeneratesUnstoredChunksAndStoresEditsWithGrowingRevision) {
+  auto world = World::create(dir_, default_world_meta(5));
+  ASSERT_TRUE(world.ok()) << world.error().message;
+  World& w = **world;
+  const Vec3i cp{0, 0, 0};
+  auto generated = w.load_chunk(cp);
+  ASSERT_TRUE(generated.ok());
+  EXPECT_EQ(generated->revision, 0u);
+  expect_same(generated->chunk, w.generate_chunk(cp));
+
+  Box edit({3, 3, 3}, solid(materials::kBrick));
+  ASSERT_TRUE(w.write_box({30, 5, 30}, edit).ok());  // spans 8 chunks
+  ASSERT_TRUE(w.write_box({30, 5, 30}, edit).ok());
+  auto stored = w.load_chunk(cp);
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->revision, 2u);
+  Box back({3, 3, 3});
+  ASSERT_TRUE(w.read_box({30, 5, 30}, back).ok());
+  EXPECT_EQ(back, edit);
+  EXPECT_EQ(*w.store().stored_chunk_count(), 8);
+}
+
+TEST_F(WorldStoreTest, BoundsClipGenerationAndWrites) {
+  WorldMeta meta = default_world_meta(5);
+  meta.bounds.min_y = 0;
+  meta.bounds.max_y = 64;
+  auto world = World::create(dir_, meta);
+  ASSERT_TRUE(world.ok());
+  Box below({32, 32, 32});
+  (*world)->generate_chunk_box({0, -1, 0}, below);
+  for (const Voxel v : below.voxels()) ASSERT_EQ(v, Voxel{});
+  Box edit({1, 1, 1}, solid(materials::kBrick));
+  ASSERT_TRUE((*world)->write_box({0, 100, 0}, edit).ok());
+  EXPECT_EQ(*(*world)->store().stored_chunk_count(), 0);
+}
+
+}  // namespace
+}  // namespace terrane
