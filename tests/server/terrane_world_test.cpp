@@ -1,0 +1,145 @@
+// End-to-end tests of the terrane-world tool: runs the built binary.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "common/vxraw.h"
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int exit_code;
+  std::string output;  // stdout and stderr
+};
+
+RunResult run(const std::string& args) {
+  const std::string cmd = std::string(TERRANE_BIN_DIR) + "/terrane-world " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  RunResult r{-1, {}};
+  if (!p) return r;
+  std::array<char, 4096> buf;
+  std::size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class WorldToolTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("terrane-tool-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+TEST_F(WorldToolTest, GenerateThenStatsJsonReportsEveryCodec) {
+  const std::string w = path("gen");
+  auto g = run("generate --world " + w + " --box -32,0,-32,32,64,32");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  // Twice is safe: nothing left to generate.
+  auto g2 = run("generate --world " + w + " --box -32,0,-32,32,64,32");
+  ASSERT_EQ(g2.exit_code, 0) << g2.output;
+  EXPECT_NE(g2.output.find("exists"), std::string::npos);
+  auto s = run("stats --world " + w + " --box -32,0,-32,32,64,32 --json");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  EXPECT_NE(s.output.find("\"voxels\": 262144"), std::string::npos) << s.output;
+  for (const char* key : {"disk_rle", "disk_rle_lz4", "network_16", "network_4", "memory_unpacked",
+                          "memory_row_packed", "bytes_per_non_empty_voxel", "encode_mb_s", "decode_mb_s"})
+    EXPECT_NE(s.output.find(key), std::string::npos) << key << " missing in " << s.output;
+  auto table = run("stats --world " + w + " --box -32,0,-32,32,64,32");
+  ASSERT_EQ(table.exit_code, 0);
+  EXPECT_NE(table.output.find("non-empty voxels"), std::string::npos);
+}
+
+TEST_F(WorldToolTest, ExportImportExportRoundTrips) {
+  const std::string w = path("src");
+  ASSERT_EQ(run("generate --world " + w + " --box -40,0,-8,8,48,40").exit_code, 0);
+  const std::string box = "-37,3,-5,5,45,36";  // not chunk-aligned
+  auto e1 = run("export --world " + w + " --box " + box + " " + path("a.vxraw.gz"));
+  ASSERT_EQ(e1.exit_code, 0) << e1.output;
+  auto im = run("import --world " + path("copy") + " " + path("a.vxraw.gz"));
+  ASSERT_EQ(im.exit_code, 0) << im.output;
+  auto e2 = run("export --world " + path("copy") + " --box " + box + " " + path("b.vxraw"));
+  ASSERT_EQ(e2.exit_code, 0) << e2.output;
+  auto a = vxraw_read_file(path("a.vxraw.gz"), VxrawLimits{});
+  auto b = vxraw_read_file(path("b.vxraw"), VxrawLimits{});
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->origin, (Vec3i{-37, 3, -5}));
+  EXPECT_EQ(a->origin, b->origin);
+  EXPECT_EQ(a->box, b->box);
+  std::size_t solid = 0;
+  for (const Voxel v : a->box.voxels()) solid += v.material != kAir;
+  EXPECT_GT(solid, 0u);
+}
+
+TEST_F(WorldToolTest, BadUsageExitsTwoNamingTheProblem) {
+  auto r = run("frobnicate");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("unknown command 'frobnicate'"), std::string::npos);
+  r = run("stats");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--world"), std::string::npos);
+  r = run("generate --world " + path("w") + " --box 1,2,3");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--box"), std::string::npos);
+  r = run("generate --world " + path("w") + " --box 0,0,0,0,5,5");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("empty"), std::string::npos);
+  r = run("generate --world " + path("w") + " --seed banana");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--seed"), std::string::npos);
+  r = run("export --world " + path("w") + " --frob 3 x.vxraw");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("unknown option --frob"), std::string::npos);
+  EXPECT_EQ(run("--help").exit_code, 0);
+  EXPECT_EQ(run("stats --help").exit_code, 0);
+}
+
+TEST_F(WorldToolTest, BadFilesAndMissingWorldsExitOneNamingThem) {
+  auto r = run("import --world " + path("w") + " " + path("missing.vxraw"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("missing.vxraw"), std::string::npos) << r.output;
+
+  // A VXRAW file with material 64 at the first voxel.
+  std::vector<std::uint8_t> bytes = vxraw_encode(Box({2, 1, 1}, solid(materials::kRock)), {0, 0, 0});
+  bytes[kVxrawHeaderSize + 2] = 64;
+  {
+    std::ofstream f(path("bad.vxraw"), std::ios::binary);
+    f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  }
+  r = run("import --world " + path("w") + " " + path("bad.vxraw"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("bad.vxraw"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("34"), std::string::npos) << r.output;  // offset of the bad byte
+
+  r = run("stats --world " + path("nowhere"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no world here"), std::string::npos) << r.output;
+}
+
+TEST_F(WorldToolTest, HeavyImportsRealRegionAndReportsIt) {
+  const std::string w = path("mc");
+  auto im = run("import --world " + w + " " + std::string(TERRANE_TEST_DATA_DIR) + "/mc-1.9.vxraw.gz");
+  ASSERT_EQ(im.exit_code, 0) << im.output;
+  auto s = run("stats --world " + w + " --box -384,0,-512,0,256,-304 --json");
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  EXPECT_NE(s.output.find("\"non_empty_voxels\": 4941334"), std::string::npos) << s.output;
+}
+
+}  // namespace
+}  // namespace terrane
