@@ -1,0 +1,86 @@
+// Framing for Terrane's TCP stream: each frame is a 4-byte little-endian
+// body length followed by the body, one FlatBuffers Message
+// (protocol/terrane.fbs). The length is checked against a fixed maximum
+// before anything is buffered, and every body is run through the
+// FlatBuffers verifier with tight depth and table limits before it is read.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "common/decode_error.h"
+
+namespace terrane::wire {
+struct Message;
+}
+
+namespace terrane {
+
+inline constexpr std::uint32_t kProtocolVersion = 1;
+inline constexpr std::size_t kFrameHeaderBytes = 4;
+// Largest frame a peer may send unless the handshake agrees on less: a
+// worst-case 16³ unit (NET_CODEC.md) plus message overhead fits many times.
+inline constexpr std::size_t kDefaultMaxFrameBytes = 1 << 20;
+
+// Appends header + body to out. Precondition: body.size() <= UINT32_MAX.
+void append_frame(std::span<const std::uint8_t> body, std::vector<std::uint8_t>& out);
+
+// Splits a byte stream into frame bodies. Memory held is bounded by
+// max_frame_bytes + the header: an over-long length is an error as soon as
+// its header arrives, before any body byte is stored.
+class FrameReader {
+ public:
+  explicit FrameReader(std::size_t max_frame_bytes = kDefaultMaxFrameBytes) : max_(max_frame_bytes) {}
+
+  // Consumes bytes; calls on_frame(std::span<const std::uint8_t> body) for
+  // each complete frame (the span is valid during the call). Returns an
+  // error (kOverLimit for an oversized length) and stops at the first bad
+  // frame; the reader must not be fed again after an error.
+  template <class OnFrame>
+  Status feed(std::span<const std::uint8_t> bytes, OnFrame&& on_frame);
+
+  std::size_t buffered() const { return buf_.size(); }
+
+ private:
+  std::size_t max_;
+  std::vector<std::uint8_t> buf_;
+  std::size_t total_ = 0;  // stream offset of buf_[0], for error offsets
+};
+
+// Verifies a frame body as a Message and returns it (pointing into body).
+// Rejects bodies that fail the verifier (kInvalidValue), have no body union
+// member, or exceed the depth/table limits.
+Result<const wire::Message*> verify_message(std::span<const std::uint8_t> body);
+
+template <class OnFrame>
+Status FrameReader::feed(std::span<const std::uint8_t> bytes, OnFrame&& on_frame) {
+  while (!bytes.empty()) {
+    // Fill the header first, then the body, never more than one frame.
+    std::size_t want = kFrameHeaderBytes;
+    if (buf_.size() >= kFrameHeaderBytes) {
+      const std::size_t len = std::size_t{buf_[0]} | std::size_t{buf_[1]} << 8 | std::size_t{buf_[2]} << 16 |
+                              std::size_t{buf_[3]} << 24;
+      want = kFrameHeaderBytes + len;
+    }
+    const std::size_t take = std::min(want - buf_.size(), bytes.size());
+    buf_.insert(buf_.end(), bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(take));
+    bytes = bytes.subspan(take);
+    if (buf_.size() == kFrameHeaderBytes && want == kFrameHeaderBytes) {
+      const std::size_t len = std::size_t{buf_[0]} | std::size_t{buf_[1]} << 8 | std::size_t{buf_[2]} << 16 |
+                              std::size_t{buf_[3]} << 24;
+      if (len > max_) return DecodeError{DecodeErrorCode::kOverLimit, total_, "frame length over the maximum"};
+      if (len == 0) return DecodeError{DecodeErrorCode::kInvalidValue, total_, "empty frame"};
+      continue;
+    }
+    if (buf_.size() == want && want > kFrameHeaderBytes) {
+      on_frame(std::span<const std::uint8_t>(buf_.data() + kFrameHeaderBytes, want - kFrameHeaderBytes));
+      total_ += want;
+      buf_.clear();
+    }
+  }
+  return Ok{};
+}
+
+}  // namespace terrane
