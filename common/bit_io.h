@@ -1,0 +1,122 @@
+// Little bit-stream reader and writer for the network voxel codec.
+//
+// Bits are packed LSB-first: the first bit written is bit 0 of byte 0, a
+// k-bit value is written low bit first. The writer appends to a caller-sized
+// byte buffer; the reader never touches memory outside its span (past the end
+// it feeds zero bits and remembers that it did, so the caller can report
+// truncation).
+#pragma once
+
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+namespace terrane {
+
+namespace bit_io_detail {
+inline std::uint64_t load_le64(const std::uint8_t* p) {
+  std::uint64_t w;
+  std::memcpy(&w, p, 8);
+  if constexpr (std::endian::native == std::endian::big) w = __builtin_bswap64(w);
+  return w;
+}
+inline void store_le64(std::uint8_t* p, std::uint64_t w) {
+  if constexpr (std::endian::native == std::endian::big) w = __builtin_bswap64(w);
+  std::memcpy(p, &w, 8);
+}
+}  // namespace bit_io_detail
+
+// Writes bits into [begin, begin + capacity). The caller guarantees capacity
+// covers everything written plus 8 bytes of slack (whole 64-bit stores).
+class BitWriter {
+ public:
+  explicit BitWriter(std::uint8_t* begin) : begin_(begin), cur_(begin) {}
+
+  // Precondition: bits <= 32 and value < 2^bits.
+  void put(std::uint32_t value, unsigned bits) {
+    acc_ |= std::uint64_t{value} << count_;
+    count_ += bits;
+    if (count_ >= 32) {
+      bit_io_detail::store_le64(cur_, acc_);
+      cur_ += 4;
+      acc_ >>= 32;
+      count_ -= 32;
+    }
+  }
+  // Flushes the partial last byte, zero padded. Returns the bytes written.
+  std::size_t finish() {
+    bit_io_detail::store_le64(cur_, acc_);
+    cur_ += (count_ + 7) / 8;
+    acc_ = 0;
+    count_ = 0;
+    return static_cast<std::size_t>(cur_ - begin_);
+  }
+  std::size_t bit_count() const { return static_cast<std::size_t>(cur_ - begin_) * 8 + count_; }
+
+ private:
+  std::uint8_t* begin_;
+  std::uint8_t* cur_;
+  std::uint64_t acc_ = 0;
+  unsigned count_ = 0;
+};
+
+// Reads bits from a span. refill() makes at least 56 bits available; a token
+// of the codec never needs more than that between refills.
+class BitReader {
+ public:
+  BitReader(const std::uint8_t* begin, const std::uint8_t* end) : begin_(begin), cur_(begin), end_(end) {}
+
+  void refill() {
+    if (count_ > 56) return;
+    if (end_ - cur_ >= 8) {
+      buf_ |= bit_io_detail::load_le64(cur_) << count_;
+      cur_ += (63 - count_) >> 3;
+      count_ |= 56;
+    } else {
+      while (count_ <= 56) {
+        std::uint64_t byte = 0;
+        if (cur_ < end_) {
+          byte = *cur_++;
+        } else {
+          ++zero_bytes_;  // past the end: feed zeros, remember the overrun
+        }
+        buf_ |= byte << count_;
+        count_ += 8;
+      }
+    }
+  }
+  // Precondition: bits <= available().
+  std::uint32_t peek(unsigned bits) const {
+    return static_cast<std::uint32_t>(buf_ & ((std::uint64_t{1} << bits) - 1));
+  }
+  void skip(unsigned bits) {
+    buf_ >>= bits;
+    count_ -= bits;
+  }
+  std::uint32_t get(unsigned bits) {
+    const std::uint32_t v = peek(bits);
+    skip(bits);
+    return v;
+  }
+  // Zero bits before the next one bit in the buffer (64 if the buffer is 0).
+  unsigned trailing_zeros() const { return static_cast<unsigned>(std::countr_zero(buf_)); }
+  unsigned available() const { return count_; }
+
+  // Bits consumed so far, counting any zero bits fed past the end.
+  std::size_t bit_position() const {
+    return (static_cast<std::size_t>(cur_ - begin_) + zero_bytes_) * 8 - count_;
+  }
+  std::size_t bit_size() const { return static_cast<std::size_t>(end_ - begin_) * 8; }
+  bool overran() const { return bit_position() > bit_size(); }
+
+ private:
+  const std::uint8_t* begin_;
+  const std::uint8_t* cur_;
+  const std::uint8_t* end_;
+  std::uint64_t buf_ = 0;
+  unsigned count_ = 0;
+  std::size_t zero_bytes_ = 0;
+};
+
+}  // namespace terrane
