@@ -1,0 +1,124 @@
+// TerrainGenerator: Terrane's deterministic, seedable world generator.
+//
+// Terrain comes from a density function (positive inside terrain) that is
+// clamped to [-1, 1] and mapped to occupancy, so the surface is smooth to
+// within a voxel; see common/GENERATOR.md for the shape, biomes, materials and
+// the versioning rule.
+//
+// Contract:
+//  - Deterministic: a voxel depends only on (params, position), never on how
+//    regions are cut or in which order they are generated.
+//  - Thread-safe: every method is const and touches no shared mutable state,
+//    so any number of threads may generate regions at once.
+//  - Every output voxel satisfies the Air invariant (Air has occupancy 0).
+//  - Any change to the output for some (params, position) must bump
+//    kGeneratorVersion and the golden hashes in
+//    tests/common/terrain_generator_test.cpp.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "common/box.h"
+#include "common/decode_error.h"
+#include "common/vec3.h"
+#include "common/voxel.h"
+
+namespace terrane {
+
+inline constexpr std::uint32_t kGeneratorVersion = 1;
+
+// The vertical range a default world is built for (Y is up). The generator
+// is defined everywhere: below kWorldMinY + 4 it is solid Basalt, above the
+// highest peak it is Air.
+inline constexpr std::int32_t kWorldMinY = -128;
+inline constexpr std::int32_t kWorldMaxY = 256;
+
+// All knobs are part of the world's metadata (to_metadata); validate() gives
+// the accepted ranges.
+struct GeneratorParams {
+  std::uint64_t seed = 1;
+  // Water fills open air below this y (oceans, rivers, swamps).
+  std::int32_t sea_level = 32;
+  // Horizontal feature size multiplier: 2 makes continents, mountains and
+  // rivers twice as wide. Range [0.25, 8].
+  float terrain_scale = 1.0f;
+  // Peak height of mountain ranges above the land, in voxels. Range [0, 400].
+  float mountain_height = 160.0f;
+  // Amplitude of rolling hills, in voxels. Range [0, 64].
+  float hill_height = 18.0f;
+  // Amplitude of the 3D surface perturbation (overhangs, arches) in
+  // steep and mountainous terrain, in voxels. Range [0, 16].
+  float overhang_strength = 7.0f;
+  // Tunnels and caverns underground (and lava deep down).
+  bool caves = true;
+
+  friend bool operator==(const GeneratorParams&, const GeneratorParams&) = default;
+};
+
+// Returns an empty string when params are valid, else a message naming the
+// first bad field.
+std::string validate(const GeneratorParams& params);
+
+// Surface classification of a column, used for topsoil and vegetation.
+enum class Biome : std::uint8_t {
+  kOcean,           // below water: sand, mud and gravel-like ground
+  kBeach,           // a thin sand strip at sea level
+  kPlains,          // Grass over Ground
+  kMeadow,          // wet temperate: LeafyGrass over Ground
+  kDesert,          // Sand over Sandstone, stepped canyons
+  kSwamp,           // Mud at sea level with pools
+  kHighlands,       // terraced rock: Slate, Limestone, thin Grass on flats
+  kSnowyMountains,  // Snow above the snow line, Ice on cold water
+};
+inline constexpr int kBiomeCount = 8;
+const char* to_string(Biome biome);
+
+class TerrainGenerator {
+ public:
+  // Precondition: validate(params) is empty (from_metadata guarantees it;
+  // invalid params are clamped into range so a bad caller cannot crash us).
+  explicit TerrainGenerator(GeneratorParams params);
+
+  const GeneratorParams& params() const { return params_; }
+
+  // Fills out (resized to region.size()) with the voxels of the half-open
+  // region, in Box order. An empty region yields an empty box.
+  void generate(const Region& region, Box& out) const;
+
+  // The reference path: one voxel, the same value generate() produces.
+  Voxel voxel_at(Vec3i p) const;
+
+  // The surface height of column (x, z) before 3D overhangs and caves (the
+  // terrain density at (x, y, z) is positive for y a little below it), and its
+  // biome. Cheap 2D queries for spawn points, maps and tests.
+  float surface_height(std::int32_t x, std::int32_t z) const;
+  Biome biome_at(std::int32_t x, std::int32_t z) const;
+  // The y below which open air in this column is water (sea or lake level).
+  std::int32_t water_level(std::int32_t x, std::int32_t z) const;
+
+  // Parameters and version as "key=value" lines for the world's metadata.
+  std::string to_metadata() const;
+
+  // Parses to_metadata() output. Unknown keys, duplicates, missing keys,
+  // malformed or out-of-range values and a different generator version are
+  // rejected: the DecodeError carries the byte offset of the bad line and, if
+  // `message` is not null, *message names the line and key.
+  static Result<TerrainGenerator> from_metadata(std::string_view text, std::string* message = nullptr);
+
+ private:
+  struct Surface;  // 2D fields of a column
+  struct Column;   // what the voxel loop needs about a column
+  Surface surface(std::int32_t x, std::int32_t z) const;
+  float raw_height(double px, double pz, Surface* s) const;
+  Column column(const Surface& c, float h_xm, float h_xp, float h_zm, float h_zp) const;
+  void lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const;
+  Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners) const;
+
+  GeneratorParams params_;
+  double inv_scale_;          // 1 / terrain_scale
+  std::uint32_t seeds_[16];   // one per noise field
+};
+
+}  // namespace terrane
