@@ -4,31 +4,54 @@
 //
 // Each of the N² rows along x, addressed by (y, z), has a 2-byte header:
 //
-//   bit 15 14 13 ........ 0
-//        0  -  -  . material   uniform row: N voxels of `material`, default occupancy
-//        1  0  offset          raw row: N voxels at raw_[offset * N] (2 bytes each)
-//        1  1  offset          byte row: N materials at bytes_[offset * N], every
-//                              voxel with its material's default occupancy
+//   bit 15 14 ........... 0
+//        0  -  . material      uniform row: N voxels of `material`, default occupancy
+//        1  offset             allocated row: its record starts at data_[offset]
+//                              (offset in voxels, i.e. 2-byte units: 15 bits
+//                              address 64 KiB, the size of an all-raw 32³ box)
+//
+// An allocated row's record says what it is in its first byte:
+//
+//   raw record (first byte < 0x40, it is voxel 0's material), 2N bytes:
+//     +------+------+------+------+-- ... --+
+//     | m0   | occ0 | m1   | occ1 |         |   read_row returns a pointer to it
+//     +------+------+------+------+-- ... --+
+//
+//   palette record (first byte >= 0x40), padded to an even length:
+//     +-----+-----------+---------------+-------------------+
+//     | tag | P mats    | P occupancies | G index bytes     |
+//     +-----+-----------+---------------+-------------------+
+//     tag bits 7-6: index width b (1 = 1 bit, 2 = 2 bits, 3 = 4 bits)
+//         bit 5: occupancies present (else each voxel has its material's
+//                default occupancy and the occupancy bytes are absent)
+//         bit 4: 0;  bits 3-0: P - 1 (P = 1..16 palette entries)
+//     G = ceil(N·b / 8) index bytes. 1 bit: voxel x is bit x % 8 of byte
+//     x / 8. 2 and 4 bits: voxel x's index is the b bits at bit b·(x / G) of
+//     byte x % G, which for N = 32 puts voxels 0..15 and 16..31 in the two
+//     halves of an SSE register after a few shifts. The SSSE3 decoder expands
+//     a row with shifts, masks and pshufb lookups, without branches.
 //
 // Uniform rows cost only their header; read_row returns a pointer into a
-// shared read-only table of pre-filled rows per material, so it stays
-// constant-time. Byte rows are this implementation's addition to the article:
-// rows whose voxels all have default occupancy (ores, strata, block worlds)
-// keep one byte per voxel and are widened into the caller's scratch row on
-// read, still constant-time. A box whose rows are all uniform with one
-// material owns no headers at all: it points at a shared header table
-// ("a uniform chunk stores one value").
+// shared read-only table of pre-filled rows per material. Raw rows are read
+// in place; palette rows are decoded into the caller's scratch row. Every
+// path is constant-time with no allocation. Identical records inside a box
+// are stored once (several headers share an offset). A box whose rows are all
+// uniform with one material owns no headers at all: it points at a shared
+// header table ("a uniform chunk stores one value").
 //
 // Writes are two-stage, as in the article: the rows a write touches are
-// materialised and classified first, storage is reallocated at most once when
-// the row classes change, then written. A box that keeps being repacked by
-// small writes switches to unpacked mode (every row raw, writes in place, no
-// repacking) until compact() is called.
+// materialised, modified and encoded first; if every touched row keeps its
+// record size (and its record is not shared) the new records are written in
+// place, otherwise the box is rebuilt once with one allocation. A box that
+// keeps being rebuilt by small writes switches to unpacked mode (every row a
+// raw record of its own at offset r·N, writes in place, no repacking) until
+// compact() is called.
 //
-// Invariants: headers_ points at N² headers; raw_count_ and byte_count_ are
-// the exact sizes (in rows) of raw_ and bytes_, every allocated header's
-// offset is below its array's count and each slot is used by one row only;
-// no stored voxel is Air with non-zero occupancy.
+// Invariants: headers_ points at N² headers; every allocated header's offset
+// starts a valid record inside data_; data_ holds data_units_ voxels of which
+// the last kPadUnits are padding so the SIMD decoder may over-read; records
+// are shared only outside unpacked mode; no stored voxel is Air with non-zero
+// occupancy; every material is < 64.
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
@@ -36,11 +59,6 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
-#include <span>
-
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
 
 #include "common/voxel.h"
 
@@ -51,31 +69,59 @@ namespace row_packed_detail {
 // largest box (32), shared read-only by every box.
 extern const std::array<std::array<Voxel, 32>, kMaterialCount> kUniformRows;
 inline const Voxel* uniform_row(Material material) { return kUniformRows[material & 63].data(); }
-// Byte-row widening; the scalar path is the reference the SIMD path is tested
-// against. n is a multiple of 16 for the SSE2 path.
-inline void widen_scalar(const std::uint8_t* materials, Voxel* out, int n) {
-  for (int i = 0; i < n; ++i) out[i] = solid(materials[i]);
-}
-#if defined(__SSE2__)
-inline void widen_sse2(const std::uint8_t* materials, Voxel* out, int n) {
-  const __m128i zero = _mm_setzero_si128();
-  const __m128i ones = _mm_set1_epi8(-1);
-  for (int i = 0; i < n; i += 16) {
-    const __m128i m = _mm_loadu_si128(reinterpret_cast<const __m128i*>(materials + i));
-    const __m128i occ = _mm_andnot_si128(_mm_cmpeq_epi8(m, zero), ones);  // 255 unless Air
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i), _mm_unpacklo_epi8(m, occ));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i + 8), _mm_unpackhi_epi8(m, occ));
-  }
-}
-#endif
 // Per-size tables of all-uniform headers, for boxes that own none.
 const std::uint16_t* uniform_headers(int size, Material material);
+
+inline constexpr std::uint8_t kPaletteTag = 0x40;  // first record bytes below it are raw
+inline constexpr std::uint8_t kTagOccupancy = 0x20;
+inline constexpr int kMaxPalette = 16;
+
+// Bytes of the record starting at rec (even). Precondition: a valid record for n.
+inline int record_bytes(const std::uint8_t* rec, int n) {
+  const unsigned tag = rec[0];
+  if (tag < kPaletteTag) return 2 * n;
+  const int bits = (tag >> 6) == 3 ? 4 : static_cast<int>(tag >> 6);
+  const int p = static_cast<int>(tag & 15) + 1;
+  const int size = 1 + p * ((tag & kTagOccupancy) ? 2 : 1) + (n * bits + 7) / 8;
+  return (size + 1) & ~1;
+}
+
+// Encodes row (n voxels, Air already normalised). Returns 0 for a uniform row
+// (default occupancy, one material: the caller stores only a header), else
+// the record's even length, written to out (capacity >= 2n bytes). Chooses a
+// palette record when it is shorter than the raw one.
+int encode_row(const Voxel* row, int n, std::uint8_t* out);
+
+// Palette record -> n voxels. The scalar decoder is the reference.
+void decode_palette_scalar(const std::uint8_t* rec, Voxel* out, int n);
+#if defined(__x86_64__) || defined(__i386__)
+// SSSE3 decoder for n = 32; may read up to 16 bytes past the record.
+// Call only when kHaveSsse3.
+void decode_palette32_ssse3(const std::uint8_t* rec, Voxel* out);
+extern const bool kHaveSsse3;
+#endif
+
+// One voxel of a palette record (constant time).
+inline Voxel palette_voxel(const std::uint8_t* rec, int n, int x) {
+  const unsigned tag = rec[0];
+  const int bits = (tag >> 6) == 3 ? 4 : static_cast<int>(tag >> 6);
+  const int p = static_cast<int>(tag & 15) + 1;
+  const bool occ = (tag & kTagOccupancy) != 0;
+  const int groups = (n * bits + 7) / 8;
+  const std::uint8_t* idx = rec + 1 + p * (occ ? 2 : 1);
+  const int i = bits == 1 ? (idx[x / 8] >> (x % 8)) & 1 : (idx[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
+  const Material m = rec[1 + i];
+  return Voxel{m, occ ? rec[1 + p + i] : default_occupancy(m)};
+}
 }  // namespace row_packed_detail
 
 struct RowPackedStats {
-  std::size_t uniform_rows = 0;
-  std::size_t raw_rows = 0;
-  std::size_t byte_rows = 0;
+  std::size_t uniform_rows = 0;  // header only
+  std::size_t raw_rows = 0;      // allocated rows carrying per-voxel occupancy (raw or palette record)
+  std::size_t byte_rows = 0;     // allocated rows of default occupancy (palette, or raw when > 16 materials)
+  std::size_t palette_rows = 0;  // allocated rows stored as palette records
+  std::size_t shared_rows = 0;   // allocated rows whose record an earlier row already uses
+  std::size_t data_bytes = 0;    // record bytes including padding
 };
 
 template <int N>
@@ -85,14 +131,17 @@ class RowPackedBox {
   static constexpr int kSize = N;
   static constexpr int kRows = N * N;
   static constexpr std::uint16_t kAllocated = 0x8000;
-  static constexpr std::uint16_t kByteRow = 0x4000;
-  static constexpr std::uint16_t kOffsetMask = 0x3FFF;
+  static constexpr std::uint16_t kOffsetMask = 0x7FFF;
+  // Voxels of padding after the records: the SSSE3 decoder (N = 32 only)
+  // loads 16 bytes at the palette, the occupancies and the indices, at most
+  // 12 bytes past the shortest record.
+  static constexpr std::uint32_t kPadUnits = N == 32 ? 8 : 0;
   // Repacks allowed between two compact() calls before the box unpacks
   // itself for good: enough that ordinary editing stays packed, few enough
   // that a stream of tiny writes costs at most a bounded number of copies.
   static constexpr int kRepackBudget = 32;
 
-  // A scratch row for read_row to widen byte rows into.
+  // A scratch row for read_row to decode palette rows into.
   using Row = std::array<Voxel, N>;
 
   explicit RowPackedBox(Material fill = kAir);
@@ -105,28 +154,31 @@ class RowPackedBox {
   RowPackedBox clone() const;
 
   // The article's readRow: the N voxels of row (y, z). Returns a pointer into
-  // the box, into the shared uniform rows, or (for byte rows) into scratch.
+  // the box, into the shared uniform rows, or (for palette rows) into scratch.
   // The pointer is valid until the next write or until scratch is reused.
   const Voxel* read_row(int y, int z, Row& scratch) const {
     const std::uint16_t h = headers_[y * N + z];
     if (!(h & kAllocated)) return row_packed_detail::uniform_row(static_cast<Material>(h & 63));
-    const std::size_t at = static_cast<std::size_t>(h & kOffsetMask) * N;
-    if (!(h & kByteRow)) return raw_.get() + at;
-    widen(bytes_.get() + at, scratch.data());
+    const Voxel* rec = data_.get() + (h & kOffsetMask);
+    const auto* bytes = reinterpret_cast<const std::uint8_t*>(rec);
+    if (bytes[0] < row_packed_detail::kPaletteTag) return rec;
+    decode(bytes, scratch.data());
     return scratch.data();
   }
 
   Voxel get(int x, int y, int z) const {
     const std::uint16_t h = headers_[y * N + z];
     if (!(h & kAllocated)) return solid(static_cast<Material>(h & 63));
-    const std::size_t at = static_cast<std::size_t>(h & kOffsetMask) * N + x;
-    return (h & kByteRow) ? solid(bytes_[at]) : raw_[at];
+    const Voxel* rec = data_.get() + (h & kOffsetMask);
+    const auto* bytes = reinterpret_cast<const std::uint8_t*>(rec);
+    if (bytes[0] < row_packed_detail::kPaletteTag) return rec[x];
+    return row_packed_detail::palette_voxel(bytes, N, x);
   }
 
   // Rewrites rows y in [y0, y1), z in [z0, z1): for each, fn(y, z, row)
   // receives the row's current N voxels in `row` and leaves the new content
   // there. Air occupancy is normalised afterwards. Two-stage as described
-  // above. Preconditions: 0 <= y0 <= y1 <= N, same for z.
+  // above. Preconditions: 0 <= y0 <= y1 <= N, same for z; materials < 64.
   template <class RowFn>
   void modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn);
 
@@ -140,52 +192,48 @@ class RowPackedBox {
   Material uniform_material() const { return static_cast<Material>(headers_[0] & 63); }
   bool unpacked() const { return unpacked_; }
 
-  // Pessimistic full unpack: every row raw, so writes never repack.
+  // Pessimistic full unpack: every row its own raw record, so writes never repack.
   void unpack_all();
-  // Repacks every row to its smallest class and leaves unpacked mode.
+  // Repacks every row to its smallest record, shares identical records and
+  // leaves unpacked mode.
   void compact();
 
-  // Every heap byte this box owns (headers, raw rows, byte rows), not
-  // counting sizeof(*this).
+  // Every heap byte this box owns (headers, records, padding), not counting
+  // sizeof(*this).
   std::size_t heap_bytes() const;
   RowPackedStats stats() const;
 
  private:
-  enum class RowClass : std::uint8_t { kUniform, kRaw, kByte };
-  struct Classified {
-    RowClass cls;
-    Material material;  // for kUniform
-  };
-
-  // Byte row -> voxels: each material with its default occupancy.
-  static void widen(const std::uint8_t* materials, Voxel* out) {
-#if defined(__SSE2__)
-    if constexpr (N % 16 == 0) {
-      row_packed_detail::widen_sse2(materials, out, N);
-      return;
+  static void decode(const std::uint8_t* rec, Voxel* out) {
+#if defined(__x86_64__) || defined(__i386__)
+    if constexpr (N == 32) {
+      if (row_packed_detail::kHaveSsse3) {
+        row_packed_detail::decode_palette32_ssse3(rec, out);
+        return;
+      }
     }
 #endif
-    row_packed_detail::widen_scalar(materials, out, N);
+    row_packed_detail::decode_palette_scalar(rec, out, N);
   }
-  static Classified classify(const Voxel* row);
+  const std::uint8_t* record(std::uint16_t h) const {
+    return reinterpret_cast<const std::uint8_t*>(data_.get() + (h & kOffsetMask));
+  }
   void read_row_into(int y, int z, Voxel* out) const;
-  RowClass class_of(std::uint16_t h) const {
-    return !(h & kAllocated) ? RowClass::kUniform : ((h & kByteRow) ? RowClass::kByte : RowClass::kRaw);
-  }
-  // Reallocates storage once so that the rows in y0..y1 x z0..z1 take the
-  // new content and classes given (row-major in that rectangle); other rows
-  // keep theirs. Becomes uniform when every row ends up uniform alike.
-  void rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content, const Classified* classes);
+  // Rebuilds all storage at once: rows in the rectangle y0..y1 × z0..z1 take
+  // the encodings given (row-major in that rectangle: sizes[i] == 0 means
+  // uniform with materials[i], else the record at records + i·2N); other rows
+  // keep theirs. Identical records are stored once. Becomes uniform when every
+  // row ends up uniform alike.
+  void rebuild_rect(int y0, int y1, int z0, int z1, const std::uint8_t* records, const std::uint16_t* sizes,
+                    const Material* materials);
   void become_uniform(Material m);
   std::uint16_t* mutable_headers();
 
-  const std::uint16_t* headers_;        // N² headers: owned_headers_ or a shared table
+  const std::uint16_t* headers_;  // N² headers: owned_headers_ or a shared table
   std::unique_ptr<std::uint16_t[]> owned_headers_;
-  std::unique_ptr<Voxel[]> raw_;
-  std::unique_ptr<std::uint8_t[]> bytes_;
-  std::uint16_t raw_count_ = 0;   // rows in raw_
-  std::uint16_t byte_count_ = 0;  // rows in bytes_
-  std::uint16_t repacks_ = 0;     // since the last compact()
+  std::unique_ptr<Voxel[]> data_;  // records, then kPadUnits of padding
+  std::uint32_t data_units_ = 0;   // voxels allocated in data_ (0 when none)
+  std::uint16_t repacks_ = 0;      // since the last compact()
   bool owns_headers_ = false;
   bool unpacked_ = false;
 };

@@ -16,8 +16,7 @@ RowPackedBox<N> RowPackedBox<N>::clone() const {
   RowPackedBox copy(kAir);
   copy.unpacked_ = unpacked_;
   copy.repacks_ = repacks_;
-  copy.raw_count_ = raw_count_;
-  copy.byte_count_ = byte_count_;
+  copy.data_units_ = data_units_;
   if (owns_headers_) {
     copy.owned_headers_ = std::make_unique<std::uint16_t[]>(kRows);
     std::memcpy(copy.owned_headers_.get(), headers_, sizeof(std::uint16_t) * kRows);
@@ -26,43 +25,17 @@ RowPackedBox<N> RowPackedBox<N>::clone() const {
   } else {
     copy.headers_ = headers_;
   }
-  if (raw_count_ > 0) {
-    copy.raw_ = std::make_unique<Voxel[]>(std::size_t{raw_count_} * N);
-    std::memcpy(copy.raw_.get(), raw_.get(), sizeof(Voxel) * raw_count_ * N);
-  }
-  if (byte_count_ > 0) {
-    copy.bytes_ = std::make_unique<std::uint8_t[]>(std::size_t{byte_count_} * N);
-    std::memcpy(copy.bytes_.get(), bytes_.get(), std::size_t{byte_count_} * N);
+  if (data_units_ > 0) {
+    copy.data_ = std::make_unique<Voxel[]>(data_units_);
+    std::memcpy(copy.data_.get(), data_.get(), sizeof(Voxel) * data_units_);
   }
   return copy;
 }
 
 template <int N>
 void RowPackedBox<N>::read_row_into(int y, int z, Voxel* out) const {
-  const std::uint16_t h = headers_[y * N + z];
-  if (!(h & kAllocated)) {
-    std::memcpy(out, row_packed_detail::uniform_row(static_cast<Material>(h & 63)), sizeof(Voxel) * N);
-    return;
-  }
-  const std::size_t at = static_cast<std::size_t>(h & kOffsetMask) * N;
-  if (h & kByteRow) {
-    widen(bytes_.get() + at, out);
-  } else {
-    std::memcpy(out, raw_.get() + at, sizeof(Voxel) * N);
-  }
-}
-
-template <int N>
-typename RowPackedBox<N>::Classified RowPackedBox<N>::classify(const Voxel* row) {
-  bool uniform = true;
-  bool all_default = true;
-  const Voxel first = row[0];
-  for (int i = 0; i < N; ++i) {
-    uniform &= row[i] == first;
-    all_default &= has_default_occupancy(row[i]);
-  }
-  if (uniform && all_default) return {RowClass::kUniform, first.material};
-  return {all_default ? RowClass::kByte : RowClass::kRaw, kAir};
+  Row scratch;
+  std::memcpy(out, read_row(y, z, scratch), sizeof(Voxel) * N);
 }
 
 template <int N>
@@ -79,9 +52,8 @@ std::uint16_t* RowPackedBox<N>::mutable_headers() {
 template <int N>
 void RowPackedBox<N>::become_uniform(Material m) {
   owned_headers_.reset();
-  raw_.reset();
-  bytes_.reset();
-  raw_count_ = byte_count_ = 0;
+  data_.reset();
+  data_units_ = 0;
   owns_headers_ = false;
   unpacked_ = false;
   headers_ = row_packed_detail::uniform_headers(N, m);
@@ -100,12 +72,11 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
   const int nz = z1 - z0;
   if (ny <= 0 || nz <= 0) return;
   const int count = ny * nz;
+  auto row_of = [&](int i) { return (y0 + i / nz) * N + z0 + i % nz; };
 
-  // Stage 1: materialise and modify the touched rows, then classify them.
+  // Stage 1: materialise and modify the touched rows.
   thread_local std::vector<Voxel> content;
-  thread_local std::vector<Classified> classes;
   content.resize(static_cast<std::size_t>(count) * N);
-  classes.resize(static_cast<std::size_t>(count));
   for (int y = y0; y < y1; ++y) {
     for (int z = z0; z < z1; ++z) {
       Voxel* row = content.data() + static_cast<std::size_t>((y - y0) * nz + (z - z0)) * N;
@@ -116,55 +87,69 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
   }
 
   if (unpacked_) {
-    // Every row is raw: write in place, never repack.
-    for (int y = y0; y < y1; ++y)
-      for (int z = z0; z < z1; ++z)
-        std::memcpy(raw_.get() + static_cast<std::size_t>(headers_[y * N + z] & kOffsetMask) * N,
-                    content.data() + static_cast<std::size_t>((y - y0) * nz + (z - z0)) * N,
-                    sizeof(Voxel) * N);
+    // Every row is a raw record of its own: write in place, never repack.
+    for (int i = 0; i < count; ++i)
+      std::memcpy(data_.get() + (headers_[row_of(i)] & kOffsetMask),
+                  content.data() + static_cast<std::size_t>(i) * N, sizeof(Voxel) * N);
     return;
   }
 
-  bool same_classes = true;
-  bool uniform_changed = false;
+  // Stage 2: encode the rows and see whether storage has to move.
+  thread_local std::vector<std::uint8_t> records;
+  thread_local std::vector<std::uint16_t> sizes;
+  thread_local std::vector<Material> materials;
+  records.resize(static_cast<std::size_t>(count) * 2 * N);
+  sizes.resize(static_cast<std::size_t>(count));
+  materials.resize(static_cast<std::size_t>(count));
+  bool in_place = true;
+  bool headers_change = false;
+  bool records_change = false;
   for (int i = 0; i < count; ++i) {
-    classes[i] = classify(content.data() + static_cast<std::size_t>(i) * N);
-    const int r = (y0 + i / nz) * N + z0 + i % nz;
-    const std::uint16_t h = headers_[r];
-    if (classes[i].cls != class_of(h)) {
-      same_classes = false;
-    } else if (classes[i].cls == RowClass::kUniform && (h & 63) != classes[i].material) {
-      uniform_changed = true;
+    const Voxel* row = content.data() + static_cast<std::size_t>(i) * N;
+    std::uint8_t* rec = records.data() + static_cast<std::size_t>(i) * 2 * N;
+    sizes[i] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, rec));
+    materials[i] = row[0].material;
+    const std::uint16_t h = headers_[row_of(i)];
+    if (sizes[i] == 0) {
+      if (h & kAllocated) in_place = false;
+      else if ((h & 63) != materials[i]) headers_change = true;
+    } else if (!(h & kAllocated) || row_packed_detail::record_bytes(record(h), N) != sizes[i]) {
+      in_place = false;
+    } else if (std::memcmp(record(h), rec, static_cast<std::size_t>(sizes[i])) != 0) {
+      records_change = true;
+    }
+  }
+  if (in_place && records_change) {
+    // A changed record may be overwritten only if no other row shares it.
+    thread_local std::vector<std::uint8_t> refs;
+    refs.assign(data_units_, 0);
+    for (int r = 0; r < kRows; ++r)
+      if (headers_[r] & kAllocated) refs[headers_[r] & kOffsetMask] += refs[headers_[r] & kOffsetMask] < 2;
+    for (int i = 0; i < count && in_place; ++i) {
+      const std::uint16_t h = headers_[row_of(i)];
+      if (sizes[i] > 0 && refs[h & kOffsetMask] > 1) in_place = false;
     }
   }
 
-  if (!same_classes) {
-    // Stage 2: one reallocation for the whole write.
-    rebuild_rect(y0, y1, z0, z1, content.data(), classes.data());
+  if (!in_place) {
+    // Stage 3a: one reallocation for the whole write.
+    rebuild_rect(y0, y1, z0, z1, records.data(), sizes.data(), materials.data());
     if (++repacks_ > kRepackBudget) unpack_all();
     return;
   }
 
-  // Stage 3 (in place): same row classes, so no storage moves.
-  std::uint16_t* headers = uniform_changed ? mutable_headers() : nullptr;
+  // Stage 3b: same record sizes, nothing shared: write in place.
+  std::uint16_t* headers = headers_change ? mutable_headers() : nullptr;
   for (int i = 0; i < count; ++i) {
-    const int r = (y0 + i / nz) * N + z0 + i % nz;
-    const Voxel* src = content.data() + static_cast<std::size_t>(i) * N;
-    const std::uint16_t h = headers_[r];
-    const std::size_t at = static_cast<std::size_t>(h & kOffsetMask) * N;
-    switch (classes[i].cls) {
-      case RowClass::kUniform:
-        if (headers != nullptr) headers[r] = classes[i].material;
-        break;
-      case RowClass::kRaw:
-        std::memcpy(raw_.get() + at, src, sizeof(Voxel) * N);
-        break;
-      case RowClass::kByte:
-        for (int k = 0; k < N; ++k) bytes_[at + k] = src[k].material;
-        break;
+    const int r = row_of(i);
+    if (sizes[i] == 0) {
+      if (headers != nullptr) headers[r] = materials[i];
+    } else {
+      std::memcpy(data_.get() + (headers_[r] & kOffsetMask), records.data() + static_cast<std::size_t>(i) * 2 * N,
+                  std::size_t{sizes[i]});
     }
   }
-  if (uniform_changed && raw_count_ == 0 && byte_count_ == 0) {
+  if (headers_change && data_units_ == 0) {
     const std::uint16_t first = headers_[0];
     if (std::all_of(headers_, headers_ + kRows, [&](std::uint16_t h) { return h == first; }))
       become_uniform(static_cast<Material>(first & 63));
@@ -172,123 +157,139 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
 }
 
 template <int N>
-void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content,
-                                   const Classified* classes) {
+void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const std::uint8_t* records, const std::uint16_t* sizes,
+                                   const Material* materials) {
   const int nz = z1 - z0;
-  auto touched_index = [&](int y, int z) -> int {
-    return (y >= y0 && y < y1 && z >= z0 && z < z1) ? (y - y0) * nz + (z - z0) : -1;
-  };
-  // Count the new layout first so each array is allocated once, exactly.
-  int raw_rows = 0, byte_rows = 0;
-  for (int y = 0; y < N; ++y) {
-    for (int z = 0; z < N; ++z) {
-      const int i = touched_index(y, z);
-      const RowClass c = i >= 0 ? classes[i].cls : class_of(headers_[y * N + z]);
-      raw_rows += c == RowClass::kRaw;
-      byte_rows += c == RowClass::kByte;
-    }
-  }
+  // New records go to a scratch buffer first (at most one raw record per
+  // row), deduplicated through an open-addressing table of offsets + 1.
+  constexpr std::size_t kTableSize = 2 * kRows;  // power of two, load <= 1/2
+  thread_local std::vector<std::uint8_t> buf;
+  thread_local std::vector<std::uint16_t> table;
+  buf.resize(std::size_t{kRows} * 2 * N);
+  table.assign(kTableSize, 0);
   auto headers = std::make_unique<std::uint16_t[]>(kRows);
-  std::unique_ptr<Voxel[]> raw = raw_rows ? std::make_unique<Voxel[]>(std::size_t(raw_rows) * N) : nullptr;
-  std::unique_ptr<std::uint8_t[]> bytes =
-      byte_rows ? std::make_unique<std::uint8_t[]>(std::size_t(byte_rows) * N) : nullptr;
-  std::uint16_t next_raw = 0, next_byte = 0;
-  Row scratch;
-  bool all_uniform_same = raw_rows == 0 && byte_rows == 0;
+  std::size_t used = 0;  // bytes in buf, always even
+  bool all_uniform_same = true;
   for (int y = 0; y < N; ++y) {
     for (int z = 0; z < N; ++z) {
       const int r = y * N + z;
-      const int i = touched_index(y, z);
-      const std::uint16_t old = headers_[r];
-      const Voxel* src;
-      Classified c;
-      if (i >= 0) {
-        src = content + static_cast<std::size_t>(i) * N;
-        c = classes[i];
+      const bool touched = y >= y0 && y < y1 && z >= z0 && z < z1;
+      const int i = touched ? (y - y0) * nz + (z - z0) : -1;
+      const std::uint8_t* src = nullptr;
+      int size = 0;
+      if (touched) {
+        size = sizes[i];
+        if (size == 0) headers[r] = materials[i];
+        src = records + static_cast<std::size_t>(i) * 2 * N;
+      } else if (const std::uint16_t h = headers_[r]; !(h & kAllocated)) {
+        headers[r] = h;
       } else {
-        src = read_row(y, z, scratch);
-        c = {class_of(old), static_cast<Material>(old & 63)};
+        src = record(h);
+        size = row_packed_detail::record_bytes(src, N);
       }
-      switch (c.cls) {
-        case RowClass::kUniform:
-          headers[r] = c.material;
-          break;
-        case RowClass::kRaw:
-          headers[r] = static_cast<std::uint16_t>(kAllocated | next_raw);
-          std::memcpy(raw.get() + std::size_t{next_raw} * N, src, sizeof(Voxel) * N);
-          ++next_raw;
-          break;
-        case RowClass::kByte:
-          headers[r] = static_cast<std::uint16_t>(kAllocated | kByteRow | next_byte);
-          for (int k = 0; k < N; ++k) bytes[std::size_t{next_byte} * N + k] = src[k].material;
-          ++next_byte;
-          break;
+      if (size > 0) {
+        std::uint32_t hash = 2166136261u;  // FNV-1a
+        for (int k = 0; k < size; ++k) hash = (hash ^ src[k]) * 16777619u;
+        for (std::size_t slot = hash & (kTableSize - 1);; slot = (slot + 1) & (kTableSize - 1)) {
+          const std::uint16_t e = table[slot];
+          if (e == 0) {
+            std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
+            headers[r] = static_cast<std::uint16_t>(kAllocated | (used / 2));
+            table[slot] = static_cast<std::uint16_t>(used / 2 + 1);
+            used += static_cast<std::size_t>(size);
+            break;
+          }
+          const std::uint8_t* cand = buf.data() + std::size_t{e - 1u} * 2;
+          if (row_packed_detail::record_bytes(cand, N) == size &&
+              std::memcmp(cand, src, static_cast<std::size_t>(size)) == 0) {
+            headers[r] = static_cast<std::uint16_t>(kAllocated | (e - 1u));
+            break;
+          }
+        }
       }
       all_uniform_same &= headers[r] == headers[0];
     }
   }
-  if (all_uniform_same) {
+  if (all_uniform_same && !(headers[0] & kAllocated)) {
     become_uniform(static_cast<Material>(headers[0] & 63));
     return;
   }
   owned_headers_ = std::move(headers);
   headers_ = owned_headers_.get();
   owns_headers_ = true;
-  raw_ = std::move(raw);
-  bytes_ = std::move(bytes);
-  raw_count_ = next_raw;
-  byte_count_ = next_byte;
+  if (used == 0) {
+    data_.reset();
+    data_units_ = 0;
+    return;
+  }
+  data_units_ = static_cast<std::uint32_t>(used / 2) + kPadUnits;
+  data_ = std::make_unique<Voxel[]>(data_units_);  // value-initialised: padding is zero
+  std::memcpy(data_.get(), buf.data(), used);
 }
 
 template <int N>
 void RowPackedBox<N>::unpack_all() {
   auto headers = std::make_unique<std::uint16_t[]>(kRows);
-  auto raw = std::make_unique<Voxel[]>(std::size_t{kRows} * N);
+  const std::uint32_t units = std::uint32_t{kRows} * N + kPadUnits;
+  auto data = std::make_unique<Voxel[]>(units);
   for (int y = 0; y < N; ++y) {
     for (int z = 0; z < N; ++z) {
       const int r = y * N + z;
-      read_row_into(y, z, raw.get() + std::size_t(r) * N);
-      headers[r] = static_cast<std::uint16_t>(kAllocated | r);
+      read_row_into(y, z, data.get() + std::size_t(r) * N);
+      headers[r] = static_cast<std::uint16_t>(kAllocated | (r * N));
     }
   }
   owned_headers_ = std::move(headers);
   headers_ = owned_headers_.get();
   owns_headers_ = true;
-  raw_ = std::move(raw);
-  bytes_.reset();
-  raw_count_ = kRows;
-  byte_count_ = 0;
+  data_ = std::move(data);
+  data_units_ = units;
   unpacked_ = true;
 }
 
 template <int N>
 void RowPackedBox<N>::compact() {
   std::vector<Voxel> content(std::size_t{kRows} * N);
-  std::vector<Classified> classes(kRows);
-  for (int y = 0; y < N; ++y) {
-    for (int z = 0; z < N; ++z) {
-      const int r = y * N + z;
-      read_row_into(y, z, content.data() + std::size_t(r) * N);
-      classes[r] = classify(content.data() + std::size_t(r) * N);
-    }
+  std::vector<std::uint8_t> records(std::size_t{kRows} * 2 * N);
+  std::vector<std::uint16_t> sizes(kRows);
+  std::vector<Material> materials(kRows);
+  for (int r = 0; r < kRows; ++r) {
+    Voxel* row = content.data() + std::size_t(r) * N;
+    read_row_into(r / N, r % N, row);
+    sizes[r] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, records.data() + std::size_t(r) * 2 * N));
+    materials[r] = row[0].material;
   }
   unpacked_ = false;
   repacks_ = 0;
-  rebuild_rect(0, N, 0, N, content.data(), classes.data());
+  rebuild_rect(0, N, 0, N, records.data(), sizes.data(), materials.data());
 }
 
 template <int N>
 std::size_t RowPackedBox<N>::heap_bytes() const {
-  return (owns_headers_ ? sizeof(std::uint16_t) * kRows : 0) + sizeof(Voxel) * std::size_t{raw_count_} * N +
-         std::size_t{byte_count_} * N;
+  return (owns_headers_ ? sizeof(std::uint16_t) * kRows : 0) + sizeof(Voxel) * std::size_t{data_units_};
 }
 
 template <int N>
 RowPackedStats RowPackedBox<N>::stats() const {
   RowPackedStats s;
-  s.raw_rows = raw_count_;
-  s.byte_rows = byte_count_;
-  s.uniform_rows = static_cast<std::size_t>(kRows) - raw_count_ - byte_count_;
+  s.data_bytes = sizeof(Voxel) * std::size_t{data_units_};
+  std::vector<bool> seen(data_units_, false);
+  for (int r = 0; r < kRows; ++r) {
+    const std::uint16_t h = headers_[r];
+    if (!(h & kAllocated)) {
+      ++s.uniform_rows;
+      continue;
+    }
+    const std::uint8_t tag = record(h)[0];
+    if (tag < row_packed_detail::kPaletteTag || (tag & row_packed_detail::kTagOccupancy)) {
+      ++s.raw_rows;
+    } else {
+      ++s.byte_rows;
+    }
+    s.palette_rows += tag >= row_packed_detail::kPaletteTag;
+    s.shared_rows += seen[h & kOffsetMask];
+    seen[h & kOffsetMask] = true;
+  }
   return s;
 }
 

@@ -69,11 +69,26 @@ void print_memory(const std::string& name) {
   std::printf("  memory row-packed %10zu bytes  %.3f B/non-empty voxel  (map %zu, objects %zu, level0 %zu, mips %zu)\n",
               m.total(), static_cast<double>(m.total()) / ne, m.map_bytes, m.object_bytes, m.level0_bytes,
               m.mip_bytes);
-  const double rows = static_cast<double>(m.level0_rows.uniform_rows + m.level0_rows.raw_rows + m.level0_rows.byte_rows);
-  std::printf("  level-0 rows: uniform %.1f%%, byte %.1f%%, raw %.1f%%\n",
-              100.0 * static_cast<double>(m.level0_rows.uniform_rows) / rows,
-              100.0 * static_cast<double>(m.level0_rows.byte_rows) / rows,
-              100.0 * static_cast<double>(m.level0_rows.raw_rows) / rows);
+  RowPackedStats s;  // level-0 row forms over all chunks
+  d.grid->for_each_chunk([&](Vec3i, const Chunk& c) {
+    const RowPackedStats cs = c.level0().stats();
+    s.uniform_rows += cs.uniform_rows;
+    s.raw_rows += cs.raw_rows;
+    s.byte_rows += cs.byte_rows;
+    s.palette_rows += cs.palette_rows;
+    s.shared_rows += cs.shared_rows;
+    s.data_bytes += cs.data_bytes;
+  });
+  const double rows = static_cast<double>(s.uniform_rows + s.raw_rows + s.byte_rows);
+  const std::size_t headers = m.level0_bytes - s.data_bytes;
+  std::printf("  level-0 rows: uniform %.1f%%, default occupancy %.1f%%, with occupancy %.1f%%; "
+              "palette records %.1f%%, shared records %.1f%%\n",
+              100.0 * static_cast<double>(s.uniform_rows) / rows, 100.0 * static_cast<double>(s.byte_rows) / rows,
+              100.0 * static_cast<double>(s.raw_rows) / rows, 100.0 * static_cast<double>(s.palette_rows) / rows,
+              100.0 * static_cast<double>(s.shared_rows) / rows);
+  std::printf("  level-0 bytes: headers %zu (%.3f B/nev), records %zu (%.3f B/nev); mips %.3f B/nev\n", headers,
+              static_cast<double>(headers) / ne, s.data_bytes, static_cast<double>(s.data_bytes) / ne,
+              static_cast<double>(m.mip_bytes) / ne);
 }
 
 // Consumes a row the way meshing or physics would: touches every voxel.
