@@ -34,6 +34,17 @@ inline Region chunk_region(Vec3i chunk_pos) {
   return Region::from_min_size(chunk_origin(chunk_pos), {kChunkSize, kChunkSize, kChunkSize});
 }
 
+// Calls fn(Vec3i chunk_pos) for every chunk overlapping a non-empty region,
+// y outermost, then z, then x.
+template <class F>
+void for_each_chunk_in(const Region& r, F&& fn) {
+  if (r.empty()) return;
+  const Vec3i c0 = chunk_of(r.min), c1 = chunk_of(r.max - Vec3i{1, 1, 1});
+  for (int y = c0.y; y <= c1.y; ++y)
+    for (int z = c0.z; z <= c1.z; ++z)
+      for (int x = c0.x; x <= c1.x; ++x) fn(Vec3i{x, y, z});
+}
+
 // The downsampling rule above, for the 8 children of one mip voxel.
 Voxel downsample(const Voxel children[8]);
 

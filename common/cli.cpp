@@ -79,21 +79,6 @@ double CommandLine::get_double(const std::string& name, double fallback, double 
   return v;
 }
 
-bool parse_int_list(const std::string& text, std::int32_t* out, int n) {
-  const char* p = text.data();
-  const char* end = text.data() + text.size();
-  for (int i = 0; i < n; ++i) {
-    auto [next, ec] = std::from_chars(p, end, out[i]);
-    if (ec != std::errc()) return false;
-    p = next;
-    if (i + 1 < n) {
-      if (p == end || *p != ',') return false;
-      ++p;
-    }
-  }
-  return p == end;
-}
-
 std::optional<Region> CommandLine::get_region(const std::string& name, std::string* error) const {
   auto it = values_.find(name);
   if (it == values_.end()) return std::nullopt;

@@ -3,7 +3,9 @@
 // typed getters that produce clear errors naming the option and the value.
 #pragma once
 
+#include <charconv>
 #include <cstdint>
+#include <string_view>
 #include <map>
 #include <optional>
 #include <set>
@@ -45,7 +47,22 @@ class CommandLine {
   std::vector<std::string> positional_;
 };
 
-// Parses "a,b,c,..." into exactly n 32-bit integers; false if malformed.
-bool parse_int_list(const std::string& text, std::int32_t* out, int n);
+// Parses "a,b,c,..." into exactly n integers; false if malformed or out of
+// the type's range.
+template <class Int>
+bool parse_int_list(std::string_view text, Int* out, int n) {
+  const char* p = text.data();
+  const char* end = text.data() + text.size();
+  for (int i = 0; i < n; ++i) {
+    auto [next, ec] = std::from_chars(p, end, out[i]);
+    if (ec != std::errc()) return false;
+    p = next;
+    if (i + 1 < n) {
+      if (p == end || *p != ',') return false;
+      ++p;
+    }
+  }
+  return p == end;
+}
 
 }  // namespace terrane

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <string>
 #include <utility>
 #include <variant>
@@ -29,12 +30,12 @@ struct DecodeError {
   std::string describe() const;  // "truncated at byte 12: run past end of box"
 };
 
-// A value or a DecodeError. Small, move-only where T is.
-template <class T>
-class [[nodiscard]] Result {
+// A value or an error E. Small, move-only where T is.
+template <class T, class E>
+class [[nodiscard]] BasicResult {
  public:
-  Result(T value) : v_(std::move(value)) {}             // NOLINT: implicit by design
-  Result(DecodeError error) : v_(std::move(error)) {}   // NOLINT: implicit by design
+  BasicResult(T value) : v_(std::move(value)) {}   // NOLINT: implicit by design
+  BasicResult(E error) : v_(std::move(error)) {}   // NOLINT: implicit by design
 
   bool ok() const { return v_.index() == 0; }
   explicit operator bool() const { return ok(); }
@@ -45,14 +46,29 @@ class [[nodiscard]] Result {
   const T& operator*() const& { return value(); }
   T* operator->() { return &value(); }
   const T* operator->() const { return &value(); }
-  const DecodeError& error() const { return std::get<1>(v_); }
+  const E& error() const { return std::get<1>(v_); }
 
  private:
-  std::variant<T, DecodeError> v_;
+  std::variant<T, E> v_;
 };
+
+// A value or a DecodeError: what every decoder of untrusted bytes returns.
+template <class T>
+using Result = BasicResult<T, DecodeError>;
+
+// A failed file or store operation: a message for people, naming the file
+// (and, for chunk data, the chunk), plus the DecodeError when the content
+// rather than the file system was at fault.
+struct FileError {
+  std::string message;
+  std::optional<DecodeError> decode;
+};
+template <class T>
+using FileResult = BasicResult<T, FileError>;
 
 // For decoders that write into a caller's buffer and return nothing else.
 struct Ok {};
 using Status = Result<Ok>;
+using FileStatus = FileResult<Ok>;
 
 }  // namespace terrane

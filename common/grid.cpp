@@ -36,30 +36,19 @@ void Grid::put_chunk(Vec3i chunk_pos, Chunk chunk) {
 }
 
 void Grid::read_box(Vec3i min, Box& out) const {
-  const Vec3i size = out.size();
-  if (size.x <= 0 || size.y <= 0 || size.z <= 0) return;
-  const Vec3i max = min + size;
-  const Vec3i c0 = chunk_of(min);
-  const Vec3i c1 = chunk_of(max - Vec3i{1, 1, 1});
-  for (int cy = c0.y; cy <= c1.y; ++cy) {
-    for (int cz = c0.z; cz <= c1.z; ++cz) {
-      for (int cx = c0.x; cx <= c1.x; ++cx) {
-        const Vec3i cp{cx, cy, cz};
-        const Vec3i origin = chunk_origin(cp);
-        const Vec3i lo = max3(min, origin);
-        const Vec3i hi = min3(max, origin + Vec3i{kChunkSize, kChunkSize, kChunkSize});
-        const Vec3i part = hi - lo;
-        const Vec3i out_offset = lo - min;
-        if (const Chunk* c = find_chunk(cp)) {
-          c->read_box(lo - origin, out, out_offset, part);
-        } else {
-          for (int y = 0; y < part.y; ++y)
-            for (int z = 0; z < part.z; ++z)
-              std::fill_n(out.write_row(out_offset.y + y, out_offset.z + z) + out_offset.x, part.x, Voxel{});
-        }
-      }
+  const Region r = Region::from_min_size(min, out.size());
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    const Region part = intersect(r, chunk_region(cp));
+    const Vec3i out_offset = part.min - min;
+    if (const Chunk* c = find_chunk(cp)) {
+      c->read_box(part.min - chunk_origin(cp), out, out_offset, part.size());
+      return;
     }
-  }
+    const Vec3i size = part.size();
+    for (int y = 0; y < size.y; ++y)
+      for (int z = 0; z < size.z; ++z)
+        std::fill_n(out.write_row(out_offset.y + y, out_offset.z + z) + out_offset.x, size.x, Voxel{});
+  });
 }
 
 void Grid::write_box(Vec3i min, const Box& src) {

@@ -123,28 +123,21 @@ class Grid {
 
 template <class VoxelFn>
 void Grid::modify(const Region& region, VoxelFn&& fn) {
-  if (region.empty()) return;
-  const Vec3i c0 = chunk_of(region.min);
-  const Vec3i c1 = chunk_of(region.max - Vec3i{1, 1, 1});
-  for (int cy = c0.y; cy <= c1.y; ++cy) {
-    for (int cz = c0.z; cz <= c1.z; ++cz) {
-      for (int cx = c0.x; cx <= c1.x; ++cx) {
-        const Vec3i cp{cx, cy, cz};
-        const Vec3i origin = chunk_origin(cp);
-        const Region local{region.min - origin, region.max - origin};
-        auto it = chunks_.find(cp);
-        if (it == chunks_.end()) {
-          // Only materialise a chunk if the edit puts something in it.
-          auto chunk = std::make_unique<Chunk>();
-          chunk->modify(local, [&](Vec3i l, Voxel old) { return fn(l + origin, old); });
-          if (!chunk->empty()) chunks_.emplace(cp, std::move(chunk));
-          continue;
-        }
-        it->second->modify(local, [&](Vec3i l, Voxel old) { return fn(l + origin, old); });
-        if (it->second->empty()) chunks_.erase(it);
-      }
+  for_each_chunk_in(region, [&](Vec3i cp) {
+    const Vec3i origin = chunk_origin(cp);
+    const Region local{region.min - origin, region.max - origin};
+    auto shifted = [&](Vec3i l, Voxel old) { return fn(l + origin, old); };
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end()) {
+      // Only materialise a chunk if the edit puts something in it.
+      auto chunk = std::make_unique<Chunk>();
+      chunk->modify(local, shifted);
+      if (!chunk->empty()) chunks_.emplace(cp, std::move(chunk));
+      return;
     }
-  }
+    it->second->modify(local, shifted);
+    if (it->second->empty()) chunks_.erase(it);
+  });
 }
 
 }  // namespace terrane

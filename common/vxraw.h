@@ -48,37 +48,6 @@ Result<VxrawFile> vxraw_decode(std::span<const std::uint8_t> bytes, const VxrawL
 // Precondition: every material < kMaterialCount.
 std::vector<std::uint8_t> vxraw_encode(const Box& box, Vec3i origin);
 
-// A failed file operation: a message for people, naming the file ("w.vxraw.gz:
-// invalid value at byte 1234 of the decompressed data: material id >= 64"),
-// plus the DecodeError when the content rather than the file system was at
-// fault.
-struct FileError {
-  std::string message;
-  std::optional<DecodeError> decode;
-};
-
-// A value or a FileError (the file-level counterpart of Result).
-template <class T>
-class [[nodiscard]] FileResult {
- public:
-  FileResult(T value) : v_(std::move(value)) {}           // NOLINT: implicit by design
-  FileResult(FileError error) : v_(std::move(error)) {}   // NOLINT: implicit by design
-
-  bool ok() const { return v_.index() == 0; }
-  explicit operator bool() const { return ok(); }
-  T& value() & { return std::get<0>(v_); }
-  const T& value() const& { return std::get<0>(v_); }
-  T&& value() && { return std::get<0>(std::move(v_)); }
-  T& operator*() & { return value(); }
-  const T& operator*() const& { return value(); }
-  T* operator->() { return &value(); }
-  const T* operator->() const { return &value(); }
-  const FileError& error() const { return std::get<1>(v_); }
-
- private:
-  std::variant<T, FileError> v_;
-};
-using FileStatus = FileResult<Ok>;
 
 // Reads a VXRAW file (plain or gzip), streaming it straight into the Box.
 FileResult<VxrawFile> vxraw_read_file(const std::string& path, const VxrawLimits& limits);

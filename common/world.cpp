@@ -78,42 +78,38 @@ FileResult<StoredChunk> World::load_chunk(Vec3i chunk_pos) {
 }
 
 FileStatus World::read_box(Vec3i min, Box& out) {
-  const Vec3i size = out.size();
-  if (size.x <= 0 || size.y <= 0 || size.z <= 0) return Ok{};
-  const Vec3i max = min + size;
-  const Vec3i c0 = chunk_of(min);
-  const Vec3i c1 = chunk_of(max - Vec3i{1, 1, 1});
-  for (int cy = c0.y; cy <= c1.y; ++cy)
-    for (int cz = c0.z; cz <= c1.z; ++cz)
-      for (int cx = c0.x; cx <= c1.x; ++cx) {
-        const Vec3i cp{cx, cy, cz};
-        auto chunk = load_chunk(cp);
-        if (!chunk) return chunk.error();
-        const Vec3i origin = chunk_origin(cp);
-        const Vec3i lo = max3(min, origin);
-        const Vec3i hi = min3(max, origin + Vec3i{kChunkSize, kChunkSize, kChunkSize});
-        chunk->chunk.read_box(lo - origin, out, lo - min, hi - lo);
-      }
-  return Ok{};
+  const Region r = Region::from_min_size(min, out.size());
+  FileStatus status = Ok{};
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    if (!status) return;
+    auto chunk = load_chunk(cp);
+    if (!chunk) {
+      status = chunk.error();
+      return;
+    }
+    const Region part = intersect(r, chunk_region(cp));
+    chunk->chunk.read_box(part.min - chunk_origin(cp), out, part.min - min, part.size());
+  });
+  return status;
 }
 
 FileStatus World::write_box(Vec3i min, const Box& src) {
   const Region target = meta().bounds.clamp(Region::from_min_size(min, src.size()));
-  if (target.empty()) return Ok{};
-  const Vec3i c0 = chunk_of(target.min);
-  const Vec3i c1 = chunk_of(target.max - Vec3i{1, 1, 1});
   std::vector<ChunkWrite> writes;
-  for (int cy = c0.y; cy <= c1.y; ++cy)
-    for (int cz = c0.z; cz <= c1.z; ++cz)
-      for (int cx = c0.x; cx <= c1.x; ++cx) {
-        const Vec3i cp{cx, cy, cz};
-        auto chunk = load_chunk(cp);
-        if (!chunk) return chunk.error();
-        const Vec3i origin = chunk_origin(cp);
-        chunk->chunk.modify(Region{target.min - origin, target.max - origin},
-                            [&](Vec3i l, Voxel) { return src.get(l + origin - min); });
-        writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
-      }
+  FileStatus status = Ok{};
+  for_each_chunk_in(target, [&](Vec3i cp) {
+    if (!status) return;
+    auto chunk = load_chunk(cp);
+    if (!chunk) {
+      status = chunk.error();
+      return;
+    }
+    const Vec3i origin = chunk_origin(cp);
+    chunk->chunk.modify(Region{target.min - origin, target.max - origin},
+                        [&](Vec3i l, Voxel) { return src.get(l + origin - min); });
+    writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
+  });
+  if (!status || writes.empty()) return status;
   return store_->save_chunks(writes);
 }
 

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "common/cli.h"
 #include "common/lz4_block.h"
 
 namespace terrane {
@@ -47,21 +48,6 @@ std::vector<std::string> split_lines(const std::string& s) {
     start = nl + 1;
   }
   return out;
-}
-
-bool parse_ints(const std::string& s, std::int64_t* out, int n) {
-  const char* p = s.data();
-  const char* end = s.data() + s.size();
-  for (int i = 0; i < n; ++i) {
-    auto [next, ec] = std::from_chars(p, end, out[i]);
-    if (ec != std::errc()) return false;
-    p = next;
-    if (i + 1 < n) {
-      if (p == end || *p != ',') return false;
-      ++p;
-    }
-  }
-  return p == end;
 }
 
 }  // namespace
@@ -253,7 +239,7 @@ FileStatus WorldStore::load_meta() {
   WorldMeta m;
   std::int64_t n[4];
   const std::string* v = need("format_version");
-  if (!v || !parse_ints(*v, n, 1)) return FileError{"world " + dir_ + ": metadata key format_version missing or malformed", {}};
+  if (!v || !parse_int_list<std::int64_t>(*v, n, 1)) return FileError{"world " + dir_ + ": metadata key format_version missing or malformed", {}};
   if (n[0] != kWorldFormatVersion)
     return FileError{"world " + dir_ + ": format version " + *v + " is not supported (this build reads " +
                          std::to_string(kWorldFormatVersion) + ")", {}};
@@ -264,13 +250,13 @@ FileStatus WorldStore::load_meta() {
   m.generator = *v == "terrain" ? GeneratorKind::kTerrain : GeneratorKind::kNone;
   if ((v = need("generator_params"))) m.generator_params = *v;
   v = need("bounds_y");
-  if (!v || !parse_ints(*v, n, 2) || n[0] >= n[1] || n[0] < INT32_MIN / 2 || n[1] > INT32_MAX / 2)
+  if (!v || !parse_int_list<std::int64_t>(*v, n, 2) || n[0] >= n[1] || n[0] < INT32_MIN / 2 || n[1] > INT32_MAX / 2)
     return FileError{"world " + dir_ + ": metadata key bounds_y missing or malformed (want min,max)", {}};
   m.bounds.min_y = static_cast<std::int32_t>(n[0]);
   m.bounds.max_y = static_cast<std::int32_t>(n[1]);
   v = need("bounds_xz");
   if (v && !v->empty()) {
-    if (!parse_ints(*v, n, 4) || n[0] >= n[2] || n[1] >= n[3])
+    if (!parse_int_list<std::int64_t>(*v, n, 4) || n[0] >= n[2] || n[1] >= n[3])
       return FileError{"world " + dir_ + ": metadata key bounds_xz malformed (want x0,z0,x1,z1)", {}};
     m.bounds.bounded_xz = true;
     m.bounds.min_x = static_cast<std::int32_t>(n[0]);
@@ -282,7 +268,7 @@ FileStatus WorldStore::load_meta() {
   if (m.materials.size() > static_cast<std::size_t>(kMaterialCount))
     return FileError{"world " + dir_ + ": material table has more than 64 entries", {}};
   v = need("epoch");
-  if (!v || !parse_ints(*v, n, 1) || n[0] < 0) return FileError{"world " + dir_ + ": metadata key epoch missing or malformed", {}};
+  if (!v || !parse_int_list<std::int64_t>(*v, n, 1) || n[0] < 0) return FileError{"world " + dir_ + ": metadata key epoch missing or malformed", {}};
   m.epoch = static_cast<std::uint64_t>(n[0]);
   meta_ = std::move(m);
   return Ok{};

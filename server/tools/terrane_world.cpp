@@ -121,10 +121,7 @@ class Progress {
 
 std::vector<Vec3i> chunks_in(const Region& r) {
   std::vector<Vec3i> out;
-  const Vec3i c0 = chunk_of(r.min), c1 = chunk_of(r.max - Vec3i{1, 1, 1});
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x) out.push_back({x, y, z});
+  for_each_chunk_in(r, [&](Vec3i c) { out.push_back(c); });
   return out;
 }
 
