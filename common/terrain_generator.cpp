@@ -609,7 +609,7 @@ std::string TerrainGenerator::to_metadata() const {
 }
 
 Result<TerrainGenerator> TerrainGenerator::from_metadata(std::string_view text, std::string* message) {
-  enum Key { kName, kVersion, kSeed, kSea, kScale, kMountain, kHill, kOverhang, kCaves, kKeyCount };
+  enum Key { kKeyName, kKeyVersion, kKeySeed, kKeySea, kKeyScale, kKeyMountain, kKeyHill, kKeyOverhang, kKeyCaves, kKeyCount };
   static constexpr std::array<std::string_view, kKeyCount> kKeys = {
       "generator", "version", "seed", "sea_level", "terrain_scale", "mountain_height", "hill_height",
       "overhang_strength", "caves"};
@@ -649,13 +649,13 @@ Result<TerrainGenerator> TerrainGenerator::from_metadata(std::string_view text, 
     seen[k] = true;
     bool ok = true;
     switch (static_cast<Key>(k)) {
-      case kName:
+      case kKeyName:
         if (value != kGeneratorName) {
           return fail(DecodeErrorCode::kBadMagic, line_start, "not a terrane.density generator",
                       what + ": unknown generator '" + std::string(value) + "'");
         }
         break;
-      case kVersion: {
+      case kKeyVersion: {
         std::uint32_t v = 0;
         if (!parse_number(value, v)) {
           ok = false;
@@ -665,13 +665,13 @@ Result<TerrainGenerator> TerrainGenerator::from_metadata(std::string_view text, 
         }
         break;
       }
-      case kSeed: ok = parse_number(value, p.seed); break;
-      case kSea: ok = parse_number(value, p.sea_level); break;
-      case kScale: ok = parse_number(value, p.terrain_scale); break;
-      case kMountain: ok = parse_number(value, p.mountain_height); break;
-      case kHill: ok = parse_number(value, p.hill_height); break;
-      case kOverhang: ok = parse_number(value, p.overhang_strength); break;
-      case kCaves:
+      case kKeySeed: ok = parse_number(value, p.seed); break;
+      case kKeySea: ok = parse_number(value, p.sea_level); break;
+      case kKeyScale: ok = parse_number(value, p.terrain_scale); break;
+      case kKeyMountain: ok = parse_number(value, p.mountain_height); break;
+      case kKeyHill: ok = parse_number(value, p.hill_height); break;
+      case kKeyOverhang: ok = parse_number(value, p.overhang_strength); break;
+      case kKeyCaves:
         if (value == "true") {
           p.caves = true;
         } else if (value == "false") {
