@@ -60,6 +60,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "common/row_packed_simd.h"
 #include "common/voxel.h"
 
 namespace terrane {
@@ -95,9 +96,8 @@ int encode_row(const Voxel* row, int n, std::uint8_t* out);
 // Palette record -> n voxels. The scalar decoder is the reference.
 void decode_palette_scalar(const std::uint8_t* rec, Voxel* out, int n);
 #if defined(__x86_64__) || defined(__i386__)
-// SSSE3 decoder for n = 32; may read up to 16 bytes past the record.
-// Call only when kHaveSsse3.
-void decode_palette32_ssse3(const std::uint8_t* rec, Voxel* out);
+// The SSSE3 decoder for n = 32 (row_packed_simd.h) may read up to 16 bytes
+// past the record. Without compile-time SSSE3, call it only when kHaveSsse3.
 extern const bool kHaveSsse3;
 #endif
 
@@ -207,6 +207,10 @@ class RowPackedBox {
   static void decode(const std::uint8_t* rec, Voxel* out) {
 #if defined(__x86_64__) || defined(__i386__)
     if constexpr (N == 32) {
+#if defined(__SSSE3__)
+      row_packed_detail::decode_palette32_ssse3(rec, out);
+      return;
+#endif
       if (row_packed_detail::kHaveSsse3) {
         row_packed_detail::decode_palette32_ssse3(rec, out);
         return;
