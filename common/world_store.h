@@ -106,6 +106,11 @@ class WorldStore {
   // Calls fn(pos, revision, blob) for every stored chunk, in key order.
   FileStatus for_each_chunk(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn);
   FileResult<std::int64_t> stored_chunk_count();
+  // Copies the whole database to dest_dir/world.sqlite with SQLite's online
+  // backup, a few hundred pages at a time, so a running server keeps
+  // writing; the copy is a consistent snapshot. dest_dir must not hold a
+  // world already. progress(done_pages, total_pages) is called as it goes.
+  FileStatus backup_to(const std::string& dest_dir, const std::function<void(int, int)>& progress);
   // Runs `PRAGMA name` and returns the first column as text (tests, checks).
   FileResult<std::string> pragma(const std::string& name);
 

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "common/vxraw.h"
+#include "common/world_store.h"
 
 namespace terrane {
 namespace {
@@ -130,6 +131,34 @@ TEST_F(WorldToolTest, BadFilesAndMissingWorldsExitOneNamingThem) {
   r = run("stats --world " + path("nowhere"));
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no world here"), std::string::npos) << r.output;
+}
+
+TEST_F(WorldToolTest, CheckFindsDamagedChunkAndBackupCopiesTheWorld) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
+  auto ok = run("check --world " + w);
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_NE(ok.output.find("0 damaged"), std::string::npos) << ok.output;
+
+  auto b = run("backup --world " + w + " --to " + path("copy"));
+  ASSERT_EQ(b.exit_code, 0) << b.output;
+  auto e1 = run("export --world " + w + " --box 0,0,0,64,64,64 " + path("a.vxraw"));
+  auto e2 = run("export --world " + path("copy") + " --box 0,0,0,64,64,64 " + path("b.vxraw"));
+  ASSERT_EQ(e1.exit_code, 0);
+  ASSERT_EQ(e2.exit_code, 0);
+  EXPECT_EQ(vxraw_read_file(path("a.vxraw"), {})->box, vxraw_read_file(path("b.vxraw"), {})->box);
+  EXPECT_EQ(run("backup --world " + w + " --to " + path("copy")).exit_code, 1);  // never overwrites
+
+  {
+    auto store = WorldStore::open(w);
+    ASSERT_TRUE(store.ok());
+    std::vector<ChunkWrite> bad = {{{1, 1, 0}, 9, {1, 1, 0x10, 0x20}}};
+    ASSERT_TRUE((*store)->save_chunks(bad).ok());
+  }
+  auto damaged = run("check --world " + w);
+  EXPECT_EQ(damaged.exit_code, 1) << damaged.output;
+  EXPECT_NE(damaged.output.find("chunk (1, 1, 0)"), std::string::npos) << damaged.output;
+  EXPECT_NE(damaged.output.find("1 damaged"), std::string::npos) << damaged.output;
 }
 
 TEST_F(WorldToolTest, HeavyImportsRealRegionAndReportsIt) {
