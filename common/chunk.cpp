@@ -46,6 +46,18 @@ Chunk Chunk::clone() const {
   return c;
 }
 
+bool Chunk::empty() const {
+  if (mip3_.is_uniform()) return mip3_.uniform_material() == kAir;
+  RowPackedBox<4>::Row scratch;
+  for (int y = 0; y < 4; ++y)
+    for (int z = 0; z < 4; ++z) {
+      const Voxel* row = mip3_.read_row(y, z, scratch);
+      for (int x = 0; x < 4; ++x)
+        if (row[x].material != kAir) return false;
+    }
+  return true;
+}
+
 Voxel Chunk::mip_get(int level, int x, int y, int z) const {
   switch (level) {
     case 0: return level0_.get(x, y, z);

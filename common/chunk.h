@@ -96,8 +96,9 @@ class Chunk {
   }
   void fill(Material m);
 
-  // True when every voxel is Air (read off the 4³ mip: O(1)).
-  bool empty() const { return mip3_.is_uniform() && mip3_.uniform_material() == kAir; }
+  // True when every voxel is Air (read off the 4³ mip: O(1) when it is uniform).
+  // (A 4³ level that unpacked itself under heavy editing is scanned: 16 rows.)
+  bool empty() const;
   // Uniform chunk: one material at default occupancy everywhere.
   bool uniform() const { return level0_.is_uniform(); }
 

@@ -92,6 +92,18 @@ std::optional<Region> CommandLine::get_region(const std::string& name, std::stri
     *error = "--" + name + ": '" + it->second + "' is empty (each of x1, y1, z1 must exceed x0, y0, z0)";
     return std::nullopt;
   }
+  constexpr std::int64_t kMaxCoordinate = std::int64_t{1} << 30;
+  constexpr std::int64_t kMaxSpan = std::int64_t{1} << 20;
+  for (int i = 0; i < 6; ++i) {
+    if (v[i] < -kMaxCoordinate || v[i] > kMaxCoordinate) {
+      *error = "--" + name + ": coordinate " + std::to_string(v[i]) + " is beyond +-2^30";
+      return std::nullopt;
+    }
+  }
+  if (std::int64_t{v[3]} - v[0] > kMaxSpan || std::int64_t{v[4]} - v[1] > kMaxSpan || std::int64_t{v[5]} - v[2] > kMaxSpan) {
+    *error = "--" + name + ": '" + it->second + "' spans more than 2^20 voxels on an axis";
+    return std::nullopt;
+  }
   return r;
 }
 

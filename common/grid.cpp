@@ -80,7 +80,9 @@ GridMemory Grid::memory() const {
 std::optional<RayHit> Grid::raycast(Vec3f origin, Vec3f dir, float max_distance,
                                     std::uint8_t min_occupancy) const {
   const float len = std::sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
-  if (!(len > 0.0f) || !(max_distance >= 0.0f)) return std::nullopt;
+  if (!(len > 0.0f) || !std::isfinite(len) || !(max_distance >= 0.0f)) return std::nullopt;
+  if (!std::isfinite(origin.x) || !std::isfinite(origin.y) || !std::isfinite(origin.z)) return std::nullopt;
+  max_distance = std::min(max_distance, kMaxRayDistance);
   dir = dir * (1.0f / len);
   // Amanatides & Woo: step voxel by voxel along the ray.
   Vec3i cell{static_cast<int>(std::floor(origin.x)), static_cast<int>(std::floor(origin.y)),

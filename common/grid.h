@@ -105,6 +105,8 @@ class Grid {
   void compact();
   GridMemory memory() const;
 
+  // Rays are capped at this length (voxels); each step is a grid lookup.
+  static constexpr float kMaxRayDistance = 1 << 16;
   // First voxel along the ray whose occupancy byte is >= min_occupancy (non-Air),
   // within max_distance. direction need not be normalised (must be non-zero).
   std::optional<RayHit> raycast(Vec3f origin, Vec3f direction, float max_distance,

@@ -59,6 +59,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <utility>
 
 #include "common/row_packed_simd.h"
 #include "common/voxel.h"
@@ -145,8 +146,24 @@ class RowPackedBox {
   using Row = std::array<Voxel, N>;
 
   explicit RowPackedBox(Material fill = kAir);
-  RowPackedBox(RowPackedBox&&) noexcept = default;
-  RowPackedBox& operator=(RowPackedBox&&) noexcept = default;
+  // A moved-from box is left uniform Air, usable as any other.
+  RowPackedBox(RowPackedBox&& other) noexcept { *this = std::move(other); }
+  RowPackedBox& operator=(RowPackedBox&& other) noexcept {
+    if (this == &other) return *this;
+    headers_ = other.headers_;
+    owned_headers_ = std::move(other.owned_headers_);
+    data_ = std::move(other.data_);
+    data_units_ = other.data_units_;
+    repacks_ = other.repacks_;
+    owns_headers_ = other.owns_headers_;
+    unpacked_ = other.unpacked_;
+    other.headers_ = row_packed_detail::uniform_headers(N, kAir);
+    other.data_units_ = 0;
+    other.repacks_ = 0;
+    other.owns_headers_ = false;
+    other.unpacked_ = false;
+    return *this;
+  }
   RowPackedBox(const RowPackedBox&) = delete;
   RowPackedBox& operator=(const RowPackedBox&) = delete;
   ~RowPackedBox() = default;
@@ -233,7 +250,7 @@ class RowPackedBox {
   void become_uniform(Material m);
   std::uint16_t* mutable_headers();
 
-  const std::uint16_t* headers_;  // N² headers: owned_headers_ or a shared table
+  const std::uint16_t* headers_ = row_packed_detail::uniform_headers(N, kAir);  // N² headers: owned_headers_ or a shared table
   std::unique_ptr<std::uint16_t[]> owned_headers_;
   std::unique_ptr<Voxel[]> data_;  // records, then kPadUnits of padding
   std::uint32_t data_units_ = 0;   // voxels allocated in data_ (0 when none)

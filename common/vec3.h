@@ -60,10 +60,10 @@ struct Region {
     return p.x >= min.x && p.y >= min.y && p.z >= min.z && p.x < max.x && p.y < max.y && p.z < max.z;
   }
   // Voxel count as 64-bit (a region can be larger than 2^31 voxels).
+  // Computed in 64 bits from the corners, so spans beyond 2^31 do not wrap.
   constexpr std::int64_t volume() const {
     if (empty()) return 0;
-    const Vec3i s = size();
-    return std::int64_t{s.x} * s.y * s.z;
+    return (std::int64_t{max.x} - min.x) * (std::int64_t{max.y} - min.y) * (std::int64_t{max.z} - min.z);
   }
   static constexpr Region from_min_size(Vec3i min, Vec3i size) { return {min, min + size}; }
 };

@@ -71,6 +71,18 @@ Region WorldBounds::clamp(const Region& r) const {
   return out;
 }
 
+std::string WorldBounds::validate() const {
+  auto in_range = [](std::int64_t v) { return v >= -kMaxWorldCoordinate && v <= kMaxWorldCoordinate; };
+  if (!in_range(min_y) || !in_range(max_y)) return "vertical bounds beyond +-2^30";
+  if (min_y >= max_y) return "vertical bounds empty (min_y >= max_y)";
+  if (bounded_xz) {
+    if (!in_range(min_x) || !in_range(max_x) || !in_range(min_z) || !in_range(max_z))
+      return "horizontal bounds beyond +-2^30";
+    if (min_x >= max_x || min_z >= max_z) return "horizontal bounds empty";
+  }
+  return {};
+}
+
 bool WorldBounds::touches_chunk(Vec3i chunk_pos) const {
   const Vec3i o = chunk_origin(chunk_pos);
   return !clamp(Region{o, o + Vec3i{kChunkSize, kChunkSize, kChunkSize}}).empty();
@@ -113,6 +125,7 @@ WorldStore::WorldStore(std::string dir, sqlite3* db) : dir_(std::move(dir)), db_
 WorldStore::~WorldStore() {
   sqlite3_finalize(load_stmt_);
   sqlite3_finalize(save_stmt_);
+  sqlite3_finalize(insert_stmt_);
   sqlite3_close(db_);
 }
 
@@ -160,6 +173,19 @@ FileResult<std::unique_ptr<WorldStore>> WorldStore::create(const std::string& di
   std::filesystem::create_directories(dir, ec);
   if (ec) return FileError{"world " + dir + ": cannot create directory: " + ec.message(), {}};
   if (exists(dir)) return FileError{"world " + dir + ": already exists (" + kWorldDatabaseName + " present)", {}};
+  if (auto why = meta.bounds.validate(); !why.empty()) return FileError{"world " + dir + ": " + why, {}};
+  if (meta.materials.size() > static_cast<std::size_t>(kMaterialCount))
+    return FileError{"world " + dir + ": material table has more than 64 entries", {}};
+  auto result = create_in(dir, meta);
+  if (!result) {
+    // Leave no half-made world behind: it could be neither opened nor created again.
+    const std::filesystem::path db_path = std::filesystem::path(dir) / kWorldDatabaseName;
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(db_path.string() + suffix, ec);
+  }
+  return result;
+}
+
+FileResult<std::unique_ptr<WorldStore>> WorldStore::create_in(const std::string& dir, const WorldMeta& meta) {
   auto db = open_db(dir, true);
   if (!db) return db.error();
   std::unique_ptr<WorldStore> store(new WorldStore(dir, *db));
@@ -200,7 +226,8 @@ FileStatus WorldStore::write_meta(const WorldMeta& m) {
       {"materials", join_lines(m.materials)},
       {"epoch", std::to_string(m.epoch)},
   };
-  sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr);
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin metadata transaction");
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO meta(key, value) VALUES(?, ?)", -1, &st, nullptr) != SQLITE_OK) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -217,7 +244,11 @@ FileStatus WorldStore::write_meta(const WorldMeta& m) {
     sqlite3_reset(st);
   }
   sqlite3_finalize(st);
-  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return error("cannot commit metadata");
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
+    FileError e = error("cannot commit metadata");
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  }
   return Ok{};
 }
 
@@ -226,12 +257,14 @@ FileStatus WorldStore::load_meta() {
   if (sqlite3_prepare_v2(db_, "SELECT key, value FROM meta", -1, &st, nullptr) != SQLITE_OK)
     return error("not a Terrane world database (no meta table)");
   std::map<std::string, std::string> kv;
-  while (sqlite3_step(st) == SQLITE_ROW) {
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
     const auto* k = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
     const auto* v = reinterpret_cast<const char*>(sqlite3_column_text(st, 1));
     if (k && v) kv[k] = v;
   }
   sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot read metadata");
   auto need = [&](const char* key) -> const std::string* {
     auto it = kv.find(key);
     return it == kv.end() ? nullptr : &it->second;
@@ -250,13 +283,14 @@ FileStatus WorldStore::load_meta() {
   m.generator = *v == "terrain" ? GeneratorKind::kTerrain : GeneratorKind::kNone;
   if ((v = need("generator_params"))) m.generator_params = *v;
   v = need("bounds_y");
-  if (!v || !parse_int_list<std::int64_t>(*v, n, 2) || n[0] >= n[1] || n[0] < INT32_MIN / 2 || n[1] > INT32_MAX / 2)
+  if (!v || !parse_int_list<std::int64_t>(*v, n, 2) || n[0] < -kMaxWorldCoordinate || n[1] > kMaxWorldCoordinate)
     return FileError{"world " + dir_ + ": metadata key bounds_y missing or malformed (want min,max)", {}};
   m.bounds.min_y = static_cast<std::int32_t>(n[0]);
   m.bounds.max_y = static_cast<std::int32_t>(n[1]);
   v = need("bounds_xz");
   if (v && !v->empty()) {
-    if (!parse_int_list<std::int64_t>(*v, n, 4) || n[0] >= n[2] || n[1] >= n[3])
+    if (!parse_int_list<std::int64_t>(*v, n, 4) ||
+        std::any_of(n, n + 4, [](std::int64_t c) { return c < -kMaxWorldCoordinate || c > kMaxWorldCoordinate; }))
       return FileError{"world " + dir_ + ": metadata key bounds_xz malformed (want x0,z0,x1,z1)", {}};
     m.bounds.bounded_xz = true;
     m.bounds.min_x = static_cast<std::int32_t>(n[0]);
@@ -264,7 +298,8 @@ FileStatus WorldStore::load_meta() {
     m.bounds.max_x = static_cast<std::int32_t>(n[2]);
     m.bounds.max_z = static_cast<std::int32_t>(n[3]);
   }
-  if ((v = need("materials"))) m.materials = split_lines(*v);
+  if (auto why = m.bounds.validate(); !why.empty()) return FileError{"world " + dir_ + ": " + why, {}};
+  if ((v = need("materials")) && !v->empty()) m.materials = split_lines(*v);
   if (m.materials.size() > static_cast<std::size_t>(kMaterialCount))
     return FileError{"world " + dir_ + ": material table has more than 64 entries", {}};
   v = need("epoch");
@@ -307,21 +342,24 @@ FileResult<std::optional<StoredChunk>> WorldStore::load_chunk(Vec3i pos) {
   return std::optional<StoredChunk>{StoredChunk{revision, std::move(*chunk)}};
 }
 
-FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes) {
-  if (!save_stmt_ &&
-      sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)", -1,
-                         &save_stmt_, nullptr) != SQLITE_OK)
+FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes, bool overwrite) {
+  sqlite3_stmt*& stmt = overwrite ? save_stmt_ : insert_stmt_;
+  if (!stmt && sqlite3_prepare_v2(db_,
+                                  overwrite ? "INSERT OR REPLACE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)"
+                                            : "INSERT OR IGNORE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)",
+                                  -1, &stmt, nullptr) != SQLITE_OK)
     return error("cannot prepare chunk write");
+  sqlite3_stmt* save_stmt = stmt;
   if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
     return error("cannot begin transaction");
   for (const ChunkWrite& w : writes) {
-    StmtReset reset{save_stmt_};
-    sqlite3_bind_int(save_stmt_, 1, w.pos.x);
-    sqlite3_bind_int(save_stmt_, 2, w.pos.y);
-    sqlite3_bind_int(save_stmt_, 3, w.pos.z);
-    sqlite3_bind_int64(save_stmt_, 4, static_cast<sqlite3_int64>(w.revision));
-    sqlite3_bind_blob(save_stmt_, 5, w.blob.data(), static_cast<int>(w.blob.size()), SQLITE_STATIC);
-    if (sqlite3_step(save_stmt_) != SQLITE_DONE) {
+    StmtReset reset{save_stmt};
+    sqlite3_bind_int(save_stmt, 1, w.pos.x);
+    sqlite3_bind_int(save_stmt, 2, w.pos.y);
+    sqlite3_bind_int(save_stmt, 3, w.pos.z);
+    sqlite3_bind_int64(save_stmt, 4, static_cast<sqlite3_int64>(w.revision));
+    sqlite3_bind_blob(save_stmt, 5, w.blob.data(), static_cast<int>(w.blob.size()), SQLITE_STATIC);
+    if (sqlite3_step(save_stmt) != SQLITE_DONE) {
       FileError e = error("cannot write chunk");
       sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
       return e;
@@ -394,6 +432,7 @@ FileStatus WorldStore::backup_to(const std::string& dest_dir, const std::functio
   if (b == nullptr) {
     std::string msg = "backup " + path + ": " + sqlite3_errmsg(dest);
     sqlite3_close(dest);
+    std::filesystem::remove(path, ec);
     return FileError{msg, {}};
   }
   // 256 pages per step (1 MiB at 4 KiB pages): short steps let the writer in.

@@ -32,6 +32,10 @@ namespace terrane {
 inline constexpr std::uint32_t kWorldFormatVersion = 1;
 inline constexpr const char* kWorldDatabaseName = "world.sqlite";
 
+// World coordinates stay within +-2^30 voxels, so chunk and voxel
+// arithmetic never overflows 32 bits.
+inline constexpr std::int32_t kMaxWorldCoordinate = 1 << 30;
+
 // Which voxels a world may hold. Vertical range always; horizontal optional.
 struct WorldBounds {
   std::int32_t min_y = -128;
@@ -43,6 +47,9 @@ struct WorldBounds {
   // True if any voxel of the chunk lies inside the bounds.
   bool touches_chunk(Vec3i chunk_pos) const;
   Region clamp(const Region& r) const;
+  // Empty when valid, else what is wrong: every limit within
+  // +-kMaxWorldCoordinate and each max above its min.
+  std::string validate() const;
 };
 
 enum class GeneratorKind : std::uint8_t {
@@ -100,8 +107,10 @@ class WorldStore {
 
   // The stored chunk, or nullopt if the chunk was never stored.
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);
-  // Stores all writes in one transaction (all or nothing).
-  FileStatus save_chunks(std::span<const ChunkWrite> writes);
+  // Stores all writes in one transaction (all or nothing). With
+  // overwrite = false, chunks already stored are left as they are (used to
+  // pre-generate without racing a server's edits).
+  FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true);
   FileStatus erase_chunk(Vec3i pos);
   // Calls fn(pos, revision, blob) for every stored chunk, in key order.
   FileStatus for_each_chunk(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn);
@@ -116,6 +125,7 @@ class WorldStore {
 
  private:
   WorldStore(std::string dir, sqlite3* db);
+  static FileResult<std::unique_ptr<WorldStore>> create_in(const std::string& dir, const WorldMeta& meta);
   FileStatus load_meta();
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
@@ -124,6 +134,7 @@ class WorldStore {
   sqlite3* db_ = nullptr;
   sqlite3_stmt* load_stmt_ = nullptr;
   sqlite3_stmt* save_stmt_ = nullptr;
+  sqlite3_stmt* insert_stmt_ = nullptr;
   WorldMeta meta_;
 };
 

@@ -57,8 +57,9 @@ constexpr const char* kImportHelp =
     "usage: terrane-world import --world DIR FILE\n"
     "\n"
     "Writes the voxels of a VXRAW file (plain or gzip) at the box's origin. A new world made\n"
-    "this way has no generator: everything outside imported boxes is Air.\n"
-    "Material ids the world's table does not name get a generic entry.\n";
+    "this way has no generator: everything outside imported boxes is Air, and material ids\n"
+    "beyond the default table get generic names (Material23, ...). Chunks are written in\n"
+    "batches; if a batch fails, the batches before it stay imported (the error says how far).\n";
 
 constexpr const char* kExportHelp =
     "usage: terrane-world export --world DIR --box x0,y0,z0,x1,y1,z1 [--raw] FILE\n"
@@ -230,7 +231,8 @@ int cmd_generate(int argc, char** argv) {
       stored_chunks += non_empty.size();
       batch.clear();
       if (save_error.empty() && !non_empty.empty()) {
-        if (auto s = world->store().save_chunks(non_empty); !s) save_error = s.error().message;
+        // Never overwrite: a server may have stored an edit of the chunk meanwhile.
+        if (auto s = world->store().save_chunks(non_empty, /*overwrite=*/false); !s) save_error = s.error().message;
       }
       progress.update(done);
     }
@@ -303,7 +305,9 @@ int cmd_import(int argc, char** argv) {
                           [&](Vec3i l, Voxel) { return file->box.get(l + origin - file->origin); });
       writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
     }
-    if (auto s = world->store().save_chunks(writes); !s) return failure(s.error().message);
+    if (auto s = world->store().save_chunks(writes); !s)
+      return failure(s.error().message + " (" + std::to_string(done) + " of " + std::to_string(chunks.size()) +
+                     " chunks were imported before the failure)");
     done += writes.size();
     progress.update(done);
   }

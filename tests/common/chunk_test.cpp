@@ -141,3 +141,18 @@ TEST_F(ChunkMipTest, UniformChunkHasUniformMips) {
 
 }  // namespace
 }  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST(Chunk, EmptyAfterHeavyEditingThatUnpackedItsMips) {
+  Chunk chunk;
+  chunk.set({0, 0, 0}, solid(materials::kRock));  // keeps the chunk alive meanwhile
+  for (int i = 0; i < 40; ++i) {
+    chunk.set({5, 5, 5}, make_voxel(materials::kSand, static_cast<std::uint8_t>(i)));
+    chunk.set({5, 5, 5}, Voxel{});
+  }
+  chunk.set({0, 0, 0}, Voxel{});
+  EXPECT_TRUE(chunk.empty());
+}
+}  // namespace
+}  // namespace terrane

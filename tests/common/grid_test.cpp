@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <map>
 #include <random>
 #include <tuple>
@@ -148,5 +149,31 @@ TEST(Collision, OverlapCollidesTouchingDoesNot) {
   EXPECT_FALSE(g.collides(Aabb{{-3.0f, -3.0f, -3.0f}, {-1.0f, -1.0f, -1.0f}}, 128));
 }
 
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST(Raycast, HugeOrInfiniteMaxDistanceStillHits) {
+  Grid g;
+  g.set({5, 0, 0}, solid(materials::kRock));
+  for (float d : {1e9f, std::numeric_limits<float>::infinity()}) {
+    auto hit = g.raycast({0.5f, 0.5f, 0.5f}, {1, 0, 0}, d);
+    ASSERT_TRUE(hit.has_value()) << d;
+    EXPECT_EQ(hit->voxel, (Vec3i{5, 0, 0}));
+  }
+  EXPECT_FALSE(g.raycast({std::numeric_limits<float>::quiet_NaN(), 0, 0}, {1, 0, 0}, 10).has_value());
+}
+
+TEST(Grid, ChunkFreedAfterChurnThatUnpackedIt) {
+  Grid g;
+  g.set({0, 0, 0}, solid(materials::kRock));
+  for (int i = 0; i < 40; ++i) {
+    g.set({5, 5, 5}, make_voxel(materials::kSand, static_cast<std::uint8_t>(i)));
+    g.set({5, 5, 5}, Voxel{});
+  }
+  g.set({0, 0, 0}, Voxel{});
+  EXPECT_EQ(g.chunk_count(), 0u);
+}
 }  // namespace
 }  // namespace terrane

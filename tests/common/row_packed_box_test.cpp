@@ -283,3 +283,18 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
 }
 }  // namespace
 }  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST(RowPackedBox, MovedFromBoxIsUniformAirAndUsable) {
+  RowPackedBox<32> a(materials::kRock);
+  a.set(1, 2, 3, make_voxel(materials::kSand, 7));
+  RowPackedBox<32> b(std::move(a));
+  EXPECT_EQ(b.get(1, 2, 3), make_voxel(materials::kSand, 7));
+  EXPECT_TRUE(a.is_uniform());  // NOLINT(bugprone-use-after-move): documented state
+  EXPECT_EQ(a.get(1, 2, 3), Voxel{});
+  a.set(4, 4, 4, solid(materials::kMud));
+  EXPECT_EQ(a.get(4, 4, 4), solid(materials::kMud));
+}
+}  // namespace
+}  // namespace terrane

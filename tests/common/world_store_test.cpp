@@ -168,3 +168,41 @@ TEST_F(WorldStoreTest, BoundsClipGenerationAndWrites) {
 
 }  // namespace
 }  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST_F(WorldStoreTest, OutOfRangeBoundsAreRefusedAndLeaveNothingBehind) {
+  WorldMeta meta = default_world_meta();
+  meta.bounds.max_y = 1'100'000'000;
+  auto bad = WorldStore::create(dir_, meta);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("2^30"), std::string::npos) << bad.error().message;
+  EXPECT_FALSE(WorldStore::exists(dir_));
+  EXPECT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+}
+
+TEST_F(WorldStoreTest, SaveWithoutOverwriteKeepsStoredChunks) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  std::vector<ChunkWrite> edited = {{{0, 0, 0}, 5, encode_chunk_blob(sample_chunk(7))}};
+  ASSERT_TRUE((*store)->save_chunks(edited).ok());
+  std::vector<ChunkWrite> generated = {{{0, 0, 0}, 0, encode_chunk_blob(sample_chunk(8))},
+                                       {{1, 0, 0}, 0, encode_chunk_blob(sample_chunk(8))}};
+  ASSERT_TRUE((*store)->save_chunks(generated, /*overwrite=*/false).ok());
+  auto kept = (*store)->load_chunk({0, 0, 0});
+  ASSERT_TRUE(kept.ok() && kept->has_value());
+  EXPECT_EQ((*kept)->revision, 5u);
+  expect_same((*kept)->chunk, sample_chunk(7));
+  EXPECT_EQ(*(*store)->stored_chunk_count(), 2);
+}
+
+TEST_F(WorldStoreTest, EmptyMaterialTableRoundTripsEmpty) {
+  WorldMeta meta = default_world_meta();
+  meta.materials.clear();
+  ASSERT_TRUE(WorldStore::create(dir_, meta).ok());
+  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(store.ok());
+  EXPECT_TRUE((*store)->meta().materials.empty());
+}
+}  // namespace
+}  // namespace terrane
