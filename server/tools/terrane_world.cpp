@@ -23,6 +23,7 @@
 #include "common/lz4_block.h"
 #include "common/vxraw.h"
 #include "common/world.h"
+#include "server/tools/enhance_command.h"
 #include "server/tools/world_stats.h"
 
 namespace terrane {
@@ -38,6 +39,7 @@ constexpr const char* kUsage =
     "  stats      the storage results table for a box: voxels, codecs, memory\n"
     "  check      decode every stored chunk and report problems (exit 1 on any)\n"
     "  backup     copy a world, consistently, even while a server is writing to it\n"
+    "  enhance    voxel detail enhancement of a VXRAW box (subdivision or resampling, lighting)\n"
     "\n"
     "Run 'terrane-world COMMAND --help' for a command's options.\n";
 
@@ -447,5 +449,6 @@ int main(int argc, char** argv) {
   if (cmd == "stats") return cmd_stats(argc, argv);
   if (cmd == "check") return cmd_check(argc, argv);
   if (cmd == "backup") return cmd_backup(argc, argv);
+  if (cmd == "enhance") return run_enhance_command(argc, argv);
   return usage_error("unknown command '" + cmd + "'", kUsage);
 }

@@ -161,6 +161,28 @@ TEST_F(WorldToolTest, CheckFindsDamagedChunkAndBackupCopiesTheWorld) {
   EXPECT_NE(damaged.output.find("1 damaged"), std::string::npos) << damaged.output;
 }
 
+TEST_F(WorldToolTest, EnhanceSubdividesAndResamplesAVxrawBox) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,32,64,32").exit_code, 0);
+  ASSERT_EQ(run("export --world " + w + " --box 0,16,0,16,32,16 " + path("in.vxraw")).exit_code, 0);
+  auto sub = run("enhance --in " + path("in.vxraw") + " --out " + path("sub.vxraw") + " --method subdivide --factor 4");
+  ASSERT_EQ(sub.exit_code, 0) << sub.output;
+  auto out = vxraw_read_file(path("sub.vxraw"), {});
+  ASSERT_TRUE(out.ok()) << out.error().message;
+  EXPECT_EQ(out->box.size(), (Vec3i{64, 64, 64}));
+  EXPECT_EQ(out->origin, (Vec3i{0, 64, 0}));
+  auto res = run("enhance --in " + path("in.vxraw") + " --out " + path("res.vxraw.gz") +
+                 " --method resample --factor 3 --probes 16");
+  ASSERT_EQ(res.exit_code, 0) << res.output;
+  EXPECT_EQ(vxraw_read_file(path("res.vxraw.gz"), {})->box.size(), (Vec3i{48, 48, 48}));
+  auto bad = run("enhance --in " + path("in.vxraw") + " --out " + path("x.vxraw") + " --method melt");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("--method"), std::string::npos) << bad.output;
+  auto missing = run("enhance --in " + path("nope.vxraw") + " --out " + path("x.vxraw") + " --method subdivide");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.output.find("nope.vxraw"), std::string::npos) << missing.output;
+}
+
 TEST_F(WorldToolTest, HeavyImportsRealRegionAndReportsIt) {
   const std::string w = path("mc");
   auto im = run("import --world " + w + " " + std::string(TERRANE_TEST_DATA_DIR) + "/mc-1.9.vxraw.gz");
