@@ -61,15 +61,24 @@ class BitWriter {
   unsigned count_ = 0;
 };
 
-// Reads bits from a span. refill() makes at least 56 bits available; a token
-// of the codec never needs more than that between refills.
+// Reads bits from a span. refill() makes at least 56 bits available; the
+// codec's decoder refills once every few tokens (a token needs at most 18
+// bits at its start, and long length codes refill on their own).
+//
+// Every member is inlined so that a reader living in a local variable stays
+// in registers (a call that took its address would pin it to memory).
 class BitReader {
  public:
-  BitReader(const std::uint8_t* begin, const std::uint8_t* end) : begin_(begin), cur_(begin), end_(end) {}
+  BitReader(const std::uint8_t* begin, const std::uint8_t* end)
+      : begin_(begin), cur_(begin), end_(end), fast_end_(end - begin >= 8 ? end - 7 : begin) {}
 
-  void refill() {
-    if (count_ > 56) return;
-    if (end_ - cur_ >= 8) {
+  // While 8 bytes remain: one unaligned 64-bit load, no branch on the bit
+  // count. The bits above count_ in buf_ are zero or the stream's next bits,
+  // so or-ing the same bytes in again changes nothing. Near the end: whole
+  // bytes while they fit, zero bytes past the end (counted, so the caller can
+  // report truncation); nothing outside [begin, end) is read.
+  [[gnu::always_inline]] void refill() {
+    if (cur_ < fast_end_) [[likely]] {  // at least 8 bytes left
       buf_ |= bit_io_detail::load_le64(cur_) << count_;
       cur_ += (63 - count_) >> 3;
       count_ |= 56;
@@ -86,15 +95,17 @@ class BitReader {
       }
     }
   }
+  // The next 64 bits; only the low available() are meaningful.
+  [[gnu::always_inline]] std::uint64_t bits() const { return buf_; }
   // Precondition: bits <= available().
-  std::uint32_t peek(unsigned bits) const {
+  [[gnu::always_inline]] std::uint32_t peek(unsigned bits) const {
     return static_cast<std::uint32_t>(buf_ & ((std::uint64_t{1} << bits) - 1));
   }
-  void skip(unsigned bits) {
+  [[gnu::always_inline]] void skip(unsigned bits) {
     buf_ >>= bits;
     count_ -= bits;
   }
-  std::uint32_t get(unsigned bits) {
+  [[gnu::always_inline]] std::uint32_t get(unsigned bits) {
     const std::uint32_t v = peek(bits);
     skip(bits);
     return v;
@@ -109,11 +120,25 @@ class BitReader {
   }
   std::size_t bit_size() const { return static_cast<std::size_t>(end_ - begin_) * 8; }
   bool overran() const { return bit_position() > bit_size(); }
+  // True when a one bit follows bit_position() before the end of the span
+  // (a slow scan for error reporting).
+  bool one_bit_ahead() const {
+    std::size_t pos = bit_position();
+    const std::size_t size = bit_size();
+    for (; pos < size && pos % 8 != 0; ++pos) {
+      if ((begin_[pos / 8] >> (pos % 8)) & 1) return true;
+    }
+    for (std::size_t at = pos / 8; at < static_cast<std::size_t>(end_ - begin_); ++at) {
+      if (begin_[at] != 0) return true;
+    }
+    return false;
+  }
 
  private:
   const std::uint8_t* begin_;
   const std::uint8_t* cur_;
   const std::uint8_t* end_;
+  const std::uint8_t* fast_end_;  // cur_ < fast_end_: 8 bytes can be loaded at cur_
   std::uint64_t buf_ = 0;
   unsigned count_ = 0;
   std::size_t zero_bytes_ = 0;
