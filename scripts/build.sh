@@ -3,7 +3,7 @@
 #   scripts/build.sh release   -> build/          (optimised, -Werror in CI)
 #   scripts/build.sh asan      -> build-asan/     (address + undefined sanitizers)
 #   scripts/build.sh fuzz      -> build-fuzz/     (clang, libFuzzer targets)
-# Extra arguments go to the build tool (e.g. a target name).
+# Extra arguments name targets to build (default: all).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,4 +29,8 @@ case "$flavour" in
 esac
 
 cmake -S . -B "$dir" -G Ninja -DTERRANE_WERROR="$werror" "${args[@]}" >/dev/null
-cmake --build "$dir" -j "$jobs" "$@"
+if [ $# -gt 0 ]; then
+  cmake --build "$dir" -j "$jobs" --target "$@"
+else
+  cmake --build "$dir" -j "$jobs"
+fi
