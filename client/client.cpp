@@ -1,0 +1,346 @@
+#include "client/client.h"
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+namespace terrane {
+
+namespace {
+
+constexpr std::size_t kReadChunkBytes = 64 * 1024;
+
+spdlog::logger& client_log() {
+  static std::shared_ptr<spdlog::logger> log = [] {
+    auto l = spdlog::get("client");
+    if (!l) l = spdlog::stdout_color_mt("client");
+    return l;
+  }();
+  return *log;
+}
+
+}  // namespace
+
+Client::Client(ClientOptions options, ClientCallbacks callbacks)
+    : options_(std::move(options)), callbacks_(std::move(callbacks)), socket_(io_), keepalive_(io_), read_buf_(kReadChunkBytes) {}
+
+Client::~Client() { disconnect(); }
+
+bool Client::connect(std::string* error) {
+  asio::error_code ec;
+  asio::ip::tcp::resolver resolver(io_);
+  const auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
+  if (ec || endpoints.empty()) {
+    if (error) *error = "cannot resolve " + options_.host + ": " + ec.message();
+    return false;
+  }
+  asio::error_code result = asio::error::would_block;
+  asio::async_connect(socket_, endpoints, [&](const asio::error_code& e, const asio::ip::tcp::endpoint&) { result = e; });
+  io_.run_for(options_.connect_timeout);
+  if (result == asio::error::would_block || result) {
+    if (error)
+      *error = "cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
+               (result == asio::error::would_block ? std::string("timed out") : result.message());
+    socket_.close(ec);
+    return false;
+  }
+  io_.restart();
+  socket_.set_option(asio::ip::tcp::no_delay(true), ec);
+  HelloMsg hello;
+  hello.protocol_version = options_.protocol_version;
+  hello.client_name = options_.name;
+  hello.auth_token = options_.auth_token;
+  send_queue_.push_back(build_hello(hello));
+  if (!options_.start_at_spawn) send_queue_.push_back(build_client_state(options_.state));
+  for (const Frame& f : send_queue_) queued_bytes_.fetch_add(f.size(), std::memory_order_relaxed);
+  do_write();
+  do_read();
+  arm_keepalive();
+  thread_ = std::thread([this] { io_.run(); });
+  return true;
+}
+
+void Client::disconnect() {
+  if (!thread_.joinable()) return;
+  asio::post(io_, [this] {
+    if (io_closed_) return;
+    asio::error_code ec;
+    const Frame bye = build_disconnect("client leaving");
+    asio::write(socket_, asio::buffer(bye), ec);
+    close_locked_io("disconnected by client");
+  });
+  thread_.join();
+}
+
+bool Client::send(Frame frame) {
+  if (io_closed_) return false;
+  const std::size_t n = frame.size();
+  if (queued_bytes_.load(std::memory_order_relaxed) + n > options_.max_send_queue_bytes) return false;
+  queued_bytes_.fetch_add(n, std::memory_order_relaxed);
+  asio::post(io_, [this, f = std::move(frame)]() mutable {
+    if (io_closed_) return;
+    send_queue_.push_back(std::move(f));
+    do_write();
+  });
+  return true;
+}
+
+void Client::do_write() {
+  if (writing_ || send_queue_.empty() || io_closed_) return;
+  writing_ = true;
+  asio::async_write(socket_, asio::buffer(send_queue_.front()), [this](const asio::error_code& ec, std::size_t) {
+    writing_ = false;
+    queued_bytes_.fetch_sub(send_queue_.front().size(), std::memory_order_relaxed);
+    send_queue_.pop_front();
+    if (ec) return close_locked_io("write failed: " + ec.message());
+    do_write();
+  });
+}
+
+void Client::arm_keepalive() {
+  keepalive_.expires_after(options_.keepalive);
+  keepalive_.async_wait([this](const asio::error_code& ec) {
+    if (ec || io_closed_) return;
+    send(build_ping(0));
+    arm_keepalive();
+  });
+}
+
+void Client::do_read() {
+  socket_.async_read_some(asio::buffer(read_buf_), [this](const asio::error_code& ec, std::size_t n) {
+    if (io_closed_) return;
+    if (ec) return close_locked_io(ec == asio::error::eof ? "server closed the connection" : ec.message());
+    {
+      std::lock_guard lock(mutex_);
+      counters_.bytes_in += n;
+    }
+    const auto st = reader_.feed(std::span<const std::uint8_t>(read_buf_.data(), n),
+                                 [&](std::span<const std::uint8_t> body) {
+                                   if (!io_closed_) handle_frame(body);
+                                 });
+    if (!st) {
+      {
+        std::lock_guard lock(mutex_);
+        ++counters_.protocol_errors;
+      }
+      return close_locked_io(std::string("protocol error: ") + st.error().detail);
+    }
+    if (!io_closed_) do_read();
+  });
+}
+
+void Client::handle_frame(std::span<const std::uint8_t> body) {
+  auto verified = verify_message(body);
+  std::unique_lock lock(mutex_);
+  ++counters_.frames_in;
+  auto fail = [&](const DecodeError& e) {
+    ++counters_.protocol_errors;
+    lock.unlock();
+    client_log().warn("'{}': bad message from server: {}", options_.name, e.describe());
+    close_locked_io(std::string("protocol error: ") + e.detail);
+  };
+  if (!verified) return fail(verified.error());
+  const wire::Message& m = **verified;
+  std::function<void()> after;  // callback to run without the lock
+  switch (m.body_type()) {
+    case wire::Body::Welcome: {
+      auto w = parse_welcome(*m.body_as_Welcome());
+      if (!w) return fail(w.error());
+      if (w->protocol_version != kProtocolVersion)
+        return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
+      welcome_ = *w;
+      if (options_.start_at_spawn) {
+        ClientStateMsg s = options_.state;
+        s.position = w->spawn;
+        lock.unlock();
+        send(build_client_state(s));
+        lock.lock();
+      }
+      if (callbacks_.on_welcome) after = [this, w = *w] { callbacks_.on_welcome(w); };
+      break;
+    }
+    case wire::Body::Disconnect: {
+      auto r = parse_disconnect(*m.body_as_Disconnect());
+      disconnect_reason_ = r ? *r : std::string("(bad reason)");
+      lock.unlock();
+      close_locked_io(disconnect_reason_);
+      return;
+    }
+    case wire::Body::ChunkData: {
+      auto c = parse_chunk_data(*m.body_as_ChunkData());
+      if (!c) return fail(c.error());
+      if (auto st = replica_.apply_chunk_data(*c); !st) return fail(st.error());
+      ++counters_.chunk_units;
+      break;
+    }
+    case wire::Body::MipData: {
+      auto d = parse_mip_data(*m.body_as_MipData());
+      if (!d) return fail(d.error());
+      if (auto st = replica_.apply_mip_data(*d); !st) return fail(st.error());
+      ++counters_.mips;
+      if (callbacks_.on_coverage)
+        after = [this, p = d->chunk_pos, l = d->level] { callbacks_.on_coverage(p, wire::CoverageKind::Mip, l); };
+      break;
+    }
+    case wire::Body::Coverage: {
+      auto c = parse_coverage(*m.body_as_Coverage());
+      if (!c) return fail(c.error());
+      replica_.apply_coverage(*c);
+      if (c->kind == wire::CoverageKind::Empty) ++counters_.coverage_empty;
+      if (c->kind == wire::CoverageKind::Full) ++counters_.coverage_full;
+      if (c->kind == wire::CoverageKind::Released) ++counters_.released;
+      if (callbacks_.on_coverage) after = [this, c = *c] { callbacks_.on_coverage(c.chunk_pos, c.kind, c.level); };
+      break;
+    }
+    case wire::Body::UpdateBatch: {
+      auto b = parse_update_batch(*m.body_as_UpdateBatch());
+      if (!b) return fail(b.error());
+      auto n = replica_.apply_update_batch(*b);
+      if (!n) return fail(n.error());
+      ++counters_.update_batches;
+      counters_.units_updated += *n;
+      break;
+    }
+    case wire::Body::EditAck: {
+      const auto* a = m.body_as_EditAck();
+      EditOutcome o{true, a->tick(), {}};
+      edits_[a->edit_id()] = o;
+      ++counters_.edits_acked;
+      if (callbacks_.on_edit_result) after = [this, id = a->edit_id(), o] { callbacks_.on_edit_result(id, o); };
+      break;
+    }
+    case wire::Body::EditReject: {
+      const auto* r = m.body_as_EditReject();
+      EditOutcome o{false, 0, r->reason() != nullptr ? r->reason()->str().substr(0, kMaxReasonBytes) : std::string()};
+      edits_[r->edit_id()] = o;
+      ++counters_.edits_rejected;
+      if (callbacks_.on_edit_result) after = [this, id = r->edit_id(), o] { callbacks_.on_edit_result(id, o); };
+      break;
+    }
+    case wire::Body::RegionHash: {
+      auto h = parse_region_hash(*m.body_as_RegionHash());
+      if (!h) return fail(h.error());
+      const auto mine = replica_.hash(h->chunk_pos);
+      const auto rev = replica_.revision(h->chunk_pos);
+      const bool match = mine && rev && *rev == h->revision && *mine == h->hash;
+      hash_checks_[h->chunk_pos] = match;
+      ++(match ? counters_.hash_matches : counters_.hash_mismatches);
+      if (callbacks_.on_hash_checked) after = [this, p = h->chunk_pos, match] { callbacks_.on_hash_checked(p, match); };
+      break;
+    }
+    case wire::Body::Pong:
+      ++counters_.pongs;
+      break;
+    case wire::Body::Ping: {
+      const std::uint64_t nonce = m.body_as_Ping()->nonce();
+      lock.unlock();
+      send(build_pong(nonce));
+      lock.lock();
+      break;
+    }
+    default:
+      return fail(DecodeError{DecodeErrorCode::kInvalidValue, 0, "message not accepted from a server"});
+  }
+  lock.unlock();
+  changed_.notify_all();
+  if (after) after();
+}
+
+void Client::close_locked_io(const std::string& reason) {
+  if (io_closed_.exchange(true)) return;
+  asio::error_code ec;
+  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  socket_.close(ec);
+  keepalive_.cancel();
+  std::string r;
+  {
+    std::lock_guard lock(mutex_);
+    closed_ = true;
+    if (disconnect_reason_.empty()) disconnect_reason_ = reason;
+    r = disconnect_reason_;
+  }
+  changed_.notify_all();
+  if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
+}
+
+bool Client::set_state(const ClientStateMsg& state) { return send(build_client_state(state)); }
+
+std::uint32_t Client::fill_box(const Region& box, Voxel v) {
+  EditRequestMsg e;
+  e.edit_id = next_edit_id_.fetch_add(1);
+  e.kind = EditKind::kFillBox;
+  e.box = box;
+  e.material = v.material;
+  e.occupancy = v.occupancy;
+  return send(build_edit_request(e)) ? e.edit_id : 0;
+}
+
+std::uint32_t Client::fill_sphere(Vec3f center, float radius, Material material) {
+  EditRequestMsg e;
+  e.edit_id = next_edit_id_.fetch_add(1);
+  e.kind = EditKind::kFillSphere;
+  e.center = center;
+  e.radius = radius;
+  e.material = material;
+  return send(build_edit_request(e)) ? e.edit_id : 0;
+}
+
+bool Client::request_region_hash(Vec3i chunk_pos) { return send(build_region_hash_request(chunk_pos)); }
+bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce)); }
+bool Client::send_raw(Frame bytes) { return send(std::move(bytes)); }
+
+ClientView Client::view() const {
+  return ClientView{replica_, counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_, hash_checks_};
+}
+
+bool Client::wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout) {
+  std::unique_lock lock(mutex_);
+  return changed_.wait_for(lock, timeout, [&] { return pred(view()); });
+}
+
+Voxel Client::get(Vec3i voxel) const {
+  std::lock_guard lock(mutex_);
+  return replica_.get(voxel);
+}
+
+void Client::read_box(Vec3i min, Box& out) const {
+  std::lock_guard lock(mutex_);
+  replica_.read_box(min, out);
+}
+
+int Client::resolution_at(Vec3i voxel) const {
+  std::lock_guard lock(mutex_);
+  return replica_.resolution_at(voxel);
+}
+
+std::optional<RayHit> Client::raycast(Vec3f origin, Vec3f direction, float max_distance) const {
+  std::lock_guard lock(mutex_);
+  return replica_.raycast(origin, direction, max_distance);
+}
+
+std::optional<std::int32_t> Client::surface_height(std::int32_t x, std::int32_t z) const {
+  std::lock_guard lock(mutex_);
+  if (!welcome_) return std::nullopt;
+  return replica_.surface_height(x, z, welcome_->bounds_min_y, welcome_->bounds_max_y);
+}
+
+std::optional<WelcomeMsg> Client::welcome() const {
+  std::lock_guard lock(mutex_);
+  return welcome_;
+}
+
+ClientCounters Client::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
+}
+
+bool Client::closed() const {
+  std::lock_guard lock(mutex_);
+  return closed_;
+}
+
+std::string Client::disconnect_reason() const {
+  std::lock_guard lock(mutex_);
+  return disconnect_reason_;
+}
+
+}  // namespace terrane

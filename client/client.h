@@ -1,0 +1,177 @@
+// Client: connects to a terrane-server, handshakes, keeps a Replica of what
+// the server streams, sends client state and edits, and verifies chunks
+// against the server's region hashes.
+//
+// Threading: the Client owns one io thread (started by connect()) that does
+// all socket I/O, verifies and parses every frame (bytes from the server are
+// treated as hostile: any bad frame closes the connection) and applies it to
+// the Replica. The Replica and the other shared state sit behind one mutex
+// because the application queries them from its own threads; the io thread
+// holds it only while applying one frame. Callbacks run on the io thread
+// without the lock held: they may call any Client method except
+// disconnect() and wait_until(). Every public method is thread-safe.
+#pragma once
+
+#include <asio.hpp>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <unordered_map>
+
+#include "client/replica.h"
+#include "protocol/framing.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+struct ClientOptions {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 0;
+  std::string name = "client";
+  std::string auth_token;
+  // Sent right after Hello. With start_at_spawn the position is replaced by
+  // the Welcome's spawn point when it arrives (and sent again).
+  ClientStateMsg state{{0, 0, 0}, 256, 64};
+  bool start_at_spawn = true;
+  std::uint32_t protocol_version = kProtocolVersion;  // tests: speak another version
+  std::chrono::milliseconds connect_timeout{5000};
+  // A Ping goes out this often so an idle client is not timed out.
+  std::chrono::milliseconds keepalive{5000};
+  // Outbound bytes queued at most; sends beyond it fail.
+  std::size_t max_send_queue_bytes = 4u << 20;
+};
+
+struct ClientCounters {
+  std::uint64_t frames_in = 0;
+  std::uint64_t bytes_in = 0;
+  std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
+  std::uint64_t mips = 0;
+  std::uint64_t coverage_empty = 0;
+  std::uint64_t coverage_full = 0;
+  std::uint64_t released = 0;
+  std::uint64_t update_batches = 0;
+  std::uint64_t units_updated = 0;
+  std::uint64_t edits_acked = 0;
+  std::uint64_t edits_rejected = 0;
+  std::uint64_t hash_matches = 0;
+  std::uint64_t hash_mismatches = 0;
+  std::uint64_t protocol_errors = 0;
+  std::uint64_t pongs = 0;
+};
+
+struct EditOutcome {
+  bool accepted = false;
+  std::uint64_t tick = 0;
+  std::string reason;  // rejections
+};
+
+struct ClientCallbacks {
+  std::function<void(const WelcomeMsg&)> on_welcome;
+  // A chunk's coverage changed: Empty, Mip (level 1..3, from MipData), Full
+  // or Released.
+  std::function<void(Vec3i chunk_pos, wire::CoverageKind kind, int level)> on_coverage;
+  std::function<void(std::uint32_t edit_id, const EditOutcome&)> on_edit_result;
+  // A RegionHash arrived and was compared with the replica's chunk.
+  std::function<void(Vec3i chunk_pos, bool match)> on_hash_checked;
+  std::function<void(const std::string& reason)> on_disconnected;
+};
+
+// What wait_until's predicate sees (under the Client's lock).
+struct ClientView {
+  const Replica& replica;
+  const ClientCounters& counters;
+  bool welcomed;
+  bool closed;
+  const std::string& disconnect_reason;
+  const std::unordered_map<std::uint32_t, EditOutcome>& edits;
+  const std::unordered_map<Vec3i, bool, Vec3iHash>& hash_checks;  // last verification per chunk
+};
+
+class Client {
+ public:
+  explicit Client(ClientOptions options, ClientCallbacks callbacks = {});
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  // Connects (blocking up to connect_timeout), queues Hello and the initial
+  // ClientState and starts the io thread. Returns false with *error set if
+  // the connection cannot be made. Call once.
+  bool connect(std::string* error);
+  // Sends Disconnect, closes the socket and joins the io thread (idempotent).
+  void disconnect();
+
+  bool set_state(const ClientStateMsg& state);
+  // Edits return their edit id (the outcome arrives as an ack or reject), or
+  // 0 when the send queue is full or the client is closed.
+  std::uint32_t fill_box(const Region& box, Voxel v);
+  std::uint32_t fill_sphere(Vec3f center, float radius, Material material);
+  bool request_region_hash(Vec3i chunk_pos);
+  bool ping(std::uint64_t nonce);
+  // Sends raw bytes as they are (tests: malformed frames).
+  bool send_raw(Frame bytes);
+
+  // Blocks until pred(view) holds (checked after every frame and on close)
+  // or the timeout passes; returns whether it held.
+  bool wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout);
+
+  // --- queries (each takes the lock once) ---------------------------------------
+  Voxel get(Vec3i voxel) const;
+  void read_box(Vec3i min, Box& out) const;
+  int resolution_at(Vec3i voxel) const;
+  std::optional<RayHit> raycast(Vec3f origin, Vec3f direction, float max_distance) const;
+  std::optional<std::int32_t> surface_height(std::int32_t x, std::int32_t z) const;
+  std::optional<WelcomeMsg> welcome() const;
+  ClientCounters counters() const;
+  bool closed() const;
+  std::string disconnect_reason() const;
+  // Runs fn(const Replica&) under the lock.
+  template <class F>
+  auto with_replica(F&& fn) const {
+    std::lock_guard lock(mutex_);
+    return fn(replica_);
+  }
+
+ private:
+  void do_read();
+  void arm_keepalive();
+  void handle_frame(std::span<const std::uint8_t> body);
+  bool send(Frame frame);
+  void do_write();
+  void close_locked_io(const std::string& reason);  // io thread
+  ClientView view() const;
+
+  ClientOptions options_;
+  ClientCallbacks callbacks_;
+  asio::io_context io_;
+  asio::ip::tcp::socket socket_;
+  asio::steady_timer keepalive_;
+  std::thread thread_;
+  FrameReader reader_;
+  std::vector<std::uint8_t> read_buf_;
+  std::deque<Frame> send_queue_;  // io thread
+  bool writing_ = false;          // io thread
+  std::atomic<std::size_t> queued_bytes_{0};
+  std::atomic<std::uint32_t> next_edit_id_{1};
+  std::atomic<bool> io_closed_{false};
+
+  // Guarded by mutex_ (shared with the application's threads).
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;
+  Replica replica_;
+  ClientCounters counters_;
+  std::optional<WelcomeMsg> welcome_;
+  bool closed_ = false;
+  std::string disconnect_reason_;
+  std::unordered_map<std::uint32_t, EditOutcome> edits_;
+  std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,194 @@
+#include "client/replica.h"
+
+#include <algorithm>
+
+namespace terrane {
+
+namespace {
+// Units decoded from one UpdateBatch at most: 16 chunks' worth. The server
+// sends one chunk per batch; the cap bounds the scratch buffer (~1 MiB).
+constexpr std::size_t kMaxBatchUnits = 16 * kUpdateUnitsPerChunk;
+}  // namespace
+
+Replica::Replica() : unit_scratch_({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit}) {}
+
+Status Replica::apply_chunk_data(const ChunkDataMsg& m) {
+  unit_scratch_.resize({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+  if (auto st = net_codec_decode(kChunkDataUnit, m.data, unit_scratch_.voxels()); !st) return st;
+  write_unit(m.unit_pos, unit_scratch_);
+  return Ok{};
+}
+
+void Replica::write_unit(Vec3i unit_pos, const Box& unit) {
+  const Vec3i cp = floor_div(unit_pos, kChunkSize / kChunkDataUnit);
+  const ChunkCoverage* c = coverage(cp);
+  auto it = pending_.find(cp);
+  const bool direct = (c != nullptr && c->state == CoverageState::kFull) ||
+                      (it == pending_.end() && pending_.size() >= kMaxPendingChunks);
+  if (direct) {
+    grid_.write_box(unit_pos * kChunkDataUnit, unit);
+    return;
+  }
+  if (it == pending_.end()) it = pending_.emplace(cp, Pending{Box({kChunkSize, kChunkSize, kChunkSize}), 0}).first;
+  const Vec3i u = floor_mod(unit_pos, kChunkSize / kChunkDataUnit);
+  const Vec3i off = u * kChunkDataUnit;
+  for (int y = 0; y < kChunkDataUnit; ++y)
+    for (int z = 0; z < kChunkDataUnit; ++z)
+      std::copy_n(unit.read_row(y, z), kChunkDataUnit, it->second.voxels.write_row(off.y + y, off.z + z) + off.x);
+  it->second.received |= static_cast<std::uint8_t>(1u << ((u.z * 2 + u.y) * 2 + u.x));
+}
+
+void Replica::flush_pending(Vec3i cp) {
+  auto it = pending_.find(cp);
+  if (it == pending_.end()) return;
+  Pending& p = it->second;
+  if (p.received == 0xff) {
+    grid_.put_chunk(cp, Chunk::from_box(p.voxels));
+  } else {
+    // Not every unit came: keep what the grid had for the others.
+    Box unit({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+    for (int i = 0; i < 8; ++i) {
+      if ((p.received & (1u << i)) == 0) continue;
+      const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * kChunkDataUnit;
+      for (int y = 0; y < kChunkDataUnit; ++y)
+        for (int z = 0; z < kChunkDataUnit; ++z)
+          std::copy_n(p.voxels.read_row(off.y + y, off.z + z) + off.x, kChunkDataUnit, unit.write_row(y, z));
+      grid_.write_box(chunk_origin(cp) + off, unit);
+    }
+  }
+  pending_.erase(it);
+}
+
+Status Replica::apply_mip_data(const MipDataMsg& m) {
+  const int n = kChunkSize >> m.level;
+  Mip mip{m.level, Box({n, n, n})};
+  if (auto st = net_codec_decode(n, m.data, mip.voxels.voxels()); !st) return st;
+  mips_[m.chunk_pos] = std::move(mip);
+  pending_.erase(m.chunk_pos);
+  auto& c = coverage_[m.chunk_pos];
+  c = ChunkCoverage{CoverageState::kMip, m.level, m.revision};
+  grid_.erase_chunk(m.chunk_pos);
+  return Ok{};
+}
+
+void Replica::apply_coverage(const CoverageMsg& m) {
+  switch (m.kind) {
+    case wire::CoverageKind::Empty:
+      pending_.erase(m.chunk_pos);
+      grid_.erase_chunk(m.chunk_pos);
+      mips_.erase(m.chunk_pos);
+      coverage_[m.chunk_pos] = ChunkCoverage{CoverageState::kEmpty, 0, m.revision};
+      break;
+    case wire::CoverageKind::Full:
+      flush_pending(m.chunk_pos);
+      mips_.erase(m.chunk_pos);
+      coverage_[m.chunk_pos] = ChunkCoverage{CoverageState::kFull, 0, m.revision};
+      break;
+    case wire::CoverageKind::Mip:
+      // Only MipData carries a mip; a bare Mip coverage changes nothing.
+      break;
+    case wire::CoverageKind::Released:
+      pending_.erase(m.chunk_pos);
+      grid_.erase_chunk(m.chunk_pos);
+      mips_.erase(m.chunk_pos);
+      coverage_.erase(m.chunk_pos);
+      break;
+  }
+}
+
+Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m) {
+  const std::size_t cap = std::min(kMaxBatchUnits, m.revisions.size() * kUpdateUnitsPerChunk);
+  update_scratch_.resize(cap);
+  auto n = net_codec_decode_update_batch(m.data, update_scratch_);
+  if (!n) return n.error();
+  // Check every unit belongs to a listed chunk before changing anything.
+  for (std::size_t i = 0; i < *n; ++i) {
+    const Vec3i cp = update_scratch_[i].chunk_pos;
+    const bool listed = std::any_of(m.revisions.begin(), m.revisions.end(),
+                                    [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
+    if (!listed) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "update for a chunk without a revision"};
+  }
+  std::size_t applied = 0;
+  for (std::size_t i = 0; i < *n; ++i) {
+    const UnitUpdate& u = update_scratch_[i];
+    auto it = coverage_.find(u.chunk_pos);
+    if (it == coverage_.end() || it->second.state == CoverageState::kMip) continue;
+    const int idx = u.unit_index;
+    const Vec3i base = chunk_origin(u.chunk_pos) + Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
+    grid_.modify(Region::from_min_size(base, {kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize}),
+                 [&](Vec3i p, Voxel) {
+                   const Vec3i l = p - base;
+                   return u.voxels[static_cast<std::size_t>((l.y * kUpdateUnitSize + l.z) * kUpdateUnitSize + l.x)];
+                 });
+    ++applied;
+  }
+  for (const auto& r : m.revisions) {
+    auto it = coverage_.find(r.chunk_pos);
+    if (it == coverage_.end() || it->second.state == CoverageState::kMip) continue;
+    it->second = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+  }
+  return applied;
+}
+
+const ChunkCoverage* Replica::coverage(Vec3i cp) const {
+  auto it = coverage_.find(cp);
+  return it == coverage_.end() ? nullptr : &it->second;
+}
+
+int Replica::resolution_at(Vec3i voxel) const {
+  const ChunkCoverage* c = coverage(chunk_of(voxel));
+  if (c == nullptr) return kNoResolution;
+  return c->state == CoverageState::kMip ? c->level : 0;
+}
+
+Voxel Replica::get(Vec3i voxel) const {
+  const Vec3i cp = chunk_of(voxel);
+  const ChunkCoverage* c = coverage(cp);
+  if (c == nullptr || c->state == CoverageState::kEmpty) return Voxel{};
+  if (c->state == CoverageState::kFull) return grid_.get(voxel);
+  auto it = mips_.find(cp);
+  if (it == mips_.end()) return Voxel{};
+  const Vec3i l = local_of(voxel);
+  const int s = it->second.level;
+  return it->second.voxels.get(l.x >> s, l.y >> s, l.z >> s);
+}
+
+void Replica::read_box(Vec3i min, Box& out) const { grid_.read_box(min, out); }
+
+std::optional<RayHit> Replica::raycast(Vec3f origin, Vec3f direction, float max_distance) const {
+  return grid_.raycast(origin, direction, max_distance);
+}
+
+std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t z, std::int32_t min_y,
+                                                    std::int32_t max_y) const {
+  for (std::int32_t y = max_y - 1; y >= min_y; --y) {
+    const Vec3i p{x, y, z};
+    const ChunkCoverage* c = coverage(chunk_of(p));
+    if (c == nullptr || c->state == CoverageState::kEmpty) {
+      // Skip the rest of this chunk column: nothing (known) here.
+      y = floor_div(y, kChunkSize) * kChunkSize;
+      continue;
+    }
+    if (get(p).material != kAir) return y + 1;
+  }
+  return std::nullopt;
+}
+
+std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
+  const ChunkCoverage* c = coverage(cp);
+  if (c == nullptr || c->state == CoverageState::kMip) return std::nullopt;
+  return region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision);
+}
+
+std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
+  const ChunkCoverage* c = coverage(cp);
+  if (c == nullptr) return std::nullopt;
+  return c->revision;
+}
+
+std::size_t Replica::chunk_count(CoverageState state) const {
+  return static_cast<std::size_t>(
+      std::count_if(coverage_.begin(), coverage_.end(), [&](const auto& kv) { return kv.second.state == state; }));
+}
+
+}  // namespace terrane

@@ -1,0 +1,106 @@
+// Replica: a client's copy of the part of the world the server sent it.
+//
+// Per 32^3 chunk it tracks coverage — what it knows and at which
+// resolution — so Air is never confused with "not received":
+//   - none:     nothing known (never sent, or released);
+//   - Empty:    known all Air (at full resolution);
+//   - Mip L:    the (32 >> L)^3 mip of the chunk, L in 1..3;
+//   - Full:     every voxel, at the revision the server stated.
+// Full-resolution voxels live in a Grid; mips in a per-chunk Box.
+//
+// Apply functions take parsed messages (protocol/messages.h) whose voxel
+// payloads are still untrusted: every decode error is returned and leaves
+// the replica consistent (at worst a chunk keeps older voxels).
+// Thread-safety: none; the Client guards its Replica with a mutex.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+#include "common/box.h"
+#include "common/grid.h"
+#include "common/net_codec.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+enum class CoverageState : std::uint8_t { kEmpty, kMip, kFull };
+
+struct ChunkCoverage {
+  CoverageState state = CoverageState::kEmpty;
+  int level = 0;  // kMip: 1..3; otherwise 0
+  std::uint64_t revision = 0;
+};
+
+// resolution_at(): -1 nothing known, 0 full resolution (or known Air),
+// 1..3 the mip level held.
+inline constexpr int kNoResolution = -1;
+
+class Replica {
+ public:
+  Replica();
+
+  Status apply_chunk_data(const ChunkDataMsg& m);
+  Status apply_mip_data(const MipDataMsg& m);
+  void apply_coverage(const CoverageMsg& m);
+  // Applies the units of chunks held at full resolution (others are
+  // ignored) and takes the batch's revisions. Returns the units applied.
+  // Errors: the codec's, or kInvalidValue for a unit of a chunk the batch
+  // lists no revision for.
+  Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m);
+
+  // --- queries ---------------------------------------------------------------
+  const ChunkCoverage* coverage(Vec3i chunk_pos) const;
+  int resolution_at(Vec3i voxel) const;
+  // The voxel at the best resolution held (a mip voxel stands for the 2^L
+  // cube it covers); Air where nothing is known — check resolution_at.
+  Voxel get(Vec3i voxel) const;
+  // Full-resolution voxels of [min, min + out.size()); Air elsewhere.
+  void read_box(Vec3i min, Box& out) const;
+  // Ray cast through full-resolution data only.
+  std::optional<RayHit> raycast(Vec3f origin, Vec3f direction, float max_distance) const;
+  // The y just above the highest non-Air voxel of column (x, z) within
+  // [min_y, max_y), reading the best resolution held; nullopt if none.
+  std::optional<std::int32_t> surface_height(std::int32_t x, std::int32_t z, std::int32_t min_y,
+                                             std::int32_t max_y) const;
+  // Region hash (protocol/messages.h) of a chunk held at full resolution
+  // (Full or Empty); nullopt otherwise.
+  std::optional<std::uint64_t> hash(Vec3i chunk_pos) const;
+  std::optional<std::uint64_t> revision(Vec3i chunk_pos) const;
+
+  std::size_t chunk_count(CoverageState state) const;
+  std::size_t chunk_count() const { return coverage_.size(); }
+  const Grid& grid() const { return grid_; }
+  template <class F>
+  void for_each_coverage(F&& f) const {
+    for (const auto& [pos, c] : coverage_) f(pos, c);
+  }
+
+ private:
+  struct Mip {
+    int level = 0;
+    Box voxels;
+  };
+  // The 16^3 units of a chunk on its way to full resolution, gathered so the
+  // chunk is packed once when Coverage Full arrives (writing units into a
+  // packed chunk one by one repacks it each time).
+  struct Pending {
+    Box voxels;
+    std::uint8_t received = 0;  // bit per unit: (uz*2+uy)*2+ux order of unit index
+  };
+  static constexpr std::size_t kMaxPendingChunks = 64;
+
+  void write_unit(Vec3i unit_pos, const Box& unit);
+  void flush_pending(Vec3i chunk_pos);
+
+  Grid grid_;
+  std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> coverage_;
+  std::unordered_map<Vec3i, Mip, Vec3iHash> mips_;
+  std::unordered_map<Vec3i, Pending, Vec3iHash> pending_;
+  Box unit_scratch_;
+  std::vector<UnitUpdate> update_scratch_;
+};
+
+}  // namespace terrane

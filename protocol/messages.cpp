@@ -1,0 +1,379 @@
+#include "protocol/messages.h"
+
+#include <cmath>
+#include <cstring>
+
+#include "common/net_codec.h"
+
+namespace terrane {
+
+namespace {
+
+using flatbuffers::FlatBufferBuilder;
+
+template <class T>
+Frame finish(FlatBufferBuilder& fbb, flatbuffers::Offset<T> body) {
+  auto msg = wire::CreateMessage(fbb, wire::BodyTraits<T>::enum_value, body.Union());
+  fbb.Finish(msg);
+  Frame out;
+  out.reserve(kFrameHeaderBytes + fbb.GetSize());
+  append_frame(std::span<const std::uint8_t>(fbb.GetBufferPointer(), fbb.GetSize()), out);
+  return out;
+}
+
+wire::Vec3i to_wire(Vec3i v) { return wire::Vec3i(v.x, v.y, v.z); }
+wire::Vec3f to_wire(Vec3f v) { return wire::Vec3f(v.x, v.y, v.z); }
+Vec3i from_wire(const wire::Vec3i& v) { return {v.x(), v.y(), v.z()}; }
+Vec3f from_wire(const wire::Vec3f& v) { return {v.x(), v.y(), v.z()}; }
+
+std::string_view clip(std::string_view s, std::size_t limit) { return s.substr(0, std::min(s.size(), limit)); }
+
+DecodeError invalid(const char* what) { return DecodeError{DecodeErrorCode::kInvalidValue, 0, what}; }
+DecodeError over(const char* what) { return DecodeError{DecodeErrorCode::kOverLimit, 0, what}; }
+
+bool finite(Vec3f v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+bool position_ok(Vec3f v) {
+  const auto lim = static_cast<float>(kMaxWireCoordinate);
+  return finite(v) && std::fabs(v.x) <= lim && std::fabs(v.y) <= lim && std::fabs(v.z) <= lim;
+}
+
+std::span<const std::uint8_t> bytes_of(const flatbuffers::Vector<std::uint8_t>* v) {
+  if (v == nullptr) return {};
+  return {v->data(), v->size()};
+}
+
+}  // namespace
+
+bool wire_coordinate_ok(Vec3i v) {
+  auto ok = [](std::int32_t c) { return c >= -kMaxWireCoordinate && c <= kMaxWireCoordinate; };
+  return ok(v.x) && ok(v.y) && ok(v.z);
+}
+
+bool wire_chunk_ok(Vec3i c) {
+  constexpr std::int32_t lim = kMaxWireCoordinate / kChunkSize;
+  auto ok = [](std::int32_t v) { return v >= -lim && v <= lim; };
+  return ok(c.x) && ok(c.y) && ok(c.z);
+}
+
+Region EditRequestMsg::bounds() const {
+  if (kind == EditKind::kFillBox) return box;
+  // Every voxel whose cube may overlap the sphere (with the half-voxel edge
+  // band used for fractional occupancy).
+  const float r = radius + 1.0f;
+  const Vec3i lo{static_cast<std::int32_t>(std::floor(center.x - r)), static_cast<std::int32_t>(std::floor(center.y - r)),
+                 static_cast<std::int32_t>(std::floor(center.z - r))};
+  const Vec3i hi{static_cast<std::int32_t>(std::ceil(center.x + r)), static_cast<std::int32_t>(std::ceil(center.y + r)),
+                 static_cast<std::int32_t>(std::ceil(center.z + r))};
+  return {lo, hi};
+}
+
+// --- builders ------------------------------------------------------------------
+
+Frame build_hello(const HelloMsg& m) {
+  FlatBufferBuilder fbb(128);
+  const auto name = fbb.CreateString(clip(m.client_name, kMaxClientNameBytes));
+  const auto token = fbb.CreateString(clip(m.auth_token, kMaxAuthTokenBytes));
+  return finish(fbb, wire::CreateHello(fbb, m.protocol_version, name, token));
+}
+
+Frame build_welcome(const WelcomeMsg& m) {
+  FlatBufferBuilder fbb(1024);
+  std::vector<flatbuffers::Offset<flatbuffers::String>> names;
+  for (std::size_t i = 0; i < m.materials.size() && i < kMaxMaterialNames; ++i)
+    names.push_back(fbb.CreateString(clip(m.materials[i], kMaxClientNameBytes)));
+  const auto spawn = to_wire(m.spawn);
+  return finish(fbb, wire::CreateWelcomeDirect(fbb, m.protocol_version, m.server_epoch, &spawn, &names, m.bounds_min_y,
+                                               m.bounds_max_y, m.max_view_distance, m.max_full_res_radius,
+                                               m.max_frame_bytes, m.tick_hz));
+}
+
+Frame build_disconnect(std::string_view reason) {
+  FlatBufferBuilder fbb(128);
+  const auto r = fbb.CreateString(clip(reason, kMaxReasonBytes));
+  return finish(fbb, wire::CreateDisconnect(fbb, r));
+}
+
+Frame build_client_state(const ClientStateMsg& m) {
+  FlatBufferBuilder fbb(64);
+  const auto pos = to_wire(m.position);
+  return finish(fbb, wire::CreateClientState(fbb, &pos, m.view_distance, m.full_res_radius));
+}
+
+Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data) {
+  FlatBufferBuilder fbb(data.size() + 64);
+  const auto p = to_wire(unit_pos);
+  const auto d = fbb.CreateVector(data.data(), data.size());
+  return finish(fbb, wire::CreateChunkData(fbb, &p, revision, d));
+}
+
+Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data) {
+  FlatBufferBuilder fbb(data.size() + 64);
+  const auto p = to_wire(chunk_pos);
+  const auto d = fbb.CreateVector(data.data(), data.size());
+  return finish(fbb, wire::CreateMipData(fbb, &p, static_cast<std::uint8_t>(level), revision, d));
+}
+
+Frame build_coverage(const CoverageMsg& m) {
+  FlatBufferBuilder fbb(64);
+  const auto p = to_wire(m.chunk_pos);
+  return finish(fbb, wire::CreateCoverage(fbb, &p, m.kind, static_cast<std::uint8_t>(m.level), m.revision));
+}
+
+Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
+                         std::span<const ChunkRevisionMsg> revisions) {
+  FlatBufferBuilder fbb(data.size() + revisions.size() * 24 + 64);
+  std::vector<wire::ChunkRevision> revs;
+  revs.reserve(revisions.size());
+  for (const auto& r : revisions) revs.emplace_back(to_wire(r.chunk_pos), r.revision);
+  const auto d = fbb.CreateVector(data.data(), data.size());
+  const auto rv = fbb.CreateVectorOfStructs(revs);
+  return finish(fbb, wire::CreateUpdateBatch(fbb, tick, d, rv));
+}
+
+Frame build_edit_request(const EditRequestMsg& m) {
+  FlatBufferBuilder fbb(128);
+  const auto mn = to_wire(m.box.min);
+  const auto mx = to_wire(m.box.max);
+  const auto c = to_wire(m.center);
+  const auto kind = m.kind == EditKind::kFillSphere ? wire::EditKind::FillSphere : wire::EditKind::FillBox;
+  return finish(fbb, wire::CreateEditRequest(fbb, m.edit_id, kind, &mn, &mx, &c, m.radius, m.material, m.occupancy));
+}
+
+Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick) {
+  FlatBufferBuilder fbb(64);
+  return finish(fbb, wire::CreateEditAck(fbb, edit_id, tick));
+}
+
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason) {
+  FlatBufferBuilder fbb(128);
+  const auto r = fbb.CreateString(clip(reason, kMaxReasonBytes));
+  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r));
+}
+
+Frame build_region_hash(const RegionHashMsg& m) {
+  FlatBufferBuilder fbb(64);
+  const auto p = to_wire(m.chunk_pos);
+  return finish(fbb, wire::CreateRegionHash(fbb, &p, m.revision, m.hash));
+}
+
+Frame build_region_hash_request(Vec3i chunk_pos) {
+  FlatBufferBuilder fbb(64);
+  const auto p = to_wire(chunk_pos);
+  return finish(fbb, wire::CreateRegionHashRequest(fbb, &p));
+}
+
+Frame build_ping(std::uint64_t nonce) {
+  FlatBufferBuilder fbb(32);
+  return finish(fbb, wire::CreatePing(fbb, nonce));
+}
+
+Frame build_pong(std::uint64_t nonce) {
+  FlatBufferBuilder fbb(32);
+  return finish(fbb, wire::CreatePong(fbb, nonce));
+}
+
+// --- parsers -------------------------------------------------------------------
+
+Result<HelloMsg> parse_hello(const wire::Hello& m) {
+  HelloMsg out;
+  out.protocol_version = m.protocol_version();
+  if (m.client_name() == nullptr || m.client_name()->size() == 0) return invalid("hello: missing client name");
+  if (m.client_name()->size() > kMaxClientNameBytes) return over("hello: client name longer than 64 bytes");
+  if (m.auth_token() != nullptr && m.auth_token()->size() > kMaxAuthTokenBytes)
+    return over("hello: auth token longer than 256 bytes");
+  out.client_name = m.client_name()->str();
+  if (m.auth_token() != nullptr) out.auth_token = m.auth_token()->str();
+  return out;
+}
+
+Result<WelcomeMsg> parse_welcome(const wire::Welcome& m) {
+  WelcomeMsg out;
+  out.protocol_version = m.protocol_version();
+  out.server_epoch = m.server_epoch();
+  if (m.spawn() == nullptr) return invalid("welcome: missing spawn");
+  out.spawn = from_wire(*m.spawn());
+  if (!position_ok(out.spawn)) return invalid("welcome: spawn out of range");
+  if (m.materials() != nullptr) {
+    if (m.materials()->size() > kMaxMaterialNames) return over("welcome: more than 64 materials");
+    for (const auto* s : *m.materials()) out.materials.push_back(s == nullptr ? std::string() : s->str());
+  }
+  out.bounds_min_y = m.bounds_min_y();
+  out.bounds_max_y = m.bounds_max_y();
+  if (out.bounds_min_y >= out.bounds_max_y) return invalid("welcome: empty vertical bounds");
+  out.max_view_distance = m.max_view_distance();
+  out.max_full_res_radius = m.max_full_res_radius();
+  if (out.max_view_distance < 0 || out.max_full_res_radius < 0) return invalid("welcome: negative radius");
+  out.max_frame_bytes = m.max_frame_bytes();
+  if (out.max_frame_bytes < 1024 || out.max_frame_bytes > kDefaultMaxFrameBytes)
+    return invalid("welcome: max frame size out of range");
+  out.tick_hz = m.tick_hz();
+  if (out.tick_hz == 0 || out.tick_hz > 1000) return invalid("welcome: tick rate out of range");
+  return out;
+}
+
+Result<std::string> parse_disconnect(const wire::Disconnect& m) {
+  if (m.reason() == nullptr) return std::string();
+  if (m.reason()->size() > kMaxReasonBytes) return over("disconnect: reason longer than 256 bytes");
+  return m.reason()->str();
+}
+
+Result<ClientStateMsg> parse_client_state(const wire::ClientState& m) {
+  ClientStateMsg out;
+  if (m.position() == nullptr) return invalid("client state: missing position");
+  out.position = from_wire(*m.position());
+  if (!position_ok(out.position)) return invalid("client state: position out of range");
+  out.view_distance = m.view_distance();
+  out.full_res_radius = m.full_res_radius();
+  if (out.view_distance < 0 || out.view_distance > kMaxWireViewDistance) return invalid("client state: view distance");
+  if (out.full_res_radius < 0 || out.full_res_radius > kMaxWireViewDistance)
+    return invalid("client state: full-resolution radius");
+  return out;
+}
+
+Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m) {
+  EditRequestMsg out;
+  out.edit_id = m.edit_id();
+  out.material = m.material();
+  out.occupancy = m.occupancy();
+  if (out.material >= kMaterialCount) return invalid("edit: material id >= 64");
+  switch (m.kind()) {
+    case wire::EditKind::FillBox: {
+      out.kind = EditKind::kFillBox;
+      if (m.min() == nullptr || m.max() == nullptr) return invalid("edit: box without min/max");
+      out.box = {from_wire(*m.min()), from_wire(*m.max())};
+      if (!wire_coordinate_ok(out.box.min) || !wire_coordinate_ok(out.box.max))
+        return invalid("edit: box coordinates out of range");
+      if (out.box.empty()) return invalid("edit: empty box");
+      if (out.box.volume() > kMaxEditVolume) return over("edit: box larger than 64^3 voxels");
+      if (out.material == kAir) out.occupancy = 0;
+      break;
+    }
+    case wire::EditKind::FillSphere: {
+      out.kind = EditKind::kFillSphere;
+      if (m.center() == nullptr) return invalid("edit: sphere without centre");
+      out.center = from_wire(*m.center());
+      out.radius = m.radius();
+      if (!position_ok(out.center)) return invalid("edit: sphere centre out of range");
+      if (!std::isfinite(out.radius) || out.radius <= 0.0f) return invalid("edit: sphere radius not positive");
+      if (out.radius > kMaxSphereRadius) return over("edit: sphere radius above 32");
+      break;
+    }
+    default:
+      return invalid("edit: kind not supported");
+  }
+  if (m.data() != nullptr && m.data()->size() != 0) return invalid("edit: unexpected data");
+  return out;
+}
+
+Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m) {
+  ChunkDataMsg out;
+  if (m.unit_pos() == nullptr) return invalid("chunk data: missing unit position");
+  out.unit_pos = from_wire(*m.unit_pos());
+  if (!wire_chunk_ok(floor_div(out.unit_pos, kChunkSize / kChunkDataUnit)))
+    return invalid("chunk data: unit position out of range");
+  out.revision = m.revision();
+  out.data = bytes_of(m.data());
+  if (out.data.empty()) return invalid("chunk data: no data");
+  if (out.data.size() > net_codec_max_encoded_size(kChunkDataUnit)) return over("chunk data: unit larger than its worst case");
+  return out;
+}
+
+Result<MipDataMsg> parse_mip_data(const wire::MipData& m) {
+  MipDataMsg out;
+  if (m.chunk_pos() == nullptr) return invalid("mip data: missing chunk position");
+  out.chunk_pos = from_wire(*m.chunk_pos());
+  if (!wire_chunk_ok(out.chunk_pos)) return invalid("mip data: chunk position out of range");
+  out.level = m.level();
+  if (out.level < 1 || out.level > kMipLevels - 1) return invalid("mip data: level not 1..3");
+  out.revision = m.revision();
+  out.data = bytes_of(m.data());
+  if (out.data.empty()) return invalid("mip data: no data");
+  if (out.data.size() > net_codec_max_encoded_size(kChunkDataUnit)) return over("mip data: unit larger than its worst case");
+  return out;
+}
+
+Result<CoverageMsg> parse_coverage(const wire::Coverage& m) {
+  CoverageMsg out;
+  if (m.chunk_pos() == nullptr) return invalid("coverage: missing chunk position");
+  out.chunk_pos = from_wire(*m.chunk_pos());
+  if (!wire_chunk_ok(out.chunk_pos)) return invalid("coverage: chunk position out of range");
+  if (m.kind() > wire::CoverageKind::MAX) return invalid("coverage: unknown kind");
+  out.kind = m.kind();
+  out.level = m.level();
+  if (out.kind == wire::CoverageKind::Mip && (out.level < 1 || out.level > kMipLevels - 1))
+    return invalid("coverage: mip level not 1..3");
+  if (out.kind != wire::CoverageKind::Mip && out.level != 0) return invalid("coverage: level on a non-mip kind");
+  out.revision = m.revision();
+  return out;
+}
+
+Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m) {
+  UpdateBatchMsg out;
+  out.tick = m.tick();
+  out.data = bytes_of(m.data());
+  if (out.data.empty()) return invalid("update batch: no data");
+  if (m.revisions() == nullptr || m.revisions()->size() == 0) return invalid("update batch: no revisions");
+  if (m.revisions()->size() > kMaxBatchRevisions) return over("update batch: too many revisions");
+  // Read the 24-byte structs as bytes: a frame body need not start 8-byte
+  // aligned (it follows the 4-byte length), so a ChunkRevision* may be
+  // misaligned in memory even though the buffer is valid.
+  static_assert(sizeof(wire::ChunkRevision) == 24);
+  const std::uint8_t* raw = m.revisions()->Data();
+  out.revisions.reserve(m.revisions()->size());
+  for (flatbuffers::uoffset_t i = 0; i < m.revisions()->size(); ++i) {
+    const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::ChunkRevision);
+    std::int32_t xyz[3];
+    std::uint64_t rev;
+    std::memcpy(xyz, e, sizeof xyz);
+    std::memcpy(&rev, e + 16, sizeof rev);
+    ChunkRevisionMsg cr{{flatbuffers::EndianScalar(xyz[0]), flatbuffers::EndianScalar(xyz[1]),
+                         flatbuffers::EndianScalar(xyz[2])},
+                        flatbuffers::EndianScalar(rev)};
+    if (!wire_chunk_ok(cr.chunk_pos)) return invalid("update batch: chunk position out of range");
+    out.revisions.push_back(cr);
+  }
+  return out;
+}
+
+Result<RegionHashMsg> parse_region_hash(const wire::RegionHash& m) {
+  RegionHashMsg out;
+  if (m.chunk_pos() == nullptr) return invalid("region hash: missing chunk position");
+  out.chunk_pos = from_wire(*m.chunk_pos());
+  if (!wire_chunk_ok(out.chunk_pos)) return invalid("region hash: chunk position out of range");
+  out.revision = m.revision();
+  out.hash = m.hash();
+  return out;
+}
+
+Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m) {
+  if (m.chunk_pos() == nullptr) return invalid("region hash request: missing chunk position");
+  const Vec3i p = from_wire(*m.chunk_pos());
+  if (!wire_chunk_ok(p)) return invalid("region hash request: chunk position out of range");
+  return p;
+}
+
+// --- region hash ------------------------------------------------------------------
+
+std::uint64_t region_hash(const Chunk* chunk, std::uint64_t revision) {
+  constexpr std::uint64_t kOffset = 0xcbf29ce484222325ull, kPrime = 0x100000001b3ull;
+  std::uint64_t h = kOffset;
+  for (int i = 0; i < 8; ++i) {
+    h ^= (revision >> (8 * i)) & 0xff;
+    h *= kPrime;
+  }
+  Chunk::Level0::Row scratch;
+  for (int y = 0; y < kChunkSize; ++y)
+    for (int z = 0; z < kChunkSize; ++z) {
+      const Voxel* row = chunk != nullptr ? chunk->read_row(y, z, scratch) : nullptr;
+      for (int x = 0; x < kChunkSize; ++x) {
+        const Voxel v = row != nullptr ? row[x] : Voxel{};
+        h ^= v.material;
+        h *= kPrime;
+        h ^= v.occupancy;
+        h *= kPrime;
+      }
+    }
+  return h;
+}
+
+}  // namespace terrane

@@ -1,0 +1,168 @@
+// Wire messages shared by the server and the client: builders that produce a
+// complete frame (length header + FlatBuffers Message, protocol/framing.h)
+// and parsers that turn a verified Message body into plain structs after
+// checking what the fields mean (coordinates in range, material < 64, radius
+// and box volume bounds, string lengths). The FlatBuffers verifier (run by
+// verify_message) only proves the bytes are a well-formed buffer; these
+// parsers are the second gate and treat every field as hostile.
+//
+// Also the region hash, which both sides must compute identically.
+// Thread-safety: every function is pure.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "common/chunk.h"
+#include "common/decode_error.h"
+#include "common/vec3.h"
+#include "common/voxel.h"
+#include "protocol/framing.h"
+#include "protocol/terrane_generated.h"
+
+namespace terrane {
+
+// --- limits (PROTOCOL.md, "Limits") ----------------------------------------
+inline constexpr std::size_t kMaxClientNameBytes = 64;
+inline constexpr std::size_t kMaxAuthTokenBytes = 256;
+inline constexpr std::size_t kMaxReasonBytes = 256;
+inline constexpr std::size_t kMaxMaterialNames = kMaterialCount;
+// Voxel coordinates on the wire stay within +-2^24 so that chunk and unit
+// coordinates, and positions as float, never overflow or lose whole voxels.
+inline constexpr std::int32_t kMaxWireCoordinate = 1 << 24;
+// One edit touches at most 64^3 voxels: bounded work per message on the
+// server's owner thread (a few milliseconds).
+inline constexpr std::int64_t kMaxEditVolume = 64 * 64 * 64;
+inline constexpr float kMaxSphereRadius = 32.0f;
+// View distances on the wire; the server caps them further.
+inline constexpr std::int32_t kMaxWireViewDistance = 1 << 16;
+// Chunk revisions in one UpdateBatch (one batch covers at most one tick).
+inline constexpr std::size_t kMaxBatchRevisions = 4096;
+// 16^3 units of a 32^3 chunk.
+inline constexpr int kChunkDataUnit = 16;
+
+using Frame = std::vector<std::uint8_t>;
+
+// --- message structs ---------------------------------------------------------
+struct HelloMsg {
+  std::uint32_t protocol_version = kProtocolVersion;
+  std::string client_name;
+  std::string auth_token;
+};
+
+struct WelcomeMsg {
+  std::uint32_t protocol_version = kProtocolVersion;
+  std::uint64_t server_epoch = 0;
+  Vec3f spawn;
+  std::vector<std::string> materials;
+  std::int32_t bounds_min_y = 0;
+  std::int32_t bounds_max_y = 0;
+  std::int32_t max_view_distance = 0;
+  std::int32_t max_full_res_radius = 0;
+  std::uint32_t max_frame_bytes = 0;
+  std::uint32_t tick_hz = 0;
+};
+
+struct ClientStateMsg {
+  Vec3f position;
+  std::int32_t view_distance = 0;    // voxels
+  std::int32_t full_res_radius = 0;  // voxels
+};
+
+enum class EditKind : std::uint8_t { kFillBox = 0, kFillSphere = 1 };
+
+struct EditRequestMsg {
+  std::uint32_t edit_id = 0;
+  EditKind kind = EditKind::kFillBox;
+  Region box;          // kFillBox: half-open
+  Vec3f center;        // kFillSphere
+  float radius = 0;    // kFillSphere
+  Material material = kAir;
+  std::uint8_t occupancy = 0;  // kFillBox: the byte written (Air forces 0)
+
+  // The voxels the edit may touch.
+  Region bounds() const;
+};
+
+// Data messages point into the frame they were parsed from.
+struct ChunkDataMsg {
+  Vec3i unit_pos;  // in 16-voxel units
+  std::uint64_t revision = 0;
+  std::span<const std::uint8_t> data;
+};
+struct MipDataMsg {
+  Vec3i chunk_pos;
+  int level = 0;  // 1..3
+  std::uint64_t revision = 0;
+  std::span<const std::uint8_t> data;
+};
+struct CoverageMsg {
+  Vec3i chunk_pos;
+  wire::CoverageKind kind = wire::CoverageKind::Empty;
+  int level = 0;
+  std::uint64_t revision = 0;
+};
+struct ChunkRevisionMsg {
+  Vec3i chunk_pos;
+  std::uint64_t revision = 0;
+};
+struct UpdateBatchMsg {
+  std::uint64_t tick = 0;
+  std::span<const std::uint8_t> data;
+  std::vector<ChunkRevisionMsg> revisions;
+};
+struct RegionHashMsg {
+  Vec3i chunk_pos;
+  std::uint64_t revision = 0;
+  std::uint64_t hash = 0;
+};
+
+// --- builders: each returns one complete frame --------------------------------
+// Strings longer than their limit are truncated to it (our own callers).
+Frame build_hello(const HelloMsg& m);
+Frame build_welcome(const WelcomeMsg& m);
+Frame build_disconnect(std::string_view reason);
+Frame build_client_state(const ClientStateMsg& m);
+Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data);
+Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data);
+Frame build_coverage(const CoverageMsg& m);
+Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
+                         std::span<const ChunkRevisionMsg> revisions);
+Frame build_edit_request(const EditRequestMsg& m);
+Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick);
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason);
+Frame build_region_hash(const RegionHashMsg& m);
+Frame build_region_hash_request(Vec3i chunk_pos);
+Frame build_ping(std::uint64_t nonce);
+Frame build_pong(std::uint64_t nonce);
+
+// --- parsers: meaning checks on a verified message ------------------------------
+// Each returns kInvalidValue / kOverLimit naming the field on failure.
+Result<HelloMsg> parse_hello(const wire::Hello& m);
+Result<WelcomeMsg> parse_welcome(const wire::Welcome& m);
+Result<std::string> parse_disconnect(const wire::Disconnect& m);
+Result<ClientStateMsg> parse_client_state(const wire::ClientState& m);
+Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m);
+Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m);
+Result<MipDataMsg> parse_mip_data(const wire::MipData& m);
+Result<CoverageMsg> parse_coverage(const wire::Coverage& m);
+Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m);
+Result<RegionHashMsg> parse_region_hash(const wire::RegionHash& m);
+Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m);
+
+// True if every component lies in [-kMaxWireCoordinate, kMaxWireCoordinate].
+bool wire_coordinate_ok(Vec3i voxel);
+// Same for chunk coordinates (voxel range / 32).
+bool wire_chunk_ok(Vec3i chunk_pos);
+
+// --- region hash ------------------------------------------------------------
+// 64-bit FNV-1a over the revision (8 bytes little-endian) then the 32^3
+// voxels of the chunk in Box order, two bytes each (material, occupancy).
+// A null chunk is all Air. Both sides hash decoded voxels, so the value does
+// not depend on how the chunk travelled.
+std::uint64_t region_hash(const Chunk* chunk, std::uint64_t revision);
+
+}  // namespace terrane

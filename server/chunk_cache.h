@@ -1,0 +1,66 @@
+// ChunkCache: the server's authoritative copy of loaded chunks — a Grid plus
+// the revision of every loaded chunk (all-Air chunks are loaded but have no
+// Grid entry). Chunks come from the world store on the owner strand (one
+// SQLite connection) or, when never stored, are generated on a worker pool
+// and handed back to the owner strand.
+//
+// Threading: every member runs on the owner strand, except the generation
+// jobs, which touch only the World's thread-safe generate_chunk.
+// Invariant: a chunk is in at most one of loaded / pending.
+#pragma once
+
+#include <asio.hpp>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "common/grid.h"
+#include "common/world.h"
+
+namespace terrane {
+
+class ChunkCache {
+ public:
+  using Strand = asio::strand<asio::io_context::executor_type>;
+
+  // on_loaded runs on the owner strand after generated chunks arrive.
+  ChunkCache(World& world, Strand owner, asio::thread_pool& workers, std::function<void()> on_loaded);
+
+  bool loaded(Vec3i chunk_pos) const { return revisions_.count(chunk_pos) != 0; }
+  // Revision of a loaded chunk (precondition: loaded).
+  std::uint64_t revision(Vec3i chunk_pos) const { return revisions_.at(chunk_pos); }
+  void set_revision(Vec3i chunk_pos, std::uint64_t revision) { revisions_[chunk_pos] = revision; }
+  // The chunk's voxels, or null when it is all Air (precondition: loaded).
+  const Chunk* chunk(Vec3i chunk_pos) const { return grid_.find_chunk(chunk_pos); }
+  Grid& grid() { return grid_; }
+  const Grid& grid() const { return grid_; }
+
+  // Starts loading the chunk unless it is loaded or pending. Returns true if
+  // the chunk is loaded when the call returns (store hits load at once).
+  // At most kMaxPendingGenerations generations run at a time; beyond that
+  // the request is ignored and must be repeated.
+  bool request(Vec3i chunk_pos);
+  std::size_t pending() const { return pending_.size(); }
+  std::size_t loaded_count() const { return revisions_.size(); }
+  std::uint64_t generated_count() const { return generated_; }
+  std::uint64_t stored_loaded_count() const { return from_store_; }
+
+  // Generation jobs queued on the worker pool at most (bounds owner memory
+  // and keeps nearest-first order meaningful).
+  static constexpr std::size_t kMaxPendingGenerations = 64;
+
+ private:
+  World& world_;
+  Strand owner_;
+  asio::thread_pool& workers_;
+  std::function<void()> on_loaded_;
+  Grid grid_;
+  std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> revisions_;
+  std::unordered_set<Vec3i, Vec3iHash> pending_;
+  std::uint64_t generated_ = 0;
+  std::uint64_t from_store_ = 0;
+};
+
+}  // namespace terrane

@@ -1,0 +1,34 @@
+// Applying edit requests to the authoritative grid, recording which 4^3
+// units changed (the unit of UpdateBatch, common/net_codec.h).
+//
+// FillBox writes one voxel (material, occupancy) over the box.
+// FillSphere gives each voxel the fraction f of its cube inside the sphere,
+// approximated as clamp(r + 0.5 - |centre - voxel centre|, 0, 1), so the
+// total occupancy written matches the sphere's volume (4/3 pi r^3) to within
+// a few percent for r >= 2. A voxel becomes the edit's material with
+// occupancy max(f, its old fraction when it already had that material);
+// voxels whose f is zero keep their value. With material Air the sphere
+// digs: the old fraction becomes min(old, 1 - f), Air when nothing is left.
+// Thread-safety: none; the caller owns the grid (the server's owner strand).
+#pragma once
+
+#include <bitset>
+#include <unordered_map>
+
+#include "common/grid.h"
+#include "common/net_codec.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+// Changed 4^3 units per chunk; bit index (uy*8+uz)*8+ux.
+using ChangedUnits = std::unordered_map<Vec3i, std::bitset<kUpdateUnitsPerChunk>, Vec3iHash>;
+
+// Applies edit to grid, only inside clip. Returns the number of voxels that
+// changed value and adds their units to changed.
+std::size_t apply_edit(Grid& grid, const EditRequestMsg& edit, const Region& clip, ChangedUnits& changed);
+
+// Sum of occupancy fractions over region (tests and tools).
+double total_occupancy(const Grid& grid, const Region& region);
+
+}  // namespace terrane

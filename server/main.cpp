@@ -1,0 +1,114 @@
+// terrane-server: the authoritative Terrane world server.
+//
+//   terrane-server --world DIR [--bind ADDR] [--port N] [options]
+//
+// Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
+// SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
+// 0 after a clean stop, 1 when the world cannot be opened or the port
+// bound, 2 on bad usage.
+#include <csignal>
+#include <cstdio>
+#include <string>
+
+#include <asio.hpp>
+
+#include "common/cli.h"
+#include "server/log.h"
+#include "server/server.h"
+
+namespace terrane {
+namespace {
+
+constexpr const char* kHelp =
+    "usage: terrane-server --world DIR [options]\n"
+    "\n"
+    "Serves a Terrane world over TCP (protocol/PROTOCOL.md). DIR is created with the default\n"
+    "generated world when it holds none.\n"
+    "\n"
+    "  --world DIR                 world directory (required)\n"
+    "  --bind ADDR                 address to listen on (default 127.0.0.1)\n"
+    "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
+    "                              'listening on ADDR:PORT'\n"
+    "  --tick-hz N                 simulation ticks per second (default 20)\n"
+    "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
+    "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
+    "  --max-view-distance N       cap on client view distances (default 1024)\n"
+    "  --max-full-res-radius N     cap on client full-resolution radii (default 256)\n"
+    "  --max-clients N             connections at once (default 64)\n"
+    "  --max-queue-bytes N         per-client send queue; a client further behind is dropped\n"
+    "                              (default 16777216)\n"
+    "  --stream-window-bytes N     per-client streaming window (default 524288)\n"
+    "  --io-threads N              network threads (default 1)\n"
+    "  --worker-threads N          chunk generation threads (default 2)\n"
+    "  --write-timeout-ms N        drop a client whose socket takes no data for this long\n"
+    "                              (default 10000)\n"
+    "  --socket-send-buffer N      SO_SNDBUF of client sockets in bytes (default: OS default)\n"
+    "  --auth-token T              require this token in Hello (default: open server)\n"
+    "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
+    "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
+    "  --help                      this text\n";
+
+int usage_error(const std::string& message) {
+  std::fprintf(stderr, "terrane-server: %s\n\n%s", message.c_str(), kHelp);
+  return 2;
+}
+
+int run(int argc, char** argv) {
+  CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
+                  "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
+                  "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "test-drop-updates", "test-corrupt-updates"},
+                 {"help"});
+  if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
+  if (cl.flag("help")) return std::printf("%s", kHelp), 0;
+  if (!cl.positional().empty()) return usage_error("unexpected argument " + cl.positional().front());
+  if (!cl.has("world")) return usage_error("--world DIR is required");
+  ServerOptions o;
+  std::string err;
+  o.world_dir = cl.get("world");
+  o.bind_address = cl.get("bind", o.bind_address);
+  o.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
+  o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", 20, 1, 1000, &err));
+  o.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
+  o.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
+  o.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
+  o.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
+  o.default_view_distance = std::min(o.default_view_distance, o.max_view_distance);
+  o.default_full_res_radius = std::min(o.default_full_res_radius, o.max_full_res_radius);
+  o.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 64, 1, 100000, &err));
+  o.session.max_queue_bytes =
+      static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));
+  o.stream_window_bytes =
+      static_cast<std::size_t>(cl.get_int("stream-window-bytes", 512 << 10, 1 << 12, std::int64_t{1} << 32, &err));
+  o.io_threads = static_cast<int>(cl.get_int("io-threads", 1, 1, 64, &err));
+  o.worker_threads = static_cast<int>(cl.get_int("worker-threads", 2, 1, 256, &err));
+  o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
+  o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
+  o.auth_token = cl.get("auth-token");
+  o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
+  o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
+  if (!err.empty()) return usage_error(err);
+
+  auto server = Server::create(o);
+  if (!server) {
+    server_log().error("{}", server.error().message);
+    return 1;
+  }
+  // Signals are caught on a private io_context so the server's own threads
+  // never block on them.
+  asio::io_context signals_io;
+  asio::signal_set signals(signals_io, SIGINT, SIGTERM);
+  int caught = 0;
+  signals.async_wait([&](const asio::error_code& ec, int sig) {
+    if (!ec) caught = sig;
+  });
+  (*server)->start();
+  signals_io.run();
+  server_log().info("signal {}: shutting down", caught);
+  (*server)->stop();
+  return 0;
+}
+
+}  // namespace
+}  // namespace terrane
+
+int main(int argc, char** argv) { return terrane::run(argc, argv); }

@@ -1,0 +1,221 @@
+#include "server/server.h"
+
+#include <future>
+
+#include "server/log.h"
+
+namespace terrane {
+
+FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options) {
+  std::unique_ptr<Server> s(new Server(options));
+  auto world = WorldStore::exists(options.world_dir) ? World::open(options.world_dir)
+                                                     : World::create(options.world_dir, default_world_meta());
+  if (!world) return world.error();
+  s->world_ = std::move(*world);
+  const std::uint64_t epoch = s->world_->meta().epoch + 1;
+  if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
+
+  asio::error_code ec;
+  const auto addr = asio::ip::make_address(options.bind_address, ec);
+  if (ec) return FileError{"bad bind address " + options.bind_address + ": " + ec.message(), {}};
+  const asio::ip::tcp::endpoint ep(addr, options.port);
+  s->acceptor_.open(ep.protocol(), ec);
+  if (!ec) s->acceptor_.set_option(asio::ip::tcp::acceptor::reuse_address(true), ec);
+  if (!ec) s->acceptor_.bind(ep, ec);
+  if (!ec) s->acceptor_.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec) return FileError{"cannot listen on " + options.bind_address + ":" + std::to_string(options.port) + ": " +
+                               ec.message(), {}};
+  s->port_ = s->acceptor_.local_endpoint().port();
+
+  s->cache_ = std::make_unique<ChunkCache>(*s->world_, s->owner_, s->workers_, [srv = s.get()] { srv->schedule_pump(); });
+  s->spawn_ = Vec3f{0.5f, 0.0f, 0.5f};
+  if (const TerrainGenerator* gen = s->world_->generator()) s->spawn_.y = gen->surface_height(0, 0) + 2.0f;
+  return s;
+}
+
+Server::Server(const ServerOptions& options)
+    : options_(options),
+      work_(asio::make_work_guard(io_)),
+      owner_(asio::make_strand(io_)),
+      acceptor_(owner_),  // accept handlers run on the owner strand
+      tick_timer_(owner_),
+      workers_(static_cast<std::size_t>(std::max(1, options.worker_threads))) {
+  options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
+  options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
+  faults_left_ = options_.fault_drop_updates;
+  corruptions_left_ = options_.fault_corrupt_updates;
+}
+
+Server::~Server() { stop(); }
+
+void Server::start() {
+  if (started_) return;
+  started_ = true;
+  server_log().info("world {} (epoch {}), tick {} Hz", world_->store().dir(), world_->meta().epoch, options_.tick_hz);
+  server_log().info("listening on {}:{}", options_.bind_address, port_);
+  asio::post(owner_, [this] { arm_tick(); });
+  do_accept();
+  for (int i = 0; i < std::max(1, options_.io_threads); ++i) threads_.emplace_back([this] { io_.run(); });
+}
+
+void Server::stop() {
+  if (stopped_.exchange(true)) return;
+  if (!started_) return;
+  std::promise<void> closed;
+  asio::post(owner_, [this, &closed] {
+    stopping_ = true;
+    asio::error_code ignored;
+    acceptor_.close(ignored);
+    tick_timer_.cancel();
+    // Edits received but not yet applied at this point are applied now so
+    // nothing acknowledged-to-be is lost.
+    apply_edits();
+    for (auto& [id, peer] : peers_) peer.session->close("server shutting down");
+    closed.set_value();
+  });
+  closed.get_future().wait();
+  workers_.join();
+  work_.reset();
+  for (auto& t : threads_) t.join();
+  threads_.clear();
+  const ServerCounters& c = counters_;
+  server_log().info(
+      "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
+      "chunks, {} mips, {} empty ({} bytes); {} update batches; world saved",
+      c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
+      c.edits_rejected.load(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
+      c.update_batches_sent.load());
+}
+
+void Server::inspect(const std::function<void(const ChunkCache&)>& fn) {
+  std::promise<void> done;
+  asio::post(owner_, [&] {
+    fn(*cache_);
+    done.set_value();
+  });
+  done.get_future().wait();
+}
+
+void Server::do_accept() {
+  acceptor_.async_accept(asio::make_strand(io_), [this](const asio::error_code& ec, asio::ip::tcp::socket socket) {
+    if (ec) {
+      if (ec != asio::error::operation_aborted && acceptor_.is_open()) do_accept();
+      return;
+    }
+    asio::post(owner_, [this, sock = std::make_shared<asio::ip::tcp::socket>(std::move(socket))]() mutable {
+      if (stopping_) return;
+      const std::uint64_t id = next_session_id_++;
+      auto session = std::make_shared<Session>(
+          std::move(*sock), id, options_.session,
+          [this](std::uint64_t sid, InboundMessage msg) {
+            asio::post(owner_, [this, sid, m = std::move(msg)]() mutable { on_inbound(sid, std::move(m)); });
+          },
+          [this](std::uint64_t sid, const std::string& reason) {
+            asio::post(owner_, [this, sid, reason] { on_session_closed(sid, reason); });
+          },
+          [this](std::uint64_t sid) {
+            asio::post(owner_, [this, sid] {
+              auto it = peers_.find(sid);
+              if (it != peers_.end() && !stopping_) pump(it->second);
+            });
+          });
+      counters_.sessions_accepted.fetch_add(1, std::memory_order_relaxed);
+      Peer& peer = peers_[id];
+      peer.session = session;
+      peer.state.view_distance = options_.default_view_distance;
+      peer.state.full_res_radius = options_.default_full_res_radius;
+      session->start();
+      if (peers_.size() > options_.max_clients) session->close("server full");
+    });
+    do_accept();
+  });
+}
+
+void Server::on_session_closed(std::uint64_t id, const std::string& reason) {
+  auto it = peers_.find(id);
+  if (it == peers_.end()) return;
+  server_log().info("session {} ({}) closed: {}", id, it->second.name.empty() ? it->second.session->remote() : it->second.name,
+                    reason);
+  counters_.sessions_closed.fetch_add(1, std::memory_order_relaxed);
+  peers_.erase(it);
+  // Its queued edits stay queued; their acks go nowhere.
+}
+
+void Server::on_inbound(std::uint64_t id, InboundMessage msg) {
+  auto it = peers_.find(id);
+  if (it == peers_.end() || stopping_) return;
+  Peer& peer = it->second;
+  if (auto* hello = std::get_if<HelloMsg>(&msg)) return on_hello(peer, *hello);
+  if (!peer.welcomed) return;
+  if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(peer, *state);
+  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(peer, *edit);
+  if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) {
+    // Only chunks this client holds: a hash request must not make the
+    // server load or generate arbitrary chunks.
+    if (peer.held.count(req->chunk_pos) == 0) return;
+    if (peer.hash_requests.size() >= 1024) {
+      peer.session->close("too many region hash requests");
+      return;
+    }
+    peer.hash_requests.push_back(req->chunk_pos);
+    serve_hash_requests(peer);
+  }
+}
+
+void Server::on_hello(Peer& peer, const HelloMsg& hello) {
+  if (hello.protocol_version != kProtocolVersion) {
+    server_log().warn("session {}: protocol version {} rejected", peer.session->id(), hello.protocol_version);
+    peer.session->close("protocol version mismatch: server speaks " + std::to_string(kProtocolVersion) + ", client " +
+                        std::to_string(hello.protocol_version));
+    return;
+  }
+  if (!options_.auth_token.empty() && hello.auth_token != options_.auth_token) {
+    server_log().warn("session {}: bad auth token", peer.session->id());
+    peer.session->close("authentication failed");
+    return;
+  }
+  peer.name = hello.client_name;
+  peer.welcomed = true;
+  peer.state.position = spawn_;
+  WelcomeMsg w;
+  w.server_epoch = world_->meta().epoch;
+  w.spawn = spawn_;
+  w.materials = world_->meta().materials;
+  w.bounds_min_y = world_->meta().bounds.min_y;
+  w.bounds_max_y = world_->meta().bounds.max_y;
+  w.max_view_distance = options_.max_view_distance;
+  w.max_full_res_radius = options_.max_full_res_radius;
+  w.max_frame_bytes = static_cast<std::uint32_t>(options_.session.max_frame_bytes);
+  w.tick_hz = options_.tick_hz;
+  peer.session->send(build_welcome(w));
+  server_log().info("session {} ({}) joined as '{}'", peer.session->id(), peer.session->remote(), peer.name);
+  // Streaming starts with the client's first ClientState.
+}
+
+void Server::arm_tick() {
+  if (stopping_) return;
+  tick_timer_.expires_after(std::chrono::microseconds(1'000'000 / options_.tick_hz));
+  tick_timer_.async_wait([this](const asio::error_code& ec) {
+    if (ec || stopping_) return;
+    on_tick();
+    arm_tick();
+  });
+}
+
+void Server::on_tick() {
+  ++tick_;
+  counters_.ticks.fetch_add(1, std::memory_order_relaxed);
+  apply_edits();
+  pump_all();
+}
+
+void Server::schedule_pump() {
+  if (pump_scheduled_) return;
+  pump_scheduled_ = true;
+  asio::post(owner_, [this] {
+    pump_scheduled_ = false;
+    if (!stopping_) pump_all();
+  });
+}
+
+}  // namespace terrane

@@ -1,0 +1,194 @@
+// Server: the authoritative Terrane world server (asio over TCP).
+//
+// Threading (the whole story):
+//   - io threads (ServerOptions::io_threads) run one asio::io_context.
+//   - Each Session runs on its own strand: socket I/O, frame verification,
+//     message parsing, Pong replies (server/session.h).
+//   - The world owner strand owns everything about the world: the World and
+//     its store (one SQLite connection), the ChunkCache (Grid + revisions),
+//     the peer table (per-client interest, what each client holds), the
+//     pending edits and the tick timer. Sessions post parsed messages to it;
+//     it posts frames back through Session::send. Nothing here takes a lock.
+//   - A worker pool (ServerOptions::worker_threads) generates chunks missing
+//     from the store and posts them back to the owner strand.
+//   - Counters are atomics, readable from any thread.
+// stop() (any thread but an io thread) closes the acceptor and every
+// session, waits for the workers and io threads, and leaves the world saved:
+// edits are persisted at the tick that applies them.
+//
+// Tick (every 1/tick_hz s, on the owner strand): apply the tick's edits in
+// arrival order, persist every changed chunk in one transaction, then send
+// EditAck to the editors and broadcast: one UpdateBatch per changed chunk
+// (encoded once, the same bytes to every client holding it at full
+// resolution) and the refreshed mip to clients holding a mip. Then stream.
+//
+// Streaming (server/streaming.cpp): per client, the chunks within its view
+// distance, nearest first. First pass: every chunk gets its coarsest form
+// (Coverage Empty, or the 4^3 mip). Second pass, nearest first: mip 2/1 by
+// distance, and inside the full-resolution radius the eight 16^3 ChunkData
+// units then Coverage Full. Chunks leaving the view get Coverage Released.
+// A client's queue is only topped up to stream_window_bytes (again each time
+// it drains, and every tick), so updates wait behind at most that much
+// streaming data; edit acks and rejects go ahead of it (SendClass::kControl).
+#pragma once
+
+#include <asio.hpp>
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "common/world.h"
+#include "protocol/messages.h"
+#include "server/chunk_cache.h"
+#include "server/session.h"
+
+namespace terrane {
+
+struct ServerOptions {
+  std::string world_dir;                // created with default_world_meta() when missing
+  std::string bind_address = "127.0.0.1";
+  std::uint16_t port = 0;               // 0: any free port (see port())
+  std::uint32_t tick_hz = 20;
+  std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
+  std::int32_t max_full_res_radius = 256;  // voxels
+  std::int32_t default_view_distance = 1024;   // until the client sends ClientState
+  std::int32_t default_full_res_radius = 128;
+  std::size_t max_clients = 64;
+  std::size_t stream_window_bytes = 512 * 1024;
+  std::size_t max_edits_queued_per_client = 64;
+  SessionLimits session;
+  int io_threads = 1;
+  int worker_threads = 2;
+  std::string auth_token;               // empty: open server
+  // Test-only fault: silently skip sending this many UpdateBatch frames
+  // (the client's revision still advances on the server's books).
+  int fault_drop_updates = 0;
+  // Test-only fault: send this many UpdateBatch frames with one voxel wrong.
+  int fault_corrupt_updates = 0;
+};
+
+struct ServerCounters {
+  std::atomic<std::uint64_t> sessions_accepted{0};
+  std::atomic<std::uint64_t> sessions_closed{0};
+  std::atomic<std::uint64_t> ticks{0};
+  std::atomic<std::uint64_t> edits_applied{0};
+  std::atomic<std::uint64_t> edits_rejected{0};
+  std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
+  std::atomic<std::uint64_t> mips_sent{0};
+  std::atomic<std::uint64_t> empties_sent{0};
+  std::atomic<std::uint64_t> update_batches_sent{0};
+  std::atomic<std::uint64_t> updates_dropped_by_fault{0};
+  std::atomic<std::uint64_t> updates_corrupted_by_fault{0};
+  std::atomic<std::uint64_t> stream_bytes{0};    // ChunkData/MipData/Coverage bytes queued
+};
+
+class Server {
+ public:
+  // Opens (or creates) the world and binds the listening socket. Nothing
+  // runs until start().
+  static FileResult<std::unique_ptr<Server>> create(const ServerOptions& options);
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  void start();
+  // Idempotent; see the threading note above.
+  void stop();
+
+  std::uint16_t port() const { return port_; }
+  const std::string& address() const { return options_.bind_address; }
+  const ServerCounters& counters() const { return counters_; }
+  const ServerOptions& options() const { return options_; }
+
+  // Runs fn on the owner strand with the authoritative cache and waits for
+  // it (tests, tools). Must not be called from an io thread.
+  void inspect(const std::function<void(const ChunkCache&)>& fn);
+
+ private:
+  enum class HeldKind : std::uint8_t { kEmpty, kMip, kFull };
+  struct Held {
+    HeldKind kind = HeldKind::kEmpty;
+    int level = 0;  // kMip: 1..3
+    std::uint64_t revision = 0;
+  };
+  // The owner strand's view of one client.
+  struct Peer {
+    std::shared_ptr<Session> session;
+    std::string name;
+    bool welcomed = false;
+    ClientStateMsg state;
+    // The plan: chunks in view, nearest first, and the two pass cursors.
+    bool plan_valid = false;
+    Vec3i plan_chunk;
+    std::int32_t plan_view = -1, plan_full = -1;
+    std::vector<Vec3i> plan;
+    std::size_t coarse = 0, refine = 0;
+    std::unordered_map<Vec3i, Held, Vec3iHash> held;
+    std::vector<Vec3i> hash_requests;
+    std::size_t edits_queued = 0;
+  };
+  struct PendingEdit {
+    std::uint64_t peer_id;
+    EditRequestMsg edit;
+  };
+
+  explicit Server(const ServerOptions& options);
+
+  // server.cpp: lifecycle, accept, handshake
+  void do_accept();
+  void on_inbound(std::uint64_t id, InboundMessage msg);  // owner strand
+  void on_session_closed(std::uint64_t id, const std::string& reason);
+  void on_hello(Peer& peer, const HelloMsg& hello);
+  void arm_tick();
+  void on_tick();
+  void schedule_pump();
+
+  // streaming.cpp: interest management
+  void on_client_state(Peer& peer, const ClientStateMsg& state);
+  void replan(Peer& peer);
+  void pump(Peer& peer);
+  void pump_all();
+  int desired_level(const Peer& peer, Vec3i chunk_pos) const;
+  void send_coarse(Peer& peer, Vec3i chunk_pos);
+  void send_level(Peer& peer, Vec3i chunk_pos, int level);
+  Frame mip_frame(Vec3i chunk_pos, int level) const;
+  void serve_hash_requests(Peer& peer);
+
+  // edits.cpp: edits, persistence, broadcast
+  void on_edit(Peer& peer, const EditRequestMsg& edit);
+  void apply_edits();
+
+  ServerOptions options_;
+  ServerCounters counters_;
+  std::unique_ptr<World> world_;
+  asio::io_context io_;
+  asio::executor_work_guard<asio::io_context::executor_type> work_;
+  ChunkCache::Strand owner_;
+  asio::ip::tcp::acceptor acceptor_;
+  asio::steady_timer tick_timer_;
+  asio::thread_pool workers_;
+  std::unique_ptr<ChunkCache> cache_;
+  std::vector<std::thread> threads_;
+  std::uint16_t port_ = 0;
+  std::atomic<bool> stopped_{false};
+  bool started_ = false;
+
+  // Owner strand only.
+  std::unordered_map<std::uint64_t, Peer> peers_;
+  std::deque<PendingEdit> edits_;
+  std::uint64_t tick_ = 0;
+  std::uint64_t next_session_id_ = 1;
+  bool pump_scheduled_ = false;
+  bool stopping_ = false;
+  int faults_left_ = 0;
+  int corruptions_left_ = 0;
+  Vec3f spawn_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,252 @@
+#include "server/session.h"
+
+#include "server/log.h"
+
+namespace terrane {
+
+namespace {
+// One read fills at most this much; the FrameReader bounds what is kept.
+constexpr std::size_t kReadChunkBytes = 64 * 1024;
+// A write gathers queued frames up to about this many bytes.
+constexpr std::size_t kWriteGatherBytes = 256 * 1024;
+// How often the watchdog checks the read/write deadlines.
+constexpr std::chrono::milliseconds kWatchdogPeriod{200};
+}  // namespace
+
+Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLimits& limits, InboundFn on_message,
+                 ClosedFn on_closed, DrainedFn on_drained)
+    : socket_(std::move(socket)),
+      watchdog_(socket_.get_executor()),
+      id_(id),
+      limits_(limits),
+      on_message_(std::move(on_message)),
+      on_closed_(std::move(on_closed)),
+      on_drained_(std::move(on_drained)),
+      reader_(limits.max_frame_bytes),
+      read_buf_(kReadChunkBytes) {
+  asio::error_code ec;
+  const auto ep = socket_.remote_endpoint(ec);
+  remote_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
+}
+
+void Session::start() {
+  asio::dispatch(socket_.get_executor(), [self = shared_from_this()] {
+    asio::error_code ec;
+    self->socket_.set_option(asio::ip::tcp::no_delay(true), ec);
+    if (self->limits_.socket_send_buffer_bytes > 0)
+      self->socket_.set_option(asio::socket_base::send_buffer_size(self->limits_.socket_send_buffer_bytes), ec);
+    self->last_read_ = Clock::now();
+    self->arm_watchdog();
+    self->do_read();
+  });
+}
+
+void Session::send(SharedFrame frame, SendClass cls) {
+  asio::dispatch(socket_.get_executor(), [self = shared_from_this(), f = std::move(frame), cls]() mutable {
+    if (self->state_ != State::kReading) return;
+    self->enqueue(std::move(f), cls);
+  });
+}
+
+void Session::close(std::string reason) {
+  asio::dispatch(socket_.get_executor(), [self = shared_from_this(), r = std::move(reason)] { self->begin_close(r); });
+}
+
+void Session::arm_watchdog() {
+  watchdog_.expires_after(kWatchdogPeriod);
+  watchdog_.async_wait([self = shared_from_this()](const asio::error_code& ec) {
+    if (ec || self->state_ == State::kClosed) return;
+    const auto now = Clock::now();
+    switch (self->state_) {
+      case State::kReading: {
+        const auto limit = self->welcomed_ ? self->limits_.idle_timeout : self->limits_.handshake_timeout;
+        if (now - self->last_read_ > limit) {
+          self->begin_close(self->welcomed_ ? "idle timeout" : "handshake timeout");
+        } else if (self->writing_ && now - self->write_started_ > self->limits_.write_timeout) {
+          // The client stopped reading. Its reason goes after the write in
+          // flight, in case it resumes within the linger time.
+          server_log().warn("session {} ({}): too slow, no data taken for {} ms; dropping", self->id_, self->remote_,
+                            self->limits_.write_timeout.count());
+          self->begin_close("too slow: no data taken for " + std::to_string(self->limits_.write_timeout.count()) +
+                            " ms");
+        }
+        break;
+      }
+      case State::kClosing:
+      case State::kDraining:
+        if (now - self->close_started_ > self->limits_.linger) {
+          self->finish_close();
+          return;
+        }
+        break;
+      case State::kClosed:
+        return;
+    }
+    self->arm_watchdog();
+  });
+}
+
+void Session::do_read() {
+  socket_.async_read_some(
+      asio::buffer(read_buf_), [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+        if (self->state_ == State::kClosed) return;
+        if (ec) {
+          if (self->state_ == State::kReading) self->close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
+          self->finish_close();
+          return;
+        }
+        if (self->state_ != State::kReading) {
+          self->do_read();  // closing: discard input until EOF or the linger deadline
+          return;
+        }
+        self->last_read_ = Clock::now();
+        const auto st = self->reader_.feed(std::span<const std::uint8_t>(self->read_buf_.data(), n),
+                                           [&](std::span<const std::uint8_t> body) {
+                                             if (self->state_ == State::kReading) self->on_frame(body);
+                                           });
+        if (!st) {
+          server_log().warn("session {} ({}): bad frame: {}", self->id_, self->remote_, st.error().describe());
+          self->begin_close(std::string("protocol error: ") + st.error().detail);
+        }
+        self->do_read();
+      });
+}
+
+void Session::on_frame(std::span<const std::uint8_t> body) {
+  auto msg = verify_message(body);
+  if (!msg) {
+    server_log().warn("session {} ({}): {}", id_, remote_, msg.error().describe());
+    begin_close(std::string("protocol error: ") + msg.error().detail);
+    return;
+  }
+  const wire::Message& m = **msg;
+  auto fail = [&](const DecodeError& e) {
+    server_log().warn("session {} ({}): {}", id_, remote_, e.detail);
+    begin_close(std::string("protocol error: ") + e.detail);
+  };
+  if (!welcomed_) {
+    if (m.body_type() != wire::Body::Hello) return fail(DecodeError{DecodeErrorCode::kInvalidValue, 0, "expected Hello"});
+    auto hello = parse_hello(*m.body_as_Hello());
+    if (!hello) return fail(hello.error());
+    welcomed_ = true;
+    on_message_(id_, std::move(*hello));
+    return;
+  }
+  switch (m.body_type()) {
+    case wire::Body::ClientState: {
+      auto s = parse_client_state(*m.body_as_ClientState());
+      if (!s) return fail(s.error());
+      on_message_(id_, *s);
+      return;
+    }
+    case wire::Body::EditRequest: {
+      const auto* req = m.body_as_EditRequest();
+      auto e = parse_edit_request(*req);
+      // A meaningless edit is rejected, not a reason to disconnect.
+      if (!e)
+        return enqueue(std::make_shared<const Frame>(build_edit_reject(req->edit_id(), e.error().detail)),
+                       SendClass::kControl);
+      on_message_(id_, *e);
+      return;
+    }
+    case wire::Body::RegionHashRequest: {
+      auto p = parse_region_hash_request(*m.body_as_RegionHashRequest());
+      if (!p) return fail(p.error());
+      on_message_(id_, RegionHashRequestMsg{*p});
+      return;
+    }
+    case wire::Body::Ping:
+      return enqueue(std::make_shared<const Frame>(build_pong(m.body_as_Ping()->nonce())), SendClass::kControl);
+    case wire::Body::Pong:
+      return;
+    case wire::Body::Disconnect:
+      close_reason_ = "client disconnected";
+      begin_close("bye");
+      return;
+    default:
+      return fail(DecodeError{DecodeErrorCode::kInvalidValue, 0, "message not accepted from a client"});
+  }
+}
+
+void Session::enqueue(SharedFrame frame, SendClass cls) {
+  const std::size_t now = queued_bytes_.load(std::memory_order_relaxed);
+  if (now + frame->size() > limits_.max_queue_bytes) {
+    server_log().warn("session {} ({}): {} bytes queued, dropping", id_, remote_, now);
+    begin_close("too far behind");
+    return;
+  }
+  queued_bytes_.fetch_add(frame->size(), std::memory_order_relaxed);
+  (cls == SendClass::kControl ? control_queue_ : queue_).push_back(std::move(frame));
+  do_write();
+}
+
+void Session::do_write() {
+  if (writing_ || (queue_.empty() && control_queue_.empty())) return;
+  writing_ = true;
+  write_started_ = Clock::now();
+  std::vector<asio::const_buffer> bufs;
+  std::size_t gathered = 0;
+  for (auto* q : {&control_queue_, &queue_}) {
+    while (!q->empty() && (gathered == 0 || gathered + q->front()->size() <= kWriteGatherBytes)) {
+      gathered += q->front()->size();
+      bufs.emplace_back(asio::buffer(*q->front()));
+      inflight_.push_back(std::move(q->front()));
+      q->pop_front();
+    }
+  }
+  asio::async_write(socket_, bufs, [self = shared_from_this(), gathered](const asio::error_code& ec, std::size_t n) {
+    self->writing_ = false;
+    self->inflight_.clear();
+    self->queued_bytes_.fetch_sub(gathered, std::memory_order_relaxed);
+    self->bytes_sent_.fetch_add(n, std::memory_order_relaxed);
+    if (self->state_ == State::kClosed) return;
+    if (ec) {
+      if (self->close_reason_.empty()) self->close_reason_ = ec.message();
+      self->finish_close();
+      return;
+    }
+    if (!self->queue_.empty() || !self->control_queue_.empty()) return self->do_write();
+    if (self->state_ == State::kReading && self->on_drained_) self->on_drained_(self->id_);
+    if (self->state_ == State::kClosing) {
+      // Reason delivered: stop sending, wait for the peer to close.
+      self->state_ = State::kDraining;
+      asio::error_code ignored;
+      self->socket_.shutdown(asio::ip::tcp::socket::shutdown_send, ignored);
+    }
+  });
+}
+
+void Session::begin_close(const std::string& reason) {
+  if (state_ != State::kReading) return;
+  if (close_reason_.empty()) close_reason_ = reason;
+  state_ = State::kClosing;
+  close_started_ = Clock::now();
+  // Drop what is queued but not in flight: the peer gets only the reason.
+  for (auto* q : {&control_queue_, &queue_}) {
+    for (const auto& f : *q) queued_bytes_.fetch_sub(f->size(), std::memory_order_relaxed);
+    q->clear();
+  }
+  auto bye = std::make_shared<const Frame>(build_disconnect(reason));
+  queued_bytes_.fetch_add(bye->size(), std::memory_order_relaxed);
+  queue_.push_back(std::move(bye));
+  do_write();
+}
+
+void Session::finish_close() {
+  if (state_ == State::kClosed) return;
+  state_ = State::kClosed;
+  asio::error_code ignored;
+  watchdog_.cancel();
+  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
+  socket_.close(ignored);
+  for (auto* q : {&control_queue_, &queue_}) {
+    for (const auto& f : *q) queued_bytes_.fetch_sub(f->size(), std::memory_order_relaxed);
+    q->clear();
+  }
+  if (on_closed_) on_closed_(id_, close_reason_.empty() ? std::string("closed") : close_reason_);
+  on_closed_ = nullptr;
+  on_message_ = nullptr;
+  on_drained_ = nullptr;
+}
+
+}  // namespace terrane

@@ -1,0 +1,137 @@
+// Session: one client connection on the server. Owns the socket, reads
+// frames, verifies and parses them (protocol/messages.h) and hands the
+// parsed messages to the server; writes frames from a bounded queue.
+//
+// Threading: every member runs on the session's own strand (the socket's
+// executor). send() and close() may be called from any thread: they post to
+// that strand. queued_bytes() is an atomic the world owner reads to decide
+// how much more to stream. A Session lives in a shared_ptr kept alive by its
+// pending handlers and by the server's peer table.
+//
+// State machine:
+//
+//   [reading] --bad frame / timeout / backlog--> [closing] --queue flushed-->
+//       |                                         (Disconnect     [draining]
+//       +--peer EOF / socket error--------------> queued)            |
+//                                                                    v
+//   [closed] <------------ EOF from peer or linger deadline ---------+
+//
+// A closing session sends nothing but its Disconnect frame, then shuts down
+// its sending side and discards input until the peer closes (so the peer
+// reads the reason instead of a reset) or the linger deadline passes.
+#pragma once
+
+#include <asio.hpp>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "protocol/framing.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+struct SessionLimits {
+  std::size_t max_frame_bytes = kDefaultMaxFrameBytes;
+  // Hard cap on queued outbound bytes: a client this far behind is dropped.
+  std::size_t max_queue_bytes = 16u << 20;
+  std::chrono::milliseconds handshake_timeout{5000};
+  std::chrono::milliseconds idle_timeout{30000};
+  // A write that makes no progress for this long drops the client.
+  std::chrono::milliseconds write_timeout{10000};
+  std::chrono::milliseconds linger{1000};
+  // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
+  // makes a stalled reader visible sooner (and bounds kernel memory).
+  int socket_send_buffer_bytes = 0;
+};
+
+struct RegionHashRequestMsg {
+  Vec3i chunk_pos;
+};
+
+// What a session hands to the server (already checked for meaning).
+using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg>;
+
+using SharedFrame = std::shared_ptr<const Frame>;
+
+// Priority classes of outbound frames. Control frames (EditAck, EditReject,
+// Pong) go out before queued data; data frames (everything about the world:
+// coverage, chunk and mip data, updates, region hashes) keep their order,
+// so an update never overtakes the chunk data it applies to and a region
+// hash reflects every update queued before it. Between near chunks and far
+// mips the streamer decides (server/streaming.cpp).
+enum class SendClass : std::uint8_t { kData, kControl };
+
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  // Called on the session strand.
+  using InboundFn = std::function<void(std::uint64_t id, InboundMessage msg)>;
+  // Called once, on the session strand, when the socket is closed.
+  using ClosedFn = std::function<void(std::uint64_t id, const std::string& reason)>;
+
+  // Called on the session strand each time the send queue runs empty, so
+  // the owner can stream more at once instead of at the next tick.
+  using DrainedFn = std::function<void(std::uint64_t id)>;
+
+  Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLimits& limits, InboundFn on_message,
+          ClosedFn on_closed, DrainedFn on_drained = nullptr);
+
+  void start();
+  // Queues a frame (any thread). Over the byte cap the session is closed
+  // with "too far behind".
+  void send(SharedFrame frame, SendClass cls = SendClass::kData);
+  void send(Frame frame, SendClass cls = SendClass::kData) {
+    send(std::make_shared<const Frame>(std::move(frame)), cls);
+  }
+  // Sends Disconnect(reason) after nothing else, then closes (any thread).
+  void close(std::string reason);
+
+  std::uint64_t id() const { return id_; }
+  std::size_t queued_bytes() const { return queued_bytes_.load(std::memory_order_relaxed); }
+  std::uint64_t bytes_sent() const { return bytes_sent_.load(std::memory_order_relaxed); }
+  const std::string& remote() const { return remote_; }
+
+ private:
+  enum class State { kReading, kClosing, kDraining, kClosed };
+  using Clock = std::chrono::steady_clock;
+
+  void do_read();
+  void on_frame(std::span<const std::uint8_t> body);
+  void enqueue(SharedFrame frame, SendClass cls);
+  void do_write();
+  void begin_close(const std::string& reason);
+  void finish_close();
+  void arm_watchdog();
+
+  asio::ip::tcp::socket socket_;
+  asio::steady_timer watchdog_;
+  std::uint64_t id_;
+  SessionLimits limits_;
+  InboundFn on_message_;
+  ClosedFn on_closed_;
+  DrainedFn on_drained_;
+  std::string remote_;
+
+  State state_ = State::kReading;
+  bool welcomed_ = false;  // set once a Hello was accepted by the parser
+  std::string close_reason_;
+  FrameReader reader_;
+  std::vector<std::uint8_t> read_buf_;
+  std::deque<SharedFrame> queue_;          // data
+  std::deque<SharedFrame> control_queue_;  // sent first
+  std::vector<SharedFrame> inflight_;
+  bool writing_ = false;
+  Clock::time_point last_read_;
+  Clock::time_point write_started_;
+  Clock::time_point close_started_;
+  std::atomic<std::size_t> queued_bytes_{0};
+  std::atomic<std::uint64_t> bytes_sent_{0};
+};
+
+}  // namespace terrane

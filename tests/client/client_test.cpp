@@ -1,0 +1,504 @@
+// Loopback integration tests: the real terrane-server binary on 127.0.0.1
+// (port 0) and the client library. Every wait is on an event with a
+// deadline; nothing sleeps.
+#include "client/client.h"
+
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <future>
+#include <mutex>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/world.h"
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// Generous: sanitizer builds on a shared 2-core machine generate slowly.
+constexpr auto kDeadline = 20s;
+
+// Runs bin/terrane-server in a child process, capturing its output.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& world, const std::vector<std::string>& extra) {
+    int fds[2];
+    if (pipe(fds) != 0) return;
+    std::vector<std::string> args = {std::string(TERRANE_BIN_DIR) + "/terrane-server", "--world", world, "--port", "0",
+                                     "--worker-threads", "2"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(fds[1], 1);
+      dup2(fds[1], 2);
+      close(fds[0]);
+      close(fds[1]);
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+    close(fds[1]);
+    fd_ = fds[0];
+    std::promise<int> port;
+    auto port_future = port.get_future();
+    reader_ = std::thread([this, p = std::move(port)]() mutable {
+      bool found = false;
+      char buf[4096];
+      while (true) {
+        const ssize_t n = read(fd_, buf, sizeof buf);
+        if (n <= 0) break;
+        std::lock_guard lock(mutex_);
+        output_.append(buf, static_cast<std::size_t>(n));
+        grew_.notify_all();
+        const auto at = output_.find("listening on 127.0.0.1:");
+        if (!found && at != std::string::npos && output_.find('\n', at) != std::string::npos) {
+          found = true;
+          p.set_value(std::stoi(output_.substr(at + 23)));
+        }
+      }
+      if (!found) p.set_value(0);
+    });
+    if (port_future.wait_for(kDeadline) == std::future_status::ready) port_ = static_cast<std::uint16_t>(port_future.get());
+  }
+  ~ServerProcess() { stop(); }
+
+  std::uint16_t port() const { return port_; }
+  // SIGTERM, then the exit status (the server saves on the way out).
+  int stop() {
+    if (pid_ <= 0) return exit_code_;
+    kill(pid_, SIGTERM);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = -1;
+    if (reader_.joinable()) reader_.join();
+    close(fd_);
+    exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return exit_code_;
+  }
+  std::string output() {
+    std::lock_guard lock(mutex_);
+    return output_;
+  }
+  bool wait_for_output(const std::string& text, std::chrono::seconds timeout) {
+    std::unique_lock lock(mutex_);
+    return grew_.wait_for(lock, timeout, [&] { return output_.find(text) != std::string::npos; });
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int fd_ = -1;
+  std::uint16_t port_ = 0;
+  int exit_code_ = -1;
+  std::thread reader_;
+  std::mutex mutex_;
+  std::condition_variable grew_;
+  std::string output_;
+};
+
+class ClientServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("terrane-client-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+  }
+  void TearDown() override {
+    if (server_) {
+      // A clean exit also means no sanitizer report in the server.
+      EXPECT_EQ(server_->stop(), 0);
+      if (HasFailure()) std::fprintf(stderr, "--- server output ---\n%s", server_->output().c_str());
+    }
+    server_.reset();
+    fs::remove_all(dir_);
+  }
+  void start_server(const std::vector<std::string>& extra = {}) {
+    server_ = std::make_unique<ServerProcess>(dir_.string(), extra);
+    ASSERT_NE(server_->port(), 0) << server_->output();
+  }
+  ClientOptions options(const std::string& name, int view = 64, int full = 32) const {
+    ClientOptions o;
+    o.port = server_->port();
+    o.name = name;
+    o.state.view_distance = view;
+    o.state.full_res_radius = full;
+    return o;
+  }
+
+  fs::path dir_;
+  std::unique_ptr<ServerProcess> server_;
+};
+
+float dist_to_chunk(Vec3f p, Vec3i cp) {
+  const Vec3i o = chunk_origin(cp);
+  auto axis = [](float v, std::int32_t lo) {
+    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
+    return v < a ? a - v : (v > b ? v - b : 0.0f);
+  };
+  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
+  return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+// The chunks within radius of p and inside the vertical bounds: what the
+// server promises at that resolution.
+std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
+  std::vector<Vec3i> out;
+  const Vec3i v{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)), static_cast<int>(std::floor(p.z))};
+  const int r = static_cast<int>(radius) + 1;
+  const Vec3i c0 = chunk_of(v - Vec3i{r, r, r}), c1 = chunk_of(v + Vec3i{r, r, r});
+  for (int y = c0.y; y <= c1.y; ++y)
+    for (int z = c0.z; z <= c1.z; ++z)
+      for (int x = c0.x; x <= c1.x; ++x) {
+        const Vec3i cp{x, y, z};
+        if (cp.y * kChunkSize >= w.bounds_max_y || (cp.y + 1) * kChunkSize <= w.bounds_min_y) continue;
+        if (dist_to_chunk(p, cp) <= radius) out.push_back(cp);
+      }
+  return out;
+}
+
+bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
+  for (const Vec3i cp : chunks) {
+    const ChunkCoverage* c = r.coverage(cp);
+    if (c == nullptr || c->state == CoverageState::kMip) return false;
+  }
+  return true;
+}
+
+bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
+  for (const Vec3i cp : chunks)
+    if (r.coverage(cp) == nullptr) return false;
+  return true;
+}
+
+// Waits for the Welcome, then for full resolution inside the radius.
+std::vector<Vec3i> wait_full_res(Client& c, float full_radius) {
+  EXPECT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto w = c.welcome();
+  if (!w) return {};
+  auto near = chunks_within(w->spawn, full_radius, *w);
+  EXPECT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near); }, kDeadline));
+  return near;
+}
+
+// Compares the replica's full-resolution chunks with the world on disk.
+void expect_replica_matches_world(Client& c, const std::vector<Vec3i>& chunks, const std::string& world_dir) {
+  auto world = World::open(world_dir);
+  ASSERT_TRUE(world.ok()) << world.error().message;
+  Box mine({kChunkSize, kChunkSize, kChunkSize}), theirs({kChunkSize, kChunkSize, kChunkSize});
+  std::size_t non_empty = 0;
+  for (const Vec3i cp : chunks) {
+    c.read_box(chunk_origin(cp), mine);
+    auto stored = (*world)->load_chunk(cp);
+    ASSERT_TRUE(stored.ok());
+    stored->chunk.read_level(0, theirs);
+    ASSERT_TRUE(mine == theirs) << "chunk " << cp.x << "," << cp.y << "," << cp.z;
+    const auto rev = c.with_replica([&](const Replica& r) { return r.revision(cp); });
+    ASSERT_TRUE(rev.has_value());
+    EXPECT_EQ(*rev, stored->revision);
+    if (!stored->chunk.empty()) ++non_empty;
+  }
+  EXPECT_GT(non_empty, 0u) << "the test should cover some terrain";
+}
+
+TEST_F(ClientServerTest, FullResolutionReplicaEqualsServerWorld) {
+  start_server();
+  Client c(options("viewer"));
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto near = wait_full_res(c, 32);
+  ASSERT_FALSE(near.empty());
+  ASSERT_FALSE(c.closed()) << c.disconnect_reason();
+  // Region hashes agree too.
+  for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || v.hash_checks.size() == near.size(); }, kDeadline));
+  EXPECT_EQ(c.counters().hash_matches, near.size());
+  EXPECT_EQ(c.counters().hash_mismatches, 0u);
+  c.disconnect();
+  ASSERT_EQ(server_->stop(), 0) << server_->output();
+  expect_replica_matches_world(c, near, dir_.string());
+}
+
+TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
+  start_server();
+  struct Event {
+    Vec3i chunk;
+    wire::CoverageKind kind;
+    int level;
+  };
+  std::mutex mu;
+  std::vector<Event> events;
+  ClientCallbacks cb;
+  cb.on_coverage = [&](Vec3i p, wire::CoverageKind k, int l) {
+    std::lock_guard lock(mu);
+    events.push_back({p, k, l});
+  };
+  Client c(options("mips", 96, 32), cb);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto near = wait_full_res(c, 32);
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 96, *w);
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return all_covered(v.replica, view); }, kDeadline));
+  c.disconnect();
+
+  std::lock_guard lock(mu);
+  // Every chunk of the view got its coarse form before any chunk went Full.
+  std::set<std::tuple<int, int, int>> coarse;
+  std::size_t first_full = events.size();
+  for (std::size_t i = 0; i < events.size(); ++i) {
+    const Event& e = events[i];
+    if (e.kind == wire::CoverageKind::Full) {
+      first_full = std::min(first_full, i);
+      continue;
+    }
+    const bool is_coarse = e.kind == wire::CoverageKind::Empty || (e.kind == wire::CoverageKind::Mip && e.level == 3);
+    if (is_coarse) {
+      coarse.insert({e.chunk.x, e.chunk.y, e.chunk.z});
+      EXPECT_LT(i, first_full) << "coarse coverage after the first full chunk";
+    }
+  }
+  for (const Vec3i cp : view) EXPECT_EQ(coarse.count({cp.x, cp.y, cp.z}), 1u);
+  EXPECT_GT(view.size(), near.size());
+  EXPECT_LT(first_full, events.size()) << "some chunk reached full resolution";
+  // Distant chunks hold a mip, never full resolution.
+  c.with_replica([&](const Replica& r) {
+    for (const Vec3i cp : view) {
+      if (dist_to_chunk(w->spawn, cp) <= 64) continue;
+      const ChunkCoverage* cov = r.coverage(cp);
+      EXPECT_TRUE(cov != nullptr && cov->state != CoverageState::kFull);
+    }
+    return 0;
+  });
+}
+
+TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
+  start_server();
+  Client a(options("a")), b(options("b"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  ASSERT_TRUE(b.connect(&err)) << err;
+  const auto near_a = wait_full_res(a, 32);
+  const auto near_b = wait_full_res(b, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  // A brick sphere just below spawn, and a glass-clear box dug beside it.
+  const Vec3f centre{w->spawn.x, w->spawn.y - 4.0f, w->spawn.z};
+  const std::uint32_t s = a.fill_sphere(centre, 5.5f, materials::kBrick);
+  const Vec3i corner{static_cast<int>(w->spawn.x) + 8, static_cast<int>(w->spawn.y) - 6, static_cast<int>(w->spawn.z)};
+  const std::uint32_t d = a.fill_box(Region{corner, corner + Vec3i{4, 4, 4}}, Voxel{});
+  ASSERT_NE(s, 0u);
+  ASSERT_NE(d, 0u);
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(s) && v.edits.count(d); }, kDeadline));
+  EXPECT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.at(s).accepted && v.edits.at(d).accepted; }, 0ms));
+  const Vec3i c{static_cast<int>(std::floor(centre.x)), static_cast<int>(std::floor(centre.y)),
+                static_cast<int>(std::floor(centre.z))};
+  EXPECT_EQ(b.wait_until([&](const ClientView& v) { return v.replica.get(c).material == materials::kBrick; }, kDeadline),
+            true);
+  EXPECT_TRUE(b.wait_until([&](const ClientView& v) { return v.replica.get(corner).material == kAir; }, kDeadline));
+  // Region hashes are answered after every update queued before them: once
+  // both clients verified the touched chunks, both replicas are current.
+  const Region area{c - Vec3i{8, 8, 8}, corner + Vec3i{8, 8, 8}};
+  std::vector<Vec3i> touched;
+  for_each_chunk_in(area, [&](Vec3i cp) { touched.push_back(cp); });
+  for (Client* cl : {&a, &b}) {
+    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_region_hash(cp));
+    ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return v.hash_checks.size() >= touched.size(); }, kDeadline));
+    EXPECT_EQ(cl->counters().hash_mismatches, 0u);
+  }
+  Box ra(area.size()), rb(area.size());
+  a.read_box(area.min, ra);
+  b.read_box(area.min, rb);
+  EXPECT_TRUE(ra == rb);
+  a.disconnect();
+  b.disconnect();
+  ASSERT_EQ(server_->stop(), 0) << server_->output();
+  expect_replica_matches_world(a, near_a, dir_.string());
+  expect_replica_matches_world(b, near_b, dir_.string());
+}
+
+TEST_F(ClientServerTest, DroppedUpdateIsDetectedByRegionHash) {
+  start_server({"--test-drop-updates", "1"});
+  Client a(options("a"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  wait_full_res(a, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  Vec3i p{static_cast<int>(w->spawn.x), static_cast<int>(w->spawn.y) - 3, static_cast<int>(w->spawn.z)};
+  if (floor_mod(p.y, kChunkSize) == kChunkSize - 1) --p.y;  // keep the edit inside one chunk
+  const std::uint32_t id = a.fill_box(Region{p, p + Vec3i{2, 2, 2}}, solid(materials::kSnow));
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
+  const Vec3i cp = chunk_of(p);
+  ASSERT_TRUE(a.request_region_hash(cp));
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.hash_checks.count(cp) != 0; }, kDeadline));
+  EXPECT_EQ(a.counters().hash_mismatches, 1u);
+  EXPECT_EQ(a.counters().update_batches, 0u);
+}
+
+TEST_F(ClientServerTest, MalformedFramesDisconnectOnlyTheirSender) {
+  start_server();
+  Client good(options("good")), garbage(options("garbage")), huge(options("huge"));
+  ClientOptions oo = options("old");
+  oo.protocol_version = kProtocolVersion + 1;
+  Client wrong_version(oo);
+  std::string err;
+  for (Client* c : {&good, &garbage, &huge, &wrong_version}) ASSERT_TRUE(c->connect(&err)) << err;
+  for (Client* c : {&good, &garbage, &huge})
+    ASSERT_TRUE(c->wait_until([](const ClientView& v) { return v.welcomed; }, kDeadline));
+  // A frame whose body is not a FlatBuffer Message.
+  Frame junk;
+  const std::uint8_t body[16] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16};
+  append_frame(body, junk);
+  ASSERT_TRUE(garbage.send_raw(junk));
+  // A length far over the maximum frame size.
+  ASSERT_TRUE(huge.send_raw(Frame{0xff, 0xff, 0xff, 0x7f}));
+  for (Client* c : {&garbage, &huge, &wrong_version})
+    ASSERT_TRUE(c->wait_until([](const ClientView& v) { return v.closed; }, kDeadline));
+  EXPECT_NE(garbage.disconnect_reason().find("protocol error"), std::string::npos) << garbage.disconnect_reason();
+  EXPECT_NE(huge.disconnect_reason().find("protocol error"), std::string::npos) << huge.disconnect_reason();
+  EXPECT_NE(wrong_version.disconnect_reason().find("protocol version mismatch"), std::string::npos)
+      << wrong_version.disconnect_reason();
+  // The good client is still served.
+  ASSERT_TRUE(good.ping(7));
+  EXPECT_TRUE(good.wait_until([](const ClientView& v) { return v.counters.pongs == 1 || v.closed; }, kDeadline));
+  EXPECT_FALSE(good.closed());
+}
+
+TEST_F(ClientServerTest, ClientThatStopsReadingIsDroppedWithoutStallingOthers) {
+  start_server({"--write-timeout-ms", "1000", "--socket-send-buffer", "16384"});
+  // A raw connection that handshakes, asks for a large view, then reads nothing.
+  asio::io_context io;
+  asio::ip::tcp::socket slow(io);
+  slow.open(asio::ip::tcp::v4());
+  slow.set_option(asio::socket_base::receive_buffer_size(4096));
+  slow.connect({asio::ip::make_address("127.0.0.1"), server_->port()});
+  Frame hello = build_hello(HelloMsg{kProtocolVersion, "slow", ""});
+  Frame state = build_client_state(ClientStateMsg{{0.5f, 40.0f, 0.5f}, 256, 128});
+  asio::write(slow, asio::buffer(hello));
+  asio::write(slow, asio::buffer(state));
+
+  Client good(options("good"));
+  std::string err;
+  ASSERT_TRUE(good.connect(&err)) << err;
+  wait_full_res(good, 32);
+  ASSERT_FALSE(good.closed());
+  ASSERT_TRUE(server_->wait_for_output("too slow", kDeadline)) << "the stalled client was never dropped";
+
+  // Now read: whatever was in flight, then (if it made it) the reason, then the end.
+  FrameReader reader;
+  std::string reason;
+  std::vector<std::uint8_t> buf(64 * 1024);
+  asio::error_code ec;
+  while (!ec) {
+    const std::size_t n = slow.read_some(asio::buffer(buf), ec);
+    const auto st = reader.feed(std::span<const std::uint8_t>(buf.data(), n), [&](std::span<const std::uint8_t> body) {
+      auto m = verify_message(body);
+      ASSERT_TRUE(m.ok());
+      if ((*m)->body_type() == wire::Body::Disconnect) reason = parse_disconnect(*(*m)->body_as_Disconnect()).value();
+    });
+    ASSERT_TRUE(st.ok());
+  }
+  if (!reason.empty()) {
+    EXPECT_NE(reason.find("too slow"), std::string::npos) << reason;
+  }
+  // The other client is still served.
+  ASSERT_TRUE(good.ping(1));
+  EXPECT_TRUE(good.wait_until([](const ClientView& v) { return v.counters.pongs == 1 || v.closed; }, kDeadline));
+  EXPECT_FALSE(good.closed());
+}
+
+TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByRegionHash) {
+  start_server({"--test-corrupt-updates", "1"});
+  Client a(options("a"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  wait_full_res(a, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  Vec3i p{static_cast<int>(w->spawn.x), static_cast<int>(w->spawn.y) - 3, static_cast<int>(w->spawn.z)};
+  if (floor_mod(p.y, kChunkSize) == kChunkSize - 1) --p.y;  // keep the edit inside one chunk
+  const std::uint32_t id = a.fill_box(Region{p, p + Vec3i{2, 2, 2}}, solid(materials::kSnow));
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
+  const Vec3i cp = chunk_of(p);
+  ASSERT_TRUE(a.request_region_hash(cp));
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.hash_checks.count(cp) != 0; }, kDeadline));
+  EXPECT_EQ(a.counters().update_batches, 1u);  // the batch arrived and decoded fine
+  EXPECT_EQ(a.counters().hash_mismatches, 1u);
+}
+
+TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {
+  start_server();
+  Client c(options("walker"));
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto old_near = wait_full_res(c, 32);
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  const Vec3f there{w->spawn.x + 256.0f, w->spawn.y, w->spawn.z};
+  ASSERT_TRUE(c.set_state(ClientStateMsg{there, 64, 32}));
+  const auto new_near = chunks_within(there, 32, *w);
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) {
+        for (const Vec3i cp : old_near)
+          if (v.replica.coverage(cp) != nullptr) return v.closed;
+        return v.closed || all_full(v.replica, new_near);
+      },
+      kDeadline));
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
+  EXPECT_GT(c.counters().released, 0u);
+  EXPECT_EQ(c.resolution_at(chunk_origin(old_near.front())), kNoResolution);
+}
+
+TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
+  start_server();
+  Client a(options("near"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  wait_full_res(a, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  // B never stands near the edit: it holds the edited chunk as a mip.
+  ClientOptions ob = options("far", 192, 16);
+  ob.start_at_spawn = false;
+  ob.state.position = Vec3f{w->spawn.x + 112.0f, w->spawn.y, w->spawn.z};
+  Client b(ob);
+  ASSERT_TRUE(b.connect(&err)) << err;
+  const Vec3f centre{w->spawn.x, w->spawn.y - 3.0f, w->spawn.z};
+  const Vec3i target = chunk_of(Vec3i{static_cast<int>(std::floor(centre.x)), static_cast<int>(std::floor(centre.y)),
+                                      static_cast<int>(std::floor(centre.z))});
+  std::uint64_t before = 0;
+  ASSERT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        if (cov == nullptr || cov->state != CoverageState::kMip) return false;
+        before = cov->revision;
+        return true;
+      },
+      kDeadline));
+  const std::uint32_t id = a.fill_sphere(centre, 4.0f, materials::kBasalt);
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
+  ASSERT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return cov != nullptr && cov->state == CoverageState::kMip && cov->revision > before;
+      },
+      kDeadline));
+  EXPECT_EQ(b.counters().update_batches, 0u);  // a mip holder gets mips, not units
+}
+
+}  // namespace
+}  // namespace terrane

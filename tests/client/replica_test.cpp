@@ -1,0 +1,122 @@
+#include "client/replica.h"
+
+#include <gtest/gtest.h>
+
+namespace terrane {
+namespace {
+
+std::vector<std::uint8_t> encode_unit(int n, Voxel fill) {
+  std::vector<Voxel> v(static_cast<std::size_t>(n) * n * n, fill);
+  std::vector<std::uint8_t> out;
+  net_codec_encode(n, v, out);
+  return out;
+}
+
+TEST(Replica, UnknownIsNotAir) {
+  Replica r;
+  EXPECT_EQ(r.resolution_at({5, 5, 5}), kNoResolution);
+  EXPECT_EQ(r.coverage({0, 0, 0}), nullptr);
+  EXPECT_FALSE(r.hash({0, 0, 0}).has_value());
+  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Empty, 0, 3});
+  EXPECT_EQ(r.resolution_at({5, 5, 5}), 0);
+  EXPECT_EQ(r.hash({0, 0, 0}), region_hash(nullptr, 3));
+}
+
+TEST(Replica, MipThenFullThenReleased) {
+  Replica r;
+  const Vec3i cp{1, 0, -1};
+  const auto mip = encode_unit(4, solid(materials::kRock));
+  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 2, mip}).ok());
+  const Vec3i inside = chunk_origin(cp) + Vec3i{9, 9, 9};
+  EXPECT_EQ(r.resolution_at(inside), 3);
+  EXPECT_EQ(r.get(inside), solid(materials::kRock));
+  EXPECT_FALSE(r.hash(cp).has_value());  // a mip cannot be verified
+
+  const auto unit = encode_unit(16, solid(materials::kSand));
+  for (int i = 0; i < 8; ++i) {
+    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
+    ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{cp * 2 + u, 2, unit}).ok());
+  }
+  EXPECT_EQ(r.resolution_at(inside), 3);  // still a mip until Full arrives
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, 2});
+  EXPECT_EQ(r.resolution_at(inside), 0);
+  EXPECT_EQ(r.get(inside), solid(materials::kSand));
+  Chunk expect(materials::kSand);
+  EXPECT_EQ(r.hash(cp), region_hash(&expect, 2));
+
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, 2});
+  EXPECT_EQ(r.resolution_at(inside), kNoResolution);
+  EXPECT_EQ(r.grid().chunk_count(), 0u);
+}
+
+TEST(Replica, BadUnitBytesAreAnErrorAndChangeNothing) {
+  Replica r;
+  const std::vector<std::uint8_t> junk = {0xff, 0x00, 0x12};
+  EXPECT_FALSE(r.apply_chunk_data(ChunkDataMsg{{0, 0, 0}, 1, junk}).ok());
+  EXPECT_FALSE(r.apply_mip_data(MipDataMsg{{0, 0, 0}, 2, 1, junk}).ok());
+  EXPECT_EQ(r.chunk_count(), 0u);
+  EXPECT_EQ(r.grid().chunk_count(), 0u);
+}
+
+TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
+  Replica r;
+  const Vec3i full{0, 0, 0}, mip{1, 0, 0};
+  r.apply_coverage(CoverageMsg{full, wire::CoverageKind::Empty, 0, 1});
+  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{mip, 3, 1, encode_unit(4, Voxel{})}).ok());
+  std::vector<UnitUpdate> ups(2);
+  ups[0].chunk_pos = full;
+  ups[0].unit_index = 9;  // ux 1, uz 1, uy 0
+  ups[0].voxels.fill(solid(materials::kGrass));
+  ups[1].chunk_pos = mip;
+  ups[1].unit_index = 0;
+  ups[1].voxels.fill(solid(materials::kGrass));
+  std::vector<std::uint8_t> data;
+  net_codec_encode_update_batch(ups, data);
+  const ChunkRevisionMsg revs[2] = {{full, 2}, {mip, 2}};
+  auto n = r.apply_update_batch(UpdateBatchMsg{5, data, {revs[0], revs[1]}});
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(*n, 1u);
+  EXPECT_EQ(r.get({4, 0, 4}), solid(materials::kGrass));
+  EXPECT_EQ(r.get({3, 0, 4}), Voxel{});
+  EXPECT_EQ(r.coverage(full)->state, CoverageState::kFull);
+  EXPECT_EQ(r.coverage(full)->revision, 2u);
+  EXPECT_EQ(r.coverage(mip)->revision, 1u);  // the mip holder waits for a refreshed mip
+
+  // A unit of a chunk the batch gives no revision for is invalid.
+  auto bad = r.apply_update_batch(UpdateBatchMsg{6, data, {revs[0]}});
+  EXPECT_FALSE(bad.ok());
+}
+
+TEST(Replica, SurfaceHeightReadsTheBestResolutionHeld) {
+  Replica r;
+  r.apply_coverage(CoverageMsg{{0, 1, 0}, wire::CoverageKind::Empty, 0, 0});
+  const auto unit = encode_unit(16, solid(materials::kRock));
+  for (int i = 0; i < 8; ++i) {
+    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
+    ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{u, 0, unit}).ok());
+  }
+  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Full, 0, 0});
+  EXPECT_EQ(r.surface_height(3, 3, -64, 64), 32);
+  EXPECT_EQ(r.surface_height(40, 3, -64, 64), std::nullopt);  // chunk column unknown
+  const auto hit = r.raycast({3.5f, 60.0f, 3.5f}, {0, -1, 0}, 100);
+  ASSERT_TRUE(hit.has_value());
+  EXPECT_EQ(hit->voxel, (Vec3i{3, 31, 3}));
+}
+
+TEST(Replica, UnitsOfAFullChunkAndIncompleteChunksAreWrittenAsTheyCome) {
+  Replica r;
+  const Vec3i cp{0, 0, 0};
+  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 1, encode_unit(4, solid(materials::kRock))}).ok());
+  // Only unit (1, 0, 0) arrives before Full: the rest stays Air.
+  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{{1, 0, 0}, 1, encode_unit(16, solid(materials::kMud))}).ok());
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, 1});
+  EXPECT_EQ(r.get({20, 3, 3}), solid(materials::kMud));
+  EXPECT_EQ(r.get({3, 3, 3}), Voxel{});
+  // A unit for a chunk already Full goes straight into the grid.
+  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{{0, 1, 0}, 1, encode_unit(16, solid(materials::kIce))}).ok());
+  EXPECT_EQ(r.get({3, 20, 3}), solid(materials::kIce));
+  EXPECT_EQ(r.get({20, 3, 3}), solid(materials::kMud));
+}
+
+}  // namespace
+}  // namespace terrane

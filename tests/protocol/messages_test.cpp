@@ -1,0 +1,238 @@
+#include "protocol/messages.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "common/net_codec.h"
+
+namespace terrane {
+namespace {
+
+// Unwraps a built frame into its verified Message.
+const wire::Message* message_of(const Frame& f) {
+  EXPECT_GE(f.size(), kFrameHeaderBytes);
+  const std::size_t len = std::size_t{f[0]} | std::size_t{f[1]} << 8 | std::size_t{f[2]} << 16 | std::size_t{f[3]} << 24;
+  EXPECT_EQ(len + kFrameHeaderBytes, f.size());
+  auto m = verify_message(std::span<const std::uint8_t>(f.data() + kFrameHeaderBytes, len));
+  EXPECT_TRUE(m.ok());
+  return m.ok() ? *m : nullptr;
+}
+
+TEST(Messages, HelloRoundTrips) {
+  const Frame f = build_hello(HelloMsg{kProtocolVersion, "alice", "secret"});
+  const auto* m = message_of(f);
+  ASSERT_EQ(m->body_type(), wire::Body::Hello);
+  auto h = parse_hello(*m->body_as_Hello());
+  ASSERT_TRUE(h.ok());
+  EXPECT_EQ(h->protocol_version, kProtocolVersion);
+  EXPECT_EQ(h->client_name, "alice");
+  EXPECT_EQ(h->auth_token, "secret");
+}
+
+TEST(Messages, HelloRejectsMissingOrLongName) {
+  flatbuffers::FlatBufferBuilder fbb;
+  const std::string long_name(kMaxClientNameBytes + 1, 'x');
+  fbb.Finish(wire::CreateHelloDirect(fbb, 1, long_name.c_str(), ""));
+  const auto* hello = flatbuffers::GetRoot<wire::Hello>(fbb.GetBufferPointer());
+  EXPECT_EQ(parse_hello(*hello).error().code, DecodeErrorCode::kOverLimit);
+  flatbuffers::FlatBufferBuilder fbb2;
+  fbb2.Finish(wire::CreateHelloDirect(fbb2, 1, nullptr, nullptr));
+  EXPECT_EQ(parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb2.GetBufferPointer())).error().code,
+            DecodeErrorCode::kInvalidValue);
+}
+
+TEST(Messages, WelcomeRoundTrips) {
+  WelcomeMsg w;
+  w.server_epoch = 7;
+  w.spawn = {1.5f, 60.0f, -3.5f};
+  w.materials = {"Air", "Water", "Grass"};
+  w.bounds_min_y = -128;
+  w.bounds_max_y = 256;
+  w.max_view_distance = 1024;
+  w.max_full_res_radius = 256;
+  w.max_frame_bytes = 1 << 20;
+  w.tick_hz = 20;
+  const Frame f = build_welcome(w);
+  const auto* m = message_of(f);
+  auto p = parse_welcome(*m->body_as_Welcome());
+  ASSERT_TRUE(p.ok()) << p.error().describe();
+  EXPECT_EQ(p->server_epoch, 7u);
+  EXPECT_EQ(p->spawn, w.spawn);
+  EXPECT_EQ(p->materials, w.materials);
+  EXPECT_EQ(p->bounds_max_y, 256);
+  EXPECT_EQ(p->tick_hz, 20u);
+}
+
+TEST(Messages, ClientStateRejectsNonFiniteAndOutOfRange) {
+  auto parse = [](ClientStateMsg s) {
+    const Frame f = build_client_state(s);
+    return parse_client_state(*message_of(f)->body_as_ClientState());
+  };
+  EXPECT_TRUE(parse({{1, 2, 3}, 256, 64}).ok());
+  EXPECT_FALSE(parse({{std::numeric_limits<float>::quiet_NaN(), 0, 0}, 256, 64}).ok());
+  EXPECT_FALSE(parse({{std::numeric_limits<float>::infinity(), 0, 0}, 256, 64}).ok());
+  EXPECT_FALSE(parse({{3e7f, 0, 0}, 256, 64}).ok());
+  EXPECT_FALSE(parse({{0, 0, 0}, -1, 64}).ok());
+  EXPECT_FALSE(parse({{0, 0, 0}, 256, kMaxWireViewDistance + 1}).ok());
+}
+
+Result<EditRequestMsg> parse_edit(const EditRequestMsg& e) {
+  const Frame f = build_edit_request(e);
+  return parse_edit_request(*message_of(f)->body_as_EditRequest());
+}
+
+TEST(Messages, EditRequestsRoundTripAndAreBounded) {
+  EditRequestMsg box;
+  box.edit_id = 9;
+  box.kind = EditKind::kFillBox;
+  box.box = {{-4, 0, -4}, {4, 8, 4}};
+  box.material = materials::kRock;
+  box.occupancy = 200;
+  auto b = parse_edit(box);
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->edit_id, 9u);
+  EXPECT_EQ(b->box, box.box);
+  EXPECT_EQ(b->occupancy, 200);
+
+  EditRequestMsg big = box;
+  big.box = {{0, 0, 0}, {65, 64, 64}};
+  EXPECT_EQ(parse_edit(big).error().code, DecodeErrorCode::kOverLimit);
+  EditRequestMsg empty = box;
+  empty.box = {{0, 0, 0}, {0, 4, 4}};
+  EXPECT_FALSE(parse_edit(empty).ok());
+  EditRequestMsg far = box;
+  far.box = {{kMaxWireCoordinate, 0, 0}, {kMaxWireCoordinate + 2, 1, 1}};
+  EXPECT_FALSE(parse_edit(far).ok());
+  EditRequestMsg bad_material = box;
+  bad_material.material = 64;
+  EXPECT_FALSE(parse_edit(bad_material).ok());
+
+  EditRequestMsg sphere;
+  sphere.kind = EditKind::kFillSphere;
+  sphere.center = {1.5f, 2.5f, 3.5f};
+  sphere.radius = 6;
+  sphere.material = materials::kSand;
+  auto s = parse_edit(sphere);
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ(s->center, sphere.center);
+  EXPECT_EQ(s->radius, 6.0f);
+  EditRequestMsg huge = sphere;
+  huge.radius = kMaxSphereRadius + 1;
+  EXPECT_EQ(parse_edit(huge).error().code, DecodeErrorCode::kOverLimit);
+  EditRequestMsg nan = sphere;
+  nan.radius = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(parse_edit(nan).ok());
+  EditRequestMsg zero = sphere;
+  zero.radius = 0;
+  EXPECT_FALSE(parse_edit(zero).ok());
+}
+
+TEST(Messages, EditKindsNotYetServedAreRejected) {
+  flatbuffers::FlatBufferBuilder fbb;
+  const wire::Vec3i mn(0, 0, 0), mx(1, 1, 1);
+  fbb.Finish(wire::CreateEditRequest(fbb, 1, wire::EditKind::Smooth, &mn, &mx));
+  EXPECT_FALSE(parse_edit_request(*flatbuffers::GetRoot<wire::EditRequest>(fbb.GetBufferPointer())).ok());
+}
+
+TEST(Messages, CoverageChecksKindAndLevel) {
+  auto parse = [](CoverageMsg c) { return parse_coverage(*message_of(build_coverage(c))->body_as_Coverage()); };
+  EXPECT_TRUE(parse({{1, -2, 3}, wire::CoverageKind::Full, 0, 5}).ok());
+  EXPECT_TRUE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 2, 5}).ok());
+  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 0, 5}).ok());
+  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 4, 5}).ok());
+  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Empty, 1, 5}).ok());
+  EXPECT_FALSE(parse({{1, -2, 3}, static_cast<wire::CoverageKind>(9), 0, 5}).ok());
+  EXPECT_FALSE(parse({{kMaxWireCoordinate, 0, 0}, wire::CoverageKind::Full, 0, 5}).ok());
+}
+
+TEST(Messages, MipAndChunkDataRejectBadLevelsAndSizes) {
+  const std::vector<std::uint8_t> data(10, 1);
+  auto mip = [&](int level) { return parse_mip_data(*message_of(build_mip_data({0, 0, 0}, level, 1, data))->body_as_MipData()); };
+  EXPECT_TRUE(mip(1).ok());
+  EXPECT_TRUE(mip(3).ok());
+  EXPECT_FALSE(mip(0).ok());
+  EXPECT_FALSE(mip(4).ok());
+  const std::vector<std::uint8_t> too_big(net_codec_max_encoded_size(16) + 1, 0);
+  auto cd = parse_chunk_data(*message_of(build_chunk_data({2, 3, 4}, 1, too_big))->body_as_ChunkData());
+  EXPECT_EQ(cd.error().code, DecodeErrorCode::kOverLimit);
+  const Frame okf = build_chunk_data({2, -3, 4}, 8, data);
+  auto ok = parse_chunk_data(*message_of(okf)->body_as_ChunkData());
+  ASSERT_TRUE(ok.ok());
+  EXPECT_EQ(ok->unit_pos, (Vec3i{2, -3, 4}));
+  EXPECT_EQ(ok->revision, 8u);
+  EXPECT_EQ(ok->data.size(), data.size());
+  EXPECT_FALSE(parse_chunk_data(*message_of(build_chunk_data({2, 3, 4}, 1, {}))->body_as_ChunkData()).ok());
+}
+
+TEST(Messages, UpdateBatchCarriesRevisions) {
+  const std::vector<std::uint8_t> data(5, 2);
+  const ChunkRevisionMsg revs[2] = {{{1, 2, 3}, 4}, {{-1, 0, 7}, 9}};
+  auto b = parse_update_batch(*message_of(build_update_batch(12, data, revs))->body_as_UpdateBatch());
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->tick, 12u);
+  ASSERT_EQ(b->revisions.size(), 2u);
+  EXPECT_EQ(b->revisions[1].chunk_pos, (Vec3i{-1, 0, 7}));
+  EXPECT_EQ(b->revisions[1].revision, 9u);
+  EXPECT_FALSE(parse_update_batch(*message_of(build_update_batch(12, data, {}))->body_as_UpdateBatch()).ok());
+}
+
+TEST(Messages, SmallMessagesRoundTrip) {
+  EXPECT_EQ(message_of(build_ping(5))->body_as_Ping()->nonce(), 5u);
+  EXPECT_EQ(message_of(build_pong(6))->body_as_Pong()->nonce(), 6u);
+  EXPECT_EQ(message_of(build_edit_ack(3, 99))->body_as_EditAck()->tick(), 99u);
+  EXPECT_EQ(message_of(build_edit_reject(3, "no"))->body_as_EditReject()->reason()->str(), "no");
+  EXPECT_EQ(parse_disconnect(*message_of(build_disconnect("bye"))->body_as_Disconnect()).value(), "bye");
+  auto h = parse_region_hash(*message_of(build_region_hash({{1, 2, 3}, 4, 5}))->body_as_RegionHash());
+  ASSERT_TRUE(h.ok());
+  EXPECT_EQ(h->hash, 5u);
+  auto r = parse_region_hash_request(*message_of(build_region_hash_request({7, 8, 9}))->body_as_RegionHashRequest());
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(*r, (Vec3i{7, 8, 9}));
+}
+
+TEST(Messages, LongStringsAreClippedByBuilders) {
+  const std::string reason(1000, 'r');
+  auto d = parse_disconnect(*message_of(build_disconnect(reason))->body_as_Disconnect());
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(d->size(), kMaxReasonBytes);
+}
+
+TEST(Messages, EveryTruncatedFrameBodyFailsVerification) {
+  EditRequestMsg e;
+  e.kind = EditKind::kFillSphere;
+  e.center = {1, 2, 3};
+  e.radius = 4;
+  e.material = 3;
+  const Frame f = build_edit_request(e);
+  const std::span<const std::uint8_t> body(f.data() + kFrameHeaderBytes, f.size() - kFrameHeaderBytes);
+  for (std::size_t n = 0; n < body.size(); ++n) EXPECT_FALSE(verify_message(body.first(n)).ok()) << n;
+}
+
+TEST(RegionHash, DependsOnVoxelsAndRevision) {
+  Chunk a;
+  EXPECT_EQ(region_hash(&a, 3), region_hash(nullptr, 3));
+  EXPECT_NE(region_hash(nullptr, 3), region_hash(nullptr, 4));
+  Chunk b;
+  b.set({1, 2, 3}, make_voxel(materials::kRock, 200));
+  EXPECT_NE(region_hash(&b, 3), region_hash(nullptr, 3));
+  Chunk c;
+  c.set({1, 2, 3}, make_voxel(materials::kRock, 201));
+  EXPECT_NE(region_hash(&b, 3), region_hash(&c, 3));
+  c.set({1, 2, 3}, make_voxel(materials::kRock, 200));
+  EXPECT_EQ(region_hash(&b, 3), region_hash(&c, 3));
+}
+
+TEST(RegionHash, GoldenValueOfAnEmptyChunk) {
+  // Pinned so both sides (and future versions) agree on the definition.
+  EXPECT_EQ(region_hash(nullptr, 0), region_hash(nullptr, 0));
+  const std::uint64_t empty0 = region_hash(nullptr, 0);
+  // FNV-1a of 8 zero bytes then 65536 zero bytes.
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  for (int i = 0; i < 8 + 2 * 32768; ++i) h *= 0x100000001b3ull;
+  EXPECT_EQ(empty0, h);
+}
+
+}  // namespace
+}  // namespace terrane
