@@ -52,41 +52,6 @@ const std::uint16_t* uniform_headers(int size, Material material) {
   }
 }
 
-namespace {
-// Stores palette index j of voxel x in the index bytes (zeroed beforehand).
-void put_index(std::uint8_t* idx, int n, int bits, int x, int j) {
-  // 1 bit: plain bit order; 2 and 4 bits: voxel x in byte x % G at bit
-  // b·(x / G); 3 bits: the low two as 2 bits, then bit 2 as 1 bit.
-  if (bits == 3) {
-    const int g2 = (2 * n + 7) / 8;
-    idx[x % g2] = static_cast<std::uint8_t>(idx[x % g2] | ((j & 3) << (2 * (x / g2))));
-    idx[g2 + x / 8] = static_cast<std::uint8_t>(idx[g2 + x / 8] | ((j >> 2) << (x % 8)));
-    return;
-  }
-  const int groups = (n * bits + 7) / 8;
-  const int byte = bits == 1 ? x / 8 : x % groups;
-  const int shift = bits == 1 ? x % 8 : bits * (x / groups);
-  idx[byte] = static_cast<std::uint8_t>(idx[byte] | (j << shift));
-}
-}  // namespace
-
-bool encode_with_entry(const Voxel* row, int n, const std::uint8_t* entry, std::uint8_t* idx) {
-  const unsigned info = entry[0];
-  const int p = static_cast<int>(info & 15) + 1;
-  const bool occ = (info & kTagOccupancy) != 0;
-  const int bits = index_bits(info);
-  std::memset(idx, 0, static_cast<std::size_t>(index_bytes(info, n)));
-  for (int x = 0; x < n; ++x) {
-    const Voxel v = row[x];
-    if (!occ && !has_default_occupancy(v)) return false;
-    int j = 0;
-    while (j < p && !(entry[1 + j] == v.material && (!occ || entry[1 + p + j] == v.occupancy))) ++j;
-    if (j == p) return false;
-    put_index(idx, n, bits, x, j);
-  }
-  return true;
-}
-
 int encode_row(const Voxel* row, int n, std::uint8_t* out) {
   const Voxel first = row[0];
   bool uniform = true;
@@ -97,56 +62,58 @@ int encode_row(const Voxel* row, int n, std::uint8_t* out) {
   }
   if (uniform && all_default) return 0;
 
-  // Distinct voxel values, sorted (material, then occupancy) so that rows
-  // with the same set share one table entry; more than 16: raw.
+  // Palette in order of first appearance; more than 16 voxel values: raw.
   Voxel palette[kMaxPalette];
+  std::uint8_t index[kMaxRow];
   int p = 0;
   for (int x = 0; x < n; ++x) {
-    const Voxel v = row[x];
     int j = 0;
-    while (j < p && (palette[j].material < v.material ||
-                     (palette[j].material == v.material && palette[j].occupancy < v.occupancy)))
-      ++j;
-    if (j < p && palette[j] == v) continue;
-    if (p == kMaxPalette) {
-      std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
-      return 2 * n;
+    while (j < p && !(palette[j] == row[x])) ++j;
+    if (j == p) {
+      if (p == kMaxPalette) {
+        std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
+        return 2 * n;
+      }
+      palette[p++] = row[x];
     }
-    for (int k = p; k > j; --k) palette[k] = palette[k - 1];
-    palette[j] = v;
-    ++p;
+    index[x] = static_cast<std::uint8_t>(j);
   }
-  const int bits = p <= 2 ? 1 : p <= 4 ? 2 : p <= 8 ? 3 : 4;
+  const int bits = p <= 2 ? 1 : p <= 4 ? 2 : 4;
   const int groups = (n * bits + 7) / 8;
-  const int entry = 1 + p * (all_default ? 1 : 2);
-  const int size = entry + groups;
-  if (size >= 2 * n) {
+  const int entry_bytes = all_default ? 1 : 2;
+  const int size = 1 + p * entry_bytes + groups;
+  const int padded = (size + 1) & ~1;
+  if (padded >= 2 * n) {
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return 2 * n;
   }
-  const int code = bits >= 3 ? 3 : bits;
-  out[0] = static_cast<std::uint8_t>((code << 6) | (all_default ? 0 : kTagOccupancy) | (bits == 3 ? kTagThreeBits : 0) |
-                                     (p - 1));
+  const int code = bits == 4 ? 3 : bits;
+  out[0] = static_cast<std::uint8_t>((code << 6) | (all_default ? 0 : kTagOccupancy) | (p - 1));
   for (int j = 0; j < p; ++j) {
     out[1 + j] = palette[j].material;
     if (!all_default) out[1 + p + j] = palette[j].occupancy;
   }
-  std::uint8_t* idx = out + entry;
-  std::memset(idx, 0, static_cast<std::size_t>(groups));
+  std::uint8_t* idx = out + 1 + p * entry_bytes;
+  std::memset(idx, 0, static_cast<std::size_t>(padded - (1 + p * entry_bytes)));  // indices and pad byte
   for (int x = 0; x < n; ++x) {
-    int j = 0;
-    while (!(palette[j] == row[x])) ++j;
-    put_index(idx, n, bits, x, j);
+    // 1 bit: plain bit order; 2 and 4 bits: voxel x in byte x % G at bit b·(x / G).
+    const int byte = bits == 1 ? x / 8 : x % groups;
+    const int shift = bits == 1 ? x % 8 : bits * (x / groups);
+    idx[byte] = static_cast<std::uint8_t>(idx[byte] | (index[x] << shift));
   }
-  return size;
+  return padded;
 }
 
-void decode_palette_scalar(const std::uint8_t* entry, const std::uint8_t* idx, Voxel* out, int n) {
-  for (int x = 0; x < n; ++x) out[x] = palette_voxel(entry, idx, n, x);
+void decode_palette_scalar(const std::uint8_t* rec, Voxel* out, int n) {
+  for (int x = 0; x < n; ++x) out[x] = palette_voxel(rec, n, x);
 }
 
 #if defined(__x86_64__) || defined(__i386__)
 const bool kHaveSsse3 = detect_ssse3();
+
+// Selection masks per index width (tag >> 6): each row form's candidate
+// indices are masked with its entry, so the decoder has no data-dependent
+// branch (the three forms are mixed unpredictably along a chunk).
 #endif
 
 }  // namespace terrane::row_packed_detail

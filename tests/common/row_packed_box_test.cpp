@@ -2,7 +2,6 @@
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cstring>
 #include <random>
 
@@ -126,31 +125,27 @@ TEST(RowPackedBox, OreRowsUsePaletteRecords) {
   EXPECT_EQ(box.stats().byte_rows, 1u);
   EXPECT_EQ(box.stats().palette_rows, 1u);
   EXPECT_EQ(box.stats().raw_rows, 0u);
-  // Table entry (info + 2 materials, padded to 4) + record (entry id + 4
-  // bytes of 1-bit indices), rounded up to whole voxels.
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 10u + kPad32);
+  // tag + 2 materials + 4 bytes of 1-bit indices, padded to 8.
+  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + kPad32);
   box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: occupancies stored
   EXPECT_EQ(box.stats().byte_rows, 0u);
   EXPECT_EQ(box.stats().raw_rows, 1u);
   EXPECT_EQ(box.stats().palette_rows, 1u);
-  // Entry (info + 3 materials + 3 occupancies, padded to 8) + record (id + 8
-  // bytes of 2-bit indices), rounded up to whole voxels.
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 18u + kPad32);
+  // tag + 3 materials + 3 occupancies + 8 bytes of 2-bit indices, padded to 16.
+  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 16u + kPad32);
   EXPECT_EQ(box.get(7, 3, 4), solid(materials::kBasalt));
   EXPECT_EQ(box.get(8, 3, 4), make_voxel(materials::kBasalt, 100));
   EXPECT_EQ(box.get(9, 3, 4), solid(materials::kRock));
 }
 
-// Table entry + record bytes per number of distinct materials in a row of
-// 32 (default occupancy): 1, 2 and 4-bit palettes (entry 1 + P bytes padded
-// to 4, record 1 + 4/8/16 bytes, rounded to whole voxels), then raw beyond
-// 16 entries (no padding: no palette row to decode).
+// Record size per number of distinct materials in a row of 32 (default
+// occupancy): 1, 2 and 4-bit palettes, then raw beyond 16 entries.
 TEST(RowPackedBox, PaletteWidthFollowsDistinctMaterials) {
   const struct {
     int distinct;
     std::size_t record_bytes;
     bool palette;
-  } cases[] = {{2, 10, true}, {3, 14, true}, {4, 18, true}, {5, 22, true}, {9, 30, true}, {16, 38, true}, {17, 64, false}};
+  } cases[] = {{2, 8, true}, {3, 12, true}, {4, 14, true}, {5, 22, true}, {9, 26, true}, {16, 34, true}, {17, 64, false}};
   for (const auto& c : cases) {
     RowPackedBox<32> box(kAir);
     Box ref({32, 32, 32});
@@ -159,58 +154,9 @@ TEST(RowPackedBox, PaletteWidthFollowsDistinctMaterials) {
     });
     for (int x = 0; x < 32; ++x) ref.set(x, 5, 9, solid(static_cast<Material>(1 + x % c.distinct)));
     EXPECT_EQ(box.stats().palette_rows, c.palette ? 1u : 0u) << c.distinct;
-    EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + c.record_bytes + (c.palette ? kPad32 : 0u)) << c.distinct;
+    EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + c.record_bytes + kPad32) << c.distinct;
     expect_equal(box, ref, "palette width");
   }
-}
-
-// Palettes of one index width merge while their union fits it: {1..5} and
-// {1..4, 6} (3-bit indices) share one 6-entry table entry, and a row may
-// then take any value of that entry without leaving its record.
-TEST(RowPackedBox, PalettesOfOneWidthMergeInTheTable) {
-  RowPackedBox<32> box(kAir);
-  Box ref({32, 32, 32});
-  auto value = [](int z, int x) { return solid(static_cast<Material>(x % 5 == 4 ? 5 + z : 1 + x % 5)); };
-  box.modify_rows(0, 1, 0, 2, [&](int y, int z, Voxel* row) {
-    for (int x = 0; x < 32; ++x) {
-      row[x] = value(z, x);
-      ref.set(x, y, z, row[x]);
-    }
-  });
-  expect_equal(box, ref, "merged");
-  EXPECT_EQ(box.stats().palette_rows, 2u);
-  // Entry: info + 6 materials, padded to 8; records: id + 12 index bytes each.
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + 26u + kPad32);
-  box.set(0, 0, 0, solid(static_cast<Material>(6)));  // in the merged entry: written in place
-  ref.set(0, 0, 0, solid(static_cast<Material>(6)));
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + 26u + kPad32);
-  expect_equal(box, ref, "in place");
-  box.compact();
-  expect_equal(box, ref, "compacted");
-}
-
-// More distinct palettes than the table holds: entries move to 8-byte units,
-// and rows whose palette still does not fit are stored raw.
-TEST(RowPackedBox, TableOverflowFallsBackCorrectly) {
-  RowPackedBox<32> box(kAir);
-  Box ref({32, 32, 32});
-  std::mt19937 rng(5);
-  box.modify_rows(0, 32, 0, 32, [&](int y, int z, Voxel* row) {
-    Material set[63];
-    for (int m = 0; m < 63; ++m) set[m] = static_cast<Material>(m + 1);
-    std::shuffle(set, set + 63, rng);
-    for (int x = 0; x < 32; ++x) {
-      row[x] = solid(set[x % 16]);
-      ref.set(x, y, z, row[x]);
-    }
-  });
-  expect_equal(box, ref, "overflow");
-  const RowPackedStats s = box.stats();
-  EXPECT_GT(s.palette_rows, 64u);
-  EXPECT_GT(s.raw_rows, 0u);
-  box.set(3, 4, 5, make_voxel(materials::kMud, 9));
-  ref.set(3, 4, 5, make_voxel(materials::kMud, 9));
-  expect_equal(box, ref, "after write");
 }
 
 TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
@@ -223,7 +169,7 @@ TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
   });
   EXPECT_EQ(box.stats().palette_rows, 128u);
   EXPECT_EQ(box.stats().shared_rows, 127u);
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 10u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + kPad32);
   // Writing one of the sharing rows must not change the others.
   box.set(1, 2, 3, solid(materials::kSand));
   ref.set(1, 2, 3, solid(materials::kSand));
@@ -311,9 +257,8 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
     Voxel row[32];
     std::uniform_int_distribution<int> pick(0, k - 1);
     for (auto& v : row) v = palette[pick(rng)];
-    // Entry and indices at the end of a buffer with exactly the decoder's
-    // padding after them.
-    std::uint8_t buf[64];
+    // Record at the end of a buffer with exactly the decoder's padding after it.
+    std::uint8_t buf[64 + kPad32];
     std::memset(buf, 0xAB, sizeof(buf));
     const int size = row_packed_detail::encode_row(row, 32, buf);
     if (size == 0 || buf[0] < row_packed_detail::kPaletteTag) continue;
@@ -321,17 +266,15 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
     std::uint8_t tail[64 + kPad32];
     std::memset(tail, 0xCD, sizeof(tail));
     std::memcpy(tail + sizeof(tail) - kPad32 - size, buf, static_cast<std::size_t>(size));
-    const std::uint8_t* entry = tail + sizeof(tail) - kPad32 - size;
-    const int eb = row_packed_detail::entry_bytes(entry[0]);
-    ASSERT_EQ(eb + row_packed_detail::index_bytes(entry[0], 32), size);
-    for (int j = 1; j < (entry[0] & 15) + 1; ++j) ASSERT_LT(entry[j], entry[j + 1]) << "palette sorted";
+    const std::uint8_t* rec = tail + sizeof(tail) - kPad32 - size;
+    ASSERT_EQ(row_packed_detail::record_bytes(rec, 32), size);
     Voxel scalar[32];
-    row_packed_detail::decode_palette_scalar(entry, entry + eb, scalar, 32);
+    row_packed_detail::decode_palette_scalar(rec, scalar, 32);
     for (int x = 0; x < 32; ++x) ASSERT_EQ(scalar[x], row[x]) << "scalar, trial " << trial << " x " << x;
 #if defined(__x86_64__) || defined(__i386__)
     if (row_packed_detail::kHaveSsse3) {
       Voxel simd[32];
-      row_packed_detail::decode_palette32_ssse3(entry, entry + eb, simd);
+      row_packed_detail::decode_palette32_ssse3(rec, simd);
       for (int x = 0; x < 32; ++x) ASSERT_EQ(simd[x], scalar[x]) << "ssse3, trial " << trial << " x " << x;
     }
 #endif
