@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "common/world.h"
+#include "tests/support/server_process.h"
 
 namespace terrane {
 namespace {
@@ -29,84 +30,7 @@ using namespace std::chrono_literals;
 // Generous: sanitizer builds on a shared 2-core machine generate slowly.
 constexpr auto kDeadline = 20s;
 
-// Runs bin/terrane-server in a child process, capturing its output.
-class ServerProcess {
- public:
-  ServerProcess(const std::string& world, const std::vector<std::string>& extra) {
-    int fds[2];
-    if (pipe(fds) != 0) return;
-    std::vector<std::string> args = {std::string(TERRANE_BIN_DIR) + "/terrane-server", "--world", world, "--port", "0",
-                                     "--worker-threads", "2"};
-    args.insert(args.end(), extra.begin(), extra.end());
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(fds[1], 1);
-      dup2(fds[1], 2);
-      close(fds[0]);
-      close(fds[1]);
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      execv(argv[0], argv.data());
-      _exit(127);
-    }
-    close(fds[1]);
-    fd_ = fds[0];
-    std::promise<int> port;
-    auto port_future = port.get_future();
-    reader_ = std::thread([this, p = std::move(port)]() mutable {
-      bool found = false;
-      char buf[4096];
-      while (true) {
-        const ssize_t n = read(fd_, buf, sizeof buf);
-        if (n <= 0) break;
-        std::lock_guard lock(mutex_);
-        output_.append(buf, static_cast<std::size_t>(n));
-        grew_.notify_all();
-        const auto at = output_.find("listening on 127.0.0.1:");
-        if (!found && at != std::string::npos && output_.find('\n', at) != std::string::npos) {
-          found = true;
-          p.set_value(std::stoi(output_.substr(at + 23)));
-        }
-      }
-      if (!found) p.set_value(0);
-    });
-    if (port_future.wait_for(kDeadline) == std::future_status::ready) port_ = static_cast<std::uint16_t>(port_future.get());
-  }
-  ~ServerProcess() { stop(); }
-
-  std::uint16_t port() const { return port_; }
-  // SIGTERM, then the exit status (the server saves on the way out).
-  int stop() {
-    if (pid_ <= 0) return exit_code_;
-    kill(pid_, SIGTERM);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    pid_ = -1;
-    if (reader_.joinable()) reader_.join();
-    close(fd_);
-    exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return exit_code_;
-  }
-  std::string output() {
-    std::lock_guard lock(mutex_);
-    return output_;
-  }
-  bool wait_for_output(const std::string& text, std::chrono::seconds timeout) {
-    std::unique_lock lock(mutex_);
-    return grew_.wait_for(lock, timeout, [&] { return output_.find(text) != std::string::npos; });
-  }
-
- private:
-  pid_t pid_ = -1;
-  int fd_ = -1;
-  std::uint16_t port_ = 0;
-  int exit_code_ = -1;
-  std::thread reader_;
-  std::mutex mutex_;
-  std::condition_variable grew_;
-  std::string output_;
-};
+using testing_support::ServerProcess;
 
 class ClientServerTest : public ::testing::Test {
  protected:
