@@ -1,5 +1,8 @@
 #include "client/client.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -202,18 +205,35 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     }
     case wire::Body::EditAck: {
       const auto* a = m.body_as_EditAck();
-      EditOutcome o{true, a->tick(), {}};
+      EditOutcome o{true, a->tick(), {}, {}, {}};
       edits_[a->edit_id()] = o;
       ++counters_.edits_acked;
       if (callbacks_.on_edit_result) after = [this, id = a->edit_id(), o] { callbacks_.on_edit_result(id, o); };
       break;
     }
     case wire::Body::EditReject: {
-      const auto* r = m.body_as_EditReject();
-      EditOutcome o{false, 0, r->reason() != nullptr ? r->reason()->str().substr(0, kMaxReasonBytes) : std::string()};
-      edits_[r->edit_id()] = o;
+      auto r = parse_edit_reject(*m.body_as_EditReject());
+      if (!r) return fail(r.error());
+      EditOutcome o{false, 0, std::move(r->reason), r->box, std::move(r->voxels)};
       ++counters_.edits_rejected;
-      if (callbacks_.on_edit_result) after = [this, id = r->edit_id(), o] { callbacks_.on_edit_result(id, o); };
+      if (callbacks_.on_edit_result) after = [this, id = r->edit_id, o] { callbacks_.on_edit_result(id, o); };
+      edits_[r->edit_id] = std::move(o);
+      break;
+    }
+    case wire::Body::ReadBoxResult: {
+      auto r = parse_read_box_result(*m.body_as_ReadBoxResult());
+      if (!r) return fail(r.error());
+      ++counters_.read_results;
+      // Bounded: a server cannot grow this past the ids we asked for.
+      if (r->request_id == 0 || r->request_id >= next_request_id_.load()) break;
+      read_results_[r->request_id] = std::move(*r);
+      break;
+    }
+    case wire::Body::Presence: {
+      auto p = parse_presence(*m.body_as_Presence());
+      if (!p) return fail(p.error());
+      presence_ = std::move(*p);
+      ++counters_.presence_updates;
       break;
     }
     case wire::Body::RegionHash: {
@@ -284,12 +304,63 @@ std::uint32_t Client::fill_sphere(Vec3f center, float radius, Material material)
   return send(build_edit_request(e)) ? e.edit_id : 0;
 }
 
+namespace {
+EditRequestMsg sphere_edit(EditKind kind, Vec3f center, float radius, Material material, std::uint8_t occupancy) {
+  EditRequestMsg e;
+  e.kind = kind;
+  e.center = center;
+  e.radius = radius;
+  e.material = material;
+  e.occupancy = occupancy;
+  return e;
+}
+}  // namespace
+
+std::uint32_t Client::send_edit(EditRequestMsg e) {
+  e.edit_id = next_edit_id_.fetch_add(1);
+  return send(build_edit_request(e)) ? e.edit_id : 0;
+}
+
+std::uint32_t Client::dig(Vec3f center, float radius) {
+  return send_edit(sphere_edit(EditKind::kDig, center, radius, kAir, 0));
+}
+
+std::uint32_t Client::paint(Vec3f center, float radius, Material material) {
+  return send_edit(sphere_edit(EditKind::kPaint, center, radius, material, 0));
+}
+
+std::uint32_t Client::smooth(Vec3f center, float radius, float strength) {
+  const float s = std::clamp(strength, 1.0f / 255.0f, 1.0f);
+  return send_edit(sphere_edit(EditKind::kSmooth, center, radius, kAir, static_cast<std::uint8_t>(std::lround(s * 255.0f))));
+}
+
+std::uint32_t Client::write_box(const Region& box, std::span<const Voxel> voxels) {
+  if (box.empty() || box.volume() > kMaxRawBoxVolume || voxels.size() != static_cast<std::size_t>(box.volume())) return 0;
+  EditRequestMsg e;
+  e.kind = EditKind::kWriteBox;
+  e.box = box;
+  e.voxels.assign(voxels.begin(), voxels.end());
+  return send_edit(std::move(e));
+}
+
+std::uint32_t Client::request_read_box(const Region& box) {
+  if (box.empty() || box.volume() > kMaxRawBoxVolume) return 0;
+  const std::uint32_t id = next_request_id_.fetch_add(1);
+  return send(build_read_box(id, box)) ? id : 0;
+}
+
+std::vector<PresenceEntryMsg> Client::presence() const {
+  std::lock_guard lock(mutex_);
+  return presence_;
+}
+
 bool Client::request_region_hash(Vec3i chunk_pos) { return send(build_region_hash_request(chunk_pos)); }
 bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce)); }
 bool Client::send_raw(Frame bytes) { return send(std::move(bytes)); }
 
 ClientView Client::view() const {
-  return ClientView{replica_, counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_, hash_checks_};
+  return ClientView{replica_,     counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_,
+                    hash_checks_, read_results_, presence_};
 }
 
 bool Client::wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout) {

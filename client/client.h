@@ -64,12 +64,18 @@ struct ClientCounters {
   std::uint64_t hash_mismatches = 0;
   std::uint64_t protocol_errors = 0;
   std::uint64_t pongs = 0;
+  std::uint64_t presence_updates = 0;
+  std::uint64_t read_results = 0;
 };
 
 struct EditOutcome {
   bool accepted = false;
   std::uint64_t tick = 0;
   std::string reason;  // rejections
+  // Rejections decided against the world also carry its true state over the
+  // edit's box (empty box otherwise), for clients that predicted the edit.
+  Region state_box;
+  std::vector<Voxel> state;
 };
 
 struct ClientCallbacks {
@@ -92,6 +98,8 @@ struct ClientView {
   const std::string& disconnect_reason;
   const std::unordered_map<std::uint32_t, EditOutcome>& edits;
   const std::unordered_map<Vec3i, bool, Vec3iHash>& hash_checks;  // last verification per chunk
+  const std::unordered_map<std::uint32_t, ReadBoxResultMsg>& read_results;  // by request id
+  const std::vector<PresenceEntryMsg>& presence;                            // latest
 };
 
 class Client {
@@ -113,6 +121,17 @@ class Client {
   // 0 when the send queue is full or the client is closed.
   std::uint32_t fill_box(const Region& box, Voxel v);
   std::uint32_t fill_sphere(Vec3f center, float radius, Material material);
+  std::uint32_t dig(Vec3f center, float radius);
+  std::uint32_t paint(Vec3f center, float radius, Material material);
+  // strength in (0, 1]: how far each voxel moves toward its neighbourhood mean.
+  std::uint32_t smooth(Vec3f center, float radius, float strength = 0.5f);
+  // voxels in Box order; 0 if the box is over kMaxRawBoxVolume or sizes differ.
+  std::uint32_t write_box(const Region& box, std::span<const Voxel> voxels);
+  // Asks the server for the raw voxels of box (at most kMaxRawBoxVolume);
+  // returns the request id (0 on failure). The answer appears in
+  // ClientView::read_results; the voxels are the server's state as of the
+  // data received before it, so they match a correct replica.
+  std::uint32_t request_read_box(const Region& box);
   bool request_region_hash(Vec3i chunk_pos);
   bool ping(std::uint64_t nonce);
   // Sends raw bytes as they are (tests: malformed frames).
@@ -132,6 +151,8 @@ class Client {
   ClientCounters counters() const;
   bool closed() const;
   std::string disconnect_reason() const;
+  // Other clients in view, nearest first, as of the latest Presence.
+  std::vector<PresenceEntryMsg> presence() const;
   // Runs fn(const Replica&) under the lock.
   template <class F>
   auto with_replica(F&& fn) const {
@@ -144,6 +165,7 @@ class Client {
   void arm_keepalive();
   void handle_frame(std::span<const std::uint8_t> body);
   bool send(Frame frame);
+  std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
   void do_write();
   void close_locked_io(const std::string& reason);  // io thread
   ClientView view() const;
@@ -172,6 +194,9 @@ class Client {
   std::string disconnect_reason_;
   std::unordered_map<std::uint32_t, EditOutcome> edits_;
   std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
+  std::unordered_map<std::uint32_t, ReadBoxResultMsg> read_results_;
+  std::vector<PresenceEntryMsg> presence_;
+  std::atomic<std::uint32_t> next_request_id_{1};
 };
 
 }  // namespace terrane

@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <functional>
 
 namespace terrane {
@@ -59,11 +60,17 @@ struct Region {
   constexpr bool contains(Vec3i p) const {
     return p.x >= min.x && p.y >= min.y && p.z >= min.z && p.x < max.x && p.y < max.y && p.z < max.z;
   }
-  // Voxel count as 64-bit (a region can be larger than 2^31 voxels).
-  // Computed in 64 bits from the corners, so spans beyond 2^31 do not wrap.
+  // Voxel count as 64-bit (a region can be larger than 2^31 voxels),
+  // saturating at INT64_MAX for regions too large to count (any span is at
+  // most 2^32, so three of them can overflow 64 bits).
   constexpr std::int64_t volume() const {
     if (empty()) return 0;
-    return (std::int64_t{max.x} - min.x) * (std::int64_t{max.y} - min.y) * (std::int64_t{max.z} - min.z);
+    const std::int64_t dx = std::int64_t{max.x} - min.x, dy = std::int64_t{max.y} - min.y,
+                       dz = std::int64_t{max.z} - min.z;
+    std::int64_t xy = 0, xyz = 0;
+    if (__builtin_mul_overflow(dx, dy, &xy) || __builtin_mul_overflow(xy, dz, &xyz))
+      return std::numeric_limits<std::int64_t>::max();
+    return xyz;
   }
   static constexpr Region from_min_size(Vec3i min, Vec3i size) { return {min, min + size}; }
 };

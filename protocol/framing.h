@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstddef>
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -41,11 +42,14 @@ class FrameReader {
   template <class OnFrame>
   Status feed(std::span<const std::uint8_t> bytes, OnFrame&& on_frame);
 
-  std::size_t buffered() const { return buf_.size(); }
+  std::size_t buffered() const { return header_size_ + buf_.size(); }
 
  private:
   std::size_t max_;
-  std::vector<std::uint8_t> buf_;
+  std::uint8_t header_[kFrameHeaderBytes] = {};
+  std::size_t header_size_ = 0;
+  std::size_t want_ = 0;           // body length of the frame being read
+  std::vector<std::uint8_t> buf_;  // body only, so it starts aligned
   std::size_t total_ = 0;  // stream offset of buf_[0], for error offsets
 };
 
@@ -57,26 +61,28 @@ Result<const wire::Message*> verify_message(std::span<const std::uint8_t> body);
 template <class OnFrame>
 Status FrameReader::feed(std::span<const std::uint8_t> bytes, OnFrame&& on_frame) {
   while (!bytes.empty()) {
-    // Fill the header first, then the body, never more than one frame.
-    std::size_t want = kFrameHeaderBytes;
-    if (buf_.size() >= kFrameHeaderBytes) {
-      const std::size_t len = std::size_t{buf_[0]} | std::size_t{buf_[1]} << 8 | std::size_t{buf_[2]} << 16 |
-                              std::size_t{buf_[3]} << 24;
-      want = kFrameHeaderBytes + len;
-    }
-    const std::size_t take = std::min(want - buf_.size(), bytes.size());
-    buf_.insert(buf_.end(), bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(take));
-    bytes = bytes.subspan(take);
-    if (buf_.size() == kFrameHeaderBytes && want == kFrameHeaderBytes) {
-      const std::size_t len = std::size_t{buf_[0]} | std::size_t{buf_[1]} << 8 | std::size_t{buf_[2]} << 16 |
-                              std::size_t{buf_[3]} << 24;
+    if (header_size_ < kFrameHeaderBytes) {
+      // Header bytes are kept apart from the body so that the body starts
+      // at the beginning of buf_ (allocator-aligned): FlatBuffers structs
+      // with 8-byte fields are read in place.
+      header_[header_size_++] = bytes.front();
+      bytes = bytes.subspan(1);
+      if (header_size_ < kFrameHeaderBytes) continue;
+      const std::size_t len = std::size_t{header_[0]} | std::size_t{header_[1]} << 8 |
+                              std::size_t{header_[2]} << 16 | std::size_t{header_[3]} << 24;
       if (len > max_) return DecodeError{DecodeErrorCode::kOverLimit, total_, "frame length over the maximum"};
       if (len == 0) return DecodeError{DecodeErrorCode::kInvalidValue, total_, "empty frame"};
+      want_ = len;
+      buf_.clear();
       continue;
     }
-    if (buf_.size() == want && want > kFrameHeaderBytes) {
-      on_frame(std::span<const std::uint8_t>(buf_.data() + kFrameHeaderBytes, want - kFrameHeaderBytes));
-      total_ += want;
+    const std::size_t take = std::min(want_ - buf_.size(), bytes.size());
+    buf_.insert(buf_.end(), bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(take));
+    bytes = bytes.subspan(take);
+    if (buf_.size() == want_) {
+      on_frame(std::span<const std::uint8_t>(buf_.data(), buf_.size()));
+      total_ += kFrameHeaderBytes + want_;
+      header_size_ = 0;
       buf_.clear();
     }
   }

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "common/byte_rle.h"
 #include "common/net_codec.h"
 
 namespace terrane {
@@ -55,8 +56,17 @@ bool wire_chunk_ok(Vec3i c) {
   return ok(c.x) && ok(c.y) && ok(c.z);
 }
 
+Region EditRequestMsg::reads() const {
+  Region r = bounds();
+  if (kind == EditKind::kSmooth) {
+    r.min = r.min - Vec3i{1, 1, 1};
+    r.max = r.max + Vec3i{1, 1, 1};
+  }
+  return r;
+}
+
 Region EditRequestMsg::bounds() const {
-  if (kind == EditKind::kFillBox) return box;
+  if (!is_sphere_edit(kind)) return box;
   // Every voxel whose cube may overlap the sphere (with the half-voxel edge
   // band used for fractional occupancy).
   const float r = radius + 1.0f;
@@ -131,12 +141,16 @@ Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
 }
 
 Frame build_edit_request(const EditRequestMsg& m) {
-  FlatBufferBuilder fbb(128);
+  std::vector<std::uint8_t> rle;
+  if (m.kind == EditKind::kWriteBox) byte_rle_encode(m.voxels, rle);
+  FlatBufferBuilder fbb(128 + rle.size());
   const auto mn = to_wire(m.box.min);
   const auto mx = to_wire(m.box.max);
   const auto c = to_wire(m.center);
-  const auto kind = m.kind == EditKind::kFillSphere ? wire::EditKind::FillSphere : wire::EditKind::FillBox;
-  return finish(fbb, wire::CreateEditRequest(fbb, m.edit_id, kind, &mn, &mx, &c, m.radius, m.material, m.occupancy));
+  const auto data = rle.empty() ? flatbuffers::Offset<flatbuffers::Vector<std::uint8_t>>()
+                                : fbb.CreateVector(rle.data(), rle.size());
+  return finish(fbb, wire::CreateEditRequest(fbb, m.edit_id, static_cast<wire::EditKind>(m.kind), &mn, &mx, &c,
+                                             m.radius, m.material, m.occupancy, data));
 }
 
 Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick) {
@@ -148,6 +162,54 @@ Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason) {
   FlatBufferBuilder fbb(128);
   const auto r = fbb.CreateString(clip(reason, kMaxReasonBytes));
   return finish(fbb, wire::CreateEditReject(fbb, edit_id, r));
+}
+
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Region& box,
+                        std::span<const Voxel> voxels) {
+  std::vector<std::uint8_t> rle;
+  byte_rle_encode(voxels, rle);
+  FlatBufferBuilder fbb(128 + rle.size());
+  const auto r = fbb.CreateString(clip(reason, kMaxReasonBytes));
+  const auto mn = to_wire(box.min);
+  const auto mx = to_wire(box.max);
+  const auto d = fbb.CreateVector(rle.data(), rle.size());
+  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r, &mn, &mx, d));
+}
+
+Frame build_read_box(std::uint32_t request_id, const Region& box) {
+  FlatBufferBuilder fbb(64);
+  const auto mn = to_wire(box.min);
+  const auto mx = to_wire(box.max);
+  return finish(fbb, wire::CreateReadBox(fbb, request_id, &mn, &mx));
+}
+
+Frame build_read_box_result(std::uint32_t request_id, const Region& box, std::span<const Voxel> voxels) {
+  std::vector<std::uint8_t> rle;
+  byte_rle_encode(voxels, rle);
+  FlatBufferBuilder fbb(128 + rle.size());
+  const auto mn = to_wire(box.min);
+  const auto mx = to_wire(box.max);
+  const auto d = fbb.CreateVector(rle.data(), rle.size());
+  return finish(fbb, wire::CreateReadBoxResult(fbb, request_id, &mn, &mx, d));
+}
+
+Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::string_view error) {
+  FlatBufferBuilder fbb(128);
+  const auto mn = to_wire(box.min);
+  const auto mx = to_wire(box.max);
+  const auto e = fbb.CreateString(clip(error.empty() ? std::string_view("error") : error, kMaxReasonBytes));
+  return finish(fbb, wire::CreateReadBoxResult(fbb, request_id, &mn, &mx, 0, e));
+}
+
+Frame build_presence(std::span<const PresenceEntryMsg> entries) {
+  FlatBufferBuilder fbb(64 + entries.size() * 32);
+  std::vector<flatbuffers::Offset<wire::PresenceEntry>> out;
+  out.reserve(std::min(entries.size(), kMaxPresenceEntries));
+  for (std::size_t i = 0; i < entries.size() && i < kMaxPresenceEntries; ++i) {
+    const auto p = to_wire(entries[i].position);
+    out.push_back(wire::CreatePresenceEntry(fbb, entries[i].client_id, &p));
+  }
+  return finish(fbb, wire::CreatePresenceDirect(fbb, &out));
 }
 
 Frame build_region_hash(const RegionHashMsg& m) {
@@ -230,38 +292,71 @@ Result<ClientStateMsg> parse_client_state(const wire::ClientState& m) {
   return out;
 }
 
+namespace {
+
+Result<Region> parse_box(const wire::Vec3i* mn, const wire::Vec3i* mx, std::int64_t max_volume, const char* what) {
+  if (mn == nullptr || mx == nullptr) return invalid(what);
+  const Region box{from_wire(*mn), from_wire(*mx)};
+  if (!wire_coordinate_ok(box.min) || !wire_coordinate_ok(box.max)) return invalid(what);
+  if (box.empty()) return invalid(what);
+  if (box.volume() > max_volume) return over(what);
+  return box;
+}
+
+// Decodes byte RLE voxels of box (volume already bounded by the caller).
+Status decode_raw_box(const Region& box, const flatbuffers::Vector<std::uint8_t>* data, std::vector<Voxel>& out) {
+  out.assign(static_cast<std::size_t>(box.volume()), Voxel{});
+  return byte_rle_decode(bytes_of(data), out);
+}
+
+}  // namespace
+
 Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m) {
   EditRequestMsg out;
   out.edit_id = m.edit_id();
   out.material = m.material();
   out.occupancy = m.occupancy();
   if (out.material >= kMaterialCount) return invalid("edit: material id >= 64");
+  const bool has_data = m.data() != nullptr && m.data()->size() != 0;
   switch (m.kind()) {
     case wire::EditKind::FillBox: {
       out.kind = EditKind::kFillBox;
-      if (m.min() == nullptr || m.max() == nullptr) return invalid("edit: box without min/max");
-      out.box = {from_wire(*m.min()), from_wire(*m.max())};
-      if (!wire_coordinate_ok(out.box.min) || !wire_coordinate_ok(out.box.max))
-        return invalid("edit: box coordinates out of range");
-      if (out.box.empty()) return invalid("edit: empty box");
-      if (out.box.volume() > kMaxEditVolume) return over("edit: box larger than 64^3 voxels");
+      auto box = parse_box(m.min(), m.max(), kMaxEditVolume, "edit: box missing, out of range, empty or over 64^3");
+      if (!box) return box.error();
+      out.box = *box;
       if (out.material == kAir) out.occupancy = 0;
-      break;
+      if (has_data) return invalid("edit: unexpected data");
+      return out;
     }
-    case wire::EditKind::FillSphere: {
-      out.kind = EditKind::kFillSphere;
-      if (m.center() == nullptr) return invalid("edit: sphere without centre");
-      out.center = from_wire(*m.center());
-      out.radius = m.radius();
-      if (!position_ok(out.center)) return invalid("edit: sphere centre out of range");
-      if (!std::isfinite(out.radius) || out.radius <= 0.0f) return invalid("edit: sphere radius not positive");
-      if (out.radius > kMaxSphereRadius) return over("edit: sphere radius above 32");
-      break;
+    case wire::EditKind::WriteBox: {
+      out.kind = EditKind::kWriteBox;
+      auto box =
+          parse_box(m.min(), m.max(), kMaxRawBoxVolume, "edit: write box missing, out of range, empty or over 32^3");
+      if (!box) return box.error();
+      out.box = *box;
+      if (auto st = decode_raw_box(out.box, m.data(), out.voxels); !st)
+        return DecodeError{st.error().code, st.error().offset, "edit: write box data is not byte RLE of its box"};
+      return out;
     }
+    case wire::EditKind::FillSphere:
+    case wire::EditKind::Dig:
+    case wire::EditKind::Paint:
+    case wire::EditKind::Smooth:
+      break;
     default:
-      return invalid("edit: kind not supported");
+      return invalid("edit: unknown kind");
   }
-  if (m.data() != nullptr && m.data()->size() != 0) return invalid("edit: unexpected data");
+  out.kind = static_cast<EditKind>(m.kind());
+  if (m.center() == nullptr) return invalid("edit: sphere without centre");
+  out.center = from_wire(*m.center());
+  out.radius = m.radius();
+  if (!position_ok(out.center)) return invalid("edit: sphere centre out of range");
+  if (!std::isfinite(out.radius) || out.radius <= 0.0f) return invalid("edit: sphere radius not positive");
+  if (out.radius > kMaxSphereRadius) return over("edit: sphere radius above 32");
+  if (has_data) return invalid("edit: unexpected data");
+  if (out.kind == EditKind::kDig) out.material = kAir;
+  if (out.kind == EditKind::kPaint && out.material == kAir) return invalid("edit: paint with Air");
+  if (out.kind == EditKind::kSmooth && out.occupancy == 0) out.occupancy = 128;
   return out;
 }
 
@@ -314,9 +409,9 @@ Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m) {
   if (out.data.empty()) return invalid("update batch: no data");
   if (m.revisions() == nullptr || m.revisions()->size() == 0) return invalid("update batch: no revisions");
   if (m.revisions()->size() > kMaxBatchRevisions) return over("update batch: too many revisions");
-  // Read the 24-byte structs as bytes: a frame body need not start 8-byte
-  // aligned (it follows the 4-byte length), so a ChunkRevision* may be
-  // misaligned in memory even though the buffer is valid.
+  // Read the 24-byte structs as bytes: FrameReader hands out aligned bodies,
+  // but a caller may pass any span (tests, fuzzers), and a ChunkRevision*
+  // into a misaligned buffer must not be dereferenced.
   static_assert(sizeof(wire::ChunkRevision) == 24);
   const std::uint8_t* raw = m.revisions()->Data();
   out.revisions.reserve(m.revisions()->size());
@@ -350,6 +445,61 @@ Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m) {
   const Vec3i p = from_wire(*m.chunk_pos());
   if (!wire_chunk_ok(p)) return invalid("region hash request: chunk position out of range");
   return p;
+}
+
+Result<ReadBoxMsg> parse_read_box(const wire::ReadBox& m) {
+  ReadBoxMsg out;
+  out.request_id = m.request_id();
+  auto box = parse_box(m.min(), m.max(), kMaxRawBoxVolume, "read box: box missing, out of range, empty or over 32^3");
+  if (!box) return box.error();
+  out.box = *box;
+  return out;
+}
+
+Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m) {
+  ReadBoxResultMsg out;
+  out.request_id = m.request_id();
+  auto box =
+      parse_box(m.min(), m.max(), kMaxRawBoxVolume, "read box result: box missing, out of range, empty or over 32^3");
+  if (!box) return box.error();
+  out.box = *box;
+  if (m.error() != nullptr && m.error()->size() != 0) {
+    if (m.error()->size() > kMaxReasonBytes) return over("read box result: error longer than 256 bytes");
+    out.error = m.error()->str();
+    return out;
+  }
+  if (auto st = decode_raw_box(out.box, m.data(), out.voxels); !st)
+    return DecodeError{st.error().code, st.error().offset, "read box result: data is not byte RLE of its box"};
+  return out;
+}
+
+Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m) {
+  EditRejectMsg out;
+  out.edit_id = m.edit_id();
+  if (m.reason() != nullptr) {
+    if (m.reason()->size() > kMaxReasonBytes) return over("edit reject: reason longer than 256 bytes");
+    out.reason = m.reason()->str();
+  }
+  if (m.data() == nullptr) return out;
+  auto box = parse_box(m.min(), m.max(), kMaxEditVolume, "edit reject: box missing, out of range, empty or over 64^3");
+  if (!box) return box.error();
+  out.box = *box;
+  if (auto st = decode_raw_box(out.box, m.data(), out.voxels); !st)
+    return DecodeError{st.error().code, st.error().offset, "edit reject: data is not byte RLE of its box"};
+  return out;
+}
+
+Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m) {
+  std::vector<PresenceEntryMsg> out;
+  if (m.entries() == nullptr) return out;
+  if (m.entries()->size() > kMaxPresenceEntries) return over("presence: more than 64 entries");
+  for (const auto* e : *m.entries()) {
+    if (e == nullptr || e->position() == nullptr) return invalid("presence: entry without position");
+    PresenceEntryMsg p{e->client_id(), from_wire(*e->position())};
+    if (!position_ok(p.position)) return invalid("presence: position out of range");
+    out.push_back(p);
+  }
+  return out;
 }
 
 // --- region hash ------------------------------------------------------------------

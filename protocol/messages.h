@@ -37,6 +37,11 @@ inline constexpr std::int32_t kMaxWireCoordinate = 1 << 24;
 // server's owner thread (a few milliseconds).
 inline constexpr std::int64_t kMaxEditVolume = 64 * 64 * 64;
 inline constexpr float kMaxSphereRadius = 32.0f;
+// WriteBox and ReadBox carry raw voxels (byte RLE, at most 2 bytes each):
+// 32^3 voxels keep one message under 64 KiB decoded.
+inline constexpr std::int64_t kMaxRawBoxVolume = 32 * 32 * 32;
+// Presence entries in one message: the nearest clients in view.
+inline constexpr std::size_t kMaxPresenceEntries = 64;
 // View distances on the wire; the server caps them further.
 inline constexpr std::int32_t kMaxWireViewDistance = 1 << 16;
 // Chunk revisions in one UpdateBatch (one batch covers at most one tick).
@@ -72,19 +77,47 @@ struct ClientStateMsg {
   std::int32_t full_res_radius = 0;  // voxels
 };
 
-enum class EditKind : std::uint8_t { kFillBox = 0, kFillSphere = 1 };
+// Same values as wire::EditKind.
+enum class EditKind : std::uint8_t { kFillBox = 0, kFillSphere = 1, kDig = 2, kPaint = 3, kSmooth = 4, kWriteBox = 5 };
+
+// True for the kinds defined by a centre and radius.
+constexpr bool is_sphere_edit(EditKind k) { return k != EditKind::kFillBox && k != EditKind::kWriteBox; }
 
 struct EditRequestMsg {
   std::uint32_t edit_id = 0;
   EditKind kind = EditKind::kFillBox;
-  Region box;          // kFillBox: half-open
-  Vec3f center;        // kFillSphere
-  float radius = 0;    // kFillSphere
-  Material material = kAir;
-  std::uint8_t occupancy = 0;  // kFillBox: the byte written (Air forces 0)
+  Region box;          // kFillBox, kWriteBox: half-open
+  Vec3f center;        // sphere kinds
+  float radius = 0;    // sphere kinds
+  Material material = kAir;    // kFillBox, kFillSphere, kPaint (not Air)
+  std::uint8_t occupancy = 0;  // kFillBox: the byte written (Air forces 0); kSmooth: strength
+  std::vector<Voxel> voxels;   // kWriteBox: the box's voxels in Box order (decoded, validated)
 
-  // The voxels the edit may touch.
+  // The voxels the edit may change.
   Region bounds() const;
+  // The voxels the edit reads (bounds() plus the smoothing filter's reach).
+  Region reads() const;
+};
+
+struct ReadBoxMsg {
+  std::uint32_t request_id = 0;
+  Region box;
+};
+struct ReadBoxResultMsg {
+  std::uint32_t request_id = 0;
+  Region box;
+  std::string error;                  // empty on success
+  std::vector<Voxel> voxels;          // Box order, box.volume() of them on success
+};
+struct EditRejectMsg {
+  std::uint32_t edit_id = 0;
+  std::string reason;
+  Region box;                 // empty when no state is attached
+  std::vector<Voxel> voxels;  // the true state of box (Box order)
+};
+struct PresenceEntryMsg {
+  std::uint32_t client_id = 0;
+  Vec3f position;
 };
 
 // Data messages point into the frame they were parsed from.
@@ -134,6 +167,12 @@ Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
 Frame build_edit_request(const EditRequestMsg& m);
 Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick);
 Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason);
+// A rejection with the true state of box (voxels in Box order).
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Region& box, std::span<const Voxel> voxels);
+Frame build_read_box(std::uint32_t request_id, const Region& box);
+Frame build_read_box_result(std::uint32_t request_id, const Region& box, std::span<const Voxel> voxels);
+Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::string_view error);
+Frame build_presence(std::span<const PresenceEntryMsg> entries);
 Frame build_region_hash(const RegionHashMsg& m);
 Frame build_region_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);
@@ -152,6 +191,10 @@ Result<CoverageMsg> parse_coverage(const wire::Coverage& m);
 Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m);
 Result<RegionHashMsg> parse_region_hash(const wire::RegionHash& m);
 Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m);
+Result<ReadBoxMsg> parse_read_box(const wire::ReadBox& m);
+Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m);
+Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m);
+Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m);
 
 // True if every component lies in [-kMaxWireCoordinate, kMaxWireCoordinate].
 bool wire_coordinate_ok(Vec3i voxel);

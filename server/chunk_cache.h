@@ -42,6 +42,15 @@ class ChunkCache {
   // At most kMaxPendingGenerations generations run at a time; beyond that
   // the request is ignored and must be repeated.
   bool request(Vec3i chunk_pos);
+  // Forgets a loaded chunk (the store or the generator has it).
+  void unload(Vec3i chunk_pos) {
+    grid_.erase_chunk(chunk_pos);
+    revisions_.erase(chunk_pos);
+  }
+  template <class F>
+  void for_each_loaded(F&& f) const {
+    for (const auto& [cp, rev] : revisions_) f(cp);
+  }
   std::size_t pending() const { return pending_.size(); }
   std::size_t loaded_count() const { return revisions_.size(); }
   std::uint64_t generated_count() const { return generated_; }

@@ -2,6 +2,7 @@
 // and broadcasting the changed units (see server/server.h, "Tick").
 #include "server/edits.h"
 
+#include <array>
 #include <cmath>
 
 #include "server/log.h"
@@ -36,43 +37,114 @@ class UnitMarker {
 
 }  // namespace
 
+namespace {
+
+float sphere_fraction(const EditRequestMsg& e, Vec3i p) {
+  const float dx = static_cast<float>(p.x) + 0.5f - e.center.x;
+  const float dy = static_cast<float>(p.y) + 0.5f - e.center.y;
+  const float dz = static_cast<float>(p.z) + 0.5f - e.center.z;
+  return std::clamp(e.radius + 0.5f - std::sqrt(dx * dx + dy * dy + dz * dz), 0.0f, 1.0f);
+}
+
+Voxel dig(Voxel old, float f) {
+  const float left = std::min(occupancy_fraction(old), 1.0f - f);
+  return left < 0.5f / 256.0f ? Voxel{} : make_voxel(old.material, occupancy_byte(left));
+}
+
+Voxel fill(Voxel old, float f, Material m) {
+  const float had = old.material == m ? occupancy_fraction(old) : 0.0f;
+  if (f > had && (old.material == kAir || old.material == m || f >= occupancy_fraction(old)))
+    return make_voxel(m, occupancy_byte(f));
+  return old;
+}
+
+// The smoothing filter of one voxel, reading the pre-edit snapshot src
+// (whose origin is origin).
+Voxel smooth(const Box& src, Vec3i origin, Vec3i p, float s) {
+  const Vec3i l = p - origin;
+  const Voxel old = src.get(l.x, l.y, l.z);
+  float sum = 0;
+  std::array<int, kMaterialCount> votes{};
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const Voxel n = src.get(l.x + dx, l.y + dy, l.z + dz);
+        sum += occupancy_fraction(n);
+        if (n.material != kAir) ++votes[n.material];
+      }
+  const float o = occupancy_fraction(old);
+  const float next = o + s * (sum / 27.0f - o);
+  if (next < 0.5f / 256.0f) return Voxel{};
+  Material m = old.material;
+  if (m == kAir) {
+    int best = 0;
+    for (std::size_t i = 1; i < votes.size(); ++i)
+      if (votes[i] > best) {
+        best = votes[i];
+        m = static_cast<Material>(i);
+      }
+    if (m == kAir) return old;
+  }
+  return make_voxel(m, occupancy_byte(next));
+}
+
+}  // namespace
+
 std::size_t apply_edit(Grid& grid, const EditRequestMsg& e, const Region& clip, ChangedUnits& changed) {
   const Region r = intersect(e.bounds(), clip);
   if (r.empty()) return 0;
   UnitMarker marker(changed);
   std::size_t n = 0;
-  if (e.kind == EditKind::kFillBox) {
-    const Voxel v = make_voxel(e.material, e.occupancy);
-    grid.modify(r, [&](Vec3i p, Voxel old) {
-      if (old != v) {
-        marker.mark(p);
-        ++n;
-      }
-      return v;
-    });
-    return n;
-  }
-  grid.modify(r, [&](Vec3i p, Voxel old) {
-    const float dx = static_cast<float>(p.x) + 0.5f - e.center.x;
-    const float dy = static_cast<float>(p.y) + 0.5f - e.center.y;
-    const float dz = static_cast<float>(p.z) + 0.5f - e.center.z;
-    const float f = std::clamp(e.radius + 0.5f - std::sqrt(dx * dx + dy * dy + dz * dz), 0.0f, 1.0f);
-    if (f <= 0.0f) return old;
-    Voxel nv = old;
-    if (e.material == kAir) {
-      const float left = std::min(occupancy_fraction(old), 1.0f - f);
-      nv = left < 0.5f / 256.0f ? Voxel{} : make_voxel(old.material, occupancy_byte(left));
-    } else {
-      const float had = old.material == e.material ? occupancy_fraction(old) : 0.0f;
-      if (f > had && (old.material == kAir || old.material == e.material || f >= occupancy_fraction(old)))
-        nv = make_voxel(e.material, occupancy_byte(f));
-    }
+  auto count = [&](Vec3i p, Voxel old, Voxel nv) {
     if (nv != old) {
       marker.mark(p);
       ++n;
     }
     return nv;
-  });
+  };
+  switch (e.kind) {
+    case EditKind::kFillBox: {
+      const Voxel v = make_voxel(e.material, e.occupancy);
+      grid.modify(r, [&](Vec3i p, Voxel old) { return count(p, old, v); });
+      return n;
+    }
+    case EditKind::kWriteBox: {
+      const Vec3i size = e.box.size();
+      grid.modify(r, [&](Vec3i p, Voxel old) {
+        const Vec3i l = p - e.box.min;
+        const Voxel v = e.voxels[static_cast<std::size_t>((l.y * size.z + l.z) * size.x + l.x)];
+        return count(p, old, make_voxel(v.material, v.occupancy));
+      });
+      return n;
+    }
+    case EditKind::kFillSphere:
+    case EditKind::kDig:
+      grid.modify(r, [&](Vec3i p, Voxel old) {
+        const float f = sphere_fraction(e, p);
+        if (f <= 0.0f) return old;
+        return count(p, old, e.material == kAir ? dig(old, f) : fill(old, f, e.material));
+      });
+      return n;
+    case EditKind::kPaint:
+      grid.modify(r, [&](Vec3i p, Voxel old) {
+        if (old.material == kAir || sphere_fraction(e, p) < 0.5f) return old;
+        return count(p, old, make_voxel(e.material, old.occupancy));
+      });
+      return n;
+    case EditKind::kSmooth: {
+      // Snapshot first: the filter reads the pre-edit state only.
+      const Region reads = {r.min - Vec3i{1, 1, 1}, r.max + Vec3i{1, 1, 1}};
+      Box src(reads.size());
+      grid.read_box(reads.min, src);
+      const float strength = static_cast<float>(e.occupancy) / 255.0f;
+      grid.modify(r, [&](Vec3i p, Voxel old) {
+        const float f = sphere_fraction(e, p);
+        if (f <= 0.0f) return old;
+        return count(p, old, smooth(src, reads.min, p, strength * f));
+      });
+      return n;
+    }
+  }
   return n;
 }
 
@@ -84,21 +156,44 @@ double total_occupancy(const Grid& grid, const Region& region) {
   return sum;
 }
 
-void Server::on_edit(Peer& peer, const EditRequestMsg& edit) {
-  if (peer.edits_queued >= options_.max_edits_queued_per_client) {
-    counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
-    peer.session->send(build_edit_reject(edit.edit_id, "too many edits queued"), SendClass::kControl);
-    return;
-  }
+bool Server::holds_full(const Peer& peer, const Region& region) const {
+  bool ok = true;
+  for_each_chunk_in(region, [&](Vec3i cp) {
+    if (!ok) return;
+    auto it = peer.held.find(cp);
+    ok = it != peer.held.end() && it->second.kind != HeldKind::kMip;
+  });
+  return ok;
+}
+
+void Server::reject_edit(Peer& peer, const EditRequestMsg& edit, const std::string& reason) {
+  counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
+  // The true state of what the edit would have touched, when it is at hand:
+  // on the data queue, after every update already queued, so it is the
+  // state the client's replica reaches once it has read that far.
   const Region r = world_->meta().bounds.clamp(edit.bounds());
-  if (r.empty()) {
-    counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
-    peer.session->send(build_edit_reject(edit.edit_id, "edit outside the world"), SendClass::kControl);
+  bool loaded = !r.empty() && r.volume() <= kMaxEditVolume;
+  if (loaded) for_each_chunk_in(r, [&](Vec3i cp) { loaded = loaded && cache_->loaded(cp); });
+  if (!loaded) {
+    peer.session->send(build_edit_reject(edit.edit_id, reason), SendClass::kControl);
     return;
   }
+  Box box(r.size());
+  cache_->grid().read_box(r.min, box);
+  peer.session->send(build_edit_reject(edit.edit_id, reason, r, box.voxels()));
+}
+
+void Server::on_edit(Peer& peer, EditRequestMsg edit) {
+  if (peer.edits_queued >= options_.max_edits_queued_per_client) return reject_edit(peer, edit, "too many edits queued");
+  const Region r = world_->meta().bounds.clamp(edit.reads());
+  if (r.empty()) return reject_edit(peer, edit, "edit outside the world");
+  // Edits are valid only where the client holds the world at full
+  // resolution: it can see what it changes, and the server only ever has
+  // to load chunks that are already loaded for it.
+  if (!holds_full(peer, r)) return reject_edit(peer, edit, "edit outside the full-resolution region");
   ++peer.edits_queued;
-  edits_.push_back(PendingEdit{peer.session->id(), edit});
   for_each_chunk_in(r, [&](Vec3i cp) { cache_->request(cp); });
+  edits_.push_back(PendingEdit{peer.session->id(), std::move(edit)});
 }
 
 void Server::apply_edits() {
@@ -112,7 +207,7 @@ void Server::apply_edits() {
   const WorldBounds& bounds = world_->meta().bounds;
   while (!edits_.empty() && acks.size() < kMaxEditsPerTick) {
     const PendingEdit& pe = edits_.front();
-    const Region r = bounds.clamp(pe.edit.bounds());
+    const Region r = bounds.clamp(pe.edit.reads());
     bool ready = true;
     for_each_chunk_in(r, [&](Vec3i cp) { ready = cache_->request(cp) && ready; });
     if (!ready) {
@@ -123,7 +218,7 @@ void Server::apply_edits() {
       edits_.pop_front();
       continue;
     }
-    apply_edit(cache_->grid(), pe.edit, r, changed);
+    apply_edit(cache_->grid(), pe.edit, bounds.clamp(pe.edit.bounds()), changed);
     acks.push_back(Ack{pe.peer_id, pe.edit.edit_id});
     if (auto it = peers_.find(pe.peer_id); it != peers_.end() && it->second.edits_queued > 0) --it->second.edits_queued;
     edits_.pop_front();
@@ -209,7 +304,7 @@ void Server::apply_edits() {
         continue;
       }
       auto& mip = mips[static_cast<std::size_t>(level)];
-      if (!mip) mip = std::make_shared<const Frame>(mip_frame(cp, level));
+      if (!mip) mip = encoded(cp, level).frames.front();
       peer.session->send(mip);
       held = Held{HeldKind::kMip, level, rev};
       // A chunk that went from empty to a mip may need refining again.

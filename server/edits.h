@@ -2,13 +2,24 @@
 // units changed (the unit of UpdateBatch, common/net_codec.h).
 //
 // FillBox writes one voxel (material, occupancy) over the box.
-// FillSphere gives each voxel the fraction f of its cube inside the sphere,
+// WriteBox writes the given voxels over the box.
+// Sphere kinds give each voxel the fraction f of its cube inside the sphere,
 // approximated as clamp(r + 0.5 - |centre - voxel centre|, 0, 1), so the
 // total occupancy written matches the sphere's volume (4/3 pi r^3) to within
-// a few percent for r >= 2. A voxel becomes the edit's material with
-// occupancy max(f, its old fraction when it already had that material);
-// voxels whose f is zero keep their value. With material Air the sphere
-// digs: the old fraction becomes min(old, 1 - f), Air when nothing is left.
+// a few percent for r >= 2; voxels whose f is zero keep their value.
+//   FillSphere: a voxel becomes the edit's material with occupancy
+//     max(f, its old fraction when it already had that material); a voxel of
+//     another solid material is replaced only where f >= its fraction.
+//     With material Air it digs (same as Dig).
+//   Dig: the old fraction becomes min(old, 1 - f), Air when nothing is left.
+//   Paint: non-Air voxels with f >= 0.5 take the edit's material and keep
+//     their occupancy.
+//   Smooth: with s = strength/255 * f, a voxel's occupancy o becomes
+//     o + s * (m - o), where m is the mean occupancy of its 3x3x3
+//     neighbourhood as it was before the edit (a box filter, so the result
+//     does not depend on visiting order). A voxel that gains occupancy from
+//     Air takes the most common non-Air material among its neighbours; one
+//     left below half a step becomes Air.
 // Thread-safety: none; the caller owns the grid (the server's owner strand).
 #pragma once
 

@@ -43,6 +43,12 @@ constexpr const char* kHelp =
     "  --write-timeout-ms N        drop a client whose socket takes no data for this long\n"
     "                              (default 10000)\n"
     "  --socket-send-buffer N      SO_SNDBUF of client sockets in bytes (default: OS default)\n"
+    "  --presence-hz N             presence updates per second, 0 = off (default 2)\n"
+    "  --presence-max N            nearest clients listed in presence (default 32, at most 64)\n"
+    "  --hash-push-ms N            push one region hash per client this often, 0 = off\n"
+    "                              (default 1000)\n"
+    "  --encode-cache-mb N         encoded chunk frames kept for reuse (default 64)\n"
+    "  --resident-chunks N         chunks kept loaded when nobody holds them (default 4096)\n"
     "  --auth-token T              require this token in Hello (default: open server)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
@@ -56,7 +62,8 @@ int usage_error(const std::string& message) {
 int run(int argc, char** argv) {
   CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
-                  "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "test-drop-updates", "test-corrupt-updates"},
+                  "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
+                  "encode-cache-mb", "resident-chunks", "test-drop-updates", "test-corrupt-updates"},
                  {"help"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -84,6 +91,11 @@ int run(int argc, char** argv) {
   o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
   o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
   o.auth_token = cl.get("auth-token");
+  o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
+  o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
+  o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
+  o.encode_cache_bytes = static_cast<std::size_t>(cl.get_int("encode-cache-mb", 64, 0, 65536, &err)) << 20;
+  o.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 4096, 0, 1 << 24, &err));
   o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);

@@ -137,6 +137,7 @@ void Server::on_session_closed(std::uint64_t id, const std::string& reason) {
   server_log().info("session {} ({}) closed: {}", id, it->second.name.empty() ? it->second.session->remote() : it->second.name,
                     reason);
   counters_.sessions_closed.fetch_add(1, std::memory_order_relaxed);
+  for (const auto& [cp, h] : it->second.held) release(cp);
   peers_.erase(it);
   // Its queued edits stay queued; their acks go nowhere.
 }
@@ -148,7 +149,8 @@ void Server::on_inbound(std::uint64_t id, InboundMessage msg) {
   if (auto* hello = std::get_if<HelloMsg>(&msg)) return on_hello(peer, *hello);
   if (!peer.welcomed) return;
   if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(peer, *state);
-  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(peer, *edit);
+  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(peer, std::move(*edit));
+  if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(peer, *read);
   if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) {
     // Only chunks this client holds: a hash request must not make the
     // server load or generate arbitrary chunks.
@@ -206,6 +208,12 @@ void Server::on_tick() {
   ++tick_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);
   apply_edits();
+  if (options_.presence_hz > 0 && tick_ % std::max<std::uint64_t>(1, options_.tick_hz / options_.presence_hz) == 0)
+    send_presence();
+  if (options_.hash_push_ms > 0 &&
+      tick_ % std::max<std::uint64_t>(1, std::uint64_t{options_.hash_push_ms} * options_.tick_hz / 1000) == 0)
+    push_region_hashes();
+  if (tick_ % options_.tick_hz == 0) unload_unwatched();
   pump_all();
 }
 

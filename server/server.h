@@ -62,6 +62,17 @@ struct ServerOptions {
   std::size_t max_clients = 64;
   std::size_t stream_window_bytes = 512 * 1024;
   std::size_t max_edits_queued_per_client = 64;
+  // Presence: how often (0 = never) and how many of the nearest clients.
+  std::uint32_t presence_hz = 2;
+  std::size_t presence_max_entries = 32;
+  // Each client is sent the hash of one of its full-resolution chunks this
+  // often (0 = only on request).
+  std::uint32_t hash_push_ms = 1000;
+  // Encoded chunk and mip frames kept for reuse across clients.
+  std::size_t encode_cache_bytes = 64u << 20;
+  // Loaded chunks kept even when no client holds them; beyond this, chunks
+  // nobody holds are unloaded (about once a second).
+  std::size_t resident_chunks = 4096;
   SessionLimits session;
   int io_threads = 1;
   int worker_threads = 2;
@@ -86,6 +97,11 @@ struct ServerCounters {
   std::atomic<std::uint64_t> updates_dropped_by_fault{0};
   std::atomic<std::uint64_t> updates_corrupted_by_fault{0};
   std::atomic<std::uint64_t> stream_bytes{0};    // ChunkData/MipData/Coverage bytes queued
+  std::atomic<std::uint64_t> presence_sent{0};
+  std::atomic<std::uint64_t> hashes_pushed{0};
+  std::atomic<std::uint64_t> chunks_unloaded{0};
+  std::atomic<std::uint64_t> encode_cache_hits{0};
+  std::atomic<std::uint64_t> encode_cache_misses{0};
 };
 
 class Server {
@@ -132,6 +148,8 @@ class Server {
     std::unordered_map<Vec3i, Held, Vec3iHash> held;
     std::vector<Vec3i> hash_requests;
     std::size_t edits_queued = 0;
+    std::vector<PresenceEntryMsg> presence;  // last sent
+    std::size_t hash_cursor = 0;             // next plan index for pushed hashes
   };
   struct PendingEdit {
     std::uint64_t peer_id;
@@ -157,11 +175,44 @@ class Server {
   int desired_level(const Peer& peer, Vec3i chunk_pos) const;
   void send_coarse(Peer& peer, Vec3i chunk_pos);
   void send_level(Peer& peer, Vec3i chunk_pos, int level);
-  Frame mip_frame(Vec3i chunk_pos, int level) const;
+  void send_frame(Peer& peer, SharedFrame frame);
+  // Interest counts: how many clients hold each chunk (chunks nobody holds
+  // may be unloaded).
+  void hold(Peer& peer, Vec3i chunk_pos, Held h);
+  void release(Vec3i chunk_pos);
+  void unload_unwatched();
+  struct EncodeKey {
+    Vec3i chunk_pos;
+    int level;
+    friend bool operator==(const EncodeKey&, const EncodeKey&) = default;
+  };
+  struct EncodeKeyHash {
+    std::size_t operator()(const EncodeKey& k) const noexcept {
+      return Vec3iHash{}(k.chunk_pos) ^ (static_cast<std::size_t>(k.level) * 0x9E3779B97F4A7C15ull);
+    }
+  };
+  // A chunk's frames at one level and revision: level 0 holds the eight
+  // ChunkData frames by unit index then Coverage Full; mip levels hold one
+  // MipData frame.
+  struct EncodedChunk {
+    std::uint64_t revision = 0;
+    std::vector<SharedFrame> frames;
+    std::size_t bytes = 0;
+  };
+  const EncodedChunk& encoded(Vec3i chunk_pos, int level);
+
   void serve_hash_requests(Peer& peer);
+  std::uint64_t chunk_hash(Vec3i chunk_pos);
 
   // edits.cpp: edits, persistence, broadcast
-  void on_edit(Peer& peer, const EditRequestMsg& edit);
+  void on_edit(Peer& peer, EditRequestMsg edit);
+  void reject_edit(Peer& peer, const EditRequestMsg& edit, const std::string& reason);
+  bool holds_full(const Peer& peer, const Region& region) const;
+
+  // queries.cpp: read box, presence, region hashes
+  void on_read_box(Peer& peer, const ReadBoxMsg& req);
+  void send_presence();
+  void push_region_hashes();
   void apply_edits();
 
   ServerOptions options_;
@@ -189,6 +240,11 @@ class Server {
   int faults_left_ = 0;
   int corruptions_left_ = 0;
   Vec3f spawn_;
+  std::unordered_map<Vec3i, std::pair<std::uint64_t, std::uint64_t>, Vec3iHash> hash_cache_;  // revision, hash
+  std::unordered_map<Vec3i, std::uint32_t, Vec3iHash> interest_;
+  std::unordered_map<EncodeKey, EncodedChunk, EncodeKeyHash> encode_cache_;
+  std::deque<EncodeKey> encode_order_;
+  std::size_t encode_cache_bytes_ = 0;
 };
 
 }  // namespace terrane

@@ -155,6 +155,12 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       on_message_(id_, RegionHashRequestMsg{*p});
       return;
     }
+    case wire::Body::ReadBox: {
+      auto r = parse_read_box(*m.body_as_ReadBox());
+      if (!r) return fail(r.error());
+      on_message_(id_, *r);
+      return;
+    }
     case wire::Body::Ping:
       return enqueue(std::make_shared<const Frame>(build_pong(m.body_as_Ping()->nonce())), SendClass::kControl);
     case wire::Body::Pong:

@@ -56,7 +56,7 @@ struct RegionHashRequestMsg {
 };
 
 // What a session hands to the server (already checked for meaning).
-using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg>;
+using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg>;
 
 using SharedFrame = std::shared_ptr<const Frame>;
 

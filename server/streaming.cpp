@@ -2,6 +2,7 @@
 // mip-first then nearest-first (see the Server comment in server/server.h).
 #include <algorithm>
 #include <cmath>
+#include <array>
 #include <unordered_set>
 
 #include "common/net_codec.h"
@@ -105,6 +106,7 @@ void Server::replan(Peer& peer) {
       continue;
     }
     peer.session->send(build_coverage(CoverageMsg{it->first, wire::CoverageKind::Released, 0, it->second.revision}));
+    release(it->first);
     it = peer.held.erase(it);
     ++released;
   }
@@ -118,43 +120,130 @@ void Server::replan(Peer& peer) {
                       released);
 }
 
-Frame Server::mip_frame(Vec3i cp, int level) const {
-  const int n = kChunkSize >> level;
-  Box box({n, n, n});
-  if (const Chunk* c = cache_->chunk(cp)) c->read_level(level, box);
+void Server::hold(Peer& peer, Vec3i cp, Held h) {
+  auto [it, inserted] = peer.held.insert_or_assign(cp, h);
+  if (inserted) ++interest_[cp];
+}
+
+void Server::release(Vec3i cp) {
+  auto it = interest_.find(cp);
+  if (it != interest_.end() && --it->second == 0) interest_.erase(it);
+}
+
+const Server::EncodedChunk& Server::encoded(Vec3i cp, int level) {
+  // Chunks near many clients are encoded once per revision, not once per
+  // client; the cache is bounded in bytes and forgets the oldest entries.
+  const std::uint64_t rev = cache_->revision(cp);
+  const EncodeKey key{cp, level};
+  auto it = encode_cache_.find(key);
+  if (it != encode_cache_.end() && it->second.revision == rev) {
+    counters_.encode_cache_hits.fetch_add(1, std::memory_order_relaxed);
+    return it->second;
+  }
+  counters_.encode_cache_misses.fetch_add(1, std::memory_order_relaxed);
+  EncodedChunk e;
+  e.revision = rev;
+  const Chunk* c = cache_->chunk(cp);
   std::vector<std::uint8_t> data;
-  net_codec_encode(n, box.voxels(), data);
-  return build_mip_data(cp, level, cache_->revision(cp), data);
+  if (level > 0) {
+    const int n = kChunkSize >> level;
+    Box box({n, n, n});
+    if (c != nullptr) c->read_level(level, box);
+    net_codec_encode(n, box.voxels(), data);
+    e.frames.push_back(std::make_shared<const Frame>(build_mip_data(cp, level, rev, data)));
+  } else {
+    Box box({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+    for (int i = 0; i < 8; ++i) {
+      const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
+      if (c != nullptr)
+        c->read_box(u * kChunkDataUnit, box, Vec3i{0, 0, 0}, Vec3i{kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+      else
+        box.fill(Voxel{});
+      data.clear();
+      net_codec_encode(kChunkDataUnit, box.voxels(), data);
+      e.frames.push_back(std::make_shared<const Frame>(build_chunk_data(cp * 2 + u, rev, data)));
+    }
+    e.frames.push_back(std::make_shared<const Frame>(build_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, rev})));
+  }
+  for (const auto& f : e.frames) e.bytes += f->size();
+  if (it != encode_cache_.end()) {
+    encode_cache_bytes_ -= it->second.bytes;
+    it->second = std::move(e);
+  } else {
+    it = encode_cache_.emplace(key, std::move(e)).first;
+    encode_order_.push_back(key);
+  }
+  encode_cache_bytes_ += it->second.bytes;
+  // FIFO eviction, never the entry just made (the deque may hold keys
+  // already dropped by unload: skip those).
+  while (encode_cache_bytes_ > options_.encode_cache_bytes && encode_order_.size() > 1) {
+    const EncodeKey old = encode_order_.front();
+    encode_order_.pop_front();
+    if (old == key) {
+      encode_order_.push_back(old);
+      continue;
+    }
+    if (auto o = encode_cache_.find(old); o != encode_cache_.end()) {
+      encode_cache_bytes_ -= o->second.bytes;
+      encode_cache_.erase(o);
+    }
+  }
+  return encode_cache_.at(key);
+}
+
+void Server::unload_unwatched() {
+  if (cache_->loaded_count() <= options_.resident_chunks) return;
+  std::unordered_set<Vec3i, Vec3iHash> busy;
+  for (const PendingEdit& pe : edits_)
+    for_each_chunk_in(world_->meta().bounds.clamp(pe.edit.reads()), [&](Vec3i cp) { busy.insert(cp); });
+  std::vector<Vec3i> drop;
+  cache_->for_each_loaded([&](Vec3i cp) {
+    if (interest_.count(cp) == 0 && busy.count(cp) == 0) drop.push_back(cp);
+  });
+  // Edits are persisted at the tick that applies them, so dropping a
+  // chunk loses nothing: it comes back from the store (or the generator).
+  const std::size_t excess = cache_->loaded_count() - options_.resident_chunks;
+  if (drop.size() > excess) drop.resize(excess);
+  for (const Vec3i cp : drop) {
+    cache_->unload(cp);
+    hash_cache_.erase(cp);
+    for (int level = 0; level < kMipLevels; ++level)
+      if (auto it = encode_cache_.find(EncodeKey{cp, level}); it != encode_cache_.end()) {
+        encode_cache_bytes_ -= it->second.bytes;
+        encode_cache_.erase(it);
+      }
+  }
+  counters_.chunks_unloaded.fetch_add(drop.size(), std::memory_order_relaxed);
+  if (!drop.empty())
+    SPDLOG_LOGGER_DEBUG(&server_log(), "unloaded {} chunks nobody holds; {} stay loaded", drop.size(),
+                        cache_->loaded_count());
+}
+
+void Server::send_frame(Peer& peer, SharedFrame frame) {
+  counters_.stream_bytes.fetch_add(frame->size(), std::memory_order_relaxed);
+  peer.session->send(std::move(frame));
 }
 
 void Server::send_coarse(Peer& peer, Vec3i cp) {
   const std::uint64_t rev = cache_->revision(cp);
-  Frame f;
   if (cache_->chunk(cp) == nullptr) {
-    f = build_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, rev});
-    peer.held[cp] = Held{HeldKind::kEmpty, 0, rev};
+    send_frame(peer, std::make_shared<const Frame>(build_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, rev})));
+    hold(peer, cp, Held{HeldKind::kEmpty, 0, rev});
     counters_.empties_sent.fetch_add(1, std::memory_order_relaxed);
-  } else {
-    f = mip_frame(cp, kMipLevels - 1);
-    peer.held[cp] = Held{HeldKind::kMip, kMipLevels - 1, rev};
-    counters_.mips_sent.fetch_add(1, std::memory_order_relaxed);
+    return;
   }
-  counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
-  peer.session->send(std::move(f));
+  send_level(peer, cp, kMipLevels - 1);
 }
 
 void Server::send_level(Peer& peer, Vec3i cp, int level) {
-  const std::uint64_t rev = cache_->revision(cp);
+  const EncodedChunk& e = encoded(cp, level);
   if (level > 0) {
-    Frame f = mip_frame(cp, level);
-    counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
+    send_frame(peer, e.frames.front());
     counters_.mips_sent.fetch_add(1, std::memory_order_relaxed);
-    peer.session->send(std::move(f));
-    peer.held[cp] = Held{HeldKind::kMip, level, rev};
+    hold(peer, cp, Held{HeldKind::kMip, level, e.revision});
     return;
   }
   // The eight 16^3 units, nearest first, then the coverage that completes them.
-  const Chunk* c = cache_->chunk(cp);
   std::array<std::pair<float, int>, 8> order;
   for (int i = 0; i < 8; ++i) {
     const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
@@ -166,25 +255,10 @@ void Server::send_level(Peer& peer, Vec3i cp, int level) {
     order[static_cast<std::size_t>(i)] = {dx * dx + dy * dy + dz * dz, i};
   }
   std::sort(order.begin(), order.end());
-  Box box({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
-  std::vector<std::uint8_t> data;
-  for (const auto& [d, i] : order) {
-    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-    if (c != nullptr)
-      c->read_box(u * kChunkDataUnit, box, Vec3i{0, 0, 0}, Vec3i{kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
-    else
-      box.fill(Voxel{});
-    data.clear();
-    net_codec_encode(kChunkDataUnit, box.voxels(), data);
-    Frame f = build_chunk_data(cp * 2 + u, rev, data);
-    counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
-    peer.session->send(std::move(f));
-  }
-  Frame done = build_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, rev});
-  counters_.stream_bytes.fetch_add(done.size(), std::memory_order_relaxed);
-  peer.session->send(std::move(done));
+  for (const auto& [d, i] : order) send_frame(peer, e.frames[static_cast<std::size_t>(i)]);
+  send_frame(peer, e.frames[8]);
   counters_.chunks_sent.fetch_add(1, std::memory_order_relaxed);
-  peer.held[cp] = Held{HeldKind::kFull, 0, rev};
+  hold(peer, cp, Held{HeldKind::kFull, 0, e.revision});
 }
 
 void Server::pump(Peer& peer) {
@@ -233,21 +307,6 @@ void Server::pump(Peer& peer) {
 
 void Server::pump_all() {
   for (auto& [id, peer] : peers_) pump(peer);
-}
-
-void Server::serve_hash_requests(Peer& peer) {
-  auto& reqs = peer.hash_requests;
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < reqs.size(); ++i) {
-    const Vec3i cp = reqs[i];
-    if (!cache_->request(cp)) {
-      reqs[kept++] = cp;
-      continue;
-    }
-    const std::uint64_t rev = cache_->revision(cp);
-    peer.session->send(build_region_hash(RegionHashMsg{cp, rev, region_hash(cache_->chunk(cp), rev)}));
-  }
-  reqs.resize(kept);
 }
 
 }  // namespace terrane

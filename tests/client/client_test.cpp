@@ -100,6 +100,10 @@ bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
   return true;
 }
 
+bool checked_all(const ClientView& v, const std::vector<Vec3i>& chunks) {
+  return v.closed || std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
+}
+
 bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks)
     if (r.coverage(cp) == nullptr) return false;
@@ -209,8 +213,85 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   });
 }
 
+TEST_F(ClientServerTest, EveryEditKindReplicatesExactly) {
+  start_server({"--hash-push-ms", "0"});  // only the hashes asked for below
+  Client a(options("a")), b(options("b"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  ASSERT_TRUE(b.connect(&err)) << err;
+  wait_full_res(a, 32);
+  wait_full_res(b, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  const Vec3f s = w->spawn;
+  const Vec3f below{s.x, s.y - 3.0f, s.z};
+  std::vector<Voxel> pattern;
+  const Region wb{{static_cast<int>(s.x) - 6, static_cast<int>(s.y) - 4, static_cast<int>(s.z) + 3},
+                  {static_cast<int>(s.x) - 1, static_cast<int>(s.y) + 1, static_cast<int>(s.z) + 7}};
+  for (std::int64_t i = 0; i < wb.volume(); ++i)
+    pattern.push_back(i % 4 == 0 ? Voxel{} : make_voxel(materials::kBrick, static_cast<std::uint8_t>(40 + i)));
+  const std::vector<std::uint32_t> ids = {
+      a.fill_sphere(below, 4.0f, materials::kSand), a.dig({s.x + 3.0f, s.y - 2.0f, s.z}, 3.0f),
+      a.paint(below, 3.0f, materials::kSnow),       a.smooth({s.x + 1.5f, s.y - 2.0f, s.z}, 4.0f, 0.8f),
+      a.write_box(wb, pattern)};
+  for (const std::uint32_t id : ids) ASSERT_NE(id, 0u);
+  ASSERT_TRUE(a.wait_until(
+      [&](const ClientView& v) {
+        return std::all_of(ids.begin(), ids.end(), [&](std::uint32_t id) { return v.edits.count(id) != 0; });
+      },
+      kDeadline));
+  a.wait_until(
+      [&](const ClientView& v) {
+        for (const std::uint32_t id : ids)
+          EXPECT_TRUE(v.edits.at(id).accepted) << "edit " << id << ": " << v.edits.at(id).reason;
+        return true;
+      },
+      0ms);
+  // The paint left snow, the write box its exact pattern (b's replica).
+  const Vec3i bc{static_cast<int>(std::floor(below.x)), static_cast<int>(std::floor(below.y)),
+                 static_cast<int>(std::floor(below.z))};
+  std::vector<Vec3i> touched;
+  for_each_chunk_in(Region{bc - Vec3i{12, 12, 12}, bc + Vec3i{12, 12, 12}}, [&](Vec3i cp) { touched.push_back(cp); });
+  for (Client* cl : {&a, &b}) {
+    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_region_hash(cp));
+    ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return checked_all(v, touched); }, kDeadline));
+    EXPECT_EQ(cl->counters().hash_mismatches, 0u);
+  }
+  EXPECT_EQ(b.get(bc).material, materials::kSnow);
+  Box got(wb.size());
+  b.read_box(wb.min, got);
+  EXPECT_TRUE(std::equal(pattern.begin(), pattern.end(), got.voxels().begin()));
+  // ReadBox through the server agrees with the replica.
+  const std::uint32_t rid = b.request_read_box(wb);
+  ASSERT_NE(rid, 0u);
+  ASSERT_TRUE(b.wait_until([&](const ClientView& v) { return v.read_results.count(rid) != 0; }, kDeadline));
+  b.wait_until(
+      [&](const ClientView& v) {
+        const ReadBoxResultMsg& r = v.read_results.at(rid);
+        EXPECT_TRUE(r.error.empty()) << r.error;
+        EXPECT_TRUE(r.voxels.size() == pattern.size() && std::equal(pattern.begin(), pattern.end(), r.voxels.begin()));
+        return true;
+      },
+      0ms);
+  a.disconnect();
+  b.disconnect();
+}
+
+TEST_F(ClientServerTest, PresenceShowsTheOtherClient) {
+  start_server({"--presence-hz", "10"});
+  Client a(options("a")), b(options("b"));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  ASSERT_TRUE(b.connect(&err)) << err;
+  wait_full_res(b, 32);
+  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.presence.size() == 1 || v.closed; }, kDeadline));
+  const auto w = b.welcome();
+  ASSERT_TRUE(w.has_value());
+  EXPECT_EQ(a.presence().at(0).position, w->spawn);
+}
+
 TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
-  start_server();
+  start_server({"--hash-push-ms", "0"});  // only the hashes asked for below
   Client a(options("a")), b(options("b"));
   std::string err;
   ASSERT_TRUE(a.connect(&err)) << err;
@@ -240,7 +321,7 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
   for_each_chunk_in(area, [&](Vec3i cp) { touched.push_back(cp); });
   for (Client* cl : {&a, &b}) {
     for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_region_hash(cp));
-    ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return v.hash_checks.size() >= touched.size(); }, kDeadline));
+    ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return checked_all(v, touched); }, kDeadline));
     EXPECT_EQ(cl->counters().hash_mismatches, 0u);
   }
   Box ra(area.size()), rb(area.size());
@@ -255,7 +336,7 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
 }
 
 TEST_F(ClientServerTest, DroppedUpdateIsDetectedByRegionHash) {
-  start_server({"--test-drop-updates", "1"});
+  start_server({"--test-drop-updates", "1", "--hash-push-ms", "0"});
   Client a(options("a"));
   std::string err;
   ASSERT_TRUE(a.connect(&err)) << err;
@@ -346,7 +427,7 @@ TEST_F(ClientServerTest, ClientThatStopsReadingIsDroppedWithoutStallingOthers) {
 }
 
 TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByRegionHash) {
-  start_server({"--test-corrupt-updates", "1"});
+  start_server({"--test-corrupt-updates", "1", "--hash-push-ms", "0"});
   Client a(options("a"));
   std::string err;
   ASSERT_TRUE(a.connect(&err)) << err;
@@ -362,6 +443,38 @@ TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByRegionHash) {
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.hash_checks.count(cp) != 0; }, kDeadline));
   EXPECT_EQ(a.counters().update_batches, 1u);  // the batch arrived and decoded fine
   EXPECT_EQ(a.counters().hash_mismatches, 1u);
+}
+
+TEST_F(ClientServerTest, PushedRegionHashesCatchACorruptedUpdateUnasked) {
+  start_server({"--test-corrupt-updates", "1", "--hash-push-ms", "50"});
+  std::vector<Vec3i> bad;
+  std::mutex m;
+  ClientCallbacks cb;
+  cb.on_hash_checked = [&](Vec3i cp, bool match) {
+    std::lock_guard lock(m);
+    if (!match) bad.push_back(cp);
+  };
+  Client a(options("a", 64, 32), cb);
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  wait_full_res(a, 32);
+  const auto w = a.welcome();
+  ASSERT_TRUE(w.has_value());
+  Vec3i p{static_cast<int>(w->spawn.x), static_cast<int>(w->spawn.y) - 3, static_cast<int>(w->spawn.z)};
+  if (floor_mod(p.y, kChunkSize) == kChunkSize - 1) --p.y;
+  const std::uint32_t id = a.fill_box(Region{p, p + Vec3i{2, 2, 2}}, solid(materials::kSnow));
+  ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
+  // The server cycles through the client's full-resolution chunks; the
+  // corrupted one is named within one cycle.
+  ASSERT_TRUE(a.wait_until(
+      [&](const ClientView& v) {
+        std::lock_guard lock(m);  // the callback runs without the client's lock
+        return !bad.empty() || v.closed;
+      },
+      kDeadline));
+  std::lock_guard lock(m);
+  ASSERT_FALSE(bad.empty());
+  EXPECT_EQ(bad.front(), chunk_of(p));
 }
 
 TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "common/byte_rle.h"
 #include "common/net_codec.h"
 
 namespace terrane {
@@ -129,11 +130,131 @@ TEST(Messages, EditRequestsRoundTripAndAreBounded) {
   EXPECT_FALSE(parse_edit(zero).ok());
 }
 
-TEST(Messages, EditKindsNotYetServedAreRejected) {
+TEST(Messages, SphereEditKindsRoundTripWithTheirRules) {
+  auto parse = [](const EditRequestMsg& e) {
+    return parse_edit_request(*message_of(build_edit_request(e))->body_as_EditRequest());
+  };
+  EditRequestMsg e;
+  e.edit_id = 4;
+  e.center = {1.5f, -2.0f, 3.25f};
+  e.radius = 2.5f;
+  e.material = materials::kRock;
+  e.kind = EditKind::kDig;
+  auto d = parse(e);
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(d->kind, EditKind::kDig);
+  EXPECT_EQ(d->material, kAir);  // a dig writes Air whatever was asked
+  EXPECT_EQ(d->center, e.center);
+  e.kind = EditKind::kPaint;
+  auto p = parse(e);
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->material, materials::kRock);
+  e.material = kAir;
+  EXPECT_FALSE(parse(e).ok());  // painting with Air means nothing
+  e.kind = EditKind::kSmooth;
+  e.occupancy = 0;
+  auto sm = parse(e);
+  ASSERT_TRUE(sm.ok());
+  EXPECT_EQ(sm->occupancy, 128);  // default strength
+  EXPECT_EQ(sm->reads(), (Region{sm->bounds().min - Vec3i{1, 1, 1}, sm->bounds().max + Vec3i{1, 1, 1}}));
+  e.radius = 40.0f;
+  EXPECT_FALSE(parse(e).ok());
+}
+
+TEST(Messages, WriteBoxCarriesExactlyItsVoxels) {
+  EditRequestMsg e;
+  e.edit_id = 8;
+  e.kind = EditKind::kWriteBox;
+  e.box = {{-3, 5, 7}, {2, 8, 9}};
+  for (std::int64_t i = 0; i < e.box.volume(); ++i)
+    e.voxels.push_back(i % 2 ? Voxel{} : make_voxel(materials::kSand, static_cast<std::uint8_t>(i * 9)));
+  auto w = parse_edit_request(*message_of(build_edit_request(e))->body_as_EditRequest());
+  ASSERT_TRUE(w.ok()) << w.error().describe();
+  EXPECT_EQ(w->box, e.box);
+  EXPECT_EQ(w->voxels, e.voxels);
+  // Data for a different box size, a box over the raw limit, no data.
+  auto with = [&](Region box, std::span<const Voxel> voxels) {
+    std::vector<std::uint8_t> rle;
+    byte_rle_encode(voxels, rle);
+    flatbuffers::FlatBufferBuilder fbb;
+    const wire::Vec3i mn(box.min.x, box.min.y, box.min.z), mx(box.max.x, box.max.y, box.max.z);
+    fbb.Finish(wire::CreateEditRequestDirect(fbb, 1, wire::EditKind::WriteBox, &mn, &mx, nullptr, 0, 0, 0, &rle));
+    return parse_edit_request(*flatbuffers::GetRoot<wire::EditRequest>(fbb.GetBufferPointer()));
+  };
+  EXPECT_TRUE(with(e.box, e.voxels).ok());
+  EXPECT_FALSE(with(e.box, std::span(e.voxels).first(e.voxels.size() - 1)).ok());
+  EXPECT_FALSE(with(Region{{0, 0, 0}, {33, 32, 32}}, std::vector<Voxel>(33 * 32 * 32)).ok());
+  EXPECT_FALSE(with(e.box, {}).ok());
+}
+
+TEST(Messages, BoxesSpanningTheWholeWireRangeAreOverLimit) {
+  // Each side 2^25 voxels: the volume does not fit 64 bits and must
+  // saturate, not overflow.
+  const Region huge{{-kMaxWireCoordinate, -kMaxWireCoordinate, -kMaxWireCoordinate},
+                    {kMaxWireCoordinate, kMaxWireCoordinate, kMaxWireCoordinate}};
+  EXPECT_EQ(huge.volume(), std::numeric_limits<std::int64_t>::max());
+  auto r = parse_read_box(*message_of(build_read_box(1, huge))->body_as_ReadBox());
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().code, DecodeErrorCode::kOverLimit);
+  EditRequestMsg e;
+  e.kind = EditKind::kFillBox;
+  e.box = huge;
+  e.material = materials::kRock;
+  EXPECT_FALSE(parse_edit_request(*message_of(build_edit_request(e))->body_as_EditRequest()).ok());
+}
+
+TEST(Messages, UnknownEditKindIsRejected) {
   flatbuffers::FlatBufferBuilder fbb;
   const wire::Vec3i mn(0, 0, 0), mx(1, 1, 1);
-  fbb.Finish(wire::CreateEditRequest(fbb, 1, wire::EditKind::Smooth, &mn, &mx));
+  fbb.Finish(wire::CreateEditRequest(fbb, 1, static_cast<wire::EditKind>(17), &mn, &mx));
   EXPECT_FALSE(parse_edit_request(*flatbuffers::GetRoot<wire::EditRequest>(fbb.GetBufferPointer())).ok());
+}
+
+TEST(Messages, ReadBoxAndItsResultRoundTrip) {
+  const Region box{{10, -4, 3}, {14, 0, 9}};
+  auto r = parse_read_box(*message_of(build_read_box(12, box))->body_as_ReadBox());
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->request_id, 12u);
+  EXPECT_EQ(r->box, box);
+  EXPECT_FALSE(parse_read_box(*message_of(build_read_box(1, Region{{0, 0, 0}, {64, 64, 64}}))->body_as_ReadBox()).ok());
+  std::vector<Voxel> voxels(static_cast<std::size_t>(box.volume()), solid(materials::kGrass));
+  voxels[5] = Voxel{};
+  auto res = parse_read_box_result(*message_of(build_read_box_result(12, box, voxels))->body_as_ReadBoxResult());
+  ASSERT_TRUE(res.ok());
+  EXPECT_TRUE(res->error.empty());
+  EXPECT_EQ(res->voxels, voxels);
+  auto err = parse_read_box_result(*message_of(build_read_box_error(13, box, "not held"))->body_as_ReadBoxResult());
+  ASSERT_TRUE(err.ok());
+  EXPECT_EQ(err->error, "not held");
+  EXPECT_TRUE(err->voxels.empty());
+}
+
+TEST(Messages, EditRejectCarriesTheTrueState) {
+  auto plain = parse_edit_reject(*message_of(build_edit_reject(3, "no"))->body_as_EditReject());
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(plain->reason, "no");
+  EXPECT_TRUE(plain->box.empty());
+  const Region box{{0, 0, 0}, {2, 3, 4}};
+  std::vector<Voxel> voxels(24, make_voxel(materials::kRock, 99));
+  auto full = parse_edit_reject(*message_of(build_edit_reject(3, "outside", box, voxels))->body_as_EditReject());
+  ASSERT_TRUE(full.ok());
+  EXPECT_EQ(full->box, box);
+  EXPECT_EQ(full->voxels, voxels);
+}
+
+TEST(Messages, PresenceIsBoundedAndChecked) {
+  std::vector<PresenceEntryMsg> entries;
+  for (std::uint32_t i = 0; i < 70; ++i) entries.push_back({i, {static_cast<float>(i), 2.0f, 3.0f}});
+  auto p = parse_presence(*message_of(build_presence(entries))->body_as_Presence());
+  ASSERT_TRUE(p.ok());
+  ASSERT_EQ(p->size(), kMaxPresenceEntries);  // the builder keeps the first 64
+  EXPECT_EQ((*p)[63].client_id, 63u);
+  flatbuffers::FlatBufferBuilder fbb;
+  std::vector<flatbuffers::Offset<wire::PresenceEntry>> bad;
+  const wire::Vec3f inf(std::numeric_limits<float>::infinity(), 0, 0);
+  bad.push_back(wire::CreatePresenceEntry(fbb, 1, &inf));
+  fbb.Finish(wire::CreatePresenceDirect(fbb, &bad));
+  EXPECT_FALSE(parse_presence(*flatbuffers::GetRoot<wire::Presence>(fbb.GetBufferPointer())).ok());
 }
 
 TEST(Messages, CoverageChecksKindAndLevel) {

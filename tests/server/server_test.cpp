@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -122,6 +123,18 @@ class ServerTest : public ::testing::Test {
     EXPECT_TRUE(w.has_value());
     return p;
   }
+  // Moves the peer to pos (small view) and reads until chunk cp is held at
+  // full resolution (Coverage Full or Empty); false if the stream ends.
+  static bool hold_full(RawPeer& p, Vec3f pos, Vec3i cp) {
+    if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return false;
+    while (auto f = p.next_of(wire::Body::Coverage)) {
+      auto c = parse_coverage(*msg(*f).body_as_Coverage());
+      if (c && c->chunk_pos == cp &&
+          (c->kind == wire::CoverageKind::Full || c->kind == wire::CoverageKind::Empty))
+        return true;
+    }
+    return false;
+  }
 
   fs::path dir_;
   std::unique_ptr<Server> server_;
@@ -226,6 +239,7 @@ TEST_F(ServerTest, EditIsAppliedPersistedAndAcknowledged) {
   e.box = {{1000, 10, 1000}, {1004, 14, 1004}};
   e.material = materials::kBrick;
   e.occupancy = 128;
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(e.box.min)));
   ASSERT_TRUE(p->send(build_edit_request(e)));
   auto ack = p->next_of(wire::Body::EditAck);
   ASSERT_TRUE(ack.has_value());
@@ -249,7 +263,179 @@ TEST_F(ServerTest, EditIsAppliedPersistedAndAcknowledged) {
   EXPECT_EQ(stored->chunk.get(local_of(e.box.min)), make_voxel(materials::kBrick, 128));
 }
 
+TEST_F(ServerTest, EditOutsideTheFullResolutionRegionIsRejectedWithTheTrueState) {
+  start();
+  auto p = join("editor");
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(Vec3i{1002, 12, 1002})));
+  // Outside its 24-voxel full-resolution radius, but inside its view
+  // (so the chunk is loaded and its state can be shown).
+  EditRequestMsg e;
+  e.edit_id = 9;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1060, 8, 1002}, {1063, 11, 1005}};
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  auto f = p->next_of(wire::Body::EditReject);
+  ASSERT_TRUE(f.has_value());
+  auto r = parse_edit_reject(*msg(*f).body_as_EditReject());
+  ASSERT_TRUE(r.ok()) << r.error().describe();
+  EXPECT_EQ(r->edit_id, 9u);
+  EXPECT_NE(r->reason.find("full-resolution"), std::string::npos) << r->reason;
+  ASSERT_EQ(r->box, e.box);
+  ASSERT_EQ(r->voxels.size(), 27u);
+  server_->inspect([&](const ChunkCache& c) {
+    std::size_t i = 0;
+    for (int y = e.box.min.y; y < e.box.max.y; ++y)
+      for (int z = e.box.min.z; z < e.box.max.z; ++z)
+        for (int x = e.box.min.x; x < e.box.max.x; ++x) EXPECT_EQ(r->voxels[i++], c.grid().get({x, y, z}));
+  });
+  EXPECT_EQ(server_->counters().edits_applied.load(), 0u);
+}
+
+TEST_F(ServerTest, ReadBoxReturnsTheServersVoxelsOnlyForHeldChunks) {
+  start();
+  auto p = join("reader");
+  const Vec3i at{1000, 5, 1000};
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(at)));
+  const Region box{at, at + Vec3i{7, 9, 5}};
+  ASSERT_TRUE(p->send(build_read_box(3, box)));
+  auto f = p->next_of(wire::Body::ReadBoxResult);
+  ASSERT_TRUE(f.has_value());
+  auto r = parse_read_box_result(*msg(*f).body_as_ReadBoxResult());
+  ASSERT_TRUE(r.ok()) << r.error().describe();
+  EXPECT_EQ(r->request_id, 3u);
+  EXPECT_TRUE(r->error.empty());
+  ASSERT_EQ(r->voxels.size(), static_cast<std::size_t>(box.volume()));
+  std::size_t solid_count = 0;
+  server_->inspect([&](const ChunkCache& c) {
+    std::size_t i = 0;
+    for (int y = box.min.y; y < box.max.y; ++y)
+      for (int z = box.min.z; z < box.max.z; ++z)
+        for (int x = box.min.x; x < box.max.x; ++x) {
+          EXPECT_EQ(r->voxels[i], c.grid().get({x, y, z}));
+          solid_count += r->voxels[i++].material != kAir;
+        }
+  });
+  EXPECT_GT(solid_count, 0u);  // y 5..14 near the surface of the default world
+  // Far away: nothing is loaded for it, and nothing gets loaded.
+  const Region far{{500000, 0, 500000}, {500004, 4, 500004}};
+  ASSERT_TRUE(p->send(build_read_box(4, far)));
+  f = p->next_of(wire::Body::ReadBoxResult);
+  ASSERT_TRUE(f.has_value());
+  r = parse_read_box_result(*msg(*f).body_as_ReadBoxResult());
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->request_id, 4u);
+  EXPECT_FALSE(r->error.empty());
+  bool loaded = true;
+  server_->inspect([&](const ChunkCache& c) { loaded = c.loaded(chunk_of(far.min)); });
+  EXPECT_FALSE(loaded);
+}
+
+TEST_F(ServerTest, PresenceListsOtherClientsInView) {
+  ServerOptions o;
+  o.presence_hz = 10;
+  start(o);
+  auto a = join("a");
+  auto b = join("b");
+  ASSERT_TRUE(a->send(build_client_state(ClientStateMsg{{10.5f, 40.0f, 10.5f}, 64, 32})));
+  ASSERT_TRUE(b->send(build_client_state(ClientStateMsg{{20.5f, 41.0f, 12.5f}, 64, 32})));
+  // a sees b where b said it is (and never itself).
+  for (int tries = 0; tries < 200; ++tries) {
+    auto f = a->next_of(wire::Body::Presence);
+    ASSERT_TRUE(f.has_value());
+    auto entries = parse_presence(*msg(*f).body_as_Presence());
+    ASSERT_TRUE(entries.ok());
+    if (entries->empty()) continue;
+    ASSERT_EQ(entries->size(), 1u);
+    EXPECT_EQ((*entries)[0].position, (Vec3f{20.5f, 41.0f, 12.5f}));
+    return;
+  }
+  FAIL() << "no presence entry arrived";
+}
+
+TEST_F(ServerTest, RegionHashesArePushedForFullResolutionChunks) {
+  ServerOptions o;
+  o.hash_push_ms = 100;
+  start(o);
+  auto p = join("verifier");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  auto f = p->next_of(wire::Body::RegionHash);
+  ASSERT_TRUE(f.has_value());
+  auto h = parse_region_hash(*msg(*f).body_as_RegionHash());
+  ASSERT_TRUE(h.ok());
+  std::uint64_t expected = 0;
+  server_->inspect([&](const ChunkCache& c) {
+    expected = region_hash(c.chunk(h->chunk_pos), c.revision(h->chunk_pos));
+  });
+  EXPECT_EQ(h->hash, expected);
+}
+
 // --- edit application ----------------------------------------------------------
+
+TEST(ApplyEdit, PaintChangesMaterialButNotOccupancy) {
+  Grid g;
+  ChangedUnits changed;
+  g.fill({{0, 0, 0}, {16, 8, 16}}, make_voxel(materials::kRock, 200));
+  EditRequestMsg e;
+  e.kind = EditKind::kPaint;
+  e.center = {8.0f, 8.0f, 8.0f};
+  e.radius = 4.0f;
+  e.material = materials::kSnow;
+  const double before = total_occupancy(g, {{0, 0, 0}, {16, 16, 16}});
+  EXPECT_GT(apply_edit(g, e, {{-64, -64, -64}, {64, 64, 64}}, changed), 0u);
+  EXPECT_EQ(total_occupancy(g, {{0, 0, 0}, {16, 16, 16}}), before);
+  EXPECT_EQ(g.get({8, 7, 8}), make_voxel(materials::kSnow, 200));
+  EXPECT_EQ(g.get({8, 9, 8}), Voxel{});                        // Air stays Air
+  EXPECT_EQ(g.get({0, 0, 0}), make_voxel(materials::kRock, 200));  // outside the sphere
+}
+
+TEST(ApplyEdit, SmoothingAStepLowersTheTopAndRaisesTheFoot) {
+  // A one-voxel step: x < 8 solid up to y 10, x >= 8 solid up to y 5.
+  Grid g;
+  ChangedUnits changed;
+  g.fill({{0, 0, 0}, {8, 10, 16}}, solid(materials::kGrass));
+  g.fill({{8, 0, 0}, {16, 5, 16}}, solid(materials::kGrass));
+  EditRequestMsg e;
+  e.kind = EditKind::kSmooth;
+  e.center = {8.0f, 7.5f, 8.0f};
+  e.radius = 5.0f;
+  e.occupancy = 255;
+  const double before = total_occupancy(g, {{0, 0, 0}, {16, 16, 16}});
+  EXPECT_GT(apply_edit(g, e, {{-64, -64, -64}, {64, 64, 64}}, changed), 0u);
+  // The upper corner lost occupancy, the lower corner gained it and took the
+  // neighbours' material; the total moves little (a box filter conserves
+  // mass away from the sphere's edge).
+  EXPECT_LT(occupancy_fraction(g.get({7, 9, 8})), 1.0f);
+  EXPECT_GT(occupancy_fraction(g.get({8, 5, 8})), 0.0f);
+  EXPECT_EQ(g.get({8, 5, 8}).material, materials::kGrass);
+  EXPECT_NEAR(total_occupancy(g, {{0, 0, 0}, {16, 16, 16}}), before, before * 0.02);
+  // Smoothing a flat solid interior changes nothing.
+  Grid flat;
+  flat.fill({{-16, -16, -16}, {16, 16, 16}}, solid(materials::kRock));
+  ChangedUnits none;
+  e.center = {0.0f, 0.0f, 0.0f};
+  EXPECT_EQ(apply_edit(flat, e, {{-64, -64, -64}, {64, 64, 64}}, none), 0u);
+}
+
+TEST(ApplyEdit, WriteBoxWritesExactlyItsVoxels) {
+  Grid g;
+  ChangedUnits changed;
+  EditRequestMsg e;
+  e.kind = EditKind::kWriteBox;
+  e.box = {{30, 2, -3}, {35, 4, 1}};  // crosses a chunk border in x and z
+  for (int i = 0; i < e.box.volume(); ++i)
+    e.voxels.push_back(i % 3 == 0 ? Voxel{} : make_voxel(static_cast<Material>(1 + i % 5), static_cast<std::uint8_t>(i * 7)));
+  EXPECT_EQ(apply_edit(g, e, {{-64, -64, -64}, {64, 64, 64}}, changed),
+            static_cast<std::size_t>(std::count_if(e.voxels.begin(), e.voxels.end(),
+                                                   [](Voxel v) { return v != Voxel{}; })));
+  std::size_t i = 0;
+  for (int y = e.box.min.y; y < e.box.max.y; ++y)
+    for (int z = e.box.min.z; z < e.box.max.z; ++z)
+      for (int x = e.box.min.x; x < e.box.max.x; ++x) EXPECT_EQ(g.get({x, y, z}), e.voxels[i++]);
+  EXPECT_EQ(changed.size(), 4u);  // chunks (0,0,-1) (1,0,-1) (0,0,0) (1,0,0)
+}
 
 TEST(ApplyEdit, SphereOccupancyMatchesItsVolume) {
   for (const float r : {3.0f, 5.5f, 10.0f}) {
@@ -304,7 +490,7 @@ TEST(ApplyEdit, BoxMarksExactlyTheUnitsItChanges) {
   EXPECT_EQ(apply_edit(g, e, Region{{-100, -100, -100}, {100, 100, 100}}, changed), 0u);
   EXPECT_TRUE(changed.empty());
   // Clipping applies.
-  EXPECT_EQ(apply_edit(g, EditRequestMsg{1, EditKind::kFillBox, {{0, 0, 0}, {8, 1, 1}}, {}, 0, kAir, 0},
+  EXPECT_EQ(apply_edit(g, EditRequestMsg{1, EditKind::kFillBox, {{0, 0, 0}, {8, 1, 1}}, {}, 0, kAir, 0, {}},
                        Region{{0, 0, 0}, {3, 1, 1}}, changed),
             1u);
 }
