@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -182,6 +183,42 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       ++counters_.mips;
       if (callbacks_.on_coverage)
         after = [this, p = d->chunk_pos, l = d->level] { callbacks_.on_coverage(p, wire::CoverageKind::Mip, l); };
+      break;
+    }
+    case wire::Body::StreamBatch: {
+      auto records = parse_stream_batch(*m.body_as_StreamBatch());
+      if (!records) return fail(records.error());
+      std::vector<std::tuple<Vec3i, wire::CoverageKind, int>> changes;
+      const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
+        replica_.apply_stream_record(r);
+        wire::CoverageKind kind = wire::CoverageKind::Mip;
+        switch (r.kind) {
+          case StreamRecordKind::kEmpty:
+            kind = wire::CoverageKind::Empty;
+            ++counters_.coverage_empty;
+            break;
+          case StreamRecordKind::kReleased:
+            kind = wire::CoverageKind::Released;
+            ++counters_.released;
+            break;
+          case StreamRecordKind::kFull:
+            kind = wire::CoverageKind::Full;
+            ++counters_.coverage_full;
+            counters_.chunk_units += 8;
+            break;
+          default:
+            ++counters_.mips;
+            break;
+        }
+        if (callbacks_.on_coverage) changes.emplace_back(r.chunk_pos, kind, r.level);
+        return Ok{};
+      });
+      // Records before a bad one were applied: the replica stays consistent.
+      if (!st) return fail(st.error());
+      if (!changes.empty())
+        after = [this, ch = std::move(changes)] {
+          for (const auto& [p, k, l] : ch) callbacks_.on_coverage(p, k, l);
+        };
       break;
     }
     case wire::Body::Coverage: {

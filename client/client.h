@@ -196,6 +196,7 @@ class Client {
   std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
   std::unordered_map<std::uint32_t, ReadBoxResultMsg> read_results_;
   std::vector<PresenceEntryMsg> presence_;
+  StreamDecodeScratch stream_scratch_;  // io thread
   std::atomic<std::uint32_t> next_request_id_{1};
 };
 

@@ -59,6 +59,37 @@ void Replica::flush_pending(Vec3i cp) {
   pending_.erase(it);
 }
 
+void Replica::apply_stream_record(const StreamRecord& r) {
+  const Vec3i cp = r.chunk_pos;
+  switch (r.kind) {
+    case StreamRecordKind::kEmpty:
+      apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, r.revision});
+      return;
+    case StreamRecordKind::kReleased:
+      apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, r.revision});
+      return;
+    case StreamRecordKind::kFull: {
+      pending_.erase(cp);
+      mips_.erase(cp);
+      Chunk chunk = Chunk::from_box(*r.voxels);
+      if (chunk.empty())
+        grid_.erase_chunk(cp);
+      else
+        grid_.put_chunk(cp, std::move(chunk));
+      coverage_[cp] = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+      return;
+    }
+    case StreamRecordKind::kMip1:
+    case StreamRecordKind::kMip2:
+    case StreamRecordKind::kMip3:
+      mips_[cp] = Mip{r.level, *r.voxels};
+      pending_.erase(cp);
+      coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision};
+      grid_.erase_chunk(cp);
+      return;
+  }
+}
+
 Status Replica::apply_mip_data(const MipDataMsg& m) {
   const int n = kChunkSize >> m.level;
   Mip mip{m.level, Box({n, n, n})};

@@ -23,6 +23,7 @@
 #include "common/grid.h"
 #include "common/net_codec.h"
 #include "protocol/messages.h"
+#include "protocol/stream_batch.h"
 
 namespace terrane {
 
@@ -43,6 +44,8 @@ class Replica {
   Replica();
 
   Status apply_chunk_data(const ChunkDataMsg& m);
+  // A decoded StreamBatch record (protocol/stream_batch.h).
+  void apply_stream_record(const StreamRecord& r);
   Status apply_mip_data(const MipDataMsg& m);
   void apply_coverage(const CoverageMsg& m);
   // Applies the units of chunks held at full resolution (others are

@@ -212,6 +212,12 @@ Frame build_presence(std::span<const PresenceEntryMsg> entries) {
   return finish(fbb, wire::CreatePresenceDirect(fbb, &out));
 }
 
+Frame build_stream_batch(std::span<const std::uint8_t> records) {
+  FlatBufferBuilder fbb(records.size() + 64);
+  const auto r = fbb.CreateVector(records.data(), records.size());
+  return finish(fbb, wire::CreateStreamBatch(fbb, r));
+}
+
 Frame build_region_hash(const RegionHashMsg& m) {
   FlatBufferBuilder fbb(64);
   const auto p = to_wire(m.chunk_pos);
@@ -500,6 +506,12 @@ Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m) {
     out.push_back(p);
   }
   return out;
+}
+
+Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m) {
+  const auto records = bytes_of(m.records());
+  if (records.empty()) return invalid("stream batch: no records");
+  return records;
 }
 
 // --- region hash ------------------------------------------------------------------

@@ -173,6 +173,8 @@ Frame build_read_box(std::uint32_t request_id, const Region& box);
 Frame build_read_box_result(std::uint32_t request_id, const Region& box, std::span<const Voxel> voxels);
 Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::string_view error);
 Frame build_presence(std::span<const PresenceEntryMsg> entries);
+// records: protocol/stream_batch.h (StreamBatchWriter builds them).
+Frame build_stream_batch(std::span<const std::uint8_t> records);
 Frame build_region_hash(const RegionHashMsg& m);
 Frame build_region_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);
@@ -195,6 +197,8 @@ Result<ReadBoxMsg> parse_read_box(const wire::ReadBox& m);
 Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m);
 Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m);
 Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m);
+// The records of a StreamBatch (non-empty); decode them with decode_stream_batch.
+Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m);
 
 // True if every component lies in [-kMaxWireCoordinate, kMaxWireCoordinate].
 bool wire_coordinate_ok(Vec3i voxel);

@@ -304,7 +304,10 @@ void Server::apply_edits() {
         continue;
       }
       auto& mip = mips[static_cast<std::size_t>(level)];
-      if (!mip) mip = encoded(cp, level).frames.front();
+      if (!mip) {
+        const EncodedChunk& e = encoded(cp, level);
+        mip = std::make_shared<const Frame>(build_mip_data(cp, level, e.revision, e.payload));
+      }
       peer.session->send(mip);
       held = Held{HeldKind::kMip, level, rev};
       // A chunk that went from empty to a mip may need refining again.

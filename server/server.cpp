@@ -28,9 +28,33 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   s->port_ = s->acceptor_.local_endpoint().port();
 
   s->cache_ = std::make_unique<ChunkCache>(*s->world_, s->owner_, s->workers_, [srv = s.get()] { srv->schedule_pump(); });
-  s->spawn_ = Vec3f{0.5f, 0.0f, 0.5f};
-  if (const TerrainGenerator* gen = s->world_->generator()) s->spawn_.y = gen->surface_height(0, 0) + 2.0f;
+  s->spawn_ = find_spawn(*s->world_);
   return s;
+}
+
+Vec3f Server::find_spawn(World& world) {
+  if (const TerrainGenerator* gen = world.generator()) return {0.5f, gen->surface_height(0, 0) + 2.0f, 0.5f};
+  // No generator (an imported world): above the ground at the centre of
+  // what is stored, so clients start where the content is.
+  Vec3i lo{0, 0, 0}, hi{0, 0, 0};
+  bool any = false;
+  (void)world.store().for_each_chunk([&](Vec3i cp, std::uint64_t, std::span<const std::uint8_t>) {
+    lo = any ? min3(lo, cp) : cp;
+    hi = any ? max3(hi, cp) : cp;
+    any = true;
+  });
+  if (!any) return {0.5f, static_cast<float>(std::max(0, world.meta().bounds.min_y)), 0.5f};
+  const std::int32_t x = (lo.x + hi.x + 1) * kChunkSize / 2, z = (lo.z + hi.z + 1) * kChunkSize / 2;
+  const WorldBounds& b = world.meta().bounds;
+  Box column({1, b.max_y - b.min_y, 1});
+  std::int32_t top = b.min_y;
+  if (world.read_box({x, b.min_y, z}, column))
+    for (int y = column.size().y - 1; y >= 0; --y)
+      if (column.get(0, y, 0).material != kAir) {
+        top = b.min_y + y + 1;
+        break;
+      }
+  return {static_cast<float>(x) + 0.5f, static_cast<float>(top) + 2.0f, static_cast<float>(z) + 0.5f};
 }
 
 Server::Server(const ServerOptions& options)

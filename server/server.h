@@ -45,6 +45,7 @@
 
 #include "common/world.h"
 #include "protocol/messages.h"
+#include "protocol/stream_batch.h"
 #include "server/chunk_cache.h"
 #include "server/session.h"
 
@@ -150,6 +151,10 @@ class Server {
     std::size_t edits_queued = 0;
     std::vector<PresenceEntryMsg> presence;  // last sent
     std::size_t hash_cursor = 0;             // next plan index for pushed hashes
+    // Streaming records not yet sent. Every owner-strand handler that adds
+    // records flushes them before it returns, so data frames sent directly
+    // (updates, hashes, read results) keep their order after them.
+    StreamBatchWriter batch;
   };
   struct PendingEdit {
     std::uint64_t peer_id;
@@ -157,6 +162,9 @@ class Server {
   };
 
   explicit Server(const ServerOptions& options);
+  // Where clients start: above the generated surface at the origin, or for
+  // worlds without a generator above the centre of the stored chunks.
+  static Vec3f find_spawn(World& world);
 
   // server.cpp: lifecycle, accept, handshake
   void do_accept();
@@ -171,11 +179,16 @@ class Server {
   void on_client_state(Peer& peer, const ClientStateMsg& state);
   void replan(Peer& peer);
   void pump(Peer& peer);
+  void pump_stream(Peer& peer);  // pump's streaming passes; the caller flushes
   void pump_all();
   int desired_level(const Peer& peer, Vec3i chunk_pos) const;
   void send_coarse(Peer& peer, Vec3i chunk_pos);
   void send_level(Peer& peer, Vec3i chunk_pos, int level);
-  void send_frame(Peer& peer, SharedFrame frame);
+  // Appends a record to the client's stream batch (sent by flush_stream,
+  // or at once when the batch is full).
+  void stream(Peer& peer, StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
+              std::span<const std::uint8_t> payload = {});
+  void flush_stream(Peer& peer);
   // Interest counts: how many clients hold each chunk (chunks nobody holds
   // may be unloaded).
   void hold(Peer& peer, Vec3i chunk_pos, Held h);
@@ -191,13 +204,11 @@ class Server {
       return Vec3iHash{}(k.chunk_pos) ^ (static_cast<std::size_t>(k.level) * 0x9E3779B97F4A7C15ull);
     }
   };
-  // A chunk's frames at one level and revision: level 0 holds the eight
-  // ChunkData frames by unit index then Coverage Full; mip levels hold one
-  // MipData frame.
+  // A chunk's encoded voxels at one level and revision: level 0 holds the
+  // eight 16^3 units in unit index order, mip levels one unit.
   struct EncodedChunk {
     std::uint64_t revision = 0;
-    std::vector<SharedFrame> frames;
-    std::size_t bytes = 0;
+    std::vector<std::uint8_t> payload;
   };
   const EncodedChunk& encoded(Vec3i chunk_pos, int level);
 

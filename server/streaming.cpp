@@ -13,8 +13,9 @@ namespace terrane {
 
 namespace {
 
-// Frames one pump may queue for one client: bounds the owner strand's work
-// per client per tick (a 16^3 unit encodes in tens of microseconds).
+// Work one pump may do for one client, in units (a mip or empty record is
+// one, a full chunk nine): bounds the owner strand's work per client per
+// tick (a 16^3 unit encodes in tens of microseconds).
 constexpr int kMaxFramesPerPump = 256;
 // Chunk loads requested ahead of the streaming cursor.
 constexpr std::size_t kPrefetch = 48;
@@ -105,7 +106,7 @@ void Server::replan(Peer& peer) {
       ++it;
       continue;
     }
-    peer.session->send(build_coverage(CoverageMsg{it->first, wire::CoverageKind::Released, 0, it->second.revision}));
+    stream(peer, StreamRecordKind::kReleased, it->first, it->second.revision);
     release(it->first);
     it = peer.held.erase(it);
     ++released;
@@ -116,6 +117,7 @@ void Server::replan(Peer& peer) {
   peer.plan_full = peer.state.full_res_radius;
   peer.coarse = 0;
   peer.refine = 0;
+  flush_stream(peer);
   SPDLOG_LOGGER_DEBUG(&server_log(), "session {}: plan of {} chunks, {} released", peer.session->id(), peer.plan.size(),
                       released);
 }
@@ -144,13 +146,11 @@ const Server::EncodedChunk& Server::encoded(Vec3i cp, int level) {
   EncodedChunk e;
   e.revision = rev;
   const Chunk* c = cache_->chunk(cp);
-  std::vector<std::uint8_t> data;
   if (level > 0) {
     const int n = kChunkSize >> level;
     Box box({n, n, n});
     if (c != nullptr) c->read_level(level, box);
-    net_codec_encode(n, box.voxels(), data);
-    e.frames.push_back(std::make_shared<const Frame>(build_mip_data(cp, level, rev, data)));
+    net_codec_encode(n, box.voxels(), e.payload);
   } else {
     Box box({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
     for (int i = 0; i < 8; ++i) {
@@ -159,21 +159,17 @@ const Server::EncodedChunk& Server::encoded(Vec3i cp, int level) {
         c->read_box(u * kChunkDataUnit, box, Vec3i{0, 0, 0}, Vec3i{kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
       else
         box.fill(Voxel{});
-      data.clear();
-      net_codec_encode(kChunkDataUnit, box.voxels(), data);
-      e.frames.push_back(std::make_shared<const Frame>(build_chunk_data(cp * 2 + u, rev, data)));
+      net_codec_encode(kChunkDataUnit, box.voxels(), e.payload);
     }
-    e.frames.push_back(std::make_shared<const Frame>(build_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, rev})));
   }
-  for (const auto& f : e.frames) e.bytes += f->size();
   if (it != encode_cache_.end()) {
-    encode_cache_bytes_ -= it->second.bytes;
+    encode_cache_bytes_ -= it->second.payload.size();
     it->second = std::move(e);
   } else {
     it = encode_cache_.emplace(key, std::move(e)).first;
     encode_order_.push_back(key);
   }
-  encode_cache_bytes_ += it->second.bytes;
+  encode_cache_bytes_ += it->second.payload.size();
   // FIFO eviction, never the entry just made (the deque may hold keys
   // already dropped by unload: skip those).
   while (encode_cache_bytes_ > options_.encode_cache_bytes && encode_order_.size() > 1) {
@@ -184,7 +180,7 @@ const Server::EncodedChunk& Server::encoded(Vec3i cp, int level) {
       continue;
     }
     if (auto o = encode_cache_.find(old); o != encode_cache_.end()) {
-      encode_cache_bytes_ -= o->second.bytes;
+      encode_cache_bytes_ -= o->second.payload.size();
       encode_cache_.erase(o);
     }
   }
@@ -209,7 +205,7 @@ void Server::unload_unwatched() {
     hash_cache_.erase(cp);
     for (int level = 0; level < kMipLevels; ++level)
       if (auto it = encode_cache_.find(EncodeKey{cp, level}); it != encode_cache_.end()) {
-        encode_cache_bytes_ -= it->second.bytes;
+        encode_cache_bytes_ -= it->second.payload.size();
         encode_cache_.erase(it);
       }
   }
@@ -219,15 +215,24 @@ void Server::unload_unwatched() {
                         cache_->loaded_count());
 }
 
-void Server::send_frame(Peer& peer, SharedFrame frame) {
-  counters_.stream_bytes.fetch_add(frame->size(), std::memory_order_relaxed);
-  peer.session->send(std::move(frame));
+void Server::stream(Peer& peer, StreamRecordKind kind, Vec3i cp, std::uint64_t revision,
+                    std::span<const std::uint8_t> payload) {
+  peer.batch.add(kind, cp, revision, payload);
+  if (peer.batch.size_bytes() >= kStreamBatchTargetBytes || peer.batch.records() >= kMaxStreamRecords)
+    flush_stream(peer);
+}
+
+void Server::flush_stream(Peer& peer) {
+  if (peer.batch.empty()) return;
+  Frame f = peer.batch.finish();
+  counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
+  peer.session->send(std::move(f));
 }
 
 void Server::send_coarse(Peer& peer, Vec3i cp) {
   const std::uint64_t rev = cache_->revision(cp);
   if (cache_->chunk(cp) == nullptr) {
-    send_frame(peer, std::make_shared<const Frame>(build_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, rev})));
+    stream(peer, StreamRecordKind::kEmpty, cp, rev);
     hold(peer, cp, Held{HeldKind::kEmpty, 0, rev});
     counters_.empties_sent.fetch_add(1, std::memory_order_relaxed);
     return;
@@ -237,36 +242,28 @@ void Server::send_coarse(Peer& peer, Vec3i cp) {
 
 void Server::send_level(Peer& peer, Vec3i cp, int level) {
   const EncodedChunk& e = encoded(cp, level);
+  stream(peer, level > 0 ? static_cast<StreamRecordKind>(level) : StreamRecordKind::kFull, cp, e.revision, e.payload);
   if (level > 0) {
-    send_frame(peer, e.frames.front());
     counters_.mips_sent.fetch_add(1, std::memory_order_relaxed);
     hold(peer, cp, Held{HeldKind::kMip, level, e.revision});
-    return;
+  } else {
+    counters_.chunks_sent.fetch_add(1, std::memory_order_relaxed);
+    hold(peer, cp, Held{HeldKind::kFull, 0, e.revision});
   }
-  // The eight 16^3 units, nearest first, then the coverage that completes them.
-  std::array<std::pair<float, int>, 8> order;
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-    const Vec3i lo = chunk_origin(cp) + u * kChunkDataUnit;
-    const float h = kChunkDataUnit / 2.0f;
-    const float dx = static_cast<float>(lo.x) + h - peer.state.position.x;
-    const float dy = static_cast<float>(lo.y) + h - peer.state.position.y;
-    const float dz = static_cast<float>(lo.z) + h - peer.state.position.z;
-    order[static_cast<std::size_t>(i)] = {dx * dx + dy * dy + dz * dz, i};
-  }
-  std::sort(order.begin(), order.end());
-  for (const auto& [d, i] : order) send_frame(peer, e.frames[static_cast<std::size_t>(i)]);
-  send_frame(peer, e.frames[8]);
-  counters_.chunks_sent.fetch_add(1, std::memory_order_relaxed);
-  hold(peer, cp, Held{HeldKind::kFull, 0, e.revision});
 }
 
 void Server::pump(Peer& peer) {
   if (!peer.welcomed || !peer.plan_valid) return;
   serve_hash_requests(peer);
+  pump_stream(peer);
+  flush_stream(peer);
+}
+
+void Server::pump_stream(Peer& peer) {
   int frames = 0;
   auto room = [&] {
-    return frames < kMaxFramesPerPump && peer.session->queued_bytes() < options_.stream_window_bytes;
+    return frames < kMaxFramesPerPump &&
+           peer.session->queued_bytes() + peer.batch.size_bytes() < options_.stream_window_bytes;
   };
   // Pass 1: the whole view at its coarsest, nearest first.
   while (peer.coarse < peer.plan.size()) {

@@ -9,6 +9,8 @@
 // 16^3 units of the generated world around the origin (default: the whole
 // default world box, 32 x 32 columns).
 #include <zlib.h>
+
+#include "tests/bench/paletted_section.h"
 #include <zstd.h>
 
 #include <algorithm>
@@ -95,50 +97,10 @@ bool zstd_decode(std::span<const std::uint8_t> in, std::span<Voxel> out) {
   return byte_rle_decode(std::span<const std::uint8_t>(g_scratch.data(), n), out).ok();
 }
 
-// Minecraft-style paletted section: [palette count u16][palette entries:
-// material, occupancy][indices at max(4, ceil(log2 count)) bits in 64-bit
-// words, no index spanning two words]; a single-value unit has no indices.
-// The whole section is then zlib level 6.
+// Minecraft-style paletted section (tests/bench/paletted_section.h), then
+// zlib level 6 over the whole section.
 void palette_encode(std::span<const Voxel> v, std::vector<std::uint8_t>& out) {
-  std::array<int, 65536> index;  // NOLINT
-  std::vector<std::uint16_t> pal;
-  std::vector<std::uint16_t> idx(v.size());
-  std::vector<std::uint16_t> seen;
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    const auto key = static_cast<std::uint16_t>(v[i].material | (v[i].occupancy << 8));
-    bool found = false;
-    for (std::size_t p = 0; p < seen.size(); ++p) {
-      if (seen[p] == key) {
-        found = true;
-        break;
-      }
-    }
-    if (!found) {
-      seen.push_back(key);
-      index[key] = static_cast<int>(pal.size());
-      pal.push_back(key);
-    }
-    idx[i] = static_cast<std::uint16_t>(index[key]);
-  }
-  g_scratch.clear();
-  g_scratch.push_back(static_cast<std::uint8_t>(pal.size() & 0xFF));
-  g_scratch.push_back(static_cast<std::uint8_t>(pal.size() >> 8));
-  for (std::uint16_t p : pal) {
-    g_scratch.push_back(static_cast<std::uint8_t>(p & 0xFF));
-    g_scratch.push_back(static_cast<std::uint8_t>(p >> 8));
-  }
-  if (pal.size() > 1) {
-    int bits = 4;
-    while ((std::size_t{1} << bits) < pal.size()) ++bits;
-    const int per_word = 64 / bits;
-    for (std::size_t i = 0; i < idx.size(); i += static_cast<std::size_t>(per_word)) {
-      std::uint64_t w = 0;
-      for (int k = 0; k < per_word && i + static_cast<std::size_t>(k) < idx.size(); ++k) {
-        w |= std::uint64_t{idx[i + static_cast<std::size_t>(k)]} << (k * bits);
-      }
-      for (int b = 0; b < 8; ++b) g_scratch.push_back(static_cast<std::uint8_t>(w >> (8 * b)));
-    }
-  }
+  paletted_section(v, g_scratch);
   const std::size_t start = out.size();
   out.resize(start + compressBound(static_cast<uLong>(g_scratch.size())));
   deflateReset(&g_deflate);

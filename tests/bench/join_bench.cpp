@@ -3,6 +3,14 @@
 // view and to full resolution inside the full-resolution radius, and the
 // bytes received by then. "Cold" starts each join on a new world (chunks
 // generated on demand); "Warm" joins a server that already holds them.
+// "Imported" joins the real regions in tests/data imported as a world (view
+// distance = full-resolution radius) and sets the bytes the client received
+// against the network codec's own bytes for the same chunks and against
+// Minecraft-style paletted sections + zlib-6 (tests/bench/paletted_section.h):
+//   bytes_per_nev  all bytes received from connect until the full-resolution
+//                  region is complete / its non-empty voxels
+//   wire_over_codec  those bytes / the codec's bytes for the region's 16^3 units
+//   paletted_per_nev paletted + zlib bytes of the same units / non-empty voxels
 //
 //   terrane-bench-join --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
@@ -10,12 +18,19 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <map>
+
+#include <zlib.h>
 
 #include <spdlog/spdlog.h>
 
 #include "client/client.h"
+#include "common/net_codec.h"
+#include "common/world.h"
 #include "server/server.h"
+#include "tests/bench/paletted_section.h"
 
 namespace terrane {
 namespace {
@@ -53,6 +68,7 @@ struct JoinResult {
   double coarse_s = 0, full_s = 0;
   std::uint64_t coarse_bytes = 0, full_bytes = 0;
   std::size_t view_chunks = 0, full_chunks = 0;
+  std::vector<Vec3i> full_set;
   bool ok = false;
 };
 
@@ -74,6 +90,7 @@ JoinResult join_once(std::uint16_t port, int view, int full) {
   const auto near = chunks_within(w->spawn, static_cast<float>(full), *w);
   r.view_chunks = in_view.size();
   r.full_chunks = near.size();
+  r.full_set = near;
   const bool coarse = c.wait_until(
       [&](const ClientView& v) {
         for (const Vec3i cp : in_view)
@@ -154,6 +171,97 @@ void BM_JoinWarm(benchmark::State& state) {
   server.reset();
   fs::remove_all(dir);
 }
+
+// --- imported real terrain ----------------------------------------------------
+
+struct Dataset {
+  const char* name;
+  const char* file;
+};
+constexpr Dataset kDatasets[] = {{"mc-1.9", "mc-1.9.vxraw.gz"}, {"mc-1.16", "mc-1.16.vxraw.gz"}};
+
+fs::path bin_dir() { return fs::read_symlink("/proc/self/exe").parent_path(); }
+
+// Imports a dataset once per process with the real terrane-world tool.
+fs::path imported_world(int index) {
+  static std::map<int, fs::path> done;
+  if (auto it = done.find(index); it != done.end()) return it->second;
+  const fs::path dir = fs::temp_directory_path() /
+                       ("terrane-join-bench-" + std::string(kDatasets[index].name) + "-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string cmd = (bin_dir() / "terrane-world").string() + " import --world " + dir.string() + " " +
+                          TERRANE_TEST_DATA_DIR + "/" + kDatasets[index].file + " > /dev/null 2>&1";
+  if (std::system(cmd.c_str()) != 0) return {};
+  done[index] = dir;
+  return dir;
+}
+
+struct RegionCost {
+  std::uint64_t non_empty = 0, codec_bytes = 0, paletted_bytes = 0;
+};
+
+// What the chunks cost encoded unit by unit, outside the protocol.
+RegionCost region_cost(const fs::path& world_dir, const std::vector<Vec3i>& chunks) {
+  RegionCost c;
+  auto world = World::open(world_dir.string());
+  if (!world) return c;
+  Box box({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+  std::vector<std::uint8_t> bytes, section, z;
+  for (const Vec3i cp : chunks) {
+    auto stored = (*world)->load_chunk(cp);
+    if (!stored || stored->chunk.empty()) continue;
+    for (int i = 0; i < 8; ++i) {
+      const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
+      stored->chunk.read_box(u * kChunkDataUnit, box, Vec3i{0, 0, 0},
+                             Vec3i{kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+      for (const Voxel v : box.voxels()) c.non_empty += v.material != kAir;
+      bytes.clear();
+      net_codec_encode(kChunkDataUnit, box.voxels(), bytes);
+      c.codec_bytes += bytes.size();
+      paletted_section(box.voxels(), section);
+      uLongf n = compressBound(static_cast<uLong>(section.size()));
+      z.resize(n);
+      compress2(z.data(), &n, section.data(), static_cast<uLong>(section.size()), 6);
+      c.paletted_bytes += n;
+    }
+  }
+  return c;
+}
+
+void BM_JoinImported(benchmark::State& state) {
+  spdlog::set_level(spdlog::level::warn);
+  const int index = static_cast<int>(state.range(0)), radius = static_cast<int>(state.range(1));
+  state.SetLabel(kDatasets[index].name);
+  const fs::path dir = imported_world(index);
+  if (dir.empty()) return state.SkipWithError("cannot import the dataset (is terrane-world built?)");
+  ServerOptions o;
+  o.world_dir = dir.string();
+  o.hash_push_ms = 0;  // only streaming bytes in the figure
+  o.presence_hz = 0;
+  auto server = Server::create(o);
+  if (!server) return state.SkipWithError("cannot start the server");
+  (*server)->start();
+  JoinResult r;
+  for (auto _ : state) {
+    r = join_once((*server)->port(), radius, radius);
+    if (!r.ok) return state.SkipWithError("join did not complete");
+    report(state, r, static_cast<double>(state.max_iterations));
+  }
+  (*server)->stop();
+  const RegionCost cost = region_cost(dir, r.full_set);
+  if (cost.non_empty == 0) return state.SkipWithError("no terrain in the full-resolution region");
+  const double nev = static_cast<double>(cost.non_empty);
+  state.counters["non_empty"] = nev;
+  state.counters["bytes_per_nev"] = static_cast<double>(r.full_bytes) / nev;
+  state.counters["codec_per_nev"] = static_cast<double>(cost.codec_bytes) / nev;
+  state.counters["wire_over_codec"] = static_cast<double>(r.full_bytes) / static_cast<double>(cost.codec_bytes);
+  state.counters["paletted_per_nev"] = static_cast<double>(cost.paletted_bytes) / nev;
+}
+
+BENCHMARK(BM_JoinImported)
+    ->ArgsProduct({{0, 1}, {64, 128}})
+    ->Iterations(2)
+    ->Unit(benchmark::kMillisecond);
 
 BENCHMARK(BM_JoinCold)->Args({128, 64})->Args({256, 128})->Iterations(2)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_JoinWarm)->Args({128, 64})->Args({256, 128})->Iterations(3)->Unit(benchmark::kMillisecond);

@@ -8,6 +8,7 @@
 
 #include "common/net_codec.h"
 #include "protocol/messages.h"
+#include "protocol/stream_batch.h"
 
 namespace {
 
@@ -30,6 +31,12 @@ void decode_payloads(const wire::Message& m) {
       if (auto b = parse_update_batch(*m.body_as_UpdateBatch())) {
         std::vector<UnitUpdate> units(64);
         (void)net_codec_decode_update_batch(b->data, units);
+      }
+      break;
+    case wire::Body::StreamBatch:
+      if (auto r = parse_stream_batch(*m.body_as_StreamBatch())) {
+        StreamDecodeScratch scratch;
+        (void)decode_stream_batch(*r, scratch, [](const StreamRecord&) -> Status { return Ok{}; });
       }
       break;
     default:

@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <numbers>
 #include <optional>
+#include <thread>
 
 #include "server/edits.h"
 
@@ -127,11 +128,17 @@ class ServerTest : public ::testing::Test {
   // full resolution (Coverage Full or Empty); false if the stream ends.
   static bool hold_full(RawPeer& p, Vec3f pos, Vec3i cp) {
     if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return false;
-    while (auto f = p.next_of(wire::Body::Coverage)) {
-      auto c = parse_coverage(*msg(*f).body_as_Coverage());
-      if (c && c->chunk_pos == cp &&
-          (c->kind == wire::CoverageKind::Full || c->kind == wire::CoverageKind::Empty))
-        return true;
+    StreamDecodeScratch scratch;
+    while (auto f = p.next_of(wire::Body::StreamBatch)) {
+      auto records = parse_stream_batch(*msg(*f).body_as_StreamBatch());
+      if (!records) return false;
+      bool found = false;
+      const auto st = decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+        found = found || (r.chunk_pos == cp && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty));
+        return Ok{};
+      });
+      if (!st) return false;
+      if (found) return true;
     }
     return false;
   }
@@ -370,6 +377,39 @@ TEST_F(ServerTest, RegionHashesArePushedForFullResolutionChunks) {
     expected = region_hash(c.chunk(h->chunk_pos), c.revision(h->chunk_pos));
   });
   EXPECT_EQ(h->hash, expected);
+}
+
+TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
+  ServerOptions o;
+  o.resident_chunks = 0;  // unload everything nobody holds, once a second
+  start(o);
+  auto p = join("walker");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  EditRequestMsg e;
+  e.edit_id = 1;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1000, 10, 1000}, {1002, 12, 1002}};
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  ASSERT_TRUE(p->next_of(wire::Body::EditAck).has_value());
+  // Walk far away: the old chunks are released, then unloaded.
+  ASSERT_TRUE(hold_full(*p, {9002.0f, 12.0f, 9002.0f}, chunk_of(Vec3i{9002, 12, 9002})));
+  bool unloaded = false;
+  for (int i = 0; i < 100 && !unloaded; ++i) {
+    server_->inspect([&](const ChunkCache& c) { unloaded = !c.loaded(cp); });
+    if (!unloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(unloaded);
+  EXPECT_GT(server_->counters().chunks_unloaded.load(), 0u);
+  // Back again: the chunk is reloaded from the store with its edit.
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  server_->inspect([&](const ChunkCache& c) {
+    ASSERT_TRUE(c.loaded(cp));
+    EXPECT_EQ(c.revision(cp), 1u);
+    EXPECT_EQ(c.grid().get({1001, 11, 1001}), solid(materials::kBrick));
+  });
 }
 
 // --- edit application ----------------------------------------------------------

@@ -1,0 +1,134 @@
+#include "protocol/stream_batch.h"
+
+#include <algorithm>
+
+#include "common/net_codec.h"
+
+namespace terrane {
+
+namespace {
+
+void put_varint(std::uint64_t v, std::vector<std::uint8_t>& out) {
+  while (v >= 0x80) {
+    out.push_back(static_cast<std::uint8_t>(v | 0x80));
+    v >>= 7;
+  }
+  out.push_back(static_cast<std::uint8_t>(v));
+}
+
+std::uint64_t zigzag(std::int64_t v) { return (static_cast<std::uint64_t>(v) << 1) ^ static_cast<std::uint64_t>(v >> 63); }
+std::int64_t unzigzag(std::uint64_t v) { return static_cast<std::int64_t>(v >> 1) ^ -static_cast<std::int64_t>(v & 1); }
+
+class Reader {
+ public:
+  explicit Reader(std::span<const std::uint8_t> b) : b_(b) {}
+  bool done() const { return pos_ == b_.size(); }
+  std::size_t pos() const { return pos_; }
+  std::span<const std::uint8_t> rest() const { return b_.subspan(pos_); }
+  void skip(std::size_t n) { pos_ += n; }
+  Result<std::uint8_t> byte() {
+    if (pos_ >= b_.size()) return DecodeError{DecodeErrorCode::kTruncated, pos_, "stream batch: record cut short"};
+    return b_[pos_++];
+  }
+  Result<std::uint64_t> varint() {
+    std::uint64_t v = 0;
+    for (int shift = 0; shift < 64; shift += 7) {
+      auto b = byte();
+      if (!b) return b.error();
+      v |= std::uint64_t{*b & 0x7Fu} << shift;
+      if ((*b & 0x80) == 0) return v;
+    }
+    return DecodeError{DecodeErrorCode::kInvalidValue, pos_, "stream batch: varint longer than 64 bits"};
+  }
+
+ private:
+  std::span<const std::uint8_t> b_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace
+
+void StreamBatchWriter::add(StreamRecordKind kind, Vec3i cp, std::uint64_t revision,
+                            std::span<const std::uint8_t> payload) {
+  bytes_.push_back(static_cast<std::uint8_t>(kind));
+  put_varint(zigzag(std::int64_t{cp.x} - prev_.x), bytes_);
+  put_varint(zigzag(std::int64_t{cp.y} - prev_.y), bytes_);
+  put_varint(zigzag(std::int64_t{cp.z} - prev_.z), bytes_);
+  put_varint(revision, bytes_);
+  bytes_.insert(bytes_.end(), payload.begin(), payload.end());
+  prev_ = cp;
+  ++records_;
+}
+
+Frame StreamBatchWriter::finish() {
+  Frame f = build_stream_batch(bytes_);
+  bytes_.clear();
+  prev_ = {0, 0, 0};
+  records_ = 0;
+  return f;
+}
+
+Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeScratch& s,
+                           const std::function<Status(const StreamRecord&)>& fn) {
+  Reader r(records);
+  Vec3i prev{0, 0, 0};
+  std::size_t count = 0;
+  while (!r.done()) {
+    if (++count > kMaxStreamRecords)
+      return DecodeError{DecodeErrorCode::kOverLimit, r.pos(), "stream batch: more than 4096 records"};
+    auto kind = r.byte();
+    if (!kind) return kind.error();
+    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kReleased))
+      return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: unknown record kind"};
+    std::int64_t c[3];
+    for (auto& v : c) {
+      auto d = r.varint();
+      if (!d) return d.error();
+      v = unzigzag(*d);
+    }
+    const std::int64_t x = prev.x + c[0], y = prev.y + c[1], z = prev.z + c[2];
+    constexpr std::int64_t lim = kMaxWireCoordinate / kChunkSize;
+    if (std::max({std::abs(x), std::abs(y), std::abs(z)}) > lim)
+      return DecodeError{DecodeErrorCode::kInvalidValue, r.pos(), "stream batch: chunk position out of range"};
+    auto rev = r.varint();
+    if (!rev) return rev.error();
+    StreamRecord rec;
+    rec.kind = static_cast<StreamRecordKind>(*kind);
+    rec.chunk_pos = {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
+    rec.revision = *rev;
+    switch (rec.kind) {
+      case StreamRecordKind::kFull:
+        for (int i = 0; i < 8; ++i) {
+          auto n = net_codec_decode_prefix(16, r.rest(), s.unit.voxels());
+          if (!n) return DecodeError{n.error().code, r.pos() + n.error().offset, n.error().detail};
+          r.skip(*n);
+          const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
+          for (int uy = 0; uy < 16; ++uy)
+            for (int uz = 0; uz < 16; ++uz)
+              std::copy_n(s.unit.read_row(uy, uz), 16, s.chunk.write_row(off.y + uy, off.z + uz) + off.x);
+        }
+        rec.voxels = &s.chunk;
+        break;
+      case StreamRecordKind::kMip1:
+      case StreamRecordKind::kMip2:
+      case StreamRecordKind::kMip3: {
+        rec.level = static_cast<int>(rec.kind);
+        const int n = kChunkSize >> rec.level;
+        s.mip.resize({n, n, n});
+        auto used = net_codec_decode_prefix(n, r.rest(), s.mip.voxels());
+        if (!used) return DecodeError{used.error().code, r.pos() + used.error().offset, used.error().detail};
+        r.skip(*used);
+        rec.voxels = &s.mip;
+        break;
+      }
+      case StreamRecordKind::kEmpty:
+      case StreamRecordKind::kReleased:
+        break;
+    }
+    if (auto st = fn(rec); !st) return st;
+    prev = rec.chunk_pos;
+  }
+  return Ok{};
+}
+
+}  // namespace terrane

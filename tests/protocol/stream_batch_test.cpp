@@ -1,0 +1,134 @@
+#include "protocol/stream_batch.h"
+
+#include <gtest/gtest.h>
+
+#include "common/net_codec.h"
+
+namespace terrane {
+namespace {
+
+std::span<const std::uint8_t> records_of(const Frame& f) {
+  auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
+  EXPECT_TRUE(m.ok());
+  auto r = parse_stream_batch(*(*m)->body_as_StreamBatch());
+  EXPECT_TRUE(r.ok());
+  return *r;
+}
+
+Box terrain(int n, int seed) {
+  Box b({n, n, n});
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x)
+        if (y < n / 2 + (x * seed + z) % 3) b.set(x, y, z, make_voxel(static_cast<Material>(1 + (x + seed) % 4), 200));
+  return b;
+}
+
+std::vector<std::uint8_t> full_payload(const Box& chunk) {
+  std::vector<std::uint8_t> out;
+  Box unit({16, 16, 16});
+  for (int i = 0; i < 8; ++i) {
+    const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
+    for (int y = 0; y < 16; ++y)
+      for (int z = 0; z < 16; ++z)
+        for (int x = 0; x < 16; ++x) unit.set(x, y, z, chunk.get(off.x + x, off.y + y, off.z + z));
+    net_codec_encode(16, unit.voxels(), out);
+  }
+  return out;
+}
+
+TEST(StreamBatch, EveryRecordKindRoundTrips) {
+  const Box chunk = terrain(32, 3);
+  const Box mip = terrain(8, 5);
+  std::vector<std::uint8_t> mip_bytes;
+  net_codec_encode(8, mip.voxels(), mip_bytes);
+  StreamBatchWriter w;
+  w.add(StreamRecordKind::kEmpty, {5, -2, 7}, 0, {});
+  w.add(StreamRecordKind::kMip2, {-300000, 4, 9}, 12, mip_bytes);
+  w.add(StreamRecordKind::kFull, {6, -2, 7}, 1ull << 40, full_payload(chunk));
+  w.add(StreamRecordKind::kReleased, {6, -1, 7}, 3, {});
+  EXPECT_EQ(w.records(), 4u);
+  const Frame f = w.finish();
+  EXPECT_TRUE(w.empty());
+  StreamDecodeScratch s;
+  std::vector<StreamRecord> got;
+  std::vector<Box> boxes;
+  ASSERT_TRUE(decode_stream_batch(records_of(f), s, [&](const StreamRecord& r) -> Status {
+                got.push_back(r);
+                boxes.push_back(r.voxels != nullptr ? *r.voxels : Box());
+                return Ok{};
+              }).ok());
+  ASSERT_EQ(got.size(), 4u);
+  EXPECT_EQ(got[0].kind, StreamRecordKind::kEmpty);
+  EXPECT_EQ(got[0].chunk_pos, (Vec3i{5, -2, 7}));
+  EXPECT_EQ(got[1].kind, StreamRecordKind::kMip2);
+  EXPECT_EQ(got[1].level, 2);
+  EXPECT_EQ(got[1].chunk_pos, (Vec3i{-300000, 4, 9}));
+  EXPECT_EQ(got[1].revision, 12u);
+  EXPECT_TRUE(boxes[1] == mip);
+  EXPECT_EQ(got[2].kind, StreamRecordKind::kFull);
+  EXPECT_EQ(got[2].revision, 1ull << 40);
+  EXPECT_TRUE(boxes[2] == chunk);
+  EXPECT_EQ(got[3].kind, StreamRecordKind::kReleased);
+  EXPECT_EQ(got[3].chunk_pos, (Vec3i{6, -1, 7}));
+}
+
+TEST(StreamBatch, RecordsCostAFewBytesBeyondTheCodec) {
+  const Box chunk = terrain(32, 7);
+  const auto payload = full_payload(chunk);
+  StreamBatchWriter w;
+  for (int i = 0; i < 10; ++i) w.add(StreamRecordKind::kFull, {i, 0, 0}, 1, payload);
+  const Frame f = w.finish();
+  // Ten chunks, one frame: the overhead over the codec is tiny.
+  EXPECT_LT(f.size(), 10 * payload.size() + 10 * 6 + 64);
+}
+
+TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
+  const Box chunk = terrain(32, 2);
+  StreamBatchWriter w;
+  w.add(StreamRecordKind::kFull, {1, 2, 3}, 4, full_payload(chunk));
+  w.add(StreamRecordKind::kEmpty, {1, 3, 3}, 0, {});
+  const Frame f = w.finish();
+  const auto records = records_of(f);
+  const std::vector<std::uint8_t> bytes(records.begin(), records.end());
+  StreamDecodeScratch s;
+  auto count = [&](std::span<const std::uint8_t> b, int* n) {
+    *n = 0;
+    return decode_stream_batch(b, s, [&](const StreamRecord&) -> Status {
+      ++*n;
+      return Ok{};
+    });
+  };
+  int n = 0;
+  ASSERT_TRUE(count(bytes, &n).ok());
+  EXPECT_EQ(n, 2);
+  for (std::size_t cut = 1; cut < bytes.size(); ++cut) {
+    // A cut at a record boundary is a valid shorter batch; anywhere else an error.
+    const auto st = count(std::span(bytes).first(cut), &n);
+    if (st.ok()) {
+      EXPECT_EQ(n, 1) << "cut " << cut;
+    }
+  }
+  std::vector<std::uint8_t> bad = bytes;
+  bad[0] = 9;  // unknown kind
+  EXPECT_EQ(count(bad, &n).error().code, DecodeErrorCode::kInvalidValue);
+  // A position beyond the wire range.
+  std::vector<std::uint8_t> far = {0, 0xFF, 0xFF, 0xFF, 0x7F, 0, 0, 0};
+  EXPECT_EQ(count(far, &n).error().code, DecodeErrorCode::kInvalidValue);
+  // An endless varint.
+  std::vector<std::uint8_t> endless(20, 0xFF);
+  endless[0] = 0;
+  EXPECT_FALSE(count(endless, &n).ok());
+}
+
+TEST(StreamBatch, TooManyRecordsAreOverLimit) {
+  std::vector<std::uint8_t> bytes;
+  for (std::size_t i = 0; i <= kMaxStreamRecords; ++i) bytes.insert(bytes.end(), {0, 0, 0, 0, 0});
+  StreamDecodeScratch s;
+  const auto st = decode_stream_batch(bytes, s, [](const StreamRecord&) -> Status { return Ok{}; });
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.error().code, DecodeErrorCode::kOverLimit);
+}
+
+}  // namespace
+}  // namespace terrane
