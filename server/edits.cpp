@@ -184,6 +184,15 @@ void Server::reject_edit(Peer& peer, const EditRequestMsg& edit, const std::stri
 }
 
 void Server::on_edit(Peer& peer, EditRequestMsg edit) {
+  if (!peer.edit_rate.take(1)) {
+    counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+    violations().warn("session " + std::to_string(peer.session->id()) + " (" + peer.name + "): edit flood; dropping");
+    peer.session->close("edit rate limit: more than " +
+                        std::to_string(static_cast<long long>(options_.edits_per_second)) + " edits/s");
+    return;
+  }
+  if (edit.bounds().volume() > options_.max_edit_voxels)
+    return reject_edit(peer, edit, "edit larger than " + std::to_string(options_.max_edit_voxels) + " voxels");
   if (peer.edits_queued >= options_.max_edits_queued_per_client) return reject_edit(peer, edit, "too many edits queued");
   const Region r = world_->meta().bounds.clamp(edit.reads());
   if (r.empty()) return reject_edit(peer, edit, "edit outside the world");

@@ -13,6 +13,7 @@
 #include <asio.hpp>
 
 #include "common/cli.h"
+#include "server/limits.h"
 #include "server/log.h"
 #include "server/server.h"
 
@@ -49,7 +50,23 @@ constexpr const char* kHelp =
     "                              (default 1000)\n"
     "  --encode-cache-mb N         encoded chunk frames kept for reuse (default 64)\n"
     "  --resident-chunks N         chunks kept loaded when nobody holds them (default 4096)\n"
-    "  --auth-token T              require this token in Hello (default: open server)\n"
+    "  --auth-token T              require this shared token in Hello\n"
+    "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN' ('#' comments)\n"
+    "  --open                      serve without authentication on a non-loopback address\n"
+    "                              (without tokens the server is open; it refuses to do so\n"
+    "                              beyond loopback unless this is given)\n"
+    "  --edits-per-second N        per-client edit rate; a flood beyond 2 s of it drops the\n"
+    "                              client (default 20)\n"
+    "  --max-edit-voxels N         larger edits are rejected (default 262144 = 64^3)\n"
+    "  --max-speed N               voxels per second a client may move; faster drops it\n"
+    "                              (default 256, 0 = unchecked)\n"
+    "  --inbound-bytes-per-second N   per-client inbound rate, burst 4x (default 1048576)\n"
+    "  --outbound-bytes-per-second N  per-client streaming rate (default 33554432)\n"
+    "  --handshake-timeout-ms N    Hello must arrive within this (default 5000)\n"
+    "  --idle-timeout-ms N         drop a client silent this long (default 30000)\n"
+    "  --frame-timeout-ms N        drop a client that leaves a frame incomplete this long\n"
+    "                              (default 10000)\n"
+    "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
     "  --help                      this text\n";
@@ -63,8 +80,10 @@ int run(int argc, char** argv) {
   CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
-                  "encode-cache-mb", "resident-chunks", "test-drop-updates", "test-corrupt-updates"},
-                 {"help"});
+                  "encode-cache-mb", "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
+                  "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
+                  "frame-timeout-ms", "max-frame-bytes", "test-drop-updates", "test-corrupt-updates"},
+                 {"help", "open"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (!cl.positional().empty()) return usage_error("unexpected argument " + cl.positional().front());
@@ -91,6 +110,20 @@ int run(int argc, char** argv) {
   o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
   o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
   o.auth_token = cl.get("auth-token");
+  o.allow_open = cl.flag("open");
+  o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
+  o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
+  o.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));
+  o.session.inbound_bytes_per_second =
+      static_cast<double>(cl.get_int("inbound-bytes-per-second", 1 << 20, 0, std::int64_t{1} << 40, &err));
+  o.session.inbound_burst_bytes = std::max(o.session.inbound_bytes_per_second * 4, 1.0 * (1 << 20));
+  o.outbound_bytes_per_second =
+      static_cast<double>(cl.get_int("outbound-bytes-per-second", 32 << 20, 0, std::int64_t{1} << 40, &err));
+  o.session.handshake_timeout = std::chrono::milliseconds(cl.get_int("handshake-timeout-ms", 5000, 100, 3600000, &err));
+  o.session.idle_timeout = std::chrono::milliseconds(cl.get_int("idle-timeout-ms", 30000, 100, 86400000, &err));
+  o.session.frame_timeout = std::chrono::milliseconds(cl.get_int("frame-timeout-ms", 10000, 100, 3600000, &err));
+  o.session.max_frame_bytes =
+      static_cast<std::size_t>(cl.get_int("max-frame-bytes", kDefaultMaxFrameBytes, 64 << 10, kDefaultMaxFrameBytes, &err));
   o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
@@ -99,6 +132,15 @@ int run(int argc, char** argv) {
   o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);
+  if (cl.has("tokens-file")) {
+    auto tokens = load_tokens_file(cl.get("tokens-file"));
+    if (!tokens) {
+      server_log().error("{}", tokens.error().message);
+      return 1;
+    }
+    if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
+    o.player_tokens = std::move(*tokens);
+  }
 
   auto server = Server::create(o);
   if (!server) {

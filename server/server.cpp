@@ -7,6 +7,11 @@
 namespace terrane {
 
 FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options) {
+  if (options.auth_token.empty() && options.player_tokens.empty() && !options.allow_open &&
+      !is_loopback_address(options.bind_address))
+    return FileError{"refusing to serve " + options.bind_address +
+                         " without authentication: give --auth-token or --tokens-file, or --open to allow anyone",
+                     {}};
   std::unique_ptr<Server> s(new Server(options));
   auto world = WorldStore::exists(options.world_dir) ? World::open(options.world_dir)
                                                      : World::create(options.world_dir, default_world_meta());
@@ -76,6 +81,13 @@ void Server::start() {
   if (started_) return;
   started_ = true;
   server_log().info("world {} (epoch {}), tick {} Hz", world_->store().dir(), world_->meta().epoch, options_.tick_hz);
+  if (!options_.player_tokens.empty())
+    server_log().info("authentication: per-player tokens ({} players)", options_.player_tokens.size());
+  else if (!options_.auth_token.empty())
+    server_log().info("authentication: shared token");
+  else
+    server_log().warn("authentication: none, anyone who can connect may play ({})",
+                      is_loopback_address(options_.bind_address) ? "loopback only" : "--open");
   server_log().info("listening on {}:{}", options_.bind_address, port_);
   asio::post(owner_, [this] { arm_tick(); });
   do_accept();
@@ -195,11 +207,22 @@ void Server::on_hello(Peer& peer, const HelloMsg& hello) {
                         std::to_string(hello.protocol_version));
     return;
   }
-  if (!options_.auth_token.empty() && hello.auth_token != options_.auth_token) {
-    server_log().warn("session {}: bad auth token", peer.session->id());
+  bool allowed = true;
+  if (!options_.player_tokens.empty()) {
+    auto it = options_.player_tokens.find(hello.client_name);
+    allowed = it != options_.player_tokens.end() && it->second == hello.auth_token;
+  } else if (!options_.auth_token.empty()) {
+    allowed = hello.auth_token == options_.auth_token;
+  }
+  if (!allowed) {
+    counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
+    violations().warn("session " + std::to_string(peer.session->id()) + " (" + peer.session->remote() +
+                      "): authentication failed for '" + hello.client_name + "'");
     peer.session->close("authentication failed");
     return;
   }
+  peer.edit_rate = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
+  peer.outbound = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   peer.name = hello.client_name;
   peer.welcomed = true;
   peer.state.position = spawn_;

@@ -47,6 +47,7 @@
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 #include "server/chunk_cache.h"
+#include "server/limits.h"
 #include "server/session.h"
 
 namespace terrane {
@@ -77,13 +78,31 @@ struct ServerOptions {
   SessionLimits session;
   int io_threads = 1;
   int worker_threads = 2;
-  std::string auth_token;               // empty: open server
+  // Authentication (checked at the handshake): per-player tokens (name ->
+  // token, from a tokens file) take precedence over one shared token; with
+  // neither the server is open, which it allows only on a loopback address
+  // unless allow_open says otherwise.
+  std::string auth_token;
+  std::unordered_map<std::string, std::string> player_tokens;
+  bool allow_open = false;
+  // Per-client limits (0 = unlimited where a rate). A flood of edits beyond
+  // the burst (edits_per_second * 2) or a move faster than max_speed (plus
+  // kSpeedSlackVoxels) disconnects the client; an edit over
+  // max_edit_voxels is rejected.
+  double edits_per_second = 20;
+  std::int64_t max_edit_voxels = kMaxEditVolume;
+  double max_speed = 256;                    // voxels per second
+  double outbound_bytes_per_second = 32 << 20;  // streaming; updates are never held back
   // Test-only fault: silently skip sending this many UpdateBatch frames
   // (the client's revision still advances on the server's books).
   int fault_drop_updates = 0;
   // Test-only fault: send this many UpdateBatch frames with one voxel wrong.
   int fault_corrupt_updates = 0;
 };
+
+// Movement allowed beyond max_speed * elapsed time between two positions
+// (network jitter bunches ClientState messages together).
+inline constexpr double kSpeedSlackVoxels = 48;
 
 struct ServerCounters {
   std::atomic<std::uint64_t> sessions_accepted{0};
@@ -103,6 +122,8 @@ struct ServerCounters {
   std::atomic<std::uint64_t> chunks_unloaded{0};
   std::atomic<std::uint64_t> encode_cache_hits{0};
   std::atomic<std::uint64_t> encode_cache_misses{0};
+  std::atomic<std::uint64_t> limit_violations{0};
+  std::atomic<std::uint64_t> auth_failures{0};
 };
 
 class Server {
@@ -155,6 +176,10 @@ class Server {
     // records flushes them before it returns, so data frames sent directly
     // (updates, hashes, read results) keep their order after them.
     StreamBatchWriter batch;
+    TokenBucket edit_rate;
+    TokenBucket outbound;
+    bool moved = false;  // a position was reported (the first one is where the client joins)
+    std::chrono::steady_clock::time_point moved_at;
   };
   struct PendingEdit {
     std::uint64_t peer_id;

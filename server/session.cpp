@@ -23,7 +23,8 @@ Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLi
       on_closed_(std::move(on_closed)),
       on_drained_(std::move(on_drained)),
       reader_(limits.max_frame_bytes),
-      read_buf_(kReadChunkBytes) {
+      read_buf_(kReadChunkBytes),
+      inbound_(limits.inbound_bytes_per_second, limits.inbound_burst_bytes) {
   asio::error_code ec;
   const auto ep = socket_.remote_endpoint(ec);
   remote_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
@@ -62,6 +63,11 @@ void Session::arm_watchdog() {
         const auto limit = self->welcomed_ ? self->limits_.idle_timeout : self->limits_.handshake_timeout;
         if (now - self->last_read_ > limit) {
           self->begin_close(self->welcomed_ ? "idle timeout" : "handshake timeout");
+        } else if (self->partial_frame_ && now - self->frame_started_ > self->limits_.frame_timeout) {
+          violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
+                            "): frame not completed in time; dropping");
+          self->begin_close("frame not completed within " + std::to_string(self->limits_.frame_timeout.count()) +
+                            " ms");
         } else if (self->writing_ && now - self->write_started_ > self->limits_.write_timeout) {
           // The client stopped reading. Its reason goes after the write in
           // flight, in case it resumes within the linger time.
@@ -100,12 +106,28 @@ void Session::do_read() {
           return;
         }
         self->last_read_ = Clock::now();
+        if (!self->inbound_.take(static_cast<double>(n), self->last_read_)) {
+          violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
+                            "): inbound rate limit; dropping");
+          self->begin_close("inbound rate limit: over " +
+                            std::to_string(static_cast<long long>(self->limits_.inbound_bytes_per_second)) +
+                            " bytes/s");
+          self->do_read();
+          return;
+        }
         const auto st = self->reader_.feed(std::span<const std::uint8_t>(self->read_buf_.data(), n),
                                            [&](std::span<const std::uint8_t> body) {
                                              if (self->state_ == State::kReading) self->on_frame(body);
                                            });
+        if (self->reader_.buffered() == 0) {
+          self->partial_frame_ = false;
+        } else if (!self->partial_frame_) {
+          self->partial_frame_ = true;
+          self->frame_started_ = self->last_read_;
+        }
         if (!st) {
-          server_log().warn("session {} ({}): bad frame: {}", self->id_, self->remote_, st.error().describe());
+          violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
+                            "): bad frame: " + st.error().describe());
           self->begin_close(std::string("protocol error: ") + st.error().detail);
         }
         self->do_read();
@@ -115,13 +137,13 @@ void Session::do_read() {
 void Session::on_frame(std::span<const std::uint8_t> body) {
   auto msg = verify_message(body);
   if (!msg) {
-    server_log().warn("session {} ({}): {}", id_, remote_, msg.error().describe());
+    violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): " + msg.error().describe());
     begin_close(std::string("protocol error: ") + msg.error().detail);
     return;
   }
   const wire::Message& m = **msg;
   auto fail = [&](const DecodeError& e) {
-    server_log().warn("session {} ({}): {}", id_, remote_, e.detail);
+    violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): " + e.detail);
     begin_close(std::string("protocol error: ") + e.detail);
   };
   if (!welcomed_) {

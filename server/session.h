@@ -34,6 +34,7 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
+#include "server/limits.h"
 
 namespace terrane {
 
@@ -46,6 +47,13 @@ struct SessionLimits {
   // A write that makes no progress for this long drops the client.
   std::chrono::milliseconds write_timeout{10000};
   std::chrono::milliseconds linger{1000};
+  // A frame whose first byte arrived must be complete within this (a
+  // slowloris trickling one frame forever is dropped).
+  std::chrono::milliseconds frame_timeout{10000};
+  // Inbound bytes per second per client (0 = unlimited) and the burst
+  // allowed above it.
+  double inbound_bytes_per_second = 1 << 20;
+  double inbound_burst_bytes = 4 << 20;
   // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
   // makes a stalled reader visible sooner (and bounds kernel memory).
   int socket_send_buffer_bytes = 0;
@@ -130,6 +138,9 @@ class Session : public std::enable_shared_from_this<Session> {
   Clock::time_point last_read_;
   Clock::time_point write_started_;
   Clock::time_point close_started_;
+  Clock::time_point frame_started_;  // when the partial frame buffered began
+  bool partial_frame_ = false;
+  TokenBucket inbound_;
   std::atomic<std::size_t> queued_bytes_{0};
   std::atomic<std::uint64_t> bytes_sent_{0};
 };

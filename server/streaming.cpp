@@ -46,6 +46,25 @@ Vec3i voxel_of(Vec3f p) {
 }  // namespace
 
 void Server::on_client_state(Peer& peer, const ClientStateMsg& state) {
+  // The first position is where the client joins; after that it moves at
+  // most max_speed (with some slack for jitter).
+  const auto now = std::chrono::steady_clock::now();
+  if (peer.moved && options_.max_speed > 0) {
+    const Vec3f a = peer.state.position, b = state.position;
+    const double d = std::sqrt(double{b.x - a.x} * (b.x - a.x) + double{b.y - a.y} * (b.y - a.y) +
+                               double{b.z - a.z} * (b.z - a.z));
+    const double allowed = options_.max_speed * std::chrono::duration<double>(now - peer.moved_at).count() + kSpeedSlackVoxels;
+    if (d > allowed) {
+      counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+      violations().warn("session " + std::to_string(peer.session->id()) + " (" + peer.name + "): moved " +
+                        std::to_string(static_cast<long long>(d)) + " voxels at once; dropping");
+      peer.session->close("moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
+                          std::to_string(static_cast<long long>(options_.max_speed)) + " voxels/s)");
+      return;
+    }
+  }
+  peer.moved = true;
+  peer.moved_at = now;
   // 0 asks for the server's default; everything is capped.
   peer.state = state;
   const std::int32_t view = state.view_distance == 0 ? options_.default_view_distance : state.view_distance;
@@ -225,6 +244,7 @@ void Server::stream(Peer& peer, StreamRecordKind kind, Vec3i cp, std::uint64_t r
 void Server::flush_stream(Peer& peer) {
   if (peer.batch.empty()) return;
   Frame f = peer.batch.finish();
+  peer.outbound.spend(static_cast<double>(f.size()));
   counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
   peer.session->send(std::move(f));
 }
@@ -261,9 +281,13 @@ void Server::pump(Peer& peer) {
 
 void Server::pump_stream(Peer& peer) {
   int frames = 0;
+  // The outbound budget is charged for what was batched when the pump ends
+  // (flush_stream), so a client over its rate waits for the next tick.
+  const bool budget = peer.outbound.available() > 0;
   auto room = [&] {
-    return frames < kMaxFramesPerPump &&
-           peer.session->queued_bytes() + peer.batch.size_bytes() < options_.stream_window_bytes;
+    return budget && frames < kMaxFramesPerPump &&
+           peer.session->queued_bytes() + peer.batch.size_bytes() < options_.stream_window_bytes &&
+           static_cast<double>(peer.batch.size_bytes()) < peer.outbound.available();
   };
   // Pass 1: the whole view at its coarsest, nearest first.
   while (peer.coarse < peer.plan.size()) {

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "server/edits.h"
+#include "tests/support/server_fixture.h"
 
 namespace terrane {
 namespace {
@@ -25,127 +26,9 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-constexpr int kTimeoutMs = 60000;
-
-// A blocking test peer: sends frames, reads verified messages with a deadline.
-class RawPeer {
- public:
-  explicit RawPeer(std::uint16_t port) {
-    fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_port = htons(port);
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    connected_ = ::connect(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0;
-  }
-  ~RawPeer() { close(); }
-  bool connected() const { return connected_; }
-  void close() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
-  bool send(std::span<const std::uint8_t> bytes) {
-    while (!bytes.empty()) {
-      const ssize_t n = ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL);
-      if (n <= 0) return false;
-      bytes = bytes.subspan(static_cast<std::size_t>(n));
-    }
-    return true;
-  }
-  // The next message's body bytes, or nullopt on EOF / error / deadline.
-  std::optional<Frame> next() {
-    while (pending_.empty()) {
-      pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, kTimeoutMs) <= 0) return std::nullopt;
-      std::uint8_t buf[16384];
-      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
-      if (n <= 0) return std::nullopt;
-      const auto st = reader_.feed(std::span<const std::uint8_t>(buf, static_cast<std::size_t>(n)),
-                                   [&](std::span<const std::uint8_t> body) { pending_.emplace_back(body.begin(), body.end()); });
-      if (!st) return std::nullopt;
-    }
-    Frame f = std::move(pending_.front());
-    pending_.erase(pending_.begin());
-    return f;
-  }
-  // Skips messages until one of the given type; nullopt if the stream ends.
-  std::optional<Frame> next_of(wire::Body type) {
-    while (auto f = next()) {
-      auto m = verify_message(*f);
-      if (!m) return std::nullopt;
-      if ((*m)->body_type() == type) return f;
-    }
-    return std::nullopt;
-  }
-  // True if the server closes the connection (EOF or reset) before the deadline.
-  bool closed_by_server() {
-    while (next()) {
-    }
-    pollfd p{fd_, POLLIN, 0};
-    if (::poll(&p, 1, 0) < 0) return false;
-    std::uint8_t b;
-    return ::recv(fd_, &b, 1, MSG_DONTWAIT) <= 0;
-  }
-
- private:
-  int fd_ = -1;
-  bool connected_ = false;
-  FrameReader reader_;
-  std::vector<Frame> pending_;
-};
-
-const wire::Message& msg(const Frame& f) { return *verify_message(f).value(); }
-
-class ServerTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("terrane-server-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-  }
-  void TearDown() override {
-    if (server_) server_->stop();
-    server_.reset();
-    fs::remove_all(dir_);
-  }
-  void start(ServerOptions o = {}) {
-    o.world_dir = dir_.string();
-    o.port = 0;
-    auto s = Server::create(o);
-    ASSERT_TRUE(s.ok()) << s.error().message;
-    server_ = std::move(*s);
-    server_->start();
-  }
-  std::unique_ptr<RawPeer> join(const std::string& name) {
-    auto p = std::make_unique<RawPeer>(server_->port());
-    EXPECT_TRUE(p->connected());
-    EXPECT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, name, ""})));
-    auto w = p->next_of(wire::Body::Welcome);
-    EXPECT_TRUE(w.has_value());
-    return p;
-  }
-  // Moves the peer to pos (small view) and reads until chunk cp is held at
-  // full resolution (Coverage Full or Empty); false if the stream ends.
-  static bool hold_full(RawPeer& p, Vec3f pos, Vec3i cp) {
-    if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return false;
-    StreamDecodeScratch scratch;
-    while (auto f = p.next_of(wire::Body::StreamBatch)) {
-      auto records = parse_stream_batch(*msg(*f).body_as_StreamBatch());
-      if (!records) return false;
-      bool found = false;
-      const auto st = decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
-        found = found || (r.chunk_pos == cp && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty));
-        return Ok{};
-      });
-      if (!st) return false;
-      if (found) return true;
-    }
-    return false;
-  }
-
-  fs::path dir_;
-  std::unique_ptr<Server> server_;
-};
+using testing_support::msg;
+using testing_support::RawPeer;
+using testing_support::ServerTest;
 
 TEST_F(ServerTest, WelcomeDescribesTheWorld) {
   start();
@@ -382,6 +265,7 @@ TEST_F(ServerTest, RegionHashesArePushedForFullResolutionChunks) {
 TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
   ServerOptions o;
   o.resident_chunks = 0;  // unload everything nobody holds, once a second
+  o.max_speed = 0;        // the walker teleports
   start(o);
   auto p = join("walker");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});

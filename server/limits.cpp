@@ -1,0 +1,94 @@
+#include "server/limits.h"
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+#include <asio/ip/address.hpp>
+
+#include "protocol/messages.h"
+#include "server/log.h"
+
+namespace terrane {
+
+void TokenBucket::refill(Clock::time_point now) {
+  const double dt = std::chrono::duration<double>(now - last_).count();
+  last_ = now;
+  if (dt > 0) tokens_ = std::min(burst_, tokens_ + dt * rate_);
+}
+
+bool TokenBucket::take(double n, Clock::time_point now) {
+  if (unlimited()) return true;
+  refill(now);
+  if (tokens_ < n) return false;
+  tokens_ -= n;
+  return true;
+}
+
+void TokenBucket::spend(double n, Clock::time_point now) {
+  if (unlimited()) return;
+  refill(now);
+  tokens_ -= n;
+}
+
+double TokenBucket::available(Clock::time_point now) {
+  if (unlimited()) return 1e300;
+  refill(now);
+  return tokens_;
+}
+
+void RateLimitedLog::warn(const std::string& line) {
+  std::lock_guard lock(mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  if (now - window_ >= std::chrono::seconds(1)) {
+    window_ = now;
+    used_ = 0;
+  }
+  if (used_ >= per_second_) {
+    ++suppressed_;
+    return;
+  }
+  ++used_;
+  if (suppressed_ > 0) {
+    server_log().warn("{} ({} similar lines suppressed)", line, suppressed_);
+    suppressed_ = 0;
+  } else {
+    server_log().warn("{}", line);
+  }
+}
+
+RateLimitedLog& violations() {
+  static RateLimitedLog log(20);
+  return log;
+}
+
+FileResult<std::unordered_map<std::string, std::string>> load_tokens_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return FileError{"cannot read tokens file " + path, {}};
+  std::unordered_map<std::string, std::string> tokens;
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const std::string where = path + ":" + std::to_string(number) + ": ";
+    std::istringstream words(line);
+    std::string name, token, extra;
+    if (!(words >> name) || name[0] == '#') continue;
+    if (!(words >> token)) return FileError{where + "player '" + name + "' has no token", {}};
+    if (words >> extra) return FileError{where + "expected 'NAME TOKEN', found more", {}};
+    if (name.size() > kMaxClientNameBytes) return FileError{where + "name longer than 64 bytes", {}};
+    if (token.size() > kMaxAuthTokenBytes) return FileError{where + "token longer than 256 bytes", {}};
+    if (!tokens.emplace(name, token).second) return FileError{where + "player '" + name + "' listed twice", {}};
+  }
+  if (in.bad()) return FileError{"error reading tokens file " + path, {}};
+  return tokens;
+}
+
+bool is_loopback_address(const std::string& address) {
+  if (address == "localhost") return true;
+  asio::error_code ec;
+  const auto a = asio::ip::make_address(address, ec);
+  return !ec && a.is_loopback();
+}
+
+}  // namespace terrane
