@@ -380,6 +380,18 @@ std::uint32_t Client::write_box(const Region& box, std::span<const Voxel> voxels
   return send_edit(std::move(e));
 }
 
+std::uint32_t Client::undo() {
+  EditRequestMsg e;
+  e.kind = EditKind::kUndo;
+  return send_edit(std::move(e));
+}
+
+std::uint32_t Client::redo() {
+  EditRequestMsg e;
+  e.kind = EditKind::kRedo;
+  return send_edit(std::move(e));
+}
+
 std::uint32_t Client::request_read_box(const Region& box) {
   if (box.empty() || box.volume() > kMaxRawBoxVolume) return 0;
   const std::uint32_t id = next_request_id_.fetch_add(1);

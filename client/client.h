@@ -132,6 +132,11 @@ class Client {
   // ClientView::read_results; the voxels are the server's state as of the
   // data received before it, so they match a correct replica.
   std::uint32_t request_read_box(const Region& box);
+  // Undo / redo this client's own edits on the server (per connection,
+  // bounded history). Undo restores only voxels still as this client left
+  // them; a voxel another client changed since keeps that change.
+  std::uint32_t undo();
+  std::uint32_t redo();
   bool request_region_hash(Vec3i chunk_pos);
   bool ping(std::uint64_t nonce);
   // Sends raw bytes as they are (tests: malformed frames).

@@ -344,6 +344,11 @@ Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m) {
         return DecodeError{st.error().code, st.error().offset, "edit: write box data is not byte RLE of its box"};
       return out;
     }
+    case wire::EditKind::Undo:
+    case wire::EditKind::Redo:
+      out.kind = m.kind() == wire::EditKind::Undo ? EditKind::kUndo : EditKind::kRedo;
+      if (has_data) return invalid("edit: unexpected data");
+      return out;
     case wire::EditKind::FillSphere:
     case wire::EditKind::Dig:
     case wire::EditKind::Paint:

@@ -78,10 +78,16 @@ struct ClientStateMsg {
 };
 
 // Same values as wire::EditKind.
-enum class EditKind : std::uint8_t { kFillBox = 0, kFillSphere = 1, kDig = 2, kPaint = 3, kSmooth = 4, kWriteBox = 5 };
+enum class EditKind : std::uint8_t {
+  kFillBox = 0, kFillSphere = 1, kDig = 2, kPaint = 3, kSmooth = 4, kWriteBox = 5, kUndo = 6, kRedo = 7
+};
 
 // True for the kinds defined by a centre and radius.
-constexpr bool is_sphere_edit(EditKind k) { return k != EditKind::kFillBox && k != EditKind::kWriteBox; }
+constexpr bool is_sphere_edit(EditKind k) {
+  return k == EditKind::kFillSphere || k == EditKind::kDig || k == EditKind::kPaint || k == EditKind::kSmooth;
+}
+// Undo and Redo act on the sender's own edit history; they carry no region.
+constexpr bool is_history_edit(EditKind k) { return k == EditKind::kUndo || k == EditKind::kRedo; }
 
 struct EditRequestMsg {
   std::uint32_t edit_id = 0;

@@ -5,6 +5,8 @@
 #include <array>
 #include <cmath>
 
+#include "common/byte_rle.h"
+
 #include "server/log.h"
 #include "server/server.h"
 
@@ -103,6 +105,9 @@ std::size_t apply_edit(Grid& grid, const EditRequestMsg& e, const Region& clip, 
     return nv;
   };
   switch (e.kind) {
+    case EditKind::kUndo:
+    case EditKind::kRedo:
+      return 0;  // history steps are applied by the server (apply_history)
     case EditKind::kFillBox: {
       const Voxel v = make_voxel(e.material, e.occupancy);
       grid.modify(r, [&](Vec3i p, Voxel old) { return count(p, old, v); });
@@ -184,11 +189,19 @@ void Server::reject_edit(Peer& peer, const EditRequestMsg& edit, const std::stri
 }
 
 void Server::on_edit(Peer& peer, EditRequestMsg edit) {
+  const bool history = is_history_edit(edit.kind);
   if (!peer.edit_rate.take(1)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(peer.session->id()) + " (" + peer.name + "): edit flood; dropping");
     peer.session->close("edit rate limit: more than " +
                         std::to_string(static_cast<long long>(options_.edits_per_second)) + " edits/s");
+    return;
+  }
+  if (history) {
+    // Checked when applied, against the history as it is then.
+    if (peer.edits_queued >= options_.max_edits_queued_per_client) return reject_edit(peer, edit, "too many edits queued");
+    ++peer.edits_queued;
+    edits_.push_back(PendingEdit{peer.session->id(), std::move(edit)});
     return;
   }
   if (edit.bounds().volume() > options_.max_edit_voxels)
@@ -203,6 +216,62 @@ void Server::on_edit(Peer& peer, EditRequestMsg edit) {
   ++peer.edits_queued;
   for_each_chunk_in(r, [&](Vec3i cp) { cache_->request(cp); });
   edits_.push_back(PendingEdit{peer.session->id(), std::move(edit)});
+}
+
+std::vector<std::uint8_t> Server::snapshot(const Region& box) {
+  Box b(box.size());
+  cache_->grid().read_box(box.min, b);
+  std::vector<std::uint8_t> out;
+  byte_rle_encode(b.voxels(), out);
+  return out;
+}
+
+void Server::push_history(Peer& peer, std::deque<HistoryEntry>& to, HistoryEntry e) {
+  peer.history_bytes += e.bytes();
+  to.push_back(std::move(e));
+  // Over the budget: forget the oldest steps, undo history first.
+  while (peer.history_bytes > options_.history_bytes_per_client && !(peer.undo.empty() && peer.redo.empty())) {
+    auto& from = !peer.undo.empty() ? peer.undo : peer.redo;
+    peer.history_bytes -= from.front().bytes();
+    from.pop_front();
+  }
+}
+
+bool Server::apply_history(Peer& peer, bool redo, ChangedUnits& changed, std::string* why) {
+  auto& from = redo ? peer.redo : peer.undo;
+  auto& to = redo ? peer.undo : peer.redo;
+  if (from.empty()) {
+    *why = redo ? "nothing to redo" : "nothing to undo";
+    return false;
+  }
+  HistoryEntry e = std::move(from.back());
+  from.pop_back();
+  peer.history_bytes -= e.bytes();
+  if (!holds_full(peer, world_->meta().bounds.clamp(e.box))) {
+    *why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
+    return false;  // the step is dropped: its box may be stale by the time the client is back
+  }
+  const auto n = static_cast<std::size_t>(e.box.volume());
+  std::vector<Voxel> before(n), after(n);
+  if (!byte_rle_decode(e.before, before) || !byte_rle_decode(e.after, after)) {
+    *why = "history damaged";  // our own bytes: cannot happen
+    return false;
+  }
+  // Restore only voxels still as this client left them: where another
+  // client has since changed a voxel, its change stands.
+  HistoryEntry back{e.box, snapshot(e.box), {}};
+  const Vec3i size = e.box.size();
+  UnitMarker marker(changed);
+  cache_->grid().modify(e.box, [&](Vec3i p, Voxel cur) {
+    const Vec3i l = p - e.box.min;
+    const auto i = static_cast<std::size_t>((l.y * size.z + l.z) * size.x + l.x);
+    if (cur != after[i] || before[i] == cur) return cur;
+    marker.mark(p);
+    return before[i];
+  });
+  back.after = snapshot(e.box);
+  push_history(peer, to, std::move(back));
+  return true;
 }
 
 void Server::apply_edits() {
@@ -227,9 +296,31 @@ void Server::apply_edits() {
       edits_.pop_front();
       continue;
     }
-    apply_edit(cache_->grid(), pe.edit, bounds.clamp(pe.edit.bounds()), changed);
+    auto peer_it = peers_.find(pe.peer_id);
+    Peer* peer = peer_it != peers_.end() ? &peer_it->second : nullptr;
+    if (peer != nullptr && peer->edits_queued > 0) --peer->edits_queued;
+    if (is_history_edit(pe.edit.kind)) {
+      std::string why = "client gone";
+      if (peer != nullptr && apply_history(*peer, pe.edit.kind == EditKind::kRedo, changed, &why)) {
+        acks.push_back(Ack{pe.peer_id, pe.edit.edit_id});
+      } else if (peer != nullptr) {
+        counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
+        peer->session->send(build_edit_reject(pe.edit.edit_id, why), SendClass::kControl);
+      }
+      edits_.pop_front();
+      continue;
+    }
+    const Region box = bounds.clamp(pe.edit.bounds());
+    HistoryEntry entry;
+    if (peer != nullptr) entry = HistoryEntry{box, snapshot(box), {}};
+    apply_edit(cache_->grid(), pe.edit, box, changed);
+    if (peer != nullptr) {
+      entry.after = snapshot(box);
+      push_history(*peer, peer->undo, std::move(entry));
+      for (const HistoryEntry& e : peer->redo) peer->history_bytes -= e.bytes();
+      peer->redo.clear();  // a new edit forks the history
+    }
     acks.push_back(Ack{pe.peer_id, pe.edit.edit_id});
-    if (auto it = peers_.find(pe.peer_id); it != peers_.end() && it->second.edits_queued > 0) --it->second.edits_queued;
     edits_.pop_front();
   }
   counters_.edits_applied.fetch_add(acks.size(), std::memory_order_relaxed);

@@ -66,6 +66,7 @@ constexpr const char* kHelp =
     "  --idle-timeout-ms N         drop a client silent this long (default 30000)\n"
     "  --frame-timeout-ms N        drop a client that leaves a frame incomplete this long\n"
     "                              (default 10000)\n"
+    "  --history-bytes N           undo/redo history per client in bytes (default 4194304)\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
@@ -82,7 +83,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
                   "encode-cache-mb", "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -124,6 +125,8 @@ int run(int argc, char** argv) {
   o.session.frame_timeout = std::chrono::milliseconds(cl.get_int("frame-timeout-ms", 10000, 100, 3600000, &err));
   o.session.max_frame_bytes =
       static_cast<std::size_t>(cl.get_int("max-frame-bytes", kDefaultMaxFrameBytes, 64 << 10, kDefaultMaxFrameBytes, &err));
+  o.history_bytes_per_client =
+      static_cast<std::size_t>(cl.get_int("history-bytes", 4 << 20, 0, std::int64_t{1} << 34, &err));
   o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));

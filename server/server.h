@@ -47,6 +47,7 @@
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 #include "server/chunk_cache.h"
+#include "server/edits.h"
 #include "server/limits.h"
 #include "server/session.h"
 
@@ -93,6 +94,8 @@ struct ServerOptions {
   std::int64_t max_edit_voxels = kMaxEditVolume;
   double max_speed = 256;                    // voxels per second
   double outbound_bytes_per_second = 32 << 20;  // streaming; updates are never held back
+  // Undo and redo history kept per client, in bytes (oldest steps go first).
+  std::size_t history_bytes_per_client = 4u << 20;
   // Test-only fault: silently skip sending this many UpdateBatch frames
   // (the client's revision still advances on the server's books).
   int fault_drop_updates = 0;
@@ -156,8 +159,17 @@ class Server {
     std::uint64_t revision = 0;
   };
   // The owner strand's view of one client.
+  // One step of a client's edit history: a box and its voxels before and
+  // after (byte RLE, as the storage article keeps undo data).
+  struct HistoryEntry {
+    Region box;
+    std::vector<std::uint8_t> before, after;
+    std::size_t bytes() const { return before.size() + after.size() + sizeof(HistoryEntry); }
+  };
   struct Peer {
     std::shared_ptr<Session> session;
+    std::deque<HistoryEntry> undo, redo;
+    std::size_t history_bytes = 0;
     std::string name;
     bool welcomed = false;
     ClientStateMsg state;
@@ -243,6 +255,12 @@ class Server {
   // edits.cpp: edits, persistence, broadcast
   void on_edit(Peer& peer, EditRequestMsg edit);
   void reject_edit(Peer& peer, const EditRequestMsg& edit, const std::string& reason);
+  // Applies the top of peer's undo (or redo) history; false with *why set
+  // when there is nothing to apply or it lies outside the full-resolution
+  // region.
+  bool apply_history(Peer& peer, bool redo, ChangedUnits& changed, std::string* why);
+  void push_history(Peer& peer, std::deque<HistoryEntry>& to, HistoryEntry e);
+  std::vector<std::uint8_t> snapshot(const Region& box);  // byte RLE of the box's voxels
   bool holds_full(const Peer& peer, const Region& region) const;
 
   // queries.cpp: read box, presence, region hashes
