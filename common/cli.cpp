@@ -1,5 +1,7 @@
 #include "common/cli.h"
 
+#include <fstream>
+
 #include <charconv>
 #include <cstdlib>
 
@@ -33,6 +35,49 @@ std::string CommandLine::parse(int argc, char** argv, int first) {
       }
     } else {
       positional_.push_back(a);
+    }
+  }
+  return {};
+}
+
+std::string CommandLine::load_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return "cannot read " + path;
+  std::string line;
+  int number = 0;
+  auto trim = [](std::string t) {
+    const auto a = t.find_first_not_of(" \t\r");
+    if (a == std::string::npos) return std::string();
+    const auto b = t.find_last_not_of(" \t\r");
+    return t.substr(a, b - a + 1);
+  };
+  while (std::getline(in, line)) {
+    ++number;
+    const std::string where = path + ":" + std::to_string(number) + ": ";
+    line = trim(line.substr(0, line.find('#')));
+    if (line.empty()) continue;
+    std::string name, value;
+    if (const auto eq = line.find('='); eq != std::string::npos) {
+      name = trim(line.substr(0, eq));
+      value = trim(line.substr(eq + 1));
+    } else if (const auto sp = line.find_first_of(" \t"); sp != std::string::npos) {
+      name = line.substr(0, sp);
+      value = trim(line.substr(sp));
+    } else {
+      name = line;
+    }
+    if (name.rfind("--", 0) == 0) name = name.substr(2);
+    if (flag_options_.count(name)) {
+      if (value.empty() || value == "true") {
+        flags_.insert(name);
+      } else if (value != "false") {
+        return where + name + " is a flag: true or false, not '" + value + "'";
+      }
+    } else if (value_options_.count(name)) {
+      if (value.empty()) return where + name + " needs a value";
+      values_.emplace(name, value);  // the command line wins
+    } else {
+      return where + "unknown option '" + name + "'";
     }
   }
   return {};

@@ -25,6 +25,12 @@ class CommandLine {
   // Parses argv[first..argc). Returns an error message, or empty on success.
   std::string parse(int argc, char** argv, int first);
 
+  // Reads options from a file: one "name = value" (or "name value") per
+  // line, a flag as "name" or "name = true|false", '#' comments. Options
+  // already given on the command line win. Returns an error naming the file
+  // and line, or empty on success.
+  std::string load_file(const std::string& path);
+
   bool has(const std::string& name) const { return values_.count(name) > 0; }
   bool flag(const std::string& name) const { return flags_.count(name) > 0; }
   const std::vector<std::string>& positional() const { return positional_; }

@@ -70,6 +70,9 @@ constexpr const char* kHelp =
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
+    "  --config FILE               read options from FILE: 'name = value' per line (names as\n"
+    "                              above without --, flags as 'name = true'); the command line\n"
+    "                              wins\n"
     "  --help                      this text\n";
 
 int usage_error(const std::string& message) {
@@ -83,10 +86,12 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
                   "encode-cache-mb", "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
+  if (cl.has("config"))
+    if (auto e = cl.load_file(cl.get("config")); !e.empty()) return usage_error("config: " + e);
   if (!cl.positional().empty()) return usage_error("unexpected argument " + cl.positional().front());
   if (!cl.has("world")) return usage_error("--world DIR is required");
   ServerOptions o;

@@ -71,6 +71,7 @@ Server::Server(const ServerOptions& options)
       workers_(static_cast<std::size_t>(std::max(1, options.worker_threads))) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
+  options_.session.traffic = &counters_.traffic;
   faults_left_ = options_.fault_drop_updates;
   corruptions_left_ = options_.fault_corrupt_updates;
 }
@@ -121,6 +122,14 @@ void Server::stop() {
       c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
       c.edits_rejected.load(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
       c.update_batches_sent.load());
+  std::string by_type;
+  for (std::size_t t = 1; t < TrafficCounters::kTypes; ++t) {
+    const std::uint64_t f = c.traffic.sent_frames[t].load(), r = c.traffic.received_frames[t].load();
+    if (f == 0 && r == 0) continue;
+    by_type += fmt::format(" {} out {} / {} B, in {} / {} B;", wire::EnumNameBody(static_cast<wire::Body>(t)), f,
+                           c.traffic.sent_bytes[t].load(), r, c.traffic.received_bytes[t].load());
+  }
+  if (!by_type.empty()) server_log().info("messages by type (frames / bytes):{}", by_type);
 }
 
 void Server::inspect(const std::function<void(const ChunkCache&)>& fn) {
@@ -261,7 +270,27 @@ void Server::on_tick() {
       tick_ % std::max<std::uint64_t>(1, std::uint64_t{options_.hash_push_ms} * options_.tick_hz / 1000) == 0)
     push_region_hashes();
   if (tick_ % options_.tick_hz == 0) unload_unwatched();
+  if (tick_ % (options_.tick_hz * 10) == 0) log_stats();
   pump_all();
+}
+
+void Server::log_stats() {
+  const auto now = std::chrono::steady_clock::now();
+  const double dt = std::max(1e-3, std::chrono::duration<double>(now - stats_at_).count());
+  std::uint64_t sent = 0, received = 0;
+  for (std::size_t t = 0; t < TrafficCounters::kTypes; ++t) {
+    sent += counters_.traffic.sent_bytes[t].load(std::memory_order_relaxed);
+    received += counters_.traffic.received_bytes[t].load(std::memory_order_relaxed);
+  }
+  const std::uint64_t edits = counters_.edits_applied.load(std::memory_order_relaxed);
+  server_log().info("{} clients; {:.1f} edits/s; out {:.2f} MB/s, in {:.3f} MB/s; {} chunks loaded",
+                    peers_.size(), static_cast<double>(edits - stats_edits_) / dt,
+                    static_cast<double>(sent - stats_sent_) / dt / 1e6,
+                    static_cast<double>(received - stats_received_) / dt / 1e6, cache_->loaded_count());
+  stats_at_ = now;
+  stats_edits_ = edits;
+  stats_sent_ = sent;
+  stats_received_ = received;
 }
 
 void Server::schedule_pump() {

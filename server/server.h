@@ -127,6 +127,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> encode_cache_misses{0};
   std::atomic<std::uint64_t> limit_violations{0};
   std::atomic<std::uint64_t> auth_failures{0};
+  TrafficCounters traffic;
 };
 
 class Server {
@@ -211,6 +212,7 @@ class Server {
   void arm_tick();
   void on_tick();
   void schedule_pump();
+  void log_stats();  // one summary line (every 10 s and at stop)
 
   // streaming.cpp: interest management
   void on_client_state(Peer& peer, const ClientStateMsg& state);
@@ -290,6 +292,8 @@ class Server {
   std::uint64_t tick_ = 0;
   std::uint64_t next_session_id_ = 1;
   bool pump_scheduled_ = false;
+  std::chrono::steady_clock::time_point stats_at_ = std::chrono::steady_clock::now();
+  std::uint64_t stats_edits_ = 0, stats_sent_ = 0, stats_received_ = 0;
   bool stopping_ = false;
   int faults_left_ = 0;
   int corruptions_left_ = 0;

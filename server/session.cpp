@@ -142,6 +142,13 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
     return;
   }
   const wire::Message& m = **msg;
+  if (limits_.traffic != nullptr) {
+    const auto type = static_cast<std::size_t>(m.body_type());
+    if (type < TrafficCounters::kTypes) {
+      limits_.traffic->received_bytes[type].fetch_add(body.size() + kFrameHeaderBytes, std::memory_order_relaxed);
+      limits_.traffic->received_frames[type].fetch_add(1, std::memory_order_relaxed);
+    }
+  }
   auto fail = [&](const DecodeError& e) {
     violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): " + e.detail);
     begin_close(std::string("protocol error: ") + e.detail);
@@ -204,6 +211,15 @@ void Session::enqueue(SharedFrame frame, SendClass cls) {
     return;
   }
   queued_bytes_.fetch_add(frame->size(), std::memory_order_relaxed);
+  if (limits_.traffic != nullptr && frame->size() > kFrameHeaderBytes) {
+    // Our own frame: its type is read without verification.
+    const auto type = static_cast<std::size_t>(
+        flatbuffers::GetRoot<wire::Message>(frame->data() + kFrameHeaderBytes)->body_type());
+    if (type < TrafficCounters::kTypes) {
+      limits_.traffic->sent_bytes[type].fetch_add(frame->size(), std::memory_order_relaxed);
+      limits_.traffic->sent_frames[type].fetch_add(1, std::memory_order_relaxed);
+    }
+  }
   (cls == SendClass::kControl ? control_queue_ : queue_).push_back(std::move(frame));
   do_write();
 }

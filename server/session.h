@@ -22,6 +22,7 @@
 #pragma once
 
 #include <asio.hpp>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -37,6 +38,13 @@
 #include "server/limits.h"
 
 namespace terrane {
+
+// Bytes and frames sent and received per message type (the Body union's
+// index), shared by every session of a server.
+struct TrafficCounters {
+  static constexpr std::size_t kTypes = 32;
+  std::array<std::atomic<std::uint64_t>, kTypes> sent_bytes{}, sent_frames{}, received_bytes{}, received_frames{};
+};
 
 struct SessionLimits {
   std::size_t max_frame_bytes = kDefaultMaxFrameBytes;
@@ -57,6 +65,7 @@ struct SessionLimits {
   // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
   // makes a stalled reader visible sooner (and bounds kernel memory).
   int socket_send_buffer_bytes = 0;
+  TrafficCounters* traffic = nullptr;  // not owned; may be null
 };
 
 struct RegionHashRequestMsg {
