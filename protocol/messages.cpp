@@ -218,6 +218,17 @@ Frame build_stream_batch(std::span<const std::uint8_t> records) {
   return finish(fbb, wire::CreateStreamBatch(fbb, r));
 }
 
+Frame build_holdings(std::span<const HeldChunkMsg> chunks) {
+  const std::size_t n = std::min(chunks.size(), kMaxHoldingsPerMessage);
+  std::vector<wire::HeldChunk> v;
+  v.reserve(n);
+  for (std::size_t i = 0; i < n; ++i)
+    v.emplace_back(to_wire(chunks[i].chunk_pos), chunks[i].revision, static_cast<std::uint8_t>(chunks[i].level));
+  FlatBufferBuilder fbb(64 + n * sizeof(wire::HeldChunk));
+  const auto vec = fbb.CreateVectorOfStructs(v);
+  return finish(fbb, wire::CreateHoldings(fbb, vec));
+}
+
 Frame build_region_hash(const RegionHashMsg& m) {
   FlatBufferBuilder fbb(64);
   const auto p = to_wire(m.chunk_pos);
@@ -517,6 +528,30 @@ Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch
   const auto records = bytes_of(m.records());
   if (records.empty()) return invalid("stream batch: no records");
   return records;
+}
+
+Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
+  std::vector<HeldChunkMsg> out;
+  if (m.chunks() == nullptr) return out;
+  if (m.chunks()->size() > kMaxHoldingsPerMessage) return over("holdings: more than 16384 chunks");
+  // Bytewise, like UpdateBatch revisions (see there).
+  static_assert(sizeof(wire::HeldChunk) == 32);
+  const std::uint8_t* raw = m.chunks()->Data();
+  out.reserve(m.chunks()->size());
+  for (flatbuffers::uoffset_t i = 0; i < m.chunks()->size(); ++i) {
+    const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::HeldChunk);
+    std::int32_t xyz[3];
+    std::uint64_t rev;
+    std::memcpy(xyz, e, sizeof xyz);
+    std::memcpy(&rev, e + 16, sizeof rev);
+    HeldChunkMsg h{{flatbuffers::EndianScalar(xyz[0]), flatbuffers::EndianScalar(xyz[1]),
+                    flatbuffers::EndianScalar(xyz[2])},
+                   flatbuffers::EndianScalar(rev), e[24]};
+    if (!wire_chunk_ok(h.chunk_pos)) return invalid("holdings: chunk position out of range");
+    if (h.level > kHeldEmpty) return invalid("holdings: level not 0..4");
+    out.push_back(h);
+  }
+  return out;
 }
 
 // --- region hash ------------------------------------------------------------------

@@ -159,6 +159,15 @@ struct RegionHashMsg {
   std::uint64_t hash = 0;
 };
 
+// One entry of Holdings. level: 0 full, 1..3 mip, kHeldEmpty known empty.
+inline constexpr int kHeldEmpty = 4;
+inline constexpr std::size_t kMaxHoldingsPerMessage = 16384;
+struct HeldChunkMsg {
+  Vec3i chunk_pos;
+  std::uint64_t revision = 0;
+  int level = 0;
+};
+
 // --- builders: each returns one complete frame --------------------------------
 // Strings longer than their limit are truncated to it (our own callers).
 Frame build_hello(const HelloMsg& m);
@@ -181,6 +190,9 @@ Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::str
 Frame build_presence(std::span<const PresenceEntryMsg> entries);
 // records: protocol/stream_batch.h (StreamBatchWriter builds them).
 Frame build_stream_batch(std::span<const std::uint8_t> records);
+// At most kMaxHoldingsPerMessage entries (the rest are dropped: split larger
+// holdings over several messages).
+Frame build_holdings(std::span<const HeldChunkMsg> chunks);
 Frame build_region_hash(const RegionHashMsg& m);
 Frame build_region_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);
@@ -205,6 +217,7 @@ Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m);
 Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m);
 // The records of a StreamBatch (non-empty); decode them with decode_stream_batch.
 Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m);
+Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m);
 
 // True if every component lies in [-kMaxWireCoordinate, kMaxWireCoordinate].
 bool wire_coordinate_ok(Vec3i voxel);

@@ -196,6 +196,7 @@ void Server::on_inbound(std::uint64_t id, InboundMessage msg) {
   if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(peer, *state);
   if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(peer, std::move(*edit));
   if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(peer, *read);
+  if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(peer, *h);
   if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) {
     // Only chunks this client holds: a hash request must not make the
     // server load or generate arbitrary chunks.

@@ -65,6 +65,8 @@ struct ServerOptions {
   std::size_t max_clients = 64;
   std::size_t stream_window_bytes = 512 * 1024;
   std::size_t max_edits_queued_per_client = 64;
+  // Chunks a resuming client may claim (Holdings) in all.
+  std::size_t max_claims_per_client = 65536;
   // Presence: how often (0 = never) and how many of the nearest clients.
   std::uint32_t presence_hz = 2;
   std::size_t presence_max_entries = 32;
@@ -127,6 +129,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> encode_cache_misses{0};
   std::atomic<std::uint64_t> limit_violations{0};
   std::atomic<std::uint64_t> auth_failures{0};
+  std::atomic<std::uint64_t> chunks_resumed{0};  // claimed by a resuming client, still current, not resent
   TrafficCounters traffic;
 };
 
@@ -189,6 +192,9 @@ class Server {
     // records flushes them before it returns, so data frames sent directly
     // (updates, hashes, read results) keep their order after them.
     StreamBatchWriter batch;
+    // What a resuming client says it still holds (Holdings): adopted without
+    // sending when the revision is still current, released when out of view.
+    std::unordered_map<Vec3i, Held, Vec3iHash> claims;
     TokenBucket edit_rate;
     TokenBucket outbound;
     bool moved = false;  // a position was reported (the first one is where the client joins)
@@ -222,6 +228,9 @@ class Server {
   void pump_all();
   int desired_level(const Peer& peer, Vec3i chunk_pos) const;
   void send_coarse(Peer& peer, Vec3i chunk_pos);
+  void on_holdings(Peer& peer, const HoldingsMsg& h);
+  // Adopts peer's claim on chunk_pos if still current; true if adopted.
+  bool adopt_claim(Peer& peer, Vec3i chunk_pos);
   void send_level(Peer& peer, Vec3i chunk_pos, int level);
   // Appends a record to the client's stream batch (sent by flush_stream,
   // or at once when the batch is full).

@@ -184,6 +184,12 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       on_message_(id_, RegionHashRequestMsg{*p});
       return;
     }
+    case wire::Body::Holdings: {
+      auto h = parse_holdings(*m.body_as_Holdings());
+      if (!h) return fail(h.error());
+      on_message_(id_, HoldingsMsg{std::move(*h)});
+      return;
+    }
     case wire::Body::ReadBox: {
       auto r = parse_read_box(*m.body_as_ReadBox());
       if (!r) return fail(r.error());

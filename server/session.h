@@ -73,7 +73,12 @@ struct RegionHashRequestMsg {
 };
 
 // What a session hands to the server (already checked for meaning).
-using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg>;
+struct HoldingsMsg {
+  std::vector<HeldChunkMsg> chunks;
+};
+
+using InboundMessage =
+    std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg, HoldingsMsg>;
 
 using SharedFrame = std::shared_ptr<const Frame>;
 

@@ -118,8 +118,16 @@ void Server::replan(Peer& peer) {
     peer.plan.push_back(cp);
     keep.insert(cp);
   }
-  // Release what left the view, on both sides.
+  // Release what left the view, on both sides (and claims outside it).
   std::size_t released = 0;
+  for (auto it = peer.claims.begin(); it != peer.claims.end();) {
+    if (keep.count(it->first) != 0) {
+      ++it;
+      continue;
+    }
+    stream(peer, StreamRecordKind::kReleased, it->first, it->second.revision);
+    it = peer.claims.erase(it);
+  }
   for (auto it = peer.held.begin(); it != peer.held.end();) {
     if (keep.count(it->first) != 0) {
       ++it;
@@ -249,7 +257,35 @@ void Server::flush_stream(Peer& peer) {
   peer.session->send(std::move(f));
 }
 
+void Server::on_holdings(Peer& peer, const HoldingsMsg& h) {
+  for (const HeldChunkMsg& c : h.chunks) {
+    if (peer.claims.size() >= options_.max_claims_per_client) break;
+    if (peer.held.count(c.chunk_pos) != 0) continue;  // already streamed this session
+    const Held held = c.level == kHeldEmpty ? Held{HeldKind::kEmpty, 0, c.revision}
+                      : c.level == 0        ? Held{HeldKind::kFull, 0, c.revision}
+                                            : Held{HeldKind::kMip, c.level, c.revision};
+    peer.claims[c.chunk_pos] = held;
+  }
+  // Claims outside the view are released at the next plan.
+  if (peer.plan_valid) replan(peer);
+}
+
+bool Server::adopt_claim(Peer& peer, Vec3i cp) {
+  auto it = peer.claims.find(cp);
+  if (it == peer.claims.end()) return false;
+  const Held claim = it->second;
+  peer.claims.erase(it);
+  // Same revision means same voxels: revisions of a stored chunk only grow,
+  // and a never-stored chunk (revision 0) is what the generator makes.
+  const bool empty = cache_->chunk(cp) == nullptr;
+  if (claim.revision != cache_->revision(cp) || (claim.kind == HeldKind::kEmpty) != empty) return false;
+  hold(peer, cp, claim);
+  counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
+  return true;
+}
+
 void Server::send_coarse(Peer& peer, Vec3i cp) {
+  if (adopt_claim(peer, cp)) return;
   const std::uint64_t rev = cache_->revision(cp);
   if (cache_->chunk(cp) == nullptr) {
     stream(peer, StreamRecordKind::kEmpty, cp, rev);

@@ -14,7 +14,9 @@
 #include <cmath>
 #include <filesystem>
 #include <numbers>
+#include <map>
 #include <optional>
+#include <tuple>
 #include <thread>
 
 #include "server/edits.h"
@@ -294,6 +296,67 @@ TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
     EXPECT_EQ(c.revision(cp), 1u);
     EXPECT_EQ(c.grid().get({1001, 11, 1001}), solid(materials::kBrick));
   });
+}
+
+// Reads stream records until none arrive for quiet_ms; chunk -> held.
+std::map<Vec3i, HeldChunkMsg, bool (*)(Vec3i, Vec3i)> collect_stream(RawPeer& p, int quiet_ms, std::size_t* records) {
+  std::map<Vec3i, HeldChunkMsg, bool (*)(Vec3i, Vec3i)> held(
+      [](Vec3i a, Vec3i b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
+  StreamDecodeScratch scratch;
+  while (auto f = p.next(quiet_ms)) {
+    const wire::Message& m = msg(*f);
+    if (m.body_type() != wire::Body::StreamBatch) continue;
+    auto r = parse_stream_batch(*m.body_as_StreamBatch());
+    EXPECT_TRUE(r.ok());
+    if (!r) break;
+    EXPECT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+                  ++*records;
+                  if (rec.kind == StreamRecordKind::kReleased)
+                    held.erase(rec.chunk_pos);
+                  else
+                    held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, rec.revision,
+                                                       rec.kind == StreamRecordKind::kEmpty ? kHeldEmpty : rec.level};
+                  return Ok{};
+                }).ok());
+  }
+  return held;
+}
+
+TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
+  start();
+  const ClientStateMsg where{{1002.0f, 12.0f, 1002.0f}, 96, 24};
+  std::vector<HeldChunkMsg> claims;
+  std::size_t first_records = 0;
+  {
+    auto a = join("a");
+    ASSERT_TRUE(a->send(build_client_state(where)));
+    for (const auto& [cp, h] : collect_stream(*a, 500, &first_records)) claims.push_back(h);
+  }
+  ASSERT_GT(claims.size(), 50u);
+  // Meanwhile another client changes the home chunk: that one is stale.
+  auto c = join("c");
+  ASSERT_TRUE(hold_full(*c, where.position, chunk_of(Vec3i{1002, 12, 1002})));
+  EditRequestMsg e;
+  e.edit_id = 1;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  ASSERT_TRUE(c->send(build_edit_request(e)));
+  ASSERT_TRUE(c->next_of(wire::Body::EditAck).has_value());
+
+  auto b = join("b");
+  ASSERT_TRUE(b->send(build_holdings(claims)));
+  ASSERT_TRUE(b->send(build_client_state(where)));
+  std::size_t records = 0;
+  const auto held = collect_stream(*b, 500, &records);
+  // Only the edited chunk comes again (its coarse mip, then full).
+  EXPECT_LE(records, 3u);
+  EXPECT_EQ(server_->counters().chunks_resumed.load(), claims.size() - 1);
+  const Vec3i home = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_EQ(held.count(home), 1u);
+  EXPECT_EQ(held.at(home).level, 0);
+  EXPECT_EQ(held.at(home).revision, 1u);
 }
 
 // --- edit application ----------------------------------------------------------

@@ -53,10 +53,11 @@ class RawPeer {
     return true;
   }
   // The next message's body bytes, or nullopt on EOF / error / deadline.
-  std::optional<Frame> next() {
+  // timeout_ms: how long to wait for more bytes.
+  std::optional<Frame> next(int timeout_ms = kTimeoutMs) {
     while (pending_.empty()) {
       pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, kTimeoutMs) <= 0) return std::nullopt;
+      if (::poll(&p, 1, timeout_ms) <= 0) return std::nullopt;
       std::uint8_t buf[16384];
       const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
       if (n <= 0) return std::nullopt;
