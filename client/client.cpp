@@ -25,7 +25,12 @@ spdlog::logger& client_log() {
 }  // namespace
 
 Client::Client(ClientOptions options, ClientCallbacks callbacks)
-    : options_(std::move(options)), callbacks_(std::move(callbacks)), socket_(io_), keepalive_(io_), read_buf_(kReadChunkBytes) {}
+    : options_(std::move(options)),
+      callbacks_(std::move(callbacks)),
+      socket_(io_),
+      keepalive_(io_),
+      read_buf_(kReadChunkBytes),
+      reconnect_timer_(io_) {}
 
 Client::~Client() { disconnect(); }
 
@@ -48,24 +53,122 @@ bool Client::connect(std::string* error) {
     return false;
   }
   io_.restart();
-  socket_.set_option(asio::ip::tcp::no_delay(true), ec);
-  HelloMsg hello;
-  hello.protocol_version = options_.protocol_version;
-  hello.client_name = options_.name;
-  hello.auth_token = options_.auth_token;
-  send_queue_.push_back(build_hello(hello));
-  if (!options_.start_at_spawn) send_queue_.push_back(build_client_state(options_.state));
-  for (const Frame& f : send_queue_) queued_bytes_.fetch_add(f.size(), std::memory_order_relaxed);
-  do_write();
-  do_read();
-  arm_keepalive();
+  endpoints_ = endpoints;
+  if (!options_.start_at_spawn) {
+    std::lock_guard lock(mutex_);
+    last_state_ = options_.state;
+  }
+  start_session();
   thread_ = std::thread([this] { io_.run(); });
   return true;
 }
 
+void Client::start_session() {
+  asio::error_code ec;
+  socket_.set_option(asio::ip::tcp::no_delay(true), ec);
+  reader_ = FrameReader();
+  HelloMsg hello;
+  hello.protocol_version = options_.protocol_version;
+  hello.client_name = options_.name;
+  hello.auth_token = options_.auth_token;
+  std::vector<Frame> frames;
+  frames.push_back(build_hello(hello));
+  {
+    std::lock_guard lock(mutex_);
+    if (resumed_) {
+      // What the replica still holds, so current chunks are not resent.
+      std::vector<HeldChunkMsg> held;
+      replica_.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
+        held.push_back(HeldChunkMsg{cp, c.revision,
+                                    c.state == CoverageState::kEmpty ? kHeldEmpty
+                                    : c.state == CoverageState::kFull ? 0
+                                                                       : c.level});
+      });
+      for (std::size_t i = 0; i < held.size(); i += kMaxHoldingsPerMessage)
+        frames.push_back(build_holdings(
+            std::span<const HeldChunkMsg>(held).subspan(i, std::min(kMaxHoldingsPerMessage, held.size() - i))));
+    }
+    if (last_state_) frames.push_back(build_client_state(*last_state_));
+  }
+  // Ahead of anything the application queued while the link was down.
+  for (auto it = frames.rbegin(); it != frames.rend(); ++it) {
+    queued_bytes_.fetch_add(it->size(), std::memory_order_relaxed);
+    send_queue_.push_front(std::move(*it));
+  }
+  linked_ = true;
+  do_write();
+  do_read();
+  arm_keepalive();
+}
+
+void Client::connection_lost(const std::string& reason, bool server_said) {
+  // Reconnect only when nobody meant to end it: a drop without a reason, or
+  // the server going away. A reason like "authentication failed" or a
+  // limit would only repeat.
+  const bool retry = options_.reconnect && !leaving_ && !io_closed_ &&
+                     (!server_said || reason == "server shutting down");
+  if (!retry) return close_locked_io(reason);
+  ++generation_;
+  linked_ = false;
+  asio::error_code ec;
+  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  socket_.close(ec);
+  socket_ = asio::ip::tcp::socket(io_);
+  keepalive_.cancel();
+  writing_ = false;
+  send_queue_.clear();
+  queued_bytes_.store(0, std::memory_order_relaxed);
+  std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
+  {
+    std::lock_guard lock(mutex_);
+    for (const std::uint32_t id : unanswered_edits_) {
+      EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
+      edits_[id] = o;
+      unknown.emplace_back(id, o);
+    }
+    unanswered_edits_.clear();
+  }
+  changed_.notify_all();
+  client_log().info("'{}': connection lost ({}); reconnecting", options_.name, reason);
+  if (callbacks_.on_connection_lost) callbacks_.on_connection_lost(reason);
+  if (callbacks_.on_edit_result)
+    for (const auto& [id, o] : unknown) callbacks_.on_edit_result(id, o);
+  attempts_ = 0;
+  backoff_ = options_.reconnect_min;
+  schedule_reconnect();
+}
+
+void Client::schedule_reconnect() {
+  reconnect_timer_.expires_after(backoff_);
+  reconnect_timer_.async_wait([this](const asio::error_code& ec) {
+    if (ec || io_closed_ || leaving_) return;
+    ++attempts_;
+    const std::uint64_t gen = generation_;
+    asio::async_connect(socket_, endpoints_, [this, gen](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
+      if (gen != generation_ || io_closed_ || leaving_) return;
+      if (e) {
+        if (options_.reconnect_attempts > 0 && attempts_ >= options_.reconnect_attempts)
+          return close_locked_io("reconnect failed after " + std::to_string(attempts_) + " attempts: " + e.message());
+        asio::error_code ignored;
+        socket_.close(ignored);
+        backoff_ = std::min(backoff_ * 2, options_.reconnect_max);
+        return schedule_reconnect();
+      }
+      resumed_ = true;
+      {
+        std::lock_guard lock(mutex_);
+        ++counters_.reconnects;
+      }
+      start_session();
+    });
+  });
+}
+
 void Client::disconnect() {
   if (!thread_.joinable()) return;
+  leaving_ = true;
   asio::post(io_, [this] {
+    reconnect_timer_.cancel();
     if (io_closed_) return;
     asio::error_code ec;
     const Frame bye = build_disconnect("client leaving");
@@ -89,37 +192,41 @@ bool Client::send(Frame frame) {
 }
 
 void Client::do_write() {
-  if (writing_ || send_queue_.empty() || io_closed_) return;
+  if (writing_ || send_queue_.empty() || io_closed_ || !linked_) return;
   writing_ = true;
-  asio::async_write(socket_, asio::buffer(send_queue_.front()), [this](const asio::error_code& ec, std::size_t) {
+  const std::uint64_t gen = generation_;
+  asio::async_write(socket_, asio::buffer(send_queue_.front()), [this, gen](const asio::error_code& ec, std::size_t) {
+    if (gen != generation_) return;  // a connection that is gone (its queue was dropped)
     writing_ = false;
     queued_bytes_.fetch_sub(send_queue_.front().size(), std::memory_order_relaxed);
     send_queue_.pop_front();
-    if (ec) return close_locked_io("write failed: " + ec.message());
+    if (ec) return connection_lost("write failed: " + ec.message(), false);
     do_write();
   });
 }
 
 void Client::arm_keepalive() {
   keepalive_.expires_after(options_.keepalive);
-  keepalive_.async_wait([this](const asio::error_code& ec) {
-    if (ec || io_closed_) return;
+  const std::uint64_t gen = generation_;
+  keepalive_.async_wait([this, gen](const asio::error_code& ec) {
+    if (ec || io_closed_ || gen != generation_) return;
     send(build_ping(0));
     arm_keepalive();
   });
 }
 
 void Client::do_read() {
-  socket_.async_read_some(asio::buffer(read_buf_), [this](const asio::error_code& ec, std::size_t n) {
-    if (io_closed_) return;
-    if (ec) return close_locked_io(ec == asio::error::eof ? "server closed the connection" : ec.message());
+  const std::uint64_t gen = generation_;
+  socket_.async_read_some(asio::buffer(read_buf_), [this, gen](const asio::error_code& ec, std::size_t n) {
+    if (io_closed_ || gen != generation_) return;
+    if (ec) return connection_lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), false);
     {
       std::lock_guard lock(mutex_);
       counters_.bytes_in += n;
     }
     const auto st = reader_.feed(std::span<const std::uint8_t>(read_buf_.data(), n),
                                  [&](std::span<const std::uint8_t> body) {
-                                   if (!io_closed_) handle_frame(body);
+                                   if (!io_closed_ && gen == generation_) handle_frame(body);
                                  });
     if (!st) {
       {
@@ -128,7 +235,7 @@ void Client::do_read() {
       }
       return close_locked_io(std::string("protocol error: ") + st.error().detail);
     }
-    if (!io_closed_) do_read();
+    if (!io_closed_ && gen == generation_) do_read();
   });
 }
 
@@ -152,9 +259,14 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
-      if (options_.start_at_spawn) {
+      if (resumed_) {
+        if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
+        break;
+      }
+      if (options_.start_at_spawn && !last_state_) {
         ClientStateMsg s = options_.state;
         s.position = w->spawn;
+        last_state_ = s;
         lock.unlock();
         send(build_client_state(s));
         lock.lock();
@@ -164,9 +276,9 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     }
     case wire::Body::Disconnect: {
       auto r = parse_disconnect(*m.body_as_Disconnect());
-      disconnect_reason_ = r ? *r : std::string("(bad reason)");
+      const std::string reason = r ? *r : std::string("(bad reason)");
       lock.unlock();
-      close_locked_io(disconnect_reason_);
+      connection_lost(reason, true);
       return;
     }
     case wire::Body::ChunkData: {
@@ -243,6 +355,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     case wire::Body::EditAck: {
       const auto* a = m.body_as_EditAck();
       EditOutcome o{true, a->tick(), {}, {}, {}};
+      unanswered_edits_.erase(a->edit_id());
       edits_[a->edit_id()] = o;
       ++counters_.edits_acked;
       if (callbacks_.on_edit_result) after = [this, id = a->edit_id(), o] { callbacks_.on_edit_result(id, o); };
@@ -252,6 +365,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       auto r = parse_edit_reject(*m.body_as_EditReject());
       if (!r) return fail(r.error());
       EditOutcome o{false, 0, std::move(r->reason), r->box, std::move(r->voxels)};
+      unanswered_edits_.erase(r->edit_id);
       ++counters_.edits_rejected;
       if (callbacks_.on_edit_result) after = [this, id = r->edit_id, o] { callbacks_.on_edit_result(id, o); };
       edits_[r->edit_id] = std::move(o);
@@ -308,6 +422,7 @@ void Client::close_locked_io(const std::string& reason) {
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
   socket_.close(ec);
   keepalive_.cancel();
+  reconnect_timer_.cancel();
   std::string r;
   {
     std::lock_guard lock(mutex_);
@@ -319,26 +434,30 @@ void Client::close_locked_io(const std::string& reason) {
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 
-bool Client::set_state(const ClientStateMsg& state) { return send(build_client_state(state)); }
+bool Client::set_state(const ClientStateMsg& state) {
+  {
+    std::lock_guard lock(mutex_);
+    last_state_ = state;
+  }
+  return send(build_client_state(state));
+}
 
 std::uint32_t Client::fill_box(const Region& box, Voxel v) {
   EditRequestMsg e;
-  e.edit_id = next_edit_id_.fetch_add(1);
   e.kind = EditKind::kFillBox;
   e.box = box;
   e.material = v.material;
   e.occupancy = v.occupancy;
-  return send(build_edit_request(e)) ? e.edit_id : 0;
+  return send_edit(std::move(e));
 }
 
 std::uint32_t Client::fill_sphere(Vec3f center, float radius, Material material) {
   EditRequestMsg e;
-  e.edit_id = next_edit_id_.fetch_add(1);
   e.kind = EditKind::kFillSphere;
   e.center = center;
   e.radius = radius;
   e.material = material;
-  return send(build_edit_request(e)) ? e.edit_id : 0;
+  return send_edit(std::move(e));
 }
 
 namespace {
@@ -355,7 +474,14 @@ EditRequestMsg sphere_edit(EditKind kind, Vec3f center, float radius, Material m
 
 std::uint32_t Client::send_edit(EditRequestMsg e) {
   e.edit_id = next_edit_id_.fetch_add(1);
-  return send(build_edit_request(e)) ? e.edit_id : 0;
+  {
+    std::lock_guard lock(mutex_);
+    unanswered_edits_.insert(e.edit_id);
+  }
+  if (send(build_edit_request(e))) return e.edit_id;
+  std::lock_guard lock(mutex_);
+  unanswered_edits_.erase(e.edit_id);
+  return 0;
 }
 
 std::uint32_t Client::dig(Vec3f center, float radius) {

@@ -24,6 +24,7 @@
 #include <string>
 #include <thread>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "client/replica.h"
 #include "protocol/framing.h"
@@ -46,7 +47,20 @@ struct ClientOptions {
   std::chrono::milliseconds keepalive{5000};
   // Outbound bytes queued at most; sends beyond it fail.
   std::size_t max_send_queue_bytes = 4u << 20;
+  // Reconnect when the connection drops without a reason, or because the
+  // server shut down: with backoff from reconnect_min doubling to
+  // reconnect_max, up to reconnect_attempts tries in a row (0 = forever).
+  // The replica is kept and offered to the server (Holdings), so chunks
+  // still current are not downloaded again. Edits sent but not answered
+  // when the connection dropped are reported rejected with reason
+  // kEditOutcomeUnknown: they may or may not have been applied.
+  bool reconnect = false;
+  std::chrono::milliseconds reconnect_min{100};
+  std::chrono::milliseconds reconnect_max{5000};
+  int reconnect_attempts = 0;
 };
+
+inline constexpr const char* kEditOutcomeUnknown = "connection lost before the answer; outcome unknown";
 
 struct ClientCounters {
   std::uint64_t frames_in = 0;
@@ -64,6 +78,7 @@ struct ClientCounters {
   std::uint64_t hash_mismatches = 0;
   std::uint64_t protocol_errors = 0;
   std::uint64_t pongs = 0;
+  std::uint64_t reconnects = 0;
   std::uint64_t presence_updates = 0;
   std::uint64_t read_results = 0;
 };
@@ -87,6 +102,10 @@ struct ClientCallbacks {
   // A RegionHash arrived and was compared with the replica's chunk.
   std::function<void(Vec3i chunk_pos, bool match)> on_hash_checked;
   std::function<void(const std::string& reason)> on_disconnected;
+  // The connection dropped and a reconnect is being tried (reason as for
+  // on_disconnected), and when it succeeded (after the new Welcome).
+  std::function<void(const std::string& reason)> on_connection_lost;
+  std::function<void()> on_reconnected;
 };
 
 // What wait_until's predicate sees (under the Client's lock).
@@ -173,6 +192,10 @@ class Client {
   std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
   void do_write();
   void close_locked_io(const std::string& reason);  // io thread
+  // io thread: the connection ended; reconnects or closes for good.
+  void connection_lost(const std::string& reason, bool server_said);
+  void schedule_reconnect();
+  void start_session();  // io thread: Hello (+ Holdings, state) and the read loop
   ClientView view() const;
 
   ClientOptions options_;
@@ -188,6 +211,14 @@ class Client {
   std::atomic<std::size_t> queued_bytes_{0};
   std::atomic<std::uint32_t> next_edit_id_{1};
   std::atomic<bool> io_closed_{false};
+  std::atomic<bool> leaving_{false};      // disconnect() was called
+  std::uint64_t generation_ = 0;          // io thread: bumps per connection; stale handlers return
+  asio::ip::tcp::resolver::results_type endpoints_;  // io thread
+  asio::steady_timer reconnect_timer_;
+  std::chrono::milliseconds backoff_{0};  // io thread
+  int attempts_ = 0;                      // io thread
+  bool resumed_ = false;                  // io thread: this connection is a reconnect
+  bool linked_ = false;                   // io thread: a connected socket to write to
 
   // Guarded by mutex_ (shared with the application's threads).
   mutable std::mutex mutex_;
@@ -200,6 +231,8 @@ class Client {
   std::unordered_map<std::uint32_t, EditOutcome> edits_;
   std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
   std::unordered_map<std::uint32_t, ReadBoxResultMsg> read_results_;
+  std::unordered_set<std::uint32_t> unanswered_edits_;
+  std::optional<ClientStateMsg> last_state_;
   std::vector<PresenceEntryMsg> presence_;
   StreamDecodeScratch stream_scratch_;  // io thread
   std::atomic<std::uint32_t> next_request_id_{1};

@@ -97,6 +97,12 @@ void Server::serve_hash_requests(Peer& peer) {
   std::size_t kept = 0;
   for (std::size_t i = 0; i < reqs.size(); ++i) {
     const Vec3i cp = reqs[i];
+    if (peer.held.count(cp) == 0) {
+      // Claimed by a resuming client but not yet adopted or resent: answer
+      // once it is, so the hash follows the data it describes.
+      if (peer.claims.count(cp) != 0) reqs[kept++] = cp;
+      continue;
+    }
     if (!cache_->request(cp)) {
       reqs[kept++] = cp;
       continue;

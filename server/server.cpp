@@ -118,9 +118,9 @@ void Server::stop() {
   const ServerCounters& c = counters_;
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
-      "chunks, {} mips, {} empty ({} bytes); {} update batches; world saved",
+      "chunks, {} mips, {} empty ({} bytes), {} resumed; {} update batches; world saved",
       c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
-      c.edits_rejected.load(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
+      c.edits_rejected.load(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(), c.chunks_resumed.load(),
       c.update_batches_sent.load());
   std::string by_type;
   for (std::size_t t = 1; t < TrafficCounters::kTypes; ++t) {
@@ -200,7 +200,7 @@ void Server::on_inbound(std::uint64_t id, InboundMessage msg) {
   if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) {
     // Only chunks this client holds: a hash request must not make the
     // server load or generate arbitrary chunks.
-    if (peer.held.count(req->chunk_pos) == 0) return;
+    if (peer.held.count(req->chunk_pos) == 0 && peer.claims.count(req->chunk_pos) == 0) return;
     if (peer.hash_requests.size() >= 1024) {
       peer.session->close("too many region hash requests");
       return;
