@@ -38,6 +38,17 @@ bool position_ok(Vec3f v) {
   return finite(v) && std::fabs(v.x) <= lim && std::fabs(v.y) <= lim && std::fabs(v.z) <= lim;
 }
 
+// ChunkRevision and HeldChunk both start with a Vec3i at byte 0 and a ulong
+// at byte 16; read bytewise (the struct may sit misaligned in a buffer).
+ChunkRevisionMsg read_chunk_and_revision(const std::uint8_t* e) {
+  std::int32_t xyz[3];
+  std::uint64_t rev;
+  std::memcpy(xyz, e, sizeof xyz);
+  std::memcpy(&rev, e + 16, sizeof rev);
+  return {{flatbuffers::EndianScalar(xyz[0]), flatbuffers::EndianScalar(xyz[1]), flatbuffers::EndianScalar(xyz[2])},
+          flatbuffers::EndianScalar(rev)};
+}
+
 std::span<const std::uint8_t> bytes_of(const flatbuffers::Vector<std::uint8_t>* v) {
   if (v == nullptr) return {};
   return {v->data(), v->size()};
@@ -438,14 +449,7 @@ Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m) {
   const std::uint8_t* raw = m.revisions()->Data();
   out.revisions.reserve(m.revisions()->size());
   for (flatbuffers::uoffset_t i = 0; i < m.revisions()->size(); ++i) {
-    const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::ChunkRevision);
-    std::int32_t xyz[3];
-    std::uint64_t rev;
-    std::memcpy(xyz, e, sizeof xyz);
-    std::memcpy(&rev, e + 16, sizeof rev);
-    ChunkRevisionMsg cr{{flatbuffers::EndianScalar(xyz[0]), flatbuffers::EndianScalar(xyz[1]),
-                         flatbuffers::EndianScalar(xyz[2])},
-                        flatbuffers::EndianScalar(rev)};
+    const ChunkRevisionMsg cr = read_chunk_and_revision(raw + std::size_t{i} * sizeof(wire::ChunkRevision));
     if (!wire_chunk_ok(cr.chunk_pos)) return invalid("update batch: chunk position out of range");
     out.revisions.push_back(cr);
   }
@@ -540,13 +544,8 @@ Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
   out.reserve(m.chunks()->size());
   for (flatbuffers::uoffset_t i = 0; i < m.chunks()->size(); ++i) {
     const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::HeldChunk);
-    std::int32_t xyz[3];
-    std::uint64_t rev;
-    std::memcpy(xyz, e, sizeof xyz);
-    std::memcpy(&rev, e + 16, sizeof rev);
-    HeldChunkMsg h{{flatbuffers::EndianScalar(xyz[0]), flatbuffers::EndianScalar(xyz[1]),
-                    flatbuffers::EndianScalar(xyz[2])},
-                   flatbuffers::EndianScalar(rev), e[24]};
+    const ChunkRevisionMsg cr = read_chunk_and_revision(e);
+    HeldChunkMsg h{cr.chunk_pos, cr.revision, e[24]};
     if (!wire_chunk_ok(h.chunk_pos)) return invalid("holdings: chunk position out of range");
     if (h.level > kHeldEmpty) return invalid("holdings: level not 0..4");
     out.push_back(h);
