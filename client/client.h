@@ -10,6 +10,18 @@
 // holds it only while applying one frame. Callbacks run on the io thread
 // without the lock held: they may call any Client method except
 // disconnect() and wait_until(). Every public method is thread-safe.
+//
+// Connection states (io thread):
+//
+//   connect() --> [linked] --drop, or Disconnect "server shutting down"-->
+//                    ^        (reconnect on)                             |
+//                    |                                                   v
+//                    +---- Welcome again <-- Hello, Holdings, state <-- [waiting: backoff]
+//   [linked] --Disconnect with another reason, protocol error,
+//              disconnect(), or reconnect attempts used up--> [closed]
+//
+// While waiting, sends are queued (up to max_send_queue_bytes) and go out
+// after the new handshake; the replica stays as it was.
 #pragma once
 
 #include <asio.hpp>
