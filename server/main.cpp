@@ -6,6 +6,9 @@
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
 // 0 after a clean stop, 1 when the world cannot be opened or the port
 // bound, 2 on bad usage.
+#include <sys/resource.h>
+
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <string>
@@ -35,7 +38,8 @@ constexpr const char* kHelp =
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
     "  --max-view-distance N       cap on client view distances (default 1024)\n"
     "  --max-full-res-radius N     cap on client full-resolution radii (default 256)\n"
-    "  --max-clients N             connections at once (default 64)\n"
+    "  --max-clients N             connections at once (default 1024; the open-file limit is\n"
+    "                              raised to fit)\n"
     "  --max-queue-bytes N         per-client send queue; a client further behind is dropped\n"
     "                              (default 16777216)\n"
     "  --stream-window-bytes N     per-client streaming window (default 524288)\n"
@@ -106,7 +110,7 @@ int run(int argc, char** argv) {
   o.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
   o.default_view_distance = std::min(o.default_view_distance, o.max_view_distance);
   o.default_full_res_radius = std::min(o.default_full_res_radius, o.max_full_res_radius);
-  o.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 64, 1, 100000, &err));
+  o.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 1024, 1, 100000, &err));
   o.session.max_queue_bytes =
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));
   o.stream_window_bytes =
@@ -148,6 +152,19 @@ int run(int argc, char** argv) {
     }
     if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
     o.player_tokens = std::move(*tokens);
+  }
+
+  // One descriptor per client plus the store, the listener and a margin.
+  rlimit nofile{};
+  if (getrlimit(RLIMIT_NOFILE, &nofile) == 0) {
+    const rlim_t want = static_cast<rlim_t>(o.max_clients) + 64;
+    if (nofile.rlim_cur < want) {
+      nofile.rlim_cur = std::min(want, nofile.rlim_max);
+      setrlimit(RLIMIT_NOFILE, &nofile);
+    }
+    if (nofile.rlim_cur < want)
+      server_log().warn("open-file limit {} is below --max-clients {} + 64; connections beyond it will fail",
+                        nofile.rlim_cur, o.max_clients);
   }
 
   auto server = Server::create(o);

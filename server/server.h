@@ -62,7 +62,7 @@ struct ServerOptions {
   std::int32_t max_full_res_radius = 256;  // voxels
   std::int32_t default_view_distance = 1024;   // until the client sends ClientState
   std::int32_t default_full_res_radius = 128;
-  std::size_t max_clients = 64;
+  std::size_t max_clients = 1024;
   std::size_t stream_window_bytes = 512 * 1024;
   std::size_t max_edits_queued_per_client = 64;
   // Chunks a resuming client may claim (Holdings) in all.
