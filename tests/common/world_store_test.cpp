@@ -204,6 +204,20 @@ TEST_F(WorldStoreTest, WorldsWithoutTheQuarantineTableGainItOnOpen) {
   EXPECT_EQ(*(*store)->quarantined_count(), 0);
 }
 
+TEST_F(WorldStoreTest, ReopenedStoreKeepsWalAndSynchronousFull) {
+  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(store.ok());
+  // The settings the durability promise rests on, on the connection a server
+  // uses (World::open opens the store this way).
+  EXPECT_EQ(*(*store)->pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
+  auto world = World::open(dir_);
+  ASSERT_TRUE(world.ok());
+  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");
+}
+
 TEST(ChunkBlob, RejectsEveryTruncationAndBadHeader) {
   const std::vector<std::uint8_t> blob = encode_chunk_blob(sample_chunk(4));
   ASSERT_TRUE(decode_chunk_blob(blob).ok());

@@ -542,6 +542,65 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   EXPECT_EQ((*now)->chunk.get(local_of(Vec3i{1001, 11, 1001})), make_voxel(materials::kSnow, 200));
 }
 
+TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  const Vec3f pos{1002.0f, 12.0f, 1002.0f};
+  auto join_epoch = [&](RawPeer& p) -> std::uint64_t {
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "restarts", ""})));
+    auto w = p.next_of(wire::Body::Welcome);
+    if (!w) return 0;
+    auto parsed = parse_welcome(*msg(*w).body_as_Welcome());
+    return parsed ? parsed->server_epoch : 0;
+  };
+  std::uint64_t epoch = 0, acked_revision = 0;
+  for (int run = 0; run < 3; ++run) {
+    start();
+    RawPeer p(server_->port());
+    ASSERT_TRUE(p.connected());
+    const std::uint64_t e = join_epoch(p);
+    if (run > 0) {
+      EXPECT_EQ(e, epoch + 1) << "run " << run;
+    }
+    epoch = e;
+    const auto revs = full_revisions(p, pos, {cp});
+    ASSERT_EQ(revs.size(), 1u);
+    // What the last acknowledged edit's update said, at least.
+    EXPECT_GE(revs.at(key(cp)), acked_revision) << "run " << run;
+    EditRequestMsg edit;
+    edit.edit_id = static_cast<std::uint32_t>(run + 1);
+    edit.kind = EditKind::kFillBox;
+    edit.box = {{1000 + run, 10, 1000}, {1001 + run, 11, 1001}};
+    edit.material = materials::kBrick;
+    edit.occupancy = static_cast<std::uint8_t>(100 + run);
+    ASSERT_TRUE(p.send(build_edit_request(edit)));
+    ASSERT_TRUE(p.next_of(wire::Body::EditAck).has_value());
+    auto update = p.next_of(wire::Body::UpdateBatch);
+    ASSERT_TRUE(update.has_value());
+    auto batch = parse_update_batch(*msg(*update).body_as_UpdateBatch());
+    ASSERT_TRUE(batch.ok());
+    ASSERT_EQ(batch->revisions.size(), 1u);
+    EXPECT_EQ(batch->revisions[0].chunk_pos, cp);
+    EXPECT_GT(batch->revisions[0].revision, acked_revision);
+    acked_revision = batch->revisions[0].revision;
+    p.close();
+    server_->stop();
+    server_.reset();
+  }
+  // On disk: the epoch of the last start and the last acknowledged revision.
+  auto world = World::open(dir_.string());
+  ASSERT_TRUE(world.ok());
+  EXPECT_EQ((*world)->meta().epoch, epoch);
+  auto stored = (*world)->load_chunk(cp);
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->revision, acked_revision);
+  for (int run = 0; run < 3; ++run)
+    EXPECT_EQ(stored->chunk.get(local_of(Vec3i{1000 + run, 10, 1000})),
+              make_voxel(materials::kBrick, static_cast<std::uint8_t>(100 + run)));
+  // The settings the promise rests on, on the store's own connection.
+  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");  // FULL
+}
+
 // --- edit application ----------------------------------------------------------
 
 TEST(ApplyEdit, PaintChangesMaterialButNotOccupancy) {
