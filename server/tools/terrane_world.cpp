@@ -185,10 +185,17 @@ int cmd_generate(int argc, char** argv) {
   const Region clipped = world->meta().bounds.clamp(box);
   if (clipped.empty()) return failure("--box lies entirely outside the world's bounds");
   std::vector<Vec3i> todo;
+  // Revision to store each with: 0, or above a quarantined row's so that
+  // revisions only grow (common/WORLD_FORMAT.md, quarantine).
+  std::vector<std::uint64_t> todo_revision;
   for (Vec3i c : chunks_in(clipped)) {
     auto stored = world->store().load_chunk(c);
     if (!stored) return failure(stored.error().message);
-    if (!stored->has_value()) todo.push_back(c);
+    if (stored->has_value()) continue;
+    auto floor = world->store().quarantined_revision(c);
+    if (!floor) return failure(floor.error().message);
+    todo.push_back(c);
+    todo_revision.push_back(floor->has_value() ? **floor + 1 : 0);
   }
 
   // Workers generate and encode; this thread stores in batches. The mutex
@@ -205,7 +212,7 @@ int cmd_generate(int argc, char** argv) {
       const std::size_t i = next.fetch_add(1);
       if (i >= todo.size()) break;
       world->generate_chunk_box(todo[i], box32);
-      ChunkWrite w{todo[i], 0, {}};
+      ChunkWrite w{todo[i], todo_revision[i], {}};
       bool empty = true;
       for (const Voxel v : box32.voxels()) empty &= v.material == kAir;
       if (!empty) w.blob = encode_chunk_blob(box32);

@@ -201,6 +201,16 @@ TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnes
   // The world reads again: the chunk comes from the generator.
   auto e = run("export --world " + w + " --box 0,0,0,64,64,64 " + path("a.vxraw"));
   EXPECT_EQ(e.exit_code, 0) << e.output;
+  // Pre-generating it again stores it above the quarantined revision.
+  auto g = run("generate --world " + w + " --box 0,0,0,64,64,64");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  auto store = WorldStore::open(w);
+  ASSERT_TRUE(store.ok());
+  auto regenerated = (*store)->load_chunk({1, 0, 1});
+  ASSERT_TRUE(regenerated.ok()) << regenerated.error().message;
+  ASSERT_TRUE(regenerated->has_value()) << "ground at y 0..31: the chunk is stored";
+  EXPECT_EQ((*regenerated)->revision, 5u);
+  EXPECT_EQ(*(*store)->quarantined_count(), 1);
 }
 
 TEST_F(WorldToolTest, EnhanceSubdividesAndResamplesAVxrawBox) {
