@@ -74,7 +74,11 @@ FileResult<StoredChunk> World::load_chunk(Vec3i chunk_pos) {
   auto stored = store_->load_chunk(chunk_pos);
   if (!stored) return stored.error();
   if (stored->has_value()) return std::move(**stored);
-  return StoredChunk{0, generate_chunk(chunk_pos)};
+  // Never stored, or quarantined: generated, with revisions continuing
+  // above any quarantined row so they only grow.
+  auto floor = store_->quarantined_revision(chunk_pos);
+  if (!floor) return floor.error();
+  return StoredChunk{floor->has_value() ? **floor + 1 : 0, generate_chunk(chunk_pos)};
 }
 
 FileStatus World::read_box(Vec3i min, Box& out) {

@@ -37,7 +37,9 @@ class World {
   void generate_chunk_box(Vec3i chunk_pos, Box& out) const;
   Chunk generate_chunk(Vec3i chunk_pos) const;
 
-  // The stored chunk, or the generated one with revision 0.
+  // The stored chunk, or the generated one with revision 0 (or, if the
+  // chunk's row was quarantined, the highest quarantined revision + 1).
+  // A damaged stored row is an error naming the chunk.
   FileResult<StoredChunk> load_chunk(Vec3i chunk_pos);
   // Reads [min, min + out.size()) chunk by chunk.
   FileStatus read_box(Vec3i min, Box& out);

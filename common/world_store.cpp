@@ -20,6 +20,14 @@ constexpr std::uint8_t kBlobVersion = 1;
 constexpr std::uint8_t kBlobCodecByteRleLz4 = 1;
 constexpr int kChunkVoxels = kChunkSize * kChunkSize * kChunkSize;
 
+// Added to format 1 after its first release: worlds made before it gain the
+// table the first time they are opened (readers that do not know it ignore it).
+constexpr const char* kQuarantineSchema =
+    "CREATE TABLE IF NOT EXISTS quarantine(id INTEGER PRIMARY KEY,"
+    " cx INTEGER NOT NULL, cy INTEGER NOT NULL, cz INTEGER NOT NULL,"
+    " revision INTEGER NOT NULL, data BLOB NOT NULL, reason TEXT NOT NULL, time INTEGER NOT NULL);"
+    "CREATE INDEX IF NOT EXISTS quarantine_chunk ON quarantine(cx, cy, cz);";
+
 // RAII for one prepared statement use: reset on scope exit.
 struct StmtReset {
   sqlite3_stmt* s;
@@ -126,6 +134,7 @@ WorldStore::~WorldStore() {
   sqlite3_finalize(load_stmt_);
   sqlite3_finalize(save_stmt_);
   sqlite3_finalize(insert_stmt_);
+  sqlite3_finalize(quarantined_rev_stmt_);
   sqlite3_close(db_);
 }
 
@@ -199,6 +208,7 @@ FileResult<std::unique_ptr<WorldStore>> WorldStore::create_in(const std::string&
     sqlite3_free(err);
     return FileError{"world " + dir + ": cannot create schema: " + msg, {}};
   }
+  if (auto s = store->ensure_quarantine_table(); !s) return s.error();
   if (auto s = store->write_meta(meta); !s) return s.error();
   if (auto s = store->load_meta(); !s) return s.error();
   return store;
@@ -210,7 +220,28 @@ FileResult<std::unique_ptr<WorldStore>> WorldStore::open(const std::string& dir)
   if (!db) return db.error();
   std::unique_ptr<WorldStore> store(new WorldStore(dir, *db));
   if (auto s = store->load_meta(); !s) return s.error();
+  if (auto s = store->ensure_quarantine_table(); !s) return s.error();
   return store;
+}
+
+FileStatus WorldStore::ensure_quarantine_table() {
+  // Look first: when the table exists (the usual case) opening stays a pure
+  // read, so tools can open a world a server is writing without a write lock.
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'quarantine'", -1, &st,
+                         nullptr) != SQLITE_OK)
+    return error("cannot read schema");
+  const int rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  if (rc == SQLITE_ROW) return Ok{};
+  if (rc != SQLITE_DONE) return error("cannot read schema");
+  char* err = nullptr;
+  if (sqlite3_exec(db_, kQuarantineSchema, nullptr, nullptr, &err) != SQLITE_OK) {
+    std::string msg = err ? err : "?";
+    sqlite3_free(err);
+    return FileError{"world " + dir_ + ": cannot create the quarantine table: " + msg, {}};
+  }
+  return Ok{};
 }
 
 FileStatus WorldStore::write_meta(const WorldMeta& m) {
@@ -384,6 +415,106 @@ FileStatus WorldStore::erase_chunk(Vec3i pos) {
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return error("cannot delete chunk");
   return Ok{};
+}
+
+FileResult<std::optional<std::uint64_t>> WorldStore::quarantine_chunk(Vec3i pos, const std::string& reason) {
+  std::ostringstream where;
+  where << "chunk (" << pos.x << ", " << pos.y << ", " << pos.z << ")";
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin quarantine of " + where.str());
+  auto fail = [&](const std::string& what) {
+    FileError e = error(what + " " + where.str());
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  };
+  // The row is copied inside SQLite: the blob moves byte for byte, however
+  // damaged it is.
+  const char* kSteps[2] = {
+      "INSERT INTO quarantine(cx, cy, cz, revision, data, reason, time)"
+      " SELECT cx, cy, cz, revision, data, ?4, CAST(strftime('%s', 'now') AS INTEGER)"
+      " FROM chunks WHERE cx = ?1 AND cy = ?2 AND cz = ?3",
+      "DELETE FROM chunks WHERE cx = ?1 AND cy = ?2 AND cz = ?3"};
+  std::optional<std::uint64_t> revision;
+  {
+    sqlite3_stmt* st = nullptr;
+    if (sqlite3_prepare_v2(db_, "SELECT revision FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st, nullptr) !=
+        SQLITE_OK)
+      return fail("cannot prepare quarantine of");
+    sqlite3_bind_int(st, 1, pos.x);
+    sqlite3_bind_int(st, 2, pos.y);
+    sqlite3_bind_int(st, 3, pos.z);
+    const int rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) revision = static_cast<std::uint64_t>(sqlite3_column_int64(st, 0));
+    sqlite3_finalize(st);
+    if (rc != SQLITE_ROW && rc != SQLITE_DONE) return fail("cannot read revision of");
+  }
+  if (!revision) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return std::optional<std::uint64_t>{};
+  }
+  for (const char* sql : kSteps) {
+    sqlite3_stmt* st = nullptr;
+    if (sqlite3_prepare_v2(db_, sql, -1, &st, nullptr) != SQLITE_OK) return fail("cannot prepare quarantine of");
+    sqlite3_bind_int(st, 1, pos.x);
+    sqlite3_bind_int(st, 2, pos.y);
+    sqlite3_bind_int(st, 3, pos.z);
+    if (sqlite3_bind_parameter_count(st) >= 4) sqlite3_bind_text(st, 4, reason.c_str(), -1, SQLITE_TRANSIENT);
+    const int rc = sqlite3_step(st);
+    const int changed = sqlite3_changes(db_);
+    sqlite3_finalize(st);
+    if (rc != SQLITE_DONE) return fail("cannot quarantine");
+    if (changed != 1) return fail("quarantine moved " + std::to_string(changed) + " rows for");
+  }
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail("cannot commit quarantine of");
+  return revision;
+}
+
+FileResult<std::optional<std::uint64_t>> WorldStore::quarantined_revision(Vec3i pos) {
+  if (!quarantined_rev_stmt_ &&
+      sqlite3_prepare_v2(db_, "SELECT max(revision) FROM quarantine WHERE cx = ? AND cy = ? AND cz = ?", -1,
+                         &quarantined_rev_stmt_, nullptr) != SQLITE_OK)
+    return error("cannot prepare quarantine read");
+  StmtReset reset{quarantined_rev_stmt_};
+  sqlite3_bind_int(quarantined_rev_stmt_, 1, pos.x);
+  sqlite3_bind_int(quarantined_rev_stmt_, 2, pos.y);
+  sqlite3_bind_int(quarantined_rev_stmt_, 3, pos.z);
+  if (sqlite3_step(quarantined_rev_stmt_) != SQLITE_ROW) return error("cannot read quarantine");
+  if (sqlite3_column_type(quarantined_rev_stmt_, 0) == SQLITE_NULL) return std::optional<std::uint64_t>{};
+  return std::optional<std::uint64_t>{static_cast<std::uint64_t>(sqlite3_column_int64(quarantined_rev_stmt_, 0))};
+}
+
+FileStatus WorldStore::for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT cx, cy, cz, revision, data, reason, time FROM quarantine ORDER BY id", -1, &st,
+                         nullptr) != SQLITE_OK)
+    return error("cannot list quarantined chunks");
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+    QuarantinedChunk q;
+    q.pos = Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)};
+    q.revision = static_cast<std::uint64_t>(sqlite3_column_int64(st, 3));
+    const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 4));
+    const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 4));
+    if (data) q.blob.assign(data, data + size);
+    const auto* reason = reinterpret_cast<const char*>(sqlite3_column_text(st, 5));
+    if (reason) q.reason = reason;
+    q.time_unix_s = sqlite3_column_int64(st, 6);
+    fn(q);
+  }
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot list quarantined chunks");
+  return Ok{};
+}
+
+FileResult<std::int64_t> WorldStore::quarantined_count() {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT count(*) FROM quarantine", -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot count quarantined chunks");
+  std::int64_t n = -1;
+  if (sqlite3_step(st) == SQLITE_ROW) n = sqlite3_column_int64(st, 0);
+  sqlite3_finalize(st);
+  if (n < 0) return error("cannot count quarantined chunks");
+  return n;
 }
 
 FileStatus WorldStore::for_each_chunk(

@@ -3,7 +3,9 @@
 //   - meta: format version, generator kind and parameters, bounds, material
 //     table, epoch;
 //   - chunks: one row per stored 32³ chunk: its coordinates, a revision that
-//     only ever grows, and the voxels as byte RLE + LZ4.
+//     only ever grows, and the voxels as byte RLE + LZ4;
+//   - quarantine: damaged chunk rows moved aside (coordinates, revision, the
+//     blob as it was, the reason, the time), kept until someone looks.
 // Chunks never stored are generated on demand from the metadata (see World).
 // Mips are not stored: they are rebuilt from level 0 on load.
 //
@@ -81,6 +83,15 @@ struct StoredChunk {
   Chunk chunk;
 };
 
+// A chunk row moved aside because its blob did not decode.
+struct QuarantinedChunk {
+  Vec3i pos;
+  std::uint64_t revision = 0;       // the row's revision when it was moved
+  std::string reason;               // why it was moved (the decode error)
+  std::int64_t time_unix_s = 0;     // when it was moved
+  std::vector<std::uint8_t> blob;   // byte for byte as it was stored
+};
+
 struct ChunkWrite {
   Vec3i pos;
   std::uint64_t revision;
@@ -112,6 +123,18 @@ class WorldStore {
   // pre-generate without racing a server's edits).
   FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true);
   FileStatus erase_chunk(Vec3i pos);
+
+  // Quarantine: moves the stored row of pos, blob untouched, into the
+  // quarantine table, in one transaction with deleting it from chunks, so a
+  // later save of the chunk can never overwrite it. Returns the moved row's
+  // revision, or nullopt if pos had no stored row (nothing is moved).
+  FileResult<std::optional<std::uint64_t>> quarantine_chunk(Vec3i pos, const std::string& reason);
+  // The highest revision ever quarantined for pos, or nullopt. A chunk that
+  // is not stored but was quarantined continues its revisions above this.
+  FileResult<std::optional<std::uint64_t>> quarantined_revision(Vec3i pos);
+  // Calls fn for every quarantined row, oldest first.
+  FileStatus for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn);
+  FileResult<std::int64_t> quarantined_count();
   // Calls fn(pos, revision, blob) for every stored chunk, in key order.
   FileStatus for_each_chunk(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn);
   FileResult<std::int64_t> stored_chunk_count();
@@ -127,6 +150,7 @@ class WorldStore {
   WorldStore(std::string dir, sqlite3* db);
   static FileResult<std::unique_ptr<WorldStore>> create_in(const std::string& dir, const WorldMeta& meta);
   FileStatus load_meta();
+  FileStatus ensure_quarantine_table();
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
 
@@ -135,6 +159,7 @@ class WorldStore {
   sqlite3_stmt* load_stmt_ = nullptr;
   sqlite3_stmt* save_stmt_ = nullptr;
   sqlite3_stmt* insert_stmt_ = nullptr;
+  sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
   WorldMeta meta_;
 };
 

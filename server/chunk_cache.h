@@ -4,6 +4,14 @@
 // SQLite connection) or, when never stored, are generated on a worker pool
 // and handed back to the owner strand.
 //
+// Damaged rows: a stored blob that does not decode is moved, in one
+// transaction, to the store's quarantine table and logged with its chunk
+// coordinates; the chunk is then served as generated (Air for worlds without
+// a generator) at the quarantined revision + 1, so revisions only grow and
+// later saves write a fresh row instead of over the damaged one. A row SQLite
+// cannot read at all is neither quarantined nor generated over: the chunk is
+// not served until a later request reads it.
+//
 // Threading: every member runs on the owner strand, except the generation
 // jobs, which touch only the World's thread-safe generate_chunk.
 // Invariant: a chunk is in at most one of loaded / pending.
@@ -55,6 +63,8 @@ class ChunkCache {
   std::size_t loaded_count() const { return revisions_.size(); }
   std::uint64_t generated_count() const { return generated_; }
   std::uint64_t stored_loaded_count() const { return from_store_; }
+  // Damaged rows this cache moved to the store's quarantine table.
+  std::uint64_t quarantined_count() const { return quarantined_; }
 
   // Generation jobs queued on the worker pool at most (bounds owner memory
   // and keeps nearest-first order meaningful).
@@ -70,6 +80,9 @@ class ChunkCache {
   std::unordered_set<Vec3i, Vec3iHash> pending_;
   std::uint64_t generated_ = 0;
   std::uint64_t from_store_ = 0;
+  std::uint64_t quarantined_ = 0;
+  // Chunks whose row could not be read (logged once each until they load).
+  std::unordered_set<Vec3i, Vec3iHash> unreadable_;
 };
 
 }  // namespace terrane

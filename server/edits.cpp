@@ -335,8 +335,23 @@ void Server::apply_edits() {
     writes.push_back(ChunkWrite{cp, rev, c != nullptr ? encode_chunk_blob(*c) : encode_chunk_blob(Chunk())});
   }
   if (!writes.empty()) {
-    if (auto st = world_->store().save_chunks(writes); !st)
-      server_log().error("tick {}: saving {} chunks failed: {}", tick_, writes.size(), st.error().message);
+    if (auto st = world_->store().save_chunks(writes); !st) {
+      // Nothing of this tick may be acknowledged or shown: it is not on
+      // disk. The in-memory world is now ahead of the store, so the server
+      // stops rather than serve state it could lose.
+      server_log().critical("tick {}: saving {} chunks failed: {}; rejecting the tick's edits and stopping", tick_,
+                            writes.size(), st.error().message);
+      for (const Ack& a : acks)
+        if (auto it = peers_.find(a.peer_id); it != peers_.end())
+          it->second.session->send(build_edit_reject(a.edit_id, "storage failure: edit not saved"), SendClass::kControl);
+      counters_.edits_rejected.fetch_add(acks.size(), std::memory_order_relaxed);
+      storage_failed_ = true;
+      storage_failed_flag_ = true;
+      for (auto& [id, peer] : peers_) peer.session->close("server storage failure");
+      stopping_ = true;
+      if (options_.on_fatal) options_.on_fatal();
+      return;
+    }
   }
 
   for (const Ack& a : acks)

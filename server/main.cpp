@@ -4,8 +4,9 @@
 //
 // Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
-// 0 after a clean stop, 1 when the world cannot be opened or the port
-// bound, 2 on bad usage.
+// 0 after a clean stop, 1 when the world cannot be opened, the port bound,
+// or a tick's changes could not be saved (the server then stops itself),
+// 2 on bad usage.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -167,6 +168,7 @@ int run(int argc, char** argv) {
                         nofile.rlim_cur, o.max_clients);
   }
 
+  o.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);
@@ -184,6 +186,10 @@ int run(int argc, char** argv) {
   signals_io.run();
   server_log().info("signal {}: shutting down", caught);
   (*server)->stop();
+  if ((*server)->storage_failed()) {
+    server_log().critical("stopped after a storage failure: the edits of the failed tick were not saved or acknowledged");
+    return 1;
+  }
   return 0;
 }
 

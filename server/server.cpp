@@ -105,8 +105,8 @@ void Server::stop() {
     acceptor_.close(ignored);
     tick_timer_.cancel();
     // Edits received but not yet applied at this point are applied now so
-    // nothing acknowledged-to-be is lost.
-    apply_edits();
+    // nothing acknowledged-to-be is lost (unless the store already failed).
+    if (!storage_failed_) apply_edits();
     for (auto& [id, peer] : peers_) peer.session->close("server shutting down");
     closed.set_value();
   });

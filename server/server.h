@@ -36,6 +36,7 @@
 #include <atomic>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -98,6 +99,9 @@ struct ServerOptions {
   double outbound_bytes_per_second = 32 << 20;  // streaming; updates are never held back
   // Undo and redo history kept per client, in bytes (oldest steps go first).
   std::size_t history_bytes_per_client = 4u << 20;
+  // Called (on the owner strand) when the server cannot go on, e.g. the
+  // store refused a tick's changes; the owner of the Server should stop it.
+  std::function<void()> on_fatal;
   // Test-only fault: silently skip sending this many UpdateBatch frames
   // (the client's revision still advances on the server's books).
   int fault_drop_updates = 0;
@@ -150,6 +154,8 @@ class Server {
   const std::string& address() const { return options_.bind_address; }
   const ServerCounters& counters() const { return counters_; }
   const ServerOptions& options() const { return options_; }
+  // True once a tick's changes could not be saved (the server stopped serving).
+  bool storage_failed() const { return storage_failed_flag_.load(); }
 
   // Runs fn on the owner strand with the authoritative cache and waits for
   // it (tests, tools). Must not be called from an io thread.
@@ -304,6 +310,8 @@ class Server {
   std::chrono::steady_clock::time_point stats_at_ = std::chrono::steady_clock::now();
   std::uint64_t stats_edits_ = 0, stats_sent_ = 0, stats_received_ = 0;
   bool stopping_ = false;
+  bool storage_failed_ = false;
+  std::atomic<bool> storage_failed_flag_{false};
   int faults_left_ = 0;
   int corruptions_left_ = 0;
   Vec3f spawn_;

@@ -4,6 +4,8 @@
 //   terrane-world import   --world DIR FILE.vxraw[.gz]
 //   terrane-world export   --world DIR --box x0,y0,z0,x1,y1,z1 FILE.vxraw[.gz]
 //   terrane-world stats    --world DIR [--box ...] [--json]
+//   terrane-world check    --world DIR [--quarantine]
+//   terrane-world backup   --world DIR --to DEST
 //
 // Exit status: 0 on success, 1 on a failure of the work (I/O, damaged data),
 // 2 on bad usage. Every error names what and where.
@@ -13,6 +15,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <ctime>
 #include <deque>
 #include <mutex>
 #include <string>
@@ -37,7 +40,7 @@ constexpr const char* kUsage =
     "  import     write a VXRAW box (plain or .gz) into a world, creating an empty world if needed\n"
     "  export     write a box of a world to a VXRAW file (.gz: gzip-compressed)\n"
     "  stats      the storage results table for a box: voxels, codecs, memory\n"
-    "  check      decode every stored chunk and report problems (exit 1 on any)\n"
+    "  check      decode every stored chunk, list quarantined ones (exit 1 on any of either)\n"
     "  backup     copy a world, consistently, even while a server is writing to it\n"
     "  enhance    voxel detail enhancement of a VXRAW box (subdivision or resampling, lighting)\n"
     "\n"
@@ -79,10 +82,16 @@ constexpr const char* kStatsHelp =
     "--json prints one JSON object instead of the table.\n";
 
 constexpr const char* kCheckHelp =
-    "usage: terrane-world check --world DIR\n"
+    "usage: terrane-world check --world DIR [--quarantine]\n"
     "\n"
     "Reads the metadata and decodes every stored chunk. Each damaged chunk is reported with\n"
-    "its chunk coordinates and what is wrong. Exit status 1 if anything is damaged.\n";
+    "its chunk coordinates and what is wrong. Chunks already in the quarantine table (damaged\n"
+    "rows a server or an earlier check moved aside) are listed with their coordinates, revision,\n"
+    "time and reason. Exit status 1 if any chunk is damaged or quarantined.\n"
+    "\n"
+    "  --quarantine   move each damaged row to the quarantine table (one transaction per chunk;\n"
+    "                 its blob is kept byte for byte) so a server serves the chunk as generated\n"
+    "                 instead of failing to read it\n";
 
 constexpr const char* kBackupHelp =
     "usage: terrane-world backup --world DIR --to DEST\n"
@@ -176,10 +185,17 @@ int cmd_generate(int argc, char** argv) {
   const Region clipped = world->meta().bounds.clamp(box);
   if (clipped.empty()) return failure("--box lies entirely outside the world's bounds");
   std::vector<Vec3i> todo;
+  // Revision to store each with: 0, or above a quarantined row's so that
+  // revisions only grow (common/WORLD_FORMAT.md, quarantine).
+  std::vector<std::uint64_t> todo_revision;
   for (Vec3i c : chunks_in(clipped)) {
     auto stored = world->store().load_chunk(c);
     if (!stored) return failure(stored.error().message);
-    if (!stored->has_value()) todo.push_back(c);
+    if (stored->has_value()) continue;
+    auto floor = world->store().quarantined_revision(c);
+    if (!floor) return failure(floor.error().message);
+    todo.push_back(c);
+    todo_revision.push_back(floor->has_value() ? **floor + 1 : 0);
   }
 
   // Workers generate and encode; this thread stores in batches. The mutex
@@ -196,7 +212,7 @@ int cmd_generate(int argc, char** argv) {
       const std::size_t i = next.fetch_add(1);
       if (i >= todo.size()) break;
       world->generate_chunk_box(todo[i], box32);
-      ChunkWrite w{todo[i], 0, {}};
+      ChunkWrite w{todo[i], todo_revision[i], {}};
       bool empty = true;
       for (const Voxel v : box32.voxels()) empty &= v.material == kAir;
       if (!empty) w.blob = encode_chunk_blob(box32);
@@ -392,28 +408,60 @@ int cmd_stats(int argc, char** argv) {
 }
 
 int cmd_check(int argc, char** argv) {
-  CommandLine cl({"world"}, {"help"});
+  CommandLine cl({"world"}, {"help", "quarantine"});
   if (auto e = cl.parse(argc, argv, 2); !e.empty()) return usage_error(e, kCheckHelp);
   if (cl.flag("help")) return std::printf("%s", kCheckHelp), 0;
   if (!cl.has("world")) return usage_error("--world DIR is required", kCheckHelp);
   if (!cl.positional().empty()) return usage_error("unexpected argument '" + cl.positional()[0] + "'", kCheckHelp);
   auto world = World::open(cl.get("world"));
   if (!world) return failure(world.error().message);
-  auto total = (*world)->store().stored_chunk_count();
+  WorldStore& store = (*world)->store();
+  auto total = store.stored_chunk_count();
   if (!total) return failure(total.error().message);
   Progress progress("check", static_cast<std::uint64_t>(*total));
-  std::uint64_t done = 0, damaged = 0;
-  auto s = (*world)->store().for_each_chunk([&](Vec3i pos, std::uint64_t, std::span<const std::uint8_t> blob) {
+  std::uint64_t done = 0;
+  std::vector<std::pair<Vec3i, std::string>> damaged;
+  auto s = store.for_each_chunk([&](Vec3i pos, std::uint64_t, std::span<const std::uint8_t> blob) {
     if (auto chunk = decode_chunk_blob(blob); !chunk) {
-      ++damaged;
-      std::fprintf(stderr, "chunk (%d, %d, %d): %s\n", pos.x, pos.y, pos.z, chunk.error().describe().c_str());
+      damaged.emplace_back(pos, chunk.error().describe());
+      std::fprintf(stderr, "chunk (%d, %d, %d): damaged: %s\n", pos.x, pos.y, pos.z, chunk.error().describe().c_str());
     }
     progress.update(++done);
   });
   if (!s) return failure(s.error().message);
-  std::printf("checked %llu chunks of world %s: %llu damaged\n", static_cast<unsigned long long>(done),
-              cl.get("world").c_str(), static_cast<unsigned long long>(damaged));
-  return damaged ? 1 : 0;
+  std::uint64_t moved = 0;
+  if (cl.flag("quarantine")) {
+    for (const auto& [pos, reason] : damaged) {
+      auto m = store.quarantine_chunk(pos, reason);
+      if (!m) return failure(m.error().message);
+      if (m->has_value()) ++moved;
+    }
+  }
+  std::uint64_t quarantined = 0;
+  s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
+    ++quarantined;
+    char when[32] = "?";
+    const std::time_t t = static_cast<std::time_t>(q.time_unix_s);
+    if (std::tm tm{}; gmtime_r(&t, &tm) != nullptr) std::strftime(when, sizeof when, "%Y-%m-%d %H:%M:%S UTC", &tm);
+    std::fprintf(stderr, "chunk (%d, %d, %d): quarantined at %s, revision %llu, %zu bytes: %s\n", q.pos.x, q.pos.y,
+                 q.pos.z, when, static_cast<unsigned long long>(q.revision), q.blob.size(), q.reason.c_str());
+  });
+  if (!s) return failure(s.error().message);
+  std::printf("checked %llu chunks of world %s: %zu damaged", static_cast<unsigned long long>(done),
+              cl.get("world").c_str(), damaged.size());
+  if (cl.flag("quarantine")) std::printf(" (%llu moved to quarantine)", static_cast<unsigned long long>(moved));
+  std::printf(", %llu quarantined\n", static_cast<unsigned long long>(quarantined));
+  if (quarantined > 0)
+    std::fprintf(stderr,
+                 "terrane-world: world %s has %llu quarantined chunk rows: damaged data set aside in its quarantine "
+                 "table (common/WORLD_FORMAT.md); the chunks are served as generated until restored\n",
+                 cl.get("world").c_str(), static_cast<unsigned long long>(quarantined));
+  if (!damaged.empty() && !cl.flag("quarantine"))
+    std::fprintf(stderr,
+                 "terrane-world: world %s has %zu damaged chunks; 'check --quarantine' moves them aside (a server "
+                 "does so when it loads them)\n",
+                 cl.get("world").c_str(), damaged.size());
+  return damaged.empty() && quarantined == 0 ? 0 : 1;
 }
 
 int cmd_backup(int argc, char** argv) {

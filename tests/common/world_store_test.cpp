@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <random>
 
+#include <sqlite3.h>
 #include <unistd.h>
 
 #include "common/world.h"
@@ -118,6 +119,103 @@ TEST_F(WorldStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
   ASSERT_FALSE(loaded.ok());
   EXPECT_NE(loaded.error().message.find("(4, -1, 7)"), std::string::npos) << loaded.error().message;
   EXPECT_TRUE(loaded.error().decode.has_value());
+}
+
+TEST_F(WorldStoreTest, QuarantineMovesTheRowAsideAndSavesNeverTouchIt) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  WorldStore& s = **store;
+  std::vector<std::uint8_t> bad = encode_chunk_blob(sample_chunk(5));
+  bad.resize(bad.size() / 3);
+  const Chunk good = sample_chunk(6);
+  std::vector<ChunkWrite> writes = {{{2, 0, -3}, 7, bad}, {{0, 0, 0}, 4, encode_chunk_blob(good)}};
+  ASSERT_TRUE(s.save_chunks(writes).ok());
+  ASSERT_FALSE(s.load_chunk({2, 0, -3}).ok());
+
+  auto moved = s.quarantine_chunk({2, 0, -3}, "truncated blob");
+  ASSERT_TRUE(moved.ok()) << moved.error().message;
+  ASSERT_TRUE(moved->has_value());
+  EXPECT_EQ(**moved, 7u);
+  // Gone from chunks (the other chunk untouched), kept byte for byte aside.
+  auto after = s.load_chunk({2, 0, -3});
+  ASSERT_TRUE(after.ok());
+  EXPECT_FALSE(after->has_value());
+  EXPECT_EQ(*s.stored_chunk_count(), 1);
+  EXPECT_EQ(*s.quarantined_count(), 1);
+  std::vector<QuarantinedChunk> q;
+  ASSERT_TRUE(s.for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
+  ASSERT_EQ(q.size(), 1u);
+  EXPECT_EQ(q[0].pos, (Vec3i{2, 0, -3}));
+  EXPECT_EQ(q[0].revision, 7u);
+  EXPECT_EQ(q[0].reason, "truncated blob");
+  EXPECT_EQ(q[0].blob, bad);
+  EXPECT_GT(q[0].time_unix_s, 1700000000);  // a real clock reading (2023 or later)
+
+  // Quarantining a chunk with no row moves nothing.
+  auto none = s.quarantine_chunk({9, 9, 9}, "nothing there");
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  EXPECT_EQ(*s.quarantined_count(), 1);
+
+  // A later save of the chunk writes a fresh row; the quarantined blob stays.
+  std::vector<ChunkWrite> again = {{{2, 0, -3}, 9, encode_chunk_blob(good)}};
+  ASSERT_TRUE(s.save_chunks(again).ok());
+  q.clear();
+  ASSERT_TRUE(s.for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
+  ASSERT_EQ(q.size(), 1u);
+  EXPECT_EQ(q[0].blob, bad);
+  EXPECT_EQ(*s.quarantined_revision({2, 0, -3}), std::optional<std::uint64_t>{7});
+  EXPECT_EQ(*s.quarantined_revision({0, 0, 0}), std::nullopt);
+}
+
+TEST_F(WorldStoreTest, QuarantinedChunkLoadsGeneratedWithItsRevisionAboveTheQuarantinedOne) {
+  {
+    auto world = World::create(dir_, default_world_meta());
+    ASSERT_TRUE(world.ok());
+    std::vector<ChunkWrite> writes = {{{1, 0, 1}, 12, {1, 1, 0xff, 0x00, 0x13}}};
+    ASSERT_TRUE((*world)->store().save_chunks(writes).ok());
+    ASSERT_TRUE((*world)->store().quarantine_chunk({1, 0, 1}, "bad").ok());
+  }
+  // Reopened: the quarantine survives and the chunk's revisions continue.
+  auto world = World::open(dir_);
+  ASSERT_TRUE(world.ok());
+  auto c = (*world)->load_chunk({1, 0, 1});
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->revision, 13u);
+  expect_same(c->chunk, (*world)->generate_chunk({1, 0, 1}));
+  Box box({4, 4, 4});
+  ASSERT_TRUE((*world)->write_box({32, 0, 32}, box).ok());
+  auto stored = (*world)->store().load_chunk({1, 0, 1});
+  ASSERT_TRUE(stored.ok() && stored->has_value());
+  EXPECT_EQ((*stored)->revision, 14u);
+  EXPECT_EQ(*(*world)->store().quarantined_count(), 1);
+}
+
+TEST_F(WorldStoreTest, WorldsWithoutTheQuarantineTableGainItOnOpen) {
+  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((fs::path(dir_) / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(db, "DROP TABLE quarantine", nullptr, nullptr, nullptr), SQLITE_OK);
+    sqlite3_close(db);
+  }
+  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  EXPECT_EQ(*(*store)->quarantined_count(), 0);
+}
+
+TEST_F(WorldStoreTest, ReopenedStoreKeepsWalAndSynchronousFull) {
+  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(store.ok());
+  // The settings the durability promise rests on, on the connection a server
+  // uses (World::open opens the store this way).
+  EXPECT_EQ(*(*store)->pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
+  auto world = World::open(dir_);
+  ASSERT_TRUE(world.ok());
+  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");
 }
 
 TEST(ChunkBlob, RejectsEveryTruncationAndBadHeader) {

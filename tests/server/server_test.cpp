@@ -9,10 +9,16 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <sqlite3.h>
+#include <spdlog/sinks/ostream_sink.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
+#include <sstream>
+#include <tuple>
 #include <numbers>
 #include <map>
 #include <optional>
@@ -20,6 +26,7 @@
 #include <thread>
 
 #include "server/edits.h"
+#include "server/log.h"
 #include "tests/support/server_fixture.h"
 
 namespace terrane {
@@ -357,6 +364,235 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   ASSERT_EQ(held.count(home), 1u);
   EXPECT_EQ(held.at(home).level, 0);
   EXPECT_EQ(held.at(home).revision, 1u);
+}
+
+// --- durability ----------------------------------------------------------------
+
+// Moves the peer to pos and reads the stream until every chunk of want has
+// arrived at full resolution (Full or Empty); returns their revisions, or
+// fewer entries if the stream ends first.
+std::map<std::tuple<int, int, int>, std::uint64_t> full_revisions(RawPeer& p, Vec3f pos, const std::vector<Vec3i>& want) {
+  std::map<std::tuple<int, int, int>, std::uint64_t> got;
+  if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return got;
+  StreamDecodeScratch scratch;
+  while (got.size() < want.size()) {
+    auto f = p.next_of(wire::Body::StreamBatch);
+    if (!f) break;
+    auto records = parse_stream_batch(*msg(*f).body_as_StreamBatch());
+    if (!records) break;
+    const auto st = decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+      const bool full = r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty;
+      if (full && std::find(want.begin(), want.end(), r.chunk_pos) != want.end())
+        got[{r.chunk_pos.x, r.chunk_pos.y, r.chunk_pos.z}] = r.revision;
+      return Ok{};
+    });
+    if (!st) break;
+  }
+  return got;
+}
+
+std::tuple<int, int, int> key(Vec3i v) { return {v.x, v.y, v.z}; }
+
+// Runs one SQL statement on the world's database behind the store's back.
+void run_sql(const fs::path& world_dir, const std::string& sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((world_dir / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
+  char* err = nullptr;
+  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err);
+  EXPECT_EQ(rc, SQLITE_OK) << sql << ": " << (err ? err : "?");
+  sqlite3_free(err);
+  sqlite3_close(db);
+}
+
+TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
+  const Vec3i bad_cp = chunk_of(Vec3i{1002, 12, 1002});
+  const Vec3i good_cp = bad_cp + Vec3i{0, 0, -1};
+  Chunk generated_bad;
+  {
+    auto world = World::create(dir_.string(), default_world_meta());
+    ASSERT_TRUE(world.ok()) << world.error().message;
+    generated_bad = (*world)->generate_chunk(bad_cp);
+    std::vector<ChunkWrite> writes;
+    for (const Vec3i cp : {bad_cp, good_cp}) {
+      // Stored content differs from the generator's: a brick corner.
+      Chunk c = (*world)->generate_chunk(cp);
+      c.modify(Region{{0, 0, 0}, {2, 2, 2}}, [](Vec3i, Voxel) { return solid(materials::kBrick); });
+      writes.push_back(ChunkWrite{cp, 5, encode_chunk_blob(c)});
+    }
+    ASSERT_TRUE((*world)->store().save_chunks(writes).ok());
+  }
+  // Damage one blob as a disk fault would: cut it in half.
+  const std::string where = " WHERE cx = " + std::to_string(bad_cp.x) + " AND cy = " + std::to_string(bad_cp.y) +
+                            " AND cz = " + std::to_string(bad_cp.z);
+  run_sql(dir_, "UPDATE chunks SET data = substr(data, 1, length(data) / 2)" + where);
+  std::vector<std::uint8_t> bad_blob;
+  {
+    auto store = WorldStore::open(dir_.string());
+    ASSERT_TRUE(store.ok());
+    ASSERT_TRUE((*store)
+                    ->for_each_chunk([&](Vec3i cp, std::uint64_t, std::span<const std::uint8_t> blob) {
+                      if (cp == bad_cp) bad_blob.assign(blob.begin(), blob.end());
+                    })
+                    .ok());
+    ASSERT_FALSE(bad_blob.empty());
+    ASSERT_FALSE(decode_chunk_blob(bad_blob).ok());
+  }
+
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  server_log().sinks().push_back(sink);
+  start();
+  auto p = join("viewer");
+  const auto revs = full_revisions(*p, {1002.0f, 12.0f, 1002.0f}, {bad_cp, good_cp});
+  ASSERT_EQ(revs.size(), 2u) << "both chunks are served";
+  EXPECT_EQ(revs.at(key(good_cp)), 5u);
+  EXPECT_EQ(revs.at(key(bad_cp)), 6u) << "generated, above the quarantined revision";
+  server_->inspect([&](const ChunkCache& c) {
+    EXPECT_EQ(c.grid().get(chunk_origin(good_cp)), solid(materials::kBrick));
+    EXPECT_EQ(c.grid().get(chunk_origin(bad_cp)), generated_bad.get({0, 0, 0}));
+    EXPECT_EQ(c.quarantined_count(), 1u);
+  });
+  // Editing the quarantined chunk writes a fresh row; the damaged one stays aside.
+  EditRequestMsg e;
+  e.edit_id = 3;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1000, 10, 1000}, {1002, 12, 1002}};
+  e.material = materials::kSnow;
+  e.occupancy = 200;
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  ASSERT_TRUE(p->next_of(wire::Body::EditAck).has_value());
+  p.reset();
+  server_->stop();
+  server_.reset();
+  std::erase(server_log().sinks(), sink);
+
+  const std::string logged = log.str();
+  const std::string coords = "chunk (" + std::to_string(bad_cp.x) + "," + std::to_string(bad_cp.y) + "," +
+                             std::to_string(bad_cp.z) + ")";
+  EXPECT_NE(logged.find(coords), std::string::npos) << logged;
+  EXPECT_NE(logged.find("quarantine"), std::string::npos) << logged;
+  EXPECT_NE(logged.find("[error]"), std::string::npos) << logged;
+
+  auto store = WorldStore::open(dir_.string());
+  ASSERT_TRUE(store.ok());
+  std::vector<QuarantinedChunk> q;
+  ASSERT_TRUE((*store)->for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
+  ASSERT_EQ(q.size(), 1u);
+  EXPECT_EQ(q[0].pos, bad_cp);
+  EXPECT_EQ(q[0].revision, 5u);
+  EXPECT_EQ(q[0].blob, bad_blob);
+  EXPECT_FALSE(q[0].reason.empty());
+  auto now = (*store)->load_chunk(bad_cp);
+  ASSERT_TRUE(now.ok()) << now.error().message;
+  ASSERT_TRUE(now->has_value());
+  EXPECT_EQ((*now)->revision, 7u);
+  EXPECT_EQ((*now)->chunk.get(local_of(Vec3i{1001, 11, 1001})), make_voxel(materials::kSnow, 200));
+}
+
+TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  const Vec3f pos{1002.0f, 12.0f, 1002.0f};
+  auto join_epoch = [&](RawPeer& p) -> std::uint64_t {
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "restarts", ""})));
+    auto w = p.next_of(wire::Body::Welcome);
+    if (!w) return 0;
+    auto parsed = parse_welcome(*msg(*w).body_as_Welcome());
+    return parsed ? parsed->server_epoch : 0;
+  };
+  std::uint64_t epoch = 0, acked_revision = 0;
+  for (int run = 0; run < 3; ++run) {
+    start();
+    RawPeer p(server_->port());
+    ASSERT_TRUE(p.connected());
+    const std::uint64_t e = join_epoch(p);
+    if (run > 0) {
+      EXPECT_EQ(e, epoch + 1) << "run " << run;
+    }
+    epoch = e;
+    const auto revs = full_revisions(p, pos, {cp});
+    ASSERT_EQ(revs.size(), 1u);
+    // What the last acknowledged edit's update said, at least.
+    EXPECT_GE(revs.at(key(cp)), acked_revision) << "run " << run;
+    EditRequestMsg edit;
+    edit.edit_id = static_cast<std::uint32_t>(run + 1);
+    edit.kind = EditKind::kFillBox;
+    edit.box = {{1000 + run, 10, 1000}, {1001 + run, 11, 1001}};
+    edit.material = materials::kBrick;
+    edit.occupancy = static_cast<std::uint8_t>(100 + run);
+    ASSERT_TRUE(p.send(build_edit_request(edit)));
+    ASSERT_TRUE(p.next_of(wire::Body::EditAck).has_value());
+    auto update = p.next_of(wire::Body::UpdateBatch);
+    ASSERT_TRUE(update.has_value());
+    auto batch = parse_update_batch(*msg(*update).body_as_UpdateBatch());
+    ASSERT_TRUE(batch.ok());
+    ASSERT_EQ(batch->revisions.size(), 1u);
+    EXPECT_EQ(batch->revisions[0].chunk_pos, cp);
+    EXPECT_GT(batch->revisions[0].revision, acked_revision);
+    acked_revision = batch->revisions[0].revision;
+    p.close();
+    server_->stop();
+    server_.reset();
+  }
+  // On disk: the epoch of the last start and the last acknowledged revision.
+  auto world = World::open(dir_.string());
+  ASSERT_TRUE(world.ok());
+  EXPECT_EQ((*world)->meta().epoch, epoch);
+  auto stored = (*world)->load_chunk(cp);
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->revision, acked_revision);
+  for (int run = 0; run < 3; ++run)
+    EXPECT_EQ(stored->chunk.get(local_of(Vec3i{1000 + run, 10, 1000})),
+              make_voxel(materials::kBrick, static_cast<std::uint8_t>(100 + run)));
+  // The settings the promise rests on, on the store's own connection.
+  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
+  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");  // FULL
+}
+
+TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
+  bool fatal = false;
+  ServerOptions o;
+  o.on_fatal = [&] { fatal = true; };
+  start(o);
+  auto p = join("editor");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  // Another connection holds the write lock past the store's busy timeout.
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  EditRequestMsg e;
+  e.edit_id = 3;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  bool acked = false, batch = false;
+  std::string rejected, reason;
+  while (auto f = p->next()) {
+    const wire::Message& m = msg(*f);
+    if (m.body_type() == wire::Body::EditAck) acked = true;
+    if (m.body_type() == wire::Body::UpdateBatch) batch = true;
+    if (m.body_type() == wire::Body::EditReject) rejected = parse_edit_reject(*m.body_as_EditReject())->reason;
+    if (m.body_type() == wire::Body::Disconnect) {
+      reason = *parse_disconnect(*m.body_as_Disconnect());
+      break;
+    }
+  }
+  sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+  sqlite3_close(db);
+  EXPECT_FALSE(acked);
+  EXPECT_FALSE(batch);
+  EXPECT_NE(rejected.find("storage failure"), std::string::npos) << rejected;
+  EXPECT_EQ(reason, "server storage failure");
+  EXPECT_TRUE(fatal);
+  EXPECT_TRUE(server_->storage_failed());
+  server_->stop();
+  auto world = World::open(dir_.string());
+  ASSERT_TRUE(world.ok());
+  auto stored = (*world)->load_chunk(cp);
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->revision, 0u);  // nothing of the failed tick reached the store
 }
 
 // --- edit application ----------------------------------------------------------

@@ -161,6 +161,58 @@ TEST_F(WorldToolTest, CheckFindsDamagedChunkAndBackupCopiesTheWorld) {
   EXPECT_NE(damaged.output.find("1 damaged"), std::string::npos) << damaged.output;
 }
 
+TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnesAside) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
+  const std::vector<std::uint8_t> bad_blob = {1, 1, 0x10, 0x20};
+  {
+    auto store = WorldStore::open(w);
+    ASSERT_TRUE(store.ok());
+    std::vector<ChunkWrite> bad = {{{1, 0, 1}, 4, bad_blob}};
+    ASSERT_TRUE((*store)->save_chunks(bad).ok());
+  }
+  // Damaged, not yet moved: exit 1, named, and how to move it aside.
+  auto damaged = run("check --world " + w);
+  EXPECT_EQ(damaged.exit_code, 1) << damaged.output;
+  EXPECT_NE(damaged.output.find("chunk (1, 0, 1): damaged"), std::string::npos) << damaged.output;
+  EXPECT_NE(damaged.output.find("1 damaged, 0 quarantined"), std::string::npos) << damaged.output;
+  EXPECT_NE(damaged.output.find("--quarantine"), std::string::npos) << damaged.output;
+
+  auto moved = run("check --world " + w + " --quarantine");
+  EXPECT_EQ(moved.exit_code, 1) << moved.output;
+  EXPECT_NE(moved.output.find("1 damaged (1 moved to quarantine), 1 quarantined"), std::string::npos) << moved.output;
+
+  // Afterwards nothing fails to decode, but the quarantine is still reported
+  // (coordinates, revision, reason) and still fails the check.
+  auto after = run("check --world " + w);
+  EXPECT_EQ(after.exit_code, 1) << after.output;
+  EXPECT_NE(after.output.find("0 damaged, 1 quarantined"), std::string::npos) << after.output;
+  EXPECT_NE(after.output.find("chunk (1, 0, 1): quarantined at "), std::string::npos) << after.output;
+  EXPECT_NE(after.output.find("revision 4"), std::string::npos) << after.output;
+  EXPECT_NE(after.output.find("quarantined chunk rows"), std::string::npos) << after.output;
+  {
+    auto store = WorldStore::open(w);
+    ASSERT_TRUE(store.ok());
+    std::vector<QuarantinedChunk> q;
+    ASSERT_TRUE((*store)->for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
+    ASSERT_EQ(q.size(), 1u);
+    EXPECT_EQ(q[0].blob, bad_blob);
+  }
+  // The world reads again: the chunk comes from the generator.
+  auto e = run("export --world " + w + " --box 0,0,0,64,64,64 " + path("a.vxraw"));
+  EXPECT_EQ(e.exit_code, 0) << e.output;
+  // Pre-generating it again stores it above the quarantined revision.
+  auto g = run("generate --world " + w + " --box 0,0,0,64,64,64");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  auto store = WorldStore::open(w);
+  ASSERT_TRUE(store.ok());
+  auto regenerated = (*store)->load_chunk({1, 0, 1});
+  ASSERT_TRUE(regenerated.ok()) << regenerated.error().message;
+  ASSERT_TRUE(regenerated->has_value()) << "ground at y 0..31: the chunk is stored";
+  EXPECT_EQ((*regenerated)->revision, 5u);
+  EXPECT_EQ(*(*store)->quarantined_count(), 1);
+}
+
 TEST_F(WorldToolTest, EnhanceSubdividesAndResamplesAVxrawBox) {
   const std::string w = path("w");
   ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,32,64,32").exit_code, 0);

@@ -82,6 +82,19 @@ class ServerProcess {
     exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return exit_code_;
   }
+  // SIGKILL: a crash, nothing runs on the way out. Waits for the process and
+  // its output; returns true if the signal is what ended it.
+  bool kill_hard() {
+    if (pid_ <= 0) return false;
+    ::kill(pid_, SIGKILL);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = -1;
+    if (reader_.joinable()) reader_.join();
+    close(fd_);
+    exit_code_ = -1;
+    return WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
+  }
   std::string output() {
     std::lock_guard lock(mutex_);
     return output_;
