@@ -5,8 +5,8 @@
 
 namespace terrane::view {
 
-MeshScheduler::MeshScheduler(SourceAccess access, LodParams params, MesherOptions mesher)
-    : access_(std::move(access)), mesher_(mesher), params_(params) {
+MeshScheduler::MeshScheduler(SourceAccess access, LodParams params, MesherOptions mesher, EnhanceViewParams enhance)
+    : access_(std::move(access)), mesher_(mesher), enhance_(enhance), params_(params) {
   thread_ = std::thread([this] { run(); });
 }
 
@@ -89,7 +89,7 @@ void MeshScheduler::replan(std::unique_lock<std::mutex>& lock) {
       kept.emplace(keys[i], it->second);
       continue;
     }
-    jobs_.push_back(Job{keys[i], plans[i].sample_level, plans[i].signature});
+    jobs_.push_back(Job{keys[i], plans[i].sample_level, plans[i].signature, plans[i].enhanced});
   }
   std::reverse(jobs_.begin(), jobs_.end());
   meshed_ = std::move(kept);
@@ -112,13 +112,20 @@ void MeshScheduler::run() {
     lock.unlock();
     const auto t0 = std::chrono::steady_clock::now();
     SampleGrid samples;
-    access_([&](const VoxelSource& source) { samples = sample_render_chunk(source, job.key, job.sample_level); });
-    MeshResult r{job.key, job.signature, job.sample_level, {}};
+    if (job.enhanced) {
+      EnhanceInput input;
+      access_([&](const VoxelSource& source) { input = read_enhance_input(source, job.key, enhance_); });
+      samples = enhance_samples(input, job.key, enhance_);
+    } else {
+      access_([&](const VoxelSource& source) { samples = sample_render_chunk(source, job.key, job.sample_level); });
+    }
+    MeshResult r{job.key, job.signature, job.sample_level, job.enhanced, {}};
     mesh_render_samples(samples, r.mesh, mesher_);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     lock.lock();
     busy_ = false;
     ++stats_.chunks_meshed;
+    stats_.enhanced_chunks += job.enhanced ? 1 : 0;
     stats_.triangles += r.mesh.triangle_count();
     stats_.mesh_seconds += secs;
     meshed_[job.key] = job.signature;

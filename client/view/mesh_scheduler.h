@@ -25,6 +25,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "client/view/enhanced_chunk.h"
 #include "client/view/render_chunk.h"
 
 namespace terrane::view {
@@ -33,6 +34,7 @@ struct MeshResult {
   NodeKey key;
   std::uint64_t signature = 0;
   int sample_level = 0;
+  bool enhanced = false;
   Mesh mesh;
 };
 
@@ -47,13 +49,14 @@ struct MeshSchedulerStats {
   std::uint64_t triangles = 0;   // of the meshes produced
   double mesh_seconds = 0;       // sampling + meshing
   std::uint64_t plans = 0;
+  std::uint64_t enhanced_chunks = 0;  // of chunks_meshed
 };
 
 class MeshScheduler {
  public:
   using SourceAccess = std::function<void(const std::function<void(const VoxelSource&)>&)>;
 
-  MeshScheduler(SourceAccess access, LodParams params, MesherOptions mesher = {});
+  MeshScheduler(SourceAccess access, LodParams params, MesherOptions mesher = {}, EnhanceViewParams enhance = {});
   ~MeshScheduler();
   MeshScheduler(const MeshScheduler&) = delete;
   MeshScheduler& operator=(const MeshScheduler&) = delete;
@@ -76,6 +79,7 @@ class MeshScheduler {
 
   SourceAccess access_;
   MesherOptions mesher_;
+  EnhanceViewParams enhance_;
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;
@@ -89,6 +93,7 @@ class MeshScheduler {
     NodeKey key;
     int sample_level;
     std::uint64_t signature;
+    bool enhanced;
   };
   std::vector<Job> jobs_;      // pending, nearest last (popped from the back)
   std::vector<MeshResult> results_;

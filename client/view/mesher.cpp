@@ -61,11 +61,14 @@ void mesh_samples(const SampleGrid& grid, Mesh& out, const MesherOptions& option
   };
   std::vector<float> occ(static_cast<std::size_t>(px) * static_cast<std::size_t>(py) * static_cast<std::size_t>(pz), 0.0f);
   std::vector<Material> mat(occ.size(), kAir);
+  const bool lit = !grid.light.empty();
+  std::vector<std::uint8_t> light(lit ? occ.size() : 0, 255);
   for (int z = 0; z < d.z; ++z)
     for (int y = 0; y < d.y; ++y)
       for (int x = 0; x < d.x; ++x) {
         occ[pidx(x + 1, y + 1, z + 1)] = grid.occupancy[grid.index(x, y, z)];
         mat[pidx(x + 1, y + 1, z + 1)] = grid.material[grid.index(x, y, z)];
+        if (lit) light[pidx(x + 1, y + 1, z + 1)] = grid.light[grid.index(x, y, z)];
       }
 
   // Cells: between padded samples c and c + 1, c in [0, p - 1): a cell's
@@ -139,7 +142,16 @@ void mesh_samples(const SampleGrid& grid, Mesh& out, const MesherOptions& option
           vert.normal[1] = -gy / len;
           vert.normal[2] = -gz / len;
         }
-        const float tint = 1.0f + (unit_hash(h, 24) - 0.5f) * 2.0f * kColourNoise;
+        float tint = 1.0f + (unit_hash(h, 24) - 0.5f) * 2.0f * kColourNoise;
+        if (lit) {
+          // The brightest solid corner: the light of the surface fragment
+          // the vertex shows (buried corners carry 0).
+          std::uint8_t l = 0;
+          for (int i = 0; i < 8; ++i)
+            if ((mask >> i) & 1) l = std::max(l, light[pidx(x + kCorner[i][0], y + kCorner[i][1], z + kCorner[i][2])]);
+          // Only diagonal contact with Air: no lit fragment, half light.
+          tint *= static_cast<float>(l == 0 ? 128 : l) / 255.0f;
+        }
         vert.rgba[0] = to_byte(static_cast<float>(style.r) * tint);
         vert.rgba[1] = to_byte(static_cast<float>(style.g) * tint);
         vert.rgba[2] = to_byte(static_cast<float>(style.b) * tint);

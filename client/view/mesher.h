@@ -32,6 +32,10 @@ struct SampleGrid {
   float spacing = 1;   // world units between neighbouring samples
   std::vector<float> occupancy;       // [0, 1]; solid when >= 0.5
   std::vector<Material> material;     // material of each sample (Air where empty)
+  // Optional light per sample (255 = unshaded); empty: none. A vertex's
+  // colour is scaled by the brightest light among its cell's solid samples
+  // (so buried samples may carry 0).
+  std::vector<std::uint8_t> light;
 
   SampleGrid() = default;
   SampleGrid(Vec3i d, Vec3f o, float s);

@@ -106,7 +106,9 @@ ChunkPlan plan_render_chunk(const VoxelSource& source, const NodeKey& key, const
     h = mix(h, static_cast<std::uint64_t>(level + 1));
     h = mix(h, source.revision(cp));
   });
-  plan.signature = mix(h, static_cast<std::uint64_t>(plan.sample_level));
+  h = mix(h, static_cast<std::uint64_t>(plan.sample_level));
+  plan.enhanced = params.enhance && plan.sample_level == 0;
+  plan.signature = mix(h, plan.enhanced ? 1 : 0);
   return plan;
 }
 

@@ -78,6 +78,9 @@ struct LodParams {
   std::int32_t min_y = -128, max_y = 256;  // world vertical bounds
   // Never sample finer than this level (1: mips only, ignoring full data).
   int min_sample_level = 0;
+  // Detail enhancement and snowflake lighting for render chunks sampled at
+  // full resolution (client/view/enhanced_chunk.h).
+  bool enhance = false;
 };
 
 // Distance from p to the nearest point of a region (0 inside).
@@ -95,6 +98,7 @@ struct ChunkPlan {
   int sample_level = 0;
   std::uint64_t signature = 0;
   bool any_known = false;
+  bool enhanced = false;  // meshed with detail enhancement (LodParams::enhance at level 0)
 };
 ChunkPlan plan_render_chunk(const VoxelSource& source, const NodeKey& key, const LodParams& params);
 

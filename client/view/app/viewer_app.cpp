@@ -36,6 +36,9 @@ Renders a Terrane world streamed from a terrane-server.
   --timeout S              screenshot: give up after S seconds (default 120)
   --msaa N                 screenshot: samples per pixel (default 4, 1 = off)
   --overlay                screenshot: draw the overlay into the picture
+  --enhance                detail enhancement (2x2x2 fragments per voxel by
+                           recursive subdivision) with snowflake lighting for
+                           the full-resolution render chunks near the camera
   --lod-tint               tint render chunks by resolution (green full, yellow
                            mip 1, orange mip 2, red mip 3, purple coarser)
   --sky-key                paint the sky pure magenta (tests count sky pixels)
@@ -44,8 +47,8 @@ Renders a Terrane world streamed from a terrane-server.
 Window controls: W A S D move, Space / C up / down, Shift fast, hold the right
 mouse button to look, left click applies the tool at the crosshair, Q switches
 dig / build, 1-9 pick the build material, [ ] brush radius, L resolution tint,
-F1 overlay, Ctrl+Z / Ctrl+Y undo / redo (not available yet: the server has no
-undo), Esc quits.
+E detail enhancement, F1 overlay, Ctrl+Z / Ctrl+Y undo / redo (not available
+yet: the server has no undo), Esc quits.
 )";
 
 float radians(float deg) { return deg * 3.14159265f / 180.0f; }
@@ -81,7 +84,7 @@ int usage_error(const std::string& message) {
 
 int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
   CommandLine cl({"connect", "screenshot", "camera", "size", "view-distance", "full-res-radius", "timeout", "msaa"},
-                 {"help", "wait-full-res", "mips-only", "sky-key", "overlay", "lod-tint"});
+                 {"help", "wait-full-res", "mips-only", "sky-key", "overlay", "lod-tint", "enhance"});
   if (std::string err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -129,6 +132,7 @@ int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
   o.sky_key = cl.flag("sky-key");
   o.overlay = cl.flag("overlay");
   o.lod_tint = cl.flag("lod-tint");
+  o.enhance = cl.flag("enhance");
   if (o.mips_only && o.wait_full_res) return usage_error("--mips-only and --wait-full-res exclude each other");
   if (o.screenshot.empty() && (cl.flag("wait-full-res") || cl.has("timeout") || cl.has("msaa") || cl.flag("overlay")))
     return usage_error("--wait-full-res, --timeout, --msaa and --overlay need --screenshot");
@@ -184,6 +188,7 @@ bool ViewerSession::start(std::string* error, double timeout_s) {
   lod_.min_y = welcome_.bounds_min_y;
   lod_.max_y = welcome_.bounds_max_y;
   lod_.min_sample_level = options_.mips_only ? 1 : 0;
+  lod_.enhance = options_.enhance;
   Client* client = client_.get();
   scheduler_ = std::make_unique<MeshScheduler>(
       [client](const std::function<void(const VoxelSource&)>& fn) {
@@ -205,6 +210,11 @@ void ViewerSession::send_camera() {
   st.full_res_radius = options_.mips_only ? 1 : options_.full_res_radius;
   client_->set_state(st);
   scheduler_->set_view(camera_.pos);
+}
+
+void ViewerSession::set_enhance(bool on) {
+  lod_.enhance = on;
+  scheduler_->set_params(lod_);
 }
 
 void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, int width, int height) {
@@ -258,8 +268,9 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
   std::snprintf(line, sizeof line, "RENDER CHUNKS %zu  DRAWN %zu  TRIS %.2fM  MESHED %llu", rs.meshes, rs.drawn,
                 static_cast<double>(rs.triangles) / 1e6, static_cast<unsigned long long>(ms.chunks_meshed));
   lines.emplace_back(line);
-  std::snprintf(line, sizeof line, "POS %.0f %.0f %.0f", static_cast<double>(cam.x), static_cast<double>(cam.y),
-                static_cast<double>(cam.z));
+  std::snprintf(line, sizeof line, "POS %.0f %.0f %.0f  ENHANCE %s (%llu CHUNKS)", static_cast<double>(cam.x),
+                static_cast<double>(cam.y), static_cast<double>(cam.z), session.lod().enhance ? "ON" : "OFF",
+                static_cast<unsigned long long>(ms.enhanced_chunks));
   lines.emplace_back(line);
   if (!info.tool.empty()) lines.push_back(info.tool);
   if (!info.status.empty()) lines.push_back(info.status);
@@ -369,6 +380,7 @@ int run_screenshot(const ViewerOptions& options) {
   if (options.overlay) {
     OverlayInfo info;
     info.status = options.mips_only ? "MIPS ONLY" : (options.wait_full_res ? "FULL RESOLUTION" : "");
+    if (options.enhance) info.status += "  DETAIL ENHANCED, SNOWFLAKE LIGHTING";
     draw_overlay(renderer, session, info, options.width, options.height);
     renderer.draw_overlay(options.width, options.height);
   }

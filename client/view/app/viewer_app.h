@@ -25,6 +25,7 @@ struct ViewerOptions {
   bool sky_key = false;
   bool overlay = false;   // headless: draw the overlay into the picture
   bool lod_tint = false;
+  bool enhance = false;  // detail enhancement + snowflake lighting near the camera
   int msaa = 4;
 };
 
@@ -45,6 +46,7 @@ class ViewerSession {
   LodParams lod() const { return lod_; }
   // Sends the camera position to the server and the mesher.
   void send_camera();
+  void set_enhance(bool on);
   std::int32_t view_distance() const;
   std::int32_t full_res_radius() const;
 

@@ -25,6 +25,8 @@ struct InputState {
   float radius = 4;
   bool overlay = true;
   bool lod_tint = false;
+  bool enhance = false;
+  bool enhance_changed = false;
   bool click = false;
   std::string status;
   double status_until = 0;
@@ -46,6 +48,10 @@ void on_key(GLFWwindow* w, int key, int, int action, int mods) {
   if (key == GLFW_KEY_RIGHT_BRACKET) in.radius = std::min(24.0f, in.radius + 1);
   if (key == GLFW_KEY_L) in.lod_tint = !in.lod_tint;
   if (key == GLFW_KEY_F1) in.overlay = !in.overlay;
+  if (key == GLFW_KEY_E) {
+    in.enhance = !in.enhance;
+    in.enhance_changed = true;
+  }
   if (ctrl && (key == GLFW_KEY_Z || key == GLFW_KEY_Y)) {
     // The server keeps no edit history yet (issue "Durability, undo and
     // hostile input"); a client-side undo would race other players' edits.
@@ -89,6 +95,7 @@ int run_window(const ViewerOptions& options) {
     } else {
       InputState in;
       in.lod_tint = options.lod_tint;
+      in.enhance = options.enhance;
       glfwSetWindowUserPointer(window, &in);
       glfwSetKeyCallback(window, on_key);
       glfwSetMouseButtonCallback(window, on_mouse);
@@ -141,6 +148,10 @@ int run_window(const ViewerOptions& options) {
             in.status = "NOTHING AT FULL RESOLUTION UNDER THE CROSSHAIR";
             in.status_until = now + 2;
           }
+        }
+        if (in.enhance_changed) {
+          in.enhance_changed = false;
+          session.set_enhance(in.enhance);
         }
         const ClientCounters c = session.client().counters();
         if (c.frames_in != frames_seen) {
