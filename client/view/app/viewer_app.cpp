@@ -257,7 +257,11 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
   const RenderStats rs = r.stats();
   char line[256];
   std::vector<std::string> lines;
-  std::snprintf(line, sizeof line, "FPS %.1f", info.fps);
+  if (info.fps < 0) {
+    std::snprintf(line, sizeof line, "HEADLESS (EGL, %s)", info.renderer.c_str());
+  } else {
+    std::snprintf(line, sizeof line, "FPS %.1f", info.fps);
+  }
   lines.emplace_back(line);
   std::snprintf(line, sizeof line, "IN %.1f KB/S  TOTAL %.2f MB", info.bytes_in_per_s / 1024.0,
                 static_cast<double>(c.bytes_in) / (1024.0 * 1024.0));
@@ -379,6 +383,8 @@ int run_screenshot(const ViewerOptions& options) {
   renderer.draw(f);
   if (options.overlay) {
     OverlayInfo info;
+    info.fps = -1;
+    info.renderer = gl.renderer_name().substr(0, gl.renderer_name().find(' '));
     info.status = options.mips_only ? "MIPS ONLY" : (options.wait_full_res ? "FULL RESOLUTION" : "");
     if (options.enhance) info.status += "  DETAIL ENHANCED, SNOWFLAKE LIGHTING";
     draw_overlay(renderer, session, info, options.width, options.height);

@@ -66,7 +66,8 @@ int run_window(const ViewerOptions& options);
 // chunk columns are held at full resolution and which as mips, and the
 // tool line. Shared by both front ends.
 struct OverlayInfo {
-  double fps = 0;
+  double fps = 0;  // < 0: headless (no frame rate; the renderer's name instead)
+  std::string renderer;
   double bytes_in_per_s = 0;
   std::string tool;
   std::string status;
