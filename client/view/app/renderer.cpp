@@ -194,6 +194,30 @@ const void* offset(std::size_t bytes) { return reinterpret_cast<const void*>(byt
 
 bool overlaps(const Region& a, const Region& b) { return !intersect(a, b).empty(); }
 
+// The six clip planes of a view-projection matrix (Gribb and Hartmann),
+// each (a, b, c, d) with inside meaning a x + b y + c z + d >= 0.
+std::array<std::array<float, 4>, 6> frustum_planes(const Mat4& m) {
+  const auto row = [&](int r, int c) { return m[static_cast<std::size_t>(c * 4 + r)]; };
+  std::array<std::array<float, 4>, 6> p{};
+  for (int i = 0; i < 3; ++i)
+    for (int sgn = 0; sgn < 2; ++sgn) {
+      auto& pl = p[static_cast<std::size_t>(i * 2 + sgn)];
+      for (int c = 0; c < 4; ++c) pl[static_cast<std::size_t>(c)] = row(3, c) + (sgn ? -row(i, c) : row(i, c));
+    }
+  return p;
+}
+
+// False when the box lies wholly outside one plane.
+bool box_visible(const std::array<std::array<float, 4>, 6>& planes, const Region& r, float margin) {
+  for (const auto& p : planes) {
+    const float x = p[0] >= 0 ? static_cast<float>(r.max.x) + margin : static_cast<float>(r.min.x) - margin;
+    const float y = p[1] >= 0 ? static_cast<float>(r.max.y) + margin : static_cast<float>(r.min.y) - margin;
+    const float z = p[2] >= 0 ? static_cast<float>(r.max.z) + margin : static_cast<float>(r.min.z) - margin;
+    if (p[0] * x + p[1] * y + p[2] * z + p[3] < 0) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 Vec3f Camera::forward() const {
@@ -359,8 +383,11 @@ void Renderer::draw(const FrameParams& f) {
   static constexpr float kTints[5][3] = {
       {0.10f, 0.80f, 0.15f}, {0.95f, 0.85f, 0.10f}, {0.95f, 0.45f, 0.05f}, {0.85f, 0.08f, 0.08f}, {0.55f, 0.15f, 0.75f}};
   stats_ = RenderStats{meshes_.size(), 0, 0, retired_.size()};
-  const auto draw_mesh = [&](const GpuMesh& m) {
+  const auto planes = frustum_planes(vp);
+  const auto draw_mesh = [&](const NodeKey& k, const GpuMesh& m) {
     if (m.count == 0) return;
+    // A chunk's mesh reaches one sample (at most 16 voxels) beyond its cube.
+    if (!box_visible(planes, k.region(), 17.0f)) return;
     const auto& c = kTints[std::clamp(m.sample_level, 0, 4)];
     glUniform4f(tint, c[0], c[1], c[2], f.lod_tint ? 0.55f : 0.0f);
     glBindVertexArray(m.vao);
@@ -368,8 +395,8 @@ void Renderer::draw(const FrameParams& f) {
     ++stats_.drawn;
     stats_.triangles += static_cast<std::uint64_t>(m.count / 3);
   };
-  for (const auto& [k, m] : meshes_) draw_mesh(m);
-  for (const auto& [k, m] : retired_) draw_mesh(m);
+  for (const auto& [k, m] : meshes_) draw_mesh(k, m);
+  for (const auto& [k, m] : retired_) draw_mesh(k, m);
   glBindVertexArray(0);
 }
 

@@ -218,7 +218,6 @@ void ViewerSession::set_enhance(bool on) {
 }
 
 void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, int width, int height) {
-  (void)height;
   static constexpr float kText[4] = {1, 1, 1, 1};
   static constexpr float kPanel[4] = {0, 0, 0, 0.45f};
   const ClientCounters c = session.client().counters();
@@ -284,7 +283,9 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
 
   // Map: one square per chunk column, north (-z) up.
   const float cell = std::max(2.0f, 160.0f / static_cast<float>(side));
-  const float mx = static_cast<float>(width) - cell * static_cast<float>(side) - 10, my = 10;
+  // Bottom right, clear of the text.
+  const float mx = static_cast<float>(width) - cell * static_cast<float>(side) - 10,
+              my = static_cast<float>(height) - cell * static_cast<float>(side) - lh - 14;
   r.overlay_rect(mx - 4, my - 4, cell * static_cast<float>(side) + 8, cell * static_cast<float>(side) + 8 + lh + 4, kPanel);
   static constexpr float kLevel[4][4] = {
       {0.10f, 0.80f, 0.15f, 0.9f}, {0.95f, 0.85f, 0.10f, 0.9f}, {0.95f, 0.45f, 0.05f, 0.9f}, {0.85f, 0.08f, 0.08f, 0.9f}};
