@@ -102,7 +102,12 @@ void MeshScheduler::run() {
   while (true) {
     wake_.wait(lock, [&] { return stop_ || dirty_ || !jobs_.empty(); });
     if (stop_) return;
-    if (dirty_) {
+    // While streaming, data changes many times a second; re-plan at most
+    // every kMinReplanInterval while there is meshing left to do, so the
+    // worker meshes rather than re-plans.
+    const auto now = std::chrono::steady_clock::now();
+    if (dirty_ && (jobs_.empty() || now - last_plan_ >= kMinReplanInterval)) {
+      last_plan_ = now;
       replan(lock);
       continue;
     }

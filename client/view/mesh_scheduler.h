@@ -16,6 +16,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -99,6 +100,8 @@ class MeshScheduler {
   std::vector<MeshResult> results_;
   std::unordered_map<NodeKey, std::uint64_t, NodeKeyHash> meshed_;  // signature of the last mesh made
   MeshSchedulerStats stats_;
+  static constexpr std::chrono::milliseconds kMinReplanInterval{100};
+  std::chrono::steady_clock::time_point last_plan_{};
   std::thread thread_;
 };
 

@@ -309,19 +309,20 @@ int run_screenshot(const ViewerOptions& options) {
   using clock = std::chrono::steady_clock;
   const auto t0 = clock::now();
   const auto deadline = t0 + std::chrono::milliseconds(static_cast<std::int64_t>(options.timeout_s * 1000));
-  HeadlessContext gl;
   std::string error;
+  // Connect first: a wrong address fails before any driver is loaded.
+  ViewerSession session(options);
+  if (!session.start(&error, options.timeout_s)) {
+    std::fprintf(stderr, "terrane-view: %s\n", error.c_str());
+    return 1;
+  }
+  HeadlessContext gl;
   if (!gl.create(options.width, options.height, options.msaa, &error)) {
     std::fprintf(stderr, "terrane-view: %s\n", error.c_str());
     return 1;
   }
   Renderer renderer;
   if (!renderer.init(&error)) {
-    std::fprintf(stderr, "terrane-view: %s\n", error.c_str());
-    return 1;
-  }
-  ViewerSession session(options);
-  if (!session.start(&error, options.timeout_s)) {
     std::fprintf(stderr, "terrane-view: %s\n", error.c_str());
     return 1;
   }
