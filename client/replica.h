@@ -72,6 +72,12 @@ class Replica {
   // (Full or Empty); nullopt otherwise.
   std::optional<std::uint64_t> hash(Vec3i chunk_pos) const;
   std::optional<std::uint64_t> revision(Vec3i chunk_pos) const;
+  // The (32 >> L)^3 voxels of a chunk held as mip level L (coverage kMip);
+  // nullptr otherwise. Valid until the replica changes.
+  const Box* mip_voxels(Vec3i chunk_pos) const {
+    auto it = mips_.find(chunk_pos);
+    return it == mips_.end() ? nullptr : &it->second.voxels;
+  }
 
   std::size_t chunk_count(CoverageState state) const;
   std::size_t chunk_count() const { return coverage_.size(); }

@@ -17,6 +17,9 @@ packages=(
   libzstd-dev
   # world files and reports
   sqlite3 python3
+  # terrane-view: GLFW windows, libepoxy (GL function loader for GLX and
+  # EGL alike), EGL + Mesa's software rasteriser for headless screenshots
+  libglfw3-dev libepoxy-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
 )
 
 missing=()

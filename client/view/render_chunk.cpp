@@ -1,0 +1,175 @@
+#include "client/view/render_chunk.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+#include "common/chunk.h"
+
+namespace terrane::view {
+namespace {
+
+std::uint64_t mix(std::uint64_t h, std::uint64_t v) {
+  h ^= v + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+  return h * 0xBF58476D1CE4E5B9ull;
+}
+
+// Source chunks whose voxels the samples of `key` can read: the chunk's own
+// cube grown by one voxel (the sample ring reaches at most one sample, of at
+// most 32 voxels, beyond it, and origins are multiples of 16).
+void for_each_source_chunk(const NodeKey& key, const auto& fn) {
+  const Region r = key.region();
+  for_each_chunk_in(Region{r.min - Vec3i{1, 1, 1}, r.max + Vec3i{1, 1, 1}}, fn);
+}
+
+// Downsamples a (n)^3 box to (n/2)^3 with the chunk mip rule.
+Box downsample_box(const Box& in) {
+  const int n = in.size().x / 2;
+  Box out({n, n, n});
+  Voxel children[8];
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        int i = 0;
+        for (int dz = 0; dz < 2; ++dz)
+          for (int dy = 0; dy < 2; ++dy)
+            for (int dx = 0; dx < 2; ++dx) children[i++] = in.get(2 * x + dx, 2 * y + dy, 2 * z + dz);
+        out.set(x, y, z, downsample(children));
+      }
+  return out;
+}
+
+}  // namespace
+
+int GridSource::read(Vec3i chunk_pos, int want, Box& out) const {
+  const int level = std::clamp(want, 0, kMipLevels - 1);
+  if (const Chunk* c = grid_.find_chunk(chunk_pos)) {
+    c->read_level(level, out);
+  } else {
+    const int n = kChunkSize >> level;
+    out.resize({n, n, n});
+  }
+  return level;
+}
+
+float distance_to(Vec3f p, const Region& r) {
+  auto axis = [](float v, std::int32_t lo, std::int32_t hi) {
+    const float a = static_cast<float>(lo), b = static_cast<float>(hi);
+    return v < a ? a - v : (v > b ? v - b : 0.0f);
+  };
+  const float dx = axis(p.x, r.min.x, r.max.x), dy = axis(p.y, r.min.y, r.max.y), dz = axis(p.z, r.min.z, r.max.z);
+  return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+std::vector<NodeKey> select_render_chunks(Vec3f camera, const LodParams& params) {
+  std::vector<std::pair<float, NodeKey>> out;
+  const int root = kRenderChunkCells << kMaxRenderLevel;
+  const auto vd = static_cast<std::int32_t>(std::ceil(params.view_distance));
+  const auto fl = [](float v) { return static_cast<std::int32_t>(std::floor(v)); };
+  const std::int32_t x0 = floor_div(fl(camera.x) - vd, root), x1 = floor_div(fl(camera.x) + vd, root);
+  const std::int32_t z0 = floor_div(fl(camera.z) - vd, root), z1 = floor_div(fl(camera.z) + vd, root);
+  const std::int32_t y0 = floor_div(std::max(fl(camera.y) - vd, params.min_y), root);
+  const std::int32_t y1 = floor_div(std::min(fl(camera.y) + vd, params.max_y - 1), root);
+  const auto visit = [&](const auto& self, const NodeKey& k) -> void {
+    const Region r = k.region();
+    if (r.max.y <= params.min_y || r.min.y >= params.max_y) return;
+    const float d = distance_to(camera, r);
+    if (d > params.view_distance) return;
+    if (k.level > 0 && d < params.split_factor * static_cast<float>(k.size())) {
+      const int h = k.size() / 2;
+      for (int i = 0; i < 8; ++i)
+        self(self, NodeKey{k.origin + Vec3i{(i & 1) * h, ((i >> 1) & 1) * h, ((i >> 2) & 1) * h}, k.level - 1});
+      return;
+    }
+    out.emplace_back(d, k);
+  };
+  for (std::int32_t y = y0; y <= y1; ++y)
+    for (std::int32_t z = z0; z <= z1; ++z)
+      for (std::int32_t x = x0; x <= x1; ++x) visit(visit, NodeKey{Vec3i{x, y, z} * root, kMaxRenderLevel});
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<NodeKey> keys;
+  keys.reserve(out.size());
+  for (const auto& [d, k] : out) keys.push_back(k);
+  return keys;
+}
+
+ChunkPlan plan_render_chunk(const VoxelSource& source, const NodeKey& key, const LodParams& params) {
+  ChunkPlan plan;
+  plan.sample_level = std::max(key.level, params.min_sample_level);
+  std::uint64_t h = mix(0, static_cast<std::uint64_t>(params.min_sample_level));
+  for_each_source_chunk(key, [&](Vec3i cp) {
+    const int level = source.level(cp);
+    if (level >= 0) {
+      plan.any_known = true;
+      plan.sample_level = std::max(plan.sample_level, level);
+    }
+    h = mix(h, static_cast<std::uint64_t>(level + 1));
+    h = mix(h, source.revision(cp));
+  });
+  h = mix(h, static_cast<std::uint64_t>(plan.sample_level));
+  plan.enhanced = params.enhance && plan.sample_level == 0;
+  plan.signature = mix(h, plan.enhanced ? 1 : 0);
+  return plan;
+}
+
+SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, int sample_level) {
+  const int s = 1 << sample_level;
+  const int n = std::max(1, key.size() / s);
+  const Vec3f origin{static_cast<float>(key.origin.x) - 0.5f * static_cast<float>(s),
+                     static_cast<float>(key.origin.y) - 0.5f * static_cast<float>(s),
+                     static_cast<float>(key.origin.z) - 0.5f * static_cast<float>(s)};
+  SampleGrid grid({n + 2, n + 2, n + 2}, origin, static_cast<float>(s));
+
+  // Each source chunk read once, brought to sample_level (or left at a
+  // coarser level when that is all there is: nearest sampling then).
+  struct Level {
+    int level = -1;
+    Box voxels;
+  };
+  std::unordered_map<Vec3i, Level, Vec3iHash> cache;
+  const auto level_of = [&](Vec3i cp) -> const Level& {
+    auto [it, fresh] = cache.try_emplace(cp);
+    if (!fresh) return it->second;
+    Level& l = it->second;
+    if (source.level(cp) < 0) return l;
+    l.level = source.read(cp, std::min(sample_level, kMipLevels - 1), l.voxels);
+    while (l.level < sample_level && l.voxels.size().x > 1) {
+      l.voxels = downsample_box(l.voxels);
+      ++l.level;
+    }
+    return l;
+  };
+
+  for (int k = 0; k < n + 2; ++k)
+    for (int j = 0; j < n + 2; ++j)
+      for (int i = 0; i < n + 2; ++i) {
+        const Vec3i cube = key.origin + Vec3i{(i - 1) * s, (j - 1) * s, (k - 1) * s};
+        const Vec3i cp = chunk_of(cube);
+        const Level& l = level_of(cp);
+        if (l.level < 0) continue;  // unknown: Air
+        const Vec3i local = cube - chunk_origin(cp);
+        const int side = l.voxels.size().x;
+        const Vec3i at{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
+                       std::min(local.z >> l.level, side - 1)};
+        const Voxel v = l.voxels.get(at);
+        grid.set(i, j, k, occupancy_fraction(v), v.material);
+      }
+  return grid;
+}
+
+void mesh_render_samples(const SampleGrid& samples, Mesh& out, const MesherOptions& options) {
+  const std::size_t solid = samples.solid_count();
+  if (solid == 0 || solid == samples.occupancy.size()) {
+    out.vertices.clear();
+    out.indices.clear();
+    return;
+  }
+  mesh_samples(samples, out, options);
+}
+
+void build_render_chunk(const VoxelSource& source, const NodeKey& key, int sample_level, Mesh& out,
+                        const MesherOptions& options) {
+  mesh_render_samples(sample_render_chunk(source, key, sample_level), out, options);
+}
+
+}  // namespace terrane::view

@@ -1,0 +1,116 @@
+// Render chunks: the cubes the viewer meshes, growing with distance from
+// 16^3 voxels near the camera to 256^3 far away (the smooth terrain
+// article's rendering chunks), each meshed as 16 cells per axis from the
+// replica's data at the matching mip level, or coarser where only a
+// coarser mip has arrived (refined in place when finer data comes).
+//
+// A render chunk of level k is the cube [origin, origin + (16 << k))^3,
+// origin a multiple of its size. Its samples are spaced s = 2^l voxels
+// apart (l its sample level, >= k), one per s^3 cube of the chunk, plus one
+// ring of samples of the neighbouring cubes: the ring makes neighbouring
+// chunks overlap so that their closed surfaces leave no crack between them
+// (client/view/mesher.h, client/view/VIEWER.md).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "client/view/mesher.h"
+#include "common/box.h"
+#include "common/grid.h"
+#include "common/vec3.h"
+
+namespace terrane::view {
+
+inline constexpr int kRenderChunkCells = 16;  // cells per axis at the chunk's own level
+inline constexpr int kMaxRenderLevel = 4;     // 16 << 4 = 256 voxels
+
+struct NodeKey {
+  Vec3i origin;
+  int level = 0;  // size 16 << level
+  int size() const { return kRenderChunkCells << level; }
+  Region region() const { return Region::from_min_size(origin, {size(), size(), size()}); }
+  friend bool operator==(const NodeKey&, const NodeKey&) = default;
+};
+struct NodeKeyHash {
+  std::size_t operator()(const NodeKey& k) const noexcept {
+    return Vec3iHash{}(k.origin) ^ (static_cast<std::size_t>(k.level) * 0x9E3779B97F4A7C15ull);
+  }
+};
+
+// What the mesher reads: per 32^3 chunk, the finest level held.
+// Implementations: GridSource (a whole Grid at full resolution) and
+// ReplicaSource (client/view/replica_source.h).
+class VoxelSource {
+ public:
+  virtual ~VoxelSource() = default;
+  // -1 nothing known (meshed as Air), 0 full resolution (or known Air),
+  // 1..3 the mip level held.
+  virtual int level(Vec3i chunk_pos) const = 0;
+  // Changes whenever the chunk's voxels change (0 when not tracked).
+  virtual std::uint64_t revision(Vec3i chunk_pos) const = 0;
+  // Writes the chunk's voxels at a level L with level(chunk_pos) <= L <=
+  // max(want, level(chunk_pos)) into out, resized to (32 >> L)^3, and
+  // returns L (callers downsample further if L < want). want is in 0..3.
+  // Precondition: level(chunk_pos) >= 0.
+  virtual int read(Vec3i chunk_pos, int want, Box& out) const = 0;
+};
+
+// A Grid held wholly at full resolution; chunks outside `known` (chunk
+// coordinates, half-open) are unknown.
+class GridSource final : public VoxelSource {
+ public:
+  GridSource(const Grid& grid, Region known_chunks) : grid_(grid), known_(known_chunks) {}
+  int level(Vec3i chunk_pos) const override { return known_.contains(chunk_pos) ? 0 : -1; }
+  std::uint64_t revision(Vec3i) const override { return 0; }
+  int read(Vec3i chunk_pos, int want, Box& out) const override;
+
+ private:
+  const Grid& grid_;
+  Region known_;
+};
+
+struct LodParams {
+  float view_distance = 384;  // voxels; render chunks beyond are not drawn
+  // A render chunk is split into 8 while the camera is nearer than
+  // split_factor times its size: higher is finer (and more triangles).
+  float split_factor = 2.5f;
+  std::int32_t min_y = -128, max_y = 256;  // world vertical bounds
+  // Never sample finer than this level (1: mips only, ignoring full data).
+  int min_sample_level = 0;
+  // Detail enhancement and snowflake lighting for render chunks sampled at
+  // full resolution (client/view/enhanced_chunk.h).
+  bool enhance = false;
+};
+
+// Distance from p to the nearest point of a region (0 inside).
+float distance_to(Vec3f p, const Region& r);
+
+// The render chunks for a camera position, nearest first: an octree from
+// 256^3 roots, split by distance, within the view distance and bounds.
+std::vector<NodeKey> select_render_chunks(Vec3f camera, const LodParams& params);
+
+// What a render chunk's mesh depends on: its sample level (the chunk's own
+// level, or coarser where the source holds only coarser data) and a hash of
+// the level and revision of every source chunk its samples read. Equal
+// plans give equal meshes.
+struct ChunkPlan {
+  int sample_level = 0;
+  std::uint64_t signature = 0;
+  bool any_known = false;
+  bool enhanced = false;  // meshed with detail enhancement (LodParams::enhance at level 0)
+};
+ChunkPlan plan_render_chunk(const VoxelSource& source, const NodeKey& key, const LodParams& params);
+
+// The samples of a render chunk at a sample level (see the header comment).
+SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, int sample_level);
+
+// Meshes a render chunk's samples. Blocks with no sample below or none above the
+// surface level give an empty mesh: a buried chunk adds no hull, its
+// neighbours' overlapping hulls seal it.
+void mesh_render_samples(const SampleGrid& samples, Mesh& out, const MesherOptions& options = {});
+// sample_render_chunk + mesh_render_samples.
+void build_render_chunk(const VoxelSource& source, const NodeKey& key, int sample_level, Mesh& out,
+                        const MesherOptions& options = {});
+
+}  // namespace terrane::view

@@ -1,0 +1,44 @@
+#include "client/view/replica_source.h"
+
+#include <algorithm>
+
+#include "common/chunk.h"
+
+namespace terrane::view {
+
+int ReplicaSource::level(Vec3i chunk_pos) const {
+  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  if (c == nullptr) return -1;
+  return c->state == CoverageState::kMip ? c->level : 0;
+}
+
+std::uint64_t ReplicaSource::revision(Vec3i chunk_pos) const {
+  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  return c == nullptr ? 0 : c->revision;
+}
+
+int ReplicaSource::read(Vec3i chunk_pos, int want, Box& out) const {
+  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  const int level = std::clamp(want, 0, kMipLevels - 1);
+  const int n = kChunkSize >> level;
+  if (c == nullptr || c->state == CoverageState::kEmpty) {
+    out.resize({n, n, n});
+    return level;
+  }
+  if (c->state == CoverageState::kMip) {
+    if (const Box* mip = replica_.mip_voxels(chunk_pos)) {
+      out = *mip;
+      return c->level;
+    }
+    out.resize({n, n, n});
+    return level;
+  }
+  if (const Chunk* chunk = replica_.grid().find_chunk(chunk_pos)) {
+    chunk->read_level(level, out);
+  } else {
+    out.resize({n, n, n});
+  }
+  return level;
+}
+
+}  // namespace terrane::view
