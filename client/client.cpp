@@ -3,11 +3,23 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <future>
+#include <memory>
+#include <utility>
+
 namespace terrane {
 
 namespace {
 
 constexpr std::size_t kReadChunkBytes = 64 * 1024;
+
+// Bytes wait while more than this is queued on the emulated link: one
+// bandwidth-delay product, and at least one socket read's worth.
+std::size_t emulation_queue_cap(const NetworkEmulation& e) {
+  if (e.bandwidth_bytes_per_s == 0) return std::size_t{64} << 20;  // latency only: never the bottleneck
+  const double bdp = static_cast<double>(e.bandwidth_bytes_per_s) * static_cast<double>(e.latency.count()) / 1000.0;
+  return std::max<std::size_t>(kReadChunkBytes, static_cast<std::size_t>(bdp));
+}
 
 spdlog::logger& client_log() {
   static std::shared_ptr<spdlog::logger> log = [] {
@@ -20,8 +32,42 @@ spdlog::logger& client_log() {
 
 }  // namespace
 
+// Every handler the client starts holds one of these: disconnect() in
+// shared mode waits until no handler can still touch the Client.
+class Client::OpGuard {
+ public:
+  explicit OpGuard(Client* c) : c_(c) { c_->pending_ops_.fetch_add(1, std::memory_order_relaxed); }
+  OpGuard(OpGuard&& o) noexcept : c_(std::exchange(o.c_, nullptr)) {}
+  OpGuard(const OpGuard&) = delete;
+  OpGuard& operator=(const OpGuard&) = delete;
+  OpGuard& operator=(OpGuard&&) = delete;
+  ~OpGuard() {
+    if (c_ == nullptr) return;
+    if (c_->pending_ops_.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+      std::lock_guard lock(c_->ops_mutex_);
+      c_->ops_done_.notify_all();
+    }
+  }
+
+ private:
+  Client* c_;
+};
+
+const char* message_type_name(std::size_t type) {
+  if (type >= kMessageTypeCount) return "unknown";
+  return wire::EnumNameBody(static_cast<wire::Body>(type));
+}
+
 Client::Client(ClientOptions options, ClientCallbacks callbacks)
-    : options_(std::move(options)), callbacks_(std::move(callbacks)), socket_(io_), keepalive_(io_), read_buf_(kReadChunkBytes) {}
+    : options_(std::move(options)),
+      callbacks_(std::move(callbacks)),
+      own_io_(options_.io_context != nullptr ? nullptr : std::make_unique<asio::io_context>()),
+      io_(options_.io_context != nullptr ? *options_.io_context : *own_io_),
+      strand_(asio::make_strand(io_)),
+      socket_(strand_),
+      keepalive_(strand_),
+      delivery_(strand_),
+      read_buf_(kReadChunkBytes) {}
 
 Client::~Client() { disconnect(); }
 
@@ -32,6 +78,12 @@ bool Client::connect(std::string* error) {
   if (ec || endpoints.empty()) {
     if (error) *error = "cannot resolve " + options_.host + ": " + ec.message();
     return false;
+  }
+  if (own_io_ == nullptr) {
+    if (!connect_shared(endpoints, error)) return false;
+    started_ = true;
+    asio::post(strand_, [this, g = OpGuard(this)] { start_io(); });
+    return true;
   }
   asio::error_code result = asio::error::would_block;
   asio::async_connect(socket_, endpoints, [&](const asio::error_code& e, const asio::ip::tcp::endpoint&) { result = e; });
@@ -44,41 +96,83 @@ bool Client::connect(std::string* error) {
     return false;
   }
   io_.restart();
+  started_ = true;
+  start_io();
+  thread_ = std::thread([this] { io_.run(); });
+  return true;
+}
+
+bool Client::connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error) {
+  auto done = std::make_shared<std::promise<asio::error_code>>();
+  auto result = done->get_future();
+  asio::post(strand_, [this, endpoints, done, g = OpGuard(this)] {
+    asio::async_connect(socket_, endpoints,
+                        [done, g2 = OpGuard(this)](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
+                          done->set_value(e);
+                        });
+  });
+  bool timed_out = false;
+  if (result.wait_for(options_.connect_timeout) != std::future_status::ready) {
+    timed_out = true;
+    asio::post(strand_, [this, g = OpGuard(this)] {
+      asio::error_code ignored;
+      socket_.close(ignored);
+    });
+  }
+  const asio::error_code ec = result.get();  // the handler always runs (aborted when closed)
+  if (!timed_out && !ec) return true;
+  if (error)
+    *error = "cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
+             (timed_out ? std::string("timed out") : ec.message());
+  // Let the close (if any) finish before the caller may destroy us.
+  std::unique_lock lock(ops_mutex_);
+  ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
+  return false;
+}
+
+void Client::start_io() {
+  asio::error_code ec;
   socket_.set_option(asio::ip::tcp::no_delay(true), ec);
   HelloMsg hello;
   hello.protocol_version = options_.protocol_version;
   hello.client_name = options_.name;
   hello.auth_token = options_.auth_token;
-  send_queue_.push_back(build_hello(hello));
-  if (!options_.start_at_spawn) send_queue_.push_back(build_client_state(options_.state));
-  for (const Frame& f : send_queue_) queued_bytes_.fetch_add(f.size(), std::memory_order_relaxed);
+  send_queue_.push_back({build_hello(hello), wire::Body::Hello});
+  if (!options_.start_at_spawn) send_queue_.push_back({build_client_state(options_.state), wire::Body::ClientState});
+  for (const Outbound& o : send_queue_) queued_bytes_.fetch_add(o.frame.size(), std::memory_order_relaxed);
   do_write();
   do_read();
   arm_keepalive();
-  thread_ = std::thread([this] { io_.run(); });
-  return true;
 }
 
 void Client::disconnect() {
-  if (!thread_.joinable()) return;
-  asio::post(io_, [this] {
+  if (!started_ || disconnected_.exchange(true)) return;
+  asio::post(strand_, [this, g = OpGuard(this)] {
     if (io_closed_) return;
     asio::error_code ec;
     const Frame bye = build_disconnect("client leaving");
     asio::write(socket_, asio::buffer(bye), ec);
     close_locked_io("disconnected by client");
   });
-  thread_.join();
+  if (thread_.joinable()) {
+    thread_.join();
+    return;
+  }
+  std::unique_lock lock(ops_mutex_);
+  ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
 }
 
-bool Client::send(Frame frame) {
+bool Client::send(Frame frame, wire::Body type) {
   if (io_closed_) return false;
   const std::size_t n = frame.size();
   if (queued_bytes_.load(std::memory_order_relaxed) + n > options_.max_send_queue_bytes) return false;
   queued_bytes_.fetch_add(n, std::memory_order_relaxed);
-  asio::post(io_, [this, f = std::move(frame)]() mutable {
-    if (io_closed_) return;
-    send_queue_.push_back(std::move(f));
+  asio::post(strand_, [this, f = std::move(frame), type, g = OpGuard(this)]() mutable {
+    if (io_closed_) {
+      queued_bytes_.fetch_sub(f.size(), std::memory_order_relaxed);
+      return;
+    }
+    send_queue_.push_back({std::move(f), type});
     do_write();
   });
   return true;
@@ -87,44 +181,106 @@ bool Client::send(Frame frame) {
 void Client::do_write() {
   if (writing_ || send_queue_.empty() || io_closed_) return;
   writing_ = true;
-  asio::async_write(socket_, asio::buffer(send_queue_.front()), [this](const asio::error_code& ec, std::size_t) {
-    writing_ = false;
-    queued_bytes_.fetch_sub(send_queue_.front().size(), std::memory_order_relaxed);
-    send_queue_.pop_front();
-    if (ec) return close_locked_io("write failed: " + ec.message());
-    do_write();
-  });
+  asio::async_write(socket_, asio::buffer(send_queue_.front().frame),
+                    [this, g = OpGuard(this)](const asio::error_code& ec, std::size_t) {
+                      writing_ = false;
+                      const Outbound& sent = send_queue_.front();
+                      queued_bytes_.fetch_sub(sent.frame.size(), std::memory_order_relaxed);
+                      if (!ec) {
+                        std::lock_guard lock(mutex_);
+                        ++counters_.frames_out;
+                        counters_.bytes_out += sent.frame.size();
+                        auto& t = counters_.by_message_type[static_cast<std::size_t>(sent.type)];
+                        ++t.frames_out;
+                        t.bytes_out += sent.frame.size();
+                      }
+                      send_queue_.pop_front();
+                      if (ec) return close_locked_io("write failed: " + ec.message());
+                      do_write();
+                    });
 }
 
 void Client::arm_keepalive() {
   keepalive_.expires_after(options_.keepalive);
-  keepalive_.async_wait([this](const asio::error_code& ec) {
+  keepalive_.async_wait([this, g = OpGuard(this)](const asio::error_code& ec) {
     if (ec || io_closed_) return;
-    send(build_ping(0));
+    send(build_ping(0), wire::Body::Ping);
     arm_keepalive();
   });
 }
 
 void Client::do_read() {
-  socket_.async_read_some(asio::buffer(read_buf_), [this](const asio::error_code& ec, std::size_t n) {
+  socket_.async_read_some(asio::buffer(read_buf_), [this, g = OpGuard(this)](const asio::error_code& ec, std::size_t n) {
     if (io_closed_) return;
     if (ec) return close_locked_io(ec == asio::error::eof ? "server closed the connection" : ec.message());
     {
       std::lock_guard lock(mutex_);
       counters_.bytes_in += n;
     }
-    const auto st = reader_.feed(std::span<const std::uint8_t>(read_buf_.data(), n),
-                                 [&](std::span<const std::uint8_t> body) {
-                                   if (!io_closed_) handle_frame(body);
-                                 });
-    if (!st) {
-      {
-        std::lock_guard lock(mutex_);
-        ++counters_.protocol_errors;
-      }
-      return close_locked_io(std::string("protocol error: ") + st.error().detail);
+    if (options_.emulation.active()) {
+      delay_bytes(n);
+      return;
     }
-    if (!io_closed_) do_read();
+    if (feed(std::span<const std::uint8_t>(read_buf_.data(), n))) do_read();
+  });
+}
+
+bool Client::feed(std::span<const std::uint8_t> bytes) {
+  const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
+    if (!io_closed_) handle_frame(body);
+  });
+  if (!st) {
+    {
+      std::lock_guard lock(mutex_);
+      ++counters_.protocol_errors;
+      ++counters_.by_message_type[static_cast<std::size_t>(wire::Body::NONE)].frames_in;
+    }
+    close_locked_io(std::string("protocol error: ") + st.error().detail);
+    return false;
+  }
+  return !io_closed_;
+}
+
+void Client::delay_bytes(std::size_t n) {
+  using clock = std::chrono::steady_clock;
+  const auto now = clock::now();
+  const NetworkEmulation& e = options_.emulation;
+  auto sent_at = now;
+  if (e.bandwidth_bytes_per_s > 0) {
+    const auto on_wire = std::chrono::nanoseconds(static_cast<std::int64_t>(
+        static_cast<double>(n) * 1e9 / static_cast<double>(e.bandwidth_bytes_per_s)));
+    link_free_ = std::max(link_free_, now) + on_wire;
+    sent_at = link_free_;
+  }
+  delayed_.push_back(Delayed{sent_at + e.latency, std::vector<std::uint8_t>(read_buf_.begin(), read_buf_.begin() +
+                                                                                           static_cast<std::ptrdiff_t>(n))});
+  delayed_bytes_ += n;
+  if (delayed_bytes_ < emulation_queue_cap(e))
+    do_read();
+  else
+    read_paused_ = true;
+  arm_delivery();
+}
+
+void Client::arm_delivery() {
+  if (delivery_armed_ || delayed_.empty() || io_closed_) return;
+  delivery_armed_ = true;
+  delivery_.expires_at(delayed_.front().deliver_at);
+  delivery_.async_wait([this, g = OpGuard(this)](const asio::error_code& ec) {
+    delivery_armed_ = false;
+    if (ec || io_closed_) return;
+    const auto now = std::chrono::steady_clock::now();
+    while (!delayed_.empty() && delayed_.front().deliver_at <= now) {
+      Delayed d = std::move(delayed_.front());
+      delayed_.pop_front();
+      delayed_bytes_ -= d.bytes.size();
+      if (!feed(d.bytes)) return;
+    }
+    if (read_paused_ && delayed_bytes_ < emulation_queue_cap(options_.emulation)) {
+      read_paused_ = false;
+      do_read();
+    }
+    arm_delivery();
   });
 }
 
@@ -132,6 +288,12 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
   auto verified = verify_message(body);
   std::unique_lock lock(mutex_);
   ++counters_.frames_in;
+  {
+    const auto type = verified ? static_cast<std::size_t>((*verified)->body_type()) : std::size_t{0};
+    auto& t = counters_.by_message_type[type < kMessageTypeCount ? type : 0];
+    ++t.frames_in;
+    t.bytes_in += body.size() + kFrameHeaderBytes;
+  }
   auto fail = [&](const DecodeError& e) {
     ++counters_.protocol_errors;
     lock.unlock();
@@ -152,7 +314,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
         ClientStateMsg s = options_.state;
         s.position = w->spawn;
         lock.unlock();
-        send(build_client_state(s));
+        send(build_client_state(s), wire::Body::ClientState);
         lock.lock();
       }
       if (callbacks_.on_welcome) after = [this, w = *w] { callbacks_.on_welcome(w); };
@@ -198,6 +360,8 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (!n) return fail(n.error());
       ++counters_.update_batches;
       counters_.units_updated += *n;
+      if (callbacks_.on_update_batch)
+        after = [this, tick = b->tick, revs = std::move(b->revisions)] { callbacks_.on_update_batch(tick, revs); };
       break;
     }
     case wire::Body::EditAck: {
@@ -224,7 +388,13 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       const bool match = mine && rev && *rev == h->revision && *mine == h->hash;
       hash_checks_[h->chunk_pos] = match;
       ++(match ? counters_.hash_matches : counters_.hash_mismatches);
-      if (callbacks_.on_hash_checked) after = [this, p = h->chunk_pos, match] { callbacks_.on_hash_checked(p, match); };
+      const ChunkCoverage* cov = replica_.coverage(h->chunk_pos);
+      const HashCheck check{h->chunk_pos, h->revision, rev, cov != nullptr && cov->state != CoverageState::kMip, match};
+      if (callbacks_.on_hash_checked || callbacks_.on_region_hash)
+        after = [this, check] {
+          if (callbacks_.on_hash_checked) callbacks_.on_hash_checked(check.chunk_pos, check.match);
+          if (callbacks_.on_region_hash) callbacks_.on_region_hash(check);
+        };
       break;
     }
     case wire::Body::Pong:
@@ -233,7 +403,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Ping: {
       const std::uint64_t nonce = m.body_as_Ping()->nonce();
       lock.unlock();
-      send(build_pong(nonce));
+      send(build_pong(nonce), wire::Body::Pong);
       lock.lock();
       break;
     }
@@ -251,6 +421,7 @@ void Client::close_locked_io(const std::string& reason) {
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
   socket_.close(ec);
   keepalive_.cancel();
+  delivery_.cancel();
   std::string r;
   {
     std::lock_guard lock(mutex_);
@@ -262,7 +433,7 @@ void Client::close_locked_io(const std::string& reason) {
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 
-bool Client::set_state(const ClientStateMsg& state) { return send(build_client_state(state)); }
+bool Client::set_state(const ClientStateMsg& state) { return send(build_client_state(state), wire::Body::ClientState); }
 
 std::uint32_t Client::fill_box(const Region& box, Voxel v) {
   EditRequestMsg e;
@@ -271,7 +442,7 @@ std::uint32_t Client::fill_box(const Region& box, Voxel v) {
   e.box = box;
   e.material = v.material;
   e.occupancy = v.occupancy;
-  return send(build_edit_request(e)) ? e.edit_id : 0;
+  return send(build_edit_request(e), wire::Body::EditRequest) ? e.edit_id : 0;
 }
 
 std::uint32_t Client::fill_sphere(Vec3f center, float radius, Material material) {
@@ -281,12 +452,14 @@ std::uint32_t Client::fill_sphere(Vec3f center, float radius, Material material)
   e.center = center;
   e.radius = radius;
   e.material = material;
-  return send(build_edit_request(e)) ? e.edit_id : 0;
+  return send(build_edit_request(e), wire::Body::EditRequest) ? e.edit_id : 0;
 }
 
-bool Client::request_region_hash(Vec3i chunk_pos) { return send(build_region_hash_request(chunk_pos)); }
-bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce)); }
-bool Client::send_raw(Frame bytes) { return send(std::move(bytes)); }
+bool Client::request_region_hash(Vec3i chunk_pos) {
+  return send(build_region_hash_request(chunk_pos), wire::Body::RegionHashRequest);
+}
+bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce), wire::Body::Ping); }
+bool Client::send_raw(Frame bytes) { return send(std::move(bytes), wire::Body::NONE); }
 
 ClientView Client::view() const {
   return ClientView{replica_, counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_, hash_checks_};
