@@ -17,6 +17,8 @@ packages=(
   libzstd-dev
   # world files and reports
   sqlite3 python3
+  # validates docker/docker-compose.yml in the tests (no Docker engine needed)
+  docker-compose
 )
 
 missing=()
