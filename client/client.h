@@ -89,8 +89,8 @@ inline constexpr std::size_t kMessageTypeCount = static_cast<std::size_t>(wire::
 const char* message_type_name(std::size_t type);
 
 struct ClientCounters {
-  std::uint64_t frames_in = 0;
-  std::uint64_t bytes_in = 0;
+  std::uint64_t frames_in = 0;  // frames handled (by_message_type counts them by type, length header included)
+  std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
   std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
   std::uint64_t mips = 0;
   std::uint64_t coverage_empty = 0;
