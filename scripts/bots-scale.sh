@@ -4,7 +4,8 @@
 # distance 512, ramp-up 20 s, a sphere edit of radius <= 3 every 2 s per
 # bot, 60 s. Server and bots share this machine. Prints the bots' report and
 # the server's peak memory (VmHWM) and CPU time (utime + stime) read from
-# /proc just before it is stopped.
+# /proc just before it is stopped. The server's log is kept beside the
+# report (REPORT.server.log).
 #   scripts/bots-scale.sh N [REPORT.json] [extra terrane-bots flags...]
 # Expects a release build and worlds/default (scripts/run.sh makes both).
 set -euo pipefail
@@ -26,7 +27,10 @@ cleanup() {
 trap cleanup EXIT INT TERM
 
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world" >/dev/null
-./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 16)) >"$scratch/server.log" 2>&1 &
+# Two io threads: the server's world owner strand loads stored chunks
+# synchronously, and with one io thread that stalls every socket.
+./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) --io-threads 2 \
+  >"$scratch/server.log" 2>&1 &
 server_pid=$!
 port=
 for _ in $(seq 1 600); do
@@ -35,6 +39,13 @@ for _ in $(seq 1 600); do
   sleep 0.1
 done
 [ -n "$port" ] || { cat "$scratch/server.log" >&2; exit 1; }
+# Warm-up (TERRANE_SCALE_WARMUP=1, not measured): 40 idle bots over the same
+# area make the server load every chunk in view from its store first, so
+# the measured run sees a warm server.
+if [ "${TERRANE_SCALE_WARMUP:-0}" = 1 ]; then
+  ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots 40 --duration 45 --behavior idle --spread 512 \
+    --view-distance 512 --full-res-radius 64 --hash-checks 0 --seed 99 --progress off >/dev/null || true
+fi
 ticks=$(getconf CLK_TCK)
 cpu0=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
 start=$(date +%s.%N)
@@ -58,4 +69,5 @@ kill -TERM "$server_pid"
 wait "$server_pid" || status=1
 server_pid=
 tail -n 1 "$scratch/server.log"
+cp "$scratch/server.log" "${report%.json}.server.log"
 exit $status
