@@ -39,7 +39,8 @@ cleanup() {
 trap cleanup EXIT INT TERM
 
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world"
-./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 16)) \
+# Two io threads: chunk loads on the world owner strand must not stall sockets.
+./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 16)) --io-threads 2 \
   >"$scratch/server.log" 2>&1 &
 server_pid=$!
 
@@ -65,7 +66,7 @@ mkdir -p reports
 status=0
 # shellcheck disable=SC2086  # TERRANE_BOTS_ARGS holds several flags
 ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration "$duration" --behavior mixed \
-  --spread 256 --view-distance 256 --full-res-radius 64 --ramp-up 5 --seed 1 \
+  --spread 128 --view-distance 128 --full-res-radius 48 --ramp-up 5 --seed 1 \
   --report reports/bots.json --html reports/bots.html ${TERRANE_BOTS_ARGS:-} || status=$?
 
 kill -TERM "$server_pid"
