@@ -16,6 +16,11 @@ constexpr float kEyeHeight = 1.6f;
 // Highest step a walker climbs per step (0.5 voxel forward) and deepest drop.
 constexpr float kMaxClimb = 1.0f;
 constexpr float kMaxDrop = 3.0f;
+// After this many refused steps in a row (walled in by edits, in a dug pit)
+// a walker stands on top of its own column again and may climb kEscapeClimb
+// in one step, like a jump.
+constexpr int kStuckSteps = 10;
+constexpr float kEscapeClimb = 3.0f;
 // Region-hash retries while the replica's revision differs from the reply's
 // before it counts as a mismatch: updates are ordered before the reply, so
 // a lasting difference means an update was lost.
@@ -236,30 +241,43 @@ void Bot::walk() {
   const Vec3f next{pos_.x + std::cos(heading_) * stride, pos_.y, pos_.z + std::sin(heading_) * stride};
   const Vec3i nv = voxel_at(next);
   const float half = std::max(static_cast<float>(ctx_.options->spread) / 2.0f, 64.0f);
-  bool ok = in_area(next.x, next.z, half);
+  ++result_.walk_steps;
+  int refused = -1;
   std::optional<std::int32_t> h;
-  if (ok) {
+  if (!in_area(next.x, next.z, half)) refused = 0;
+  if (refused < 0) {
     h = client_->surface_height(nv.x, nv.z);
     // Only where the replica holds the ground and the air above it at full resolution.
-    ok = h && client_->resolution_at({nv.x, *h - 1, nv.z}) == 0 && client_->resolution_at({nv.x, *h, nv.z}) == 0;
+    if (!h || client_->resolution_at({nv.x, *h - 1, nv.z}) != 0 || client_->resolution_at({nv.x, *h, nv.z}) != 0)
+      refused = 1;
   }
-  if (ok) {
+  if (refused < 0) {
     const float dy = static_cast<float>(*h) - pos_.y;
-    ok = dy <= kMaxClimb && dy >= -kMaxDrop;
+    if (dy > (stuck_steps_ >= kStuckSteps ? kEscapeClimb : kMaxClimb) || dy < -kMaxDrop) refused = 2;
   }
-  if (ok) {
+  if (refused < 0) {
     // Nothing solid between here and there at knee height.
     const Vec3f from{pos_.x, pos_.y + 1.2f, pos_.z};
     const Vec3f to{next.x, static_cast<float>(*h) + 1.2f, next.z};
     const Vec3f d = to - from;
     const float len = length(d);
-    ok = len <= 0 || !client_->raycast(from, d * (1.0f / len), len).has_value();
+    if (len > 0 && client_->raycast(from, d * (1.0f / len), len).has_value()) refused = 3;
   }
-  if (!ok) {
-    ++result_.walk_blocked;
+  if (refused >= 0) {
+    ++result_.walk_blocked[static_cast<std::size_t>(refused)];
     heading_ += std::numbers::pi_v<float> * (0.5f + unit(rng_));
+    if (++stuck_steps_ == kStuckSteps) {
+      // An edit may have buried the walker: back on top of its own column.
+      const Vec3i v = voxel_at(pos_);
+      const auto top = client_->surface_height(v.x, v.z);
+      if (top && static_cast<float>(*top) > pos_.y && client_->resolution_at({v.x, *top, v.z}) == 0) {
+        pos_.y = static_cast<float>(*top);
+        state_dirty_ = true;
+      }
+    }
     return;
   }
+  stuck_steps_ = 0;
   result_.distance_moved += stride;
   pos_ = Vec3f{next.x, static_cast<float>(*h), next.z};
   state_dirty_ = true;

@@ -9,6 +9,7 @@
 // callback (order: Bot::mutex_, then the Client's lock).
 #pragma once
 
+#include <array>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -46,7 +47,10 @@ struct BotResult {
   std::uint64_t join_bytes = 0;          // received from connect until the full-resolution region was complete
   std::uint64_t join_non_empty_voxels = 0;
   std::uint64_t hash_checked = 0, hash_unanswered = 0;
-  std::uint64_t walk_blocked = 0;
+  std::uint64_t walk_steps = 0;
+  // Steps refused: [0] outside the area, [1] ground not held at full resolution,
+  // [2] too steep, [3] something solid in the way.
+  std::array<std::uint64_t, 4> walk_blocked{};
   int checks_during_run = 0;
   double distance_moved = 0;
   bool unexpected_disconnect = false;
@@ -108,6 +112,7 @@ class Bot {
   Vec3f pos_;
   float heading_ = 0;
   bool landed_ = false;
+  int stuck_steps_ = 0;  // walk steps refused in a row
   int steps_ = 0;
   bool state_dirty_ = false;
   Clock::time_point connect_at_;

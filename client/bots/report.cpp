@@ -127,7 +127,9 @@ std::string report_json(const BotsReport& r) {
       << "\"}";
   j << "],\n";
   j << "  \"connect_failures\": " << r.connect_failures << ",\n";
-  j << "  \"walk_blocked_steps\": " << r.walk_blocked_steps << ",\n";
+  j << "  \"walk_steps\": " << r.walk_steps << ",\n";
+  j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
+    << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
   j << "  \"server_counters\": null,\n";
   j << "  \"by_message_type\": {";
   first = true;
@@ -184,6 +186,10 @@ std::string report_table(const BotsReport& r) {
   row("replica mismatches", std::to_string(r.mismatches.size()));
   row("hash requests unanswered", std::to_string(r.hash_unanswered));
   row("unexpected disconnects", std::to_string(r.unexpected_disconnects));
+  if (r.walk_steps > 0)
+    row("walk steps (refused: area / not full res / steep / obstacle)",
+        std::to_string(r.walk_steps) + " (" + std::to_string(r.walk_blocked[0]) + " / " + std::to_string(r.walk_blocked[1]) +
+            " / " + std::to_string(r.walk_blocked[2]) + " / " + std::to_string(r.walk_blocked[3]) + ")");
   if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);
   t << "  by message type (frames in / bytes in / frames out / bytes out):\n";
   for (std::size_t i = 0; i < kMessageTypeCount; ++i) {

@@ -262,7 +262,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     }
     r.replica_regions_checked += br.hash_checked;
     r.hash_unanswered += br.hash_unanswered;
-    r.walk_blocked_steps += br.walk_blocked;
+    r.walk_steps += br.walk_steps;
+    for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += br.walk_blocked[w];
     r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));
     if (br.unexpected_disconnect) {
       ++r.unexpected_disconnects;

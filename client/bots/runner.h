@@ -46,7 +46,8 @@ struct BotsReport {
   int connect_failures = 0;
   std::string first_connect_error;
   int joins_incomplete = 0;
-  std::uint64_t walk_blocked_steps = 0;
+  std::uint64_t walk_steps = 0;
+  std::array<std::uint64_t, 4> walk_blocked{};  // BotResult::walk_blocked, summed
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
   std::vector<TimelinePoint> timeline;
 
