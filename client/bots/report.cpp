@@ -1,8 +1,10 @@
 #include "client/bots/report.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <sstream>
 
 namespace terrane::bots {

@@ -3,6 +3,8 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <limits>
+#include <random>
 #include <thread>
 
 #include "client/bots/bot.h"
