@@ -7,11 +7,23 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <future>
+#include <memory>
+#include <utility>
+
 namespace terrane {
 
 namespace {
 
 constexpr std::size_t kReadChunkBytes = 64 * 1024;
+
+// Bytes wait while more than this is queued on the emulated link: one
+// bandwidth-delay product, and at least one socket read's worth.
+std::size_t emulation_queue_cap(const NetworkEmulation& e) {
+  if (e.bandwidth_bytes_per_s == 0) return std::size_t{64} << 20;  // latency only: never the bottleneck
+  const double bdp = static_cast<double>(e.bandwidth_bytes_per_s) * static_cast<double>(e.latency.count()) / 1000.0;
+  return std::max<std::size_t>(kReadChunkBytes, static_cast<std::size_t>(bdp));
+}
 
 spdlog::logger& client_log() {
   static std::shared_ptr<spdlog::logger> log = [] {
@@ -24,13 +36,43 @@ spdlog::logger& client_log() {
 
 }  // namespace
 
+// Every handler the client starts holds one of these: disconnect() in
+// shared mode waits until no handler can still touch the Client.
+class Client::OpGuard {
+ public:
+  explicit OpGuard(Client* c) : c_(c) { c_->pending_ops_.fetch_add(1, std::memory_order_relaxed); }
+  OpGuard(OpGuard&& o) noexcept : c_(std::exchange(o.c_, nullptr)) {}
+  OpGuard(const OpGuard&) = delete;
+  OpGuard& operator=(const OpGuard&) = delete;
+  OpGuard& operator=(OpGuard&&) = delete;
+  ~OpGuard() {
+    if (c_ == nullptr) return;
+    if (c_->pending_ops_.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+      std::lock_guard lock(c_->ops_mutex_);
+      c_->ops_done_.notify_all();
+    }
+  }
+
+ private:
+  Client* c_;
+};
+
+const char* message_type_name(std::size_t type) {
+  if (type >= kMessageTypeCount) return "unknown";
+  return wire::EnumNameBody(static_cast<wire::Body>(type));
+}
+
 Client::Client(ClientOptions options, ClientCallbacks callbacks)
     : options_(std::move(options)),
       callbacks_(std::move(callbacks)),
-      socket_(io_),
-      keepalive_(io_),
+      own_io_(options_.io_context != nullptr ? nullptr : std::make_unique<asio::io_context>()),
+      io_(options_.io_context != nullptr ? *options_.io_context : *own_io_),
+      strand_(asio::make_strand(io_)),
+      socket_(strand_),
+      keepalive_(strand_),
+      delivery_(strand_),
       read_buf_(kReadChunkBytes),
-      reconnect_timer_(io_) {}
+      reconnect_timer_(strand_) {}
 
 Client::~Client() { disconnect(); }
 
@@ -41,6 +83,17 @@ bool Client::connect(std::string* error) {
   if (ec || endpoints.empty()) {
     if (error) *error = "cannot resolve " + options_.host + ": " + ec.message();
     return false;
+  }
+  endpoints_ = endpoints;
+  if (!options_.start_at_spawn) {
+    std::lock_guard lock(mutex_);
+    last_state_ = options_.state;
+  }
+  if (own_io_ == nullptr) {
+    if (!connect_shared(endpoints, error)) return false;
+    started_ = true;
+    asio::post(strand_, [this, g = OpGuard(this)] { start_io(); });
+    return true;
   }
   asio::error_code result = asio::error::would_block;
   asio::async_connect(socket_, endpoints, [&](const asio::error_code& e, const asio::ip::tcp::endpoint&) { result = e; });
@@ -53,15 +106,41 @@ bool Client::connect(std::string* error) {
     return false;
   }
   io_.restart();
-  endpoints_ = endpoints;
-  if (!options_.start_at_spawn) {
-    std::lock_guard lock(mutex_);
-    last_state_ = options_.state;
-  }
-  start_session();
+  started_ = true;
+  start_io();
   thread_ = std::thread([this] { io_.run(); });
   return true;
 }
+
+bool Client::connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error) {
+  auto done = std::make_shared<std::promise<asio::error_code>>();
+  auto result = done->get_future();
+  asio::post(strand_, [this, endpoints, done, g = OpGuard(this)] {
+    asio::async_connect(socket_, endpoints,
+                        [done, g2 = OpGuard(this)](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
+                          done->set_value(e);
+                        });
+  });
+  bool timed_out = false;
+  if (result.wait_for(options_.connect_timeout) != std::future_status::ready) {
+    timed_out = true;
+    asio::post(strand_, [this, g = OpGuard(this)] {
+      asio::error_code ignored;
+      socket_.close(ignored);
+    });
+  }
+  const asio::error_code ec = result.get();  // the handler always runs (aborted when closed)
+  if (!timed_out && !ec) return true;
+  if (error)
+    *error = "cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
+             (timed_out ? std::string("timed out") : ec.message());
+  // Let the close (if any) finish before the caller may destroy us.
+  std::unique_lock lock(ops_mutex_);
+  ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
+  return false;
+}
+
+void Client::start_io() { start_session(); }
 
 void Client::start_session() {
   asio::error_code ec;
@@ -71,8 +150,8 @@ void Client::start_session() {
   hello.protocol_version = options_.protocol_version;
   hello.client_name = options_.name;
   hello.auth_token = options_.auth_token;
-  std::vector<Frame> frames;
-  frames.push_back(build_hello(hello));
+  std::vector<Outbound> frames;
+  frames.push_back({build_hello(hello), wire::Body::Hello});
   {
     std::lock_guard lock(mutex_);
     if (resumed_) {
@@ -85,14 +164,15 @@ void Client::start_session() {
                                                                        : c.level});
       });
       for (std::size_t i = 0; i < held.size(); i += kMaxHoldingsPerMessage)
-        frames.push_back(build_holdings(
-            std::span<const HeldChunkMsg>(held).subspan(i, std::min(kMaxHoldingsPerMessage, held.size() - i))));
+        frames.push_back({build_holdings(std::span<const HeldChunkMsg>(held).subspan(
+                              i, std::min(kMaxHoldingsPerMessage, held.size() - i))),
+                          wire::Body::Holdings});
     }
-    if (last_state_) frames.push_back(build_client_state(*last_state_));
+    if (last_state_) frames.push_back({build_client_state(*last_state_), wire::Body::ClientState});
   }
   // Ahead of anything the application queued while the link was down.
   for (auto it = frames.rbegin(); it != frames.rend(); ++it) {
-    queued_bytes_.fetch_add(it->size(), std::memory_order_relaxed);
+    queued_bytes_.fetch_add(it->frame.size(), std::memory_order_relaxed);
     send_queue_.push_front(std::move(*it));
   }
   linked_ = true;
@@ -113,8 +193,13 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   asio::error_code ec;
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
   socket_.close(ec);
-  socket_ = asio::ip::tcp::socket(io_);
+  socket_ = asio::ip::tcp::socket(strand_);
   keepalive_.cancel();
+  // Bytes of the old connection still on the emulated link go with it.
+  delivery_.cancel();
+  delayed_.clear();
+  delayed_bytes_ = 0;
+  read_paused_ = false;
   writing_ = false;
   send_queue_.clear();
   queued_bytes_.store(0, std::memory_order_relaxed);
@@ -140,11 +225,12 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
 
 void Client::schedule_reconnect() {
   reconnect_timer_.expires_after(backoff_);
-  reconnect_timer_.async_wait([this](const asio::error_code& ec) {
+  reconnect_timer_.async_wait([this, g = OpGuard(this)](const asio::error_code& ec) {
     if (ec || io_closed_ || leaving_) return;
     ++attempts_;
     const std::uint64_t gen = generation_;
-    asio::async_connect(socket_, endpoints_, [this, gen](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
+    asio::async_connect(socket_, endpoints_,
+                        [this, gen, g2 = OpGuard(this)](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
       if (gen != generation_ || io_closed_ || leaving_) return;
       if (e) {
         if (options_.reconnect_attempts > 0 && attempts_ >= options_.reconnect_attempts)
@@ -165,9 +251,9 @@ void Client::schedule_reconnect() {
 }
 
 void Client::disconnect() {
-  if (!thread_.joinable()) return;
+  if (!started_ || disconnected_.exchange(true)) return;
   leaving_ = true;
-  asio::post(io_, [this] {
+  asio::post(strand_, [this, g = OpGuard(this)] {
     reconnect_timer_.cancel();
     if (io_closed_) return;
     asio::error_code ec;
@@ -175,17 +261,25 @@ void Client::disconnect() {
     asio::write(socket_, asio::buffer(bye), ec);
     close_locked_io("disconnected by client");
   });
-  thread_.join();
+  if (thread_.joinable()) {
+    thread_.join();
+    return;
+  }
+  std::unique_lock lock(ops_mutex_);
+  ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
 }
 
-bool Client::send(Frame frame) {
+bool Client::send(Frame frame, wire::Body type) {
   if (io_closed_) return false;
   const std::size_t n = frame.size();
   if (queued_bytes_.load(std::memory_order_relaxed) + n > options_.max_send_queue_bytes) return false;
   queued_bytes_.fetch_add(n, std::memory_order_relaxed);
-  asio::post(io_, [this, f = std::move(frame)]() mutable {
-    if (io_closed_) return;
-    send_queue_.push_back(std::move(f));
+  asio::post(strand_, [this, f = std::move(frame), type, g = OpGuard(this)]() mutable {
+    if (io_closed_) {
+      queued_bytes_.fetch_sub(f.size(), std::memory_order_relaxed);
+      return;
+    }
+    send_queue_.push_back({std::move(f), type});
     do_write();
   });
   return true;
@@ -195,47 +289,113 @@ void Client::do_write() {
   if (writing_ || send_queue_.empty() || io_closed_ || !linked_) return;
   writing_ = true;
   const std::uint64_t gen = generation_;
-  asio::async_write(socket_, asio::buffer(send_queue_.front()), [this, gen](const asio::error_code& ec, std::size_t) {
-    if (gen != generation_) return;  // a connection that is gone (its queue was dropped)
-    writing_ = false;
-    queued_bytes_.fetch_sub(send_queue_.front().size(), std::memory_order_relaxed);
-    send_queue_.pop_front();
-    if (ec) return connection_lost("write failed: " + ec.message(), false);
-    do_write();
-  });
+  asio::async_write(socket_, asio::buffer(send_queue_.front().frame),
+                    [this, gen, g = OpGuard(this)](const asio::error_code& ec, std::size_t) {
+                      if (gen != generation_) return;  // a connection that is gone (its queue was dropped)
+                      writing_ = false;
+                      const Outbound& sent = send_queue_.front();
+                      queued_bytes_.fetch_sub(sent.frame.size(), std::memory_order_relaxed);
+                      if (!ec) {
+                        std::lock_guard lock(mutex_);
+                        ++counters_.frames_out;
+                        counters_.bytes_out += sent.frame.size();
+                        auto& t = counters_.by_message_type[static_cast<std::size_t>(sent.type)];
+                        ++t.frames_out;
+                        t.bytes_out += sent.frame.size();
+                      }
+                      send_queue_.pop_front();
+                      if (ec) return connection_lost("write failed: " + ec.message(), false);
+                      do_write();
+                    });
 }
 
 void Client::arm_keepalive() {
   keepalive_.expires_after(options_.keepalive);
   const std::uint64_t gen = generation_;
-  keepalive_.async_wait([this, gen](const asio::error_code& ec) {
+  keepalive_.async_wait([this, gen, g = OpGuard(this)](const asio::error_code& ec) {
     if (ec || io_closed_ || gen != generation_) return;
-    send(build_ping(0));
+    send(build_ping(0), wire::Body::Ping);
     arm_keepalive();
   });
 }
 
 void Client::do_read() {
   const std::uint64_t gen = generation_;
-  socket_.async_read_some(asio::buffer(read_buf_), [this, gen](const asio::error_code& ec, std::size_t n) {
+  socket_.async_read_some(asio::buffer(read_buf_), [this, gen, g = OpGuard(this)](const asio::error_code& ec, std::size_t n) {
     if (io_closed_ || gen != generation_) return;
     if (ec) return connection_lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), false);
     {
       std::lock_guard lock(mutex_);
       counters_.bytes_in += n;
     }
-    const auto st = reader_.feed(std::span<const std::uint8_t>(read_buf_.data(), n),
-                                 [&](std::span<const std::uint8_t> body) {
-                                   if (!io_closed_ && gen == generation_) handle_frame(body);
-                                 });
-    if (!st) {
-      {
-        std::lock_guard lock(mutex_);
-        ++counters_.protocol_errors;
-      }
-      return close_locked_io(std::string("protocol error: ") + st.error().detail);
+    if (options_.emulation.active()) {
+      delay_bytes(n);
+      return;
     }
-    if (!io_closed_ && gen == generation_) do_read();
+    if (feed(std::span<const std::uint8_t>(read_buf_.data(), n)) && gen == generation_) do_read();
+  });
+}
+
+bool Client::feed(std::span<const std::uint8_t> bytes) {
+  // A frame that ends the connection (a Disconnect before a reconnect)
+  // makes the rest of these bytes belong to a connection that is gone.
+  const std::uint64_t gen = generation_;
+  const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
+    if (!io_closed_ && gen == generation_) handle_frame(body);
+  });
+  if (gen != generation_) return false;
+  if (!st) {
+    {
+      std::lock_guard lock(mutex_);
+      ++counters_.protocol_errors;
+      ++counters_.by_message_type[static_cast<std::size_t>(wire::Body::NONE)].frames_in;
+    }
+    close_locked_io(std::string("protocol error: ") + st.error().detail);
+    return false;
+  }
+  return !io_closed_;
+}
+
+void Client::delay_bytes(std::size_t n) {
+  using clock = std::chrono::steady_clock;
+  const auto now = clock::now();
+  const NetworkEmulation& e = options_.emulation;
+  auto sent_at = now;
+  if (e.bandwidth_bytes_per_s > 0) {
+    const auto on_wire = std::chrono::nanoseconds(static_cast<std::int64_t>(
+        static_cast<double>(n) * 1e9 / static_cast<double>(e.bandwidth_bytes_per_s)));
+    link_free_ = std::max(link_free_, now) + on_wire;
+    sent_at = link_free_;
+  }
+  delayed_.push_back(Delayed{sent_at + e.latency, std::vector<std::uint8_t>(read_buf_.begin(), read_buf_.begin() +
+                                                                                           static_cast<std::ptrdiff_t>(n))});
+  delayed_bytes_ += n;
+  if (delayed_bytes_ < emulation_queue_cap(e))
+    do_read();
+  else
+    read_paused_ = true;
+  arm_delivery();
+}
+
+void Client::arm_delivery() {
+  if (delivery_armed_ || delayed_.empty() || io_closed_) return;
+  delivery_armed_ = true;
+  delivery_.expires_at(delayed_.front().deliver_at);
+  delivery_.async_wait([this, g = OpGuard(this)](const asio::error_code& ec) {
+    delivery_armed_ = false;
+    if (ec || io_closed_) return;
+    const auto now = std::chrono::steady_clock::now();
+    while (!delayed_.empty() && delayed_.front().deliver_at <= now) {
+      Delayed d = std::move(delayed_.front());
+      delayed_.pop_front();
+      delayed_bytes_ -= d.bytes.size();
+      if (!feed(d.bytes)) return;
+    }
+    if (read_paused_ && delayed_bytes_ < emulation_queue_cap(options_.emulation)) {
+      read_paused_ = false;
+      do_read();
+    }
+    arm_delivery();
   });
 }
 
@@ -243,6 +403,12 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
   auto verified = verify_message(body);
   std::unique_lock lock(mutex_);
   ++counters_.frames_in;
+  {
+    const auto type = verified ? static_cast<std::size_t>((*verified)->body_type()) : std::size_t{0};
+    auto& t = counters_.by_message_type[type < kMessageTypeCount ? type : 0];
+    ++t.frames_in;
+    t.bytes_in += body.size() + kFrameHeaderBytes;
+  }
   auto fail = [&](const DecodeError& e) {
     ++counters_.protocol_errors;
     lock.unlock();
@@ -268,7 +434,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
         s.position = w->spawn;
         last_state_ = s;
         lock.unlock();
-        send(build_client_state(s));
+        send(build_client_state(s), wire::Body::ClientState);
         lock.lock();
       }
       if (callbacks_.on_welcome) after = [this, w = *w] { callbacks_.on_welcome(w); };
@@ -350,6 +516,8 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (!n) return fail(n.error());
       ++counters_.update_batches;
       counters_.units_updated += *n;
+      if (callbacks_.on_update_batch)
+        after = [this, tick = b->tick, revs = std::move(b->revisions)] { callbacks_.on_update_batch(tick, revs); };
       break;
     }
     case wire::Body::EditAck: {
@@ -395,7 +563,13 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       const bool match = mine && rev && *rev == h->revision && *mine == h->hash;
       hash_checks_[h->chunk_pos] = match;
       ++(match ? counters_.hash_matches : counters_.hash_mismatches);
-      if (callbacks_.on_hash_checked) after = [this, p = h->chunk_pos, match] { callbacks_.on_hash_checked(p, match); };
+      const ChunkCoverage* cov = replica_.coverage(h->chunk_pos);
+      const HashCheck check{h->chunk_pos, h->revision, rev, cov != nullptr && cov->state != CoverageState::kMip, match};
+      if (callbacks_.on_hash_checked || callbacks_.on_region_hash)
+        after = [this, check] {
+          if (callbacks_.on_hash_checked) callbacks_.on_hash_checked(check.chunk_pos, check.match);
+          if (callbacks_.on_region_hash) callbacks_.on_region_hash(check);
+        };
       break;
     }
     case wire::Body::Pong:
@@ -404,7 +578,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Ping: {
       const std::uint64_t nonce = m.body_as_Ping()->nonce();
       lock.unlock();
-      send(build_pong(nonce));
+      send(build_pong(nonce), wire::Body::Pong);
       lock.lock();
       break;
     }
@@ -423,6 +597,7 @@ void Client::close_locked_io(const std::string& reason) {
   socket_.close(ec);
   keepalive_.cancel();
   reconnect_timer_.cancel();
+  delivery_.cancel();
   std::string r;
   {
     std::lock_guard lock(mutex_);
@@ -439,7 +614,7 @@ bool Client::set_state(const ClientStateMsg& state) {
     std::lock_guard lock(mutex_);
     last_state_ = state;
   }
-  return send(build_client_state(state));
+  return send(build_client_state(state), wire::Body::ClientState);
 }
 
 std::uint32_t Client::fill_box(const Region& box, Voxel v) {
@@ -478,7 +653,7 @@ std::uint32_t Client::send_edit(EditRequestMsg e) {
     std::lock_guard lock(mutex_);
     unanswered_edits_.insert(e.edit_id);
   }
-  if (send(build_edit_request(e))) return e.edit_id;
+  if (send(build_edit_request(e), wire::Body::EditRequest)) return e.edit_id;
   std::lock_guard lock(mutex_);
   unanswered_edits_.erase(e.edit_id);
   return 0;
@@ -521,7 +696,7 @@ std::uint32_t Client::redo() {
 std::uint32_t Client::request_read_box(const Region& box) {
   if (box.empty() || box.volume() > kMaxRawBoxVolume) return 0;
   const std::uint32_t id = next_request_id_.fetch_add(1);
-  return send(build_read_box(id, box)) ? id : 0;
+  return send(build_read_box(id, box), wire::Body::ReadBox) ? id : 0;
 }
 
 std::vector<PresenceEntryMsg> Client::presence() const {
@@ -529,9 +704,11 @@ std::vector<PresenceEntryMsg> Client::presence() const {
   return presence_;
 }
 
-bool Client::request_region_hash(Vec3i chunk_pos) { return send(build_region_hash_request(chunk_pos)); }
-bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce)); }
-bool Client::send_raw(Frame bytes) { return send(std::move(bytes)); }
+bool Client::request_region_hash(Vec3i chunk_pos) {
+  return send(build_region_hash_request(chunk_pos), wire::Body::RegionHashRequest);
+}
+bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce), wire::Body::Ping); }
+bool Client::send_raw(Frame bytes) { return send(std::move(bytes), wire::Body::NONE); }
 
 ClientView Client::view() const {
   return ClientView{replica_,     counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_,

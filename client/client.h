@@ -2,14 +2,22 @@
 // the server streams, sends client state and edits, and verifies chunks
 // against the server's region hashes.
 //
-// Threading: the Client owns one io thread (started by connect()) that does
-// all socket I/O, verifies and parses every frame (bytes from the server are
-// treated as hostile: any bad frame closes the connection) and applies it to
-// the Replica. The Replica and the other shared state sit behind one mutex
-// because the application queries them from its own threads; the io thread
-// holds it only while applying one frame. Callbacks run on the io thread
-// without the lock held: they may call any Client method except
-// disconnect() and wait_until(). Every public method is thread-safe.
+// Threading: by default the Client owns one io thread (started by
+// connect()). With ClientOptions::io_context set, it owns no thread: its
+// handlers run on a strand of that shared io_context, which the application
+// runs on a pool of its own (many clients, few threads: the bots). Either
+// way the io side — the owned thread or the strand — does all socket I/O,
+// verifies and parses every frame (bytes from the server are treated as
+// hostile: any bad frame closes the connection) and applies it to the
+// Replica; one client's handlers never run concurrently. The Replica and
+// the other shared state sit behind one mutex because the application
+// queries them from its own threads; the io side holds it only while
+// applying one frame. Callbacks run on the io side without the lock held:
+// they may call any Client method except disconnect() and wait_until().
+// Every public method is thread-safe. In shared mode connect(),
+// disconnect() and wait_until() block, so they must not be called from the
+// shared io_context's threads, and the io_context must be running while
+// they wait and must outlive the Client.
 //
 // Connection states (io thread):
 //
@@ -25,6 +33,7 @@
 #pragma once
 
 #include <asio.hpp>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -33,6 +42,7 @@
 #include <functional>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <thread>
 #include <unordered_map>
@@ -43,6 +53,20 @@
 #include "protocol/messages.h"
 
 namespace terrane {
+
+// Optional emulation of a slow downstream link (server -> client), applied
+// where bytes leave the socket: each read is delivered to the frame parser
+// after the link has carried it at bandwidth_bytes_per_s (a single
+// bottleneck queue, first in first out) plus a fixed one-way latency. The
+// client stops reading the socket while more than about one
+// bandwidth-delay product (at least 64 KiB) waits, so a capped link pushes
+// back on the server through TCP as a real one would. Upstream (client ->
+// server) bytes are not delayed. Zero fields disable each part.
+struct NetworkEmulation {
+  std::chrono::milliseconds latency{0};
+  std::uint64_t bandwidth_bytes_per_s = 0;
+  bool active() const { return latency.count() > 0 || bandwidth_bytes_per_s > 0; }
+};
 
 struct ClientOptions {
   std::string host = "127.0.0.1";
@@ -70,13 +94,29 @@ struct ClientOptions {
   std::chrono::milliseconds reconnect_min{100};
   std::chrono::milliseconds reconnect_max{5000};
   int reconnect_attempts = 0;
+  // Shared mode (see the threading note): run on this io_context instead of
+  // an owned thread. Not owned.
+  asio::io_context* io_context = nullptr;
+  NetworkEmulation emulation;
 };
 
 inline constexpr const char* kEditOutcomeUnknown = "connection lost before the answer; outcome unknown";
 
-struct ClientCounters {
+// Frames and bytes (length header included) of one message type.
+struct MessageTypeCounters {
   std::uint64_t frames_in = 0;
   std::uint64_t bytes_in = 0;
+  std::uint64_t frames_out = 0;
+  std::uint64_t bytes_out = 0;
+};
+inline constexpr std::size_t kMessageTypeCount = static_cast<std::size_t>(wire::Body::MAX) + 1;
+// The message type's name ("ChunkData"); "NONE" counts frames that did not
+// verify (inbound) or raw bytes (send_raw).
+const char* message_type_name(std::size_t type);
+
+struct ClientCounters {
+  std::uint64_t frames_in = 0;  // frames handled (by_message_type counts them by type, length header included)
+  std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
   std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
   std::uint64_t mips = 0;
   std::uint64_t coverage_empty = 0;
@@ -93,6 +133,20 @@ struct ClientCounters {
   std::uint64_t reconnects = 0;
   std::uint64_t presence_updates = 0;
   std::uint64_t read_results = 0;
+  std::uint64_t frames_out = 0;
+  std::uint64_t bytes_out = 0;  // written to the socket
+  // Indexed by wire::Body (message_type_name()).
+  std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
+};
+
+// The outcome of one RegionHash, with what the comparison saw: a client
+// that only wants the verdict can use on_hash_checked instead.
+struct HashCheck {
+  Vec3i chunk_pos;
+  std::uint64_t server_revision = 0;
+  std::optional<std::uint64_t> replica_revision;  // nullopt: chunk not held
+  bool replica_full = false;  // held at full resolution (Full or Empty)
+  bool match = false;         // full, same revision, same hash
 };
 
 struct EditOutcome {
@@ -113,6 +167,11 @@ struct ClientCallbacks {
   std::function<void(std::uint32_t edit_id, const EditOutcome&)> on_edit_result;
   // A RegionHash arrived and was compared with the replica's chunk.
   std::function<void(Vec3i chunk_pos, bool match)> on_hash_checked;
+  // The same event with the revisions compared (runs after on_hash_checked).
+  std::function<void(const HashCheck&)> on_region_hash;
+  // An UpdateBatch was applied to the replica: the tick it belongs to and
+  // the chunks it touched with their new revisions.
+  std::function<void(std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions)> on_update_batch;
   std::function<void(const std::string& reason)> on_disconnected;
   // The connection dropped and a reconnect is being tried (reason as for
   // on_disconnected), and when it succeeded (after the new Welcome).
@@ -141,10 +200,12 @@ class Client {
   Client& operator=(const Client&) = delete;
 
   // Connects (blocking up to connect_timeout), queues Hello and the initial
-  // ClientState and starts the io thread. Returns false with *error set if
-  // the connection cannot be made. Call once.
+  // ClientState and starts the io thread (shared mode: starts reading on
+  // the strand). Returns false with *error set if the connection cannot be
+  // made. Call once.
   bool connect(std::string* error);
-  // Sends Disconnect, closes the socket and joins the io thread (idempotent).
+  // Sends Disconnect, closes the socket and joins the io thread (shared
+  // mode: waits until none of the client's handlers is pending). Idempotent.
   void disconnect();
 
   bool set_state(const ClientStateMsg& state);
@@ -197,29 +258,59 @@ class Client {
   }
 
  private:
+  struct Outbound {
+    Frame frame;
+    wire::Body type;
+  };
+  // Bytes read from the socket, waiting for the emulated link.
+  struct Delayed {
+    std::chrono::steady_clock::time_point deliver_at;
+    std::vector<std::uint8_t> bytes;
+  };
+  // Counts one pending handler of this client (shared mode waits for none).
+  class OpGuard;
+
+  bool connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error);
+  void start_io();  // io side: first writes, reads and timers
   void do_read();
+  bool feed(std::span<const std::uint8_t> bytes);  // io side; false once closed
+  void delay_bytes(std::size_t n);
+  void arm_delivery();
   void arm_keepalive();
   void handle_frame(std::span<const std::uint8_t> body);
-  bool send(Frame frame);
+  bool send(Frame frame, wire::Body type);
   std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
   void do_write();
-  void close_locked_io(const std::string& reason);  // io thread
-  // io thread: the connection ended; reconnects or closes for good.
+  void close_locked_io(const std::string& reason);  // io side
+  // io side: the connection ended; reconnects or closes for good.
   void connection_lost(const std::string& reason, bool server_said);
   void schedule_reconnect();
-  void start_session();  // io thread: Hello (+ Holdings, state) and the read loop
+  void start_session();  // io side: Hello (+ Holdings, state) and the read loop
   ClientView view() const;
 
   ClientOptions options_;
   ClientCallbacks callbacks_;
-  asio::io_context io_;
-  asio::ip::tcp::socket socket_;
-  asio::steady_timer keepalive_;
+  std::unique_ptr<asio::io_context> own_io_;  // null in shared mode
+  asio::io_context& io_;
+  asio::strand<asio::io_context::executor_type> strand_;
+  asio::ip::tcp::socket socket_;   // on strand_
+  asio::steady_timer keepalive_;   // on strand_
+  asio::steady_timer delivery_;    // on strand_
   std::thread thread_;
+  bool started_ = false;           // connect() succeeded (caller's thread)
+  std::atomic<bool> disconnected_{false};
+  std::atomic<int> pending_ops_{0};
+  std::mutex ops_mutex_;           // only to wait for pending_ops_ == 0
+  std::condition_variable ops_done_;
   FrameReader reader_;
   std::vector<std::uint8_t> read_buf_;
-  std::deque<Frame> send_queue_;  // io thread
-  bool writing_ = false;          // io thread
+  std::deque<Outbound> send_queue_;  // io side
+  bool writing_ = false;             // io side
+  std::deque<Delayed> delayed_;      // io side (emulation)
+  std::size_t delayed_bytes_ = 0;    // io side
+  bool read_paused_ = false;         // io side
+  bool delivery_armed_ = false;      // io side
+  std::chrono::steady_clock::time_point link_free_{};  // io side
   std::atomic<std::size_t> queued_bytes_{0};
   std::atomic<std::uint32_t> next_edit_id_{1};
   std::atomic<bool> io_closed_{false};

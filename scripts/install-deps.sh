@@ -20,6 +20,8 @@ packages=(
   # terrane-view: GLFW windows, libepoxy (GL function loader for GLX and
   # EGL alike), EGL + Mesa's software rasteriser for headless screenshots
   libglfw3-dev libepoxy-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
+  # validates docker/docker-compose.yml in the tests (no Docker engine needed)
+  docker-compose
 )
 
 missing=()

@@ -1,17 +1,77 @@
 #!/usr/bin/env bash
 # Sets everything up and runs Terrane's main job: the README's first command.
 #   1. install system packages (scripts/install-deps.sh)
-#   2. release build
+#   2. release build of the world tool, the server and the bots
 #   3. generate the default world in worlds/default (kept between runs:
 #      chunks already stored are not generated again)
-#   4. print the world's storage report (terrane-world stats)
-# Safe to run any number of times.
+#   4. copy it to a scratch world, so the bots' edits never change
+#      worlds/default and every run starts from the same terrain
+#   5. start terrane-server on the copy (port 0: the port is read from its
+#      'listening on 127.0.0.1:PORT' log line)
+#   6. run a terrane-bots load test against it and print the report
+#      (reports/bots.json, reports/bots.html)
+#   7. stop the server cleanly (SIGTERM) and remove the scratch world
+# Safe to run any number of times. Exit status: the bots' (0 = every replica
+# verified, no unexpected disconnects).
+#
+# Environment: TERRANE_WORLD (default worlds/default), TERRANE_BOTS (50),
+# TERRANE_BOTS_DURATION (30 s), TERRANE_BOTS_ARGS (extra terrane-bots flags).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 world=${TERRANE_WORLD:-worlds/default}
+bots=${TERRANE_BOTS:-50}
+duration=${TERRANE_BOTS_DURATION:-30}
 
 bash scripts/install-deps.sh
-TERRANE_WERROR=OFF bash scripts/build.sh release terrane-world
+TERRANE_WERROR=${TERRANE_WERROR:-OFF} bash scripts/build.sh release terrane-world terrane-server terrane-bots
 ./build/bin/terrane-world generate --world "$world"
-./build/bin/terrane-world stats --world "$world"
+
+scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-run.XXXXXX")
+server_pid=
+cleanup() {
+  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
+    kill -TERM "$server_pid" 2>/dev/null || true
+    wait "$server_pid" 2>/dev/null || true
+  fi
+  rm -rf "$scratch"
+}
+trap cleanup EXIT INT TERM
+
+./build/bin/terrane-world backup --world "$world" --to "$scratch/world"
+# Two io threads: chunk loads on the world owner strand must not stall sockets.
+./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 16)) --io-threads 2 \
+  >"$scratch/server.log" 2>&1 &
+server_pid=$!
+
+port=
+for _ in $(seq 1 600); do
+  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
+  [ -n "$port" ] && break
+  if ! kill -0 "$server_pid" 2>/dev/null; then
+    echo "run.sh: terrane-server exited before listening:" >&2
+    cat "$scratch/server.log" >&2
+    exit 1
+  fi
+  sleep 0.1
+done
+if [ -z "$port" ]; then
+  echo "run.sh: terrane-server did not report its port within 60 s:" >&2
+  cat "$scratch/server.log" >&2
+  exit 1
+fi
+echo "run.sh: terrane-server on 127.0.0.1:$port, world $world (scratch copy)"
+
+mkdir -p reports
+status=0
+# shellcheck disable=SC2086  # TERRANE_BOTS_ARGS holds several flags
+./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration "$duration" --behavior mixed \
+  --spread 128 --view-distance 128 --full-res-radius 48 --ramp-up 5 --seed 1 \
+  --report reports/bots.json --html reports/bots.html ${TERRANE_BOTS_ARGS:-} || status=$?
+
+kill -TERM "$server_pid"
+wait "$server_pid" || { echo "run.sh: terrane-server did not stop cleanly:" >&2; tail -n 20 "$scratch/server.log" >&2; status=1; }
+server_pid=
+tail -n 1 "$scratch/server.log"
+echo "run.sh: reports in reports/bots.json and reports/bots.html"
+exit $status

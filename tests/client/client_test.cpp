@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -587,6 +588,140 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
       },
       kDeadline));
   EXPECT_EQ(b.counters().update_batches, 0u);  // a mip holder gets mips, not units
+}
+
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+
+// Shared mode: many clients on one io_context run by a small pool.
+class SharedIoPool {
+ public:
+  explicit SharedIoPool(int threads) : work_(asio::make_work_guard(io_)) {
+    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { io_.run(); });
+  }
+  ~SharedIoPool() {
+    work_.reset();
+    for (auto& t : threads_) t.join();
+  }
+  asio::io_context& io() { return io_; }
+
+ private:
+  asio::io_context io_;
+  asio::executor_work_guard<asio::io_context::executor_type> work_;
+  std::vector<std::thread> threads_;
+};
+
+TEST_F(ClientServerTest, SharedIoContextServesManyClientsAndReportsUpdateBatches) {
+  start_server();
+  SharedIoPool pool(2);
+  constexpr int kClients = 6;
+  std::mutex mu;
+  std::vector<std::pair<int, std::uint64_t>> batches;  // (client, tick)
+  std::vector<std::unique_ptr<Client>> clients;
+  for (int i = 0; i < kClients; ++i) {
+    ClientOptions o = options("shared" + std::to_string(i));
+    o.io_context = &pool.io();
+    ClientCallbacks cb;
+    cb.on_update_batch = [&, i](std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revs) {
+      EXPECT_FALSE(revs.empty());
+      std::lock_guard lock(mu);
+      batches.emplace_back(i, tick);
+    };
+    clients.push_back(std::make_unique<Client>(o, cb));
+    std::string err;
+    ASSERT_TRUE(clients.back()->connect(&err)) << err;
+  }
+  for (auto& c : clients) wait_full_res(*c, 32);
+  const auto w = clients[0]->welcome();
+  ASSERT_TRUE(w.has_value());
+  const std::uint32_t id = clients[0]->fill_sphere({w->spawn.x, w->spawn.y - 3.0f, w->spawn.z}, 3.0f, materials::kBrick);
+  ASSERT_NE(id, 0u);
+  ASSERT_TRUE(clients[0]->wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
+  const auto outcome = clients[0]->wait_until([&](const ClientView& v) { return v.edits.at(id).accepted; }, 0ms);
+  ASSERT_TRUE(outcome);
+  std::uint64_t tick = 0;
+  clients[0]->wait_until([&](const ClientView& v) { return (tick = v.edits.at(id).tick), true; }, 0ms);
+  // Every client holds the edit at full resolution: each hears of it, at the ack's tick.
+  for (int i = 0; i < kClients; ++i)
+    ASSERT_TRUE(clients[static_cast<std::size_t>(i)]->wait_until(
+        [&](const ClientView&) {
+          std::lock_guard lock(mu);
+          return std::count(batches.begin(), batches.end(), std::make_pair(i, tick)) > 0;
+        },
+        kDeadline))
+        << "client " << i;
+  for (auto& c : clients) {
+    const ClientCounters k = c->counters();
+    // Chunks stream in StreamBatch frames, eight 16^3 units per full chunk.
+    const auto& stream = k.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)];
+    EXPECT_GT(stream.frames_in, 0u);
+    EXPECT_EQ(k.chunk_units, 8 * k.coverage_full);
+    EXPECT_EQ(k.by_message_type[static_cast<std::size_t>(wire::Body::Hello)].frames_out, 1u);
+    std::uint64_t in = 0, out = 0;
+    for (const auto& t : k.by_message_type) in += t.bytes_in, out += t.bytes_out;
+    EXPECT_LE(in, k.bytes_in);
+    EXPECT_GT(in, k.bytes_in / 2);
+    EXPECT_EQ(out, k.bytes_out);
+    EXPECT_FALSE(c->closed()) << c->disconnect_reason();
+  }
+  EXPECT_STREQ(message_type_name(static_cast<std::size_t>(wire::Body::UpdateBatch)), "UpdateBatch");
+  for (auto& c : clients) c->disconnect();
+  for (auto& c : clients) EXPECT_TRUE(c->closed());
+}
+
+TEST_F(ClientServerTest, SharedModeConnectFailureIsReported) {
+  SharedIoPool pool(1);
+  // A port nothing listens on: bind one, then close it.
+  asio::io_context io;
+  asio::ip::tcp::acceptor a(io, {asio::ip::make_address("127.0.0.1"), 0});
+  const std::uint16_t port = a.local_endpoint().port();
+  a.close();
+  ClientOptions o;
+  o.port = port;
+  o.io_context = &pool.io();
+  Client c(o);
+  std::string err;
+  EXPECT_FALSE(c.connect(&err));
+  EXPECT_NE(err.find("cannot connect to 127.0.0.1:" + std::to_string(port)), std::string::npos) << err;
+}
+
+TEST_F(ClientServerTest, EmulatedLatencyDelaysEveryFrame) {
+  start_server();
+  ClientOptions o = options("laggy");
+  o.emulation.latency = 300ms;
+  Client c(o);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto sent = std::chrono::steady_clock::now();
+  ASSERT_TRUE(c.ping(42));
+  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.counters.pongs >= 1 || v.closed; }, kDeadline));
+  EXPECT_GE(std::chrono::steady_clock::now() - sent, 300ms);
+  EXPECT_FALSE(c.closed());
+}
+
+TEST_F(ClientServerTest, EmulatedBandwidthCapsDeliveryRate) {
+  start_server();
+  ClientOptions o = options("thin", 96, 32);
+  constexpr std::uint64_t kRate = 40 * 1024;
+  o.emulation.bandwidth_bytes_per_s = kRate;
+  o.emulation.latency = 20ms;
+  Client c(o);
+  std::string err;
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE(c.connect(&err)) << err;
+  wait_full_res(c, 32);
+  const double elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const ClientCounters k = c.counters();
+  std::uint64_t delivered = 0;
+  for (const auto& t : k.by_message_type) delivered += t.bytes_in;
+  ASSERT_GT(delivered, 2 * kRate) << "the test needs more than a few reads of data";
+  // Delivered bytes never outrun the link (plus one read in flight).
+  EXPECT_LE(static_cast<double>(delivered), static_cast<double>(kRate) * elapsed_s + 64 * 1024);
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
 }
 
 }  // namespace

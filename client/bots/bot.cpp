@@ -1,0 +1,492 @@
+#include "client/bots/bot.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace terrane::bots {
+
+namespace {
+
+constexpr auto kStep = std::chrono::milliseconds(100);
+constexpr float kWalkSpeed = 5.0f;   // voxels per second
+constexpr float kFlySpeed = 40.0f;   // voxels per second
+constexpr float kFlyHeight = 40.0f;  // above the start height
+constexpr float kEyeHeight = 1.6f;
+// Highest step a walker climbs per step (0.5 voxel forward) and deepest drop.
+constexpr float kMaxClimb = 1.0f;
+constexpr float kMaxDrop = 3.0f;
+// After this many refused steps in a row (walled in by edits, in a dug pit)
+// a walker stands on top of its own column again and may climb kEscapeClimb
+// in one step, like a jump.
+constexpr int kStuckSteps = 10;
+constexpr float kEscapeClimb = 3.0f;
+// Region-hash retries while the replica's revision differs from the reply's
+// before it counts as a mismatch: updates are ordered before the reply, so
+// a lasting difference means an update was lost.
+constexpr int kMaxHashAttempts = 5;
+constexpr auto kHashRetry = std::chrono::milliseconds(250);
+constexpr auto kHashTimeout = std::chrono::seconds(10);
+// Edits in flight per bot at most (the server queues 64 per client).
+constexpr std::size_t kMaxOutstandingEdits = 8;
+constexpr Material kBuildMaterials[] = {materials::kBrick, materials::kConcrete, materials::kWoodPlanks,
+                                        materials::kCobblestone, materials::kSandstone};
+
+// Same arithmetic as the server's interest management (server/streaming.cpp).
+float dist_to_chunk(Vec3f p, Vec3i cp) {
+  const Vec3i o = chunk_origin(cp);
+  auto axis = [](float v, std::int32_t lo) {
+    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
+    return v < a ? a - v : (v > b ? v - b : 0.0f);
+  };
+  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
+  return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+float length(Vec3f v) { return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
+
+}  // namespace
+
+Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditMode edits, std::uint64_t seed)
+    : index_(index), ctx_(ctx), movement_(movement), edits_mode_(edits), rng_(seed), pos_(start) {
+  const BotsOptions& o = *ctx_.options;
+  ClientOptions co;
+  co.host = o.host;
+  co.port = o.port;
+  co.name = "bot-" + std::to_string(index);
+  co.auth_token = o.token;
+  co.start_at_spawn = false;
+  co.state = ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius};
+  co.io_context = ctx_.io;
+  co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
+  co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;
+  ClientCallbacks cb;
+  cb.on_coverage = [this](Vec3i cp, wire::CoverageKind kind, int) { on_coverage(cp, kind); };
+  cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
+    ctx_.fanout->edit_result(index_, id, outcome, Clock::now());
+    std::lock_guard lock(mutex_);
+    if (outstanding_edits_ > 0) --outstanding_edits_;
+  };
+  cb.on_update_batch = [this](std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions) {
+    ctx_.fanout->update_received(index_, tick, revisions, Clock::now());
+  };
+  cb.on_region_hash = [this](const HashCheck& check) { on_region_hash(check); };
+  cb.on_disconnected = [this](const std::string& reason) { on_disconnected(reason); };
+  client_ = std::make_unique<Client>(co, cb);
+  std::uniform_real_distribution<float> angle(0.0f, 2.0f * std::numbers::pi_v<float>);
+  heading_ = angle(rng_);
+  init_join_tracking();
+}
+
+// The Client's handlers capture this Bot: it goes first.
+Bot::~Bot() { client_.reset(); }
+
+void Bot::init_join_tracking() {
+  const std::int32_t view = ctx_.view_distance, full = ctx_.full_res_radius;
+  const Vec3i v = voxel_at(pos_);
+  Vec3i c0 = chunk_of(v - Vec3i{view, view, view}), c1 = chunk_of(v + Vec3i{view, view, view});
+  c0.y = std::max(c0.y, floor_div(ctx_.welcome.bounds_min_y, kChunkSize));
+  c1.y = std::min(c1.y, floor_div(ctx_.welcome.bounds_max_y - 1, kChunkSize));
+  box_min_ = c0;
+  box_size_ = Vec3i{c1.x - c0.x + 1, std::max(0, c1.y - c0.y + 1), c1.z - c0.z + 1};
+  need_.assign(static_cast<std::size_t>(box_size_.x) * static_cast<std::size_t>(box_size_.y) *
+                   static_cast<std::size_t>(box_size_.z),
+               0);
+  std::size_t i = 0;
+  for (int y = c0.y; y <= c1.y; ++y)
+    for (int z = c0.z; z <= c1.z; ++z)
+      for (int x = c0.x; x <= c1.x; ++x, ++i) {
+        const float d = dist_to_chunk(pos_, {x, y, z});
+        if (d <= static_cast<float>(view)) need_[i] |= 1, ++need_coarse_;
+        if (d <= static_cast<float>(full)) need_[i] |= 2, ++need_full_;
+      }
+}
+
+bool Bot::connect() {
+  connect_at_ = Clock::now();
+  next_edit_ = connect_at_;
+  next_check_ = connect_at_;
+  std::string err;
+  if (!client_->connect(&err)) {
+    result_.connect_error = err;
+    return false;
+  }
+  result_.connected = true;
+  std::lock_guard lock(mutex_);
+  if (need_full_ == 0) joined_ = true;
+  if (need_coarse_ == 0) result_.join_coarse_ms = 0;
+  if (need_full_ == 0) result_.join_full_ms = 0;
+  return true;
+}
+
+void Bot::on_coverage(Vec3i cp, wire::CoverageKind kind) {
+  if (kind == wire::CoverageKind::Released) return;
+  std::lock_guard lock(mutex_);
+  if (joined_ && result_.join_coarse_ms) return;
+  const Vec3i l = cp - box_min_;
+  if (l.x < 0 || l.y < 0 || l.z < 0 || l.x >= box_size_.x || l.y >= box_size_.y || l.z >= box_size_.z) return;
+  std::uint8_t& b = need_[(static_cast<std::size_t>(l.y) * static_cast<std::size_t>(box_size_.z) +
+                           static_cast<std::size_t>(l.z)) * static_cast<std::size_t>(box_size_.x) +
+                          static_cast<std::size_t>(l.x)];
+  const auto now = Clock::now();
+  if ((b & 1) != 0) {
+    b &= std::uint8_t(~1u);
+    if (--need_coarse_ == 0) result_.join_coarse_ms = ms_between(connect_at_, now);
+  }
+  const bool full = kind == wire::CoverageKind::Empty || kind == wire::CoverageKind::Full;
+  if ((b & 2) != 0 && full) {
+    b &= std::uint8_t(~2u);
+    if (--need_full_ == 0) {
+      result_.join_full_ms = ms_between(connect_at_, now);
+      const ClientCounters k = client_->counters();
+      std::uint64_t delivered = 0;
+      for (const auto& t : k.by_message_type) delivered += t.bytes_in;
+      result_.join_bytes = delivered;
+      joined_ = true;
+    }
+  }
+}
+
+bool Bot::joined() const {
+  std::lock_guard lock(mutex_);
+  return joined_;
+}
+
+std::size_t Bot::outstanding_edits() const {
+  std::lock_guard lock(mutex_);
+  return outstanding_edits_;
+}
+
+void Bot::count_join_voxels() {
+  // The full-resolution region as it stood at join (the bot has not moved).
+  const float full = static_cast<float>(ctx_.full_res_radius);
+  std::uint64_t n = 0;
+  client_->with_replica([&](const Replica& r) {
+    Chunk::Level0::Row scratch;
+    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
+      if (c.state != CoverageState::kFull || dist_to_chunk(pos_, cp) > full) return;
+      const Chunk* chunk = r.grid().find_chunk(cp);
+      if (chunk == nullptr || chunk->empty()) return;
+      for (int y = 0; y < kChunkSize; ++y)
+        for (int z = 0; z < kChunkSize; ++z) {
+          const Voxel* row = chunk->read_row(y, z, scratch);
+          for (int x = 0; x < kChunkSize; ++x) n += row[x].material != kAir ? 1 : 0;
+        }
+    });
+    return 0;
+  });
+  result_.join_non_empty_voxels = n;
+}
+
+Vec3i Bot::voxel_at(Vec3f p) const {
+  return {static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
+          static_cast<std::int32_t>(std::floor(p.z))};
+}
+
+bool Bot::in_area(float x, float z, float half) const {
+  return std::abs(x - ctx_.spawn.x) <= half && std::abs(z - ctx_.spawn.z) <= half;
+}
+
+bool Bot::held_full(Vec3i cp) const {
+  return client_->with_replica([&](const Replica& r) {
+    const ChunkCoverage* c = r.coverage(cp);
+    return c != nullptr && c->state != CoverageState::kMip;
+  });
+}
+
+void Bot::step(Clock::time_point now, bool active) {
+  if (!result_.connected) return;
+  {
+    std::lock_guard lock(mutex_);
+    if (!joined_ || closing_) return;
+  }
+  if (!voxels_counted_) {
+    count_join_voxels();
+    voxels_counted_ = true;
+  }
+  if (active) {
+    move(now);
+    maybe_edit(now);
+    schedule_check(now);
+  }
+  // Hash retries and time-outs.
+  checks_pending(now);
+}
+
+void Bot::move(Clock::time_point) {
+  ++steps_;
+  if (movement_ == Movement::kWalk) walk();
+  if (movement_ == Movement::kFly) fly();
+  // ClientState at most every other step (5 Hz) while moving.
+  if (state_dirty_ && steps_ % 2 == 0) {
+    client_->set_state(ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius});
+    state_dirty_ = false;
+  }
+}
+
+void Bot::walk() {
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  if (!landed_) {
+    // Start standing on the surface under the spawn column, if known at full resolution.
+    const Vec3i v = voxel_at(pos_);
+    const auto h = client_->surface_height(v.x, v.z);
+    if (!h || client_->resolution_at({v.x, *h - 1, v.z}) != 0) return;
+    pos_.y = static_cast<float>(*h);
+    landed_ = true;
+    state_dirty_ = true;
+    return;
+  }
+  if (unit(rng_) < 0.02f) heading_ += (unit(rng_) - 0.5f) * std::numbers::pi_v<float>;
+  const float stride = kWalkSpeed * std::chrono::duration<float>(kStep).count();
+  const Vec3f next{pos_.x + std::cos(heading_) * stride, pos_.y, pos_.z + std::sin(heading_) * stride};
+  const Vec3i nv = voxel_at(next);
+  const float half = std::max(static_cast<float>(ctx_.options->spread) / 2.0f, 64.0f);
+  ++result_.walk_steps;
+  int refused = -1;
+  std::optional<std::int32_t> h;
+  if (!in_area(next.x, next.z, half)) refused = 0;
+  if (refused < 0) {
+    h = client_->surface_height(nv.x, nv.z);
+    // Only where the replica holds the ground and the air above it at full resolution.
+    if (!h || client_->resolution_at({nv.x, *h - 1, nv.z}) != 0 || client_->resolution_at({nv.x, *h, nv.z}) != 0)
+      refused = 1;
+  }
+  if (refused < 0) {
+    const float dy = static_cast<float>(*h) - pos_.y;
+    if (dy > (stuck_steps_ >= kStuckSteps ? kEscapeClimb : kMaxClimb) || dy < -kMaxDrop) refused = 2;
+  }
+  if (refused < 0) {
+    // Nothing solid between here and there at knee height.
+    const Vec3f from{pos_.x, pos_.y + 1.2f, pos_.z};
+    const Vec3f to{next.x, static_cast<float>(*h) + 1.2f, next.z};
+    const Vec3f d = to - from;
+    const float len = length(d);
+    if (len > 0 && client_->raycast(from, d * (1.0f / len), len).has_value()) refused = 3;
+  }
+  if (refused >= 0) {
+    ++result_.walk_blocked[static_cast<std::size_t>(refused)];
+    heading_ += std::numbers::pi_v<float> * (0.5f + unit(rng_));
+    if (++stuck_steps_ == kStuckSteps) {
+      // An edit may have buried the walker: back on top of its own column.
+      const Vec3i v = voxel_at(pos_);
+      const auto top = client_->surface_height(v.x, v.z);
+      if (top && static_cast<float>(*top) > pos_.y && client_->resolution_at({v.x, *top, v.z}) == 0) {
+        pos_.y = static_cast<float>(*top);
+        state_dirty_ = true;
+      }
+    }
+    return;
+  }
+  stuck_steps_ = 0;
+  result_.distance_moved += stride;
+  pos_ = Vec3f{next.x, static_cast<float>(*h), next.z};
+  state_dirty_ = true;
+}
+
+void Bot::fly() {
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  if (!landed_) {
+    pos_.y = std::min(pos_.y + kFlyHeight, static_cast<float>(ctx_.welcome.bounds_max_y - 2));
+    landed_ = true;
+    state_dirty_ = true;
+    return;
+  }
+  const float stride = kFlySpeed * std::chrono::duration<float>(kStep).count();
+  const float half = std::max(static_cast<float>(ctx_.options->spread) / 2.0f, 128.0f);
+  Vec3f dir{std::cos(heading_), 0.0f, std::sin(heading_)};
+  const Vec3f next = pos_ + dir * stride;
+  if (!in_area(next.x, next.z, half)) {
+    heading_ += std::numbers::pi_v<float> * (0.75f + 0.5f * unit(rng_));
+    return;
+  }
+  if (client_->raycast(pos_, dir, stride + 1.0f)) {
+    // Terrain ahead: climb instead (never through it).
+    pos_.y = std::min(pos_.y + stride, static_cast<float>(ctx_.welcome.bounds_max_y - 2));
+  } else {
+    pos_ = next;
+    result_.distance_moved += stride;
+  }
+  state_dirty_ = true;
+}
+
+void Bot::maybe_edit(Clock::time_point now) {
+  if (edits_mode_ == EditMode::kNone || now < next_edit_) return;
+  const BotsOptions& o = *ctx_.options;
+  std::exponential_distribution<double> gap(1.0 / o.edit_interval_s);
+  next_edit_ = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(gap(rng_)));
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  const bool dig = edits_mode_ == EditMode::kDig || (edits_mode_ == EditMode::kBoth && unit(rng_) < 0.5f);
+  const bool sphere = unit(rng_) < 0.8f;
+  // Aim down at the ground nearby.
+  const float yaw = unit(rng_) * 2.0f * std::numbers::pi_v<float>;
+  const float pitch = -(25.0f + 50.0f * unit(rng_)) * std::numbers::pi_v<float> / 180.0f;
+  const Vec3f eye{pos_.x, pos_.y + kEyeHeight, pos_.z};
+  const Vec3f dir{std::cos(pitch) * std::cos(yaw), std::sin(pitch), std::cos(pitch) * std::sin(yaw)};
+  const float reach = movement_ == Movement::kFly ? 96.0f : 48.0f;
+  const auto hit = client_->raycast(eye, dir, reach);
+  if (!hit) return;
+  {
+    std::lock_guard lock(mutex_);
+    if (outstanding_edits_ >= kMaxOutstandingEdits) return;
+    ++outstanding_edits_;
+  }
+  const Vec3i normal = hit->normal == Vec3i{} ? Vec3i{0, 1, 0} : hit->normal;
+  const Material material = kBuildMaterials[std::uniform_int_distribution<std::size_t>(0, std::size(kBuildMaterials) - 1)(rng_)];
+  EditRequestMsg e;
+  std::uint32_t id = 0;
+  if (sphere) {
+    const float r = 1.0f + (o.edit_radius - 1.0f) * unit(rng_);
+    const Vec3i at = dig ? hit->voxel : hit->voxel + normal * static_cast<std::int32_t>(std::ceil(r));
+    e.kind = EditKind::kFillSphere;
+    e.center = Vec3f{static_cast<float>(at.x) + 0.5f, static_cast<float>(at.y) + 0.5f, static_cast<float>(at.z) + 0.5f};
+    e.radius = std::max(0.5f, r);
+    const Region b = e.bounds();
+    double voxels = 0;
+    const float reach_r = e.radius + 0.5f;
+    for (int y = b.min.y; y < b.max.y; ++y)
+      for (int z = b.min.z; z < b.max.z; ++z)
+        for (int x = b.min.x; x < b.max.x; ++x) {
+          const Vec3f c{static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, static_cast<float>(z) + 0.5f};
+          if (length(c - e.center) < reach_r) voxels += 1;
+        }
+    id = ctx_.fanout->send_edit(index_, b, voxels, [&] {
+      return client_->fill_sphere(e.center, e.radius, dig ? kAir : material);
+    });
+  } else {
+    const int max_side = std::max(2, static_cast<int>(2.0f * o.edit_radius));
+    const int s = std::uniform_int_distribution<int>(2, max_side)(rng_);
+    const Vec3i at = dig ? hit->voxel : hit->voxel + normal;
+    const Region box{at - Vec3i{s / 2, s / 2, s / 2}, at - Vec3i{s / 2, s / 2, s / 2} + Vec3i{s, s, s}};
+    const Voxel v = dig ? Voxel{} : solid(material);
+    id = ctx_.fanout->send_edit(index_, box, static_cast<double>(box.volume()),
+                                [&] { return client_->fill_box(box, v); });
+  }
+  if (id == 0) {
+    std::lock_guard lock(mutex_);
+    --outstanding_edits_;
+  }
+}
+
+void Bot::schedule_check(Clock::time_point now) {
+  const BotsOptions& o = *ctx_.options;
+  if (o.hash_checks == 0 || now < next_check_) return;
+  const double span = std::clamp((o.duration_s - o.ramp_up_s) / (o.hash_checks + 1), 0.2, 10.0);
+  next_check_ = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(span));
+  const float r = static_cast<float>(ctx_.full_res_radius);
+  std::uniform_real_distribution<float> off(-r, r);
+  for (int attempt = 0; attempt < 8; ++attempt) {
+    const Vec3f p{pos_.x + off(rng_), pos_.y + off(rng_), pos_.z + off(rng_)};
+    const Vec3i cp = chunk_of(voxel_at(p));
+    if (dist_to_chunk(pos_, cp) > r || !held_full(cp)) continue;
+    {
+      std::lock_guard lock(mutex_);
+      if (pending_hash_.count(cp) != 0) continue;
+    }
+    request_hash(cp, false);
+    ++checks_done_;
+    return;
+  }
+}
+
+void Bot::request_hash(Vec3i cp, bool final_check) {
+  {
+    std::lock_guard lock(mutex_);
+    PendingHash& p = pending_hash_[cp];
+    p.sent_at = Clock::now();
+    p.retry_at.reset();
+    p.final_check = p.final_check || final_check;
+  }
+  client_->request_region_hash(cp);
+}
+
+void Bot::on_region_hash(const HashCheck& check) {
+  std::lock_guard lock(mutex_);
+  auto it = pending_hash_.find(check.chunk_pos);
+  if (it == pending_hash_.end() || it->second.retry_at) return;
+  PendingHash& p = it->second;
+  if (check.match) {
+    ++result_.hash_checked;
+    pending_hash_.erase(it);
+    return;
+  }
+  if (!check.replica_full) {
+    // The chunk left full resolution (or the view) meanwhile: nothing to compare.
+    pending_hash_.erase(it);
+    return;
+  }
+  const std::uint64_t mine = check.replica_revision.value_or(0);
+  Mismatch m{index_, check.chunk_pos, mine, check.server_revision, "", p.final_check};
+  if (mine == check.server_revision) {
+    m.reason = "voxels differ at the same revision";
+  } else if (++p.attempts < kMaxHashAttempts) {
+    p.retry_at = Clock::now() + kHashRetry;
+    return;
+  } else {
+    m.reason = "replica revision " + std::to_string(mine) + " != server revision " +
+               std::to_string(check.server_revision) + " after " + std::to_string(kMaxHashAttempts) + " checks";
+  }
+  ++result_.hash_checked;
+  ctx_.mismatches->add(m);
+  pending_hash_.erase(it);
+}
+
+bool Bot::checks_pending(Clock::time_point now) {
+  std::vector<Vec3i> resend;
+  bool pending = false;
+  {
+    std::lock_guard lock(mutex_);
+    for (auto it = pending_hash_.begin(); it != pending_hash_.end();) {
+      PendingHash& p = it->second;
+      if (p.retry_at && now >= *p.retry_at) {
+        p.retry_at.reset();
+        p.sent_at = now;
+        resend.push_back(it->first);
+      } else if (!p.retry_at && now - p.sent_at > kHashTimeout) {
+        ++result_.hash_unanswered;
+        it = pending_hash_.erase(it);
+        continue;
+      }
+      ++it;
+    }
+    pending = !pending_hash_.empty();
+  }
+  if (!client_->closed())
+    for (const Vec3i cp : resend) client_->request_region_hash(cp);
+  return pending;
+}
+
+void Bot::start_final_check() {
+  if (!result_.connected || client_->closed()) return;
+  const float full = static_cast<float>(ctx_.full_res_radius);
+  std::vector<Vec3i> chunks;
+  client_->with_replica([&](const Replica& r) {
+    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
+      if (c.state != CoverageState::kMip && dist_to_chunk(pos_, cp) <= full) chunks.push_back(cp);
+    });
+    return 0;
+  });
+  for (const Vec3i cp : chunks) request_hash(cp, true);
+}
+
+void Bot::on_disconnected(const std::string& reason) {
+  std::lock_guard lock(mutex_);
+  if (closing_) return;
+  result_.unexpected_disconnect = true;
+  result_.disconnect_reason = reason;
+}
+
+void Bot::finish() {
+  {
+    std::lock_guard lock(mutex_);
+    closing_ = true;
+  }
+  result_.checks_during_run = checks_done_;
+  if (!result_.connected) return;
+  client_->disconnect();
+  result_.counters = client_->counters();
+}
+
+bool Bot::closed() const { return client_->closed(); }
+ClientCounters Bot::counters() const { return client_->counters(); }
+
+}  // namespace terrane::bots

@@ -1,0 +1,137 @@
+// One bot: a Client in shared mode (client/client.h) plus a behaviour
+// (client/bots/options.h describes them), join tracking, edits at ray-cast
+// targets and region-hash verification.
+//
+// Threading: the driver thread calls every public method; the client's
+// callbacks run on the io pool. State both touch (join progress, pending
+// hash checks, outstanding edits, disconnects) sits behind mutex_, which is
+// never held while calling into the Client except counters() from a
+// callback (order: Bot::mutex_, then the Client's lock).
+#pragma once
+
+#include <array>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <random>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "client/bots/options.h"
+#include "client/bots/stats.h"
+#include "client/client.h"
+
+namespace terrane::bots {
+
+// Read-only run context shared by every bot.
+struct RunContext {
+  const BotsOptions* options = nullptr;
+  WelcomeMsg welcome;
+  std::int32_t view_distance = 0;    // after the server's caps
+  std::int32_t full_res_radius = 0;  // after the server's caps
+  Vec3f spawn;
+  asio::io_context* io = nullptr;
+  FanoutTracker* fanout = nullptr;
+  MismatchLog* mismatches = nullptr;
+  Clock::time_point run_start;
+};
+
+enum class Movement : std::uint8_t { kIdle, kWalk, kFly };
+enum class EditMode : std::uint8_t { kNone, kDig, kBuild, kBoth };
+
+struct BotResult {
+  bool connected = false;
+  std::string connect_error;
+  std::optional<double> join_coarse_ms, join_full_ms;
+  std::uint64_t join_bytes = 0;          // received from connect until the full-resolution region was complete
+  std::uint64_t join_non_empty_voxels = 0;
+  std::uint64_t hash_checked = 0, hash_unanswered = 0;
+  std::uint64_t walk_steps = 0;
+  // Steps refused: [0] outside the area, [1] ground not held at full resolution,
+  // [2] too steep, [3] something solid in the way.
+  std::array<std::uint64_t, 4> walk_blocked{};
+  int checks_during_run = 0;
+  double distance_moved = 0;
+  bool unexpected_disconnect = false;
+  std::string disconnect_reason;
+  ClientCounters counters;
+};
+
+class Bot {
+ public:
+  Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditMode edits, std::uint64_t seed);
+  ~Bot();
+  Bot(const Bot&) = delete;
+  Bot& operator=(const Bot&) = delete;
+
+  bool connect();
+  // One behaviour step (every 100 ms): movement, edits, scheduled checks,
+  // hash retries. active: moving and editing allowed.
+  void step(Clock::time_point now, bool active);
+  bool joined() const;
+  std::size_t outstanding_edits() const;
+  // Final verification: every chunk of the full-resolution region held.
+  void start_final_check();
+  bool checks_pending(Clock::time_point now);
+  void finish();  // disconnect (expected) and take the final counters
+  bool closed() const;
+  ClientCounters counters() const;
+  const BotResult& result() const { return result_; }
+  bool connected() const { return result_.connected; }
+
+ private:
+  struct PendingHash {
+    int attempts = 0;
+    Clock::time_point sent_at;
+    std::optional<Clock::time_point> retry_at;
+    bool final_check = false;
+  };
+
+  void on_coverage(Vec3i cp, wire::CoverageKind kind);
+  void on_region_hash(const HashCheck& check);
+  void on_disconnected(const std::string& reason);
+  void init_join_tracking();
+  void count_join_voxels();
+  void move(Clock::time_point now);
+  void walk();
+  void fly();
+  void maybe_edit(Clock::time_point now);
+  void schedule_check(Clock::time_point now);
+  void request_hash(Vec3i cp, bool final_check);  // takes mutex_
+  bool held_full(Vec3i cp) const;
+  bool in_area(float x, float z, float half) const;
+  Vec3i voxel_at(Vec3f p) const;
+
+  const int index_;
+  const RunContext& ctx_;
+  Movement movement_;
+  EditMode edits_mode_;
+  std::mt19937_64 rng_;
+  std::unique_ptr<Client> client_;
+  Vec3f pos_;
+  float heading_ = 0;
+  bool landed_ = false;
+  int stuck_steps_ = 0;  // walk steps refused in a row
+  int steps_ = 0;
+  bool state_dirty_ = false;
+  Clock::time_point connect_at_;
+  Clock::time_point next_edit_, next_check_;
+  int checks_done_ = 0;
+  BotResult result_;
+
+  mutable std::mutex mutex_;
+  // Join tracking over the chunk box [box_min_, box_min_ + box_size_):
+  // bit 0 = in view, no coverage yet; bit 1 = in the full-resolution
+  // region, not yet at full resolution.
+  Vec3i box_min_, box_size_;
+  std::vector<std::uint8_t> need_;
+  std::size_t need_coarse_ = 0, need_full_ = 0;
+  bool joined_ = false;
+  bool voxels_counted_ = false;
+  std::unordered_map<Vec3i, PendingHash, Vec3iHash> pending_hash_;
+  std::size_t outstanding_edits_ = 0;
+  bool closing_ = false;
+};
+
+}  // namespace terrane::bots

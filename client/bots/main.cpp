@@ -1,0 +1,86 @@
+// terrane-bots: N headless bots against a terrane-server, a replication
+// load test with a report (client/bots/options.cpp has the usage text).
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "client/bots/options.h"
+#include "client/bots/report.h"
+#include "client/bots/runner.h"
+
+namespace terrane::bots {
+namespace {
+
+int usage_error(const std::string& message) {
+  std::fprintf(stderr, "terrane-bots: %s\n(terrane-bots --help lists the options)\n", message.c_str());
+  return 2;
+}
+
+bool read_file(const std::string& path, std::string* out) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return false;
+  std::stringstream s;
+  s << f.rdbuf();
+  *out = s.str();
+  return true;
+}
+
+bool write_file(const std::string& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f << text;
+  return static_cast<bool>(f.flush());
+}
+
+int compare(int argc, char** argv) {
+  if (argc != 4) return usage_error("compare takes two JSON reports: terrane-bots compare A.json B.json");
+  std::string a, b, err;
+  if (!read_file(argv[2], &a)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", argv[2]), 1;
+  if (!read_file(argv[3], &b)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", argv[3]), 1;
+  const std::string table = compare_reports(argv[2], a, argv[3], b, &err);
+  if (!err.empty()) return std::fprintf(stderr, "terrane-bots: %s\n", err.c_str()), 1;
+  std::fputs(table.c_str(), stdout);
+  return 0;
+}
+
+int run(int argc, char** argv) {
+  if (argc >= 2 && std::string(argv[1]) == "compare") return compare(argc, argv);
+  BotsOptions o;
+  bool help = false;
+  if (auto err = parse_bots_options(argc, argv, 1, &o, &help); !err.empty()) return usage_error(err);
+  if (help) return std::fputs(kBotsHelp, stdout), 0;
+  if (!o.save_scenario_path.empty() && !write_file(o.save_scenario_path, scenario_text(o)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.save_scenario_path.c_str()), 1;
+
+  const bool live = o.progress == "on" || (o.progress == "auto" && isatty(STDERR_FILENO) != 0);
+  std::function<void(const Progress&)> progress;
+  if (live)
+    progress = [](const Progress& p) {
+      std::fprintf(stderr,
+                   "\r[%5.0f s] bots %d/%d  in %.2f MB/s  out %.3f MB/s  edits %.0f/s  fan-out p99 %.0f ms  "
+                   "mismatches %zu   ",
+                   p.t_s, p.bots_connected, p.bots_total, p.mb_per_s_in, p.mb_per_s_out, p.edits_per_s,
+                   p.fanout_p99_ms, p.mismatches);
+      std::fflush(stderr);
+    };
+  BotsReport report;
+  std::string err;
+  if (!run_bots(o, progress, &report, &err)) {
+    if (live) std::fputc('\n', stderr);
+    std::fprintf(stderr, "terrane-bots: %s\n", err.c_str());
+    return 1;
+  }
+  if (live) std::fputc('\n', stderr);
+  std::fputs(report_table(report).c_str(), stdout);
+  if (!o.report_path.empty() && !write_file(o.report_path, report_json(report)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.report_path.c_str()), 1;
+  if (!o.html_path.empty() && !write_file(o.html_path, report_html(report)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.html_path.c_str()), 1;
+  return report.passed() ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace terrane::bots
+
+int main(int argc, char** argv) { return terrane::bots::run(argc, argv); }

@@ -1,0 +1,277 @@
+#include "client/bots/options.h"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "common/cli.h"
+
+namespace terrane::bots {
+
+const char* const kBotsHelp =
+    "usage: terrane-bots --connect HOST:PORT [options]\n"
+    "       terrane-bots compare A.json B.json\n"
+    "\n"
+    "Runs N headless bots in one process against a terrane-server, each with its own replica,\n"
+    "and reports what replication cost and whether every replica stayed right. Exit status:\n"
+    "0 clean run, 1 replica mismatches or unexpected disconnects (or the server unreachable),\n"
+    "2 bad usage.\n"
+    "\n"
+    "  --connect HOST:PORT       server address (required)\n"
+    "  --bots N                  bots (default 10)\n"
+    "  --duration S              seconds from the first connection to the end of edits (default 30)\n"
+    "  --behavior B              idle | walk | fly | dig | build | mixed (default mixed):\n"
+    "                              walk   moves along the surface (5 voxels/s) inside its full-resolution\n"
+    "                                     region, never through solid ground\n"
+    "                              fly    travels at 40 voxels/s above the terrain (stresses streaming)\n"
+    "                              dig    digs spheres and boxes at ray-cast targets\n"
+    "                              build  builds spheres and boxes at ray-cast targets\n"
+    "                              mixed  60% walk, 30% idle, 10% fly; every bot edits: dig or build\n"
+    "                                     (even odds), sphere 80% / box 20%\n"
+    "  --spawn X,Y,Z             centre of the start area (default: the server's spawn)\n"
+    "  --spread R                bots start spread over an R x R square around the spawn (default 0)\n"
+    "  --view-distance N         voxels (default 256; the server caps it)\n"
+    "  --full-res-radius N       voxels (default 64; the server caps it)\n"
+    "  --ramp-up S               connections spread over S seconds; latency samples of edits sent\n"
+    "                            before S are not counted (default 0)\n"
+    "  --seed N                  random seed: positions, roles, edits (default 1)\n"
+    "  --token T                 auth token for the server\n"
+    "  --edit-interval S         mean seconds between edits per editing bot (default 2)\n"
+    "  --edit-radius R           largest sphere radius, boxes up to 2R on a side (default 3, max 32)\n"
+    "  --latency-ms N            emulated downstream latency per bot (default 0)\n"
+    "  --bandwidth-kbps N        emulated downstream cap per bot, kilobits/s (default 0: none)\n"
+    "  --hash-checks N           region-hash checks per bot during the run, at least (default 5);\n"
+    "                            every bot also checks its whole full-resolution region at the end\n"
+    "  --quiet S                 pause after the last edit ack before the final check (default 1)\n"
+    "  --threads N               io threads shared by all bots (default: one per core)\n"
+    "  --report FILE.json        write the JSON report\n"
+    "  --html FILE.html          write a self-contained HTML report with charts\n"
+    "  --scenario FILE           read options from FILE (key=value per line, the flag names);\n"
+    "                            flags given on the command line override it\n"
+    "  --save-scenario FILE      write the effective options as a scenario file\n"
+    "  --progress auto|on|off    live progress line (default auto: only on a terminal)\n"
+    "  --help                    this text\n";
+
+namespace {
+
+using Values = std::map<std::string, std::pair<std::string, std::string>>;
+
+const std::set<std::string>& value_keys() {
+  static const std::set<std::string> k = {
+      "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
+      "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "edit-interval",
+      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "threads",
+      "report",         "html",         "save-scenario", "progress",   "scenario"};
+  return k;
+}
+
+std::string bad(const std::string& where, const std::string& value, const std::string& what) {
+  return where + ": '" + value + "' " + what;
+}
+
+bool parse_i64(const std::string& s, std::int64_t* v) {
+  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), *v);
+  return ec == std::errc() && p == s.data() + s.size();
+}
+
+bool parse_f64(const std::string& s, double* v) {
+  auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), *v);
+  return ec == std::errc() && p == s.data() + s.size() && std::isfinite(*v);
+}
+
+}  // namespace
+
+const char* behavior_name(Behavior b) {
+  switch (b) {
+    case Behavior::kIdle: return "idle";
+    case Behavior::kWalk: return "walk";
+    case Behavior::kFly: return "fly";
+    case Behavior::kDig: return "dig";
+    case Behavior::kBuild: return "build";
+    case Behavior::kMixed: return "mixed";
+  }
+  return "?";
+}
+
+std::string parse_scenario_text(const std::string& text, const std::string& source, Values* out) {
+  std::istringstream in(text);
+  std::string line;
+  int n = 0;
+  auto trim = [](std::string s) {
+    const auto a = s.find_first_not_of(" \t\r");
+    if (a == std::string::npos) return std::string();
+    const auto b = s.find_last_not_of(" \t\r");
+    return s.substr(a, b - a + 1);
+  };
+  while (std::getline(in, line)) {
+    ++n;
+    const std::string where = source + ":" + std::to_string(n);
+    if (auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+    line = trim(line);
+    if (line.empty()) continue;
+    const auto eq = line.find('=');
+    if (eq == std::string::npos) return where + ": expected key=value, got '" + line + "'";
+    std::string key = trim(line.substr(0, eq));
+    const std::string value = trim(line.substr(eq + 1));
+    if (key.rfind("--", 0) == 0) key = key.substr(2);
+    if (value_keys().count(key) == 0 || key == "scenario") return where + ": unknown key '" + key + "'";
+    (*out)[key] = {value, where + ": " + key};
+  }
+  return "";
+}
+
+std::string apply_option_values(const Values& values, BotsOptions* o) {
+  for (const auto& [key, vw] : values) {
+    const std::string& v = vw.first;
+    const std::string& where = vw.second;
+    std::int64_t i = 0;
+    double d = 0;
+    auto int_in = [&](std::int64_t lo, std::int64_t hi, auto* field) -> std::string {
+      if (!parse_i64(v, &i) || i < lo || i > hi)
+        return bad(where, v, "is not an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+      *field = static_cast<std::remove_pointer_t<decltype(field)>>(i);
+      return "";
+    };
+    auto num_in = [&](double lo, double hi, auto* field) -> std::string {
+      if (!parse_f64(v, &d) || d < lo || d > hi) {
+        std::ostringstream r;
+        r << "is not a number in [" << lo << ", " << hi << "]";
+        return bad(where, v, r.str());
+      }
+      *field = static_cast<std::remove_pointer_t<decltype(field)>>(d);
+      return "";
+    };
+    std::string err;
+    if (key == "connect") {
+      const auto colon = v.rfind(':');
+      if (colon == std::string::npos || colon == 0 || !parse_i64(v.substr(colon + 1), &i) || i < 1 || i > 65535)
+        return bad(where, v, "is not HOST:PORT (port 1..65535)");
+      o->host = v.substr(0, colon);
+      o->port = static_cast<std::uint16_t>(i);
+    } else if (key == "bots") {
+      err = int_in(1, 100000, &o->bots);
+    } else if (key == "duration") {
+      err = num_in(0.5, 86400, &o->duration_s);
+    } else if (key == "behavior") {
+      bool found = false;
+      for (Behavior b : {Behavior::kIdle, Behavior::kWalk, Behavior::kFly, Behavior::kDig, Behavior::kBuild,
+                         Behavior::kMixed})
+        if (v == behavior_name(b)) o->behavior = b, found = true;
+      if (!found) return bad(where, v, "is not one of idle, walk, fly, dig, build, mixed");
+    } else if (key == "spawn") {
+      std::int32_t xyz[3];
+      if (!parse_int_list<std::int32_t>(v, xyz, 3) || std::abs(xyz[0]) > (1 << 24) || std::abs(xyz[1]) > (1 << 24) ||
+          std::abs(xyz[2]) > (1 << 24))
+        return bad(where, v, "is not X,Y,Z (integers within +-2^24)");
+      o->spawn = {xyz[0], xyz[1], xyz[2]};
+      o->spawn_set = true;
+    } else if (key == "spread") {
+      err = int_in(0, 1 << 20, &o->spread);
+    } else if (key == "view-distance") {
+      err = int_in(1, 65536, &o->view_distance);
+    } else if (key == "full-res-radius") {
+      err = int_in(1, 65536, &o->full_res_radius);
+    } else if (key == "ramp-up") {
+      err = num_in(0, 86400, &o->ramp_up_s);
+    } else if (key == "seed") {
+      if (!parse_i64(v, &i) || i < 0) return bad(where, v, "is not a non-negative integer");
+      o->seed = static_cast<std::uint64_t>(i);
+    } else if (key == "token") {
+      if (v.size() > 256) return bad(where, v.substr(0, 16) + "...", "is longer than 256 bytes");
+      o->token = v;
+    } else if (key == "edit-interval") {
+      err = num_in(0.01, 86400, &o->edit_interval_s);
+    } else if (key == "edit-radius") {
+      err = num_in(0.5, 32, &o->edit_radius);
+    } else if (key == "latency-ms") {
+      err = int_in(0, 60000, &o->latency_ms);
+    } else if (key == "bandwidth-kbps") {
+      err = int_in(0, 100000000, &o->bandwidth_kbps);
+    } else if (key == "hash-checks") {
+      err = int_in(0, 100000, &o->hash_checks);
+    } else if (key == "quiet") {
+      err = num_in(0, 600, &o->quiet_s);
+    } else if (key == "threads") {
+      err = int_in(0, 256, &o->threads);
+    } else if (key == "report") {
+      o->report_path = v;
+    } else if (key == "html") {
+      o->html_path = v;
+    } else if (key == "save-scenario") {
+      o->save_scenario_path = v;
+    } else if (key == "progress") {
+      if (v != "auto" && v != "on" && v != "off") return bad(where, v, "is not auto, on or off");
+      o->progress = v;
+    }
+    if (!err.empty()) return err;
+  }
+  if (o->ramp_up_s >= o->duration_s) return "--ramp-up: must be shorter than --duration";
+  return "";
+}
+
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help) {
+  Values flags;
+  std::string scenario;
+  *help = false;
+  for (int a = first; a < argc; ++a) {
+    std::string arg = argv[a];
+    if (arg == "--help" || arg == "-h") {
+      *help = true;
+      return "";
+    }
+    if (arg.rfind("--", 0) != 0) return "unexpected argument '" + arg + "'";
+    std::string key = arg.substr(2), value;
+    if (auto eq = key.find('='); eq != std::string::npos) {
+      value = key.substr(eq + 1);
+      key.resize(eq);
+    } else {
+      if (value_keys().count(key) == 0) return "unknown option --" + key;
+      if (a + 1 >= argc) return "--" + key + ": missing value";
+      value = argv[++a];
+    }
+    if (value_keys().count(key) == 0) return "unknown option --" + key;
+    if (key == "scenario")
+      scenario = value;
+    else
+      flags[key] = {value, "--" + key};
+  }
+  Values values;
+  if (!scenario.empty()) {
+    std::ifstream f(scenario);
+    if (!f) return "--scenario: cannot read '" + scenario + "'";
+    std::stringstream text;
+    text << f.rdbuf();
+    if (auto err = parse_scenario_text(text.str(), scenario, &values); !err.empty()) return err;
+  }
+  for (const auto& [k, v] : flags) values[k] = v;  // the command line wins
+  if (values.count("connect") == 0) return "--connect HOST:PORT is required";
+  return apply_option_values(values, out);
+}
+
+std::string scenario_text(const BotsOptions& o) {
+  std::ostringstream s;
+  s << "# terrane-bots scenario (terrane-bots --scenario FILE)\n";
+  s << "connect = " << o.host << ":" << o.port << "\n";
+  s << "bots = " << o.bots << "\n";
+  s << "duration = " << o.duration_s << "\n";
+  s << "behavior = " << behavior_name(o.behavior) << "\n";
+  if (o.spawn_set) s << "spawn = " << o.spawn.x << "," << o.spawn.y << "," << o.spawn.z << "\n";
+  s << "spread = " << o.spread << "\n";
+  s << "view-distance = " << o.view_distance << "\n";
+  s << "full-res-radius = " << o.full_res_radius << "\n";
+  s << "ramp-up = " << o.ramp_up_s << "\n";
+  s << "seed = " << o.seed << "\n";
+  if (!o.token.empty()) s << "token = " << o.token << "\n";
+  s << "edit-interval = " << o.edit_interval_s << "\n";
+  s << "edit-radius = " << o.edit_radius << "\n";
+  s << "latency-ms = " << o.latency_ms << "\n";
+  s << "bandwidth-kbps = " << o.bandwidth_kbps << "\n";
+  s << "hash-checks = " << o.hash_checks << "\n";
+  s << "quiet = " << o.quiet_s << "\n";
+  s << "threads = " << o.threads << "\n";
+  return s.str();
+}
+
+}  // namespace terrane::bots

@@ -1,0 +1,64 @@
+// terrane-bots options: one struct filled from a scenario file (key=value
+// lines, the flag names without "--") and then the command line, which
+// overrides the file. Every error names the flag (or file and line) and the
+// value. Thread-safety: plain data and pure functions.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common/vec3.h"
+
+namespace terrane::bots {
+
+enum class Behavior : std::uint8_t { kIdle, kWalk, kFly, kDig, kBuild, kMixed };
+const char* behavior_name(Behavior b);
+
+struct BotsOptions {
+  std::string host = "127.0.0.1";
+  std::uint16_t port = 0;  // required (--connect)
+  int bots = 10;
+  double duration_s = 30;
+  Behavior behavior = Behavior::kMixed;
+  bool spawn_set = false;  // else the server's spawn (Welcome)
+  Vec3i spawn;
+  int spread = 0;  // bots start spread over a square of this side around the spawn (voxels)
+  int view_distance = 256;
+  int full_res_radius = 64;
+  double ramp_up_s = 0;   // connections spread over this; latency samples before it end are not counted
+  std::uint64_t seed = 1;
+  std::string token;
+  double edit_interval_s = 2;  // mean seconds between edits per editing bot (Poisson)
+  float edit_radius = 3;       // largest sphere radius (boxes up to 2x this on a side)
+  int latency_ms = 0;          // per-bot downstream latency (client/client.h NetworkEmulation)
+  int bandwidth_kbps = 0;      // per-bot downstream cap, kilobits per second
+  int hash_checks = 5;         // region-hash checks per bot during the run, at least
+  double quiet_s = 1;          // after the last ack, before the final full check
+  int threads = 0;             // io threads for all bots; 0: one per core
+  std::string report_path;     // JSON
+  std::string html_path;
+  std::string save_scenario_path;
+  std::string progress = "auto";  // auto (terminal only), on, off
+};
+
+// Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
+// else the error (for exit status 2). Sets *help when --help was given.
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help);
+
+// Parses scenario text into key -> (value, "FILE:LINE"). '#' starts a
+// comment; blank lines are skipped; "key = value" with optional spaces.
+std::string parse_scenario_text(const std::string& text, const std::string& source,
+                                std::map<std::string, std::pair<std::string, std::string>>* out);
+
+// Applies key -> (value, where) pairs to *o; returns the first error.
+std::string apply_option_values(const std::map<std::string, std::pair<std::string, std::string>>& values,
+                                BotsOptions* o);
+
+// The scenario file text that reproduces *o (every key, flags' names).
+std::string scenario_text(const BotsOptions& o);
+
+extern const char* const kBotsHelp;
+
+}  // namespace terrane::bots

@@ -1,0 +1,433 @@
+#include "client/bots/report.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+namespace terrane::bots {
+
+namespace {
+
+std::string esc(const std::string& s) {
+  std::string o;
+  for (const char c : s) {
+    switch (c) {
+      case '"': o += "\\\""; break;
+      case '\\': o += "\\\\"; break;
+      case '\n': o += "\\n"; break;
+      case '<': o += "\\u003c"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char b[8];
+          std::snprintf(b, sizeof b, "\\u%04x", c);
+          o += b;
+        } else {
+          o += c;
+        }
+    }
+  }
+  return o;
+}
+
+std::string num(double v) {
+  if (!std::isfinite(v)) return "0";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+
+std::string lat(const LatencySummary& l) {
+  return "{\"p50\": " + num(l.p50) + ", \"p95\": " + num(l.p95) + ", \"p99\": " + num(l.p99) +
+         ", \"count\": " + std::to_string(l.count) + "}";
+}
+
+std::string html_esc(const std::string& s) {
+  std::string o;
+  for (const char c : s) {
+    if (c == '<') o += "&lt;";
+    else if (c == '>') o += "&gt;";
+    else if (c == '&') o += "&amp;";
+    else if (c == '"') o += "&quot;";
+    else o += c;
+  }
+  return o;
+}
+
+std::string region_name(Vec3i cp) {
+  const Vec3i o = chunk_origin(cp);
+  std::ostringstream s;
+  s << "chunk (" << cp.x << "," << cp.y << "," << cp.z << ") voxels [" << o.x << "," << o.y << "," << o.z << " .. "
+    << o.x + kChunkSize << "," << o.y + kChunkSize << "," << o.z + kChunkSize << ")";
+  return s.str();
+}
+
+}  // namespace
+
+std::string report_json(const BotsReport& r) {
+  std::ostringstream j;
+  const BotsOptions& o = r.options;
+  j << "{\n";
+  j << "  \"scenario\": {\"connect\": \"" << esc(o.host) << ":" << o.port << "\", \"bots\": " << o.bots
+    << ", \"duration\": " << num(o.duration_s) << ", \"behavior\": \"" << behavior_name(o.behavior) << "\", ";
+  if (o.spawn_set) j << "\"spawn\": [" << o.spawn.x << ", " << o.spawn.y << ", " << o.spawn.z << "], ";
+  j << "\"spread\": " << o.spread << ", \"view_distance\": " << o.view_distance
+    << ", \"full_res_radius\": " << o.full_res_radius << ", \"ramp_up\": " << num(o.ramp_up_s)
+    << ", \"seed\": " << o.seed << ", \"edit_interval\": " << num(o.edit_interval_s)
+    << ", \"edit_radius\": " << num(o.edit_radius) << ", \"latency_ms\": " << o.latency_ms
+    << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
+    << ", \"threads\": " << o.threads << "},\n";
+  j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
+  j << "  \"bots\": " << r.bots << ",\n";
+  j << "  \"duration_s\": " << num(r.duration_s) << ",\n";
+  j << "  \"bytes_received\": " << r.bytes_received << ",\n";
+  j << "  \"bytes_sent\": " << r.bytes_sent << ",\n";
+  j << "  \"join_bytes_received\": " << r.join_bytes_received << ",\n";
+  j << "  \"steady_bytes_received\": " << r.steady_bytes_received << ",\n";
+  j << "  \"bytes_per_non_empty_voxel\": " << num(r.bytes_per_non_empty_voxel) << ",\n";
+  j << "  \"join_coarse_ms\": " << lat(r.join_coarse_ms) << ",\n";
+  j << "  \"join_full_ms\": " << lat(r.join_full_ms) << ",\n";
+  j << "  \"joins_incomplete\": " << r.joins_incomplete << ",\n";
+  j << "  \"edit_ack_ms\": " << lat(r.edit_ack_ms) << ",\n";
+  j << "  \"edit_fanout_ms\": " << lat(r.edit_fanout_ms) << ",\n";
+  j << "  \"edits_sent\": " << r.edits_sent << ",\n";
+  j << "  \"edits_acked\": " << r.edits_acked << ",\n";
+  j << "  \"edits_rejected\": " << r.edits_rejected << ",\n";
+  j << "  \"reject_reasons\": {";
+  bool first = true;
+  for (const auto& [reason, n] : r.reject_reasons) {
+    j << (first ? "" : ", ") << "\"" << esc(reason) << "\": " << n;
+    first = false;
+  }
+  j << "},\n";
+  j << "  \"edits_measured\": " << r.edits_measured << ",\n";
+  j << "  \"receivers_per_edit\": " << num(r.receivers_per_edit) << ",\n";
+  j << "  \"update_batch_bytes_steady\": " << r.update_batch_bytes_steady << ",\n";
+  j << "  \"update_bytes_per_edited_voxel_per_receiver\": " << num(r.update_bytes_per_edited_voxel_per_receiver)
+    << ",\n";
+  j << "  \"replica_regions_checked\": " << r.replica_regions_checked << ",\n";
+  j << "  \"replica_mismatches\": " << r.mismatches.size() << ",\n";
+  j << "  \"mismatches\": [";
+  for (std::size_t i = 0; i < r.mismatches.size(); ++i) {
+    const Mismatch& m = r.mismatches[i];
+    const Vec3i c = m.chunk, v = chunk_origin(m.chunk);
+    j << (i ? ",\n    " : "\n    ") << "{\"bot\": " << m.bot << ", \"chunk\": [" << c.x << ", " << c.y << ", " << c.z
+      << "], \"voxels\": [" << v.x << ", " << v.y << ", " << v.z << ", " << v.x + kChunkSize << ", "
+      << v.y + kChunkSize << ", " << v.z + kChunkSize << "], \"replica_revision\": " << m.replica_revision
+      << ", \"server_revision\": " << m.server_revision << ", \"final_check\": " << (m.final_check ? "true" : "false")
+      << ", \"reason\": \"" << esc(m.reason) << "\"}";
+  }
+  j << (r.mismatches.empty() ? "],\n" : "\n  ],\n");
+  j << "  \"hash_unanswered\": " << r.hash_unanswered << ",\n";
+  j << "  \"min_hash_checks_during_run\": " << r.min_checks_during_run << ",\n";
+  j << "  \"unexpected_disconnects\": " << r.unexpected_disconnects << ",\n";
+  j << "  \"disconnects\": [";
+  for (std::size_t i = 0; i < r.disconnects.size(); ++i)
+    j << (i ? ", " : "") << "{\"bot\": " << r.disconnects[i].first << ", \"reason\": \"" << esc(r.disconnects[i].second)
+      << "\"}";
+  j << "],\n";
+  j << "  \"connect_failures\": " << r.connect_failures << ",\n";
+  j << "  \"walk_steps\": " << r.walk_steps << ",\n";
+  j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
+    << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
+  j << "  \"server_counters\": null,\n";
+  j << "  \"by_message_type\": {";
+  first = true;
+  for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
+    const auto& m = r.by_message_type[t];
+    if (m.frames_in == 0 && m.frames_out == 0) continue;
+    j << (first ? "\n    " : ",\n    ") << "\"" << message_type_name(t) << "\": {\"frames_in\": " << m.frames_in
+      << ", \"bytes_in\": " << m.bytes_in << ", \"frames_out\": " << m.frames_out << ", \"bytes_out\": " << m.bytes_out
+      << "}";
+    first = false;
+  }
+  j << "\n  },\n";
+  j << "  \"timeline\": [";
+  for (std::size_t i = 0; i < r.timeline.size(); ++i) {
+    const TimelinePoint& p = r.timeline[i];
+    j << (i ? ",\n    " : "\n    ") << "{\"t_s\": " << num(p.t_s) << ", \"bots\": " << p.bots_connected
+      << ", \"mb_per_s_in\": " << num(p.mb_per_s_in) << ", \"mb_per_s_out\": " << num(p.mb_per_s_out)
+      << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"fanout_ms\": " << lat(p.fanout_ms)
+      << ", \"ack_ms\": " << lat(p.ack_ms) << "}";
+  }
+  j << "\n  ]\n}\n";
+  return j.str();
+}
+
+std::string report_table(const BotsReport& r) {
+  std::ostringstream t;
+  char line[256];
+  auto row = [&](const char* name, const std::string& value) {
+    std::snprintf(line, sizeof line, "  %-44s %s\n", name, value.c_str());
+    t << line;
+  };
+  auto l = [](const LatencySummary& s) {
+    char b[128];
+    std::snprintf(b, sizeof b, "p50 %.1f  p95 %.1f  p99 %.1f  (%zu samples)", s.p50, s.p95, s.p99, s.count);
+    return std::string(b);
+  };
+  auto mb = [](std::uint64_t b) { return num(static_cast<double>(b) / 1e6) + " MB"; };
+  t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
+    << num(r.duration_s) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
+  row("bytes received (all / join / steady)",
+      mb(r.bytes_received) + " / " + mb(r.join_bytes_received) + " / " + mb(r.steady_bytes_received));
+  row("bytes sent", mb(r.bytes_sent));
+  row("bytes per non-empty voxel (join, mean)", num(r.bytes_per_non_empty_voxel));
+  row("join coarse ms", l(r.join_coarse_ms));
+  row("join full ms", l(r.join_full_ms));
+  row("joins incomplete", std::to_string(r.joins_incomplete));
+  row("edit ack ms", l(r.edit_ack_ms));
+  row("edit fan-out ms", l(r.edit_fanout_ms));
+  row("edits sent / acked / rejected",
+      std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected));
+  row("receivers per edit (mean)", num(r.receivers_per_edit));
+  row("update bytes per edited voxel per receiver", num(r.update_bytes_per_edited_voxel_per_receiver));
+  row("replica regions checked", std::to_string(r.replica_regions_checked));
+  row("replica mismatches", std::to_string(r.mismatches.size()));
+  row("hash requests unanswered", std::to_string(r.hash_unanswered));
+  row("unexpected disconnects", std::to_string(r.unexpected_disconnects));
+  if (r.walk_steps > 0)
+    row("walk steps (refused: area / not full res / steep / obstacle)",
+        std::to_string(r.walk_steps) + " (" + std::to_string(r.walk_blocked[0]) + " / " + std::to_string(r.walk_blocked[1]) +
+            " / " + std::to_string(r.walk_blocked[2]) + " / " + std::to_string(r.walk_blocked[3]) + ")");
+  if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);
+  t << "  by message type (frames in / bytes in / frames out / bytes out):\n";
+  for (std::size_t i = 0; i < kMessageTypeCount; ++i) {
+    const auto& m = r.by_message_type[i];
+    if (m.frames_in == 0 && m.frames_out == 0) continue;
+    std::snprintf(line, sizeof line, "    %-20s %12llu %14llu %12llu %14llu\n", message_type_name(i),
+                  static_cast<unsigned long long>(m.frames_in), static_cast<unsigned long long>(m.bytes_in),
+                  static_cast<unsigned long long>(m.frames_out), static_cast<unsigned long long>(m.bytes_out));
+    t << line;
+  }
+  const std::size_t shown = std::min<std::size_t>(r.mismatches.size(), 20);
+  for (std::size_t i = 0; i < shown; ++i) {
+    const Mismatch& m = r.mismatches[i];
+    t << "  MISMATCH bot " << m.bot << " " << region_name(m.chunk) << ": " << m.reason
+      << (m.final_check ? " (final check)" : "") << "\n";
+  }
+  if (r.mismatches.size() > shown) t << "  ... " << r.mismatches.size() - shown << " more mismatches in the JSON report\n";
+  for (const auto& [bot, reason] : r.disconnects) t << "  DISCONNECTED bot " << bot << ": " << reason << "\n";
+  return t.str();
+}
+
+namespace {
+
+struct Series {
+  std::string name, colour;
+  std::vector<double> y;
+};
+
+// A line chart as inline SVG: x = seconds, one polyline per series.
+std::string svg_chart(const std::string& title, const std::string& unit, const std::vector<double>& x,
+                      const std::vector<Series>& series) {
+  constexpr double kW = 720, kH = 240, kL = 56, kR = 12, kT = 28, kB = 32;
+  double ymax = 0;
+  for (const auto& s : series)
+    for (const double v : s.y) ymax = std::max(ymax, v);
+  ymax = ymax <= 0 ? 1 : ymax * 1.1;
+  const double xmax = x.empty() ? 1 : std::max(1.0, x.back());
+  auto px = [&](double v) { return kL + (kW - kL - kR) * v / xmax; };
+  auto py = [&](double v) { return kT + (kH - kT - kB) * (1 - v / ymax); };
+  std::ostringstream s;
+  s << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << kW << "\" height=\"" << kH << "\" viewBox=\"0 0 " << kW
+    << " " << kH << "\">\n";
+  s << "<text x=\"" << kL << "\" y=\"18\" font-size=\"14\" font-weight=\"bold\">" << html_esc(title) << "</text>\n";
+  s << "<line x1=\"" << kL << "\" y1=\"" << py(0) << "\" x2=\"" << kW - kR << "\" y2=\"" << py(0)
+    << "\" stroke=\"#888\"/>\n<line x1=\"" << kL << "\" y1=\"" << kT << "\" x2=\"" << kL << "\" y2=\"" << py(0)
+    << "\" stroke=\"#888\"/>\n";
+  for (int i = 0; i <= 4; ++i) {
+    const double v = ymax * i / 4;
+    s << "<text x=\"" << kL - 4 << "\" y=\"" << py(v) + 4 << "\" font-size=\"10\" text-anchor=\"end\">" << num(v)
+      << "</text>\n";
+  }
+  s << "<text x=\"" << kL - 4 << "\" y=\"" << kT - 6 << "\" font-size=\"10\" text-anchor=\"end\">" << html_esc(unit)
+    << "</text>\n";
+  for (int i = 0; i <= 5; ++i) {
+    const double v = xmax * i / 5;
+    s << "<text x=\"" << px(v) << "\" y=\"" << kH - 14 << "\" font-size=\"10\" text-anchor=\"middle\">" << num(v)
+      << " s</text>\n";
+  }
+  double lx = kW - kR - 150;
+  for (const auto& se : series) {
+    s << "<polyline fill=\"none\" stroke=\"" << se.colour << "\" stroke-width=\"1.5\" points=\"";
+    for (std::size_t i = 0; i < x.size() && i < se.y.size(); ++i) s << px(x[i]) << "," << py(se.y[i]) << " ";
+    s << "\"/>\n";
+    s << "<text x=\"" << lx << "\" y=\"18\" font-size=\"11\" fill=\"" << se.colour << "\">" << html_esc(se.name)
+      << "</text>\n";
+    lx += 50;
+  }
+  s << "</svg>\n";
+  return s.str();
+}
+
+}  // namespace
+
+std::string report_html(const BotsReport& r) {
+  std::vector<double> x;
+  Series in{"in", "#1f77b4", {}}, out{"out", "#d62728", {}};
+  Series f50{"p50", "#2ca02c", {}}, f99{"p99", "#d62728", {}}, a99{"ack p99", "#9467bd", {}};
+  Series live{"bots", "#1f77b4", {}};
+  for (const TimelinePoint& p : r.timeline) {
+    x.push_back(p.t_s);
+    in.y.push_back(p.mb_per_s_in);
+    out.y.push_back(p.mb_per_s_out);
+    f50.y.push_back(p.fanout_ms.p50);
+    f99.y.push_back(p.fanout_ms.p99);
+    a99.y.push_back(p.ack_ms.p99);
+    live.y.push_back(p.bots_connected);
+  }
+  std::ostringstream h;
+  h << "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>terrane-bots report</title>\n"
+       "<style>body{font-family:sans-serif;margin:2em;max-width:60em}pre{background:#f4f4f4;padding:1em;"
+       "overflow-x:auto}</style></head><body>\n";
+  h << "<h1>terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << " — "
+    << (r.passed() ? "passed" : "FAILED") << "</h1>\n";
+  h << "<pre>" << html_esc(report_table(r)) << "</pre>\n";
+  h << svg_chart("Bandwidth, all bots (MB/s)", "MB/s", x, {in, out});
+  h << svg_chart("Edit latency by send time (ms): fan-out p50, p99; ack p99", "ms", x, {f50, f99, a99});
+  h << svg_chart("Bots connected", "bots", x, {live});
+  h << "<h2>Scenario</h2><pre>" << html_esc(scenario_text(r.options)) << "</pre>\n</body></html>\n";
+  return h.str();
+}
+
+namespace {
+
+class JsonFlattener {
+ public:
+  JsonFlattener(const std::string& s, std::map<std::string, std::string>* out) : s_(s), out_(out) {}
+  std::string run() {
+    ws();
+    if (!value("", 0)) return err_;
+    ws();
+    if (i_ != s_.size()) return "trailing bytes at offset " + std::to_string(i_);
+    return "";
+  }
+
+ private:
+  static constexpr int kMaxDepth = 32;
+  bool fail(const std::string& what) {
+    if (err_.empty()) err_ = what + " at offset " + std::to_string(i_);
+    return false;
+  }
+  void ws() {
+    while (i_ < s_.size() && (s_[i_] == ' ' || s_[i_] == '\n' || s_[i_] == '\r' || s_[i_] == '\t')) ++i_;
+  }
+  bool string(std::string* v) {
+    if (i_ >= s_.size() || s_[i_] != '"') return fail("expected a string");
+    ++i_;
+    while (i_ < s_.size() && s_[i_] != '"') {
+      if (s_[i_] == '\\') {
+        if (++i_ >= s_.size()) break;
+        const char c = s_[i_];
+        if (c == 'u') {
+          if (s_.size() - i_ < 5) return fail("bad escape");
+          v->push_back('?');
+          i_ += 5;
+          continue;
+        }
+        v->push_back(c == 'n' ? '\n' : c == 't' ? '\t' : c);
+        ++i_;
+        continue;
+      }
+      v->push_back(s_[i_++]);
+    }
+    if (i_ >= s_.size()) return fail("unterminated string");
+    ++i_;
+    return true;
+  }
+  bool value(const std::string& path, int depth) {
+    if (depth > kMaxDepth) return fail("nesting too deep");
+    ws();
+    if (i_ >= s_.size()) return fail("unexpected end");
+    const char c = s_[i_];
+    if (c == '{' || c == '[') {
+      const bool obj = c == '{';
+      ++i_;
+      ws();
+      if (i_ < s_.size() && s_[i_] == (obj ? '}' : ']')) return ++i_, true;
+      for (std::size_t n = 0;; ++n) {
+        std::string key = std::to_string(n);
+        if (obj) {
+          ws();
+          key.clear();
+          if (!string(&key)) return false;
+          ws();
+          if (i_ >= s_.size() || s_[i_] != ':') return fail("expected ':'");
+          ++i_;
+        }
+        if (!value(path.empty() ? key : path + "." + key, depth + 1)) return false;
+        ws();
+        if (i_ < s_.size() && s_[i_] == ',') {
+          ++i_;
+          continue;
+        }
+        if (i_ < s_.size() && s_[i_] == (obj ? '}' : ']')) return ++i_, true;
+        return fail(obj ? "expected ',' or '}'" : "expected ',' or ']'");
+      }
+    }
+    std::string v;
+    if (c == '"') {
+      if (!string(&v)) return false;
+    } else {
+      const std::size_t start = i_;
+      while (i_ < s_.size() && (std::isalnum(static_cast<unsigned char>(s_[i_])) || s_[i_] == '-' || s_[i_] == '+' ||
+                                s_[i_] == '.'))
+        ++i_;
+      if (i_ == start) return fail("unexpected character");
+      v = s_.substr(start, i_ - start);
+    }
+    (*out_)[path] = v;
+    return true;
+  }
+
+  const std::string& s_;
+  std::map<std::string, std::string>* out_;
+  std::size_t i_ = 0;
+  std::string err_;
+};
+
+}  // namespace
+
+std::string flatten_json(const std::string& text, std::map<std::string, std::string>* out) {
+  if (text.size() > (std::size_t{256} << 20)) return "larger than 256 MiB";
+  return JsonFlattener(text, out).run();
+}
+
+std::string compare_reports(const std::string& name_a, const std::string& a, const std::string& name_b,
+                            const std::string& b, std::string* error) {
+  std::map<std::string, std::string> fa, fb;
+  if (auto e = flatten_json(a, &fa); !e.empty()) return *error = name_a + ": " + e, "";
+  if (auto e = flatten_json(b, &fb); !e.empty()) return *error = name_b + ": " + e, "";
+  for (const auto* f : {&fa, &fb})
+    if (f->count("bots") == 0 || f->count("edit_fanout_ms.p99") == 0)
+      return *error = (f == &fa ? name_a : name_b) + ": not a terrane-bots report (no bots / edit_fanout_ms)", "";
+  static const char* const kKeys[] = {
+      "passed", "bots", "duration_s", "scenario.behavior", "scenario.view_distance", "scenario.full_res_radius",
+      "bytes_received", "join_bytes_received", "steady_bytes_received", "bytes_sent", "bytes_per_non_empty_voxel",
+      "join_coarse_ms.p50", "join_coarse_ms.p99", "join_full_ms.p50", "join_full_ms.p99", "edit_ack_ms.p50",
+      "edit_ack_ms.p99", "edit_fanout_ms.p50", "edit_fanout_ms.p95", "edit_fanout_ms.p99", "edit_fanout_ms.count",
+      "edits_acked", "edits_rejected", "receivers_per_edit", "update_bytes_per_edited_voxel_per_receiver",
+      "replica_regions_checked", "replica_mismatches", "unexpected_disconnects"};
+  std::ostringstream t;
+  char line[256];
+  std::snprintf(line, sizeof line, "%-44s %16s %16s %9s\n", "", name_a.substr(0, 16).c_str(),
+                name_b.substr(0, 16).c_str(), "B/A");
+  t << line;
+  for (const char* k : kKeys) {
+    const auto ia = fa.find(k), ib = fb.find(k);
+    const std::string va = ia == fa.end() ? "-" : ia->second, vb = ib == fb.end() ? "-" : ib->second;
+    std::string ratio;
+    char* ea = nullptr;
+    char* eb = nullptr;
+    const double da = std::strtod(va.c_str(), &ea), db = std::strtod(vb.c_str(), &eb);
+    if (ea != va.c_str() && *ea == 0 && eb != vb.c_str() && *eb == 0 && da != 0) ratio = num(db / da) + "x";
+    std::snprintf(line, sizeof line, "%-44s %16s %16s %9s\n", k, va.c_str(), vb.c_str(), ratio.c_str());
+    t << line;
+  }
+  return t.str();
+}
+
+}  // namespace terrane::bots

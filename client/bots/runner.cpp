@@ -1,0 +1,303 @@
+#include "client/bots/runner.h"
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <limits>
+#include <random>
+#include <thread>
+
+#include "client/bots/bot.h"
+
+namespace terrane::bots {
+
+namespace {
+
+constexpr auto kStep = std::chrono::milliseconds(100);
+// Fan-out is joined once a tick is this old: every receiver has had time
+// to hear of it (a later batch would still be a valid sample, but rare).
+constexpr auto kSettleHorizon = std::chrono::seconds(3);
+constexpr auto kDrainTimeout = std::chrono::seconds(15);
+constexpr auto kFinalCheckTimeout = std::chrono::seconds(30);
+
+// One open file per bot plus the runtime's own.
+void raise_open_file_limit(int bots) {
+  rlimit lim{};
+  if (getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
+  const rlim_t want = static_cast<rlim_t>(bots) + 256;
+  if (lim.rlim_cur >= want) return;
+  lim.rlim_cur = lim.rlim_max == RLIM_INFINITY ? want : std::min(want, lim.rlim_max);
+  setrlimit(RLIMIT_NOFILE, &lim);
+}
+
+std::uint64_t splitmix(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+class IoPool {
+ public:
+  explicit IoPool(int threads) : work_(asio::make_work_guard(io_)) {
+    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { io_.run(); });
+  }
+  ~IoPool() {
+    work_.reset();
+    for (auto& t : threads_) t.join();
+  }
+  asio::io_context& io() { return io_; }
+
+ private:
+  asio::io_context io_;
+  asio::executor_work_guard<asio::io_context::executor_type> work_;
+  std::vector<std::thread> threads_;
+};
+
+}  // namespace
+
+bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& progress, BotsReport* report,
+              std::string* error) {
+  raise_open_file_limit(o.bots);
+  const int threads = o.threads > 0 ? o.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  IoPool pool(threads);
+
+  // A probe learns the spawn, the bounds and the server's caps.
+  WelcomeMsg welcome;
+  {
+    ClientOptions po;
+    po.host = o.host;
+    po.port = o.port;
+    po.name = "bots-probe";
+    po.auth_token = o.token;
+    po.io_context = &pool.io();
+    po.state = ClientStateMsg{{0, 0, 0}, 32, 32};
+    Client probe(po);
+    std::string err;
+    if (!probe.connect(&err)) {
+      *error = err;
+      return false;
+    }
+    probe.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, std::chrono::seconds(10));
+    const auto w = probe.welcome();
+    if (!w) {
+      *error = "no Welcome from " + o.host + ":" + std::to_string(o.port) + ": " +
+               (probe.closed() ? probe.disconnect_reason() : std::string("timed out"));
+      return false;
+    }
+    welcome = *w;
+    probe.disconnect();
+  }
+
+  RunContext ctx;
+  ctx.options = &o;
+  ctx.welcome = welcome;
+  ctx.view_distance = std::min(o.view_distance, welcome.max_view_distance);
+  ctx.full_res_radius = std::min({o.full_res_radius, welcome.max_full_res_radius, ctx.view_distance});
+  ctx.spawn = o.spawn_set ? Vec3f{static_cast<float>(o.spawn.x) + 0.5f, static_cast<float>(o.spawn.y),
+                                  static_cast<float>(o.spawn.z) + 0.5f}
+                          : welcome.spawn;
+  ctx.io = &pool.io();
+  const auto t0 = Clock::now();
+  const auto ramp = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.ramp_up_s));
+  const auto measure_from = t0 + ramp;
+  FanoutTracker fanout(t0, measure_from);
+  MismatchLog mismatches;
+  ctx.fanout = &fanout;
+  ctx.mismatches = &mismatches;
+  ctx.run_start = t0;
+
+  std::mt19937_64 rng(o.seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<std::unique_ptr<Bot>> bots;
+  bots.reserve(static_cast<std::size_t>(o.bots));
+  const float half = static_cast<float>(o.spread) / 2.0f;
+  for (int i = 0; i < o.bots; ++i) {
+    const Vec3f start{ctx.spawn.x + (unit(rng) * 2.0f - 1.0f) * half, ctx.spawn.y,
+                      ctx.spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
+    Movement m = Movement::kIdle;
+    EditMode e = EditMode::kNone;
+    switch (o.behavior) {
+      case Behavior::kIdle: break;
+      case Behavior::kWalk: m = Movement::kWalk; break;
+      case Behavior::kFly: m = Movement::kFly; break;
+      case Behavior::kDig: e = EditMode::kDig; break;
+      case Behavior::kBuild: e = EditMode::kBuild; break;
+      case Behavior::kMixed: {
+        const float u = unit(rng);
+        m = u < 0.6f ? Movement::kWalk : (u < 0.9f ? Movement::kIdle : Movement::kFly);
+        e = EditMode::kBoth;
+        break;
+      }
+    }
+    bots.push_back(std::make_unique<Bot>(i, ctx, start, m, e, splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i))));
+  }
+
+  BotsReport& r = *report;
+  r = BotsReport{};
+  r.options = o;
+  r.bots = o.bots;
+  std::size_t next_bot = 0;
+  std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
+  bool measured_snapshot = ramp.count() == 0;
+  auto next_second = t0 + std::chrono::seconds(1);
+  auto sum_counters = [&](std::uint64_t* in, std::uint64_t* out, std::uint64_t* updates, int* live) {
+    *in = *out = *updates = 0;
+    *live = 0;
+    for (auto& b : bots) {
+      if (!b->connected()) continue;
+      const ClientCounters k = b->counters();
+      *in += k.bytes_in;
+      *out += k.bytes_out;
+      *updates += k.by_message_type[static_cast<std::size_t>(wire::Body::UpdateBatch)].bytes_in;
+      if (!b->closed()) ++*live;
+    }
+  };
+  auto once_a_second = [&](Clock::time_point now) {
+    if (now < next_second) return;
+    next_second += std::chrono::seconds(1);
+    std::uint64_t in = 0, out = 0, updates = 0;
+    int live = 0;
+    sum_counters(&in, &out, &updates, &live);
+    if (!measured_snapshot && now >= measure_from) {
+      update_bytes_at_measure = updates;
+      measured_snapshot = true;
+    }
+    fanout.settle(now, kSettleHorizon);
+    const auto totals = fanout.totals();
+    TimelinePoint p;
+    p.t_s = std::chrono::duration<double>(now - t0).count();
+    p.bots_connected = live;
+    p.mb_per_s_in = static_cast<double>(in - prev_in) / 1e6;
+    p.mb_per_s_out = static_cast<double>(out - prev_out) / 1e6;
+    p.edits_acked_per_s = static_cast<double>(totals.edits_acked - prev_acked);
+    prev_in = in;
+    prev_out = out;
+    prev_acked = totals.edits_acked;
+    r.timeline.push_back(p);
+    if (progress)
+      progress(Progress{p.t_s, live, o.bots, p.mb_per_s_in, p.mb_per_s_out, p.edits_acked_per_s,
+                        fanout.recent_fanout_p99(), mismatches.count()});
+  };
+
+  // Active phase: connect over the ramp-up, step every bot every 100 ms.
+  const auto end_active = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration_s));
+  auto next_step = t0;
+  for (auto now = Clock::now(); now < end_active; now = Clock::now()) {
+    while (next_bot < bots.size() &&
+           now >= t0 + ramp * static_cast<Clock::rep>(next_bot) / static_cast<Clock::rep>(bots.size())) {
+      Bot& b = *bots[next_bot++];
+      if (!b.connect()) {
+        ++r.connect_failures;
+        if (r.first_connect_error.empty()) r.first_connect_error = b.result().connect_error;
+      }
+    }
+    for (auto& b : bots) b->step(now, true);
+    once_a_second(now);
+    next_step = std::max(next_step + kStep, Clock::now());
+    std::this_thread::sleep_until(next_step);
+  }
+  // Bots not connected by now (a ramp-up as long as the run) connect late.
+  for (; next_bot < bots.size(); ++next_bot)
+    if (!bots[next_bot]->connect()) ++r.connect_failures;
+
+  // Drain: every edit acknowledged (or rejected), then a quiet period.
+  auto wait_phase = [&](Clock::duration limit, const std::function<bool()>& done) {
+    const auto until = Clock::now() + limit;
+    for (auto now = Clock::now(); now < until && !done(); now = Clock::now()) {
+      for (auto& b : bots) b->step(now, false);
+      once_a_second(now);
+      std::this_thread::sleep_for(kStep);
+    }
+  };
+  wait_phase(kDrainTimeout, [&] {
+    return std::all_of(bots.begin(), bots.end(),
+                       [](const auto& b) { return b->closed() || b->outstanding_edits() == 0; });
+  });
+  wait_phase(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.quiet_s)),
+             [] { return false; });
+  // Final check: each bot's whole full-resolution region.
+  for (auto& b : bots) b->start_final_check();
+  wait_phase(kFinalCheckTimeout, [&] {
+    const auto now = Clock::now();
+    bool any = false;
+    for (auto& b : bots) any = b->checks_pending(now) || any;
+    return !any;
+  });
+  fanout.settle(Clock::now(), Clock::duration::zero());
+  std::uint64_t ub_end = 0;
+  {
+    std::uint64_t in = 0, out = 0;
+    int live = 0;
+    sum_counters(&in, &out, &ub_end, &live);
+  }
+  r.duration_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  for (auto& b : bots) b->finish();
+
+  // --- the report ----------------------------------------------------------
+  std::vector<float> coarse, full;
+  double bpv_sum = 0;
+  int bpv_n = 0;
+  r.min_checks_during_run = std::numeric_limits<std::uint64_t>::max();
+  for (std::size_t i = 0; i < bots.size(); ++i) {
+    const BotResult& br = bots[i]->result();
+    if (!br.connected) continue;
+    const ClientCounters& k = br.counters;
+    r.bytes_received += k.bytes_in;
+    r.bytes_sent += k.bytes_out;
+    for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
+      r.by_message_type[t].frames_in += k.by_message_type[t].frames_in;
+      r.by_message_type[t].bytes_in += k.by_message_type[t].bytes_in;
+      r.by_message_type[t].frames_out += k.by_message_type[t].frames_out;
+      r.by_message_type[t].bytes_out += k.by_message_type[t].bytes_out;
+    }
+    if (br.join_coarse_ms) coarse.push_back(static_cast<float>(*br.join_coarse_ms));
+    if (br.join_full_ms) {
+      full.push_back(static_cast<float>(*br.join_full_ms));
+      r.join_bytes_received += br.join_bytes;
+      if (br.join_non_empty_voxels > 0) {
+        bpv_sum += static_cast<double>(br.join_bytes) / static_cast<double>(br.join_non_empty_voxels);
+        ++bpv_n;
+      }
+    } else {
+      ++r.joins_incomplete;
+    }
+    r.replica_regions_checked += br.hash_checked;
+    r.hash_unanswered += br.hash_unanswered;
+    r.walk_steps += br.walk_steps;
+    for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += br.walk_blocked[w];
+    r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));
+    if (br.unexpected_disconnect) {
+      ++r.unexpected_disconnects;
+      r.disconnects.emplace_back(static_cast<int>(i), br.disconnect_reason);
+    }
+  }
+  if (r.min_checks_during_run == std::numeric_limits<std::uint64_t>::max()) r.min_checks_during_run = 0;
+  r.steady_bytes_received = r.bytes_received - std::min(r.bytes_received, r.join_bytes_received);
+  r.bytes_per_non_empty_voxel = bpv_n > 0 ? bpv_sum / bpv_n : 0;
+  r.join_coarse_ms = summarize(coarse);
+  r.join_full_ms = summarize(full);
+  r.edit_ack_ms = summarize(fanout.ack_ms());
+  r.edit_fanout_ms = summarize(fanout.fanout_ms());
+  const auto totals = fanout.totals();
+  r.edits_sent = totals.edits_sent;
+  r.edits_acked = totals.edits_acked;
+  r.edits_rejected = totals.edits_rejected;
+  r.edits_measured = totals.edits_measured;
+  r.reject_reasons = totals.reject_reasons;
+  r.receivers_per_edit =
+      totals.edits_measured > 0 ? static_cast<double>(totals.receiver_pairs) / static_cast<double>(totals.edits_measured) : 0;
+  r.update_batch_bytes_steady = ub_end - std::min(ub_end, update_bytes_at_measure);
+  r.update_bytes_per_edited_voxel_per_receiver =
+      totals.edited_voxel_receivers > 0 ? static_cast<double>(r.update_batch_bytes_steady) / totals.edited_voxel_receivers
+                                        : 0;
+  r.mismatches = mismatches.all();
+  const auto fan_s = fanout.fanout_by_second(), ack_s = fanout.ack_by_second();
+  for (std::size_t s = 0; s < r.timeline.size(); ++s) {
+    if (s < fan_s.size()) r.timeline[s].fanout_ms = summarize(fan_s[s]);
+    if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
+  }
+  return true;
+}
+
+}  // namespace terrane::bots

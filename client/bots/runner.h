@@ -1,0 +1,69 @@
+// A bots run: connects a probe to learn the server's spawn and caps, starts
+// the bots over the ramp-up on a shared io_context (a small thread pool),
+// drives their behaviours from one driver thread every 100 ms, then drains
+// edits, waits a quiet period, verifies every bot's whole full-resolution
+// region against the server's hashes and builds the report.
+// Thread-safety: run_bots is called from one thread and blocks for the run.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "client/bots/options.h"
+#include "client/bots/stats.h"
+
+namespace terrane::bots {
+
+struct TimelinePoint {
+  double t_s = 0;  // end of the second, since the first connection
+  int bots_connected = 0;
+  double mb_per_s_in = 0, mb_per_s_out = 0;
+  double edits_acked_per_s = 0;
+  LatencySummary fanout_ms, ack_ms;  // of edits sent in that second
+};
+
+struct BotsReport {
+  BotsOptions options;
+  int bots = 0;
+  double duration_s = 0;  // wall time from the first connection to the end of the final check
+  std::uint64_t bytes_received = 0, bytes_sent = 0;
+  std::uint64_t join_bytes_received = 0, steady_bytes_received = 0;
+  double bytes_per_non_empty_voxel = 0;  // mean over bots that completed their join
+  LatencySummary join_coarse_ms, join_full_ms, edit_ack_ms, edit_fanout_ms;
+  std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0, edits_measured = 0;
+  std::map<std::string, std::uint64_t> reject_reasons;
+  double receivers_per_edit = 0;
+  std::uint64_t update_batch_bytes_steady = 0;
+  double update_bytes_per_edited_voxel_per_receiver = 0;
+  std::uint64_t replica_regions_checked = 0;
+  std::vector<Mismatch> mismatches;
+  std::uint64_t hash_unanswered = 0;
+  std::uint64_t min_checks_during_run = 0;
+  int unexpected_disconnects = 0;
+  std::vector<std::pair<int, std::string>> disconnects;  // bot, reason
+  int connect_failures = 0;
+  std::string first_connect_error;
+  int joins_incomplete = 0;
+  std::uint64_t walk_steps = 0;
+  std::array<std::uint64_t, 4> walk_blocked{};  // BotResult::walk_blocked, summed
+  std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
+  std::vector<TimelinePoint> timeline;
+
+  bool passed() const { return mismatches.empty() && unexpected_disconnects == 0 && connect_failures == 0; }
+};
+
+struct Progress {
+  double t_s = 0;
+  int bots_connected = 0, bots_total = 0;
+  double mb_per_s_in = 0, mb_per_s_out = 0, edits_per_s = 0, fanout_p99_ms = 0;
+  std::size_t mismatches = 0;
+};
+
+// Returns false with *error when the server cannot be reached at all (the
+// probe fails); everything else ends up in the report.
+bool run_bots(const BotsOptions& options, const std::function<void(const Progress&)>& progress, BotsReport* report,
+              std::string* error);
+
+}  // namespace terrane::bots

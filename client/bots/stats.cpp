@@ -1,0 +1,163 @@
+#include "client/bots/stats.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_set>
+
+namespace terrane::bots {
+
+namespace {
+// Fan-out samples kept for the live progress line.
+constexpr std::size_t kRecentSamples = 20000;
+}  // namespace
+
+LatencySummary summarize(std::vector<float> s) {
+  LatencySummary r;
+  r.count = s.size();
+  if (s.empty()) return r;
+  std::sort(s.begin(), s.end());
+  auto rank = [&](double p) {
+    const auto i = static_cast<std::size_t>(std::ceil(p * static_cast<double>(s.size())));
+    return static_cast<double>(s[std::min(s.size(), std::max<std::size_t>(i, 1)) - 1]);
+  };
+  r.p50 = rank(0.50);
+  r.p95 = rank(0.95);
+  r.p99 = rank(0.99);
+  return r;
+}
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from)
+    : run_start_(run_start), measure_from_(measure_from) {}
+
+std::size_t FanoutTracker::second_of(Clock::time_point t) const {
+  if (t <= run_start_) return 0;
+  return static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start_).count());
+}
+
+void FanoutTracker::add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms) {
+  const std::size_t s = second_of(sent);
+  if (by_second.size() <= s) by_second.resize(s + 1);
+  by_second[s].push_back(ms);
+}
+
+std::uint32_t FanoutTracker::send_edit(int bot, const Region& bounds, double edited_voxels,
+                                       const std::function<std::uint32_t()>& send) {
+  std::lock_guard lock(mutex_);
+  Edit e;
+  e.bot = bot;
+  e.voxels = edited_voxels;
+  for_each_chunk_in(bounds, [&](Vec3i cp) { e.chunks.push_back(cp); });
+  e.sent = Clock::now();
+  const std::uint32_t id = send();
+  if (id == 0) return 0;
+  ++totals_.edits_sent;
+  in_flight_[key(bot, id)] = std::move(e);
+  return id;
+}
+
+void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcome& o, Clock::time_point t) {
+  std::lock_guard lock(mutex_);
+  auto it = in_flight_.find(key(bot, edit_id));
+  if (it == in_flight_.end()) return;
+  Edit e = std::move(it->second);
+  in_flight_.erase(it);
+  if (!o.accepted) {
+    ++totals_.edits_rejected;
+    ++totals_.reject_reasons[o.reason];
+    return;
+  }
+  ++totals_.edits_acked;
+  if (e.sent >= measure_from_) {
+    const float ms = static_cast<float>(ms_between(e.sent, t));
+    ack_ms_.push_back(ms);
+    add_sample(ack_by_second_, e.sent, ms);
+  }
+  auto [tick, fresh] = ticks_.try_emplace(o.tick);
+  if (fresh) tick->second.first_seen = t;
+  tick->second.edits.push_back(std::move(e));
+}
+
+void FanoutTracker::update_received(int bot, std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions,
+                                    Clock::time_point t) {
+  std::lock_guard lock(mutex_);
+  auto [it, fresh] = ticks_.try_emplace(tick);
+  if (fresh) it->second.first_seen = t;
+  for (const auto& r : revisions) it->second.updates.push_back(Update{bot, r.chunk_pos, t});
+}
+
+void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
+  std::lock_guard lock(mutex_);
+  std::unordered_map<int, Clock::time_point> last;  // receiver -> last batch for one edit
+  for (auto it = ticks_.begin(); it != ticks_.end();) {
+    Tick& tk = it->second;
+    if (horizon.count() != 0 && tk.first_seen + horizon > now) {
+      ++it;
+      continue;
+    }
+    for (const Edit& e : tk.edits) {
+      last.clear();
+      for (const Update& u : tk.updates) {
+        if (u.bot == e.bot) continue;
+        if (std::find(e.chunks.begin(), e.chunks.end(), u.chunk) == e.chunks.end()) continue;
+        auto [l, fresh] = last.try_emplace(u.bot, u.t);
+        if (!fresh && u.t > l->second) l->second = u.t;
+      }
+      if (e.sent < measure_from_) continue;
+      ++totals_.edits_measured;
+      totals_.receiver_pairs += last.size();
+      totals_.edited_voxel_receivers += e.voxels * static_cast<double>(last.size());
+      for (const auto& [bot, t] : last) {
+        const float ms = static_cast<float>(ms_between(e.sent, t));
+        fanout_ms_.push_back(ms);
+        add_sample(fanout_by_second_, e.sent, ms);
+        recent_.push_back(ms);
+      }
+    }
+    it = ticks_.erase(it);
+  }
+  if (recent_.size() > kRecentSamples) recent_.erase(recent_.begin(), recent_.end() - kRecentSamples / 2);
+}
+
+FanoutTracker::Totals FanoutTracker::totals() const {
+  std::lock_guard lock(mutex_);
+  return totals_;
+}
+std::vector<float> FanoutTracker::ack_ms() const {
+  std::lock_guard lock(mutex_);
+  return ack_ms_;
+}
+std::vector<float> FanoutTracker::fanout_ms() const {
+  std::lock_guard lock(mutex_);
+  return fanout_ms_;
+}
+std::vector<std::vector<float>> FanoutTracker::fanout_by_second() const {
+  std::lock_guard lock(mutex_);
+  return fanout_by_second_;
+}
+std::vector<std::vector<float>> FanoutTracker::ack_by_second() const {
+  std::lock_guard lock(mutex_);
+  return ack_by_second_;
+}
+double FanoutTracker::recent_fanout_p99() const {
+  std::lock_guard lock(mutex_);
+  return summarize(recent_).p99;
+}
+
+void MismatchLog::add(const Mismatch& m) {
+  std::lock_guard lock(mutex_);
+  list_.push_back(m);
+}
+std::vector<Mismatch> MismatchLog::all() const {
+  std::lock_guard lock(mutex_);
+  return list_;
+}
+std::size_t MismatchLog::count() const {
+  std::lock_guard lock(mutex_);
+  return list_.size();
+}
+
+}  // namespace terrane::bots

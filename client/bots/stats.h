@@ -1,0 +1,121 @@
+// Measurements shared by all bots of a run: latency summaries, the edit
+// fan-out tracker (joins each edit's ack tick with the UpdateBatches other
+// bots received for that tick), and the mismatch log.
+//
+// Thread-safety: FanoutTracker and MismatchLog are called from the io pool
+// (client callbacks) and the driver thread; each guards its state with one
+// mutex because those threads share it and nothing else orders them.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "client/client.h"
+
+namespace terrane::bots {
+
+using Clock = std::chrono::steady_clock;
+
+struct LatencySummary {
+  double p50 = 0, p95 = 0, p99 = 0;
+  std::size_t count = 0;
+};
+// Nearest-rank percentiles (sorts a copy).
+LatencySummary summarize(std::vector<float> samples_ms);
+
+double ms_between(Clock::time_point a, Clock::time_point b);
+
+// Fan-out of an edit to one receiver: from the author calling fill_* to the
+// receiver's UpdateBatch of the edit's tick that covers one of the edit's
+// chunks (the last such batch when the edit spans several chunks). Bots
+// share a process, hence a clock. Edits sent before measure_from are
+// tracked (receivers) but give no latency samples.
+class FanoutTracker {
+ public:
+  FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from);
+
+  // Records the send time, calls send() (which returns the edit id, 0 when
+  // the client refused), and registers the edit under that id. Holding the
+  // lock across send() means the ack cannot be seen first.
+  std::uint32_t send_edit(int bot, const Region& bounds, double edited_voxels,
+                          const std::function<std::uint32_t()>& send);
+  void edit_result(int bot, std::uint32_t edit_id, const EditOutcome& outcome, Clock::time_point t);
+  void update_received(int bot, std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions,
+                       Clock::time_point t);
+  // Joins edits and updates of ticks first seen before now - horizon (every
+  // tick when horizon is zero) and forgets them.
+  void settle(Clock::time_point now, Clock::duration horizon);
+
+  struct Totals {
+    std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0;
+    std::uint64_t edits_measured = 0;        // acked, sent after measure_from, settled
+    std::uint64_t receiver_pairs = 0;        // (edit, receiver) over measured edits
+    double edited_voxel_receivers = 0;       // sum of edited voxels x receivers, measured edits
+    std::map<std::string, std::uint64_t> reject_reasons;
+  };
+  Totals totals() const;
+  std::vector<float> ack_ms() const;
+  std::vector<float> fanout_ms() const;
+  // Per second of the run (by send time): samples for the timeline.
+  std::vector<std::vector<float>> fanout_by_second() const;
+  std::vector<std::vector<float>> ack_by_second() const;
+  // Live: p99 of fan-out samples settled in the last few seconds.
+  double recent_fanout_p99() const;
+
+ private:
+  struct Edit {
+    int bot = 0;
+    Clock::time_point sent;
+    std::vector<Vec3i> chunks;
+    double voxels = 0;
+  };
+  struct Update {
+    int bot;
+    Vec3i chunk;
+    Clock::time_point t;
+  };
+  struct Tick {
+    Clock::time_point first_seen;
+    std::vector<Edit> edits;
+    std::vector<Update> updates;
+  };
+  static std::uint64_t key(int bot, std::uint32_t id) { return (std::uint64_t(std::uint32_t(bot)) << 32) | id; }
+  std::size_t second_of(Clock::time_point t) const;
+  void add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms);
+
+  mutable std::mutex mutex_;
+  Clock::time_point run_start_, measure_from_;
+  std::unordered_map<std::uint64_t, Edit> in_flight_;
+  std::map<std::uint64_t, Tick> ticks_;
+  Totals totals_;
+  std::vector<float> ack_ms_, fanout_ms_;
+  std::vector<std::vector<float>> fanout_by_second_, ack_by_second_;
+  std::vector<float> recent_;  // fan-out samples of the last settle rounds
+};
+
+struct Mismatch {
+  int bot = 0;
+  Vec3i chunk;
+  std::uint64_t replica_revision = 0, server_revision = 0;
+  std::string reason;
+  bool final_check = false;
+};
+
+class MismatchLog {
+ public:
+  void add(const Mismatch& m);
+  std::vector<Mismatch> all() const;
+  std::size_t count() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<Mismatch> list_;
+};
+
+}  // namespace terrane::bots

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# One run of the scale scenario (README "Scale"): N mixed bots spread over
+# 512 x 512 voxels around the spawn, full-resolution radius 64, view
+# distance 512, ramp-up 20 s, a sphere edit of radius <= 3 every 2 s per
+# bot, 60 s. Server and bots share this machine. Prints the bots' report and
+# the server's peak memory (VmHWM) and CPU time (utime + stime) read from
+# /proc just before it is stopped. The server's log is kept beside the
+# report (REPORT.server.log).
+#   scripts/bots-scale.sh N [REPORT.json] [extra terrane-bots flags...]
+# Expects a release build and worlds/default (scripts/run.sh makes both).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bots=${1:?usage: scripts/bots-scale.sh N [REPORT.json] [flags...]}
+report=${2:-reports/scale-$bots.json}
+shift $(( $# >= 2 ? 2 : 1 ))
+world=${TERRANE_WORLD:-worlds/default}
+
+scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-scale.XXXXXX")
+server_pid=
+cleanup() {
+  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
+    kill -TERM "$server_pid" 2>/dev/null || true
+    wait "$server_pid" 2>/dev/null || true
+  fi
+  rm -rf "$scratch"
+}
+trap cleanup EXIT INT TERM
+
+./build/bin/terrane-world backup --world "$world" --to "$scratch/world" >/dev/null
+# Two io threads: the server's world owner strand loads stored chunks
+# synchronously, and with one io thread that stalls every socket.
+./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) --io-threads 2 \
+  >"$scratch/server.log" 2>&1 &
+server_pid=$!
+port=
+for _ in $(seq 1 600); do
+  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
+  [ -n "$port" ] && break
+  sleep 0.1
+done
+[ -n "$port" ] || { cat "$scratch/server.log" >&2; exit 1; }
+# Warm-up (TERRANE_SCALE_WARMUP=1, not measured): 40 idle bots over the same
+# area make the server load every chunk in view from its store first, so
+# the measured run sees a warm server.
+if [ "${TERRANE_SCALE_WARMUP:-0}" = 1 ]; then
+  ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots 40 --duration 45 --behavior idle --spread 512 \
+    --view-distance 512 --full-res-radius 64 --hash-checks 0 --seed 99 --progress off >/dev/null || true
+fi
+ticks=$(getconf CLK_TCK)
+cpu0=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
+start=$(date +%s.%N)
+
+mkdir -p "$(dirname "$report")"
+status=0
+# The bots' own peak memory and CPU, when GNU time is installed.
+timer=()
+[ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
+"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration 60 --behavior mixed \
+  --spread 512 --view-distance 512 --full-res-radius 64 --ramp-up 20 --edit-interval 2 --edit-radius 3 \
+  --seed 1 --progress off --report "$report" "$@" || status=$?
+
+cpu1=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
+end=$(date +%s.%N)
+hwm=$(awk '/VmHWM/ {print $2}' "/proc/$server_pid/status")
+awk -v h="$hwm" -v c0="$cpu0" -v c1="$cpu1" -v t="$ticks" -v s="$start" -v e="$end" 'BEGIN {
+  printf "server: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core)\n",
+         h / 1024, (c1 - c0) / t, e - s, 100 * (c1 - c0) / t / (e - s) }'
+kill -TERM "$server_pid"
+wait "$server_pid" || status=1
+server_pid=
+tail -n 1 "$scratch/server.log"
+cp "$scratch/server.log" "${report%.json}.server.log"
+exit $status

@@ -1,0 +1,293 @@
+// terrane-bots (client/bots): in-process runs against the real
+// terrane-server on 127.0.0.1 (port 0), the fault flags that must fail a
+// run, option and scenario parsing, reports, and the binary's usage errors.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "client/bots/options.h"
+#include "client/bots/report.h"
+#include "client/bots/runner.h"
+#include "tests/support/server_process.h"
+
+namespace terrane::bots {
+namespace {
+
+namespace fs = std::filesystem;
+using testing_support::ServerProcess;
+
+class BotsRunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("terrane-bots-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+  }
+  void TearDown() override {
+    if (server_) {
+      EXPECT_EQ(server_->stop(), 0);
+      if (HasFailure()) std::fprintf(stderr, "--- server output ---\n%s", server_->output().c_str());
+    }
+    fs::remove_all(dir_);
+  }
+  void start_server(const std::vector<std::string>& extra = {}) {
+    server_ = std::make_unique<ServerProcess>(dir_.string(), extra);
+    ASSERT_NE(server_->port(), 0) << server_->output();
+  }
+  // Small and short: tens of bots, a few seconds, a small view.
+  BotsOptions small_run(int bots, Behavior behavior) const {
+    BotsOptions o;
+    o.port = server_->port();
+    o.bots = bots;
+    o.duration_s = 4;
+    o.behavior = behavior;
+    o.spread = 96;
+    o.view_distance = 96;
+    o.full_res_radius = 32;
+    o.edit_interval_s = 0.5;
+    o.hash_checks = 3;
+    o.quiet_s = 0.5;
+    o.threads = 2;
+    o.progress = "off";
+    return o;
+  }
+
+  fs::path dir_;
+  std::unique_ptr<ServerProcess> server_;
+};
+
+TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
+  start_server();
+  BotsOptions o = small_run(20, Behavior::kMixed);
+  o.ramp_up_s = 1;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  EXPECT_EQ(r.mismatches.size(), 0u);
+  EXPECT_EQ(r.unexpected_disconnects, 0);
+  EXPECT_EQ(r.connect_failures, 0);
+  EXPECT_EQ(r.bots, 20);
+  EXPECT_EQ(r.join_full_ms.count, 20u) << "every bot completed its full-resolution region";
+  EXPECT_EQ(r.joins_incomplete, 0);
+  EXPECT_GT(r.join_coarse_ms.p50, 0);
+  EXPECT_GT(r.join_full_ms.p50, 0);
+  EXPECT_GT(r.edits_acked, 0u);
+  EXPECT_GT(r.edit_ack_ms.count, 0u);
+  EXPECT_GT(r.edit_fanout_ms.count, 0u);
+  EXPECT_GT(r.receivers_per_edit, 0);
+  EXPECT_GT(r.bytes_received, 0u);
+  EXPECT_GT(r.bytes_sent, 0u);
+  EXPECT_EQ(r.join_bytes_received + r.steady_bytes_received, r.bytes_received);
+  // Bytes per non-empty voxel is a fraction of a byte with this codec, far
+  // below the 2 bytes of a raw voxel.
+  EXPECT_GT(r.bytes_per_non_empty_voxel, 0.01);
+  EXPECT_LT(r.bytes_per_non_empty_voxel, 2.0);
+  EXPECT_GT(r.update_bytes_per_edited_voxel_per_receiver, 0);
+  // Checks during the run plus every bot's final region check.
+  EXPECT_GE(r.replica_regions_checked, 20u * 4);
+  EXPECT_EQ(r.hash_unanswered, 0u);
+  EXPECT_GT(r.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in, 0u);
+  EXPECT_GT(r.by_message_type[static_cast<std::size_t>(wire::Body::UpdateBatch)].frames_in, 0u);
+  EXPECT_FALSE(r.timeline.empty());
+
+  std::map<std::string, std::string> j;
+  ASSERT_EQ(flatten_json(report_json(r), &j), "");
+  for (const char* key :
+       {"bots", "duration_s", "bytes_received", "bytes_sent", "bytes_per_non_empty_voxel", "join_coarse_ms.p50",
+        "join_full_ms.p95", "edit_ack_ms.p99", "edit_fanout_ms.p50", "edit_fanout_ms.p95", "edit_fanout_ms.p99",
+        "edit_fanout_ms.count", "edits_acked", "receivers_per_edit", "replica_regions_checked", "replica_mismatches",
+        "unexpected_disconnects", "by_message_type.StreamBatch.bytes_in", "join_bytes_received",
+        "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in"})
+    EXPECT_EQ(j.count(key), 1u) << key;
+  EXPECT_EQ(j["bots"], "20");
+  EXPECT_EQ(j["replica_mismatches"], "0");
+  EXPECT_EQ(j["passed"], "true");
+
+  const std::string html = report_html(r);
+  EXPECT_NE(html.find("<svg"), std::string::npos);
+  EXPECT_EQ(html.find("<script"), std::string::npos) << "self-contained, no scripts";
+}
+
+// The fault flags make the server send wrong or no UpdateBatches: the run
+// must fail and name the region. Every batch is faulty so that no later
+// edit of the same 4^3 unit can repair the replica before the check (a
+// fault that a later update overwrites is invisible to any hash).
+void expect_failure_naming_region(const BotsReport& r) {
+  EXPECT_FALSE(r.passed());
+  ASSERT_FALSE(r.mismatches.empty()) << report_table(r);
+  const std::string table = report_table(r);
+  EXPECT_NE(table.find("MISMATCH bot"), std::string::npos) << table;
+  const Vec3i c = r.mismatches.front().chunk;
+  EXPECT_NE(table.find("chunk (" + std::to_string(c.x) + "," + std::to_string(c.y) + "," + std::to_string(c.z) + ")"),
+            std::string::npos)
+      << table;
+  std::map<std::string, std::string> j;
+  ASSERT_EQ(flatten_json(report_json(r), &j), "");
+  EXPECT_EQ(j["passed"], "false");
+  EXPECT_EQ(j["mismatches.0.chunk.0"], std::to_string(c.x));
+}
+
+TEST_F(BotsRunTest, CorruptedUpdatesFailTheRunAndNameTheRegion) {
+  start_server({"--test-corrupt-updates", "1000000"});
+  BotsOptions o = small_run(10, Behavior::kDig);
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_GT(r.edits_acked, 0u);
+  expect_failure_naming_region(r);
+}
+
+TEST_F(BotsRunTest, DroppedUpdatesFailTheRunAndNameTheRegion) {
+  start_server({"--test-drop-updates", "1000000"});
+  BotsOptions o = small_run(10, Behavior::kBuild);
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_GT(r.edits_acked, 0u);
+  expect_failure_naming_region(r);
+}
+
+TEST_F(BotsRunTest, UnreachableServerIsAnError) {
+  BotsOptions o;
+  asio::io_context io;
+  asio::ip::tcp::acceptor a(io, {asio::ip::make_address("127.0.0.1"), 0});
+  o.port = a.local_endpoint().port();
+  a.close();
+  o.progress = "off";
+  BotsReport r;
+  std::string err;
+  EXPECT_FALSE(run_bots(o, nullptr, &r, &err));
+  EXPECT_NE(err.find("cannot connect to 127.0.0.1:" + std::to_string(o.port)), std::string::npos) << err;
+}
+
+// --- options -------------------------------------------------------------------
+
+std::string parse(std::vector<std::string> args, BotsOptions* o) {
+  args.insert(args.begin(), "terrane-bots");
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  bool help = false;
+  return parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, o, &help);
+}
+
+TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
+  const fs::path file = fs::temp_directory_path() / ("terrane-bots-scenario-" + std::to_string(::getpid()));
+  {
+    std::ofstream f(file);
+    f << "# a scenario\nconnect = 10.0.0.2:7000\nbots=250\nduration = 60\nbehavior = walk\n"
+         "spawn = 10,70,-20\nspread = 512\nview-distance = 512\nfull-res-radius = 64\nramp-up = 20\n"
+         "seed = 9\nedit-interval = 2\nedit-radius = 3\nlatency-ms = 40\nbandwidth-kbps = 2000\n";
+  }
+  BotsOptions o;
+  ASSERT_EQ(parse({"--scenario", file.string(), "--bots", "300", "--behavior=mixed"}, &o), "");
+  EXPECT_EQ(o.host, "10.0.0.2");
+  EXPECT_EQ(o.port, 7000);
+  EXPECT_EQ(o.bots, 300);  // the flag wins
+  EXPECT_EQ(o.behavior, Behavior::kMixed);
+  EXPECT_EQ(o.duration_s, 60);
+  EXPECT_TRUE(o.spawn_set);
+  EXPECT_EQ(o.spawn, (Vec3i{10, 70, -20}));
+  EXPECT_EQ(o.spread, 512);
+  EXPECT_EQ(o.view_distance, 512);
+  EXPECT_EQ(o.full_res_radius, 64);
+  EXPECT_EQ(o.ramp_up_s, 20);
+  EXPECT_EQ(o.seed, 9u);
+  EXPECT_EQ(o.latency_ms, 40);
+  EXPECT_EQ(o.bandwidth_kbps, 2000);
+  // The saved scenario reproduces the options.
+  std::map<std::string, std::pair<std::string, std::string>> kv;
+  ASSERT_EQ(parse_scenario_text(scenario_text(o), "saved", &kv), "");
+  BotsOptions again;
+  ASSERT_EQ(apply_option_values(kv, &again), "");
+  EXPECT_EQ(scenario_text(again), scenario_text(o));
+  fs::remove(file);
+}
+
+TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
+  BotsOptions o;
+  EXPECT_NE(parse({"--bots", "3"}, &o).find("--connect"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "127.0.0.1:1", "--bots", "0"}, &o).find("--bots: '0'"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "127.0.0.1:1", "--behavior", "swim"}, &o).find("--behavior: 'swim'"),
+            std::string::npos);
+  EXPECT_NE(parse({"--connect", "nohost"}, &o).find("--connect: 'nohost'"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--spawn", "1,2"}, &o).find("--spawn"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--edit-radius", "40"}, &o).find("--edit-radius"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--frobnicate", "1"}, &o).find("unknown option --frobnicate"),
+            std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--duration"}, &o).find("--duration: missing value"), std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--duration", "5", "--ramp-up", "5"}, &o).find("--ramp-up"),
+            std::string::npos);
+  EXPECT_NE(parse({"--connect", "h:1", "--scenario", "/nonexistent/x"}, &o).find("--scenario: cannot read"),
+            std::string::npos);
+  std::map<std::string, std::pair<std::string, std::string>> kv;
+  EXPECT_EQ(parse_scenario_text("bots = 2\nwings = 2\n", "s.txt", &kv), "s.txt:2: unknown key 'wings'");
+  EXPECT_EQ(parse_scenario_text("bots 2\n", "s.txt", &kv), "s.txt:1: expected key=value, got 'bots 2'");
+  kv.clear();
+  ASSERT_EQ(parse_scenario_text("\n# c\nbots = many\n", "s.txt", &kv), "");
+  EXPECT_NE(apply_option_values(kv, &o).find("s.txt:3: bots: 'many'"), std::string::npos);
+}
+
+// --- reports -------------------------------------------------------------------
+
+TEST(BotsReport, CompareShowsBothReportsSideBySide) {
+  BotsReport a, b;
+  a.bots = 100;
+  b.bots = 200;
+  a.edit_fanout_ms = LatencySummary{10, 20, 40, 1000};
+  b.edit_fanout_ms = LatencySummary{12, 30, 80, 2000};
+  std::string err;
+  const std::string t = compare_reports("a.json", report_json(a), "b.json", report_json(b), &err);
+  EXPECT_EQ(err, "");
+  EXPECT_NE(t.find("edit_fanout_ms.p99"), std::string::npos) << t;
+  EXPECT_NE(t.find("2x"), std::string::npos) << t;  // p99 40 -> 80, bots 100 -> 200
+  EXPECT_EQ(compare_reports("a.json", "{\"bots\": 1,", "b.json", report_json(b), &err), "");
+  EXPECT_NE(err.find("a.json: "), std::string::npos) << err;
+  EXPECT_EQ(compare_reports("a.json", report_json(a), "b.json", "{\"x\": 1}", &err), "");
+  EXPECT_NE(err.find("b.json: not a terrane-bots report"), std::string::npos) << err;
+}
+
+TEST(BotsReport, JsonFlattenerRejectsMalformedInput) {
+  std::map<std::string, std::string> j;
+  EXPECT_NE(flatten_json("{\"a\": [1, 2}", &j), "");
+  EXPECT_NE(flatten_json("{\"a\": 1} x", &j).find("trailing"), std::string::npos);
+  EXPECT_NE(flatten_json(std::string(100, '['), &j).find("too deep"), std::string::npos);
+  j.clear();
+  ASSERT_EQ(flatten_json("{\"a\": {\"b\": [1, \"x\"]}, \"c\": true}", &j), "");
+  EXPECT_EQ(j["a.b.0"], "1");
+  EXPECT_EQ(j["a.b.1"], "x");
+  EXPECT_EQ(j["c"], "true");
+}
+
+// --- the binary ------------------------------------------------------------------
+
+int run_binary(const std::string& args, std::string* output) {
+  const std::string cmd = std::string(TERRANE_BIN_DIR) + "/terrane-bots " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (p == nullptr) return -1;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) output->append(buf, n);
+  const int status = pclose(p);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
+  std::string out;
+  EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --bots lots", &out), 2);
+  EXPECT_NE(out.find("--bots: 'lots'"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(run_binary("--help", &out), 0);
+  EXPECT_NE(out.find("--behavior"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(run_binary("compare only-one.json", &out), 2);
+  EXPECT_NE(out.find("compare takes two JSON reports"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace terrane::bots
