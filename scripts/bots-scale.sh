@@ -8,6 +8,9 @@
 # report (REPORT.server.log).
 #   scripts/bots-scale.sh N [REPORT.json] [extra terrane-bots flags...]
 # Expects a release build and worlds/default (scripts/run.sh makes both).
+# TERRANE_SCALE_TOKEN=T runs the server with --auth-token T and every bot
+# with --token T (authentication on; limits are always on at their
+# defaults); TERRANE_SERVER_FLAGS adds server flags.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bots=${1:?usage: scripts/bots-scale.sh N [REPORT.json] [flags...]}
@@ -29,8 +32,15 @@ trap cleanup EXIT INT TERM
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world" >/dev/null
 # Two io threads: the server's world owner strand loads stored chunks
 # synchronously, and with one io thread that stalls every socket.
+token_flags=()
+server_auth=()
+if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then
+  token_flags=(--token "$TERRANE_SCALE_TOKEN")
+  server_auth=(--auth-token "$TERRANE_SCALE_TOKEN")
+fi
+# shellcheck disable=SC2086
 ./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) --io-threads 2 \
-  >"$scratch/server.log" 2>&1 &
+  "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-} >"$scratch/server.log" 2>&1 &
 server_pid=$!
 port=
 for _ in $(seq 1 600); do
@@ -44,7 +54,7 @@ done
 # the measured run sees a warm server.
 if [ "${TERRANE_SCALE_WARMUP:-0}" = 1 ]; then
   ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots 40 --duration 45 --behavior idle --spread 512 \
-    --view-distance 512 --full-res-radius 64 --hash-checks 0 --seed 99 --progress off >/dev/null || true
+    --view-distance 512 --full-res-radius 64 --hash-checks 0 --seed 99 --progress off "${token_flags[@]}" >/dev/null || true
 fi
 ticks=$(getconf CLK_TCK)
 cpu0=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
@@ -57,7 +67,7 @@ timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
 "${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration 60 --behavior mixed \
   --spread 512 --view-distance 512 --full-res-radius 64 --ramp-up 20 --edit-interval 2 --edit-radius 3 \
-  --seed 1 --progress off --report "$report" "$@" || status=$?
+  --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 
 cpu1=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
 end=$(date +%s.%N)
