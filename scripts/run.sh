@@ -72,6 +72,6 @@ status=0
 kill -TERM "$server_pid"
 wait "$server_pid" || { echo "run.sh: terrane-server did not stop cleanly:" >&2; tail -n 20 "$scratch/server.log" >&2; status=1; }
 server_pid=
-tail -n 1 "$scratch/server.log"
+tail -n 2 "$scratch/server.log"  # the server's totals and its traffic by message type
 echo "run.sh: reports in reports/bots.json and reports/bots.html"
 exit $status
