@@ -74,7 +74,7 @@ TEST(RenderChunks, GrowWithDistanceAndTileTheView) {
 
 class FakeSource final : public VoxelSource {
  public:
-  explicit FakeSource(const Grid& g) : grid_(g), inner_(g, {{-100, -100, -100}, {100, 100, 100}}) {}
+  explicit FakeSource(const Grid& g) : inner_(g, {{-100, -100, -100}, {100, 100, 100}}) {}
   int level(Vec3i cp) const override {
     auto it = levels_.find(cp);
     return it == levels_.end() ? inner_.level(cp) : it->second;
@@ -88,7 +88,6 @@ class FakeSource final : public VoxelSource {
   std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> revisions_;
 
  private:
-  const Grid& grid_;
   GridSource inner_;
 };
 
