@@ -431,7 +431,8 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       }
       if (options_.start_at_spawn && !last_state_) {
         ClientStateMsg s = options_.state;
-        s.position = w->spawn;
+        s.position = {w->spawn.x + options_.spawn_offset.x, w->spawn.y + options_.spawn_offset.y,
+                      w->spawn.z + options_.spawn_offset.z};
         last_state_ = s;
         lock.unlock();
         send(build_client_state(s), wire::Body::ClientState);

@@ -77,6 +77,9 @@ struct ClientOptions {
   // the Welcome's spawn point when it arrives (and sent again).
   ClientStateMsg state{{0, 0, 0}, 256, 64};
   bool start_at_spawn = true;
+  // With start_at_spawn: the first position is the spawn plus this (the
+  // server limits movement speed after the first position).
+  Vec3f spawn_offset{0, 0, 0};
   std::uint32_t protocol_version = kProtocolVersion;  // tests: speak another version
   std::chrono::milliseconds connect_timeout{5000};
   // A Ping goes out this often so an idle client is not timed out.

@@ -151,6 +151,11 @@ std::int32_t ViewerSession::full_res_radius() const {
   return std::min({want, welcome_.max_full_res_radius, view_distance()});
 }
 
+namespace {
+// Where the camera starts without --camera: up and back from the spawn.
+constexpr Vec3f kDefaultCameraOffset{-70.0f, 45.0f, 70.0f};
+}  // namespace
+
 bool ViewerSession::start(std::string* error, double timeout_s) {
   ClientOptions co;
   co.host = options_.host;
@@ -161,6 +166,10 @@ bool ViewerSession::start(std::string* error, double timeout_s) {
   if (options_.camera) {
     co.state.position = options_.camera->pos;
     co.start_at_spawn = false;
+  } else {
+    // The first position the server sees is the default camera's: it
+    // limits how fast a client moves after that.
+    co.spawn_offset = kDefaultCameraOffset;
   }
   client_ = std::make_unique<Client>(co);
   if (!client_->connect(error)) {
@@ -179,7 +188,7 @@ bool ViewerSession::start(std::string* error, double timeout_s) {
     camera_ = *options_.camera;
   } else {
     const Vec3f s = welcome_.spawn;
-    camera_.pos = {s.x - 70.0f, s.y + 45.0f, s.z + 70.0f};
+    camera_.pos = {s.x + kDefaultCameraOffset.x, s.y + kDefaultCameraOffset.y, s.z + kDefaultCameraOffset.z};
     const Vec3f d = s - camera_.pos;
     camera_.yaw = std::atan2(d.x, -d.z);
     camera_.pitch = std::atan2(d.y, std::sqrt(d.x * d.x + d.z * d.z));
