@@ -20,16 +20,6 @@ constexpr int kMaxFramesPerPump = 256;
 // Chunk loads requested ahead of the streaming cursor.
 constexpr std::size_t kPrefetch = 48;
 
-float dist_to_chunk(Vec3f p, Vec3i cp) {
-  const Vec3i o = chunk_origin(cp);
-  auto axis = [](float v, std::int32_t lo) {
-    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
-    return v < a ? a - v : (v > b ? v - b : 0.0f);
-  };
-  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
 float dist_to_center(Vec3f p, Vec3i cp) {
   const Vec3i o = chunk_origin(cp);
   const float h = kChunkSize / 2.0f;

@@ -33,16 +33,6 @@ constexpr Material kBuildMaterials[] = {materials::kBrick, materials::kConcrete,
                                         materials::kCobblestone, materials::kSandstone};
 
 // Same arithmetic as the server's interest management (server/streaming.cpp).
-float dist_to_chunk(Vec3f p, Vec3i cp) {
-  const Vec3i o = chunk_origin(cp);
-  auto axis = [](float v, std::int32_t lo) {
-    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
-    return v < a ? a - v : (v > b ? v - b : 0.0f);
-  };
-  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
 float length(Vec3f v) { return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 
 }  // namespace

@@ -67,16 +67,6 @@ class ClientServerTest : public ::testing::Test {
   std::unique_ptr<ServerProcess> server_;
 };
 
-float dist_to_chunk(Vec3f p, Vec3i cp) {
-  const Vec3i o = chunk_origin(cp);
-  auto axis = [](float v, std::int32_t lo) {
-    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
-    return v < a ? a - v : (v > b ? v - b : 0.0f);
-  };
-  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
 // The chunks within radius of p and inside the vertical bounds: what the
 // server promises at that resolution.
 std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {

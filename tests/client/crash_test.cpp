@@ -60,16 +60,6 @@ Voxel value_for(std::size_t i) {
   return make_voxel(static_cast<Material>(1 + i % 12), static_cast<std::uint8_t>(1 + (i * 37) % 255));
 }
 
-float dist_to_chunk(Vec3f p, Vec3i cp) {
-  const Vec3i o = chunk_origin(cp);
-  auto axis = [](float v, std::int32_t lo) {
-    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
-    return v < a ? a - v : (v > b ? v - b : 0.0f);
-  };
-  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
-
 // The chunks the server promises at full resolution around p.
 std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
   std::vector<Vec3i> out;
