@@ -32,18 +32,6 @@ inline constexpr int kMipLevels = 4;  // level 0 (32³) .. level 3 (4³)
 inline Vec3i chunk_of(Vec3i voxel) { return floor_div(voxel, kChunkSize); }
 inline Vec3i local_of(Vec3i voxel) { return floor_mod(voxel, kChunkSize); }
 inline Vec3i chunk_origin(Vec3i chunk_pos) { return chunk_pos * kChunkSize; }
-// Distance from p to the nearest point of the chunk's cube (0 inside): what
-// view distances and full-resolution radii are measured against, on the
-// server and in every client.
-inline float dist_to_chunk(Vec3f p, Vec3i chunk_pos) {
-  const Vec3i o = chunk_origin(chunk_pos);
-  auto axis = [](float v, std::int32_t lo) {
-    const float a = static_cast<float>(lo), b = static_cast<float>(lo + kChunkSize);
-    return v < a ? a - v : (v > b ? v - b : 0.0f);
-  };
-  const float dx = axis(p.x, o.x), dy = axis(p.y, o.y), dz = axis(p.z, o.z);
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
 inline Region chunk_region(Vec3i chunk_pos) {
   return Region::from_min_size(chunk_origin(chunk_pos), {kChunkSize, kChunkSize, kChunkSize});
 }

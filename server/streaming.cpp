@@ -6,6 +6,7 @@
 #include <unordered_set>
 
 #include "common/net_codec.h"
+#include "common/view.h"
 #include "server/log.h"
 #include "server/server.h"
 
@@ -19,14 +20,6 @@ namespace {
 constexpr int kMaxFramesPerPump = 256;
 // Chunk loads requested ahead of the streaming cursor.
 constexpr std::size_t kPrefetch = 48;
-
-float dist_to_center(Vec3f p, Vec3i cp) {
-  const Vec3i o = chunk_origin(cp);
-  const float h = kChunkSize / 2.0f;
-  const float dx = static_cast<float>(o.x) + h - p.x, dy = static_cast<float>(o.y) + h - p.y,
-              dz = static_cast<float>(o.z) + h - p.z;
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
 
 Vec3i voxel_of(Vec3f p) {
   return {static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
@@ -70,13 +63,7 @@ void Server::on_client_state(Peer& peer, const ClientStateMsg& state) {
 }
 
 int Server::desired_level(const Peer& peer, Vec3i cp) const {
-  const float d = dist_to_chunk(peer.state.position, cp);
-  const float full = static_cast<float>(peer.state.full_res_radius);
-  if (d <= full) return 0;
-  const float step = std::max(full, static_cast<float>(kChunkSize));
-  if (d <= 2.0f * step) return 1;
-  if (d <= 4.0f * step) return 2;
-  return 3;
+  return terrane::desired_level(peer.state.position, cp, peer.state.full_res_radius);
 }
 
 void Server::replan(Peer& peer) {
@@ -84,27 +71,13 @@ void Server::replan(Peer& peer) {
   const std::int32_t vd = peer.state.view_distance;
   const WorldBounds& b = world_->meta().bounds;
   const Vec3i v = voxel_of(p);
-  Vec3i c0 = chunk_of(v - Vec3i{vd, vd, vd}), c1 = chunk_of(v + Vec3i{vd, vd, vd});
-  c0.y = std::max(c0.y, floor_div(b.min_y, kChunkSize));
-  c1.y = std::min(c1.y, floor_div(b.max_y - 1, kChunkSize));
-  std::vector<std::pair<float, Vec3i>> in_view;
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x) {
-        const Vec3i cp{x, y, z};
-        if (!b.touches_chunk(cp) || dist_to_chunk(p, cp) > static_cast<float>(vd)) continue;
-        in_view.emplace_back(dist_to_center(p, cp), cp);
-      }
-  std::sort(in_view.begin(), in_view.end(), [](const auto& a, const auto& c) {
-    if (a.first != c.first) return a.first < c.first;
-    const Vec3i u = a.second, w = c.second;
-    return std::tie(u.y, u.z, u.x) < std::tie(w.y, w.z, w.x);
-  });
+  std::vector<Vec3i> in_view = chunks_in_view(p, vd, b.min_y, b.max_y);
+  std::erase_if(in_view, [&](Vec3i cp) { return !b.touches_chunk(cp); });
   peer.plan.clear();
   peer.plan.reserve(in_view.size());
   std::unordered_set<Vec3i, Vec3iHash> keep;
   keep.reserve(in_view.size());
-  for (const auto& [d, cp] : in_view) {
+  for (const Vec3i cp : in_view) {
     peer.plan.push_back(cp);
     keep.insert(cp);
   }

@@ -1,5 +1,7 @@
 #include "client/bots/bot.h"
 
+#include "common/view.h"
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -73,8 +75,8 @@ Bot::~Bot() { client_.reset(); }
 
 void Bot::init_join_tracking() {
   const std::int32_t view = ctx_.view_distance, full = ctx_.full_res_radius;
-  const Vec3i v = voxel_at(pos_);
-  Vec3i c0 = chunk_of(v - Vec3i{view, view, view}), c1 = chunk_of(v + Vec3i{view, view, view});
+  Vec3i c0, c1;
+  chunk_range(pos_, view, &c0, &c1);
   c0.y = std::max(c0.y, floor_div(ctx_.welcome.bounds_min_y, kChunkSize));
   c1.y = std::min(c1.y, floor_div(ctx_.welcome.bounds_max_y - 1, kChunkSize));
   box_min_ = c0;
@@ -86,9 +88,8 @@ void Bot::init_join_tracking() {
   for (int y = c0.y; y <= c1.y; ++y)
     for (int z = c0.z; z <= c1.z; ++z)
       for (int x = c0.x; x <= c1.x; ++x, ++i) {
-        const float d = dist_to_chunk(pos_, {x, y, z});
-        if (d <= static_cast<float>(view)) need_[i] |= 1, ++need_coarse_;
-        if (d <= static_cast<float>(full)) need_[i] |= 2, ++need_full_;
+        if (within(pos_, {x, y, z}, view)) need_[i] |= 1, ++need_coarse_;
+        if (within(pos_, {x, y, z}, full)) need_[i] |= 2, ++need_full_;
       }
 }
 
@@ -149,12 +150,12 @@ std::size_t Bot::outstanding_edits() const {
 
 void Bot::count_join_voxels() {
   // The full-resolution region as it stood at join (the bot has not moved).
-  const float full = static_cast<float>(ctx_.full_res_radius);
+  const std::int32_t full = ctx_.full_res_radius;
   std::uint64_t n = 0;
   client_->with_replica([&](const Replica& r) {
     Chunk::Level0::Row scratch;
     r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-      if (c.state != CoverageState::kFull || dist_to_chunk(pos_, cp) > full) return;
+      if (c.state != CoverageState::kFull || !within(pos_, cp, full)) return;
       const Chunk* chunk = r.grid().find_chunk(cp);
       if (chunk == nullptr || chunk->empty()) return;
       for (int y = 0; y < kChunkSize; ++y)
@@ -367,7 +368,7 @@ void Bot::schedule_check(Clock::time_point now) {
   for (int attempt = 0; attempt < 8; ++attempt) {
     const Vec3f p{pos_.x + off(rng_), pos_.y + off(rng_), pos_.z + off(rng_)};
     const Vec3i cp = chunk_of(voxel_at(p));
-    if (dist_to_chunk(pos_, cp) > r || !held_full(cp)) continue;
+    if (!within(pos_, cp, ctx_.full_res_radius) || !held_full(cp)) continue;
     {
       std::lock_guard lock(mutex_);
       if (pending_hash_.count(cp) != 0) continue;
@@ -447,11 +448,11 @@ bool Bot::checks_pending(Clock::time_point now) {
 
 void Bot::start_final_check() {
   if (!result_.connected || client_->closed()) return;
-  const float full = static_cast<float>(ctx_.full_res_radius);
+  const std::int32_t full = ctx_.full_res_radius;
   std::vector<Vec3i> chunks;
   client_->with_replica([&](const Replica& r) {
     r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-      if (c.state != CoverageState::kMip && dist_to_chunk(pos_, cp) <= full) chunks.push_back(cp);
+      if (c.state != CoverageState::kMip && within(pos_, cp, full)) chunks.push_back(cp);
     });
     return 0;
   });

@@ -45,6 +45,9 @@ const char* const kBotsHelp =
     "  --hash-checks N           region-hash checks per bot during the run, at least (default 5);\n"
     "                            every bot also checks its whole full-resolution region at the end\n"
     "  --quiet S                 pause after the last edit ack before the final check (default 1)\n"
+    "  --wait-joined S           start the duration once every bot has joined (coarse view and\n"
+    "                            full-resolution region), waiting at most S seconds after the\n"
+    "                            ramp-up (default 0: the duration counts from the first connection)\n"
     "  --threads N               io threads shared by all bots (default: one per core)\n"
     "  --report FILE.json        write the JSON report\n"
     "  --html FILE.html          write a self-contained HTML report with charts\n"
@@ -62,7 +65,7 @@ const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "edit-interval",
-      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "threads",
+      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",
       "report",         "html",         "save-scenario", "progress",   "scenario"};
   return k;
 }
@@ -193,6 +196,8 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       err = int_in(0, 100000, &o->hash_checks);
     } else if (key == "quiet") {
       err = num_in(0, 600, &o->quiet_s);
+    } else if (key == "wait-joined") {
+      err = num_in(0, 86400, &o->join_timeout_s);
     } else if (key == "threads") {
       err = int_in(0, 256, &o->threads);
     } else if (key == "report") {
@@ -270,6 +275,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "bandwidth-kbps = " << o.bandwidth_kbps << "\n";
   s << "hash-checks = " << o.hash_checks << "\n";
   s << "quiet = " << o.quiet_s << "\n";
+  s << "wait-joined = " << o.join_timeout_s << "\n";
   s << "threads = " << o.threads << "\n";
   return s.str();
 }

@@ -36,6 +36,10 @@ struct BotsOptions {
   int bandwidth_kbps = 0;      // per-bot downstream cap, kilobits per second
   int hash_checks = 5;         // region-hash checks per bot during the run, at least
   double quiet_s = 1;          // after the last ack, before the final full check
+  // > 0: the duration starts once every bot has joined (coarse view and
+  // full-resolution region), waiting at most this long after the ramp-up;
+  // 0: the duration counts from the first connection.
+  double join_timeout_s = 0;
   int threads = 0;             // io threads for all bots; 0: one per core
   std::string report_path;     // JSON
   std::string html_path;

@@ -80,6 +80,13 @@ std::string report_json(const BotsReport& r) {
     << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
     << ", \"threads\": " << o.threads << "},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
+  j << "  \"failures\": [";
+  {
+    const auto why = r.failures();
+    for (std::size_t i = 0; i < why.size(); ++i) j << (i ? ", " : "") << "\"" << esc(why[i]) << "\"";
+  }
+  j << "],\n";
+  j << "  \"joined_s\": " << num(r.joined_s) << ",\n";
   j << "  \"bots\": " << r.bots << ",\n";
   j << "  \"duration_s\": " << num(r.duration_s) << ",\n";
   j << "  \"bytes_received\": " << r.bytes_received << ",\n";
@@ -171,6 +178,8 @@ std::string report_table(const BotsReport& r) {
   auto mb = [](std::uint64_t b) { return num(static_cast<double>(b) / 1e6) + " MB"; };
   t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
     << num(r.duration_s) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
+  for (const std::string& why : r.failures()) t << "  FAILED: " << why << "\n";
+  if (r.joined_s > 0) row("all bots joined after", num(r.joined_s) + " s");
   row("bytes received (all / join / steady)",
       mb(r.bytes_received) + " / " + mb(r.join_bytes_received) + " / " + mb(r.steady_bytes_received));
   row("bytes sent", mb(r.bytes_sent));

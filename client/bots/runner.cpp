@@ -136,6 +136,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   BotsReport& r = *report;
   r = BotsReport{};
   r.options = o;
+  r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
   r.bots = o.bots;
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
@@ -181,9 +182,14 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   };
 
   // Active phase: connect over the ramp-up, step every bot every 100 ms.
-  const auto end_active = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration_s));
+  // With a join wait, the duration starts once every bot has joined.
+  const auto duration = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration_s));
+  auto end_active = t0 + duration;
+  bool joins_done = o.join_timeout_s <= 0;
+  const auto join_deadline =
+      t0 + ramp + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.join_timeout_s));
   auto next_step = t0;
-  for (auto now = Clock::now(); now < end_active; now = Clock::now()) {
+  for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
            now >= t0 + ramp * static_cast<Clock::rep>(next_bot) / static_cast<Clock::rep>(bots.size())) {
       Bot& b = *bots[next_bot++];
@@ -194,6 +200,14 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     }
     for (auto& b : bots) b->step(now, true);
     once_a_second(now);
+    if (!joins_done && next_bot == bots.size()) {
+      const bool all = std::all_of(bots.begin(), bots.end(), [](const auto& b) { return b->closed() || b->joined(); });
+      if (all || now >= join_deadline) {
+        joins_done = true;
+        r.joined_s = std::chrono::duration<double>(now - t0).count();
+        end_active = now + duration;
+      }
+    }
     next_step = std::max(next_step + kStep, Clock::now());
     std::this_thread::sleep_until(next_step);
   }
@@ -298,6 +312,22 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
   }
   return true;
+}
+
+std::vector<std::string> BotsReport::failures() const {
+  std::vector<std::string> out;
+  if (!mismatches.empty()) out.push_back(std::to_string(mismatches.size()) + " replica mismatches");
+  if (unexpected_disconnects > 0)
+    out.push_back(std::to_string(unexpected_disconnects) + " bots were disconnected unexpectedly");
+  if (connect_failures > 0)
+    out.push_back(std::to_string(connect_failures) + " bots could not connect: " + first_connect_error);
+  if (joins_incomplete > 0)
+    out.push_back(std::to_string(joins_incomplete) + " of " + std::to_string(bots) +
+                  " bots never completed their join (coarse view and full-resolution region)");
+  if (edits_expected && edits_acked == 0)
+    out.push_back("the bots were to edit, but no edit was acknowledged (" + std::to_string(edits_sent) + " sent, " +
+                  std::to_string(edits_rejected) + " rejected)");
+  return out;
 }
 
 }  // namespace terrane::bots

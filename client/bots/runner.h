@@ -51,7 +51,17 @@ struct BotsReport {
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
   std::vector<TimelinePoint> timeline;
 
-  bool passed() const { return mismatches.empty() && unexpected_disconnects == 0 && connect_failures == 0; }
+  // Seconds from the first connection until every bot had joined (or the
+  // join wait gave up); 0 when the run did not wait (--wait-joined 0).
+  double joined_s = 0;
+  bool edits_expected = false;  // the behaviour edits
+
+  // Why the run failed, one line each; empty when it passed. A run fails on
+  // a replica mismatch, an unexpected disconnect, a failed connection, a bot
+  // that never completed its join, and a run whose bots were to edit but
+  // none of whose edits was acknowledged.
+  std::vector<std::string> failures() const;
+  bool passed() const { return failures().empty(); }
 };
 
 struct Progress {

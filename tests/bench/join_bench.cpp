@@ -31,6 +31,7 @@
 #include "common/world.h"
 #include "server/server.h"
 #include "tests/bench/paletted_section.h"
+#include "tests/support/view_chunks.h"
 
 namespace terrane {
 namespace {
@@ -39,20 +40,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using namespace std::chrono_literals;
 
-std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
-  std::vector<Vec3i> out;
-  const Vec3i v{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)), static_cast<int>(std::floor(p.z))};
-  const int r = static_cast<int>(radius) + 1;
-  const Vec3i c0 = chunk_of(v - Vec3i{r, r, r}), c1 = chunk_of(v + Vec3i{r, r, r});
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x) {
-        const Vec3i cp{x, y, z};
-        if (cp.y * kChunkSize >= w.bounds_max_y || (cp.y + 1) * kChunkSize <= w.bounds_min_y) continue;
-        if (dist_to_chunk(p, cp) <= radius) out.push_back(cp);
-      }
-  return out;
-}
+using testing_support::chunks_within;
 
 struct JoinResult {
   double coarse_s = 0, full_s = 0;

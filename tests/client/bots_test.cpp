@@ -52,6 +52,9 @@ class BotsRunTest : public ::testing::Test {
     o.edit_interval_s = 0.5;
     o.hash_checks = 3;
     o.quiet_s = 0.5;
+    // The duration starts once every bot has joined: a loaded machine
+    // (sanitizers, parallel tests) slows joins, never shortens the run.
+    o.join_timeout_s = 240;
     o.threads = 2;
     o.progress = "off";
     return o;
@@ -151,6 +154,30 @@ TEST_F(BotsRunTest, DroppedUpdatesFailTheRunAndNameTheRegion) {
   ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
   EXPECT_GT(r.edits_acked, 0u);
   expect_failure_naming_region(r);
+}
+
+TEST_F(BotsRunTest, ARunWhoseBotNeverJoinedOrEditedFails) {
+  // A cold server (nothing generated) and a view far larger than a fraction
+  // of a second can fill: the bot cannot finish its join within the run.
+  start_server();
+  BotsOptions o = small_run(1, Behavior::kDig);
+  o.join_timeout_s = 0;
+  o.duration_s = 0.2;
+  o.quiet_s = 0;
+  o.view_distance = 512;
+  o.full_res_radius = 128;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  ASSERT_EQ(r.joins_incomplete, 1) << report_table(r);
+  EXPECT_FALSE(r.passed());
+  const std::string table = report_table(r);
+  EXPECT_NE(table.find("FAILED: 1 of 1 bots never completed their join"), std::string::npos) << table;
+  EXPECT_NE(table.find("FAILED: the bots were to edit, but no edit was acknowledged"), std::string::npos) << table;
+  std::map<std::string, std::string> j;
+  ASSERT_EQ(flatten_json(report_json(r), &j), "");
+  EXPECT_EQ(j["passed"], "false");
+  EXPECT_EQ(j.count("failures.1"), 1u);
 }
 
 TEST_F(BotsRunTest, UnreachableServerIsAnError) {

@@ -22,6 +22,7 @@
 
 #include "common/world.h"
 #include "tests/support/server_process.h"
+#include "tests/support/view_chunks.h"
 
 namespace terrane {
 namespace {
@@ -67,22 +68,7 @@ class ClientServerTest : public ::testing::Test {
   std::unique_ptr<ServerProcess> server_;
 };
 
-// The chunks within radius of p and inside the vertical bounds: what the
-// server promises at that resolution.
-std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
-  std::vector<Vec3i> out;
-  const Vec3i v{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)), static_cast<int>(std::floor(p.z))};
-  const int r = static_cast<int>(radius) + 1;
-  const Vec3i c0 = chunk_of(v - Vec3i{r, r, r}), c1 = chunk_of(v + Vec3i{r, r, r});
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x) {
-        const Vec3i cp{x, y, z};
-        if (cp.y * kChunkSize >= w.bounds_max_y || (cp.y + 1) * kChunkSize <= w.bounds_min_y) continue;
-        if (dist_to_chunk(p, cp) <= radius) out.push_back(cp);
-      }
-  return out;
-}
+using testing_support::chunks_within;
 
 bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks) {
@@ -99,6 +85,17 @@ bool checked_all(const ClientView& v, const std::vector<Vec3i>& chunks) {
 bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks)
     if (r.coverage(cp) == nullptr) return false;
+  return true;
+}
+
+// True when every chunk is held at the level the view rule promises at p
+// (Empty counts as full resolution anywhere).
+bool all_at_desired_level(const Replica& r, const std::vector<Vec3i>& chunks, Vec3f p, std::int32_t full_radius) {
+  for (const Vec3i cp : chunks) {
+    const ChunkCoverage* c = r.coverage(cp);
+    if (c == nullptr) return false;
+    if (c->state == CoverageState::kMip && c->level != desired_level(p, cp, full_radius)) return false;
+  }
   return true;
 }
 
@@ -197,7 +194,7 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   // Distant chunks hold a mip, never full resolution.
   c.with_replica([&](const Replica& r) {
     for (const Vec3i cp : view) {
-      if (dist_to_chunk(w->spawn, cp) <= 64) continue;
+      if (within(w->spawn, cp, 64)) continue;
       const ChunkCoverage* cov = r.coverage(cp);
       EXPECT_TRUE(cov != nullptr && cov->state != CoverageState::kFull);
     }
@@ -487,15 +484,11 @@ TEST_F(ClientServerTest, ClientReconnectsAfterARestartAndResumesItsReplica) {
   const auto w = c.welcome();
   ASSERT_TRUE(w.has_value());
   const auto in_view = chunks_within(w->spawn, 96, *w);
-  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_covered(v.replica, in_view); }, kDeadline));
-  // ... and refined: wait until nothing more arrives for a while.
-  std::uint64_t first_bytes = 0;
-  for (int i = 0; i < 100; ++i) {
-    const std::uint64_t now = c.counters().bytes_in;
-    if (now == first_bytes) break;
-    first_bytes = now;
-    std::this_thread::sleep_for(300ms);
-  }
+  // ... and refined: every chunk at the level the view rule promises.
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, in_view, w->spawn, 32); },
+      kDeadline));
+  const std::uint64_t first_bytes = c.counters().bytes_in;
 
   // The server goes away and comes back on the same port and world.
   ASSERT_EQ(server_->stop(), 0);

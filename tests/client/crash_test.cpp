@@ -25,6 +25,7 @@
 #include "client/client.h"
 #include "common/world.h"
 #include "tests/support/server_process.h"
+#include "tests/support/view_chunks.h"
 
 namespace terrane {
 namespace {
@@ -60,21 +61,7 @@ Voxel value_for(std::size_t i) {
   return make_voxel(static_cast<Material>(1 + i % 12), static_cast<std::uint8_t>(1 + (i * 37) % 255));
 }
 
-// The chunks the server promises at full resolution around p.
-std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
-  std::vector<Vec3i> out;
-  const Vec3i v{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)), static_cast<int>(std::floor(p.z))};
-  const int r = static_cast<int>(radius) + 1;
-  const Vec3i c0 = chunk_of(v - Vec3i{r, r, r}), c1 = chunk_of(v + Vec3i{r, r, r});
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x) {
-        const Vec3i cp{x, y, z};
-        if (cp.y * kChunkSize >= w.bounds_max_y || (cp.y + 1) * kChunkSize <= w.bounds_min_y) continue;
-        if (dist_to_chunk(p, cp) <= radius) out.push_back(cp);
-      }
-  return out;
-}
+using testing_support::chunks_within;
 
 bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
   return std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) {
