@@ -94,6 +94,14 @@ class Grid {
   // erases the entry.
   void put_chunk(Vec3i chunk_pos, Chunk chunk);
   void erase_chunk(Vec3i chunk_pos) { chunks_.erase(chunk_pos); }
+  // Removes the chunk from the grid and returns it (null if absent).
+  std::unique_ptr<Chunk> take_chunk(Vec3i chunk_pos) {
+    auto it = chunks_.find(chunk_pos);
+    if (it == chunks_.end()) return nullptr;
+    std::unique_ptr<Chunk> c = std::move(it->second);
+    chunks_.erase(it);
+    return c;
+  }
   std::size_t chunk_count() const { return chunks_.size(); }
   template <class F>
   void for_each_chunk(F&& f) const {

@@ -1063,6 +1063,40 @@ void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vec
   }
 }
 
+UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units) {
+  std::vector<const UnitUpdate*> sorted;
+  sorted.reserve(units.size());
+  for (const UnitUpdate& u : units) sorted.push_back(&u);
+  std::sort(sorted.begin(), sorted.end(),
+            [](const UnitUpdate* a, const UnitUpdate* b) { return a->unit_index < b->unit_index; });
+  UpdatePiece p;
+  p.chunk_pos = sorted.front()->chunk_pos;
+  p.first_unit = sorted.front()->unit_index;
+  p.count = static_cast<std::uint32_t>(sorted.size());
+  int prev = -1;
+  for (const UnitUpdate* u : sorted) {
+    if (prev >= 0) net_codec_put_update_coords(p.chunk_pos, u->unit_index, p.chunk_pos, prev, p.rest);
+    net_codec_encode(kUpdateUnitSize, u->voxels, p.rest);
+    prev = u->unit_index;
+  }
+  return p;
+}
+
+void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out) {
+  std::uint32_t count = 0;
+  for (const UpdatePiece* p : pieces) count += p->count;
+  out.push_back(kUpdateBatchVersion);
+  put_varint(count, out);
+  Vec3i prev_chunk{};
+  int prev_unit = -1;
+  for (const UpdatePiece* p : pieces) {
+    net_codec_put_update_coords(p->chunk_pos, p->first_unit, prev_chunk, prev_unit, out);
+    out.insert(out.end(), p->rest.begin(), p->rest.end());
+    prev_chunk = p->chunk_pos;
+    prev_unit = kUpdateUnitsPerChunk;  // pieces are distinct chunks
+  }
+}
+
 Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> bytes, std::span<UnitUpdate> out) {
   if (bytes.empty()) return DecodeError{DecodeErrorCode::kTruncated, 0, "empty batch"};
   if (bytes[0] != kUpdateBatchVersion) return DecodeError{DecodeErrorCode::kBadVersion, 0, "unknown batch version"};

@@ -92,6 +92,23 @@ void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vec
 // updates and kInvalidValue for a unit index >= 512 or an over-long varint.
 Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> bytes, std::span<UnitUpdate> out);
 
+// One chunk's units of a batch, encoded once and joined into batches that
+// differ per receiver (a server sends each client the chunks it holds):
+// joining writes each piece's first coordinates and copies the rest, so a
+// batch costs its receiver one copy of the shared bytes. Joining pieces in
+// update_batch_order of their chunks gives the bytes
+// net_codec_encode_update_batch makes of the same units.
+struct UpdatePiece {
+  Vec3i chunk_pos;
+  int first_unit = 0;
+  std::uint32_t count = 0;
+  std::vector<std::uint8_t> rest;  // the first unit, then the other entries
+};
+// Precondition: units is non-empty, every unit of chunk_pos, distinct indices.
+UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units);
+// Appends one batch of the pieces (distinct chunks), in the order given.
+void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out);
+
 // The coordinate part of one batch entry, exposed so benchmarks can put the
 // same coordinates in front of other unit codecs. prev_* is the previous
 // entry's chunk and unit (start: chunk (0,0,0), unit -1).

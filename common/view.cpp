@@ -5,25 +5,30 @@
 
 namespace terrane {
 
-std::vector<Vec3i> chunks_in_view(Vec3f p, std::int32_t radius, std::int32_t min_y, std::int32_t max_y) {
-  Vec3i lo, hi;
-  chunk_range(p, radius, &lo, &hi);
-  lo.y = std::max(lo.y, floor_div(min_y, kChunkSize));
-  hi.y = std::min(hi.y, floor_div(max_y - 1, kChunkSize));
-  std::vector<std::pair<double, Vec3i>> in;
-  for (int y = lo.y; y <= hi.y; ++y)
-    for (int z = lo.z; z <= hi.z; ++z)
-      for (int x = lo.x; x <= hi.x; ++x) {
-        const Vec3i cp{x, y, z};
-        if (within(p, cp, radius)) in.emplace_back(chunk_center_dist2(p, cp), cp);
-      }
-  std::sort(in.begin(), in.end(), [](const auto& a, const auto& b) {
-    if (a.first != b.first) return a.first < b.first;
-    return std::tie(a.second.y, a.second.z, a.second.x) < std::tie(b.second.y, b.second.z, b.second.x);
-  });
+std::vector<Vec3i> view_offsets(std::int32_t radius) {
+  // 32 |o| - 16 <= radius  <=>  |o| <= (radius + 16) / 32.
+  const std::int32_t n = (std::max(radius, 0) + kChunkSize / 2) / kChunkSize;
   std::vector<Vec3i> out;
-  out.reserve(in.size());
-  for (const auto& e : in) out.push_back(e.second);
+  for (int y = -n; y <= n; ++y)
+    for (int z = -n; z <= n; ++z)
+      for (int x = -n; x <= n; ++x)
+        if (offset_within({x, y, z}, radius)) out.push_back({x, y, z});
+  std::sort(out.begin(), out.end(), [](Vec3i a, Vec3i b) {
+    const std::int64_t da = offset_center_dist2(a), db = offset_center_dist2(b);
+    if (da != db) return da < db;
+    return std::tie(a.y, a.z, a.x) < std::tie(b.y, b.z, b.x);
+  });
+  return out;
+}
+
+std::vector<Vec3i> chunks_in_view(Vec3f position, std::int32_t radius, std::int32_t min_y, std::int32_t max_y) {
+  const Vec3i c = view_chunk(position);
+  const std::int32_t lo = floor_div(min_y, kChunkSize), hi = floor_div(max_y - 1, kChunkSize);
+  std::vector<Vec3i> out;
+  for (const Vec3i o : view_offsets(radius)) {
+    const Vec3i cp = c + o;
+    if (cp.y >= lo && cp.y <= hi) out.push_back(cp);
+  }
   return out;
 }
 

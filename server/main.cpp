@@ -17,7 +17,7 @@
 #include <asio.hpp>
 
 #include "common/cli.h"
-#include "server/limits.h"
+#include "server/net/limits.h"
 #include "server/log.h"
 #include "server/server.h"
 
@@ -44,8 +44,8 @@ constexpr const char* kHelp =
     "  --max-queue-bytes N         per-client send queue; a client further behind is dropped\n"
     "                              (default 16777216)\n"
     "  --stream-window-bytes N     per-client streaming window (default 524288)\n"
-    "  --io-threads N              network threads (default 1)\n"
-    "  --worker-threads N          chunk generation threads (default 2)\n"
+    "  --io-threads N              network and replication threads (default 2)\n"
+    "  --worker-threads N          chunk loading and generation threads (default 2)\n"
     "  --write-timeout-ms N        drop a client whose socket takes no data for this long\n"
     "                              (default 10000)\n"
     "  --socket-send-buffer N      SO_SNDBUF of client sockets in bytes (default: OS default)\n"
@@ -53,8 +53,8 @@ constexpr const char* kHelp =
     "  --presence-max N            nearest clients listed in presence (default 32, at most 64)\n"
     "  --hash-push-ms N            push one region hash per client this often, 0 = off\n"
     "                              (default 1000)\n"
-    "  --encode-cache-mb N         encoded chunk frames kept for reuse (default 64)\n"
-    "  --resident-chunks N         chunks kept loaded when nobody holds them (default 4096)\n"
+    "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
+    "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
     "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN' ('#' comments)\n"
     "  --open                      serve without authentication on a non-loopback address\n"
@@ -89,7 +89,7 @@ int run(int argc, char** argv) {
   CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
-                  "encode-cache-mb", "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
+                  "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open"});
@@ -116,7 +116,7 @@ int run(int argc, char** argv) {
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));
   o.stream_window_bytes =
       static_cast<std::size_t>(cl.get_int("stream-window-bytes", 512 << 10, 1 << 12, std::int64_t{1} << 32, &err));
-  o.io_threads = static_cast<int>(cl.get_int("io-threads", 1, 1, 64, &err));
+  o.io_threads = static_cast<int>(cl.get_int("io-threads", 2, 1, 64, &err));
   o.worker_threads = static_cast<int>(cl.get_int("worker-threads", 2, 1, 256, &err));
   o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
   o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
@@ -140,8 +140,7 @@ int run(int argc, char** argv) {
   o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
-  o.encode_cache_bytes = static_cast<std::size_t>(cl.get_int("encode-cache-mb", 64, 0, 65536, &err)) << 20;
-  o.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 4096, 0, 1 << 24, &err));
+  o.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 32768, 0, 1 << 24, &err));
   o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);

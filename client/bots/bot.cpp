@@ -75,8 +75,8 @@ Bot::~Bot() { client_.reset(); }
 
 void Bot::init_join_tracking() {
   const std::int32_t view = ctx_.view_distance, full = ctx_.full_res_radius;
-  Vec3i c0, c1;
-  chunk_range(pos_, view, &c0, &c1);
+  const std::int32_t n = (view + kChunkSize / 2) / kChunkSize;
+  Vec3i c0 = view_chunk(pos_) - Vec3i{n, n, n}, c1 = view_chunk(pos_) + Vec3i{n, n, n};
   c0.y = std::max(c0.y, floor_div(ctx_.welcome.bounds_min_y, kChunkSize));
   c1.y = std::min(c1.y, floor_div(ctx_.welcome.bounds_max_y - 1, kChunkSize));
   box_min_ = c0;

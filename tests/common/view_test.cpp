@@ -1,5 +1,6 @@
-// The view rule (common/view.h): distances to a chunk's closed cube, ties
-// inside, levels by distance, nearest-first order.
+// The view rule (common/view.h): distances from the client's chunk centre
+// to a chunk's closed cube, ties inside, levels by distance, nearest-first
+// order.
 #include "common/view.h"
 
 #include <gtest/gtest.h>
@@ -11,44 +12,53 @@ namespace {
 
 bool contains(const std::vector<Vec3i>& v, Vec3i c) { return std::find(v.begin(), v.end(), c) != v.end(); }
 
-TEST(View, ChunksExactlyAtTheRadiusAreInsideAboveAndBelow) {
-  // PROTOCOL.md's worked example: both chunks are exactly 64 voxels away
-  // (one above, one below the client); ties are in.
+TEST(View, PROTOCOLsWorkedExample) {
+  // A client at (232, 128, -88) is in chunk (7, 4, -3), centre
+  // (240, 144, -80). Chunk (7, 6, -3) starts 48 above the centre, chunk
+  // (7, 1, -3) ends 80 below it: at radius 64 the first is in view, the
+  // second is not, and the same holds mirrored.
   const Vec3f p{232.0f, 128.0f, -88.0f};
-  EXPECT_EQ(chunk_dist2(p, {7, 6, -3}), 64.0 * 64.0);
-  EXPECT_EQ(chunk_dist2(p, {7, 1, -3}), 64.0 * 64.0);
+  EXPECT_EQ(view_chunk(p), (Vec3i{7, 4, -3}));
+  EXPECT_EQ(offset_dist2({0, 2, 0}), 48 * 48);
+  EXPECT_EQ(offset_dist2({0, -3, 0}), 80 * 80);
   EXPECT_TRUE(within(p, {7, 6, -3}, 64));
-  EXPECT_TRUE(within(p, {7, 1, -3}, 64));
-  EXPECT_FALSE(within(p, {7, 0, -3}, 64));
+  EXPECT_TRUE(within(p, {7, 2, -3}, 64));
+  EXPECT_FALSE(within(p, {7, 1, -3}, 64));
   EXPECT_FALSE(within(p, {7, 7, -3}, 64));
-  const auto view = chunks_in_view(p, 64, -1000, 1000);
-  EXPECT_TRUE(contains(view, {7, 6, -3}));
-  EXPECT_TRUE(contains(view, {7, 1, -3}));
-  EXPECT_FALSE(contains(view, {7, 0, -3}));
-  EXPECT_EQ(desired_level(p, {7, 1, -3}, 64), 0);
-  EXPECT_EQ(desired_level(p, {7, 0, -3}, 64), 1);
+  // Exactly at the radius is inside.
+  EXPECT_TRUE(within(p, {7, 6, -3}, 48));
+  EXPECT_FALSE(within(p, {7, 6, -3}, 47));
+  EXPECT_EQ(desired_level(p, {7, 6, -3}, 48), 0);
+  EXPECT_EQ(desired_level(p, {7, 6, -3}, 47), 1);
+  // A diagonal neighbour: (16, 16, 16) away.
+  EXPECT_EQ(offset_dist2({1, 1, -1}), 3 * 16 * 16);
 }
 
-TEST(View, EveryChunkWithinTheRadiusAndNoOtherIsInView) {
-  const Vec3f p{10.3f, -5.7f, 100.9f};
-  for (const std::int32_t r : {0, 1, 31, 32, 33, 64, 100}) {
-    const auto view = chunks_in_view(p, r, -10000, 10000);
-    for (int y = -6; y <= 6; ++y)
-      for (int z = -6; z <= 10; ++z)
-        for (int x = -6; x <= 6; ++x) EXPECT_EQ(contains(view, {x, y, z}), within(p, {x, y, z}, r)) << r;
+TEST(View, OnlyTheClientsChunkMatters) {
+  for (const Vec3f p : {Vec3f{0.0f, 0.0f, 0.0f}, Vec3f{31.9f, 0.5f, 17.0f}, Vec3f{16.0f, 31.99f, 0.01f}})
+    EXPECT_EQ(chunks_in_view(p, 100, -1000, 1000), chunks_in_view({1, 1, 1}, 100, -1000, 1000));
+  EXPECT_NE(chunks_in_view({-0.5f, 0, 0}, 100, -1000, 1000), chunks_in_view({0.5f, 0, 0}, 100, -1000, 1000));
+}
+
+TEST(View, EveryOffsetWithinTheRadiusAndNoOtherIsListed) {
+  for (const std::int32_t r : {0, 15, 16, 47, 48, 64, 100, 256}) {
+    const auto offsets = view_offsets(r);
+    for (int y = -10; y <= 10; ++y)
+      for (int z = -10; z <= 10; ++z)
+        for (int x = -10; x <= 10; ++x) EXPECT_EQ(contains(offsets, {x, y, z}), offset_within({x, y, z}, r)) << r;
   }
+  EXPECT_EQ(view_offsets(15).size(), 1u);   // the client's own chunk
+  EXPECT_EQ(view_offsets(16).size(), 7u);   // and its face neighbours
 }
 
 TEST(View, NearestFirstWithTiesByYThenZThenX) {
-  const Vec3f p{16.0f, 16.0f, 16.0f};  // the centre of chunk (0, 0, 0)
-  const auto view = chunks_in_view(p, 32, -1000, 1000);
-  ASSERT_FALSE(view.empty());
+  const auto view = view_offsets(32);
+  ASSERT_GE(view.size(), 7u);
   EXPECT_EQ(view.front(), (Vec3i{0, 0, 0}));
-  // The six face neighbours are equally far: y first, then z, then x.
   const std::vector<Vec3i> faces(view.begin() + 1, view.begin() + 7);
   EXPECT_EQ(faces, (std::vector<Vec3i>{{0, -1, 0}, {0, 0, -1}, {-1, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}}));
   for (std::size_t i = 1; i < view.size(); ++i)
-    EXPECT_LE(chunk_center_dist2(p, view[i - 1]), chunk_center_dist2(p, view[i]));
+    EXPECT_LE(offset_center_dist2(view[i - 1]), offset_center_dist2(view[i]));
 }
 
 TEST(View, VerticalBoundsCutTheView) {
@@ -61,16 +71,18 @@ TEST(View, VerticalBoundsCutTheView) {
 }
 
 TEST(View, LevelsGrowWithDistanceInSteps) {
-  const Vec3f p{0.5f, 0.5f, 0.5f};
-  // full 64: step 64; level 1 to 128, level 2 to 256, then 3.
-  EXPECT_EQ(desired_level(p, {2, 0, 0}, 64), 0);   // 63.5 away
-  EXPECT_EQ(desired_level(p, {3, 0, 0}, 64), 1);   // 95.5
-  EXPECT_EQ(desired_level(p, {5, 0, 0}, 64), 2);   // 159.5
-  EXPECT_EQ(desired_level(p, {8, 0, 0}, 64), 2);   // 255.5
-  EXPECT_EQ(desired_level(p, {9, 0, 0}, 64), 3);   // 287.5
+  // full 64, step 64: level 1 to 128, level 2 to 256, then 3. Offsets along
+  // x are 32 |o| - 16 away.
+  EXPECT_EQ(offset_level({2, 0, 0}, 64), 0);   // 48
+  EXPECT_EQ(offset_level({3, 0, 0}, 64), 1);   // 80
+  EXPECT_EQ(offset_level({4, 0, 0}, 64), 1);   // 112
+  EXPECT_EQ(offset_level({5, 0, 0}, 64), 2);   // 144
+  EXPECT_EQ(offset_level({8, 0, 0}, 64), 2);   // 240
+  EXPECT_EQ(offset_level({9, 0, 0}, 64), 3);   // 272
   // A full-resolution radius below a chunk still steps by a chunk.
-  EXPECT_EQ(desired_level(p, {1, 0, 0}, 0), 1);    // 31.5 <= 64
-  EXPECT_EQ(desired_level(p, {0, 0, 0}, 0), 0);    // inside
+  EXPECT_EQ(offset_level({0, 0, 0}, 0), 0);
+  EXPECT_EQ(offset_level({1, 0, 0}, 0), 1);    // 16 <= 64
+  EXPECT_EQ(offset_level({3, 0, 0}, 0), 2);    // 80 <= 128
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 // Hostile input and limits: each offender is dropped with the right reason
 // while a well-behaved client on the same server keeps being served (its
 // edits acknowledged and broadcast back to it).
-#include "server/limits.h"
+#include "server/net/limits.h"
 
 #include <gtest/gtest.h>
 

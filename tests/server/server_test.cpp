@@ -27,7 +27,7 @@
 #include <thread>
 
 #include "common/view.h"
-#include "server/edits.h"
+#include "server/world/edits.h"
 #include "server/log.h"
 #include "tests/support/server_fixture.h"
 
@@ -148,9 +148,9 @@ TEST_F(ServerTest, EditIsAppliedPersistedAndAcknowledged) {
   const Vec3i cp = chunk_of(e.box.min);
   std::uint64_t rev = 0;
   Voxel v{};
-  server_->inspect([&](const ChunkCache& c) {
+  server_->inspect([&](const WorldView& c) {
     rev = c.revision(cp);
-    v = c.grid().get(e.box.min + Vec3i{1, 1, 1});
+    v = c.get(e.box.min + Vec3i{1, 1, 1});
   });
   EXPECT_EQ(rev, 1u);
   EXPECT_EQ(v, make_voxel(materials::kBrick, 128));
@@ -185,11 +185,11 @@ TEST_F(ServerTest, EditOutsideTheFullResolutionRegionIsRejectedWithTheTrueState)
   EXPECT_NE(r->reason.find("full-resolution"), std::string::npos) << r->reason;
   ASSERT_EQ(r->box, e.box);
   ASSERT_EQ(r->voxels.size(), 27u);
-  server_->inspect([&](const ChunkCache& c) {
+  server_->inspect([&](const WorldView& c) {
     std::size_t i = 0;
     for (int y = e.box.min.y; y < e.box.max.y; ++y)
       for (int z = e.box.min.z; z < e.box.max.z; ++z)
-        for (int x = e.box.min.x; x < e.box.max.x; ++x) EXPECT_EQ(r->voxels[i++], c.grid().get({x, y, z}));
+        for (int x = e.box.min.x; x < e.box.max.x; ++x) EXPECT_EQ(r->voxels[i++], c.get({x, y, z}));
   });
   EXPECT_EQ(server_->counters().edits_applied.load(), 0u);
 }
@@ -209,12 +209,12 @@ TEST_F(ServerTest, ReadBoxReturnsTheServersVoxelsOnlyForHeldChunks) {
   EXPECT_TRUE(r->error.empty());
   ASSERT_EQ(r->voxels.size(), static_cast<std::size_t>(box.volume()));
   std::size_t solid_count = 0;
-  server_->inspect([&](const ChunkCache& c) {
+  server_->inspect([&](const WorldView& c) {
     std::size_t i = 0;
     for (int y = box.min.y; y < box.max.y; ++y)
       for (int z = box.min.z; z < box.max.z; ++z)
         for (int x = box.min.x; x < box.max.x; ++x) {
-          EXPECT_EQ(r->voxels[i], c.grid().get({x, y, z}));
+          EXPECT_EQ(r->voxels[i], c.get({x, y, z}));
           solid_count += r->voxels[i++].material != kAir;
         }
   });
@@ -229,7 +229,7 @@ TEST_F(ServerTest, ReadBoxReturnsTheServersVoxelsOnlyForHeldChunks) {
   EXPECT_EQ(r->request_id, 4u);
   EXPECT_FALSE(r->error.empty());
   bool loaded = true;
-  server_->inspect([&](const ChunkCache& c) { loaded = c.loaded(chunk_of(far.min)); });
+  server_->inspect([&](const WorldView& c) { loaded = c.loaded(chunk_of(far.min)); });
   EXPECT_FALSE(loaded);
 }
 
@@ -267,7 +267,7 @@ TEST_F(ServerTest, RegionHashesArePushedForFullResolutionChunks) {
   auto h = parse_region_hash(*msg(*f).body_as_RegionHash());
   ASSERT_TRUE(h.ok());
   std::uint64_t expected = 0;
-  server_->inspect([&](const ChunkCache& c) {
+  server_->inspect([&](const WorldView& c) {
     expected = region_hash(c.chunk(h->chunk_pos), c.revision(h->chunk_pos));
   });
   EXPECT_EQ(h->hash, expected);
@@ -293,17 +293,17 @@ TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
   ASSERT_TRUE(hold_full(*p, {9002.0f, 12.0f, 9002.0f}, chunk_of(Vec3i{9002, 12, 9002})));
   bool unloaded = false;
   for (int i = 0; i < 100 && !unloaded; ++i) {
-    server_->inspect([&](const ChunkCache& c) { unloaded = !c.loaded(cp); });
+    server_->inspect([&](const WorldView& c) { unloaded = !c.loaded(cp); });
     if (!unloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   ASSERT_TRUE(unloaded);
   EXPECT_GT(server_->counters().chunks_unloaded.load(), 0u);
   // Back again: the chunk is reloaded from the store with its edit.
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
-  server_->inspect([&](const ChunkCache& c) {
+  server_->inspect([&](const WorldView& c) {
     ASSERT_TRUE(c.loaded(cp));
     EXPECT_EQ(c.revision(cp), 1u);
-    EXPECT_EQ(c.grid().get({1001, 11, 1001}), solid(materials::kBrick));
+    EXPECT_EQ(c.get({1001, 11, 1001}), solid(materials::kBrick));
   });
 }
 
@@ -488,11 +488,11 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   ASSERT_EQ(revs.size(), 2u) << "both chunks are served";
   EXPECT_EQ(revs.at(key(good_cp)), 5u);
   EXPECT_EQ(revs.at(key(bad_cp)), 6u) << "generated, above the quarantined revision";
-  server_->inspect([&](const ChunkCache& c) {
-    EXPECT_EQ(c.grid().get(chunk_origin(good_cp)), solid(materials::kBrick));
-    EXPECT_EQ(c.grid().get(chunk_origin(bad_cp)), generated_bad.get({0, 0, 0}));
-    EXPECT_EQ(c.quarantined_count(), 1u);
+  server_->inspect([&](const WorldView& c) {
+    EXPECT_EQ(c.get(chunk_origin(good_cp)), solid(materials::kBrick));
+    EXPECT_EQ(c.get(chunk_origin(bad_cp)), generated_bad.get({0, 0, 0}));
   });
+  EXPECT_EQ(server_->storage_counters().quarantined.load(), 1u);
   // Editing the quarantined chunk writes a fresh row; the damaged one stays aside.
   EditRequestMsg e;
   e.edit_id = 3;

@@ -52,10 +52,10 @@ class UndoTest : public ServerTest {
   }
   std::vector<Voxel> voxels(const Region& r) {
     std::vector<Voxel> out;
-    server_->inspect([&](const ChunkCache& c) {
+    server_->inspect([&](const WorldView& c) {
       for (int y = r.min.y; y < r.max.y; ++y)
         for (int z = r.min.z; z < r.max.z; ++z)
-          for (int x = r.min.x; x < r.max.x; ++x) out.push_back(c.grid().get({x, y, z}));
+          for (int x = r.min.x; x < r.max.x; ++x) out.push_back(c.get({x, y, z}));
     });
     return out;
   }

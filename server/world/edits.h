@@ -20,7 +20,7 @@
 //     does not depend on visiting order). A voxel that gains occupancy from
 //     Air takes the most common non-Air material among its neighbours; one
 //     left below half a step becomes Air.
-// Thread-safety: none; the caller owns the grid (the server's owner strand).
+// Thread-safety: none; the caller owns the grid (the world strand's scratch).
 #pragma once
 
 #include <bitset>
@@ -34,6 +34,27 @@ namespace terrane {
 
 // Changed 4^3 units per chunk; bit index (uy*8+uz)*8+ux.
 using ChangedUnits = std::unordered_map<Vec3i, std::bitset<kUpdateUnitsPerChunk>, Vec3iHash>;
+
+// Marks the 4^3 units of voxels as changed (consecutive voxels of one chunk
+// cost one lookup).
+class UnitMarker {
+ public:
+  explicit UnitMarker(ChangedUnits& changed) : changed_(changed) {}
+  void mark(Vec3i p) {
+    const Vec3i cp = chunk_of(p);
+    if (bits_ == nullptr || cp != last_) {
+      bits_ = &changed_[cp];
+      last_ = cp;
+    }
+    const Vec3i l = local_of(p);
+    bits_->set(static_cast<std::size_t>(((l.y / 4) * 8 + l.z / 4) * 8 + l.x / 4));
+  }
+
+ private:
+  ChangedUnits& changed_;
+  std::bitset<kUpdateUnitsPerChunk>* bits_ = nullptr;
+  Vec3i last_;
+};
 
 // Applies edit to grid, only inside clip. Returns the number of voxels that
 // changed value and adds their units to changed.

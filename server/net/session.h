@@ -35,7 +35,7 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
-#include "server/limits.h"
+#include "server/net/limits.h"
 
 namespace terrane {
 
@@ -115,6 +115,8 @@ class Session : public std::enable_shared_from_this<Session> {
   void close(std::string reason);
 
   std::uint64_t id() const { return id_; }
+  // The session's strand: post here to run beside its I/O.
+  asio::ip::tcp::socket::executor_type executor() { return socket_.get_executor(); }
   std::size_t queued_bytes() const { return queued_bytes_.load(std::memory_order_relaxed); }
   std::uint64_t bytes_sent() const { return bytes_sent_.load(std::memory_order_relaxed); }
   const std::string& remote() const { return remote_; }

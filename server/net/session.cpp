@@ -1,4 +1,4 @@
-#include "server/session.h"
+#include "server/net/session.h"
 
 #include "server/log.h"
 

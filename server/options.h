@@ -1,0 +1,110 @@
+// The server's options and counters, shared read-only (options) or as
+// atomics (counters) by every room: net, world, storage and replication.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <unordered_map>
+
+#include "protocol/messages.h"
+#include "server/net/session.h"
+
+namespace terrane {
+
+struct ServerOptions {
+  std::string world_dir;                // created with default_world_meta() when missing
+  std::string bind_address = "127.0.0.1";
+  std::uint16_t port = 0;               // 0: any free port (see port())
+  std::uint32_t tick_hz = 20;
+  std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
+  std::int32_t max_full_res_radius = 256;  // voxels
+  std::int32_t default_view_distance = 1024;   // until the client sends ClientState
+  std::int32_t default_full_res_radius = 128;
+  std::size_t max_clients = 1024;
+  std::size_t stream_window_bytes = 512 * 1024;
+  std::size_t max_edits_queued_per_client = 64;
+  // Chunks a resuming client may claim (Holdings) in all.
+  std::size_t max_claims_per_client = 65536;
+  // Presence: how often (0 = never) and how many of the nearest clients.
+  std::uint32_t presence_hz = 2;
+  std::size_t presence_max_entries = 32;
+  // Each client is sent the hash of one of its full-resolution chunks this
+  // often (0 = only on request).
+  std::uint32_t hash_push_ms = 1000;
+  // Chunks kept loaded beyond those someone holds at full resolution or is
+  // editing (about once a second the least recently used of the rest go;
+  // they come back from the store).
+  std::size_t resident_chunks = 32768;
+  SessionLimits session;
+  int io_threads = 2;
+  // Loader threads: reading stored chunks and generating missing ones.
+  int worker_threads = 2;
+  // Authentication (checked at the handshake): per-player tokens (name ->
+  // token, from a tokens file) take precedence over one shared token; with
+  // neither the server is open, which it allows only on a loopback address
+  // unless allow_open says otherwise.
+  std::string auth_token;
+  std::unordered_map<std::string, std::string> player_tokens;
+  bool allow_open = false;
+  // Per-client limits (0 = unlimited where a rate). A flood of edits beyond
+  // the burst (edits_per_second * 2) or a move faster than max_speed (plus
+  // kSpeedSlackVoxels) disconnects the client; an edit over
+  // max_edit_voxels is rejected.
+  double edits_per_second = 20;
+  std::int64_t max_edit_voxels = kMaxEditVolume;
+  double max_speed = 256;                    // voxels per second
+  double outbound_bytes_per_second = 32 << 20;  // streaming; updates are never held back
+  // Undo and redo history kept per client, in bytes (oldest steps go first).
+  std::size_t history_bytes_per_client = 4u << 20;
+  // Called (on the world strand) when the server cannot go on, e.g. the
+  // store refused a tick's changes; the owner of the Server should stop it.
+  std::function<void()> on_fatal;
+  // Test-only fault: silently skip sending this many UpdateBatch frames
+  // (the client's revision still advances on the server's books).
+  int fault_drop_updates = 0;
+  // Test-only fault: send this many UpdateBatch frames with one voxel wrong.
+  int fault_corrupt_updates = 0;
+};
+
+// Movement allowed beyond max_speed * elapsed time between two positions
+// (network jitter bunches ClientState messages together).
+inline constexpr double kSpeedSlackVoxels = 48;
+
+struct ServerCounters {
+  std::atomic<std::uint64_t> sessions_accepted{0};
+  std::atomic<std::uint64_t> sessions_closed{0};
+  std::atomic<std::uint64_t> clients{0};         // welcomed and connected now
+  std::atomic<std::uint64_t> ticks{0};
+  std::atomic<std::uint64_t> edits_applied{0};
+  std::atomic<std::uint64_t> edits_rejected{0};
+  std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
+  std::atomic<std::uint64_t> mips_sent{0};
+  std::atomic<std::uint64_t> empties_sent{0};
+  std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
+  std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not
+  std::atomic<std::uint64_t> update_batches_sent{0};
+  std::atomic<std::uint64_t> update_units_sent{0};
+  std::atomic<std::uint64_t> updates_dropped_by_fault{0};
+  std::atomic<std::uint64_t> updates_corrupted_by_fault{0};
+  std::atomic<std::uint64_t> stream_bytes{0};    // StreamBatch bytes queued
+  std::atomic<std::uint64_t> presence_sent{0};
+  std::atomic<std::uint64_t> hashes_pushed{0};
+  std::atomic<std::uint64_t> chunks_loaded{0};   // resident now
+  std::atomic<std::uint64_t> chunks_unloaded{0};
+  std::atomic<std::uint64_t> limit_violations{0};
+  std::atomic<std::uint64_t> auth_failures{0};
+  std::atomic<std::uint64_t> chunks_resumed{0};  // claimed by a resuming client, still current, not resent
+  // Per-tick cost split (microseconds summed over ticks, world strand):
+  // applying edits and publishing versions, and fanning committed changes
+  // out to their holders. Commit time is the storage's (StorageCounters).
+  std::atomic<std::uint64_t> apply_us{0};
+  std::atomic<std::uint64_t> fanout_us{0};
+  std::atomic<std::uint64_t> deliveries{0};      // (changed chunk, holder) pairs fanned out
+  std::atomic<std::uint64_t> tick_frames{0};     // frames the replicators sent for ticks' news
+  std::atomic<std::uint64_t> ticks_late{0};      // ticks that started more than a period late
+  TrafficCounters traffic;
+};
+
+}  // namespace terrane

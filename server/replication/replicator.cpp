@@ -1,0 +1,637 @@
+#include "server/replication/replicator.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/view.h"
+#include "server/log.h"
+
+namespace terrane {
+
+namespace {
+
+constexpr auto kPumpRetry = std::chrono::milliseconds(20);
+
+StreamRecordKind record_kind(int level) {
+  return level == 0 ? StreamRecordKind::kFull : static_cast<StreamRecordKind>(level);
+}
+
+}  // namespace
+
+Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
+                       const WelcomeTemplate& welcome, ReplicationFaults& faults)
+    : id_(id), world_(world), options_(options), counters_(counters), welcome_(welcome), faults_(faults) {
+  state_.view_distance = options_.default_view_distance;
+  state_.full_res_radius = options_.default_full_res_radius;
+}
+
+void Replicator::attach(std::shared_ptr<Session> session) {
+  session_ = std::move(session);
+  weak_session_ = session_;
+  executor_ = session_->executor();
+  timer_ = std::make_unique<asio::steady_timer>(executor_);
+}
+
+// --- from the world (world strand: post to ours) --------------------------------
+
+void Replicator::granted(std::vector<VersionPtr> versions) {
+  asio::post(executor_, [self = shared_from_this(), v = std::move(versions)]() mutable {
+    self->on_granted(std::move(v));
+  });
+}
+
+void Replicator::committed(std::uint64_t tick, std::vector<VersionPtr> changed) {
+  asio::post(executor_, [self = shared_from_this(), tick, c = std::move(changed)]() mutable {
+    self->on_committed(tick, std::move(c));
+  });
+}
+
+void Replicator::send(SharedFrame frame, SendClass cls) {
+  if (auto s = weak_session_.lock()) s->send(std::move(frame), cls);
+}
+
+void Replicator::close(const std::string& reason) {
+  if (auto s = weak_session_.lock()) s->close(reason);
+}
+
+// --- messages ------------------------------------------------------------------
+
+void Replicator::on_message(InboundMessage msg) {
+  if (closed_) return;
+  if (auto* hello = std::get_if<HelloMsg>(&msg)) return on_hello(*hello);
+  if (!welcomed_) return;
+  if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(*state);
+  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(std::move(*edit));
+  if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(*read);
+  if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
+  if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
+}
+
+void Replicator::on_hello(const HelloMsg& hello) {
+  if (hello.protocol_version != kProtocolVersion) {
+    server_log().warn("session {}: protocol version {} rejected", id_, hello.protocol_version);
+    session_->close("protocol version mismatch: server speaks " + std::to_string(kProtocolVersion) + ", client " +
+                    std::to_string(hello.protocol_version));
+    return;
+  }
+  bool allowed = true;
+  if (!options_.player_tokens.empty()) {
+    auto it = options_.player_tokens.find(hello.client_name);
+    allowed = it != options_.player_tokens.end() && it->second == hello.auth_token;
+  } else if (!options_.auth_token.empty()) {
+    allowed = hello.auth_token == options_.auth_token;
+  }
+  if (!allowed) {
+    counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
+    violations().warn("session " + std::to_string(id_) + " (" + session_->remote() + "): authentication failed for '" +
+                      hello.client_name + "'");
+    session_->close("authentication failed");
+    return;
+  }
+  edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
+  outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
+  name_ = hello.client_name;
+  welcomed_ = true;
+  state_.position = welcome_.welcome.spawn;
+  world_.join(id_, name_, shared_from_this());
+  counters_.clients.fetch_add(1, std::memory_order_relaxed);
+  session_->send(build_welcome(welcome_.welcome));
+  server_log().info("session {} ({}) joined as '{}'", id_, session_->remote(), name_);
+  next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
+  arm_timer();
+  // Streaming starts with the client's first ClientState.
+}
+
+void Replicator::on_closed(const std::string& reason) {
+  if (closed_) return;
+  closed_ = true;
+  if (timer_) timer_->cancel();
+  if (welcomed_) {
+    // Everything held or asked for, so nothing stays registered.
+    std::vector<Vec3i> all;
+    all.reserve(held_.size() + requested_.size());
+    for (const auto& [cp, h] : held_) all.push_back(cp);
+    for (const auto& [cp, r] : requested_) all.push_back(cp);
+    world_.release(id_, std::move(all));
+    world_.leave(id_);
+    counters_.clients.fetch_sub(1, std::memory_order_relaxed);
+  }
+  server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : name_, reason);
+  held_.clear();
+  full_.clear();
+  ready_versions_.clear();
+  session_.reset();  // breaks the cycle with the session's callbacks
+}
+
+void Replicator::on_client_state(const ClientStateMsg& state) {
+  // The first position is where the client joins; after that it moves at
+  // most max_speed (with some slack for jitter).
+  const auto now = std::chrono::steady_clock::now();
+  if (moved_ && options_.max_speed > 0) {
+    const Vec3f a = state_.position, b = state.position;
+    const double d = std::sqrt(double{b.x - a.x} * (b.x - a.x) + double{b.y - a.y} * (b.y - a.y) +
+                               double{b.z - a.z} * (b.z - a.z));
+    const double allowed =
+        options_.max_speed * std::chrono::duration<double>(now - moved_at_).count() + kSpeedSlackVoxels;
+    if (d > allowed) {
+      counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+      violations().warn("session " + std::to_string(id_) + " (" + name_ + "): moved " +
+                        std::to_string(static_cast<long long>(d)) + " voxels at once; dropping");
+      session_->close("moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
+                      std::to_string(static_cast<long long>(options_.max_speed)) + " voxels/s)");
+      return;
+    }
+  }
+  moved_ = true;
+  moved_at_ = now;
+  // 0 asks for the server's default; everything is capped.
+  state_ = state;
+  const std::int32_t view = state.view_distance == 0 ? options_.default_view_distance : state.view_distance;
+  const std::int32_t full = state.full_res_radius == 0 ? options_.default_full_res_radius : state.full_res_radius;
+  state_.view_distance = std::min(view, options_.max_view_distance);
+  state_.full_res_radius = std::min({full, options_.max_full_res_radius, state_.view_distance});
+  world_.moved(id_, state_.position, state_.view_distance, state_.full_res_radius);
+  const Vec3i c = view_chunk(state_.position);
+  if (!plan_valid_ || table_->view_distance() != state_.view_distance ||
+      table_->full_res_radius() != state_.full_res_radius) {
+    replan();
+  } else if (c != center_) {
+    const Vec3i d = c - center_;
+    if (std::abs(d.x) <= 1 && std::abs(d.y) <= 1 && std::abs(d.z) <= 1)
+      move_by(d);
+    else
+      replan();
+  }
+  pump();
+}
+
+void Replicator::on_edit(EditRequestMsg edit) {
+  if (!edit_rate_.take(1)) {
+    counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+    violations().warn("session " + std::to_string(id_) + " (" + name_ + "): edit flood; dropping");
+    session_->close("edit rate limit: more than " + std::to_string(static_cast<long long>(options_.edits_per_second)) +
+                    " edits/s");
+    return;
+  }
+  if (is_history_edit(edit.kind)) return world_.edit(id_, std::move(edit));
+  if (edit.bounds().volume() > options_.max_edit_voxels)
+    return world_.refuse(id_, std::move(edit), "edit larger than " + std::to_string(options_.max_edit_voxels) + " voxels");
+  const Region r = welcome_.bounds.clamp(edit.reads());
+  if (r.empty()) return world_.refuse(id_, std::move(edit), "edit outside the world");
+  // Edits are valid only where the client holds the world at full
+  // resolution: it can see what it changes.
+  bool full = true;
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    if (!full) return;
+    auto it = held_.find(cp);
+    full = it != held_.end() && (it->second.level == 0 || it->second.level == kHeldEmpty);
+  });
+  if (!full) return world_.refuse(id_, std::move(edit), "edit outside the full-resolution region");
+  world_.edit(id_, std::move(edit));
+}
+
+void Replicator::on_read_box(const ReadBoxMsg& req) {
+  // Only chunks the client holds (at any resolution): a read must never make
+  // the server load chunks nobody is looking at.
+  bool held = true;
+  for_each_chunk_in(req.box, [&](Vec3i cp) { held = held && held_.count(cp) != 0; });
+  if (!held) {
+    session_->send(build_read_box_error(req.request_id, req.box, "box outside the chunks this client holds"));
+    return;
+  }
+  flush_stream();  // the result follows every record already sent
+  world_.read_box(id_, req);
+}
+
+void Replicator::on_holdings(const HoldingsMsg& h) {
+  for (const HeldChunkMsg& c : h.chunks) {
+    if (claims_.size() >= options_.max_claims_per_client) break;
+    if (held_.count(c.chunk_pos) != 0) continue;  // already streamed this session
+    claims_[c.chunk_pos] = Held{static_cast<std::uint8_t>(c.level), c.revision};
+  }
+  // Claims outside the view are released at the next plan.
+  if (plan_valid_) {
+    replan();
+    pump();
+  }
+}
+
+void Replicator::on_hash_request(Vec3i cp) {
+  // Only chunks this client holds: a hash request must not make the server
+  // load or generate arbitrary chunks.
+  if (held_.count(cp) == 0 && claims_.count(cp) == 0 && requested_.count(cp) == 0) return;
+  if (held_.count(cp) == 0) {
+    // Claimed by a resuming client but not yet adopted or resent: answered
+    // once it is, so the hash follows the data it describes.
+    if (hash_requests_.size() >= 1024) {
+      session_->close("too many region hash requests");
+      return;
+    }
+    hash_requests_.push_back(cp);
+    return;
+  }
+  answer_hash(cp);
+}
+
+void Replicator::answer_hash(Vec3i cp) {
+  const Held h = held_.at(cp);
+  if (h.level == kHeldEmpty) {
+    flush_stream();
+    session_->send(build_region_hash(RegionHashMsg{cp, h.revision, region_hash(nullptr, h.revision)}));
+  } else if (auto it = full_.find(cp); it != full_.end()) {
+    flush_stream();
+    session_->send(build_region_hash(RegionHashMsg{cp, it->second->revision(), it->second->hash()}));
+  } else {
+    flush_stream();
+    world_.hash(id_, cp);  // a mip holder: the world has the chunk
+  }
+}
+
+// --- the plan ------------------------------------------------------------------
+
+bool Replicator::in_view(Vec3i cp) const {
+  return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
+}
+
+int Replicator::desired(Vec3i cp) const { return table_->level(cp - center_); }
+
+void Replicator::push_refine(Vec3i cp) { refine_.emplace(offset_center_dist2(cp - center_), cp); }
+
+void Replicator::rebuild_refine() {
+  std::vector<RefineEntry> all;
+  all.reserve(refine_.size());
+  while (!refine_.empty()) {
+    const Vec3i cp = refine_.top().second;
+    refine_.pop();
+    all.emplace_back(offset_center_dist2(cp - center_), cp);
+  }
+  refine_ = decltype(refine_)(RefineOrder{}, std::move(all));
+}
+
+void Replicator::release_outside_view() {
+  std::vector<Vec3i> released;
+  for (auto it = claims_.begin(); it != claims_.end();) {
+    if (in_view(it->first)) {
+      ++it;
+      continue;
+    }
+    stream(StreamRecordKind::kReleased, it->first, it->second.revision);
+    it = claims_.erase(it);
+  }
+  for (auto it = held_.begin(); it != held_.end();) {
+    if (in_view(it->first)) {
+      ++it;
+      continue;
+    }
+    stream(StreamRecordKind::kReleased, it->first, it->second.revision);
+    released.push_back(it->first);
+    full_.erase(it->first);
+    ready_versions_.erase(it->first);
+    it = held_.erase(it);
+  }
+  if (!released.empty()) world_.release(id_, std::move(released));
+}
+
+void Replicator::replan() {
+  table_ = ViewTable::get(state_.view_distance, state_.full_res_radius);
+  center_ = view_chunk(state_.position);
+  plan_valid_ = true;
+  coarse_center_ = center_;
+  coarse_pos_ = 0;
+  entering_.clear();
+  release_outside_view();
+  std::vector<RefineEntry> all;
+  for (const auto& [cp, h] : held_)
+    if (h.level != kHeldEmpty && desired(cp) < h.level) all.emplace_back(offset_center_dist2(cp - center_), cp);
+  refine_ = decltype(refine_)(RefineOrder{}, std::move(all));
+  flush_stream();
+}
+
+void Replicator::move_by(Vec3i d) {
+  const Vec3i old = center_;
+  center_ = center_ + d;
+  std::vector<Vec3i> released;
+  for (const Vec3i o : table_->leaving(d)) {
+    const Vec3i cp = old + o;
+    if (auto c = claims_.find(cp); c != claims_.end()) {
+      stream(StreamRecordKind::kReleased, cp, c->second.revision);
+      claims_.erase(c);
+    }
+    auto it = held_.find(cp);
+    if (it == held_.end()) continue;
+    stream(StreamRecordKind::kReleased, cp, it->second.revision);
+    released.push_back(cp);
+    full_.erase(cp);
+    ready_versions_.erase(cp);
+    held_.erase(it);
+  }
+  if (!released.empty()) world_.release(id_, std::move(released));
+  for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
+  rebuild_refine();
+  for (const Vec3i o : table_->finer(d)) {
+    const Vec3i cp = center_ + o;
+    if (auto it = held_.find(cp); it != held_.end() && it->second.level != kHeldEmpty && table_->level(o) < it->second.level)
+      push_refine(cp);
+  }
+  flush_stream();
+}
+
+// --- streaming -----------------------------------------------------------------
+
+void Replicator::pump() {
+  if (!welcomed_ || !plan_valid_ || closed_) return;
+  send_ready();
+  request_more();
+  flush_stream();
+}
+
+void Replicator::request_more() {
+  if (requested_.size() + ready_.size() >= kMaxRequests) return;
+  std::vector<ChunkWant> wants;
+  auto want = [&](Vec3i cp, Intent intent, int level) {
+    requested_.emplace(cp, Request{intent, level});
+    wants.push_back(ChunkWant{cp, level == 0});
+  };
+  auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
+  // Pass 1: the whole view at its coarsest, nearest first.
+  auto coarse = [&](Vec3i cp) {
+    if (!in_view(cp) || held_.count(cp) != 0 || requested_.count(cp) != 0) return;
+    if (auto c = claims_.find(cp); c != claims_.end()) {
+      const std::uint8_t l = c->second.level;
+      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l);
+    }
+    want(cp, Intent::kCoarse, kMipLevels - 1);
+  };
+  const auto& offsets = table_->offsets();
+  while (room() && coarse_pos_ < offsets.size()) coarse(coarse_center_ + offsets[coarse_pos_++]);
+  while (room() && !entering_.empty()) {
+    coarse(entering_.front());
+    entering_.pop_front();
+  }
+  // Pass 2: refine nearest first, once the coarse view is complete (asked
+  // for and sent: a grant waiting for a load would otherwise be overtaken).
+  const bool coarse_done = coarse_pos_ >= offsets.size() && entering_.empty() &&
+                           std::none_of(requested_.begin(), requested_.end(),
+                                        [](const auto& r) { return r.second.intent != Intent::kRefine; });
+  while (coarse_done && room() && !refine_.empty()) {
+    const Vec3i cp = refine_.top().second;
+    refine_.pop();
+    auto it = held_.find(cp);
+    if (it == held_.end() || it->second.level == kHeldEmpty || requested_.count(cp) != 0 || !in_view(cp)) continue;
+    const int want_level = desired(cp);
+    if (want_level >= it->second.level) continue;
+    want(cp, Intent::kRefine, want_level);
+  }
+  if (!wants.empty()) world_.want(id_, std::move(wants));
+}
+
+void Replicator::on_granted(std::vector<VersionPtr> versions) {
+  if (closed_) return;
+  std::vector<Vec3i> unwanted;
+  for (VersionPtr& v : versions) {
+    const Vec3i cp = v->pos();
+    if (requested_.count(cp) == 0 || !in_view(cp)) {
+      requested_.erase(cp);
+      if (held_.count(cp) == 0) unwanted.push_back(cp);
+      continue;
+    }
+    if (ready_versions_.emplace(cp, std::move(v)).second) ready_.push_back(cp);
+  }
+  if (!unwanted.empty()) world_.release(id_, std::move(unwanted));
+  pump();
+}
+
+void Replicator::send_ready() {
+  const auto now = std::chrono::steady_clock::now();
+  const double budget = outbound_.unlimited() ? 1e18 : outbound_.available(now);
+  const std::size_t queued = session_->queued_bytes();
+  auto room = [&] {
+    return budget > 0 && queued + batch_.size_bytes() < options_.stream_window_bytes &&
+           static_cast<double>(batch_.size_bytes()) < budget;
+  };
+  while (!ready_.empty() && room()) {
+    const Vec3i cp = ready_.front();
+    ready_.pop_front();
+    auto rv = ready_versions_.find(cp);
+    auto rq = requested_.find(cp);
+    if (rv == ready_versions_.end() || rq == requested_.end()) {
+      if (rv != ready_versions_.end()) ready_versions_.erase(rv);
+      if (rq != requested_.end()) requested_.erase(rq);
+      continue;
+    }
+    const VersionPtr v = std::move(rv->second);
+    const Request req = rq->second;
+    ready_versions_.erase(rv);
+    requested_.erase(rq);
+    if (req.intent == Intent::kClaim) {
+      auto c = claims_.find(cp);
+      if (c != claims_.end()) {
+        const Held claim = c->second;
+        claims_.erase(c);
+        // Same revision means same voxels: revisions of a stored chunk only
+        // grow, and a never-stored chunk (revision 0) is what the generator
+        // makes.
+        if (claim.revision == v->revision() && (claim.level == kHeldEmpty) == v->empty()) {
+          hold(cp, claim, v);
+          counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
+          continue;
+        }
+      }
+      send_chunk(*v, kMipLevels - 1);
+      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : kMipLevels - 1), v->revision()}, v);
+      continue;
+    }
+    send_chunk(*v, req.level);
+    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : req.level), v->revision()}, v);
+  }
+  if (!ready_.empty()) arm_timer();
+}
+
+void Replicator::send_chunk(const ChunkVersion& v, int level) {
+  if (v.empty()) {
+    stream(StreamRecordKind::kEmpty, v.pos(), v.revision());
+    counters_.empties_sent.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  stream(record_kind(level), v.pos(), v.revision(), v.encoded(level));
+  (level == 0 ? counters_.chunks_sent : counters_.mips_sent).fetch_add(1, std::memory_order_relaxed);
+}
+
+void Replicator::hold(Vec3i cp, Held h, const VersionPtr& v) {
+  held_[cp] = h;
+  if (h.level == 0) {
+    if (full_.insert_or_assign(cp, v).second) hash_order_.push_back(cp);
+  } else {
+    full_.erase(cp);
+    if (h.level != kHeldEmpty && desired(cp) < h.level) push_refine(cp);
+  }
+  // Hash requests waiting for this chunk.
+  if (!hash_requests_.empty()) {
+    auto it = std::find(hash_requests_.begin(), hash_requests_.end(), cp);
+    if (it != hash_requests_.end()) {
+      hash_requests_.erase(it);
+      answer_hash(cp);
+    }
+  }
+}
+
+void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> changed) {
+  if (closed_) return;
+  std::vector<const UpdatePiece*> pieces;
+  std::vector<ChunkRevisionMsg> revisions;
+  std::vector<VersionPtr> keep;  // the pieces' owners, alive until the frame is built
+  for (VersionPtr& v : changed) {
+    const Vec3i cp = v->pos();
+    if (auto r = ready_versions_.find(cp); r != ready_versions_.end()) {
+      r->second = v;  // granted, not sent yet: send the newest
+      continue;
+    }
+    auto it = held_.find(cp);
+    if (it == held_.end()) continue;
+    Held& h = it->second;
+    const bool near = desired(cp) == 0;
+    if (h.level == 0 || (h.level == kHeldEmpty && near)) {
+      h = Held{0, v->revision()};
+      if (v->empty()) {
+        full_.erase(cp);
+      } else if (full_.insert_or_assign(cp, v).second) {
+        hash_order_.push_back(cp);
+      }
+      pieces.push_back(&v->update_piece());
+      revisions.push_back(ChunkRevisionMsg{cp, v->revision()});
+      keep.push_back(std::move(v));
+      continue;
+    }
+    if (v->empty()) {
+      stream(StreamRecordKind::kEmpty, cp, v->revision());
+      h = Held{kHeldEmpty, v->revision()};
+      continue;
+    }
+    const int level = h.level == kHeldEmpty ? kMipLevels - 1 : h.level;
+    if (h.level != kHeldEmpty && v->level_since(level) <= h.revision) {
+      counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
+      continue;
+    }
+    stream(record_kind(level), cp, v->revision(), v->encoded(level));
+    counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
+    h = Held{static_cast<std::uint8_t>(level), v->revision()};
+    if (desired(cp) < level) push_refine(cp);
+  }
+  // Records first, so an update never overtakes the data it applies to.
+  flush_stream();
+  if (!pieces.empty()) {
+    // Chunk order, so the joined batch is what one encoder would write.
+    std::vector<std::size_t> order(pieces.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const Vec3i u = pieces[a]->chunk_pos, w = pieces[b]->chunk_pos;
+      return std::tie(u.y, u.z, u.x) < std::tie(w.y, w.z, w.x);
+    });
+    std::vector<const UpdatePiece*> sorted;
+    std::vector<ChunkRevisionMsg> revs;
+    for (const std::size_t i : order) {
+      sorted.push_back(pieces[i]);
+      revs.push_back(revisions[i]);
+    }
+    if (faults_.drop_updates.load(std::memory_order_relaxed) > 0 &&
+        faults_.drop_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
+      counters_.updates_dropped_by_fault.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      std::vector<std::uint8_t> data;
+      if (faults_.corrupt_updates.load(std::memory_order_relaxed) > 0 &&
+          faults_.corrupt_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
+        // One voxel of the first unit made wrong.
+        counters_.updates_corrupted_by_fault.fetch_add(1, std::memory_order_relaxed);
+        UpdatePiece bad = *sorted.front();
+        std::array<Voxel, kUpdateUnitVoxels> unit{};
+        if (auto n = net_codec_decode_prefix(kUpdateUnitSize, bad.rest, unit); n) {
+          Voxel& v0 = unit[0];
+          v0 = v0.material == kAir ? solid(materials::kRock) : Voxel{};
+          std::vector<std::uint8_t> rest;
+          net_codec_encode(kUpdateUnitSize, unit, rest);
+          rest.insert(rest.end(), bad.rest.begin() + static_cast<std::ptrdiff_t>(*n), bad.rest.end());
+          bad.rest = std::move(rest);
+        }
+        sorted.front() = &bad;
+        net_codec_join_update_pieces(sorted, data);
+      } else {
+        net_codec_join_update_pieces(sorted, data);
+      }
+      std::size_t units = 0;
+      for (const UpdatePiece* p : sorted) units += p->count;
+      session_->send(build_update_batch(tick, data, revs));
+      counters_.update_batches_sent.fetch_add(1, std::memory_order_relaxed);
+      counters_.update_units_sent.fetch_add(units, std::memory_order_relaxed);
+    }
+  }
+  counters_.tick_frames.fetch_add(1, std::memory_order_relaxed);
+  pump();
+}
+
+void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload) {
+  batch_.add(kind, cp, revision, payload);
+  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+}
+
+void Replicator::flush_stream() {
+  if (batch_.empty() || !session_) return;
+  Frame f = batch_.finish();
+  outbound_.spend(static_cast<double>(f.size()));
+  counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
+  session_->send(std::move(f));
+}
+
+void Replicator::on_drained() {
+  if (closed_) return;
+  pump();
+}
+
+// --- timer: budget retries and pushed hashes ---------------------------------------
+
+void Replicator::arm_timer() {
+  if (closed_) return;
+  // Soon while granted chunks wait for room in the window or budget;
+  // otherwise at the next pushed hash.
+  const auto now = std::chrono::steady_clock::now();
+  auto at = ready_.empty() ? next_hash_push_ : now + kPumpRetry;
+  if (ready_.empty() && options_.hash_push_ms == 0) return;
+  if (timer_armed_) {
+    if (timer_->expiry() <= at) return;
+    timer_->cancel();  // re-armed sooner below (the cancelled wait sees operation_aborted)
+  }
+  timer_armed_ = true;
+  timer_->expires_at(at);
+  timer_->async_wait([self = shared_from_this(), at](const asio::error_code& ec) {
+    if (ec || self->closed_) return;
+    if (self->timer_->expiry() != at) return;  // superseded
+    self->timer_armed_ = false;
+    self->on_timer();
+  });
+}
+
+void Replicator::on_timer() {
+  const auto now = std::chrono::steady_clock::now();
+  if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
+    next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);
+    // The next chunk this client holds at full resolution.
+    for (std::size_t tries = 0; tries < hash_order_.size(); ++tries) {
+      if (hash_cursor_ >= hash_order_.size()) hash_cursor_ = 0;
+      const Vec3i cp = hash_order_[hash_cursor_];
+      auto it = full_.find(cp);
+      if (it == full_.end()) {
+        hash_order_[hash_cursor_] = hash_order_.back();  // no longer full: forget it
+        hash_order_.pop_back();
+        continue;
+      }
+      ++hash_cursor_;
+      flush_stream();
+      session_->send(build_region_hash(RegionHashMsg{cp, it->second->revision(), it->second->hash()}));
+      counters_.hashes_pushed.fetch_add(1, std::memory_order_relaxed);
+      break;
+    }
+  }
+  pump();
+  arm_timer();
+}
+
+}  // namespace terrane

@@ -1,0 +1,180 @@
+// Replicator: one client's replication, on its session's strand. It owns
+// what the client holds and what it should hold: the view plan (a shared
+// ViewTable moved to the client's chunk, updated by the shells a move
+// changes), the chunks held and the level and revision of each, the queue
+// of chunks to refine, outstanding requests to the world, claims of a
+// resuming client, the outbound budget and pushed region hashes.
+//
+// Streaming. First the whole view at its coarsest (the 4^3 mip, or Empty
+// for all-Air chunks) nearest first, then each chunk refined to the level
+// the view rule gives it, nearest first (a queue of chunks needing
+// refinement, filled when a chunk arrives coarser than it should be or a
+// move brings it closer). Chunks are asked of the world in batches, at most
+// kMaxRequests outstanding; the world grants versions, and the replicator
+// sends their encodings (computed once per version and level, shared by
+// every client) as StreamBatch records while the client's window and byte
+// budget allow. Chunks leaving the view are released on both sides.
+//
+// Ticks. The world hands each committed tick's changes of held chunks in one
+// call; the replicator answers with at most one UpdateBatch (the changed 4^3
+// units of every chunk held at full resolution, joined from per-version
+// pieces) and the stream records of mips whose bytes changed at the level
+// held (a mip whose level did not change is not sent), written together.
+//
+// Threading: every member runs on the session's strand. The WorldClient
+// methods are called on the world strand and post here. Lifetime: shared;
+// kept by the world (until leave) and by the session's callbacks.
+#pragma once
+
+#include <asio.hpp>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <queue>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "common/world_store.h"
+#include "protocol/stream_batch.h"
+#include "server/net/limits.h"
+#include "server/net/session.h"
+#include "server/options.h"
+#include "server/replication/view_table.h"
+#include "server/world/world_owner.h"
+
+namespace terrane {
+
+// Test-only faults shared by every replicator of a server.
+struct ReplicationFaults {
+  std::atomic<int> drop_updates{0};
+  std::atomic<int> corrupt_updates{0};
+};
+
+// What every client is told at the handshake (the parts that do not vary).
+struct WelcomeTemplate {
+  WelcomeMsg welcome;
+  WorldBounds bounds;
+};
+
+class Replicator : public WorldClient, public std::enable_shared_from_this<Replicator> {
+ public:
+  // What one chunk held by the client is: its level in Holdings' terms
+  // (0 full, 1..3 mip, kHeldEmpty all Air) and the revision sent.
+  struct Held {
+    std::uint8_t level = kHeldEmpty;
+    std::uint64_t revision = 0;
+  };
+  // Outstanding requests to the world at most.
+  static constexpr std::size_t kMaxRequests = 96;
+
+  Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
+             const WelcomeTemplate& welcome, ReplicationFaults& faults);
+  // Before any message: the session this replicator speaks through.
+  void attach(std::shared_ptr<Session> session);
+
+  // Session strand.
+  void on_message(InboundMessage msg);
+  void on_drained();
+  void on_closed(const std::string& reason);
+
+  // WorldClient (world strand; each posts to the session strand).
+  void granted(std::vector<VersionPtr> versions) override;
+  void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
+  void send(SharedFrame frame, SendClass cls) override;
+  void close(const std::string& reason) override;
+
+  ClientId id() const { return id_; }
+
+ private:
+  enum class Intent : std::uint8_t { kCoarse, kRefine, kClaim };
+  struct Request {
+    Intent intent;
+    int level;  // the level to send (0 full, 1..3 mip)
+  };
+
+  void on_hello(const HelloMsg& hello);
+  void on_client_state(const ClientStateMsg& state);
+  void on_edit(EditRequestMsg edit);
+  void on_read_box(const ReadBoxMsg& req);
+  void on_holdings(const HoldingsMsg& h);
+  void on_hash_request(Vec3i chunk_pos);
+
+  void replan();
+  void move_by(Vec3i d);
+  void release_outside_view();
+  bool in_view(Vec3i chunk_pos) const;
+  int desired(Vec3i chunk_pos) const;
+  void push_refine(Vec3i chunk_pos);
+  void rebuild_refine();
+
+  void on_granted(std::vector<VersionPtr> versions);
+  void on_committed(std::uint64_t tick, std::vector<VersionPtr> changed);
+  void pump();
+  void request_more();
+  void send_ready();
+  void send_chunk(const ChunkVersion& v, int level);
+  void hold(Vec3i chunk_pos, Held h, const VersionPtr& v);
+  void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
+              std::span<const std::uint8_t> payload = {});
+  void flush_stream();
+  void answer_hash(Vec3i chunk_pos);
+  void arm_timer();
+  void on_timer();
+
+  const ClientId id_;
+  WorldOwner& world_;
+  const ServerOptions& options_;
+  ServerCounters& counters_;
+  const WelcomeTemplate& welcome_;
+  ReplicationFaults& faults_;
+  // session_ is used on the session strand only and dropped when the
+  // session closes (it and the session's callbacks keep each other alive);
+  // the world strand reaches the session through weak_session_ and posts to
+  // executor_.
+  std::shared_ptr<Session> session_;
+  std::weak_ptr<Session> weak_session_;
+  asio::any_io_executor executor_;
+  std::unique_ptr<asio::steady_timer> timer_;
+
+  bool welcomed_ = false;
+  bool closed_ = false;
+  std::string name_;
+  ClientStateMsg state_;
+  bool moved_ = false;
+  std::chrono::steady_clock::time_point moved_at_;
+  TokenBucket edit_rate_, outbound_;
+
+  // The plan.
+  std::shared_ptr<const ViewTable> table_;
+  Vec3i center_;
+  bool plan_valid_ = false;
+  Vec3i coarse_center_;        // the centre the coarse cursor walks the table from
+  std::size_t coarse_pos_ = 0;
+  std::deque<Vec3i> entering_;  // chunks that came into view by moves, to send coarse
+  // Chunks that may need refining, nearest first (distance to center_).
+  using RefineEntry = std::pair<std::int64_t, Vec3i>;
+  struct RefineOrder {
+    bool operator()(const RefineEntry& a, const RefineEntry& b) const { return a.first > b.first; }
+  };
+  std::priority_queue<RefineEntry, std::vector<RefineEntry>, RefineOrder> refine_;
+
+  std::unordered_map<Vec3i, Held, Vec3iHash> held_;
+  // Versions of chunks held at full resolution (region hashes, pushed and
+  // answered here).
+  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> full_;
+  std::vector<Vec3i> hash_order_;
+  std::size_t hash_cursor_ = 0;
+  std::unordered_map<Vec3i, Request, Vec3iHash> requested_;
+  // Granted, not yet sent (the window or budget was full), oldest first.
+  std::deque<Vec3i> ready_;
+  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> ready_versions_;
+  std::unordered_map<Vec3i, Held, Vec3iHash> claims_;
+  std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
+  StreamBatchWriter batch_;
+  bool timer_armed_ = false;
+  std::chrono::steady_clock::time_point next_hash_push_;
+};
+
+}  // namespace terrane

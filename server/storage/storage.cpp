@@ -1,0 +1,158 @@
+#include "server/storage/storage.h"
+
+#include <chrono>
+#include <unordered_map>
+
+#include "server/log.h"
+
+namespace terrane {
+
+FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_threads) {
+  const int n = std::max(1, loader_threads);
+  std::unique_ptr<Storage> s(new Storage(world, n));
+  for (int i = 0; i < n; ++i) {
+    auto store = WorldStore::open(world.store().dir());
+    if (!store) return store.error();
+    s->readers_.push_back(std::move(*store));
+  }
+  auto w = WorldStore::open(world.store().dir());
+  if (!w) return w.error();
+  s->writer_store_ = std::move(*w);
+  s->writer_ = std::thread([p = s.get()] { p->writer_loop(); });
+  return s;
+}
+
+Storage::Storage(World& world, int loader_threads)
+    : world_(world), loaders_(static_cast<std::size_t>(loader_threads)) {}
+
+Storage::~Storage() { stop(); }
+
+void Storage::stop() {
+  if (stopped_) return;
+  stopped_ = true;
+  loaders_.join();
+  {
+    std::lock_guard lock(jobs_mutex_);
+    stopping_ = true;
+  }
+  jobs_cv_.notify_all();
+  if (writer_.joinable()) writer_.join();
+}
+
+void Storage::load(Vec3i pos, LoadDone done) {
+  asio::post(loaders_, [this, pos, done = std::move(done)] {
+    std::unique_ptr<WorldStore> store;
+    {
+      std::lock_guard lock(readers_mutex_);
+      store = std::move(readers_.back());
+      readers_.pop_back();
+    }
+    LoadedChunk c = load_now(*store, pos);
+    {
+      std::lock_guard lock(readers_mutex_);
+      readers_.push_back(std::move(store));
+    }
+    done(std::move(c));
+  });
+}
+
+LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
+  LoadedChunk out;
+  out.pos = cp;
+  if (!world_.meta().bounds.touches_chunk(cp)) return out;  // outside the world: Air forever
+  auto stored = store.load_chunk(cp);
+  if (!stored) {
+    if (!stored.error().decode) {
+      out.ok = false;
+      out.error = "cannot be read: " + stored.error().message;
+      return out;
+    }
+    // A damaged blob: move the row aside (never generate over it), then
+    // serve the chunk as generated with a revision above the damaged one.
+    auto moved = store.quarantine_chunk(cp, stored.error().decode->describe());
+    if (!moved) {
+      out.ok = false;
+      out.error = stored.error().message + "; quarantine failed: " + moved.error().message;
+      return out;
+    }
+    counters_.quarantined.fetch_add(1, std::memory_order_relaxed);
+    server_log().error(
+        "chunk ({},{},{}): {}; row (revision {}) moved to the quarantine table, serving the chunk as generated", cp.x,
+        cp.y, cp.z, stored.error().message, moved->value_or(0));
+  } else if (stored->has_value()) {
+    StoredChunk& sc = **stored;
+    out.revision = sc.revision;
+    if (!sc.chunk.empty()) out.chunk = std::make_shared<const Chunk>(std::move(sc.chunk));
+    counters_.loaded_from_store.fetch_add(1, std::memory_order_relaxed);
+    return out;
+  }
+  // Not stored: generated. A chunk whose row was quarantined (now or by an
+  // earlier run) continues its revisions above the quarantined one.
+  auto floor = store.quarantined_revision(cp);
+  if (!floor) {
+    out.ok = false;
+    out.error = "cannot read its quarantine record: " + floor.error().message;
+    return out;
+  }
+  out.revision = floor->has_value() ? **floor + 1 : 0;
+  Chunk c = world_.generate_chunk(cp);
+  if (!c.empty()) out.chunk = std::make_shared<const Chunk>(std::move(c));
+  out.generated = true;
+  counters_.generated.fetch_add(1, std::memory_order_relaxed);
+  return out;
+}
+
+void Storage::commit(std::vector<VersionPtr> versions, CommitDone done) {
+  in_flight_.fetch_add(1, std::memory_order_relaxed);
+  {
+    std::lock_guard lock(jobs_mutex_);
+    jobs_.push_back(CommitJob{std::move(versions), std::move(done)});
+  }
+  jobs_cv_.notify_one();
+}
+
+void Storage::writer_loop() {
+  FileStatus status = Ok{};
+  for (;;) {
+    std::deque<CommitJob> batch;
+    {
+      std::unique_lock lock(jobs_mutex_);
+      jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      if (jobs_.empty()) return;  // stopping, nothing left
+      batch.swap(jobs_);
+    }
+    if (status) {  // after a failure, every later tick fails too
+      // One transaction for every tick queued: the latest version of each
+      // chunk is what is stored.
+      std::unordered_map<Vec3i, std::size_t, Vec3iHash> index;
+      std::vector<ChunkWrite> writes;
+      for (const CommitJob& job : batch)
+        for (const VersionPtr& v : job.versions) {
+          const auto blob = v->blob();
+          ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end())};
+          auto [it, fresh] = index.emplace(v->pos(), writes.size());
+          if (fresh)
+            writes.push_back(std::move(w));
+          else if (writes[it->second].revision < w.revision)
+            writes[it->second] = std::move(w);
+        }
+      if (!writes.empty()) {
+        const auto t0 = std::chrono::steady_clock::now();
+        status = writer_store_->save_chunks(writes);
+        counters_.commit_us.fetch_add(static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                                                      std::chrono::steady_clock::now() - t0)
+                                                                      .count()),
+                                      std::memory_order_relaxed);
+        counters_.commits.fetch_add(1, std::memory_order_relaxed);
+        counters_.chunks_written.fetch_add(writes.size(), std::memory_order_relaxed);
+      }
+      if (status) counters_.ticks_committed.fetch_add(batch.size(), std::memory_order_relaxed);
+    }
+    for (CommitJob& job : batch) {
+      job.done(status);
+      in_flight_.fetch_sub(1, std::memory_order_relaxed);
+    }
+  }
+}
+
+}  // namespace terrane

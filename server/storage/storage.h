@@ -1,0 +1,111 @@
+// Storage: the world store, off the world strand.
+//
+//   Loads run on a loader pool: each load reads the chunk's row on a
+//   connection of its own (SQLite in WAL mode lets readers run beside the
+//   writer) and decodes it, or generates a chunk that was never stored. A
+//   damaged blob is moved, in one transaction, to the quarantine table and
+//   the chunk is served as generated at the quarantined revision + 1, so
+//   revisions only grow and later saves write a fresh row. A row SQLite
+//   cannot read at all is reported as a failure: nothing says the data is
+//   bad, so it is neither quarantined nor generated over.
+//
+//   Commits run on one writer thread with its own connection: each tick's
+//   changed chunk versions are queued, and the writer takes every tick
+//   queued by then and stores them in one transaction (a group commit),
+//   then reports each tick in order. After a failed commit every later tick
+//   fails too: the world in memory is ahead of the disk, and the server
+//   stops rather than serve what it could lose.
+//
+// Threading: load() and commit() may be called from any thread; their
+// callbacks run on a loader thread and the writer thread: post from there
+// to where the result belongs. stop() waits for queued work (commits are
+// never dropped) and must not be called from a storage thread.
+#pragma once
+
+#include <asio.hpp>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/world.h"
+#include "server/world/chunk_version.h"
+
+namespace terrane {
+
+struct LoadedChunk {
+  Vec3i pos;
+  std::uint64_t revision = 0;
+  std::shared_ptr<const Chunk> chunk;  // null: all Air
+  bool ok = true;                      // false: the row could not be read (error says why)
+  bool generated = false;
+  std::string error;
+};
+
+struct StorageCounters {
+  std::atomic<std::uint64_t> loaded_from_store{0};
+  std::atomic<std::uint64_t> generated{0};
+  std::atomic<std::uint64_t> quarantined{0};
+  std::atomic<std::uint64_t> commits{0};           // transactions
+  std::atomic<std::uint64_t> ticks_committed{0};   // ticks carried by them
+  std::atomic<std::uint64_t> chunks_written{0};
+  std::atomic<std::uint64_t> commit_us{0};         // wall time inside transactions
+};
+
+class Storage {
+ public:
+  using LoadDone = std::function<void(LoadedChunk)>;
+  using CommitDone = std::function<void(const FileStatus&)>;
+
+  // world: shared for its metadata and generator (thread-safe); the store
+  // directory is opened again once per loader and once for the writer.
+  static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads);
+  ~Storage();
+  Storage(const Storage&) = delete;
+  Storage& operator=(const Storage&) = delete;
+
+  void load(Vec3i pos, LoadDone done);
+  void commit(std::vector<VersionPtr> versions, CommitDone done);
+  void stop();
+
+  const StorageCounters& counters() const { return counters_; }
+  // Commits queued or being written.
+  std::size_t commits_in_flight() const { return in_flight_.load(std::memory_order_relaxed); }
+
+ private:
+  Storage(World& world, int loader_threads);
+  LoadedChunk load_now(WorldStore& store, Vec3i pos);
+  void writer_loop();
+
+  struct CommitJob {
+    std::vector<VersionPtr> versions;
+    CommitDone done;
+  };
+
+  World& world_;
+  StorageCounters counters_;
+  asio::thread_pool loaders_;
+  // Loader connections, borrowed for one load at a time. Guarded by
+  // readers_mutex_: loads on the pool's threads share the free list.
+  std::mutex readers_mutex_;
+  std::vector<std::unique_ptr<WorldStore>> readers_;
+
+  std::unique_ptr<WorldStore> writer_store_;
+  // The hand-off from the world strand to the writer thread. Guarded by
+  // jobs_mutex_ (the writer sleeps on jobs_cv_ when there is nothing to do).
+  std::mutex jobs_mutex_;
+  std::condition_variable jobs_cv_;
+  std::deque<CommitJob> jobs_;
+  bool stopping_ = false;
+  std::atomic<std::size_t> in_flight_{0};
+  std::thread writer_;
+  bool stopped_ = false;
+};
+
+}  // namespace terrane

@@ -1,0 +1,92 @@
+#include "server/world/chunk_version.h"
+
+#include <cstring>
+
+#include "common/box.h"
+#include "common/world_store.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk,
+                           UnitBits changed_units, std::array<std::uint64_t, kMipLevels> level_since)
+    : pos_(pos),
+      revision_(revision),
+      chunk_(std::move(chunk)),
+      changed_units_(changed_units),
+      level_since_(level_since) {}
+
+ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk)
+    : ChunkVersion(pos, revision, std::move(chunk), UnitBits{}, {revision, revision, revision, revision}) {}
+
+std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
+  const auto l = static_cast<std::size_t>(level);
+  std::call_once(encoded_once_[l], [&] {
+    std::vector<std::uint8_t>& out = encoded_[l];
+    if (level > 0) {
+      const int n = kChunkSize >> level;
+      Box box({n, n, n});
+      if (chunk_) chunk_->read_level(level, box);
+      net_codec_encode(n, box.voxels(), out);
+      return;
+    }
+    constexpr int u = kChunkSize / 2;
+    Box box({u, u, u});
+    for (int i = 0; i < 8; ++i) {
+      const Vec3i o{i & 1, (i >> 1) & 1, (i >> 2) & 1};
+      if (chunk_)
+        chunk_->read_box(o * u, box, Vec3i{0, 0, 0}, Vec3i{u, u, u});
+      else
+        box.fill(Voxel{});
+      net_codec_encode(u, box.voxels(), out);
+    }
+  });
+  return encoded_[l];
+}
+
+const UpdatePiece& ChunkVersion::update_piece() const {
+  std::call_once(piece_once_, [&] {
+    std::vector<UnitUpdate> units;
+    units.reserve(changed_units_.count());
+    for (std::size_t i = 0; i < changed_units_.size(); ++i) {
+      if (!changed_units_.test(i)) continue;
+      UnitUpdate u;
+      u.chunk_pos = pos_;
+      u.unit_index = static_cast<std::uint16_t>(i);
+      const Vec3i base{static_cast<int>(i % 8) * 4, static_cast<int>(i / 64) * 4, static_cast<int>((i / 8) % 8) * 4};
+      for (int y = 0; y < 4; ++y)
+        for (int z = 0; z < 4; ++z)
+          for (int x = 0; x < 4; ++x)
+            u.voxels[static_cast<std::size_t>((y * 4 + z) * 4 + x)] = chunk_ ? chunk_->get(base + Vec3i{x, y, z}) : Voxel{};
+      units.push_back(u);
+    }
+    if (!units.empty()) piece_ = net_codec_encode_update_piece(units);
+  });
+  return piece_;
+}
+
+std::uint64_t ChunkVersion::hash() const {
+  std::call_once(hash_once_, [&] { hash_ = region_hash(chunk_.get(), revision_); });
+  return hash_;
+}
+
+std::span<const std::uint8_t> ChunkVersion::blob() const {
+  std::call_once(blob_once_, [&] { blob_ = chunk_ ? encode_chunk_blob(*chunk_) : encode_chunk_blob(Chunk()); });
+  return blob_;
+}
+
+std::array<bool, kMipLevels> levels_changed(const Chunk* prev, const Chunk* next) {
+  std::array<bool, kMipLevels> out{};
+  out[0] = true;
+  for (int level = 1; level < kMipLevels; ++level) {
+    const int n = kChunkSize >> level;
+    Box a({n, n, n}), b({n, n, n});
+    if (prev) prev->read_level(level, a);
+    if (next) next->read_level(level, b);
+    out[static_cast<std::size_t>(level)] =
+        std::memcmp(a.voxels().data(), b.voxels().data(), a.voxels().size() * sizeof(Voxel)) != 0;
+  }
+  return out;
+}
+
+}  // namespace terrane

@@ -1,0 +1,79 @@
+// ChunkVersion: one revision of one chunk, immutable once published, shared
+// by every reader (replicators on their session strands, the storage writer,
+// the world). What readers derive from it — the encoding of each level, the
+// tick's 4^3 update units, the region hash, the stored blob — is computed
+// once, lazily, by whichever thread asks first, and then shared.
+//
+// A null chunk is all Air. changed_units names the 4^3 units the tick that
+// made this version changed (empty for versions loaded or generated).
+// level_since[L] is the revision since which level L's voxels are what they
+// are in this version: a client holding level L at a revision >= that holds
+// exactly these bytes, so a refresh would tell it nothing.
+//
+// Thread-safety: every member is const after publication; the lazy parts
+// are guarded by std::call_once.
+#pragma once
+
+#include <array>
+#include <bitset>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <vector>
+
+#include "common/chunk.h"
+#include "common/net_codec.h"
+
+namespace terrane {
+
+using UnitBits = std::bitset<kUpdateUnitsPerChunk>;
+
+class ChunkVersion {
+ public:
+  ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk, UnitBits changed_units,
+               std::array<std::uint64_t, kMipLevels> level_since);
+  // A version as loaded or generated: every level is current since revision.
+  ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk);
+
+  Vec3i pos() const { return pos_; }
+  std::uint64_t revision() const { return revision_; }
+  const Chunk* chunk() const { return chunk_.get(); }
+  const std::shared_ptr<const Chunk>& shared_chunk() const { return chunk_; }
+  bool empty() const { return chunk_ == nullptr; }
+  const UnitBits& changed_units() const { return changed_units_; }
+  std::uint64_t level_since(int level) const { return level_since_[static_cast<std::size_t>(level)]; }
+
+  // Network codec bytes: level 0 is the eight 16^3 units in unit index order
+  // (a Full stream record), levels 1..3 one (32 >> L)^3 unit.
+  std::span<const std::uint8_t> encoded(int level) const;
+  // The changed units as one update piece (precondition: changed_units()
+  // is not empty).
+  const UpdatePiece& update_piece() const;
+  // protocol/messages.h region_hash of this chunk and revision.
+  std::uint64_t hash() const;
+  // The world store's blob (byte RLE + LZ4).
+  std::span<const std::uint8_t> blob() const;
+
+ private:
+  Vec3i pos_;
+  std::uint64_t revision_;
+  std::shared_ptr<const Chunk> chunk_;
+  UnitBits changed_units_;
+  std::array<std::uint64_t, kMipLevels> level_since_;
+
+  mutable std::array<std::once_flag, kMipLevels> encoded_once_;
+  mutable std::array<std::vector<std::uint8_t>, kMipLevels> encoded_;
+  mutable std::once_flag piece_once_, hash_once_, blob_once_;
+  mutable UpdatePiece piece_;
+  mutable std::uint64_t hash_ = 0;
+  mutable std::vector<std::uint8_t> blob_;
+};
+
+using VersionPtr = std::shared_ptr<const ChunkVersion>;
+
+// The levels of next whose voxels differ from prev's (bit L set for level L;
+// level 0 is the chunk itself). Either may be null (all Air).
+std::array<bool, kMipLevels> levels_changed(const Chunk* prev, const Chunk* next);
+
+}  // namespace terrane

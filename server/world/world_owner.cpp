@@ -1,0 +1,549 @@
+#include "server/world/world_owner.h"
+
+#include <algorithm>
+
+#include "common/view.h"
+#include "server/log.h"
+
+namespace terrane {
+
+namespace {
+
+// Edits applied per tick at most: bounds a tick's work on the strand (each
+// edit touches at most kMaxEditVolume voxels).
+constexpr std::size_t kMaxEditsPerTick = 256;
+
+std::uint64_t micros_since(std::chrono::steady_clock::time_point t0) {
+  return static_cast<std::uint64_t>(
+      std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - t0).count());
+}
+
+}  // namespace
+
+WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
+                       ServerCounters& counters)
+    : io_(io),
+      world_(world),
+      storage_(storage),
+      options_(options),
+      counters_(counters),
+      strand_(asio::make_strand(io)),
+      tick_timer_(strand_) {}
+
+void WorldOwner::start() {
+  asio::post(strand_, [this] {
+    next_tick_ = std::chrono::steady_clock::now();
+    arm_tick();
+  });
+}
+
+void WorldOwner::stop() {
+  std::promise<void> applied;
+  auto drained = drained_.get_future();
+  asio::post(strand_, [this, &applied] {
+    stopping_ = true;
+    tick_timer_.cancel();
+    // Edits received but not yet applied are applied now so nothing
+    // acknowledged-to-be is lost (unless the store already failed).
+    if (!storage_failed_) {
+      while (!edits_.empty()) {
+        const std::size_t before = edits_.size();
+        apply_edits();
+        if (edits_.size() == before) break;
+      }
+    }
+    drain_wanted_ = true;
+    if (commits_pending_ == 0) drained_.set_value();
+    applied.set_value();
+  });
+  applied.get_future().wait();
+  drained.wait();
+}
+
+// --- clients -------------------------------------------------------------------
+
+void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client) {
+  asio::post(strand_, [this, id, name = std::move(name), client = std::move(client)]() mutable {
+    Client c{std::move(name), std::move(client), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}};
+    clients_.emplace(id, std::move(c));
+  });
+}
+
+void WorldOwner::leave(ClientId id) {
+  asio::post(strand_, [this, id] {
+    // The replicator released what it held or had asked for just before;
+    // after this nothing more is granted to id. Its queued edits stay
+    // queued (their acks go nowhere).
+    clients_.erase(id);
+    presence_.remove(id);
+    grants_.erase(id);
+  });
+}
+
+void WorldOwner::moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius) {
+  asio::post(strand_, [this, id, position, view_distance, full_res_radius] {
+    auto it = clients_.find(id);
+    if (it == clients_.end()) return;
+    it->second.position = position;
+    it->second.view_distance = view_distance;
+    it->second.full_res_radius = full_res_radius;
+    it->second.placed = true;
+    presence_.place(id, position);
+  });
+}
+
+void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
+  asio::post(strand_, [this, id, chunks = std::move(chunks)] {
+    if (clients_.count(id) == 0) return;
+    for (const ChunkWant& w : chunks) {
+      if (request(w.chunk_pos)) {
+        grant(id, w.chunk_pos, w.full);
+      } else {
+        loading_[w.chunk_pos].push_back(Waiter{id, w.full});
+      }
+    }
+    flush_grants();
+  });
+}
+
+void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
+  asio::post(strand_, [this, id, chunks = std::move(chunks)] {
+    for (const Vec3i cp : chunks) interest_.release(cp, id);
+  });
+}
+
+void WorldOwner::grant(ClientId id, Vec3i cp, bool full) {
+  Loaded& l = loaded_.at(cp);
+  l.used_tick = tick_;
+  interest_.hold(cp, id, full);
+  grants_[id].push_back(l.published);
+}
+
+void WorldOwner::flush_grants() {
+  for (auto& [id, versions] : grants_) {
+    auto it = clients_.find(id);
+    if (it == clients_.end() || versions.empty()) continue;
+    it->second.link->granted(std::move(versions));
+  }
+  grants_.clear();
+}
+
+// --- chunks --------------------------------------------------------------------
+
+bool WorldOwner::request(Vec3i cp) {
+  if (auto it = loaded_.find(cp); it != loaded_.end()) return true;
+  if (loading_.count(cp) != 0) return false;
+  loading_.emplace(cp, std::vector<Waiter>{});
+  storage_.load(cp, [this](LoadedChunk c) {
+    asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); });
+  });
+  return false;
+}
+
+void WorldOwner::on_loaded(LoadedChunk c) {
+  auto waiting = loading_.find(c.pos);
+  if (waiting == loading_.end()) return;
+  if (!c.ok) {
+    // Not served until a later request can read it: the waiters wait, and
+    // the load is tried again next second.
+    if (unreadable_.emplace(c.pos, c.error).second)
+      server_log().error("chunk ({},{},{}): {}; not served until it can be read", c.pos.x, c.pos.y, c.pos.z, c.error);
+    return;
+  }
+  unreadable_.erase(c.pos);
+  auto v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
+  Loaded& l = loaded_[c.pos];
+  l.published = v;
+  l.current = v;
+  l.used_tick = tick_;
+  counters_.chunks_loaded.store(loaded_.size(), std::memory_order_relaxed);
+  const std::vector<Waiter> waiters = std::move(waiting->second);
+  loading_.erase(waiting);
+  for (const Waiter& w : waiters)
+    if (clients_.count(w.id) != 0) grant(w.id, c.pos, w.full);
+  if (!grants_scheduled_) {
+    // Loads finish one by one; hand them over in one go per strand turn.
+    grants_scheduled_ = true;
+    asio::post(strand_, [this] {
+      grants_scheduled_ = false;
+      flush_grants();
+    });
+  }
+}
+
+void WorldOwner::retry_pending() {
+  // Loads that failed to read are tried again.
+  for (auto it = unreadable_.begin(); it != unreadable_.end(); ++it) {
+    const Vec3i cp = it->first;
+    if (loading_.count(cp) == 0) continue;
+    storage_.load(cp, [this](LoadedChunk c) {
+      asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); });
+    });
+  }
+  // Reads and hashes whose chunks have arrived.
+  std::size_t kept = 0;
+  for (auto& [id, req] : reads_) {
+    auto it = clients_.find(id);
+    if (it == clients_.end()) continue;
+    Box box(req.box.size());
+    if (!read_current(req.box, box)) {
+      reads_[kept++] = {id, req};
+      continue;
+    }
+    it->second.link->send(std::make_shared<const Frame>(build_read_box_result(req.request_id, req.box, box.voxels())),
+                          SendClass::kData);
+  }
+  reads_.resize(kept);
+  kept = 0;
+  for (auto& [id, cp] : hashes_) {
+    auto it = clients_.find(id);
+    if (it == clients_.end()) continue;
+    if (!request(cp)) {
+      hashes_[kept++] = {id, cp};
+      continue;
+    }
+    const VersionPtr& v = loaded_.at(cp).published;
+    it->second.link->send(std::make_shared<const Frame>(build_region_hash(RegionHashMsg{cp, v->revision(), v->hash()})),
+                          SendClass::kData);
+  }
+  hashes_.resize(kept);
+}
+
+Voxel WorldOwner::get(Vec3i p) const {
+  auto it = loaded_.find(chunk_of(p));
+  if (it == loaded_.end() || it->second.current->empty()) return Voxel{};
+  return it->second.current->chunk()->get(local_of(p));
+}
+
+bool WorldOwner::read_current(const Region& r, Box& out) const {
+  bool all = true;
+  for_each_chunk_in(r, [&](Vec3i cp) { all = all && loaded_.count(cp) != 0; });
+  if (!all) return false;
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    const Region c = intersect(r, chunk_region(cp));
+    const ChunkVersion& v = *loaded_.at(cp).current;
+    const Vec3i size = c.size();
+    if (v.empty()) {
+      for (int y = 0; y < size.y; ++y)
+        for (int z = 0; z < size.z; ++z)
+          for (int x = 0; x < size.x; ++x) out.set(c.min.x - r.min.x + x, c.min.y - r.min.y + y, c.min.z - r.min.z + z, Voxel{});
+      return;
+    }
+    v.chunk()->read_box(c.min - chunk_origin(cp), out, c.min - r.min, size);
+  });
+  return true;
+}
+
+void WorldOwner::unload_unwatched() {
+  if (loaded_.size() <= options_.resident_chunks) return;
+  std::vector<std::pair<std::uint64_t, Vec3i>> drop;
+  for (const auto& [cp, l] : loaded_) {
+    if (busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp)) continue;
+    drop.emplace_back(l.used_tick, cp);
+  }
+  const std::size_t excess = loaded_.size() - options_.resident_chunks;
+  if (drop.size() > excess) {
+    std::nth_element(drop.begin(), drop.begin() + static_cast<std::ptrdiff_t>(excess), drop.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    drop.resize(excess);
+  }
+  // Edits are committed at the tick that applies them, so dropping a chunk
+  // loses nothing: it comes back from the store (or the generator).
+  for (const auto& [t, cp] : drop) loaded_.erase(cp);
+  counters_.chunks_unloaded.fetch_add(drop.size(), std::memory_order_relaxed);
+  counters_.chunks_loaded.store(loaded_.size(), std::memory_order_relaxed);
+}
+
+// --- edits ---------------------------------------------------------------------
+
+void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, const std::string& reason) {
+  counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
+  auto it = clients_.find(id);
+  if (it == clients_.end()) return;
+  // The true state of what the edit would have touched, when it is at hand:
+  // on the data queue, after every change already sent, so it is the state
+  // the client's replica reaches once it has read that far.
+  const Region r = world_.meta().bounds.clamp(edit.bounds());
+  if (!r.empty() && r.volume() <= kMaxEditVolume) {
+    Box box(r.size());
+    if (read_current(r, box)) {
+      it->second.link->send(std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels())),
+                            SendClass::kData);
+      return;
+    }
+  }
+  it->second.link->send(std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason)), SendClass::kControl);
+}
+
+void WorldOwner::edit(ClientId id, EditRequestMsg e) {
+  asio::post(strand_, [this, id, e = std::move(e)]() mutable {
+    auto it = clients_.find(id);
+    if (it == clients_.end() || stopping_) return;
+    Client& c = it->second;
+    if (c.edits_queued >= options_.max_edits_queued_per_client) return reject(id, e, "too many edits queued");
+    if (!is_history_edit(e.kind)) {
+      const Region r = world_.meta().bounds.clamp(e.reads());
+      if (r.empty()) return reject(id, e, "edit outside the world");
+      for_each_chunk_in(r, [&](Vec3i cp) {
+        request(cp);
+        ++busy_[cp];
+      });
+    }
+    ++c.edits_queued;
+    edits_.push_back(PendingEdit{id, std::move(e)});
+  });
+}
+
+void WorldOwner::unbusy(const Region& r) {
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    auto it = busy_.find(cp);
+    if (it != busy_.end() && --it->second <= 0) busy_.erase(it);
+  });
+}
+
+void WorldOwner::refuse(ClientId id, EditRequestMsg e, std::string reason) {
+  asio::post(strand_, [this, id, e = std::move(e), reason = std::move(reason)] { reject(id, e, reason); });
+}
+
+bool WorldOwner::near_enough(const Client& c, const Region& r) const {
+  // History steps are checked where they apply: the client's replicator
+  // checked the original edit, and the step's box must still lie in the
+  // full-resolution region of where the client is now.
+  bool ok = c.placed;
+  for_each_chunk_in(r, [&](Vec3i cp) { ok = ok && within(c.position, cp, c.full_res_radius); });
+  return ok;
+}
+
+void WorldOwner::copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied) {
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    if (!copied.insert(cp).second) return;
+    const ChunkVersion& v = *loaded_.at(cp).current;
+    if (!v.empty()) scratch.put_chunk(cp, v.chunk()->clone());
+  });
+}
+
+void WorldOwner::apply_edits() {
+  const auto t0 = std::chrono::steady_clock::now();
+  ++tick_;
+  counters_.ticks.fetch_add(1, std::memory_order_relaxed);
+  const WorldBounds& bounds = world_.meta().bounds;
+  // The tick's edits apply to copies of the chunks they touch; each changed
+  // chunk then becomes a new version.
+  Grid scratch;
+  std::unordered_set<Vec3i, Vec3iHash> copied;
+  ChangedUnits changed;
+  std::vector<Ack> acks;
+  while (!edits_.empty() && acks.size() < kMaxEditsPerTick) {
+    PendingEdit& pe = edits_.front();
+    auto cit = clients_.find(pe.id);
+    Client* client = cit != clients_.end() ? &cit->second : nullptr;
+    const bool history = is_history_edit(pe.edit.kind);
+    const bool redo = pe.edit.kind == EditKind::kRedo;
+    Region r;
+    if (history) {
+      const HistoryEntry* top = client != nullptr ? client->history.top(redo) : nullptr;
+      if (top != nullptr) r = bounds.clamp(top->box);
+    } else {
+      r = bounds.clamp(pe.edit.reads());
+    }
+    bool ready = true;
+    for_each_chunk_in(r, [&](Vec3i cp) { ready = request(cp) && ready; });
+    if (!ready) {
+      if (!stopping_) break;  // wait for its chunks (arrival order is kept)
+      // Shutting down: chunks still loading will not be waited for.
+      if (client != nullptr) reject(pe.id, pe.edit, "server shutting down");
+      if (!history) unbusy(r);
+      if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+      edits_.pop_front();
+      continue;
+    }
+    copy_into(scratch, r, copied);
+    if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+    if (history) {
+      std::string why = "client gone";
+      if (client != nullptr && client->history.top(redo) == nullptr) {
+        why = redo ? "nothing to redo" : "nothing to undo";
+      } else if (client != nullptr && !near_enough(*client, r)) {
+        why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
+        client->history.drop(redo);  // its box may be stale by the time the client is back
+      } else if (client != nullptr && client->history.apply(scratch, redo, changed, &why)) {
+        acks.push_back(Ack{pe.id, pe.edit.edit_id});
+        edits_.pop_front();
+        continue;
+      }
+      if (client != nullptr) reject(pe.id, pe.edit, why);
+      edits_.pop_front();
+      continue;
+    }
+    const Region box = bounds.clamp(pe.edit.bounds());
+    HistoryEntry entry;
+    if (client != nullptr) entry = HistoryEntry{box, snapshot(scratch, box), {}};
+    apply_edit(scratch, pe.edit, box, changed);
+    if (client != nullptr) {
+      entry.after = snapshot(scratch, box);
+      client->history.record(std::move(entry));
+    }
+    unbusy(r);
+    acks.push_back(Ack{pe.id, pe.edit.edit_id});
+    edits_.pop_front();
+  }
+  counters_.edits_applied.fetch_add(acks.size(), std::memory_order_relaxed);
+
+  std::vector<VersionPtr> versions;
+  versions.reserve(changed.size());
+  for (const auto& [cp, bits] : changed) {
+    if (bits.none()) continue;
+    Loaded& l = loaded_.at(cp);
+    std::shared_ptr<const Chunk> chunk;
+    if (std::unique_ptr<Chunk> c = scratch.take_chunk(cp); c && !c->empty()) chunk = std::move(c);
+    const VersionPtr& prev = l.current;
+    const std::uint64_t rev = prev->revision() + 1;
+    const auto differs = levels_changed(prev->chunk(), chunk.get());
+    std::array<std::uint64_t, kMipLevels> since{};
+    for (int level = 0; level < kMipLevels; ++level)
+      since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? rev : prev->level_since(level);
+    l.current = std::make_shared<const ChunkVersion>(cp, rev, std::move(chunk), bits, since);
+    l.used_tick = tick_;
+    versions.push_back(l.current);
+  }
+  counters_.apply_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
+  if (versions.empty() && acks.empty()) return;
+  ++commits_pending_;
+  const std::uint64_t tick = tick_;
+  storage_.commit(versions, [this, tick, versions, acks = std::move(acks)](const FileStatus& st) {
+    asio::post(strand_, [this, tick, versions, acks, st] { on_committed(tick, versions, acks, st); });
+  });
+}
+
+void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
+                              const FileStatus& status) {
+  --commits_pending_;
+  if (!status) {
+    if (!storage_failed_) {
+      server_log().critical("tick {}: saving {} chunks failed: {}; rejecting the tick's edits and stopping", tick,
+                            versions.size(), status.error().message);
+    }
+    // Nothing of this tick may be acknowledged or shown: it is not on disk.
+    for (const Ack& a : acks)
+      if (auto it = clients_.find(a.id); it != clients_.end())
+        it->second.link->send(std::make_shared<const Frame>(build_edit_reject(a.edit_id, "storage failure: edit not saved")),
+                              SendClass::kControl);
+    counters_.edits_rejected.fetch_add(acks.size(), std::memory_order_relaxed);
+    fatal_storage(status.error().message);
+  } else {
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const Ack& a : acks)
+      if (auto it = clients_.find(a.id); it != clients_.end())
+        it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
+    // Publish, then tell each holder once about all of its changed chunks.
+    std::unordered_map<ClientId, std::vector<VersionPtr>> news;
+    std::uint64_t deliveries = 0;
+    for (const VersionPtr& v : versions) {
+      if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
+        it->second.published = v;
+      for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
+        news[h.id].push_back(v);
+        ++deliveries;
+      }
+    }
+    for (auto& [id, changed] : news)
+      if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
+    counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
+    counters_.fanout_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
+  }
+  if (drain_wanted_ && commits_pending_ == 0) {
+    drain_wanted_ = false;
+    drained_.set_value();
+  }
+}
+
+void WorldOwner::fatal_storage(const std::string& why) {
+  if (storage_failed_) return;
+  (void)why;
+  storage_failed_ = true;
+  storage_failed_flag_ = true;
+  for (auto& [id, c] : clients_) c.link->close("server storage failure");
+  stopping_ = true;
+  tick_timer_.cancel();
+  if (options_.on_fatal) options_.on_fatal();
+}
+
+// --- queries -------------------------------------------------------------------
+
+void WorldOwner::read_box(ClientId id, ReadBoxMsg req) {
+  asio::post(strand_, [this, id, req] {
+    auto it = clients_.find(id);
+    if (it == clients_.end()) return;
+    for_each_chunk_in(req.box, [&](Vec3i cp) { request(cp); });
+    reads_.emplace_back(id, req);
+    retry_pending();
+  });
+}
+
+void WorldOwner::hash(ClientId id, Vec3i cp) {
+  asio::post(strand_, [this, id, cp] {
+    hashes_.emplace_back(id, cp);
+    retry_pending();
+  });
+}
+
+void WorldOwner::send_presence() {
+  for (auto& [id, c] : clients_) {
+    if (!c.placed) continue;
+    auto entries =
+        presence_.nearest(id, c.position, static_cast<float>(c.view_distance), options_.presence_max_entries);
+    // Only when something changed: idle crowds cost nothing.
+    auto same = [](const PresenceEntryMsg& a, const PresenceEntryMsg& b) {
+      return a.client_id == b.client_id && a.position.x == b.position.x && a.position.y == b.position.y &&
+             a.position.z == b.position.z;
+    };
+    if (entries.size() == c.presence.size() && std::equal(entries.begin(), entries.end(), c.presence.begin(), same))
+      continue;
+    c.link->send(std::make_shared<const Frame>(build_presence(entries)), SendClass::kData);
+    c.presence = std::move(entries);
+    counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+// --- tick ----------------------------------------------------------------------
+
+void WorldOwner::arm_tick() {
+  if (stopping_) return;
+  // A fixed schedule: the next tick is due one period after the last one was
+  // due, however long the work took; a tick more than a period late starts
+  // the schedule again from now (counted) rather than bunching ticks up.
+  const auto period = std::chrono::microseconds(1'000'000 / std::max<std::uint32_t>(1, options_.tick_hz));
+  next_tick_ += period;
+  const auto now = std::chrono::steady_clock::now();
+  if (next_tick_ + period < now) {
+    counters_.ticks_late.fetch_add(1, std::memory_order_relaxed);
+    next_tick_ = now;
+  }
+  tick_timer_.expires_at(next_tick_);
+  tick_timer_.async_wait([this](const asio::error_code& ec) {
+    if (ec || stopping_) return;
+    on_tick();
+    arm_tick();
+  });
+}
+
+void WorldOwner::on_tick() {
+  apply_edits();
+  const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
+  if (options_.presence_hz > 0 && tick_ % std::max<std::uint64_t>(1, hz / options_.presence_hz) == 0) send_presence();
+  if (tick_ % hz == 0) {
+    unload_unwatched();
+    retry_pending();
+  }
+}
+
+void WorldOwner::inspect(const std::function<void(const WorldView&)>& fn) {
+  std::promise<void> done;
+  asio::post(strand_, [&] {
+    fn(*this);
+    done.set_value();
+  });
+  done.get_future().wait();
+}
+
+}  // namespace terrane

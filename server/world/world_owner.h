@@ -1,0 +1,204 @@
+// WorldOwner: the one strand that owns the world's state — the loaded
+// chunk versions, the queued edits, every client's undo history, the
+// interest index (who holds what) and the presence grid.
+//
+// It applies edits and publishes versions; it does no per-client streaming
+// and no encoding (replicators do both on their own strands, from the
+// versions they are handed).
+//
+// Tick (a fixed schedule of tick_hz, not re-armed after the work):
+//   1. apply the queued edits whose chunks are loaded, in arrival order, to
+//      copies of those chunks; each changed chunk becomes a new version
+//      (revision + 1) that the next tick builds on;
+//   2. hand the tick's versions to Storage, whose writer commits them (with
+//      any other tick queued by then) in one transaction while the world
+//      goes on with the next tick;
+//   3. when that commit is reported: acknowledge the tick's edits, publish
+//      its versions (what new readers are handed from then on) and tell each
+//      holder of a changed chunk, once per tick, which of its chunks changed
+//      (InterestIndex). A failed commit rejects the edits, closes every
+//      client with "server storage failure" and calls on_fatal.
+//
+// Chunks: a client asks for chunks (want); loaded ones are granted at once,
+// the others when Storage has loaded or generated them. A grant registers
+// the client as a holder, so every later change reaches it, in order after
+// the grant. Chunks nobody holds at full resolution, with nothing pending,
+// are unloaded beyond resident_chunks, least recently used first.
+//
+// Threading: the public methods may be called from any thread and post to
+// the strand; WorldClient callbacks are made on the strand.
+#pragma once
+
+#include <asio.hpp>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <future>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "common/grid.h"
+#include "common/world.h"
+#include "server/options.h"
+#include "server/storage/storage.h"
+#include "server/world/chunk_version.h"
+#include "server/world/history.h"
+#include "server/world/interest.h"
+#include "server/world/presence.h"
+
+namespace terrane {
+
+// What the world needs of a connected client. Each call is made on the
+// world strand; implementations post to the client's own strand.
+class WorldClient {
+ public:
+  virtual ~WorldClient() = default;
+  // Versions of chunks the client asked for (in want), nearest asked first.
+  virtual void granted(std::vector<VersionPtr> versions) = 0;
+  // A committed tick's new versions of chunks the client holds.
+  virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
+  // Frames the world answers with (acks, rejects, read results, presence).
+  virtual void send(SharedFrame frame, SendClass cls) = 0;
+  virtual void close(const std::string& reason) = 0;
+};
+
+struct ChunkWant {
+  Vec3i chunk_pos;
+  bool full = false;  // the client will hold it at full resolution
+};
+
+// Read access for tests and tools (Server::inspect).
+class WorldView {
+ public:
+  virtual ~WorldView() = default;
+  virtual bool loaded(Vec3i chunk_pos) const = 0;
+  // Revision of a loaded chunk as applied (committed or about to be).
+  virtual std::uint64_t revision(Vec3i chunk_pos) const = 0;
+  virtual Voxel get(Vec3i voxel) const = 0;
+  // The chunk as applied, or null when it is all Air (precondition: loaded).
+  virtual const Chunk* chunk(Vec3i chunk_pos) const = 0;
+  virtual std::size_t loaded_count() const = 0;
+};
+
+class WorldOwner : private WorldView {
+ public:
+  using Strand = asio::strand<asio::io_context::executor_type>;
+
+  WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
+             ServerCounters& counters);
+
+  void start();
+  // Applies what is queued, stops the tick and waits for every commit.
+  // Blocks; must not be called from an io thread.
+  void stop();
+
+  void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client);
+  void leave(ClientId id);
+  void moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius);
+  void want(ClientId id, std::vector<ChunkWant> chunks);
+  void release(ClientId id, std::vector<Vec3i> chunks);
+  // Already checked by the client's replicator: rate, size, and that the
+  // client holds the edit's chunks at full resolution.
+  void edit(ClientId id, EditRequestMsg edit);
+  // Rejects an edit the replicator refused, with the true state of its box.
+  void refuse(ClientId id, EditRequestMsg edit, std::string reason);
+  void read_box(ClientId id, ReadBoxMsg request);
+  void hash(ClientId id, Vec3i chunk_pos);
+
+  // Runs fn on the strand and waits (tests, tools).
+  void inspect(const std::function<void(const WorldView&)>& fn);
+  bool storage_failed() const { return storage_failed_flag_.load(); }
+  std::uint64_t epoch() const { return world_.meta().epoch; }
+
+ private:
+  struct Loaded {
+    VersionPtr published;  // what clients are handed
+    VersionPtr current;    // what the next edit builds on (newer while a commit is in flight)
+    std::uint64_t used_tick = 0;
+  };
+  struct Client {
+    std::string name;
+    std::shared_ptr<WorldClient> link;
+    Vec3f position;
+    std::int32_t view_distance = 0, full_res_radius = 0;
+    bool placed = false;
+    std::size_t edits_queued = 0;
+    History history;
+    std::vector<PresenceEntryMsg> presence;  // last sent
+  };
+  struct PendingEdit {
+    ClientId id;
+    EditRequestMsg edit;
+  };
+  struct Ack {
+    ClientId id;
+    std::uint32_t edit_id;
+  };
+  struct Waiter {
+    ClientId id;
+    bool full;
+  };
+
+  // WorldView
+  bool loaded(Vec3i chunk_pos) const override { return loaded_.count(chunk_pos) != 0; }
+  std::uint64_t revision(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->revision(); }
+  Voxel get(Vec3i voxel) const override;
+  const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
+  std::size_t loaded_count() const override { return loaded_.size(); }
+
+  void arm_tick();
+  void on_tick();
+  void apply_edits();
+  void on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
+                    const FileStatus& status);
+  void fatal_storage(const std::string& why);
+  // Starts loading chunk_pos unless loaded or loading; true if loaded.
+  bool request(Vec3i chunk_pos);
+  void on_loaded(LoadedChunk c);
+  void grant(ClientId id, Vec3i chunk_pos, bool full);
+  void flush_grants();
+  void retry_pending();
+  void reject(ClientId id, const EditRequestMsg& edit, const std::string& reason);
+  bool read_current(const Region& r, Box& out) const;
+  void copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied);
+  bool near_enough(const Client& c, const Region& r) const;
+  void unbusy(const Region& r);
+  void send_presence();
+  void unload_unwatched();
+
+  asio::io_context& io_;
+  World& world_;
+  Storage& storage_;
+  const ServerOptions& options_;
+  ServerCounters& counters_;
+  Strand strand_;
+  asio::steady_timer tick_timer_;
+  std::chrono::steady_clock::time_point next_tick_;
+
+  std::unordered_map<ClientId, Client> clients_;
+  std::unordered_map<Vec3i, Loaded, Vec3iHash> loaded_;
+  std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
+  std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
+  std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
+  bool grants_scheduled_ = false;
+  std::deque<PendingEdit> edits_;
+  // Chunks queued edits will touch (never unloaded): chunk -> edits.
+  std::unordered_map<Vec3i, int, Vec3iHash> busy_;
+  std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
+  std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
+  InterestIndex interest_;
+  PresenceGrid presence_;
+  std::uint64_t tick_ = 0;
+  std::uint64_t commits_pending_ = 0;
+  bool stopping_ = false;
+  bool storage_failed_ = false;
+  std::atomic<bool> storage_failed_flag_{false};
+  std::promise<void> drained_;
+  bool drain_wanted_ = false;
+};
+
+}  // namespace terrane
