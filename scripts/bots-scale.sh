@@ -1,22 +1,44 @@
 #!/usr/bin/env bash
-# One run of the scale scenario (README "Scale"): N mixed bots spread over
-# 512 x 512 voxels around the spawn, full-resolution radius 64, view
-# distance 512, ramp-up 20 s, a sphere edit of radius <= 3 every 2 s per
-# bot, 60 s. Server and bots share this machine. Prints the bots' report and
-# the server's peak memory (VmHWM) and CPU time (utime + stime) read from
-# /proc just before it is stopped. The server's log is kept beside the
-# report (REPORT.server.log).
-#   scripts/bots-scale.sh N [REPORT.json] [extra terrane-bots flags...]
-# Expects a release build and worlds/default (scripts/run.sh makes both).
+# One run of a scale scenario (README "Scale"). Server and bots share this
+# machine; the server starts cold on a copy of a pre-generated world. Both:
+# mixed bots, full-resolution radius 64, view distance 512, a sphere edit of
+# radius <= 3 every 2 s per bot, 60 s measured.
+#   crowd  N bots spread over 512 x 512 voxels around the spawn (every bot
+#          sees every edit), ramp-up 20 s; world: worlds/scale
+#          (terrane-world generate --world worlds/scale
+#           --box -1024,-128,-1024,1024,256,1024).
+#   world  N bots at constant density, 1,000 over 3,072 x 3,072 voxels (the
+#          square scales with sqrt(N)), inside a 4,096 x 4,096 world so no
+#          view reaches ungenerated ground; ramp-up N/20 s, and the 60 s
+#          start once every bot has joined (--wait-joined); world:
+#          worlds/world4k (terrane-world generate --world worlds/world4k
+#          --box -2048,-128,-2048,2048,256,2048).
+# Prints the bots' report, the bots' and the server's peak memory and CPU
+# time (/proc of the server just before it is stopped; GNU time for the
+# bots). The server's log is kept beside the report (REPORT.server.log).
+#   scripts/bots-scale.sh [crowd|world] N [REPORT.json] [extra terrane-bots flags...]
+# (A first argument that is a number means crowd.) Expects a release build.
 # TERRANE_SCALE_TOKEN=T runs the server with --auth-token T and every bot
 # with --token T (authentication on; limits are always on at their
 # defaults); TERRANE_SERVER_FLAGS adds server flags.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bots=${1:?usage: scripts/bots-scale.sh N [REPORT.json] [flags...]}
-report=${2:-reports/scale-$bots.json}
+scenario=crowd
+case "${1:-}" in
+  crowd|world) scenario=$1; shift ;;
+esac
+bots=${1:?usage: scripts/bots-scale.sh [crowd|world] N [REPORT.json] [flags...]}
+report=${2:-reports/$scenario-$bots.json}
 shift $(( $# >= 2 ? 2 : 1 ))
-world=${TERRANE_WORLD:-worlds/default}
+if [ "$scenario" = crowd ]; then
+  world=${TERRANE_WORLD:-worlds/scale}
+  scenario_flags=(--spread 512 --ramp-up 20)
+else
+  world=${TERRANE_WORLD:-worlds/world4k}
+  spread=$(awk -v n="$bots" 'BEGIN { printf "%d", 3072 * sqrt(n / 1000) }')
+  scenario_flags=(--spread "$spread" --ramp-up $(( (bots + 19) / 20 )) --wait-joined 600)
+fi
+[ -d "$world" ] || { echo "bots-scale.sh: no world at $world (see the comment at the top for how to make it)" >&2; exit 2; }
 
 scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-scale.XXXXXX")
 server_pid=
@@ -30,8 +52,6 @@ cleanup() {
 trap cleanup EXIT INT TERM
 
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world" >/dev/null
-# Two io threads: the server's world owner strand loads stored chunks
-# synchronously, and with one io thread that stalls every socket.
 token_flags=()
 server_auth=()
 if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then
@@ -39,7 +59,7 @@ if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then
   server_auth=(--auth-token "$TERRANE_SCALE_TOKEN")
 fi
 # shellcheck disable=SC2086
-./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) --io-threads 2 \
+./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) \
   "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-} >"$scratch/server.log" 2>&1 &
 server_pid=$!
 port=
@@ -66,7 +86,7 @@ status=0
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
 "${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration 60 --behavior mixed \
-  --spread 512 --view-distance 512 --full-res-radius 64 --ramp-up 20 --edit-interval 2 --edit-radius 3 \
+  "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
   --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 
 cpu1=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")

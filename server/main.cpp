@@ -51,6 +51,8 @@ constexpr const char* kHelp =
     "  --socket-send-buffer N      SO_SNDBUF of client sockets in bytes (default: OS default)\n"
     "  --presence-hz N             presence updates per second, 0 = off (default 2)\n"
     "  --presence-max N            nearest clients listed in presence (default 32, at most 64)\n"
+    "  --mip-refresh-ms N          refresh the mips a client holds at most this often, with\n"
+    "                              their newest bytes (default 500; 0 = every tick)\n"
     "  --hash-push-ms N            push one region hash per client this often, 0 = off\n"
     "                              (default 1000)\n"
     "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
@@ -88,7 +90,7 @@ int usage_error(const std::string& message) {
 int run(int argc, char** argv) {
   CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
-                  "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms",
+                  "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "config", "test-drop-updates", "test-corrupt-updates"},
@@ -140,6 +142,7 @@ int run(int argc, char** argv) {
   o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
+  o.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));
   o.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 32768, 0, 1 << 24, &err));
   o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));

@@ -33,6 +33,9 @@ struct ServerOptions {
   // Each client is sent the hash of one of its full-resolution chunks this
   // often (0 = only on request).
   std::uint32_t hash_push_ms = 1000;
+  // Chunks a client holds as mips are refreshed at most this often, with
+  // their newest version (0: at the tick that changed them).
+  std::uint32_t mip_refresh_ms = 500;
   // Chunks kept loaded beyond those someone holds at full resolution or is
   // editing (about once a second the least recently used of the rest go;
   // they come back from the store).

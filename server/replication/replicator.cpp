@@ -502,20 +502,15 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       keep.push_back(std::move(v));
       continue;
     }
-    if (v->empty()) {
-      stream(StreamRecordKind::kEmpty, cp, v->revision());
-      h = Held{kHeldEmpty, v->revision()};
-      continue;
+    // A chunk held coarser than full resolution: refreshed with the next
+    // flush of mips, the newest version by then (changes coalesce).
+    if (options_.mip_refresh_ms == 0) {
+      refresh_mip(cp, v);
+    } else {
+      if (mip_dirty_.empty()) next_mip_flush_ = std::chrono::steady_clock::now() +
+                                                std::chrono::milliseconds(options_.mip_refresh_ms);
+      mip_dirty_.insert_or_assign(cp, std::move(v));
     }
-    const int level = h.level == kHeldEmpty ? kMipLevels - 1 : h.level;
-    if (h.level != kHeldEmpty && v->level_since(level) <= h.revision) {
-      counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
-      continue;
-    }
-    stream(record_kind(level), cp, v->revision(), v->encoded(level));
-    counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
-    h = Held{static_cast<std::uint8_t>(level), v->revision()};
-    if (desired(cp) < level) push_refine(cp);
   }
   // Records first, so an update never overtakes the data it applies to.
   flush_stream();
@@ -566,6 +561,35 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
   }
   counters_.tick_frames.fetch_add(1, std::memory_order_relaxed);
   pump();
+  if (!mip_dirty_.empty()) arm_timer();
+}
+
+void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
+  auto it = held_.find(cp);
+  if (it == held_.end()) return;
+  Held& h = it->second;
+  if (h.level == 0 || h.revision >= v->revision()) return;  // refined since, with newer data
+  if (v->empty()) {
+    if (h.level != kHeldEmpty) stream(StreamRecordKind::kEmpty, cp, v->revision());
+    h = Held{kHeldEmpty, v->revision()};
+    return;
+  }
+  const int level = h.level == kHeldEmpty ? kMipLevels - 1 : h.level;
+  if (h.level != kHeldEmpty && v->level_since(level) <= h.revision) {
+    // The level held did not change: nothing to tell the client.
+    counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  stream(record_kind(level), cp, v->revision(), v->encoded(level));
+  counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
+  h = Held{static_cast<std::uint8_t>(level), v->revision()};
+  if (desired(cp) < level) push_refine(cp);
+}
+
+void Replicator::flush_mips() {
+  for (auto& [cp, v] : mip_dirty_) refresh_mip(cp, v);
+  mip_dirty_.clear();
+  flush_stream();
 }
 
 void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload) {
@@ -591,10 +615,13 @@ void Replicator::on_drained() {
 void Replicator::arm_timer() {
   if (closed_) return;
   // Soon while granted chunks wait for room in the window or budget;
-  // otherwise at the next pushed hash.
+  // otherwise at the next mip flush or pushed hash.
   const auto now = std::chrono::steady_clock::now();
-  auto at = ready_.empty() ? next_hash_push_ : now + kPumpRetry;
-  if (ready_.empty() && options_.hash_push_ms == 0) return;
+  auto at = std::chrono::steady_clock::time_point::max();
+  if (!ready_.empty()) at = now + kPumpRetry;
+  if (!mip_dirty_.empty()) at = std::min(at, next_mip_flush_);
+  if (options_.hash_push_ms > 0) at = std::min(at, next_hash_push_);
+  if (at == std::chrono::steady_clock::time_point::max()) return;
   if (timer_armed_) {
     if (timer_->expiry() <= at) return;
     timer_->cancel();  // re-armed sooner below (the cancelled wait sees operation_aborted)
@@ -611,6 +638,7 @@ void Replicator::arm_timer() {
 
 void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
+  if (!mip_dirty_.empty() && now >= next_mip_flush_) flush_mips();
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
     next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);
     // The next chunk this client holds at full resolution.

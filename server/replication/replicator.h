@@ -16,10 +16,10 @@
 // budget allow. Chunks leaving the view are released on both sides.
 //
 // Ticks. The world hands each committed tick's changes of held chunks in one
-// call; the replicator answers with at most one UpdateBatch (the changed 4^3
-// units of every chunk held at full resolution, joined from per-version
-// pieces) and the stream records of mips whose bytes changed at the level
-// held (a mip whose level did not change is not sent), written together.
+// call; the replicator answers with one UpdateBatch: the changed 4^3 units
+// of every chunk held at full resolution, joined from per-version pieces.
+// Chunks held as mips are refreshed together every mip_refresh_ms (changes
+// in between coalesce), and only when the bytes of the level held changed.
 //
 // Threading: every member runs on the session's strand. The WorldClient
 // methods are called on the world strand and post here. Lifetime: shared;
@@ -116,6 +116,8 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void send_ready();
   void send_chunk(const ChunkVersion& v, int level);
   void hold(Vec3i chunk_pos, Held h, const VersionPtr& v);
+  void refresh_mip(Vec3i chunk_pos, const VersionPtr& v);
+  void flush_mips();
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
               std::span<const std::uint8_t> payload = {});
   void flush_stream();
@@ -173,6 +175,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   std::unordered_map<Vec3i, Held, Vec3iHash> claims_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
   StreamBatchWriter batch_;
+  // Changed chunks held coarser than full resolution, newest version each,
+  // refreshed together every mip_refresh_ms.
+  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> mip_dirty_;
+  std::chrono::steady_clock::time_point next_mip_flush_;
   bool timer_armed_ = false;
   std::chrono::steady_clock::time_point next_hash_push_;
 };
