@@ -14,10 +14,23 @@ ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<co
       revision_(revision),
       chunk_(std::move(chunk)),
       changed_units_(changed_units),
-      level_since_(level_since) {}
+      level_since_(level_since),
+      empty_(chunk_ == nullptr) {}
 
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk)
     : ChunkVersion(pos, revision, std::move(chunk), UnitBits{}, {revision, revision, revision, revision}) {}
+
+std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& full) {
+  auto v = std::make_shared<ChunkVersion>(full.pos_, full.revision_, nullptr, UnitBits{}, full.level_since_);
+  v->empty_ = full.empty_;
+  v->has_voxels_ = false;
+  for (int level = 1; level < kMipLevels; ++level) {
+    const auto bytes = full.encoded(level);
+    const auto l = static_cast<std::size_t>(level);
+    std::call_once(v->encoded_once_[l], [&] { v->encoded_[l].assign(bytes.begin(), bytes.end()); });
+  }
+  return v;
+}
 
 std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   const auto l = static_cast<std::size_t>(level);

@@ -35,17 +35,24 @@ class ChunkVersion {
                std::array<std::uint64_t, kMipLevels> level_since);
   // A version as loaded or generated: every level is current since revision.
   ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk);
+  // The mips of full without its voxels: what the world keeps of a chunk
+  // nobody holds at full resolution (a few hundred bytes instead of the
+  // chunk). encoded() answers levels 1..3 only; the rest needs the chunk.
+  static std::shared_ptr<const ChunkVersion> mips_only(const ChunkVersion& full);
 
   Vec3i pos() const { return pos_; }
   std::uint64_t revision() const { return revision_; }
   const Chunk* chunk() const { return chunk_.get(); }
   const std::shared_ptr<const Chunk>& shared_chunk() const { return chunk_; }
-  bool empty() const { return chunk_ == nullptr; }
+  bool empty() const { return empty_; }
+  // False for a mips_only version.
+  bool has_voxels() const { return has_voxels_; }
   const UnitBits& changed_units() const { return changed_units_; }
   std::uint64_t level_since(int level) const { return level_since_[static_cast<std::size_t>(level)]; }
 
   // Network codec bytes: level 0 is the eight 16^3 units in unit index order
-  // (a Full stream record), levels 1..3 one (32 >> L)^3 unit.
+  // (a Full stream record), levels 1..3 one (32 >> L)^3 unit. The rest of
+  // the methods below need has_voxels().
   std::span<const std::uint8_t> encoded(int level) const;
   // The changed units as one update piece (precondition: changed_units()
   // is not empty).
@@ -61,6 +68,8 @@ class ChunkVersion {
   std::shared_ptr<const Chunk> chunk_;
   UnitBits changed_units_;
   std::array<std::uint64_t, kMipLevels> level_since_;
+  bool empty_ = true;
+  bool has_voxels_ = true;
 
   mutable std::array<std::once_flag, kMipLevels> encoded_once_;
   mutable std::array<std::vector<std::uint8_t>, kMipLevels> encoded_;

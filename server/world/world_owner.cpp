@@ -96,7 +96,7 @@ void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
   asio::post(strand_, [this, id, chunks = std::move(chunks)] {
     if (clients_.count(id) == 0) return;
     for (const ChunkWant& w : chunks) {
-      if (request(w.chunk_pos)) {
+      if (request(w.chunk_pos, !w.full)) {
         grant(id, w.chunk_pos, w.full);
       } else {
         loading_[w.chunk_pos].push_back(Waiter{id, w.full});
@@ -130,8 +130,9 @@ void WorldOwner::flush_grants() {
 
 // --- chunks --------------------------------------------------------------------
 
-bool WorldOwner::request(Vec3i cp) {
-  if (auto it = loaded_.find(cp); it != loaded_.end()) return true;
+bool WorldOwner::request(Vec3i cp, bool mips_enough) {
+  if (auto it = loaded_.find(cp); it != loaded_.end() && (mips_enough || it->second.current->has_voxels()))
+    return true;
   if (loading_.count(cp) != 0) return false;
   loading_.emplace(cp, std::vector<Waiter>{});
   storage_.load(cp, [this](LoadedChunk c) {
@@ -152,11 +153,19 @@ void WorldOwner::on_loaded(LoadedChunk c) {
   }
   unreadable_.erase(c.pos);
   auto v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
-  Loaded& l = loaded_[c.pos];
+  auto [it, fresh] = loaded_.try_emplace(c.pos);
+  Loaded& l = it->second;
+  if (!fresh) {
+    // It was kept as mips only (so committed: the store has this revision).
+    if (!l.current->has_voxels()) --mips_only_;
+    if (l.current->revision() != c.revision)
+      server_log().error("chunk ({},{},{}): loaded revision {} but {} was committed", c.pos.x, c.pos.y, c.pos.z,
+                         c.revision, l.current->revision());
+  }
   l.published = v;
   l.current = v;
   l.used_tick = tick_;
-  counters_.chunks_loaded.store(loaded_.size(), std::memory_order_relaxed);
+  counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
   const std::vector<Waiter> waiters = std::move(waiting->second);
   loading_.erase(waiting);
   for (const Waiter& w : waiters)
@@ -211,13 +220,13 @@ void WorldOwner::retry_pending() {
 
 Voxel WorldOwner::get(Vec3i p) const {
   auto it = loaded_.find(chunk_of(p));
-  if (it == loaded_.end() || it->second.current->empty()) return Voxel{};
+  if (it == loaded_.end() || it->second.current->empty() || !it->second.current->has_voxels()) return Voxel{};
   return it->second.current->chunk()->get(local_of(p));
 }
 
 bool WorldOwner::read_current(const Region& r, Box& out) const {
   bool all = true;
-  for_each_chunk_in(r, [&](Vec3i cp) { all = all && loaded_.count(cp) != 0; });
+  for_each_chunk_in(r, [&](Vec3i cp) { all = all && loaded(cp); });
   if (!all) return false;
   for_each_chunk_in(r, [&](Vec3i cp) {
     const Region c = intersect(r, chunk_region(cp));
@@ -235,23 +244,45 @@ bool WorldOwner::read_current(const Region& r, Box& out) const {
 }
 
 void WorldOwner::unload_unwatched() {
-  if (loaded_.size() <= options_.resident_chunks) return;
-  std::vector<std::pair<std::uint64_t, Vec3i>> drop;
-  for (const auto& [cp, l] : loaded_) {
-    if (busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp)) continue;
-    drop.emplace_back(l.used_tick, cp);
+  // Beyond resident_chunks, the least recently used chunks nobody holds at
+  // full resolution, with no edit queued and nothing uncommitted, keep only
+  // their mips: clients holding mips are served and refreshed from those,
+  // and the voxels come back from the store when needed. Edits are
+  // committed at the tick that applies them, so this loses nothing.
+  const std::size_t full = loaded_.size() - mips_only_;
+  if (full > options_.resident_chunks) {
+    std::vector<std::pair<std::uint64_t, Vec3i>> drop;
+    for (const auto& [cp, l] : loaded_) {
+      if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp) ||
+          loading_.count(cp) != 0)
+        continue;
+      drop.emplace_back(l.used_tick, cp);
+    }
+    const std::size_t excess = full - options_.resident_chunks;
+    if (drop.size() > excess) {
+      std::nth_element(drop.begin(), drop.begin() + static_cast<std::ptrdiff_t>(excess), drop.end(),
+                       [](const auto& a, const auto& b) { return a.first < b.first; });
+      drop.resize(excess);
+    }
+    for (const auto& [t, cp] : drop) {
+      Loaded& l = loaded_.at(cp);
+      l.published = l.current = ChunkVersion::mips_only(*l.current);
+      ++mips_only_;
+    }
+    counters_.chunks_unloaded.fetch_add(drop.size(), std::memory_order_relaxed);
   }
-  const std::size_t excess = loaded_.size() - options_.resident_chunks;
-  if (drop.size() > excess) {
-    std::nth_element(drop.begin(), drop.begin() + static_cast<std::ptrdiff_t>(excess), drop.end(),
-                     [](const auto& a, const auto& b) { return a.first < b.first; });
-    drop.resize(excess);
+  // Mips nobody holds are forgotten when there are very many.
+  if (mips_only_ > kMaxMipsOnly) {
+    for (auto it = loaded_.begin(); it != loaded_.end() && mips_only_ > kMaxMipsOnly / 2;) {
+      if (!it->second.current->has_voxels() && !interest_.watched(it->first) && loading_.count(it->first) == 0) {
+        it = loaded_.erase(it);
+        --mips_only_;
+      } else {
+        ++it;
+      }
+    }
   }
-  // Edits are committed at the tick that applies them, so dropping a chunk
-  // loses nothing: it comes back from the store (or the generator).
-  for (const auto& [t, cp] : drop) loaded_.erase(cp);
-  counters_.chunks_unloaded.fetch_add(drop.size(), std::memory_order_relaxed);
-  counters_.chunks_loaded.store(loaded_.size(), std::memory_order_relaxed);
+  counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
 }
 
 // --- edits ---------------------------------------------------------------------

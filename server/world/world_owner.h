@@ -142,13 +142,19 @@ class WorldOwner : private WorldView {
     ClientId id;
     bool full;
   };
+  // The chunks kept only as mips (ChunkVersion::mips_only) at most, beyond
+  // which those nobody holds are forgotten.
+  static constexpr std::size_t kMaxMipsOnly = 1 << 20;
 
   // WorldView
-  bool loaded(Vec3i chunk_pos) const override { return loaded_.count(chunk_pos) != 0; }
+  bool loaded(Vec3i chunk_pos) const override {
+    auto it = loaded_.find(chunk_pos);
+    return it != loaded_.end() && it->second.current->has_voxels();
+  }
   std::uint64_t revision(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->revision(); }
   Voxel get(Vec3i voxel) const override;
   const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
-  std::size_t loaded_count() const override { return loaded_.size(); }
+  std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
 
   void arm_tick();
   void on_tick();
@@ -156,8 +162,9 @@ class WorldOwner : private WorldView {
   void on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
                     const FileStatus& status);
   void fatal_storage(const std::string& why);
-  // Starts loading chunk_pos unless loaded or loading; true if loaded.
-  bool request(Vec3i chunk_pos);
+  // Starts loading chunk_pos unless loaded or loading; true if loaded with
+  // its voxels (or, with mips_enough, at least its mips).
+  bool request(Vec3i chunk_pos, bool mips_enough = false);
   void on_loaded(LoadedChunk c);
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void flush_grants();
@@ -180,7 +187,9 @@ class WorldOwner : private WorldView {
   std::chrono::steady_clock::time_point next_tick_;
 
   std::unordered_map<ClientId, Client> clients_;
+  // Chunks with their voxels, and chunks kept as mips only.
   std::unordered_map<Vec3i, Loaded, Vec3iHash> loaded_;
+  std::size_t mips_only_ = 0;
   std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
   std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over

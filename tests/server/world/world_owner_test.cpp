@@ -1,0 +1,195 @@
+// WorldOwner on its own (real Storage, no sockets): edits become versions
+// that are committed before anyone hears of them, changes reach holders
+// only, once per holder per tick, and history steps apply on the strand.
+#include "server/world/world_owner.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <condition_variable>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// A client that records what the world tells it.
+class Recorder : public WorldClient {
+ public:
+  void granted(std::vector<VersionPtr> versions) override {
+    std::lock_guard lock(m_);
+    for (auto& v : versions) grants_.push_back(std::move(v));
+    cv_.notify_all();
+  }
+  void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override {
+    std::lock_guard lock(m_);
+    ticks_.emplace_back(tick, std::move(changed));
+    cv_.notify_all();
+  }
+  void send(SharedFrame frame, SendClass) override {
+    std::lock_guard lock(m_);
+    frames_.push_back(std::move(frame));
+    cv_.notify_all();
+  }
+  void close(const std::string& reason) override {
+    std::lock_guard lock(m_);
+    closed_ = reason;
+    cv_.notify_all();
+  }
+  template <class Pred>
+  bool wait(Pred p) {
+    std::unique_lock lock(m_);
+    return cv_.wait_for(lock, 60s, [&] { return p(*this); });
+  }
+  std::size_t count_frames(wire::Body type) const {
+    std::size_t n = 0;
+    for (const auto& f : frames_)
+      if (flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes)->body_type() == type) ++n;
+    return n;
+  }
+
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::vector<VersionPtr> grants_;
+  std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
+  std::vector<SharedFrame> frames_;
+  std::string closed_;
+};
+
+class WorldOwnerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("terrane-world-owner-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    auto w = World::create(dir_.string(), default_world_meta());
+    ASSERT_TRUE(w.ok()) << w.error().message;
+    world_ = std::move(*w);
+    auto s = Storage::open(*world_, 1);
+    ASSERT_TRUE(s.ok());
+    storage_ = std::move(*s);
+    owner_ = std::make_unique<WorldOwner>(io_, *world_, *storage_, options_, counters_);
+    owner_->start();
+    thread_ = std::thread([this] { io_.run(); });
+  }
+  void TearDown() override {
+    owner_->stop();
+    work_.reset();
+    io_.stop();
+    thread_.join();
+    owner_.reset();
+    storage_.reset();
+    world_.reset();
+    fs::remove_all(dir_);
+  }
+  std::shared_ptr<Recorder> client(ClientId id, Vec3f at) {
+    auto r = std::make_shared<Recorder>();
+    std::string name = "client ";
+    name += std::to_string(id);
+    owner_->join(id, name, r);
+    owner_->moved(id, at, 96, 32);
+    return r;
+  }
+  static EditRequestMsg fill(std::uint32_t id, Region box, Material m) {
+    EditRequestMsg e;
+    e.edit_id = id;
+    e.kind = EditKind::kFillBox;
+    e.box = box;
+    e.material = m;
+    e.occupancy = 255;
+    return e;
+  }
+
+  fs::path dir_;
+  std::unique_ptr<World> world_;
+  std::unique_ptr<Storage> storage_;
+  ServerOptions options_;
+  ServerCounters counters_;
+  asio::io_context io_;
+  asio::executor_work_guard<asio::io_context::executor_type> work_{asio::make_work_guard(io_)};
+  std::unique_ptr<WorldOwner> owner_;
+  std::thread thread_;
+};
+
+TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
+  const Vec3i a{31, 0, 31}, b{31, 0, 32}, far{-40, 0, 5};
+  auto holder = client(1, {1000, 10, 1000});
+  auto other = client(2, {-1280, 10, 160});
+  owner_->want(1, {{a, true}, {b, true}});
+  owner_->want(2, {{far, false}});
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  ASSERT_TRUE(other->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  const std::uint64_t rev_a = holder->grants_[0]->pos() == a ? holder->grants_[0]->revision() : holder->grants_[1]->revision();
+  // One edit spanning both chunks: one tick, one call with both versions.
+  owner_->edit(1, fill(5, Region{{1020, 0, 1020}, {1030, 4, 1030}}, materials::kBrick));
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty(); }));
+  {
+    std::lock_guard lock(holder->m_);
+    ASSERT_EQ(holder->ticks_.size(), 1u);
+    const auto& changed = holder->ticks_.front().second;
+    ASSERT_EQ(changed.size(), 2u);
+    for (const VersionPtr& v : changed) {
+      EXPECT_TRUE(v->pos() == a || v->pos() == b);
+      EXPECT_TRUE(v->changed_units().any());
+      if (v->pos() == a) {
+        EXPECT_EQ(v->revision(), rev_a + 1);
+      }
+    }
+    EXPECT_EQ(holder->count_frames(wire::Body::EditAck), 1u);
+  }
+  // Committed before anyone heard: the store has it.
+  auto stored = world_->store().load_chunk(a);
+  ASSERT_TRUE(stored.ok());
+  ASSERT_TRUE(stored->has_value());
+  EXPECT_EQ((*stored)->revision, rev_a + 1);
+  EXPECT_EQ((*stored)->chunk.get({28, 1, 28}), solid(materials::kBrick));
+  {
+    std::lock_guard lock(other->m_);
+    EXPECT_TRUE(other->ticks_.empty()) << "not a holder of the changed chunks";
+  }
+  EXPECT_EQ(counters_.deliveries.load(), 2u);
+}
+
+TEST_F(WorldOwnerTest, AReleasedChunkIsNoLongerTold) {
+  const Vec3i a{31, 0, 31};
+  auto c = client(1, {1000, 10, 1000});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  owner_->release(1, {a});
+  owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kRock));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }));
+  std::lock_guard lock(c->m_);
+  EXPECT_TRUE(c->ticks_.empty());
+}
+
+TEST_F(WorldOwnerTest, UndoAndRedoApplyOnTheStrand) {
+  const Vec3i a{31, 0, 31};
+  auto c = client(1, {1000, 10, 1000});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  const Vec3i p{1001, 1, 1001};
+  Voxel before{};
+  owner_->inspect([&](const WorldView& v) { before = v.get(p); });
+  owner_->edit(1, fill(1, Region{p, p + Vec3i{1, 1, 1}}, materials::kSnow));
+  EditRequestMsg undo;
+  undo.edit_id = 2;
+  undo.kind = EditKind::kUndo;
+  owner_->edit(1, undo);
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 2; }));
+  owner_->inspect([&](const WorldView& v) { EXPECT_EQ(v.get(p), before); });
+  EditRequestMsg redo = undo;
+  redo.edit_id = 3;
+  redo.kind = EditKind::kRedo;
+  owner_->edit(1, redo);
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 3; }));
+  owner_->inspect([&](const WorldView& v) { EXPECT_EQ(v.get(p), solid(materials::kSnow)); });
+  owner_->edit(1, redo);  // nothing left to redo
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditReject) == 1; }));
+}
+
+}  // namespace
+}  // namespace terrane
