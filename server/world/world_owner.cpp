@@ -253,7 +253,9 @@ void WorldOwner::unload_unwatched() {
   if (full > options_.resident_chunks) {
     std::vector<std::pair<std::uint64_t, Vec3i>> drop;
     for (const auto& [cp, l] : loaded_) {
-      if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp) ||
+      // (An all-Air chunk has no voxels to drop.)
+      if (!l.current->has_voxels() || l.current->empty() || busy_.count(cp) != 0 || l.current != l.published ||
+          interest_.held_full(cp) ||
           loading_.count(cp) != 0)
         continue;
       drop.emplace_back(l.used_tick, cp);
