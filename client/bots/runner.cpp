@@ -100,7 +100,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   ctx.io = &pool.io();
   const auto t0 = Clock::now();
   const auto ramp = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.ramp_up_s));
-  const auto measure_from = t0 + ramp;
+  auto measure_from = t0 + ramp;
   FanoutTracker fanout(t0, measure_from);
   MismatchLog mismatches;
   ctx.fanout = &fanout;
@@ -206,6 +206,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
         joins_done = true;
         r.joined_s = std::chrono::duration<double>(now - t0).count();
         end_active = now + duration;
+        // Latency and steady-state figures count from here: joins under way
+        // are the ramp-up, reported as joined_s.
+        fanout.set_measure_from(now);
+        measure_from = now;
+        measured_snapshot = false;
       }
     }
     next_step = std::max(next_step + kStep, Clock::now());

@@ -39,6 +39,12 @@ double ms_between(Clock::time_point a, Clock::time_point b);
 class FanoutTracker {
  public:
   FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from);
+  // Moves the start of measurement (a run that waits for every bot's join
+  // measures from then on).
+  void set_measure_from(Clock::time_point t) {
+    std::lock_guard lock(mutex_);
+    measure_from_ = t;
+  }
 
   // Records the send time, calls send() (which returns the edit id, 0 when
   // the client refused), and registers the edit under that id. Holding the

@@ -600,7 +600,8 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   // Another connection holds the write lock past the store's busy timeout.
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_busy_timeout(db, 10000);  // a connection opening beside it may hold a lock for a moment
+  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
   EditRequestMsg e;
   e.edit_id = 3;
   e.kind = EditKind::kFillBox;

@@ -79,7 +79,8 @@ TEST_F(StorageTest, TicksQueuedBehindABusyWriterCommitTogether) {
   // waits, the ticks queued meanwhile go in one transaction after it.
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_busy_timeout(db, 10000);  // a connection opening beside it may hold a lock for a moment
+  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
   constexpr int kTicks = 6;
   std::vector<std::promise<FileStatus>> done(kTicks);
   std::vector<int> order;
@@ -108,7 +109,8 @@ TEST_F(StorageTest, TicksQueuedBehindABusyWriterCommitTogether) {
 TEST_F(StorageTest, AFailedCommitFailsEveryLaterTick) {
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_busy_timeout(db, 10000);  // a connection opening beside it may hold a lock for a moment
+  ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
   std::promise<FileStatus> first;
   storage_->commit({version({1, 0, 0}, 1, materials::kRock)}, [&](const FileStatus& st) { first.set_value(st); });
   const FileStatus st = first.get_future().get();  // after the store's busy timeout
