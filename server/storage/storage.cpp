@@ -39,20 +39,28 @@ void Storage::stop() {
   if (writer_.joinable()) writer_.join();
 }
 
-void Storage::load(Vec3i pos, LoadDone done) {
-  asio::post(loaders_, [this, pos, done = std::move(done)] {
+void Storage::load(Vec3i pos, LoadDone done, bool urgent) {
+  {
+    std::lock_guard lock(readers_mutex_);
+    (urgent ? urgent_loads_ : loads_).push_back(LoadJob{pos, std::move(done)});
+  }
+  asio::post(loaders_, [this] {
     std::unique_ptr<WorldStore> store;
+    LoadJob job;
     {
       std::lock_guard lock(readers_mutex_);
+      auto& q = !urgent_loads_.empty() ? urgent_loads_ : loads_;
+      job = std::move(q.front());
+      q.pop_front();
       store = std::move(readers_.back());
       readers_.pop_back();
     }
-    LoadedChunk c = load_now(*store, pos);
+    LoadedChunk c = load_now(*store, job.pos);
     {
       std::lock_guard lock(readers_mutex_);
       readers_.push_back(std::move(store));
     }
-    done(std::move(c));
+    job.done(std::move(c));
   });
 }
 

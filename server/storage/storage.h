@@ -70,7 +70,9 @@ class Storage {
   Storage(const Storage&) = delete;
   Storage& operator=(const Storage&) = delete;
 
-  void load(Vec3i pos, LoadDone done);
+  // urgent loads (an edit or a full-resolution request waits on them) go
+  // before the others (streaming a view's coarse chunks).
+  void load(Vec3i pos, LoadDone done, bool urgent = false);
   void commit(std::vector<VersionPtr> versions, CommitDone done);
   void stop();
 
@@ -91,10 +93,16 @@ class Storage {
   World& world_;
   StorageCounters counters_;
   asio::thread_pool loaders_;
-  // Loader connections, borrowed for one load at a time. Guarded by
-  // readers_mutex_: loads on the pool's threads share the free list.
+  // Loader connections, borrowed for one load at a time, and the queued
+  // loads (urgent first). Guarded by readers_mutex_: loads on the pool's
+  // threads share them. Each queued load posts one runner to the pool.
   std::mutex readers_mutex_;
   std::vector<std::unique_ptr<WorldStore>> readers_;
+  struct LoadJob {
+    Vec3i pos;
+    LoadDone done;
+  };
+  std::deque<LoadJob> urgent_loads_, loads_;
 
   std::unique_ptr<WorldStore> writer_store_;
   // The hand-off from the world strand to the writer thread. Guarded by

@@ -135,9 +135,9 @@ bool WorldOwner::request(Vec3i cp, bool mips_enough) {
     return true;
   if (loading_.count(cp) != 0) return false;
   loading_.emplace(cp, std::vector<Waiter>{});
-  storage_.load(cp, [this](LoadedChunk c) {
-    asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); });
-  });
+  storage_.load(
+      cp, [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
+      !mips_enough);
   return false;
 }
 
@@ -266,12 +266,10 @@ void WorldOwner::unload_unwatched() {
                        [](const auto& a, const auto& b) { return a.first < b.first; });
       drop.resize(excess);
     }
-    for (const auto& [t, cp] : drop) {
-      Loaded& l = loaded_.at(cp);
-      l.published = l.current = ChunkVersion::mips_only(*l.current);
-      ++mips_only_;
-    }
-    counters_.chunks_unloaded.fetch_add(drop.size(), std::memory_order_relaxed);
+    // Reduced a few per tick (lighten_some), so no tick waits for thousands.
+    std::sort(drop.begin(), drop.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    lighten_.clear();
+    for (const auto& [t, cp] : drop) lighten_.push_back(cp);
   }
   // Mips nobody holds are forgotten when there are very many.
   if (mips_only_ > kMaxMipsOnly) {
@@ -479,9 +477,9 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
         ++deliveries;
       }
     }
+    counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
     for (auto& [id, changed] : news)
       if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
-    counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
     counters_.fanout_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
   }
   if (drain_wanted_ && commits_pending_ == 0) {
@@ -560,7 +558,31 @@ void WorldOwner::arm_tick() {
   });
 }
 
+void WorldOwner::lighten_some() {
+  std::size_t n = 0;
+  while (!lighten_.empty() && n < kLightenPerTick) {
+    const Vec3i cp = lighten_.back();
+    lighten_.pop_back();
+    auto it = loaded_.find(cp);
+    if (it == loaded_.end()) continue;
+    Loaded& l = it->second;
+    // Checked again: it may have been asked for at full resolution or
+    // edited since the list was made.
+    if (!l.current->has_voxels() || l.current->empty() || busy_.count(cp) != 0 || l.current != l.published ||
+        interest_.held_full(cp) || loading_.count(cp) != 0)
+      continue;
+    l.published = l.current = ChunkVersion::mips_only(*l.current);
+    ++mips_only_;
+    ++n;
+  }
+  if (n > 0) {
+    counters_.chunks_unloaded.fetch_add(n, std::memory_order_relaxed);
+    counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+  }
+}
+
 void WorldOwner::on_tick() {
+  lighten_some();
   apply_edits();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
   if (options_.presence_hz > 0 && tick_ % std::max<std::uint64_t>(1, hz / options_.presence_hz) == 0) send_presence();

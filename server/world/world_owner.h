@@ -145,6 +145,9 @@ class WorldOwner : private WorldView {
   // The chunks kept only as mips (ChunkVersion::mips_only) at most, beyond
   // which those nobody holds are forgotten.
   static constexpr std::size_t kMaxMipsOnly = 1 << 20;
+  // Chunks reduced to their mips per tick at most (each costs encoding its
+  // three mip levels, tens of microseconds).
+  static constexpr std::size_t kLightenPerTick = 128;
 
   // WorldView
   bool loaded(Vec3i chunk_pos) const override {
@@ -176,6 +179,7 @@ class WorldOwner : private WorldView {
   void unbusy(const Region& r);
   void send_presence();
   void unload_unwatched();
+  void lighten_some();
 
   asio::io_context& io_;
   World& world_;
@@ -190,6 +194,7 @@ class WorldOwner : private WorldView {
   // Chunks with their voxels, and chunks kept as mips only.
   std::unordered_map<Vec3i, Loaded, Vec3iHash> loaded_;
   std::size_t mips_only_ = 0;
+  std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
   std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
   std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
