@@ -9,7 +9,7 @@
 #           --box -1024,-128,-1024,1024,256,1024).
 #   world  N bots at constant density, 1,000 over 3,072 x 3,072 voxels (the
 #          square scales with sqrt(N)), inside a 4,096 x 4,096 world so no
-#          view reaches ungenerated ground; ramp-up N/20 s, and the 60 s
+#          view reaches ungenerated ground; ramp-up N/5 s, and the 60 s
 #          start once every bot has joined (--wait-joined); world:
 #          worlds/world4k (terrane-world generate --world worlds/world4k
 #          --box -2048,-128,-2048,2048,256,2048).
@@ -36,7 +36,7 @@ if [ "$scenario" = crowd ]; then
 else
   world=${TERRANE_WORLD:-worlds/world4k}
   spread=$(awk -v n="$bots" 'BEGIN { printf "%d", 3072 * sqrt(n / 1000) }')
-  scenario_flags=(--spread "$spread" --ramp-up $(( (bots + 19) / 20 )) --wait-joined 600)
+  scenario_flags=(--spread "$spread" --ramp-up $(( (bots + 4) / 5 )) --wait-joined 600)
 fi
 [ -d "$world" ] || { echo "bots-scale.sh: no world at $world (see the comment at the top for how to make it)" >&2; exit 2; }
 

@@ -157,8 +157,8 @@ void Storage::writer_loop() {
       if (status) counters_.ticks_committed.fetch_add(batch.size(), std::memory_order_relaxed);
     }
     for (CommitJob& job : batch) {
-      job.done(status);
       in_flight_.fetch_sub(1, std::memory_order_relaxed);
+      job.done(status);
     }
   }
 }
