@@ -213,7 +213,8 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
     }
     if (!err.empty()) return err;
   }
-  if (o->ramp_up_s >= o->duration_s) return "--ramp-up: must be shorter than --duration";
+  if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
+    return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
 }
 
