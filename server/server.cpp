@@ -36,7 +36,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
         "cannot listen on " + options.bind_address + ":" + std::to_string(options.port) + ": " + ec.message(), {}};
   s->port_ = s->acceptor_.local_endpoint().port();
 
-  s->world_owner_ = std::make_unique<WorldOwner>(s->io_, *s->world_, *s->storage_, s->options_, s->counters_);
+  s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
   WelcomeMsg& w = s->welcome_.welcome;
   const WorldMeta& meta = s->world_->meta();
   w.server_epoch = meta.epoch;
@@ -78,7 +78,11 @@ Vec3f Server::find_spawn(World& world) {
 }
 
 Server::Server(const ServerOptions& options)
-    : options_(options), work_(asio::make_work_guard(io_)), acceptor_(io_), stats_timer_(io_) {
+    : options_(options),
+      work_(asio::make_work_guard(io_)),
+      world_work_(asio::make_work_guard(world_io_)),
+      acceptor_(io_),
+      stats_timer_(io_) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
   options_.session.traffic = &counters_.traffic;
@@ -104,6 +108,7 @@ void Server::start() {
     server_log().warn("authentication: none, anyone who can connect may play ({})",
                       is_loopback_address(options_.bind_address) ? "loopback only" : "--open");
   server_log().info("listening on {}:{}", options_.bind_address, port_);
+  world_thread_ = std::thread([this] { world_io_.run(); });
   world_owner_->start();
   do_accept();
   arm_stats();
@@ -136,6 +141,8 @@ void Server::stop() {
   work_.reset();
   for (auto& t : threads_) t.join();
   threads_.clear();
+  world_work_.reset();
+  if (world_thread_.joinable()) world_thread_.join();
   const ServerCounters& c = counters_;
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "

@@ -6,7 +6,7 @@
 // | server/net/         | each session's strand      | socket, framing, parsing, timeouts, limits   |
 // | server/replication/ | the same session strand    | the client's plan, what it holds, requests,  |
 // |                     |                            | budget, pushed hashes, per-tick frames       |
-// | server/world/       | the world strand           | chunk versions, edits, undo history, ticks,  |
+// | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
 // |                     |                            | who holds what (interest), presence          |
 // | server/storage/     | loader pool, writer thread | SQLite reads and generation; group commits   |
 //
@@ -88,6 +88,11 @@ class Server {
   std::unique_ptr<Storage> storage_;
   asio::io_context io_;
   asio::executor_work_guard<asio::io_context::executor_type> work_;
+  // The world strand runs on a thread of its own, so ticks keep their
+  // schedule however many session handlers wait for the io threads.
+  asio::io_context world_io_;
+  asio::executor_work_guard<asio::io_context::executor_type> world_work_;
+  std::thread world_thread_;
   asio::ip::tcp::acceptor acceptor_;
   asio::steady_timer stats_timer_;
   std::unique_ptr<WorldOwner> world_owner_;
