@@ -1,6 +1,7 @@
 #include "client/replica.h"
 
 #include <algorithm>
+#include <array>
 
 namespace terrane {
 
@@ -139,19 +140,41 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m) {
                                     [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
     if (!listed) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "update for a chunk without a revision"};
   }
+  // Each chunk's units are written in one pass over the box that holds
+  // them, so its rows are repacked and its mips updated once per batch, not
+  // once per unit. (A batch lists units chunk by chunk.)
   std::size_t applied = 0;
-  for (std::size_t i = 0; i < *n; ++i) {
-    const UnitUpdate& u = update_scratch_[i];
-    auto it = coverage_.find(u.chunk_pos);
-    if (it == coverage_.end() || it->second.state == CoverageState::kMip) continue;
-    const int idx = u.unit_index;
-    const Vec3i base = chunk_origin(u.chunk_pos) + Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
-    grid_.modify(Region::from_min_size(base, {kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize}),
-                 [&](Vec3i p, Voxel) {
-                   const Vec3i l = p - base;
-                   return u.voxels[static_cast<std::size_t>((l.y * kUpdateUnitSize + l.z) * kUpdateUnitSize + l.x)];
-                 });
-    ++applied;
+  std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index{};
+  for (std::size_t begin = 0; begin < *n;) {
+    const Vec3i cp = update_scratch_[begin].chunk_pos;
+    std::size_t end = begin;
+    while (end < *n && update_scratch_[end].chunk_pos == cp) ++end;
+    auto it = coverage_.find(cp);
+    if (it == coverage_.end() || it->second.state == CoverageState::kMip) {
+      begin = end;
+      continue;
+    }
+    by_index.fill(nullptr);
+    Vec3i lo{kChunkSize, kChunkSize, kChunkSize}, hi{0, 0, 0};
+    for (std::size_t i = begin; i < end; ++i) {
+      const UnitUpdate& u = update_scratch_[i];
+      by_index[u.unit_index] = &u;
+      const int idx = u.unit_index;
+      const Vec3i base = Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
+      lo = min3(lo, base);
+      hi = max3(hi, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
+      ++applied;
+    }
+    const Vec3i origin = chunk_origin(cp);
+    grid_.modify(Region{origin + lo, origin + hi}, [&](Vec3i p, Voxel old) {
+      const Vec3i l = p - origin;
+      const Vec3i uc{l.x / kUpdateUnitSize, l.y / kUpdateUnitSize, l.z / kUpdateUnitSize};
+      const UnitUpdate* u = by_index[static_cast<std::size_t>((uc.y * 8 + uc.z) * 8 + uc.x)];
+      if (u == nullptr) return old;
+      const Vec3i w = l - uc * kUpdateUnitSize;
+      return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
+    });
+    begin = end;
   }
   for (const auto& r : m.revisions) {
     auto it = coverage_.find(r.chunk_pos);
