@@ -533,11 +533,12 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       counters_.updates_dropped_by_fault.fetch_add(1, std::memory_order_relaxed);
     } else {
       std::vector<std::uint8_t> data;
+      UpdatePiece bad;  // outlives sorted, which may point at it
       if (faults_.corrupt_updates.load(std::memory_order_relaxed) > 0 &&
           faults_.corrupt_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
         // One voxel of the first unit made wrong.
         counters_.updates_corrupted_by_fault.fetch_add(1, std::memory_order_relaxed);
-        UpdatePiece bad = *sorted.front();
+        bad = *sorted.front();
         std::array<Voxel, kUpdateUnitVoxels> unit{};
         if (auto n = net_codec_decode_prefix(kUpdateUnitSize, bad.rest, unit); n) {
           Voxel& v0 = unit[0];
