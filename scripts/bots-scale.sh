@@ -51,7 +51,9 @@ cleanup() {
 }
 trap cleanup EXIT INT TERM
 
-./build/bin/terrane-world backup --world "$world" --to "$scratch/world" >/dev/null
+# A plain copy: nothing has the world open (terrane-world backup copies a
+# world a server is using, page by page, and takes minutes for this size).
+cp -r "$world" "$scratch/world"
 token_flags=()
 server_auth=()
 if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then

@@ -34,7 +34,6 @@ constexpr std::size_t kMaxOutstandingEdits = 8;
 constexpr Material kBuildMaterials[] = {materials::kBrick, materials::kConcrete, materials::kWoodPlanks,
                                         materials::kCobblestone, materials::kSandstone};
 
-// Same arithmetic as the server's interest management (server/streaming.cpp).
 float length(Vec3f v) { return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 
 }  // namespace

@@ -87,7 +87,7 @@ using SharedFrame = std::shared_ptr<const Frame>;
 // coverage, chunk and mip data, updates, region hashes) keep their order,
 // so an update never overtakes the chunk data it applies to and a region
 // hash reflects every update queued before it. Between near chunks and far
-// mips the streamer decides (server/streaming.cpp).
+// mips the replicator decides (server/replication/replicator.h).
 enum class SendClass : std::uint8_t { kData, kControl };
 
 class Session : public std::enable_shared_from_this<Session> {
