@@ -158,6 +158,19 @@ TEST_F(ScreenshotHeavyTest, DigChangesThePixelsWhereItHappened) {
   std::string error;
   ASSERT_TRUE(c.connect(&error)) << error;
   ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed; }, 20s));
+  // Edits are accepted only where the client holds the world at full
+  // resolution: wait for every chunk the sphere reads.
+  const Region reads{{px - 8, py - 8, pz - 8}, {px + 9, py + 7, pz + 9}};
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) {
+        bool full = true;
+        for_each_chunk_in(reads, [&](Vec3i cp) {
+          const ChunkCoverage* cov = v.replica.coverage(cp);
+          full = full && cov != nullptr && cov->state != CoverageState::kMip;
+        });
+        return full;
+      },
+      60s));
   const std::uint32_t id = c.fill_sphere({px + 0.5f, static_cast<float>(py) - 1.0f, pz + 0.5f}, 6.0f, kAir);
   ASSERT_NE(id, 0u);
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.edits.count(id) > 0; }, 20s));
