@@ -463,10 +463,10 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     fatal_storage(status.error().message);
   } else {
     const auto t0 = std::chrono::steady_clock::now();
-    for (const Ack& a : acks)
-      if (auto it = clients_.find(a.id); it != clients_.end())
-        it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
-    // Publish, then tell each holder once about all of its changed chunks.
+    // Publish, then tell each holder once about all of its changed chunks,
+    // then acknowledge: on a client's strand the news is handled before the
+    // ack is queued, so whatever the client asks after reading its ack (a
+    // region hash, a read) is answered from the new versions.
     std::unordered_map<ClientId, std::vector<VersionPtr>> news;
     std::uint64_t deliveries = 0;
     for (const VersionPtr& v : versions) {
@@ -480,6 +480,9 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
     for (auto& [id, changed] : news)
       if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
+    for (const Ack& a : acks)
+      if (auto it = clients_.find(a.id); it != clients_.end())
+        it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
     counters_.fanout_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
   }
   if (drain_wanted_ && commits_pending_ == 0) {

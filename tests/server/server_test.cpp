@@ -561,10 +561,9 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
     edit.material = materials::kBrick;
     edit.occupancy = static_cast<std::uint8_t>(100 + run);
     ASSERT_TRUE(p.send(build_edit_request(edit)));
-    ASSERT_TRUE(p.next_of(wire::Body::EditAck).has_value());
-    auto update = p.next_of(wire::Body::UpdateBatch);
-    ASSERT_TRUE(update.has_value());
-    auto batch = parse_update_batch(*msg(*update).body_as_UpdateBatch());
+    auto both = p.next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch);
+    ASSERT_TRUE(both.has_value());
+    auto batch = parse_update_batch(*msg(both->second).body_as_UpdateBatch());
     ASSERT_TRUE(batch.ok());
     ASSERT_EQ(batch->revisions.size(), 1u);
     EXPECT_EQ(batch->revisions[0].chunk_pos, cp);

@@ -79,6 +79,21 @@ class RawPeer {
     return std::nullopt;
   }
   // True if the server closes the connection (EOF or reset) before the deadline.
+  // Reads until a frame of each type has arrived, in either order (an
+  // EditAck and the UpdateBatch of its tick travel in different priority
+  // classes); the first of each, or nullopt if the stream ends first.
+  std::optional<std::pair<Frame, Frame>> next_of_both(wire::Body a, wire::Body b) {
+    std::optional<Frame> fa, fb;
+    while (!fa || !fb) {
+      auto f = next();
+      if (!f) return std::nullopt;
+      auto m = verify_message(*f);
+      if (!m) return std::nullopt;
+      if ((*m)->body_type() == a && !fa) fa = std::move(*f);
+      else if ((*m)->body_type() == b && !fb) fb = std::move(*f);
+    }
+    return std::make_pair(std::move(*fa), std::move(*fb));
+  }
   bool closed_by_server() {
     while (next()) {
     }

@@ -126,7 +126,7 @@ TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
   const std::uint64_t rev_a = holder->grants_[0]->pos() == a ? holder->grants_[0]->revision() : holder->grants_[1]->revision();
   // One edit spanning both chunks: one tick, one call with both versions.
   owner_->edit(1, fill(5, Region{{1020, 0, 1020}, {1030, 4, 1030}}, materials::kBrick));
-  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty(); }));
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty() && r.count_frames(wire::Body::EditAck) == 1; }));
   {
     std::lock_guard lock(holder->m_);
     ASSERT_EQ(holder->ticks_.size(), 1u);
