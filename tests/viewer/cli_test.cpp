@@ -6,6 +6,11 @@
 #include <cstdio>
 #include <string>
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "tests/support/server_process.h"
 
 namespace {
 
@@ -27,7 +32,8 @@ ViewRun run(const std::string& args) {
 TEST(ViewerCli, HelpListsTheHeadlessOptions) {
   const ViewRun r = run("--help");
   EXPECT_EQ(r.code, 0);
-  for (const char* flag : {"--connect", "--screenshot", "--camera", "--wait-full-res", "--size", "--mips-only", "--enhance"})
+  for (const char* flag :
+       {"--connect", "--token", "--screenshot", "--camera", "--wait-full-res", "--size", "--mips-only", "--enhance"})
     EXPECT_NE(r.output.find(flag), std::string::npos) << flag;
 }
 
@@ -53,6 +59,32 @@ TEST(ViewerCli, NoServerIsAClearError) {
   const ViewRun r = run("--connect 127.0.0.1:1 --screenshot /dev/null --timeout 5");
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("cannot connect to 127.0.0.1:1"), std::string::npos) << r.output;
+}
+
+TEST(ViewerCli, TheTokenReachesTheServer) {
+  // A server that wants a token: the viewer is refused without it and with
+  // a wrong one, and says so (it connects before it loads any GL driver),
+  // and joins with the right one.
+  const auto dir = std::filesystem::temp_directory_path() / ("terrane-view-token-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  {
+    terrane::testing_support::ServerProcess server(dir.string(), {"--auth-token", "sesame"});
+    ASSERT_NE(server.port(), 0) << server.output();
+    const std::string connect = "--connect 127.0.0.1:" + std::to_string(server.port()) + " --screenshot /dev/null --timeout 20";
+    for (const std::string token : {"", " --token guess"}) {
+      const ViewRun r = run(connect + token);
+      EXPECT_EQ(r.code, 1) << r.output;
+      EXPECT_NE(r.output.find("authentication failed"), std::string::npos) << token << "\n" << r.output;
+    }
+    EXPECT_TRUE(server.wait_for_output("authentication failed for 'terrane-view'", std::chrono::seconds(20)))
+        << server.output();
+    // With the token it joins (what it does after that, headless GL with a
+    // one-second timeout, does not matter here).
+    (void)run("--connect 127.0.0.1:" + std::to_string(server.port()) + " --screenshot /dev/null --timeout 1 --token sesame");
+    EXPECT_TRUE(server.wait_for_output("joined as 'terrane-view'", std::chrono::seconds(20))) << server.output();
+    EXPECT_EQ(server.stop(), 0);
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -22,6 +22,8 @@ constexpr const char* kUsage = R"(usage: terrane-view --connect HOST:PORT [optio
 Renders a Terrane world streamed from a terrane-server.
 
   --connect HOST:PORT      server to join (required)
+  --token T                auth token (the server's --auth-token, or this
+                           viewer's name "terrane-view" in its tokens file)
   --screenshot FILE.png    render one picture headless (EGL, no display) and exit
   --camera X,Y,Z,YAW,PITCH camera position (voxels) and angles (degrees; yaw 0
                            looks towards -z, 90 towards +x; pitch up positive);
@@ -83,7 +85,7 @@ int usage_error(const std::string& message) {
 }  // namespace
 
 int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
-  CommandLine cl({"connect", "screenshot", "camera", "size", "view-distance", "full-res-radius", "timeout", "msaa"},
+  CommandLine cl({"connect", "token", "screenshot", "camera", "size", "view-distance", "full-res-radius", "timeout", "msaa"},
                  {"help", "wait-full-res", "mips-only", "sky-key", "overlay", "lod-tint", "enhance"});
   if (std::string err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) {
@@ -101,6 +103,7 @@ int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
   o.host = c.substr(0, colon);
   o.port = static_cast<std::uint16_t>(port);
   o.screenshot = cl.get("screenshot");
+  if (cl.has("token")) o.token = cl.get("token");
   if (cl.has("camera")) {
     float v[5];
     if (!parse_floats(cl.get("camera"), v, 5))
@@ -161,6 +164,7 @@ bool ViewerSession::start(std::string* error, double timeout_s) {
   co.host = options_.host;
   co.port = options_.port;
   co.name = "terrane-view";
+  co.auth_token = options_.token;
   co.state.view_distance = options_.view_distance;
   co.state.full_res_radius = options_.mips_only ? 1 : options_.full_res_radius;
   if (options_.camera) {

@@ -14,6 +14,7 @@ namespace terrane::view {
 struct ViewerOptions {
   std::string host = "127.0.0.1";
   std::uint16_t port = 0;
+  std::string token;                      // --token: auth token for the server
   std::string screenshot;                 // headless when set
   std::optional<Camera> camera;           // --camera; else looking at the spawn
   bool wait_full_res = false;
