@@ -174,6 +174,22 @@ void Replicator::on_edit(EditRequestMsg edit) {
     return;
   }
   if (is_history_edit(edit.kind)) return world_.edit(id_, std::move(edit));
+  // Only materials the world defines (the Welcome's table).
+  const std::size_t defined = welcome_.welcome.materials.size();
+  Material unknown = kAir;
+  if ((edit.kind == EditKind::kFillBox || edit.kind == EditKind::kFillSphere || edit.kind == EditKind::kPaint) &&
+      edit.material >= defined)
+    unknown = edit.material;
+  if (edit.kind == EditKind::kWriteBox)
+    for (const Voxel v : edit.voxels)
+      if (v.material >= defined) {
+        unknown = v.material;
+        break;
+      }
+  if (unknown != kAir)
+    return world_.refuse(id_, std::move(edit),
+                         "unknown material " + std::to_string(unknown) + ": this world defines " +
+                             std::to_string(defined) + " (0.." + std::to_string(defined - 1) + ")");
   if (edit.bounds().volume() > options_.max_edit_voxels)
     return world_.refuse(id_, std::move(edit), "edit larger than " + std::to_string(options_.max_edit_voxels) + " voxels");
   const Region r = welcome_.bounds.clamp(edit.reads());

@@ -205,6 +205,18 @@ TEST_F(LimitsTest, GarbageAndOutOfRangeValuesAreRefused) {
   auto rej = painter->next_of(wire::Body::EditReject);
   ASSERT_TRUE(rej.has_value());
   EXPECT_NE(parse_edit_reject(*msg(*rej).body_as_EditReject())->reason.find("material"), std::string::npos);
+  // A material the wire allows (< 64) but this world does not define.
+  EditRequestMsg e;
+  e.edit_id = 6;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1001, 10, 1001}, {1002, 11, 1002}};
+  e.material = static_cast<Material>(default_material_names().size());
+  e.occupancy = 255;
+  ASSERT_TRUE(painter->send(build_edit_request(e)));
+  rej = painter->next_of(wire::Body::EditReject);
+  ASSERT_TRUE(rej.has_value());
+  EXPECT_NE(parse_edit_reject(*msg(*rej).body_as_EditReject())->reason.find("unknown material"), std::string::npos)
+      << parse_edit_reject(*msg(*rej).body_as_EditReject())->reason;
   expect_served(*good);
 }
 
