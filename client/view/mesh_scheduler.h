@@ -85,7 +85,10 @@ class MeshScheduler {
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   bool stop_ = false;
-  bool dirty_ = true;
+  // Nothing to plan until told where (set_view, set_params or mark_dirty):
+  // planning for a default camera first meshed chunks of a plan about to
+  // be replaced.
+  bool dirty_ = false;
   bool busy_ = false;
   LodParams params_;
   Vec3f camera_;
