@@ -85,8 +85,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void send(SharedFrame frame, SendClass cls) override;
   void close(const std::string& reason) override;
 
-  ClientId id() const { return id_; }
-
  private:
   enum class Intent : std::uint8_t { kCoarse, kRefine, kClaim };
   struct Request {

@@ -20,14 +20,39 @@ ViewTable::ViewTable(std::int32_t view_distance, std::int32_t full_res_radius)
   }
 }
 
+namespace {
+
+struct SharedTables {
+  std::mutex mutex;
+  std::map<std::pair<std::int32_t, std::int32_t>, std::shared_ptr<const ViewTable>> tables;
+};
+
+SharedTables& shared_tables() {
+  static SharedTables t;
+  return t;
+}
+
+}  // namespace
+
+std::size_t ViewTable::shared_count() {
+  auto& [mutex, tables] = shared_tables();
+  std::lock_guard lock(mutex);
+  return tables.size();
+}
+
 std::shared_ptr<const ViewTable> ViewTable::get(std::int32_t view_distance, std::int32_t full_res_radius) {
   // A process-wide cache: clients mostly ask for the same few radii. Guarded
   // by a mutex: replicators on any io thread look tables up on (re)plans.
-  static std::mutex mutex;
-  static std::map<std::pair<std::int32_t, std::int32_t>, std::shared_ptr<const ViewTable>> tables;
+  // The radii come from clients, so the cache is bounded: when full, the
+  // tables no replicator uses any more go, and past that a table is made
+  // for its caller alone.
+  auto& [mutex, tables] = shared_tables();
   std::lock_guard lock(mutex);
-  auto& t = tables[{view_distance, full_res_radius}];
-  if (!t) t = std::make_shared<const ViewTable>(view_distance, full_res_radius);
+  const std::pair key{view_distance, full_res_radius};
+  if (auto it = tables.find(key); it != tables.end()) return it->second;
+  if (tables.size() >= kMaxShared) std::erase_if(tables, [](const auto& e) { return e.second.use_count() == 1; });
+  auto t = std::make_shared<const ViewTable>(view_distance, full_res_radius);
+  if (tables.size() < kMaxShared) tables.emplace(key, t);
   return t;
 }
 

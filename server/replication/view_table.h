@@ -26,8 +26,11 @@ class ViewTable {
  public:
   ViewTable(std::int32_t view_distance, std::int32_t full_res_radius);
 
-  // Shared tables: one per (view, full) pair for the whole process.
+  // Shared tables: one per (view, full) pair for the whole process, at most
+  // kMaxShared of them kept.
   static std::shared_ptr<const ViewTable> get(std::int32_t view_distance, std::int32_t full_res_radius);
+  static constexpr std::size_t kMaxShared = 64;
+  static std::size_t shared_count();
 
   std::int32_t view_distance() const { return view_; }
   std::int32_t full_res_radius() const { return full_; }

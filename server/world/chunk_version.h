@@ -43,7 +43,6 @@ class ChunkVersion {
   Vec3i pos() const { return pos_; }
   std::uint64_t revision() const { return revision_; }
   const Chunk* chunk() const { return chunk_.get(); }
-  const std::shared_ptr<const Chunk>& shared_chunk() const { return chunk_; }
   bool empty() const { return empty_; }
   // False for a mips_only version.
   bool has_voxels() const { return has_voxels_; }

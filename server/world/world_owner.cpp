@@ -22,8 +22,7 @@ std::uint64_t micros_since(std::chrono::steady_clock::time_point t0) {
 
 WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
                        ServerCounters& counters)
-    : io_(io),
-      world_(world),
+    : world_(world),
       storage_(storage),
       options_(options),
       counters_(counters),

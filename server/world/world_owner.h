@@ -112,7 +112,6 @@ class WorldOwner : private WorldView {
   // Runs fn on the strand and waits (tests, tools).
   void inspect(const std::function<void(const WorldView&)>& fn);
   bool storage_failed() const { return storage_failed_flag_.load(); }
-  std::uint64_t epoch() const { return world_.meta().epoch; }
 
  private:
   struct Loaded {
@@ -181,7 +180,6 @@ class WorldOwner : private WorldView {
   void unload_unwatched();
   void lighten_some();
 
-  asio::io_context& io_;
   World& world_;
   Storage& storage_;
   const ServerOptions& options_;

@@ -65,5 +65,12 @@ TEST(ViewTable, TablesAreSharedPerRadii) {
   EXPECT_NE(ViewTable::get(256, 64).get(), ViewTable::get(256, 32).get());
 }
 
+TEST(ViewTable, RadiiClientsChooseCannotGrowTheSharedTablesWithoutBound) {
+  const auto kept = ViewTable::get(96, 32);  // in use by "a replicator"
+  for (std::int32_t r = 1; r <= 300; ++r) (void)ViewTable::get(64, r);
+  EXPECT_LE(ViewTable::shared_count(), ViewTable::kMaxShared);
+  EXPECT_EQ(ViewTable::get(96, 32).get(), kept.get()) << "a table in use stays shared";
+}
+
 }  // namespace
 }  // namespace terrane

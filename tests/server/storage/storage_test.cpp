@@ -10,6 +10,8 @@
 #include <filesystem>
 #include <future>
 
+#include "tests/support/scratch_dir.h"
+
 namespace terrane {
 namespace {
 
@@ -18,9 +20,7 @@ namespace fs = std::filesystem;
 class StorageTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("terrane-storage-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
+    dir_ = testing_support::scratch_dir("terrane-storage");
     auto w = World::create(dir_.string(), default_world_meta());
     ASSERT_TRUE(w.ok()) << w.error().message;
     world_ = std::move(*w);

@@ -11,6 +11,8 @@
 #include <mutex>
 #include <thread>
 
+#include "tests/support/scratch_dir.h"
+
 namespace terrane {
 namespace {
 
@@ -63,9 +65,7 @@ class Recorder : public WorldClient {
 class WorldOwnerTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("terrane-world-owner-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
+    dir_ = testing_support::scratch_dir("terrane-world-owner");
     auto w = World::create(dir_.string(), default_world_meta());
     ASSERT_TRUE(w.ok()) << w.error().message;
     world_ = std::move(*w);
