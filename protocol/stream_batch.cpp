@@ -80,14 +80,19 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
     if (!kind) return kind.error();
     if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kReleased))
       return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: unknown record kind"};
+    // A delta is bounded before it is added: the previous position is within
+    // +-lim, so any delta beyond 2*lim lands out of range (and an unchecked
+    // one could overflow the sum).
+    constexpr std::int64_t lim = kMaxWireCoordinate / kChunkSize;
     std::int64_t c[3];
     for (auto& v : c) {
       auto d = r.varint();
       if (!d) return d.error();
       v = unzigzag(*d);
+      if (v > 2 * lim || v < -2 * lim)
+        return DecodeError{DecodeErrorCode::kInvalidValue, r.pos(), "stream batch: chunk position out of range"};
     }
     const std::int64_t x = prev.x + c[0], y = prev.y + c[1], z = prev.z + c[2];
-    constexpr std::int64_t lim = kMaxWireCoordinate / kChunkSize;
     if (std::max({std::abs(x), std::abs(y), std::abs(z)}) > lim)
       return DecodeError{DecodeErrorCode::kInvalidValue, r.pos(), "stream batch: chunk position out of range"};
     auto rev = r.varint();

@@ -115,6 +115,12 @@ TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
   // A position beyond the wire range.
   std::vector<std::uint8_t> far = {0, 0xFF, 0xFF, 0xFF, 0x7F, 0, 0, 0};
   EXPECT_EQ(count(far, &n).error().code, DecodeErrorCode::kInvalidValue);
+  // A record in range followed by a delta near INT64_MIN: out of range, and
+  // no overflow computing it (UBSan runs this).
+  std::vector<std::uint8_t> huge = {5, 1, 0, 0, 0};  // a released record at x = -1
+  huge.insert(huge.end(), {5, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x01, 0, 0, 0});
+  EXPECT_EQ(count(huge, &n).error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(n, 1);
   // An endless varint.
   std::vector<std::uint8_t> endless(20, 0xFF);
   endless[0] = 0;
