@@ -13,6 +13,8 @@ packages=(
   # libraries (see README "Dependencies")
   libasio-dev liblz4-dev flatbuffers-compiler libflatbuffers-dev libspdlog-dev
   libgtest-dev libgmock-dev libbenchmark-dev libsqlite3-dev zlib1g-dev
+  # HTTP for the server's /metrics and /health (and the bots' scrape of them)
+  libcpp-httplib-dev
   # benchmark-only comparison codec
   libzstd-dev
   # world files and reports
@@ -22,6 +24,9 @@ packages=(
   libglfw3-dev libepoxy-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
   # validates docker/docker-compose.yml in the tests (no Docker engine needed)
   docker-compose
+  # promtool checks the metrics endpoint in the tests; prometheus scrapes it
+  # in the operations test (started by the test itself, on loopback)
+  prometheus
 )
 
 missing=()

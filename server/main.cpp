@@ -34,6 +34,9 @@ constexpr const char* kHelp =
     "  --bind ADDR                 address to listen on (default 127.0.0.1)\n"
     "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
     "                              'listening on ADDR:PORT'\n"
+    "  --metrics ADDR:PORT         serve GET /metrics (Prometheus text format) and GET /health\n"
+    "                              (200 while ticking and storing, else 503) over HTTP here;\n"
+    "                              port 0 picks a free one (default: off)\n"
     "  --tick-hz N                 simulation ticks per second (default 20)\n"
     "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
@@ -88,7 +91,7 @@ int usage_error(const std::string& message) {
 }
 
 int run(int argc, char** argv) {
-  CommandLine cl({"world", "bind", "port", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
+  CommandLine cl({"world", "bind", "port", "metrics", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
@@ -106,6 +109,9 @@ int run(int argc, char** argv) {
   o.world_dir = cl.get("world");
   o.bind_address = cl.get("bind", o.bind_address);
   o.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
+  o.metrics_address = cl.get("metrics");
+  if (cl.has("metrics"))
+    if (auto hp = parse_host_port(o.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
   o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", 20, 1, 1000, &err));
   o.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
   o.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));

@@ -1,5 +1,5 @@
-// The server's options and counters, shared read-only (options) or as
-// atomics (counters) by every room: net, world, storage and replication.
+// The server's options, shared read-only by every room: net, world,
+// storage and replication (their counters: server/counters.h).
 #pragma once
 
 #include <atomic>
@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "protocol/messages.h"
+#include "server/counters.h"
 #include "server/net/session.h"
 
 namespace terrane {
@@ -17,6 +18,9 @@ struct ServerOptions {
   std::string world_dir;                // created with default_world_meta() when missing
   std::string bind_address = "127.0.0.1";
   std::uint16_t port = 0;               // 0: any free port (see port())
+  // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =
+  // none; port 0 picks a free one (see metrics_port()).
+  std::string metrics_address;
   std::uint32_t tick_hz = 20;
   std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
   std::int32_t max_full_res_radius = 256;  // voxels
@@ -74,40 +78,5 @@ struct ServerOptions {
 // Movement allowed beyond max_speed * elapsed time between two positions
 // (network jitter bunches ClientState messages together).
 inline constexpr double kSpeedSlackVoxels = 48;
-
-struct ServerCounters {
-  std::atomic<std::uint64_t> sessions_accepted{0};
-  std::atomic<std::uint64_t> sessions_closed{0};
-  std::atomic<std::uint64_t> clients{0};         // welcomed and connected now
-  std::atomic<std::uint64_t> ticks{0};
-  std::atomic<std::uint64_t> edits_applied{0};
-  std::atomic<std::uint64_t> edits_rejected{0};
-  std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
-  std::atomic<std::uint64_t> mips_sent{0};
-  std::atomic<std::uint64_t> empties_sent{0};
-  std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
-  std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not
-  std::atomic<std::uint64_t> update_batches_sent{0};
-  std::atomic<std::uint64_t> update_units_sent{0};
-  std::atomic<std::uint64_t> updates_dropped_by_fault{0};
-  std::atomic<std::uint64_t> updates_corrupted_by_fault{0};
-  std::atomic<std::uint64_t> stream_bytes{0};    // StreamBatch bytes queued
-  std::atomic<std::uint64_t> presence_sent{0};
-  std::atomic<std::uint64_t> hashes_pushed{0};
-  std::atomic<std::uint64_t> chunks_loaded{0};   // resident now
-  std::atomic<std::uint64_t> chunks_unloaded{0};
-  std::atomic<std::uint64_t> limit_violations{0};
-  std::atomic<std::uint64_t> auth_failures{0};
-  std::atomic<std::uint64_t> chunks_resumed{0};  // claimed by a resuming client, still current, not resent
-  // Per-tick cost split (microseconds summed over ticks, world strand):
-  // applying edits and publishing versions, and fanning committed changes
-  // out to their holders. Commit time is the storage's (StorageCounters).
-  std::atomic<std::uint64_t> apply_us{0};
-  std::atomic<std::uint64_t> fanout_us{0};
-  std::atomic<std::uint64_t> deliveries{0};      // (changed chunk, holder) pairs fanned out
-  std::atomic<std::uint64_t> tick_frames{0};     // frames the replicators sent for ticks' news
-  std::atomic<std::uint64_t> ticks_late{0};      // ticks that started more than a period late
-  TrafficCounters traffic;
-};
 
 }  // namespace terrane

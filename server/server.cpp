@@ -49,6 +49,15 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   w.max_frame_bytes = static_cast<std::uint32_t>(s->options_.session.max_frame_bytes);
   w.tick_hz = s->options_.tick_hz;
   s->welcome_.bounds = meta.bounds;
+  if (!options.metrics_address.empty()) {
+    auto hp = parse_host_port(options.metrics_address);
+    if (!hp) return FileError{"--metrics: " + hp.error().message, {}};
+    Server* self = s.get();
+    auto http = HttpEndpoint::bind(
+        hp->first, hp->second, [self] { return self->metrics_text(); }, [self] { return self->health(); });
+    if (!http) return http.error();
+    s->metrics_ = std::move(*http);
+  }
   return s;
 }
 
@@ -85,7 +94,7 @@ Server::Server(const ServerOptions& options)
       stats_timer_(io_) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
-  options_.session.traffic = &counters_.traffic;
+  options_.session.counters = &counters_;
   faults_.drop_updates = options_.fault_drop_updates;
   faults_.corrupt_updates = options_.fault_corrupt_updates;
 }
@@ -110,6 +119,11 @@ void Server::start() {
   server_log().info("listening on {}:{}", options_.bind_address, port_);
   world_thread_ = std::thread([this] { world_io_.run(); });
   world_owner_->start();
+  if (metrics_) {
+    metrics_->start();
+    server_log().info("metrics on http://{}:{}/metrics", parse_host_port(options_.metrics_address)->first,
+                      metrics_->port());
+  }
   do_accept();
   arm_stats();
   for (int i = 0; i < std::max(1, options_.io_threads); ++i) threads_.emplace_back([this] { io_.run(); });
@@ -135,9 +149,10 @@ void Server::stop() {
   {
     std::lock_guard lock(sessions_mutex_);
     for (auto& [id, w] : sessions_)
-      if (auto s = w.lock()) s->close("server shutting down");
+      if (auto s = w.lock()) s->close(CloseReason::kShutdown, "server shutting down");
   }
   storage_->stop();
+  if (metrics_) metrics_->stop();
   work_.reset();
   for (auto& t : threads_) t.join();
   threads_.clear();
@@ -149,16 +164,26 @@ void Server::stop() {
       "chunks, {} mips, {} empty ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} skipped: bytes "
       "unchanged); world saved",
       c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
-      c.edits_rejected.load(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
+      c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
       c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
   std::string by_type;
-  for (std::size_t t = 1; t < TrafficCounters::kTypes; ++t) {
-    const std::uint64_t f = c.traffic.sent_frames[t].load(), r = c.traffic.received_frames[t].load();
+  for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {
+    const std::uint64_t f = c.net.sent_frames[t].load(), r = c.net.received_frames[t].load();
     if (f == 0 && r == 0) continue;
     by_type += fmt::format(" {} out {} / {} B, in {} / {} B;", wire::EnumNameBody(static_cast<wire::Body>(t)), f,
-                           c.traffic.sent_bytes[t].load(), r, c.traffic.received_bytes[t].load());
+                           c.net.sent_bytes[t].load(), r, c.net.received_bytes[t].load());
   }
   if (!by_type.empty()) server_log().info("messages by type (frames / bytes):{}", by_type);
+}
+
+std::string Server::metrics_text() const {
+  return render_metrics(MetricsSources{counters_, storage_->counters(), encode_counters(), storage_failed(),
+                                       read_process_stats()});
+}
+
+Health Server::health() const {
+  if (stopping_) return {false, "shutting down"};
+  return check_health(counters_, storage_failed(), options_.tick_hz, std::chrono::steady_clock::now());
 }
 
 void Server::inspect(const std::function<void(const WorldView&)>& fn) { world_owner_->inspect(fn); }
@@ -193,7 +218,7 @@ void Server::do_accept() {
       full = sessions_.size() > options_.max_clients;
     }
     session->start();
-    if (full) session->close("server full");
+    if (full) session->close(CloseReason::kServerFull, "server full");
     do_accept();
   });
 }
@@ -211,9 +236,9 @@ void Server::log_stats() {
   const auto now = std::chrono::steady_clock::now();
   const double dt = std::max(1e-3, std::chrono::duration<double>(now - stats_at_).count());
   std::uint64_t sent = 0, received = 0;
-  for (std::size_t t = 0; t < TrafficCounters::kTypes; ++t) {
-    sent += counters_.traffic.sent_bytes[t].load(std::memory_order_relaxed);
-    received += counters_.traffic.received_bytes[t].load(std::memory_order_relaxed);
+  for (std::size_t t = 0; t < NetCounters::kTypes; ++t) {
+    sent += counters_.net.sent_bytes[t].load(std::memory_order_relaxed);
+    received += counters_.net.received_bytes[t].load(std::memory_order_relaxed);
   }
   const std::uint64_t edits = counters_.edits_applied.load(std::memory_order_relaxed);
   server_log().info("{} clients; {:.1f} edits/s; out {:.2f} MB/s, in {:.3f} MB/s; {} chunks loaded",

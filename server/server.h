@@ -9,6 +9,7 @@
 // | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
 // |                     |                            | who holds what (interest), presence          |
 // | server/storage/     | loader pool, writer thread | SQLite reads and generation; group commits   |
+// | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
 //
 // Between them only immutable data travels: chunk versions (server/world/
 // chunk_version.h) whose encodings, update units, hash and blob are made
@@ -40,6 +41,7 @@
 #include <vector>
 
 #include "common/world.h"
+#include "server/ops/http_endpoint.h"
 #include "server/options.h"
 #include "server/replication/replicator.h"
 #include "server/storage/storage.h"
@@ -61,6 +63,11 @@ class Server {
   void stop();
 
   std::uint16_t port() const { return port_; }
+  // The metrics endpoint's port (0 without --metrics).
+  std::uint16_t metrics_port() const { return metrics_ ? metrics_->port() : 0; }
+  // Prometheus text (what /metrics serves) and the health rule (/health).
+  std::string metrics_text() const;
+  Health health() const;
   const std::string& address() const { return options_.bind_address; }
   const ServerCounters& counters() const { return counters_; }
   const StorageCounters& storage_counters() const { return storage_->counters(); }
@@ -96,6 +103,7 @@ class Server {
   asio::ip::tcp::acceptor acceptor_;
   asio::steady_timer stats_timer_;
   std::unique_ptr<WorldOwner> world_owner_;
+  std::unique_ptr<HttpEndpoint> metrics_;
   WelcomeTemplate welcome_;
   std::vector<std::thread> threads_;
   std::uint16_t port_ = 0;

@@ -49,8 +49,9 @@ void Session::send(SharedFrame frame, SendClass cls) {
   });
 }
 
-void Session::close(std::string reason) {
-  asio::dispatch(socket_.get_executor(), [self = shared_from_this(), r = std::move(reason)] { self->begin_close(r); });
+void Session::close(CloseReason why, std::string text) {
+  asio::dispatch(socket_.get_executor(),
+                 [self = shared_from_this(), why, t = std::move(text)] { self->begin_close(why, t); });
 }
 
 void Session::arm_watchdog() {
@@ -62,18 +63,21 @@ void Session::arm_watchdog() {
       case State::kReading: {
         const auto limit = self->welcomed_ ? self->limits_.idle_timeout : self->limits_.handshake_timeout;
         if (now - self->last_read_ > limit) {
-          self->begin_close(self->welcomed_ ? "idle timeout" : "handshake timeout");
+          if (self->welcomed_)
+            self->begin_close(CloseReason::kIdleTimeout, "idle timeout");
+          else
+            self->begin_close(CloseReason::kHandshakeTimeout, "handshake timeout");
         } else if (self->partial_frame_ && now - self->frame_started_ > self->limits_.frame_timeout) {
           violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
                             "): frame not completed in time; dropping");
-          self->begin_close("frame not completed within " + std::to_string(self->limits_.frame_timeout.count()) +
+          self->begin_close(CloseReason::kFrameTimeout, "frame not completed within " + std::to_string(self->limits_.frame_timeout.count()) +
                             " ms");
         } else if (self->writing_ && now - self->write_started_ > self->limits_.write_timeout) {
           // The client stopped reading. Its reason goes after the write in
           // flight, in case it resumes within the linger time.
           server_log().warn("session {} ({}): too slow, no data taken for {} ms; dropping", self->id_, self->remote_,
                             self->limits_.write_timeout.count());
-          self->begin_close("too slow: no data taken for " + std::to_string(self->limits_.write_timeout.count()) +
+          self->begin_close(CloseReason::kTooSlow, "too slow: no data taken for " + std::to_string(self->limits_.write_timeout.count()) +
                             " ms");
         }
         break;
@@ -97,7 +101,10 @@ void Session::do_read() {
       asio::buffer(read_buf_), [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
         if (self->state_ == State::kClosed) return;
         if (ec) {
-          if (self->state_ == State::kReading) self->close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
+          if (self->state_ == State::kReading) {
+            self->close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
+            self->close_why_ = ec == asio::error::eof ? CloseReason::kPeerClosed : CloseReason::kSocketError;
+          }
           self->finish_close();
           return;
         }
@@ -109,7 +116,7 @@ void Session::do_read() {
         if (!self->inbound_.take(static_cast<double>(n), self->last_read_)) {
           violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
                             "): inbound rate limit; dropping");
-          self->begin_close("inbound rate limit: over " +
+          self->begin_close(CloseReason::kInboundRate, "inbound rate limit: over " +
                             std::to_string(static_cast<long long>(self->limits_.inbound_bytes_per_second)) +
                             " bytes/s");
           self->do_read();
@@ -128,7 +135,7 @@ void Session::do_read() {
         if (!st) {
           violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
                             "): bad frame: " + st.error().describe());
-          self->begin_close(std::string("protocol error: ") + st.error().detail);
+          self->begin_close(CloseReason::kProtocolError, std::string("protocol error: ") + st.error().detail);
         }
         self->do_read();
       });
@@ -138,20 +145,20 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
   auto msg = verify_message(body);
   if (!msg) {
     violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): " + msg.error().describe());
-    begin_close(std::string("protocol error: ") + msg.error().detail);
+    begin_close(CloseReason::kProtocolError, std::string("protocol error: ") + msg.error().detail);
     return;
   }
   const wire::Message& m = **msg;
-  if (limits_.traffic != nullptr) {
+  if (limits_.counters != nullptr) {
     const auto type = static_cast<std::size_t>(m.body_type());
-    if (type < TrafficCounters::kTypes) {
-      limits_.traffic->received_bytes[type].fetch_add(body.size() + kFrameHeaderBytes, std::memory_order_relaxed);
-      limits_.traffic->received_frames[type].fetch_add(1, std::memory_order_relaxed);
+    if (type < NetCounters::kTypes) {
+      limits_.counters->net.received_bytes[type].fetch_add(body.size() + kFrameHeaderBytes, std::memory_order_relaxed);
+      limits_.counters->net.received_frames[type].fetch_add(1, std::memory_order_relaxed);
     }
   }
   auto fail = [&](const DecodeError& e) {
     violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): " + e.detail);
-    begin_close(std::string("protocol error: ") + e.detail);
+    begin_close(CloseReason::kProtocolError, std::string("protocol error: ") + e.detail);
   };
   if (!welcomed_) {
     if (m.body_type() != wire::Body::Hello) return fail(DecodeError{DecodeErrorCode::kInvalidValue, 0, "expected Hello"});
@@ -172,9 +179,11 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       const auto* req = m.body_as_EditRequest();
       auto e = parse_edit_request(*req);
       // A meaningless edit is rejected, not a reason to disconnect.
-      if (!e)
+      if (!e) {
+        if (limits_.counters != nullptr) limits_.counters->rejected(RejectReason::kInvalid);
         return enqueue(std::make_shared<const Frame>(build_edit_reject(req->edit_id(), e.error().detail)),
                        SendClass::kControl);
+      }
       on_message_(id_, *e);
       return;
     }
@@ -202,7 +211,8 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       return;
     case wire::Body::Disconnect:
       close_reason_ = "client disconnected";
-      begin_close("bye");
+      close_why_ = CloseReason::kClientBye;
+      begin_close(CloseReason::kClientBye, "bye");
       return;
     default:
       return fail(DecodeError{DecodeErrorCode::kInvalidValue, 0, "message not accepted from a client"});
@@ -213,17 +223,17 @@ void Session::enqueue(SharedFrame frame, SendClass cls) {
   const std::size_t now = queued_bytes_.load(std::memory_order_relaxed);
   if (now + frame->size() > limits_.max_queue_bytes) {
     server_log().warn("session {} ({}): {} bytes queued, dropping", id_, remote_, now);
-    begin_close("too far behind");
+    begin_close(CloseReason::kTooFarBehind, "too far behind");
     return;
   }
-  queued_bytes_.fetch_add(frame->size(), std::memory_order_relaxed);
-  if (limits_.traffic != nullptr && frame->size() > kFrameHeaderBytes) {
+  add_queued(static_cast<std::int64_t>(frame->size()));
+  if (limits_.counters != nullptr && frame->size() > kFrameHeaderBytes) {
     // Our own frame: its type is read without verification.
     const auto type = static_cast<std::size_t>(
         flatbuffers::GetRoot<wire::Message>(frame->data() + kFrameHeaderBytes)->body_type());
-    if (type < TrafficCounters::kTypes) {
-      limits_.traffic->sent_bytes[type].fetch_add(frame->size(), std::memory_order_relaxed);
-      limits_.traffic->sent_frames[type].fetch_add(1, std::memory_order_relaxed);
+    if (type < NetCounters::kTypes) {
+      limits_.counters->net.sent_bytes[type].fetch_add(frame->size(), std::memory_order_relaxed);
+      limits_.counters->net.sent_frames[type].fetch_add(1, std::memory_order_relaxed);
     }
   }
   (cls == SendClass::kControl ? control_queue_ : queue_).push_back(std::move(frame));
@@ -247,11 +257,14 @@ void Session::do_write() {
   asio::async_write(socket_, bufs, [self = shared_from_this(), gathered](const asio::error_code& ec, std::size_t n) {
     self->writing_ = false;
     self->inflight_.clear();
-    self->queued_bytes_.fetch_sub(gathered, std::memory_order_relaxed);
+    self->add_queued(-static_cast<std::int64_t>(gathered));
     self->bytes_sent_.fetch_add(n, std::memory_order_relaxed);
     if (self->state_ == State::kClosed) return;
     if (ec) {
-      if (self->close_reason_.empty()) self->close_reason_ = ec.message();
+      if (self->close_reason_.empty()) {
+        self->close_reason_ = ec.message();
+        self->close_why_ = CloseReason::kSocketError;
+      }
       self->finish_close();
       return;
     }
@@ -266,18 +279,29 @@ void Session::do_write() {
   });
 }
 
-void Session::begin_close(const std::string& reason) {
+void Session::add_queued(std::int64_t delta) {
+  if (delta >= 0)
+    queued_bytes_.fetch_add(static_cast<std::size_t>(delta), std::memory_order_relaxed);
+  else
+    queued_bytes_.fetch_sub(static_cast<std::size_t>(-delta), std::memory_order_relaxed);
+  if (limits_.counters != nullptr) limits_.counters->net.queued_bytes.fetch_add(delta, std::memory_order_relaxed);
+}
+
+void Session::begin_close(CloseReason why, const std::string& reason) {
   if (state_ != State::kReading) return;
-  if (close_reason_.empty()) close_reason_ = reason;
+  if (close_reason_.empty()) {
+    close_reason_ = reason;
+    close_why_ = why;
+  }
   state_ = State::kClosing;
   close_started_ = Clock::now();
   // Drop what is queued but not in flight: the peer gets only the reason.
   for (auto* q : {&control_queue_, &queue_}) {
-    for (const auto& f : *q) queued_bytes_.fetch_sub(f->size(), std::memory_order_relaxed);
+    for (const auto& f : *q) add_queued(-static_cast<std::int64_t>(f->size()));
     q->clear();
   }
   auto bye = std::make_shared<const Frame>(build_disconnect(reason));
-  queued_bytes_.fetch_add(bye->size(), std::memory_order_relaxed);
+  add_queued(static_cast<std::int64_t>(bye->size()));
   queue_.push_back(std::move(bye));
   do_write();
 }
@@ -290,10 +314,12 @@ void Session::finish_close() {
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
   socket_.close(ignored);
   for (auto* q : {&control_queue_, &queue_}) {
-    for (const auto& f : *q) queued_bytes_.fetch_sub(f->size(), std::memory_order_relaxed);
+    for (const auto& f : *q) add_queued(-static_cast<std::int64_t>(f->size()));
     q->clear();
   }
   if (on_closed_) on_closed_(id_, close_reason_.empty() ? std::string("closed") : close_reason_);
+  // After the owner's books (clients connected) are settled.
+  if (limits_.counters != nullptr) limits_.counters->net.disconnected(close_why_);
   on_closed_ = nullptr;
   on_message_ = nullptr;
   on_drained_ = nullptr;

@@ -35,16 +35,10 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
+#include "server/counters.h"
 #include "server/net/limits.h"
 
 namespace terrane {
-
-// Bytes and frames sent and received per message type (the Body union's
-// index), shared by every session of a server.
-struct TrafficCounters {
-  static constexpr std::size_t kTypes = 32;
-  std::array<std::atomic<std::uint64_t>, kTypes> sent_bytes{}, sent_frames{}, received_bytes{}, received_frames{};
-};
 
 struct SessionLimits {
   std::size_t max_frame_bytes = kDefaultMaxFrameBytes;
@@ -65,7 +59,7 @@ struct SessionLimits {
   // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
   // makes a stalled reader visible sooner (and bounds kernel memory).
   int socket_send_buffer_bytes = 0;
-  TrafficCounters* traffic = nullptr;  // not owned; may be null
+  ServerCounters* counters = nullptr;  // not owned; may be null
 };
 
 struct RegionHashRequestMsg {
@@ -106,13 +100,14 @@ class Session : public std::enable_shared_from_this<Session> {
 
   void start();
   // Queues a frame (any thread). Over the byte cap the session is closed
-  // with "too far behind".
+  // as too far behind.
   void send(SharedFrame frame, SendClass cls = SendClass::kData);
   void send(Frame frame, SendClass cls = SendClass::kData) {
     send(std::make_shared<const Frame>(std::move(frame)), cls);
   }
-  // Sends Disconnect(reason) after nothing else, then closes (any thread).
-  void close(std::string reason);
+  // Sends Disconnect(text) after nothing else, then closes (any thread);
+  // why is counted (NetCounters::disconnects).
+  void close(CloseReason why, std::string text);
 
   std::uint64_t id() const { return id_; }
   // The session's strand: post here to run beside its I/O.
@@ -129,8 +124,10 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_frame(std::span<const std::uint8_t> body);
   void enqueue(SharedFrame frame, SendClass cls);
   void do_write();
-  void begin_close(const std::string& reason);
+  void begin_close(CloseReason why, const std::string& text);
   void finish_close();
+  // Moves this session's queued bytes and the server-wide total together.
+  void add_queued(std::int64_t delta);
   void arm_watchdog();
 
   asio::ip::tcp::socket socket_;
@@ -145,6 +142,7 @@ class Session : public std::enable_shared_from_this<Session> {
   State state_ = State::kReading;
   bool welcomed_ = false;  // set once a Hello was accepted by the parser
   std::string close_reason_;
+  CloseReason close_why_ = CloseReason::kPeerClosed;
   FrameReader reader_;
   std::vector<std::uint8_t> read_buf_;
   std::deque<SharedFrame> queue_;          // data

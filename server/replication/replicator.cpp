@@ -50,8 +50,8 @@ void Replicator::send(SharedFrame frame, SendClass cls) {
   if (auto s = weak_session_.lock()) s->send(std::move(frame), cls);
 }
 
-void Replicator::close(const std::string& reason) {
-  if (auto s = weak_session_.lock()) s->close(reason);
+void Replicator::close(CloseReason why, const std::string& text) {
+  if (auto s = weak_session_.lock()) s->close(why, text);
 }
 
 // --- messages ------------------------------------------------------------------
@@ -70,7 +70,7 @@ void Replicator::on_message(InboundMessage msg) {
 void Replicator::on_hello(const HelloMsg& hello) {
   if (hello.protocol_version != kProtocolVersion) {
     server_log().warn("session {}: protocol version {} rejected", id_, hello.protocol_version);
-    session_->close("protocol version mismatch: server speaks " + std::to_string(kProtocolVersion) + ", client " +
+    session_->close(CloseReason::kVersionMismatch, "protocol version mismatch: server speaks " + std::to_string(kProtocolVersion) + ", client " +
                     std::to_string(hello.protocol_version));
     return;
   }
@@ -85,7 +85,7 @@ void Replicator::on_hello(const HelloMsg& hello) {
     counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + session_->remote() + "): authentication failed for '" +
                       hello.client_name + "'");
-    session_->close("authentication failed");
+    session_->close(CloseReason::kAuthFailed, "authentication failed");
     return;
   }
   edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
@@ -95,6 +95,7 @@ void Replicator::on_hello(const HelloMsg& hello) {
   state_.position = welcome_.welcome.spawn;
   world_.join(id_, name_, shared_from_this());
   counters_.clients.fetch_add(1, std::memory_order_relaxed);
+  counters_.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(welcome_.welcome));
   server_log().info("session {} ({}) joined as '{}'", id_, session_->remote(), name_);
   next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
@@ -137,7 +138,7 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
       counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
       violations().warn("session " + std::to_string(id_) + " (" + name_ + "): moved " +
                         std::to_string(static_cast<long long>(d)) + " voxels at once; dropping");
-      session_->close("moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
+      session_->close(CloseReason::kMovingTooFast, "moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
                       std::to_string(static_cast<long long>(options_.max_speed)) + " voxels/s)");
       return;
     }
@@ -169,7 +170,7 @@ void Replicator::on_edit(EditRequestMsg edit) {
   if (!edit_rate_.take(1)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + name_ + "): edit flood; dropping");
-    session_->close("edit rate limit: more than " + std::to_string(static_cast<long long>(options_.edits_per_second)) +
+    session_->close(CloseReason::kEditRate, "edit rate limit: more than " + std::to_string(static_cast<long long>(options_.edits_per_second)) +
                     " edits/s");
     return;
   }
@@ -187,13 +188,13 @@ void Replicator::on_edit(EditRequestMsg edit) {
         break;
       }
   if (unknown != kAir)
-    return world_.refuse(id_, std::move(edit),
+    return world_.refuse(id_, std::move(edit), RejectReason::kUnknownMaterial,
                          "unknown material " + std::to_string(unknown) + ": this world defines " +
                              std::to_string(defined) + " (0.." + std::to_string(defined - 1) + ")");
   if (edit.bounds().volume() > options_.max_edit_voxels)
-    return world_.refuse(id_, std::move(edit), "edit larger than " + std::to_string(options_.max_edit_voxels) + " voxels");
+    return world_.refuse(id_, std::move(edit), RejectReason::kTooLarge, "edit larger than " + std::to_string(options_.max_edit_voxels) + " voxels");
   const Region r = welcome_.bounds.clamp(edit.reads());
-  if (r.empty()) return world_.refuse(id_, std::move(edit), "edit outside the world");
+  if (r.empty()) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideWorld, "edit outside the world");
   // Edits are valid only where the client holds the world at full
   // resolution: it can see what it changes.
   bool full = true;
@@ -202,7 +203,7 @@ void Replicator::on_edit(EditRequestMsg edit) {
     auto it = held_.find(cp);
     full = it != held_.end() && (it->second.level == 0 || it->second.level == kHeldEmpty);
   });
-  if (!full) return world_.refuse(id_, std::move(edit), "edit outside the full-resolution region");
+  if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");
   world_.edit(id_, std::move(edit));
 }
 
@@ -240,7 +241,7 @@ void Replicator::on_hash_request(Vec3i cp) {
     // Claimed by a resuming client but not yet adopted or resent: answered
     // once it is, so the hash follows the data it describes.
     if (hash_requests_.size() >= 1024) {
-      session_->close("too many region hash requests");
+      session_->close(CloseReason::kRequestRate, "too many region hash requests");
       return;
     }
     hash_requests_.push_back(cp);

@@ -83,7 +83,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void granted(std::vector<VersionPtr> versions) override;
   void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
   void send(SharedFrame frame, SendClass cls) override;
-  void close(const std::string& reason) override;
+  void close(CloseReason why, const std::string& text) override;
 
  private:
   enum class Intent : std::uint8_t { kCoarse, kRefine, kClaim };

@@ -147,10 +147,7 @@ void Storage::writer_loop() {
       if (!writes.empty()) {
         const auto t0 = std::chrono::steady_clock::now();
         status = writer_store_->save_chunks(writes);
-        counters_.commit_us.fetch_add(static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                                                      std::chrono::steady_clock::now() - t0)
-                                                                      .count()),
-                                      std::memory_order_relaxed);
+        counters_.commit_duration.observe(std::chrono::steady_clock::now() - t0);
         counters_.commits.fetch_add(1, std::memory_order_relaxed);
         counters_.chunks_written.fetch_add(writes.size(), std::memory_order_relaxed);
       }

@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "common/world.h"
+#include "server/counters.h"
 #include "server/world/chunk_version.h"
 
 namespace terrane {
@@ -55,7 +56,7 @@ struct StorageCounters {
   std::atomic<std::uint64_t> commits{0};           // transactions
   std::atomic<std::uint64_t> ticks_committed{0};   // ticks carried by them
   std::atomic<std::uint64_t> chunks_written{0};
-  std::atomic<std::uint64_t> commit_us{0};         // wall time inside transactions
+  DurationHistogram commit_duration;               // wall time inside each transaction
 };
 
 class Storage {

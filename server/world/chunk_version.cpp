@@ -8,6 +8,11 @@
 
 namespace terrane {
 
+EncodeCounters& encode_counters() {
+  static EncodeCounters c;
+  return c;
+}
+
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk,
                            UnitBits changed_units, std::array<std::uint64_t, kMipLevels> level_since)
     : pos_(pos),
@@ -34,7 +39,9 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
 
 std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   const auto l = static_cast<std::size_t>(level);
+  encode_counters().asked.fetch_add(1, std::memory_order_relaxed);
   std::call_once(encoded_once_[l], [&] {
+    encode_counters().made.fetch_add(1, std::memory_order_relaxed);
     std::vector<std::uint8_t>& out = encoded_[l];
     if (level > 0) {
       const int n = kChunkSize >> level;

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <bitset>
 #include <cstdint>
 #include <memory>
@@ -28,6 +29,13 @@
 namespace terrane {
 
 using UnitBits = std::bitset<kUpdateUnitsPerChunk>;
+
+// How often a level's encoding was asked for and how often it had to be
+// made (the rest were served from a version's own copy): process-wide.
+struct EncodeCounters {
+  std::atomic<std::uint64_t> asked{0}, made{0};
+};
+EncodeCounters& encode_counters();
 
 class ChunkVersion {
  public:

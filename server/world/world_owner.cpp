@@ -13,11 +13,6 @@ namespace {
 // edit touches at most kMaxEditVolume voxels).
 constexpr std::size_t kMaxEditsPerTick = 256;
 
-std::uint64_t micros_since(std::chrono::steady_clock::time_point t0) {
-  return static_cast<std::uint64_t>(
-      std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - t0).count());
-}
-
 }  // namespace
 
 WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
@@ -286,8 +281,8 @@ void WorldOwner::unload_unwatched() {
 
 // --- edits ---------------------------------------------------------------------
 
-void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, const std::string& reason) {
-  counters_.edits_rejected.fetch_add(1, std::memory_order_relaxed);
+void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason) {
+  counters_.rejected(why);
   auto it = clients_.find(id);
   if (it == clients_.end()) return;
   // The true state of what the edit would have touched, when it is at hand:
@@ -310,10 +305,10 @@ void WorldOwner::edit(ClientId id, EditRequestMsg e) {
     auto it = clients_.find(id);
     if (it == clients_.end() || stopping_) return;
     Client& c = it->second;
-    if (c.edits_queued >= options_.max_edits_queued_per_client) return reject(id, e, "too many edits queued");
+    if (c.edits_queued >= options_.max_edits_queued_per_client) return reject(id, e, RejectReason::kQueueFull, "too many edits queued");
     if (!is_history_edit(e.kind)) {
       const Region r = world_.meta().bounds.clamp(e.reads());
-      if (r.empty()) return reject(id, e, "edit outside the world");
+      if (r.empty()) return reject(id, e, RejectReason::kOutsideWorld, "edit outside the world");
       for_each_chunk_in(r, [&](Vec3i cp) {
         request(cp);
         ++busy_[cp];
@@ -331,8 +326,8 @@ void WorldOwner::unbusy(const Region& r) {
   });
 }
 
-void WorldOwner::refuse(ClientId id, EditRequestMsg e, std::string reason) {
-  asio::post(strand_, [this, id, e = std::move(e), reason = std::move(reason)] { reject(id, e, reason); });
+void WorldOwner::refuse(ClientId id, EditRequestMsg e, RejectReason why, std::string reason) {
+  asio::post(strand_, [this, id, e = std::move(e), why, reason = std::move(reason)] { reject(id, e, why, reason); });
 }
 
 bool WorldOwner::near_enough(const Client& c, const Region& r) const {
@@ -353,7 +348,6 @@ void WorldOwner::copy_into(Grid& scratch, const Region& r, std::unordered_set<Ve
 }
 
 void WorldOwner::apply_edits() {
-  const auto t0 = std::chrono::steady_clock::now();
   ++tick_;
   counters_.ticks.fetch_add(1, std::memory_order_relaxed);
   const WorldBounds& bounds = world_.meta().bounds;
@@ -381,7 +375,7 @@ void WorldOwner::apply_edits() {
     if (!ready) {
       if (!stopping_) break;  // wait for its chunks (arrival order is kept)
       // Shutting down: chunks still loading will not be waited for.
-      if (client != nullptr) reject(pe.id, pe.edit, "server shutting down");
+      if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
       if (!history) unbusy(r);
       if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
       edits_.pop_front();
@@ -401,7 +395,7 @@ void WorldOwner::apply_edits() {
         edits_.pop_front();
         continue;
       }
-      if (client != nullptr) reject(pe.id, pe.edit, why);
+      if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kHistory, why);
       edits_.pop_front();
       continue;
     }
@@ -436,7 +430,6 @@ void WorldOwner::apply_edits() {
     l.used_tick = tick_;
     versions.push_back(l.current);
   }
-  counters_.apply_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
   if (versions.empty() && acks.empty()) return;
   ++commits_pending_;
   const std::uint64_t tick = tick_;
@@ -458,7 +451,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
       if (auto it = clients_.find(a.id); it != clients_.end())
         it->second.link->send(std::make_shared<const Frame>(build_edit_reject(a.edit_id, "storage failure: edit not saved")),
                               SendClass::kControl);
-    counters_.edits_rejected.fetch_add(acks.size(), std::memory_order_relaxed);
+    counters_.rejected(RejectReason::kStorageFailure, acks.size());
     fatal_storage(status.error().message);
   } else {
     const auto t0 = std::chrono::steady_clock::now();
@@ -482,7 +475,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     for (const Ack& a : acks)
       if (auto it = clients_.find(a.id); it != clients_.end())
         it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
-    counters_.fanout_us.fetch_add(micros_since(t0), std::memory_order_relaxed);
+    counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }
   if (drain_wanted_ && commits_pending_ == 0) {
     drain_wanted_ = false;
@@ -495,7 +488,7 @@ void WorldOwner::fatal_storage(const std::string& why) {
   (void)why;
   storage_failed_ = true;
   storage_failed_flag_ = true;
-  for (auto& [id, c] : clients_) c.link->close("server storage failure");
+  for (auto& [id, c] : clients_) c.link->close(CloseReason::kStorageFailure, "server storage failure");
   stopping_ = true;
   tick_timer_.cancel();
   if (options_.on_fatal) options_.on_fatal();
@@ -584,6 +577,10 @@ void WorldOwner::lighten_some() {
 }
 
 void WorldOwner::on_tick() {
+  const auto t0 = std::chrono::steady_clock::now();
+  counters_.tick_lag_ns.store(
+      static_cast<std::uint64_t>(std::max<std::int64_t>(0, std::chrono::nanoseconds(t0 - next_tick_).count())),
+      std::memory_order_relaxed);
   lighten_some();
   apply_edits();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
@@ -592,6 +589,9 @@ void WorldOwner::on_tick() {
     unload_unwatched();
     retry_pending();
   }
+  const auto t1 = std::chrono::steady_clock::now();
+  counters_.tick_duration.observe(t1 - t0);
+  counters_.last_tick_at_ns.store(std::chrono::nanoseconds(t1.time_since_epoch()).count(), std::memory_order_relaxed);
 }
 
 void WorldOwner::inspect(const std::function<void(const WorldView&)>& fn) {

@@ -63,7 +63,7 @@ class WorldClient {
   virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
   // Frames the world answers with (acks, rejects, read results, presence).
   virtual void send(SharedFrame frame, SendClass cls) = 0;
-  virtual void close(const std::string& reason) = 0;
+  virtual void close(CloseReason why, const std::string& text) = 0;
 };
 
 struct ChunkWant {
@@ -105,7 +105,7 @@ class WorldOwner : private WorldView {
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
   // Rejects an edit the replicator refused, with the true state of its box.
-  void refuse(ClientId id, EditRequestMsg edit, std::string reason);
+  void refuse(ClientId id, EditRequestMsg edit, RejectReason why, std::string reason);
   void read_box(ClientId id, ReadBoxMsg request);
   void hash(ClientId id, Vec3i chunk_pos);
 
@@ -171,7 +171,7 @@ class WorldOwner : private WorldView {
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void flush_grants();
   void retry_pending();
-  void reject(ClientId id, const EditRequestMsg& edit, const std::string& reason);
+  void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason);
   bool read_current(const Region& r, Box& out) const;
   void copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied);
   bool near_enough(const Client& c, const Region& r) const;

@@ -37,7 +37,7 @@ class Recorder : public WorldClient {
     frames_.push_back(std::move(frame));
     cv_.notify_all();
   }
-  void close(const std::string& reason) override {
+  void close(CloseReason, const std::string& reason) override {
     std::lock_guard lock(m_);
     closed_ = reason;
     cv_.notify_all();

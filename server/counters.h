@@ -1,0 +1,142 @@
+// The server's counters: atomics every room adds to and any thread reads
+// (the metrics endpoint, the stats log, tests). Nothing here knows a room;
+// each room includes this and bumps its own.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+namespace terrane {
+
+// A fixed-bucket histogram of durations, lock-free (Prometheus' histogram
+// type: cumulative buckets "le", a _sum and a _count, made when rendered).
+class DurationHistogram {
+ public:
+  static constexpr std::size_t kBuckets = 12;
+  // Upper bounds in seconds; the last bucket is +Inf.
+  static constexpr std::array<double, kBuckets - 1> kBounds = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
+                                                                0.05,   0.1,   0.25,   0.5,   1.0};
+
+  void observe(std::chrono::nanoseconds d) {
+    const double s = std::chrono::duration<double>(d).count();
+    const auto i = static_cast<std::size_t>(std::lower_bound(kBounds.begin(), kBounds.end(), s) - kBounds.begin());
+    counts_[i].fetch_add(1, std::memory_order_relaxed);
+    sum_ns_.fetch_add(static_cast<std::uint64_t>(std::max<std::int64_t>(0, d.count())), std::memory_order_relaxed);
+  }
+  // Observations in bucket i alone (not cumulative).
+  std::uint64_t bucket(std::size_t i) const { return counts_[i].load(std::memory_order_relaxed); }
+  std::uint64_t count() const {
+    std::uint64_t n = 0;
+    for (const auto& c : counts_) n += c.load(std::memory_order_relaxed);
+    return n;
+  }
+  double sum_seconds() const { return static_cast<double>(sum_ns_.load(std::memory_order_relaxed)) * 1e-9; }
+
+ private:
+  std::array<std::atomic<std::uint64_t>, kBuckets> counts_{};
+  std::atomic<std::uint64_t> sum_ns_{0};
+};
+
+// Why a session ended: one label each on terrane_disconnects_total. The
+// text sent to the client (Disconnect.reason) says more.
+enum class CloseReason : std::uint8_t {
+  kPeerClosed,        // the client closed the socket
+  kClientBye,         // the client sent Disconnect
+  kSocketError,
+  kHandshakeTimeout,
+  kIdleTimeout,
+  kFrameTimeout,      // a frame begun and not finished in time
+  kTooSlow,           // a write made no progress
+  kTooFarBehind,      // the send queue reached its cap
+  kInboundRate,
+  kProtocolError,
+  kVersionMismatch,
+  kAuthFailed,
+  kMovingTooFast,
+  kEditRate,
+  kRequestRate,       // region hash requests beyond their budget
+  kServerFull,
+  kShutdown,
+  kStorageFailure,
+  kCount
+};
+const char* close_reason_label(CloseReason r);
+
+// Why an edit was refused: one label each on terrane_edits_rejected_total.
+enum class RejectReason : std::uint8_t {
+  kInvalid,            // meaningless on the wire (bad kind, inverted box, ...)
+  kUnknownMaterial,
+  kTooLarge,
+  kOutsideWorld,
+  kOutsideFullRes,     // not where the client holds the world at full resolution
+  kQueueFull,
+  kHistory,            // nothing to undo/redo, or the step is out of reach
+  kShutdown,
+  kStorageFailure,
+  kCount
+};
+const char* reject_reason_label(RejectReason r);
+
+// Per message type (the Body union's index), shared by every session; plus
+// what the sessions hold queued in all and why they ended.
+struct NetCounters {
+  static constexpr std::size_t kTypes = 32;
+  std::array<std::atomic<std::uint64_t>, kTypes> sent_bytes{}, sent_frames{}, received_bytes{}, received_frames{};
+  std::atomic<std::int64_t> queued_bytes{0};  // every session's send queue
+  std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(CloseReason::kCount)> disconnects{};
+  void disconnected(CloseReason r) { disconnects[static_cast<std::size_t>(r)].fetch_add(1, std::memory_order_relaxed); }
+};
+
+struct ServerCounters {
+  std::atomic<std::uint64_t> sessions_accepted{0};
+  std::atomic<std::uint64_t> sessions_closed{0};
+  std::atomic<std::uint64_t> joins{0};           // handshakes accepted (Welcome sent)
+  std::atomic<std::uint64_t> clients{0};         // welcomed and connected now
+  std::atomic<std::uint64_t> ticks{0};
+  std::atomic<std::uint64_t> edits_applied{0};
+  std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(RejectReason::kCount)> edits_rejected_by{};
+  std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
+  std::atomic<std::uint64_t> mips_sent{0};
+  std::atomic<std::uint64_t> empties_sent{0};
+  std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
+  std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not
+  std::atomic<std::uint64_t> update_batches_sent{0};
+  std::atomic<std::uint64_t> update_units_sent{0};
+  std::atomic<std::uint64_t> updates_dropped_by_fault{0};
+  std::atomic<std::uint64_t> updates_corrupted_by_fault{0};
+  std::atomic<std::uint64_t> stream_bytes{0};    // StreamBatch bytes queued
+  std::atomic<std::uint64_t> presence_sent{0};
+  std::atomic<std::uint64_t> hashes_pushed{0};
+  std::atomic<std::uint64_t> chunks_loaded{0};   // resident now
+  std::atomic<std::uint64_t> chunks_unloaded{0};
+  std::atomic<std::uint64_t> limit_violations{0};
+  std::atomic<std::uint64_t> auth_failures{0};
+  std::atomic<std::uint64_t> chunks_resumed{0};  // claimed by a resuming client, still current, not resent
+  // Per-tick cost split (world strand): applying edits and publishing
+  // versions (the tick), and fanning committed changes out to their
+  // holders. Commit time is the storage's (StorageCounters).
+  DurationHistogram tick_duration;
+  DurationHistogram fanout_duration;
+  std::atomic<std::uint64_t> tick_lag_ns{0};     // how late the last tick started
+  std::atomic<std::int64_t> last_tick_at_ns{0};  // steady clock, when the last tick ended
+  std::atomic<std::uint64_t> deliveries{0};      // (changed chunk, holder) pairs fanned out
+  std::atomic<std::uint64_t> tick_frames{0};     // frames the replicators sent for ticks' news
+  std::atomic<std::uint64_t> ticks_late{0};      // ticks that started more than a period late
+  NetCounters net;
+
+  void rejected(RejectReason r, std::uint64_t n = 1) {
+    edits_rejected_by[static_cast<std::size_t>(r)].fetch_add(n, std::memory_order_relaxed);
+  }
+  std::uint64_t edits_rejected() const {
+    std::uint64_t n = 0;
+    for (const auto& c : edits_rejected_by) n += c.load(std::memory_order_relaxed);
+    return n;
+  }
+};
+
+}  // namespace terrane

@@ -1,0 +1,228 @@
+#include "server/ops/metrics.h"
+
+#include <dirent.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "protocol/messages.h"
+
+namespace terrane {
+
+namespace {
+
+// Writes one metric family at a time: HELP and TYPE, then its samples.
+class Exposition {
+ public:
+  void family(const char* name, const char* type, const char* help) {
+    out_ << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
+  }
+  template <class T>
+  void sample(const std::string& name, T value, const std::string& labels = {}) {
+    out_ << name;
+    if (!labels.empty()) out_ << '{' << labels << '}';
+    out_ << ' ' << value << '\n';
+  }
+  template <class T>
+  void counter(const char* name, const char* help, T value) {
+    family(name, "counter", help);
+    sample(name, value);
+  }
+  template <class T>
+  void gauge(const char* name, const char* help, T value) {
+    family(name, "gauge", help);
+    sample(name, value);
+  }
+  void histogram(const char* name, const char* help, const DurationHistogram& h) {
+    family(name, "histogram", help);
+    std::uint64_t cumulative = 0;
+    for (std::size_t i = 0; i < DurationHistogram::kBuckets; ++i) {
+      cumulative += h.bucket(i);
+      std::ostringstream le;
+      if (i < DurationHistogram::kBounds.size())
+        le << DurationHistogram::kBounds[i];
+      else
+        le << "+Inf";
+      sample(std::string(name) + "_bucket", cumulative, "le=\"" + le.str() + "\"");
+    }
+    // _count is the +Inf bucket, read once above: the two always agree.
+    sample(std::string(name) + "_sum", h.sum_seconds());
+    sample(std::string(name) + "_count", cumulative);
+  }
+  std::string str() const { return out_.str(); }
+
+ private:
+  std::ostringstream out_;
+};
+
+std::uint64_t load(const std::atomic<std::uint64_t>& a) { return a.load(std::memory_order_relaxed); }
+
+}  // namespace
+
+ProcessStats read_process_stats() {
+  ProcessStats p;
+  const double tick = static_cast<double>(sysconf(_SC_CLK_TCK));
+  const auto page = static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
+  if (std::ifstream stat("/proc/self/stat"); stat) {
+    std::string line;
+    std::getline(stat, line);
+    // Fields after the command name (which may hold spaces) start at ')'.
+    const auto close = line.rfind(')');
+    if (close != std::string::npos && tick > 0) {
+      std::istringstream rest(line.substr(close + 2));
+      std::string f;
+      // rest[0] is field 3 (state); utime, stime are fields 14, 15;
+      // starttime is field 22 (clock ticks after boot).
+      std::vector<std::string> fields;
+      while (rest >> f) fields.push_back(f);
+      if (fields.size() > 19) {
+        p.cpu_seconds = (std::stod(fields[11]) + std::stod(fields[12])) / tick;
+        double boot = 0;
+        if (std::ifstream st("/proc/stat"); st) {
+          std::string key;
+          while (st >> key)
+            if (key == "btime") {
+              st >> boot;
+              break;
+            }
+        }
+        p.start_time_seconds = boot + std::stod(fields[19]) / tick;
+      }
+    }
+  }
+  if (std::ifstream statm("/proc/self/statm"); statm) {
+    std::uint64_t size = 0, resident = 0;
+    statm >> size >> resident;
+    p.virtual_bytes = size * page;
+    p.resident_bytes = resident * page;
+  }
+  if (DIR* d = opendir("/proc/self/fd")) {
+    while (const dirent* e = readdir(d))
+      if (e->d_name[0] != '.') ++p.open_fds;
+    closedir(d);
+    if (p.open_fds > 0) --p.open_fds;  // the directory stream itself
+  }
+  return p;
+}
+
+std::string render_metrics(const MetricsSources& s) {
+  const ServerCounters& c = s.server;
+  Exposition m;
+
+  m.gauge("terrane_clients", "Clients connected and past the handshake.", load(c.clients));
+  m.counter("terrane_sessions_accepted_total", "TCP connections accepted.", load(c.sessions_accepted));
+  m.counter("terrane_joins_total", "Handshakes accepted (Welcome sent).", load(c.joins));
+  m.family("terrane_disconnects_total", "counter", "Sessions ended, by reason.");
+  for (std::size_t r = 0; r < static_cast<std::size_t>(CloseReason::kCount); ++r)
+    m.sample("terrane_disconnects_total", load(c.net.disconnects[r]),
+             std::string("reason=\"") + close_reason_label(static_cast<CloseReason>(r)) + "\"");
+  m.counter("terrane_auth_failures_total", "Handshakes refused for a missing or wrong token.", load(c.auth_failures));
+  m.counter("terrane_limit_violations_total", "Clients dropped for exceeding a per-client limit.",
+            load(c.limit_violations));
+
+  m.counter("terrane_ticks_total", "World ticks run.", load(c.ticks));
+  m.counter("terrane_ticks_late_total", "Ticks that started more than a period late (the schedule restarted).",
+            load(c.ticks_late));
+  m.histogram("terrane_tick_duration_seconds", "Time the world strand spent in each tick (applying edits, "
+                                               "publishing versions, presence, unloading).",
+              c.tick_duration);
+  m.gauge("terrane_tick_lag_seconds", "How late the last tick started after its scheduled time.",
+          static_cast<double>(c.tick_lag_ns.load(std::memory_order_relaxed)) * 1e-9);
+  m.histogram("terrane_fanout_duration_seconds",
+              "Time the world strand spent handing each committed tick's changes to their holders.",
+              c.fanout_duration);
+  m.counter("terrane_deliveries_total", "Changed chunks handed to a holder (one per chunk and holder).",
+            load(c.deliveries));
+
+  m.counter("terrane_edits_applied_total", "Edits applied (each acknowledged once stored).", load(c.edits_applied));
+  m.family("terrane_edits_rejected_total", "counter", "Edits refused, by reason.");
+  for (std::size_t r = 0; r < static_cast<std::size_t>(RejectReason::kCount); ++r)
+    m.sample("terrane_edits_rejected_total", load(c.edits_rejected_by[r]),
+             std::string("reason=\"") + reject_reason_label(static_cast<RejectReason>(r)) + "\"");
+
+  const StorageCounters& st = s.storage;
+  m.histogram("terrane_commit_duration_seconds", "Wall time of each store transaction (one or more ticks).",
+              st.commit_duration);
+  m.counter("terrane_commits_total", "Store transactions committed.", load(st.commits));
+  m.counter("terrane_ticks_committed_total", "Ticks carried by those transactions.", load(st.ticks_committed));
+  m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));
+  m.gauge("terrane_storage_failed", "1 once a tick's changes could not be stored (the server stops serving).",
+          s.storage_failed ? 1 : 0);
+
+  m.gauge("terrane_chunks_resident", "Chunks loaded in memory now.", load(c.chunks_loaded));
+  m.counter("terrane_chunks_loaded_total", "Chunks read from the store.", load(st.loaded_from_store));
+  m.counter("terrane_chunks_generated_total", "Chunks made by the world's generator.", load(st.generated));
+  m.counter("terrane_chunks_unloaded_total", "Chunks dropped from memory (they come back from the store).",
+            load(c.chunks_unloaded));
+  m.counter("terrane_chunks_quarantined_total", "Stored chunks that failed to decode and were set aside.",
+            load(st.quarantined));
+  const std::uint64_t asked = load(s.encode.asked), made = load(s.encode.made);
+  m.counter("terrane_encode_cache_hits_total", "Chunk encodings served from a version's own copy.",
+            asked > made ? asked - made : 0);
+  m.counter("terrane_encode_cache_misses_total", "Chunk encodings made (once per version and level).", made);
+
+  m.family("terrane_streamed_chunks_total", "counter", "Chunks streamed to clients, by what was sent.");
+  m.sample("terrane_streamed_chunks_total", load(c.chunks_sent), "kind=\"full\"");
+  m.sample("terrane_streamed_chunks_total", load(c.mips_sent), "kind=\"mip\"");
+  m.sample("terrane_streamed_chunks_total", load(c.empties_sent), "kind=\"empty\"");
+  m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
+            load(c.chunks_resumed));
+  m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));
+  m.counter("terrane_update_batches_total", "UpdateBatch frames sent.", load(c.update_batches_sent));
+  m.counter("terrane_update_units_total", "4x4x4 update units sent in them.", load(c.update_units_sent));
+  m.counter("terrane_presence_sent_total", "Presence frames sent.", load(c.presence_sent));
+  m.counter("terrane_hashes_pushed_total", "Region hashes pushed to clients unasked.", load(c.hashes_pushed));
+
+  m.gauge("terrane_send_queue_bytes", "Bytes queued for sending, every session together.",
+          std::max<std::int64_t>(0, c.net.queued_bytes.load(std::memory_order_relaxed)));
+  struct Traffic {
+    const char* name;
+    const char* help;
+    const std::array<std::atomic<std::uint64_t>, NetCounters::kTypes>& values;
+  };
+  const Traffic traffic[] = {
+      {"terrane_sent_bytes_total", "Bytes sent (frame headers included), by message type.", c.net.sent_bytes},
+      {"terrane_sent_frames_total", "Frames sent, by message type.", c.net.sent_frames},
+      {"terrane_received_bytes_total", "Bytes received (frame headers included), by message type.",
+       c.net.received_bytes},
+      {"terrane_received_frames_total", "Frames received, by message type.", c.net.received_frames},
+  };
+  for (const Traffic& t : traffic) {
+    m.family(t.name, "counter", t.help);
+    for (std::size_t i = 1; i <= static_cast<std::size_t>(wire::Body::MAX) && i < NetCounters::kTypes; ++i)
+      m.sample(t.name, load(t.values[i]),
+               std::string("type=\"") + wire::EnumNameBody(static_cast<wire::Body>(i)) + "\"");
+  }
+
+  const ProcessStats& p = s.process;
+  m.counter("process_cpu_seconds_total", "User and system CPU time spent, in seconds.", p.cpu_seconds);
+  m.gauge("process_resident_memory_bytes", "Resident memory size, in bytes.", p.resident_bytes);
+  m.gauge("process_virtual_memory_bytes", "Virtual memory size, in bytes.", p.virtual_bytes);
+  m.gauge("process_open_fds", "Open file descriptors.", p.open_fds);
+  m.gauge("process_start_time_seconds", "Start time of the process since the Unix epoch, in seconds.",
+          static_cast<std::uint64_t>(p.start_time_seconds));
+  m.family("terrane_build_info", "gauge", "Always 1; the labels say which build and protocol this is.");
+  m.sample("terrane_build_info", 1,
+           "version=\"" TERRANE_VERSION_STRING "\",protocol=\"" + std::to_string(kProtocolVersion) + "\"");
+  return m.str();
+}
+
+Health check_health(const ServerCounters& c, bool storage_failed, std::uint32_t tick_hz,
+                    std::chrono::steady_clock::time_point now) {
+  if (storage_failed) return {false, "storage failed: the world's changes can no longer be saved"};
+  const std::int64_t last = c.last_tick_at_ns.load(std::memory_order_relaxed);
+  const auto period = std::chrono::nanoseconds(1'000'000'000LL / std::max<std::uint32_t>(1, tick_hz));
+  const auto limit = std::max<std::chrono::nanoseconds>(std::chrono::seconds(1), period * 10);
+  if (last == 0) return {false, "not ticking yet"};
+  const auto since = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()) -
+                     std::chrono::nanoseconds(last);
+  if (since > limit)
+    return {false, "no tick for " + std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(since).count()) +
+                       " ms"};
+  return {true, "ok"};
+}
+
+}  // namespace terrane

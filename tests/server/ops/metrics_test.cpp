@@ -1,0 +1,245 @@
+// The operator's endpoint: /metrics in Prometheus' text format, checked by
+// Prometheus' own promtool, counters that move when a client joins, edits
+// and leaves, and /health; over real sockets on 127.0.0.1.
+#include "server/ops/metrics.h"
+
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <cstdio>
+#include <fstream>
+#include <optional>
+#include <regex>
+#include <set>
+#include <string>
+#include <thread>
+
+#include "server/ops/http_endpoint.h"
+#include "tests/support/scratch_dir.h"
+#include "tests/support/server_fixture.h"
+
+namespace terrane {
+namespace {
+
+using testing_support::msg;
+using testing_support::RawPeer;
+using testing_support::ServerTest;
+using namespace std::chrono_literals;
+
+// promtool's verdict on an exposition: its exit status and what it printed.
+struct Verdict {
+  int status = -1;
+  std::string output;
+};
+
+Verdict promtool_check(const std::string& text) {
+  const auto dir = testing_support::scratch_dir("terrane-promtool");
+  std::filesystem::create_directories(dir);
+  const auto file = dir / "metrics.txt";
+  std::ofstream(file) << text;
+  Verdict v;
+  const std::string cmd = "promtool check metrics < '" + file.string() + "' 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (p == nullptr) return v;
+  char buf[4096];
+  while (const std::size_t n = std::fread(buf, 1, sizeof buf, p)) v.output.append(buf, n);
+  const int st = pclose(p);
+  v.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  std::filesystem::remove_all(dir);
+  return v;
+}
+
+// The value of one sample (name with its labels, exactly as rendered).
+std::optional<double> sample(const std::string& text, const std::string& series) {
+  const std::string key = "\n" + series + " ";
+  const auto at = ("\n" + text).find(key);
+  if (at == std::string::npos) return std::nullopt;
+  return std::stod(text.substr(at + key.size() - 1));
+}
+
+void expect_promtool_accepts(const std::string& text) {
+  ASSERT_EQ(std::system("command -v promtool > /dev/null 2>&1"), 0)
+      << "promtool (Debian package prometheus) is not installed: run scripts/install-deps.sh";
+  const Verdict v = promtool_check(text);
+  EXPECT_EQ(v.status, 0) << v.output;
+  EXPECT_EQ(v.output, "") << "promtool lint findings:\n" << v.output;  // lint problems print, even at status 0
+}
+
+TEST(Metrics, EveryFamilyHasHelpAndTypeAndHistogramsAreCumulative) {
+  ServerCounters c;
+  StorageCounters st;
+  EncodeCounters enc;
+  c.clients = 3;
+  c.edits_applied = 41;
+  c.rejected(RejectReason::kOutsideWorld, 2);
+  c.net.disconnected(CloseReason::kIdleTimeout);
+  c.tick_duration.observe(300us);   // le 0.0005
+  c.tick_duration.observe(2ms);     // le 0.0025
+  c.tick_duration.observe(2s);      // +Inf only
+  c.net.sent_bytes[static_cast<std::size_t>(wire::Body::StreamBatch)] = 1234;
+  enc.asked = 10;
+  enc.made = 4;
+  const std::string text = render_metrics(MetricsSources{c, st, enc, false, read_process_stats()});
+  EXPECT_EQ(sample(text, "terrane_clients"), 3);
+  EXPECT_EQ(sample(text, "terrane_edits_applied_total"), 41);
+  EXPECT_EQ(sample(text, "terrane_edits_rejected_total{reason=\"outside_world\"}"), 2);
+  EXPECT_EQ(sample(text, "terrane_edits_rejected_total{reason=\"queue_full\"}"), 0);
+  EXPECT_EQ(sample(text, "terrane_disconnects_total{reason=\"idle_timeout\"}"), 1);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_bucket{le=\"0.0005\"}"), 1);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_bucket{le=\"0.001\"}"), 1);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_bucket{le=\"0.0025\"}"), 2);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_bucket{le=\"1\"}"), 2);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_bucket{le=\"+Inf\"}"), 3);
+  EXPECT_EQ(sample(text, "terrane_tick_duration_seconds_count"), 3);
+  EXPECT_NEAR(*sample(text, "terrane_tick_duration_seconds_sum"), 2.0023, 1e-6);
+  EXPECT_EQ(sample(text, "terrane_sent_bytes_total{type=\"StreamBatch\"}"), 1234);
+  EXPECT_EQ(sample(text, "terrane_encode_cache_hits_total"), 6);
+  EXPECT_EQ(sample(text, "terrane_encode_cache_misses_total"), 4);
+  EXPECT_GT(*sample(text, "process_resident_memory_bytes"), 0);
+  EXPECT_GT(*sample(text, "process_start_time_seconds"), 1.6e9);
+  // Each family declared once, before its samples.
+  const std::regex type_line("# TYPE (\\S+) (counter|gauge|histogram)");
+  std::set<std::string> families;
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), type_line); it != std::sregex_iterator(); ++it)
+    EXPECT_TRUE(families.insert((*it)[1]).second) << "declared twice: " << (*it)[1];
+  EXPECT_GT(families.size(), 40u);
+  expect_promtool_accepts(text);
+}
+
+TEST(Metrics, HealthWantsRecentTicksAndAWorkingStore) {
+  ServerCounters c;
+  const auto now = std::chrono::steady_clock::now();
+  EXPECT_FALSE(check_health(c, false, 20, now).ok);  // not ticking yet
+  c.last_tick_at_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
+  EXPECT_TRUE(check_health(c, false, 20, now + 900ms).ok);
+  const Health late = check_health(c, false, 20, now + 1500ms);
+  EXPECT_FALSE(late.ok);
+  EXPECT_NE(late.text.find("no tick for 1500 ms"), std::string::npos) << late.text;
+  EXPECT_TRUE(check_health(c, false, 1, now + 9s).ok);  // 1 Hz: ten periods allowed
+  const Health failed = check_health(c, true, 20, now);
+  EXPECT_FALSE(failed.ok);
+  EXPECT_NE(failed.text.find("storage failed"), std::string::npos);
+}
+
+TEST(Metrics, HostPortIsParsedOrNamedWrong) {
+  EXPECT_EQ(parse_host_port("127.0.0.1:9464").value(), std::make_pair(std::string("127.0.0.1"), std::uint16_t{9464}));
+  EXPECT_EQ(parse_host_port("[::1]:0").value(), std::make_pair(std::string("::1"), std::uint16_t{0}));
+  EXPECT_NE(parse_host_port("9464").error().message.find("not HOST:PORT"), std::string::npos);
+  EXPECT_NE(parse_host_port("localhost:http").error().message.find("port must be a number"), std::string::npos);
+  EXPECT_NE(parse_host_port("localhost:70000").error().message.find("port must be a number"), std::string::npos);
+}
+
+class MetricsEndpointTest : public ServerTest {
+ protected:
+  std::string get(const std::string& path, int* status = nullptr) {
+    httplib::Client http("127.0.0.1", server_->metrics_port());
+    http.set_connection_timeout(10, 0);
+    http.set_read_timeout(30, 0);
+    auto res = http.Get(path);
+    EXPECT_TRUE(res) << "GET " << path << ": " << httplib::to_string(res.error());
+    if (!res) return {};
+    if (status != nullptr) *status = res->status;
+    return res->body;
+  }
+  // Scrapes until pred holds (a counter another thread moves), or a deadline.
+  template <class Pred>
+  std::string scrape_until(Pred pred) {
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    std::string text = get("/metrics");
+    while (!pred(text) && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(20ms);
+      text = get("/metrics");
+    }
+    return text;
+  }
+};
+
+TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenAClientEdits) {
+  ServerOptions o;
+  o.metrics_address = "127.0.0.1:0";
+  start(o);
+  ASSERT_NE(server_->metrics_port(), 0);
+  // Healthy from the first tick on (503 "not ticking yet" before it).
+  int status = 0;
+  std::string health = get("/health", &status);
+  for (const auto deadline = std::chrono::steady_clock::now() + 30s;
+       status != 200 && std::chrono::steady_clock::now() < deadline; health = get("/health", &status)) {
+    EXPECT_EQ(health, "not ticking yet\n");
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_EQ(status, 200);
+  EXPECT_EQ(health, "ok\n");
+  const std::string before = get("/metrics");
+  expect_promtool_accepts(before);
+  EXPECT_EQ(sample(before, "terrane_joins_total"), 0);
+  EXPECT_EQ(sample(before, "terrane_edits_applied_total"), 0);
+
+  auto p = join("editor");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    EditRequestMsg e;
+    e.edit_id = id;
+    e.kind = EditKind::kFillBox;
+    e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
+    e.material = materials::kBrick;
+    e.occupancy = static_cast<std::uint8_t>(100 + id);
+    ASSERT_TRUE(p->send(build_edit_request(e)));
+    ASSERT_TRUE(p->next_of(wire::Body::EditAck));
+  }
+  EditRequestMsg outside;  // beyond the world's height: refused with a reason
+  outside.edit_id = 9;
+  outside.kind = EditKind::kFillBox;
+  outside.box = {{1001, 100000, 1001}, {1003, 100002, 1003}};
+  outside.material = materials::kBrick;
+  outside.occupancy = 255;
+  ASSERT_TRUE(p->send(build_edit_request(outside)));
+  ASSERT_TRUE(p->next_of(wire::Body::EditReject));
+
+  const std::string during = get("/metrics");
+  expect_promtool_accepts(during);
+  EXPECT_EQ(sample(during, "terrane_clients"), 1);
+  EXPECT_EQ(sample(during, "terrane_joins_total"), 1);
+  EXPECT_EQ(sample(during, "terrane_edits_applied_total"), 3);
+  EXPECT_EQ(sample(during, "terrane_edits_rejected_total{reason=\"outside_world\"}"), 1);
+  EXPECT_EQ(sample(during, "terrane_received_frames_total{type=\"EditRequest\"}"), 4);
+  EXPECT_GE(sample(during, "terrane_sent_frames_total{type=\"EditAck\"}"), 3);
+  EXPECT_GT(sample(during, "terrane_sent_bytes_total{type=\"StreamBatch\"}"), 0);
+  EXPECT_GE(sample(during, "terrane_commits_total"), 1);
+  EXPECT_GE(sample(during, "terrane_commit_duration_seconds_count"), 1);
+  EXPECT_GE(sample(during, "terrane_chunks_written_total"), 1);
+  EXPECT_GT(sample(during, "terrane_chunks_resident"), 0);
+  EXPECT_GT(sample(during, "terrane_chunks_generated_total"), 0);
+  EXPECT_GT(sample(during, "terrane_streamed_chunks_total{kind=\"full\"}"), 0);
+  EXPECT_GT(sample(during, "terrane_ticks_total"), sample(before, "terrane_ticks_total"));
+
+  // The client leaves: counted once the server has seen the socket close.
+  p->close();
+  const std::string after = scrape_until([](const std::string& t) {
+    return sample(t, "terrane_disconnects_total{reason=\"peer_closed\"}") == 1;
+  });
+  EXPECT_EQ(sample(after, "terrane_disconnects_total{reason=\"peer_closed\"}"), 1) << after;
+  EXPECT_EQ(sample(after, "terrane_clients"), 0);
+  EXPECT_EQ(sample(after, "terrane_send_queue_bytes"), 0);
+}
+
+TEST_F(MetricsEndpointTest, ABadOrTakenAddressIsAClearError) {
+  ServerOptions o;
+  o.metrics_address = "127.0.0.1:0";
+  start(o);
+  ServerOptions again;
+  again.world_dir = (dir_ / "second").string();
+  again.metrics_address = "127.0.0.1:" + std::to_string(server_->metrics_port());
+  auto taken = Server::create(again);
+  ASSERT_FALSE(taken.ok());
+  EXPECT_NE(taken.error().message.find("metrics: cannot listen on 127.0.0.1:"), std::string::npos)
+      << taken.error().message;
+  again.metrics_address = "nowhere";
+  auto bad = Server::create(again);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("--metrics: 'nowhere' is not HOST:PORT"), std::string::npos)
+      << bad.error().message;
+}
+
+}  // namespace
+}  // namespace terrane
