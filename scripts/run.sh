@@ -6,10 +6,11 @@
 #      chunks already stored are not generated again)
 #   4. copy it to a scratch world, so the bots' edits never change
 #      worlds/default and every run starts from the same terrain
-#   5. start terrane-server on the copy (port 0: the port is read from its
-#      'listening on 127.0.0.1:PORT' log line)
-#   6. run a terrane-bots load test against it and print the report
-#      (reports/bots.json, reports/bots.html)
+#   5. start terrane-server on the copy, with its metrics endpoint (ports 0:
+#      read from its 'listening on 127.0.0.1:PORT' and 'metrics on
+#      http://127.0.0.1:PORT/metrics' log lines)
+#   6. run a terrane-bots load test against it and print the report, the
+#      server's own figures included (reports/bots.json, reports/bots.html)
 #   7. stop the server cleanly (SIGTERM) and remove the scratch world
 # Safe to run any number of times. Exit status: the bots' (0 = every replica
 # verified, no unexpected disconnects).
@@ -42,14 +43,16 @@ trap cleanup EXIT INT TERM
 
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world"
 # Two io threads: chunk loads on the world owner strand must not stall sockets.
-./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 16)) --io-threads 2 \
-  >"$scratch/server.log" 2>&1 &
+./build/bin/terrane-server --world "$scratch/world" --port 0 --metrics 127.0.0.1:0 --max-clients $((bots + 16)) \
+  --io-threads 2 >"$scratch/server.log" 2>&1 &
 server_pid=$!
 
 port=
+metrics_port=
 for _ in $(seq 1 600); do
   port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
-  [ -n "$port" ] && break
+  metrics_port=$(sed -n 's|.*metrics on http://127\.0\.0\.1:\([0-9]*\)/metrics.*|\1|p' "$scratch/server.log" | head -n 1)
+  [ -n "$port" ] && [ -n "$metrics_port" ] && break
   if ! kill -0 "$server_pid" 2>/dev/null; then
     echo "run.sh: terrane-server exited before listening:" >&2
     cat "$scratch/server.log" >&2
@@ -57,23 +60,23 @@ for _ in $(seq 1 600); do
   fi
   sleep 0.1
 done
-if [ -z "$port" ]; then
+if [ -z "$port" ] || [ -z "$metrics_port" ]; then
   echo "run.sh: terrane-server did not report its port within 60 s:" >&2
   cat "$scratch/server.log" >&2
   exit 1
 fi
-echo "run.sh: terrane-server on 127.0.0.1:$port, world $world (scratch copy)"
+echo "run.sh: terrane-server on 127.0.0.1:$port (metrics: http://127.0.0.1:$metrics_port/metrics), world $world (scratch copy)"
 
 mkdir -p reports
 status=0
 # shellcheck disable=SC2086  # TERRANE_BOTS_ARGS holds several flags
-./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration "$duration" --behavior mixed \
+./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration "$duration" --behavior mixed \
   --spread 128 --view-distance 128 --full-res-radius 48 --ramp-up 5 --seed 1 \
   --report reports/bots.json --html reports/bots.html ${TERRANE_BOTS_ARGS:-} || status=$?
 
 kill -TERM "$server_pid"
 wait "$server_pid" || { echo "run.sh: terrane-server did not stop cleanly:" >&2; tail -n 20 "$scratch/server.log" >&2; status=1; }
 server_pid=
-tail -n 2 "$scratch/server.log"  # the server's totals and its traffic by message type
+grep -A 40 'stopped after' "$scratch/server.log"  # the server's totals and its traffic by message type
 echo "run.sh: reports in reports/bots.json and reports/bots.html"
 exit $status

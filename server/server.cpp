@@ -166,14 +166,17 @@ void Server::stop() {
       c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
       c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
       c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
-  std::string by_type;
+  bool header = false;
   for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {
     const std::uint64_t f = c.net.sent_frames[t].load(), r = c.net.received_frames[t].load();
     if (f == 0 && r == 0) continue;
-    by_type += fmt::format(" {} out {} / {} B, in {} / {} B;", wire::EnumNameBody(static_cast<wire::Body>(t)), f,
-                           c.net.sent_bytes[t].load(), r, c.net.received_bytes[t].load());
+    if (!header)
+      server_log().info("{:<18} {:>10} {:>14} {:>10} {:>14}", "messages by type", "frames out", "bytes out",
+                        "frames in", "bytes in");
+    header = true;
+    server_log().info("{:<18} {:>10} {:>14} {:>10} {:>14}", wire::EnumNameBody(static_cast<wire::Body>(t)), f,
+                      c.net.sent_bytes[t].load(), r, c.net.received_bytes[t].load());
   }
-  if (!by_type.empty()) server_log().info("messages by type (frames / bytes):{}", by_type);
 }
 
 std::string Server::metrics_text() const {

@@ -38,6 +38,10 @@ const char* const kBotsHelp =
     "                            before S are not counted (default 0)\n"
     "  --seed N                  random seed: positions, roles, edits (default 1)\n"
     "  --token T                 auth token for the server\n"
+    "  --server-metrics HOST:PORT\n"
+    "                            the server's metrics endpoint (terrane-server --metrics): the\n"
+    "                            report adds the server's CPU, peak RSS, tick and commit times,\n"
+    "                            edits and bytes by message type over the run\n"
     "  --edit-interval S         mean seconds between edits per editing bot (default 2)\n"
     "  --edit-radius R           largest sphere radius, boxes up to 2R on a side (default 3, max 32)\n"
     "  --latency-ms N            emulated downstream latency per bot (default 0)\n"
@@ -65,7 +69,7 @@ using Values = std::map<std::string, std::pair<std::string, std::string>>;
 const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
-      "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "edit-interval",
+      "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",
       "report",         "html",         "save-scenario", "progress",   "scenario"};
   return k;
@@ -154,6 +158,12 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
         return bad(where, v, "is not HOST:PORT (port 1..65535)");
       o->host = v.substr(0, colon);
       o->port = static_cast<std::uint16_t>(i);
+    } else if (key == "server-metrics") {
+      const auto colon = v.rfind(':');
+      if (colon == std::string::npos || colon == 0 || !parse_i64(v.substr(colon + 1), &i) || i < 1 || i > 65535)
+        return bad(where, v, "is not HOST:PORT (port 1..65535)");
+      o->metrics_host = v.substr(0, colon);
+      o->metrics_port = static_cast<std::uint16_t>(i);
     } else if (key == "bots") {
       err = int_in(1, 100000, &o->bots);
     } else if (key == "duration") {
@@ -271,6 +281,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "ramp-up = " << o.ramp_up_s << "\n";
   s << "seed = " << o.seed << "\n";
   if (!o.token.empty()) s << "token = " << o.token << "\n";
+  if (o.metrics_port != 0) s << "server-metrics = " << o.metrics_host << ":" << o.metrics_port << "\n";
   s << "edit-interval = " << o.edit_interval_s << "\n";
   s << "edit-radius = " << o.edit_radius << "\n";
   s << "latency-ms = " << o.latency_ms << "\n";

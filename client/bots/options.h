@@ -30,6 +30,9 @@ struct BotsOptions {
   double ramp_up_s = 0;   // connections spread over this; latency samples before it end are not counted
   std::uint64_t seed = 1;
   std::string token;
+  // The server's metrics endpoint (terrane-server --metrics): "" = none.
+  std::string metrics_host;
+  std::uint16_t metrics_port = 0;
   double edit_interval_s = 2;  // mean seconds between edits per editing bot (Poisson)
   float edit_radius = 3;       // largest sphere radius (boxes up to 2x this on a side)
   int latency_ms = 0;          // per-bot downstream latency (client/client.h NetworkEmulation)

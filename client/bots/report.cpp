@@ -39,6 +39,45 @@ std::string num(double v) {
   return b;
 }
 
+// A figure for people: d decimals.
+std::string fixed(double v, int d) {
+  if (!std::isfinite(v)) return "-";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", d, v);
+  return b;
+}
+
+// A histogram's bucket bound (server figures): "<= 5 ms", "> 1000 ms".
+std::string bound_ms(const std::optional<double>& ms) {
+  if (!ms) return "-";
+  if (!std::isfinite(*ms)) return "> 1000 ms";
+  return "<= " + num(*ms) + " ms";
+}
+
+std::string json_opt(const std::optional<double>& v) {
+  if (!v) return "null";
+  if (!std::isfinite(*v)) return "\"+Inf\"";
+  return num(*v);
+}
+
+std::string server_json(const ServerFigures& f) {
+  std::ostringstream j;
+  j << "{\"wall_s\": " << num(f.wall_s) << ", \"cpu_s\": " << num(f.cpu_s)
+    << ", \"cpu_share\": " << num(f.wall_s > 0 ? f.cpu_s / f.wall_s : 0) << ", \"rss_peak_bytes\": " << f.rss_peak
+    << ", \"edits_applied\": " << f.edits_applied << ", \"edits_rejected\": " << f.edits_rejected
+    << ", \"ticks\": " << f.ticks << ", \"ticks_late\": " << f.ticks_late << ", \"disconnects\": " << f.disconnects
+    << ", \"tick_p99_ms_bound\": " << json_opt(f.tick_p99_ms) << ", \"commit_p99_ms_bound\": " << json_opt(f.commit_p99_ms)
+    << ", \"fanout_p99_ms_bound\": " << json_opt(f.fanout_p99_ms) << ", \"scrapes\": " << f.scrapes
+    << ", \"scrape_errors\": " << f.scrape_errors << ", \"sent_by_type\": {";
+  bool first = true;
+  for (const auto& [type, fb] : f.sent_by_type) {
+    j << (first ? "" : ", ") << "\"" << type << "\": {\"frames\": " << fb.first << ", \"bytes\": " << fb.second << "}";
+    first = false;
+  }
+  j << "}}";
+  return j.str();
+}
+
 std::string lat(const LatencySummary& l) {
   return "{\"p50\": " + num(l.p50) + ", \"p95\": " + num(l.p95) + ", \"p99\": " + num(l.p99) +
          ", \"count\": " + std::to_string(l.count) + "}";
@@ -139,7 +178,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"walk_steps\": " << r.walk_steps << ",\n";
   j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
     << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
-  j << "  \"server_counters\": null,\n";
+  j << "  \"server_counters\": " << (r.server ? server_json(*r.server) : std::string("null")) << ",\n";
   j << "  \"by_message_type\": {";
   first = true;
   for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
@@ -175,15 +214,15 @@ std::string report_table(const BotsReport& r) {
     std::snprintf(b, sizeof b, "p50 %.1f  p95 %.1f  p99 %.1f  (%zu samples)", s.p50, s.p95, s.p99, s.count);
     return std::string(b);
   };
-  auto mb = [](std::uint64_t b) { return num(static_cast<double>(b) / 1e6) + " MB"; };
+  auto mb = [](std::uint64_t b) { return fixed(static_cast<double>(b) / 1e6, 2) + " MB"; };
   t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
-    << num(r.duration_s) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
+    << fixed(r.duration_s, 1) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
   for (const std::string& why : r.failures()) t << "  FAILED: " << why << "\n";
-  if (r.joined_s > 0) row("all bots joined after", num(r.joined_s) + " s");
+  if (r.joined_s > 0) row("all bots joined after", fixed(r.joined_s, 1) + " s");
   row("bytes received (all / join / steady)",
       mb(r.bytes_received) + " / " + mb(r.join_bytes_received) + " / " + mb(r.steady_bytes_received));
   row("bytes sent", mb(r.bytes_sent));
-  row("bytes per non-empty voxel (join, mean)", num(r.bytes_per_non_empty_voxel));
+  row("bytes per non-empty voxel (join, mean)", fixed(r.bytes_per_non_empty_voxel, 3));
   row("join coarse ms", l(r.join_coarse_ms));
   row("join full ms", l(r.join_full_ms));
   row("joins incomplete", std::to_string(r.joins_incomplete));
@@ -191,18 +230,20 @@ std::string report_table(const BotsReport& r) {
   row("edit fan-out ms", l(r.edit_fanout_ms));
   row("edits sent / acked / rejected",
       std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected));
-  row("receivers per edit (mean)", num(r.receivers_per_edit));
-  row("update bytes per edited voxel per receiver", num(r.update_bytes_per_edited_voxel_per_receiver));
+  row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));
+  row("update bytes per edited voxel per receiver", fixed(r.update_bytes_per_edited_voxel_per_receiver, 2));
   row("replica regions checked", std::to_string(r.replica_regions_checked));
   row("replica mismatches", std::to_string(r.mismatches.size()));
   row("hash requests unanswered", std::to_string(r.hash_unanswered));
   row("unexpected disconnects", std::to_string(r.unexpected_disconnects));
   if (r.walk_steps > 0)
-    row("walk steps (refused: area / not full res / steep / obstacle)",
+    row("walk steps (refused: area/res/steep/block)",
         std::to_string(r.walk_steps) + " (" + std::to_string(r.walk_blocked[0]) + " / " + std::to_string(r.walk_blocked[1]) +
             " / " + std::to_string(r.walk_blocked[2]) + " / " + std::to_string(r.walk_blocked[3]) + ")");
   if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);
-  t << "  by message type (frames in / bytes in / frames out / bytes out):\n";
+  std::snprintf(line, sizeof line, "  %-22s %12s %14s %12s %14s\n", "bots' traffic by type", "frames in",
+                "bytes in", "frames out", "bytes out");
+  t << line;
   for (std::size_t i = 0; i < kMessageTypeCount; ++i) {
     const auto& m = r.by_message_type[i];
     if (m.frames_in == 0 && m.frames_out == 0) continue;
@@ -210,6 +251,26 @@ std::string report_table(const BotsReport& r) {
                   static_cast<unsigned long long>(m.frames_in), static_cast<unsigned long long>(m.bytes_in),
                   static_cast<unsigned long long>(m.frames_out), static_cast<unsigned long long>(m.bytes_out));
     t << line;
+  }
+  if (r.server) {
+    const ServerFigures& f = *r.server;
+    t << "  the server over the run (its /metrics, " << f.scrapes << " scrapes):\n";
+    if (f.scrape_errors > 0) row("  scrapes failed", std::to_string(f.scrape_errors) + ": " + f.first_error);
+    row("  CPU", fixed(f.cpu_s, 1) + " s over " + fixed(f.wall_s, 1) + " s (" +
+                     fixed(f.wall_s > 0 ? 100 * f.cpu_s / f.wall_s : 0, 0) + "% of one core)");
+    row("  resident memory (peak)", fixed(static_cast<double>(f.rss_peak) / (1 << 20), 0) + " MiB");
+    row("  ticks (late)", std::to_string(f.ticks) + " (" + std::to_string(f.ticks_late) + ")");
+    row("  tick / commit / fan-out p99", bound_ms(f.tick_p99_ms) + " / " + bound_ms(f.commit_p99_ms) + " / " +
+                                             bound_ms(f.fanout_p99_ms));
+    row("  edits applied / rejected", std::to_string(f.edits_applied) + " / " + std::to_string(f.edits_rejected));
+    row("  sessions ended", std::to_string(f.disconnects));
+    std::snprintf(line, sizeof line, "    %-20s %12s %14s\n", "sent by type", "frames", "bytes");
+    t << line;
+    for (const auto& [type, fb] : f.sent_by_type) {
+      std::snprintf(line, sizeof line, "    %-20s %12llu %14llu\n", type.c_str(),
+                    static_cast<unsigned long long>(fb.first), static_cast<unsigned long long>(fb.second));
+      t << line;
+    }
   }
   const std::size_t shown = std::min<std::size_t>(r.mismatches.size(), 20);
   for (std::size_t i = 0; i < shown; ++i) {

@@ -88,6 +88,15 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     welcome = *w;
     probe.disconnect();
   }
+  // The server's figures cover the whole run, joins included.
+  std::unique_ptr<ServerWatch> watch;
+  if (o.metrics_port != 0) {
+    watch = std::make_unique<ServerWatch>(o.metrics_host, o.metrics_port);
+    if (std::string err; !watch->start(&err)) {
+      *error = "--server-metrics: " + err;
+      return false;
+    }
+  }
 
   RunContext ctx;
   ctx.options = &o;
@@ -251,6 +260,10 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     sum_counters(&in, &out, &ub_end, &live);
   }
   r.duration_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (watch) {
+    watch->stop();
+    r.server = watch->figures();
+  }
   for (auto& b : bots) b->finish();
 
   // --- the report ----------------------------------------------------------

@@ -8,10 +8,12 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "client/bots/options.h"
+#include "client/bots/server_watch.h"
 #include "client/bots/stats.h"
 
 namespace terrane::bots {
@@ -50,6 +52,8 @@ struct BotsReport {
   std::array<std::uint64_t, 4> walk_blocked{};  // BotResult::walk_blocked, summed
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
   std::vector<TimelinePoint> timeline;
+  // The server's own figures over the run (--server-metrics), else none.
+  std::optional<ServerFigures> server;
 
   // Seconds from the first connection until every bot had joined (or the
   // join wait gave up); 0 when the run did not wait (--wait-joined 0).

@@ -65,9 +65,14 @@ class BotsRunTest : public ::testing::Test {
 };
 
 TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
-  start_server();
+  start_server({"--metrics", "127.0.0.1:0"});
+  const std::string line = "metrics on http://127.0.0.1:";
+  ASSERT_TRUE(server_->wait_for_output("/metrics", testing_support::kServerStartDeadline)) << server_->output();
+  const std::string out = server_->output();
   BotsOptions o = small_run(20, Behavior::kMixed);
   o.ramp_up_s = 1;
+  o.metrics_host = "127.0.0.1";
+  o.metrics_port = static_cast<std::uint16_t>(std::stoi(out.substr(out.find(line) + line.size())));
   BotsReport r;
   std::string err;
   ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
@@ -98,6 +103,20 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_GT(r.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in, 0u);
   EXPECT_GT(r.by_message_type[static_cast<std::size_t>(wire::Body::UpdateBatch)].frames_in, 0u);
   EXPECT_FALSE(r.timeline.empty());
+  // The server's own books agree with the bots': only they edit.
+  ASSERT_TRUE(r.server.has_value());
+  EXPECT_EQ(r.server->scrape_errors, 0) << r.server->first_error;
+  EXPECT_GE(r.server->scrapes, 2);
+  EXPECT_EQ(r.server->edits_applied, r.edits_acked);
+  EXPECT_EQ(r.server->edits_rejected, r.edits_rejected);
+  EXPECT_GT(r.server->cpu_s, 0);
+  EXPECT_GT(r.server->rss_peak, 0u);
+  EXPECT_GT(r.server->ticks, 0u);
+  EXPECT_TRUE(r.server->tick_p99_ms.has_value());
+  EXPECT_TRUE(r.server->commit_p99_ms.has_value());
+  EXPECT_GT(r.server->sent_by_type["StreamBatch"].second, 0u);
+  EXPECT_EQ(r.server->sent_by_type["EditAck"].first, r.edits_acked);
+  EXPECT_NE(report_table(r).find("the server over the run"), std::string::npos) << report_table(r);
 
   std::map<std::string, std::string> j;
   ASSERT_EQ(flatten_json(report_json(r), &j), "");
@@ -106,7 +125,9 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
         "join_full_ms.p95", "edit_ack_ms.p99", "edit_fanout_ms.p50", "edit_fanout_ms.p95", "edit_fanout_ms.p99",
         "edit_fanout_ms.count", "edits_acked", "receivers_per_edit", "replica_regions_checked", "replica_mismatches",
         "unexpected_disconnects", "by_message_type.StreamBatch.bytes_in", "join_bytes_received",
-        "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in"})
+        "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in",
+        "server_counters.cpu_s", "server_counters.rss_peak_bytes", "server_counters.tick_p99_ms_bound",
+        "server_counters.sent_by_type.StreamBatch.bytes"})
     EXPECT_EQ(j.count(key), 1u) << key;
   EXPECT_EQ(j["bots"], "20");
   EXPECT_EQ(j["replica_mismatches"], "0");
@@ -314,6 +335,32 @@ TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
   out.clear();
   EXPECT_EQ(run_binary("compare only-one.json", &out), 2);
   EXPECT_NE(out.find("compare takes two JSON reports"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace terrane::bots
+
+namespace terrane::bots {
+namespace {
+
+TEST(ServerWatch, ReadsTheExpositionAndAHistogramsQuantileBetweenTwoScrapes) {
+  const Scrape a = parse_exposition(
+      "# HELP x_total help\n# TYPE x_total counter\nx_total 5\n"
+      "t_seconds_bucket{le=\"0.001\"} 10\nt_seconds_bucket{le=\"0.01\"} 10\nt_seconds_bucket{le=\"+Inf\"} 10\n"
+      "labelled_total{reason=\"a b\"} 2\nbroken line\nnan_total abc\n");
+  EXPECT_EQ(a.at("x_total"), 5);
+  EXPECT_EQ(a.at("labelled_total{reason=\"a b\"}"), 2);
+  EXPECT_EQ(a.count("broken"), 0u);
+  EXPECT_EQ(a.count("nan_total"), 0u);
+  // Between the scrapes 100 more observations: 98 at most 1 ms, 2 in (1, 10] ms.
+  const Scrape b = parse_exposition(
+      "t_seconds_bucket{le=\"0.001\"} 108\nt_seconds_bucket{le=\"0.01\"} 110\nt_seconds_bucket{le=\"+Inf\"} 110\n");
+  EXPECT_EQ(histogram_quantile_ms(a, b, "t_seconds", 0.5), 1.0);
+  EXPECT_EQ(histogram_quantile_ms(a, b, "t_seconds", 0.99), 10.0);
+  EXPECT_EQ(histogram_quantile_ms(a, a, "t_seconds", 0.99), std::nullopt);  // nothing observed
+  const Scrape c = parse_exposition("t_seconds_bucket{le=\"0.001\"} 10\nt_seconds_bucket{le=\"0.01\"} 10\n"
+                                    "t_seconds_bucket{le=\"+Inf\"} 20\n");
+  EXPECT_TRUE(std::isinf(*histogram_quantile_ms(a, c, "t_seconds", 0.99)));
 }
 
 }  // namespace

@@ -1,0 +1,73 @@
+// ServerWatch: the server's own figures for a bots run, from its metrics
+// endpoint (terrane-server --metrics; terrane-bots --server-metrics). A
+// thread scrapes /metrics once a second from start() to stop(); figures()
+// turns the first and last scrape into the run's deltas (CPU, edits, ticks,
+// bytes by message type) and every scrape into the peak RSS.
+// Thread-safety: start/stop/figures from the run's thread only.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+namespace terrane::bots {
+
+// One scrape: each sample's series (name and labels exactly as exposed)
+// and its value. Malformed lines are skipped; comments ignored.
+using Scrape = std::map<std::string, double>;
+Scrape parse_exposition(const std::string& text);
+
+// The p-quantile's bucket bound, in ms, of a histogram's growth between
+// two scrapes ("le" bounds); +inf when it lies beyond the last bound, and
+// nullopt without observations.
+std::optional<double> histogram_quantile_ms(const Scrape& first, const Scrape& last, const std::string& name, double q);
+
+struct ServerFigures {
+  double wall_s = 0;             // between the first and last scrape
+  double cpu_s = 0;              // process_cpu_seconds_total growth
+  std::uint64_t rss_peak = 0;    // largest process_resident_memory_bytes seen
+  std::uint64_t edits_applied = 0, edits_rejected = 0;
+  std::uint64_t ticks = 0, ticks_late = 0, disconnects = 0;
+  std::optional<double> tick_p99_ms, commit_p99_ms, fanout_p99_ms;
+  std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> sent_by_type;  // frames, bytes
+  int scrapes = 0, scrape_errors = 0;
+  std::string first_error;
+};
+
+class ServerWatch {
+ public:
+  ServerWatch(std::string host, std::uint16_t port);
+  ~ServerWatch();
+  ServerWatch(const ServerWatch&) = delete;
+  ServerWatch& operator=(const ServerWatch&) = delete;
+
+  // Scrapes once now (false with *error when the endpoint does not answer),
+  // then every second on a thread of its own.
+  bool start(std::string* error);
+  // Scrapes a last time and stops the thread.
+  void stop();
+  ServerFigures figures() const;
+
+ private:
+  bool scrape(std::string* error);
+  void loop();
+
+  std::string host_;
+  std::uint16_t port_;
+  std::thread thread_;
+  mutable std::mutex m_;
+  std::condition_variable cv_;
+  bool stopping_ = false;
+  Scrape first_, last_;
+  double first_at_s_ = 0, last_at_s_ = 0;
+  std::uint64_t rss_peak_ = 0;
+  int scrapes_ = 0, errors_ = 0;
+  std::string first_error_;
+};
+
+}  // namespace terrane::bots
