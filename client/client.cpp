@@ -85,7 +85,7 @@ bool Client::connect(std::string* error) {
     return false;
   }
   endpoints_ = endpoints;
-  if (!options_.start_at_spawn) {
+  if (!options_.start_at_spawn && options_.stream) {
     std::lock_guard lock(mutex_);
     last_state_ = options_.state;
   }
@@ -185,8 +185,13 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   // Reconnect only when nobody meant to end it: a drop without a reason, or
   // the server going away. A reason like "authentication failed" or a
   // limit would only repeat.
+  bool not_returning = false;
+  {
+    std::lock_guard lock(mutex_);
+    not_returning = server_not_returning_;
+  }
   const bool retry = options_.reconnect && !leaving_ && !io_closed_ &&
-                     (!server_said || reason == "server shutting down");
+                     (!server_said || (reason == "server shutting down" && !not_returning));
   if (!retry) return close_locked_io(reason);
   ++generation_;
   linked_ = false;
@@ -425,11 +430,12 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
+      server_not_returning_ = false;
       if (resumed_) {
         if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
         break;
       }
-      if (options_.start_at_spawn && !last_state_) {
+      if (options_.start_at_spawn && options_.stream && !last_state_) {
         ClientStateMsg s = options_.state;
         s.position = {w->spawn.x + options_.spawn_offset.x, w->spawn.y + options_.spawn_offset.y,
                       w->spawn.z + options_.spawn_offset.z};
@@ -576,6 +582,25 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Pong:
       ++counters_.pongs;
       break;
+    case wire::Body::ServerNotice: {
+      auto n = parse_server_notice(*m.body_as_ServerNotice());
+      if (!n) return fail(n.error());
+      if (n->kind == wire::NoticeKind::Shutdown) server_not_returning_ = !n->reconnect;
+      client_log().info("'{}': server notice: {}", options_.name, n->text);
+      notices_.push_back(*n);
+      if (notices_.size() > kMaxNotices) notices_.pop_front();
+      if (callbacks_.on_notice) after = [this, n = *n] { callbacks_.on_notice(n); };
+      break;
+    }
+    case wire::Body::AdminResult: {
+      auto r = parse_admin_result(*m.body_as_AdminResult());
+      if (!r) return fail(r.error());
+      // Bounded: a server cannot grow this past the ids we asked for.
+      if (r->request_id == 0 || r->request_id >= next_request_id_.load()) break;
+      admin_results_[r->request_id] = *r;
+      if (callbacks_.on_admin_result) after = [this, r = *r] { callbacks_.on_admin_result(r); };
+      break;
+    }
     case wire::Body::Ping: {
       const std::uint64_t nonce = m.body_as_Ping()->nonce();
       lock.unlock();
@@ -705,6 +730,19 @@ std::vector<PresenceEntryMsg> Client::presence() const {
   return presence_;
 }
 
+std::uint32_t Client::admin(const std::string& command, const std::vector<std::string>& args) {
+  if (command.empty() || command.size() > kMaxAdminCommandBytes || args.size() > kMaxAdminArgs) return 0;
+  for (const auto& a : args)
+    if (a.size() > kMaxAdminArgBytes) return 0;
+  const std::uint32_t id = next_request_id_.fetch_add(1);
+  return send(build_admin_request(AdminRequestMsg{id, command, args}), wire::Body::AdminRequest) ? id : 0;
+}
+
+std::vector<ServerNoticeMsg> Client::notices() const {
+  std::lock_guard lock(mutex_);
+  return {notices_.begin(), notices_.end()};
+}
+
 bool Client::request_region_hash(Vec3i chunk_pos) {
   return send(build_region_hash_request(chunk_pos), wire::Body::RegionHashRequest);
 }
@@ -712,8 +750,9 @@ bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce), wire::Bo
 bool Client::send_raw(Frame bytes) { return send(std::move(bytes), wire::Body::NONE); }
 
 ClientView Client::view() const {
-  return ClientView{replica_,     counters_, welcome_.has_value(), closed_, disconnect_reason_, edits_,
-                    hash_checks_, read_results_, presence_};
+  return ClientView{replica_,     counters_,     welcome_.has_value(), closed_,  disconnect_reason_,
+                    edits_,       hash_checks_,  read_results_,        presence_, notices_,
+                    admin_results_};
 }
 
 bool Client::wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout) {

@@ -77,6 +77,9 @@ struct ClientOptions {
   // the Welcome's spawn point when it arrives (and sent again).
   ClientStateMsg state{{0, 0, 0}, 256, 64};
   bool start_at_spawn = true;
+  // False: never send a ClientState, so the server streams nothing (tools
+  // such as terrane-admin that only speak to the server).
+  bool stream = true;
   // With start_at_spawn: the first position is the spawn plus this (the
   // server limits movement speed after the first position).
   Vec3f spawn_offset{0, 0, 0};
@@ -103,6 +106,7 @@ struct ClientOptions {
   NetworkEmulation emulation;
 };
 
+inline constexpr std::size_t kMaxNotices = 32;
 inline constexpr const char* kEditOutcomeUnknown = "connection lost before the answer; outcome unknown";
 
 // Frames and bytes (length header included) of one message type.
@@ -180,6 +184,10 @@ struct ClientCallbacks {
   // on_disconnected), and when it succeeded (after the new Welcome).
   std::function<void(const std::string& reason)> on_connection_lost;
   std::function<void()> on_reconnected;
+  // A notice from the server's operators: a message (Say) or a shutdown
+  // warning (Shutdown, with the seconds left and whether it restarts).
+  std::function<void(const ServerNoticeMsg&)> on_notice;
+  std::function<void(const AdminResultMsg&)> on_admin_result;
 };
 
 // What wait_until's predicate sees (under the Client's lock).
@@ -193,6 +201,8 @@ struct ClientView {
   const std::unordered_map<Vec3i, bool, Vec3iHash>& hash_checks;  // last verification per chunk
   const std::unordered_map<std::uint32_t, ReadBoxResultMsg>& read_results;  // by request id
   const std::vector<PresenceEntryMsg>& presence;                            // latest
+  const std::deque<ServerNoticeMsg>& notices;  // the latest kMaxNotices, oldest first
+  const std::unordered_map<std::uint32_t, AdminResultMsg>& admin_results;  // by request id
 };
 
 class Client {
@@ -233,6 +243,11 @@ class Client {
   std::uint32_t undo();
   std::uint32_t redo();
   bool request_region_hash(Vec3i chunk_pos);
+  // An operator's command (the session's token must have the admin role);
+  // the answer arrives as ClientView::admin_results[id] and on_admin_result.
+  // 0 if it could not be sent.
+  std::uint32_t admin(const std::string& command, const std::vector<std::string>& args = {});
+  std::vector<ServerNoticeMsg> notices() const;
   bool ping(std::uint64_t nonce);
   // Sends raw bytes as they are (tests: malformed frames).
   bool send_raw(Frame bytes);
@@ -337,6 +352,10 @@ class Client {
   std::unordered_map<std::uint32_t, EditOutcome> edits_;
   std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
   std::unordered_map<std::uint32_t, ReadBoxResultMsg> read_results_;
+  std::unordered_map<std::uint32_t, AdminResultMsg> admin_results_;
+  std::deque<ServerNoticeMsg> notices_;
+  // The server said it stops without coming back: do not reconnect.
+  bool server_not_returning_ = false;
   std::unordered_set<std::uint32_t> unanswered_edits_;
   std::optional<ClientStateMsg> last_state_;
   std::vector<PresenceEntryMsg> presence_;

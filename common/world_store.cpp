@@ -340,6 +340,53 @@ FileStatus WorldStore::load_meta() {
   return Ok{};
 }
 
+FileResult<std::vector<std::pair<std::string, std::string>>> WorldStore::access_entries() {
+  std::vector<std::pair<std::string, std::string>> out;
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT key, value FROM access ORDER BY key", -1, &st, nullptr) != SQLITE_OK) {
+    sqlite3_finalize(st);
+    return out;  // no table yet: nothing listed
+  }
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+    out.emplace_back(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)),
+                     reinterpret_cast<const char*>(sqlite3_column_text(st, 1)));
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot read the access lists");
+  return out;
+}
+
+FileStatus WorldStore::put_access(const std::string& key, const std::string& value) {
+  char* err = nullptr;
+  if (sqlite3_exec(db_, "CREATE TABLE IF NOT EXISTS access(key TEXT PRIMARY KEY, value TEXT NOT NULL) WITHOUT ROWID",
+                   nullptr, nullptr, &err) != SQLITE_OK) {
+    sqlite3_free(err);
+    return error("cannot create the access table");
+  }
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO access(key, value) VALUES(?, ?)", -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot prepare an access write");
+  sqlite3_bind_text(st, 1, key.data(), static_cast<int>(key.size()), SQLITE_TRANSIENT);
+  sqlite3_bind_text(st, 2, value.data(), static_cast<int>(value.size()), SQLITE_TRANSIENT);
+  const int rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot write the access lists");
+  return Ok{};
+}
+
+FileStatus WorldStore::erase_access(const std::string& key) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "DELETE FROM access WHERE key = ?", -1, &st, nullptr) != SQLITE_OK) {
+    sqlite3_finalize(st);
+    return Ok{};  // no table: nothing to erase
+  }
+  sqlite3_bind_text(st, 1, key.data(), static_cast<int>(key.size()), SQLITE_TRANSIENT);
+  const int rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot write the access lists");
+  return Ok{};
+}
+
 FileStatus WorldStore::set_epoch(std::uint64_t epoch) {
   WorldMeta m = meta_;
   m.epoch = epoch;

@@ -143,6 +143,11 @@ class WorldStore {
   // writing; the copy is a consistent snapshot. dest_dir must not hold a
   // world already. progress(done_pages, total_pages) is called as it goes.
   FileStatus backup_to(const std::string& dest_dir, const std::function<void(int, int)>& progress);
+  // The operators' access lists (bans, whitelist: server/ops/access.h), as
+  // key -> value text in the table "access", made on the first write.
+  FileResult<std::vector<std::pair<std::string, std::string>>> access_entries();
+  FileStatus put_access(const std::string& key, const std::string& value);
+  FileStatus erase_access(const std::string& key);
   // Runs `PRAGMA name` and returns the first column as text (tests, checks).
   FileResult<std::string> pragma(const std::string& name);
 

@@ -114,6 +114,32 @@ Frame build_disconnect(std::string_view reason) {
   return finish(fbb, wire::CreateDisconnect(fbb, r));
 }
 
+Frame build_admin_request(const AdminRequestMsg& m) {
+  FlatBufferBuilder fbb(256);
+  const auto cmd = fbb.CreateString(m.command);
+  std::vector<flatbuffers::Offset<flatbuffers::String>> args;
+  for (const auto& a : m.args) args.push_back(fbb.CreateString(a));
+  const auto av = fbb.CreateVector(args);
+  return finish(fbb, wire::CreateAdminRequest(fbb, m.request_id, cmd, av));
+}
+
+Frame build_admin_result(const AdminResultMsg& m) {
+  // Leave room for the frame header and the table within the default frame cap.
+  constexpr std::size_t kRoom = kDefaultMaxFrameBytes - 4096;
+  const std::string_view text = clip(m.text, kRoom / 2);
+  const std::string_view json = m.json.size() <= kRoom / 2 ? std::string_view(m.json) : std::string_view("{}");
+  FlatBufferBuilder fbb(text.size() + json.size() + 128);
+  const auto t = fbb.CreateString(text);
+  const auto j = fbb.CreateString(json);
+  return finish(fbb, wire::CreateAdminResult(fbb, m.request_id, m.ok, t, j));
+}
+
+Frame build_server_notice(const ServerNoticeMsg& m) {
+  FlatBufferBuilder fbb(m.text.size() + 64);
+  const auto t = fbb.CreateString(clip(m.text, kMaxNoticeBytes));
+  return finish(fbb, wire::CreateServerNotice(fbb, m.kind, t, m.seconds_left, m.reconnect));
+}
+
 Frame build_client_state(const ClientStateMsg& m) {
   FlatBufferBuilder fbb(64);
   const auto pos = to_wire(m.position);
@@ -305,6 +331,46 @@ Result<std::string> parse_disconnect(const wire::Disconnect& m) {
   if (m.reason() == nullptr) return std::string();
   if (m.reason()->size() > kMaxReasonBytes) return over("disconnect: reason longer than 256 bytes");
   return m.reason()->str();
+}
+
+Result<AdminRequestMsg> parse_admin_request(const wire::AdminRequest& m) {
+  AdminRequestMsg out;
+  out.request_id = m.request_id();
+  if (m.command() == nullptr || m.command()->size() == 0) return invalid("admin request: missing command");
+  if (m.command()->size() > kMaxAdminCommandBytes) return over("admin request: command longer than 32 bytes");
+  out.command = m.command()->str();
+  if (m.args() != nullptr) {
+    if (m.args()->size() > kMaxAdminArgs) return over("admin request: more than 16 arguments");
+    for (const auto* a : *m.args()) {
+      if (a == nullptr) return invalid("admin request: missing argument");
+      if (a->size() > kMaxAdminArgBytes) return over("admin request: argument longer than 1024 bytes");
+      out.args.push_back(a->str());
+    }
+  }
+  return out;
+}
+
+Result<AdminResultMsg> parse_admin_result(const wire::AdminResult& m) {
+  AdminResultMsg out;
+  out.request_id = m.request_id();
+  out.ok = m.ok();
+  if (m.text() != nullptr) out.text = m.text()->str();
+  if (m.json() != nullptr) out.json = m.json()->str();
+  return out;
+}
+
+Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m) {
+  ServerNoticeMsg out;
+  if (m.kind() != wire::NoticeKind::Say && m.kind() != wire::NoticeKind::Shutdown)
+    return invalid("server notice: unknown kind");
+  out.kind = m.kind();
+  if (m.text() != nullptr) {
+    if (m.text()->size() > kMaxNoticeBytes) return over("server notice: text longer than 1024 bytes");
+    out.text = m.text()->str();
+  }
+  out.seconds_left = m.seconds_left();
+  out.reconnect = m.reconnect();
+  return out;
 }
 
 Result<ClientStateMsg> parse_client_state(const wire::ClientState& m) {

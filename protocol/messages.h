@@ -29,6 +29,10 @@ namespace terrane {
 inline constexpr std::size_t kMaxClientNameBytes = 64;
 inline constexpr std::size_t kMaxAuthTokenBytes = 256;
 inline constexpr std::size_t kMaxReasonBytes = 256;
+inline constexpr std::size_t kMaxAdminCommandBytes = 32;
+inline constexpr std::size_t kMaxAdminArgs = 16;
+inline constexpr std::size_t kMaxAdminArgBytes = 1024;
+inline constexpr std::size_t kMaxNoticeBytes = 1024;
 inline constexpr std::size_t kMaxMaterialNames = kMaterialCount;
 // Voxel coordinates on the wire stay within +-2^24 so that chunk and unit
 // coordinates, and positions as float, never overflow or lose whole voxels.
@@ -56,6 +60,26 @@ struct HelloMsg {
   std::uint32_t protocol_version = kProtocolVersion;
   std::string client_name;
   std::string auth_token;
+};
+
+struct AdminRequestMsg {
+  std::uint32_t request_id = 0;
+  std::string command;
+  std::vector<std::string> args;
+};
+
+struct AdminResultMsg {
+  std::uint32_t request_id = 0;
+  bool ok = false;
+  std::string text;
+  std::string json;
+};
+
+struct ServerNoticeMsg {
+  wire::NoticeKind kind = wire::NoticeKind::Say;
+  std::string text;
+  std::uint32_t seconds_left = 0;
+  bool reconnect = false;
 };
 
 struct WelcomeMsg {
@@ -173,6 +197,10 @@ struct HeldChunkMsg {
 Frame build_hello(const HelloMsg& m);
 Frame build_welcome(const WelcomeMsg& m);
 Frame build_disconnect(std::string_view reason);
+Frame build_admin_request(const AdminRequestMsg& m);
+// text and json are cut to fit one frame (the json is then replaced by {}).
+Frame build_admin_result(const AdminResultMsg& m);
+Frame build_server_notice(const ServerNoticeMsg& m);
 Frame build_client_state(const ClientStateMsg& m);
 Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data);
 Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data);
@@ -203,6 +231,9 @@ Frame build_pong(std::uint64_t nonce);
 Result<HelloMsg> parse_hello(const wire::Hello& m);
 Result<WelcomeMsg> parse_welcome(const wire::Welcome& m);
 Result<std::string> parse_disconnect(const wire::Disconnect& m);
+Result<AdminRequestMsg> parse_admin_request(const wire::AdminRequest& m);
+Result<AdminResultMsg> parse_admin_result(const wire::AdminResult& m);
+Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m);
 Result<ClientStateMsg> parse_client_state(const wire::ClientState& m);
 Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m);
 Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m);

@@ -22,6 +22,9 @@ const char* close_reason_label(CloseReason r) {
     case CloseReason::kServerFull: return "server_full";
     case CloseReason::kShutdown: return "shutdown";
     case CloseReason::kStorageFailure: return "storage_failure";
+    case CloseReason::kKicked: return "kicked";
+    case CloseReason::kBanned: return "banned";
+    case CloseReason::kNotWhitelisted: return "not_whitelisted";
     case CloseReason::kCount: break;
   }
   return "unknown";

@@ -63,6 +63,9 @@ enum class CloseReason : std::uint8_t {
   kServerFull,
   kShutdown,
   kStorageFailure,
+  kKicked,            // by an operator (terrane-admin kick or ban)
+  kBanned,            // refused at the handshake
+  kNotWhitelisted,    // refused at the handshake
   kCount
 };
 const char* close_reason_label(CloseReason r);

@@ -61,7 +61,9 @@ constexpr const char* kHelp =
     "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
-    "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN' ('#' comments)\n"
+    "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN [player|admin]' ('#'\n"
+    "                              comments); admins may run terrane-admin commands\n"
+    "  --admin-token T             whoever gives this token joins as an admin (terrane-admin)\n"
     "  --open                      serve without authentication on a non-loopback address\n"
     "                              (without tokens the server is open; it refuses to do so\n"
     "                              beyond loopback unless this is given)\n"
@@ -94,7 +96,7 @@ int run(int argc, char** argv) {
   CommandLine cl({"world", "bind", "port", "metrics", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
-                  "resident-chunks", "tokens-file", "edits-per-second", "max-edit-voxels", "max-speed",
+                  "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open"});
@@ -129,6 +131,9 @@ int run(int argc, char** argv) {
   o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
   o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
   o.auth_token = cl.get("auth-token");
+  o.admin_token = cl.get("admin-token");
+  if (cl.has("admin-token") && o.admin_token.size() < 8)
+    return usage_error("--admin-token: at least 8 characters (it lets its holder kick, ban and stop the server)");
   o.allow_open = cl.flag("open");
   o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
   o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
@@ -177,6 +182,7 @@ int run(int argc, char** argv) {
   }
 
   o.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
+  o.on_shutdown = [] { std::raise(SIGTERM); };  // terrane-admin shutdown, once its warning time is up
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);

@@ -53,7 +53,14 @@ struct ServerOptions {
   // neither the server is open, which it allows only on a loopback address
   // unless allow_open says otherwise.
   std::string auth_token;
-  std::unordered_map<std::string, std::string> player_tokens;
+  std::unordered_map<std::string, PlayerToken> player_tokens;
+  // Whoever gives this token joins as an admin (terrane-admin), whatever
+  // the name; empty = admins only through the tokens file's roles.
+  std::string admin_token;
+  // Called (any thread) when an operator asked the server to stop
+  // (terrane-admin shutdown) and the warning time is up; the owner of the
+  // Server should stop it, as on SIGTERM.
+  std::function<void()> on_shutdown;
   bool allow_open = false;
   // Per-client limits (0 = unlimited where a rate). A flood of edits beyond
   // the burst (edits_per_second * 2) or a move faster than max_speed (plus

@@ -49,6 +49,16 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   w.max_frame_bytes = static_cast<std::uint32_t>(s->options_.session.max_frame_bytes);
   w.tick_hz = s->options_.tick_hz;
   s->welcome_.bounds = meta.bounds;
+  auto access = AccessControl::open(options.world_dir, options.auth_token, options.player_tokens, options.admin_token);
+  if (!access) return access.error();
+  s->access_ = std::move(*access);
+  s->admin_ = std::make_unique<Admin>(options.world_dir, *s->access_, s->admin_hooks());
+  s->admin_fn_ = [self = s.get()](const std::string& who, AdminRequestMsg req,
+                                  std::function<void(AdminResultMsg)> reply) {
+    std::lock_guard lock(self->admin_mutex_);
+    if (self->admin_) return self->admin_->handle(who, std::move(req), std::move(reply));
+    reply(AdminResultMsg{req.request_id, false, "the server is stopping", "{}"});
+  };
   if (!options.metrics_address.empty()) {
     auto hp = parse_host_port(options.metrics_address);
     if (!hp) return FileError{"--metrics: " + hp.error().message, {}};
@@ -91,7 +101,8 @@ Server::Server(const ServerOptions& options)
       work_(asio::make_work_guard(io_)),
       world_work_(asio::make_work_guard(world_io_)),
       acceptor_(io_),
-      stats_timer_(io_) {
+      stats_timer_(io_),
+      shutdown_timer_(io_) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
   options_.session.counters = &counters_;
@@ -101,6 +112,7 @@ Server::Server(const ServerOptions& options)
 
 Server::~Server() {
   stop();
+  if (shutdown_thread_.joinable()) shutdown_thread_.join();
   world_owner_.reset();
   if (storage_) storage_->stop();
 }
@@ -139,17 +151,32 @@ void Server::stop() {
       asio::error_code ignored;
       acceptor_.close(ignored);
       stats_timer_.cancel();
+      shutdown_timer_.cancel();
       closed.set_value();
     });
     closed.get_future().wait();
+  }
+  // The command running finishes (the world still runs, so a save can);
+  // nothing queued after it runs.
+  {
+    std::unique_ptr<Admin> admin;
+    {
+      std::lock_guard lock(admin_mutex_);
+      admin = std::move(admin_);
+    }
   }
   // Applies what is queued and waits for its commit: nothing acknowledged
   // is lost, and every acknowledgement is sent before the sessions close.
   world_owner_->stop();
   {
+    ServerNoticeMsg bye;
+    bye.kind = wire::NoticeKind::Shutdown;
+    bye.reconnect = clients_reconnect_.load();
+    bye.text = bye.reconnect ? "server stopping now; it restarts: reconnect" : "server stopping now";
+    notify_all(bye);
     std::lock_guard lock(sessions_mutex_);
-    for (auto& [id, w] : sessions_)
-      if (auto s = w.lock()) s->close(CloseReason::kShutdown, "server shutting down");
+    for (auto& [id, peer] : sessions_)
+      if (auto s = peer.session.lock()) s->close(CloseReason::kShutdown, "server shutting down");
   }
   storage_->stop();
   if (metrics_) metrics_->stop();
@@ -199,7 +226,8 @@ void Server::do_accept() {
     }
     if (stopping_) return;
     const ClientId id = next_id_.fetch_add(1);
-    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_);
+    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_, *access_,
+                                            admin_fn_);
     auto session = std::make_shared<Session>(
         std::move(socket), id, options_.session,
         [rep](std::uint64_t, InboundMessage msg) { rep->on_message(std::move(msg)); },
@@ -217,13 +245,109 @@ void Server::do_accept() {
     bool full = false;
     {
       std::lock_guard lock(sessions_mutex_);
-      sessions_[id] = session;
+      sessions_[id] = Peer{session, rep};
       full = sessions_.size() > options_.max_clients;
     }
     session->start();
     if (full) session->close(CloseReason::kServerFull, "server full");
     do_accept();
   });
+}
+
+void Server::notify_all(const ServerNoticeMsg& notice) {
+  const auto frame = std::make_shared<const Frame>(build_server_notice(notice));
+  std::lock_guard lock(sessions_mutex_);
+  for (auto& [id, peer] : sessions_) {
+    auto s = peer.session.lock();
+    auto r = peer.replicator.lock();
+    if (s && r && r->info().welcomed) s->send(frame, SendClass::kControl);
+  }
+}
+
+void Server::schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason) {
+  clients_reconnect_ = restart;
+  ServerNoticeMsg n;
+  n.kind = wire::NoticeKind::Shutdown;
+  n.seconds_left = seconds;
+  n.reconnect = restart;
+  n.text = "server stopping in " + std::to_string(seconds) + " s" + (restart ? " and restarting" : "") +
+           (reason.empty() ? std::string() : ": " + reason);
+  server_log().warn("{} (asked by an operator)", n.text);
+  notify_all(n);
+  asio::post(io_, [this, seconds] {
+    if (stopping_) return;
+    shutdown_timer_.expires_after(std::chrono::seconds(seconds));
+    shutdown_timer_.async_wait([this](const asio::error_code& ec) {
+      if (ec || stopping_) return;
+      if (options_.on_shutdown) return options_.on_shutdown();
+      // No owner to ask: stop from a thread of our own (stop() joins the io
+      // threads, this one among them).
+      if (!shutdown_thread_.joinable()) shutdown_thread_ = std::thread([this] { stop(); });
+    });
+  });
+}
+
+AdminHooks Server::admin_hooks() {
+  AdminHooks h;
+  h.status = [this] {
+    ServerStatus s;
+    s.world_dir = options_.world_dir;
+    s.epoch = world_->meta().epoch;
+    s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_at_).count();
+    s.clients = counters_.clients.load();
+    s.ticks = counters_.ticks.load();
+    s.tick_hz = options_.tick_hz;
+    s.edits_applied = counters_.edits_applied.load();
+    s.edits_rejected = counters_.edits_rejected();
+    s.chunks_resident = counters_.chunks_loaded.load();
+    s.storage_failed = storage_failed();
+    const std::uint64_t n = counters_.tick_duration.count();
+    s.tick_mean_ms = n > 0 ? counters_.tick_duration.sum_seconds() * 1000 / static_cast<double>(n) : 0;
+    return s;
+  };
+  auto each = [this](const std::function<void(Session&, const PlayerInfo&)>& fn) {
+    std::lock_guard lock(sessions_mutex_);
+    const auto now = std::chrono::steady_clock::now();
+    for (auto& [id, peer] : sessions_) {
+      auto s = peer.session.lock();
+      auto r = peer.replicator.lock();
+      if (!s || !r) continue;
+      const Replicator::Info info = r->info();
+      if (!info.welcomed) continue;
+      PlayerInfo p;
+      p.id = id;
+      p.name = info.name;
+      p.address = s->address();
+      p.position = info.position;
+      p.admin = info.admin;
+      p.connected_s = std::chrono::duration<double>(now - info.joined).count();
+      p.bytes_in = s->bytes_received();
+      p.bytes_out = s->bytes_sent();
+      fn(*s, p);
+    }
+  };
+  h.players = [each] {
+    std::vector<PlayerInfo> out;
+    each([&](Session&, const PlayerInfo& p) { out.push_back(p); });
+    std::sort(out.begin(), out.end(), [](const PlayerInfo& a, const PlayerInfo& b) { return a.name < b.name; });
+    return out;
+  };
+  h.close_matching = [each](const std::function<bool(const PlayerInfo&)>& match, CloseReason why,
+                            const std::string& text) {
+    int n = 0;
+    each([&](Session& s, const PlayerInfo& p) {
+      if (!match(p)) return;
+      s.close(why, text);
+      ++n;
+    });
+    return n;
+  };
+  h.notify_all = [this](const ServerNoticeMsg& n) { notify_all(n); };
+  h.flush = [this](std::function<void(std::uint64_t, bool)> done) { world_owner_->flush(std::move(done)); };
+  h.shutdown = [this](std::uint32_t seconds, bool restart, const std::string& reason) {
+    schedule_shutdown(seconds, restart, reason);
+  };
+  return h;
 }
 
 void Server::arm_stats() {

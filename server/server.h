@@ -10,6 +10,7 @@
 // |                     |                            | who holds what (interest), presence          |
 // | server/storage/     | loader pool, writer thread | SQLite reads and generation; group commits   |
 // | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
+// |                     | the admin thread           | operators' commands; bans and whitelist      |
 //
 // Between them only immutable data travels: chunk versions (server/world/
 // chunk_version.h) whose encodings, update units, hash and blob are made
@@ -41,6 +42,8 @@
 #include <vector>
 
 #include "common/world.h"
+#include "server/ops/access.h"
+#include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"
 #include "server/options.h"
 #include "server/replication/replicator.h"
@@ -85,6 +88,9 @@ class Server {
   // worlds without a generator above the centre of the stored chunks.
   static Vec3f find_spawn(World& world);
   void do_accept();
+  AdminHooks admin_hooks();
+  void schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason);
+  void notify_all(const ServerNoticeMsg& notice);
   void log_stats();
   void arm_stats();
 
@@ -104,6 +110,17 @@ class Server {
   asio::steady_timer stats_timer_;
   std::unique_ptr<WorldOwner> world_owner_;
   std::unique_ptr<HttpEndpoint> metrics_;
+  std::unique_ptr<AccessControl> access_;
+  std::mutex admin_mutex_;  // admin_ is dropped in stop() while sessions may still ask
+  std::unique_ptr<Admin> admin_;
+  Replicator::AdminFn admin_fn_;
+  asio::steady_timer shutdown_timer_;
+  // What the last notice tells clients when the server stops: to reconnect
+  // (a SIGTERM is usually a restart) unless an operator's shutdown said
+  // otherwise.
+  std::atomic<bool> clients_reconnect_{true};
+  std::thread shutdown_thread_;  // stops the server when no owner does (options.on_shutdown unset)
+  const std::chrono::steady_clock::time_point started_at_ = std::chrono::steady_clock::now();
   WelcomeTemplate welcome_;
   std::vector<std::thread> threads_;
   std::uint16_t port_ = 0;
@@ -115,7 +132,11 @@ class Server {
   // Live sessions, for stop() and the client cap. Guarded by sessions_mutex_:
   // sessions are added by the acceptor and removed on their own strands.
   std::mutex sessions_mutex_;
-  std::unordered_map<ClientId, std::weak_ptr<Session>> sessions_;
+  struct Peer {
+    std::weak_ptr<Session> session;
+    std::weak_ptr<Replicator> replicator;
+  };
+  std::unordered_map<ClientId, Peer> sessions_;
 
   std::chrono::steady_clock::time_point stats_at_ = std::chrono::steady_clock::now();
   std::uint64_t stats_edits_ = 0, stats_sent_ = 0, stats_received_ = 0;

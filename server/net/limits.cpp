@@ -62,23 +62,25 @@ RateLimitedLog& violations() {
   return log;
 }
 
-FileResult<std::unordered_map<std::string, std::string>> load_tokens_file(const std::string& path) {
+FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path) {
   std::ifstream in(path);
   if (!in) return FileError{"cannot read tokens file " + path, {}};
-  std::unordered_map<std::string, std::string> tokens;
+  std::unordered_map<std::string, PlayerToken> tokens;
   std::string line;
   int number = 0;
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
     std::istringstream words(line);
-    std::string name, token, extra;
+    std::string name, token, role, extra;
     if (!(words >> name) || name[0] == '#') continue;
     if (!(words >> token)) return FileError{where + "player '" + name + "' has no token", {}};
-    if (words >> extra) return FileError{where + "expected 'NAME TOKEN', found more", {}};
+    if ((words >> role) && role != "player" && role != "admin")
+      return FileError{where + "role '" + role + "' is neither player nor admin", {}};
+    if (words >> extra) return FileError{where + "expected 'NAME TOKEN [player|admin]', found more", {}};
     if (name.size() > kMaxClientNameBytes) return FileError{where + "name longer than 64 bytes", {}};
     if (token.size() > kMaxAuthTokenBytes) return FileError{where + "token longer than 256 bytes", {}};
-    if (!tokens.emplace(name, token).second) return FileError{where + "player '" + name + "' listed twice", {}};
+    if (!tokens.emplace(name, PlayerToken{token, role == "admin"}).second) return FileError{where + "player '" + name + "' listed twice", {}};
   }
   if (in.bad()) return FileError{"error reading tokens file " + path, {}};
   return tokens;

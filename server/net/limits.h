@@ -55,11 +55,17 @@ class RateLimitedLog {
 // The server's shared log for client misbehaviour.
 RateLimitedLog& violations();
 
-// A tokens file: one player per line, "NAME TOKEN" separated by whitespace;
-// blank lines and lines starting with '#' are ignored. Errors name the file
-// and line (a line without a token, a duplicate name, a name or token over
-// the protocol's limits).
-FileResult<std::unordered_map<std::string, std::string>> load_tokens_file(const std::string& path);
+struct PlayerToken {
+  std::string token;
+  bool admin = false;  // may run terrane-admin commands
+};
+
+// A tokens file: one player per line, "NAME TOKEN [ROLE]" separated by
+// whitespace, ROLE being player (the default) or admin; blank lines and
+// lines starting with '#' are ignored. Errors name the file and line (a
+// line without a token, an unknown role, a duplicate name, a name or token
+// over the protocol's limits).
+FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path);
 
 // True for 127.0.0.0/8, ::1 and localhost.
 bool is_loopback_address(const std::string& address);

@@ -27,7 +27,8 @@ Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLi
       inbound_(limits.inbound_bytes_per_second, limits.inbound_burst_bytes) {
   asio::error_code ec;
   const auto ep = socket_.remote_endpoint(ec);
-  remote_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
+  address_ = ec ? std::string("?") : ep.address().to_string();
+  remote_ = ec ? std::string("?") : address_ + ":" + std::to_string(ep.port());
 }
 
 void Session::start() {
@@ -113,6 +114,7 @@ void Session::do_read() {
           return;
         }
         self->last_read_ = Clock::now();
+        self->bytes_received_.fetch_add(n, std::memory_order_relaxed);
         if (!self->inbound_.take(static_cast<double>(n), self->last_read_)) {
           violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
                             "): inbound rate limit; dropping");
@@ -203,6 +205,12 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       auto r = parse_read_box(*m.body_as_ReadBox());
       if (!r) return fail(r.error());
       on_message_(id_, *r);
+      return;
+    }
+    case wire::Body::AdminRequest: {
+      auto r = parse_admin_request(*m.body_as_AdminRequest());
+      if (!r) return fail(r.error());
+      on_message_(id_, std::move(*r));
       return;
     }
     case wire::Body::Ping:

@@ -71,8 +71,8 @@ struct HoldingsMsg {
   std::vector<HeldChunkMsg> chunks;
 };
 
-using InboundMessage =
-    std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg, HoldingsMsg>;
+using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg,
+                                    HoldingsMsg, AdminRequestMsg>;
 
 using SharedFrame = std::shared_ptr<const Frame>;
 
@@ -114,7 +114,10 @@ class Session : public std::enable_shared_from_this<Session> {
   asio::ip::tcp::socket::executor_type executor() { return socket_.get_executor(); }
   std::size_t queued_bytes() const { return queued_bytes_.load(std::memory_order_relaxed); }
   std::uint64_t bytes_sent() const { return bytes_sent_.load(std::memory_order_relaxed); }
+  std::uint64_t bytes_received() const { return bytes_received_.load(std::memory_order_relaxed); }
+  // "IP:PORT" of the peer, and its IP alone (what bans take).
   const std::string& remote() const { return remote_; }
+  const std::string& address() const { return address_; }
 
  private:
   enum class State { kReading, kClosing, kDraining, kClosed };
@@ -138,6 +141,7 @@ class Session : public std::enable_shared_from_this<Session> {
   ClosedFn on_closed_;
   DrainedFn on_drained_;
   std::string remote_;
+  std::string address_;
 
   State state_ = State::kReading;
   bool welcomed_ = false;  // set once a Hello was accepted by the parser
@@ -157,6 +161,7 @@ class Session : public std::enable_shared_from_this<Session> {
   TokenBucket inbound_;
   std::atomic<std::size_t> queued_bytes_{0};
   std::atomic<std::uint64_t> bytes_sent_{0};
+  std::atomic<std::uint64_t> bytes_received_{0};
 };
 
 }  // namespace terrane

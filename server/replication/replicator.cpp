@@ -19,8 +19,16 @@ StreamRecordKind record_kind(int level) {
 }  // namespace
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-                       const WelcomeTemplate& welcome, ReplicationFaults& faults)
-    : id_(id), world_(world), options_(options), counters_(counters), welcome_(welcome), faults_(faults) {
+                       const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
+                       const AdminFn& admin)
+    : id_(id),
+      world_(world),
+      options_(options),
+      counters_(counters),
+      welcome_(welcome),
+      faults_(faults),
+      access_(access),
+      admin_fn_(admin) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;
 }
@@ -65,6 +73,23 @@ void Replicator::on_message(InboundMessage msg) {
   if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(*read);
   if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
   if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
+  if (auto* admin = std::get_if<AdminRequestMsg>(&msg)) return on_admin(std::move(*admin));
+}
+
+Replicator::Info Replicator::info() const {
+  std::lock_guard lock(info_m_);
+  return info_;
+}
+
+void Replicator::on_admin(AdminRequestMsg req) {
+  if (!admin_) {
+    AdminResultMsg r{req.request_id, false, "not an admin: this session's token does not have the admin role", "{}"};
+    session_->send(build_admin_result(r), SendClass::kControl);
+    return;
+  }
+  admin_fn_(name_, std::move(req), [weak = weak_session_](AdminResultMsg r) {
+    if (auto s = weak.lock()) s->send(build_admin_result(r), SendClass::kControl);
+  });
 }
 
 void Replicator::on_hello(const HelloMsg& hello) {
@@ -74,30 +99,36 @@ void Replicator::on_hello(const HelloMsg& hello) {
                     std::to_string(hello.protocol_version));
     return;
   }
-  bool allowed = true;
-  if (!options_.player_tokens.empty()) {
-    auto it = options_.player_tokens.find(hello.client_name);
-    allowed = it != options_.player_tokens.end() && it->second == hello.auth_token;
-  } else if (!options_.auth_token.empty()) {
-    allowed = hello.auth_token == options_.auth_token;
-  }
-  if (!allowed) {
-    counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
-    violations().warn("session " + std::to_string(id_) + " (" + session_->remote() + "): authentication failed for '" +
-                      hello.client_name + "'");
-    session_->close(CloseReason::kAuthFailed, "authentication failed");
+  const auto now_unix =
+      std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const Admission admission = access_.admit(hello.client_name, hello.auth_token, session_->address(), now_unix);
+  if (!admission.ok) {
+    if (admission.why == CloseReason::kAuthFailed) {
+      counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
+      violations().warn("session " + std::to_string(id_) + " (" + session_->remote() +
+                        "): authentication failed for '" + hello.client_name + "'");
+    } else {
+      server_log().info("session {} ({}): '{}' refused: {}", id_, session_->remote(), hello.client_name,
+                        admission.reason);
+    }
+    session_->close(admission.why, admission.reason);
     return;
   }
+  admin_ = admission.admin;
   edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = hello.client_name;
   welcomed_ = true;
   state_.position = welcome_.welcome.spawn;
+  {
+    std::lock_guard lock(info_m_);
+    info_ = Info{name_, state_.position, admin_, true, std::chrono::steady_clock::now()};
+  }
   world_.join(id_, name_, shared_from_this());
   counters_.clients.fetch_add(1, std::memory_order_relaxed);
   counters_.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(welcome_.welcome));
-  server_log().info("session {} ({}) joined as '{}'", id_, session_->remote(), name_);
+  server_log().info("session {} ({}) joined as '{}'{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "");
   next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
   arm_timer();
   // Streaming starts with the client's first ClientState.
@@ -147,6 +178,10 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
   moved_at_ = now;
   // 0 asks for the server's default; everything is capped.
   state_ = state;
+  {
+    std::lock_guard lock(info_m_);
+    info_.position = state.position;
+  }
   const std::int32_t view = state.view_distance == 0 ? options_.default_view_distance : state.view_distance;
   const std::int32_t full = state.full_res_radius == 0 ? options_.default_full_res_radius : state.full_res_radius;
   state_.view_distance = std::min(view, options_.max_view_distance);

@@ -30,6 +30,8 @@
 #include <chrono>
 #include <cstdint>
 #include <deque>
+#include <functional>
+#include <mutex>
 #include <memory>
 #include <queue>
 #include <string>
@@ -40,6 +42,7 @@
 #include "protocol/stream_batch.h"
 #include "server/net/limits.h"
 #include "server/net/session.h"
+#include "server/ops/access.h"
 #include "server/options.h"
 #include "server/replication/view_table.h"
 #include "server/world/world_owner.h"
@@ -69,8 +72,21 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;
 
+  // An admin command from this client (name), answered through reply.
+  using AdminFn = std::function<void(const std::string& who, AdminRequestMsg req,
+                                     std::function<void(AdminResultMsg)> reply)>;
+  // Who this client is, for operators (any thread).
+  struct Info {
+    std::string name;
+    Vec3f position;
+    bool admin = false;
+    bool welcomed = false;
+    std::chrono::steady_clock::time_point joined;
+  };
+
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-             const WelcomeTemplate& welcome, ReplicationFaults& faults);
+             const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
+             const AdminFn& admin);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
@@ -78,6 +94,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void on_message(InboundMessage msg);
   void on_drained();
   void on_closed(const std::string& reason);
+  Info info() const;
 
   // WorldClient (world strand; each posts to the session strand).
   void granted(std::vector<VersionPtr> versions) override;
@@ -98,6 +115,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void on_read_box(const ReadBoxMsg& req);
   void on_holdings(const HoldingsMsg& h);
   void on_hash_request(Vec3i chunk_pos);
+  void on_admin(AdminRequestMsg req);
 
   void replan();
   void move_by(Vec3i d);
@@ -129,6 +147,11 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   ServerCounters& counters_;
   const WelcomeTemplate& welcome_;
   ReplicationFaults& faults_;
+  const AccessControl& access_;
+  const AdminFn& admin_fn_;
+  bool admin_ = false;
+  mutable std::mutex info_m_;
+  Info info_;  // a copy of name, position and role for other threads
   // session_ is used on the session strand only and dropped when the
   // session closes (it and the session's callbacks keep each other alive);
   // the world strand reaches the session through weak_session_ and posts to

@@ -477,6 +477,15 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
         it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }
+  if (status) last_committed_tick_ = std::max(last_committed_tick_, tick);
+  for (auto it = flush_waiters_.begin(); it != flush_waiters_.end();) {
+    if (commits_pending_ == 0 || it->first <= last_committed_tick_) {
+      it->second(it->first, !storage_failed_);
+      it = flush_waiters_.erase(it);
+    } else {
+      ++it;
+    }
+  }
   if (drain_wanted_ && commits_pending_ == 0) {
     drain_wanted_ = false;
     drained_.set_value();
@@ -592,6 +601,13 @@ void WorldOwner::on_tick() {
   const auto t1 = std::chrono::steady_clock::now();
   counters_.tick_duration.observe(t1 - t0);
   counters_.last_tick_at_ns.store(std::chrono::nanoseconds(t1.time_since_epoch()).count(), std::memory_order_relaxed);
+}
+
+void WorldOwner::flush(std::function<void(std::uint64_t tick, bool stored)> done) {
+  asio::post(strand_, [this, done = std::move(done)]() mutable {
+    if (commits_pending_ == 0) return done(tick_, !storage_failed_);
+    flush_waiters_.emplace_back(tick_, std::move(done));
+  });
 }
 
 void WorldOwner::inspect(const std::function<void(const WorldView&)>& fn) {

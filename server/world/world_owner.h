@@ -109,6 +109,12 @@ class WorldOwner : private WorldView {
   void read_box(ClientId id, ReadBoxMsg request);
   void hash(ClientId id, Vec3i chunk_pos);
 
+  // done(tick, stored) runs (on the world strand) once every tick applied so
+  // far is committed: every edit applied up to tick is stored (acknowledged
+  // edits always are; this also covers the tick in flight); stored is false
+  // once the store has failed.
+  void flush(std::function<void(std::uint64_t tick, bool stored)> done);
+
   // Runs fn on the strand and waits (tests, tools).
   void inspect(const std::function<void(const WorldView&)>& fn);
   bool storage_failed() const { return storage_failed_flag_.load(); }
@@ -206,6 +212,8 @@ class WorldOwner : private WorldView {
   PresenceGrid presence_;
   std::uint64_t tick_ = 0;
   std::uint64_t commits_pending_ = 0;
+  std::uint64_t last_committed_tick_ = 0;
+  std::vector<std::pair<std::uint64_t, std::function<void(std::uint64_t, bool)>>> flush_waiters_;
   bool stopping_ = false;
   bool storage_failed_ = false;
   std::atomic<bool> storage_failed_flag_{false};

@@ -82,6 +82,25 @@ class ServerProcess {
     exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return exit_code_;
   }
+  // Waits for it to exit by itself: its exit status, or -1 if it had not
+  // within timeout (it is then stopped).
+  int wait_exit(std::chrono::seconds timeout) {
+    if (pid_ <= 0) return exit_code_;
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    int status = 0;
+    while (waitpid(pid_, &status, WNOHANG) == 0) {
+      if (std::chrono::steady_clock::now() > deadline) {
+        stop();
+        return -1;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    pid_ = -1;
+    if (reader_.joinable()) reader_.join();
+    close(fd_);
+    exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return exit_code_;
+  }
   // SIGKILL: a crash, nothing runs on the way out. Waits for the process and
   // its output; returns true if the signal is what ended it.
   bool kill_hard() {

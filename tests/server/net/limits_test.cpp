@@ -54,7 +54,7 @@ class LimitsTest : public ServerTest {
 
 TEST_F(LimitsTest, PerPlayerTokensAdmitOnlyTheirPlayer) {
   ServerOptions o;
-  o.player_tokens = {{"good", "g-token"}, {"bob", "b-token"}};
+  o.player_tokens = {{"good", {"g-token", false}}, {"bob", {"b-token", false}}};
   start(o);
   RawPeer good(server_->port());
   ASSERT_TRUE(good.send(build_hello(HelloMsg{kProtocolVersion, "good", "g-token"})));
@@ -95,11 +95,21 @@ TEST_F(LimitsTest, TokensFileErrorsNameFileAndLine) {
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find(f.string() + ":4:"), std::string::npos) << r.error().message;
   {
-    std::ofstream(f) << "alice s3cret\nbob hunter2\n";
+    std::ofstream(f) << "alice s3cret admin\nbob hunter2\ncarol c player\n";
   }
   r = load_tokens_file(f.string());
   ASSERT_TRUE(r.ok()) << r.error().message;
-  EXPECT_EQ(r->at("bob"), "hunter2");
+  EXPECT_EQ(r->at("bob").token, "hunter2");
+  EXPECT_FALSE(r->at("bob").admin);
+  EXPECT_TRUE(r->at("alice").admin);
+  EXPECT_FALSE(r->at("carol").admin);
+  {
+    std::ofstream(f) << "alice a owner\n";
+  }
+  r = load_tokens_file(f.string());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find(":1: role 'owner' is neither player nor admin"), std::string::npos)
+      << r.error().message;
   {
     std::ofstream(f) << "alice a\nalice b\n";
   }

@@ -1,0 +1,154 @@
+#include "server/ops/access.h"
+
+#include <sstream>
+
+namespace terrane {
+
+namespace {
+
+std::string ban_key(const std::string& target, bool address) {
+  return std::string(address ? "ban:addr:" : "ban:name:") + target;
+}
+
+}  // namespace
+
+FileResult<std::unique_ptr<AccessControl>> AccessControl::open(const std::string& world_dir, std::string shared_token,
+                                                                std::unordered_map<std::string, PlayerToken> players,
+                                                                std::string admin_token) {
+  std::unique_ptr<AccessControl> a(new AccessControl());
+  a->shared_token_ = std::move(shared_token);
+  a->players_ = std::move(players);
+  a->admin_token_ = std::move(admin_token);
+  auto store = WorldStore::open(world_dir);
+  if (!store) return store.error();
+  a->store_ = std::move(*store);
+  if (auto st = a->load(); !st) return st.error();
+  return a;
+}
+
+FileStatus AccessControl::load() {
+  auto entries = store_->access_entries();
+  if (!entries) return entries.error();
+  for (const auto& [key, value] : *entries) {
+    if (key == "whitelist") {
+      whitelist_on_ = value == "on";
+    } else if (key.rfind("whitelist:", 0) == 0) {
+      whitelist_.insert(key.substr(10));
+    } else if (key.rfind("ban:name:", 0) == 0 || key.rfind("ban:addr:", 0) == 0) {
+      Ban b;
+      b.address = key[4] == 'a';
+      b.target = key.substr(9);
+      std::istringstream v(value);
+      v >> b.until;
+      std::getline(v >> std::ws, b.reason);
+      bans_[key] = b;
+    }
+  }
+  return Ok{};
+}
+
+Admission AccessControl::admit(const std::string& name, const std::string& token, const std::string& address,
+                               std::int64_t now) const {
+  Admission a;
+  const bool is_admin = !admin_token_.empty() && token == admin_token_;
+  if (is_admin) {
+    a.admin = true;
+  } else if (!players_.empty()) {
+    auto it = players_.find(name);
+    if (it == players_.end() || it->second.token != token) {
+      a.reason = "authentication failed";
+      return a;
+    }
+    a.admin = it->second.admin;
+  } else if (!shared_token_.empty() && token != shared_token_) {
+    a.reason = "authentication failed";
+    return a;
+  } else if (shared_token_.empty() && !admin_token_.empty() && !token.empty()) {
+    // An open server with an admin token: a wrong token is refused rather
+    // than let in as a player (it was meant to be the admin's).
+    a.reason = "authentication failed";
+    return a;
+  }
+  std::lock_guard lock(m_);
+  if (!a.admin) {
+    for (const auto& [target, address_ban] : {std::pair{name, false}, std::pair{address, true}}) {
+      auto it = bans_.find(ban_key(target, address_ban));
+      if (it == bans_.end() || (it->second.until != 0 && it->second.until <= now)) continue;
+      a.why = CloseReason::kBanned;
+      a.reason = "banned";
+      if (it->second.until != 0) a.reason += " for " + std::to_string(it->second.until - now) + " s more";
+      if (!it->second.reason.empty()) a.reason += ": " + it->second.reason;
+      return a;
+    }
+    if (whitelist_on_ && whitelist_.count(name) == 0) {
+      a.why = CloseReason::kNotWhitelisted;
+      a.reason = "not on the whitelist: the server admits listed players only (ask an operator)";
+      return a;
+    }
+  }
+  a.ok = true;
+  return a;
+}
+
+FileStatus AccessControl::ban(const Ban& b) {
+  std::lock_guard lock(m_);
+  const std::string key = ban_key(b.target, b.address);
+  if (auto st = store_->put_access(key, std::to_string(b.until) + " " + b.reason); !st) return st;
+  bans_[key] = b;
+  return Ok{};
+}
+
+FileResult<bool> AccessControl::unban(const std::string& target) {
+  std::lock_guard lock(m_);
+  bool any = false;
+  for (const bool address : {false, true}) {
+    const std::string key = ban_key(target, address);
+    if (bans_.count(key) == 0) continue;
+    if (auto st = store_->erase_access(key); !st) return st.error();
+    bans_.erase(key);
+    any = true;
+  }
+  return any;
+}
+
+std::vector<Ban> AccessControl::bans(std::int64_t now) const {
+  std::lock_guard lock(m_);
+  std::vector<Ban> out;
+  for (const auto& [key, b] : bans_)
+    if (b.until == 0 || b.until > now) out.push_back(b);
+  return out;
+}
+
+FileStatus AccessControl::set_whitelist(bool on) {
+  std::lock_guard lock(m_);
+  if (auto st = store_->put_access("whitelist", on ? "on" : "off"); !st) return st;
+  whitelist_on_ = on;
+  return Ok{};
+}
+
+FileStatus AccessControl::whitelist_add(const std::string& name) {
+  std::lock_guard lock(m_);
+  if (auto st = store_->put_access("whitelist:" + name, ""); !st) return st;
+  whitelist_.insert(name);
+  return Ok{};
+}
+
+FileResult<bool> AccessControl::whitelist_remove(const std::string& name) {
+  std::lock_guard lock(m_);
+  if (whitelist_.count(name) == 0) return false;
+  if (auto st = store_->erase_access("whitelist:" + name); !st) return st.error();
+  whitelist_.erase(name);
+  return true;
+}
+
+bool AccessControl::whitelist_on() const {
+  std::lock_guard lock(m_);
+  return whitelist_on_;
+}
+
+std::set<std::string> AccessControl::whitelist() const {
+  std::lock_guard lock(m_);
+  return whitelist_;
+}
+
+}  // namespace terrane

@@ -1,0 +1,76 @@
+// AccessControl: who may join and who is an admin. Tokens (the shared
+// token, per-player tokens with a role, the admin token) come from the
+// options; bans (by name or address, for a while or for ever) and the
+// whitelist are the operators' (terrane-admin) and live in the world's
+// store (table "access", common/WORLD_FORMAT.md), so they survive restarts.
+//
+// Threading: every method may be called from any thread (one mutex; the
+// store is its own SQLite connection, written only by admin commands).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "common/world_store.h"
+#include "server/counters.h"
+#include "server/net/limits.h"
+
+namespace terrane {
+
+struct Admission {
+  bool ok = false;
+  bool admin = false;
+  CloseReason why = CloseReason::kAuthFailed;
+  std::string reason;  // sent to a refused client
+};
+
+struct Ban {
+  std::string target;   // a name, or an address
+  bool address = false;
+  std::int64_t until = 0;  // Unix seconds; 0 = never ends
+  std::string reason;
+};
+
+class AccessControl {
+ public:
+  static FileResult<std::unique_ptr<AccessControl>> open(const std::string& world_dir, std::string shared_token,
+                                                          std::unordered_map<std::string, PlayerToken> players,
+                                                          std::string admin_token);
+
+  // now: Unix seconds (bans that ended are ignored).
+  Admission admit(const std::string& name, const std::string& token, const std::string& address,
+                  std::int64_t now) const;
+  bool open_to_all() const { return shared_token_.empty() && players_.empty(); }
+
+  FileStatus ban(const Ban& b);
+  // True if something was banned under target (a name or an address).
+  FileResult<bool> unban(const std::string& target);
+  std::vector<Ban> bans(std::int64_t now) const;
+
+  FileStatus set_whitelist(bool on);
+  FileStatus whitelist_add(const std::string& name);
+  FileResult<bool> whitelist_remove(const std::string& name);
+  bool whitelist_on() const;
+  std::set<std::string> whitelist() const;
+
+ private:
+  AccessControl() = default;
+  FileStatus load();
+
+  std::string shared_token_, admin_token_;
+  std::unordered_map<std::string, PlayerToken> players_;
+  mutable std::mutex m_;
+  std::unique_ptr<WorldStore> store_;
+  std::map<std::string, Ban> bans_;  // by store key
+  std::set<std::string> whitelist_;
+  bool whitelist_on_ = false;
+};
+
+}  // namespace terrane

@@ -1,0 +1,331 @@
+#include "server/ops/admin.h"
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <future>
+#include <sstream>
+
+#include "common/world_store.h"
+#include "server/log.h"
+
+namespace terrane {
+
+const char* const kAdminHelp =
+    "status                          the server at a glance\n"
+    "players                         who is connected: name, address, position, bytes in/out\n"
+    "kick NAME [REASON...]           end NAME's session (they may join again)\n"
+    "ban NAME|ADDRESS [--for DURATION] [REASON...]\n"
+    "                                refuse NAME or ADDRESS at the handshake (DURATION: 90s, 15m,\n"
+    "                                2h, 7d; default: until unbanned) and end their sessions\n"
+    "unban NAME|ADDRESS              lift a ban\n"
+    "bans                            the bans in force\n"
+    "whitelist on|off|add NAME|remove NAME|list\n"
+    "                                while on, only listed players may join (admins always may)\n"
+    "say TEXT...                     a message to every client\n"
+    "save                            wait until every edit applied so far is stored\n"
+    "backup PATH                     a consistent copy of the world, made while it runs, in the\n"
+    "                                new directory PATH (on the server's machine)\n"
+    "shutdown [--in SECONDS] [--restart] [--reason TEXT...]\n"
+    "                                warn every client, then stop (saving); --restart tells them\n"
+    "                                the server comes back, so they reconnect by themselves\n"
+    "help                            this text\n";
+
+namespace {
+
+std::string json_string(const std::string& s) {
+  std::string o = "\"";
+  for (const char c : s) {
+    switch (c) {
+      case '"': o += "\\\""; break;
+      case '\\': o += "\\\\"; break;
+      case '\n': o += "\\n"; break;
+      case '\r': o += "\\r"; break;
+      case '\t': o += "\\t"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char b[8];
+          std::snprintf(b, sizeof b, "\\u%04x", c);
+          o += b;
+        } else {
+          o += c;
+        }
+    }
+  }
+  return o + "\"";
+}
+
+std::string num(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+
+std::string join(const std::vector<std::string>& v, std::size_t from) {
+  std::string out;
+  for (std::size_t i = from; i < v.size(); ++i) out += (i > from ? " " : "") + v[i];
+  return out;
+}
+
+std::int64_t unix_now() {
+  return std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+bool is_address(const std::string& s) {
+  asio::error_code ec;
+  (void)asio::ip::make_address(s, ec);
+  return !ec;
+}
+
+AdminResultMsg ok(std::string text, std::string json) { return {0, true, std::move(text), std::move(json)}; }
+AdminResultMsg fail(std::string text) { return {0, false, text, "{\"error\": " + json_string(text) + "}"}; }
+
+}  // namespace
+
+std::optional<std::int64_t> parse_duration_s(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  std::int64_t unit = 1;
+  std::string digits = text;
+  switch (text.back()) {
+    case 's': unit = 1; digits.pop_back(); break;
+    case 'm': unit = 60; digits.pop_back(); break;
+    case 'h': unit = 3600; digits.pop_back(); break;
+    case 'd': unit = 86400; digits.pop_back(); break;
+    default: break;
+  }
+  if (digits.empty() || digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos)
+    return std::nullopt;
+  const std::int64_t n = std::stoll(digits) * unit;
+  if (n <= 0) return std::nullopt;
+  return n;
+}
+
+Admin::Admin(std::string world_dir, AccessControl& access, AdminHooks hooks)
+    : world_dir_(std::move(world_dir)), access_(access), hooks_(std::move(hooks)), work_(asio::make_work_guard(io_)) {
+  thread_ = std::thread([this] { io_.run(); });
+}
+
+Admin::~Admin() {
+  work_.reset();
+  io_.stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+void Admin::handle(const std::string& who, AdminRequestMsg req, Reply reply) {
+  asio::post(io_, [this, who, req = std::move(req), reply = std::move(reply)] {
+    AdminResultMsg r = run(who, req);
+    r.request_id = req.request_id;
+    server_log().info("admin {}: {} {} -> {}", who, req.command, join(req.args, 0),
+                      r.ok ? "ok" : "refused: " + r.text);
+    reply(std::move(r));
+  });
+}
+
+AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
+  const std::string& cmd = req.command;
+  const std::vector<std::string>& a = req.args;
+  if (cmd == "help") return ok(kAdminHelp, "{\"help\": " + json_string(kAdminHelp) + "}");
+
+  if (cmd == "status") {
+    const ServerStatus s = hooks_.status();
+    std::ostringstream t;
+    t << "world " << s.world_dir << " (epoch " << s.epoch << "), up " << static_cast<long long>(s.uptime_s) << " s\n"
+      << s.clients << " clients; " << s.ticks << " ticks at " << s.tick_hz << " Hz (mean " << num(s.tick_mean_ms)
+      << " ms); edits " << s.edits_applied << " applied, " << s.edits_rejected << " rejected; " << s.chunks_resident
+      << " chunks resident; storage " << (s.storage_failed ? "FAILED" : "ok") << "; whitelist "
+      << (access_.whitelist_on() ? "on" : "off") << "\n";
+    std::ostringstream j;
+    j << "{\"world\": " << json_string(s.world_dir) << ", \"epoch\": " << s.epoch << ", \"uptime_s\": " << num(s.uptime_s)
+      << ", \"clients\": " << s.clients << ", \"ticks\": " << s.ticks << ", \"tick_hz\": " << s.tick_hz
+      << ", \"tick_mean_ms\": " << num(s.tick_mean_ms) << ", \"edits_applied\": " << s.edits_applied
+      << ", \"edits_rejected\": " << s.edits_rejected << ", \"chunks_resident\": " << s.chunks_resident
+      << ", \"storage_failed\": " << (s.storage_failed ? "true" : "false")
+      << ", \"whitelist\": " << (access_.whitelist_on() ? "true" : "false") << "}";
+    return ok(t.str(), j.str());
+  }
+
+  if (cmd == "players") {
+    const auto players = hooks_.players();
+    std::ostringstream t, j;
+    char line[512];
+    std::snprintf(line, sizeof line, "%-20s %-16s %-26s %8s %12s %12s\n", "name", "address", "position", "online",
+                  "bytes in", "bytes out");
+    t << line;
+    j << "{\"players\": [";
+    for (std::size_t i = 0; i < players.size(); ++i) {
+      const PlayerInfo& p = players[i];
+      char pos[96];
+      std::snprintf(pos, sizeof pos, "%.0f,%.0f,%.0f", p.position.x, p.position.y, p.position.z);
+      std::snprintf(line, sizeof line, "%-20s %-16s %-26s %7.0fs %12llu %12llu%s\n", p.name.c_str(), p.address.c_str(),
+                    pos, p.connected_s, static_cast<unsigned long long>(p.bytes_in),
+                    static_cast<unsigned long long>(p.bytes_out), p.admin ? "  (admin)" : "");
+      t << line;
+      j << (i ? ", " : "") << "{\"id\": " << p.id << ", \"name\": " << json_string(p.name)
+        << ", \"address\": " << json_string(p.address) << ", \"position\": [" << num(p.position.x) << ", "
+        << num(p.position.y) << ", " << num(p.position.z) << "], \"admin\": " << (p.admin ? "true" : "false")
+        << ", \"connected_s\": " << num(p.connected_s) << ", \"bytes_in\": " << p.bytes_in
+        << ", \"bytes_out\": " << p.bytes_out << "}";
+    }
+    j << "]}";
+    t << players.size() << " connected\n";
+    return ok(t.str(), j.str());
+  }
+
+  if (cmd == "kick") {
+    if (a.empty()) return fail("usage: kick NAME [REASON...]");
+    const std::string reason = a.size() > 1 ? join(a, 1) : "no reason given";
+    const int n = hooks_.close_matching([&](const PlayerInfo& p) { return p.name == a[0]; }, CloseReason::kKicked,
+                                        "kicked by an operator: " + reason);
+    if (n == 0) return fail("no player named '" + a[0] + "' is connected");
+    return ok("kicked " + a[0] + " (" + std::to_string(n) + " session" + (n == 1 ? "" : "s") + ")\n",
+              "{\"kicked\": " + std::to_string(n) + "}");
+  }
+
+  if (cmd == "ban") {
+    if (a.empty()) return fail("usage: ban NAME|ADDRESS [--for DURATION] [REASON...]");
+    Ban b;
+    b.target = a[0];
+    b.address = is_address(a[0]);
+    std::size_t rest = 1;
+    if (a.size() > 2 && a[1] == "--for") {
+      const auto d = parse_duration_s(a[2]);
+      if (!d) return fail("ban --for '" + a[2] + "': not a duration (90s, 15m, 2h, 7d)");
+      b.until = unix_now() + *d;
+      rest = 3;
+    } else if (a.size() == 2 && a[1] == "--for") {
+      return fail("ban --for: missing DURATION");
+    }
+    b.reason = join(a, rest);
+    if (auto st = access_.ban(b); !st) return fail("ban: " + st.error().message);
+    const int n = hooks_.close_matching(
+        [&](const PlayerInfo& p) { return !p.admin && (b.address ? p.address == b.target : p.name == b.target); },
+        CloseReason::kBanned, "banned" + (b.reason.empty() ? std::string() : ": " + b.reason));
+    const std::string how = b.until == 0 ? "until unbanned" : "for " + std::to_string(b.until - unix_now()) + " s";
+    return ok("banned " + std::string(b.address ? "address " : "") + b.target + " " + how + " (" + std::to_string(n) +
+                  " session" + (n == 1 ? "" : "s") + " ended)\n",
+              "{\"banned\": " + json_string(b.target) + ", \"address\": " + (b.address ? "true" : "false") +
+                  ", \"until\": " + std::to_string(b.until) + ", \"sessions_ended\": " + std::to_string(n) + "}");
+  }
+
+  if (cmd == "unban") {
+    if (a.size() != 1) return fail("usage: unban NAME|ADDRESS");
+    auto r = access_.unban(a[0]);
+    if (!r) return fail("unban: " + r.error().message);
+    if (!*r) return fail("'" + a[0] + "' is not banned");
+    return ok("unbanned " + a[0] + "\n", "{\"unbanned\": " + json_string(a[0]) + "}");
+  }
+
+  if (cmd == "bans") {
+    const auto bans = access_.bans(unix_now());
+    std::ostringstream t, j;
+    j << "{\"bans\": [";
+    for (std::size_t i = 0; i < bans.size(); ++i) {
+      const Ban& b = bans[i];
+      t << (b.address ? "address " : "name    ") << b.target << "  "
+        << (b.until == 0 ? std::string("until unbanned") : std::to_string(b.until - unix_now()) + " s left")
+        << (b.reason.empty() ? "" : "  " + b.reason) << "\n";
+      j << (i ? ", " : "") << "{\"target\": " << json_string(b.target) << ", \"address\": " << (b.address ? "true" : "false")
+        << ", \"until\": " << b.until << ", \"reason\": " << json_string(b.reason) << "}";
+    }
+    j << "]}";
+    t << bans.size() << " bans\n";
+    return ok(t.str(), j.str());
+  }
+
+  if (cmd == "whitelist") {
+    const std::string sub = a.empty() ? "list" : a[0];
+    if (sub == "on" || sub == "off") {
+      if (auto st = access_.set_whitelist(sub == "on"); !st) return fail("whitelist: " + st.error().message);
+      return ok("whitelist " + sub + "\n", std::string("{\"whitelist\": ") + (sub == "on" ? "true" : "false") + "}");
+    }
+    if (sub == "add" && a.size() == 2) {
+      if (a[1].empty() || a[1].size() > kMaxClientNameBytes) return fail("whitelist add: a name is 1 to 64 bytes");
+      if (auto st = access_.whitelist_add(a[1]); !st) return fail("whitelist: " + st.error().message);
+      return ok("added " + a[1] + " to the whitelist\n", "{\"added\": " + json_string(a[1]) + "}");
+    }
+    if (sub == "remove" && a.size() == 2) {
+      auto r = access_.whitelist_remove(a[1]);
+      if (!r) return fail("whitelist: " + r.error().message);
+      if (!*r) return fail("'" + a[1] + "' is not on the whitelist");
+      return ok("removed " + a[1] + " from the whitelist\n", "{\"removed\": " + json_string(a[1]) + "}");
+    }
+    if (sub == "list" && a.size() <= 1) {
+      const auto names = access_.whitelist();
+      std::ostringstream t, j;
+      t << "whitelist " << (access_.whitelist_on() ? "on" : "off") << ", " << names.size() << " names\n";
+      j << "{\"on\": " << (access_.whitelist_on() ? "true" : "false") << ", \"names\": [";
+      bool first = true;
+      for (const auto& n : names) {
+        t << "  " << n << "\n";
+        j << (first ? "" : ", ") << json_string(n);
+        first = false;
+      }
+      j << "]}";
+      return ok(t.str(), j.str());
+    }
+    return fail("usage: whitelist on|off|add NAME|remove NAME|list");
+  }
+
+  if (cmd == "say") {
+    if (a.empty()) return fail("usage: say TEXT...");
+    ServerNoticeMsg n;
+    n.kind = wire::NoticeKind::Say;
+    n.text = join(a, 0);
+    if (n.text.size() > kMaxNoticeBytes) return fail("say: text longer than 1024 bytes");
+    hooks_.notify_all(n);
+    return ok("said to every client\n", "{\"said\": " + json_string(n.text) + "}");
+  }
+
+  if (cmd == "save") {
+    if (!a.empty()) return fail("usage: save");
+    auto done = std::make_shared<std::promise<std::pair<std::uint64_t, bool>>>();
+    auto f = done->get_future();
+    hooks_.flush([done](std::uint64_t tick, bool stored) { done->set_value({tick, stored}); });
+    if (f.wait_for(std::chrono::seconds(60)) != std::future_status::ready)
+      return fail("save: the store did not confirm within 60 s");
+    const auto [tick, stored] = f.get();
+    if (!stored) return fail("save: the store has failed; edits since the failure were not saved");
+    return ok("saved: every edit applied up to tick " + std::to_string(tick) + " is stored\n",
+              "{\"saved_through_tick\": " + std::to_string(tick) + "}");
+  }
+
+  if (cmd == "backup") {
+    if (a.size() != 1) return fail("usage: backup PATH");
+    auto store = WorldStore::open(world_dir_);
+    if (!store) return fail("backup: " + store.error().message);
+    const auto t0 = std::chrono::steady_clock::now();
+    if (auto st = (*store)->backup_to(a[0], [](int, int) {}); !st) return fail("backup: " + st.error().message);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return ok("backed up the world to " + a[0] + " in " + num(s) + " s\n",
+              "{\"backup\": " + json_string(a[0]) + ", \"seconds\": " + num(s) + "}");
+  }
+
+  if (cmd == "shutdown") {
+    std::uint32_t seconds = 0;
+    bool restart = false;
+    std::string reason;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (a[i] == "--in" && i + 1 < a.size()) {
+        const auto d = a[i + 1] == "0" ? std::optional<std::int64_t>(0) : parse_duration_s(a[i + 1]);
+        if (!d || *d > 86400) return fail("shutdown --in '" + a[i + 1] + "': not a duration up to a day");
+        seconds = static_cast<std::uint32_t>(*d);
+        ++i;
+      } else if (a[i] == "--restart") {
+        restart = true;
+      } else if (a[i] == "--reason" && i + 1 < a.size()) {
+        reason = join(a, i + 1);
+        break;
+      } else {
+        return fail("usage: shutdown [--in SECONDS] [--restart] [--reason TEXT...]");
+      }
+    }
+    hooks_.shutdown(seconds, restart, reason);
+    return ok("stopping in " + std::to_string(seconds) + " s" + (restart ? ", clients told to reconnect" : "") + "\n",
+              "{\"seconds\": " + std::to_string(seconds) + ", \"restart\": " + (restart ? "true" : "false") + "}");
+  }
+
+  (void)who;
+  return fail("unknown command '" + cmd + "' (try help)");
+}
+
+}  // namespace terrane

@@ -1,0 +1,294 @@
+// Operators' commands against the real server over 127.0.0.1: only admins
+// may run them; kick ends only that session; a ban and the whitelist
+// refuse with a clear reason and survive a restart; say reaches every
+// client; save and backup keep what was acknowledged; shutdown warns, then
+// stops.
+#include "server/ops/admin.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <thread>
+
+#include "common/world.h"
+#include "tests/support/server_fixture.h"
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using testing_support::msg;
+using testing_support::RawPeer;
+using testing_support::ServerTest;
+
+constexpr const char* kAdminToken = "admin-secret-1";
+
+class AdminTest : public ServerTest {
+ protected:
+  void start_admin(ServerOptions o = {}) {
+    o.admin_token = kAdminToken;
+    start(o);
+  }
+  // A session that sent Hello: its Welcome, or the Disconnect reason.
+  struct Joined {
+    std::unique_ptr<RawPeer> peer;
+    bool welcomed = false;
+    std::string refused;
+  };
+  Joined connect(const std::string& name, const std::string& token = "") {
+    Joined j;
+    j.peer = std::make_unique<RawPeer>(server_->port());
+    EXPECT_TRUE(j.peer->send(build_hello(HelloMsg{kProtocolVersion, name, token})));
+    while (auto f = j.peer->next()) {
+      const wire::Message& m = msg(*f);
+      if (m.body_type() == wire::Body::Welcome) {
+        j.welcomed = true;
+        break;
+      }
+      if (m.body_type() == wire::Body::Disconnect) {
+        j.refused = *parse_disconnect(*m.body_as_Disconnect());
+        break;
+      }
+    }
+    return j;
+  }
+  AdminResultMsg command(RawPeer& admin, const std::string& cmd, std::vector<std::string> args = {}) {
+    const std::uint32_t id = ++next_id_;
+    EXPECT_TRUE(admin.send(build_admin_request(AdminRequestMsg{id, cmd, std::move(args)})));
+    auto f = admin.next_of(wire::Body::AdminResult);
+    EXPECT_TRUE(f.has_value()) << cmd;
+    if (!f) return {};
+    auto r = parse_admin_result(*msg(*f).body_as_AdminResult());
+    EXPECT_TRUE(r.ok());
+    EXPECT_EQ(r->request_id, id);
+    return *r;
+  }
+  // Reads until the Disconnect: its reason ("" if the stream ended without one).
+  static std::string disconnect_reason(RawPeer& p) {
+    while (auto f = p.next()) {
+      const wire::Message& m = msg(*f);
+      if (m.body_type() == wire::Body::Disconnect) return *parse_disconnect(*m.body_as_Disconnect());
+    }
+    return "";
+  }
+  std::uint32_t next_id_ = 0;
+};
+
+TEST_F(AdminTest, OnlyAdminsMayRunCommands) {
+  start_admin();
+  auto player = connect("player");
+  ASSERT_TRUE(player.welcomed);
+  const AdminResultMsg r = command(*player.peer, "status");
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.text.find("not an admin"), std::string::npos) << r.text;
+  // A wrong admin token is refused outright, not let in as a player.
+  auto wrong = connect("admin", "not-the-token");
+  EXPECT_FALSE(wrong.welcomed);
+  EXPECT_EQ(wrong.refused, "authentication failed");
+  auto admin = connect("admin", kAdminToken);
+  ASSERT_TRUE(admin.welcomed);
+  const AdminResultMsg s = command(*admin.peer, "status");
+  EXPECT_TRUE(s.ok) << s.text;
+  EXPECT_NE(s.json.find("\"clients\": 2"), std::string::npos) << s.json;
+  EXPECT_NE(s.text.find("2 clients"), std::string::npos) << s.text;
+  const AdminResultMsg u = command(*admin.peer, "frobnicate");
+  EXPECT_FALSE(u.ok);
+  EXPECT_NE(u.text.find("unknown command 'frobnicate'"), std::string::npos) << u.text;
+}
+
+TEST_F(AdminTest, TokensFileRolesMakeAdmins) {
+  ServerOptions o;
+  o.player_tokens = {{"op", {"op-token", true}}, {"pat", {"pat-token", false}}};
+  start(o);
+  auto op = connect("op", "op-token");
+  auto pat = connect("pat", "pat-token");
+  ASSERT_TRUE(op.welcomed && pat.welcomed);
+  EXPECT_TRUE(command(*op.peer, "status").ok);
+  EXPECT_FALSE(command(*pat.peer, "status").ok);
+}
+
+TEST_F(AdminTest, PlayersListsWhoIsConnectedAndKickEndsOnlyThatSession) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  auto griefer = connect("griefer");
+  auto builder = connect("builder");
+  ASSERT_TRUE(admin.welcomed && griefer.welcomed && builder.welcomed);
+  ASSERT_TRUE(builder.peer->send(build_client_state(ClientStateMsg{{40.5f, 30.0f, -12.5f}, 32, 16})));
+  // The position shows once the server has read it.
+  AdminResultMsg players;
+  for (const auto deadline = std::chrono::steady_clock::now() + 30s; std::chrono::steady_clock::now() < deadline;) {
+    players = command(*admin.peer, "players");
+    if (players.json.find("[40.5, 30, -12.5]") != std::string::npos) break;
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_TRUE(players.ok);
+  EXPECT_NE(players.json.find("\"name\": \"builder\""), std::string::npos) << players.json;
+  EXPECT_NE(players.json.find("[40.5, 30, -12.5]"), std::string::npos) << players.json;
+  EXPECT_NE(players.json.find("\"address\": \"127.0.0.1\""), std::string::npos) << players.json;
+  EXPECT_NE(players.text.find("3 connected"), std::string::npos) << players.text;
+
+  const AdminResultMsg k = command(*admin.peer, "kick", {"griefer", "stop", "that"});
+  EXPECT_TRUE(k.ok) << k.text;
+  EXPECT_EQ(disconnect_reason(*griefer.peer), "kicked by an operator: stop that");
+  // The others stay: both still answer.
+  EXPECT_TRUE(command(*admin.peer, "status").ok);
+  ASSERT_TRUE(builder.peer->send(build_ping(7)));
+  EXPECT_TRUE(builder.peer->next_of(wire::Body::Pong).has_value());
+  EXPECT_FALSE(command(*admin.peer, "kick", {"nobody"}).ok);
+  // A kicked player may come back.
+  EXPECT_TRUE(connect("griefer").welcomed);
+}
+
+TEST_F(AdminTest, ABanRefusesWithItsReasonSurvivesARestartAndUnbanLiftsIt) {
+  start_admin();
+  {
+    auto admin = connect("admin", kAdminToken);
+    auto griefer = connect("griefer");
+    ASSERT_TRUE(admin.welcomed && griefer.welcomed);
+    const AdminResultMsg b = command(*admin.peer, "ban", {"griefer", "tunnelling", "under", "spawn"});
+    EXPECT_TRUE(b.ok) << b.text;
+    EXPECT_NE(b.text.find("1 session ended"), std::string::npos) << b.text;
+    EXPECT_EQ(disconnect_reason(*griefer.peer), "banned: tunnelling under spawn");
+    const AdminResultMsg timed = command(*admin.peer, "ban", {"visitor", "--for", "2h"});
+    EXPECT_TRUE(timed.ok) << timed.text;
+    EXPECT_FALSE(command(*admin.peer, "ban", {"x", "--for", "soon"}).ok);
+  }
+  server_->stop();
+  server_.reset();
+  start_admin();
+  auto again = connect("griefer");
+  EXPECT_FALSE(again.welcomed);
+  EXPECT_EQ(again.refused, "banned: tunnelling under spawn");
+  auto visitor = connect("visitor");
+  EXPECT_FALSE(visitor.welcomed);
+  EXPECT_NE(visitor.refused.find("banned for "), std::string::npos) << visitor.refused;
+  auto admin = connect("admin", kAdminToken);
+  ASSERT_TRUE(admin.welcomed);
+  const AdminResultMsg bans = command(*admin.peer, "bans");
+  EXPECT_NE(bans.text.find("2 bans"), std::string::npos) << bans.text;
+  EXPECT_TRUE(command(*admin.peer, "unban", {"griefer"}).ok);
+  EXPECT_FALSE(command(*admin.peer, "unban", {"griefer"}).ok);  // not banned any more
+  EXPECT_TRUE(connect("griefer").welcomed);
+  // An address ban refuses every name from it (admins still come in).
+  EXPECT_TRUE(command(*admin.peer, "ban", {"127.0.0.1"}).ok);
+  EXPECT_EQ(connect("anyone").refused, "banned");
+  EXPECT_TRUE(connect("admin2", kAdminToken).welcomed);
+}
+
+TEST_F(AdminTest, TheWhitelistRefusesWhoIsNotListedAndIsKeptAcrossRestarts) {
+  start_admin();
+  {
+    auto admin = connect("admin", kAdminToken);
+    ASSERT_TRUE(admin.welcomed);
+    EXPECT_TRUE(command(*admin.peer, "whitelist", {"add", "alice"}).ok);
+    EXPECT_TRUE(command(*admin.peer, "whitelist", {"on"}).ok);
+    const AdminResultMsg list = command(*admin.peer, "whitelist", {"list"});
+    EXPECT_NE(list.json.find("\"names\": [\"alice\"]"), std::string::npos) << list.json;
+  }
+  server_->stop();
+  server_.reset();
+  start_admin();
+  auto bob = connect("bob");
+  EXPECT_FALSE(bob.welcomed);
+  EXPECT_NE(bob.refused.find("not on the whitelist"), std::string::npos) << bob.refused;
+  EXPECT_TRUE(connect("alice").welcomed);
+  auto admin = connect("admin", kAdminToken);
+  ASSERT_TRUE(admin.welcomed);
+  EXPECT_TRUE(command(*admin.peer, "whitelist", {"off"}).ok);
+  EXPECT_TRUE(connect("bob").welcomed);
+}
+
+TEST_F(AdminTest, SayReachesEveryClient) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  auto a = connect("a");
+  auto b = connect("b");
+  ASSERT_TRUE(admin.welcomed && a.welcomed && b.welcomed);
+  EXPECT_TRUE(command(*admin.peer, "say", {"restart", "at", "noon"}).ok);
+  for (RawPeer* p : {a.peer.get(), b.peer.get()}) {
+    auto f = p->next_of(wire::Body::ServerNotice);
+    ASSERT_TRUE(f.has_value());
+    auto n = parse_server_notice(*msg(*f).body_as_ServerNotice());
+    ASSERT_TRUE(n.ok());
+    EXPECT_EQ(n->kind, wire::NoticeKind::Say);
+    EXPECT_EQ(n->text, "restart at noon");
+  }
+}
+
+TEST_F(AdminTest, SaveAndBackupKeepWhatWasAcknowledged) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  auto p = join("editor");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  EditRequestMsg e;
+  e.edit_id = 1;
+  e.kind = EditKind::kFillBox;
+  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
+  e.material = materials::kBrick;
+  e.occupancy = 201;
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  ASSERT_TRUE(p->next_of(wire::Body::EditAck));
+  const AdminResultMsg save = command(*admin.peer, "save");
+  EXPECT_TRUE(save.ok) << save.text;
+  EXPECT_NE(save.json.find("saved_through_tick"), std::string::npos) << save.json;
+  const fs::path copy = dir_ / "backup";
+  const AdminResultMsg backup = command(*admin.peer, "backup", {copy.string()});
+  ASSERT_TRUE(backup.ok) << backup.text;
+  auto world = World::open(copy.string());
+  ASSERT_TRUE(world.ok()) << world.error().message;
+  auto stored = (*world)->load_chunk(cp);
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->chunk.get(local_of(Vec3i{1002, 12, 1002})), make_voxel(materials::kBrick, 201));
+  // A second backup into the same place is refused, naming it.
+  const AdminResultMsg twice = command(*admin.peer, "backup", {copy.string()});
+  EXPECT_FALSE(twice.ok);
+  EXPECT_NE(twice.text.find(copy.string()), std::string::npos) << twice.text;
+}
+
+TEST_F(AdminTest, ShutdownWarnsEveryClientThenAsksTheOwnerToStop) {
+  std::atomic<bool> asked{false};
+  ServerOptions o;
+  o.on_shutdown = [&] { asked = true; };
+  start_admin(o);
+  auto admin = connect("admin", kAdminToken);
+  auto player = connect("player");
+  ASSERT_TRUE(admin.welcomed && player.welcomed);
+  const AdminResultMsg r = command(*admin.peer, "shutdown", {"--in", "1", "--restart", "--reason", "upgrade"});
+  EXPECT_TRUE(r.ok) << r.text;
+  auto f = player.peer->next_of(wire::Body::ServerNotice);
+  ASSERT_TRUE(f.has_value());
+  auto n = parse_server_notice(*msg(*f).body_as_ServerNotice());
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(n->kind, wire::NoticeKind::Shutdown);
+  EXPECT_EQ(n->seconds_left, 1u);
+  EXPECT_TRUE(n->reconnect);
+  EXPECT_NE(n->text.find("upgrade"), std::string::npos) << n->text;
+  for (const auto deadline = std::chrono::steady_clock::now() + 60s;
+       !asked && std::chrono::steady_clock::now() < deadline;)
+    std::this_thread::sleep_for(10ms);
+  EXPECT_TRUE(asked);
+  // The owner stops it: the last notice says it restarts, then the Disconnect.
+  server_->stop();
+  auto last = player.peer->next_of(wire::Body::ServerNotice);
+  ASSERT_TRUE(last.has_value());
+  EXPECT_TRUE(parse_server_notice(*msg(*last).body_as_ServerNotice())->reconnect);
+  EXPECT_EQ(disconnect_reason(*player.peer), "server shutting down");
+}
+
+TEST(AdminDuration, TakesSecondsMinutesHoursAndDays) {
+  EXPECT_EQ(parse_duration_s("90"), 90);
+  EXPECT_EQ(parse_duration_s("90s"), 90);
+  EXPECT_EQ(parse_duration_s("15m"), 900);
+  EXPECT_EQ(parse_duration_s("2h"), 7200);
+  EXPECT_EQ(parse_duration_s("7d"), 604800);
+  EXPECT_EQ(parse_duration_s(""), std::nullopt);
+  EXPECT_EQ(parse_duration_s("0"), std::nullopt);
+  EXPECT_EQ(parse_duration_s("-5m"), std::nullopt);
+  EXPECT_EQ(parse_duration_s("5w"), std::nullopt);
+  EXPECT_EQ(parse_duration_s("9999999999d"), std::nullopt);
+}
+
+}  // namespace
+}  // namespace terrane
