@@ -27,7 +27,7 @@ duration=${TERRANE_BOTS_DURATION:-30}
 bash scripts/install-deps.sh
 # The same flags as the test command (scripts/test.sh), so neither rebuilds
 # after the other; the viewer is built too, to look at the world.
-bash scripts/build.sh release terrane-world terrane-server terrane-bots terrane-view
+bash scripts/build.sh release terrane-world terrane-server terrane-bots terrane-admin terrane-view
 ./build/bin/terrane-world generate --world "$world"
 
 scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-run.XXXXXX")

@@ -86,6 +86,19 @@ TEST_F(ServerTest, MessageBeforeHelloIsAProtocolError) {
   EXPECT_NE(parse_disconnect(*msg(*f).body_as_Disconnect())->find("expected Hello"), std::string::npos);
 }
 
+TEST_F(ServerTest, ASecondHelloOrAServersMessageAfterTheWelcomeIsAProtocolError) {
+  start();
+  for (Frame f : {build_hello(HelloMsg{kProtocolVersion, "again", ""}), build_edit_ack(1, 2),
+                  build_server_notice(ServerNoticeMsg{}), build_admin_result(AdminResultMsg{})}) {
+    auto p = join("twice");
+    ASSERT_TRUE(p->send(f));
+    auto d = p->next_of(wire::Body::Disconnect);
+    ASSERT_TRUE(d.has_value());
+    EXPECT_EQ(*parse_disconnect(*msg(*d).body_as_Disconnect()), "protocol error: message not accepted from a client");
+    EXPECT_TRUE(p->closed_by_server());
+  }
+}
+
 TEST_F(ServerTest, SilentPeerIsDroppedAtTheHandshakeDeadline) {
   ServerOptions o;
   o.session.handshake_timeout = 200ms;
