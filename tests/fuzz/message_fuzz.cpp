@@ -58,6 +58,9 @@ void parse_any(const wire::Message& m) {
     case wire::Body::RegionHash: (void)parse_region_hash(*m.body_as_RegionHash()); break;
     case wire::Body::RegionHashRequest: (void)parse_region_hash_request(*m.body_as_RegionHashRequest()); break;
     case wire::Body::Presence: (void)parse_presence(*m.body_as_Presence()); break;
+    case wire::Body::AdminRequest: (void)parse_admin_request(*m.body_as_AdminRequest()); break;
+    case wire::Body::AdminResult: (void)parse_admin_result(*m.body_as_AdminResult()); break;
+    case wire::Body::ServerNotice: (void)parse_server_notice(*m.body_as_ServerNotice()); break;
     default: decode_payloads(m); break;
   }
 }
