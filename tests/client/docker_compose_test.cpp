@@ -5,7 +5,17 @@
 #include <sys/wait.h>
 
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <sstream>
 #include <string>
+#include <thread>
+#include <vector>
+
+#include "client/bots/report.h"
+#include "tests/support/child_process.h"
 
 namespace terrane {
 namespace {
@@ -45,6 +55,111 @@ TEST(DockerCompose, ConfigRejectsABrokenFile) {
   std::string out;
   EXPECT_NE(run("docker-compose -f '" + file + "' config", &out), 0) << out;
   std::remove(file.c_str());
+}
+
+// The compose file's and the Dockerfile's command lines, run as written on
+// this machine without Docker: only what cannot be the same outside a
+// container is replaced (the world's path, the reports' paths, the
+// addresses: loopback and free ports for 0.0.0.0, 7777 and 9464, the
+// service name "server"). Then the server's healthcheck must pass and the
+// bots' run, exactly as configured, must succeed.
+class DockerComposeHeavy : public ::testing::Test {
+ protected:
+  static std::vector<std::string> list(const std::map<std::string, std::string>& j, const std::string& key) {
+    std::vector<std::string> out;
+    for (int i = 0; j.count(key + "." + std::to_string(i)) > 0; ++i) out.push_back(j.at(key + "." + std::to_string(i)));
+    return out;
+  }
+  static std::string replace_all(std::string s, const std::string& from, const std::string& to) {
+    for (std::size_t at = 0; (at = s.find(from, at)) != std::string::npos; at += to.size()) s.replace(at, from.size(), to);
+    return s;
+  }
+};
+
+TEST_F(DockerComposeHeavy, TheServerAndBotsCommandLinesRunAsWritten) {
+  std::string which;
+  ASSERT_EQ(run("command -v docker-compose", &which), 0) << "docker-compose is not installed: run scripts/install-deps.sh";
+  const std::filesystem::path docker = std::filesystem::path(TERRANE_TEST_DATA_DIR) / ".." / ".." / "docker";
+  std::string json;
+  ASSERT_EQ(run("docker-compose -f '" + (docker / "docker-compose.yml").string() +
+                    "' config | python3 -c 'import sys, yaml, json; print(json.dumps(yaml.safe_load(sys.stdin)))'",
+                &json),
+            0)
+      << json;
+  std::map<std::string, std::string> compose;
+  ASSERT_EQ(terrane::bots::flatten_json(json, &compose), "") << json;
+  // The Dockerfile's server ENTRYPOINT (a JSON array on one line).
+  std::ifstream df(docker / "Dockerfile");
+  std::string line, entry;
+  bool in_server = false;
+  while (std::getline(df, line)) {
+    if (line.rfind("FROM ", 0) == 0) in_server = line.find(" AS server") != std::string::npos;
+    if (in_server && line.rfind("ENTRYPOINT ", 0) == 0) entry = line.substr(11);
+  }
+  ASSERT_FALSE(entry.empty()) << "no ENTRYPOINT in the Dockerfile's server stage";
+  std::map<std::string, std::string> ep;
+  ASSERT_EQ(terrane::bots::flatten_json("{\"e\": " + entry + "}", &ep), "") << entry;
+  const auto dir = std::filesystem::temp_directory_path() / ("terrane-docker-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "reports");
+  const std::string path = std::string(TERRANE_BIN_DIR) + ":" + std::getenv("PATH");
+
+  auto server_argv = [&] {
+    std::vector<std::string> argv = list(ep, "e");
+    for (std::string a : list(compose, "services.server.command")) {
+      a = replace_all(a, "/data/world", (dir / "world").string());
+      a = a == "7777" ? "0" : replace_all(a, "0.0.0.0:9464", "127.0.0.1:0");
+      argv.push_back(replace_all(a, "0.0.0.0", "127.0.0.1"));
+    }
+    return argv;
+  };
+  const std::string token = compose.at("services.server.environment.TERRANE_TOKEN");
+  // Without a token the image refuses to start, saying why.
+  {
+    testing_support::ChildProcess bare(server_argv(), {{"PATH", path}, {"TERRANE_TOKEN", ""}});
+    EXPECT_NE(bare.wait(std::chrono::seconds(60)), 0);
+    EXPECT_NE(bare.output().find("set TERRANE_TOKEN"), std::string::npos) << bare.output();
+  }
+  testing_support::ChildProcess server(server_argv(), {{"PATH", path}, {"TERRANE_TOKEN", token}});
+  ASSERT_TRUE(server.wait_for_output("/metrics", std::chrono::seconds(120))) << server.output();
+  const std::string out = server.output();
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("listening on 127\\.0\\.0\\.1:([0-9]+)"))) << out;
+  const std::string port = m[1];
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("metrics on http://127\\.0\\.0\\.1:([0-9]+)/metrics"))) << out;
+  const std::string metrics_port = m[1];
+
+  // The healthcheck, as written (its port is the metrics port).
+  const auto health = list(compose, "services.server.healthcheck.test");
+  ASSERT_EQ(health.size(), 4u);
+  ASSERT_EQ(health[0], "CMD");
+  std::string check;
+  for (std::size_t i = 1; i < health.size(); ++i)
+    check += (i > 1 ? " " : "") + std::string("'") + replace_all(replace_all(health[i], "9464", metrics_port), "'", "'\\''") + "'";
+  bool healthy = false;
+  for (const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+       !healthy && std::chrono::steady_clock::now() < deadline;) {
+    std::string ignored;
+    healthy = run(check, &ignored) == 0;
+    if (!healthy) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(healthy) << check;
+
+  // The bots' command, as written.
+  std::vector<std::string> bots = {"terrane-bots"};
+  for (std::string a : list(compose, "services.bots.command")) {
+    a = replace_all(a, "server:7777", "127.0.0.1:" + port);
+    a = replace_all(a, "server:9464", "127.0.0.1:" + metrics_port);
+    bots.push_back(replace_all(a, "/reports/", (dir / "reports").string() + "/"));
+  }
+  testing_support::ChildProcess run_bots(bots, {{"PATH", path}});
+  const int status = run_bots.wait(std::chrono::seconds(900));
+  EXPECT_EQ(status, 0) << run_bots.output();
+  EXPECT_NE(run_bots.output().find("PASSED"), std::string::npos) << run_bots.output();
+  EXPECT_NE(run_bots.output().find("the server over the run"), std::string::npos) << run_bots.output();
+  EXPECT_TRUE(std::filesystem::exists(dir / "reports" / "bots.json"));
+  EXPECT_EQ(server.stop(), 0) << server.output();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
