@@ -98,6 +98,26 @@ struct ChunkWrite {
   std::vector<std::uint8_t> blob;  // encode_chunk_blob output
 };
 
+// One applied edit in the edit log (table edit_log): who, when, the box
+// and its voxels before and after (byte RLE, Box order), as undo keeps them.
+struct EditLogEntry {
+  std::int64_t id = 0;  // assigned by the store, increasing
+  std::uint64_t tick = 0;
+  std::int64_t time_ms = 0;  // Unix milliseconds
+  std::string player;
+  Region box;
+  std::vector<std::uint8_t> before, after;
+};
+
+// Which edits to list, newest first.
+struct EditLogQuery {
+  std::string player;              // "" = anyone
+  std::optional<Region> box;       // edits whose box meets this one
+  std::int64_t since_ms = 0;       // at or after this time
+  std::size_t limit = 100;
+  bool with_voxels = false;        // fill before/after
+};
+
 class WorldStore {
  public:
   // Creates the directory (if needed) and a new world in it; fails if the
@@ -121,7 +141,15 @@ class WorldStore {
   // Stores all writes in one transaction (all or nothing). With
   // overwrite = false, chunks already stored are left as they are (used to
   // pre-generate without racing a server's edits).
-  FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true);
+  // log: edits recorded in the same transaction (the edit log).
+  FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
+                         std::span<const EditLogEntry> log = {});
+  FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q);
+  // Deletes log entries older than before_ms, then the oldest until the
+  // entries' voxel bytes are at most max_bytes (0: no bound); how many went.
+  FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes);
+  // Entries and the bytes of their before/after voxels.
+  FileResult<std::pair<std::int64_t, std::uint64_t>> edit_log_size();
   FileStatus erase_chunk(Vec3i pos);
 
   // Quarantine: moves the stored row of pos, blob untouched, into the
@@ -163,6 +191,7 @@ class WorldStore {
   sqlite3* db_ = nullptr;
   sqlite3_stmt* load_stmt_ = nullptr;
   sqlite3_stmt* save_stmt_ = nullptr;
+  sqlite3_stmt* log_stmt_ = nullptr;
   sqlite3_stmt* insert_stmt_ = nullptr;
   sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
   WorldMeta meta_;

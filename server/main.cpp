@@ -79,6 +79,10 @@ constexpr const char* kHelp =
     "  --frame-timeout-ms N        drop a client that leaves a frame incomplete this long\n"
     "                              (default 10000)\n"
     "  --history-bytes N           undo/redo history per client in bytes (default 4194304)\n"
+    "  --edit-log-days N           keep the edit log (terrane-admin log, rollback) this many days,\n"
+    "                              0 = for ever (default 30)\n"
+    "  --edit-log-mb N             and at most this many MiB of logged voxels, the oldest going\n"
+    "                              first; 0 = no bound (default 1024)\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
@@ -98,7 +102,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "config", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -151,6 +155,8 @@ int run(int argc, char** argv) {
   o.history_bytes_per_client =
       static_cast<std::size_t>(cl.get_int("history-bytes", 4 << 20, 0, std::int64_t{1} << 34, &err));
   o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
+  o.edit_log_days = static_cast<std::uint32_t>(cl.get_int("edit-log-days", 30, 0, 36500, &err));
+  o.edit_log_mb = static_cast<std::uint32_t>(cl.get_int("edit-log-mb", 1024, 0, 1 << 22, &err));
   o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
   o.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));

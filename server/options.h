@@ -70,6 +70,10 @@ struct ServerOptions {
   std::int64_t max_edit_voxels = kMaxEditVolume;
   double max_speed = 256;                    // voxels per second
   double outbound_bytes_per_second = 32 << 20;  // streaming; updates are never held back
+  // The edit log (who changed what, for terrane-admin log and rollback)
+  // keeps entries this many days and this many MiB of voxels (0: no bound).
+  std::uint32_t edit_log_days = 30;
+  std::uint32_t edit_log_mb = 1024;
   // Undo and redo history kept per client, in bytes (oldest steps go first).
   std::size_t history_bytes_per_client = 4u << 20;
   // Called (on the world strand) when the server cannot go on, e.g. the

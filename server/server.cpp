@@ -22,6 +22,8 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   auto storage = Storage::open(*s->world_, s->options_.worker_threads);
   if (!storage) return storage.error();
   s->storage_ = std::move(*storage);
+  s->storage_->set_edit_log_retention(std::chrono::hours(24) * options.edit_log_days,
+                                      static_cast<std::uint64_t>(options.edit_log_mb) << 20);
 
   asio::error_code ec;
   const auto addr = asio::ip::make_address(options.bind_address, ec);
@@ -346,6 +348,12 @@ AdminHooks Server::admin_hooks() {
   h.flush = [this](std::function<void(std::uint64_t, bool)> done) { world_owner_->flush(std::move(done)); };
   h.shutdown = [this](std::uint32_t seconds, bool restart, const std::string& reason) {
     schedule_shutdown(seconds, restart, reason);
+  };
+  h.rollback = [this](const std::string& actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
+                      std::function<void(bool, std::string, std::uint64_t, std::uint64_t)> done) {
+    world_owner_->rollback(actor, std::move(entries), within, [done = std::move(done)](WorldOwner::RollbackResult r) {
+      done(r.ok, std::move(r.error), r.tick, r.voxels_restored);
+    });
   };
   return h;
 }

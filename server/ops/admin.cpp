@@ -6,6 +6,7 @@
 #include <future>
 #include <sstream>
 
+#include "common/cli.h"
 #include "common/world_store.h"
 #include "server/log.h"
 
@@ -23,6 +24,11 @@ const char* const kAdminHelp =
     "whitelist on|off|add NAME|remove NAME|list\n"
     "                                while on, only listed players may join (admins always may)\n"
     "say TEXT...                     a message to every client\n"
+    "log [--player NAME] [--box X0,Y0,Z0,X1,Y1,Z1] [--since DURATION] [--limit N]\n"
+    "                                who changed what, newest first (default limit 50)\n"
+    "rollback --player NAME [--since DURATION] [--box X0,Y0,Z0,X1,Y1,Z1]\n"
+    "                                undo NAME's edits, newest first, leaving voxels others\n"
+    "                                changed since as they are; one edit, itself logged\n"
     "save                            wait until every edit applied so far is stored\n"
     "backup PATH                     a consistent copy of the world, made while it runs, in the\n"
     "                                new directory PATH (on the server's machine)\n"
@@ -75,6 +81,52 @@ bool is_address(const std::string& s) {
   asio::error_code ec;
   (void)asio::ip::make_address(s, ec);
   return !ec;
+}
+
+std::string utc(std::int64_t ms) {
+  const std::time_t t = static_cast<std::time_t>(ms / 1000);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char b[32];
+  std::strftime(b, sizeof b, "%Y-%m-%d %H:%M:%S", &tm);
+  return b;
+}
+
+std::string region_text(const Region& r) {
+  return std::to_string(r.min.x) + "," + std::to_string(r.min.y) + "," + std::to_string(r.min.z) + " .. " +
+         std::to_string(r.max.x) + "," + std::to_string(r.max.y) + "," + std::to_string(r.max.z);
+}
+
+// The options of log and rollback; "" or the error.
+struct LogOptions {
+  EditLogQuery query;
+};
+std::string parse_log_options(const std::vector<std::string>& a, LogOptions* o) {
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const bool has_value = i + 1 < a.size();
+    if (a[i] == "--player" && has_value) {
+      o->query.player = a[++i];
+    } else if (a[i] == "--since" && has_value) {
+      const auto d = parse_duration_s(a[++i]);
+      if (!d) return "--since '" + a[i] + "': not a duration (90s, 15m, 2h, 7d)";
+      o->query.since_ms = (unix_now() - *d) * 1000;
+    } else if (a[i] == "--box" && has_value) {
+      std::int32_t c[6];
+      if (!parse_int_list<std::int32_t>(a[++i], c, 6)) return "--box '" + a[i] + "': not X0,Y0,Z0,X1,Y1,Z1";
+      const Region r{{std::min(c[0], c[3]), std::min(c[1], c[4]), std::min(c[2], c[5])},
+                     {std::max(c[0], c[3]), std::max(c[1], c[4]), std::max(c[2], c[5])}};
+      if (r.empty()) return "--box '" + a[i] + "': an empty box";
+      o->query.box = r;
+    } else if (a[i] == "--limit" && has_value) {
+      const std::string& v = a[++i];
+      if (v.empty() || v.size() > 7 || v.find_first_not_of("0123456789") != std::string::npos || std::stoul(v) == 0)
+        return "--limit '" + v + "': a number from 1 to 9999999";
+      o->query.limit = std::stoul(v);
+    } else {
+      return "unexpected '" + a[i] + "'";
+    }
+  }
+  return "";
 }
 
 AdminResultMsg ok(std::string text, std::string json) { return {0, true, std::move(text), std::move(json)}; }
@@ -274,6 +326,62 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     if (n.text.size() > kMaxNoticeBytes) return fail("say: text longer than 1024 bytes");
     hooks_.notify_all(n);
     return ok("said to every client\n", "{\"said\": " + json_string(n.text) + "}");
+  }
+
+  if (cmd == "log") {
+    LogOptions o;
+    o.query.limit = 50;
+    if (auto e = parse_log_options(a, &o); !e.empty())
+      return fail("log: " + e + " (usage: log [--player NAME] [--box X0,Y0,Z0,X1,Y1,Z1] [--since DURATION] [--limit N])");
+    auto store = WorldStore::open(world_dir_);
+    if (!store) return fail("log: " + store.error().message);
+    auto entries = (*store)->edit_log(o.query);
+    if (!entries) return fail("log: " + entries.error().message);
+    std::ostringstream t, j;
+    j << "{\"edits\": [";
+    for (std::size_t i = 0; i < entries->size(); ++i) {
+      const EditLogEntry& e = (*entries)[i];
+      t << utc(e.time_ms) << "  " << e.player << "  " << region_text(e.box) << "  (tick " << e.tick << ")\n";
+      j << (i ? ", " : "") << "{\"id\": " << e.id << ", \"time_ms\": " << e.time_ms << ", \"tick\": " << e.tick
+        << ", \"player\": " << json_string(e.player) << ", \"box\": [" << e.box.min.x << ", " << e.box.min.y << ", "
+        << e.box.min.z << ", " << e.box.max.x << ", " << e.box.max.y << ", " << e.box.max.z << "]}";
+    }
+    j << "]}";
+    t << entries->size() << " edits" << (entries->size() == o.query.limit ? " (the limit: --limit N for more)" : "")
+      << "\n";
+    return ok(t.str(), j.str());
+  }
+
+  if (cmd == "rollback") {
+    LogOptions o;
+    o.query.limit = kMaxRollbackEdits + 1;
+    o.query.with_voxels = true;
+    if (auto e = parse_log_options(a, &o); !e.empty() || o.query.player.empty())
+      return fail("rollback: " + (e.empty() ? std::string("--player NAME is required") : e) +
+                  " (usage: rollback --player NAME [--since DURATION] [--box X0,Y0,Z0,X1,Y1,Z1])");
+    auto store = WorldStore::open(world_dir_);
+    if (!store) return fail("rollback: " + store.error().message);
+    auto entries = (*store)->edit_log(o.query);
+    if (!entries) return fail("rollback: " + entries.error().message);
+    if (entries->empty()) return fail("rollback: no edits by '" + o.query.player + "' match");
+    if (entries->size() > kMaxRollbackEdits)
+      return fail("rollback: more than " + std::to_string(kMaxRollbackEdits) +
+                  " edits match; narrow it with --since or --box");
+    const std::size_t n = entries->size();
+    auto done = std::make_shared<std::promise<std::tuple<bool, std::string, std::uint64_t, std::uint64_t>>>();
+    auto f = done->get_future();
+    hooks_.rollback(who, std::move(*entries), o.query.box,
+                    [done](bool good, std::string error, std::uint64_t tick, std::uint64_t voxels) {
+                      done->set_value({good, std::move(error), tick, voxels});
+                    });
+    if (f.wait_for(std::chrono::seconds(300)) != std::future_status::ready)
+      return fail("rollback: not applied within 300 s");
+    const auto [good, error, tick, voxels] = f.get();
+    if (!good) return fail("rollback: " + error);
+    return ok("rolled back " + std::to_string(n) + " edits by " + o.query.player + ": " + std::to_string(voxels) +
+                  " voxels restored at tick " + std::to_string(tick) + " (logged as " + who + "'s edit)\n",
+              "{\"edits\": " + std::to_string(n) + ", \"voxels_restored\": " + std::to_string(voxels) +
+                  ", \"tick\": " + std::to_string(tick) + "}");
   }
 
   if (cmd == "save") {

@@ -55,9 +55,15 @@ struct AdminHooks {
   // stored (stored false: the store failed).
   std::function<void(std::function<void(std::uint64_t tick, bool stored)> done)> flush;
   std::function<void(std::uint32_t seconds, bool restart, const std::string& reason)> shutdown;
+  // Undoes entries (newest first) as one edit by actor; done after the commit.
+  std::function<void(const std::string& actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
+                     std::function<void(bool ok, std::string error, std::uint64_t tick, std::uint64_t voxels)> done)>
+      rollback;
 };
 
 extern const char* const kAdminHelp;
+// A rollback undoes at most this many logged edits at once.
+inline constexpr std::size_t kMaxRollbackEdits = 20000;
 
 class Admin {
  public:

@@ -110,11 +110,32 @@ LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
   return out;
 }
 
-void Storage::commit(std::vector<VersionPtr> versions, CommitDone done) {
+void Storage::set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes) {
+  log_max_age_ = max_age;
+  log_max_bytes_ = max_bytes;
+}
+
+void Storage::prune_log() {
+  const auto now = std::chrono::steady_clock::now();
+  if (now < next_prune_ || (log_max_age_.count() == 0 && log_max_bytes_ == 0)) return;
+  next_prune_ = now + std::chrono::minutes(1);
+  const std::int64_t now_ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const std::int64_t before =
+      log_max_age_.count() == 0 ? 0 : now_ms - std::chrono::duration_cast<std::chrono::milliseconds>(log_max_age_).count();
+  auto n = writer_store_->prune_edit_log(before, log_max_bytes_);
+  if (!n) {
+    server_log().warn("edit log: pruning failed: {}", n.error().message);
+    return;
+  }
+  counters_.log_entries_pruned.fetch_add(static_cast<std::uint64_t>(*n), std::memory_order_relaxed);
+}
+
+void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done) {
   in_flight_.fetch_add(1, std::memory_order_relaxed);
   {
     std::lock_guard lock(jobs_mutex_);
-    jobs_.push_back(CommitJob{std::move(versions), std::move(done)});
+    jobs_.push_back(CommitJob{std::move(versions), std::move(log), std::move(done)});
   }
   jobs_cv_.notify_one();
 }
@@ -125,16 +146,21 @@ void Storage::writer_loop() {
     std::deque<CommitJob> batch;
     {
       std::unique_lock lock(jobs_mutex_);
-      jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
-      if (jobs_.empty()) return;  // stopping, nothing left
+      // Wakes at least once a minute to prune the edit log.
+      jobs_cv_.wait_for(lock, std::chrono::minutes(1), [&] { return stopping_ || !jobs_.empty(); });
+      if (jobs_.empty() && stopping_) return;  // stopping, nothing left
       batch.swap(jobs_);
     }
+    if (status) prune_log();
+    if (batch.empty()) continue;
     if (status) {  // after a failure, every later tick fails too
       // One transaction for every tick queued: the latest version of each
       // chunk is what is stored.
       std::unordered_map<Vec3i, std::size_t, Vec3iHash> index;
       std::vector<ChunkWrite> writes;
-      for (const CommitJob& job : batch)
+      std::vector<EditLogEntry> log;
+      for (CommitJob& job : batch) {
+        for (EditLogEntry& e : job.log) log.push_back(std::move(e));
         for (const VersionPtr& v : job.versions) {
           const auto blob = v->blob();
           ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end())};
@@ -144,9 +170,11 @@ void Storage::writer_loop() {
           else if (writes[it->second].revision < w.revision)
             writes[it->second] = std::move(w);
         }
-      if (!writes.empty()) {
+      }
+      if (!writes.empty() || !log.empty()) {
         const auto t0 = std::chrono::steady_clock::now();
-        status = writer_store_->save_chunks(writes);
+        status = writer_store_->save_chunks(writes, true, log);
+        if (status) counters_.edits_logged.fetch_add(log.size(), std::memory_order_relaxed);
         counters_.commit_duration.observe(std::chrono::steady_clock::now() - t0);
         counters_.commits.fetch_add(1, std::memory_order_relaxed);
         counters_.chunks_written.fetch_add(writes.size(), std::memory_order_relaxed);

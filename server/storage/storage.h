@@ -56,6 +56,8 @@ struct StorageCounters {
   std::atomic<std::uint64_t> commits{0};           // transactions
   std::atomic<std::uint64_t> ticks_committed{0};   // ticks carried by them
   std::atomic<std::uint64_t> chunks_written{0};
+  std::atomic<std::uint64_t> edits_logged{0};
+  std::atomic<std::uint64_t> log_entries_pruned{0};
   DurationHistogram commit_duration;               // wall time inside each transaction
 };
 
@@ -67,6 +69,10 @@ class Storage {
   // world: shared for its metadata and generator (thread-safe); the store
   // directory is opened again once per loader and once for the writer.
   static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads);
+  // The edit log keeps entries this long (0: for ever) and at most this many
+  // bytes of voxels (0: no bound); the writer prunes it about once a minute.
+  // Call before the first commit.
+  void set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes);
   ~Storage();
   Storage(const Storage&) = delete;
   Storage& operator=(const Storage&) = delete;
@@ -74,7 +80,8 @@ class Storage {
   // urgent loads (an edit or a full-resolution request waits on them) go
   // before the others (streaming a view's coarse chunks).
   void load(Vec3i pos, LoadDone done, bool urgent = false);
-  void commit(std::vector<VersionPtr> versions, CommitDone done);
+  // log: the tick's edits for the edit log, stored in the same transaction.
+  void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done);
   void stop();
 
   const StorageCounters& counters() const { return counters_; }
@@ -88,8 +95,13 @@ class Storage {
 
   struct CommitJob {
     std::vector<VersionPtr> versions;
+    std::vector<EditLogEntry> log;
     CommitDone done;
   };
+  void prune_log();
+  std::chrono::seconds log_max_age_{0};
+  std::uint64_t log_max_bytes_ = 0;
+  std::chrono::steady_clock::time_point next_prune_{};
 
   World& world_;
   StorageCounters counters_;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "common/byte_rle.h"
 #include "common/view.h"
 #include "server/log.h"
 
@@ -315,7 +316,27 @@ void WorldOwner::edit(ClientId id, EditRequestMsg e) {
       });
     }
     ++c.edits_queued;
-    edits_.push_back(PendingEdit{id, std::move(e)});
+    edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr});
+  });
+}
+
+void WorldOwner::rollback(std::string actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
+                          std::function<void(RollbackResult)> done) {
+  asio::post(strand_, [this, actor = std::move(actor), entries = std::move(entries), within,
+                       done = std::move(done)]() mutable {
+    if (stopping_) return done(RollbackResult{false, "the server is stopping", 0, 0});
+    const WorldBounds& bounds = world_.meta().bounds;
+    for (const EditLogEntry& e : entries)
+      for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) {
+        request(cp);
+        ++busy_[cp];
+      });
+    auto job = std::make_shared<Rollback>();
+    job->actor = std::move(actor);
+    job->entries = std::move(entries);
+    job->within = within;
+    job->done = std::move(done);
+    edits_.push_back(PendingEdit{0, EditRequestMsg{}, job->actor, std::move(job)});
   });
 }
 
@@ -357,8 +378,56 @@ void WorldOwner::apply_edits() {
   std::unordered_set<Vec3i, Vec3iHash> copied;
   ChangedUnits changed;
   std::vector<Ack> acks;
-  while (!edits_.empty() && acks.size() < kMaxEditsPerTick) {
+  std::vector<EditLogEntry> log;
+  std::vector<std::shared_ptr<Rollback>> rollbacks;
+  const std::int64_t now_ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+  auto log_step = [&](const std::string& player, const Region& box, std::vector<std::uint8_t> before,
+                      std::vector<std::uint8_t> after) {
+    if (before == after) return;  // nothing changed: nothing to log
+    log.push_back(EditLogEntry{0, tick_, now_ms, player, box, std::move(before), std::move(after)});
+  };
+  while (!edits_.empty() && acks.size() + rollbacks.size() < kMaxEditsPerTick) {
     PendingEdit& pe = edits_.front();
+    if (pe.rollback) {
+      Rollback& job = *pe.rollback;
+      bool ready = true;
+      for (const EditLogEntry& e : job.entries)
+        for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) { ready = request(cp) && ready; });
+      if (!ready && !stopping_) break;  // wait for its chunks
+      for (const EditLogEntry& e : job.entries) unbusy(bounds.clamp(e.box));
+      if (!ready) {
+        job.done(RollbackResult{false, "the server is stopping", 0, 0});
+        edits_.pop_front();
+        continue;
+      }
+      for (const EditLogEntry& e : job.entries) copy_into(scratch, bounds.clamp(e.box), copied);
+      UnitMarker marker(changed);
+      std::unordered_map<Vec3i, Voxel, Vec3iHash> first;  // each restored voxel's value before the rollback
+      for (const EditLogEntry& e : job.entries) {
+        Region b = bounds.clamp(e.box);
+        if (job.within) b = intersect(b, *job.within);
+        if (b.empty()) continue;
+        const auto n = static_cast<std::size_t>(e.box.volume());
+        std::vector<Voxel> before(n), after(n);
+        if (!byte_rle_decode(e.before, before) || !byte_rle_decode(e.after, after)) continue;  // damaged entry
+        auto was = snapshot(scratch, b);
+        const Vec3i size = e.box.size();
+        scratch.modify(b, [&](Vec3i p, Voxel cur) {
+          const Vec3i l = p - e.box.min;
+          const auto i = static_cast<std::size_t>((l.y * size.z + l.z) * size.x + l.x);
+          if (cur != after[i] || before[i] == cur) return cur;
+          marker.mark(p);
+          first.emplace(p, cur);
+          return before[i];
+        });
+        log_step(job.actor, b, std::move(was), snapshot(scratch, b));
+      }
+      for (const auto& [p, v] : first) job.restored += scratch.get(p) != v ? 1 : 0;
+      rollbacks.push_back(std::move(pe.rollback));
+      edits_.pop_front();
+      continue;
+    }
     auto cit = clients_.find(pe.id);
     Client* client = cit != clients_.end() ? &cit->second : nullptr;
     const bool history = is_history_edit(pe.edit.kind);
@@ -390,7 +459,9 @@ void WorldOwner::apply_edits() {
       } else if (client != nullptr && !near_enough(*client, r)) {
         why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
         client->history.drop(redo);  // its box may be stale by the time the client is back
-      } else if (client != nullptr && client->history.apply(scratch, redo, changed, &why)) {
+      } else if (auto was = client != nullptr ? snapshot(scratch, r) : std::vector<std::uint8_t>{};
+                 client != nullptr && client->history.apply(scratch, redo, changed, &why)) {
+        log_step(pe.player, r, std::move(was), snapshot(scratch, r));
         acks.push_back(Ack{pe.id, pe.edit.edit_id});
         edits_.pop_front();
         continue;
@@ -400,13 +471,11 @@ void WorldOwner::apply_edits() {
       continue;
     }
     const Region box = bounds.clamp(pe.edit.bounds());
-    HistoryEntry entry;
-    if (client != nullptr) entry = HistoryEntry{box, snapshot(scratch, box), {}};
+    HistoryEntry entry{box, snapshot(scratch, box), {}};
     apply_edit(scratch, pe.edit, box, changed);
-    if (client != nullptr) {
-      entry.after = snapshot(scratch, box);
-      client->history.record(std::move(entry));
-    }
+    entry.after = snapshot(scratch, box);
+    log_step(pe.player, box, entry.before, entry.after);
+    if (client != nullptr) client->history.record(std::move(entry));
     unbusy(r);
     acks.push_back(Ack{pe.id, pe.edit.edit_id});
     edits_.pop_front();
@@ -430,12 +499,18 @@ void WorldOwner::apply_edits() {
     l.used_tick = tick_;
     versions.push_back(l.current);
   }
-  if (versions.empty() && acks.empty()) return;
+  if (versions.empty() && acks.empty() && rollbacks.empty()) return;
   ++commits_pending_;
   const std::uint64_t tick = tick_;
-  storage_.commit(versions, [this, tick, versions, acks = std::move(acks)](const FileStatus& st) {
-    asio::post(strand_, [this, tick, versions, acks, st] { on_committed(tick, versions, acks, st); });
-  });
+  storage_.commit(versions, std::move(log),
+                  [this, tick, versions, acks = std::move(acks), rollbacks = std::move(rollbacks)](const FileStatus& st) {
+                    asio::post(strand_, [this, tick, versions, acks, rollbacks, st] {
+                      on_committed(tick, versions, acks, st);
+                      for (const auto& job : rollbacks)
+                        job->done(st ? RollbackResult{true, "", tick, job->restored}
+                                     : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
+                    });
+                  });
 }
 
 void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,

@@ -36,6 +36,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
@@ -106,6 +107,21 @@ class WorldOwner : private WorldView {
   void edit(ClientId id, EditRequestMsg edit);
   // Rejects an edit the replicator refused, with the true state of its box.
   void refuse(ClientId id, EditRequestMsg edit, RejectReason why, std::string reason);
+
+  // A rollback (terrane-admin rollback): log entries of one player, newest
+  // first, undone in that order under the undo rule (a voxel is restored
+  // only while it is still as the entry left it), limited to within when
+  // given. Applied as one edit in a tick, stored and logged (as actor's),
+  // fanned out like any edit; done runs on the world strand after the
+  // commit.
+  struct RollbackResult {
+    bool ok = false;
+    std::string error;
+    std::uint64_t tick = 0;
+    std::uint64_t voxels_restored = 0;
+  };
+  void rollback(std::string actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
+                std::function<void(RollbackResult)> done);
   void read_box(ClientId id, ReadBoxMsg request);
   void hash(ClientId id, Vec3i chunk_pos);
 
@@ -135,9 +151,18 @@ class WorldOwner : private WorldView {
     History history;
     std::vector<PresenceEntryMsg> presence;  // last sent
   };
+  struct Rollback {
+    std::string actor;
+    std::vector<EditLogEntry> entries;  // newest first
+    std::optional<Region> within;
+    std::function<void(RollbackResult)> done;
+    std::uint64_t restored = 0;
+  };
   struct PendingEdit {
     ClientId id;
     EditRequestMsg edit;
+    std::string player;                  // for the edit log
+    std::shared_ptr<Rollback> rollback;  // set: this is a rollback, not edit
   };
   struct Ack {
     ClientId id;

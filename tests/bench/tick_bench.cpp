@@ -135,7 +135,7 @@ void BM_TickCommit(benchmark::State& state) {
     for (const auto& v : vs) benchmark::DoNotOptimize(v->blob().data());  // the writer's encoding, measured apart
     state.ResumeTiming();
     std::promise<void> done;
-    (*storage)->commit(vs, [&](const FileStatus&) { done.set_value(); });
+    (*storage)->commit(vs, {}, [&](const FileStatus&) { done.set_value(); });
     done.get_future().wait();
   }
 }

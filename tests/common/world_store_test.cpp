@@ -108,6 +108,53 @@ TEST_F(WorldStoreTest, ChunksRoundTripWithRevisions) {
   EXPECT_EQ(*(*store)->stored_chunk_count(), 2);
 }
 
+TEST_F(WorldStoreTest, TheEditLogIsWrittenWithTheChunksAndQueriedNewestFirst) {
+  auto store = WorldStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  // Before anything was logged the log is empty, not an error.
+  auto empty = (*store)->edit_log(EditLogQuery{});
+  ASSERT_TRUE(empty.ok());
+  EXPECT_TRUE(empty->empty());
+  auto entry = [](std::uint64_t tick, std::int64_t ms, const std::string& who, Region box, std::size_t bytes) {
+    return EditLogEntry{0, tick, ms, who, box, std::vector<std::uint8_t>(bytes, 1), std::vector<std::uint8_t>(bytes, 2)};
+  };
+  const std::vector<EditLogEntry> log = {entry(1, 1000, "ann", {{0, 0, 0}, {2, 2, 2}}, 10),
+                                         entry(2, 2000, "bob", {{10, 0, 10}, {12, 2, 12}}, 20),
+                                         entry(3, 3000, "ann", {{5, 5, 5}, {6, 6, 6}}, 30)};
+  const std::vector<ChunkWrite> writes = {{{0, 0, 0}, 1, encode_chunk_blob(sample_chunk(1))}};
+  ASSERT_TRUE((*store)->save_chunks(writes, true, log).ok());
+  EditLogQuery q;
+  q.player = "ann";
+  q.with_voxels = true;
+  auto ann = (*store)->edit_log(q);
+  ASSERT_TRUE(ann.ok());
+  ASSERT_EQ(ann->size(), 2u);
+  EXPECT_EQ((*ann)[0].tick, 3u);  // newest first
+  EXPECT_EQ((*ann)[1].tick, 1u);
+  EXPECT_EQ((*ann)[0].box, (Region{{5, 5, 5}, {6, 6, 6}}));
+  EXPECT_EQ((*ann)[0].before, std::vector<std::uint8_t>(30, 1));
+  EXPECT_EQ((*ann)[0].after, std::vector<std::uint8_t>(30, 2));
+  EditLogQuery near_bob;
+  near_bob.box = Region{{11, 1, 11}, {20, 20, 20}};
+  auto b = (*store)->edit_log(near_bob);
+  ASSERT_TRUE(b.ok());
+  ASSERT_EQ(b->size(), 1u);
+  EXPECT_EQ((*b)[0].player, "bob");
+  EXPECT_TRUE((*b)[0].before.empty());  // voxels only when asked
+  EditLogQuery recent;
+  recent.since_ms = 2000;
+  recent.limit = 1;
+  EXPECT_EQ((*store)->edit_log(recent)->at(0).tick, 3u);
+  EXPECT_EQ((*store)->edit_log_size()->first, 3);
+  EXPECT_EQ((*store)->edit_log_size()->second, 120u);
+  // Pruning: by age, then the oldest until the bytes fit.
+  EXPECT_EQ(*(*store)->prune_edit_log(1500, 0), 1);
+  EXPECT_EQ(*(*store)->prune_edit_log(0, 60), 1);  // 100 bytes left > 60: bob's (the older) goes
+  auto left = (*store)->edit_log(EditLogQuery{});
+  ASSERT_EQ(left->size(), 1u);
+  EXPECT_EQ(left->at(0).tick, 3u);
+}
+
 TEST_F(WorldStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
   auto store = WorldStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());

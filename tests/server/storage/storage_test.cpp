@@ -62,7 +62,7 @@ TEST_F(StorageTest, LoadsGenerateWhatWasNeverStoredAndReadWhatWas) {
   }
 
   std::promise<FileStatus> done;
-  storage_->commit({version(cp, 9, materials::kBrick)}, [&](const FileStatus& st) { done.set_value(st); });
+  storage_->commit({version(cp, 9, materials::kBrick)}, {}, [&](const FileStatus& st) { done.set_value(st); });
   ASSERT_TRUE(done.get_future().get().ok());
   LoadedChunk s = load(cp);
   ASSERT_TRUE(s.ok) << s.error;
@@ -86,7 +86,7 @@ TEST_F(StorageTest, TicksQueuedBehindABusyWriterCommitTogether) {
   std::vector<int> order;
   std::mutex m;
   for (int t = 0; t < kTicks; ++t)
-    storage_->commit({version({t, 0, 0}, 1, materials::kRock), version({0, 0, 0}, static_cast<std::uint64_t>(t + 1), materials::kSand)},
+    storage_->commit({version({t, 0, 0}, 1, materials::kRock), version({0, 0, 0}, static_cast<std::uint64_t>(t + 1), materials::kSand)}, {},
                      [&, t](const FileStatus& st) {
                        {
                          std::lock_guard lock(m);
@@ -112,13 +112,13 @@ TEST_F(StorageTest, AFailedCommitFailsEveryLaterTick) {
   sqlite3_busy_timeout(db, 10000);  // a connection opening beside it may hold a lock for a moment
   ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
   std::promise<FileStatus> first;
-  storage_->commit({version({1, 0, 0}, 1, materials::kRock)}, [&](const FileStatus& st) { first.set_value(st); });
+  storage_->commit({version({1, 0, 0}, 1, materials::kRock)}, {}, [&](const FileStatus& st) { first.set_value(st); });
   const FileStatus st = first.get_future().get();  // after the store's busy timeout
   EXPECT_FALSE(st.ok());
   ASSERT_EQ(sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr), SQLITE_OK);
   sqlite3_close(db);
   std::promise<FileStatus> later;
-  storage_->commit({version({2, 0, 0}, 1, materials::kRock)}, [&](const FileStatus& s) { later.set_value(s); });
+  storage_->commit({version({2, 0, 0}, 1, materials::kRock)}, {}, [&](const FileStatus& s) { later.set_value(s); });
   EXPECT_FALSE(later.get_future().get().ok()) << "the disk is behind the world: nothing more is committed";
   LoadedChunk c = load({2, 0, 0});
   EXPECT_TRUE(c.generated) << "never stored";
