@@ -21,13 +21,12 @@ std::vector<Vec3i> view_offsets(std::int32_t radius) {
   return out;
 }
 
-std::vector<Vec3i> chunks_in_view(Vec3f position, std::int32_t radius, std::int32_t min_y, std::int32_t max_y) {
+std::vector<Vec3i> chunks_in_view(Vec3f position, std::int32_t radius, const WorldBounds& bounds) {
   const Vec3i c = view_chunk(position);
-  const std::int32_t lo = floor_div(min_y, kChunkSize), hi = floor_div(max_y - 1, kChunkSize);
   std::vector<Vec3i> out;
   for (const Vec3i o : view_offsets(radius)) {
     const Vec3i cp = c + o;
-    if (cp.y >= lo && cp.y <= hi) out.push_back(cp);
+    if (bounds.touches_chunk(cp)) out.push_back(cp);
   }
   return out;
 }

@@ -25,6 +25,7 @@
 
 #include "common/chunk.h"
 #include "common/vec3.h"
+#include "common/world_bounds.h"
 
 namespace terrane {
 
@@ -75,8 +76,9 @@ inline int desired_level(Vec3f position, Vec3i chunk_pos, std::int32_t full_res_
 // Every offset within radius, nearest first (the order above).
 std::vector<Vec3i> view_offsets(std::int32_t radius);
 
-// The chunks within radius of a client at position whose y range overlaps
-// [min_y, max_y), nearest first.
-std::vector<Vec3i> chunks_in_view(Vec3f position, std::int32_t radius, std::int32_t min_y, std::int32_t max_y);
+// The chunks within radius of a client at position that hold any voxel of
+// the world (WorldBounds::touches_chunk: its vertical range and, when it has
+// one, its horizontal border), nearest first: what a complete view holds.
+std::vector<Vec3i> chunks_in_view(Vec3f position, std::int32_t radius, const WorldBounds& bounds);
 
 }  // namespace terrane

@@ -60,42 +60,6 @@ std::vector<std::string> split_lines(const std::string& s) {
 
 }  // namespace
 
-bool WorldBounds::contains(Vec3i v) const {
-  if (v.y < min_y || v.y >= max_y) return false;
-  if (!bounded_xz) return true;
-  return v.x >= min_x && v.x < max_x && v.z >= min_z && v.z < max_z;
-}
-
-Region WorldBounds::clamp(const Region& r) const {
-  Region out = r;
-  out.min.y = std::max(out.min.y, min_y);
-  out.max.y = std::min(out.max.y, max_y);
-  if (bounded_xz) {
-    out.min.x = std::max(out.min.x, min_x);
-    out.max.x = std::min(out.max.x, max_x);
-    out.min.z = std::max(out.min.z, min_z);
-    out.max.z = std::min(out.max.z, max_z);
-  }
-  return out;
-}
-
-std::string WorldBounds::validate() const {
-  auto in_range = [](std::int64_t v) { return v >= -kMaxWorldCoordinate && v <= kMaxWorldCoordinate; };
-  if (!in_range(min_y) || !in_range(max_y)) return "vertical bounds beyond +-2^30";
-  if (min_y >= max_y) return "vertical bounds empty (min_y >= max_y)";
-  if (bounded_xz) {
-    if (!in_range(min_x) || !in_range(max_x) || !in_range(min_z) || !in_range(max_z))
-      return "horizontal bounds beyond +-2^30";
-    if (min_x >= max_x || min_z >= max_z) return "horizontal bounds empty";
-  }
-  return {};
-}
-
-bool WorldBounds::touches_chunk(Vec3i chunk_pos) const {
-  const Vec3i o = chunk_origin(chunk_pos);
-  return !clamp(Region{o, o + Vec3i{kChunkSize, kChunkSize, kChunkSize}}).empty();
-}
-
 std::vector<std::string> default_material_names() {
   std::vector<std::string> names(kDefaultMaterialNames.begin(), kDefaultMaterialNames.end());
   return names;
@@ -385,6 +349,15 @@ FileStatus WorldStore::erase_access(const std::string& key) {
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return error("cannot write the access lists");
+  return Ok{};
+}
+
+FileStatus WorldStore::set_bounds(const WorldBounds& bounds) {
+  if (auto why = bounds.validate(); !why.empty()) return FileError{"world " + dir_ + ": " + why, {}};
+  WorldMeta m = meta_;
+  m.bounds = bounds;
+  if (auto s = write_meta(m); !s) return s;
+  meta_.bounds = bounds;
   return Ok{};
 }
 

@@ -25,6 +25,7 @@
 #include "common/chunk.h"
 #include "common/decode_error.h"
 #include "common/vxraw.h"
+#include "common/world_bounds.h"
 
 struct sqlite3;
 struct sqlite3_stmt;
@@ -33,26 +34,6 @@ namespace terrane {
 
 inline constexpr std::uint32_t kWorldFormatVersion = 1;
 inline constexpr const char* kWorldDatabaseName = "world.sqlite";
-
-// World coordinates stay within +-2^30 voxels, so chunk and voxel
-// arithmetic never overflows 32 bits.
-inline constexpr std::int32_t kMaxWorldCoordinate = 1 << 30;
-
-// Which voxels a world may hold. Vertical range always; horizontal optional.
-struct WorldBounds {
-  std::int32_t min_y = -128;
-  std::int32_t max_y = 256;  // exclusive
-  bool bounded_xz = false;
-  std::int32_t min_x = 0, max_x = 0, min_z = 0, max_z = 0;  // exclusive max, if bounded_xz
-
-  bool contains(Vec3i voxel) const;
-  // True if any voxel of the chunk lies inside the bounds.
-  bool touches_chunk(Vec3i chunk_pos) const;
-  Region clamp(const Region& r) const;
-  // Empty when valid, else what is wrong: every limit within
-  // +-kMaxWorldCoordinate and each max above its min.
-  std::string validate() const;
-};
 
 enum class GeneratorKind : std::uint8_t {
   kNone,     // nothing outside stored chunks (e.g. imported worlds)
@@ -135,6 +116,8 @@ class WorldStore {
   const std::string& dir() const { return dir_; }
   const WorldMeta& meta() const { return meta_; }
   FileStatus set_epoch(std::uint64_t epoch);
+  // A new border (or none): bounds.validate() must be empty.
+  FileStatus set_bounds(const WorldBounds& bounds);
 
   // The stored chunk, or nullopt if the chunk was never stored.
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);

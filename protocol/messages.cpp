@@ -105,7 +105,9 @@ Frame build_welcome(const WelcomeMsg& m) {
   const auto spawn = to_wire(m.spawn);
   return finish(fbb, wire::CreateWelcomeDirect(fbb, m.protocol_version, m.server_epoch, &spawn, &names, m.bounds_min_y,
                                                m.bounds_max_y, m.max_view_distance, m.max_full_res_radius,
-                                               m.max_frame_bytes, m.tick_hz));
+                                               m.max_frame_bytes, m.tick_hz, m.bounded_xz, m.bounds_min_x,
+                                               m.bounds_min_z, m.bounds_max_x, m.bounds_max_z, m.default_view_distance,
+                                               m.default_full_res_radius));
 }
 
 Frame build_disconnect(std::string_view reason) {
@@ -324,6 +326,19 @@ Result<WelcomeMsg> parse_welcome(const wire::Welcome& m) {
     return invalid("welcome: max frame size out of range");
   out.tick_hz = m.tick_hz();
   if (out.tick_hz == 0 || out.tick_hz > 1000) return invalid("welcome: tick rate out of range");
+  out.bounded_xz = m.bounded_xz();
+  if (out.bounded_xz) {
+    out.bounds_min_x = m.bounds_min_x();
+    out.bounds_min_z = m.bounds_min_z();
+    out.bounds_max_x = m.bounds_max_x();
+    out.bounds_max_z = m.bounds_max_z();
+    if (!out.bounds().validate().empty()) return invalid("welcome: bad horizontal bounds");
+  }
+  out.default_view_distance = m.default_view_distance();
+  out.default_full_res_radius = m.default_full_res_radius();
+  if (out.default_view_distance < 0 || out.default_full_res_radius < 0 ||
+      out.default_view_distance > out.max_view_distance || out.default_full_res_radius > out.max_full_res_radius)
+    return invalid("welcome: defaults beyond the caps");
   return out;
 }
 

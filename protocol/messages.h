@@ -20,6 +20,7 @@
 #include "common/decode_error.h"
 #include "common/vec3.h"
 #include "common/voxel.h"
+#include "common/world_bounds.h"
 #include "protocol/framing.h"
 #include "protocol/terrane_generated.h"
 
@@ -93,6 +94,14 @@ struct WelcomeMsg {
   std::int32_t max_full_res_radius = 0;
   std::uint32_t max_frame_bytes = 0;
   std::uint32_t tick_hz = 0;
+  bool bounded_xz = false;
+  std::int32_t bounds_min_x = 0, bounds_min_z = 0, bounds_max_x = 0, bounds_max_z = 0;
+  std::int32_t default_view_distance = 0, default_full_res_radius = 0;
+
+  // The world's bounds as the view rule and edits take them.
+  WorldBounds bounds() const {
+    return WorldBounds{bounds_min_y, bounds_max_y, bounded_xz, bounds_min_x, bounds_max_x, bounds_min_z, bounds_max_z};
+  }
 };
 
 struct ClientStateMsg {

@@ -37,6 +37,9 @@ constexpr const char* kHelp =
     "  --metrics ADDR:PORT         serve GET /metrics (Prometheus text format) and GET /health\n"
     "                              (200 while ticking and storing, else 503) over HTTP here;\n"
     "                              port 0 picks a free one (default: off)\n"
+    "  --border X0,Z0,X1,Z1        set the world border (kept in the world): nothing is generated,\n"
+    "                              streamed or editable outside x0 <= x < x1, z0 <= z < z1;\n"
+    "                              'none' removes it (default: the world's, if any)\n"
     "  --tick-hz N                 simulation ticks per second (default 20)\n"
     "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
@@ -97,7 +100,7 @@ int usage_error(const std::string& message) {
 }
 
 int run(int argc, char** argv) {
-  CommandLine cl({"world", "bind", "port", "metrics", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
+  CommandLine cl({"world", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
@@ -116,6 +119,16 @@ int run(int argc, char** argv) {
   o.bind_address = cl.get("bind", o.bind_address);
   o.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
   o.metrics_address = cl.get("metrics");
+  if (cl.has("border")) {
+    o.border_set = true;
+    if (cl.get("border") != "none") {
+      std::int32_t c[4];
+      if (!parse_int_list<std::int32_t>(cl.get("border"), c, 4))
+        return usage_error("--border: '" + cl.get("border") + "' is not X0,Z0,X1,Z1 (or none)");
+      o.border = WorldBounds{0, 1, true, c[0], c[2], c[1], c[3]};
+      if (auto why = o.border.validate(); !why.empty()) return usage_error("--border: " + why);
+    }
+  }
   if (cl.has("metrics"))
     if (auto hp = parse_host_port(o.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
   o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", 20, 1, 1000, &err));

@@ -21,6 +21,10 @@ struct ServerOptions {
   // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =
   // none; port 0 picks a free one (see metrics_port()).
   std::string metrics_address;
+  // A world border to set (persisted in the world): nothing is generated,
+  // streamed or editable beyond it. border_set with !bounded_xz removes one.
+  bool border_set = false;
+  WorldBounds border;
   std::uint32_t tick_hz = 20;
   std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
   std::int32_t max_full_res_radius = 256;  // voxels

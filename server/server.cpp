@@ -17,6 +17,15 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
                                                      : World::create(options.world_dir, default_world_meta());
   if (!world) return world.error();
   s->world_ = std::move(*world);
+  if (options.border_set) {
+    WorldBounds b = s->world_->meta().bounds;
+    b.bounded_xz = options.border.bounded_xz;
+    b.min_x = options.border.min_x;
+    b.max_x = options.border.max_x;
+    b.min_z = options.border.min_z;
+    b.max_z = options.border.max_z;
+    if (auto st = s->world_->store().set_bounds(b); !st) return FileError{"--border: " + st.error().message, {}};
+  }
   const std::uint64_t epoch = s->world_->meta().epoch + 1;
   if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
   auto storage = Storage::open(*s->world_, s->options_.worker_threads);
@@ -50,6 +59,13 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   w.max_full_res_radius = s->options_.max_full_res_radius;
   w.max_frame_bytes = static_cast<std::uint32_t>(s->options_.session.max_frame_bytes);
   w.tick_hz = s->options_.tick_hz;
+  w.bounded_xz = meta.bounds.bounded_xz;
+  w.bounds_min_x = meta.bounds.min_x;
+  w.bounds_min_z = meta.bounds.min_z;
+  w.bounds_max_x = meta.bounds.max_x;
+  w.bounds_max_z = meta.bounds.max_z;
+  w.default_view_distance = s->options_.default_view_distance;
+  w.default_full_res_radius = s->options_.default_full_res_radius;
   s->welcome_.bounds = meta.bounds;
   auto access = AccessControl::open(options.world_dir, options.auth_token, options.player_tokens, options.admin_token);
   if (!access) return access.error();
@@ -74,7 +90,16 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
 }
 
 Vec3f Server::find_spawn(World& world) {
-  if (const TerrainGenerator* gen = world.generator()) return {0.5f, gen->surface_height(0, 0) + 2.0f, 0.5f};
+  if (const TerrainGenerator* gen = world.generator()) {
+    // The origin, or the middle of a border that leaves it out.
+    const WorldBounds& b = world.meta().bounds;
+    std::int32_t x = 0, z = 0;
+    if (b.bounded_xz && !b.contains({0, b.min_y, 0})) {
+      x = b.min_x + (b.max_x - b.min_x) / 2;
+      z = b.min_z + (b.max_z - b.min_z) / 2;
+    }
+    return {static_cast<float>(x) + 0.5f, gen->surface_height(x, z) + 2.0f, static_cast<float>(z) + 0.5f};
+  }
   // No generator (an imported world): above the ground at the centre of
   // what is stored, so clients start where the content is.
   Vec3i lo{0, 0, 0}, hi{0, 0, 0};
@@ -107,6 +132,8 @@ Server::Server(const ServerOptions& options)
       shutdown_timer_(io_) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
+  options_.default_view_distance = std::min(options_.default_view_distance, options_.max_view_distance);
+  options_.default_full_res_radius = std::min(options_.default_full_res_radius, options_.max_full_res_radius);
   options_.session.counters = &counters_;
   faults_.drop_updates = options_.fault_drop_updates;
   faults_.corrupt_updates = options_.fault_corrupt_updates;

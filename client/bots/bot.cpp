@@ -83,10 +83,12 @@ void Bot::init_join_tracking() {
   need_.assign(static_cast<std::size_t>(box_size_.x) * static_cast<std::size_t>(box_size_.y) *
                    static_cast<std::size_t>(box_size_.z),
                0);
+  const WorldBounds bounds = ctx_.welcome.bounds();  // chunks beyond a border are never sent
   std::size_t i = 0;
   for (int y = c0.y; y <= c1.y; ++y)
     for (int z = c0.z; z <= c1.z; ++z)
       for (int x = c0.x; x <= c1.x; ++x, ++i) {
+        if (!bounds.touches_chunk({x, y, z})) continue;
         if (within(pos_, {x, y, z}, view)) need_[i] |= 1, ++need_coarse_;
         if (within(pos_, {x, y, z}, full)) need_[i] |= 2, ++need_full_;
       }

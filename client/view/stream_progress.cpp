@@ -5,10 +5,10 @@
 namespace terrane::view {
 
 StreamProgress stream_progress(const Replica& replica, Vec3f p, std::int32_t vd, std::int32_t full,
-                               std::int32_t min_y, std::int32_t max_y) {
+                               const WorldBounds& bounds) {
   // The server's view rule (common/view.h): the same chunks, the same levels.
   StreamProgress out;
-  for (const Vec3i cp : chunks_in_view(p, vd, min_y, max_y)) {
+  for (const Vec3i cp : chunks_in_view(p, vd, bounds)) {
     ++out.in_view;
     const ChunkCoverage* c = replica.coverage(cp);
     if (c == nullptr) continue;

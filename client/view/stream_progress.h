@@ -18,8 +18,8 @@ struct StreamProgress {
 };
 
 // view_distance and full_res_radius as the server applies them (capped by
-// the Welcome's maxima); min_y/max_y the world's vertical bounds.
+// the Welcome's maxima); bounds the world's (WelcomeMsg::bounds()).
 StreamProgress stream_progress(const Replica& replica, Vec3f position, std::int32_t view_distance,
-                               std::int32_t full_res_radius, std::int32_t min_y, std::int32_t max_y);
+                               std::int32_t full_res_radius, const WorldBounds& bounds);
 
 }  // namespace terrane::view

@@ -36,8 +36,8 @@ TEST(View, PROTOCOLsWorkedExample) {
 
 TEST(View, OnlyTheClientsChunkMatters) {
   for (const Vec3f p : {Vec3f{0.0f, 0.0f, 0.0f}, Vec3f{31.9f, 0.5f, 17.0f}, Vec3f{16.0f, 31.99f, 0.01f}})
-    EXPECT_EQ(chunks_in_view(p, 100, -1000, 1000), chunks_in_view({1, 1, 1}, 100, -1000, 1000));
-  EXPECT_NE(chunks_in_view({-0.5f, 0, 0}, 100, -1000, 1000), chunks_in_view({0.5f, 0, 0}, 100, -1000, 1000));
+    EXPECT_EQ(chunks_in_view(p, 100, WorldBounds{-1000, 1000}), chunks_in_view({1, 1, 1}, 100, WorldBounds{-1000, 1000}));
+  EXPECT_NE(chunks_in_view({-0.5f, 0, 0}, 100, WorldBounds{-1000, 1000}), chunks_in_view({0.5f, 0, 0}, 100, WorldBounds{-1000, 1000}));
 }
 
 TEST(View, EveryOffsetWithinTheRadiusAndNoOtherIsListed) {
@@ -61,8 +61,20 @@ TEST(View, NearestFirstWithTiesByYThenZThenX) {
     EXPECT_LE(offset_center_dist2(view[i - 1]), offset_center_dist2(view[i]));
 }
 
+TEST(View, AHorizontalBorderCutsTheView) {
+  // A border from x = 10 to 70, z = -40 to 20: chunks x 0..2, z -2..0.
+  const WorldBounds b{-1000, 1000, true, 10, 70, -40, 20};
+  const auto view = chunks_in_view({30, 0, 0}, 200, b);
+  ASSERT_FALSE(view.empty());
+  for (const Vec3i c : view) {
+    EXPECT_TRUE(c.x >= 0 && c.x <= 2) << c.x;
+    EXPECT_TRUE(c.z >= -2 && c.z <= 0) << c.z;
+  }
+  EXPECT_GT(chunks_in_view({30, 0, 0}, 200, WorldBounds{-1000, 1000}).size(), view.size());
+}
+
 TEST(View, VerticalBoundsCutTheView) {
-  const auto view = chunks_in_view({0, 0, 0}, 200, 0, 64);
+  const auto view = chunks_in_view({0, 0, 0}, 200, WorldBounds{0, 64});
   ASSERT_FALSE(view.empty());
   for (const Vec3i c : view) {
     EXPECT_GE(c.y, 0);

@@ -64,6 +64,29 @@ TEST(Messages, WelcomeRoundTrips) {
   EXPECT_EQ(p->materials, w.materials);
   EXPECT_EQ(p->bounds_max_y, 256);
   EXPECT_EQ(p->tick_hz, 20u);
+  EXPECT_FALSE(p->bounded_xz);
+  // A border and the defaults travel too; nonsense is refused.
+  w.bounded_xz = true;
+  w.bounds_min_x = -64;
+  w.bounds_max_x = 640;
+  w.bounds_min_z = 0;
+  w.bounds_max_z = 96;
+  w.default_view_distance = 512;
+  w.default_full_res_radius = 64;
+  const Frame fb = build_welcome(w);
+  auto q = parse_welcome(*message_of(fb)->body_as_Welcome());
+  ASSERT_TRUE(q.ok()) << q.error().describe();
+  EXPECT_EQ(q->bounds().min_x, -64);
+  EXPECT_EQ(q->bounds().max_z, 96);
+  EXPECT_EQ(q->default_view_distance, 512);
+  EXPECT_EQ(q->default_full_res_radius, 64);
+  w.bounds_max_z = -5;  // empty
+  const Frame bad = build_welcome(w);
+  EXPECT_FALSE(parse_welcome(*message_of(bad)->body_as_Welcome()).ok());
+  w.bounds_max_z = 96;
+  w.default_view_distance = 2048;  // beyond the cap
+  const Frame bad2 = build_welcome(w);
+  EXPECT_FALSE(parse_welcome(*message_of(bad2)->body_as_Welcome()).ok());
 }
 
 TEST(Messages, ClientStateRejectsNonFiniteAndOutOfRange) {

@@ -357,16 +357,71 @@ bool read_stream(RawPeer& p, HeldMap& held, std::size_t* records, const std::fun
 // True when every chunk of the view is held at the level the view rule
 // (common/view.h) promises: Empty or full resolution inside the radius, the
 // desired mip (or Empty) beyond it.
-bool view_complete(const HeldMap& held, const ClientStateMsg& where) {
-  const WorldBounds b = default_world_meta().bounds;
-  for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, b.min_y, b.max_y)) {
-    if (!b.touches_chunk(cp)) continue;
+bool view_complete(const HeldMap& held, const ClientStateMsg& where,
+                   const WorldBounds& b = default_world_meta().bounds) {
+  for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, b)) {
     auto it = held.find(cp);
     if (it == held.end()) return false;
     if (it->second.level != kHeldEmpty && it->second.level != desired_level(where.position, cp, where.full_res_radius))
       return false;
   }
   return true;
+}
+
+TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
+  ServerOptions o;
+  o.border_set = true;
+  o.border = WorldBounds{0, 1, true, 0, 96, -64, 32};  // x in [0, 96), z in [-64, 32)
+  start(o);
+  auto welcome_of = [&](RawPeer& p) {
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "edge", ""})));
+    auto f = p.next_of(wire::Body::Welcome);
+    EXPECT_TRUE(f.has_value());
+    return *parse_welcome(*msg(*f).body_as_Welcome());
+  };
+  RawPeer p(server_->port());
+  const WelcomeMsg w = welcome_of(p);
+  ASSERT_TRUE(w.bounded_xz);
+  EXPECT_EQ(w.bounds_min_x, 0);
+  EXPECT_EQ(w.bounds_max_x, 96);
+  EXPECT_EQ(w.bounds_min_z, -64);
+  EXPECT_EQ(w.bounds_max_z, 32);
+  EXPECT_EQ(w.default_view_distance, 1024);
+  EXPECT_EQ(w.default_full_res_radius, 128);
+  // A client at the border's corner: its view completes with the chunks
+  // inside the border, and nothing beyond it is ever sent.
+  const ClientStateMsg where{{8.5f, w.spawn.y, 8.5f}, 128, 48};
+  ASSERT_TRUE(p.send(build_client_state(where)));
+  HeldMap held = empty_held();
+  std::size_t records = 0;
+  ASSERT_TRUE(read_stream(p, held, &records, [&](const HeldMap& h) { return view_complete(h, where, w.bounds()); }));
+  for (const auto& [cp, h] : held) EXPECT_TRUE(w.bounds().touches_chunk(cp)) << cp.x << "," << cp.y << "," << cp.z;
+  // An edit beyond the border is refused.
+  EditRequestMsg e;
+  e.edit_id = 5;
+  e.kind = EditKind::kFillBox;
+  e.box = {{-4, 10, 4}, {-2, 12, 6}};
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  ASSERT_TRUE(p.send(build_edit_request(e)));
+  auto r = p.next_of(wire::Body::EditReject);
+  ASSERT_TRUE(r.has_value());
+  EXPECT_EQ(parse_edit_reject(*msg(*r).body_as_EditReject())->reason, "edit outside the world");
+  p.close();
+  // Kept in the world: a restart without --border still has it; 'none' removes it.
+  server_->stop();
+  server_.reset();
+  start();
+  RawPeer again(server_->port());
+  EXPECT_TRUE(welcome_of(again).bounded_xz);
+  again.close();
+  server_->stop();
+  server_.reset();
+  ServerOptions none;
+  none.border_set = true;
+  start(none);
+  RawPeer open(server_->port());
+  EXPECT_FALSE(welcome_of(open).bounded_xz);
 }
 
 TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {

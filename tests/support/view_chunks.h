@@ -11,7 +11,7 @@
 namespace terrane::testing_support {
 
 inline std::vector<Vec3i> chunks_within(Vec3f p, float radius, const WelcomeMsg& w) {
-  return chunks_in_view(p, static_cast<std::int32_t>(radius), w.bounds_min_y, w.bounds_max_y);
+  return chunks_in_view(p, static_cast<std::int32_t>(radius), w.bounds());
 }
 
 }  // namespace terrane::testing_support

@@ -362,7 +362,7 @@ int run_screenshot(const ViewerOptions& options) {
     if (!data_ready) {
       progress = session.client().with_replica([&](const Replica& r) {
         return stream_progress(r, session.camera().pos, session.view_distance(), session.full_res_radius(),
-                               w.bounds_min_y, w.bounds_max_y);
+                               w.bounds());
       });
       const bool waited = options.wait_full_res || options.mips_only ? progress.settled == progress.in_view
                                                                      : progress.covered == progress.in_view;
