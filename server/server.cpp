@@ -352,6 +352,7 @@ AdminHooks Server::admin_hooks() {
       p.connected_s = std::chrono::duration<double>(now - info.joined).count();
       p.bytes_in = s->bytes_received();
       p.bytes_out = s->bytes_sent();
+      p.ping_ms = info.ping_ms;
       fn(*s, p);
     }
   };

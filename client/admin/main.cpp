@@ -30,7 +30,7 @@ constexpr const char* kHelp =
     "\n"
     "Commands:\n"
     "  status                          the server at a glance\n"
-    "  players                         who is connected: name, address, position, bytes in/out\n"
+    "  players                         who is connected: name, address, position, ping, bytes\n"
     "  kick NAME [REASON...]           end NAME's session (they may join again)\n"
     "  ban NAME|ADDRESS [--for DURATION] [REASON...]\n"
     "                                  refuse NAME or ADDRESS at the handshake (DURATION: 90s,\n"

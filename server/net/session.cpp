@@ -216,6 +216,7 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Ping:
       return enqueue(std::make_shared<const Frame>(build_pong(m.body_as_Ping()->nonce())), SendClass::kControl);
     case wire::Body::Pong:
+      on_message_(id_, PongMsg{m.body_as_Pong()->nonce()});
       return;
     case wire::Body::Disconnect:
       close_reason_ = "client disconnected";

@@ -71,8 +71,13 @@ struct HoldingsMsg {
   std::vector<HeldChunkMsg> chunks;
 };
 
+// A Pong answering one of the server's Pings (the round trip it measures).
+struct PongMsg {
+  std::uint64_t nonce = 0;
+};
+
 using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg,
-                                    HoldingsMsg, AdminRequestMsg>;
+                                    HoldingsMsg, AdminRequestMsg, PongMsg>;
 
 using SharedFrame = std::shared_ptr<const Frame>;
 

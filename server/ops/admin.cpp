@@ -200,22 +200,28 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     const auto players = hooks_.players();
     std::ostringstream t, j;
     char line[512];
-    std::snprintf(line, sizeof line, "%-20s %-16s %-26s %8s %12s %12s\n", "name", "address", "position", "online",
-                  "bytes in", "bytes out");
+    std::snprintf(line, sizeof line, "%-20s %-16s %-26s %8s %8s %12s %12s\n", "name", "address", "position", "online",
+                  "ping", "bytes in", "bytes out");
     t << line;
     j << "{\"players\": [";
     for (std::size_t i = 0; i < players.size(); ++i) {
       const PlayerInfo& p = players[i];
       char pos[96];
       std::snprintf(pos, sizeof pos, "%.0f,%.0f,%.0f", p.position.x, p.position.y, p.position.z);
-      std::snprintf(line, sizeof line, "%-20s %-16s %-26s %7.0fs %12llu %12llu%s\n", p.name.c_str(), p.address.c_str(),
-                    pos, p.connected_s, static_cast<unsigned long long>(p.bytes_in),
+      char ping[32];
+      if (p.ping_ms < 0)
+        std::snprintf(ping, sizeof ping, "-");
+      else
+        std::snprintf(ping, sizeof ping, "%.1fms", p.ping_ms);
+      std::snprintf(line, sizeof line, "%-20s %-16s %-26s %7.0fs %8s %12llu %12llu%s\n", p.name.c_str(),
+                    p.address.c_str(), pos, p.connected_s, ping, static_cast<unsigned long long>(p.bytes_in),
                     static_cast<unsigned long long>(p.bytes_out), p.admin ? "  (admin)" : "");
       t << line;
       j << (i ? ", " : "") << "{\"id\": " << p.id << ", \"name\": " << json_string(p.name)
         << ", \"address\": " << json_string(p.address) << ", \"position\": [" << num(p.position.x) << ", "
         << num(p.position.y) << ", " << num(p.position.z) << "], \"admin\": " << (p.admin ? "true" : "false")
-        << ", \"connected_s\": " << num(p.connected_s) << ", \"bytes_in\": " << p.bytes_in
+        << ", \"connected_s\": " << num(p.connected_s)
+        << ", \"ping_ms\": " << (p.ping_ms < 0 ? std::string("null") : num(p.ping_ms)) << ", \"bytes_in\": " << p.bytes_in
         << ", \"bytes_out\": " << p.bytes_out << "}";
     }
     j << "]}";

@@ -32,6 +32,7 @@ struct PlayerInfo {
   bool admin = false;
   double connected_s = 0;
   std::uint64_t bytes_in = 0, bytes_out = 0;
+  double ping_ms = -1;  // round trip of the server's last Ping; -1: none answered yet
 };
 
 struct ServerStatus {

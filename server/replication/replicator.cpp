@@ -74,6 +74,19 @@ void Replicator::on_message(InboundMessage msg) {
   if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
   if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
   if (auto* admin = std::get_if<AdminRequestMsg>(&msg)) return on_admin(std::move(*admin));
+  if (auto* pong = std::get_if<PongMsg>(&msg)) return on_pong(pong->nonce);
+}
+
+void Replicator::on_pong(std::uint64_t nonce) {
+  // The nonce is the steady clock when we sent the Ping; anything else (a
+  // client's own nonce, a forgery) is out of range and ignored.
+  const auto now = std::chrono::duration_cast<std::chrono::microseconds>(
+                       std::chrono::steady_clock::now().time_since_epoch())
+                       .count();
+  const auto sent = static_cast<std::int64_t>(nonce);
+  if (sent <= 0 || sent > now || now - sent > 60'000'000) return;
+  std::lock_guard lock(info_m_);
+  info_.ping_ms = static_cast<double>(now - sent) / 1000.0;
 }
 
 Replicator::Info Replicator::info() const {
@@ -674,6 +687,7 @@ void Replicator::arm_timer() {
   if (!ready_.empty()) at = now + kPumpRetry;
   if (!mip_dirty_.empty()) at = std::min(at, next_mip_flush_);
   if (options_.hash_push_ms > 0) at = std::min(at, next_hash_push_);
+  if (welcomed_) at = std::min(at, next_ping_);
   if (at == std::chrono::steady_clock::time_point::max()) return;
   if (timer_armed_) {
     if (timer_->expiry() <= at) return;
@@ -691,6 +705,11 @@ void Replicator::arm_timer() {
 
 void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
+  if (welcomed_ && now >= next_ping_) {
+    next_ping_ = now + kPingPeriod;
+    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count();
+    session_->send(build_ping(static_cast<std::uint64_t>(us)), SendClass::kControl);
+  }
   if (!mip_dirty_.empty() && now >= next_mip_flush_) flush_mips();
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
     next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);

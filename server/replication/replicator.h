@@ -82,7 +82,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
     bool admin = false;
     bool welcomed = false;
     std::chrono::steady_clock::time_point joined;
+    double ping_ms = -1;  // the last round trip measured; -1 before the first
   };
+  // The server pings each client this often (its round trip, for operators).
+  static constexpr std::chrono::seconds kPingPeriod{5};
 
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
              const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
@@ -116,6 +119,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void on_holdings(const HoldingsMsg& h);
   void on_hash_request(Vec3i chunk_pos);
   void on_admin(AdminRequestMsg req);
+  void on_pong(std::uint64_t nonce);
 
   void replan();
   void move_by(Vec3i d);
@@ -152,6 +156,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   bool admin_ = false;
   mutable std::mutex info_m_;
   Info info_;  // a copy of name, position and role for other threads
+  std::chrono::steady_clock::time_point next_ping_{};
   // session_ is used on the session strand only and dropped when the
   // session closes (it and the session's callbacks keep each other alive);
   // the world strand reaches the session through weak_session_ and posts to

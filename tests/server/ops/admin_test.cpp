@@ -127,6 +127,20 @@ TEST_F(AdminTest, PlayersListsWhoIsConnectedAndKickEndsOnlyThatSession) {
   EXPECT_NE(players.json.find("[40.5, 30, -12.5]"), std::string::npos) << players.json;
   EXPECT_NE(players.json.find("\"address\": \"127.0.0.1\""), std::string::npos) << players.json;
   EXPECT_NE(players.text.find("3 connected"), std::string::npos) << players.text;
+  // The server pings every client; once the builder answers, its round trip shows.
+  EXPECT_NE(players.json.find("\"ping_ms\": null"), std::string::npos) << players.json;
+  auto ping = builder.peer->next_of(wire::Body::Ping);
+  ASSERT_TRUE(ping.has_value());
+  ASSERT_TRUE(builder.peer->send(build_pong(msg(*ping).body_as_Ping()->nonce())));
+  for (const auto deadline = std::chrono::steady_clock::now() + 30s; std::chrono::steady_clock::now() < deadline;) {
+    players = command(*admin.peer, "players");
+    if (players.text.find("ms ") != std::string::npos) break;
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_NE(players.text.find("ms "), std::string::npos) << players.text;
+  EXPECT_NE(players.json.find("\"ping_ms\": null"), std::string::npos) << "the others have not answered: " << players.json;
+  // A forged Pong (a nonce from the future) changes nothing.
+  ASSERT_TRUE(griefer.peer->send(build_pong(~0ull)));
 
   const AdminResultMsg k = command(*admin.peer, "kick", {"griefer", "stop", "that"});
   EXPECT_TRUE(k.ok) << k.text;
