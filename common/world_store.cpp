@@ -305,12 +305,33 @@ FileStatus WorldStore::load_meta() {
   return Ok{};
 }
 
+namespace {
+constexpr const char* kEditLogSchema =
+    "CREATE TABLE IF NOT EXISTS edit_log(id INTEGER PRIMARY KEY, tick INTEGER NOT NULL, time INTEGER NOT NULL,"
+    " player TEXT NOT NULL, x0 INTEGER NOT NULL, y0 INTEGER NOT NULL, z0 INTEGER NOT NULL,"
+    " x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, z1 INTEGER NOT NULL, before BLOB NOT NULL, after BLOB NOT NULL);"
+    "CREATE INDEX IF NOT EXISTS edit_log_player ON edit_log(player, id);"
+    "CREATE INDEX IF NOT EXISTS edit_log_time ON edit_log(time);";
+
+bool table_exists(sqlite3* db, const char* name) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", -1, &st, nullptr) !=
+      SQLITE_OK)
+    return false;
+  sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
+  const bool yes = sqlite3_step(st) == SQLITE_ROW;
+  sqlite3_finalize(st);
+  return yes;
+}
+}  // namespace
+
 FileResult<std::vector<std::pair<std::string, std::string>>> WorldStore::access_entries() {
   std::vector<std::pair<std::string, std::string>> out;
+  if (!table_exists(db_, "access")) return out;  // made by the first write: nothing listed
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "SELECT key, value FROM access ORDER BY key", -1, &st, nullptr) != SQLITE_OK) {
     sqlite3_finalize(st);
-    return out;  // no table yet: nothing listed
+    return error("cannot read the access lists");
   }
   int rc;
   while ((rc = sqlite3_step(st)) == SQLITE_ROW)
@@ -340,10 +361,11 @@ FileStatus WorldStore::put_access(const std::string& key, const std::string& val
 }
 
 FileStatus WorldStore::erase_access(const std::string& key) {
+  if (!table_exists(db_, "access")) return Ok{};  // no table: nothing to erase
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "DELETE FROM access WHERE key = ?", -1, &st, nullptr) != SQLITE_OK) {
     sqlite3_finalize(st);
-    return Ok{};  // no table: nothing to erase
+    return error("cannot write the access lists");
   }
   sqlite3_bind_text(st, 1, key.data(), static_cast<int>(key.size()), SQLITE_TRANSIENT);
   const int rc = sqlite3_step(st);
@@ -394,25 +416,6 @@ FileResult<std::optional<StoredChunk>> WorldStore::load_chunk(Vec3i pos) {
   return std::optional<StoredChunk>{StoredChunk{revision, std::move(*chunk)}};
 }
 
-namespace {
-constexpr const char* kEditLogSchema =
-    "CREATE TABLE IF NOT EXISTS edit_log(id INTEGER PRIMARY KEY, tick INTEGER NOT NULL, time INTEGER NOT NULL,"
-    " player TEXT NOT NULL, x0 INTEGER NOT NULL, y0 INTEGER NOT NULL, z0 INTEGER NOT NULL,"
-    " x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, z1 INTEGER NOT NULL, before BLOB NOT NULL, after BLOB NOT NULL);"
-    "CREATE INDEX IF NOT EXISTS edit_log_player ON edit_log(player, id);"
-    "CREATE INDEX IF NOT EXISTS edit_log_time ON edit_log(time);";
-
-bool table_exists(sqlite3* db, const char* name) {
-  sqlite3_stmt* st = nullptr;
-  if (sqlite3_prepare_v2(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", -1, &st, nullptr) !=
-      SQLITE_OK)
-    return false;
-  sqlite3_bind_text(st, 1, name, -1, SQLITE_STATIC);
-  const bool yes = sqlite3_step(st) == SQLITE_ROW;
-  sqlite3_finalize(st);
-  return yes;
-}
-}  // namespace
 
 FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes, bool overwrite,
                                    std::span<const EditLogEntry> log) {
@@ -518,24 +521,28 @@ FileResult<std::vector<EditLogEntry>> WorldStore::edit_log(const EditLogQuery& q
   return out;
 }
 
-FileResult<std::int64_t> WorldStore::prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes) {
+FileResult<std::int64_t> WorldStore::prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
+                                                    std::int64_t max_rows) {
   if (!table_exists(db_, "edit_log")) return std::int64_t{0};
   std::int64_t deleted = 0;
   sqlite3_stmt* st = nullptr;
-  if (sqlite3_prepare_v2(db_, "DELETE FROM edit_log WHERE time < ?", -1, &st, nullptr) != SQLITE_OK)
+  if (sqlite3_prepare_v2(db_,
+                         "DELETE FROM edit_log WHERE id IN (SELECT id FROM edit_log WHERE time < ? ORDER BY id LIMIT ?)",
+                         -1, &st, nullptr) != SQLITE_OK)
     return error("cannot prune the edit log");
   sqlite3_bind_int64(st, 1, before_ms);
+  sqlite3_bind_int64(st, 2, max_rows);
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return error("cannot prune the edit log");
   deleted += sqlite3_changes(db_);
-  if (max_bytes == 0) return deleted;
+  if (max_bytes == 0 || deleted >= max_rows) return deleted;
   auto size = edit_log_size();
   if (!size) return size.error();
   std::uint64_t bytes = size->second;
   // The oldest go first, until under the bound: read up to a thousand
   // sizes at a time, delete through the last one needed.
-  while (bytes > max_bytes) {
+  while (bytes > max_bytes && deleted < max_rows) {
     sqlite3_stmt* sel = nullptr;
     if (sqlite3_prepare_v2(db_, "SELECT id, length(before) + length(after) FROM edit_log ORDER BY id LIMIT 1000", -1,
                            &sel, nullptr) != SQLITE_OK)

@@ -129,8 +129,10 @@ class WorldStore {
                          std::span<const EditLogEntry> log = {});
   FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q);
   // Deletes log entries older than before_ms, then the oldest until the
-  // entries' voxel bytes are at most max_bytes (0: no bound); how many went.
-  FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes);
+  // entries' voxel bytes are at most max_bytes (0: no bound), at most
+  // max_rows in all (a bounded pause; the rest go next time); how many went.
+  FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
+                                          std::int64_t max_rows = 10000);
   // Entries and the bytes of their before/after voxels.
   FileResult<std::pair<std::int64_t, std::uint64_t>> edit_log_size();
   FileStatus erase_chunk(Vec3i pos);

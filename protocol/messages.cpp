@@ -376,9 +376,7 @@ Result<AdminResultMsg> parse_admin_result(const wire::AdminResult& m) {
 
 Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m) {
   ServerNoticeMsg out;
-  if (m.kind() != wire::NoticeKind::Say && m.kind() != wire::NoticeKind::Shutdown)
-    return invalid("server notice: unknown kind");
-  out.kind = m.kind();
+  out.kind = m.kind();  // kinds this side does not know are kept (and ignored by the client)
   if (m.text() != nullptr) {
     if (m.text()->size() > kMaxNoticeBytes) return over("server notice: text longer than 1024 bytes");
     out.text = m.text()->str();

@@ -76,6 +76,7 @@ struct AdminResultMsg {
   std::string json;
 };
 
+// kind may be one this build does not know (a newer server): ignore it.
 struct ServerNoticeMsg {
   wire::NoticeKind kind = wire::NoticeKind::Say;
   std::string text;

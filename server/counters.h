@@ -63,8 +63,8 @@ enum class CloseReason : std::uint8_t {
   kServerFull,
   kShutdown,
   kStorageFailure,
-  kKicked,            // by an operator (terrane-admin kick or ban)
-  kBanned,            // refused at the handshake
+  kKicked,            // by an operator (terrane-admin kick)
+  kBanned,            // refused at the handshake, or ended by a ban
   kNotWhitelisted,    // refused at the handshake
   kCount
 };

@@ -95,8 +95,8 @@ Vec3f Server::find_spawn(World& world) {
     const WorldBounds& b = world.meta().bounds;
     std::int32_t x = 0, z = 0;
     if (b.bounded_xz && !b.contains({0, b.min_y, 0})) {
-      x = b.min_x + (b.max_x - b.min_x) / 2;
-      z = b.min_z + (b.max_z - b.min_z) / 2;
+      x = static_cast<std::int32_t>((std::int64_t{b.min_x} + b.max_x) / 2);
+      z = static_cast<std::int32_t>((std::int64_t{b.min_z} + b.max_z) / 2);
     }
     return {static_cast<float>(x) + 0.5f, gen->surface_height(x, z) + 2.0f, static_cast<float>(z) + 0.5f};
   }

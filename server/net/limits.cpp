@@ -86,6 +86,14 @@ FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const 
   return tokens;
 }
 
+std::string canonical_address(const std::string& text) {
+  asio::error_code ec;
+  auto a = asio::ip::make_address(text, ec);
+  if (ec) return text;
+  if (a.is_v6() && a.to_v6().is_v4_mapped()) a = asio::ip::make_address_v4(asio::ip::v4_mapped, a.to_v6());
+  return a.to_string();
+}
+
 bool is_loopback_address(const std::string& address) {
   if (address == "localhost") return true;
   asio::error_code ec;

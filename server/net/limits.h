@@ -67,6 +67,11 @@ struct PlayerToken {
 // over the protocol's limits).
 FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path);
 
+// An IP address as the server prints and compares it (lower case, IPv4
+// for v4-mapped IPv6, so "::FFFF:1.2.3.4" is "1.2.3.4"); text that is not
+// an address comes back as it is.
+std::string canonical_address(const std::string& text);
+
 // True for 127.0.0.0/8, ::1 and localhost.
 bool is_loopback_address(const std::string& address);
 

@@ -27,7 +27,7 @@ Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLi
       inbound_(limits.inbound_bytes_per_second, limits.inbound_burst_bytes) {
   asio::error_code ec;
   const auto ep = socket_.remote_endpoint(ec);
-  address_ = ec ? std::string("?") : ep.address().to_string();
+  address_ = ec ? std::string("?") : canonical_address(ep.address().to_string());
   remote_ = ec ? std::string("?") : address_ + ":" + std::to_string(ep.port());
 }
 
@@ -304,11 +304,11 @@ void Session::begin_close(CloseReason why, const std::string& reason) {
   }
   state_ = State::kClosing;
   close_started_ = Clock::now();
-  // Drop what is queued but not in flight: the peer gets only the reason.
-  for (auto* q : {&control_queue_, &queue_}) {
-    for (const auto& f : *q) add_queued(-static_cast<std::int64_t>(f->size()));
-    q->clear();
-  }
+  // Drop the world data queued but not in flight; control frames (acks,
+  // rejections, notices, admin answers: small, and what the peer most needs
+  // to know) still go out, ahead of the reason.
+  for (const auto& f : queue_) add_queued(-static_cast<std::int64_t>(f->size()));
+  queue_.clear();
   auto bye = std::make_shared<const Frame>(build_disconnect(reason));
   add_queued(static_cast<std::int64_t>(bye->size()));
   queue_.push_back(std::move(bye));

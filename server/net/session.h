@@ -16,7 +16,8 @@
 //                                                                    v
 //   [closed] <------------ EOF from peer or linger deadline ---------+
 //
-// A closing session sends nothing but its Disconnect frame, then shuts down
+// A closing session sends nothing but the control frames already queued
+// (acks, rejections, notices) and its Disconnect frame, then shuts down
 // its sending side and discards input until the peer closes (so the peer
 // reads the reason instead of a reset) or the linger deadline passes.
 #pragma once

@@ -91,20 +91,25 @@ Admission AccessControl::admit(const std::string& name, const std::string& token
 }
 
 FileStatus AccessControl::ban(const Ban& b) {
-  std::lock_guard lock(m_);
+  std::lock_guard store_lock(store_m_);
   const std::string key = ban_key(b.target, b.address);
   if (auto st = store_->put_access(key, std::to_string(b.until) + " " + b.reason); !st) return st;
+  std::lock_guard lock(m_);
   bans_[key] = b;
   return Ok{};
 }
 
 FileResult<bool> AccessControl::unban(const std::string& target) {
-  std::lock_guard lock(m_);
+  std::lock_guard store_lock(store_m_);
   bool any = false;
   for (const bool address : {false, true}) {
     const std::string key = ban_key(target, address);
-    if (bans_.count(key) == 0) continue;
+    {
+      std::lock_guard lock(m_);
+      if (bans_.count(key) == 0) continue;
+    }
     if (auto st = store_->erase_access(key); !st) return st.error();
+    std::lock_guard lock(m_);
     bans_.erase(key);
     any = true;
   }
@@ -120,23 +125,29 @@ std::vector<Ban> AccessControl::bans(std::int64_t now) const {
 }
 
 FileStatus AccessControl::set_whitelist(bool on) {
-  std::lock_guard lock(m_);
+  std::lock_guard store_lock(store_m_);
   if (auto st = store_->put_access("whitelist", on ? "on" : "off"); !st) return st;
+  std::lock_guard lock(m_);
   whitelist_on_ = on;
   return Ok{};
 }
 
 FileStatus AccessControl::whitelist_add(const std::string& name) {
-  std::lock_guard lock(m_);
+  std::lock_guard store_lock(store_m_);
   if (auto st = store_->put_access("whitelist:" + name, ""); !st) return st;
+  std::lock_guard lock(m_);
   whitelist_.insert(name);
   return Ok{};
 }
 
 FileResult<bool> AccessControl::whitelist_remove(const std::string& name) {
-  std::lock_guard lock(m_);
-  if (whitelist_.count(name) == 0) return false;
+  std::lock_guard store_lock(store_m_);
+  {
+    std::lock_guard lock(m_);
+    if (whitelist_.count(name) == 0) return false;
+  }
   if (auto st = store_->erase_access("whitelist:" + name); !st) return st.error();
+  std::lock_guard lock(m_);
   whitelist_.erase(name);
   return true;
 }

@@ -66,7 +66,10 @@ class AccessControl {
 
   std::string shared_token_, admin_token_;
   std::unordered_map<std::string, PlayerToken> players_;
+  // m_ guards the lists (admit() reads them on io threads); store_m_ the
+  // store's connection, so a write waiting on SQLite never holds up admit().
   mutable std::mutex m_;
+  std::mutex store_m_;
   std::unique_ptr<WorldStore> store_;
   std::map<std::string, Ban> bans_;  // by store key
   std::set<std::string> whitelist_;

@@ -158,14 +158,29 @@ Admin::Admin(std::string world_dir, AccessControl& access, AdminHooks hooks)
 }
 
 Admin::~Admin() {
+  stopping_ = true;  // a command waiting on the world gives up
   work_.reset();
   io_.stop();
   if (thread_.joinable()) thread_.join();
 }
 
+template <class Future>
+bool Admin::wait_for(Future& f, std::chrono::seconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (f.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) {
+    if (stopping_ || std::chrono::steady_clock::now() > deadline) return false;
+  }
+  return true;
+}
+
 void Admin::handle(const std::string& who, AdminRequestMsg req, Reply reply) {
   asio::post(io_, [this, who, req = std::move(req), reply = std::move(reply)] {
-    AdminResultMsg r = run(who, req);
+    AdminResultMsg r;
+    try {
+      r = run(who, req);
+    } catch (const std::exception& e) {  // e.g. a promise broken by a stopping world
+      r = fail(req.command + ": " + e.what());
+    }
     r.request_id = req.request_id;
     server_log().info("admin {}: {} {} -> {}", who, req.command, join(req.args, 0),
                       r.ok ? "ok" : "refused: " + r.text);
@@ -242,8 +257,8 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
   if (cmd == "ban") {
     if (a.empty()) return fail("usage: ban NAME|ADDRESS [--for DURATION] [REASON...]");
     Ban b;
-    b.target = a[0];
     b.address = is_address(a[0]);
+    b.target = b.address ? canonical_address(a[0]) : a[0];
     std::size_t rest = 1;
     if (a.size() > 2 && a[1] == "--for") {
       const auto d = parse_duration_s(a[2]);
@@ -267,7 +282,7 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
 
   if (cmd == "unban") {
     if (a.size() != 1) return fail("usage: unban NAME|ADDRESS");
-    auto r = access_.unban(a[0]);
+    auto r = access_.unban(is_address(a[0]) ? canonical_address(a[0]) : a[0]);
     if (!r) return fail("unban: " + r.error().message);
     if (!*r) return fail("'" + a[0] + "' is not banned");
     return ok("unbanned " + a[0] + "\n", "{\"unbanned\": " + json_string(a[0]) + "}");
@@ -360,19 +375,30 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
 
   if (cmd == "rollback") {
     LogOptions o;
+    for (const std::string& arg : a)
+      if (arg == "--limit") return fail("rollback: takes no --limit (narrow it with --since or --box)");
     o.query.limit = kMaxRollbackEdits + 1;
-    o.query.with_voxels = true;
     if (auto e = parse_log_options(a, &o); !e.empty() || o.query.player.empty())
       return fail("rollback: " + (e.empty() ? std::string("--player NAME is required") : e) +
                   " (usage: rollback --player NAME [--since DURATION] [--box X0,Y0,Z0,X1,Y1,Z1])");
     auto store = WorldStore::open(world_dir_);
     if (!store) return fail("rollback: " + store.error().message);
+    // First the boxes alone: the work is bounded before any voxels are read.
+    auto boxes = (*store)->edit_log(o.query);
+    if (!boxes) return fail("rollback: " + boxes.error().message);
+    if (boxes->empty()) return fail("rollback: no edits by '" + o.query.player + "' match");
+    if (boxes->size() > kMaxRollbackEdits)
+      return fail("rollback: more than " + std::to_string(kMaxRollbackEdits) +
+                  " edits match; narrow it with --since or --box");
+    std::int64_t volume = 0;
+    for (const EditLogEntry& e : *boxes) volume += e.box.volume();
+    if (volume > kMaxRollbackVoxels)
+      return fail("rollback: the matching edits cover " + std::to_string(volume) + " voxels, more than " +
+                  std::to_string(kMaxRollbackVoxels) + " at once; narrow it with --since or --box");
+    o.query.with_voxels = true;
     auto entries = (*store)->edit_log(o.query);
     if (!entries) return fail("rollback: " + entries.error().message);
     if (entries->empty()) return fail("rollback: no edits by '" + o.query.player + "' match");
-    if (entries->size() > kMaxRollbackEdits)
-      return fail("rollback: more than " + std::to_string(kMaxRollbackEdits) +
-                  " edits match; narrow it with --since or --box");
     const std::size_t n = entries->size();
     auto done = std::make_shared<std::promise<std::tuple<bool, std::string, std::uint64_t, std::uint64_t>>>();
     auto f = done->get_future();
@@ -380,8 +406,9 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
                     [done](bool good, std::string error, std::uint64_t tick, std::uint64_t voxels) {
                       done->set_value({good, std::move(error), tick, voxels});
                     });
-    if (f.wait_for(std::chrono::seconds(300)) != std::future_status::ready)
-      return fail("rollback: not applied within 300 s");
+    if (!wait_for(f, std::chrono::seconds(300)))
+      return fail(stopping_ ? "rollback: the server is stopping (it may not have been applied)"
+                            : "rollback: still not applied after 300 s (it applies once its chunks are loaded)");
     const auto [good, error, tick, voxels] = f.get();
     if (!good) return fail("rollback: " + error);
     return ok("rolled back " + std::to_string(n) + " edits by " + o.query.player + ": " + std::to_string(voxels) +
@@ -395,8 +422,8 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     auto done = std::make_shared<std::promise<std::pair<std::uint64_t, bool>>>();
     auto f = done->get_future();
     hooks_.flush([done](std::uint64_t tick, bool stored) { done->set_value({tick, stored}); });
-    if (f.wait_for(std::chrono::seconds(60)) != std::future_status::ready)
-      return fail("save: the store did not confirm within 60 s");
+    if (!wait_for(f, std::chrono::seconds(60)))
+      return fail(stopping_ ? "save: the server is stopping" : "save: the store did not confirm within 60 s");
     const auto [tick, stored] = f.get();
     if (!stored) return fail("save: the store has failed; edits since the failure were not saved");
     return ok("saved: every edit applied up to tick " + std::to_string(tick) + " is stored\n",

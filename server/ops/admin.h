@@ -11,6 +11,8 @@
 #pragma once
 
 #include <asio.hpp>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -65,6 +67,8 @@ struct AdminHooks {
 extern const char* const kAdminHelp;
 // A rollback undoes at most this many logged edits at once.
 inline constexpr std::size_t kMaxRollbackEdits = 20000;
+// ... whose boxes cover at most this many voxels in all (the work of one tick).
+inline constexpr std::int64_t kMaxRollbackVoxels = 16 << 20;
 
 class Admin {
  public:
@@ -84,6 +88,12 @@ class Admin {
   std::string world_dir_;
   AccessControl& access_;
   AdminHooks hooks_;
+  // Waits (on the admin thread) until f is ready, the server stops, or the
+  // timeout; false unless ready.
+  template <class Future>
+  bool wait_for(Future& f, std::chrono::seconds timeout);
+
+  std::atomic<bool> stopping_{false};
   asio::io_context io_;
   asio::executor_work_guard<asio::io_context::executor_type> work_;
   std::thread thread_;

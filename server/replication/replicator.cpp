@@ -78,15 +78,15 @@ void Replicator::on_message(InboundMessage msg) {
 }
 
 void Replicator::on_pong(std::uint64_t nonce) {
-  // The nonce is the steady clock when we sent the Ping; anything else (a
-  // client's own nonce, a forgery) is out of range and ignored.
+  // Only the answer to the last Ping sent counts (its nonce is the steady
+  // clock in microseconds when it went out), once.
+  if (nonce == 0 || nonce != ping_nonce_) return;
+  ping_nonce_ = 0;
   const auto now = std::chrono::duration_cast<std::chrono::microseconds>(
                        std::chrono::steady_clock::now().time_since_epoch())
                        .count();
-  const auto sent = static_cast<std::int64_t>(nonce);
-  if (sent <= 0 || sent > now || now - sent > 60'000'000) return;
   std::lock_guard lock(info_m_);
-  info_.ping_ms = static_cast<double>(now - sent) / 1000.0;
+  info_.ping_ms = static_cast<double>(now - static_cast<std::int64_t>(nonce)) / 1000.0;
 }
 
 Replicator::Info Replicator::info() const {
@@ -686,7 +686,9 @@ void Replicator::arm_timer() {
   auto at = std::chrono::steady_clock::time_point::max();
   if (!ready_.empty()) at = now + kPumpRetry;
   if (!mip_dirty_.empty()) at = std::min(at, next_mip_flush_);
-  if (options_.hash_push_ms > 0) at = std::min(at, next_hash_push_);
+  // Hashes are pushed only once there is a plan (a first ClientState): a
+  // session that never sends one (terrane-admin) must not wake for them.
+  if (options_.hash_push_ms > 0 && plan_valid_) at = std::min(at, next_hash_push_);
   if (welcomed_) at = std::min(at, next_ping_);
   if (at == std::chrono::steady_clock::time_point::max()) return;
   if (timer_armed_) {
@@ -707,8 +709,9 @@ void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
   if (welcomed_ && now >= next_ping_) {
     next_ping_ = now + kPingPeriod;
-    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count();
-    session_->send(build_ping(static_cast<std::uint64_t>(us)), SendClass::kControl);
+    ping_nonce_ = static_cast<std::uint64_t>(
+        std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count());
+    session_->send(build_ping(ping_nonce_), SendClass::kControl);
   }
   if (!mip_dirty_.empty() && now >= next_mip_flush_) flush_mips();
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {

@@ -157,6 +157,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   mutable std::mutex info_m_;
   Info info_;  // a copy of name, position and role for other threads
   std::chrono::steady_clock::time_point next_ping_{};
+  std::uint64_t ping_nonce_ = 0;  // of the Ping awaiting its Pong
   // session_ is used on the session strand only and dropped when the
   // session closes (it and the session's callbacks keep each other alive);
   // the world strand reaches the session through weak_session_ and posts to

@@ -151,8 +151,10 @@ void Storage::writer_loop() {
       if (jobs_.empty() && stopping_) return;  // stopping, nothing left
       batch.swap(jobs_);
     }
-    if (status) prune_log();
-    if (batch.empty()) continue;
+    if (batch.empty()) {
+      if (status) prune_log();
+      continue;
+    }
     if (status) {  // after a failure, every later tick fails too
       // One transaction for every tick queued: the latest version of each
       // chunk is what is stored.
@@ -185,6 +187,9 @@ void Storage::writer_loop() {
       in_flight_.fetch_sub(1, std::memory_order_relaxed);
       job.done(status);
     }
+    // After the acks went out: a prune (at most once a minute, a bounded
+    // number of rows) delays only the next batch.
+    if (status) prune_log();
   }
 }
 

@@ -47,6 +47,7 @@ void WorldOwner::stop() {
         if (edits_.size() == before) break;
       }
     }
+    fail_rollbacks("the server is stopping");  // any the store's failure left queued
     drain_wanted_ = true;
     if (commits_pending_ == 0) drained_.set_value();
     applied.set_value();
@@ -567,9 +568,21 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
   }
 }
 
+void WorldOwner::fail_rollbacks(const std::string& why) {
+  for (auto it = edits_.begin(); it != edits_.end();) {
+    if (it->rollback) {
+      it->rollback->done(RollbackResult{false, why, 0, 0});
+      it = edits_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
 void WorldOwner::fatal_storage(const std::string& why) {
   if (storage_failed_) return;
   (void)why;
+  fail_rollbacks("storage failure: rollback not applied");
   storage_failed_ = true;
   storage_failed_flag_ = true;
   for (auto& [id, c] : clients_) c.link->close(CloseReason::kStorageFailure, "server storage failure");

@@ -122,6 +122,8 @@ class WorldOwner : private WorldView {
   };
   void rollback(std::string actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
                 std::function<void(RollbackResult)> done);
+  // Answers every queued rollback with why (stopping, storage failed).
+  void fail_rollbacks(const std::string& why);
   void read_box(ClientId id, ReadBoxMsg request);
   void hash(ClientId id, Vec3i chunk_pos);
 

@@ -6,6 +6,7 @@
 #include "server/ops/admin.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <filesystem>
 #include <thread>
@@ -95,6 +96,35 @@ TEST_F(AdminTest, OnlyAdminsMayRunCommands) {
   const AdminResultMsg u = command(*admin.peer, "frobnicate");
   EXPECT_FALSE(u.ok);
   EXPECT_NE(u.text.find("unknown command 'frobnicate'"), std::string::npos) << u.text;
+}
+
+// A session that never sends ClientState (terrane-admin) has no plan and no
+// hashes to push: its replicator must not wake for them (it once spun an io
+// thread flat out one second after the Welcome).
+TEST_F(AdminTest, ASessionWithoutAViewCostsNoCpu) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  ASSERT_TRUE(admin.welcomed);
+  const ServerCounters& c = server_->counters();
+  auto wait_ticks = [&](std::uint64_t n) {
+    const std::uint64_t target = c.ticks.load() + n;
+    while (c.ticks.load() < target) std::this_thread::sleep_for(5ms);
+  };
+  auto cpu_s = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+           static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+  };
+  wait_ticks(30);  // past the first hash-push deadline (1 s)
+  const double cpu0 = cpu_s();
+  const auto t0 = std::chrono::steady_clock::now();
+  wait_ticks(40);  // two seconds of the server's own clock
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // An idle server with one session uses a few percent of a core; a spinning
+  // thread uses most of one.
+  EXPECT_LT(cpu_s() - cpu0, 0.5 * wall) << "CPU " << cpu_s() - cpu0 << " s over " << wall << " s";
+  EXPECT_TRUE(command(*admin.peer, "status").ok);
 }
 
 TEST_F(AdminTest, TokensFileRolesMakeAdmins) {
