@@ -738,6 +738,11 @@ std::uint32_t Client::admin(const std::string& command, const std::vector<std::s
   return send(build_admin_request(AdminRequestMsg{id, command, args}), wire::Body::AdminRequest) ? id : 0;
 }
 
+std::optional<ClientStateMsg> Client::last_state() const {
+  std::lock_guard lock(mutex_);
+  return last_state_;
+}
+
 std::vector<ServerNoticeMsg> Client::notices() const {
   std::lock_guard lock(mutex_);
   return {notices_.begin(), notices_.end()};

@@ -248,6 +248,8 @@ class Client {
   // 0 if it could not be sent.
   std::uint32_t admin(const std::string& command, const std::vector<std::string>& args = {});
   std::vector<ServerNoticeMsg> notices() const;
+  // The state last sent (position, view), once there is one.
+  std::optional<ClientStateMsg> last_state() const;
   bool ping(std::uint64_t nonce);
   // Sends raw bytes as they are (tests: malformed frames).
   bool send_raw(Frame bytes);

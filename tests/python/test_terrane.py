@@ -1,0 +1,145 @@
+"""The terrane Python module against a real terrane-server on 127.0.0.1.
+
+Run by CTest (label unit) as: python3 -m pytest tests/python, with
+PYTHONPATH at the built module and TERRANE_BIN_DIR at the server binary.
+Every wait has a deadline and waits for a condition.
+"""
+import os
+import re
+import shutil
+import socket
+import subprocess
+import tempfile
+import threading
+import time
+
+import numpy
+import pytest
+
+import terrane
+
+BIN = os.environ.get("TERRANE_BIN_DIR", "build/bin")
+
+
+class Server:
+    def __init__(self, *extra):
+        self.dir = tempfile.mkdtemp(prefix="terrane-py-")
+        self.proc = subprocess.Popen(
+            [os.path.join(BIN, "terrane-server"), "--world", os.path.join(self.dir, "world"), "--port", "0", *extra],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.output = []
+        self.port = None
+        ready = threading.Event()
+
+        def read():
+            for line in self.proc.stdout:
+                self.output.append(line)
+                m = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
+                if m and self.port is None:
+                    self.port = int(m.group(1))
+                    ready.set()
+            ready.set()
+
+        self.reader = threading.Thread(target=read, daemon=True)
+        self.reader.start()
+        assert ready.wait(60) and self.port, "".join(self.output)
+        self.address = "127.0.0.1:%d" % self.port
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            assert self.proc.wait(60) == 0, "".join(self.output)
+        self.reader.join(10)
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+@pytest.fixture
+def server():
+    s = Server()
+    yield s
+    s.stop()
+
+
+def test_ready_and_loaded_are_true_only_when_true(server):
+    with terrane.connect(server.address, name="reader", view_distance=64, full_res_radius=32) as c:
+        c.wait_ready(30)
+        assert "Air" in c.materials[0]
+        c.wait_loaded(60)
+        assert c.loaded
+        # At that moment the replica matches the server chunk for chunk.
+        assert c.verify(60) == 0
+
+
+def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
+    with terrane.connect(server.address, name="a", view_distance=64, full_res_radius=32) as a, \
+         terrane.connect(server.address, name="b", view_distance=64, full_res_radius=32) as b:
+        a.wait_loaded(60)
+        b.wait_loaded(60)
+        x, y, z = (int(v) for v in a.position)
+        y -= 3
+        assert a.fill_box((x, y, z), (x + 2, y + 2, z + 2), "Brick").result(30)
+        assert a.fill_sphere((x + 0.5, y + 4.5, z + 0.5), 1.5, 5).result(30)
+        assert a.paint((x + 0.5, y + 0.5, z + 0.5), 1.0, "Snow").result(30)
+        assert a.dig((x + 0.5, y + 4.5, z + 0.5), 1.0).result(30)
+        assert a.undo().result(30)
+        assert a.redo().result(30)
+        # b's replica reaches the server's state, checked by region hash.
+        deadline = time.monotonic() + 60
+        while b.verify(60) != 0:
+            assert time.monotonic() < deadline, "b never matched the server"
+        assert a.verify(60) == 0
+        box = b.read_box((x, y, z), (x + 2, y + 2, z + 2))
+        assert box.shape == (2, 2, 2, 2) and box.dtype == numpy.uint8
+        assert b.voxel((x + 1, y + 1, z + 1)) == a.voxel((x + 1, y + 1, z + 1))
+        assert a.voxel((x, y, z))[0] in ("Brick", "Snow")
+
+
+def test_rejections_surface_their_reason(server):
+    with terrane.connect(server.address, name="r", view_distance=64, full_res_radius=32) as c:
+        c.wait_loaded(60)
+        x, y, z = (int(v) for v in c.position)
+        far = c.fill_box((x + 5000, y, z), (x + 5001, y + 1, z + 1), "Brick")
+        with pytest.raises(terrane.EditRejected, match="outside the full-resolution region"):
+            far.result(30)
+        with pytest.raises(terrane.EditRejected, match="nothing to redo"):
+            c.redo().result(30)
+
+
+def test_bad_arguments_raise_clear_python_errors(server):
+    with terrane.connect(server.address, name="bad") as c:
+        c.wait_ready(30)
+        with pytest.raises(ValueError, match="unknown material 'Unobtainium'"):
+            c.fill_box((0, 0, 0), (1, 1, 1), "Unobtainium")
+        with pytest.raises(ValueError, match="unknown material 63"):
+            c.fill_box((0, 0, 0), (1, 1, 1), 63)
+        with pytest.raises(TypeError):
+            c.fill_box((0, 0, 0), (1, 1, 1), 2.5)
+        with pytest.raises(TypeError):
+            c.voxel("origin")
+        with pytest.raises(ValueError, match="within"):
+            c.voxel((1 << 30, 0, 0))
+        with pytest.raises(ValueError, match="radius"):
+            c.dig((0, 0, 0), 100)
+        with pytest.raises(ValueError, match="max must exceed min"):
+            c.read_box((0, 0, 0), (0, 5, 5))
+    with pytest.raises(ValueError, match="not HOST:PORT"):
+        terrane.connect("nowhere")
+
+
+def test_a_closed_server_raises_and_never_hangs():
+    # Nothing listens on a port just released.
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    with pytest.raises(ConnectionError):
+        terrane.connect("127.0.0.1:%d" % port)
+    srv = Server()
+    c = terrane.connect(srv.address, name="left")
+    c.wait_ready(30)
+    srv.stop()
+    with pytest.raises(ConnectionError):
+        c.wait_loaded(60)
+    with pytest.raises(ConnectionError):
+        c.fill_box((0, 0, 0), (1, 1, 1), "Brick").result(30)
+    c.close()
