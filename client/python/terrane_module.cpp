@@ -251,6 +251,86 @@ class PyClient {
   EditFuture paint(const Vec3& center, double radius, const py::object& material) {
     return sent(c_->paint(point_of(center, "center"), radius_of(radius), material_of(material)));
   }
+  // Writes [min, min + shape) from a uint8 array of shape (2, y, z, x)
+  // (materials, occupancies), as read_box returns it; at most 32^3 voxels.
+  EditFuture write_box(const IVec3& lo, const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>& a) {
+    if (a.ndim() != 4 || a.shape(0) != 2) raise(PyExc_ValueError, "write_box: the array must have shape (2, y, z, x)");
+    const Vec3i size{static_cast<int>(a.shape(3)), static_cast<int>(a.shape(1)), static_cast<int>(a.shape(2))};
+    const Vec3i min = voxel_of(lo, "write_box min");
+    const Region r{min, min + size};
+    if (r.empty() || r.volume() > kMaxRawBoxVolume)
+      raise(PyExc_ValueError, "write_box: 1 to " + std::to_string(kMaxRawBoxVolume) + " voxels");
+    const auto names = materials();
+    auto m = a.unchecked<4>();
+    std::vector<Voxel> voxels;
+    voxels.reserve(static_cast<std::size_t>(r.volume()));
+    for (int y = 0; y < size.y; ++y)
+      for (int z = 0; z < size.z; ++z)
+        for (int x = 0; x < size.x; ++x) {
+          const std::uint8_t mat = m(0, y, z, x), occ = m(1, y, z, x);
+          if (mat >= std::max<std::size_t>(names.size(), 1))
+            raise(PyExc_ValueError, "write_box: material " + std::to_string(mat) + " at (" + std::to_string(x) + ", " +
+                                        std::to_string(y) + ", " + std::to_string(z) + ") is not one of this world's");
+          voxels.push_back(mat == kAir ? Voxel{} : make_voxel(mat, occ));
+        }
+    return sent(c_->write_box(r, voxels));
+  }
+
+  // The first solid voxel along a ray: ((x, y, z), (nx, ny, nz), distance,
+  // material name) or None (only what the replica holds counts).
+  py::object raycast(const Vec3& origin, const Vec3& direction, double max_distance) const {
+    const Vec3f d = point_of(direction, "direction");
+    if (d.x == 0 && d.y == 0 && d.z == 0) raise(PyExc_ValueError, "raycast: the direction must not be zero");
+    if (!(max_distance > 0) || max_distance > 4096) raise(PyExc_ValueError, "raycast: max_distance must be in (0, 4096]");
+    const auto hit = c_->raycast(point_of(origin, "origin"), d, static_cast<float>(max_distance));
+    if (!hit) return py::none();
+    return py::make_tuple(py::make_tuple(hit->voxel.x, hit->voxel.y, hit->voxel.z),
+                          py::make_tuple(hit->normal.x, hit->normal.y, hit->normal.z), hit->distance,
+                          material_name(hit->value.material));
+  }
+
+  // The y just above the highest solid voxel of column (x, z), or None.
+  py::object ground(std::int64_t x, std::int64_t z) const {
+    const Vec3i p = voxel_of({x, 0, z}, "ground");
+    const auto h = c_->surface_height(p.x, p.z);
+    return h ? py::object(py::int_(*h)) : py::none();
+  }
+
+  // The server's voxels of [min, max) (at most 32^3), as read_box returns
+  // the replica's: for comparing, or reading what the replica lacks.
+  py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout) {
+    const Region r{voxel_of(lo, "min"), voxel_of(hi, "max")};
+    if (r.empty() || r.volume() > kMaxRawBoxVolume)
+      raise(PyExc_ValueError, "read_server_box: 1 to " + std::to_string(kMaxRawBoxVolume) + " voxels");
+    const std::uint32_t id = c_->request_read_box(r);
+    if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+    std::optional<ReadBoxResultMsg> res;
+    bool closed = false;
+    {
+      py::gil_scoped_release nogil;
+      c_->wait_until(
+          [&](const ClientView& v) {
+            if (auto it = v.read_results.find(id); it != v.read_results.end()) res = it->second;
+            closed = v.closed;
+            return res.has_value() || closed;
+          },
+          ms(timeout));
+    }
+    if (!res) fail_or_timeout(closed, "the server did not answer the read within the timeout");
+    if (!res->error.empty()) raise(PyExc_ValueError, "read_server_box: " + res->error);
+    const Vec3i s = r.size();
+    py::array_t<std::uint8_t> out({std::size_t{2}, std::size_t(s.y), std::size_t(s.z), std::size_t(s.x)});
+    auto m = out.mutable_unchecked<4>();
+    std::size_t i = 0;
+    for (int y = 0; y < s.y; ++y)
+      for (int z = 0; z < s.z; ++z)
+        for (int x = 0; x < s.x; ++x, ++i) {
+          m(0, y, z, x) = res->voxels[i].material;
+          m(1, y, z, x) = res->voxels[i].occupancy;
+        }
+    return out;
+  }
+
   EditFuture undo() { return sent(c_->undo()); }
   EditFuture redo() { return sent(c_->redo()); }
 
@@ -362,6 +442,14 @@ PYBIND11_MODULE(terrane, m) {
       .def("fill_sphere", &PyClient::fill_sphere, py::arg("center"), py::arg("radius"), py::arg("material"))
       .def("dig", &PyClient::dig, py::arg("center"), py::arg("radius"))
       .def("paint", &PyClient::paint, py::arg("center"), py::arg("radius"), py::arg("material"))
+      .def("write_box", &PyClient::write_box, py::arg("min"), py::arg("voxels"),
+           "Write a uint8 array of shape (2, y, z, x) (materials, occupancies) at min; at most 32^3 voxels.")
+      .def("raycast", &PyClient::raycast, py::arg("origin"), py::arg("direction"), py::arg("max_distance") = 256.0,
+           "The first solid voxel along a ray: ((x, y, z), normal, distance, material) or None.")
+      .def("ground", &PyClient::ground, py::arg("x"), py::arg("z"),
+           "The y just above the highest solid voxel of a column the replica holds, or None.")
+      .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
+           "The server's voxels of [min, max) (at most 32^3) as a (2, y, z, x) uint8 array.")
       .def("undo", &PyClient::undo)
       .def("redo", &PyClient::redo)
       .def("move_to", &PyClient::move_to, py::arg("position"), "Move (the server streams around the new place).")

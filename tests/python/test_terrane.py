@@ -94,6 +94,38 @@ def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
         assert a.voxel((x, y, z))[0] in ("Brick", "Snow")
 
 
+def test_queries_and_write_box_agree_with_the_server(server):
+    with terrane.connect(server.address, name="q", view_distance=64, full_res_radius=32) as c:
+        c.wait_loaded(60)
+        x, y, z = (int(v) for v in c.position)
+        g = c.ground(x, z)
+        assert isinstance(g, int) and g <= y + 1
+        hit = c.raycast((x + 0.5, g + 2.5, z + 0.5), (0, -1, 0), 64)
+        assert hit is not None
+        (hx, hy, hz), normal, distance, material = hit
+        assert (hx, hz) == (x, z) and hy == g - 1 and normal == (0, 1, 0) and material != "Air"
+        assert c.raycast((x + 0.5, g + 2.5, z + 0.5), (0, 1, 0), 8) is None  # open sky
+        # A 4x3x2 block of two materials, written and read back from the server.
+        lo = (x, g - 3, z)
+        block = numpy.zeros((2, 3, 2, 4), dtype=numpy.uint8)
+        block[0] = c.materials.index("Brick")
+        block[0, :, 1, :] = c.materials.index("Snow")
+        block[1] = 255
+        assert c.write_box(lo, block).result(30)
+        got = c.read_server_box(lo, (x + 4, g, z + 2))
+        assert (got == block).all()
+        deadline = time.monotonic() + 60
+        while not (c.read_box(lo, (x + 4, g, z + 2)) == block).all():
+            assert time.monotonic() < deadline, "the replica never showed the write"
+            time.sleep(0.01)
+        with pytest.raises(ValueError, match="shape"):
+            c.write_box(lo, numpy.zeros((3, 1, 1, 1), dtype=numpy.uint8))
+        bad = block.copy()
+        bad[0, 0, 0, 0] = 60
+        with pytest.raises(ValueError, match="material 60"):
+            c.write_box(lo, bad)
+
+
 def test_rejections_surface_their_reason(server):
     with terrane.connect(server.address, name="r", view_distance=64, full_res_radius=32) as c:
         c.wait_loaded(60)
