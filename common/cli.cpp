@@ -163,4 +163,19 @@ std::optional<Vec3i> CommandLine::get_vec3i(const std::string& name, std::string
   return Vec3i{v[0], v[1], v[2]};
 }
 
+FileResult<std::pair<std::string, std::uint16_t>> parse_host_port(const std::string& text) {
+  const auto colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == text.size())
+    return FileError{"'" + text + "' is not HOST:PORT (e.g. 127.0.0.1:9464)", {}};
+  std::string host = text.substr(0, colon);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  unsigned port = 0;
+  const char* first = text.data() + colon + 1;
+  const char* last = text.data() + text.size();
+  const auto [end, ec] = std::from_chars(first, last, port);
+  if (ec != std::errc{} || end != last || port > 65535)
+    return FileError{"'" + text + "': port must be a number from 0 to 65535", {}};
+  return std::pair{host, static_cast<std::uint16_t>(port)};
+}
+
 }  // namespace terrane

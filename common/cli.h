@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/decode_error.h"
 #include "common/vec3.h"
 
 namespace terrane {
@@ -70,5 +71,9 @@ bool parse_int_list(std::string_view text, Int* out, int n) {
   }
   return p == end;
 }
+
+// "HOST:PORT" or "[V6]:PORT" (port 0..65535) into its parts; the error
+// names what is wrong. Every tool's address flags go through it.
+FileResult<std::pair<std::string, std::uint16_t>> parse_host_port(const std::string& text);
 
 }  // namespace terrane

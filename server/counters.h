@@ -93,11 +93,15 @@ struct NetCounters {
   std::atomic<std::int64_t> queued_bytes{0};  // every session's send queue
   std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(CloseReason::kCount)> disconnects{};
   void disconnected(CloseReason r) { disconnects[static_cast<std::size_t>(r)].fetch_add(1, std::memory_order_relaxed); }
+  std::uint64_t sessions_closed() const {
+    std::uint64_t n = 0;
+    for (const auto& d : disconnects) n += d.load(std::memory_order_relaxed);
+    return n;
+  }
 };
 
 struct ServerCounters {
   std::atomic<std::uint64_t> sessions_accepted{0};
-  std::atomic<std::uint64_t> sessions_closed{0};
   std::atomic<std::uint64_t> joins{0};           // handshakes accepted (Welcome sent)
   std::atomic<std::uint64_t> clients{0};         // welcomed and connected now
   std::atomic<std::uint64_t> ticks{0};

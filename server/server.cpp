@@ -219,7 +219,7 @@ void Server::stop() {
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
       "chunks, {} mips, {} empty ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} skipped: bytes "
       "unchanged); world saved",
-      c.ticks.load(), c.sessions_accepted.load(), c.sessions_closed.load(), c.edits_applied.load(),
+      c.ticks.load(), c.sessions_accepted.load(), c.net.sessions_closed(), c.edits_applied.load(),
       c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
       c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
   bool header = false;
@@ -261,7 +261,6 @@ void Server::do_accept() {
         std::move(socket), id, options_.session,
         [rep](std::uint64_t, InboundMessage msg) { rep->on_message(std::move(msg)); },
         [this, rep](std::uint64_t sid, const std::string& reason) {
-          counters_.sessions_closed.fetch_add(1, std::memory_order_relaxed);
           {
             std::lock_guard lock(sessions_mutex_);
             sessions_.erase(sid);

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "common/cli.h"
 
 namespace terrane {
 namespace {
@@ -97,15 +98,12 @@ int run(int argc, char** argv) {
   if (i >= argc) return usage_error("no command given");
   const std::string command = argv[i++];
   std::vector<std::string> args(argv + i, argv + argc);
-  const auto colon = connect.rfind(':');
-  char* end = nullptr;
-  const long port = colon == std::string::npos ? 0 : std::strtol(connect.c_str() + colon + 1, &end, 10);
-  if (colon == std::string::npos || colon == 0 || end == nullptr || *end != '\0' || port < 1 || port > 65535)
-    return usage_error("--connect: '" + connect + "' is not HOST:PORT");
+  const auto hp = parse_host_port(connect);
+  if (!hp || hp->second == 0) return usage_error("--connect: '" + connect + "' is not HOST:PORT (port 1..65535)");
 
   ClientOptions o;
-  o.host = connect.substr(0, colon);
-  o.port = static_cast<std::uint16_t>(port);
+  o.host = hp->first;
+  o.port = hp->second;
   o.name = name;
   o.auth_token = token;
   o.stream = false;

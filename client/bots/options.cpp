@@ -152,18 +152,11 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       return "";
     };
     std::string err;
-    if (key == "connect") {
-      const auto colon = v.rfind(':');
-      if (colon == std::string::npos || colon == 0 || !parse_i64(v.substr(colon + 1), &i) || i < 1 || i > 65535)
-        return bad(where, v, "is not HOST:PORT (port 1..65535)");
-      o->host = v.substr(0, colon);
-      o->port = static_cast<std::uint16_t>(i);
-    } else if (key == "server-metrics") {
-      const auto colon = v.rfind(':');
-      if (colon == std::string::npos || colon == 0 || !parse_i64(v.substr(colon + 1), &i) || i < 1 || i > 65535)
-        return bad(where, v, "is not HOST:PORT (port 1..65535)");
-      o->metrics_host = v.substr(0, colon);
-      o->metrics_port = static_cast<std::uint16_t>(i);
+    if (key == "connect" || key == "server-metrics") {
+      const auto hp = parse_host_port(v);
+      if (!hp || hp->second == 0) return bad(where, v, "is not HOST:PORT (port 1..65535)");
+      (key == "connect" ? o->host : o->metrics_host) = hp->first;
+      (key == "connect" ? o->port : o->metrics_port) = hp->second;
     } else if (key == "bots") {
       err = int_in(1, 100000, &o->bots);
     } else if (key == "duration") {

@@ -7,30 +7,13 @@
 #include <cstdlib>
 #include <sstream>
 
+#include "common/json.h"
+
 namespace terrane::bots {
 
 namespace {
 
-std::string esc(const std::string& s) {
-  std::string o;
-  for (const char c : s) {
-    switch (c) {
-      case '"': o += "\\\""; break;
-      case '\\': o += "\\\\"; break;
-      case '\n': o += "\\n"; break;
-      case '<': o += "\\u003c"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char b[8];
-          std::snprintf(b, sizeof b, "\\u%04x", c);
-          o += b;
-        } else {
-          o += c;
-        }
-    }
-  }
-  return o;
-}
+std::string esc(const std::string& s) { return json_escape(s); }
 
 std::string num(double v) {
   if (!std::isfinite(v)) return "0";
@@ -71,7 +54,7 @@ std::string server_json(const ServerFigures& f) {
     << ", \"scrape_errors\": " << f.scrape_errors << ", \"sent_by_type\": {";
   bool first = true;
   for (const auto& [type, fb] : f.sent_by_type) {
-    j << (first ? "" : ", ") << "\"" << type << "\": {\"frames\": " << fb.first << ", \"bytes\": " << fb.second << "}";
+    j << (first ? "" : ", ") << "\"" << esc(type) << "\": {\"frames\": " << fb.first << ", \"bytes\": " << fb.second << "}";
     first = false;
   }
   j << "}}";

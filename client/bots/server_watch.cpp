@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <sstream>
 #include <vector>
@@ -12,6 +13,9 @@
 namespace terrane::bots {
 
 namespace {
+
+// A scrape larger than this is refused (a few KiB is usual).
+constexpr std::size_t kMaxScrapeBytes = 16u << 20;
 
 double now_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -72,9 +76,16 @@ std::optional<double> histogram_quantile_ms(const Scrape& first, const Scrape& l
   std::vector<std::pair<double, double>> buckets;
   const std::string prefix = name + "_bucket{le=\"";
   for (auto it = last.lower_bound(prefix); it != last.end() && it->first.rfind(prefix, 0) == 0; ++it) {
-    const std::string le = it->first.substr(prefix.size(), it->first.size() - prefix.size() - 2);
-    const double bound = le == "+Inf" ? std::numeric_limits<double>::infinity() : std::stod(le);
-    buckets.emplace_back(bound, it->second - value_of(first, it->first));
+    const std::string& key = it->first;  // the server's text: checked, never trusted
+    if (key.size() < prefix.size() + 2 || key.compare(key.size() - 2, 2, "\"}") != 0) continue;
+    const std::string le = key.substr(prefix.size(), key.size() - prefix.size() - 2);
+    double bound = std::numeric_limits<double>::infinity();
+    if (le != "+Inf") {
+      char* end = nullptr;
+      bound = std::strtod(le.c_str(), &end);
+      if (le.empty() || end != le.c_str() + le.size()) continue;
+    }
+    buckets.emplace_back(bound, it->second - value_of(first, key));
   }
   std::sort(buckets.begin(), buckets.end());
   if (buckets.empty() || buckets.back().second <= 0) return std::nullopt;
@@ -98,6 +109,8 @@ bool ServerWatch::scrape(std::string* error) {
     why = "GET http://" + host_ + ":" + std::to_string(port_) + "/metrics: " + httplib::to_string(res.error());
   else if (res->status != 200)
     why = "GET http://" + host_ + ":" + std::to_string(port_) + "/metrics: status " + std::to_string(res->status);
+  else if (res->body.size() > kMaxScrapeBytes)
+    why = "GET http://" + host_ + ":" + std::to_string(port_) + "/metrics: more than 16 MiB";
   std::lock_guard lock(m_);
   if (!why.empty()) {
     ++errors_;
@@ -163,6 +176,7 @@ ServerFigures ServerWatch::figures() const {
   f.fanout_p99_ms = histogram_quantile_ms(first_, last_, "terrane_fanout_duration_seconds", 0.99);
   const std::string frames = "terrane_sent_frames_total{type=\"";
   for (auto it = last_.lower_bound(frames); it != last_.end() && it->first.rfind(frames, 0) == 0; ++it) {
+    if (it->first.size() < frames.size() + 2 || f.sent_by_type.size() >= 64) continue;
     const std::string type = it->first.substr(frames.size(), it->first.size() - frames.size() - 2);
     const std::uint64_t n = growth(first_, last_, it->first);
     if (n == 0) continue;

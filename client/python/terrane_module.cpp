@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "common/cli.h"
 #include "common/view.h"
 
 namespace py = pybind11;
@@ -98,21 +99,15 @@ class PyClient {
  public:
   PyClient(const std::string& address, const std::string& name, const std::string& token,
            std::optional<Vec3> position, int view_distance, int full_res_radius, bool reconnect) {
-    const auto colon = address.rfind(':');
-    if (colon == std::string::npos || colon == 0) raise(PyExc_ValueError, "address '" + address + "' is not HOST:PORT");
-    int port = 0;
-    try {
-      port = std::stoi(address.substr(colon + 1));
-    } catch (const std::exception&) {
-      port = 0;
-    }
-    if (port < 1 || port > 65535) raise(PyExc_ValueError, "address '" + address + "': port must be 1..65535");
+    const auto hp = parse_host_port(address);
+    if (!hp) raise(PyExc_ValueError, "address: " + hp.error().message);
+    if (hp->second == 0) raise(PyExc_ValueError, "address '" + address + "': port must be 1..65535");
     if (name.empty() || name.size() > kMaxClientNameBytes) raise(PyExc_ValueError, "name must be 1..64 bytes");
     if (view_distance < 1 || view_distance > 16384 || full_res_radius < 1 || full_res_radius > view_distance)
       raise(PyExc_ValueError, "view_distance must be 1..16384 and full_res_radius 1..view_distance");
     ClientOptions o;
-    o.host = address.substr(0, colon);
-    o.port = static_cast<std::uint16_t>(port);
+    o.host = hp->first;
+    o.port = hp->second;
     o.name = name;
     o.auth_token = token;
     o.reconnect = reconnect;

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "common/cli.h"
+#include "common/json.h"
 #include "common/world_store.h"
 #include "server/log.h"
 
@@ -39,27 +40,6 @@ const char* const kAdminHelp =
 
 namespace {
 
-std::string json_string(const std::string& s) {
-  std::string o = "\"";
-  for (const char c : s) {
-    switch (c) {
-      case '"': o += "\\\""; break;
-      case '\\': o += "\\\\"; break;
-      case '\n': o += "\\n"; break;
-      case '\r': o += "\\r"; break;
-      case '\t': o += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char b[8];
-          std::snprintf(b, sizeof b, "\\u%04x", c);
-          o += b;
-        } else {
-          o += c;
-        }
-    }
-  }
-  return o + "\"";
-}
 
 std::string num(double v) {
   char b[64];
@@ -119,8 +99,9 @@ std::string parse_log_options(const std::vector<std::string>& a, LogOptions* o) 
       o->query.box = r;
     } else if (a[i] == "--limit" && has_value) {
       const std::string& v = a[++i];
-      if (v.empty() || v.size() > 7 || v.find_first_not_of("0123456789") != std::string::npos || std::stoul(v) == 0)
-        return "--limit '" + v + "': a number from 1 to 9999999";
+      if (v.empty() || v.size() > 5 || v.find_first_not_of("0123456789") != std::string::npos || std::stoul(v) == 0 ||
+          std::stoul(v) > 10000)
+        return "--limit '" + v + "': a number from 1 to 10000";
       o->query.limit = std::stoul(v);
     } else {
       return "unexpected '" + a[i] + "'";

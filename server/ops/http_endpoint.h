@@ -15,6 +15,7 @@
 #include <string>
 #include <thread>
 
+#include "common/cli.h"
 #include "common/decode_error.h"
 #include "server/ops/metrics.h"
 
@@ -49,7 +50,5 @@ class HttpEndpoint {
   std::atomic<bool> listen_returned_{false};
 };
 
-// "HOST:PORT" or "[V6]:PORT" into its parts; an error names what is wrong.
-FileResult<std::pair<std::string, std::uint16_t>> parse_host_port(const std::string& text);
 
 }  // namespace terrane

@@ -13,6 +13,7 @@
 #include <map>
 #include <random>
 
+#include "tests/support/run_command.h"
 #include "client/client.h"
 #include "tests/support/view_chunks.h"
 #include "tests/support/server_process.h"
@@ -27,15 +28,6 @@ using testing_support::ServerProcess;
 constexpr auto kDeadline = 120s;
 constexpr const char* kToken = "operator-token-1";
 
-int run(const std::string& cmd, std::string* out) {
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return -1;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out->append(buf, n);
-  const int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 class AdminToolTest : public ::testing::Test {
  protected:
@@ -58,7 +50,7 @@ class AdminToolTest : public ::testing::Test {
     ASSERT_NE(server_->port(), 0) << server_->output();
   }
   int admin(const std::string& args, std::string* out, const std::string& token = kToken) {
-    return run(std::string(TERRANE_BIN_DIR) + "/terrane-admin --connect 127.0.0.1:" + std::to_string(server_->port()) +
+    return testing_support::run_command(std::string(TERRANE_BIN_DIR) + "/terrane-admin --connect 127.0.0.1:" + std::to_string(server_->port()) +
                    " --token '" + token + "' " + args,
                out);
   }
@@ -107,7 +99,7 @@ TEST_F(AdminToolTest, CommandsAnswerInTextOrJsonAndSayReachesTheLibrary) {
   EXPECT_EQ(admin("", &out), 2) << out;
   EXPECT_NE(out.find("no command given"), std::string::npos) << out;
   out.clear();
-  EXPECT_EQ(run(std::string(TERRANE_BIN_DIR) + "/terrane-admin --token x status", &out), 2) << out;
+  EXPECT_EQ(testing_support::run_command(std::string(TERRANE_BIN_DIR) + "/terrane-admin --token x status", &out), 2) << out;
   EXPECT_NE(out.find("--connect HOST:PORT is required"), std::string::npos) << out;
   listener.disconnect();
 }

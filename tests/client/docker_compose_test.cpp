@@ -13,21 +13,15 @@
 #include <thread>
 #include <vector>
 
+#include "tests/support/run_command.h"
 #include "client/bots/report.h"
 #include "tests/support/child_process.h"
+#include "tests/support/eventually.h"
 
 namespace terrane {
 namespace {
 
-int run(const std::string& cmd, std::string* out) {
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return -1;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out->append(buf, n);
-  const int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+constexpr auto run = &testing_support::run_command;
 
 TEST(DockerCompose, ConfigValidatesAndRunsBotsAgainstTheServer) {
   std::string which;
@@ -142,13 +136,12 @@ TEST_F(DockerComposeHeavy, TheServerAndBotsCommandLinesRunAsWritten) {
     check.append(replace_all(replace_all(health[i], "9464", metrics_port), "'", "'\\''"));
     check.push_back('\'');
   }
-  bool healthy = false;
-  for (const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
-       !healthy && std::chrono::steady_clock::now() < deadline;) {
-    std::string ignored;
-    healthy = run(check, &ignored) == 0;
-    if (!healthy) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  const bool healthy = testing_support::eventually(
+      [&] {
+        std::string ignored;
+        return run(check, &ignored) == 0;
+      },
+      std::chrono::seconds(120));
   EXPECT_TRUE(healthy) << check;
 
   // The bots' command, as written.

@@ -114,10 +114,11 @@ def test_queries_and_write_box_agree_with_the_server(server):
         assert c.write_box(lo, block).result(30)
         got = c.read_server_box(lo, (x + 4, g, z + 2))
         assert (got == block).all()
+        # The replica has the write once it matches the server's hashes.
         deadline = time.monotonic() + 60
-        while not (c.read_box(lo, (x + 4, g, z + 2)) == block).all():
-            assert time.monotonic() < deadline, "the replica never showed the write"
-            time.sleep(0.01)
+        while c.verify(60) != 0:
+            assert time.monotonic() < deadline, "the replica never matched the server"
+        assert (c.read_box(lo, (x + 4, g, z + 2)) == block).all()
         with pytest.raises(ValueError, match="shape"):
             c.write_box(lo, numpy.zeros((3, 1, 1, 1), dtype=numpy.uint8))
         bad = block.copy()

@@ -147,12 +147,7 @@ TEST_F(ServerTest, InvalidEditIsRejectedNotFatal) {
 TEST_F(ServerTest, EditIsAppliedPersistedAndAcknowledged) {
   start();
   auto p = join("editor");
-  EditRequestMsg e;
-  e.edit_id = 77;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1000, 10, 1000}, {1004, 14, 1004}};
-  e.material = materials::kBrick;
-  e.occupancy = 128;
+  const EditRequestMsg e = testing_support::fill_box_edit(77, Region{{1000, 10, 1000}, {1004, 14, 1004}}, materials::kBrick, 128);
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(e.box.min)));
   ASSERT_TRUE(p->send(build_edit_request(e)));
   auto ack = p->next_of(wire::Body::EditAck);
@@ -183,12 +178,7 @@ TEST_F(ServerTest, EditOutsideTheFullResolutionRegionIsRejectedWithTheTrueState)
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(Vec3i{1002, 12, 1002})));
   // Outside its 24-voxel full-resolution radius, but inside its view
   // (so the chunk is loaded and its state can be shown).
-  EditRequestMsg e;
-  e.edit_id = 9;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1060, 8, 1002}, {1063, 11, 1005}};
-  e.material = materials::kBrick;
-  e.occupancy = 255;
+  const EditRequestMsg e = testing_support::fill_box_edit(9, Region{{1060, 8, 1002}, {1063, 11, 1005}}, materials::kBrick, 255);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   auto f = p->next_of(wire::Body::EditReject);
   ASSERT_TRUE(f.has_value());
@@ -294,12 +284,7 @@ TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
   auto p = join("walker");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
-  EditRequestMsg e;
-  e.edit_id = 1;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1000, 10, 1000}, {1002, 12, 1002}};
-  e.material = materials::kBrick;
-  e.occupancy = 255;
+  const EditRequestMsg e = testing_support::fill_box_edit(1, Region{{1000, 10, 1000}, {1002, 12, 1002}}, materials::kBrick, 255);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   ASSERT_TRUE(p->next_of(wire::Body::EditAck).has_value());
   // Walk far away: the old chunks are released, then unloaded.
@@ -397,12 +382,7 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   ASSERT_TRUE(read_stream(p, held, &records, [&](const HeldMap& h) { return view_complete(h, where, w.bounds()); }));
   for (const auto& [cp, h] : held) EXPECT_TRUE(w.bounds().touches_chunk(cp)) << cp.x << "," << cp.y << "," << cp.z;
   // An edit beyond the border is refused.
-  EditRequestMsg e;
-  e.edit_id = 5;
-  e.kind = EditKind::kFillBox;
-  e.box = {{-4, 10, 4}, {-2, 12, 6}};
-  e.material = materials::kBrick;
-  e.occupancy = 255;
+  const EditRequestMsg e = testing_support::fill_box_edit(5, Region{{-4, 10, 4}, {-2, 12, 6}}, materials::kBrick, 255);
   ASSERT_TRUE(p.send(build_edit_request(e)));
   auto r = p.next_of(wire::Body::EditReject);
   ASSERT_TRUE(r.has_value());
@@ -441,12 +421,7 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   auto c = join("c");
   const Vec3i home = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*c, where.position, home));
-  EditRequestMsg e;
-  e.edit_id = 1;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
-  e.material = materials::kBrick;
-  e.occupancy = 255;
+  const EditRequestMsg e = testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255);
   ASSERT_TRUE(c->send(build_edit_request(e)));
   ASSERT_TRUE(c->next_of(wire::Body::EditAck).has_value());
 
@@ -586,12 +561,7 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   });
   EXPECT_EQ(server_->storage_counters().quarantined.load(), 1u);
   // Editing the quarantined chunk writes a fresh row; the damaged one stays aside.
-  EditRequestMsg e;
-  e.edit_id = 3;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1000, 10, 1000}, {1002, 12, 1002}};
-  e.material = materials::kSnow;
-  e.occupancy = 200;
+  const EditRequestMsg e = testing_support::fill_box_edit(3, Region{{1000, 10, 1000}, {1002, 12, 1002}}, materials::kSnow, 200);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   ASSERT_TRUE(p->next_of(wire::Body::EditAck).has_value());
   p.reset();
@@ -646,12 +616,7 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
     ASSERT_EQ(revs.size(), 1u);
     // What the last acknowledged edit's update said, at least.
     EXPECT_GE(revs.at(key(cp)), acked_revision) << "run " << run;
-    EditRequestMsg edit;
-    edit.edit_id = static_cast<std::uint32_t>(run + 1);
-    edit.kind = EditKind::kFillBox;
-    edit.box = {{1000 + run, 10, 1000}, {1001 + run, 11, 1001}};
-    edit.material = materials::kBrick;
-    edit.occupancy = static_cast<std::uint8_t>(100 + run);
+    const EditRequestMsg edit = testing_support::fill_box_edit(static_cast<std::uint32_t>(run + 1), Region{{1000 + run, 10, 1000}, {1001 + run, 11, 1001}}, materials::kBrick, static_cast<std::uint8_t>(100 + run));
     ASSERT_TRUE(p.send(build_edit_request(edit)));
     auto both = p.next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch);
     ASSERT_TRUE(both.has_value());
@@ -693,12 +658,7 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
   sqlite3_busy_timeout(db, 10000);  // a connection opening beside it may hold a lock for a moment
   ASSERT_EQ(sqlite3_exec(db, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
-  EditRequestMsg e;
-  e.edit_id = 3;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
-  e.material = materials::kBrick;
-  e.occupancy = 255;
+  const EditRequestMsg e = testing_support::fill_box_edit(3, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   bool acked = false, batch = false;
   std::string rejected, reason;

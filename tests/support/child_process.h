@@ -53,11 +53,21 @@ class ChildProcess {
         if (n <= 0) break;
         std::lock_guard lock(mutex_);
         output_.append(buf, static_cast<std::size_t>(n));
-        grew_.notify_all();
+        changed_.notify_all();
       }
       std::lock_guard lock(mutex_);
       eof_ = true;
-      grew_.notify_all();
+      changed_.notify_all();
+    });
+    // Waits for the exit (blocking waitpid) and says so: stop() and wait()
+    // wait on that, never poll.
+    waiter_ = std::thread([this] {
+      int st = 0;
+      waitpid(pid_, &st, 0);
+      std::lock_guard lock(mutex_);
+      status_ = WIFEXITED(st) ? WEXITSTATUS(st) : (WIFSIGNALED(st) ? -WTERMSIG(st) : -1);
+      exited_ = true;
+      changed_.notify_all();
     });
   }
   ~ChildProcess() { stop(); }
@@ -68,60 +78,77 @@ class ChildProcess {
 
   // SIGTERM to its group, SIGKILL if it has not exited after grace; the exit
   // status (or -signal).
-  int stop(std::chrono::seconds grace = std::chrono::seconds(20)) {
-    if (pid_ <= 0) return status_;
-    ::kill(-pid_, SIGTERM);
-    const auto deadline = std::chrono::steady_clock::now() + grace;
-    int st = 0;
-    while (waitpid(pid_, &st, WNOHANG) == 0) {
-      if (std::chrono::steady_clock::now() > deadline) {
-        ::kill(-pid_, SIGKILL);
-        waitpid(pid_, &st, 0);
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return finish(st);
-  }
-  // Waits for it to exit by itself (at most timeout; then it is killed).
+  int stop(std::chrono::seconds grace = std::chrono::seconds(20)) { return end(SIGTERM, grace); }
+  // SIGKILL: a crash, nothing runs on the way out.
+  int kill_hard() { return end(SIGKILL, std::chrono::seconds(60)); }
+  // Waits for it to exit by itself (at most timeout; then it is stopped).
   int wait(std::chrono::seconds timeout) {
-    if (pid_ <= 0) return status_;
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    int st = 0;
-    while (waitpid(pid_, &st, WNOHANG) == 0) {
-      if (std::chrono::steady_clock::now() > deadline) return stop(std::chrono::seconds(1));
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!started()) return status_;
+    {
+      std::unique_lock lock(mutex_);
+      if (!changed_.wait_for(lock, timeout, [&] { return exited_; })) {
+        lock.unlock();
+        stop(std::chrono::seconds(1));
+        return -1;
+      }
     }
-    return finish(st);
+    return finish();
   }
   std::string output() {
     std::lock_guard lock(mutex_);
     return output_;
   }
+  // The rest of the first output line holding text, once that whole line
+  // is there ("" at the deadline or EOF).
+  std::string wait_for_line(const std::string& text, std::chrono::seconds timeout) {
+    std::unique_lock lock(mutex_);
+    auto complete = [&] {
+      const auto at = output_.find(text);
+      return at != std::string::npos && output_.find('\n', at) != std::string::npos;
+    };
+    if (!changed_.wait_for(lock, timeout, [&] { return eof_ || complete(); }) || !complete()) return {};
+    const auto at = output_.find(text) + text.size();
+    return output_.substr(at, output_.find('\n', at) - at);
+  }
   // True once text appears in the output (false at the deadline or EOF).
   bool wait_for_output(const std::string& text, std::chrono::seconds timeout) {
     std::unique_lock lock(mutex_);
-    return grew_.wait_for(lock, timeout, [&] { return eof_ || output_.find(text) != std::string::npos; }) &&
-           output_.find(text) != std::string::npos;
+    changed_.wait_for(lock, timeout, [&] { return eof_ || output_.find(text) != std::string::npos; });
+    return output_.find(text) != std::string::npos;
   }
 
  private:
-  int finish(int st) {
-    pid_ = -1;
+  int end(int sig, std::chrono::seconds grace) {
+    if (!started()) return status_;
+    std::unique_lock lock(mutex_);
+    if (!exited_) {
+      ::kill(-pid_, sig);
+      if (!changed_.wait_for(lock, grace, [&] { return exited_; })) {
+        ::kill(-pid_, SIGKILL);
+        changed_.wait(lock, [&] { return exited_; });
+      }
+    }
+    lock.unlock();
+    return finish();
+  }
+  int finish() {
+    if (waiter_.joinable()) waiter_.join();
     if (reader_.joinable()) reader_.join();
-    close(fd_);
-    status_ = WIFEXITED(st) ? WEXITSTATUS(st) : (WIFSIGNALED(st) ? -WTERMSIG(st) : -1);
+    if (fd_ >= 0) close(fd_);
+    fd_ = -1;
+    pid_ = -1;
     return status_;
   }
 
   pid_t pid_ = -1;
   int fd_ = -1;
   int status_ = -1;
-  std::thread reader_;
-  std::mutex mutex_;
-  std::condition_variable grew_;
-  std::string output_;
+  bool exited_ = false;
   bool eof_ = false;
+  std::thread reader_, waiter_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::string output_;
 };
 
 // A TCP port on 127.0.0.1 free a moment ago (for programs that cannot be

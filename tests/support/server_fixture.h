@@ -112,6 +112,17 @@ class RawPeer {
 
 inline const wire::Message& msg(const Frame& f) { return *verify_message(f).value(); }
 
+// A FillBox edit request.
+inline EditRequestMsg fill_box_edit(std::uint32_t id, Region box, Material material, std::uint8_t occupancy = 255) {
+  EditRequestMsg e;
+  e.edit_id = id;
+  e.kind = EditKind::kFillBox;
+  e.box = box;
+  e.material = material;
+  e.occupancy = occupancy;
+  return e;
+}
+
 class ServerTest : public ::testing::Test {
  protected:
   void SetUp() override {

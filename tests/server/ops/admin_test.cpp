@@ -9,9 +9,12 @@
 #include <sys/resource.h>
 
 #include <filesystem>
+#include <future>
+#include <mutex>
 #include <thread>
 
 #include "common/world.h"
+#include "tests/support/eventually.h"
 #include "tests/support/server_fixture.h"
 
 namespace terrane {
@@ -108,7 +111,7 @@ TEST_F(AdminTest, ASessionWithoutAViewCostsNoCpu) {
   const ServerCounters& c = server_->counters();
   auto wait_ticks = [&](std::uint64_t n) {
     const std::uint64_t target = c.ticks.load() + n;
-    while (c.ticks.load() < target) std::this_thread::sleep_for(5ms);
+    ASSERT_TRUE(testing_support::eventually([&] { return c.ticks.load() >= target; }));
   };
   auto cpu_s = [] {
     rusage u{};
@@ -147,11 +150,10 @@ TEST_F(AdminTest, PlayersListsWhoIsConnectedAndKickEndsOnlyThatSession) {
   ASSERT_TRUE(builder.peer->send(build_client_state(ClientStateMsg{{40.5f, 30.0f, -12.5f}, 32, 16})));
   // The position shows once the server has read it.
   AdminResultMsg players;
-  for (const auto deadline = std::chrono::steady_clock::now() + 30s; std::chrono::steady_clock::now() < deadline;) {
+  testing_support::eventually([&] {
     players = command(*admin.peer, "players");
-    if (players.json.find("[40.5, 30, -12.5]") != std::string::npos) break;
-    std::this_thread::sleep_for(10ms);
-  }
+    return players.json.find("[40.5, 30, -12.5]") != std::string::npos;
+  });
   EXPECT_TRUE(players.ok);
   EXPECT_NE(players.json.find("\"name\": \"builder\""), std::string::npos) << players.json;
   EXPECT_NE(players.json.find("[40.5, 30, -12.5]"), std::string::npos) << players.json;
@@ -162,11 +164,10 @@ TEST_F(AdminTest, PlayersListsWhoIsConnectedAndKickEndsOnlyThatSession) {
   auto ping = builder.peer->next_of(wire::Body::Ping);
   ASSERT_TRUE(ping.has_value());
   ASSERT_TRUE(builder.peer->send(build_pong(msg(*ping).body_as_Ping()->nonce())));
-  for (const auto deadline = std::chrono::steady_clock::now() + 30s; std::chrono::steady_clock::now() < deadline;) {
+  testing_support::eventually([&] {
     players = command(*admin.peer, "players");
-    if (players.text.find("ms ") != std::string::npos) break;
-    std::this_thread::sleep_for(10ms);
-  }
+    return players.text.find("ms ") != std::string::npos;
+  });
   EXPECT_NE(players.text.find("ms "), std::string::npos) << players.text;
   EXPECT_NE(players.json.find("\"ping_ms\": null"), std::string::npos) << "the others have not answered: " << players.json;
   // A forged Pong (a nonce from the future) changes nothing.
@@ -266,12 +267,7 @@ TEST_F(AdminTest, SaveAndBackupKeepWhatWasAcknowledged) {
   auto p = join("editor");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
-  EditRequestMsg e;
-  e.edit_id = 1;
-  e.kind = EditKind::kFillBox;
-  e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
-  e.material = materials::kBrick;
-  e.occupancy = 201;
+  const EditRequestMsg e = testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 201);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   ASSERT_TRUE(p->next_of(wire::Body::EditAck));
   const AdminResultMsg save = command(*admin.peer, "save");
@@ -292,9 +288,10 @@ TEST_F(AdminTest, SaveAndBackupKeepWhatWasAcknowledged) {
 }
 
 TEST_F(AdminTest, ShutdownWarnsEveryClientThenAsksTheOwnerToStop) {
-  std::atomic<bool> asked{false};
+  std::promise<void> asked;
+  std::once_flag once;
   ServerOptions o;
-  o.on_shutdown = [&] { asked = true; };
+  o.on_shutdown = [&] { std::call_once(once, [&] { asked.set_value(); }); };
   start_admin(o);
   auto admin = connect("admin", kAdminToken);
   auto player = connect("player");
@@ -309,10 +306,7 @@ TEST_F(AdminTest, ShutdownWarnsEveryClientThenAsksTheOwnerToStop) {
   EXPECT_EQ(n->seconds_left, 1u);
   EXPECT_TRUE(n->reconnect);
   EXPECT_NE(n->text.find("upgrade"), std::string::npos) << n->text;
-  for (const auto deadline = std::chrono::steady_clock::now() + 60s;
-       !asked && std::chrono::steady_clock::now() < deadline;)
-    std::this_thread::sleep_for(10ms);
-  EXPECT_TRUE(asked);
+  EXPECT_EQ(asked.get_future().wait_for(60s), std::future_status::ready);
   // The owner stops it: the last notice says it restarts, then the Disconnect.
   server_->stop();
   auto last = player.peer->next_of(wire::Body::ServerNotice);

@@ -15,6 +15,8 @@
 #include <thread>
 
 #include "server/ops/http_endpoint.h"
+#include "tests/support/eventually.h"
+#include "tests/support/run_command.h"
 #include "tests/support/scratch_dir.h"
 #include "tests/support/server_fixture.h"
 
@@ -38,13 +40,7 @@ Verdict promtool_check(const std::string& text) {
   const auto file = dir / "metrics.txt";
   std::ofstream(file) << text;
   Verdict v;
-  const std::string cmd = "promtool check metrics < '" + file.string() + "' 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return v;
-  char buf[4096];
-  while (const std::size_t n = std::fread(buf, 1, sizeof buf, p)) v.output.append(buf, n);
-  const int st = pclose(p);
-  v.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  v.status = testing_support::run_command("promtool check metrics < '" + file.string() + "'", &v.output);
   std::filesystem::remove_all(dir);
   return v;
 }
@@ -150,12 +146,8 @@ class MetricsEndpointTest : public ServerTest {
   // Scrapes until pred holds (a counter another thread moves), or a deadline.
   template <class Pred>
   std::string scrape_until(Pred pred) {
-    const auto deadline = std::chrono::steady_clock::now() + 60s;
-    std::string text = get("/metrics");
-    while (!pred(text) && std::chrono::steady_clock::now() < deadline) {
-      std::this_thread::sleep_for(20ms);
-      text = get("/metrics");
-    }
+    std::string text;
+    testing_support::eventually([&] { return pred(text = get("/metrics")); });
     return text;
   }
 };
@@ -167,12 +159,14 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   ASSERT_NE(server_->metrics_port(), 0);
   // Healthy from the first tick on (503 "not ticking yet" before it).
   int status = 0;
-  std::string health = get("/health", &status);
-  for (const auto deadline = std::chrono::steady_clock::now() + 30s;
-       status != 200 && std::chrono::steady_clock::now() < deadline; health = get("/health", &status)) {
-    EXPECT_EQ(health, "not ticking yet\n");
-    std::this_thread::sleep_for(5ms);
-  }
+  std::string health;
+  testing_support::eventually([&] {
+    health = get("/health", &status);
+    if (status != 200) {
+      EXPECT_EQ(health, "not ticking yet\n");
+    }
+    return status == 200;
+  });
   EXPECT_EQ(status, 200);
   EXPECT_EQ(health, "ok\n");
   const std::string before = get("/metrics");
@@ -184,12 +178,7 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
   for (std::uint32_t id = 1; id <= 3; ++id) {
-    EditRequestMsg e;
-    e.edit_id = id;
-    e.kind = EditKind::kFillBox;
-    e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
-    e.material = materials::kBrick;
-    e.occupancy = static_cast<std::uint8_t>(100 + id);
+    const EditRequestMsg e = testing_support::fill_box_edit(id, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, static_cast<std::uint8_t>(100 + id));
     ASSERT_TRUE(p->send(build_edit_request(e)));
     ASSERT_TRUE(p->next_of(wire::Body::EditAck));
   }

@@ -13,6 +13,8 @@
 
 #include "server/ops/metrics.h"
 #include "tests/support/child_process.h"
+#include "tests/support/eventually.h"
+#include "tests/support/run_command.h"
 #include "tests/support/scratch_dir.h"
 #include "tests/support/server_fixture.h"
 
@@ -58,12 +60,7 @@ TEST_F(PrometheusTest, ARealPrometheusScrapesTheServerAndSeesItsEdits) {
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
   for (std::uint32_t id = 1; id <= 3; ++id) {
-    EditRequestMsg e;
-    e.edit_id = id;
-    e.kind = EditKind::kFillBox;
-    e.box = {{1001, 11, 1001}, {1003, 13, 1003}};
-    e.material = materials::kBrick;
-    e.occupancy = static_cast<std::uint8_t>(100 + id);
+    const EditRequestMsg e = testing_support::fill_box_edit(id, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, static_cast<std::uint8_t>(100 + id));
     ASSERT_TRUE(p->send(build_edit_request(e)));
     ASSERT_TRUE(p->next_of(wire::Body::EditAck));
   }
@@ -77,13 +74,13 @@ TEST_F(PrometheusTest, ARealPrometheusScrapesTheServerAndSeesItsEdits) {
     return res && res->status == 200 ? res->body : std::string();
   };
   std::string answer, up;
-  const auto deadline = std::chrono::steady_clock::now() + 120s;
-  while (std::chrono::steady_clock::now() < deadline) {
-    answer = query("terrane_edits_applied_total");
-    up = query("up{job=\"terrane\"}");
-    if (answer.find("\"3\"]") != std::string::npos && up.find("\"1\"]") != std::string::npos) break;
-    std::this_thread::sleep_for(200ms);
-  }
+  testing_support::eventually(
+      [&] {
+        answer = query("terrane_edits_applied_total");
+        up = query("up{job=\"terrane\"}");
+        return answer.find("\"3\"]") != std::string::npos && up.find("\"1\"]") != std::string::npos;
+      },
+      120s);
   EXPECT_NE(up.find("\"1\"]"), std::string::npos) << "target not up: " << up << "\n" << prom.output();
   EXPECT_NE(answer.find("\"3\"]"), std::string::npos) << answer << "\n" << prom.output();
   // A histogram Prometheus can take a quantile of.
@@ -96,14 +93,9 @@ TEST_F(PrometheusTest, ARealPrometheusScrapesTheServerAndSeesItsEdits) {
 
 TEST(MonitoringFiles, ScrapeConfigPassesPromtool) {
   ASSERT_TRUE(have("promtool")) << "promtool is not installed: run scripts/install-deps.sh";
-  const std::string cmd = "promtool check config '" + (kDocker / "prometheus.yml").string() + "' 2>&1";
-  FILE* f = popen(cmd.c_str(), "r");
-  ASSERT_NE(f, nullptr);
   std::string out;
-  char buf[1024];
-  while (const std::size_t n = std::fread(buf, 1, sizeof buf, f)) out.append(buf, n);
-  const int st = pclose(f);
-  EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << out;
+  EXPECT_EQ(testing_support::run_command("promtool check config '" + (kDocker / "prometheus.yml").string() + "'", &out), 0)
+      << out;
   EXPECT_NE(out.find("SUCCESS"), std::string::npos) << out;
 }
 
