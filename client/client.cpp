@@ -519,12 +519,16 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
     case wire::Body::UpdateBatch: {
       auto b = parse_update_batch(*m.body_as_UpdateBatch());
       if (!b) return fail(b.error());
-      auto n = replica_.apply_update_batch(*b);
+      std::vector<Region> changed;
+      auto n = replica_.apply_update_batch(*b, callbacks_.on_update ? &changed : nullptr);
       if (!n) return fail(n.error());
       ++counters_.update_batches;
       counters_.units_updated += *n;
-      if (callbacks_.on_update_batch)
-        after = [this, tick = b->tick, revs = std::move(b->revisions)] { callbacks_.on_update_batch(tick, revs); };
+      if (callbacks_.on_update_batch || callbacks_.on_update)
+        after = [this, info = UpdateInfo{b->tick, std::move(b->revisions), std::move(changed)}] {
+          if (callbacks_.on_update_batch) callbacks_.on_update_batch(info.tick, info.revisions);
+          if (callbacks_.on_update) callbacks_.on_update(info);
+        };
       break;
     }
     case wire::Body::EditAck: {
@@ -560,6 +564,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (!p) return fail(p.error());
       presence_ = std::move(*p);
       ++counters_.presence_updates;
+      if (callbacks_.on_presence) after = [this, p = presence_] { callbacks_.on_presence(p); };
       break;
     }
     case wire::Body::RegionHash: {

@@ -166,6 +166,15 @@ struct EditOutcome {
   std::vector<Voxel> state;
 };
 
+// One UpdateBatch as applied to the replica: its tick, the chunks it
+// touched with their new revisions, and per chunk held at full resolution
+// the voxel box its changed units cover.
+struct UpdateInfo {
+  std::uint64_t tick = 0;
+  std::vector<ChunkRevisionMsg> revisions;
+  std::vector<Region> changed;
+};
+
 struct ClientCallbacks {
   std::function<void(const WelcomeMsg&)> on_welcome;
   // A chunk's coverage changed: Empty, Mip (level 1..3, from MipData), Full
@@ -179,6 +188,10 @@ struct ClientCallbacks {
   // An UpdateBatch was applied to the replica: the tick it belongs to and
   // the chunks it touched with their new revisions.
   std::function<void(std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions)> on_update_batch;
+  // The same event with the changed voxel boxes (runs after on_update_batch).
+  std::function<void(const UpdateInfo&)> on_update;
+  // A Presence arrived: the other clients in view, nearest first.
+  std::function<void(const std::vector<PresenceEntryMsg>&)> on_presence;
   std::function<void(const std::string& reason)> on_disconnected;
   // The connection dropped and a reconnect is being tried (reason as for
   // on_disconnected), and when it succeeded (after the new Welcome).

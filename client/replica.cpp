@@ -128,7 +128,7 @@ void Replica::apply_coverage(const CoverageMsg& m) {
   }
 }
 
-Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m) {
+Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed) {
   const std::size_t cap = std::min(kMaxBatchUnits, m.revisions.size() * kUpdateUnitsPerChunk);
   update_scratch_.resize(cap);
   auto n = net_codec_decode_update_batch(m.data, update_scratch_);
@@ -166,6 +166,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m) {
       ++applied;
     }
     const Vec3i origin = chunk_origin(cp);
+    if (changed != nullptr) changed->push_back(Region{origin + lo, origin + hi});
     grid_.modify(Region{origin + lo, origin + hi}, [&](Vec3i p, Voxel old) {
       const Vec3i l = p - origin;
       const Vec3i uc{l.x / kUpdateUnitSize, l.y / kUpdateUnitSize, l.z / kUpdateUnitSize};

@@ -51,8 +51,9 @@ class Replica {
   // Applies the units of chunks held at full resolution (others are
   // ignored) and takes the batch's revisions. Returns the units applied.
   // Errors: the codec's, or kInvalidValue for a unit of a chunk the batch
-  // lists no revision for.
-  Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m);
+  // lists no revision for. With changed set, appends per chunk applied the
+  // voxel box its units cover.
+  Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed = nullptr);
 
   // --- queries ---------------------------------------------------------------
   const ChunkCoverage* coverage(Vec3i chunk_pos) const;
