@@ -4,67 +4,21 @@ Run by CTest (label unit) as: python3 -m pytest tests/python, with
 PYTHONPATH at the built module and TERRANE_BIN_DIR at the server binary.
 Every wait has a deadline and waits for a condition.
 """
-import os
-import re
-import shutil
 import socket
-import subprocess
-import tempfile
-import threading
 import time
 
 import numpy
 import pytest
 
 import terrane
-
-BIN = os.environ.get("TERRANE_BIN_DIR", "build/bin")
-
-
-class Server:
-    def __init__(self, *extra):
-        self.dir = tempfile.mkdtemp(prefix="terrane-py-")
-        self.proc = subprocess.Popen(
-            [os.path.join(BIN, "terrane-server"), "--world", os.path.join(self.dir, "world"), "--port", "0", *extra],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.output = []
-        self.port = None
-        ready = threading.Event()
-
-        def read():
-            for line in self.proc.stdout:
-                self.output.append(line)
-                m = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
-                if m and self.port is None:
-                    self.port = int(m.group(1))
-                    ready.set()
-            ready.set()
-
-        self.reader = threading.Thread(target=read, daemon=True)
-        self.reader.start()
-        assert ready.wait(60) and self.port, "".join(self.output)
-        self.address = "127.0.0.1:%d" % self.port
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            assert self.proc.wait(60) == 0, "".join(self.output)
-        self.reader.join(10)
-        shutil.rmtree(self.dir, ignore_errors=True)
-
-
-@pytest.fixture
-def server():
-    s = Server()
-    yield s
-    s.stop()
+from support import Server
 
 
 def test_ready_and_loaded_are_true_only_when_true(server):
     with terrane.connect(server.address, name="reader", view_distance=64, full_res_radius=32) as c:
         c.wait_ready(30)
         assert "Air" in c.materials[0]
-        c.wait_loaded(60)
+        c.wait_loaded(timeout=60)
         assert c.loaded
         # At that moment the replica matches the server chunk for chunk.
         assert c.verify(60) == 0
@@ -73,8 +27,8 @@ def test_ready_and_loaded_are_true_only_when_true(server):
 def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
     with terrane.connect(server.address, name="a", view_distance=64, full_res_radius=32) as a, \
          terrane.connect(server.address, name="b", view_distance=64, full_res_radius=32) as b:
-        a.wait_loaded(60)
-        b.wait_loaded(60)
+        a.wait_loaded(timeout=60)
+        b.wait_loaded(timeout=60)
         x, y, z = (int(v) for v in a.position)
         y -= 3
         assert a.fill_box((x, y, z), (x + 2, y + 2, z + 2), "Brick").result(30)
@@ -96,7 +50,7 @@ def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
 
 def test_queries_and_write_box_agree_with_the_server(server):
     with terrane.connect(server.address, name="q", view_distance=64, full_res_radius=32) as c:
-        c.wait_loaded(60)
+        c.wait_loaded(timeout=60)
         x, y, z = (int(v) for v in c.position)
         g = c.ground(x, z)
         assert isinstance(g, int) and g <= y + 1
@@ -129,7 +83,7 @@ def test_queries_and_write_box_agree_with_the_server(server):
 
 def test_rejections_surface_their_reason(server):
     with terrane.connect(server.address, name="r", view_distance=64, full_res_radius=32) as c:
-        c.wait_loaded(60)
+        c.wait_loaded(timeout=60)
         x, y, z = (int(v) for v in c.position)
         far = c.fill_box((x + 5000, y, z), (x + 5001, y + 1, z + 1), "Brick")
         with pytest.raises(terrane.EditRejected, match="outside the full-resolution region"):
@@ -172,7 +126,7 @@ def test_a_closed_server_raises_and_never_hangs():
     c.wait_ready(30)
     srv.stop()
     with pytest.raises(ConnectionError):
-        c.wait_loaded(60)
+        c.wait_loaded(timeout=60)
     with pytest.raises(ConnectionError):
         c.fill_box((0, 0, 0), (1, 1, 1), "Brick").result(30)
     c.close()

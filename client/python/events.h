@@ -1,0 +1,167 @@
+// Events from the client library to Python, without ever holding the GIL
+// on the library's io side.
+//
+// The io side (a Client's io thread, or a Swarm's pool) turns each event
+// into plain C++ data and hands it to an EventSink: the sink keeps the
+// latest kMaxQueuedEvents for blocking waits (next_event) and, once a
+// callback is registered, posts a job to a Dispatcher. The Dispatcher is
+// one thread that takes the GIL only to run callbacks; a Swarm's clients
+// share one. No Python object is created, copied or destroyed off the GIL:
+// jobs carry C++ data and a weak pointer to the Python side's handlers,
+// which live and die under the GIL.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <optional>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <tuple>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "client/client.h"
+
+namespace terrane::python {
+
+namespace py = pybind11;
+using Vec3 = std::tuple<double, double, double>;
+using IVec3 = std::tuple<std::int64_t, std::int64_t, std::int64_t>;
+
+inline IVec3 ivec(Vec3i v) { return {v.x, v.y, v.z}; }
+inline Vec3 vec(Vec3f v) { return {v.x, v.y, v.z}; }
+
+// --- what Python sees ---------------------------------------------------------
+struct UpdateEvent {
+  std::uint64_t tick = 0;
+  std::vector<std::pair<IVec3, std::uint64_t>> chunks;  // (chunk position, new revision)
+  std::vector<std::pair<IVec3, IVec3>> regions;        // changed voxels [min, max), per chunk held in full
+};
+struct Player {
+  std::uint32_t id = 0;
+  Vec3 position;
+};
+struct PresenceEvent {
+  std::vector<Player> players;
+};
+struct MessageEvent {
+  std::string kind;  // "say" or "shutdown"
+  std::string text;
+  std::uint32_t seconds_left = 0;
+  bool reconnect = false;
+};
+struct DisconnectEvent {
+  std::string reason;
+};
+using Event = std::variant<UpdateEvent, PresenceEvent, MessageEvent, DisconnectEvent>;
+
+inline const char* event_kind(const Event& e) {
+  static constexpr const char* kNames[] = {"update", "presence", "message", "disconnect"};
+  return kNames[e.index()];
+}
+
+UpdateEvent to_event(const UpdateInfo& u);
+PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p);
+MessageEvent to_event(const ServerNoticeMsg& n);
+
+// --- the callbacks' thread ----------------------------------------------------
+// Jobs run in order; a job's Python exception is reported as unraisable
+// (printed) and the next job runs. Stopping runs what is queued first.
+class Dispatcher {
+ public:
+  using Job = std::function<void()>;  // runs with the GIL held; owns no Python object
+  static constexpr std::size_t kMaxQueuedJobs = 65536;
+
+  Dispatcher();
+  ~Dispatcher();  // stop()
+  // Any thread, GIL not needed. False (and counted) when the queue is full.
+  bool post(Job job);
+  // Drains and joins the thread (releasing the GIL while it waits, if this
+  // thread holds it). From a callback (the dispatcher's own thread) it only
+  // asks the thread to end after the current job.
+  void stop();
+  std::uint64_t dropped() const;
+
+ private:
+  struct State {
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::deque<Job> jobs;
+    bool stopping = false;
+    std::uint64_t dropped = 0;
+  };
+  static void run(std::shared_ptr<State> state);
+
+  std::shared_ptr<State> state_;  // shared with the thread, which may outlive this object
+  std::thread thread_;
+};
+
+// A Dispatcher made on first use, shared by the clients that hold the slot.
+class DispatcherSlot {
+ public:
+  std::shared_ptr<Dispatcher> get();  // GIL held (creates the thread once)
+  std::shared_ptr<Dispatcher> peek() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::shared_ptr<Dispatcher> dispatcher_;
+};
+
+// The Python callbacks of one client (touched only under the GIL).
+struct Handlers {
+  std::vector<py::object> update, presence, message, disconnect;
+  std::vector<py::object>& of(std::size_t kind) {
+    switch (kind) {
+      case 0: return update;
+      case 1: return presence;
+      case 2: return message;
+      default: return disconnect;
+    }
+  }
+};
+
+// Where one client's io side puts its events.
+class EventSink {
+ public:
+  static constexpr std::size_t kMaxQueuedEvents = 4096;
+
+  EventSink(std::shared_ptr<DispatcherSlot> slot, std::weak_ptr<Handlers> handlers)
+      : slot_(std::move(slot)), handlers_(std::move(handlers)) {}
+  // io side. A DisconnectEvent also marks the sink closed.
+  void push(Event e);
+  // Python side, GIL released: the oldest queued event of kind (any kind
+  // when kind is empty), removed from the queue; nullopt at the deadline
+  // or, with *closed set, once the client closed and nothing matching is
+  // queued.
+  std::optional<Event> next(const std::string& kind, std::chrono::milliseconds timeout, bool* closed);
+  // Set once a callback is registered (GIL held).
+  void enable_callbacks() { callbacks_.store(true); }
+  std::uint64_t dropped() const;
+
+ private:
+  std::shared_ptr<DispatcherSlot> slot_;
+  std::weak_ptr<Handlers> handlers_;
+  std::atomic<bool> callbacks_{false};
+  mutable std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<Event> queue_;
+  bool closed_ = false;
+  std::uint64_t dropped_ = 0;
+};
+
+// Every live dispatcher, so Python's exit can stop them all (their threads
+// must not wait for the GIL while the interpreter finalizes).
+void stop_all_dispatchers();
+
+py::object to_python(const Event& e);
+
+}  // namespace terrane::python

@@ -1,0 +1,221 @@
+// terrane._native: the bindings of client/python/py_client.h. The package
+// terrane (client/python/terrane/__init__.py) re-exports them and adds the
+// asyncio helpers; terrane/__init__.pyi holds the type hints.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "client/python/events.h"
+#include "client/python/py_client.h"
+
+namespace {
+
+std::string repr(const terrane::python::Vec3& v) {
+  const auto [x, y, z] = v;
+  return "(" + std::to_string(x) + ", " + std::to_string(y) + ", " + std::to_string(z) + ")";
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_native, m) {
+  using namespace terrane::python;
+  namespace py = pybind11;
+  m.doc() = "Terrane's client library for scripts: connect to a terrane-server, query its world, edit it, walk it.";
+  py::register_exception<EditRejected>(m, "EditRejected", PyExc_RuntimeError);
+  py::register_exception<Unreachable>(m, "Unreachable", PyExc_RuntimeError);
+
+  py::class_<UpdateEvent>(m, "Update", "Voxels changed by other clients' (or this one's) edits in one server tick.")
+      .def_property_readonly_static("kind", [](const py::object&) { return "update"; })
+      .def_readonly("tick", &UpdateEvent::tick, "The server tick the edits were applied in.")
+      .def_readonly("chunks", &UpdateEvent::chunks, "[((cx, cy, cz), revision)]: the 32^3 chunks touched.")
+      .def_readonly("regions", &UpdateEvent::regions,
+                    "[((x0, y0, z0), (x1, y1, z1))]: per chunk held at full resolution, the changed voxels [min, max).")
+      .def("__repr__", [](const UpdateEvent& e) {
+        return "<Update tick=" + std::to_string(e.tick) + " chunks=" + std::to_string(e.chunks.size()) + ">";
+      });
+  py::class_<Player>(m, "Player", "Another client in view.")
+      .def_readonly("id", &Player::id, "The server's id of the client (stable for its connection).")
+      .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
+      .def("__repr__",
+           [](const Player& p) { return "<Player id=" + std::to_string(p.id) + " at " + repr(p.position) + ">"; });
+  py::class_<PresenceEvent>(m, "Presence", "The other clients in view, nearest first (sent about once a second).")
+      .def_property_readonly_static("kind", [](const py::object&) { return "presence"; })
+      .def_readonly("players", &PresenceEvent::players)
+      .def("__repr__",
+           [](const PresenceEvent& e) { return "<Presence players=" + std::to_string(e.players.size()) + ">"; });
+  py::class_<MessageEvent>(m, "Message", "A notice from the server's operators.")
+      .def_property_readonly_static("kind", [](const py::object&) { return "message"; })
+      .def_readonly("type", &MessageEvent::kind, "'say' (a message) or 'shutdown' (the server is stopping).")
+      .def_readonly("text", &MessageEvent::text)
+      .def_readonly("seconds_left", &MessageEvent::seconds_left, "shutdown: seconds until the server stops.")
+      .def_readonly("reconnect", &MessageEvent::reconnect, "shutdown: whether the server says it comes back.")
+      .def("__repr__", [](const MessageEvent& e) { return "<Message " + e.kind + ": " + e.text + ">"; });
+  py::class_<DisconnectEvent>(m, "Disconnect", "The connection closed for good.")
+      .def_property_readonly_static("kind", [](const py::object&) { return "disconnect"; })
+      .def_readonly("reason", &DisconnectEvent::reason)
+      .def("__repr__", [](const DisconnectEvent& e) { return "<Disconnect: " + e.reason + ">"; });
+
+  py::class_<EditFuture>(m, "EditFuture", "The outcome of one edit, answered by the server.")
+      .def_property_readonly("id", &EditFuture::id, "The edit's id on this connection.")
+      .def("done", &EditFuture::done, "True once the server answered (acknowledged or rejected).")
+      .def("result", &EditFuture::result, py::arg("timeout") = 30.0,
+           "Wait for the answer: True once the edit is applied and stored (durable); raises EditRejected(reason), "
+           "TimeoutError or ConnectionError.");
+
+  py::class_<PyClient, std::shared_ptr<PyClient>>(m, "Client",
+                                                   R"(A connection to a terrane-server and a replica of what it streams.
+
+Made by terrane.connect(...) (or a Swarm). Queries read the replica: what
+the server has sent, at full resolution near the client and as coarse mips
+farther out. Edits return an EditFuture. Events (update, presence,
+message, disconnect) reach callbacks registered with on_update(fn) and
+friends, run on a thread of their own, and wait in a queue for
+next_event(). Every wait releases the GIL; a closed connection raises
+ConnectionError instead of hanging.)")
+      // events and waits
+      .def("wait_ready", &PyClient::wait_ready, py::arg("timeout") = 30.0,
+           "Wait for the server's Welcome (the handshake is done; materials and bounds are known).")
+      .def("wait_loaded", &PyClient::wait_loaded, py::arg("radius") = py::none(), py::arg("timeout") = 60.0,
+           "Wait until every chunk within radius (default: the full-resolution radius) of the client is held at "
+           "full resolution. Returns only when that is true.")
+      .def_property_readonly("loaded", &PyClient::loaded, "The whole full-resolution region is held now.")
+      .def("verify", &PyClient::verify, py::arg("timeout") = 60.0,
+           "Ask the server for the region hash of every full-resolution chunk and compare each with the replica; "
+           "returns how many differ (0: the replica is exact).")
+      .def("next_event", &PyClient::next_event, py::arg("kind") = "", py::arg("timeout") = 30.0,
+           "The oldest queued event (of kind 'update', 'presence', 'message' or 'disconnect', or any), removed from "
+           "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
+           "ConnectionError once closed with nothing left.")
+      .def(
+          "on_update", [](PyClient& c, py::object fn) { return c.on(0, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Update) for every update batch applied to the replica (usable as a decorator).")
+      .def(
+          "on_presence", [](PyClient& c, py::object fn) { return c.on(1, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Presence) when the server says who is in view.")
+      .def(
+          "on_message", [](PyClient& c, py::object fn) { return c.on(2, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Message) for notices from the server's operators.")
+      .def(
+          "on_disconnect", [](PyClient& c, py::object fn) { return c.on(3, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Disconnect) when the connection closes for good.")
+      .def_property_readonly("events_dropped", &PyClient::events_dropped,
+                             "Events dropped from the queue because nobody took them (the oldest go first).")
+      // the replica
+      .def("voxel", &PyClient::voxel, py::arg("position"),
+           "(material name, occupancy 0..255) at integer (x, y, z), at the best resolution held (Air if nothing).")
+      .def("resolution", &PyClient::resolution, py::arg("position"),
+           "How the voxel is known: 0 full resolution, 1..3 a mip level, -1 not at all.")
+      .def("holds", &PyClient::holds, py::arg("min"), py::arg("max"),
+           "True if every voxel of [min, max) is held at full resolution.")
+      .def("read_box", &PyClient::read_box, py::arg("min"), py::arg("max"),
+           "The replica's full-resolution voxels of [min, max) as a uint8 numpy array of shape (2, y, z, x): "
+           "materials, occupancies (Air where not held).")
+      .def("raycast", &PyClient::raycast, py::arg("origin"), py::arg("direction"), py::arg("max_distance") = 256.0,
+           "The first solid voxel along a ray: ((x, y, z), normal, distance, material) or None.")
+      .def("ground", &PyClient::ground, py::arg("x"), py::arg("z"),
+           "The y just above the highest solid voxel of column (x, z) as held, or None.")
+      .def_property_readonly("presence", &PyClient::presence, "The other clients in view, nearest first.")
+      .def_property_readonly("materials", &PyClient::materials, "The world's material names, by id.")
+      // edits
+      .def("fill_box", &PyClient::fill_box, py::arg("min"), py::arg("max"), py::arg("material"),
+           py::arg("occupancy") = 255, "Fill [min, max) with a material (name or id; 'Air' clears).")
+      .def("fill_sphere", &PyClient::fill_sphere, py::arg("center"), py::arg("radius"), py::arg("material"),
+           "Fill a sphere (radius up to 32) with a material, with a smooth surface.")
+      .def("dig", &PyClient::dig, py::arg("center"), py::arg("radius"), "Clear a sphere (radius up to 32).")
+      .def("paint", &PyClient::paint, py::arg("center"), py::arg("radius"), py::arg("material"),
+           "Change the material of the solid voxels in a sphere, keeping their shape.")
+      .def("smooth", &PyClient::smooth, py::arg("center"), py::arg("radius"), py::arg("strength") = 0.5,
+           "Move each voxel's occupancy toward its neighbourhood's mean by strength (0, 1].")
+      .def("write_box", &PyClient::write_box, py::arg("min"), py::arg("voxels"),
+           "Write a uint8 array of shape (2, y, z, x) (materials, occupancies) at min; at most 32^3 voxels.")
+      .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
+      .def("redo", &PyClient::redo, "Redo the last undone edit.")
+      .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
+           "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")
+      // movement
+      .def("move_to", &PyClient::move_to, py::arg("position"),
+           "Move to (x, y, z) (feet); the server streams around the new place.")
+      .def("walk_to", &PyClient::walk_to, py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
+           py::arg("max_nodes") = 200000,
+           "Walk to the place to stand nearest target over the voxel surface (A*: steps up to 1 voxel, drops up to "
+           "3, 2 voxels of head room, never through what is not held at full resolution), at speed voxels per "
+           "second. Returns the places walked. Raises Unreachable with the reason when there is no way.")
+      .def("look_at", &PyClient::look_at, py::arg("point"),
+           "Face a point (from the eye, 1.6 above the feet); returns the unit direction. Facing is the script's: "
+           "the protocol carries no orientation.")
+      .def_property_readonly("facing", &PyClient::facing, "The unit direction the client faces.")
+      .def("target", &PyClient::target, py::arg("max_distance") = 64.0,
+           "What the client looks at: raycast from the eye along facing.")
+      .def_property_readonly("position", &PyClient::position, "(x, y, z) of the client's feet, as last sent.")
+      // the connection
+      .def_property_readonly("name", &PyClient::name)
+      .def_property_readonly("closed", &PyClient::closed)
+      .def_property_readonly("disconnect_reason", &PyClient::disconnect_reason)
+      .def("close", &PyClient::close, "Say goodbye and close the connection (idempotent).")
+      .def("__enter__", [](const std::shared_ptr<PyClient>& c) { return c; })
+      .def("__exit__", [](PyClient& c, const py::object&, const py::object&, const py::object&) { c.close(); })
+      .def("__repr__", [](const PyClient& c) {
+        return "<terrane.Client '" + c.name() + "'" + (c.closed() ? " closed" : "") + ">";
+      });
+
+  py::class_<Swarm, std::shared_ptr<Swarm>>(m, "Swarm", R"(Many clients from one script, cheaply.
+
+The clients share one small pool of io threads (as terrane-bots does) and
+one thread for their callbacks, so a hundred scripted bots cost a few
+threads, not a hundred. A Swarm is a sequence of Clients.)")
+      .def(py::init([](int n, const std::string& address, const std::string& name, const std::string& token,
+                       double spread, int view_distance, int full_res_radius, int threads) {
+             ConnectArgs a;
+             a.address = address;
+             a.name = name;
+             a.token = token;
+             a.view_distance = view_distance;
+             a.full_res_radius = full_res_radius;
+             return std::make_shared<Swarm>(n, std::move(a), spread, threads);
+           }),
+           py::arg("n"), py::arg("address"), py::arg("name") = "bot", py::arg("token") = "", py::arg("spread") = 0.0,
+           py::arg("view_distance") = 64, py::arg("full_res_radius") = 32, py::arg("threads") = 2,
+           "Connect n clients named name-0 .. name-(n-1), spread evenly over a disc of radius spread around the "
+           "server's spawn.")
+      .def("__len__", &Swarm::size)
+      .def("__getitem__", &Swarm::at)
+      .def("__iter__", [](const Swarm& s) { return py::iter(py::cast(s.clients())); })
+      .def_property_readonly("clients", &Swarm::clients)
+      .def("wait_ready", &Swarm::wait_ready, py::arg("timeout") = 60.0, "Wait until every client is welcomed.")
+      .def("wait_loaded", &Swarm::wait_loaded, py::arg("timeout") = 120.0,
+           "Wait until every client holds its full-resolution region.")
+      .def("verify", &Swarm::verify, py::arg("timeout") = 120.0,
+           "Every client's verify(): the total of chunks that differ from the server (0: all exact).")
+      .def("close", &Swarm::close, "Close every client.")
+      .def("__enter__", [](const std::shared_ptr<Swarm>& s) { return s; })
+      .def("__exit__", [](Swarm& s, const py::object&, const py::object&, const py::object&) { s.close(); });
+
+  m.def(
+      "connect",
+      [](const std::string& address, const std::string& name, const std::string& token, std::optional<Vec3> position,
+         int view_distance, int full_res_radius, bool reconnect) {
+        ConnectArgs a;
+        a.address = address;
+        a.name = name;
+        a.token = token;
+        a.position = position;
+        a.view_distance = view_distance;
+        a.full_res_radius = full_res_radius;
+        a.reconnect = reconnect;
+        auto c = std::make_shared<PyClient>(std::move(a));
+        remember_client(c);
+        return c;
+      },
+      py::arg("address"), py::arg("name") = "python", py::arg("token") = "", py::arg("position") = py::none(),
+      py::arg("view_distance") = 128, py::arg("full_res_radius") = 48, py::arg("reconnect") = false,
+      "Connect to a terrane-server at 'HOST:PORT'. position None starts at the server's spawn. With reconnect, a "
+      "dropped connection is retried with backoff and the replica kept. Raises ConnectionError if the server "
+      "cannot be reached, ValueError for bad arguments.");
+
+  // Before the interpreter finalizes: close every client and stop every
+  // callbacks thread, so none waits for a GIL that will not come back.
+  py::module_::import("atexit").attr("register")(py::cpp_function([] {
+    close_all_clients();
+    stop_all_dispatchers();
+  }));
+}

@@ -1,0 +1,642 @@
+#include "client/python/py_client.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "client/path.h"
+#include "common/cli.h"
+#include "common/view.h"
+
+namespace terrane::python {
+
+using Clock = std::chrono::steady_clock;
+
+[[noreturn]] void raise(PyObject* type, const std::string& what) {
+  PyErr_SetString(type, what.c_str());
+  throw py::error_already_set();
+}
+
+std::chrono::milliseconds timeout_of(double seconds) {
+  if (!(seconds >= 0) || seconds > 86400) raise(PyExc_ValueError, "timeout must be 0..86400 seconds");
+  return std::chrono::milliseconds(static_cast<std::int64_t>(seconds * 1000));
+}
+
+namespace {
+
+constexpr float kEyeHeight = 1.6f;
+
+std::string str(Vec3i v) {
+  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
+}
+
+Vec3i voxel_of(const IVec3& p, const char* what) {
+  const auto [x, y, z] = p;
+  for (const std::int64_t v : {x, y, z})
+    if (v < -kMaxWireCoordinate || v > kMaxWireCoordinate)
+      raise(PyExc_ValueError, std::string(what) + ": coordinates must lie within +-2^24");
+  return {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
+}
+
+Vec3f point_of(const Vec3& p, const char* what) {
+  const auto [x, y, z] = p;
+  for (const double v : {x, y, z})
+    if (!std::isfinite(v) || std::abs(v) > kMaxWireCoordinate)
+      raise(PyExc_ValueError, std::string(what) + ": coordinates must be finite, within +-2^24");
+  return {static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
+}
+
+float radius_of(double r) {
+  if (!(r > 0) || r > kMaxSphereRadius) raise(PyExc_ValueError, "radius must be in (0, 32]");
+  return static_cast<float>(r);
+}
+
+Region box_of(const IVec3& lo, const IVec3& hi, const char* what) {
+  const Region r{voxel_of(lo, what), voxel_of(hi, what)};
+  if (r.empty()) raise(PyExc_ValueError, std::string(what) + ": max must exceed min on every axis");
+  return r;
+}
+
+// (2, y, z, x) uint8: materials, occupancies.
+py::array_t<std::uint8_t> planes(Vec3i s, const auto& voxel_at) {
+  py::array_t<std::uint8_t> out({std::size_t{2}, std::size_t(s.y), std::size_t(s.z), std::size_t(s.x)});
+  auto m = out.mutable_unchecked<4>();
+  for (int y = 0; y < s.y; ++y)
+    for (int z = 0; z < s.z; ++z)
+      for (int x = 0; x < s.x; ++x) {
+        const Voxel v = voxel_at(x, y, z);
+        m(0, y, z, x) = v.material;
+        m(1, y, z, x) = v.occupancy;
+      }
+  return out;
+}
+
+// Under the client's lock (a wait_until predicate): touches only v.
+bool held_full(const ClientView& v, const std::vector<Vec3i>& chunks) {
+  if (!v.welcomed) return false;
+  for (const Vec3i cp : chunks) {
+    const ChunkCoverage* c = v.replica.coverage(cp);
+    if (c == nullptr || c->state == CoverageState::kMip) return false;
+  }
+  return true;
+}
+
+std::mutex g_clients_mutex;
+std::vector<std::weak_ptr<PyClient>> g_clients;
+
+}  // namespace
+
+void remember_client(const std::shared_ptr<PyClient>& c) {
+  std::lock_guard lock(g_clients_mutex);
+  std::erase_if(g_clients, [](const auto& w) { return w.expired(); });
+  g_clients.push_back(c);
+}
+
+void close_all_clients() {
+  std::vector<std::shared_ptr<PyClient>> live;
+  {
+    std::lock_guard lock(g_clients_mutex);
+    for (const auto& w : g_clients)
+      if (auto c = w.lock()) live.push_back(c);
+  }
+  for (const auto& c : live) c->close();
+}
+
+// --- EditFuture -----------------------------------------------------------------
+bool EditFuture::done() const {
+  bool d = false;
+  c_->wait_until([&](const ClientView& v) { return d = v.edits.count(id_) != 0; }, std::chrono::milliseconds(0));
+  return d;
+}
+
+bool EditFuture::result(double timeout) {
+  const auto t = timeout_of(timeout);
+  std::optional<EditOutcome> o;
+  bool closed = false;
+  {
+    py::gil_scoped_release nogil;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          if (auto it = v.edits.find(id_); it != v.edits.end()) o = it->second;
+          closed = v.closed;
+          return o.has_value() || closed;
+        },
+        t);
+  }
+  if (o && o->accepted) return true;
+  if (o) throw EditRejected(o->reason);
+  if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
+  raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
+}
+
+// --- IoPool -----------------------------------------------------------------------
+IoPool::IoPool(int threads) : guard_(asio::make_work_guard(io_)) {
+  for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { io_.run(); });
+}
+
+IoPool::~IoPool() {
+  guard_.reset();
+  io_.stop();
+  const auto join = [&] {
+    for (auto& t : threads_) t.join();
+  };
+  if (Py_IsInitialized() && PyGILState_Check()) {
+    py::gil_scoped_release nogil;
+    join();
+  } else {
+    join();
+  }
+}
+
+// --- PyClient ---------------------------------------------------------------------
+PyClient::PyClient(ConnectArgs a) : name_(a.name) {
+  const auto hp = parse_host_port(a.address);
+  if (!hp) raise(PyExc_ValueError, "address: " + hp.error().message);
+  if (hp->second == 0) raise(PyExc_ValueError, "address '" + a.address + "': port must be 1..65535");
+  if (a.name.empty() || a.name.size() > kMaxClientNameBytes) raise(PyExc_ValueError, "name must be 1..64 bytes");
+  if (a.view_distance < 1 || a.view_distance > 16384 || a.full_res_radius < 1 || a.full_res_radius > a.view_distance)
+    raise(PyExc_ValueError, "view_distance must be 1..16384 and full_res_radius 1..view_distance");
+  ClientOptions o;
+  o.host = hp->first;
+  o.port = hp->second;
+  o.name = a.name;
+  o.auth_token = a.token;
+  o.reconnect = a.reconnect;
+  o.state.view_distance = a.view_distance;
+  o.state.full_res_radius = a.full_res_radius;
+  o.spawn_offset = a.spawn_offset;
+  if (a.position) {
+    o.start_at_spawn = false;
+    o.state.position = point_of(*a.position, "position");
+  }
+  if (a.pool) o.io_context = &a.pool->io();
+  own_slot_ = !a.slot;
+  slot_ = a.slot ? a.slot : std::make_shared<DispatcherSlot>();
+  handlers_ = std::make_shared<Handlers>();
+  sink_ = std::make_shared<EventSink>(slot_, handlers_);
+  ClientCallbacks cb;
+  cb.on_update = [sink = sink_](const UpdateInfo& u) { sink->push(to_event(u)); };
+  cb.on_presence = [sink = sink_](const std::vector<PresenceEntryMsg>& p) { sink->push(to_event(p)); };
+  cb.on_notice = [sink = sink_](const ServerNoticeMsg& n) { sink->push(to_event(n)); };
+  cb.on_disconnected = [sink = sink_](const std::string& reason) { sink->push(DisconnectEvent{reason}); };
+  // The pool outlives the client: the deleter holds it.
+  c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
+  std::string err;
+  bool ok = false;
+  {
+    py::gil_scoped_release nogil;
+    ok = c_->connect(&err);
+  }
+  if (!ok) raise(PyExc_ConnectionError, "cannot connect to " + a.address + ": " + err);
+}
+
+PyClient::~PyClient() {
+  if (Py_IsInitialized() && PyGILState_Check()) {
+    py::gil_scoped_release nogil;
+    c_->disconnect();
+  } else {
+    c_->disconnect();
+  }
+}
+
+void PyClient::close() {
+  {
+    py::gil_scoped_release nogil;
+    c_->disconnect();
+  }
+  // A client of its own: its callbacks thread ends once the disconnect
+  // event has run (a Swarm's ends with the Swarm).
+  if (own_slot_)
+    if (auto d = slot_->peek()) d->stop();
+}
+
+void PyClient::wait_ready(double timeout) {
+  const auto t = timeout_of(timeout);
+  bool ready = false, closed = false;
+  {
+    py::gil_scoped_release nogil;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          ready = v.welcomed;
+          closed = v.closed;
+          return ready || closed;
+        },
+        t);
+  }
+  if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
+}
+
+std::int32_t PyClient::full_radius(const WelcomeMsg& w) const {
+  const ClientStateMsg s = state();
+  return std::min({s.full_res_radius == 0 ? w.default_full_res_radius : s.full_res_radius, w.max_full_res_radius,
+                   s.view_distance == 0 ? w.default_view_distance : s.view_distance, w.max_view_distance});
+}
+
+void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
+  const auto t = timeout_of(timeout);
+  wait_ready(timeout);
+  const WelcomeMsg w = *c_->welcome();
+  const std::int32_t full = full_radius(w);
+  std::int32_t r = full;
+  if (radius) {
+    if (!(*radius > 0) || *radius > full)
+      raise(PyExc_ValueError, "radius must be in (0, " + std::to_string(full) + "], the full-resolution radius");
+    r = static_cast<std::int32_t>(std::ceil(*radius));
+  }
+  // The chunks first: the predicate runs under the client's lock.
+  const auto chunks = chunks_in_view(state().position, r, w.bounds());
+  bool loaded = false, closed = false;
+  {
+    py::gil_scoped_release nogil;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          closed = v.closed;
+          loaded = held_full(v, chunks);
+          return loaded || closed;
+        },
+        t);
+  }
+  if (!loaded) fail_or_timeout(closed, "the full-resolution region was not loaded within the timeout");
+}
+
+bool PyClient::loaded() const {
+  const auto w = c_->welcome();
+  if (!w) return false;
+  const auto chunks = chunks_in_view(state().position, full_radius(*w), w->bounds());
+  bool l = false;
+  c_->wait_until([&](const ClientView& v) { return l = held_full(v, chunks); }, std::chrono::milliseconds(0));
+  return l;
+}
+
+int PyClient::verify(double timeout) {
+  const auto t = timeout_of(timeout);
+  wait_ready(timeout);
+  const WelcomeMsg w = *c_->welcome();
+  const auto chunks = chunks_in_view(state().position, full_radius(w), w.bounds());
+  std::uint64_t before = 0;
+  c_->wait_until([&](const ClientView& v) { return before = v.counters.hash_matches + v.counters.hash_mismatches, true; },
+                 std::chrono::milliseconds(0));
+  for (const Vec3i cp : chunks)
+    if (!c_->request_region_hash(cp)) raise(PyExc_ConnectionError, "connection closed");
+  bool done = false, closed = false;
+  int bad = 0;
+  {
+    py::gil_scoped_release nogil;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          closed = v.closed;
+          done = v.counters.hash_matches + v.counters.hash_mismatches >= before + chunks.size();
+          if (done) {
+            bad = 0;
+            for (const Vec3i cp : chunks)
+              if (auto it = v.hash_checks.find(cp); it == v.hash_checks.end() || !it->second) ++bad;
+          }
+          return done || closed;
+        },
+        t);
+  }
+  if (!done) fail_or_timeout(closed, "region hashes not answered within the timeout");
+  return bad;
+}
+
+py::object PyClient::next_event(const std::string& kind, double timeout) {
+  if (!kind.empty() && kind != "update" && kind != "presence" && kind != "message" && kind != "disconnect")
+    raise(PyExc_ValueError, "kind must be None, 'update', 'presence', 'message' or 'disconnect', not '" + kind + "'");
+  const auto t = timeout_of(timeout);
+  std::optional<Event> e;
+  bool closed = false;
+  {
+    py::gil_scoped_release nogil;
+    e = sink_->next(kind, t, &closed);
+  }
+  if (e) return to_python(*e);
+  fail_or_timeout(closed, "no " + (kind.empty() ? std::string("event") : kind + " event") + " within the timeout");
+}
+
+py::object PyClient::on(std::size_t kind, py::object fn) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "the callback must be callable");
+  handlers_->of(kind).push_back(fn);
+  slot_->get();
+  sink_->enable_callbacks();
+  return fn;
+}
+
+std::uint64_t PyClient::events_dropped() const { return sink_->dropped(); }
+
+py::tuple PyClient::voxel(const IVec3& p) const {
+  const Voxel v = c_->get(voxel_of(p, "voxel"));
+  return py::make_tuple(material_name(v.material), v.occupancy);
+}
+
+int PyClient::resolution(const IVec3& p) const { return c_->resolution_at(voxel_of(p, "resolution")); }
+
+bool PyClient::holds(const IVec3& lo, const IVec3& hi) const {
+  const Region r = box_of(lo, hi, "holds");
+  const Vec3i c0 = chunk_of(r.min), c1 = chunk_of(r.max - Vec3i{1, 1, 1});
+  if ((std::int64_t{c1.x} - c0.x + 1) * (std::int64_t{c1.y} - c0.y + 1) * (std::int64_t{c1.z} - c0.z + 1) > 1 << 20)
+    raise(PyExc_ValueError, "holds: at most 2^20 chunks at once");
+  return c_->with_replica([&](const Replica& rep) {
+    for (int y = c0.y; y <= c1.y; ++y)
+      for (int z = c0.z; z <= c1.z; ++z)
+        for (int x = c0.x; x <= c1.x; ++x) {
+          const ChunkCoverage* c = rep.coverage({x, y, z});
+          if (c == nullptr || c->state == CoverageState::kMip) return false;
+        }
+    return true;
+  });
+}
+
+py::array_t<std::uint8_t> PyClient::read_box(const IVec3& lo, const IVec3& hi) const {
+  const Region r = box_of(lo, hi, "read_box");
+  if (r.volume() > (std::int64_t{1} << 26)) raise(PyExc_ValueError, "read_box: at most 2^26 voxels at once");
+  Box box(r.size());
+  c_->read_box(r.min, box);
+  return planes(r.size(), [&](int x, int y, int z) { return box.get(x, y, z); });
+}
+
+py::object PyClient::raycast(const Vec3& origin, const Vec3& direction, double max_distance) const {
+  const Vec3f d = point_of(direction, "direction");
+  if (d.x == 0 && d.y == 0 && d.z == 0) raise(PyExc_ValueError, "raycast: the direction must not be zero");
+  if (!(max_distance > 0) || max_distance > 4096) raise(PyExc_ValueError, "raycast: max_distance must be in (0, 4096]");
+  const auto hit = c_->raycast(point_of(origin, "origin"), d, static_cast<float>(max_distance));
+  if (!hit) return py::none();
+  return py::make_tuple(py::make_tuple(hit->voxel.x, hit->voxel.y, hit->voxel.z),
+                        py::make_tuple(hit->normal.x, hit->normal.y, hit->normal.z), hit->distance,
+                        material_name(hit->value.material));
+}
+
+py::object PyClient::ground(std::int64_t x, std::int64_t z) const {
+  const Vec3i p = voxel_of({x, 0, z}, "ground");
+  const auto h = c_->surface_height(p.x, p.z);
+  return h ? py::object(py::int_(*h)) : py::none();
+}
+
+std::vector<Player> PyClient::presence() const { return to_event(c_->presence()).players; }
+
+EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object& material, int occupancy) {
+  const Region r = box_of(lo, hi, "fill_box");
+  if (occupancy < 0 || occupancy > 255) raise(PyExc_ValueError, "occupancy must be 0..255");
+  const Material m = material_of(material);
+  return sent(c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))));
+}
+EditFuture PyClient::fill_sphere(const Vec3& center, double radius, const py::object& material) {
+  return sent(c_->fill_sphere(point_of(center, "center"), radius_of(radius), material_of(material)));
+}
+EditFuture PyClient::dig(const Vec3& center, double radius) {
+  return sent(c_->dig(point_of(center, "center"), radius_of(radius)));
+}
+EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& material) {
+  return sent(c_->paint(point_of(center, "center"), radius_of(radius), material_of(material)));
+}
+EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) {
+  if (!(strength > 0) || strength > 1) raise(PyExc_ValueError, "smooth: strength must be in (0, 1]");
+  return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
+}
+
+EditFuture PyClient::write_box(const IVec3& lo,
+                               const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>& a) {
+  if (a.ndim() != 4 || a.shape(0) != 2) raise(PyExc_ValueError, "write_box: the array must have shape (2, y, z, x)");
+  const Vec3i size{static_cast<int>(a.shape(3)), static_cast<int>(a.shape(1)), static_cast<int>(a.shape(2))};
+  const Vec3i min = voxel_of(lo, "write_box min");
+  const Region r{min, min + size};
+  if (r.empty() || r.volume() > kMaxRawBoxVolume)
+    raise(PyExc_ValueError, "write_box: 1 to " + std::to_string(kMaxRawBoxVolume) + " voxels");
+  const std::size_t known = std::max<std::size_t>(materials().size(), 1);
+  auto m = a.unchecked<4>();
+  std::vector<Voxel> voxels;
+  voxels.reserve(static_cast<std::size_t>(r.volume()));
+  for (int y = 0; y < size.y; ++y)
+    for (int z = 0; z < size.z; ++z)
+      for (int x = 0; x < size.x; ++x) {
+        const std::uint8_t mat = m(0, y, z, x), occ = m(1, y, z, x);
+        if (mat >= known)
+          raise(PyExc_ValueError, "write_box: material " + std::to_string(mat) + " at " + str({x, y, z}) +
+                                      " is not one of this world's");
+        voxels.push_back(mat == kAir ? Voxel{} : make_voxel(mat, occ));
+      }
+  return sent(c_->write_box(r, voxels));
+}
+
+EditFuture PyClient::undo() { return sent(c_->undo()); }
+EditFuture PyClient::redo() { return sent(c_->redo()); }
+
+py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3& hi, double timeout) {
+  const auto t = timeout_of(timeout);
+  const Region r = box_of(lo, hi, "read_server_box");
+  if (r.volume() > kMaxRawBoxVolume)
+    raise(PyExc_ValueError, "read_server_box: 1 to " + std::to_string(kMaxRawBoxVolume) + " voxels");
+  const std::uint32_t id = c_->request_read_box(r);
+  if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+  std::optional<ReadBoxResultMsg> res;
+  bool closed = false;
+  {
+    py::gil_scoped_release nogil;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          if (auto it = v.read_results.find(id); it != v.read_results.end()) res = it->second;
+          closed = v.closed;
+          return res.has_value() || closed;
+        },
+        t);
+  }
+  if (!res) fail_or_timeout(closed, "the server did not answer the read within the timeout");
+  if (!res->error.empty()) raise(PyExc_ValueError, "read_server_box: " + res->error);
+  const Vec3i s = r.size();
+  return planes(s, [&](int x, int y, int z) { return res->voxels[static_cast<std::size_t>((y * s.z + z) * s.x + x)]; });
+}
+
+void PyClient::move_to(const Vec3& position) {
+  ClientStateMsg s = state();
+  s.position = point_of(position, "position");
+  if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
+}
+
+std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
+  if (!(speed > 0) || speed > 64) raise(PyExc_ValueError, "walk_to: speed must be in (0, 64] voxels per second");
+  if (max_nodes < 1 || max_nodes > 10'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..10^7");
+  const Vec3f goal_point = point_of(target, "target");
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  wait_ready(timeout);
+  PathOptions o;
+  o.max_nodes = max_nodes;
+  const auto floor_of = [](float v) { return static_cast<std::int32_t>(std::floor(v)); };
+  const Vec3i goal_voxel{floor_of(goal_point.x), floor_of(goal_point.y), floor_of(goal_point.z)};
+  std::vector<IVec3> walked;
+  // The world may change under the walker: each step is checked before it
+  // is taken, and a blocked way is searched again (a few times).
+  constexpr int kReplans = 3;
+  for (int attempt = 0;; ++attempt) {
+    const Vec3f here = state().position;
+    std::optional<Vec3i> start, goal;
+    PathResult path;
+    int goal_resolution = 0;
+    {
+      py::gil_scoped_release nogil;
+      c_->with_replica([&](const Replica& rep) {
+        start = place_near(rep, floor_of(here.x), floor_of(here.z), floor_of(here.y + 0.01f), 32, o);
+        goal = place_near(rep, goal_voxel.x, goal_voxel.z, goal_voxel.y, 8, o);
+        goal_resolution = rep.resolution_at(goal_voxel);
+        if (start && goal) path = find_path(rep, *start, *goal, o);
+      });
+    }
+    if (!start)
+      throw Unreachable("walk_to: no ground held at full resolution under the client at " +
+                        str({floor_of(here.x), floor_of(here.y), floor_of(here.z)}));
+    if (!goal)
+      throw Unreachable(goal_resolution != 0
+                            ? "walk_to: the target " + str(goal_voxel) +
+                                  " is not held at full resolution (beyond the full-resolution radius, or not loaded yet)"
+                            : "walk_to: no place to stand within 8 voxels of the target " + str(goal_voxel));
+    if (!path.found) throw Unreachable("walk_to: " + path.error);
+    bool blocked = false;
+    Vec3f at = here;
+    for (const Vec3i s : path.steps) {
+      const bool still = c_->with_replica([&](const Replica& rep) { return is_place(rep, s, o); });
+      if (!still) {
+        blocked = true;
+        break;
+      }
+      const Vec3f next{static_cast<float>(s.x) + 0.5f, static_cast<float>(s.y), static_cast<float>(s.z) + 0.5f};
+      const Vec3f d = next - at;
+      const double dist = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
+      const auto pace = std::chrono::milliseconds(static_cast<std::int64_t>(dist / speed * 1000));
+      if (Clock::now() + pace > deadline) raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout");
+      bool closed = false;
+      {
+        py::gil_scoped_release nogil;
+        // Walking pace: the wait ends early only if the connection closes.
+        c_->wait_until([&](const ClientView& v) { return closed = v.closed; }, pace);
+      }
+      if (closed) raise(PyExc_ConnectionError, "connection closed while walking: " + c_->disconnect_reason());
+      move_to(vec(next));
+      at = next;
+      walked.push_back(ivec(s));
+    }
+    if (!blocked) return walked;
+    if (attempt == kReplans) throw Unreachable("walk_to: the way kept changing under the walker");
+  }
+}
+
+Vec3 PyClient::look_at(const Vec3& point) {
+  const Vec3f p = point_of(point, "point");
+  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
+  const Vec3f d = p - eye;
+  const float len = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+  if (!(len > 1e-6f)) raise(PyExc_ValueError, "look_at: the point is at the client's eye");
+  facing_ = d * (1.0f / len);
+  return vec(facing_);
+}
+
+py::object PyClient::target(double max_distance) const {
+  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
+  return raycast(vec(eye), vec(facing_), max_distance);
+}
+
+Vec3 PyClient::position() const { return vec(state().position); }
+
+std::vector<std::string> PyClient::materials() const {
+  const auto w = c_->welcome();
+  return w ? w->materials : std::vector<std::string>{};
+}
+
+ClientStateMsg PyClient::state() const { return c_->last_state().value_or(ClientStateMsg{}); }
+
+void PyClient::fail_or_timeout(bool closed, const std::string& what) const {
+  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c_->disconnect_reason());
+  raise(PyExc_TimeoutError, what);
+}
+
+std::string PyClient::material_name(Material m) const {
+  const auto names = materials();
+  return m < names.size() ? names[m] : std::to_string(m);
+}
+
+Material PyClient::material_of(const py::object& m) const {
+  const auto names = materials();
+  if (py::isinstance<py::bool_>(m)) raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
+  if (py::isinstance<py::int_>(m)) {
+    const long id = m.cast<long>();
+    if (id < 0 || static_cast<std::size_t>(id) >= std::max<std::size_t>(names.size(), 1))
+      raise(PyExc_ValueError, "unknown material " + std::to_string(id) + ": this world defines 0.." +
+                                  std::to_string(names.empty() ? 0 : names.size() - 1));
+    return static_cast<Material>(id);
+  }
+  if (py::isinstance<py::str>(m)) {
+    const std::string s = m.cast<std::string>();
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (names[i] == s) return static_cast<Material>(i);
+    std::string known;
+    for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
+    raise(PyExc_ValueError, "unknown material '" + s + "': this world has " + known);
+  }
+  raise(PyExc_TypeError, "material must be a name (str) or an id (int)");
+}
+
+EditFuture PyClient::sent(std::uint32_t id) {
+  if (id == 0) raise(PyExc_ConnectionError, "the edit could not be sent (connection closed or queue full)");
+  return EditFuture(c_, id);
+}
+
+// --- Swarm --------------------------------------------------------------------------
+Swarm::Swarm(int n, ConnectArgs base, double spread, int threads) {
+  if (n < 1 || n > 10000) raise(PyExc_ValueError, "Swarm: n must be 1..10000");
+  if (threads < 1 || threads > 64) raise(PyExc_ValueError, "Swarm: threads must be 1..64");
+  if (!(spread >= 0) || spread > 1e6) raise(PyExc_ValueError, "Swarm: spread must be 0..10^6 voxels");
+  if (base.position) raise(PyExc_ValueError, "Swarm: clients start around the spawn (use spread), not at a position");
+  pool_ = std::make_shared<IoPool>(threads);
+  slot_ = std::make_shared<DispatcherSlot>();
+  clients_.reserve(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    ConnectArgs a = base;
+    a.name = base.name + "-" + std::to_string(i);
+    // A sunflower spiral: even density over a disc of radius spread.
+    const double r = spread * std::sqrt((i + 0.5) / n);
+    const double angle = i * std::numbers::pi * (3 - std::sqrt(5.0));
+    a.spawn_offset = Vec3f{static_cast<float>(r * std::cos(angle)), 0, static_cast<float>(r * std::sin(angle))};
+    a.pool = pool_;
+    a.slot = slot_;
+    auto c = std::make_shared<PyClient>(std::move(a));
+    remember_client(c);
+    clients_.push_back(std::move(c));
+  }
+}
+
+Swarm::~Swarm() { close(); }
+
+std::shared_ptr<PyClient> Swarm::at(std::ptrdiff_t i) const {
+  const auto n = static_cast<std::ptrdiff_t>(clients_.size());
+  if (i < 0) i += n;
+  if (i < 0 || i >= n) throw py::index_error("Swarm index out of range");
+  return clients_[static_cast<std::size_t>(i)];
+}
+
+namespace {
+// What is left of a timeout shared by several waits.
+double left(Clock::time_point deadline) {
+  return std::max(0.0, std::chrono::duration<double>(deadline - Clock::now()).count());
+}
+}  // namespace
+
+void Swarm::wait_ready(double timeout) {
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  for (const auto& c : clients_) c->wait_ready(left(deadline));
+}
+
+void Swarm::wait_loaded(double timeout) {
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  for (const auto& c : clients_) c->wait_loaded(std::nullopt, left(deadline));
+}
+
+int Swarm::verify(double timeout) {
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  int bad = 0;
+  for (const auto& c : clients_) bad += c->verify(left(deadline));
+  return bad;
+}
+
+void Swarm::close() {
+  for (const auto& c : clients_) c->close();
+  if (auto d = slot_ ? slot_->peek() : nullptr) d->stop();
+}
+
+}  // namespace terrane::python

@@ -1,0 +1,168 @@
+// The Python face of the client library: Client (one connection and its
+// replica), EditFuture (one edit's outcome) and Swarm (many clients on one
+// shared io pool and one callbacks thread). Every wait releases the GIL;
+// the library's io side never takes it (client/python/events.h).
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <asio.hpp>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/client.h"
+#include "client/python/events.h"
+
+namespace terrane::python {
+
+class EditRejected : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+class Unreachable : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] void raise(PyObject* type, const std::string& what);
+std::chrono::milliseconds timeout_of(double seconds);
+
+// The outcome of one edit: result() waits for the server's answer.
+class EditFuture {
+ public:
+  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
+  std::uint32_t id() const { return id_; }
+  bool done() const;
+  // True when acknowledged (applied and stored); raises EditRejected with
+  // the server's reason, TimeoutError, or ConnectionError.
+  bool result(double timeout);
+
+ private:
+  std::shared_ptr<Client> c_;
+  std::uint32_t id_;
+};
+
+// An io_context run by a few threads, shared by a Swarm's clients. It
+// outlives every client on it (each client's deleter holds it).
+class IoPool {
+ public:
+  explicit IoPool(int threads);
+  ~IoPool();
+  asio::io_context& io() { return io_; }
+
+ private:
+  asio::io_context io_;
+  asio::executor_work_guard<asio::io_context::executor_type> guard_;
+  std::vector<std::thread> threads_;
+};
+
+struct ConnectArgs {
+  std::string address;
+  std::string name = "python";
+  std::string token;
+  std::optional<Vec3> position;  // none: the server's spawn (plus spawn_offset)
+  Vec3f spawn_offset{0, 0, 0};
+  int view_distance = 128;
+  int full_res_radius = 48;
+  bool reconnect = false;
+  std::shared_ptr<IoPool> pool;           // null: the client owns its io thread
+  std::shared_ptr<DispatcherSlot> slot;   // null: a slot of its own
+};
+
+class PyClient {
+ public:
+  explicit PyClient(ConnectArgs a);
+  ~PyClient();
+
+  // --- events and waits --------------------------------------------------------
+  void wait_ready(double timeout);
+  void wait_loaded(std::optional<double> radius, double timeout);
+  bool loaded() const;
+  int verify(double timeout);
+  py::object next_event(const std::string& kind, double timeout);
+  // Registers fn for events of kind (update, presence, message, disconnect).
+  py::object on(std::size_t kind, py::object fn);
+  std::uint64_t events_dropped() const;
+
+  // --- the replica ---------------------------------------------------------------
+  py::tuple voxel(const IVec3& p) const;
+  int resolution(const IVec3& p) const;
+  bool holds(const IVec3& lo, const IVec3& hi) const;
+  py::array_t<std::uint8_t> read_box(const IVec3& lo, const IVec3& hi) const;
+  py::object raycast(const Vec3& origin, const Vec3& direction, double max_distance) const;
+  py::object ground(std::int64_t x, std::int64_t z) const;
+  std::vector<Player> presence() const;
+
+  // --- edits ---------------------------------------------------------------------
+  EditFuture fill_box(const IVec3& lo, const IVec3& hi, const py::object& material, int occupancy);
+  EditFuture fill_sphere(const Vec3& center, double radius, const py::object& material);
+  EditFuture dig(const Vec3& center, double radius);
+  EditFuture paint(const Vec3& center, double radius, const py::object& material);
+  EditFuture smooth(const Vec3& center, double radius, double strength);
+  EditFuture write_box(const IVec3& lo, const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>& a);
+  EditFuture undo();
+  EditFuture redo();
+  py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
+
+  // --- movement --------------------------------------------------------------------
+  void move_to(const Vec3& position);
+  std::vector<IVec3> walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes);
+  Vec3 look_at(const Vec3& point);
+  Vec3 position() const;
+  Vec3 facing() const { return vec(facing_); }
+  py::object target(double max_distance) const;
+
+  std::vector<std::string> materials() const;
+  bool closed() const { return c_->closed(); }
+  std::string disconnect_reason() const { return c_->disconnect_reason(); }
+  std::string name() const { return name_; }
+  void close();
+
+ private:
+  ClientStateMsg state() const;
+  std::int32_t full_radius(const WelcomeMsg& w) const;
+  [[noreturn]] void fail_or_timeout(bool closed, const std::string& what) const;
+  std::string material_name(Material m) const;
+  Material material_of(const py::object& m) const;
+  EditFuture sent(std::uint32_t id);
+
+  std::string name_;
+  std::shared_ptr<DispatcherSlot> slot_;
+  bool own_slot_ = false;               // not a Swarm's
+  std::shared_ptr<Handlers> handlers_;  // GIL
+  std::shared_ptr<EventSink> sink_;
+  std::shared_ptr<Client> c_;
+  Vec3f facing_{0, 0, 1};
+};
+
+// Every live client, so Python's exit can close them (registry of weak
+// pointers; the module's atexit hook calls close_all_clients).
+void remember_client(const std::shared_ptr<PyClient>& c);
+void close_all_clients();
+
+// n clients on one io pool of `threads` threads and one callbacks thread.
+class Swarm {
+ public:
+  Swarm(int n, ConnectArgs base, double spread, int threads);
+  ~Swarm();
+  std::size_t size() const { return clients_.size(); }
+  std::shared_ptr<PyClient> at(std::ptrdiff_t i) const;
+  const std::vector<std::shared_ptr<PyClient>>& clients() const { return clients_; }
+  void wait_ready(double timeout);
+  void wait_loaded(double timeout);
+  int verify(double timeout);
+  void close();
+
+ private:
+  std::shared_ptr<IoPool> pool_;
+  std::shared_ptr<DispatcherSlot> slot_;
+  std::vector<std::shared_ptr<PyClient>> clients_;
+};
+
+}  // namespace terrane::python
