@@ -107,7 +107,7 @@ Frame build_welcome(const WelcomeMsg& m) {
                                                m.bounds_max_y, m.max_view_distance, m.max_full_res_radius,
                                                m.max_frame_bytes, m.tick_hz, m.bounded_xz, m.bounds_min_x,
                                                m.bounds_min_z, m.bounds_max_x, m.bounds_max_z, m.default_view_distance,
-                                               m.default_full_res_radius));
+                                               m.default_full_res_radius, m.edits_per_second, m.edit_burst));
 }
 
 Frame build_disconnect(std::string_view reason) {
@@ -339,6 +339,9 @@ Result<WelcomeMsg> parse_welcome(const wire::Welcome& m) {
   if (out.default_view_distance < 0 || out.default_full_res_radius < 0 ||
       out.default_view_distance > out.max_view_distance || out.default_full_res_radius > out.max_full_res_radius)
     return invalid("welcome: defaults beyond the caps");
+  out.edits_per_second = m.edits_per_second();
+  out.edit_burst = m.edit_burst();
+  if (!(out.edits_per_second >= 0) || out.edits_per_second > 1e6) return invalid("welcome: edit rate out of range");
   return out;
 }
 

@@ -98,6 +98,8 @@ struct WelcomeMsg {
   bool bounded_xz = false;
   std::int32_t bounds_min_x = 0, bounds_min_z = 0, bounds_max_x = 0, bounds_max_z = 0;
   std::int32_t default_view_distance = 0, default_full_res_radius = 0;
+  float edits_per_second = 0;  // 0: unlimited (or a server that does not say)
+  std::uint32_t edit_burst = 0;
 
   // The world's bounds as the view rule and edits take them.
   WorldBounds bounds() const {

@@ -66,6 +66,9 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   w.bounds_max_z = meta.bounds.max_z;
   w.default_view_distance = s->options_.default_view_distance;
   w.default_full_res_radius = s->options_.default_full_res_radius;
+  // As the sessions' edit-rate buckets (replication/replicator.cpp) take them.
+  w.edits_per_second = static_cast<float>(s->options_.edits_per_second);
+  w.edit_burst = static_cast<std::uint32_t>(s->options_.edits_per_second * 2);
   s->welcome_.bounds = meta.bounds;
   auto access = AccessControl::open(options.world_dir, options.auth_token, options.player_tokens, options.admin_token);
   if (!access) return access.error();

@@ -58,9 +58,10 @@ PYBIND11_MODULE(_native, m) {
   py::class_<EditFuture>(m, "EditFuture", "The outcome of one edit, answered by the server.")
       .def_property_readonly("id", &EditFuture::id, "The edit's id on this connection.")
       .def("done", &EditFuture::done, "True once the server answered (acknowledged or rejected).")
-      .def("result", &EditFuture::result, py::arg("timeout") = 30.0,
-           "Wait for the answer: True once the edit is applied and stored (durable); raises EditRejected(reason), "
-           "TimeoutError or ConnectionError.");
+      .def("result", &EditFuture::result, py::arg("timeout") = 30.0, py::arg("visible") = true,
+           "Wait for the answer: True once the edit is applied and stored (durable) and, with visible, shown by "
+           "this client's replica (one more round trip; visible=False for throughput). Raises "
+           "EditRejected(reason), TimeoutError or ConnectionError.");
 
   py::class_<PyClient, std::shared_ptr<PyClient>>(m, "Client",
                                                    R"(A connection to a terrane-server and a replica of what it streams.
@@ -75,6 +76,8 @@ ConnectionError instead of hanging.)")
       // events and waits
       .def("wait_ready", &PyClient::wait_ready, py::arg("timeout") = 30.0,
            "Wait for the server's Welcome (the handshake is done; materials and bounds are known).")
+      .def("sync", &PyClient::sync, py::arg("timeout") = 30.0,
+           "Wait until everything the server sent before it reads this request is in the replica (one round trip).")
       .def("wait_loaded", &PyClient::wait_loaded, py::arg("radius") = py::none(), py::arg("timeout") = 60.0,
            "Wait until every chunk within radius (default: the full-resolution radius) of the client is held at "
            "full resolution. Returns only when that is true.")

@@ -109,8 +109,31 @@ bool EditFuture::done() const {
   return d;
 }
 
-bool EditFuture::result(double timeout) {
+void sync(Client& c, std::chrono::milliseconds timeout) {
+  const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
+  const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
+                static_cast<std::int32_t>(std::floor(p.z))};
+  const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
+  if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+  bool answered = false, closed = false;
+  {
+    py::gil_scoped_release nogil;
+    c.wait_until(
+        [&](const ClientView& view) {
+          answered = view.read_results.count(id) != 0;
+          closed = view.closed;
+          return answered || closed;
+        },
+        timeout);
+  }
+  if (answered) return;
+  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
+  raise(PyExc_TimeoutError, "the server did not answer within the timeout");
+}
+
+bool EditFuture::result(double timeout, bool visible) {
   const auto t = timeout_of(timeout);
+  const auto start = Clock::now();
   std::optional<EditOutcome> o;
   bool closed = false;
   {
@@ -123,7 +146,11 @@ bool EditFuture::result(double timeout) {
         },
         t);
   }
-  if (o && o->accepted) return true;
+  if (o && o->accepted) {
+    const auto spent = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start);
+    if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
+    return true;
+  }
   if (o) throw EditRejected(o->reason);
   if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
   raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
@@ -225,6 +252,8 @@ void PyClient::wait_ready(double timeout) {
   }
   if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
 }
+
+void PyClient::sync(double timeout) { python::sync(*c_, timeout_of(timeout)); }
 
 std::int32_t PyClient::full_radius(const WelcomeMsg& w) const {
   const ClientStateMsg s = state();
@@ -377,19 +406,24 @@ EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object
   const Region r = box_of(lo, hi, "fill_box");
   if (occupancy < 0 || occupancy > 255) raise(PyExc_ValueError, "occupancy must be 0..255");
   const Material m = material_of(material);
+  pace();
   return sent(c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))));
 }
 EditFuture PyClient::fill_sphere(const Vec3& center, double radius, const py::object& material) {
+  pace();
   return sent(c_->fill_sphere(point_of(center, "center"), radius_of(radius), material_of(material)));
 }
 EditFuture PyClient::dig(const Vec3& center, double radius) {
+  pace();
   return sent(c_->dig(point_of(center, "center"), radius_of(radius)));
 }
 EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& material) {
+  pace();
   return sent(c_->paint(point_of(center, "center"), radius_of(radius), material_of(material)));
 }
 EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) {
   if (!(strength > 0) || strength > 1) raise(PyExc_ValueError, "smooth: strength must be in (0, 1]");
+  pace();
   return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
 }
 
@@ -414,11 +448,18 @@ EditFuture PyClient::write_box(const IVec3& lo,
                                       " is not one of this world's");
         voxels.push_back(mat == kAir ? Voxel{} : make_voxel(mat, occ));
       }
+  pace();
   return sent(c_->write_box(r, voxels));
 }
 
-EditFuture PyClient::undo() { return sent(c_->undo()); }
-EditFuture PyClient::redo() { return sent(c_->redo()); }
+EditFuture PyClient::undo() {
+  pace();
+  return sent(c_->undo());
+}
+EditFuture PyClient::redo() {
+  pace();
+  return sent(c_->redo());
+}
 
 py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3& hi, double timeout) {
   const auto t = timeout_of(timeout);
@@ -570,6 +611,31 @@ Material PyClient::material_of(const py::object& m) const {
     raise(PyExc_ValueError, "unknown material '" + s + "': this world has " + known);
   }
   raise(PyExc_TypeError, "material must be a name (str) or an id (int)");
+}
+
+void PyClient::pace() {
+  const auto w = c_->welcome();
+  if (!w || !(w->edits_per_second > 0)) return;
+  // Below the server's bucket, with room for jitter on the way.
+  const double rate = w->edits_per_second * 0.9, burst = std::max(1.0, w->edit_burst / 2.0);
+  std::chrono::milliseconds wait{0};
+  {
+    std::lock_guard lock(pace_mutex_);
+    const auto now = Clock::now();
+    if (!paced_) {
+      tokens_ = burst;
+      paced_ = true;
+    } else {
+      tokens_ = std::min(burst, tokens_ + std::chrono::duration<double>(now - refilled_).count() * rate);
+    }
+    refilled_ = now;
+    tokens_ -= 1;  // taken now; a debt is waited off below
+    if (tokens_ < 0) wait = std::chrono::milliseconds(static_cast<std::int64_t>(std::ceil(-tokens_ / rate * 1000)));
+  }
+  if (wait.count() == 0) return;
+  py::gil_scoped_release nogil;
+  // Pacing: ends early only if the connection closes.
+  c_->wait_until([](const ClientView& v) { return v.closed; }, wait);
 }
 
 EditFuture PyClient::sent(std::uint32_t id) {

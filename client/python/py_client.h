@@ -31,6 +31,10 @@ class Unreachable : public std::runtime_error {
 };
 
 [[noreturn]] void raise(PyObject* type, const std::string& what);
+// Waits (GIL released) until everything the server sent before it reads
+// this request is in the replica: a one-voxel ReadBox, answered in order
+// with the world's data. Raises TimeoutError or ConnectionError.
+void sync(Client& c, std::chrono::milliseconds timeout);
 std::chrono::milliseconds timeout_of(double seconds);
 
 // The outcome of one edit: result() waits for the server's answer.
@@ -39,9 +43,10 @@ class EditFuture {
   EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
   std::uint32_t id() const { return id_; }
   bool done() const;
-  // True when acknowledged (applied and stored); raises EditRejected with
-  // the server's reason, TimeoutError, or ConnectionError.
-  bool result(double timeout);
+  // True when acknowledged (applied and stored) and, with visible, once
+  // the replica shows it (sync); raises EditRejected with the server's
+  // reason, TimeoutError, or ConnectionError.
+  bool result(double timeout, bool visible);
 
  private:
   std::shared_ptr<Client> c_;
@@ -82,6 +87,7 @@ class PyClient {
 
   // --- events and waits --------------------------------------------------------
   void wait_ready(double timeout);
+  void sync(double timeout);
   void wait_loaded(std::optional<double> radius, double timeout);
   bool loaded() const;
   int verify(double timeout);
@@ -131,6 +137,9 @@ class PyClient {
   std::string material_name(Material m) const;
   Material material_of(const py::object& m) const;
   EditFuture sent(std::uint32_t id);
+  // Keeps this client's edits within the rate the server's Welcome states
+  // (waiting, GIL released, when a script edits faster).
+  void pace();
 
   std::string name_;
   std::shared_ptr<DispatcherSlot> slot_;
@@ -139,6 +148,10 @@ class PyClient {
   std::shared_ptr<EventSink> sink_;
   std::shared_ptr<Client> c_;
   Vec3f facing_{0, 0, 1};
+  std::mutex pace_mutex_;
+  bool paced_ = false;
+  double tokens_ = 0;
+  std::chrono::steady_clock::time_point refilled_;
 };
 
 // Every live client, so Python's exit can close them (registry of weak
@@ -155,6 +168,7 @@ class Swarm {
   std::shared_ptr<PyClient> at(std::ptrdiff_t i) const;
   const std::vector<std::shared_ptr<PyClient>>& clients() const { return clients_; }
   void wait_ready(double timeout);
+  void sync(double timeout);
   void wait_loaded(double timeout);
   int verify(double timeout);
   void close();

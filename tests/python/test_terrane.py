@@ -32,6 +32,8 @@ def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
         x, y, z = (int(v) for v in a.position)
         y -= 3
         assert a.fill_box((x, y, z), (x + 2, y + 2, z + 2), "Brick").result(30)
+        # result() returns once the editor's own replica shows the edit.
+        assert a.voxel((x + 1, y + 1, z + 1)) == ("Brick", 255)
         assert a.fill_sphere((x + 0.5, y + 4.5, z + 0.5), 1.5, 5).result(30)
         assert a.paint((x + 0.5, y + 0.5, z + 0.5), 1.0, "Snow").result(30)
         assert a.dig((x + 0.5, y + 4.5, z + 0.5), 1.0).result(30)
