@@ -87,6 +87,21 @@ TEST(Messages, WelcomeRoundTrips) {
   w.default_view_distance = 2048;  // beyond the cap
   const Frame bad2 = build_welcome(w);
   EXPECT_FALSE(parse_welcome(*message_of(bad2)->body_as_Welcome()).ok());
+  // The edit rate: absent reads as 0 (unlimited); negative or NaN is refused.
+  w.default_view_distance = 512;
+  EXPECT_EQ(q->edits_per_second, 0.0f);
+  w.edits_per_second = 20;
+  w.edit_burst = 40;
+  const Frame fr = build_welcome(w);
+  auto r = parse_welcome(*message_of(fr)->body_as_Welcome());
+  ASSERT_TRUE(r.ok()) << r.error().describe();
+  EXPECT_EQ(r->edits_per_second, 20.0f);
+  EXPECT_EQ(r->edit_burst, 40u);
+  for (const float bad_rate : {-1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    w.edits_per_second = bad_rate;
+    const Frame fbad = build_welcome(w);
+    EXPECT_FALSE(parse_welcome(*message_of(fbad)->body_as_Welcome()).ok());
+  }
 }
 
 TEST(Messages, ClientStateRejectsNonFiniteAndOutOfRange) {

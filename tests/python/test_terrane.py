@@ -94,6 +94,19 @@ def test_rejections_surface_their_reason(server):
             c.redo().result(30)
 
 
+def test_a_burst_of_edits_is_paced_below_the_servers_rate_not_disconnected(server):
+    # The server allows 20 edits/s with a burst of 40 and closes a session
+    # beyond them; 60 edits at once are paced by the client instead.
+    with terrane.connect(server.address, name="eager", view_distance=64, full_res_radius=32) as c:
+        c.wait_loaded(timeout=60)
+        x, _, z = (int(v) for v in c.position)
+        y = c.ground(x, z) + 2
+        futures = [c.fill_box((x + i % 8, y + i // 8, z), (x + i % 8 + 1, y + i // 8 + 1, z + 1), "Brick")
+                   for i in range(60)]
+        assert all(f.result(60, visible=False) for f in futures)
+        assert not c.closed, c.disconnect_reason
+
+
 def test_bad_arguments_raise_clear_python_errors(server):
     with terrane.connect(server.address, name="bad") as c:
         c.wait_ready(30)
