@@ -20,6 +20,7 @@
 #pragma once
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <optional>
@@ -38,8 +39,10 @@ struct PathOptions {
   int max_climb = 1;
   int max_drop = 3;
   float climb_cost = 0.5f;
-  // Places expanded at most before the search gives up.
+  // Places expanded at most before the search gives up, and when it gives
+  // up at the latest (checked every 256 places).
   std::size_t max_nodes = 200000;
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
 };
 
 struct PathResult {
@@ -48,7 +51,8 @@ struct PathResult {
   std::vector<Vec3i> steps;
   bool found = false;
   std::size_t explored = 0;
-  std::string error;  // why not found
+  bool timed_out = false;  // the deadline passed
+  std::string error;       // why not found
 };
 
 template <class World>
@@ -136,6 +140,11 @@ PathResult find_path(const World& w, Vec3i start, Vec3i goal, const PathOptions&
     }
     if (++r.explored > o.max_nodes) {
       r.error = "no path found within " + std::to_string(o.max_nodes) + " places searched";
+      return r;
+    }
+    if (r.explored % 256 == 0 && std::chrono::steady_clock::now() > o.deadline) {
+      r.timed_out = true;
+      r.error = "the search ran out of time after " + std::to_string(r.explored) + " places";
       return r;
     }
     const Vec3i p = cur.p;

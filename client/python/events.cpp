@@ -1,5 +1,7 @@
 #include "client/python/events.h"
 
+#include "client/python/gil.h"
+
 #include <algorithm>
 
 namespace terrane::python {
@@ -19,7 +21,8 @@ PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p) {
 }
 
 MessageEvent to_event(const ServerNoticeMsg& n) {
-  return MessageEvent{n.kind == wire::NoticeKind::Shutdown ? "shutdown" : "say", n.text, n.seconds_left, n.reconnect};
+  return MessageEvent{n.kind == wire::NoticeKind::Shutdown ? "shutdown" : "say", utf8(n.text), n.seconds_left,
+                      n.reconnect};
 }
 
 py::object to_python(const Event& e) {
@@ -28,61 +31,79 @@ py::object to_python(const Event& e) {
 
 // --- Dispatcher -----------------------------------------------------------------
 namespace {
-std::mutex g_registry_mutex;
-std::vector<std::weak_ptr<Dispatcher>> g_dispatchers;
+thread_local bool t_callbacks_thread = false;
 
-void remember(const std::shared_ptr<Dispatcher>& d) {
+std::mutex g_registry_mutex;
+std::vector<std::weak_ptr<Dispatcher::State>> g_states;
+
+void remember(const std::shared_ptr<Dispatcher::State>& s) {
   std::lock_guard lock(g_registry_mutex);
-  std::erase_if(g_dispatchers, [](const auto& w) { return w.expired(); });
-  g_dispatchers.push_back(d);
+  std::erase_if(g_states, [](const auto& w) { return w.expired(); });
+  g_states.push_back(s);
+}
+
+void ask_to_stop(Dispatcher::State& s) {
+  {
+    std::lock_guard lock(s.mutex);
+    s.stopping = true;
+  }
+  s.cv.notify_all();
+}
+
+// Waits (GIL released) until the thread has run its queue and ended its loop.
+bool wait_finished(Dispatcher::State& s, std::chrono::milliseconds patience) {
+  return without_gil([&] {
+    std::unique_lock lock(s.mutex);
+    return s.cv.wait_for(lock, patience, [&] { return s.finished; });
+  });
 }
 }  // namespace
 
-void stop_all_dispatchers() {
-  std::vector<std::shared_ptr<Dispatcher>> live;
+void stop_all_dispatchers(std::chrono::milliseconds patience) {
+  std::vector<std::shared_ptr<Dispatcher::State>> live;
   {
     std::lock_guard lock(g_registry_mutex);
-    for (const auto& w : g_dispatchers)
-      if (auto d = w.lock()) live.push_back(d);
+    for (const auto& w : g_states)
+      if (auto s = w.lock()) live.push_back(s);
   }
-  for (const auto& d : live) d->stop();
+  for (const auto& s : live) ask_to_stop(*s);
+  if (t_callbacks_thread) return;
+  for (const auto& s : live) wait_finished(*s, patience);
 }
 
-Dispatcher::Dispatcher() : state_(std::make_shared<State>()), thread_(&Dispatcher::run, state_) {}
+Dispatcher::Dispatcher() : state_(std::make_shared<State>()), thread_(&Dispatcher::run, state_) { remember(state_); }
 
-Dispatcher::~Dispatcher() { stop(); }
+Dispatcher::~Dispatcher() {
+  stop();
+  std::lock_guard lock(thread_mutex_);
+  if (thread_.joinable()) thread_.detach();  // a callbacks thread's: it ends on its own
+}
 
-bool Dispatcher::post(Job job) {
+bool Dispatcher::post(Job job, bool must) {
   {
     std::lock_guard lock(state_->mutex);
-    if (state_->stopping) return false;
-    if (state_->jobs.size() >= kMaxQueuedJobs) {
+    if (state_->stopping && !must) return false;
+    if (state_->jobs.size() >= kMaxQueuedJobs && !must) {
       ++state_->dropped;
       return false;
     }
     state_->jobs.push_back(std::move(job));
   }
-  state_->cv.notify_one();
+  state_->cv.notify_all();
   return true;
 }
 
 void Dispatcher::stop() {
-  {
-    std::lock_guard lock(state_->mutex);
-    state_->stopping = true;
-  }
-  state_->cv.notify_one();
-  if (!thread_.joinable()) return;
-  if (thread_.get_id() == std::this_thread::get_id()) {
-    thread_.detach();  // the thread holds state_ and ends after this job
-    return;
-  }
-  if (Py_IsInitialized() && PyGILState_Check()) {
-    py::gil_scoped_release nogil;
-    thread_.join();
-  } else {
-    thread_.join();
-  }
+  ask_to_stop(*state_);
+  if (t_callbacks_thread) return;
+  wait_finished(*state_, std::chrono::hours(24));
+  std::lock_guard lock(thread_mutex_);
+  if (thread_.joinable()) thread_.join();  // finished: returns at once
+}
+
+bool Dispatcher::finished() const {
+  std::lock_guard lock(state_->mutex);
+  return state_->finished;
 }
 
 std::uint64_t Dispatcher::dropped() const {
@@ -91,15 +112,17 @@ std::uint64_t Dispatcher::dropped() const {
 }
 
 void Dispatcher::run(std::shared_ptr<State> s) {
+  t_callbacks_thread = true;
   for (;;) {
     Job job;
     {
       std::unique_lock lock(s->mutex);
       s->cv.wait(lock, [&] { return s->stopping || !s->jobs.empty(); });
-      if (s->jobs.empty()) return;
+      if (s->jobs.empty()) break;
       job = std::move(s->jobs.front());
       s->jobs.pop_front();
     }
+    if (!Py_IsInitialized()) continue;  // Python is gone: nothing to call
     py::gil_scoped_acquire gil;
     try {
       job();
@@ -110,14 +133,16 @@ void Dispatcher::run(std::shared_ptr<State> s) {
       PyErr_WriteUnraisable(nullptr);
     }
   }
+  {
+    std::lock_guard lock(s->mutex);
+    s->finished = true;
+  }
+  s->cv.notify_all();
 }
 
 std::shared_ptr<Dispatcher> DispatcherSlot::get() {
   std::lock_guard lock(mutex_);
-  if (!dispatcher_) {
-    dispatcher_ = std::make_shared<Dispatcher>();
-    remember(dispatcher_);
-  }
+  if (!dispatcher_) dispatcher_ = std::make_shared<Dispatcher>();
   return dispatcher_;
 }
 
@@ -129,6 +154,7 @@ std::shared_ptr<Dispatcher> DispatcherSlot::peek() const {
 // --- EventSink --------------------------------------------------------------------
 void EventSink::push(Event e) {
   const bool disconnect = std::holds_alternative<DisconnectEvent>(e);
+  if (auto* d = std::get_if<DisconnectEvent>(&e)) d->reason = utf8(d->reason);
   std::optional<Event> for_callbacks;
   if (callbacks_.load()) for_callbacks = e;
   {
@@ -144,7 +170,8 @@ void EventSink::push(Event e) {
   if (!for_callbacks) return;
   auto d = slot_->peek();
   if (!d) return;
-  d->post([handlers = handlers_, ev = std::move(*for_callbacks)] {
+  d->post(
+      [handlers = handlers_, ev = std::move(*for_callbacks)] {
     auto h = handlers.lock();
     if (!h) return;
     const auto fns = h->of(ev.index());  // a copy: a callback may register another
@@ -157,7 +184,21 @@ void EventSink::push(Event e) {
         err.discard_as_unraisable(f);
       }
     }
-  });
+      },
+      disconnect);
+}
+
+void EventSink::post_one(std::size_t kind, std::size_t index, Event e) {
+  auto d = slot_->peek();
+  if (!d) return;
+  d->post(
+      [handlers = handlers_, kind, index, ev = std::move(e)] {
+        auto h = handlers.lock();
+        if (!h || index >= h->of(kind).size()) return;
+        const py::object f = h->of(kind)[index];
+        f(to_python(ev));
+      },
+      true);
 }
 
 std::optional<Event> EventSink::next(const std::string& kind, std::chrono::milliseconds timeout, bool* closed) {

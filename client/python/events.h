@@ -82,26 +82,33 @@ class Dispatcher {
   static constexpr std::size_t kMaxQueuedJobs = 65536;
 
   Dispatcher();
-  ~Dispatcher();  // stop()
-  // Any thread, GIL not needed. False (and counted) when the queue is full.
-  bool post(Job job);
-  // Drains and joins the thread (releasing the GIL while it waits, if this
-  // thread holds it). From a callback (the dispatcher's own thread) it only
-  // asks the thread to end after the current job.
+  ~Dispatcher();
+  // Any thread, GIL not needed. False (and counted) when the queue is full,
+  // unless must (a client's last event, which is never dropped).
+  bool post(Job job, bool must = false);
+  // Asks the thread to end once its queue is run, and waits for that
+  // (releasing the GIL meanwhile) — except on a callbacks thread (any
+  // client's), which never waits for another: two callbacks closing each
+  // other's clients would wait for each other for ever.
   void stop();
   std::uint64_t dropped() const;
+  // The thread has run its queue and ended.
+  bool finished() const;
 
- private:
   struct State {
     std::mutex mutex;
-    std::condition_variable cv;
+    std::condition_variable cv;  // jobs queued, stopping, finished
     std::deque<Job> jobs;
     bool stopping = false;
+    bool finished = false;
     std::uint64_t dropped = 0;
   };
+
+ private:
   static void run(std::shared_ptr<State> state);
 
   std::shared_ptr<State> state_;  // shared with the thread, which may outlive this object
+  std::mutex thread_mutex_;       // joins or detaches thread_ once
   std::thread thread_;
 };
 
@@ -138,6 +145,9 @@ class EventSink {
       : slot_(std::move(slot)), handlers_(std::move(handlers)) {}
   // io side. A DisconnectEvent also marks the sink closed.
   void push(Event e);
+  // Posts a job for one handler (index in its kind's list) with an event
+  // (on_disconnect registered after the client closed).
+  void post_one(std::size_t kind, std::size_t index, Event e);
   // Python side, GIL released: the oldest queued event of kind (any kind
   // when kind is empty), removed from the queue; nullopt at the deadline
   // or, with *closed set, once the client closed and nothing matching is
@@ -158,9 +168,10 @@ class EventSink {
   std::uint64_t dropped_ = 0;
 };
 
-// Every live dispatcher, so Python's exit can stop them all (their threads
-// must not wait for the GIL while the interpreter finalizes).
-void stop_all_dispatchers();
+// Every live callbacks thread (detached ones too), so Python's exit can
+// stop them all before the interpreter finalizes; each gets at most
+// `patience` to finish its queue.
+void stop_all_dispatchers(std::chrono::milliseconds patience);
 
 py::object to_python(const Event& e);
 

@@ -6,6 +6,7 @@
 #include <pybind11/stl.h>
 
 #include "client/python/events.h"
+#include "client/python/gil.h"
 #include "client/python/py_client.h"
 
 namespace {
@@ -71,8 +72,11 @@ the server has sent, at full resolution near the client and as coarse mips
 farther out. Edits return an EditFuture. Events (update, presence,
 message, disconnect) reach callbacks registered with on_update(fn) and
 friends, run on a thread of their own, and wait in a queue for
-next_event(). Every wait releases the GIL; a closed connection raises
-ConnectionError instead of hanging.)")
+next_event(). Callbacks hear of events from their registration on; the
+queue holds them from the connection on. Every wait releases the GIL and
+can be interrupted with Ctrl-C; a closed connection raises ConnectionError
+instead of hanging. close() forgets the callbacks (a callback that refers
+to its client keeps it alive until then).)")
       // events and waits
       .def("wait_ready", &PyClient::wait_ready, py::arg("timeout") = 30.0,
            "Wait for the server's Welcome (the handshake is done; materials and bounds are known).")
@@ -85,7 +89,7 @@ ConnectionError instead of hanging.)")
       .def("verify", &PyClient::verify, py::arg("timeout") = 60.0,
            "Ask the server for the region hash of every full-resolution chunk and compare each with the replica; "
            "returns how many differ (0: the replica is exact).")
-      .def("next_event", &PyClient::next_event, py::arg("kind") = "", py::arg("timeout") = 30.0,
+      .def("next_event", &PyClient::next_event, py::arg("kind") = py::none(), py::arg("timeout") = 30.0,
            "The oldest queued event (of kind 'update', 'presence', 'message' or 'disconnect', or any), removed from "
            "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
            "ConnectionError once closed with nothing left.")
@@ -103,6 +107,9 @@ ConnectionError instead of hanging.)")
           "Call fn(Disconnect) when the connection closes for good.")
       .def_property_readonly("events_dropped", &PyClient::events_dropped,
                              "Events dropped from the queue because nobody took them (the oldest go first).")
+      .def_property_readonly("callbacks_dropped", &PyClient::callbacks_dropped,
+                             "Events not passed to callbacks because 65,536 were already waiting for the callbacks "
+                             "thread (shared by a Swarm); a Disconnect is never dropped.")
       // the replica
       .def("voxel", &PyClient::voxel, py::arg("position"),
            "(material name, occupancy 0..255) at integer (x, y, z), at the best resolution held (Air if nothing).")
@@ -218,7 +225,8 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
   // Before the interpreter finalizes: close every client and stop every
   // callbacks thread, so none waits for a GIL that will not come back.
   py::module_::import("atexit").attr("register")(py::cpp_function([] {
+    g_exiting.store(true);
     close_all_clients();
-    stop_all_dispatchers();
+    stop_all_dispatchers(std::chrono::seconds(10));
   }));
 }

@@ -13,7 +13,7 @@ namespace terrane::python {
 using Clock = std::chrono::steady_clock;
 
 [[noreturn]] void raise(PyObject* type, const std::string& what) {
-  PyErr_SetString(type, what.c_str());
+  PyErr_SetString(type, utf8(what).c_str());
   throw py::error_already_set();
 }
 
@@ -25,6 +25,13 @@ std::chrono::milliseconds timeout_of(double seconds) {
 namespace {
 
 constexpr float kEyeHeight = 1.6f;
+
+// Waits until pred holds on the client's view (checked after every frame)
+// or the timeout passes; Ctrl-C interrupts it. pred runs under the
+// client's lock.
+bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred) {
+  return wait_interruptibly(timeout, [&](std::chrono::milliseconds slice) { return c.wait_until(pred, slice); });
+}
 
 std::string str(Vec3i v) {
   return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
@@ -116,16 +123,12 @@ void sync(Client& c, std::chrono::milliseconds timeout) {
   const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
   if (id == 0) raise(PyExc_ConnectionError, "connection closed");
   bool answered = false, closed = false;
-  {
-    py::gil_scoped_release nogil;
-    c.wait_until(
+  wait_for(c, timeout,
         [&](const ClientView& view) {
           answered = view.read_results.count(id) != 0;
           closed = view.closed;
           return answered || closed;
-        },
-        timeout);
-  }
+        });
   if (answered) return;
   if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
   raise(PyExc_TimeoutError, "the server did not answer within the timeout");
@@ -136,22 +139,18 @@ bool EditFuture::result(double timeout, bool visible) {
   const auto start = Clock::now();
   std::optional<EditOutcome> o;
   bool closed = false;
-  {
-    py::gil_scoped_release nogil;
-    c_->wait_until(
+  wait_for(*c_, t,
         [&](const ClientView& v) {
           if (auto it = v.edits.find(id_); it != v.edits.end()) o = it->second;
           closed = v.closed;
           return o.has_value() || closed;
-        },
-        t);
-  }
+        });
   if (o && o->accepted) {
     const auto spent = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start);
     if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
     return true;
   }
-  if (o) throw EditRejected(o->reason);
+  if (o) throw EditRejected(utf8(o->reason));
   if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
   raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
 }
@@ -164,15 +163,9 @@ IoPool::IoPool(int threads) : guard_(asio::make_work_guard(io_)) {
 IoPool::~IoPool() {
   guard_.reset();
   io_.stop();
-  const auto join = [&] {
+  without_gil([&] {
     for (auto& t : threads_) t.join();
-  };
-  if (Py_IsInitialized() && PyGILState_Check()) {
-    py::gil_scoped_release nogil;
-    join();
-  } else {
-    join();
-  }
+  });
 }
 
 // --- PyClient ---------------------------------------------------------------------
@@ -210,46 +203,39 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
   std::string err;
   bool ok = false;
-  {
-    py::gil_scoped_release nogil;
-    ok = c_->connect(&err);
-  }
+  ok = without_gil([&] { return c_->connect(&err); });
   if (!ok) raise(PyExc_ConnectionError, "cannot connect to " + a.address + ": " + err);
 }
 
 PyClient::~PyClient() {
-  if (Py_IsInitialized() && PyGILState_Check()) {
-    py::gil_scoped_release nogil;
-    c_->disconnect();
-  } else {
-    c_->disconnect();
-  }
+  without_gil([&] { c_->disconnect(); });
 }
 
 void PyClient::close() {
-  {
-    py::gil_scoped_release nogil;
-    c_->disconnect();
-  }
+  without_gil([&] { c_->disconnect(); });
   // A client of its own: its callbacks thread ends once the disconnect
-  // event has run (a Swarm's ends with the Swarm).
+  // event has run (a Swarm's ends with the Swarm); then its handlers go,
+  // so a callback that refers to the client no longer keeps it alive.
   if (own_slot_)
-    if (auto d = slot_->peek()) d->stop();
+    if (auto d = slot_->peek()) {
+      d->stop();
+      if (d->finished()) clear_handlers();
+    }
+}
+
+void PyClient::clear_handlers() {
+  for (std::size_t k = 0; k < 4; ++k) handlers_->of(k).clear();
 }
 
 void PyClient::wait_ready(double timeout) {
   const auto t = timeout_of(timeout);
   bool ready = false, closed = false;
-  {
-    py::gil_scoped_release nogil;
-    c_->wait_until(
+  wait_for(*c_, t,
         [&](const ClientView& v) {
           ready = v.welcomed;
           closed = v.closed;
           return ready || closed;
-        },
-        t);
-  }
+        });
   if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
 }
 
@@ -275,16 +261,12 @@ void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
   // The chunks first: the predicate runs under the client's lock.
   const auto chunks = chunks_in_view(state().position, r, w.bounds());
   bool loaded = false, closed = false;
-  {
-    py::gil_scoped_release nogil;
-    c_->wait_until(
+  wait_for(*c_, t,
         [&](const ClientView& v) {
           closed = v.closed;
           loaded = held_full(v, chunks);
           return loaded || closed;
-        },
-        t);
-  }
+        });
   if (!loaded) fail_or_timeout(closed, "the full-resolution region was not loaded within the timeout");
 }
 
@@ -299,45 +281,43 @@ bool PyClient::loaded() const {
 
 int PyClient::verify(double timeout) {
   const auto t = timeout_of(timeout);
+  const auto start = Clock::now();
   wait_ready(timeout);
   const WelcomeMsg w = *c_->welcome();
   const auto chunks = chunks_in_view(state().position, full_radius(w), w.bounds());
-  std::uint64_t before = 0;
-  c_->wait_until([&](const ClientView& v) { return before = v.counters.hash_matches + v.counters.hash_mismatches, true; },
-                 std::chrono::milliseconds(0));
   for (const Vec3i cp : chunks)
     if (!c_->request_region_hash(cp)) raise(PyExc_ConnectionError, "connection closed");
-  bool done = false, closed = false;
+  // The answers come in order with the world's data: once the barrier's
+  // does, every chunk asked about has its answer (a chunk the client does
+  // not hold is not answered, and counts as differing).
+  python::sync(*c_, std::max(std::chrono::milliseconds(0),
+                             t - std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start)));
   int bad = 0;
-  {
-    py::gil_scoped_release nogil;
-    c_->wait_until(
-        [&](const ClientView& v) {
-          closed = v.closed;
-          done = v.counters.hash_matches + v.counters.hash_mismatches >= before + chunks.size();
-          if (done) {
-            bad = 0;
-            for (const Vec3i cp : chunks)
-              if (auto it = v.hash_checks.find(cp); it == v.hash_checks.end() || !it->second) ++bad;
-          }
-          return done || closed;
-        },
-        t);
-  }
-  if (!done) fail_or_timeout(closed, "region hashes not answered within the timeout");
+  c_->wait_until(
+      [&](const ClientView& v) {
+    bad = 0;
+    for (const Vec3i cp : chunks) {
+      const ChunkCoverage* cov = v.replica.coverage(cp);
+      const auto it = v.hash_checks.find(cp);
+          if (cov == nullptr || cov->state == CoverageState::kMip || it == v.hash_checks.end() || !it->second) ++bad;
+        }
+        return true;
+      },
+      std::chrono::milliseconds(0));
   return bad;
 }
 
-py::object PyClient::next_event(const std::string& kind, double timeout) {
+py::object PyClient::next_event(const std::optional<std::string>& kind_or_none, double timeout) {
+  const std::string kind = kind_or_none.value_or("");
   if (!kind.empty() && kind != "update" && kind != "presence" && kind != "message" && kind != "disconnect")
     raise(PyExc_ValueError, "kind must be None, 'update', 'presence', 'message' or 'disconnect', not '" + kind + "'");
   const auto t = timeout_of(timeout);
   std::optional<Event> e;
   bool closed = false;
-  {
-    py::gil_scoped_release nogil;
-    e = sink_->next(kind, t, &closed);
-  }
+  wait_interruptibly(t, [&](std::chrono::milliseconds slice) {
+    e = sink_->next(kind, slice, &closed);
+    return e.has_value() || closed;
+  });
   if (e) return to_python(*e);
   fail_or_timeout(closed, "no " + (kind.empty() ? std::string("event") : kind + " event") + " within the timeout");
 }
@@ -347,10 +327,17 @@ py::object PyClient::on(std::size_t kind, py::object fn) {
   handlers_->of(kind).push_back(fn);
   slot_->get();
   sink_->enable_callbacks();
+  // Registered after the end: it still hears of it.
+  if (kind == 3 && c_->closed()) sink_->post_one(kind, handlers_->of(kind).size() - 1, DisconnectEvent{utf8(c_->disconnect_reason())});
   return fn;
 }
 
 std::uint64_t PyClient::events_dropped() const { return sink_->dropped(); }
+
+std::uint64_t PyClient::callbacks_dropped() const {
+  const auto d = slot_->peek();
+  return d ? d->dropped() : 0;
+}
 
 py::tuple PyClient::voxel(const IVec3& p) const {
   const Voxel v = c_->get(voxel_of(p, "voxel"));
@@ -427,9 +414,15 @@ EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) 
   return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
 }
 
-EditFuture PyClient::write_box(const IVec3& lo,
-                               const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>& a) {
-  if (a.ndim() != 4 || a.shape(0) != 2) raise(PyExc_ValueError, "write_box: the array must have shape (2, y, z, x)");
+EditFuture PyClient::write_box(const IVec3& lo, const py::array& in) {
+  // Integers 0..255 of any integer type (as read_box returns, or numpy's
+  // default int64); floats would be truncated without a word, so they are refused.
+  const char kind = in.dtype().kind();
+  if (kind != 'u' && kind != 'i')
+    raise(PyExc_TypeError, std::string("write_box: the array must hold integers (uint8 as read_box returns), not dtype '") +
+                               std::string(py::str(in.dtype())) + "'");
+  const auto a = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(in);
+  if (!a || a.ndim() != 4 || a.shape(0) != 2) raise(PyExc_ValueError, "write_box: the array must have shape (2, y, z, x)");
   const Vec3i size{static_cast<int>(a.shape(3)), static_cast<int>(a.shape(1)), static_cast<int>(a.shape(2))};
   const Vec3i min = voxel_of(lo, "write_box min");
   const Region r{min, min + size};
@@ -442,11 +435,14 @@ EditFuture PyClient::write_box(const IVec3& lo,
   for (int y = 0; y < size.y; ++y)
     for (int z = 0; z < size.z; ++z)
       for (int x = 0; x < size.x; ++x) {
-        const std::uint8_t mat = m(0, y, z, x), occ = m(1, y, z, x);
-        if (mat >= known)
+        const std::int64_t mat = m(0, y, z, x), occ = m(1, y, z, x);
+        if (mat < 0 || static_cast<std::uint64_t>(mat) >= known)
           raise(PyExc_ValueError, "write_box: material " + std::to_string(mat) + " at " + str({x, y, z}) +
                                       " is not one of this world's");
-        voxels.push_back(mat == kAir ? Voxel{} : make_voxel(mat, occ));
+        if (occ < 0 || occ > 255)
+          raise(PyExc_ValueError, "write_box: occupancy " + std::to_string(occ) + " at " + str({x, y, z}) +
+                                      " is not 0..255");
+        voxels.push_back(mat == kAir ? Voxel{} : make_voxel(static_cast<Material>(mat), static_cast<std::uint8_t>(occ)));
       }
   pace();
   return sent(c_->write_box(r, voxels));
@@ -470,18 +466,17 @@ py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3
   if (id == 0) raise(PyExc_ConnectionError, "connection closed");
   std::optional<ReadBoxResultMsg> res;
   bool closed = false;
-  {
-    py::gil_scoped_release nogil;
-    c_->wait_until(
+  wait_for(*c_, t,
         [&](const ClientView& v) {
           if (auto it = v.read_results.find(id); it != v.read_results.end()) res = it->second;
           closed = v.closed;
           return res.has_value() || closed;
-        },
-        t);
-  }
+        });
   if (!res) fail_or_timeout(closed, "the server did not answer the read within the timeout");
   if (!res->error.empty()) raise(PyExc_ValueError, "read_server_box: " + res->error);
+  // The answer must be for the box asked (the server is not trusted).
+  if (!(res->box == r) || res->voxels.size() != static_cast<std::size_t>(r.volume()))
+    raise(PyExc_ConnectionError, "read_server_box: the server answered for another box");
   const Vec3i s = r.size();
   return planes(s, [&](int x, int y, int z) { return res->voxels[static_cast<std::size_t>((y * s.z + z) * s.x + x)]; });
 }
@@ -492,34 +487,47 @@ void PyClient::move_to(const Vec3& position) {
   if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
 }
 
+namespace {
+// The replica as the path search reads it: each query takes the client's
+// lock on its own, so the io thread goes on applying frames during a long
+// search.
+struct LiveReplica {
+  const Client& c;
+  Voxel get(Vec3i p) const { return c.get(p); }
+  int resolution_at(Vec3i p) const { return c.resolution_at(p); }
+};
+}  // namespace
+
 std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
   if (!(speed > 0) || speed > 64) raise(PyExc_ValueError, "walk_to: speed must be in (0, 64] voxels per second");
-  if (max_nodes < 1 || max_nodes > 10'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..10^7");
+  if (max_nodes < 1 || max_nodes > 2'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..2000000");
   const Vec3f goal_point = point_of(target, "target");
   const auto deadline = Clock::now() + timeout_of(timeout);
   wait_ready(timeout);
   PathOptions o;
   o.max_nodes = max_nodes;
+  o.deadline = deadline;
+  const LiveReplica world{*c_};
   const auto floor_of = [](float v) { return static_cast<std::int32_t>(std::floor(v)); };
   const Vec3i goal_voxel{floor_of(goal_point.x), floor_of(goal_point.y), floor_of(goal_point.z)};
+  const auto out_of_time = [&] { raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout"); };
   std::vector<IVec3> walked;
   // The world may change under the walker: each step is checked before it
   // is taken, and a blocked way is searched again (a few times).
   constexpr int kReplans = 3;
   for (int attempt = 0;; ++attempt) {
+    if (Clock::now() >= deadline) out_of_time();
     const Vec3f here = state().position;
     std::optional<Vec3i> start, goal;
     PathResult path;
     int goal_resolution = 0;
-    {
-      py::gil_scoped_release nogil;
-      c_->with_replica([&](const Replica& rep) {
-        start = place_near(rep, floor_of(here.x), floor_of(here.z), floor_of(here.y + 0.01f), 32, o);
-        goal = place_near(rep, goal_voxel.x, goal_voxel.z, goal_voxel.y, 8, o);
-        goal_resolution = rep.resolution_at(goal_voxel);
-        if (start && goal) path = find_path(rep, *start, *goal, o);
-      });
-    }
+    without_gil([&] {
+      start = place_near(world, floor_of(here.x), floor_of(here.z), floor_of(here.y + 0.01f), 32, o);
+      goal = place_near(world, goal_voxel.x, goal_voxel.z, goal_voxel.y, 8, o);
+      goal_resolution = world.resolution_at(goal_voxel);
+      if (start && goal) path = find_path(world, *start, *goal, o);
+    });
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     if (!start)
       throw Unreachable("walk_to: no ground held at full resolution under the client at " +
                         str({floor_of(here.x), floor_of(here.y), floor_of(here.z)}));
@@ -528,12 +536,12 @@ std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double ti
                             ? "walk_to: the target " + str(goal_voxel) +
                                   " is not held at full resolution (beyond the full-resolution radius, or not loaded yet)"
                             : "walk_to: no place to stand within 8 voxels of the target " + str(goal_voxel));
+    if (path.timed_out) out_of_time();
     if (!path.found) throw Unreachable("walk_to: " + path.error);
     bool blocked = false;
     Vec3f at = here;
     for (const Vec3i s : path.steps) {
-      const bool still = c_->with_replica([&](const Replica& rep) { return is_place(rep, s, o); });
-      if (!still) {
+      if (!is_place(world, s, o)) {
         blocked = true;
         break;
       }
@@ -541,13 +549,10 @@ std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double ti
       const Vec3f d = next - at;
       const double dist = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
       const auto pace = std::chrono::milliseconds(static_cast<std::int64_t>(dist / speed * 1000));
-      if (Clock::now() + pace > deadline) raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout");
+      if (Clock::now() + pace > deadline) out_of_time();
       bool closed = false;
-      {
-        py::gil_scoped_release nogil;
-        // Walking pace: the wait ends early only if the connection closes.
-        c_->wait_until([&](const ClientView& v) { return closed = v.closed; }, pace);
-      }
+      // Walking pace: the wait ends early only if the connection closes.
+      wait_for(*c_, pace, [&](const ClientView& v) { return closed = v.closed; });
       if (closed) raise(PyExc_ConnectionError, "connection closed while walking: " + c_->disconnect_reason());
       move_to(vec(next));
       at = next;
@@ -577,7 +582,10 @@ Vec3 PyClient::position() const { return vec(state().position); }
 
 std::vector<std::string> PyClient::materials() const {
   const auto w = c_->welcome();
-  return w ? w->materials : std::vector<std::string>{};
+  std::vector<std::string> names;
+  if (w)
+    for (const auto& n : w->materials) names.push_back(utf8(n));
+  return names;
 }
 
 ClientStateMsg PyClient::state() const { return c_->last_state().value_or(ClientStateMsg{}); }
@@ -596,7 +604,9 @@ Material PyClient::material_of(const py::object& m) const {
   const auto names = materials();
   if (py::isinstance<py::bool_>(m)) raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
   if (py::isinstance<py::int_>(m)) {
-    const long id = m.cast<long>();
+    int overflow = 0;
+    const long long id = PyLong_AsLongLongAndOverflow(m.ptr(), &overflow);
+    if (overflow != 0) raise(PyExc_ValueError, "unknown material: an id too large for any world (0..63)");
     if (id < 0 || static_cast<std::size_t>(id) >= std::max<std::size_t>(names.size(), 1))
       raise(PyExc_ValueError, "unknown material " + std::to_string(id) + ": this world defines 0.." +
                                   std::to_string(names.empty() ? 0 : names.size() - 1));
@@ -633,9 +643,8 @@ void PyClient::pace() {
     if (tokens_ < 0) wait = std::chrono::milliseconds(static_cast<std::int64_t>(std::ceil(-tokens_ / rate * 1000)));
   }
   if (wait.count() == 0) return;
-  py::gil_scoped_release nogil;
   // Pacing: ends early only if the connection closes.
-  c_->wait_until([](const ClientView& v) { return v.closed; }, wait);
+  wait_for(*c_, wait, [](const ClientView& v) { return v.closed; });
 }
 
 EditFuture PyClient::sent(std::uint32_t id) {
@@ -649,6 +658,9 @@ Swarm::Swarm(int n, ConnectArgs base, double spread, int threads) {
   if (threads < 1 || threads > 64) raise(PyExc_ValueError, "Swarm: threads must be 1..64");
   if (!(spread >= 0) || spread > 1e6) raise(PyExc_ValueError, "Swarm: spread must be 0..10^6 voxels");
   if (base.position) raise(PyExc_ValueError, "Swarm: clients start around the spawn (use spread), not at a position");
+  const std::string last = base.name + "-" + std::to_string(n - 1);
+  if (base.name.empty() || last.size() > kMaxClientNameBytes)
+    raise(PyExc_ValueError, "Swarm: names (up to '" + last + "') must be 1..64 bytes");
   pool_ = std::make_shared<IoPool>(threads);
   slot_ = std::make_shared<DispatcherSlot>();
   clients_.reserve(static_cast<std::size_t>(n));
@@ -702,7 +714,11 @@ int Swarm::verify(double timeout) {
 
 void Swarm::close() {
   for (const auto& c : clients_) c->close();
-  if (auto d = slot_ ? slot_->peek() : nullptr) d->stop();
+  if (auto d = slot_ ? slot_->peek() : nullptr) {
+    d->stop();  // runs the clients' last callbacks (their disconnects)
+    if (!d->finished()) return;  // called from a callback: they have not run yet
+  }
+  for (const auto& c : clients_) c->clear_handlers();
 }
 
 }  // namespace terrane::python

@@ -18,6 +18,7 @@
 
 #include "client/client.h"
 #include "client/python/events.h"
+#include "client/python/gil.h"
 
 namespace terrane::python {
 
@@ -91,10 +92,14 @@ class PyClient {
   void wait_loaded(std::optional<double> radius, double timeout);
   bool loaded() const;
   int verify(double timeout);
-  py::object next_event(const std::string& kind, double timeout);
+  py::object next_event(const std::optional<std::string>& kind, double timeout);
   // Registers fn for events of kind (update, presence, message, disconnect).
   py::object on(std::size_t kind, py::object fn);
   std::uint64_t events_dropped() const;
+  std::uint64_t callbacks_dropped() const;
+  // Forgets every callback (GIL held): after the last has run, so a
+  // callback that refers to its client no longer keeps it alive.
+  void clear_handlers();
 
   // --- the replica ---------------------------------------------------------------
   py::tuple voxel(const IVec3& p) const;
@@ -111,7 +116,7 @@ class PyClient {
   EditFuture dig(const Vec3& center, double radius);
   EditFuture paint(const Vec3& center, double radius, const py::object& material);
   EditFuture smooth(const Vec3& center, double radius, double strength);
-  EditFuture write_box(const IVec3& lo, const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>& a);
+  EditFuture write_box(const IVec3& lo, const py::array& a);
   EditFuture undo();
   EditFuture redo();
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
@@ -126,7 +131,7 @@ class PyClient {
 
   std::vector<std::string> materials() const;
   bool closed() const { return c_->closed(); }
-  std::string disconnect_reason() const { return c_->disconnect_reason(); }
+  std::string disconnect_reason() const { return utf8(c_->disconnect_reason()); }
   std::string name() const { return name_; }
   void close();
 

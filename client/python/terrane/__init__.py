@@ -53,7 +53,7 @@ async def loaded(client, radius=None, timeout=60.0):
     return await _in_executor(client.wait_loaded, radius, timeout)
 
 
-async def event(client, kind="", timeout=30.0):
+async def event(client, kind=None, timeout=30.0):
     """Awaitable Client.next_event."""
     return await _in_executor(client.next_event, kind, timeout)
 
