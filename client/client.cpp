@@ -256,22 +256,26 @@ void Client::schedule_reconnect() {
 }
 
 void Client::disconnect() {
-  if (!started_ || disconnected_.exchange(true)) return;
-  leaving_ = true;
-  asio::post(strand_, [this, g = OpGuard(this)] {
-    reconnect_timer_.cancel();
-    if (io_closed_) return;
-    asio::error_code ec;
-    const Frame bye = build_disconnect("client leaving");
-    asio::write(socket_, asio::buffer(bye), ec);
-    close_locked_io("disconnected by client");
+  if (!started_) return;
+  // Once; a second caller waits until the first is done, so every caller
+  // returns with the client closed and its last callbacks made.
+  std::call_once(disconnect_once_, [this] {
+    leaving_ = true;
+    asio::post(strand_, [this, g = OpGuard(this)] {
+      reconnect_timer_.cancel();
+      if (io_closed_) return;
+      asio::error_code ec;
+      const Frame bye = build_disconnect("client leaving");
+      asio::write(socket_, asio::buffer(bye), ec);
+      close_locked_io("disconnected by client");
+    });
+    if (thread_.joinable()) {
+      thread_.join();
+      return;
+    }
+    std::unique_lock lock(ops_mutex_);
+    ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
   });
-  if (thread_.joinable()) {
-    thread_.join();
-    return;
-  }
-  std::unique_lock lock(ops_mutex_);
-  ops_done_.wait(lock, [&] { return pending_ops_.load(std::memory_order_acquire) == 0; });
 }
 
 bool Client::send(Frame frame, wire::Body type) {

@@ -231,7 +231,8 @@ class Client {
   // made. Call once.
   bool connect(std::string* error);
   // Sends Disconnect, closes the socket and joins the io thread (shared
-  // mode: waits until none of the client's handlers is pending). Idempotent.
+  // mode: waits until none of the client's handlers is pending). Idempotent;
+  // concurrent callers all return once it is done.
   void disconnect();
 
   bool set_state(const ClientStateMsg& state);
@@ -331,7 +332,7 @@ class Client {
   asio::steady_timer delivery_;    // on strand_
   std::thread thread_;
   bool started_ = false;           // connect() succeeded (caller's thread)
-  std::atomic<bool> disconnected_{false};
+  std::once_flag disconnect_once_;
   std::atomic<int> pending_ops_{0};
   std::mutex ops_mutex_;           // only to wait for pending_ops_ == 0
   std::condition_variable ops_done_;
