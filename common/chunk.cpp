@@ -6,20 +6,30 @@
 namespace terrane {
 
 Voxel downsample(const Voxel children[8]) {
-  std::array<std::uint8_t, kMaterialCount> counts{};
+  // Eight equal children (uniform ground, open sky: most of a world) are
+  // their own parent: the rule below gives the same material and, with
+  // sum = 8 (o + 1), the byte (8 o + 12) / 8 - 1 = o.
+  const Voxel first = children[0];
+  bool same = true;
+  for (int i = 1; i < 8; ++i) same &= children[i] == first;
+  if (same) return first.material == kAir ? Voxel{} : first;
+  // The most common non-Air material (ties: the lowest id), counted among
+  // the eight children themselves rather than in a table of every material.
   int sum = 0;  // sum of (occupancy + 1) over non-Air children: 256 × fractions
-  int solid_children = 0;
+  Material best = kAir;
+  int best_count = 0;
   for (int i = 0; i < 8; ++i) {
     const Voxel c = children[i];
     if (c.material == kAir) continue;
-    ++counts[c.material];
     sum += c.occupancy + 1;
-    ++solid_children;
+    int count = 0;
+    for (int j = 0; j < 8; ++j) count += children[j].material == c.material;
+    if (count > best_count || (count == best_count && c.material < best)) {
+      best = c.material;
+      best_count = count;
+    }
   }
-  if (solid_children == 0) return Voxel{};
-  Material best = 1;
-  for (int m = 2; m < kMaterialCount; ++m)
-    if (counts[m] > counts[best]) best = static_cast<Material>(m);
+  if (best == kAir) return Voxel{};
   // mean fraction = sum / (8 · 256); its byte is mean·256 − 1 = sum/8 − 1,
   // rounded to nearest and kept >= 0 (the smallest non-zero occupancy).
   const int byte = std::clamp((sum + 4) / 8 - 1, 0, 255);

@@ -1,6 +1,7 @@
 // Storage benchmark: memory of the row-packed grid against the same content
 // unpacked, read_row and box reads over packed versus unpacked chunks (the
-// ratio is printed), and writes (single voxel, box, repeated tiny writes).
+// ratio is printed), writes (single voxel, box, repeated tiny writes), and
+// making chunks: from their voxels (packing and mips) and from stored blobs.
 //
 // Memory counts every byte the grid holds: row headers, row data, mips,
 // Chunk objects and the hash map (nodes and buckets, through a counting
@@ -18,6 +19,7 @@
 
 #include "common/grid.h"
 #include "common/vxraw.h"
+#include "common/world_store.h"
 
 namespace terrane {
 namespace {
@@ -180,6 +182,31 @@ void BM_WriteBox(benchmark::State& state) {
   state.SetBytesProcessed(state.iterations() * n * n * n * 2);
 }
 
+// What a chunk costs to make from its voxels: packing the rows and building
+// the three mips (every load, generation and coarse view pays it).
+void BM_ChunkFromBox(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  for (auto _ : state)
+    for (const Box& b : d.unpacked) {
+      Chunk c = Chunk::from_box(b);
+      benchmark::DoNotOptimize(&c);
+    }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(d.unpacked.size()));
+}
+
+// A stored chunk's load: its blob (byte RLE + LZ4) decoded into a Chunk.
+void BM_DecodeChunkBlob(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  std::vector<std::vector<std::uint8_t>> blobs;
+  for (const Box& b : d.unpacked) blobs.push_back(encode_chunk_blob(b));
+  for (auto _ : state)
+    for (const auto& blob : blobs) {
+      auto c = decode_chunk_blob(blob);
+      benchmark::DoNotOptimize(&c);
+    }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(blobs.size()));
+}
+
 // Prints each packed/unpacked pair's speed ratio after the normal report.
 class RatioReporter : public benchmark::ConsoleReporter {
  public:
@@ -215,6 +242,9 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark((std::string("BM_ReadRowPacked/") + name).c_str(), BM_ReadRowPacked, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ReadRowUnpacked/") + name).c_str(), BM_ReadRowUnpacked, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ReadBox48/") + name).c_str(), BM_ReadBox, std::string(name));
+    benchmark::RegisterBenchmark((std::string("BM_ChunkFromBox/") + name).c_str(), BM_ChunkFromBox, std::string(name));
+    benchmark::RegisterBenchmark((std::string("BM_DecodeChunkBlob/") + name).c_str(), BM_DecodeChunkBlob,
+                                 std::string(name));
   }
   benchmark::RegisterBenchmark("BM_WriteSingleVoxel", BM_WriteSingleVoxel);
   benchmark::RegisterBenchmark("BM_WriteRepeatedTiny", BM_WriteRepeatedTiny);

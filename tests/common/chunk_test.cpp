@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -39,6 +41,42 @@ TEST(Downsample, OccupancyIsMeanOfChildren) {
   Voxel full[8];
   for (auto& v : full) v = solid(kRock);
   EXPECT_EQ(downsample(full), solid(kRock));
+}
+
+// The rule as first written (a count per material): the fast version must
+// agree with it on every input.
+Voxel downsample_by_table(const Voxel children[8]) {
+  std::array<std::uint8_t, kMaterialCount> counts{};
+  int sum = 0, solid_children = 0;
+  for (int i = 0; i < 8; ++i) {
+    if (children[i].material == kAir) continue;
+    ++counts[children[i].material];
+    sum += children[i].occupancy + 1;
+    ++solid_children;
+  }
+  if (solid_children == 0) return Voxel{};
+  Material best = 1;
+  for (int m = 2; m < kMaterialCount; ++m)
+    if (counts[m] > counts[best]) best = static_cast<Material>(m);
+  return make_voxel(best, static_cast<std::uint8_t>(std::clamp((sum + 4) / 8 - 1, 0, 255)));
+}
+
+TEST(Downsample, AgreesWithTheCountPerMaterialRuleOnRandomChildren) {
+  std::mt19937 rng(11);
+  // Few materials and occupancies so ties, equal children and Air are common.
+  std::uniform_int_distribution<int> material(0, 4), occupancy(0, 3), wide(0, 63), byte(0, 255);
+  for (int n = 0; n < 200000; ++n) {
+    Voxel c[8];
+    const bool narrow = n % 2 == 0;
+    for (auto& v : c) {
+      const int m = narrow ? material(rng) : wide(rng);
+      const int o = narrow ? occupancy(rng) * 85 : byte(rng);
+      v = m == 0 ? Voxel{} : make_voxel(static_cast<Material>(m), static_cast<std::uint8_t>(o));
+    }
+    if (n % 7 == 0)
+      for (auto& v : c) v = c[0];  // all eight equal
+    ASSERT_EQ(downsample(c), downsample_by_table(c)) << "case " << n;
+  }
 }
 
 // Reference mip pyramid computed from a plain Box.
