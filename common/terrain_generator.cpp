@@ -4,9 +4,13 @@
 #include <array>
 #include <charconv>
 #include <cmath>
+#include <deque>
 #include <limits>
+#include <mutex>
+#include <unordered_map>
 #include <vector>
 
+#include "common/chunk.h"
 #include "common/noise.h"
 
 namespace terrane {
@@ -149,6 +153,7 @@ TerrainGenerator::TerrainGenerator(GeneratorParams params) : params_(params) {
   params_.overhang_strength = fix(params_.overhang_strength, 0.0f, 16.0f, d.overhang_strength);
   inv_scale_ = 1.0 / static_cast<double>(params_.terrain_scale);
   for (std::uint32_t i = 0; i < 16; ++i) seeds_[i] = derive_seed(params_.seed, i);
+  cache_ = std::make_shared<ColumnCache>();
 }
 
 // The height of a column from continents, hills, mountains, highlands,
@@ -475,21 +480,20 @@ Voxel TerrainGenerator::voxel_at(Vec3i p) const {
   return shade(col, p.x, p.y, p.z, cp);
 }
 
-void TerrainGenerator::generate(const Region& region, Box& out) const {
-  if (region.empty()) {
-    out.resize({0, 0, 0});
-    return;
-  }
-  const Vec3i size = region.size();
-  out.resize(size);
-  const int sx = size.x, sy = size.y, sz = size.z;
+struct TerrainGenerator::ColumnCache {
+  std::mutex mutex;
+  std::unordered_map<std::uint64_t, std::shared_ptr<const std::vector<Column>>> entries;
+  std::deque<std::uint64_t> order;  // oldest first
+};
 
-  // 1. 2D fields with a one-voxel margin (for the slope).
+std::vector<TerrainGenerator::Column> TerrainGenerator::columns(std::int32_t x0, std::int32_t z0, int sx,
+                                                                int sz) const {
+  // 2D fields with a one-voxel margin (for the slope).
   const int mx = sx + 2;
   std::vector<Surface> surf(static_cast<std::size_t>(mx) * (sz + 2));
   for (int z = 0; z < sz + 2; ++z) {
     for (int x = 0; x < mx; ++x) {
-      surf[static_cast<std::size_t>(z) * mx + x] = surface(region.min.x + x - 1, region.min.z + z - 1);
+      surf[static_cast<std::size_t>(z) * mx + x] = surface(x0 + x - 1, z0 + z - 1);
     }
   }
   std::vector<Column> cols(static_cast<std::size_t>(sx) * sz);
@@ -503,6 +507,49 @@ void TerrainGenerator::generate(const Region& region, Box& out) const {
                                                           at(0, 1).height);
     }
   }
+  return cols;
+}
+
+std::shared_ptr<const std::vector<TerrainGenerator::Column>> TerrainGenerator::chunk_columns(std::int32_t x0,
+                                                                                            std::int32_t z0) const {
+  const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(x0)) << 32) |
+                            static_cast<std::uint32_t>(z0);
+  {
+    std::lock_guard lock(cache_->mutex);
+    if (auto it = cache_->entries.find(key); it != cache_->entries.end()) return it->second;
+  }
+  // Made outside the lock (two threads may make the same one: the same result).
+  auto made = std::make_shared<const std::vector<Column>>(columns(x0, z0, kChunkSize, kChunkSize));
+  std::lock_guard lock(cache_->mutex);
+  if (cache_->entries.emplace(key, made).second) {
+    cache_->order.push_back(key);
+    if (cache_->order.size() > kColumnCacheSize) {
+      cache_->entries.erase(cache_->order.front());
+      cache_->order.pop_front();
+    }
+  }
+  return made;
+}
+
+void TerrainGenerator::generate(const Region& region, Box& out) const {
+  if (region.empty()) {
+    out.resize({0, 0, 0});
+    return;
+  }
+  const Vec3i size = region.size();
+  out.resize(size);
+  const int sx = size.x, sy = size.y, sz = size.z;
+
+  // 1. The columns' 2D fields (shared by a chunk's column stack).
+  std::shared_ptr<const std::vector<Column>> cached;
+  std::vector<Column> own;
+  const bool chunk_footprint = sx == kChunkSize && sz == kChunkSize && floor_mod(region.min.x, kChunkSize) == 0 &&
+                               floor_mod(region.min.z, kChunkSize) == 0;
+  if (chunk_footprint)
+    cached = chunk_columns(region.min.x, region.min.z);
+  else
+    own = columns(region.min.x, region.min.z, sx, sz);
+  const std::vector<Column>& cols = chunk_footprint ? *cached : own;
 
   // 2. Which lattice points are read: per lattice column, the hull of the
   // lattice y indices needed by the voxel columns of the cells around it.

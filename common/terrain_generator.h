@@ -8,8 +8,9 @@
 // Contract:
 //  - Deterministic: a voxel depends only on (params, position), never on how
 //    regions are cut or in which order they are generated.
-//  - Thread-safe: every method is const and touches no shared mutable state,
-//    so any number of threads may generate regions at once.
+//  - Thread-safe: every method is const, so any number of threads may
+//    generate regions at once (the only shared state is a cache of column
+//    fields, behind a mutex, which never changes what is generated).
 //  - Every output voxel satisfies the Air invariant (Air has occupancy 0).
 //  - Any change to the output for some (params, position) must bump
 //    kGeneratorVersion and the golden hashes in
@@ -17,7 +18,9 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
+#include <vector>
 #include <string_view>
 
 #include "common/box.h"
@@ -116,9 +119,21 @@ class TerrainGenerator {
   void lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const;
   Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners) const;
 
+  // The per-column part of generate() for a footprint: 2D noise fields
+  // (with a one-voxel margin for the slope) turned into Columns.
+  std::vector<Column> columns(std::int32_t x0, std::int32_t z0, int sx, int sz) const;
+  // The same for a chunk's 32 x 32 footprint, kept for the chunks above
+  // and below it (a column stack shares it; most of a generated chunk's
+  // cost was these 2D fields, computed again for every chunk of the stack).
+  std::shared_ptr<const std::vector<Column>> chunk_columns(std::int32_t x0, std::int32_t z0) const;
+
+  struct ColumnCache;  // chunk footprint -> Columns, the latest kColumnCacheSize, behind a mutex
+  static constexpr std::size_t kColumnCacheSize = 1024;
+
   GeneratorParams params_;
   double inv_scale_;          // 1 / terrain_scale
   std::uint32_t seeds_[16];   // one per noise field
+  std::shared_ptr<ColumnCache> cache_;  // shared by copies (same params, same columns)
 };
 
 }  // namespace terrane

@@ -1,5 +1,6 @@
 #include "common/world.h"
 
+#include <algorithm>
 #include <map>
 
 namespace terrane {
@@ -67,6 +68,9 @@ void World::generate_chunk_box(Vec3i chunk_pos, Box& out) const {
 Chunk World::generate_chunk(Vec3i chunk_pos) const {
   Box box;
   generate_chunk_box(chunk_pos, box);
+  // Sky (most chunks of a generated world): no rows to pack, no mips to build.
+  if (std::all_of(box.voxels().begin(), box.voxels().end(), [](Voxel v) { return v.material == kAir; }))
+    return Chunk(kAir);
   return Chunk::from_box(box);
 }
 
