@@ -115,7 +115,8 @@ FileStatus World::write_box(Vec3i min, const Box& src) {
     const Vec3i origin = chunk_origin(cp);
     chunk->chunk.modify(Region{target.min - origin, target.max - origin},
                         [&](Vec3i l, Voxel) { return src.get(l + origin - min); });
-    writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
+    writes.push_back(
+        ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk), coarse_voxels(&chunk->chunk)});
   });
   if (!status || writes.empty()) return status;
   return store_->save_chunks(writes);

@@ -5,7 +5,10 @@
 #include <algorithm>
 #include <charconv>
 #include <climits>
+#include <chrono>
+#include <cstdio>
 #include <map>
+#include <tuple>
 #include <filesystem>
 #include <sstream>
 
@@ -27,6 +30,11 @@ constexpr const char* kQuarantineSchema =
     " cx INTEGER NOT NULL, cy INTEGER NOT NULL, cz INTEGER NOT NULL,"
     " revision INTEGER NOT NULL, data BLOB NOT NULL, reason TEXT NOT NULL, time INTEGER NOT NULL);"
     "CREATE INDEX IF NOT EXISTS quarantine_chunk ON quarantine(cx, cy, cz);";
+
+// Format 2: the coarse images (common/coarse_image.h), one row per region.
+constexpr const char* kCoarseSchema =
+    "CREATE TABLE IF NOT EXISTS coarse(rx INTEGER NOT NULL, ry INTEGER NOT NULL, rz INTEGER NOT NULL,"
+    " image BLOB NOT NULL, PRIMARY KEY(rx, ry, rz)) WITHOUT ROWID;";
 
 // RAII for one prepared statement use: reset on scope exit.
 struct StmtReset {
@@ -100,6 +108,8 @@ WorldStore::~WorldStore() {
   sqlite3_finalize(insert_stmt_);
   sqlite3_finalize(log_stmt_);
   sqlite3_finalize(quarantined_rev_stmt_);
+  sqlite3_finalize(coarse_load_stmt_);
+  sqlite3_finalize(coarse_save_stmt_);
   sqlite3_close(db_);
 }
 
@@ -168,7 +178,8 @@ FileResult<std::unique_ptr<WorldStore>> WorldStore::create_in(const std::string&
       "CREATE TABLE chunks(cx INTEGER NOT NULL, cy INTEGER NOT NULL, cz INTEGER NOT NULL,"
       " revision INTEGER NOT NULL, data BLOB NOT NULL, PRIMARY KEY(cx, cy, cz)) WITHOUT ROWID;";
   char* err = nullptr;
-  if (sqlite3_exec(store->db_, schema, nullptr, nullptr, &err) != SQLITE_OK) {
+  if (sqlite3_exec(store->db_, schema, nullptr, nullptr, &err) != SQLITE_OK ||
+      sqlite3_exec(store->db_, kCoarseSchema, nullptr, nullptr, &err) != SQLITE_OK) {
     std::string msg = err ? err : "?";
     sqlite3_free(err);
     return FileError{"world " + dir + ": cannot create schema: " + msg, {}};
@@ -179,14 +190,157 @@ FileResult<std::unique_ptr<WorldStore>> WorldStore::create_in(const std::string&
   return store;
 }
 
-FileResult<std::unique_ptr<WorldStore>> WorldStore::open(const std::string& dir) {
+FileResult<std::unique_ptr<WorldStore>> WorldStore::open(const std::string& dir, const Progress& progress) {
   if (!exists(dir)) return FileError{"world " + dir + ": no world here (" + kWorldDatabaseName + " missing)", {}};
   auto db = open_db(dir, false);
   if (!db) return db.error();
   std::unique_ptr<WorldStore> store(new WorldStore(dir, *db));
   if (auto s = store->load_meta(); !s) return s.error();
   if (auto s = store->ensure_quarantine_table(); !s) return s.error();
+  if (store->meta_.format_version < kWorldFormatVersion)
+    if (auto s = store->upgrade_to_coarse(progress); !s) return s.error();
   return store;
+}
+
+FileStatus WorldStore::upgrade_to_coarse(const Progress& progress) {
+  auto total = stored_chunk_count();
+  if (!total) return total.error();
+  const auto start = std::chrono::steady_clock::now();
+  auto last = start;
+  const auto report = [&](std::int64_t done, bool final) {
+    if (progress) return progress(done, *total);
+    const auto now = std::chrono::steady_clock::now();
+    if (!final && now - last < std::chrono::seconds(2)) return;
+    last = now;
+    std::fprintf(stderr, "world %s: building coarse images (format 2): %lld/%lld chunks\n", dir_.c_str(),
+                 static_cast<long long>(done), static_cast<long long>(*total));
+  };
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin the upgrade to format 2");
+  const auto fail = [&](FileError e) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  };
+  if (sqlite3_exec(db_, kCoarseSchema, nullptr, nullptr, nullptr) != SQLITE_OK ||
+      sqlite3_exec(db_, "DELETE FROM coarse", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return fail(error("cannot create the coarse table"));
+  std::map<std::tuple<int, int, int>, std::vector<CoarseEntry>> regions;
+  std::int64_t done = 0;
+  auto listed = for_each_chunk([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob) {
+    // A damaged chunk gets no entry: it is served as its load decides
+    // (quarantined and generated).
+    if (auto chunk = decode_chunk_blob(blob)) {
+      const Vec3i r = coarse_region_of(pos);
+      regions[{r.x, r.y, r.z}].push_back(CoarseEntry{pos, revision, coarse_voxels(&*chunk)});
+    }
+    report(++done, false);
+  });
+  if (!listed) return fail(listed.error());
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "INSERT INTO coarse(rx, ry, rz, image) VALUES(?, ?, ?, ?)", -1, &st, nullptr) !=
+      SQLITE_OK)
+    return fail(error("cannot write coarse images"));
+  for (auto& [key, entries] : regions) {
+    const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
+    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(entries));
+    StmtReset reset{st};
+    sqlite3_bind_int(st, 1, r.x);
+    sqlite3_bind_int(st, 2, r.y);
+    sqlite3_bind_int(st, 3, r.z);
+    sqlite3_bind_blob(st, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
+    if (sqlite3_step(st) != SQLITE_DONE) {
+      sqlite3_reset(st);
+      sqlite3_finalize(st);
+      return fail(error("cannot write coarse images"));
+    }
+  }
+  sqlite3_finalize(st);
+  if (sqlite3_exec(db_, "INSERT OR REPLACE INTO meta(key, value) VALUES('format_version', '2')", nullptr, nullptr,
+                   nullptr) != SQLITE_OK)
+    return fail(error("cannot record format 2"));
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return fail(error("cannot commit the upgrade to format 2"));
+  meta_.format_version = kWorldFormatVersion;
+  report(done, true);
+  return Ok{};
+}
+
+FileStatus WorldStore::change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase) {
+  if (set.empty() && erase.empty()) return Ok{};
+  if (!coarse_save_stmt_ && sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO coarse(rx, ry, rz, image) VALUES(?, ?, ?, ?)",
+                                               -1, &coarse_save_stmt_, nullptr) != SQLITE_OK)
+    return error("cannot prepare coarse image write");
+  // Per region: the image as stored, changed, written back.
+  std::map<std::tuple<int, int, int>, std::pair<std::vector<const CoarseEntry*>, std::vector<Vec3i>>> by_region;
+  for (const CoarseEntry& e : set) {
+    const Vec3i r = coarse_region_of(e.chunk_pos);
+    by_region[{r.x, r.y, r.z}].first.push_back(&e);
+  }
+  for (const Vec3i p : erase) {
+    const Vec3i r = coarse_region_of(p);
+    by_region[{r.x, r.y, r.z}].second.push_back(p);
+  }
+  for (const auto& [key, change] : by_region) {
+    const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
+    auto stored = load_coarse(r);
+    if (!stored) return stored.error();
+    std::map<int, CoarseEntry> entries;
+    for (CoarseEntry& e : *stored) entries[coarse_index(e.chunk_pos)] = std::move(e);
+    for (const Vec3i p : change.second) entries.erase(coarse_index(p));
+    for (const CoarseEntry* e : change.first) entries[coarse_index(e->chunk_pos)] = *e;
+    std::vector<CoarseEntry> all;
+    all.reserve(entries.size());
+    for (auto& [i, e] : entries) all.push_back(std::move(e));
+    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(all));
+    StmtReset reset{coarse_save_stmt_};
+    sqlite3_bind_int(coarse_save_stmt_, 1, r.x);
+    sqlite3_bind_int(coarse_save_stmt_, 2, r.y);
+    sqlite3_bind_int(coarse_save_stmt_, 3, r.z);
+    sqlite3_bind_blob(coarse_save_stmt_, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
+    if (sqlite3_step(coarse_save_stmt_) != SQLITE_DONE) return error("cannot write coarse image");
+  }
+  return Ok{};
+}
+
+FileResult<std::vector<CoarseEntry>> WorldStore::load_coarse(Vec3i region) {
+  if (!coarse_load_stmt_ && sqlite3_prepare_v2(db_, "SELECT image FROM coarse WHERE rx = ? AND ry = ? AND rz = ?", -1,
+                                               &coarse_load_stmt_, nullptr) != SQLITE_OK)
+    return error("cannot prepare coarse image read");
+  StmtReset reset{coarse_load_stmt_};
+  sqlite3_bind_int(coarse_load_stmt_, 1, region.x);
+  sqlite3_bind_int(coarse_load_stmt_, 2, region.y);
+  sqlite3_bind_int(coarse_load_stmt_, 3, region.z);
+  const int rc = sqlite3_step(coarse_load_stmt_);
+  if (rc == SQLITE_DONE) return std::vector<CoarseEntry>{};
+  if (rc != SQLITE_ROW) return error("cannot read coarse image");
+  const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(coarse_load_stmt_, 0));
+  const auto size = static_cast<std::size_t>(sqlite3_column_bytes(coarse_load_stmt_, 0));
+  auto entries = decode_coarse_image(region, std::span<const std::uint8_t>(data, data ? size : 0));
+  if (!entries) {
+    std::ostringstream msg;
+    msg << "world " << dir_ << ": the coarse image of region (" << region.x << ", " << region.y << ", " << region.z
+        << ") is damaged: " << entries.error().describe();
+    return FileError{msg.str(), entries.error()};
+  }
+  return std::move(*entries);
+}
+
+FileStatus WorldStore::for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT rx, ry, rz FROM coarse ORDER BY rx, ry, rz", -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot list coarse images");
+  std::vector<Vec3i> regions;
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+    regions.push_back(Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)});
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot list coarse images");
+  for (const Vec3i r : regions) {
+    auto entries = load_coarse(r);
+    if (!entries) return entries.error();
+    fn(r, *entries);
+  }
+  return Ok{};
 }
 
 FileStatus WorldStore::ensure_quarantine_table() {
@@ -269,7 +423,7 @@ FileStatus WorldStore::load_meta() {
   std::int64_t n[4];
   const std::string* v = need("format_version");
   if (!v || !parse_int_list<std::int64_t>(*v, n, 1)) return FileError{"world " + dir_ + ": metadata key format_version missing or malformed", {}};
-  if (n[0] != kWorldFormatVersion)
+  if (n[0] < 1 || n[0] > kWorldFormatVersion)
     return FileError{"world " + dir_ + ": format version " + *v + " is not supported (this build reads " +
                          std::to_string(kWorldFormatVersion) + ")", {}};
   m.format_version = static_cast<std::uint32_t>(n[0]);
@@ -456,6 +610,8 @@ FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes, bool over
       }
     }
   }
+  std::vector<CoarseEntry> coarse;
+  std::vector<Vec3i> no_coarse;  // blobs that do not decode: no entry (a load quarantines them)
   for (const ChunkWrite& w : writes) {
     StmtReset reset{save_stmt};
     sqlite3_bind_int(save_stmt, 1, w.pos.x);
@@ -468,6 +624,21 @@ FileStatus WorldStore::save_chunks(std::span<const ChunkWrite> writes, bool over
       sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
       return e;
     }
+    if (sqlite3_changes(db_) == 0) continue;  // kept as it was (overwrite = false)
+    CoarseEntry e{w.pos, w.revision, {}};
+    if (w.coarse) {
+      e.voxels = *w.coarse;
+    } else if (auto chunk = decode_chunk_blob(w.blob)) {
+      e.voxels = coarse_voxels(&*chunk);
+    } else {
+      no_coarse.push_back(w.pos);
+      continue;
+    }
+    coarse.push_back(e);
+  }
+  if (auto c = change_coarse(coarse, no_coarse); !c) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return c.error();
   }
   if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
     FileError e = error("cannot commit chunks");
@@ -582,15 +753,23 @@ FileResult<std::pair<std::int64_t, std::uint64_t>> WorldStore::edit_log_size() {
 }
 
 FileStatus WorldStore::erase_chunk(Vec3i pos) {
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin chunk delete");
+  const auto fail = [&](FileError e) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  };
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "DELETE FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st, nullptr) != SQLITE_OK)
-    return error("cannot prepare chunk delete");
+    return fail(error("cannot prepare chunk delete"));
   sqlite3_bind_int(st, 1, pos.x);
   sqlite3_bind_int(st, 2, pos.y);
   sqlite3_bind_int(st, 3, pos.z);
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
-  if (rc != SQLITE_DONE) return error("cannot delete chunk");
+  if (rc != SQLITE_DONE) return fail(error("cannot delete chunk"));
+  if (auto c = change_coarse({}, {pos}); !c) return fail(c.error());
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail(error("cannot commit chunk delete"));
   return Ok{};
 }
 
@@ -641,6 +820,11 @@ FileResult<std::optional<std::uint64_t>> WorldStore::quarantine_chunk(Vec3i pos,
     sqlite3_finalize(st);
     if (rc != SQLITE_DONE) return fail("cannot quarantine");
     if (changed != 1) return fail("quarantine moved " + std::to_string(changed) + " rows for");
+  }
+  // The chunk is no longer stored: its coarse entry goes with it.
+  if (auto c = change_coarse({}, {pos}); !c) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return c.error();
   }
   if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail("cannot commit quarantine of");
   return revision;

@@ -5,9 +5,12 @@
 //   - chunks: one row per stored 32³ chunk: its coordinates, a revision that
 //     only ever grows, and the voxels as byte RLE + LZ4;
 //   - quarantine: damaged chunk rows moved aside (coordinates, revision, the
-//     blob as it was, the reason, the time), kept until someone looks.
+//     blob as it was, the reason, the time), kept until someone looks;
+//   - coarse (format 2): per 256³ region, the 4³ mip and revision of every
+//     stored chunk in it (common/coarse_image.h), written in the same
+//     transaction as the chunks, so a distant view never decodes them.
 // Chunks never stored are generated on demand from the metadata (see World).
-// Mips are not stored: they are rebuilt from level 0 on load.
+// The finer mips are not stored: they are rebuilt from level 0 on load.
 //
 // Errors are returned as FileError naming the world and, for chunk data,
 // the chunk's coordinates; a damaged blob never crashes the reader.
@@ -23,6 +26,7 @@
 #include <vector>
 
 #include "common/chunk.h"
+#include "common/coarse_image.h"
 #include "common/decode_error.h"
 #include "common/vxraw.h"
 #include "common/world_bounds.h"
@@ -32,7 +36,9 @@ struct sqlite3_stmt;
 
 namespace terrane {
 
-inline constexpr std::uint32_t kWorldFormatVersion = 1;
+// Format 2 added the coarse images; a format-1 world gains them (and
+// becomes format 2) the first time it is opened.
+inline constexpr std::uint32_t kWorldFormatVersion = 2;
 inline constexpr const char* kWorldDatabaseName = "world.sqlite";
 
 enum class GeneratorKind : std::uint8_t {
@@ -77,6 +83,8 @@ struct ChunkWrite {
   Vec3i pos;
   std::uint64_t revision;
   std::vector<std::uint8_t> blob;  // encode_chunk_blob output
+  // The chunk's coarse_voxels; decoded from the blob when not given.
+  std::optional<CoarseVoxels> coarse = std::nullopt;
 };
 
 // One applied edit in the edit log (table edit_log): who, when, the box
@@ -105,8 +113,12 @@ class WorldStore {
   // directory already holds a world.
   static FileResult<std::unique_ptr<WorldStore>> create(const std::string& dir, const WorldMeta& meta);
   // Opens an existing world; fails with a clear message if there is none or
-  // its format version is not one we read.
-  static FileResult<std::unique_ptr<WorldStore>> open(const std::string& dir);
+  // its format version is not one we read. A format-1 world is upgraded
+  // first (its coarse images built from every chunk, in one transaction);
+  // progress(done, total) is called as that goes, or a line is printed to
+  // stderr every few seconds when progress is null.
+  using Progress = std::function<void(std::int64_t done, std::int64_t total)>;
+  static FileResult<std::unique_ptr<WorldStore>> open(const std::string& dir, const Progress& progress = nullptr);
   static bool exists(const std::string& dir);
 
   ~WorldStore();
@@ -121,6 +133,10 @@ class WorldStore {
 
   // The stored chunk, or nullopt if the chunk was never stored.
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);
+  // The coarse entries of region (coarse_region_of): one per stored chunk.
+  FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region);
+  // Calls fn(region, entries) for every coarse image (terrane-world check).
+  FileStatus for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn);
   // Stores all writes in one transaction (all or nothing). With
   // overwrite = false, chunks already stored are left as they are (used to
   // pre-generate without racing a server's edits).
@@ -169,6 +185,10 @@ class WorldStore {
   static FileResult<std::unique_ptr<WorldStore>> create_in(const std::string& dir, const WorldMeta& meta);
   FileStatus load_meta();
   FileStatus ensure_quarantine_table();
+  FileStatus upgrade_to_coarse(const Progress& progress);
+  // Inside a transaction: the images of the regions of entries, changed.
+  // set: entries to put; erase: chunks whose entries go.
+  FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase);
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
 
@@ -179,6 +199,8 @@ class WorldStore {
   sqlite3_stmt* log_stmt_ = nullptr;
   sqlite3_stmt* insert_stmt_ = nullptr;
   sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
+  sqlite3_stmt* coarse_load_stmt_ = nullptr;
+  sqlite3_stmt* coarse_save_stmt_ = nullptr;
   WorldMeta meta_;
 };
 

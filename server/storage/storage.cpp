@@ -165,7 +165,8 @@ void Storage::writer_loop() {
         for (EditLogEntry& e : job.log) log.push_back(std::move(e));
         for (const VersionPtr& v : job.versions) {
           const auto blob = v->blob();
-          ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end())};
+          ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end()),
+                       coarse_voxels(v->chunk())};
           auto [it, fresh] = index.emplace(v->pos(), writes.size());
           if (fresh)
             writes.push_back(std::move(w));

@@ -17,9 +17,11 @@
 #include <cstdio>
 #include <ctime>
 #include <deque>
+#include <map>
 #include <mutex>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "common/cli.h"
@@ -87,7 +89,9 @@ constexpr const char* kCheckHelp =
     "Reads the metadata and decodes every stored chunk. Each damaged chunk is reported with\n"
     "its chunk coordinates and what is wrong. Chunks already in the quarantine table (damaged\n"
     "rows a server or an earlier check moved aside) are listed with their coordinates, revision,\n"
-    "time and reason. Exit status 1 if any chunk is damaged or quarantined.\n"
+    "time and reason. Every coarse image entry (each chunk's 4^3 mip, what distant views are\n"
+    "served from) is compared with its chunk. Exit status 1 if any chunk is damaged or\n"
+    "quarantined or any coarse entry is wrong or missing.\n"
     "\n"
     "  --quarantine   move each damaged row to the quarantine table (one transaction per chunk;\n"
     "                 its blob is kept byte for byte) so a server serves the chunk as generated\n"
@@ -212,10 +216,13 @@ int cmd_generate(int argc, char** argv) {
       const std::size_t i = next.fetch_add(1);
       if (i >= todo.size()) break;
       world->generate_chunk_box(todo[i], box32);
-      ChunkWrite w{todo[i], todo_revision[i], {}};
+      ChunkWrite w{todo[i], todo_revision[i], {}, {}};
       bool empty = true;
       for (const Voxel v : box32.voxels()) empty &= v.material == kAir;
-      if (!empty) w.blob = encode_chunk_blob(box32);
+      if (!empty) {
+        w.blob = encode_chunk_blob(box32);
+        w.coarse = coarse_voxels(box32);
+      }
       std::lock_guard lock(mu);
       ready.push_back(std::move(w));
       cv.notify_one();
@@ -321,7 +328,8 @@ int cmd_import(int argc, char** argv) {
       const Vec3i origin = chunk_origin(cp);
       chunk->chunk.modify(Region{clipped.min - origin, clipped.max - origin},
                           [&](Vec3i l, Voxel) { return file->box.get(l + origin - file->origin); });
-      writes.push_back(ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk)});
+      writes.push_back(
+        ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk), coarse_voxels(&chunk->chunk)});
     }
     if (auto s = world->store().save_chunks(writes); !s)
       return failure(s.error().message + " (" + std::to_string(done) + " of " + std::to_string(chunks.size()) +
@@ -421,14 +429,38 @@ int cmd_check(int argc, char** argv) {
   Progress progress("check", static_cast<std::uint64_t>(*total));
   std::uint64_t done = 0;
   std::vector<std::pair<Vec3i, std::string>> damaged;
-  auto s = store.for_each_chunk([&](Vec3i pos, std::uint64_t, std::span<const std::uint8_t> blob) {
+  // Each chunk's coarse entry as its blob implies, to compare with the images.
+  std::map<std::tuple<int, int, int>, CoarseEntry> expected;
+  auto s = store.for_each_chunk([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob) {
     if (auto chunk = decode_chunk_blob(blob); !chunk) {
       damaged.emplace_back(pos, chunk.error().describe());
       std::fprintf(stderr, "chunk (%d, %d, %d): damaged: %s\n", pos.x, pos.y, pos.z, chunk.error().describe().c_str());
+    } else {
+      expected[{pos.x, pos.y, pos.z}] = CoarseEntry{pos, revision, coarse_voxels(&*chunk)};
     }
     progress.update(++done);
   });
   if (!s) return failure(s.error().message);
+  // The coarse images: one entry per good chunk, equal to it.
+  std::uint64_t coarse_bad = 0, images = 0;
+  const auto bad_entry = [&](Vec3i p, const char* what) {
+    if (++coarse_bad <= 20) std::fprintf(stderr, "chunk (%d, %d, %d): coarse image %s\n", p.x, p.y, p.z, what);
+  };
+  s = store.for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+    ++images;
+    for (const CoarseEntry& e : entries) {
+      auto it = expected.find({e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z});
+      if (it == expected.end()) {
+        bad_entry(e.chunk_pos, "entry without a stored chunk");
+        continue;
+      }
+      if (it->second.revision != e.revision) bad_entry(e.chunk_pos, "revision differs from the chunk's");
+      else if (it->second.voxels != e.voxels) bad_entry(e.chunk_pos, "voxels differ from the chunk's mip");
+      expected.erase(it);
+    }
+  });
+  if (!s) return failure(s.error().message);
+  for (const auto& [key, e] : expected) bad_entry(e.chunk_pos, "entry missing");
   std::uint64_t moved = 0;
   if (cl.flag("quarantine")) {
     for (const auto& [pos, reason] : damaged) {
@@ -447,10 +479,12 @@ int cmd_check(int argc, char** argv) {
                  q.pos.z, when, static_cast<unsigned long long>(q.revision), q.blob.size(), q.reason.c_str());
   });
   if (!s) return failure(s.error().message);
-  std::printf("checked %llu chunks of world %s: %zu damaged", static_cast<unsigned long long>(done),
-              cl.get("world").c_str(), damaged.size());
+  std::printf("checked %llu chunks and %llu coarse images of world %s: %zu damaged",
+              static_cast<unsigned long long>(done), static_cast<unsigned long long>(images), cl.get("world").c_str(),
+              damaged.size());
   if (cl.flag("quarantine")) std::printf(" (%llu moved to quarantine)", static_cast<unsigned long long>(moved));
-  std::printf(", %llu quarantined\n", static_cast<unsigned long long>(quarantined));
+  std::printf(", %llu quarantined, %llu coarse entries wrong\n", static_cast<unsigned long long>(quarantined),
+              static_cast<unsigned long long>(coarse_bad));
   if (quarantined > 0)
     std::fprintf(stderr,
                  "terrane-world: world %s has %llu quarantined chunk rows: damaged data set aside in its quarantine "
@@ -461,7 +495,10 @@ int cmd_check(int argc, char** argv) {
                  "terrane-world: world %s has %zu damaged chunks; 'check --quarantine' moves them aside (a server "
                  "does so when it loads them)\n",
                  cl.get("world").c_str(), damaged.size());
-  return damaged.empty() && quarantined == 0 ? 0 : 1;
+  if (coarse_bad > 0)
+    std::fprintf(stderr, "terrane-world: world %s has %llu wrong coarse image entries (a server would serve distant "
+                 "views from them)\n", cl.get("world").c_str(), static_cast<unsigned long long>(coarse_bad));
+  return damaged.empty() && quarantined == 0 && coarse_bad == 0 ? 0 : 1;
 }
 
 int cmd_backup(int argc, char** argv) {

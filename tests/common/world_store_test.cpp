@@ -2,12 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <map>
 #include <random>
+#include <tuple>
 
 #include <sqlite3.h>
 #include <unistd.h>
 
+#include "common/lz4_block.h"
 #include "common/world.h"
 
 namespace terrane {
@@ -349,5 +353,148 @@ TEST_F(WorldStoreTest, EmptyMaterialTableRoundTripsEmpty) {
   ASSERT_TRUE(store.ok());
   EXPECT_TRUE((*store)->meta().materials.empty());
 }
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+
+// Every stored chunk has the coarse entry its blob implies, and no entry
+// lacks a chunk (what terrane-world check verifies).
+void expect_coarse_matches_chunks(WorldStore& s) {
+  std::map<std::tuple<int, int, int>, CoarseEntry> from_chunks, from_images;
+  ASSERT_TRUE(s.for_each_chunk([&](Vec3i p, std::uint64_t rev, std::span<const std::uint8_t> blob) {
+                 auto c = decode_chunk_blob(blob);
+                 if (c) from_chunks[{p.x, p.y, p.z}] = CoarseEntry{p, rev, coarse_voxels(&*c)};
+               }).ok());
+  ASSERT_TRUE(s.for_each_coarse([&](Vec3i r, const std::vector<CoarseEntry>& entries) {
+                 for (const CoarseEntry& e : entries) {
+                   EXPECT_EQ(coarse_region_of(e.chunk_pos), r);
+                   from_images[{e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z}] = e;
+                 }
+               }).ok());
+  EXPECT_EQ(from_images, from_chunks);
+}
+
+TEST_F(WorldStoreTest, CoarseImagesFollowEveryWriteEraseAndQuarantine) {
+  auto s = WorldStore::create(dir_, default_world_meta(1));
+  ASSERT_TRUE(s.ok());
+  WorldStore& store = **s;
+  // Chunks in two regions, one on a region's negative edge.
+  std::vector<ChunkWrite> writes;
+  const Vec3i spots[] = {{0, 0, 0}, {7, 1, 7}, {-1, 0, 0}, {-8, -2, 3}, {8, 0, 0}};
+  for (unsigned i = 0; i < 5; ++i) writes.push_back(ChunkWrite{spots[i], 1 + i, encode_chunk_blob(sample_chunk(i))});
+  ASSERT_TRUE(store.save_chunks(writes).ok());
+  expect_coarse_matches_chunks(store);
+  auto r0 = store.load_coarse({0, 0, 0});
+  ASSERT_TRUE(r0.ok());
+  ASSERT_EQ(r0->size(), 2u);  // (0,0,0) and (7,1,7)
+  EXPECT_EQ((*r0)[0].revision, 1u);
+  EXPECT_EQ((*r0)[0].voxels, coarse_voxels(&*decode_chunk_blob(writes[0].blob)));
+  EXPECT_TRUE(store.load_coarse({5, 5, 5})->empty());
+
+  // A new revision replaces the entry; a save without overwrite keeps both.
+  ASSERT_TRUE(store.save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 9, encode_chunk_blob(sample_chunk(20))}}).ok());
+  ASSERT_TRUE(store.save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 10, encode_chunk_blob(sample_chunk(21))},
+                                                        {{1, 0, 0}, 2, encode_chunk_blob(sample_chunk(22))}},
+                                false)
+                  .ok());
+  expect_coarse_matches_chunks(store);
+  EXPECT_EQ(store.load_coarse({0, 0, 0})->front().revision, 9u);
+  // A chunk's coarse voxels given by the writer are taken as they are.
+  const Chunk c = sample_chunk(30);
+  ASSERT_TRUE(store.save_chunks(std::vector<ChunkWrite>{{{2, 0, 0}, 3, encode_chunk_blob(c), coarse_voxels(&c)}}).ok());
+  expect_coarse_matches_chunks(store);
+
+  ASSERT_TRUE(store.erase_chunk({7, 1, 7}).ok());
+  expect_coarse_matches_chunks(store);
+  // A damaged blob gets no entry; quarantining a chunk removes its entry.
+  ASSERT_TRUE(store.save_chunks(std::vector<ChunkWrite>{{{-1, 0, 0}, 6, {1, 1, 0xff, 0x00, 0x13}}}).ok());
+  expect_coarse_matches_chunks(store);
+  ASSERT_TRUE(store.quarantine_chunk({-8, -2, 3}, "test").ok());
+  expect_coarse_matches_chunks(store);
+  EXPECT_TRUE(store.load_coarse({-1, -1, 0})->empty());
+}
+
+TEST_F(WorldStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
+  {
+    auto s = WorldStore::create(dir_, default_world_meta(1));
+    ASSERT_TRUE(s.ok());
+    std::vector<ChunkWrite> writes;
+    for (int i = 0; i < 40; ++i)
+      writes.push_back(ChunkWrite{{i % 10 - 5, i / 20, (i * 7) % 13 - 6}, static_cast<std::uint64_t>(i + 1),
+                                  encode_chunk_blob(sample_chunk(static_cast<unsigned>(i)))});
+    ASSERT_TRUE((*s)->save_chunks(writes).ok());
+  }
+  // As the previous format left it: no coarse table, format_version 1.
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "DROP TABLE coarse; UPDATE meta SET value = '1' WHERE key = 'format_version'", nullptr,
+                         nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  std::int64_t last_done = -1, last_total = -1;
+  auto s = WorldStore::open(dir_, [&](std::int64_t done, std::int64_t total) {
+    EXPECT_GE(done, last_done);
+    last_done = done;
+    last_total = total;
+  });
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(last_done, 40);
+  EXPECT_EQ(last_total, 40);
+  EXPECT_EQ((*s)->meta().format_version, kWorldFormatVersion);
+  expect_coarse_matches_chunks(**s);
+  s->reset();
+  // Opened again: nothing more to do.
+  bool called = false;
+  auto again = WorldStore::open(dir_, [&](std::int64_t, std::int64_t) { called = true; });
+  ASSERT_TRUE(again.ok());
+  EXPECT_FALSE(called);
+}
+
+TEST(CoarseImage, RoundTripsAndRefusesDamage) {
+  const Vec3i region{-1, 0, 2};
+  std::vector<CoarseEntry> entries;
+  for (int i : {0, 5, 511, 64}) {
+    CoarseEntry e;
+    e.chunk_pos = region * kCoarseRegionChunks + Vec3i{i % 8, i / 64, (i / 8) % 8};
+    e.revision = 1000u + static_cast<unsigned>(i);
+    e.voxels[static_cast<std::size_t>(i % 64)] = make_voxel(materials::kBrick, 7);
+    entries.push_back(e);
+  }
+  const auto blob = encode_coarse_image(region, entries);
+  auto back = decode_coarse_image(region, blob);
+  ASSERT_TRUE(back.ok());
+  std::sort(entries.begin(), entries.end(),
+            [](const CoarseEntry& a, const CoarseEntry& b) { return coarse_index(a.chunk_pos) < coarse_index(b.chunk_pos); });
+  EXPECT_EQ(*back, entries);
+  // Every truncation, and a wrong version or codec, is an error.
+  for (std::size_t n = 0; n < blob.size(); ++n)
+    EXPECT_FALSE(decode_coarse_image(region, std::span(blob.data(), n)).ok()) << n;
+  auto bad = blob;
+  bad[0] = 2;
+  EXPECT_FALSE(decode_coarse_image(region, bad).ok());
+  // Raw payloads with a bad index order, a bad material, Air with occupancy.
+  const auto with_raw = [](std::vector<std::uint8_t> raw) {
+    std::vector<std::uint8_t> out{1, 1};
+    lz4_compress(raw, out);
+    return out;
+  };
+  std::vector<std::uint8_t> two(2 + 2 * 138, 0);
+  two[0] = 2;
+  two[2] = 5;              // first index 5
+  two[2 + 138] = 5;        // second index 5 again
+  EXPECT_FALSE(decode_coarse_image(region, with_raw(two)).ok());
+  std::vector<std::uint8_t> one(2 + 138, 0);
+  one[0] = 1;
+  one[2 + 10] = 64;        // material 64
+  EXPECT_FALSE(decode_coarse_image(region, with_raw(one)).ok());
+  one[2 + 10] = 0;
+  one[2 + 11] = 9;         // Air with occupancy
+  EXPECT_FALSE(decode_coarse_image(region, with_raw(one)).ok());
+  one[2 + 11] = 0;
+  EXPECT_TRUE(decode_coarse_image(region, with_raw(one)).ok());
+}
+
 }  // namespace
 }  // namespace terrane

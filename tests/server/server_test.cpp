@@ -525,7 +525,7 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
       // Stored content differs from the generator's: a brick corner.
       Chunk c = (*world)->generate_chunk(cp);
       c.modify(Region{{0, 0, 0}, {2, 2, 2}}, [](Vec3i, Voxel) { return solid(materials::kBrick); });
-      writes.push_back(ChunkWrite{cp, 5, encode_chunk_blob(c)});
+      writes.push_back(ChunkWrite{cp, 5, encode_chunk_blob(c), coarse_voxels(&c)});
     }
     ASSERT_TRUE((*world)->store().save_chunks(writes).ok());
   }

@@ -1,5 +1,6 @@
 // End-to-end tests of the terrane-world tool: runs the built binary.
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -159,6 +160,38 @@ TEST_F(WorldToolTest, CheckFindsDamagedChunkAndBackupCopiesTheWorld) {
   EXPECT_EQ(damaged.exit_code, 1) << damaged.output;
   EXPECT_NE(damaged.output.find("chunk (1, 1, 0)"), std::string::npos) << damaged.output;
   EXPECT_NE(damaged.output.find("1 damaged"), std::string::npos) << damaged.output;
+}
+
+TEST_F(WorldToolTest, CheckComparesEveryCoarseImageEntryWithItsChunk) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
+  auto good = run("check --world " + w);
+  EXPECT_EQ(good.exit_code, 0) << good.output;
+  EXPECT_NE(good.output.find("0 coarse entries wrong"), std::string::npos) << good.output;
+  {
+    // An image that says Brick everywhere, and lacks every other chunk.
+    auto store = WorldStore::open(w);
+    ASSERT_TRUE(store.ok());
+    auto entries = (*store)->load_coarse({0, 0, 0});
+    ASSERT_TRUE(entries.ok());
+    ASSERT_GE(entries->size(), 2u);
+    CoarseEntry wrong = entries->front();
+    wrong.voxels.fill(solid(materials::kBrick));
+    const auto image = encode_coarse_image({0, 0, 0}, {wrong});
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((w + "/world.sqlite").c_str(), &db), SQLITE_OK);
+    sqlite3_stmt* st = nullptr;
+    ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE coarse SET image = ? WHERE rx = 0 AND ry = 0 AND rz = 0", -1, &st, nullptr),
+              SQLITE_OK);
+    sqlite3_bind_blob(st, 1, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_DONE);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+  }
+  auto bad = run("check --world " + w);
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("coarse image voxels differ from the chunk's mip"), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("coarse image entry missing"), std::string::npos) << bad.output;
 }
 
 TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnesAside) {
