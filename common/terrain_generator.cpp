@@ -531,6 +531,27 @@ std::shared_ptr<const std::vector<TerrainGenerator::Column>> TerrainGenerator::c
   return made;
 }
 
+bool TerrainGenerator::all_air(const Region& region) const {
+  if (region.empty()) return true;
+  const Vec3i size = region.size();
+  const bool chunk_footprint = size.x == kChunkSize && size.z == kChunkSize && floor_mod(region.min.x, kChunkSize) == 0 &&
+                               floor_mod(region.min.z, kChunkSize) == 0;
+  std::shared_ptr<const std::vector<Column>> cached;
+  std::vector<Column> own;
+  if (chunk_footprint)
+    cached = chunk_columns(region.min.x, region.min.z);
+  else
+    own = columns(region.min.x, region.min.z, size.x, size.z);
+  const std::vector<Column>& cols = chunk_footprint ? *cached : own;
+  // shade(): at y >= top_y the density is -1, so the voxel is Air unless
+  // y < kBedrockY (Basalt), y < kLavaY (lava) or y < water_level (water).
+  const std::int32_t y = region.min.y;
+  if (y < kBedrockY || y < kLavaY) return false;
+  for (const Column& c : cols)
+    if (y < c.top_y || y < c.water_level) return false;
+  return true;
+}
+
 void TerrainGenerator::generate(const Region& region, Box& out) const {
   if (region.empty()) {
     out.resize({0, 0, 0});

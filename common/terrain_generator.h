@@ -101,6 +101,12 @@ class TerrainGenerator {
   // The y below which open air in this column is water (sea or lake level).
   std::int32_t water_level(std::int32_t x, std::int32_t z) const;
 
+  // True only if generate(region) would be all Air, judged from the
+  // columns alone (no voxel is evaluated): the region lies above every
+  // column's terrain, water and lava. Chunks of sky answer true; a false
+  // answer means only that generating is needed to know.
+  bool all_air(const Region& region) const;
+
   // Parameters and version as "key=value" lines for the world's metadata.
   std::string to_metadata() const;
 

@@ -65,6 +65,11 @@ void World::generate_chunk_box(Vec3i chunk_pos, Box& out) const {
       std::copy_n(part.read_row(y, z), s.x, out.write_row(off.y + y, off.z + z) + off.x);
 }
 
+bool World::generates_air(Vec3i chunk_pos) const {
+  const Region inside = meta().bounds.clamp(chunk_region(chunk_pos));
+  return !generator_ || inside.empty() || generator_->all_air(inside);
+}
+
 Chunk World::generate_chunk(Vec3i chunk_pos) const {
   Box box;
   generate_chunk_box(chunk_pos, box);

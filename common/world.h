@@ -36,6 +36,9 @@ class World {
   // Thread-safe.
   void generate_chunk_box(Vec3i chunk_pos, Box& out) const;
   Chunk generate_chunk(Vec3i chunk_pos) const;
+  // True only if generate_chunk would be all Air, known without generating
+  // it (TerrainGenerator::all_air; always true without a generator).
+  bool generates_air(Vec3i chunk_pos) const;
 
   // The stored chunk, or the generated one with revision 0 (or, if the
   // chunk's row was quarantined, the highest quarantined revision + 1).

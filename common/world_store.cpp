@@ -325,6 +325,25 @@ FileResult<std::vector<CoarseEntry>> WorldStore::load_coarse(Vec3i region) {
   return std::move(*entries);
 }
 
+FileResult<std::vector<Vec3i>> WorldStore::quarantined_in(Vec3i region) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_,
+                         "SELECT DISTINCT cx, cy, cz FROM quarantine WHERE cx BETWEEN ?1 AND ?2 AND cy BETWEEN ?3 AND ?4"
+                         " AND cz BETWEEN ?5 AND ?6",
+                         -1, &st, nullptr) != SQLITE_OK)
+    return error("cannot read the quarantine table");
+  const Vec3i lo = region * kCoarseRegionChunks, hi = lo + Vec3i{7, 7, 7};
+  const int b[6] = {lo.x, hi.x, lo.y, hi.y, lo.z, hi.z};
+  for (int i = 0; i < 6; ++i) sqlite3_bind_int(st, i + 1, b[i]);
+  std::vector<Vec3i> out;
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+    out.push_back(Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)});
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return error("cannot read the quarantine table");
+  return out;
+}
+
 FileStatus WorldStore::for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn) {
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "SELECT rx, ry, rz FROM coarse ORDER BY rx, ry, rz", -1, &st, nullptr) != SQLITE_OK)

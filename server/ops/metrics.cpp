@@ -155,6 +155,9 @@ std::string render_metrics(const MetricsSources& s) {
   m.gauge("terrane_chunks_resident", "Chunks loaded in memory now.", load(c.chunks_loaded));
   m.counter("terrane_chunks_loaded_total", "Chunks read from the store.", load(st.loaded_from_store));
   m.counter("terrane_chunks_generated_total", "Chunks made by the world's generator.", load(st.generated));
+  m.counter("terrane_coarse_images_read_total",
+            "Coarse images read from the store (each serves the 4^3 mips of a 256^3 region's chunks).",
+            load(st.coarse_images_read));
   m.counter("terrane_chunks_unloaded_total", "Chunks dropped from memory (they come back from the store).",
             load(c.chunks_unloaded));
   m.counter("terrane_chunks_quarantined_total", "Stored chunks that failed to decode and were set aside.",

@@ -415,7 +415,7 @@ void Replicator::request_more() {
   std::vector<ChunkWant> wants;
   auto want = [&](Vec3i cp, Intent intent, int level) {
     requested_.emplace(cp, Request{intent, level});
-    wants.push_back(ChunkWant{cp, level == 0});
+    wants.push_back(ChunkWant{cp, level == 0, level});
   };
   auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
   // Pass 1: the whole view at its coarsest, nearest first.

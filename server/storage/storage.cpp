@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "server/log.h"
 
@@ -42,8 +43,20 @@ void Storage::stop() {
 void Storage::load(Vec3i pos, LoadDone done, bool urgent) {
   {
     std::lock_guard lock(readers_mutex_);
-    (urgent ? urgent_loads_ : loads_).push_back(LoadJob{pos, std::move(done)});
+    (urgent ? urgent_loads_ : loads_).push_back(LoadJob{pos, std::move(done), nullptr});
   }
+  post_load();
+}
+
+void Storage::load_coarse(Vec3i region, CoarseDone done) {
+  {
+    std::lock_guard lock(readers_mutex_);
+    loads_.push_back(LoadJob{region, nullptr, std::move(done)});
+  }
+  post_load();
+}
+
+void Storage::post_load() {
   asio::post(loaders_, [this] {
     std::unique_ptr<WorldStore> store;
     LoadJob job;
@@ -54,6 +67,35 @@ void Storage::load(Vec3i pos, LoadDone done, bool urgent) {
       q.pop_front();
       store = std::move(readers_.back());
       readers_.pop_back();
+    }
+    if (job.coarse_done) {
+      LoadedCoarse c;
+      c.region = job.pos;
+      auto entries = store->load_coarse(job.pos);
+      auto quarantined = entries ? store->quarantined_in(job.pos) : FileResult<std::vector<Vec3i>>{std::vector<Vec3i>{}};
+      if (entries && quarantined) {
+        c.entries = std::move(*entries);
+        counters_.coarse_images_read.fetch_add(1, std::memory_order_relaxed);
+        std::unordered_set<Vec3i, Vec3iHash> known(quarantined->begin(), quarantined->end());
+        for (const CoarseEntry& e : c.entries) known.insert(e.chunk_pos);
+        const Vec3i base = job.pos * kCoarseRegionChunks;
+        for (int y = 0; y < kCoarseRegionChunks; ++y)
+          for (int z = 0; z < kCoarseRegionChunks; ++z)
+            for (int x = 0; x < kCoarseRegionChunks; ++x) {
+              const Vec3i cp = base + Vec3i{x, y, z};
+              if (known.count(cp) == 0 && world_.meta().bounds.touches_chunk(cp) && world_.generates_air(cp))
+                c.air.push_back(cp);
+            }
+      } else {
+        c.ok = false;
+        c.error = entries ? quarantined.error().message : entries.error().message;
+      }
+      {
+        std::lock_guard lock(readers_mutex_);
+        readers_.push_back(std::move(store));
+      }
+      job.coarse_done(std::move(c));
+      return;
     }
     LoadedChunk c = load_now(*store, job.pos);
     {

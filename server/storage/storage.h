@@ -49,8 +49,21 @@ struct LoadedChunk {
   std::string error;
 };
 
+// A region's coarse image (common/coarse_image.h): one entry per stored chunk.
+struct LoadedCoarse {
+  Vec3i region;
+  std::vector<CoarseEntry> entries;
+  // Chunks of the region never stored that the generator makes all Air
+  // (sky; every one of a world without a generator), at revision 0: known
+  // exactly without generating them.
+  std::vector<Vec3i> air;
+  bool ok = true;  // false: the image could not be read or is damaged (error says why)
+  std::string error;
+};
+
 struct StorageCounters {
   std::atomic<std::uint64_t> loaded_from_store{0};
+  std::atomic<std::uint64_t> coarse_images_read{0};
   std::atomic<std::uint64_t> generated{0};
   std::atomic<std::uint64_t> quarantined{0};
   std::atomic<std::uint64_t> commits{0};           // transactions
@@ -64,6 +77,7 @@ struct StorageCounters {
 class Storage {
  public:
   using LoadDone = std::function<void(LoadedChunk)>;
+  using CoarseDone = std::function<void(LoadedCoarse)>;
   using CommitDone = std::function<void(const FileStatus&)>;
 
   // world: shared for its metadata and generator (thread-safe); the store
@@ -80,6 +94,8 @@ class Storage {
   // urgent loads (an edit or a full-resolution request waits on them) go
   // before the others (streaming a view's coarse chunks).
   void load(Vec3i pos, LoadDone done, bool urgent = false);
+  // Reads a region's coarse image (queued with the other loads).
+  void load_coarse(Vec3i region, CoarseDone done);
   // log: the tick's edits for the edit log, stored in the same transaction.
   void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done);
   void stop();
@@ -112,9 +128,11 @@ class Storage {
   std::mutex readers_mutex_;
   std::vector<std::unique_ptr<WorldStore>> readers_;
   struct LoadJob {
-    Vec3i pos;
+    Vec3i pos;  // a chunk, or the region of a coarse image
     LoadDone done;
+    CoarseDone coarse_done;  // set: a coarse image
   };
+  void post_load();
   std::deque<LoadJob> urgent_loads_, loads_;
 
   std::unique_ptr<WorldStore> writer_store_;

@@ -1,5 +1,6 @@
 #include "server/world/chunk_version.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include "common/box.h"
@@ -29,6 +30,7 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   auto v = std::make_shared<ChunkVersion>(full.pos_, full.revision_, nullptr, UnitBits{}, full.level_since_);
   v->empty_ = full.empty_;
   v->has_voxels_ = false;
+  v->finest_level_ = 1;
   for (int level = 1; level < kMipLevels; ++level) {
     const auto bytes = full.encoded(level);
     const auto l = static_cast<std::size_t>(level);
@@ -37,7 +39,23 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   return v;
 }
 
+std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::uint64_t revision,
+                                                              const CoarseVoxels& voxels) {
+  auto v = std::make_shared<ChunkVersion>(pos, revision, nullptr);
+  // The coarsest mip is Air only when every voxel is (one non-Air child
+  // makes its parent non-Air), so an all-Air image entry is an empty chunk.
+  v->empty_ = std::all_of(voxels.begin(), voxels.end(), [](Voxel x) { return x.material == kAir; });
+  v->has_voxels_ = false;
+  v->finest_level_ = kMipLevels - 1;
+  const auto l = static_cast<std::size_t>(kMipLevels - 1);
+  std::call_once(v->encoded_once_[l], [&] { net_codec_encode(kCoarseSide, voxels, v->encoded_[l]); });
+  return v;
+}
+
 std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
+  // Precondition: has_level(level) (a version without the voxels cannot
+  // make a finer level; asking would be a bug in the caller).
+  if (!has_level(level)) return {};
   const auto l = static_cast<std::size_t>(level);
   encode_counters().asked.fetch_add(1, std::memory_order_relaxed);
   std::call_once(encoded_once_[l], [&] {

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "common/chunk.h"
+#include "common/coarse_image.h"
 #include "common/net_codec.h"
 
 namespace terrane {
@@ -47,13 +48,20 @@ class ChunkVersion {
   // nobody holds at full resolution (a few hundred bytes instead of the
   // chunk). encoded() answers levels 1..3 only; the rest needs the chunk.
   static std::shared_ptr<const ChunkVersion> mips_only(const ChunkVersion& full);
+  // Only the coarsest level (4^3), as a coarse image stored it: what a
+  // distant view needs, without reading the chunk. encoded() answers level
+  // 3 only.
+  static std::shared_ptr<const ChunkVersion> coarse_only(Vec3i pos, std::uint64_t revision, const CoarseVoxels& voxels);
 
   Vec3i pos() const { return pos_; }
   std::uint64_t revision() const { return revision_; }
   const Chunk* chunk() const { return chunk_.get(); }
   bool empty() const { return empty_; }
-  // False for a mips_only version.
+  // False for a mips_only or coarse_only version.
   bool has_voxels() const { return has_voxels_; }
+  // Whether encoded(level) can answer: every level for a chunk with its
+  // voxels, 1..3 for mips_only, 3 for coarse_only.
+  bool has_level(int level) const { return level >= finest_level_; }
   const UnitBits& changed_units() const { return changed_units_; }
   std::uint64_t level_since(int level) const { return level_since_[static_cast<std::size_t>(level)]; }
 
@@ -77,6 +85,7 @@ class ChunkVersion {
   std::array<std::uint64_t, kMipLevels> level_since_;
   bool empty_ = true;
   bool has_voxels_ = true;
+  int finest_level_ = 0;
 
   mutable std::array<std::once_flag, kMipLevels> encoded_once_;
   mutable std::array<std::vector<std::uint8_t>, kMipLevels> encoded_;

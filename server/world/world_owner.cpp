@@ -92,7 +92,8 @@ void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
   asio::post(strand_, [this, id, chunks = std::move(chunks)] {
     if (clients_.count(id) == 0) return;
     for (const ChunkWant& w : chunks) {
-      if (request(w.chunk_pos, !w.full)) {
+      if (w.level == kMipLevels - 1 && want_coarse(w.chunk_pos, Waiter{id, w.full})) continue;
+      if (request(w.chunk_pos, w.level)) {
         grant(id, w.chunk_pos, w.full);
       } else {
         loading_[w.chunk_pos].push_back(Waiter{id, w.full});
@@ -126,15 +127,66 @@ void WorldOwner::flush_grants() {
 
 // --- chunks --------------------------------------------------------------------
 
-bool WorldOwner::request(Vec3i cp, bool mips_enough) {
-  if (auto it = loaded_.find(cp); it != loaded_.end() && (mips_enough || it->second.current->has_voxels()))
-    return true;
+bool WorldOwner::request(Vec3i cp, int level) {
+  if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.current->has_level(level)) return true;
   if (loading_.count(cp) != 0) return false;
   loading_.emplace(cp, std::vector<Waiter>{});
   storage_.load(
       cp, [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
-      !mips_enough);
+      level == 0);
   return false;
+}
+
+bool WorldOwner::want_coarse(Vec3i cp, Waiter w) {
+  // Loaded in any form, or being loaded: the usual way serves it.
+  if (loaded_.count(cp) != 0 || loading_.count(cp) != 0) return false;
+  const Vec3i region = coarse_region_of(cp);
+  // Read, and the chunk had no entry: it was never stored (generated).
+  if (regions_read_.count(region) != 0) return false;
+  auto [it, fresh] = coarse_waiting_.try_emplace(region);
+  it->second.emplace_back(cp, w);
+  if (fresh)
+    storage_.load_coarse(region, [this](LoadedCoarse c) {
+      asio::post(strand_, [this, c = std::move(c)]() mutable { on_coarse_loaded(std::move(c)); });
+    });
+  return true;
+}
+
+void WorldOwner::on_coarse_loaded(LoadedCoarse c) {
+  auto node = coarse_waiting_.extract(c.region);
+  if (c.ok) {
+    regions_read_.insert(c.region);
+    for (const CoarseEntry& e : c.entries) {
+      // What is loaded is as new or newer: the image never overrides it.
+      auto [it, fresh] = loaded_.try_emplace(e.chunk_pos);
+      if (!fresh) continue;
+      const VersionPtr v = ChunkVersion::coarse_only(e.chunk_pos, e.revision, e.voxels);
+      it->second = Loaded{v, v, tick_};
+      ++mips_only_;
+    }
+    for (const Vec3i cp : c.air) {
+      auto [it, fresh] = loaded_.try_emplace(cp);
+      if (!fresh) continue;
+      const VersionPtr v = ChunkVersion::coarse_only(cp, 0, CoarseVoxels{});
+      it->second = Loaded{v, v, tick_};
+      ++mips_only_;
+    }
+  } else {
+    // Served by reading the chunks instead (a damaged image is found by
+    // terrane-world check).
+    server_log().error("coarse image of region ({},{},{}): {}; reading its chunks instead", c.region.x, c.region.y,
+                       c.region.z, c.error);
+    regions_read_.insert(c.region);
+  }
+  if (node.empty()) return;
+  for (const auto& [cp, w] : node.mapped()) {
+    if (clients_.count(w.id) == 0) continue;
+    if (request(cp, kMipLevels - 1))
+      grant(w.id, cp, w.full);
+    else
+      loading_[cp].push_back(w);
+  }
+  flush_grants();
 }
 
 void WorldOwner::on_loaded(LoadedChunk c) {

@@ -20,7 +20,11 @@
 //      client with "server storage failure" and calls on_fatal.
 //
 // Chunks: a client asks for chunks (want); loaded ones are granted at once,
-// the others when Storage has loaded or generated them. A grant registers
+// the others when Storage has loaded or generated them. A chunk wanted only
+// at its coarsest level (4^3) comes from its region's coarse image when it
+// was stored (one read serves the region's 512 chunks, none decoded), as a
+// version with that level only; the chunk itself is read when a finer
+// level, an edit or a hash needs it. A grant registers
 // the client as a holder, so every later change reaches it, in order after
 // the grant. Chunks nobody holds at full resolution, with nothing pending,
 // are unloaded beyond resident_chunks, least recently used first.
@@ -70,6 +74,7 @@ class WorldClient {
 struct ChunkWant {
   Vec3i chunk_pos;
   bool full = false;  // the client will hold it at full resolution
+  int level = 0;      // the level it will be sent at: 0 full, 1..3 a mip (3: served from coarse images)
 };
 
 // Read access for tests and tools (Server::inspect).
@@ -198,9 +203,13 @@ class WorldOwner : private WorldView {
                     const FileStatus& status);
   void fatal_storage(const std::string& why);
   // Starts loading chunk_pos unless loaded or loading; true if loaded with
-  // its voxels (or, with mips_enough, at least its mips).
-  bool request(Vec3i chunk_pos, bool mips_enough = false);
+  // the given level (0: its voxels).
+  bool request(Vec3i chunk_pos, int level = 0);
   void on_loaded(LoadedChunk c);
+  // A want of the coarsest level of a chunk not loaded: taken (true) when
+  // its region's coarse image can serve it (read now or being read).
+  bool want_coarse(Vec3i chunk_pos, Waiter w);
+  void on_coarse_loaded(LoadedCoarse c);
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void flush_grants();
   void retry_pending();
@@ -227,6 +236,10 @@ class WorldOwner : private WorldView {
   std::size_t mips_only_ = 0;
   std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
   std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
+  // Regions whose coarse image was read (a chunk of one without an entry
+  // was never stored), and the wants waiting for an image being read.
+  std::unordered_set<Vec3i, Vec3iHash> regions_read_;
+  std::unordered_map<Vec3i, std::vector<std::pair<Vec3i, Waiter>>, Vec3iHash> coarse_waiting_;
   std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
   bool grants_scheduled_ = false;

@@ -14,15 +14,18 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <random>
 #include <string>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
 #include <unistd.h>
 
 #include "client/client.h"
+#include "common/coarse_image.h"
 #include "common/world.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
@@ -212,6 +215,28 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
       ADD_FAILURE() << "acknowledged edit lost at (" << e.voxel.x << ", " << e.voxel.y << ", " << e.voxel.z << ")";
     }
   }
+  // The coarse images (what distant views are served from) still match
+  // every chunk after the kills: they are written in the chunks' transactions.
+  std::size_t coarse_wrong = 0, coarse_entries = 0;
+  {
+    std::map<std::tuple<int, int, int>, CoarseEntry> expected;
+    ASSERT_TRUE((*world)->store().for_each_chunk([&](Vec3i p, std::uint64_t rev, std::span<const std::uint8_t> blob) {
+      auto chunk = decode_chunk_blob(blob);
+      ASSERT_TRUE(chunk.ok());
+      expected[{p.x, p.y, p.z}] = CoarseEntry{p, rev, coarse_voxels(&*chunk)};
+    }).ok());
+    ASSERT_TRUE((*world)->store().for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+      for (const CoarseEntry& e : entries) {
+        ++coarse_entries;
+        auto it = expected.find({e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z});
+        if (it == expected.end() || !(it->second == e)) ++coarse_wrong;
+        if (it != expected.end()) expected.erase(it);
+      }
+    }).ok());
+    coarse_wrong += expected.size();
+  }
+  EXPECT_EQ(coarse_wrong, 0u) << "of " << coarse_entries << " coarse entries";
+  EXPECT_GT(coarse_entries, 0u);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   std::printf(

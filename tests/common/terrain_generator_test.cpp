@@ -136,6 +136,31 @@ TEST(TerrainGenerator, ChunkStacksFromManyThreadsMatchOneRegion) {
   }
 }
 
+TEST(TerrainGenerator, AllAirIsNeverWrongAndKnowsTheSky) {
+  // Whole column stacks at places with sea, plains and mountains: every
+  // chunk said to be Air generates all Air, and the sky above is known.
+  const TerrainGenerator gen(GeneratorParams{});
+  int said_air = 0, air = 0;
+  for (const Vec3i c : {Vec3i{0, 0, 0}, Vec3i{-40, 0, 17}, Vec3i{25, 0, -60}, Vec3i{-300, 0, 170}}) {
+    for (int cy = kWorldMinY / 32; cy < kWorldMaxY / 32; ++cy) {
+      const Region r = Region::from_min_size(Vec3i{c.x * 32, cy * 32, c.z * 32}, {32, 32, 32});
+      const Box b = generate(gen, r);
+      const bool is_air =
+          std::all_of(b.voxels().begin(), b.voxels().end(), [](Voxel v) { return v.material == kAir; });
+      air += is_air;
+      if (gen.all_air(r)) {
+        ++said_air;
+        EXPECT_TRUE(is_air) << "chunk at " << r.min.x << "," << r.min.y << "," << r.min.z;
+      }
+    }
+  }
+  EXPECT_GT(said_air, 0);
+  EXPECT_GE(said_air * 10, air * 8) << "most sky should be known without generating it";
+  // Unaligned regions answer by the same rule.
+  EXPECT_TRUE(gen.all_air(Region{{5, 250, 7}, {40, 256, 19}}));
+  EXPECT_FALSE(gen.all_air(Region{{5, -128, 7}, {40, -100, 19}}));
+}
+
 TEST(TerrainGenerator, VoxelAtMatchesGenerate) {
   const TerrainGenerator gen(GeneratorParams{});
   for (const Vec3i corner : {Vec3i{-48, 0, -80}, Vec3i{100, 0, 37}}) {

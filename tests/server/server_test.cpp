@@ -26,6 +26,7 @@
 #include <tuple>
 #include <thread>
 
+#include "common/coarse_image.h"
 #include "common/view.h"
 #include "server/world/edits.h"
 #include "server/log.h"
@@ -351,6 +352,73 @@ bool view_complete(const HeldMap& held, const ClientStateMsg& where,
       return false;
   }
   return true;
+}
+
+TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) {
+  // A stored world around (1000, y, 1000), as terrane-world generate leaves
+  // it: every chunk that is not Air has a row (and a coarse entry).
+  std::map<std::tuple<int, int, int>, CoarseVoxels> stored;
+  {
+    auto world = World::create(dir_.string(), default_world_meta());
+    ASSERT_TRUE(world.ok()) << world.error().message;
+    std::vector<ChunkWrite> writes;
+    for (int cx = 21; cx <= 41; ++cx)
+      for (int cz = 21; cz <= 41; ++cz)
+        for (int cy = -4; cy < 8; ++cy) {
+          const Vec3i cp{cx, cy, cz};
+          const Chunk c = (*world)->generate_chunk(cp);
+          if (c.empty()) continue;
+          writes.push_back(ChunkWrite{cp, 3, encode_chunk_blob(c), coarse_voxels(&c)});
+          stored[{cp.x, cp.y, cp.z}] = coarse_voxels(&c);
+        }
+    ASSERT_TRUE((*world)->store().save_chunks(writes).ok());
+  }
+  start();
+  auto p = join("far-sighted");
+  const ClientStateMsg where{{1000.5f, 60.0f, 1000.5f}, 300, 32};
+  ASSERT_TRUE(p->send(build_client_state(where)));
+  // Read until every chunk of the view is held at its level, keeping the
+  // coarsest mips received.
+  HeldMap held = empty_held();
+  std::map<std::tuple<int, int, int>, std::pair<std::uint64_t, CoarseVoxels>> coarse;
+  StreamDecodeScratch scratch;
+  while (!view_complete(held, where)) {
+    auto f = p->next_of(wire::Body::StreamBatch);
+    ASSERT_TRUE(f.has_value()) << "the stream ended before the view was complete";
+    auto r = parse_stream_batch(*msg(*f).body_as_StreamBatch());
+    ASSERT_TRUE(r.ok());
+    ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+                  if (rec.kind == StreamRecordKind::kReleased) {
+                    held.erase(rec.chunk_pos);
+                    return Ok{};
+                  }
+                  held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, rec.revision,
+                                                     rec.kind == StreamRecordKind::kEmpty ? kHeldEmpty : rec.level};
+                  if (rec.kind == StreamRecordKind::kMip3) {
+                    CoarseVoxels v{};
+                    std::copy_n(rec.voxels->voxels().begin(), kCoarseVoxels, v.begin());
+                    coarse[{rec.chunk_pos.x, rec.chunk_pos.y, rec.chunk_pos.z}] = {rec.revision, v};
+                  }
+                  return Ok{};
+                }).ok());
+  }
+  // Every coarsest mip sent is the stored chunk's, at its revision.
+  ASSERT_GT(coarse.size(), 100u);
+  for (const auto& [key, got] : coarse) {
+    auto it = stored.find(key);
+    ASSERT_NE(it, stored.end()) << "a mip for a chunk that was never stored";
+    EXPECT_EQ(got.first, 3u);
+    EXPECT_EQ(got.second, it->second);
+  }
+  // Chunks were read only for finer levels: the coarsest came from images.
+  std::size_t finer = 0;
+  for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, default_world_meta().bounds))
+    finer += desired_level(where.position, cp, where.full_res_radius) < kMipLevels - 1;
+  const StorageCounters& st = server_->storage_counters();
+  EXPECT_GT(st.coarse_images_read.load(), 0u);
+  EXPECT_LE(st.loaded_from_store.load() + st.generated.load(), finer)
+      << "loaded " << st.loaded_from_store.load() << ", generated " << st.generated.load();
+  server_->inspect([&](const WorldView& w) { EXPECT_LE(w.loaded_count(), finer); });
 }
 
 TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
