@@ -123,7 +123,11 @@ void Bot::on_coverage(Vec3i cp, wire::CoverageKind kind) {
   const auto now = Clock::now();
   if ((b & 1) != 0) {
     b &= std::uint8_t(~1u);
-    if (--need_coarse_ == 0) result_.join_coarse_ms = ms_between(connect_at_, now);
+    if (--need_coarse_ == 0) {
+      result_.join_coarse_ms = ms_between(connect_at_, now);
+      const ClientCounters k = client_->counters();
+      for (const auto& t : k.by_message_type) result_.join_coarse_bytes += t.bytes_in;
+    }
   }
   const bool full = kind == wire::CoverageKind::Empty || kind == wire::CoverageKind::Full;
   if ((b & 2) != 0 && full) {

@@ -45,6 +45,7 @@ struct BotResult {
   std::string connect_error;
   std::optional<double> join_coarse_ms, join_full_ms;
   std::uint64_t join_bytes = 0;          // received from connect until the full-resolution region was complete
+  std::uint64_t join_coarse_bytes = 0;  // bytes received when the coarse view was complete
   std::uint64_t join_non_empty_voxels = 0;
   std::uint64_t hash_checked = 0, hash_unanswered = 0;
   std::uint64_t walk_steps = 0;

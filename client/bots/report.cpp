@@ -114,6 +114,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"bytes_received\": " << r.bytes_received << ",\n";
   j << "  \"bytes_sent\": " << r.bytes_sent << ",\n";
   j << "  \"join_bytes_received\": " << r.join_bytes_received << ",\n";
+  j << "  \"join_coarse_bytes\": " << r.join_coarse_bytes << ",\n";
   j << "  \"steady_bytes_received\": " << r.steady_bytes_received << ",\n";
   j << "  \"bytes_per_non_empty_voxel\": " << num(r.bytes_per_non_empty_voxel) << ",\n";
   j << "  \"join_coarse_ms\": " << lat(r.join_coarse_ms) << ",\n";
@@ -207,6 +208,7 @@ std::string report_table(const BotsReport& r) {
   row("bytes sent", mb(r.bytes_sent));
   row("bytes per non-empty voxel (join, mean)", fixed(r.bytes_per_non_empty_voxel, 3));
   row("join coarse ms", l(r.join_coarse_ms));
+  row("join coarse bytes (all bots)", mb(r.join_coarse_bytes));
   row("join full ms", l(r.join_full_ms));
   row("joins incomplete", std::to_string(r.joins_incomplete));
   row("edit ack ms", l(r.edit_ack_ms));
@@ -460,7 +462,7 @@ std::string compare_reports(const std::string& name_a, const std::string& a, con
   static const char* const kKeys[] = {
       "passed", "bots", "duration_s", "scenario.behavior", "scenario.view_distance", "scenario.full_res_radius",
       "bytes_received", "join_bytes_received", "steady_bytes_received", "bytes_sent", "bytes_per_non_empty_voxel",
-      "join_coarse_ms.p50", "join_coarse_ms.p99", "join_full_ms.p50", "join_full_ms.p99", "edit_ack_ms.p50",
+      "join_coarse_bytes", "join_coarse_ms.p50", "join_coarse_ms.p99", "join_full_ms.p50", "join_full_ms.p99", "edit_ack_ms.p50",
       "edit_ack_ms.p99", "edit_fanout_ms.p50", "edit_fanout_ms.p95", "edit_fanout_ms.p99", "edit_fanout_ms.count",
       "edits_acked", "edits_rejected", "receivers_per_edit", "update_bytes_per_edited_voxel_per_receiver",
       "replica_regions_checked", "replica_mismatches", "unexpected_disconnects"};

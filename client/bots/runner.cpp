@@ -283,7 +283,10 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
       r.by_message_type[t].frames_out += k.by_message_type[t].frames_out;
       r.by_message_type[t].bytes_out += k.by_message_type[t].bytes_out;
     }
-    if (br.join_coarse_ms) coarse.push_back(static_cast<float>(*br.join_coarse_ms));
+    if (br.join_coarse_ms) {
+      coarse.push_back(static_cast<float>(*br.join_coarse_ms));
+      r.join_coarse_bytes += br.join_coarse_bytes;
+    }
     if (br.join_full_ms) {
       full.push_back(static_cast<float>(*br.join_full_ms));
       r.join_bytes_received += br.join_bytes;

@@ -32,6 +32,7 @@ struct BotsReport {
   double duration_s = 0;  // wall time from the first connection to the end of the final check
   std::uint64_t bytes_received = 0, bytes_sent = 0;
   std::uint64_t join_bytes_received = 0, steady_bytes_received = 0;
+  std::uint64_t join_coarse_bytes = 0;  // summed over the bots whose coarse view completed
   double bytes_per_non_empty_voxel = 0;  // mean over bots that completed their join
   LatencySummary join_coarse_ms, join_full_ms, edit_ack_ms, edit_fanout_ms;
   std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0, edits_measured = 0;
