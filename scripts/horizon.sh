@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# How fast a new client sees its whole horizon (issue: "The whole horizon at
+# once"). One idle bot joins a server started cold (a fresh process on a
+# fresh copy of the world) at view 1,024 / full resolution 128 and at
+# 512 / 64, on three worlds:
+#   generated   the default world right after `terrane-world generate`
+#               (the default box, +-256 around the spawn, stored)
+#   never       a world never generated: every chunk is made on demand
+#   mc-1.16     a real region imported as a world (tests/data/mc-1.16)
+# and prints the time to the whole coarse view, to full resolution, and the
+# bytes received by then (the bots' join_coarse_ms, join_full_ms,
+# join_coarse_bytes, join_bytes_received). Expects a release build.
+#   scripts/horizon.sh [REPORT_DIR]      (reports kept there; default: a scratch dir)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+[ -x build/bin/terrane-server ] || { echo "horizon.sh: build first (scripts/build.sh release)" >&2; exit 2; }
+scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-horizon.XXXXXX")
+reports=${1:-$scratch/reports}  # inside scratch: removed at the end unless given
+mkdir -p "$reports"
+server_pid=
+cleanup() {
+  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
+    kill -TERM "$server_pid" 2>/dev/null || true
+    wait "$server_pid" 2>/dev/null || true
+  fi
+  rm -rf "$scratch"
+}
+trap cleanup EXIT INT TERM
+
+echo "preparing worlds..." >&2
+./build/bin/terrane-world generate --world "$scratch/generated" >/dev/null
+./build/bin/terrane-world import --world "$scratch/mc-1.16" tests/data/mc-1.16.vxraw.gz >/dev/null
+
+run() {  # world view full
+  local world=$1 view=$2 full=$3 name=$1-$2
+  rm -rf "$scratch/run"
+  [ "$world" = never ] || cp -r "$scratch/$world" "$scratch/run"
+  ./build/bin/terrane-server --world "$scratch/run" --port 0 >"$scratch/server.log" 2>&1 &
+  server_pid=$!
+  for _ in $(seq 600); do
+    grep -q "listening on" "$scratch/server.log" && break
+    kill -0 "$server_pid" 2>/dev/null || { cat "$scratch/server.log" >&2; exit 1; }
+    sleep 0.1
+  done
+  local address
+  address=$(grep -o "listening on 127.0.0.1:[0-9]*" "$scratch/server.log" | head -1 | sed 's/listening on //')
+  ./build/bin/terrane-bots --connect "$address" --bots 1 --behavior idle --duration 1 --wait-joined 600 \
+    --view-distance "$view" --full-res-radius "$full" --hash-checks 1 --quiet 0 --progress off \
+    --report "$reports/$name.json" >/dev/null || true
+  kill -TERM "$server_pid"
+  wait "$server_pid" || true
+  server_pid=
+  /usr/bin/python3 - "$reports/$name.json" "$world" "$view" "$full" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+c, f = r["join_coarse_ms"], r["join_full_ms"]
+print("%-10s %5s / %-4s %12.0f %12.0f %14.1f %14.1f %6s" % (sys.argv[2], sys.argv[3], sys.argv[4],
+      c.get("p50") or -1, f.get("p50") or -1, r["join_coarse_bytes"] / 1000, r["join_bytes_received"] / 1000,
+      "ok" if r["passed"] else "FAIL"))
+PY
+}
+
+printf "%-10s %12s %12s %12s %14s %14s %6s\n" world "view / full" "coarse ms" "full ms" "coarse kB" "join kB" ""
+for world in generated never mc-1.16; do
+  for vf in "1024 128" "512 64"; do
+    run $world $vf
+  done
+done
