@@ -325,13 +325,15 @@ FileResult<std::vector<CoarseEntry>> WorldStore::load_coarse(Vec3i region) {
   return std::move(*entries);
 }
 
-FileResult<std::vector<Vec3i>> WorldStore::quarantined_in(Vec3i region) {
+namespace {
+// The chunk coordinates of table rows within a region (an index range scan).
+FileResult<std::vector<Vec3i>> chunks_in_region(sqlite3* db, const char* table, Vec3i region,
+                                                const std::function<FileError(const std::string&)>& error) {
   sqlite3_stmt* st = nullptr;
-  if (sqlite3_prepare_v2(db_,
-                         "SELECT DISTINCT cx, cy, cz FROM quarantine WHERE cx BETWEEN ?1 AND ?2 AND cy BETWEEN ?3 AND ?4"
-                         " AND cz BETWEEN ?5 AND ?6",
-                         -1, &st, nullptr) != SQLITE_OK)
-    return error("cannot read the quarantine table");
+  const std::string sql = std::string("SELECT DISTINCT cx, cy, cz FROM ") + table +
+                          " WHERE cx BETWEEN ?1 AND ?2 AND cy BETWEEN ?3 AND ?4 AND cz BETWEEN ?5 AND ?6";
+  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &st, nullptr) != SQLITE_OK)
+    return error(std::string("cannot read the ") + table + " table");
   const Vec3i lo = region * kCoarseRegionChunks, hi = lo + Vec3i{7, 7, 7};
   const int b[6] = {lo.x, hi.x, lo.y, hi.y, lo.z, hi.z};
   for (int i = 0; i < 6; ++i) sqlite3_bind_int(st, i + 1, b[i]);
@@ -340,8 +342,17 @@ FileResult<std::vector<Vec3i>> WorldStore::quarantined_in(Vec3i region) {
   while ((rc = sqlite3_step(st)) == SQLITE_ROW)
     out.push_back(Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)});
   sqlite3_finalize(st);
-  if (rc != SQLITE_DONE) return error("cannot read the quarantine table");
+  if (rc != SQLITE_DONE) return error(std::string("cannot read the ") + table + " table");
   return out;
+}
+}  // namespace
+
+FileResult<std::vector<Vec3i>> WorldStore::quarantined_in(Vec3i region) {
+  return chunks_in_region(db_, "quarantine", region, [this](const std::string& w) { return error(w); });
+}
+
+FileResult<std::vector<Vec3i>> WorldStore::stored_in(Vec3i region) {
+  return chunks_in_region(db_, "chunks", region, [this](const std::string& w) { return error(w); });
 }
 
 FileStatus WorldStore::for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn) {

@@ -136,8 +136,9 @@ class WorldStore {
   // The coarse entries of region (coarse_region_of): one per stored chunk.
   FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region);
   // The chunks of region with a quarantine row (their generated content
-  // continues above the quarantined revision).
+  // continues above the quarantined revision), and those with a chunks row.
   FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region);
+  FileResult<std::vector<Vec3i>> stored_in(Vec3i region);
   // Calls fn(region, entries) for every coarse image (terrane-world check).
   FileStatus for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn);
   // Stores all writes in one transaction (all or nothing). With

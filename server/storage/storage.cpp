@@ -72,12 +72,16 @@ void Storage::post_load() {
       LoadedCoarse c;
       c.region = job.pos;
       auto entries = store->load_coarse(job.pos);
-      auto quarantined = entries ? store->quarantined_in(job.pos) : FileResult<std::vector<Vec3i>>{std::vector<Vec3i>{}};
-      if (entries && quarantined) {
+      using Positions = FileResult<std::vector<Vec3i>>;
+      auto quarantined = entries ? store->quarantined_in(job.pos) : Positions{std::vector<Vec3i>{}};
+      auto stored = entries && quarantined ? store->stored_in(job.pos) : Positions{std::vector<Vec3i>{}};
+      if (entries && quarantined && stored) {
         c.entries = std::move(*entries);
         counters_.coarse_images_read.fetch_add(1, std::memory_order_relaxed);
+        // Only chunks with no row of any kind are the generator's: a row
+        // without an entry is damaged (its load quarantines it).
         std::unordered_set<Vec3i, Vec3iHash> known(quarantined->begin(), quarantined->end());
-        for (const CoarseEntry& e : c.entries) known.insert(e.chunk_pos);
+        known.insert(stored->begin(), stored->end());
         const Vec3i base = job.pos * kCoarseRegionChunks;
         for (int y = 0; y < kCoarseRegionChunks; ++y)
           for (int z = 0; z < kCoarseRegionChunks; ++z)
@@ -88,7 +92,7 @@ void Storage::post_load() {
             }
       } else {
         c.ok = false;
-        c.error = entries ? quarantined.error().message : entries.error().message;
+        c.error = !entries ? entries.error().message : !quarantined ? quarantined.error().message : stored.error().message;
       }
       {
         std::lock_guard lock(readers_mutex_);
