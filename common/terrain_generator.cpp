@@ -533,6 +533,7 @@ std::shared_ptr<const std::vector<TerrainGenerator::Column>> TerrainGenerator::c
 
 bool TerrainGenerator::all_air(const Region& region) const {
   if (region.empty()) return true;
+  if (region.min.y < kBedrockY || region.min.y < kLavaY) return false;  // before any column is made
   const Vec3i size = region.size();
   const bool chunk_footprint = size.x == kChunkSize && size.z == kChunkSize && floor_mod(region.min.x, kChunkSize) == 0 &&
                                floor_mod(region.min.z, kChunkSize) == 0;
@@ -546,7 +547,6 @@ bool TerrainGenerator::all_air(const Region& region) const {
   // shade(): at y >= top_y the density is -1, so the voxel is Air unless
   // y < kBedrockY (Basalt), y < kLavaY (lava) or y < water_level (water).
   const std::int32_t y = region.min.y;
-  if (y < kBedrockY || y < kLavaY) return false;
   for (const Column& c : cols)
     if (y < c.top_y || y < c.water_level) return false;
   return true;

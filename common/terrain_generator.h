@@ -131,10 +131,11 @@ class TerrainGenerator {
   // The same for a chunk's 32 x 32 footprint, kept for the chunks above
   // and below it (a column stack shares it; most of a generated chunk's
   // cost was these 2D fields, computed again for every chunk of the stack).
+  // The latest kColumnCacheSize footprints are kept.
   std::shared_ptr<const std::vector<Column>> chunk_columns(std::int32_t x0, std::int32_t z0) const;
 
   struct ColumnCache;  // chunk footprint -> Columns, the latest kColumnCacheSize, behind a mutex
-  static constexpr std::size_t kColumnCacheSize = 1024;
+  static constexpr std::size_t kColumnCacheSize = 256;  // ~20 MB of Columns
 
   GeneratorParams params_;
   double inv_scale_;          // 1 / terrain_scale

@@ -7,6 +7,7 @@
 #include <climits>
 #include <chrono>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <tuple>
 #include <filesystem>
@@ -221,40 +222,59 @@ FileStatus WorldStore::upgrade_to_coarse(const Progress& progress) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return e;
   };
+  // Another process may have upgraded it while this one waited for the lock.
+  {
+    sqlite3_stmt* v = nullptr;
+    bool done_already = false;
+    if (sqlite3_prepare_v2(db_, "SELECT value FROM meta WHERE key = 'format_version'", -1, &v, nullptr) == SQLITE_OK &&
+        sqlite3_step(v) == SQLITE_ROW)
+      done_already = std::string(reinterpret_cast<const char*>(sqlite3_column_text(v, 0))) == "2";
+    sqlite3_finalize(v);
+    if (done_already) {
+      sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr);
+      meta_.format_version = kWorldFormatVersion;
+      return Ok{};
+    }
+  }
   if (sqlite3_exec(db_, kCoarseSchema, nullptr, nullptr, nullptr) != SQLITE_OK ||
       sqlite3_exec(db_, "DELETE FROM coarse", nullptr, nullptr, nullptr) != SQLITE_OK)
     return fail(error("cannot create the coarse table"));
-  std::map<std::tuple<int, int, int>, std::vector<CoarseEntry>> regions;
-  std::int64_t done = 0;
-  auto listed = for_each_chunk([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob) {
-    // A damaged chunk gets no entry: it is served as its load decides
-    // (quarantined and generated).
-    if (auto chunk = decode_chunk_blob(blob)) {
-      const Vec3i r = coarse_region_of(pos);
-      regions[{r.x, r.y, r.z}].push_back(CoarseEntry{pos, revision, coarse_voxels(&*chunk)});
-    }
-    report(++done, false);
-  });
-  if (!listed) return fail(listed.error());
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "INSERT INTO coarse(rx, ry, rz, image) VALUES(?, ?, ?, ?)", -1, &st, nullptr) !=
       SQLITE_OK)
     return fail(error("cannot write coarse images"));
-  for (auto& [key, entries] : regions) {
-    const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
-    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(entries));
-    StmtReset reset{st};
-    sqlite3_bind_int(st, 1, r.x);
-    sqlite3_bind_int(st, 2, r.y);
-    sqlite3_bind_int(st, 3, r.z);
-    sqlite3_bind_blob(st, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
-    if (sqlite3_step(st) != SQLITE_DONE) {
+  // Chunks come in cx order: a region is complete (and written, so memory
+  // stays bounded) once cx has passed it.
+  std::map<std::tuple<int, int, int>, std::vector<CoarseEntry>> regions;
+  bool write_failed = false;
+  const auto write_before = [&](int rx_limit) {
+    for (auto it = regions.begin(); it != regions.end() && std::get<0>(it->first) < rx_limit;) {
+      const Vec3i r{std::get<0>(it->first), std::get<1>(it->first), std::get<2>(it->first)};
+      const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(it->second));
+      sqlite3_bind_int(st, 1, r.x);
+      sqlite3_bind_int(st, 2, r.y);
+      sqlite3_bind_int(st, 3, r.z);
+      sqlite3_bind_blob(st, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
+      write_failed = write_failed || sqlite3_step(st) != SQLITE_DONE;
       sqlite3_reset(st);
-      sqlite3_finalize(st);
-      return fail(error("cannot write coarse images"));
+      sqlite3_clear_bindings(st);
+      it = regions.erase(it);
     }
-  }
+  };
+  std::int64_t done = 0;
+  auto listed = for_each_chunk([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob) {
+    const Vec3i r = coarse_region_of(pos);
+    write_before(r.x);
+    // A damaged chunk gets no entry: it is served as its load decides
+    // (quarantined and generated).
+    if (auto chunk = decode_chunk_blob(blob))
+      regions[{r.x, r.y, r.z}].push_back(CoarseEntry{pos, revision, coarse_voxels(&*chunk)});
+    report(++done, false);
+  });
+  write_before(std::numeric_limits<int>::max());
   sqlite3_finalize(st);
+  if (!listed) return fail(listed.error());
+  if (write_failed) return fail(error("cannot write coarse images"));
   if (sqlite3_exec(db_, "INSERT OR REPLACE INTO meta(key, value) VALUES('format_version', '2')", nullptr, nullptr,
                    nullptr) != SQLITE_OK)
     return fail(error("cannot record format 2"));
@@ -283,7 +303,13 @@ FileStatus WorldStore::change_coarse(const std::vector<CoarseEntry>& set, const 
   for (const auto& [key, change] : by_region) {
     const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
     auto stored = load_coarse(r);
-    if (!stored) return stored.error();
+    if (!stored && !stored.error().decode) return stored.error();
+    if (!stored) {
+      // A damaged image is derived data: made again from the region's rows.
+      auto rebuilt = coarse_from_rows(r);
+      if (!rebuilt) return rebuilt.error();
+      stored = std::move(*rebuilt);
+    }
     std::map<int, CoarseEntry> entries;
     for (CoarseEntry& e : *stored) entries[coarse_index(e.chunk_pos)] = std::move(e);
     for (const Vec3i p : change.second) entries.erase(coarse_index(p));
@@ -301,6 +327,37 @@ FileStatus WorldStore::change_coarse(const std::vector<CoarseEntry>& set, const 
   }
   return Ok{};
 }
+
+FileResult<std::vector<CoarseEntry>> WorldStore::coarse_from_rows(Vec3i region) {
+  auto positions = stored_in(region);
+  if (!positions) return positions.error();
+  std::vector<CoarseEntry> out;
+  for (const Vec3i p : *positions) {
+    sqlite3_stmt* st = nullptr;
+    if (sqlite3_prepare_v2(db_, "SELECT revision, data FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st,
+                           nullptr) != SQLITE_OK)
+      return error("cannot read chunk");
+    sqlite3_bind_int(st, 1, p.x);
+    sqlite3_bind_int(st, 2, p.y);
+    sqlite3_bind_int(st, 3, p.z);
+    if (sqlite3_step(st) == SQLITE_ROW) {
+      const auto rev = static_cast<std::uint64_t>(sqlite3_column_int64(st, 0));
+      const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 1));
+      const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 1));
+      if (auto c = decode_chunk_blob(std::span<const std::uint8_t>(data, data ? size : 0)))
+        out.push_back(CoarseEntry{p, rev, coarse_voxels(&*c)});
+    }
+    sqlite3_finalize(st);
+  }
+  return out;
+}
+
+FileStatus WorldStore::begin_read() {
+  if (sqlite3_exec(db_, "BEGIN", nullptr, nullptr, nullptr) != SQLITE_OK) return error("cannot begin a read");
+  return Ok{};
+}
+
+void WorldStore::end_read() { sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr); }
 
 FileResult<std::vector<CoarseEntry>> WorldStore::load_coarse(Vec3i region) {
   if (!coarse_load_stmt_ && sqlite3_prepare_v2(db_, "SELECT image FROM coarse WHERE rx = ? AND ry = ? AND rz = ?", -1,
@@ -330,19 +387,33 @@ namespace {
 FileResult<std::vector<Vec3i>> chunks_in_region(sqlite3* db, const char* table, Vec3i region,
                                                 const std::function<FileError(const std::string&)>& error) {
   sqlite3_stmt* st = nullptr;
-  const std::string sql = std::string("SELECT DISTINCT cx, cy, cz FROM ") + table +
-                          " WHERE cx BETWEEN ?1 AND ?2 AND cy BETWEEN ?3 AND ?4 AND cz BETWEEN ?5 AND ?6";
-  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &st, nullptr) != SQLITE_OK)
-    return error(std::string("cannot read the ") + table + " table");
-  const Vec3i lo = region * kCoarseRegionChunks, hi = lo + Vec3i{7, 7, 7};
-  const int b[6] = {lo.x, hi.x, lo.y, hi.y, lo.z, hi.z};
-  for (int i = 0; i < 6; ++i) sqlite3_bind_int(st, i + 1, b[i]);
+  // cx and cy as lists, so the (cx, cy, cz) index is used for all three
+  // (a range on cx alone would scan an 8-wide slab of the whole world).
+  const Vec3i lo = region * kCoarseRegionChunks;
+  std::string sql = "SELECT DISTINCT cx, cy, cz FROM ";
+  sql.append(table);
+  for (const auto& [column, first] : {std::pair<const char*, int>{" WHERE cx IN (", lo.x}, {") AND cy IN (", lo.y}}) {
+    sql.append(column);
+    for (int i = 0; i < kCoarseRegionChunks; ++i) {
+      if (i > 0) sql.push_back(',');
+      sql.append(std::to_string(first + i));
+    }
+  }
+  sql.append(") AND cz BETWEEN ?1 AND ?2");
+  const auto read_error = [&] {
+    std::string what = "cannot read the ";
+    what.append(table).append(" table");
+    return error(what);
+  };
+  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &st, nullptr) != SQLITE_OK) return read_error();
+  sqlite3_bind_int(st, 1, lo.z);
+  sqlite3_bind_int(st, 2, lo.z + kCoarseRegionChunks - 1);
   std::vector<Vec3i> out;
   int rc;
   while ((rc = sqlite3_step(st)) == SQLITE_ROW)
     out.push_back(Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)});
   sqlite3_finalize(st);
-  if (rc != SQLITE_DONE) return error(std::string("cannot read the ") + table + " table");
+  if (rc != SQLITE_DONE) return read_error();
   return out;
 }
 }  // namespace

@@ -139,6 +139,10 @@ class WorldStore {
   // continues above the quarantined revision), and those with a chunks row.
   FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region);
   FileResult<std::vector<Vec3i>> stored_in(Vec3i region);
+  // A read transaction around several reads, so they see one state of the
+  // world (another connection may commit between them otherwise).
+  FileStatus begin_read();
+  void end_read();
   // Calls fn(region, entries) for every coarse image (terrane-world check).
   FileStatus for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn);
   // Stores all writes in one transaction (all or nothing). With
@@ -190,6 +194,8 @@ class WorldStore {
   FileStatus load_meta();
   FileStatus ensure_quarantine_table();
   FileStatus upgrade_to_coarse(const Progress& progress);
+  // A region's entries made from its chunk rows (a damaged image's repair).
+  FileResult<std::vector<CoarseEntry>> coarse_from_rows(Vec3i region);
   // Inside a transaction: the images of the regions of entries, changed.
   // set: entries to put; erase: chunks whose entries go.
   FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase);

@@ -555,6 +555,14 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     if (it == held_.end()) continue;
     Held& h = it->second;
     const bool near = desired(cp) == 0;
+    if ((h.level == 0 || (h.level == kHeldEmpty && near)) && v->changed_units().none()) {
+      // Not a tick's change but the chunk loaded again at another revision
+      // (a damaged row quarantined): sent whole.
+      flush_stream();
+      send_chunk(*v, 0);
+      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
+      continue;
+    }
     if (h.level == 0 || (h.level == kHeldEmpty && near)) {
       h = Held{0, v->revision()};
       if (v->empty()) {

@@ -71,10 +71,14 @@ void Storage::post_load() {
     if (job.coarse_done) {
       LoadedCoarse c;
       c.region = job.pos;
+      // One read transaction: the image, the quarantined and the stored rows
+      // as of one moment.
+      const bool snapshot = store->begin_read().ok();
       auto entries = store->load_coarse(job.pos);
       using Positions = FileResult<std::vector<Vec3i>>;
       auto quarantined = entries ? store->quarantined_in(job.pos) : Positions{std::vector<Vec3i>{}};
       auto stored = entries && quarantined ? store->stored_in(job.pos) : Positions{std::vector<Vec3i>{}};
+      if (snapshot) store->end_read();
       if (entries && quarantined && stored) {
         c.entries = std::move(*entries);
         counters_.coarse_images_read.fetch_add(1, std::memory_order_relaxed);

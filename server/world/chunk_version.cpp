@@ -6,6 +6,7 @@
 #include "common/box.h"
 #include "common/world_store.h"
 #include "protocol/messages.h"
+#include "server/log.h"
 
 namespace terrane {
 
@@ -54,8 +55,12 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::ui
 
 std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   // Precondition: has_level(level) (a version without the voxels cannot
-  // make a finer level; asking would be a bug in the caller).
-  if (!has_level(level)) return {};
+  // make a finer level; asking is a bug in the caller).
+  if (!has_level(level)) {
+    server_log().error("chunk ({},{},{}): level {} asked of a version that holds only {}..3", pos_.x, pos_.y, pos_.z,
+                       level, finest_level_);
+    return {};
+  }
   const auto l = static_cast<std::size_t>(level);
   encode_counters().asked.fetch_add(1, std::memory_order_relaxed);
   std::call_once(encoded_once_[l], [&] {

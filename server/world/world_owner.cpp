@@ -203,15 +203,26 @@ void WorldOwner::on_loaded(LoadedChunk c) {
   auto v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
   auto [it, fresh] = loaded_.try_emplace(c.pos);
   Loaded& l = it->second;
+  bool differs = false;
   if (!fresh) {
-    // It was kept as mips only (so committed: the store has this revision).
+    // It was kept as mips only, or known from a coarse image (so committed:
+    // the store has this revision) — unless the row turned out damaged and
+    // was quarantined, when the chunk comes back generated at a higher one.
     if (!l.current->has_voxels()) --mips_only_;
-    if (l.current->revision() != c.revision)
-      server_log().error("chunk ({},{},{}): loaded revision {} but {} was committed", c.pos.x, c.pos.y, c.pos.z,
-                         c.revision, l.current->revision());
+    if (l.current->revision() != c.revision) {
+      server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
+                        c.pos.x, c.pos.y, c.pos.z, c.revision, l.current->revision());
+      differs = true;
+    }
   }
   l.published = v;
   l.current = v;
+  if (differs) {
+    // As a commit would: every holder (all hold it coarser than full
+    // resolution, since it had no voxels) refreshes from the new version.
+    for (const InterestIndex::Holder& h : interest_.holders(c.pos))
+      if (auto holder = clients_.find(h.id); holder != clients_.end()) holder->second.link->committed(tick_, {v});
+  }
   l.used_tick = tick_;
   counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
   const std::vector<Waiter> waiters = std::move(waiting->second);
@@ -323,6 +334,8 @@ void WorldOwner::unload_unwatched() {
   if (mips_only_ > kMaxMipsOnly) {
     for (auto it = loaded_.begin(); it != loaded_.end() && mips_only_ > kMaxMipsOnly / 2;) {
       if (!it->second.current->has_voxels() && !interest_.watched(it->first) && loading_.count(it->first) == 0) {
+        // Its region's image is read again when next wanted.
+        regions_read_.erase(coarse_region_of(it->first));
         it = loaded_.erase(it);
         --mips_only_;
       } else {

@@ -452,6 +452,23 @@ TEST_F(WorldStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
   EXPECT_FALSE(called);
 }
 
+TEST_F(WorldStoreTest, ADamagedCoarseImageIsMadeAgainFromItsChunksOnTheNextWrite) {
+  auto s = WorldStore::create(dir_, default_world_meta(1));
+  ASSERT_TRUE(s.ok());
+  ASSERT_TRUE((*s)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 1, encode_chunk_blob(sample_chunk(1))},
+                                                        {{3, 0, 0}, 2, encode_chunk_blob(sample_chunk(2))}})
+                  .ok());
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE coarse SET image = x'0101ff'", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(db);
+  EXPECT_FALSE((*s)->load_coarse({0, 0, 0}).ok()) << "the damage is reported on read";
+  // A write into the region succeeds and leaves a whole, correct image.
+  ASSERT_TRUE((*s)->save_chunks(std::vector<ChunkWrite>{{{5, 0, 0}, 1, encode_chunk_blob(sample_chunk(3))}}).ok());
+  expect_coarse_matches_chunks(**s);
+  EXPECT_EQ((*s)->load_coarse({0, 0, 0})->size(), 3u);
+}
+
 TEST(CoarseImage, RoundTripsAndRefusesDamage) {
   const Vec3i region{-1, 0, 2};
   std::vector<CoarseEntry> entries;

@@ -660,6 +660,56 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   EXPECT_EQ((*now)->chunk.get(local_of(Vec3i{1001, 11, 1001})), make_voxel(materials::kSnow, 200));
 }
 
+TEST_F(ServerTest, AFarHolderOfACoarseMipIsRefreshedWhenItsDamagedRowIsQuarantined) {
+  // A stored chunk at revision 5 whose row is later damaged: its coarse
+  // image entry still says 5, and a far client is served that.
+  const Vec3i far_cp{37, 0, 31};
+  Vec3i x = far_cp;
+  {
+    auto world = World::create(dir_.string(), default_world_meta());
+    ASSERT_TRUE(world.ok()) << world.error().message;
+    for (x.y = 7; x.y >= -4 && (*world)->generate_chunk(x).empty(); --x.y) {
+    }
+    const Chunk c = (*world)->generate_chunk(x);
+    ASSERT_FALSE(c.empty());
+    ASSERT_TRUE((*world)->store().save_chunks(std::vector<ChunkWrite>{{x, 5, encode_chunk_blob(c), coarse_voxels(&c)}}).ok());
+  }
+  run_sql(dir_, "UPDATE chunks SET data = substr(data, 1, length(data) / 2) WHERE cx = " + std::to_string(x.x) +
+                    " AND cy = " + std::to_string(x.y) + " AND cz = " + std::to_string(x.z));
+  start();
+  auto far = join("far");
+  const Vec3f far_at{1000.5f, static_cast<float>(x.y * 32 + 16), 1000.5f};
+  ASSERT_GT(desired_level(far_at, x, 32), 2) << "the chunk must be held at its coarsest";
+  ASSERT_TRUE(far->send(build_client_state(ClientStateMsg{far_at, 300, 32})));
+  // Reads far's stream until chunk x is held at `revision`.
+  StreamDecodeScratch scratch;
+  const auto wait_for_revision = [&](std::uint64_t revision) {
+    // Other frames (pushed hashes, presence) keep coming: bounded by a deadline.
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    while (std::chrono::steady_clock::now() < deadline) {
+      auto f = far->next_of(wire::Body::StreamBatch);
+      if (!f) return false;
+      auto r = parse_stream_batch(*msg(*f).body_as_StreamBatch());
+      if (!r) return false;
+      bool seen = false;
+      if (!decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+             seen = seen || (rec.chunk_pos == x && rec.revision == revision && rec.kind != StreamRecordKind::kReleased);
+             return Ok{};
+           }))
+        return false;
+      if (seen) return true;
+    }
+    return false;
+  };
+  ASSERT_TRUE(wait_for_revision(5)) << "served from the image";
+  // Someone near wants it whole: the load finds the row damaged,
+  // quarantines it and generates it at 6; the far holder is told.
+  auto near = join("near");
+  const Vec3i o = chunk_origin(x) + Vec3i{16, 16, 16};
+  ASSERT_TRUE(hold_full(*near, Vec3f{static_cast<float>(o.x), static_cast<float>(o.y), static_cast<float>(o.z)}, x));
+  EXPECT_TRUE(wait_for_revision(6)) << "the far holder kept the damaged row's revision";
+}
+
 TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   const Vec3f pos{1002.0f, 12.0f, 1002.0f};
