@@ -40,16 +40,8 @@ else
 fi
 [ -d "$world" ] || { echo "bots-scale.sh: no world at $world (see the comment at the top for how to make it)" >&2; exit 2; }
 
-scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-scale.XXXXXX")
-server_pid=
-cleanup() {
-  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
-    kill -TERM "$server_pid" 2>/dev/null || true
-    wait "$server_pid" 2>/dev/null || true
-  fi
-  rm -rf "$scratch"
-}
-trap cleanup EXIT INT TERM
+. scripts/lib.sh
+terrane_scratch scale
 
 # A plain copy: nothing has the world open (terrane-world backup copies a
 # world a server is using, page by page, and takes minutes for this size).
@@ -61,16 +53,9 @@ if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then
   server_auth=(--auth-token "$TERRANE_SCALE_TOKEN")
 fi
 # shellcheck disable=SC2086
-./build/bin/terrane-server --world "$scratch/world" --port 0 --max-clients $((bots + 64)) \
-  "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-} >"$scratch/server.log" 2>&1 &
-server_pid=$!
-port=
-for _ in $(seq 1 600); do
-  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
-  [ -n "$port" ] && break
-  sleep 0.1
-done
-[ -n "$port" ] || { cat "$scratch/server.log" >&2; exit 1; }
+terrane_start_server "$scratch/server.log" --world "$scratch/world" --port 0 --max-clients $((bots + 64)) \
+  "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-}
+port=$server_port
 # Warm-up (TERRANE_SCALE_WARMUP=1, not measured): 40 idle bots over the same
 # area make the server load every chunk in view from its store first, so
 # the measured run sees a warm server.
@@ -97,9 +82,7 @@ hwm=$(awk '/VmHWM/ {print $2}' "/proc/$server_pid/status")
 awk -v h="$hwm" -v c0="$cpu0" -v c1="$cpu1" -v t="$ticks" -v s="$start" -v e="$end" 'BEGIN {
   printf "server: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core)\n",
          h / 1024, (c1 - c0) / t, e - s, 100 * (c1 - c0) / t / (e - s) }'
-kill -TERM "$server_pid"
-wait "$server_pid" || status=1
-server_pid=
+terrane_stop_server || status=1
 tail -n 1 "$scratch/server.log"
 cp "$scratch/server.log" "${report%.json}.server.log"
 exit $status

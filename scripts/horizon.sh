@@ -14,18 +14,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 [ -x build/bin/terrane-server ] || { echo "horizon.sh: build first (scripts/build.sh release)" >&2; exit 2; }
-scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-horizon.XXXXXX")
+. scripts/lib.sh
+terrane_scratch horizon
 reports=${1:-$scratch/reports}  # inside scratch: removed at the end unless given
 mkdir -p "$reports"
-server_pid=
-cleanup() {
-  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
-    kill -TERM "$server_pid" 2>/dev/null || true
-    wait "$server_pid" 2>/dev/null || true
-  fi
-  rm -rf "$scratch"
-}
-trap cleanup EXIT INT TERM
 
 echo "preparing worlds..." >&2
 ./build/bin/terrane-world generate --world "$scratch/generated" >/dev/null
@@ -35,21 +27,12 @@ run() {  # world view full
   local world=$1 view=$2 full=$3 name=$1-$2
   rm -rf "$scratch/run"
   [ "$world" = never ] || cp -r "$scratch/$world" "$scratch/run"
-  ./build/bin/terrane-server --world "$scratch/run" --port 0 >"$scratch/server.log" 2>&1 &
-  server_pid=$!
-  for _ in $(seq 600); do
-    grep -q "listening on" "$scratch/server.log" && break
-    kill -0 "$server_pid" 2>/dev/null || { cat "$scratch/server.log" >&2; exit 1; }
-    sleep 0.1
-  done
-  local address
-  address=$(grep -o "listening on 127.0.0.1:[0-9]*" "$scratch/server.log" | head -1 | sed 's/listening on //')
+  terrane_start_server "$scratch/server.log" --world "$scratch/run" --port 0
+  local address=127.0.0.1:$server_port
   ./build/bin/terrane-bots --connect "$address" --bots 1 --behavior idle --duration 1 --wait-joined 600 \
     --view-distance "$view" --full-res-radius "$full" --hash-checks 1 --quiet 0 --progress off \
     --report "$reports/$name.json" >/dev/null || true
-  kill -TERM "$server_pid"
-  wait "$server_pid" || true
-  server_pid=
+  terrane_stop_server || true
   /usr/bin/python3 - "$reports/$name.json" "$world" "$view" "$full" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))

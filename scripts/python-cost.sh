@@ -17,25 +17,10 @@ runs=${3:-3}
   echo "python-cost.sh: build first (scripts/build.sh release)" >&2
   exit 2
 }
-scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-pycost.XXXXXX")
-server_pid=
-cleanup() {
-  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
-    kill -TERM "$server_pid" 2>/dev/null || true
-    wait "$server_pid" 2>/dev/null || true
-  fi
-  rm -rf "$scratch"
-}
-trap cleanup EXIT INT TERM
-
-build/bin/terrane-server --world "$scratch/world" --port 0 >"$scratch/server.log" 2>&1 &
-server_pid=$!
-for _ in $(seq 600); do
-  grep -q "listening on" "$scratch/server.log" && break
-  kill -0 "$server_pid" 2>/dev/null || { cat "$scratch/server.log" >&2; exit 1; }
-  sleep 0.1
-done
-address=$(grep -o "listening on 127.0.0.1:[0-9]*" "$scratch/server.log" | head -1 | sed 's/listening on //')
+. scripts/lib.sh
+terrane_scratch pycost
+terrane_start_server "$scratch/server.log" --world "$scratch/world" --port 0
+address=127.0.0.1:$server_port
 
 swarm() {
   PYTHONPATH=build/python /usr/bin/python3 - "$address" "$bots" "$idle" <<'PY'

@@ -30,41 +30,14 @@ bash scripts/install-deps.sh
 bash scripts/build.sh release terrane-world terrane-server terrane-bots terrane-admin terrane-view
 ./build/bin/terrane-world generate --world "$world"
 
-scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-run.XXXXXX")
-server_pid=
-cleanup() {
-  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
-    kill -TERM "$server_pid" 2>/dev/null || true
-    wait "$server_pid" 2>/dev/null || true
-  fi
-  rm -rf "$scratch"
-}
-trap cleanup EXIT INT TERM
+. scripts/lib.sh
+terrane_scratch run
 
 ./build/bin/terrane-world backup --world "$world" --to "$scratch/world"
 # Two io threads: chunk loads on the world owner strand must not stall sockets.
-./build/bin/terrane-server --world "$scratch/world" --port 0 --metrics 127.0.0.1:0 --max-clients $((bots + 16)) \
-  --io-threads 2 >"$scratch/server.log" 2>&1 &
-server_pid=$!
-
-port=
-metrics_port=
-for _ in $(seq 1 600); do
-  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
-  metrics_port=$(sed -n 's|.*metrics on http://127\.0\.0\.1:\([0-9]*\)/metrics.*|\1|p' "$scratch/server.log" | head -n 1)
-  [ -n "$port" ] && [ -n "$metrics_port" ] && break
-  if ! kill -0 "$server_pid" 2>/dev/null; then
-    echo "run.sh: terrane-server exited before listening:" >&2
-    cat "$scratch/server.log" >&2
-    exit 1
-  fi
-  sleep 0.1
-done
-if [ -z "$port" ] || [ -z "$metrics_port" ]; then
-  echo "run.sh: terrane-server did not report its port within 60 s:" >&2
-  cat "$scratch/server.log" >&2
-  exit 1
-fi
+terrane_start_server "$scratch/server.log" --world "$scratch/world" --port 0 --metrics 127.0.0.1:0 \
+  --max-clients $((bots + 16)) --io-threads 2
+port=$server_port
 echo "run.sh: terrane-server on 127.0.0.1:$port (metrics: http://127.0.0.1:$metrics_port/metrics), world $world (scratch copy)"
 
 mkdir -p reports
@@ -74,9 +47,7 @@ status=0
   --spread 128 --view-distance 128 --full-res-radius 48 --ramp-up 5 --seed 1 \
   --report reports/bots.json --html reports/bots.html ${TERRANE_BOTS_ARGS:-} || status=$?
 
-kill -TERM "$server_pid"
-wait "$server_pid" || { echo "run.sh: terrane-server did not stop cleanly:" >&2; tail -n 20 "$scratch/server.log" >&2; status=1; }
-server_pid=
+terrane_stop_server || { echo "run.sh: terrane-server did not stop cleanly:" >&2; tail -n 20 "$scratch/server.log" >&2; status=1; }
 grep -A 40 'stopped after' "$scratch/server.log"  # the server's totals and its traffic by message type
 echo "run.sh: reports in reports/bots.json and reports/bots.html"
 exit $status
