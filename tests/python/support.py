@@ -8,7 +8,6 @@ import shutil
 import subprocess
 import tempfile
 import threading
-import time
 
 BIN = os.environ.get("TERRANE_BIN_DIR", "build/bin")
 SOURCE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -44,14 +43,3 @@ class Server:
             assert self.proc.wait(60) == 0, "".join(self.output)
         self.reader.join(10)
         shutil.rmtree(self.dir, ignore_errors=True)
-
-
-def eventually(condition, timeout=60, what="the condition"):
-    """Waits until condition() is true (polling what nothing signals); fails at the deadline."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        assert time.monotonic() < deadline, what + " did not hold within %d s" % timeout
-        time.sleep(0.05)

@@ -10,7 +10,7 @@ import numpy
 import pytest
 
 import terrane
-from support import SOURCE_DIR, eventually
+from support import SOURCE_DIR
 
 EXAMPLES = os.path.join(SOURCE_DIR, "examples", "python")
 

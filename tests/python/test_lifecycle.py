@@ -145,7 +145,7 @@ def test_more_bad_arguments_raise_clear_errors(server):
         with pytest.raises(ValueError, match="max_nodes"):
             c.walk_to((0, 0, 0), max_nodes=10 ** 9)
         with pytest.raises(TimeoutError):
-            c.next_event(None, 0.05)
+            c.next_event(None, 0)
         # numpy's default integer arrays are fine.
         x, _, z = (int(v) for v in c.position)
         g = c.ground(x, z)
