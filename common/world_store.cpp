@@ -333,21 +333,10 @@ FileResult<std::vector<CoarseEntry>> WorldStore::coarse_from_rows(Vec3i region) 
   if (!positions) return positions.error();
   std::vector<CoarseEntry> out;
   for (const Vec3i p : *positions) {
-    sqlite3_stmt* st = nullptr;
-    if (sqlite3_prepare_v2(db_, "SELECT revision, data FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st,
-                           nullptr) != SQLITE_OK)
-      return error("cannot read chunk");
-    sqlite3_bind_int(st, 1, p.x);
-    sqlite3_bind_int(st, 2, p.y);
-    sqlite3_bind_int(st, 3, p.z);
-    if (sqlite3_step(st) == SQLITE_ROW) {
-      const auto rev = static_cast<std::uint64_t>(sqlite3_column_int64(st, 0));
-      const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 1));
-      const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 1));
-      if (auto c = decode_chunk_blob(std::span<const std::uint8_t>(data, data ? size : 0)))
-        out.push_back(CoarseEntry{p, rev, coarse_voxels(&*c)});
-    }
-    sqlite3_finalize(st);
+    auto stored = load_chunk(p);
+    if (!stored && !stored.error().decode) return stored.error();
+    // A damaged row gets no entry (its load quarantines it).
+    if (stored && stored->has_value()) out.push_back(CoarseEntry{p, (*stored)->revision, coarse_voxels(&(*stored)->chunk)});
   }
   return out;
 }

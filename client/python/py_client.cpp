@@ -580,12 +580,14 @@ py::object PyClient::target(double max_distance) const {
 
 Vec3 PyClient::position() const { return vec(state().position); }
 
-std::vector<std::string> PyClient::materials() const {
-  const auto w = c_->welcome();
-  std::vector<std::string> names;
-  if (w)
-    for (const auto& n : w->materials) names.push_back(utf8(n));
-  return names;
+const std::vector<std::string>& PyClient::materials() const {
+  // Read once from the Welcome (every query names materials; copying the
+  // Welcome each time cost more than the query). Under the GIL, like every
+  // other member.
+  if (names_.empty())
+    if (const auto w = c_->welcome())
+      for (const auto& n : w->materials) names_.push_back(utf8(n));
+  return names_;
 }
 
 ClientStateMsg PyClient::state() const { return c_->last_state().value_or(ClientStateMsg{}); }
@@ -596,12 +598,12 @@ void PyClient::fail_or_timeout(bool closed, const std::string& what) const {
 }
 
 std::string PyClient::material_name(Material m) const {
-  const auto names = materials();
+  const auto& names = materials();
   return m < names.size() ? names[m] : std::to_string(m);
 }
 
 Material PyClient::material_of(const py::object& m) const {
-  const auto names = materials();
+  const auto& names = materials();
   if (py::isinstance<py::bool_>(m)) raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
   if (py::isinstance<py::int_>(m)) {
     int overflow = 0;

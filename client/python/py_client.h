@@ -129,7 +129,7 @@ class PyClient {
   Vec3 facing() const { return vec(facing_); }
   py::object target(double max_distance) const;
 
-  std::vector<std::string> materials() const;
+  const std::vector<std::string>& materials() const;
   bool closed() const { return c_->closed(); }
   std::string disconnect_reason() const { return utf8(c_->disconnect_reason()); }
   std::string name() const { return name_; }
@@ -153,6 +153,7 @@ class PyClient {
   std::shared_ptr<EventSink> sink_;
   std::shared_ptr<Client> c_;
   Vec3f facing_{0, 0, 1};
+  mutable std::vector<std::string> names_;  // the world's materials, once welcomed
   std::mutex pace_mutex_;
   bool paced_ = false;
   double tokens_ = 0;

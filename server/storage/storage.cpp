@@ -68,50 +68,57 @@ void Storage::post_load() {
       store = std::move(readers_.back());
       readers_.pop_back();
     }
-    if (job.coarse_done) {
-      LoadedCoarse c;
-      c.region = job.pos;
-      // One read transaction: the image, the quarantined and the stored rows
-      // as of one moment.
-      const bool snapshot = store->begin_read().ok();
-      auto entries = store->load_coarse(job.pos);
-      using Positions = FileResult<std::vector<Vec3i>>;
-      auto quarantined = entries ? store->quarantined_in(job.pos) : Positions{std::vector<Vec3i>{}};
-      auto stored = entries && quarantined ? store->stored_in(job.pos) : Positions{std::vector<Vec3i>{}};
-      if (snapshot) store->end_read();
-      if (entries && quarantined && stored) {
-        c.entries = std::move(*entries);
-        counters_.coarse_images_read.fetch_add(1, std::memory_order_relaxed);
-        // Only chunks with no row of any kind are the generator's: a row
-        // without an entry is damaged (its load quarantines it).
-        std::unordered_set<Vec3i, Vec3iHash> known(quarantined->begin(), quarantined->end());
-        known.insert(stored->begin(), stored->end());
-        const Vec3i base = job.pos * kCoarseRegionChunks;
-        for (int y = 0; y < kCoarseRegionChunks; ++y)
-          for (int z = 0; z < kCoarseRegionChunks; ++z)
-            for (int x = 0; x < kCoarseRegionChunks; ++x) {
-              const Vec3i cp = base + Vec3i{x, y, z};
-              if (known.count(cp) == 0 && world_.meta().bounds.touches_chunk(cp) && world_.generates_air(cp))
-                c.air.push_back(cp);
-            }
-      } else {
-        c.ok = false;
-        c.error = !entries ? entries.error().message : !quarantined ? quarantined.error().message : stored.error().message;
-      }
-      {
-        std::lock_guard lock(readers_mutex_);
-        readers_.push_back(std::move(store));
-      }
-      job.coarse_done(std::move(c));
-      return;
-    }
-    LoadedChunk c = load_now(*store, job.pos);
-    {
+    const auto give_back = [&] {
       std::lock_guard lock(readers_mutex_);
       readers_.push_back(std::move(store));
+    };
+    if (!job.coarse_done) {
+      LoadedChunk c = load_now(*store, job.pos);
+      give_back();
+      job.done(std::move(c));
+      return;
     }
-    job.done(std::move(c));
+    std::vector<Vec3i> rows;
+    LoadedCoarse c = read_coarse(*store, job.pos, rows);
+    give_back();  // the generator's judgement below needs no connection
+    if (c.ok) {
+      // Only chunks with no row of any kind are the generator's: a row
+      // without an entry is damaged (its load quarantines it).
+      const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
+      const Vec3i base = job.pos * kCoarseRegionChunks;
+      for (int y = 0; y < kCoarseRegionChunks; ++y)
+        for (int z = 0; z < kCoarseRegionChunks; ++z)
+          for (int x = 0; x < kCoarseRegionChunks; ++x) {
+            const Vec3i cp = base + Vec3i{x, y, z};
+            if (known.count(cp) == 0 && world_.meta().bounds.touches_chunk(cp) && world_.generates_air(cp))
+              c.air.push_back(cp);
+          }
+    }
+    job.coarse_done(std::move(c));
   });
+}
+
+LoadedCoarse Storage::read_coarse(WorldStore& store, Vec3i region, std::vector<Vec3i>& rows) {
+  LoadedCoarse c;
+  c.region = region;
+  // One read transaction: the image, the quarantined and the stored rows as
+  // of one moment.
+  const bool snapshot = store.begin_read().ok();
+  auto entries = store.load_coarse(region);
+  FileResult<std::vector<Vec3i>> quarantined = std::vector<Vec3i>{}, stored = std::vector<Vec3i>{};
+  if (entries) quarantined = store.quarantined_in(region);
+  if (entries && quarantined) stored = store.stored_in(region);
+  if (snapshot) store.end_read();
+  if (!entries || !quarantined || !stored) {
+    c.ok = false;
+    c.error = !entries ? entries.error().message : !quarantined ? quarantined.error().message : stored.error().message;
+    return c;
+  }
+  c.entries = std::move(*entries);
+  rows = std::move(*quarantined);
+  rows.insert(rows.end(), stored->begin(), stored->end());
+  counters_.coarse_images_read.fetch_add(1, std::memory_order_relaxed);
+  return c;
 }
 
 LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {

@@ -107,6 +107,9 @@ class Storage {
  private:
   Storage(World& world, int loader_threads);
   LoadedChunk load_now(WorldStore& store, Vec3i pos);
+  // A region's coarse image; rows gets the region's chunks that have a row
+  // (stored or quarantined).
+  LoadedCoarse read_coarse(WorldStore& store, Vec3i region, std::vector<Vec3i>& rows);
   void writer_loop();
 
   struct CommitJob {

@@ -156,21 +156,16 @@ void WorldOwner::on_coarse_loaded(LoadedCoarse c) {
   auto node = coarse_waiting_.extract(c.region);
   if (c.ok) {
     regions_read_.insert(c.region);
-    for (const CoarseEntry& e : c.entries) {
-      // What is loaded is as new or newer: the image never overrides it.
-      auto [it, fresh] = loaded_.try_emplace(e.chunk_pos);
-      if (!fresh) continue;
-      const VersionPtr v = ChunkVersion::coarse_only(e.chunk_pos, e.revision, e.voxels);
-      it->second = Loaded{v, v, tick_};
-      ++mips_only_;
-    }
-    for (const Vec3i cp : c.air) {
+    // What is loaded is as new or newer: the image never overrides it.
+    const auto know = [&](Vec3i cp, std::uint64_t revision, const CoarseVoxels& voxels) {
       auto [it, fresh] = loaded_.try_emplace(cp);
-      if (!fresh) continue;
-      const VersionPtr v = ChunkVersion::coarse_only(cp, 0, CoarseVoxels{});
+      if (!fresh) return;
+      const VersionPtr v = ChunkVersion::coarse_only(cp, revision, voxels);
       it->second = Loaded{v, v, tick_};
       ++mips_only_;
-    }
+    };
+    for (const CoarseEntry& e : c.entries) know(e.chunk_pos, e.revision, e.voxels);
+    for (const Vec3i cp : c.air) know(cp, 0, CoarseVoxels{});
   } else {
     // Served by reading the chunks instead (a damaged image is found by
     // terrane-world check).
