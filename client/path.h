@@ -29,8 +29,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/vec3.h"
-#include "common/voxel.h"
+#include "common/voxel/vec3.h"
+#include "common/voxel/voxel.h"
 
 namespace terrane {
 

@@ -19,9 +19,9 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/box.h"
-#include "common/grid.h"
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
+#include "common/voxel/box.h"
+#include "common/voxel/grid.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 

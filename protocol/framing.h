@@ -11,7 +11,7 @@
 #include <span>
 #include <vector>
 
-#include "common/decode_error.h"
+#include "common/codec/decode_error.h"
 
 namespace terrane::wire {
 struct Message;

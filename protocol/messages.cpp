@@ -3,8 +3,8 @@
 #include <cmath>
 #include <cstring>
 
-#include "common/byte_rle.h"
-#include "common/net_codec.h"
+#include "common/codec/byte_rle.h"
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 

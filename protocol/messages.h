@@ -16,11 +16,11 @@
 #include <string_view>
 #include <vector>
 
-#include "common/chunk.h"
-#include "common/decode_error.h"
-#include "common/vec3.h"
-#include "common/voxel.h"
-#include "common/world_bounds.h"
+#include "common/codec/decode_error.h"
+#include "common/voxel/chunk.h"
+#include "common/voxel/vec3.h"
+#include "common/voxel/voxel.h"
+#include "common/world/world_bounds.h"
 #include "protocol/framing.h"
 #include "protocol/terrane_generated.h"
 

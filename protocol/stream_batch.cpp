@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 

@@ -23,9 +23,9 @@
 #include <span>
 #include <vector>
 
-#include "common/box.h"
-#include "common/decode_error.h"
-#include "common/vec3.h"
+#include "common/codec/decode_error.h"
+#include "common/voxel/box.h"
+#include "common/voxel/vec3.h"
 #include "protocol/messages.h"
 
 namespace terrane {

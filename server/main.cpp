@@ -16,7 +16,7 @@
 
 #include <asio.hpp>
 
-#include "common/cli.h"
+#include "common/cli/cli.h"
 #include "server/net/limits.h"
 #include "server/log.h"
 #include "server/server.h"

@@ -41,7 +41,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/world.h"
+#include "common/world/world.h"
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"

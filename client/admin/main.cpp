@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "client/client.h"
-#include "common/cli.h"
+#include "common/cli/cli.h"
 
 namespace terrane {
 namespace {

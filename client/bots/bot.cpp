@@ -1,6 +1,6 @@
 #include "client/bots/bot.h"
 
-#include "common/view.h"
+#include "common/world/view.h"
 
 #include <algorithm>
 #include <cmath>

@@ -6,7 +6,7 @@
 #include <set>
 #include <sstream>
 
-#include "common/cli.h"
+#include "common/cli/cli.h"
 
 namespace terrane::bots {
 

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane::bots {
 

@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <sstream>
 
-#include "common/json.h"
+#include "common/cli/json.h"
 
 namespace terrane::bots {
 

@@ -5,8 +5,8 @@
 #include <numbers>
 
 #include "client/path.h"
-#include "common/cli.h"
-#include "common/view.h"
+#include "common/cli/cli.h"
+#include "common/world/view.h"
 
 namespace terrane::python {
 

@@ -1,5 +1,5 @@
-// Detail-enhanced render chunks: the viewer's toggle for common/enhance and
-// common/lighting (A. M. Smith, "Two Methods for Voxel Detail
+// Detail-enhanced render chunks: the viewer's toggle for common/enhance/
+// (enhance.h and lighting.h; A. M. Smith, "Two Methods for Voxel Detail
 // Enhancement"). A full-resolution render chunk is subdivided into 2x2x2
 // fragments per voxel by recursive subdivision, its surface fragments are
 // lit by snowflake tracing (particles wandering towards the sun and the
@@ -13,8 +13,8 @@
 
 #include "client/view/mesher.h"
 #include "client/view/render_chunk.h"
-#include "common/enhance.h"
-#include "common/lighting.h"
+#include "common/enhance/enhance.h"
+#include "common/enhance/lighting.h"
 
 namespace terrane::view {
 

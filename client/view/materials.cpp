@@ -3,7 +3,7 @@
 namespace terrane::view {
 namespace {
 
-// The article's 23 default materials (common/voxel.h order).
+// The article's 23 default materials (common/voxel/voxel.h order).
 constexpr std::array<MaterialStyle, 23> kStyles = {{
     {0, 0, 0, 0.0f},         // Air (never meshed)
     {52, 104, 150, 0.0f},    // Water

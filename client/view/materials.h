@@ -11,7 +11,7 @@
 #include <array>
 #include <cstdint>
 
-#include "common/voxel.h"
+#include "common/voxel/voxel.h"
 
 namespace terrane::view {
 

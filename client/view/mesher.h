@@ -20,8 +20,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "common/vec3.h"
-#include "common/voxel.h"
+#include "common/voxel/vec3.h"
+#include "common/voxel/voxel.h"
 
 namespace terrane::view {
 

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <unordered_map>
 
-#include "common/chunk.h"
+#include "common/voxel/chunk.h"
 
 namespace terrane::view {
 namespace {

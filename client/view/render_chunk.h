@@ -16,9 +16,9 @@
 #include <vector>
 
 #include "client/view/mesher.h"
-#include "common/box.h"
-#include "common/grid.h"
-#include "common/vec3.h"
+#include "common/voxel/box.h"
+#include "common/voxel/grid.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane::view {
 

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "common/chunk.h"
+#include "common/voxel/chunk.h"
 
 namespace terrane::view {
 

@@ -1,5 +1,5 @@
 // How far the server's mip-first streaming has got for a client at a
-// position, by the view rule the server streams with (common/view.h,
+// position, by the view rule the server streams with (common/world/view.h,
 // PROTOCOL.md "The view rule"): every chunk in view first gets its coarsest
 // form, then is refined to its level.
 #pragma once
@@ -7,7 +7,7 @@
 #include <cstdint>
 
 #include "client/replica.h"
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane::view {
 

@@ -4,7 +4,7 @@
     PYTHONPATH=build/python python3 examples/python/build_from_vxraw.py \\
         --server 127.0.0.1:7777 examples/python/models/house.vxraw
 
-The model (VXRAW, common/VXRAW.md; .gz too) is written with write_box in
+The model (VXRAW, common/vxraw/VXRAW.md; .gz too) is written with write_box in
 pieces of at most 32^3 voxels, every voxel as the file has it (Air too, so a
 house is hollow). The client moves beside each piece first (edits must lie
 within its full-resolution radius) and waits for each piece's

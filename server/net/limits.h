@@ -13,7 +13,7 @@
 #include <string>
 #include <unordered_map>
 
-#include "common/world_store.h"
+#include "common/world/world_store.h"
 
 namespace terrane {
 

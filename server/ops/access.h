@@ -2,7 +2,7 @@
 // token, per-player tokens with a role, the admin token) come from the
 // options; bans (by name or address, for a while or for ever) and the
 // whitelist are the operators' (terrane-admin) and live in the world's
-// store (table "access", common/WORLD_FORMAT.md), so they survive restarts.
+// store (table "access", common/world/WORLD_FORMAT.md), so they survive restarts.
 //
 // Threading: every method may be called from any thread (one mutex; the
 // store is its own SQLite connection, written only by admin commands).
@@ -18,7 +18,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/world_store.h"
+#include "common/world/world_store.h"
 #include "server/counters.h"
 #include "server/net/limits.h"
 

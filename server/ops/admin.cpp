@@ -6,9 +6,9 @@
 #include <future>
 #include <sstream>
 
-#include "common/cli.h"
-#include "common/json.h"
-#include "common/world_store.h"
+#include "common/cli/cli.h"
+#include "common/cli/json.h"
+#include "common/world/world_store.h"
 #include "server/log.h"
 
 namespace terrane {

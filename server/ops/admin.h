@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 #include "protocol/messages.h"
 #include "server/ops/access.h"
 

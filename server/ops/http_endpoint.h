@@ -15,8 +15,8 @@
 #include <string>
 #include <thread>
 
-#include "common/cli.h"
-#include "common/decode_error.h"
+#include "common/cli/cli.h"
+#include "common/codec/decode_error.h"
 #include "server/ops/metrics.h"
 
 namespace httplib {

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "common/view.h"
+#include "common/world/view.h"
 #include "server/log.h"
 
 namespace terrane {

@@ -38,7 +38,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/world_store.h"
+#include "common/world/world_store.h"
 #include "protocol/stream_batch.h"
 #include "server/net/limits.h"
 #include "server/net/session.h"

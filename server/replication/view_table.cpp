@@ -2,7 +2,7 @@
 
 #include <map>
 
-#include "common/view.h"
+#include "common/world/view.h"
 
 namespace terrane {
 

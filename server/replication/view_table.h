@@ -1,4 +1,4 @@
-// ViewTable: the view rule of common/view.h for one view distance and one
+// ViewTable: the view rule of common/world/view.h for one view distance and one
 // full-resolution radius, precomputed once and shared by every replicator
 // that uses them. Since the rule depends only on the offset from the
 // client's chunk, a client's plan is the table moved to its chunk, and a
@@ -18,7 +18,7 @@
 #include <mutex>
 #include <vector>
 
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane {
 

@@ -34,7 +34,7 @@
 #include <thread>
 #include <vector>
 
-#include "common/world.h"
+#include "common/world/world.h"
 #include "server/counters.h"
 #include "server/world/chunk_version.h"
 
@@ -49,7 +49,7 @@ struct LoadedChunk {
   std::string error;
 };
 
-// A region's coarse image (common/coarse_image.h): one entry per stored chunk.
+// A region's coarse image (common/world/coarse_image.h): one entry per stored chunk.
 struct LoadedCoarse {
   Vec3i region;
   std::vector<CoarseEntry> entries;

@@ -12,10 +12,10 @@
 #include <string_view>
 #include <utility>
 
-#include "common/cli.h"
-#include "common/enhance.h"
-#include "common/lighting.h"
-#include "common/vxraw.h"
+#include "common/cli/cli.h"
+#include "common/enhance/enhance.h"
+#include "common/enhance/lighting.h"
+#include "common/vxraw/vxraw.h"
 
 namespace terrane {
 namespace {
@@ -23,7 +23,7 @@ namespace {
 constexpr const char* kEnhanceHelp =
     "usage: terrane-world enhance --in FILE --out FILE --method subdivide|resample [options]\n"
     "\n"
-    "Voxel detail enhancement (common/ENHANCE.md): every voxel of the input VXRAW box (plain or\n"
+    "Voxel detail enhancement (common/enhance/ENHANCE.md): every voxel of the input VXRAW box (plain or\n"
     "gzip) becomes factor^3 full-or-Air fragments in the output box, whose origin is the input\n"
     "origin times the factor. The output is gzip-compressed when its name ends in .gz.\n"
     "\n"
@@ -42,7 +42,7 @@ constexpr const char* kEnhanceHelp =
     "  --spread S         resample: probe offsets in [-S, S] coarse voxels, 0 < S <= 4 (default 1)\n"
     "  --seed N           seed of the probe pattern and of the lighting particles (default 1)\n"
     "  --light            also light the fragments by snowflake tracing and write OUT.light\n"
-    "                     (format in common/ENHANCE.md)\n"
+    "                     (format in common/enhance/ENHANCE.md)\n"
     "\n"
     "Exit status: 0 success, 1 a file could not be read or written, 2 bad usage.\n";
 
@@ -131,7 +131,7 @@ void put_u32(std::string& out, std::uint32_t v) {
   for (int i = 0; i < 4; ++i) out.push_back(static_cast<char>((v >> (8 * i)) & 0xFF));
 }
 
-// The light sidecar (common/ENHANCE.md, "Light file"), written to a
+// The light sidecar (common/enhance/ENHANCE.md, "Light file"), written to a
 // temporary name and renamed into place.
 bool write_light_file(const std::string& path, const LightMap& map, std::string* error) {
   std::string header = "TLGT";

@@ -1,5 +1,5 @@
 // terrane-world enhance: voxel detail enhancement of a VXRAW file (see
-// common/ENHANCE.md), optionally with snowflake-traced lighting.
+// common/enhance/ENHANCE.md), optionally with snowflake-traced lighting.
 //
 //   terrane-world enhance --in FILE.vxraw --out FILE.vxraw --method subdivide|resample
 //                         [--factor N] [--threshold T] [--probes N] [--spread S] [--seed N] [--light]

@@ -24,10 +24,10 @@
 #include <tuple>
 #include <vector>
 
-#include "common/cli.h"
-#include "common/lz4_block.h"
-#include "common/vxraw.h"
-#include "common/world.h"
+#include "common/cli/cli.h"
+#include "common/codec/lz4_block.h"
+#include "common/vxraw/vxraw.h"
+#include "common/world/world.h"
 #include "server/tools/enhance_command.h"
 #include "server/tools/world_stats.h"
 
@@ -190,7 +190,7 @@ int cmd_generate(int argc, char** argv) {
   if (clipped.empty()) return failure("--box lies entirely outside the world's bounds");
   std::vector<Vec3i> todo;
   // Revision to store each with: 0, or above a quarantined row's so that
-  // revisions only grow (common/WORLD_FORMAT.md, quarantine).
+  // revisions only grow (common/world/WORLD_FORMAT.md, quarantine).
   std::vector<std::uint64_t> todo_revision;
   for (Vec3i c : chunks_in(clipped)) {
     auto stored = world->store().load_chunk(c);
@@ -488,7 +488,7 @@ int cmd_check(int argc, char** argv) {
   if (quarantined > 0)
     std::fprintf(stderr,
                  "terrane-world: world %s has %llu quarantined chunk rows: damaged data set aside in its quarantine "
-                 "table (common/WORLD_FORMAT.md); the chunks are served as generated until restored\n",
+                 "table (common/world/WORLD_FORMAT.md); the chunks are served as generated until restored\n",
                  cl.get("world").c_str(), static_cast<unsigned long long>(quarantined));
   if (!damaged.empty() && !cl.flag("quarantine"))
     std::fprintf(stderr,

@@ -4,10 +4,10 @@
 #include <cstdio>
 #include <sstream>
 
-#include "common/byte_rle.h"
-#include "common/grid.h"
-#include "common/lz4_block.h"
-#include "common/net_codec.h"
+#include "common/codec/byte_rle.h"
+#include "common/codec/lz4_block.h"
+#include "common/codec/net_codec.h"
+#include "common/voxel/grid.h"
 
 namespace terrane {
 

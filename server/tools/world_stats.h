@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
-#include "common/box.h"
-#include "common/vec3.h"
+#include "common/voxel/box.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane {
 

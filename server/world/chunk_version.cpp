@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
-#include "common/box.h"
-#include "common/world_store.h"
+#include "common/voxel/box.h"
+#include "common/world/world_store.h"
 #include "protocol/messages.h"
 #include "server/log.h"
 

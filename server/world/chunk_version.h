@@ -23,9 +23,9 @@
 #include <span>
 #include <vector>
 
-#include "common/chunk.h"
-#include "common/coarse_image.h"
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
+#include "common/voxel/chunk.h"
+#include "common/world/coarse_image.h"
 
 namespace terrane {
 

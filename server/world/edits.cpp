@@ -4,7 +4,7 @@
 #include <array>
 #include <cmath>
 
-#include "common/byte_rle.h"
+#include "common/codec/byte_rle.h"
 
 
 namespace terrane {

@@ -1,6 +1,6 @@
 #include "server/world/history.h"
 
-#include "common/byte_rle.h"
+#include "common/codec/byte_rle.h"
 
 namespace terrane {
 

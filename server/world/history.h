@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "common/grid.h"
+#include "common/voxel/grid.h"
 #include "server/world/edits.h"
 
 namespace terrane {

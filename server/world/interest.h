@@ -14,7 +14,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 
 namespace terrane {
 

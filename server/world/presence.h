@@ -8,7 +8,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/vec3.h"
+#include "common/voxel/vec3.h"
 #include "protocol/messages.h"
 #include "server/world/interest.h"
 

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 
-#include "common/byte_rle.h"
-#include "common/view.h"
+#include "common/codec/byte_rle.h"
+#include "common/world/view.h"
 #include "server/log.h"
 
 namespace terrane {

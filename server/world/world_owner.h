@@ -46,8 +46,8 @@
 #include <unordered_set>
 #include <vector>
 
-#include "common/grid.h"
-#include "common/world.h"
+#include "common/voxel/grid.h"
+#include "common/world/world.h"
 #include "server/options.h"
 #include "server/storage/storage.h"
 #include "server/world/chunk_version.h"

@@ -6,9 +6,9 @@
 #include <cstdio>
 #include <vector>
 
-#include "common/byte_rle.h"
-#include "common/lz4_block.h"
-#include "common/vxraw.h"
+#include "common/codec/byte_rle.h"
+#include "common/codec/lz4_block.h"
+#include "common/vxraw/vxraw.h"
 
 namespace terrane {
 namespace {

@@ -1,6 +1,6 @@
 // Side-by-side comparison of the voxel unit codecs on the same 16^3 units:
 // byte RLE, byte RLE + LZ4, byte RLE + zstd-3, a Minecraft-style paletted
-// section + zlib-6, and Terrane's network codec (common/net_codec.h); plus
+// section + zlib-6, and Terrane's network codec (common/codec/net_codec.h); plus
 // 4^3 update batches for random small sphere edits.
 //
 // Prints tables (sizes are exact, timings are wall clock on this machine).
@@ -23,12 +23,12 @@
 #include <string>
 #include <vector>
 
-#include "common/box.h"
-#include "common/byte_rle.h"
-#include "common/lz4_block.h"
-#include "common/net_codec.h"
-#include "common/terrain_generator.h"
-#include "common/vxraw.h"
+#include "common/codec/byte_rle.h"
+#include "common/codec/lz4_block.h"
+#include "common/codec/net_codec.h"
+#include "common/voxel/box.h"
+#include "common/vxraw/vxraw.h"
+#include "common/world/terrain_generator.h"
 
 using namespace terrane;
 

@@ -6,10 +6,10 @@
 
 #include <cstdint>
 
-#include "common/box.h"
-#include "common/enhance.h"
-#include "common/lighting.h"
-#include "common/terrain_generator.h"
+#include "common/enhance/enhance.h"
+#include "common/enhance/lighting.h"
+#include "common/voxel/box.h"
+#include "common/world/terrain_generator.h"
 
 namespace terrane {
 namespace {

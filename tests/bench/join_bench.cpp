@@ -27,8 +27,8 @@
 #include <spdlog/spdlog.h>
 
 #include "client/client.h"
-#include "common/net_codec.h"
-#include "common/world.h"
+#include "common/codec/net_codec.h"
+#include "common/world/world.h"
 #include "server/server.h"
 #include "tests/bench/paletted_section.h"
 #include "tests/support/view_chunks.h"

@@ -7,8 +7,8 @@
 #include <benchmark/benchmark.h>
 
 #include "client/view/render_chunk.h"
-#include "common/terrain_generator.h"
-#include "common/world.h"
+#include "common/world/terrain_generator.h"
+#include "common/world/world.h"
 
 namespace terrane::view {
 namespace {

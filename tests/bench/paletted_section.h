@@ -13,7 +13,7 @@
 #include <span>
 #include <vector>
 
-#include "common/voxel.h"
+#include "common/voxel/voxel.h"
 
 namespace terrane {
 

@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "common/grid.h"
-#include "common/vxraw.h"
-#include "common/world_store.h"
+#include "common/voxel/grid.h"
+#include "common/vxraw/vxraw.h"
+#include "common/world/world_store.h"
 
 namespace terrane {
 namespace {

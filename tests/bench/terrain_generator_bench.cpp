@@ -5,8 +5,8 @@
 
 #include <cstdint>
 
-#include "common/box.h"
-#include "common/terrain_generator.h"
+#include "common/voxel/box.h"
+#include "common/world/terrain_generator.h"
 
 namespace terrane {
 namespace {

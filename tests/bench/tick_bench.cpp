@@ -17,7 +17,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "common/world.h"
+#include "common/world/world.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 #include "server/storage/storage.h"

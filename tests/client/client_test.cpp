@@ -20,7 +20,7 @@
 #include <thread>
 #include <vector>
 
-#include "common/world.h"
+#include "common/world/world.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
 

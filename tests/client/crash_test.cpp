@@ -25,8 +25,8 @@
 #include <unistd.h>
 
 #include "client/client.h"
-#include "common/coarse_image.h"
-#include "common/world.h"
+#include "common/world/coarse_image.h"
+#include "common/world/world.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
 

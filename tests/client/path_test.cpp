@@ -6,7 +6,7 @@
 
 #include <cstdlib>
 
-#include "common/grid.h"
+#include "common/voxel/grid.h"
 
 namespace terrane {
 namespace {

@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "common/byte_rle.h"
+#include "common/codec/byte_rle.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace terrane;

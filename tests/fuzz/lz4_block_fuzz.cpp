@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "common/lz4_block.h"
+#include "common/codec/lz4_block.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace terrane;

@@ -6,7 +6,7 @@
 #include <span>
 #include <vector>
 
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 

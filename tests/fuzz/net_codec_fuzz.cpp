@@ -8,7 +8,7 @@
 #include <span>
 #include <vector>
 
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
 
 using namespace terrane;
 

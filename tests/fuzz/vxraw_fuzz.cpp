@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <span>
 
-#include "common/vxraw.h"
+#include "common/vxraw/vxraw.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace terrane;

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <limits>
 
-#include "common/byte_rle.h"
-#include "common/net_codec.h"
+#include "common/codec/byte_rle.h"
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 namespace {

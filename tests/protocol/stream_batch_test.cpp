@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "common/net_codec.h"
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 namespace {

@@ -26,8 +26,8 @@
 #include <tuple>
 #include <thread>
 
-#include "common/coarse_image.h"
-#include "common/view.h"
+#include "common/world/coarse_image.h"
+#include "common/world/view.h"
 #include "server/world/edits.h"
 #include "server/log.h"
 #include "tests/support/server_fixture.h"
@@ -341,7 +341,7 @@ bool read_stream(RawPeer& p, HeldMap& held, std::size_t* records, const std::fun
 }
 
 // True when every chunk of the view is held at the level the view rule
-// (common/view.h) promises: Empty or full resolution inside the radius, the
+// (common/world/view.h) promises: Empty or full resolution inside the radius, the
 // desired mip (or Empty) beyond it.
 bool view_complete(const HeldMap& held, const ClientStateMsg& where,
                    const WorldBounds& b = default_world_meta().bounds) {

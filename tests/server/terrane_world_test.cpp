@@ -10,8 +10,8 @@
 #include <fstream>
 #include <string>
 
-#include "common/vxraw.h"
-#include "common/world_store.h"
+#include "common/vxraw/vxraw.h"
+#include "common/world/world_store.h"
 
 namespace terrane {
 namespace {

@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""A decoder of Terrane network codec units written from common/NET_CODEC.md
+"""A decoder of Terrane network codec units written from common/codec/NET_CODEC.md
 alone (kinds 0..5), run against the document's own worked examples: every
 example's bytes are read out of the document and must decode to the voxels
 the document says. Exit status 0 when they all do.
 
-    python3 tests/spec/net_codec_reference.py common/NET_CODEC.md
+    python3 tests/spec/net_codec_reference.py common/codec/NET_CODEC.md
 """
 import math
 import re

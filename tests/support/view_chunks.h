@@ -1,11 +1,11 @@
 // Test support: the chunks a client at p is promised within radius (inside
-// the world's vertical bounds), by the one view rule of common/view.h.
+// the world's vertical bounds), by the one view rule of common/world/view.h.
 // Header-only; used by the integration tests and the join benchmark.
 #pragma once
 
 #include <vector>
 
-#include "common/view.h"
+#include "common/world/view.h"
 #include "protocol/messages.h"
 
 namespace terrane::testing_support {

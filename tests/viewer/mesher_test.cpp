@@ -8,7 +8,7 @@
 #include <map>
 #include <utility>
 
-#include "common/voxel.h"
+#include "common/voxel/voxel.h"
 
 namespace terrane::view {
 namespace {

@@ -11,8 +11,8 @@
 #include <unordered_map>
 
 #include "client/view/mesh_scheduler.h"
-#include "common/terrain_generator.h"
-#include "common/world.h"
+#include "common/world/terrain_generator.h"
+#include "common/world/world.h"
 
 namespace terrane::view {
 namespace {

@@ -24,8 +24,8 @@
 
 #include "client/client.h"
 #include "client/view/png.h"
-#include "common/terrain_generator.h"
-#include "common/world.h"
+#include "common/world/terrain_generator.h"
+#include "common/world/world.h"
 #include "tests/support/server_process.h"
 
 namespace terrane::view {

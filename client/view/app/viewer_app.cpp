@@ -11,8 +11,8 @@
 #include "client/view/png.h"
 #include "client/view/replica_source.h"
 #include "client/view/stream_progress.h"
-#include "common/chunk.h"
-#include "common/cli.h"
+#include "common/cli/cli.h"
+#include "common/voxel/chunk.h"
 
 namespace terrane::view {
 namespace {

@@ -13,7 +13,7 @@
 #include <mutex>
 #include <thread>
 
-#include "common/world.h"
+#include "common/world/world.h"
 #include "tests/support/eventually.h"
 #include "tests/support/server_fixture.h"
 

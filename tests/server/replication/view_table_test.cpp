@@ -7,7 +7,7 @@
 #include <set>
 #include <tuple>
 
-#include "common/view.h"
+#include "common/world/view.h"
 
 namespace terrane {
 namespace {

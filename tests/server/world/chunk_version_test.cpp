@@ -7,7 +7,7 @@
 
 #include <thread>
 
-#include "common/world_store.h"
+#include "common/world/world_store.h"
 #include "protocol/messages.h"
 
 namespace terrane {

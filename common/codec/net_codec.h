@@ -1,0 +1,118 @@
+// Terrane's network voxel codec: a bit-packed RLE for cubic units of N^3
+// voxels, N in {4, 8, 16} (16^3 for the initial load, 4^3 for edit updates,
+// 16^3/8^3/4^3 for the mip levels of a 32^3 chunk). Format version 1 is
+// specified in common/codec/NET_CODEC.md.
+//
+// A unit is a span of N^3 voxels in Box order (x fastest, then z, then y;
+// index (y*N+z)*N+x). Each unit encodes and decodes on its own: there is no
+// state shared between units or messages. The encoding is a run/copy token
+// stream: runs of the previous voxel, copies from the row behind (z-1, offset
+// N) and the layer below (y-1, offset N^2), and literals from a per-unit
+// material palette; occupancy bytes are only stored for non-default voxels.
+//
+// Decoders never trust their input: every error comes back as a DecodeError,
+// nothing is read outside the given span, nothing is allocated from input
+// sizes, and the output buffer is the caller's.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "common/codec/decode_error.h"
+#include "common/voxel/vec3.h"
+#include "common/voxel/voxel.h"
+
+namespace terrane {
+
+inline constexpr std::uint8_t kNetCodecVersion = 1;
+
+// True for the unit edge lengths the codec speaks: 4, 8 and 16.
+constexpr bool net_codec_valid_size(int n) { return n == 4 || n == 8 || n == 16; }
+
+// The largest encoding of any N^3 unit (random materials and occupancies):
+// 1 + min(2 * N^3, ceil((391 + 14 * N^3) / 8)) bytes, i.e. 129, 946 and 7218
+// bytes for N = 4, 8, 16: a 64-entry palette then 6-bit indices and 8-bit
+// occupancies (1.75 bytes per voxel), or raw 2-byte voxels when smaller.
+// Precondition: net_codec_valid_size(n).
+constexpr std::size_t net_codec_max_encoded_size(int n) {
+  const std::size_t volume = static_cast<std::size_t>(n) * n * n;
+  const std::size_t packed = (391 + 14 * volume + 7) / 8;
+  return 1 + (packed < 2 * volume ? packed : 2 * volume);
+}
+
+// Appends the encoding of one unit to out.
+// Preconditions: net_codec_valid_size(n), voxels.size() == n^3, every voxel
+// has material < kMaterialCount and Air voxels have occupancy 0 (true for
+// anything read from a Box or built with make_voxel).
+void net_codec_encode(int n, std::span<const Voxel> voxels, std::vector<std::uint8_t>& out);
+
+// Decodes exactly one unit from all of bytes into out (n^3 voxels, the
+// caller's buffer). Errors: kTruncated, kBadVersion, kInvalidValue (unknown
+// unit kind, material >= 64, palette index out of range, duplicate palette
+// entry, a run or copy past the end of the unit or before its start, non-zero
+// padding bits), kTrailingBytes (bytes after the unit), kOverLimit (n not a
+// valid size or out.size() != n^3). On error out holds unspecified voxels,
+// all of them valid (material < 64, Air with occupancy 0).
+Status net_codec_decode(int n, std::span<const std::uint8_t> bytes, std::span<Voxel> out);
+
+// Like net_codec_decode but the unit may be followed by other data: returns
+// the number of bytes the unit occupied.
+Result<std::size_t> net_codec_decode_prefix(int n, std::span<const std::uint8_t> bytes, std::span<Voxel> out);
+
+// ---------------------------------------------------------------------------
+// Update batches: the 4^3 units that changed in one tick.
+
+inline constexpr int kUpdateUnitSize = 4;
+inline constexpr int kUpdateUnitVoxels = 64;
+// Units of 4^3 in a 32^3 chunk, indexed (uy*8+uz)*8+ux.
+inline constexpr int kUpdateUnitsPerChunk = 512;
+inline constexpr std::uint8_t kUpdateBatchVersion = 1;
+
+struct UnitUpdate {
+  Vec3i chunk_pos;               // signed coordinate of the 32^3 chunk
+  std::uint16_t unit_index = 0;  // 0..511: (uy*8+uz)*8+ux within the chunk
+  std::array<Voxel, kUpdateUnitVoxels> voxels{};
+
+  friend bool operator==(const UnitUpdate&, const UnitUpdate&) = default;
+};
+
+// Orders updates the way a batch stores them: by chunk (y, z, x), then unit.
+bool update_batch_order(const UnitUpdate& a, const UnitUpdate& b);
+
+// Appends a batch holding the given updates. The batch is a set: entries are
+// written sorted by update_batch_order (so coordinates delta-code well) and
+// decode in that order. Preconditions: unit_index < 512, voxels valid.
+void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out);
+
+// Decodes a whole batch into out, returning the number of updates. Errors as
+// net_codec_decode, plus kOverLimit when the batch holds more than out.size()
+// updates and kInvalidValue for a unit index >= 512 or an over-long varint.
+Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> bytes, std::span<UnitUpdate> out);
+
+// One chunk's units of a batch, encoded once and joined into batches that
+// differ per receiver (a server sends each client the chunks it holds):
+// joining writes each piece's first coordinates and copies the rest, so a
+// batch costs its receiver one copy of the shared bytes. Joining pieces in
+// update_batch_order of their chunks gives the bytes
+// net_codec_encode_update_batch makes of the same units.
+struct UpdatePiece {
+  Vec3i chunk_pos;
+  int first_unit = 0;
+  std::uint32_t count = 0;
+  std::vector<std::uint8_t> rest;  // the first unit, then the other entries
+};
+// Precondition: units is non-empty, every unit of chunk_pos, distinct indices.
+UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units);
+// Appends one batch of the pieces (distinct chunks), in the order given.
+void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out);
+
+// The coordinate part of one batch entry, exposed so benchmarks can put the
+// same coordinates in front of other unit codecs. prev_* is the previous
+// entry's chunk and unit (start: chunk (0,0,0), unit -1).
+void net_codec_put_update_coords(Vec3i chunk_pos, int unit_index, Vec3i prev_chunk, int prev_unit,
+                                 std::vector<std::uint8_t>& out);
+
+}  // namespace terrane

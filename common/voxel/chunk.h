@@ -1,0 +1,124 @@
+// Chunk: a 32³ block of the grid, row-packed, with its mip pyramid.
+//
+// Level 0 is the full-resolution 32³ content; levels 1, 2, 3 are the 16³, 8³
+// and 4³ mips, each row-packed too, updated on every write. A mip voxel
+// covers 2×2×2 voxels of the level below (its "children"):
+//   - it is Air only if all its children are Air, so Air at any level means
+//     Air in everything it covers (an all-Air 4³ level is an empty chunk);
+//   - otherwise its material is the most common non-Air material among the
+//     children (ties go to the lowest id) and its occupancy is the mean of
+//     the children's occupancy fractions (Air counting 0), quantized to the
+//     nearest byte and never below the smallest non-zero value: matter is
+//     conserved up to quantization.
+// Coordinates here are chunk-local, 0..31 at level 0.
+#pragma once
+
+#include <cmath>
+
+#include <cstddef>
+#include <cstdint>
+
+#include "common/voxel/box.h"
+#include "common/voxel/row_packed_box.h"
+#include "common/voxel/vec3.h"
+
+namespace terrane {
+
+inline constexpr int kChunkSize = 32;
+inline constexpr int kChunkShift = 5;
+inline constexpr int kMipLevels = 4;  // level 0 (32³) .. level 3 (4³)
+
+// Voxel <-> chunk coordinates (floor division: negative coordinates work).
+inline Vec3i chunk_of(Vec3i voxel) { return floor_div(voxel, kChunkSize); }
+inline Vec3i local_of(Vec3i voxel) { return floor_mod(voxel, kChunkSize); }
+inline Vec3i chunk_origin(Vec3i chunk_pos) { return chunk_pos * kChunkSize; }
+inline Region chunk_region(Vec3i chunk_pos) {
+  return Region::from_min_size(chunk_origin(chunk_pos), {kChunkSize, kChunkSize, kChunkSize});
+}
+
+// Calls fn(Vec3i chunk_pos) for every chunk overlapping a non-empty region,
+// y outermost, then z, then x.
+template <class F>
+void for_each_chunk_in(const Region& r, F&& fn) {
+  if (r.empty()) return;
+  const Vec3i c0 = chunk_of(r.min), c1 = chunk_of(r.max - Vec3i{1, 1, 1});
+  for (int y = c0.y; y <= c1.y; ++y)
+    for (int z = c0.z; z <= c1.z; ++z)
+      for (int x = c0.x; x <= c1.x; ++x) fn(Vec3i{x, y, z});
+}
+
+// The downsampling rule above, for the 8 children of one mip voxel.
+Voxel downsample(const Voxel children[8]);
+
+struct ChunkMemory {
+  std::size_t object_bytes = 0;  // sizeof(Chunk)
+  std::size_t level0_bytes = 0;  // headers + row data of the 32³ level
+  std::size_t mip_bytes = 0;     // headers + row data of levels 1..3
+  std::size_t total() const { return object_bytes + level0_bytes + mip_bytes; }
+};
+
+class Chunk {
+ public:
+  using Level0 = RowPackedBox<32>;
+
+  explicit Chunk(Material fill = kAir);
+  // A packed chunk with current mips from a 32³ box. Precondition: box is 32³.
+  static Chunk from_box(const Box& box);
+  Chunk(Chunk&&) noexcept = default;
+  Chunk& operator=(Chunk&&) noexcept = default;
+  Chunk clone() const;
+
+  Voxel get(int x, int y, int z) const { return level0_.get(x, y, z); }
+  Voxel get(Vec3i p) const { return get(p.x, p.y, p.z); }
+  const Voxel* read_row(int y, int z, Level0::Row& scratch) const { return level0_.read_row(y, z, scratch); }
+  const Level0& level0() const { return level0_; }
+
+  // Voxel of mip level 0..3 at level-local coordinates (0 .. 32 >> level).
+  Voxel mip_get(int level, int x, int y, int z) const;
+  // Reads a whole level into a (32 >> level)³ box.
+  void read_level(int level, Box& out) const;
+
+  // Copies the chunk-local region [min, min + out.size()) into out.
+  // Precondition: the region lies inside the chunk.
+  void read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const;
+
+  // Rewrites the chunk-local region: fn(Vec3i local, Voxel old) -> Voxel new.
+  // fn must not touch this chunk. Mips are updated before returning.
+  template <class VoxelFn>
+  void modify(const Region& local, VoxelFn&& fn) {
+    const Region r = intersect(local, Region{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}});
+    if (r.empty()) return;
+    level0_.modify_rows(r.min.y, r.max.y, r.min.z, r.max.z, [&](int y, int z, Voxel* row) {
+      for (int x = r.min.x; x < r.max.x; ++x) row[x] = fn(Vec3i{x, y, z}, row[x]);
+    });
+    update_mips(r);
+  }
+  void set(Vec3i local, Voxel v) {
+    modify(Region{local, local + Vec3i{1, 1, 1}}, [&](Vec3i, Voxel) { return v; });
+  }
+  void fill(Material m);
+
+  // True when every voxel is Air (read off the 4³ mip: O(1) when it is uniform).
+  // (A 4³ level that unpacked itself under heavy editing is scanned: 16 rows.)
+  bool empty() const;
+  // Uniform chunk: one material at default occupancy everywhere.
+  bool uniform() const { return level0_.is_uniform(); }
+
+  // Recomputes every mip level from level 0 (after bulk loads).
+  void rebuild_mips();
+  // Repacks all levels (leaving unpacked mode): call after write-heavy phases.
+  void compact();
+
+  ChunkMemory memory() const;
+  RowPackedStats level0_stats() const { return level0_.stats(); }
+
+ private:
+  void update_mips(const Region& changed_level0);
+
+  Level0 level0_;
+  RowPackedBox<16> mip1_;
+  RowPackedBox<8> mip2_;
+  RowPackedBox<4> mip3_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,153 @@
+// Grid: the sparse, unbounded voxel grid — a hash map from signed chunk
+// coordinates to 32³ row-packed chunks (the article's
+// HashMap<Vector3int32, Chunk>). Voxel coordinates map to chunks by floor
+// division, so negative coordinates work. A chunk absent from the map is all
+// Air; a chunk that becomes all Air is freed.
+//
+// Memory is counted exactly: the map allocates through a counting allocator,
+// and chunks report their own heap bytes (see memory()).
+// Thread-safety: const methods may run concurrently; writes need exclusion.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+
+#include "common/voxel/box.h"
+#include "common/voxel/chunk.h"
+#include "common/voxel/vec3.h"
+
+namespace terrane {
+
+// An allocator that adds what it hands out to a shared byte counter.
+template <class T>
+struct CountingAllocator {
+  using value_type = T;
+  std::size_t* counter;
+
+  explicit CountingAllocator(std::size_t* c) noexcept : counter(c) {}
+  template <class U>
+  CountingAllocator(const CountingAllocator<U>& o) noexcept : counter(o.counter) {}  // NOLINT
+  T* allocate(std::size_t n) {
+    *counter += n * sizeof(T);
+    return std::allocator<T>{}.allocate(n);
+  }
+  void deallocate(T* p, std::size_t n) noexcept {
+    *counter -= n * sizeof(T);
+    std::allocator<T>{}.deallocate(p, n);
+  }
+  template <class U>
+  bool operator==(const CountingAllocator<U>& o) const noexcept { return counter == o.counter; }
+};
+
+
+struct GridMemory {
+  std::size_t chunks = 0;
+  std::size_t map_bytes = 0;      // hash map nodes and buckets
+  std::size_t object_bytes = 0;   // Chunk objects
+  std::size_t level0_bytes = 0;   // 32³ headers and row data
+  std::size_t mip_bytes = 0;      // mip headers and row data
+  RowPackedStats level0_rows;     // row classes over all chunks
+  std::size_t total() const { return map_bytes + object_bytes + level0_bytes + mip_bytes; }
+};
+
+struct RayHit {
+  Vec3i voxel;      // the voxel hit
+  Vec3i normal;     // outward normal of the face entered (zero if the ray starts inside)
+  float distance;   // along the normalised direction, from the origin to the entry point
+  Voxel value;
+};
+
+// An axis-aligned box in world units; voxel (x, y, z) spans [x, x+1) etc.
+struct Aabb {
+  Vec3f min;
+  Vec3f max;
+};
+
+class Grid {
+ public:
+  Grid();
+  Grid(Grid&&) = delete;  // the map's allocator points at this object's counter
+  Grid& operator=(Grid&&) = delete;
+
+  Voxel get(Vec3i p) const;
+  void set(Vec3i p, Voxel v);
+
+  // Reads the box [min, min + out.size()) into out (out keeps its size).
+  void read_box(Vec3i min, Box& out) const;
+  // Writes src at [min, min + src.size()).
+  void write_box(Vec3i min, const Box& src);
+  // Rewrites every voxel of region: fn(Vec3i world, Voxel old) -> Voxel new.
+  // Chunks that do not exist are created only if fn produces non-Air in them;
+  // chunks left all Air are freed. fn must not touch the grid.
+  template <class VoxelFn>
+  void modify(const Region& region, VoxelFn&& fn);
+  // Fills region with one voxel.
+  void fill(const Region& region, Voxel v) {
+    modify(region, [v](Vec3i, Voxel) { return v; });
+  }
+
+  const Chunk* find_chunk(Vec3i chunk_pos) const;
+  // Inserts or replaces a whole chunk (mips must be current). An empty chunk
+  // erases the entry.
+  void put_chunk(Vec3i chunk_pos, Chunk chunk);
+  void erase_chunk(Vec3i chunk_pos) { chunks_.erase(chunk_pos); }
+  // Removes the chunk from the grid and returns it (null if absent).
+  std::unique_ptr<Chunk> take_chunk(Vec3i chunk_pos) {
+    auto it = chunks_.find(chunk_pos);
+    if (it == chunks_.end()) return nullptr;
+    std::unique_ptr<Chunk> c = std::move(it->second);
+    chunks_.erase(it);
+    return c;
+  }
+  std::size_t chunk_count() const { return chunks_.size(); }
+  template <class F>
+  void for_each_chunk(F&& f) const {
+    for (const auto& [pos, chunk] : chunks_) f(pos, *chunk);
+  }
+  void clear() { chunks_.clear(); }
+
+  // Repacks every chunk (after imports or write-heavy phases).
+  void compact();
+  GridMemory memory() const;
+
+  // Rays are capped at this length (voxels); each step is a grid lookup.
+  static constexpr float kMaxRayDistance = 1 << 16;
+  // First voxel along the ray whose occupancy byte is >= min_occupancy (non-Air),
+  // within max_distance. direction need not be normalised (must be non-zero).
+  std::optional<RayHit> raycast(Vec3f origin, Vec3f direction, float max_distance,
+                                std::uint8_t min_occupancy = 0) const;
+  // True if any non-Air voxel with occupancy >= min_occupancy overlaps the box
+  // (touching faces do not count).
+  bool collides(const Aabb& box, std::uint8_t min_occupancy = 0) const;
+
+ private:
+  using Map = std::unordered_map<Vec3i, std::unique_ptr<Chunk>, Vec3iHash, std::equal_to<Vec3i>,
+                                 CountingAllocator<std::pair<const Vec3i, std::unique_ptr<Chunk>>>>;
+
+  std::size_t map_bytes_ = 0;  // must precede chunks_: the allocator points at it
+  Map chunks_;
+};
+
+template <class VoxelFn>
+void Grid::modify(const Region& region, VoxelFn&& fn) {
+  for_each_chunk_in(region, [&](Vec3i cp) {
+    const Vec3i origin = chunk_origin(cp);
+    const Region local{region.min - origin, region.max - origin};
+    auto shifted = [&](Vec3i l, Voxel old) { return fn(l + origin, old); };
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end()) {
+      // Only materialise a chunk if the edit puts something in it.
+      auto chunk = std::make_unique<Chunk>();
+      chunk->modify(local, shifted);
+      if (!chunk->empty()) chunks_.emplace(cp, std::move(chunk));
+      return;
+    }
+    it->second->modify(local, shifted);
+    if (it->second->empty()) chunks_.erase(it);
+  });
+}
+
+}  // namespace terrane

@@ -1,0 +1,130 @@
+#include "common/world/world.h"
+
+#include <algorithm>
+#include <map>
+
+namespace terrane {
+
+WorldMeta default_world_meta(std::uint64_t seed) {
+  WorldMeta m;
+  m.generator = GeneratorKind::kTerrain;
+  GeneratorParams p;
+  p.seed = seed;
+  m.generator_params = TerrainGenerator(p).to_metadata();
+  m.materials = default_material_names();
+  return m;
+}
+
+World::World(std::unique_ptr<WorldStore> store) : store_(std::move(store)) {}
+
+FileStatus World::init_generator() {
+  if (meta().generator != GeneratorKind::kTerrain) return Ok{};
+  std::string message;
+  auto gen = TerrainGenerator::from_metadata(meta().generator_params, &message);
+  if (!gen) return FileError{"world " + store_->dir() + ": generator parameters: " + message, gen.error()};
+  generator_.emplace(std::move(*gen));
+  return Ok{};
+}
+
+FileResult<std::unique_ptr<World>> World::open(const std::string& dir) {
+  auto store = WorldStore::open(dir);
+  if (!store) return store.error();
+  std::unique_ptr<World> w(new World(std::move(*store)));
+  if (auto s = w->init_generator(); !s) return s.error();
+  return w;
+}
+
+FileResult<std::unique_ptr<World>> World::create(const std::string& dir, const WorldMeta& meta) {
+  if (meta.generator == GeneratorKind::kTerrain) {
+    std::string message;
+    if (!TerrainGenerator::from_metadata(meta.generator_params, &message))
+      return FileError{"world " + dir + ": generator parameters: " + message, {}};
+  }
+  auto store = WorldStore::create(dir, meta);
+  if (!store) return store.error();
+  std::unique_ptr<World> w(new World(std::move(*store)));
+  if (auto s = w->init_generator(); !s) return s.error();
+  return w;
+}
+
+void World::generate_chunk_box(Vec3i chunk_pos, Box& out) const {
+  out.resize({kChunkSize, kChunkSize, kChunkSize});
+  const Region full = chunk_region(chunk_pos);
+  const Region inside = meta().bounds.clamp(full);
+  if (!generator_ || inside.empty()) return;
+  if (inside == full) {
+    generator_->generate(full, out);
+    return;
+  }
+  Box part;
+  generator_->generate(inside, part);
+  const Vec3i off = inside.min - full.min;
+  const Vec3i s = inside.size();
+  for (int y = 0; y < s.y; ++y)
+    for (int z = 0; z < s.z; ++z)
+      std::copy_n(part.read_row(y, z), s.x, out.write_row(off.y + y, off.z + z) + off.x);
+}
+
+bool World::generates_air(Vec3i chunk_pos) const {
+  const Region inside = meta().bounds.clamp(chunk_region(chunk_pos));
+  return !generator_ || inside.empty() || generator_->all_air(inside);
+}
+
+Chunk World::generate_chunk(Vec3i chunk_pos) const {
+  Box box;
+  generate_chunk_box(chunk_pos, box);
+  // Sky (most chunks of a generated world): no rows to pack, no mips to build.
+  if (std::all_of(box.voxels().begin(), box.voxels().end(), [](Voxel v) { return v.material == kAir; }))
+    return Chunk(kAir);
+  return Chunk::from_box(box);
+}
+
+FileResult<StoredChunk> World::load_chunk(Vec3i chunk_pos) {
+  auto stored = store_->load_chunk(chunk_pos);
+  if (!stored) return stored.error();
+  if (stored->has_value()) return std::move(**stored);
+  // Never stored, or quarantined: generated, with revisions continuing
+  // above any quarantined row so they only grow.
+  auto floor = store_->quarantined_revision(chunk_pos);
+  if (!floor) return floor.error();
+  return StoredChunk{floor->has_value() ? **floor + 1 : 0, generate_chunk(chunk_pos)};
+}
+
+FileStatus World::read_box(Vec3i min, Box& out) {
+  const Region r = Region::from_min_size(min, out.size());
+  FileStatus status = Ok{};
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    if (!status) return;
+    auto chunk = load_chunk(cp);
+    if (!chunk) {
+      status = chunk.error();
+      return;
+    }
+    const Region part = intersect(r, chunk_region(cp));
+    chunk->chunk.read_box(part.min - chunk_origin(cp), out, part.min - min, part.size());
+  });
+  return status;
+}
+
+FileStatus World::write_box(Vec3i min, const Box& src) {
+  const Region target = meta().bounds.clamp(Region::from_min_size(min, src.size()));
+  std::vector<ChunkWrite> writes;
+  FileStatus status = Ok{};
+  for_each_chunk_in(target, [&](Vec3i cp) {
+    if (!status) return;
+    auto chunk = load_chunk(cp);
+    if (!chunk) {
+      status = chunk.error();
+      return;
+    }
+    const Vec3i origin = chunk_origin(cp);
+    chunk->chunk.modify(Region{target.min - origin, target.max - origin},
+                        [&](Vec3i l, Voxel) { return src.get(l + origin - min); });
+    writes.push_back(
+        ChunkWrite{cp, chunk->revision + 1, encode_chunk_blob(chunk->chunk), coarse_voxels(&chunk->chunk)});
+  });
+  if (!status || writes.empty()) return status;
+  return store_->save_chunks(writes);
+}
+
+}  // namespace terrane

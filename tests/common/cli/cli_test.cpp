@@ -1,0 +1,51 @@
+#include "common/cli/cli.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace terrane {
+namespace {
+
+namespace fs = std::filesystem;
+
+class CliFileTest : public ::testing::Test {
+ protected:
+  void write(const std::string& text) { std::ofstream(path_) << text; }
+  void TearDown() override { fs::remove(path_); }
+  fs::path path_ = fs::temp_directory_path() / ("terrane-cli-" + std::to_string(::getpid()) + ".conf");
+};
+
+TEST_F(CliFileTest, FileOptionsFillInAndTheCommandLineWins) {
+  write("# server\nport = 7000\ntick-hz 30\n--bind=ignored-form-is-fine\nopen = true\n\n");
+  CommandLine cl({"port", "tick-hz", "bind"}, {"open", "help"});
+  char a0[] = "prog", a1[] = "--port", a2[] = "8000";
+  char* argv[] = {a0, a1, a2};
+  ASSERT_EQ(cl.parse(3, argv, 1), "");
+  ASSERT_EQ(cl.load_file(path_.string()), "");
+  std::string err;
+  EXPECT_EQ(cl.get_int("port", 0, 0, 65535, &err), 8000);  // command line
+  EXPECT_EQ(cl.get_int("tick-hz", 0, 0, 1000, &err), 30);  // file
+  EXPECT_EQ(cl.get("bind"), "ignored-form-is-fine");
+  EXPECT_TRUE(cl.flag("open"));
+  EXPECT_TRUE(err.empty());
+}
+
+TEST_F(CliFileTest, ErrorsNameTheFileAndLine) {
+  write("port = 1\nbogus = 2\n");
+  CommandLine cl({"port"}, {"open"});
+  EXPECT_EQ(cl.load_file(path_.string()), path_.string() + ":2: unknown option 'bogus'");
+  write("open = maybe\n");
+  CommandLine c2({"port"}, {"open"});
+  EXPECT_NE(c2.load_file(path_.string()).find(":1: open is a flag"), std::string::npos);
+  write("port\n");
+  CommandLine c3({"port"}, {"open"});
+  EXPECT_NE(c3.load_file(path_.string()).find(":1: port needs a value"), std::string::npos);
+  CommandLine c4({"port"}, {});
+  EXPECT_EQ(c4.load_file("/nonexistent/terrane.conf"), "cannot read /nonexistent/terrane.conf");
+}
+
+}  // namespace
+}  // namespace terrane

@@ -1,0 +1,425 @@
+#include "common/codec/net_codec.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "common/vxraw/vxraw.h"
+
+namespace terrane {
+namespace {
+
+constexpr int kSizes[] = {4, 8, 16};
+
+std::vector<Voxel> make_unit(int n, Voxel fill = {}) { return std::vector<Voxel>(static_cast<std::size_t>(n * n * n), fill); }
+std::size_t idx(int n, int x, int y, int z) { return static_cast<std::size_t>((y * n + z) * n + x); }
+
+std::vector<std::uint8_t> encode(int n, const std::vector<Voxel>& v) {
+  std::vector<std::uint8_t> out;
+  net_codec_encode(n, v, out);
+  return out;
+}
+
+void expect_round_trip(int n, const std::vector<Voxel>& v) {
+  const auto bytes = encode(n, v);
+  EXPECT_LE(bytes.size(), net_codec_max_encoded_size(n));
+  std::vector<Voxel> back = make_unit(n, solid(5));
+  const Status s = net_codec_decode(n, bytes, back);
+  ASSERT_TRUE(s.ok()) << s.error().describe();
+  EXPECT_EQ(back, v);
+  // Prefix decode with data after it reports the unit's own size.
+  auto longer = bytes;
+  longer.push_back(0xAB);
+  auto used = net_codec_decode_prefix(n, longer, back);
+  ASSERT_TRUE(used.ok());
+  EXPECT_EQ(*used, bytes.size());
+}
+
+std::vector<Voxel> random_unit(int n, std::mt19937& rng, int materials, bool partial) {
+  auto v = make_unit(n);
+  for (Voxel& x : v) {
+    const auto m = static_cast<Material>(rng() % static_cast<unsigned>(materials));
+    x = make_voxel(m, partial ? static_cast<std::uint8_t>(rng()) : default_occupancy(m));
+  }
+  return v;
+}
+
+// Smooth terrain: a sloped surface with fractional occupancy, strata below.
+std::vector<Voxel> terrain_unit(int n, float base, float slope) {
+  auto v = make_unit(n);
+  for (int y = 0; y < n; ++y) {
+    for (int z = 0; z < n; ++z) {
+      for (int x = 0; x < n; ++x) {
+        const float h = base + slope * static_cast<float>(x) + 0.3f * static_cast<float>(z);
+        const float f = h - static_cast<float>(y);
+        if (f <= 0) continue;
+        const Material m = f < 2 ? materials::kGrass : (y % 5 == 0 ? materials::kSlate : materials::kRock);
+        v[idx(n, x, y, z)] = make_voxel(m, f >= 1 ? kFullOccupancy : occupancy_byte(f));
+      }
+    }
+  }
+  return v;
+}
+
+// The worked examples of common/codec/NET_CODEC.md, one per unit kind: the encoder
+// writes exactly these bytes and the decoder returns exactly these voxels
+// (tests/spec/net_codec_reference.py decodes the same examples from the
+// document with a decoder written from it alone).
+TEST(NetCodec, SpecExamplesAreTheEncodersBytesAndDecodeToTheirVoxels) {
+  auto hex = [](const std::string& h) {
+    std::vector<std::uint8_t> out;
+    for (std::size_t i = 0; i + 1 < h.size(); i += 3) out.push_back(static_cast<std::uint8_t>(std::stoi(h.substr(i, 2), nullptr, 16)));
+    return out;
+  };
+  auto idx = [](int x, int y, int z) { return static_cast<std::size_t>((y * 4 + z) * 4 + x); };
+  struct Example {
+    const char* name;
+    std::vector<Voxel> voxels;
+    std::string bytes;
+  };
+  std::vector<Example> examples;
+  examples.push_back({"kind 0", std::vector<Voxel>(64), "01"});
+  examples.push_back({"kind 1", std::vector<Voxel>(64, make_voxel(3, 255)), "11 03"});
+  examples.push_back({"kind 2", std::vector<Voxel>(64, make_voxel(3, 128)), "21 03 80"});
+  std::vector<Voxel> layers(64);
+  for (int z = 0; z < 4; ++z)
+    for (int x = 0; x < 4; ++x) {
+      layers[idx(x, 0, z)] = make_voxel(1, 255);
+      layers[idx(x, 1, z)] = make_voxel(x == 2 && z == 1 ? 5 : 2, 255);
+    }
+  examples.push_back({"kind 3", layers, "31 03 10 08 05 c2 17 d6 49 34 e0 03"});
+  const int scattered[64] = {3, 1, 1, 1, 1, 2, 1, 2, 2, 3, 2, 1, 3, 1, 1, 2, 1, 2, 1, 3, 1, 2, 3, 3, 2, 1, 1, 2, 3, 2, 3, 1,
+                             1, 3, 1, 1, 3, 1, 2, 2, 3, 3, 3, 2, 3, 2, 1, 2, 1, 3, 2, 1, 1, 1, 2, 2, 2, 1, 3, 1, 1, 1, 1, 2};
+  std::vector<Voxel> packed(64);
+  for (int i = 0; i < 64; ++i) packed[static_cast<std::size_t>(i)] = make_voxel(static_cast<Material>(scattered[i]), 255);
+  examples.push_back({"kind 4", packed, "41 42 20 0c 04 88 32 84 08 49 83 4c 10 a4 d4 8c 30 a0 42 80 00"});
+  std::vector<Voxel> raw(64);
+  std::string raw_hex = "51";
+  for (int i = 0; i < 64; ++i) {
+    raw[static_cast<std::size_t>(i)] = make_voxel(static_cast<Material>(1 + i % 63), static_cast<std::uint8_t>(4 * i + 3));
+    char b[8];
+    std::snprintf(b, sizeof b, " %02x %02x", 1 + i % 63, (4 * i + 3) & 255);
+    raw_hex += b;
+  }
+  examples.push_back({"kind 5", raw, raw_hex});
+  for (const Example& e : examples) {
+    std::vector<std::uint8_t> out;
+    net_codec_encode(4, e.voxels, out);
+    EXPECT_EQ(out, hex(e.bytes)) << e.name;
+    std::vector<Voxel> back(64);
+    const auto used = net_codec_decode_prefix(4, hex(e.bytes), back);
+    ASSERT_TRUE(used.ok()) << e.name;
+    EXPECT_EQ(*used, hex(e.bytes).size()) << e.name;
+    EXPECT_EQ(back, e.voxels) << e.name;
+  }
+}
+
+TEST(NetCodec, MaxEncodedSizeIsBelowRaw) {
+  EXPECT_EQ(net_codec_max_encoded_size(4), 129u);
+  EXPECT_EQ(net_codec_max_encoded_size(8), 946u);
+  EXPECT_EQ(net_codec_max_encoded_size(16), 7218u);
+  for (int n : kSizes) EXPECT_LE(net_codec_max_encoded_size(n), static_cast<std::size_t>(2 * n * n * n + 1));
+}
+
+TEST(NetCodec, UniformUnitsCostOneToThreeBytes) {
+  for (int n : kSizes) {
+    EXPECT_EQ(encode(n, make_unit(n)).size(), 1u);
+    EXPECT_EQ(encode(n, make_unit(n, solid(materials::kRock))).size(), 2u);
+    EXPECT_EQ(encode(n, make_unit(n, make_voxel(materials::kWater, 100))).size(), 3u);
+    expect_round_trip(n, make_unit(n));
+    expect_round_trip(n, make_unit(n, solid(63)));
+    expect_round_trip(n, make_unit(n, make_voxel(1, 0)));
+  }
+}
+
+TEST(NetCodec, RoundTripsRandomUnits) {
+  std::mt19937 rng(7);
+  for (int n : kSizes) {
+    for (int materials : {2, 3, 5, 17, 64}) {
+      for (int rep = 0; rep < 5; ++rep) {
+        expect_round_trip(n, random_unit(n, rng, materials, false));
+        expect_round_trip(n, random_unit(n, rng, materials, true));
+      }
+    }
+  }
+}
+
+TEST(NetCodec, WorstCaseStaysWithinBound) {
+  std::mt19937 rng(11);
+  for (int n : kSizes) {
+    for (int rep = 0; rep < 20; ++rep) {
+      auto v = random_unit(n, rng, 64, true);
+      const auto bytes = encode(n, v);
+      EXPECT_LE(bytes.size(), net_codec_max_encoded_size(n));
+      expect_round_trip(n, v);
+    }
+  }
+}
+
+TEST(NetCodec, RoundTripsSingleVoxelDifferences) {
+  for (int n : kSizes) {
+    const int volume = n * n * n;
+    for (int i : {0, 1, n - 1, n, n * n - 1, n * n, volume / 2, volume - 1}) {
+      auto v = make_unit(n, solid(materials::kRock));
+      v[static_cast<std::size_t>(i)] = Voxel{};
+      expect_round_trip(n, v);
+      v[static_cast<std::size_t>(i)] = make_voxel(materials::kRock, 7);
+      expect_round_trip(n, v);
+      auto a = make_unit(n);
+      a[static_cast<std::size_t>(i)] = solid(63);
+      expect_round_trip(n, a);
+    }
+  }
+}
+
+TEST(NetCodec, RoundTripsStructuredUnits) {
+  for (int n : kSizes) {
+    for (float base : {-1.0f, 0.5f, 2.3f, 5.0f}) {
+      for (float slope : {0.0f, 0.25f, 0.7f, 1.9f}) expect_round_trip(n, terrain_unit(n, base, slope));
+    }
+    // Horizontal strata: rows and layers repeat.
+    auto s = make_unit(n);
+    for (int i = 0; i < n * n * n; ++i) s[static_cast<std::size_t>(i)] = solid(static_cast<Material>(1 + (i / (n * n)) % 4));
+    expect_round_trip(n, s);
+    // A strata unit is a handful of bytes.
+    EXPECT_LT(encode(n, s).size(), static_cast<std::size_t>(3 * n));
+  }
+}
+
+TEST(NetCodec, RoundTripsRealMinecraftUnits) {
+  auto file = vxraw_read_file(std::string(TERRANE_TEST_DATA_DIR) + "/mc-1.16.vxraw.gz", VxrawLimits{});
+  ASSERT_TRUE(file.ok());
+  const Box& box = file->box;
+  int checked = 0;
+  for (int n : kSizes) {
+    for (int uy = 32; uy + n <= 112; uy += 2 * n) {
+      for (int uz = 0; uz + n <= box.size().z; uz += 5 * n) {
+        for (int ux = 0; ux + n <= box.size().x; ux += 3 * n) {
+          auto v = make_unit(n);
+          for (int y = 0; y < n; ++y) {
+            for (int z = 0; z < n; ++z) {
+              for (int x = 0; x < n; ++x) v[idx(n, x, y, z)] = box.get(ux + x, uy + y, uz + z);
+            }
+          }
+          expect_round_trip(n, v);
+          ++checked;
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 100);
+}
+
+// Format version 1, byte for byte.
+TEST(NetCodec, GoldenBytesVersion1) {
+  EXPECT_EQ(encode(4, make_unit(4)), (std::vector<std::uint8_t>{0x01}));
+  EXPECT_EQ(encode(4, make_unit(4, solid(8))), (std::vector<std::uint8_t>{0x11, 0x08}));
+  EXPECT_EQ(encode(4, make_unit(4, make_voxel(2, 0x80))), (std::vector<std::uint8_t>{0x21, 0x02, 0x80}));
+  // Rock below y = 2, Air above: palette {Air, Rock}, literal Rock, run 31,
+  // literal (Air, 0 bits: it must differ from Rock), run 31.
+  auto half = make_unit(4, solid(8));
+  for (std::size_t i = 32; i < 64; ++i) half[i] = Voxel{};
+  EXPECT_EQ(encode(4, half), (std::vector<std::uint8_t>{0x31, 0x01, 0x80, 0x10, 0xFC, 0xC0, 0x07}));
+  // One voxel of Grass with occupancy 0x40 at the origin, Air elsewhere.
+  auto dot = make_unit(4);
+  dot[0] = make_voxel(2, 0x40);
+  EXPECT_EQ(encode(4, dot), (std::vector<std::uint8_t>{0x31, 0x01, 0x20, 0x34, 0xD0, 0x00, 0x3D}));
+  for (const auto& v : {half, dot}) expect_round_trip(4, v);
+}
+
+std::vector<std::vector<Voxel>> sample_units(int n) {
+  std::mt19937 rng(3);
+  std::vector<std::vector<Voxel>> units = {terrain_unit(n, 1.5f, 0.4f), random_unit(n, rng, 5, false),
+                                           random_unit(n, rng, 64, true), make_unit(n, solid(3)),
+                                           make_unit(n, make_voxel(3, 9))};
+  auto dot = make_unit(n);
+  dot[static_cast<std::size_t>(n)] = solid(1);
+  units.push_back(dot);
+  return units;
+}
+
+TEST(NetCodec, RejectsEveryTruncatedPrefix) {
+  for (int n : kSizes) {
+    for (const auto& v : sample_units(n)) {
+      const auto bytes = encode(n, v);
+      std::vector<Voxel> out = make_unit(n);
+      for (std::size_t len = 0; len < bytes.size(); ++len) {
+        // A copy of exactly len bytes, so ASan sees any read past it.
+        std::vector<std::uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(len));
+        const Status s = net_codec_decode(n, prefix, out);
+        ASSERT_FALSE(s.ok()) << "n=" << n << " len=" << len;
+        EXPECT_EQ(s.error().code, DecodeErrorCode::kTruncated) << s.error().describe();
+      }
+    }
+  }
+}
+
+TEST(NetCodec, RejectsTrailingBytes) {
+  for (int n : kSizes) {
+    for (const auto& v : sample_units(n)) {
+      auto bytes = encode(n, v);
+      bytes.push_back(0);
+      std::vector<Voxel> out = make_unit(n);
+      const Status s = net_codec_decode(n, bytes, out);
+      ASSERT_FALSE(s.ok());
+      EXPECT_EQ(s.error().code, DecodeErrorCode::kTrailingBytes);
+    }
+  }
+}
+
+DecodeErrorCode decode_error(int n, const std::vector<std::uint8_t>& bytes) {
+  std::vector<Voxel> out = make_unit(n);
+  const Status s = net_codec_decode(n, bytes, out);
+  EXPECT_FALSE(s.ok());
+  return s.ok() ? DecodeErrorCode::kTruncated : s.error().code;
+}
+
+TEST(NetCodec, RejectsBadValues) {
+  // Version and kind.
+  EXPECT_EQ(decode_error(4, {0x02}), DecodeErrorCode::kBadVersion);
+  EXPECT_EQ(decode_error(4, {0x61}), DecodeErrorCode::kInvalidValue);
+  // Raw kind: Air with occupancy, material 64.
+  {
+    std::vector<std::uint8_t> raw(129, 0);
+    raw[0] = 0x51;
+    std::vector<Voxel> out = make_unit(4);
+    EXPECT_TRUE(net_codec_decode(4, raw, out).ok());
+    raw[2] = 1;
+    EXPECT_EQ(decode_error(4, raw), DecodeErrorCode::kInvalidValue);
+    raw[2] = 0;
+    raw[1] = 64;
+    EXPECT_EQ(decode_error(4, raw), DecodeErrorCode::kInvalidValue);
+  }
+  EXPECT_EQ(decode_error(4, {0xF1}), DecodeErrorCode::kInvalidValue);
+  // Uniform material 0 (Air has its own kind) and >= 64.
+  EXPECT_EQ(decode_error(4, {0x11, 0x00}), DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(decode_error(4, {0x11, 0x40}), DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(decode_error(4, {0x21, 0xFF, 0x10}), DecodeErrorCode::kInvalidValue);
+  // Duplicate palette entry: count 2, materials 8, 8.
+  EXPECT_EQ(decode_error(4, {0x31, 0x01, 0x82, 0x00, 0x00, 0x00}), DecodeErrorCode::kInvalidValue);
+  // Packed kind, palette {8, 0} (count 2, 1 bit per index), not partial,
+  // then 64 index bits: valid; with count 3 (2 bits) index 3 is out of range.
+  {
+    std::vector<std::uint8_t> ok = {0x41, 0x01, 0x02, 0x00};  // count-1=1, 8, 0, partial 0
+    ok.resize(4 + 8, 0);  // 64 one-bit indices (all 0 -> Rock), 3 bits padding fit in byte 3
+    std::vector<Voxel> out = make_unit(4);
+    const Status s = net_codec_decode(4, ok, out);
+    ASSERT_TRUE(s.ok()) << s.error().describe();
+    EXPECT_EQ(out, make_unit(4, solid(8)));
+  }
+  // A run past the end: the "half" golden unit with its last run's
+  // Exp-Golomb code replaced by one for a length of 512 or more.
+  {
+    std::vector<std::uint8_t> bytes = {0x31, 0x01, 0x80, 0x10, 0xFC, 0x00, 0x08, 0x00};
+    EXPECT_EQ(decode_error(4, bytes), DecodeErrorCode::kInvalidValue);
+  }
+  {
+    std::vector<std::uint8_t> bytes = {0x31, 0x01, 0x80, 0x10, 0xFC, 0xC0, 0x07};
+    std::vector<Voxel> out = make_unit(4);
+    ASSERT_TRUE(net_codec_decode(4, bytes, out).ok());
+  }
+  // Non-zero padding bits after a valid unit.
+  {
+    std::vector<std::uint8_t> bytes = {0x31, 0x01, 0x80, 0x10, 0xFC, 0xC0, 0x07};
+    bytes.back() |= 0x80;
+    EXPECT_EQ(decode_error(4, bytes), DecodeErrorCode::kInvalidValue);
+  }
+  // Wrong buffer size or unit size.
+  std::vector<Voxel> small(10);
+  EXPECT_FALSE(net_codec_decode(4, std::vector<std::uint8_t>{0x01}, small).ok());
+  std::vector<Voxel> out = make_unit(4);
+  EXPECT_FALSE(net_codec_decode(5, std::vector<std::uint8_t>{0x01}, out).ok());
+}
+
+// Random byte strings never crash the decoder, and whatever decodes holds
+// valid voxels and re-encodes to the same voxels.
+TEST(NetCodec, GarbageDecodesSafely) {
+  std::mt19937 rng(99);
+  for (int n : kSizes) {
+    std::vector<Voxel> out = make_unit(n);
+    for (int rep = 0; rep < 3000; ++rep) {
+      std::vector<std::uint8_t> bytes(rng() % 64);
+      for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
+      if (!bytes.empty()) bytes[0] = static_cast<std::uint8_t>((bytes[0] & 0xF0) | 1);
+      if (net_codec_decode(n, bytes, out).ok()) {
+        for (Voxel v : out) {
+          ASSERT_LT(v.material, kMaterialCount);
+          if (v.material == kAir) {
+            ASSERT_EQ(v.occupancy, 0);
+          }
+        }
+        expect_round_trip(n, out);
+      }
+    }
+  }
+}
+
+UnitUpdate make_update(Vec3i chunk, int unit, std::vector<Voxel> v) {
+  UnitUpdate u;
+  u.chunk_pos = chunk;
+  u.unit_index = static_cast<std::uint16_t>(unit);
+  std::copy(v.begin(), v.end(), u.voxels.begin());
+  return u;
+}
+
+TEST(NetCodecUpdateBatch, RoundTrips) {
+  std::mt19937 rng(5);
+  std::vector<UnitUpdate> updates = {
+      make_update({0, 0, 0}, 0, make_unit(4)),
+      make_update({-3, 2, 7}, 511, terrain_unit(4, 1.2f, 0.5f)),
+      make_update({-3, 2, 7}, 12, random_unit(4, rng, 64, true)),
+      make_update({-3, 2, 7}, 13, make_unit(4, solid(9))),
+      make_update({2147483647, -2147483647 - 1, 5}, 300, random_unit(4, rng, 3, false)),
+      make_update({-2147483647 - 1, 2147483647, -5}, 1, make_unit(4, make_voxel(4, 77))),
+  };
+  std::vector<std::uint8_t> bytes;
+  net_codec_encode_update_batch(updates, bytes);
+  std::vector<UnitUpdate> out(updates.size());
+  auto n = net_codec_decode_update_batch(bytes, out);
+  ASSERT_TRUE(n.ok()) << n.error().describe();
+  ASSERT_EQ(*n, updates.size());
+  std::sort(updates.begin(), updates.end(), update_batch_order);
+  EXPECT_EQ(out, updates);
+
+  // Too small an output is over limit; every prefix is rejected; trailing
+  // bytes are rejected.
+  std::vector<UnitUpdate> small(updates.size() - 1);
+  auto over = net_codec_decode_update_batch(bytes, small);
+  ASSERT_FALSE(over.ok());
+  EXPECT_EQ(over.error().code, DecodeErrorCode::kOverLimit);
+  for (std::size_t len = 0; len < bytes.size(); ++len) {
+    std::vector<std::uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(len));
+    EXPECT_FALSE(net_codec_decode_update_batch(prefix, out).ok()) << len;
+  }
+  bytes.push_back(0);
+  auto trailing = net_codec_decode_update_batch(bytes, out);
+  ASSERT_FALSE(trailing.ok());
+  EXPECT_EQ(trailing.error().code, DecodeErrorCode::kTrailingBytes);
+}
+
+TEST(NetCodecUpdateBatch, EmptyBatchAndBadIndices) {
+  std::vector<std::uint8_t> bytes;
+  net_codec_encode_update_batch({}, bytes);
+  EXPECT_EQ(bytes, (std::vector<std::uint8_t>{0x01, 0x00}));
+  std::vector<UnitUpdate> out(4);
+  auto n = net_codec_decode_update_batch(bytes, out);
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(*n, 0u);
+  // Unit index 512 (tag 1024 = varint 0x80 0x08), chunk deltas 0, all-Air unit.
+  auto bad = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x01, 0x01, 0x80, 0x08, 0, 0, 0, 0x01}, out);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, DecodeErrorCode::kInvalidValue);
+  // Over-long varint count.
+  auto big = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x01, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F}, out);
+  ASSERT_FALSE(big.ok());
+  // Wrong batch version.
+  auto ver = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x02, 0x00}, out);
+  ASSERT_FALSE(ver.ok());
+  EXPECT_EQ(ver.error().code, DecodeErrorCode::kBadVersion);
+}
+
+}  // namespace
+}  // namespace terrane

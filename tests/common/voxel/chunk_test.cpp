@@ -1,0 +1,196 @@
+#include "common/voxel/chunk.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <random>
+
+namespace terrane {
+namespace {
+
+using materials::kGrass;
+using materials::kRock;
+using materials::kSand;
+
+TEST(Downsample, AllAirChildrenGiveAir) {
+  const Voxel c[8] = {};
+  EXPECT_EQ(downsample(c), Voxel{});
+}
+
+TEST(Downsample, OneSolidChildIsEnoughToBeNonAir) {
+  Voxel c[8] = {};
+  c[5] = make_voxel(kSand, 0);  // the smallest non-zero occupancy
+  const Voxel v = downsample(c);
+  EXPECT_EQ(v.material, kSand);
+  EXPECT_EQ(v.occupancy, 0);  // mean 1/2048 is kept at the smallest non-zero value
+}
+
+TEST(Downsample, MostCommonMaterialWinsTiesToLowestId) {
+  Voxel c[8] = {solid(kSand), solid(kSand), solid(kRock), solid(kRock), solid(kGrass), {}, {}, {}};
+  EXPECT_EQ(downsample(c).material, kSand);  // Sand(6) and Rock(8) both twice, Grass once
+  Voxel d[8] = {solid(kSand), solid(kSand), solid(kRock), solid(kRock), {}, {}, {}, {}};
+  EXPECT_EQ(downsample(d).material, kSand);  // tie between Sand(6) and Rock(8): lowest id
+}
+
+TEST(Downsample, OccupancyIsMeanOfChildren) {
+  Voxel c[8] = {solid(kRock), solid(kRock), solid(kRock), solid(kRock), {}, {}, {}, {}};
+  // mean fraction = 4 * 1.0 / 8 = 0.5 -> byte 127 ((127 + 1) / 256 = 0.5).
+  EXPECT_EQ(downsample(c), make_voxel(kRock, 127));
+  Voxel full[8];
+  for (auto& v : full) v = solid(kRock);
+  EXPECT_EQ(downsample(full), solid(kRock));
+}
+
+// The rule as first written (a count per material): the fast version must
+// agree with it on every input.
+Voxel downsample_by_table(const Voxel children[8]) {
+  std::array<std::uint8_t, kMaterialCount> counts{};
+  int sum = 0, solid_children = 0;
+  for (int i = 0; i < 8; ++i) {
+    if (children[i].material == kAir) continue;
+    ++counts[children[i].material];
+    sum += children[i].occupancy + 1;
+    ++solid_children;
+  }
+  if (solid_children == 0) return Voxel{};
+  Material best = 1;
+  for (int m = 2; m < kMaterialCount; ++m)
+    if (counts[m] > counts[best]) best = static_cast<Material>(m);
+  return make_voxel(best, static_cast<std::uint8_t>(std::clamp((sum + 4) / 8 - 1, 0, 255)));
+}
+
+TEST(Downsample, AgreesWithTheCountPerMaterialRuleOnRandomChildren) {
+  std::mt19937 rng(11);
+  // Few materials and occupancies so ties, equal children and Air are common.
+  std::uniform_int_distribution<int> material(0, 4), occupancy(0, 3), wide(0, 63), byte(0, 255);
+  for (int n = 0; n < 200000; ++n) {
+    Voxel c[8];
+    const bool narrow = n % 2 == 0;
+    for (auto& v : c) {
+      const int m = narrow ? material(rng) : wide(rng);
+      const int o = narrow ? occupancy(rng) * 85 : byte(rng);
+      v = m == 0 ? Voxel{} : make_voxel(static_cast<Material>(m), static_cast<std::uint8_t>(o));
+    }
+    if (n % 7 == 0)
+      for (auto& v : c) v = c[0];  // all eight equal
+    ASSERT_EQ(downsample(c), downsample_by_table(c)) << "case " << n;
+  }
+}
+
+// Reference mip pyramid computed from a plain Box.
+Box reference_mip(const Box& fine) {
+  const int n = fine.size().x / 2;
+  Box out({n, n, n});
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x) {
+        Voxel c[8];
+        int i = 0;
+        for (int dy = 0; dy < 2; ++dy)
+          for (int dz = 0; dz < 2; ++dz)
+            for (int dx = 0; dx < 2; ++dx) c[i++] = fine.get(2 * x + dx, 2 * y + dy, 2 * z + dz);
+        out.set(x, y, z, downsample(c));
+      }
+  return out;
+}
+
+double matter(const Box& b) {
+  double s = 0;
+  for (const Voxel v : b.voxels()) s += occupancy_fraction(v);
+  return s;
+}
+
+class ChunkMipTest : public ::testing::Test {
+ protected:
+  void check_mips(const char* when) {
+    Box level0;
+    chunk_.read_level(0, level0);
+    Box expected = level0;
+    const double matter0 = matter(level0);
+    double tolerance = 0;
+    for (int level = 1; level < kMipLevels; ++level) {
+      expected = reference_mip(expected);
+      Box actual;
+      chunk_.read_level(level, actual);
+      ASSERT_EQ(actual, expected) << "mip level " << level << " " << when;
+      // Air guarantee: an Air mip voxel covers only Air at level 0.
+      const int scale = 1 << level;
+      for (int y = 0; y < 32 / scale; ++y)
+        for (int z = 0; z < 32 / scale; ++z)
+          for (int x = 0; x < 32 / scale; ++x) {
+            if (actual.get(x, y, z).material != kAir) continue;
+            for (int dy = 0; dy < scale; ++dy)
+              for (int dz = 0; dz < scale; ++dz)
+                for (int dx = 0; dx < scale; ++dx)
+                  ASSERT_EQ(level0.get(x * scale + dx, y * scale + dy, z * scale + dz).material, kAir);
+          }
+      // Matter conserved up to quantization: each non-Air mip voxel may be off
+      // by one byte step (1/256) of its volume, accumulating level by level.
+      std::size_t non_air = 0;
+      for (const Voxel v : actual.voxels()) non_air += v.material != kAir;
+      const double volume = std::pow(8.0, level);
+      tolerance += static_cast<double>(non_air) * volume / 256.0;
+      EXPECT_NEAR(matter(actual) * volume, matter0, tolerance + 1e-6) << "level " << level << " " << when;
+    }
+    EXPECT_EQ(chunk_.empty(), matter0 == 0.0);
+  }
+
+  Chunk chunk_;
+};
+
+TEST_F(ChunkMipTest, MipsFollowTheRuleUnderRandomEdits) {
+  std::mt19937 rng(99);
+  std::uniform_int_distribution<int> c(0, 31), len(1, 12), mat(1, 12), occ(0, 255), kind(0, 3);
+  for (int step = 0; step < 120; ++step) {
+    const Vec3i lo{c(rng), c(rng), c(rng)};
+    const Vec3i hi = min3(lo + Vec3i{len(rng), len(rng), len(rng)}, Vec3i{32, 32, 32});
+    const int k = kind(rng);
+    chunk_.modify(Region{lo, hi}, [&](Vec3i, Voxel old) -> Voxel {
+      switch (k) {
+        case 0: return Voxel{};
+        case 1: return solid(static_cast<Material>(mat(rng)));
+        case 2: return make_voxel(static_cast<Material>(mat(rng)), static_cast<std::uint8_t>(occ(rng)));
+        default: return old.material == kAir ? solid(kRock) : Voxel{};
+      }
+    });
+    check_mips("after random edit");
+    if (HasFatalFailure()) return;
+  }
+}
+
+TEST_F(ChunkMipTest, SingleVoxelMakesEveryLevelNonEmpty) {
+  chunk_.set({31, 0, 17}, make_voxel(kSand, 3));
+  EXPECT_FALSE(chunk_.empty());
+  EXPECT_NE(chunk_.mip_get(3, 3, 0, 2).material, kAir);
+  check_mips("one voxel");
+  chunk_.set({31, 0, 17}, Voxel{});
+  EXPECT_TRUE(chunk_.empty());
+}
+
+TEST_F(ChunkMipTest, UniformChunkHasUniformMips) {
+  chunk_.fill(kRock);
+  EXPECT_TRUE(chunk_.uniform());
+  EXPECT_EQ(chunk_.mip_get(3, 0, 0, 0), solid(kRock));
+  EXPECT_EQ(chunk_.memory().level0_bytes + chunk_.memory().mip_bytes, 0u);
+  check_mips("uniform");
+}
+
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+TEST(Chunk, EmptyAfterHeavyEditingThatUnpackedItsMips) {
+  Chunk chunk;
+  chunk.set({0, 0, 0}, solid(materials::kRock));  // keeps the chunk alive meanwhile
+  for (int i = 0; i < 40; ++i) {
+    chunk.set({5, 5, 5}, make_voxel(materials::kSand, static_cast<std::uint8_t>(i)));
+    chunk.set({5, 5, 5}, Voxel{});
+  }
+  chunk.set({0, 0, 0}, Voxel{});
+  EXPECT_TRUE(chunk.empty());
+}
+}  // namespace
+}  // namespace terrane
