@@ -19,7 +19,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "common/voxel/box.h"
 #include "common/voxel/grid.h"
 #include "protocol/messages.h"

@@ -2,19 +2,12 @@
 
 #include <algorithm>
 
+#include "common/codec/bit_io.h"
 #include "common/codec/net_codec.h"
 
 namespace terrane {
 
 namespace {
-
-void put_varint(std::uint64_t v, std::vector<std::uint8_t>& out) {
-  while (v >= 0x80) {
-    out.push_back(static_cast<std::uint8_t>(v | 0x80));
-    v >>= 7;
-  }
-  out.push_back(static_cast<std::uint8_t>(v));
-}
 
 std::uint64_t zigzag(std::int64_t v) { return (static_cast<std::uint64_t>(v) << 1) ^ static_cast<std::uint64_t>(v >> 63); }
 std::int64_t unzigzag(std::uint64_t v) { return static_cast<std::int64_t>(v >> 1) ^ -static_cast<std::int64_t>(v & 1); }
@@ -32,13 +25,12 @@ class Reader {
   }
   Result<std::uint64_t> varint() {
     std::uint64_t v = 0;
-    for (int shift = 0; shift < 64; shift += 7) {
-      auto b = byte();
-      if (!b) return b.error();
-      v |= std::uint64_t{*b & 0x7Fu} << shift;
-      if ((*b & 0x80) == 0) return v;
+    const VarintRead r = get_varint(b_, pos_, 10, v);
+    if (r == VarintRead::kTruncated) return DecodeError{DecodeErrorCode::kTruncated, pos_, "stream batch: record cut short"};
+    if (r == VarintRead::kTooLong) {
+      return DecodeError{DecodeErrorCode::kInvalidValue, pos_, "stream batch: varint longer than 64 bits"};
     }
-    return DecodeError{DecodeErrorCode::kInvalidValue, pos_, "stream batch: varint longer than 64 bits"};
+    return v;
   }
 
  private:

@@ -1,4 +1,5 @@
-// Little bit-stream reader and writer for the network voxel codec.
+// Little bit-stream reader and writer for the network voxel codec, and the
+// one LEB128 varint of every Terrane format that has one.
 //
 // Bits are packed LSB-first: the first bit written is bit 0 of byte 0, a
 // k-bit value is written low bit first. The writer appends to a caller-sized
@@ -11,6 +12,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <span>
+#include <vector>
 
 namespace terrane {
 
@@ -143,5 +146,41 @@ class BitReader {
   unsigned count_ = 0;
   std::size_t zero_bytes_ = 0;
 };
+
+// LEB128 varints: 7 bits per byte, low bits first, the top bit set on every
+// byte but the last. The update batch (NET_CODEC.md), the LZ4 block's size
+// (BYTE_RLE.md) and the stream batch (PROTOCOL.md) write and read them here;
+// each format sets its own length limit and names its own errors.
+
+// Appends v in the fewest bytes (1 to 10).
+inline void put_varint(std::uint64_t v, std::vector<std::uint8_t>& out) {
+  while (v >= 0x80) {
+    out.push_back(static_cast<std::uint8_t>(v | 0x80));
+    v >>= 7;
+  }
+  out.push_back(static_cast<std::uint8_t>(v));
+}
+
+enum class VarintRead : std::uint8_t {
+  kOk,         // v holds the value, pos is just past its last byte
+  kTruncated,  // the span ended first: pos is at its end
+  kTooLong,    // max_bytes bytes all had the top bit set: pos is past them
+};
+
+// Reads one varint of at most max_bytes (<= 10) bytes starting at pos,
+// advancing pos over the bytes read. Bits above the 64th are dropped, and
+// nothing is checked beyond the length: callers judge the value (range,
+// minimal length) themselves. Nothing outside bytes is read.
+inline VarintRead get_varint(std::span<const std::uint8_t> bytes, std::size_t& pos, std::size_t max_bytes,
+                             std::uint64_t& v) {
+  v = 0;
+  for (std::size_t i = 0; i < max_bytes; ++i) {
+    if (pos >= bytes.size()) return VarintRead::kTruncated;
+    const std::uint8_t b = bytes[pos++];
+    v |= std::uint64_t{b & 0x7Fu} << (7 * i);
+    if ((b & 0x80) == 0) return VarintRead::kOk;
+  }
+  return VarintRead::kTooLong;
+}
 
 }  // namespace terrane

@@ -5,6 +5,7 @@
 #include <cassert>
 #include <climits>
 
+#include "common/codec/bit_io.h"
 #include "common/codec/byte_rle.h"
 
 namespace terrane {
@@ -13,32 +14,20 @@ namespace {
 static_assert(kLz4MaxInputSize == LZ4_MAX_INPUT_SIZE);
 static_assert(lz4_max_compressed_size(1000) == kLz4MaxHeaderSize + LZ4_COMPRESSBOUND(1000));
 
-void put_varint(std::uint32_t v, std::vector<std::uint8_t>& out) {
-  while (v >= 0x80) {
-    out.push_back(static_cast<std::uint8_t>(v | 0x80));
-    v >>= 7;
-  }
-  out.push_back(static_cast<std::uint8_t>(v));
-}
-
 struct Header {
   std::size_t decoded_size;
   std::size_t header_size;
 };
 
 Result<Header> read_header(std::span<const std::uint8_t> in) {
+  std::size_t pos = 0;
   std::uint64_t v = 0;
-  for (std::size_t i = 0; i < kLz4MaxHeaderSize; ++i) {
-    if (i == in.size()) return DecodeError{DecodeErrorCode::kTruncated, i, "lz4 block: size varint cut short"};
-    const std::uint8_t b = in[i];
-    v |= std::uint64_t{b & 0x7Fu} << (7 * i);
-    if ((b & 0x80) == 0) {
-      if (b == 0 && i > 0) return DecodeError{DecodeErrorCode::kInvalidValue, i, "lz4 block: size varint not minimal"};
-      if (v > kLz4MaxInputSize) return DecodeError{DecodeErrorCode::kOverLimit, 0, "lz4 block: size above the LZ4 maximum"};
-      return Header{static_cast<std::size_t>(v), i + 1};
-    }
-  }
-  return DecodeError{DecodeErrorCode::kOverLimit, 0, "lz4 block: size varint longer than 5 bytes"};
+  const VarintRead r = get_varint(in, pos, kLz4MaxHeaderSize, v);
+  if (r == VarintRead::kTruncated) return DecodeError{DecodeErrorCode::kTruncated, pos, "lz4 block: size varint cut short"};
+  if (r == VarintRead::kTooLong) return DecodeError{DecodeErrorCode::kOverLimit, 0, "lz4 block: size varint longer than 5 bytes"};
+  if (pos > 1 && in[pos - 1] == 0) return DecodeError{DecodeErrorCode::kInvalidValue, pos - 1, "lz4 block: size varint not minimal"};
+  if (v > kLz4MaxInputSize) return DecodeError{DecodeErrorCode::kOverLimit, 0, "lz4 block: size above the LZ4 maximum"};
+  return Header{static_cast<std::size_t>(v), pos};
 }
 
 // Decompresses the block after `h` into exactly h.decoded_size bytes at dst.

@@ -1,7 +1,9 @@
-// Network voxel codec, format version 1 (see common/codec/NET_CODEC.md).
+// Network voxel codec units, format version 1 (see common/codec/NET_CODEC.md);
+// update batches are in update_batch.cpp.
 #include "common/codec/net_codec.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 
@@ -353,38 +355,6 @@ std::size_t packed_bits(int n, int palette_count, int solid_count, bool partial)
   const unsigned bits = palette_count <= 1 ? 0u : static_cast<unsigned>(std::bit_width(static_cast<unsigned>(palette_count - 1)));
   return 6 + 6 * static_cast<std::size_t>(palette_count) + 1 + volume * bits +
          (partial ? 8 * static_cast<std::size_t>(solid_count) : 0);
-}
-
-// ---------------------------------------------------------------------------
-// Varints for the update batch.
-
-void put_varint(std::uint32_t v, std::vector<std::uint8_t>& out) {
-  while (v >= 0x80) {
-    out.push_back(static_cast<std::uint8_t>(v | 0x80));
-    v >>= 7;
-  }
-  out.push_back(static_cast<std::uint8_t>(v));
-}
-
-std::uint32_t zigzag(std::int32_t v) {
-  const auto u = static_cast<std::uint32_t>(v);
-  return (u << 1) ^ static_cast<std::uint32_t>(-static_cast<std::int32_t>(u >> 31));
-}
-std::int32_t unzigzag(std::uint32_t z) {
-  return static_cast<std::int32_t>((z >> 1) ^ (0u - (z & 1)));
-}
-
-// Reads a LEB128 varint of at most 5 bytes that fits 32 bits.
-Status get_varint(std::span<const std::uint8_t> bytes, std::size_t& pos, std::uint32_t& v) {
-  v = 0;
-  for (unsigned shift = 0; shift < 35; shift += 7) {
-    if (pos >= bytes.size()) return DecodeError{DecodeErrorCode::kTruncated, pos, "varint cut short"};
-    const std::uint8_t b = bytes[pos++];
-    if (shift == 28 && (b & 0xF0) != 0) return DecodeError{DecodeErrorCode::kInvalidValue, pos - 1, "varint over 32 bits"};
-    v |= std::uint32_t{b & 0x7Fu} << shift;
-    if ((b & 0x80) == 0) return Ok{};
-  }
-  return DecodeError{DecodeErrorCode::kInvalidValue, pos, "varint over 32 bits"};
 }
 
 // ---------------------------------------------------------------------------
@@ -1018,131 +988,6 @@ Status net_codec_decode(int n, std::span<const std::uint8_t> bytes, std::span<Vo
   if (!used) return used.error();
   if (*used != bytes.size()) return DecodeError{DecodeErrorCode::kTrailingBytes, *used, "bytes after the unit"};
   return Ok{};
-}
-
-// ---------------------------------------------------------------------------
-// Update batches
-
-bool update_batch_order(const UnitUpdate& a, const UnitUpdate& b) {
-  if (a.chunk_pos.y != b.chunk_pos.y) return a.chunk_pos.y < b.chunk_pos.y;
-  if (a.chunk_pos.z != b.chunk_pos.z) return a.chunk_pos.z < b.chunk_pos.z;
-  if (a.chunk_pos.x != b.chunk_pos.x) return a.chunk_pos.x < b.chunk_pos.x;
-  return a.unit_index < b.unit_index;
-}
-
-void net_codec_put_update_coords(Vec3i chunk_pos, int unit_index, Vec3i prev_chunk, int prev_unit,
-                                 std::vector<std::uint8_t>& out) {
-  if (chunk_pos == prev_chunk && unit_index > prev_unit) {
-    put_varint((static_cast<std::uint32_t>(unit_index - prev_unit - 1) << 1) | 1u, out);
-    return;
-  }
-  put_varint(static_cast<std::uint32_t>(unit_index) << 1, out);
-  // Deltas wrap modulo 2^32 so any pair of int32 coordinates round-trips.
-  auto delta = [](std::int32_t a, std::int32_t b) {
-    return static_cast<std::int32_t>(static_cast<std::uint32_t>(a) - static_cast<std::uint32_t>(b));
-  };
-  put_varint(zigzag(delta(chunk_pos.x, prev_chunk.x)), out);
-  put_varint(zigzag(delta(chunk_pos.y, prev_chunk.y)), out);
-  put_varint(zigzag(delta(chunk_pos.z, prev_chunk.z)), out);
-}
-
-void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out) {
-  std::vector<const UnitUpdate*> sorted;
-  sorted.reserve(updates.size());
-  for (const UnitUpdate& u : updates) sorted.push_back(&u);
-  std::stable_sort(sorted.begin(), sorted.end(), [](const UnitUpdate* a, const UnitUpdate* b) { return update_batch_order(*a, *b); });
-  out.push_back(kUpdateBatchVersion);
-  put_varint(static_cast<std::uint32_t>(sorted.size()), out);
-  Vec3i prev_chunk{};
-  int prev_unit = -1;
-  for (const UnitUpdate* u : sorted) {
-    net_codec_put_update_coords(u->chunk_pos, u->unit_index, prev_chunk, prev_unit, out);
-    net_codec_encode(kUpdateUnitSize, u->voxels, out);
-    prev_chunk = u->chunk_pos;
-    prev_unit = u->unit_index;
-  }
-}
-
-UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units) {
-  std::vector<const UnitUpdate*> sorted;
-  sorted.reserve(units.size());
-  for (const UnitUpdate& u : units) sorted.push_back(&u);
-  std::sort(sorted.begin(), sorted.end(),
-            [](const UnitUpdate* a, const UnitUpdate* b) { return a->unit_index < b->unit_index; });
-  UpdatePiece p;
-  p.chunk_pos = sorted.front()->chunk_pos;
-  p.first_unit = sorted.front()->unit_index;
-  p.count = static_cast<std::uint32_t>(sorted.size());
-  int prev = -1;
-  for (const UnitUpdate* u : sorted) {
-    if (prev >= 0) net_codec_put_update_coords(p.chunk_pos, u->unit_index, p.chunk_pos, prev, p.rest);
-    net_codec_encode(kUpdateUnitSize, u->voxels, p.rest);
-    prev = u->unit_index;
-  }
-  return p;
-}
-
-void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out) {
-  std::uint32_t count = 0;
-  for (const UpdatePiece* p : pieces) count += p->count;
-  out.push_back(kUpdateBatchVersion);
-  put_varint(count, out);
-  Vec3i prev_chunk{};
-  int prev_unit = -1;
-  for (const UpdatePiece* p : pieces) {
-    net_codec_put_update_coords(p->chunk_pos, p->first_unit, prev_chunk, prev_unit, out);
-    out.insert(out.end(), p->rest.begin(), p->rest.end());
-    prev_chunk = p->chunk_pos;
-    prev_unit = kUpdateUnitsPerChunk;  // pieces are distinct chunks
-  }
-}
-
-Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> bytes, std::span<UnitUpdate> out) {
-  if (bytes.empty()) return DecodeError{DecodeErrorCode::kTruncated, 0, "empty batch"};
-  if (bytes[0] != kUpdateBatchVersion) return DecodeError{DecodeErrorCode::kBadVersion, 0, "unknown batch version"};
-  std::size_t pos = 1;
-  std::uint32_t count = 0;
-  if (auto s = get_varint(bytes, pos, count); !s) return s.error();
-  if (count > out.size()) return DecodeError{DecodeErrorCode::kOverLimit, 1, "more updates than the caller allows"};
-  Vec3i prev_chunk{};
-  int prev_unit = -1;
-  for (std::uint32_t e = 0; e < count; ++e) {
-    UnitUpdate& u = out[e];
-    const std::size_t entry_pos = pos;
-    std::uint32_t tag = 0;
-    if (auto s = get_varint(bytes, pos, tag); !s) return s.error();
-    std::uint32_t unit = 0;
-    if (tag & 1) {
-      unit = static_cast<std::uint32_t>(prev_unit + 1) + (tag >> 1);
-      if ((tag >> 1) >= kUpdateUnitsPerChunk || unit >= kUpdateUnitsPerChunk) {
-        return DecodeError{DecodeErrorCode::kInvalidValue, entry_pos, "unit index >= 512"};
-      }
-      u.chunk_pos = prev_chunk;
-    } else {
-      unit = tag >> 1;
-      if (unit >= kUpdateUnitsPerChunk) return DecodeError{DecodeErrorCode::kInvalidValue, entry_pos, "unit index >= 512"};
-      std::array<std::uint32_t, 3> d{};
-      for (auto& c : d) {
-        if (auto s = get_varint(bytes, pos, c); !s) return s.error();
-      }
-      auto add = [](std::int32_t a, std::uint32_t z) {
-        return static_cast<std::int32_t>(static_cast<std::uint32_t>(a) + static_cast<std::uint32_t>(unzigzag(z)));
-      };
-      u.chunk_pos = {add(prev_chunk.x, d[0]), add(prev_chunk.y, d[1]), add(prev_chunk.z, d[2])};
-    }
-    u.unit_index = static_cast<std::uint16_t>(unit);
-    auto used = net_codec_decode_prefix(kUpdateUnitSize, bytes.subspan(pos), u.voxels);
-    if (!used) {
-      DecodeError err = used.error();
-      err.offset += pos;
-      return err;
-    }
-    pos += *used;
-    prev_chunk = u.chunk_pos;
-    prev_unit = static_cast<int>(unit);
-  }
-  if (pos != bytes.size()) return DecodeError{DecodeErrorCode::kTrailingBytes, pos, "bytes after the batch"};
-  return std::size_t{count};
 }
 
 }  // namespace terrane

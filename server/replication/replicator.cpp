@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/codec/update_batch.h"
 #include "common/world/view.h"
 #include "server/log.h"
 

@@ -23,7 +23,7 @@
 #include <span>
 #include <vector>
 
-#include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "common/voxel/chunk.h"
 #include "common/world/coarse_image.h"
 

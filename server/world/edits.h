@@ -1,5 +1,5 @@
 // Applying edit requests to the authoritative grid, recording which 4^3
-// units changed (the unit of UpdateBatch, common/codec/net_codec.h).
+// units changed (the unit of UpdateBatch, common/codec/update_batch.h).
 //
 // FillBox writes one voxel (material, occupancy) over the box.
 // WriteBox writes the given voxels over the box.
@@ -26,7 +26,7 @@
 #include <bitset>
 #include <unordered_map>
 
-#include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "common/voxel/grid.h"
 #include "protocol/messages.h"
 

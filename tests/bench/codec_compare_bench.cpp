@@ -26,6 +26,7 @@
 #include "common/codec/byte_rle.h"
 #include "common/codec/lz4_block.h"
 #include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "common/voxel/box.h"
 #include "common/vxraw/vxraw.h"
 #include "common/world/terrain_generator.h"

@@ -17,6 +17,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "common/codec/update_batch.h"
 #include "common/world/world.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "common/codec/update_batch.h"
+
 namespace terrane {
 namespace {
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 

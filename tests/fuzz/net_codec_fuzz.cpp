@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 
 using namespace terrane;
 

@@ -7,6 +7,7 @@
 
 #include <thread>
 
+#include "common/codec/update_batch.h"
 #include "common/world/world_store.h"
 #include "protocol/messages.h"
 

@@ -1,0 +1,107 @@
+#include "common/codec/update_batch.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <vector>
+
+namespace terrane {
+namespace {
+
+// Units as in net_codec_test.cpp.
+std::vector<Voxel> make_unit(int n, Voxel fill = {}) { return std::vector<Voxel>(static_cast<std::size_t>(n * n * n), fill); }
+std::size_t idx(int n, int x, int y, int z) { return static_cast<std::size_t>((y * n + z) * n + x); }
+
+std::vector<Voxel> random_unit(int n, std::mt19937& rng, int materials, bool partial) {
+  auto v = make_unit(n);
+  for (Voxel& x : v) {
+    const auto m = static_cast<Material>(rng() % static_cast<unsigned>(materials));
+    x = make_voxel(m, partial ? static_cast<std::uint8_t>(rng()) : default_occupancy(m));
+  }
+  return v;
+}
+
+// Smooth terrain: a sloped surface with fractional occupancy, strata below.
+std::vector<Voxel> terrain_unit(int n, float base, float slope) {
+  auto v = make_unit(n);
+  for (int y = 0; y < n; ++y) {
+    for (int z = 0; z < n; ++z) {
+      for (int x = 0; x < n; ++x) {
+        const float h = base + slope * static_cast<float>(x) + 0.3f * static_cast<float>(z);
+        const float f = h - static_cast<float>(y);
+        if (f <= 0) continue;
+        const Material m = f < 2 ? materials::kGrass : (y % 5 == 0 ? materials::kSlate : materials::kRock);
+        v[idx(n, x, y, z)] = make_voxel(m, f >= 1 ? kFullOccupancy : occupancy_byte(f));
+      }
+    }
+  }
+  return v;
+}
+
+UnitUpdate make_update(Vec3i chunk, int unit, std::vector<Voxel> v) {
+  UnitUpdate u;
+  u.chunk_pos = chunk;
+  u.unit_index = static_cast<std::uint16_t>(unit);
+  std::copy(v.begin(), v.end(), u.voxels.begin());
+  return u;
+}
+
+TEST(NetCodecUpdateBatch, RoundTrips) {
+  std::mt19937 rng(5);
+  std::vector<UnitUpdate> updates = {
+      make_update({0, 0, 0}, 0, make_unit(4)),
+      make_update({-3, 2, 7}, 511, terrain_unit(4, 1.2f, 0.5f)),
+      make_update({-3, 2, 7}, 12, random_unit(4, rng, 64, true)),
+      make_update({-3, 2, 7}, 13, make_unit(4, solid(9))),
+      make_update({2147483647, -2147483647 - 1, 5}, 300, random_unit(4, rng, 3, false)),
+      make_update({-2147483647 - 1, 2147483647, -5}, 1, make_unit(4, make_voxel(4, 77))),
+  };
+  std::vector<std::uint8_t> bytes;
+  net_codec_encode_update_batch(updates, bytes);
+  std::vector<UnitUpdate> out(updates.size());
+  auto n = net_codec_decode_update_batch(bytes, out);
+  ASSERT_TRUE(n.ok()) << n.error().describe();
+  ASSERT_EQ(*n, updates.size());
+  std::sort(updates.begin(), updates.end(), update_batch_order);
+  EXPECT_EQ(out, updates);
+
+  // Too small an output is over limit; every prefix is rejected; trailing
+  // bytes are rejected.
+  std::vector<UnitUpdate> small(updates.size() - 1);
+  auto over = net_codec_decode_update_batch(bytes, small);
+  ASSERT_FALSE(over.ok());
+  EXPECT_EQ(over.error().code, DecodeErrorCode::kOverLimit);
+  for (std::size_t len = 0; len < bytes.size(); ++len) {
+    std::vector<std::uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(len));
+    EXPECT_FALSE(net_codec_decode_update_batch(prefix, out).ok()) << len;
+  }
+  bytes.push_back(0);
+  auto trailing = net_codec_decode_update_batch(bytes, out);
+  ASSERT_FALSE(trailing.ok());
+  EXPECT_EQ(trailing.error().code, DecodeErrorCode::kTrailingBytes);
+}
+
+TEST(NetCodecUpdateBatch, EmptyBatchAndBadIndices) {
+  std::vector<std::uint8_t> bytes;
+  net_codec_encode_update_batch({}, bytes);
+  EXPECT_EQ(bytes, (std::vector<std::uint8_t>{0x01, 0x00}));
+  std::vector<UnitUpdate> out(4);
+  auto n = net_codec_decode_update_batch(bytes, out);
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(*n, 0u);
+  // Unit index 512 (tag 1024 = varint 0x80 0x08), chunk deltas 0, all-Air unit.
+  auto bad = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x01, 0x01, 0x80, 0x08, 0, 0, 0, 0x01}, out);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().code, DecodeErrorCode::kInvalidValue);
+  // Over-long varint count.
+  auto big = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x01, 0xFF, 0xFF, 0xFF, 0xFF, 0x7F}, out);
+  ASSERT_FALSE(big.ok());
+  // Wrong batch version.
+  auto ver = net_codec_decode_update_batch(std::vector<std::uint8_t>{0x02, 0x00}, out);
+  ASSERT_FALSE(ver.ok());
+  EXPECT_EQ(ver.error().code, DecodeErrorCode::kBadVersion);
+}
+
+}  // namespace
+}  // namespace terrane
