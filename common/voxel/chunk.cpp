@@ -2,6 +2,11 @@
 
 #include <algorithm>
 #include <array>
+#include <cassert>
+#include <cstring>
+#include <vector>
+
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 
@@ -36,7 +41,7 @@ Voxel downsample(const Voxel children[8]) {
   return make_voxel(best, static_cast<std::uint8_t>(byte));
 }
 
-Chunk::Chunk(Material fill) : level0_(fill), mip1_(fill), mip2_(fill), mip3_(fill) {}
+Chunk::Chunk(Material fill) : level0_(fill), mip_fill_(fill), empty_(fill == kAir) {}
 
 Chunk Chunk::from_box(const Box& box) {
   Chunk c;
@@ -50,71 +55,77 @@ Chunk Chunk::from_box(const Box& box) {
 Chunk Chunk::clone() const {
   Chunk c;
   c.level0_ = level0_.clone();
-  c.mip1_ = mip1_.clone();
-  c.mip2_ = mip2_.clone();
-  c.mip3_ = mip3_.clone();
+  c.mip_end_ = mip_end_;
+  c.mip_fill_ = mip_fill_;
+  c.empty_ = empty_;
+  if (mips_) {
+    const std::size_t bytes = mip_end_[kMipLevels - 1];
+    c.mips_ = std::make_unique<std::uint8_t[]>(bytes);
+    std::memcpy(c.mips_.get(), mips_.get(), bytes);
+  }
   return c;
 }
 
-bool Chunk::empty() const {
-  if (mip3_.is_uniform()) return mip3_.uniform_material() == kAir;
-  RowPackedBox<4>::Row scratch;
-  for (int y = 0; y < 4; ++y)
-    for (int z = 0; z < 4; ++z) {
-      const Voxel* row = mip3_.read_row(y, z, scratch);
-      for (int x = 0; x < 4; ++x)
-        if (row[x].material != kAir) return false;
-    }
-  return true;
+std::span<const std::uint8_t> Chunk::mip_unit(int level) const {
+  if (!mips_ || level < 1 || level >= kMipLevels) return {};
+  const std::size_t begin = level == 1 ? 0 : mip_end_[static_cast<std::size_t>(level - 1)];
+  return {mips_.get() + begin, mip_end_[static_cast<std::size_t>(level)] - begin};
 }
 
 Voxel Chunk::mip_get(int level, int x, int y, int z) const {
-  switch (level) {
-    case 0: return level0_.get(x, y, z);
-    case 1: return mip1_.get(x, y, z);
-    case 2: return mip2_.get(x, y, z);
-    default: return mip3_.get(x, y, z);
-  }
+  if (level == 0) return level0_.get(x, y, z);
+  thread_local Box box;
+  read_level(level, box);
+  return box.get(x, y, z);
 }
 
 namespace {
-template <int N>
-void read_all(const RowPackedBox<N>& b, Box& out) {
-  out.resize({N, N, N});
-  typename RowPackedBox<N>::Row scratch;
-  for (int y = 0; y < N; ++y)
-    for (int z = 0; z < N; ++z) std::copy_n(b.read_row(y, z, scratch), N, out.write_row(y, z));
+// Recomputes the voxels of `coarse` (the level above `fine`) covering the
+// fine-level region r, returning the coarse region touched. Fine rows come
+// from read(y, z) -> const Voxel*.
+template <class ReadFine>
+Region downsample_region(ReadFine&& read, Box& coarse, const Region& r) {
+  const Region c{floor_div(r.min, 2), Vec3i{(r.max.x + 1) / 2, (r.max.y + 1) / 2, (r.max.z + 1) / 2}};
+  RowPackedBox<32>::Row s00, s01, s10, s11;
+  for (int y = c.min.y; y < c.max.y; ++y) {
+    for (int z = c.min.z; z < c.max.z; ++z) {
+      const Voxel* r00 = read(2 * y, 2 * z, s00);
+      const Voxel* r01 = read(2 * y, 2 * z + 1, s01);
+      const Voxel* r10 = read(2 * y + 1, 2 * z, s10);
+      const Voxel* r11 = read(2 * y + 1, 2 * z + 1, s11);
+      Voxel* row = coarse.write_row(y, z);
+      for (int x = c.min.x; x < c.max.x; ++x) {
+        const int fx = 2 * x;
+        const Voxel children[8] = {r00[fx], r00[fx + 1], r01[fx], r01[fx + 1],
+                                   r10[fx], r10[fx + 1], r11[fx], r11[fx + 1]};
+        row[x] = downsample(children);
+      }
+    }
+  }
+  return c;
 }
 
-// Recomputes the mip voxels of `fine`'s parent level covering the fine-level
-// region r (fine-level coordinates), returning the coarse region touched.
-template <int NF, int NC>
-Region downsample_region(const RowPackedBox<NF>& fine, RowPackedBox<NC>& coarse, const Region& r) {
-  const Region c{floor_div(r.min, 2), Vec3i{(r.max.x + 1) / 2, (r.max.y + 1) / 2, (r.max.z + 1) / 2}};
-  coarse.modify_rows(c.min.y, c.max.y, c.min.z, c.max.z, [&](int y, int z, Voxel* row) {
-    typename RowPackedBox<NF>::Row s00, s01, s10, s11;
-    const Voxel* r00 = fine.read_row(2 * y, 2 * z, s00);
-    const Voxel* r01 = fine.read_row(2 * y, 2 * z + 1, s01);
-    const Voxel* r10 = fine.read_row(2 * y + 1, 2 * z, s10);
-    const Voxel* r11 = fine.read_row(2 * y + 1, 2 * z + 1, s11);
-    for (int x = c.min.x; x < c.max.x; ++x) {
-      const int fx = 2 * x;
-      const Voxel children[8] = {r00[fx], r00[fx + 1], r01[fx], r01[fx + 1],
-                                 r10[fx], r10[fx + 1], r11[fx], r11[fx + 1]};
-      row[x] = downsample(children);
-    }
-  });
-  return c;
+Region downsample_box(const Box& fine, Box& coarse, const Region& r) {
+  return downsample_region([&](int y, int z, RowPackedBox<32>::Row&) { return fine.read_row(y, z); }, coarse, r);
 }
 }  // namespace
 
 void Chunk::read_level(int level, Box& out) const {
-  switch (level) {
-    case 0: read_all(level0_, out); break;
-    case 1: read_all(mip1_, out); break;
-    case 2: read_all(mip2_, out); break;
-    default: read_all(mip3_, out); break;
+  const int n = kChunkSize >> level;
+  out.resize({n, n, n});
+  if (level == 0) {
+    Level0::Row scratch;
+    for (int y = 0; y < n; ++y)
+      for (int z = 0; z < n; ++z) std::copy_n(level0_.read_row(y, z, scratch), n, out.write_row(y, z));
+    return;
   }
+  if (!mips_) {
+    out.fill(solid(mip_fill_));
+    return;
+  }
+  // The units were made by this chunk: a failure is a bug, not bad input.
+  [[maybe_unused]] const Status s = net_codec_decode(n, mip_unit(level), out.voxels());
+  assert(s.ok());
 }
 
 void Chunk::read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
@@ -127,33 +138,62 @@ void Chunk::read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
   }
 }
 
+void Chunk::store_mips(const Box& l1, const Box& l2, const Box& l3) {
+  empty_ = std::all_of(l3.voxels().begin(), l3.voxels().end(), [](Voxel v) { return v.material == kAir; });
+  if (level0_.is_uniform()) {
+    mips_.reset();
+    mip_end_ = {};
+    mip_fill_ = level0_.uniform_material();
+    return;
+  }
+  thread_local std::vector<std::uint8_t> units;
+  units.clear();
+  net_codec_encode(16, l1.voxels(), units);
+  mip_end_[1] = static_cast<std::uint16_t>(units.size());
+  net_codec_encode(8, l2.voxels(), units);
+  mip_end_[2] = static_cast<std::uint16_t>(units.size());
+  net_codec_encode(4, l3.voxels(), units);
+  mip_end_[3] = static_cast<std::uint16_t>(units.size());
+  mips_ = std::make_unique<std::uint8_t[]>(units.size());
+  std::memcpy(mips_.get(), units.data(), units.size());
+}
+
 void Chunk::update_mips(const Region& changed) {
-  const Region r1 = downsample_region(level0_, mip1_, changed);
-  const Region r2 = downsample_region(mip1_, mip2_, r1);
-  downsample_region(mip2_, mip3_, r2);
+  thread_local Box l1, l2, l3;
+  const bool whole = changed.min == Vec3i{0, 0, 0} && changed.max == Vec3i{kChunkSize, kChunkSize, kChunkSize};
+  if (whole) {
+    l1.resize({16, 16, 16});
+    l2.resize({8, 8, 8});
+    l3.resize({4, 4, 4});
+  } else {
+    read_level(1, l1);
+    read_level(2, l2);
+    read_level(3, l3);
+  }
+  const Region r1 = downsample_region(
+      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l1, changed);
+  const Region r2 = downsample_box(l1, l2, r1);
+  downsample_box(l2, l3, r2);
+  store_mips(l1, l2, l3);
 }
 
 void Chunk::rebuild_mips() { update_mips(Region{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}}); }
 
 void Chunk::fill(Material m) {
   level0_.fill(m);
-  mip1_.fill(m);
-  mip2_.fill(m);
-  mip3_.fill(m);
+  mips_.reset();
+  mip_end_ = {};
+  mip_fill_ = m;
+  empty_ = m == kAir;
 }
 
-void Chunk::compact() {
-  level0_.compact();
-  mip1_.compact();
-  mip2_.compact();
-  mip3_.compact();
-}
+void Chunk::compact() { level0_.compact(); }
 
 ChunkMemory Chunk::memory() const {
   ChunkMemory m;
   m.object_bytes = sizeof(Chunk);
   m.level0_bytes = level0_.heap_bytes();
-  m.mip_bytes = mip1_.heap_bytes() + mip2_.heap_bytes() + mip3_.heap_bytes();
+  m.mip_bytes = mips_ ? mip_end_[kMipLevels - 1] : 0;
   return m;
 }
 

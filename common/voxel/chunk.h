@@ -1,7 +1,11 @@
 // Chunk: a 32³ block of the grid, row-packed, with its mip pyramid.
 //
-// Level 0 is the full-resolution 32³ content; levels 1, 2, 3 are the 16³, 8³
-// and 4³ mips, each row-packed too, updated on every write. A mip voxel
+// Level 0 is the full-resolution 32³ content, row-packed; levels 1, 2, 3 are
+// the 16³, 8³ and 4³ mips, kept as network-codec units (NET_CODEC.md) back
+// to back in one allocation and updated on every write: a bit-packed RLE is
+// several times smaller than row-packed 16-voxel rows, the mips are read
+// whole (for LOD and replication, where the stored unit is the bytes sent),
+// and re-encoding them costs a write a few microseconds. A mip voxel
 // covers 2×2×2 voxels of the level below (its "children"):
 //   - it is Air only if all its children are Air, so Air at any level means
 //     Air in everything it covers (an all-Air 4³ level is an empty chunk);
@@ -15,8 +19,11 @@
 
 #include <cmath>
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <span>
 
 #include "common/voxel/box.h"
 #include "common/voxel/row_packed_box.h"
@@ -53,7 +60,7 @@ Voxel downsample(const Voxel children[8]);
 struct ChunkMemory {
   std::size_t object_bytes = 0;  // sizeof(Chunk)
   std::size_t level0_bytes = 0;  // headers + row data of the 32³ level
-  std::size_t mip_bytes = 0;     // headers + row data of levels 1..3
+  std::size_t mip_bytes = 0;     // the encoded units of levels 1..3
   std::size_t total() const { return object_bytes + level0_bytes + mip_bytes; }
 };
 
@@ -74,9 +81,13 @@ class Chunk {
   const Level0& level0() const { return level0_; }
 
   // Voxel of mip level 0..3 at level-local coordinates (0 .. 32 >> level).
+  // (Levels 1..3 decode their unit: read a level whole where speed matters.)
   Voxel mip_get(int level, int x, int y, int z) const;
   // Reads a whole level into a (32 >> level)³ box.
   void read_level(int level, Box& out) const;
+  // The network-codec unit of mip level 1..3, as stored (empty for a uniform
+  // chunk, whose levels are all its one material).
+  std::span<const std::uint8_t> mip_unit(int level) const;
 
   // Copies the chunk-local region [min, min + out.size()) into out.
   // Precondition: the region lies inside the chunk.
@@ -98,9 +109,8 @@ class Chunk {
   }
   void fill(Material m);
 
-  // True when every voxel is Air (read off the 4³ mip: O(1) when it is uniform).
-  // (A 4³ level that unpacked itself under heavy editing is scanned: 16 rows.)
-  bool empty() const;
+  // True when every voxel is Air (kept beside the mips).
+  bool empty() const { return empty_; }
   // Uniform chunk: one material at default occupancy everywhere.
   bool uniform() const { return level0_.is_uniform(); }
 
@@ -114,11 +124,14 @@ class Chunk {
 
  private:
   void update_mips(const Region& changed_level0);
+  // Stores levels 1..3 (16³, 8³, 4³ boxes) as units.
+  void store_mips(const Box& l1, const Box& l2, const Box& l3);
 
   Level0 level0_;
-  RowPackedBox<16> mip1_;
-  RowPackedBox<8> mip2_;
-  RowPackedBox<4> mip3_;
+  std::unique_ptr<std::uint8_t[]> mips_;      // units of levels 1, 2, 3; null when level 0 is uniform
+  std::array<std::uint16_t, kMipLevels> mip_end_{};  // end of level l's unit in mips_ (l = 1..3)
+  Material mip_fill_ = kAir;  // without units: every mip voxel is this material (level 0's, when last uniform)
+  bool empty_ = true;
 };
 
 }  // namespace terrane

@@ -69,10 +69,7 @@ GridMemory Grid::memory() const {
     m.object_bytes += cm.object_bytes;
     m.level0_bytes += cm.level0_bytes;
     m.mip_bytes += cm.mip_bytes;
-    const RowPackedStats s = chunk->level0_stats();
-    m.level0_rows.uniform_rows += s.uniform_rows;
-    m.level0_rows.raw_rows += s.raw_rows;
-    m.level0_rows.byte_rows += s.byte_rows;
+    m.level0_rows += chunk->level0_stats();
   }
   return m;
 }

@@ -1,10 +1,8 @@
 #include "common/voxel/row_packed_box.h"
 
+#include <algorithm>
+#include <bit>
 #include <cstring>
-
-#if defined(__x86_64__) || defined(__i386__)
-#include <tmmintrin.h>
-#endif
 
 namespace terrane::row_packed_detail {
 namespace {
@@ -38,6 +36,26 @@ bool detect_ssse3() {
 }
 #endif
 
+int bitmap_bytes(int n) { return (n + 7) / 8; }
+
+// Bytes of a record's occupancy section starting at p.
+int occupancy_bytes(const std::uint8_t* p, int n) {
+  int set = 0;
+  for (int i = 0; i < bitmap_bytes(n); ++i) set += std::popcount(static_cast<unsigned>(p[i]));
+  return bitmap_bytes(n) + set;
+}
+
+// Where a record's body (indices or run count) starts.
+const std::uint8_t* record_body(const std::uint8_t* rec, const std::uint8_t* pal) {
+  return (rec[0] & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
+}
+
+int index_of(const Material* materials, int p, Material m) {
+  int i = 0;
+  while (i < p && materials[i] != m) ++i;
+  return i;
+}
+
 }  // namespace
 
 constinit const std::array<std::array<Voxel, 32>, kMaterialCount> kUniformRows = make_uniform_rows();
@@ -52,68 +70,195 @@ const std::uint16_t* uniform_headers(int size, Material material) {
   }
 }
 
-int encode_row(const Voxel* row, int n, std::uint8_t* out) {
-  const Voxel first = row[0];
-  bool uniform = true;
-  bool all_default = true;
-  for (int i = 0; i < n; ++i) {
-    uniform &= row[i] == first;
-    all_default &= has_default_occupancy(row[i]);
+PaletteTable::PaletteTable(const std::uint8_t* table) {
+  if (table == nullptr || table[0] == 0) return;
+  for (int id = 0; id < table[0]; ++id) {
+    const std::uint8_t* pal = table + table[1 + id];
+    add(reinterpret_cast<const Material*>(pal + 1), pal[0] + 1);
   }
-  if (uniform && all_default) return 0;
-
-  // Palette in order of first appearance; more than 16 voxel values: raw.
-  Voxel palette[kMaxPalette];
-  std::uint8_t index[kMaxRow];
-  int p = 0;
-  for (int x = 0; x < n; ++x) {
-    int j = 0;
-    while (j < p && !(palette[j] == row[x])) ++j;
-    if (j == p) {
-      if (p == kMaxPalette) {
-        std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
-        return 2 * n;
-      }
-      palette[p++] = row[x];
-    }
-    index[x] = static_cast<std::uint8_t>(j);
-  }
-  const int bits = p <= 2 ? 1 : p <= 4 ? 2 : 4;
-  const int groups = (n * bits + 7) / 8;
-  const int entry_bytes = all_default ? 1 : 2;
-  const int size = 1 + p * entry_bytes + groups;
-  const int padded = (size + 1) & ~1;
-  if (padded >= 2 * n) {
-    std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
-    return 2 * n;
-  }
-  const int code = bits == 4 ? 3 : bits;
-  out[0] = static_cast<std::uint8_t>((code << 6) | (all_default ? 0 : kTagOccupancy) | (p - 1));
-  for (int j = 0; j < p; ++j) {
-    out[1 + j] = palette[j].material;
-    if (!all_default) out[1 + p + j] = palette[j].occupancy;
-  }
-  std::uint8_t* idx = out + 1 + p * entry_bytes;
-  std::memset(idx, 0, static_cast<std::size_t>(padded - (1 + p * entry_bytes)));  // indices and pad byte
-  for (int x = 0; x < n; ++x) {
-    // 1 bit: plain bit order; 2 and 4 bits: voxel x in byte x % G at bit b·(x / G).
-    const int byte = bits == 1 ? x / 8 : x % groups;
-    const int shift = bits == 1 ? x % 8 : bits * (x / groups);
-    idx[byte] = static_cast<std::uint8_t>(idx[byte] | (index[x] << shift));
-  }
-  return padded;
 }
 
-void decode_palette_scalar(const std::uint8_t* rec, Voxel* out, int n) {
-  for (int x = 0; x < n; ++x) out[x] = palette_voxel(rec, n, x);
+int PaletteTable::find(const Material* materials, int p) const {
+  for (int id = 0; id < count_; ++id) {
+    const std::uint8_t* pal = palette(id);
+    if (pal[0] + 1 == p && std::memcmp(pal + 1, materials, static_cast<std::size_t>(p)) == 0) return id;
+  }
+  return -1;
+}
+
+int PaletteTable::add(const Material* materials, int p) {
+  // After this palette: 1 (count) + count_ + 1 offsets + used_ + 1 + p bytes.
+  if (!fits(p)) return -1;
+  offsets_[static_cast<std::size_t>(count_)] = static_cast<std::uint8_t>(used_);
+  pool_[static_cast<std::size_t>(used_)] = static_cast<std::uint8_t>(p - 1);
+  std::memcpy(pool_.data() + used_ + 1, materials, static_cast<std::size_t>(p));
+  used_ += 1 + p;
+  return count_++;
+}
+
+void PaletteTable::write(std::uint8_t* out) const {
+  out[0] = static_cast<std::uint8_t>(count_);
+  if (count_ == 0) return;
+  const int base = 1 + count_;
+  for (int id = 0; id < count_; ++id) out[1 + id] = static_cast<std::uint8_t>(base + offsets_[static_cast<std::size_t>(id)]);
+  std::memcpy(out + base, pool_.data(), static_cast<std::size_t>(used_));
+}
+
+RowSummary summarize_row(const Voxel* row, int n) {
+  RowSummary s;
+  std::uint64_t seen = 0;
+  const Voxel first = row[0];
+  bool same = true;
+  for (int x = 0; x < n; ++x) {
+    seen |= std::uint64_t{1} << (row[x].material & 63);
+    s.occupancy |= !has_default_occupancy(row[x]);
+    same &= row[x] == first;
+  }
+  s.uniform = same && !s.occupancy;
+  while (seen != 0 && s.p < 17) {
+    s.materials[s.p++] = static_cast<Material>(std::countr_zero(seen));
+    seen &= seen - 1;
+  }
+  if (seen != 0) s.p = 17;
+  return s;
+}
+
+int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t* out) {
+  const RowSummary s = summarize_row(row, n);
+  if (s.uniform) return 0;
+  const int raw = 2 * n;
+  if (s.p > kMaxPalette) {
+    std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
+    return raw;
+  }
+  std::uint8_t index[kMaxRow];
+  int runs = 0;
+  for (int x = 0; x < n; ++x) {
+    index[x] = static_cast<std::uint8_t>(index_of(s.materials, s.p, row[x].material));
+    runs += x == 0 || index[x] != index[x - 1];
+  }
+  int occupied = 0;
+  for (int x = 0; x < n; ++x) occupied += !has_default_occupancy(row[x]);
+  const int occ_size = s.occupancy ? bitmap_bytes(n) + occupied : 0;
+  const int id = table.find(s.materials, s.p);
+  const int head = id >= 0 ? 1 : 2 + s.p;  // tag and palette
+  const int bits = index_bits(s.p);
+  const int groups = (n * bits + 7) / 8;
+  const int index_size = head + groups + occ_size;
+  const int run_size = s.p <= kMaxRunPalette && runs <= kMaxRuns ? head + 1 + runs + occ_size : raw + 1;
+  if (std::min(index_size, run_size) >= raw) {
+    std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
+    return raw;
+  }
+  const bool use_runs = run_size < index_size;
+  out[0] = static_cast<std::uint8_t>((use_runs ? kKindRuns : kKindIndex) | (s.occupancy ? kTagOccupancy : 0) |
+                                     (id >= 0 ? id : kInlinePalette));
+  std::uint8_t* p = out + 1;
+  if (id < 0) {
+    *p++ = static_cast<std::uint8_t>(s.p - 1);
+    std::memcpy(p, s.materials, static_cast<std::size_t>(s.p));
+    p += s.p;
+  }
+  if (use_runs) {
+    *p++ = static_cast<std::uint8_t>(runs);
+    for (int x = 0; x < n; ++x)
+      if (x == 0 || index[x] != index[x - 1]) *p++ = static_cast<std::uint8_t>(index[x] << 5 | x);
+  } else {
+    std::memset(p, 0, static_cast<std::size_t>(groups));
+    for (int x = 0; x < n; ++x) {
+      // 1 bit: plain bit order; 2 and 4 bits: voxel x in byte x % G at bit b·(x / G).
+      const int byte = bits == 1 ? x / 8 : x % groups;
+      const int shift = bits == 1 ? x % 8 : bits * (x / groups);
+      p[byte] = static_cast<std::uint8_t>(p[byte] | (index[x] << shift));
+    }
+    p += groups;
+  }
+  if (s.occupancy) {
+    std::memset(p, 0, static_cast<std::size_t>(bitmap_bytes(n)));
+    std::uint8_t* occ = p + bitmap_bytes(n);
+    for (int x = 0; x < n; ++x) {
+      if (has_default_occupancy(row[x])) continue;
+      p[x / 8] = static_cast<std::uint8_t>(p[x / 8] | (1 << (x % 8)));
+      *occ++ = row[x].occupancy;
+    }
+    p = occ;
+  }
+  return static_cast<int>(p - out);
+}
+
+int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n) {
+  const unsigned tag = rec[0];
+  if (tag < kKindIndex) return 2 * n;
+  const std::uint8_t* pal = record_palette(rec, table);
+  const std::uint8_t* body = record_body(rec, pal);
+  const std::uint8_t* end =
+      (tag & kKindMask) == kKindRuns ? body + 1 + body[0] : body + (n * index_bits(pal[0] + 1) + 7) / 8;
+  if (tag & kTagOccupancy) end += occupancy_bytes(end, n);
+  return static_cast<int>(end - rec);
+}
+
+void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n) {
+  const unsigned tag = rec[0];
+  const std::uint8_t* pal = record_palette(rec, table);
+  const std::uint8_t* body = record_body(rec, pal);
+  const std::uint8_t* end;
+  if ((tag & kKindMask) == kKindRuns) {
+    const int runs = body[0];
+    for (int r = 0; r < runs; ++r) {
+      const int from = body[1 + r] & 31;
+      const int to = r + 1 < runs ? body[2 + r] & 31 : n;
+      const Voxel v = solid(pal[1 + (body[1 + r] >> 5)]);
+      for (int x = from; x < to; ++x) out[x] = v;
+    }
+    end = body + 1 + runs;
+  } else {
+    const int bits = index_bits(pal[0] + 1);
+    const int groups = (n * bits + 7) / 8;
+    for (int x = 0; x < n; ++x) {
+      const int i = bits == 1 ? (body[x / 8] >> (x % 8)) & 1
+                              : (body[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
+      out[x] = solid(pal[1 + i]);
+    }
+    end = body + groups;
+  }
+  if (tag & kTagOccupancy) {
+    const std::uint8_t* occ = end + bitmap_bytes(n);
+    for (int x = 0; x < n; ++x)
+      if ((end[x / 8] >> (x % 8)) & 1) out[x].occupancy = *occ++;
+  }
+}
+
+Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, int x) {
+  const unsigned tag = rec[0];
+  const std::uint8_t* pal = record_palette(rec, table);
+  const std::uint8_t* body = record_body(rec, pal);
+  const std::uint8_t* end;
+  Material m;
+  if ((tag & kKindMask) == kKindRuns) {
+    const int runs = body[0];
+    int r = 0;
+    while (r + 1 < runs && (body[2 + r] & 31) <= x) ++r;
+    m = pal[1 + (body[1 + r] >> 5)];
+    end = body + 1 + runs;
+  } else {
+    const int bits = index_bits(pal[0] + 1);
+    const int groups = (n * bits + 7) / 8;
+    const int i = bits == 1 ? (body[x / 8] >> (x % 8)) & 1
+                            : (body[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
+    m = pal[1 + i];
+    end = body + groups;
+  }
+  if ((tag & kTagOccupancy) && ((end[x / 8] >> (x % 8)) & 1)) {
+    int before = 0;
+    for (int i = 0; i < x / 8; ++i) before += std::popcount(static_cast<unsigned>(end[i]));
+    before += std::popcount(static_cast<unsigned>(end[x / 8] & ((1u << (x % 8)) - 1)));
+    return make_voxel(m, end[bitmap_bytes(n) + before]);
+  }
+  return solid(m);
 }
 
 #if defined(__x86_64__) || defined(__i386__)
 const bool kHaveSsse3 = detect_ssse3();
-
-// Selection masks per index width (tag >> 6): each row form's candidate
-// indices are masked with its entry, so the decoder has no data-dependent
-// branch (the three forms are mixed unpredictably along a chunk).
 #endif
 
 }  // namespace terrane::row_packed_detail

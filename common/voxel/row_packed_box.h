@@ -1,57 +1,71 @@
 // RowPackedBox<N>: an N³ box of voxels stored row-packed, the in-memory format
 // of the storage article ("Memory format, take two"), used for a chunk's full
-// resolution (N = 32) and for each level of its mip pyramid (16, 8, 4).
+// resolution (N = 32; a chunk's mips are kept as network-codec units, see
+// chunk.h).
 //
 // Each of the N² rows along x, addressed by (y, z), has a 2-byte header:
 //
 //   bit 15 14 ........... 0
 //        0  -  . material      uniform row: N voxels of `material`, default occupancy
-//        1  offset             allocated row: its record starts at data_[offset]
-//                              (offset in voxels, i.e. 2-byte units: 15 bits
-//                              address 64 KiB, the size of an all-raw 32³ box)
+//        1  offset             allocated row: its record starts at byte
+//                              offset << shift_ of data_ (shift_ is 0, or 1
+//                              in unpacked mode, where rows are 2N bytes apart)
+//
+// data_ starts with the box's palette table, then holds the records:
+//
+//   palette table:  T | T offsets (1 byte each, from data_) | T palettes
+//   palette:        P - 1 | P materials (ascending)           (P = 1..16)
+//   (T <= 31 and the whole table within 255 bytes; T = 0 is one byte.)
 //
 // An allocated row's record says what it is in its first byte:
 //
 //   raw record (first byte < 0x40, it is voxel 0's material), 2N bytes:
-//     +------+------+------+------+-- ... --+
-//     | m0   | occ0 | m1   | occ1 |         |   read_row returns a pointer to it
-//     +------+------+------+------+-- ... --+
+//     m0 occ0 m1 occ1 ...                   read_row returns a pointer to it
 //
-//   palette record (first byte >= 0x40), padded to an even length:
-//     +-----+-----------+---------------+-------------------+
-//     | tag | P mats    | P occupancies | G index bytes     |
-//     +-----+-----------+---------------+-------------------+
-//     tag bits 7-6: index width b (1 = 1 bit, 2 = 2 bits, 3 = 4 bits)
-//         bit 5: occupancies present (else each voxel has its material's
-//                default occupancy and the occupancy bytes are absent)
-//         bit 4: 0;  bits 3-0: P - 1 (P = 1..16 palette entries)
-//     G = ceil(N·b / 8) index bytes. 1 bit: voxel x is bit x % 8 of byte
-//     x / 8. 2 and 4 bits: voxel x's index is the b bits at bit b·(x / G) of
-//     byte x % G, which for N = 32 puts voxels 0..15 and 16..31 in the two
-//     halves of an SSE register after a few shifts. The SSSE3 decoder expands
-//     a row with shifts, masks and pshufb lookups, without branches.
+//   index record (tag 01oiiiii):  tag | [palette] | G index bytes | [occupancies]
+//   run record   (tag 10oiiiii):  tag | [palette] | R | R run bytes | [occupancies]
+//     i (bits 4-0): a palette of the table, or 31: the palette follows the tag
+//     o (bit 5): the record ends with an occupancy section (else every voxel
+//        has its material's default occupancy)
+//     index record: b = 1, 2 or 4 bits per voxel for P <= 2, <= 4, <= 16;
+//        G = ceil(N·b / 8). 1 bit: voxel x is bit x % 8 of byte x / 8. 2 and 4
+//        bits: voxel x's index is the b bits at bit b·(x / G) of byte x % G,
+//        which for N = 32 puts voxels 0..15 and 16..31 in the two halves of an
+//        SSE register after a few shifts.
+//     run record (P <= 8): R runs, each one byte (index << 5 | first x),
+//        first x strictly ascending from 0.
+//     occupancy section: ceil(N / 8) bytes of bitmap (bit x % 8 of byte x / 8:
+//        voxel x has a non-default occupancy), then one occupancy byte per set
+//        bit, in x order.
 //
-// Uniform rows cost only their header; read_row returns a pointer into a
-// shared read-only table of pre-filled rows per material. Raw rows are read
-// in place; palette rows are decoded into the caller's scratch row. Every
-// path is constant-time with no allocation. Identical records inside a box
-// are stored once (several headers share an offset). A box whose rows are all
-// uniform with one material owns no headers at all: it points at a shared
-// header table ("a uniform chunk stores one value").
+// Records are byte-aligned and unpadded; data_ ends with kPadBytes of padding
+// so the SIMD decoder may over-read. Identical records are stored once
+// (several headers share an offset). A box whose rows are all uniform with
+// one material owns no headers at all: it points at a shared header table
+// ("a uniform chunk stores one value"). Each row takes the smallest of its
+// encodings; compact() (and any write covering the whole box) chooses the
+// table's palettes by the bytes they save, partial writes add palettes while
+// the table has room.
+//
+// Uniform rows read in place from a shared read-only table of pre-filled rows
+// per material; raw rows in place; index and run records are decoded into the
+// caller's scratch row (SSSE3 for N = 32, a scalar reference otherwise). Every
+// path is constant-time except the occupancy section (one step per voxel of
+// non-default occupancy) and runs (one step per run), with no allocation.
 //
 // Writes are two-stage, as in the article: the rows a write touches are
-// materialised, modified and encoded first; if every touched row keeps its
-// record size (and its record is not shared) the new records are written in
-// place, otherwise the box is rebuilt once with one allocation. A box that
+// materialised, modified and encoded first; if no touched row's record grows
+// (or is shared, or has an inline palette the table has room for) the new
+// records are written in place, otherwise the box is rebuilt once with one allocation. A box that
 // keeps being rebuilt by small writes switches to unpacked mode (every row a
-// raw record of its own at offset r·N, writes in place, no repacking) until
-// compact() is called.
+// raw record of its own, writes in place, no repacking) until compact() is
+// called.
 //
 // Invariants: headers_ points at N² headers; every allocated header's offset
-// starts a valid record inside data_; data_ holds data_units_ voxels of which
-// the last kPadUnits are padding so the SIMD decoder may over-read; records
-// are shared only outside unpacked mode; no stored voxel is Air with non-zero
-// occupancy; every material is < 64.
+// starts a valid record inside data_; records name only palettes of the
+// table; data_ holds data_bytes_ bytes of which the last kPadBytes are
+// padding; records are shared only outside unpacked mode; no stored voxel is
+// Air with non-zero occupancy; every material is < 64.
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
@@ -61,7 +75,6 @@
 #include <memory>
 #include <utility>
 
-#include "common/voxel/row_packed_simd.h"
 #include "common/voxel/voxel.h"
 
 namespace terrane {
@@ -74,55 +87,112 @@ inline const Voxel* uniform_row(Material material) { return kUniformRows[materia
 // Per-size tables of all-uniform headers, for boxes that own none.
 const std::uint16_t* uniform_headers(int size, Material material);
 
-inline constexpr std::uint8_t kPaletteTag = 0x40;  // first record bytes below it are raw
+inline constexpr std::uint8_t kKindMask = 0xC0;
+inline constexpr std::uint8_t kKindIndex = 0x40;  // first record bytes below it are raw
+inline constexpr std::uint8_t kKindRuns = 0x80;
 inline constexpr std::uint8_t kTagOccupancy = 0x20;
+inline constexpr std::uint8_t kPaletteMask = 0x1F;
+inline constexpr std::uint8_t kInlinePalette = 31;
 inline constexpr int kMaxPalette = 16;
+inline constexpr int kMaxRunPalette = 8;
+inline constexpr int kMaxRuns = 32;
+inline constexpr int kMaxTablePalettes = 31;
+inline constexpr int kMaxTableBytes = 255;
 
-// Bytes of the record starting at rec (even). Precondition: a valid record for n.
-inline int record_bytes(const std::uint8_t* rec, int n) {
-  const unsigned tag = rec[0];
-  if (tag < kPaletteTag) return 2 * n;
-  const int bits = (tag >> 6) == 3 ? 4 : static_cast<int>(tag >> 6);
-  const int p = static_cast<int>(tag & 15) + 1;
-  const int size = 1 + p * ((tag & kTagOccupancy) ? 2 : 1) + (n * bits + 7) / 8;
-  return (size + 1) & ~1;
+// Index bits per voxel for a palette of p materials (1..16).
+inline constexpr int index_bits(int p) { return p <= 2 ? 1 : p <= 4 ? 2 : 4; }
+
+// The palette a record uses: its first byte is P - 1, then P materials.
+inline const std::uint8_t* record_palette(const std::uint8_t* rec, const std::uint8_t* table) {
+  const unsigned id = rec[0] & kPaletteMask;
+  return id == kInlinePalette ? rec + 1 : table + table[1 + id];
 }
 
-// Encodes row (n voxels, Air already normalised). Returns 0 for a uniform row
-// (default occupancy, one material: the caller stores only a header), else
-// the record's even length, written to out (capacity >= 2n bytes). Chooses a
-// palette record when it is shorter than the raw one.
-int encode_row(const Voxel* row, int n, std::uint8_t* out);
+// Bytes of the record starting at rec. Precondition: a valid record for n
+// whose table palettes are in `table`.
+int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n);
 
-// Palette record -> n voxels. The scalar decoder is the reference.
-void decode_palette_scalar(const std::uint8_t* rec, Voxel* out, int n);
+// A box's palette table while rows are encoded: lookup by material set.
+class PaletteTable {
+ public:
+  PaletteTable() = default;
+  // Adopts the table at the front of a box's data (nullptr: empty).
+  explicit PaletteTable(const std::uint8_t* table);
+  int size() const { return count_; }
+  int bytes() const { return count_ == 0 ? 1 : 1 + count_ + used_; }
+  // The id of the palette with exactly these materials, or -1.
+  int find(const Material* materials, int p) const;
+  // Whether a palette of p materials would fit.
+  bool fits(int p) const { return p <= kMaxPalette && count_ < kMaxTablePalettes && 2 + count_ + used_ + 1 + p <= kMaxTableBytes; }
+  // Adds a palette if the table has room; returns its id or -1.
+  int add(const Material* materials, int p);
+  // Writes the table (bytes() bytes).
+  void write(std::uint8_t* out) const;
+  // Palette bytes (P - 1, materials) of id.
+  const std::uint8_t* palette(int id) const { return pool_.data() + offsets_[static_cast<std::size_t>(id)]; }
+
+ private:
+  int count_ = 0;
+  int used_ = 0;  // bytes of palettes
+  std::array<std::uint8_t, kMaxTablePalettes> offsets_{};  // into pool_
+  std::array<std::uint8_t, kMaxTableBytes> pool_{};
+};
+
+// What encode_row needs to know of a row: its distinct materials (ascending)
+// and whether any voxel has a non-default occupancy.
+struct RowSummary {
+  int p = 0;                  // distinct materials (17 means more than 16)
+  Material materials[17] = {};
+  bool uniform = false;       // one voxel value at default occupancy
+  bool occupancy = false;     // some voxel has a non-default occupancy
+};
+RowSummary summarize_row(const Voxel* row, int n);
+
+// Encodes row (n voxels, Air already normalised) against table. Returns 0 for
+// a uniform row (the caller stores only a header), else the record's length,
+// written to out (capacity >= 2n bytes). Takes the shortest of the index,
+// run and raw records; a palette not in the table goes inline.
+int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t* out);
+
+// Index or run record -> n voxels. The scalar decoder is the reference.
+void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n);
 #if defined(__x86_64__) || defined(__i386__)
 // The SSSE3 decoder for n = 32 (row_packed_simd.h) may read up to 16 bytes
-// past the record. Without compile-time SSSE3, call it only when kHaveSsse3.
+// past the record and the palette. Without compile-time SSSE3, call it only
+// when kHaveSsse3.
 extern const bool kHaveSsse3;
 #endif
 
-// One voxel of a palette record (constant time).
-inline Voxel palette_voxel(const std::uint8_t* rec, int n, int x) {
-  const unsigned tag = rec[0];
-  const int bits = (tag >> 6) == 3 ? 4 : static_cast<int>(tag >> 6);
-  const int p = static_cast<int>(tag & 15) + 1;
-  const bool occ = (tag & kTagOccupancy) != 0;
-  const int groups = (n * bits + 7) / 8;
-  const std::uint8_t* idx = rec + 1 + p * (occ ? 2 : 1);
-  const int i = bits == 1 ? (idx[x / 8] >> (x % 8)) & 1 : (idx[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
-  const Material m = rec[1 + i];
-  return Voxel{m, occ ? rec[1 + p + i] : default_occupancy(m)};
-}
+// One voxel of an index or run record.
+Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, int x);
 }  // namespace row_packed_detail
 
+}  // namespace terrane
+
+#include "common/voxel/row_packed_simd.h"
+
+namespace terrane {
+
 struct RowPackedStats {
-  std::size_t uniform_rows = 0;  // header only
-  std::size_t raw_rows = 0;      // allocated rows carrying per-voxel occupancy (raw or palette record)
-  std::size_t byte_rows = 0;     // allocated rows of default occupancy (palette, or raw when > 16 materials)
-  std::size_t palette_rows = 0;  // allocated rows stored as palette records
-  std::size_t shared_rows = 0;   // allocated rows whose record an earlier row already uses
-  std::size_t data_bytes = 0;    // record bytes including padding
+  std::size_t uniform_rows = 0;    // header only
+  std::size_t raw_rows = 0;        // raw records (2 bytes per voxel)
+  std::size_t index_rows = 0;      // index records
+  std::size_t run_rows = 0;        // run records
+  std::size_t occupancy_rows = 0;  // records with an occupancy section (or raw)
+  std::size_t shared_rows = 0;     // allocated rows whose record an earlier row already uses
+  std::size_t table_bytes = 0;     // the palette table
+  std::size_t data_bytes = 0;      // table, records and padding
+  RowPackedStats& operator+=(const RowPackedStats& o) {
+    uniform_rows += o.uniform_rows;
+    raw_rows += o.raw_rows;
+    index_rows += o.index_rows;
+    run_rows += o.run_rows;
+    occupancy_rows += o.occupancy_rows;
+    shared_rows += o.shared_rows;
+    table_bytes += o.table_bytes;
+    data_bytes += o.data_bytes;
+    return *this;
+  }
 };
 
 template <int N>
@@ -133,16 +203,15 @@ class RowPackedBox {
   static constexpr int kRows = N * N;
   static constexpr std::uint16_t kAllocated = 0x8000;
   static constexpr std::uint16_t kOffsetMask = 0x7FFF;
-  // Voxels of padding after the records: the SSSE3 decoder (N = 32 only)
-  // loads 16 bytes at the palette, the occupancies and the indices, at most
-  // 12 bytes past the shortest record.
-  static constexpr std::uint32_t kPadUnits = N == 32 ? 8 : 0;
+  // Bytes of padding after the records: the SSSE3 decoder (N = 32) loads 16
+  // bytes at the palette and at the indices.
+  static constexpr std::uint32_t kPadBytes = 16;
   // Repacks allowed between two compact() calls before the box unpacks
   // itself for good: enough that ordinary editing stays packed, few enough
   // that a stream of tiny writes costs at most a bounded number of copies.
   static constexpr int kRepackBudget = 32;
 
-  // A scratch row for read_row to decode palette rows into.
+  // A scratch row for read_row to decode records into.
   using Row = std::array<Voxel, N>;
 
   explicit RowPackedBox(Material fill = kAir);
@@ -153,15 +222,15 @@ class RowPackedBox {
     headers_ = other.headers_;
     owned_headers_ = std::move(other.owned_headers_);
     data_ = std::move(other.data_);
-    data_units_ = other.data_units_;
+    data_bytes_ = other.data_bytes_;
     repacks_ = other.repacks_;
+    shift_ = other.shift_;
     owns_headers_ = other.owns_headers_;
-    unpacked_ = other.unpacked_;
     other.headers_ = row_packed_detail::uniform_headers(N, kAir);
-    other.data_units_ = 0;
+    other.data_bytes_ = 0;
     other.repacks_ = 0;
+    other.shift_ = 0;
     other.owns_headers_ = false;
-    other.unpacked_ = false;
     return *this;
   }
   RowPackedBox(const RowPackedBox&) = delete;
@@ -171,25 +240,23 @@ class RowPackedBox {
   RowPackedBox clone() const;
 
   // The article's readRow: the N voxels of row (y, z). Returns a pointer into
-  // the box, into the shared uniform rows, or (for palette rows) into scratch.
-  // The pointer is valid until the next write or until scratch is reused.
+  // the box, into the shared uniform rows, or (for index and run records)
+  // into scratch. Valid until the next write or until scratch is reused.
   const Voxel* read_row(int y, int z, Row& scratch) const {
     const std::uint16_t h = headers_[y * N + z];
     if (!(h & kAllocated)) return row_packed_detail::uniform_row(static_cast<Material>(h & 63));
-    const Voxel* rec = data_.get() + (h & kOffsetMask);
-    const auto* bytes = reinterpret_cast<const std::uint8_t*>(rec);
-    if (bytes[0] < row_packed_detail::kPaletteTag) return rec;
-    decode(bytes, scratch.data());
+    const std::uint8_t* rec = data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
+    if (rec[0] < row_packed_detail::kKindIndex) return reinterpret_cast<const Voxel*>(rec);
+    decode(rec, data_.get(), scratch.data());
     return scratch.data();
   }
 
   Voxel get(int x, int y, int z) const {
     const std::uint16_t h = headers_[y * N + z];
     if (!(h & kAllocated)) return solid(static_cast<Material>(h & 63));
-    const Voxel* rec = data_.get() + (h & kOffsetMask);
-    const auto* bytes = reinterpret_cast<const std::uint8_t*>(rec);
-    if (bytes[0] < row_packed_detail::kPaletteTag) return rec[x];
-    return row_packed_detail::palette_voxel(bytes, N, x);
+    const std::uint8_t* rec = data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
+    if (rec[0] < row_packed_detail::kKindIndex) return reinterpret_cast<const Voxel*>(rec)[x];
+    return row_packed_detail::record_voxel(rec, data_.get(), N, x);
   }
 
   // Rewrites rows y in [y0, y1), z in [z0, z1): for each, fn(y, z, row)
@@ -207,56 +274,64 @@ class RowPackedBox {
   // Uniform box: every voxel the same material at default occupancy.
   bool is_uniform() const { return !owns_headers_; }
   Material uniform_material() const { return static_cast<Material>(headers_[0] & 63); }
-  bool unpacked() const { return unpacked_; }
+  bool unpacked() const { return shift_ != 0; }
 
   // Pessimistic full unpack: every row its own raw record, so writes never repack.
   void unpack_all();
-  // Repacks every row to its smallest record, shares identical records and
-  // leaves unpacked mode.
+  // Repacks every row to its smallest record with a palette table chosen for
+  // the whole box, shares identical records and leaves unpacked mode.
   void compact();
 
-  // Every heap byte this box owns (headers, records, padding), not counting
-  // sizeof(*this).
+  // Every heap byte this box owns (headers, table, records, padding), not
+  // counting sizeof(*this).
   std::size_t heap_bytes() const;
   RowPackedStats stats() const;
 
  private:
-  static void decode(const std::uint8_t* rec, Voxel* out) {
+  static void decode(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out) {
 #if defined(__x86_64__) || defined(__i386__)
     if constexpr (N == 32) {
 #if defined(__SSSE3__)
-      row_packed_detail::decode_palette32_ssse3(rec, out);
+      row_packed_detail::decode_record32_ssse3(rec, table, out);
       return;
 #endif
       if (row_packed_detail::kHaveSsse3) {
-        row_packed_detail::decode_palette32_ssse3(rec, out);
+        row_packed_detail::decode_record32_ssse3(rec, table, out);
         return;
       }
     }
 #endif
-    row_packed_detail::decode_palette_scalar(rec, out, N);
+    row_packed_detail::decode_record_scalar(rec, table, out, N);
   }
   const std::uint8_t* record(std::uint16_t h) const {
-    return reinterpret_cast<const std::uint8_t*>(data_.get() + (h & kOffsetMask));
+    return data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
   }
+  const std::uint8_t* table() const { return data_ ? data_.get() : nullptr; }
   void read_row_into(int y, int z, Voxel* out) const;
   // Rebuilds all storage at once: rows in the rectangle y0..y1 × z0..z1 take
-  // the encodings given (row-major in that rectangle: sizes[i] == 0 means
-  // uniform with materials[i], else the record at records + i·2N); other rows
-  // keep theirs. Identical records are stored once. Becomes uniform when every
-  // row ends up uniform alike.
-  void rebuild_rect(int y0, int y1, int z0, int z1, const std::uint8_t* records, const std::uint16_t* sizes,
-                    const Material* materials);
+  // the content given (row-major in that rectangle, N voxels each), encoded
+  // against `table` (which grows by their palettes while it has room if
+  // grow_table); other rows keep their records, whose palettes `table` must
+  // keep at the same ids. Identical records are stored
+  // once. Becomes uniform when every row ends up uniform alike. Falls back to
+  // unpacked mode if the records would not fit 15-bit byte offsets.
+  void rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content, row_packed_detail::PaletteTable& table,
+                    bool grow_table);
+  // Unpacked mode from the rows in the rectangle (content as for
+  // rebuild_rect) and the box's other rows.
+  void unpack_from(int y0, int y1, int z0, int z1, const Voxel* content);
+  // compact() of the given content (N² rows of N voxels, Air normalised).
+  void compact_from(const Voxel* content);
   void become_uniform(Material m);
   std::uint16_t* mutable_headers();
 
   const std::uint16_t* headers_ = row_packed_detail::uniform_headers(N, kAir);  // N² headers: owned_headers_ or a shared table
   std::unique_ptr<std::uint16_t[]> owned_headers_;
-  std::unique_ptr<Voxel[]> data_;  // records, then kPadUnits of padding
-  std::uint32_t data_units_ = 0;   // voxels allocated in data_ (0 when none)
-  std::uint16_t repacks_ = 0;      // since the last compact()
+  std::unique_ptr<std::uint8_t[]> data_;  // palette table, records, then kPadBytes of padding
+  std::uint32_t data_bytes_ = 0;          // bytes allocated in data_ (0 when none)
+  std::uint16_t repacks_ = 0;             // since the last compact()
+  std::uint8_t shift_ = 0;                // offset scale: 0 packed, 1 unpacked
   bool owns_headers_ = false;
-  bool unpacked_ = false;
 };
 
 }  // namespace terrane

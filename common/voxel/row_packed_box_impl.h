@@ -8,15 +8,14 @@
 namespace terrane {
 
 template <int N>
-RowPackedBox<N>::RowPackedBox(Material fill)
-    : headers_(row_packed_detail::uniform_headers(N, fill)) {}
+RowPackedBox<N>::RowPackedBox(Material fill) : headers_(row_packed_detail::uniform_headers(N, fill)) {}
 
 template <int N>
 RowPackedBox<N> RowPackedBox<N>::clone() const {
   RowPackedBox copy(kAir);
-  copy.unpacked_ = unpacked_;
+  copy.shift_ = shift_;
   copy.repacks_ = repacks_;
-  copy.data_units_ = data_units_;
+  copy.data_bytes_ = data_bytes_;
   if (owns_headers_) {
     copy.owned_headers_ = std::make_unique<std::uint16_t[]>(kRows);
     std::memcpy(copy.owned_headers_.get(), headers_, sizeof(std::uint16_t) * kRows);
@@ -25,9 +24,9 @@ RowPackedBox<N> RowPackedBox<N>::clone() const {
   } else {
     copy.headers_ = headers_;
   }
-  if (data_units_ > 0) {
-    copy.data_ = std::make_unique<Voxel[]>(data_units_);
-    std::memcpy(copy.data_.get(), data_.get(), sizeof(Voxel) * data_units_);
+  if (data_bytes_ > 0) {
+    copy.data_ = std::make_unique<std::uint8_t[]>(data_bytes_);
+    std::memcpy(copy.data_.get(), data_.get(), data_bytes_);
   }
   return copy;
 }
@@ -53,9 +52,9 @@ template <int N>
 void RowPackedBox<N>::become_uniform(Material m) {
   owned_headers_.reset();
   data_.reset();
-  data_units_ = 0;
+  data_bytes_ = 0;
   owns_headers_ = false;
-  unpacked_ = false;
+  shift_ = 0;
   headers_ = row_packed_detail::uniform_headers(N, m);
 }
 
@@ -86,34 +85,43 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     }
   }
 
-  if (unpacked_) {
+  if (unpacked()) {
     // Every row is a raw record of its own: write in place, never repack.
     for (int i = 0; i < count; ++i)
-      std::memcpy(data_.get() + (headers_[row_of(i)] & kOffsetMask),
+      std::memcpy(data_.get() + (static_cast<std::uint32_t>(headers_[row_of(i)] & kOffsetMask) << shift_),
                   content.data() + static_cast<std::size_t>(i) * N, sizeof(Voxel) * N);
     return;
   }
 
-  // Stage 2: encode the rows and see whether storage has to move.
+  if (count == kRows) {
+    // The whole box: choose its palette table afresh.
+    compact_from(content.data());
+    return;
+  }
+  row_packed_detail::PaletteTable table(this->table());
+
+  // Stage 2: encode the rows against the box's table and see whether storage
+  // has to move.
   thread_local std::vector<std::uint8_t> records;
   thread_local std::vector<std::uint16_t> sizes;
-  thread_local std::vector<Material> materials;
   records.resize(static_cast<std::size_t>(count) * 2 * N);
   sizes.resize(static_cast<std::size_t>(count));
-  materials.resize(static_cast<std::size_t>(count));
   bool in_place = true;
   bool headers_change = false;
   bool records_change = false;
   for (int i = 0; i < count; ++i) {
     const Voxel* row = content.data() + static_cast<std::size_t>(i) * N;
     std::uint8_t* rec = records.data() + static_cast<std::size_t>(i) * 2 * N;
-    sizes[i] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, rec));
-    materials[i] = row[0].material;
+    sizes[i] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, table, rec));
     const std::uint16_t h = headers_[row_of(i)];
     if (sizes[i] == 0) {
       if (h & kAllocated) in_place = false;
-      else if ((h & 63) != materials[i]) headers_change = true;
-    } else if (!(h & kAllocated) || row_packed_detail::record_bytes(record(h), N) != sizes[i]) {
+      else if ((h & 63) != row[0].material) headers_change = true;
+    } else if (!(h & kAllocated) || row_packed_detail::record_bytes(record(h), this->table(), N) < sizes[i] ||
+               (rec[0] >= row_packed_detail::kKindIndex &&
+                (rec[0] & row_packed_detail::kPaletteMask) == row_packed_detail::kInlinePalette &&
+                table.fits(row_packed_detail::summarize_row(content.data() + static_cast<std::size_t>(i) * N, N).p))) {
+      // A record that grows, or whose palette could join the table, is rebuilt.
       in_place = false;
     } else if (std::memcmp(record(h), rec, static_cast<std::size_t>(sizes[i])) != 0) {
       records_change = true;
@@ -122,7 +130,7 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
   if (in_place && records_change) {
     // A changed record may be overwritten only if no other row shares it.
     thread_local std::vector<std::uint8_t> refs;
-    refs.assign(data_units_, 0);
+    refs.assign(data_bytes_, 0);
     for (int r = 0; r < kRows; ++r)
       if (headers_[r] & kAllocated) refs[headers_[r] & kOffsetMask] += refs[headers_[r] & kOffsetMask] < 2;
     for (int i = 0; i < count && in_place; ++i) {
@@ -133,23 +141,24 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
 
   if (!in_place) {
     // Stage 3a: one reallocation for the whole write.
-    rebuild_rect(y0, y1, z0, z1, records.data(), sizes.data(), materials.data());
+    rebuild_rect(y0, y1, z0, z1, content.data(), table, true);
     if (++repacks_ > kRepackBudget) unpack_all();
     return;
   }
 
-  // Stage 3b: same record sizes, nothing shared: write in place.
+  // Stage 3b: no record grows, nothing shared: write in place (a shorter
+  // record leaves its tail unused until the next rebuild).
   std::uint16_t* headers = headers_change ? mutable_headers() : nullptr;
   for (int i = 0; i < count; ++i) {
     const int r = row_of(i);
     if (sizes[i] == 0) {
-      if (headers != nullptr) headers[r] = materials[i];
+      if (headers != nullptr) headers[r] = content[static_cast<std::size_t>(i) * N].material;
     } else {
       std::memcpy(data_.get() + (headers_[r] & kOffsetMask), records.data() + static_cast<std::size_t>(i) * 2 * N,
                   std::size_t{sizes[i]});
     }
   }
-  if (headers_change && data_units_ == 0) {
+  if (headers_change && data_bytes_ == 0) {
     const std::uint16_t first = headers_[0];
     if (std::all_of(headers_, headers_ + kRows, [&](std::uint16_t h) { return h == first; }))
       become_uniform(static_cast<Material>(first & 63));
@@ -157,50 +166,66 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
 }
 
 template <int N>
-void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const std::uint8_t* records, const std::uint16_t* sizes,
-                                   const Material* materials) {
+void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content,
+                                   row_packed_detail::PaletteTable& table, bool grow_table) {
   const int nz = z1 - z0;
-  // New records go to a scratch buffer first (at most one raw record per
-  // row), deduplicated through an open-addressing table of offsets + 1.
+  const std::uint8_t* old_table = this->table();
+  // Touched rows may add their palettes to the table while it has room.
+  for (int i = 0; grow_table && i < (y1 - y0) * nz; ++i) {
+    const row_packed_detail::RowSummary s = row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+    if (!s.uniform && s.p <= row_packed_detail::kMaxPalette && table.find(s.materials, s.p) < 0)
+      table.add(s.materials, s.p);
+  }
+  const std::size_t table_bytes = static_cast<std::size_t>(table.bytes());
+  // New records go to a scratch buffer after the table (at most one raw
+  // record per row), deduplicated through an open-addressing table of
+  // offsets + 1.
   constexpr std::size_t kTableSize = 2 * kRows;  // power of two, load <= 1/2
   thread_local std::vector<std::uint8_t> buf;
-  thread_local std::vector<std::uint16_t> table;
-  buf.resize(std::size_t{kRows} * 2 * N);
-  table.assign(kTableSize, 0);
+  thread_local std::vector<std::uint16_t> slots;
+  buf.resize(table_bytes + std::size_t{kRows} * 2 * N);
+  slots.assign(kTableSize, 0);
+  table.write(buf.data());
   auto headers = std::make_unique<std::uint16_t[]>(kRows);
-  std::size_t used = 0;  // bytes in buf, always even
+  std::size_t used = table_bytes;
   bool all_uniform_same = true;
+  std::uint8_t encoded[2 * N];
   for (int y = 0; y < N; ++y) {
     for (int z = 0; z < N; ++z) {
       const int r = y * N + z;
       const bool touched = y >= y0 && y < y1 && z >= z0 && z < z1;
-      const int i = touched ? (y - y0) * nz + (z - z0) : -1;
       const std::uint8_t* src = nullptr;
       int size = 0;
       if (touched) {
-        size = sizes[i];
-        if (size == 0) headers[r] = materials[i];
-        src = records + static_cast<std::size_t>(i) * 2 * N;
+        const Voxel* row = content + static_cast<std::size_t>((y - y0) * nz + (z - z0)) * N;
+        size = row_packed_detail::encode_row(row, N, table, encoded);
+        if (size == 0) headers[r] = row[0].material;
+        src = encoded;
       } else if (const std::uint16_t h = headers_[r]; !(h & kAllocated)) {
         headers[r] = h;
       } else {
         src = record(h);
-        size = row_packed_detail::record_bytes(src, N);
+        size = row_packed_detail::record_bytes(src, old_table, N);
       }
       if (size > 0) {
         std::uint32_t hash = 2166136261u;  // FNV-1a
         for (int k = 0; k < size; ++k) hash = (hash ^ src[k]) * 16777619u;
         for (std::size_t slot = hash & (kTableSize - 1);; slot = (slot + 1) & (kTableSize - 1)) {
-          const std::uint16_t e = table[slot];
+          const std::uint16_t e = slots[slot];
           if (e == 0) {
             std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
-            headers[r] = static_cast<std::uint16_t>(kAllocated | (used / 2));
-            table[slot] = static_cast<std::uint16_t>(used / 2 + 1);
+            if (used > kOffsetMask) {
+              // Beyond 15-bit byte offsets: this box is better unpacked.
+              unpack_from(y0, y1, z0, z1, content);
+              return;
+            }
+            headers[r] = static_cast<std::uint16_t>(kAllocated | used);
+            slots[slot] = static_cast<std::uint16_t>(used + 1);
             used += static_cast<std::size_t>(size);
             break;
           }
-          const std::uint8_t* cand = buf.data() + std::size_t{e - 1u} * 2;
-          if (row_packed_detail::record_bytes(cand, N) == size &&
+          const std::uint8_t* cand = buf.data() + std::size_t{e - 1u};
+          if (row_packed_detail::record_bytes(cand, buf.data(), N) == size &&
               std::memcmp(cand, src, static_cast<std::size_t>(size)) == 0) {
             headers[r] = static_cast<std::uint16_t>(kAllocated | (e - 1u));
             break;
@@ -217,63 +242,99 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const std::ui
   owned_headers_ = std::move(headers);
   headers_ = owned_headers_.get();
   owns_headers_ = true;
-  if (used == 0) {
+  shift_ = 0;
+  if (used == table_bytes) {
     data_.reset();
-    data_units_ = 0;
+    data_bytes_ = 0;
     return;
   }
-  data_units_ = static_cast<std::uint32_t>(used / 2) + kPadUnits;
-  data_ = std::make_unique<Voxel[]>(data_units_);  // value-initialised: padding is zero
+  data_bytes_ = static_cast<std::uint32_t>(used) + kPadBytes;
+  data_ = std::make_unique<std::uint8_t[]>(data_bytes_);  // value-initialised: padding is zero
   std::memcpy(data_.get(), buf.data(), used);
 }
 
 template <int N>
-void RowPackedBox<N>::unpack_all() {
+void RowPackedBox<N>::unpack_from(int y0, int y1, int z0, int z1, const Voxel* content) {
+  const int nz = z1 - z0;
   auto headers = std::make_unique<std::uint16_t[]>(kRows);
-  const std::uint32_t units = std::uint32_t{kRows} * N + kPadUnits;
-  auto data = std::make_unique<Voxel[]>(units);
+  const std::uint32_t bytes = std::uint32_t{kRows} * N * sizeof(Voxel) + kPadBytes;
+  auto data = std::make_unique<std::uint8_t[]>(bytes);
   for (int y = 0; y < N; ++y) {
     for (int z = 0; z < N; ++z) {
       const int r = y * N + z;
-      read_row_into(y, z, data.get() + std::size_t(r) * N);
-      headers[r] = static_cast<std::uint16_t>(kAllocated | (r * N));
+      Voxel* dst = reinterpret_cast<Voxel*>(data.get()) + std::size_t(r) * N;
+      if (y >= y0 && y < y1 && z >= z0 && z < z1)
+        std::memcpy(dst, content + static_cast<std::size_t>((y - y0) * nz + (z - z0)) * N, sizeof(Voxel) * N);
+      else
+        read_row_into(y, z, dst);
+      headers[r] = static_cast<std::uint16_t>(kAllocated | (r * N));  // in 2-byte units: shift_ = 1
     }
   }
   owned_headers_ = std::move(headers);
   headers_ = owned_headers_.get();
   owns_headers_ = true;
   data_ = std::move(data);
-  data_units_ = units;
-  unpacked_ = true;
+  data_bytes_ = bytes;
+  shift_ = 1;
+}
+
+template <int N>
+void RowPackedBox<N>::unpack_all() {
+  unpack_from(0, 0, 0, 0, nullptr);
+}
+
+template <int N>
+void RowPackedBox<N>::compact_from(const Voxel* content) {
+  // Palettes by the bytes they would save inline (1 + P per row using them).
+  struct Candidate {
+    int saving = 0;
+    int p = 0;
+    Material materials[row_packed_detail::kMaxPalette] = {};
+  };
+  std::vector<Candidate> candidates;
+  for (int r = 0; r < kRows; ++r) {
+    const row_packed_detail::RowSummary s = row_packed_detail::summarize_row(content + std::size_t(r) * N, N);
+    if (s.uniform || s.p > row_packed_detail::kMaxPalette) continue;
+    auto it = std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) {
+      return c.p == s.p && std::equal(c.materials, c.materials + c.p, s.materials);
+    });
+    if (it == candidates.end()) {
+      Candidate c;
+      c.p = s.p;
+      std::copy_n(s.materials, s.p, c.materials);
+      candidates.push_back(c);
+      it = candidates.end() - 1;
+    }
+    it->saving += 1 + s.p;
+  }
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.saving > b.saving; });
+  row_packed_detail::PaletteTable table;
+  for (const Candidate& c : candidates)
+    if (c.saving > 1 + c.p) table.add(c.materials, c.p);
+  shift_ = 0;
+  repacks_ = 0;
+  rebuild_rect(0, N, 0, N, content, table, false);
 }
 
 template <int N>
 void RowPackedBox<N>::compact() {
   std::vector<Voxel> content(std::size_t{kRows} * N);
-  std::vector<std::uint8_t> records(std::size_t{kRows} * 2 * N);
-  std::vector<std::uint16_t> sizes(kRows);
-  std::vector<Material> materials(kRows);
-  for (int r = 0; r < kRows; ++r) {
-    Voxel* row = content.data() + std::size_t(r) * N;
-    read_row_into(r / N, r % N, row);
-    sizes[r] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, records.data() + std::size_t(r) * 2 * N));
-    materials[r] = row[0].material;
-  }
-  unpacked_ = false;
-  repacks_ = 0;
-  rebuild_rect(0, N, 0, N, records.data(), sizes.data(), materials.data());
+  for (int r = 0; r < kRows; ++r) read_row_into(r / N, r % N, content.data() + std::size_t(r) * N);
+  compact_from(content.data());
 }
 
 template <int N>
 std::size_t RowPackedBox<N>::heap_bytes() const {
-  return (owns_headers_ ? sizeof(std::uint16_t) * kRows : 0) + sizeof(Voxel) * std::size_t{data_units_};
+  return (owns_headers_ ? sizeof(std::uint16_t) * kRows : 0) + std::size_t{data_bytes_};
 }
 
 template <int N>
 RowPackedStats RowPackedBox<N>::stats() const {
   RowPackedStats s;
-  s.data_bytes = sizeof(Voxel) * std::size_t{data_units_};
-  std::vector<bool> seen(data_units_, false);
+  s.data_bytes = data_bytes_;
+  if (data_ && !unpacked()) s.table_bytes = static_cast<std::size_t>(row_packed_detail::PaletteTable(data_.get()).bytes());
+  std::vector<bool> seen(data_bytes_, false);
   for (int r = 0; r < kRows; ++r) {
     const std::uint16_t h = headers_[r];
     if (!(h & kAllocated)) {
@@ -281,12 +342,14 @@ RowPackedStats RowPackedBox<N>::stats() const {
       continue;
     }
     const std::uint8_t tag = record(h)[0];
-    if (tag < row_packed_detail::kPaletteTag || (tag & row_packed_detail::kTagOccupancy)) {
+    if (tag < row_packed_detail::kKindIndex) {
       ++s.raw_rows;
+      ++s.occupancy_rows;
     } else {
-      ++s.byte_rows;
+      s.run_rows += (tag & row_packed_detail::kKindMask) == row_packed_detail::kKindRuns;
+      s.index_rows += (tag & row_packed_detail::kKindMask) == row_packed_detail::kKindIndex;
+      s.occupancy_rows += (tag & row_packed_detail::kTagOccupancy) != 0;
     }
-    s.palette_rows += tag >= row_packed_detail::kPaletteTag;
     s.shared_rows += seen[h & kOffsetMask];
     seen[h & kOffsetMask] = true;
   }

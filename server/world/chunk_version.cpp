@@ -67,6 +67,12 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
     encode_counters().made.fetch_add(1, std::memory_order_relaxed);
     std::vector<std::uint8_t>& out = encoded_[l];
     if (level > 0) {
+      // A chunk keeps its mips as exactly these units: share their bytes.
+      if (chunk_ && !chunk_->mip_unit(level).empty()) {
+        const std::span<const std::uint8_t> unit = chunk_->mip_unit(level);
+        out.assign(unit.begin(), unit.end());
+        return;
+      }
       const int n = kChunkSize >> level;
       Box box({n, n, n});
       if (chunk_) chunk_->read_level(level, box);
@@ -122,6 +128,13 @@ std::array<bool, kMipLevels> levels_changed(const Chunk* prev, const Chunk* next
   std::array<bool, kMipLevels> out{};
   out[0] = true;
   for (int level = 1; level < kMipLevels; ++level) {
+    // Units are canonical (one content, one encoding): compare them when
+    // both chunks keep theirs, else the decoded levels.
+    if (prev && next && !prev->mip_unit(level).empty() && !next->mip_unit(level).empty()) {
+      const auto a = prev->mip_unit(level), b = next->mip_unit(level);
+      out[static_cast<std::size_t>(level)] = !std::equal(a.begin(), a.end(), b.begin(), b.end());
+      continue;
+    }
     const int n = kChunkSize >> level;
     Box a({n, n, n}), b({n, n, n});
     if (prev) prev->read_level(level, a);

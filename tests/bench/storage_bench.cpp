@@ -7,7 +7,8 @@
 // Chunk objects and the hash map (nodes and buckets, through a counting
 // allocator). "Unpacked" is the article's Memory #1: each chunk as plain
 // 2-byte-per-voxel arrays for level 0 and its three mips, plus the same
-// map. Datasets: the real regions in tests/data (VXRAW).
+// map. Datasets: the real regions in tests/data (VXRAW) and "generated", a
+// 512 × 256 × 512 box of the default world's terrain (seed 1) made in process.
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "common/voxel/grid.h"
+#include "common/world/terrain_generator.h"
 #include "common/vxraw/vxraw.h"
 #include "common/world/world_store.h"
 
@@ -40,15 +42,25 @@ Dataset& dataset(const std::string& name) {
   Dataset d;
   d.name = name;
   d.grid = std::make_unique<Grid>();
-  const std::string path = std::string(TERRANE_TEST_DATA_DIR) + "/" + name + ".vxraw.gz";
-  auto file = vxraw_read_file(path, VxrawLimits{});
-  if (!file) {
-    std::fprintf(stderr, "storage bench: %s\n", file.error().message.c_str());
-    std::exit(1);
+  Vec3i origin;
+  Box box;
+  if (name == "generated") {
+    const Region r{{-256, -64, -256}, {256, 192, 256}};
+    TerrainGenerator(GeneratorParams{}).generate(r, box);
+    origin = r.min;
+  } else {
+    const std::string path = std::string(TERRANE_TEST_DATA_DIR) + "/" + name + ".vxraw.gz";
+    auto file = vxraw_read_file(path, VxrawLimits{});
+    if (!file) {
+      std::fprintf(stderr, "storage bench: %s\n", file.error().message.c_str());
+      std::exit(1);
+    }
+    origin = file->origin;
+    box = std::move(file->box);
   }
-  d.voxels = static_cast<std::int64_t>(file->box.voxel_count());
-  for (const Voxel v : file->box.voxels()) d.non_empty += v.material != kAir;
-  d.grid->write_box(file->origin, file->box);
+  d.voxels = static_cast<std::int64_t>(box.voxel_count());
+  for (const Voxel v : box.voxels()) d.non_empty += v.material != kAir;
+  d.grid->write_box(origin, box);
   d.grid->compact();
   d.grid->for_each_chunk([&](Vec3i pos, const Chunk& c) {
     d.chunk_positions.push_back(pos);
@@ -71,25 +83,18 @@ void print_memory(const std::string& name) {
   std::printf("  memory row-packed %10zu bytes  %.3f B/non-empty voxel  (map %zu, objects %zu, level0 %zu, mips %zu)\n",
               m.total(), static_cast<double>(m.total()) / ne, m.map_bytes, m.object_bytes, m.level0_bytes,
               m.mip_bytes);
-  RowPackedStats s;  // level-0 row forms over all chunks
-  d.grid->for_each_chunk([&](Vec3i, const Chunk& c) {
-    const RowPackedStats cs = c.level0().stats();
-    s.uniform_rows += cs.uniform_rows;
-    s.raw_rows += cs.raw_rows;
-    s.byte_rows += cs.byte_rows;
-    s.palette_rows += cs.palette_rows;
-    s.shared_rows += cs.shared_rows;
-    s.data_bytes += cs.data_bytes;
-  });
-  const double rows = static_cast<double>(s.uniform_rows + s.raw_rows + s.byte_rows);
+  const RowPackedStats& s = m.level0_rows;  // level-0 row forms over all chunks
+  const double rows = static_cast<double>(s.uniform_rows + s.raw_rows + s.index_rows + s.run_rows);
   const std::size_t headers = m.level0_bytes - s.data_bytes;
-  std::printf("  level-0 rows: uniform %.1f%%, default occupancy %.1f%%, with occupancy %.1f%%; "
-              "palette records %.1f%%, shared records %.1f%%\n",
-              100.0 * static_cast<double>(s.uniform_rows) / rows, 100.0 * static_cast<double>(s.byte_rows) / rows,
-              100.0 * static_cast<double>(s.raw_rows) / rows, 100.0 * static_cast<double>(s.palette_rows) / rows,
-              100.0 * static_cast<double>(s.shared_rows) / rows);
-  std::printf("  level-0 bytes: headers %zu (%.3f B/nev), records %zu (%.3f B/nev); mips %.3f B/nev\n", headers,
-              static_cast<double>(headers) / ne, s.data_bytes, static_cast<double>(s.data_bytes) / ne,
+  std::printf("  level-0 rows: uniform %.1f%%, index records %.1f%%, run records %.1f%%, raw %.1f%%; "
+              "with occupancy %.1f%%, shared %.1f%%\n",
+              100.0 * static_cast<double>(s.uniform_rows) / rows, 100.0 * static_cast<double>(s.index_rows) / rows,
+              100.0 * static_cast<double>(s.run_rows) / rows, 100.0 * static_cast<double>(s.raw_rows) / rows,
+              100.0 * static_cast<double>(s.occupancy_rows) / rows, 100.0 * static_cast<double>(s.shared_rows) / rows);
+  std::printf("  level-0 bytes: headers %zu (%.3f B/nev), palette tables %zu (%.3f), records %zu (%.3f); "
+              "mip units %.3f B/nev\n",
+              headers, static_cast<double>(headers) / ne, s.table_bytes, static_cast<double>(s.table_bytes) / ne,
+              s.data_bytes - s.table_bytes, static_cast<double>(s.data_bytes - s.table_bytes) / ne,
               static_cast<double>(m.mip_bytes) / ne);
 }
 
@@ -207,6 +212,28 @@ void BM_DecodeChunkBlob(benchmark::State& state, const std::string& name) {
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(blobs.size()));
 }
 
+// Edit throughput: spheres of radius 1..3 (dig, or fill with sand) at random
+// places in the dataset's chunks, each applied to the grid with its mips, as
+// the world strand applies edits. One item is one sphere.
+void BM_SphereEdits(benchmark::State& state, const std::string& name) {
+  Dataset& d = dataset(name);
+  Grid g;
+  for (std::size_t i = 0; i < d.chunk_positions.size(); ++i) g.put_chunk(d.chunk_positions[i], Chunk::from_box(d.unpacked[i]));
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::size_t> pick(0, d.chunk_positions.size() - 1);
+  std::uniform_int_distribution<int> c(0, 31), rad(1, 3), coin(0, 1);
+  for (auto _ : state) {
+    const Vec3i center = chunk_origin(d.chunk_positions[pick(rng)]) + Vec3i{c(rng), c(rng), c(rng)};
+    const int r = rad(rng);
+    const Voxel fill = coin(rng) ? Voxel{} : solid(materials::kSand);
+    g.modify(Region{center - Vec3i{r, r, r}, center + Vec3i{r + 1, r + 1, r + 1}}, [&](Vec3i p, Voxel old) {
+      const Vec3i q = p - center;
+      return q.x * q.x + q.y * q.y + q.z * q.z <= r * r ? fill : old;
+    });
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+
 // Prints each packed/unpacked pair's speed ratio after the normal report.
 class RatioReporter : public benchmark::ConsoleReporter {
  public:
@@ -217,7 +244,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
   }
   void Finalize() override {
     ConsoleReporter::Finalize();
-    for (const char* name : {"mc-1.9", "mc-1.16"}) {
+    for (const char* name : {"mc-1.9", "mc-1.16", "generated"}) {
       const auto p = times_.find(std::string("BM_ReadRowPacked/") + name);
       const auto u = times_.find(std::string("BM_ReadRowUnpacked/") + name);
       if (p != times_.end() && u != times_.end())
@@ -235,16 +262,17 @@ class RatioReporter : public benchmark::ConsoleReporter {
 int main(int argc, char** argv) {
   using namespace terrane;
   benchmark::Initialize(&argc, argv);
-  std::printf("Grid memory on real regions (tests/data):\n");
-  for (const char* name : {"mc-1.9", "mc-1.16"}) print_memory(name);
+  std::printf("Grid memory on real regions (tests/data) and generated terrain:\n");
+  for (const char* name : {"mc-1.9", "mc-1.16", "generated"}) print_memory(name);
   std::printf("\n");
-  for (const char* name : {"mc-1.9", "mc-1.16"}) {
+  for (const char* name : {"mc-1.9", "mc-1.16", "generated"}) {
     benchmark::RegisterBenchmark((std::string("BM_ReadRowPacked/") + name).c_str(), BM_ReadRowPacked, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ReadRowUnpacked/") + name).c_str(), BM_ReadRowUnpacked, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ReadBox48/") + name).c_str(), BM_ReadBox, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ChunkFromBox/") + name).c_str(), BM_ChunkFromBox, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_DecodeChunkBlob/") + name).c_str(), BM_DecodeChunkBlob,
                                  std::string(name));
+    benchmark::RegisterBenchmark((std::string("BM_SphereEdits/") + name).c_str(), BM_SphereEdits, std::string(name));
   }
   benchmark::RegisterBenchmark("BM_WriteSingleVoxel", BM_WriteSingleVoxel);
   benchmark::RegisterBenchmark("BM_WriteRepeatedTiny", BM_WriteRepeatedTiny);

@@ -1,5 +1,7 @@
 #include "common/voxel/chunk.h"
 
+#include "common/codec/net_codec.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -182,15 +184,41 @@ TEST_F(ChunkMipTest, UniformChunkHasUniformMips) {
 
 namespace terrane {
 namespace {
-TEST(Chunk, EmptyAfterHeavyEditingThatUnpackedItsMips) {
+TEST(Chunk, EmptyAfterHeavyEditingThatUnpackedLevel0) {
   Chunk chunk;
   chunk.set({0, 0, 0}, solid(materials::kRock));  // keeps the chunk alive meanwhile
   for (int i = 0; i < 40; ++i) {
     chunk.set({5, 5, 5}, make_voxel(materials::kSand, static_cast<std::uint8_t>(i)));
     chunk.set({5, 5, 5}, Voxel{});
   }
+  EXPECT_TRUE(chunk.level0().unpacked());
   chunk.set({0, 0, 0}, Voxel{});
   EXPECT_TRUE(chunk.empty());
+}
+
+TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
+  Chunk chunk(materials::kRock);
+  for (int level = 1; level < kMipLevels; ++level) EXPECT_TRUE(chunk.mip_unit(level).empty());  // uniform: none kept
+  chunk.modify(Region{{3, 4, 5}, {20, 9, 30}}, [](Vec3i p, Voxel) {
+    return p.x % 3 ? Voxel{} : make_voxel(materials::kSand, static_cast<std::uint8_t>(p.z * 8));
+  });
+  for (int level = 1; level < kMipLevels; ++level) {
+    Box box;
+    chunk.read_level(level, box);
+    std::vector<std::uint8_t> expected;
+    net_codec_encode(kChunkSize >> level, box.voxels(), expected);
+    const auto unit = chunk.mip_unit(level);
+    EXPECT_EQ(std::vector<std::uint8_t>(unit.begin(), unit.end()), expected) << "level " << level;
+  }
+  const ChunkMemory m = chunk.memory();
+  EXPECT_EQ(m.mip_bytes, chunk.mip_unit(1).size() + chunk.mip_unit(2).size() + chunk.mip_unit(3).size());
+  // Back to uniform: the units go.
+  chunk.fill(materials::kMud);
+  EXPECT_TRUE(chunk.mip_unit(1).empty());
+  EXPECT_EQ(chunk.memory().mip_bytes, 0u);
+  Box top;
+  chunk.read_level(3, top);
+  EXPECT_EQ(top.get(1, 2, 3), solid(materials::kMud));
 }
 }  // namespace
 }  // namespace terrane

@@ -76,7 +76,7 @@ TEST(Grid, MemoryCountsEveryPart) {
   EXPECT_EQ(m.object_bytes, 4 * sizeof(Chunk));
   EXPECT_GT(m.level0_bytes, 0u);
   EXPECT_GT(m.mip_bytes, 0u);
-  EXPECT_EQ(m.level0_rows.raw_rows, 1u);
+  EXPECT_EQ(m.level0_rows.occupancy_rows, 1u);  // the sand voxel's row
 }
 
 class RaycastTest : public ::testing::Test {

@@ -88,8 +88,8 @@ TYPED_TEST(RowPackedBoxTest, EqualsUnpackedReferenceUnderRandomWrites) {
     expect_equal(packed, ref, "after write");
     if (::testing::Test::HasFatalFailure()) return;
     const RowPackedStats s = packed.stats();
-    ASSERT_EQ(s.uniform_rows + s.raw_rows + s.byte_rows, static_cast<std::size_t>(N * N));
-    ASSERT_LE(s.palette_rows + s.shared_rows, s.raw_rows + s.byte_rows + s.shared_rows);
+    ASSERT_EQ(s.uniform_rows + s.raw_rows + s.index_rows + s.run_rows, static_cast<std::size_t>(N * N));
+    ASSERT_LE(s.shared_rows, s.raw_rows + s.index_rows + s.run_rows);
     if (step % 50 == 49) {
       packed.compact();
       expect_equal(packed, ref, "after compact");
@@ -112,40 +112,45 @@ TEST(RowPackedBox, UniformRowsCostOnlyHeaders) {
   });
   EXPECT_FALSE(box.is_uniform());
   EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u);
-  EXPECT_EQ(box.stats().raw_rows, 0u);
-  EXPECT_EQ(box.stats().byte_rows, 0u);
+  EXPECT_EQ(box.stats().uniform_rows, 1024u);
 }
 
-// Padding after the records of a 32³ box (SSSE3 over-read), in bytes.
-constexpr std::size_t kPad32 = 2 * RowPackedBox<32>::kPadUnits;
+constexpr std::size_t kHeaders32 = 32 * 32 * 2;
+constexpr std::size_t kPad32 = RowPackedBox<32>::kPadBytes;
+// A palette table of palettes with these sizes: count, offsets, palettes.
+std::size_t table_bytes(std::initializer_list<int> sizes) {
+  std::size_t bytes = 1;
+  for (int p : sizes) bytes += 1 + 1 + static_cast<std::size_t>(p);
+  return bytes;
+}
 
-TEST(RowPackedBox, OreRowsUsePaletteRecords) {
+TEST(RowPackedBox, OreRowUsesAnIndexRecordOverTheTable) {
   RowPackedBox<32> box(materials::kRock);
   box.set(7, 3, 4, solid(materials::kBasalt));  // an ore in one row
-  EXPECT_EQ(box.stats().byte_rows, 1u);
-  EXPECT_EQ(box.stats().palette_rows, 1u);
+  EXPECT_EQ(box.stats().index_rows + box.stats().run_rows, 1u);
   EXPECT_EQ(box.stats().raw_rows, 0u);
-  // tag + 2 materials + 4 bytes of 1-bit indices, padded to 8.
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + kPad32);
-  box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: occupancies stored
-  EXPECT_EQ(box.stats().byte_rows, 0u);
-  EXPECT_EQ(box.stats().raw_rows, 1u);
-  EXPECT_EQ(box.stats().palette_rows, 1u);
-  // tag + 3 materials + 3 occupancies + 8 bytes of 2-bit indices, padded to 16.
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 16u + kPad32);
+  // The palette {rock, basalt} joins the table; the record is its tag and
+  // 4 bytes of 1-bit indices (three runs would cost as much).
+  EXPECT_EQ(box.stats().table_bytes, table_bytes({2}));
+  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 5u + kPad32);
+  box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: an occupancy section
+  EXPECT_EQ(box.stats().occupancy_rows, 1u);
+  // + 4 bytes of bitmap and the one occupancy byte.
+  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 10u + kPad32);
   EXPECT_EQ(box.get(7, 3, 4), solid(materials::kBasalt));
   EXPECT_EQ(box.get(8, 3, 4), make_voxel(materials::kBasalt, 100));
   EXPECT_EQ(box.get(9, 3, 4), solid(materials::kRock));
 }
 
-// Record size per number of distinct materials in a row of 32 (default
-// occupancy): 1, 2 and 4-bit palettes, then raw beyond 16 entries.
-TEST(RowPackedBox, PaletteWidthFollowsDistinctMaterials) {
+// Record size per number of distinct materials in a row of 32 that changes
+// material at every voxel (default occupancy): 1, 2 and 4-bit indices over a
+// table palette, raw beyond 16 materials.
+TEST(RowPackedBox, IndexWidthFollowsDistinctMaterials) {
   const struct {
     int distinct;
     std::size_t record_bytes;
-    bool palette;
-  } cases[] = {{2, 8, true}, {3, 12, true}, {4, 14, true}, {5, 22, true}, {9, 26, true}, {16, 34, true}, {17, 64, false}};
+    bool raw;
+  } cases[] = {{2, 5, false}, {3, 9, false}, {4, 9, false}, {5, 17, false}, {9, 17, false}, {16, 17, false}, {17, 64, true}};
   for (const auto& c : cases) {
     RowPackedBox<32> box(kAir);
     Box ref({32, 32, 32});
@@ -153,10 +158,56 @@ TEST(RowPackedBox, PaletteWidthFollowsDistinctMaterials) {
       for (int x = 0; x < 32; ++x) row[x] = solid(static_cast<Material>(1 + x % c.distinct));
     });
     for (int x = 0; x < 32; ++x) ref.set(x, 5, 9, solid(static_cast<Material>(1 + x % c.distinct)));
-    EXPECT_EQ(box.stats().palette_rows, c.palette ? 1u : 0u) << c.distinct;
-    EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + c.record_bytes + kPad32) << c.distinct;
-    expect_equal(box, ref, "palette width");
+    EXPECT_EQ(box.stats().raw_rows, c.raw ? 1u : 0u) << c.distinct;
+    EXPECT_EQ(box.stats().index_rows, c.raw ? 0u : 1u) << c.distinct;
+    const std::size_t table = c.raw ? 1u : table_bytes({c.distinct});
+    EXPECT_EQ(box.heap_bytes(), kHeaders32 + table + c.record_bytes + kPad32) << c.distinct;
+    expect_equal(box, ref, "index width");
   }
+}
+
+TEST(RowPackedBox, FewRunsUseARunRecord) {
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  auto material = [](int x) { return x < 10 ? materials::kRock : x < 20 ? materials::kSand : materials::kMud; };
+  box.modify_rows(0, 1, 0, 1, [&](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(material(x));
+  });
+  for (int x = 0; x < 32; ++x) ref.set(x, 0, 0, solid(material(x)));
+  EXPECT_EQ(box.stats().run_rows, 1u);
+  // tag, run count, three runs (2-bit indices would take 1 + 8).
+  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({3}) + 5u + kPad32);
+  expect_equal(box, ref, "runs");
+  // Occupancy on top of runs: the section follows the runs.
+  box.set(15, 0, 0, make_voxel(materials::kSand, 3));
+  ref.set(15, 0, 0, make_voxel(materials::kSand, 3));
+  EXPECT_EQ(box.stats().run_rows, 1u);
+  EXPECT_EQ(box.stats().occupancy_rows, 1u);
+  expect_equal(box, ref, "runs with occupancy");
+}
+
+TEST(RowPackedBox, PalettesBeyondTheTableGoInline) {
+  // 40 rows, each over its own pair of materials, in one write: 31 pairs
+  // fit the table, the rest carry their palette in the record; compact()
+  // keeps the same content.
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  box.modify_rows(0, 2, 0, 32, [&](int y, int z, Voxel* row) {
+    const int r = y * 32 + z;
+    if (r >= 40) return;
+    const Material a = static_cast<Material>(1 + r % 63), b = static_cast<Material>(1 + (r + 20) % 63);
+    for (int x = 0; x < 32; ++x) {
+      row[x] = solid(x % 3 ? a : b);
+      ref.set(x, y, z, row[x]);
+    }
+  });
+  EXPECT_GT(box.stats().table_bytes, 1u);
+  EXPECT_EQ(box.stats().index_rows, 40u);
+  expect_equal(box, ref, "inline palettes");
+  box.compact();
+  expect_equal(box, ref, "compacted");
+  // Each pair is used once, so compact() keeps every palette inline.
+  EXPECT_EQ(box.stats().table_bytes, 1u);
 }
 
 TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
@@ -167,9 +218,9 @@ TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
     for (int x = 0; x < 32; ++x) row[x] = pattern(x);
     for (int x = 0; x < 32; ++x) ref.set(x, y, z, pattern(x));
   });
-  EXPECT_EQ(box.stats().palette_rows, 128u);
+  EXPECT_EQ(box.stats().index_rows, 128u);
   EXPECT_EQ(box.stats().shared_rows, 127u);
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u + 8u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 5u + kPad32);
   // Writing one of the sharing rows must not change the others.
   box.set(1, 2, 3, solid(materials::kSand));
   ref.set(1, 2, 3, solid(materials::kSand));
@@ -177,15 +228,17 @@ TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
   EXPECT_EQ(box.stats().shared_rows, 126u);
 }
 
-TEST(RowPackedBox, SameSizeWritesStayInPlace) {
+TEST(RowPackedBox, WritesThatDoNotGrowARecordStayInPlace) {
   RowPackedBox<32> box(materials::kRock);
-  box.set(0, 0, 0, solid(materials::kSand));
-  box.set(0, 0, 1, solid(materials::kMud));
+  // Rows alternating sand and rock: index records of 5 bytes.
+  box.modify_rows(0, 1, 0, 2, [&](int, int z, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(x % 2 ? materials::kRock : z ? materials::kMud : materials::kSand);
+  });
   const std::size_t bytes = box.heap_bytes();
-  // Same record size (2 palette entries, sand kept at x = 0), different
-  // content: no rebuild, so repeated writes never reach the unpack budget.
+  // Flipping voxels keeps the record at most as long: no rebuild, so
+  // repeated writes never reach the unpack budget.
   for (int i = 0; i < 3 * RowPackedBox<32>::kRepackBudget; ++i)
-    box.set(1 + i % 31, 0, 0, solid(i % 2 ? materials::kSand : materials::kRock));
+    box.set(1 + i % 31, 0, 0, solid(i % 2 ? materials::kRock : materials::kSand));
   EXPECT_FALSE(box.unpacked());
   EXPECT_EQ(box.heap_bytes(), bytes);
   EXPECT_EQ(box.get(0, 0, 1), solid(materials::kMud));
@@ -215,6 +268,7 @@ TEST(RowPackedBox, RepeatedTinyWritesUnpackInsteadOfRepackingForever) {
   }
   EXPECT_TRUE(box.unpacked());
   EXPECT_EQ(box.stats().raw_rows, 1024u);
+  EXPECT_EQ(box.heap_bytes(), kHeaders32 + 32u * 32u * 64u + kPad32);
   expect_equal(box, ref, "unpacked");
   box.compact();
   EXPECT_FALSE(box.unpacked());
@@ -244,42 +298,63 @@ namespace terrane {
 namespace {
 TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
   std::mt19937 rng(99);
-  std::uniform_int_distribution<int> occ(0, 255), count(1, 16), flip(0, 3);
-  int palette_records = 0;
-  for (int trial = 0; trial < 2000; ++trial) {
-    // A palette of 1..16 voxel values, with or without partial occupancy.
+  std::uniform_int_distribution<int> occ(0, 255), count(1, 16), flip(0, 3), runs(1, 12), coin(0, 1);
+  int records = 0, run_records = 0, occupancy_records = 0, table_records = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    // 1..16 materials; runs or scattered voxels; some partial occupancy.
     const int k = count(rng);
-    const bool partial = flip(rng) == 0;
-    Voxel palette[16];
-    for (int j = 0; j < k; ++j)
-      palette[j] = partial ? make_voxel(static_cast<Material>(j * 3 % 64), static_cast<std::uint8_t>(occ(rng)))
-                           : solid(static_cast<Material>((j * 7 + trial) % 64));
-    Voxel row[32];
+    Material mats[16];
+    for (int j = 0; j < k; ++j) mats[j] = static_cast<Material>((j * 7 + trial) % 64);
     std::uniform_int_distribution<int> pick(0, k - 1);
-    for (auto& v : row) v = palette[pick(rng)];
-    // Record at the end of a buffer with exactly the decoder's padding after it.
-    std::uint8_t buf[64 + kPad32];
-    std::memset(buf, 0xAB, sizeof(buf));
-    const int size = row_packed_detail::encode_row(row, 32, buf);
-    if (size == 0 || buf[0] < row_packed_detail::kPaletteTag) continue;
-    ++palette_records;
-    std::uint8_t tail[64 + kPad32];
-    std::memset(tail, 0xCD, sizeof(tail));
-    std::memcpy(tail + sizeof(tail) - kPad32 - size, buf, static_cast<std::size_t>(size));
-    const std::uint8_t* rec = tail + sizeof(tail) - kPad32 - size;
-    ASSERT_EQ(row_packed_detail::record_bytes(rec, 32), size);
+    Voxel row[32];
+    if (coin(rng)) {
+      for (auto& v : row) v = solid(mats[pick(rng)]);
+    } else {
+      const int n_runs = runs(rng);
+      for (int x = 0; x < 32; ++x) row[x] = solid(mats[(x * n_runs / 32) % k]);
+    }
+    if (flip(rng) == 0)
+      for (int i = 0; i < 1 + flip(rng) * 4; ++i) {
+        Voxel& v = row[occ(rng) % 32];
+        v = make_voxel(v.material, static_cast<std::uint8_t>(occ(rng)));
+      }
+    // A table holding this row's palette half of the time, laid out as in a
+    // box: table, then the record, then exactly the decoder's padding.
+    row_packed_detail::PaletteTable table;
+    const row_packed_detail::RowSummary s = row_packed_detail::summarize_row(row, 32);
+    if (coin(rng) && s.p <= 16) table.add(s.materials, s.p);
+    std::uint8_t buf[256 + 64 + kPad32];
+    std::memset(buf, 0xCD, sizeof(buf));
+    table.write(buf);
+    std::uint8_t* rec = buf + table.bytes();
+    const int size = row_packed_detail::encode_row(row, 32, table, rec);
+    if (size == 0 || rec[0] < row_packed_detail::kKindIndex) continue;
+    std::memmove(buf + sizeof(buf) - kPad32 - size - table.bytes(), buf, static_cast<std::size_t>(table.bytes() + size));
+    const std::uint8_t* tbl = buf + sizeof(buf) - kPad32 - size - table.bytes();
+    rec = buf + sizeof(buf) - kPad32 - size;
+    ++records;
+    run_records += (rec[0] & row_packed_detail::kKindMask) == row_packed_detail::kKindRuns;
+    occupancy_records += (rec[0] & row_packed_detail::kTagOccupancy) != 0;
+    table_records += (rec[0] & row_packed_detail::kPaletteMask) != row_packed_detail::kInlinePalette;
+    ASSERT_EQ(row_packed_detail::record_bytes(rec, tbl, 32), size);
     Voxel scalar[32];
-    row_packed_detail::decode_palette_scalar(rec, scalar, 32);
-    for (int x = 0; x < 32; ++x) ASSERT_EQ(scalar[x], row[x]) << "scalar, trial " << trial << " x " << x;
+    row_packed_detail::decode_record_scalar(rec, tbl, scalar, 32);
+    for (int x = 0; x < 32; ++x) {
+      ASSERT_EQ(scalar[x], row[x]) << "scalar, trial " << trial << " x " << x;
+      ASSERT_EQ(row_packed_detail::record_voxel(rec, tbl, 32, x), row[x]) << "voxel, trial " << trial << " x " << x;
+    }
 #if defined(__x86_64__) || defined(__i386__)
     if (row_packed_detail::kHaveSsse3) {
       Voxel simd[32];
-      row_packed_detail::decode_palette32_ssse3(rec, simd);
+      row_packed_detail::decode_record32_ssse3(rec, tbl, simd);
       for (int x = 0; x < 32; ++x) ASSERT_EQ(simd[x], scalar[x]) << "ssse3, trial " << trial << " x " << x;
     }
 #endif
   }
-  EXPECT_GT(palette_records, 1000);
+  EXPECT_GT(records, 2000);
+  EXPECT_GT(run_records, 200);
+  EXPECT_GT(occupancy_records, 200);
+  EXPECT_GT(table_records, 200);
 }
 }  // namespace
 }  // namespace terrane
