@@ -88,8 +88,9 @@ def test_ctrl_c_interrupts_a_long_wait(server):
         import sys, terrane
         c = terrane.connect(sys.argv[1], name="sleeper")
         c.wait_ready(30)
-        print("waiting", flush=True)
         try:
+            # Inside the try: the signal may arrive as soon as this is read.
+            print("waiting", flush=True)
             c.next_event("message", 86400)
         except KeyboardInterrupt:
             print("interrupted", flush=True)
