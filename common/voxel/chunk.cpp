@@ -49,6 +49,7 @@ Chunk Chunk::from_box(const Box& box) {
     std::copy_n(box.read_row(y, z), kChunkSize, row);
   });
   c.rebuild_mips();
+  c.pack_mips();
   return c;
 }
 
@@ -58,6 +59,7 @@ Chunk Chunk::clone() const {
   c.mip_end_ = mip_end_;
   c.mip_fill_ = mip_fill_;
   c.empty_ = empty_;
+  if (dense_) c.dense_ = std::make_unique<DenseMips>(*dense_);
   if (mips_) {
     const std::size_t bytes = mip_end_[kMipLevels - 1];
     c.mips_ = std::make_unique<std::uint8_t[]>(bytes);
@@ -67,7 +69,7 @@ Chunk Chunk::clone() const {
 }
 
 std::span<const std::uint8_t> Chunk::mip_unit(int level) const {
-  if (!mips_ || level < 1 || level >= kMipLevels) return {};
+  if (!mips_ || dense_ || level < 1 || level >= kMipLevels) return {};
   const std::size_t begin = level == 1 ? 0 : mip_end_[static_cast<std::size_t>(level - 1)];
   return {mips_.get() + begin, mip_end_[static_cast<std::size_t>(level)] - begin};
 }
@@ -119,6 +121,10 @@ void Chunk::read_level(int level, Box& out) const {
       for (int z = 0; z < n; ++z) std::copy_n(level0_.read_row(y, z, scratch), n, out.write_row(y, z));
     return;
   }
+  if (dense_) {
+    out = dense_->levels[level];
+    return;
+  }
   if (!mips_) {
     out.fill(solid(mip_fill_));
     return;
@@ -138,8 +144,9 @@ void Chunk::read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
   }
 }
 
-void Chunk::store_mips(const Box& l1, const Box& l2, const Box& l3) {
-  empty_ = std::all_of(l3.voxels().begin(), l3.voxels().end(), [](Voxel v) { return v.material == kAir; });
+void Chunk::pack_mips() {
+  if (!dense_) return;
+  const std::unique_ptr<DenseMips> dense = std::move(dense_);
   if (level0_.is_uniform()) {
     mips_.reset();
     mip_end_ = {};
@@ -148,52 +155,57 @@ void Chunk::store_mips(const Box& l1, const Box& l2, const Box& l3) {
   }
   thread_local std::vector<std::uint8_t> units;
   units.clear();
-  net_codec_encode(16, l1.voxels(), units);
-  mip_end_[1] = static_cast<std::uint16_t>(units.size());
-  net_codec_encode(8, l2.voxels(), units);
-  mip_end_[2] = static_cast<std::uint16_t>(units.size());
-  net_codec_encode(4, l3.voxels(), units);
-  mip_end_[3] = static_cast<std::uint16_t>(units.size());
+  for (int level = 1; level < kMipLevels; ++level) {
+    net_codec_encode(kChunkSize >> level, dense->levels[level].voxels(), units);
+    mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(units.size());
+  }
   mips_ = std::make_unique<std::uint8_t[]>(units.size());
   std::memcpy(mips_.get(), units.data(), units.size());
 }
 
 void Chunk::update_mips(const Region& changed) {
-  thread_local Box l1, l2, l3;
   const bool whole = changed.min == Vec3i{0, 0, 0} && changed.max == Vec3i{kChunkSize, kChunkSize, kChunkSize};
-  if (whole) {
-    l1.resize({16, 16, 16});
-    l2.resize({8, 8, 8});
-    l3.resize({4, 4, 4});
-  } else {
-    read_level(1, l1);
-    read_level(2, l2);
-    read_level(3, l3);
+  if (!dense_) {
+    auto dense = std::make_unique<DenseMips>();
+    for (int level = 1; level < kMipLevels; ++level) {
+      if (whole) dense->levels[level].resize({kChunkSize >> level, kChunkSize >> level, kChunkSize >> level});
+      else read_level(level, dense->levels[level]);
+    }
+    dense_ = std::move(dense);
+    mips_.reset();
+    mip_end_ = {};
   }
+  Box* l = dense_->levels;
   const Region r1 = downsample_region(
-      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l1, changed);
-  const Region r2 = downsample_box(l1, l2, r1);
-  downsample_box(l2, l3, r2);
-  store_mips(l1, l2, l3);
+      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l[1], changed);
+  const Region r2 = downsample_box(l[1], l[2], r1);
+  downsample_box(l[2], l[3], r2);
+  empty_ = std::all_of(l[3].voxels().begin(), l[3].voxels().end(), [](Voxel v) { return v.material == kAir; });
+  if (level0_.is_uniform()) mip_fill_ = level0_.uniform_material();
 }
 
 void Chunk::rebuild_mips() { update_mips(Region{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}}); }
 
 void Chunk::fill(Material m) {
   level0_.fill(m);
+  dense_.reset();
   mips_.reset();
   mip_end_ = {};
   mip_fill_ = m;
   empty_ = m == kAir;
 }
 
-void Chunk::compact() { level0_.compact(); }
+void Chunk::compact() {
+  level0_.compact();
+  pack_mips();
+}
 
 ChunkMemory Chunk::memory() const {
   ChunkMemory m;
   m.object_bytes = sizeof(Chunk);
   m.level0_bytes = level0_.heap_bytes();
-  m.mip_bytes = mips_ ? mip_end_[kMipLevels - 1] : 0;
+  m.mip_bytes = (mips_ ? mip_end_[kMipLevels - 1] : 0) +
+                (dense_ ? sizeof(DenseMips) + sizeof(Voxel) * (16 * 16 * 16 + 8 * 8 * 8 + 4 * 4 * 4) : 0);
   return m;
 }
 

@@ -2,10 +2,12 @@
 //
 // Level 0 is the full-resolution 32³ content, row-packed; levels 1, 2, 3 are
 // the 16³, 8³ and 4³ mips, kept as network-codec units (NET_CODEC.md) back
-// to back in one allocation and updated on every write: a bit-packed RLE is
-// several times smaller than row-packed 16-voxel rows, the mips are read
-// whole (for LOD and replication, where the stored unit is the bytes sent),
-// and re-encoding them costs a write a few microseconds. A mip voxel
+// to back in one allocation: a bit-packed RLE is several times smaller than
+// row-packed 16-voxel rows, and the mips are read whole (for LOD and
+// replication, where the stored unit is the bytes sent). Writes update the
+// mips at once, in plain boxes the chunk holds from its first write until
+// pack_mips() or compact() encodes them again, so a run of writes pays one
+// encoding (the world strand packs each tick's chunks before publishing). A mip voxel
 // covers 2×2×2 voxels of the level below (its "children"):
 //   - it is Air only if all its children are Air, so Air at any level means
 //     Air in everything it covers (an all-Air 4³ level is an empty chunk);
@@ -86,8 +88,12 @@ class Chunk {
   // Reads a whole level into a (32 >> level)³ box.
   void read_level(int level, Box& out) const;
   // The network-codec unit of mip level 1..3, as stored (empty for a uniform
-  // chunk, whose levels are all its one material).
+  // chunk, whose levels are all its one material, and while writes have left
+  // the mips unpacked).
   std::span<const std::uint8_t> mip_unit(int level) const;
+  // Encodes mips left unpacked by writes into units (no-op otherwise).
+  void pack_mips();
+  bool mips_packed() const { return dense_ == nullptr; }
 
   // Copies the chunk-local region [min, min + out.size()) into out.
   // Precondition: the region lies inside the chunk.
@@ -116,18 +122,23 @@ class Chunk {
 
   // Recomputes every mip level from level 0 (after bulk loads).
   void rebuild_mips();
-  // Repacks all levels (leaving unpacked mode): call after write-heavy phases.
+  // Repacks level 0 (leaving unpacked mode) and packs the mips: call after
+  // write-heavy phases.
   void compact();
 
   ChunkMemory memory() const;
   RowPackedStats level0_stats() const { return level0_.stats(); }
 
  private:
+  // Mips between writes and pack_mips(): levels 1, 2, 3 as plain boxes.
+  struct DenseMips {
+    Box levels[kMipLevels];  // [1..3]
+  };
+
   void update_mips(const Region& changed_level0);
-  // Stores levels 1..3 (16³, 8³, 4³ boxes) as units.
-  void store_mips(const Box& l1, const Box& l2, const Box& l3);
 
   Level0 level0_;
+  std::unique_ptr<DenseMips> dense_;          // unpacked mips (then mips_ is stale and null)
   std::unique_ptr<std::uint8_t[]> mips_;      // units of levels 1, 2, 3; null when level 0 is uniform
   std::array<std::uint16_t, kMipLevels> mip_end_{};  // end of level l's unit in mips_ (l = 1..3)
   Material mip_fill_ = kAir;  // without units: every mip voxel is this material (level 0's, when last uniform)

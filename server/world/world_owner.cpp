@@ -549,7 +549,10 @@ void WorldOwner::apply_edits() {
     if (bits.none()) continue;
     Loaded& l = loaded_.at(cp);
     std::shared_ptr<const Chunk> chunk;
-    if (std::unique_ptr<Chunk> c = scratch.take_chunk(cp); c && !c->empty()) chunk = std::move(c);
+    if (std::unique_ptr<Chunk> c = scratch.take_chunk(cp); c && !c->empty()) {
+      c->pack_mips();  // one encoding of the mips per tick, shared by every reader of the version
+      chunk = std::move(c);
+    }
     const VersionPtr& prev = l.current;
     const std::uint64_t rev = prev->revision() + 1;
     const auto differs = levels_changed(prev->chunk(), chunk.get());

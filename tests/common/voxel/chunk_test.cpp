@@ -202,6 +202,16 @@ TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
   chunk.modify(Region{{3, 4, 5}, {20, 9, 30}}, [](Vec3i p, Voxel) {
     return p.x % 3 ? Voxel{} : make_voxel(materials::kSand, static_cast<std::uint8_t>(p.z * 8));
   });
+  // Written: the mips wait unpacked, readable, for pack_mips().
+  EXPECT_FALSE(chunk.mips_packed());
+  EXPECT_TRUE(chunk.mip_unit(1).empty());
+  Box before;
+  chunk.read_level(2, before);
+  chunk.pack_mips();
+  EXPECT_TRUE(chunk.mips_packed());
+  Box after;
+  chunk.read_level(2, after);
+  EXPECT_TRUE(before == after);
   for (int level = 1; level < kMipLevels; ++level) {
     Box box;
     chunk.read_level(level, box);
