@@ -50,12 +50,6 @@ const std::uint8_t* record_body(const std::uint8_t* rec, const std::uint8_t* pal
   return (rec[0] & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
 }
 
-int index_of(const Material* materials, int p, Material m) {
-  int i = 0;
-  while (i < p && materials[i] != m) ++i;
-  return i;
-}
-
 }  // namespace
 
 constinit const std::array<std::array<Voxel, 32>, kMaterialCount> kUniformRows = make_uniform_rows();
@@ -124,17 +118,22 @@ RowSummary summarize_row(const Voxel* row, int n) {
 }
 
 int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t* out) {
-  const RowSummary s = summarize_row(row, n);
+  return encode_row(row, n, summarize_row(row, n), table, out);
+}
+
+int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable& table, std::uint8_t* out) {
   if (s.uniform) return 0;
   const int raw = 2 * n;
   if (s.p > kMaxPalette) {
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return raw;
   }
+  std::uint8_t slot[kMaterialCount] = {};
+  for (int j = 0; j < s.p; ++j) slot[s.materials[j]] = static_cast<std::uint8_t>(j);
   std::uint8_t index[kMaxRow];
   int runs = 0;
   for (int x = 0; x < n; ++x) {
-    index[x] = static_cast<std::uint8_t>(index_of(s.materials, s.p, row[x].material));
+    index[x] = slot[row[x].material & 63];
     runs += x == 0 || index[x] != index[x - 1];
   }
   int occupied = 0;
@@ -164,7 +163,7 @@ int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t*
     for (int x = 0; x < n; ++x)
       if (x == 0 || index[x] != index[x - 1]) *p++ = static_cast<std::uint8_t>(index[x] << 5 | x);
   } else {
-    std::memset(p, 0, static_cast<std::size_t>(groups));
+    for (int i = 0; i < groups; ++i) p[i] = 0;
     for (int x = 0; x < n; ++x) {
       // 1 bit: plain bit order; 2 and 4 bits: voxel x in byte x % G at bit b·(x / G).
       const int byte = bits == 1 ? x / 8 : x % groups;
@@ -174,7 +173,7 @@ int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t*
     p += groups;
   }
   if (s.occupancy) {
-    std::memset(p, 0, static_cast<std::size_t>(bitmap_bytes(n)));
+    for (int i = 0; i < bitmap_bytes(n); ++i) p[i] = 0;
     std::uint8_t* occ = p + bitmap_bytes(n);
     for (int x = 0; x < n; ++x) {
       if (has_default_occupancy(row[x])) continue;

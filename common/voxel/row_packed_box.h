@@ -153,6 +153,8 @@ RowSummary summarize_row(const Voxel* row, int n);
 // written to out (capacity >= 2n bytes). Takes the shortest of the index,
 // run and raw records; a palette not in the table goes inline.
 int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t* out);
+// The same with the row's summary already made (summarize_row(row, n)).
+int encode_row(const Voxel* row, int n, const RowSummary& summary, const PaletteTable& table, std::uint8_t* out);
 
 // Index or run record -> n voxels. The scalar decoder is the reference.
 void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n);

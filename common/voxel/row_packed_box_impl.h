@@ -170,10 +170,14 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
                                    row_packed_detail::PaletteTable& table, bool grow_table) {
   const int nz = z1 - z0;
   const std::uint8_t* old_table = this->table();
-  // Touched rows may add their palettes to the table while it has room.
-  for (int i = 0; grow_table && i < (y1 - y0) * nz; ++i) {
-    const row_packed_detail::RowSummary s = row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
-    if (!s.uniform && s.p <= row_packed_detail::kMaxPalette && table.find(s.materials, s.p) < 0)
+  // Touched rows are summarised once; they may add their palettes to the
+  // table while it has room.
+  thread_local std::vector<row_packed_detail::RowSummary> summaries;
+  summaries.resize(static_cast<std::size_t>((y1 - y0) * nz));
+  for (int i = 0; i < (y1 - y0) * nz; ++i) {
+    const row_packed_detail::RowSummary& s = summaries[static_cast<std::size_t>(i)] =
+        row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+    if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette && table.find(s.materials, s.p) < 0)
       table.add(s.materials, s.p);
   }
   const std::size_t table_bytes = static_cast<std::size_t>(table.bytes());
@@ -197,8 +201,9 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
       const std::uint8_t* src = nullptr;
       int size = 0;
       if (touched) {
-        const Voxel* row = content + static_cast<std::size_t>((y - y0) * nz + (z - z0)) * N;
-        size = row_packed_detail::encode_row(row, N, table, encoded);
+        const std::size_t i = static_cast<std::size_t>((y - y0) * nz + (z - z0));
+        const Voxel* row = content + i * N;
+        size = row_packed_detail::encode_row(row, N, summaries[i], table, encoded);
         if (size == 0) headers[r] = row[0].material;
         src = encoded;
       } else if (const std::uint16_t h = headers_[r]; !(h & kAllocated)) {

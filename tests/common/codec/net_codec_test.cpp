@@ -9,13 +9,14 @@
 
 #include "common/vxraw/vxraw.h"
 
+#include "tests/common/codec/test_units.h"
+
 namespace terrane {
 namespace {
 
 constexpr int kSizes[] = {4, 8, 16};
 
-std::vector<Voxel> make_unit(int n, Voxel fill = {}) { return std::vector<Voxel>(static_cast<std::size_t>(n * n * n), fill); }
-std::size_t idx(int n, int x, int y, int z) { return static_cast<std::size_t>((y * n + z) * n + x); }
+using namespace test_units;
 
 std::vector<std::uint8_t> encode(int n, const std::vector<Voxel>& v) {
   std::vector<std::uint8_t> out;
@@ -36,32 +37,6 @@ void expect_round_trip(int n, const std::vector<Voxel>& v) {
   auto used = net_codec_decode_prefix(n, longer, back);
   ASSERT_TRUE(used.ok());
   EXPECT_EQ(*used, bytes.size());
-}
-
-std::vector<Voxel> random_unit(int n, std::mt19937& rng, int materials, bool partial) {
-  auto v = make_unit(n);
-  for (Voxel& x : v) {
-    const auto m = static_cast<Material>(rng() % static_cast<unsigned>(materials));
-    x = make_voxel(m, partial ? static_cast<std::uint8_t>(rng()) : default_occupancy(m));
-  }
-  return v;
-}
-
-// Smooth terrain: a sloped surface with fractional occupancy, strata below.
-std::vector<Voxel> terrain_unit(int n, float base, float slope) {
-  auto v = make_unit(n);
-  for (int y = 0; y < n; ++y) {
-    for (int z = 0; z < n; ++z) {
-      for (int x = 0; x < n; ++x) {
-        const float h = base + slope * static_cast<float>(x) + 0.3f * static_cast<float>(z);
-        const float f = h - static_cast<float>(y);
-        if (f <= 0) continue;
-        const Material m = f < 2 ? materials::kGrass : (y % 5 == 0 ? materials::kSlate : materials::kRock);
-        v[idx(n, x, y, z)] = make_voxel(m, f >= 1 ? kFullOccupancy : occupancy_byte(f));
-      }
-    }
-  }
-  return v;
 }
 
 // The worked examples of common/codec/NET_CODEC.md, one per unit kind: the encoder
