@@ -175,6 +175,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
       const Vec3i w = l - uc * kUpdateUnitSize;
       return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
     });
+    grid_.pack_mips(cp);  // the replica keeps its mips encoded, as the server does
     begin = end;
   }
   for (const auto& r : m.revisions) {

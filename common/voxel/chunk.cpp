@@ -53,6 +53,20 @@ Chunk Chunk::from_box(const Box& box) {
   return c;
 }
 
+Chunk& Chunk::operator=(Chunk&& other) noexcept {
+  if (this == &other) return *this;
+  level0_ = std::move(other.level0_);
+  dense_ = std::move(other.dense_);
+  mips_ = std::move(other.mips_);
+  mip_end_ = other.mip_end_;
+  mip_fill_ = other.mip_fill_;
+  empty_ = other.empty_;
+  other.mip_end_ = {};
+  other.mip_fill_ = kAir;
+  other.empty_ = true;
+  return *this;
+}
+
 Chunk Chunk::clone() const {
   Chunk c;
   c.level0_ = level0_.clone();
@@ -122,7 +136,7 @@ void Chunk::read_level(int level, Box& out) const {
     return;
   }
   if (dense_) {
-    out = dense_->levels[level];
+    out = dense_->levels[level - 1];
     return;
   }
   if (!mips_) {
@@ -156,7 +170,7 @@ void Chunk::pack_mips() {
   thread_local std::vector<std::uint8_t> units;
   units.clear();
   for (int level = 1; level < kMipLevels; ++level) {
-    net_codec_encode(kChunkSize >> level, dense->levels[level].voxels(), units);
+    net_codec_encode(kChunkSize >> level, dense->levels[level - 1].voxels(), units);
     mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(units.size());
   }
   mips_ = std::make_unique<std::uint8_t[]>(units.size());
@@ -168,19 +182,20 @@ void Chunk::update_mips(const Region& changed) {
   if (!dense_) {
     auto dense = std::make_unique<DenseMips>();
     for (int level = 1; level < kMipLevels; ++level) {
-      if (whole) dense->levels[level].resize({kChunkSize >> level, kChunkSize >> level, kChunkSize >> level});
-      else read_level(level, dense->levels[level]);
+      Box& box = dense->levels[level - 1];
+      if (whole) box.resize({kChunkSize >> level, kChunkSize >> level, kChunkSize >> level});
+      else read_level(level, box);
     }
     dense_ = std::move(dense);
     mips_.reset();
     mip_end_ = {};
   }
-  Box* l = dense_->levels;
+  Box* l = dense_->levels;  // levels 1, 2, 3
   const Region r1 = downsample_region(
-      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l[1], changed);
-  const Region r2 = downsample_box(l[1], l[2], r1);
-  downsample_box(l[2], l[3], r2);
-  empty_ = std::all_of(l[3].voxels().begin(), l[3].voxels().end(), [](Voxel v) { return v.material == kAir; });
+      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l[0], changed);
+  const Region r2 = downsample_box(l[0], l[1], r1);
+  downsample_box(l[1], l[2], r2);
+  empty_ = std::all_of(l[2].voxels().begin(), l[2].voxels().end(), [](Voxel v) { return v.material == kAir; });
   if (level0_.is_uniform()) mip_fill_ = level0_.uniform_material();
 }
 
@@ -206,6 +221,7 @@ ChunkMemory Chunk::memory() const {
   m.level0_bytes = level0_.heap_bytes();
   m.mip_bytes = (mips_ ? mip_end_[kMipLevels - 1] : 0) +
                 (dense_ ? sizeof(DenseMips) + sizeof(Voxel) * (16 * 16 * 16 + 8 * 8 * 8 + 4 * 4 * 4) : 0);
+  // (Unpacked mips: three plain boxes until pack_mips().)
   return m;
 }
 

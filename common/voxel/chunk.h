@@ -73,8 +73,9 @@ class Chunk {
   explicit Chunk(Material fill = kAir);
   // A packed chunk with current mips from a 32³ box. Precondition: box is 32³.
   static Chunk from_box(const Box& box);
-  Chunk(Chunk&&) noexcept = default;
-  Chunk& operator=(Chunk&&) noexcept = default;
+  // A moved-from chunk is empty Air, usable as any other.
+  Chunk(Chunk&& other) noexcept { *this = std::move(other); }
+  Chunk& operator=(Chunk&& other) noexcept;
   Chunk clone() const;
 
   Voxel get(int x, int y, int z) const { return level0_.get(x, y, z); }
@@ -132,7 +133,7 @@ class Chunk {
  private:
   // Mips between writes and pack_mips(): levels 1, 2, 3 as plain boxes.
   struct DenseMips {
-    Box levels[kMipLevels];  // [1..3]
+    Box levels[kMipLevels - 1];  // levels 1..3 at [0..2]
   };
 
   void update_mips(const Region& changed_level0);

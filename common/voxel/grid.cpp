@@ -55,6 +55,10 @@ void Grid::write_box(Vec3i min, const Box& src) {
   modify(Region::from_min_size(min, src.size()), [&](Vec3i p, Voxel) { return src.get(p - min); });
 }
 
+void Grid::pack_mips(Vec3i chunk_pos) {
+  if (auto it = chunks_.find(chunk_pos); it != chunks_.end()) it->second->pack_mips();
+}
+
 void Grid::compact() {
   for (auto& [pos, chunk] : chunks_) chunk->compact();
 }

@@ -90,6 +90,8 @@ class Grid {
   }
 
   const Chunk* find_chunk(Vec3i chunk_pos) const;
+  // Encodes the mips writes left unpacked in that chunk, if it is held.
+  void pack_mips(Vec3i chunk_pos);
   // Inserts or replaces a whole chunk (mips must be current). An empty chunk
   // erases the entry.
   void put_chunk(Vec3i chunk_pos, Chunk chunk);

@@ -281,8 +281,17 @@ class RowPackedBox {
   // Pessimistic full unpack: every row its own raw record, so writes never repack.
   void unpack_all();
   // Repacks every row to its smallest record with a palette table chosen for
-  // the whole box, shares identical records and leaves unpacked mode.
+  // the whole box, shares identical records and leaves unpacked mode (unless
+  // the records pass 32 KiB, beyond 15-bit byte offsets: such a box, more
+  // than half raw rows, stays unpacked).
   void compact();
+
+  // The first byte of row (y, z)'s record (its kind and palette), or -1 for
+  // a uniform row.
+  int record_tag(int y, int z) const {
+    const std::uint16_t h = headers_[y * N + z];
+    return (h & kAllocated) ? record(h)[0] : -1;
+  }
 
   // Every heap byte this box owns (headers, table, records, padding), not
   // counting sizeof(*this).

@@ -14,7 +14,9 @@ template <int N>
 RowPackedBox<N> RowPackedBox<N>::clone() const {
   RowPackedBox copy(kAir);
   copy.shift_ = shift_;
-  copy.repacks_ = repacks_;
+  // A copy starts its own budget: a chunk cloned and edited every tick
+  // would otherwise spend one budget over its whole life and unpack.
+  copy.repacks_ = 0;
   copy.data_bytes_ = data_bytes_;
   if (owns_headers_) {
     copy.owned_headers_ = std::make_unique<std::uint16_t[]>(kRows);

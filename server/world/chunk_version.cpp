@@ -63,16 +63,13 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   }
   const auto l = static_cast<std::size_t>(level);
   encode_counters().asked.fetch_add(1, std::memory_order_relaxed);
+  // A chunk keeps its mips as exactly these units: the version hands out
+  // the chunk's own bytes (immutable, owned with the chunk).
+  if (level > 0 && chunk_ && !chunk_->mip_unit(level).empty()) return chunk_->mip_unit(level);
   std::call_once(encoded_once_[l], [&] {
     encode_counters().made.fetch_add(1, std::memory_order_relaxed);
     std::vector<std::uint8_t>& out = encoded_[l];
     if (level > 0) {
-      // A chunk keeps its mips as exactly these units: share their bytes.
-      if (chunk_ && !chunk_->mip_unit(level).empty()) {
-        const std::span<const std::uint8_t> unit = chunk_->mip_unit(level);
-        out.assign(unit.begin(), unit.end());
-        return;
-      }
       const int n = kChunkSize >> level;
       Box box({n, n, n});
       if (chunk_) chunk_->read_level(level, box);

@@ -550,7 +550,10 @@ void WorldOwner::apply_edits() {
     Loaded& l = loaded_.at(cp);
     std::shared_ptr<const Chunk> chunk;
     if (std::unique_ptr<Chunk> c = scratch.take_chunk(cp); c && !c->empty()) {
-      c->pack_mips();  // one encoding of the mips per tick, shared by every reader of the version
+      // One encoding of the mips per tick, shared by every reader of the
+      // version; a level 0 that tiny writes unpacked is packed again.
+      if (c->level0().unpacked()) c->compact();
+      c->pack_mips();
       chunk = std::move(c);
     }
     const VersionPtr& prev = l.current;

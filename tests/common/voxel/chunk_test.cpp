@@ -196,6 +196,40 @@ TEST(Chunk, EmptyAfterHeavyEditingThatUnpackedLevel0) {
   EXPECT_TRUE(chunk.empty());
 }
 
+TEST(Chunk, EditedEveryTickLikeTheWorldStrandStaysPacked) {
+  // The world strand clones a chunk, edits it and packs its mips every tick:
+  // each clone starts its own repack budget, so level 0 never unpacks.
+  Box content({32, 32, 32});
+  for (int y = 0; y < 32; ++y)
+    for (int z = 0; z < 32; ++z)
+      for (int x = 0; x < 32; ++x)
+        content.set(x, y, z, y < 12 + (x + z) % 7 ? solid(materials::kRock) : Voxel{});
+  Chunk current = Chunk::from_box(content);
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> c(2, 29), occ(0, 255);
+  for (int tick = 0; tick < 200; ++tick) {
+    Chunk next = current.clone();
+    const Vec3i at{c(rng), c(rng), c(rng)};
+    next.modify(Region{at - Vec3i{2, 2, 2}, at + Vec3i{3, 3, 3}}, [&](Vec3i, Voxel old) {
+      return old.material == kAir ? make_voxel(materials::kSand, static_cast<std::uint8_t>(occ(rng))) : Voxel{};
+    });
+    next.pack_mips();
+    current = std::move(next);
+    ASSERT_FALSE(current.level0().unpacked()) << "tick " << tick;
+    ASSERT_TRUE(current.mips_packed());
+  }
+}
+
+TEST(Chunk, MovedFromChunkIsEmptyAir) {
+  Chunk a(materials::kRock);
+  Chunk b(std::move(a));
+  EXPECT_FALSE(b.empty());
+  EXPECT_TRUE(a.empty());  // NOLINT(bugprone-use-after-move): documented state
+  Box top;
+  a.read_level(3, top);
+  EXPECT_EQ(top.get(0, 0, 0), Voxel{});
+}
+
 TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
   Chunk chunk(materials::kRock);
   for (int level = 1; level < kMipLevels; ++level) EXPECT_TRUE(chunk.mip_unit(level).empty());  // uniform: none kept
@@ -205,13 +239,15 @@ TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
   // Written: the mips wait unpacked, readable, for pack_mips().
   EXPECT_FALSE(chunk.mips_packed());
   EXPECT_TRUE(chunk.mip_unit(1).empty());
-  Box before;
-  chunk.read_level(2, before);
+  Box before[kMipLevels];
+  for (int level = 1; level < kMipLevels; ++level) chunk.read_level(level, before[level]);
   chunk.pack_mips();
   EXPECT_TRUE(chunk.mips_packed());
-  Box after;
-  chunk.read_level(2, after);
-  EXPECT_TRUE(before == after);
+  for (int level = 1; level < kMipLevels; ++level) {
+    Box after;
+    chunk.read_level(level, after);
+    EXPECT_TRUE(before[level] == after) << "level " << level;
+  }
   for (int level = 1; level < kMipLevels; ++level) {
     Box box;
     chunk.read_level(level, box);

@@ -76,9 +76,12 @@ TEST(GridFuzz, RandomBoxesAndSpheresMatchADenseReference) {
           for (int x = 0; x < size.x; ++x)
             ASSERT_EQ(back.get(x, y, z), ref.get(x, y, z)) << "step " << step << " at " << x << "," << y << "," << z;
     }
-    if (step % 150 == 149) grid.compact();
+    if (step % 150 == 149 && step != 599) grid.compact();
   }
   EXPECT_TRUE(saw_unpacked);
+  // The mips as writes left them (unpacked), then packed.
+  for (int pass = 0; pass < 2; ++pass) {
+  if (pass == 1) grid.compact();
   grid.for_each_chunk([&](Vec3i pos, const Chunk& chunk) {
     Box level0;
     chunk.read_level(0, level0);
@@ -91,6 +94,7 @@ TEST(GridFuzz, RandomBoxesAndSpheresMatchADenseReference) {
     }
     EXPECT_EQ(chunk.empty(), fresh.empty());
   });
+  }
 }
 
 }  // namespace

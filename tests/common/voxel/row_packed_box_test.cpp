@@ -202,6 +202,13 @@ TEST(RowPackedBox, PalettesBeyondTheTableGoInline) {
     }
   });
   EXPECT_GT(box.stats().table_bytes, 1u);
+  int inline_records = 0;
+  for (int r = 0; r < 40; ++r) {
+    // A record names its palette in its tag: 31 is inline.
+    if ((box.record_tag(r / 32, r % 32) & row_packed_detail::kPaletteMask) == row_packed_detail::kInlinePalette)
+      ++inline_records;
+  }
+  EXPECT_EQ(inline_records, 40 - row_packed_detail::kMaxTablePalettes);
   EXPECT_EQ(box.stats().index_rows, 40u);
   expect_equal(box, ref, "inline palettes");
   box.compact();
@@ -242,6 +249,32 @@ TEST(RowPackedBox, WritesThatDoNotGrowARecordStayInPlace) {
   EXPECT_FALSE(box.unpacked());
   EXPECT_EQ(box.heap_bytes(), bytes);
   EXPECT_EQ(box.get(0, 0, 1), solid(materials::kMud));
+  for (int x = 0; x < 32; ++x) {
+    // The last write to each x (i = x - 1 + 31k) decides it; x = 0 kept sand.
+    const int last = x == 0 ? -1 : x - 1 + 31 * ((3 * RowPackedBox<32>::kRepackBudget - x) / 31);
+    const Material want = x == 0 ? materials::kSand : last % 2 ? materials::kRock : materials::kSand;
+    EXPECT_EQ(box.get(x, 0, 0), solid(want)) << x;
+  }
+}
+
+TEST(RowPackedBox, RecordsBeyondFifteenBitOffsetsStayUnpacked) {
+  // 513 distinct rows of 17+ materials (raw, 64 bytes each) pass 32 KiB of
+  // records: the box falls back to unpacked mode and reads back exactly.
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  box.modify_rows(0, 17, 0, 32, [&](int y, int z, Voxel* row) {
+    const int r = y * 32 + z;
+    if (r >= 513) return;
+    for (int x = 0; x < 32; ++x) {
+      row[x] = make_voxel(static_cast<Material>(1 + (x + r) % 40), static_cast<std::uint8_t>(r));
+      ref.set(x, y, z, row[x]);
+    }
+  });
+  EXPECT_TRUE(box.unpacked());
+  expect_equal(box, ref, "past 32 KiB");
+  box.compact();
+  EXPECT_TRUE(box.unpacked());
+  expect_equal(box, ref, "compacted past 32 KiB");
 }
 
 TEST(RowPackedBox, BoxReturnsToUniformWhenContentDoes) {
