@@ -175,7 +175,9 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
       const Vec3i w = l - uc * kUpdateUnitSize;
       return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
     });
-    grid_.pack_mips(cp);  // the replica keeps its mips encoded, as the server does
+    // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
+    // keep coming: encoding them for every batch would cost a bot more than
+    // the update itself; the replica holds full resolution only near it.
     begin = end;
   }
   for (const auto& r : m.revisions) {
