@@ -326,8 +326,9 @@ class RowPackedBox {
   // keep at the same ids. Identical records are stored
   // once. Becomes uniform when every row ends up uniform alike. Falls back to
   // unpacked mode if the records would not fit 15-bit byte offsets.
+  // (known: the touched rows' summaries, if the caller made them.)
   void rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content, row_packed_detail::PaletteTable& table,
-                    bool grow_table);
+                    bool grow_table, const row_packed_detail::RowSummary* known = nullptr);
   // Unpacked mode from the rows in the rectangle (content as for
   // rebuild_rect) and the box's other rows.
   void unpack_from(int y0, int y1, int z0, int z1, const Voxel* content);

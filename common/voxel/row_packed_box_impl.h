@@ -169,16 +169,19 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
 
 template <int N>
 void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* content,
-                                   row_packed_detail::PaletteTable& table, bool grow_table) {
+                                   row_packed_detail::PaletteTable& table, bool grow_table,
+                                   const row_packed_detail::RowSummary* known) {
   const int nz = z1 - z0;
   const std::uint8_t* old_table = this->table();
   // Touched rows are summarised once; they may add their palettes to the
   // table while it has room.
-  thread_local std::vector<row_packed_detail::RowSummary> summaries;
-  summaries.resize(static_cast<std::size_t>((y1 - y0) * nz));
+  thread_local std::vector<row_packed_detail::RowSummary> made;
+  if (known == nullptr) made.resize(static_cast<std::size_t>((y1 - y0) * nz));
+  for (int i = 0; known == nullptr && i < (y1 - y0) * nz; ++i)
+    made[static_cast<std::size_t>(i)] = row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+  const row_packed_detail::RowSummary* summaries = known != nullptr ? known : made.data();
   for (int i = 0; i < (y1 - y0) * nz; ++i) {
-    const row_packed_detail::RowSummary& s = summaries[static_cast<std::size_t>(i)] =
-        row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+    const row_packed_detail::RowSummary& s = summaries[i];
     if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette && table.find(s.materials, s.p) < 0)
       table.add(s.materials, s.p);
   }
@@ -299,8 +302,11 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
     Material materials[row_packed_detail::kMaxPalette] = {};
   };
   std::vector<Candidate> candidates;
+  thread_local std::vector<row_packed_detail::RowSummary> summaries;
+  summaries.resize(kRows);
   for (int r = 0; r < kRows; ++r) {
-    const row_packed_detail::RowSummary s = row_packed_detail::summarize_row(content + std::size_t(r) * N, N);
+    const row_packed_detail::RowSummary& s = summaries[static_cast<std::size_t>(r)] =
+        row_packed_detail::summarize_row(content + std::size_t(r) * N, N);
     if (s.uniform || s.p > row_packed_detail::kMaxPalette) continue;
     auto it = std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) {
       return c.p == s.p && std::equal(c.materials, c.materials + c.p, s.materials);
@@ -321,7 +327,7 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
     if (c.saving > 1 + c.p) table.add(c.materials, c.p);
   shift_ = 0;
   repacks_ = 0;
-  rebuild_rect(0, N, 0, N, content, table, false);
+  rebuild_rect(0, N, 0, N, content, table, false, summaries.data());
 }
 
 template <int N>
