@@ -45,9 +45,31 @@ int occupancy_bytes(const std::uint8_t* p, int n) {
   return bitmap_bytes(n) + set;
 }
 
-// Where a record's body (indices or run count) starts.
-const std::uint8_t* record_body(const std::uint8_t* rec, const std::uint8_t* pal) {
-  return (rec[0] & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
+// An index or run record's parts, found once for every reader of it.
+struct RecordParts {
+  const std::uint8_t* pal;   // P - 1, then P materials
+  const std::uint8_t* body;  // the indices, or the run count then the runs
+  const std::uint8_t* end;   // the occupancy section, if the tag has one
+  bool runs;
+  int bits;    // index records: bits per voxel
+  int groups;  // index records: index bytes
+};
+
+RecordParts parts_of(const std::uint8_t* rec, const std::uint8_t* table, int n) {
+  RecordParts p{};
+  p.pal = record_palette(rec, table);
+  p.body = (rec[0] & kPaletteMask) == kInlinePalette ? rec + 3 + p.pal[0] : rec + 1;
+  p.runs = (rec[0] & kKindMask) == kKindRuns;
+  p.bits = index_bits(p.pal[0] + 1);
+  p.groups = (n * p.bits + 7) / 8;
+  p.end = p.runs ? p.body + 1 + p.body[0] : p.body + p.groups;
+  return p;
+}
+
+// The palette index of voxel x of an index record.
+int index_at(const RecordParts& p, int x) {
+  return p.bits == 1 ? (p.body[x / 8] >> (x % 8)) & 1
+                     : (p.body[x % p.groups] >> (p.bits * (x / p.groups))) & ((1 << p.bits) - 1);
 }
 
 }  // namespace
@@ -92,7 +114,6 @@ int PaletteTable::add(const Material* materials, int p) {
 
 void PaletteTable::write(std::uint8_t* out) const {
   out[0] = static_cast<std::uint8_t>(count_);
-  if (count_ == 0) return;
   const int base = 1 + count_;
   for (int id = 0; id < count_; ++id) out[1 + id] = static_cast<std::uint8_t>(base + offsets_[static_cast<std::size_t>(id)]);
   std::memcpy(out + base, pool_.data(), static_cast<std::size_t>(used_));
@@ -144,7 +165,7 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
   const int bits = index_bits(s.p);
   const int groups = (n * bits + 7) / 8;
   const int index_size = head + groups + occ_size;
-  const int run_size = s.p <= kMaxRunPalette && runs <= kMaxRuns ? head + 1 + runs + occ_size : raw + 1;
+  const int run_size = s.p <= kMaxRunPalette ? head + 1 + runs + occ_size : raw + 1;
   if (std::min(index_size, run_size) >= raw) {
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return raw;
@@ -186,72 +207,48 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
 }
 
 int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n) {
-  const unsigned tag = rec[0];
-  if (tag < kKindIndex) return 2 * n;
-  const std::uint8_t* pal = record_palette(rec, table);
-  const std::uint8_t* body = record_body(rec, pal);
-  const std::uint8_t* end =
-      (tag & kKindMask) == kKindRuns ? body + 1 + body[0] : body + (n * index_bits(pal[0] + 1) + 7) / 8;
-  if (tag & kTagOccupancy) end += occupancy_bytes(end, n);
+  if (rec[0] < kKindIndex) return 2 * n;
+  const RecordParts p = parts_of(rec, table, n);
+  const std::uint8_t* end = p.end + ((rec[0] & kTagOccupancy) ? occupancy_bytes(p.end, n) : 0);
   return static_cast<int>(end - rec);
 }
 
 void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n) {
-  const unsigned tag = rec[0];
-  const std::uint8_t* pal = record_palette(rec, table);
-  const std::uint8_t* body = record_body(rec, pal);
-  const std::uint8_t* end;
-  if ((tag & kKindMask) == kKindRuns) {
-    const int runs = body[0];
+  const RecordParts p = parts_of(rec, table, n);
+  if (p.runs) {
+    const int runs = p.body[0];
     for (int r = 0; r < runs; ++r) {
-      const int from = body[1 + r] & 31;
-      const int to = r + 1 < runs ? body[2 + r] & 31 : n;
-      const Voxel v = solid(pal[1 + (body[1 + r] >> 5)]);
+      const int from = p.body[1 + r] & 31;
+      const int to = r + 1 < runs ? p.body[2 + r] & 31 : n;
+      const Voxel v = solid(p.pal[1 + (p.body[1 + r] >> 5)]);
       for (int x = from; x < to; ++x) out[x] = v;
     }
-    end = body + 1 + runs;
   } else {
-    const int bits = index_bits(pal[0] + 1);
-    const int groups = (n * bits + 7) / 8;
-    for (int x = 0; x < n; ++x) {
-      const int i = bits == 1 ? (body[x / 8] >> (x % 8)) & 1
-                              : (body[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
-      out[x] = solid(pal[1 + i]);
-    }
-    end = body + groups;
+    for (int x = 0; x < n; ++x) out[x] = solid(p.pal[1 + index_at(p, x)]);
   }
-  if (tag & kTagOccupancy) {
-    const std::uint8_t* occ = end + bitmap_bytes(n);
+  if (rec[0] & kTagOccupancy) {
+    const std::uint8_t* occ = p.end + bitmap_bytes(n);
     for (int x = 0; x < n; ++x)
-      if ((end[x / 8] >> (x % 8)) & 1) out[x].occupancy = *occ++;
+      if ((p.end[x / 8] >> (x % 8)) & 1) out[x].occupancy = *occ++;
   }
 }
 
 Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, int x) {
-  const unsigned tag = rec[0];
-  const std::uint8_t* pal = record_palette(rec, table);
-  const std::uint8_t* body = record_body(rec, pal);
-  const std::uint8_t* end;
+  const RecordParts p = parts_of(rec, table, n);
   Material m;
-  if ((tag & kKindMask) == kKindRuns) {
-    const int runs = body[0];
+  if (p.runs) {
+    const int runs = p.body[0];
     int r = 0;
-    while (r + 1 < runs && (body[2 + r] & 31) <= x) ++r;
-    m = pal[1 + (body[1 + r] >> 5)];
-    end = body + 1 + runs;
+    while (r + 1 < runs && (p.body[2 + r] & 31) <= x) ++r;
+    m = p.pal[1 + (p.body[1 + r] >> 5)];
   } else {
-    const int bits = index_bits(pal[0] + 1);
-    const int groups = (n * bits + 7) / 8;
-    const int i = bits == 1 ? (body[x / 8] >> (x % 8)) & 1
-                            : (body[x % groups] >> (bits * (x / groups))) & ((1 << bits) - 1);
-    m = pal[1 + i];
-    end = body + groups;
+    m = p.pal[1 + index_at(p, x)];
   }
-  if ((tag & kTagOccupancy) && ((end[x / 8] >> (x % 8)) & 1)) {
+  if ((rec[0] & kTagOccupancy) && ((p.end[x / 8] >> (x % 8)) & 1)) {
     int before = 0;
-    for (int i = 0; i < x / 8; ++i) before += std::popcount(static_cast<unsigned>(end[i]));
-    before += std::popcount(static_cast<unsigned>(end[x / 8] & ((1u << (x % 8)) - 1)));
-    return make_voxel(m, end[bitmap_bytes(n) + before]);
+    for (int i = 0; i < x / 8; ++i) before += std::popcount(static_cast<unsigned>(p.end[i]));
+    before += std::popcount(static_cast<unsigned>(p.end[x / 8] & ((1u << (x % 8)) - 1)));
+    return make_voxel(m, p.end[bitmap_bytes(n) + before]);
   }
   return solid(m);
 }

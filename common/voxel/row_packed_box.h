@@ -95,7 +95,6 @@ inline constexpr std::uint8_t kPaletteMask = 0x1F;
 inline constexpr std::uint8_t kInlinePalette = 31;
 inline constexpr int kMaxPalette = 16;
 inline constexpr int kMaxRunPalette = 8;
-inline constexpr int kMaxRuns = 32;
 inline constexpr int kMaxTablePalettes = 31;
 inline constexpr int kMaxTableBytes = 255;
 
@@ -119,7 +118,7 @@ class PaletteTable {
   // Adopts the table at the front of a box's data (nullptr: empty).
   explicit PaletteTable(const std::uint8_t* table);
   int size() const { return count_; }
-  int bytes() const { return count_ == 0 ? 1 : 1 + count_ + used_; }
+  int bytes() const { return 1 + count_ + used_; }
   // The id of the palette with exactly these materials, or -1.
   int find(const Material* materials, int p) const;
   // Whether a palette of p materials would fit.

@@ -122,7 +122,7 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     } else if (!(h & kAllocated) || row_packed_detail::record_bytes(record(h), this->table(), N) < sizes[i] ||
                (rec[0] >= row_packed_detail::kKindIndex &&
                 (rec[0] & row_packed_detail::kPaletteMask) == row_packed_detail::kInlinePalette &&
-                table.fits(row_packed_detail::summarize_row(content.data() + static_cast<std::size_t>(i) * N, N).p))) {
+                table.fits(rec[1] + 1))) {  // an inline palette's first byte is P - 1
       // A record that grows, or whose palette could join the table, is rebuilt.
       in_place = false;
     } else if (std::memcmp(record(h), rec, static_cast<std::size_t>(sizes[i])) != 0) {
