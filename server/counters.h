@@ -45,7 +45,8 @@ class DurationHistogram {
 // Why a session ended: one label each on terrane_disconnects_total. The
 // text sent to the client (Disconnect.reason) says more.
 enum class CloseReason : std::uint8_t {
-  kPeerClosed,        // the client closed the socket
+  kPeerClosed,        // the client closed the socket (FIN, or a reset when it
+                      // left with our data unread)
   kClientBye,         // the client sent Disconnect
   kSocketError,
   kHandshakeTimeout,

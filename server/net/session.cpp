@@ -11,6 +11,16 @@ constexpr std::size_t kReadChunkBytes = 64 * 1024;
 constexpr std::size_t kWriteGatherBytes = 256 * 1024;
 // How often the watchdog checks the read/write deadlines.
 constexpr std::chrono::milliseconds kWatchdogPeriod{200};
+
+// A client that leaves with our data unread makes its kernel answer with a
+// reset, not a FIN: the read or the write then fails with ECONNRESET or
+// EPIPE. It is still the client closing, not a fault of the socket.
+CloseReason close_reason_of(const asio::error_code& ec) {
+  if (ec == asio::error::eof || ec == asio::error::connection_reset || ec == asio::error::broken_pipe) {
+    return CloseReason::kPeerClosed;
+  }
+  return CloseReason::kSocketError;
+}
 }  // namespace
 
 Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLimits& limits, InboundFn on_message,
@@ -104,7 +114,7 @@ void Session::do_read() {
         if (ec) {
           if (self->state_ == State::kReading) {
             self->close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
-            self->close_why_ = ec == asio::error::eof ? CloseReason::kPeerClosed : CloseReason::kSocketError;
+            self->close_why_ = close_reason_of(ec);
           }
           self->finish_close();
           return;
@@ -272,7 +282,7 @@ void Session::do_write() {
     if (ec) {
       if (self->close_reason_.empty()) {
         self->close_reason_ = ec.message();
-        self->close_why_ = CloseReason::kSocketError;
+        self->close_why_ = close_reason_of(ec);
       }
       self->finish_close();
       return;

@@ -44,6 +44,14 @@ class RawPeer {
     if (fd_ >= 0) ::close(fd_);
     fd_ = -1;
   }
+  // Closes with a reset (RST) instead of a FIN, as a kernel does for a
+  // client that leaves with data unread.
+  void reset() {
+    if (fd_ < 0) return;
+    const linger abort_now{1, 0};
+    ::setsockopt(fd_, SOL_SOCKET, SO_LINGER, &abort_now, sizeof abort_now);
+    close();
+  }
   bool send(std::span<const std::uint8_t> bytes) {
     while (!bytes.empty()) {
       const ssize_t n = ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL);
