@@ -158,6 +158,7 @@ void Client::start_session() {
       // What the replica still holds, so current chunks are not resent.
       std::vector<HeldChunkMsg> held;
       replica_.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
+        if (c.estimate) return;  // not the chunk's mip: streamed again
         held.push_back(HeldChunkMsg{cp, c.revision,
                                     c.state == CoverageState::kEmpty ? kHeldEmpty
                                     : c.state == CoverageState::kFull ? 0
@@ -494,6 +495,10 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
             kind = wire::CoverageKind::Full;
             ++counters_.coverage_full;
             counters_.chunk_units += 8;
+            break;
+          case StreamRecordKind::kEstimate:
+            ++counters_.mips;
+            ++counters_.estimates;
             break;
           default:
             ++counters_.mips;

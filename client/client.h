@@ -126,6 +126,7 @@ struct ClientCounters {
   std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
   std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
   std::uint64_t mips = 0;
+  std::uint64_t estimates = 0;  // of mips: Estimate records (a chunk's coarsest mip estimated)
   std::uint64_t coverage_empty = 0;
   std::uint64_t coverage_full = 0;
   std::uint64_t released = 0;

@@ -83,11 +83,20 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip1:
     case StreamRecordKind::kMip2:
     case StreamRecordKind::kMip3:
-      mips_[cp] = Mip{r.level, *r.voxels};
+    case StreamRecordKind::kEstimate: {
+      auto [it, fresh] = mips_.try_emplace(cp, Mip{r.level, *r.voxels});
+      if (!fresh) {
+        if (it->second.level == r.level && it->second.voxels.voxels().size() == r.voxels->voxels().size() &&
+            std::equal(it->second.voxels.voxels().begin(), it->second.voxels.voxels().end(),
+                       r.voxels->voxels().begin()))
+          ++redundant_mips_;
+        it->second = Mip{r.level, *r.voxels};
+      }
       pending_.erase(cp);
-      coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision};
+      coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
       grid_.erase_chunk(cp);
       return;
+    }
   }
 }
 
@@ -242,6 +251,11 @@ std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
   const ChunkCoverage* c = coverage(cp);
   if (c == nullptr) return std::nullopt;
   return c->revision;
+}
+
+std::size_t Replica::estimate_count() const {
+  return static_cast<std::size_t>(
+      std::count_if(coverage_.begin(), coverage_.end(), [](const auto& kv) { return kv.second.estimate; }));
 }
 
 std::size_t Replica::chunk_count(CoverageState state) const {

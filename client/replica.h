@@ -33,6 +33,9 @@ struct ChunkCoverage {
   CoverageState state = CoverageState::kEmpty;
   int level = 0;  // kMip: 1..3; otherwise 0
   std::uint64_t revision = 0;
+  // kMip level 3 from an Estimate record: the server's estimate for a chunk
+  // never generated, not yet its mip (never claimed in Holdings).
+  bool estimate = false;
 };
 
 // resolution_at(): -1 nothing known, 0 full resolution (or known Air),
@@ -81,6 +84,11 @@ class Replica {
   }
 
   std::size_t chunk_count(CoverageState state) const;
+  // Chunks held as estimates now.
+  std::size_t estimate_count() const;
+  // Mip records that brought a chunk's level again with the very voxels
+  // held at that level (a refresh that told nothing; the server avoids them).
+  std::uint64_t redundant_mips() const { return redundant_mips_; }
   std::size_t chunk_count() const { return coverage_.size(); }
   const Grid& grid() const { return grid_; }
   template <class F>
@@ -111,6 +119,7 @@ class Replica {
   std::unordered_map<Vec3i, Pending, Vec3iHash> pending_;
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
+  std::uint64_t redundant_mips_ = 0;
 };
 
 }  // namespace terrane

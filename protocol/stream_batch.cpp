@@ -70,7 +70,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       return DecodeError{DecodeErrorCode::kOverLimit, r.pos(), "stream batch: more than 4096 records"};
     auto kind = r.byte();
     if (!kind) return kind.error();
-    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kReleased))
+    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kEstimate))
       return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: unknown record kind"};
     // A delta is bounded before it is added: the previous position is within
     // +-lim, so any delta beyond 2*lim lands out of range (and an unchecked
@@ -108,8 +108,9 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         break;
       case StreamRecordKind::kMip1:
       case StreamRecordKind::kMip2:
-      case StreamRecordKind::kMip3: {
-        rec.level = static_cast<int>(rec.kind);
+      case StreamRecordKind::kMip3:
+      case StreamRecordKind::kEstimate: {
+        rec.level = rec.kind == StreamRecordKind::kEstimate ? kMipLevels - 1 : static_cast<int>(rec.kind);
         const int n = kChunkSize >> rec.level;
         s.mip.resize({n, n, n});
         auto used = net_codec_decode_prefix(n, r.rest(), s.mip.voxels());

@@ -11,6 +11,9 @@
 //     kind 4 Full      eight 16^3 network codec units, unit i at offset
 //                      (i & 1, (i >> 1) & 1, (i >> 2) & 1) * 16
 //     kind 5 Released  the chunk left the view; no payload
+//     kind 6 Estimate  one 4^3 unit, as Mip 3, estimated from the world's
+//                      generator for a chunk never generated; replaced by
+//                      a Mip or Empty record when the exact mip differs
 //   (dx, dy, dz) is the chunk position minus the previous record's (the
 //   first record's is relative to (0, 0, 0)).
 //
@@ -30,7 +33,15 @@
 
 namespace terrane {
 
-enum class StreamRecordKind : std::uint8_t { kEmpty = 0, kMip1 = 1, kMip2 = 2, kMip3 = 3, kFull = 4, kReleased = 5 };
+enum class StreamRecordKind : std::uint8_t {
+  kEmpty = 0,
+  kMip1 = 1,
+  kMip2 = 2,
+  kMip3 = 3,
+  kFull = 4,
+  kReleased = 5,
+  kEstimate = 6,
+};
 
 // Records in one batch at most (bounds a receiver's work per frame).
 inline constexpr std::size_t kMaxStreamRecords = 4096;
@@ -42,7 +53,7 @@ struct StreamRecord {
   StreamRecordKind kind = StreamRecordKind::kEmpty;
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
-  int level = 0;               // 0 for Full, 1..3 for Mip
+  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate
   const Box* voxels = nullptr; // Full: 32^3; Mip: (32 >> level)^3; else null
 };
 

@@ -110,6 +110,7 @@ struct ServerCounters {
   std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(RejectReason::kCount)> edits_rejected_by{};
   std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
   std::atomic<std::uint64_t> mips_sent{0};
+  std::atomic<std::uint64_t> estimates_sent{0};  // Estimate records (a coarsest mip estimated)
   std::atomic<std::uint64_t> empties_sent{0};
   std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
   std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not
@@ -125,6 +126,10 @@ struct ServerCounters {
   std::atomic<std::uint64_t> limit_violations{0};
   std::atomic<std::uint64_t> auth_failures{0};
   std::atomic<std::uint64_t> chunks_resumed{0};  // claimed by a resuming client, still current, not resent
+  // Estimated chunks generated for real (world strand): each replaced its
+  // estimate; corrected: the exact mip differed, so holders were sent it.
+  std::atomic<std::uint64_t> estimates_replaced{0};
+  std::atomic<std::uint64_t> estimates_corrected{0};
   // Per-tick cost split (world strand): applying edits and publishing
   // versions (the tick), and fanning committed changes out to their
   // holders. Commit time is the storage's (StorageCounters).

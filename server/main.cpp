@@ -61,6 +61,9 @@ constexpr const char* kHelp =
     "                              their newest bytes (default 500; 0 = every tick)\n"
     "  --hash-push-ms N            push one region hash per client this often, 0 = off\n"
     "                              (default 1000)\n"
+    "  --exact-horizon             send no estimates: a distant chunk never generated is generated\n"
+    "                              whole before its coarse mip is sent (by default its mip is\n"
+    "                              first estimated at the mip's resolution, then replaced)\n"
     "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
@@ -106,7 +109,7 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open"});
+                 {"help", "open", "exact-horizon"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -152,6 +155,7 @@ int run(int argc, char** argv) {
   if (cl.has("admin-token") && o.admin_token.size() < 8)
     return usage_error("--admin-token: at least 8 characters (it lets its holder kick, ban and stop the server)");
   o.allow_open = cl.flag("open");
+  o.horizon_estimates = !cl.flag("exact-horizon");
   o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
   o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
   o.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));

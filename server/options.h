@@ -48,6 +48,10 @@ struct ServerOptions {
   // editing (about once a second the least recently used of the rest go;
   // they come back from the store).
   std::size_t resident_chunks = 32768;
+  // A distant chunk never generated is first sent as an estimate of its
+  // coarsest mip (World::estimate_coarse), then generated in the background
+  // and corrected; false: generated whole before its mip is sent.
+  bool horizon_estimates = true;
   SessionLimits session;
   int io_threads = 2;
   // Loader threads: reading stored chunks and generating missing ones.

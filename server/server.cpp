@@ -31,6 +31,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   auto storage = Storage::open(*s->world_, s->options_.worker_threads);
   if (!storage) return storage.error();
   s->storage_ = std::move(*storage);
+  s->storage_->set_horizon_estimates(options.horizon_estimates);
   s->storage_->set_edit_log_retention(std::chrono::hours(24) * options.edit_log_days,
                                       static_cast<std::uint64_t>(options.edit_log_mb) << 20);
 

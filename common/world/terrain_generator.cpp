@@ -368,8 +368,10 @@ TerrainGenerator::Column TerrainGenerator::column(const Surface& s, float h_xm, 
 }
 
 void TerrainGenerator::lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const {
-  const double x = static_cast<double>(lx) * kStep, y = static_cast<double>(ly) * kStep,
-               z = static_cast<double>(lz) * kStep;
+  fields_at(static_cast<double>(lx) * kStep, static_cast<double>(ly) * kStep, static_cast<double>(lz) * kStep, out);
+}
+
+void TerrainGenerator::fields_at(double x, double y, double z, float out[4]) const {
   out[0] = clampf(2.0f * fbm3(x / 26.0, y / 20.0, z / 26.0, seeds_[kOverhang], 2), -1.0f, 1.0f);
   if (params_.caves) {
     out[1] = gradient_noise3(x / 64.0, y / 40.0, z / 64.0, seeds_[kWormA]);
@@ -384,7 +386,7 @@ void TerrainGenerator::lattice_sample(std::int32_t lx, std::int32_t ly, std::int
 // each field (corners[f * 8 + i]); it is read only for y in
 // [lattice_lo, lattice_hi] and may be null elsewhere.
 Voxel TerrainGenerator::shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z,
-                              const float* corners) const {
+                              const float* corners, float sharpness) const {
   if (y < kBedrockY) return solid(m::kBasalt);
   const auto fy = static_cast<float>(y);
   float d = 1.0f;
@@ -396,7 +398,8 @@ Voxel TerrainGenerator::shade(const Column& col, std::int32_t x, std::int32_t y,
     const float fz = static_cast<float>(floor_mod(z, kStep)) * kInvStep;
     if (y > col.bot_y) {
       const float ov = trilerp(corners, fx, fyl, fz);
-      d = clampf((col.height + col.overhang * ov - fy) * col.inv_len + col.normal_overhang * ov, -1.0f, 1.0f);
+      d = clampf(((col.height + col.overhang * ov - fy) * col.inv_len + col.normal_overhang * ov) * sharpness, -1.0f,
+                 1.0f);
     }
     if (params_.caves && y >= kCaveMinY && d > -1.0f) {
       const float a = trilerp(corners + 8, fx, fyl, fz);
@@ -412,7 +415,7 @@ Voxel TerrainGenerator::shade(const Column& col, std::int32_t x, std::int32_t y,
       // below water, so the sea never pours into an air pocket.
       const float depth = col.height - fy;
       if (depth < col.cave_guard) dc += col.cave_guard - depth;
-      d = std::min(d, clampf(dc, -1.0f, 1.0f));
+      d = std::min(d, clampf(dc * sharpness, -1.0f, 1.0f));
     }
   }
 
@@ -631,6 +634,58 @@ void TerrainGenerator::generate(const Region& region, Box& out) const {
           cp = corners;
         }
         row[x] = shade(c, wx, wy, wz, cp);
+      }
+    }
+  }
+}
+
+void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& out) const {
+  out.resize(count);
+  if (count.x <= 0 || count.y <= 0 || count.z <= 0) return;
+  cell = std::max(cell, 1);
+  const std::int32_t half = cell / 2;
+  // The surface ramp (and the caves' walls) widened from about two voxels to
+  // about two cells: a cell's occupancy approximates its voxels' mean.
+  const float sharpness = 2.0f / static_cast<float>(std::max(cell, 2));
+  const int nx = count.x, ny = count.y, nz = count.z;
+  const auto at = [&](int i, std::int32_t o) { return o + static_cast<std::int32_t>(cell) * i + half; };
+  // The columns at the cells' centres, their bands widened by the wider
+  // ramp (a cell whose centre is above the band may still reach into it).
+  std::vector<Column> cols(static_cast<std::size_t>(nx) * nz);
+  for (int z = 0; z < nz; ++z) {
+    for (int x = 0; x < nx; ++x) {
+      const std::int32_t wx = at(x, origin.x), wz = at(z, origin.z);
+      Column c = column(surface(wx, wz), surface(wx - 1, wz).height, surface(wx + 1, wz).height,
+                        surface(wx, wz - 1).height, surface(wx, wz + 1).height);
+      // (The ramp is len voxels wide per voxel along y: cell * len here.)
+      const auto widen = static_cast<std::int32_t>(std::ceil(static_cast<float>(half) / c.inv_len));
+      c.top_y += widen;
+      c.bot_y -= widen;
+      // The cell's centre lies half a voxel below the voxel evaluated (at
+      // an even cell): the surface is raised by as much instead.
+      if (cell % 2 == 0) c.height += 0.5f;
+      cols[static_cast<std::size_t>(z) * nx + x] = c;
+    }
+  }
+  // The 3D fields are evaluated at each centre (not interpolated from the
+  // lattice generate() uses: one evaluation per cell, not per lattice point).
+  float corners[kFields * 8];
+  for (int y = 0; y < ny; ++y) {
+    const std::int32_t wy = at(y, origin.y);
+    for (int z = 0; z < nz; ++z) {
+      const std::int32_t wz = at(z, origin.z);
+      Voxel* row = out.write_row(y, z);
+      for (int x = 0; x < nx; ++x) {
+        const Column& c = cols[static_cast<std::size_t>(z) * nx + x];
+        const std::int32_t wx = at(x, origin.x);
+        const float* cp = nullptr;
+        if (wy < c.top_y && wy >= kBedrockY) {
+          float v[kFields];
+          fields_at(static_cast<double>(wx), static_cast<double>(wy), static_cast<double>(wz), v);
+          for (int f = 0; f < kFields; ++f) std::fill_n(corners + f * 8, 8, v[f]);
+          cp = corners;
+        }
+        row[x] = shade(c, wx, wy, wz, cp, sharpness);
       }
     }
   }

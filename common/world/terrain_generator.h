@@ -93,6 +93,16 @@ class TerrainGenerator {
   // The reference path: one voxel, the same value generate() produces.
   Voxel voxel_at(Vec3i p) const;
 
+  // The terrain at a coarser resolution: out (resized to count) gets, in
+  // Box order, one voxel per cell of cell^3 voxels, the cell i covering
+  // [origin + cell * i, origin + cell * (i + 1)). Each is evaluated once, at
+  // the cell's centre, with the surface's occupancy ramp widened to the
+  // cell, so it approximates the mean of the cell's voxels (as the mips'
+  // downsampling would give) at 1 / cell^3 of generate()'s cost. An
+  // estimate, not a mip: it differs where the terrain has detail finer
+  // than a cell. Every output voxel keeps the Air invariant. cell >= 1.
+  void coarse_sample(Vec3i origin, int cell, Vec3i count, Box& out) const;
+
   // The surface height of column (x, z) before 3D overhangs and caves (the
   // terrain density at (x, y, z) is positive for y a little below it), and its
   // biome. Cheap 2D queries for spawn points, maps and tests.
@@ -123,7 +133,12 @@ class TerrainGenerator {
   float raw_height(double px, double pz, Surface* s) const;
   Column column(const Surface& c, float h_xm, float h_xp, float h_zm, float h_zp) const;
   void lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const;
-  Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners) const;
+  // The 3D fields (overhang, two worms, cavern) at a point.
+  void fields_at(double x, double y, double z, float out[4]) const;
+  // sharpness scales the density before it is clamped: 1 for voxels, 2 /
+  // cell for a coarse_sample cell.
+  Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners,
+              float sharpness = 1.0f) const;
 
   // The per-column part of generate() for a footprint: 2D noise fields
   // (with a one-voxel margin for the slope) turned into Columns.

@@ -70,7 +70,42 @@ bool World::generates_air(Vec3i chunk_pos) const {
   return !generator_ || inside.empty() || generator_->all_air(inside);
 }
 
+std::vector<CoarseVoxels> World::estimate_coarse(std::span<const Vec3i> chunks) const {
+  std::vector<CoarseVoxels> out(chunks.size(), CoarseVoxels{});
+  if (!generator_) return out;
+  constexpr int kCell = kChunkSize / kCoarseSide;  // 8: voxels a side per coarse voxel
+  // Column stacks: the chunks of each (x, z), sampled in one call.
+  std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::size_t>> stacks;
+  for (std::size_t i = 0; i < chunks.size(); ++i) stacks[{chunks[i].x, chunks[i].z}].push_back(i);
+  Box cells;
+  for (const auto& [xz, members] : stacks) {
+    std::int32_t lo = chunks[members.front()].y, hi = lo;
+    for (const std::size_t i : members) {
+      lo = std::min(lo, chunks[i].y);
+      hi = std::max(hi, chunks[i].y);
+    }
+    generator_->coarse_sample(Vec3i{xz.first, lo, xz.second} * kChunkSize, kCell,
+                              Vec3i{kCoarseSide, kCoarseSide * (hi - lo + 1), kCoarseSide}, cells);
+    for (const std::size_t i : members) {
+      const int y0 = (chunks[i].y - lo) * kCoarseSide;
+      const Vec3i base = chunks[i] * kChunkSize;
+      CoarseVoxels& c = out[i];
+      for (int y = 0; y < kCoarseSide; ++y)
+        for (int z = 0; z < kCoarseSide; ++z)
+          for (int x = 0; x < kCoarseSide; ++x) {
+            // Cells outside the bounds are Air, as generate_chunk's voxels.
+            const Vec3i centre = base + Vec3i{x, y, z} * kCell + Vec3i{kCell / 2, kCell / 2, kCell / 2};
+            c[static_cast<std::size_t>((y * kCoarseSide + z) * kCoarseSide + x)] =
+                meta().bounds.contains(centre) ? cells.get({x, y0 + y, z}) : Voxel{};
+          }
+    }
+  }
+  return out;
+}
+
 Chunk World::generate_chunk(Vec3i chunk_pos) const {
+  // Sky known from the columns alone: no voxel to evaluate.
+  if (generates_air(chunk_pos)) return Chunk(kAir);
   Box box;
   generate_chunk_box(chunk_pos, box);
   // Sky (most chunks of a generated world): no rows to pack, no mips to build.

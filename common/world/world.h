@@ -8,7 +8,9 @@
 
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "common/world/terrain_generator.h"
 #include "common/world/world_store.h"
@@ -39,6 +41,14 @@ class World {
   // True only if generate_chunk would be all Air, known without generating
   // it (TerrainGenerator::all_air; always true without a generator).
   bool generates_air(Vec3i chunk_pos) const;
+  // Estimates of chunks' coarsest mip (4^3), made from the generator at the
+  // mip's resolution (TerrainGenerator::coarse_sample, one evaluation per
+  // coarse voxel: 64 a chunk instead of 32,768; a column stack shares its
+  // 2D fields). Not the chunk's mip: the two differ where the terrain has
+  // detail finer than 8 voxels. Outside the bounds Air, as generate_chunk;
+  // all Air without a generator. One estimate per chunk of chunks, in that
+  // order. Thread-safe.
+  std::vector<CoarseVoxels> estimate_coarse(std::span<const Vec3i> chunks) const;
 
   // The stored chunk, or the generated one with revision 0 (or, if the
   // chunk's row was quarantined, the highest quarantined revision + 1).

@@ -171,6 +171,14 @@ std::string render_metrics(const MetricsSources& s) {
   m.sample("terrane_streamed_chunks_total", load(c.chunks_sent), "kind=\"full\"");
   m.sample("terrane_streamed_chunks_total", load(c.mips_sent), "kind=\"mip\"");
   m.sample("terrane_streamed_chunks_total", load(c.empties_sent), "kind=\"empty\"");
+  m.sample("terrane_streamed_chunks_total", load(c.estimates_sent), "kind=\"estimate\"");
+  m.counter("terrane_coarse_estimated_total", "Never-generated chunks whose coarsest mip was estimated.",
+            load(st.coarse_estimated));
+  m.counter("terrane_estimates_replaced_total", "Estimated chunks since generated for real.",
+            load(c.estimates_replaced));
+  m.counter("terrane_estimates_corrected_total",
+            "Of those, the chunks whose exact coarsest mip differed from the estimate (holders were sent it).",
+            load(c.estimates_corrected));
   m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
             load(c.chunks_resumed));
   m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));

@@ -414,9 +414,9 @@ void Replicator::pump() {
 void Replicator::request_more() {
   if (requested_.size() + ready_.size() >= kMaxRequests) return;
   std::vector<ChunkWant> wants;
-  auto want = [&](Vec3i cp, Intent intent, int level) {
+  auto want = [&](Vec3i cp, Intent intent, int level, bool exact = false) {
     requested_.emplace(cp, Request{intent, level});
-    wants.push_back(ChunkWant{cp, level == 0, level});
+    wants.push_back(ChunkWant{cp, level == 0, level, exact});
   };
   auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
   // Pass 1: the whole view at its coarsest, nearest first.
@@ -424,7 +424,9 @@ void Replicator::request_more() {
     if (!in_view(cp) || held_.count(cp) != 0 || requested_.count(cp) != 0) return;
     if (auto c = claims_.find(cp); c != claims_.end()) {
       const std::uint8_t l = c->second.level;
-      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l);
+      // A claim of Empty is checked against the chunk's own emptiness (an
+      // estimate is never Empty); a claimed mip's revision says enough.
+      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l, l == kHeldEmpty);
     }
     want(cp, Intent::kCoarse, kMipLevels - 1);
   };
@@ -504,11 +506,12 @@ void Replicator::send_ready() {
         }
       }
       send_chunk(*v, kMipLevels - 1);
-      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : kMipLevels - 1), v->revision()}, v);
+      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : kMipLevels - 1), v->revision(), v->estimate()},
+           v);
       continue;
     }
     send_chunk(*v, req.level);
-    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : req.level), v->revision()}, v);
+    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : req.level), v->revision(), v->estimate()}, v);
   }
   if (!ready_.empty()) arm_timer();
 }
@@ -517,6 +520,12 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
   if (v.empty()) {
     stream(StreamRecordKind::kEmpty, v.pos(), v.revision());
     counters_.empties_sent.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (v.estimate()) {
+    // Only level 3 exists of an estimate (the world grants it for no finer).
+    stream(StreamRecordKind::kEstimate, v.pos(), v.revision(), v.encoded(kMipLevels - 1));
+    counters_.estimates_sent.fetch_add(1, std::memory_order_relaxed);
     return;
   }
   stream(record_kind(level), v.pos(), v.revision(), v.encoded(level));
@@ -643,14 +652,17 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
   auto it = held_.find(cp);
   if (it == held_.end()) return;
   Held& h = it->second;
-  if (h.level == 0 || h.revision >= v->revision()) return;  // refined since, with newer data
+  if (h.level == 0 || v->estimate()) return;
+  // Refined since, with newer data (an estimate is replaced by the chunk's
+  // mip at the same revision: the world tells only when the two differ).
+  if (h.revision >= v->revision() && !h.estimate) return;
   if (v->empty()) {
     if (h.level != kHeldEmpty) stream(StreamRecordKind::kEmpty, cp, v->revision());
     h = Held{kHeldEmpty, v->revision()};
     return;
   }
   const int level = h.level == kHeldEmpty ? kMipLevels - 1 : h.level;
-  if (h.level != kHeldEmpty && v->level_since(level) <= h.revision) {
+  if (h.level != kHeldEmpty && !h.estimate && v->level_since(level) <= h.revision) {
     // The level held did not change: nothing to tell the client.
     counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
     return;

@@ -68,6 +68,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   struct Held {
     std::uint8_t level = kHeldEmpty;
     std::uint64_t revision = 0;
+    // Level 3 sent as an Estimate record (ChunkVersion::estimate): the
+    // chunk's exact mip replaces it, whatever the revisions say.
+    bool estimate = false;
   };
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;

@@ -40,10 +40,11 @@ void Storage::stop() {
   if (writer_.joinable()) writer_.join();
 }
 
-void Storage::load(Vec3i pos, LoadDone done, bool urgent) {
+void Storage::load(Vec3i pos, LoadDone done, Priority priority) {
   {
     std::lock_guard lock(readers_mutex_);
-    (urgent ? urgent_loads_ : loads_).push_back(LoadJob{pos, std::move(done), nullptr});
+    auto& q = priority == Priority::kUrgent ? urgent_loads_ : priority == Priority::kStream ? loads_ : background_loads_;
+    q.push_back(LoadJob{pos, std::move(done), nullptr});
   }
   post_load();
 }
@@ -62,7 +63,7 @@ void Storage::post_load() {
     LoadJob job;
     {
       std::lock_guard lock(readers_mutex_);
-      auto& q = !urgent_loads_.empty() ? urgent_loads_ : loads_;
+      auto& q = !urgent_loads_.empty() ? urgent_loads_ : !loads_.empty() ? loads_ : background_loads_;
       job = std::move(q.front());
       q.pop_front();
       store = std::move(readers_.back());
@@ -84,15 +85,32 @@ void Storage::post_load() {
     if (c.ok) {
       // Only chunks with no row of any kind are the generator's: a row
       // without an entry is damaged (its load quarantines it).
+      // With estimates on, every one of them is estimated from the generator
+      // at the mip's resolution, sky too: judging a chunk all Air exactly
+      // costs its 32 x 32 columns, more than its estimate (the background
+      // generation finds out). Otherwise sky is judged exactly and the rest
+      // is generated when wanted.
       const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
       const Vec3i base = job.pos * kCoarseRegionChunks;
+      std::vector<Vec3i> unknown;
       for (int y = 0; y < kCoarseRegionChunks; ++y)
         for (int z = 0; z < kCoarseRegionChunks; ++z)
           for (int x = 0; x < kCoarseRegionChunks; ++x) {
             const Vec3i cp = base + Vec3i{x, y, z};
-            if (known.count(cp) == 0 && world_.meta().bounds.touches_chunk(cp) && world_.generates_air(cp))
+            if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) continue;
+            if (!world_.generator())
+              c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
+            else if (estimate_coarse_)
+              unknown.push_back(cp);
+            else if (world_.generates_air(cp))
               c.air.push_back(cp);
           }
+      if (!unknown.empty()) {
+        std::vector<CoarseVoxels> voxels = world_.estimate_coarse(unknown);
+        c.estimates.reserve(unknown.size());
+        for (std::size_t i = 0; i < unknown.size(); ++i) c.estimates.push_back(CoarseEntry{unknown[i], 0, voxels[i]});
+        counters_.coarse_estimated.fetch_add(unknown.size(), std::memory_order_relaxed);
+      }
     }
     job.coarse_done(std::move(c));
   });

@@ -57,6 +57,11 @@ struct LoadedCoarse {
   // (sky; every one of a world without a generator), at revision 0: known
   // exactly without generating them.
   std::vector<Vec3i> air;
+  // The region's other chunks never stored, their coarsest mip estimated
+  // from the generator (World::estimate_coarse), revision 0: a distant view
+  // is served these until the chunks are generated for real. Empty when
+  // estimates are off.
+  std::vector<CoarseEntry> estimates;
   bool ok = true;  // false: the image could not be read or is damaged (error says why)
   std::string error;
 };
@@ -65,6 +70,7 @@ struct StorageCounters {
   std::atomic<std::uint64_t> loaded_from_store{0};
   std::atomic<std::uint64_t> coarse_images_read{0};
   std::atomic<std::uint64_t> generated{0};
+  std::atomic<std::uint64_t> coarse_estimated{0};  // chunks' coarsest mips estimated (LoadedCoarse::estimates)
   std::atomic<std::uint64_t> quarantined{0};
   std::atomic<std::uint64_t> commits{0};           // transactions
   std::atomic<std::uint64_t> ticks_committed{0};   // ticks carried by them
@@ -87,13 +93,19 @@ class Storage {
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.
   // Call before the first commit.
   void set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes);
+  // Whether a coarse image's read estimates the region's chunks never
+  // stored (LoadedCoarse::estimates). Call before the first load.
+  void set_horizon_estimates(bool on) { estimate_coarse_ = on; }
   ~Storage();
   Storage(const Storage&) = delete;
   Storage& operator=(const Storage&) = delete;
 
-  // urgent loads (an edit or a full-resolution request waits on them) go
-  // before the others (streaming a view's coarse chunks).
-  void load(Vec3i pos, LoadDone done, bool urgent = false);
+  // Which loads go first: urgent ones (an edit or a full-resolution request
+  // waits on them), then the stream's (a view's coarser chunks and coarse
+  // images), then background ones (chunks whose estimates are to be
+  // replaced), only when nothing else waits.
+  enum class Priority : std::uint8_t { kUrgent, kStream, kBackground };
+  void load(Vec3i pos, LoadDone done, Priority priority = Priority::kStream);
   // Reads a region's coarse image (queued with the other loads).
   void load_coarse(Vec3i region, CoarseDone done);
   // log: the tick's edits for the edit log, stored in the same transaction.
@@ -118,6 +130,7 @@ class Storage {
     CommitDone done;
   };
   void prune_log();
+  bool estimate_coarse_ = true;
   std::chrono::seconds log_max_age_{0};
   std::uint64_t log_max_bytes_ = 0;
   std::chrono::steady_clock::time_point next_prune_{};
@@ -136,7 +149,7 @@ class Storage {
     CoarseDone coarse_done;  // set: a coarse image
   };
   void post_load();
-  std::deque<LoadJob> urgent_loads_, loads_;
+  std::deque<LoadJob> urgent_loads_, loads_, background_loads_;
 
   std::unique_ptr<WorldStore> writer_store_;
   // The hand-off from the world strand to the writer thread. Guarded by

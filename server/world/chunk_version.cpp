@@ -53,6 +53,17 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::ui
   return v;
 }
 
+std::shared_ptr<const ChunkVersion> ChunkVersion::estimated(Vec3i pos, const CoarseVoxels& voxels) {
+  auto v = std::make_shared<ChunkVersion>(pos, 0, nullptr);
+  v->empty_ = false;
+  v->estimate_ = true;
+  v->has_voxels_ = false;
+  v->finest_level_ = kMipLevels - 1;
+  const auto l = static_cast<std::size_t>(kMipLevels - 1);
+  std::call_once(v->encoded_once_[l], [&] { net_codec_encode(kCoarseSide, voxels, v->encoded_[l]); });
+  return v;
+}
+
 std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   // Precondition: has_level(level) (a version without the voxels cannot
   // make a finer level; asking is a bug in the caller).

@@ -52,13 +52,21 @@ class ChunkVersion {
   // distant view needs, without reading the chunk. encoded() answers level
   // 3 only.
   static std::shared_ptr<const ChunkVersion> coarse_only(Vec3i pos, std::uint64_t revision, const CoarseVoxels& voxels);
+  // An estimate of a never-generated chunk's coarsest level
+  // (World::estimate_coarse), revision 0: like coarse_only, but never empty
+  // (Empty would claim the chunk all Air at full resolution; an all-Air
+  // estimate is sent as a mip) and marked estimate(), to be replaced when
+  // the chunk is generated.
+  static std::shared_ptr<const ChunkVersion> estimated(Vec3i pos, const CoarseVoxels& voxels);
 
   Vec3i pos() const { return pos_; }
   std::uint64_t revision() const { return revision_; }
   const Chunk* chunk() const { return chunk_.get(); }
   bool empty() const { return empty_; }
-  // False for a mips_only or coarse_only version.
+  // False for a mips_only, coarse_only or estimated version.
   bool has_voxels() const { return has_voxels_; }
+  // True for an estimated version: its level 3 is not the chunk's mip.
+  bool estimate() const { return estimate_; }
   // Whether encoded(level) can answer: every level for a chunk with its
   // voxels, 1..3 for mips_only, 3 for coarse_only.
   bool has_level(int level) const { return level >= finest_level_; }
@@ -85,6 +93,7 @@ class ChunkVersion {
   std::array<std::uint64_t, kMipLevels> level_since_;
   bool empty_ = true;
   bool has_voxels_ = true;
+  bool estimate_ = false;
   int finest_level_ = 0;
 
   mutable std::array<std::once_flag, kMipLevels> encoded_once_;

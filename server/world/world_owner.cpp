@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "common/codec/byte_rle.h"
+#include "common/codec/net_codec.h"
 #include "common/world/view.h"
 #include "server/log.h"
 
@@ -13,6 +14,22 @@ namespace {
 // Edits applied per tick at most: bounds a tick's work on the strand (each
 // edit touches at most kMaxEditVolume voxels).
 constexpr std::size_t kMaxEditsPerTick = 256;
+
+// Whether two n^3 network codec units hold the same voxels (a unit that
+// does not decode differs from everything).
+bool same_voxels(int n, std::span<const std::uint8_t> a, std::span<const std::uint8_t> b) {
+  if (std::equal(a.begin(), a.end(), b.begin(), b.end())) return true;
+  const auto count = static_cast<std::size_t>(n) * static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  std::vector<Voxel> va(count), vb(count);
+  return net_codec_decode(n, a, va).ok() && net_codec_decode(n, b, vb).ok() && va == vb;
+}
+
+bool all_air_unit(int n, std::span<const std::uint8_t> unit) {
+  const auto count = static_cast<std::size_t>(n) * static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  std::vector<Voxel> v(count);
+  return net_codec_decode(n, unit, v).ok() &&
+         std::all_of(v.begin(), v.end(), [](Voxel x) { return x.material == kAir; });
+}
 
 }  // namespace
 
@@ -92,8 +109,8 @@ void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
   asio::post(strand_, [this, id, chunks = std::move(chunks)] {
     if (clients_.count(id) == 0) return;
     for (const ChunkWant& w : chunks) {
-      if (w.level == kMipLevels - 1 && want_coarse(w.chunk_pos, Waiter{id, w.full})) continue;
-      if (request(w.chunk_pos, w.level)) {
+      if (w.level == kMipLevels - 1 && !w.exact && want_coarse(w.chunk_pos, Waiter{id, w.full})) continue;
+      if (request(w.chunk_pos, w.level, w.exact)) {
         grant(id, w.chunk_pos, w.full);
       } else {
         loading_[w.chunk_pos].push_back(Waiter{id, w.full});
@@ -112,6 +129,10 @@ void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
 void WorldOwner::grant(ClientId id, Vec3i cp, bool full) {
   Loaded& l = loaded_.at(cp);
   l.used_tick = tick_;
+  if (l.published->estimate() && l.replace == Loaded::Replace::kNo) {
+    l.replace = Loaded::Replace::kQueued;
+    estimates_.push_back(cp);
+  }
   interest_.hold(cp, id, full);
   grants_[id].push_back(l.published);
 }
@@ -127,13 +148,15 @@ void WorldOwner::flush_grants() {
 
 // --- chunks --------------------------------------------------------------------
 
-bool WorldOwner::request(Vec3i cp, int level) {
-  if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.current->has_level(level)) return true;
+bool WorldOwner::request(Vec3i cp, int level, bool exact) {
+  if (auto it = loaded_.find(cp);
+      it != loaded_.end() && it->second.current->has_level(level) && !(exact && it->second.current->estimate()))
+    return true;
   if (loading_.count(cp) != 0) return false;
   loading_.emplace(cp, std::vector<Waiter>{});
   storage_.load(
       cp, [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
-      level == 0);
+      level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream);
   return false;
 }
 
@@ -166,6 +189,13 @@ void WorldOwner::on_coarse_loaded(LoadedCoarse c) {
     };
     for (const CoarseEntry& e : c.entries) know(e.chunk_pos, e.revision, e.voxels);
     for (const Vec3i cp : c.air) know(cp, 0, CoarseVoxels{});
+    for (const CoarseEntry& e : c.estimates) {
+      auto [it, fresh] = loaded_.try_emplace(e.chunk_pos);
+      if (!fresh) continue;
+      const VersionPtr v = ChunkVersion::estimated(e.chunk_pos, e.voxels);
+      it->second = Loaded{v, v, tick_};
+      ++mips_only_;
+    }
   } else {
     // Served by reading the chunks instead (a damaged image is found by
     // terrane-world check).
@@ -184,7 +214,34 @@ void WorldOwner::on_coarse_loaded(LoadedCoarse c) {
   flush_grants();
 }
 
+void WorldOwner::replace_estimates() {
+  const std::size_t cap = kReplacingLoadsPerWorker * static_cast<std::size_t>(std::max(1, options_.worker_threads));
+  while (replacing_ < cap && !estimates_.empty() && !stopping_) {
+    const Vec3i cp = estimates_.front();
+    estimates_.pop_front();
+    auto it = loaded_.find(cp);
+    if (it == loaded_.end() || it->second.replace != Loaded::Replace::kQueued) continue;
+    Loaded& l = it->second;
+    if (!l.current->estimate() || loading_.count(cp) != 0) {
+      l.replace = Loaded::Replace::kNo;  // loaded, or being loaded for a client
+      continue;
+    }
+    l.replace = Loaded::Replace::kLoading;
+    ++replacing_;
+    loading_.emplace(cp, std::vector<Waiter>{});
+    storage_.load(
+        cp,
+        [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
+        Storage::Priority::kBackground);
+  }
+}
+
 void WorldOwner::on_loaded(LoadedChunk c) {
+  if (auto it = loaded_.find(c.pos); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
+    it->second.replace = Loaded::Replace::kNo;
+    --replacing_;
+    replace_estimates();
+  }
   auto waiting = loading_.find(c.pos);
   if (waiting == loading_.end()) return;
   if (!c.ok) {
@@ -204,7 +261,16 @@ void WorldOwner::on_loaded(LoadedChunk c) {
     // the store has this revision) — unless the row turned out damaged and
     // was quarantined, when the chunk comes back generated at a higher one.
     if (!l.current->has_voxels()) --mips_only_;
-    if (l.current->revision() != c.revision) {
+    if (l.current->estimate()) {
+      // Its holders are told only when the exact mip differs from the
+      // estimate they hold (an all-Air chunk's mip is all Air: a holder
+      // within full resolution is sent Empty when it refines it).
+      counters_.estimates_replaced.fetch_add(1, std::memory_order_relaxed);
+      const std::span<const std::uint8_t> held = l.current->encoded(kMipLevels - 1);
+      differs = v->empty() ? !all_air_unit(kCoarseSide, held)
+                           : !same_voxels(kCoarseSide, held, v->encoded(kMipLevels - 1));
+      if (differs) counters_.estimates_corrected.fetch_add(1, std::memory_order_relaxed);
+    } else if (l.current->revision() != c.revision) {
       server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
                         c.pos.x, c.pos.y, c.pos.z, c.revision, l.current->revision());
       differs = true;
@@ -741,6 +807,7 @@ void WorldOwner::lighten_some() {
 
 void WorldOwner::on_tick() {
   const auto t0 = std::chrono::steady_clock::now();
+  replace_estimates();
   counters_.tick_lag_ns.store(
       static_cast<std::uint64_t>(std::max<std::int64_t>(0, std::chrono::nanoseconds(t0 - next_tick_).count())),
       std::memory_order_relaxed);

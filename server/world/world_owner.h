@@ -75,6 +75,7 @@ struct ChunkWant {
   Vec3i chunk_pos;
   bool full = false;  // the client will hold it at full resolution
   int level = 0;      // the level it will be sent at: 0 full, 1..3 a mip (3: served from coarse images)
+  bool exact = false; // never an estimate (ChunkVersion::estimate), even at level 3
 };
 
 // Read access for tests and tools (Server::inspect).
@@ -147,6 +148,9 @@ class WorldOwner : private WorldView {
     VersionPtr published;  // what clients are handed
     VersionPtr current;    // what the next edit builds on (newer while a commit is in flight)
     std::uint64_t used_tick = 0;
+    // An estimate (ChunkVersion::estimate) granted to a client is queued to
+    // be generated for real in the background (estimates_), then loaded.
+    enum class Replace : std::uint8_t { kNo, kQueued, kLoading } replace = Replace::kNo;
   };
   struct Client {
     std::string name;
@@ -185,6 +189,9 @@ class WorldOwner : private WorldView {
   // Chunks reduced to their mips per tick at most (each costs encoding its
   // three mip levels, tens of microseconds).
   static constexpr std::size_t kLightenPerTick = 128;
+  // Background loads replacing estimates at a time (per loader thread: a
+  // stream or urgent load waits for at most one generation).
+  static constexpr std::size_t kReplacingLoadsPerWorker = 1;
 
   // WorldView
   bool loaded(Vec3i chunk_pos) const override {
@@ -203,13 +210,16 @@ class WorldOwner : private WorldView {
                     const FileStatus& status);
   void fatal_storage(const std::string& why);
   // Starts loading chunk_pos unless loaded or loading; true if loaded with
-  // the given level (0: its voxels).
-  bool request(Vec3i chunk_pos, int level = 0);
+  // the given level (0: its voxels), and not as an estimate when exact.
+  bool request(Vec3i chunk_pos, int level = 0, bool exact = false);
   void on_loaded(LoadedChunk c);
   // A want of the coarsest level of a chunk not loaded: taken (true) when
   // its region's coarse image can serve it (read now or being read).
   bool want_coarse(Vec3i chunk_pos, Waiter w);
   void on_coarse_loaded(LoadedCoarse c);
+  // Starts background loads of queued estimates (estimates_), at most
+  // kReplacingLoads at a time.
+  void replace_estimates();
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void flush_grants();
   void retry_pending();
@@ -241,6 +251,10 @@ class WorldOwner : private WorldView {
   std::unordered_set<Vec3i, Vec3iHash> regions_read_;
   std::unordered_map<Vec3i, std::vector<std::pair<Vec3i, Waiter>>, Vec3iHash> coarse_waiting_;
   std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
+  // Estimates granted, to be generated for real, in the order first granted
+  // (a client asks nearest first), and how many of them are loading.
+  std::deque<Vec3i> estimates_;
+  std::size_t replacing_ = 0;
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
   bool grants_scheduled_ = false;
   std::deque<PendingEdit> edits_;

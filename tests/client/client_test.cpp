@@ -148,6 +148,67 @@ TEST_F(ClientServerTest, FullResolutionReplicaEqualsServerWorld) {
   expect_replica_matches_world(c, near, dir_.string());
 }
 
+TEST_F(ClientServerTest, EstimatedMipsAreReplacedByTheChunksOwnOnlyWhereTheyDiffer) {
+  // A world never generated: the coarsest mip of every chunk comes first as
+  // an estimate, then (generated in the background) the chunk's own mip is
+  // sent where it differs, immediately (no refresh batching).
+  start_server({"--mip-refresh-ms", "0", "--max-speed", "0"});
+  Client c(options("horizon", 192, 32));
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto near = wait_full_res(c, 32);
+  ASSERT_FALSE(near.empty());
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 192, *w);
+  // Each chunk's exact coarsest mip, from the world's own generator.
+  auto world = World::open(dir_.string());
+  ASSERT_TRUE(world.ok()) << world.error().message;
+  std::unordered_map<Vec3i, std::vector<Voxel>, Vec3iHash> exact;
+  for (const Vec3i cp : view) {
+    const Chunk chunk = (*world)->generate_chunk(cp);
+    Box mip;
+    chunk.read_level(kMipLevels - 1, mip);
+    exact[cp].assign(mip.voxels().begin(), mip.voxels().end());
+  }
+  const auto replaced = [&](const Replica& r) {
+    for (const Vec3i cp : view) {
+      const ChunkCoverage* cov = r.coverage(cp);
+      if (cov == nullptr) return false;
+      if (cov->state != CoverageState::kMip || cov->level != kMipLevels - 1) continue;
+      const Box* held = r.mip_voxels(cp);
+      if (held == nullptr || !std::equal(held->voxels().begin(), held->voxels().end(), exact[cp].begin(),
+                                         exact[cp].end()))
+        return false;
+    }
+    return true;
+  };
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || replaced(v.replica); }, 60s))
+      << "the coarsest mips held never all became the chunks' own";
+  ASSERT_FALSE(c.closed()) << c.disconnect_reason();
+  const ClientCounters counters = c.counters();
+  EXPECT_GT(counters.estimates, 0u) << "no estimate was sent: the test shows nothing";
+  c.with_replica([&](const Replica& r) {
+    // Some estimates differed and were corrected (those that were exact keep
+    // their mark: nothing was sent for them) ...
+    EXPECT_LT(r.estimate_count(), counters.estimates);
+    // ... and no record brought a level again with the voxels held.
+    EXPECT_EQ(r.redundant_mips(), 0u);
+  });
+  // Full resolution, where the client is and where it moves, passes the
+  // region hashes (estimates never reach full resolution).
+  const Vec3f far{w->spawn.x + 150.0f, w->spawn.y, w->spawn.z};
+  ASSERT_TRUE(c.set_state(ClientStateMsg{far, 192, 32}));
+  const auto there = chunks_within(far, 32, *w);
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, there); }, 60s));
+  std::vector<Vec3i> checked = near;
+  checked.insert(checked.end(), there.begin(), there.end());
+  for (const Vec3i cp : checked) ASSERT_TRUE(c.request_region_hash(cp));
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, checked); }, kDeadline));
+  EXPECT_EQ(c.counters().hash_mismatches, 0u);
+  c.disconnect();
+}
+
 TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   start_server();
   struct Event {
@@ -183,8 +244,8 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
       continue;
     }
     const bool is_coarse = e.kind == wire::CoverageKind::Empty || (e.kind == wire::CoverageKind::Mip && e.level == 3);
-    if (is_coarse) {
-      coarse.insert({e.chunk.x, e.chunk.y, e.chunk.z});
+    // (A later coarse record is a refresh: an estimate corrected.)
+    if (is_coarse && coarse.insert({e.chunk.x, e.chunk.y, e.chunk.z}).second) {
       EXPECT_LT(i, first_full) << "coarse coverage after the first full chunk";
     }
   }

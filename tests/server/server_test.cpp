@@ -176,10 +176,10 @@ TEST_F(ServerTest, EditIsAppliedPersistedAndAcknowledged) {
 TEST_F(ServerTest, EditOutsideTheFullResolutionRegionIsRejectedWithTheTrueState) {
   start();
   auto p = join("editor");
-  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, chunk_of(Vec3i{1002, 12, 1002})));
-  // Outside its 24-voxel full-resolution radius, but inside its view
-  // (so the chunk is loaded and its state can be shown).
+  // Outside its 24-voxel full-resolution radius, but inside its view, held
+  // as mip 1 (so the chunk is loaded and its state can be shown).
   const EditRequestMsg e = testing_support::fill_box_edit(9, Region{{1060, 8, 1002}, {1063, 11, 1005}}, materials::kBrick, 255);
+  ASSERT_TRUE(hold_at(*p, {1002.0f, 12.0f, 1002.0f}, {{chunk_of(Vec3i{1002, 12, 1002}), 0}, {chunk_of(e.box.min), 1}}));
   ASSERT_TRUE(p->send(build_edit_request(e)));
   auto f = p->next_of(wire::Body::EditReject);
   ASSERT_TRUE(f.has_value());
@@ -373,7 +373,11 @@ TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) 
         }
     ASSERT_TRUE((*world)->store().save_chunks(writes).ok());
   }
-  start();
+  // Exact mips only (estimates for the chunks never stored are tested
+  // below): the unstored chunks are judged Air or generated when wanted.
+  ServerOptions o;
+  o.horizon_estimates = false;
+  start(o);
   auto p = join("far-sighted");
   const ClientStateMsg where{{1000.5f, 60.0f, 1000.5f}, 300, 32};
   ASSERT_TRUE(p->send(build_client_state(where)));

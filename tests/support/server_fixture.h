@@ -161,19 +161,26 @@ class ServerTest : public ::testing::Test {
   }
   // Moves the peer to pos (small view) and reads until chunk cp is held at
   // full resolution (Coverage Full or Empty); false if the stream ends.
-  static bool hold_full(RawPeer& p, Vec3f pos, Vec3i cp) {
+  static bool hold_full(RawPeer& p, Vec3f pos, Vec3i cp) { return hold_at(p, pos, {{cp, 0}}); }
+  // Moves p to pos (view 96, full resolution 24) and reads the stream until
+  // each chunk is held at its level or finer (0 full resolution or Empty,
+  // 1..3 a mip; an Estimate record is coarser than every level).
+  static bool hold_at(RawPeer& p, Vec3f pos, std::vector<std::pair<Vec3i, int>> wanted) {
     if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return false;
     StreamDecodeScratch scratch;
     while (auto f = p.next_of(wire::Body::StreamBatch)) {
       auto records = parse_stream_batch(*msg(*f).body_as_StreamBatch());
       if (!records) return false;
-      bool found = false;
       const auto st = decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
-        found = found || (r.chunk_pos == cp && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty));
+        const int level = r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty ? 0
+                          : r.kind == StreamRecordKind::kEstimate || r.kind == StreamRecordKind::kReleased
+                              ? kMipLevels
+                              : r.level;
+        std::erase_if(wanted, [&](const auto& w) { return w.first == r.chunk_pos && level <= w.second; });
         return Ok{};
       });
       if (!st) return false;
-      if (found) return true;
+      if (wanted.empty()) return true;
     }
     return false;
   }
