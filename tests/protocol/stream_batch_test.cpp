@@ -47,7 +47,11 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
   w.add(StreamRecordKind::kMip2, {-300000, 4, 9}, 12, mip_bytes);
   w.add(StreamRecordKind::kFull, {6, -2, 7}, 1ull << 40, full_payload(chunk));
   w.add(StreamRecordKind::kReleased, {6, -1, 7}, 3, {});
-  EXPECT_EQ(w.records(), 4u);
+  const Box estimate = terrain(4, 7);
+  std::vector<std::uint8_t> estimate_bytes;
+  net_codec_encode(4, estimate.voxels(), estimate_bytes);
+  w.add(StreamRecordKind::kEstimate, {6, -1, 8}, 0, estimate_bytes);
+  EXPECT_EQ(w.records(), 5u);
   const Frame f = w.finish();
   EXPECT_TRUE(w.empty());
   StreamDecodeScratch s;
@@ -58,7 +62,7 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
                 boxes.push_back(r.voxels != nullptr ? *r.voxels : Box());
                 return Ok{};
               }).ok());
-  ASSERT_EQ(got.size(), 4u);
+  ASSERT_EQ(got.size(), 5u);
   EXPECT_EQ(got[0].kind, StreamRecordKind::kEmpty);
   EXPECT_EQ(got[0].chunk_pos, (Vec3i{5, -2, 7}));
   EXPECT_EQ(got[1].kind, StreamRecordKind::kMip2);
@@ -71,6 +75,10 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
   EXPECT_TRUE(boxes[2] == chunk);
   EXPECT_EQ(got[3].kind, StreamRecordKind::kReleased);
   EXPECT_EQ(got[3].chunk_pos, (Vec3i{6, -1, 7}));
+  EXPECT_EQ(got[4].kind, StreamRecordKind::kEstimate);
+  EXPECT_EQ(got[4].level, kMipLevels - 1);  // a 4^3 unit, as Mip 3
+  EXPECT_EQ(got[4].chunk_pos, (Vec3i{6, -1, 8}));
+  EXPECT_TRUE(boxes[4] == estimate);
 }
 
 TEST(StreamBatch, RecordsCostAFewBytesBeyondTheCodec) {
