@@ -26,6 +26,9 @@ packages=(
   libglfw3-dev libepoxy-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
   # validates docker/docker-compose.yml in the tests (no Docker engine needed)
   docker-compose
+  # worlds shared by several servers: libpq, and PostgreSQL itself for the
+  # tests (each test starts its own, in a scratch directory, on loopback)
+  libpq-dev postgresql-15
   # promtool checks the metrics endpoint in the tests; prometheus scrapes it
   # in the operations test (started by the test itself, on loopback)
   prometheus

@@ -1,0 +1,228 @@
+// PostgresStore against a real PostgreSQL started by the test (one per
+// suite, a database per test), on 127.0.0.1: the schema, chunk rows, and
+// the region leases that keep one writer per region.
+#include "server/storage/postgres_store.h"
+
+#include <gtest/gtest.h>
+#include <libpq-fe.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "common/world/world.h"
+#include "tests/support/eventually.h"
+#include "tests/support/postgres.h"
+
+namespace terrane {
+namespace {
+
+using namespace std::chrono_literals;
+using testing_support::eventually;
+using testing_support::ScratchPostgres;
+
+// Runs one statement on its own connection (what the store does not offer).
+std::string sql(const std::string& url, const std::string& statement) {
+  PGconn* c = PQconnectdb(url.c_str());
+  std::string error;
+  if (PQstatus(c) != CONNECTION_OK) {
+    error = PQerrorMessage(c);
+  } else {
+    PGresult* r = PQexec(c, statement.c_str());
+    if (PQresultStatus(r) != PGRES_COMMAND_OK && PQresultStatus(r) != PGRES_TUPLES_OK) error = PQresultErrorMessage(r);
+    PQclear(r);
+  }
+  PQfinish(c);
+  return error;
+}
+
+class PostgresStoreTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    pg_ = new ScratchPostgres(std::filesystem::temp_directory_path() /
+                              ("terrane-pg-store-" + std::to_string(::getpid())));
+    if (pg_->available()) started_ = pg_->start();
+  }
+  static void TearDownTestSuite() {
+    delete pg_;
+    pg_ = nullptr;
+  }
+  void SetUp() override {
+    if (!pg_->available()) GTEST_SKIP() << pg_->why();
+    ASSERT_TRUE(started_) << pg_->why();
+    // A database of this test's own.
+    db_ = std::string("t_") + ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    for (char& ch : db_) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    ASSERT_EQ(sql(pg_->url(), "CREATE DATABASE " + db_), "");
+    url_ = "postgresql://terrane@127.0.0.1:" + std::to_string(pg_->port()) + "/" + db_;
+  }
+  std::unique_ptr<PostgresStore> open() {
+    auto s = PostgresStore::open(url_);
+    EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
+    return s.ok() ? std::move(*s) : nullptr;
+  }
+  static ChunkWrite chunk_write(Vec3i cp, std::uint64_t revision, Material m) {
+    Box box({kChunkSize, kChunkSize, kChunkSize});
+    for (int y = 0; y < 10; ++y)
+      for (int z = 0; z < kChunkSize; ++z)
+        for (int x = 0; x < kChunkSize; ++x) box.set(x, y, z, make_voxel(m, static_cast<std::uint8_t>(x * 8)));
+    return ChunkWrite{cp, revision, encode_chunk_blob(box)};
+  }
+
+  static ScratchPostgres* pg_;
+  static bool started_;
+  std::string db_, url_;
+};
+ScratchPostgres* PostgresStoreTest::pg_ = nullptr;
+bool PostgresStoreTest::started_ = false;
+
+TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
+  auto a = open();
+  ASSERT_TRUE(a);
+  auto again = open();  // finds the schema made by the first
+  ASSERT_TRUE(again);
+  const Vec3i cp{3, -2, 17};
+  auto lease = a->claim(lease_region_of(cp), 1, 60s);
+  ASSERT_TRUE(lease.ok()) << lease.error().message;
+  const ChunkWrite w = chunk_write(cp, 7, materials::kBrick);
+  ASSERT_TRUE(a->save_chunks(std::span(&*lease, 1), std::span(&w, 1)).ok());
+  auto got = again->load_chunk(cp);
+  ASSERT_TRUE(got.ok()) << got.error().message;
+  ASSERT_TRUE(got->has_value());
+  EXPECT_EQ((*got)->revision, 7u);
+  auto expected = decode_chunk_blob(w.blob);
+  ASSERT_TRUE(expected.ok());
+  EXPECT_EQ((*got)->chunk.get({31, 9, 4}), expected->get({31, 9, 4}));
+  EXPECT_EQ((*got)->chunk.get({31, 9, 4}), make_voxel(materials::kBrick, 248));
+  EXPECT_EQ((*got)->chunk.get({0, 10, 0}), Voxel{});
+  auto none = again->load_chunk({3, -2, 18});
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+}
+
+TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  const Vec3i region{0, 0, 0};
+  auto first = a->claim(region, 1, 60s);
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  EXPECT_EQ(first->epoch, 1u);
+  // Another server is refused, told who holds it.
+  auto refused = b->claim(region, 2, 60s);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().kind, StoreError::Kind::kOwned);
+  EXPECT_NE(refused.error().message.find("server 1"), std::string::npos) << refused.error().message;
+  // The holder claiming again renews at the same epoch.
+  auto renewed = a->claim(region, 1, 60s);
+  ASSERT_TRUE(renewed.ok());
+  EXPECT_EQ(renewed->epoch, 1u);
+  auto who = b->holder(region);
+  ASSERT_TRUE(who.ok());
+  ASSERT_TRUE(who->has_value());
+  EXPECT_EQ(**who, *first);
+  // Other regions are free.
+  auto other = b->claim({1, 0, 0}, 2, 60s);
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(other->owner, 2u);
+  // Given up, the region goes to the next claim, at a higher epoch.
+  ASSERT_TRUE(a->release(std::span(&*first, 1)).ok());
+  auto taken = b->claim(region, 2, 60s);
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+  EXPECT_EQ(taken->epoch, 2u);
+}
+
+TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  const Vec3i cp{5, 1, 5};
+  const Vec3i region = lease_region_of(cp);
+  auto mine = a->claim(region, 1, 300ms);
+  ASSERT_TRUE(mine.ok());
+  const ChunkWrite v1 = chunk_write(cp, 1, materials::kBrick);
+  ASSERT_TRUE(a->save_chunks(std::span(&*mine, 1), std::span(&v1, 1)).ok());
+  // Server 1 stops renewing (paused, say): once its lease has run out by
+  // the database's clock, server 2's claim succeeds, one epoch up.
+  StoreResult<RegionLease> theirs = StoreError{};
+  ASSERT_TRUE(eventually([&] { return (theirs = b->claim(region, 2, 60s)).ok(); }, 30s))
+      << theirs.error().message;
+  EXPECT_EQ(theirs->epoch, mine->epoch + 1);
+  // Server 1 comes back: its renewal finds the lease gone ...
+  auto kept = a->renew(std::span(&*mine, 1), 300ms);
+  ASSERT_TRUE(kept.ok());
+  EXPECT_TRUE(kept->empty());
+  // ... and its next write is fenced: nothing is written.
+  const ChunkWrite stale = chunk_write(cp, 2, materials::kSand);
+  auto fenced = a->save_chunks(std::span(&*mine, 1), std::span(&stale, 1));
+  ASSERT_FALSE(fenced.ok());
+  EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
+  EXPECT_NE(fenced.error().message.find("no longer current"), std::string::npos) << fenced.error().message;
+  auto got = b->load_chunk(cp);
+  ASSERT_TRUE(got.ok() && got->has_value());
+  EXPECT_EQ((*got)->revision, 1u);
+  EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kBrick);
+  // The new holder writes.
+  const ChunkWrite v2 = chunk_write(cp, 2, materials::kSnow);
+  ASSERT_TRUE(b->save_chunks(std::span(&*theirs, 1), std::span(&v2, 1)).ok());
+  got = a->load_chunk(cp);
+  ASSERT_TRUE(got.ok() && got->has_value());
+  EXPECT_EQ((*got)->revision, 2u);
+  EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kSnow);
+}
+
+TEST_F(PostgresStoreTest, AWriteSpanningRegionsIsAllOrNothing) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  const Vec3i here{7, 0, 0}, there{8, 0, 0};  // two regions side by side
+  ASSERT_NE(lease_region_of(here), lease_region_of(there));
+  auto mine = a->claim(lease_region_of(here), 1, 60s);
+  auto theirs = b->claim(lease_region_of(there), 2, 60s);
+  ASSERT_TRUE(mine.ok() && theirs.ok());
+  const ChunkWrite both[] = {chunk_write(here, 1, materials::kBrick), chunk_write(there, 1, materials::kBrick)};
+  // Without a lease for one of them: refused before anything is written.
+  auto outside = a->save_chunks(std::span(&*mine, 1), both);
+  ASSERT_FALSE(outside.ok());
+  EXPECT_EQ(outside.error().kind, StoreError::Kind::kFenced);
+  EXPECT_NE(outside.error().message.find("under none of the leases"), std::string::npos) << outside.error().message;
+  // With another server's lease passed off as its own: fenced by the check.
+  const RegionLease forged[] = {*mine, RegionLease{theirs->region, 1, theirs->epoch}};
+  auto forged_write = a->save_chunks(forged, both);
+  ASSERT_FALSE(forged_write.ok());
+  EXPECT_EQ(forged_write.error().kind, StoreError::Kind::kFenced);
+  for (const Vec3i cp : {here, there}) {
+    auto got = a->load_chunk(cp);
+    ASSERT_TRUE(got.ok());
+    EXPECT_FALSE(got->has_value()) << "a fenced transaction wrote a chunk";
+  }
+}
+
+TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
+  // Nothing listening: the error names the address.
+  const std::string nowhere =
+      "postgresql://terrane@127.0.0.1:" + std::to_string(testing_support::free_loopback_port()) + "/none";
+  auto unreachable = PostgresStore::open(nowhere);
+  ASSERT_FALSE(unreachable.ok());
+  EXPECT_EQ(unreachable.error().kind, StoreError::Kind::kConnection);
+  EXPECT_NE(unreachable.error().message.find("cannot connect to " + nowhere), std::string::npos)
+      << unreachable.error().message;
+  // A schema of another version is refused, naming both versions.
+  ASSERT_TRUE(open());
+  ASSERT_EQ(sql(url_, "UPDATE terrane_schema SET version = 99"), "");
+  auto newer = PostgresStore::open(url_);
+  ASSERT_FALSE(newer.ok());
+  EXPECT_NE(newer.error().message.find("version 99"), std::string::npos) << newer.error().message;
+  EXPECT_NE(newer.error().message.find("reads version 1"), std::string::npos) << newer.error().message;
+  // A damaged blob is a decode error naming the chunk.
+  ASSERT_EQ(sql(url_, "UPDATE terrane_schema SET version = 1"), "");
+  ASSERT_EQ(sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102')"), "");
+  auto store = open();
+  ASSERT_TRUE(store);
+  auto damaged = store->load_chunk({1, 2, 3});
+  ASSERT_FALSE(damaged.ok());
+  EXPECT_EQ(damaged.error().kind, StoreError::Kind::kDecode);
+  EXPECT_NE(damaged.error().message.find("chunk (1,2,3)"), std::string::npos) << damaged.error().message;
+}
+
+}  // namespace
+}  // namespace terrane

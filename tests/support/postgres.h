@@ -1,0 +1,111 @@
+// Test support: a real PostgreSQL of the test's own. initdb runs in a
+// scratch directory, the server listens on 127.0.0.1 only (and on a Unix
+// socket in that directory), and it is stopped by pid when the object goes.
+// As root, both run as the "postgres" user (PostgreSQL refuses root).
+// Header-only.
+//
+//   ScratchPostgres pg(scratch_dir("terrane-pg"));
+//   if (!pg.available()) GTEST_SKIP() << pg.why();
+//   ASSERT_TRUE(pg.start()) << pg.why();
+//   PostgresStore::open(pg.url())...
+#pragma once
+
+#include <pwd.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tests/support/child_process.h"
+#include "tests/support/scratch_dir.h"
+
+namespace terrane::testing_support {
+
+class ScratchPostgres {
+ public:
+  // dir: emptied first, removed at the end (a suite's set-up has no test
+  // name for scratch_dir: name it after the process).
+  explicit ScratchPostgres(std::filesystem::path dir) : dir_(std::move(dir)) {
+    std::filesystem::remove_all(dir_);
+    bin_ = find_bin();
+  }
+  ~ScratchPostgres() {
+    if (server_) server_->stop();
+    std::filesystem::remove_all(dir_);
+  }
+
+  // False where PostgreSQL is not installed (why() says so).
+  bool available() {
+    if (bin_.empty()) why_ = "PostgreSQL is not installed (scripts/install-deps.sh installs postgresql-15)";
+    return !bin_.empty();
+  }
+  const std::string& why() const { return why_; }
+
+  // initdb, then the server; true once it accepts connections.
+  bool start() {
+    if (!available()) return false;
+    std::filesystem::create_directories(dir_);
+    const bool root = ::geteuid() == 0;
+    if (root) {
+      const passwd* pw = ::getpwnam("postgres");
+      if (pw == nullptr) {
+        why_ = "running as root and there is no 'postgres' user to run PostgreSQL as";
+        return false;
+      }
+      if (::chown(dir_.c_str(), pw->pw_uid, pw->pw_gid) != 0) {
+        why_ = "cannot hand " + dir_.string() + " to the postgres user";
+        return false;
+      }
+    }
+    const std::string data = (dir_ / "data").string();
+    std::vector<std::string> initdb = as_postgres(root, {bin_ + "/initdb", "-D", data, "-U", "terrane",
+                                                         "--auth=trust", "--encoding=UTF8", "--no-sync"});
+    ChildProcess init(initdb);
+    if (const int st = init.wait(std::chrono::seconds(120)); st != 0) {
+      why_ = "initdb failed (" + std::to_string(st) + "): " + init.output();
+      return false;
+    }
+    port_ = free_loopback_port();
+    server_ = std::make_unique<ChildProcess>(as_postgres(
+        root, {bin_ + "/postgres", "-D", data, "-p", std::to_string(port_), "-c", "listen_addresses=127.0.0.1",
+               "-c", "unix_socket_directories=" + dir_.string(), "-c", "fsync=off", "-c", "max_connections=50"}));
+    if (!server_->wait_for_output("database system is ready to accept connections", std::chrono::seconds(120))) {
+      why_ = "postgres did not start: " + server_->output();
+      return false;
+    }
+    return true;
+  }
+
+  // The test database (created by the first call).
+  std::string url() const { return "postgresql://terrane@127.0.0.1:" + std::to_string(port_) + "/postgres"; }
+  std::uint16_t port() const { return port_; }
+  // SIGSTOP / SIGCONT / restart, for tests of a database that pauses or
+  // goes away.
+  ChildProcess* server() { return server_.get(); }
+
+ private:
+  static std::string find_bin() {
+    for (const char* v : {"17", "16", "15", "14", "13"}) {
+      const std::string d = std::string("/usr/lib/postgresql/") + v + "/bin";
+      if (std::filesystem::exists(d + "/initdb") && std::filesystem::exists(d + "/postgres")) return d;
+    }
+    return {};
+  }
+  static std::vector<std::string> as_postgres(bool root, std::vector<std::string> argv) {
+    if (!root) return argv;
+    std::vector<std::string> out{"runuser", "-u", "postgres", "--"};
+    out.insert(out.end(), argv.begin(), argv.end());
+    return out;
+  }
+
+  std::filesystem::path dir_;
+  std::string bin_, why_;
+  std::uint16_t port_ = 0;
+  std::unique_ptr<ChildProcess> server_;
+};
+
+}  // namespace terrane::testing_support
