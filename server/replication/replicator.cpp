@@ -425,8 +425,10 @@ void Replicator::request_more() {
     if (auto c = claims_.find(cp); c != claims_.end()) {
       const std::uint8_t l = c->second.level;
       // A claim of Empty is checked against the chunk's own emptiness (an
-      // estimate is never Empty); a claimed mip's revision says enough.
-      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l, l == kHeldEmpty);
+      // estimate is never Empty; without estimates the coarse image says);
+      // a claimed mip's revision says enough.
+      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l,
+                  l == kHeldEmpty && options_.horizon_estimates);
     }
     want(cp, Intent::kCoarse, kMipLevels - 1);
   };

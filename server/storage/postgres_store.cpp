@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <tuple>
 
@@ -18,6 +19,26 @@ namespace {
 constexpr std::int64_t kSchemaLockKey = 0x7465727261'6e65;  // "terrane"
 
 std::string region_text(Vec3i r) { return fmt::format("({},{},{})", r.x, r.y, r.z); }
+
+// A connection string as it may be logged: the password replaced by ***.
+std::string redacted(const std::string& url) {
+  std::string out = url;
+  if (const auto scheme = out.find("://"); scheme != std::string::npos) {
+    const auto at = out.find('@', scheme + 3);
+    const auto slash = out.find('/', scheme + 3);
+    if (at != std::string::npos && (slash == std::string::npos || at < slash)) {
+      const auto colon = out.find(':', scheme + 3);
+      if (colon != std::string::npos && colon < at) out.replace(colon + 1, at - colon - 1, "***");
+    }
+  }
+  for (std::size_t at = out.find("password="); at != std::string::npos; at = out.find("password=", at + 1)) {
+    const std::size_t begin = at + 9;
+    std::size_t end = begin;
+    while (end < out.size() && out[end] != ' ' && out[end] != '&') ++end;
+    out.replace(begin, end - begin, "***");
+  }
+  return out;
+}
 
 // One statement parameter: text, or raw bytes sent in binary format.
 struct Param {
@@ -39,6 +60,7 @@ std::uint64_t be64(const char* p) {
 
 struct PostgresStore::Connection {
   PGconn* conn = nullptr;
+  std::string url;  // redacted, for messages
   ~Connection() {
     if (conn != nullptr) PQfinish(conn);
   }
@@ -72,6 +94,9 @@ struct PostgresStore::Connection {
   // Runs one statement; binary_result asks for binary columns.
   StoreResult<Rows> exec(const char* what, const char* sql, const std::vector<Param>& params = {},
                          bool binary_result = false) {
+    // A connection that broke (the database restarted, say) is opened again
+    // before the next statement; the statement fails if that fails too.
+    if (PQstatus(conn) != CONNECTION_OK) PQreset(conn);
     std::vector<const char*> values;
     std::vector<int> lengths, formats;
     for (const Param& p : params) {
@@ -105,14 +130,29 @@ PostgresStore::~PostgresStore() = default;
 
 StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::string& url) {
   auto c = std::make_unique<Connection>();
-  c->conn = PQconnectdb(url.c_str());
+  // Defaults first, so that the same settings in url win: a bounded connect
+  // and TCP keepalives, so a dead peer is noticed in seconds, not hours.
+  const char* keys[] = {"connect_timeout", "keepalives", "keepalives_idle", "keepalives_interval",
+                        "keepalives_count", "dbname", nullptr};
+  const char* values[] = {"10", "1", "5", "2", "3", url.c_str(), nullptr};
+  c->conn = PQconnectdbParams(keys, values, /*expand_dbname=*/1);
   if (c->conn == nullptr || PQstatus(c->conn) != CONNECTION_OK) {
     std::string detail = c->conn != nullptr ? PQerrorMessage(c->conn) : "out of memory";
     while (!detail.empty() && (detail.back() == '\n' || detail.back() == ' ')) detail.pop_back();
-    return StoreError{StoreError::Kind::kConnection, fmt::format("postgresql: cannot connect to {}: {}", url, detail)};
+    return StoreError{StoreError::Kind::kConnection,
+                      fmt::format("postgresql: cannot connect to {}: {}", redacted(url), detail)};
   }
+  c->url = redacted(url);
   // Notices (e.g. "relation already exists, skipping") are not errors.
   PQsetNoticeProcessor(c->conn, [](void*, const char*) {}, nullptr);
+  // A writer stopped inside a transaction (paused, partitioned) must not
+  // hold a lease row's lock for ever: the database ends its session, which
+  // rolls it back, and a takeover goes on. No statement waits long for a
+  // lock either.
+  for (const char* limit : {"SET idle_in_transaction_session_timeout = '10s'", "SET lock_timeout = '10s'"}) {
+    auto set = c->exec("session limits", limit);
+    if (!set) return set.error();
+  }
   auto begin = c->exec("begin", "BEGIN");
   if (!begin) return begin.error();
   auto lock = c->exec("lock schema", "SELECT pg_advisory_xact_lock($1)", {text(kSchemaLockKey)});
@@ -139,7 +179,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     return c->abort(StoreError{StoreError::Kind::kQuery,
                                fmt::format("postgresql: {} holds a Terrane schema of version {}; this build reads "
                                            "version {}",
-                                           url, version->get(0, 0), kSchemaVersion)});
+                                           redacted(url), version->get(0, 0), kSchemaVersion)});
   }
   auto commit = c->exec("commit schema", "COMMIT");
   if (!commit) return c->abort(commit.error());
@@ -147,15 +187,17 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
 }
 
 StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease) {
-  // Free or expired: the epoch goes up. Held by owner: renewed, same epoch.
-  // Held by another: no row changes, and the answer is empty.
+  if (owner > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max()))
+    return StoreError{StoreError::Kind::kQuery, fmt::format("server id {} is not below 2^31", owner)};
+  // Free, expired or the claimant's own: taken at the next epoch (a server
+  // that claims again is a new incarnation: whatever its earlier self still
+  // has in flight is fenced). Held by another: no row changes, and the
+  // answer is empty.
   auto r = c_->exec("claim region",
                     "INSERT INTO terrane_leases AS l (rx, ry, rz, owner, epoch, expires_at)"
                     " VALUES ($1, $2, $3, $4, 1, clock_timestamp() + $5::bigint * interval '1 millisecond')"
                     " ON CONFLICT (rx, ry, rz) DO UPDATE SET"
-                    "  epoch = CASE WHEN l.owner = EXCLUDED.owner AND l.expires_at > clock_timestamp()"
-                    "               THEN l.epoch ELSE l.epoch + 1 END,"
-                    "  owner = EXCLUDED.owner, expires_at = EXCLUDED.expires_at"
+                    "  epoch = l.epoch + 1, owner = EXCLUDED.owner, expires_at = EXCLUDED.expires_at"
                     "  WHERE l.owner = EXCLUDED.owner OR l.expires_at <= clock_timestamp()"
                     " RETURNING epoch",
                     {text(region.x), text(region.y), text(region.z), text(owner), text(lease.count())});

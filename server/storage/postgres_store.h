@@ -8,8 +8,11 @@
 // transaction, so a server that lost its lease can never write.
 //
 // Connection strings are libpq's: "postgresql://HOST:PORT/DB" or
-// "host=... port=... dbname=...". Errors name the statement that failed and
-// PostgreSQL's own message.
+// "host=... port=... dbname=...", with a 10 s connect timeout and TCP
+// keepalives unless they say otherwise. Errors name the statement that
+// failed and PostgreSQL's own message; a password never appears in them.
+// A session that stays inside a transaction for 10 s is ended by the
+// database (rolling it back), and no statement waits over 10 s for a lock.
 //
 // Threading: one object is one connection; use it from one thread at a
 // time (open one per thread, as the SQLite store does).
@@ -65,10 +68,12 @@ class PostgresStore {
   // The schema version this build reads and writes.
   static constexpr int kSchemaVersion = 1;
 
-  // Takes the region for owner for the lease time. If the region is free,
-  // or its lease has expired, the epoch goes up by one. If owner holds it
-  // already, the lease is renewed at the same epoch. Otherwise the error is
-  // kOwned, naming the holder and when its lease runs out.
+  // Takes the region for owner (a server id below 2^31) for the lease time,
+  // at the next epoch, if it is free, its lease has expired, or owner holds
+  // it already (a server that claims again is a new incarnation: writes its
+  // earlier self still has in flight are fenced; renew keeps an epoch).
+  // Otherwise the error is kOwned, naming the holder and when its lease
+  // runs out.
   StoreResult<RegionLease> claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease);
   // Extends each lease still current (same owner and epoch, not expired) by
   // lease from now; returns those it extended. A lease missing from the

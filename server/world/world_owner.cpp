@@ -152,11 +152,26 @@ bool WorldOwner::request(Vec3i cp, int level, bool exact) {
   if (auto it = loaded_.find(cp);
       it != loaded_.end() && it->second.current->has_level(level) && !(exact && it->second.current->estimate()))
     return true;
-  if (loading_.count(cp) != 0) return false;
+  const auto priority = level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream;
+  const auto load = [this, cp, priority] {
+    storage_.load(
+        cp,
+        [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
+        priority);
+  };
+  if (loading_.count(cp) != 0) {
+    // A background replacement waits behind every other load: whoever
+    // needs the chunk now asks again at its own priority (the first of the
+    // two loads to come back serves the waiters; the other is dropped).
+    if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
+      it->second.replace = Loaded::Replace::kNo;
+      --replacing_;
+      load();
+    }
+    return false;
+  }
   loading_.emplace(cp, std::vector<Waiter>{});
-  storage_.load(
-      cp, [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
-      level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream);
+  load();
   return false;
 }
 
@@ -222,8 +237,8 @@ void WorldOwner::replace_estimates() {
     auto it = loaded_.find(cp);
     if (it == loaded_.end() || it->second.replace != Loaded::Replace::kQueued) continue;
     Loaded& l = it->second;
-    if (!l.current->estimate() || loading_.count(cp) != 0) {
-      l.replace = Loaded::Replace::kNo;  // loaded, or being loaded for a client
+    if (!l.current->estimate() || loading_.count(cp) != 0 || !interest_.watched(cp)) {
+      l.replace = Loaded::Replace::kNo;  // loaded, being loaded for a client, or no longer held by anyone
       continue;
     }
     l.replace = Loaded::Replace::kLoading;
@@ -237,9 +252,11 @@ void WorldOwner::replace_estimates() {
 }
 
 void WorldOwner::on_loaded(LoadedChunk c) {
+  bool background = false;  // a replacement nobody else asked for (yet)
   if (auto it = loaded_.find(c.pos); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
     it->second.replace = Loaded::Replace::kNo;
     --replacing_;
+    background = true;
     replace_estimates();
   }
   auto waiting = loading_.find(c.pos);
@@ -252,7 +269,11 @@ void WorldOwner::on_loaded(LoadedChunk c) {
     return;
   }
   unreadable_.erase(c.pos);
-  auto v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
+  VersionPtr v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
+  // Sky that replaced an estimate, wanted at full resolution by nobody: kept
+  // as light as sky known from a coarse image (forgotten when unwatched),
+  // not as a chunk that is never unloaded.
+  if (background && v->empty() && waiting->second.empty()) v = ChunkVersion::coarse_only(c.pos, c.revision, CoarseVoxels{});
   auto [it, fresh] = loaded_.try_emplace(c.pos);
   Loaded& l = it->second;
   bool differs = false;
@@ -278,6 +299,7 @@ void WorldOwner::on_loaded(LoadedChunk c) {
   }
   l.published = v;
   l.current = v;
+  if (!v->has_voxels()) ++mips_only_;
   if (differs) {
     // As a commit would: every holder (all hold it coarser than full
     // resolution, since it had no voxels) refreshes from the new version.
@@ -373,8 +395,9 @@ void WorldOwner::unload_unwatched() {
   if (full > options_.resident_chunks) {
     std::vector<std::pair<std::uint64_t, Vec3i>> drop;
     for (const auto& [cp, l] : loaded_) {
-      // (An all-Air chunk has no voxels to drop.)
-      if (!l.current->has_voxels() || l.current->empty() || busy_.count(cp) != 0 || l.current != l.published ||
+      // (An all-Air chunk has no voxels to drop, but is kept as light as
+      // sky known from a coarse image, which can then be forgotten.)
+      if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
           interest_.held_full(cp) ||
           loading_.count(cp) != 0)
         continue;
@@ -792,10 +815,12 @@ void WorldOwner::lighten_some() {
     Loaded& l = it->second;
     // Checked again: it may have been asked for at full resolution or
     // edited since the list was made.
-    if (!l.current->has_voxels() || l.current->empty() || busy_.count(cp) != 0 || l.current != l.published ||
+    if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
         interest_.held_full(cp) || loading_.count(cp) != 0)
       continue;
-    l.published = l.current = ChunkVersion::mips_only(*l.current);
+    l.published = l.current = l.current->empty()
+                                  ? ChunkVersion::coarse_only(cp, l.current->revision(), CoarseVoxels{})
+                                  : ChunkVersion::mips_only(*l.current);
     ++mips_only_;
     ++n;
   }

@@ -33,6 +33,7 @@
 // the strand; WorldClient callbacks are made on the strand.
 #pragma once
 
+#include <algorithm>
 #include <asio.hpp>
 #include <chrono>
 #include <cstdint>
@@ -89,6 +90,8 @@ class WorldView {
   // The chunk as applied, or null when it is all Air (precondition: loaded).
   virtual const Chunk* chunk(Vec3i chunk_pos) const = 0;
   virtual std::size_t loaded_count() const = 0;
+  // Estimates granted and not yet replaced (queued or being generated).
+  virtual std::size_t estimates_waiting() const = 0;
 };
 
 class WorldOwner : private WorldView {
@@ -202,6 +205,11 @@ class WorldOwner : private WorldView {
   Voxel get(Vec3i voxel) const override;
   const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
   std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
+  std::size_t estimates_waiting() const override {
+    return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [](const auto& kv) {
+      return kv.second.replace != Loaded::Replace::kNo && kv.second.current->estimate();
+    }));
+  }
 
   void arm_tick();
   void on_tick();

@@ -30,6 +30,7 @@
 #include "common/world/view.h"
 #include "server/world/edits.h"
 #include "server/log.h"
+#include "tests/support/eventually.h"
 #include "tests/support/server_fixture.h"
 
 namespace terrane {
@@ -423,6 +424,40 @@ TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) 
   EXPECT_LE(st.loaded_from_store.load() + st.generated.load(), finer)
       << "loaded " << st.loaded_from_store.load() << ", generated " << st.generated.load();
   server_->inspect([&](const WorldView& w) { EXPECT_LE(w.loaded_count(), finer); });
+}
+
+TEST_F(ServerTest, ReplacedEstimatesAreUnloadedOnceNobodyWatchesThem) {
+  // Nothing kept beyond what clients hold, on a world never generated.
+  ServerOptions o;
+  o.resident_chunks = 0;
+  o.max_speed = 0;
+  start(o);
+  auto p = join("explorer");
+  const Vec3f here{1000.5f, 60.0f, 1000.5f};
+  ASSERT_TRUE(p->send(build_client_state(ClientStateMsg{here, 192, 32})));
+  // The view's coarse forms come as estimates; the server generates those
+  // chunks in the background until none is left (the stream is read
+  // meanwhile, so the client keeps up).
+  std::size_t waiting = 0;
+  ASSERT_TRUE(testing_support::eventually([&] {
+    while (p->next(0)) {
+    }
+    server_->inspect([&](const WorldView& w) { waiting = w.estimates_waiting(); });
+    return server_->counters().estimates_sent.load() > 0 && waiting == 0;
+  })) << waiting << " estimates still waiting";
+  EXPECT_GT(server_->counters().estimates_replaced.load(), 0u);
+  // Far away with a small view, the client watches nothing of the old view:
+  // what was generated there, sky and terrain, goes from memory.
+  const Vec3f far{here.x + 4000.0f, here.y, here.z};
+  ASSERT_TRUE(p->send(build_client_state(ClientStateMsg{far, 32, 32})));
+  const std::size_t near = chunks_in_view(far, 32, default_world_meta().bounds).size();
+  std::size_t loaded = 0;
+  EXPECT_TRUE(testing_support::eventually([&] {
+    while (p->next(0)) {
+    }
+    server_->inspect([&](const WorldView& w) { loaded = w.loaded_count(); });
+    return loaded <= near;
+  })) << loaded << " chunks still loaded, " << near << " in view";
 }
 
 TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {

@@ -114,23 +114,39 @@ TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.error().kind, StoreError::Kind::kOwned);
   EXPECT_NE(refused.error().message.find("server 1"), std::string::npos) << refused.error().message;
-  // The holder claiming again renews at the same epoch.
-  auto renewed = a->claim(region, 1, 60s);
+  // Renewing keeps the epoch; claiming again (a restarted server) starts
+  // the next one, which fences whatever the earlier incarnation writes.
+  auto renewed = a->renew(std::span(&*first, 1), 60s);
   ASSERT_TRUE(renewed.ok());
-  EXPECT_EQ(renewed->epoch, 1u);
+  ASSERT_EQ(renewed->size(), 1u);
+  EXPECT_EQ(renewed->front(), *first);
+  auto again = a->claim(region, 1, 60s);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->epoch, 2u);
+  const ChunkWrite w = chunk_write(region * 8, 1, materials::kBrick);
+  auto stale = a->save_chunks(std::span(&*first, 1), std::span(&w, 1));
+  ASSERT_FALSE(stale.ok());
+  EXPECT_EQ(stale.error().kind, StoreError::Kind::kFenced);
   auto who = b->holder(region);
   ASSERT_TRUE(who.ok());
   ASSERT_TRUE(who->has_value());
-  EXPECT_EQ(**who, *first);
+  EXPECT_EQ(**who, *again);
   // Other regions are free.
   auto other = b->claim({1, 0, 0}, 2, 60s);
   ASSERT_TRUE(other.ok());
   EXPECT_EQ(other->owner, 2u);
-  // Given up, the region goes to the next claim, at a higher epoch.
+  // A stale lease gives nothing up; the current one, given up, goes to the
+  // next claim, at a higher epoch.
   ASSERT_TRUE(a->release(std::span(&*first, 1)).ok());
+  EXPECT_FALSE(b->claim(region, 2, 60s).ok());
+  ASSERT_TRUE(a->release(std::span(&*again, 1)).ok());
   auto taken = b->claim(region, 2, 60s);
   ASSERT_TRUE(taken.ok()) << taken.error().message;
-  EXPECT_EQ(taken->epoch, 2u);
+  EXPECT_EQ(taken->epoch, 3u);
+  // Server ids are below 2^31 (the table's integer).
+  auto too_big = b->claim({5, 5, 5}, 0x80000000u, 60s);
+  ASSERT_FALSE(too_big.ok());
+  EXPECT_NE(too_big.error().message.find("not below 2^31"), std::string::npos) << too_big.error().message;
 }
 
 TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
@@ -206,6 +222,14 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   EXPECT_EQ(unreachable.error().kind, StoreError::Kind::kConnection);
   EXPECT_NE(unreachable.error().message.find("cannot connect to " + nowhere), std::string::npos)
       << unreachable.error().message;
+  // A password never appears in an error.
+  const std::string secret = "postgresql://terrane:s3cret@127.0.0.1:" +
+                             std::to_string(testing_support::free_loopback_port()) + "/none";
+  auto with_password = PostgresStore::open(secret);
+  ASSERT_FALSE(with_password.ok());
+  EXPECT_EQ(with_password.error().message.find("s3cret"), std::string::npos) << with_password.error().message;
+  EXPECT_NE(with_password.error().message.find("terrane:***@127.0.0.1"), std::string::npos)
+      << with_password.error().message;
   // A schema of another version is refused, naming both versions.
   ASSERT_TRUE(open());
   ASSERT_EQ(sql(url_, "UPDATE terrane_schema SET version = 99"), "");
