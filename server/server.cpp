@@ -221,10 +221,11 @@ void Server::stop() {
   const ServerCounters& c = counters_;
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
-      "chunks, {} mips, {} empty ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} skipped: bytes "
-      "unchanged); world saved",
+      "chunks, {} mips, {} estimates, {} empty ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} "
+      "skipped: bytes unchanged); world saved",
       c.ticks.load(), c.sessions_accepted.load(), c.net.sessions_closed(), c.edits_applied.load(),
-      c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.empties_sent.load(), c.stream_bytes.load(),
+      c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.estimates_sent.load(), c.empties_sent.load(),
+      c.stream_bytes.load(),
       c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
   bool header = false;
   for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {
