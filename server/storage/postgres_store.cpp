@@ -7,6 +7,8 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <optional>
+#include <string_view>
 #include <tuple>
 
 #include "common/world/coarse_image.h"
@@ -31,13 +33,23 @@ std::string redacted(const std::string& url) {
       if (colon != std::string::npos && colon < at) out.replace(colon + 1, at - colon - 1, "***");
     }
   }
-  for (std::size_t at = out.find("password="); at != std::string::npos; at = out.find("password=", at + 1)) {
-    const std::size_t begin = at + 9;
-    std::size_t end = begin;
-    while (end < out.size() && out[end] != ' ' && out[end] != '&') ++end;
-    out.replace(begin, end - begin, "***");
+  if (out.find("password") == std::string::npos) return out;
+  // Anything else that names a password: rebuilt from libpq's own parse,
+  // the password left out (quoting and spaces around '=' as libpq reads them).
+  char* err = nullptr;
+  PQconninfoOption* opts = PQconninfoParse(url.c_str(), &err);
+  if (err != nullptr) PQfreemem(err);
+  if (opts == nullptr) return "(a connection string that does not parse)";
+  std::string rebuilt;
+  for (const PQconninfoOption* o = opts; o->keyword != nullptr; ++o) {
+    if (o->val == nullptr || *o->val == '\0') continue;
+    if (!rebuilt.empty()) rebuilt += ' ';
+    rebuilt += o->keyword;
+    rebuilt += '=';
+    rebuilt += std::string_view(o->keyword) == "password" ? std::string("***") : std::string(o->val);
   }
-  return out;
+  PQconninfoFree(opts);
+  return rebuilt;
 }
 
 // One statement parameter: text, or raw bytes sent in binary format.
@@ -96,7 +108,10 @@ struct PostgresStore::Connection {
                          bool binary_result = false) {
     // A connection that broke (the database restarted, say) is opened again
     // before the next statement; the statement fails if that fails too.
-    if (PQstatus(conn) != CONNECTION_OK) PQreset(conn);
+    if (PQstatus(conn) != CONNECTION_OK) {
+      PQreset(conn);
+      if (PQstatus(conn) == CONNECTION_OK) set_limits();
+    }
     std::vector<const char*> values;
     std::vector<int> lengths, formats;
     for (const Param& p : params) {
@@ -113,6 +128,21 @@ struct PostgresStore::Connection {
       return e;
     }
     return Rows(res);
+  }
+
+  // The session's limits (STORE_POSTGRESQL.md): a transaction left idle is
+  // ended, no statement waits long for a lock. Per session: set again
+  // after a reset.
+  std::optional<StoreError> set_limits() {
+    for (const char* limit : {"SET idle_in_transaction_session_timeout = '10s'", "SET lock_timeout = '10s'"}) {
+      PGresult* r = PQexec(conn, limit);
+      const bool ok = r != nullptr && PQresultStatus(r) == PGRES_COMMAND_OK;
+      std::optional<StoreError> e;
+      if (!ok) e = error("session limits", r);
+      if (r != nullptr) PQclear(r);
+      if (e) return e;
+    }
+    return std::nullopt;
   }
 
   // Ends a failed transaction (if the connection still works) and passes
@@ -149,10 +179,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   // hold a lease row's lock for ever: the database ends its session, which
   // rolls it back, and a takeover goes on. No statement waits long for a
   // lock either.
-  for (const char* limit : {"SET idle_in_transaction_session_timeout = '10s'", "SET lock_timeout = '10s'"}) {
-    auto set = c->exec("session limits", limit);
-    if (!set) return set.error();
-  }
+  if (auto e = c->set_limits()) return *e;
   auto begin = c->exec("begin", "BEGIN");
   if (!begin) return begin.error();
   auto lock = c->exec("lock schema", "SELECT pg_advisory_xact_lock($1)", {text(kSchemaLockKey)});

@@ -268,12 +268,23 @@ void WorldOwner::on_loaded(LoadedChunk c) {
       server_log().error("chunk ({},{},{}): {}; not served until it can be read", c.pos.x, c.pos.y, c.pos.z, c.error);
     return;
   }
+  if (auto it = loaded_.find(c.pos);
+      it != loaded_.end() && !it->second.current->estimate() && c.revision < it->second.current->revision()) {
+    // A load that read the store before a later commit (one overtaken by
+    // a more urgent load of the same chunk, answering a newer request):
+    // never older than what is held. Read again.
+    storage_.load(
+        c.pos,
+        [this](LoadedChunk d) { asio::post(strand_, [this, d = std::move(d)]() mutable { on_loaded(std::move(d)); }); },
+        Storage::Priority::kUrgent);
+    return;
+  }
   unreadable_.erase(c.pos);
   VersionPtr v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
   // Sky that replaced an estimate, wanted at full resolution by nobody: kept
-  // as light as sky known from a coarse image (forgotten when unwatched),
-  // not as a chunk that is never unloaded.
-  if (background && v->empty() && waiting->second.empty()) v = ChunkVersion::coarse_only(c.pos, c.revision, CoarseVoxels{});
+  // as its mips (all Air, a few bytes; levels 1..3 answer refinements
+  // without generating it again), forgotten when unwatched.
+  if (background && v->empty() && waiting->second.empty()) v = ChunkVersion::mips_only(*v);
   auto [it, fresh] = loaded_.try_emplace(c.pos);
   Loaded& l = it->second;
   bool differs = false;
@@ -338,6 +349,8 @@ void WorldOwner::retry_pending() {
     if (it == clients_.end()) continue;
     Box box(req.box.size());
     if (!read_current(req.box, box)) {
+      // Asked again: a chunk of the box may have been lightened meanwhile.
+      for_each_chunk_in(req.box, [&](Vec3i cp) { request(cp); });
       reads_[kept++] = {id, req};
       continue;
     }
@@ -395,8 +408,8 @@ void WorldOwner::unload_unwatched() {
   if (full > options_.resident_chunks) {
     std::vector<std::pair<std::uint64_t, Vec3i>> drop;
     for (const auto& [cp, l] : loaded_) {
-      // (An all-Air chunk has no voxels to drop, but is kept as light as
-      // sky known from a coarse image, which can then be forgotten.)
+      // (An all-Air chunk has no voxels to drop, but as its mips it can
+      // then be forgotten.)
       if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
           interest_.held_full(cp) ||
           loading_.count(cp) != 0)
@@ -818,9 +831,7 @@ void WorldOwner::lighten_some() {
     if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
         interest_.held_full(cp) || loading_.count(cp) != 0)
       continue;
-    l.published = l.current = l.current->empty()
-                                  ? ChunkVersion::coarse_only(cp, l.current->revision(), CoarseVoxels{})
-                                  : ChunkVersion::mips_only(*l.current);
+    l.published = l.current = ChunkVersion::mips_only(*l.current);
     ++mips_only_;
     ++n;
   }

@@ -10,8 +10,12 @@
 //   PostgresStore::open(pg.url())...
 #pragma once
 
+#include <gtest/gtest.h>
+#include <libpq-fe.h>
 #include <pwd.h>
 #include <unistd.h>
+
+#include <cctype>
 
 #include <chrono>
 #include <cstdlib>
@@ -106,6 +110,49 @@ class ScratchPostgres {
   std::string bin_, why_;
   std::uint16_t port_ = 0;
   std::unique_ptr<ChildProcess> server_;
+};
+
+// Runs one statement on a connection of its own; "" or the error.
+inline std::string run_sql(const std::string& url, const std::string& statement) {
+  PGconn* c = PQconnectdb(url.c_str());
+  std::string error;
+  if (PQstatus(c) != CONNECTION_OK) {
+    error = PQerrorMessage(c);
+  } else {
+    PGresult* r = PQexec(c, statement.c_str());
+    if (PQresultStatus(r) != PGRES_COMMAND_OK && PQresultStatus(r) != PGRES_TUPLES_OK) error = PQresultErrorMessage(r);
+    PQclear(r);
+  }
+  PQfinish(c);
+  return error;
+}
+
+// A fixture: one PostgreSQL per test process (started by the suite's first
+// test), and a database of each test's own at url_. Skips where PostgreSQL
+// is not installed.
+class PostgresTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    pg_ = new ScratchPostgres(std::filesystem::temp_directory_path() /
+                              ("terrane-pg-" + std::to_string(::getpid())));
+    if (pg_->available()) started_ = pg_->start();
+  }
+  static void TearDownTestSuite() {
+    delete pg_;
+    pg_ = nullptr;
+  }
+  void SetUp() override {
+    if (!pg_->available()) GTEST_SKIP() << pg_->why();
+    ASSERT_TRUE(started_) << pg_->why();
+    db_ = std::string("t_") + ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    for (char& ch : db_) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    ASSERT_EQ(run_sql(pg_->url(), "CREATE DATABASE " + db_), "");
+    url_ = "postgresql://terrane@127.0.0.1:" + std::to_string(pg_->port()) + "/" + db_;
+  }
+
+  static inline ScratchPostgres* pg_ = nullptr;
+  static inline bool started_ = false;
+  std::string db_, url_;
 };
 
 }  // namespace terrane::testing_support

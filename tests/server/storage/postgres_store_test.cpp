@@ -4,7 +4,6 @@
 #include "server/storage/postgres_store.h"
 
 #include <gtest/gtest.h>
-#include <libpq-fe.h>
 
 #include <unistd.h>
 
@@ -21,43 +20,11 @@ namespace {
 
 using namespace std::chrono_literals;
 using testing_support::eventually;
-using testing_support::ScratchPostgres;
 
-// Runs one statement on its own connection (what the store does not offer).
-std::string sql(const std::string& url, const std::string& statement) {
-  PGconn* c = PQconnectdb(url.c_str());
-  std::string error;
-  if (PQstatus(c) != CONNECTION_OK) {
-    error = PQerrorMessage(c);
-  } else {
-    PGresult* r = PQexec(c, statement.c_str());
-    if (PQresultStatus(r) != PGRES_COMMAND_OK && PQresultStatus(r) != PGRES_TUPLES_OK) error = PQresultErrorMessage(r);
-    PQclear(r);
-  }
-  PQfinish(c);
-  return error;
-}
+using testing_support::run_sql;
 
-class PostgresStoreTest : public ::testing::Test {
+class PostgresStoreTest : public testing_support::PostgresTest {
  protected:
-  static void SetUpTestSuite() {
-    pg_ = new ScratchPostgres(std::filesystem::temp_directory_path() /
-                              ("terrane-pg-store-" + std::to_string(::getpid())));
-    if (pg_->available()) started_ = pg_->start();
-  }
-  static void TearDownTestSuite() {
-    delete pg_;
-    pg_ = nullptr;
-  }
-  void SetUp() override {
-    if (!pg_->available()) GTEST_SKIP() << pg_->why();
-    ASSERT_TRUE(started_) << pg_->why();
-    // A database of this test's own.
-    db_ = std::string("t_") + ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    for (char& ch : db_) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-    ASSERT_EQ(sql(pg_->url(), "CREATE DATABASE " + db_), "");
-    url_ = "postgresql://terrane@127.0.0.1:" + std::to_string(pg_->port()) + "/" + db_;
-  }
   std::unique_ptr<PostgresStore> open() {
     auto s = PostgresStore::open(url_);
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
@@ -71,12 +38,7 @@ class PostgresStoreTest : public ::testing::Test {
     return ChunkWrite{cp, revision, encode_chunk_blob(box)};
   }
 
-  static ScratchPostgres* pg_;
-  static bool started_;
-  std::string db_, url_;
 };
-ScratchPostgres* PostgresStoreTest::pg_ = nullptr;
-bool PostgresStoreTest::started_ = false;
 
 TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto a = open();
@@ -230,16 +192,22 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   EXPECT_EQ(with_password.error().message.find("s3cret"), std::string::npos) << with_password.error().message;
   EXPECT_NE(with_password.error().message.find("terrane:***@127.0.0.1"), std::string::npos)
       << with_password.error().message;
+  const std::string keywords = "host=127.0.0.1 port=" + std::to_string(testing_support::free_loopback_port()) +
+                               " password = 'open sesame' dbname=none";
+  auto with_keyword = PostgresStore::open(keywords);
+  ASSERT_FALSE(with_keyword.ok());
+  EXPECT_EQ(with_keyword.error().message.find("sesame"), std::string::npos) << with_keyword.error().message;
+  EXPECT_NE(with_keyword.error().message.find("password=***"), std::string::npos) << with_keyword.error().message;
   // A schema of another version is refused, naming both versions.
   ASSERT_TRUE(open());
-  ASSERT_EQ(sql(url_, "UPDATE terrane_schema SET version = 99"), "");
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 99"), "");
   auto newer = PostgresStore::open(url_);
   ASSERT_FALSE(newer.ok());
   EXPECT_NE(newer.error().message.find("version 99"), std::string::npos) << newer.error().message;
   EXPECT_NE(newer.error().message.find("reads version 1"), std::string::npos) << newer.error().message;
   // A damaged blob is a decode error naming the chunk.
-  ASSERT_EQ(sql(url_, "UPDATE terrane_schema SET version = 1"), "");
-  ASSERT_EQ(sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102')"), "");
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 1"), "");
+  ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102')"), "");
   auto store = open();
   ASSERT_TRUE(store);
   auto damaged = store->load_chunk({1, 2, 3});

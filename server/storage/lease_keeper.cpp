@@ -1,0 +1,128 @@
+#include "server/storage/lease_keeper.h"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+namespace terrane {
+
+StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& url, std::uint32_t owner,
+                                                            LeaseTimes times, LostFn on_lost) {
+  if (times.renew >= times.lease)
+    return StoreError{StoreError::Kind::kQuery, fmt::format("lease renewal every {} ms cannot keep a {} ms lease",
+                                                            times.renew.count(), times.lease.count())};
+  auto claims = PostgresStore::open(url);
+  if (!claims) return claims.error();
+  auto renewer = PostgresStore::open(url);
+  if (!renewer) return renewer.error();
+  return std::unique_ptr<LeaseKeeper>(
+      new LeaseKeeper(owner, times, std::move(on_lost), std::move(*claims), std::move(*renewer)));
+}
+
+LeaseKeeper::LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<PostgresStore> claims,
+                         std::unique_ptr<PostgresStore> renewer)
+    : owner_(owner),
+      times_(times),
+      on_lost_(std::move(on_lost)),
+      claims_(std::move(claims)),
+      renewer_(std::move(renewer)),
+      thread_([this] { renew_loop(); }) {}
+
+LeaseKeeper::~LeaseKeeper() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+StoreResult<std::vector<RegionLease>> LeaseKeeper::ensure(std::span<const Vec3i> regions) {
+  std::vector<Vec3i> order(regions.begin(), regions.end());
+  std::sort(order.begin(), order.end(), [](Vec3i a, Vec3i b) { return key_of(a) < key_of(b); });
+  order.erase(std::unique(order.begin(), order.end()), order.end());
+  std::vector<RegionLease> out;
+  out.reserve(order.size());
+  std::lock_guard claiming(claims_mutex_);
+  for (const Vec3i region : order) {
+    {
+      std::lock_guard lock(mutex_);
+      if (auto it = held_.find(key_of(region)); it != held_.end()) {
+        out.push_back(it->second);
+        continue;
+      }
+    }
+    auto lease = claims_->claim(region, owner_, times_.lease);
+    if (!lease) return lease.error();
+    {
+      std::lock_guard lock(mutex_);
+      held_[key_of(region)] = *lease;
+    }
+    out.push_back(*lease);
+  }
+  return out;
+}
+
+std::vector<RegionLease> LeaseKeeper::held() const {
+  std::lock_guard lock(mutex_);
+  std::vector<RegionLease> out;
+  for (const auto& [key, l] : held_) out.push_back(l);
+  return out;
+}
+
+std::uint64_t LeaseKeeper::renewals() const {
+  std::lock_guard lock(mutex_);
+  return rounds_;
+}
+
+StoreResult<Ok> LeaseKeeper::release_all() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+  const std::vector<RegionLease> all = held();
+  {
+    std::lock_guard lock(mutex_);
+    held_.clear();
+  }
+  std::lock_guard claiming(claims_mutex_);
+  return claims_->release(all);
+}
+
+void LeaseKeeper::renew_loop() {
+  auto last_ok = std::chrono::steady_clock::now();
+  std::unique_lock lock(mutex_);
+  while (!wake_.wait_for(lock, times_.renew, [&] { return stopping_; })) {
+    std::vector<RegionLease> all;
+    for (const auto& [key, l] : held_) all.push_back(l);
+    lock.unlock();
+    std::vector<std::pair<RegionLease, std::string>> lost;
+    auto kept = renewer_->renew(all, times_.lease);
+    const auto now = std::chrono::steady_clock::now();
+    if (kept) {
+      last_ok = now;
+      for (const RegionLease& l : all)
+        if (std::find(kept->begin(), kept->end(), l) == kept->end())
+          lost.emplace_back(l, "the database no longer extends its lease (it ran out, or another server took it)");
+    } else if (now - last_ok >= times_.lease) {
+      // Not renewed for a whole lease time: by now it has run out.
+      for (const RegionLease& l : all)
+        lost.emplace_back(l, fmt::format("not renewed for {} ms: {}", times_.lease.count(), kept.error().message));
+    }
+    lock.lock();
+    for (const auto& [l, why] : lost) {
+      // Unless claimed again meanwhile (a newer epoch).
+      if (auto it = held_.find(key_of(l.region)); it != held_.end() && it->second == l) held_.erase(it);
+    }
+    ++rounds_;
+    if (!lost.empty() && on_lost_) {
+      lock.unlock();
+      for (const auto& [l, why] : lost) on_lost_(l, why);
+      lock.lock();
+    }
+  }
+}
+
+}  // namespace terrane

@@ -1,0 +1,81 @@
+// LeaseKeeper: the regions one server holds in a shared PostgreSQL world,
+// kept alive (server/storage/STORE_POSTGRESQL.md, "Regions and leases").
+//
+// ensure() claims the regions a write needs, and renews none of them itself.
+// A thread of the keeper's own renews every held lease each renew period,
+// on a connection of its own, so a slow write never delays a renewal. A
+// lease the database no longer extends is lost: the keeper drops it and
+// calls on_lost, and the owner must stop writing that region. The writes
+// themselves are fenced by PostgreSQL whatever the keeper believes: the
+// keeper is how a server learns early, not what keeps the data safe.
+//
+// Threading: ensure(), held() and stop() may be called from any thread;
+// on_lost runs on the keeper's thread.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <tuple>
+#include <vector>
+
+#include "server/storage/postgres_store.h"
+
+namespace terrane {
+
+struct LeaseTimes {
+  std::chrono::milliseconds lease{5000};  // how long a claim or renewal lasts
+  std::chrono::milliseconds renew{1000};  // how often every held lease is renewed
+};
+
+class LeaseKeeper {
+ public:
+  using LostFn = std::function<void(const RegionLease& lost, const std::string& why)>;
+
+  // url: the world's database; owner: this server's id (below 2^31).
+  static StoreResult<std::unique_ptr<LeaseKeeper>> open(const std::string& url, std::uint32_t owner,
+                                                        LeaseTimes times, LostFn on_lost);
+  ~LeaseKeeper();  // stops renewing; the leases then run out
+  LeaseKeeper(const LeaseKeeper&) = delete;
+  LeaseKeeper& operator=(const LeaseKeeper&) = delete;
+
+  // The leases of regions, claiming those not held (in one order for every
+  // server). Fails with kOwned (naming the holder) if another server holds
+  // one of them; the regions claimed before the failure stay held.
+  StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions);
+  std::vector<RegionLease> held() const;
+  // Gives every lease up at once (a clean shutdown), then stops renewing.
+  StoreResult<Ok> release_all();
+  // Renewal rounds done so far (tests wait on it).
+  std::uint64_t renewals() const;
+
+ private:
+  LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<PostgresStore> claims,
+              std::unique_ptr<PostgresStore> renewals);
+  void renew_loop();
+  using Key = std::tuple<int, int, int>;  // (y, z, x): the claiming order
+  static Key key_of(Vec3i region) { return {region.y, region.z, region.x}; }
+
+  const std::uint32_t owner_;
+  const LeaseTimes times_;
+  const LostFn on_lost_;
+  std::mutex claims_mutex_;               // one claim at a time on claims_
+  std::unique_ptr<PostgresStore> claims_;
+  std::unique_ptr<PostgresStore> renewer_;  // the keeper thread's own
+
+  mutable std::mutex mutex_;  // guards held_, rounds_, stopping_
+  std::condition_variable wake_;
+  std::map<Key, RegionLease> held_;
+  std::uint64_t rounds_ = 0;
+  bool stopping_ = false;
+  std::thread thread_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,119 @@
+// LeaseKeeper against a real PostgreSQL started by the test: leases kept
+// alive past many lease times, lost leases reported, released on shutdown.
+#include "server/storage/lease_keeper.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <mutex>
+#include <vector>
+
+#include "tests/support/eventually.h"
+#include "tests/support/postgres.h"
+
+namespace terrane {
+namespace {
+
+using namespace std::chrono_literals;
+using testing_support::eventually;
+
+class LeaseKeeperTest : public testing_support::PostgresTest {
+ protected:
+  struct Lost {
+    std::mutex mutex;
+    std::vector<std::pair<RegionLease, std::string>> leases;
+    std::size_t size() {
+      std::lock_guard lock(mutex);
+      return leases.size();
+    }
+  };
+  std::unique_ptr<LeaseKeeper> keeper(std::uint32_t owner, LeaseTimes times, Lost* lost = nullptr) {
+    auto k = LeaseKeeper::open(url_, owner, times, [lost](const RegionLease& l, const std::string& why) {
+      if (lost == nullptr) return;
+      std::lock_guard lock(lost->mutex);
+      lost->leases.emplace_back(l, why);
+    });
+    EXPECT_TRUE(k.ok()) << (k.ok() ? "" : k.error().message);
+    return k.ok() ? std::move(*k) : nullptr;
+  }
+  std::unique_ptr<PostgresStore> store() {
+    auto s = PostgresStore::open(url_);
+    EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
+    return s.ok() ? std::move(*s) : nullptr;
+  }
+};
+
+TEST_F(LeaseKeeperTest, KeepsItsLeasesAlivePastManyLeaseTimes) {
+  Lost lost;
+  auto a = keeper(1, {300ms, 60ms}, &lost);
+  ASSERT_TRUE(a);
+  const Vec3i regions[] = {{0, 0, 0}, {1, 0, 0}, {0, 0, 0}};  // a repeat is claimed once
+  auto leases = a->ensure(regions);
+  ASSERT_TRUE(leases.ok()) << leases.error().message;
+  ASSERT_EQ(leases->size(), 2u);
+  // Asked again: the same leases, nothing claimed anew.
+  auto again = a->ensure(regions);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(*again, *leases);
+  // Ten renewal rounds (2 s, several lease times) later another server is
+  // still refused.
+  const std::uint64_t start = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() >= start + 10; }, 60s));
+  auto b = store();
+  ASSERT_TRUE(b);
+  auto refused = b->claim({1, 0, 0}, 2, 60s);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().kind, StoreError::Kind::kOwned);
+  EXPECT_EQ(lost.size(), 0u);
+  EXPECT_EQ(a->held().size(), 2u);
+  // A region another server holds is not taken: kOwned, naming it.
+  auto mine = b->claim({5, 0, 0}, 2, 60s);
+  ASSERT_TRUE(mine.ok());
+  const Vec3i theirs[] = {{5, 0, 0}};
+  auto owned = a->ensure(theirs);
+  ASSERT_FALSE(owned.ok());
+  EXPECT_EQ(owned.error().kind, StoreError::Kind::kOwned);
+  EXPECT_NE(owned.error().message.find("server 2"), std::string::npos) << owned.error().message;
+  // Shut down cleanly: released, so the next server need not wait.
+  ASSERT_TRUE(a->release_all().ok());
+  EXPECT_TRUE(a->held().empty());
+  auto taken = b->claim({1, 0, 0}, 2, 60s);
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+}
+
+TEST_F(LeaseKeeperTest, ALeaseTakenWhileItsKeeperWasLateIsReportedLost) {
+  Lost lost;
+  auto open = LeaseKeeper::open(url_, 1, {400ms, 500ms}, nullptr);
+  ASSERT_FALSE(open.ok()) << "a renewal slower than the lease is refused";
+  EXPECT_NE(open.error().message.find("cannot keep"), std::string::npos) << open.error().message;
+  auto a = keeper(1, {300ms, 250ms}, &lost);
+  ASSERT_TRUE(a);
+  const Vec3i region[] = {{2, 0, 2}};
+  auto leases = a->ensure(region);
+  ASSERT_TRUE(leases.ok());
+  // The lease runs out (made to at once here, as a pause past it would),
+  // another server takes the region, and the keeper learns it at its next
+  // renewal.
+  auto b = store();
+  ASSERT_TRUE(b);
+  ASSERT_EQ(testing_support::run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
+  auto taken = b->claim({2, 0, 2}, 2, 60s);
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+  ASSERT_TRUE(eventually([&] { return lost.size() == 1; }, 60s));
+  {
+    std::lock_guard lock(lost.mutex);
+    EXPECT_EQ(lost.leases.front().first, leases->front());
+    EXPECT_NE(lost.leases.front().second.find("no longer extends"), std::string::npos) << lost.leases.front().second;
+  }
+  EXPECT_TRUE(a->held().empty());
+  // Its writes are fenced by the database whatever the keeper believed.
+  auto writer = store();
+  ASSERT_TRUE(writer);
+  const ChunkWrite w{Vec3i{16, 0, 16}, 1, encode_chunk_blob(Chunk(kAir))};
+  auto fenced = writer->save_chunks(*leases, std::span(&w, 1));
+  ASSERT_FALSE(fenced.ok());
+  EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
+}
+
+}  // namespace
+}  // namespace terrane
