@@ -1,5 +1,7 @@
 #include "server/storage/storage.h"
 
+#include <algorithm>
+
 #include <chrono>
 #include <unordered_map>
 #include <unordered_set>
@@ -47,6 +49,17 @@ void Storage::load(Vec3i pos, LoadDone done, Priority priority) {
     q.push_back(LoadJob{pos, std::move(done), nullptr});
   }
   post_load();
+}
+
+bool Storage::promote(Vec3i pos, Priority priority) {
+  if (priority == Priority::kBackground) return false;
+  std::lock_guard lock(readers_mutex_);
+  auto it = std::find_if(background_loads_.begin(), background_loads_.end(),
+                         [&](const LoadJob& j) { return j.pos == pos && !j.coarse_done; });
+  if (it == background_loads_.end()) return false;
+  (priority == Priority::kUrgent ? urgent_loads_ : loads_).push_back(std::move(*it));
+  background_loads_.erase(it);
+  return true;  // its runner is already posted: whichever runner comes next takes the most urgent job
 }
 
 void Storage::load_coarse(Vec3i region, CoarseDone done) {

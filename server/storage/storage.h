@@ -106,6 +106,9 @@ class Storage {
   // replaced), only when nothing else waits.
   enum class Priority : std::uint8_t { kUrgent, kStream, kBackground };
   void load(Vec3i pos, LoadDone done, Priority priority = Priority::kStream);
+  // Moves a queued background load of pos to priority's queue: true if one
+  // was queued (not started yet), so no second load is needed.
+  bool promote(Vec3i pos, Priority priority);
   // Reads a region's coarse image (queued with the other loads).
   void load_coarse(Vec3i region, CoarseDone done);
   // log: the tick's edits for the edit log, stored in the same transaction.

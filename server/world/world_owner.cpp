@@ -161,12 +161,13 @@ bool WorldOwner::request(Vec3i cp, int level, bool exact) {
   };
   if (loading_.count(cp) != 0) {
     // A background replacement waits behind every other load: whoever
-    // needs the chunk now asks again at its own priority (the first of the
-    // two loads to come back serves the waiters; the other is dropped).
+    // needs the chunk now moves it to its own priority, or, if it is being
+    // generated already, asks again (the first of the two loads to come
+    // back serves the waiters; the other is dropped).
     if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
       it->second.replace = Loaded::Replace::kNo;
       --replacing_;
-      load();
+      if (!storage_.promote(cp, priority)) load();
     }
     return false;
   }

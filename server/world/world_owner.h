@@ -90,7 +90,8 @@ class WorldView {
   // The chunk as applied, or null when it is all Air (precondition: loaded).
   virtual const Chunk* chunk(Vec3i chunk_pos) const = 0;
   virtual std::size_t loaded_count() const = 0;
-  // Estimates granted and not yet replaced (queued or being generated).
+  // Estimates granted and not yet replaced: queued, or being generated (in
+  // the background or for a client).
   virtual std::size_t estimates_waiting() const = 0;
 };
 
@@ -206,8 +207,9 @@ class WorldOwner : private WorldView {
   const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
   std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
   std::size_t estimates_waiting() const override {
-    return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [](const auto& kv) {
-      return kv.second.replace != Loaded::Replace::kNo && kv.second.current->estimate();
+    return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [this](const auto& kv) {
+      return kv.second.current->estimate() &&
+             (kv.second.replace != Loaded::Replace::kNo || loading_.count(kv.first) != 0);
     }));
   }
 
