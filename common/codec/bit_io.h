@@ -152,6 +152,17 @@ class BitReader {
 // (BYTE_RLE.md) and the stream batch (PROTOCOL.md) write and read them here;
 // each format sets its own length limit and names its own errors.
 
+// Zigzag: a signed integer as an unsigned one whose size follows its
+// magnitude (0, -1, 1, -2, 2 ... -> 0, 1, 2, 3, 4 ...), so small deltas of
+// either sign make short varints. The same value for a 32-bit input as the
+// 32-bit formula.
+inline std::uint64_t zigzag(std::int64_t v) {
+  return (static_cast<std::uint64_t>(v) << 1) ^ static_cast<std::uint64_t>(v >> 63);
+}
+inline std::int64_t unzigzag(std::uint64_t z) {
+  return static_cast<std::int64_t>(z >> 1) ^ -static_cast<std::int64_t>(z & 1);
+}
+
 // Appends v in the fewest bytes (1 to 10).
 inline void put_varint(std::uint64_t v, std::vector<std::uint8_t>& out) {
   while (v >= 0x80) {

@@ -9,14 +9,6 @@
 namespace terrane {
 namespace {
 
-std::uint32_t zigzag(std::int32_t v) {
-  const auto u = static_cast<std::uint32_t>(v);
-  return (u << 1) ^ static_cast<std::uint32_t>(-static_cast<std::int32_t>(u >> 31));
-}
-std::int32_t unzigzag(std::uint32_t z) {
-  return static_cast<std::int32_t>((z >> 1) ^ (0u - (z & 1)));
-}
-
 // Reads a LEB128 varint of at most 5 bytes that fits 32 bits.
 Status get_varint32(std::span<const std::uint8_t> bytes, std::size_t& pos, std::uint32_t& v) {
   std::uint64_t x = 0;
