@@ -154,6 +154,7 @@ TerrainGenerator::TerrainGenerator(GeneratorParams params) : params_(params) {
   inv_scale_ = 1.0 / static_cast<double>(params_.terrain_scale);
   for (std::uint32_t i = 0; i < 16; ++i) seeds_[i] = derive_seed(params_.seed, i);
   cache_ = std::make_shared<ColumnCache>();
+  coarse_cache_ = std::make_shared<ColumnCache>();
 }
 
 // The height of a column from continents, hills, mountains, highlands,
@@ -371,8 +372,8 @@ void TerrainGenerator::lattice_sample(std::int32_t lx, std::int32_t ly, std::int
   fields_at(static_cast<double>(lx) * kStep, static_cast<double>(ly) * kStep, static_cast<double>(lz) * kStep, out);
 }
 
-void TerrainGenerator::fields_at(double x, double y, double z, float out[4]) const {
-  out[0] = clampf(2.0f * fbm3(x / 26.0, y / 20.0, z / 26.0, seeds_[kOverhang], 2), -1.0f, 1.0f);
+void TerrainGenerator::fields_at(double x, double y, double z, float out[4], bool overhang) const {
+  out[0] = overhang ? clampf(2.0f * fbm3(x / 26.0, y / 20.0, z / 26.0, seeds_[kOverhang], 2), -1.0f, 1.0f) : 0.0f;
   if (params_.caves) {
     out[1] = gradient_noise3(x / 64.0, y / 40.0, z / 64.0, seeds_[kWormA]);
     out[2] = gradient_noise3(x / 64.0, y / 40.0, z / 64.0, seeds_[kWormB]);
@@ -651,22 +652,53 @@ void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& o
   const auto at = [&](int i, std::int32_t o) { return o + static_cast<std::int32_t>(cell) * i + half; };
   // The columns at the cells' centres, their bands widened by the wider
   // ramp (a cell whose centre is above the band may still reach into it).
-  std::vector<Column> cols(static_cast<std::size_t>(nx) * nz);
-  for (int z = 0; z < nz; ++z) {
-    for (int x = 0; x < nx; ++x) {
-      const std::int32_t wx = at(x, origin.x), wz = at(z, origin.z);
-      Column c = column(surface(wx, wz), surface(wx - 1, wz).height, surface(wx + 1, wz).height,
-                        surface(wx, wz - 1).height, surface(wx, wz + 1).height);
-      // (The ramp is len voxels wide per voxel along y: cell * len here.)
-      const auto widen = static_cast<std::int32_t>(std::ceil(static_cast<float>(half) / c.inv_len));
-      c.top_y += widen;
-      c.bot_y -= widen;
-      // The cell's centre lies half a voxel below the voxel evaluated (at
-      // an even cell): the surface is raised by as much instead.
-      if (cell % 2 == 0) c.height += 0.5f;
-      cols[static_cast<std::size_t>(z) * nx + x] = c;
+  // A chunk's column stack is often sampled in parts (the regions above
+  // and below one another): the latest footprints are kept.
+  const auto make_columns = [&] {
+    std::vector<Column> made(static_cast<std::size_t>(nx) * nz);
+    for (int z = 0; z < nz; ++z) {
+      for (int x = 0; x < nx; ++x) {
+        const std::int32_t wx = at(x, origin.x), wz = at(z, origin.z);
+        Column c = column(surface(wx, wz), surface(wx - 1, wz).height, surface(wx + 1, wz).height,
+                          surface(wx, wz - 1).height, surface(wx, wz + 1).height);
+        // (The ramp is len voxels wide per voxel along y: cell * len here.)
+        const auto widen = static_cast<std::int32_t>(std::ceil(static_cast<float>(half) / c.inv_len));
+        c.top_y += widen;
+        c.bot_y -= widen;
+        // The cell's centre lies half a voxel below the voxel evaluated (at
+        // an even cell): the surface is raised by as much instead.
+        if (cell % 2 == 0) c.height += 0.5f;
+        made[static_cast<std::size_t>(z) * nx + x] = c;
+      }
     }
+    return made;
+  };
+  std::shared_ptr<const std::vector<Column>> kept;
+  std::vector<Column> own;
+  const bool chunk_stack = cell == kChunkSize / 4 && nx == 4 && nz == 4 && floor_mod(origin.x, kChunkSize) == 0 &&
+                           floor_mod(origin.z, kChunkSize) == 0;
+  if (chunk_stack) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(origin.x)) << 32) |
+                              static_cast<std::uint32_t>(origin.z);
+    {
+      std::lock_guard lock(coarse_cache_->mutex);
+      if (auto it = coarse_cache_->entries.find(key); it != coarse_cache_->entries.end()) kept = it->second;
+    }
+    if (!kept) {
+      kept = std::make_shared<const std::vector<Column>>(make_columns());
+      std::lock_guard lock(coarse_cache_->mutex);
+      if (coarse_cache_->entries.emplace(key, kept).second) {
+        coarse_cache_->order.push_back(key);
+        if (coarse_cache_->order.size() > kCoarseColumnCacheSize) {
+          coarse_cache_->entries.erase(coarse_cache_->order.front());
+          coarse_cache_->order.pop_front();
+        }
+      }
+    }
+  } else {
+    own = make_columns();
   }
+  const std::vector<Column>& cols = kept ? *kept : own;
   // The 3D fields are evaluated at each centre (not interpolated from the
   // lattice generate() uses: one evaluation per cell, not per lattice point).
   float corners[kFields * 8];
@@ -681,7 +713,8 @@ void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& o
         const float* cp = nullptr;
         if (wy < c.top_y && wy >= kBedrockY) {
           float v[kFields];
-          fields_at(static_cast<double>(wx), static_cast<double>(wy), static_cast<double>(wz), v);
+          // shade() reads the overhang only above the band's bottom.
+          fields_at(static_cast<double>(wx), static_cast<double>(wy), static_cast<double>(wz), v, wy > c.bot_y);
           for (int f = 0; f < kFields; ++f) std::fill_n(corners + f * 8, 8, v[f]);
           cp = corners;
         }

@@ -133,8 +133,9 @@ class TerrainGenerator {
   float raw_height(double px, double pz, Surface* s) const;
   Column column(const Surface& c, float h_xm, float h_xp, float h_zm, float h_zp) const;
   void lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const;
-  // The 3D fields (overhang, two worms, cavern) at a point.
-  void fields_at(double x, double y, double z, float out[4]) const;
+  // The 3D fields (overhang, two worms, cavern) at a point; without
+  // overhang, out[0] is 0 (for points where shade() does not read it).
+  void fields_at(double x, double y, double z, float out[4], bool overhang = true) const;
   // sharpness scales the density before it is clamped: 1 for voxels, 2 /
   // cell for a coarse_sample cell.
   Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners,
@@ -151,11 +152,13 @@ class TerrainGenerator {
 
   struct ColumnCache;  // chunk footprint -> Columns, the latest kColumnCacheSize, behind a mutex
   static constexpr std::size_t kColumnCacheSize = 256;  // ~20 MB of Columns
+  static constexpr std::size_t kCoarseColumnCacheSize = 1024;  // 16 Columns each, ~2 MB
 
   GeneratorParams params_;
   double inv_scale_;          // 1 / terrain_scale
   std::uint32_t seeds_[16];   // one per noise field
   std::shared_ptr<ColumnCache> cache_;  // shared by copies (same params, same columns)
+  std::shared_ptr<ColumnCache> coarse_cache_;  // coarse_sample's chunk stacks (4 x 4 columns at cell 8)
 };
 
 }  // namespace terrane
