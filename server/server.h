@@ -8,7 +8,9 @@
 // |                     |                            | budget, pushed hashes, per-tick frames       |
 // | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
 // |                     |                            | who holds what (interest), presence          |
-// | server/storage/     | loader pool, writer thread | SQLite reads and generation; group commits   |
+// | server/storage/     | loader pool, writer thread | SQLite reads, generation and estimates (three|
+// |                     |                            | priorities); group commits. Not wired yet:   |
+// |                     |                            | PostgresStore, LeaseKeeper (its own thread)  |
 // | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
 // |                     | the admin thread           | operators' commands; bans and whitelist      |
 //
