@@ -86,10 +86,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kEstimate: {
       auto [it, fresh] = mips_.try_emplace(cp, Mip{r.level, *r.voxels});
       if (!fresh) {
-        if (it->second.level == r.level && it->second.voxels.voxels().size() == r.voxels->voxels().size() &&
-            std::equal(it->second.voxels.voxels().begin(), it->second.voxels.voxels().end(),
-                       r.voxels->voxels().begin()))
-          ++redundant_mips_;
+        if (it->second.level == r.level && it->second.voxels == *r.voxels) ++redundant_mips_;
         it->second = Mip{r.level, *r.voxels};
       }
       pending_.erase(cp);

@@ -9,7 +9,6 @@ namespace terrane {
 
 namespace {
 
-
 class Reader {
  public:
   explicit Reader(std::span<const std::uint8_t> b) : b_(b) {}

@@ -176,9 +176,11 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   // Touched rows are summarised once; they may add their palettes to the
   // table while it has room.
   thread_local std::vector<row_packed_detail::RowSummary> made;
-  if (known == nullptr) made.resize(static_cast<std::size_t>((y1 - y0) * nz));
-  for (int i = 0; known == nullptr && i < (y1 - y0) * nz; ++i)
-    made[static_cast<std::size_t>(i)] = row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+  if (known == nullptr) {
+    made.resize(static_cast<std::size_t>((y1 - y0) * nz));
+    for (int i = 0; i < (y1 - y0) * nz; ++i)
+      made[static_cast<std::size_t>(i)] = row_packed_detail::summarize_row(content + std::size_t(i) * N, N);
+  }
   const row_packed_detail::RowSummary* summaries = known != nullptr ? known : made.data();
   for (int i = 0; i < (y1 - y0) * nz; ++i) {
     const row_packed_detail::RowSummary& s = summaries[i];

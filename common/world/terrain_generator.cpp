@@ -153,8 +153,8 @@ TerrainGenerator::TerrainGenerator(GeneratorParams params) : params_(params) {
   params_.overhang_strength = fix(params_.overhang_strength, 0.0f, 16.0f, d.overhang_strength);
   inv_scale_ = 1.0 / static_cast<double>(params_.terrain_scale);
   for (std::uint32_t i = 0; i < 16; ++i) seeds_[i] = derive_seed(params_.seed, i);
-  cache_ = std::make_shared<ColumnCache>();
-  coarse_cache_ = std::make_shared<ColumnCache>();
+  cache_ = std::make_shared<ColumnCache>(kColumnCacheSize);
+  coarse_cache_ = std::make_shared<ColumnCache>(kCoarseColumnCacheSize);
 }
 
 // The height of a column from continents, hills, mountains, highlands,
@@ -485,6 +485,32 @@ Voxel TerrainGenerator::voxel_at(Vec3i p) const {
 }
 
 struct TerrainGenerator::ColumnCache {
+  explicit ColumnCache(std::size_t cap) : capacity(cap) {}
+
+  // The columns of the footprint at (x0, z0): kept ones, or make() kept as
+  // the newest (the oldest going beyond capacity). make() runs outside the
+  // lock: two threads may make the same columns, which are the same.
+  template <class Make>
+  std::shared_ptr<const std::vector<Column>> get(std::int32_t x0, std::int32_t z0, Make&& make) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(x0)) << 32) |
+                              static_cast<std::uint32_t>(z0);
+    {
+      std::lock_guard lock(mutex);
+      if (auto it = entries.find(key); it != entries.end()) return it->second;
+    }
+    auto made = std::make_shared<const std::vector<Column>>(make());
+    std::lock_guard lock(mutex);
+    if (entries.emplace(key, made).second) {
+      order.push_back(key);
+      if (order.size() > capacity) {
+        entries.erase(order.front());
+        order.pop_front();
+      }
+    }
+    return made;
+  }
+
+  const std::size_t capacity;
   std::mutex mutex;
   std::unordered_map<std::uint64_t, std::shared_ptr<const std::vector<Column>>> entries;
   std::deque<std::uint64_t> order;  // oldest first
@@ -516,23 +542,7 @@ std::vector<TerrainGenerator::Column> TerrainGenerator::columns(std::int32_t x0,
 
 std::shared_ptr<const std::vector<TerrainGenerator::Column>> TerrainGenerator::chunk_columns(std::int32_t x0,
                                                                                             std::int32_t z0) const {
-  const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(x0)) << 32) |
-                            static_cast<std::uint32_t>(z0);
-  {
-    std::lock_guard lock(cache_->mutex);
-    if (auto it = cache_->entries.find(key); it != cache_->entries.end()) return it->second;
-  }
-  // Made outside the lock (two threads may make the same one: the same result).
-  auto made = std::make_shared<const std::vector<Column>>(columns(x0, z0, kChunkSize, kChunkSize));
-  std::lock_guard lock(cache_->mutex);
-  if (cache_->entries.emplace(key, made).second) {
-    cache_->order.push_back(key);
-    if (cache_->order.size() > kColumnCacheSize) {
-      cache_->entries.erase(cache_->order.front());
-      cache_->order.pop_front();
-    }
-  }
-  return made;
+  return cache_->get(x0, z0, [&] { return columns(x0, z0, kChunkSize, kChunkSize); });
 }
 
 bool TerrainGenerator::all_air(const Region& region) const {
@@ -677,27 +687,10 @@ void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& o
   std::vector<Column> own;
   const bool chunk_stack = cell == kChunkSize / 4 && nx == 4 && nz == 4 && floor_mod(origin.x, kChunkSize) == 0 &&
                            floor_mod(origin.z, kChunkSize) == 0;
-  if (chunk_stack) {
-    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(origin.x)) << 32) |
-                              static_cast<std::uint32_t>(origin.z);
-    {
-      std::lock_guard lock(coarse_cache_->mutex);
-      if (auto it = coarse_cache_->entries.find(key); it != coarse_cache_->entries.end()) kept = it->second;
-    }
-    if (!kept) {
-      kept = std::make_shared<const std::vector<Column>>(make_columns());
-      std::lock_guard lock(coarse_cache_->mutex);
-      if (coarse_cache_->entries.emplace(key, kept).second) {
-        coarse_cache_->order.push_back(key);
-        if (coarse_cache_->order.size() > kCoarseColumnCacheSize) {
-          coarse_cache_->entries.erase(coarse_cache_->order.front());
-          coarse_cache_->order.pop_front();
-        }
-      }
-    }
-  } else {
+  if (chunk_stack)
+    kept = coarse_cache_->get(origin.x, origin.z, make_columns);
+  else
     own = make_columns();
-  }
   const std::vector<Column>& cols = kept ? *kept : own;
   // The 3D fields are evaluated at each centre (not interpolated from the
   // lattice generate() uses: one evaluation per cell, not per lattice point).

@@ -150,7 +150,7 @@ class TerrainGenerator {
   // The latest kColumnCacheSize footprints are kept.
   std::shared_ptr<const std::vector<Column>> chunk_columns(std::int32_t x0, std::int32_t z0) const;
 
-  struct ColumnCache;  // chunk footprint -> Columns, the latest kColumnCacheSize, behind a mutex
+  struct ColumnCache;  // footprint -> Columns, the latest few (its capacity), behind a mutex
   static constexpr std::size_t kColumnCacheSize = 256;  // ~20 MB of Columns
   static constexpr std::size_t kCoarseColumnCacheSize = 1024;  // 16 Columns each, ~2 MB
 

@@ -4,6 +4,7 @@
 #include <libpq-fe.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -21,6 +22,12 @@ namespace {
 constexpr std::int64_t kSchemaLockKey = 0x7465727261'6e65;  // "terrane"
 
 std::string region_text(Vec3i r) { return fmt::format("({},{},{})", r.x, r.y, r.z); }
+
+// A lease row whose values are not what the schema allows.
+StoreError bad_row(const char* what, Vec3i region) {
+  return StoreError{StoreError::Kind::kDecode,
+                    fmt::format("postgresql: {}: region {} has a lease row out of range", what, region_text(region))};
+}
 
 // A connection string as it may be logged: the password replaced by ***.
 std::string redacted(const std::string& url) {
@@ -72,7 +79,6 @@ std::uint64_t be64(const char* p) {
 
 struct PostgresStore::Connection {
   PGconn* conn = nullptr;
-  std::string url;  // redacted, for messages
   ~Connection() {
     if (conn != nullptr) PQfinish(conn);
   }
@@ -91,7 +97,16 @@ struct PostgresStore::Connection {
     }
     int count() const { return PQntuples(res); }
     std::string get(int row, int col) const { return PQgetvalue(res, row, col); }
-    std::int64_t integer(int row, int col) const { return std::stoll(get(row, col)); }
+    // A column read as an integer, or nullopt if it is not one (never an
+    // exception: the database's answer is checked like any input).
+    std::optional<std::int64_t> integer(int row, int col) const {
+      const char* v = PQgetvalue(res, row, col);
+      const char* end = v + std::strlen(v);
+      std::int64_t out = 0;
+      const auto [at, ec] = std::from_chars(v, end, out);
+      if (ec != std::errc{} || at != end) return std::nullopt;
+      return out;
+    }
   };
 
   StoreError error(const char* what, PGresult* res) const {
@@ -159,6 +174,7 @@ PostgresStore::PostgresStore(std::unique_ptr<Connection> c) : c_(std::move(c)) {
 PostgresStore::~PostgresStore() = default;
 
 StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::string& url) {
+  const std::string shown = redacted(url);  // as messages name it
   auto c = std::make_unique<Connection>();
   // Defaults first, so that the same settings in url win: a bounded connect
   // and TCP keepalives, so a dead peer is noticed in seconds, not hours.
@@ -170,9 +186,8 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     std::string detail = c->conn != nullptr ? PQerrorMessage(c->conn) : "out of memory";
     while (!detail.empty() && (detail.back() == '\n' || detail.back() == ' ')) detail.pop_back();
     return StoreError{StoreError::Kind::kConnection,
-                      fmt::format("postgresql: cannot connect to {}: {}", redacted(url), detail)};
+                      fmt::format("postgresql: cannot connect to {}: {}", shown, detail)};
   }
-  c->url = redacted(url);
   // Notices (e.g. "relation already exists, skipping") are not errors.
   PQsetNoticeProcessor(c->conn, [](void*, const char*) {}, nullptr);
   // A writer stopped inside a transaction (paused, partitioned) must not
@@ -206,7 +221,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     return c->abort(StoreError{StoreError::Kind::kQuery,
                                fmt::format("postgresql: {} holds a Terrane schema of version {}; this build reads "
                                            "version {}",
-                                           redacted(url), version->get(0, 0), kSchemaVersion)});
+                                           shown, version->get(0, 0), kSchemaVersion)});
   }
   auto commit = c->exec("commit schema", "COMMIT");
   if (!commit) return c->abort(commit.error());
@@ -229,7 +244,11 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
                     " RETURNING epoch",
                     {text(region.x), text(region.y), text(region.z), text(owner), text(lease.count())});
   if (!r) return r.error();
-  if (r->count() == 1) return RegionLease{region, owner, static_cast<std::uint64_t>(r->integer(0, 0))};
+  if (r->count() == 1) {
+    const auto epoch = r->integer(0, 0);
+    if (!epoch || *epoch < 1) return bad_row("claim region", region);
+    return RegionLease{region, owner, static_cast<std::uint64_t>(*epoch)};
+  }
   auto who = c_->exec("read region holder",
                       "SELECT owner, epoch, expires_at FROM terrane_leases WHERE rx = $1 AND ry = $2 AND rz = $3",
                       {text(region.x), text(region.y), text(region.z)});
@@ -275,8 +294,10 @@ StoreResult<std::optional<RegionLease>> PostgresStore::holder(Vec3i region) {
                     {text(region.x), text(region.y), text(region.z)});
   if (!r) return r.error();
   if (r->count() == 0) return std::optional<RegionLease>{};
-  return std::optional<RegionLease>{RegionLease{region, static_cast<std::uint32_t>(r->integer(0, 0)),
-                                                static_cast<std::uint64_t>(r->integer(0, 1))}};
+  const auto owner = r->integer(0, 0), epoch = r->integer(0, 1);
+  if (!owner || *owner < 0 || !epoch || *epoch < 1) return bad_row("read region holder", region);
+  return std::optional<RegionLease>{
+      RegionLease{region, static_cast<std::uint32_t>(*owner), static_cast<std::uint64_t>(*epoch)}};
 }
 
 StoreResult<Ok> PostgresStore::save_chunks(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks) {

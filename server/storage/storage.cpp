@@ -45,8 +45,7 @@ void Storage::stop() {
 void Storage::load(Vec3i pos, LoadDone done, Priority priority) {
   {
     std::lock_guard lock(readers_mutex_);
-    auto& q = priority == Priority::kUrgent ? urgent_loads_ : priority == Priority::kStream ? loads_ : background_loads_;
-    q.push_back(LoadJob{pos, std::move(done), nullptr});
+    queue(priority).push_back(LoadJob{pos, std::move(done), nullptr});
   }
   post_load();
 }
@@ -57,9 +56,13 @@ bool Storage::promote(Vec3i pos, Priority priority) {
   auto it = std::find_if(background_loads_.begin(), background_loads_.end(),
                          [&](const LoadJob& j) { return j.pos == pos && !j.coarse_done; });
   if (it == background_loads_.end()) return false;
-  (priority == Priority::kUrgent ? urgent_loads_ : loads_).push_back(std::move(*it));
+  queue(priority).push_back(std::move(*it));
   background_loads_.erase(it);
   return true;  // its runner is already posted: whichever runner comes next takes the most urgent job
+}
+
+std::deque<Storage::LoadJob>& Storage::queue(Priority priority) {
+  return priority == Priority::kUrgent ? urgent_loads_ : priority == Priority::kStream ? loads_ : background_loads_;
 }
 
 void Storage::load_coarse(Vec3i region, CoarseDone done) {

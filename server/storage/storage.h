@@ -152,6 +152,7 @@ class Storage {
     CoarseDone coarse_done;  // set: a coarse image
   };
   void post_load();
+  std::deque<LoadJob>& queue(Priority priority);  // under readers_mutex_
   std::deque<LoadJob> urgent_loads_, loads_, background_loads_;
 
   std::unique_ptr<WorldStore> writer_store_;

@@ -40,12 +40,9 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   return v;
 }
 
-std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::uint64_t revision,
-                                                              const CoarseVoxels& voxels) {
+std::shared_ptr<ChunkVersion> ChunkVersion::level3_only(Vec3i pos, std::uint64_t revision,
+                                                       const CoarseVoxels& voxels) {
   auto v = std::make_shared<ChunkVersion>(pos, revision, nullptr);
-  // The coarsest mip is Air only when every voxel is (one non-Air child
-  // makes its parent non-Air), so an all-Air image entry is an empty chunk.
-  v->empty_ = std::all_of(voxels.begin(), voxels.end(), [](Voxel x) { return x.material == kAir; });
   v->has_voxels_ = false;
   v->finest_level_ = kMipLevels - 1;
   const auto l = static_cast<std::size_t>(kMipLevels - 1);
@@ -53,14 +50,19 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::ui
   return v;
 }
 
+std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::uint64_t revision,
+                                                              const CoarseVoxels& voxels) {
+  auto v = level3_only(pos, revision, voxels);
+  // The coarsest mip is Air only when every voxel is (one non-Air child
+  // makes its parent non-Air), so an all-Air image entry is an empty chunk.
+  v->empty_ = std::all_of(voxels.begin(), voxels.end(), [](Voxel x) { return x.material == kAir; });
+  return v;
+}
+
 std::shared_ptr<const ChunkVersion> ChunkVersion::estimated(Vec3i pos, const CoarseVoxels& voxels) {
-  auto v = std::make_shared<ChunkVersion>(pos, 0, nullptr);
+  auto v = level3_only(pos, 0, voxels);
   v->empty_ = false;
   v->estimate_ = true;
-  v->has_voxels_ = false;
-  v->finest_level_ = kMipLevels - 1;
-  const auto l = static_cast<std::size_t>(kMipLevels - 1);
-  std::call_once(v->encoded_once_[l], [&] { net_codec_encode(kCoarseSide, voxels, v->encoded_[l]); });
   return v;
 }
 

@@ -86,6 +86,9 @@ class ChunkVersion {
   std::span<const std::uint8_t> blob() const;
 
  private:
+  // A version holding level 3 only, from its voxels (coarse_only, estimated).
+  static std::shared_ptr<ChunkVersion> level3_only(Vec3i pos, std::uint64_t revision, const CoarseVoxels& voxels);
+
   Vec3i pos_;
   std::uint64_t revision_;
   std::shared_ptr<const Chunk> chunk_;

@@ -24,13 +24,6 @@ bool same_voxels(int n, std::span<const std::uint8_t> a, std::span<const std::ui
   return net_codec_decode(n, a, va).ok() && net_codec_decode(n, b, vb).ok() && va == vb;
 }
 
-bool all_air_unit(int n, std::span<const std::uint8_t> unit) {
-  const auto count = static_cast<std::size_t>(n) * static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
-  std::vector<Voxel> v(count);
-  return net_codec_decode(n, unit, v).ok() &&
-         std::all_of(v.begin(), v.end(), [](Voxel x) { return x.material == kAir; });
-}
-
 }  // namespace
 
 WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
@@ -153,12 +146,6 @@ bool WorldOwner::request(Vec3i cp, int level, bool exact) {
       it != loaded_.end() && it->second.current->has_level(level) && !(exact && it->second.current->estimate()))
     return true;
   const auto priority = level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream;
-  const auto load = [this, cp, priority] {
-    storage_.load(
-        cp,
-        [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
-        priority);
-  };
   if (loading_.count(cp) != 0) {
     // A background replacement waits behind every other load: whoever
     // needs the chunk now moves it to its own priority, or, if it is being
@@ -167,13 +154,19 @@ bool WorldOwner::request(Vec3i cp, int level, bool exact) {
     if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
       it->second.replace = Loaded::Replace::kNo;
       --replacing_;
-      if (!storage_.promote(cp, priority)) load();
+      if (!storage_.promote(cp, priority)) load(cp, priority);
     }
     return false;
   }
   loading_.emplace(cp, std::vector<Waiter>{});
-  load();
+  load(cp, priority);
   return false;
+}
+
+void WorldOwner::load(Vec3i cp, Storage::Priority priority) {
+  storage_.load(
+      cp, [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
+      priority);
 }
 
 bool WorldOwner::want_coarse(Vec3i cp, Waiter w) {
@@ -245,10 +238,7 @@ void WorldOwner::replace_estimates() {
     l.replace = Loaded::Replace::kLoading;
     ++replacing_;
     loading_.emplace(cp, std::vector<Waiter>{});
-    storage_.load(
-        cp,
-        [this](LoadedChunk c) { asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); }); },
-        Storage::Priority::kBackground);
+    load(cp, Storage::Priority::kBackground);
   }
 }
 
@@ -274,10 +264,7 @@ void WorldOwner::on_loaded(LoadedChunk c) {
     // A load that read the store before a later commit (one overtaken by
     // a more urgent load of the same chunk, answering a newer request):
     // never older than what is held. Read again.
-    storage_.load(
-        c.pos,
-        [this](LoadedChunk d) { asio::post(strand_, [this, d = std::move(d)]() mutable { on_loaded(std::move(d)); }); },
-        Storage::Priority::kUrgent);
+    load(c.pos, Storage::Priority::kUrgent);
     return;
   }
   unreadable_.erase(c.pos);
@@ -299,9 +286,8 @@ void WorldOwner::on_loaded(LoadedChunk c) {
       // estimate they hold (an all-Air chunk's mip is all Air: a holder
       // within full resolution is sent Empty when it refines it).
       counters_.estimates_replaced.fetch_add(1, std::memory_order_relaxed);
-      const std::span<const std::uint8_t> held = l.current->encoded(kMipLevels - 1);
-      differs = v->empty() ? !all_air_unit(kCoarseSide, held)
-                           : !same_voxels(kCoarseSide, held, v->encoded(kMipLevels - 1));
+      // (An all-Air version's level 3 is an all-Air unit.)
+      differs = !same_voxels(kCoarseSide, l.current->encoded(kMipLevels - 1), v->encoded(kMipLevels - 1));
       if (differs) counters_.estimates_corrected.fetch_add(1, std::memory_order_relaxed);
     } else if (l.current->revision() != c.revision) {
       server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
@@ -339,9 +325,7 @@ void WorldOwner::retry_pending() {
   for (auto it = unreadable_.begin(); it != unreadable_.end(); ++it) {
     const Vec3i cp = it->first;
     if (loading_.count(cp) == 0) continue;
-    storage_.load(cp, [this](LoadedChunk c) {
-      asio::post(strand_, [this, c = std::move(c)]() mutable { on_loaded(std::move(c)); });
-    });
+    load(cp, Storage::Priority::kStream);
   }
   // Reads and hashes whose chunks have arrived.
   std::size_t kept = 0;

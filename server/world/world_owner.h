@@ -222,13 +222,15 @@ class WorldOwner : private WorldView {
   // Starts loading chunk_pos unless loaded or loading; true if loaded with
   // the given level (0: its voxels), and not as an estimate when exact.
   bool request(Vec3i chunk_pos, int level = 0, bool exact = false);
+  // Hands chunk_pos to Storage; the result comes back to on_loaded.
+  void load(Vec3i chunk_pos, Storage::Priority priority);
   void on_loaded(LoadedChunk c);
   // A want of the coarsest level of a chunk not loaded: taken (true) when
   // its region's coarse image can serve it (read now or being read).
   bool want_coarse(Vec3i chunk_pos, Waiter w);
   void on_coarse_loaded(LoadedCoarse c);
   // Starts background loads of queued estimates (estimates_), at most
-  // kReplacingLoads at a time.
+  // kReplacingLoadsPerWorker per loader thread at a time.
   void replace_estimates();
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void flush_grants();
