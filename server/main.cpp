@@ -1,6 +1,7 @@
 // terrane-server: the authoritative Terrane world server.
 //
 //   terrane-server --world DIR [--bind ADDR] [--port N] [options]
+//   terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]
 //
 // Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
@@ -20,17 +21,28 @@
 #include "server/net/limits.h"
 #include "server/log.h"
 #include "server/server.h"
+#include "server/storage/postgres_store.h"
 
 namespace terrane {
 namespace {
 
 constexpr const char* kHelp =
     "usage: terrane-server --world DIR [options]\n"
+    "       terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]\n"
     "\n"
     "Serves a Terrane world over TCP (protocol/PROTOCOL.md). DIR is created with the default\n"
     "generated world when it holds none.\n"
     "\n"
-    "  --world DIR                 world directory (required)\n"
+    "  --world DIR                 world directory (SQLite; this or --store is required)\n"
+    "  --store URL                 the world in PostgreSQL (libpq URL; the database must exist,\n"
+    "                              Terrane's tables are made in it), shared with other servers:\n"
+    "                              each writes only regions it holds by lease\n"
+    "                              (server/storage/STORE_POSTGRESQL.md); --world DIR is the same\n"
+    "                              as --store DIR\n"
+    "  --server-id N               this server's id in a PostgreSQL world, 0 to 2147483647, one\n"
+    "                              per running server (required with a postgresql:// store)\n"
+    "  --lease-ms N                how long a region lease lasts without renewal; renewed every\n"
+    "                              fifth of it (default 5000)\n"
     "  --bind ADDR                 address to listen on (default 127.0.0.1)\n"
     "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
     "                              'listening on ADDR:PORT'\n"
@@ -103,7 +115,7 @@ int usage_error(const std::string& message) {
 }
 
 int run(int argc, char** argv) {
-  CommandLine cl({"world", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
+  CommandLine cl({"world", "store", "server-id", "lease-ms", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
@@ -115,10 +127,23 @@ int run(int argc, char** argv) {
   if (cl.has("config"))
     if (auto e = cl.load_file(cl.get("config")); !e.empty()) return usage_error("config: " + e);
   if (!cl.positional().empty()) return usage_error("unexpected argument " + cl.positional().front());
-  if (!cl.has("world")) return usage_error("--world DIR is required");
+  if (cl.has("world") == cl.has("store"))
+    return usage_error(cl.has("world") ? "give --world DIR or --store URL, not both"
+                                       : "--world DIR (or --store URL) is required");
   ServerOptions o;
   std::string err;
-  o.world_dir = cl.get("world");
+  const std::string where = cl.has("world") ? cl.get("world") : cl.get("store");
+  if (PostgresStore::is_url(where)) {
+    o.store_url = where;
+    if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
+    o.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, 2147483647, &err));
+    o.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
+  } else {
+    if (where.find("://") != std::string::npos)
+      return usage_error("--store: '" + where + "' is neither a postgresql:// URL nor a world directory");
+    if (cl.has("server-id")) return usage_error("--server-id is for a PostgreSQL store (--store postgresql://...)");
+    o.world_dir = where;
+  }
   o.bind_address = cl.get("bind", o.bind_address);
   o.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
   o.metrics_address = cl.get("metrics");

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -16,6 +17,13 @@ namespace terrane {
 
 struct ServerOptions {
   std::string world_dir;                // created with default_world_meta() when missing
+  // The world in PostgreSQL instead ("postgresql://HOST:PORT/DB", with
+  // world_dir empty), shared with other servers: server/storage/
+  // STORE_POSTGRESQL.md. Created with default_world_meta() when the
+  // database holds none.
+  std::string store_url;
+  std::uint32_t server_id = 0;          // this server in a PostgreSQL world (below 2^31)
+  std::chrono::milliseconds lease{5000};  // a region lease's length; renewed every fifth of it
   std::string bind_address = "127.0.0.1";
   std::uint16_t port = 0;               // 0: any free port (see port())
   // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =

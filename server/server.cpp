@@ -2,9 +2,40 @@
 
 #include <future>
 
+#include "common/world/sqlite_store.h"
 #include "server/log.h"
+#include "server/storage/postgres_store.h"
 
 namespace terrane {
+
+FileResult<std::unique_ptr<World>> Server::open_world() {
+  if (options_.store_url.empty())
+    return SqliteStore::exists(options_.world_dir) ? World::open(options_.world_dir)
+                                                   : World::create(options_.world_dir, default_world_meta());
+  auto store = PostgresStore::open(options_.store_url);
+  if (!store) return FileError{store.error().message, {}};
+  if (!(*store)->has_world()) {
+    if (auto made = (*store)->create_world(default_world_meta()); !made) return FileError{made.error().message, {}};
+    server_log().info("world {}: created the default generated world", (*store)->where());
+  }
+  // Writes are fenced by this server's leases (STORE_POSTGRESQL.md): a
+  // region another server holds is never written, and a lease lost (this
+  // server paused or cut off past it) makes the next write fail, which
+  // stops the server as any failed commit does.
+  LeaseTimes times;
+  times.lease = options_.lease;
+  times.renew = std::max(std::chrono::milliseconds(1), options_.lease / 5);
+  auto keeper = LeaseKeeper::open(options_.store_url, options_.server_id, times,
+                                  [](const RegionLease& lost, const std::string& why) {
+                                    server_log().error("region ({},{},{}): lease lost (epoch {}): {}", lost.region.x,
+                                                       lost.region.y, lost.region.z, lost.epoch, why);
+                                  });
+  if (!keeper) return FileError{keeper.error().message, {}};
+  leases_ = std::move(*keeper);
+  (*store)->set_lease_source(std::make_shared<const LeaseSource>(
+      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->ensure(regions); }));
+  return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
+}
 
 FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options) {
   if (options.auth_token.empty() && options.player_tokens.empty() && !options.allow_open &&
@@ -13,8 +44,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
                          " without authentication: give --auth-token or --tokens-file, or --open to allow anyone",
                      {}};
   std::unique_ptr<Server> s(new Server(options));
-  auto world = WorldStore::exists(options.world_dir) ? World::open(options.world_dir)
-                                                     : World::create(options.world_dir, default_world_meta());
+  auto world = s->open_world();
   if (!world) return world.error();
   s->world_ = std::move(*world);
   if (options.border_set) {
@@ -71,10 +101,13 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   w.edits_per_second = static_cast<float>(s->options_.edits_per_second);
   w.edit_burst = static_cast<std::uint32_t>(s->options_.edits_per_second * 2);
   s->welcome_.bounds = meta.bounds;
-  auto access = AccessControl::open(options.world_dir, options.auth_token, options.player_tokens, options.admin_token);
+  auto access_store = s->world_->store().reopen();
+  if (!access_store) return access_store.error();
+  auto access = AccessControl::open(std::move(*access_store), options.auth_token, options.player_tokens,
+                                    options.admin_token);
   if (!access) return access.error();
   s->access_ = std::move(*access);
-  s->admin_ = std::make_unique<Admin>(options.world_dir, *s->access_, s->admin_hooks());
+  s->admin_ = std::make_unique<Admin>(s->world_->store(), *s->access_, s->admin_hooks());
   s->admin_fn_ = [self = s.get()](const std::string& who, AdminRequestMsg req,
                                   std::function<void(AdminResultMsg)> reply) {
     std::lock_guard lock(self->admin_mutex_);
@@ -153,7 +186,10 @@ Server::~Server() {
 void Server::start() {
   if (started_) return;
   started_ = true;
-  server_log().info("world {} (epoch {}), tick {} Hz", world_->store().dir(), world_->meta().epoch, options_.tick_hz);
+  server_log().info("world {} (epoch {}), tick {} Hz", world_->store().where(), world_->meta().epoch, options_.tick_hz);
+  if (leases_)
+    server_log().info("server id {} in a shared PostgreSQL world: regions leased for {} ms", options_.server_id,
+                      options_.lease.count());
   if (!options_.player_tokens.empty())
     server_log().info("authentication: per-player tokens ({} players)", options_.player_tokens.size());
   else if (!options_.auth_token.empty())
@@ -212,6 +248,12 @@ void Server::stop() {
       if (auto s = peer.session.lock()) s->close(CloseReason::kShutdown, "server shutting down");
   }
   storage_->stop();
+  // Every commit is done: the regions are given up at once, so another
+  // server takes them over without waiting for the leases to run out.
+  if (leases_)
+    if (auto released = leases_->release_all(); !released)
+      server_log().warn("leases not released (they run out in {} ms): {}", options_.lease.count(),
+                        released.error().message);
   if (metrics_) metrics_->stop();
   work_.reset();
   for (auto& t : threads_) t.join();

@@ -49,6 +49,7 @@
 #include "server/ops/http_endpoint.h"
 #include "server/options.h"
 #include "server/replication/replicator.h"
+#include "server/storage/lease_keeper.h"
 #include "server/storage/storage.h"
 #include "server/world/world_owner.h"
 
@@ -92,6 +93,9 @@ class Server {
   void do_accept();
   AdminHooks admin_hooks();
   void schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason);
+  // The world of options_: a directory (made when missing) or a PostgreSQL
+  // database (made when it holds none; leases_ set up for its writes).
+  FileResult<std::unique_ptr<World>> open_world();
   void notify_all(const ServerNoticeMsg& notice);
   void log_stats();
   void arm_stats();
@@ -99,6 +103,9 @@ class Server {
   ServerOptions options_;
   ServerCounters counters_;
   ReplicationFaults faults_;
+  // A PostgreSQL world's leases (null for SQLite): the writer's lease
+  // source, so it outlives the world and storage below.
+  std::unique_ptr<LeaseKeeper> leases_;
   std::unique_ptr<World> world_;
   std::unique_ptr<Storage> storage_;
   asio::io_context io_;

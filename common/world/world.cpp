@@ -1,5 +1,7 @@
 #include "common/world/world.h"
 
+#include "common/world/sqlite_store.h"
+
 #include <algorithm>
 #include <map>
 
@@ -21,15 +23,19 @@ FileStatus World::init_generator() {
   if (meta().generator != GeneratorKind::kTerrain) return Ok{};
   std::string message;
   auto gen = TerrainGenerator::from_metadata(meta().generator_params, &message);
-  if (!gen) return FileError{"world " + store_->dir() + ": generator parameters: " + message, gen.error()};
+  if (!gen) return FileError{store_->where() + ": generator parameters: " + message, gen.error()};
   generator_.emplace(std::move(*gen));
   return Ok{};
 }
 
 FileResult<std::unique_ptr<World>> World::open(const std::string& dir) {
-  auto store = WorldStore::open(dir);
+  auto store = SqliteStore::open(dir);
   if (!store) return store.error();
-  std::unique_ptr<World> w(new World(std::move(*store)));
+  return open(std::move(*store));
+}
+
+FileResult<std::unique_ptr<World>> World::open(std::unique_ptr<WorldStore> store) {
+  std::unique_ptr<World> w(new World(std::move(store)));
   if (auto s = w->init_generator(); !s) return s.error();
   return w;
 }
@@ -40,7 +46,7 @@ FileResult<std::unique_ptr<World>> World::create(const std::string& dir, const W
     if (!TerrainGenerator::from_metadata(meta.generator_params, &message))
       return FileError{"world " + dir + ": generator parameters: " + message, {}};
   }
-  auto store = WorldStore::create(dir, meta);
+  auto store = SqliteStore::create(dir, meta);
   if (!store) return store.error();
   std::unique_ptr<World> w(new World(std::move(*store)));
   if (auto s = w->init_generator(); !s) return s.error();

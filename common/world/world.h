@@ -1,4 +1,4 @@
-// World: a WorldStore plus the generator its metadata names. Reads come from
+// World: a WorldStore (SQLite or PostgreSQL) plus the generator its metadata names. Reads come from
 // stored chunks where they exist and from the generator elsewhere (inside
 // the world's bounds; Air outside them). Used by the world tool and the
 // server's loader.
@@ -26,8 +26,11 @@ inline constexpr Region kDefaultWorldBox{{-256, -64, -256}, {256, 192, 256}};
 
 class World {
  public:
+  // A world directory (SqliteStore).
   static FileResult<std::unique_ptr<World>> open(const std::string& dir);
   static FileResult<std::unique_ptr<World>> create(const std::string& dir, const WorldMeta& meta);
+  // A world in a store already open (any backend).
+  static FileResult<std::unique_ptr<World>> open(std::unique_ptr<WorldStore> store);
 
   WorldStore& store() { return *store_; }
   const WorldMeta& meta() const { return store_->meta(); }

@@ -1,20 +1,24 @@
-// WorldStore: a world on disk. A world is a directory holding world.sqlite,
-// an embedded SQLite database in WAL mode (format: common/world/WORLD_FORMAT.md):
-//   - meta: format version, generator kind and parameters, bounds, material
-//     table, epoch;
-//   - chunks: one row per stored 32³ chunk: its coordinates, a revision that
-//     only ever grows, and the voxels as byte RLE + LZ4;
-//   - quarantine: damaged chunk rows moved aside (coordinates, revision, the
-//     blob as it was, the reason, the time), kept until someone looks;
-//   - coarse (format 2): per 256³ region, the 4³ mip and revision of every
-//     stored chunk in it (common/world/coarse_image.h), written in the same
-//     transaction as the chunks, so a distant view never decodes them.
+// WorldStore: where a world is kept, as one connection to it. Two backends
+// implement it: SqliteStore (a directory holding world.sqlite, the default
+// for one server: common/world/WORLD_FORMAT.md) and PostgresStore (a world
+// shared by several servers: server/storage/STORE_POSTGRESQL.md). Both keep
+// the same things:
+//   - the metadata: format version, generator kind and parameters, bounds,
+//     material table, epoch;
+//   - one row per stored 32³ chunk: its coordinates, a revision that only
+//     ever grows, and the voxels as a chunk blob (below);
+//   - per 256³ region, the 4³ mip and revision of every stored chunk in it
+//     (common/world/coarse_image.h), written in the same transaction as the
+//     chunks, so a distant view never decodes them;
+//   - the quarantine (damaged chunk rows moved aside), the edit log and the
+//     operators' access lists.
 // Chunks never stored are generated on demand from the metadata (see World).
-// The finer mips are not stored: they are rebuilt from level 0 on load.
 //
 // Errors are returned as FileError naming the world and, for chunk data,
-// the chunk's coordinates; a damaged blob never crashes the reader.
-// Thread-safety: one owner thread per WorldStore (one SQLite connection).
+// the chunk's coordinates (with decode set when the stored bytes do not
+// decode); a damaged blob never crashes the reader.
+// Thread-safety: one owner thread per object (one connection); reopen()
+// gives another connection to the same world for another thread.
 #pragma once
 
 #include <cstdint>
@@ -31,15 +35,11 @@
 #include "common/world/coarse_image.h"
 #include "common/world/world_bounds.h"
 
-struct sqlite3;
-struct sqlite3_stmt;
-
 namespace terrane {
 
-// Format 2 added the coarse images; a format-1 world gains them (and
-// becomes format 2) the first time it is opened.
+// Format 2 added the coarse images (SqliteStore: a format-1 world gains
+// them, and becomes format 2, the first time it is opened).
 inline constexpr std::uint32_t kWorldFormatVersion = 2;
-inline constexpr const char* kWorldDatabaseName = "world.sqlite";
 
 enum class GeneratorKind : std::uint8_t {
   kNone,     // nothing outside stored chunks (e.g. imported worlds)
@@ -109,109 +109,71 @@ struct EditLogQuery {
 
 class WorldStore {
  public:
-  // Creates the directory (if needed) and a new world in it; fails if the
-  // directory already holds a world.
-  static FileResult<std::unique_ptr<WorldStore>> create(const std::string& dir, const WorldMeta& meta);
-  // Opens an existing world; fails with a clear message if there is none or
-  // its format version is not one we read. A format-1 world is upgraded
-  // first (its coarse images built from every chunk, in one transaction);
-  // progress(done, total) is called as that goes, or a line is printed to
-  // stderr every few seconds when progress is null.
-  using Progress = std::function<void(std::int64_t done, std::int64_t total)>;
-  static FileResult<std::unique_ptr<WorldStore>> open(const std::string& dir, const Progress& progress = nullptr);
-  static bool exists(const std::string& dir);
-
-  ~WorldStore();
+  virtual ~WorldStore() = default;
+  WorldStore() = default;
   WorldStore(const WorldStore&) = delete;
   WorldStore& operator=(const WorldStore&) = delete;
 
-  const std::string& dir() const { return dir_; }
-  const WorldMeta& meta() const { return meta_; }
-  FileStatus set_epoch(std::uint64_t epoch);
-  // A new border (or none): bounds.validate() must be empty.
-  FileStatus set_bounds(const WorldBounds& bounds);
+  // Where the world is, as messages name it: a directory, or a database
+  // address without its password.
+  virtual const std::string& where() const = 0;
+  // Another connection to the same world (one per thread).
+  virtual FileResult<std::unique_ptr<WorldStore>> reopen() const = 0;
 
-  // The stored chunk, or nullopt if the chunk was never stored.
-  FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);
+  virtual const WorldMeta& meta() const = 0;
+  virtual FileStatus set_epoch(std::uint64_t epoch) = 0;
+  // A new border (or none): bounds.validate() must be empty.
+  virtual FileStatus set_bounds(const WorldBounds& bounds) = 0;
+
+  // The stored chunk, or nullopt if the chunk was never stored. A blob that
+  // does not decode is an error with decode set.
+  virtual FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) = 0;
   // The coarse entries of region (coarse_region_of): one per stored chunk.
-  FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region);
+  virtual FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) = 0;
   // The chunks of region with a quarantine row (their generated content
-  // continues above the quarantined revision), and those with a chunks row.
-  FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region);
-  FileResult<std::vector<Vec3i>> stored_in(Vec3i region);
+  // continues above the quarantined revision), and those with a chunk row.
+  virtual FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) = 0;
+  virtual FileResult<std::vector<Vec3i>> stored_in(Vec3i region) = 0;
   // A read transaction around several reads, so they see one state of the
   // world (another connection may commit between them otherwise).
-  FileStatus begin_read();
-  void end_read();
-  // Calls fn(region, entries) for every coarse image (terrane-world check).
-  FileStatus for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn);
+  virtual FileStatus begin_read() = 0;
+  virtual void end_read() = 0;
   // Stores all writes in one transaction (all or nothing). With
   // overwrite = false, chunks already stored are left as they are (used to
   // pre-generate without racing a server's edits).
   // log: edits recorded in the same transaction (the edit log).
-  FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
-                         std::span<const EditLogEntry> log = {});
-  FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q);
+  virtual FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
+                                 std::span<const EditLogEntry> log = {}) = 0;
+  virtual FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) = 0;
   // Deletes log entries older than before_ms, then the oldest until the
   // entries' voxel bytes are at most max_bytes (0: no bound), at most
   // max_rows in all (a bounded pause; the rest go next time); how many went.
-  FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
-                                          std::int64_t max_rows = 10000);
-  // Entries and the bytes of their before/after voxels.
-  FileResult<std::pair<std::int64_t, std::uint64_t>> edit_log_size();
-  FileStatus erase_chunk(Vec3i pos);
+  virtual FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
+                                                  std::int64_t max_rows = 10000) = 0;
 
   // Quarantine: moves the stored row of pos, blob untouched, into the
-  // quarantine table, in one transaction with deleting it from chunks, so a
+  // quarantine, in one transaction with deleting it from the chunks, so a
   // later save of the chunk can never overwrite it. Returns the moved row's
   // revision, or nullopt if pos had no stored row (nothing is moved).
-  FileResult<std::optional<std::uint64_t>> quarantine_chunk(Vec3i pos, const std::string& reason);
+  virtual FileResult<std::optional<std::uint64_t>> quarantine_chunk(Vec3i pos, const std::string& reason) = 0;
   // The highest revision ever quarantined for pos, or nullopt. A chunk that
   // is not stored but was quarantined continues its revisions above this.
-  FileResult<std::optional<std::uint64_t>> quarantined_revision(Vec3i pos);
-  // Calls fn for every quarantined row, oldest first.
-  FileStatus for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn);
-  FileResult<std::int64_t> quarantined_count();
+  virtual FileResult<std::optional<std::uint64_t>> quarantined_revision(Vec3i pos) = 0;
   // Calls fn(pos, revision, blob) for every stored chunk, in key order.
-  FileStatus for_each_chunk(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn);
-  FileResult<std::int64_t> stored_chunk_count();
-  // Copies the whole database to dest_dir/world.sqlite with SQLite's online
-  // backup, a few hundred pages at a time, so a running server keeps
-  // writing; the copy is a consistent snapshot. dest_dir must not hold a
-  // world already. progress(done_pages, total_pages) is called as it goes.
-  FileStatus backup_to(const std::string& dest_dir, const std::function<void(int, int)>& progress);
+  virtual FileStatus for_each_chunk(
+      const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) = 0;
+  virtual FileResult<std::int64_t> stored_chunk_count() = 0;
   // The operators' access lists (bans, whitelist: server/ops/access.h), as
-  // key -> value text in the table "access", made on the first write.
-  FileResult<std::vector<std::pair<std::string, std::string>>> access_entries();
-  FileStatus put_access(const std::string& key, const std::string& value);
-  FileStatus erase_access(const std::string& key);
-  // Runs `PRAGMA name` and returns the first column as text (tests, checks).
-  FileResult<std::string> pragma(const std::string& name);
-
- private:
-  WorldStore(std::string dir, sqlite3* db);
-  static FileResult<std::unique_ptr<WorldStore>> create_in(const std::string& dir, const WorldMeta& meta);
-  FileStatus load_meta();
-  FileStatus ensure_quarantine_table();
-  FileStatus upgrade_to_coarse(const Progress& progress);
-  // A region's entries made from its chunk rows (a damaged image's repair).
-  FileResult<std::vector<CoarseEntry>> coarse_from_rows(Vec3i region);
-  // Inside a transaction: the images of the regions of entries, changed.
-  // set: entries to put; erase: chunks whose entries go.
-  FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase);
-  FileStatus write_meta(const WorldMeta& meta);
-  FileError error(const std::string& what) const;
-
-  std::string dir_;
-  sqlite3* db_ = nullptr;
-  sqlite3_stmt* load_stmt_ = nullptr;
-  sqlite3_stmt* save_stmt_ = nullptr;
-  sqlite3_stmt* log_stmt_ = nullptr;
-  sqlite3_stmt* insert_stmt_ = nullptr;
-  sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
-  sqlite3_stmt* coarse_load_stmt_ = nullptr;
-  sqlite3_stmt* coarse_save_stmt_ = nullptr;
-  WorldMeta meta_;
+  // key -> value text.
+  virtual FileResult<std::vector<std::pair<std::string, std::string>>> access_entries() = 0;
+  virtual FileStatus put_access(const std::string& key, const std::string& value) = 0;
+  virtual FileStatus erase_access(const std::string& key) = 0;
 };
+
+// The metadata as key -> value text (both backends store it so), and back;
+// where names the world in errors.
+std::vector<std::pair<std::string, std::string>> meta_to_keys(const WorldMeta& meta);
+FileResult<WorldMeta> meta_from_keys(const std::vector<std::pair<std::string, std::string>>& keys,
+                                     const std::string& where);
 
 }  // namespace terrane

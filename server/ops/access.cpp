@@ -12,16 +12,14 @@ std::string ban_key(const std::string& target, bool address) {
 
 }  // namespace
 
-FileResult<std::unique_ptr<AccessControl>> AccessControl::open(const std::string& world_dir, std::string shared_token,
+FileResult<std::unique_ptr<AccessControl>> AccessControl::open(std::unique_ptr<WorldStore> store, std::string shared_token,
                                                                 std::unordered_map<std::string, PlayerToken> players,
                                                                 std::string admin_token) {
   std::unique_ptr<AccessControl> a(new AccessControl());
   a->shared_token_ = std::move(shared_token);
   a->players_ = std::move(players);
   a->admin_token_ = std::move(admin_token);
-  auto store = WorldStore::open(world_dir);
-  if (!store) return store.error();
-  a->store_ = std::move(*store);
+  a->store_ = std::move(store);
   if (auto st = a->load(); !st) return st.error();
   return a;
 }

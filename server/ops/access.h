@@ -40,7 +40,7 @@ struct Ban {
 
 class AccessControl {
  public:
-  static FileResult<std::unique_ptr<AccessControl>> open(const std::string& world_dir, std::string shared_token,
+  static FileResult<std::unique_ptr<AccessControl>> open(std::unique_ptr<WorldStore> store, std::string shared_token,
                                                           std::unordered_map<std::string, PlayerToken> players,
                                                           std::string admin_token);
 

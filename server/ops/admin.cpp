@@ -8,7 +8,7 @@
 
 #include "common/cli/cli.h"
 #include "common/cli/json.h"
-#include "common/world/world_store.h"
+#include "common/world/sqlite_store.h"
 #include "server/log.h"
 
 namespace terrane {
@@ -133,8 +133,8 @@ std::optional<std::int64_t> parse_duration_s(const std::string& text) {
   return n;
 }
 
-Admin::Admin(std::string world_dir, AccessControl& access, AdminHooks hooks)
-    : world_dir_(std::move(world_dir)), access_(access), hooks_(std::move(hooks)), work_(asio::make_work_guard(io_)) {
+Admin::Admin(const WorldStore& store, AccessControl& access, AdminHooks hooks)
+    : store_(store), access_(access), hooks_(std::move(hooks)), work_(asio::make_work_guard(io_)) {
   thread_ = std::thread([this] { io_.run(); });
 }
 
@@ -335,7 +335,7 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     o.query.limit = 50;
     if (auto e = parse_log_options(a, &o); !e.empty())
       return fail("log: " + e + " (usage: log [--player NAME] [--box X0,Y0,Z0,X1,Y1,Z1] [--since DURATION] [--limit N])");
-    auto store = WorldStore::open(world_dir_);
+    auto store = store_.reopen();
     if (!store) return fail("log: " + store.error().message);
     auto entries = (*store)->edit_log(o.query);
     if (!entries) return fail("log: " + entries.error().message);
@@ -362,7 +362,7 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     if (auto e = parse_log_options(a, &o); !e.empty() || o.query.player.empty())
       return fail("rollback: " + (e.empty() ? std::string("--player NAME is required") : e) +
                   " (usage: rollback --player NAME [--since DURATION] [--box X0,Y0,Z0,X1,Y1,Z1])");
-    auto store = WorldStore::open(world_dir_);
+    auto store = store_.reopen();
     if (!store) return fail("rollback: " + store.error().message);
     // First the boxes alone: the work is bounded before any voxels are read.
     auto boxes = (*store)->edit_log(o.query);
@@ -413,7 +413,11 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
 
   if (cmd == "backup") {
     if (a.size() != 1) return fail("usage: backup PATH");
-    auto store = WorldStore::open(world_dir_);
+    const auto* sqlite = dynamic_cast<const SqliteStore*>(&store_);
+    if (sqlite == nullptr)
+      return fail("backup: the world is in PostgreSQL (" + store_.where() +
+                  "): back it up with PostgreSQL's own tools (pg_dump, or a base backup)");
+    auto store = SqliteStore::open(sqlite->dir());
     if (!store) return fail("backup: " + store.error().message);
     const auto t0 = std::chrono::steady_clock::now();
     if (auto st = (*store)->backup_to(a[0], [](int, int) {}); !st) return fail("backup: " + st.error().message);

@@ -74,7 +74,9 @@ class Admin {
  public:
   using Reply = std::function<void(AdminResultMsg)>;
 
-  Admin(std::string world_dir, AccessControl& access, AdminHooks hooks);
+  // store: the world's; reopened (WorldStore::reopen) for the log, rollback
+  // and backup, so they never share the world owner's connection.
+  Admin(const WorldStore& store, AccessControl& access, AdminHooks hooks);
   ~Admin();  // finishes the command running, drops the rest
   Admin(const Admin&) = delete;
   Admin& operator=(const Admin&) = delete;
@@ -85,7 +87,7 @@ class Admin {
  private:
   AdminResultMsg run(const std::string& who, const AdminRequestMsg& req);
 
-  std::string world_dir_;
+  const WorldStore& store_;
   AccessControl& access_;
   AdminHooks hooks_;
   // Waits (on the admin thread) until f is ready, the server stops, or the

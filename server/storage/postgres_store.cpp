@@ -75,6 +75,20 @@ std::uint64_t be64(const char* p) {
   return v;
 }
 
+// A chunk's coarse mip as stored in terrane_chunks.coarse: 64 voxels,
+// material then occupancy, Box order (the coarse image's entry voxels).
+std::vector<std::uint8_t> coarse_bytes(const CoarseVoxels& v) {
+  std::vector<std::uint8_t> out;
+  out.reserve(v.size() * 2);
+  for (const Voxel& x : v) {
+    out.push_back(x.material);
+    out.push_back(x.occupancy);
+  }
+  return out;
+}
+
+FileError file_error(const StoreError& e) { return FileError{e.message, std::nullopt}; }
+
 }  // namespace
 
 struct PostgresStore::Connection {
@@ -170,7 +184,12 @@ struct PostgresStore::Connection {
 
 Vec3i lease_region_of(Vec3i chunk_pos) { return coarse_region_of(chunk_pos); }
 
-PostgresStore::PostgresStore(std::unique_ptr<Connection> c) : c_(std::move(c)) {}
+PostgresStore::PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown)
+    : c_(std::move(c)), url_(std::move(url)), shown_(std::move(shown)) {}
+
+bool PostgresStore::is_url(const std::string& url) {
+  return url.rfind("postgresql://", 0) == 0 || url.rfind("postgres://", 0) == 0;
+}
 PostgresStore::~PostgresStore() = default;
 
 StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::string& url) {
@@ -201,9 +220,22 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   if (!lock) return c->abort(lock.error());
   for (const char* table : {
            "CREATE TABLE IF NOT EXISTS terrane_schema (version integer NOT NULL)",
+           "CREATE TABLE IF NOT EXISTS terrane_meta (key text PRIMARY KEY, value text NOT NULL)",
            "CREATE TABLE IF NOT EXISTS terrane_chunks ("
            "  x integer NOT NULL, y integer NOT NULL, z integer NOT NULL,"
-           "  revision bigint NOT NULL, blob bytea NOT NULL, PRIMARY KEY (x, y, z))",
+           "  revision bigint NOT NULL, blob bytea NOT NULL, coarse bytea NOT NULL, PRIMARY KEY (x, y, z))",
+           "CREATE TABLE IF NOT EXISTS terrane_quarantine ("
+           "  id bigserial PRIMARY KEY, x integer NOT NULL, y integer NOT NULL, z integer NOT NULL,"
+           "  revision bigint NOT NULL, blob bytea NOT NULL, reason text NOT NULL, time_s bigint NOT NULL)",
+           "CREATE INDEX IF NOT EXISTS terrane_quarantine_chunk ON terrane_quarantine (x, y, z)",
+           "CREATE TABLE IF NOT EXISTS terrane_edit_log ("
+           "  id bigserial PRIMARY KEY, tick bigint NOT NULL, time_ms bigint NOT NULL, player text NOT NULL,"
+           "  x0 integer NOT NULL, y0 integer NOT NULL, z0 integer NOT NULL,"
+           "  x1 integer NOT NULL, y1 integer NOT NULL, z1 integer NOT NULL,"
+           "  before bytea NOT NULL, after bytea NOT NULL)",
+           "CREATE INDEX IF NOT EXISTS terrane_edit_log_player ON terrane_edit_log (player, id)",
+           "CREATE INDEX IF NOT EXISTS terrane_edit_log_time ON terrane_edit_log (time_ms)",
+           "CREATE TABLE IF NOT EXISTS terrane_access (key text PRIMARY KEY, value text NOT NULL)",
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
@@ -225,7 +257,9 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   }
   auto commit = c->exec("commit schema", "COMMIT");
   if (!commit) return c->abort(commit.error());
-  return std::unique_ptr<PostgresStore>(new PostgresStore(std::move(c)));
+  std::unique_ptr<PostgresStore> store(new PostgresStore(std::move(c), url, shown));
+  if (auto m = store->read_meta(); !m) return m.error();
+  return store;
 }
 
 StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease) {
@@ -300,7 +334,8 @@ StoreResult<std::optional<RegionLease>> PostgresStore::holder(Vec3i region) {
       RegionLease{region, static_cast<std::uint32_t>(*owner), static_cast<std::uint64_t>(*epoch)}};
 }
 
-StoreResult<Ok> PostgresStore::save_chunks(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks) {
+StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
+                                           std::span<const EditLogEntry> log, bool overwrite) {
   // The leases the chunks need, in one order for every server (lease rows
   // are locked in that order, so two writers never deadlock).
   std::map<std::tuple<int, int, int>, RegionLease> used;
@@ -328,11 +363,34 @@ StoreResult<Ok> PostgresStore::save_chunks(std::span<const RegionLease> leases, 
                                               region_text(l.region), l.owner, l.epoch)});
   }
   for (const ChunkWrite& w : chunks) {
+    CoarseVoxels coarse{};
+    if (w.coarse) {
+      coarse = *w.coarse;
+    } else {
+      auto decoded = decode_chunk_blob(w.blob);
+      if (!decoded)
+        return c_->abort(StoreError{StoreError::Kind::kDecode, fmt::format("chunk {}: the blob to write: {}",
+                                                                            region_text(w.pos),
+                                                                            decoded.error().describe())});
+      coarse = coarse_voxels(&*decoded);
+    }
     auto r = c_->exec("write chunk",
-                      "INSERT INTO terrane_chunks (x, y, z, revision, blob) VALUES ($1, $2, $3, $4, $5)"
-                      " ON CONFLICT (x, y, z) DO UPDATE SET revision = EXCLUDED.revision, blob = EXCLUDED.blob",
+                      overwrite ? "INSERT INTO terrane_chunks (x, y, z, revision, blob, coarse)"
+                                  " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO UPDATE SET"
+                                  " revision = EXCLUDED.revision, blob = EXCLUDED.blob, coarse = EXCLUDED.coarse"
+                                : "INSERT INTO terrane_chunks (x, y, z, revision, blob, coarse)"
+                                  " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO NOTHING",
                       {text(w.pos.x), text(w.pos.y), text(w.pos.z), text(static_cast<std::int64_t>(w.revision)),
-                       blob(w.blob)});
+                       blob(w.blob), blob(coarse_bytes(coarse))});
+    if (!r) return c_->abort(r.error());
+  }
+  for (const EditLogEntry& e : log) {
+    auto r = c_->exec("write edit log",
+                      "INSERT INTO terrane_edit_log (tick, time_ms, player, x0, y0, z0, x1, y1, z1, before, after)"
+                      " VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)",
+                      {text(static_cast<std::int64_t>(e.tick)), text(e.time_ms), Param{e.player, false},
+                       text(e.box.min.x), text(e.box.min.y), text(e.box.min.z), text(e.box.max.x), text(e.box.max.y),
+                       text(e.box.max.z), blob(e.before), blob(e.after)});
     if (!r) return c_->abort(r.error());
   }
   auto commit = c_->exec("commit chunks", "COMMIT");
@@ -340,21 +398,375 @@ StoreResult<Ok> PostgresStore::save_chunks(std::span<const RegionLease> leases, 
   return Ok{};
 }
 
-StoreResult<std::optional<StoredChunk>> PostgresStore::load_chunk(Vec3i pos) {
+
+namespace {
+
+// Binary columns, each checked for its length: the database's answer is
+// read like any input.
+std::optional<std::int32_t> be32_at(PGresult* res, int row, int col) {
+  if (PQgetisnull(res, row, col) || PQgetlength(res, row, col) != 4) return std::nullopt;
+  const char* p = PQgetvalue(res, row, col);
+  std::uint32_t v = 0;
+  for (int i = 0; i < 4; ++i) v = (v << 8) | static_cast<unsigned char>(p[i]);
+  return static_cast<std::int32_t>(v);
+}
+std::optional<std::int64_t> be64_at(PGresult* res, int row, int col) {
+  if (PQgetisnull(res, row, col) || PQgetlength(res, row, col) != 8) return std::nullopt;
+  return static_cast<std::int64_t>(be64(PQgetvalue(res, row, col)));
+}
+std::span<const std::uint8_t> bytes_at(PGresult* res, int row, int col) {
+  return {reinterpret_cast<const std::uint8_t*>(PQgetvalue(res, row, col)),
+          static_cast<std::size_t>(PQgetlength(res, row, col))};
+}
+
+FileError decode_failure(Vec3i pos, const DecodeError& e) {
+  return FileError{fmt::format("postgresql: chunk {}: {}", region_text(pos), e.describe()), e};
+}
+
+Result<CoarseVoxels> coarse_from_bytes(std::span<const std::uint8_t> b) {
+  CoarseVoxels v{};
+  if (b.size() != v.size() * 2) return DecodeError{DecodeErrorCode::kTruncated, b.size(), "coarse mip length"};
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const Voxel x{b[2 * i], b[2 * i + 1]};
+    if (x.material >= kMaterialCount) return DecodeError{DecodeErrorCode::kInvalidValue, 2 * i, "coarse mip material"};
+    if (x.material == kAir && x.occupancy != 0)
+      return DecodeError{DecodeErrorCode::kInvalidValue, 2 * i + 1, "coarse mip Air with occupancy"};
+    v[i] = x;
+  }
+  return v;
+}
+
+// The parameters of a region's chunk range: x0, x1, y0, y1, z0, z1.
+std::vector<Param> region_range(Vec3i region) {
+  const Vec3i lo = region * kCoarseRegionChunks, hi = lo + Vec3i{kCoarseRegionChunks - 1, kCoarseRegionChunks - 1,
+                                                                  kCoarseRegionChunks - 1};
+  return {text(lo.x), text(hi.x), text(lo.y), text(hi.y), text(lo.z), text(hi.z)};
+}
+
+}  // namespace
+
+StoreResult<Ok> PostgresStore::read_meta() {
+  auto r = c_->exec("read world metadata", "SELECT key, value FROM terrane_meta");
+  if (!r) return r.error();
+  if (r->count() == 0) {
+    has_world_ = false;
+    return Ok{};
+  }
+  std::vector<std::pair<std::string, std::string>> keys;
+  for (int i = 0; i < r->count(); ++i) keys.emplace_back(r->get(i, 0), r->get(i, 1));
+  auto m = meta_from_keys(keys, "world " + shown_);
+  if (!m) return StoreError{StoreError::Kind::kDecode, m.error().message};
+  meta_ = std::move(*m);
+  has_world_ = true;
+  return Ok{};
+}
+
+StoreResult<Ok> PostgresStore::create_world(const WorldMeta& meta) {
+  if (auto why = meta.bounds.validate(); !why.empty())
+    return StoreError{StoreError::Kind::kQuery, fmt::format("world {}: {}", shown_, why)};
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return begin.error();
+  // The schema lock again: two servers making the world at once agree on
+  // one metadata (the first's).
+  auto lock = c_->exec("lock schema", "SELECT pg_advisory_xact_lock($1)", {text(kSchemaLockKey)});
+  if (!lock) return c_->abort(lock.error());
+  auto any = c_->exec("read world metadata", "SELECT 1 FROM terrane_meta LIMIT 1");
+  if (!any) return c_->abort(any.error());
+  if (any->count() == 0) {
+    for (const auto& [k, v] : meta_to_keys(meta)) {
+      auto put = c_->exec("write world metadata", "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)",
+                          {Param{k, false}, Param{v, false}});
+      if (!put) return c_->abort(put.error());
+    }
+  }
+  auto commit = c_->exec("commit world metadata", "COMMIT");
+  if (!commit) return c_->abort(commit.error());
+  return read_meta();
+}
+
+FileStatus PostgresStore::put_meta(const WorldMeta& meta) {
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return file_error(begin.error());
+  for (const auto& [k, v] : meta_to_keys(meta)) {
+    auto put = c_->exec("write world metadata",
+                        "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)"
+                        " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+                        {Param{k, false}, Param{v, false}});
+    if (!put) return file_error(c_->abort(put.error()));
+  }
+  auto commit = c_->exec("commit world metadata", "COMMIT");
+  if (!commit) return file_error(c_->abort(commit.error()));
+  return Ok{};
+}
+
+FileResult<std::unique_ptr<WorldStore>> PostgresStore::reopen() const {
+  auto again = open(url_);
+  if (!again) return file_error(again.error());
+  (*again)->set_lease_source(leases_);
+  return std::unique_ptr<WorldStore>(std::move(*again));
+}
+
+FileStatus PostgresStore::set_epoch(std::uint64_t epoch) {
+  WorldMeta m = meta_;
+  m.epoch = epoch;
+  if (auto st = put_meta(m); !st) return st;
+  meta_.epoch = epoch;
+  return Ok{};
+}
+
+FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) {
+  if (auto why = bounds.validate(); !why.empty()) return FileError{"world " + shown_ + ": " + why, {}};
+  WorldMeta m = meta_;
+  m.bounds = bounds;
+  if (auto st = put_meta(m); !st) return st;
+  meta_.bounds = bounds;
+  return Ok{};
+}
+
+FileResult<std::optional<StoredChunk>> PostgresStore::load_chunk(Vec3i pos) {
   auto r = c_->exec("read chunk", "SELECT revision, blob FROM terrane_chunks WHERE x = $1 AND y = $2 AND z = $3",
                     {text(pos.x), text(pos.y), text(pos.z)}, /*binary_result=*/true);
-  if (!r) return r.error();
+  if (!r) return file_error(r.error());
   if (r->count() == 0) return std::optional<StoredChunk>{};
-  if (PQgetlength(r->res, 0, 0) != 8)
-    return StoreError{StoreError::Kind::kDecode, fmt::format("chunk {}: revision is not a bigint", region_text(pos))};
-  StoredChunk out;
-  out.revision = be64(PQgetvalue(r->res, 0, 0));
-  const auto* data = reinterpret_cast<const std::uint8_t*>(PQgetvalue(r->res, 0, 1));
-  auto chunk = decode_chunk_blob(std::span<const std::uint8_t>(data, static_cast<std::size_t>(PQgetlength(r->res, 0, 1))));
-  if (!chunk)
-    return StoreError{StoreError::Kind::kDecode, fmt::format("chunk {}: {}", region_text(pos), chunk.error().describe())};
-  out.chunk = std::move(*chunk);
-  return std::optional<StoredChunk>{std::move(out)};
+  const auto revision = be64_at(r->res, 0, 0);
+  if (!revision || *revision < 0)
+    return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
+  auto chunk = decode_chunk_blob(bytes_at(r->res, 0, 1));
+  if (!chunk) return decode_failure(pos, chunk.error());
+  return std::optional<StoredChunk>{StoredChunk{static_cast<std::uint64_t>(*revision), std::move(*chunk)}};
+}
+
+FileResult<std::vector<CoarseEntry>> PostgresStore::load_coarse(Vec3i region) {
+  auto r = c_->exec("read coarse mips",
+                    "SELECT x, y, z, revision, coarse FROM terrane_chunks"
+                    " WHERE x BETWEEN $1 AND $2 AND y BETWEEN $3 AND $4 AND z BETWEEN $5 AND $6",
+                    region_range(region), /*binary_result=*/true);
+  if (!r) return file_error(r.error());
+  std::vector<CoarseEntry> out;
+  out.reserve(static_cast<std::size_t>(r->count()));
+  for (int i = 0; i < r->count(); ++i) {
+    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+    const auto revision = be64_at(r->res, i, 3);
+    if (!x || !y || !z) return FileError{fmt::format("postgresql: region {}: a chunk row's position does not read",
+                                                     region_text(region)), std::nullopt};
+    const Vec3i pos{*x, *y, *z};
+    if (!revision || *revision < 0)
+      return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
+    auto voxels = coarse_from_bytes(bytes_at(r->res, i, 4));
+    if (!voxels) return decode_failure(pos, voxels.error());
+    out.push_back(CoarseEntry{pos, static_cast<std::uint64_t>(*revision), *voxels});
+  }
+  return out;
+}
+
+namespace {
+template <class Rows>
+FileResult<std::vector<Vec3i>> positions(Rows& r, Vec3i region) {
+  if (!r) return file_error(r.error());
+  std::vector<Vec3i> out;
+  for (int i = 0; i < r->count(); ++i) {
+    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+    if (!x || !y || !z) return FileError{fmt::format("postgresql: region {}: a row's position does not read",
+                                                     region_text(region)), std::nullopt};
+    out.push_back({*x, *y, *z});
+  }
+  return out;
+}
+}  // namespace
+
+FileResult<std::vector<Vec3i>> PostgresStore::quarantined_in(Vec3i region) {
+  auto r = c_->exec("read quarantine",
+                    "SELECT DISTINCT x, y, z FROM terrane_quarantine"
+                    " WHERE x BETWEEN $1 AND $2 AND y BETWEEN $3 AND $4 AND z BETWEEN $5 AND $6",
+                    region_range(region), /*binary_result=*/true);
+  return positions(r, region);
+}
+
+FileResult<std::vector<Vec3i>> PostgresStore::stored_in(Vec3i region) {
+  auto r = c_->exec("read chunk positions",
+                    "SELECT x, y, z FROM terrane_chunks"
+                    " WHERE x BETWEEN $1 AND $2 AND y BETWEEN $3 AND $4 AND z BETWEEN $5 AND $6",
+                    region_range(region), /*binary_result=*/true);
+  return positions(r, region);
+}
+
+FileStatus PostgresStore::begin_read() {
+  auto r = c_->exec("begin read", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
+  if (!r) return file_error(r.error());
+  return Ok{};
+}
+
+void PostgresStore::end_read() { (void)c_->exec("end read", "COMMIT"); }
+
+FileStatus PostgresStore::save_chunks(std::span<const ChunkWrite> writes, bool overwrite,
+                                      std::span<const EditLogEntry> log) {
+  if (!leases_)
+    return FileError{fmt::format("world {}: this connection holds no leases, and writes to a PostgreSQL world "
+                                 "are fenced by them (give the server or tool a --server-id)",
+                                 shown_),
+                     std::nullopt};
+  std::vector<Vec3i> regions;
+  for (const ChunkWrite& w : writes) {
+    const Vec3i r = lease_region_of(w.pos);
+    if (std::find(regions.begin(), regions.end(), r) == regions.end()) regions.push_back(r);
+  }
+  auto leases = (*leases_)(regions);
+  if (!leases) return file_error(leases.error());
+  auto saved = save_fenced(*leases, writes, log, overwrite);
+  if (!saved) return file_error(saved.error());
+  return Ok{};
+}
+
+FileResult<std::vector<EditLogEntry>> PostgresStore::edit_log(const EditLogQuery& q) {
+  std::string sql = std::string("SELECT id, tick, time_ms, player, x0, y0, z0, x1, y1, z1") +
+                    (q.with_voxels ? ", before, after" : "") + " FROM terrane_edit_log WHERE time_ms >= $1";
+  std::vector<Param> params{text(q.since_ms)};
+  if (!q.player.empty()) {
+    params.push_back(Param{q.player, false});
+    sql += fmt::format(" AND player = ${}", params.size());
+  }
+  if (q.box) {
+    const Region& b = *q.box;
+    const std::size_t n = params.size();
+    for (const int v : {b.max.x, b.min.x, b.max.y, b.min.y, b.max.z, b.min.z}) params.push_back(text(v));
+    sql += fmt::format(" AND x0 < ${} AND x1 > ${} AND y0 < ${} AND y1 > ${} AND z0 < ${} AND z1 > ${}", n + 1, n + 2,
+                       n + 3, n + 4, n + 5, n + 6);
+  }
+  params.push_back(text(static_cast<std::int64_t>(std::min<std::size_t>(q.limit, 1u << 30))));
+  sql += fmt::format(" ORDER BY id DESC LIMIT ${}", params.size());
+  auto r = c_->exec("read edit log", sql.c_str(), params, /*binary_result=*/true);
+  if (!r) return file_error(r.error());
+  std::vector<EditLogEntry> out;
+  for (int i = 0; i < r->count(); ++i) {
+    EditLogEntry e;
+    const auto id = be64_at(r->res, i, 0), tick = be64_at(r->res, i, 1), time = be64_at(r->res, i, 2);
+    std::optional<std::int32_t> c[6];
+    for (int k = 0; k < 6; ++k) c[k] = be32_at(r->res, i, 4 + k);
+    if (!id || !tick || *tick < 0 || !time || std::any_of(c, c + 6, [](const auto& v) { return !v; }))
+      return FileError{"postgresql: read edit log: a row does not read", std::nullopt};
+    e.id = *id;
+    e.tick = static_cast<std::uint64_t>(*tick);
+    e.time_ms = *time;
+    const auto name = bytes_at(r->res, i, 3);
+    e.player.assign(name.begin(), name.end());
+    e.box = {{*c[0], *c[1], *c[2]}, {*c[3], *c[4], *c[5]}};
+    if (q.with_voxels) {
+      const auto before = bytes_at(r->res, i, 10), after = bytes_at(r->res, i, 11);
+      e.before.assign(before.begin(), before.end());
+      e.after.assign(after.begin(), after.end());
+    }
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+FileResult<std::int64_t> PostgresStore::prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
+                                                       std::int64_t max_rows) {
+  // The oldest first: those older than before_ms, then those beyond the
+  // newest max_bytes of voxels; at most max_rows.
+  auto r = c_->exec(
+      "prune edit log",
+      "DELETE FROM terrane_edit_log WHERE id IN (SELECT id FROM ("
+      "  SELECT id, time_ms, sum(octet_length(before) + octet_length(after)) OVER (ORDER BY id DESC) AS newer"
+      "  FROM terrane_edit_log) t"
+      " WHERE time_ms < $1 OR ($2::bigint > 0 AND newer > $2::bigint) ORDER BY id LIMIT $3)",
+      {text(before_ms), text(static_cast<std::int64_t>(std::min<std::uint64_t>(max_bytes, std::numeric_limits<std::int64_t>::max()))),
+       text(max_rows)});
+  if (!r) return file_error(r.error());
+  std::int64_t n = 0;
+  const char* tuples = PQcmdTuples(r->res);
+  std::from_chars(tuples, tuples + std::strlen(tuples), n);
+  return n;
+}
+
+FileResult<std::optional<std::uint64_t>> PostgresStore::quarantine_chunk(Vec3i pos, const std::string& reason) {
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return file_error(begin.error());
+  // Copied inside the database: the blob moves byte for byte, however
+  // damaged it is.
+  auto moved = c_->exec("quarantine chunk",
+                        "WITH gone AS (DELETE FROM terrane_chunks WHERE x = $1 AND y = $2 AND z = $3"
+                        "  RETURNING x, y, z, revision, blob)"
+                        " INSERT INTO terrane_quarantine (x, y, z, revision, blob, reason, time_s)"
+                        " SELECT x, y, z, revision, blob, $4, extract(epoch from clock_timestamp())::bigint FROM gone"
+                        " RETURNING revision",
+                        {text(pos.x), text(pos.y), text(pos.z), Param{reason, false}});
+  if (!moved) return file_error(c_->abort(moved.error()));
+  std::optional<std::uint64_t> revision;
+  if (moved->count() == 1) {
+    const auto rev = moved->integer(0, 0);
+    if (!rev || *rev < 0) return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: quarantine: revision out of range"}));
+    revision = static_cast<std::uint64_t>(*rev);
+  }
+  auto commit = c_->exec("commit quarantine", "COMMIT");
+  if (!commit) return file_error(c_->abort(commit.error()));
+  return revision;
+}
+
+FileResult<std::optional<std::uint64_t>> PostgresStore::quarantined_revision(Vec3i pos) {
+  auto r = c_->exec("read quarantine", "SELECT max(revision) FROM terrane_quarantine WHERE x = $1 AND y = $2 AND z = $3",
+                    {text(pos.x), text(pos.y), text(pos.z)});
+  if (!r) return file_error(r.error());
+  if (r->count() == 0 || PQgetisnull(r->res, 0, 0)) return std::optional<std::uint64_t>{};
+  const auto rev = r->integer(0, 0);
+  if (!rev || *rev < 0) return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "quarantined revision"});
+  return std::optional<std::uint64_t>{static_cast<std::uint64_t>(*rev)};
+}
+
+FileStatus PostgresStore::for_each_chunk(
+    const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) {
+  auto begin = c_->exec("begin", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
+  if (!begin) return file_error(begin.error());
+  auto cursor = c_->exec("read chunks",
+                         "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob FROM terrane_chunks"
+                         " ORDER BY x, y, z");
+  if (!cursor) return file_error(c_->abort(cursor.error()));
+  for (;;) {
+    auto r = c_->exec("read chunks", "FETCH 1000 FROM terrane_each", {}, /*binary_result=*/true);
+    if (!r) return file_error(c_->abort(r.error()));
+    if (r->count() == 0) break;
+    for (int i = 0; i < r->count(); ++i) {
+      const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+      const auto revision = be64_at(r->res, i, 3);
+      if (!x || !y || !z || !revision || *revision < 0)
+        return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
+      fn({*x, *y, *z}, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4));
+    }
+  }
+  auto commit = c_->exec("end read", "COMMIT");
+  if (!commit) return file_error(c_->abort(commit.error()));
+  return Ok{};
+}
+
+FileResult<std::int64_t> PostgresStore::stored_chunk_count() {
+  auto r = c_->exec("count chunks", "SELECT count(*) FROM terrane_chunks");
+  if (!r) return file_error(r.error());
+  const auto n = r->integer(0, 0);
+  if (!n) return FileError{"postgresql: count chunks: the count does not read", std::nullopt};
+  return *n;
+}
+
+FileResult<std::vector<std::pair<std::string, std::string>>> PostgresStore::access_entries() {
+  auto r = c_->exec("read access lists", "SELECT key, value FROM terrane_access ORDER BY key");
+  if (!r) return file_error(r.error());
+  std::vector<std::pair<std::string, std::string>> out;
+  for (int i = 0; i < r->count(); ++i) out.emplace_back(r->get(i, 0), r->get(i, 1));
+  return out;
+}
+
+FileStatus PostgresStore::put_access(const std::string& key, const std::string& value) {
+  auto r = c_->exec("write access lists",
+                    "INSERT INTO terrane_access (key, value) VALUES ($1, $2)"
+                    " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+                    {Param{key, false}, Param{value, false}});
+  if (!r) return file_error(r.error());
+  return Ok{};
+}
+
+FileStatus PostgresStore::erase_access(const std::string& key) {
+  auto r = c_->exec("write access lists", "DELETE FROM terrane_access WHERE key = $1", {Param{key, false}});
+  if (!r) return file_error(r.error());
+  return Ok{};
 }
 
 }  // namespace terrane

@@ -1,11 +1,13 @@
 // PostgresStore: a world kept in PostgreSQL, so that several servers can
 // share it (server/storage/STORE_POSTGRESQL.md has the tables and the rules).
 //
-// This part holds the chunk rows and the region leases. A region (8 x 8 x 8
-// chunks, the coarse images' regions) has at most one writer. That writer
-// is the server whose lease is current, and every write transaction checks
-// the lease (owner, epoch, not expired by the database's clock) in the same
-// transaction, so a server that lost its lease can never write.
+// It is a WorldStore (the world's metadata, chunk rows with their coarse
+// mips, quarantine, edit log, access lists) plus the region leases. A
+// region (8 x 8 x 8 chunks, the coarse images' regions) has at most one
+// writer. That writer is the server whose lease is current, and every write
+// transaction checks the lease (owner, epoch, not expired by the database's
+// clock) in the same transaction, so a server that lost its lease can never
+// write.
 //
 // Connection strings are libpq's: "postgresql://HOST:PORT/DB" or
 // "host=... port=... dbname=...", with a 10 s connect timeout and TCP
@@ -20,6 +22,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -56,17 +59,34 @@ struct RegionLease {
   friend bool operator==(const RegionLease&, const RegionLease&) = default;
 };
 
-class PostgresStore {
+// Where a server's writes get their leases: the leases of the regions given
+// (a LeaseKeeper's ensure), or kOwned naming the holder of one of them.
+using LeaseSource = std::function<StoreResult<std::vector<RegionLease>>(std::span<const Vec3i> regions)>;
+
+class PostgresStore final : public WorldStore {
  public:
   // Connects and creates the schema if the database has none (in one
   // transaction; a schema of another version is an error naming both).
+  // The world's metadata is read if the database holds a world
+  // (has_world()); create_world puts one there.
   static StoreResult<std::unique_ptr<PostgresStore>> open(const std::string& url);
-  ~PostgresStore();
-  PostgresStore(const PostgresStore&) = delete;
-  PostgresStore& operator=(const PostgresStore&) = delete;
+  ~PostgresStore() override;
 
   // The schema version this build reads and writes.
   static constexpr int kSchemaVersion = 1;
+  // Whether url names a PostgreSQL database ("postgresql://..." or
+  // "postgres://...") rather than a world directory.
+  static bool is_url(const std::string& url);
+
+  bool has_world() const { return has_world_; }
+  // Stores meta as the world's unless the database holds a world already
+  // (another server may have made it first: its metadata wins), then reads
+  // it back.
+  StoreResult<Ok> create_world(const WorldMeta& meta);
+  // Every write of this connection (save_chunks) asks source for the
+  // leases of the regions it writes and is fenced by them. Connections
+  // made by reopen() share it. Without one, writes are refused.
+  void set_lease_source(std::shared_ptr<const LeaseSource> source) { leases_ = std::move(source); }
 
   // Takes the region for owner (a server id below 2^31) for the lease time,
   // at the next epoch, if it is free, its lease has expired, or owner holds
@@ -84,21 +104,56 @@ class PostgresStore {
   // Who holds region now (a current lease), if anyone.
   StoreResult<std::optional<RegionLease>> holder(Vec3i region);
 
-  // Stores the chunks in one transaction, fenced. Every chunk's region
-  // must be under one of leases, and every lease used must still be
-  // current when the transaction checks it (it locks the lease rows, so a
-  // takeover waits for the commit and then sees the chunks). Otherwise
-  // kFenced and nothing is written. A chunk outside every given lease is
-  // kFenced too.
-  StoreResult<Ok> save_chunks(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks);
-  // The stored chunk, or nullopt where none is stored. A blob that does not
-  // decode is kDecode, naming the chunk.
-  StoreResult<std::optional<StoredChunk>> load_chunk(Vec3i pos);
+  // Stores the chunks and the log entries in one transaction, fenced. Every
+  // chunk's region must be under one of leases, and every lease used must
+  // still be current when the transaction checks it (it locks the lease
+  // rows, so a takeover waits for the commit and then sees the chunks).
+  // Otherwise kFenced and nothing is written. A chunk outside every given
+  // lease is kFenced too. overwrite = false leaves chunks already stored.
+  StoreResult<Ok> save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
+                              std::span<const EditLogEntry> log = {}, bool overwrite = true);
+
+  // WorldStore. Errors name the statement and PostgreSQL's message; a chunk
+  // row that does not decode is an error with decode set, naming the chunk.
+  const std::string& where() const override { return shown_; }
+  FileResult<std::unique_ptr<WorldStore>> reopen() const override;
+  const WorldMeta& meta() const override { return meta_; }
+  FileStatus set_epoch(std::uint64_t epoch) override;
+  FileStatus set_bounds(const WorldBounds& bounds) override;
+  FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override;
+  FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) override;
+  FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) override;
+  FileResult<std::vector<Vec3i>> stored_in(Vec3i region) override;
+  FileStatus begin_read() override;
+  void end_read() override;
+  // Fenced by the lease source's leases (save_fenced).
+  FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
+                         std::span<const EditLogEntry> log = {}) override;
+  FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) override;
+  FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
+                                          std::int64_t max_rows = 10000) override;
+  FileResult<std::optional<std::uint64_t>> quarantine_chunk(Vec3i pos, const std::string& reason) override;
+  FileResult<std::optional<std::uint64_t>> quarantined_revision(Vec3i pos) override;
+  // Reads the rows a thousand at a time (a cursor), so memory stays bounded.
+  FileStatus for_each_chunk(
+      const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) override;
+  FileResult<std::int64_t> stored_chunk_count() override;
+  FileResult<std::vector<std::pair<std::string, std::string>>> access_entries() override;
+  FileStatus put_access(const std::string& key, const std::string& value) override;
+  FileStatus erase_access(const std::string& key) override;
 
  private:
   struct Connection;
-  explicit PostgresStore(std::unique_ptr<Connection> c);
+  PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown);
+  StoreResult<Ok> read_meta();
+  FileStatus put_meta(const WorldMeta& meta);
+
   std::unique_ptr<Connection> c_;
+  std::string url_;    // as given (reopen connects with it)
+  std::string shown_;  // as messages name it: the password left out
+  bool has_world_ = false;
+  WorldMeta meta_;
+  std::shared_ptr<const LeaseSource> leases_;
 };
 
 // The region (8 x 8 x 8 chunks) a chunk belongs to.

@@ -14,11 +14,11 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   const int n = std::max(1, loader_threads);
   std::unique_ptr<Storage> s(new Storage(world, n));
   for (int i = 0; i < n; ++i) {
-    auto store = WorldStore::open(world.store().dir());
+    auto store = world.store().reopen();
     if (!store) return store.error();
     s->readers_.push_back(std::move(*store));
   }
-  auto w = WorldStore::open(world.store().dir());
+  auto w = world.store().reopen();
   if (!w) return w.error();
   s->writer_store_ = std::move(*w);
   s->writer_ = std::thread([p = s.get()] { p->writer_loop(); });

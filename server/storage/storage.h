@@ -1,8 +1,8 @@
 // Storage: the world store, off the world strand.
 //
 //   Loads run on a loader pool: each load reads the chunk's row on a
-//   connection of its own (SQLite in WAL mode lets readers run beside the
-//   writer) and decodes it, or generates a chunk that was never stored. A
+//   connection of its own (the world's WorldStore reopened: SQLite in WAL
+//   mode and PostgreSQL both let readers run beside the writer) and decodes it, or generates a chunk that was never stored. A
 //   damaged blob is moved, in one transaction, to the quarantine table and
 //   the chunk is served as generated at the quarantined revision + 1, so
 //   revisions only grow and later saves write a fresh row. A row SQLite
@@ -86,8 +86,9 @@ class Storage {
   using CoarseDone = std::function<void(LoadedCoarse)>;
   using CommitDone = std::function<void(const FileStatus&)>;
 
-  // world: shared for its metadata and generator (thread-safe); the store
-  // directory is opened again once per loader and once for the writer.
+  // world: shared for its metadata and generator (thread-safe); its store
+  // is opened again (WorldStore::reopen) once per loader and once for the
+  // writer.
   static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads);
   // The edit log keeps entries this long (0: for ever) and at most this many
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.

@@ -27,7 +27,10 @@
 #include "common/cli/cli.h"
 #include "common/codec/lz4_block.h"
 #include "common/vxraw/vxraw.h"
+#include "common/world/sqlite_store.h"
 #include "common/world/world.h"
+#include "server/storage/lease_keeper.h"
+#include "server/storage/postgres_store.h"
 #include "server/tools/enhance_command.h"
 #include "server/tools/world_stats.h"
 
@@ -170,7 +173,7 @@ int cmd_generate(int argc, char** argv) {
   const std::string dir = cl.get("world");
 
   std::unique_ptr<World> world;
-  if (WorldStore::exists(dir)) {
+  if (SqliteStore::exists(dir)) {
     auto w = World::open(dir);
     if (!w) return failure(w.error().message);
     world = std::move(*w);
@@ -287,7 +290,7 @@ int cmd_import(int argc, char** argv) {
                  static_cast<unsigned long long>(file->repaired_air));
 
   std::unique_ptr<World> world;
-  if (WorldStore::exists(dir)) {
+  if (SqliteStore::exists(dir)) {
     auto w = World::open(dir);
     if (!w) return failure(w.error().message);
     world = std::move(*w);
@@ -421,9 +424,12 @@ int cmd_check(int argc, char** argv) {
   if (cl.flag("help")) return std::printf("%s", kCheckHelp), 0;
   if (!cl.has("world")) return usage_error("--world DIR is required", kCheckHelp);
   if (!cl.positional().empty()) return usage_error("unexpected argument '" + cl.positional()[0] + "'", kCheckHelp);
-  auto world = World::open(cl.get("world"));
-  if (!world) return failure(world.error().message);
-  WorldStore& store = (*world)->store();
+  if (PostgresStore::is_url(cl.get("world")))
+    return usage_error("check reads a world directory; a PostgreSQL world's rows are checked as a server "
+                       "loads them (a damaged one is quarantined)", kCheckHelp);
+  auto opened = SqliteStore::open(cl.get("world"));
+  if (!opened) return failure(opened.error().message);
+  SqliteStore& store = **opened;
   auto total = store.stored_chunk_count();
   if (!total) return failure(total.error().message);
   Progress progress("check", static_cast<std::uint64_t>(*total));
@@ -508,7 +514,7 @@ int cmd_backup(int argc, char** argv) {
   if (!cl.has("world")) return usage_error("--world DIR is required", kBackupHelp);
   if (!cl.has("to")) return usage_error("--to DEST is required", kBackupHelp);
   if (!cl.positional().empty()) return usage_error("unexpected argument '" + cl.positional()[0] + "'", kBackupHelp);
-  auto store = WorldStore::open(cl.get("world"));
+  auto store = SqliteStore::open(cl.get("world"));
   if (!store) return failure(store.error().message);
   std::unique_ptr<Progress> progress;
   auto s = (*store)->backup_to(cl.get("to"), [&](int done, int total) {

@@ -21,7 +21,7 @@
 #include "common/voxel/grid.h"
 #include "common/world/terrain_generator.h"
 #include "common/vxraw/vxraw.h"
-#include "common/world/world_store.h"
+#include "common/world/sqlite_store.h"
 
 namespace terrane {
 namespace {

@@ -26,6 +26,7 @@
 
 #include "client/client.h"
 #include "common/world/coarse_image.h"
+#include "common/world/sqlite_store.h"
 #include "common/world/world.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
@@ -225,7 +226,7 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
       ASSERT_TRUE(chunk.ok());
       expected[{p.x, p.y, p.z}] = CoarseEntry{p, rev, coarse_voxels(&*chunk)};
     }).ok());
-    ASSERT_TRUE((*world)->store().for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+    ASSERT_TRUE(dynamic_cast<SqliteStore&>((*world)->store()).for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
       for (const CoarseEntry& e : entries) {
         ++coarse_entries;
         auto it = expected.find({e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z});

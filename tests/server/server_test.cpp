@@ -27,6 +27,7 @@
 #include <thread>
 
 #include "common/world/coarse_image.h"
+#include "common/world/sqlite_store.h"
 #include "common/world/view.h"
 #include "server/world/edits.h"
 #include "server/log.h"
@@ -642,7 +643,7 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   run_sql(dir_, "UPDATE chunks SET data = substr(data, 1, length(data) / 2)" + where);
   std::vector<std::uint8_t> bad_blob;
   {
-    auto store = WorldStore::open(dir_.string());
+    auto store = SqliteStore::open(dir_.string());
     ASSERT_TRUE(store.ok());
     ASSERT_TRUE((*store)
                     ->for_each_chunk([&](Vec3i cp, std::uint64_t, std::span<const std::uint8_t> blob) {
@@ -683,7 +684,7 @@ TEST_F(ServerTest, DamagedChunkIsQuarantinedLoggedAndTheRestStillServed) {
   EXPECT_NE(logged.find("quarantine"), std::string::npos) << logged;
   EXPECT_NE(logged.find("[error]"), std::string::npos) << logged;
 
-  auto store = WorldStore::open(dir_.string());
+  auto store = SqliteStore::open(dir_.string());
   ASSERT_TRUE(store.ok());
   std::vector<QuarantinedChunk> q;
   ASSERT_TRUE((*store)->for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
@@ -798,8 +799,8 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
     EXPECT_EQ(stored->chunk.get(local_of(Vec3i{1000 + run, 10, 1000})),
               make_voxel(materials::kBrick, static_cast<std::uint8_t>(100 + run)));
   // The settings the promise rests on, on the store's own connection.
-  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
-  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");  // FULL
+  EXPECT_EQ(*dynamic_cast<SqliteStore&>((*world)->store()).pragma("journal_mode"), "wal");
+  EXPECT_EQ(*dynamic_cast<SqliteStore&>((*world)->store()).pragma("synchronous"), "2");  // FULL
 }
 
 TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {

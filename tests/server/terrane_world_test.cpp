@@ -11,7 +11,7 @@
 #include <string>
 
 #include "common/vxraw/vxraw.h"
-#include "common/world/world_store.h"
+#include "common/world/sqlite_store.h"
 
 namespace terrane {
 namespace {
@@ -151,7 +151,7 @@ TEST_F(WorldToolTest, CheckFindsDamagedChunkAndBackupCopiesTheWorld) {
   EXPECT_EQ(run("backup --world " + w + " --to " + path("copy")).exit_code, 1);  // never overwrites
 
   {
-    auto store = WorldStore::open(w);
+    auto store = SqliteStore::open(w);
     ASSERT_TRUE(store.ok());
     std::vector<ChunkWrite> bad = {{{1, 1, 0}, 9, {1, 1, 0x10, 0x20}}};
     ASSERT_TRUE((*store)->save_chunks(bad).ok());
@@ -170,7 +170,7 @@ TEST_F(WorldToolTest, CheckComparesEveryCoarseImageEntryWithItsChunk) {
   EXPECT_NE(good.output.find("0 coarse entries wrong"), std::string::npos) << good.output;
   {
     // An image that says Brick everywhere, and lacks every other chunk.
-    auto store = WorldStore::open(w);
+    auto store = SqliteStore::open(w);
     ASSERT_TRUE(store.ok());
     auto entries = (*store)->load_coarse({0, 0, 0});
     ASSERT_TRUE(entries.ok());
@@ -199,7 +199,7 @@ TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnes
   ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
   const std::vector<std::uint8_t> bad_blob = {1, 1, 0x10, 0x20};
   {
-    auto store = WorldStore::open(w);
+    auto store = SqliteStore::open(w);
     ASSERT_TRUE(store.ok());
     std::vector<ChunkWrite> bad = {{{1, 0, 1}, 4, bad_blob}};
     ASSERT_TRUE((*store)->save_chunks(bad).ok());
@@ -224,7 +224,7 @@ TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnes
   EXPECT_NE(after.output.find("revision 4"), std::string::npos) << after.output;
   EXPECT_NE(after.output.find("quarantined chunk rows"), std::string::npos) << after.output;
   {
-    auto store = WorldStore::open(w);
+    auto store = SqliteStore::open(w);
     ASSERT_TRUE(store.ok());
     std::vector<QuarantinedChunk> q;
     ASSERT_TRUE((*store)->for_each_quarantined([&](const QuarantinedChunk& c) { q.push_back(c); }).ok());
@@ -237,7 +237,7 @@ TEST_F(WorldToolTest, CheckReportsQuarantinedChunksAndQuarantineMovesDamagedOnes
   // Pre-generating it again stores it above the quarantined revision.
   auto g = run("generate --world " + w + " --box 0,0,0,64,64,64");
   ASSERT_EQ(g.exit_code, 0) << g.output;
-  auto store = WorldStore::open(w);
+  auto store = SqliteStore::open(w);
   ASSERT_TRUE(store.ok());
   auto regenerated = (*store)->load_chunk({1, 0, 1});
   ASSERT_TRUE(regenerated.ok()) << regenerated.error().message;

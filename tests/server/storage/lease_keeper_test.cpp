@@ -110,7 +110,7 @@ TEST_F(LeaseKeeperTest, ALeaseTakenWhileItsKeeperWasLateIsReportedLost) {
   auto writer = store();
   ASSERT_TRUE(writer);
   const ChunkWrite w{Vec3i{16, 0, 16}, 1, encode_chunk_blob(Chunk(kAir))};
-  auto fenced = writer->save_chunks(*leases, std::span(&w, 1));
+  auto fenced = writer->save_fenced(*leases, std::span(&w, 1));
   ASSERT_FALSE(fenced.ok());
   EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
 }

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "common/world/world.h"
+#include "server/storage/lease_keeper.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 
@@ -49,7 +50,7 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto lease = a->claim(lease_region_of(cp), 1, 60s);
   ASSERT_TRUE(lease.ok()) << lease.error().message;
   const ChunkWrite w = chunk_write(cp, 7, materials::kBrick);
-  ASSERT_TRUE(a->save_chunks(std::span(&*lease, 1), std::span(&w, 1)).ok());
+  ASSERT_TRUE(a->save_fenced(std::span(&*lease, 1), std::span(&w, 1)).ok());
   auto got = again->load_chunk(cp);
   ASSERT_TRUE(got.ok()) << got.error().message;
   ASSERT_TRUE(got->has_value());
@@ -86,7 +87,7 @@ TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
   ASSERT_TRUE(again.ok());
   EXPECT_EQ(again->epoch, 2u);
   const ChunkWrite w = chunk_write(region * 8, 1, materials::kBrick);
-  auto stale = a->save_chunks(std::span(&*first, 1), std::span(&w, 1));
+  auto stale = a->save_fenced(std::span(&*first, 1), std::span(&w, 1));
   ASSERT_FALSE(stale.ok());
   EXPECT_EQ(stale.error().kind, StoreError::Kind::kFenced);
   auto who = b->holder(region);
@@ -119,7 +120,7 @@ TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
   auto mine = a->claim(region, 1, 300ms);
   ASSERT_TRUE(mine.ok());
   const ChunkWrite v1 = chunk_write(cp, 1, materials::kBrick);
-  ASSERT_TRUE(a->save_chunks(std::span(&*mine, 1), std::span(&v1, 1)).ok());
+  ASSERT_TRUE(a->save_fenced(std::span(&*mine, 1), std::span(&v1, 1)).ok());
   // Server 1 stops renewing (paused, say): once its lease has run out by
   // the database's clock, server 2's claim succeeds, one epoch up.
   StoreResult<RegionLease> theirs = StoreError{};
@@ -132,7 +133,7 @@ TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
   EXPECT_TRUE(kept->empty());
   // ... and its next write is fenced: nothing is written.
   const ChunkWrite stale = chunk_write(cp, 2, materials::kSand);
-  auto fenced = a->save_chunks(std::span(&*mine, 1), std::span(&stale, 1));
+  auto fenced = a->save_fenced(std::span(&*mine, 1), std::span(&stale, 1));
   ASSERT_FALSE(fenced.ok());
   EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
   EXPECT_NE(fenced.error().message.find("no longer current"), std::string::npos) << fenced.error().message;
@@ -142,7 +143,7 @@ TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
   EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kBrick);
   // The new holder writes.
   const ChunkWrite v2 = chunk_write(cp, 2, materials::kSnow);
-  ASSERT_TRUE(b->save_chunks(std::span(&*theirs, 1), std::span(&v2, 1)).ok());
+  ASSERT_TRUE(b->save_fenced(std::span(&*theirs, 1), std::span(&v2, 1)).ok());
   got = a->load_chunk(cp);
   ASSERT_TRUE(got.ok() && got->has_value());
   EXPECT_EQ((*got)->revision, 2u);
@@ -159,13 +160,13 @@ TEST_F(PostgresStoreTest, AWriteSpanningRegionsIsAllOrNothing) {
   ASSERT_TRUE(mine.ok() && theirs.ok());
   const ChunkWrite both[] = {chunk_write(here, 1, materials::kBrick), chunk_write(there, 1, materials::kBrick)};
   // Without a lease for one of them: refused before anything is written.
-  auto outside = a->save_chunks(std::span(&*mine, 1), both);
+  auto outside = a->save_fenced(std::span(&*mine, 1), both);
   ASSERT_FALSE(outside.ok());
   EXPECT_EQ(outside.error().kind, StoreError::Kind::kFenced);
   EXPECT_NE(outside.error().message.find("under none of the leases"), std::string::npos) << outside.error().message;
   // With another server's lease passed off as its own: fenced by the check.
   const RegionLease forged[] = {*mine, RegionLease{theirs->region, 1, theirs->epoch}};
-  auto forged_write = a->save_chunks(forged, both);
+  auto forged_write = a->save_fenced(forged, both);
   ASSERT_FALSE(forged_write.ok());
   EXPECT_EQ(forged_write.error().kind, StoreError::Kind::kFenced);
   for (const Vec3i cp : {here, there}) {
@@ -207,13 +208,146 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   EXPECT_NE(newer.error().message.find("reads version 1"), std::string::npos) << newer.error().message;
   // A damaged blob is a decode error naming the chunk.
   ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 1"), "");
-  ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102')"), "");
+  ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
   auto store = open();
   ASSERT_TRUE(store);
   auto damaged = store->load_chunk({1, 2, 3});
   ASSERT_FALSE(damaged.ok());
-  EXPECT_EQ(damaged.error().kind, StoreError::Kind::kDecode);
+  EXPECT_TRUE(damaged.error().decode.has_value());
   EXPECT_NE(damaged.error().message.find("chunk (1,2,3)"), std::string::npos) << damaged.error().message;
+}
+
+TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLogAndAccessLists) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  EXPECT_FALSE(s->has_world());
+  // Writes without a lease source are refused, naming what is missing.
+  const ChunkWrite a = chunk_write({1, 0, 2}, 3, materials::kBrick);
+  auto unleased = s->save_chunks(std::span(&a, 1));
+  ASSERT_FALSE(unleased.ok());
+  EXPECT_NE(unleased.error().message.find("--server-id"), std::string::npos) << unleased.error().message;
+  // The metadata: made once; a second maker finds the first's.
+  WorldMeta meta = default_world_meta(42);
+  meta.bounds.min_y = -96;
+  ASSERT_TRUE(s->create_world(meta).ok());
+  ASSERT_TRUE(s->has_world());
+  WorldMeta other = default_world_meta(7);
+  auto second = open();
+  ASSERT_TRUE(second && second->has_world());
+  ASSERT_TRUE(second->create_world(other).ok());
+  EXPECT_EQ(second->meta().generator_params, meta.generator_params);
+  EXPECT_EQ(second->meta().bounds.min_y, -96);
+  ASSERT_TRUE(second->set_epoch(9).ok());
+  auto third = s->reopen();
+  ASSERT_TRUE(third.ok());
+  EXPECT_EQ((*third)->meta().epoch, 9u);
+  EXPECT_EQ((*third)->meta().materials, meta.materials);
+
+  // Chunks with their coarse mips and the edit log in one fenced write,
+  // through the lease source (which reopened connections share).
+  std::vector<Vec3i> asked;
+  s->set_lease_source(std::make_shared<const LeaseSource>([&](std::span<const Vec3i> regions) {
+    std::vector<RegionLease> out;
+    for (Vec3i r : regions) {
+      asked.push_back(r);
+      auto l = s->claim(r, 4, 60s);
+      if (!l) return StoreResult<std::vector<RegionLease>>(l.error());
+      out.push_back(*l);
+    }
+    return StoreResult<std::vector<RegionLease>>(out);
+  }));
+  const ChunkWrite b = chunk_write({9, 0, 2}, 1, materials::kSlate);  // the next region in x
+  const std::vector<ChunkWrite> writes{a, b};
+  EditLogEntry e{0, 12, 1000, "ann", Region{{32, 0, 64}, {36, 4, 68}}, {1, 2, 3}, {4, 5}};
+  EditLogEntry f{0, 13, 2000, "bob", Region{{300, 0, 64}, {301, 1, 65}}, {6}, {7}};
+  const std::vector<EditLogEntry> log{e, f};
+  ASSERT_TRUE(s->save_chunks(writes, true, log).ok());
+  EXPECT_EQ(asked, (std::vector<Vec3i>{{0, 0, 0}, {1, 0, 0}}));
+  auto coarse = s->load_coarse({0, 0, 0});
+  ASSERT_TRUE(coarse.ok()) << coarse.error().message;
+  ASSERT_EQ(coarse->size(), 1u);
+  auto decoded = decode_chunk_blob(a.blob);
+  ASSERT_TRUE(decoded.ok());
+  EXPECT_EQ((*coarse)[0], (CoarseEntry{{1, 0, 2}, 3, coarse_voxels(&*decoded)}));
+  auto stored = s->stored_in({1, 0, 0});
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(*stored, (std::vector<Vec3i>{Vec3i{9, 0, 2}}));
+  EXPECT_EQ(*s->stored_chunk_count(), 2);
+  // Without overwrite a stored chunk stays as it is.
+  const ChunkWrite a2 = chunk_write({1, 0, 2}, 4, materials::kGrass);
+  ASSERT_TRUE(s->save_chunks(std::span(&a2, 1), false).ok());
+  EXPECT_EQ((*s->load_chunk({1, 0, 2}))->revision, 3u);
+  std::vector<std::pair<Vec3i, std::uint64_t>> each;
+  ASSERT_TRUE(s->for_each_chunk([&](Vec3i p, std::uint64_t rev, std::span<const std::uint8_t> blob) {
+                 EXPECT_TRUE(decode_chunk_blob(blob).ok());
+                 each.emplace_back(p, rev);
+               }).ok());
+  EXPECT_EQ(each, (std::vector<std::pair<Vec3i, std::uint64_t>>{{{1, 0, 2}, 3}, {{9, 0, 2}, 1}}));
+
+  // The edit log: newest first, filtered by player and box, voxels on request.
+  EditLogQuery q;
+  auto all = s->edit_log(q);
+  ASSERT_TRUE(all.ok()) << all.error().message;
+  ASSERT_EQ(all->size(), 2u);
+  EXPECT_EQ((*all)[0].player, "bob");
+  EXPECT_TRUE((*all)[0].after.empty());
+  q.player = "ann";
+  q.with_voxels = true;
+  auto ann = s->edit_log(q);
+  ASSERT_TRUE(ann.ok() && ann->size() == 1u);
+  EXPECT_EQ((*ann)[0].box, e.box);
+  EXPECT_EQ((*ann)[0].tick, 12u);
+  EXPECT_EQ((*ann)[0].before, e.before);
+  EXPECT_EQ((*ann)[0].after, e.after);
+  q = EditLogQuery{};
+  q.box = Region{{299, 0, 60}, {400, 10, 70}};
+  auto in_box = s->edit_log(q);
+  ASSERT_TRUE(in_box.ok() && in_box->size() == 1u);
+  EXPECT_EQ((*in_box)[0].player, "bob");
+  auto pruned = s->prune_edit_log(1500, 0);
+  ASSERT_TRUE(pruned.ok());
+  EXPECT_EQ(*pruned, 1);
+  EXPECT_EQ(s->edit_log(EditLogQuery{})->size(), 1u);
+
+  // Quarantine: the row moves aside, blob untouched, and its revision is
+  // the floor of the chunk's next ones.
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_chunks SET blob = '\\x0107' WHERE x = 9"), "");
+  auto damaged = s->load_chunk({9, 0, 2});
+  ASSERT_FALSE(damaged.ok());
+  ASSERT_TRUE(damaged.error().decode.has_value());
+  auto moved = s->quarantine_chunk({9, 0, 2}, damaged.error().decode->describe());
+  ASSERT_TRUE(moved.ok()) << moved.error().message;
+  EXPECT_EQ(*moved, (std::optional<std::uint64_t>{1}));
+  EXPECT_EQ(*s->quarantined_revision({9, 0, 2}), (std::optional<std::uint64_t>{1}));
+  EXPECT_EQ(*s->quarantined_in({1, 0, 0}), (std::vector<Vec3i>{Vec3i{9, 0, 2}}));
+  EXPECT_TRUE(s->stored_in({1, 0, 0})->empty());
+  EXPECT_EQ(*s->quarantine_chunk({9, 0, 2}, "again"), std::nullopt);  // nothing left to move
+
+  // The access lists.
+  ASSERT_TRUE(s->put_access("ban:name:eve", "0 griefing").ok());
+  ASSERT_TRUE(s->put_access("whitelist", "on").ok());
+  ASSERT_TRUE(s->put_access("whitelist", "off").ok());
+  ASSERT_TRUE(s->erase_access("ban:name:eve").ok());
+  auto access = s->access_entries();
+  ASSERT_TRUE(access.ok());
+  const std::vector<std::pair<std::string, std::string>> want{{"whitelist", "off"}};
+  EXPECT_EQ(*access, want);
+}
+
+TEST_F(PostgresStoreTest, WritesInARegionAnotherServerHoldsAreRefusedWithTheHolder) {
+  auto mine = open(), theirs = open();
+  ASSERT_TRUE(mine && theirs);
+  ASSERT_TRUE(mine->create_world(default_world_meta()).ok());
+  ASSERT_TRUE(theirs->claim({0, 0, 0}, 2, 60s).ok());
+  auto keeper = LeaseKeeper::open(url_, 1, LeaseTimes{}, nullptr);
+  ASSERT_TRUE(keeper.ok()) << keeper.error().message;
+  mine->set_lease_source(std::make_shared<const LeaseSource>(
+      [k = keeper->get()](std::span<const Vec3i> regions) { return k->ensure(regions); }));
+  const ChunkWrite w = chunk_write({1, 1, 1}, 1, materials::kBrick);
+  auto refused = mine->save_chunks(std::span(&w, 1));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("leased to server 2"), std::string::npos) << refused.error().message;
+  EXPECT_FALSE(mine->load_chunk({1, 1, 1})->has_value());
 }
 
 }  // namespace

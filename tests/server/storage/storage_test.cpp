@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <future>
 
+#include "common/world/sqlite_store.h"
 #include "tests/support/scratch_dir.h"
 
 namespace terrane {
@@ -133,7 +134,7 @@ TEST_F(StorageTest, ADamagedRowIsQuarantinedAndServedAsGeneratedAboveItsRevision
   EXPECT_TRUE(c.generated);
   EXPECT_EQ(c.revision, 5u);
   EXPECT_EQ(storage_->counters().quarantined.load(), 1u);
-  auto n = world_->store().quarantined_count();
+  auto n = dynamic_cast<SqliteStore&>(world_->store()).quarantined_count();
   ASSERT_TRUE(n.ok());
   EXPECT_EQ(*n, 1);
 }

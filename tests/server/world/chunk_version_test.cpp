@@ -8,7 +8,7 @@
 #include <thread>
 
 #include "common/codec/update_batch.h"
-#include "common/world/world_store.h"
+#include "common/world/sqlite_store.h"
 #include "protocol/messages.h"
 
 namespace terrane {

@@ -1,4 +1,4 @@
-#include "common/world/world_store.h"
+#include "common/world/sqlite_store.h"
 
 #include <gtest/gtest.h>
 
@@ -19,7 +19,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class WorldStoreTest : public ::testing::Test {
+class SqliteStoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = (fs::temp_directory_path() / ("terrane-store-" + std::to_string(::getpid()) + "-" +
@@ -53,7 +53,7 @@ void expect_same(const Chunk& a, const Chunk& b) {
   }
 }
 
-TEST_F(WorldStoreTest, CreateThenOpenKeepsMetadata) {
+TEST_F(SqliteStoreTest, CreateThenOpenKeepsMetadata) {
   WorldMeta meta = default_world_meta(42);
   meta.bounds.bounded_xz = true;
   meta.bounds.min_x = -100;
@@ -61,8 +61,8 @@ TEST_F(WorldStoreTest, CreateThenOpenKeepsMetadata) {
   meta.bounds.min_z = -50;
   meta.bounds.max_z = 60;
   meta.epoch = 7;
-  ASSERT_TRUE(WorldStore::create(dir_, meta).ok());
-  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(SqliteStore::create(dir_, meta).ok());
+  auto store = SqliteStore::open(dir_);
   ASSERT_TRUE(store.ok()) << store.error().message;
   const WorldMeta& m = (*store)->meta();
   EXPECT_EQ(m.generator, GeneratorKind::kTerrain);
@@ -74,25 +74,25 @@ TEST_F(WorldStoreTest, CreateThenOpenKeepsMetadata) {
   EXPECT_EQ(m.epoch, 7u);
 }
 
-TEST_F(WorldStoreTest, CreateRefusesExistingWorldAndOpenRefusesMissingOne) {
-  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
-  auto again = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, CreateRefusesExistingWorldAndOpenRefusesMissingOne) {
+  ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
+  auto again = SqliteStore::create(dir_, default_world_meta());
   ASSERT_FALSE(again.ok());
   EXPECT_NE(again.error().message.find("already exists"), std::string::npos);
-  auto missing = WorldStore::open(dir_ + "-nope");
+  auto missing = SqliteStore::open(dir_ + "-nope");
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.error().message.find("no world here"), std::string::npos);
 }
 
-TEST_F(WorldStoreTest, DurabilitySettingsAreWalAndSynchronousFull) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, DurabilitySettingsAreWalAndSynchronousFull) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
   EXPECT_EQ(*(*store)->pragma("journal_mode"), "wal");
   EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
 }
 
-TEST_F(WorldStoreTest, ChunksRoundTripWithRevisions) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, ChunksRoundTripWithRevisions) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
   const Chunk a = sample_chunk(1), b = sample_chunk(2);
   std::vector<ChunkWrite> writes = {{{0, 0, 0}, 3, encode_chunk_blob(a)}, {{-5, 2, 9}, 8, encode_chunk_blob(b)}};
@@ -112,8 +112,8 @@ TEST_F(WorldStoreTest, ChunksRoundTripWithRevisions) {
   EXPECT_EQ(*(*store)->stored_chunk_count(), 2);
 }
 
-TEST_F(WorldStoreTest, TheEditLogIsWrittenWithTheChunksAndQueriedNewestFirst) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, TheEditLogIsWrittenWithTheChunksAndQueriedNewestFirst) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
   // Before anything was logged the log is empty, not an error.
   auto empty = (*store)->edit_log(EditLogQuery{});
@@ -159,8 +159,8 @@ TEST_F(WorldStoreTest, TheEditLogIsWrittenWithTheChunksAndQueriedNewestFirst) {
   EXPECT_EQ(left->at(0).tick, 3u);
 }
 
-TEST_F(WorldStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
   std::vector<std::uint8_t> blob = encode_chunk_blob(sample_chunk(3));
   blob.resize(blob.size() / 2);
@@ -172,10 +172,10 @@ TEST_F(WorldStoreTest, DamagedBlobIsReportedWithItsCoordinates) {
   EXPECT_TRUE(loaded.error().decode.has_value());
 }
 
-TEST_F(WorldStoreTest, QuarantineMovesTheRowAsideAndSavesNeverTouchIt) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, QuarantineMovesTheRowAsideAndSavesNeverTouchIt) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
-  WorldStore& s = **store;
+  SqliteStore& s = **store;
   std::vector<std::uint8_t> bad = encode_chunk_blob(sample_chunk(5));
   bad.resize(bad.size() / 3);
   const Chunk good = sample_chunk(6);
@@ -219,7 +219,7 @@ TEST_F(WorldStoreTest, QuarantineMovesTheRowAsideAndSavesNeverTouchIt) {
   EXPECT_EQ(*s.quarantined_revision({0, 0, 0}), std::nullopt);
 }
 
-TEST_F(WorldStoreTest, QuarantinedChunkLoadsGeneratedWithItsRevisionAboveTheQuarantinedOne) {
+TEST_F(SqliteStoreTest, QuarantinedChunkLoadsGeneratedWithItsRevisionAboveTheQuarantinedOne) {
   {
     auto world = World::create(dir_, default_world_meta());
     ASSERT_TRUE(world.ok());
@@ -239,25 +239,25 @@ TEST_F(WorldStoreTest, QuarantinedChunkLoadsGeneratedWithItsRevisionAboveTheQuar
   auto stored = (*world)->store().load_chunk({1, 0, 1});
   ASSERT_TRUE(stored.ok() && stored->has_value());
   EXPECT_EQ((*stored)->revision, 14u);
-  EXPECT_EQ(*(*world)->store().quarantined_count(), 1);
+  EXPECT_EQ(*dynamic_cast<SqliteStore&>((*world)->store()).quarantined_count(), 1);
 }
 
-TEST_F(WorldStoreTest, WorldsWithoutTheQuarantineTableGainItOnOpen) {
-  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+TEST_F(SqliteStoreTest, WorldsWithoutTheQuarantineTableGainItOnOpen) {
+  ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
   {
     sqlite3* db = nullptr;
     ASSERT_EQ(sqlite3_open((fs::path(dir_) / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
     ASSERT_EQ(sqlite3_exec(db, "DROP TABLE quarantine", nullptr, nullptr, nullptr), SQLITE_OK);
     sqlite3_close(db);
   }
-  auto store = WorldStore::open(dir_);
+  auto store = SqliteStore::open(dir_);
   ASSERT_TRUE(store.ok()) << store.error().message;
   EXPECT_EQ(*(*store)->quarantined_count(), 0);
 }
 
-TEST_F(WorldStoreTest, ReopenedStoreKeepsWalAndSynchronousFull) {
-  ASSERT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
-  auto store = WorldStore::open(dir_);
+TEST_F(SqliteStoreTest, ReopenedStoreKeepsWalAndSynchronousFull) {
+  ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
+  auto store = SqliteStore::open(dir_);
   ASSERT_TRUE(store.ok());
   // The settings the durability promise rests on, on the connection a server
   // uses (World::open opens the store this way).
@@ -265,8 +265,8 @@ TEST_F(WorldStoreTest, ReopenedStoreKeepsWalAndSynchronousFull) {
   EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
   auto world = World::open(dir_);
   ASSERT_TRUE(world.ok());
-  EXPECT_EQ(*(*world)->store().pragma("journal_mode"), "wal");
-  EXPECT_EQ(*(*world)->store().pragma("synchronous"), "2");
+  EXPECT_EQ(*dynamic_cast<SqliteStore&>((*world)->store()).pragma("journal_mode"), "wal");
+  EXPECT_EQ(*dynamic_cast<SqliteStore&>((*world)->store()).pragma("synchronous"), "2");
 }
 
 TEST(ChunkBlob, RejectsEveryTruncationAndBadHeader) {
@@ -279,7 +279,7 @@ TEST(ChunkBlob, RejectsEveryTruncationAndBadHeader) {
   EXPECT_EQ(decode_chunk_blob(bad).error().code, DecodeErrorCode::kBadVersion);
 }
 
-TEST_F(WorldStoreTest, WorldGeneratesUnstoredChunksAndStoresEditsWithGrowingRevision) {
+TEST_F(SqliteStoreTest, WorldGeneratesUnstoredChunksAndStoresEditsWithGrowingRevision) {
   auto world = World::create(dir_, default_world_meta(5));
   ASSERT_TRUE(world.ok()) << world.error().message;
   World& w = **world;
@@ -301,7 +301,7 @@ TEST_F(WorldStoreTest, WorldGeneratesUnstoredChunksAndStoresEditsWithGrowingRevi
   EXPECT_EQ(*w.store().stored_chunk_count(), 4);
 }
 
-TEST_F(WorldStoreTest, BoundsClipGenerationAndWrites) {
+TEST_F(SqliteStoreTest, BoundsClipGenerationAndWrites) {
   WorldMeta meta = default_world_meta(5);
   meta.bounds.min_y = 0;
   meta.bounds.max_y = 64;
@@ -320,18 +320,18 @@ TEST_F(WorldStoreTest, BoundsClipGenerationAndWrites) {
 
 namespace terrane {
 namespace {
-TEST_F(WorldStoreTest, OutOfRangeBoundsAreRefusedAndLeaveNothingBehind) {
+TEST_F(SqliteStoreTest, OutOfRangeBoundsAreRefusedAndLeaveNothingBehind) {
   WorldMeta meta = default_world_meta();
   meta.bounds.max_y = 1'100'000'000;
-  auto bad = WorldStore::create(dir_, meta);
+  auto bad = SqliteStore::create(dir_, meta);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("2^30"), std::string::npos) << bad.error().message;
-  EXPECT_FALSE(WorldStore::exists(dir_));
-  EXPECT_TRUE(WorldStore::create(dir_, default_world_meta()).ok());
+  EXPECT_FALSE(SqliteStore::exists(dir_));
+  EXPECT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
 }
 
-TEST_F(WorldStoreTest, SaveWithoutOverwriteKeepsStoredChunks) {
-  auto store = WorldStore::create(dir_, default_world_meta());
+TEST_F(SqliteStoreTest, SaveWithoutOverwriteKeepsStoredChunks) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());
   std::vector<ChunkWrite> edited = {{{0, 0, 0}, 5, encode_chunk_blob(sample_chunk(7))}};
   ASSERT_TRUE((*store)->save_chunks(edited).ok());
@@ -345,11 +345,11 @@ TEST_F(WorldStoreTest, SaveWithoutOverwriteKeepsStoredChunks) {
   EXPECT_EQ(*(*store)->stored_chunk_count(), 2);
 }
 
-TEST_F(WorldStoreTest, EmptyMaterialTableRoundTripsEmpty) {
+TEST_F(SqliteStoreTest, EmptyMaterialTableRoundTripsEmpty) {
   WorldMeta meta = default_world_meta();
   meta.materials.clear();
-  ASSERT_TRUE(WorldStore::create(dir_, meta).ok());
-  auto store = WorldStore::open(dir_);
+  ASSERT_TRUE(SqliteStore::create(dir_, meta).ok());
+  auto store = SqliteStore::open(dir_);
   ASSERT_TRUE(store.ok());
   EXPECT_TRUE((*store)->meta().materials.empty());
 }
@@ -361,7 +361,7 @@ namespace {
 
 // Every stored chunk has the coarse entry its blob implies, and no entry
 // lacks a chunk (what terrane-world check verifies).
-void expect_coarse_matches_chunks(WorldStore& s) {
+void expect_coarse_matches_chunks(SqliteStore& s) {
   std::map<std::tuple<int, int, int>, CoarseEntry> from_chunks, from_images;
   ASSERT_TRUE(s.for_each_chunk([&](Vec3i p, std::uint64_t rev, std::span<const std::uint8_t> blob) {
                  auto c = decode_chunk_blob(blob);
@@ -376,10 +376,10 @@ void expect_coarse_matches_chunks(WorldStore& s) {
   EXPECT_EQ(from_images, from_chunks);
 }
 
-TEST_F(WorldStoreTest, CoarseImagesFollowEveryWriteEraseAndQuarantine) {
-  auto s = WorldStore::create(dir_, default_world_meta(1));
+TEST_F(SqliteStoreTest, CoarseImagesFollowEveryWriteEraseAndQuarantine) {
+  auto s = SqliteStore::create(dir_, default_world_meta(1));
   ASSERT_TRUE(s.ok());
-  WorldStore& store = **s;
+  SqliteStore& store = **s;
   // Chunks in two regions, one on a region's negative edge.
   std::vector<ChunkWrite> writes;
   const Vec3i spots[] = {{0, 0, 0}, {7, 1, 7}, {-1, 0, 0}, {-8, -2, 3}, {8, 0, 0}};
@@ -416,9 +416,9 @@ TEST_F(WorldStoreTest, CoarseImagesFollowEveryWriteEraseAndQuarantine) {
   EXPECT_TRUE(store.load_coarse({-1, -1, 0})->empty());
 }
 
-TEST_F(WorldStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
+TEST_F(SqliteStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
   {
-    auto s = WorldStore::create(dir_, default_world_meta(1));
+    auto s = SqliteStore::create(dir_, default_world_meta(1));
     ASSERT_TRUE(s.ok());
     std::vector<ChunkWrite> writes;
     for (int i = 0; i < 40; ++i)
@@ -434,7 +434,7 @@ TEST_F(WorldStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
             SQLITE_OK);
   sqlite3_close(db);
   std::int64_t last_done = -1, last_total = -1;
-  auto s = WorldStore::open(dir_, [&](std::int64_t done, std::int64_t total) {
+  auto s = SqliteStore::open(dir_, [&](std::int64_t done, std::int64_t total) {
     EXPECT_GE(done, last_done);
     last_done = done;
     last_total = total;
@@ -447,13 +447,13 @@ TEST_F(WorldStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
   s->reset();
   // Opened again: nothing more to do.
   bool called = false;
-  auto again = WorldStore::open(dir_, [&](std::int64_t, std::int64_t) { called = true; });
+  auto again = SqliteStore::open(dir_, [&](std::int64_t, std::int64_t) { called = true; });
   ASSERT_TRUE(again.ok());
   EXPECT_FALSE(called);
 }
 
-TEST_F(WorldStoreTest, ADamagedCoarseImageIsMadeAgainFromItsChunksOnTheNextWrite) {
-  auto s = WorldStore::create(dir_, default_world_meta(1));
+TEST_F(SqliteStoreTest, ADamagedCoarseImageIsMadeAgainFromItsChunksOnTheNextWrite) {
+  auto s = SqliteStore::create(dir_, default_world_meta(1));
   ASSERT_TRUE(s.ok());
   ASSERT_TRUE((*s)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 1, encode_chunk_blob(sample_chunk(1))},
                                                         {{3, 0, 0}, 2, encode_chunk_blob(sample_chunk(2))}})
