@@ -41,6 +41,7 @@ const char* reject_reason_label(RejectReason r) {
     case RejectReason::kHistory: return "history";
     case RejectReason::kShutdown: return "shutdown";
     case RejectReason::kStorageFailure: return "storage_failure";
+    case RejectReason::kNotOwner: return "not_owner";
     case RejectReason::kCount: break;
   }
   return "unknown";

@@ -82,6 +82,7 @@ enum class RejectReason : std::uint8_t {
   kHistory,            // nothing to undo/redo, or the step is out of reach
   kShutdown,
   kStorageFailure,
+  kNotOwner,           // a region another server of a shared world holds
   kCount
 };
 const char* reject_reason_label(RejectReason r);

@@ -26,9 +26,9 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   times.lease = options_.lease;
   times.renew = std::max(std::chrono::milliseconds(1), options_.lease / 5);
   auto keeper = LeaseKeeper::open(options_.store_url, options_.server_id, times,
-                                  [](const RegionLease& lost, const std::string& why) {
-                                    server_log().error("region ({},{},{}): lease lost (epoch {}): {}", lost.region.x,
-                                                       lost.region.y, lost.region.z, lost.epoch, why);
+                                  [this](const RegionLease& lost, const std::string& why) {
+                                    // Leases are held only once edits run, so the world owner exists.
+                                    if (world_owner_) world_owner_->lease_lost(lost.region, why);
                                   });
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
@@ -78,6 +78,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
         "cannot listen on " + options.bind_address + ":" + std::to_string(options.port) + ": " + ec.message(), {}};
   s->port_ = s->acceptor_.local_endpoint().port();
 
+  s->storage_->set_leases(s->leases_.get());
   s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
   WelcomeMsg& w = s->welcome_.welcome;
   const WorldMeta& meta = s->world_->meta();

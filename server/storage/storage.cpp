@@ -65,6 +65,38 @@ std::deque<Storage::LoadJob>& Storage::queue(Priority priority) {
   return priority == Priority::kUrgent ? urgent_loads_ : priority == Priority::kStream ? loads_ : background_loads_;
 }
 
+void Storage::claim(Vec3i region, ClaimDone done) {
+  asio::post(loaders_, [this, region, done = std::move(done)] {
+    Claimed out;
+    auto held = leases_->ensure(std::span(&region, 1));
+    if (!held) {
+      out.why = held.error().message;
+      done(std::move(out));
+      return;
+    }
+    std::unique_ptr<WorldStore> store;
+    {
+      std::lock_guard lock(readers_mutex_);
+      store = std::move(readers_.back());
+      readers_.pop_back();
+    }
+    auto entries = store->load_coarse(region);
+    {
+      std::lock_guard lock(readers_mutex_);
+      readers_.push_back(std::move(store));
+    }
+    if (!entries) {
+      // Held, but what is stored there is not known: not written until it is.
+      out.why = "cannot read what the region holds: " + entries.error().message;
+      done(std::move(out));
+      return;
+    }
+    out.held = true;
+    for (const CoarseEntry& e : *entries) out.stored.emplace_back(e.chunk_pos, e.revision);
+    done(std::move(out));
+  });
+}
+
 void Storage::load_coarse(Vec3i region, CoarseDone done) {
   {
     std::lock_guard lock(readers_mutex_);

@@ -36,6 +36,7 @@
 
 #include "common/world/world.h"
 #include "server/counters.h"
+#include "server/storage/lease_keeper.h"
 #include "server/world/chunk_version.h"
 
 namespace terrane {
@@ -112,6 +113,23 @@ class Storage {
   bool promote(Vec3i pos, Priority priority);
   // Reads a region's coarse image (queued with the other loads).
   void load_coarse(Vec3i region, CoarseDone done);
+  // A shared PostgreSQL world's leases (null: SQLite, every region is this
+  // server's). Call before the first load; keeper outlives this.
+  void set_leases(LeaseKeeper* keeper) { leases_ = keeper; }
+  bool leased() const { return leases_ != nullptr; }
+  // Claims region's lease for this server if it does not hold it (on a
+  // loader thread, queued with the loads). Once held, the region's stored
+  // chunks are listed with their revisions, read after the claim: another
+  // server may have written them while it held the region, and whatever
+  // this server holds of them older than that must be read again before it
+  // writes there. why names the holder when another server has the region.
+  struct Claimed {
+    bool held = false;
+    std::string why;
+    std::vector<std::pair<Vec3i, std::uint64_t>> stored;  // chunk, revision
+  };
+  using ClaimDone = std::function<void(Claimed)>;
+  void claim(Vec3i region, ClaimDone done);
   // log: the tick's edits for the edit log, stored in the same transaction.
   void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done);
   void stop();
@@ -135,6 +153,7 @@ class Storage {
   };
   void prune_log();
   bool estimate_coarse_ = true;
+  LeaseKeeper* leases_ = nullptr;
   std::chrono::seconds log_max_age_{0};
   std::uint64_t log_max_bytes_ = 0;
   std::chrono::steady_clock::time_point next_prune_{};

@@ -243,6 +243,12 @@ void WorldOwner::replace_estimates() {
 }
 
 void WorldOwner::on_loaded(LoadedChunk c) {
+  const Vec3i cp = c.pos;
+  apply_loaded(std::move(c));
+  refreshed(cp);
+}
+
+void WorldOwner::apply_loaded(LoadedChunk c) {
   bool background = false;  // a replacement nobody else asked for (yet)
   if (auto it = loaded_.find(c.pos); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
     it->second.replace = Loaded::Replace::kNo;
@@ -508,6 +514,89 @@ bool WorldOwner::near_enough(const Client& c, const Region& r) const {
   return ok;
 }
 
+WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
+  if (!storage_.leased() || r.empty()) return Writable::kYes;
+  const auto now = std::chrono::steady_clock::now();
+  Writable out = Writable::kYes;
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    const Vec3i region = lease_region_of(cp);
+    auto [it, unknown] = leases_.try_emplace(region);
+    RegionLeaseState& l = it->second;
+    if (unknown || (l.state == RegionLeaseState::kRefused && now >= l.ask_again)) {
+      // Another server's lease may have run out since (it died): ask again.
+      l.state = RegionLeaseState::kClaiming;
+      storage_.claim(region, [this, region](Storage::Claimed claimed) {
+        asio::post(strand_, [this, region, claimed = std::move(claimed)]() mutable {
+          on_claimed(region, std::move(claimed));
+        });
+      });
+    }
+    if (l.state == RegionLeaseState::kRefused) {
+      out = Writable::kNo;
+      *why = l.why;
+    } else if ((l.state == RegionLeaseState::kClaiming || l.state == RegionLeaseState::kRefreshing) &&
+               out == Writable::kYes) {
+      out = Writable::kWaiting;
+    }
+  });
+  return out;
+}
+
+void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
+  RegionLeaseState& l = leases_[region];
+  if (!claimed.held) {
+    l.state = RegionLeaseState::kRefused;
+    l.why = std::move(claimed.why);
+    l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+    return;
+  }
+  // What this server holds of the region older than stored was written by
+  // the region's earlier owner: read again before anything is written over
+  // it (its holders are sent the newer chunk as it lands).
+  l.stale.clear();
+  for (const auto& [cp, revision] : claimed.stored) {
+    auto it = loaded_.find(cp);
+    if (it == loaded_.end()) continue;  // read from the store when wanted
+    const ChunkVersion& held = *it->second.current;
+    if (!held.estimate() && held.revision() >= revision) continue;
+    l.stale.emplace(cp, revision);
+    loading_.try_emplace(cp);
+    load(cp, Storage::Priority::kUrgent);
+  }
+  l.state = l.stale.empty() ? RegionLeaseState::kHeld : RegionLeaseState::kRefreshing;
+}
+
+void WorldOwner::refreshed(Vec3i cp) {
+  if (leases_.empty()) return;
+  auto it = leases_.find(lease_region_of(cp));
+  if (it == leases_.end() || it->second.state != RegionLeaseState::kRefreshing) return;
+  RegionLeaseState& l = it->second;
+  auto s = l.stale.find(cp);
+  if (s == l.stale.end()) return;
+  auto held = loaded_.find(cp);
+  if (held == loaded_.end() ||  // no longer held: read from the store when wanted
+      (!held->second.current->estimate() && held->second.current->revision() >= s->second)) {
+    l.stale.erase(s);
+    if (l.stale.empty()) l.state = RegionLeaseState::kHeld;
+  } else if (loading_.count(cp) == 0) {
+    // The load that landed read the store before the newer revision (it
+    // started before the claim): read again.
+    loading_.try_emplace(cp);
+    load(cp, Storage::Priority::kUrgent);
+  }
+}
+
+void WorldOwner::lease_lost(Vec3i region, std::string why) {
+  asio::post(strand_, [this, region, why = std::move(why)] {
+    // Another server may have written the region since: what this one holds
+    // of it may be stale, so it must not write there again. Stopping is the
+    // safe answer (a restart reads the region afresh); writes in flight are
+    // fenced by the database whatever happens here.
+    server_log().critical("region ({},{},{}): lease lost ({}); stopping", region.x, region.y, region.z, why);
+    fatal_storage("lease lost");
+  });
+}
+
 void WorldOwner::copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied) {
   for_each_chunk_in(r, [&](Vec3i cp) {
     if (!copied.insert(cp).second) return;
@@ -542,10 +631,15 @@ void WorldOwner::apply_edits() {
       bool ready = true;
       for (const EditLogEntry& e : job.entries)
         for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) { ready = request(cp) && ready; });
-      if (!ready && !stopping_) break;  // wait for its chunks
+      std::string not_ours;
+      Writable w = Writable::kYes;
+      for (const EditLogEntry& e : job.entries)
+        if (w != Writable::kNo)
+          if (const Writable here = writable(bounds.clamp(e.box), &not_ours); here != Writable::kYes) w = here;
+      if ((!ready || w == Writable::kWaiting) && !stopping_) break;  // wait for its chunks and leases
       for (const EditLogEntry& e : job.entries) unbusy(bounds.clamp(e.box));
-      if (!ready) {
-        job.done(RollbackResult{false, "the server is stopping", 0, 0});
+      if (!ready || w != Writable::kYes) {
+        job.done(RollbackResult{false, w == Writable::kNo ? not_ours : std::string("the server is stopping"), 0, 0});
         edits_.pop_front();
         continue;
       }
@@ -593,6 +687,22 @@ void WorldOwner::apply_edits() {
       if (!stopping_) break;  // wait for its chunks (arrival order is kept)
       // Shutting down: chunks still loading will not be waited for.
       if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
+      if (!history) unbusy(r);
+      if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+      edits_.pop_front();
+      continue;
+    }
+    // In a shared world, only regions this server holds are written.
+    std::string not_ours;
+    const Writable w = writable(history ? r : bounds.clamp(pe.edit.bounds()), &not_ours);
+    if (w == Writable::kWaiting && !stopping_) break;  // wait for the claim (arrival order is kept)
+    if (w != Writable::kYes) {
+      if (client != nullptr) {
+        if (w == Writable::kNo)
+          reject(pe.id, pe.edit, RejectReason::kNotOwner, "not this server's region: " + not_ours);
+        else
+          reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
+      }
       if (!history) unbusy(r);
       if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
       edits_.pop_front();

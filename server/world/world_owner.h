@@ -115,6 +115,9 @@ class WorldOwner : private WorldView {
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
+  // A shared world's region lease this server held is gone (the lease
+  // keeper found it lost): the server stops, as after a failed commit.
+  void lease_lost(Vec3i region, std::string why);
   // Rejects an edit the replicator refused, with the true state of its box.
   void refuse(ClientId id, EditRequestMsg edit, RejectReason why, std::string reason);
 
@@ -238,6 +241,12 @@ class WorldOwner : private WorldView {
   void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason);
   bool read_current(const Region& r, Box& out) const;
   void copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied);
+  // Whether this server may write every chunk of r now: always on SQLite;
+  // in a shared PostgreSQL world, once it holds the leases of their regions
+  // (a claim is started for each region not known). kNo sets why (the
+  // holder).
+  enum class Writable : std::uint8_t { kYes, kWaiting, kNo };
+  Writable writable(const Region& r, std::string* why);
   bool near_enough(const Client& c, const Region& r) const;
   void unbusy(const Region& r);
   void send_presence();
@@ -272,6 +281,22 @@ class WorldOwner : private WorldView {
   std::deque<PendingEdit> edits_;
   // Chunks queued edits will touch (never unloaded): chunk -> edits.
   std::unordered_map<Vec3i, int, Vec3iHash> busy_;
+  // A shared world's regions as far as this server's edits know them:
+  // claiming; held, with chunks still being read again (stale: held here
+  // older than stored, by another server's writes); held; or held by another
+  // server (asked again after a second).
+  struct RegionLeaseState {
+    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused } state = kClaiming;
+    std::string why;
+    std::chrono::steady_clock::time_point ask_again{};
+    std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale;  // chunk -> the revision stored
+  };
+  void on_claimed(Vec3i region, Storage::Claimed claimed);
+  // After a load of cp landed: a stale chunk of a region being refreshed
+  // is done once held at its stored revision, else read again.
+  void refreshed(Vec3i cp);
+  void apply_loaded(LoadedChunk c);
+  std::unordered_map<Vec3i, RegionLeaseState, Vec3iHash> leases_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
   InterestIndex interest_;

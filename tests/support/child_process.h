@@ -81,6 +81,11 @@ class ChildProcess {
   int stop(std::chrono::seconds grace = std::chrono::seconds(20)) { return end(SIGTERM, grace); }
   // SIGKILL: a crash, nothing runs on the way out.
   int kill_hard() { return end(SIGKILL, std::chrono::seconds(60)); }
+  // Sends sig to the process alone (SIGSTOP / SIGCONT: a pause); true if sent.
+  bool signal(int sig) {
+    std::lock_guard lock(mutex_);
+    return started() && !exited_ && ::kill(pid_, sig) == 0;
+  }
   // Waits for it to exit by itself (at most timeout; then it is stopped).
   int wait(std::chrono::seconds timeout) {
     if (!started()) return status_;

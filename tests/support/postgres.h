@@ -17,6 +17,7 @@
 
 #include <cctype>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -146,6 +147,7 @@ class PostgresTest : public ::testing::Test {
     ASSERT_TRUE(started_) << pg_->why();
     db_ = std::string("t_") + ::testing::UnitTest::GetInstance()->current_test_info()->name();
     for (char& ch : db_) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    db_.resize(std::min<std::size_t>(db_.size(), 63));  // PostgreSQL's longest name
     ASSERT_EQ(run_sql(pg_->url(), "CREATE DATABASE " + db_), "");
     url_ = "postgresql://terrane@127.0.0.1:" + std::to_string(pg_->port()) + "/" + db_;
   }

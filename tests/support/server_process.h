@@ -21,6 +21,7 @@ inline constexpr auto kServerStartDeadline = std::chrono::seconds(20);
 
 class ServerProcess {
  public:
+  // world: a directory, or a postgresql:// URL (give --server-id in extra).
   ServerProcess(const std::string& world, const std::vector<std::string>& extra) : child_(argv(world, extra)) {
     const std::string rest = child_.wait_for_line("listening on 127.0.0.1:", kServerStartDeadline);
     if (!rest.empty()) port_ = static_cast<std::uint16_t>(std::stoi(rest));
@@ -32,6 +33,9 @@ class ServerProcess {
   // SIGKILL: a crash, nothing runs on the way out. True if the signal is
   // what ended it.
   bool kill_hard() { return child_.kill_hard() == -SIGKILL; }
+  // SIGSTOP / SIGCONT: the server paused and resumed (nothing runs between).
+  bool pause() { return child_.signal(SIGSTOP); }
+  bool resume() { return child_.signal(SIGCONT); }
   // Waits for it to exit by itself: its exit status, or -1 if it had not
   // within timeout (it is then stopped).
   int wait_exit(std::chrono::seconds timeout) { return child_.wait(timeout); }

@@ -1,0 +1,241 @@
+// Servers sharing one world in a real PostgreSQL started by the test (on
+// 127.0.0.1, a database per test), with the real terrane-server binaries and
+// the client library: what one server acknowledges survives it, a region has
+// one writer, and a server that takes a region over reads what the previous
+// owner wrote before writing there. Every wait is on an event with a
+// deadline; nothing sleeps.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/client.h"
+#include "tests/support/postgres.h"
+#include "tests/support/server_process.h"
+#include "tests/support/view_chunks.h"
+
+namespace terrane {
+namespace {
+
+using namespace std::chrono_literals;
+using testing_support::run_sql;
+using testing_support::ServerProcess;
+
+// Generous: sanitizer builds on a shared 2-core machine generate slowly.
+constexpr auto kDeadline = 30s;
+
+class ClusterTest : public testing_support::PostgresTest {
+ protected:
+  void TearDown() override {
+    for (auto& s : servers_) {
+      if (!s) continue;
+      if (HasFailure()) std::fprintf(stderr, "--- server output ---\n%s", s->output().c_str());
+      s->stop();
+    }
+  }
+  // A server of the shared world; lease_ms short where a test waits for one
+  // to run out.
+  // Edits may be tried again at once while a region is another server's
+  // (refused without waiting), so the edit rate is no bound here.
+  ServerProcess& start(std::uint32_t id, int lease_ms = 5000) {
+    servers_.push_back(std::make_unique<ServerProcess>(
+        url_, std::vector<std::string>{"--server-id", std::to_string(id), "--lease-ms", std::to_string(lease_ms),
+                                       "--hash-push-ms", "0", "--edits-per-second", "100000"}));
+    EXPECT_NE(servers_.back()->port(), 0) << servers_.back()->output();
+    return *servers_.back();
+  }
+  static ClientOptions options(const ServerProcess& s, const std::string& name) {
+    ClientOptions o;
+    o.port = s.port();
+    o.name = name;
+    o.state.view_distance = 64;
+    o.state.full_res_radius = 32;
+    return o;
+  }
+  // Connects and waits until the chunks around the spawn are held at full
+  // resolution.
+  static std::vector<Vec3i> join(Client& c) {
+    std::string err;
+    EXPECT_TRUE(c.connect(&err)) << err;
+    EXPECT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+    const auto w = c.welcome();
+    if (!w) return {};
+    auto near = testing_support::chunks_within(w->spawn, 20, *w);
+    EXPECT_TRUE(c.wait_until(
+        [&](const ClientView& v) {
+          return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) {
+                   const ChunkCoverage* cov = v.replica.coverage(cp);
+                   return cov != nullptr && cov->state != CoverageState::kMip;
+                 });
+        },
+        kDeadline));
+    return near;
+  }
+  // The edit's answer: "" if accepted, else the reason.
+  static std::string outcome(Client& c, std::uint32_t id) {
+    EXPECT_NE(id, 0u);
+    std::string reason = "no answer";
+    c.wait_until(
+        [&](const ClientView& v) {
+          auto it = v.edits.find(id);
+          if (it == v.edits.end()) return v.closed;
+          reason = it->second.accepted ? "" : it->second.reason;
+          return true;
+        },
+        kDeadline);
+    return reason;
+  }
+  // Tries the edit until it is accepted (a region is taken over once its
+  // lease is given up or runs out): "" then, else the last refusal.
+  static std::string until_accepted(Client& c, const Region& r, const std::vector<Voxel>& v) {
+    std::string answer = "not tried";
+    const auto deadline = std::chrono::steady_clock::now() + kDeadline;
+    while (!answer.empty() && std::chrono::steady_clock::now() < deadline && !c.wait_until(
+                                                                                 [](const ClientView& view) {
+                                                                                   return view.closed;
+                                                                                 },
+                                                                                 0ms))
+      answer = outcome(c, c.write_box(r, v));
+    return answer;
+  }
+  // A box beside the spawn, and a pattern to write there.
+  static Region box_near(const Client& c, int dx) {
+    const Vec3f s = c.welcome()->spawn;
+    const Vec3i p{static_cast<int>(std::floor(s.x)) + dx, static_cast<int>(std::floor(s.y)) - 3,
+                  static_cast<int>(std::floor(s.z)) + 2};
+    return Region{p, p + Vec3i{3, 3, 3}};
+  }
+  static std::vector<Voxel> pattern(const Region& r, Material m) {
+    std::vector<Voxel> out;
+    for (std::int64_t i = 0; i < r.volume(); ++i)
+      out.push_back(i % 3 == 0 ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(30 + i)));
+    return out;
+  }
+  static bool shows(const Replica& replica, const Region& r, const std::vector<Voxel>& want) {
+    Box got(r.size());
+    replica.read_box(r.min, got);
+    return std::equal(want.begin(), want.end(), got.voxels().begin());
+  }
+  static bool replica_shows(Client& c, const Region& r, const std::vector<Voxel>& want) {
+    return c.with_replica([&](const Replica& replica) { return shows(replica, r, want); });
+  }
+  int current_leases() {
+    PGconn* conn = PQconnectdb(url_.c_str());
+    PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
+    const int n = PQresultStatus(r) == PGRES_TUPLES_OK ? std::atoi(PQgetvalue(r, 0, 0)) : -1;
+    PQclear(r);
+    PQfinish(conn);
+    return n;
+  }
+
+  std::vector<std::unique_ptr<ServerProcess>> servers_;
+};
+
+TEST_F(ClusterTest, AServerOnPostgresqlKeepsWhatItAcknowledgedAcrossARestart) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  Region box;
+  std::vector<Voxel> want;
+  {
+    Client c(options(a, "ann"));
+    join(c);
+    box = box_near(c, 0);
+    want = pattern(box, materials::kBrick);
+    ASSERT_EQ(outcome(c, c.write_box(box, want)), "");
+    c.disconnect();
+  }
+  ASSERT_EQ(a.stop(), 0) << a.output();
+  // A clean stop gives its leases up at once.
+  EXPECT_EQ(current_leases(), 0);
+  ServerProcess& again = start(1);
+  ASSERT_NE(again.port(), 0);
+  Client c(options(again, "ann"));
+  join(c);
+  EXPECT_TRUE(replica_shows(c, box, want));
+  c.disconnect();
+}
+
+TEST_F(ClusterTest, TwoServersWriteOnlyTheirRegionsAndATakeoverReadsWhatTheOtherWrote) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  Client ann(options(a, "ann")), bob(options(b, "bob"));
+  join(ann);
+  const auto near = join(bob);  // bob's server holds the spawn's chunks before ann edits them
+  const Region box = box_near(ann, 0);
+  const auto anns = pattern(box, materials::kBrick);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  // The region is server 1's now: server 2 refuses bob's edit there,
+  // naming the holder, and writes nothing.
+  const Region beside = box_near(bob, 5);
+  const auto bobs = pattern(beside, materials::kSnow);
+  const std::string refused = outcome(bob, bob.write_box(beside, bobs));
+  EXPECT_NE(refused.find("not this server's region"), std::string::npos) << refused;
+  EXPECT_NE(refused.find("leased to server 1"), std::string::npos) << refused;
+  // Server 1 stops (giving its leases up): server 2 takes the region over,
+  // reads ann's edit from the database first, then writes bob's.
+  ann.disconnect();
+  ASSERT_EQ(a.stop(), 0) << a.output();
+  ASSERT_EQ(until_accepted(bob, beside, bobs), "");
+  ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return shows(v.replica, box, anns); }, kDeadline))
+      << "bob's replica never showed ann's edit";
+  EXPECT_TRUE(replica_shows(bob, beside, bobs));
+  // Every chunk bob holds agrees with server 2's.
+  for (const Vec3i cp : near) ASSERT_TRUE(bob.request_region_hash(cp));
+  ASSERT_TRUE(bob.wait_until(
+      [&](const ClientView& v) {
+        return v.closed ||
+               std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
+      },
+      kDeadline));
+  EXPECT_EQ(bob.counters().hash_mismatches, 0u);
+  bob.disconnect();
+  // And the database holds both: a third server shows them.
+  ServerProcess& c = start(3);
+  ASSERT_NE(c.port(), 0);
+  Client cy(options(c, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, box, anns));
+  EXPECT_TRUE(replica_shows(cy, beside, bobs));
+  cy.disconnect();
+}
+
+TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {
+  ServerProcess& a = start(1, 1000);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2, 1000);
+  ASSERT_NE(b.port(), 0);
+  Client ann(options(a, "ann")), bob(options(b, "bob"));
+  join(ann);
+  join(bob);
+  const Region box = box_near(ann, 0);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, pattern(box, materials::kBrick))), "");
+  // Server 1 is paused: its lease runs out and server 2 takes the region.
+  ASSERT_TRUE(a.pause());
+  const Region beside = box_near(bob, 5);
+  const auto bobs = pattern(beside, materials::kSnow);
+  ASSERT_EQ(until_accepted(bob, beside, bobs), "");
+  // Resumed, server 1 finds its lease lost and stops rather than write over
+  // server 2's data; an edit it was sent meanwhile is never acknowledged.
+  const std::uint32_t late = ann.write_box(box, pattern(box, materials::kSand));
+  ASSERT_TRUE(a.resume());
+  EXPECT_EQ(a.wait_exit(60s), 1) << a.output();
+  EXPECT_NE(a.output().find("lease lost"), std::string::npos) << a.output();
+  EXPECT_NE(outcome(ann, late), "");
+  // Server 2's write stands.
+  ServerProcess& c = start(3);
+  ASSERT_NE(c.port(), 0);
+  Client cy(options(c, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, beside, bobs));
+  cy.disconnect();
+  bob.disconnect();
+}
+
+}  // namespace
+}  // namespace terrane
