@@ -131,6 +131,9 @@ struct ServerCounters {
   // estimate; corrected: the exact mip differed, so holders were sent it.
   std::atomic<std::uint64_t> estimates_replaced{0};
   std::atomic<std::uint64_t> estimates_corrected{0};
+  // A shared world: chunks held here that another server's notice said were
+  // stored newer, so they were read again (world strand).
+  std::atomic<std::uint64_t> chunks_changed_elsewhere{0};
   // Per-tick cost split (world strand): applying edits and publishing
   // versions (the tick), and fanning committed changes out to their
   // holders. Commit time is the storage's (StorageCounters).

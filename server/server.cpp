@@ -80,6 +80,16 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
 
   s->storage_->set_leases(s->leases_.get());
   s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
+  if (s->leases_) {
+    // Subscribed before any client joins: every commit of another server
+    // from now on reaches what this one holds.
+    WorldOwner* owner = s->world_owner_.get();
+    auto listener = ChangeListener::open(
+        options.store_url, [owner](std::vector<ChunkChange> changes) { owner->changed_elsewhere(std::move(changes)); },
+        [owner] { owner->read_again_elsewhere(); });
+    if (!listener) return FileError{listener.error().message, {}};
+    s->changes_ = std::move(*listener);
+  }
   WelcomeMsg& w = s->welcome_.welcome;
   const WorldMeta& meta = s->world_->meta();
   w.server_epoch = meta.epoch;
@@ -180,6 +190,7 @@ Server::Server(const ServerOptions& options)
 Server::~Server() {
   stop();
   if (shutdown_thread_.joinable()) shutdown_thread_.join();
+  changes_.reset();
   world_owner_.reset();
   if (storage_) storage_->stop();
 }
@@ -235,6 +246,7 @@ void Server::stop() {
       admin = std::move(admin_);
     }
   }
+  changes_.reset();  // no notice reaches the world owner once it stops
   // Applies what is queued and waits for its commit: nothing acknowledged
   // is lost, and every acknowledgement is sent before the sessions close.
   world_owner_->stop();

@@ -49,6 +49,7 @@
 #include "server/ops/http_endpoint.h"
 #include "server/options.h"
 #include "server/replication/replicator.h"
+#include "server/storage/change_listener.h"
 #include "server/storage/lease_keeper.h"
 #include "server/storage/storage.h"
 #include "server/world/world_owner.h"
@@ -118,6 +119,9 @@ class Server {
   asio::ip::tcp::acceptor acceptor_;
   asio::steady_timer stats_timer_;
   std::unique_ptr<WorldOwner> world_owner_;
+  // A shared world's notices from the other servers, handed to the world
+  // owner (stopped before it).
+  std::unique_ptr<ChangeListener> changes_;
   std::unique_ptr<HttpEndpoint> metrics_;
   std::unique_ptr<AccessControl> access_;
   std::mutex admin_mutex_;  // admin_ is dropped in stop() while sessions may still ask

@@ -179,6 +179,9 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_estimates_corrected_total",
             "Of those, the chunks whose exact coarsest mip differed from the estimate (holders were sent it).",
             load(c.estimates_corrected));
+  m.counter("terrane_chunks_changed_elsewhere_total",
+            "Chunks held here that another server of a shared world stored newer, read again from the database.",
+            load(c.chunks_changed_elsewhere));
   m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
             load(c.chunks_resumed));
   m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));

@@ -2,7 +2,9 @@
 
 #include <fmt/format.h>
 #include <libpq-fe.h>
+#include <poll.h>
 
+#include <cerrno>
 #include <algorithm>
 #include <charconv>
 #include <cstring>
@@ -183,6 +185,46 @@ struct PostgresStore::Connection {
 };
 
 Vec3i lease_region_of(Vec3i chunk_pos) { return coarse_region_of(chunk_pos); }
+
+std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks) {
+  std::vector<std::string> out;
+  std::string payload;
+  for (const ChunkWrite& w : chunks) {
+    const std::string entry = fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision);
+    if (!payload.empty() && payload.size() + 1 + entry.size() > kMaxChangeNoticeBytes) {
+      out.push_back(std::move(payload));
+      payload.clear();
+    }
+    if (!payload.empty()) payload += ' ';
+    payload += entry;
+  }
+  if (!payload.empty()) out.push_back(std::move(payload));
+  return out;
+}
+
+std::optional<std::vector<ChunkChange>> parse_change_notice(std::string_view payload) {
+  std::vector<ChunkChange> out;
+  while (!payload.empty()) {
+    const std::size_t end = std::min(payload.find(' '), payload.size());
+    std::string_view entry = payload.substr(0, end);
+    payload.remove_prefix(std::min(end + 1, payload.size()));
+    std::int64_t v[4];
+    for (int i = 0; i < 4; ++i) {
+      const std::size_t comma = i < 3 ? entry.find(',') : entry.size();
+      if (comma == std::string_view::npos) return std::nullopt;
+      const auto [at, ec] = std::from_chars(entry.data(), entry.data() + comma, v[i]);
+      if (ec != std::errc{} || at != entry.data() + comma) return std::nullopt;
+      entry.remove_prefix(std::min(comma + 1, entry.size()));
+    }
+    const auto fits = [](std::int64_t c) { return c >= std::numeric_limits<std::int32_t>::min() &&
+                                                  c <= std::numeric_limits<std::int32_t>::max(); };
+    if (!fits(v[0]) || !fits(v[1]) || !fits(v[2]) || v[3] < 0) return std::nullopt;
+    out.push_back(ChunkChange{{static_cast<std::int32_t>(v[0]), static_cast<std::int32_t>(v[1]),
+                               static_cast<std::int32_t>(v[2])},
+                              static_cast<std::uint64_t>(v[3])});
+  }
+  return out;
+}
 
 PostgresStore::PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown)
     : c_(std::move(c)), url_(std::move(url)), shown_(std::move(shown)) {}
@@ -393,6 +435,12 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
                        text(e.box.max.z), blob(e.before), blob(e.after)});
     if (!r) return c_->abort(r.error());
   }
+  // The news for the other servers, delivered by PostgreSQL at the commit
+  // and only if it commits: each chunk written with its revision.
+  for (const std::string& payload : change_notices(chunks)) {
+    auto r = c_->exec("notify changes", "SELECT pg_notify($1, $2)", {Param{kChangesChannel, false}, Param{payload, false}});
+    if (!r) return c_->abort(r.error());
+  }
   auto commit = c_->exec("commit chunks", "COMMIT");
   if (!commit) return c_->abort(commit.error());
   return Ok{};
@@ -444,6 +492,34 @@ std::vector<Param> region_range(Vec3i region) {
 }
 
 }  // namespace
+
+StoreResult<Ok> PostgresStore::listen() {
+  auto r = c_->exec("listen for changes", "LISTEN terrane_changes");
+  if (!r) return r.error();
+  return Ok{};
+}
+
+StoreResult<std::vector<std::string>> PostgresStore::wait_notices(std::chrono::milliseconds timeout) {
+  std::vector<std::string> out;
+  const auto take = [&] {
+    while (PGnotify* n = PQnotifies(c_->conn)) {
+      if (std::string_view(n->relname) == kChangesChannel) out.emplace_back(n->extra);
+      PQfreemem(n);
+    }
+  };
+  take();
+  if (!out.empty()) return out;
+  const int fd = PQsocket(c_->conn);
+  if (fd < 0 || PQstatus(c_->conn) != CONNECTION_OK)
+    return StoreError{StoreError::Kind::kConnection, "postgresql: listen for changes: the connection is gone"};
+  pollfd p{fd, POLLIN, 0};
+  const int ready = ::poll(&p, 1, static_cast<int>(timeout.count()));
+  if (ready < 0 && errno != EINTR)
+    return StoreError{StoreError::Kind::kConnection, "postgresql: listen for changes: poll failed"};
+  if (ready > 0 && PQconsumeInput(c_->conn) == 0) return c_->error("listen for changes", nullptr);
+  take();
+  return out;
+}
 
 StoreResult<Ok> PostgresStore::read_meta() {
   auto r = c_->exec("read world metadata", "SELECT key, value FROM terrane_meta");

@@ -27,6 +27,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/codec/decode_error.h"
@@ -113,6 +114,13 @@ class PostgresStore final : public WorldStore {
   StoreResult<Ok> save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
                               std::span<const EditLogEntry> log = {}, bool overwrite = true);
 
+  // Subscribes this connection to terrane_changes; wait_notices then
+  // returns the payloads that arrived, waiting up to timeout for the first.
+  // A broken connection is kConnection (open another and read again what
+  // may have been missed).
+  StoreResult<Ok> listen();
+  StoreResult<std::vector<std::string>> wait_notices(std::chrono::milliseconds timeout);
+
   // WorldStore. Errors name the statement and PostgreSQL's message; a chunk
   // row that does not decode is an error with decode set, naming the chunk.
   const std::string& where() const override { return shown_; }
@@ -155,6 +163,22 @@ class PostgresStore final : public WorldStore {
   WorldMeta meta_;
   std::shared_ptr<const LeaseSource> leases_;
 };
+
+// The news between servers (STORE_POSTGRESQL.md, "Notices"): every fenced
+// write notifies channel terrane_changes, in its transaction, of each chunk
+// it wrote and the chunk's new revision. Payloads are text: entries
+// "x,y,z,revision" separated by one space, at most kMaxChangeNoticeBytes
+// each (more chunks: more notices).
+inline constexpr const char* kChangesChannel = "terrane_changes";
+inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
+struct ChunkChange {
+  Vec3i pos;
+  std::uint64_t revision = 0;
+  friend bool operator==(const ChunkChange&, const ChunkChange&) = default;
+};
+std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks);
+// nullopt if the payload is not one (another program's notice, damage).
+std::optional<std::vector<ChunkChange>> parse_change_notice(std::string_view payload);
 
 // The region (8 x 8 x 8 chunks) a chunk belongs to.
 Vec3i lease_region_of(Vec3i chunk_pos);

@@ -552,38 +552,80 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   }
   // What this server holds of the region older than stored was written by
   // the region's earlier owner: read again before anything is written over
-  // it (its holders are sent the newer chunk as it lands).
-  l.stale.clear();
+  // it (its holders are sent the newer chunks as they land).
+  bool stale = false;
   for (const auto& [cp, revision] : claimed.stored) {
     auto it = loaded_.find(cp);
     if (it == loaded_.end()) continue;  // read from the store when wanted
     const ChunkVersion& held = *it->second.current;
     if (!held.estimate() && held.revision() >= revision) continue;
-    l.stale.emplace(cp, revision);
-    loading_.try_emplace(cp);
-    load(cp, Storage::Priority::kUrgent);
+    read_again(cp, revision, Storage::Priority::kUrgent);
+    stale = true;
   }
-  l.state = l.stale.empty() ? RegionLeaseState::kHeld : RegionLeaseState::kRefreshing;
+  for (const auto& [cp, revision] : stale_) stale = stale || lease_region_of(cp) == region;
+  l.state = stale ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
+}
+
+bool WorldOwner::writes_region(Vec3i region) const {
+  auto it = leases_.find(region);
+  return it != leases_.end() &&
+         (it->second.state == RegionLeaseState::kHeld || it->second.state == RegionLeaseState::kRefreshing);
+}
+
+void WorldOwner::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority) {
+  auto [it, fresh] = stale_.try_emplace(cp, revision);
+  if (!fresh) it->second = std::max(it->second, revision);
+  // A load already under way may have read the store before this revision:
+  // refreshed() reads again when it lands.
+  if (loading_.count(cp) != 0) return;
+  loading_.try_emplace(cp);
+  load(cp, priority);
 }
 
 void WorldOwner::refreshed(Vec3i cp) {
-  if (leases_.empty()) return;
-  auto it = leases_.find(lease_region_of(cp));
-  if (it == leases_.end() || it->second.state != RegionLeaseState::kRefreshing) return;
-  RegionLeaseState& l = it->second;
-  auto s = l.stale.find(cp);
-  if (s == l.stale.end()) return;
+  auto s = stale_.find(cp);
+  if (s == stale_.end()) return;
   auto held = loaded_.find(cp);
-  if (held == loaded_.end() ||  // no longer held: read from the store when wanted
-      (!held->second.current->estimate() && held->second.current->revision() >= s->second)) {
-    l.stale.erase(s);
-    if (l.stale.empty()) l.state = RegionLeaseState::kHeld;
-  } else if (loading_.count(cp) == 0) {
-    // The load that landed read the store before the newer revision (it
-    // started before the claim): read again.
-    loading_.try_emplace(cp);
-    load(cp, Storage::Priority::kUrgent);
+  if (held != loaded_.end() && (held->second.current->estimate() || held->second.current->revision() < s->second)) {
+    if (loading_.count(cp) == 0) {
+      // The load that landed read the store before the newer revision.
+      loading_.try_emplace(cp);
+      load(cp, Storage::Priority::kUrgent);
+    }
+    return;
   }
+  // Held at the stored revision, or no longer held (read from the store when wanted).
+  const Vec3i region = lease_region_of(cp);
+  stale_.erase(s);
+  auto l = leases_.find(region);
+  if (l == leases_.end() || l->second.state != RegionLeaseState::kRefreshing) return;
+  for (const auto& [other, revision] : stale_)
+    if (lease_region_of(other) == region) return;
+  l->second.state = RegionLeaseState::kHeld;
+}
+
+void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
+  asio::post(strand_, [this, changes = std::move(changes)] {
+    for (const ChunkChange& c : changes) {
+      if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
+      auto it = loaded_.find(c.pos);
+      if (it == loaded_.end()) continue;  // read from the store when wanted
+      const ChunkVersion& held = *it->second.current;
+      if (!held.estimate() && held.revision() >= c.revision) continue;
+      counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
+      read_again(c.pos, c.revision, Storage::Priority::kStream);
+    }
+  });
+}
+
+void WorldOwner::read_again_elsewhere() {
+  asio::post(strand_, [this] {
+    for (const auto& [cp, l] : loaded_) {
+      if (writes_region(lease_region_of(cp)) || loading_.count(cp) != 0) continue;
+      loading_.try_emplace(cp);
+      load(cp, Storage::Priority::kBackground);
+    }
+  });
 }
 
 void WorldOwner::lease_lost(Vec3i region, std::string why) {

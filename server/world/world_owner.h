@@ -50,6 +50,7 @@
 #include "common/voxel/grid.h"
 #include "common/world/world.h"
 #include "server/options.h"
+#include "server/storage/postgres_store.h"
 #include "server/storage/storage.h"
 #include "server/world/chunk_version.h"
 #include "server/world/history.h"
@@ -115,6 +116,13 @@ class WorldOwner : private WorldView {
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
+  // Chunks another server of a shared world stored, at these revisions
+  // (its notices): what this server holds of them older than that is read
+  // again, and its holders are sent the newer chunks.
+  void changed_elsewhere(std::vector<ChunkChange> changes);
+  // Notices may have been missed: every chunk held outside the regions this
+  // server writes is read again (background loads).
+  void read_again_elsewhere();
   // A shared world's region lease this server held is gone (the lease
   // keeper found it lost): the server stops, as after a failed commit.
   void lease_lost(Vec3i region, std::string why);
@@ -282,21 +290,26 @@ class WorldOwner : private WorldView {
   // Chunks queued edits will touch (never unloaded): chunk -> edits.
   std::unordered_map<Vec3i, int, Vec3iHash> busy_;
   // A shared world's regions as far as this server's edits know them:
-  // claiming; held, with chunks still being read again (stale: held here
-  // older than stored, by another server's writes); held; or held by another
-  // server (asked again after a second).
+  // claiming; held, with stale chunks of it still being read again; held;
+  // or held by another server (asked again after a second).
   struct RegionLeaseState {
     enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused } state = kClaiming;
     std::string why;
     std::chrono::steady_clock::time_point ask_again{};
-    std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale;  // chunk -> the revision stored
   };
   void on_claimed(Vec3i region, Storage::Claimed claimed);
-  // After a load of cp landed: a stale chunk of a region being refreshed
-  // is done once held at its stored revision, else read again.
+  bool writes_region(Vec3i region) const;
+  // cp is stored at revision, newer than held here (another server wrote
+  // it): read again until held at least at revision.
+  void read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority);
+  // After a load of cp landed: a stale chunk is done once held at its
+  // stored revision (or no longer held), else read again.
   void refreshed(Vec3i cp);
   void apply_loaded(LoadedChunk c);
   std::unordered_map<Vec3i, RegionLeaseState, Vec3iHash> leases_;
+  // Chunks held older than stored (another server wrote them): chunk ->
+  // the revision stored.
+  std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
   InterestIndex interest_;

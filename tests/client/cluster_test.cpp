@@ -237,5 +237,93 @@ TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {
   bob.disconnect();
 }
 
+TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  Client ann(options(a, "ann")), bob(options(b, "bob"));
+  join(ann);
+  const auto near = join(bob);
+  const Region box = box_near(ann, 0);
+  const auto anns = pattern(box, materials::kBrick);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  // Server 1's commit notifies server 2, which reads the chunks again and
+  // sends them to bob.
+  ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, box, anns); }, kDeadline))
+      << "bob never saw ann's edit";
+  // A second edit of the same chunks follows the first.
+  const auto again = pattern(box, materials::kSnow);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, again)), "");
+  ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, box, again); }, kDeadline));
+  for (const Vec3i cp : near) ASSERT_TRUE(bob.request_region_hash(cp));
+  ASSERT_TRUE(bob.wait_until(
+      [&](const ClientView& v) {
+        return v.closed ||
+               std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
+      },
+      kDeadline));
+  EXPECT_EQ(bob.counters().hash_mismatches, 0u);
+  ann.disconnect();
+  bob.disconnect();
+}
+
+TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEdit) {
+  ServerProcess& a = start(1, 1000);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2, 1000);
+  ASSERT_NE(b.port(), 0);
+  Client ann(options(a, "ann")), bob(options(b, "bob"));
+  join(ann);
+  join(bob);
+  // Edits acknowledged by server 1, then more sent as it is killed.
+  std::vector<std::pair<Region, std::vector<Voxel>>> acknowledged;
+  for (int i = 0; i < 4; ++i) {
+    const Region r = box_near(ann, -8 + 4 * i);
+    auto v = pattern(r, static_cast<Material>(materials::kBrick + i));
+    ASSERT_EQ(outcome(ann, ann.write_box(r, v)), "");
+    acknowledged.emplace_back(r, std::move(v));
+  }
+  std::vector<std::uint32_t> sand;
+  for (int i = 0; i < 4; ++i) {
+    const Region r = box_near(ann, -8 + 4 * i);
+    sand.push_back(ann.write_box(r, pattern(r, materials::kSand)));
+  }
+  ASSERT_TRUE(a.kill_hard());
+  std::vector<bool> sand_acknowledged(sand.size(), false);
+  ann.wait_until(
+      [&](const ClientView& v) {
+        for (std::size_t i = 0; i < sand.size(); ++i) {
+          auto it = v.edits.find(sand[i]);
+          sand_acknowledged[i] = it != v.edits.end() && it->second.accepted;
+        }
+        return true;
+      },
+      0ms);
+  // Server 2 takes the region over once the lease runs out, reads what
+  // server 1 stored, and writes on top of it.
+  const Region beside = box_near(bob, 9);
+  const auto bobs = pattern(beside, materials::kSnow);
+  ASSERT_EQ(until_accepted(bob, beside, bobs), "");
+  ServerProcess& c = start(3);
+  ASSERT_NE(c.port(), 0);
+  Client cy(options(c, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, beside, bobs));
+  // Every edit acknowledged is there: a sand edit acknowledged before the
+  // kill, else the edit before it (or the sand edit, stored but not yet
+  // acknowledged when server 1 died).
+  for (std::size_t i = 0; i < acknowledged.size(); ++i) {
+    const auto& [r, v] = acknowledged[i];
+    const auto sand_box = pattern(r, materials::kSand);
+    if (sand_acknowledged[i])
+      EXPECT_TRUE(replica_shows(cy, r, sand_box)) << "acknowledged sand edit " << i << " lost";
+    else
+      EXPECT_TRUE(replica_shows(cy, r, v) || replica_shows(cy, r, sand_box)) << "acknowledged edit " << i << " lost";
+  }
+  cy.disconnect();
+  bob.disconnect();
+}
+
 }  // namespace
 }  // namespace terrane

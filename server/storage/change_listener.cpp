@@ -1,0 +1,75 @@
+#include "server/storage/change_listener.h"
+
+#include <chrono>
+
+#include "server/log.h"
+
+namespace terrane {
+
+StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, ChangesFn on_changes,
+                                                                  MissedFn on_missed) {
+  auto conn = PostgresStore::open(url);
+  if (!conn) return conn.error();
+  if (auto l = (*conn)->listen(); !l) return l.error();
+  std::unique_ptr<ChangeListener> out(
+      new ChangeListener(url, std::move(on_changes), std::move(on_missed), std::move(*conn)));
+  out->thread_ = std::thread([p = out.get()] { p->run(); });
+  return out;
+}
+
+ChangeListener::ChangeListener(std::string url, ChangesFn on_changes, MissedFn on_missed,
+                               std::unique_ptr<PostgresStore> conn)
+    : url_(std::move(url)), on_changes_(std::move(on_changes)), on_missed_(std::move(on_missed)),
+      conn_(std::move(conn)) {}
+
+ChangeListener::~ChangeListener() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void ChangeListener::run() {
+  const auto stopping = [&] {
+    std::lock_guard lock(mutex_);
+    return stopping_;
+  };
+  while (!stopping()) {
+    if (!conn_) {
+      // Connected again and subscribed before anything is read again, so
+      // nothing committed after the read can be missed.
+      auto again = PostgresStore::open(url_);
+      if (again && (*again)->listen()) {
+        conn_ = std::move(*again);
+        reconnects_.fetch_add(1, std::memory_order_relaxed);
+        server_log().info("notices from the other servers: listening again; reading again what may have been missed");
+        on_missed_();
+        continue;
+      }
+      std::unique_lock lock(mutex_);
+      wake_.wait_for(lock, std::chrono::seconds(1), [&] { return stopping_; });
+      continue;
+    }
+    // Short waits, so a stop is noticed soon.
+    auto got = conn_->wait_notices(std::chrono::milliseconds(200));
+    if (!got) {
+      server_log().warn("notices from the other servers: {}; connecting again", got.error().message);
+      conn_.reset();
+      continue;
+    }
+    for (const std::string& payload : *got) {
+      notices_.fetch_add(1, std::memory_order_relaxed);
+      auto changes = parse_change_notice(payload);
+      if (!changes) {
+        server_log().warn("notices from the other servers: a notice that does not read ({} bytes), ignored",
+                          payload.size());
+        continue;
+      }
+      on_changes_(std::move(*changes));
+    }
+  }
+}
+
+}  // namespace terrane
