@@ -33,7 +33,8 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
   (*store)->set_lease_source(std::make_shared<const LeaseSource>(
-      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->ensure(regions); }));
+      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->ensure(regions); }),
+      options_.lease);
   return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
 }
 

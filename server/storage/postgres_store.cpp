@@ -12,9 +12,11 @@
 #include <map>
 #include <optional>
 #include <string_view>
+#include <thread>
 #include <tuple>
 
 #include "common/world/coarse_image.h"
+#include "server/log.h"
 
 namespace terrane {
 
@@ -578,7 +580,7 @@ FileStatus PostgresStore::put_meta(const WorldMeta& meta) {
 FileResult<std::unique_ptr<WorldStore>> PostgresStore::reopen() const {
   auto again = open(url_);
   if (!again) return file_error(again.error());
-  (*again)->set_lease_source(leases_);
+  (*again)->set_lease_source(leases_, retry_for_);
   return std::unique_ptr<WorldStore>(std::move(*again));
 }
 
@@ -686,11 +688,24 @@ FileStatus PostgresStore::save_chunks(std::span<const ChunkWrite> writes, bool o
     const Vec3i r = lease_region_of(w.pos);
     if (std::find(regions.begin(), regions.end(), r) == regions.end()) regions.push_back(r);
   }
-  auto leases = (*leases_)(regions);
-  if (!leases) return file_error(leases.error());
-  auto saved = save_fenced(*leases, writes, log, overwrite);
-  if (!saved) return file_error(saved.error());
-  return Ok{};
+  // A database that went away (restarted, say) is waited for, up to
+  // retry_for: the write is tried again on a new connection. Nothing is
+  // acknowledged meanwhile, and once the leases have run out the write is
+  // fenced anyway. (A commit whose answer was lost may be stored twice: the
+  // chunk rows are the same, its edit log entries appear twice.)
+  const auto give_up = std::chrono::steady_clock::now() + retry_for_;
+  for (int attempt = 0;; ++attempt) {
+    auto leases = (*leases_)(regions);
+    StoreResult<Ok> saved = leases ? save_fenced(*leases, writes, log, overwrite) : StoreResult<Ok>(leases.error());
+    if (saved) {
+      if (attempt > 0) server_log().info("world {}: stored after {} tries: the database is back", shown_, attempt + 1);
+      return Ok{};
+    }
+    if (saved.error().kind != StoreError::Kind::kConnection || std::chrono::steady_clock::now() >= give_up)
+      return file_error(saved.error());
+    if (attempt == 0) server_log().warn("world {}: {}; trying again", shown_, saved.error().message);
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
 }
 
 FileResult<std::vector<EditLogEntry>> PostgresStore::edit_log(const EditLogQuery& q) {

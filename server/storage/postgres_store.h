@@ -87,7 +87,13 @@ class PostgresStore final : public WorldStore {
   // Every write of this connection (save_chunks) asks source for the
   // leases of the regions it writes and is fenced by them. Connections
   // made by reopen() share it. Without one, writes are refused.
-  void set_lease_source(std::shared_ptr<const LeaseSource> source) { leases_ = std::move(source); }
+  // retry_for: how long a write waits for a database that cannot be
+  // reached (tried again on a new connection) before it fails.
+  void set_lease_source(std::shared_ptr<const LeaseSource> source,
+                        std::chrono::milliseconds retry_for = std::chrono::milliseconds(0)) {
+    leases_ = std::move(source);
+    retry_for_ = retry_for;
+  }
 
   // Takes the region for owner (a server id below 2^31) for the lease time,
   // at the next epoch, if it is free, its lease has expired, or owner holds
@@ -162,6 +168,7 @@ class PostgresStore final : public WorldStore {
   bool has_world_ = false;
   WorldMeta meta_;
   std::shared_ptr<const LeaseSource> leases_;
+  std::chrono::milliseconds retry_for_{0};
 };
 
 // The news between servers (STORE_POSTGRESQL.md, "Notices"): every fenced

@@ -71,6 +71,7 @@ void Storage::claim(Vec3i region, ClaimDone done) {
     auto held = leases_->ensure(std::span(&region, 1));
     if (!held) {
       out.why = held.error().message;
+      out.unreachable = held.error().kind == StoreError::Kind::kConnection;
       done(std::move(out));
       return;
     }
@@ -88,6 +89,7 @@ void Storage::claim(Vec3i region, ClaimDone done) {
     if (!entries) {
       // Held, but what is stored there is not known: not written until it is.
       out.why = "cannot read what the region holds: " + entries.error().message;
+      out.unreachable = true;
       done(std::move(out));
       return;
     }

@@ -125,6 +125,7 @@ class Storage {
   // writes there. why names the holder when another server has the region.
   struct Claimed {
     bool held = false;
+    bool unreachable = false;  // not held because the database could not be reached (try again)
     std::string why;
     std::vector<std::pair<Vec3i, std::uint64_t>> stored;  // chunk, revision
   };

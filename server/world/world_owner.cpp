@@ -522,7 +522,8 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
     const Vec3i region = lease_region_of(cp);
     auto [it, unknown] = leases_.try_emplace(region);
     RegionLeaseState& l = it->second;
-    if (unknown || (l.state == RegionLeaseState::kRefused && now >= l.ask_again)) {
+    if (unknown || ((l.state == RegionLeaseState::kRefused || l.state == RegionLeaseState::kUnreachable) &&
+                    now >= l.ask_again)) {
       // Another server's lease may have run out since (it died): ask again.
       l.state = RegionLeaseState::kClaiming;
       storage_.claim(region, [this, region](Storage::Claimed claimed) {
@@ -534,8 +535,7 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
     if (l.state == RegionLeaseState::kRefused) {
       out = Writable::kNo;
       *why = l.why;
-    } else if ((l.state == RegionLeaseState::kClaiming || l.state == RegionLeaseState::kRefreshing) &&
-               out == Writable::kYes) {
+    } else if (l.state != RegionLeaseState::kHeld && out == Writable::kYes) {
       out = Writable::kWaiting;
     }
   });
@@ -545,7 +545,7 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
 void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   RegionLeaseState& l = leases_[region];
   if (!claimed.held) {
-    l.state = RegionLeaseState::kRefused;
+    l.state = claimed.unreachable ? RegionLeaseState::kUnreachable : RegionLeaseState::kRefused;
     l.why = std::move(claimed.why);
     l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     return;

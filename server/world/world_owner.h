@@ -291,9 +291,10 @@ class WorldOwner : private WorldView {
   std::unordered_map<Vec3i, int, Vec3iHash> busy_;
   // A shared world's regions as far as this server's edits know them:
   // claiming; held, with stale chunks of it still being read again; held;
-  // or held by another server (asked again after a second).
+  // held by another server; or not known, the database out of reach (both
+  // asked again after a second; edits wait in the second case).
   struct RegionLeaseState {
-    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused } state = kClaiming;
+    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable } state = kClaiming;
     std::string why;
     std::chrono::steady_clock::time_point ask_again{};
   };

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "client/client.h"
@@ -323,6 +324,36 @@ TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEd
   }
   cy.disconnect();
   bob.disconnect();
+}
+
+TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  Client ann(options(a, "ann"));
+  join(ann);
+  const Region first = box_near(ann, 0), second = box_near(ann, 5), third = box_near(ann, -5);
+  const auto v1 = pattern(first, materials::kBrick), v2 = pattern(second, materials::kSnow),
+             v3 = pattern(third, materials::kSand);
+  ASSERT_EQ(outcome(ann, ann.write_box(first, v1)), "");
+  // The database restarts while an edit is under way: it is acknowledged
+  // once stored, after the database is back; the server keeps running.
+  bool restarted = false;
+  std::thread restart([&] { restarted = pg_->restart(); });
+  const std::uint32_t during = ann.write_box(second, v2);
+  restart.join();
+  ASSERT_TRUE(restarted) << pg_->why();
+  EXPECT_EQ(outcome(ann, during), "");
+  EXPECT_EQ(outcome(ann, ann.write_box(third, v3)), "");
+  ann.disconnect();
+  ASSERT_EQ(a.stop(), 0) << a.output();
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  Client cy(options(b, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, first, v1));
+  EXPECT_TRUE(replica_shows(cy, second, v2));
+  EXPECT_TRUE(replica_shows(cy, third, v3));
+  cy.disconnect();
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 #include <libpq-fe.h>
 #include <pwd.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -21,6 +22,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <vector>
@@ -75,14 +77,30 @@ class ScratchPostgres {
       return false;
     }
     port_ = free_loopback_port();
-    server_ = std::make_unique<ChildProcess>(as_postgres(
-        root, {bin_ + "/postgres", "-D", data, "-p", std::to_string(port_), "-c", "listen_addresses=127.0.0.1",
-               "-c", "unix_socket_directories=" + dir_.string(), "-c", "fsync=off", "-c", "max_connections=50"}));
-    if (!server_->wait_for_output("database system is ready to accept connections", std::chrono::seconds(120))) {
-      why_ = "postgres did not start: " + server_->output();
+    argv_ = as_postgres(root, {bin_ + "/postgres", "-D", data, "-p", std::to_string(port_), "-c",
+                               "listen_addresses=127.0.0.1", "-c", "unix_socket_directories=" + dir_.string(), "-c",
+                               "fsync=off", "-c", "max_connections=50"});
+    return run_server();
+  }
+
+  // Stops the database (a fast shutdown: sessions are cut) and starts it
+  // again on the same port and data; true once it accepts connections.
+  bool restart() {
+    if (!server_) return false;
+    // To the postmaster itself (its pid is the first line of
+    // postmaster.pid): as root, the child is runuser, which passes no signal on.
+    std::ifstream pid_file(dir_ / "data" / "postmaster.pid");
+    long pid = 0;
+    if (!(pid_file >> pid) || pid <= 0 || ::kill(static_cast<pid_t>(pid), SIGINT) != 0) {
+      why_ = "cannot signal the postmaster (data/postmaster.pid)";
       return false;
     }
-    return true;
+    if (server_->wait(std::chrono::seconds(60)) != 0) {
+      why_ = "postgres did not stop: " + server_->output();
+      return false;
+    }
+    server_.reset();
+    return run_server();
   }
 
   // The test database (created by the first call).
@@ -107,7 +125,17 @@ class ScratchPostgres {
     return out;
   }
 
+  bool run_server() {
+    server_ = std::make_unique<ChildProcess>(argv_);
+    if (!server_->wait_for_output("database system is ready to accept connections", std::chrono::seconds(120))) {
+      why_ = "postgres did not start: " + server_->output();
+      return false;
+    }
+    return true;
+  }
+
   std::filesystem::path dir_;
+  std::vector<std::string> argv_;
   std::string bin_, why_;
   std::uint16_t port_ = 0;
   std::unique_ptr<ChildProcess> server_;
