@@ -134,6 +134,10 @@ struct ServerCounters {
   // A shared world: chunks held here that another server's notice said were
   // stored newer, so they were read again (world strand).
   std::atomic<std::uint64_t> chunks_changed_elsewhere{0};
+  // Edits in regions another server holds sent to its inbox, and edits
+  // other servers sent to this one's.
+  std::atomic<std::uint64_t> edits_forwarded{0};
+  std::atomic<std::uint64_t> forwarded_edits_received{0};
   // Per-tick cost split (world strand): applying edits and publishing
   // versions (the tick), and fanning committed changes out to their
   // holders. Commit time is the storage's (StorageCounters).

@@ -85,9 +85,15 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
     // Subscribed before any client joins: every commit of another server
     // from now on reaches what this one holds.
     WorldOwner* owner = s->world_owner_.get();
-    auto listener = ChangeListener::open(
-        options.store_url, [owner](std::vector<ChunkChange> changes) { owner->changed_elsewhere(std::move(changes)); },
-        [owner] { owner->read_again_elsewhere(); });
+    ChangeListener::Handlers on;
+    on.changes = [owner](std::vector<ChunkChange> changes) { owner->changed_elsewhere(std::move(changes)); };
+    on.inbox = [owner] { owner->inbox_has_edits(); };
+    on.answer = [owner](ForwardAnswer a) { owner->answered(std::move(a)); };
+    on.missed = [owner] {
+      owner->read_again_elsewhere();
+      owner->inbox_has_edits();
+    };
+    auto listener = ChangeListener::open(options.store_url, options.server_id, std::move(on));
     if (!listener) return FileError{listener.error().message, {}};
     s->changes_ = std::move(*listener);
   }

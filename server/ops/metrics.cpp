@@ -182,6 +182,10 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_changed_elsewhere_total",
             "Chunks held here that another server of a shared world stored newer, read again from the database.",
             load(c.chunks_changed_elsewhere));
+  m.counter("terrane_edits_forwarded_total", "Edits in regions another server holds, sent to its inbox.",
+            load(c.edits_forwarded));
+  m.counter("terrane_forwarded_edits_received_total", "Edits other servers forwarded to this one.",
+            load(c.forwarded_edits_received));
   m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
             load(c.chunks_resumed));
   m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));

@@ -6,21 +6,19 @@
 
 namespace terrane {
 
-StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, ChangesFn on_changes,
-                                                                  MissedFn on_missed) {
+StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, std::uint32_t server,
+                                                                  Handlers handlers) {
   auto conn = PostgresStore::open(url);
   if (!conn) return conn.error();
   if (auto l = (*conn)->listen(); !l) return l.error();
-  std::unique_ptr<ChangeListener> out(
-      new ChangeListener(url, std::move(on_changes), std::move(on_missed), std::move(*conn)));
+  std::unique_ptr<ChangeListener> out(new ChangeListener(url, server, std::move(handlers), std::move(*conn)));
   out->thread_ = std::thread([p = out.get()] { p->run(); });
   return out;
 }
 
-ChangeListener::ChangeListener(std::string url, ChangesFn on_changes, MissedFn on_missed,
+ChangeListener::ChangeListener(std::string url, std::uint32_t server, Handlers handlers,
                                std::unique_ptr<PostgresStore> conn)
-    : url_(std::move(url)), on_changes_(std::move(on_changes)), on_missed_(std::move(on_missed)),
-      conn_(std::move(conn)) {}
+    : url_(std::move(url)), server_(server), on_(std::move(handlers)), conn_(std::move(conn)) {}
 
 ChangeListener::~ChangeListener() {
   {
@@ -45,7 +43,7 @@ void ChangeListener::run() {
         conn_ = std::move(*again);
         reconnects_.fetch_add(1, std::memory_order_relaxed);
         server_log().info("notices from the other servers: listening again; reading again what may have been missed");
-        on_missed_();
+        on_.missed();
         continue;
       }
       std::unique_lock lock(mutex_);
@@ -59,17 +57,27 @@ void ChangeListener::run() {
       conn_.reset();
       continue;
     }
-    for (const std::string& payload : *got) {
-      notices_.fetch_add(1, std::memory_order_relaxed);
-      auto changes = parse_change_notice(payload);
-      if (!changes) {
-        server_log().warn("notices from the other servers: a notice that does not read ({} bytes), ignored",
-                          payload.size());
-        continue;
-      }
-      on_changes_(std::move(*changes));
-    }
+    for (const PostgresStore::Notice& n : *got) hand_on(n);
   }
+}
+
+void ChangeListener::hand_on(const PostgresStore::Notice& n) {
+  notices_.fetch_add(1, std::memory_order_relaxed);
+  bool read = true;
+  if (n.channel == kChangesChannel) {
+    auto changes = parse_change_notice(n.payload);
+    read = changes.has_value();
+    if (changes) on_.changes(std::move(*changes));
+  } else if (n.channel == kInboxChannel) {
+    if (n.payload == std::to_string(server_)) on_.inbox();
+  } else if (n.channel == kAnswersChannel) {
+    auto a = parse_answer_notice(n.payload);
+    read = a.has_value();
+    if (a && a->from == server_) on_.answer(std::move(*a));
+  }
+  if (!read)
+    server_log().warn("notices from the other servers: a {} notice that does not read ({} bytes), ignored", n.channel,
+                      n.payload.size());
 }
 
 }  // namespace terrane

@@ -1,11 +1,15 @@
-// ChangeListener: the other servers' writes to a shared PostgreSQL world, as
-// they commit (server/storage/STORE_POSTGRESQL.md, "Notices").
+// ChangeListener: the news from the other servers of a shared PostgreSQL
+// world, as they commit (server/storage/STORE_POSTGRESQL.md, "Notices" and
+// "Forwarded edits").
 //
-// A thread of its own holds a connection subscribed to terrane_changes and
-// hands each notice's chunks and revisions to on_changes. When the
+// A thread of its own holds a connection subscribed to the three channels
+// and hands on: each change notice's chunks and revisions (changes); that
+// this server's inbox has edits (inbox); an answer to an edit this server
+// forwarded (answer). Notices for other servers are left out. When the
 // connection breaks, notices may have been missed: it connects again
-// (every second until it can), subscribes, and then calls on_missed, so the
-// owner reads again what it holds of regions it does not write.
+// (every second until it can), subscribes, and then calls missed, so the
+// owner reads again what it holds of regions it does not write, and its
+// inbox.
 //
 // Threading: the callbacks run on the listener's thread. The destructor
 // stops the thread; no callback runs after it returns.
@@ -27,13 +31,17 @@ namespace terrane {
 
 class ChangeListener {
  public:
-  using ChangesFn = std::function<void(std::vector<ChunkChange>)>;
-  using MissedFn = std::function<void()>;
+  struct Handlers {
+    std::function<void(std::vector<ChunkChange>)> changes;
+    std::function<void()> inbox;
+    std::function<void(ForwardAnswer)> answer;
+    std::function<void()> missed;
+  };
 
   // Connects and subscribes before returning, so no commit after open() is
-  // missed.
-  static StoreResult<std::unique_ptr<ChangeListener>> open(const std::string& url, ChangesFn on_changes,
-                                                           MissedFn on_missed);
+  // missed. server: this server's id (whose inbox and answers are its own).
+  static StoreResult<std::unique_ptr<ChangeListener>> open(const std::string& url, std::uint32_t server,
+                                                           Handlers handlers);
   ~ChangeListener();
   ChangeListener(const ChangeListener&) = delete;
   ChangeListener& operator=(const ChangeListener&) = delete;
@@ -42,12 +50,13 @@ class ChangeListener {
   std::uint64_t reconnects() const { return reconnects_.load(std::memory_order_relaxed); }
 
  private:
-  ChangeListener(std::string url, ChangesFn on_changes, MissedFn on_missed, std::unique_ptr<PostgresStore> conn);
+  ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<PostgresStore> conn);
   void run();
+  void hand_on(const PostgresStore::Notice& n);
 
   const std::string url_;
-  const ChangesFn on_changes_;
-  const MissedFn on_missed_;
+  const std::uint32_t server_;
+  const Handlers on_;
   std::unique_ptr<PostgresStore> conn_;  // the thread's
   std::atomic<std::uint64_t> notices_{0}, reconnects_{0};
   std::mutex mutex_;  // guards stopping_

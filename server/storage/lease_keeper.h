@@ -51,6 +51,7 @@ class LeaseKeeper {
   // one of them; the regions claimed before the failure stay held.
   StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions);
   std::vector<RegionLease> held() const;
+  std::uint32_t owner() const { return owner_; }
   // Gives every lease up at once (a clean shutdown), then stops renewing.
   StoreResult<Ok> release_all();
   // Renewal rounds done so far (tests wait on it).

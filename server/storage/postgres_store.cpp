@@ -280,6 +280,11 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "CREATE INDEX IF NOT EXISTS terrane_edit_log_player ON terrane_edit_log (player, id)",
            "CREATE INDEX IF NOT EXISTS terrane_edit_log_time ON terrane_edit_log (time_ms)",
            "CREATE TABLE IF NOT EXISTS terrane_access (key text PRIMARY KEY, value text NOT NULL)",
+           "CREATE TABLE IF NOT EXISTS terrane_inbox ("
+           "  id bigserial PRIMARY KEY, to_server integer NOT NULL, from_server integer NOT NULL,"
+           "  player text NOT NULL, edit bytea NOT NULL, created_at timestamptz NOT NULL,"
+           "  answered boolean NOT NULL DEFAULT false, accepted boolean, tick bigint, reason text)",
+           "CREATE INDEX IF NOT EXISTS terrane_inbox_open ON terrane_inbox (to_server, id) WHERE NOT answered",
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
@@ -334,7 +339,11 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
   const std::string holder = who->count() == 1 ? fmt::format("server {} (epoch {}) until {}", who->get(0, 0),
                                                               who->get(0, 1), who->get(0, 2))
                                                : std::string("another server");
-  return StoreError{StoreError::Kind::kOwned, fmt::format("region {} is leased to {}", region_text(region), holder)};
+  StoreError owned{StoreError::Kind::kOwned, fmt::format("region {} is leased to {}", region_text(region), holder), {}};
+  if (who->count() == 1)
+    if (const auto id = who->integer(0, 0); id && *id >= 0 && *id <= std::numeric_limits<std::int32_t>::max())
+      owned.holder = static_cast<std::uint32_t>(*id);
+  return owned;
 }
 
 StoreResult<std::vector<RegionLease>> PostgresStore::renew(std::span<const RegionLease> leases,
@@ -379,7 +388,8 @@ StoreResult<std::optional<RegionLease>> PostgresStore::holder(Vec3i region) {
 }
 
 StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
-                                           std::span<const EditLogEntry> log, bool overwrite) {
+                                           std::span<const EditLogEntry> log, bool overwrite,
+                                           std::span<const ForwardAnswer> answers) {
   // The leases the chunks need, in one order for every server (lease rows
   // are locked in that order, so two writers never deadlock).
   std::map<std::tuple<int, int, int>, RegionLease> used;
@@ -443,6 +453,9 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
     auto r = c_->exec("notify changes", "SELECT pg_notify($1, $2)", {Param{kChangesChannel, false}, Param{payload, false}});
     if (!r) return c_->abort(r.error());
   }
+  // After the changes: the sender reads its edit's chunks again before it
+  // acknowledges.
+  if (auto a = answer_in_transaction(answers); !a) return c_->abort(a.error());
   auto commit = c_->exec("commit chunks", "COMMIT");
   if (!commit) return c_->abort(commit.error());
   return Ok{};
@@ -496,16 +509,18 @@ std::vector<Param> region_range(Vec3i region) {
 }  // namespace
 
 StoreResult<Ok> PostgresStore::listen() {
-  auto r = c_->exec("listen for changes", "LISTEN terrane_changes");
-  if (!r) return r.error();
+  for (const char* sql : {"LISTEN terrane_changes", "LISTEN terrane_inbox", "LISTEN terrane_answers"}) {
+    auto r = c_->exec("listen for notices", sql);
+    if (!r) return r.error();
+  }
   return Ok{};
 }
 
-StoreResult<std::vector<std::string>> PostgresStore::wait_notices(std::chrono::milliseconds timeout) {
-  std::vector<std::string> out;
+StoreResult<std::vector<PostgresStore::Notice>> PostgresStore::wait_notices(std::chrono::milliseconds timeout) {
+  std::vector<Notice> out;
   const auto take = [&] {
     while (PGnotify* n = PQnotifies(c_->conn)) {
-      if (std::string_view(n->relname) == kChangesChannel) out.emplace_back(n->extra);
+      out.push_back(Notice{n->relname, n->extra});
       PQfreemem(n);
     }
   };
@@ -520,6 +535,94 @@ StoreResult<std::vector<std::string>> PostgresStore::wait_notices(std::chrono::m
     return StoreError{StoreError::Kind::kConnection, "postgresql: listen for changes: poll failed"};
   if (ready > 0 && PQconsumeInput(c_->conn) == 0) return c_->error("listen for changes", nullptr);
   take();
+  return out;
+}
+
+std::string answer_notice(const ForwardAnswer& a) {
+  std::string reason = a.reason.substr(0, 256);
+  return fmt::format("{} {} {} {} {}", a.from, a.id, a.accepted ? 1 : 0, a.tick, reason);
+}
+
+std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload) {
+  ForwardAnswer a;
+  std::int64_t v[4];
+  for (int i = 0; i < 4; ++i) {
+    const std::size_t end = std::min(payload.find(' '), payload.size());
+    const auto [at, ec] = std::from_chars(payload.data(), payload.data() + end, v[i]);
+    if (ec != std::errc{} || at != payload.data() + end) return std::nullopt;
+    payload.remove_prefix(std::min(end + 1, payload.size()));
+  }
+  if (v[0] < 0 || v[0] > std::numeric_limits<std::int32_t>::max() || v[1] < 1 || (v[2] != 0 && v[2] != 1) || v[3] < 0)
+    return std::nullopt;
+  a.from = static_cast<std::uint32_t>(v[0]);
+  a.id = v[1];
+  a.accepted = v[2] == 1;
+  a.tick = static_cast<std::uint64_t>(v[3]);
+  a.reason = std::string(payload);
+  return a;
+}
+
+StoreResult<Ok> PostgresStore::answer_in_transaction(std::span<const ForwardAnswer> answers) {
+  for (const ForwardAnswer& a : answers) {
+    auto r = c_->exec("answer forwarded edit",
+                      "UPDATE terrane_inbox SET answered = true, accepted = $2, tick = $3, reason = $4 WHERE id = $1",
+                      {text(a.id), Param{a.accepted ? "true" : "false", false}, text(static_cast<std::int64_t>(a.tick)),
+                       Param{a.reason, false}});
+    if (!r) return r.error();
+    auto n = c_->exec("notify answer", "SELECT pg_notify($1, $2)",
+                      {Param{kAnswersChannel, false}, Param{answer_notice(a), false}});
+    if (!n) return n.error();
+  }
+  return Ok{};
+}
+
+StoreResult<Ok> PostgresStore::answer(std::span<const ForwardAnswer> answers) {
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return begin.error();
+  if (auto a = answer_in_transaction(answers); !a) return c_->abort(a.error());
+  auto commit = c_->exec("commit answers", "COMMIT");
+  if (!commit) return c_->abort(commit.error());
+  return Ok{};
+}
+
+StoreResult<std::int64_t> PostgresStore::forward(std::uint32_t from, std::uint32_t to, const std::string& player,
+                                                 std::span<const std::uint8_t> edit) {
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return begin.error();
+  auto row = c_->exec("forward edit",
+                      "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
+                      " VALUES ($1, $2, $3, $4, clock_timestamp()) RETURNING id",
+                      {text(to), text(from), Param{player, false}, blob(edit)});
+  if (!row) return c_->abort(row.error());
+  const auto id = row->count() == 1 ? row->integer(0, 0) : std::nullopt;
+  if (!id) return c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: forward edit: no row id"});
+  auto n = c_->exec("notify inbox", "SELECT pg_notify($1, $2)", {Param{kInboxChannel, false}, Param{std::to_string(to), false}});
+  if (!n) return c_->abort(n.error());
+  auto commit = c_->exec("commit forward", "COMMIT");
+  if (!commit) return c_->abort(commit.error());
+  return *id;
+}
+
+StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
+  auto r = c_->exec("read inbox",
+                    "SELECT id, from_server, player, edit FROM terrane_inbox"
+                    " WHERE to_server = $1 AND NOT answered AND id > $2 ORDER BY id LIMIT $3",
+                    {text(to), text(after), text(static_cast<std::int64_t>(limit))}, /*binary_result=*/true);
+  if (!r) return r.error();
+  std::vector<InboxEdit> out;
+  for (int i = 0; i < r->count(); ++i) {
+    const auto id = be64_at(r->res, i, 0);
+    const auto from = be32_at(r->res, i, 1);
+    if (!id || !from || *from < 0)
+      return StoreError{StoreError::Kind::kDecode, "postgresql: read inbox: a row does not read"};
+    InboxEdit e;
+    e.id = *id;
+    e.from = static_cast<std::uint32_t>(*from);
+    const auto name = bytes_at(r->res, i, 2), edit = bytes_at(r->res, i, 3);
+    e.player.assign(name.begin(), name.end());
+    e.edit.assign(edit.begin(), edit.end());
+    out.push_back(std::move(e));
+  }
   return out;
 }
 
@@ -678,6 +781,16 @@ void PostgresStore::end_read() { (void)c_->exec("end read", "COMMIT"); }
 
 FileStatus PostgresStore::save_chunks(std::span<const ChunkWrite> writes, bool overwrite,
                                       std::span<const EditLogEntry> log) {
+  return save(writes, overwrite, log, {});
+}
+
+FileStatus PostgresStore::save_answering(std::span<const ChunkWrite> writes, std::span<const EditLogEntry> log,
+                                         std::span<const ForwardAnswer> answers) {
+  return save(writes, true, log, answers);
+}
+
+FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrite, std::span<const EditLogEntry> log,
+                               std::span<const ForwardAnswer> answers) {
   if (!leases_)
     return FileError{fmt::format("world {}: this connection holds no leases, and writes to a PostgreSQL world "
                                  "are fenced by them (give the server or tool a --server-id)",
@@ -696,7 +809,8 @@ FileStatus PostgresStore::save_chunks(std::span<const ChunkWrite> writes, bool o
   const auto give_up = std::chrono::steady_clock::now() + retry_for_;
   for (int attempt = 0;; ++attempt) {
     auto leases = (*leases_)(regions);
-    StoreResult<Ok> saved = leases ? save_fenced(*leases, writes, log, overwrite) : StoreResult<Ok>(leases.error());
+    StoreResult<Ok> saved =
+        leases ? save_fenced(*leases, writes, log, overwrite, answers) : StoreResult<Ok>(leases.error());
     if (saved) {
       if (attempt > 0) server_log().info("world {}: stored after {} tries: the database is back", shown_, attempt + 1);
       return Ok{};

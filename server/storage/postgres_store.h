@@ -45,8 +45,12 @@ struct StoreError {
     kFenced,      // a write's lease is no longer current: nothing was written
     kDecode,      // a stored row does not decode
   };
+  StoreError() = default;
+  StoreError(Kind k, std::string m, std::optional<std::uint32_t> h = std::nullopt)
+      : kind(k), message(std::move(m)), holder(h) {}
   Kind kind = Kind::kQuery;
   std::string message;
+  std::optional<std::uint32_t> holder;  // kOwned: the server holding the region
 };
 template <class T>
 using StoreResult = BasicResult<T, StoreError>;
@@ -59,6 +63,32 @@ struct RegionLease {
   std::uint64_t epoch = 0;
   friend bool operator==(const RegionLease&, const RegionLease&) = default;
 };
+
+// Edits forwarded between servers (STORE_POSTGRESQL.md, "Forwarded
+// edits"): a server sends an edit in a region another server holds to that
+// server's inbox (a row, and a notice on terrane_inbox naming the server);
+// the owner applies it in a tick and answers in the tick's commit (the row
+// marked answered, and a notice on terrane_answers naming the sender).
+inline constexpr const char* kInboxChannel = "terrane_inbox";
+inline constexpr const char* kAnswersChannel = "terrane_answers";
+struct InboxEdit {
+  std::int64_t id = 0;
+  std::uint32_t from = 0;  // the server that forwarded it
+  std::string player;
+  std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it
+};
+struct ForwardAnswer {
+  std::int64_t id = 0;     // the inbox row
+  std::uint32_t from = 0;  // the server that forwarded it (the notice's addressee)
+  bool accepted = false;
+  std::uint64_t tick = 0;  // the owner's tick that applied it
+  std::string reason;      // why not, if not
+  friend bool operator==(const ForwardAnswer&, const ForwardAnswer&) = default;
+};
+// terrane_answers payload: "from id accepted(0|1) tick reason..." (the
+// reason, up to 256 bytes, last).
+std::string answer_notice(const ForwardAnswer& a);
+std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload);
 
 // Where a server's writes get their leases: the leases of the regions given
 // (a LeaseKeeper's ensure), or kOwned naming the holder of one of them.
@@ -117,15 +147,36 @@ class PostgresStore final : public WorldStore {
   // rows, so a takeover waits for the commit and then sees the chunks).
   // Otherwise kFenced and nothing is written. A chunk outside every given
   // lease is kFenced too. overwrite = false leaves chunks already stored.
+  // answers: forwarded edits this write applied (or refused), answered in
+  // the same transaction.
   StoreResult<Ok> save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
-                              std::span<const EditLogEntry> log = {}, bool overwrite = true);
+                              std::span<const EditLogEntry> log = {}, bool overwrite = true,
+                              std::span<const ForwardAnswer> answers = {});
+  // save_chunks with answers to forwarded edits in its transaction.
+  FileStatus save_answering(std::span<const ChunkWrite> writes, std::span<const EditLogEntry> log,
+                            std::span<const ForwardAnswer> answers);
+
+  // Forwards an edit to server to's inbox (one transaction: the row and
+  // its notice); the row's id.
+  StoreResult<std::int64_t> forward(std::uint32_t from, std::uint32_t to, const std::string& player,
+                                    std::span<const std::uint8_t> edit);
+  // Unanswered edits for server to with an id above after, oldest first, at
+  // most limit.
+  StoreResult<std::vector<InboxEdit>> inbox(std::uint32_t to, std::int64_t after, std::size_t limit);
+  // Answers without writing chunks (edits refused).
+  StoreResult<Ok> answer(std::span<const ForwardAnswer> answers);
 
   // Subscribes this connection to terrane_changes; wait_notices then
   // returns the payloads that arrived, waiting up to timeout for the first.
   // A broken connection is kConnection (open another and read again what
   // may have been missed).
+  // (And on terrane_inbox and terrane_answers: wait_notices returns every
+  // channel's payloads, each with its channel.)
   StoreResult<Ok> listen();
-  StoreResult<std::vector<std::string>> wait_notices(std::chrono::milliseconds timeout);
+  struct Notice {
+    std::string channel, payload;
+  };
+  StoreResult<std::vector<Notice>> wait_notices(std::chrono::milliseconds timeout);
 
   // WorldStore. Errors name the statement and PostgreSQL's message; a chunk
   // row that does not decode is an error with decode set, naming the chunk.
@@ -160,6 +211,10 @@ class PostgresStore final : public WorldStore {
   struct Connection;
   PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown);
   StoreResult<Ok> read_meta();
+  FileStatus save(std::span<const ChunkWrite> writes, bool overwrite, std::span<const EditLogEntry> log,
+                  std::span<const ForwardAnswer> answers);
+  // Inside a transaction: the rows answered and their notices.
+  StoreResult<Ok> answer_in_transaction(std::span<const ForwardAnswer> answers);
   FileStatus put_meta(const WorldMeta& meta);
 
   std::unique_ptr<Connection> c_;

@@ -72,6 +72,7 @@ void Storage::claim(Vec3i region, ClaimDone done) {
     if (!held) {
       out.why = held.error().message;
       out.unreachable = held.error().kind == StoreError::Kind::kConnection;
+      out.holder = held.error().holder;
       done(std::move(out));
       return;
     }
@@ -96,6 +97,38 @@ void Storage::claim(Vec3i region, ClaimDone done) {
     out.held = true;
     for (const CoarseEntry& e : *entries) out.stored.emplace_back(e.chunk_pos, e.revision);
     done(std::move(out));
+  });
+}
+
+void Storage::with_postgres(std::function<void(PostgresStore&)> fn) {
+  asio::post(loaders_, [this, fn = std::move(fn)] {
+    std::unique_ptr<WorldStore> store;
+    {
+      std::lock_guard lock(readers_mutex_);
+      store = std::move(readers_.back());
+      readers_.pop_back();
+    }
+    // Only a shared world forwards edits: its readers are PostgreSQL's.
+    if (auto* pg = dynamic_cast<PostgresStore*>(store.get())) fn(*pg);
+    std::lock_guard lock(readers_mutex_);
+    readers_.push_back(std::move(store));
+  });
+}
+
+void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
+                      std::function<void(StoreResult<std::int64_t>)> done) {
+  with_postgres([this, to, player = std::move(player), edit = std::move(edit), done = std::move(done)](
+                    PostgresStore& pg) { done(pg.forward(leases_->owner(), to, player, edit)); });
+}
+
+void Storage::read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
+  with_postgres([this, after, done = std::move(done)](PostgresStore& pg) { done(pg.inbox(leases_->owner(), after, 256)); });
+}
+
+void Storage::answer(std::vector<ForwardAnswer> answers) {
+  with_postgres([answers = std::move(answers)](PostgresStore& pg) {
+    if (auto a = pg.answer(answers); !a)
+      server_log().warn("forwarded edits: {} answers not sent: {}", answers.size(), a.error().message);
   });
 }
 
@@ -256,11 +289,12 @@ void Storage::prune_log() {
   counters_.log_entries_pruned.fetch_add(static_cast<std::uint64_t>(*n), std::memory_order_relaxed);
 }
 
-void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done) {
+void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done,
+                     std::vector<ForwardAnswer> answers) {
   in_flight_.fetch_add(1, std::memory_order_relaxed);
   {
     std::lock_guard lock(jobs_mutex_);
-    jobs_.push_back(CommitJob{std::move(versions), std::move(log), std::move(done)});
+    jobs_.push_back(CommitJob{std::move(versions), std::move(log), std::move(done), std::move(answers)});
   }
   jobs_cv_.notify_one();
 }
@@ -286,8 +320,10 @@ void Storage::writer_loop() {
       std::unordered_map<Vec3i, std::size_t, Vec3iHash> index;
       std::vector<ChunkWrite> writes;
       std::vector<EditLogEntry> log;
+      std::vector<ForwardAnswer> answers;
       for (CommitJob& job : batch) {
         for (EditLogEntry& e : job.log) log.push_back(std::move(e));
+        for (ForwardAnswer& a : job.answers) answers.push_back(std::move(a));
         for (const VersionPtr& v : job.versions) {
           const auto blob = v->blob();
           ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end()),
@@ -299,9 +335,11 @@ void Storage::writer_loop() {
             writes[it->second] = std::move(w);
         }
       }
-      if (!writes.empty() || !log.empty()) {
+      if (!writes.empty() || !log.empty() || !answers.empty()) {
         const auto t0 = std::chrono::steady_clock::now();
-        status = writer_store_->save_chunks(writes, true, log);
+        auto* shared = answers.empty() ? nullptr : dynamic_cast<PostgresStore*>(writer_store_.get());
+        status = shared != nullptr ? shared->save_answering(writes, log, answers)
+                                   : writer_store_->save_chunks(writes, true, log);
         if (status) counters_.edits_logged.fetch_add(log.size(), std::memory_order_relaxed);
         counters_.commit_duration.observe(std::chrono::steady_clock::now() - t0);
         counters_.commits.fetch_add(1, std::memory_order_relaxed);

@@ -127,12 +127,22 @@ class Storage {
     bool held = false;
     bool unreachable = false;  // not held because the database could not be reached (try again)
     std::string why;
+    std::optional<std::uint32_t> holder;  // the server holding it instead
     std::vector<std::pair<Vec3i, std::uint64_t>> stored;  // chunk, revision
   };
   using ClaimDone = std::function<void(Claimed)>;
   void claim(Vec3i region, ClaimDone done);
-  // log: the tick's edits for the edit log, stored in the same transaction.
-  void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done);
+  // Forwarded edits (a shared world; on a loader thread): sends one to
+  // server to's inbox (done gets the inbox row's id), reads this server's
+  // inbox past after, and answers edits refused without a commit.
+  void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
+               std::function<void(StoreResult<std::int64_t>)> done);
+  void read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done);
+  void answer(std::vector<ForwardAnswer> answers);
+  // log: the tick's edits for the edit log, and answers: the forwarded
+  // edits it applied, stored in the same transaction.
+  void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done,
+              std::vector<ForwardAnswer> answers = {});
   void stop();
 
   const StorageCounters& counters() const { return counters_; }
@@ -151,7 +161,11 @@ class Storage {
     std::vector<VersionPtr> versions;
     std::vector<EditLogEntry> log;
     CommitDone done;
+    std::vector<ForwardAnswer> answers;
   };
+  // Runs fn(store) on a loader thread with a reader connection of a
+  // PostgreSQL world.
+  void with_postgres(std::function<void(PostgresStore&)> fn);
   void prune_log();
   bool estimate_coarse_ = true;
   LeaseKeeper* leases_ = nullptr;

@@ -14,6 +14,9 @@ namespace {
 // Edits applied per tick at most: bounds a tick's work on the strand (each
 // edit touches at most kMaxEditVolume voxels).
 constexpr std::size_t kMaxEditsPerTick = 256;
+// How long a forwarded edit waits at least for its owner's answer (at least
+// a lease time) before its client is told there was none.
+constexpr auto kForwardAnswerWait = std::chrono::milliseconds(2000);
 
 // Whether two n^3 network codec units hold the same voxels (a unit that
 // does not decode differs from everything).
@@ -39,6 +42,8 @@ void WorldOwner::start() {
   asio::post(strand_, [this] {
     next_tick_ = std::chrono::steady_clock::now();
     arm_tick();
+    // Edits forwarded while this server was away.
+    if (storage_.leased()) take_inbox();
   });
 }
 
@@ -470,7 +475,7 @@ void WorldOwner::edit(ClientId id, EditRequestMsg e) {
       });
     }
     ++c.edits_queued;
-    edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr});
+    edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr, std::nullopt});
   });
 }
 
@@ -490,7 +495,7 @@ void WorldOwner::rollback(std::string actor, std::vector<EditLogEntry> entries, 
     job->entries = std::move(entries);
     job->within = within;
     job->done = std::move(done);
-    edits_.push_back(PendingEdit{0, EditRequestMsg{}, job->actor, std::move(job)});
+    edits_.push_back(PendingEdit{0, EditRequestMsg{}, job->actor, std::move(job), std::nullopt});
   });
 }
 
@@ -514,7 +519,7 @@ bool WorldOwner::near_enough(const Client& c, const Region& r) const {
   return ok;
 }
 
-WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
+WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder) {
   if (!storage_.leased() || r.empty()) return Writable::kYes;
   const auto now = std::chrono::steady_clock::now();
   Writable out = Writable::kYes;
@@ -535,6 +540,7 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why) {
     if (l.state == RegionLeaseState::kRefused) {
       out = Writable::kNo;
       *why = l.why;
+      if (holder != nullptr) *holder = l.holder;
     } else if (l.state != RegionLeaseState::kHeld && out == Writable::kYes) {
       out = Writable::kWaiting;
     }
@@ -546,6 +552,7 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   RegionLeaseState& l = leases_[region];
   if (!claimed.held) {
     l.state = claimed.unreachable ? RegionLeaseState::kUnreachable : RegionLeaseState::kRefused;
+    l.holder = claimed.holder;
     l.why = std::move(claimed.why);
     l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     return;
@@ -628,6 +635,107 @@ void WorldOwner::read_again_elsewhere() {
   });
 }
 
+void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
+  const Frame frame = build_edit_request(pe.edit);
+  counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
+  storage_.forward(to, pe.player, frame, [this, id = pe.id, edit = pe.edit, box, to](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, row = std::move(row)] {
+      if (!row) {
+        if (clients_.count(id) != 0)
+          reject(id, edit, RejectReason::kNotOwner,
+                 fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
+        return;
+      }
+      forwarded_.emplace(*row, Outgoing{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt});
+    });
+  });
+}
+
+void WorldOwner::inbox_has_edits() {
+  asio::post(strand_, [this] { take_inbox(); });
+}
+
+void WorldOwner::take_inbox() {
+  if (inbox_reading_) {
+    inbox_again_ = true;
+    return;
+  }
+  inbox_reading_ = true;
+  storage_.read_inbox(inbox_taken_, [this](StoreResult<std::vector<InboxEdit>> got) {
+    asio::post(strand_, [this, got = std::move(got)] {
+      inbox_reading_ = false;
+      if (!got) {
+        server_log().warn("forwarded edits: cannot read the inbox: {}", got.error().message);
+      } else {
+        std::vector<ForwardAnswer> refused;
+        for (const InboxEdit& in : *got) {
+          inbox_taken_ = std::max(inbox_taken_, in.id);
+          // Another server's bytes, checked as a client's are.
+          auto edit = decode_forwarded_edit(in.edit);
+          const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
+          if (!edit || r.empty() || is_history_edit(edit->kind) || stopping_) {
+            const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
+                                    : stopping_ ? std::string("the region's server is shutting down")
+                                    : r.empty() ? std::string("edit outside the world")
+                                                : std::string("undo and redo are not forwarded");
+            refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
+            continue;
+          }
+          counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
+          for_each_chunk_in(r, [&](Vec3i cp) {
+            request(cp);
+            ++busy_[cp];
+          });
+          edits_.push_back(PendingEdit{0, std::move(*edit), in.player, nullptr, Forwarded{in.id, in.from}});
+        }
+        if (!refused.empty()) storage_.answer(std::move(refused));
+        if (got->size() == 256) inbox_again_ = true;  // a full page: there may be more
+      }
+      if (std::exchange(inbox_again_, false)) take_inbox();
+    });
+  });
+}
+
+void WorldOwner::answered(ForwardAnswer answer) {
+  asio::post(strand_, [this, answer = std::move(answer)] {
+    auto it = forwarded_.find(answer.id);
+    if (it != forwarded_.end()) it->second.answer = answer;
+    settle_forwarded();
+  });
+}
+
+void WorldOwner::settle_forwarded() {
+  const auto now = std::chrono::steady_clock::now();
+  // An owner silent for a lease time has lost its regions anyway.
+  const auto forward_wait = std::max(kForwardAnswerWait, options_.lease);
+  for (auto it = forwarded_.begin(); it != forwarded_.end();) {
+    Outgoing& o = it->second;
+    const auto client = clients_.find(o.id);
+    bool done = client == clients_.end();
+    if (!done && o.answer && !o.answer->accepted) {
+      reject(o.id, o.edit, RejectReason::kNotOwner,
+             fmt::format("server {} refused the forwarded edit: {}", o.to, o.answer->reason));
+      done = true;
+    } else if (!done && o.answer) {
+      // Acknowledged once this server shows the edit: its chunks are read
+      // again here (the owner's notice came with the answer) and sent to
+      // the client before the ack.
+      bool current = true;
+      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
+      if (current) {
+        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, tick_)), SendClass::kControl);
+        done = true;
+      }
+    } else if (!done && now - o.sent > forward_wait) {
+      reject(o.id, o.edit, RejectReason::kNotOwner,
+             fmt::format("forwarded to server {}, no answer within {} ms (it may still be applied)", o.to,
+                         forward_wait.count()));
+      done = true;
+    }
+    it = done ? forwarded_.erase(it) : std::next(it);
+  }
+}
+
 void WorldOwner::lease_lost(Vec3i region, std::string why) {
   asio::post(strand_, [this, region, why = std::move(why)] {
     // Another server may have written the region since: what this one holds
@@ -657,6 +765,7 @@ void WorldOwner::apply_edits() {
   std::unordered_set<Vec3i, Vec3iHash> copied;
   ChangedUnits changed;
   std::vector<Ack> acks;
+  std::vector<ForwardAnswer> answers, refused;  // to forwarded edits: applied (in the commit), refused (at once)
   std::vector<EditLogEntry> log;
   std::vector<std::shared_ptr<Rollback>> rollbacks;
   const std::int64_t now_ms =
@@ -729,19 +838,32 @@ void WorldOwner::apply_edits() {
       if (!stopping_) break;  // wait for its chunks (arrival order is kept)
       // Shutting down: chunks still loading will not be waited for.
       if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
+      if (pe.forwarded) refused.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, false, 0,
+                                                        "the region's server is shutting down"});
       if (!history) unbusy(r);
       if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
       edits_.pop_front();
       continue;
     }
-    // In a shared world, only regions this server holds are written.
+    // In a shared world, only regions this server holds are written; a
+    // client's edit in another server's is forwarded to it.
     std::string not_ours;
-    const Writable w = writable(history ? r : bounds.clamp(pe.edit.bounds()), &not_ours);
+    std::optional<std::uint32_t> holder;
+    const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
+    const Writable w = writable(writes, &not_ours, &holder);
     if (w == Writable::kWaiting && !stopping_) break;  // wait for the claim (arrival order is kept)
     if (w != Writable::kYes) {
-      if (client != nullptr) {
+      if (pe.forwarded) {
+        refused.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, false, 0,
+                                        w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
+                                                           : std::string("the region's server is shutting down")});
+      } else if (client != nullptr && w == Writable::kNo && holder && !history && !stopping_) {
+        forward(pe, writes, *holder);
+      } else if (client != nullptr) {
         if (w == Writable::kNo)
-          reject(pe.id, pe.edit, RejectReason::kNotOwner, "not this server's region: " + not_ours);
+          reject(pe.id, pe.edit, RejectReason::kNotOwner,
+                 std::string(history ? "undo and redo only where this server writes; " : "") +
+                     "not this server's region: " + not_ours);
         else
           reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
       }
@@ -777,10 +899,14 @@ void WorldOwner::apply_edits() {
     log_step(pe.player, box, entry.before, entry.after);
     if (client != nullptr) client->history.record(std::move(entry));
     unbusy(r);
-    acks.push_back(Ack{pe.id, pe.edit.edit_id});
+    if (pe.forwarded)
+      answers.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, true, tick_, ""});
+    else
+      acks.push_back(Ack{pe.id, pe.edit.edit_id});
     edits_.pop_front();
   }
-  counters_.edits_applied.fetch_add(acks.size(), std::memory_order_relaxed);
+  if (!refused.empty()) storage_.answer(std::move(refused));
+  counters_.edits_applied.fetch_add(acks.size() + answers.size(), std::memory_order_relaxed);
 
   std::vector<VersionPtr> versions;
   versions.reserve(changed.size());
@@ -805,18 +931,20 @@ void WorldOwner::apply_edits() {
     l.used_tick = tick_;
     versions.push_back(l.current);
   }
-  if (versions.empty() && acks.empty() && rollbacks.empty()) return;
+  if (versions.empty() && acks.empty() && rollbacks.empty() && answers.empty()) return;
   ++commits_pending_;
   const std::uint64_t tick = tick_;
-  storage_.commit(versions, std::move(log),
-                  [this, tick, versions, acks = std::move(acks), rollbacks = std::move(rollbacks)](const FileStatus& st) {
-                    asio::post(strand_, [this, tick, versions, acks, rollbacks, st] {
-                      on_committed(tick, versions, acks, st);
-                      for (const auto& job : rollbacks)
-                        job->done(st ? RollbackResult{true, "", tick, job->restored}
-                                     : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
-                    });
-                  });
+  storage_.commit(
+      versions, std::move(log),
+      [this, tick, versions, acks = std::move(acks), rollbacks = std::move(rollbacks)](const FileStatus& st) {
+        asio::post(strand_, [this, tick, versions, acks, rollbacks, st] {
+          on_committed(tick, versions, acks, st);
+          for (const auto& job : rollbacks)
+            job->done(st ? RollbackResult{true, "", tick, job->restored}
+                         : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
+        });
+      },
+      std::move(answers));
 }
 
 void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
@@ -986,6 +1114,7 @@ void WorldOwner::on_tick() {
       std::memory_order_relaxed);
   lighten_some();
   apply_edits();
+  if (!forwarded_.empty()) settle_forwarded();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
   if (options_.presence_hz > 0 && tick_ % std::max<std::uint64_t>(1, hz / options_.presence_hz) == 0) send_presence();
   if (tick_ % hz == 0) {

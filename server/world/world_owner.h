@@ -123,6 +123,12 @@ class WorldOwner : private WorldView {
   // Notices may have been missed: every chunk held outside the regions this
   // server writes is read again (background loads).
   void read_again_elsewhere();
+  // This server's inbox has edits forwarded by another server (its notice):
+  // they are read and applied like its own clients' edits, and answered in
+  // the tick's commit.
+  void inbox_has_edits();
+  // The owner's answer to an edit this server forwarded.
+  void answered(ForwardAnswer answer);
   // A shared world's region lease this server held is gone (the lease
   // keeper found it lost): the server stops, as after a failed commit.
   void lease_lost(Vec3i region, std::string why);
@@ -184,11 +190,27 @@ class WorldOwner : private WorldView {
     std::function<void(RollbackResult)> done;
     std::uint64_t restored = 0;
   };
+  struct Forwarded {
+    std::int64_t inbox_id = 0;
+    std::uint32_t from = 0;  // the server that forwarded it
+  };
   struct PendingEdit {
     ClientId id;
     EditRequestMsg edit;
     std::string player;                  // for the edit log
     std::shared_ptr<Rollback> rollback;  // set: this is a rollback, not edit
+    std::optional<Forwarded> forwarded;  // set: another server's client's edit, from this server's inbox
+  };
+  // An edit this server forwarded to a region's owner, waiting for its
+  // answer; then for the edit's chunks to be read again here, before the
+  // client is told.
+  struct Outgoing {
+    ClientId id;
+    EditRequestMsg edit;
+    Region box;
+    std::uint32_t to;
+    std::chrono::steady_clock::time_point sent;
+    std::optional<ForwardAnswer> answer;
   };
   struct Ack {
     ClientId id;
@@ -254,7 +276,8 @@ class WorldOwner : private WorldView {
   // (a claim is started for each region not known). kNo sets why (the
   // holder).
   enum class Writable : std::uint8_t { kYes, kWaiting, kNo };
-  Writable writable(const Region& r, std::string* why);
+  // kNo also sets holder when the holding server is known.
+  Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr);
   bool near_enough(const Client& c, const Region& r) const;
   void unbusy(const Region& r);
   void send_presence();
@@ -296,9 +319,17 @@ class WorldOwner : private WorldView {
   struct RegionLeaseState {
     enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable } state = kClaiming;
     std::string why;
+    std::optional<std::uint32_t> holder;
     std::chrono::steady_clock::time_point ask_again{};
   };
   void on_claimed(Vec3i region, Storage::Claimed claimed);
+  // Sends pe (a client's edit of box, in regions server to holds) to that
+  // server's inbox.
+  void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
+  void take_inbox();
+  // Tells clients the answers to their forwarded edits once the edits'
+  // chunks are current here; gives up on those unanswered for too long.
+  void settle_forwarded();
   bool writes_region(Vec3i region) const;
   // cp is stored at revision, newer than held here (another server wrote
   // it): read again until held at least at revision.
@@ -311,6 +342,12 @@ class WorldOwner : private WorldView {
   // Chunks held older than stored (another server wrote them): chunk ->
   // the revision stored.
   std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
+  // Forwarded edits: this server's clients' (inbox row -> edit), and the
+  // inbox of this server (the highest row taken; a read under way; another
+  // notice came during it).
+  std::unordered_map<std::int64_t, Outgoing> forwarded_;
+  std::int64_t inbox_taken_ = 0;
+  bool inbox_reading_ = false, inbox_again_ = false;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
   InterestIndex interest_;

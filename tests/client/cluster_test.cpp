@@ -160,7 +160,7 @@ TEST_F(ClusterTest, AServerOnPostgresqlKeepsWhatItAcknowledgedAcrossARestart) {
   c.disconnect();
 }
 
-TEST_F(ClusterTest, TwoServersWriteOnlyTheirRegionsAndATakeoverReadsWhatTheOtherWrote) {
+TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhatTheOwnerWrote) {
   ServerProcess& a = start(1);
   ASSERT_NE(a.port(), 0);
   ServerProcess& b = start(2);
@@ -171,21 +171,23 @@ TEST_F(ClusterTest, TwoServersWriteOnlyTheirRegionsAndATakeoverReadsWhatTheOther
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
   ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
-  // The region is server 1's now: server 2 refuses bob's edit there,
-  // naming the holder, and writes nothing.
+  // The region is server 1's now: server 2 forwards bob's edit there to it,
+  // and acknowledges it once server 1 stored it and bob's replica shows it.
   const Region beside = box_near(bob, 5);
   const auto bobs = pattern(beside, materials::kSnow);
-  const std::string refused = outcome(bob, bob.write_box(beside, bobs));
-  EXPECT_NE(refused.find("not this server's region"), std::string::npos) << refused;
-  EXPECT_NE(refused.find("leased to server 1"), std::string::npos) << refused;
+  ASSERT_EQ(outcome(bob, bob.write_box(beside, bobs)), "");
+  EXPECT_TRUE(replica_shows(bob, beside, bobs));
+  EXPECT_TRUE(replica_shows(bob, box, anns));
+  ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, beside, bobs); }, kDeadline))
+      << "ann never saw bob's forwarded edit";
   // Server 1 stops (giving its leases up): server 2 takes the region over,
-  // reads ann's edit from the database first, then writes bob's.
+  // reads what server 1 stored, then writes bob's next edit itself.
   ann.disconnect();
   ASSERT_EQ(a.stop(), 0) << a.output();
-  ASSERT_EQ(until_accepted(bob, beside, bobs), "");
-  ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return shows(v.replica, box, anns); }, kDeadline))
-      << "bob's replica never showed ann's edit";
-  EXPECT_TRUE(replica_shows(bob, beside, bobs));
+  const Region third = box_near(bob, -5);
+  const auto more = pattern(third, materials::kSand);
+  ASSERT_EQ(until_accepted(bob, third, more), "");
+  EXPECT_TRUE(replica_shows(bob, third, more));
   // Every chunk bob holds agrees with server 2's.
   for (const Vec3i cp : near) ASSERT_TRUE(bob.request_region_hash(cp));
   ASSERT_TRUE(bob.wait_until(
@@ -196,13 +198,14 @@ TEST_F(ClusterTest, TwoServersWriteOnlyTheirRegionsAndATakeoverReadsWhatTheOther
       kDeadline));
   EXPECT_EQ(bob.counters().hash_mismatches, 0u);
   bob.disconnect();
-  // And the database holds both: a third server shows them.
+  // And the database holds all three: a third server shows them.
   ServerProcess& c = start(3);
   ASSERT_NE(c.port(), 0);
   Client cy(options(c, "cy"));
   join(cy);
   EXPECT_TRUE(replica_shows(cy, box, anns));
   EXPECT_TRUE(replica_shows(cy, beside, bobs));
+  EXPECT_TRUE(replica_shows(cy, third, more));
   cy.disconnect();
 }
 
