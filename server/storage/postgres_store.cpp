@@ -282,9 +282,8 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "CREATE TABLE IF NOT EXISTS terrane_access (key text PRIMARY KEY, value text NOT NULL)",
            "CREATE TABLE IF NOT EXISTS terrane_inbox ("
            "  id bigserial PRIMARY KEY, to_server integer NOT NULL, from_server integer NOT NULL,"
-           "  player text NOT NULL, edit bytea NOT NULL, created_at timestamptz NOT NULL,"
-           "  answered boolean NOT NULL DEFAULT false, accepted boolean, tick bigint, reason text)",
-           "CREATE INDEX IF NOT EXISTS terrane_inbox_open ON terrane_inbox (to_server, id) WHERE NOT answered",
+           "  player text NOT NULL, edit bytea NOT NULL, created_at timestamptz NOT NULL)",
+           "CREATE INDEX IF NOT EXISTS terrane_inbox_to ON terrane_inbox (to_server, id)",
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
@@ -564,10 +563,8 @@ std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload) {
 
 StoreResult<Ok> PostgresStore::answer_in_transaction(std::span<const ForwardAnswer> answers) {
   for (const ForwardAnswer& a : answers) {
-    auto r = c_->exec("answer forwarded edit",
-                      "UPDATE terrane_inbox SET answered = true, accepted = $2, tick = $3, reason = $4 WHERE id = $1",
-                      {text(a.id), Param{a.accepted ? "true" : "false", false}, text(static_cast<std::int64_t>(a.tick)),
-                       Param{a.reason, false}});
+    // Answered: the row goes (the answer travels in the notice).
+    auto r = c_->exec("answer forwarded edit", "DELETE FROM terrane_inbox WHERE id = $1", {text(a.id)});
     if (!r) return r.error();
     auto n = c_->exec("notify answer", "SELECT pg_notify($1, $2)",
                       {Param{kAnswersChannel, false}, Param{answer_notice(a), false}});
@@ -606,7 +603,7 @@ StoreResult<std::int64_t> PostgresStore::forward(std::uint32_t from, std::uint32
 StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
   auto r = c_->exec("read inbox",
                     "SELECT id, from_server, player, edit FROM terrane_inbox"
-                    " WHERE to_server = $1 AND NOT answered AND id > $2 ORDER BY id LIMIT $3",
+                    " WHERE to_server = $1 AND id > $2 ORDER BY id LIMIT $3",
                     {text(to), text(after), text(static_cast<std::int64_t>(limit))}, /*binary_result=*/true);
   if (!r) return r.error();
   std::vector<InboxEdit> out;

@@ -68,7 +68,7 @@ struct RegionLease {
 // edits"): a server sends an edit in a region another server holds to that
 // server's inbox (a row, and a notice on terrane_inbox naming the server);
 // the owner applies it in a tick and answers in the tick's commit (the row
-// marked answered, and a notice on terrane_answers naming the sender).
+// deleted, and a notice on terrane_answers naming the sender).
 inline constexpr const char* kInboxChannel = "terrane_inbox";
 inline constexpr const char* kAnswersChannel = "terrane_answers";
 struct InboxEdit {
@@ -160,8 +160,8 @@ class PostgresStore final : public WorldStore {
   // its notice); the row's id.
   StoreResult<std::int64_t> forward(std::uint32_t from, std::uint32_t to, const std::string& player,
                                     std::span<const std::uint8_t> edit);
-  // Unanswered edits for server to with an id above after, oldest first, at
-  // most limit.
+  // Edits for server to not answered yet with an id above after, oldest
+  // first, at most limit.
   StoreResult<std::vector<InboxEdit>> inbox(std::uint32_t to, std::int64_t after, std::size_t limit);
   // Answers without writing chunks (edits refused).
   StoreResult<Ok> answer(std::span<const ForwardAnswer> answers);
