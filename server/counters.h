@@ -138,6 +138,7 @@ struct ServerCounters {
   // other servers sent to this one's.
   std::atomic<std::uint64_t> edits_forwarded{0};
   std::atomic<std::uint64_t> forwarded_edits_received{0};
+  std::atomic<std::uint64_t> regions_handed_over{0};  // released to the server an edit across a border went to
   // Per-tick cost split (world strand): applying edits and publishing
   // versions (the tick), and fanning committed changes out to their
   // holders. Commit time is the storage's (StorageCounters).

@@ -42,8 +42,9 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
     : index_(index), ctx_(ctx), movement_(movement), edits_mode_(edits), rng_(seed), pos_(start) {
   const BotsOptions& o = *ctx_.options;
   ClientOptions co;
-  co.host = o.host;
-  co.port = o.port;
+  // Several servers of one world: bot i on the (i mod n)-th.
+  co.host = o.servers.empty() ? o.host : o.servers[static_cast<std::size_t>(index) % o.servers.size()].first;
+  co.port = o.servers.empty() ? o.port : o.servers[static_cast<std::size_t>(index) % o.servers.size()].second;
   co.name = "bot-" + std::to_string(index);
   co.auth_token = o.token;
   co.start_at_spawn = false;
@@ -52,7 +53,11 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
   co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;
   ClientCallbacks cb;
-  cb.on_coverage = [this](Vec3i cp, wire::CoverageKind kind, int) { on_coverage(cp, kind); };
+  cb.on_coverage = [this](Vec3i cp, wire::CoverageKind kind, int level) {
+    if ((kind == wire::CoverageKind::Full && level == 0) || kind == wire::CoverageKind::Empty)
+      ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
+    on_coverage(cp, kind);
+  };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
     ctx_.fanout->edit_result(index_, id, outcome, Clock::now());
     std::lock_guard lock(mutex_);

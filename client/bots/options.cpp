@@ -1,5 +1,6 @@
 #include "client/bots/options.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -19,7 +20,11 @@ const char* const kBotsHelp =
     "0 clean run, 1 replica mismatches or unexpected disconnects (or the server unreachable),\n"
     "2 bad usage.\n"
     "\n"
-    "  --connect HOST:PORT       server address (required)\n"
+    "  --connect HOST:PORT       server address (required); several, comma-separated, for the\n"
+    "                            servers of one shared world (terrane-server --store\n"
+    "                            postgresql://...): bot i connects to the (i mod n)-th, and the\n"
+    "                            report splits edit fan-out by whether the receiver is on the\n"
+    "                            editor's server\n"
     "  --bots N                  bots (default 10)\n"
     "  --duration S              seconds from the first connection to the end of edits (default 30)\n"
     "  --behavior B              idle | walk | fly | dig | build | mixed (default mixed):\n"
@@ -152,11 +157,24 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       return "";
     };
     std::string err;
-    if (key == "connect" || key == "server-metrics") {
+    if (key == "connect") {
+      o->servers.clear();
+      std::size_t start = 0;
+      while (start <= v.size()) {
+        const std::size_t comma = std::min(v.find(',', start), v.size());
+        const std::string one = v.substr(start, comma - start);
+        const auto hp = parse_host_port(one);
+        if (!hp || hp->second == 0) return bad(where, v, "is not HOST:PORT[,HOST:PORT...] (port 1..65535)");
+        o->servers.emplace_back(hp->first, hp->second);
+        start = comma + 1;
+      }
+      o->host = o->servers.front().first;
+      o->port = o->servers.front().second;
+    } else if (key == "server-metrics") {
       const auto hp = parse_host_port(v);
       if (!hp || hp->second == 0) return bad(where, v, "is not HOST:PORT (port 1..65535)");
-      (key == "connect" ? o->host : o->metrics_host) = hp->first;
-      (key == "connect" ? o->port : o->metrics_port) = hp->second;
+      o->metrics_host = hp->first;
+      o->metrics_port = hp->second;
     } else if (key == "bots") {
       err = int_in(1, 100000, &o->bots);
     } else if (key == "duration") {
@@ -263,7 +281,10 @@ std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* ou
 std::string scenario_text(const BotsOptions& o) {
   std::ostringstream s;
   s << "# terrane-bots scenario (terrane-bots --scenario FILE)\n";
-  s << "connect = " << o.host << ":" << o.port << "\n";
+  s << "connect = ";
+  for (std::size_t i = 0; i < o.servers.size(); ++i) s << (i ? "," : "") << o.servers[i].first << ":" << o.servers[i].second;
+  if (o.servers.empty()) s << o.host << ":" << o.port;
+  s << "\n";
   s << "bots = " << o.bots << "\n";
   s << "duration = " << o.duration_s << "\n";
   s << "behavior = " << behavior_name(o.behavior) << "\n";

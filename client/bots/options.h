@@ -18,7 +18,10 @@ const char* behavior_name(Behavior b);
 
 struct BotsOptions {
   std::string host = "127.0.0.1";
-  std::uint16_t port = 0;  // required (--connect)
+  std::uint16_t port = 0;  // required (--connect): the first server
+  // Every server given (--connect A,B,C: servers of one shared world); bot
+  // i connects to servers[i % size].
+  std::vector<std::pair<std::string, std::uint16_t>> servers;
   int bots = 10;
   double duration_s = 30;
   Behavior behavior = Behavior::kMixed;

@@ -92,7 +92,13 @@ std::string report_json(const BotsReport& r) {
   std::ostringstream j;
   const BotsOptions& o = r.options;
   j << "{\n";
-  j << "  \"scenario\": {\"connect\": \"" << esc(o.host) << ":" << o.port << "\", \"bots\": " << o.bots
+  std::string connect = o.host + ":" + std::to_string(o.port);
+  if (o.servers.size() > 1) {
+    connect.clear();
+    for (const auto& [host, port] : o.servers) connect += (connect.empty() ? "" : ",") + host + ":" + std::to_string(port);
+  }
+  j << "  \"scenario\": {\"connect\": \"" << esc(connect) << "\", \"servers\": " << std::max<std::size_t>(1, o.servers.size())
+    << ", \"bots\": " << o.bots
     << ", \"duration\": " << num(o.duration_s) << ", \"behavior\": \"" << behavior_name(o.behavior) << "\", ";
   if (o.spawn_set) j << "\"spawn\": [" << o.spawn.x << ", " << o.spawn.y << ", " << o.spawn.z << "], ";
   j << "\"spread\": " << o.spread << ", \"view_distance\": " << o.view_distance
@@ -122,6 +128,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"joins_incomplete\": " << r.joins_incomplete << ",\n";
   j << "  \"edit_ack_ms\": " << lat(r.edit_ack_ms) << ",\n";
   j << "  \"edit_fanout_ms\": " << lat(r.edit_fanout_ms) << ",\n";
+  j << "  \"edit_fanout_other_server_ms\": " << lat(r.edit_fanout_other_server_ms) << ",\n";
   j << "  \"edits_sent\": " << r.edits_sent << ",\n";
   j << "  \"edits_acked\": " << r.edits_acked << ",\n";
   j << "  \"edits_rejected\": " << r.edits_rejected << ",\n";
@@ -212,7 +219,8 @@ std::string report_table(const BotsReport& r) {
   row("join full ms", l(r.join_full_ms));
   row("joins incomplete", std::to_string(r.joins_incomplete));
   row("edit ack ms", l(r.edit_ack_ms));
-  row("edit fan-out ms", l(r.edit_fanout_ms));
+  row(r.options.servers.size() > 1 ? "edit fan-out ms, same server" : "edit fan-out ms", l(r.edit_fanout_ms));
+  if (r.options.servers.size() > 1) row("edit fan-out ms, other server", l(r.edit_fanout_other_server_ms));
   row("edits sent / acked / rejected",
       std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected));
   row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));

@@ -110,7 +110,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   const auto t0 = Clock::now();
   const auto ramp = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.ramp_up_s));
   auto measure_from = t0 + ramp;
-  FanoutTracker fanout(t0, measure_from);
+  FanoutTracker fanout(t0, measure_from, std::max<int>(1, static_cast<int>(o.servers.size())));
   MismatchLog mismatches;
   ctx.fanout = &fanout;
   ctx.mismatches = &mismatches;
@@ -314,6 +314,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.join_full_ms = summarize(full);
   r.edit_ack_ms = summarize(fanout.ack_ms());
   r.edit_fanout_ms = summarize(fanout.fanout_ms());
+  r.edit_fanout_other_server_ms = summarize(fanout.fanout_other_server_ms());
   const auto totals = fanout.totals();
   r.edits_sent = totals.edits_sent;
   r.edits_acked = totals.edits_acked;

@@ -35,6 +35,9 @@ struct BotsReport {
   std::uint64_t join_coarse_bytes = 0;  // summed over the bots whose coarse view completed
   double bytes_per_non_empty_voxel = 0;  // mean over bots that completed their join
   LatencySummary join_coarse_ms, join_full_ms, edit_ack_ms, edit_fanout_ms;
+  // Several servers: receivers on another server than the editor's (each
+  // edited chunk arriving again there, whole).
+  LatencySummary edit_fanout_other_server_ms;
   std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0, edits_measured = 0;
   std::map<std::string, std::uint64_t> reject_reasons;
   double receivers_per_edit = 0;

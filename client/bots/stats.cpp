@@ -30,8 +30,8 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
-FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from)
-    : run_start_(run_start), measure_from_(measure_from) {}
+FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers)
+    : run_start_(run_start), measure_from_(measure_from), servers_(std::max(1, servers)) {}
 
 std::size_t FanoutTracker::second_of(Clock::time_point t) const {
   if (t <= run_start_) return 0;
@@ -76,7 +76,7 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
     ack_ms_.push_back(ms);
     add_sample(ack_by_second_, e.sent, ms);
   }
-  auto [tick, fresh] = ticks_.try_emplace(o.tick);
+  auto [tick, fresh] = ticks_.try_emplace(tick_key(bot, o.tick));
   if (fresh) tick->second.first_seen = t;
   tick->second.edits.push_back(std::move(e));
 }
@@ -84,9 +84,15 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
 void FanoutTracker::update_received(int bot, std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions,
                                     Clock::time_point t) {
   std::lock_guard lock(mutex_);
-  auto [it, fresh] = ticks_.try_emplace(tick);
+  auto [it, fresh] = ticks_.try_emplace(tick_key(bot, tick));
   if (fresh) it->second.first_seen = t;
   for (const auto& r : revisions) it->second.updates.push_back(Update{bot, r.chunk_pos, t});
+}
+
+void FanoutTracker::chunk_arrived(int bot, Vec3i chunk, Clock::time_point t) {
+  if (servers_ == 1) return;
+  std::lock_guard lock(mutex_);
+  arrivals_[chunk].emplace_back(bot, t);
 }
 
 void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
@@ -106,7 +112,27 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
         auto [l, fresh] = last.try_emplace(u.bot, u.t);
         if (!fresh && u.t > l->second) l->second = u.t;
       }
+      // Receivers on other servers: each edited chunk's first arrival at
+      // them after the edit was sent (the last of those per receiver).
+      std::unordered_map<int, Clock::time_point> other;
+      if (servers_ > 1)
+        for (const Vec3i cp : e.chunks) {
+          auto a = arrivals_.find(cp);
+          if (a == arrivals_.end()) continue;
+          std::unordered_map<int, Clock::time_point> first;
+          for (const auto& [bot, t] : a->second) {
+            if (server_of(bot) == server_of(e.bot) || t < e.sent) continue;
+            auto [f, fresh] = first.try_emplace(bot, t);
+            if (!fresh && t < f->second) f->second = t;
+          }
+          for (const auto& [bot, t] : first) {
+            auto [o, fresh] = other.try_emplace(bot, t);
+            if (!fresh && t > o->second) o->second = t;
+          }
+        }
       if (e.sent < measure_from_) continue;
+      for (const auto& [bot, t] : other) fanout_other_ms_.push_back(static_cast<float>(ms_between(e.sent, t)));
+      totals_.receiver_pairs += other.size();
       ++totals_.edits_measured;
       totals_.receiver_pairs += last.size();
       totals_.edited_voxel_receivers += e.voxels * static_cast<double>(last.size());
@@ -120,6 +146,13 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
     it = ticks_.erase(it);
   }
   if (recent_.size() > kRecentSamples) recent_.erase(recent_.begin(), recent_.end() - kRecentSamples / 2);
+  // Arrivals are kept a few horizons, for edits settled later.
+  if (servers_ > 1 && horizon.count() != 0)
+    for (auto a = arrivals_.begin(); a != arrivals_.end();) {
+      auto& v = a->second;
+      v.erase(std::remove_if(v.begin(), v.end(), [&](const auto& p) { return p.second + 4 * horizon < now; }), v.end());
+      a = v.empty() ? arrivals_.erase(a) : std::next(a);
+    }
 }
 
 FanoutTracker::Totals FanoutTracker::totals() const {
@@ -133,6 +166,10 @@ std::vector<float> FanoutTracker::ack_ms() const {
 std::vector<float> FanoutTracker::fanout_ms() const {
   std::lock_guard lock(mutex_);
   return fanout_ms_;
+}
+std::vector<float> FanoutTracker::fanout_other_server_ms() const {
+  std::lock_guard lock(mutex_);
+  return fanout_other_ms_;
 }
 std::vector<std::vector<float>> FanoutTracker::fanout_by_second() const {
   std::lock_guard lock(mutex_);

@@ -38,7 +38,11 @@ double ms_between(Clock::time_point a, Clock::time_point b);
 // tracked (receivers) but give no latency samples.
 class FanoutTracker {
  public:
-  FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from);
+  // servers: how many servers the bots spread over (bot i on server
+  // i % servers); ticks are matched per server, and a receiver on another
+  // server than the editor's is measured by when the edited chunks arrive
+  // again at it (chunk_arrived), as those servers resend changed chunks.
+  FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers = 1);
   // Moves the start of measurement (a run that waits for every bot's join
   // measures from then on).
   void set_measure_from(Clock::time_point t) {
@@ -54,6 +58,8 @@ class FanoutTracker {
   void edit_result(int bot, std::uint32_t edit_id, const EditOutcome& outcome, Clock::time_point t);
   void update_received(int bot, std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions,
                        Clock::time_point t);
+  // A chunk arrived whole at full resolution (several servers only).
+  void chunk_arrived(int bot, Vec3i chunk, Clock::time_point t);
   // Joins edits and updates of ticks first seen before now - horizon (every
   // tick when horizon is zero) and forgets them.
   void settle(Clock::time_point now, Clock::duration horizon);
@@ -68,6 +74,8 @@ class FanoutTracker {
   Totals totals() const;
   std::vector<float> ack_ms() const;
   std::vector<float> fanout_ms() const;
+  // Receivers on another server than the editor's (several servers only).
+  std::vector<float> fanout_other_server_ms() const;
   // Per second of the run (by send time): samples for the timeline.
   std::vector<std::vector<float>> fanout_by_second() const;
   std::vector<std::vector<float>> ack_by_second() const;
@@ -92,6 +100,11 @@ class FanoutTracker {
     std::vector<Update> updates;
   };
   static std::uint64_t key(int bot, std::uint32_t id) { return (std::uint64_t(std::uint32_t(bot)) << 32) | id; }
+  int server_of(int bot) const { return bot % servers_; }
+  // A server's tick, told apart from another server's same tick number.
+  std::uint64_t tick_key(int bot, std::uint64_t tick) const {
+    return (std::uint64_t(std::uint32_t(server_of(bot))) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
+  }
   std::size_t second_of(Clock::time_point t) const;
   void add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms);
 
@@ -100,7 +113,11 @@ class FanoutTracker {
   std::unordered_map<std::uint64_t, Edit> in_flight_;
   std::map<std::uint64_t, Tick> ticks_;
   Totals totals_;
-  std::vector<float> ack_ms_, fanout_ms_;
+  std::vector<float> ack_ms_, fanout_ms_, fanout_other_ms_;
+  const int servers_;
+  // Several servers: whole-chunk arrivals, chunk -> (bot, when), kept a
+  // while past the settle horizon.
+  std::unordered_map<Vec3i, std::vector<std::pair<int, Clock::time_point>>, Vec3iHash> arrivals_;
   std::vector<std::vector<float>> fanout_by_second_, ack_by_second_;
   std::vector<float> recent_;  // fan-out samples of the last settle rounds
 };

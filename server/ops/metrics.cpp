@@ -186,6 +186,9 @@ std::string render_metrics(const MetricsSources& s) {
             load(c.edits_forwarded));
   m.counter("terrane_forwarded_edits_received_total", "Edits other servers forwarded to this one.",
             load(c.forwarded_edits_received));
+  m.counter("terrane_regions_handed_over_total",
+            "Regions released to another server with an edit across their border that it writes.",
+            load(c.regions_handed_over));
   m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
             load(c.chunks_resumed));
   m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));

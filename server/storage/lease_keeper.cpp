@@ -75,6 +75,21 @@ std::uint64_t LeaseKeeper::renewals() const {
   return rounds_;
 }
 
+StoreResult<Ok> LeaseKeeper::release(std::span<const Vec3i> regions) {
+  std::vector<RegionLease> going;
+  {
+    std::lock_guard lock(mutex_);
+    for (const Vec3i r : regions)
+      if (auto it = held_.find(key_of(r)); it != held_.end()) {
+        going.push_back(it->second);
+        held_.erase(it);
+      }
+  }
+  if (going.empty()) return Ok{};
+  std::lock_guard claiming(claims_mutex_);
+  return claims_->release(going);
+}
+
 StoreResult<Ok> LeaseKeeper::release_all() {
   {
     std::lock_guard lock(mutex_);

@@ -52,6 +52,9 @@ class LeaseKeeper {
   StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions);
   std::vector<RegionLease> held() const;
   std::uint32_t owner() const { return owner_; }
+  // Gives these regions' leases up at once (handed to another server:
+  // nothing of them may be in flight); regions not held are skipped.
+  StoreResult<Ok> release(std::span<const Vec3i> regions);
   // Gives every lease up at once (a clean shutdown), then stops renewing.
   StoreResult<Ok> release_all();
   // Renewal rounds done so far (tests wait on it).

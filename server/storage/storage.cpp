@@ -115,10 +115,14 @@ void Storage::with_postgres(std::function<void(PostgresStore&)> fn) {
   });
 }
 
-void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
+void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
                       std::function<void(StoreResult<std::int64_t>)> done) {
-  with_postgres([this, to, player = std::move(player), edit = std::move(edit), done = std::move(done)](
-                    PostgresStore& pg) { done(pg.forward(leases_->owner(), to, player, edit)); });
+  with_postgres([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over),
+                 done = std::move(done)](PostgresStore& pg) {
+    if (!hand_over.empty())
+      if (auto released = leases_->release(hand_over); !released) return done(released.error());
+    done(pg.forward(leases_->owner(), to, player, edit));
+  });
 }
 
 void Storage::read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {

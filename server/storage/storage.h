@@ -135,7 +135,9 @@ class Storage {
   // Forwarded edits (a shared world; on a loader thread): sends one to
   // server to's inbox (done gets the inbox row's id), reads this server's
   // inbox past after, and answers edits refused without a commit.
-  void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
+  // hand_over: regions of this server's the edit also writes, released
+  // first (nothing of them in flight), so that server can take them.
+  void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
                std::function<void(StoreResult<std::int64_t>)> done);
   void read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done);
   void answer(std::vector<ForwardAnswer> answers);

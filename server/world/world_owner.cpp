@@ -620,7 +620,8 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
       const ChunkVersion& held = *it->second.current;
       if (!held.estimate() && held.revision() >= c.revision) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
-      read_again(c.pos, c.revision, Storage::Priority::kStream);
+      // As urgent as an edit of this server's: its holders wait to see it.
+      read_again(c.pos, c.revision, Storage::Priority::kUrgent);
     }
   });
 }
@@ -638,7 +639,17 @@ void WorldOwner::read_again_elsewhere() {
 void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
   const Frame frame = build_edit_request(pe.edit);
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
-  storage_.forward(to, pe.player, frame, [this, id = pe.id, edit = pe.edit, box, to](StoreResult<std::int64_t> row) {
+  std::vector<Vec3i> hand_over;
+  for_each_chunk_in(box, [&](Vec3i cp) {
+    const Vec3i region = lease_region_of(cp);
+    if (!writes_region(region)) return;
+    // Forgotten here: an edit of it later claims it again.
+    leases_.erase(region);
+    hand_over.push_back(region);
+  });
+  if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
+  storage_.forward(to, pe.player, frame, std::move(hand_over),
+                   [this, id = pe.id, edit = pe.edit, box, to](StoreResult<std::int64_t> row) {
     asio::post(strand_, [this, id, edit, box, to, row = std::move(row)] {
       if (!row) {
         if (clients_.count(id) != 0)
@@ -858,6 +869,13 @@ void WorldOwner::apply_edits() {
                                         w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
                                                            : std::string("the region's server is shutting down")});
       } else if (client != nullptr && w == Writable::kNo && holder && !history && !stopping_) {
+        // An edit across a border also writes regions of this server's: they
+        // are handed over with it, once nothing of them is in flight.
+        bool mine = false;
+        for_each_chunk_in(writes, [&](Vec3i cp) { mine = mine || writes_region(lease_region_of(cp)); });
+        // Handed over only with nothing of this server's in flight: no commit
+        // under way, nothing applied yet this tick (arrival order is kept).
+        if (mine && (commits_pending_ > 0 || !changed.empty())) break;
         forward(pe, writes, *holder);
       } else if (client != nullptr) {
         if (w == Writable::kNo)

@@ -324,7 +324,8 @@ class WorldOwner : private WorldView {
   };
   void on_claimed(Vec3i region, Storage::Claimed claimed);
   // Sends pe (a client's edit of box, in regions server to holds) to that
-  // server's inbox.
+  // server's inbox, handing over first the regions of box this server
+  // holds (so one server can write the whole edit).
   void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
   void take_inbox();
   // Tells clients the answers to their forwarded edits once the edits'

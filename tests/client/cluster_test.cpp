@@ -359,5 +359,46 @@ TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
   cy.disconnect();
 }
 
+TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  Client ann(options(a, "ann")), bob(options(b, "bob"));
+  join(ann);
+  join(bob);
+  // The spawn lies on a region border (x = 0): ann's server takes the
+  // region west of it, bob's the one east.
+  const Region west = box_near(ann, -8), east = box_near(bob, 4);
+  ASSERT_LT(west.max.x, 0);
+  ASSERT_GE(east.min.x, 0);
+  const auto wv = pattern(west, materials::kBrick), ev = pattern(east, materials::kSnow);
+  ASSERT_EQ(outcome(ann, ann.write_box(west, wv)), "");
+  ASSERT_EQ(outcome(bob, bob.write_box(east, ev)), "");
+  // An edit across the border: bob's server hands its region over with the
+  // edit to ann's, which then writes both sides.
+  const Region across{{-2, west.min.y, west.min.z}, {2, west.max.y, west.max.z}};
+  const auto av = pattern(across, materials::kSand);
+  ASSERT_EQ(outcome(bob, bob.write_box(across, av)), "");
+  EXPECT_TRUE(replica_shows(bob, across, av));
+  ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, across, av); }, kDeadline));
+  // Bob's next edit east is forwarded there too, or his server takes the
+  // region back: either way it is stored.
+  const Region east2 = box_near(bob, 8);
+  const auto ev2 = pattern(east2, materials::kGrass);
+  ASSERT_EQ(until_accepted(bob, east2, ev2), "");
+  ann.disconnect();
+  bob.disconnect();
+  ServerProcess& c = start(3);
+  ASSERT_NE(c.port(), 0);
+  Client cy(options(c, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, west, wv));
+  EXPECT_TRUE(replica_shows(cy, east, ev));
+  EXPECT_TRUE(replica_shows(cy, across, av));
+  EXPECT_TRUE(replica_shows(cy, east2, ev2));
+  cy.disconnect();
+}
+
 }  // namespace
 }  // namespace terrane
