@@ -96,6 +96,16 @@ echo "servers: $connect" >&2
 psql_value() {
   "$pgbin/psql" -h 127.0.0.1 -p "$pg_port" -U terrane -d postgres -Atc "$1" 2>/dev/null || echo 0
 }
+# One metric summed over the servers.
+sum_metric() {
+  local total=0 mp v
+  for mp in "${metrics[@]}"; do
+    v=$(curl -s "http://127.0.0.1:$mp/metrics" | awk -v n="$1" '$1 == n {print $2}' | head -n 1 | cut -d. -f1)
+    total=$(( total + ${v:-0} ))
+  done
+  echo "$total"
+}
+writes0=$(sum_metric terrane_commits_total)
 ticks=$(getconf CLK_TCK)
 cpu0=()
 for p in "${server_pids[@]}"; do cpu0+=("$(awk '{print $14 + $15}' "/proc/$p/stat")"); done
@@ -115,6 +125,7 @@ end=$(date +%s.%N)
 commits1=$(psql_value "SELECT xact_commit FROM pg_stat_database WHERE datname = 'postgres'")
 bytes1=$(psql_value "SELECT pg_current_wal_lsn() - '0/0'::pg_lsn")
 acked=$(sed -n 's/.*"edits_acked": \([0-9]*\).*/\1/p' "$report" | head -n 1)
+writes=$(( $(sum_metric terrane_commits_total) - writes0 ))
 for i in $(seq 1 "$servers"); do
   p=${server_pids[$((i - 1))]}
   cpu1=$(awk '{print $14 + $15}' "/proc/$p/stat")
@@ -127,7 +138,8 @@ for i in $(seq 1 "$servers"); do
     printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks read again for the others %d\n",
            i, h / 1024, (c1 - c0) / t, e - s, 100 * (c1 - c0) / t / (e - s), f, r, x }'
 done
-awk -v c0="$commits0" -v c1="$commits1" -v b0="$bytes0" -v b1="$bytes1" -v s="$start" -v e="$end" -v a="${acked:-0}" 'BEGIN {
-  printf "database: %.0f commits/s (every transaction of every connection); WAL %.1f MB, %.0f bytes per acknowledged edit\n",
-         (c1 - c0) / (e - s), (b1 - b0) / 1e6, a > 0 ? (b1 - b0) / a : 0 }'
+awk -v c0="$commits0" -v c1="$commits1" -v b0="$bytes0" -v b1="$bytes1" -v s="$start" -v e="$end" -v a="${acked:-0}" \
+  -v w="$writes" 'BEGIN {
+  printf "database: %.0f write commits/s (the servers'"'"' ticks), %.0f transactions/s in all (reads, leases, notices); WAL %.1f MB, %.0f bytes per acknowledged edit\n",
+         w / (e - s), (c1 - c0) / (e - s), (b1 - b0) / 1e6, (a > 0 ? (b1 - b0) / a : 0) }'
 exit $status
