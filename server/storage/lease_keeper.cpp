@@ -127,10 +127,14 @@ void LeaseKeeper::renew_loop() {
         lost.emplace_back(l, fmt::format("not renewed for {} ms: {}", times_.lease.count(), kept.error().message));
     }
     lock.lock();
-    for (const auto& [l, why] : lost) {
-      // Unless claimed again meanwhile (a newer epoch).
-      if (auto it = held_.find(key_of(l.region)); it != held_.end() && it->second == l) held_.erase(it);
-    }
+    // Only leases still held as they were: not released meanwhile (handed
+    // over) nor claimed again (a newer epoch).
+    std::erase_if(lost, [&](const auto& entry) {
+      auto it = held_.find(key_of(entry.first.region));
+      if (it == held_.end() || !(it->second == entry.first)) return true;
+      held_.erase(it);
+      return false;
+    });
     ++rounds_;
     if (!lost.empty() && on_lost_) {
       lock.unlock();

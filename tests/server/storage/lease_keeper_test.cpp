@@ -115,5 +115,27 @@ TEST_F(LeaseKeeperTest, ALeaseTakenWhileItsKeeperWasLateIsReportedLost) {
   EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
 }
 
+TEST_F(LeaseKeeperTest, ARegionHandedOverIsFreeAtOnceAndNeverReportedLost) {
+  Lost lost;
+  auto a = keeper(1, {300ms, 20ms}, &lost);
+  ASSERT_TRUE(a);
+  const Vec3i regions[] = {{0, 0, 0}, {1, 0, 0}};
+  ASSERT_TRUE(a->ensure(regions).ok());
+  // Released while renewals go on (one may be under way with it): the
+  // region is free for another server at once, the other one stays held,
+  // and no renewal round reports the released one lost.
+  const Vec3i gone[] = {{1, 0, 0}};
+  ASSERT_TRUE(a->release(gone).ok());
+  auto b = store();
+  ASSERT_TRUE(b);
+  EXPECT_TRUE(b->claim({1, 0, 0}, 2, 60s).ok());
+  EXPECT_FALSE(b->claim({0, 0, 0}, 2, 60s).ok());
+  const std::uint64_t start = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() >= start + 5; }, 20s));
+  EXPECT_EQ(lost.size(), 0u);
+  ASSERT_EQ(a->held().size(), 1u);
+  EXPECT_EQ(a->held()[0].region, (Vec3i{0, 0, 0}));
+}
+
 }  // namespace
 }  // namespace terrane
