@@ -112,6 +112,43 @@ TEST_F(WorldToolTest, BadUsageExitsTwoNamingTheProblem) {
   EXPECT_EQ(run("stats --help").exit_code, 0);
 }
 
+// Usage errors of PostgreSQL worlds come before any connection: these need
+// no database (tests/server/terrane_world_postgres_test.cpp runs on one).
+TEST_F(WorldToolTest, StoreUsageErrorsNameWhatToGiveOrUseInstead) {
+  const std::string url = "postgresql://terrane@127.0.0.1:1/nowhere";
+  const std::string file = path("box.vxraw");
+  ASSERT_TRUE(vxraw_write_file(file, Box({2, 2, 2}, solid(materials::kRock)), {0, 0, 0}, false).ok());
+  for (const std::string& cmd : {"import --store " + url + " " + file, "import --world " + url + " " + file,
+                                "generate --store " + url}) {
+    auto r = run(cmd);
+    EXPECT_EQ(r.exit_code, 2) << cmd << ": " << r.output;
+    EXPECT_NE(r.output.find("--server-id N is required"), std::string::npos) << cmd << ": " << r.output;
+  }
+  auto r = run("import --world " + path("w") + " --server-id 4 " + file);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--server-id is for a PostgreSQL world"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("w")));
+  r = run("stats --world " + path("w") + " --store " + url);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("not both"), std::string::npos) << r.output;
+  r = run("export --store mysql://u:pw@host/db --box 0,0,0,1,1,1 " + path("x.vxraw"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("neither a postgresql:// URL nor a world directory"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("pw"), std::string::npos) << r.output;
+  r = run("check --store " + url);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("check reads a world directory"), std::string::npos) << r.output;
+  r = run("backup --world " + url + " --to " + path("copy"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("pg_dump"), std::string::npos) << r.output;
+  r = run("migrate --world " + path("w"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--to"), std::string::npos) << r.output;
+  r = run("migrate --world " + path("w") + " --to " + url + " --server-id -1");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--server-id"), std::string::npos) << r.output;
+}
+
 TEST_F(WorldToolTest, BadFilesAndMissingWorldsExitOneNamingThem) {
   auto r = run("import --world " + path("w") + " " + path("missing.vxraw"));
   EXPECT_EQ(r.exit_code, 1);
