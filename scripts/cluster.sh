@@ -128,6 +128,12 @@ acked=$(sed -n 's/.*"edits_acked": \([0-9]*\).*/\1/p' "$report" | head -n 1)
 writes=$(( $(sum_metric terrane_commits_total) - writes0 ))
 for i in $(seq 1 "$servers"); do
   p=${server_pids[$((i - 1))]}
+  cp "$scratch/server-$i.log" "${report%.json}.server-$i.log"
+  if ! kill -0 "$p" 2>/dev/null; then
+    echo "server $i: exited during the run (its log: ${report%.json}.server-$i.log)"
+    status=1
+    continue
+  fi
   cpu1=$(awk '{print $14 + $15}' "/proc/$p/stat")
   hwm=$(awk '/VmHWM/ {print $2}' "/proc/$p/status")
   m=$(curl -s "http://127.0.0.1:${metrics[$((i - 1))]}/metrics" || true)
