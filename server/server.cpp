@@ -33,7 +33,10 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
   (*store)->set_lease_source(std::make_shared<const LeaseSource>(
-      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->ensure(regions); }),
+      // Only leases held: the world owner claims a region (and reads it
+      // again) before it applies anything there, so a write never takes
+      // back a region this server lost or handed over.
+      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->held(regions); }),
       options_.lease);
   return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
 }

@@ -56,6 +56,8 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   cb.on_coverage = [this](Vec3i cp, wire::CoverageKind kind, int level) {
     if ((kind == wire::CoverageKind::Full && level == 0) || kind == wire::CoverageKind::Empty)
       ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
+    else
+      ctx_.fanout->chunk_released(index_, cp);  // released, or held coarser now
     on_coverage(cp, kind);
   };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {

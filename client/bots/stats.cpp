@@ -86,13 +86,27 @@ void FanoutTracker::update_received(int bot, std::uint64_t tick, const std::vect
   std::lock_guard lock(mutex_);
   auto [it, fresh] = ticks_.try_emplace(tick_key(bot, tick));
   if (fresh) it->second.first_seen = t;
-  for (const auto& r : revisions) it->second.updates.push_back(Update{bot, r.chunk_pos, t});
+  for (const auto& r : revisions) {
+    it->second.updates.push_back(Update{bot, r.chunk_pos, t});
+    // Several servers: an edit forwarded to its region's server reaches
+    // that server's bots as an update of that server's tick.
+    if (servers_ > 1) arrivals_[r.chunk_pos].emplace_back(bot, t);
+  }
 }
 
 void FanoutTracker::chunk_arrived(int bot, Vec3i chunk, Clock::time_point t) {
   if (servers_ == 1) return;
   std::lock_guard lock(mutex_);
-  arrivals_[chunk].emplace_back(bot, t);
+  if (!held_full_[chunk].insert(bot).second) arrivals_[chunk].emplace_back(bot, t);
+}
+
+void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
+  if (servers_ == 1) return;
+  std::lock_guard lock(mutex_);
+  if (auto it = held_full_.find(chunk); it != held_full_.end()) {
+    it->second.erase(bot);
+    if (it->second.empty()) held_full_.erase(it);
+  }
 }
 
 void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {

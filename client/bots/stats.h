@@ -14,6 +14,7 @@
 #include <mutex>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "client/client.h"
@@ -40,8 +41,10 @@ class FanoutTracker {
  public:
   // servers: how many servers the bots spread over (bot i on server
   // i % servers); ticks are matched per server, and a receiver on another
-  // server than the editor's is measured by when the edited chunks arrive
-  // again at it (chunk_arrived), as those servers resend changed chunks.
+  // server than the editor's is measured by the first change of each
+  // edited chunk it receives after the edit was sent: the chunk arriving
+  // again whole (chunk_arrived: a server resends what another server
+  // changed) or an update (an edit forwarded to the region's server).
   FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers = 1);
   // Moves the start of measurement (a run that waits for every bot's join
   // measures from then on).
@@ -58,8 +61,11 @@ class FanoutTracker {
   void edit_result(int bot, std::uint32_t edit_id, const EditOutcome& outcome, Clock::time_point t);
   void update_received(int bot, std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions,
                        Clock::time_point t);
-  // A chunk arrived whole at full resolution (several servers only).
+  // A chunk arrived whole at full resolution, or was released (several
+  // servers only). Only a chunk arriving again at a bot that held it
+  // counts: a first arrival is the bot's view reaching it, not an edit.
   void chunk_arrived(int bot, Vec3i chunk, Clock::time_point t);
+  void chunk_released(int bot, Vec3i chunk);
   // Joins edits and updates of ticks first seen before now - horizon (every
   // tick when horizon is zero) and forgets them.
   void settle(Clock::time_point now, Clock::duration horizon);
@@ -118,6 +124,7 @@ class FanoutTracker {
   // Several servers: whole-chunk arrivals, chunk -> (bot, when), kept a
   // while past the settle horizon.
   std::unordered_map<Vec3i, std::vector<std::pair<int, Clock::time_point>>, Vec3iHash> arrivals_;
+  std::unordered_map<Vec3i, std::unordered_set<int>, Vec3iHash> held_full_;  // chunk -> bots holding it whole
   std::vector<std::vector<float>> fanout_by_second_, ack_by_second_;
   std::vector<float> recent_;  // fan-out samples of the last settle rounds
 };

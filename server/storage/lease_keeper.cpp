@@ -37,6 +37,26 @@ LeaseKeeper::~LeaseKeeper() {
   if (thread_.joinable()) thread_.join();
 }
 
+StoreResult<std::vector<RegionLease>> LeaseKeeper::held(std::span<const Vec3i> regions) const {
+  std::vector<RegionLease> out;
+  std::lock_guard lock(mutex_);
+  for (const Vec3i region : regions) {
+    auto it = held_.find(key_of(region));
+    if (it == held_.end())
+      return StoreError{StoreError::Kind::kFenced,
+                        fmt::format("region ({},{},{}) is not held by server {} (lost or handed over); nothing was "
+                                    "written",
+                                    region.x, region.y, region.z, owner_)};
+    out.push_back(it->second);
+  }
+  return out;
+}
+
+bool LeaseKeeper::holds(Vec3i region) const {
+  std::lock_guard lock(mutex_);
+  return held_.count(key_of(region)) != 0;
+}
+
 StoreResult<std::vector<RegionLease>> LeaseKeeper::ensure(std::span<const Vec3i> regions) {
   std::vector<Vec3i> order(regions.begin(), regions.end());
   std::sort(order.begin(), order.end(), [](Vec3i a, Vec3i b) { return key_of(a) < key_of(b); });

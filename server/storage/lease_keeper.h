@@ -50,6 +50,11 @@ class LeaseKeeper {
   // server). Fails with kOwned (naming the holder) if another server holds
   // one of them; the regions claimed before the failure stay held.
   StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions);
+  // The leases of regions, all of them held already; claims nothing.
+  // kFenced naming a region not held: a write must never take a region
+  // back by itself (the world owner claims, then reads the region again).
+  StoreResult<std::vector<RegionLease>> held(std::span<const Vec3i> regions) const;
+  bool holds(Vec3i region) const;
   std::vector<RegionLease> held() const;
   std::uint32_t owner() const { return owner_; }
   // Gives these regions' leases up at once (handed to another server:

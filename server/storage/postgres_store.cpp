@@ -258,6 +258,14 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   // rolls it back, and a takeover goes on. No statement waits long for a
   // lock either.
   if (auto e = c->set_limits()) return *e;
+  // A database whose schema is this build's is used as it is: the
+  // statements below take table locks even when there is nothing to make.
+  if (auto current = c->exec("read schema version", "SELECT version FROM terrane_schema");
+      current && current->count() == 1 && current->integer(0, 0) == kSchemaVersion) {
+    std::unique_ptr<PostgresStore> store(new PostgresStore(std::move(c), url, shown));
+    if (auto m = store->read_meta(); !m) return m.error();
+    return store;
+  }
   auto begin = c->exec("begin", "BEGIN");
   if (!begin) return begin.error();
   auto lock = c->exec("lock schema", "SELECT pg_advisory_xact_lock($1)", {text(kSchemaLockKey)});
@@ -602,7 +610,8 @@ StoreResult<std::int64_t> PostgresStore::forward(std::uint32_t from, std::uint32
 
 StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
   auto r = c_->exec("read inbox",
-                    "SELECT id, from_server, player, edit FROM terrane_inbox"
+                    "SELECT id, from_server, player, edit,"
+                    " (extract(epoch from clock_timestamp() - created_at) * 1000)::bigint FROM terrane_inbox"
                     " WHERE to_server = $1 AND id > $2 ORDER BY id LIMIT $3",
                     {text(to), text(after), text(static_cast<std::int64_t>(limit))}, /*binary_result=*/true);
   if (!r) return r.error();
@@ -616,6 +625,7 @@ StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::
     e.id = *id;
     e.from = static_cast<std::uint32_t>(*from);
     const auto name = bytes_at(r->res, i, 2), edit = bytes_at(r->res, i, 3);
+    e.age_ms = std::max<std::int64_t>(0, be64_at(r->res, i, 4).value_or(0));
     e.player.assign(name.begin(), name.end());
     e.edit.assign(edit.begin(), edit.end());
     out.push_back(std::move(e));
@@ -751,6 +761,23 @@ FileResult<std::vector<Vec3i>> positions(Rows& r, Vec3i region) {
   return out;
 }
 }  // namespace
+
+StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> PostgresStore::stored_revisions(Vec3i region) {
+  auto r = c_->exec("read revisions",
+                    "SELECT x, y, z, revision FROM terrane_chunks"
+                    " WHERE x BETWEEN $1 AND $2 AND y BETWEEN $3 AND $4 AND z BETWEEN $5 AND $6",
+                    region_range(region), /*binary_result=*/true);
+  if (!r) return r.error();
+  std::vector<std::pair<Vec3i, std::uint64_t>> out;
+  for (int i = 0; i < r->count(); ++i) {
+    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+    const auto revision = be64_at(r->res, i, 3);
+    if (!x || !y || !z || !revision || *revision < 0)
+      return StoreError{StoreError::Kind::kDecode, "postgresql: read revisions: a row does not read"};
+    out.emplace_back(Vec3i{*x, *y, *z}, static_cast<std::uint64_t>(*revision));
+  }
+  return out;
+}
 
 FileResult<std::vector<Vec3i>> PostgresStore::quarantined_in(Vec3i region) {
   auto r = c_->exec("read quarantine",

@@ -76,6 +76,7 @@ struct InboxEdit {
   std::uint32_t from = 0;  // the server that forwarded it
   std::string player;
   std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it
+  std::int64_t age_ms = 0;         // since it was forwarded, by the database's clock
 };
 struct ForwardAnswer {
   std::int64_t id = 0;     // the inbox row
@@ -155,6 +156,9 @@ class PostgresStore final : public WorldStore {
   // save_chunks with answers to forwarded edits in its transaction.
   FileStatus save_answering(std::span<const ChunkWrite> writes, std::span<const EditLogEntry> log,
                             std::span<const ForwardAnswer> answers);
+
+  // The stored chunks of a region and their revisions.
+  StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> stored_revisions(Vec3i region);
 
   // Forwards an edit to server to's inbox (one transaction: the row and
   // its notice); the row's id.

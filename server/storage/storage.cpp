@@ -82,20 +82,24 @@ void Storage::claim(Vec3i region, ClaimDone done) {
       store = std::move(readers_.back());
       readers_.pop_back();
     }
-    auto entries = store->load_coarse(region);
+    // Revisions only (no voxels: nothing there can fail to decode).
+    auto* pg = dynamic_cast<PostgresStore*>(store.get());
+    auto revisions = pg != nullptr ? pg->stored_revisions(region)
+                                   : StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>>(
+                                         StoreError{StoreError::Kind::kQuery, "not a PostgreSQL world"});
     {
       std::lock_guard lock(readers_mutex_);
       readers_.push_back(std::move(store));
     }
-    if (!entries) {
+    if (!revisions) {
       // Held, but what is stored there is not known: not written until it is.
-      out.why = "cannot read what the region holds: " + entries.error().message;
+      out.why = "cannot read what the region holds: " + revisions.error().message;
       out.unreachable = true;
       done(std::move(out));
       return;
     }
     out.held = true;
-    for (const CoarseEntry& e : *entries) out.stored.emplace_back(e.chunk_pos, e.revision);
+    out.stored = std::move(*revisions);
     done(std::move(out));
   });
 }
@@ -126,7 +130,7 @@ void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uin
 }
 
 void Storage::read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
-  with_postgres([this, after, done = std::move(done)](PostgresStore& pg) { done(pg.inbox(leases_->owner(), after, 256)); });
+  with_postgres([this, after, done = std::move(done)](PostgresStore& pg) { done(pg.inbox(leases_->owner(), after, 256)); });  // kInboxPage
 }
 
 void Storage::answer(std::vector<ForwardAnswer> answers) {
@@ -235,6 +239,14 @@ LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
     if (!stored.error().decode) {
       out.ok = false;
       out.error = "cannot be read: " + stored.error().message;
+      return out;
+    }
+    // In a shared world only the region's writer moves a row: elsewhere
+    // it may be a row its writer is replacing.
+    if (leases_ != nullptr && !leases_->holds(lease_region_of(cp))) {
+      out.ok = false;
+      out.error = "does not decode (" + stored.error().message +
+                  "); in a region this server does not write, so it is left for the region's server";
       return out;
     }
     // A damaged blob: move the row aside (never generate over it), then

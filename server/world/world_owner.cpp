@@ -17,6 +17,7 @@ constexpr std::size_t kMaxEditsPerTick = 256;
 // How long a forwarded edit waits at least for its owner's answer (at least
 // a lease time) before its client is told there was none.
 constexpr auto kForwardAnswerWait = std::chrono::milliseconds(2000);
+constexpr std::size_t kInboxPage = 256;
 
 // Whether two n^3 network codec units hold the same voxels (a unit that
 // does not decode differs from everything).
@@ -301,8 +302,11 @@ void WorldOwner::apply_loaded(LoadedChunk c) {
       differs = !same_voxels(kCoarseSide, l.current->encoded(kMipLevels - 1), v->encoded(kMipLevels - 1));
       if (differs) counters_.estimates_corrected.fetch_add(1, std::memory_order_relaxed);
     } else if (l.current->revision() != c.revision) {
-      server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
-                        c.pos.x, c.pos.y, c.pos.z, c.revision, l.current->revision());
+      // Expected where another server of a shared world wrote it (read again
+      // for that); otherwise a quarantined row came back generated.
+      if (stale_.count(c.pos) == 0)
+        server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
+                          c.pos.x, c.pos.y, c.pos.z, c.revision, l.current->revision());
       differs = true;
     }
   }
@@ -563,7 +567,15 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   bool stale = false;
   for (const auto& [cp, revision] : claimed.stored) {
     auto it = loaded_.find(cp);
-    if (it == loaded_.end()) continue;  // read from the store when wanted
+    if (it == loaded_.end()) {
+      // Read from the store when wanted; a load under way may have read it
+      // before the previous owner's last write.
+      if (loading_.count(cp) != 0) {
+        read_again(cp, revision, Storage::Priority::kUrgent);
+        stale = true;
+      }
+      continue;
+    }
     const ChunkVersion& held = *it->second.current;
     if (!held.estimate() && held.revision() >= revision) continue;
     read_again(cp, revision, Storage::Priority::kUrgent);
@@ -616,7 +628,12 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
     for (const ChunkChange& c : changes) {
       if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
       auto it = loaded_.find(c.pos);
-      if (it == loaded_.end()) continue;  // read from the store when wanted
+      if (it == loaded_.end()) {
+        // Not held; but a load under way may have read the store before
+        // this commit: read again if it did.
+        if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
+        continue;
+      }
       const ChunkVersion& held = *it->second.current;
       if (!held.estimate() && held.revision() >= c.revision) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
@@ -643,8 +660,12 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
   for_each_chunk_in(box, [&](Vec3i cp) {
     const Vec3i region = lease_region_of(cp);
     if (!writes_region(region)) return;
-    // Forgotten here: an edit of it later claims it again.
-    leases_.erase(region);
+    // Being released: edits there wait until the forward is done (a claim
+    // now could run before the release).
+    RegionLeaseState& l = leases_[region];
+    l.state = RegionLeaseState::kHandingOver;
+    l.holder = to;
+    l.why = fmt::format("handed over to server {}", to);
     hand_over.push_back(region);
   });
   if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
@@ -652,12 +673,32 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
                    [this, id = pe.id, edit = pe.edit, box, to](StoreResult<std::int64_t> row) {
     asio::post(strand_, [this, id, edit, box, to, row = std::move(row)] {
       if (!row) {
+        // Not forwarded: a region being handed over is asked for again.
+        for (auto& [region, l] : leases_)
+          if (l.state == RegionLeaseState::kHandingOver && l.holder == to) {
+            l.state = RegionLeaseState::kRefused;
+            l.ask_again = std::chrono::steady_clock::now();
+          }
         if (clients_.count(id) != 0)
           reject(id, edit, RejectReason::kNotOwner,
                  fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
         return;
       }
-      forwarded_.emplace(*row, Outgoing{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt});
+      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt};
+      if (auto early = early_answers_.find(*row); early != early_answers_.end()) {
+        o.answer = early->second.first;
+        early_answers_.erase(early);
+      }
+      forwarded_.emplace(*row, std::move(o));
+      // Handed over: the recipient's now (this server's next edits there
+      // are forwarded to it too, until asked again a second on, so the
+      // region does not bounce back before the recipient has claimed it).
+      for (auto& [region, l] : leases_)
+        if (l.state == RegionLeaseState::kHandingOver && l.holder == to) {
+          l.state = RegionLeaseState::kRefused;
+          l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+        }
+      settle_forwarded();
     });
   });
 }
@@ -672,36 +713,61 @@ void WorldOwner::take_inbox() {
     return;
   }
   inbox_reading_ = true;
-  storage_.read_inbox(inbox_taken_, [this](StoreResult<std::vector<InboxEdit>> got) {
+  inbox_seen_.clear();
+  read_inbox_page(0);
+}
+
+void WorldOwner::read_inbox_page(std::int64_t after) {
+  // Row ids are given at insert, not in commit order: every read lists all
+  // rows waiting (a page at a time) and takes those not taken yet.
+  storage_.read_inbox(after, [this](StoreResult<std::vector<InboxEdit>> got) {
     asio::post(strand_, [this, got = std::move(got)] {
-      inbox_reading_ = false;
       if (!got) {
         server_log().warn("forwarded edits: cannot read the inbox: {}", got.error().message);
-      } else {
-        std::vector<ForwardAnswer> refused;
-        for (const InboxEdit& in : *got) {
-          inbox_taken_ = std::max(inbox_taken_, in.id);
-          // Another server's bytes, checked as a client's are.
-          auto edit = decode_forwarded_edit(in.edit);
-          const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
-          if (!edit || r.empty() || is_history_edit(edit->kind) || stopping_) {
-            const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
-                                    : stopping_ ? std::string("the region's server is shutting down")
-                                    : r.empty() ? std::string("edit outside the world")
-                                                : std::string("undo and redo are not forwarded");
-            refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
-            continue;
-          }
-          counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
-          for_each_chunk_in(r, [&](Vec3i cp) {
-            request(cp);
-            ++busy_[cp];
-          });
-          edits_.push_back(PendingEdit{0, std::move(*edit), in.player, nullptr, Forwarded{in.id, in.from}});
-        }
-        if (!refused.empty()) storage_.answer(std::move(refused));
-        if (got->size() == 256) inbox_again_ = true;  // a full page: there may be more
+        inbox_reading_ = false;
+        if (std::exchange(inbox_again_, false)) take_inbox();
+        return;
       }
+      std::vector<ForwardAnswer> refused;
+      const auto forward_wait = std::max(kForwardAnswerWait, options_.lease);
+      for (const InboxEdit& in : *got) {
+        inbox_seen_.insert(in.id);
+        if (!inbox_taken_.insert(in.id).second) continue;  // queued or answered already
+        // Another server's bytes, checked as a client's are.
+        auto edit = decode_forwarded_edit(in.edit);
+        const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
+        const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait;
+        if (!edit || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
+          // Too old: its sender has told its client there was no answer.
+          const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
+                                  : stopping_ ? std::string("the region's server is shutting down")
+                                  : too_old   ? std::string("it waited too long; its sender has given up on it")
+                                  : r.empty() ? std::string("edit outside the world")
+                                              : std::string("undo and redo are not forwarded");
+          refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
+          continue;
+        }
+        counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
+        for_each_chunk_in(r, [&](Vec3i cp) {
+          request(cp);
+          ++busy_[cp];
+          // What this server knew of the edit's regions held elsewhere may
+          // be out of date (the sender may have handed them over): asked
+          // again when the edit's turn comes.
+          if (auto l = leases_.find(lease_region_of(cp));
+              l != leases_.end() && l->second.state == RegionLeaseState::kRefused)
+            leases_.erase(l);
+        });
+        edits_.push_back(PendingEdit{0, std::move(*edit), in.player, nullptr, Forwarded{in.id, in.from}});
+      }
+      if (!refused.empty()) storage_.answer(std::move(refused));
+      if (got->size() == kInboxPage) {
+        read_inbox_page(got->back().id);
+        return;
+      }
+      // The whole inbox listed: ids no longer there were answered and deleted.
+      std::erase_if(inbox_taken_, [&](std::int64_t id) { return inbox_seen_.count(id) == 0; });
+      inbox_reading_ = false;
       if (std::exchange(inbox_again_, false)) take_inbox();
     });
   });
@@ -710,7 +776,10 @@ void WorldOwner::take_inbox() {
 void WorldOwner::answered(ForwardAnswer answer) {
   asio::post(strand_, [this, answer = std::move(answer)] {
     auto it = forwarded_.find(answer.id);
-    if (it != forwarded_.end()) it->second.answer = answer;
+    if (it != forwarded_.end())
+      it->second.answer = answer;
+    else  // before the forward's own callback: kept for it
+      early_answers_.emplace(answer.id, std::make_pair(answer, std::chrono::steady_clock::now()));
     settle_forwarded();
   });
 }
@@ -719,6 +788,7 @@ void WorldOwner::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
   // An owner silent for a lease time has lost its regions anyway.
   const auto forward_wait = std::max(kForwardAnswerWait, options_.lease);
+  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > forward_wait; });
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
     const auto client = clients_.find(o.id);

@@ -317,7 +317,7 @@ class WorldOwner : private WorldView {
   // held by another server; or not known, the database out of reach (both
   // asked again after a second; edits wait in the second case).
   struct RegionLeaseState {
-    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable } state = kClaiming;
+    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable, kHandingOver } state = kClaiming;
     std::string why;
     std::optional<std::uint32_t> holder;
     std::chrono::steady_clock::time_point ask_again{};
@@ -328,6 +328,7 @@ class WorldOwner : private WorldView {
   // holds (so one server can write the whole edit).
   void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
   void take_inbox();
+  void read_inbox_page(std::int64_t after);
   // Tells clients the answers to their forwarded edits once the edits'
   // chunks are current here; gives up on those unanswered for too long.
   void settle_forwarded();
@@ -347,8 +348,11 @@ class WorldOwner : private WorldView {
   // inbox of this server (the highest row taken; a read under way; another
   // notice came during it).
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
-  std::int64_t inbox_taken_ = 0;
+  std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
+  std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
   bool inbox_reading_ = false, inbox_again_ = false;
+  // Answers that came before their forward's own callback.
+  std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
   InterestIndex interest_;
