@@ -96,11 +96,19 @@ echo "servers: $connect" >&2
 psql_value() {
   "$pgbin/psql" -h 127.0.0.1 -p "$pg_port" -U terrane -d postgres -Atc "$1" 2>/dev/null || echo 0
 }
+# A server's /metrics (bash's /dev/tcp: no HTTP client needed).
+metrics_text() {
+  local fd
+  exec {fd}<>"/dev/tcp/127.0.0.1/$1" || return 0
+  printf 'GET /metrics HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n' >&"$fd"
+  cat <&"$fd"
+  exec {fd}<&-
+}
 # One metric summed over the servers.
 sum_metric() {
   local total=0 mp v
   for mp in "${metrics[@]}"; do
-    v=$(curl -s "http://127.0.0.1:$mp/metrics" | awk -v n="$1" '$1 == n {print $2}' | head -n 1 | cut -d. -f1)
+    v=$(metrics_text "$mp" | awk -v n="$1" '$1 == n {print $2}' | head -n 1 | cut -d. -f1)
     total=$(( total + ${v:-0} ))
   done
   echo "$total"
@@ -136,7 +144,7 @@ for i in $(seq 1 "$servers"); do
   fi
   cpu1=$(awk '{print $14 + $15}' "/proc/$p/stat")
   hwm=$(awk '/VmHWM/ {print $2}' "/proc/$p/status")
-  m=$(curl -s "http://127.0.0.1:${metrics[$((i - 1))]}/metrics" || true)
+  m=$(metrics_text "${metrics[$((i - 1))]}" || true)
   metric() { echo "$m" | awk -v n="$1" '$1 == n {print $2}' | head -n 1; }
   awk -v i="$i" -v h="$hwm" -v c0="${cpu0[$((i - 1))]}" -v c1="$cpu1" -v t="$ticks" -v s="$start" -v e="$end" \
     -v f="$(metric terrane_edits_forwarded_total)" -v r="$(metric terrane_forwarded_edits_received_total)" \

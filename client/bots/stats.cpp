@@ -30,6 +30,12 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+namespace {
+// How long after an edit a change of its chunks at a bot of another server
+// still counts as the edit's (fan-out is measured below this).
+constexpr auto kArrivalWindow = std::chrono::seconds(3);
+}  // namespace
+
 FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers)
     : run_start_(run_start), measure_from_(measure_from), servers_(std::max(1, servers)) {}
 
@@ -126,22 +132,19 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
         auto [l, fresh] = last.try_emplace(u.bot, u.t);
         if (!fresh && u.t > l->second) l->second = u.t;
       }
-      // Receivers on other servers: each edited chunk's first arrival at
-      // them after the edit was sent (the last of those per receiver).
+      // Receivers on other servers: the first change of any of the edit's
+      // chunks they receive after it was sent, within the window (the
+      // edit's box may reach chunks it did not change, whose next change is
+      // another edit's; one commit's chunks arrive together).
       std::unordered_map<int, Clock::time_point> other;
       if (servers_ > 1)
         for (const Vec3i cp : e.chunks) {
           auto a = arrivals_.find(cp);
           if (a == arrivals_.end()) continue;
-          std::unordered_map<int, Clock::time_point> first;
           for (const auto& [bot, t] : a->second) {
-            if (server_of(bot) == server_of(e.bot) || t < e.sent) continue;
-            auto [f, fresh] = first.try_emplace(bot, t);
-            if (!fresh && t < f->second) f->second = t;
-          }
-          for (const auto& [bot, t] : first) {
+            if (server_of(bot) == server_of(e.bot) || t < e.sent || t > e.sent + kArrivalWindow) continue;
             auto [o, fresh] = other.try_emplace(bot, t);
-            if (!fresh && t > o->second) o->second = t;
+            if (!fresh && t < o->second) o->second = t;
           }
         }
       if (e.sent < measure_from_) continue;

@@ -41,10 +41,11 @@ class FanoutTracker {
  public:
   // servers: how many servers the bots spread over (bot i on server
   // i % servers); ticks are matched per server, and a receiver on another
-  // server than the editor's is measured by the first change of each
-  // edited chunk it receives after the edit was sent: the chunk arriving
-  // again whole (chunk_arrived: a server resends what another server
-  // changed) or an update (an edit forwarded to the region's server).
+  // server than the editor's is measured by the first change of the edited
+  // chunks it receives after the edit was sent (within 3 s): a chunk
+  // arriving again whole (chunk_arrived: a server resends what another
+  // server changed) or an update (an edit forwarded to the region's
+  // server).
   FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers = 1);
   // Moves the start of measurement (a run that waits for every bot's join
   // measures from then on).
