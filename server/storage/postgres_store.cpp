@@ -672,10 +672,10 @@ StoreResult<Ok> PostgresStore::create_world(const WorldMeta& meta) {
   return read_meta();
 }
 
-FileStatus PostgresStore::put_meta(const WorldMeta& meta) {
+FileStatus PostgresStore::put_meta(const std::vector<std::pair<std::string, std::string>>& keys) {
   auto begin = c_->exec("begin", "BEGIN");
   if (!begin) return file_error(begin.error());
-  for (const auto& [k, v] : meta_to_keys(meta)) {
+  for (const auto& [k, v] : keys) {
     auto put = c_->exec("write world metadata",
                         "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)"
                         " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
@@ -695,10 +695,17 @@ FileResult<std::unique_ptr<WorldStore>> PostgresStore::reopen() const {
 }
 
 FileStatus PostgresStore::set_epoch(std::uint64_t epoch) {
-  WorldMeta m = meta_;
-  m.epoch = epoch;
-  if (auto st = put_meta(m); !st) return st;
-  meta_.epoch = epoch;
+  // One statement, above whatever is stored: servers starting at once each
+  // get an epoch of their own (a client's resume token names one).
+  auto r = c_->exec("write world epoch",
+                    "UPDATE terrane_meta SET value = (GREATEST(value::bigint + 1, $1::bigint))::text"
+                    " WHERE key = 'epoch' RETURNING value",
+                    {text(static_cast<std::int64_t>(std::min<std::uint64_t>(
+                        epoch, static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()))))});
+  if (!r) return file_error(r.error());
+  const auto got = r->count() == 1 ? r->integer(0, 0) : std::nullopt;
+  if (!got || *got < 0) return FileError{"world " + shown_ + ": metadata key epoch missing or malformed", {}};
+  meta_.epoch = static_cast<std::uint64_t>(*got);
   return Ok{};
 }
 
@@ -706,7 +713,11 @@ FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) {
   if (auto why = bounds.validate(); !why.empty()) return FileError{"world " + shown_ + ": " + why, {}};
   WorldMeta m = meta_;
   m.bounds = bounds;
-  if (auto st = put_meta(m); !st) return st;
+  // Only the bounds' keys: another server's epoch is left as it is.
+  std::vector<std::pair<std::string, std::string>> keys;
+  for (auto& kv : meta_to_keys(m))
+    if (kv.first == "bounds_y" || kv.first == "bounds_xz") keys.push_back(std::move(kv));
+  if (auto st = put_meta(keys); !st) return st;
   meta_.bounds = bounds;
   return Ok{};
 }

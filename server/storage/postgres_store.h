@@ -219,7 +219,8 @@ class PostgresStore final : public WorldStore {
                   std::span<const ForwardAnswer> answers);
   // Inside a transaction: the rows answered and their notices.
   StoreResult<Ok> answer_in_transaction(std::span<const ForwardAnswer> answers);
-  FileStatus put_meta(const WorldMeta& meta);
+  // Writes these metadata keys (others are left as they are).
+  FileStatus put_meta(const std::vector<std::pair<std::string, std::string>>& keys);
 
   std::unique_ptr<Connection> c_;
   std::string url_;    // as given (reopen connects with it)

@@ -646,7 +646,8 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
 void WorldOwner::read_again_elsewhere() {
   asio::post(strand_, [this] {
     for (const auto& [cp, l] : loaded_) {
-      if (writes_region(lease_region_of(cp)) || loading_.count(cp) != 0) continue;
+      // Estimates are replaced by the chunks as they are (their loads read the store).
+      if (writes_region(lease_region_of(cp)) || loading_.count(cp) != 0 || l.current->estimate()) continue;
       loading_.try_emplace(cp);
       load(cp, Storage::Priority::kBackground);
     }

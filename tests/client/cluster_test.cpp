@@ -103,6 +103,18 @@ class ClusterTest : public testing_support::PostgresTest {
       answer = outcome(c, c.write_box(r, v));
     return answer;
   }
+  // Every chunk of near the client holds agrees with its server's (region
+  // hashes asked for and answered, none mismatched).
+  static void expect_agrees_with_its_server(Client& c, const std::vector<Vec3i>& near) {
+    for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+    ASSERT_TRUE(c.wait_until(
+        [&](const ClientView& v) {
+          return v.closed ||
+                 std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
+        },
+        kDeadline));
+    EXPECT_EQ(c.counters().hash_mismatches, 0u);
+  }
   // A box beside the spawn, and a pattern to write there.
   static Region box_near(const Client& c, int dx) {
     const Vec3f s = c.welcome()->spawn;
@@ -189,14 +201,7 @@ TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhat
   ASSERT_EQ(until_accepted(bob, third, more), "");
   EXPECT_TRUE(replica_shows(bob, third, more));
   // Every chunk bob holds agrees with server 2's.
-  for (const Vec3i cp : near) ASSERT_TRUE(bob.request_region_hash(cp));
-  ASSERT_TRUE(bob.wait_until(
-      [&](const ClientView& v) {
-        return v.closed ||
-               std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
-      },
-      kDeadline));
-  EXPECT_EQ(bob.counters().hash_mismatches, 0u);
+  expect_agrees_with_its_server(bob, near);
   bob.disconnect();
   // And the database holds all three: a third server shows them.
   ServerProcess& c = start(3);
@@ -263,14 +268,7 @@ TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
   const auto again = pattern(box, materials::kSnow);
   ASSERT_EQ(outcome(ann, ann.write_box(box, again)), "");
   ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, box, again); }, kDeadline));
-  for (const Vec3i cp : near) ASSERT_TRUE(bob.request_region_hash(cp));
-  ASSERT_TRUE(bob.wait_until(
-      [&](const ClientView& v) {
-        return v.closed ||
-               std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
-      },
-      kDeadline));
-  EXPECT_EQ(bob.counters().hash_mismatches, 0u);
+  expect_agrees_with_its_server(bob, near);
   ann.disconnect();
   bob.disconnect();
 }

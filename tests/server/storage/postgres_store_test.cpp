@@ -241,6 +241,11 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
   auto third = s->reopen();
   ASSERT_TRUE(third.ok());
   EXPECT_EQ((*third)->meta().epoch, 9u);
+  // Two servers starting from the same metadata each get an epoch of their own.
+  ASSERT_TRUE(s->set_epoch(10).ok());
+  ASSERT_TRUE(second->set_epoch(10).ok());
+  EXPECT_EQ(s->meta().epoch, 10u);
+  EXPECT_EQ(second->meta().epoch, 11u);
   EXPECT_EQ((*third)->meta().materials, meta.materials);
 
   // Chunks with their coarse mips and the edit log in one fenced write,
