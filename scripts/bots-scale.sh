@@ -63,8 +63,7 @@ if [ "${TERRANE_SCALE_WARMUP:-0}" = 1 ]; then
   ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots 40 --duration 45 --behavior idle --spread 512 \
     --view-distance 512 --full-res-radius 64 --hash-checks 0 --seed 99 --progress off "${token_flags[@]}" >/dev/null || true
 fi
-ticks=$(getconf CLK_TCK)
-cpu0=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
+cpu0=$(terrane_cpu_seconds "$server_pid")
 start=$(date +%s.%N)
 
 mkdir -p "$(dirname "$report")"
@@ -76,12 +75,12 @@ timer=()
   "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
   --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 
-cpu1=$(awk '{print $14 + $15}' "/proc/$server_pid/stat")
+cpu1=$(terrane_cpu_seconds "$server_pid")
 end=$(date +%s.%N)
-hwm=$(awk '/VmHWM/ {print $2}' "/proc/$server_pid/status")
-awk -v h="$hwm" -v c0="$cpu0" -v c1="$cpu1" -v t="$ticks" -v s="$start" -v e="$end" 'BEGIN {
+hwm=$(terrane_peak_kib "$server_pid")
+awk -v h="$hwm" -v c0="$cpu0" -v c1="$cpu1" -v s="$start" -v e="$end" 'BEGIN {
   printf "server: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core)\n",
-         h / 1024, (c1 - c0) / t, e - s, 100 * (c1 - c0) / t / (e - s) }'
+         h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s) }'
 terrane_stop_server || status=1
 tail -n 1 "$scratch/server.log"
 cp "$scratch/server.log" "${report%.json}.server.log"

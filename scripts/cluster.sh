@@ -22,6 +22,11 @@ servers=${1:-2}
 bots=${2:-20}
 report=${3:-reports/cluster-$servers-$bots.json}
 shift $(( $# >= 3 ? 3 : $# ))
+case "$servers$bots" in
+  *[!0-9]*|'') echo "cluster.sh: SERVERS and BOTS are positive numbers (got '$servers', '$bots')" >&2; exit 2 ;;
+esac
+[ "$servers" -ge 1 ] && [ "$bots" -ge 1 ] || { echo "cluster.sh: SERVERS and BOTS are at least 1" >&2; exit 2; }
+. scripts/lib.sh  # terrane_cpu_seconds, terrane_peak_kib
 pgbin=
 for v in 17 16 15 14 13; do
   [ -x "/usr/lib/postgresql/$v/bin/postgres" ] && { pgbin=/usr/lib/postgresql/$v/bin; break; }
@@ -114,9 +119,8 @@ sum_metric() {
   echo "$total"
 }
 writes0=$(sum_metric terrane_commits_total)
-ticks=$(getconf CLK_TCK)
 cpu0=()
-for p in "${server_pids[@]}"; do cpu0+=("$(awk '{print $14 + $15}' "/proc/$p/stat")"); done
+for p in "${server_pids[@]}"; do cpu0+=("$(terrane_cpu_seconds "$p")"); done
 commits0=$(psql_value "SELECT xact_commit FROM pg_stat_database WHERE datname = 'postgres'")
 bytes0=$(psql_value "SELECT pg_current_wal_lsn() - '0/0'::pg_lsn")
 start=$(date +%s.%N)
@@ -142,15 +146,15 @@ for i in $(seq 1 "$servers"); do
     status=1
     continue
   fi
-  cpu1=$(awk '{print $14 + $15}' "/proc/$p/stat")
-  hwm=$(awk '/VmHWM/ {print $2}' "/proc/$p/status")
+  cpu1=$(terrane_cpu_seconds "$p")
+  hwm=$(terrane_peak_kib "$p")
   m=$(metrics_text "${metrics[$((i - 1))]}" || true)
   metric() { echo "$m" | awk -v n="$1" '$1 == n {print $2}' | head -n 1; }
-  awk -v i="$i" -v h="$hwm" -v c0="${cpu0[$((i - 1))]}" -v c1="$cpu1" -v t="$ticks" -v s="$start" -v e="$end" \
+  awk -v i="$i" -v h="$hwm" -v c0="${cpu0[$((i - 1))]}" -v c1="$cpu1" -v s="$start" -v e="$end" \
     -v f="$(metric terrane_edits_forwarded_total)" -v r="$(metric terrane_forwarded_edits_received_total)" \
     -v x="$(metric terrane_chunks_changed_elsewhere_total)" 'BEGIN {
     printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks read again for the others %d\n",
-           i, h / 1024, (c1 - c0) / t, e - s, 100 * (c1 - c0) / t / (e - s), f, r, x }'
+           i, h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s), f, r, x }'
 done
 awk -v c0="$commits0" -v c1="$commits1" -v b0="$bytes0" -v b1="$bytes1" -v s="$start" -v e="$end" -v a="${acked:-0}" \
   -v w="$writes" 'BEGIN {

@@ -10,6 +10,8 @@
 #                                 $metrics_port; exits 1 with the log if it
 #                                 does not come up within 60 s
 #   terrane_stop_server           SIGTERM and wait (its exit status is returned)
+#   terrane_cpu_seconds PID       CPU time (user + system) a process used so far
+#   terrane_peak_kib PID          its peak resident memory (VmHWM), KiB
 
 terrane_scratch() {
   scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-$1.XXXXXX")
@@ -46,6 +48,14 @@ terrane_start_server() {
   echo "terrane-server did not report its port within 60 s:" >&2
   cat "$log" >&2
   exit 1
+}
+
+terrane_cpu_seconds() {
+  awk -v t="$(getconf CLK_TCK)" '{printf "%.2f\n", ($14 + $15) / t}' "/proc/$1/stat"
+}
+
+terrane_peak_kib() {
+  awk '/VmHWM/ {print $2}' "/proc/$1/status"
 }
 
 terrane_stop_server() {

@@ -136,7 +136,7 @@ int run(int argc, char** argv) {
   if (PostgresStore::is_url(where)) {
     o.store_url = where;
     if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
-    o.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, 2147483647, &err));
+    o.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
     o.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
   } else {
     if (where.find("://") != std::string::npos)

@@ -22,22 +22,17 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   // region another server holds is never written, and a lease lost (this
   // server paused or cut off past it) makes the next write fail, which
   // stops the server as any failed commit does.
-  LeaseTimes times;
-  times.lease = options_.lease;
-  times.renew = std::max(std::chrono::milliseconds(1), options_.lease / 5);
-  auto keeper = LeaseKeeper::open(options_.store_url, options_.server_id, times,
+  auto keeper = LeaseKeeper::open(options_.store_url, options_.server_id, LeaseTimes::of(options_.lease),
                                   [this](const RegionLease& lost, const std::string& why) {
                                     // Leases are held only once edits run, so the world owner exists.
                                     if (world_owner_) world_owner_->lease_lost(lost.region, why);
                                   });
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
-  (*store)->set_lease_source(std::make_shared<const LeaseSource>(
-      // Only leases held: the world owner claims a region (and reads it
-      // again) before it applies anything there, so a write never takes
-      // back a region this server lost or handed over.
-      [keeper = leases_.get()](std::span<const Vec3i> regions) { return keeper->held(regions); }),
-      options_.lease);
+  // Only leases held: the world owner claims a region (and reads it again)
+  // before it applies anything there, so a write never takes back a region
+  // this server lost or handed over.
+  (*store)->set_lease_source(leases_->held_source(), options_.lease);
   return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
 }
 

@@ -18,7 +18,7 @@ StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::str
 
 ChangeListener::ChangeListener(std::string url, std::uint32_t server, Handlers handlers,
                                std::unique_ptr<PostgresStore> conn)
-    : url_(std::move(url)), server_(server), on_(std::move(handlers)), conn_(std::move(conn)) {}
+    : url_(std::move(url)), server_(server), server_text_(std::to_string(server)), on_(std::move(handlers)), conn_(std::move(conn)) {}
 
 ChangeListener::~ChangeListener() {
   {
@@ -41,7 +41,6 @@ void ChangeListener::run() {
       auto again = PostgresStore::open(url_);
       if (again && (*again)->listen()) {
         conn_ = std::move(*again);
-        reconnects_.fetch_add(1, std::memory_order_relaxed);
         server_log().info("notices from the other servers: listening again; reading again what may have been missed");
         on_.missed();
         continue;
@@ -62,14 +61,13 @@ void ChangeListener::run() {
 }
 
 void ChangeListener::hand_on(const PostgresStore::Notice& n) {
-  notices_.fetch_add(1, std::memory_order_relaxed);
   bool read = true;
   if (n.channel == kChangesChannel) {
     auto changes = parse_change_notice(n.payload);
     read = changes.has_value();
     if (changes) on_.changes(std::move(*changes));
   } else if (n.channel == kInboxChannel) {
-    if (n.payload == std::to_string(server_)) on_.inbox();
+    if (n.payload == server_text_) on_.inbox();
   } else if (n.channel == kAnswersChannel) {
     auto a = parse_answer_notice(n.payload);
     read = a.has_value();

@@ -15,7 +15,6 @@
 // stops the thread; no callback runs after it returns.
 #pragma once
 
-#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -46,9 +45,6 @@ class ChangeListener {
   ChangeListener(const ChangeListener&) = delete;
   ChangeListener& operator=(const ChangeListener&) = delete;
 
-  std::uint64_t notices() const { return notices_.load(std::memory_order_relaxed); }
-  std::uint64_t reconnects() const { return reconnects_.load(std::memory_order_relaxed); }
-
  private:
   ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<PostgresStore> conn);
   void run();
@@ -56,9 +52,9 @@ class ChangeListener {
 
   const std::string url_;
   const std::uint32_t server_;
+  const std::string server_text_;  // as inbox notices name it
   const Handlers on_;
   std::unique_ptr<PostgresStore> conn_;  // the thread's
-  std::atomic<std::uint64_t> notices_{0}, reconnects_{0};
   std::mutex mutex_;  // guards stopping_
   std::condition_variable wake_;
   bool stopping_ = false;

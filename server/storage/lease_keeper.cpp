@@ -52,6 +52,14 @@ StoreResult<std::vector<RegionLease>> LeaseKeeper::held(std::span<const Vec3i> r
   return out;
 }
 
+std::shared_ptr<const LeaseSource> LeaseKeeper::held_source() const {
+  return std::make_shared<const LeaseSource>([this](std::span<const Vec3i> regions) { return held(regions); });
+}
+
+std::shared_ptr<const LeaseSource> LeaseKeeper::claiming_source() {
+  return std::make_shared<const LeaseSource>([this](std::span<const Vec3i> regions) { return ensure(regions); });
+}
+
 bool LeaseKeeper::holds(Vec3i region) const {
   std::lock_guard lock(mutex_);
   return held_.count(key_of(region)) != 0;

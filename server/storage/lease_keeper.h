@@ -13,6 +13,7 @@
 // on_lost runs on the keeper's thread.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -33,6 +34,10 @@ namespace terrane {
 struct LeaseTimes {
   std::chrono::milliseconds lease{5000};  // how long a claim or renewal lasts
   std::chrono::milliseconds renew{1000};  // how often every held lease is renewed
+  // A lease of this length, renewed every fifth of it.
+  static LeaseTimes of(std::chrono::milliseconds lease) {
+    return {lease, std::max(std::chrono::milliseconds(1), lease / 5)};
+  }
 };
 
 class LeaseKeeper {
@@ -57,6 +62,10 @@ class LeaseKeeper {
   bool holds(Vec3i region) const;
   std::vector<RegionLease> held() const;
   std::uint32_t owner() const { return owner_; }
+  // A lease source for a PostgresStore: the leases held only (held()), or
+  // claiming those not held (ensure()). Valid while this keeper lives.
+  std::shared_ptr<const LeaseSource> held_source() const;
+  std::shared_ptr<const LeaseSource> claiming_source();
   // Gives these regions' leases up at once (handed to another server:
   // nothing of them may be in flight); regions not held are skipped.
   StoreResult<Ok> release(std::span<const Vec3i> regions);

@@ -16,6 +16,8 @@
 #include <tuple>
 
 #include "common/world/coarse_image.h"
+#include "protocol/framing.h"
+#include "protocol/messages.h"
 #include "server/log.h"
 
 namespace terrane {
@@ -319,7 +321,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
 }
 
 StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease) {
-  if (owner > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max()))
+  if (owner > kMaxServerId)
     return StoreError{StoreError::Kind::kQuery, fmt::format("server id {} is not below 2^31", owner)};
   // Free, expired or the claimant's own: taken at the next epoch (a server
   // that claims again is a new incarnation: whatever its earlier self still
@@ -489,6 +491,13 @@ std::span<const std::uint8_t> bytes_at(PGresult* res, int row, int col) {
           static_cast<std::size_t>(PQgetlength(res, row, col))};
 }
 
+// The chunk position in a row's first three columns (x, y, z integers).
+std::optional<Vec3i> position_at(PGresult* res, int row) {
+  const auto x = be32_at(res, row, 0), y = be32_at(res, row, 1), z = be32_at(res, row, 2);
+  if (!x || !y || !z) return std::nullopt;
+  return Vec3i{*x, *y, *z};
+}
+
 FileError decode_failure(Vec3i pos, const DecodeError& e) {
   return FileError{fmt::format("postgresql: chunk {}: {}", region_text(pos), e.describe()), e};
 }
@@ -581,39 +590,51 @@ StoreResult<Ok> PostgresStore::answer_in_transaction(std::span<const ForwardAnsw
   return Ok{};
 }
 
-StoreResult<Ok> PostgresStore::answer(std::span<const ForwardAnswer> answers) {
+template <class T>
+StoreResult<T> PostgresStore::transaction(const char* what, const std::function<StoreResult<T>()>& body) {
   auto begin = c_->exec("begin", "BEGIN");
   if (!begin) return begin.error();
-  if (auto a = answer_in_transaction(answers); !a) return c_->abort(a.error());
-  auto commit = c_->exec("commit answers", "COMMIT");
+  auto out = body();
+  if (!out) return c_->abort(out.error());
+  auto commit = c_->exec(what, "COMMIT");
   if (!commit) return c_->abort(commit.error());
-  return Ok{};
+  return out;
+}
+
+StoreResult<Ok> PostgresStore::answer(std::span<const ForwardAnswer> answers) {
+  return transaction<Ok>("commit answers", [&] { return answer_in_transaction(answers); });
 }
 
 StoreResult<std::int64_t> PostgresStore::forward(std::uint32_t from, std::uint32_t to, const std::string& player,
                                                  std::span<const std::uint8_t> edit) {
-  auto begin = c_->exec("begin", "BEGIN");
-  if (!begin) return begin.error();
-  auto row = c_->exec("forward edit",
-                      "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
-                      " VALUES ($1, $2, $3, $4, clock_timestamp()) RETURNING id",
-                      {text(to), text(from), Param{player, false}, blob(edit)});
-  if (!row) return c_->abort(row.error());
-  const auto id = row->count() == 1 ? row->integer(0, 0) : std::nullopt;
-  if (!id) return c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: forward edit: no row id"});
-  auto n = c_->exec("notify inbox", "SELECT pg_notify($1, $2)", {Param{kInboxChannel, false}, Param{std::to_string(to), false}});
-  if (!n) return c_->abort(n.error());
-  auto commit = c_->exec("commit forward", "COMMIT");
-  if (!commit) return c_->abort(commit.error());
-  return *id;
+  return transaction<std::int64_t>("commit forward", [&]() -> StoreResult<std::int64_t> {
+    auto row = c_->exec("forward edit",
+                        "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
+                        " VALUES ($1, $2, $3, $4, clock_timestamp()) RETURNING id",
+                        {text(to), text(from), Param{player, false}, blob(edit)});
+    if (!row) return row.error();
+    const auto id = row->count() == 1 ? row->integer(0, 0) : std::nullopt;
+    if (!id) return StoreError{StoreError::Kind::kDecode, "postgresql: forward edit: no row id"};
+    auto n = c_->exec("notify inbox", "SELECT pg_notify($1, $2)",
+                      {Param{kInboxChannel, false}, Param{std::to_string(to), false}});
+    if (!n) return n.error();
+    return *id;
+  });
 }
 
 StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
   auto r = c_->exec("read inbox",
-                    "SELECT id, from_server, player, edit,"
+                    // A row's player and edit are read only up to what a
+                    // client may send (longer: empty, so refused).
+                    "SELECT id, from_server,"
+                    " CASE WHEN octet_length(player) <= $4 THEN player ELSE '' END,"
+                    " CASE WHEN octet_length(edit) <= $5 THEN edit ELSE ''::bytea END,"
                     " (extract(epoch from clock_timestamp() - created_at) * 1000)::bigint FROM terrane_inbox"
                     " WHERE to_server = $1 AND id > $2 ORDER BY id LIMIT $3",
-                    {text(to), text(after), text(static_cast<std::int64_t>(limit))}, /*binary_result=*/true);
+                    {text(to), text(after), text(static_cast<std::int64_t>(limit)),
+                     text(static_cast<std::int64_t>(kMaxClientNameBytes)),
+                     text(static_cast<std::int64_t>(kDefaultMaxFrameBytes + kFrameHeaderBytes))},
+                    /*binary_result=*/true);
   if (!r) return r.error();
   std::vector<InboxEdit> out;
   for (int i = 0; i < r->count(); ++i) {
@@ -673,17 +694,17 @@ StoreResult<Ok> PostgresStore::create_world(const WorldMeta& meta) {
 }
 
 FileStatus PostgresStore::put_meta(const std::vector<std::pair<std::string, std::string>>& keys) {
-  auto begin = c_->exec("begin", "BEGIN");
-  if (!begin) return file_error(begin.error());
-  for (const auto& [k, v] : keys) {
-    auto put = c_->exec("write world metadata",
-                        "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)"
-                        " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
-                        {Param{k, false}, Param{v, false}});
-    if (!put) return file_error(c_->abort(put.error()));
-  }
-  auto commit = c_->exec("commit world metadata", "COMMIT");
-  if (!commit) return file_error(c_->abort(commit.error()));
+  auto done = transaction<Ok>("commit world metadata", [&]() -> StoreResult<Ok> {
+    for (const auto& [k, v] : keys) {
+      auto put = c_->exec("write world metadata",
+                          "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)"
+                          " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+                          {Param{k, false}, Param{v, false}});
+      if (!put) return put.error();
+    }
+    return Ok{};
+  });
+  if (!done) return file_error(done.error());
   return Ok{};
 }
 
@@ -744,16 +765,15 @@ FileResult<std::vector<CoarseEntry>> PostgresStore::load_coarse(Vec3i region) {
   std::vector<CoarseEntry> out;
   out.reserve(static_cast<std::size_t>(r->count()));
   for (int i = 0; i < r->count(); ++i) {
-    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+    const auto pos = position_at(r->res, i);
     const auto revision = be64_at(r->res, i, 3);
-    if (!x || !y || !z) return FileError{fmt::format("postgresql: region {}: a chunk row's position does not read",
-                                                     region_text(region)), std::nullopt};
-    const Vec3i pos{*x, *y, *z};
+    if (!pos) return FileError{fmt::format("postgresql: region {}: a chunk row's position does not read",
+                                           region_text(region)), std::nullopt};
     if (!revision || *revision < 0)
-      return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
+      return decode_failure(*pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
     auto voxels = coarse_from_bytes(bytes_at(r->res, i, 4));
-    if (!voxels) return decode_failure(pos, voxels.error());
-    out.push_back(CoarseEntry{pos, static_cast<std::uint64_t>(*revision), *voxels});
+    if (!voxels) return decode_failure(*pos, voxels.error());
+    out.push_back(CoarseEntry{*pos, static_cast<std::uint64_t>(*revision), *voxels});
   }
   return out;
 }
@@ -764,10 +784,10 @@ FileResult<std::vector<Vec3i>> positions(Rows& r, Vec3i region) {
   if (!r) return file_error(r.error());
   std::vector<Vec3i> out;
   for (int i = 0; i < r->count(); ++i) {
-    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
-    if (!x || !y || !z) return FileError{fmt::format("postgresql: region {}: a row's position does not read",
-                                                     region_text(region)), std::nullopt};
-    out.push_back({*x, *y, *z});
+    const auto pos = position_at(r->res, i);
+    if (!pos) return FileError{fmt::format("postgresql: region {}: a row's position does not read",
+                                           region_text(region)), std::nullopt};
+    out.push_back(*pos);
   }
   return out;
 }
@@ -781,11 +801,11 @@ StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> PostgresStore::stored_
   if (!r) return r.error();
   std::vector<std::pair<Vec3i, std::uint64_t>> out;
   for (int i = 0; i < r->count(); ++i) {
-    const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+    const auto pos = position_at(r->res, i);
     const auto revision = be64_at(r->res, i, 3);
-    if (!x || !y || !z || !revision || *revision < 0)
+    if (!pos || !revision || *revision < 0)
       return StoreError{StoreError::Kind::kDecode, "postgresql: read revisions: a row does not read"};
-    out.emplace_back(Vec3i{*x, *y, *z}, static_cast<std::uint64_t>(*revision));
+    out.emplace_back(*pos, static_cast<std::uint64_t>(*revision));
   }
   return out;
 }
@@ -966,11 +986,11 @@ FileStatus PostgresStore::for_each_chunk(
     if (!r) return file_error(c_->abort(r.error()));
     if (r->count() == 0) break;
     for (int i = 0; i < r->count(); ++i) {
-      const auto x = be32_at(r->res, i, 0), y = be32_at(r->res, i, 1), z = be32_at(r->res, i, 2);
+      const auto pos = position_at(r->res, i);
       const auto revision = be64_at(r->res, i, 3);
-      if (!x || !y || !z || !revision || *revision < 0)
+      if (!pos || !revision || *revision < 0)
         return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
-      fn({*x, *y, *z}, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4));
+      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4));
     }
   }
   auto commit = c_->exec("end read", "COMMIT");

@@ -91,6 +91,9 @@ struct ForwardAnswer {
 std::string answer_notice(const ForwardAnswer& a);
 std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload);
 
+// Server ids (terrane-server --server-id) are below 2^31: PostgreSQL's integer.
+inline constexpr std::uint32_t kMaxServerId = 2147483647;
+
 // Where a server's writes get their leases: the leases of the regions given
 // (a LeaseKeeper's ensure), or kOwned naming the holder of one of them.
 using LeaseSource = std::function<StoreResult<std::vector<RegionLease>>(std::span<const Vec3i> regions)>;
@@ -217,6 +220,9 @@ class PostgresStore final : public WorldStore {
   StoreResult<Ok> read_meta();
   FileStatus save(std::span<const ChunkWrite> writes, bool overwrite, std::span<const EditLogEntry> log,
                   std::span<const ForwardAnswer> answers);
+  // BEGIN, body, COMMIT; on any failure the transaction is rolled back.
+  template <class T>
+  StoreResult<T> transaction(const char* what, const std::function<StoreResult<T>()>& body);
   // Inside a transaction: the rows answered and their notices.
   StoreResult<Ok> answer_in_transaction(std::span<const ForwardAnswer> answers);
   // Writes these metadata keys (others are left as they are).

@@ -66,7 +66,7 @@ std::deque<Storage::LoadJob>& Storage::queue(Priority priority) {
 }
 
 void Storage::claim(Vec3i region, ClaimDone done) {
-  asio::post(loaders_, [this, region, done = std::move(done)] {
+  with_postgres([this, region, done = std::move(done)](PostgresStore& pg) {
     Claimed out;
     auto held = leases_->ensure(std::span(&region, 1));
     if (!held) {
@@ -76,21 +76,8 @@ void Storage::claim(Vec3i region, ClaimDone done) {
       done(std::move(out));
       return;
     }
-    std::unique_ptr<WorldStore> store;
-    {
-      std::lock_guard lock(readers_mutex_);
-      store = std::move(readers_.back());
-      readers_.pop_back();
-    }
     // Revisions only (no voxels: nothing there can fail to decode).
-    auto* pg = dynamic_cast<PostgresStore*>(store.get());
-    auto revisions = pg != nullptr ? pg->stored_revisions(region)
-                                   : StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>>(
-                                         StoreError{StoreError::Kind::kQuery, "not a PostgreSQL world"});
-    {
-      std::lock_guard lock(readers_mutex_);
-      readers_.push_back(std::move(store));
-    }
+    auto revisions = pg.stored_revisions(region);
     if (!revisions) {
       // Held, but what is stored there is not known: not written until it is.
       out.why = "cannot read what the region holds: " + revisions.error().message;
@@ -104,18 +91,27 @@ void Storage::claim(Vec3i region, ClaimDone done) {
   });
 }
 
+std::unique_ptr<WorldStore> Storage::take_reader() {
+  auto store = std::move(readers_.back());
+  readers_.pop_back();
+  return store;
+}
+
+void Storage::give_reader(std::unique_ptr<WorldStore> store) {
+  std::lock_guard lock(readers_mutex_);
+  readers_.push_back(std::move(store));
+}
+
 void Storage::with_postgres(std::function<void(PostgresStore&)> fn) {
   asio::post(loaders_, [this, fn = std::move(fn)] {
     std::unique_ptr<WorldStore> store;
     {
       std::lock_guard lock(readers_mutex_);
-      store = std::move(readers_.back());
-      readers_.pop_back();
+      store = take_reader();
     }
-    // Only a shared world forwards edits: its readers are PostgreSQL's.
+    // Only a shared world (set_leases) asks: its readers are PostgreSQL's.
     if (auto* pg = dynamic_cast<PostgresStore*>(store.get())) fn(*pg);
-    std::lock_guard lock(readers_mutex_);
-    readers_.push_back(std::move(store));
+    give_reader(std::move(store));
   });
 }
 
@@ -129,8 +125,11 @@ void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uin
   });
 }
 
-void Storage::read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
-  with_postgres([this, after, done = std::move(done)](PostgresStore& pg) { done(pg.inbox(leases_->owner(), after, 256)); });  // kInboxPage
+void Storage::read_inbox(std::int64_t after, std::size_t limit,
+                         std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
+  with_postgres([this, after, limit, done = std::move(done)](PostgresStore& pg) {
+    done(pg.inbox(leases_->owner(), after, limit));
+  });
 }
 
 void Storage::answer(std::vector<ForwardAnswer> answers) {
@@ -157,13 +156,9 @@ void Storage::post_load() {
       auto& q = !urgent_loads_.empty() ? urgent_loads_ : !loads_.empty() ? loads_ : background_loads_;
       job = std::move(q.front());
       q.pop_front();
-      store = std::move(readers_.back());
-      readers_.pop_back();
+      store = take_reader();
     }
-    const auto give_back = [&] {
-      std::lock_guard lock(readers_mutex_);
-      readers_.push_back(std::move(store));
-    };
+    const auto give_back = [&] { give_reader(std::move(store)); };
     if (!job.coarse_done) {
       LoadedChunk c = load_now(*store, job.pos);
       give_back();
@@ -353,6 +348,7 @@ void Storage::writer_loop() {
       }
       if (!writes.empty() || !log.empty() || !answers.empty()) {
         const auto t0 = std::chrono::steady_clock::now();
+        // Answers exist only in a shared world: its writer is PostgreSQL's.
         auto* shared = answers.empty() ? nullptr : dynamic_cast<PostgresStore*>(writer_store_.get());
         status = shared != nullptr ? shared->save_answering(writes, log, answers)
                                    : writer_store_->save_chunks(writes, true, log);

@@ -2,7 +2,8 @@
 //
 //   Loads run on a loader pool: each load reads the chunk's row on a
 //   connection of its own (the world's WorldStore reopened: SQLite in WAL
-//   mode and PostgreSQL both let readers run beside the writer) and decodes it, or generates a chunk that was never stored. A
+//   mode and PostgreSQL both let readers run beside the writer) and
+//   decodes it, or generates a chunk that was never stored. A
 //   damaged blob is moved, in one transaction, to the quarantine table and
 //   the chunk is served as generated at the quarantined revision + 1, so
 //   revisions only grow and later saves write a fresh row. A row SQLite
@@ -139,7 +140,7 @@ class Storage {
   // first (nothing of them in flight), so that server can take them.
   void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
                std::function<void(StoreResult<std::int64_t>)> done);
-  void read_inbox(std::int64_t after, std::function<void(StoreResult<std::vector<InboxEdit>>)> done);
+  void read_inbox(std::int64_t after, std::size_t limit, std::function<void(StoreResult<std::vector<InboxEdit>>)> done);
   void answer(std::vector<ForwardAnswer> answers);
   // log: the tick's edits for the edit log, and answers: the forwarded
   // edits it applied, stored in the same transaction.
@@ -166,8 +167,12 @@ class Storage {
     std::vector<ForwardAnswer> answers;
   };
   // Runs fn(store) on a loader thread with a reader connection of a
-  // PostgreSQL world.
+  // PostgreSQL world (only a shared world's callers ask).
   void with_postgres(std::function<void(PostgresStore&)> fn);
+  // A reader connection borrowed (take_reader under readers_mutex_) and
+  // given back.
+  std::unique_ptr<WorldStore> take_reader();
+  void give_reader(std::unique_ptr<WorldStore> store);
   void prune_log();
   bool estimate_coarse_ = true;
   LeaseKeeper* leases_ = nullptr;

@@ -177,7 +177,6 @@ constexpr const char* kMigrateHelp =
     "                 given up at the end.\n";
 
 // The highest server id (ids are below 2^31), migrate's default.
-constexpr std::uint32_t kMaxServerId = 2147483647;
 // Chunks per transaction when migrating.
 constexpr std::size_t kMigrateBatch = 256;
 
@@ -291,9 +290,7 @@ class ToolLeases {
     if (!keeper) return FileError{keeper.error().message, std::nullopt};
     keeper_ = std::move(*keeper);
     where_ = store.where();
-    auto source = std::make_shared<const LeaseSource>(
-        [k = keeper_.get()](std::span<const Vec3i> regions) { return k->ensure(regions); });
-    store.set_lease_source(std::move(source), times.lease);  // a database restart is waited for a lease time
+    store.set_lease_source(keeper_->claiming_source(), times.lease);  // a database restart is waited for a lease time
     return Ok{};
   }
   // Gives every lease up (they would otherwise run out within a lease time).

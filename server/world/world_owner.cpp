@@ -473,10 +473,7 @@ void WorldOwner::edit(ClientId id, EditRequestMsg e) {
     if (!is_history_edit(e.kind)) {
       const Region r = world_.meta().bounds.clamp(e.reads());
       if (r.empty()) return reject(id, e, RejectReason::kOutsideWorld, "edit outside the world");
-      for_each_chunk_in(r, [&](Vec3i cp) {
-        request(cp);
-        ++busy_[cp];
-      });
+      reserve(r);
     }
     ++c.edits_queued;
     edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr, std::nullopt});
@@ -500,6 +497,13 @@ void WorldOwner::rollback(std::string actor, std::vector<EditLogEntry> entries, 
     job->within = within;
     job->done = std::move(done);
     edits_.push_back(PendingEdit{0, EditRequestMsg{}, job->actor, std::move(job), std::nullopt});
+  });
+}
+
+void WorldOwner::reserve(const Region& r) {
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    request(cp);
+    ++busy_[cp];
   });
 }
 
@@ -564,25 +568,26 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   // What this server holds of the region older than stored was written by
   // the region's earlier owner: read again before anything is written over
   // it (its holders are sent the newer chunks as they land).
-  bool stale = false;
-  for (const auto& [cp, revision] : claimed.stored) {
-    auto it = loaded_.find(cp);
-    if (it == loaded_.end()) {
-      // Read from the store when wanted; a load under way may have read it
-      // before the previous owner's last write.
-      if (loading_.count(cp) != 0) {
-        read_again(cp, revision, Storage::Priority::kUrgent);
-        stale = true;
-      }
-      continue;
-    }
-    const ChunkVersion& held = *it->second.current;
-    if (!held.estimate() && held.revision() >= revision) continue;
-    read_again(cp, revision, Storage::Priority::kUrgent);
-    stale = true;
-  }
-  for (const auto& [cp, revision] : stale_) stale = stale || lease_region_of(cp) == region;
-  l.state = stale ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
+  // (A chunk not held is read from the store when wanted, but a load of it
+  // under way may have read it before the previous owner's last write.)
+  for (const auto& [cp, revision] : claimed.stored)
+    if (auto it = loaded_.find(cp); it == loaded_.end() ? loading_.count(cp) != 0
+                                                        : older_than(*it->second.current, revision))
+      read_again(cp, revision, Storage::Priority::kUrgent);
+  l.state = stale_in(region) ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
+}
+
+bool WorldOwner::older_than(const ChunkVersion& held, std::uint64_t revision) {
+  return held.estimate() || held.revision() < revision;
+}
+
+bool WorldOwner::stale_in(Vec3i region) const {
+  return std::any_of(stale_.begin(), stale_.end(), [&](const auto& s) { return lease_region_of(s.first) == region; });
+}
+
+void WorldOwner::load_unless_loading(Vec3i cp, Storage::Priority priority) {
+  if (!loading_.try_emplace(cp).second) return;
+  load(cp, priority);
 }
 
 bool WorldOwner::writes_region(Vec3i region) const {
@@ -596,31 +601,23 @@ void WorldOwner::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority 
   if (!fresh) it->second = std::max(it->second, revision);
   // A load already under way may have read the store before this revision:
   // refreshed() reads again when it lands.
-  if (loading_.count(cp) != 0) return;
-  loading_.try_emplace(cp);
-  load(cp, priority);
+  load_unless_loading(cp, priority);
 }
 
 void WorldOwner::refreshed(Vec3i cp) {
   auto s = stale_.find(cp);
   if (s == stale_.end()) return;
-  auto held = loaded_.find(cp);
-  if (held != loaded_.end() && (held->second.current->estimate() || held->second.current->revision() < s->second)) {
-    if (loading_.count(cp) == 0) {
-      // The load that landed read the store before the newer revision.
-      loading_.try_emplace(cp);
-      load(cp, Storage::Priority::kUrgent);
-    }
+  if (auto held = loaded_.find(cp); held != loaded_.end() && older_than(*held->second.current, s->second)) {
+    // The load that landed read the store before the newer revision.
+    load_unless_loading(cp, Storage::Priority::kUrgent);
     return;
   }
   // Held at the stored revision, or no longer held (read from the store when wanted).
   const Vec3i region = lease_region_of(cp);
   stale_.erase(s);
-  auto l = leases_.find(region);
-  if (l == leases_.end() || l->second.state != RegionLeaseState::kRefreshing) return;
-  for (const auto& [other, revision] : stale_)
-    if (lease_region_of(other) == region) return;
-  l->second.state = RegionLeaseState::kHeld;
+  if (auto l = leases_.find(region);
+      l != leases_.end() && l->second.state == RegionLeaseState::kRefreshing && !stale_in(region))
+    l->second.state = RegionLeaseState::kHeld;
 }
 
 void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
@@ -634,8 +631,7 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
         if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
         continue;
       }
-      const ChunkVersion& held = *it->second.current;
-      if (!held.estimate() && held.revision() >= c.revision) continue;
+      if (!older_than(*it->second.current, c.revision)) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
       // As urgent as an edit of this server's: its holders wait to see it.
       read_again(c.pos, c.revision, Storage::Priority::kUrgent);
@@ -647,9 +643,8 @@ void WorldOwner::read_again_elsewhere() {
   asio::post(strand_, [this] {
     for (const auto& [cp, l] : loaded_) {
       // Estimates are replaced by the chunks as they are (their loads read the store).
-      if (writes_region(lease_region_of(cp)) || loading_.count(cp) != 0 || l.current->estimate()) continue;
-      loading_.try_emplace(cp);
-      load(cp, Storage::Priority::kBackground);
+      if (writes_region(lease_region_of(cp)) || l.current->estimate()) continue;
+      load_unless_loading(cp, Storage::Priority::kBackground);
     }
   });
 }
@@ -670,16 +665,20 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
     hand_over.push_back(region);
   });
   if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
-  storage_.forward(to, pe.player, frame, std::move(hand_over),
-                   [this, id = pe.id, edit = pe.edit, box, to](StoreResult<std::int64_t> row) {
-    asio::post(strand_, [this, id, edit, box, to, row = std::move(row)] {
+  storage_.forward(to, pe.player, frame, hand_over,
+                   [this, id = pe.id, edit = pe.edit, box, to, hand_over](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, hand_over, row = std::move(row)] {
+      // The regions handed over are the recipient's now: this server's next
+      // edits there are forwarded to it too, until asked again a second on,
+      // so a region does not bounce back before the recipient has claimed
+      // it. Not forwarded: they are asked for again at once.
+      const auto now = std::chrono::steady_clock::now();
+      for (const Vec3i region : hand_over)
+        if (auto l = leases_.find(region); l != leases_.end() && l->second.state == RegionLeaseState::kHandingOver) {
+          l->second.state = RegionLeaseState::kRefused;
+          l->second.ask_again = row ? now + std::chrono::seconds(1) : now;
+        }
       if (!row) {
-        // Not forwarded: a region being handed over is asked for again.
-        for (auto& [region, l] : leases_)
-          if (l.state == RegionLeaseState::kHandingOver && l.holder == to) {
-            l.state = RegionLeaseState::kRefused;
-            l.ask_again = std::chrono::steady_clock::now();
-          }
         if (clients_.count(id) != 0)
           reject(id, edit, RejectReason::kNotOwner,
                  fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
@@ -691,14 +690,6 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
         early_answers_.erase(early);
       }
       forwarded_.emplace(*row, std::move(o));
-      // Handed over: the recipient's now (this server's next edits there
-      // are forwarded to it too, until asked again a second on, so the
-      // region does not bounce back before the recipient has claimed it).
-      for (auto& [region, l] : leases_)
-        if (l.state == RegionLeaseState::kHandingOver && l.holder == to) {
-          l.state = RegionLeaseState::kRefused;
-          l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
-        }
       settle_forwarded();
     });
   });
@@ -721,7 +712,7 @@ void WorldOwner::take_inbox() {
 void WorldOwner::read_inbox_page(std::int64_t after) {
   // Row ids are given at insert, not in commit order: every read lists all
   // rows waiting (a page at a time) and takes those not taken yet.
-  storage_.read_inbox(after, [this](StoreResult<std::vector<InboxEdit>> got) {
+  storage_.read_inbox(after, kInboxPage, [this](StoreResult<std::vector<InboxEdit>> got) {
     asio::post(strand_, [this, got = std::move(got)] {
       if (!got) {
         server_log().warn("forwarded edits: cannot read the inbox: {}", got.error().message);
@@ -730,17 +721,17 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
         return;
       }
       std::vector<ForwardAnswer> refused;
-      const auto forward_wait = std::max(kForwardAnswerWait, options_.lease);
       for (const InboxEdit& in : *got) {
         inbox_seen_.insert(in.id);
         if (!inbox_taken_.insert(in.id).second) continue;  // queued or answered already
         // Another server's bytes, checked as a client's are.
         auto edit = decode_forwarded_edit(in.edit);
         const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
-        const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait;
-        if (!edit || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
+        const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait();
+        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
           // Too old: its sender has told its client there was no answer.
           const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
+                                  : in.player.empty() ? std::string("the player's name is missing or too long")
                                   : stopping_ ? std::string("the region's server is shutting down")
                                   : too_old   ? std::string("it waited too long; its sender has given up on it")
                                   : r.empty() ? std::string("edit outside the world")
@@ -749,12 +740,11 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
           continue;
         }
         counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
+        reserve(r);
+        // What this server knew of the edit's regions held elsewhere may be
+        // out of date (the sender may have handed them over): asked again
+        // when the edit's turn comes.
         for_each_chunk_in(r, [&](Vec3i cp) {
-          request(cp);
-          ++busy_[cp];
-          // What this server knew of the edit's regions held elsewhere may
-          // be out of date (the sender may have handed them over): asked
-          // again when the edit's turn comes.
           if (auto l = leases_.find(lease_region_of(cp));
               l != leases_.end() && l->second.state == RegionLeaseState::kRefused)
             leases_.erase(l);
@@ -774,6 +764,11 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
   });
 }
 
+std::chrono::milliseconds WorldOwner::forward_wait() const {
+  // An owner silent for a lease time has lost its regions anyway.
+  return std::max<std::chrono::milliseconds>(kForwardAnswerWait, options_.lease);
+}
+
 void WorldOwner::answered(ForwardAnswer answer) {
   asio::post(strand_, [this, answer = std::move(answer)] {
     auto it = forwarded_.find(answer.id);
@@ -787,9 +782,8 @@ void WorldOwner::answered(ForwardAnswer answer) {
 
 void WorldOwner::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
-  // An owner silent for a lease time has lost its regions anyway.
-  const auto forward_wait = std::max(kForwardAnswerWait, options_.lease);
-  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > forward_wait; });
+  const auto wait = forward_wait();
+  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
     const auto client = clients_.find(o.id);
@@ -808,10 +802,10 @@ void WorldOwner::settle_forwarded() {
         client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, tick_)), SendClass::kControl);
         done = true;
       }
-    } else if (!done && now - o.sent > forward_wait) {
+    } else if (!done && now - o.sent > wait) {
       reject(o.id, o.edit, RejectReason::kNotOwner,
              fmt::format("forwarded to server {}, no answer within {} ms (it may still be applied)", o.to,
-                         forward_wait.count()));
+                         wait.count()));
       done = true;
     }
     it = done ? forwarded_.erase(it) : std::next(it);
@@ -848,6 +842,9 @@ void WorldOwner::apply_edits() {
   ChangedUnits changed;
   std::vector<Ack> acks;
   std::vector<ForwardAnswer> answers, refused;  // to forwarded edits: applied (in the commit), refused (at once)
+  const auto refuse = [&](const Forwarded& f, std::string why) {
+    refused.push_back(ForwardAnswer{f.inbox_id, f.from, false, 0, std::move(why)});
+  };
   std::vector<EditLogEntry> log;
   std::vector<std::shared_ptr<Rollback>> rollbacks;
   const std::int64_t now_ms =
@@ -920,8 +917,7 @@ void WorldOwner::apply_edits() {
       if (!stopping_) break;  // wait for its chunks (arrival order is kept)
       // Shutting down: chunks still loading will not be waited for.
       if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
-      if (pe.forwarded) refused.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, false, 0,
-                                                        "the region's server is shutting down"});
+      if (pe.forwarded) refuse(*pe.forwarded, "the region's server is shutting down");
       if (!history) unbusy(r);
       if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
       edits_.pop_front();
@@ -936,9 +932,8 @@ void WorldOwner::apply_edits() {
     if (w == Writable::kWaiting && !stopping_) break;  // wait for the claim (arrival order is kept)
     if (w != Writable::kYes) {
       if (pe.forwarded) {
-        refused.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, false, 0,
-                                        w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
-                                                           : std::string("the region's server is shutting down")});
+        refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
+                                                 : std::string("the region's server is shutting down"));
       } else if (client != nullptr && w == Writable::kNo && holder && !history && !stopping_) {
         // An edit across a border also writes regions of this server's: they
         // are handed over with it, once nothing of them is in flight.

@@ -279,6 +279,9 @@ class WorldOwner : private WorldView {
   // kNo also sets holder when the holding server is known.
   Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr);
   bool near_enough(const Client& c, const Region& r) const;
+  // The chunks of r asked for and kept loaded for a queued edit (unbusy
+  // releases them).
+  void reserve(const Region& r);
   void unbusy(const Region& r);
   void send_presence();
   void unload_unwatched();
@@ -323,6 +326,13 @@ class WorldOwner : private WorldView {
     std::chrono::steady_clock::time_point ask_again{};
   };
   void on_claimed(Vec3i region, Storage::Claimed claimed);
+  // Whether held is older than revision (an estimate is older than anything stored).
+  static bool older_than(const ChunkVersion& held, std::uint64_t revision);
+  bool stale_in(Vec3i region) const;
+  // Loads cp unless a load of it is under way.
+  void load_unless_loading(Vec3i cp, Storage::Priority priority);
+  // How long a forwarded edit waits for its owner's answer.
+  std::chrono::milliseconds forward_wait() const;
   // Sends pe (a client's edit of box, in regions server to holds) to that
   // server's inbox, handing over first the regions of box this server
   // holds (so one server can write the whole edit).

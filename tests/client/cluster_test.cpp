@@ -57,6 +57,24 @@ class ClusterTest : public testing_support::PostgresTest {
     o.state.full_res_radius = 32;
     return o;
   }
+  // Servers 1 and 2, with ann joined on the first and bob on the second,
+  // each holding the spawn's chunks at full resolution.
+  struct Pair {
+    ServerProcess* a = nullptr;
+    ServerProcess* b = nullptr;
+    std::unique_ptr<Client> ann, bob;
+    std::vector<Vec3i> near;  // the chunks bob holds around the spawn
+  };
+  void start_pair(int lease_ms, Pair* p) {
+    p->a = &start(1, lease_ms);
+    ASSERT_NE(p->a->port(), 0);
+    p->b = &start(2, lease_ms);
+    ASSERT_NE(p->b->port(), 0);
+    p->ann = std::make_unique<Client>(options(*p->a, "ann"));
+    p->bob = std::make_unique<Client>(options(*p->b, "bob"));
+    join(*p->ann);
+    p->near = join(*p->bob);
+  }
   // Connects and waits until the chunks around the spawn are held at full
   // resolution.
   static std::vector<Vec3i> join(Client& c) {
@@ -173,13 +191,11 @@ TEST_F(ClusterTest, AServerOnPostgresqlKeepsWhatItAcknowledgedAcrossARestart) {
 }
 
 TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhatTheOwnerWrote) {
-  ServerProcess& a = start(1);
-  ASSERT_NE(a.port(), 0);
-  ServerProcess& b = start(2);
-  ASSERT_NE(b.port(), 0);
-  Client ann(options(a, "ann")), bob(options(b, "bob"));
-  join(ann);
-  const auto near = join(bob);  // bob's server holds the spawn's chunks before ann edits them
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(5000, &p));
+  ServerProcess& a = *p.a;
+  Client &ann = *p.ann, &bob = *p.bob;
+  const std::vector<Vec3i>& near = p.near;
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
   ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
@@ -215,13 +231,10 @@ TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhat
 }
 
 TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {
-  ServerProcess& a = start(1, 1000);
-  ASSERT_NE(a.port(), 0);
-  ServerProcess& b = start(2, 1000);
-  ASSERT_NE(b.port(), 0);
-  Client ann(options(a, "ann")), bob(options(b, "bob"));
-  join(ann);
-  join(bob);
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(1000, &p));
+  ServerProcess &a = *p.a, &b = *p.b;
+  Client &ann = *p.ann, &bob = *p.bob;
   const Region box = box_near(ann, 0);
   ASSERT_EQ(outcome(ann, ann.write_box(box, pattern(box, materials::kBrick))), "");
   // Server 1 is paused: its lease runs out and server 2 takes the region.
@@ -250,13 +263,10 @@ TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {
 }
 
 TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
-  ServerProcess& a = start(1);
-  ASSERT_NE(a.port(), 0);
-  ServerProcess& b = start(2);
-  ASSERT_NE(b.port(), 0);
-  Client ann(options(a, "ann")), bob(options(b, "bob"));
-  join(ann);
-  const auto near = join(bob);
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(5000, &p));
+  Client &ann = *p.ann, &bob = *p.bob;
+  const std::vector<Vec3i>& near = p.near;
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
   ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
@@ -274,13 +284,10 @@ TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
 }
 
 TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEdit) {
-  ServerProcess& a = start(1, 1000);
-  ASSERT_NE(a.port(), 0);
-  ServerProcess& b = start(2, 1000);
-  ASSERT_NE(b.port(), 0);
-  Client ann(options(a, "ann")), bob(options(b, "bob"));
-  join(ann);
-  join(bob);
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(1000, &p));
+  ServerProcess& a = *p.a;
+  Client &ann = *p.ann, &bob = *p.bob;
   // Edits acknowledged by server 1, then more sent as it is killed.
   std::vector<std::pair<Region, std::vector<Voxel>>> acknowledged;
   for (int i = 0; i < 4; ++i) {
@@ -361,13 +368,9 @@ TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
 }
 
 TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
-  ServerProcess& a = start(1);
-  ASSERT_NE(a.port(), 0);
-  ServerProcess& b = start(2);
-  ASSERT_NE(b.port(), 0);
-  Client ann(options(a, "ann")), bob(options(b, "bob"));
-  join(ann);
-  join(bob);
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(5000, &p));
+  Client &ann = *p.ann, &bob = *p.bob;
   // The spawn lies on a region border (x = 0): ann's server takes the
   // region west of it, bob's the one east.
   const Region west = box_near(ann, -8), east = box_near(bob, 4);
