@@ -178,9 +178,10 @@ TEST_F(BotsRunTest, DroppedUpdatesFailTheRunAndNameTheRegion) {
 }
 
 TEST_F(BotsRunTest, ARunWhoseBotNeverJoinedOrEditedFails) {
-  // A cold server (nothing generated) and a view far larger than a fraction
-  // of a second can fill: the bot cannot finish its join within the run.
-  start_server();
+  // The server streams at most 16 KiB a second to a client, and the join at
+  // this view is megabytes: however fast the machine, the bot cannot finish
+  // its join within the run (a cold server alone once joined in 0.29 s).
+  start_server({"--outbound-bytes-per-second", "16384"});
   BotsOptions o = small_run(1, Behavior::kDig);
   o.join_timeout_s = 0;
   o.duration_s = 0.2;
