@@ -28,6 +28,7 @@ void Replica::write_unit(Vec3i unit_pos, const Box& unit) {
                       (it == pending_.end() && pending_.size() >= kMaxPendingChunks);
   if (direct) {
     grid_.write_box(unit_pos * kChunkDataUnit, unit);
+    voxels_changed(cp);
     return;
   }
   if (it == pending_.end()) it = pending_.emplace(cp, Pending{Box({kChunkSize, kChunkSize, kChunkSize}), 0}).first;
@@ -58,6 +59,7 @@ void Replica::flush_pending(Vec3i cp) {
     }
   }
   pending_.erase(it);
+  voxels_changed(cp);
 }
 
 void Replica::apply_stream_record(const StreamRecord& r) {
@@ -77,6 +79,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         grid_.erase_chunk(cp);
       else
         grid_.put_chunk(cp, std::move(chunk));
+      voxels_changed(cp);
       coverage_[cp] = ChunkCoverage{CoverageState::kFull, 0, r.revision};
       return;
     }
@@ -92,6 +95,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       pending_.erase(cp);
       coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
       grid_.erase_chunk(cp);
+      voxels_changed(cp);
       return;
     }
   }
@@ -106,10 +110,12 @@ Status Replica::apply_mip_data(const MipDataMsg& m) {
   auto& c = coverage_[m.chunk_pos];
   c = ChunkCoverage{CoverageState::kMip, m.level, m.revision};
   grid_.erase_chunk(m.chunk_pos);
+  voxels_changed(m.chunk_pos);
   return Ok{};
 }
 
 void Replica::apply_coverage(const CoverageMsg& m) {
+  voxels_changed(m.chunk_pos);
   switch (m.kind) {
     case wire::CoverageKind::Empty:
       pending_.erase(m.chunk_pos);
@@ -173,6 +179,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     }
     const Vec3i origin = chunk_origin(cp);
     if (changed != nullptr) changed->push_back(Region{origin + lo, origin + hi});
+    voxels_changed(cp);
     grid_.modify(Region{origin + lo, origin + hi}, [&](Vec3i p, Voxel old) {
       const Vec3i l = p - origin;
       const Vec3i uc{l.x / kUpdateUnitSize, l.y / kUpdateUnitSize, l.z / kUpdateUnitSize};
@@ -225,15 +232,26 @@ std::optional<RayHit> Replica::raycast(Vec3f origin, Vec3f direction, float max_
 
 std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t z, std::int32_t min_y,
                                                     std::int32_t max_y) const {
-  for (std::int32_t y = max_y - 1; y >= min_y; --y) {
-    const Vec3i p{x, y, z};
-    const ChunkCoverage* c = coverage(chunk_of(p));
-    if (c == nullptr || c->state == CoverageState::kEmpty) {
-      // Skip the rest of this chunk column: nothing (known) here.
-      y = floor_div(y, kChunkSize) * kChunkSize;
-      continue;
+  // A chunk at a time: one lookup of its coverage and of its voxels (full
+  // or mip), then its part of the column from the top.
+  for (std::int32_t y = max_y - 1; y >= min_y;) {
+    const Vec3i cp = chunk_of(Vec3i{x, y, z});
+    const std::int32_t bottom = std::max(min_y, cp.y * kChunkSize);
+    const ChunkCoverage* c = coverage(cp);
+    const Vec3i l = local_of(Vec3i{x, y, z});
+    if (c != nullptr && c->state == CoverageState::kFull) {
+      if (const Chunk* chunk = grid_.find_chunk(cp); chunk != nullptr)
+        for (std::int32_t v = y; v >= bottom; --v)
+          if (chunk->get(l.x, v - cp.y * kChunkSize, l.z).material != kAir) return v + 1;
+    } else if (c != nullptr && c->state == CoverageState::kMip) {
+      if (auto it = mips_.find(cp); it != mips_.end()) {
+        const int s = it->second.level;
+        for (std::int32_t v = y; v >= bottom; --v)
+          if (it->second.voxels.get(l.x >> s, (v - cp.y * kChunkSize) >> s, l.z >> s).material != kAir) return v + 1;
+      }
     }
-    if (get(p).material != kAir) return y + 1;
+    // Nothing (known) in the rest of this chunk's column.
+    y = bottom - 1;
   }
   return std::nullopt;
 }
@@ -241,7 +259,13 @@ std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t
 std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   const ChunkCoverage* c = coverage(cp);
   if (c == nullptr || c->state == CoverageState::kMip) return std::nullopt;
-  return region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision);
+  auto [it, fresh] = hashes_.try_emplace(cp);
+  CachedHash& h = it->second;
+  if (fresh || h.state != c->state || h.revision != c->revision) {
+    h = CachedHash{c->state, c->revision,
+                   region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision)};
+  }
+  return h.hash;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {

@@ -112,11 +112,23 @@ class Replica {
 
   void write_unit(Vec3i unit_pos, const Box& unit);
   void flush_pending(Vec3i chunk_pos);
+  // A chunk's voxels changed: its cached hash is gone.
+  void voxels_changed(Vec3i chunk_pos) { hashes_.erase(chunk_pos); }
+
+  // A chunk's region hash as last computed, for the state and revision it
+  // was computed at (a hash costs a pass over 32^3 voxels; a client checks
+  // the same unchanged chunks again and again).
+  struct CachedHash {
+    CoverageState state = CoverageState::kEmpty;
+    std::uint64_t revision = 0;
+    std::uint64_t hash = 0;
+  };
 
   Grid grid_;
   std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> coverage_;
   std::unordered_map<Vec3i, Mip, Vec3iHash> mips_;
   std::unordered_map<Vec3i, Pending, Vec3iHash> pending_;
+  mutable std::unordered_map<Vec3i, CachedHash, Vec3iHash> hashes_;
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;

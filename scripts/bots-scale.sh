@@ -13,7 +13,8 @@
 #          start once every bot has joined (--wait-joined); world:
 #          worlds/world4k (terrane-world generate --world worlds/world4k
 #          --box -2048,-128,-2048,2048,256,2048).
-# Prints the bots' report, the bots' and the server's peak memory and CPU
+# Prints the bots' report (with the server's tick, commit and fan-out times
+# from its metrics endpoint), the bots' and the server's peak memory and CPU
 # time (/proc of the server just before it is stopped; GNU time for the
 # bots). The server's log is kept beside the report (REPORT.server.log).
 #   scripts/bots-scale.sh [crowd|world] N [REPORT.json] [extra terrane-bots flags...]
@@ -53,8 +54,8 @@ if [ -n "${TERRANE_SCALE_TOKEN:-}" ]; then
   server_auth=(--auth-token "$TERRANE_SCALE_TOKEN")
 fi
 # shellcheck disable=SC2086
-terrane_start_server "$scratch/server.log" --world "$scratch/world" --port 0 --max-clients $((bots + 64)) \
-  "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-}
+terrane_start_server "$scratch/server.log" --world "$scratch/world" --port 0 --metrics 127.0.0.1:0 \
+  --max-clients $((bots + 64)) "${server_auth[@]}" ${TERRANE_SERVER_FLAGS:-}
 port=$server_port
 # Warm-up (TERRANE_SCALE_WARMUP=1, not measured): 40 idle bots over the same
 # area make the server load every chunk in view from its store first, so
@@ -71,7 +72,7 @@ status=0
 # The bots' own peak memory and CPU, when GNU time is installed.
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
-"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --bots "$bots" --duration 60 --behavior mixed \
+"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration 60 --behavior mixed \
   "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
   --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 

@@ -8,9 +8,12 @@
 // |                     |                            | budget, pushed hashes, per-tick frames       |
 // | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
 // |                     |                            | who holds what (interest), presence          |
-// | server/storage/     | loader pool, writer thread | SQLite reads, generation and estimates (three|
-// |                     |                            | priorities); group commits. Not wired yet:   |
-// |                     |                            | PostgresStore, LeaseKeeper (its own thread)  |
+// | server/storage/     | loader pool, writer thread | store reads (SQLite or PostgreSQL),          |
+// |                     |                            | generation and estimates (three priorities); |
+// |                     |                            | group commits                                |
+// |                     | the lease keeper's thread  | a PostgreSQL world's region leases           |
+// |                     | the change listener's      | other servers' notices (changed chunks,      |
+// |                     | thread                     | forwarded edits and their answers)           |
 // | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
 // |                     | the admin thread           | operators' commands; bans and whitelist      |
 //

@@ -120,5 +120,92 @@ TEST(Replica, UnitsOfAFullChunkAndIncompleteChunksAreWrittenAsTheyCome) {
   EXPECT_EQ(r.get({20, 3, 3}), solid(materials::kMud));
 }
 
+
+// The replica keeps each chunk's hash until the chunk changes: whatever
+// changes it (a unit, an update, a whole chunk again, a new coverage), the
+// hash asked next is the hash of the voxels held then, at the same revision
+// too.
+TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
+  Replica r;
+  const Vec3i cp{2, -1, 3};
+  auto fresh = [&] { return region_hash(r.grid().find_chunk(cp), r.coverage(cp)->revision); };
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, 4});
+  EXPECT_EQ(r.hash(cp), region_hash(nullptr, 4));
+
+  // An update at the same revision.
+  std::vector<UnitUpdate> ups(1);
+  ups[0].chunk_pos = cp;
+  ups[0].unit_index = 17;
+  ups[0].voxels.fill(solid(materials::kGrass));
+  std::vector<std::uint8_t> data;
+  net_codec_encode_update_batch(ups, data);
+  ASSERT_TRUE(r.apply_update_batch(UpdateBatchMsg{1, data, {ChunkRevisionMsg{cp, 4}}}).ok());
+  const auto after_update = r.hash(cp);
+  EXPECT_NE(after_update, region_hash(nullptr, 4));
+  EXPECT_EQ(after_update, fresh());
+
+  // A unit written straight into the full chunk, same revision again.
+  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{cp * 2, 4, encode_unit(16, solid(materials::kIce))}).ok());
+  EXPECT_NE(r.hash(cp), after_update);
+  EXPECT_EQ(r.hash(cp), fresh());
+
+  // The whole chunk again, same revision, other voxels.
+  Box whole({kChunkSize, kChunkSize, kChunkSize});
+  whole.fill(solid(materials::kMud));
+  const auto before_full = r.hash(cp);
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 4, 0, &whole});
+  Chunk mud(materials::kMud);
+  EXPECT_NE(r.hash(cp), before_full);
+  EXPECT_EQ(r.hash(cp), region_hash(&mud, 4));
+
+  // A new revision alone changes the hash; a mip has none; Empty again.
+  ups[0].voxels.fill(solid(materials::kMud));
+  data.clear();
+  net_codec_encode_update_batch(ups, data);
+  ASSERT_TRUE(r.apply_update_batch(UpdateBatchMsg{2, data, {ChunkRevisionMsg{cp, 5}}}).ok());
+  EXPECT_EQ(r.hash(cp), region_hash(&mud, 5));
+  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 6, encode_unit(4, solid(materials::kRock))}).ok());
+  EXPECT_FALSE(r.hash(cp).has_value());
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, 6});
+  EXPECT_EQ(r.hash(cp), region_hash(nullptr, 6));
+  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, 6});
+  EXPECT_FALSE(r.hash(cp).has_value());
+}
+
+// surface_height reads a chunk at a time; it must agree with reading the
+// column voxel by voxel through get(), over full, mip, Empty and unknown
+// chunks and bounds that cut chunks.
+TEST(Replica, SurfaceHeightAgreesWithTheVoxelsOfTheColumn) {
+  Replica r;
+  // Column chunks y = -1..3: full with a slope, a mip, Empty, unknown, full.
+  Box slope({kChunkSize, kChunkSize, kChunkSize});
+  for (int y = 0; y < kChunkSize; ++y)
+    for (int z = 0; z < kChunkSize; ++z)
+      for (int x = 0; x < kChunkSize; ++x)
+        slope.set(x, y, z, y < (x + z) / 2 ? solid(materials::kRock) : Voxel{});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, -1, 0}, 1, 0, &slope});
+  Box mip({8, 8, 8});
+  for (int y = 0; y < 8; ++y)
+    for (int z = 0; z < 8; ++z)
+      for (int x = 0; x < 8; ++x) mip.set(x, y, z, y < x ? solid(materials::kSand) : Voxel{});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kMip2, {0, 0, 0}, 1, 2, &mip});
+  r.apply_coverage(CoverageMsg{{0, 1, 0}, wire::CoverageKind::Empty, 0, 1});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, 3, 0}, 1, 0, &slope});
+  auto by_voxel = [&](std::int32_t x, std::int32_t z, std::int32_t lo, std::int32_t hi) -> std::optional<std::int32_t> {
+    for (std::int32_t y = hi - 1; y >= lo; --y)
+      if (r.resolution_at({x, y, z}) != kNoResolution && r.get({x, y, z}).material != kAir) return y + 1;
+    return std::nullopt;
+  };
+  int found = 0;
+  for (const auto& [lo, hi] : {std::pair{-32, 128}, std::pair{-20, 50}, std::pair{-40, 20}, std::pair{5, 7}, std::pair{100, 110}})
+    for (std::int32_t z = 0; z < kChunkSize; z += 3)
+      for (std::int32_t x = 0; x < kChunkSize; x += 3) {
+        const auto h = r.surface_height(x, z, lo, hi);
+        ASSERT_EQ(h, by_voxel(x, z, lo, hi)) << x << "," << z << " in [" << lo << "," << hi << ")";
+        found += h.has_value();
+      }
+  EXPECT_GT(found, 100);
+}
+
 }  // namespace
 }  // namespace terrane
