@@ -644,6 +644,15 @@ std::uint64_t region_hash(const Chunk* chunk, std::uint64_t revision) {
     h ^= (revision >> (8 * i)) & 0xff;
     h *= kPrime;
   }
+  if (chunk == nullptr) {
+    // All Air: each of the 2 x 32^3 zero bytes only multiplies by the prime
+    // (x ^ 0 = x), so the rest of the hash is one multiplication by
+    // prime^(2^16), the prime squared 16 times (mod 2^64).
+    static_assert(2 * kChunkSize * kChunkSize * kChunkSize == 1 << 16);
+    std::uint64_t power = kPrime;
+    for (int i = 0; i < 16; ++i) power *= power;
+    return h * power;
+  }
   Chunk::Level0::Row scratch;
   for (int y = 0; y < kChunkSize; ++y)
     for (int z = 0; z < kChunkSize; ++z) {
