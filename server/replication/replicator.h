@@ -35,9 +35,9 @@
 #include <memory>
 #include <queue>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
+#include "common/voxel/vec3_map.h"
 #include "common/world/world_store.h"
 #include "protocol/stream_batch.h"
 #include "server/net/limits.h"
@@ -192,22 +192,22 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   };
   std::priority_queue<RefineEntry, std::vector<RefineEntry>, RefineOrder> refine_;
 
-  std::unordered_map<Vec3i, Held, Vec3iHash> held_;
+  Vec3iMap<Held> held_;
   // Versions of chunks held at full resolution (region hashes, pushed and
   // answered here).
-  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> full_;
+  Vec3iMap<VersionPtr> full_;
   std::vector<Vec3i> hash_order_;
   std::size_t hash_cursor_ = 0;
-  std::unordered_map<Vec3i, Request, Vec3iHash> requested_;
+  Vec3iMap<Request> requested_;
   // Granted, not yet sent (the window or budget was full), oldest first.
   std::deque<Vec3i> ready_;
-  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> ready_versions_;
-  std::unordered_map<Vec3i, Held, Vec3iHash> claims_;
+  Vec3iMap<VersionPtr> ready_versions_;
+  Vec3iMap<Held> claims_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
   StreamBatchWriter batch_;
   // Changed chunks held coarser than full resolution, newest version each,
   // refreshed together every mip_refresh_ms.
-  std::unordered_map<Vec3i, VersionPtr, Vec3iHash> mip_dirty_;
+  Vec3iMap<VersionPtr> mip_dirty_;
   std::chrono::steady_clock::time_point next_mip_flush_;
   bool timer_armed_ = false;
   std::chrono::steady_clock::time_point next_hash_push_;

@@ -11,10 +11,10 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 #include "common/voxel/vec3.h"
+#include "common/voxel/vec3_map.h"
 
 namespace terrane {
 
@@ -72,7 +72,7 @@ class InterestIndex {
     std::vector<Holder> holders;
     int full = 0;
   };
-  std::unordered_map<Vec3i, Entry, Vec3iHash> map_;
+  Vec3iMap<Entry> map_;
   std::vector<Holder> none_;
   std::size_t entries_ = 0;
 };

@@ -48,6 +48,7 @@
 #include <vector>
 
 #include "common/voxel/grid.h"
+#include "common/voxel/vec3_map.h"
 #include "common/world/world.h"
 #include "server/options.h"
 #include "server/storage/postgres_store.h"
@@ -297,7 +298,7 @@ class WorldOwner : private WorldView {
 
   std::unordered_map<ClientId, Client> clients_;
   // Chunks with their voxels, and chunks kept as mips only.
-  std::unordered_map<Vec3i, Loaded, Vec3iHash> loaded_;
+  Vec3iMap<Loaded> loaded_;
   std::size_t mips_only_ = 0;
   std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
   std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
