@@ -16,12 +16,12 @@
 
 #include <cstdint>
 #include <optional>
-#include <unordered_map>
 #include <vector>
 
 #include "common/codec/update_batch.h"
 #include "common/voxel/box.h"
 #include "common/voxel/grid.h"
+#include "common/voxel/vec3_map.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 
@@ -59,6 +59,7 @@ class Replica {
   Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed = nullptr);
 
   // --- queries ---------------------------------------------------------------
+  // Valid until the replica changes.
   const ChunkCoverage* coverage(Vec3i chunk_pos) const;
   int resolution_at(Vec3i voxel) const;
   // The voxel at the best resolution held (a mip voxel stands for the 2^L
@@ -125,10 +126,10 @@ class Replica {
   };
 
   Grid grid_;
-  std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> coverage_;
-  std::unordered_map<Vec3i, Mip, Vec3iHash> mips_;
-  std::unordered_map<Vec3i, Pending, Vec3iHash> pending_;
-  mutable std::unordered_map<Vec3i, CachedHash, Vec3iHash> hashes_;
+  Vec3iMap<ChunkCoverage> coverage_;
+  Vec3iMap<Mip> mips_;
+  Vec3iMap<Pending> pending_;
+  mutable Vec3iMap<CachedHash> hashes_;
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;
