@@ -6,8 +6,6 @@
 
 namespace terrane {
 
-Grid::Grid() : chunks_(0, Vec3iHash{}, std::equal_to<Vec3i>{}, Map::allocator_type(&map_bytes_)) {}
-
 Voxel Grid::get(Vec3i p) const {
   const Chunk* c = find_chunk(chunk_of(p));
   if (c == nullptr) return Voxel{};
@@ -66,8 +64,7 @@ void Grid::compact() {
 GridMemory Grid::memory() const {
   GridMemory m;
   m.chunks = chunks_.size();
-  // Nodes come from the counting allocator; the bucket array does too.
-  m.map_bytes = map_bytes_;
+  m.map_bytes = chunks_.table_bytes();
   for (const auto& [pos, chunk] : chunks_) {
     const ChunkMemory cm = chunk->memory();
     m.object_bytes += cm.object_bytes;

@@ -13,39 +13,19 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
-#include <unordered_map>
 
 #include "common/voxel/box.h"
 #include "common/voxel/chunk.h"
 #include "common/voxel/vec3.h"
+#include "common/voxel/vec3_map.h"
 
 namespace terrane {
 
-// An allocator that adds what it hands out to a shared byte counter.
-template <class T>
-struct CountingAllocator {
-  using value_type = T;
-  std::size_t* counter;
-
-  explicit CountingAllocator(std::size_t* c) noexcept : counter(c) {}
-  template <class U>
-  CountingAllocator(const CountingAllocator<U>& o) noexcept : counter(o.counter) {}  // NOLINT
-  T* allocate(std::size_t n) {
-    *counter += n * sizeof(T);
-    return std::allocator<T>{}.allocate(n);
-  }
-  void deallocate(T* p, std::size_t n) noexcept {
-    *counter -= n * sizeof(T);
-    std::allocator<T>{}.deallocate(p, n);
-  }
-  template <class U>
-  bool operator==(const CountingAllocator<U>& o) const noexcept { return counter == o.counter; }
-};
 
 
 struct GridMemory {
   std::size_t chunks = 0;
-  std::size_t map_bytes = 0;      // hash map nodes and buckets
+  std::size_t map_bytes = 0;      // the hash map's table
   std::size_t object_bytes = 0;   // Chunk objects
   std::size_t level0_bytes = 0;   // 32³ headers and row data
   std::size_t mip_bytes = 0;      // mip headers and row data
@@ -68,7 +48,7 @@ struct Aabb {
 
 class Grid {
  public:
-  Grid();
+  Grid() = default;
   Grid(Grid&&) = delete;  // the map's allocator points at this object's counter
   Grid& operator=(Grid&&) = delete;
 
@@ -126,11 +106,7 @@ class Grid {
   bool collides(const Aabb& box, std::uint8_t min_occupancy = 0) const;
 
  private:
-  using Map = std::unordered_map<Vec3i, std::unique_ptr<Chunk>, Vec3iHash, std::equal_to<Vec3i>,
-                                 CountingAllocator<std::pair<const Vec3i, std::unique_ptr<Chunk>>>>;
-
-  std::size_t map_bytes_ = 0;  // must precede chunks_: the allocator points at it
-  Map chunks_;
+  Vec3iMap<std::unique_ptr<Chunk>> chunks_;
 };
 
 template <class VoxelFn>

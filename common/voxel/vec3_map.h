@@ -95,6 +95,8 @@ class Vec3iMap {
   }
 
   std::size_t size() const { return size_; }
+  // The table's own memory (what the values own besides is theirs).
+  std::size_t table_bytes() const { return capacity() * (sizeof(Slot) + 1); }
   bool empty() const { return size_ == 0; }
 
   iterator begin() { return iterator(this, next_full(0)); }
