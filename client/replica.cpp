@@ -87,11 +87,11 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip2:
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
-      auto [it, fresh] = mips_.try_emplace(cp, Mip{r.level, *r.voxels});
-      if (!fresh) {
-        if (it->second.level == r.level && it->second.voxels == *r.voxels) ++redundant_mips_;
-        it->second = Mip{r.level, *r.voxels};
-      }
+      // A refresh of a mip held overwrites it in place (no new allocation).
+      auto [it, fresh] = mips_.try_emplace(cp);
+      if (!fresh && it->second.level == r.level && it->second.voxels == *r.voxels) ++redundant_mips_;
+      it->second.level = r.level;
+      it->second.voxels = *r.voxels;
       pending_.erase(cp);
       coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
       grid_.erase_chunk(cp);
