@@ -144,6 +144,10 @@ struct ServerCounters {
   // holders. Commit time is the storage's (StorageCounters).
   DurationHistogram tick_duration;
   DurationHistogram fanout_duration;
+  // A client's edit from its session handing it to the world to its ack
+  // being queued on that session: the wait for the tick, the tick, the
+  // commit and the fan-out (the network and the client's side excluded).
+  DurationHistogram edit_ack_duration;
   std::atomic<std::uint64_t> tick_lag_ns{0};     // how late the last tick started
   std::atomic<std::int64_t> last_tick_at_ns{0};  // steady clock, when the last tick ended
   std::atomic<std::uint64_t> deliveries{0};      // (changed chunk, holder) pairs fanned out

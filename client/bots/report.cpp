@@ -50,7 +50,9 @@ std::string server_json(const ServerFigures& f) {
     << ", \"edits_applied\": " << f.edits_applied << ", \"edits_rejected\": " << f.edits_rejected
     << ", \"ticks\": " << f.ticks << ", \"ticks_late\": " << f.ticks_late << ", \"disconnects\": " << f.disconnects
     << ", \"tick_p99_ms_bound\": " << json_opt(f.tick_p99_ms) << ", \"commit_p99_ms_bound\": " << json_opt(f.commit_p99_ms)
-    << ", \"fanout_p99_ms_bound\": " << json_opt(f.fanout_p99_ms) << ", \"scrapes\": " << f.scrapes
+    << ", \"fanout_p99_ms_bound\": " << json_opt(f.fanout_p99_ms)
+    << ", \"edit_ack_mean_ms\": " << json_opt(f.edit_ack_mean_ms)
+    << ", \"edit_ack_p99_ms_bound\": " << json_opt(f.edit_ack_p99_ms) << ", \"scrapes\": " << f.scrapes
     << ", \"scrape_errors\": " << f.scrape_errors << ", \"sent_by_type\": {";
   bool first = true;
   for (const auto& [type, fb] : f.sent_by_type) {
@@ -255,6 +257,9 @@ std::string report_table(const BotsReport& r) {
     row("  ticks (late)", std::to_string(f.ticks) + " (" + std::to_string(f.ticks_late) + ")");
     row("  tick / commit / fan-out p99", bound_ms(f.tick_p99_ms) + " / " + bound_ms(f.commit_p99_ms) + " / " +
                                              bound_ms(f.fanout_p99_ms));
+    row("  edit to ack in the server, mean / p99",
+        (f.edit_ack_mean_ms ? fixed(*f.edit_ack_mean_ms, 1) + " ms" : std::string("-")) + " / " +
+            bound_ms(f.edit_ack_p99_ms));
     row("  edits applied / rejected", std::to_string(f.edits_applied) + " / " + std::to_string(f.edits_rejected));
     row("  sessions ended", std::to_string(f.disconnects));
     std::snprintf(line, sizeof line, "    %-20s %12s %14s\n", "sent by type", "frames", "bytes");

@@ -174,6 +174,14 @@ ServerFigures ServerWatch::figures() const {
   f.tick_p99_ms = histogram_quantile_ms(first_, last_, "terrane_tick_duration_seconds", 0.99);
   f.commit_p99_ms = histogram_quantile_ms(first_, last_, "terrane_commit_duration_seconds", 0.99);
   f.fanout_p99_ms = histogram_quantile_ms(first_, last_, "terrane_fanout_duration_seconds", 0.99);
+  f.edit_ack_p99_ms = histogram_quantile_ms(first_, last_, "terrane_edit_ack_duration_seconds", 0.99);
+  if (const double n = value_of(last_, "terrane_edit_ack_duration_seconds_count") -
+                       value_of(first_, "terrane_edit_ack_duration_seconds_count");
+      n > 0)
+    f.edit_ack_mean_ms = 1000 *
+                         (value_of(last_, "terrane_edit_ack_duration_seconds_sum") -
+                          value_of(first_, "terrane_edit_ack_duration_seconds_sum")) /
+                         n;
   const std::string frames = "terrane_sent_frames_total{type=\"";
   for (auto it = last_.lower_bound(frames); it != last_.end() && it->first.rfind(frames, 0) == 0; ++it) {
     if (it->first.size() < frames.size() + 2 || f.sent_by_type.size() >= 64) continue;

@@ -34,6 +34,9 @@ struct ServerFigures {
   std::uint64_t edits_applied = 0, edits_rejected = 0;
   std::uint64_t ticks = 0, ticks_late = 0, disconnects = 0;
   std::optional<double> tick_p99_ms, commit_p99_ms, fanout_p99_ms;
+  // An edit inside the server (terrane_edit_ack_duration_seconds): from its
+  // session handing it to the world to its ack being queued.
+  std::optional<double> edit_ack_mean_ms, edit_ack_p99_ms;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> sent_by_type;  // frames, bytes
   int scrapes = 0, scrape_errors = 0;
   std::string first_error;

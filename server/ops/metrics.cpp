@@ -134,6 +134,10 @@ std::string render_metrics(const MetricsSources& s) {
   m.histogram("terrane_fanout_duration_seconds",
               "Time the world strand spent handing each committed tick's changes to their holders.",
               c.fanout_duration);
+  m.histogram("terrane_edit_ack_duration_seconds",
+              "Time from a client's edit reaching the world to its acknowledgement being queued: the wait for "
+              "the next tick, the tick, the commit and the fan-out.",
+              c.edit_ack_duration);
   m.counter("terrane_deliveries_total", "Changed chunks handed to a holder (one per chunk and holder).",
             load(c.deliveries));
 

@@ -465,7 +465,7 @@ void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, RejectReason wh
 }
 
 void WorldOwner::edit(ClientId id, EditRequestMsg e) {
-  asio::post(strand_, [this, id, e = std::move(e)]() mutable {
+  asio::post(strand_, [this, id, e = std::move(e), received = std::chrono::steady_clock::now()]() mutable {
     auto it = clients_.find(id);
     if (it == clients_.end() || stopping_) return;
     Client& c = it->second;
@@ -476,7 +476,7 @@ void WorldOwner::edit(ClientId id, EditRequestMsg e) {
       reserve(r);
     }
     ++c.edits_queued;
-    edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr, std::nullopt});
+    edits_.push_back(PendingEdit{id, std::move(e), c.name, nullptr, std::nullopt, received});
   });
 }
 
@@ -968,7 +968,7 @@ void WorldOwner::apply_edits() {
       } else if (auto was = client != nullptr ? snapshot(scratch, r) : std::vector<std::uint8_t>{};
                  client != nullptr && client->history.apply(scratch, redo, changed, &why)) {
         log_step(pe.player, r, std::move(was), snapshot(scratch, r));
-        acks.push_back(Ack{pe.id, pe.edit.edit_id});
+        acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
         edits_.pop_front();
         continue;
       }
@@ -986,7 +986,7 @@ void WorldOwner::apply_edits() {
     if (pe.forwarded)
       answers.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, true, tick_, ""});
     else
-      acks.push_back(Ack{pe.id, pe.edit.edit_id});
+      acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
     edits_.pop_front();
   }
   if (!refused.empty()) storage_.answer(std::move(refused));
@@ -1065,9 +1065,13 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
     for (auto& [id, changed] : news)
       if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
-    for (const Ack& a : acks)
+    const auto acked_at = std::chrono::steady_clock::now();
+    for (const Ack& a : acks) {
+      // Counted before the ack leaves, so a client that read it sees it counted.
+      if (a.received != std::chrono::steady_clock::time_point{}) counters_.edit_ack_duration.observe(acked_at - a.received);
       if (auto it = clients_.find(a.id); it != clients_.end())
         it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
+    }
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }
   if (status) last_committed_tick_ = std::max(last_committed_tick_, tick);

@@ -201,6 +201,8 @@ class WorldOwner : private WorldView {
     std::string player;                  // for the edit log
     std::shared_ptr<Rollback> rollback;  // set: this is a rollback, not edit
     std::optional<Forwarded> forwarded;  // set: another server's client's edit, from this server's inbox
+    // When the client's session handed it over (terrane_edit_ack_seconds).
+    std::chrono::steady_clock::time_point received{};
   };
   // An edit this server forwarded to a region's owner, waiting for its
   // answer; then for the edit's chunks to be read again here, before the
@@ -216,6 +218,7 @@ class WorldOwner : private WorldView {
   struct Ack {
     ClientId id;
     std::uint32_t edit_id;
+    std::chrono::steady_clock::time_point received;
   };
   struct Waiter {
     ClientId id;

@@ -114,6 +114,12 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_GT(r.server->ticks, 0u);
   EXPECT_TRUE(r.server->tick_p99_ms.has_value());
   EXPECT_TRUE(r.server->commit_p99_ms.has_value());
+  // The server's share of an edit's round trip: it waits for a tick, so
+  // more than nothing.
+  ASSERT_TRUE(r.server->edit_ack_mean_ms.has_value());
+  EXPECT_GT(*r.server->edit_ack_mean_ms, 0);
+  EXPECT_TRUE(r.server->edit_ack_p99_ms.has_value());
+  EXPECT_NE(report_table(r).find("edit to ack in the server"), std::string::npos) << report_table(r);
   EXPECT_GT(r.server->sent_by_type["StreamBatch"].second, 0u);
   EXPECT_EQ(r.server->sent_by_type["EditAck"].first, r.edits_acked);
   EXPECT_NE(report_table(r).find("the server over the run"), std::string::npos) << report_table(r);

@@ -202,6 +202,9 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   EXPECT_GT(sample(during, "terrane_sent_bytes_total{type=\"StreamBatch\"}"), 0);
   EXPECT_GE(sample(during, "terrane_commits_total"), 1);
   EXPECT_GE(sample(during, "terrane_commit_duration_seconds_count"), 1);
+  // Each acknowledged edit's time in the server, and only theirs.
+  EXPECT_EQ(sample(during, "terrane_edit_ack_duration_seconds_count"), 3);
+  EXPECT_GT(sample(during, "terrane_edit_ack_duration_seconds_sum"), 0);
   EXPECT_GE(sample(during, "terrane_chunks_written_total"), 1);
   EXPECT_GT(sample(during, "terrane_chunks_resident"), 0);
   EXPECT_GT(sample(during, "terrane_chunks_generated_total"), 0);
