@@ -4,8 +4,8 @@
 // division, so negative coordinates work. A chunk absent from the map is all
 // Air; a chunk that becomes all Air is freed.
 //
-// Memory is counted exactly: the map allocates through a counting allocator,
-// and chunks report their own heap bytes (see memory()).
+// Memory is counted exactly: the map's table (a flat Vec3iMap) and the
+// chunks' own heap bytes (see memory()).
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
@@ -49,8 +49,8 @@ struct Aabb {
 class Grid {
  public:
   Grid() = default;
-  Grid(Grid&&) = delete;  // the map's allocator points at this object's counter
-  Grid& operator=(Grid&&) = delete;
+  Grid(Grid&&) = default;
+  Grid& operator=(Grid&&) = default;
 
   Voxel get(Vec3i p) const;
   void set(Vec3i p, Voxel v);

@@ -10,7 +10,10 @@
 // difference: inserting a key that is not there yet may move every element
 // (references and iterators are then invalid). Erasing never moves one, so
 // erase(it) while iterating is safe. Erased slots become tombstones, dropped
-// when the table is rebuilt (at 3/4 full, counting tombstones).
+// when the table is rebuilt (at 3/4 full, counting tombstones). Iterators
+// point at their map: they do not follow it through a move or swap. Values
+// must move without throwing (a rebuild moves them all); the map is not
+// copyable.
 // Thread-safety: none.
 #pragma once
 
@@ -30,6 +33,8 @@ namespace terrane {
 
 template <class V>
 class Vec3iMap {
+  static_assert(std::is_nothrow_move_constructible_v<V>, "a rebuild moves every value and must not fail halfway");
+
  public:
   using key_type = Vec3i;
   using mapped_type = V;
@@ -49,10 +54,9 @@ class Vec3iMap {
     using reference = Ref;
     Iter() = default;
     Iter(Map* m, std::size_t i) : m_(m), i_(i) {}
-    template <bool C = Const, std::enable_if_t<!C, int> = 0>
-    operator Iter<true>() const {  // NOLINT: implicit, like std's
-      return Iter<true>(m_, i_);
-    }
+    // An iterator converts to a const_iterator, implicitly as std's do.
+    template <bool C = Const, std::enable_if_t<C, int> = 0>
+    Iter(const Iter<false>& o) : m_(o.m_), i_(o.i_) {}  // NOLINT: implicit
     Ref operator*() const { return *m_->slot(i_); }
     Ptr operator->() const { return m_->slot(i_); }
     Iter& operator++() {
@@ -68,6 +72,8 @@ class Vec3iMap {
 
    private:
     friend class Vec3iMap;
+    template <bool>
+    friend class Iter;
     Map* m_ = nullptr;
     std::size_t i_ = 0;
   };
@@ -82,17 +88,8 @@ class Vec3iMap {
     swap(tmp);
     return *this;
   }
-  Vec3iMap(const Vec3iMap& o) {
-    reserve(o.size_);
-    for (const auto& [k, v] : o) try_emplace(k, v);
-  }
-  Vec3iMap& operator=(const Vec3iMap& o) {
-    if (this != &o) {
-      Vec3iMap tmp(o);
-      swap(tmp);
-    }
-    return *this;
-  }
+  Vec3iMap(const Vec3iMap&) = delete;
+  Vec3iMap& operator=(const Vec3iMap&) = delete;
 
   std::size_t size() const { return size_; }
   // The table's own memory (what the values own besides is theirs).

@@ -1067,10 +1067,11 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
       if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
     const auto acked_at = std::chrono::steady_clock::now();
     for (const Ack& a : acks) {
+      auto it = clients_.find(a.id);
+      if (it == clients_.end()) continue;  // gone: nothing acknowledged
       // Counted before the ack leaves, so a client that read it sees it counted.
       if (a.received != std::chrono::steady_clock::time_point{}) counters_.edit_ack_duration.observe(acked_at - a.received);
-      if (auto it = clients_.find(a.id); it != clients_.end())
-        it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
+      it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
     }
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }

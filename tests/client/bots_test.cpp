@@ -184,9 +184,11 @@ TEST_F(BotsRunTest, DroppedUpdatesFailTheRunAndNameTheRegion) {
 }
 
 TEST_F(BotsRunTest, ARunWhoseBotNeverJoinedOrEditedFails) {
-  // The server streams at most 16 KiB a second to a client, and the join at
-  // this view is megabytes: however fast the machine, the bot cannot finish
-  // its join within the run (a cold server alone once joined in 0.29 s).
+  // The server streams at most 16 KiB a second to a client, and a join
+  // refines the full-resolution region only once the coarse pass over the
+  // whole view (thousands of records at view 512) is sent: however fast the
+  // machine, the bot cannot finish its join within the run (a cold server
+  // alone once joined in 0.29 s).
   start_server({"--outbound-bytes-per-second", "16384"});
   BotsOptions o = small_run(1, Behavior::kDig);
   o.join_timeout_s = 0;
