@@ -197,6 +197,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     auto it = coverage_.find(r.chunk_pos);
     if (it == coverage_.end() || it->second.state == CoverageState::kMip) continue;
     it->second = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+    voxels_changed(r.chunk_pos);
   }
   return applied;
 }
@@ -260,12 +261,8 @@ std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   const ChunkCoverage* c = coverage(cp);
   if (c == nullptr || c->state == CoverageState::kMip) return std::nullopt;
   auto [it, fresh] = hashes_.try_emplace(cp);
-  CachedHash& h = it->second;
-  if (fresh || h.state != c->state || h.revision != c->revision) {
-    h = CachedHash{c->state, c->revision,
-                   region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision)};
-  }
-  return h.hash;
+  if (fresh) it->second = region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision);
+  return it->second;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {

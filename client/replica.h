@@ -113,23 +113,18 @@ class Replica {
 
   void write_unit(Vec3i unit_pos, const Box& unit);
   void flush_pending(Vec3i chunk_pos);
-  // A chunk's voxels changed: its cached hash is gone.
+  // A chunk's voxels, coverage or revision changed: its cached hash is gone.
+  // Every write of grid_, mips_ or coverage_ calls it.
   void voxels_changed(Vec3i chunk_pos) { hashes_.erase(chunk_pos); }
-
-  // A chunk's region hash as last computed, for the state and revision it
-  // was computed at (a hash costs a pass over 32^3 voxels; a client checks
-  // the same unchanged chunks again and again).
-  struct CachedHash {
-    CoverageState state = CoverageState::kEmpty;
-    std::uint64_t revision = 0;
-    std::uint64_t hash = 0;
-  };
 
   Grid grid_;
   Vec3iMap<ChunkCoverage> coverage_;
   Vec3iMap<Mip> mips_;
   Vec3iMap<Pending> pending_;
-  mutable Vec3iMap<CachedHash> hashes_;
+  // Region hashes computed since each chunk last changed (a hash is a pass
+  // over 32^3 voxels; a client checks the same unchanged chunks again and
+  // again).
+  mutable Vec3iMap<std::uint64_t> hashes_;
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;

@@ -21,8 +21,6 @@
 
 namespace terrane {
 
-
-
 struct GridMemory {
   std::size_t chunks = 0;
   std::size_t map_bytes = 0;      // the hash map's table

@@ -36,8 +36,6 @@ class Vec3iMap {
   static_assert(std::is_nothrow_move_constructible_v<V>, "a rebuild moves every value and must not fail halfway");
 
  public:
-  using key_type = Vec3i;
-  using mapped_type = V;
   using value_type = std::pair<const Vec3i, V>;
   using element = value_type;
 
@@ -104,7 +102,6 @@ class Vec3iMap {
   iterator find(Vec3i k) { return iterator(this, find_index(k)); }
   const_iterator find(Vec3i k) const { return const_iterator(this, find_index(k)); }
   std::size_t count(Vec3i k) const { return find_index(k) != capacity() ? 1 : 0; }
-  bool contains(Vec3i k) const { return count(k) != 0; }
 
   V& at(Vec3i k) {
     const std::size_t i = find_index(k);
@@ -120,6 +117,7 @@ class Vec3iMap {
 
   template <class... Args>
   std::pair<iterator, bool> try_emplace(Vec3i k, Args&&... args) {
+    std::size_t free_slot = capacity();  // where the probe ended
     if (capacity() != 0) {
       std::size_t i = home(k), tomb = capacity();
       for (;; i = (i + 1) & mask_) {
@@ -131,12 +129,15 @@ class Vec3iMap {
         }
       }
       if (tomb != capacity()) return {iterator(this, construct(tomb, k, std::forward<Args>(args)...)), true};
+      free_slot = i;
     }
-    if ((used_ + 1) * 4 > capacity() * 3) rebuild(size_ + 1);
-    std::size_t i = home(k);
-    while (state_[i] == kFull) i = (i + 1) & mask_;  // a rebuilt table has no tombstones
+    if ((used_ + 1) * 4 > capacity() * 3) {
+      rebuild(size_ + 1);
+      free_slot = home(k);
+      while (state_[free_slot] == kFull) free_slot = (free_slot + 1) & mask_;  // a rebuilt table has no tombstones
+    }
     ++used_;
-    return {iterator(this, construct(i, k, std::forward<Args>(args)...)), true};
+    return {iterator(this, construct(free_slot, k, std::forward<Args>(args)...)), true};
   }
   template <class... Args>
   std::pair<iterator, bool> emplace(Vec3i k, Args&&... args) {
@@ -165,10 +166,6 @@ class Vec3iMap {
     destroy_all();
     for (std::size_t i = 0; i < capacity(); ++i) state_[i] = kEmpty;
     used_ = 0;
-  }
-  // Room for n elements without rebuilding.
-  void reserve(std::size_t n) {
-    if (n * 4 > capacity() * 3) rebuild(n);
   }
   void swap(Vec3iMap& o) noexcept {
     std::swap(slots_, o.slots_);

@@ -176,7 +176,6 @@ constexpr const char* kMigrateHelp =
     "                 (default 2147483647); use an id no running server uses. The leases are\n"
     "                 given up at the end.\n";
 
-// The highest server id (ids are below 2^31), migrate's default.
 // Chunks per transaction when migrating.
 constexpr std::size_t kMigrateBatch = 256;
 

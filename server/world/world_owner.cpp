@@ -1070,7 +1070,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
       auto it = clients_.find(a.id);
       if (it == clients_.end()) continue;  // gone: nothing acknowledged
       // Counted before the ack leaves, so a client that read it sees it counted.
-      if (a.received != std::chrono::steady_clock::time_point{}) counters_.edit_ack_duration.observe(acked_at - a.received);
+      counters_.edit_ack_duration.observe(acked_at - a.received);
       it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
     }
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);

@@ -201,7 +201,8 @@ class WorldOwner : private WorldView {
     std::string player;                  // for the edit log
     std::shared_ptr<Rollback> rollback;  // set: this is a rollback, not edit
     std::optional<Forwarded> forwarded;  // set: another server's client's edit, from this server's inbox
-    // When the client's session handed it over (terrane_edit_ack_seconds).
+    // When the client's session handed it over (terrane_edit_ack_duration_seconds;
+    // unset for rollbacks and forwarded edits, which are not acknowledged to a client).
     std::chrono::steady_clock::time_point received{};
   };
   // An edit this server forwarded to a region's owner, waiting for its
@@ -359,8 +360,8 @@ class WorldOwner : private WorldView {
   // the revision stored.
   std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
   // Forwarded edits: this server's clients' (inbox row -> edit), and the
-  // inbox of this server (the highest row taken; a read under way; another
-  // notice came during it).
+  // inbox of this server (rows taken and rows listed by the read under way;
+  // a read under way; another notice came during it).
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
   std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
   std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
