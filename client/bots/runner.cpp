@@ -14,6 +14,13 @@ namespace terrane::bots {
 namespace {
 
 constexpr auto kStep = std::chrono::milliseconds(100);
+// Bots step in this many groups spread over each step, as a crowd of real
+// players acts at times of its own: when every bot stepped at once, the
+// edits of all of them reached the server in one burst every 100 ms, at a
+// phase to its ticks that changed from run to run (and with it every
+// latency measured).
+constexpr int kStepPhases = 10;
+constexpr auto kPhaseStep = kStep / kStepPhases;
 // Fan-out is joined once a tick is this old: every receiver has had time
 // to hear of it (a later batch would still be a valid sample, but rare).
 constexpr auto kSettleHorizon = std::chrono::seconds(3);
@@ -190,7 +197,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
                         fanout.recent_fanout_p99(), mismatches.count()});
   };
 
-  // Active phase: connect over the ramp-up, step every bot every 100 ms.
+  // Active phase: connect over the ramp-up, step every bot every 100 ms
+  // (bot i in phase i mod kStepPhases, one phase every 10 ms).
   // With a join wait, the duration starts once every bot has joined.
   const auto duration = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration_s));
   auto end_active = t0 + duration;
@@ -198,6 +206,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   const auto join_deadline =
       t0 + ramp + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.join_timeout_s));
   auto next_step = t0;
+  std::size_t phase = 0;
   for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
            now >= t0 + ramp * static_cast<Clock::rep>(next_bot) / static_cast<Clock::rep>(bots.size())) {
@@ -207,9 +216,10 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
         if (r.first_connect_error.empty()) r.first_connect_error = b.result().connect_error;
       }
     }
-    for (auto& b : bots) b->step(now, true);
+    for (std::size_t i = phase; i < bots.size(); i += kStepPhases) bots[i]->step(now, true);
+    phase = (phase + 1) % static_cast<std::size_t>(kStepPhases);
     once_a_second(now);
-    if (!joins_done && next_bot == bots.size()) {
+    if (!joins_done && next_bot == bots.size() && phase == 0) {
       const bool all = std::all_of(bots.begin(), bots.end(), [](const auto& b) { return b->closed() || b->joined(); });
       if (all || now >= join_deadline) {
         joins_done = true;
@@ -222,7 +232,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
         measured_snapshot = false;
       }
     }
-    next_step = std::max(next_step + kStep, Clock::now());
+    next_step = std::max<Clock::time_point>(next_step + kPhaseStep, Clock::now());
     std::this_thread::sleep_until(next_step);
   }
   // Bots not connected by now (a ramp-up as long as the run) connect late.
