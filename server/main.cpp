@@ -52,7 +52,8 @@ constexpr const char* kHelp =
     "  --border X0,Z0,X1,Z1        set the world border (kept in the world): nothing is generated,\n"
     "                              streamed or editable outside x0 <= x < x1, z0 <= z < z1;\n"
     "                              'none' removes it (default: the world's, if any)\n"
-    "  --tick-hz N                 simulation ticks per second (default 20)\n"
+    "  --tick-hz N                 simulation ticks per second; an edit waits for the next one\n"
+    "                              (default 30)\n"
     "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
     "  --max-view-distance N       cap on client view distances (default 1024)\n"
@@ -159,7 +160,7 @@ int run(int argc, char** argv) {
   }
   if (cl.has("metrics"))
     if (auto hp = parse_host_port(o.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
-  o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", 20, 1, 1000, &err));
+  o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", o.tick_hz, 1, 1000, &err));
   o.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
   o.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
   o.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
