@@ -189,7 +189,13 @@ std::string report_json(const BotsReport& r) {
     j << (i ? ",\n    " : "\n    ") << "{\"t_s\": " << num(p.t_s) << ", \"bots\": " << p.bots_connected
       << ", \"mb_per_s_in\": " << num(p.mb_per_s_in) << ", \"mb_per_s_out\": " << num(p.mb_per_s_out)
       << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"fanout_ms\": " << lat(p.fanout_ms)
-      << ", \"ack_ms\": " << lat(p.ack_ms) << "}";
+      << ", \"ack_ms\": " << lat(p.ack_ms);
+    if (p.server)
+      j << ", \"server\": {\"cpu_share\": " << num(p.server->cpu_share)
+        << ", \"edits_applied\": " << p.server->edits_applied << ", \"tick_ms_mean\": " << json_opt(p.server->tick_ms_mean)
+        << ", \"commit_ms_mean\": " << json_opt(p.server->commit_ms_mean)
+        << ", \"edit_ack_ms_mean\": " << json_opt(p.server->edit_ack_ms_mean) << "}";
+    j << "}";
   }
   j << "\n  ]\n}\n";
   return j.str();

@@ -188,6 +188,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     p.mb_per_s_in = static_cast<double>(in - prev_in) / 1e6;
     p.mb_per_s_out = static_cast<double>(out - prev_out) / 1e6;
     p.edits_acked_per_s = static_cast<double>(totals.edits_acked - prev_acked);
+    if (watch) p.server = watch->next_interval();
     prev_in = in;
     prev_out = out;
     prev_acked = totals.edits_acked;

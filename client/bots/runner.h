@@ -24,6 +24,9 @@ struct TimelinePoint {
   double mb_per_s_in = 0, mb_per_s_out = 0;
   double edits_acked_per_s = 0;
   LatencySummary fanout_ms, ack_ms;  // of edits sent in that second
+  // With --server-metrics: the server since the previous point (its
+  // scrapes, up to a second behind).
+  std::optional<ServerInterval> server;
 };
 
 struct BotsReport {

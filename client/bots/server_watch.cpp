@@ -95,6 +95,24 @@ std::optional<double> histogram_quantile_ms(const Scrape& first, const Scrape& l
   return std::numeric_limits<double>::infinity();
 }
 
+std::optional<double> histogram_mean_ms(const Scrape& first, const Scrape& last, const std::string& name) {
+  const double n = value_of(last, name + "_count") - value_of(first, name + "_count");
+  if (n <= 0) return std::nullopt;
+  return 1000 * (value_of(last, name + "_sum") - value_of(first, name + "_sum")) / n;
+}
+
+ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s) {
+  ServerInterval i;
+  if (const double wall = last_at_s - first_at_s; wall > 0)
+    i.cpu_share =
+        std::max(0.0, value_of(last, "process_cpu_seconds_total") - value_of(first, "process_cpu_seconds_total")) / wall;
+  i.edits_applied = growth(first, last, "terrane_edits_applied_total");
+  i.tick_ms_mean = histogram_mean_ms(first, last, "terrane_tick_duration_seconds");
+  i.commit_ms_mean = histogram_mean_ms(first, last, "terrane_commit_duration_seconds");
+  i.edit_ack_ms_mean = histogram_mean_ms(first, last, "terrane_edit_ack_duration_seconds");
+  return i;
+}
+
 ServerWatch::ServerWatch(std::string host, std::uint16_t port) : host_(std::move(host)), port_(port) {}
 
 ServerWatch::~ServerWatch() { stop(); }
@@ -175,13 +193,7 @@ ServerFigures ServerWatch::figures() const {
   f.commit_p99_ms = histogram_quantile_ms(first_, last_, "terrane_commit_duration_seconds", 0.99);
   f.fanout_p99_ms = histogram_quantile_ms(first_, last_, "terrane_fanout_duration_seconds", 0.99);
   f.edit_ack_p99_ms = histogram_quantile_ms(first_, last_, "terrane_edit_ack_duration_seconds", 0.99);
-  if (const double n = value_of(last_, "terrane_edit_ack_duration_seconds_count") -
-                       value_of(first_, "terrane_edit_ack_duration_seconds_count");
-      n > 0)
-    f.edit_ack_mean_ms = 1000 *
-                         (value_of(last_, "terrane_edit_ack_duration_seconds_sum") -
-                          value_of(first_, "terrane_edit_ack_duration_seconds_sum")) /
-                         n;
+  f.edit_ack_mean_ms = histogram_mean_ms(first_, last_, "terrane_edit_ack_duration_seconds");
   const std::string frames = "terrane_sent_frames_total{type=\"";
   for (auto it = last_.lower_bound(frames); it != last_.end() && it->first.rfind(frames, 0) == 0; ++it) {
     if (it->first.size() < frames.size() + 2 || f.sent_by_type.size() >= 64) continue;
@@ -191,6 +203,21 @@ ServerFigures ServerWatch::figures() const {
     f.sent_by_type[type] = {n, growth(first_, last_, "terrane_sent_bytes_total{type=\"" + type + "\"}")};
   }
   return f;
+}
+
+std::optional<ServerInterval> ServerWatch::next_interval() {
+  std::lock_guard lock(m_);
+  if (scrapes_ == 0) return std::nullopt;
+  if (!marked_) {
+    mark_ = first_;
+    mark_at_s_ = first_at_s_;
+    marked_ = true;
+  }
+  if (last_at_s_ <= mark_at_s_) return std::nullopt;
+  ServerInterval i = server_interval(mark_, mark_at_s_, last_, last_at_s_);
+  mark_ = last_;
+  mark_at_s_ = last_at_s_;
+  return i;
 }
 
 }  // namespace terrane::bots

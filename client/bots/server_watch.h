@@ -26,6 +26,18 @@ Scrape parse_exposition(const std::string& text);
 // two scrapes ("le" bounds); +inf when it lies beyond the last bound, and
 // nullopt without observations.
 std::optional<double> histogram_quantile_ms(const Scrape& first, const Scrape& last, const std::string& name, double q);
+// The mean, in ms, of a histogram's observations between two scrapes
+// (_sum and _count); nullopt without observations.
+std::optional<double> histogram_mean_ms(const Scrape& first, const Scrape& last, const std::string& name);
+
+// The server between two scrapes: the timeline's second-by-second view of
+// it, so a slow second can be told to be the server's or the bots'.
+struct ServerInterval {
+  double cpu_share = 0;  // of one core
+  std::uint64_t edits_applied = 0;
+  std::optional<double> tick_ms_mean, commit_ms_mean, edit_ack_ms_mean;
+};
+ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s);
 
 struct ServerFigures {
   double wall_s = 0;             // between the first and last scrape
@@ -55,6 +67,10 @@ class ServerWatch {
   // Scrapes a last time and stops the thread.
   void stop();
   ServerFigures figures() const;
+  // The server from the scrape the previous call ended at (the first
+  // scrape, at the first call) to the newest; nullopt when no scrape came
+  // since. Called once a second, it trails the caller's second by up to one.
+  std::optional<ServerInterval> next_interval();
 
  private:
   bool scrape(std::string* error);
@@ -66,8 +82,9 @@ class ServerWatch {
   mutable std::mutex m_;
   std::condition_variable cv_;
   bool stopping_ = false;
-  Scrape first_, last_;
-  double first_at_s_ = 0, last_at_s_ = 0;
+  Scrape first_, last_, mark_;
+  double first_at_s_ = 0, last_at_s_ = 0, mark_at_s_ = 0;
+  bool marked_ = false;
   std::uint64_t rss_peak_ = 0;
   int scrapes_ = 0, errors_ = 0;
   std::string first_error_;

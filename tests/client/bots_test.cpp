@@ -123,6 +123,20 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_GT(r.server->sent_by_type["StreamBatch"].second, 0u);
   EXPECT_EQ(r.server->sent_by_type["EditAck"].first, r.edits_acked);
   EXPECT_NE(report_table(r).find("the server over the run"), std::string::npos) << report_table(r);
+  // Second by second too: the intervals between scrapes add up to the
+  // server's edits over the run (each point takes the scrapes since the
+  // previous one; the last scrape, at the end, may come after the last point).
+  std::uint64_t applied = 0;
+  bool ack_mean = false;
+  for (const TimelinePoint& p : r.timeline) {
+    if (!p.server) continue;
+    applied += p.server->edits_applied;
+    EXPECT_GE(p.server->cpu_share, 0);
+    ack_mean = ack_mean || (p.server->edit_ack_ms_mean && *p.server->edit_ack_ms_mean > 0);
+  }
+  EXPECT_GT(applied, 0u);
+  EXPECT_LE(applied, r.server->edits_applied);
+  EXPECT_TRUE(ack_mean);
 
   std::map<std::string, std::string> j;
   ASSERT_EQ(flatten_json(report_json(r), &j), "");
@@ -370,6 +384,26 @@ TEST(ServerWatch, ReadsTheExpositionAndAHistogramsQuantileBetweenTwoScrapes) {
   const Scrape c = parse_exposition("t_seconds_bucket{le=\"0.001\"} 10\nt_seconds_bucket{le=\"0.01\"} 10\n"
                                     "t_seconds_bucket{le=\"+Inf\"} 20\n");
   EXPECT_TRUE(std::isinf(*histogram_quantile_ms(a, c, "t_seconds", 0.99)));
+}
+
+TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
+  const Scrape a = parse_exposition(
+      "process_cpu_seconds_total 10\nterrane_edits_applied_total 100\n"
+      "terrane_edit_ack_duration_seconds_sum 2\nterrane_edit_ack_duration_seconds_count 100\n"
+      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 50\n");
+  const Scrape b = parse_exposition(
+      "process_cpu_seconds_total 11.5\nterrane_edits_applied_total 140\n"
+      "terrane_edit_ack_duration_seconds_sum 3.2\nterrane_edit_ack_duration_seconds_count 140\n"
+      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 80\n");
+  const ServerInterval i = server_interval(a, 100.0, b, 102.0);
+  EXPECT_DOUBLE_EQ(i.cpu_share, 0.75);  // 1.5 s of CPU over 2 s
+  EXPECT_EQ(i.edits_applied, 40u);
+  ASSERT_TRUE(i.edit_ack_ms_mean.has_value());
+  EXPECT_NEAR(*i.edit_ack_ms_mean, 30.0, 1e-9);  // 1.2 s over 40 edits
+  ASSERT_TRUE(i.tick_ms_mean.has_value());
+  EXPECT_NEAR(*i.tick_ms_mean, 0.0, 1e-9);  // 30 ticks, no time added
+  EXPECT_FALSE(i.commit_ms_mean.has_value());  // no commits observed
+  EXPECT_EQ(histogram_mean_ms(b, b, "terrane_edit_ack_duration_seconds"), std::nullopt);
 }
 
 }  // namespace
