@@ -194,7 +194,8 @@ std::string report_json(const BotsReport& r) {
       j << ", \"server\": {\"cpu_share\": " << num(p.server->cpu_share)
         << ", \"edits_applied\": " << p.server->edits_applied << ", \"tick_ms_mean\": " << json_opt(p.server->tick_ms_mean)
         << ", \"commit_ms_mean\": " << json_opt(p.server->commit_ms_mean)
-        << ", \"edit_ack_ms_mean\": " << json_opt(p.server->edit_ack_ms_mean) << "}";
+        << ", \"edit_ack_ms_mean\": " << json_opt(p.server->edit_ack_ms_mean)
+        << ", \"edit_ack_p99_ms_bound\": " << json_opt(p.server->edit_ack_p99_ms) << "}";
     j << "}";
   }
   j << "\n  ]\n}\n";

@@ -110,6 +110,7 @@ ServerInterval server_interval(const Scrape& first, double first_at_s, const Scr
   i.tick_ms_mean = histogram_mean_ms(first, last, "terrane_tick_duration_seconds");
   i.commit_ms_mean = histogram_mean_ms(first, last, "terrane_commit_duration_seconds");
   i.edit_ack_ms_mean = histogram_mean_ms(first, last, "terrane_edit_ack_duration_seconds");
+  i.edit_ack_p99_ms = histogram_quantile_ms(first, last, "terrane_edit_ack_duration_seconds", 0.99);
   return i;
 }
 

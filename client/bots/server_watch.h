@@ -36,6 +36,7 @@ struct ServerInterval {
   double cpu_share = 0;  // of one core
   std::uint64_t edits_applied = 0;
   std::optional<double> tick_ms_mean, commit_ms_mean, edit_ack_ms_mean;
+  std::optional<double> edit_ack_p99_ms;  // bucket bound (histogram_quantile_ms)
 };
 ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s);
 

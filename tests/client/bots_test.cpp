@@ -390,16 +390,23 @@ TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
   const Scrape a = parse_exposition(
       "process_cpu_seconds_total 10\nterrane_edits_applied_total 100\n"
       "terrane_edit_ack_duration_seconds_sum 2\nterrane_edit_ack_duration_seconds_count 100\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"0.05\"} 100\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"0.1\"} 100\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"+Inf\"} 100\n"
       "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 50\n");
   const Scrape b = parse_exposition(
       "process_cpu_seconds_total 11.5\nterrane_edits_applied_total 140\n"
       "terrane_edit_ack_duration_seconds_sum 3.2\nterrane_edit_ack_duration_seconds_count 140\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"0.05\"} 138\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"0.1\"} 140\n"
+      "terrane_edit_ack_duration_seconds_bucket{le=\"+Inf\"} 140\n"
       "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 80\n");
   const ServerInterval i = server_interval(a, 100.0, b, 102.0);
   EXPECT_DOUBLE_EQ(i.cpu_share, 0.75);  // 1.5 s of CPU over 2 s
   EXPECT_EQ(i.edits_applied, 40u);
   ASSERT_TRUE(i.edit_ack_ms_mean.has_value());
   EXPECT_NEAR(*i.edit_ack_ms_mean, 30.0, 1e-9);  // 1.2 s over 40 edits
+  EXPECT_EQ(i.edit_ack_p99_ms, 100.0);  // 38 of the 40 within 50 ms, the last 2 within 100
   ASSERT_TRUE(i.tick_ms_mean.has_value());
   EXPECT_NEAR(*i.tick_ms_mean, 0.0, 1e-9);  // 30 ticks, no time added
   EXPECT_FALSE(i.commit_ms_mean.has_value());  // no commits observed
