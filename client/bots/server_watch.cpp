@@ -139,12 +139,13 @@ bool ServerWatch::scrape(std::string* error) {
   }
   Scrape s = parse_exposition(res->body);
   rss_peak_ = std::max(rss_peak_, static_cast<std::uint64_t>(value_of(s, "process_resident_memory_bytes")));
+  const double at = now_s();
   if (scrapes_++ == 0) {
-    first_ = s;
-    first_at_s_ = now_s();
+    first_ = mark_ = s;
+    first_at_s_ = mark_at_s_ = at;
   }
   last_ = std::move(s);
-  last_at_s_ = now_s();
+  last_at_s_ = at;
   return true;
 }
 
@@ -208,13 +209,7 @@ ServerFigures ServerWatch::figures() const {
 
 std::optional<ServerInterval> ServerWatch::next_interval() {
   std::lock_guard lock(m_);
-  if (scrapes_ == 0) return std::nullopt;
-  if (!marked_) {
-    mark_ = first_;
-    mark_at_s_ = first_at_s_;
-    marked_ = true;
-  }
-  if (last_at_s_ <= mark_at_s_) return std::nullopt;
+  if (scrapes_ == 0 || last_at_s_ <= mark_at_s_) return std::nullopt;
   ServerInterval i = server_interval(mark_, mark_at_s_, last_, last_at_s_);
   mark_ = last_;
   mark_at_s_ = last_at_s_;

@@ -83,9 +83,10 @@ class ServerWatch {
   mutable std::mutex m_;
   std::condition_variable cv_;
   bool stopping_ = false;
+  // mark_: where the next interval starts (the first scrape, then the
+  // newest at each next_interval()).
   Scrape first_, last_, mark_;
   double first_at_s_ = 0, last_at_s_ = 0, mark_at_s_ = 0;
-  bool marked_ = false;
   std::uint64_t rss_peak_ = 0;
   int scrapes_ = 0, errors_ = 0;
   std::string first_error_;
