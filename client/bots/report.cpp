@@ -195,7 +195,11 @@ std::string report_json(const BotsReport& r) {
         << ", \"edits_applied\": " << p.server->edits_applied << ", \"tick_ms_mean\": " << json_opt(p.server->tick_ms_mean)
         << ", \"commit_ms_mean\": " << json_opt(p.server->commit_ms_mean)
         << ", \"edit_ack_ms_mean\": " << json_opt(p.server->edit_ack_ms_mean)
-        << ", \"edit_ack_p99_ms_bound\": " << json_opt(p.server->edit_ack_p99_ms) << "}";
+        << ", \"edit_ack_p99_ms_bound\": " << json_opt(p.server->edit_ack_p99_ms)
+        << ", \"tick_ms_max_bound\": " << json_opt(p.server->tick_ms_max)
+        << ", \"commit_ms_max_bound\": " << json_opt(p.server->commit_ms_max)
+        << ", \"fanout_ms_max_bound\": " << json_opt(p.server->fanout_ms_max)
+        << ", \"ticks_late\": " << p.server->ticks_late << "}";
     j << "}";
   }
   j << "\n  ]\n}\n";

@@ -111,6 +111,10 @@ ServerInterval server_interval(const Scrape& first, double first_at_s, const Scr
   i.commit_ms_mean = histogram_mean_ms(first, last, "terrane_commit_duration_seconds");
   i.edit_ack_ms_mean = histogram_mean_ms(first, last, "terrane_edit_ack_duration_seconds");
   i.edit_ack_p99_ms = histogram_quantile_ms(first, last, "terrane_edit_ack_duration_seconds", 0.99);
+  i.tick_ms_max = histogram_quantile_ms(first, last, "terrane_tick_duration_seconds", 1.0);
+  i.commit_ms_max = histogram_quantile_ms(first, last, "terrane_commit_duration_seconds", 1.0);
+  i.fanout_ms_max = histogram_quantile_ms(first, last, "terrane_fanout_duration_seconds", 1.0);
+  i.ticks_late = growth(first, last, "terrane_ticks_late_total");
   return i;
 }
 

@@ -393,14 +393,18 @@ TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
       "terrane_edit_ack_duration_seconds_bucket{le=\"0.05\"} 100\n"
       "terrane_edit_ack_duration_seconds_bucket{le=\"0.1\"} 100\n"
       "terrane_edit_ack_duration_seconds_bucket{le=\"+Inf\"} 100\n"
-      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 50\n");
+      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 50\n"
+      "terrane_tick_duration_seconds_bucket{le=\"0.005\"} 50\nterrane_tick_duration_seconds_bucket{le=\"0.25\"} 50\n"
+      "terrane_tick_duration_seconds_bucket{le=\"+Inf\"} 50\nterrane_ticks_late_total 3\n");
   const Scrape b = parse_exposition(
       "process_cpu_seconds_total 11.5\nterrane_edits_applied_total 140\n"
       "terrane_edit_ack_duration_seconds_sum 3.2\nterrane_edit_ack_duration_seconds_count 140\n"
       "terrane_edit_ack_duration_seconds_bucket{le=\"0.05\"} 138\n"
       "terrane_edit_ack_duration_seconds_bucket{le=\"0.1\"} 140\n"
       "terrane_edit_ack_duration_seconds_bucket{le=\"+Inf\"} 140\n"
-      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 80\n");
+      "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 80\n"
+      "terrane_tick_duration_seconds_bucket{le=\"0.005\"} 79\nterrane_tick_duration_seconds_bucket{le=\"0.25\"} 80\n"
+      "terrane_tick_duration_seconds_bucket{le=\"+Inf\"} 80\nterrane_ticks_late_total 4\n");
   const ServerInterval i = server_interval(a, 100.0, b, 102.0);
   EXPECT_DOUBLE_EQ(i.cpu_share, 0.75);  // 1.5 s of CPU over 2 s
   EXPECT_EQ(i.edits_applied, 40u);
@@ -410,6 +414,9 @@ TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
   ASSERT_TRUE(i.tick_ms_mean.has_value());
   EXPECT_NEAR(*i.tick_ms_mean, 0.0, 1e-9);  // 30 ticks, no time added
   EXPECT_FALSE(i.commit_ms_mean.has_value());  // no commits observed
+  EXPECT_EQ(i.tick_ms_max, 250.0);  // 29 of the 30 ticks within 5 ms, one within 250
+  EXPECT_FALSE(i.commit_ms_max.has_value());
+  EXPECT_EQ(i.ticks_late, 1u);
   EXPECT_EQ(histogram_mean_ms(b, b, "terrane_edit_ack_duration_seconds"), std::nullopt);
 }
 
