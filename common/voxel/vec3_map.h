@@ -99,6 +99,20 @@ class Vec3iMap {
   const_iterator begin() const { return const_iterator(this, next_full(0)); }
   const_iterator end() const { return const_iterator(this, capacity()); }
 
+  // A scan in parts: the table has slot_count() slots, and
+  // for_each_in_slots(from, to, f) calls f(key, value) for the elements in
+  // slots [from, to) (to clipped to slot_count()). Parts that cover 0 to
+  // slot_count() visit every element present throughout, once each, as long
+  // as no insert rebuilt the table meanwhile (slot_count() changed); after a
+  // rebuild some are missed or seen twice. f must not insert or erase.
+  std::size_t slot_count() const { return capacity(); }
+  template <class F>
+  void for_each_in_slots(std::size_t from, std::size_t to, F&& f) const {
+    to = to < capacity() ? to : capacity();
+    for (std::size_t i = from; i < to; ++i)
+      if (state_[i] == kFull) f(slot(i)->first, std::as_const(slot(i)->second));
+  }
+
   iterator find(Vec3i k) { return iterator(this, find_index(k)); }
   const_iterator find(Vec3i k) const { return const_iterator(this, find_index(k)); }
   std::size_t count(Vec3i k) const { return find_index(k) != capacity() ? 1 : 0; }

@@ -403,43 +403,63 @@ void WorldOwner::unload_unwatched() {
   // full resolution, with no edit queued and nothing uncommitted, keep only
   // their mips: clients holding mips are served and refreshed from those,
   // and the voxels come back from the store when needed. Edits are
-  // committed at the tick that applies them, so this loses nothing.
-  const std::size_t full = loaded_.size() - mips_only_;
-  if (full > options_.resident_chunks) {
-    std::vector<std::pair<std::uint64_t, Vec3i>> drop;
-    for (const auto& [cp, l] : loaded_) {
+  // committed at the tick that applies them, so this loses nothing. And
+  // mips nobody holds are forgotten when there are very many.
+  //
+  // One pass over every loaded chunk a second, a tick's share of the table
+  // each tick: a whole pass at once (hundreds of thousands of chunks at a
+  // thousand clients) took a tick 15-40 ms, and every edit arriving
+  // meanwhile waited for it.
+  UnloadPass& pass = unload_pass_;
+  if (pass.next_slot == 0) {
+    pass.lighten = loaded_.size() - mips_only_ > options_.resident_chunks;
+    pass.forget = mips_only_ > kMaxMipsOnly;
+    pass.drop.clear();
+    if (!pass.lighten && !pass.forget) return;  // nothing to do: asked again next tick
+  }
+  const std::size_t slots = loaded_.slot_count();
+  const std::size_t part = slots / std::max<std::uint32_t>(1, options_.tick_hz) + 1;
+  const std::size_t from = pass.next_slot, to = std::min(slots, from + part);
+  std::vector<Vec3i> forget;
+  loaded_.for_each_in_slots(from, to, [&](Vec3i cp, const Loaded& l) {
+    if (!l.current->has_voxels()) {
       // (An all-Air chunk has no voxels to drop, but as its mips it can
-      // then be forgotten.)
-      if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
-          interest_.held_full(cp) ||
-          loading_.count(cp) != 0)
-        continue;
-      drop.emplace_back(l.used_tick, cp);
+      // be forgotten.)
+      if (pass.forget && forget.size() + kMaxMipsOnly / 2 < mips_only_ && !interest_.watched(cp) &&
+          loading_.count(cp) == 0)
+        forget.push_back(cp);
+      return;
     }
+    if (!pass.lighten || busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp) ||
+        loading_.count(cp) != 0)
+      return;
+    pass.drop.emplace_back(l.used_tick, cp);
+  });
+  for (const Vec3i cp : forget) {
+    // Its region's image is read again when next wanted.
+    regions_read_.erase(coarse_region_of(cp));
+    loaded_.erase(cp);
+    --mips_only_;
+  }
+  pass.next_slot = to;
+  if (to < slots) return;
+  pass.next_slot = 0;  // the pass is over
+  const std::size_t full = loaded_.size() - mips_only_;
+  if (pass.lighten && full > options_.resident_chunks) {
+    std::vector<std::pair<std::uint64_t, Vec3i>>& drop = pass.drop;
     const std::size_t excess = full - options_.resident_chunks;
     if (drop.size() > excess) {
       std::nth_element(drop.begin(), drop.begin() + static_cast<std::ptrdiff_t>(excess), drop.end(),
-                       [](const auto& a, const auto& b) { return a.first < b.first; });
+                       [](const auto& x, const auto& y) { return x.first < y.first; });
       drop.resize(excess);
     }
-    // Reduced a few per tick (lighten_some), so no tick waits for thousands.
-    std::sort(drop.begin(), drop.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    // Reduced a few per tick (lighten_some), so no tick waits for thousands;
+    // each is checked again then (it may have been asked for or edited).
+    std::sort(drop.begin(), drop.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
     lighten_.clear();
     for (const auto& [t, cp] : drop) lighten_.push_back(cp);
   }
-  // Mips nobody holds are forgotten when there are very many.
-  if (mips_only_ > kMaxMipsOnly) {
-    for (auto it = loaded_.begin(); it != loaded_.end() && mips_only_ > kMaxMipsOnly / 2;) {
-      if (!it->second.current->has_voxels() && !interest_.watched(it->first) && loading_.count(it->first) == 0) {
-        // Its region's image is read again when next wanted.
-        regions_read_.erase(coarse_region_of(it->first));
-        it = loaded_.erase(it);
-        --mips_only_;
-      } else {
-        ++it;
-      }
-    }
-  }
+  pass.drop.clear();
   counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
 }
 
@@ -1133,8 +1153,13 @@ void WorldOwner::hash(ClientId id, Vec3i cp) {
 }
 
 void WorldOwner::send_presence() {
+  // Each client every `every` ticks, at a phase of its own (its id): a
+  // thousand nearest-neighbour queries and frames spread over the ticks
+  // instead of lengthening one.
+  const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
+  const std::uint64_t every = std::max<std::uint64_t>(1, hz / options_.presence_hz);
   for (auto& [id, c] : clients_) {
-    if (!c.placed) continue;
+    if (!c.placed || (id + tick_) % every != 0) continue;
     auto entries =
         presence_.nearest(id, c.position, static_cast<float>(c.view_distance), options_.presence_max_entries);
     // Only when something changed: idle crowds cost nothing.
@@ -1196,23 +1221,41 @@ void WorldOwner::lighten_some() {
 }
 
 void WorldOwner::on_tick() {
-  const auto t0 = std::chrono::steady_clock::now();
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
   replace_estimates();
   counters_.tick_lag_ns.store(
       static_cast<std::uint64_t>(std::max<std::int64_t>(0, std::chrono::nanoseconds(t0 - next_tick_).count())),
       std::memory_order_relaxed);
   lighten_some();
+  const auto t_edits = Clock::now();
   apply_edits();
   if (!forwarded_.empty()) settle_forwarded();
+  const auto t_presence = Clock::now();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
-  if (options_.presence_hz > 0 && tick_ % std::max<std::uint64_t>(1, hz / options_.presence_hz) == 0) send_presence();
-  if (tick_ % hz == 0) {
-    unload_unwatched();
-    retry_pending();
-  }
-  const auto t1 = std::chrono::steady_clock::now();
+  if (options_.presence_hz > 0) send_presence();
+  const auto t_unload = Clock::now();
+  unload_unwatched();
+  if (tick_ % hz == 0) retry_pending();
+  const auto t1 = Clock::now();
   counters_.tick_duration.observe(t1 - t0);
   counters_.last_tick_at_ns.store(std::chrono::nanoseconds(t1.time_since_epoch()).count(), std::memory_order_relaxed);
+  // A tick longer than half its period delays every edit that arrives
+  // meanwhile: said, with its parts, at most once every 10 s.
+  const auto period = std::chrono::microseconds(1'000'000 / hz);
+  if (t1 - t0 > period / 2) {
+    ++slow_ticks_;
+    if (t1 >= next_slow_tick_report_) {
+      const auto ms = [](Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); };
+      server_log().warn(
+          "tick {} took {:.1f} ms (period {:.1f}): loads and lightening {:.1f}, edits {:.1f}, presence {:.1f}, "
+          "unloading {:.1f}; {} such ticks since the last report",
+          tick_, ms(t1 - t0), ms(period), ms(t_edits - t0), ms(t_presence - t_edits), ms(t_unload - t_presence),
+          ms(t1 - t_unload), slow_ticks_);
+      slow_ticks_ = 0;
+      next_slow_tick_report_ = t1 + std::chrono::seconds(10);
+    }
+  }
 }
 
 void WorldOwner::flush(std::function<void(std::uint64_t tick, bool stored)> done) {

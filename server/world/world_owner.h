@@ -289,7 +289,7 @@ class WorldOwner : private WorldView {
   void reserve(const Region& r);
   void unbusy(const Region& r);
   void send_presence();
-  void unload_unwatched();
+  void unload_unwatched();  // every tick: a tick's part of a pass over loaded_
   void lighten_some();
 
   World& world_;
@@ -299,12 +299,21 @@ class WorldOwner : private WorldView {
   Strand strand_;
   asio::steady_timer tick_timer_;
   std::chrono::steady_clock::time_point next_tick_;
+  std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report
+  std::chrono::steady_clock::time_point next_slow_tick_report_{};
 
   std::unordered_map<ClientId, Client> clients_;
   // Chunks with their voxels, and chunks kept as mips only.
   Vec3iMap<Loaded> loaded_;
   std::size_t mips_only_ = 0;
   std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
+  // unload_unwatched's pass over loaded_, a tick's share of its slots at a time.
+  struct UnloadPass {
+    std::size_t next_slot = 0;  // 0: a pass begins at the next tick
+    bool lighten = false;       // over resident_chunks when the pass began
+    bool forget = false;        // over kMaxMipsOnly when the pass began
+    std::vector<std::pair<std::uint64_t, Vec3i>> drop;  // (used tick, chunk) that may be lightened
+  } unload_pass_;
   std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
   // Regions whose coarse image was read (a chunk of one without an entry
   // was never stored), and the wants waiting for an image being read.

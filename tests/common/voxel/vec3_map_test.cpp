@@ -76,6 +76,29 @@ TEST(Vec3iMap, EraseWhileIteratingVisitsEachElementOnce) {
   EXPECT_THROW(m.at(Vec3i{9999, 0, 0}), std::out_of_range);
 }
 
+TEST(Vec3iMap, AScanInPartsVisitsEachElementOnce) {
+  Vec3iMap<int> m;
+  for (int i = 0; i < 3000; ++i) m[Vec3i{i, 2 * i, -i}] = i;
+  for (int i = 0; i < 3000; i += 4) m.erase(Vec3i{i, 2 * i, -i});  // tombstones are skipped
+  std::unordered_map<Vec3i, int, Vec3iHash> visited;
+  const std::size_t slots = m.slot_count();
+  ASSERT_GE(slots, m.size());
+  // Parts of uneven sizes, the last past the end (clipped).
+  for (std::size_t from = 0, step = 1; from < slots; from += step, step = step * 3 + 1)
+    m.for_each_in_slots(from, from + step, [&](Vec3i k, int v) {
+      ++visited[k];
+      EXPECT_EQ(v, k.x);
+    });
+  EXPECT_EQ(visited.size(), m.size());
+  for (const auto& [k, n] : visited) {
+    EXPECT_EQ(n, 1) << k.x;
+    EXPECT_NE(k.x % 4, 0) << k.x;
+  }
+  Vec3iMap<int> empty;
+  EXPECT_EQ(empty.slot_count(), 0u);
+  empty.for_each_in_slots(0, 10, [&](Vec3i, int) { ADD_FAILURE(); });
+}
+
 TEST(Vec3iMap, OwnsMoveOnlyValuesAndDestroysEachOnce) {
   auto alive = std::make_shared<int>(0);
   struct Counted {
