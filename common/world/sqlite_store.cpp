@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <set>
 #include <tuple>
 #include <filesystem>
 #include <sstream>
@@ -252,7 +253,7 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
   }
   for (const auto& [key, change] : by_region) {
     const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
-    auto stored = load_coarse(r);
+    auto stored = read_image(r);
     if (!stored && !stored.error().decode) return stored.error();
     if (!stored) {
       // A damaged image is derived data: made again from the region's rows.
@@ -267,7 +268,11 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
     std::vector<CoarseEntry> all;
     all.reserve(entries.size());
     for (auto& [i, e] : entries) all.push_back(std::move(e));
-    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(all));
+    // Whatever else of the region was behind its rows (a writer that
+    // stopped before catching up) is made right with it.
+    auto whole = read_past(r, std::move(all));
+    if (!whole) return whole.error();
+    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(*whole));
     StmtReset reset{coarse_save_stmt_};
     sqlite3_bind_int(coarse_save_stmt_, 1, r.x);
     sqlite3_bind_int(coarse_save_stmt_, 2, r.y);
@@ -299,6 +304,46 @@ FileStatus SqliteStore::begin_read() {
 void SqliteStore::end_read() { sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr); }
 
 FileResult<std::vector<CoarseEntry>> SqliteStore::load_coarse(Vec3i region) {
+  auto image = read_image(region);
+  if (!image) return image.error();
+  return read_past(region, std::move(*image));
+}
+
+FileResult<std::vector<CoarseEntry>> SqliteStore::read_past(Vec3i region, std::vector<CoarseEntry> entries) {
+  // The rows are the truth: an entry whose row has another revision (its
+  // image not caught up: set_coarse_behind) is made from the row, and one
+  // whose row went is dropped. A row with no entry is either newer than
+  // the image or damaged: decoded, it gets one if it decodes.
+  auto rows = revisions_in(region);
+  if (!rows) return rows.error();
+  std::map<int, std::uint64_t> revision;
+  for (const auto& [p, rev] : *rows) revision[coarse_index(p)] = rev;
+  std::vector<CoarseEntry> out;
+  out.reserve(rows->size());
+  for (CoarseEntry& e : entries) {
+    auto it = revision.find(coarse_index(e.chunk_pos));
+    if (it != revision.end() && it->second == e.revision) out.push_back(std::move(e));
+  }
+  const auto by_index = [](const CoarseEntry& a, const CoarseEntry& b) {
+    return coarse_index(a.chunk_pos) < coarse_index(b.chunk_pos);
+  };
+  if (out.size() < rows->size()) {
+    std::set<int> have;
+    for (const CoarseEntry& e : out) have.insert(coarse_index(e.chunk_pos));
+    for (const auto& [p, rev] : *rows) {
+      if (have.count(coarse_index(p)) != 0) continue;
+      auto stored = load_chunk(p);
+      if (!stored && !stored.error().decode) return stored.error();
+      // A damaged row gets no entry (its load quarantines it).
+      if (stored && stored->has_value())
+        out.push_back(CoarseEntry{p, (*stored)->revision, coarse_voxels(&(*stored)->chunk)});
+    }
+  }
+  if (!std::is_sorted(out.begin(), out.end(), by_index)) std::sort(out.begin(), out.end(), by_index);
+  return out;
+}
+
+FileResult<std::vector<CoarseEntry>> SqliteStore::read_image(Vec3i region) {
   if (!coarse_load_stmt_ && sqlite3_prepare_v2(db_, "SELECT image FROM coarse WHERE rx = ? AND ry = ? AND rz = ?", -1,
                                                &coarse_load_stmt_, nullptr) != SQLITE_OK)
     return error("cannot prepare coarse image read");
@@ -322,14 +367,17 @@ FileResult<std::vector<CoarseEntry>> SqliteStore::load_coarse(Vec3i region) {
 }
 
 namespace {
-// The chunk coordinates of table rows within a region (an index range scan).
+// The chunk coordinates of table rows within a region (an index range scan),
+// and with revisions set, each row's revision (the chunks table: one row
+// per chunk).
 FileResult<std::vector<Vec3i>> chunks_in_region(sqlite3* db, const char* table, Vec3i region,
-                                                const std::function<FileError(const std::string&)>& error) {
+                                                const std::function<FileError(const std::string&)>& error,
+                                                std::vector<std::uint64_t>* revisions = nullptr) {
   sqlite3_stmt* st = nullptr;
   // cx and cy as lists, so the (cx, cy, cz) index is used for all three
   // (a range on cx alone would scan an 8-wide slab of the whole world).
   const Vec3i lo = region * kCoarseRegionChunks;
-  std::string sql = "SELECT DISTINCT cx, cy, cz FROM ";
+  std::string sql = revisions != nullptr ? "SELECT cx, cy, cz, revision FROM " : "SELECT DISTINCT cx, cy, cz FROM ";
   sql.append(table);
   for (const auto& [column, first] : {std::pair<const char*, int>{" WHERE cx IN (", lo.x}, {") AND cy IN (", lo.y}}) {
     sql.append(column);
@@ -349,8 +397,10 @@ FileResult<std::vector<Vec3i>> chunks_in_region(sqlite3* db, const char* table, 
   sqlite3_bind_int(st, 2, lo.z + kCoarseRegionChunks - 1);
   std::vector<Vec3i> out;
   int rc;
-  while ((rc = sqlite3_step(st)) == SQLITE_ROW)
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
     out.push_back(Vec3i{sqlite3_column_int(st, 0), sqlite3_column_int(st, 1), sqlite3_column_int(st, 2)});
+    if (revisions != nullptr) revisions->push_back(static_cast<std::uint64_t>(sqlite3_column_int64(st, 3)));
+  }
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return read_error();
   return out;
@@ -365,6 +415,16 @@ FileResult<std::vector<Vec3i>> SqliteStore::stored_in(Vec3i region) {
   return chunks_in_region(db_, "chunks", region, [this](const std::string& w) { return error(w); });
 }
 
+FileResult<std::vector<std::pair<Vec3i, std::uint64_t>>> SqliteStore::revisions_in(Vec3i region) {
+  std::vector<std::uint64_t> revisions;
+  auto positions = chunks_in_region(db_, "chunks", region, [this](const std::string& w) { return error(w); }, &revisions);
+  if (!positions) return positions.error();
+  std::vector<std::pair<Vec3i, std::uint64_t>> out;
+  out.reserve(positions->size());
+  for (std::size_t i = 0; i < positions->size(); ++i) out.emplace_back((*positions)[i], revisions[i]);
+  return out;
+}
+
 FileStatus SqliteStore::for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn) {
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "SELECT rx, ry, rz FROM coarse ORDER BY rx, ry, rz", -1, &st, nullptr) != SQLITE_OK)
@@ -376,7 +436,7 @@ FileStatus SqliteStore::for_each_coarse(const std::function<void(Vec3i, const st
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return error("cannot list coarse images");
   for (const Vec3i r : regions) {
-    auto entries = load_coarse(r);
+    auto entries = read_image(r);
     if (!entries) return entries.error();
     fn(r, *entries);
   }
@@ -627,7 +687,15 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
     }
     coarse.push_back(e);
   }
-  if (auto c = change_coarse(coarse, no_coarse); !c) {
+  // Behind: the entries wait in memory (loads read past them); an entry
+  // that goes is taken out of the image now (rare: a blob that does not
+  // decode), and out of what waits.
+  if (coarse_behind_)
+    for (const Vec3i p : no_coarse) {
+      const Vec3i r = coarse_region_of(p);
+      if (auto it = pending_coarse_.find({r.x, r.y, r.z}); it != pending_coarse_.end()) it->second.entries.erase(coarse_index(p));
+    }
+  if (auto c = change_coarse(coarse_behind_ ? std::vector<CoarseEntry>{} : coarse, no_coarse); !c) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return c.error();
   }
@@ -636,7 +704,47 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return e;
   }
+  if (coarse_behind_) {
+    const auto now = std::chrono::steady_clock::now();
+    for (CoarseEntry& e : coarse) {
+      const Vec3i r = coarse_region_of(e.chunk_pos);
+      auto [it, fresh] = pending_coarse_.try_emplace({r.x, r.y, r.z});
+      if (fresh) it->second.since = now;
+      CoarseEntry& slot = it->second.entries[coarse_index(e.chunk_pos)];
+      if (slot.revision <= e.revision) slot = std::move(e);
+    }
+  }
   return Ok{};
+}
+
+FileResult<std::size_t> SqliteStore::catch_up_coarse(std::size_t max_regions,
+                                                    std::chrono::steady_clock::duration min_age) {
+  if (pending_coarse_.empty() || max_regions == 0) return pending_coarse_.size();
+  const auto due = std::chrono::steady_clock::now() - min_age;
+  std::vector<std::pair<std::chrono::steady_clock::time_point, std::tuple<int, int, int>>> oldest;
+  for (const auto& [key, p] : pending_coarse_)
+    if (p.since <= due) oldest.emplace_back(p.since, key);
+  if (oldest.empty()) return pending_coarse_.size();
+  if (oldest.size() > max_regions) {
+    std::nth_element(oldest.begin(), oldest.begin() + static_cast<std::ptrdiff_t>(max_regions), oldest.end());
+    oldest.resize(max_regions);
+  }
+  std::vector<CoarseEntry> set;
+  for (const auto& [since, key] : oldest)
+    for (const auto& [i, e] : pending_coarse_.at(key).entries) set.push_back(e);
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot begin writing coarse images");
+  if (auto c = change_coarse(set, {}); !c) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return c.error();
+  }
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
+    FileError e = error("cannot commit coarse images");
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    return e;
+  }
+  for (const auto& [since, key] : oldest) pending_coarse_.erase(key);
+  return pending_coarse_.size();
 }
 
 FileResult<std::vector<EditLogEntry>> SqliteStore::edit_log(const EditLogQuery& q) {

@@ -7,8 +7,11 @@
 //   - quarantine: damaged chunk rows moved aside (coordinates, revision, the
 //     blob as it was, the reason, the time), kept until someone looks;
 //   - coarse (format 2): per 256³ region, the 4³ mip and revision of every
-//     stored chunk in it (common/world/coarse_image.h), written in the same
-//     transaction as the chunks, so a distant view never decodes them.
+//     stored chunk in it (common/world/coarse_image.h), so a distant view
+//     never decodes them. Written in the same transaction as the chunks,
+//     or, by a server (set_coarse_behind), after them: load_coarse then
+//     reads the rows' revisions and decodes the few chunks whose entry
+//     lags, so what it returns always matches the rows.
 // Chunks never stored are generated on demand from the metadata (see World).
 // The finer mips are not stored: they are rebuilt from level 0 on load.
 //
@@ -17,12 +20,15 @@
 // Thread-safety: one owner thread per object (one SQLite connection).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <span>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "common/world/world_store.h"
@@ -61,9 +67,23 @@ class SqliteStore final : public WorldStore {
   FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) override;
   FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) override;
   FileResult<std::vector<Vec3i>> stored_in(Vec3i region) override;
+  // Coarse images behind the chunks: save_chunks leaves the images' changes
+  // pending in memory (the rows are the truth: load_coarse reads past any
+  // lag) and catch_up_coarse writes them. Costs a commit the image rewrites
+  // (about four fifths of a server tick's commit), and coalesces a region's
+  // changes while they wait. Writes pending when the process dies are
+  // caught up by the next write into their region (until then, loads
+  // decode them).
+  void set_coarse_behind(bool on) override { coarse_behind_ = on; }
+  // In one transaction, the images of up to max_regions regions whose
+  // oldest pending change is at least min_age old (oldest first); how many
+  // regions still have pending changes.
+  FileResult<std::size_t> catch_up_coarse(std::size_t max_regions, std::chrono::steady_clock::duration min_age) override;
+  std::size_t coarse_pending() const override { return pending_coarse_.size(); }
   FileStatus begin_read() override;
   void end_read() override;
-  // Calls fn(region, entries) for every coarse image (terrane-world check).
+  // Calls fn(region, entries) for every coarse image as stored, which may
+  // be behind the chunks (set_coarse_behind; terrane-world check).
   FileStatus for_each_coarse(const std::function<void(Vec3i, const std::vector<CoarseEntry>&)>& fn);
   FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
                          std::span<const EditLogEntry> log = {}) override;
@@ -106,6 +126,14 @@ class SqliteStore final : public WorldStore {
   // Inside a transaction: the images of the regions of entries, changed.
   // set: entries to put; erase: chunks whose entries go.
   FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase);
+  // entries (an image's) made to match the region's rows: entries whose row
+  // has another revision or none are made from the row or dropped, rows
+  // without one decoded; in index order.
+  FileResult<std::vector<CoarseEntry>> read_past(Vec3i region, std::vector<CoarseEntry> entries);
+  // The image as stored (no entries if there is none).
+  FileResult<std::vector<CoarseEntry>> read_image(Vec3i region);
+  // The region's chunk rows and their revisions (an index range scan).
+  FileResult<std::vector<std::pair<Vec3i, std::uint64_t>>> revisions_in(Vec3i region);
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
 
@@ -119,6 +147,14 @@ class SqliteStore final : public WorldStore {
   sqlite3_stmt* coarse_load_stmt_ = nullptr;
   sqlite3_stmt* coarse_save_stmt_ = nullptr;
   WorldMeta meta_;
+  bool coarse_behind_ = false;
+  // Images' changes not written yet (set_coarse_behind), per region: since
+  // when, and the entries by coarse_index.
+  struct PendingImage {
+    std::chrono::steady_clock::time_point since;
+    std::map<int, CoarseEntry> entries;
+  };
+  std::map<std::tuple<int, int, int>, PendingImage> pending_coarse_;
 };
 
 }  // namespace terrane

@@ -8,8 +8,9 @@
 //   - one row per stored 32³ chunk: its coordinates, a revision that only
 //     ever grows, and the voxels as a chunk blob (below);
 //   - per 256³ region, the 4³ mip and revision of every stored chunk in it
-//     (common/world/coarse_image.h), written in the same transaction as the
-//     chunks, so a distant view never decodes them;
+//     (common/world/coarse_image.h), so a distant view never decodes them;
+//     written with the chunks, or after them (set_coarse_behind), never
+//     read behind them;
 //   - the quarantine (damaged chunk rows moved aside), the edit log and the
 //     operators' access lists.
 // Chunks never stored are generated on demand from the metadata (see World).
@@ -21,6 +22,7 @@
 // gives another connection to the same world for another thread.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -144,6 +146,19 @@ class WorldStore {
   // log: edits recorded in the same transaction (the edit log).
   virtual FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
                                  std::span<const EditLogEntry> log = {}) = 0;
+  // Coarse mips written after the chunks they describe instead of with
+  // them (a server's writer; SqliteStore, whose images per region cost a
+  // commit most of its time, does so; a store that keeps a chunk's coarse
+  // mip in its row writes it with the row and ignores this). Loads are
+  // never behind: they read past whatever is pending.
+  virtual void set_coarse_behind(bool) {}
+  // Writes pending coarse changes: those at least min_age old, of up to
+  // max_regions regions; returns how many regions still wait.
+  virtual FileResult<std::size_t> catch_up_coarse(std::size_t /*max_regions*/,
+                                                  std::chrono::steady_clock::duration /*min_age*/) {
+    return std::size_t{0};
+  }
+  virtual std::size_t coarse_pending() const { return 0; }
   virtual FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) = 0;
   // Deletes log entries older than before_ms, then the oldest until the
   // entries' voxel bytes are at most max_bytes (0: no bound), at most

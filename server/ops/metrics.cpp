@@ -150,6 +150,11 @@ std::string render_metrics(const MetricsSources& s) {
   const StorageCounters& st = s.storage;
   m.histogram("terrane_commit_duration_seconds", "Wall time of each store transaction (one or more ticks).",
               st.commit_duration);
+  m.histogram("terrane_coarse_catch_up_duration_seconds",
+              "Wall time of each transaction writing coarse images after their chunks' commit.",
+              st.coarse_catch_up_duration);
+  m.gauge("terrane_coarse_regions_pending", "Regions whose coarse image is behind its chunks (loads read past it).",
+          load(st.coarse_regions_pending));
   m.counter("terrane_commits_total", "Store transactions committed.", load(st.commits));
   m.counter("terrane_ticks_committed_total", "Ticks carried by those transactions.", load(st.ticks_committed));
   m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));

@@ -21,6 +21,9 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   auto w = world.store().reopen();
   if (!w) return w.error();
   s->writer_store_ = std::move(*w);
+  // A commit stores the chunks and the edit log; the coarse images follow
+  // when the writer has nothing else to do (writer_loop).
+  s->writer_store_->set_coarse_behind(true);
   s->writer_ = std::thread([p = s.get()] { p->writer_loop(); });
   return s;
 }
@@ -314,15 +317,26 @@ void Storage::writer_loop() {
   FileStatus status = Ok{};
   for (;;) {
     std::deque<CommitJob> batch;
+    bool stop = false;
     {
       std::unique_lock lock(jobs_mutex_);
-      // Wakes at least once a minute to prune the edit log.
-      jobs_cv_.wait_for(lock, std::chrono::minutes(1), [&] { return stopping_ || !jobs_.empty(); });
-      if (jobs_.empty() && stopping_) return;  // stopping, nothing left
+      // Wakes at least once a minute to prune the edit log, and while coarse
+      // images wait, when the oldest may be due.
+      const auto wait = writer_store_->coarse_pending() > 0 ? kCoarseCheck : std::chrono::minutes(1);
+      jobs_cv_.wait_for(lock, wait, [&] { return stopping_ || !jobs_.empty(); });
+      stop = jobs_.empty() && stopping_;  // stopping, nothing left
       batch.swap(jobs_);
     }
+    if (stop) {
+      // Everything the commits left behind, before the world is closed.
+      if (status) catch_up_coarse(std::chrono::steady_clock::duration::zero(), false);
+      return;
+    }
     if (batch.empty()) {
-      if (status) prune_log();
+      if (status) {
+        prune_log();
+        catch_up_coarse(kCoarseDelay, true);
+      }
       continue;
     }
     if (status) {  // after a failure, every later tick fails too
@@ -364,8 +378,35 @@ void Storage::writer_loop() {
       job.done(status);
     }
     // After the acks went out: a prune (at most once a minute, a bounded
-    // number of rows) delays only the next batch.
-    if (status) prune_log();
+    // number of rows) and the coarse images due delay only the next batch.
+    if (status) {
+      prune_log();
+      catch_up_coarse(kCoarseDelay, true);
+    }
+  }
+}
+
+void Storage::catch_up_coarse(std::chrono::steady_clock::duration min_age, bool yield) {
+  for (std::size_t before = writer_store_->coarse_pending(); before > 0;) {
+    if (yield) {
+      std::lock_guard lock(jobs_mutex_);
+      if (!jobs_.empty()) return;  // a tick's commit first
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    auto left = writer_store_->catch_up_coarse(kCoarseRegionsPerCatchUp, min_age);
+    if (!left) {
+      // Derived data: the rows are stored, and loads read past the lag.
+      // Tried again next time; said once a minute at most.
+      if (const auto now = std::chrono::steady_clock::now(); now >= next_coarse_error_) {
+        server_log().error("coarse images: {} (loads decode the chunks meanwhile)", left.error().message);
+        next_coarse_error_ = now + std::chrono::minutes(1);
+      }
+      return;
+    }
+    counters_.coarse_regions_pending.store(*left, std::memory_order_relaxed);
+    if (*left == before) return;  // none due yet
+    counters_.coarse_catch_up_duration.observe(std::chrono::steady_clock::now() - t0);
+    before = *left;
   }
 }
 

@@ -13,7 +13,10 @@
 //   Commits run on one writer thread with its own connection: each tick's
 //   changed chunk versions are queued, and the writer takes every tick
 //   queued by then and stores them in one transaction (a group commit),
-//   then reports each tick in order. After a failed commit every later tick
+//   then reports each tick in order. The coarse images of the chunks
+//   written follow in transactions of their own when no commit waits, a
+//   region's changes held about a second so repeated edits share one
+//   rewrite (WorldStore::set_coarse_behind: loads read past the lag). After a failed commit every later tick
 //   fails too: the world in memory is ahead of the disk, and the server
 //   stops rather than serve what it could lose.
 //
@@ -80,6 +83,10 @@ struct StorageCounters {
   std::atomic<std::uint64_t> edits_logged{0};
   std::atomic<std::uint64_t> log_entries_pruned{0};
   DurationHistogram commit_duration;               // wall time inside each transaction
+  // Coarse images written after the commits (Storage::catch_up_coarse):
+  // each transaction's wall time, and the regions still waiting.
+  DurationHistogram coarse_catch_up_duration;
+  std::atomic<std::uint64_t> coarse_regions_pending{0};
 };
 
 class Storage {
@@ -159,6 +166,17 @@ class Storage {
   // (stored or quarantined).
   LoadedCoarse read_coarse(WorldStore& store, Vec3i region, std::vector<Vec3i>& rows);
   void writer_loop();
+  // Writes the coarse images the commits left behind (set_coarse_behind),
+  // those pending at least min_age, a few regions per transaction; with
+  // yield, only while no commit waits.
+  void catch_up_coarse(std::chrono::steady_clock::duration min_age, bool yield);
+  // A region's image changes wait this long, so a region edited again and
+  // again is rewritten about once a second instead of on every tick; the
+  // writer looks every kCoarseCheck while any wait.
+  static constexpr std::chrono::milliseconds kCoarseDelay{1000};
+  static constexpr std::chrono::milliseconds kCoarseCheck{100};
+  static constexpr std::size_t kCoarseRegionsPerCatchUp = 8;
+  std::chrono::steady_clock::time_point next_coarse_error_{};
 
   struct CommitJob {
     std::vector<VersionPtr> versions;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <map>
 #include <random>
+#include <set>
 #include <tuple>
 
 #include <sqlite3.h>
@@ -511,6 +512,101 @@ TEST(CoarseImage, RoundTripsAndRefusesDamage) {
   EXPECT_FALSE(decode_coarse_image(region, with_raw(one)).ok());
   one[2 + 11] = 0;
   EXPECT_TRUE(decode_coarse_image(region, with_raw(one)).ok());
+}
+
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+
+// The coarse entries load_coarse gives for every region that has chunks
+// (what a server reads), against the chunks' own.
+void expect_loads_match_chunks(SqliteStore& s) {
+  std::map<std::tuple<int, int, int>, CoarseEntry> from_chunks, from_loads;
+  std::set<std::tuple<int, int, int>> regions;
+  ASSERT_TRUE(s.for_each_chunk([&](Vec3i p, std::uint64_t rev, std::span<const std::uint8_t> blob) {
+                 auto c = decode_chunk_blob(blob);
+                 if (c) from_chunks[{p.x, p.y, p.z}] = CoarseEntry{p, rev, coarse_voxels(&*c)};
+                 const Vec3i r = coarse_region_of(p);
+                 regions.insert({r.x, r.y, r.z});
+               }).ok());
+  for (const auto& [rx, ry, rz] : regions) {
+    auto entries = s.load_coarse({rx, ry, rz});
+    ASSERT_TRUE(entries.ok()) << entries.error().message;
+    for (std::size_t i = 0; i < entries->size(); ++i) {
+      const CoarseEntry& e = (*entries)[i];
+      if (i > 0) {
+        EXPECT_LT(coarse_index((*entries)[i - 1].chunk_pos), coarse_index(e.chunk_pos)) << "in index order";
+      }
+      from_loads[{e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z}] = e;
+    }
+  }
+  EXPECT_EQ(from_loads, from_chunks);
+}
+
+TEST_F(SqliteStoreTest, CoarseImagesBehindTheChunksAreReadPastThenCaughtUp) {
+  auto created = SqliteStore::create(dir_, default_world_meta(1));
+  ASSERT_TRUE(created.ok());
+  ASSERT_TRUE((*created)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 1, encode_chunk_blob(sample_chunk(1))},
+                                                              {{3, 0, 0}, 1, encode_chunk_blob(sample_chunk(2))},
+                                                              {{9, 0, 0}, 1, encode_chunk_blob(sample_chunk(3))}})
+                  .ok());
+  // A server's writer: its images follow the chunks; a reader beside it.
+  auto writer_opened = (*created)->reopen();
+  ASSERT_TRUE(writer_opened.ok());
+  WorldStore& writer = **writer_opened;
+  writer.set_coarse_behind(true);
+  SqliteStore& reader = **created;
+  // A new revision, a new chunk (region 0), a decoded-free write (region 1).
+  const Chunk c9 = sample_chunk(40);
+  ASSERT_TRUE(writer.save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 2, encode_chunk_blob(sample_chunk(10))},
+                                                         {{5, 1, 0}, 1, encode_chunk_blob(sample_chunk(11))},
+                                                         {{9, 0, 0}, 4, encode_chunk_blob(c9), coarse_voxels(&c9)}})
+                  .ok());
+  EXPECT_EQ(writer.coarse_pending(), 2u);
+  // As stored, the images are behind: region 0 still has revision 1 and no (5, 1, 0)...
+  std::map<std::tuple<int, int, int>, std::uint64_t> stored;
+  ASSERT_TRUE(reader.for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+                     for (const CoarseEntry& e : entries) stored[{e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z}] = e.revision;
+                   }).ok());
+  EXPECT_EQ(stored[std::make_tuple(0, 0, 0)], 1u);
+  EXPECT_EQ(stored.count({5, 1, 0}), 0u);
+  // ...but every load, on either connection, reads past that.
+  expect_loads_match_chunks(reader);
+  expect_loads_match_chunks(dynamic_cast<SqliteStore&>(writer));
+  // Nothing is due before its time; then all of it, and the images as
+  // stored match the chunks.
+  auto left = writer.catch_up_coarse(8, std::chrono::hours(1));
+  ASSERT_TRUE(left.ok());
+  EXPECT_EQ(*left, 2u);
+  left = writer.catch_up_coarse(1, std::chrono::seconds(0));
+  ASSERT_TRUE(left.ok());
+  EXPECT_EQ(*left, 1u);  // a region per transaction asked for
+  left = writer.catch_up_coarse(8, std::chrono::seconds(0));
+  ASSERT_TRUE(left.ok());
+  EXPECT_EQ(*left, 0u);
+  expect_coarse_matches_chunks(reader);
+
+  // A writer that stops without catching up (a crash) leaves its images
+  // behind; loads after a restart still match the chunks, and its next
+  // save of the region catches that region up.
+  ASSERT_TRUE(writer.save_chunks(std::vector<ChunkWrite>{{{3, 0, 0}, 7, encode_chunk_blob(sample_chunk(12))},
+                                                         {{1, 2, 3}, 1, encode_chunk_blob(sample_chunk(13))}})
+                  .ok());
+  writer_opened->reset();
+  created->reset();
+  auto reopened = SqliteStore::open(dir_);
+  ASSERT_TRUE(reopened.ok());
+  expect_loads_match_chunks(**reopened);
+  std::uint64_t behind = 0;
+  ASSERT_TRUE((*reopened)->for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+                 for (const CoarseEntry& e : entries)
+                   if (e.chunk_pos == Vec3i{3, 0, 0} && e.revision < 7) ++behind;
+               }).ok());
+  EXPECT_EQ(behind, 1u);
+  ASSERT_TRUE((*reopened)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 3, encode_chunk_blob(sample_chunk(14))}}).ok());
+  expect_coarse_matches_chunks(**reopened);
 }
 
 }  // namespace

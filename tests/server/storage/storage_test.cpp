@@ -9,6 +9,8 @@
 
 #include <filesystem>
 #include <future>
+#include <map>
+#include <tuple>
 
 #include "common/world/sqlite_store.h"
 #include "tests/support/scratch_dir.h"
@@ -105,6 +107,37 @@ TEST_F(StorageTest, TicksQueuedBehindABusyWriterCommitTogether) {
   // The newest revision of a chunk written by several ticks is what is stored.
   LoadedChunk c = load({0, 0, 0});
   EXPECT_EQ(c.revision, static_cast<std::uint64_t>(kTicks));
+}
+
+TEST_F(StorageTest, ACommitsCoarseImagesFollowItAndAreReadPastMeanwhile) {
+  // Two chunks of region 0 committed: the commit writes no image, a coarse
+  // read right after sees both at their revisions, and stopping writes the
+  // images (nothing waits for their delay).
+  std::promise<FileStatus> done;
+  storage_->commit({version({0, 0, 0}, 3, materials::kBrick), version({2, 1, 0}, 5, materials::kSand)}, {},
+                   [&](const FileStatus& st) { done.set_value(st); });
+  ASSERT_TRUE(done.get_future().get().ok());
+  std::promise<LoadedCoarse> read;
+  storage_->load_coarse({0, 0, 0}, [&](LoadedCoarse c) { read.set_value(std::move(c)); });
+  const LoadedCoarse c = read.get_future().get();
+  ASSERT_TRUE(c.ok) << c.error;
+  std::map<std::tuple<int, int, int>, std::uint64_t> revisions;
+  for (const CoarseEntry& e : c.entries) revisions[{e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z}] = e.revision;
+  EXPECT_EQ(revisions, (std::map<std::tuple<int, int, int>, std::uint64_t>{{{0, 0, 0}, 3}, {{2, 1, 0}, 5}}));
+  for (const CoarseEntry& e : c.entries) {
+    if (e.chunk_pos == Vec3i{0, 0, 0}) {
+      EXPECT_EQ(e.voxels[0].material, materials::kBrick);
+    }
+  }
+  storage_->stop();
+  EXPECT_EQ(storage_->counters().coarse_regions_pending.load(), 0u);
+  EXPECT_GE(storage_->counters().coarse_catch_up_duration.count(), 1u);
+  auto& store = dynamic_cast<SqliteStore&>(world_->store());
+  std::map<std::tuple<int, int, int>, std::uint64_t> stored;
+  ASSERT_TRUE(store.for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+                     for (const CoarseEntry& e : entries) stored[{e.chunk_pos.x, e.chunk_pos.y, e.chunk_pos.z}] = e.revision;
+                   }).ok());
+  EXPECT_EQ(stored, revisions) << "the images as stored, once the writer stopped";
 }
 
 TEST_F(StorageTest, AFailedCommitFailsEveryLaterTick) {
