@@ -1,15 +1,17 @@
 // Coarse images: the coarsest mip (4^3 voxels) of every stored chunk of a
 // 256^3 region (8^3 chunks), with each chunk's revision, in one blob. The
-// world store keeps one per region beside the chunks, written in the same
-// transaction, so a distant view reads a few rows instead of decoding
-// thousands of chunks (common/world/WORLD_FORMAT.md, "coarse").
+// world store keeps one per region beside the chunks, written with them or
+// after them (never newer; a reader reads past an image that is behind), so
+// a distant view reads a few rows instead of decoding thousands of chunks
+// (common/world/WORLD_FORMAT.md, "coarse").
 //
 // Blob (version 1): [version u8 = 1][codec u8 = 1: LZ4][LZ4 block of:
 //   count u16 LE, then count entries in increasing index order:
 //     index u16 LE     (y * 8 + z) * 8 + x of the chunk in its region
 //     revision u64 LE
 //     64 voxels        material u8, occupancy u8 each, Box order (x fastest)]
-// A chunk without an entry was never stored (the generator makes it).
+// In an image as read (past any lag), a chunk without an entry was never
+// stored (the generator makes it) or its row is damaged.
 #pragma once
 
 #include <array>

@@ -236,8 +236,9 @@ FileStatus SqliteStore::upgrade_to_coarse(const Progress& progress) {
   return Ok{};
 }
 
-FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase) {
-  if (set.empty() && erase.empty()) return Ok{};
+FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase,
+                                      const std::set<RegionKey>& repair, bool heal_all) {
+  if (set.empty() && erase.empty() && repair.empty()) return Ok{};
   if (!coarse_save_stmt_ && sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO coarse(rx, ry, rz, image) VALUES(?, ?, ?, ?)",
                                                -1, &coarse_save_stmt_, nullptr) != SQLITE_OK)
     return error("cannot prepare coarse image write");
@@ -251,6 +252,7 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
     const Vec3i r = coarse_region_of(p);
     by_region[{r.x, r.y, r.z}].second.push_back(p);
   }
+  for (const RegionKey& key : repair) by_region.try_emplace(key);
   for (const auto& [key, change] : by_region) {
     const Vec3i r{std::get<0>(key), std::get<1>(key), std::get<2>(key)};
     auto stored = read_image(r);
@@ -269,10 +271,16 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
     all.reserve(entries.size());
     for (auto& [i, e] : entries) all.push_back(std::move(e));
     // Whatever else of the region was behind its rows (a writer that
-    // stopped before catching up) is made right with it.
-    auto whole = read_past(r, std::move(all));
-    if (!whole) return whole.error();
-    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(*whole));
+    // stopped before catching up) is made right with it: by the tools on
+    // every write, by a server's writer where a load found it behind (its
+    // own changes waiting are all it has to add otherwise, and this costs
+    // a scan of the region's rows).
+    if (heal_all || repair.count(key) != 0) {
+      auto whole = read_past(r, std::move(all));
+      if (!whole) return whole.error();
+      all = std::move(*whole);
+    }
+    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(all));
     StmtReset reset{coarse_save_stmt_};
     sqlite3_bind_int(coarse_save_stmt_, 1, r.x);
     sqlite3_bind_int(coarse_save_stmt_, 2, r.y);
@@ -306,7 +314,17 @@ void SqliteStore::end_read() { sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nul
 FileResult<std::vector<CoarseEntry>> SqliteStore::load_coarse(Vec3i region) {
   auto image = read_image(region);
   if (!image) return image.error();
-  return read_past(region, std::move(*image));
+  std::vector<std::pair<int, std::uint64_t>> as_stored;  // (index, revision)
+  as_stored.reserve(image->size());
+  for (const CoarseEntry& e : *image) as_stored.emplace_back(coarse_index(e.chunk_pos), e.revision);
+  auto out = read_past(region, std::move(*image));
+  if (!out) return out;
+  // Entries the image lacked, or had at another revision, or had for no row.
+  std::vector<std::pair<int, std::uint64_t>> read;
+  read.reserve(out->size());
+  for (const CoarseEntry& e : *out) read.emplace_back(coarse_index(e.chunk_pos), e.revision);
+  coarse_read_behind_ = as_stored != read;
+  return out;
 }
 
 FileResult<std::vector<CoarseEntry>> SqliteStore::read_past(Vec3i region, std::vector<CoarseEntry> entries) {
@@ -693,9 +711,12 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
   if (coarse_behind_)
     for (const Vec3i p : no_coarse) {
       const Vec3i r = coarse_region_of(p);
-      if (auto it = pending_coarse_.find({r.x, r.y, r.z}); it != pending_coarse_.end()) it->second.entries.erase(coarse_index(p));
+      auto it = pending_coarse_.find({r.x, r.y, r.z});
+      if (it == pending_coarse_.end()) continue;
+      it->second.entries.erase(coarse_index(p));
+      if (it->second.entries.empty() && !it->second.repair) pending_coarse_.erase(it);
     }
-  if (auto c = change_coarse(coarse_behind_ ? std::vector<CoarseEntry>{} : coarse, no_coarse); !c) {
+  if (auto c = change_coarse(coarse_behind_ ? std::vector<CoarseEntry>{} : coarse, no_coarse, {}, !coarse_behind_); !c) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return c.error();
   }
@@ -717,11 +738,18 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
   return Ok{};
 }
 
+void SqliteStore::repair_coarse(Vec3i region) {
+  auto [it, fresh] = pending_coarse_.try_emplace({region.x, region.y, region.z});
+  if (fresh) it->second.since = std::chrono::steady_clock::now();
+  it->second.repair = true;
+}
+
 FileResult<std::size_t> SqliteStore::catch_up_coarse(std::size_t max_regions,
                                                     std::chrono::steady_clock::duration min_age) {
   if (pending_coarse_.empty() || max_regions == 0) return pending_coarse_.size();
-  const auto due = std::chrono::steady_clock::now() - min_age;
-  std::vector<std::pair<std::chrono::steady_clock::time_point, std::tuple<int, int, int>>> oldest;
+  const auto now = std::chrono::steady_clock::now();
+  const auto due = now - min_age;
+  std::vector<std::pair<std::chrono::steady_clock::time_point, RegionKey>> oldest;
   for (const auto& [key, p] : pending_coarse_)
     if (p.since <= due) oldest.emplace_back(p.since, key);
   if (oldest.empty()) return pending_coarse_.size();
@@ -730,19 +758,33 @@ FileResult<std::size_t> SqliteStore::catch_up_coarse(std::size_t max_regions,
     oldest.resize(max_regions);
   }
   std::vector<CoarseEntry> set;
-  for (const auto& [since, key] : oldest)
-    for (const auto& [i, e] : pending_coarse_.at(key).entries) set.push_back(e);
-  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin writing coarse images");
-  if (auto c = change_coarse(set, {}); !c) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    return c.error();
+  std::set<RegionKey> repair;
+  for (const auto& [since, key] : oldest) {
+    const PendingImage& p = pending_coarse_.at(key);
+    for (const auto& [i, e] : p.entries) set.push_back(e);
+    if (p.repair) repair.insert(key);
   }
-  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
-    FileError e = error("cannot commit coarse images");
+  const auto failed = [&](FileError e) -> FileResult<std::size_t> {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    // Tried again later, not at once: each failure doubles a region's wait
+    // (kept at most a minute); after kMaxCoarseFailures its changes are
+    // given up (the rows are the truth, and loads read past the image).
+    for (const auto& [since, key] : oldest) {
+      PendingImage& p = pending_coarse_.at(key);
+      if (++p.failures >= kMaxCoarseFailures) {
+        pending_coarse_.erase(key);
+        continue;
+      }
+      p.since = now + std::min<std::chrono::steady_clock::duration>(std::chrono::seconds(1L << p.failures),
+                                                                    std::chrono::minutes(1));
+    }
     return e;
-  }
+  };
+  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return failed(error("cannot begin writing coarse images"));
+  if (auto c = change_coarse(set, {}, repair, false); !c) return failed(c.error());
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
+    return failed(error("cannot commit coarse images"));
   for (const auto& [since, key] : oldest) pending_coarse_.erase(key);
   return pending_coarse_.size();
 }
@@ -867,7 +909,7 @@ FileStatus SqliteStore::erase_chunk(Vec3i pos) {
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return fail(error("cannot delete chunk"));
-  if (auto c = change_coarse({}, {pos}); !c) return fail(c.error());
+  if (auto c = change_coarse({}, {pos}, {}, true); !c) return fail(c.error());
   if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail(error("cannot commit chunk delete"));
   return Ok{};
 }
@@ -921,7 +963,7 @@ FileResult<std::optional<std::uint64_t>> SqliteStore::quarantine_chunk(Vec3i pos
     if (changed != 1) return fail("quarantine moved " + std::to_string(changed) + " rows for");
   }
   // The chunk is no longer stored: its coarse entry goes with it.
-  if (auto c = change_coarse({}, {pos}); !c) {
+  if (auto c = change_coarse({}, {pos}, {}, true); !c) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return c.error();
   }

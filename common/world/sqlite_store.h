@@ -8,7 +8,7 @@
 //     blob as it was, the reason, the time), kept until someone looks;
 //   - coarse (format 2): per 256³ region, the 4³ mip and revision of every
 //     stored chunk in it (common/world/coarse_image.h), so a distant view
-//     never decodes them. Written in the same transaction as the chunks,
+//     does not decode them. Written in the same transaction as the chunks,
 //     or, by a server (set_coarse_behind), after them: load_coarse then
 //     reads the rows' revisions and decodes the few chunks whose entry
 //     lags, so what it returns always matches the rows.
@@ -26,6 +26,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <span>
 #include <string>
 #include <tuple>
@@ -80,6 +81,12 @@ class SqliteStore final : public WorldStore {
   // regions still have pending changes.
   FileResult<std::size_t> catch_up_coarse(std::size_t max_regions, std::chrono::steady_clock::duration min_age) override;
   std::size_t coarse_pending() const override { return pending_coarse_.size(); }
+  // The region's image is rewritten from its rows at the next catch-up (a
+  // load found it behind: maybe left by a writer that stopped before
+  // catching up, which nothing else would repair until the next write
+  // there).
+  void repair_coarse(Vec3i region) override;
+  bool coarse_read_behind() const override { return coarse_read_behind_; }
   FileStatus begin_read() override;
   void end_read() override;
   // Calls fn(region, entries) for every coarse image as stored, which may
@@ -125,7 +132,11 @@ class SqliteStore final : public WorldStore {
   FileResult<std::vector<CoarseEntry>> coarse_from_rows(Vec3i region);
   // Inside a transaction: the images of the regions of entries, changed.
   // set: entries to put; erase: chunks whose entries go.
-  FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase);
+  // repair: regions rewritten even if nothing of them changes; heal_all,
+  // or a region in repair: made to match its rows (read_past) as well.
+  using RegionKey = std::tuple<int, int, int>;
+  FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase,
+                           const std::set<RegionKey>& repair, bool heal_all);
   // entries (an image's) made to match the region's rows: entries whose row
   // has another revision or none are made from the row or dropped, rows
   // without one decoded; in index order.
@@ -148,13 +159,18 @@ class SqliteStore final : public WorldStore {
   sqlite3_stmt* coarse_save_stmt_ = nullptr;
   WorldMeta meta_;
   bool coarse_behind_ = false;
-  // Images' changes not written yet (set_coarse_behind), per region: since
-  // when, and the entries by coarse_index.
+  bool coarse_read_behind_ = false;  // the last load_coarse read past its image
+  // Images' changes not written yet (set_coarse_behind), per region: due
+  // from when, the entries by coarse_index, whether the whole region is to
+  // be made from its rows, and failed attempts.
   struct PendingImage {
     std::chrono::steady_clock::time_point since;
     std::map<int, CoarseEntry> entries;
+    bool repair = false;
+    int failures = 0;
   };
-  std::map<std::tuple<int, int, int>, PendingImage> pending_coarse_;
+  static constexpr int kMaxCoarseFailures = 5;
+  std::map<RegionKey, PendingImage> pending_coarse_;
 };
 
 }  // namespace terrane

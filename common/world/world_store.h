@@ -8,7 +8,7 @@
 //   - one row per stored 32³ chunk: its coordinates, a revision that only
 //     ever grows, and the voxels as a chunk blob (below);
 //   - per 256³ region, the 4³ mip and revision of every stored chunk in it
-//     (common/world/coarse_image.h), so a distant view never decodes them;
+//     (common/world/coarse_image.h), so a distant view seldom decodes them;
 //     written with the chunks, or after them (set_coarse_behind), never
 //     read behind them;
 //   - the quarantine (damaged chunk rows moved aside), the edit log and the
@@ -159,6 +159,11 @@ class WorldStore {
     return std::size_t{0};
   }
   virtual std::size_t coarse_pending() const { return 0; }
+  // Whether the last load_coarse found the image behind the rows (and read
+  // past it), and a writer's request to rewrite a region's image from its
+  // rows at its next catch-up.
+  virtual bool coarse_read_behind() const { return false; }
+  virtual void repair_coarse(Vec3i /*region*/) {}
   virtual FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) = 0;
   // Deletes log entries older than before_ms, then the oldest until the
   // entries' voxel bytes are at most max_bytes (0: no bound), at most

@@ -212,6 +212,12 @@ LoadedCoarse Storage::read_coarse(WorldStore& store, Vec3i region, std::vector<V
   // of one moment.
   const bool snapshot = store.begin_read().ok();
   auto entries = store.load_coarse(region);
+  if (entries && store.coarse_read_behind()) {
+    // Behind its rows: the writer rewrites it (if only its own changes
+    // waiting were missing, that costs one extra scan of the region).
+    std::lock_guard lock(jobs_mutex_);
+    coarse_repairs_.push_back(region);
+  }
   FileResult<std::vector<Vec3i>> quarantined = std::vector<Vec3i>{}, stored = std::vector<Vec3i>{};
   if (entries) quarantined = store.quarantined_in(region);
   if (entries && quarantined) stored = store.stored_in(region);
@@ -372,6 +378,7 @@ void Storage::writer_loop() {
         counters_.chunks_written.fetch_add(writes.size(), std::memory_order_relaxed);
       }
       if (status) counters_.ticks_committed.fetch_add(batch.size(), std::memory_order_relaxed);
+      counters_.coarse_regions_pending.store(writer_store_->coarse_pending(), std::memory_order_relaxed);
     }
     for (CommitJob& job : batch) {
       in_flight_.fetch_sub(1, std::memory_order_relaxed);
@@ -387,23 +394,38 @@ void Storage::writer_loop() {
 }
 
 void Storage::catch_up_coarse(std::chrono::steady_clock::duration min_age, bool yield) {
+  {
+    std::vector<Vec3i> repairs;
+    {
+      std::lock_guard lock(jobs_mutex_);
+      repairs.swap(coarse_repairs_);
+    }
+    for (const Vec3i r : repairs) writer_store_->repair_coarse(r);
+  }
   for (std::size_t before = writer_store_->coarse_pending(); before > 0;) {
     if (yield) {
       std::lock_guard lock(jobs_mutex_);
-      if (!jobs_.empty()) return;  // a tick's commit first
+      // A tick's commit first; but changes kCoarseMaxDelay old go one slice
+      // at a time between commits, so a writer that is never idle still
+      // catches up.
+      if (!jobs_.empty()) {
+        if (min_age >= kCoarseMaxDelay) return;
+        min_age = kCoarseMaxDelay;
+      }
     }
     const auto t0 = std::chrono::steady_clock::now();
     auto left = writer_store_->catch_up_coarse(kCoarseRegionsPerCatchUp, min_age);
+    counters_.coarse_regions_pending.store(writer_store_->coarse_pending(), std::memory_order_relaxed);
     if (!left) {
-      // Derived data: the rows are stored, and loads read past the lag.
-      // Tried again next time; said once a minute at most.
+      // Derived data: the rows are stored, and loads read past the lag. The
+      // store tries those regions again later; said once a minute at most.
       if (const auto now = std::chrono::steady_clock::now(); now >= next_coarse_error_) {
-        server_log().error("coarse images: {} (loads decode the chunks meanwhile)", left.error().message);
+        server_log().error("coarse images: {} (tried again later; loads decode the chunks meanwhile)",
+                           left.error().message);
         next_coarse_error_ = now + std::chrono::minutes(1);
       }
       return;
     }
-    counters_.coarse_regions_pending.store(*left, std::memory_order_relaxed);
     if (*left == before) return;  // none due yet
     counters_.coarse_catch_up_duration.observe(std::chrono::steady_clock::now() - t0);
     before = *left;

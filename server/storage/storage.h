@@ -174,6 +174,8 @@ class Storage {
   // again is rewritten about once a second instead of on every tick; the
   // writer looks every kCoarseCheck while any wait.
   static constexpr std::chrono::milliseconds kCoarseDelay{1000};
+  // Changes this old are written even while commits queue (a slice per batch).
+  static constexpr std::chrono::milliseconds kCoarseMaxDelay{10000};
   static constexpr std::chrono::milliseconds kCoarseCheck{100};
   static constexpr std::size_t kCoarseRegionsPerCatchUp = 8;
   std::chrono::steady_clock::time_point next_coarse_error_{};
@@ -221,6 +223,7 @@ class Storage {
   std::mutex jobs_mutex_;
   std::condition_variable jobs_cv_;
   std::deque<CommitJob> jobs_;
+  std::vector<Vec3i> coarse_repairs_;  // regions loads found behind their rows
   bool stopping_ = false;
   std::atomic<std::size_t> in_flight_{0};
   std::thread writer_;

@@ -641,6 +641,17 @@ int cmd_check(int argc, char** argv) {
   std::vector<std::pair<Vec3i, std::string>> damaged;
   // Each chunk's coarse entry as its blob implies, to compare with the images.
   std::map<std::tuple<int, int, int>, CoarseEntry> expected;
+  // The chunks and the images as of one moment (a server may be writing).
+  if (auto r = store.begin_read(); !r) return failure(r.error().message);
+  struct EndRead {
+    SqliteStore& s;
+    bool open = true;
+    void end() {
+      if (open) s.end_read();
+      open = false;
+    }
+    ~EndRead() { end(); }
+  } read{store};
   auto s = store.for_each_chunk([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob) {
     if (auto chunk = decode_chunk_blob(blob); !chunk) {
       damaged.emplace_back(pos, chunk.error().describe());
@@ -654,8 +665,8 @@ int cmd_check(int argc, char** argv) {
   // The coarse images: one entry per good chunk, equal to it.
   // An entry older than its chunk, or missing for a chunk, is behind: a
   // server writes the images after the chunks (loads read past that), and
-  // one that stopped before catching up leaves them so until the chunk's
-  // next save. Not wrong; counted.
+  // one that stopped before catching up leaves them so until the next
+  // write into their region. Not wrong; counted.
   std::uint64_t coarse_bad = 0, images = 0, coarse_behind = 0;
   const auto bad_entry = [&](Vec3i p, const char* what) {
     if (++coarse_bad <= 20) std::fprintf(stderr, "chunk (%d, %d, %d): coarse image %s\n", p.x, p.y, p.z, what);
@@ -676,6 +687,7 @@ int cmd_check(int argc, char** argv) {
   });
   if (!s) return failure(s.error().message);
   coarse_behind += expected.size();  // good chunks without an entry
+  read.end();
   std::uint64_t moved = 0;
   if (cl.flag("quarantine")) {
     for (const auto& [pos, reason] : damaged) {

@@ -1,6 +1,7 @@
 #include "server/world/world_owner.h"
 
 #include <algorithm>
+#include <tuple>
 
 #include "common/codec/byte_rle.h"
 #include "common/codec/net_codec.h"
@@ -447,6 +448,21 @@ void WorldOwner::unload_unwatched() {
   const std::size_t full = loaded_.size() - mips_only_;
   if (pass.lighten && full > options_.resident_chunks) {
     std::vector<std::pair<std::uint64_t, Vec3i>>& drop = pass.drop;
+    // Seen over the last second: those lightened or gone since are left
+    // out (lighten_some was still working through the previous list, and
+    // a table rebuilt meanwhile may have shown one twice), the others taken
+    // at their latest use.
+    std::erase_if(drop, [&](std::pair<std::uint64_t, Vec3i>& d) {
+      auto it = loaded_.find(d.second);
+      if (it == loaded_.end() || !it->second.current->has_voxels()) return true;
+      d.first = it->second.used_tick;
+      return false;
+    });
+    std::sort(drop.begin(), drop.end(), [](const auto& x, const auto& y) {
+      return std::tie(x.second.x, x.second.y, x.second.z) < std::tie(y.second.x, y.second.y, y.second.z);
+    });
+    drop.erase(std::unique(drop.begin(), drop.end(), [](const auto& x, const auto& y) { return x.second == y.second; }),
+               drop.end());
     const std::size_t excess = full - options_.resident_chunks;
     if (drop.size() > excess) {
       std::nth_element(drop.begin(), drop.begin() + static_cast<std::ptrdiff_t>(excess), drop.end(),

@@ -589,23 +589,40 @@ TEST_F(SqliteStoreTest, CoarseImagesBehindTheChunksAreReadPastThenCaughtUp) {
   expect_coarse_matches_chunks(reader);
 
   // A writer that stops without catching up (a crash) leaves its images
-  // behind; loads after a restart still match the chunks, and its next
-  // save of the region catches that region up.
+  // behind; loads after a restart still match the chunks and say so.
   ASSERT_TRUE(writer.save_chunks(std::vector<ChunkWrite>{{{3, 0, 0}, 7, encode_chunk_blob(sample_chunk(12))},
-                                                         {{1, 2, 3}, 1, encode_chunk_blob(sample_chunk(13))}})
+                                                         {{1, 2, 3}, 1, encode_chunk_blob(sample_chunk(13))},
+                                                         {{9, 0, 0}, 8, encode_chunk_blob(sample_chunk(15))}})
                   .ok());
   writer_opened->reset();
   created->reset();
   auto reopened = SqliteStore::open(dir_);
   ASSERT_TRUE(reopened.ok());
   expect_loads_match_chunks(**reopened);
+  ASSERT_TRUE((*reopened)->load_coarse({0, 0, 0}).ok());
+  EXPECT_TRUE((*reopened)->coarse_read_behind());
   std::uint64_t behind = 0;
   ASSERT_TRUE((*reopened)->for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
                  for (const CoarseEntry& e : entries)
                    if (e.chunk_pos == Vec3i{3, 0, 0} && e.revision < 7) ++behind;
                }).ok());
   EXPECT_EQ(behind, 1u);
-  ASSERT_TRUE((*reopened)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 3, encode_chunk_blob(sample_chunk(14))}}).ok());
+  // A server's writer asked to repair region 0 (its loads found it behind)
+  // rewrites it from its rows with nothing of its own to add...
+  auto writer2 = (*reopened)->reopen();
+  ASSERT_TRUE(writer2.ok());
+  (*writer2)->set_coarse_behind(true);
+  (*writer2)->repair_coarse({0, 0, 0});
+  EXPECT_EQ((*writer2)->coarse_pending(), 1u);
+  left = (*writer2)->catch_up_coarse(8, std::chrono::seconds(0));
+  ASSERT_TRUE(left.ok());
+  EXPECT_EQ(*left, 0u);
+  ASSERT_TRUE((*reopened)->load_coarse({0, 0, 0}).ok());
+  EXPECT_FALSE((*reopened)->coarse_read_behind());
+  ASSERT_TRUE((*reopened)->load_coarse({1, 0, 0}).ok());
+  EXPECT_TRUE((*reopened)->coarse_read_behind());
+  // ...and a tool's write into region 1 catches the rest of region 1 up.
+  ASSERT_TRUE((*reopened)->save_chunks(std::vector<ChunkWrite>{{{10, 0, 0}, 1, encode_chunk_blob(sample_chunk(14))}}).ok());
   expect_coarse_matches_chunks(**reopened);
 }
 

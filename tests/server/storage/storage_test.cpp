@@ -140,6 +140,34 @@ TEST_F(StorageTest, ACommitsCoarseImagesFollowItAndAreReadPastMeanwhile) {
   EXPECT_EQ(stored, revisions) << "the images as stored, once the writer stopped";
 }
 
+TEST_F(StorageTest, ACoarseImageALoadFindsBehindItsRowsIsRewritten) {
+  // What a writer killed before catching up leaves: a row newer than its
+  // region's image.
+  {
+    auto other = world_->store().reopen();
+    ASSERT_TRUE(other.ok());
+    (*other)->set_coarse_behind(true);
+    Chunk c;
+    c.modify(Region{{0, 0, 0}, {32, 8, 32}}, [&](Vec3i, Voxel) { return solid(materials::kRock); });
+    ASSERT_TRUE((*other)->save_chunks(std::vector<ChunkWrite>{{{1, 0, 1}, 4, encode_chunk_blob(c)}}).ok());
+  }  // gone without catching up
+  std::promise<LoadedCoarse> read;
+  storage_->load_coarse({0, 0, 0}, [&](LoadedCoarse c) { read.set_value(std::move(c)); });
+  const LoadedCoarse c = read.get_future().get();
+  ASSERT_TRUE(c.ok) << c.error;
+  ASSERT_EQ(c.entries.size(), 1u);
+  EXPECT_EQ(c.entries[0].revision, 4u);
+  EXPECT_EQ(c.entries[0].voxels[0].material, materials::kRock);
+  storage_->stop();  // the repair the load asked for is written by then
+  auto& store = dynamic_cast<SqliteStore&>(world_->store());
+  std::vector<CoarseEntry> stored;
+  ASSERT_TRUE(store.for_each_coarse([&](Vec3i, const std::vector<CoarseEntry>& entries) {
+                     stored.insert(stored.end(), entries.begin(), entries.end());
+                   }).ok());
+  ASSERT_EQ(stored.size(), 1u);
+  EXPECT_EQ(stored[0], c.entries[0]);
+}
+
 TEST_F(StorageTest, AFailedCommitFailsEveryLaterTick) {
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir_ / kWorldDatabaseName).string().c_str(), &db), SQLITE_OK);
