@@ -659,7 +659,10 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
   // mip at the same revision: the world tells only when the two differ).
   if (h.revision >= v->revision() && !h.estimate) return;
   if (v->empty()) {
-    if (h.level != kHeldEmpty) stream(StreamRecordKind::kEmpty, cp, v->revision());
+    // Sent even to a holder of Empty: its revision must move on too (a
+    // chunk changed and emptied again between two flushes of mips looks
+    // unchanged to it, and its hash would never match again).
+    stream(StreamRecordKind::kEmpty, cp, v->revision());
     h = Held{kHeldEmpty, v->revision()};
     return;
   }

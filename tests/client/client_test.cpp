@@ -597,6 +597,75 @@ TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {
   EXPECT_EQ(c.resolution_at(chunk_origin(old_near.front())), kNoResolution);
 }
 
+TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmptiedAgain) {
+  // A chunk of sky that a far client holds as Empty is filled and emptied
+  // again within one flush of mips: what the far client is sent still
+  // carries the new revision.
+  start_server();
+  Client a(options("near", 192, 96));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto welcome = a.welcome();
+  ASSERT_TRUE(welcome.has_value());
+  const Vec3i spawn{static_cast<int>(std::floor(welcome->spawn.x)), static_cast<int>(std::floor(welcome->spawn.y)),
+                    static_cast<int>(std::floor(welcome->spawn.z))};
+  // A chunk wholly 32 to 64 voxels above the spawn: sky, held at full
+  // resolution by the near client.
+  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
+  ASSERT_TRUE(a.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return cov != nullptr && cov->state == CoverageState::kEmpty;
+      },
+      kDeadline))
+      << "the premise: the chunk is sky";
+  ClientOptions ob = options("far", 192, 16);
+  ob.start_at_spawn = false;
+  ob.state.position = Vec3f{welcome->spawn.x + 112.0f, welcome->spawn.y, welcome->spawn.z};
+  Client b(ob);
+  ASSERT_TRUE(b.connect(&err)) << err;
+  std::uint64_t before = 0;
+  ASSERT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return false;
+        before = cov->revision;
+        return true;
+      },
+      kDeadline))
+      << "the far client holds it as Empty";
+  const Vec3i o = chunk_origin(target);
+  const Region box{o + Vec3i{10, 10, 10}, o + Vec3i{14, 14, 14}};
+  // Two ticks, well within one flush of mips (500 ms by default).
+  const auto edit = [&](Voxel v) {
+    const std::uint32_t id = a.fill_box(box, v);
+    bool accepted = false;
+    EXPECT_TRUE(a.wait_until(
+        [&](const ClientView& view) {
+          auto it = view.edits.find(id);
+          if (it == view.edits.end()) return false;
+          accepted = it->second.accepted;
+          return true;
+        },
+        kDeadline));
+    return accepted;
+  };
+  ASSERT_TRUE(edit(solid(materials::kBasalt)));
+  ASSERT_TRUE(edit(Voxel{}));
+  // Acknowledged after the news: the near client's revision is the server's.
+  const auto server_revision = a.with_replica([&](const Replica& r) { return r.revision(target); });
+  ASSERT_TRUE(server_revision.has_value());
+  ASSERT_GT(*server_revision, before);
+  EXPECT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return cov != nullptr && cov->state == CoverageState::kEmpty && cov->revision == *server_revision;
+      },
+      kDeadline))
+      << "the far client's revision stays behind the server's " << *server_revision;
+}
+
 TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   start_server();
   Client a(options("near"));
