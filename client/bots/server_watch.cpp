@@ -101,11 +101,17 @@ std::optional<double> histogram_mean_ms(const Scrape& first, const Scrape& last,
   return 1000 * (value_of(last, name + "_sum") - value_of(first, name + "_sum")) / n;
 }
 
+namespace {
+// The server's CPU seconds between two scrapes (never negative: a counter
+// that went back is a restarted server, not negative time).
+double cpu_seconds(const Scrape& first, const Scrape& last) {
+  return std::max(0.0, value_of(last, "process_cpu_seconds_total") - value_of(first, "process_cpu_seconds_total"));
+}
+}  // namespace
+
 ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s) {
   ServerInterval i;
-  if (const double wall = last_at_s - first_at_s; wall > 0)
-    i.cpu_share =
-        std::max(0.0, value_of(last, "process_cpu_seconds_total") - value_of(first, "process_cpu_seconds_total")) / wall;
+  if (const double wall = last_at_s - first_at_s; wall > 0) i.cpu_share = cpu_seconds(first, last) / wall;
   i.edits_applied = growth(first, last, "terrane_edits_applied_total");
   i.tick_ms_mean = histogram_mean_ms(first, last, "terrane_tick_duration_seconds");
   i.commit_ms_mean = histogram_mean_ms(first, last, "terrane_commit_duration_seconds");
@@ -188,7 +194,7 @@ ServerFigures ServerWatch::figures() const {
   f.first_error = first_error_;
   if (scrapes_ == 0) return f;
   f.wall_s = last_at_s_ - first_at_s_;
-  f.cpu_s = std::max(0.0, value_of(last_, "process_cpu_seconds_total") - value_of(first_, "process_cpu_seconds_total"));
+  f.cpu_s = cpu_seconds(first_, last_);
   f.rss_peak = rss_peak_;
   f.edits_applied = growth(first_, last_, "terrane_edits_applied_total");
   f.edits_rejected = family_growth(first_, last_, "terrane_edits_rejected_total");

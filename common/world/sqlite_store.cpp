@@ -259,7 +259,7 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
     if (!stored && !stored.error().decode) return stored.error();
     if (!stored) {
       // A damaged image is derived data: made again from the region's rows.
-      auto rebuilt = coarse_from_rows(r);
+      auto rebuilt = read_past(r, {});
       if (!rebuilt) return rebuilt.error();
       stored = std::move(*rebuilt);
     }
@@ -291,19 +291,6 @@ FileStatus SqliteStore::change_coarse(const std::vector<CoarseEntry>& set, const
   return Ok{};
 }
 
-FileResult<std::vector<CoarseEntry>> SqliteStore::coarse_from_rows(Vec3i region) {
-  auto positions = stored_in(region);
-  if (!positions) return positions.error();
-  std::vector<CoarseEntry> out;
-  for (const Vec3i p : *positions) {
-    auto stored = load_chunk(p);
-    if (!stored && !stored.error().decode) return stored.error();
-    // A damaged row gets no entry (its load quarantines it).
-    if (stored && stored->has_value()) out.push_back(CoarseEntry{p, (*stored)->revision, coarse_voxels(&(*stored)->chunk)});
-  }
-  return out;
-}
-
 FileStatus SqliteStore::begin_read() {
   if (sqlite3_exec(db_, "BEGIN", nullptr, nullptr, nullptr) != SQLITE_OK) return error("cannot begin a read");
   return Ok{};
@@ -314,20 +301,11 @@ void SqliteStore::end_read() { sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nul
 FileResult<std::vector<CoarseEntry>> SqliteStore::load_coarse(Vec3i region) {
   auto image = read_image(region);
   if (!image) return image.error();
-  std::vector<std::pair<int, std::uint64_t>> as_stored;  // (index, revision)
-  as_stored.reserve(image->size());
-  for (const CoarseEntry& e : *image) as_stored.emplace_back(coarse_index(e.chunk_pos), e.revision);
-  auto out = read_past(region, std::move(*image));
-  if (!out) return out;
-  // Entries the image lacked, or had at another revision, or had for no row.
-  std::vector<std::pair<int, std::uint64_t>> read;
-  read.reserve(out->size());
-  for (const CoarseEntry& e : *out) read.emplace_back(coarse_index(e.chunk_pos), e.revision);
-  coarse_read_behind_ = as_stored != read;
-  return out;
+  return read_past(region, std::move(*image), &coarse_read_behind_);
 }
 
-FileResult<std::vector<CoarseEntry>> SqliteStore::read_past(Vec3i region, std::vector<CoarseEntry> entries) {
+FileResult<std::vector<CoarseEntry>> SqliteStore::read_past(Vec3i region, std::vector<CoarseEntry> entries,
+                                                            bool* behind) {
   // The rows are the truth: an entry whose row has another revision (its
   // image not caught up: set_coarse_behind) is made from the row, and one
   // whose row went is dropped. A row with no entry is either newer than
@@ -345,6 +323,9 @@ FileResult<std::vector<CoarseEntry>> SqliteStore::read_past(Vec3i region, std::v
   const auto by_index = [](const CoarseEntry& a, const CoarseEntry& b) {
     return coarse_index(a.chunk_pos) < coarse_index(b.chunk_pos);
   };
+  // Behind: an entry was dropped (another revision, or no row) or a row
+  // had none.
+  if (behind != nullptr) *behind = out.size() != entries.size() || out.size() != rows->size();
   if (out.size() < rows->size()) {
     std::set<int> have;
     for (const CoarseEntry& e : out) have.insert(coarse_index(e.chunk_pos));

@@ -128,8 +128,6 @@ class SqliteStore final : public WorldStore {
   FileStatus load_meta();
   FileStatus ensure_quarantine_table();
   FileStatus upgrade_to_coarse(const Progress& progress);
-  // A region's entries made from its chunk rows (a damaged image's repair).
-  FileResult<std::vector<CoarseEntry>> coarse_from_rows(Vec3i region);
   // Inside a transaction: the images of the regions of entries, changed.
   // set: entries to put; erase: chunks whose entries go.
   // repair: regions rewritten even if nothing of them changes; heal_all,
@@ -139,8 +137,11 @@ class SqliteStore final : public WorldStore {
                            const std::set<RegionKey>& repair, bool heal_all);
   // entries (an image's) made to match the region's rows: entries whose row
   // has another revision or none are made from the row or dropped, rows
-  // without one decoded; in index order.
-  FileResult<std::vector<CoarseEntry>> read_past(Vec3i region, std::vector<CoarseEntry> entries);
+  // without one decoded; in index order (with no entries: the region made
+  // from its rows alone, a damaged image's repair). behind, if given: set
+  // to whether entries did not match the rows.
+  FileResult<std::vector<CoarseEntry>> read_past(Vec3i region, std::vector<CoarseEntry> entries,
+                                                 bool* behind = nullptr);
   // The image as stored (no entries if there is none).
   FileResult<std::vector<CoarseEntry>> read_image(Vec3i region);
   // The region's chunk rows and their revisions (an index range scan).
