@@ -567,12 +567,17 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     if (it == held_.end()) continue;
     Held& h = it->second;
     const bool near = desired(cp) == 0;
-    if ((h.level == 0 || (h.level == kHeldEmpty && near)) && v->changed_units().none()) {
-      // Not a tick's change but the chunk loaded again at another revision
-      // (a damaged row quarantined): sent whole.
+    // A tick's units change the version before it (revision - 1): they are
+    // sent only to a client holding exactly that. Anything else is sent
+    // whole: a chunk loaded again at another revision (a damaged row
+    // quarantined; no units), or a chunk held Empty whose earlier changes
+    // wait in mip_dirty_ because it was far when they came and is near now.
+    const bool holds_base = v->changed_units().any() && h.revision + 1 == v->revision();
+    if ((h.level == 0 || (h.level == kHeldEmpty && near)) && !holds_base) {
       flush_stream();
       send_chunk(*v, 0);
       hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
+      mip_dirty_.erase(cp);
       continue;
     }
     if (h.level == 0 || (h.level == kHeldEmpty && near)) {

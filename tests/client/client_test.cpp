@@ -671,6 +671,86 @@ TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmp
       << "the far client's revision stays behind the server's " << server_revision;
 }
 
+TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItChangesAgainNear) {
+  // A far client holds a chunk of sky as Empty. It is filled (the far
+  // client's refresh waits for the next flush of mips), the client comes
+  // near, and another part of it is filled: the second tick's units alone
+  // would leave out the first fill, so the chunk is sent whole.
+  start_server({"--max-speed", "0", "--mip-refresh-ms", "60000"});
+  Client a(options("near", 192, 96));
+  std::string err;
+  ASSERT_TRUE(a.connect(&err)) << err;
+  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto welcome = a.welcome();
+  ASSERT_TRUE(welcome.has_value());
+  const Vec3i spawn{static_cast<int>(std::floor(welcome->spawn.x)), static_cast<int>(std::floor(welcome->spawn.y)),
+                    static_cast<int>(std::floor(welcome->spawn.z))};
+  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
+  ASSERT_TRUE(a.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return cov != nullptr && cov->state == CoverageState::kEmpty;
+      },
+      kDeadline))
+      << "the premise: the chunk is sky";
+  ClientOptions ob = options("far", 256, 64);
+  ob.start_at_spawn = false;
+  ob.state.position = Vec3f{welcome->spawn.x + 160.0f, welcome->spawn.y, welcome->spawn.z};
+  Client b(ob);
+  ASSERT_TRUE(b.connect(&err)) << err;
+  std::uint64_t before = 0;
+  ASSERT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return v.closed;
+        before = cov->revision;
+        return true;
+      },
+      kDeadline))
+      << "the far client holds it as Empty";
+  ASSERT_FALSE(b.closed()) << b.disconnect_reason();
+  const auto edit = [&](const Region& box, Voxel v) {
+    const std::uint32_t id = a.fill_box(box, v);
+    bool accepted = false;
+    EXPECT_TRUE(a.wait_until(
+        [&](const ClientView& view) {
+          auto it = view.edits.find(id);
+          if (it == view.edits.end()) return view.closed;
+          accepted = it->second.accepted;
+          return true;
+        },
+        kDeadline));
+    return accepted;
+  };
+  const Vec3i o = chunk_origin(target);
+  const Region first{o + Vec3i{2, 2, 2}, o + Vec3i{6, 6, 6}};
+  const Region second{o + Vec3i{20, 20, 20}, o + Vec3i{24, 24, 24}};
+  ASSERT_TRUE(edit(first, solid(materials::kBasalt)));
+  // The client comes to the spawn, where the chunk is within its full
+  // resolution; the chunks around the spawn reaching full resolution say
+  // the server has its new position.
+  ASSERT_TRUE(b.set_state(ClientStateMsg{welcome->spawn, 256, 64}));
+  std::vector<Vec3i> near_spawn;
+  for (const Vec3i cp : chunks_within(welcome->spawn, 32, *welcome))
+    if (cp != target) near_spawn.push_back(cp);
+  ASSERT_TRUE(b.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near_spawn); }, kDeadline));
+  ASSERT_FALSE(b.closed()) << b.disconnect_reason();
+  ASSERT_TRUE(edit(second, solid(materials::kBrick)));
+  ASSERT_TRUE(b.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return v.closed || (cov != nullptr && cov->state == CoverageState::kFull && cov->revision == before + 2);
+      },
+      kDeadline));
+  ASSERT_FALSE(b.closed()) << b.disconnect_reason();
+  EXPECT_EQ(b.with_replica([&](const Replica& r) { return r.get(o + Vec3i{3, 3, 3}); }).material, materials::kBasalt)
+      << "the first fill is missing from the far client's replica";
+  EXPECT_EQ(b.with_replica([&](const Replica& r) { return r.get(o + Vec3i{21, 21, 21}); }).material, materials::kBrick);
+  ASSERT_TRUE(b.request_region_hash(target));
+  ASSERT_TRUE(b.wait_until([&](const ClientView& v) { return checked_all(v, {target}); }, kDeadline));
+  EXPECT_EQ(b.counters().hash_mismatches, 0u);
+}
+
 TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   start_server();
   Client a(options("near"));
