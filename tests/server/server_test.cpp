@@ -819,12 +819,18 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   const EditRequestMsg e = testing_support::fill_box_edit(3, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255);
   ASSERT_TRUE(p->send(build_edit_request(e)));
   bool acked = false, batch = false;
-  std::string rejected, reason;
+  std::vector<std::string> rejected;  // every rejection, in order (one is expected)
+  std::string reason;
+  std::string seen;  // the body types read, for a failure's message
   while (auto f = p->next()) {
     const wire::Message& m = msg(*f);
+    seen += std::string(seen.empty() ? "" : ", ") + wire::EnumNameBody(m.body_type());
     if (m.body_type() == wire::Body::EditAck) acked = true;
     if (m.body_type() == wire::Body::UpdateBatch) batch = true;
-    if (m.body_type() == wire::Body::EditReject) rejected = parse_edit_reject(*m.body_as_EditReject())->reason;
+    if (m.body_type() == wire::Body::EditReject) {
+      auto r = parse_edit_reject(*m.body_as_EditReject());
+      rejected.push_back(std::to_string(r->edit_id) + ": " + r->reason);
+    }
     if (m.body_type() == wire::Body::Disconnect) {
       reason = *parse_disconnect(*m.body_as_Disconnect());
       break;
@@ -834,7 +840,10 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   sqlite3_close(db);
   EXPECT_FALSE(acked);
   EXPECT_FALSE(batch);
-  EXPECT_NE(rejected.find("storage failure"), std::string::npos) << rejected;
+  std::string all;
+  for (const std::string& r : rejected) all += "[" + r + "] ";
+  ASSERT_EQ(rejected.size(), 1u) << "rejections: " << all << "; frames read: " << seen;
+  EXPECT_NE(rejected[0].find("3: storage failure"), std::string::npos) << all << "; frames read: " << seen;
   EXPECT_EQ(reason, "server storage failure");
   EXPECT_TRUE(fatal);
   EXPECT_TRUE(server_->storage_failed());
