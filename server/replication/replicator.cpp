@@ -335,27 +335,40 @@ void Replicator::rebuild_refine() {
 }
 
 void Replicator::release_outside_view() {
+  std::vector<Vec3i> leaving;
+  for (const auto& [cp, c] : claims_)
+    if (!in_view(cp)) leaving.push_back(cp);
+  for (const auto& [cp, h] : held_)
+    if (!in_view(cp)) leaving.push_back(cp);
+  for (const auto& [cp, r] : requested_)
+    if (!in_view(cp)) leaving.push_back(cp);
   std::vector<Vec3i> released;
-  for (auto it = claims_.begin(); it != claims_.end();) {
-    if (in_view(it->first)) {
-      ++it;
-      continue;
-    }
-    stream(StreamRecordKind::kReleased, it->first, it->second.revision);
-    it = claims_.erase(it);
-  }
-  for (auto it = held_.begin(); it != held_.end();) {
-    if (in_view(it->first)) {
-      ++it;
-      continue;
-    }
-    stream(StreamRecordKind::kReleased, it->first, it->second.revision);
-    released.push_back(it->first);
-    full_.erase(it->first);
-    ready_versions_.erase(it->first);
-    it = held_.erase(it);
-  }
+  for (const Vec3i cp : leaving) leave(cp, released);
   if (!released.empty()) world_.release(id_, std::move(released));
+}
+
+void Replicator::leave(Vec3i cp, std::vector<Vec3i>& released) {
+  if (auto c = claims_.find(cp); c != claims_.end()) {
+    stream(StreamRecordKind::kReleased, cp, c->second.revision);
+    claims_.erase(c);
+  }
+  bool registered = false;  // the world counts this client among the chunk's holders
+  if (auto it = held_.find(cp); it != held_.end()) {
+    stream(StreamRecordKind::kReleased, cp, it->second.revision);
+    full_.erase(cp);
+    held_.erase(it);
+    registered = true;
+  }
+  if (auto rv = ready_versions_.find(cp); rv != ready_versions_.end()) {
+    // Granted (so registered) and not sent: dropped with its request.
+    ready_versions_.erase(rv);
+    requested_.erase(cp);
+    registered = true;
+  } else if (auto rq = requested_.find(cp); rq != requested_.end()) {
+    // Its grant is on its way: it comes to nothing (on_granted).
+    rq->second.cancelled = true;
+  }
+  if (registered) released.push_back(cp);
 }
 
 void Replicator::replan() {
@@ -377,20 +390,7 @@ void Replicator::move_by(Vec3i d) {
   const Vec3i old = center_;
   center_ = center_ + d;
   std::vector<Vec3i> released;
-  for (const Vec3i o : table_->leaving(d)) {
-    const Vec3i cp = old + o;
-    if (auto c = claims_.find(cp); c != claims_.end()) {
-      stream(StreamRecordKind::kReleased, cp, c->second.revision);
-      claims_.erase(c);
-    }
-    auto it = held_.find(cp);
-    if (it == held_.end()) continue;
-    stream(StreamRecordKind::kReleased, cp, it->second.revision);
-    released.push_back(cp);
-    full_.erase(cp);
-    ready_versions_.erase(cp);
-    held_.erase(it);
-  }
+  for (const Vec3i o : table_->leaving(d)) leave(old + o, released);
   if (!released.empty()) world_.release(id_, std::move(released));
   for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
   rebuild_refine();
@@ -460,9 +460,19 @@ void Replicator::on_granted(std::vector<VersionPtr> versions) {
   std::vector<Vec3i> unwanted;
   for (VersionPtr& v : versions) {
     const Vec3i cp = v->pos();
-    if (requested_.count(cp) == 0 || !in_view(cp)) {
-      requested_.erase(cp);
-      if (held_.count(cp) == 0) unwanted.push_back(cp);
+    auto rq = requested_.find(cp);
+    if (rq == requested_.end() || rq->second.cancelled || !in_view(cp)) {
+      // Not wanted now. The world registered this client as a holder when
+      // it granted the chunk, after any release the client had sent for
+      // it: it is released again.
+      const bool cancelled = rq != requested_.end() && rq->second.cancelled;
+      if (rq != requested_.end()) requested_.erase(rq);
+      if (held_.count(cp) != 0) continue;
+      unwanted.push_back(cp);
+      // It left the view and came back while this grant was on its way
+      // (the coarse pass passed it over, as asked for): asked again, after
+      // the release.
+      if (cancelled && in_view(cp)) entering_.push_back(cp);
       continue;
     }
     if (ready_versions_.emplace(cp, std::move(v)).second) ready_.push_back(cp);

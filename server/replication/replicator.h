@@ -113,6 +113,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   struct Request {
     Intent intent;
     int level;  // the level to send (0 full, 1..3 mip)
+    // The chunk left the view after it was asked for: its grant, still on
+    // its way, is dropped and released (the world registers a holder when
+    // it grants, which may come after the client's release).
+    bool cancelled = false;
   };
 
   void on_hello(const HelloMsg& hello);
@@ -127,6 +131,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void replan();
   void move_by(Vec3i d);
   void release_outside_view();
+  // A chunk leaving the view: released on both sides (its claim, what is
+  // held, a grant waiting to be sent), its request cancelled; appends it
+  // to released when the world must be told.
+  void leave(Vec3i chunk_pos, std::vector<Vec3i>& released);
   bool in_view(Vec3i chunk_pos) const;
   int desired(Vec3i chunk_pos) const;
   void push_refine(Vec3i chunk_pos);

@@ -597,6 +597,35 @@ TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {
   EXPECT_EQ(c.resolution_at(chunk_origin(old_near.front())), kNoResolution);
 }
 
+TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreStillSent) {
+  // Streaming held back (16 KiB/s), so chunks granted to the client wait
+  // to be sent: the client jumps away and straight back, and every chunk
+  // of its view must still arrive at its level (none is passed over as
+  // already asked for, none kept registered with the world unsent).
+  start_server({"--max-speed", "0", "--outbound-bytes-per-second", "16384"});
+  Client c(options("jumper", 48, 16));
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  // Refinement under way: some chunk is at full resolution already.
+  ASSERT_TRUE(c.wait_until(
+      [](const ClientView& v) { return v.closed || v.replica.chunk_count(CoverageState::kFull) > 0; }, kDeadline));
+  const Vec3f away{w->spawn.x + 1024.0f, w->spawn.y, w->spawn.z};
+  ASSERT_TRUE(c.set_state(ClientStateMsg{away, 48, 16}));
+  ASSERT_TRUE(c.set_state(ClientStateMsg{w->spawn, 48, 16}));
+  const auto view = chunks_within(w->spawn, 48, *w);
+  EXPECT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, view, w->spawn, 16); }, kDeadline));
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
+  std::size_t missing = 0;
+  c.with_replica([&](const Replica& r) {
+    for (const Vec3i cp : view) missing += r.coverage(cp) == nullptr ? 1 : 0;
+  });
+  EXPECT_EQ(missing, 0u) << "chunks of the view never sent";
+}
+
 TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmptiedAgain) {
   // A chunk of sky that a far client holds as Empty is filled and emptied
   // again within one flush of mips: what the far client is sent still
@@ -735,6 +764,12 @@ TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItChanges
     if (cp != target) near_spawn.push_back(cp);
   ASSERT_TRUE(b.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near_spawn); }, kDeadline));
   ASSERT_FALSE(b.closed()) << b.disconnect_reason();
+  // The premise: the first fill's refresh still waits, so the client holds
+  // the chunk as Empty at its old revision.
+  ASSERT_TRUE(b.with_replica([&](const Replica& r) {
+    const ChunkCoverage* cov = r.coverage(target);
+    return cov != nullptr && cov->state == CoverageState::kEmpty && cov->revision == before;
+  }));
   ASSERT_TRUE(edit(second, solid(materials::kBrick)));
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
