@@ -212,7 +212,22 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
     else
       replan();
   }
+  send_parked_near();
   pump();
+}
+
+void Replicator::send_parked_near() {
+  std::vector<Vec3i> near;
+  for (const auto& [cp, v] : mip_dirty_) {
+    auto it = held_.find(cp);
+    if (it != held_.end() && it->second.level == kHeldEmpty && desired(cp) == 0) near.push_back(cp);
+  }
+  for (const Vec3i cp : near) {
+    const VersionPtr v = mip_dirty_.at(cp);
+    mip_dirty_.erase(cp);
+    send_chunk(*v, 0);
+    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
+  }
 }
 
 void Replicator::on_edit(EditRequestMsg edit) {

@@ -138,6 +138,11 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   bool in_view(Vec3i chunk_pos) const;
   int desired(Vec3i chunk_pos) const;
   void push_refine(Vec3i chunk_pos);
+  // Chunks held as Empty whose change waits for the next flush of mips and
+  // that a move brought within full resolution: sent whole at once, since
+  // the client may now edit there and the next tick's units change the
+  // revision it has not seen.
+  void send_parked_near();
   void rebuild_refine();
 
   void on_granted(std::vector<VersionPtr> versions);
