@@ -64,6 +64,14 @@ class ClientServerTest : public ::testing::Test {
     return o;
   }
 
+  // A client that starts at position instead of the spawn.
+  ClientOptions options_at(const std::string& name, Vec3f position, int view, int full) const {
+    ClientOptions o = options(name, view, full);
+    o.start_at_spawn = false;
+    o.state.position = position;
+    return o;
+  }
+
   fs::path dir_;
   std::unique_ptr<ServerProcess> server_;
 };
@@ -597,6 +605,57 @@ TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {
   EXPECT_EQ(c.resolution_at(chunk_origin(old_near.front())), kNoResolution);
 }
 
+// The chunk wholly 32 to 64 voxels above the spawn, sky in the default
+// world; waits until c (near the spawn, full resolution beyond 64) holds it
+// as Empty. nullopt if it never does.
+std::optional<Vec3i> sky_above_spawn(Client& c) {
+  if (!c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline)) return std::nullopt;
+  const auto w = c.welcome();
+  if (!w) return std::nullopt;
+  const Vec3i spawn{static_cast<int>(std::floor(w->spawn.x)), static_cast<int>(std::floor(w->spawn.y)),
+                    static_cast<int>(std::floor(w->spawn.z))};
+  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
+  const bool sky = c.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(target);
+        return v.closed || (cov != nullptr && cov->state == CoverageState::kEmpty);
+      },
+      kDeadline);
+  if (!sky || c.closed()) return std::nullopt;
+  return target;
+}
+
+// Waits until c holds the chunk as Empty (exact, not an estimate); its
+// revision then, or nullopt.
+std::optional<std::uint64_t> held_empty_revision(Client& c, Vec3i chunk_pos) {
+  std::uint64_t revision = 0;
+  const bool held = c.wait_until(
+      [&](const ClientView& v) {
+        const ChunkCoverage* cov = v.replica.coverage(chunk_pos);
+        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return v.closed;
+        revision = cov->revision;
+        return true;
+      },
+      kDeadline);
+  if (!held || c.closed()) return std::nullopt;
+  return revision;
+}
+
+// Fills box with v through c; true once the edit is acknowledged.
+bool fill_acknowledged(Client& c, const Region& box, Voxel v) {
+  const std::uint32_t id = c.fill_box(box, v);
+  bool accepted = false;
+  const bool answered = c.wait_until(
+      [&](const ClientView& view) {
+        auto it = view.edits.find(id);
+        if (it == view.edits.end()) return view.closed;
+        accepted = it->second.accepted;
+        return true;
+      },
+      kDeadline);
+  return answered && accepted;
+}
+
 TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreStillSent) {
   // Streaming held back (16 KiB/s), so chunks granted to the client wait
   // to be sent: the client jumps away and straight back, and every chunk
@@ -634,52 +693,18 @@ TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmp
   Client a(options("near", 192, 96));
   std::string err;
   ASSERT_TRUE(a.connect(&err)) << err;
-  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto target = sky_above_spawn(a);
+  ASSERT_TRUE(target.has_value()) << "the premise: the chunk is sky";
   const auto welcome = a.welcome();
-  ASSERT_TRUE(welcome.has_value());
-  const Vec3i spawn{static_cast<int>(std::floor(welcome->spawn.x)), static_cast<int>(std::floor(welcome->spawn.y)),
-                    static_cast<int>(std::floor(welcome->spawn.z))};
-  // A chunk wholly 32 to 64 voxels above the spawn: sky, held at full
-  // resolution by the near client.
-  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
-  ASSERT_TRUE(a.wait_until(
-      [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return cov != nullptr && cov->state == CoverageState::kEmpty;
-      },
-      kDeadline))
-      << "the premise: the chunk is sky";
-  ClientOptions ob = options("far", 192, 16);
-  ob.start_at_spawn = false;
-  ob.state.position = Vec3f{welcome->spawn.x + 112.0f, welcome->spawn.y, welcome->spawn.z};
-  Client b(ob);
+  Client b(options_at("far", Vec3f{welcome->spawn.x + 112.0f, welcome->spawn.y, welcome->spawn.z}, 192, 16));
   ASSERT_TRUE(b.connect(&err)) << err;
-  std::uint64_t before = 0;
-  ASSERT_TRUE(b.wait_until(
-      [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return false;
-        before = cov->revision;
-        return true;
-      },
-      kDeadline))
-      << "the far client holds it as Empty";
-  const Vec3i o = chunk_origin(target);
+  const auto held = held_empty_revision(b, *target);
+  ASSERT_TRUE(held.has_value()) << "the far client holds it as Empty";
+  const std::uint64_t before = *held;
+  const Vec3i o = chunk_origin(*target);
   const Region box{o + Vec3i{10, 10, 10}, o + Vec3i{14, 14, 14}};
   // Two ticks, well within one flush of mips (500 ms by default).
-  const auto edit = [&](Voxel v) {
-    const std::uint32_t id = a.fill_box(box, v);
-    bool accepted = false;
-    EXPECT_TRUE(a.wait_until(
-        [&](const ClientView& view) {
-          auto it = view.edits.find(id);
-          if (it == view.edits.end()) return false;
-          accepted = it->second.accepted;
-          return true;
-        },
-        kDeadline));
-    return accepted;
-  };
+  const auto edit = [&](Voxel v) { return fill_acknowledged(a, box, v); };
   ASSERT_TRUE(edit(solid(materials::kBasalt)));
   ASSERT_TRUE(edit(Voxel{}));
   // Each edit, in a tick of its own, made a revision; the near client sees
@@ -687,13 +712,13 @@ TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmp
   const std::uint64_t server_revision = before + 2;
   ASSERT_TRUE(a.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
+        const ChunkCoverage* cov = v.replica.coverage(*target);
         return cov != nullptr && cov->revision == server_revision;
       },
       kDeadline));
   EXPECT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
+        const ChunkCoverage* cov = v.replica.coverage(*target);
         return cov != nullptr && cov->state == CoverageState::kEmpty && cov->revision == server_revision;
       },
       kDeadline))
@@ -710,48 +735,16 @@ TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItComesNe
   Client a(options("near", 192, 96));
   std::string err;
   ASSERT_TRUE(a.connect(&err)) << err;
-  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto sky = sky_above_spawn(a);
+  ASSERT_TRUE(sky.has_value()) << "the premise: the chunk is sky";
+  const Vec3i target = *sky;
   const auto welcome = a.welcome();
-  ASSERT_TRUE(welcome.has_value());
-  const Vec3i spawn{static_cast<int>(std::floor(welcome->spawn.x)), static_cast<int>(std::floor(welcome->spawn.y)),
-                    static_cast<int>(std::floor(welcome->spawn.z))};
-  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
-  ASSERT_TRUE(a.wait_until(
-      [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return cov != nullptr && cov->state == CoverageState::kEmpty;
-      },
-      kDeadline))
-      << "the premise: the chunk is sky";
-  ClientOptions ob = options("far", 256, 64);
-  ob.start_at_spawn = false;
-  ob.state.position = Vec3f{welcome->spawn.x + 160.0f, welcome->spawn.y, welcome->spawn.z};
-  Client b(ob);
+  Client b(options_at("far", Vec3f{welcome->spawn.x + 160.0f, welcome->spawn.y, welcome->spawn.z}, 256, 64));
   ASSERT_TRUE(b.connect(&err)) << err;
-  std::uint64_t before = 0;
-  ASSERT_TRUE(b.wait_until(
-      [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return v.closed;
-        before = cov->revision;
-        return true;
-      },
-      kDeadline))
-      << "the far client holds it as Empty";
-  ASSERT_FALSE(b.closed()) << b.disconnect_reason();
-  const auto edit = [&](const Region& box, Voxel v) {
-    const std::uint32_t id = a.fill_box(box, v);
-    bool accepted = false;
-    EXPECT_TRUE(a.wait_until(
-        [&](const ClientView& view) {
-          auto it = view.edits.find(id);
-          if (it == view.edits.end()) return view.closed;
-          accepted = it->second.accepted;
-          return true;
-        },
-        kDeadline));
-    return accepted;
-  };
+  const auto held = held_empty_revision(b, target);
+  ASSERT_TRUE(held.has_value()) << "the far client holds it as Empty";
+  const std::uint64_t before = *held;
+  const auto edit = [&](const Region& box, Voxel v) { return fill_acknowledged(a, box, v); };
   const Vec3i o = chunk_origin(target);
   const Region first{o + Vec3i{2, 2, 2}, o + Vec3i{6, 6, 6}};
   const Region second{o + Vec3i{20, 20, 20}, o + Vec3i{24, 24, 24}};
