@@ -595,8 +595,9 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     // A tick's units change the version before it (revision - 1): they are
     // sent only to a client holding exactly that. Anything else is sent
     // whole: a chunk loaded again at another revision (a damaged row
-    // quarantined; no units), or a chunk held Empty whose earlier changes
-    // wait in mip_dirty_ because it was far when they came and is near now.
+    // quarantined; no units), or any holder left behind the units' base (a
+    // chunk held Empty with a change parked in mip_dirty_ was one, before
+    // moves sent those whole: send_parked_near).
     const bool holds_base = v->changed_units().any() && h.revision + 1 == v->revision();
     if ((h.level == 0 || (h.level == kHeldEmpty && near)) && !holds_base) {
       flush_stream();
