@@ -202,8 +202,10 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
   state_.full_res_radius = std::min({full, options_.max_full_res_radius, state_.view_distance});
   world_.moved(id_, state_.position, state_.view_distance, state_.full_res_radius);
   const Vec3i c = view_chunk(state_.position);
-  if (!plan_valid_ || table_->view_distance() != state_.view_distance ||
-      table_->full_res_radius() != state_.full_res_radius) {
+  const Vec3i center_before = center_;
+  const bool new_plan = !plan_valid_ || table_->view_distance() != state_.view_distance ||
+                        table_->full_res_radius() != state_.full_res_radius;
+  if (new_plan) {
     replan();
   } else if (c != center_) {
     const Vec3i d = c - center_;
@@ -212,7 +214,8 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
     else
       replan();
   }
-  send_parked_near();
+  // Only a new centre or radii bring chunks within full resolution.
+  if (new_plan || c != center_before) send_parked_near();
   pump();
 }
 
@@ -222,12 +225,14 @@ void Replicator::send_parked_near() {
     auto it = held_.find(cp);
     if (it != held_.end() && it->second.level == kHeldEmpty && desired(cp) == 0) near.push_back(cp);
   }
-  for (const Vec3i cp : near) {
-    const VersionPtr v = mip_dirty_.at(cp);
-    mip_dirty_.erase(cp);
-    send_chunk(*v, 0);
-    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
-  }
+  // A copy of the pointer: send_whole erases the entry it comes from.
+  for (const Vec3i cp : near) send_whole(cp, VersionPtr(mip_dirty_.at(cp)));
+}
+
+void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
+  send_chunk(*v, 0);
+  hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
+  mip_dirty_.erase(cp);  // older than v: nothing left to refresh
 }
 
 void Replicator::on_edit(EditRequestMsg edit) {
@@ -601,9 +606,7 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     const bool holds_base = v->changed_units().any() && h.revision + 1 == v->revision();
     if ((h.level == 0 || (h.level == kHeldEmpty && near)) && !holds_base) {
       flush_stream();
-      send_chunk(*v, 0);
-      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
-      mip_dirty_.erase(cp);
+      send_whole(cp, v);
       continue;
     }
     if (h.level == 0 || (h.level == kHeldEmpty && near)) {

@@ -143,6 +143,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // the client may now edit there and the next tick's units change the
   // revision it has not seen.
   void send_parked_near();
+  // Sends v whole (Full, or Empty) and holds it at full resolution; a
+  // refresh parked for the chunk is dropped.
+  void send_whole(Vec3i chunk_pos, const VersionPtr& v);
   void rebuild_refine();
 
   void on_granted(std::vector<VersionPtr> versions);

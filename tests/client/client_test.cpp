@@ -612,9 +612,7 @@ std::optional<Vec3i> sky_above_spawn(Client& c) {
   if (!c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline)) return std::nullopt;
   const auto w = c.welcome();
   if (!w) return std::nullopt;
-  const Vec3i spawn{static_cast<int>(std::floor(w->spawn.x)), static_cast<int>(std::floor(w->spawn.y)),
-                    static_cast<int>(std::floor(w->spawn.z))};
-  const Vec3i target = chunk_of(Vec3i{spawn.x, spawn.y + 64, spawn.z});
+  const Vec3i target = view_chunk(w->spawn) + Vec3i{0, 2, 0};
   const bool sky = c.wait_until(
       [&](const ClientView& v) {
         const ChunkCoverage* cov = v.replica.coverage(target);
