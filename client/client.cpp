@@ -158,7 +158,8 @@ void Client::start_session() {
       // What the replica still holds, so current chunks are not resent.
       std::vector<HeldChunkMsg> held;
       replica_.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-        if (c.estimate) return;  // not the chunk's mip: streamed again
+        // Not the chunk's mip (an estimate, a horizon image): streamed again.
+        if (c.estimate || c.level > kMipLevels - 1) return;
         held.push_back(HeldChunkMsg{cp, c.revision,
                                     c.state == CoverageState::kEmpty ? kHeldEmpty
                                     : c.state == CoverageState::kFull ? 0
@@ -480,6 +481,15 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (!records) return fail(records.error());
       std::vector<std::tuple<Vec3i, wire::CoverageKind, int>> changes;
       const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
+        if (r.kind == StreamRecordKind::kHorizon) {
+          // A whole region: each chunk it newly covers is a coverage change.
+          horizon_covered_.clear();
+          replica_.apply_horizon(r, horizon_covered_);
+          counters_.horizon_chunks += horizon_covered_.size();
+          if (callbacks_.on_coverage)
+            for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, wire::CoverageKind::Mip, r.level);
+          return Ok{};
+        }
         replica_.apply_stream_record(r);
         wire::CoverageKind kind = wire::CoverageKind::Mip;
         switch (r.kind) {

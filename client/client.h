@@ -127,6 +127,7 @@ struct ClientCounters {
   std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
   std::uint64_t mips = 0;
   std::uint64_t estimates = 0;  // of mips: Estimate records (a chunk's coarsest mip estimated)
+  std::uint64_t horizon_chunks = 0;  // chunks first seen through a region's horizon image (not in mips)
   std::uint64_t coverage_empty = 0;
   std::uint64_t coverage_full = 0;
   std::uint64_t released = 0;
@@ -377,6 +378,7 @@ class Client {
   std::optional<ClientStateMsg> last_state_;
   std::vector<PresenceEntryMsg> presence_;
   StreamDecodeScratch stream_scratch_;  // io thread
+  std::vector<Vec3i> horizon_covered_;  // io thread: a Horizon record's chunks newly covered
   std::atomic<std::uint32_t> next_request_id_{1};
 };
 

@@ -71,6 +71,11 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kReleased:
       apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, r.revision});
       return;
+    case StreamRecordKind::kHorizon: {
+      std::vector<Vec3i> covered;
+      apply_horizon(r, covered);
+      return;
+    }
     case StreamRecordKind::kFull: {
       pending_.erase(cp);
       mips_.erase(cp);
@@ -99,6 +104,60 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       return;
     }
   }
+}
+
+void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) {
+  const Vec3i region = floor_div(r.chunk_pos, kHorizonRegionChunks);
+  auto [it, fresh] = horizons_.try_emplace(region);
+  Horizon& h = it->second;
+  // A newer image of the region (another plan's) serves every chunk it covers.
+  h.coverage = ChunkCoverage{CoverageState::kMip, r.level, 0};
+  h.image = *r.voxels;
+  for (int i = 0; i < kHorizonRegionSlots; ++i) {
+    if (((*r.mask)[static_cast<std::size_t>(i / 8)] >> (i % 8) & 1) == 0 || h.covers.test(static_cast<std::size_t>(i)))
+      continue;
+    const Vec3i cp = horizon_chunk(region, i);
+    if (coverage_.find(cp) != coverage_.end()) continue;
+    h.covers.set(static_cast<std::size_t>(i));
+    ++horizon_chunks_;
+    covered.push_back(cp);
+  }
+  if (h.covers.none()) horizons_.erase(region);
+}
+
+const Replica::Horizon* Replica::horizon_of(Vec3i cp) const {
+  if (horizons_.empty()) return nullptr;
+  auto it = horizons_.find(floor_div(cp, kHorizonRegionChunks));
+  if (it == horizons_.end() || !it->second.covers.test(static_cast<std::size_t>(coarse_index(cp)))) return nullptr;
+  return &it->second;
+}
+
+void Replica::forget_horizon(Vec3i cp) {
+  auto it = horizons_.find(floor_div(cp, kHorizonRegionChunks));
+  if (it == horizons_.end()) return;
+  const auto i = static_cast<std::size_t>(coarse_index(cp));
+  if (!it->second.covers.test(i)) return;
+  it->second.covers.reset(i);
+  --horizon_chunks_;
+  if (it->second.covers.none()) horizons_.erase(it);
+}
+
+Replica::MipView Replica::mip_view(Vec3i cp) const {
+  if (auto it = mips_.find(cp); it != mips_.end()) return MipView{&it->second.voxels, {0, 0, 0}, it->second.level};
+  if (const Horizon* h = horizon_of(cp))
+    return MipView{&h->image, floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->coverage.level), h->coverage.level};
+  return {};
+}
+
+bool Replica::read_mip(Vec3i cp, Box& out) const {
+  const MipView m = mip_view(cp);
+  if (m.box == nullptr) return false;
+  const int n = kChunkSize >> m.level;
+  out.resize({n, n, n});
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x) out.set(x, y, z, m.box->get(m.origin + Vec3i{x, y, z}));
+  return true;
 }
 
 Status Replica::apply_mip_data(const MipDataMsg& m) {
@@ -204,7 +263,9 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
 
 const ChunkCoverage* Replica::coverage(Vec3i cp) const {
   auto it = coverage_.find(cp);
-  return it == coverage_.end() ? nullptr : &it->second;
+  if (it != coverage_.end()) return &it->second;
+  const Horizon* h = horizon_of(cp);
+  return h == nullptr ? nullptr : &h->coverage;
 }
 
 int Replica::resolution_at(Vec3i voxel) const {
@@ -218,11 +279,10 @@ Voxel Replica::get(Vec3i voxel) const {
   const ChunkCoverage* c = coverage(cp);
   if (c == nullptr || c->state == CoverageState::kEmpty) return Voxel{};
   if (c->state == CoverageState::kFull) return grid_.get(voxel);
-  auto it = mips_.find(cp);
-  if (it == mips_.end()) return Voxel{};
+  const MipView m = mip_view(cp);
+  if (m.box == nullptr) return Voxel{};
   const Vec3i l = local_of(voxel);
-  const int s = it->second.level;
-  return it->second.voxels.get(l.x >> s, l.y >> s, l.z >> s);
+  return m.box->get(m.origin + Vec3i{l.x >> m.level, l.y >> m.level, l.z >> m.level});
 }
 
 void Replica::read_box(Vec3i min, Box& out) const { grid_.read_box(min, out); }
@@ -245,10 +305,11 @@ std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t
         for (std::int32_t v = y; v >= bottom; --v)
           if (chunk->get(l.x, v - cp.y * kChunkSize, l.z).material != kAir) return v + 1;
     } else if (c != nullptr && c->state == CoverageState::kMip) {
-      if (auto it = mips_.find(cp); it != mips_.end()) {
-        const int s = it->second.level;
+      if (const MipView m = mip_view(cp); m.box != nullptr) {
+        const int s = m.level;
         for (std::int32_t v = y; v >= bottom; --v)
-          if (it->second.voxels.get(l.x >> s, (v - cp.y * kChunkSize) >> s, l.z >> s).material != kAir) return v + 1;
+          if (m.box->get(m.origin + Vec3i{l.x >> s, (v - cp.y * kChunkSize) >> s, l.z >> s}).material != kAir)
+            return v + 1;
       }
     }
     // Nothing (known) in the rest of this chunk's column.
@@ -278,7 +339,8 @@ std::size_t Replica::estimate_count() const {
 
 std::size_t Replica::chunk_count(CoverageState state) const {
   return static_cast<std::size_t>(
-      std::count_if(coverage_.begin(), coverage_.end(), [&](const auto& kv) { return kv.second.state == state; }));
+             std::count_if(coverage_.begin(), coverage_.end(), [&](const auto& kv) { return kv.second.state == state; })) +
+         (state == CoverageState::kMip ? horizon_chunks_ : 0);
 }
 
 }  // namespace terrane

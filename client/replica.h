@@ -4,7 +4,10 @@
 // resolution — so Air is never confused with "not received":
 //   - none:     nothing known (never sent, or released);
 //   - Empty:    known all Air (at full resolution);
-//   - Mip L:    the (32 >> L)^3 mip of the chunk, L in 1..3;
+//   - Mip L:    the (32 >> L)^3 mip of the chunk, L in 1..3; or L in 4..5
+//               from its region's horizon image (approximate, kept once per
+//               8^3-chunk region, replaced by the chunk's own record; never
+//               claimed, hashed or edited);
 //   - Full:     every voxel, at the revision the server stated.
 // Full-resolution voxels live in a Grid; mips in a per-chunk Box.
 //
@@ -14,6 +17,7 @@
 // Thread-safety: none; the Client guards its Replica with a mutex.
 #pragma once
 
+#include <bitset>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -22,6 +26,7 @@
 #include "common/voxel/box.h"
 #include "common/voxel/grid.h"
 #include "common/voxel/vec3_map.h"
+#include "common/world/horizon.h"
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 
@@ -31,7 +36,7 @@ enum class CoverageState : std::uint8_t { kEmpty, kMip, kFull };
 
 struct ChunkCoverage {
   CoverageState state = CoverageState::kEmpty;
-  int level = 0;  // kMip: 1..3; otherwise 0
+  int level = 0;  // kMip: 1..3, or 4..5 from a horizon image; otherwise 0
   std::uint64_t revision = 0;
   // kMip level 3 from an Estimate record: the server's estimate for a chunk
   // never generated, not yet its mip (never claimed in Holdings).
@@ -39,7 +44,7 @@ struct ChunkCoverage {
 };
 
 // resolution_at(): -1 nothing known, 0 full resolution (or known Air),
-// 1..3 the mip level held.
+// 1..5 the mip level held.
 inline constexpr int kNoResolution = -1;
 
 class Replica {
@@ -49,6 +54,10 @@ class Replica {
   Status apply_chunk_data(const ChunkDataMsg& m);
   // A decoded StreamBatch record (protocol/stream_batch.h).
   void apply_stream_record(const StreamRecord& r);
+  // A Horizon record (precondition: r.kind is kHorizon): the chunks of its
+  // mask with no coverage are covered by the region's image from now on
+  // (a horizon image never replaces anything); appends each to covered.
+  void apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered);
   Status apply_mip_data(const MipDataMsg& m);
   void apply_coverage(const CoverageMsg& m);
   // Applies the units of chunks held at full resolution (others are
@@ -77,12 +86,9 @@ class Replica {
   // (Full or Empty); nullopt otherwise.
   std::optional<std::uint64_t> hash(Vec3i chunk_pos) const;
   std::optional<std::uint64_t> revision(Vec3i chunk_pos) const;
-  // The (32 >> L)^3 voxels of a chunk held as mip level L (coverage kMip);
-  // nullptr otherwise. Valid until the replica changes.
-  const Box* mip_voxels(Vec3i chunk_pos) const {
-    auto it = mips_.find(chunk_pos);
-    return it == mips_.end() ? nullptr : &it->second.voxels;
-  }
+  // The (32 >> L)^3 voxels of a chunk held as mip level L (coverage kMip)
+  // into out, and true; false (out unchanged) otherwise.
+  bool read_mip(Vec3i chunk_pos, Box& out) const;
 
   std::size_t chunk_count(CoverageState state) const;
   // Chunks held as estimates now.
@@ -90,11 +96,14 @@ class Replica {
   // Mip records that brought a chunk's level again with the very voxels
   // held at that level (a refresh that told nothing; the server avoids them).
   std::uint64_t redundant_mips() const { return redundant_mips_; }
-  std::size_t chunk_count() const { return coverage_.size(); }
+  std::size_t chunk_count() const { return coverage_.size() + horizon_chunks_; }
   const Grid& grid() const { return grid_; }
   template <class F>
   void for_each_coverage(F&& f) const {
     for (const auto& [pos, c] : coverage_) f(pos, c);
+    for (const auto& [region, h] : horizons_)
+      for (int i = 0; i < kHorizonRegionSlots; ++i)
+        if (h.covers.test(static_cast<std::size_t>(i))) f(horizon_chunk(region, i), h.coverage);
   }
 
  private:
@@ -102,6 +111,29 @@ class Replica {
     int level = 0;
     Box voxels;
   };
+  // A region's horizon image and the chunks it still covers (those with no
+  // coverage of their own), which share one coverage value.
+  struct Horizon {
+    ChunkCoverage coverage;
+    Box image;
+    std::bitset<kHorizonRegionSlots> covers;
+  };
+  static Vec3i horizon_chunk(Vec3i region, int i) {
+    return region * kHorizonRegionChunks + Vec3i{i % kHorizonRegionChunks, i / (kHorizonRegionChunks * kHorizonRegionChunks),
+                                                 (i / kHorizonRegionChunks) % kHorizonRegionChunks};
+  }
+  // The voxels a chunk's mip is read from: a box, the chunk's corner in it
+  // and the level (box null: no mip held).
+  struct MipView {
+    const Box* box = nullptr;
+    Vec3i origin;
+    int level = 0;
+  };
+  MipView mip_view(Vec3i chunk_pos) const;
+  const Horizon* horizon_of(Vec3i chunk_pos) const;
+  // The chunk is no longer covered by its region's image (it has coverage
+  // of its own now, or none).
+  void forget_horizon(Vec3i chunk_pos);
   // The 16^3 units of a chunk on its way to full resolution, gathered so the
   // chunk is packed once when Coverage Full arrives (writing units into a
   // packed chunk one by one repacks it each time).
@@ -115,12 +147,17 @@ class Replica {
   void flush_pending(Vec3i chunk_pos);
   // A chunk's voxels, coverage or revision changed: its cached hash is gone.
   // Every write of grid_, mips_ or coverage_ calls it.
-  void voxels_changed(Vec3i chunk_pos) { hashes_.erase(chunk_pos); }
+  void voxels_changed(Vec3i chunk_pos) {
+    hashes_.erase(chunk_pos);
+    if (!horizons_.empty()) forget_horizon(chunk_pos);
+  }
 
   Grid grid_;
   Vec3iMap<ChunkCoverage> coverage_;
   Vec3iMap<Mip> mips_;
   Vec3iMap<Pending> pending_;
+  Vec3iMap<Horizon> horizons_;     // by region
+  std::size_t horizon_chunks_ = 0;  // chunks covered by horizons_
   // Region hashes computed since each chunk last changed (a hash is a pass
   // over 32^3 voxels; a client checks the same unchanged chunks again and
   // again).

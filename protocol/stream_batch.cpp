@@ -4,6 +4,7 @@
 
 #include "common/codec/bit_io.h"
 #include "common/codec/net_codec.h"
+#include "common/world/horizon.h"
 
 namespace terrane {
 
@@ -49,6 +50,13 @@ void StreamBatchWriter::add(StreamRecordKind kind, Vec3i cp, std::uint64_t revis
   ++records_;
 }
 
+void StreamBatchWriter::add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit) {
+  const std::uint8_t head[2] = {static_cast<std::uint8_t>(level), static_cast<std::uint8_t>(mask != nullptr ? 1 : 0)};
+  add(StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0, head);
+  if (mask != nullptr) bytes_.insert(bytes_.end(), mask->begin(), mask->end());
+  bytes_.insert(bytes_.end(), unit.begin(), unit.end());
+}
+
 Frame StreamBatchWriter::finish() {
   Frame f = build_stream_batch(bytes_);
   bytes_.clear();
@@ -67,7 +75,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       return DecodeError{DecodeErrorCode::kOverLimit, r.pos(), "stream batch: more than 4096 records"};
     auto kind = r.byte();
     if (!kind) return kind.error();
-    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kEstimate))
+    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kHorizon))
       return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: unknown record kind"};
     // A delta is bounded before it is added: the previous position is within
     // +-lim, so any delta beyond 2*lim lands out of range (and an unchecked
@@ -119,6 +127,39 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       case StreamRecordKind::kEmpty:
       case StreamRecordKind::kReleased:
         break;
+      case StreamRecordKind::kHorizon: {
+        // One record per chunk covered, each with its (32 >> level)^3 voxels.
+        const Vec3i first = rec.chunk_pos;
+        if (floor_mod(first, kHorizonRegionChunks) != Vec3i{0, 0, 0} ||
+            std::max({first.x, first.y, first.z}) + kHorizonRegionChunks - 1 > lim)
+          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos(), "stream batch: horizon region not aligned to 8 chunks"};
+        auto level = r.byte();
+        if (!level) return level.error();
+        if (!is_horizon_level(*level))
+          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: horizon level not 4 or 5"};
+        auto masked = r.byte();
+        if (!masked) return masked.error();
+        if (*masked > 1)
+          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: horizon mask flag not 0 or 1"};
+        HorizonMask mask;
+        mask.fill(0xFF);
+        if (*masked == 1) {
+          if (r.rest().size() < mask.size())
+            return DecodeError{DecodeErrorCode::kTruncated, r.pos(), "stream batch: record cut short"};
+          std::copy_n(r.rest().begin(), mask.size(), mask.begin());
+          r.skip(mask.size());
+        }
+        const int side = horizon_side(*level);
+        s.horizon.resize({side, side, side});
+        auto used = net_codec_decode_prefix(side, r.rest(), s.horizon.voxels());
+        if (!used) return DecodeError{used.error().code, r.pos() + used.error().offset, used.error().detail};
+        r.skip(*used);
+        s.mask = mask;
+        rec.level = *level;
+        rec.voxels = &s.horizon;
+        rec.mask = &s.mask;
+        break;
+      }
     }
     if (auto st = fn(rec); !st) return st;
     prev = rec.chunk_pos;

@@ -14,6 +14,15 @@
 //     kind 6 Estimate  one 4^3 unit, as Mip 3, estimated from the world's
 //                      generator for a chunk never generated; replaced by
 //                      a Mip or Empty record when the exact mip differs
+//     kind 7 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk)
+//                      or 5 (1 voxel per chunk); position: the region's
+//                      first chunk (multiples of 8); revision 0; payload:
+//                      level:u8, masked:u8 (0: every chunk of the region;
+//                      1: a 64-byte mask follows, bit i of byte i / 8 for
+//                      chunk (y * 8 + z) * 8 + x), then one network codec
+//                      unit of (8 * (32 >> level))^3 voxels
+//                      (common/world/horizon.h). Decoded as one record:
+//                      the region's image and mask.
 //   (dx, dy, dz) is the chunk position minus the previous record's (the
 //   first record's is relative to (0, 0, 0)).
 //
@@ -21,6 +30,7 @@
 // decode_stream_batch is reentrant given its own scratch.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -41,7 +51,12 @@ enum class StreamRecordKind : std::uint8_t {
   kFull = 4,
   kReleased = 5,
   kEstimate = 6,
+  kHorizon = 7,
 };
+
+// A Horizon record's mask of the region's chunks it covers (bit i: chunk
+// (y * 8 + z) * 8 + x).
+using HorizonMask = std::array<std::uint8_t, 64>;
 
 // Records in one batch at most (bounds a receiver's work per frame).
 inline constexpr std::size_t kMaxStreamRecords = 4096;
@@ -53,14 +68,20 @@ struct StreamRecord {
   StreamRecordKind kind = StreamRecordKind::kEmpty;
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
-  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate
-  const Box* voxels = nullptr; // Full: 32^3; Mip: (32 >> level)^3; else null
+  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..5 for Horizon
+  // Full: 32^3; Mip: (32 >> level)^3; Horizon: the region's image,
+  // (8 * (32 >> level))^3; else null.
+  const Box* voxels = nullptr;
+  const HorizonMask* mask = nullptr;  // Horizon: the region's chunks it covers
 };
 
 class StreamBatchWriter {
  public:
   // payload: the record's encoded units (empty for Empty and Released).
   void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload);
+  // A Horizon record: region's image at level (4 or 5), for the chunks of
+  // mask (null: every chunk of the region).
+  void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit);
   bool empty() const { return records_ == 0; }
   std::size_t records() const { return records_; }
   std::size_t size_bytes() const { return bytes_.size(); }
@@ -78,6 +99,8 @@ struct StreamDecodeScratch {
   Box unit{Vec3i{16, 16, 16}};
   Box chunk{Vec3i{32, 32, 32}};
   Box mip;
+  Box horizon;
+  HorizonMask mask{};
 };
 
 // Decodes every record in order and calls fn for each (the Box is valid

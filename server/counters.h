@@ -112,6 +112,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> chunks_sent{0};     // full-resolution chunks (8 units each)
   std::atomic<std::uint64_t> mips_sent{0};
   std::atomic<std::uint64_t> estimates_sent{0};  // Estimate records (a coarsest mip estimated)
+  std::atomic<std::uint64_t> horizons_sent{0};   // Horizon records (a region's image, to one client)
   std::atomic<std::uint64_t> empties_sent{0};
   std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
   std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not

@@ -77,6 +77,8 @@ constexpr const char* kHelp =
     "  --exact-horizon             send no estimates: a distant chunk never generated is generated\n"
     "                              whole before its coarse mip is sent (by default its mip is\n"
     "                              first estimated at the mip's resolution, then replaced)\n"
+    "  --no-horizon-images         start a new view with each chunk's own 4^3 mip instead of\n"
+    "                              whole regions at 2^3 or 1 voxel per chunk (horizon images)\n"
     "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
@@ -122,7 +124,7 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "exact-horizon"});
+                 {"help", "open", "exact-horizon", "no-horizon-images"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -182,6 +184,7 @@ int run(int argc, char** argv) {
     return usage_error("--admin-token: at least 8 characters (it lets its holder kick, ban and stop the server)");
   o.allow_open = cl.flag("open");
   o.horizon_estimates = !cl.flag("exact-horizon");
+  o.horizon_images = !cl.flag("no-horizon-images");
   o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
   o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
   o.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));

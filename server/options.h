@@ -62,6 +62,9 @@ struct ServerOptions {
   // coarsest mip (World::estimate_coarse), then generated in the background
   // and corrected; false: generated whole before its mip is sent.
   bool horizon_estimates = true;
+  // A new view's first pass: every region of it as one horizon image (2^3
+  // or 1 voxel per chunk), before any chunk's own coarsest mip.
+  bool horizon_images = true;
   SessionLimits session;
   int io_threads = 2;
   // Loader threads: reading stored chunks and generating missing ones.

@@ -214,6 +214,11 @@ void Server::start() {
   else
     server_log().warn("authentication: none, anyone who can connect may play ({})",
                       is_loopback_address(options_.bind_address) ? "loopback only" : "--open");
+  // The default view's table (its offsets nearest first), made before the
+  // first client instead of on its strand (tens of milliseconds at 1,024).
+  // (Capped as a replicator caps a client's radii.)
+  const std::int32_t view = std::min(options_.default_view_distance, options_.max_view_distance);
+  default_view_ = ViewTable::get(view, std::min({options_.default_full_res_radius, options_.max_full_res_radius, view}));
   server_log().info("listening on {}:{}", options_.bind_address, port_);
   world_thread_ = std::thread([this] { world_io_.run(); });
   world_owner_->start();
@@ -281,11 +286,11 @@ void Server::stop() {
   const ServerCounters& c = counters_;
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
-      "chunks, {} mips, {} estimates, {} empty ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} "
+      "chunks, {} mips, {} estimates, {} empty, {} horizon images ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} "
       "skipped: bytes unchanged); world saved",
       c.ticks.load(), c.sessions_accepted.load(), c.net.sessions_closed(), c.edits_applied.load(),
       c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.estimates_sent.load(), c.empties_sent.load(),
-      c.stream_bytes.load(),
+      c.horizons_sent.load(), c.stream_bytes.load(),
       c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
   bool header = false;
   for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {

@@ -138,6 +138,7 @@ class Server {
   std::thread shutdown_thread_;  // stops the server when no owner does (options.on_shutdown unset)
   const std::chrono::steady_clock::time_point started_at_ = std::chrono::steady_clock::now();
   WelcomeTemplate welcome_;
+  std::shared_ptr<const ViewTable> default_view_;  // kept made (ViewTable::get's cache may drop unused tables)
   std::vector<std::thread> threads_;
   std::uint16_t port_ = 0;
   std::atomic<bool> stopped_{false};

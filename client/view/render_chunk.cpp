@@ -22,23 +22,6 @@ void for_each_source_chunk(const NodeKey& key, const auto& fn) {
   for_each_chunk_in(Region{r.min - Vec3i{1, 1, 1}, r.max + Vec3i{1, 1, 1}}, fn);
 }
 
-// Downsamples a (n)^3 box to (n/2)^3 with the chunk mip rule.
-Box downsample_box(const Box& in) {
-  const int n = in.size().x / 2;
-  Box out({n, n, n});
-  Voxel children[8];
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        int i = 0;
-        for (int dz = 0; dz < 2; ++dz)
-          for (int dy = 0; dy < 2; ++dy)
-            for (int dx = 0; dx < 2; ++dx) children[i++] = in.get(2 * x + dx, 2 * y + dy, 2 * z + dz);
-        out.set(x, y, z, downsample(children));
-      }
-  return out;
-}
-
 }  // namespace
 
 int GridSource::read(Vec3i chunk_pos, int want, Box& out) const {

@@ -26,10 +26,7 @@ int ReplicaSource::read(Vec3i chunk_pos, int want, Box& out) const {
     return level;
   }
   if (c->state == CoverageState::kMip) {
-    if (const Box* mip = replica_.mip_voxels(chunk_pos)) {
-      out = *mip;
-      return c->level;
-    }
+    if (replica_.read_mip(chunk_pos, out)) return c->level;
     out.resize({n, n, n});
     return level;
   }

@@ -225,4 +225,20 @@ ChunkMemory Chunk::memory() const {
   return m;
 }
 
+Box downsample_box(const Box& in) {
+  const int h = in.size().x / 2;
+  Box out(Vec3i{h, h, h});
+  for (int y = 0; y < h; ++y)
+    for (int z = 0; z < h; ++z)
+      for (int x = 0; x < h; ++x) {
+        Voxel c[8];
+        int i = 0;
+        for (int dy = 0; dy < 2; ++dy)
+          for (int dz = 0; dz < 2; ++dz)
+            for (int dx = 0; dx < 2; ++dx) c[i++] = in.get(2 * x + dx, 2 * y + dy, 2 * z + dz);
+        out.set(x, y, z, downsample(c));
+      }
+  return out;
+}
+
 }  // namespace terrane

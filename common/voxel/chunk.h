@@ -58,6 +58,9 @@ void for_each_chunk_in(const Region& r, F&& fn) {
 
 // The downsampling rule above, for the 8 children of one mip voxel.
 Voxel downsample(const Voxel children[8]);
+// A box of even side n downsampled to side n / 2 by that rule (children in
+// the order the chunk's mips take them: x fastest, then z, then y).
+Box downsample_box(const Box& in);
 
 struct ChunkMemory {
   std::size_t object_bytes = 0;  // sizeof(Chunk)

@@ -26,24 +26,10 @@ CoarseVoxels coarse_voxels(const Chunk* chunk) {
 
 CoarseVoxels coarse_voxels(const Box& box) {
   // 32 -> 16 -> 8 -> 4, each level from the one before (as Chunk's mips).
-  std::vector<Voxel> level(box.voxels().begin(), box.voxels().end());
-  for (int n = kChunkSize; n > kCoarseSide; n /= 2) {
-    const int h = n / 2;
-    std::vector<Voxel> next(static_cast<std::size_t>(h) * h * h);
-    const auto at = [&](int x, int y, int z) { return level[static_cast<std::size_t>((y * n + z) * n + x)]; };
-    for (int y = 0; y < h; ++y)
-      for (int z = 0; z < h; ++z)
-        for (int x = 0; x < h; ++x) {
-          const Voxel c[8] = {at(2 * x, 2 * y, 2 * z),         at(2 * x + 1, 2 * y, 2 * z),
-                              at(2 * x, 2 * y, 2 * z + 1),     at(2 * x + 1, 2 * y, 2 * z + 1),
-                              at(2 * x, 2 * y + 1, 2 * z),     at(2 * x + 1, 2 * y + 1, 2 * z),
-                              at(2 * x, 2 * y + 1, 2 * z + 1), at(2 * x + 1, 2 * y + 1, 2 * z + 1)};
-          next[static_cast<std::size_t>((y * h + z) * h + x)] = downsample(c);
-        }
-    level = std::move(next);
-  }
+  Box level = downsample_box(box);
+  while (level.size().x > kCoarseSide) level = downsample_box(level);
   CoarseVoxels out{};
-  std::copy_n(level.begin(), kCoarseVoxels, out.begin());
+  std::copy_n(level.voxels().begin(), kCoarseVoxels, out.begin());
   return out;
 }
 

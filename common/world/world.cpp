@@ -76,10 +76,16 @@ bool World::generates_air(Vec3i chunk_pos) const {
   return !generator_ || inside.empty() || generator_->all_air(inside);
 }
 
-std::vector<CoarseVoxels> World::estimate_coarse(std::span<const Vec3i> chunks) const {
-  std::vector<CoarseVoxels> out(chunks.size(), CoarseVoxels{});
-  if (!generator_) return out;
-  constexpr int kCell = kChunkSize / kCoarseSide;  // 8: voxels a side per coarse voxel
+namespace {
+
+// Estimates of chunks at side^3 voxels each (a divisor of 32), one
+// coarse_sample per column stack; put(i, voxel index in Box order, voxel)
+// for the i-th chunk. Cells outside the bounds are Air, as generate_chunk's
+// voxels.
+template <class Put>
+void estimate_cells(const TerrainGenerator& generator, const WorldBounds& bounds, std::span<const Vec3i> chunks,
+                    int side, Put&& put) {
+  const int cell = kChunkSize / side;  // voxels a side per estimated voxel
   // Column stacks: the chunks of each (x, z), sampled in one call.
   std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::size_t>> stacks;
   for (std::size_t i = 0; i < chunks.size(); ++i) stacks[{chunks[i].x, chunks[i].z}].push_back(i);
@@ -90,23 +96,41 @@ std::vector<CoarseVoxels> World::estimate_coarse(std::span<const Vec3i> chunks) 
       lo = std::min(lo, chunks[i].y);
       hi = std::max(hi, chunks[i].y);
     }
-    generator_->coarse_sample(Vec3i{xz.first, lo, xz.second} * kChunkSize, kCell,
-                              Vec3i{kCoarseSide, kCoarseSide * (hi - lo + 1), kCoarseSide}, cells);
+    generator.coarse_sample(Vec3i{xz.first, lo, xz.second} * kChunkSize, cell, Vec3i{side, side * (hi - lo + 1), side},
+                            cells);
     for (const std::size_t i : members) {
-      const int y0 = (chunks[i].y - lo) * kCoarseSide;
+      const int y0 = (chunks[i].y - lo) * side;
       const Vec3i base = chunks[i] * kChunkSize;
-      CoarseVoxels& c = out[i];
-      for (int y = 0; y < kCoarseSide; ++y)
-        for (int z = 0; z < kCoarseSide; ++z)
-          for (int x = 0; x < kCoarseSide; ++x) {
-            // Cells outside the bounds are Air, as generate_chunk's voxels.
-            const Vec3i centre = base + Vec3i{x, y, z} * kCell + Vec3i{kCell / 2, kCell / 2, kCell / 2};
-            c[static_cast<std::size_t>((y * kCoarseSide + z) * kCoarseSide + x)] =
-                meta().bounds.contains(centre) ? cells.get({x, y0 + y, z}) : Voxel{};
+      for (int y = 0; y < side; ++y)
+        for (int z = 0; z < side; ++z)
+          for (int x = 0; x < side; ++x) {
+            const Vec3i centre = base + Vec3i{x, y, z} * cell + Vec3i{cell / 2, cell / 2, cell / 2};
+            put(i, static_cast<std::size_t>((y * side + z) * side + x),
+                bounds.contains(centre) ? cells.get({x, y0 + y, z}) : Voxel{});
           }
     }
   }
+}
+
+}  // namespace
+
+std::vector<CoarseVoxels> World::estimate_coarse(std::span<const Vec3i> chunks) const {
+  std::vector<CoarseVoxels> out(chunks.size(), CoarseVoxels{});
+  if (!generator_) return out;
+  estimate_cells(*generator_, meta().bounds, chunks, kCoarseSide,
+                 [&](std::size_t i, std::size_t at, Voxel v) { out[i][at] = v; });
   return out;
+}
+
+void World::estimate_horizon(std::span<const Vec3i> chunks, HorizonBuilder& out) const {
+  if (!generator_) return;
+  const int n = out.per_chunk();
+  const std::size_t per = static_cast<std::size_t>(n) * n * n;
+  std::vector<Voxel> voxels(chunks.size() * per);
+  estimate_cells(*generator_, meta().bounds, chunks, n,
+                 [&](std::size_t i, std::size_t at, Voxel v) { voxels[i * per + at] = v; });
+  for (std::size_t i = 0; i < chunks.size(); ++i)
+    out.put(chunks[i], std::span<const Voxel>(voxels).subspan(i * per, per));
 }
 
 Chunk World::generate_chunk(Vec3i chunk_pos) const {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/world/horizon.h"
 #include "common/world/terrain_generator.h"
 #include "common/world/world_store.h"
 
@@ -52,6 +53,10 @@ class World {
   // all Air without a generator. One estimate per chunk of chunks, in that
   // order. Thread-safe.
   std::vector<CoarseVoxels> estimate_coarse(std::span<const Vec3i> chunks) const;
+  // The same at a horizon image's resolution (8 evaluations a chunk at
+  // level 4, 1 at level 5), put into it (precondition: chunks of out's
+  // region). Nothing without a generator (the image stays Air). Thread-safe.
+  void estimate_horizon(std::span<const Vec3i> chunks, HorizonBuilder& out) const;
 
   // The stored chunk, or the generated one with revision 0 (or, if the
   // chunk's row was quarantined, the highest quarantined revision + 1).

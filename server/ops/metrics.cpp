@@ -181,6 +181,10 @@ std::string render_metrics(const MetricsSources& s) {
   m.sample("terrane_streamed_chunks_total", load(c.mips_sent), "kind=\"mip\"");
   m.sample("terrane_streamed_chunks_total", load(c.empties_sent), "kind=\"empty\"");
   m.sample("terrane_streamed_chunks_total", load(c.estimates_sent), "kind=\"estimate\"");
+  m.counter("terrane_horizon_images_sent_total", "Regions sent to clients as one horizon image (a new view's first pass).",
+            load(c.horizons_sent));
+  m.counter("terrane_horizon_images_made_total", "Horizon images made (each shared by every client until its region changes).",
+            load(st.horizons_made));
   m.counter("terrane_coarse_estimated_total", "Never-generated chunks whose coarsest mip was estimated.",
             load(st.coarse_estimated));
   m.counter("terrane_estimates_replaced_total", "Estimated chunks since generated for real.",

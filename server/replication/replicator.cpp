@@ -49,6 +49,12 @@ void Replicator::granted(std::vector<VersionPtr> versions) {
   });
 }
 
+void Replicator::horizons(std::vector<HorizonPtr> images) {
+  asio::post(executor_, [self = shared_from_this(), i = std::move(images)]() mutable {
+    self->on_horizons(std::move(i));
+  });
+}
+
 void Replicator::committed(std::uint64_t tick, std::vector<VersionPtr> changed) {
   asio::post(executor_, [self = shared_from_this(), tick, c = std::move(changed)]() mutable {
     self->on_committed(tick, std::move(c));
@@ -166,6 +172,8 @@ void Replicator::on_closed(const std::string& reason) {
   held_.clear();
   full_.clear();
   ready_versions_.clear();
+  horizon_.clear();
+  horizon_wanted_.clear();
   session_.reset();  // breaks the cycle with the session's callbacks
 }
 
@@ -362,6 +370,8 @@ void Replicator::release_outside_view() {
     if (!in_view(cp)) leaving.push_back(cp);
   for (const auto& [cp, r] : requested_)
     if (!in_view(cp)) leaving.push_back(cp);
+  for (const auto& [cp, level] : horizon_)
+    if (!in_view(cp)) leaving.push_back(cp);
   std::vector<Vec3i> released;
   for (const Vec3i cp : leaving) leave(cp, released);
   if (!released.empty()) world_.release(id_, std::move(released));
@@ -379,6 +389,8 @@ void Replicator::leave(Vec3i cp, std::vector<Vec3i>& released) {
     held_.erase(it);
     registered = true;
   }
+  // (Never both held and seen through a horizon image: hold() forgets the image.)
+  if (horizon_.erase(cp)) stream(StreamRecordKind::kReleased, cp, 0);
   if (auto rv = ready_versions_.find(cp); rv != ready_versions_.end()) {
     // Granted (so registered) and not sent: dropped with its request.
     ready_versions_.erase(rv);
@@ -403,7 +415,61 @@ void Replicator::replan() {
   for (const auto& [cp, h] : held_)
     if (h.level != kHeldEmpty && desired(cp) < h.level) all.emplace_back(offset_center_dist2(cp - center_), cp);
   refine_ = decltype(refine_)(RefineOrder{}, std::move(all));
+  plan_horizon();
   flush_stream();
+}
+
+void Replicator::plan_horizon() {
+  horizon_wanted_.clear();
+  if (!options_.horizon_images) return;
+  // Each region with a chunk in view that the client has nothing of, nearest
+  // first (the table's order: a region's first chunk met is about its
+  // nearest), at 2^3 per chunk when that chunk is within a quarter of the
+  // view distance, else 1 voxel per chunk.
+  const std::int64_t near = state_.view_distance / 4;
+  std::vector<HorizonWant> wants;
+  for (const Vec3i o : table_->offsets()) {
+    const Vec3i cp = center_ + o;
+    if (!welcome_.bounds.touches_chunk(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 ||
+        horizon_.count(cp) != 0)
+      continue;
+    const Vec3i region = coarse_region_of(cp);
+    if (horizon_wanted_.count(region) != 0) continue;
+    const int level = offset_dist2(o) <= near * near ? kHorizonNearLevel : kHorizonFarLevel;
+    horizon_wanted_.emplace(region, static_cast<std::uint8_t>(level));
+    wants.push_back(HorizonWant{region, level});
+  }
+  if (!wants.empty()) world_.want_horizon(id_, std::move(wants));
+}
+
+void Replicator::on_horizons(std::vector<HorizonPtr> images) {
+  if (closed_) return;
+  for (const HorizonPtr& image : images) {
+    auto w = horizon_wanted_.find(image->region);
+    if (w == horizon_wanted_.end() || w->second != image->level) continue;  // asked for by an earlier plan
+    const int level = image->level;
+    horizon_wanted_.erase(w);
+    if (image->unit.empty()) continue;  // not made: the chunks' own records follow
+    // The region's chunks in view that the client has nothing of yet.
+    HorizonMask mask{};
+    std::size_t covered = 0, slots = 0;
+    const Vec3i first = image->region * kHorizonRegionChunks;
+    for (int i = 0; i < kHorizonRegionSlots; ++i) {
+      const Vec3i cp = first + Vec3i{i % kHorizonRegionChunks, i / (kHorizonRegionChunks * kHorizonRegionChunks),
+                                     (i / kHorizonRegionChunks) % kHorizonRegionChunks};
+      ++slots;
+      if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) continue;
+      mask[static_cast<std::size_t>(i / 8)] |= static_cast<std::uint8_t>(1u << (i % 8));
+      horizon_.emplace(cp, static_cast<std::uint8_t>(level));
+      ++covered;
+    }
+    if (covered == 0) continue;
+    batch_.add_horizon(image->region, level, covered == slots ? nullptr : &mask, image->unit);
+    counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
+    if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+  }
+  if (horizon_wanted_.empty()) flush_stream();
+  pump();
 }
 
 void Replicator::move_by(Vec3i d) {
@@ -432,6 +498,8 @@ void Replicator::pump() {
 }
 
 void Replicator::request_more() {
+  // The horizon images first: chunks' own records wait until all are sent.
+  if (!horizon_wanted_.empty()) return;
   if (requested_.size() + ready_.size() >= kMaxRequests) return;
   std::vector<ChunkWant> wants;
   auto want = [&](Vec3i cp, Intent intent, int level, bool exact = false) {
@@ -566,6 +634,7 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
 
 void Replicator::hold(Vec3i cp, Held h, const VersionPtr& v) {
   held_[cp] = h;
+  horizon_.erase(cp);
   if (h.level == 0) {
     if (full_.insert_or_assign(cp, v).second) hash_order_.push_back(cp);
   } else {

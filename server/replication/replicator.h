@@ -5,8 +5,12 @@
 // of chunks to refine, outstanding requests to the world, claims of a
 // resuming client, the outbound budget and pushed region hashes.
 //
-// Streaming. First the whole view at its coarsest (the 4^3 mip, or Empty
-// for all-Air chunks) nearest first, then each chunk refined to the level
+// Streaming. First, for a new plan, every region of the view that has
+// chunks the client knows nothing of, as one horizon image each (2^3 per
+// chunk within a quarter of the view distance, 1 voxel per chunk beyond; made once
+// by the world and shared), nearest first. Then the whole view at its
+// coarsest (the 4^3 mip, or Empty for all-Air chunks) nearest first, then
+// each chunk refined to the level
 // the view rule gives it, nearest first (a queue of chunks needing
 // refinement, filled when a chunk arrives coarser than it should be or a
 // move brings it closer). Chunks are asked of the world in batches, at most
@@ -104,6 +108,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
 
   // WorldClient (world strand; each posts to the session strand).
   void granted(std::vector<VersionPtr> versions) override;
+  void horizons(std::vector<HorizonPtr> images) override;
   void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
   void send(SharedFrame frame, SendClass cls) override;
   void close(CloseReason why, const std::string& text) override;
@@ -129,6 +134,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void on_pong(std::uint64_t nonce);
 
   void replan();
+  // Asks the world for the horizon images of the new plan's regions.
+  void plan_horizon();
+  void on_horizons(std::vector<HorizonPtr> images);
   void move_by(Vec3i d);
   void release_outside_view();
   // A chunk leaving the view: released on both sides (its claim, what is
@@ -209,6 +217,14 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   std::priority_queue<RefineEntry, std::vector<RefineEntry>, RefineOrder> refine_;
 
   Vec3iMap<Held> held_;
+  // Regions of this plan whose horizon images were asked for, with the
+  // level of each (an image of a region not listed, or at another level,
+  // answers an earlier plan: dropped); streaming's first pass waits until
+  // none is.
+  Vec3iMap<std::uint8_t> horizon_wanted_;
+  // Chunks the client has only from a horizon image (not held: no record
+  // of their own sent yet), with its level. Released when they leave the view.
+  Vec3iMap<std::uint8_t> horizon_;
   // Versions of chunks held at full resolution (region hashes, pushed and
   // answered here).
   Vec3iMap<VersionPtr> full_;

@@ -16,6 +16,11 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   for (int i = 0; i < n; ++i) {
     auto store = world.store().reopen();
     if (!store) return store.error();
+    // One read of a region before the first client: a connection's first
+    // read prepares its statements and fills its page cache with the
+    // tables' upper pages (about 10-25 ms a connection, which the first
+    // view's horizon would otherwise wait for). Its answer does not matter.
+    (void)(*store)->load_coarse(Vec3i{0, 0, 0});
     s->readers_.push_back(std::move(*store));
   }
   auto w = world.store().reopen();
@@ -48,7 +53,7 @@ void Storage::stop() {
 void Storage::load(Vec3i pos, LoadDone done, Priority priority) {
   {
     std::lock_guard lock(readers_mutex_);
-    queue(priority).push_back(LoadJob{pos, std::move(done), nullptr});
+    queue(priority).push_back(LoadJob{pos, 0, std::move(done), nullptr, nullptr});
   }
   post_load();
 }
@@ -145,7 +150,15 @@ void Storage::answer(std::vector<ForwardAnswer> answers) {
 void Storage::load_coarse(Vec3i region, CoarseDone done) {
   {
     std::lock_guard lock(readers_mutex_);
-    loads_.push_back(LoadJob{region, nullptr, std::move(done)});
+    loads_.push_back(LoadJob{region, 0, nullptr, std::move(done), nullptr});
+  }
+  post_load();
+}
+
+void Storage::load_horizon(Vec3i region, int level, HorizonDone done) {
+  {
+    std::lock_guard lock(readers_mutex_);
+    urgent_loads_.push_back(LoadJob{region, level, nullptr, nullptr, std::move(done)});
   }
   post_load();
 }
@@ -162,47 +175,90 @@ void Storage::post_load() {
       store = take_reader();
     }
     const auto give_back = [&] { give_reader(std::move(store)); };
+    if (job.horizon_done) return run_horizon(*store, job, give_back);
     if (!job.coarse_done) {
       LoadedChunk c = load_now(*store, job.pos);
       give_back();
       job.done(std::move(c));
       return;
     }
-    std::vector<Vec3i> rows;
-    LoadedCoarse c = read_coarse(*store, job.pos, rows);
-    give_back();  // the generator's judgement below needs no connection
-    if (c.ok) {
-      // Only chunks with no row of any kind are the generator's: a row
-      // without an entry is damaged (its load quarantines it).
-      // With estimates on, every one of them is estimated from the generator
-      // at the mip's resolution, sky too: judging a chunk all Air exactly
-      // costs its 32 x 32 columns, more than its estimate (the background
-      // generation finds out). Otherwise sky is judged exactly and the rest
-      // is generated when wanted.
-      const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
-      const Vec3i base = job.pos * kCoarseRegionChunks;
-      std::vector<Vec3i> unknown;
-      for (int y = 0; y < kCoarseRegionChunks; ++y)
-        for (int z = 0; z < kCoarseRegionChunks; ++z)
-          for (int x = 0; x < kCoarseRegionChunks; ++x) {
-            const Vec3i cp = base + Vec3i{x, y, z};
-            if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) continue;
-            if (!world_.generator())
-              c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
-            else if (estimate_coarse_)
-              unknown.push_back(cp);
-            else if (world_.generates_air(cp))
-              c.air.push_back(cp);
-          }
-      if (!unknown.empty()) {
-        std::vector<CoarseVoxels> voxels = world_.estimate_coarse(unknown);
-        c.estimates.reserve(unknown.size());
-        for (std::size_t i = 0; i < unknown.size(); ++i) c.estimates.push_back(CoarseEntry{unknown[i], 0, voxels[i]});
-        counters_.coarse_estimated.fetch_add(unknown.size(), std::memory_order_relaxed);
-      }
-    }
-    job.coarse_done(std::move(c));
+    run_coarse(*store, job, give_back);
   });
+}
+
+void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<void()>& give_back) {
+  std::vector<Vec3i> rows;
+  LoadedCoarse c = read_coarse(store, job.pos, rows);
+  give_back();  // the generator's judgement below needs no connection
+  if (c.ok) {
+    // Only chunks with no row of any kind are the generator's: a row
+    // without an entry is damaged (its load quarantines it).
+    // With estimates on, every one of them is estimated from the generator
+    // at the mip's resolution, sky too: judging a chunk all Air exactly
+    // costs its 32 x 32 columns, more than its estimate (the background
+    // generation finds out). Otherwise sky is judged exactly and the rest
+    // is generated when wanted.
+    const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
+    const Vec3i base = job.pos * kCoarseRegionChunks;
+    std::vector<Vec3i> unknown;
+    for (int y = 0; y < kCoarseRegionChunks; ++y)
+      for (int z = 0; z < kCoarseRegionChunks; ++z)
+        for (int x = 0; x < kCoarseRegionChunks; ++x) {
+          const Vec3i cp = base + Vec3i{x, y, z};
+          if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) continue;
+          if (!world_.generator())
+            c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
+          else if (estimate_coarse_)
+            unknown.push_back(cp);
+          else if (world_.generates_air(cp))
+            c.air.push_back(cp);
+        }
+    if (!unknown.empty()) {
+      std::vector<CoarseVoxels> voxels = world_.estimate_coarse(unknown);
+      c.estimates.reserve(unknown.size());
+      for (std::size_t i = 0; i < unknown.size(); ++i) c.estimates.push_back(CoarseEntry{unknown[i], 0, voxels[i]});
+      counters_.coarse_estimated.fetch_add(unknown.size(), std::memory_order_relaxed);
+    }
+  }
+  job.coarse_done(std::move(c));
+}
+
+void Storage::run_horizon(WorldStore& store, LoadJob& job, const std::function<void()>& give_back) {
+  // The image as read past any lag: an entry for every stored chunk that
+  // decodes. Every other chunk is estimated (never generated, or a damaged
+  // row that is served generated): the image is approximate anyway, so
+  // the rows are not listed as a chunk's load needs them.
+  auto entries = store.load_coarse(job.pos);
+  give_back();
+  LoadedHorizon h;
+  h.region = job.pos;
+  h.level = job.level;
+  if (!entries) {
+    h.error = entries.error().message;
+    return job.horizon_done(std::move(h));
+  }
+  // Stored chunks from their mips; the rest estimated (whatever the
+  // estimates setting: a distant chunk never generated is not generated
+  // for its image). Chunks outside the bounds stay Air.
+  HorizonBuilder b(job.pos, job.level);
+  std::array<bool, kHorizonRegionSlots> stored{};
+  for (const CoarseEntry& e : *entries) {
+    b.put_coarse(e.chunk_pos, e.voxels);
+    stored[static_cast<std::size_t>(coarse_index(e.chunk_pos))] = true;
+  }
+  const Vec3i base = job.pos * kCoarseRegionChunks;
+  std::vector<Vec3i> unknown;
+  for (int y = 0; y < kCoarseRegionChunks; ++y)
+    for (int z = 0; z < kCoarseRegionChunks; ++z)
+      for (int x = 0; x < kCoarseRegionChunks; ++x) {
+        const Vec3i cp = base + Vec3i{x, y, z};
+        if (!stored[static_cast<std::size_t>(coarse_index(cp))] && world_.meta().bounds.touches_chunk(cp))
+          unknown.push_back(cp);
+      }
+  world_.estimate_horizon(unknown, b);
+  h.image = encode_horizon(b);
+  counters_.horizons_made.fetch_add(1, std::memory_order_relaxed);
+  job.horizon_done(std::move(h));
 }
 
 LoadedCoarse Storage::read_coarse(WorldStore& store, Vec3i region, std::vector<Vec3i>& rows) {

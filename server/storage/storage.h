@@ -38,6 +38,7 @@
 #include <thread>
 #include <vector>
 
+#include "common/world/horizon.h"
 #include "common/world/world.h"
 #include "server/counters.h"
 #include "server/storage/lease_keeper.h"
@@ -71,11 +72,21 @@ struct LoadedCoarse {
   std::string error;
 };
 
+// A region's horizon image (common/world/horizon.h), made from its coarse
+// image and, for chunks never stored, estimates at the image's resolution.
+struct LoadedHorizon {
+  Vec3i region;
+  int level = kHorizonFarLevel;
+  HorizonPtr image;  // null when the coarse image could not be read (error says why)
+  std::string error;
+};
+
 struct StorageCounters {
   std::atomic<std::uint64_t> loaded_from_store{0};
   std::atomic<std::uint64_t> coarse_images_read{0};
   std::atomic<std::uint64_t> generated{0};
   std::atomic<std::uint64_t> coarse_estimated{0};  // chunks' coarsest mips estimated (LoadedCoarse::estimates)
+  std::atomic<std::uint64_t> horizons_made{0};     // horizon images (LoadedHorizon)
   std::atomic<std::uint64_t> quarantined{0};
   std::atomic<std::uint64_t> commits{0};           // transactions
   std::atomic<std::uint64_t> ticks_committed{0};   // ticks carried by them
@@ -93,6 +104,7 @@ class Storage {
  public:
   using LoadDone = std::function<void(LoadedChunk)>;
   using CoarseDone = std::function<void(LoadedCoarse)>;
+  using HorizonDone = std::function<void(LoadedHorizon)>;
   using CommitDone = std::function<void(const FileStatus&)>;
 
   // world: shared for its metadata and generator (thread-safe); its store
@@ -121,6 +133,9 @@ class Storage {
   bool promote(Vec3i pos, Priority priority);
   // Reads a region's coarse image (queued with the other loads).
   void load_coarse(Vec3i region, CoarseDone done);
+  // Makes a region's horizon image (ahead of every other load: a new
+  // view's first pass waits on them, and each costs one read).
+  void load_horizon(Vec3i region, int level, HorizonDone done);
   // A shared PostgreSQL world's leases (null: SQLite, every region is this
   // server's). Call before the first load; keeper outlives this.
   void set_leases(LeaseKeeper* keeper) { leases_ = keeper; }
@@ -209,10 +224,14 @@ class Storage {
   std::mutex readers_mutex_;
   std::vector<std::unique_ptr<WorldStore>> readers_;
   struct LoadJob {
-    Vec3i pos;  // a chunk, or the region of a coarse image
+    Vec3i pos;  // a chunk, or the region of a coarse or horizon image
+    int level = 0;  // of a horizon image
     LoadDone done;
     CoarseDone coarse_done;  // set: a coarse image
+    HorizonDone horizon_done;  // set: a horizon image
   };
+  void run_coarse(WorldStore& store, LoadJob& job, const std::function<void()>& give_back);
+  void run_horizon(WorldStore& store, LoadJob& job, const std::function<void()>& give_back);
   void post_load();
   std::deque<LoadJob>& queue(Priority priority);  // under readers_mutex_
   std::deque<LoadJob> urgent_loads_, loads_, background_loads_;

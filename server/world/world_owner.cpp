@@ -126,6 +126,54 @@ void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
   });
 }
 
+void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
+  asio::post(strand_, [this, id, wants = std::move(wants)] {
+    auto client = clients_.find(id);
+    if (client == clients_.end()) return;
+    std::vector<HorizonPtr> ready;
+    for (const HorizonWant& w : wants) {
+      const auto k = static_cast<std::size_t>(w.level - kHorizonNearLevel);
+      if (auto it = horizons_[k].find(w.region); it != horizons_[k].end()) {
+        ready.push_back(it->second);
+        continue;
+      }
+      auto [waiting, fresh] = horizon_waiting_[k].try_emplace(w.region);
+      waiting->second.push_back(id);
+      if (fresh)
+        storage_.load_horizon(w.region, w.level, [this](LoadedHorizon h) {
+          asio::post(strand_, [this, h = std::move(h)]() mutable { on_horizon_loaded(std::move(h)); });
+        });
+    }
+    if (!ready.empty()) client->second.link->horizons(std::move(ready));
+  });
+}
+
+void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
+  const auto k = static_cast<std::size_t>(h.level - kHorizonNearLevel);
+  auto node = horizon_waiting_[k].extract(h.region);
+  const bool stale = horizon_stale_[k].erase(h.region) != 0;
+  HorizonPtr image = h.image;
+  if (!image) {
+    server_log().error("horizon image of region ({},{},{}): {}; its chunks are sent as usual", h.region.x, h.region.y,
+                       h.region.z, h.error);
+    image = std::make_shared<const HorizonImage>(HorizonImage{h.region, h.level, {}});
+  } else if (!stale) {
+    if (horizons_[k].size() >= kMaxHorizons) horizons_[k].clear();
+    horizons_[k].emplace(h.region, image);
+  }
+  if (node.empty()) return;
+  for (const ClientId id : node.mapped())
+    if (auto it = clients_.find(id); it != clients_.end()) it->second.link->horizons({image});
+}
+
+void WorldOwner::horizon_changed(Vec3i cp) {
+  const Vec3i region = coarse_region_of(cp);
+  for (std::size_t k = 0; k < 2; ++k) {
+    horizons_[k].erase(region);
+    if (horizon_waiting_[k].count(region) != 0) horizon_stale_[k].insert(region);
+  }
+}
+
 void WorldOwner::grant(ClientId id, Vec3i cp, bool full) {
   Loaded& l = loaded_.at(cp);
   l.used_tick = tick_;
@@ -315,6 +363,7 @@ void WorldOwner::apply_loaded(LoadedChunk c) {
   l.current = v;
   if (!v->has_voxels()) ++mips_only_;
   if (differs) {
+    horizon_changed(c.pos);
     // As a commit would: every holder (all hold it coarser than full
     // resolution, since it had no voxels) refreshes from the new version.
     for (const InterestIndex::Holder& h : interest_.holders(c.pos))
@@ -1093,6 +1142,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     for (const VersionPtr& v : versions) {
       if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
         it->second.published = v;
+      horizon_changed(v->pos());
       for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
         news[h.id].push_back(v);
         ++deliveries;

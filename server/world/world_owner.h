@@ -67,11 +67,20 @@ class WorldClient {
   virtual ~WorldClient() = default;
   // Versions of chunks the client asked for (in want), nearest asked first.
   virtual void granted(std::vector<VersionPtr> versions) = 0;
+  // Horizon images the client asked for (want_horizon), in the order they
+  // were made. An image with no unit could not be made (its region's
+  // coarse image is unreadable): the chunks come as usual.
+  virtual void horizons(std::vector<HorizonPtr> images) = 0;
   // A committed tick's new versions of chunks the client holds.
   virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
   // Frames the world answers with (acks, rejects, read results, presence).
   virtual void send(SharedFrame frame, SendClass cls) = 0;
   virtual void close(CloseReason why, const std::string& text) = 0;
+};
+
+struct HorizonWant {
+  Vec3i region;
+  int level = kHorizonFarLevel;
 };
 
 struct ChunkWant {
@@ -114,6 +123,10 @@ class WorldOwner : private WorldView {
   void moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius);
   void want(ClientId id, std::vector<ChunkWant> chunks);
   void release(ClientId id, std::vector<Vec3i> chunks);
+  // Horizon images of these regions at these levels (nearest first),
+  // handed over through WorldClient::horizons as each is made; each is made
+  // once and kept until a chunk of its region changes.
+  void want_horizon(ClientId id, std::vector<HorizonWant> wants);
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
@@ -234,6 +247,9 @@ class WorldOwner : private WorldView {
   // Background loads replacing estimates at a time (per loader thread: a
   // stream or urgent load waits for at most one generation).
   static constexpr std::size_t kReplacingLoadsPerWorker = 1;
+  // Horizon images kept at most (a few kilobytes each); beyond, all are
+  // dropped and made again when wanted.
+  static constexpr std::size_t kMaxHorizons = 4096;
 
   // WorldView
   bool loaded(Vec3i chunk_pos) const override {
@@ -325,6 +341,15 @@ class WorldOwner : private WorldView {
   std::deque<Vec3i> estimates_;
   std::size_t replacing_ = 0;
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
+  // Horizon images made and kept (dropped when a chunk of the region
+  // changes), the clients waiting for images being made, and regions that
+  // changed while theirs was being made (handed over, not kept).
+  void on_horizon_loaded(LoadedHorizon h);
+  void horizon_changed(Vec3i chunk_pos);
+  // Each indexed by level - kHorizonNearLevel.
+  std::unordered_map<Vec3i, HorizonPtr, Vec3iHash> horizons_[2];
+  std::unordered_map<Vec3i, std::vector<ClientId>, Vec3iHash> horizon_waiting_[2];
+  std::unordered_set<Vec3i, Vec3iHash> horizon_stale_[2];
   bool grants_scheduled_ = false;
   std::deque<PendingEdit> edits_;
   // Chunks queued edits will touch (never unloaded): chunk -> edits.

@@ -184,9 +184,9 @@ TEST_F(ClientServerTest, EstimatedMipsAreReplacedByTheChunksOwnOnlyWhereTheyDiff
       const ChunkCoverage* cov = r.coverage(cp);
       if (cov == nullptr) return false;
       if (cov->state != CoverageState::kMip || cov->level != kMipLevels - 1) continue;
-      const Box* held = r.mip_voxels(cp);
-      if (held == nullptr || !std::equal(held->voxels().begin(), held->voxels().end(), exact[cp].begin(),
-                                         exact[cp].end()))
+      Box held;
+      if (!r.read_mip(cp, held) ||
+          !std::equal(held.voxels().begin(), held.voxels().end(), exact[cp].begin(), exact[cp].end()))
         return false;
     }
     return true;
@@ -681,6 +681,85 @@ TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreSt
     for (const Vec3i cp : view) missing += r.coverage(cp) == nullptr ? 1 : 0;
   });
   EXPECT_EQ(missing, 0u) << "chunks of the view never sent";
+}
+
+// Chunks the replica has only from a horizon image.
+std::size_t horizon_only(const Replica& r) {
+  std::size_t n = 0;
+  r.for_each_coverage([&](Vec3i, const ChunkCoverage& c) { n += c.state == CoverageState::kMip && c.level > 3; });
+  return n;
+}
+
+TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOwn) {
+  start_server();
+  std::mutex mu;
+  std::vector<std::pair<Vec3i, int>> events;  // (chunk, level: 0 Full or Empty, 1..5 a mip)
+  ClientCallbacks cb;
+  cb.on_coverage = [&](Vec3i p, wire::CoverageKind k, int l) {
+    if (k == wire::CoverageKind::Released) return;
+    std::lock_guard lock(mu);
+    events.emplace_back(p, k == wire::CoverageKind::Mip ? l : 0);
+  };
+  // View 320 / 32: regions at 2^3 per chunk within 80 voxels, 1 voxel per
+  // chunk beyond.
+  Client c(options("horizon", 320, 32), cb);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 320, *w);
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, view, w->spawn, 32); }, kDeadline));
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
+  // Every chunk of the view came first as part of a horizon image, at the
+  // level its distance gives, before any chunk's own record.
+  std::lock_guard lock(mu);
+  std::set<std::tuple<int, int, int>> seen;
+  std::size_t horizon = 0;
+  for (; horizon < events.size() && events[horizon].second > 3; ++horizon) {
+    const auto [cp, level] = events[horizon];
+    EXPECT_TRUE(seen.insert({cp.x, cp.y, cp.z}).second) << "a chunk covered twice by horizon images";
+    EXPECT_TRUE(within(w->spawn, cp, 320)) << "a horizon image covered a chunk outside the view";
+  }
+  EXPECT_EQ(horizon, view.size()) << "the horizon images cover the whole view";
+  for (std::size_t i = horizon; i < events.size(); ++i) EXPECT_LE(events[i].second, 3) << "a horizon image after a chunk's own record";
+  const std::set<int> levels = [&] {
+    std::set<int> l;
+    for (std::size_t i = 0; i < horizon; ++i) l.insert(events[i].second);
+    return l;
+  }();
+  EXPECT_EQ(levels, (std::set<int>{4, 5})) << "near regions at 2^3 per chunk, far ones at 1 voxel per chunk";
+  // Then every chunk got its own data: nothing is left of the images.
+  EXPECT_EQ(c.with_replica([](const Replica& r) { return horizon_only(r); }), 0u);
+  EXPECT_EQ(c.counters().horizon_chunks, view.size());
+}
+
+TEST_F(ClientServerTest, ChunksSeenOnlyThroughAHorizonImageAreReleasedWhenTheyLeaveTheView) {
+  // Streaming held back (4 KiB/s): most of the view is still known only
+  // from its horizon images when the client jumps away; what it had of the
+  // old view is released (none of it is in the new view), images included.
+  start_server({"--max-speed", "0", "--outbound-bytes-per-second", "4096"});
+  Client c(options("leaver", 320, 32));
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 320, *w);
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_covered(v.replica, view); }, kDeadline));
+  ASSERT_GT(c.with_replica([](const Replica& r) { return horizon_only(r); }), view.size() / 2)
+      << "the premise: most of the view known only from horizon images";
+  const Vec3f away{w->spawn.x + 4096.0f, w->spawn.y, w->spawn.z};
+  ASSERT_TRUE(c.set_state(ClientStateMsg{away, 320, 32}));
+  const auto outside = [&](const Replica& r) {
+    std::size_t n = 0;
+    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage&) { n += within(away, cp, 320) ? 0 : 1; });
+    return n;
+  };
+  EXPECT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || outside(v.replica) == 0; }, kDeadline))
+      << c.with_replica(outside) << " chunks of the old view still held";
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
 }
 
 TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmptiedAgain) {

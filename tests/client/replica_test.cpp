@@ -51,6 +51,50 @@ TEST(Replica, MipThenFullThenReleased) {
   EXPECT_EQ(r.grid().chunk_count(), 0u);
 }
 
+TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecords) {
+  Replica r;
+  // Region (0, 0, 0) at level 4: 2^3 voxels per chunk; the image's column x
+  // is material 1 + x (chunk i has columns 2i and 2i + 1).
+  Box image({16, 16, 16});
+  for (int y = 0; y < 16; ++y)
+    for (int z = 0; z < 16; ++z)
+      for (int x = 0; x < 16; ++x) image.set(x, y, z, solid(static_cast<Material>(1 + x)));
+  const Vec3i held{1, 0, 0};
+  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{held, 3, 7, encode_unit(4, solid(materials::kSand))}).ok());
+  HorizonMask mask{};
+  mask[0] = 0b111;  // chunks x = 0, 1, 2 of y = z = 0
+  std::vector<Vec3i> covered;
+  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask}, covered);
+  EXPECT_EQ(covered, (std::vector<Vec3i>{{0, 0, 0}, {2, 0, 0}})) << "the chunk held already is not covered";
+  EXPECT_EQ(r.coverage(held)->level, 3);
+  ASSERT_NE(r.coverage({2, 0, 0}), nullptr);
+  EXPECT_EQ(r.coverage({2, 0, 0})->level, kHorizonNearLevel);
+  EXPECT_EQ(r.coverage({3, 0, 0}), nullptr) << "outside the mask";
+  EXPECT_EQ(r.get({70, 5, 5}), solid(5)) << "chunk 2's voxels are the image's columns 4 and 5";
+  EXPECT_EQ(r.resolution_at({70, 5, 5}), kHorizonNearLevel);
+  EXPECT_FALSE(r.hash({2, 0, 0}).has_value());
+  Box mip;
+  ASSERT_TRUE(r.read_mip({2, 0, 0}, mip));
+  EXPECT_EQ(mip.size(), (Vec3i{2, 2, 2}));
+  EXPECT_EQ(mip.get(1, 1, 1), solid(6));
+  EXPECT_EQ(r.chunk_count(), 3u);
+  EXPECT_EQ(r.chunk_count(CoverageState::kMip), 3u);
+  std::size_t seen = 0;
+  r.for_each_coverage([&](Vec3i, const ChunkCoverage&) { ++seen; });
+  EXPECT_EQ(seen, 3u);
+  // A chunk's own record replaces the image; a release forgets it.
+  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Empty, 0, 4});
+  EXPECT_EQ(r.coverage({0, 0, 0})->state, CoverageState::kEmpty);
+  EXPECT_EQ(r.get({5, 5, 5}), Voxel{});
+  r.apply_coverage(CoverageMsg{{2, 0, 0}, wire::CoverageKind::Released, 0, 0});
+  EXPECT_EQ(r.coverage({2, 0, 0}), nullptr);
+  EXPECT_EQ(r.chunk_count(), 2u);
+  // A second image covers again only what has nothing.
+  covered.clear();
+  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask}, covered);
+  EXPECT_EQ(covered, (std::vector<Vec3i>{{2, 0, 0}}));
+}
+
 TEST(Replica, BadUnitBytesAreAnErrorAndChangeNothing) {
   Replica r;
   const std::vector<std::uint8_t> junk = {0xff, 0x00, 0x12};

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "common/codec/net_codec.h"
+#include "common/world/horizon.h"
 
 namespace terrane {
 namespace {
@@ -133,6 +134,82 @@ TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
   std::vector<std::uint8_t> endless(20, 0xFF);
   endless[0] = 0;
   EXPECT_FALSE(count(endless, &n).ok());
+}
+
+TEST(StreamBatch, HorizonRecordsCarryARegionImageAndTheChunksItCovers) {
+  const Box near = terrain(16, 4);
+  const Box far = terrain(8, 6);
+  std::vector<std::uint8_t> near_bytes, far_bytes;
+  net_codec_encode(16, near.voxels(), near_bytes);
+  net_codec_encode(8, far.voxels(), far_bytes);
+  HorizonMask mask{};
+  mask[0] = 0b101;  // chunks (0,0,0) and (2,0,0) of the region
+  mask[63] = 0x80;  // chunk (7,7,7)
+  StreamBatchWriter w;
+  w.add_horizon({-3, 0, 2}, kHorizonNearLevel, &mask, near_bytes);
+  w.add(StreamRecordKind::kEmpty, {-24, 1, 17}, 2, {});  // relative to the region's first chunk
+  w.add_horizon({4, -1, -7}, kHorizonFarLevel, nullptr, far_bytes);
+  const Frame f = w.finish();
+  StreamDecodeScratch s;
+  std::vector<StreamRecord> got;
+  std::vector<Box> images;
+  std::vector<HorizonMask> masks;
+  ASSERT_TRUE(decode_stream_batch(records_of(f), s, [&](const StreamRecord& r) -> Status {
+                got.push_back(r);
+                images.push_back(r.voxels != nullptr ? *r.voxels : Box{});
+                masks.push_back(r.mask != nullptr ? *r.mask : HorizonMask{});
+                return Ok{};
+              }).ok());
+  ASSERT_EQ(got.size(), 3u);
+  EXPECT_EQ(got[0].kind, StreamRecordKind::kHorizon);
+  EXPECT_EQ(got[0].chunk_pos, (Vec3i{-24, 0, 16}));
+  EXPECT_EQ(got[0].level, kHorizonNearLevel);
+  EXPECT_EQ(images[0], near);
+  EXPECT_EQ(masks[0], mask);
+  EXPECT_EQ(got[1].chunk_pos, (Vec3i{-24, 1, 17}));
+  EXPECT_EQ(got[2].chunk_pos, (Vec3i{32, -8, -56}));
+  EXPECT_EQ(got[2].level, kHorizonFarLevel);
+  EXPECT_EQ(images[2], far);
+  HorizonMask all;
+  all.fill(0xFF);
+  EXPECT_EQ(masks[2], all) << "no mask: every chunk of the region";
+  // A horizon record costs the codec's bytes, its mask if any and a few
+  // bytes (kind, position, revision, level, flag: 8 here at most).
+  EXPECT_LE(records_of(f).size(), near_bytes.size() + far_bytes.size() + 64 + 8 + 8 + 5);
+}
+
+TEST(StreamBatch, BadHorizonRecordsAreErrors) {
+  std::vector<std::uint8_t> unit;
+  net_codec_encode(8, terrain(8, 2).voxels(), unit);
+  StreamDecodeScratch s;
+  const auto decode = [&](const std::vector<std::uint8_t>& b) {
+    return decode_stream_batch(b, s, [](const StreamRecord&) -> Status { return Ok{}; });
+  };
+  // kind 7, position (16, 0, 8) as zigzag varints (32, 0, 16), revision 0.
+  const std::vector<std::uint8_t> head = {7, 32, 0, 16, 0};
+  auto record = [&](std::vector<std::uint8_t> rest) {
+    std::vector<std::uint8_t> b = head;
+    b.insert(b.end(), rest.begin(), rest.end());
+    return b;
+  };
+  std::vector<std::uint8_t> good = record({5, 0});
+  good.insert(good.end(), unit.begin(), unit.end());
+  ASSERT_TRUE(decode(good).ok());
+  auto bad_level = good;
+  bad_level[5] = 3;
+  EXPECT_EQ(decode(bad_level).error().code, DecodeErrorCode::kInvalidValue);
+  auto bad_flag = good;
+  bad_flag[6] = 2;
+  EXPECT_EQ(decode(bad_flag).error().code, DecodeErrorCode::kInvalidValue);
+  auto unaligned = good;
+  unaligned[1] = 34;  // x = 17
+  EXPECT_EQ(decode(unaligned).error().code, DecodeErrorCode::kInvalidValue);
+  // A mask promised and cut short.
+  EXPECT_EQ(decode(record({5, 1, 0xFF, 0xFF})).error().code, DecodeErrorCode::kTruncated);
+  // Every cut inside the record is an error.
+  for (std::size_t cut = 1; cut < good.size(); ++cut)
+    EXPECT_FALSE(decode(std::vector<std::uint8_t>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(cut))).ok())
+        << "cut " << cut;
 }
 
 TEST(StreamBatch, TooManyRecordsAreOverLimit) {

@@ -329,6 +329,8 @@ bool read_stream(RawPeer& p, HeldMap& held, std::size_t* records, const std::fun
     auto r = parse_stream_batch(*m.body_as_StreamBatch());
     if (!r) return false;
     const Status st = decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+      // A horizon image is no holding (never claimed): each chunk's own record follows.
+      if (rec.kind == StreamRecordKind::kHorizon) return Ok{};
       ++*records;
       if (rec.kind == StreamRecordKind::kReleased)
         held.erase(rec.chunk_pos);

@@ -27,6 +27,11 @@ class Recorder : public WorldClient {
     for (auto& v : versions) grants_.push_back(std::move(v));
     cv_.notify_all();
   }
+  void horizons(std::vector<HorizonPtr> images) override {
+    std::lock_guard lock(m_);
+    for (auto& i : images) horizons_.push_back(std::move(i));
+    cv_.notify_all();
+  }
   void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override {
     std::lock_guard lock(m_);
     ticks_.emplace_back(tick, std::move(changed));
@@ -57,6 +62,7 @@ class Recorder : public WorldClient {
   std::mutex m_;
   std::condition_variable cv_;
   std::vector<VersionPtr> grants_;
+  std::vector<HorizonPtr> horizons_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
   std::vector<SharedFrame> frames_;
   std::string closed_;

@@ -1,0 +1,35 @@
+#include "common/world/horizon.h"
+
+#include <algorithm>
+
+#include "common/codec/net_codec.h"
+
+namespace terrane {
+
+HorizonBuilder::HorizonBuilder(Vec3i region, int level)
+    : region_(region), level_(level), image_(Vec3i{horizon_side(level), horizon_side(level), horizon_side(level)}) {}
+
+void HorizonBuilder::put_coarse(Vec3i cp, const CoarseVoxels& voxels) {
+  Box b(Vec3i{kCoarseSide, kCoarseSide, kCoarseSide});
+  std::copy(voxels.begin(), voxels.end(), b.voxels().begin());
+  while (b.size().x > per_chunk()) b = downsample_box(b);
+  put(cp, b.voxels());
+}
+
+void HorizonBuilder::put(Vec3i cp, std::span<const Voxel> voxels) {
+  const int n = per_chunk();
+  const Vec3i at = floor_mod(cp, kHorizonRegionChunks) * n;
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x) image_.set(at + Vec3i{x, y, z}, voxels[static_cast<std::size_t>((y * n + z) * n + x)]);
+}
+
+HorizonPtr encode_horizon(const HorizonBuilder& b) {
+  auto img = std::make_shared<HorizonImage>();
+  img->region = b.region();
+  img->level = b.level();
+  net_codec_encode(horizon_side(b.level()), b.image().voxels(), img->unit);
+  return img;
+}
+
+}  // namespace terrane
