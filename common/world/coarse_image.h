@@ -42,6 +42,15 @@ inline int coarse_index(Vec3i chunk_pos) {
   return (l.y * kCoarseRegionChunks + l.z) * kCoarseRegionChunks + l.x;
 }
 
+// Every chunk of region, in index order (coarse_index 0, 1, ...).
+template <class F>
+void for_each_region_chunk(Vec3i region, F&& fn) {
+  const Vec3i base = region * kCoarseRegionChunks;
+  for (int y = 0; y < kCoarseRegionChunks; ++y)
+    for (int z = 0; z < kCoarseRegionChunks; ++z)
+      for (int x = 0; x < kCoarseRegionChunks; ++x) fn(base + Vec3i{x, y, z});
+}
+
 // The chunk's coarsest mip (null: all Air).
 CoarseVoxels coarse_voxels(const Chunk* chunk);
 // The same from a chunk's 32^3 voxels (precondition: box is 32^3), by the

@@ -452,19 +452,16 @@ void Replicator::on_horizons(std::vector<HorizonPtr> images) {
     if (image->unit.empty()) continue;  // not made: the chunks' own records follow
     // The region's chunks in view that the client has nothing of yet.
     HorizonMask mask{};
-    std::size_t covered = 0, slots = 0;
-    const Vec3i first = image->region * kHorizonRegionChunks;
-    for (int i = 0; i < kHorizonRegionSlots; ++i) {
-      const Vec3i cp = first + Vec3i{i % kHorizonRegionChunks, i / (kHorizonRegionChunks * kHorizonRegionChunks),
-                                     (i / kHorizonRegionChunks) % kHorizonRegionChunks};
-      ++slots;
-      if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) continue;
+    std::size_t covered = 0;
+    for_each_region_chunk(image->region, [&](Vec3i cp) {
+      if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) return;
+      const int i = coarse_index(cp);
       mask[static_cast<std::size_t>(i / 8)] |= static_cast<std::uint8_t>(1u << (i % 8));
       horizon_.emplace(cp, static_cast<std::uint8_t>(level));
       ++covered;
-    }
+    });
     if (covered == 0) continue;
-    batch_.add_horizon(image->region, level, covered == slots ? nullptr : &mask, image->unit);
+    batch_.add_horizon(image->region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image->unit);
     counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
     if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
   }

@@ -199,20 +199,16 @@ void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<vo
     // generation finds out). Otherwise sky is judged exactly and the rest
     // is generated when wanted.
     const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
-    const Vec3i base = job.pos * kCoarseRegionChunks;
     std::vector<Vec3i> unknown;
-    for (int y = 0; y < kCoarseRegionChunks; ++y)
-      for (int z = 0; z < kCoarseRegionChunks; ++z)
-        for (int x = 0; x < kCoarseRegionChunks; ++x) {
-          const Vec3i cp = base + Vec3i{x, y, z};
-          if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) continue;
-          if (!world_.generator())
-            c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
-          else if (estimate_coarse_)
-            unknown.push_back(cp);
-          else if (world_.generates_air(cp))
-            c.air.push_back(cp);
-        }
+    for_each_region_chunk(job.pos, [&](Vec3i cp) {
+      if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) return;
+      if (!world_.generator())
+        c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
+      else if (estimate_coarse_)
+        unknown.push_back(cp);
+      else if (world_.generates_air(cp))
+        c.air.push_back(cp);
+    });
     if (!unknown.empty()) {
       std::vector<CoarseVoxels> voxels = world_.estimate_coarse(unknown);
       c.estimates.reserve(unknown.size());
@@ -246,15 +242,11 @@ void Storage::run_horizon(WorldStore& store, LoadJob& job, const std::function<v
     b.put_coarse(e.chunk_pos, e.voxels);
     stored[static_cast<std::size_t>(coarse_index(e.chunk_pos))] = true;
   }
-  const Vec3i base = job.pos * kCoarseRegionChunks;
   std::vector<Vec3i> unknown;
-  for (int y = 0; y < kCoarseRegionChunks; ++y)
-    for (int z = 0; z < kCoarseRegionChunks; ++z)
-      for (int x = 0; x < kCoarseRegionChunks; ++x) {
-        const Vec3i cp = base + Vec3i{x, y, z};
-        if (!stored[static_cast<std::size_t>(coarse_index(cp))] && world_.meta().bounds.touches_chunk(cp))
-          unknown.push_back(cp);
-      }
+  for_each_region_chunk(job.pos, [&](Vec3i cp) {
+    if (!stored[static_cast<std::size_t>(coarse_index(cp))] && world_.meta().bounds.touches_chunk(cp))
+      unknown.push_back(cp);
+  });
   world_.estimate_horizon(unknown, b);
   h.image = encode_horizon(b);
   counters_.horizons_made.fetch_add(1, std::memory_order_relaxed);

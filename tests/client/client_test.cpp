@@ -108,6 +108,21 @@ bool all_at_desired_level(const Replica& r, const std::vector<Vec3i>& chunks, Ve
 }
 
 // Waits for the Welcome, then for full resolution inside the radius.
+// Connects c and waits for its Welcome (nullopt, with the reason, when
+// either fails).
+std::optional<WelcomeMsg> join(Client& c) {
+  std::string err;
+  if (!c.connect(&err)) {
+    ADD_FAILURE() << err;
+    return std::nullopt;
+  }
+  if (!c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline) || !c.welcome()) {
+    ADD_FAILURE() << "no Welcome: " << c.disconnect_reason();
+    return std::nullopt;
+  }
+  return c.welcome();
+}
+
 std::vector<Vec3i> wait_full_res(Client& c, float full_radius) {
   EXPECT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
   const auto w = c.welcome();
@@ -661,10 +676,7 @@ TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreSt
   // already asked for, none kept registered with the world unsent).
   start_server({"--max-speed", "0", "--outbound-bytes-per-second", "16384"});
   Client c(options("jumper", 48, 16));
-  std::string err;
-  ASSERT_TRUE(c.connect(&err)) << err;
-  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
-  const auto w = c.welcome();
+  const auto w = join(c);
   ASSERT_TRUE(w.has_value());
   // Refinement under way: some chunk is at full resolution already.
   ASSERT_TRUE(c.wait_until(
@@ -703,10 +715,7 @@ TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOw
   // View 320 / 32: regions at 2^3 per chunk within 80 voxels, 1 voxel per
   // chunk beyond.
   Client c(options("horizon", 320, 32), cb);
-  std::string err;
-  ASSERT_TRUE(c.connect(&err)) << err;
-  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
-  const auto w = c.welcome();
+  const auto w = join(c);
   ASSERT_TRUE(w.has_value());
   const auto view = chunks_within(w->spawn, 320, *w);
   ASSERT_TRUE(c.wait_until(
@@ -741,10 +750,7 @@ TEST_F(ClientServerTest, ChunksSeenOnlyThroughAHorizonImageAreReleasedWhenTheyLe
   // old view is released (none of it is in the new view), images included.
   start_server({"--max-speed", "0", "--outbound-bytes-per-second", "4096"});
   Client c(options("leaver", 320, 32));
-  std::string err;
-  ASSERT_TRUE(c.connect(&err)) << err;
-  ASSERT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
-  const auto w = c.welcome();
+  const auto w = join(c);
   ASSERT_TRUE(w.has_value());
   const auto view = chunks_within(w->spawn, 320, *w);
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_covered(v.replica, view); }, kDeadline));
