@@ -131,10 +131,12 @@ void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
     auto client = clients_.find(id);
     if (client == clients_.end()) return;
     std::vector<HorizonPtr> ready;
+    const auto now = std::chrono::steady_clock::now();
     for (const HorizonWant& w : wants) {
       const auto k = static_cast<std::size_t>(w.level - kHorizonNearLevel);
-      if (auto it = horizons_[k].find(w.region); it != horizons_[k].end()) {
-        ready.push_back(it->second);
+      if (auto it = horizons_[k].find(w.region);
+          it != horizons_[k].end() && (!it->second.changed || now - it->second.made < kHorizonRefresh)) {
+        ready.push_back(it->second.image);
         continue;
       }
       auto [waiting, fresh] = horizon_waiting_[k].try_emplace(w.region);
@@ -159,7 +161,7 @@ void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
     image = std::make_shared<const HorizonImage>(HorizonImage{h.region, h.level, {}});
   } else if (!stale) {
     if (horizons_[k].size() >= kMaxHorizons) horizons_[k].clear();
-    horizons_[k].emplace(h.region, image);
+    horizons_[k].insert_or_assign(h.region, KeptHorizon{image, std::chrono::steady_clock::now(), false});
   }
   if (node.empty()) return;
   for (const ClientId id : node.mapped())
@@ -169,7 +171,7 @@ void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
 void WorldOwner::horizon_changed(Vec3i cp) {
   const Vec3i region = coarse_region_of(cp);
   for (std::size_t k = 0; k < 2; ++k) {
-    horizons_[k].erase(region);
+    if (auto it = horizons_[k].find(region); it != horizons_[k].end()) it->second.changed = true;
     if (horizon_waiting_[k].count(region) != 0) horizon_stale_[k].insert(region);
   }
 }

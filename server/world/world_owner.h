@@ -250,6 +250,11 @@ class WorldOwner : private WorldView {
   // Horizon images kept at most (a few kilobytes each); beyond, all are
   // dropped and made again when wanted.
   static constexpr std::size_t kMaxHorizons = 4096;
+  // A kept image whose region changed is served until it is this old, then
+  // made again when next wanted: images are approximate, and remaking one
+  // after every tick that edits its region would cost a busy world a
+  // region's read per joining client.
+  static constexpr std::chrono::seconds kHorizonRefresh{10};
 
   // WorldView
   bool loaded(Vec3i chunk_pos) const override {
@@ -341,13 +346,19 @@ class WorldOwner : private WorldView {
   std::deque<Vec3i> estimates_;
   std::size_t replacing_ = 0;
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
-  // Horizon images made and kept (dropped when a chunk of the region
-  // changes), the clients waiting for images being made, and regions that
-  // changed while theirs was being made (handed over, not kept).
+  // Horizon images made and kept (made again once a chunk of the region
+  // changed and kHorizonRefresh passed), the clients waiting for images
+  // being made, and regions that changed while theirs was being made
+  // (handed over, not kept).
   void on_horizon_loaded(LoadedHorizon h);
   void horizon_changed(Vec3i chunk_pos);
   // Each indexed by level - kHorizonNearLevel.
-  std::unordered_map<Vec3i, HorizonPtr, Vec3iHash> horizons_[2];
+  struct KeptHorizon {
+    HorizonPtr image;
+    std::chrono::steady_clock::time_point made;
+    bool changed = false;  // a chunk of the region changed since
+  };
+  std::unordered_map<Vec3i, KeptHorizon, Vec3iHash> horizons_[2];
   std::unordered_map<Vec3i, std::vector<ClientId>, Vec3iHash> horizon_waiting_[2];
   std::unordered_set<Vec3i, Vec3iHash> horizon_stale_[2];
   bool grants_scheduled_ = false;
