@@ -159,9 +159,11 @@ void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
     server_log().error("horizon image of region ({},{},{}): {}; its chunks are sent as usual", h.region.x, h.region.y,
                        h.region.z, h.error);
     image = std::make_shared<const HorizonImage>(HorizonImage{h.region, h.level, {}});
-  } else if (!stale) {
+  } else {
+    // Kept even when its region changed while it was being made (marked so):
+    // in a busy region that happens often, and the refresh rule applies.
     if (horizons_[k].size() >= kMaxHorizons) horizons_[k].clear();
-    horizons_[k].insert_or_assign(h.region, KeptHorizon{image, std::chrono::steady_clock::now(), false});
+    horizons_[k].insert_or_assign(h.region, KeptHorizon{image, std::chrono::steady_clock::now(), stale});
   }
   if (node.empty()) return;
   for (const ClientId id : node.mapped())

@@ -348,8 +348,8 @@ class WorldOwner : private WorldView {
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
   // Horizon images made and kept (made again once a chunk of the region
   // changed and kHorizonRefresh passed), the clients waiting for images
-  // being made, and regions that changed while theirs was being made
-  // (handed over, not kept).
+  // being made, and regions that changed while theirs was being made (kept
+  // as changed).
   void on_horizon_loaded(LoadedHorizon h);
   void horizon_changed(Vec3i chunk_pos);
   // Each indexed by level - kHorizonNearLevel.
