@@ -66,6 +66,7 @@ class SqliteStore final : public WorldStore {
 
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override;
   FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) override;
+  FileResult<std::vector<CoarseEntry>> load_coarse_as_kept(Vec3i region) override { return read_image(region); }
   FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) override;
   FileResult<std::vector<Vec3i>> stored_in(Vec3i region) override;
   // Coarse images behind the chunks: save_chunks leaves the images' changes

@@ -132,6 +132,10 @@ class WorldStore {
   virtual FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) = 0;
   // The coarse entries of region (coarse_region_of): one per stored chunk.
   virtual FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) = 0;
+  // The same as the store keeps them, without reading past a lag (a store
+  // writing coarse mips after the chunks may be behind: missing or older
+  // entries). One read; for approximate uses (horizon images).
+  virtual FileResult<std::vector<CoarseEntry>> load_coarse_as_kept(Vec3i region) { return load_coarse(region); }
   // The chunks of region with a quarantine row (their generated content
   // continues above the quarantined revision), and those with a chunk row.
   virtual FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) = 0;

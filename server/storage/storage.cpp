@@ -158,7 +158,7 @@ void Storage::load_coarse(Vec3i region, CoarseDone done) {
 void Storage::load_horizon(Vec3i region, int level, HorizonDone done) {
   {
     std::lock_guard lock(readers_mutex_);
-    urgent_loads_.push_back(LoadJob{region, level, nullptr, nullptr, std::move(done)});
+    loads_.push_back(LoadJob{region, level, nullptr, nullptr, std::move(done)});
   }
   post_load();
 }
@@ -220,11 +220,12 @@ void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<vo
 }
 
 void Storage::run_horizon(WorldStore& store, LoadJob& job, const std::function<void()>& give_back) {
-  // The image as read past any lag: an entry for every stored chunk that
-  // decodes. Every other chunk is estimated (never generated, or a damaged
-  // row that is served generated): the image is approximate anyway, so
-  // the rows are not listed as a chunk's load needs them.
-  auto entries = store.load_coarse(job.pos);
+  // The coarse image as kept: one read, not past any lag (reading past it
+  // decodes every chunk written since, which in a busy region held loader
+  // threads that edits' loads wait for). Chunks without an entry (never
+  // generated, a damaged row served generated, or written since) are
+  // estimated: the image is approximate anyway.
+  auto entries = store.load_coarse_as_kept(job.pos);
   give_back();
   LoadedHorizon h;
   h.region = job.pos;

@@ -133,8 +133,8 @@ class Storage {
   bool promote(Vec3i pos, Priority priority);
   // Reads a region's coarse image (queued with the other loads).
   void load_coarse(Vec3i region, CoarseDone done);
-  // Makes a region's horizon image (ahead of every other load: a new
-  // view's first pass waits on them, and each costs one read).
+  // Makes a region's horizon image (queued with the stream's loads, behind
+  // the urgent ones that edits and full resolution wait on).
   void load_horizon(Vec3i region, int level, HorizonDone done);
   // A shared PostgreSQL world's leases (null: SQLite, every region is this
   // server's). Call before the first load; keeper outlives this.
