@@ -504,7 +504,10 @@ void Replicator::request_more() {
     wants.push_back(ChunkWant{cp, level == 0, level, exact});
   };
   auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
-  // Pass 1: the whole view at its coarsest, nearest first.
+  // Pass 1: the whole view at its coarsest, nearest first. With horizon
+  // images the client sees the whole view already: a chunk within full
+  // resolution is sent at full resolution at once instead (its 4^3 mip
+  // would be replaced moments later).
   auto coarse = [&](Vec3i cp) {
     if (!in_view(cp) || held_.count(cp) != 0 || requested_.count(cp) != 0) return;
     if (auto c = claims_.find(cp); c != claims_.end()) {
@@ -515,7 +518,7 @@ void Replicator::request_more() {
       return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l,
                   l == kHeldEmpty && options_.horizon_estimates);
     }
-    want(cp, Intent::kCoarse, kMipLevels - 1);
+    want(cp, Intent::kCoarse, options_.horizon_images && desired(cp) == 0 ? 0 : kMipLevels - 1);
   };
   const auto& offsets = table_->offsets();
   while (room() && coarse_pos_ < offsets.size()) coarse(coarse_center_ + offsets[coarse_pos_++]);

@@ -9,7 +9,8 @@
 // chunks the client knows nothing of, as one horizon image each (2^3 per
 // chunk within a quarter of the view distance, 1 voxel per chunk beyond; made once
 // by the world and shared), nearest first. Then the whole view at its
-// coarsest (the 4^3 mip, or Empty for all-Air chunks) nearest first, then
+// coarsest (the 4^3 mip, or Empty for all-Air chunks; with horizon images,
+// chunks within full resolution at full resolution) nearest first, then
 // each chunk refined to the level
 // the view rule gives it, nearest first (a queue of chunks needing
 // refinement, filled when a chunk arrives coarser than it should be or a

@@ -233,7 +233,9 @@ TEST_F(ClientServerTest, EstimatedMipsAreReplacedByTheChunksOwnOnlyWhereTheyDiff
 }
 
 TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
-  start_server();
+  // Without horizon images, the coarse view is every chunk's 4^3 mip (with
+  // them, chunks within full resolution skip it).
+  start_server({"--no-horizon-images"});
   struct Event {
     Vec3i chunk;
     wire::CoverageKind kind;
@@ -733,6 +735,13 @@ TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOw
   }
   EXPECT_EQ(horizon, view.size()) << "the horizon images cover the whole view";
   for (std::size_t i = horizon; i < events.size(); ++i) EXPECT_LE(events[i].second, 3) << "a horizon image after a chunk's own record";
+  // Chunks within full resolution get it at once, not their 4^3 mip first.
+  std::set<std::tuple<int, int, int>> first_own;
+  for (std::size_t i = horizon; i < events.size(); ++i) {
+    const auto [cp, level] = events[i];
+    if (first_own.insert({cp.x, cp.y, cp.z}).second && within(w->spawn, cp, 32))
+      EXPECT_EQ(level, 0) << "chunk (" << cp.x << "," << cp.y << "," << cp.z << ") within full resolution";
+  }
   const std::set<int> levels = [&] {
     std::set<int> l;
     for (std::size_t i = 0; i < horizon; ++i) l.insert(events[i].second);
