@@ -739,8 +739,9 @@ TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOw
   std::set<std::tuple<int, int, int>> first_own;
   for (std::size_t i = horizon; i < events.size(); ++i) {
     const auto [cp, level] = events[i];
-    if (first_own.insert({cp.x, cp.y, cp.z}).second && within(w->spawn, cp, 32))
+    if (first_own.insert({cp.x, cp.y, cp.z}).second && within(w->spawn, cp, 32)) {
       EXPECT_EQ(level, 0) << "chunk (" << cp.x << "," << cp.y << "," << cp.z << ") within full resolution";
+    }
   }
   const std::set<int> levels = [&] {
     std::set<int> l;
