@@ -113,15 +113,15 @@ void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) 
   // A newer image of the region (another plan's) serves every chunk it covers.
   h.coverage = ChunkCoverage{CoverageState::kMip, r.level, 0};
   h.image = *r.voxels;
-  for (int i = 0; i < kHorizonRegionSlots; ++i) {
-    if (((*r.mask)[static_cast<std::size_t>(i / 8)] >> (i % 8) & 1) == 0 || h.covers.test(static_cast<std::size_t>(i)))
-      continue;
-    const Vec3i cp = horizon_chunk(region, i);
-    if (coverage_.find(cp) != coverage_.end()) continue;
+  for_each_region_chunk(region, [&](Vec3i cp) {
+    const int i = coarse_index(cp);
+    if (!horizon_mask_has(*r.mask, i) || h.covers.test(static_cast<std::size_t>(i)) ||
+        coverage_.find(cp) != coverage_.end())
+      return;
     h.covers.set(static_cast<std::size_t>(i));
     ++horizon_chunks_;
     covered.push_back(cp);
-  }
+  });
   if (h.covers.none()) horizons_.erase(region);
 }
 

@@ -102,8 +102,9 @@ class Replica {
   void for_each_coverage(F&& f) const {
     for (const auto& [pos, c] : coverage_) f(pos, c);
     for (const auto& [region, h] : horizons_)
-      for (int i = 0; i < kHorizonRegionSlots; ++i)
-        if (h.covers.test(static_cast<std::size_t>(i))) f(horizon_chunk(region, i), h.coverage);
+      for_each_region_chunk(region, [&](Vec3i cp) {
+        if (h.covers.test(static_cast<std::size_t>(coarse_index(cp)))) f(cp, h.coverage);
+      });
   }
 
  private:
@@ -118,10 +119,6 @@ class Replica {
     Box image;
     std::bitset<kHorizonRegionSlots> covers;
   };
-  static Vec3i horizon_chunk(Vec3i region, int i) {
-    return region * kHorizonRegionChunks + Vec3i{i % kHorizonRegionChunks, i / (kHorizonRegionChunks * kHorizonRegionChunks),
-                                                 (i / kHorizonRegionChunks) % kHorizonRegionChunks};
-  }
   // The voxels a chunk's mip is read from: a box, the chunk's corner in it
   // and the level (box null: no mip held).
   struct MipView {

@@ -57,6 +57,13 @@ enum class StreamRecordKind : std::uint8_t {
 // A Horizon record's mask of the region's chunks it covers (bit i: chunk
 // (y * 8 + z) * 8 + x).
 using HorizonMask = std::array<std::uint8_t, 64>;
+// Bit i of a mask: chunk i = coarse_index (common/world/coarse_image.h).
+inline bool horizon_mask_has(const HorizonMask& m, int i) {
+  return (m[static_cast<std::size_t>(i / 8)] >> (i % 8) & 1) != 0;
+}
+inline void horizon_mask_set(HorizonMask& m, int i) {
+  m[static_cast<std::size_t>(i / 8)] |= static_cast<std::uint8_t>(1u << (i % 8));
+}
 
 // Records in one batch at most (bounds a receiver's work per frame).
 inline constexpr std::size_t kMaxStreamRecords = 4096;

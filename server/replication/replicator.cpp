@@ -455,8 +455,7 @@ void Replicator::on_horizons(std::vector<HorizonPtr> images) {
     std::size_t covered = 0;
     for_each_region_chunk(image->region, [&](Vec3i cp) {
       if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) return;
-      const int i = coarse_index(cp);
-      mask[static_cast<std::size_t>(i / 8)] |= static_cast<std::uint8_t>(1u << (i % 8));
+      horizon_mask_set(mask, coarse_index(cp));
       horizon_.emplace(cp, static_cast<std::uint8_t>(level));
       ++covered;
     });

@@ -16,11 +16,11 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   for (int i = 0; i < n; ++i) {
     auto store = world.store().reopen();
     if (!store) return store.error();
-    // One read of a region before the first client: a connection's first
-    // read prepares its statements and fills its page cache with the
+    // One read of a region's coarse image, as horizon images read it,
+    // before the first client: a connection's first read prepares its statements and fills its page cache with the
     // tables' upper pages (about 10-25 ms a connection, which the first
     // view's horizon would otherwise wait for). Its answer does not matter.
-    (void)(*store)->load_coarse(Vec3i{0, 0, 0});
+    (void)(*store)->load_coarse_as_kept(Vec3i{0, 0, 0});
     s->readers_.push_back(std::move(*store));
   }
   auto w = world.store().reopen();
@@ -53,7 +53,7 @@ void Storage::stop() {
 void Storage::load(Vec3i pos, LoadDone done, Priority priority) {
   {
     std::lock_guard lock(readers_mutex_);
-    queue(priority).push_back(LoadJob{pos, 0, std::move(done), nullptr, nullptr});
+    queue(priority).push_back(LoadJob{pos, std::move(done)});
   }
   post_load();
 }
@@ -62,7 +62,7 @@ bool Storage::promote(Vec3i pos, Priority priority) {
   if (priority == Priority::kBackground) return false;
   std::lock_guard lock(readers_mutex_);
   auto it = std::find_if(background_loads_.begin(), background_loads_.end(),
-                         [&](const LoadJob& j) { return j.pos == pos && !j.coarse_done; });
+                         [&](const LoadJob& j) { return j.pos == pos && std::holds_alternative<LoadDone>(j.what); });
   if (it == background_loads_.end()) return false;
   queue(priority).push_back(std::move(*it));
   background_loads_.erase(it);
@@ -150,7 +150,7 @@ void Storage::answer(std::vector<ForwardAnswer> answers) {
 void Storage::load_coarse(Vec3i region, CoarseDone done) {
   {
     std::lock_guard lock(readers_mutex_);
-    loads_.push_back(LoadJob{region, 0, nullptr, std::move(done), nullptr});
+    loads_.push_back(LoadJob{region, std::move(done)});
   }
   post_load();
 }
@@ -158,7 +158,7 @@ void Storage::load_coarse(Vec3i region, CoarseDone done) {
 void Storage::load_horizon(Vec3i region, int level, HorizonDone done) {
   {
     std::lock_guard lock(readers_mutex_);
-    loads_.push_back(LoadJob{region, level, nullptr, nullptr, std::move(done)});
+    loads_.push_back(LoadJob{region, HorizonJob{level, std::move(done)}});
   }
   post_load();
 }
@@ -175,20 +175,18 @@ void Storage::post_load() {
       store = take_reader();
     }
     const auto give_back = [&] { give_reader(std::move(store)); };
-    if (job.horizon_done) return run_horizon(*store, job, give_back);
-    if (!job.coarse_done) {
-      LoadedChunk c = load_now(*store, job.pos);
-      give_back();
-      job.done(std::move(c));
-      return;
-    }
-    run_coarse(*store, job, give_back);
+    if (const auto* h = std::get_if<HorizonJob>(&job.what)) return run_horizon(*store, job.pos, *h, give_back);
+    if (const auto* coarse = std::get_if<CoarseDone>(&job.what)) return run_coarse(*store, job.pos, *coarse, give_back);
+    LoadedChunk c = load_now(*store, job.pos);
+    give_back();
+    std::get<LoadDone>(job.what)(std::move(c));
   });
 }
 
-void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<void()>& give_back) {
+void Storage::run_coarse(WorldStore& store, Vec3i region, const CoarseDone& done,
+                         const std::function<void()>& give_back) {
   std::vector<Vec3i> rows;
-  LoadedCoarse c = read_coarse(store, job.pos, rows);
+  LoadedCoarse c = read_coarse(store, region, rows);
   give_back();  // the generator's judgement below needs no connection
   if (c.ok) {
     // Only chunks with no row of any kind are the generator's: a row
@@ -200,7 +198,7 @@ void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<vo
     // is generated when wanted.
     const std::unordered_set<Vec3i, Vec3iHash> known(rows.begin(), rows.end());
     std::vector<Vec3i> unknown;
-    for_each_region_chunk(job.pos, [&](Vec3i cp) {
+    for_each_region_chunk(region, [&](Vec3i cp) {
       if (known.count(cp) != 0 || !world_.meta().bounds.touches_chunk(cp)) return;
       if (!world_.generator())
         c.air.push_back(cp);  // a world without a generator is Air where nothing is stored
@@ -216,42 +214,43 @@ void Storage::run_coarse(WorldStore& store, LoadJob& job, const std::function<vo
       counters_.coarse_estimated.fetch_add(unknown.size(), std::memory_order_relaxed);
     }
   }
-  job.coarse_done(std::move(c));
+  done(std::move(c));
 }
 
-void Storage::run_horizon(WorldStore& store, LoadJob& job, const std::function<void()>& give_back) {
+void Storage::run_horizon(WorldStore& store, Vec3i region, const HorizonJob& job,
+                          const std::function<void()>& give_back) {
   // The coarse image as kept: one read, not past any lag (reading past it
   // decodes every chunk written since, which in a busy region held loader
   // threads that edits' loads wait for). Chunks without an entry (never
   // generated, a damaged row served generated, or written since) are
   // estimated: the image is approximate anyway.
-  auto entries = store.load_coarse_as_kept(job.pos);
+  auto entries = store.load_coarse_as_kept(region);
   give_back();
   LoadedHorizon h;
-  h.region = job.pos;
+  h.region = region;
   h.level = job.level;
   if (!entries) {
     h.error = entries.error().message;
-    return job.horizon_done(std::move(h));
+    return job.done(std::move(h));
   }
   // Stored chunks from their mips; the rest estimated (whatever the
   // estimates setting: a distant chunk never generated is not generated
   // for its image). Chunks outside the bounds stay Air.
-  HorizonBuilder b(job.pos, job.level);
+  HorizonBuilder b(region, job.level);
   std::array<bool, kHorizonRegionSlots> stored{};
   for (const CoarseEntry& e : *entries) {
     b.put_coarse(e.chunk_pos, e.voxels);
     stored[static_cast<std::size_t>(coarse_index(e.chunk_pos))] = true;
   }
   std::vector<Vec3i> unknown;
-  for_each_region_chunk(job.pos, [&](Vec3i cp) {
+  for_each_region_chunk(region, [&](Vec3i cp) {
     if (!stored[static_cast<std::size_t>(coarse_index(cp))] && world_.meta().bounds.touches_chunk(cp))
       unknown.push_back(cp);
   });
   world_.estimate_horizon(unknown, b);
   h.image = encode_horizon(b);
   counters_.horizons_made.fetch_add(1, std::memory_order_relaxed);
-  job.horizon_done(std::move(h));
+  job.done(std::move(h));
 }
 
 LoadedCoarse Storage::read_coarse(WorldStore& store, Vec3i region, std::vector<Vec3i>& rows) {

@@ -36,6 +36,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <variant>
 #include <vector>
 
 #include "common/world/horizon.h"
@@ -223,15 +224,16 @@ class Storage {
   // threads share them. Each queued load posts one runner to the pool.
   std::mutex readers_mutex_;
   std::vector<std::unique_ptr<WorldStore>> readers_;
+  struct HorizonJob {
+    int level = 0;
+    HorizonDone done;
+  };
   struct LoadJob {
     Vec3i pos;  // a chunk, or the region of a coarse or horizon image
-    int level = 0;  // of a horizon image
-    LoadDone done;
-    CoarseDone coarse_done;  // set: a coarse image
-    HorizonDone horizon_done;  // set: a horizon image
+    std::variant<LoadDone, CoarseDone, HorizonJob> what;  // the kind of load, and where its answer goes
   };
-  void run_coarse(WorldStore& store, LoadJob& job, const std::function<void()>& give_back);
-  void run_horizon(WorldStore& store, LoadJob& job, const std::function<void()>& give_back);
+  void run_coarse(WorldStore& store, Vec3i region, const CoarseDone& done, const std::function<void()>& give_back);
+  void run_horizon(WorldStore& store, Vec3i region, const HorizonJob& job, const std::function<void()>& give_back);
   void post_load();
   std::deque<LoadJob>& queue(Priority priority);  // under readers_mutex_
   std::deque<LoadJob> urgent_loads_, loads_, background_loads_;

@@ -139,8 +139,8 @@ void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
         ready.push_back(it->second.image);
         continue;
       }
-      auto [waiting, fresh] = horizon_waiting_[k].try_emplace(w.region);
-      waiting->second.push_back(id);
+      auto [making, fresh] = horizon_making_[k].try_emplace(w.region);
+      making->second.waiting.push_back(id);
       if (fresh)
         storage_.load_horizon(w.region, w.level, [this](LoadedHorizon h) {
           asio::post(strand_, [this, h = std::move(h)]() mutable { on_horizon_loaded(std::move(h)); });
@@ -152,8 +152,8 @@ void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
 
 void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
   const auto k = static_cast<std::size_t>(h.level - kHorizonNearLevel);
-  auto node = horizon_waiting_[k].extract(h.region);
-  const bool stale = horizon_stale_[k].erase(h.region) != 0;
+  auto node = horizon_making_[k].extract(h.region);
+  const bool changed = !node.empty() && node.mapped().changed;
   HorizonPtr image = h.image;
   if (!image) {
     server_log().error("horizon image of region ({},{},{}): {}; its chunks are sent as usual", h.region.x, h.region.y,
@@ -163,10 +163,10 @@ void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
     // Kept even when its region changed while it was being made (marked so):
     // in a busy region that happens often, and the refresh rule applies.
     if (horizons_[k].size() >= kMaxHorizons) horizons_[k].clear();
-    horizons_[k].insert_or_assign(h.region, KeptHorizon{image, std::chrono::steady_clock::now(), stale});
+    horizons_[k].insert_or_assign(h.region, KeptHorizon{image, std::chrono::steady_clock::now(), changed});
   }
   if (node.empty()) return;
-  for (const ClientId id : node.mapped())
+  for (const ClientId id : node.mapped().waiting)
     if (auto it = clients_.find(id); it != clients_.end()) it->second.link->horizons({image});
 }
 
@@ -174,7 +174,7 @@ void WorldOwner::horizon_changed(Vec3i cp) {
   const Vec3i region = coarse_region_of(cp);
   for (std::size_t k = 0; k < 2; ++k) {
     if (auto it = horizons_[k].find(region); it != horizons_[k].end()) it->second.changed = true;
-    if (horizon_waiting_[k].count(region) != 0) horizon_stale_[k].insert(region);
+    if (auto it = horizon_making_[k].find(region); it != horizon_making_[k].end()) it->second.changed = true;
   }
 }
 

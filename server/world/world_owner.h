@@ -347,9 +347,9 @@ class WorldOwner : private WorldView {
   std::size_t replacing_ = 0;
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
   // Horizon images made and kept (made again once a chunk of the region
-  // changed and kHorizonRefresh passed), the clients waiting for images
-  // being made, and regions that changed while theirs was being made (kept
-  // as changed).
+  // changed and kHorizonRefresh passed), and images being made: the clients
+  // waiting for each, and whether its region changed meanwhile (then it is
+  // kept as changed).
   void on_horizon_loaded(LoadedHorizon h);
   void horizon_changed(Vec3i chunk_pos);
   // Each indexed by level - kHorizonNearLevel.
@@ -359,8 +359,11 @@ class WorldOwner : private WorldView {
     bool changed = false;  // a chunk of the region changed since
   };
   std::unordered_map<Vec3i, KeptHorizon, Vec3iHash> horizons_[2];
-  std::unordered_map<Vec3i, std::vector<ClientId>, Vec3iHash> horizon_waiting_[2];
-  std::unordered_set<Vec3i, Vec3iHash> horizon_stale_[2];
+  struct MakingHorizon {
+    std::vector<ClientId> waiting;
+    bool changed = false;
+  };
+  std::unordered_map<Vec3i, MakingHorizon, Vec3iHash> horizon_making_[2];
   bool grants_scheduled_ = false;
   std::deque<PendingEdit> edits_;
   // Chunks queued edits will touch (never unloaded): chunk -> edits.
