@@ -72,7 +72,8 @@ Client::Client(ClientOptions options, ClientCallbacks callbacks)
       keepalive_(strand_),
       delivery_(strand_),
       read_buf_(kReadChunkBytes),
-      reconnect_timer_(strand_) {}
+      reconnect_timer_(strand_),
+      redirect_timer_(strand_) {}
 
 Client::~Client() { disconnect(); }
 
@@ -150,6 +151,7 @@ void Client::start_session() {
   hello.protocol_version = options_.protocol_version;
   hello.client_name = options_.name;
   hello.auth_token = options_.auth_token;
+  hello.resume_token = std::exchange(resume_token_, std::string());
   std::vector<Outbound> frames;
   frames.push_back({build_hello(hello), wire::Body::Hello});
   {
@@ -195,20 +197,10 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   const bool retry = options_.reconnect && !leaving_ && !io_closed_ &&
                      (!server_said || (reason == "server shutting down" && !not_returning));
   if (!retry) return close_locked_io(reason);
-  ++generation_;
-  linked_ = false;
-  asio::error_code ec;
-  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
-  socket_.close(ec);
-  socket_ = asio::ip::tcp::socket(strand_);
-  keepalive_.cancel();
-  // Bytes of the old connection still on the emulated link go with it.
-  delivery_.cancel();
-  delayed_.clear();
-  delayed_bytes_ = 0;
-  read_paused_ = false;
+  drop_socket();
   writing_ = false;
   send_queue_.clear();
+  edits_on_wire_.clear();
   queued_bytes_.store(0, std::memory_order_relaxed);
   std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
   {
@@ -228,6 +220,104 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   attempts_ = 0;
   backoff_ = options_.reconnect_min;
   schedule_reconnect();
+}
+
+void Client::drop_socket() {
+  ++generation_;
+  linked_ = false;
+  asio::error_code ec;
+  socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  socket_.close(ec);
+  socket_ = asio::ip::tcp::socket(strand_);
+  keepalive_.cancel();
+  // Bytes of the old connection still on the emulated link go with it.
+  delivery_.cancel();
+  delayed_.clear();
+  delayed_bytes_ = 0;
+  read_paused_ = false;
+  redirect_.reset();
+  redirect_timer_.cancel();
+  redirect_timer_armed_ = false;
+}
+
+void Client::follow_when_ready() {
+  if (!redirect_ || io_closed_ || leaving_) return;
+  if (!writing_ && edits_on_wire_.empty()) return follow_redirect();
+  if (redirect_timer_armed_) return;
+  redirect_timer_armed_ = true;
+  redirect_timer_.expires_after(options_.redirect_wait);
+  const std::uint64_t gen = generation_;
+  redirect_timer_.async_wait([this, gen, g = OpGuard(this)](const asio::error_code& ec) {
+    if (ec || gen != generation_ || io_closed_ || leaving_ || !redirect_) return;
+    follow_redirect();
+  });
+}
+
+void Client::follow_redirect() {
+  const RedirectMsg to = *redirect_;
+  const std::string target = to.host + ":" + std::to_string(to.port);
+  if (!writing_) {
+    // Nothing half written: the old server is told why.
+    asio::error_code ignored;
+    const Frame bye = build_disconnect("redirected to " + target);
+    asio::write(socket_, asio::buffer(bye), ignored);
+  } else {
+    // redirect_wait ran out during a write: the frame may or may not have
+    // gone, so it is not sent again.
+    const Outbound& front = send_queue_.front();
+    if (front.edit_id != 0) edits_on_wire_.insert(front.edit_id);
+    queued_bytes_.fetch_sub(front.frame.size(), std::memory_order_relaxed);
+    send_queue_.pop_front();
+    writing_ = false;
+  }
+  drop_socket();
+  // Edits the old server has not answered may or may not be applied.
+  std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
+  {
+    std::lock_guard lock(mutex_);
+    for (const std::uint32_t id : edits_on_wire_) {
+      EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
+      unanswered_edits_.erase(id);
+      edits_[id] = o;
+      unknown.emplace_back(id, o);
+    }
+    ++counters_.redirects;
+  }
+  edits_on_wire_.clear();
+  changed_.notify_all();
+  client_log().info("'{}': redirected to server {} at {}", options_.name, to.server_id, target);
+  if (callbacks_.on_redirected) callbacks_.on_redirected(to);
+  if (callbacks_.on_edit_result)
+    for (const auto& [id, o] : unknown) callbacks_.on_edit_result(id, o);
+  if (io_closed_ || leaving_) return;
+  resume_token_ = to.token;
+  resumed_ = true;
+  asio::error_code ec;
+  asio::ip::tcp::resolver resolver(io_);
+  auto endpoints = resolver.resolve(to.host, std::to_string(to.port), ec);
+  auto failed = [this, target](const std::string& why) {
+    client_log().warn("'{}': cannot go on at {}: {}", options_.name, target, why);
+    if (!options_.reconnect) return close_locked_io("redirect to " + target + " failed: " + why);
+    // Back to the server that sent it (its endpoints are still endpoints_).
+    resume_token_.clear();
+    attempts_ = 0;
+    backoff_ = options_.reconnect_min;
+    schedule_reconnect();
+  };
+  if (ec || endpoints.empty()) return failed("cannot resolve: " + ec.message());
+  const std::uint64_t gen = generation_;
+  asio::async_connect(socket_, endpoints,
+                      [this, gen, endpoints, failed, g = OpGuard(this)](const asio::error_code& e,
+                                                                        const asio::ip::tcp::endpoint&) {
+                        if (gen != generation_ || io_closed_ || leaving_) return;
+                        if (e) {
+                          asio::error_code ignored;
+                          socket_.close(ignored);
+                          return failed(e.message());
+                        }
+                        endpoints_ = endpoints;  // reconnects go here from now on
+                        start_session();
+                      });
 }
 
 void Client::schedule_reconnect() {
@@ -280,24 +370,25 @@ void Client::disconnect() {
   });
 }
 
-bool Client::send(Frame frame, wire::Body type) {
+bool Client::send(Frame frame, wire::Body type, std::uint32_t edit_id) {
   if (io_closed_) return false;
   const std::size_t n = frame.size();
   if (queued_bytes_.load(std::memory_order_relaxed) + n > options_.max_send_queue_bytes) return false;
   queued_bytes_.fetch_add(n, std::memory_order_relaxed);
-  asio::post(strand_, [this, f = std::move(frame), type, g = OpGuard(this)]() mutable {
+  asio::post(strand_, [this, f = std::move(frame), type, edit_id, g = OpGuard(this)]() mutable {
     if (io_closed_) {
       queued_bytes_.fetch_sub(f.size(), std::memory_order_relaxed);
       return;
     }
-    send_queue_.push_back({std::move(f), type});
+    send_queue_.push_back({std::move(f), type, edit_id});
     do_write();
   });
   return true;
 }
 
 void Client::do_write() {
-  if (writing_ || send_queue_.empty() || io_closed_ || !linked_) return;
+  // A pending Redirect holds what is queued for the next server.
+  if (writing_ || send_queue_.empty() || io_closed_ || !linked_ || redirect_) return;
   writing_ = true;
   const std::uint64_t gen = generation_;
   asio::async_write(socket_, asio::buffer(send_queue_.front().frame),
@@ -314,8 +405,10 @@ void Client::do_write() {
                         ++t.frames_out;
                         t.bytes_out += sent.frame.size();
                       }
+                      if (!ec && sent.edit_id != 0) edits_on_wire_.insert(sent.edit_id);
                       send_queue_.pop_front();
                       if (ec) return connection_lost("write failed: " + ec.message(), false);
+                      if (redirect_) return follow_when_ready();
                       do_write();
                     });
 }
@@ -554,6 +647,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       const auto* a = m.body_as_EditAck();
       EditOutcome o{true, a->tick(), {}, {}, {}};
       unanswered_edits_.erase(a->edit_id());
+      edits_on_wire_.erase(a->edit_id());
       edits_[a->edit_id()] = o;
       ++counters_.edits_acked;
       if (callbacks_.on_edit_result) after = [this, id = a->edit_id(), o] { callbacks_.on_edit_result(id, o); };
@@ -564,6 +658,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (!r) return fail(r.error());
       EditOutcome o{false, 0, std::move(r->reason), r->box, std::move(r->voxels)};
       unanswered_edits_.erase(r->edit_id);
+      edits_on_wire_.erase(r->edit_id);
       ++counters_.edits_rejected;
       if (callbacks_.on_edit_result) after = [this, id = r->edit_id, o] { callbacks_.on_edit_result(id, o); };
       edits_[r->edit_id] = std::move(o);
@@ -616,6 +711,16 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (callbacks_.on_notice) after = [this, n = *n] { callbacks_.on_notice(n); };
       break;
     }
+    case wire::Body::Redirect: {
+      auto r = parse_redirect(*m.body_as_Redirect());
+      if (!r) return fail(r.error());
+      // One at a time; a client that does not follow stays (and is closed
+      // by the server after its grace).
+      if (!options_.follow_redirects || redirect_) break;
+      client_log().info("'{}': server asks to go on at server {} ({}:{})", options_.name, r->server_id, r->host, r->port);
+      redirect_ = std::move(*r);
+      break;
+    }
     case wire::Body::AdminResult: {
       auto r = parse_admin_result(*m.body_as_AdminResult());
       if (!r) return fail(r.error());
@@ -638,6 +743,7 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
   lock.unlock();
   changed_.notify_all();
   if (after) after();
+  if (redirect_) follow_when_ready();
 }
 
 void Client::close_locked_io(const std::string& reason) {
@@ -703,7 +809,7 @@ std::uint32_t Client::send_edit(EditRequestMsg e) {
     std::lock_guard lock(mutex_);
     unanswered_edits_.insert(e.edit_id);
   }
-  if (send(build_edit_request(e), wire::Body::EditRequest)) return e.edit_id;
+  if (send(build_edit_request(e), wire::Body::EditRequest, e.edit_id)) return e.edit_id;
   std::lock_guard lock(mutex_);
   unanswered_edits_.erase(e.edit_id);
   return 0;

@@ -27,6 +27,10 @@
 //                    +---- Welcome again <-- Hello, Holdings, state <-- [waiting: backoff]
 //   [linked] --Disconnect with another reason, protocol error,
 //              disconnect(), or reconnect attempts used up--> [closed]
+//   [linked] --Redirect--> [leaving: sends held until every edit written is
+//              answered, at most redirect_wait] --> Hello (resume token),
+//              Holdings, state at the server named --> [linked]
+//              (a connection that fails there: as a drop)
 //
 // While waiting, sends are queued (up to max_send_queue_bytes) and go out
 // after the new handshake; the replica stays as it was.
@@ -100,6 +104,15 @@ struct ClientOptions {
   std::chrono::milliseconds reconnect_min{100};
   std::chrono::milliseconds reconnect_max{5000};
   int reconnect_attempts = 0;
+  // Follow a Redirect (a world shared by several servers): go on at the
+  // server named, keeping the replica (Holdings), once every edit written
+  // to this one is answered or redirect_wait has passed (edits then
+  // unanswered are reported with kEditOutcomeUnknown). Edits made
+  // meanwhile wait and go to the new server. If the new server cannot be
+  // reached, the client reconnects to the old one when reconnect is on,
+  // else closes. false: stay (the server closes the session after a grace).
+  bool follow_redirects = true;
+  std::chrono::milliseconds redirect_wait{5000};
   // Shared mode (see the threading note): run on this io_context instead of
   // an owned thread. Not owned.
   asio::io_context* io_context = nullptr;
@@ -140,6 +153,7 @@ struct ClientCounters {
   std::uint64_t protocol_errors = 0;
   std::uint64_t pongs = 0;
   std::uint64_t reconnects = 0;
+  std::uint64_t redirects = 0;  // Redirects followed
   std::uint64_t presence_updates = 0;
   std::uint64_t read_results = 0;
   std::uint64_t frames_out = 0;
@@ -199,6 +213,9 @@ struct ClientCallbacks {
   // on_disconnected), and when it succeeded (after the new Welcome).
   std::function<void(const std::string& reason)> on_connection_lost;
   std::function<void()> on_reconnected;
+  // A Redirect is being followed (the new connection is being made; its
+  // Welcome comes with on_reconnected).
+  std::function<void(const RedirectMsg&)> on_redirected;
   // A notice from the server's operators: a message (Say) or a shutdown
   // warning (Shutdown, with the seconds left and whether it restarts).
   std::function<void(const ServerNoticeMsg&)> on_notice;
@@ -297,6 +314,7 @@ class Client {
   struct Outbound {
     Frame frame;
     wire::Body type;
+    std::uint32_t edit_id = 0;  // an EditRequest's
   };
   // Bytes read from the socket, waiting for the emulated link.
   struct Delayed {
@@ -314,7 +332,7 @@ class Client {
   void arm_delivery();
   void arm_keepalive();
   void handle_frame(std::span<const std::uint8_t> body);
-  bool send(Frame frame, wire::Body type);
+  bool send(Frame frame, wire::Body type, std::uint32_t edit_id = 0);
   std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
   void do_write();
   void close_locked_io(const std::string& reason);  // io side
@@ -322,6 +340,12 @@ class Client {
   void connection_lost(const std::string& reason, bool server_said);
   void schedule_reconnect();
   void start_session();  // io side: Hello (+ Holdings, state) and the read loop
+  // io side: a Redirect is pending; follows it once nothing written waits
+  // for an answer (or at redirect_wait).
+  void follow_when_ready();
+  void follow_redirect();
+  // io side: ends this connection's socket and timers (a new one follows).
+  void drop_socket();
   ClientView view() const;
 
   ClientOptions options_;
@@ -358,6 +382,11 @@ class Client {
   int attempts_ = 0;                      // io thread
   bool resumed_ = false;                  // io thread: this connection is a reconnect
   bool linked_ = false;                   // io thread: a connected socket to write to
+  std::optional<RedirectMsg> redirect_;   // io thread: to follow
+  asio::steady_timer redirect_timer_;     // on strand_
+  bool redirect_timer_armed_ = false;     // io thread
+  std::string resume_token_;              // io thread: for the next Hello
+  std::unordered_set<std::uint32_t> edits_on_wire_;  // io thread: written, not answered
 
   // Guarded by mutex_ (shared with the application's threads).
   mutable std::mutex mutex_;

@@ -95,7 +95,8 @@ Frame build_hello(const HelloMsg& m) {
   FlatBufferBuilder fbb(128);
   const auto name = fbb.CreateString(clip(m.client_name, kMaxClientNameBytes));
   const auto token = fbb.CreateString(clip(m.auth_token, kMaxAuthTokenBytes));
-  return finish(fbb, wire::CreateHello(fbb, m.protocol_version, name, token));
+  const auto resume = m.resume_token.empty() ? 0 : fbb.CreateString(clip(m.resume_token, kMaxResumeTokenBytes));
+  return finish(fbb, wire::CreateHello(fbb, m.protocol_version, name, token, resume));
 }
 
 Frame build_welcome(const WelcomeMsg& m) {
@@ -108,7 +109,8 @@ Frame build_welcome(const WelcomeMsg& m) {
                                                m.bounds_max_y, m.max_view_distance, m.max_full_res_radius,
                                                m.max_frame_bytes, m.tick_hz, m.bounded_xz, m.bounds_min_x,
                                                m.bounds_min_z, m.bounds_max_x, m.bounds_max_z, m.default_view_distance,
-                                               m.default_full_res_radius, m.edits_per_second, m.edit_burst));
+                                               m.default_full_res_radius, m.edits_per_second, m.edit_burst,
+                                               m.server_id));
 }
 
 Frame build_disconnect(std::string_view reason) {
@@ -141,6 +143,13 @@ Frame build_server_notice(const ServerNoticeMsg& m) {
   FlatBufferBuilder fbb(m.text.size() + 64);
   const auto t = fbb.CreateString(clip(m.text, kMaxNoticeBytes));
   return finish(fbb, wire::CreateServerNotice(fbb, m.kind, t, m.seconds_left, m.reconnect));
+}
+
+Frame build_redirect(const RedirectMsg& m) {
+  FlatBufferBuilder fbb(128);
+  const auto h = fbb.CreateString(clip(m.host, kMaxRedirectHostBytes));
+  const auto t = fbb.CreateString(clip(m.token, kMaxResumeTokenBytes));
+  return finish(fbb, wire::CreateRedirect(fbb, m.server_id, h, m.port, t));
 }
 
 Frame build_client_state(const ClientStateMsg& m) {
@@ -300,8 +309,11 @@ Result<HelloMsg> parse_hello(const wire::Hello& m) {
   if (m.client_name()->size() > kMaxClientNameBytes) return over("hello: client name longer than 64 bytes");
   if (m.auth_token() != nullptr && m.auth_token()->size() > kMaxAuthTokenBytes)
     return over("hello: auth token longer than 256 bytes");
+  if (m.resume_token() != nullptr && m.resume_token()->size() > kMaxResumeTokenBytes)
+    return over("hello: resume token longer than 64 bytes");
   out.client_name = m.client_name()->str();
   if (m.auth_token() != nullptr) out.auth_token = m.auth_token()->str();
+  if (m.resume_token() != nullptr) out.resume_token = m.resume_token()->str();
   return out;
 }
 
@@ -342,6 +354,7 @@ Result<WelcomeMsg> parse_welcome(const wire::Welcome& m) {
     return invalid("welcome: defaults beyond the caps");
   out.edits_per_second = m.edits_per_second();
   out.edit_burst = m.edit_burst();
+  out.server_id = m.server_id();
   if (!(out.edits_per_second >= 0) || out.edits_per_second > 1e6) return invalid("welcome: edit rate out of range");
   return out;
 }
@@ -387,6 +400,24 @@ Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m) {
   }
   out.seconds_left = m.seconds_left();
   out.reconnect = m.reconnect();
+  return out;
+}
+
+Result<RedirectMsg> parse_redirect(const wire::Redirect& m) {
+  RedirectMsg out;
+  out.server_id = m.server_id();
+  if (m.host() == nullptr || m.host()->size() == 0) return invalid("redirect: missing host");
+  if (m.host()->size() > kMaxRedirectHostBytes) return over("redirect: host longer than 253 bytes");
+  out.host = m.host()->str();
+  // A host name or an address: no spaces, controls or NULs (it is resolved).
+  for (const char ch : out.host)
+    if (static_cast<unsigned char>(ch) <= 0x20 || ch == 0x7f) return invalid("redirect: host has a control or space");
+  out.port = m.port();
+  if (out.port == 0) return invalid("redirect: port 0");
+  if (m.token() != nullptr) {
+    if (m.token()->size() > kMaxResumeTokenBytes) return over("redirect: token longer than 64 bytes");
+    out.token = m.token()->str();
+  }
   return out;
 }
 

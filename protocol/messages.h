@@ -34,6 +34,8 @@ inline constexpr std::size_t kMaxAdminCommandBytes = 32;
 inline constexpr std::size_t kMaxAdminArgs = 16;
 inline constexpr std::size_t kMaxAdminArgBytes = 1024;
 inline constexpr std::size_t kMaxNoticeBytes = 1024;
+inline constexpr std::size_t kMaxResumeTokenBytes = 64;
+inline constexpr std::size_t kMaxRedirectHostBytes = 253;
 inline constexpr std::size_t kMaxMaterialNames = kMaterialCount;
 // Voxel coordinates on the wire stay within +-2^24 so that chunk and unit
 // coordinates, and positions as float, never overflow or lose whole voxels.
@@ -61,6 +63,7 @@ struct HelloMsg {
   std::uint32_t protocol_version = kProtocolVersion;
   std::string client_name;
   std::string auth_token;
+  std::string resume_token;  // a Redirect's token, echoed (empty on a first connection)
 };
 
 struct AdminRequestMsg {
@@ -84,6 +87,14 @@ struct ServerNoticeMsg {
   bool reconnect = false;
 };
 
+// Go on at another server of the same world (PROTOCOL.md, "Redirects").
+struct RedirectMsg {
+  std::uint32_t server_id = 0;
+  std::string host;
+  std::uint16_t port = 0;
+  std::string token;  // echoed in the next Hello's resume_token
+};
+
 struct WelcomeMsg {
   std::uint32_t protocol_version = kProtocolVersion;
   std::uint64_t server_epoch = 0;
@@ -100,6 +111,7 @@ struct WelcomeMsg {
   std::int32_t default_view_distance = 0, default_full_res_radius = 0;
   float edits_per_second = 0;  // 0: unlimited (or a server that does not say)
   std::uint32_t edit_burst = 0;
+  std::uint32_t server_id = 0;  // in a world of several servers; 0 otherwise
 
   // The world's bounds as the view rule and edits take them.
   WorldBounds bounds() const {
@@ -213,6 +225,7 @@ Frame build_admin_request(const AdminRequestMsg& m);
 // text and json are cut to fit one frame (the json is then replaced by {}).
 Frame build_admin_result(const AdminResultMsg& m);
 Frame build_server_notice(const ServerNoticeMsg& m);
+Frame build_redirect(const RedirectMsg& m);
 Frame build_client_state(const ClientStateMsg& m);
 Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data);
 Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data);
@@ -246,6 +259,7 @@ Result<std::string> parse_disconnect(const wire::Disconnect& m);
 Result<AdminRequestMsg> parse_admin_request(const wire::AdminRequest& m);
 Result<AdminResultMsg> parse_admin_result(const wire::AdminResult& m);
 Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m);
+Result<RedirectMsg> parse_redirect(const wire::Redirect& m);
 Result<ClientStateMsg> parse_client_state(const wire::ClientState& m);
 Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m);
 Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m);

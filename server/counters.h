@@ -67,6 +67,7 @@ enum class CloseReason : std::uint8_t {
   kKicked,            // by an operator (terrane-admin kick)
   kBanned,            // refused at the handshake, or ended by a ban
   kNotWhitelisted,    // refused at the handshake
+  kRedirected,        // sent to another server and did not go within the grace
   kCount
 };
 const char* close_reason_label(CloseReason r);
@@ -139,6 +140,8 @@ struct ServerCounters {
   // other servers sent to this one's.
   std::atomic<std::uint64_t> edits_forwarded{0};
   std::atomic<std::uint64_t> forwarded_edits_received{0};
+  std::atomic<std::uint64_t> redirects_sent{0};      // clients told to go on at another server
+  std::atomic<std::uint64_t> redirects_received{0};  // clients that came with a Redirect's token
   std::atomic<std::uint64_t> regions_handed_over{0};  // released to the server an edit across a border went to
   // Per-tick cost split (world strand): applying edits and publishing
   // versions (the tick), and fanning committed changes out to their

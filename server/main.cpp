@@ -43,6 +43,12 @@ constexpr const char* kHelp =
     "                              per running server (required with a postgresql:// store)\n"
     "  --lease-ms N                how long a region lease lasts without renewal; renewed every\n"
     "                              fifth of it (default 5000)\n"
+    "  --advertise HOST:PORT       where clients reach this server, told to the others so they can\n"
+    "                              redirect clients here (default: --bind and the port listened on;\n"
+    "                              required when --bind is 0.0.0.0 or ::)\n"
+    "  --redirect-margin N         a client standing N voxels or more inside a region another\n"
+    "                              server writes is redirected there, keeping what it holds;\n"
+    "                              0 never redirects (default 32)\n"
     "  --bind ADDR                 address to listen on (default 127.0.0.1)\n"
     "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
     "                              'listening on ADDR:PORT'\n"
@@ -118,7 +124,7 @@ int usage_error(const std::string& message) {
 }
 
 int run(int argc, char** argv) {
-  CommandLine cl({"world", "store", "server-id", "lease-ms", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
+  CommandLine cl({"world", "store", "server-id", "lease-ms", "advertise", "redirect-margin", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
                   "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
@@ -141,10 +147,19 @@ int run(int argc, char** argv) {
     if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
     o.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
     o.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
+    if (cl.has("advertise")) {
+      std::string why;
+      auto a = parse_server_address(cl.get("advertise"), &why);
+      if (!a) return usage_error("--advertise: " + why);
+      o.advertise = a->text();
+    }
+    o.redirect_margin = static_cast<std::int32_t>(cl.get_int("redirect-margin", 32, 0, 128, &err));
   } else {
     if (where.find("://") != std::string::npos)
       return usage_error("--store: '" + where + "' is neither a postgresql:// URL nor a world directory");
-    if (cl.has("server-id")) return usage_error("--server-id is for a PostgreSQL store (--store postgresql://...)");
+    for (const char* cluster_only : {"server-id", "lease-ms", "advertise", "redirect-margin"})
+      if (cl.has(cluster_only))
+        return usage_error(std::string("--") + cluster_only + " is for a PostgreSQL store (--store postgresql://...)");
     o.world_dir = where;
   }
   o.bind_address = cl.get("bind", o.bind_address);

@@ -24,6 +24,14 @@ struct ServerOptions {
   std::string store_url;
   std::uint32_t server_id = 0;          // this server in a PostgreSQL world (below 2^31)
   std::chrono::milliseconds lease{5000};  // a region lease's length; renewed every fifth of it
+  // Where clients reach this server ("HOST:PORT"), told to the other
+  // servers of a PostgreSQL world; empty: the bind address and the port
+  // listened on (none when bound to every address).
+  std::string advertise;
+  // A client standing this many voxels or more inside a region another
+  // server writes (from every face of the 256^3 region) is redirected there
+  // (PROTOCOL.md, "Redirects"); 0 never. At most 128 (half a region).
+  std::int32_t redirect_margin = 32;
   std::string bind_address = "127.0.0.1";
   std::uint16_t port = 0;               // 0: any free port (see port())
   // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =

@@ -116,6 +116,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   // As the sessions' edit-rate buckets (replication/replicator.cpp) take them.
   w.edits_per_second = static_cast<float>(s->options_.edits_per_second);
   w.edit_burst = static_cast<std::uint32_t>(s->options_.edits_per_second * 2);
+  w.server_id = s->options_.server_id;
   s->welcome_.bounds = meta.bounds;
   auto access_store = s->world_->store().reopen();
   if (!access_store) return access_store.error();
@@ -204,9 +205,22 @@ void Server::start() {
   if (started_) return;
   started_ = true;
   server_log().info("world {} (epoch {}), tick {} Hz", world_->store().where(), world_->meta().epoch, options_.tick_hz);
-  if (leases_)
+  if (leases_) {
     server_log().info("server id {} in a shared PostgreSQL world: regions leased for {} ms", options_.server_id,
                       options_.lease.count());
+    // Where the other servers send clients that stand in regions this one
+    // writes (and where this one learns who writes what).
+    std::string advertised = options_.advertise;
+    if (advertised.empty() && !is_any_address(options_.bind_address))
+      advertised = ServerAddress{options_.server_id, options_.bind_address, port_}.text();
+    if (advertised.empty())
+      server_log().warn("no --advertise address (bound to {}): other servers redirect no client here",
+                        options_.bind_address);
+    else
+      server_log().info("clients are redirected here as {}{}", advertised,
+                        options_.redirect_margin > 0 ? "" : " (this server redirects none: --redirect-margin 0)");
+    leases_->advertise(advertised, &cluster_);
+  }
   if (!options_.player_tokens.empty())
     server_log().info("authentication: per-player tokens ({} players)", options_.player_tokens.size());
   else if (!options_.auth_token.empty())
@@ -326,7 +340,7 @@ void Server::do_accept() {
     if (stopping_) return;
     const ClientId id = next_id_.fetch_add(1);
     auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_, *access_,
-                                            admin_fn_);
+                                            admin_fn_, leases_ ? &cluster_ : nullptr);
     auto session = std::make_shared<Session>(
         std::move(socket), id, options_.session,
         [rep](std::uint64_t, InboundMessage msg) { rep->on_message(std::move(msg)); },

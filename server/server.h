@@ -107,6 +107,9 @@ class Server {
   ServerOptions options_;
   ServerCounters counters_;
   ReplicationFaults faults_;
+  // Who writes which region of a PostgreSQL world, published by the lease
+  // keeper's thread (so it outlives it) and read by the replicators.
+  ClusterDirectory cluster_;
   // A PostgreSQL world's leases (null for SQLite): the writer's lease
   // source, so it outlives the world and storage below.
   std::unique_ptr<LeaseKeeper> leases_;

@@ -101,4 +101,10 @@ bool is_loopback_address(const std::string& address) {
   return !ec && a.is_loopback();
 }
 
+bool is_any_address(const std::string& address) {
+  asio::error_code ec;
+  const auto a = asio::ip::make_address(address, ec);
+  return !ec && a.is_unspecified();
+}
+
 }  // namespace terrane

@@ -74,5 +74,7 @@ std::string canonical_address(const std::string& text);
 
 // True for 127.0.0.0/8, ::1 and localhost.
 bool is_loopback_address(const std::string& address);
+// 0.0.0.0 or :: (every address of the machine: not one a client can be sent to).
+bool is_any_address(const std::string& address);
 
 }  // namespace terrane

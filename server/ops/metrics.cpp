@@ -199,6 +199,10 @@ std::string render_metrics(const MetricsSources& s) {
             load(c.edits_forwarded));
   m.counter("terrane_forwarded_edits_received_total", "Edits other servers forwarded to this one.",
             load(c.forwarded_edits_received));
+  m.counter("terrane_redirects_sent_total",
+            "Clients told to go on at the server writing the region they stand in.", load(c.redirects_sent));
+  m.counter("terrane_redirects_received_total", "Clients that arrived with a Redirect's token.",
+            load(c.redirects_received));
   m.counter("terrane_regions_handed_over_total",
             "Regions released to another server with an edit across their border that it writes.",
             load(c.regions_handed_over));

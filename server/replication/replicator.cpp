@@ -21,7 +21,7 @@ StreamRecordKind record_kind(int level) {
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
                        const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-                       const AdminFn& admin)
+                       const AdminFn& admin, const ClusterDirectory* cluster)
     : id_(id),
       world_(world),
       options_(options),
@@ -29,7 +29,8 @@ Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& opti
       welcome_(welcome),
       faults_(faults),
       access_(access),
-      admin_fn_(admin) {
+      admin_fn_(admin),
+      cluster_(cluster) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;
 }
@@ -148,7 +149,10 @@ void Replicator::on_hello(const HelloMsg& hello) {
   counters_.clients.fetch_add(1, std::memory_order_relaxed);
   counters_.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(welcome_.welcome));
-  server_log().info("session {} ({}) joined as '{}'{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "");
+  // A Redirect's token says where the client comes from (it grants nothing).
+  if (!hello.resume_token.empty()) counters_.redirects_received.fetch_add(1, std::memory_order_relaxed);
+  server_log().info("session {} ({}) joined as '{}'{}{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "",
+                    hello.resume_token.empty() ? std::string() : " (redirected: " + hello.resume_token + ")");
   next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
   arm_timer();
   // Streaming starts with the client's first ClientState.
@@ -224,7 +228,40 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
   }
   // Only a new centre or radii bring chunks within full resolution.
   if (new_plan || c != center_before) send_parked_near();
+  maybe_redirect();
   pump();
+}
+
+void Replicator::maybe_redirect() {
+  if (cluster_ == nullptr || redirected_ || options_.redirect_margin <= 0) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - info().joined < kRedirectSettle) return;
+  const auto map = cluster_->current();
+  // A map older than a lease may name a writer that is gone.
+  if (!map || now - map->read_at() > options_.lease) return;
+  const Vec3i region = coarse_region_of(view_chunk(state_.position));
+  const ServerAddress* to = map->writer_of(region);
+  if (to == nullptr || to->id == options_.server_id) return;
+  // Well inside: the margin from every face of the region, so a client on
+  // a border does not go back and forth.
+  constexpr double kRegionVoxels = kCoarseRegionChunks * kChunkSize;
+  const Vec3f p = state_.position;
+  const double m = options_.redirect_margin;
+  for (const auto& [v, r] : {std::pair<double, int>{p.x, region.x}, std::pair<double, int>{p.y, region.y},
+                             std::pair<double, int>{p.z, region.z}}) {
+    const double lo = r * kRegionVoxels;
+    if (v - lo < m || lo + kRegionVoxels - v < m) return;
+  }
+  redirected_ = true;
+  redirected_at_ = now;
+  redirected_to_ = "server " + std::to_string(to->id) + " at " + to->text();
+  counters_.redirects_sent.fetch_add(1, std::memory_order_relaxed);
+  server_log().info("session {} ({}): redirected to {}, which writes region ({},{},{})", id_, name_, redirected_to_,
+                    region.x, region.y, region.z);
+  flush_stream();
+  // In order with the data: everything sent before it is the client's to keep.
+  session_->send(build_redirect(RedirectMsg{to->id, to->host, to->port,
+                                            std::to_string(options_.server_id) + "/" + std::to_string(id_)}));
 }
 
 void Replicator::send_parked_near() {
@@ -488,6 +525,7 @@ void Replicator::move_by(Vec3i d) {
 
 void Replicator::pump() {
   if (!welcomed_ || !plan_valid_ || closed_) return;
+  if (redirected_) return flush_stream();  // the client goes on elsewhere: nothing more to stream
   send_ready();
   request_more();
   flush_stream();
@@ -818,6 +856,13 @@ void Replicator::arm_timer() {
   // session that never sends one (terrane-admin) must not wake for them.
   if (options_.hash_push_ms > 0 && plan_valid_) at = std::min(at, next_hash_push_);
   if (welcomed_) at = std::min(at, next_ping_);
+  // In a shared world: whether the client stands in another server's
+  // region is checked again each second (the map of writers changes), and
+  // a redirected client is closed after its grace.
+  if (redirected_)
+    at = std::min(at, redirected_at_ + kRedirectGrace);
+  else if (cluster_ != nullptr && options_.redirect_margin > 0 && plan_valid_)
+    at = std::min(at, now + kRedirectCheck);
   if (at == std::chrono::steady_clock::time_point::max()) return;
   if (timer_armed_) {
     if (timer_->expiry() <= at) return;
@@ -835,6 +880,9 @@ void Replicator::arm_timer() {
 
 void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
+  if (redirected_ && now - redirected_at_ >= kRedirectGrace)
+    return close(CloseReason::kRedirected, "redirected to " + redirected_to_ + " and did not go");
+  if (plan_valid_) maybe_redirect();
   if (welcomed_ && now >= next_ping_) {
     next_ping_ = now + kPingPeriod;
     ping_nonce_ = static_cast<std::uint64_t>(

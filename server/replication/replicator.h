@@ -50,6 +50,7 @@
 #include "server/ops/access.h"
 #include "server/options.h"
 #include "server/replication/view_table.h"
+#include "server/storage/cluster_map.h"
 #include "server/world/world_owner.h"
 
 namespace terrane {
@@ -95,9 +96,18 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // The server pings each client this often (its round trip, for operators).
   static constexpr std::chrono::seconds kPingPeriod{5};
 
+  // A redirected client that is still here this long after is closed.
+  static constexpr std::chrono::seconds kRedirectGrace{10};
+  // A client is not redirected in its first seconds on a server: the map
+  // of writers it is judged by may be a renewal round old.
+  static constexpr std::chrono::seconds kRedirectSettle{3};
+  static constexpr std::chrono::seconds kRedirectCheck{1};
+
+  // cluster: who writes which region, in a world shared by several
+  // servers (null: one server, no redirects).
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
              const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-             const AdminFn& admin);
+             const AdminFn& admin, const ClusterDirectory* cluster = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
@@ -152,6 +162,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // the client may now edit there and the next tick's units change the
   // revision it has not seen.
   void send_parked_near();
+  // A client standing options_.redirect_margin voxels inside a region
+  // another server writes is sent a Redirect there; its streaming stops
+  // (updates go on until it leaves).
+  void maybe_redirect();
   // Sends v whole (Full, or Empty) and holds it at full resolution; a
   // refresh parked for the chunk is dropped.
   void send_whole(Vec3i chunk_pos, const VersionPtr& v);
@@ -181,6 +195,12 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   ReplicationFaults& faults_;
   const AccessControl& access_;
   const AdminFn& admin_fn_;
+  const ClusterDirectory* const cluster_;
+  // Sent a Redirect (when): nothing more is streamed, and the session is
+  // closed if the client stays past kRedirectGrace.
+  bool redirected_ = false;
+  std::chrono::steady_clock::time_point redirected_at_;
+  std::string redirected_to_;
   bool admin_ = false;
   mutable std::mutex info_m_;
   Info info_;  // a copy of name, position and role for other threads

@@ -119,9 +119,11 @@ StoreResult<Ok> LeaseKeeper::release(std::span<const Vec3i> regions) {
 }
 
 StoreResult<Ok> LeaseKeeper::release_all() {
+  std::string address;
   {
     std::lock_guard lock(mutex_);
     stopping_ = true;
+    address = address_;
   }
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
@@ -131,13 +133,40 @@ StoreResult<Ok> LeaseKeeper::release_all() {
     held_.clear();
   }
   std::lock_guard claiming(claims_mutex_);
+  // No client is sent here any more, then the regions are free.
+  if (!address.empty())
+    if (auto gone = claims_->withdraw(owner_); !gone) return gone.error();
   return claims_->release(all);
+}
+
+void LeaseKeeper::advertise(std::string address, ClusterDirectory* directory) {
+  {
+    std::lock_guard lock(mutex_);
+    address_ = std::move(address);
+    directory_ = directory;
+    round_now_ = true;
+  }
+  wake_.notify_all();
+}
+
+void LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirectory* directory) {
+  // Failures leave the last map in place: it carries the time it was read,
+  // and its readers stop trusting it after a lease time.
+  if (auto seen = renewer_->advertise(owner_, address); !seen || directory == nullptr) return;
+  auto c = renewer_->cluster(times_.lease);
+  if (!c) return;
+  directory->publish(std::make_shared<const ClusterMap>(c->writers, c->servers, std::chrono::steady_clock::now()));
 }
 
 void LeaseKeeper::renew_loop() {
   auto last_ok = std::chrono::steady_clock::now();
   std::unique_lock lock(mutex_);
-  while (!wake_.wait_for(lock, times_.renew, [&] { return stopping_; })) {
+  for (;;) {
+    wake_.wait_for(lock, times_.renew, [&] { return stopping_ || round_now_; });
+    if (stopping_) break;
+    round_now_ = false;
+    const std::string address = address_;
+    ClusterDirectory* const directory = directory_;
     std::vector<RegionLease> all;
     for (const auto& [key, l] : held_) all.push_back(l);
     lock.unlock();
@@ -164,6 +193,11 @@ void LeaseKeeper::renew_loop() {
       return false;
     });
     ++rounds_;
+    if (!address.empty()) {
+      lock.unlock();
+      exchange_addresses(address, directory);
+      lock.lock();
+    }
     if (!lost.empty() && on_lost_) {
       lock.unlock();
       for (const auto& [l, why] : lost) on_lost_(l, why);

@@ -73,6 +73,12 @@ class LeaseKeeper {
   StoreResult<Ok> release_all();
   // Renewal rounds done so far (tests wait on it).
   std::uint64_t renewals() const;
+  // From now on, every renewal round (the first at once) also tells the
+  // database where this server takes clients (address "HOST:PORT") and
+  // publishes to directory who writes which region (server/storage/
+  // cluster_map.h). directory must outlive the keeper. release_all()
+  // withdraws the address.
+  void advertise(std::string address, ClusterDirectory* directory);
 
  private:
   LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<PostgresStore> claims,
@@ -88,11 +94,18 @@ class LeaseKeeper {
   std::unique_ptr<PostgresStore> claims_;
   std::unique_ptr<PostgresStore> renewer_;  // the keeper thread's own
 
-  mutable std::mutex mutex_;  // guards held_, rounds_, stopping_
+  // A renewal round's news of the cluster: this server's address seen now,
+  // and the map of writers published (renewer_'s connection, keeper thread).
+  void exchange_addresses(const std::string& address, ClusterDirectory* directory);
+
+  mutable std::mutex mutex_;  // guards held_, rounds_, stopping_, address_, directory_, round_now_
   std::condition_variable wake_;
   std::map<Key, RegionLease> held_;
   std::uint64_t rounds_ = 0;
   bool stopping_ = false;
+  std::string address_;
+  ClusterDirectory* directory_ = nullptr;
+  bool round_now_ = false;
   std::thread thread_;
 };
 

@@ -1,6 +1,7 @@
 #include "server/storage/postgres_store.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <libpq-fe.h>
 #include <poll.h>
 
@@ -297,7 +298,10 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
-           "  PRIMARY KEY (rx, ry, rz))"}) {
+           "  PRIMARY KEY (rx, ry, rz))",
+           // Version 2: where each server takes clients (redirects).
+           "CREATE TABLE IF NOT EXISTS terrane_servers ("
+           "  id integer PRIMARY KEY, address text NOT NULL, seen_at timestamptz NOT NULL)"}) {
     auto made = c->exec("create schema", table);
     if (!made) return c->abort(made.error());
   }
@@ -306,6 +310,10 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   if (version->count() == 0) {
     auto put = c->exec("write schema version", "INSERT INTO terrane_schema (version) VALUES ($1)",
                        {text(kSchemaVersion)});
+    if (!put) return c->abort(put.error());
+  } else if (version->integer(0, 0) == 1) {
+    // Version 1 lacks terrane_servers only, made above.
+    auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) != kSchemaVersion) {
     return c->abort(StoreError{StoreError::Kind::kQuery,
@@ -358,15 +366,38 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
 StoreResult<std::vector<RegionLease>> PostgresStore::renew(std::span<const RegionLease> leases,
                                                            std::chrono::milliseconds lease) {
   std::vector<RegionLease> kept;
-  for (const RegionLease& l : leases) {
-    auto r = c_->exec("renew lease",
-                      "UPDATE terrane_leases SET expires_at = clock_timestamp() + $6::bigint * interval '1 millisecond'"
-                      " WHERE rx = $1 AND ry = $2 AND rz = $3 AND owner = $4 AND epoch = $5"
-                      " AND expires_at > clock_timestamp() RETURNING 1",
-                      {text(l.region.x), text(l.region.y), text(l.region.z), text(l.owner),
-                       text(static_cast<std::int64_t>(l.epoch)), text(lease.count())});
+  if (leases.empty()) return kept;
+  // One statement for every lease of one owner (a server holds thousands
+  // of regions in a big world): arrays of the regions and their epochs.
+  std::map<std::uint32_t, std::vector<const RegionLease*>> by_owner;
+  for (const RegionLease& l : leases) by_owner[l.owner].push_back(&l);
+  for (const auto& [owner, ls] : by_owner) {
+    std::vector<std::int64_t> xs, ys, zs, epochs;
+    for (const RegionLease* l : ls) {
+      xs.push_back(l->region.x);
+      ys.push_back(l->region.y);
+      zs.push_back(l->region.z);
+      epochs.push_back(static_cast<std::int64_t>(l->epoch));
+    }
+    auto array = [](const std::vector<std::int64_t>& v) { return Param{fmt::format("{{{}}}", fmt::join(v, ",")), false}; };
+    auto r = c_->exec("renew leases",
+                      "UPDATE terrane_leases AS l SET expires_at = clock_timestamp() + $6::bigint * interval '1 millisecond'"
+                      " FROM unnest($1::integer[], $2::integer[], $3::integer[], $4::bigint[]) AS k(rx, ry, rz, epoch)"
+                      " WHERE l.rx = k.rx AND l.ry = k.ry AND l.rz = k.rz AND l.epoch = k.epoch AND l.owner = $5"
+                      " AND l.expires_at > clock_timestamp() RETURNING l.rx, l.ry, l.rz, l.epoch",
+                      {array(xs), array(ys), array(zs), array(epochs), text(owner), text(lease.count())});
     if (!r) return r.error();
-    if (r->count() == 1) kept.push_back(l);
+    for (int row = 0; row < r->count(); ++row) {
+      const auto x = r->integer(row, 0), y = r->integer(row, 1), z = r->integer(row, 2), e = r->integer(row, 3);
+      if (!x || !y || !z || !e) continue;
+      const RegionLease got{{static_cast<int>(*x), static_cast<int>(*y), static_cast<int>(*z)}, owner,
+                            static_cast<std::uint64_t>(*e)};
+      for (const RegionLease* l : ls)
+        if (*l == got) {
+          kept.push_back(*l);
+          break;
+        }
+    }
   }
   return kept;
 }
@@ -394,6 +425,50 @@ StoreResult<std::optional<RegionLease>> PostgresStore::holder(Vec3i region) {
   if (!owner || *owner < 0 || !epoch || *epoch < 1) return bad_row("read region holder", region);
   return std::optional<RegionLease>{
       RegionLease{region, static_cast<std::uint32_t>(*owner), static_cast<std::uint64_t>(*epoch)}};
+}
+
+StoreResult<Ok> PostgresStore::advertise(std::uint32_t id, const std::string& address) {
+  if (id > kMaxServerId) return StoreError{StoreError::Kind::kQuery, fmt::format("server id {} is not below 2^31", id)};
+  auto r = c_->exec("advertise server",
+                    "INSERT INTO terrane_servers AS s (id, address, seen_at) VALUES ($1, $2, clock_timestamp())"
+                    " ON CONFLICT (id) DO UPDATE SET address = EXCLUDED.address, seen_at = EXCLUDED.seen_at",
+                    {text(id), Param{address, false}});
+  if (!r) return r.error();
+  return Ok{};
+}
+
+StoreResult<Ok> PostgresStore::withdraw(std::uint32_t id) {
+  auto r = c_->exec("withdraw server", "DELETE FROM terrane_servers WHERE id = $1", {text(id)});
+  if (!r) return r.error();
+  return Ok{};
+}
+
+StoreResult<PostgresStore::Cluster> PostgresStore::cluster(std::chrono::milliseconds fresh) {
+  Cluster out;
+  auto servers = c_->exec("read servers",
+                          "SELECT id, address FROM terrane_servers"
+                          " WHERE seen_at > clock_timestamp() - $1::bigint * interval '1 millisecond'",
+                          {text(fresh.count())});
+  if (!servers) return servers.error();
+  for (int row = 0; row < servers->count(); ++row) {
+    const auto id = servers->integer(row, 0);
+    // Another server's row: an address that does not parse is skipped (no
+    // client is sent there), never trusted.
+    auto a = parse_server_address(servers->get(row, 1), nullptr);
+    if (!id || *id < 0 || *id > kMaxServerId || !a) continue;
+    a->id = static_cast<std::uint32_t>(*id);
+    out.servers.push_back(std::move(*a));
+  }
+  auto leases = c_->exec("read leases", "SELECT rx, ry, rz, owner FROM terrane_leases WHERE expires_at > clock_timestamp()");
+  if (!leases) return leases.error();
+  for (int row = 0; row < leases->count(); ++row) {
+    const auto x = leases->integer(row, 0), y = leases->integer(row, 1), z = leases->integer(row, 2),
+               owner = leases->integer(row, 3);
+    if (!x || !y || !z || !owner || *owner < 0 || *owner > kMaxServerId) continue;
+    out.writers.push_back(RegionWriter{{static_cast<int>(*x), static_cast<int>(*y), static_cast<int>(*z)},
+                                       static_cast<std::uint32_t>(*owner)});
+  }
+  return out;
 }
 
 StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,

@@ -33,6 +33,7 @@
 #include "common/codec/decode_error.h"
 #include "common/voxel/vec3.h"
 #include "common/world/world_store.h"
+#include "server/storage/cluster_map.h"
 
 namespace terrane {
 
@@ -108,7 +109,7 @@ class PostgresStore final : public WorldStore {
   ~PostgresStore() override;
 
   // The schema version this build reads and writes.
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;  // 1 is upgraded on open (terrane_servers added)
   // Whether url names a PostgreSQL database ("postgresql://..." or
   // "postgres://...") rather than a world directory.
   static bool is_url(const std::string& url);
@@ -144,6 +145,18 @@ class PostgresStore final : public WorldStore {
   StoreResult<Ok> release(std::span<const RegionLease> leases);
   // Who holds region now (a current lease), if anyone.
   StoreResult<std::optional<RegionLease>> holder(Vec3i region);
+
+  // Where server id takes clients ("HOST:PORT"), seen now: a lease keeper
+  // calls it every renewal round. withdraw forgets it (a clean stop).
+  StoreResult<Ok> advertise(std::uint32_t id, const std::string& address);
+  StoreResult<Ok> withdraw(std::uint32_t id);
+  // Every current lease's region and writer, and the addresses of servers
+  // seen within fresh (rows that do not parse are left out).
+  struct Cluster {
+    std::vector<RegionWriter> writers;
+    std::vector<ServerAddress> servers;
+  };
+  StoreResult<Cluster> cluster(std::chrono::milliseconds fresh);
 
   // Stores the chunks and the log entries in one transaction, fenced. Every
   // chunk's region must be under one of leases, and every lease used must

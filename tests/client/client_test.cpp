@@ -466,7 +466,7 @@ TEST_F(ClientServerTest, ClientThatStopsReadingIsDroppedWithoutStallingOthers) {
   slow.open(asio::ip::tcp::v4());
   slow.set_option(asio::socket_base::receive_buffer_size(4096));
   slow.connect({asio::ip::make_address("127.0.0.1"), server_->port()});
-  Frame hello = build_hello(HelloMsg{kProtocolVersion, "slow", ""});
+  Frame hello = build_hello(HelloMsg{kProtocolVersion, "slow", "", {}});
   Frame state = build_client_state(ClientStateMsg{{0.5f, 40.0f, 0.5f}, 256, 128});
   asio::write(slow, asio::buffer(hello));
   asio::write(slow, asio::buffer(state));

@@ -7,6 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <mutex>
+#include <unordered_map>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -14,7 +17,10 @@
 #include <thread>
 #include <vector>
 
+#include <fmt/format.h>
+
 #include "client/client.h"
+#include "common/world/coarse_image.h"
 #include "tests/support/postgres.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
@@ -75,15 +81,15 @@ class ClusterTest : public testing_support::PostgresTest {
     join(*p->ann);
     p->near = join(*p->bob);
   }
-  // Connects and waits until the chunks around the spawn are held at full
-  // resolution.
-  static std::vector<Vec3i> join(Client& c) {
+  // Connects and waits until the chunks around the spawn (plus the
+  // client's spawn offset) are held at full resolution.
+  static std::vector<Vec3i> join(Client& c, Vec3f offset = {}) {
     std::string err;
     EXPECT_TRUE(c.connect(&err)) << err;
     EXPECT_TRUE(c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
     const auto w = c.welcome();
     if (!w) return {};
-    auto near = testing_support::chunks_within(w->spawn, 20, *w);
+    auto near = testing_support::chunks_within(w->spawn + offset, 20, *w);
     EXPECT_TRUE(c.wait_until(
         [&](const ClientView& v) {
           return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) {
@@ -124,6 +130,7 @@ class ClusterTest : public testing_support::PostgresTest {
   // Every chunk of near the client holds agrees with its server's (region
   // hashes asked for and answered, none mismatched).
   static void expect_agrees_with_its_server(Client& c, const std::vector<Vec3i>& near) {
+    const std::uint64_t before = c.counters().hash_mismatches;
     for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
     ASSERT_TRUE(c.wait_until(
         [&](const ClientView& v) {
@@ -131,7 +138,7 @@ class ClusterTest : public testing_support::PostgresTest {
                  std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
         },
         kDeadline));
-    EXPECT_EQ(c.counters().hash_mismatches, 0u);
+    EXPECT_EQ(c.counters().hash_mismatches, before);
   }
   // A box beside the spawn, and a pattern to write there.
   static Region box_near(const Client& c, int dx) {
@@ -402,6 +409,155 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   EXPECT_TRUE(replica_shows(cy, across, av));
   EXPECT_TRUE(replica_shows(cy, east2, ev2));
   cy.disconnect();
+}
+
+// A client that walks well inside a region another server writes is sent
+// there and keeps its replica: the new server streams only what the client
+// did not hold (chunks entering the view, finer levels), never a chunk again.
+TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunkIsSentTwice) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  // What ann holds when it leaves server 1, and the records it gets after.
+  struct Seen {
+    std::mutex m;
+    std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> held;
+    bool redirected = false;
+    std::vector<std::string> resent;
+    std::size_t records = 0;
+    std::uint64_t stream_bytes_before = 0;
+    std::atomic<std::uint32_t> now_on{0};  // the server of the latest Welcome
+  };
+  auto seen = std::make_shared<Seen>();
+  Client* ann_ptr = nullptr;
+  ClientCallbacks cb;
+  cb.on_welcome = [seen](const WelcomeMsg& w) { seen->now_on = w.server_id; };
+  cb.on_redirected = [&ann_ptr, seen](const RedirectMsg&) {
+    std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> held;
+    ann_ptr->with_replica([&](const Replica& r) {
+      r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) { held[cp] = c; });
+    });
+    const auto before = ann_ptr->counters().by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in;
+    std::lock_guard lock(seen->m);
+    seen->held = std::move(held);
+    seen->stream_bytes_before = before;
+    seen->redirected = true;
+  };
+  cb.on_reconnected = [&ann_ptr, seen] { seen->now_on = ann_ptr->welcome()->server_id; };
+  cb.on_coverage = [seen](Vec3i cp, wire::CoverageKind kind, int level) {
+    std::lock_guard lock(seen->m);
+    if (!seen->redirected || kind == wire::CoverageKind::Released) return;
+    ++seen->records;
+    auto it = seen->held.find(cp);
+    if (it == seen->held.end() || it->second.estimate || it->second.level >= kMipLevels) return;
+    const ChunkCoverage& had = it->second;
+    const bool again = (kind == wire::CoverageKind::Full && had.state == CoverageState::kFull) ||
+                       (kind == wire::CoverageKind::Empty && had.state == CoverageState::kEmpty) ||
+                       (kind == wire::CoverageKind::Mip && (had.state != CoverageState::kMip || had.level <= level));
+    if (again)
+      seen->resent.push_back(fmt::format("({},{},{}) kind {} level {}", cp.x, cp.y, cp.z, static_cast<int>(kind), level));
+  };
+  Client ann(options(a, "ann"), cb);
+  ann_ptr = &ann;
+  // Bob stands where ann walks to: 48 voxels east and south of the spawn,
+  // which lies by the corner x = 0, z = 0 of four regions.
+  ClientOptions bobs = options(b, "bob");
+  bobs.spawn_offset = {48, 0, 48};
+  Client bob(bobs);
+  join(ann);
+  join(bob, bobs.spawn_offset);
+  ASSERT_EQ(seen->now_on.load(), 1u);
+  const WelcomeMsg w = *ann.welcome();
+  const Vec3f spawn = w.spawn;
+  const Vec3f there{spawn.x + 48, spawn.y, spawn.z + 48};
+  const Vec3i region = coarse_region_of(view_chunk(there));
+  std::printf("spawn (%.1f, %.1f, %.1f), region (%d,%d,%d)\n", spawn.x, spawn.y, spawn.z, region.x, region.y, region.z);
+  ASSERT_EQ(region, coarse_region_of(view_chunk(spawn + Vec3f{1, 0, 1}))) << "the spawn is not by the region's corner";
+  // Bob's server writes that region (its first edit there claims it), ann's
+  // the one west of the spawn.
+  const Vec3i at{static_cast<int>(std::floor(there.x)), static_cast<int>(std::floor(there.y)),
+                 static_cast<int>(std::floor(there.z))};
+  const Region east{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
+  ASSERT_EQ(coarse_region_of(chunk_of(east.min)), region);
+  ASSERT_EQ(outcome(bob, bob.write_box(east, pattern(east, materials::kSnow))), "");
+  const Region west = box_near(ann, -8);
+  ASSERT_EQ(outcome(ann, ann.write_box(west, pattern(west, materials::kBrick))), "");
+  // Ann's whole view first, each chunk with a record of its own (not only a
+  // horizon image or an estimate), so that anything sent again would show.
+  auto whole_view = [](const std::vector<Vec3i>& chunks) {
+    return [&chunks](const ClientView& v) {
+      return v.closed || std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) {
+               const ChunkCoverage* c = v.replica.coverage(cp);
+               return c != nullptr && !c->estimate && c->level < kMipLevels;
+             });
+    };
+  };
+  const auto view = testing_support::chunks_within(spawn, 64, w);
+  ASSERT_TRUE(ann.wait_until(whole_view(view), kDeadline));
+  // On the border (within the margin of bob's region) ann stays; then it
+  // walks there in steps within the speed limit.
+  for (int step = 1; step <= 3; ++step) {
+    ClientStateMsg s = *ann.last_state();
+    s.position = spawn + Vec3f{16.0f * static_cast<float>(step), 0, 16.0f * static_cast<float>(step)};
+    ASSERT_TRUE(ann.set_state(s));
+  }
+  ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || seen->now_on == 2; }, kDeadline))
+      << "never redirected";
+  EXPECT_EQ(ann.counters().redirects, 1u);
+  // Every chunk ann held that is still in its view is asked for its hash:
+  // the new server answers a claimed chunk only once it kept it (or sent
+  // it again), so once all are answered every claim is settled.
+  std::vector<Vec3i> kept;
+  {
+    std::lock_guard lock(seen->m);
+    for (const Vec3i cp : testing_support::chunks_within(there, 64, w))
+      if (auto it = seen->held.find(cp); it != seen->held.end() && !it->second.estimate && it->second.level < kMipLevels)
+        kept.push_back(cp);
+  }
+  ASSERT_FALSE(kept.empty());
+  for (const Vec3i cp : kept) ASSERT_TRUE(ann.request_region_hash(cp));
+  ASSERT_TRUE(ann.wait_until(
+      [&](const ClientView& v) {
+        return v.closed || std::all_of(kept.begin(), kept.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
+      },
+      kDeadline));
+  EXPECT_FALSE(ann.closed()) << ann.disconnect_reason();
+  {
+    std::lock_guard lock(seen->m);
+    // Those ann holds at full resolution are server 2's chunks exactly (a
+    // mip holder's check never matches: it has no voxels to hash).
+    std::size_t full = 0;
+    for (const Vec3i cp : kept)
+      if (seen->held.at(cp).state != CoverageState::kMip) {
+        ++full;
+        EXPECT_TRUE(ann.wait_until([&](const ClientView& v) { return v.hash_checks.at(cp); }, 0ms))
+            << "chunk (" << cp.x << "," << cp.y << "," << cp.z << ") differs from server 2's";
+      }
+    EXPECT_GT(full, 0u);
+    EXPECT_TRUE(seen->resent.empty()) << seen->resent.size() << " chunks sent again, the first "
+                                      << (seen->resent.empty() ? std::string() : seen->resent.front());
+    const auto c = ann.counters();
+    std::printf("redirect: %zu chunks kept, %zu records after it (chunks new to the view, or finer), stream bytes "
+                "%llu before it and %llu after\n",
+                kept.size(), seen->records, static_cast<unsigned long long>(seen->stream_bytes_before),
+                static_cast<unsigned long long>(
+                    c.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in -
+                    seen->stream_bytes_before));
+  }
+  // The whole new view arrives, and what ann holds there at full
+  // resolution agrees with server 2.
+  const auto near = testing_support::chunks_within(there, 20, w);
+  ASSERT_TRUE(ann.wait_until(whole_view(testing_support::chunks_within(there, 64, w)), kDeadline));
+  expect_agrees_with_its_server(ann, near);
+  // Ann's edits there are server 2's to write, and bob sees them.
+  const Region more{at + Vec3i{3, 4, 3}, at + Vec3i{5, 6, 5}};
+  const auto mv = pattern(more, materials::kSand);
+  EXPECT_EQ(outcome(ann, ann.write_box(more, mv)), "");
+  EXPECT_TRUE(replica_shows(ann, more, mv));
+  ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, more, mv); }, kDeadline));
+  ann.disconnect();
+  bob.disconnect();
 }
 
 }  // namespace

@@ -62,6 +62,7 @@ void parse_any(const wire::Message& m) {
     case wire::Body::AdminRequest: (void)parse_admin_request(*m.body_as_AdminRequest()); break;
     case wire::Body::AdminResult: (void)parse_admin_result(*m.body_as_AdminResult()); break;
     case wire::Body::ServerNotice: (void)parse_server_notice(*m.body_as_ServerNotice()); break;
+    case wire::Body::Redirect: (void)parse_redirect(*m.body_as_Redirect()); break;
     default: decode_payloads(m); break;
   }
 }

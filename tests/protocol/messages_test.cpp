@@ -22,7 +22,7 @@ const wire::Message* message_of(const Frame& f) {
 }
 
 TEST(Messages, HelloRoundTrips) {
-  const Frame f = build_hello(HelloMsg{kProtocolVersion, "alice", "secret"});
+  const Frame f = build_hello(HelloMsg{kProtocolVersion, "alice", "secret", {}});
   const auto* m = message_of(f);
   ASSERT_EQ(m->body_type(), wire::Body::Hello);
   auto h = parse_hello(*m->body_as_Hello());
@@ -30,6 +30,41 @@ TEST(Messages, HelloRoundTrips) {
   EXPECT_EQ(h->protocol_version, kProtocolVersion);
   EXPECT_EQ(h->client_name, "alice");
   EXPECT_EQ(h->auth_token, "secret");
+  EXPECT_EQ(h->resume_token, "");
+  // A redirected client echoes its Redirect's token.
+  auto r = parse_hello(*message_of(build_hello(HelloMsg{kProtocolVersion, "alice", "", "1/17"}))->body_as_Hello());
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->resume_token, "1/17");
+  flatbuffers::FlatBufferBuilder fbb;
+  const std::string long_token(kMaxResumeTokenBytes + 1, 't');
+  fbb.Finish(wire::CreateHelloDirect(fbb, 1, "alice", "", long_token.c_str()));
+  EXPECT_EQ(parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb.GetBufferPointer())).error().code,
+            DecodeErrorCode::kOverLimit);
+}
+
+TEST(Messages, RedirectRoundTripsAndBadOnesAreErrors) {
+  const RedirectMsg sent{2, "10.0.0.7", 7778, "1/17"};
+  auto r = parse_redirect(*message_of(build_redirect(sent))->body_as_Redirect());
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->server_id, 2u);
+  EXPECT_EQ(r->host, "10.0.0.7");
+  EXPECT_EQ(r->port, 7778);
+  EXPECT_EQ(r->token, "1/17");
+  auto parse = [](const char* host, std::uint16_t port, const std::string& token) {
+    flatbuffers::FlatBufferBuilder fbb;
+    fbb.Finish(wire::CreateRedirectDirect(fbb, 2, host, port, token.c_str()));
+    return parse_redirect(*flatbuffers::GetRoot<wire::Redirect>(fbb.GetBufferPointer()));
+  };
+  EXPECT_TRUE(parse("server.example", 1, "").ok());
+  EXPECT_EQ(parse(nullptr, 7778, "").error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(parse("", 7778, "").error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(parse("10.0.0.7", 0, "").error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(parse("bad host", 7778, "").error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(parse("bad\nhost", 7778, "").error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(parse(std::string(kMaxRedirectHostBytes + 1, 'h').c_str(), 7778, "").error().code,
+            DecodeErrorCode::kOverLimit);
+  EXPECT_EQ(parse("10.0.0.7", 7778, std::string(kMaxResumeTokenBytes + 1, 't')).error().code,
+            DecodeErrorCode::kOverLimit);
 }
 
 TEST(Messages, HelloRejectsMissingOrLongName) {
@@ -55,11 +90,13 @@ TEST(Messages, WelcomeRoundTrips) {
   w.max_full_res_radius = 256;
   w.max_frame_bytes = 1 << 20;
   w.tick_hz = 20;
+  w.server_id = 3;
   const Frame f = build_welcome(w);
   const auto* m = message_of(f);
   auto p = parse_welcome(*m->body_as_Welcome());
   ASSERT_TRUE(p.ok()) << p.error().describe();
   EXPECT_EQ(p->server_epoch, 7u);
+  EXPECT_EQ(p->server_id, 3u);
   EXPECT_EQ(p->spawn, w.spawn);
   EXPECT_EQ(p->materials, w.materials);
   EXPECT_EQ(p->bounds_max_y, 256);

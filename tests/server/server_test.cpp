@@ -48,7 +48,7 @@ TEST_F(ServerTest, WelcomeDescribesTheWorld) {
   start();
   RawPeer p(server_->port());
   ASSERT_TRUE(p.connected());
-  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "t", ""})));
+  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "t", "", {}})));
   auto f = p.next_of(wire::Body::Welcome);
   ASSERT_TRUE(f.has_value());
   auto w = parse_welcome(*msg(*f).body_as_Welcome());
@@ -62,7 +62,7 @@ TEST_F(ServerTest, WelcomeDescribesTheWorld) {
 TEST_F(ServerTest, VersionMismatchIsToldWhy) {
   start();
   RawPeer p(server_->port());
-  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion + 5, "t", ""})));
+  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion + 5, "t", "", {}})));
   auto f = p.next_of(wire::Body::Disconnect);
   ASSERT_TRUE(f.has_value());
   EXPECT_NE(parse_disconnect(*msg(*f).body_as_Disconnect())->find("protocol version mismatch"), std::string::npos);
@@ -74,7 +74,7 @@ TEST_F(ServerTest, WrongAuthTokenIsRejected) {
   o.auth_token = "open sesame";
   start(o);
   RawPeer p(server_->port());
-  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "t", "guess"})));
+  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "t", "guess", {}})));
   auto f = p.next_of(wire::Body::Disconnect);
   ASSERT_TRUE(f.has_value());
   EXPECT_EQ(*parse_disconnect(*msg(*f).body_as_Disconnect()), "authentication failed");
@@ -91,7 +91,7 @@ TEST_F(ServerTest, MessageBeforeHelloIsAProtocolError) {
 
 TEST_F(ServerTest, ASecondHelloOrAServersMessageAfterTheWelcomeIsAProtocolError) {
   start();
-  for (Frame f : {build_hello(HelloMsg{kProtocolVersion, "again", ""}), build_edit_ack(1, 2),
+  for (Frame f : {build_hello(HelloMsg{kProtocolVersion, "again", "", {}}), build_edit_ack(1, 2),
                   build_server_notice(ServerNoticeMsg{}), build_admin_result(AdminResultMsg{})}) {
     auto p = join("twice");
     ASSERT_TRUE(p->send(f));
@@ -117,7 +117,7 @@ TEST_F(ServerTest, TruncatedAndOversizedFramesAffectOnlyTheirSender) {
   auto good = join("good");
   {
     RawPeer truncated(server_->port());
-    const Frame hello = build_hello(HelloMsg{kProtocolVersion, "cut", ""});
+    const Frame hello = build_hello(HelloMsg{kProtocolVersion, "cut", "", {}});
     ASSERT_TRUE(truncated.send(std::span<const std::uint8_t>(hello).first(hello.size() / 2)));
     truncated.close();  // the server sees EOF mid-frame
   }
@@ -469,7 +469,7 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   o.border = WorldBounds{0, 1, true, 0, 96, -64, 32};  // x in [0, 96), z in [-64, 32)
   start(o);
   auto welcome_of = [&](RawPeer& p) {
-    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "edge", ""})));
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "edge", "", {}})));
     auto f = p.next_of(wire::Body::Welcome);
     EXPECT_TRUE(f.has_value());
     return *parse_welcome(*msg(*f).body_as_Welcome());
@@ -756,7 +756,7 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   const Vec3f pos{1002.0f, 12.0f, 1002.0f};
   auto join_epoch = [&](RawPeer& p) -> std::uint64_t {
-    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "restarts", ""})));
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "restarts", "", {}})));
     auto w = p.next_of(wire::Body::Welcome);
     if (!w) return 0;
     auto parsed = parse_welcome(*msg(*w).body_as_Welcome());

@@ -154,7 +154,7 @@ class ServerTest : public ::testing::Test {
   std::unique_ptr<RawPeer> join(const std::string& name) {
     auto p = std::make_unique<RawPeer>(server_->port());
     EXPECT_TRUE(p->connected());
-    EXPECT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, name, ""})));
+    EXPECT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, name, "", {}})));
     auto w = p->next_of(wire::Body::Welcome);
     EXPECT_TRUE(w.has_value());
     return p;

@@ -57,18 +57,18 @@ TEST_F(LimitsTest, PerPlayerTokensAdmitOnlyTheirPlayer) {
   o.player_tokens = {{"good", {"g-token", false}}, {"bob", {"b-token", false}}};
   start(o);
   RawPeer good(server_->port());
-  ASSERT_TRUE(good.send(build_hello(HelloMsg{kProtocolVersion, "good", "g-token"})));
+  ASSERT_TRUE(good.send(build_hello(HelloMsg{kProtocolVersion, "good", "g-token", {}})));
   ASSERT_TRUE(good.next_of(wire::Body::Welcome).has_value());
   ASSERT_TRUE(hold_full(good, kHome, chunk_of(Vec3i{1002, 12, 1002})));
   for (const auto& [name, token] : std::vector<std::pair<std::string, std::string>>{
            {"bob", "g-token"}, {"mallory", "b-token"}, {"bob", ""}}) {
     RawPeer bad(server_->port());
-    ASSERT_TRUE(bad.send(build_hello(HelloMsg{kProtocolVersion, name, token})));
+    ASSERT_TRUE(bad.send(build_hello(HelloMsg{kProtocolVersion, name, token, {}})));
     EXPECT_EQ(reason_of(bad), "authentication failed") << name;
     EXPECT_TRUE(bad.closed_by_server());
   }
   RawPeer bob(server_->port());
-  ASSERT_TRUE(bob.send(build_hello(HelloMsg{kProtocolVersion, "bob", "b-token"})));
+  ASSERT_TRUE(bob.send(build_hello(HelloMsg{kProtocolVersion, "bob", "b-token", {}})));
   EXPECT_TRUE(bob.next_of(wire::Body::Welcome).has_value());
   expect_served(good);
   EXPECT_EQ(server_->counters().auth_failures.load(), 3u);
@@ -128,7 +128,7 @@ TEST_F(LimitsTest, SlowlorisFramesAreDropped) {
   EXPECT_NE(reason_of(*slow).find("frame not completed"), std::string::npos);
   // Before the handshake too.
   RawPeer early(server_->port());
-  const Frame hello = build_hello(HelloMsg{kProtocolVersion, "early", ""});
+  const Frame hello = build_hello(HelloMsg{kProtocolVersion, "early", "", {}});
   ASSERT_TRUE(early.send(std::span<const std::uint8_t>(hello).first(hello.size() - 1)));
   EXPECT_NE(reason_of(early).find("frame not completed"), std::string::npos);
   expect_served(*good);

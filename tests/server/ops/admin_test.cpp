@@ -43,7 +43,7 @@ class AdminTest : public ServerTest {
   Joined connect(const std::string& name, const std::string& token = "") {
     Joined j;
     j.peer = std::make_unique<RawPeer>(server_->port());
-    EXPECT_TRUE(j.peer->send(build_hello(HelloMsg{kProtocolVersion, name, token})));
+    EXPECT_TRUE(j.peer->send(build_hello(HelloMsg{kProtocolVersion, name, token, {}})));
     while (auto f = j.peer->next()) {
       const wire::Message& m = msg(*f);
       if (m.body_type() == wire::Body::Welcome) {

@@ -81,6 +81,31 @@ TEST_F(LeaseKeeperTest, KeepsItsLeasesAlivePastManyLeaseTimes) {
   ASSERT_TRUE(taken.ok()) << taken.error().message;
 }
 
+TEST_F(LeaseKeeperTest, EachRoundSaysWhereItsServerIsAndPublishesWhoWritesWhat) {
+  Lost lost;
+  auto a = keeper(1, {2000ms, 100ms}, &lost);
+  auto b = keeper(2, {2000ms, 100ms}, &lost);
+  ASSERT_TRUE(a && b);
+  const Vec3i mine[] = {{0, 0, 0}}, theirs[] = {{1, 0, 0}};
+  ASSERT_TRUE(a->ensure(mine).ok());
+  ASSERT_TRUE(b->ensure(theirs).ok());
+  ClusterDirectory seen_by_a;
+  a->advertise("127.0.0.1:7001", &seen_by_a);
+  b->advertise("127.0.0.1:7002", nullptr);  // says where it is, reads nothing
+  ASSERT_TRUE(eventually([&] {
+    auto m = seen_by_a.current();
+    return m && m->writer_of({1, 0, 0}) != nullptr && m->writer_of({0, 0, 0}) != nullptr;
+  }, 30s));
+  auto m = seen_by_a.current();
+  EXPECT_EQ(*m->writer_of({1, 0, 0}), (ServerAddress{2, "127.0.0.1", 7002}));
+  EXPECT_EQ(m->writer_of({0, 0, 0})->id, 1u);
+  // A clean stop withdraws the address with the leases: no client is sent
+  // to a server that is gone.
+  ASSERT_TRUE(b->release_all().ok());
+  ASSERT_TRUE(eventually([&] { return seen_by_a.current()->writer_of({1, 0, 0}) == nullptr; }, 30s));
+  EXPECT_EQ(lost.size(), 0u);
+}
+
 TEST_F(LeaseKeeperTest, ALeaseTakenWhileItsKeeperWasLateIsReportedLost) {
   Lost lost;
   auto open = LeaseKeeper::open(url_, 1, {400ms, 500ms}, nullptr);

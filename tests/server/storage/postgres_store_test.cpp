@@ -7,6 +7,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -63,6 +64,80 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto none = again->load_chunk({3, -2, 18});
   ASSERT_TRUE(none.ok());
   EXPECT_FALSE(none->has_value());
+}
+
+TEST_F(PostgresStoreTest, ManyLeasesRenewInOneStatementAndStaleOnesAreLeftOut) {
+  auto a = open();
+  ASSERT_TRUE(a);
+  std::vector<RegionLease> leases;
+  for (int x = -2; x <= 2; ++x) {
+    auto l = a->claim({x, 1, -x}, 1, 60s);
+    ASSERT_TRUE(l.ok()) << l.error().message;
+    leases.push_back(*l);
+  }
+  // Region (0,1,0) changes hands (its epoch moves on), (2,1,-2) runs out.
+  auto newer = a->claim({0, 1, 0}, 1, 60s);
+  ASSERT_TRUE(newer.ok());
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp() WHERE rx = 2"), "");
+  auto kept = a->renew(leases, 60s);
+  ASSERT_TRUE(kept.ok()) << kept.error().message;
+  std::vector<RegionLease> want{leases[0], leases[1], leases[3]};
+  std::sort(kept->begin(), kept->end(), [](const RegionLease& p, const RegionLease& q) { return p.region.x < q.region.x; });
+  EXPECT_EQ(*kept, want);
+  auto none = a->renew({}, 60s);
+  ASSERT_TRUE(none.ok());
+  EXPECT_TRUE(none->empty());
+}
+
+TEST_F(PostgresStoreTest, ServersSayWhereClientsReachThemAndTheMapNamesEachRegionsWriter) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  ASSERT_TRUE(a->claim({0, 0, 0}, 1, 60s).ok());
+  ASSERT_TRUE(b->claim({1, 0, 0}, 2, 60s).ok());
+  ASSERT_TRUE(b->claim({2, 0, 0}, 3, 60s).ok());
+  ASSERT_TRUE(a->advertise(1, "127.0.0.1:7001").ok());
+  ASSERT_TRUE(b->advertise(2, "[::1]:7002").ok());
+  ASSERT_TRUE(b->advertise(2, "127.0.0.1:7002").ok());  // seen again, moved
+  // A row that is not HOST:PORT (another program's, damage) is left out.
+  ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_servers VALUES (3, 'nowhere', clock_timestamp())"), "");
+  auto c = a->cluster(60s);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->writers.size(), 3u);
+  ASSERT_EQ(c->servers.size(), 2u);
+  const ClusterMap map(c->writers, c->servers, std::chrono::steady_clock::now());
+  ASSERT_NE(map.writer_of({0, 0, 0}), nullptr);
+  EXPECT_EQ(map.writer_of({0, 0, 0})->text(), "127.0.0.1:7001");
+  ASSERT_NE(map.writer_of({1, 0, 0}), nullptr);
+  EXPECT_EQ(*map.writer_of({1, 0, 0}), (ServerAddress{2, "127.0.0.1", 7002}));
+  EXPECT_EQ(map.writer_of({2, 0, 0}), nullptr);  // its writer has no address
+  EXPECT_EQ(map.writer_of({3, 0, 0}), nullptr);  // nobody writes it
+  // A server gone quiet (not seen within fresh) or withdrawn is no
+  // address, nor is a lease that ran out a writer.
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_servers SET seen_at = clock_timestamp() - interval '10 seconds' WHERE id = 1"),
+            "");
+  ASSERT_TRUE(b->withdraw(2).ok());
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp() WHERE rx = 2"), "");
+  auto later = a->cluster(5s);
+  ASSERT_TRUE(later.ok());
+  EXPECT_TRUE(later->servers.empty());
+  EXPECT_EQ(later->writers.size(), 2u);
+}
+
+TEST(ServerAddressTest, ParsesHostAndPortAndSaysWhatIsWrong) {
+  std::string why;
+  auto a = parse_server_address("game.example:7777", &why);
+  ASSERT_TRUE(a) << why;
+  EXPECT_EQ(a->host, "game.example");
+  EXPECT_EQ(a->port, 7777);
+  auto v6 = parse_server_address("[::1]:7778", &why);
+  ASSERT_TRUE(v6) << why;
+  EXPECT_EQ(v6->host, "::1");
+  EXPECT_EQ(v6->text(), "[::1]:7778");
+  for (const char* bad : {"7777", "host:", "host:0", "host:65536", "host:x", "bad host:1", ":7777"}) {
+    why.clear();
+    EXPECT_FALSE(parse_server_address(bad, &why)) << bad;
+    EXPECT_NE(why.find(bad), std::string::npos) << why;
+  }
 }
 
 TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
@@ -205,9 +280,19 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   auto newer = PostgresStore::open(url_);
   ASSERT_FALSE(newer.ok());
   EXPECT_NE(newer.error().message.find("version 99"), std::string::npos) << newer.error().message;
-  EXPECT_NE(newer.error().message.find("reads version 1"), std::string::npos) << newer.error().message;
+  EXPECT_NE(newer.error().message.find("reads version " + std::to_string(PostgresStore::kSchemaVersion)),
+            std::string::npos)
+      << newer.error().message;
+  // A database of version 1 (before terrane_servers) is brought up to date.
+  ASSERT_EQ(run_sql(url_, "DROP TABLE terrane_servers; UPDATE terrane_schema SET version = 1"), "");
+  {
+    auto upgraded = open();
+    ASSERT_TRUE(upgraded);
+    ASSERT_TRUE(upgraded->advertise(1, "127.0.0.1:7001").ok());
+  }
+  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 2 THEN RAISE 'not 2'; END IF; END $$"),
+            "");
   // A damaged blob is a decode error naming the chunk.
-  ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 1"), "");
   ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
   auto store = open();
   ASSERT_TRUE(store);
