@@ -4,8 +4,8 @@
 # root, listening on 127.0.0.1 only, stopped by its pid), N terrane-servers
 # on it (server ids 1..N, each with a metrics endpoint), and a terrane-bots
 # run spread over them (bot i on server i mod N). Prints the bots' report,
-# then per server its CPU, peak memory and what it forwarded, received and
-# read again for the others, then the database's figures (commits, bytes
+# then per server its CPU, peak memory, what it forwarded, received and
+# read again for the others and the clients it redirected away and in, then the database's figures (commits, bytes
 # written per acknowledged edit).
 #   scripts/cluster.sh [SERVERS] [BOTS] [REPORT.json] [extra terrane-bots flags...]
 # Defaults: 2 servers, 20 bots over 512 x 512 voxels around the spawn (every
@@ -152,9 +152,10 @@ for i in $(seq 1 "$servers"); do
   metric() { echo "$m" | awk -v n="$1" '$1 == n {print $2}' | head -n 1; }
   awk -v i="$i" -v h="$hwm" -v c0="${cpu0[$((i - 1))]}" -v c1="$cpu1" -v s="$start" -v e="$end" \
     -v f="$(metric terrane_edits_forwarded_total)" -v r="$(metric terrane_forwarded_edits_received_total)" \
-    -v x="$(metric terrane_chunks_changed_elsewhere_total)" 'BEGIN {
-    printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks read again for the others %d\n",
-           i, h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s), f, r, x }'
+    -v x="$(metric terrane_chunks_changed_elsewhere_total)" -v rs="$(metric terrane_redirects_sent_total)" \
+    -v rr="$(metric terrane_redirects_received_total)" 'BEGIN {
+    printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks read again for the others %d; clients redirected away %d, in %d\n",
+           i, h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s), f, r, x, rs, rr }'
 done
 awk -v c0="$commits0" -v c1="$commits1" -v b0="$bytes0" -v b1="$bytes1" -v s="$start" -v e="$end" -v a="${acked:-0}" \
   -v w="$writes" 'BEGIN {

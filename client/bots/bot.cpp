@@ -70,6 +70,12 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   };
   cb.on_region_hash = [this](const HashCheck& check) { on_region_hash(check); };
   cb.on_disconnected = [this](const std::string& reason) { on_disconnected(reason); };
+  // Several servers: ticks and fan-out are told apart by the server the bot
+  // is on now (redirects move it).
+  cb.on_welcome = [this](const WelcomeMsg& w) { ctx_.fanout->bot_on_server(index_, w.server_id); };
+  cb.on_reconnected = [this] {
+    if (auto w = client_->welcome()) ctx_.fanout->bot_on_server(index_, w->server_id);
+  };
   client_ = std::make_unique<Client>(co, cb);
   std::uniform_real_distribution<float> angle(0.0f, 2.0f * std::numbers::pi_v<float>);
   heading_ = angle(rng_);
@@ -487,6 +493,7 @@ void Bot::finish() {
   if (!result_.connected) return;
   client_->disconnect();
   result_.counters = client_->counters();
+  if (auto w = client_->welcome()) result_.server_id = w->server_id;
 }
 
 bool Bot::closed() const { return client_->closed(); }

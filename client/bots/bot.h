@@ -57,6 +57,7 @@ struct BotResult {
   bool unexpected_disconnect = false;
   std::string disconnect_reason;
   ClientCounters counters;
+  std::uint32_t server_id = 0;  // the server of its last Welcome (several servers: where redirects left it)
 };
 
 class Bot {

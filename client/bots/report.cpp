@@ -131,6 +131,11 @@ std::string report_json(const BotsReport& r) {
   j << "  \"edit_ack_ms\": " << lat(r.edit_ack_ms) << ",\n";
   j << "  \"edit_fanout_ms\": " << lat(r.edit_fanout_ms) << ",\n";
   j << "  \"edit_fanout_other_server_ms\": " << lat(r.edit_fanout_other_server_ms) << ",\n";
+  j << "  \"redirects\": " << r.redirects << ",\n";
+  j << "  \"bots_per_server\": {";
+  for (auto it = r.bots_per_server.begin(); it != r.bots_per_server.end(); ++it)
+    j << (it == r.bots_per_server.begin() ? "" : ", ") << "\"" << it->first << "\": " << it->second;
+  j << "},\n";
   j << "  \"edits_sent\": " << r.edits_sent << ",\n";
   j << "  \"edits_acked\": " << r.edits_acked << ",\n";
   j << "  \"edits_rejected\": " << r.edits_rejected << ",\n";
@@ -233,7 +238,14 @@ std::string report_table(const BotsReport& r) {
   row("joins incomplete", std::to_string(r.joins_incomplete));
   row("edit ack ms", l(r.edit_ack_ms));
   row(r.options.servers.size() > 1 ? "edit fan-out ms, same server" : "edit fan-out ms", l(r.edit_fanout_ms));
-  if (r.options.servers.size() > 1) row("edit fan-out ms, other server", l(r.edit_fanout_other_server_ms));
+  if (r.options.servers.size() > 1) {
+    row("edit fan-out ms, other server", l(r.edit_fanout_other_server_ms));
+    std::string per;
+    for (const auto& [id, n] : r.bots_per_server)
+      per += (per.empty() ? "" : ", ") + std::string("server ") + std::to_string(id) + ": " + std::to_string(n);
+    row("redirects followed", std::to_string(r.redirects));
+    row("bots per server at the end", per);
+  }
   row("edits sent / acked / rejected",
       std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected));
   row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));

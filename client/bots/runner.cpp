@@ -286,6 +286,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     const BotResult& br = bots[i]->result();
     if (!br.connected) continue;
     const ClientCounters& k = br.counters;
+    r.redirects += k.redirects;
+    ++r.bots_per_server[br.server_id];
     r.bytes_received += k.bytes_in;
     r.bytes_sent += k.bytes_out;
     for (std::size_t t = 0; t < kMessageTypeCount; ++t) {

@@ -51,6 +51,10 @@ struct BotsReport {
   std::uint64_t hash_unanswered = 0;
   std::uint64_t min_checks_during_run = 0;
   int unexpected_disconnects = 0;
+  // Several servers: Redirects the bots followed, and how many bots each
+  // server had at the end (by server id).
+  std::uint64_t redirects = 0;
+  std::map<std::uint32_t, int> bots_per_server;
   std::vector<std::pair<int, std::string>> disconnects;  // bot, reason
   int connect_failures = 0;
   std::string first_connect_error;

@@ -106,6 +106,11 @@ void FanoutTracker::chunk_arrived(int bot, Vec3i chunk, Clock::time_point t) {
   if (!held_full_[chunk].insert(bot).second) arrivals_[chunk].emplace_back(bot, t);
 }
 
+void FanoutTracker::bot_on_server(int bot, std::uint32_t server_id) {
+  std::lock_guard lock(mutex_);
+  server_of_bot_[bot] = server_id;
+}
+
 void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
   if (servers_ == 1) return;
   std::lock_guard lock(mutex_);

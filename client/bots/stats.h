@@ -67,6 +67,9 @@ class FanoutTracker {
   // counts: a first arrival is the bot's view reaching it, not an edit.
   void chunk_arrived(int bot, Vec3i chunk, Clock::time_point t);
   void chunk_released(int bot, Vec3i chunk);
+  // The bot was welcomed by this server (its Welcome's server_id): a bot
+  // not yet welcomed counts as on its entry server.
+  void bot_on_server(int bot, std::uint32_t server_id);
   // Joins edits and updates of ticks first seen before now - horizon (every
   // tick when horizon is zero) and forgets them.
   void settle(Clock::time_point now, Clock::duration horizon);
@@ -107,10 +110,16 @@ class FanoutTracker {
     std::vector<Update> updates;
   };
   static std::uint64_t key(int bot, std::uint32_t id) { return (std::uint64_t(std::uint32_t(bot)) << 32) | id; }
-  int server_of(int bot) const { return bot % servers_; }
-  // A server's tick, told apart from another server's same tick number.
+  // Under mutex_: the server a bot is on (its entry server's index, above
+  // every server id, before its first Welcome).
+  std::uint64_t server_of(int bot) const {
+    auto it = server_of_bot_.find(bot);
+    return it != server_of_bot_.end() ? it->second : (std::uint64_t{1} << 32) + static_cast<std::uint64_t>(bot % servers_);
+  }
+  // A server's tick, told apart from another server's same tick number
+  // (server ids modulo 2^16).
   std::uint64_t tick_key(int bot, std::uint64_t tick) const {
-    return (std::uint64_t(std::uint32_t(server_of(bot))) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
+    return ((server_of(bot) & 0xffff) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
   }
   std::size_t second_of(Clock::time_point t) const;
   void add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms);
@@ -122,6 +131,7 @@ class FanoutTracker {
   Totals totals_;
   std::vector<float> ack_ms_, fanout_ms_, fanout_other_ms_;
   const int servers_;
+  std::unordered_map<int, std::uint64_t> server_of_bot_;
   // Several servers: whole-chunk arrivals, chunk -> (bot, when), kept a
   // while past the settle horizon.
   std::unordered_map<Vec3i, std::vector<std::pair<int, Clock::time_point>>, Vec3iHash> arrivals_;
