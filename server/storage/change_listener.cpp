@@ -6,10 +6,15 @@
 
 namespace terrane {
 
+std::string ChangeListener::name_of(std::uint32_t server) {
+  return "terrane-server " + std::to_string(server) + " listener";
+}
+
 StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, std::uint32_t server,
                                                                   Handlers handlers) {
   auto conn = PostgresStore::open(url);
   if (!conn) return conn.error();
+  if (auto n = (*conn)->set_name(name_of(server)); !n) return n.error();
   if (auto l = (*conn)->listen(); !l) return l.error();
   std::unique_ptr<ChangeListener> out(new ChangeListener(url, server, std::move(handlers), std::move(*conn)));
   out->thread_ = std::thread([p = out.get()] { p->run(); });
@@ -39,10 +44,18 @@ void ChangeListener::run() {
       // Connected again and subscribed before anything is read again, so
       // nothing committed after the read can be missed.
       auto again = PostgresStore::open(url_);
-      if (again && (*again)->listen()) {
+      if (again && (*again)->set_name(name_of(server_)) && (*again)->listen()) {
         conn_ = std::move(*again);
         server_log().info("notices from the other servers: listening again; reading again what may have been missed");
         on_.missed();
+        // Answers whose notices went out meanwhile, after the chunks they
+        // acknowledge were marked for reading again.
+        if (auto answers = conn_->take_answers(server_); answers) {
+          for (ForwardAnswer& a : *answers) on_.answer(std::move(a));
+        } else {
+          server_log().warn("notices from the other servers: {}; connecting again", answers.error().message);
+          conn_.reset();
+        }
         continue;
       }
       std::unique_lock lock(mutex_);
@@ -56,11 +69,15 @@ void ChangeListener::run() {
       conn_.reset();
       continue;
     }
-    for (const PostgresStore::Notice& n : *got) hand_on(n);
+    std::vector<std::int64_t> answered;
+    for (const PostgresStore::Notice& n : *got) hand_on(n, answered);
+    // Their rows are not needed once the notices came (a failure leaves
+    // them to the ten-minute sweep).
+    if (!answered.empty()) (void)conn_->forget_answers(answered);
   }
 }
 
-void ChangeListener::hand_on(const PostgresStore::Notice& n) {
+void ChangeListener::hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered) {
   bool read = true;
   if (n.channel == kChangesChannel) {
     auto changes = parse_change_notice(n.payload);
@@ -71,7 +88,10 @@ void ChangeListener::hand_on(const PostgresStore::Notice& n) {
   } else if (n.channel == kAnswersChannel) {
     auto a = parse_answer_notice(n.payload);
     read = a.has_value();
-    if (a && a->from == server_) on_.answer(std::move(*a));
+    if (a && a->from == server_) {
+      answered.push_back(a->id);
+      on_.answer(std::move(*a));
+    }
   }
   if (!read)
     server_log().warn("notices from the other servers: a {} notice that does not read ({} bytes), ignored", n.channel,

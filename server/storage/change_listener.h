@@ -9,7 +9,8 @@
 // connection breaks, notices may have been missed: it connects again
 // (every second until it can), subscribes, and then calls missed, so the
 // owner reads again what it holds of regions it does not write, and its
-// inbox.
+// inbox; then hands on the answers kept for it in the database
+// (PostgresStore::take_answers), whose notices it may have missed.
 //
 // Threading: the callbacks run on the listener's thread. The destructor
 // stops the thread; no callback runs after it returns.
@@ -42,13 +43,16 @@ class ChangeListener {
   static StoreResult<std::unique_ptr<ChangeListener>> open(const std::string& url, std::uint32_t server,
                                                            Handlers handlers);
   ~ChangeListener();
+  // Its connection's application_name in pg_stat_activity.
+  static std::string name_of(std::uint32_t server);
   ChangeListener(const ChangeListener&) = delete;
   ChangeListener& operator=(const ChangeListener&) = delete;
 
  private:
   ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<PostgresStore> conn);
   void run();
-  void hand_on(const PostgresStore::Notice& n);
+  // answered: the ids of answers to this server handed on.
+  void hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered);
 
   const std::string url_;
   const std::uint32_t server_;

@@ -299,9 +299,14 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
            "  PRIMARY KEY (rx, ry, rz))",
-           // Version 2: where each server takes clients (redirects).
+           // Version 2: where each server takes clients (redirects), and
+           // answers to forwarded edits kept until their sender read them.
            "CREATE TABLE IF NOT EXISTS terrane_servers ("
-           "  id integer PRIMARY KEY, address text NOT NULL, seen_at timestamptz NOT NULL)"}) {
+           "  id integer PRIMARY KEY, address text NOT NULL, seen_at timestamptz NOT NULL)",
+           "CREATE TABLE IF NOT EXISTS terrane_answers ("
+           "  id bigint PRIMARY KEY, from_server integer NOT NULL, accepted boolean NOT NULL, tick bigint NOT NULL,"
+           "  reason text NOT NULL, answered_at timestamptz NOT NULL)",
+           "CREATE INDEX IF NOT EXISTS terrane_answers_from ON terrane_answers (from_server)"}) {
     auto made = c->exec("create schema", table);
     if (!made) return c->abort(made.error());
   }
@@ -312,7 +317,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
                        {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) == 1) {
-    // Version 1 lacks terrane_servers only, made above.
+    // Version 1 lacks terrane_servers and terrane_answers only, made above.
     auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) != kSchemaVersion) {
@@ -599,6 +604,13 @@ std::vector<Param> region_range(Vec3i region) {
 
 }  // namespace
 
+StoreResult<Ok> PostgresStore::set_name(const std::string& application_name) {
+  auto r = c_->exec("name connection", "SELECT set_config('application_name', $1, false)",
+                    {Param{application_name, false}});
+  if (!r) return r.error();
+  return Ok{};
+}
+
 StoreResult<Ok> PostgresStore::listen() {
   for (const char* sql : {"LISTEN terrane_changes", "LISTEN terrane_inbox", "LISTEN terrane_answers"}) {
     auto r = c_->exec("listen for notices", sql);
@@ -655,9 +667,17 @@ std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload) {
 
 StoreResult<Ok> PostgresStore::answer_in_transaction(std::span<const ForwardAnswer> answers) {
   for (const ForwardAnswer& a : answers) {
-    // Answered: the row goes (the answer travels in the notice).
+    // Answered: the row goes. The answer travels in the notice, and stays
+    // in terrane_answers until its sender has it (a sender whose listener
+    // was reconnecting when the notice went out reads it there).
     auto r = c_->exec("answer forwarded edit", "DELETE FROM terrane_inbox WHERE id = $1", {text(a.id)});
     if (!r) return r.error();
+    auto kept = c_->exec("keep answer",
+                         "INSERT INTO terrane_answers (id, from_server, accepted, tick, reason, answered_at)"
+                         " VALUES ($1, $2, $3, $4, $5, clock_timestamp()) ON CONFLICT (id) DO NOTHING",
+                         {text(a.id), text(a.from), Param{a.accepted ? "true" : "false", false},
+                          text(static_cast<std::int64_t>(a.tick)), Param{a.reason.substr(0, 256), false}});
+    if (!kept) return kept.error();
     auto n = c_->exec("notify answer", "SELECT pg_notify($1, $2)",
                       {Param{kAnswersChannel, false}, Param{answer_notice(a), false}});
     if (!n) return n.error();
@@ -674,6 +694,30 @@ StoreResult<T> PostgresStore::transaction(const char* what, const std::function<
   auto commit = c_->exec(what, "COMMIT");
   if (!commit) return c_->abort(commit.error());
   return out;
+}
+
+StoreResult<std::vector<ForwardAnswer>> PostgresStore::take_answers(std::uint32_t from) {
+  auto r = c_->exec("take answers",
+                    "DELETE FROM terrane_answers WHERE from_server = $1 RETURNING id, accepted, tick, reason",
+                    {text(from)});
+  if (!r) return r.error();
+  std::vector<ForwardAnswer> out;
+  for (int row = 0; row < r->count(); ++row) {
+    const auto id = r->integer(row, 0), tick = r->integer(row, 2);
+    if (!id || !tick || *tick < 0) continue;  // not a row this build wrote: left out
+    out.push_back(ForwardAnswer{*id, from, r->get(row, 1) == "t", static_cast<std::uint64_t>(*tick), r->get(row, 3)});
+  }
+  return out;
+}
+
+StoreResult<Ok> PostgresStore::forget_answers(std::span<const std::int64_t> ids) {
+  // Rows nobody took (a sender that stopped) go after ten minutes.
+  auto r = c_->exec("forget answers",
+                    "DELETE FROM terrane_answers WHERE id = ANY($1::bigint[])"
+                    " OR answered_at < clock_timestamp() - interval '10 minutes'",
+                    {Param{fmt::format("{{{}}}", fmt::join(ids, ",")), false}});
+  if (!r) return r.error();
+  return Ok{};
 }
 
 StoreResult<Ok> PostgresStore::answer(std::span<const ForwardAnswer> answers) {

@@ -185,6 +185,13 @@ class PostgresStore final : public WorldStore {
   StoreResult<std::vector<InboxEdit>> inbox(std::uint32_t to, std::int64_t after, std::size_t limit);
   // Answers without writing chunks (edits refused).
   StoreResult<Ok> answer(std::span<const ForwardAnswer> answers);
+  // Every answer is also kept in terrane_answers until its sender has it:
+  // take_answers hands over (and deletes) those to edits server from
+  // forwarded (a listener that reconnected may have missed their notices);
+  // forget_answers deletes those whose notices arrived, and any older than
+  // ten minutes.
+  StoreResult<std::vector<ForwardAnswer>> take_answers(std::uint32_t from);
+  StoreResult<Ok> forget_answers(std::span<const std::int64_t> ids);
 
   // Subscribes this connection to terrane_changes; wait_notices then
   // returns the payloads that arrived, waiting up to timeout for the first.
@@ -193,6 +200,9 @@ class PostgresStore final : public WorldStore {
   // (And on terrane_inbox and terrane_answers: wait_notices returns every
   // channel's payloads, each with its channel.)
   StoreResult<Ok> listen();
+  // Names this connection in pg_stat_activity (operators see which server
+  // and which part of it a session is).
+  StoreResult<Ok> set_name(const std::string& application_name);
   struct Notice {
     std::string channel, payload;
   };
