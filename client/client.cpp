@@ -174,6 +174,15 @@ void Client::start_session() {
     }
     if (last_state_) frames.push_back({build_client_state(*last_state_), wire::Body::ClientState});
   }
+  // Positions queued while the link was down (or a Redirect held the
+  // queue) are older than the one just put first: sent after it, they
+  // would move the client back in a burst, faster than a server allows.
+  if (std::any_of(frames.begin(), frames.end(), [](const Outbound& o) { return o.type == wire::Body::ClientState; }))
+    std::erase_if(send_queue_, [&](const Outbound& o) {
+      if (o.type != wire::Body::ClientState) return false;
+      queued_bytes_.fetch_sub(o.frame.size(), std::memory_order_relaxed);
+      return true;
+    });
   // Ahead of anything the application queued while the link was down.
   for (auto it = frames.rbegin(); it != frames.rend(); ++it) {
     queued_bytes_.fetch_add(it->frame.size(), std::memory_order_relaxed);

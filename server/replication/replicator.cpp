@@ -242,6 +242,7 @@ void Replicator::maybe_redirect() {
   const Vec3i region = coarse_region_of(view_chunk(state_.position));
   const ServerAddress* to = map->writer_of(region);
   if (to == nullptr || to->id == options_.server_id) return;
+  if (now - map->written_since(region).value_or(now) < kRedirectStable) return;
   // Well inside: the margin from every face of the region, so a client on
   // a border does not go back and forth.
   constexpr double kRegionVoxels = kCoarseRegionChunks * kChunkSize;

@@ -102,6 +102,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // of writers it is judged by may be a renewal round old.
   static constexpr std::chrono::seconds kRedirectSettle{3};
   static constexpr std::chrono::seconds kRedirectCheck{1};
+  // Nor to a server that has written the region for less than this (a
+  // region handed back and forth across a busy border would send its
+  // clients back and forth).
+  static constexpr std::chrono::seconds kRedirectStable{10};
 
   // cluster: who writes which region, in a world shared by several
   // servers (null: one server, no redirects).

@@ -28,17 +28,30 @@ std::string ServerAddress::text() const {
 }
 
 ClusterMap::ClusterMap(const std::vector<RegionWriter>& writers, const std::vector<ServerAddress>& servers,
-                       Clock::time_point read_at)
+                       Clock::time_point read_at, const ClusterMap* previous)
     : read_at_(read_at) {
-  for (const RegionWriter& w : writers) writers_[w.region] = w.server;
+  for (const RegionWriter& w : writers) {
+    Lease l{w.server, w.epoch, read_at};
+    if (previous != nullptr)
+      if (auto p = previous->writers_.find(w.region);
+          p != previous->writers_.end() && p->second.server == w.server && p->second.epoch == w.epoch)
+        l.since = p->second.since;
+    writers_[w.region] = l;
+  }
   for (const ServerAddress& s : servers) servers_[s.id] = s;
 }
 
 const ServerAddress* ClusterMap::writer_of(Vec3i region) const {
   auto it = writers_.find(region);
   if (it == writers_.end()) return nullptr;
-  auto s = servers_.find(it->second);
+  auto s = servers_.find(it->second.server);
   return s == servers_.end() ? nullptr : &s->second;
+}
+
+std::optional<ClusterMap::Clock::time_point> ClusterMap::written_since(Vec3i region) const {
+  auto it = writers_.find(region);
+  if (it == writers_.end()) return std::nullopt;
+  return it->second.since;
 }
 
 }  // namespace terrane

@@ -37,27 +37,41 @@ struct ServerAddress {
 // *error saying what is wrong with it.
 std::optional<ServerAddress> parse_server_address(std::string_view text, std::string* error);
 
-// A current lease: region (8 x 8 x 8 chunks) and the server writing it.
+// A current lease: region (8 x 8 x 8 chunks), the server writing it and
+// the lease's epoch (a new one each time the region changes hands).
 struct RegionWriter {
   Vec3i region;
   std::uint32_t server = 0;
+  std::uint64_t epoch = 0;
 };
 
 class ClusterMap {
  public:
   using Clock = std::chrono::steady_clock;
-  ClusterMap(const std::vector<RegionWriter>& writers, const std::vector<ServerAddress>& servers, Clock::time_point read_at);
+  // previous: the map this one follows, if any: a region whose lease
+  // (writer and epoch) is unchanged keeps the time it was first seen.
+  ClusterMap(const std::vector<RegionWriter>& writers, const std::vector<ServerAddress>& servers, Clock::time_point read_at,
+             const ClusterMap* previous = nullptr);
   ClusterMap(const ClusterMap&) = delete;
   ClusterMap& operator=(const ClusterMap&) = delete;
 
   // The server writing region and its address; nullptr when no server holds
   // a current lease on it, or its holder advertises no address.
   const ServerAddress* writer_of(Vec3i region) const;
+  // Since when the maps have seen region's current lease (its writer and
+  // epoch); nullopt when nobody writes it. Regions handed back and forth
+  // across a busy border are young.
+  std::optional<Clock::time_point> written_since(Vec3i region) const;
   Clock::time_point read_at() const { return read_at_; }
   std::size_t regions() const { return writers_.size(); }
 
  private:
-  Vec3iMap<std::uint32_t> writers_;
+  struct Lease {
+    std::uint32_t server = 0;
+    std::uint64_t epoch = 0;
+    Clock::time_point since;
+  };
+  Vec3iMap<Lease> writers_;
   std::unordered_map<std::uint32_t, ServerAddress> servers_;
   Clock::time_point read_at_;
 };

@@ -155,7 +155,8 @@ void LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirector
   if (auto seen = renewer_->advertise(owner_, address); !seen || directory == nullptr) return;
   auto c = renewer_->cluster(times_.lease);
   if (!c) return;
-  directory->publish(std::make_shared<const ClusterMap>(c->writers, c->servers, std::chrono::steady_clock::now()));
+  last_map_ = std::make_shared<const ClusterMap>(c->writers, c->servers, std::chrono::steady_clock::now(), last_map_.get());
+  directory->publish(last_map_);
 }
 
 void LeaseKeeper::renew_loop() {

@@ -106,6 +106,7 @@ class LeaseKeeper {
   std::string address_;
   ClusterDirectory* directory_ = nullptr;
   bool round_now_ = false;
+  std::shared_ptr<const ClusterMap> last_map_;  // keeper thread: the map published last
   std::thread thread_;
 };
 

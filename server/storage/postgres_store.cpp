@@ -464,14 +464,15 @@ StoreResult<PostgresStore::Cluster> PostgresStore::cluster(std::chrono::millisec
     a->id = static_cast<std::uint32_t>(*id);
     out.servers.push_back(std::move(*a));
   }
-  auto leases = c_->exec("read leases", "SELECT rx, ry, rz, owner FROM terrane_leases WHERE expires_at > clock_timestamp()");
+  auto leases = c_->exec("read leases",
+                         "SELECT rx, ry, rz, owner, epoch FROM terrane_leases WHERE expires_at > clock_timestamp()");
   if (!leases) return leases.error();
   for (int row = 0; row < leases->count(); ++row) {
     const auto x = leases->integer(row, 0), y = leases->integer(row, 1), z = leases->integer(row, 2),
-               owner = leases->integer(row, 3);
-    if (!x || !y || !z || !owner || *owner < 0 || *owner > kMaxServerId) continue;
+               owner = leases->integer(row, 3), epoch = leases->integer(row, 4);
+    if (!x || !y || !z || !owner || *owner < 0 || *owner > kMaxServerId || !epoch || *epoch < 1) continue;
     out.writers.push_back(RegionWriter{{static_cast<int>(*x), static_cast<int>(*y), static_cast<int>(*z)},
-                                       static_cast<std::uint32_t>(*owner)});
+                                       static_cast<std::uint32_t>(*owner), static_cast<std::uint64_t>(*epoch)});
   }
   return out;
 }

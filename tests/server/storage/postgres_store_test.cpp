@@ -123,6 +123,25 @@ TEST_F(PostgresStoreTest, ServersSayWhereClientsReachThemAndTheMapNamesEachRegio
   EXPECT_EQ(later->writers.size(), 2u);
 }
 
+TEST(ClusterMapTest, ALeaseKeepsTheTimeItWasFirstSeenUntilItChangesHands) {
+  using Clock = ClusterMap::Clock;
+  const Clock::time_point t0{}, t1 = t0 + 1s, t2 = t0 + 2s;
+  const std::vector<ServerAddress> servers{{1, "a", 1}, {2, "b", 2}};
+  const ClusterMap first({{{0, 0, 0}, 1, 5}, {{1, 0, 0}, 1, 3}}, servers, t0);
+  // (1,0,0) is handed to server 2, (0,0,0) claimed again by its writer (a
+  // new epoch: a restart), (2,0,0) new.
+  const ClusterMap second({{{0, 0, 0}, 1, 5}, {{1, 0, 0}, 2, 4}, {{2, 0, 0}, 2, 1}}, servers, t1, &first);
+  EXPECT_EQ(second.written_since({0, 0, 0}), t0);
+  EXPECT_EQ(second.written_since({1, 0, 0}), t1);
+  EXPECT_EQ(second.written_since({2, 0, 0}), t1);
+  EXPECT_EQ(second.writer_of({1, 0, 0})->id, 2u);
+  const ClusterMap third({{{0, 0, 0}, 1, 6}, {{1, 0, 0}, 2, 4}}, servers, t2, &second);
+  EXPECT_EQ(third.written_since({0, 0, 0}), t2);
+  EXPECT_EQ(third.written_since({1, 0, 0}), t1);
+  EXPECT_EQ(third.written_since({2, 0, 0}), std::nullopt);
+  EXPECT_EQ(third.writer_of({2, 0, 0}), nullptr);
+}
+
 TEST(ServerAddressTest, ParsesHostAndPortAndSaysWhatIsWrong) {
   std::string why;
   auto a = parse_server_address("game.example:7777", &why);
