@@ -828,6 +828,14 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
           refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
           continue;
         }
+        if (!take_forwarded_rate(in.player)) {
+          counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+          refused.push_back(ForwardAnswer{
+              in.id, in.from, false, 0,
+              fmt::format("edit rate limit: '{}' sent more than {} edits a second through the servers of this world",
+                          in.player, options_.edits_per_second)});
+          continue;
+        }
         counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
         reserve(r);
         // What this server knew of the edit's regions held elsewhere may be
@@ -851,6 +859,16 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
       if (std::exchange(inbox_again_, false)) take_inbox();
     });
   });
+}
+
+bool WorldOwner::take_forwarded_rate(const std::string& player) {
+  if (options_.edits_per_second <= 0) return true;
+  // Bounded: players idle long enough to have a full bucket are forgotten.
+  if (forwarded_rate_.size() >= 4096)
+    for (auto it = forwarded_rate_.begin(); it != forwarded_rate_.end();)
+      it = it->second.available() >= options_.edits_per_second * 2 ? forwarded_rate_.erase(it) : std::next(it);
+  auto [it, fresh] = forwarded_rate_.try_emplace(player, options_.edits_per_second, options_.edits_per_second * 2);
+  return it->second.take(1);
 }
 
 std::chrono::milliseconds WorldOwner::forward_wait() const {

@@ -50,6 +50,7 @@
 #include "common/voxel/grid.h"
 #include "common/voxel/vec3_map.h"
 #include "common/world/world.h"
+#include "server/net/limits.h"
 #include "server/options.h"
 #include "server/storage/postgres_store.h"
 #include "server/storage/storage.h"
@@ -385,6 +386,8 @@ class WorldOwner : private WorldView {
   // Loads cp unless a load of it is under way.
   void load_unless_loading(Vec3i cp, Storage::Priority priority);
   // How long a forwarded edit waits for its owner's answer.
+  // One forwarded edit of player within its rate (forwarded_rate_).
+  bool take_forwarded_rate(const std::string& player);
   std::chrono::milliseconds forward_wait() const;
   // Sends pe (a client's edit of box, in regions server to holds) to that
   // server's inbox, handing over first the regions of box this server
@@ -413,6 +416,10 @@ class WorldOwner : private WorldView {
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
   std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
   std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
+  // Forwarded edits per player, whatever server they came through, at the
+  // rate a session may keep up: a player cannot pass it by editing here
+  // through several servers at once.
+  std::unordered_map<std::string, TokenBucket> forwarded_rate_;
   bool inbox_reading_ = false, inbox_again_ = false;
   // Answers that came before their forward's own callback.
   std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;

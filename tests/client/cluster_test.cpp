@@ -48,10 +48,11 @@ class ClusterTest : public testing_support::PostgresTest {
   // to run out.
   // Edits may be tried again at once while a region is another server's
   // (refused without waiting), so the edit rate is no bound here.
-  ServerProcess& start(std::uint32_t id, int lease_ms = 5000) {
+  ServerProcess& start(std::uint32_t id, int lease_ms = 5000, int edits_per_second = 100000) {
     servers_.push_back(std::make_unique<ServerProcess>(
         url_, std::vector<std::string>{"--server-id", std::to_string(id), "--lease-ms", std::to_string(lease_ms),
-                                       "--hash-push-ms", "0", "--edits-per-second", "100000"}));
+                                       "--hash-push-ms", "0", "--edits-per-second",
+                                       std::to_string(edits_per_second)}));
     EXPECT_NE(servers_.back()->port(), 0) << servers_.back()->output();
     return *servers_.back();
   }
@@ -409,6 +410,43 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   EXPECT_TRUE(replica_shows(cy, across, av));
   EXPECT_TRUE(replica_shows(cy, east2, ev2));
   cy.disconnect();
+}
+
+// A player's edits forwarded to a region's server are held to the edit rate
+// there, whatever server they come through: its own server allows more.
+TEST_F(ClusterTest, ForwardedEditsAreHeldToThePlayersEditRateAtTheRegionsServer) {
+  ServerProcess& a = start(1, 5000, 1);  // 1 edit a second, a burst of 2
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  ClientOptions ao = options(a, "ann");
+  Client ann(ao);
+  join(ann);
+  const Region box = box_near(ann, 0);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, pattern(box, materials::kBrick))), "");
+  // Server 1 writes the region now; bob, on server 2, edits there at once
+  // ten times: forwarded, the first few applied, the rest refused.
+  Client bob(options(b, "bob"));
+  join(bob);
+  std::vector<std::uint32_t> ids;
+  for (int i = 0; i < 10; ++i) ids.push_back(bob.write_box(box, pattern(box, static_cast<Material>(materials::kBrick + i % 4))));
+  int accepted = 0, limited = 0;
+  for (const std::uint32_t id : ids) {
+    const std::string why = outcome(bob, id);
+    if (why.empty())
+      ++accepted;
+    else if (why.find("edit rate limit") != std::string::npos)
+      ++limited;
+    else
+      ADD_FAILURE() << "refused otherwise: " << why;
+  }
+  // The burst, and what refilled while they were forwarded one by one.
+  EXPECT_GE(accepted, 1);
+  EXPECT_GE(limited, 1);
+  EXPECT_EQ(accepted + limited, 10);
+  EXPECT_FALSE(bob.closed()) << bob.disconnect_reason();
+  ann.disconnect();
+  bob.disconnect();
 }
 
 // A client that walks well inside a region another server writes is sent
