@@ -87,8 +87,8 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
     on.changes = [owner](std::vector<ChunkChange> changes) { owner->changed_elsewhere(std::move(changes)); };
     on.inbox = [owner] { owner->inbox_has_edits(); };
     on.answer = [owner](ForwardAnswer a) { owner->answered(std::move(a)); };
-    on.missed = [owner] {
-      owner->read_again_elsewhere();
+    on.missed = [owner](std::vector<Vec3i> regions) {
+      owner->read_again_elsewhere(std::move(regions));
       owner->inbox_has_edits();
     };
     auto listener = ChangeListener::open(options.store_url, options.server_id, std::move(on));

@@ -17,6 +17,8 @@ StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::str
   if (auto n = (*conn)->set_name(name_of(server)); !n) return n.error();
   if (auto l = (*conn)->listen(); !l) return l.error();
   std::unique_ptr<ChangeListener> out(new ChangeListener(url, server, std::move(handlers), std::move(*conn)));
+  // Subscribed first: every write after this read is in a notice.
+  if (auto seqs = out->read_seqs(); !seqs) return seqs.error();
   out->thread_ = std::thread([p = out.get()] { p->run(); });
   return out;
 }
@@ -46,8 +48,15 @@ void ChangeListener::run() {
       auto again = PostgresStore::open(url_);
       if (again && (*again)->set_name(name_of(server_)) && (*again)->listen()) {
         conn_ = std::move(*again);
-        server_log().info("notices from the other servers: listening again; reading again what may have been missed");
-        on_.missed();
+        auto moved = read_seqs();
+        if (!moved) {
+          server_log().warn("notices from the other servers: {}; connecting again", moved.error().message);
+          conn_.reset();
+          continue;
+        }
+        server_log().info("notices from the other servers: listening again; {} regions written meanwhile are read again",
+                          moved->size());
+        on_.missed(std::move(*moved));
         // Answers whose notices went out meanwhile, after the chunks they
         // acknowledge were marked for reading again.
         if (auto answers = conn_->take_answers(server_); answers) {
@@ -77,12 +86,39 @@ void ChangeListener::run() {
   }
 }
 
+StoreResult<std::vector<Vec3i>> ChangeListener::read_seqs() {
+  auto now = conn_->region_seqs();
+  if (!now) return now.error();
+  std::vector<Vec3i> moved;
+  for (const RegionSeq& r : *now) {
+    std::uint64_t& known = seqs_[{r.region.x, r.region.y, r.region.z}];
+    if (r.seq > known) {
+      moved.push_back(r.region);
+      known = r.seq;
+    }
+  }
+  return moved;
+}
+
 void ChangeListener::hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered) {
   bool read = true;
   if (n.channel == kChangesChannel) {
-    auto changes = parse_change_notice(n.payload);
-    read = changes.has_value();
-    if (changes) on_.changes(std::move(*changes));
+    auto notice = parse_change_notice(n.payload);
+    read = notice.has_value();
+    if (notice) {
+      std::vector<Vec3i> skipped;
+      for (const RegionSeq& r : notice->regions) {
+        std::uint64_t& known = seqs_[{r.region.x, r.region.y, r.region.z}];
+        if (r.seq > known + 1) skipped.push_back(r.region);
+        known = std::max(known, r.seq);
+      }
+      if (!notice->chunks.empty()) on_.changes(std::move(notice->chunks));
+      if (!skipped.empty()) {
+        server_log().warn("notices from the other servers: {} regions skipped a write; reading them again",
+                          skipped.size());
+        on_.missed(std::move(skipped));
+      }
+    }
   } else if (n.channel == kInboxChannel) {
     if (n.payload == server_text_) on_.inbox();
   } else if (n.channel == kAnswersChannel) {

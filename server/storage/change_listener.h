@@ -5,12 +5,18 @@
 // A thread of its own holds a connection subscribed to the three channels
 // and hands on: each change notice's chunks and revisions (changes); that
 // this server's inbox has edits (inbox); an answer to an edit this server
-// forwarded (answer). Notices for other servers are left out. When the
-// connection breaks, notices may have been missed: it connects again
-// (every second until it can), subscribes, and then calls missed, so the
-// owner reads again what it holds of regions it does not write, and its
-// inbox; then hands on the answers kept for it in the database
-// (PostgresStore::take_answers), whose notices it may have missed.
+// forwarded (answer). Notices for other servers are left out.
+//
+// It follows each region's write sequence (+1 per commit writing it, in
+// the notices): it reads them all once subscribed, then from the notices.
+// When the connection breaks, notices may have been missed: it connects
+// again (every second until it can), subscribes, reads the sequences again
+// and calls missed with the regions whose sequence moved meanwhile, so the
+// owner reads again what it holds of those, and its inbox; then hands on
+// the answers kept for it in the database (PostgresStore::take_answers),
+// whose notices it may have missed. A notice whose sequence skips one (a
+// notice lost, which PostgreSQL does not do while connected) calls missed
+// with its region too.
 //
 // Threading: the callbacks run on the listener's thread. The destructor
 // stops the thread; no callback runs after it returns.
@@ -19,6 +25,8 @@
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
+#include <map>
+#include <tuple>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -35,7 +43,7 @@ class ChangeListener {
     std::function<void(std::vector<ChunkChange>)> changes;
     std::function<void()> inbox;
     std::function<void(ForwardAnswer)> answer;
-    std::function<void()> missed;
+    std::function<void(std::vector<Vec3i> regions)> missed;
   };
 
   // Connects and subscribes before returning, so no commit after open() is
@@ -53,12 +61,16 @@ class ChangeListener {
   void run();
   // answered: the ids of answers to this server handed on.
   void hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered);
+  // Reads every region's sequence; returns those that moved since known
+  // (all of them the first time: nothing is held yet then).
+  StoreResult<std::vector<Vec3i>> read_seqs();
 
   const std::string url_;
   const std::uint32_t server_;
   const std::string server_text_;  // as inbox notices name it
   const Handlers on_;
   std::unique_ptr<PostgresStore> conn_;  // the thread's
+  std::map<std::tuple<int, int, int>, std::uint64_t> seqs_;  // the thread's: region -> write sequence seen
   std::mutex mutex_;  // guards stopping_
   std::condition_variable wake_;
   bool stopping_ = false;

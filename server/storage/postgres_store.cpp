@@ -191,28 +191,31 @@ struct PostgresStore::Connection {
 
 Vec3i lease_region_of(Vec3i chunk_pos) { return coarse_region_of(chunk_pos); }
 
-std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks) {
+std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std::span<const RegionSeq> regions) {
   std::vector<std::string> out;
   std::string payload;
-  for (const ChunkWrite& w : chunks) {
-    const std::string entry = fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision);
+  auto add = [&](const std::string& entry) {
     if (!payload.empty() && payload.size() + 1 + entry.size() > kMaxChangeNoticeBytes) {
       out.push_back(std::move(payload));
       payload.clear();
     }
     if (!payload.empty()) payload += ' ';
     payload += entry;
-  }
+  };
+  for (const RegionSeq& r : regions) add(fmt::format("r,{},{},{},{}", r.region.x, r.region.y, r.region.z, r.seq));
+  for (const ChunkWrite& w : chunks) add(fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision));
   if (!payload.empty()) out.push_back(std::move(payload));
   return out;
 }
 
-std::optional<std::vector<ChunkChange>> parse_change_notice(std::string_view payload) {
-  std::vector<ChunkChange> out;
+std::optional<ChangeNotice> parse_change_notice(std::string_view payload) {
+  ChangeNotice out;
   while (!payload.empty()) {
     const std::size_t end = std::min(payload.find(' '), payload.size());
     std::string_view entry = payload.substr(0, end);
     payload.remove_prefix(std::min(end + 1, payload.size()));
+    const bool region = entry.substr(0, 2) == "r,";
+    if (region) entry.remove_prefix(2);
     std::int64_t v[4];
     for (int i = 0; i < 4; ++i) {
       const std::size_t comma = i < 3 ? entry.find(',') : entry.size();
@@ -224,9 +227,11 @@ std::optional<std::vector<ChunkChange>> parse_change_notice(std::string_view pay
     const auto fits = [](std::int64_t c) { return c >= std::numeric_limits<std::int32_t>::min() &&
                                                   c <= std::numeric_limits<std::int32_t>::max(); };
     if (!fits(v[0]) || !fits(v[1]) || !fits(v[2]) || v[3] < 0) return std::nullopt;
-    out.push_back(ChunkChange{{static_cast<std::int32_t>(v[0]), static_cast<std::int32_t>(v[1]),
-                               static_cast<std::int32_t>(v[2])},
-                              static_cast<std::uint64_t>(v[3])});
+    const Vec3i p{static_cast<std::int32_t>(v[0]), static_cast<std::int32_t>(v[1]), static_cast<std::int32_t>(v[2])};
+    if (region)
+      out.regions.push_back(RegionSeq{p, static_cast<std::uint64_t>(v[3])});
+    else
+      out.chunks.push_back(ChunkChange{p, static_cast<std::uint64_t>(v[3])});
   }
   return out;
 }
@@ -298,7 +303,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
            "  owner integer NOT NULL, epoch bigint NOT NULL, expires_at timestamptz NOT NULL,"
-           "  PRIMARY KEY (rx, ry, rz))",
+           "  seq bigint NOT NULL DEFAULT 0, PRIMARY KEY (rx, ry, rz))",
            // Version 2: where each server takes clients (redirects), and
            // answers to forwarded edits kept until their sender read them.
            "CREATE TABLE IF NOT EXISTS terrane_servers ("
@@ -306,7 +311,8 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "CREATE TABLE IF NOT EXISTS terrane_answers ("
            "  id bigint PRIMARY KEY, from_server integer NOT NULL, accepted boolean NOT NULL, tick bigint NOT NULL,"
            "  reason text NOT NULL, answered_at timestamptz NOT NULL)",
-           "CREATE INDEX IF NOT EXISTS terrane_answers_from ON terrane_answers (from_server)"}) {
+           "CREATE INDEX IF NOT EXISTS terrane_answers_from ON terrane_answers (from_server)",
+           "ALTER TABLE terrane_leases ADD COLUMN IF NOT EXISTS seq bigint NOT NULL DEFAULT 0"}) {
     auto made = c->exec("create schema", table);
     if (!made) return c->abort(made.error());
   }
@@ -317,7 +323,8 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
                        {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) == 1) {
-    // Version 1 lacks terrane_servers and terrane_answers only, made above.
+    // Version 1 lacks terrane_servers, terrane_answers and the leases'
+    // seq only, made above.
     auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) != kSchemaVersion) {
@@ -432,6 +439,19 @@ StoreResult<std::optional<RegionLease>> PostgresStore::holder(Vec3i region) {
       RegionLease{region, static_cast<std::uint32_t>(*owner), static_cast<std::uint64_t>(*epoch)}};
 }
 
+StoreResult<std::vector<RegionSeq>> PostgresStore::region_seqs() {
+  auto r = c_->exec("read region sequences", "SELECT rx, ry, rz, seq FROM terrane_leases WHERE seq > 0");
+  if (!r) return r.error();
+  std::vector<RegionSeq> out;
+  for (int row = 0; row < r->count(); ++row) {
+    const auto x = r->integer(row, 0), y = r->integer(row, 1), z = r->integer(row, 2), seq = r->integer(row, 3);
+    if (!x || !y || !z || !seq || *seq < 0) continue;
+    out.push_back(RegionSeq{{static_cast<int>(*x), static_cast<int>(*y), static_cast<int>(*z)},
+                            static_cast<std::uint64_t>(*seq)});
+  }
+  return out;
+}
+
 StoreResult<Ok> PostgresStore::advertise(std::uint32_t id, const std::string& address) {
   if (id > kMaxServerId) return StoreError{StoreError::Kind::kQuery, fmt::format("server id {} is not below 2^31", id)};
   auto r = c_->exec("advertise server",
@@ -493,13 +513,19 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
   }
   auto begin = c_->exec("begin", "BEGIN");
   if (!begin) return begin.error();
+  // Checking a lease locks its row (as a takeover's update would) and
+  // moves the region's write sequence on.
+  std::vector<RegionSeq> seqs;
   for (const auto& [key, l] : used) {
     auto r = c_->exec("check lease",
-                      "SELECT 1 FROM terrane_leases WHERE rx = $1 AND ry = $2 AND rz = $3 AND owner = $4"
-                      " AND epoch = $5 AND expires_at > clock_timestamp() FOR UPDATE",
+                      "UPDATE terrane_leases SET seq = seq + 1 WHERE rx = $1 AND ry = $2 AND rz = $3 AND owner = $4"
+                      " AND epoch = $5 AND expires_at > clock_timestamp() RETURNING seq",
                       {text(l.region.x), text(l.region.y), text(l.region.z), text(l.owner),
                        text(static_cast<std::int64_t>(l.epoch))});
     if (!r) return c_->abort(r.error());
+    if (r->count() == 1)
+      if (const auto seq = r->integer(0, 0); seq && *seq > 0)
+        seqs.push_back(RegionSeq{l.region, static_cast<std::uint64_t>(*seq)});
     if (r->count() == 0)
       return c_->abort(StoreError{StoreError::Kind::kFenced,
                                   fmt::format("region {}: the lease of server {} at epoch {} is no longer current; "
@@ -539,7 +565,7 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
   }
   // The news for the other servers, delivered by PostgreSQL at the commit
   // and only if it commits: each chunk written with its revision.
-  for (const std::string& payload : change_notices(chunks)) {
+  for (const std::string& payload : change_notices(chunks, seqs)) {
     auto r = c_->exec("notify changes", "SELECT pg_notify($1, $2)", {Param{kChangesChannel, false}, Param{payload, false}});
     if (!r) return c_->abort(r.error());
   }

@@ -65,6 +65,14 @@ struct RegionLease {
   friend bool operator==(const RegionLease&, const RegionLease&) = default;
 };
 
+// A region's write sequence: +1 with each commit that writes it (kept
+// across changes of hands), so a reader that missed a notice finds out.
+struct RegionSeq {
+  Vec3i region;
+  std::uint64_t seq = 0;
+  friend bool operator==(const RegionSeq&, const RegionSeq&) = default;
+};
+
 // Edits forwarded between servers (STORE_POSTGRESQL.md, "Forwarded
 // edits"): a server sends an edit in a region another server holds to that
 // server's inbox (a row, and a notice on terrane_inbox naming the server);
@@ -173,6 +181,9 @@ class PostgresStore final : public WorldStore {
   FileStatus save_answering(std::span<const ChunkWrite> writes, std::span<const EditLogEntry> log,
                             std::span<const ForwardAnswer> answers);
 
+  // Every region's write sequence number (regions never written under a
+  // lease have none: 0).
+  StoreResult<std::vector<RegionSeq>> region_seqs();
   // The stored chunks of a region and their revisions.
   StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> stored_revisions(Vec3i region);
 
@@ -262,9 +273,11 @@ class PostgresStore final : public WorldStore {
 
 // The news between servers (STORE_POSTGRESQL.md, "Notices"): every fenced
 // write notifies channel terrane_changes, in its transaction, of each chunk
-// it wrote and the chunk's new revision. Payloads are text: entries
-// "x,y,z,revision" separated by one space, at most kMaxChangeNoticeBytes
-// each (more chunks: more notices).
+// it wrote and the chunk's new revision, and of each region it wrote and
+// the region's new sequence number (+1 per write of it). Payloads are
+// text: entries "x,y,z,revision" (a chunk) and "r,x,y,z,seq" (a region)
+// separated by one space, at most kMaxChangeNoticeBytes each (more
+// entries: more notices).
 inline constexpr const char* kChangesChannel = "terrane_changes";
 inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
 struct ChunkChange {
@@ -272,9 +285,13 @@ struct ChunkChange {
   std::uint64_t revision = 0;
   friend bool operator==(const ChunkChange&, const ChunkChange&) = default;
 };
-std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks);
+struct ChangeNotice {
+  std::vector<ChunkChange> chunks;
+  std::vector<RegionSeq> regions;
+};
+std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std::span<const RegionSeq> regions = {});
 // nullopt if the payload is not one (another program's notice, damage).
-std::optional<std::vector<ChunkChange>> parse_change_notice(std::string_view payload);
+std::optional<ChangeNotice> parse_change_notice(std::string_view payload);
 
 // The region (8 x 8 x 8 chunks) a chunk belongs to.
 Vec3i lease_region_of(Vec3i chunk_pos);

@@ -728,11 +728,15 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
   });
 }
 
-void WorldOwner::read_again_elsewhere() {
-  asio::post(strand_, [this] {
+void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
+  asio::post(strand_, [this, regions = std::move(regions)] {
+    if (regions.empty()) return;
+    Vec3iMap<bool> in;
+    for (const Vec3i r : regions) in[r] = true;
     for (const auto& [cp, l] : loaded_) {
+      const Vec3i region = lease_region_of(cp);
       // Estimates are replaced by the chunks as they are (their loads read the store).
-      if (writes_region(lease_region_of(cp)) || l.current->estimate()) continue;
+      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) continue;
       load_unless_loading(cp, Storage::Priority::kBackground);
     }
   });

@@ -135,9 +135,10 @@ class WorldOwner : private WorldView {
   // (its notices): what this server holds of them older than that is read
   // again, and its holders are sent the newer chunks.
   void changed_elsewhere(std::vector<ChunkChange> changes);
-  // Notices may have been missed: every chunk held outside the regions this
-  // server writes is read again (background loads).
-  void read_again_elsewhere();
+  // Notices of these regions may have been missed (their write sequences
+  // moved while the listener reconnected): every chunk held there, outside
+  // the regions this server writes, is read again (background loads).
+  void read_again_elsewhere(std::vector<Vec3i> regions);
   // This server's inbox has edits forwarded by another server (its notice):
   // they are read and applied like its own clients' edits, and answered in
   // the tick's commit.

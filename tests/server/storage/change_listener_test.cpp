@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "common/world/world.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 
@@ -43,6 +44,7 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
   std::mutex m;
   std::vector<ForwardAnswer> got;
   int missed = 0;
+  std::vector<Vec3i> missed_regions;
   ChangeListener::Handlers on;
   on.changes = [](std::vector<ChunkChange>) {};
   on.inbox = [] {};
@@ -50,12 +52,23 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
     std::lock_guard lock(m);
     got.push_back(std::move(a));
   };
-  on.missed = [&] {
+  on.missed = [&](std::vector<Vec3i> regions) {
     std::lock_guard lock(m);
     ++missed;
+    missed_regions = std::move(regions);
   };
+  // Two regions of another server, written once before the listener
+  // starts: none is read again unless written while it is away.
+  auto lease_a = (*store)->claim({0, 0, 0}, 9, 60s), lease_b = (*store)->claim({1, 0, 0}, 9, 60s);
+  ASSERT_TRUE(lease_a.ok() && lease_b.ok());
+  const ChunkWrite write_a{{0, 0, 0}, 1, encode_chunk_blob(Box({kChunkSize, kChunkSize, kChunkSize}))},
+      write_b{{8, 0, 0}, 1, encode_chunk_blob(Box({kChunkSize, kChunkSize, kChunkSize}))};
+  ASSERT_TRUE((*store)->save_fenced(std::span(&*lease_a, 1), std::span(&write_a, 1)).ok());
+  ASSERT_TRUE((*store)->save_fenced(std::span(&*lease_b, 1), std::span(&write_b, 1)).ok());
   auto listener = ChangeListener::open(url_, 7, on);
   ASSERT_TRUE(listener.ok()) << listener.error().message;
+  // Written while listening: its notice comes, in sequence.
+  ASSERT_TRUE((*store)->save_fenced(std::span(&*lease_b, 1), std::span(&write_b, 1)).ok());
   auto has = [&](std::int64_t id) {
     std::lock_guard lock(m);
     return std::any_of(got.begin(), got.end(), [&](const ForwardAnswer& a) { return a.id == id; });
@@ -84,6 +97,8 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
       30s));
   const ForwardAnswer answers[] = {{12, 7, false, 0, "refused: a region held by server 9"}, {13, 8, true, 4, ""}};
   ASSERT_TRUE((*store)->answer(answers).ok());
+  // A region written meanwhile (its sequence moves on; its notice is lost).
+  ASSERT_TRUE((*store)->save_fenced(std::span(&*lease_a, 1), std::span(&write_a, 1)).ok());
   PQclear(PQexec(holder, "COMMIT"));
   PQfinish(holder);
   // Connected again: what may have been missed is read again, and the
@@ -92,6 +107,7 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
   {
     std::lock_guard lock(m);
     EXPECT_EQ(missed, 1);
+    EXPECT_EQ(missed_regions, (std::vector<Vec3i>{{0, 0, 0}}));
     const auto it = std::find_if(got.begin(), got.end(), [](const ForwardAnswer& a) { return a.id == 12; });
     EXPECT_EQ(*it, answers[0]);
     EXPECT_FALSE(std::any_of(got.begin(), got.end(), [](const ForwardAnswer& a) { return a.id == 13; }));

@@ -123,6 +123,51 @@ TEST_F(PostgresStoreTest, ServersSayWhereClientsReachThemAndTheMapNamesEachRegio
   EXPECT_EQ(later->writers.size(), 2u);
 }
 
+TEST(ChangeNoticeTest, ChunksAndRegionSequencesRoundTripAndBadPayloadsAreRefused) {
+  std::vector<ChunkWrite> chunks;
+  for (int i = 0; i < 600; ++i) chunks.push_back(ChunkWrite{{i, -i, 1 << 20}, static_cast<std::uint64_t>(i) * 977, {}});
+  const std::vector<RegionSeq> regions{{{0, 0, 0}, 1}, {{-3, 2, 1 << 17}, 123456789}};
+  const auto notices = change_notices(chunks, regions);
+  ASSERT_GT(notices.size(), 1u);  // split under the size cap
+  std::vector<ChunkChange> got_chunks;
+  std::vector<RegionSeq> got_regions;
+  for (const std::string& n : notices) {
+    EXPECT_LE(n.size(), kMaxChangeNoticeBytes);
+    auto p = parse_change_notice(n);
+    ASSERT_TRUE(p) << n.substr(0, 80);
+    got_chunks.insert(got_chunks.end(), p->chunks.begin(), p->chunks.end());
+    got_regions.insert(got_regions.end(), p->regions.begin(), p->regions.end());
+  }
+  EXPECT_EQ(got_regions, regions);
+  ASSERT_EQ(got_chunks.size(), chunks.size());
+  for (std::size_t i = 0; i < chunks.size(); ++i)
+    EXPECT_EQ(got_chunks[i], (ChunkChange{chunks[i].pos, chunks[i].revision}));
+  for (const char* bad : {"1,2,3", "1,2,3,-4", "r,1,2,3", "x,1,2,3,4", "1,2,3,4,5", "1,2,99999999999,4", "r,1,2,3,-1"})
+    EXPECT_FALSE(parse_change_notice(bad)) << bad;
+}
+
+TEST_F(PostgresStoreTest, EachWriteMovesItsRegionsSequenceOnAcrossChangesOfHands) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  auto first = a->claim({0, 0, 0}, 1, 60s);
+  ASSERT_TRUE(first.ok());
+  const ChunkWrite w = chunk_write({1, 1, 1}, 1, materials::kBrick);
+  ASSERT_TRUE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
+  ASSERT_TRUE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
+  ASSERT_TRUE(a->release(std::span(&*first, 1)).ok());
+  auto second = b->claim({0, 0, 0}, 2, 60s);
+  ASSERT_TRUE(second.ok());
+  ASSERT_TRUE(b->save_fenced(std::span(&*second, 1), std::span(&w, 1)).ok());
+  // A region only claimed has no writes.
+  ASSERT_TRUE(b->claim({5, 0, 0}, 2, 60s).ok());
+  auto seqs = a->region_seqs();
+  ASSERT_TRUE(seqs.ok()) << seqs.error().message;
+  EXPECT_EQ(*seqs, (std::vector<RegionSeq>{{{0, 0, 0}, 3}}));
+  // A fenced write moves nothing.
+  EXPECT_FALSE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
+  EXPECT_EQ(a->region_seqs()->front().seq, 3u);
+}
+
 TEST(ClusterMapTest, ALeaseKeepsTheTimeItWasFirstSeenUntilItChangesHands) {
   using Clock = ClusterMap::Clock;
   const Clock::time_point t0{}, t1 = t0 + 1s, t2 = t0 + 2s;
