@@ -29,6 +29,31 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
                                   });
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
+  // A border is the whole world's: every server must apply the same one,
+  // and a running server reads it only when it starts. So a new border is
+  // set only while no other server runs on the world.
+  if (options_.border_set) {
+    const WorldBounds& now = (*store)->meta().bounds;
+    const WorldBounds& want = options_.border;
+    const bool same = now.bounded_xz == want.bounded_xz &&
+                      (!want.bounded_xz || (now.min_x == want.min_x && now.max_x == want.max_x &&
+                                            now.min_z == want.min_z && now.max_z == want.max_z));
+    if (!same) {
+      auto c = (*store)->cluster(options_.lease);
+      if (!c) return FileError{"--border: " + c.error().message, {}};
+      std::string running;
+      int others = 0;
+      for (const ServerAddress& a : c->servers)
+        if (a.id != options_.server_id)
+          running += fmt::format("{}server {} ({})", others++ == 0 ? "" : ", ", a.id, a.text());
+      if (others > 0)
+        return FileError{fmt::format("--border: {} {} running on this world, and a border applies to every server: "
+                                     "stop {}, start this one with --border, then start {} again",
+                                     running, others > 1 ? "are" : "is", others > 1 ? "them" : "it",
+                                     others > 1 ? "them" : "it"),
+                         {}};
+    }
+  }
   // Only leases held: the world owner claims a region (and reads it again)
   // before it applies anything there, so a write never takes back a region
   // this server lost or handed over.

@@ -21,6 +21,7 @@
 
 #include "client/client.h"
 #include "common/world/coarse_image.h"
+#include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 #include "tests/support/server_process.h"
 #include "tests/support/view_chunks.h"
@@ -48,12 +49,15 @@ class ClusterTest : public testing_support::PostgresTest {
   // to run out.
   // Edits may be tried again at once while a region is another server's
   // (refused without waiting), so the edit rate is no bound here.
-  ServerProcess& start(std::uint32_t id, int lease_ms = 5000, int edits_per_second = 100000) {
-    servers_.push_back(std::make_unique<ServerProcess>(
-        url_, std::vector<std::string>{"--server-id", std::to_string(id), "--lease-ms", std::to_string(lease_ms),
-                                       "--hash-push-ms", "0", "--edits-per-second",
-                                       std::to_string(edits_per_second)}));
-    EXPECT_NE(servers_.back()->port(), 0) << servers_.back()->output();
+  ServerProcess& start(std::uint32_t id, int lease_ms = 5000, int edits_per_second = 100000,
+                       std::vector<std::string> more = {}, bool expect_start = true) {
+    std::vector<std::string> flags{"--server-id", std::to_string(id), "--lease-ms", std::to_string(lease_ms),
+                                   "--hash-push-ms", "0", "--edits-per-second", std::to_string(edits_per_second)};
+    flags.insert(flags.end(), more.begin(), more.end());
+    servers_.push_back(std::make_unique<ServerProcess>(url_, flags));
+    if (expect_start) {
+      EXPECT_NE(servers_.back()->port(), 0) << servers_.back()->output();
+    }
     return *servers_.back();
   }
   static ClientOptions options(const ServerProcess& s, const std::string& name) {
@@ -410,6 +414,48 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   EXPECT_TRUE(replica_shows(cy, across, av));
   EXPECT_TRUE(replica_shows(cy, east2, ev2));
   cy.disconnect();
+}
+
+// A border is the whole world's: a server is refused a new one while
+// another runs on the world (which would go on without it); once alone it
+// sets it, and every server started after applies it.
+TEST_F(ClusterTest, ABorderIsSetOnlyWhileNoOtherServerRunsAndEveryServerAfterAppliesIt) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  // Server 1 has said where it runs once its keeper's first round is done.
+  ASSERT_TRUE(testing_support::eventually(
+      [&] {
+        PGconn* conn = PQconnectdb(url_.c_str());
+        PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_servers");
+        const bool seen = PQresultStatus(r) == PGRES_TUPLES_OK && std::atoi(PQgetvalue(r, 0, 0)) == 1;
+        PQclear(r);
+        PQfinish(conn);
+        return seen;
+      },
+      kDeadline));
+  const std::vector<std::string> border{"--border", "-512,-512,512,512"};
+  ServerProcess& refused = start(2, 5000, 100000, border, false);
+  EXPECT_EQ(refused.wait_exit(60s), 1) << refused.output();
+  EXPECT_NE(refused.output().find("--border: server 1 (127.0.0.1:" + std::to_string(a.port()) + ") is running"),
+            std::string::npos)
+      << refused.output();
+  // The border the world has already is no change: allowed.
+  ServerProcess& same = start(2, 5000, 100000, {"--border", "none"});
+  ASSERT_NE(same.port(), 0);
+  ASSERT_EQ(same.stop(), 0) << same.output();
+  ASSERT_EQ(a.stop(), 0) << a.output();
+  ServerProcess& b = start(2, 5000, 100000, border);
+  ASSERT_NE(b.port(), 0);
+  ServerProcess& again = start(1);
+  ASSERT_NE(again.port(), 0);
+  Client c(options(again, "cy"));
+  join(c);
+  const auto w = c.welcome();
+  ASSERT_TRUE(w);
+  EXPECT_TRUE(w->bounded_xz);
+  EXPECT_EQ(w->bounds_min_x, -512);
+  EXPECT_EQ(w->bounds_max_z, 512);
+  c.disconnect();
 }
 
 // A player's edits forwarded to a region's server are held to the edit rate
