@@ -203,6 +203,8 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
     std::lock_guard lock(mutex_);
     not_returning = server_not_returning_;
   }
+  // A Redirect waiting for answers is followed now: this server is gone.
+  if (redirect_ && !leaving_ && !io_closed_) return follow_redirect();
   const bool retry = options_.reconnect && !leaving_ && !io_closed_ &&
                      (!server_said || (reason == "server shutting down" && !not_returning));
   if (!retry) return close_locked_io(reason);
@@ -272,11 +274,11 @@ void Client::follow_redirect() {
     asio::write(socket_, asio::buffer(bye), ignored);
   } else {
     // redirect_wait ran out during a write: the frame may or may not have
-    // gone, so it is not sent again.
-    const Outbound& front = send_queue_.front();
+    // gone, so it is not sent again. It stays queued (the write may still
+    // read it) and is dropped when the next connection's writes reach it.
+    Outbound& front = send_queue_.front();
     if (front.edit_id != 0) edits_on_wire_.insert(front.edit_id);
-    queued_bytes_.fetch_sub(front.frame.size(), std::memory_order_relaxed);
-    send_queue_.pop_front();
+    front.skip = true;
     writing_ = false;
   }
   drop_socket();
@@ -301,32 +303,56 @@ void Client::follow_redirect() {
   if (io_closed_ || leaving_) return;
   resume_token_ = to.token;
   resumed_ = true;
-  asio::error_code ec;
-  asio::ip::tcp::resolver resolver(io_);
-  auto endpoints = resolver.resolve(to.host, std::to_string(to.port), ec);
-  auto failed = [this, target](const std::string& why) {
-    client_log().warn("'{}': cannot go on at {}: {}", options_.name, target, why);
-    if (!options_.reconnect) return close_locked_io("redirect to " + target + " failed: " + why);
-    // Back to the server that sent it (its endpoints are still endpoints_).
-    resume_token_.clear();
-    attempts_ = 0;
-    backoff_ = options_.reconnect_min;
-    schedule_reconnect();
-  };
-  if (ec || endpoints.empty()) return failed("cannot resolve: " + ec.message());
   const std::uint64_t gen = generation_;
-  asio::async_connect(socket_, endpoints,
-                      [this, gen, endpoints, failed, g = OpGuard(this)](const asio::error_code& e,
-                                                                        const asio::ip::tcp::endpoint&) {
-                        if (gen != generation_ || io_closed_ || leaving_) return;
-                        if (e) {
-                          asio::error_code ignored;
-                          socket_.close(ignored);
-                          return failed(e.message());
-                        }
-                        endpoints_ = endpoints;  // reconnects go here from now on
-                        start_session();
-                      });
+  // Back to the server that sent it (its endpoints are still endpoints_),
+  // which may serve it on; Redirects to this target are not followed for a
+  // while.
+  auto failed = [this, gen, target](const std::string& why) {
+    if (gen != generation_ || io_closed_ || leaving_) return;
+    client_log().warn("'{}': cannot go on at {}: {}; back to the server that sent it", options_.name, target, why);
+    unreachable_ = target;
+    unreachable_until_ = std::chrono::steady_clock::now() + kUnreachableFor;
+    resume_token_.clear();
+    asio::error_code ignored;
+    socket_.close(ignored);
+    socket_ = asio::ip::tcp::socket(strand_);
+    if (options_.reconnect) {
+      attempts_ = 0;
+      backoff_ = options_.reconnect_min;
+      return schedule_reconnect();
+    }
+    asio::async_connect(socket_, endpoints_, [this, gen, target, g = OpGuard(this)](const asio::error_code& e,
+                                                                                    const asio::ip::tcp::endpoint&) {
+      if (gen != generation_ || io_closed_ || leaving_) return;
+      if (e) return close_locked_io("redirect to " + target + " failed, and the server that sent it: " + e.message());
+      start_session();
+    });
+  };
+  auto resolver = std::make_shared<asio::ip::tcp::resolver>(strand_);
+  resolver->async_resolve(
+      to.host, std::to_string(to.port),
+      [this, gen, resolver, failed, g = OpGuard(this)](const asio::error_code& ec,
+                                                      asio::ip::tcp::resolver::results_type endpoints) {
+        if (gen != generation_ || io_closed_ || leaving_) return;
+        if (ec || endpoints.empty()) return failed("cannot resolve: " + ec.message());
+        // A target that never answers is given up after connect_timeout.
+        redirect_timer_.expires_after(options_.connect_timeout);
+        redirect_timer_.async_wait([this, gen, g2 = OpGuard(this)](const asio::error_code& e) {
+          if (e || gen != generation_ || linked_) return;
+          asio::error_code ignored;
+          socket_.cancel(ignored);
+        });
+        asio::async_connect(socket_, endpoints,
+                            [this, gen, endpoints, failed, g2 = OpGuard(this)](const asio::error_code& e,
+                                                                              const asio::ip::tcp::endpoint&) {
+                              if (gen != generation_ || io_closed_ || leaving_) return;
+                              redirect_timer_.cancel();
+                              if (e) return failed(e == asio::error::operation_aborted ? std::string("timed out")
+                                                                                       : e.message());
+                              endpoints_ = endpoints;  // reconnects go here from now on
+                              start_session();
+                            });
+      });
 }
 
 void Client::schedule_reconnect() {
@@ -397,7 +423,12 @@ bool Client::send(Frame frame, wire::Body type, std::uint32_t edit_id) {
 
 void Client::do_write() {
   // A pending Redirect holds what is queued for the next server.
-  if (writing_ || send_queue_.empty() || io_closed_ || !linked_ || redirect_) return;
+  if (writing_ || io_closed_ || !linked_ || redirect_) return;
+  while (!send_queue_.empty() && send_queue_.front().skip) {
+    queued_bytes_.fetch_sub(send_queue_.front().frame.size(), std::memory_order_relaxed);
+    send_queue_.pop_front();
+  }
+  if (send_queue_.empty()) return;
   writing_ = true;
   const std::uint64_t gen = generation_;
   asio::async_write(socket_, asio::buffer(send_queue_.front().frame),
@@ -414,7 +445,11 @@ void Client::do_write() {
                         ++t.frames_out;
                         t.bytes_out += sent.frame.size();
                       }
-                      if (!ec && sent.edit_id != 0) edits_on_wire_.insert(sent.edit_id);
+                      if (!ec && sent.edit_id != 0) {
+                        // Its answer may have been read before this ran.
+                        std::lock_guard lock(mutex_);
+                        if (unanswered_edits_.count(sent.edit_id) != 0) edits_on_wire_.insert(sent.edit_id);
+                      }
                       send_queue_.pop_front();
                       if (ec) return connection_lost("write failed: " + ec.message(), false);
                       if (redirect_) return follow_when_ready();
@@ -726,6 +761,8 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       // One at a time; a client that does not follow stays (and is closed
       // by the server after its grace).
       if (!options_.follow_redirects || redirect_) break;
+      if (r->host + ":" + std::to_string(r->port) == unreachable_ && std::chrono::steady_clock::now() < unreachable_until_)
+        break;  // failed a moment ago: stay
       client_log().info("'{}': server asks to go on at server {} ({}:{})", options_.name, r->server_id, r->host, r->port);
       redirect_ = std::move(*r);
       break;
@@ -763,6 +800,8 @@ void Client::close_locked_io(const std::string& reason) {
   keepalive_.cancel();
   reconnect_timer_.cancel();
   delivery_.cancel();
+  redirect_timer_.cancel();
+  redirect_.reset();
   std::string r;
   {
     std::lock_guard lock(mutex_);

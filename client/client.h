@@ -107,10 +107,13 @@ struct ClientOptions {
   // Follow a Redirect (a world shared by several servers): go on at the
   // server named, keeping the replica (Holdings), once every edit written
   // to this one is answered or redirect_wait has passed (edits then
-  // unanswered are reported with kEditOutcomeUnknown). Edits made
-  // meanwhile wait and go to the new server. If the new server cannot be
-  // reached, the client reconnects to the old one when reconnect is on,
-  // else closes. false: stay (the server closes the session after a grace).
+  // unanswered are reported with kEditOutcomeUnknown; reads and hash
+  // requests unanswered are dropped: ask again). Edits made meanwhile wait
+  // and go to the new server. If the new server cannot be resolved or
+  // reached within connect_timeout, the client goes back to the old one
+  // (resuming likewise; with reconnect on, with its backoff) and follows
+  // no Redirect there for a minute. false: stay (the server serves the
+  // session on after a grace).
   bool follow_redirects = true;
   std::chrono::milliseconds redirect_wait{5000};
   // Shared mode (see the threading note): run on this io_context instead of
@@ -315,6 +318,7 @@ class Client {
     Frame frame;
     wire::Body type;
     std::uint32_t edit_id = 0;  // an EditRequest's
+    bool skip = false;          // cut off mid-write by a Redirect: not sent again
   };
   // Bytes read from the socket, waiting for the emulated link.
   struct Delayed {
@@ -387,6 +391,11 @@ class Client {
   bool redirect_timer_armed_ = false;     // io thread
   std::string resume_token_;              // io thread: for the next Hello
   std::unordered_set<std::uint32_t> edits_on_wire_;  // io thread: written, not answered
+  // io thread: a Redirect target that could not be reached, not followed
+  // again until then.
+  static constexpr std::chrono::seconds kUnreachableFor{60};
+  std::string unreachable_;
+  std::chrono::steady_clock::time_point unreachable_until_{};
 
   // Guarded by mutex_ (shared with the application's threads).
   mutable std::mutex mutex_;

@@ -309,8 +309,12 @@ Result<HelloMsg> parse_hello(const wire::Hello& m) {
   if (m.client_name()->size() > kMaxClientNameBytes) return over("hello: client name longer than 64 bytes");
   if (m.auth_token() != nullptr && m.auth_token()->size() > kMaxAuthTokenBytes)
     return over("hello: auth token longer than 256 bytes");
-  if (m.resume_token() != nullptr && m.resume_token()->size() > kMaxResumeTokenBytes)
-    return over("hello: resume token longer than 64 bytes");
+  if (m.resume_token() != nullptr) {
+    if (m.resume_token()->size() > kMaxResumeTokenBytes) return over("hello: resume token longer than 64 bytes");
+    // Printable (servers log it).
+    for (const char ch : m.resume_token()->string_view())
+      if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f) return invalid("hello: resume token has a control character");
+  }
   out.client_name = m.client_name()->str();
   if (m.auth_token() != nullptr) out.auth_token = m.auth_token()->str();
   if (m.resume_token() != nullptr) out.resume_token = m.resume_token()->str();

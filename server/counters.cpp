@@ -25,7 +25,6 @@ const char* close_reason_label(CloseReason r) {
     case CloseReason::kKicked: return "kicked";
     case CloseReason::kBanned: return "banned";
     case CloseReason::kNotWhitelisted: return "not_whitelisted";
-    case CloseReason::kRedirected: return "redirected";
     case CloseReason::kCount: break;
   }
   return "unknown";

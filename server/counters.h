@@ -67,7 +67,6 @@ enum class CloseReason : std::uint8_t {
   kKicked,            // by an operator (terrane-admin kick)
   kBanned,            // refused at the handshake, or ended by a ban
   kNotWhitelisted,    // refused at the handshake
-  kRedirected,        // sent to another server and did not go within the grace
   kCount
 };
 const char* close_reason_label(CloseReason r);

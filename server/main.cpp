@@ -45,7 +45,7 @@ constexpr const char* kHelp =
     "                              fifth of it (default 5000)\n"
     "  --advertise HOST:PORT       where clients reach this server, told to the others so they can\n"
     "                              redirect clients here (default: --bind and the port listened on;\n"
-    "                              required when --bind is 0.0.0.0 or ::)\n"
+    "                              with --bind 0.0.0.0 or :: and no --advertise, none is)\n"
     "  --redirect-margin N         a client standing N voxels or more inside a region another\n"
     "                              server writes is redirected there, keeping what it holds;\n"
     "                              0 never redirects (default 32)\n"

@@ -39,13 +39,12 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
                       (!want.bounded_xz || (now.min_x == want.min_x && now.max_x == want.max_x &&
                                             now.min_z == want.min_z && now.max_z == want.max_z));
     if (!same) {
-      auto c = (*store)->cluster(options_.lease);
-      if (!c) return FileError{"--border: " + c.error().message, {}};
+      auto ids = (*store)->running(options_.lease);
+      if (!ids) return FileError{"--border: " + ids.error().message, {}};
       std::string running;
       int others = 0;
-      for (const ServerAddress& a : c->servers)
-        if (a.id != options_.server_id)
-          running += fmt::format("{}server {} ({})", others++ == 0 ? "" : ", ", a.id, a.text());
+      for (const std::uint32_t id : *ids)
+        if (id != options_.server_id) running += fmt::format("{}server {}", others++ == 0 ? "" : ", ", id);
       if (others > 0)
         return FileError{fmt::format("--border: {} {} running on this world, and a border applies to every server: "
                                      "stop {}, start this one with --border, then start {} again",
@@ -241,6 +240,8 @@ void Server::start() {
     if (advertised.empty())
       server_log().warn("no --advertise address (bound to {}): other servers redirect no client here",
                         options_.bind_address);
+    // (Without an address it is still known to run: a --border elsewhere
+    // waits for it.)
     else
       server_log().info("clients are redirected here as {}{}", advertised,
                         options_.redirect_margin > 0 ? "" : " (this server redirects none: --redirect-margin 0)");

@@ -235,7 +235,7 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
 void Replicator::maybe_redirect() {
   if (cluster_ == nullptr || redirected_ || options_.redirect_margin <= 0) return;
   const auto now = std::chrono::steady_clock::now();
-  if (now - info().joined < kRedirectSettle) return;
+  if (now - info().joined < kRedirectSettle || now < no_redirect_until_) return;
   const auto map = cluster_->current();
   // A map older than a lease may name a writer that is gone.
   if (!map || now - map->read_at() > options_.lease) return;
@@ -881,8 +881,13 @@ void Replicator::arm_timer() {
 
 void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
-  if (redirected_ && now - redirected_at_ >= kRedirectGrace)
-    return close(CloseReason::kRedirected, "redirected to " + redirected_to_ + " and did not go");
+  if (redirected_ && now - redirected_at_ >= kRedirectGrace) {
+    // It did not go (it cannot reach the other server, or does not follow
+    // redirects): served here again, and not redirected for a while.
+    server_log().info("session {} ({}): did not go to {}; served here again", id_, name_, redirected_to_);
+    redirected_ = false;
+    no_redirect_until_ = now + kRedirectBackoff;
+  }
   if (plan_valid_) maybe_redirect();
   if (welcomed_ && now >= next_ping_) {
     next_ping_ = now + kPingPeriod;

@@ -96,8 +96,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // The server pings each client this often (its round trip, for operators).
   static constexpr std::chrono::seconds kPingPeriod{5};
 
-  // A redirected client that is still here this long after is closed.
+  // A redirected client that is still here this long after is served again
+  // (streaming goes on) and not redirected for kRedirectBackoff.
   static constexpr std::chrono::seconds kRedirectGrace{10};
+  static constexpr std::chrono::seconds kRedirectBackoff{60};
   // A client is not redirected in its first seconds on a server: the map
   // of writers it is judged by may be a renewal round old.
   static constexpr std::chrono::seconds kRedirectSettle{3};
@@ -200,10 +202,11 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   const AccessControl& access_;
   const AdminFn& admin_fn_;
   const ClusterDirectory* const cluster_;
-  // Sent a Redirect (when): nothing more is streamed, and the session is
-  // closed if the client stays past kRedirectGrace.
+  // Sent a Redirect (when): nothing more is streamed until the client
+  // leaves, or kRedirectGrace passes.
   bool redirected_ = false;
   std::chrono::steady_clock::time_point redirected_at_;
+  std::chrono::steady_clock::time_point no_redirect_until_{};
   std::string redirected_to_;
   bool admin_ = false;
   mutable std::mutex info_m_;

@@ -119,11 +119,11 @@ StoreResult<Ok> LeaseKeeper::release(std::span<const Vec3i> regions) {
 }
 
 StoreResult<Ok> LeaseKeeper::release_all() {
-  std::string address;
+  bool advertised = false;
   {
     std::lock_guard lock(mutex_);
     stopping_ = true;
-    address = address_;
+    advertised = advertising_;
   }
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
@@ -133,10 +133,12 @@ StoreResult<Ok> LeaseKeeper::release_all() {
     held_.clear();
   }
   std::lock_guard claiming(claims_mutex_);
-  // No client is sent here any more, then the regions are free.
-  if (!address.empty())
-    if (auto gone = claims_->withdraw(owner_); !gone) return gone.error();
-  return claims_->release(all);
+  // No client is sent here any more, then the regions are free (whether or
+  // not the row could be withdrawn: it ages out).
+  auto gone = advertised ? claims_->withdraw(owner_) : StoreResult<Ok>(Ok{});
+  auto released = claims_->release(all);
+  if (!released) return released.error();
+  return gone;
 }
 
 void LeaseKeeper::advertise(std::string address, ClusterDirectory* directory) {
@@ -144,6 +146,7 @@ void LeaseKeeper::advertise(std::string address, ClusterDirectory* directory) {
     std::lock_guard lock(mutex_);
     address_ = std::move(address);
     directory_ = directory;
+    advertising_ = true;
     round_now_ = true;
   }
   wake_.notify_all();
@@ -168,6 +171,7 @@ void LeaseKeeper::renew_loop() {
     round_now_ = false;
     const std::string address = address_;
     ClusterDirectory* const directory = directory_;
+    const bool advertising = advertising_;
     std::vector<RegionLease> all;
     for (const auto& [key, l] : held_) all.push_back(l);
     lock.unlock();
@@ -194,7 +198,7 @@ void LeaseKeeper::renew_loop() {
       return false;
     });
     ++rounds_;
-    if (!address.empty()) {
+    if (advertising) {
       lock.unlock();
       exchange_addresses(address, directory);
       lock.lock();

@@ -74,10 +74,11 @@ class LeaseKeeper {
   // Renewal rounds done so far (tests wait on it).
   std::uint64_t renewals() const;
   // From now on, every renewal round (the first at once) also tells the
-  // database where this server takes clients (address "HOST:PORT") and
-  // publishes to directory who writes which region (server/storage/
+  // database that this server runs and where it takes clients (address
+  // "HOST:PORT", or "" for nowhere: it is then never a redirect's target)
+  // and publishes to directory who writes which region (server/storage/
   // cluster_map.h). directory must outlive the keeper. release_all()
-  // withdraws the address.
+  // withdraws the row.
   void advertise(std::string address, ClusterDirectory* directory);
 
  private:
@@ -106,6 +107,7 @@ class LeaseKeeper {
   std::string address_;
   ClusterDirectory* directory_ = nullptr;
   bool round_now_ = false;
+  bool advertising_ = false;
   std::shared_ptr<const ClusterMap> last_map_;  // keeper thread: the map published last
   std::thread thread_;
 };

@@ -323,6 +323,15 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
                        {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) == 1) {
+    // Servers of version 1 still running would write without moving the
+    // write sequences or keeping answers: the upgrade waits for them.
+    auto running = c->exec("count current leases", "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
+    if (!running) return c->abort(running.error());
+    if (running->integer(0, 0).value_or(0) > 0)
+      return c->abort(StoreError{StoreError::Kind::kQuery,
+                                 fmt::format("postgresql: {} holds a Terrane schema of version 1 with {} regions leased "
+                                             "now: stop its servers, then start this build to bring it to version {}",
+                                             shown, running->get(0, 0), kSchemaVersion)});
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
     // seq only, made above.
     auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
@@ -468,11 +477,22 @@ StoreResult<Ok> PostgresStore::withdraw(std::uint32_t id) {
   return Ok{};
 }
 
+StoreResult<std::vector<std::uint32_t>> PostgresStore::running(std::chrono::milliseconds fresh) {
+  auto r = c_->exec("read running servers",
+                    "SELECT id FROM terrane_servers WHERE seen_at > clock_timestamp() - $1::bigint * interval '1 millisecond'",
+                    {text(fresh.count())});
+  if (!r) return r.error();
+  std::vector<std::uint32_t> out;
+  for (int row = 0; row < r->count(); ++row)
+    if (const auto id = r->integer(row, 0); id && *id >= 0 && *id <= kMaxServerId) out.push_back(static_cast<std::uint32_t>(*id));
+  return out;
+}
+
 StoreResult<PostgresStore::Cluster> PostgresStore::cluster(std::chrono::milliseconds fresh) {
   Cluster out;
   auto servers = c_->exec("read servers",
-                          "SELECT id, address FROM terrane_servers"
-                          " WHERE seen_at > clock_timestamp() - $1::bigint * interval '1 millisecond'",
+                          "SELECT id, address FROM terrane_servers WHERE address <> ''"
+                          " AND seen_at > clock_timestamp() - $1::bigint * interval '1 millisecond'",
                           {text(fresh.count())});
   if (!servers) return servers.error();
   for (int row = 0; row < servers->count(); ++row) {
@@ -731,8 +751,9 @@ StoreResult<std::vector<ForwardAnswer>> PostgresStore::take_answers(std::uint32_
   std::vector<ForwardAnswer> out;
   for (int row = 0; row < r->count(); ++row) {
     const auto id = r->integer(row, 0), tick = r->integer(row, 2);
-    if (!id || !tick || *tick < 0) continue;  // not a row this build wrote: left out
-    out.push_back(ForwardAnswer{*id, from, r->get(row, 1) == "t", static_cast<std::uint64_t>(*tick), r->get(row, 3)});
+    if (!id || *id < 1 || !tick || *tick < 0) continue;  // not a row this build wrote: left out
+    out.push_back(
+        ForwardAnswer{*id, from, r->get(row, 1) == "t", static_cast<std::uint64_t>(*tick), r->get(row, 3).substr(0, 256)});
   }
   return out;
 }

@@ -165,6 +165,8 @@ class PostgresStore final : public WorldStore {
     std::vector<ServerAddress> servers;
   };
   StoreResult<Cluster> cluster(std::chrono::milliseconds fresh);
+  // The ids of servers seen within fresh (with an address or without).
+  StoreResult<std::vector<std::uint32_t>> running(std::chrono::milliseconds fresh);
 
   // Stores the chunks and the log entries in one transaction, fenced. Every
   // chunk's region must be under one of leases, and every lease used must

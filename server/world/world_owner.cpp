@@ -867,11 +867,17 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
 
 bool WorldOwner::take_forwarded_rate(const std::string& player) {
   if (options_.edits_per_second <= 0) return true;
-  // Bounded: players idle long enough to have a full bucket are forgotten.
-  if (forwarded_rate_.size() >= 4096)
+  // Twice a session's burst: forwarded edits arrive in batches (an inbox
+  // read after a reconnect), not as their player sent them.
+  const double burst = options_.edits_per_second * 4;
+  // Bounded: players idle long enough to have a full bucket are forgotten,
+  // and if that is not enough, all are (they start full again).
+  if (forwarded_rate_.size() >= kMaxForwardedRates) {
     for (auto it = forwarded_rate_.begin(); it != forwarded_rate_.end();)
-      it = it->second.available() >= options_.edits_per_second * 2 ? forwarded_rate_.erase(it) : std::next(it);
-  auto [it, fresh] = forwarded_rate_.try_emplace(player, options_.edits_per_second, options_.edits_per_second * 2);
+      it = it->second.available() >= burst ? forwarded_rate_.erase(it) : std::next(it);
+    if (forwarded_rate_.size() >= kMaxForwardedRates / 2) forwarded_rate_.clear();
+  }
+  auto [it, fresh] = forwarded_rate_.try_emplace(player, options_.edits_per_second, burst);
   return it->second.take(1);
 }
 

@@ -421,6 +421,7 @@ class WorldOwner : private WorldView {
   // rate a session may keep up: a player cannot pass it by editing here
   // through several servers at once.
   std::unordered_map<std::string, TokenBucket> forwarded_rate_;
+  static constexpr std::size_t kMaxForwardedRates = 4096;
   bool inbox_reading_ = false, inbox_again_ = false;
   // Answers that came before their forward's own callback.
   std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;

@@ -40,6 +40,10 @@ TEST(Messages, HelloRoundTrips) {
   fbb.Finish(wire::CreateHelloDirect(fbb, 1, "alice", "", long_token.c_str()));
   EXPECT_EQ(parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb.GetBufferPointer())).error().code,
             DecodeErrorCode::kOverLimit);
+  flatbuffers::FlatBufferBuilder fbb3;
+  fbb3.Finish(wire::CreateHelloDirect(fbb3, 1, "alice", "", "1/17\n[forged log line]"));
+  EXPECT_EQ(parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb3.GetBufferPointer())).error().code,
+            DecodeErrorCode::kInvalidValue);
 }
 
 TEST(Messages, RedirectRoundTripsAndBadOnesAreErrors) {

@@ -113,6 +113,17 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
     EXPECT_FALSE(std::any_of(got.begin(), got.end(), [](const ForwardAnswer& a) { return a.id == 13; }));
   }
   EXPECT_EQ(value("SELECT string_agg(id::text, ',') FROM terrane_answers"), "13");
+  // A notice whose region skips a write (which PostgreSQL's delivery never
+  // does on a live connection) has the region read again.
+  ASSERT_EQ(run_sql(url_, "SELECT pg_notify('terrane_changes', 'r,5,0,0,7 40,0,0,3')"), "");
+  ASSERT_TRUE(eventually(
+      [&] {
+        std::lock_guard lock(m);
+        return missed == 2;
+      },
+      30s));
+  std::lock_guard lock(m);
+  EXPECT_EQ(missed_regions, (std::vector<Vec3i>{{5, 0, 0}}));
 }
 
 }  // namespace

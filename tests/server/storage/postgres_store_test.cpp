@@ -347,12 +347,31 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   EXPECT_NE(newer.error().message.find("reads version " + std::to_string(PostgresStore::kSchemaVersion)),
             std::string::npos)
       << newer.error().message;
-  // A database of version 1 (before terrane_servers) is brought up to date.
-  ASSERT_EQ(run_sql(url_, "DROP TABLE terrane_servers; UPDATE terrane_schema SET version = 1"), "");
+  // A database of version 1 (before terrane_servers, terrane_answers and
+  // the leases' seq) is brought up to date once no region is leased: its
+  // servers of version 1 would write without the new rules.
+  ASSERT_EQ(run_sql(url_, "DROP TABLE terrane_servers; DROP TABLE terrane_answers;"
+                          " ALTER TABLE terrane_leases DROP COLUMN seq; UPDATE terrane_schema SET version = 1;"
+                          " INSERT INTO terrane_leases VALUES (0, 0, 0, 1, 1, clock_timestamp() + interval '1 hour')"),
+            "");
+  auto running = PostgresStore::open(url_);
+  ASSERT_FALSE(running.ok());
+  EXPECT_NE(running.error().message.find("with 1 regions leased now: stop its servers"), std::string::npos)
+      << running.error().message;
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
   {
     auto upgraded = open();
     ASSERT_TRUE(upgraded);
     ASSERT_TRUE(upgraded->advertise(1, "127.0.0.1:7001").ok());
+    auto lease = upgraded->claim({0, 0, 0}, 1, 60s);
+    ASSERT_TRUE(lease.ok()) << lease.error().message;
+    const ChunkWrite w = chunk_write({0, 0, 0}, 1, materials::kBrick);
+    ASSERT_TRUE(upgraded->save_fenced(std::span(&*lease, 1), std::span(&w, 1)).ok());
+    EXPECT_EQ(*upgraded->region_seqs(), (std::vector<RegionSeq>{{{0, 0, 0}, 1}}));
+    const ForwardAnswer a{5, 1, true, 1, ""};
+    ASSERT_TRUE(upgraded->answer(std::span(&a, 1)).ok());
+    EXPECT_EQ(*upgraded->take_answers(1), std::vector<ForwardAnswer>{a});
+    ASSERT_TRUE(upgraded->release(std::span(&*lease, 1)).ok());
   }
   EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 2 THEN RAISE 'not 2'; END IF; END $$"),
             "");
