@@ -416,6 +416,49 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   cy.disconnect();
 }
 
+// Three servers at once on one world: each writes the region its first
+// editor claimed, every edit reaches the clients of the other two (by
+// notice, or forwarded to its region's server), and every replica agrees
+// with its own server.
+TEST_F(ClusterTest, ThreeServersAtOnceEachWriteTheirRegionsAndEveryClientSeesEveryEdit) {
+  std::vector<ServerProcess*> s;
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    s.push_back(&start(id));
+    ASSERT_NE(s.back()->port(), 0);
+  }
+  std::vector<std::unique_ptr<Client>> c;
+  std::vector<std::vector<Vec3i>> near;
+  for (int i = 0; i < 3; ++i) {
+    c.push_back(std::make_unique<Client>(options(*s[static_cast<std::size_t>(i)], "player-" + std::to_string(i))));
+    near.push_back(join(*c.back()));
+  }
+  // Each claims a region of its own first: west of the spawn (x < 0), east
+  // and north of it (x >= 0, z >= 0), east and south (x >= 0, z < 0).
+  const Vec3f sp = c[0]->welcome()->spawn;
+  const int y = static_cast<int>(std::floor(sp.y)) - 3;
+  const Region own[3] = {{{-8, y, 2}, {-5, y + 3, 5}}, {{4, y, 2}, {7, y + 3, 5}}, {{4, y, -6}, {7, y + 3, -3}}};
+  for (int i = 0; i < 3; ++i)
+    ASSERT_EQ(until_accepted(*c[static_cast<std::size_t>(i)], own[i], pattern(own[i], materials::kBrick)), "") << i;
+  // Then each edits the next one's region: forwarded there, acknowledged,
+  // and seen by all three.
+  std::vector<std::pair<Region, std::vector<Voxel>>> edits;
+  for (int i = 0; i < 3; ++i) {
+    const Region r = own[(i + 1) % 3];
+    auto v = pattern(r, static_cast<Material>(materials::kSnow + i));
+    ASSERT_EQ(until_accepted(*c[static_cast<std::size_t>(i)], r, v), "") << i;
+    edits.emplace_back(r, std::move(v));
+  }
+  for (int i = 0; i < 3; ++i)
+    for (const auto& [r, v] : edits)
+      EXPECT_TRUE(c[static_cast<std::size_t>(i)]->wait_until(
+          [&](const ClientView& view) { return view.closed || shows(view.replica, r, v); }, kDeadline))
+          << "player " << i << " never saw an edit";
+  for (int i = 0; i < 3; ++i) {
+    expect_agrees_with_its_server(*c[static_cast<std::size_t>(i)], near[static_cast<std::size_t>(i)]);
+    c[static_cast<std::size_t>(i)]->disconnect();
+  }
+}
+
 // A border is the whole world's: a server is refused a new one while
 // another runs on the world (which would go on without it); once alone it
 // sets it, and every server started after applies it.
