@@ -145,6 +145,22 @@ class ClusterTest : public testing_support::PostgresTest {
         kDeadline));
     EXPECT_EQ(c.counters().hash_mismatches, before);
   }
+  // Where the redirect tests' second player stands: 48 voxels east and
+  // south of the spawn, which lies by the corner x = 0, z = 0 of four
+  // regions, so inside another region by more than the margin.
+  static constexpr Vec3f kBeyond{48, 0, 48};
+  // Moves c from `from` by `by` in three steps, each within the speed limit.
+  static void walk(Client& c, Vec3f from, Vec3f by) {
+    for (int step = 1; step <= 3; ++step) {
+      ClientStateMsg st = *c.last_state();
+      const float f = static_cast<float>(step) / 3.0f;
+      st.position = from + Vec3f{by.x * f, by.y * f, by.z * f};
+      ASSERT_TRUE(c.set_state(st));
+    }
+  }
+  static Vec3i voxel_of(Vec3f p) {
+    return {static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)), static_cast<int>(std::floor(p.z))};
+  }
   // A box beside the spawn, and a pattern to write there.
   static Region box_near(const Client& c, int dx) {
     const Vec3f s = c.welcome()->spawn;
@@ -589,21 +605,20 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   // Bob stands where ann walks to: 48 voxels east and south of the spawn,
   // which lies by the corner x = 0, z = 0 of four regions.
   ClientOptions bobs = options(b, "bob");
-  bobs.spawn_offset = {48, 0, 48};
+  bobs.spawn_offset = kBeyond;
   Client bob(bobs);
   join(ann);
   join(bob, bobs.spawn_offset);
   ASSERT_EQ(seen->now_on.load(), 1u);
   const WelcomeMsg w = *ann.welcome();
   const Vec3f spawn = w.spawn;
-  const Vec3f there{spawn.x + 48, spawn.y, spawn.z + 48};
+  const Vec3f there = spawn + kBeyond;
   const Vec3i region = coarse_region_of(view_chunk(there));
   std::printf("spawn (%.1f, %.1f, %.1f), region (%d,%d,%d)\n", spawn.x, spawn.y, spawn.z, region.x, region.y, region.z);
   ASSERT_EQ(region, coarse_region_of(view_chunk(spawn + Vec3f{1, 0, 1}))) << "the spawn is not by the region's corner";
   // Bob's server writes that region (its first edit there claims it), ann's
   // the one west of the spawn.
-  const Vec3i at{static_cast<int>(std::floor(there.x)), static_cast<int>(std::floor(there.y)),
-                 static_cast<int>(std::floor(there.z))};
+  const Vec3i at = voxel_of(there);
   const Region east{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
   ASSERT_EQ(coarse_region_of(chunk_of(east.min)), region);
   ASSERT_EQ(outcome(bob, bob.write_box(east, pattern(east, materials::kSnow))), "");
@@ -623,11 +638,7 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   ASSERT_TRUE(ann.wait_until(whole_view(view), kDeadline));
   // On the border (within the margin of bob's region) ann stays; then it
   // walks there in steps within the speed limit.
-  for (int step = 1; step <= 3; ++step) {
-    ClientStateMsg s = *ann.last_state();
-    s.position = spawn + Vec3f{16.0f * static_cast<float>(step), 0, 16.0f * static_cast<float>(step)};
-    ASSERT_TRUE(ann.set_state(s));
-  }
+  walk(ann, spawn, kBeyond);
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || seen->now_on == 2; }, kDeadline))
       << "never redirected";
   EXPECT_EQ(ann.counters().redirects, 1u);
@@ -702,21 +713,16 @@ TEST_F(ClusterTest, AClientThatCannotReachTheServerItIsRedirectedToGoesBackAndIs
   Client ann(options(a, "ann"), cb);
   ann_ptr = &ann;
   ClientOptions bobs = options(b, "bob");
-  bobs.spawn_offset = {48, 0, 48};
+  bobs.spawn_offset = kBeyond;
   Client bob(bobs);
   join(ann);
   join(bob, bobs.spawn_offset);
   const WelcomeMsg w = *ann.welcome();
-  const Vec3f there{w.spawn.x + 48, w.spawn.y, w.spawn.z + 48};
-  const Vec3i at{static_cast<int>(std::floor(there.x)), static_cast<int>(std::floor(there.y)),
-                 static_cast<int>(std::floor(there.z))};
+  const Vec3f there = w.spawn + kBeyond;
+  const Vec3i at = voxel_of(there);
   const Region east{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
   ASSERT_EQ(outcome(bob, bob.write_box(east, pattern(east, materials::kSnow))), "");
-  for (int step = 1; step <= 3; ++step) {
-    ClientStateMsg st = *ann.last_state();
-    st.position = w.spawn + Vec3f{16.0f * static_cast<float>(step), 0, 16.0f * static_cast<float>(step)};
-    ASSERT_TRUE(ann.set_state(st));
-  }
+  walk(ann, w.spawn, kBeyond);
   // Sent to 127.0.0.1:1, refused there, back on server 1 in a new session.
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || *on == 101; }, kDeadline))
       << "never went back to server 1";
