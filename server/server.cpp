@@ -32,26 +32,19 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   // A border is the whole world's: every server must apply the same one,
   // and a running server reads it only when it starts. So a new border is
   // set only while no other server runs on the world.
-  if (options_.border_set) {
-    const WorldBounds& now = (*store)->meta().bounds;
-    const WorldBounds& want = options_.border;
-    const bool same = now.bounded_xz == want.bounded_xz &&
-                      (!want.bounded_xz || (now.min_x == want.min_x && now.max_x == want.max_x &&
-                                            now.min_z == want.min_z && now.max_z == want.max_z));
-    if (!same) {
-      auto ids = (*store)->running(options_.lease);
-      if (!ids) return FileError{"--border: " + ids.error().message, {}};
-      std::string running;
-      int others = 0;
-      for (const std::uint32_t id : *ids)
-        if (id != options_.server_id) running += fmt::format("{}server {}", others++ == 0 ? "" : ", ", id);
-      if (others > 0)
-        return FileError{fmt::format("--border: {} {} running on this world, and a border applies to every server: "
-                                     "stop {}, start this one with --border, then start {} again",
-                                     running, others > 1 ? "are" : "is", others > 1 ? "them" : "it",
-                                     others > 1 ? "them" : "it"),
-                         {}};
-    }
+  if (options_.border_set && !(*store)->meta().bounds.same_border(options_.border)) {
+    auto ids = (*store)->running(options_.lease);
+    if (!ids) return FileError{"--border: " + ids.error().message, {}};
+    std::string running;
+    int others = 0;
+    for (const std::uint32_t id : *ids)
+      if (id != options_.server_id) running += fmt::format("{}server {}", others++ == 0 ? "" : ", ", id);
+    if (others > 0)
+      return FileError{fmt::format("--border: {} {} running on this world, and a border applies to every server: "
+                                   "stop {}, start this one with --border, then start {} again",
+                                   running, others > 1 ? "are" : "is", others > 1 ? "them" : "it",
+                                   others > 1 ? "them" : "it"),
+                       {}};
   }
   // Only leases held: the world owner claims a region (and reads it again)
   // before it applies anything there, so a write never takes back a region
@@ -71,12 +64,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   if (!world) return world.error();
   s->world_ = std::move(*world);
   if (options.border_set) {
-    WorldBounds b = s->world_->meta().bounds;
-    b.bounded_xz = options.border.bounded_xz;
-    b.min_x = options.border.min_x;
-    b.max_x = options.border.max_x;
-    b.min_z = options.border.min_z;
-    b.max_z = options.border.max_z;
+    const WorldBounds b = s->world_->meta().bounds.with_border(options.border);
     if (auto st = s->world_->store().set_bounds(b); !st) return FileError{"--border: " + st.error().message, {}};
   }
   const std::uint64_t epoch = s->world_->meta().epoch + 1;
@@ -237,11 +225,11 @@ void Server::start() {
     std::string advertised = options_.advertise;
     if (advertised.empty() && !is_any_address(options_.bind_address))
       advertised = ServerAddress{options_.server_id, options_.bind_address, port_}.text();
+    // (Without an address it is still known to run: a --border elsewhere
+    // waits for it.)
     if (advertised.empty())
       server_log().warn("no --advertise address (bound to {}): other servers redirect no client here",
                         options_.bind_address);
-    // (Without an address it is still known to run: a --border elsewhere
-    // waits for it.)
     else
       server_log().info("clients are redirected here as {}{}", advertised,
                         options_.redirect_margin > 0 ? "" : " (this server redirects none: --redirect-margin 0)");

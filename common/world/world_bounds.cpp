@@ -42,4 +42,20 @@ bool WorldBounds::touches_chunk(Vec3i chunk_pos) const {
   return !clamp(Region{o, o + Vec3i{kChunkSize, kChunkSize, kChunkSize}}).empty();
 }
 
+WorldBounds WorldBounds::with_border(const WorldBounds& border) const {
+  WorldBounds b = *this;
+  b.bounded_xz = border.bounded_xz;
+  b.min_x = border.min_x;
+  b.max_x = border.max_x;
+  b.min_z = border.min_z;
+  b.max_z = border.max_z;
+  return b;
+}
+
+bool WorldBounds::same_border(const WorldBounds& border) const {
+  if (bounded_xz != border.bounded_xz) return false;
+  return !bounded_xz ||
+         (min_x == border.min_x && max_x == border.max_x && min_z == border.min_z && max_z == border.max_z);
+}
+
 }  // namespace terrane

@@ -30,6 +30,11 @@ struct WorldBounds {
   // Empty when valid, else what is wrong: every limit within
   // +-kMaxWorldCoordinate and each max above its min.
   std::string validate() const;
+  // These bounds with border's horizontal limits (or none, when border is
+  // not bounded_xz): what a world border (terrane-server --border) makes of
+  // a world's bounds. same_border: whether border would change nothing.
+  WorldBounds with_border(const WorldBounds& border) const;
+  bool same_border(const WorldBounds& border) const;
 };
 
 }  // namespace terrane

@@ -859,7 +859,7 @@ void Replicator::arm_timer() {
   if (welcomed_) at = std::min(at, next_ping_);
   // In a shared world: whether the client stands in another server's
   // region is checked again each second (the map of writers changes), and
-  // a redirected client is closed after its grace.
+  // a redirected client that has not gone is served again after its grace.
   if (redirected_)
     at = std::min(at, redirected_at_ + kRedirectGrace);
   else if (cluster_ != nullptr && options_.redirect_margin > 0 && plan_valid_)
