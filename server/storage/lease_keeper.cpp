@@ -65,7 +65,7 @@ bool LeaseKeeper::holds(Vec3i region) const {
   return held_.count(key_of(region)) != 0;
 }
 
-StoreResult<std::vector<RegionLease>> LeaseKeeper::ensure(std::span<const Vec3i> regions) {
+StoreResult<std::vector<RegionLease>> LeaseKeeper::ensure(std::span<const Vec3i> regions, ClaimRule rule) {
   std::vector<Vec3i> order(regions.begin(), regions.end());
   std::sort(order.begin(), order.end(), [](Vec3i a, Vec3i b) { return key_of(a) < key_of(b); });
   order.erase(std::unique(order.begin(), order.end()), order.end());
@@ -80,7 +80,7 @@ StoreResult<std::vector<RegionLease>> LeaseKeeper::ensure(std::span<const Vec3i>
         continue;
       }
     }
-    auto lease = claims_->claim(region, owner_, times_.lease);
+    auto lease = claims_->claim(region, owner_, times_.lease, rule);
     if (!lease) return lease.error();
     {
       std::lock_guard lock(mutex_);

@@ -53,8 +53,9 @@ class LeaseKeeper {
 
   // The leases of regions, claiming those not held (in one order for every
   // server). Fails with kOwned (naming the holder) if another server holds
-  // one of them; the regions claimed before the failure stay held.
-  StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions);
+  // one of them (kLeft, by rule, if it leaves a free one to a neighbour's
+  // server); the regions claimed before the failure stay held.
+  StoreResult<std::vector<RegionLease>> ensure(std::span<const Vec3i> regions, ClaimRule rule = ClaimRule::kAny);
   // The leases of regions, all of them held already; claims nothing.
   // kFenced naming a region not held: a write must never take a region
   // back by itself (the world owner claims, then reads the region again).

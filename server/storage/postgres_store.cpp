@@ -349,9 +349,15 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   return store;
 }
 
-StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease) {
+StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease,
+                                               ClaimRule rule) {
   if (owner > kMaxServerId)
     return StoreError{StoreError::Kind::kQuery, fmt::format("server id {} is not below 2^31", owner)};
+  if (rule == ClaimRule::kPreferNeighbours) {
+    auto left = left_to_neighbour(region, owner);
+    if (!left) return left.error();
+    if (*left) return **left;
+  }
   // Free, expired or the claimant's own: taken at the next epoch (a server
   // that claims again is a new incarnation: whatever its earlier self still
   // has in flight is fenced). Held by another: no row changes, and the
@@ -382,6 +388,54 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
     if (const auto id = who->integer(0, 0); id && *id >= 0 && *id <= std::numeric_limits<std::int32_t>::max())
       owned.holder = static_cast<std::uint32_t>(*id);
   return owned;
+}
+
+StoreResult<std::optional<StoreError>> PostgresStore::left_to_neighbour(Vec3i region, std::uint32_t owner) {
+  // Per server with a current lease: how many of the region's 26
+  // neighbours it writes, how many regions in all, and whether it writes
+  // the region itself. A preference, read apart from the claim: a claim
+  // racing it only makes a territory less whole.
+  auto r = c_->exec("read neighbouring leases",
+                    "SELECT owner,"
+                    " count(*) FILTER (WHERE rx BETWEEN $1::int - 1 AND $1::int + 1"
+                    "  AND ry BETWEEN $2::int - 1 AND $2::int + 1 AND rz BETWEEN $3::int - 1 AND $3::int + 1"
+                    "  AND NOT (rx = $1::int AND ry = $2::int AND rz = $3::int)),"
+                    " count(*),"
+                    " count(*) FILTER (WHERE rx = $1::int AND ry = $2::int AND rz = $3::int)"
+                    " FROM terrane_leases WHERE expires_at > clock_timestamp() GROUP BY owner",
+                    {text(region.x), text(region.y), text(region.z)});
+  if (!r) return r.error();
+  struct Writer {
+    std::int64_t id = 0, near = 0, total = 0, here = 0;
+  };
+  std::vector<Writer> writers;
+  for (int i = 0; i < r->count(); ++i) {
+    Writer w{r->integer(i, 0).value_or(-1), r->integer(i, 1).value_or(-1), r->integer(i, 2).value_or(-1),
+             r->integer(i, 3).value_or(-1)};
+    if (w.id < 0 || w.id > kMaxServerId || w.near < 0 || w.total < 0 || w.here < 0)
+      return StoreError{StoreError::Kind::kDecode, "postgresql: read neighbouring leases: a row is not a lease count"};
+    writers.push_back(w);
+  }
+  std::int64_t mine = 0;
+  for (const Writer& w : writers) {
+    if (w.here > 0 && w.id != owner) return std::optional<StoreError>{};  // held: the claim says by whom
+    if (w.id == owner) {
+      if (w.near > 0) return std::optional<StoreError>{};  // next to this server's own
+      mine = w.total;
+    }
+  }
+  const Writer* best = nullptr;
+  for (const Writer& w : writers)
+    if (w.id != owner && w.near > 0 && w.total <= mine &&
+        (best == nullptr || w.near > best->near || (w.near == best->near && w.id < best->id)))
+      best = &w;
+  if (best == nullptr) return std::optional<StoreError>{};
+  return std::optional<StoreError>{StoreError{
+      StoreError::Kind::kLeft,
+      fmt::format("region {} is left to server {}, which writes {} of its neighbours (this server writes none, and "
+                  "{} regions to its {})",
+                  region_text(region), best->id, best->near, mine, best->total),
+      static_cast<std::uint32_t>(best->id)}};
 }
 
 StoreResult<std::vector<RegionLease>> PostgresStore::renew(std::span<const RegionLease> leases,

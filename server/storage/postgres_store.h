@@ -43,6 +43,7 @@ struct StoreError {
     kConnection,  // the database cannot be reached, or the connection broke
     kQuery,       // PostgreSQL refused a statement
     kOwned,       // a region is leased to another server (claim)
+    kLeft,        // a free region is left to the server writing its neighbours (claim, ClaimRule::kPreferNeighbours)
     kFenced,      // a write's lease is no longer current: nothing was written
     kDecode,      // a stored row does not decode
   };
@@ -51,7 +52,14 @@ struct StoreError {
       : kind(k), message(std::move(m)), holder(h) {}
   Kind kind = Kind::kQuery;
   std::string message;
-  std::optional<std::uint32_t> holder;  // kOwned: the server holding the region
+  std::optional<std::uint32_t> holder;  // kOwned: the server holding the region; kLeft: the one it is left to
+};
+
+// How a claim treats a free region (STORE_POSTGRESQL.md, "Leases").
+enum class ClaimRule : std::uint8_t {
+  kAny,               // take it (tools, forwarded edits, rollbacks)
+  kPreferNeighbours,  // leave it to a server writing a neighbour, unless the claimant writes one itself or
+                      // that server writes more regions than the claimant (a server's clients' own edits)
 };
 template <class T>
 using StoreResult = BasicResult<T, StoreError>;
@@ -143,8 +151,14 @@ class PostgresStore final : public WorldStore {
   // it already (a server that claims again is a new incarnation: writes its
   // earlier self still has in flight are fenced; renew keeps an epoch).
   // Otherwise the error is kOwned, naming the holder and when its lease
-  // runs out.
-  StoreResult<RegionLease> claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease);
+  // runs out. With kPreferNeighbours, a free region one of whose 26
+  // neighbours another server writes is left to that server (error kLeft,
+  // naming it) unless owner writes a neighbour too or every such server
+  // writes more regions than owner (the one writing most neighbours, then
+  // the lowest id). Territories stay whole, so clients cross fewer borders,
+  // without one server's growing past the others'.
+  StoreResult<RegionLease> claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease,
+                                 ClaimRule rule = ClaimRule::kAny);
   // Extends each lease still current (same owner and epoch, not expired) by
   // lease from now; returns those it extended. A lease missing from the
   // answer is lost: its holder must stop writing the region.
@@ -251,6 +265,9 @@ class PostgresStore final : public WorldStore {
   FileStatus erase_access(const std::string& key) override;
 
  private:
+  // kPreferNeighbours' rule: the kLeft error if region is left to another
+  // server, nullopt if owner may claim it.
+  StoreResult<std::optional<StoreError>> left_to_neighbour(Vec3i region, std::uint32_t owner);
   struct Connection;
   PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown);
   StoreResult<Ok> read_meta();

@@ -73,13 +73,14 @@ std::deque<Storage::LoadJob>& Storage::queue(Priority priority) {
   return priority == Priority::kUrgent ? urgent_loads_ : priority == Priority::kStream ? loads_ : background_loads_;
 }
 
-void Storage::claim(Vec3i region, ClaimDone done) {
-  with_postgres([this, region, done = std::move(done)](PostgresStore& pg) {
+void Storage::claim(Vec3i region, ClaimRule rule, ClaimDone done) {
+  with_postgres([this, region, rule, done = std::move(done)](PostgresStore& pg) {
     Claimed out;
-    auto held = leases_->ensure(std::span(&region, 1));
+    auto held = leases_->ensure(std::span(&region, 1), rule);
     if (!held) {
       out.why = held.error().message;
       out.unreachable = held.error().kind == StoreError::Kind::kConnection;
+      out.left = held.error().kind == StoreError::Kind::kLeft;
       out.holder = held.error().holder;
       done(std::move(out));
       return;

@@ -150,12 +150,13 @@ class Storage {
   struct Claimed {
     bool held = false;
     bool unreachable = false;  // not held because the database could not be reached (try again)
+    bool left = false;         // free, but left to holder, which writes its neighbours (ClaimRule)
     std::string why;
     std::optional<std::uint32_t> holder;  // the server holding it instead
     std::vector<std::pair<Vec3i, std::uint64_t>> stored;  // chunk, revision
   };
   using ClaimDone = std::function<void(Claimed)>;
-  void claim(Vec3i region, ClaimDone done);
+  void claim(Vec3i region, ClaimRule rule, ClaimDone done);
   // Forwarded edits (a shared world; on a loader thread): sends one to
   // server to's inbox (done gets the inbox row's id), reads this server's
   // inbox past after, and answers edits refused without a commit.

@@ -616,7 +616,8 @@ bool WorldOwner::near_enough(const Client& c, const Region& r) const {
   return ok;
 }
 
-WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder) {
+WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder,
+                                          ClaimRule rule) {
   if (!storage_.leased() || r.empty()) return Writable::kYes;
   const auto now = std::chrono::steady_clock::now();
   Writable out = Writable::kYes;
@@ -624,11 +625,15 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std
     const Vec3i region = lease_region_of(cp);
     auto [it, unknown] = leases_.try_emplace(region);
     RegionLeaseState& l = it->second;
-    if (unknown || ((l.state == RegionLeaseState::kRefused || l.state == RegionLeaseState::kUnreachable) &&
-                    now >= l.ask_again)) {
+    if (unknown ||
+        ((l.state == RegionLeaseState::kRefused || l.state == RegionLeaseState::kUnreachable) &&
+         now >= l.ask_again) ||
+        (l.state == RegionLeaseState::kRefused && l.left && rule == ClaimRule::kAny)) {
       // Another server's lease may have run out since (it died): ask again.
+      // A region left to a neighbour's server by preference is taken for
+      // what cannot be forwarded (a forwarded edit, undo, a rollback).
       l.state = RegionLeaseState::kClaiming;
-      storage_.claim(region, [this, region](Storage::Claimed claimed) {
+      storage_.claim(region, rule, [this, region](Storage::Claimed claimed) {
         asio::post(strand_, [this, region, claimed = std::move(claimed)]() mutable {
           on_claimed(region, std::move(claimed));
         });
@@ -649,6 +654,7 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   RegionLeaseState& l = leases_[region];
   if (!claimed.held) {
     l.state = claimed.unreachable ? RegionLeaseState::kUnreachable : RegionLeaseState::kRefused;
+    l.left = claimed.left;
     l.holder = claimed.holder;
     l.why = std::move(claimed.why);
     l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
@@ -753,6 +759,7 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
     // now could run before the release).
     RegionLeaseState& l = leases_[region];
     l.state = RegionLeaseState::kHandingOver;
+    l.left = false;
     l.holder = to;
     l.why = fmt::format("handed over to server {}", to);
     hand_over.push_back(region);
@@ -1045,7 +1052,9 @@ void WorldOwner::apply_edits() {
     std::string not_ours;
     std::optional<std::uint32_t> holder;
     const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
-    const Writable w = writable(writes, &not_ours, &holder);
+    const Writable w =
+        writable(writes, &not_ours, &holder,
+                 client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
     if (w == Writable::kWaiting && !stopping_) break;  // wait for the claim (arrival order is kept)
     if (w != Writable::kYes) {
       if (pe.forwarded) {

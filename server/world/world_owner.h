@@ -304,8 +304,11 @@ class WorldOwner : private WorldView {
   // (a claim is started for each region not known). kNo sets why (the
   // holder).
   enum class Writable : std::uint8_t { kYes, kWaiting, kNo };
-  // kNo also sets holder when the holding server is known.
-  Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr);
+  // kNo also sets holder when the holding server is known. rule: how a
+  // free region is claimed; a client's own edit (which can be forwarded)
+  // leaves one to the server writing its neighbours (ClaimRule).
+  Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr,
+                    ClaimRule rule = ClaimRule::kAny);
   bool near_enough(const Client& c, const Region& r) const;
   // The chunks of r asked for and kept loaded for a queued edit (unbusy
   // releases them).
@@ -376,6 +379,7 @@ class WorldOwner : private WorldView {
   // asked again after a second; edits wait in the second case).
   struct RegionLeaseState {
     enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable, kHandingOver } state = kClaiming;
+    bool left = false;  // kRefused: free, left to holder by ClaimRule::kPreferNeighbours
     std::string why;
     std::optional<std::uint32_t> holder;
     std::chrono::steady_clock::time_point ask_again{};

@@ -182,6 +182,18 @@ class ClusterTest : public testing_support::PostgresTest {
   static bool replica_shows(Client& c, const Region& r, const std::vector<Voxel>& want) {
     return c.with_replica([&](const Replica& replica) { return shows(replica, r, want); });
   }
+  // The server writing region now (a current lease), or -1.
+  int lease_owner(Vec3i region) {
+    PGconn* conn = PQconnectdb(url_.c_str());
+    const std::string q = fmt::format(
+        "SELECT owner FROM terrane_leases WHERE rx = {} AND ry = {} AND rz = {} AND expires_at > clock_timestamp()",
+        region.x, region.y, region.z);
+    PGresult* r = PQexec(conn, q.c_str());
+    const int n = PQresultStatus(r) == PGRES_TUPLES_OK && PQntuples(r) == 1 ? std::atoi(PQgetvalue(r, 0, 0)) : -1;
+    PQclear(r);
+    PQfinish(conn);
+    return n;
+  }
   int current_leases() {
     PGconn* conn = PQconnectdb(url_.c_str());
     PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
@@ -256,6 +268,49 @@ TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhat
   EXPECT_TRUE(replica_shows(cy, beside, bobs));
   EXPECT_TRUE(replica_shows(cy, third, more));
   cy.disconnect();
+}
+
+TEST_F(ClusterTest, AFreeRegionBesideAnotherServersIsLeftToItWhileItWritesNoMoreThanThisOne) {
+  Pair p;
+  ASSERT_NO_FATAL_FAILURE(start_pair(5000, &p));
+  Client &ann = *p.ann, &bob = *p.bob;
+  const auto region_of = [](const Region& r) { return coarse_region_of(chunk_of(r.min)); };
+  // The spawn lies by the corner x = 0, z = 0 of four regions: boxes a few
+  // voxels from it, one in each of three of them.
+  const Vec3f spawn = ann.welcome()->spawn;
+  const Vec3i s = voxel_of(spawn);
+  const Vec3i corner{0, s.y - 3, 0};
+  const auto box_at = [&](int dx, int dz) {
+    return Region{corner + Vec3i{dx, 0, dz}, corner + Vec3i{dx + 3, 3, dz + 3}};
+  };
+  const Region anns = box_at(4, 4), beside = box_at(-8, 4), third = box_at(-8, -8);
+  ASSERT_LT(std::abs(s.x) + std::abs(s.z), 4) << "the spawn is not by the region corner";
+  // Server 1 writes the region of ann's edit; server 2 one far away (a
+  // player of its own there), so each writes one.
+  ASSERT_EQ(outcome(ann, ann.write_box(anns, pattern(anns, materials::kBrick))), "");
+  ClientOptions fars = options(*p.b, "far");
+  fars.spawn_offset = Vec3f{600, 0, 600};
+  Client far(fars);
+  join(far, fars.spawn_offset);
+  const Vec3i at = voxel_of(spawn + fars.spawn_offset);
+  const Region away{at + Vec3i{0, -3, 0}, at + Vec3i{2, -1, 2}};
+  ASSERT_EQ(outcome(far, far.write_box(away, pattern(away, materials::kSand))), "");
+  ASSERT_EQ(lease_owner(region_of(anns)), 1);
+  ASSERT_EQ(lease_owner(region_of(away)), 2);
+  // Bob (on server 2) edits a free region beside server 1's only: it is
+  // left to server 1, so the edit is forwarded there and server 1 writes it.
+  const auto bobs = pattern(beside, materials::kSnow);
+  ASSERT_EQ(outcome(bob, bob.write_box(beside, bobs)), "");
+  EXPECT_EQ(lease_owner(region_of(beside)), 1) << "server 2 took a region beside server 1's";
+  EXPECT_TRUE(replica_shows(bob, beside, bobs));
+  // Server 1 writes two regions now, server 2 one: bob's edit in a third
+  // free region beside server 1's only is server 2's to write, so that no
+  // server's territory grows past the others'.
+  const auto more = pattern(third, materials::kRock);
+  ASSERT_EQ(outcome(bob, bob.write_box(third, more)), "");
+  EXPECT_EQ(lease_owner(region_of(third)), 2);
+  EXPECT_TRUE(replica_shows(bob, third, more));
+  far.disconnect();
 }
 
 TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {

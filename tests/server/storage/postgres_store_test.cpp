@@ -251,6 +251,50 @@ TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
   EXPECT_NE(too_big.error().message.find("not below 2^31"), std::string::npos) << too_big.error().message;
 }
 
+TEST_F(PostgresStoreTest, AFreeRegionIsLeftToTheServerWritingItsNeighboursUnlessThatServerWritesMore) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  const auto prefer = ClaimRule::kPreferNeighbours;
+  // Server 2 writes nothing yet: it takes a region next to server 1's
+  // (a server with no region always may), and one far away.
+  ASSERT_TRUE(a->claim({0, 0, 0}, 1, 60s, prefer).ok());
+  ASSERT_TRUE(b->claim({10, 0, 10}, 2, 60s, prefer).ok());
+  // Now each writes one: a free region touching only server 1's (here by a
+  // corner) is left to server 1, named.
+  auto left = b->claim({1, 1, 1}, 2, 60s, prefer);
+  ASSERT_FALSE(left.ok());
+  EXPECT_EQ(left.error().kind, StoreError::Kind::kLeft);
+  EXPECT_EQ(left.error().holder, std::optional<std::uint32_t>(1));
+  EXPECT_NE(left.error().message.find("left to server 1"), std::string::npos) << left.error().message;
+  auto free = b->holder({1, 1, 1});
+  ASSERT_TRUE(free.ok());
+  EXPECT_FALSE(free->has_value()) << "a preference changes no lease";
+  // Without the rule (a tool, a forwarded edit) the claim takes it.
+  ASSERT_TRUE(b->claim({1, 1, 1}, 2, 60s).ok());
+  // Next to its own, a server takes a region whatever else touches it.
+  ASSERT_TRUE(b->claim({1, 0, 0}, 2, 60s, prefer).ok());
+  ASSERT_TRUE(b->release(std::vector<RegionLease>{{{1, 1, 1}, 2, 1}, {{1, 0, 0}, 2, 1}}).ok());
+  // Server 1 writes more than server 2 (3 against 1): server 2 takes a free
+  // region touching only server 1's itself, so no server grows past the others.
+  ASSERT_TRUE(a->claim({-1, 0, 0}, 1, 60s, prefer).ok());
+  ASSERT_TRUE(a->claim({0, 0, -1}, 1, 60s, prefer).ok());
+  auto grows = b->claim({-1, 0, -1}, 2, 60s, prefer);
+  ASSERT_TRUE(grows.ok()) << grows.error().message;
+  EXPECT_EQ(grows->owner, 2u);
+  // A held region is refused as ever, naming its holder.
+  auto held = b->claim({0, 0, 0}, 2, 60s, prefer);
+  ASSERT_FALSE(held.ok());
+  EXPECT_EQ(held.error().kind, StoreError::Kind::kOwned);
+  // An expired lease counts for nothing: servers 3 and 4 write one region
+  // each, and once server 3's (at 300 ms) has run out, a region next to it
+  // alone is server 4's to take (were it counted, it would be left to 3 for good).
+  ASSERT_TRUE(a->claim({30, 0, 30}, 3, 300ms, prefer).ok());
+  ASSERT_TRUE(b->claim({40, 0, 40}, 4, 60s, prefer).ok());
+  StoreResult<RegionLease> after = StoreError{};
+  ASSERT_TRUE(eventually([&] { return (after = b->claim({31, 0, 30}, 4, 60s, prefer)).ok(); }, 30s))
+      << after.error().message;
+}
+
 TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
   auto a = open(), b = open();
   ASSERT_TRUE(a && b);
