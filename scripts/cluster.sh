@@ -26,12 +26,7 @@ case "$servers$bots" in
   *[!0-9]*|'') echo "cluster.sh: SERVERS and BOTS are positive numbers (got '$servers', '$bots')" >&2; exit 2 ;;
 esac
 [ "$servers" -ge 1 ] && [ "$bots" -ge 1 ] || { echo "cluster.sh: SERVERS and BOTS are at least 1" >&2; exit 2; }
-. scripts/lib.sh  # terrane_cpu_seconds, terrane_peak_kib
-pgbin=
-for v in 17 16 15 14 13; do
-  [ -x "/usr/lib/postgresql/$v/bin/postgres" ] && { pgbin=/usr/lib/postgresql/$v/bin; break; }
-done
-[ -n "$pgbin" ] || { echo "cluster.sh: PostgreSQL is not installed (scripts/install-deps.sh installs it)" >&2; exit 2; }
+. scripts/lib.sh  # terrane_cpu_seconds, terrane_peak_kib, terrane_start_postgres
 [ -x build/bin/terrane-server ] || { echo "cluster.sh: no build (scripts/build.sh release)" >&2; exit 2; }
 
 scratch=$(mktemp -d "${TMPDIR:-/tmp}/terrane-cluster.XXXXXX")
@@ -40,34 +35,13 @@ server_pids=()
 cleanup() {
   for p in "${server_pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
   for p in "${server_pids[@]}"; do wait "$p" 2>/dev/null || true; done
-  if [ -n "$pg_pid" ]; then
-    # The postmaster itself (as root, pg_pid is runuser's): a fast shutdown.
-    kill -INT "$(head -n 1 "$scratch/pg/data/postmaster.pid" 2>/dev/null || echo "$pg_pid")" 2>/dev/null || true
-    wait "$pg_pid" 2>/dev/null || true
-  fi
+  terrane_stop_postgres
   rm -rf "$scratch"
 }
 trap cleanup EXIT INT TERM
 
-as_pg=()
-mkdir -p "$scratch/pg"
-if [ "$(id -u)" = 0 ]; then
-  chmod 755 "$scratch"  # postgres must reach its directory inside
-  chown postgres: "$scratch/pg"
-  as_pg=(runuser -u postgres --)
-fi
-"${as_pg[@]}" "$pgbin/initdb" -D "$scratch/pg/data" -U terrane --auth=trust --encoding=UTF8 >"$scratch/initdb.log" 2>&1 ||
-  { cat "$scratch/initdb.log" >&2; exit 1; }
-pg_port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-"${as_pg[@]}" "$pgbin/postgres" -D "$scratch/pg/data" -p "$pg_port" -c listen_addresses=127.0.0.1 \
-  -c unix_socket_directories="$scratch/pg" -c max_connections=200 >"$scratch/postgres.log" 2>&1 &
-pg_pid=$!
-for _ in $(seq 1 600); do
-  grep -q "ready to accept connections" "$scratch/postgres.log" && break
-  kill -0 "$pg_pid" 2>/dev/null || { cat "$scratch/postgres.log" >&2; exit 1; }
-  sleep 0.1
-done
-url="postgresql://terrane@127.0.0.1:$pg_port/postgres"
+terrane_start_postgres "$scratch/pg"
+url=$pg_url
 echo "PostgreSQL on 127.0.0.1:$pg_port (data in $scratch/pg)" >&2
 
 if [ -n "${TERRANE_WORLD:-}" ]; then
