@@ -120,6 +120,20 @@ void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
   }
 }
 
+std::vector<Vec3i> FanoutTracker::changed_by(const Edit& e, const Tick& tk) const {
+  std::vector<Vec3i> out;
+  for (const Vec3i cp : e.chunks) {
+    bool changed = std::any_of(tk.updates.begin(), tk.updates.end(), [&](const Update& u) { return u.chunk == cp; });
+    if (!changed)
+      if (auto a = arrivals_.find(cp); a != arrivals_.end())
+        changed = std::any_of(a->second.begin(), a->second.end(), [&](const auto& arrival) {
+          return arrival.first == e.bot && arrival.second >= e.sent && arrival.second <= e.sent + kArrivalWindow;
+        });
+    if (changed) out.push_back(cp);
+  }
+  return out.empty() ? e.chunks : out;
+}
+
 void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
   std::lock_guard lock(mutex_);
   std::unordered_map<int, Clock::time_point> last;  // receiver -> last batch for one edit
@@ -137,13 +151,16 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
         auto [l, fresh] = last.try_emplace(u.bot, u.t);
         if (!fresh && u.t > l->second) l->second = u.t;
       }
-      // Receivers on other servers: the first change of any of the edit's
-      // chunks they receive after it was sent, within the window (the
-      // edit's box may reach chunks it did not change, whose next change is
-      // another edit's; one commit's chunks arrive together).
+      // Receivers on other servers: the first change of any of the chunks
+      // the edit changed that they receive after it was sent, within the
+      // window (one commit's chunks arrive together). The chunks changed:
+      // those of its box in its tick's updates, or (an edit forwarded to
+      // another server) arriving again at the editor; its whole box if
+      // neither says (a chunk the box reaches but the edit left alone
+      // changes next by another edit, seconds later).
       std::unordered_map<int, Clock::time_point> other;
       if (servers_ > 1)
-        for (const Vec3i cp : e.chunks) {
+        for (const Vec3i cp : changed_by(e, tk)) {
           auto a = arrivals_.find(cp);
           if (a == arrivals_.end()) continue;
           for (const auto& [bot, t] : a->second) {

@@ -121,6 +121,9 @@ class FanoutTracker {
   std::uint64_t tick_key(int bot, std::uint64_t tick) const {
     return ((server_of(bot) & 0xffff) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
   }
+  // Under mutex_: the chunks of e's box its tick (or, forwarded, its
+  // owner) changed; all of them when that is not known.
+  std::vector<Vec3i> changed_by(const Edit& e, const Tick& tk) const;
   std::size_t second_of(Clock::time_point t) const;
   void add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms);
 

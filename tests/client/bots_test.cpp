@@ -13,6 +13,7 @@
 #include "client/bots/options.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
+#include "client/bots/stats.h"
 #include "tests/support/server_process.h"
 
 namespace terrane::bots {
@@ -245,6 +246,41 @@ std::string parse(std::vector<std::string> args, BotsOptions* o) {
   for (auto& a : args) argv.push_back(a.data());
   bool help = false;
   return parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, o, &help);
+}
+
+// Several servers: a receiver on another server is measured by the chunks
+// the edit changed (its tick's updates), not by every chunk its box reaches.
+TEST(FanoutTrackerTest, AReceiverOnAnotherServerIsMeasuredByTheChunksTheEditChanged) {
+  using namespace std::chrono_literals;
+  const auto t0 = std::chrono::steady_clock::now();
+  FanoutTracker f(t0, t0, 2);
+  f.bot_on_server(0, 1);  // the editor
+  f.bot_on_server(1, 2);  // holds the box's second chunk only
+  f.bot_on_server(2, 2);  // holds both
+  const Vec3i changed{0, 0, 0}, reached{1, 0, 0};
+  f.chunk_arrived(1, reached, t0);
+  f.chunk_arrived(2, changed, t0);
+  f.chunk_arrived(2, reached, t0);
+  // A box across both chunks that changes only the first (its tick's update).
+  const Region box{{30, 0, 0}, {34, 4, 4}};
+  const std::uint32_t id = f.send_edit(0, box, 8, [] { return 7u; });
+  ASSERT_EQ(id, 7u);
+  const auto sent = std::chrono::steady_clock::now();
+  EditOutcome ok;
+  ok.accepted = true;
+  ok.tick = 5;
+  f.edit_result(0, id, ok, sent + 20ms);
+  f.update_received(0, 5, {ChunkRevisionMsg{changed, 2}}, sent + 20ms);
+  // Bot 2 gets the change from its server 40 ms on; the second chunk
+  // changes 1.5 s on, by another edit, and reaches both.
+  f.chunk_arrived(2, changed, sent + 40ms);
+  f.chunk_arrived(1, reached, sent + 1500ms);
+  f.chunk_arrived(2, reached, sent + 1500ms);
+  f.settle(sent + 10s, 0s);
+  const auto other = f.fanout_other_server_ms();
+  ASSERT_EQ(other.size(), 1u) << "bot 1 never received a chunk the edit changed";
+  EXPECT_GE(other[0], 40.0f);
+  EXPECT_LT(other[0], 1000.0f);
 }
 
 TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
