@@ -392,49 +392,42 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
 
 StoreResult<std::optional<StoreError>> PostgresStore::left_to_neighbour(Vec3i region, std::uint32_t owner) {
   // Per server with a current lease: how many of the region's 26
-  // neighbours it writes, how many regions in all, and whether it writes
-  // the region itself. A preference, read apart from the claim: a claim
-  // racing it only makes a territory less whole.
+  // neighbours it writes, and whether it writes the region itself. A
+  // preference, read apart from the claim: a claim racing it only makes a
+  // territory less whole.
   auto r = c_->exec("read neighbouring leases",
                     "SELECT owner,"
                     " count(*) FILTER (WHERE rx BETWEEN $1::int - 1 AND $1::int + 1"
                     "  AND ry BETWEEN $2::int - 1 AND $2::int + 1 AND rz BETWEEN $3::int - 1 AND $3::int + 1"
                     "  AND NOT (rx = $1::int AND ry = $2::int AND rz = $3::int)),"
-                    " count(*),"
                     " count(*) FILTER (WHERE rx = $1::int AND ry = $2::int AND rz = $3::int)"
                     " FROM terrane_leases WHERE expires_at > clock_timestamp() GROUP BY owner",
                     {text(region.x), text(region.y), text(region.z)});
   if (!r) return r.error();
   struct Writer {
-    std::int64_t id = 0, near = 0, total = 0, here = 0;
+    std::int64_t id = 0, near = 0, here = 0;
   };
   std::vector<Writer> writers;
   for (int i = 0; i < r->count(); ++i) {
-    Writer w{r->integer(i, 0).value_or(-1), r->integer(i, 1).value_or(-1), r->integer(i, 2).value_or(-1),
-             r->integer(i, 3).value_or(-1)};
-    if (w.id < 0 || w.id > kMaxServerId || w.near < 0 || w.total < 0 || w.here < 0)
+    Writer w{r->integer(i, 0).value_or(-1), r->integer(i, 1).value_or(-1), r->integer(i, 2).value_or(-1)};
+    if (w.id < 0 || w.id > kMaxServerId || w.near < 0 || w.here < 0)
       return StoreError{StoreError::Kind::kDecode, "postgresql: read neighbouring leases: a row is not a lease count"};
     writers.push_back(w);
   }
-  std::int64_t mine = 0;
   for (const Writer& w : writers) {
     if (w.here > 0 && w.id != owner) return std::optional<StoreError>{};  // held: the claim says by whom
-    if (w.id == owner) {
-      if (w.near > 0) return std::optional<StoreError>{};  // next to this server's own
-      mine = w.total;
-    }
+    if (w.id == owner && w.near > 0) return std::optional<StoreError>{};  // next to this server's own
   }
   const Writer* best = nullptr;
   for (const Writer& w : writers)
-    if (w.id != owner && w.near > 0 && w.total <= mine &&
+    if (w.id != owner && w.near > 0 &&
         (best == nullptr || w.near > best->near || (w.near == best->near && w.id < best->id)))
       best = &w;
   if (best == nullptr) return std::optional<StoreError>{};
   return std::optional<StoreError>{StoreError{
       StoreError::Kind::kLeft,
-      fmt::format("region {} is left to server {}, which writes {} of its neighbours (this server writes none, and "
-                  "{} regions to its {})",
-                  region_text(region), best->id, best->near, mine, best->total),
+      fmt::format("region {} is left to server {}, which writes {} of its neighbours (this server writes none)",
+                  region_text(region), best->id, best->near),
       static_cast<std::uint32_t>(best->id)}};
 }
 

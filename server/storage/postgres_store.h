@@ -58,8 +58,8 @@ struct StoreError {
 // How a claim treats a free region (STORE_POSTGRESQL.md, "Leases").
 enum class ClaimRule : std::uint8_t {
   kAny,               // take it (tools, forwarded edits, rollbacks)
-  kPreferNeighbours,  // leave it to a server writing a neighbour, unless the claimant writes one itself or
-                      // that server writes more regions than the claimant (a server's clients' own edits)
+  kPreferNeighbours,  // leave it to a server writing a neighbour unless the claimant writes one itself
+                      // (a server's clients' own edits)
 };
 template <class T>
 using StoreResult = BasicResult<T, StoreError>;
@@ -153,10 +153,9 @@ class PostgresStore final : public WorldStore {
   // Otherwise the error is kOwned, naming the holder and when its lease
   // runs out. With kPreferNeighbours, a free region one of whose 26
   // neighbours another server writes is left to that server (error kLeft,
-  // naming it) unless owner writes a neighbour too or every such server
-  // writes more regions than owner (the one writing most neighbours, then
-  // the lowest id). Territories stay whole, so clients cross fewer borders,
-  // without one server's growing past the others'.
+  // naming it) unless owner writes a neighbour too (the server writing
+  // most neighbours, then the lowest id). Territories stay whole, so
+  // clients cross fewer borders.
   StoreResult<RegionLease> claim(Vec3i region, std::uint32_t owner, std::chrono::milliseconds lease,
                                  ClaimRule rule = ClaimRule::kAny);
   // Extends each lease still current (same owner and epoch, not expired) by
