@@ -391,17 +391,19 @@ StoreResult<RegionLease> PostgresStore::claim(Vec3i region, std::uint32_t owner,
 }
 
 StoreResult<std::optional<StoreError>> PostgresStore::left_to_neighbour(Vec3i region, std::uint32_t owner) {
-  // Per server with a current lease: how many of the region's 26
-  // neighbours it writes, and whether it writes the region itself. A
-  // preference, read apart from the claim: a claim racing it only makes a
-  // territory less whole.
+  // Per server with a current lease in the 3 x 3 x 3 regions around (a
+  // range of the primary key): how many of the region's 26 neighbours it
+  // writes, and whether it writes the region itself. A preference, read
+  // apart from the claim: a claim racing it only makes a territory less
+  // whole.
   auto r = c_->exec("read neighbouring leases",
                     "SELECT owner,"
-                    " count(*) FILTER (WHERE rx BETWEEN $1::int - 1 AND $1::int + 1"
-                    "  AND ry BETWEEN $2::int - 1 AND $2::int + 1 AND rz BETWEEN $3::int - 1 AND $3::int + 1"
-                    "  AND NOT (rx = $1::int AND ry = $2::int AND rz = $3::int)),"
+                    " count(*) FILTER (WHERE NOT (rx = $1::int AND ry = $2::int AND rz = $3::int)),"
                     " count(*) FILTER (WHERE rx = $1::int AND ry = $2::int AND rz = $3::int)"
-                    " FROM terrane_leases WHERE expires_at > clock_timestamp() GROUP BY owner",
+                    " FROM terrane_leases WHERE expires_at > clock_timestamp()"
+                    "  AND rx BETWEEN $1::int - 1 AND $1::int + 1 AND ry BETWEEN $2::int - 1 AND $2::int + 1"
+                    "  AND rz BETWEEN $3::int - 1 AND $3::int + 1"
+                    " GROUP BY owner",
                     {text(region.x), text(region.y), text(region.z)});
   if (!r) return r.error();
   struct Writer {
@@ -415,7 +417,7 @@ StoreResult<std::optional<StoreError>> PostgresStore::left_to_neighbour(Vec3i re
     writers.push_back(w);
   }
   for (const Writer& w : writers) {
-    if (w.here > 0 && w.id != owner) return std::optional<StoreError>{};  // held: the claim says by whom
+    if (w.here > 0) return std::optional<StoreError>{};  // held: by another (the claim says whom) or by owner
     if (w.id == owner && w.near > 0) return std::optional<StoreError>{};  // next to this server's own
   }
   const Writer* best = nullptr;

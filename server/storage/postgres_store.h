@@ -55,7 +55,7 @@ struct StoreError {
   std::optional<std::uint32_t> holder;  // kOwned: the server holding the region; kLeft: the one it is left to
 };
 
-// How a claim treats a free region (STORE_POSTGRESQL.md, "Leases").
+// How a claim treats a free region (STORE_POSTGRESQL.md, "Regions and leases").
 enum class ClaimRule : std::uint8_t {
   kAny,               // take it (tools, forwarded edits, rollbacks)
   kPreferNeighbours,  // leave it to a server writing a neighbour unless the claimant writes one itself
