@@ -77,6 +77,7 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
     return;
   }
   ++totals_.edits_acked;
+  e.acked = t;
   if (e.sent >= measure_from_) {
     const float ms = static_cast<float>(ms_between(e.sent, t));
     ack_ms_.push_back(ms);
@@ -127,7 +128,7 @@ std::vector<Vec3i> FanoutTracker::changed_by(const Edit& e, const Tick& tk) cons
     if (!changed)
       if (auto a = arrivals_.find(cp); a != arrivals_.end())
         changed = std::any_of(a->second.begin(), a->second.end(), [&](const auto& arrival) {
-          return arrival.first == e.bot && arrival.second >= e.sent && arrival.second <= e.sent + kArrivalWindow;
+          return arrival.first == e.bot && arrival.second >= e.sent && arrival.second <= e.acked;
         });
     if (changed) out.push_back(cp);
   }
@@ -155,9 +156,10 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
       // the edit changed that they receive after it was sent, within the
       // window (one commit's chunks arrive together). The chunks changed:
       // those of its box in its tick's updates, or (an edit forwarded to
-      // another server) arriving again at the editor; its whole box if
-      // neither says (a chunk the box reaches but the edit left alone
-      // changes next by another edit, seconds later).
+      // another server) arriving again at the editor before its ack (which
+      // waits for them); its whole box if neither says (a chunk the box
+      // reaches but the edit left alone changes next by another edit,
+      // seconds later).
       std::unordered_map<int, Clock::time_point> other;
       if (servers_ > 1)
         for (const Vec3i cp : changed_by(e, tk)) {

@@ -96,6 +96,7 @@ class FanoutTracker {
   struct Edit {
     int bot = 0;
     Clock::time_point sent;
+    Clock::time_point acked;  // once acknowledged
     std::vector<Vec3i> chunks;
     double voxels = 0;
   };

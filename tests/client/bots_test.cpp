@@ -249,37 +249,70 @@ std::string parse(std::vector<std::string> args, BotsOptions* o) {
 }
 
 // Several servers: a receiver on another server is measured by the chunks
-// the edit changed (its tick's updates), not by every chunk its box reaches.
-TEST(FanoutTrackerTest, AReceiverOnAnotherServerIsMeasuredByTheChunksTheEditChanged) {
+// the edit changed, not by every chunk its box reaches. Bot 0 edits on
+// server 1; bot 1 (server 2) holds only the box's second chunk, bot 2
+// (server 2) both; the edit changes only the first.
+class FanoutTrackerTest : public ::testing::Test {
+ protected:
+  FanoutTrackerTest() : f_(std::chrono::steady_clock::now(), std::chrono::steady_clock::now(), 2) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f_.bot_on_server(0, 1);
+    f_.bot_on_server(1, 2);
+    f_.bot_on_server(2, 2);
+    f_.chunk_arrived(0, kChanged, t0);
+    f_.chunk_arrived(0, kReached, t0);
+    f_.chunk_arrived(1, kReached, t0);
+    f_.chunk_arrived(2, kChanged, t0);
+    f_.chunk_arrived(2, kReached, t0);
+  }
+  static constexpr Vec3i kChanged{0, 0, 0}, kReached{1, 0, 0};
+  static constexpr Region kBox{{30, 0, 0}, {34, 4, 4}};  // across both chunks
+  FanoutTracker f_;
+};
+
+TEST_F(FanoutTrackerTest, ALocalEditIsMeasuredByTheChunksItsTicksUpdatesChanged) {
   using namespace std::chrono_literals;
-  const auto t0 = std::chrono::steady_clock::now();
-  FanoutTracker f(t0, t0, 2);
-  f.bot_on_server(0, 1);  // the editor
-  f.bot_on_server(1, 2);  // holds the box's second chunk only
-  f.bot_on_server(2, 2);  // holds both
-  const Vec3i changed{0, 0, 0}, reached{1, 0, 0};
-  f.chunk_arrived(1, reached, t0);
-  f.chunk_arrived(2, changed, t0);
-  f.chunk_arrived(2, reached, t0);
-  // A box across both chunks that changes only the first (its tick's update).
-  const Region box{{30, 0, 0}, {34, 4, 4}};
-  const std::uint32_t id = f.send_edit(0, box, 8, [] { return 7u; });
+  const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 7u; });
   ASSERT_EQ(id, 7u);
   const auto sent = std::chrono::steady_clock::now();
   EditOutcome ok;
   ok.accepted = true;
   ok.tick = 5;
-  f.edit_result(0, id, ok, sent + 20ms);
-  f.update_received(0, 5, {ChunkRevisionMsg{changed, 2}}, sent + 20ms);
+  f_.edit_result(0, id, ok, sent + 20ms);
+  f_.update_received(0, 5, {ChunkRevisionMsg{kChanged, 2}}, sent + 20ms);
   // Bot 2 gets the change from its server 40 ms on; the second chunk
-  // changes 1.5 s on, by another edit, and reaches both.
-  f.chunk_arrived(2, changed, sent + 40ms);
-  f.chunk_arrived(1, reached, sent + 1500ms);
-  f.chunk_arrived(2, reached, sent + 1500ms);
-  f.settle(sent + 10s, 0s);
-  const auto other = f.fanout_other_server_ms();
-  ASSERT_EQ(other.size(), 1u) << "bot 1 never received a chunk the edit changed";
+  // changes 1.5 s on, by another edit, and reaches bots 1 and 2.
+  f_.chunk_arrived(2, kChanged, sent + 40ms);
+  f_.chunk_arrived(1, kReached, sent + 1500ms);
+  f_.chunk_arrived(2, kReached, sent + 1500ms);
+  f_.settle(sent + 10s, 0s);
+  const auto other = f_.fanout_other_server_ms();
+  ASSERT_EQ(other.size(), 1u) << "bot 1, which holds no chunk the edit changed, was measured";
   EXPECT_GE(other[0], 40.0f);
+  EXPECT_LT(other[0], 1000.0f);
+}
+
+TEST_F(FanoutTrackerTest, AForwardedEditIsMeasuredByTheChunksArrivingAtTheEditorBeforeItsAck) {
+  using namespace std::chrono_literals;
+  // No update of the editor's server's tick says what a forwarded edit
+  // changed; its chunks arrive again at the editor before the ack (which
+  // waits for them). A change of the second chunk after the ack is another
+  // edit's.
+  const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 8u; });
+  const auto sent = std::chrono::steady_clock::now();
+  f_.chunk_arrived(0, kChanged, sent + 30ms);
+  EditOutcome ok;
+  ok.accepted = true;
+  ok.tick = 9;
+  f_.edit_result(0, id, ok, sent + 35ms);
+  f_.chunk_arrived(2, kChanged, sent + 50ms);
+  f_.chunk_arrived(0, kReached, sent + 1500ms);
+  f_.chunk_arrived(1, kReached, sent + 1500ms);
+  f_.chunk_arrived(2, kReached, sent + 1500ms);
+  f_.settle(sent + 10s, 0s);
+  const auto other = f_.fanout_other_server_ms();
+  ASSERT_EQ(other.size(), 1u) << "bot 1, which holds no chunk the edit changed, was measured";
+  EXPECT_GE(other[0], 50.0f);
   EXPECT_LT(other[0], 1000.0f);
 }
 
