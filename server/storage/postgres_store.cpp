@@ -1191,10 +1191,16 @@ FileResult<std::optional<std::uint64_t>> PostgresStore::quarantined_revision(Vec
 
 FileStatus PostgresStore::for_each_chunk(
     const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) {
+  return for_each_chunk_row([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob,
+                                const std::optional<CoarseVoxels>&) { fn(pos, revision, blob); });
+}
+
+FileStatus PostgresStore::for_each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
+                                                                      const std::optional<CoarseVoxels>&)>& fn) {
   auto begin = c_->exec("begin", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
   if (!begin) return file_error(begin.error());
   auto cursor = c_->exec("read chunks",
-                         "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob FROM terrane_chunks"
+                         "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob, coarse FROM terrane_chunks"
                          " ORDER BY x, y, z");
   if (!cursor) return file_error(c_->abort(cursor.error()));
   for (;;) {
@@ -1206,11 +1212,35 @@ FileStatus PostgresStore::for_each_chunk(
       const auto revision = be64_at(r->res, i, 3);
       if (!pos || !revision || *revision < 0)
         return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
-      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4));
+      auto coarse = coarse_from_bytes(bytes_at(r->res, i, 5));
+      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4),
+         coarse ? std::optional<CoarseVoxels>(*coarse) : std::nullopt);
     }
   }
   auto commit = c_->exec("end read", "COMMIT");
   if (!commit) return file_error(c_->abort(commit.error()));
+  return Ok{};
+}
+
+FileStatus PostgresStore::for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn) {
+  auto r = c_->exec("read quarantine",
+                    "SELECT x, y, z, revision, time_s, blob, reason FROM terrane_quarantine ORDER BY x, y, z, revision",
+                    {}, /*binary_result=*/true);
+  if (!r) return file_error(r.error());
+  for (int i = 0; i < r->count(); ++i) {
+    const auto pos = position_at(r->res, i);
+    const auto revision = be64_at(r->res, i, 3), time = be64_at(r->res, i, 4);
+    if (!pos || !revision || *revision < 0 || !time)
+      return FileError{"postgresql: read quarantine: a row does not read", std::nullopt};
+    QuarantinedChunk q;
+    q.pos = *pos;
+    q.revision = static_cast<std::uint64_t>(*revision);
+    q.time_unix_s = *time;
+    const auto b = bytes_at(r->res, i, 5), reason = bytes_at(r->res, i, 6);
+    q.blob.assign(b.begin(), b.end());
+    q.reason.assign(reason.begin(), reason.end());
+    fn(q);
+  }
   return Ok{};
 }
 

@@ -32,6 +32,7 @@
 
 #include "common/codec/decode_error.h"
 #include "common/voxel/vec3.h"
+#include "common/world/coarse_image.h"
 #include "common/world/world_store.h"
 #include "server/storage/cluster_map.h"
 
@@ -258,6 +259,12 @@ class PostgresStore final : public WorldStore {
   // Reads the rows a thousand at a time (a cursor), so memory stays bounded.
   FileStatus for_each_chunk(
       const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) override;
+  // The same, with each row's coarse mip column (nullopt if it does not
+  // decode), in one read-only snapshot: terrane-world check.
+  FileStatus for_each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
+                                                         const std::optional<CoarseVoxels>&)>& fn);
+  // Every quarantined row, by chunk and revision.
+  FileStatus for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn);
   FileResult<std::int64_t> stored_chunk_count() override;
   FileResult<std::vector<std::pair<std::string, std::string>>> access_entries() override;
   FileStatus put_access(const std::string& key, const std::string& value) override;

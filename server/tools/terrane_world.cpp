@@ -62,8 +62,7 @@ constexpr const char* kUsage =
     "  import     write a VXRAW box (plain or .gz) into a world, creating an empty world if needed\n"
     "  export     write a box of a world to a VXRAW file (.gz: gzip-compressed)\n"
     "  stats      the storage results table for a box: voxels, codecs, memory\n"
-    "  check      decode every stored chunk, list quarantined ones (exit 1 on any of either);\n"
-    "             world directories only\n"
+    "  check      decode every stored chunk, list quarantined ones (exit 1 on any of either)\n"
     "  backup     copy a world directory, consistently, even while a server is writing to it\n"
     "             (a PostgreSQL world: pg_dump)\n"
     "  migrate    copy a world directory into a PostgreSQL database that holds no world yet\n"
@@ -127,7 +126,7 @@ constexpr const char* kStatsHelp =
     "A PostgreSQL world is only read: no --server-id, no leases.\n";
 
 constexpr const char* kCheckHelp =
-    "usage: terrane-world check --world DIR [--quarantine]\n"
+    "usage: terrane-world check (--world DIR [--quarantine] | --store URL)\n"
     "\n"
     "Reads the metadata and decodes every stored chunk. Each damaged chunk is reported with\n"
     "its chunk coordinates and what is wrong. Chunks already in the quarantine table (damaged\n"
@@ -137,6 +136,11 @@ constexpr const char* kCheckHelp =
     "the same revision, is wrong; one older, or missing, is behind (a server writes the images\n"
     "after the chunks, and readers read past that), counted but not an error. Exit status 1 if\n"
     "any chunk is damaged or quarantined or any coarse entry is wrong.\n"
+    "\n"
+    "A PostgreSQL world (--store URL) is read in one read-only snapshot, beside running servers:\n"
+    "each chunk row is decoded and its coarse mip column compared with its blob's (wrong if it\n"
+    "differs: rows and mips are written together); quarantined rows are listed. Its damaged\n"
+    "rows are quarantined by the server writing their region, as it loads them.\n"
     "\n"
     "  --quarantine   move each damaged row to the quarantine table (one transaction per chunk;\n"
     "                 its blob is kept byte for byte) so a server serves the chunk as generated\n"
@@ -620,6 +624,60 @@ int cmd_stats(int argc, char** argv) {
   return 0;
 }
 
+// Prints a quarantined row as check lists it.
+void print_quarantined(const QuarantinedChunk& q) {
+  char when[32] = "?";
+  const std::time_t t = static_cast<std::time_t>(q.time_unix_s);
+  if (std::tm tm{}; gmtime_r(&t, &tm) != nullptr) std::strftime(when, sizeof when, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  std::fprintf(stderr, "chunk (%d, %d, %d): quarantined at %s, revision %llu, %zu bytes: %s\n", q.pos.x, q.pos.y,
+               q.pos.z, when, static_cast<unsigned long long>(q.revision), q.blob.size(), q.reason.c_str());
+}
+
+// check of a PostgreSQL world: every chunk row decoded and its coarse mip
+// column compared with its blob's, in one read-only snapshot; quarantined
+// rows listed.
+int check_postgres(const WorldPlace& place) {
+  auto opened = PostgresStore::open(place.where);
+  if (!opened) return failure(opened.error().message);
+  PostgresStore& store = **opened;
+  const std::string& shown = store.where();  // no password
+  auto total = store.stored_chunk_count();
+  if (!total) return failure(total.error().message);
+  Progress progress("check", static_cast<std::uint64_t>(*total));
+  std::uint64_t done = 0, coarse_bad = 0;
+  std::vector<std::pair<Vec3i, std::string>> damaged;
+  auto s = store.for_each_chunk_row([&](Vec3i pos, std::uint64_t, std::span<const std::uint8_t> blob,
+                                        const std::optional<CoarseVoxels>& coarse) {
+    progress.update(++done);
+    auto chunk = decode_chunk_blob(blob);
+    if (!chunk) {
+      damaged.emplace_back(pos, chunk.error().describe());
+      std::fprintf(stderr, "chunk (%d, %d, %d): damaged: %s\n", pos.x, pos.y, pos.z, chunk.error().describe().c_str());
+      return;
+    }
+    if (!coarse || *coarse != coarse_voxels(&*chunk))
+      if (++coarse_bad <= 20)
+        std::fprintf(stderr, "chunk (%d, %d, %d): coarse mip %s\n", pos.x, pos.y, pos.z,
+                     coarse ? "differs from the chunk's" : "does not decode");
+  });
+  if (!s) return failure(s.error().message);
+  std::uint64_t quarantined = 0;
+  s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
+    ++quarantined;
+    print_quarantined(q);
+  });
+  if (!s) return failure(s.error().message);
+  std::printf("checked %llu chunks of world %s: %zu damaged, %llu quarantined, %llu coarse mips wrong\n",
+              static_cast<unsigned long long>(done), shown.c_str(), damaged.size(),
+              static_cast<unsigned long long>(quarantined), static_cast<unsigned long long>(coarse_bad));
+  if (!damaged.empty())
+    std::fprintf(stderr,
+                 "terrane-world: world %s has %zu damaged chunk rows; the server writing each region quarantines "
+                 "them as it loads them\n",
+                 shown.c_str(), damaged.size());
+  return damaged.empty() && quarantined == 0 && coarse_bad == 0 ? 0 : 1;
+}
+
 int cmd_check(int argc, char** argv) {
   CommandLine cl({"world", "store"}, {"help", "quarantine"});
   if (auto e = cl.parse(argc, argv, 2); !e.empty()) return usage_error(e, kCheckHelp);
@@ -627,9 +685,12 @@ int cmd_check(int argc, char** argv) {
   WorldPlace place;
   if (auto e = world_place(cl, &place); !e.empty()) return usage_error(e, kCheckHelp);
   if (!cl.positional().empty()) return usage_error("unexpected argument '" + cl.positional()[0] + "'", kCheckHelp);
-  if (place.postgres)
-    return usage_error("check reads a world directory; a PostgreSQL world's rows are checked as a server "
-                       "loads them (a damaged one is quarantined)", kCheckHelp);
+  if (place.postgres) {
+    if (cl.flag("quarantine"))
+      return usage_error("--quarantine is for world directories; in a PostgreSQL world the server writing a "
+                         "region quarantines its damaged rows as it loads them", kCheckHelp);
+    return check_postgres(place);
+  }
   const std::string& dir = place.where;
   auto opened = SqliteStore::open(dir);
   if (!opened) return failure(opened.error().message);
@@ -699,11 +760,7 @@ int cmd_check(int argc, char** argv) {
   std::uint64_t quarantined = 0;
   s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
     ++quarantined;
-    char when[32] = "?";
-    const std::time_t t = static_cast<std::time_t>(q.time_unix_s);
-    if (std::tm tm{}; gmtime_r(&t, &tm) != nullptr) std::strftime(when, sizeof when, "%Y-%m-%d %H:%M:%S UTC", &tm);
-    std::fprintf(stderr, "chunk (%d, %d, %d): quarantined at %s, revision %llu, %zu bytes: %s\n", q.pos.x, q.pos.y,
-                 q.pos.z, when, static_cast<unsigned long long>(q.revision), q.blob.size(), q.reason.c_str());
+    print_quarantined(q);
   });
   if (!s) return failure(s.error().message);
   std::printf("checked %llu chunks and %llu coarse images of world %s: %zu damaged",

@@ -2,6 +2,7 @@
 // built binary against a real PostgreSQL started by the test (one per test
 // process, a database per test; skipped where PostgreSQL is not installed).
 #include <gtest/gtest.h>
+#include <libpq-fe.h>
 
 #include <filesystem>
 #include <fstream>
@@ -286,13 +287,64 @@ TEST_F(TerraneWorldPostgresTest, ImportToADatabaseNeedsAServerIdAndGivesItsLease
   }
 }
 
-TEST_F(TerraneWorldPostgresTest, CheckAndBackupOfADatabaseSayWhatToUseInstead) {
-  auto check = run("check --store " + url_);
-  EXPECT_EQ(check.exit_code, 2) << check.output;
-  EXPECT_NE(check.output.find("checked as a server loads them"), std::string::npos) << check.output;
-  auto check_world = run("check --world " + url_);
-  EXPECT_EQ(check_world.exit_code, 2) << check_world.output;
-  EXPECT_NE(check_world.output.find("checked as a server loads them"), std::string::npos) << check_world.output;
+TEST_F(TerraneWorldPostgresTest, CheckReadsEveryRowOfADatabaseAndNamesDamagedRowsAndWrongMips) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
+  ASSERT_EQ(run("migrate --world " + w + " --to " + url_).exit_code, 0);
+  auto good = run("check --store " + url_);
+  EXPECT_EQ(good.exit_code, 0) << good.output;
+  EXPECT_NE(good.output.find(": 0 damaged, 0 quarantined, 0 coarse mips wrong"), std::string::npos) << good.output;
+  // One row's blob damaged, another's coarse mip column changed (a valid
+  // mip, other voxels: Brick at occupancy 8 throughout).
+  PGconn* conn = PQconnectdb(url_.c_str());
+  ASSERT_EQ(PQstatus(conn), CONNECTION_OK) << PQerrorMessage(conn);
+  const auto changed = [&](const char* set, int offset) {
+    const std::string q = std::string("UPDATE terrane_chunks SET ") + set +
+                          " WHERE (x, y, z) IN (SELECT x, y, z FROM terrane_chunks ORDER BY x, y, z LIMIT 1 OFFSET " +
+                          std::to_string(offset) + ") RETURNING x, y, z";
+    PGresult* r = PQexec(conn, q.c_str());
+    std::string at = "none";
+    if (PQresultStatus(r) == PGRES_TUPLES_OK && PQntuples(r) == 1)
+      at = std::string("(") + PQgetvalue(r, 0, 0) + ", " + PQgetvalue(r, 0, 1) + ", " + PQgetvalue(r, 0, 2) + ")";
+    PQclear(r);
+    return at;
+  };
+  const std::string damaged = changed("blob = '\\x01011020'::bytea", 0);
+  const std::string wrong = changed("coarse = decode(repeat('0508', 64), 'hex')", 1);
+  PQfinish(conn);
+  ASSERT_NE(damaged, "none");
+  ASSERT_NE(wrong, "none");
+  auto bad = run("check --store " + url_);
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("chunk " + damaged + ": damaged"), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("chunk " + wrong + ": coarse mip differs from the chunk's"), std::string::npos)
+      << bad.output;
+  EXPECT_NE(bad.output.find(": 1 damaged, 0 quarantined, 1 coarse mips wrong"), std::string::npos) << bad.output;
+  // The damaged row quarantined (as its region's server does when it
+  // loads it): listed with its reason, and no longer damaged.
+  {
+    auto store = open_store();
+    ASSERT_TRUE(store);
+    std::optional<Vec3i> first;
+    ASSERT_TRUE(store->for_each_chunk([&](Vec3i p, std::uint64_t, std::span<const std::uint8_t>) {
+                       if (!first) first = p;
+                     }).ok());
+    ASSERT_TRUE(first.has_value());
+    auto moved = store->quarantine_chunk(*first, "a test's reason");
+    ASSERT_TRUE(moved.ok() && moved->has_value());
+  }
+  auto listed = run("check --store " + url_);
+  EXPECT_EQ(listed.exit_code, 1) << listed.output;
+  EXPECT_NE(listed.output.find("chunk " + damaged + ": quarantined at "), std::string::npos) << listed.output;
+  EXPECT_NE(listed.output.find("a test's reason"), std::string::npos) << listed.output;
+  EXPECT_NE(listed.output.find(": 0 damaged, 1 quarantined, 1 coarse mips wrong"), std::string::npos) << listed.output;
+  // Quarantining is the region's server's, as it loads a row.
+  auto quarantine = run("check --store " + url_ + " --quarantine");
+  EXPECT_EQ(quarantine.exit_code, 2) << quarantine.output;
+  EXPECT_NE(quarantine.output.find("--quarantine is for world directories"), std::string::npos) << quarantine.output;
+}
+
+TEST_F(TerraneWorldPostgresTest, BackupOfADatabaseSaysWhatToUseInstead) {
   auto backup = run("backup --store " + url_ + " --to " + path("copy"));
   EXPECT_EQ(backup.exit_code, 2) << backup.output;
   EXPECT_NE(backup.output.find("pg_dump"), std::string::npos) << backup.output;
