@@ -239,20 +239,27 @@ void Replicator::maybe_redirect() {
   const auto map = cluster_->current();
   // A map older than a lease may name a writer that is gone.
   if (!map || now - map->read_at() > options_.lease) return;
-  const Vec3i region = coarse_region_of(view_chunk(state_.position));
+  const Vec3f p = state_.position;
+  const Vec3i region = coarse_region_of(view_chunk(p));
   const ServerAddress* to = map->writer_of(region);
   if (to == nullptr || to->id == options_.server_id) return;
-  if (now - map->written_since(region).value_or(now) < kRedirectStable) return;
-  // Well inside: the margin from every face of the region, so a client on
-  // a border does not go back and forth.
+  // Well inside that server's territory: every region within the margin
+  // of the client (the cube of that half-width around it; at most 2 x 2 x 2
+  // regions, the margin being at most 128) written by it, each lease seen
+  // for a while. A client by a border with another server's region, or a
+  // free one, stays, so it does not go back and forth; one by a border
+  // between two of that server's regions goes.
   constexpr double kRegionVoxels = kCoarseRegionChunks * kChunkSize;
-  const Vec3f p = state_.position;
   const double m = options_.redirect_margin;
-  for (const auto& [v, r] : {std::pair<double, int>{p.x, region.x}, std::pair<double, int>{p.y, region.y},
-                             std::pair<double, int>{p.z, region.z}}) {
-    const double lo = r * kRegionVoxels;
-    if (v - lo < m || lo + kRegionVoxels - v < m) return;
-  }
+  const auto region_at = [&](double v) { return static_cast<int>(std::floor(v / kRegionVoxels)); };
+  for (int y = region_at(p.y - m); y <= region_at(p.y + m); ++y)
+    for (int z = region_at(p.z - m); z <= region_at(p.z + m); ++z)
+      for (int x = region_at(p.x - m); x <= region_at(p.x + m); ++x) {
+        const Vec3i r{x, y, z};
+        const ServerAddress* w = map->writer_of(r);
+        if (w == nullptr || w->id != to->id) return;
+        if (now - map->written_since(r).value_or(now) < kRedirectStable) return;
+      }
   redirected_ = true;
   redirected_at_ = now;
   redirected_to_ = "server " + std::to_string(to->id) + " at " + to->text();

@@ -168,8 +168,8 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // the client may now edit there and the next tick's units change the
   // revision it has not seen.
   void send_parked_near();
-  // A client standing options_.redirect_margin voxels inside a region
-  // another server writes is sent a Redirect there; its streaming stops
+  // A client whose every region within options_.redirect_margin voxels
+  // one other server writes is sent a Redirect there; its streaming stops
   // (updates go on until it leaves).
   void maybe_redirect();
   // Sends v whole (Full, or Empty) and holds it at full resolution; a

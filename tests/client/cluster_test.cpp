@@ -737,6 +737,55 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
 
 // A Redirect to an address the client cannot reach: it goes back to the
 // server that sent it, keeps what it holds, and is served there on.
+// A border between two regions of one server is no border: a client near
+// it, well away from any other server's region, is redirected there.
+TEST_F(ClusterTest, AClientByABorderBetweenTwoRegionsOfAnotherServerIsRedirectedThere) {
+  ServerProcess& a = start(1);
+  ASSERT_NE(a.port(), 0);
+  ServerProcess& b = start(2);
+  ASSERT_NE(b.port(), 0);
+  // Bob and cy (server 2) stand on either side of the face z = 0 east of
+  // the spawn (which lies by the corner x = 0, z = 0 of four regions), and
+  // each edits there: server 2 writes both regions.
+  ClientOptions bobs = options(b, "bob"), cys = options(b, "cy");
+  bobs.spawn_offset = kBeyond;
+  cys.spawn_offset = Vec3f{kBeyond.x, 0, -kBeyond.z};
+  // Where ann is redirected to, and whether it resumed there (set on the
+  // client's thread).
+  auto redirected_to = std::make_shared<std::atomic<std::uint32_t>>(0);
+  ClientCallbacks cb;
+  cb.on_redirected = [redirected_to](const RedirectMsg& r) { redirected_to->store(r.server_id); };
+  auto resumed = std::make_shared<std::atomic<bool>>(false);
+  cb.on_reconnected = [resumed] { resumed->store(true); };
+  Client ann(options(a, "ann"), cb), bob(bobs), cy(cys);
+  join(ann);
+  join(bob, bobs.spawn_offset);
+  join(cy, cys.spawn_offset);
+  const Vec3f spawn = ann.welcome()->spawn;
+  for (auto [c, offset] : {std::pair<Client*, Vec3f>{&bob, bobs.spawn_offset}, {&cy, cys.spawn_offset}}) {
+    const Vec3i at = voxel_of(spawn + offset);
+    const Region box{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
+    ASSERT_EQ(outcome(*c, c->write_box(box, pattern(box, materials::kSnow))), "");
+  }
+  const Vec3i north = coarse_region_of(view_chunk(spawn + cys.spawn_offset));
+  const Vec3i south = coarse_region_of(view_chunk(spawn + bobs.spawn_offset));
+  ASSERT_EQ((north + Vec3i{0, 0, 1}), south) << "the two regions are not either side of one face";
+  ASSERT_EQ(lease_owner(north), 2);
+  ASSERT_EQ(lease_owner(south), 2);
+  // Ann walks to 5 voxels from that face, deep in x: within the margin of
+  // the face, but both sides are server 2's.
+  const Vec3f by{kBeyond.x, 0, 5};
+  walk(ann, spawn, by);
+  ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || redirected_to->load() != 0; }, kDeadline))
+      << "never redirected";
+  EXPECT_EQ(redirected_to->load(), 2u);
+  ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || resumed->load(); }, kDeadline))
+      << "never resumed after the redirect";
+  ASSERT_TRUE(ann.welcome().has_value());
+  EXPECT_EQ(ann.welcome()->server_id, 2u);
+  EXPECT_FALSE(ann.closed()) << ann.disconnect_reason();
+}
+
 TEST_F(ClusterTest, AClientThatCannotReachTheServerItIsRedirectedToGoesBackAndIsServedOn) {
   ServerProcess& a = start(1);
   ASSERT_NE(a.port(), 0);
