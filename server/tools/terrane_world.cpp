@@ -144,10 +144,7 @@ constexpr const char* kCheckHelp =
     "\n"
     "  --quarantine   move each damaged row to the quarantine table (one transaction per chunk;\n"
     "                 its blob is kept byte for byte) so a server serves the chunk as generated\n"
-    "                 instead of failing to read it\n"
-    "\n"
-    "World directories only: a PostgreSQL world's rows are checked as a server loads them (a\n"
-    "damaged one is quarantined then).\n";
+    "                 instead of failing to read it (world directories only)\n";
 
 constexpr const char* kBackupHelp =
     "usage: terrane-world backup --world DIR --to DEST\n"

@@ -135,9 +135,12 @@ TEST_F(WorldToolTest, StoreUsageErrorsNameWhatToGiveOrUseInstead) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("neither a postgresql:// URL nor a world directory"), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("pw"), std::string::npos) << r.output;
-  r = run("check --store " + url);
+  r = run("check --store " + url + " --quarantine");
   EXPECT_EQ(r.exit_code, 2) << r.output;
-  EXPECT_NE(r.output.find("check reads a world directory"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--quarantine is for world directories"), std::string::npos) << r.output;
+  r = run("check --store " + url);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot connect to postgresql://terrane@127.0.0.1:1/nowhere"), std::string::npos) << r.output;
   r = run("backup --world " + url + " --to " + path("copy"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("pg_dump"), std::string::npos) << r.output;
