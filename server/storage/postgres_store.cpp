@@ -1191,17 +1191,28 @@ FileResult<std::optional<std::uint64_t>> PostgresStore::quarantined_revision(Vec
 
 FileStatus PostgresStore::for_each_chunk(
     const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) {
-  return for_each_chunk_row([&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob,
-                                const std::optional<CoarseVoxels>&) { fn(pos, revision, blob); });
+  return each_chunk_row(
+      [&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob, const std::optional<CoarseVoxels>&) {
+        fn(pos, revision, blob);
+      },
+      /*with_coarse=*/false);
 }
 
 FileStatus PostgresStore::for_each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
                                                                       const std::optional<CoarseVoxels>&)>& fn) {
+  return each_chunk_row(fn, /*with_coarse=*/true);
+}
+
+FileStatus PostgresStore::each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
+                                                                  const std::optional<CoarseVoxels>&)>& fn,
+                                         bool with_coarse) {
   auto begin = c_->exec("begin", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
   if (!begin) return file_error(begin.error());
   auto cursor = c_->exec("read chunks",
-                         "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob, coarse FROM terrane_chunks"
-                         " ORDER BY x, y, z");
+                         with_coarse ? "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob, coarse"
+                                       " FROM terrane_chunks ORDER BY x, y, z"
+                                     : "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob"
+                                       " FROM terrane_chunks ORDER BY x, y, z");
   if (!cursor) return file_error(c_->abort(cursor.error()));
   for (;;) {
     auto r = c_->exec("read chunks", "FETCH 1000 FROM terrane_each", {}, /*binary_result=*/true);
@@ -1212,9 +1223,10 @@ FileStatus PostgresStore::for_each_chunk_row(const std::function<void(Vec3i, std
       const auto revision = be64_at(r->res, i, 3);
       if (!pos || !revision || *revision < 0)
         return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
-      auto coarse = coarse_from_bytes(bytes_at(r->res, i, 5));
-      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4),
-         coarse ? std::optional<CoarseVoxels>(*coarse) : std::nullopt);
+      std::optional<CoarseVoxels> coarse;
+      if (with_coarse)
+        if (auto c = coarse_from_bytes(bytes_at(r->res, i, 5)); c) coarse = *c;
+      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4), coarse);
     }
   }
   auto commit = c_->exec("end read", "COMMIT");

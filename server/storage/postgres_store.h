@@ -274,6 +274,10 @@ class PostgresStore final : public WorldStore {
   // kPreferNeighbours' rule: the kLeft error if region is left to another
   // server, nullopt if owner may claim it.
   StoreResult<std::optional<StoreError>> left_to_neighbour(Vec3i region, std::uint32_t owner);
+  // for_each_chunk(_row): the coarse column read and decoded only if asked.
+  FileStatus each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
+                                                     const std::optional<CoarseVoxels>&)>& fn,
+                            bool with_coarse);
   struct Connection;
   PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown);
   StoreResult<Ok> read_meta();

@@ -622,6 +622,20 @@ int cmd_stats(int argc, char** argv) {
 }
 
 // Prints a quarantined row as check lists it.
+void print_quarantined(const QuarantinedChunk& q);
+
+// Lists a store's quarantined rows (SqliteStore or PostgresStore); how many.
+template <class Store>
+FileResult<std::uint64_t> list_quarantined(Store& store) {
+  std::uint64_t n = 0;
+  auto s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
+    ++n;
+    print_quarantined(q);
+  });
+  if (!s) return s.error();
+  return n;
+}
+
 void print_quarantined(const QuarantinedChunk& q) {
   char when[32] = "?";
   const std::time_t t = static_cast<std::time_t>(q.time_unix_s);
@@ -658,21 +672,17 @@ int check_postgres(const WorldPlace& place) {
                      coarse ? "differs from the chunk's" : "does not decode");
   });
   if (!s) return failure(s.error().message);
-  std::uint64_t quarantined = 0;
-  s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
-    ++quarantined;
-    print_quarantined(q);
-  });
-  if (!s) return failure(s.error().message);
+  auto quarantined = list_quarantined(store);
+  if (!quarantined) return failure(quarantined.error().message);
   std::printf("checked %llu chunks of world %s: %zu damaged, %llu quarantined, %llu coarse mips wrong\n",
               static_cast<unsigned long long>(done), shown.c_str(), damaged.size(),
-              static_cast<unsigned long long>(quarantined), static_cast<unsigned long long>(coarse_bad));
+              static_cast<unsigned long long>(*quarantined), static_cast<unsigned long long>(coarse_bad));
   if (!damaged.empty())
     std::fprintf(stderr,
                  "terrane-world: world %s has %zu damaged chunk rows; the server writing each region quarantines "
                  "them as it loads them\n",
                  shown.c_str(), damaged.size());
-  return damaged.empty() && quarantined == 0 && coarse_bad == 0 ? 0 : 1;
+  return damaged.empty() && *quarantined == 0 && coarse_bad == 0 ? 0 : 1;
 }
 
 int cmd_check(int argc, char** argv) {
@@ -754,12 +764,9 @@ int cmd_check(int argc, char** argv) {
       if (m->has_value()) ++moved;
     }
   }
-  std::uint64_t quarantined = 0;
-  s = store.for_each_quarantined([&](const QuarantinedChunk& q) {
-    ++quarantined;
-    print_quarantined(q);
-  });
-  if (!s) return failure(s.error().message);
+  auto listed = list_quarantined(store);
+  if (!listed) return failure(listed.error().message);
+  const std::uint64_t quarantined = *listed;
   std::printf("checked %llu chunks and %llu coarse images of world %s: %zu damaged",
               static_cast<unsigned long long>(done), static_cast<unsigned long long>(images), dir.c_str(),
               damaged.size());
