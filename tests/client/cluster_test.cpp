@@ -179,8 +179,16 @@ class ClusterTest : public testing_support::PostgresTest {
     replica.read_box(r.min, got);
     return std::equal(want.begin(), want.end(), got.voxels().begin());
   }
-  static bool replica_shows(Client& c, const Region& r, const std::vector<Voxel>& want) {
-    return c.with_replica([&](const Replica& replica) { return shows(replica, r, want); });
+  // Whether c's replica comes to show want in r (or, given, or_else), waited
+  // for: an EditAck is a control frame and may arrive before the update
+  // showing its edit (PROTOCOL.md, "Edits and updates").
+  static bool replica_shows(Client& c, const Region& r, const std::vector<Voxel>& want,
+                            const std::vector<Voxel>* or_else = nullptr) {
+    const auto either = [&](const Replica& replica) {
+      return shows(replica, r, want) || (or_else != nullptr && shows(replica, r, *or_else));
+    };
+    c.wait_until([&](const ClientView& v) { return v.closed || either(v.replica); }, kDeadline);
+    return c.with_replica(either);
   }
   // The server writing region now (a current lease), or -1.
   int lease_owner(Vec3i region) {
@@ -397,7 +405,7 @@ TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEd
     if (sand_acknowledged[i])
       EXPECT_TRUE(replica_shows(cy, r, sand_box)) << "acknowledged sand edit " << i << " lost";
     else
-      EXPECT_TRUE(replica_shows(cy, r, v) || replica_shows(cy, r, sand_box)) << "acknowledged edit " << i << " lost";
+      EXPECT_TRUE(replica_shows(cy, r, v, &sand_box)) << "acknowledged edit " << i << " lost";
   }
   cy.disconnect();
   bob.disconnect();
