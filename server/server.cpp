@@ -4,6 +4,7 @@
 
 #include "common/world/sqlite_store.h"
 #include "server/log.h"
+#include "server/thread_name.h"
 #include "server/storage/postgres_store.h"
 
 namespace terrane {
@@ -248,7 +249,10 @@ void Server::start() {
   const std::int32_t view = std::min(options_.default_view_distance, options_.max_view_distance);
   default_view_ = ViewTable::get(view, std::min({options_.default_full_res_radius, options_.max_full_res_radius, view}));
   server_log().info("listening on {}:{}", options_.bind_address, port_);
-  world_thread_ = std::thread([this] { world_io_.run(); });
+  world_thread_ = std::thread([this] {
+    name_this_thread("terrane-world");
+    world_io_.run();
+  });
   world_owner_->start();
   if (metrics_) {
     metrics_->start();
@@ -257,7 +261,11 @@ void Server::start() {
   }
   do_accept();
   arm_stats();
-  for (int i = 0; i < std::max(1, options_.io_threads); ++i) threads_.emplace_back([this] { io_.run(); });
+  for (int i = 0; i < std::max(1, options_.io_threads); ++i)
+    threads_.emplace_back([this] {
+      name_this_thread("terrane-io");
+      io_.run();
+    });
 }
 
 void Server::stop() {

@@ -7,6 +7,7 @@
 #include <unordered_set>
 
 #include "server/log.h"
+#include "server/thread_name.h"
 
 namespace terrane {
 
@@ -29,7 +30,10 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   // A commit stores the chunks and the edit log; the coarse images follow
   // when the writer has nothing else to do (writer_loop).
   s->writer_store_->set_coarse_behind(true);
-  s->writer_ = std::thread([p = s.get()] { p->writer_loop(); });
+  s->writer_ = std::thread([p = s.get()] {
+    name_this_thread("terrane-writer");
+    p->writer_loop();
+  });
   return s;
 }
 
@@ -166,6 +170,8 @@ void Storage::load_horizon(Vec3i region, int level, HorizonDone done) {
 
 void Storage::post_load() {
   asio::post(loaders_, [this] {
+    static thread_local const bool named = (name_this_thread("terrane-loader"), true);
+    (void)named;
     std::unique_ptr<WorldStore> store;
     LoadJob job;
     {

@@ -153,7 +153,7 @@ void expect_replica_matches_world(Client& c, const std::vector<Vec3i>& chunks, c
 }
 
 TEST_F(ClientServerTest, FullResolutionReplicaEqualsServerWorld) {
-  start_server();
+  start_server({"--hash-push-ms", "0"});  // only the hashes asked for below
   Client c(options("viewer"));
   std::string err;
   ASSERT_TRUE(c.connect(&err)) << err;

@@ -292,12 +292,11 @@ TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
   ASSERT_TRUE(p->next_of(wire::Body::EditAck).has_value());
   // Walk far away: the old chunks are released, then unloaded.
   ASSERT_TRUE(hold_full(*p, {9002.0f, 12.0f, 9002.0f}, chunk_of(Vec3i{9002, 12, 9002})));
-  bool unloaded = false;
-  for (int i = 0; i < 100 && !unloaded; ++i) {
+  ASSERT_TRUE(testing_support::eventually([&] {
+    bool unloaded = false;
     server_->inspect([&](const WorldView& c) { unloaded = !c.loaded(cp); });
-    if (!unloaded) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  ASSERT_TRUE(unloaded);
+    return unloaded;
+  }));
   EXPECT_GT(server_->counters().chunks_unloaded.load(), 0u);
   // Back again: the chunk is reloaded from the store with its edit.
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
