@@ -462,7 +462,10 @@ void Client::arm_keepalive() {
   const std::uint64_t gen = generation_;
   keepalive_.async_wait([this, gen, g = OpGuard(this)](const asio::error_code& ec) {
     if (ec || io_closed_ || gen != generation_) return;
-    send(build_ping(0), wire::Body::Ping);
+    // Its nonce is the steady clock in microseconds: the Pong times the round trip.
+    const auto now_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                            std::chrono::steady_clock::now().time_since_epoch()).count();
+    send(build_ping(static_cast<std::uint64_t>(std::max<std::int64_t>(1, now_us))), wire::Body::Ping);
     arm_keepalive();
   });
 }
@@ -742,9 +745,19 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
         };
       break;
     }
-    case wire::Body::Pong:
+    case wire::Body::Pong: {
       ++counters_.pongs;
+      // Only a nonce this client could have sent (a time not in the future).
+      const std::uint64_t nonce = m.body_as_Pong()->nonce();
+      const auto now_us = static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                                         std::chrono::steady_clock::now().time_since_epoch())
+                                                         .count());
+      if (nonce == 0 || nonce > now_us) break;
+      const double ms = static_cast<double>(now_us - nonce) / 1000.0;
+      counters_.last_round_trip_ms = ms;
+      if (callbacks_.on_round_trip) after = [this, ms] { callbacks_.on_round_trip(ms); };
       break;
+    }
     case wire::Body::ServerNotice: {
       auto n = parse_server_notice(*m.body_as_ServerNotice());
       if (!n) return fail(n.error());

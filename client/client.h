@@ -155,6 +155,10 @@ struct ClientCounters {
   std::uint64_t hash_mismatches = 0;
   std::uint64_t protocol_errors = 0;
   std::uint64_t pongs = 0;
+  // The last keepalive Ping's round trip (-1 before the first answer): from
+  // queuing the Ping to handling its Pong, so it counts what waits on both
+  // sides (this client's queue and reading, the server's) besides the wire.
+  double last_round_trip_ms = -1;
   std::uint64_t reconnects = 0;
   std::uint64_t redirects = 0;  // Redirects followed
   std::uint64_t presence_updates = 0;
@@ -223,6 +227,8 @@ struct ClientCallbacks {
   // warning (Shutdown, with the seconds left and whether it restarts).
   std::function<void(const ServerNoticeMsg&)> on_notice;
   std::function<void(const AdminResultMsg&)> on_admin_result;
+  // A keepalive Ping was answered: its round trip (counters' last_round_trip_ms).
+  std::function<void(double ms)> on_round_trip;
 };
 
 // What wait_until's predicate sees (under the Client's lock).

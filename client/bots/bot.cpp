@@ -65,6 +65,9 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
     std::lock_guard lock(mutex_);
     if (outstanding_edits_ > 0) --outstanding_edits_;
   };
+  cb.on_round_trip = [this](double ms) {
+    if (ctx_.round_trips != nullptr) ctx_.round_trips->add(Clock::now(), ms);
+  };
   cb.on_update_batch = [this](std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions) {
     ctx_.fanout->update_received(index_, tick, revisions, Clock::now());
   };
@@ -379,7 +382,7 @@ void Bot::maybe_edit(Clock::time_point now) {
 void Bot::schedule_check(Clock::time_point now) {
   const BotsOptions& o = *ctx_.options;
   if (o.hash_checks == 0 || now < next_check_) return;
-  const double span = std::clamp((o.duration_s - o.ramp_up_s) / (o.hash_checks + 1), 0.2, 10.0);
+  const double span = hash_check_span_s(o);
   next_check_ = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(span));
   const float r = static_cast<float>(ctx_.full_res_radius);
   std::uniform_real_distribution<float> off(-r, r);

@@ -33,6 +33,7 @@ struct RunContext {
   Vec3f spawn;
   asio::io_context* io = nullptr;
   FanoutTracker* fanout = nullptr;
+  RoundTripLog* round_trips = nullptr;
   MismatchLog* mismatches = nullptr;
   Clock::time_point run_start;
 };

@@ -240,6 +240,11 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
   return "";
 }
 
+double hash_check_span_s(const BotsOptions& o) {
+  const double window = o.join_timeout_s > 0 ? o.duration_s : o.duration_s - o.ramp_up_s;
+  return std::clamp(window / (o.hash_checks + 1), 0.2, 10.0);
+}
+
 std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help) {
   Values flags;
   std::string scenario;

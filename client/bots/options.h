@@ -53,6 +53,13 @@ struct BotsOptions {
   std::string progress = "auto";  // auto (terminal only), on, off
 };
 
+// Seconds between a bot's region-hash checks, so that every bot makes at
+// least hash_checks of them in the measured run: the duration after the
+// last connection (the ramp-up is part of the duration), or the whole
+// duration when it starts once every bot has joined (join_timeout_s > 0).
+// Between 0.2 and 10 s.
+double hash_check_span_s(const BotsOptions& o);
+
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
 // else the error (for exit status 2). Sets *help when --help was given.
 std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help);

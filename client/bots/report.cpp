@@ -131,6 +131,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"edit_ack_ms\": " << lat(r.edit_ack_ms) << ",\n";
   j << "  \"edit_fanout_ms\": " << lat(r.edit_fanout_ms) << ",\n";
   j << "  \"edit_fanout_other_server_ms\": " << lat(r.edit_fanout_other_server_ms) << ",\n";
+  j << "  \"round_trip_ms\": " << lat(r.round_trip_ms) << ",\n";
   j << "  \"redirects\": " << r.redirects << ",\n";
   j << "  \"bots_per_server\": {";
   for (auto it = r.bots_per_server.begin(); it != r.bots_per_server.end(); ++it)
@@ -194,7 +195,7 @@ std::string report_json(const BotsReport& r) {
     j << (i ? ",\n    " : "\n    ") << "{\"t_s\": " << num(p.t_s) << ", \"bots\": " << p.bots_connected
       << ", \"mb_per_s_in\": " << num(p.mb_per_s_in) << ", \"mb_per_s_out\": " << num(p.mb_per_s_out)
       << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"fanout_ms\": " << lat(p.fanout_ms)
-      << ", \"ack_ms\": " << lat(p.ack_ms);
+      << ", \"ack_ms\": " << lat(p.ack_ms) << ", \"round_trip_ms\": " << lat(p.round_trip_ms);
     if (p.server)
       j << ", \"server\": {\"cpu_share\": " << num(p.server->cpu_share)
         << ", \"edits_applied\": " << p.server->edits_applied << ", \"tick_ms_mean\": " << json_opt(p.server->tick_ms_mean)
@@ -238,6 +239,7 @@ std::string report_table(const BotsReport& r) {
   row("joins incomplete", std::to_string(r.joins_incomplete));
   row("edit ack ms", l(r.edit_ack_ms));
   row(r.options.servers.size() > 1 ? "edit fan-out ms, same server" : "edit fan-out ms", l(r.edit_fanout_ms));
+  row("round trip ms (keepalive pings)", l(r.round_trip_ms));
   if (r.options.servers.size() > 1) {
     row("edit fan-out ms, other server", l(r.edit_fanout_other_server_ms));
     std::string per;

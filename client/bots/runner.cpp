@@ -119,7 +119,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   auto measure_from = t0 + ramp;
   FanoutTracker fanout(t0, measure_from, std::max<int>(1, static_cast<int>(o.servers.size())));
   MismatchLog mismatches;
+  RoundTripLog round_trips(t0, measure_from);
   ctx.fanout = &fanout;
+  ctx.round_trips = &round_trips;
   ctx.mismatches = &mismatches;
   ctx.run_start = t0;
 
@@ -229,6 +231,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
         // Latency and steady-state figures count from here: joins under way
         // are the ramp-up, reported as joined_s.
         fanout.set_measure_from(now);
+        round_trips.set_measure_from(now);
         measure_from = now;
         measured_snapshot = false;
       }
@@ -328,6 +331,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.edit_ack_ms = summarize(fanout.ack_ms());
   r.edit_fanout_ms = summarize(fanout.fanout_ms());
   r.edit_fanout_other_server_ms = summarize(fanout.fanout_other_server_ms());
+  r.round_trip_ms = summarize(round_trips.all());
   const auto totals = fanout.totals();
   r.edits_sent = totals.edits_sent;
   r.edits_acked = totals.edits_acked;
@@ -341,10 +345,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
       totals.edited_voxel_receivers > 0 ? static_cast<double>(r.update_batch_bytes_steady) / totals.edited_voxel_receivers
                                         : 0;
   r.mismatches = mismatches.all();
-  const auto fan_s = fanout.fanout_by_second(), ack_s = fanout.ack_by_second();
+  const auto fan_s = fanout.fanout_by_second(), ack_s = fanout.ack_by_second(), rtt_s = round_trips.by_second();
   for (std::size_t s = 0; s < r.timeline.size(); ++s) {
     if (s < fan_s.size()) r.timeline[s].fanout_ms = summarize(fan_s[s]);
     if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
+    if (s < rtt_s.size()) r.timeline[s].round_trip_ms = summarize(rtt_s[s]);
   }
   return true;
 }

@@ -24,6 +24,7 @@ struct TimelinePoint {
   double mb_per_s_in = 0, mb_per_s_out = 0;
   double edits_acked_per_s = 0;
   LatencySummary fanout_ms, ack_ms;  // of edits sent in that second
+  LatencySummary round_trip_ms;      // keepalive round trips answered in that second
   // With --server-metrics: the server since the previous point (its
   // scrapes, up to a second behind).
   std::optional<ServerInterval> server;
@@ -41,6 +42,8 @@ struct BotsReport {
   // Several servers: receivers on another server than the editor's (each
   // edited chunk arriving again there, whole).
   LatencySummary edit_fanout_other_server_ms;
+  // Keepalive round trips (each bot's Ping every 5 s) answered while measured.
+  LatencySummary round_trip_ms;
   std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0, edits_measured = 0;
   std::map<std::string, std::uint64_t> reject_reasons;
   double receivers_per_edit = 0;

@@ -238,4 +238,24 @@ std::size_t MismatchLog::count() const {
   return list_.size();
 }
 
+void RoundTripLog::add(Clock::time_point t, double ms) {
+  std::lock_guard lock(mutex_);
+  const auto f = static_cast<float>(ms);
+  if (t >= measure_from_) all_.push_back(f);
+  const std::size_t s =
+      t <= run_start_ ? 0 : static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start_).count());
+  if (by_second_.size() <= s) by_second_.resize(s + 1);
+  by_second_[s].push_back(f);
+}
+
+std::vector<float> RoundTripLog::all() const {
+  std::lock_guard lock(mutex_);
+  return all_;
+}
+
+std::vector<std::vector<float>> RoundTripLog::by_second() const {
+  std::lock_guard lock(mutex_);
+  return by_second_;
+}
+
 }  // namespace terrane::bots

@@ -152,6 +152,29 @@ struct Mismatch {
   bool final_check = false;
 };
 
+// Keepalive round trips (Ping to Pong, ClientCounters::last_round_trip_ms)
+// of every bot: over the measured part of the run and per second of it (by
+// the time the Pong was handled). Where a round trip is long, bytes wait in
+// a queue on one side or the other, whatever the world does.
+class RoundTripLog {
+ public:
+  RoundTripLog(Clock::time_point run_start, Clock::time_point measure_from)
+      : run_start_(run_start), measure_from_(measure_from) {}
+  void set_measure_from(Clock::time_point t) {
+    std::lock_guard lock(mutex_);
+    measure_from_ = t;
+  }
+  void add(Clock::time_point t, double ms);
+  std::vector<float> all() const;
+  std::vector<std::vector<float>> by_second() const;
+
+ private:
+  mutable std::mutex mutex_;
+  Clock::time_point run_start_, measure_from_;
+  std::vector<float> all_;
+  std::vector<std::vector<float>> by_second_;
+};
+
 class MismatchLog {
  public:
   void add(const Mismatch& m);

@@ -349,6 +349,28 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   fs::remove(file);
 }
 
+// Every bot makes at least --hash-checks checks in the measured run, and
+// not many more: a ramp-up longer than the duration (which --wait-joined
+// allows: the duration starts after the joins) once made the span negative,
+// so every bot asked for a hash every 0.2 s instead of every 10 s.
+TEST(BotsOptions, HashChecksAreSpreadOverTheMeasuredRun) {
+  BotsOptions crowd;
+  crowd.duration_s = 60;
+  crowd.ramp_up_s = 20;
+  crowd.hash_checks = 5;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(crowd), 40.0 / 6);  // the last bot connects 20 s in
+  BotsOptions world = crowd;
+  world.ramp_up_s = 200;
+  world.join_timeout_s = 600;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(world), 10.0);  // 60 s measured after the joins
+  world.duration_s = 300;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(world), 10.0);  // at most 10 s apart
+  world.hash_checks = 999;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(world), 0.3);
+  world.hash_checks = 100000;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(world), 0.2);   // at least 0.2 s apart
+}
+
 TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
   BotsOptions o;
   EXPECT_NE(parse({"--bots", "3"}, &o).find("--connect"), std::string::npos);
