@@ -17,6 +17,10 @@
 // | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
 // |                     | the admin thread           | operators' commands; bans and whitelist      |
 //
+// The threads carry names (server/thread_name.h, for top -H and perf):
+// terrane-io (sessions and replicators), terrane-world, terrane-loader,
+// terrane-writer.
+//
 // Between them only immutable data travels: chunk versions (server/world/
 // chunk_version.h) whose encodings, update units, hash and blob are made
 // once, lazily, by the first thread that needs them; and frames (shared
