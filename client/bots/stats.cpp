@@ -39,13 +39,10 @@ constexpr auto kArrivalWindow = std::chrono::seconds(3);
 FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers)
     : run_start_(run_start), measure_from_(measure_from), servers_(std::max(1, servers)) {}
 
-std::size_t FanoutTracker::second_of(Clock::time_point t) const {
-  if (t <= run_start_) return 0;
-  return static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start_).count());
-}
-
-void FanoutTracker::add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms) {
-  const std::size_t s = second_of(sent);
+void add_per_second(std::vector<std::vector<float>>& by_second, Clock::time_point run_start, Clock::time_point t,
+                    float ms) {
+  const std::size_t s =
+      t <= run_start ? 0 : static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start).count());
   if (by_second.size() <= s) by_second.resize(s + 1);
   by_second[s].push_back(ms);
 }
@@ -81,7 +78,7 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
   if (e.sent >= measure_from_) {
     const float ms = static_cast<float>(ms_between(e.sent, t));
     ack_ms_.push_back(ms);
-    add_sample(ack_by_second_, e.sent, ms);
+    add_per_second(ack_by_second_, run_start_, e.sent, ms);
   }
   auto [tick, fresh] = ticks_.try_emplace(tick_key(bot, o.tick));
   if (fresh) tick->second.first_seen = t;
@@ -180,7 +177,7 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
       for (const auto& [bot, t] : last) {
         const float ms = static_cast<float>(ms_between(e.sent, t));
         fanout_ms_.push_back(ms);
-        add_sample(fanout_by_second_, e.sent, ms);
+        add_per_second(fanout_by_second_, run_start_, e.sent, ms);
         recent_.push_back(ms);
       }
     }
@@ -242,10 +239,7 @@ void RoundTripLog::add(Clock::time_point t, double ms) {
   std::lock_guard lock(mutex_);
   const auto f = static_cast<float>(ms);
   if (t >= measure_from_) all_.push_back(f);
-  const std::size_t s =
-      t <= run_start_ ? 0 : static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start_).count());
-  if (by_second_.size() <= s) by_second_.resize(s + 1);
-  by_second_[s].push_back(f);
+  add_per_second(by_second_, run_start_, t, f);
 }
 
 std::vector<float> RoundTripLog::all() const {

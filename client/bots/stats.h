@@ -32,6 +32,11 @@ LatencySummary summarize(std::vector<float> samples_ms);
 
 double ms_between(Clock::time_point a, Clock::time_point b);
 
+// Appends a sample to by_second[the whole seconds from run_start to t]
+// (second 0 for t before run_start), growing it as needed.
+void add_per_second(std::vector<std::vector<float>>& by_second, Clock::time_point run_start, Clock::time_point t,
+                    float ms);
+
 // Fan-out of an edit to one receiver: from the author calling fill_* to the
 // receiver's UpdateBatch of the edit's tick that covers one of the edit's
 // chunks (the last such batch when the edit spans several chunks). Bots
@@ -125,8 +130,6 @@ class FanoutTracker {
   // Under mutex_: the chunks of e's box its tick (or, forwarded, its
   // owner) changed; all of them when that is not known.
   std::vector<Vec3i> changed_by(const Edit& e, const Tick& tk) const;
-  std::size_t second_of(Clock::time_point t) const;
-  void add_sample(std::vector<std::vector<float>>& by_second, Clock::time_point sent, float ms);
 
   mutable std::mutex mutex_;
   Clock::time_point run_start_, measure_from_;

@@ -152,6 +152,39 @@ void expect_replica_matches_world(Client& c, const std::vector<Vec3i>& chunks, c
   EXPECT_GT(non_empty, 0u) << "the test should cover some terrain";
 }
 
+// Each keepalive Ping carries the client's clock: its Pong gives the round
+// trip, in the counters and to the callback (the bots' round_trip_ms).
+TEST_F(ClientServerTest, KeepalivePingsAreTimedByTheirPongs) {
+  start_server({"--hash-push-ms", "0"});
+  ClientOptions o = options("pinger");
+  o.keepalive = std::chrono::milliseconds(20);
+  std::mutex mu;
+  std::vector<double> timed;
+  ClientCallbacks cb;
+  cb.on_round_trip = [&](double ms) {
+    std::lock_guard lock(mu);
+    timed.push_back(ms);
+  };
+  Client c(o, cb);
+  EXPECT_LT(c.counters().last_round_trip_ms, 0) << "a round trip before any Ping";
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  ASSERT_TRUE(c.wait_until(
+      [](const ClientView& v) { return v.closed || (v.counters.pongs >= 3 && v.counters.last_round_trip_ms >= 0); },
+      kDeadline));
+  ASSERT_FALSE(c.closed()) << c.disconnect_reason();
+  const double last = c.counters().last_round_trip_ms;
+  EXPECT_GE(last, 0);
+  EXPECT_LT(last, 30000);
+  c.disconnect();
+  std::lock_guard lock(mu);
+  ASSERT_FALSE(timed.empty());
+  for (const double ms : timed) {
+    EXPECT_GE(ms, 0);
+    EXPECT_LT(ms, 30000);
+  }
+}
+
 TEST_F(ClientServerTest, FullResolutionReplicaEqualsServerWorld) {
   start_server({"--hash-push-ms", "0"});  // only the hashes asked for below
   Client c(options("viewer"));
