@@ -95,15 +95,19 @@ class ClusterTest : public testing_support::PostgresTest {
     const auto w = c.welcome();
     if (!w) return {};
     auto near = testing_support::chunks_within(w->spawn + offset, 20, *w);
-    EXPECT_TRUE(c.wait_until(
+    EXPECT_TRUE(wait_full_resolution(c, near));
+    return near;
+  }
+  // Waits until c holds every chunk of near at full resolution (or closes).
+  static bool wait_full_resolution(Client& c, const std::vector<Vec3i>& near) {
+    return c.wait_until(
         [&](const ClientView& v) {
           return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) {
                    const ChunkCoverage* cov = v.replica.coverage(cp);
                    return cov != nullptr && cov->state != CoverageState::kMip;
                  });
         },
-        kDeadline));
-    return near;
+        kDeadline);
   }
   // The edit's answer: "" if accepted, else the reason.
   static std::string outcome(Client& c, std::uint32_t id) {
@@ -733,14 +737,7 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   // resolution agrees with server 2.
   const auto near = testing_support::chunks_within(there, 20, w);
   ASSERT_TRUE(ann.wait_until(whole_view(testing_support::chunks_within(there, 64, w)), kDeadline));
-  ASSERT_TRUE(ann.wait_until(
-      [&](const ClientView& v) {
-        return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) {
-                 const ChunkCoverage* cov = v.replica.coverage(cp);
-                 return cov != nullptr && cov->state != CoverageState::kMip;
-               });
-      },
-      kDeadline));
+  ASSERT_TRUE(wait_full_resolution(ann, near));
   expect_agrees_with_its_server(ann, near);
   // Ann's edits there are server 2's to write, and bob sees them.
   const Region more{at + Vec3i{3, 4, 3}, at + Vec3i{5, 6, 5}};
