@@ -1239,10 +1239,12 @@ void WorldOwner::fatal_storage(const std::string& why) {
   fail_rollbacks("storage failure: rollback not applied");
   storage_failed_ = true;
   storage_failed_flag_ = true;
+  // The owner hears of the failure before any client does: a client that reads
+  // "server storage failure" may ask the server, and finds it failed.
+  if (options_.on_fatal) options_.on_fatal();
   for (auto& [id, c] : clients_) c.link->close(CloseReason::kStorageFailure, "server storage failure");
   stopping_ = true;
   tick_timer_.cancel();
-  if (options_.on_fatal) options_.on_fatal();
 }
 
 // --- queries -------------------------------------------------------------------

@@ -17,7 +17,7 @@
 //      its versions (what new readers are handed from then on) and tell each
 //      holder of a changed chunk, once per tick, which of its chunks changed
 //      (InterestIndex). A failed commit rejects the edits, closes every
-//      client with "server storage failure" and calls on_fatal.
+//      client with "server storage failure", after calling on_fatal.
 //
 // Chunks: a client asks for chunks (want); loaded ones are granted at once,
 // the others when Storage has loaded or generated them. A chunk wanted only

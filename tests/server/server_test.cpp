@@ -13,6 +13,7 @@
 #include <spdlog/sinks/ostream_sink.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -805,7 +806,7 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
 }
 
 TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
-  bool fatal = false;
+  std::atomic<bool> fatal{false};  // set on the world thread, read here
   ServerOptions o;
   o.on_fatal = [&] { fatal = true; };
   start(o);
@@ -846,7 +847,7 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   ASSERT_EQ(rejected.size(), 1u) << "rejections: " << all << "; frames read: " << seen;
   EXPECT_NE(rejected[0].find("3: storage failure"), std::string::npos) << all << "; frames read: " << seen;
   EXPECT_EQ(reason, "server storage failure");
-  EXPECT_TRUE(fatal);
+  EXPECT_TRUE(fatal.load());  // called before any client is told
   EXPECT_TRUE(server_->storage_failed());
   EXPECT_FALSE(server_->health().ok);  // /health answers 503
   EXPECT_NE(server_->health().text.find("storage failed"), std::string::npos) << server_->health().text;
