@@ -73,7 +73,9 @@ Client::Client(ClientOptions options, ClientCallbacks callbacks)
       delivery_(strand_),
       read_buf_(kReadChunkBytes),
       reconnect_timer_(strand_),
-      redirect_timer_(strand_) {}
+      redirect_timer_(strand_) {
+  replica_.share_decoded(options_.shared_chunks);
+}
 
 Client::~Client() { disconnect(); }
 

@@ -119,6 +119,10 @@ struct ClientOptions {
   // Shared mode (see the threading note): run on this io_context instead of
   // an owned thread. Not owned.
   asio::io_context* io_context = nullptr;
+  // Chunks packed from Full records, shared with the process's other
+  // clients (null: each packs its own). Many clients in one process
+  // receive the same records (client/decoded_chunks.h).
+  std::shared_ptr<DecodedChunks> shared_chunks;
   NetworkEmulation emulation;
 };
 

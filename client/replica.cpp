@@ -79,7 +79,15 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kFull: {
       pending_.erase(cp);
       mips_.erase(cp);
-      Chunk chunk = Chunk::from_box(*r.voxels);
+      Chunk chunk;
+      if (!shared_) {
+        chunk = Chunk::from_box(*r.voxels);
+      } else if (auto known = shared_->find(r.payload)) {
+        chunk = known->clone();
+      } else {
+        chunk = Chunk::from_box(*r.voxels);
+        shared_->add(r.payload, std::make_shared<const Chunk>(chunk.clone()));
+      }
       if (chunk.empty())
         grid_.erase_chunk(cp);
       else

@@ -19,9 +19,11 @@
 
 #include <bitset>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <vector>
 
+#include "client/decoded_chunks.h"
 #include "common/codec/update_batch.h"
 #include "common/voxel/box.h"
 #include "common/voxel/grid.h"
@@ -50,6 +52,10 @@ inline constexpr int kNoResolution = -1;
 class Replica {
  public:
   Replica();
+
+  // Full records' chunks are looked up in, and added to, shared (a cache
+  // shared with the process's other replicas; null: none).
+  void share_decoded(std::shared_ptr<DecodedChunks> shared) { shared_ = std::move(shared); }
 
   Status apply_chunk_data(const ChunkDataMsg& m);
   // A decoded StreamBatch record (protocol/stream_batch.h).
@@ -162,6 +168,7 @@ class Replica {
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;
+  std::shared_ptr<DecodedChunks> shared_;
 };
 
 }  // namespace terrane

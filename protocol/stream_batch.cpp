@@ -99,7 +99,8 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
     rec.chunk_pos = {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
     rec.revision = *rev;
     switch (rec.kind) {
-      case StreamRecordKind::kFull:
+      case StreamRecordKind::kFull: {
+        const std::span<const std::uint8_t> start = r.rest();
         for (int i = 0; i < 8; ++i) {
           auto n = net_codec_decode_prefix(16, r.rest(), s.unit.voxels());
           if (!n) return DecodeError{n.error().code, r.pos() + n.error().offset, n.error().detail};
@@ -110,7 +111,9 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
               std::copy_n(s.unit.read_row(uy, uz), 16, s.chunk.write_row(off.y + uy, off.z + uz) + off.x);
         }
         rec.voxels = &s.chunk;
+        rec.payload = start.first(start.size() - r.rest().size());
         break;
+      }
       case StreamRecordKind::kMip1:
       case StreamRecordKind::kMip2:
       case StreamRecordKind::kMip3:
@@ -120,6 +123,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         s.mip.resize({n, n, n});
         auto used = net_codec_decode_prefix(n, r.rest(), s.mip.voxels());
         if (!used) return DecodeError{used.error().code, r.pos() + used.error().offset, used.error().detail};
+        rec.payload = r.rest().first(*used);
         r.skip(*used);
         rec.voxels = &s.mip;
         break;

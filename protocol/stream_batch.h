@@ -80,6 +80,10 @@ struct StreamRecord {
   // (8 * (32 >> level))^3; else null.
   const Box* voxels = nullptr;
   const HorizonMask* mask = nullptr;  // Horizon: the region's chunks it covers
+  // Full, Mip, Estimate: the record's encoded units, as received (equal
+  // bytes decode to equal voxels: a receiver may share what it made of
+  // them); valid during the call, as voxels.
+  std::span<const std::uint8_t> payload;
 };
 
 class StreamBatchWriter {

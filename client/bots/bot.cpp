@@ -50,6 +50,7 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   co.start_at_spawn = false;
   co.state = ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius};
   co.io_context = ctx_.io;
+  co.shared_chunks = ctx_.shared_chunks;
   co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
   co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;
   ClientCallbacks cb;

@@ -20,6 +20,7 @@
 
 #include "client/bots/options.h"
 #include "client/bots/stats.h"
+#include "client/decoded_chunks.h"
 #include "client/client.h"
 
 namespace terrane::bots {
@@ -35,6 +36,7 @@ struct RunContext {
   FanoutTracker* fanout = nullptr;
   RoundTripLog* round_trips = nullptr;
   MismatchLog* mismatches = nullptr;
+  std::shared_ptr<DecodedChunks> shared_chunks;  // null: --shared-chunks 0
   Clock::time_point run_start;
 };
 

@@ -60,6 +60,9 @@ const char* const kBotsHelp =
     "                            ramp-up; latencies count from then (default 0: the duration\n"
     "                            counts from the first connection)\n"
     "  --threads N               io threads shared by all bots (default: one per core)\n"
+    "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
+    "                            equal bytes are packed once in this process (default 4096;\n"
+    "                            0: each bot packs its own)\n"
     "  --report FILE.json        write the JSON report\n"
     "  --html FILE.html          write a self-contained HTML report with charts\n"
     "  --scenario FILE           read options from FILE (key=value per line, the flag names);\n"
@@ -76,7 +79,7 @@ const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
-      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",
+      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",     "shared-chunks",
       "report",         "html",         "save-scenario", "progress",   "scenario"};
   return k;
 }
@@ -223,6 +226,8 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       err = num_in(0, 86400, &o->join_timeout_s);
     } else if (key == "threads") {
       err = int_in(0, 256, &o->threads);
+    } else if (key == "shared-chunks") {
+      err = int_in(0, 1000000, &o->shared_chunks);
     } else if (key == "report") {
       o->report_path = v;
     } else if (key == "html") {
@@ -310,6 +315,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "quiet = " << o.quiet_s << "\n";
   s << "wait-joined = " << o.join_timeout_s << "\n";
   s << "threads = " << o.threads << "\n";
+  s << "shared-chunks = " << o.shared_chunks << "\n";
   return s.str();
 }
 

@@ -47,6 +47,10 @@ struct BotsOptions {
   // 0: the duration counts from the first connection.
   double join_timeout_s = 0;
   int threads = 0;             // io threads for all bots; 0: one per core
+  // Chunks packed from Full records kept for every bot to share (entries;
+  // 0: each bot packs its own). Bots near one another receive the same
+  // records: packing each once halves what they cost this process.
+  int shared_chunks = 4096;
   std::string report_path;     // JSON
   std::string html_path;
   std::string save_scenario_path;

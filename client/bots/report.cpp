@@ -133,6 +133,8 @@ std::string report_json(const BotsReport& r) {
   j << "  \"edit_fanout_other_server_ms\": " << lat(r.edit_fanout_other_server_ms) << ",\n";
   j << "  \"round_trip_ms\": " << lat(r.round_trip_ms) << ",\n";
   j << "  \"redirects\": " << r.redirects << ",\n";
+  j << "  \"shared_chunk_hits\": " << r.shared_chunk_hits << ",\n";
+  j << "  \"shared_chunk_misses\": " << r.shared_chunk_misses << ",\n";
   j << "  \"bots_per_server\": {";
   for (auto it = r.bots_per_server.begin(); it != r.bots_per_server.end(); ++it)
     j << (it == r.bots_per_server.begin() ? "" : ", ") << "\"" << it->first << "\": " << it->second;
@@ -253,6 +255,9 @@ std::string report_table(const BotsReport& r) {
   row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));
   row("update bytes per edited voxel per receiver", fixed(r.update_bytes_per_edited_voxel_per_receiver, 2));
   row("replica regions checked", std::to_string(r.replica_regions_checked));
+  if (r.shared_chunk_hits + r.shared_chunk_misses > 0)
+    row("full chunks shared / packed by a bot",
+        std::to_string(r.shared_chunk_hits) + " / " + std::to_string(r.shared_chunk_misses));
   row("replica mismatches", std::to_string(r.mismatches.size()));
   row("hash requests unanswered", std::to_string(r.hash_unanswered));
   row("unexpected disconnects", std::to_string(r.unexpected_disconnects));

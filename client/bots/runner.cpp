@@ -123,6 +123,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   ctx.fanout = &fanout;
   ctx.round_trips = &round_trips;
   ctx.mismatches = &mismatches;
+  if (o.shared_chunks > 0)
+    ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
   ctx.run_start = t0;
 
   std::mt19937_64 rng(o.seed);
@@ -332,6 +334,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.edit_fanout_ms = summarize(fanout.fanout_ms());
   r.edit_fanout_other_server_ms = summarize(fanout.fanout_other_server_ms());
   r.round_trip_ms = summarize(round_trips.all());
+  if (ctx.shared_chunks) {
+    const DecodedChunks::Stats s = ctx.shared_chunks->stats();
+    r.shared_chunk_hits = s.hits;
+    r.shared_chunk_misses = s.misses;
+  }
   const auto totals = fanout.totals();
   r.edits_sent = totals.edits_sent;
   r.edits_acked = totals.edits_acked;

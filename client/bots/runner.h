@@ -57,6 +57,9 @@ struct BotsReport {
   // Several servers: Redirects the bots followed, and how many bots each
   // server had at the end (by server id).
   std::uint64_t redirects = 0;
+  // Full records' chunks taken from the bots' shared cache / packed anew
+  // (--shared-chunks; both 0 when off).
+  std::uint64_t shared_chunk_hits = 0, shared_chunk_misses = 0;
   std::map<std::uint32_t, int> bots_per_server;
   std::vector<std::pair<int, std::string>> disconnects;  // bot, reason
   int connect_failures = 0;

@@ -64,7 +64,7 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
   HorizonMask mask{};
   mask[0] = 0b111;  // chunks x = 0, 1, 2 of y = z = 0
   std::vector<Vec3i> covered;
-  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask}, covered);
+  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask, {}}, covered);
   EXPECT_EQ(covered, (std::vector<Vec3i>{{0, 0, 0}, {2, 0, 0}})) << "the chunk held already is not covered";
   EXPECT_EQ(r.coverage(held)->level, 3);
   ASSERT_NE(r.coverage({2, 0, 0}), nullptr);
@@ -91,7 +91,7 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
   EXPECT_EQ(r.chunk_count(), 2u);
   // A second image covers again only what has nothing.
   covered.clear();
-  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask}, covered);
+  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask, {}}, covered);
   EXPECT_EQ(covered, (std::vector<Vec3i>{{2, 0, 0}}));
 }
 
@@ -197,7 +197,7 @@ TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
   Box whole({kChunkSize, kChunkSize, kChunkSize});
   whole.fill(solid(materials::kMud));
   const auto before_full = r.hash(cp);
-  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 4, 0, &whole});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 4, 0, &whole, nullptr, {}});
   Chunk mud(materials::kMud);
   EXPECT_NE(r.hash(cp), before_full);
   EXPECT_EQ(r.hash(cp), region_hash(&mud, 4));
@@ -227,14 +227,14 @@ TEST(Replica, SurfaceHeightAgreesWithTheVoxelsOfTheColumn) {
     for (int z = 0; z < kChunkSize; ++z)
       for (int x = 0; x < kChunkSize; ++x)
         slope.set(x, y, z, y < (x + z) / 2 ? solid(materials::kRock) : Voxel{});
-  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, -1, 0}, 1, 0, &slope});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, -1, 0}, 1, 0, &slope, nullptr, {}});
   Box mip({8, 8, 8});
   for (int y = 0; y < 8; ++y)
     for (int z = 0; z < 8; ++z)
       for (int x = 0; x < 8; ++x) mip.set(x, y, z, y < x ? solid(materials::kSand) : Voxel{});
-  r.apply_stream_record(StreamRecord{StreamRecordKind::kMip2, {0, 0, 0}, 1, 2, &mip});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kMip2, {0, 0, 0}, 1, 2, &mip, nullptr, {}});
   r.apply_coverage(CoverageMsg{{0, 1, 0}, wire::CoverageKind::Empty, 0, 1});
-  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, 3, 0}, 1, 0, &slope});
+  r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, 3, 0}, 1, 0, &slope, nullptr, {}});
   auto by_voxel = [&](std::int32_t x, std::int32_t z, std::int32_t lo, std::int32_t hi) -> std::optional<std::int32_t> {
     for (std::int32_t y = hi - 1; y >= lo; --y)
       if (r.resolution_at({x, y, z}) != kNoResolution && r.get({x, y, z}).material != kAir) return y + 1;

@@ -80,6 +80,16 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
   EXPECT_EQ(got[4].level, kMipLevels - 1);  // a 4^3 unit, as Mip 3
   EXPECT_EQ(got[4].chunk_pos, (Vec3i{6, -1, 8}));
   EXPECT_TRUE(boxes[4] == estimate);
+  // Each record's payload is its encoded units as written (the frame is
+  // still alive); records without voxels have none.
+  auto same = [](std::span<const std::uint8_t> a, const std::vector<std::uint8_t>& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end());
+  };
+  EXPECT_TRUE(got[0].payload.empty());
+  EXPECT_TRUE(same(got[1].payload, mip_bytes));
+  EXPECT_TRUE(same(got[2].payload, full_payload(chunk)));
+  EXPECT_TRUE(got[3].payload.empty());
+  EXPECT_TRUE(same(got[4].payload, estimate_bytes));
 }
 
 TEST(StreamBatch, RecordsCostAFewBytesBeyondTheCodec) {

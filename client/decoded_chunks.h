@@ -1,0 +1,66 @@
+// DecodedChunks: chunks packed from Full stream records, shared by the
+// replicas of one process, so bytes many clients receive are packed once.
+//
+// A server sends every client the same encoding of a chunk version (one
+// per version, made once), and a process running many clients (the
+// terrane-bots load test) receives the same Full record once per client
+// that comes near the chunk. A Full record taken from here costs a client
+// about a ninth of one it packs itself (rows and mips, Chunk::from_box):
+// terrane-bench-replica, BM_Full against BM_FullShared.
+// Keyed by the record's bytes, compared whole: equal bytes decode to
+// equal voxels, so a replica that takes a chunk from here holds exactly
+// what its own bytes say; nothing is trusted across clients but the codec.
+//
+// Bounded: the least recently used entries go first (capacity entries).
+// Thread-safety: every member may be called from any thread.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <list>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+#include "common/voxel/chunk.h"
+
+namespace terrane {
+
+class DecodedChunks {
+ public:
+  static constexpr std::size_t kDefaultCapacity = 4096;
+  explicit DecodedChunks(std::size_t capacity = kDefaultCapacity);
+
+  // The chunk packed from exactly these bytes, or null.
+  std::shared_ptr<const Chunk> find(std::span<const std::uint8_t> payload);
+  // Keeps chunk as what payload decodes to (in place of another entry
+  // whose bytes hash alike).
+  void add(std::span<const std::uint8_t> payload, std::shared_ptr<const Chunk> chunk);
+
+  struct Stats {
+    std::uint64_t hits = 0, misses = 0;
+    std::size_t entries = 0;
+  };
+  Stats stats() const;
+
+ private:
+  struct Entry {
+    std::vector<std::uint8_t> bytes;
+    std::shared_ptr<const Chunk> chunk;
+    std::list<std::size_t>::iterator lru;  // this entry's place; its value is the key
+  };
+  static std::size_t key_of(std::span<const std::uint8_t> payload);
+
+  const std::size_t capacity_;
+  mutable std::mutex m_;
+  // By hash of the bytes (one entry per hash: of two whose bytes hash
+  // alike, the newer is kept).
+  std::unordered_map<std::size_t, Entry> entries_;
+  std::list<std::size_t> lru_;  // keys, most recently used first
+  Stats stats_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,200 @@
+// A client's replica taking stream records, as a moving client does: the
+// cost a bot pays per record (decode and apply), the largest part of the
+// bots' CPU in the README's world scenario.
+//   MipChurn   a replica holding a view of 4^3 mips (radius 16 chunks,
+//              12 high: ~9,600 chunks) moves one chunk along x per
+//              iteration: the slice behind is Released, the slice ahead
+//              arrives as Mip 3 records (one StreamBatch each way).
+//   Full       Full records of generated terrain chunks, each then
+//              Released (the ring at full resolution a move brings).
+//   FullShared the same, with the replica's decoded chunks shared through
+//              a DecodedChunks cache warmed by another replica (the bots
+//              process: another bot took the same bytes a moment before).
+// Counters: records_per_s, ns_per_record.
+//   terrane-bench-replica --benchmark_counters_tabular=true
+#include <benchmark/benchmark.h>
+
+#include <memory>
+#include <vector>
+
+#include "client/decoded_chunks.h"
+#include "client/replica.h"
+#include "common/codec/net_codec.h"
+#include "common/voxel/chunk.h"
+#include "common/world/terrain_generator.h"
+#include "protocol/stream_batch.h"
+
+namespace terrane {
+namespace {
+
+constexpr int kRadius = 16;  // chunks: view distance 512
+constexpr int kMinY = -4, kMaxY = 8;
+
+std::span<const std::uint8_t> records_of(const Frame& f) {
+  auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
+  if (!m.ok()) std::abort();
+  auto r = parse_stream_batch(*(*m)->body_as_StreamBatch());
+  if (!r.ok()) std::abort();
+  return *r;
+}
+
+const TerrainGenerator& generator() {
+  static const TerrainGenerator g{GeneratorParams{}};
+  return g;
+}
+
+Chunk chunk_at(Vec3i cp) {
+  Box b;
+  generator().generate(Region{chunk_origin(cp), chunk_origin(cp) + Vec3i{kChunkSize, kChunkSize, kChunkSize}}, b);
+  return Chunk::from_box(b);
+}
+
+// The Mip 3 payload of a chunk (its coarsest unit; a uniform chunk's
+// encodes its one material).
+std::vector<std::uint8_t> mip3_payload(const Chunk& c) {
+  Box m;
+  c.read_level(3, m);
+  std::vector<std::uint8_t> out;
+  net_codec_encode(4, m.voxels(), out);
+  return out;
+}
+
+std::vector<std::uint8_t> full_payload(const Chunk& c) {
+  std::vector<std::uint8_t> out;
+  Box unit({16, 16, 16});
+  for (int i = 0; i < 8; ++i) {
+    const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
+    c.read_box(off, unit, {0, 0, 0}, {16, 16, 16});
+    net_codec_encode(16, unit.voxels(), out);
+  }
+  return out;
+}
+
+struct Applier {
+  Replica replica;
+  StreamDecodeScratch scratch;
+  void apply(const Frame& f) {
+    const Status st = decode_stream_batch(records_of(f), scratch, [&](const StreamRecord& r) -> Status {
+      replica.apply_stream_record(r);
+      return Ok{};
+    });
+    if (!st.ok()) std::abort();
+  }
+};
+
+// The chunks of column (x, z) of the view around centre column cx.
+template <class F>
+void for_each_view_chunk(int cx, F&& f) {
+  for (int x = cx - kRadius; x <= cx + kRadius; ++x)
+    for (int z = -kRadius; z <= kRadius; ++z)
+      if ((x - cx) * (x - cx) + z * z <= kRadius * kRadius)
+        for (int y = kMinY; y < kMaxY; ++y) f(Vec3i{x, y, z});
+}
+
+void BM_MipChurn(benchmark::State& state) {
+  // Payloads by column height only (x, z vary the terrain little at 4^3 for
+  // this purpose; the bytes are real mips of real terrain).
+  std::vector<std::vector<std::uint8_t>> by_y;
+  for (int y = kMinY; y < kMaxY; ++y) by_y.push_back(mip3_payload(chunk_at({3, y, 5})));
+  auto mip = [&](StreamBatchWriter& w, Vec3i cp) {
+    w.add(StreamRecordKind::kMip3, cp, 1, by_y[static_cast<std::size_t>(cp.y - kMinY)]);
+  };
+  Applier a;
+  {
+    StreamBatchWriter w;
+    for_each_view_chunk(0, [&](Vec3i cp) {
+      mip(w, cp);
+      if (w.records() >= kMaxStreamRecords) a.apply(w.finish());
+    });
+    if (!w.empty()) a.apply(w.finish());
+  }
+  // Frames of the moves, made ahead: leaving and entering slices for
+  // centres 1..kMoves, then back (so the replica stays at steady size).
+  constexpr int kMoves = 64;
+  std::vector<Frame> frames;
+  std::size_t records = 0;
+  auto move = [&](int from, int to) {
+    StreamBatchWriter leave, enter;
+    const int dir = to > from ? 1 : -1;
+    for (int z = -kRadius; z <= kRadius; ++z) {
+      for (int x = from - kRadius - 1; x <= from + kRadius + 1; ++x) {
+        const bool was = (x - from) * (x - from) + z * z <= kRadius * kRadius;
+        const bool is = (x - to) * (x - to) + z * z <= kRadius * kRadius;
+        for (int y = kMinY; y < kMaxY && was != is; ++y) {
+          if (was) leave.add(StreamRecordKind::kReleased, {x, y, z}, 0, {});
+          else mip(enter, {x, y, z});
+        }
+      }
+    }
+    (void)dir;
+    records += leave.records() + enter.records();
+    frames.push_back(leave.finish());
+    frames.push_back(enter.finish());
+  };
+  for (int c = 0; c < kMoves; ++c) move(c, c + 1);
+  for (int c = kMoves; c > 0; --c) move(c, c - 1);
+  for (auto _ : state)
+    for (const Frame& f : frames) a.apply(f);
+  state.counters["records_per_s"] =
+      benchmark::Counter(static_cast<double>(records), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["ns_per_record"] = benchmark::Counter(
+      static_cast<double>(records), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  state.counters["chunks_held"] = static_cast<double>(a.replica.chunk_count());
+}
+BENCHMARK(BM_MipChurn)->Unit(benchmark::kMillisecond);
+
+// Full records of 64 terrain chunks (a few columns' worth, as near a
+// moving client), then each Released.
+struct FullFrames {
+  Frame full, released;
+  std::size_t records = 0;
+};
+const FullFrames& full_frames() {
+  static const FullFrames f = [] {
+    FullFrames out;
+    StreamBatchWriter w, r;
+    for (int x = 0; x < 4; ++x)
+      for (int z = 0; z < 4; ++z)
+        for (int y = -1; y < 3; ++y) {
+          const Vec3i cp{x, y, z};
+          const Chunk c = chunk_at(cp);
+          if (c.empty()) continue;
+          w.add(StreamRecordKind::kFull, cp, 1, full_payload(c));
+          r.add(StreamRecordKind::kReleased, cp, 0, {});
+        }
+    out.records = w.records() + r.records();
+    out.full = w.finish();
+    out.released = r.finish();
+    return out;
+  }();
+  return f;
+}
+
+void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared) {
+  const FullFrames& f = full_frames();
+  Applier a;
+  a.replica.share_decoded(shared);
+  if (shared) {
+    Applier warm;  // another client took the same bytes first
+    warm.replica.share_decoded(shared);
+    warm.apply(f.full);
+  }
+  for (auto _ : state) {
+    a.apply(f.full);
+    a.apply(f.released);
+  }
+  state.counters["records_per_s"] =
+      benchmark::Counter(static_cast<double>(f.records), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["ns_per_record"] = benchmark::Counter(
+      static_cast<double>(f.records), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
+void BM_Full(benchmark::State& state) { run_full(state, nullptr); }
+BENCHMARK(BM_Full)->Unit(benchmark::kMillisecond);
+
+void BM_FullShared(benchmark::State& state) { run_full(state, std::make_shared<DecodedChunks>()); }
+BENCHMARK(BM_FullShared)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace terrane
+BENCHMARK_MAIN();
