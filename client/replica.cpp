@@ -78,7 +78,6 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     }
     case StreamRecordKind::kFull: {
       pending_.erase(cp);
-      mips_.erase(cp);
       Chunk chunk;
       if (!shared_) {
         chunk = Chunk::from_box(*r.voxels);
@@ -92,8 +91,10 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         grid_.erase_chunk(cp);
       else
         grid_.put_chunk(cp, std::move(chunk));
-      voxels_changed(cp);
-      coverage_[cp] = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+      Entry& e = chunks_[cp];
+      e.mip.reset();
+      e.coverage = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+      entry_changed(cp, e);
       return;
     }
     case StreamRecordKind::kMip1:
@@ -101,14 +102,18 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       // A refresh of a mip held overwrites it in place (no new allocation).
-      auto [it, fresh] = mips_.try_emplace(cp);
-      if (!fresh && it->second.level == r.level && it->second.voxels == *r.voxels) ++redundant_mips_;
-      it->second.level = r.level;
-      it->second.voxels = *r.voxels;
+      Entry& e = chunks_[cp];
+      if (e.coverage.state == CoverageState::kMip && e.coverage.level == r.level && e.mip &&
+          *e.mip == *r.voxels)
+        ++redundant_mips_;
+      if (e.mip)
+        *e.mip = *r.voxels;
+      else
+        e.mip = std::make_unique<Box>(*r.voxels);
       pending_.erase(cp);
-      coverage_[cp] = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
+      e.coverage = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
       grid_.erase_chunk(cp);
-      voxels_changed(cp);
+      entry_changed(cp, e);
       return;
     }
   }
@@ -124,7 +129,7 @@ void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) 
   for_each_region_chunk(region, [&](Vec3i cp) {
     const int i = coarse_index(cp);
     if (!horizon_mask_has(*r.mask, i) || h.covers.test(static_cast<std::size_t>(i)) ||
-        coverage_.find(cp) != coverage_.end())
+        chunks_.find(cp) != chunks_.end())
       return;
     h.covers.set(static_cast<std::size_t>(i));
     ++horizon_chunks_;
@@ -151,7 +156,10 @@ void Replica::forget_horizon(Vec3i cp) {
 }
 
 Replica::MipView Replica::mip_view(Vec3i cp) const {
-  if (auto it = mips_.find(cp); it != mips_.end()) return MipView{&it->second.voxels, {0, 0, 0}, it->second.level};
+  if (auto it = chunks_.find(cp); it != chunks_.end())
+    return it->second.coverage.state == CoverageState::kMip
+               ? MipView{it->second.mip.get(), {0, 0, 0}, it->second.coverage.level}
+               : MipView{};
   if (const Horizon* h = horizon_of(cp))
     return MipView{&h->image, floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->coverage.level), h->coverage.level};
   return {};
@@ -170,39 +178,47 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
 
 Status Replica::apply_mip_data(const MipDataMsg& m) {
   const int n = kChunkSize >> m.level;
-  Mip mip{m.level, Box({n, n, n})};
-  if (auto st = net_codec_decode(n, m.data, mip.voxels.voxels()); !st) return st;
-  mips_[m.chunk_pos] = std::move(mip);
+  Box mip({n, n, n});
+  if (auto st = net_codec_decode(n, m.data, mip.voxels()); !st) return st;
+  Entry& e = chunks_[m.chunk_pos];
+  e.mip = std::make_unique<Box>(std::move(mip));
   pending_.erase(m.chunk_pos);
-  auto& c = coverage_[m.chunk_pos];
-  c = ChunkCoverage{CoverageState::kMip, m.level, m.revision};
+  e.coverage = ChunkCoverage{CoverageState::kMip, m.level, m.revision};
   grid_.erase_chunk(m.chunk_pos);
-  voxels_changed(m.chunk_pos);
+  entry_changed(m.chunk_pos, e);
   return Ok{};
 }
 
 void Replica::apply_coverage(const CoverageMsg& m) {
-  voxels_changed(m.chunk_pos);
+  const Vec3i cp = m.chunk_pos;
   switch (m.kind) {
-    case wire::CoverageKind::Empty:
-      pending_.erase(m.chunk_pos);
-      grid_.erase_chunk(m.chunk_pos);
-      mips_.erase(m.chunk_pos);
-      coverage_[m.chunk_pos] = ChunkCoverage{CoverageState::kEmpty, 0, m.revision};
+    case wire::CoverageKind::Empty: {
+      if (!pending_.empty()) pending_.erase(cp);
+      grid_.erase_chunk(cp);
+      Entry& e = chunks_[cp];
+      e.mip.reset();
+      e.coverage = ChunkCoverage{CoverageState::kEmpty, 0, m.revision};
+      entry_changed(cp, e);
       break;
-    case wire::CoverageKind::Full:
-      flush_pending(m.chunk_pos);
-      mips_.erase(m.chunk_pos);
-      coverage_[m.chunk_pos] = ChunkCoverage{CoverageState::kFull, 0, m.revision};
+    }
+    case wire::CoverageKind::Full: {
+      flush_pending(cp);
+      Entry& e = chunks_[cp];
+      e.mip.reset();
+      e.coverage = ChunkCoverage{CoverageState::kFull, 0, m.revision};
+      entry_changed(cp, e);
       break;
+    }
     case wire::CoverageKind::Mip:
-      // Only MipData carries a mip; a bare Mip coverage changes nothing.
+      // Only MipData carries a mip; a bare Mip coverage changes nothing
+      // but what the chunk's cached hash and horizon image claimed.
+      voxels_changed(cp);
       break;
     case wire::CoverageKind::Released:
-      pending_.erase(m.chunk_pos);
-      grid_.erase_chunk(m.chunk_pos);
-      mips_.erase(m.chunk_pos);
-      coverage_.erase(m.chunk_pos);
+      if (!pending_.empty()) pending_.erase(cp);
+      grid_.erase_chunk(cp);
+      chunks_.erase(cp);
+      if (!horizons_.empty()) forget_horizon(cp);
       break;
   }
 }
@@ -228,8 +244,8 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const Vec3i cp = update_scratch_[begin].chunk_pos;
     std::size_t end = begin;
     while (end < *n && update_scratch_[end].chunk_pos == cp) ++end;
-    auto it = coverage_.find(cp);
-    if (it == coverage_.end() || it->second.state == CoverageState::kMip) {
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) {
       begin = end;
       continue;
     }
@@ -246,7 +262,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     }
     const Vec3i origin = chunk_origin(cp);
     if (changed != nullptr) changed->push_back(Region{origin + lo, origin + hi});
-    voxels_changed(cp);
+    entry_changed(cp, it->second);
     grid_.modify(Region{origin + lo, origin + hi}, [&](Vec3i p, Voxel old) {
       const Vec3i l = p - origin;
       const Vec3i uc{l.x / kUpdateUnitSize, l.y / kUpdateUnitSize, l.z / kUpdateUnitSize};
@@ -261,17 +277,17 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     begin = end;
   }
   for (const auto& r : m.revisions) {
-    auto it = coverage_.find(r.chunk_pos);
-    if (it == coverage_.end() || it->second.state == CoverageState::kMip) continue;
-    it->second = ChunkCoverage{CoverageState::kFull, 0, r.revision};
-    voxels_changed(r.chunk_pos);
+    auto it = chunks_.find(r.chunk_pos);
+    if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) continue;
+    it->second.coverage = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+    entry_changed(r.chunk_pos, it->second);
   }
   return applied;
 }
 
 const ChunkCoverage* Replica::coverage(Vec3i cp) const {
-  auto it = coverage_.find(cp);
-  if (it != coverage_.end()) return &it->second;
+  auto it = chunks_.find(cp);
+  if (it != chunks_.end()) return &it->second.coverage;
   const Horizon* h = horizon_of(cp);
   return h == nullptr ? nullptr : &h->coverage;
 }
@@ -327,11 +343,13 @@ std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t
 }
 
 std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
-  const ChunkCoverage* c = coverage(cp);
-  if (c == nullptr || c->state == CoverageState::kMip) return std::nullopt;
-  auto [it, fresh] = hashes_.try_emplace(cp);
-  if (fresh) it->second = region_hash(c->state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, c->revision);
-  return it->second;
+  // Only a chunk's own coverage can be Full or Empty (a horizon's is a mip).
+  auto it = chunks_.find(cp);
+  if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) return std::nullopt;
+  const Entry& e = it->second;
+  if (!e.hash)
+    e.hash = region_hash(e.coverage.state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, e.coverage.revision);
+  return e.hash;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
@@ -342,12 +360,13 @@ std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
 
 std::size_t Replica::estimate_count() const {
   return static_cast<std::size_t>(
-      std::count_if(coverage_.begin(), coverage_.end(), [](const auto& kv) { return kv.second.estimate; }));
+      std::count_if(chunks_.begin(), chunks_.end(), [](const auto& kv) { return kv.second.coverage.estimate; }));
 }
 
 std::size_t Replica::chunk_count(CoverageState state) const {
   return static_cast<std::size_t>(
-             std::count_if(coverage_.begin(), coverage_.end(), [&](const auto& kv) { return kv.second.state == state; })) +
+             std::count_if(chunks_.begin(), chunks_.end(),
+                           [&](const auto& kv) { return kv.second.coverage.state == state; })) +
          (state == CoverageState::kMip ? horizon_chunks_ : 0);
 }
 

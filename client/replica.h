@@ -9,7 +9,8 @@
 //               8^3-chunk region, replaced by the chunk's own record; never
 //               claimed, hashed or edited);
 //   - Full:     every voxel, at the revision the server stated.
-// Full-resolution voxels live in a Grid; mips in a per-chunk Box.
+// Full-resolution voxels live in a Grid; per chunk, one entry holds its
+// coverage, its mip voxels (a Box) and its cached region hash.
 //
 // Apply functions take parsed messages (protocol/messages.h) whose voxel
 // payloads are still untrusted: every decode error is returned and leaves
@@ -102,11 +103,11 @@ class Replica {
   // Mip records that brought a chunk's level again with the very voxels
   // held at that level (a refresh that told nothing; the server avoids them).
   std::uint64_t redundant_mips() const { return redundant_mips_; }
-  std::size_t chunk_count() const { return coverage_.size() + horizon_chunks_; }
+  std::size_t chunk_count() const { return chunks_.size() + horizon_chunks_; }
   const Grid& grid() const { return grid_; }
   template <class F>
   void for_each_coverage(F&& f) const {
-    for (const auto& [pos, c] : coverage_) f(pos, c);
+    for (const auto& [pos, e] : chunks_) f(pos, e.coverage);
     for (const auto& [region, h] : horizons_)
       for_each_region_chunk(region, [&](Vec3i cp) {
         if (h.covers.test(static_cast<std::size_t>(coarse_index(cp)))) f(cp, h.coverage);
@@ -114,9 +115,18 @@ class Replica {
   }
 
  private:
-  struct Mip {
-    int level = 0;
-    Box voxels;
+  // What the replica has of one chunk (beside its voxels in grid_ when
+  // Full): one entry, so a record costs one lookup.
+  struct Entry {
+    ChunkCoverage coverage;
+    // coverage kMip: the (32 >> level)^3 voxels of the chunk's own record
+    // (apart, so the table's slots stay small: a replica's tables are
+    // read far more than its mips).
+    std::unique_ptr<Box> mip;
+    // Its region hash, computed since the chunk last changed (a hash is a
+    // pass over 32^3 voxels; a client checks the same unchanged chunks
+    // again and again).
+    mutable std::optional<std::uint64_t> hash;
   };
   // A region's horizon image and the chunks it still covers (those with no
   // coverage of their own), which share one coverage value.
@@ -148,23 +158,23 @@ class Replica {
 
   void write_unit(Vec3i unit_pos, const Box& unit);
   void flush_pending(Vec3i chunk_pos);
-  // A chunk's voxels, coverage or revision changed: its cached hash is gone.
-  // Every write of grid_, mips_ or coverage_ calls it.
+  // A chunk's voxels, coverage or revision changed: its cached hash is
+  // gone, and its region's horizon image no longer covers it. Every write
+  // of grid_ or of an entry calls it (or, holding the entry, entry_changed()).
   void voxels_changed(Vec3i chunk_pos) {
-    hashes_.erase(chunk_pos);
+    if (auto it = chunks_.find(chunk_pos); it != chunks_.end()) it->second.hash.reset();
+    if (!horizons_.empty()) forget_horizon(chunk_pos);
+  }
+  void entry_changed(Vec3i chunk_pos, Entry& e) {
+    e.hash.reset();
     if (!horizons_.empty()) forget_horizon(chunk_pos);
   }
 
   Grid grid_;
-  Vec3iMap<ChunkCoverage> coverage_;
-  Vec3iMap<Mip> mips_;
+  Vec3iMap<Entry> chunks_;  // every chunk with coverage of its own
   Vec3iMap<Pending> pending_;
   Vec3iMap<Horizon> horizons_;     // by region
   std::size_t horizon_chunks_ = 0;  // chunks covered by horizons_
-  // Region hashes computed since each chunk last changed (a hash is a pass
-  // over 32^3 voxels; a client checks the same unchanged chunks again and
-  // again).
-  mutable Vec3iMap<std::uint64_t> hashes_;
   Box unit_scratch_;
   std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;

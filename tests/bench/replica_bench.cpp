@@ -1,10 +1,12 @@
 // A client's replica taking stream records, as a moving client does: the
 // cost a bot pays per record (decode and apply), the largest part of the
 // bots' CPU in the README's world scenario.
-//   MipChurn   a replica holding a view of 4^3 mips (radius 16 chunks,
-//              12 high: ~9,600 chunks) moves one chunk along x per
-//              iteration: the slice behind is Released, the slice ahead
-//              arrives as Mip 3 records (one StreamBatch each way).
+//   MipChurn/N N replicas, each holding a view of 4^3 mips (radius 16
+//              chunks, 12 high: ~9,600 chunks), take turns to move one
+//              chunk along x: the slice behind is Released, the slice
+//              ahead arrives as Mip 3 records (one StreamBatch each way).
+//              With 64 the replicas' maps are far beyond the caches, as
+//              in the bots process.
 //   Full       Full records of generated terrain chunks, each then
 //              Released (the ring at full resolution a move brings).
 //   FullShared the same, with the replica's decoded chunks shared through
@@ -91,7 +93,10 @@ void for_each_view_chunk(int cx, F&& f) {
         for (int y = kMinY; y < kMaxY; ++y) f(Vec3i{x, y, z});
 }
 
+// state.range(0) replicas take the same moves in turn, as the bots'
+// replicas do in one process: their maps no longer fit in the caches.
 void BM_MipChurn(benchmark::State& state) {
+  const auto replicas = static_cast<std::size_t>(state.range(0));
   // Payloads by column height only (x, z vary the terrain little at 4^3 for
   // this purpose; the bytes are real mips of real terrain).
   std::vector<std::vector<std::uint8_t>> by_y;
@@ -99,14 +104,18 @@ void BM_MipChurn(benchmark::State& state) {
   auto mip = [&](StreamBatchWriter& w, Vec3i cp) {
     w.add(StreamRecordKind::kMip3, cp, 1, by_y[static_cast<std::size_t>(cp.y - kMinY)]);
   };
-  Applier a;
+  std::vector<std::unique_ptr<Applier>> appliers;
+  for (std::size_t i = 0; i < replicas; ++i) appliers.push_back(std::make_unique<Applier>());
   {
     StreamBatchWriter w;
+    std::vector<Frame> view;
     for_each_view_chunk(0, [&](Vec3i cp) {
       mip(w, cp);
-      if (w.records() >= kMaxStreamRecords) a.apply(w.finish());
+      if (w.records() >= kMaxStreamRecords) view.push_back(w.finish());
     });
-    if (!w.empty()) a.apply(w.finish());
+    if (!w.empty()) view.push_back(w.finish());
+    for (auto& a : appliers)
+      for (const Frame& f : view) a->apply(f);
   }
   // Frames of the moves, made ahead: leaving and entering slices for
   // centres 1..kMoves, then back (so the replica stays at steady size).
@@ -133,15 +142,26 @@ void BM_MipChurn(benchmark::State& state) {
   };
   for (int c = 0; c < kMoves; ++c) move(c, c + 1);
   for (int c = kMoves; c > 0; --c) move(c, c - 1);
-  for (auto _ : state)
-    for (const Frame& f : frames) a.apply(f);
+  // Each replica takes its next move (both frames), then the next replica
+  // its own; an iteration is as many moves as there are.
+  std::vector<std::size_t> next(replicas, 0);
+  std::size_t turn = 0;
+  for (auto _ : state) {
+    for (std::size_t m = 0; m < frames.size() / 2; ++m) {
+      const std::size_t i = turn++ % replicas;
+      Applier& a = *appliers[i];
+      a.apply(frames[2 * next[i]]);
+      a.apply(frames[2 * next[i] + 1]);
+      next[i] = (next[i] + 1) % (frames.size() / 2);
+    }
+  }
   state.counters["records_per_s"] =
       benchmark::Counter(static_cast<double>(records), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["ns_per_record"] = benchmark::Counter(
       static_cast<double>(records), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
-  state.counters["chunks_held"] = static_cast<double>(a.replica.chunk_count());
+  state.counters["chunks_held"] = static_cast<double>(appliers[0]->replica.chunk_count());
 }
-BENCHMARK(BM_MipChurn)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MipChurn)->Arg(1)->Arg(64)->Unit(benchmark::kMillisecond);
 
 // Full records of 64 terrain chunks (a few columns' worth, as near a
 // moving client), then each Released.
