@@ -88,10 +88,15 @@ FileResult<sqlite3*> open_db(const std::string& dir, bool create) {
   sqlite3_busy_timeout(db, 5000);
   // WAL + synchronous=FULL: a committed transaction survives a crash and a
   // power loss; readers (backups, tools) never block the writer.
+  // A page cache of up to 32 MiB per connection (SQLite's default is 2):
+  // a large world's b-tree pages above its chunks' rows then stay cached,
+  // where with 2 MiB the writer read them again (a system call each) for
+  // nearly every chunk it saved. Pages are allocated as they are used.
   const char* setup =
       "PRAGMA journal_mode=WAL;"
       "PRAGMA synchronous=FULL;"
-      "PRAGMA foreign_keys=ON;";
+      "PRAGMA foreign_keys=ON;"
+      "PRAGMA cache_size=-32768;";
   char* err = nullptr;
   if (sqlite3_exec(db, setup, nullptr, nullptr, &err) != SQLITE_OK) {
     std::string msg = "world " + dir + ": cannot configure " + path + ": " + (err ? err : "?");
