@@ -123,6 +123,8 @@ struct ServerCounters {
   std::atomic<std::uint64_t> stream_bytes{0};    // StreamBatch bytes queued
   std::atomic<std::uint64_t> presence_sent{0};
   std::atomic<std::uint64_t> hashes_pushed{0};
+  std::atomic<std::uint64_t> chunks_asked{0};   // chunks replicators asked the world for (streaming)
+  std::atomic<std::uint64_t> stream_yields{0};  // pumps that found the stream gate closed (one per pause and client)
   std::atomic<std::uint64_t> chunks_loaded{0};   // resident now
   std::atomic<std::uint64_t> chunks_unloaded{0};
   std::atomic<std::uint64_t> limit_violations{0};

@@ -70,6 +70,9 @@ constexpr const char* kHelp =
     "  --max-queue-bytes N         per-client send queue; a client further behind is dropped\n"
     "                              (default 16777216)\n"
     "  --stream-window-bytes N     per-client streaming window (default 524288)\n"
+    "  --stream-yield-ms N         streaming pauses while work waits longer than N ms on the io\n"
+    "                              threads or the world strand, so edits and updates keep\n"
+    "                              their pace (default 20; 0: streaming never yields)\n"
     "  --io-threads N              network and replication threads (default 2)\n"
     "  --worker-threads N          chunk loading and generation threads (default 2)\n"
     "  --write-timeout-ms N        drop a client whose socket takes no data for this long\n"
@@ -126,7 +129,7 @@ int usage_error(const std::string& message) {
 
 int run(int argc, char** argv) {
   CommandLine cl({"world", "store", "server-id", "lease-ms", "advertise", "redirect-margin", "bind", "port", "metrics", "border", "tick-hz", "view-distance", "full-res-radius", "max-view-distance",
-                  "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "io-threads",
+                  "max-full-res-radius", "max-clients", "max-queue-bytes", "stream-window-bytes", "stream-yield-ms", "io-threads",
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
@@ -190,6 +193,7 @@ int run(int argc, char** argv) {
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));
   o.stream_window_bytes =
       static_cast<std::size_t>(cl.get_int("stream-window-bytes", 512 << 10, 1 << 12, std::int64_t{1} << 32, &err));
+  o.stream_yield = std::chrono::milliseconds(cl.get_int("stream-yield-ms", 20, 0, 60000, &err));
   o.io_threads = static_cast<int>(cl.get_int("io-threads", 2, 1, 64, &err));
   o.worker_threads = static_cast<int>(cl.get_int("worker-threads", 2, 1, 256, &err));
   o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));

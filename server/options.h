@@ -50,6 +50,9 @@ struct ServerOptions {
   std::int32_t default_full_res_radius = 128;
   std::size_t max_clients = 1024;
   std::size_t stream_window_bytes = 512 * 1024;
+  // Streaming yields when work waits longer than this on the io threads or
+  // the world strand (replication/stream_gate.h); 0: it never yields.
+  std::chrono::milliseconds stream_yield{20};
   std::size_t max_edits_queued_per_client = 64;
   // Chunks a resuming client may claim (Holdings) in all.
   std::size_t max_claims_per_client = 65536;

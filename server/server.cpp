@@ -196,6 +196,7 @@ Server::Server(const ServerOptions& options)
       world_work_(asio::make_work_guard(world_io_)),
       acceptor_(io_),
       stats_timer_(io_),
+      stream_gate_(std::make_unique<StreamGate>(options.stream_yield)),
       shutdown_timer_(io_) {
   options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
   options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
@@ -254,6 +255,7 @@ void Server::start() {
     world_io_.run();
   });
   world_owner_->start();
+  stream_gate_->start(io_, world_io_);
   if (metrics_) {
     metrics_->start();
     server_log().info("metrics on http://{}:{}/metrics", parse_host_port(options_.metrics_address)->first,
@@ -272,6 +274,7 @@ void Server::stop() {
   if (stopped_.exchange(true)) return;
   if (!started_) return;
   stopping_ = true;
+  stream_gate_->stop();  // while both contexts run (its probes re-arm until then)
   {
     std::promise<void> closed;
     asio::post(acceptor_.get_executor(), [this, &closed] {
@@ -343,7 +346,8 @@ void Server::stop() {
 
 std::string Server::metrics_text() const {
   return render_metrics(MetricsSources{counters_, storage_->counters(), encode_counters(), storage_failed(),
-                                       read_process_stats()});
+                                       read_process_stats(), stream_gate_->closed_count(),
+                                       stream_gate_->closed_seconds()});
 }
 
 Health Server::health() const {
@@ -362,7 +366,7 @@ void Server::do_accept() {
     if (stopping_) return;
     const ClientId id = next_id_.fetch_add(1);
     auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_, *access_,
-                                            admin_fn_, leases_ ? &cluster_ : nullptr);
+                                            admin_fn_, *stream_gate_, leases_ ? &cluster_ : nullptr);
     auto session = std::make_shared<Session>(
         std::move(socket), id, options_.session,
         [rep](std::uint64_t, InboundMessage msg) { rep->on_message(std::move(msg)); },

@@ -6,6 +6,8 @@
 // | server/net/         | each session's strand      | socket, framing, parsing, timeouts, limits   |
 // | server/replication/ | the same session strand    | the client's plan, what it holds, requests,  |
 // |                     |                            | budget, pushed hashes, per-tick frames       |
+// |                     | probe timers on the io     | the stream gate: whether streaming yields    |
+// |                     | threads and world strand   | to live traffic (an atomic flag)             |
 // | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
 // |                     |                            | who holds what (interest), presence          |
 // | server/storage/     | loader pool, writer thread | store reads (SQLite or PostgreSQL),          |
@@ -81,6 +83,8 @@ class Server {
   std::uint16_t metrics_port() const { return metrics_ ? metrics_->port() : 0; }
   // Prometheus text (what /metrics serves) and the health rule (/health).
   std::string metrics_text() const;
+  // Whether streaming yields now (and holding it paused: tests, operators).
+  StreamGate& stream_gate() { return *stream_gate_; }
   Health health() const;
   const std::string& address() const { return options_.bind_address; }
   const ServerCounters& counters() const { return counters_; }
@@ -129,6 +133,9 @@ class Server {
   asio::ip::tcp::acceptor acceptor_;
   asio::steady_timer stats_timer_;
   std::unique_ptr<WorldOwner> world_owner_;
+  // Streaming yields to live traffic while the io threads or the world
+  // strand fall behind (probes on both; stopped first in stop()).
+  std::unique_ptr<StreamGate> stream_gate_;
   // A shared world's notices from the other servers, handed to the world
   // owner (stopped before it).
   std::unique_ptr<ChangeListener> changes_;

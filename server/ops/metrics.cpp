@@ -213,6 +213,15 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_update_units_total", "4x4x4 update units sent in them.", load(c.update_units_sent));
   m.counter("terrane_presence_sent_total", "Presence frames sent.", load(c.presence_sent));
   m.counter("terrane_hashes_pushed_total", "Region hashes pushed to clients unasked.", load(c.hashes_pushed));
+  m.counter("terrane_chunks_asked_total", "Chunks the replicators asked the world for (streaming; each view's churn).",
+            load(c.chunks_asked));
+  m.counter("terrane_stream_yields_total",
+            "Times a client's streaming paused because the server was behind (--stream-yield-ms).",
+            load(c.stream_yields));
+  m.counter("terrane_stream_gate_closed_total", "Times streaming was paused server-wide (work waited too long).",
+            s.stream_gate_closings);
+  m.counter("terrane_stream_gate_closed_seconds_total", "Time streaming was paused server-wide.",
+            s.stream_gate_closed_seconds);
 
   m.gauge("terrane_send_queue_bytes", "Bytes queued for sending, every session together.",
           std::max<std::int64_t>(0, c.net.queued_bytes.load(std::memory_order_relaxed)));

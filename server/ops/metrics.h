@@ -31,6 +31,9 @@ struct MetricsSources {
   const EncodeCounters& encode;
   bool storage_failed = false;
   ProcessStats process;
+  // Streaming yielding to live traffic (replication/stream_gate.h).
+  std::uint64_t stream_gate_closings = 0;
+  double stream_gate_closed_seconds = 0;
 };
 
 // Every metric, named terrane_* (process_* for the process), with HELP and

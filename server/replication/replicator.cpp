@@ -12,6 +12,11 @@ namespace terrane {
 namespace {
 
 constexpr auto kPumpRetry = std::chrono::milliseconds(20);
+// While the stream gate is closed: a client's streaming is tried again
+// after this, plus up to kYieldJitter by client (a thousand clients do not
+// all wake at once, and each costs a timer wake, not 50 a second).
+constexpr auto kYieldRetry = std::chrono::milliseconds(100);
+constexpr std::uint64_t kYieldJitterMs = 50;
 
 StreamRecordKind record_kind(int level) {
   return level == 0 ? StreamRecordKind::kFull : static_cast<StreamRecordKind>(level);
@@ -21,7 +26,7 @@ StreamRecordKind record_kind(int level) {
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
                        const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-                       const AdminFn& admin, const ClusterDirectory* cluster)
+                       const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster)
     : id_(id),
       world_(world),
       options_(options),
@@ -30,6 +35,7 @@ Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& opti
       faults_(faults),
       access_(access),
       admin_fn_(admin),
+      gate_(gate),
       cluster_(cluster) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;
@@ -534,6 +540,15 @@ void Replicator::move_by(Vec3i d) {
 void Replicator::pump() {
   if (!welcomed_ || !plan_valid_ || closed_) return;
   if (redirected_) return flush_stream();  // the client goes on elsewhere: nothing more to stream
+  if (!gate_.open()) {
+    // The server is behind: live traffic first; the timer pumps again.
+    if (!stream_yielded_) counters_.stream_yields.fetch_add(1, std::memory_order_relaxed);
+    stream_yielded_ = true;
+    flush_stream();
+    arm_timer();
+    return;
+  }
+  stream_yielded_ = false;
   send_ready();
   request_more();
   flush_stream();
@@ -585,7 +600,10 @@ void Replicator::request_more() {
     if (want_level >= it->second.level) continue;
     want(cp, Intent::kRefine, want_level);
   }
-  if (!wants.empty()) world_.want(id_, std::move(wants));
+  if (!wants.empty()) {
+    counters_.chunks_asked.fetch_add(wants.size(), std::memory_order_relaxed);
+    world_.want(id_, std::move(wants));
+  }
 }
 
 void Replicator::on_granted(std::vector<VersionPtr> versions) {
@@ -859,6 +877,7 @@ void Replicator::arm_timer() {
   const auto now = std::chrono::steady_clock::now();
   auto at = std::chrono::steady_clock::time_point::max();
   if (!ready_.empty()) at = now + kPumpRetry;
+  if (stream_yielded_) at = std::min(at, now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs));
   if (!mip_dirty_.empty()) at = std::min(at, next_mip_flush_);
   // Hashes are pushed only once there is a plan (a first ClientState): a
   // session that never sends one (terrane-admin) must not wake for them.

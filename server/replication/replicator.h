@@ -49,6 +49,7 @@
 #include "server/net/session.h"
 #include "server/ops/access.h"
 #include "server/options.h"
+#include "server/replication/stream_gate.h"
 #include "server/replication/view_table.h"
 #include "server/storage/cluster_map.h"
 #include "server/world/world_owner.h"
@@ -113,7 +114,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // servers (null: one server, no redirects).
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
              const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-             const AdminFn& admin, const ClusterDirectory* cluster = nullptr);
+             const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
@@ -201,7 +202,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   ReplicationFaults& faults_;
   const AccessControl& access_;
   const AdminFn& admin_fn_;
+  const StreamGate& gate_;
   const ClusterDirectory* const cluster_;
+  // The gate was closed at the last pump: streaming waits for the timer.
+  bool stream_yielded_ = false;
   // Sent a Redirect (when): nothing more is streamed until the client
   // leaves, or kRedirectGrace passes.
   bool redirected_ = false;

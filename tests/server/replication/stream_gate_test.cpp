@@ -1,0 +1,143 @@
+// StreamGate: when streaming yields to live traffic. The rule from probe
+// lateness (hysteresis, either probe, a hold), real probes on io contexts
+// that fall behind, and a server whose streaming is paused: no chunk is
+// streamed, edits and updates go on, and streaming resumes once it opens.
+#include "server/replication/stream_gate.h"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "tests/support/eventually.h"
+#include "tests/support/server_fixture.h"
+
+namespace terrane {
+namespace {
+
+using namespace std::chrono_literals;
+using testing_support::eventually;
+using testing_support::msg;
+using Probe = StreamGate::Probe;
+
+TEST(StreamGate, ALateProbeClosesItAndOnlyEveryProbeBackWithinHalfOpensIt) {
+  StreamGate g(20ms);
+  EXPECT_TRUE(g.open());
+  g.observe(Probe::kIo, 15ms);  // late, within the threshold
+  EXPECT_TRUE(g.open());
+  g.observe(Probe::kIo, 25ms);
+  EXPECT_FALSE(g.open());
+  EXPECT_EQ(g.closed_count(), 1u);
+  g.observe(Probe::kIo, 15ms);  // better, not yet within half
+  EXPECT_FALSE(g.open());
+  g.observe(Probe::kIo, 10ms);
+  EXPECT_TRUE(g.open());
+  // Either probe closes it; both must be back.
+  g.observe(Probe::kWorld, 30ms);
+  EXPECT_FALSE(g.open());
+  g.observe(Probe::kIo, 0ms);
+  EXPECT_FALSE(g.open());
+  g.observe(Probe::kWorld, 1ms);
+  EXPECT_TRUE(g.open());
+  EXPECT_EQ(g.closed_count(), 2u);
+  EXPECT_GT(g.closed_seconds(), 0.0);
+}
+
+TEST(StreamGate, AHoldKeepsItClosedWhateverTheProbesSay) {
+  StreamGate g(20ms);
+  g.hold_closed(true);
+  EXPECT_FALSE(g.open());
+  g.observe(Probe::kIo, 0ms);
+  g.observe(Probe::kWorld, 0ms);
+  EXPECT_FALSE(g.open());
+  g.hold_closed(false);
+  EXPECT_TRUE(g.open());
+}
+
+TEST(StreamGate, ThresholdZeroNeverCloses) {
+  StreamGate g(0ms);
+  g.observe(Probe::kIo, 10s);
+  EXPECT_TRUE(g.open());
+  EXPECT_EQ(g.closed_count(), 0u);
+}
+
+TEST(StreamGate, ProbesCloseItWhileAContextFallsBehindAndOpenItWhenItCatchesUp) {
+  asio::io_context io, world;
+  auto io_work = asio::make_work_guard(io);
+  auto world_work = asio::make_work_guard(world);
+  std::thread io_thread([&] { io.run(); });
+  std::thread world_thread([&] { world.run(); });
+  StreamGate g(20ms);
+  g.start(io, world);
+  // The world falls behind: handlers that each keep it busy past the
+  // threshold, queued until the gate is seen closed (the probe that closes
+  // it waited behind one of them).
+  std::atomic<bool> seen_closed{false};
+  std::function<void()> busy = [&] {
+    const auto until = std::chrono::steady_clock::now() + 30ms;
+    while (std::chrono::steady_clock::now() < until) {
+    }
+    if (!seen_closed) asio::post(world, busy);
+  };
+  asio::post(world, busy);
+  EXPECT_TRUE(eventually([&] { return !g.open(); }));
+  seen_closed = true;
+  // Idle again: the next probes are on time.
+  EXPECT_TRUE(eventually([&] { return g.open(); }));
+  EXPECT_GE(g.closed_count(), 1u);
+  g.stop();
+  io_work.reset();
+  world_work.reset();
+  io_thread.join();  // the probes are gone: nothing keeps the contexts running
+  world_thread.join();
+}
+
+class StreamGateServerTest : public testing_support::ServerTest {};
+
+TEST_F(StreamGateServerTest, WhileClosedNothingIsStreamedButEditsAndUpdatesGoOn) {
+  ServerOptions o;
+  o.horizon_images = false;  // a new view's first pump asks for chunks at once (not after its horizon images)
+  start(o);
+  StreamGate& gate = server_->stream_gate();
+  gate.hold_closed(true);
+  auto p = join("walker");
+  const Vec3f pos{1002.0f, 12.0f, 1002.0f};
+  ASSERT_TRUE(p->send(build_client_state(ClientStateMsg{pos, 96, 24})));
+  // Its streaming yielded (the pump that the ClientState ran found the gate
+  // closed). The answer to a later ping is sent after that handler ended
+  // (one strand, in order): by then nothing was asked of the world, and no
+  // chunk's record came.
+  ASSERT_TRUE(eventually([&] { return server_->counters().stream_yields.load() >= 1; }));
+  ASSERT_TRUE(p->send(build_ping(7)));
+  StreamDecodeScratch scratch;
+  std::size_t chunk_records = 0;
+  for (;;) {
+    auto f = p->next();
+    ASSERT_TRUE(f.has_value());
+    const wire::Message& m = msg(*f);
+    if (m.body_type() == wire::Body::Pong) break;
+    if (m.body_type() != wire::Body::StreamBatch) continue;
+    auto records = parse_stream_batch(*m.body_as_StreamBatch());
+    ASSERT_TRUE(records.ok());
+    ASSERT_TRUE(decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+                  if (r.kind != StreamRecordKind::kHorizon && r.kind != StreamRecordKind::kReleased) ++chunk_records;
+                  return Ok{};
+                }).ok());
+  }
+  EXPECT_EQ(chunk_records, 0u);
+  EXPECT_EQ(server_->counters().chunks_asked.load(), 0u);
+  // Opened: streaming resumes (on the replicator's timer) and completes.
+  gate.hold_closed(false);
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, pos, cp));
+  // Closed again: an edit in what the client holds is acknowledged and
+  // its update arrives.
+  gate.hold_closed(true);
+  const EditRequestMsg e =
+      testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255);
+  ASSERT_TRUE(p->send(build_edit_request(e)));
+  EXPECT_TRUE(p->next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch).has_value());
+  gate.hold_closed(false);
+}
+
+}  // namespace
+}  // namespace terrane
