@@ -34,7 +34,7 @@ struct RunContext {
   Vec3f spawn;
   asio::io_context* io = nullptr;
   FanoutTracker* fanout = nullptr;
-  RoundTripLog* round_trips = nullptr;
+  LatencyLog* round_trips = nullptr;
   MismatchLog* mismatches = nullptr;
   std::shared_ptr<DecodedChunks> shared_chunks;  // null: --shared-chunks 0
   Clock::time_point run_start;

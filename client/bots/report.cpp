@@ -52,7 +52,9 @@ std::string server_json(const ServerFigures& f) {
     << ", \"tick_p99_ms_bound\": " << json_opt(f.tick_p99_ms) << ", \"commit_p99_ms_bound\": " << json_opt(f.commit_p99_ms)
     << ", \"fanout_p99_ms_bound\": " << json_opt(f.fanout_p99_ms)
     << ", \"edit_ack_mean_ms\": " << json_opt(f.edit_ack_mean_ms)
-    << ", \"edit_ack_p99_ms_bound\": " << json_opt(f.edit_ack_p99_ms) << ", \"scrapes\": " << f.scrapes
+    << ", \"edit_ack_p99_ms_bound\": " << json_opt(f.edit_ack_p99_ms)
+    << ", \"stream_gate_closings\": " << f.stream_gate_closings
+    << ", \"stream_gate_closed_s\": " << num(f.stream_gate_closed_s) << ", \"scrapes\": " << f.scrapes
     << ", \"scrape_errors\": " << f.scrape_errors << ", \"sent_by_type\": {";
   bool first = true;
   for (const auto& [type, fb] : f.sent_by_type) {
@@ -132,6 +134,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"edit_fanout_ms\": " << lat(r.edit_fanout_ms) << ",\n";
   j << "  \"edit_fanout_other_server_ms\": " << lat(r.edit_fanout_other_server_ms) << ",\n";
   j << "  \"round_trip_ms\": " << lat(r.round_trip_ms) << ",\n";
+  j << "  \"bots_io_lag_ms\": " << lat(r.bots_io_lag_ms) << ",\n";
   j << "  \"redirects\": " << r.redirects << ",\n";
   j << "  \"shared_chunk_hits\": " << r.shared_chunk_hits << ",\n";
   j << "  \"shared_chunk_misses\": " << r.shared_chunk_misses << ",\n";
@@ -242,6 +245,7 @@ std::string report_table(const BotsReport& r) {
   row("edit ack ms", l(r.edit_ack_ms));
   row(r.options.servers.size() > 1 ? "edit fan-out ms, same server" : "edit fan-out ms", l(r.edit_fanout_ms));
   row("round trip ms (keepalive pings)", l(r.round_trip_ms));
+  row("bots' own io lag ms (10 ms probe)", l(r.bots_io_lag_ms));
   if (r.options.servers.size() > 1) {
     row("edit fan-out ms, other server", l(r.edit_fanout_other_server_ms));
     std::string per;
@@ -291,6 +295,8 @@ std::string report_table(const BotsReport& r) {
         (f.edit_ack_mean_ms ? fixed(*f.edit_ack_mean_ms, 1) + " ms" : std::string("-")) + " / " +
             bound_ms(f.edit_ack_p99_ms));
     row("  edits applied / rejected", std::to_string(f.edits_applied) + " / " + std::to_string(f.edits_rejected));
+    row("  streaming paused (server behind)",
+        std::to_string(f.stream_gate_closings) + " times, " + fixed(f.stream_gate_closed_s, 1) + " s in all");
     row("  sessions ended", std::to_string(f.disconnects));
     std::snprintf(line, sizeof line, "    %-20s %12s %14s\n", "sent by type", "frames", "bytes");
     t << line;

@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <future>
 #include <limits>
 #include <random>
 #include <thread>
@@ -14,6 +15,7 @@ namespace terrane::bots {
 namespace {
 
 constexpr auto kStep = std::chrono::milliseconds(100);
+constexpr auto kLagProbe = std::chrono::milliseconds(10);
 // Bots step in this many groups spread over each step, as a crowd of real
 // players acts at times of its own: when every bot stepped at once, the
 // edits of all of them reached the server in one burst every 100 ms, at a
@@ -119,9 +121,42 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   auto measure_from = t0 + ramp;
   FanoutTracker fanout(t0, measure_from, std::max<int>(1, static_cast<int>(o.servers.size())));
   MismatchLog mismatches;
-  RoundTripLog round_trips(t0, measure_from);
+  LatencyLog round_trips(t0, measure_from);
   ctx.fanout = &fanout;
   ctx.round_trips = &round_trips;
+  // The bots' own io lag: a timer every kLagProbe on their io threads (on
+  // a strand of its own), sampled for how late it fires.
+  LatencyLog io_lag(t0, measure_from);
+  struct LagProbe {
+    asio::strand<asio::io_context::executor_type> strand;
+    asio::steady_timer timer;
+    LatencyLog& log;
+    bool stopped = false;  // on the strand
+    void arm() {
+      timer.async_wait([this](const asio::error_code& ec) {
+        if (ec || stopped) return;
+        const auto now = Clock::now();
+        log.add(now, std::chrono::duration<double, std::milli>(now - timer.expiry()).count());
+        timer.expires_at(std::max(timer.expiry() + kLagProbe, now));
+        arm();
+      });
+    }
+    // On the strand: no wait pending, no handler left to run, after it.
+    void stop() {
+      for (int round = 0; round < 2; ++round) {  // the second waits for the aborted wait's handler
+        std::promise<void> done;
+        asio::post(strand, [this, &done] {
+          stopped = true;
+          timer.cancel();
+          done.set_value();
+        });
+        done.get_future().wait();
+      }
+    }
+  };
+  auto lag_strand = asio::make_strand(pool.io());
+  LagProbe lag_probe{lag_strand, asio::steady_timer(lag_strand, kLagProbe), io_lag};
+  asio::post(lag_strand, [&lag_probe] { lag_probe.arm(); });
   ctx.mismatches = &mismatches;
   if (o.shared_chunks > 0)
     ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
@@ -234,6 +269,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
         // are the ramp-up, reported as joined_s.
         fanout.set_measure_from(now);
         round_trips.set_measure_from(now);
+        io_lag.set_measure_from(now);
         measure_from = now;
         measured_snapshot = false;
       }
@@ -269,6 +305,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     return !any;
   });
   fanout.settle(Clock::now(), Clock::duration::zero());
+  lag_probe.stop();
   std::uint64_t ub_end = 0;
   {
     std::uint64_t in = 0, out = 0;
@@ -334,6 +371,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.edit_fanout_ms = summarize(fanout.fanout_ms());
   r.edit_fanout_other_server_ms = summarize(fanout.fanout_other_server_ms());
   r.round_trip_ms = summarize(round_trips.all());
+  r.bots_io_lag_ms = summarize(io_lag.all());
   if (ctx.shared_chunks) {
     const DecodedChunks::Stats s = ctx.shared_chunks->stats();
     r.shared_chunk_hits = s.hits;

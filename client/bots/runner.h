@@ -44,6 +44,9 @@ struct BotsReport {
   LatencySummary edit_fanout_other_server_ms;
   // Keepalive round trips (each bot's Ping every 5 s) answered while measured.
   LatencySummary round_trip_ms;
+  // How late a 10 ms timer on the bots' io threads fired while measured:
+  // the bots process behind (every latency above includes it).
+  LatencySummary bots_io_lag_ms;
   std::uint64_t edits_sent = 0, edits_acked = 0, edits_rejected = 0, edits_measured = 0;
   std::map<std::string, std::uint64_t> reject_reasons;
   double receivers_per_edit = 0;

@@ -206,6 +206,9 @@ ServerFigures ServerWatch::figures() const {
   f.fanout_p99_ms = histogram_quantile_ms(first_, last_, "terrane_fanout_duration_seconds", 0.99);
   f.edit_ack_p99_ms = histogram_quantile_ms(first_, last_, "terrane_edit_ack_duration_seconds", 0.99);
   f.edit_ack_mean_ms = histogram_mean_ms(first_, last_, "terrane_edit_ack_duration_seconds");
+  f.stream_gate_closings = growth(first_, last_, "terrane_stream_gate_closed_total");
+  f.stream_gate_closed_s = std::max(0.0, value_of(last_, "terrane_stream_gate_closed_seconds_total") -
+                                             value_of(first_, "terrane_stream_gate_closed_seconds_total"));
   const std::string frames = "terrane_sent_frames_total{type=\"";
   for (auto it = last_.lower_bound(frames); it != last_.end() && it->first.rfind(frames, 0) == 0; ++it) {
     if (it->first.size() < frames.size() + 2 || f.sent_by_type.size() >= 64) continue;

@@ -55,6 +55,9 @@ struct ServerFigures {
   // An edit inside the server (terrane_edit_ack_duration_seconds): from its
   // session handing it to the world to its ack being queued.
   std::optional<double> edit_ack_mean_ms, edit_ack_p99_ms;
+  // Streaming paused because the server was behind (its stream gate).
+  std::uint64_t stream_gate_closings = 0;
+  double stream_gate_closed_s = 0;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> sent_by_type;  // frames, bytes
   int scrapes = 0, scrape_errors = 0;
   std::string first_error;

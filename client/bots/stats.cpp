@@ -235,19 +235,19 @@ std::size_t MismatchLog::count() const {
   return list_.size();
 }
 
-void RoundTripLog::add(Clock::time_point t, double ms) {
+void LatencyLog::add(Clock::time_point t, double ms) {
   std::lock_guard lock(mutex_);
   const auto f = static_cast<float>(ms);
   if (t >= measure_from_) all_.push_back(f);
   add_per_second(by_second_, run_start_, t, f);
 }
 
-std::vector<float> RoundTripLog::all() const {
+std::vector<float> LatencyLog::all() const {
   std::lock_guard lock(mutex_);
   return all_;
 }
 
-std::vector<std::vector<float>> RoundTripLog::by_second() const {
+std::vector<std::vector<float>> LatencyLog::by_second() const {
   std::lock_guard lock(mutex_);
   return by_second_;
 }

@@ -155,13 +155,15 @@ struct Mismatch {
   bool final_check = false;
 };
 
-// Keepalive round trips (Ping to Pong, ClientCounters::last_round_trip_ms)
-// of every bot: over the measured part of the run and per second of it (by
-// the time the Pong was handled). Where a round trip is long, bytes wait in
-// a queue on one side or the other, whatever the world does.
-class RoundTripLog {
+// Latency samples over the measured part of the run and per second of it
+// (by the time each was taken). Two logs: keepalive round trips of every
+// bot (Ping to Pong, ClientCounters::last_round_trip_ms; where one is long,
+// bytes wait in a queue on one side or the other, whatever the world does)
+// and the bots' own io lag (how late a 10 ms timer on their io threads
+// fires: the bots process behind, which every figure it takes includes).
+class LatencyLog {
  public:
-  RoundTripLog(Clock::time_point run_start, Clock::time_point measure_from)
+  LatencyLog(Clock::time_point run_start, Clock::time_point measure_from)
       : run_start_(run_start), measure_from_(measure_from) {}
   void set_measure_from(Clock::time_point t) {
     std::lock_guard lock(mutex_);
