@@ -13,7 +13,7 @@ namespace {
 
 constexpr auto kPumpRetry = std::chrono::milliseconds(20);
 // While the stream gate is closed: a client's streaming is tried again
-// after this, plus up to kYieldJitter by client (a thousand clients do not
+// after this, plus up to kYieldJitterMs by client (a thousand clients do not
 // all wake at once, and each costs a timer wake, not 50 a second).
 constexpr auto kYieldRetry = std::chrono::milliseconds(100);
 constexpr std::uint64_t kYieldJitterMs = 50;

@@ -5,13 +5,15 @@
 
 namespace terrane {
 
-// A probe: a timer on one context, re-armed each period; its lateness is
-// how long its completion waited behind the context's other work.
+// A probe: a timer on one context (on a strand of its own: the io context
+// has several threads), re-armed each period; its lateness is how long its
+// completion waited behind the context's other work.
 struct StreamGate::Prober {
-  Prober(asio::io_context& ctx, Probe p) : timer(ctx), which(p) {}
+  Prober(asio::io_context& ctx, Probe p) : strand(asio::make_strand(ctx)), timer(strand), which(p) {}
+  asio::strand<asio::io_context::executor_type> strand;
   asio::steady_timer timer;
   Probe which;
-  bool stopped = false;  // on the context's threads only
+  bool stopped = false;  // on the strand
 };
 
 namespace {
@@ -84,15 +86,18 @@ void StreamGate::stop() {
   for (auto& p : probers_) {
     if (!p) continue;
     Prober* raw = p.get();
-    // On the probe's own context: its handler never runs concurrently with
-    // this, and sees stopped (or operation_aborted) afterwards.
-    std::promise<void> done;
-    asio::post(raw->timer.get_executor(), [raw, &done] {
-      raw->stopped = true;
-      raw->timer.cancel();
-      done.set_value();
-    });
-    done.get_future().wait();
+    // On the probe's strand: its handler never runs beside this one and
+    // sees stopped (or operation_aborted) after it; the second round runs
+    // after the cancelled wait's handler, so none is left once it has.
+    for (int round = 0; round < 2; ++round) {
+      std::promise<void> done;
+      asio::post(raw->strand, [raw, &done] {
+        raw->stopped = true;
+        raw->timer.cancel();
+        done.set_value();
+      });
+      done.get_future().wait();
+    }
   }
 }
 
