@@ -25,6 +25,7 @@
 #include "common/voxel/chunk.h"
 #include "common/world/terrain_generator.h"
 #include "protocol/stream_batch.h"
+#include "tests/support/stream_records.h"
 
 namespace terrane {
 namespace {
@@ -62,14 +63,9 @@ std::vector<std::uint8_t> mip3_payload(const Chunk& c) {
 }
 
 std::vector<std::uint8_t> full_payload(const Chunk& c) {
-  std::vector<std::uint8_t> out;
-  Box unit({16, 16, 16});
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
-    c.read_box(off, unit, {0, 0, 0}, {16, 16, 16});
-    net_codec_encode(16, unit.voxels(), out);
-  }
-  return out;
+  Box voxels({kChunkSize, kChunkSize, kChunkSize});
+  c.read_box({0, 0, 0}, voxels, {0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize});
+  return testing_support::full_payload(voxels);
 }
 
 struct Applier {
@@ -124,7 +120,6 @@ void BM_MipChurn(benchmark::State& state) {
   std::size_t records = 0;
   auto move = [&](int from, int to) {
     StreamBatchWriter leave, enter;
-    const int dir = to > from ? 1 : -1;
     for (int z = -kRadius; z <= kRadius; ++z) {
       for (int x = from - kRadius - 1; x <= from + kRadius + 1; ++x) {
         const bool was = (x - from) * (x - from) + z * z <= kRadius * kRadius;
@@ -135,7 +130,6 @@ void BM_MipChurn(benchmark::State& state) {
         }
       }
     }
-    (void)dir;
     records += leave.records() + enter.records();
     frames.push_back(leave.finish());
     frames.push_back(enter.finish());

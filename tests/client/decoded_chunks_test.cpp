@@ -5,6 +5,7 @@
 #include "client/replica.h"
 #include "common/codec/net_codec.h"
 #include "protocol/stream_batch.h"
+#include "tests/support/stream_records.h"
 
 namespace terrane {
 namespace {
@@ -20,18 +21,7 @@ Box slope(int seed) {
   return b;
 }
 
-std::vector<std::uint8_t> full_payload(const Box& chunk) {
-  std::vector<std::uint8_t> out;
-  Box unit({16, 16, 16});
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
-    for (int y = 0; y < 16; ++y)
-      for (int z = 0; z < 16; ++z)
-        std::copy_n(chunk.read_row(off.y + y, off.z + z) + off.x, 16, unit.write_row(y, z));
-    net_codec_encode(16, unit.voxels(), out);
-  }
-  return out;
-}
+using testing_support::full_payload;
 
 // The replica takes a Full record of these bytes, as the client does.
 void take_full(Replica& r, Vec3i cp, std::uint64_t revision, const std::vector<std::uint8_t>& payload) {

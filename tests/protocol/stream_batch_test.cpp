@@ -4,6 +4,7 @@
 
 #include "common/codec/net_codec.h"
 #include "common/world/horizon.h"
+#include "tests/support/stream_records.h"
 
 namespace terrane {
 namespace {
@@ -25,18 +26,7 @@ Box terrain(int n, int seed) {
   return b;
 }
 
-std::vector<std::uint8_t> full_payload(const Box& chunk) {
-  std::vector<std::uint8_t> out;
-  Box unit({16, 16, 16});
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
-    for (int y = 0; y < 16; ++y)
-      for (int z = 0; z < 16; ++z)
-        for (int x = 0; x < 16; ++x) unit.set(x, y, z, chunk.get(off.x + x, off.y + y, off.z + z));
-    net_codec_encode(16, unit.voxels(), out);
-  }
-  return out;
-}
+using testing_support::full_payload;
 
 TEST(StreamBatch, EveryRecordKindRoundTrips) {
   const Box chunk = terrain(32, 3);
