@@ -17,6 +17,10 @@ constexpr auto kPumpRetry = std::chrono::milliseconds(20);
 // all wake at once, and each costs a timer wake, not 50 a second).
 constexpr auto kYieldRetry = std::chrono::milliseconds(100);
 constexpr std::uint64_t kYieldJitterMs = 50;
+// A client's streaming yields this long at most: then it goes on once
+// (one pump) and yields again, so under a load that never lets up a view
+// still fills, slowly.
+constexpr auto kYieldAtMost = std::chrono::seconds(2);
 
 StreamRecordKind record_kind(int level) {
   return level == 0 ? StreamRecordKind::kFull : static_cast<StreamRecordKind>(level);
@@ -542,13 +546,21 @@ void Replicator::pump() {
   if (redirected_) return flush_stream();  // the client goes on elsewhere: nothing more to stream
   if (!gate_.open()) {
     // The server is behind: live traffic first; the timer pumps again.
-    if (!stream_yielded_) counters_.stream_yields.fetch_add(1, std::memory_order_relaxed);
-    stream_yielded_ = true;
-    flush_stream();
-    arm_timer();
-    return;
+    const auto now = std::chrono::steady_clock::now();
+    if (!stream_yielded_) {
+      counters_.stream_yields.fetch_add(1, std::memory_order_relaxed);
+      stream_yielded_ = true;
+      yielded_since_ = now;
+    }
+    if (gate_.held() || now - yielded_since_ < kYieldAtMost) {
+      flush_stream();
+      arm_timer();
+      return;
+    }
+    yielded_since_ = now;  // waited long enough: one pump, then yield again
+  } else {
+    stream_yielded_ = false;
   }
-  stream_yielded_ = false;
   send_ready();
   request_more();
   flush_stream();

@@ -204,8 +204,10 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   const AdminFn& admin_fn_;
   const StreamGate& gate_;
   const ClusterDirectory* const cluster_;
-  // The gate was closed at the last pump: streaming waits for the timer.
+  // The gate was closed at the last pump: streaming waits for the timer
+  // (since yielded_since_, or the last pump it let through).
   bool stream_yielded_ = false;
+  std::chrono::steady_clock::time_point yielded_since_;
   // Sent a Redirect (when): nothing more is streamed until the client
   // leaves, or kRedirectGrace passes.
   bool redirected_ = false;

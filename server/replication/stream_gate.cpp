@@ -39,6 +39,7 @@ void StreamGate::observe(Probe p, std::chrono::nanoseconds late) {
 void StreamGate::hold_closed(bool held) {
   std::lock_guard lock(m_);
   held_ = held;
+  held_flag_.store(held, std::memory_order_relaxed);
   update();
 }
 

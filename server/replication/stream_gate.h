@@ -15,7 +15,9 @@
 // is closed, replicators send and ask for no more streamed chunks (what a
 // client already has keeps being updated; edits, updates, hashes and
 // pings go on), and retry shortly. Streaming then runs at the rate the
-// machine can carry beside the live traffic.
+// machine can carry beside the live traffic. It slows, never stops: a
+// client's streaming that has waited kYieldAtMost (replicator.cpp) goes
+// on once, closed or not, unless the gate is held closed by hand.
 //
 // Threading: open() from any thread; observe() from the probes (or a
 // test); start() and stop() from the Server's owner.
@@ -41,6 +43,8 @@ class StreamGate {
   StreamGate& operator=(const StreamGate&) = delete;
 
   bool open() const { return open_.load(std::memory_order_relaxed); }
+  // Closed by hold_closed(true), not by the probes.
+  bool held() const { return held_flag_.load(std::memory_order_relaxed); }
   std::chrono::milliseconds threshold() const { return threshold_; }
 
   // One probe's lateness: later than the threshold closes the gate; every
@@ -66,6 +70,7 @@ class StreamGate {
 
   const std::chrono::milliseconds threshold_;
   std::atomic<bool> open_{true};
+  std::atomic<bool> held_flag_{false};
   mutable std::mutex m_;  // the two probes' states and the closed time
   std::array<bool, 2> late_{};
   bool held_ = false;

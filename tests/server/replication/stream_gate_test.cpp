@@ -46,11 +46,13 @@ TEST(StreamGate, AHoldKeepsItClosedWhateverTheProbesSay) {
   StreamGate g(20ms);
   g.hold_closed(true);
   EXPECT_FALSE(g.open());
+  EXPECT_TRUE(g.held());
   g.observe(Probe::kIo, 0ms);
   g.observe(Probe::kWorld, 0ms);
   EXPECT_FALSE(g.open());
   g.hold_closed(false);
   EXPECT_TRUE(g.open());
+  EXPECT_FALSE(g.held());
 }
 
 TEST(StreamGate, ThresholdZeroNeverCloses) {
@@ -137,6 +139,25 @@ TEST_F(StreamGateServerTest, WhileClosedNothingIsStreamedButEditsAndUpdatesGoOn)
   ASSERT_TRUE(p->send(build_edit_request(e)));
   EXPECT_TRUE(p->next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch).has_value());
   gate.hold_closed(false);
+}
+
+TEST_F(StreamGateServerTest, ClosedByTheProbesStreamingSlowsButNeverStops) {
+  // A threshold so long that the probes (every quarter of it) neither close
+  // nor reopen the gate during the test: one late observation closes it.
+  ServerOptions o;
+  o.stream_yield = std::chrono::minutes(10);
+  start(o);
+  StreamGate& gate = server_->stream_gate();
+  gate.observe(Probe::kIo, std::chrono::minutes(11));
+  ASSERT_FALSE(gate.open());
+  ASSERT_FALSE(gate.held());
+  auto p = join("walker");
+  const Vec3f pos{1002.0f, 12.0f, 1002.0f};
+  // The view fills while the gate stays closed: each yield ends after
+  // at most 2 s with one pump.
+  EXPECT_TRUE(hold_full(*p, pos, chunk_of(Vec3i{1002, 12, 1002})));
+  EXPECT_FALSE(gate.open());
+  EXPECT_GE(server_->counters().stream_yields.load(), 1u);
 }
 
 }  // namespace
