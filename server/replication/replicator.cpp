@@ -404,17 +404,26 @@ bool Replicator::in_view(Vec3i cp) const {
 
 int Replicator::desired(Vec3i cp) const { return table_->level(cp - center_); }
 
-void Replicator::push_refine(Vec3i cp) { refine_.emplace(offset_center_dist2(cp - center_), cp); }
+void Replicator::push_refine(Vec3i cp) {
+  refine_.emplace_back(offset_center_dist2(cp - center_), cp);
+  if (!refine_stale_) std::push_heap(refine_.begin(), refine_.end(), RefineOrder{});
+}
+
+bool Replicator::needs_refining(Vec3i cp) const {
+  auto it = held_.find(cp);
+  return it != held_.end() && it->second.level != kHeldEmpty && in_view(cp) && desired(cp) < it->second.level;
+}
 
 void Replicator::rebuild_refine() {
-  std::vector<RefineEntry> all;
-  all.reserve(refine_.size());
-  while (!refine_.empty()) {
-    const Vec3i cp = refine_.top().second;
-    refine_.pop();
-    all.emplace_back(offset_center_dist2(cp - center_), cp);
-  }
-  refine_ = decltype(refine_)(RefineOrder{}, std::move(all));
+  std::erase_if(refine_, [&](const RefineEntry& e) { return !needs_refining(e.second); });
+  for (RefineEntry& e : refine_) e.first = offset_center_dist2(e.second - center_);
+  // Nearest first, ties by position; repeats (pushed again by later moves) once.
+  std::sort(refine_.begin(), refine_.end(), [](const RefineEntry& a, const RefineEntry& b) {
+    return std::tie(a.first, a.second.y, a.second.z, a.second.x) < std::tie(b.first, b.second.y, b.second.z, b.second.x);
+  });
+  refine_.erase(std::unique(refine_.begin(), refine_.end()), refine_.end());
+  std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
+  refine_stale_ = false;
 }
 
 void Replicator::release_outside_view() {
@@ -466,10 +475,11 @@ void Replicator::replan() {
   coarse_pos_ = 0;
   entering_.clear();
   release_outside_view();
-  std::vector<RefineEntry> all;
+  refine_.clear();
   for (const auto& [cp, h] : held_)
-    if (h.level != kHeldEmpty && desired(cp) < h.level) all.emplace_back(offset_center_dist2(cp - center_), cp);
-  refine_ = decltype(refine_)(RefineOrder{}, std::move(all));
+    if (h.level != kHeldEmpty && desired(cp) < h.level) refine_.emplace_back(offset_center_dist2(cp - center_), cp);
+  std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
+  refine_stale_ = false;
   plan_horizon();
   flush_stream();
 }
@@ -530,7 +540,7 @@ void Replicator::move_by(Vec3i d) {
   for (const Vec3i o : table_->leaving(d)) leave(old + o, released);
   if (!released.empty()) world_.release(id_, std::move(released));
   for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
-  rebuild_refine();
+  refine_stale_ = true;  // keys are distances to the old centre: recomputed when next read
   for (const Vec3i o : table_->finer(d)) {
     const Vec3i cp = center_ + o;
     if (auto it = held_.find(cp); it != held_.end() && it->second.level != kHeldEmpty && table_->level(o) < it->second.level)
@@ -603,14 +613,13 @@ void Replicator::request_more() {
   const bool coarse_done = coarse_pos_ >= offsets.size() && entering_.empty() &&
                            std::none_of(requested_.begin(), requested_.end(),
                                         [](const auto& r) { return r.second.intent != Intent::kRefine; });
+  if (coarse_done && room() && refine_stale_) rebuild_refine();
   while (coarse_done && room() && !refine_.empty()) {
-    const Vec3i cp = refine_.top().second;
-    refine_.pop();
-    auto it = held_.find(cp);
-    if (it == held_.end() || it->second.level == kHeldEmpty || requested_.count(cp) != 0 || !in_view(cp)) continue;
-    const int want_level = desired(cp);
-    if (want_level >= it->second.level) continue;
-    want(cp, Intent::kRefine, want_level);
+    std::pop_heap(refine_.begin(), refine_.end(), RefineOrder{});
+    const Vec3i cp = refine_.back().second;
+    refine_.pop_back();
+    if (requested_.count(cp) != 0 || !needs_refining(cp)) continue;
+    want(cp, Intent::kRefine, desired(cp));
   }
   if (!wants.empty()) {
     counters_.chunks_asked.fetch_add(wants.size(), std::memory_order_relaxed);
@@ -770,8 +779,9 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     if (options_.mip_refresh_ms == 0) {
       refresh_mip(cp, v);
     } else {
-      if (mip_dirty_.empty()) next_mip_flush_ = std::chrono::steady_clock::now() +
-                                                std::chrono::milliseconds(options_.mip_refresh_ms);
+      if (mip_dirty_.empty())
+        mip_due_ = next_mip_flush_ =
+            std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms);
       mip_dirty_.insert_or_assign(cp, std::move(v));
     }
   }
@@ -933,7 +943,16 @@ void Replicator::on_timer() {
         std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count());
     session_->send(build_ping(ping_nonce_), SendClass::kControl);
   }
-  if (!mip_dirty_.empty() && now >= next_mip_flush_) flush_mips();
+  if (!mip_dirty_.empty() && now >= next_mip_flush_) {
+    // Refreshes of mips are streaming too: while the gate is closed they
+    // wait (and coalesce), kYieldAtMost past their time at most.
+    if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
+      next_mip_flush_ = now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs);
+      counters_.mip_flush_yields.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      flush_mips();
+    }
+  }
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
     next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);
     // The next chunk this client holds at full resolution.

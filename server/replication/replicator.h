@@ -38,7 +38,6 @@
 #include <functional>
 #include <mutex>
 #include <memory>
-#include <queue>
 #include <string>
 #include <vector>
 
@@ -164,6 +163,8 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   bool in_view(Vec3i chunk_pos) const;
   int desired(Vec3i chunk_pos) const;
   void push_refine(Vec3i chunk_pos);
+  // Whether chunk_pos, held, is coarser than the plan wants it.
+  bool needs_refining(Vec3i chunk_pos) const;
   // Chunks held as Empty whose change waits for the next flush of mips and
   // that a move brought within full resolution: sent whole at once, since
   // the client may now edit there and the next tick's units change the
@@ -176,6 +177,8 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // Sends v whole (Full, or Empty) and holds it at full resolution; a
   // refresh parked for the chunk is dropped.
   void send_whole(Vec3i chunk_pos, const VersionPtr& v);
+  // Recomputes the refine queue's keys for center_, drops what needs no
+  // refining any more (and repeats), and heaps it again.
   void rebuild_refine();
 
   void on_granted(std::vector<VersionPtr> versions);
@@ -243,12 +246,17 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   Vec3i coarse_center_;        // the centre the coarse cursor walks the table from
   std::size_t coarse_pos_ = 0;
   std::deque<Vec3i> entering_;  // chunks that came into view by moves, to send coarse
-  // Chunks that may need refining, nearest first (distance to center_).
+  // Chunks that may need refining, nearest first: a heap keyed by the
+  // distance to center_ when pushed. A move only marks the keys stale; they
+  // are recomputed (and entries no longer needing refinement dropped) when
+  // the queue is next read, so a client moving chunk after chunk while its
+  // coarse view fills pays for one reordering, not one per move.
   using RefineEntry = std::pair<std::int64_t, Vec3i>;
   struct RefineOrder {
     bool operator()(const RefineEntry& a, const RefineEntry& b) const { return a.first > b.first; }
   };
-  std::priority_queue<RefineEntry, std::vector<RefineEntry>, RefineOrder> refine_;
+  std::vector<RefineEntry> refine_;
+  bool refine_stale_ = false;
 
   Vec3iMap<Held> held_;
   // Regions of this plan whose horizon images were asked for, with the
@@ -274,7 +282,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // Changed chunks held coarser than full resolution, newest version each,
   // refreshed together every mip_refresh_ms.
   Vec3iMap<VersionPtr> mip_dirty_;
-  std::chrono::steady_clock::time_point next_mip_flush_;
+  // When they were due (mip_refresh_ms after the first), and when they are
+  // flushed (later while the stream gate is closed).
+  std::chrono::steady_clock::time_point mip_due_, next_mip_flush_;
   bool timer_armed_ = false;
   std::chrono::steady_clock::time_point next_hash_push_;
 };
