@@ -12,9 +12,10 @@
 // probe timer on each, every probe period; its lateness is how long work
 // queued there waits. A probe later than the threshold closes the gate;
 // it opens again once every probe comes back within half of it. While it
-// is closed, replicators send and ask for no more streamed chunks (what a
-// client already has keeps being updated; edits, updates, hashes and
-// pings go on), and retry shortly. Streaming then runs at the rate the
+// is closed, replicators send and ask for no more streamed chunks, and put
+// off refreshing the mips clients hold (they coalesce meanwhile); chunks
+// held at full resolution keep being updated, and edits, hashes and pings
+// go on; they retry shortly. Streaming then runs at the rate the
 // machine can carry beside the live traffic. It slows, never stops: a
 // client's streaming that has waited kYieldAtMost (replicator.cpp) goes
 // on once, closed or not, unless the gate is held closed by hand.

@@ -141,6 +141,58 @@ TEST_F(StreamGateServerTest, WhileClosedNothingIsStreamedButEditsAndUpdatesGoOn)
   gate.hold_closed(false);
 }
 
+TEST_F(StreamGateServerTest, WhileClosedRefreshesOfMipsWaitAndComeOnceItOpens) {
+  start();
+  StreamGate& gate = server_->stream_gate();
+  // The editor holds the edited chunk at full resolution; the watcher, 60
+  // voxels away, holds it as mip 1.
+  const EditRequestMsg e = testing_support::fill_box_edit(1, Region{{1060, 8, 1002}, {1063, 11, 1005}}, materials::kBrick, 255);
+  const Vec3i cp = chunk_of(e.box.min);
+  auto editor = join("editor");
+  ASSERT_TRUE(hold_full(*editor, {1062.0f, 12.0f, 1002.0f}, cp));
+  auto watcher = join("watcher");
+  ASSERT_TRUE(hold_at(*watcher, {1002.0f, 12.0f, 1002.0f}, {{cp, 1}}));
+  gate.hold_closed(true);
+  ASSERT_TRUE(editor->send(build_edit_request(e)));
+  EXPECT_TRUE(editor->next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch).has_value());
+  // The watcher's refresh came due and waited; a ping answered after that
+  // finds nothing of the chunk sent.
+  ASSERT_TRUE(eventually([&] { return server_->counters().mip_flush_yields.load() >= 1; }));
+  ASSERT_TRUE(watcher->send(build_ping(7)));
+  StreamDecodeScratch scratch;
+  auto records_of_cp = [&](const wire::Message& m, std::uint64_t* revision) {
+    std::size_t n = 0;
+    auto records = parse_stream_batch(*m.body_as_StreamBatch());
+    EXPECT_TRUE(records.ok());
+    if (!records.ok()) return n;
+    EXPECT_TRUE(decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+                  if (r.chunk_pos == cp) ++n, *revision = r.revision;
+                  return Ok{};
+                }).ok());
+    return n;
+  };
+  std::uint64_t revision = 0;
+  for (;;) {
+    auto f = watcher->next();
+    ASSERT_TRUE(f.has_value());
+    const wire::Message& m = msg(*f);
+    if (m.body_type() == wire::Body::Pong) break;
+    if (m.body_type() == wire::Body::StreamBatch) {
+      EXPECT_EQ(records_of_cp(m, &revision), 0u);
+    }
+  }
+  EXPECT_EQ(server_->counters().mip_refreshes.load(), 0u);
+  // Opened: the refresh comes, with the edit's revision.
+  gate.hold_closed(false);
+  while (revision == 0) {
+    auto f = watcher->next_of(wire::Body::StreamBatch);
+    ASSERT_TRUE(f.has_value());
+    records_of_cp(msg(*f), &revision);
+  }
+  EXPECT_EQ(revision, 1u);
+  EXPECT_EQ(server_->counters().mip_refreshes.load(), 1u);
+}
+
 TEST_F(StreamGateServerTest, ClosedByTheProbesStreamingSlowsButNeverStops) {
   // A threshold so long that the probes (every quarter of it) neither close
   // nor reopen the gate during the test: one late observation closes it.
