@@ -402,7 +402,14 @@ bool Replicator::in_view(Vec3i cp) const {
   return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
 }
 
-int Replicator::desired(Vec3i cp) const { return table_->level(cp - center_); }
+bool Replicator::kept(Vec3i cp) const {
+  return keep_table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
+}
+
+int Replicator::desired(Vec3i cp) const {
+  const int level = table_->level(cp - center_);
+  return level < 0 ? kMipLevels : level;  // kept beyond the view: wants nothing finer
+}
 
 void Replicator::push_refine(Vec3i cp) {
   refine_.emplace_back(offset_center_dist2(cp - center_), cp);
@@ -469,6 +476,7 @@ void Replicator::leave(Vec3i cp, std::vector<Vec3i>& released) {
 
 void Replicator::replan() {
   table_ = ViewTable::get(state_.view_distance, state_.full_res_radius);
+  keep_table_ = ViewTable::get(state_.view_distance + kKeepMargin, state_.full_res_radius);
   center_ = view_chunk(state_.position);
   plan_valid_ = true;
   coarse_center_ = center_;
@@ -537,7 +545,10 @@ void Replicator::move_by(Vec3i d) {
   const Vec3i old = center_;
   center_ = center_ + d;
   std::vector<Vec3i> released;
-  for (const Vec3i o : table_->leaving(d)) leave(old + o, released);
+  // Released only beyond the view and its margin: a client stepping back
+  // and forth across a chunk's edge does not release and ask again the
+  // shell of the view each time.
+  for (const Vec3i o : keep_table_->leaving(d)) leave(old + o, released);
   if (!released.empty()) world_.release(id_, std::move(released));
   for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
   refine_stale_ = true;  // keys are distances to the old centre: recomputed when next read

@@ -18,7 +18,8 @@
 // kMaxRequests outstanding; the world grants versions, and the replicator
 // sends their encodings (computed once per version and level, shared by
 // every client) as StreamBatch records while the client's window and byte
-// budget allow. Chunks leaving the view are released on both sides.
+// budget allow. Chunks more than kKeepMargin beyond the view are released
+// on both sides.
 //
 // Ticks. The world hands each committed tick's changes of held chunks in one
 // call; the replicator answers with one UpdateBatch: the changed 4^3 units
@@ -80,6 +81,12 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   };
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;
+  // A chunk held is released when it is more than this beyond the view
+  // distance (in view's terms: d^2 > (view + margin)^2), not as soon as it
+  // leaves the view: a client moving back and forth across a chunk's edge
+  // would otherwise have the view's shell released and streamed again at
+  // each crossing. Chunks are asked for only in view.
+  static constexpr std::int32_t kKeepMargin = kChunkSize;
 
   // An admin command from this client (name), answered through reply.
   using AdminFn = std::function<void(const std::string& who, AdminRequestMsg req,
@@ -161,6 +168,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // to released when the world must be told.
   void leave(Vec3i chunk_pos, std::vector<Vec3i>& released);
   bool in_view(Vec3i chunk_pos) const;
+  // Within the view or its margin (kKeepMargin): held chunks stay.
+  bool kept(Vec3i chunk_pos) const;
+  // The level the plan wants: 0..3 in view, kMipLevels (none finer) beyond.
   int desired(Vec3i chunk_pos) const;
   void push_refine(Vec3i chunk_pos);
   // Whether chunk_pos, held, is coarser than the plan wants it.
@@ -241,6 +251,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
 
   // The plan.
   std::shared_ptr<const ViewTable> table_;
+  std::shared_ptr<const ViewTable> keep_table_;  // the view and its margin: what is released beyond
   Vec3i center_;
   bool plan_valid_ = false;
   Vec3i coarse_center_;        // the centre the coarse cursor walks the table from
