@@ -75,6 +75,8 @@ constexpr const char* kHelp =
     "                              their pace (default 20; 0: streaming never yields)\n"
     "  --io-threads N              network and replication threads (default 2)\n"
     "  --worker-threads N          chunk loading and generation threads (default 2)\n"
+    "  --no-thread-priorities      run every thread at the process's niceness (default: the world\n"
+    "                              and writer threads at -5, needing CAP_SYS_NICE; loaders at +5)\n"
     "  --write-timeout-ms N        drop a client whose socket takes no data for this long\n"
     "                              (default 10000)\n"
     "  --socket-send-buffer N      SO_SNDBUF of client sockets in bytes (default: OS default)\n"
@@ -134,7 +136,7 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "exact-horizon", "no-horizon-images"});
+                 {"help", "open", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -205,6 +207,7 @@ int run(int argc, char** argv) {
   o.allow_open = cl.flag("open");
   o.horizon_estimates = !cl.flag("exact-horizon");
   o.horizon_images = !cl.flag("no-horizon-images");
+  o.thread_priorities = !cl.flag("no-thread-priorities");
   o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
   o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
   o.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));

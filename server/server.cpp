@@ -4,7 +4,7 @@
 
 #include "common/world/sqlite_store.h"
 #include "server/log.h"
-#include "server/thread_name.h"
+#include "server/thread_role.h"
 #include "server/storage/postgres_store.h"
 
 namespace terrane {
@@ -70,7 +70,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   }
   const std::uint64_t epoch = s->world_->meta().epoch + 1;
   if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
-  auto storage = Storage::open(*s->world_, s->options_.worker_threads);
+  auto storage = Storage::open(*s->world_, s->options_.worker_threads, s->options_.thread_priorities);
   if (!storage) return storage.error();
   s->storage_ = std::move(*storage);
   s->storage_->set_horizon_estimates(options.horizon_estimates);
@@ -251,7 +251,9 @@ void Server::start() {
   default_view_ = ViewTable::get(view, std::min({options_.default_full_res_radius, options_.max_full_res_radius, view}));
   server_log().info("listening on {}:{}", options_.bind_address, port_);
   world_thread_ = std::thread([this] {
-    name_this_thread("terrane-world");
+    if (!enter_thread_role(ThreadRole::kWorld, options_.thread_priorities))
+      server_log().info("thread priorities: the world and writer threads run at the process's niceness "
+                        "(raising them needs CAP_SYS_NICE; --no-thread-priorities silences this)");
     world_io_.run();
   });
   world_owner_->start();
@@ -265,7 +267,7 @@ void Server::start() {
   arm_stats();
   for (int i = 0; i < std::max(1, options_.io_threads); ++i)
     threads_.emplace_back([this] {
-      name_this_thread("terrane-io");
+      enter_thread_role(ThreadRole::kIo, options_.thread_priorities);
       io_.run();
     });
 }

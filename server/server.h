@@ -19,9 +19,11 @@
 // | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
 // |                     | the admin thread           | operators' commands; bans and whitelist      |
 //
-// The threads carry names (server/thread_name.h, for top -H and perf):
+// The threads carry names (server/thread_role.h, for top -H and perf):
 // terrane-io (sessions and replicators), terrane-world, terrane-loader,
-// terrane-writer.
+// terrane-writer; and, unless --no-thread-priorities, a niceness by role:
+// the world and the writer, which every edit waits on, above the io
+// threads, the loaders (streaming's loads) below.
 //
 // Between them only immutable data travels: chunk versions (server/world/
 // chunk_version.h) whose encodings, update units, hash and blob are made

@@ -7,13 +7,13 @@
 #include <unordered_set>
 
 #include "server/log.h"
-#include "server/thread_name.h"
+#include "server/thread_role.h"
 
 namespace terrane {
 
-FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_threads) {
+FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_threads, bool thread_priorities) {
   const int n = std::max(1, loader_threads);
-  std::unique_ptr<Storage> s(new Storage(world, n));
+  std::unique_ptr<Storage> s(new Storage(world, n, thread_priorities));
   for (int i = 0; i < n; ++i) {
     auto store = world.store().reopen();
     if (!store) return store.error();
@@ -31,14 +31,14 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
   // when the writer has nothing else to do (writer_loop).
   s->writer_store_->set_coarse_behind(true);
   s->writer_ = std::thread([p = s.get()] {
-    name_this_thread("terrane-writer");
+    enter_thread_role(ThreadRole::kWriter, p->thread_priorities_);
     p->writer_loop();
   });
   return s;
 }
 
-Storage::Storage(World& world, int loader_threads)
-    : world_(world), loaders_(static_cast<std::size_t>(loader_threads)) {}
+Storage::Storage(World& world, int loader_threads, bool thread_priorities)
+    : world_(world), thread_priorities_(thread_priorities), loaders_(static_cast<std::size_t>(loader_threads)) {}
 
 Storage::~Storage() { stop(); }
 
@@ -170,7 +170,7 @@ void Storage::load_horizon(Vec3i region, int level, HorizonDone done) {
 
 void Storage::post_load() {
   asio::post(loaders_, [this] {
-    static thread_local const bool named = (name_this_thread("terrane-loader"), true);
+    static thread_local const bool named = (enter_thread_role(ThreadRole::kLoader, thread_priorities_), true);
     (void)named;
     std::unique_ptr<WorldStore> store;
     LoadJob job;

@@ -111,7 +111,9 @@ class Storage {
   // world: shared for its metadata and generator (thread-safe); its store
   // is opened again (WorldStore::reopen) once per loader and once for the
   // writer.
-  static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads);
+  // thread_priorities: the writer and loader threads at their roles'
+  // niceness (server/thread_role.h).
+  static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true);
   // The edit log keeps entries this long (0: for ever) and at most this many
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.
   // Call before the first commit.
@@ -177,7 +179,7 @@ class Storage {
   std::size_t commits_in_flight() const { return in_flight_.load(std::memory_order_relaxed); }
 
  private:
-  Storage(World& world, int loader_threads);
+  Storage(World& world, int loader_threads, bool thread_priorities);
   LoadedChunk load_now(WorldStore& store, Vec3i pos);
   // A region's coarse image; rows gets the region's chunks that have a row
   // (stored or quarantined).
@@ -219,6 +221,7 @@ class Storage {
 
   World& world_;
   StorageCounters counters_;
+  const bool thread_priorities_;
   asio::thread_pool loaders_;
   // Loader connections, borrowed for one load at a time, and the queued
   // loads (urgent first). Guarded by readers_mutex_: loads on the pool's
