@@ -78,8 +78,8 @@ struct ServerOptions {
   bool horizon_images = true;
   SessionLimits session;
   int io_threads = 2;
-  // Niceness by thread role (server/thread_role.h): the world and the
-  // writer above the io threads, the loaders below.
+  // Niceness by thread role (server/thread_role.h): the loaders below the
+  // rest.
   bool thread_priorities = true;
   // Loader threads: reading stored chunks and generating missing ones.
   int worker_threads = 2;

@@ -251,9 +251,7 @@ void Server::start() {
   default_view_ = ViewTable::get(view, std::min({options_.default_full_res_radius, options_.max_full_res_radius, view}));
   server_log().info("listening on {}:{}", options_.bind_address, port_);
   world_thread_ = std::thread([this] {
-    if (!enter_thread_role(ThreadRole::kWorld, options_.thread_priorities))
-      server_log().info("thread priorities: the world and writer threads run at the process's niceness "
-                        "(raising them needs CAP_SYS_NICE; --no-thread-priorities silences this)");
+    enter_thread_role(ThreadRole::kWorld, options_.thread_priorities);
     world_io_.run();
   });
   world_owner_->start();

@@ -22,8 +22,7 @@
 // The threads carry names (server/thread_role.h, for top -H and perf):
 // terrane-io (sessions and replicators), terrane-world, terrane-loader,
 // terrane-writer; and, unless --no-thread-priorities, a niceness by role:
-// the world and the writer, which every edit waits on, above the io
-// threads, the loaders (streaming's loads) below.
+// the loaders (streaming's loads) below the rest.
 //
 // Between them only immutable data travels: chunk versions (server/world/
 // chunk_version.h) whose encodings, update units, hash and blob are made

@@ -23,7 +23,7 @@ const char* role_name(ThreadRole role) {
 int thread_role_niceness(ThreadRole role) {
   switch (role) {
     case ThreadRole::kWorld:
-    case ThreadRole::kWriter: return -5;
+    case ThreadRole::kWriter:
     case ThreadRole::kIo: return 0;
     case ThreadRole::kLoader: return 5;
   }

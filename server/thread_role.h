@@ -1,20 +1,23 @@
 // The server's threads by role. Each is named (at most 15 characters
 // shown), so `top -H`, `perf report --sort comm` and a debugger tell the
 // owners apart, and, unless turned off (--no-thread-priorities), runs at a
-// niceness by how directly a delay there delays what clients wait for:
+// niceness relative to the process's:
 //
-// | thread         | niceness | why                                                  |
-// |----------------|----------|------------------------------------------------------|
-// | terrane-world  | -5       | ticks: every acknowledgement and update waits on one |
-// | terrane-writer | -5       | each tick's group commit: acks and updates follow it |
-// | terrane-io     | 0        | sessions and replicators: live traffic and streaming |
-// | terrane-loader | +5       | loads and generation: streaming, no deadline         |
+// | thread         | niceness | what it runs                                          |
+// |----------------|----------|-------------------------------------------------------|
+// | terrane-world  | 0        | ticks, and streaming's requests between them          |
+// | terrane-writer | 0        | each tick's group commit, then coarse images          |
+// | terrane-io     | 0        | sessions and replicators: live traffic and streaming  |
+// | terrane-loader | +5       | loads and generation: streaming's, without a deadline |
 //
-// Relative to the process's niceness. On a machine with cores to spare
-// nothing changes; on a busy one (or with clients on the same machine) the
-// threads every edit passes through are not starved by streaming. Raising
-// a thread needs CAP_SYS_NICE or RLIMIT_NICE: without them the world and
-// the writer run at the process's niceness (best effort, reported).
+// On a machine with cores to spare nothing changes; on a busy one the
+// loaders yield to the threads that edits pass through. The world and the
+// writer are not raised above the rest: the world strand also answers
+// streaming's requests, and at 1,000 clients with the bots on the same
+// machine a world thread at -5 (with the writer) took the cores from the
+// clients' side in bursts until every queue grew (README, scale section).
+// A role at a niceness above the process's would need CAP_SYS_NICE: set
+// best effort, reported.
 #pragma once
 
 namespace terrane {

@@ -1,6 +1,5 @@
 // Thread roles: each names its thread, and sets its niceness relative to
-// the process's (the loaders below, the world and the writer above when
-// the process may raise them, the io threads unchanged); with priorities
+// the process's (the loaders below, the rest unchanged); with priorities
 // off, nothing but the name changes.
 #include "server/thread_role.h"
 
@@ -44,12 +43,14 @@ TEST(ThreadRole, ALoaderRunsBelowTheProcessAndIsNamed) {
   EXPECT_EQ(e.name, "terrane-loader");
 }
 
-TEST(ThreadRole, TheWorldRunsAboveTheProcessWhenItMayElseWhereItWas) {
-  const Entered e = enter_on_a_thread(ThreadRole::kWorld, true);
-  EXPECT_LT(thread_role_niceness(ThreadRole::kWorld), 0);
-  EXPECT_EQ(e.after, e.ok ? e.before + thread_role_niceness(ThreadRole::kWorld) : e.before);
-  EXPECT_EQ(e.name, "terrane-world");
-  EXPECT_EQ(thread_role_niceness(ThreadRole::kWriter), thread_role_niceness(ThreadRole::kWorld));
+TEST(ThreadRole, TheWorldAndTheWriterRunAtTheProcesssNiceness) {
+  for (const ThreadRole role : {ThreadRole::kWorld, ThreadRole::kWriter}) {
+    const Entered e = enter_on_a_thread(role, true);
+    EXPECT_TRUE(e.ok);
+    EXPECT_EQ(e.after, e.before);
+  }
+  EXPECT_EQ(enter_on_a_thread(ThreadRole::kWorld, true).name, "terrane-world");
+  EXPECT_EQ(enter_on_a_thread(ThreadRole::kWriter, true).name, "terrane-writer");
 }
 
 TEST(ThreadRole, IoThreadsAndPrioritiesOffKeepTheProcesssNiceness) {
