@@ -92,6 +92,11 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
 
   s->storage_->set_leases(s->leases_.get());
   s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
+  // Streaming's requests that wait too long in the world's queue hold
+  // streaming back, as late probes do.
+  s->world_owner_->on_request_wait([gate = s->stream_gate_.get()](std::chrono::nanoseconds waited) {
+    gate->observe(StreamGate::Probe::kRequests, waited);
+  });
   if (s->leases_) {
     // Subscribed before any client joins: every commit of another server
     // from now on reaches what this one holds.

@@ -44,7 +44,7 @@ void StreamGate::hold_closed(bool held) {
 }
 
 void StreamGate::update() {
-  const bool open = !held_ && !late_[0] && !late_[1];
+  const bool open = !held_ && std::none_of(late_.begin(), late_.end(), [](bool late) { return late; });
   if (open == open_.load(std::memory_order_relaxed)) return;
   const auto now = std::chrono::steady_clock::now();
   if (!open) {

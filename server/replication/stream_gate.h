@@ -10,7 +10,9 @@
 //
 // The gate measures how late the io threads and the world strand are: a
 // probe timer on each, every probe period; its lateness is how long work
-// queued there waits. A probe later than the threshold closes the gate;
+// queued there waits. The world's streaming requests have a queue of their
+// own (drained between ticks, server/world/world_owner.h): how long they
+// wait there is the third probe. A probe later than the threshold closes the gate;
 // it opens again once every probe comes back within half of it. While it
 // is closed, replicators send and ask for no more streamed chunks, and put
 // off refreshing the mips clients hold (they coalesce meanwhile); chunks
@@ -36,7 +38,9 @@ namespace terrane {
 
 class StreamGate {
  public:
-  enum class Probe : std::uint8_t { kIo = 0, kWorld = 1 };
+  // kIo and kWorld: the probe timers (start()); kRequests: how long the
+  // world's streaming requests wait in their queue (the world reports it).
+  enum class Probe : std::uint8_t { kIo = 0, kWorld = 1, kRequests = 2 };
   // threshold 0: the gate never closes.
   explicit StreamGate(std::chrono::milliseconds threshold);
   ~StreamGate();
@@ -73,7 +77,7 @@ class StreamGate {
   std::atomic<bool> open_{true};
   std::atomic<bool> held_flag_{false};
   mutable std::mutex m_;  // the two probes' states and the closed time
-  std::array<bool, 2> late_{};
+  std::array<bool, 3> late_{};
   bool held_ = false;
   std::atomic<std::uint64_t> closed_count_{0};
   std::chrono::steady_clock::duration closed_for_{};

@@ -76,83 +76,143 @@ void WorldOwner::stop() {
 // --- clients -------------------------------------------------------------------
 
 void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client) {
-  asio::post(strand_, [this, id, name = std::move(name), client = std::move(client)]() mutable {
-    Client c{std::move(name), std::move(client), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}};
-    clients_.emplace(id, std::move(c));
-  });
+  queue_request(Request{id, {}, Join{std::move(name), std::move(client)}});
 }
 
-void WorldOwner::leave(ClientId id) {
-  asio::post(strand_, [this, id] {
-    // The replicator released what it held or had asked for just before;
-    // after this nothing more is granted to id. Its queued edits stay
-    // queued (their acks go nowhere).
-    clients_.erase(id);
-    presence_.remove(id);
-    grants_.erase(id);
-  });
-}
+void WorldOwner::leave(ClientId id) { queue_request(Request{id, {}, Leave{}}); }
 
 void WorldOwner::moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius) {
-  asio::post(strand_, [this, id, position, view_distance, full_res_radius] {
-    auto it = clients_.find(id);
-    if (it == clients_.end()) return;
-    it->second.position = position;
-    it->second.view_distance = view_distance;
-    it->second.full_res_radius = full_res_radius;
-    it->second.placed = true;
-    presence_.place(id, position);
-  });
+  queue_request(Request{id, {}, Moved{position, view_distance, full_res_radius}});
+}
+
+void WorldOwner::do_join(ClientId id, Join j) {
+  Client c{std::move(j.name), std::move(j.link), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}};
+  clients_.emplace(id, std::move(c));
+}
+
+void WorldOwner::do_leave(ClientId id) {
+  // The replicator released what it held or had asked for just before;
+  // after this nothing more is granted to id. Its queued edits stay
+  // queued (their acks go nowhere).
+  clients_.erase(id);
+  presence_.remove(id);
+  grants_.erase(id);
+}
+
+void WorldOwner::do_moved(ClientId id, const Moved& m) {
+  auto it = clients_.find(id);
+  if (it == clients_.end()) return;
+  it->second.position = m.position;
+  it->second.view_distance = m.view_distance;
+  it->second.full_res_radius = m.full_res_radius;
+  it->second.placed = true;
+  presence_.place(id, m.position);
 }
 
 void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
-  asio::post(strand_, [this, id, chunks = std::move(chunks)] {
-    if (clients_.count(id) == 0) return;
-    // Room for the whole batch at once: grown one grant at a time, the list
-    // was reallocated again and again (with a thousand clients moving, a
-    // few percent of this strand's time, with the consolidation it set off).
-    auto& granted = grants_[id];
-    granted.reserve(granted.size() + chunks.size());
-    for (const ChunkWant& w : chunks) {
-      if (w.level == kMipLevels - 1 && !w.exact && want_coarse(w.chunk_pos, Waiter{id, w.full})) continue;
-      if (request(w.chunk_pos, w.level, w.exact)) {
-        grant(id, w.chunk_pos, w.full);
-      } else {
-        loading_[w.chunk_pos].push_back(Waiter{id, w.full});
-      }
-    }
-    flush_grants();
-  });
+  queue_request(Request{id, {}, std::move(chunks)});
 }
 
 void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
-  asio::post(strand_, [this, id, chunks = std::move(chunks)] {
-    for (const Vec3i cp : chunks) interest_.release(cp, id);
-  });
+  queue_request(Request{id, {}, std::move(chunks)});
 }
 
 void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
-  asio::post(strand_, [this, id, wants = std::move(wants)] {
-    auto client = clients_.find(id);
-    if (client == clients_.end()) return;
-    std::vector<HorizonPtr> ready;
-    const auto now = std::chrono::steady_clock::now();
-    for (const HorizonWant& w : wants) {
-      const auto k = static_cast<std::size_t>(w.level - kHorizonNearLevel);
-      if (auto it = horizons_[k].find(w.region);
-          it != horizons_[k].end() && (!it->second.changed || now - it->second.made < kHorizonRefresh)) {
-        ready.push_back(it->second.image);
-        continue;
+  queue_request(Request{id, {}, std::move(wants)});
+}
+
+void WorldOwner::queue_request(Request r) {
+  r.queued = std::chrono::steady_clock::now();
+  std::lock_guard lock(requests_m_);
+  requests_.push_back(std::move(r));
+  if (drain_posted_) return;
+  drain_posted_ = true;
+  asio::post(strand_, [this] { drain_requests(); });
+}
+
+void WorldOwner::drain_requests() {
+  const auto until = std::chrono::steady_clock::now() + kRequestSlice;
+  for (;;) {
+    Request r;
+    {
+      std::lock_guard lock(requests_m_);
+      if (requests_.empty()) {
+        drain_posted_ = false;
+        break;
       }
-      auto [making, fresh] = horizon_making_[k].try_emplace(w.region);
-      making->second.waiting.push_back(id);
-      if (fresh)
-        storage_.load_horizon(w.region, w.level, [this](LoadedHorizon h) {
-          asio::post(strand_, [this, h = std::move(h)]() mutable { on_horizon_loaded(std::move(h)); });
-        });
+      r = std::move(requests_.front());
+      requests_.pop_front();
     }
-    if (!ready.empty()) client->second.link->horizons(std::move(ready));
-  });
+    const auto now = std::chrono::steady_clock::now();
+    if (request_wait_) request_wait_(now - r.queued);
+    std::visit(
+        [&](auto& what) {
+          using T = std::decay_t<decltype(what)>;
+          if constexpr (std::is_same_v<T, std::vector<ChunkWant>>)
+            do_want(r.id, what);
+          else if constexpr (std::is_same_v<T, std::vector<Vec3i>>)
+            do_release(r.id, what);
+          else if constexpr (std::is_same_v<T, std::vector<HorizonWant>>)
+            do_want_horizon(r.id, what);
+          else if constexpr (std::is_same_v<T, Join>)
+            do_join(r.id, std::move(what));
+          else if constexpr (std::is_same_v<T, Leave>)
+            do_leave(r.id);
+          else
+            do_moved(r.id, what);
+        },
+        r.what);
+    if (std::chrono::steady_clock::now() >= until) {
+      // The slice is spent: whatever was posted meanwhile goes first.
+      asio::post(strand_, [this] { drain_requests(); });
+      return;
+    }
+  }
+  if (request_wait_) request_wait_(std::chrono::nanoseconds{0});  // nothing waits now
+}
+
+void WorldOwner::do_want(ClientId id, const std::vector<ChunkWant>& chunks) {
+  if (clients_.count(id) == 0) return;
+  // Room for the whole batch at once: grown one grant at a time, the list
+  // was reallocated again and again (with a thousand clients moving, a
+  // few percent of this strand's time, with the consolidation it set off).
+  auto& granted = grants_[id];
+  granted.reserve(granted.size() + chunks.size());
+  for (const ChunkWant& w : chunks) {
+    if (w.level == kMipLevels - 1 && !w.exact && want_coarse(w.chunk_pos, Waiter{id, w.full})) continue;
+    if (request(w.chunk_pos, w.level, w.exact)) {
+      grant(id, w.chunk_pos, w.full);
+    } else {
+      loading_[w.chunk_pos].push_back(Waiter{id, w.full});
+    }
+  }
+  flush_grants();
+}
+
+void WorldOwner::do_release(ClientId id, const std::vector<Vec3i>& chunks) {
+  for (const Vec3i cp : chunks) interest_.release(cp, id);
+}
+
+void WorldOwner::do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants) {
+  auto client = clients_.find(id);
+  if (client == clients_.end()) return;
+  std::vector<HorizonPtr> ready;
+  const auto now = std::chrono::steady_clock::now();
+  for (const HorizonWant& w : wants) {
+    const auto k = static_cast<std::size_t>(w.level - kHorizonNearLevel);
+    if (auto it = horizons_[k].find(w.region);
+        it != horizons_[k].end() && (!it->second.changed || now - it->second.made < kHorizonRefresh)) {
+      ready.push_back(it->second.image);
+      continue;
+    }
+    auto [making, fresh] = horizon_making_[k].try_emplace(w.region);
+    making->second.waiting.push_back(id);
+    if (fresh)
+      storage_.load_horizon(w.region, w.level, [this](LoadedHorizon h) {
+        asio::post(strand_, [this, h = std::move(h)]() mutable { on_horizon_loaded(std::move(h)); });
+      });
+  }
+  if (!ready.empty()) client->second.link->horizons(std::move(ready));
 }
 
 void WorldOwner::on_horizon_loaded(LoadedHorizon h) {

@@ -29,8 +29,18 @@
 // the grant. Chunks nobody holds at full resolution, with nothing pending,
 // are unloaded beyond resident_chunks, least recently used first.
 //
+// Clients' comings and goings and streaming's requests (join, leave,
+// moved, want, release, want_horizon) wait in one queue of their own, in
+// the order called, which the strand drains in slices of kRequestSlice: a
+// tick, a commit's acknowledgements or an edit posted meanwhile runs
+// between two slices instead of behind every request a thousand moving
+// clients queued. (One queue, so a client's requests never pass its join.)
+// How long each request waited is reported (on_request_wait: the stream
+// gate, which then holds streaming back).
+//
 // Threading: the public methods may be called from any thread and post to
-// the strand; WorldClient callbacks are made on the strand.
+// the strand (or queue a request for it); WorldClient callbacks are made on
+// the strand.
 #pragma once
 
 #include <algorithm>
@@ -45,6 +55,7 @@
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
+#include <variant>
 #include <vector>
 
 #include "common/voxel/grid.h"
@@ -122,12 +133,18 @@ class WorldOwner : private WorldView {
   void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client);
   void leave(ClientId id);
   void moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius);
+  // Streaming's requests (queued after the join, with it).
   void want(ClientId id, std::vector<ChunkWant> chunks);
   void release(ClientId id, std::vector<Vec3i> chunks);
   // Horizon images of these regions at these levels (nearest first),
   // handed over through WorldClient::horizons as each is made; each is made
   // once and kept until a chunk of its region changes.
   void want_horizon(ClientId id, std::vector<HorizonWant> wants);
+  // How long each streaming request waited in its queue (0 once it is
+  // empty), called on the strand. Before start().
+  void on_request_wait(std::function<void(std::chrono::nanoseconds)> fn) { request_wait_ = std::move(fn); }
+  // The longest the strand spends on streaming requests at a time.
+  static constexpr std::chrono::microseconds kRequestSlice{2000};
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
@@ -323,6 +340,32 @@ class WorldOwner : private WorldView {
   const ServerOptions& options_;
   ServerCounters& counters_;
   Strand strand_;
+  struct Join {
+    std::string name;
+    std::shared_ptr<WorldClient> link;
+  };
+  struct Leave {};
+  struct Moved {
+    Vec3f position;
+    std::int32_t view_distance, full_res_radius;
+  };
+  struct Request {
+    ClientId id;
+    std::chrono::steady_clock::time_point queued;
+    std::variant<std::vector<ChunkWant>, std::vector<Vec3i>, std::vector<HorizonWant>, Join, Leave, Moved> what;
+  };
+  void queue_request(Request r);
+  void drain_requests();
+  void do_join(ClientId id, Join j);
+  void do_leave(ClientId id);
+  void do_moved(ClientId id, const Moved& m);
+  void do_want(ClientId id, const std::vector<ChunkWant>& chunks);
+  void do_release(ClientId id, const std::vector<Vec3i>& chunks);
+  void do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants);
+  std::mutex requests_m_;
+  std::deque<Request> requests_;  // guarded by requests_m_
+  bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue
+  std::function<void(std::chrono::nanoseconds)> request_wait_;
   asio::steady_timer tick_timer_;
   std::chrono::steady_clock::time_point next_tick_;
   std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report

@@ -1,13 +1,17 @@
 // WorldOwner on its own (real Storage, no sockets): edits become versions
 // that are committed before anyone hears of them, changes reach holders
-// only, once per holder per tick, and history steps apply on the strand.
+// only, once per holder per tick, history steps apply on the strand, and
+// streaming's requests, in their own queue, neither hold up a tick nor
+// pass each other.
 #include "server/world/world_owner.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <filesystem>
+#include <future>
 #include <mutex>
 #include <thread>
 
@@ -39,6 +43,9 @@ class Recorder : public WorldClient {
   }
   void send(SharedFrame frame, SendClass) override {
     std::lock_guard lock(m_);
+    if (grants_at_first_ack_ < 0 &&
+        flatbuffers::GetRoot<wire::Message>(frame->data() + kFrameHeaderBytes)->body_type() == wire::Body::EditAck)
+      grants_at_first_ack_ = static_cast<std::int64_t>(grants_.size());
     frames_.push_back(std::move(frame));
     cv_.notify_all();
   }
@@ -65,6 +72,7 @@ class Recorder : public WorldClient {
   std::vector<HorizonPtr> horizons_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
   std::vector<SharedFrame> frames_;
+  std::int64_t grants_at_first_ack_ = -1;  // grants received when the first EditAck came
   std::string closed_;
 };
 
@@ -79,6 +87,10 @@ class WorldOwnerTest : public ::testing::Test {
     ASSERT_TRUE(s.ok());
     storage_ = std::move(*s);
     owner_ = std::make_unique<WorldOwner>(io_, *world_, *storage_, options_, counters_);
+    owner_->on_request_wait([this](std::chrono::nanoseconds waited) {
+      last_wait_ns_ = waited.count();
+      if (waited.count() > max_wait_ns_) max_wait_ns_ = waited.count();
+    });
     owner_->start();
     thread_ = std::thread([this] { io_.run(); });
   }
@@ -119,6 +131,8 @@ class WorldOwnerTest : public ::testing::Test {
   asio::executor_work_guard<asio::io_context::executor_type> work_{asio::make_work_guard(io_)};
   std::unique_ptr<WorldOwner> owner_;
   std::thread thread_;
+  // What the world reported of its streaming requests' waits (its strand).
+  std::atomic<std::int64_t> last_wait_ns_{-1}, max_wait_ns_{0};
 };
 
 TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
@@ -195,6 +209,64 @@ TEST_F(WorldOwnerTest, UndoAndRedoApplyOnTheStrand) {
   owner_->inspect([&](const WorldView& v) { EXPECT_EQ(v.get(p), solid(materials::kSnow)); });
   owner_->edit(1, redo);  // nothing left to redo
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditReject) == 1; }));
+}
+
+TEST_F(WorldOwnerTest, ATickRunsBetweenSlicesOfQueuedRequestsNotBehindThemAll) {
+  const Vec3i a{31, 0, 31};
+  auto c = client(1, {1000, 10, 1000});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  // Far more streaming work queued than one slice (each request is granted
+  // again), then an edit: were requests served first come first served,
+  // its tick and acknowledgement would wait for every one of them.
+  constexpr std::size_t kRequests = 200000;
+  for (std::size_t i = 0; i < kRequests; ++i) owner_->want(1, {{a, true}});
+  owner_->edit(1, fill(1, Region{{1001, 1, 1001}, {1002, 2, 1002}}, materials::kBrick));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == kRequests + 1; }));
+  std::lock_guard lock(c->m_);
+  ASSERT_GE(c->grants_at_first_ack_, 0) << "acknowledged";
+  EXPECT_LT(static_cast<std::size_t>(c->grants_at_first_ack_), kRequests + 1);
+  // Their waits were reported, and a queue drained says nothing waits.
+  EXPECT_GT(max_wait_ns_.load(), 0);
+  EXPECT_EQ(last_wait_ns_.load(), 0);
+}
+
+TEST_F(WorldOwnerTest, RequestsAreServedInTheOrderMade) {
+  const Vec3i a{31, 0, 31};
+  auto c = client(1, {1000, 10, 1000});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));  // loaded
+  // Release, want: the client ends a holder (a change reaches it);
+  // release last: it does not.
+  owner_->release(1, {a});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  owner_->edit(1, fill(1, Region{{1001, 1, 1001}, {1002, 2, 1002}}, materials::kBrick));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1 && !r.ticks_.empty(); }));
+  owner_->release(1, {a});
+  owner_->edit(1, fill(2, Region{{1003, 1, 1003}, {1004, 2, 1004}}, materials::kSnow));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 2; }));
+  std::lock_guard lock(c->m_);
+  EXPECT_EQ(c->ticks_.size(), 1u);
+}
+
+TEST_F(WorldOwnerTest, AClientsRequestsNeverPassItsJoin) {
+  const Vec3i a{31, 0, 31};
+  auto first = client(1, {1000, 10, 1000});
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  // The strand held busy while one client's request is queued (its drain
+  // posted), a second client joins and asks at once: its request must not
+  // be served before its join, or it would be dropped as a stranger's.
+  std::promise<void> go;
+  std::shared_future<void> released = go.get_future().share();
+  asio::post(io_, [released] { released.wait(); });
+  owner_->want(1, {{a, true}});
+  auto second = client(2, {1000, 10, 1000});
+  owner_->want(2, {{a, true}});
+  go.set_value();
+  EXPECT_TRUE(second->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  EXPECT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 2; }));
 }
 
 }  // namespace
