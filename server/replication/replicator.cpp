@@ -402,10 +402,6 @@ bool Replicator::in_view(Vec3i cp) const {
   return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
 }
 
-bool Replicator::kept(Vec3i cp) const {
-  return keep_table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
-}
-
 int Replicator::desired(Vec3i cp) const {
   const int level = table_->level(cp - center_);
   return level < 0 ? kMipLevels : level;  // kept beyond the view: wants nothing finer
@@ -418,7 +414,8 @@ void Replicator::push_refine(Vec3i cp) {
 
 bool Replicator::needs_refining(Vec3i cp) const {
   auto it = held_.find(cp);
-  return it != held_.end() && it->second.level != kHeldEmpty && in_view(cp) && desired(cp) < it->second.level;
+  // (Beyond the view desired() is kMipLevels: nothing is finer.)
+  return it != held_.end() && it->second.level != kHeldEmpty && desired(cp) < it->second.level;
 }
 
 void Replicator::rebuild_refine() {

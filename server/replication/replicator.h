@@ -168,8 +168,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // to released when the world must be told.
   void leave(Vec3i chunk_pos, std::vector<Vec3i>& released);
   bool in_view(Vec3i chunk_pos) const;
-  // Within the view or its margin (kKeepMargin): held chunks stay.
-  bool kept(Vec3i chunk_pos) const;
   // The level the plan wants: 0..3 in view, kMipLevels (none finer) beyond.
   int desired(Vec3i chunk_pos) const;
   void push_refine(Vec3i chunk_pos);

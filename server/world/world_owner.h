@@ -35,6 +35,10 @@
 // tick, a commit's acknowledgements or an edit posted meanwhile runs
 // between two slices instead of behind every request a thousand moving
 // clients queued. (One queue, so a client's requests never pass its join.)
+// The world's copy of a client's position so trails a directly posted edit
+// by that queue's wait (the stream gate keeps it near 20 ms): only undo and
+// redo are checked against it, and a step at the very edge of the
+// full-resolution region during a move may be refused, with its reason.
 // How long each request waited is reported (on_request_wait: the stream
 // gate, which then holds streaming back).
 //
