@@ -125,7 +125,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> hashes_pushed{0};
   std::atomic<std::uint64_t> chunks_asked{0};   // chunks replicators asked the world for (streaming)
   std::atomic<std::uint64_t> stream_yields{0};  // pumps that found the stream gate closed (one per pause and client)
-  std::atomic<std::uint64_t> mip_flush_yields{0};  // flushes of mips put off because the stream gate was closed
+  std::atomic<std::uint64_t> mip_refresh_yields{0};  // refreshes of mips put off: the stream gate was closed
   std::atomic<std::uint64_t> chunks_loaded{0};   // resident now
   std::atomic<std::uint64_t> chunks_unloaded{0};
   std::atomic<std::uint64_t> limit_violations{0};

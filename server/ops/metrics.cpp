@@ -220,7 +220,7 @@ std::string render_metrics(const MetricsSources& s) {
             load(c.stream_yields));
   m.counter("terrane_mip_refresh_yields_total",
             "Times a client's refreshes of mips waited because the server was behind (--stream-yield-ms).",
-            load(c.mip_flush_yields));
+            load(c.mip_refresh_yields));
   m.counter("terrane_stream_gate_closed_total", "Times streaming was paused server-wide (work waited too long).",
             s.stream_gate_closings);
   m.counter("terrane_stream_gate_closed_seconds_total", "Time streaming was paused server-wide.",

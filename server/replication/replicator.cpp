@@ -956,7 +956,7 @@ void Replicator::on_timer() {
     // wait (and coalesce), kYieldAtMost past their time at most.
     if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
       next_mip_flush_ = now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs);
-      counters_.mip_flush_yields.fetch_add(1, std::memory_order_relaxed);
+      counters_.mip_refresh_yields.fetch_add(1, std::memory_order_relaxed);
     } else {
       flush_mips();
     }

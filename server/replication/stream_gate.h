@@ -12,8 +12,8 @@
 // probe timer on each, every probe period; its lateness is how long work
 // queued there waits. The world's streaming requests have a queue of their
 // own (drained between ticks, server/world/world_owner.h): how long they
-// wait there is the third probe. A probe later than the threshold closes the gate;
-// it opens again once every probe comes back within half of it. While it
+// wait there is the third probe. A probe later than the threshold closes
+// the gate; it opens again once every probe comes back within half of it. While it
 // is closed, replicators send and ask for no more streamed chunks, and put
 // off refreshing the mips clients hold (they coalesce meanwhile); chunks
 // held at full resolution keep being updated, and edits, hashes and pings
@@ -76,7 +76,7 @@ class StreamGate {
   const std::chrono::milliseconds threshold_;
   std::atomic<bool> open_{true};
   std::atomic<bool> held_flag_{false};
-  mutable std::mutex m_;  // the two probes' states and the closed time
+  mutable std::mutex m_;  // the probes' states and the closed time
   std::array<bool, 3> late_{};
   bool held_ = false;
   std::atomic<std::uint64_t> closed_count_{0};

@@ -12,6 +12,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -167,20 +168,41 @@ class ServerTest : public ::testing::Test {
   // 1..3 a mip; an Estimate record is coarser than every level).
   static bool hold_at(RawPeer& p, Vec3f pos, std::vector<std::pair<Vec3i, int>> wanted) {
     if (!p.send(build_client_state(ClientStateMsg{pos, 96, 24}))) return false;
-    StreamDecodeScratch scratch;
     while (auto f = p.next_of(wire::Body::StreamBatch)) {
-      auto records = parse_stream_batch(*msg(*f).body_as_StreamBatch());
-      if (!records) return false;
-      const auto st = decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+      const bool ok = for_each_record(msg(*f), [&](const StreamRecord& r) {
         const int level = r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty ? 0
                           : r.kind == StreamRecordKind::kEstimate || r.kind == StreamRecordKind::kReleased
                               ? kMipLevels
                               : r.level;
         std::erase_if(wanted, [&](const auto& w) { return w.first == r.chunk_pos && level <= w.second; });
-        return Ok{};
       });
-      if (!st) return false;
+      if (!ok) return false;
       if (wanted.empty()) return true;
+    }
+    return false;
+  }
+  // Calls fn for each record of a StreamBatch message; false if the batch
+  // does not decode.
+  static bool for_each_record(const wire::Message& m, const std::function<void(const StreamRecord&)>& fn) {
+    auto records = parse_stream_batch(*m.body_as_StreamBatch());
+    if (!records) return false;
+    StreamDecodeScratch scratch;
+    return decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
+             fn(r);
+             return Ok{};
+           })
+        .ok();
+  }
+  // Sends a Ping and reads p's frames up to its Pong, which the server sends
+  // after everything it had queued for p before (one strand, in order),
+  // calling fn for each stream record on the way. False if the stream ends
+  // or a batch does not decode.
+  static bool records_until_pong(RawPeer& p, std::uint64_t nonce, const std::function<void(const StreamRecord&)>& fn) {
+    if (!p.send(build_ping(nonce))) return false;
+    while (auto f = p.next()) {
+      const wire::Message& m = msg(*f);
+      if (m.body_type() == wire::Body::Pong) return true;
+      if (m.body_type() == wire::Body::StreamBatch && !for_each_record(m, fn)) return false;
     }
     return false;
   }

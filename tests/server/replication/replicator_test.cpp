@@ -29,17 +29,8 @@ class ReplicatorTest : public testing_support::ServerTest {
   Seen move_and_sync(testing_support::RawPeer& p, Vec3f pos, std::uint64_t nonce) {
     Seen seen;
     EXPECT_TRUE(p.send(build_client_state(ClientStateMsg{pos, kView, kFull})));
-    EXPECT_TRUE(p.send(build_ping(nonce)));
-    for (;;) {
-      auto f = p.next();
-      if (!f) {
-        ADD_FAILURE() << "the stream ended";
-        return seen;
-      }
-      const wire::Message& m = msg(*f);
-      if (m.body_type() == wire::Body::Pong) return seen;
-      if (m.body_type() == wire::Body::StreamBatch) note(m, seen);
-    }
+    EXPECT_TRUE(records_until_pong(p, nonce, [&](const StreamRecord& r) { note(r, seen); }));
+    return seen;
   }
 
   // Moves p to pos and reads the stream until every chunk in view is held
@@ -57,30 +48,25 @@ class ReplicatorTest : public testing_support::ServerTest {
     Seen ignored;
     while (!complete()) {
       auto f = p.next_of(wire::Body::StreamBatch);
-      if (!f) return false;
-      note(msg(*f), ignored);
+      if (!f || !for_each_record(msg(*f), [&](const StreamRecord& r) { note(r, ignored); })) return false;
     }
     return true;
   }
 
-  void note(const wire::Message& m, Seen& seen) {
-    auto records = parse_stream_batch(*m.body_as_StreamBatch());
-    ASSERT_TRUE(records.ok());
-    ASSERT_TRUE(decode_stream_batch(*records, scratch_, [&](const StreamRecord& r) -> Status {
-                  switch (r.kind) {
-                    case StreamRecordKind::kHorizon: break;
-                    case StreamRecordKind::kReleased:
-                      seen.released.push_back(r.chunk_pos);
-                      held_.erase(r.chunk_pos);
-                      break;
-                    default:
-                      ++seen.chunk_records;
-                      held_[r.chunk_pos] = r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty ? 0
-                                           : r.kind == StreamRecordKind::kEstimate ? kMipLevels
-                                                                                   : r.level;
-                  }
-                  return Ok{};
-                }).ok());
+  // What the client holds after r, and what r was.
+  void note(const StreamRecord& r, Seen& seen) {
+    switch (r.kind) {
+      case StreamRecordKind::kHorizon: break;
+      case StreamRecordKind::kReleased:
+        seen.released.push_back(r.chunk_pos);
+        held_.erase(r.chunk_pos);
+        break;
+      default:
+        ++seen.chunk_records;
+        held_[r.chunk_pos] = r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty ? 0
+                             : r.kind == StreamRecordKind::kEstimate                                 ? kMipLevels
+                                                                                                     : r.level;
+    }
   }
 
   // Joins, keeping the world's bounds from the Welcome.
@@ -97,7 +83,6 @@ class ReplicatorTest : public testing_support::ServerTest {
     return p;
   }
 
-  StreamDecodeScratch scratch_;
   Vec3iMap<int> held_;  // what the client holds, at which level
   WorldBounds bounds_;
 };

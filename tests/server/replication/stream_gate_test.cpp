@@ -109,22 +109,10 @@ TEST_F(StreamGateServerTest, WhileClosedNothingIsStreamedButEditsAndUpdatesGoOn)
   // (one strand, in order): by then nothing was asked of the world, and no
   // chunk's record came.
   ASSERT_TRUE(eventually([&] { return server_->counters().stream_yields.load() >= 1; }));
-  ASSERT_TRUE(p->send(build_ping(7)));
-  StreamDecodeScratch scratch;
   std::size_t chunk_records = 0;
-  for (;;) {
-    auto f = p->next();
-    ASSERT_TRUE(f.has_value());
-    const wire::Message& m = msg(*f);
-    if (m.body_type() == wire::Body::Pong) break;
-    if (m.body_type() != wire::Body::StreamBatch) continue;
-    auto records = parse_stream_batch(*m.body_as_StreamBatch());
-    ASSERT_TRUE(records.ok());
-    ASSERT_TRUE(decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
-                  if (r.kind != StreamRecordKind::kHorizon && r.kind != StreamRecordKind::kReleased) ++chunk_records;
-                  return Ok{};
-                }).ok());
-  }
+  ASSERT_TRUE(records_until_pong(*p, 7, [&](const StreamRecord& r) {
+    if (r.kind != StreamRecordKind::kHorizon && r.kind != StreamRecordKind::kReleased) ++chunk_records;
+  }));
   EXPECT_EQ(chunk_records, 0u);
   EXPECT_EQ(server_->counters().chunks_asked.load(), 0u);
   // Opened: streaming resumes (on the replicator's timer) and completes.
@@ -161,37 +149,21 @@ TEST_F(StreamGateServerTest, WhileClosedRefreshesOfMipsWaitAndComeOnceItOpens) {
   EXPECT_TRUE(editor->next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch).has_value());
   // The watcher's refresh came due and waited; a ping answered after that
   // finds nothing of the chunk sent.
-  ASSERT_TRUE(eventually([&] { return server_->counters().mip_flush_yields.load() >= 1; }));
-  ASSERT_TRUE(watcher->send(build_ping(7)));
-  StreamDecodeScratch scratch;
-  auto records_of_cp = [&](const wire::Message& m, std::uint64_t* revision) {
-    std::size_t n = 0;
-    auto records = parse_stream_batch(*m.body_as_StreamBatch());
-    EXPECT_TRUE(records.ok());
-    if (!records.ok()) return n;
-    EXPECT_TRUE(decode_stream_batch(*records, scratch, [&](const StreamRecord& r) -> Status {
-                  if (r.chunk_pos == cp) ++n, *revision = r.revision;
-                  return Ok{};
-                }).ok());
-    return n;
-  };
+  ASSERT_TRUE(eventually([&] { return server_->counters().mip_refresh_yields.load() >= 1; }));
+  std::size_t records_of_cp = 0;
   std::uint64_t revision = 0;
-  for (;;) {
-    auto f = watcher->next();
-    ASSERT_TRUE(f.has_value());
-    const wire::Message& m = msg(*f);
-    if (m.body_type() == wire::Body::Pong) break;
-    if (m.body_type() == wire::Body::StreamBatch) {
-      EXPECT_EQ(records_of_cp(m, &revision), 0u);
-    }
-  }
+  auto note = [&](const StreamRecord& r) {
+    if (r.chunk_pos == cp) ++records_of_cp, revision = r.revision;
+  };
+  ASSERT_TRUE(records_until_pong(*watcher, 7, note));
+  EXPECT_EQ(records_of_cp, 0u);
   EXPECT_EQ(server_->counters().mip_refreshes.load(), 0u);
   // Opened: the refresh comes, with the edit's revision.
   gate.hold_closed(false);
   while (revision == 0) {
     auto f = watcher->next_of(wire::Body::StreamBatch);
     ASSERT_TRUE(f.has_value());
-    records_of_cp(msg(*f), &revision);
+    ASSERT_TRUE(for_each_record(msg(*f), note));
   }
   EXPECT_EQ(revision, 1u);
   EXPECT_EQ(server_->counters().mip_refreshes.load(), 1u);
