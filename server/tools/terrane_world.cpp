@@ -75,8 +75,10 @@ constexpr const char* kGenerateHelp =
     "                              [--seed N] [--threads N]\n"
     "\n"
     "Creates a world with Terrane's terrain generator (unless the directory or database already\n"
-    "holds one) and stores the generated chunks of the box, so a server starts without\n"
-    "generating them. Chunks already stored are left alone, so running it twice is safe.\n"
+    "holds one) and stores every generated chunk of the box, all-Air ones too (a few dozen\n"
+    "bytes each), so a server neither generates nor estimates any of them. Chunks already\n"
+    "stored are left alone, so running it twice is safe (and fills in what an older version\n"
+    "left out: it stored no all-Air chunk).\n"
     "\n"
     "  --world DIR    world directory (created if missing), or a postgresql:// URL\n"
     "  --store URL    the world in PostgreSQL (libpq URL; the database must exist, Terrane's\n"
@@ -404,6 +406,7 @@ int cmd_generate(int argc, char** argv) {
   // Workers generate and encode; this thread stores in batches. The mutex
   // guards only the hand-over queue between them.
   std::atomic<std::size_t> next{0};
+  std::atomic<std::uint64_t> air_chunks{0};
   std::mutex mu;
   std::condition_variable cv;
   std::deque<ChunkWrite> ready;
@@ -415,13 +418,12 @@ int cmd_generate(int argc, char** argv) {
       const std::size_t i = next.fetch_add(1);
       if (i >= todo.size()) break;
       world->generate_chunk_box(todo[i], box32);
-      ChunkWrite w{todo[i], todo_revision[i], {}, {}};
-      bool empty = true;
-      for (const Voxel v : box32.voxels()) empty &= v.material == kAir;
-      if (!empty) {
-        w.blob = encode_chunk_blob(box32);
-        w.coarse = coarse_voxels(box32);
-      }
+      // Stored even when all Air: a chunk without a row is the generator's,
+      // and a server would estimate it and generate it again whenever a
+      // client looks at it (the sky above the terrain, most of a view).
+      ChunkWrite w{todo[i], todo_revision[i], encode_chunk_blob(box32), coarse_voxels(box32)};
+      if (std::all_of(box32.voxels().begin(), box32.voxels().end(), [](Voxel v) { return v.material == kAir; }))
+        air_chunks.fetch_add(1, std::memory_order_relaxed);
       std::lock_guard lock(mu);
       ready.push_back(std::move(w));
       cv.notify_one();
@@ -434,7 +436,7 @@ int cmd_generate(int argc, char** argv) {
   for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
 
   Progress progress("generate", todo.size());
-  std::uint64_t done = 0, stored_chunks = 0;
+  std::uint64_t done = 0;
   std::string save_error;
   std::vector<ChunkWrite> batch;
   for (;;) {
@@ -448,16 +450,12 @@ int cmd_generate(int argc, char** argv) {
     }
     const bool last = [&] { std::lock_guard lock(mu); return finished == pool.size() && ready.empty(); }();
     if (batch.size() >= 64 || (last && !batch.empty())) {
-      std::vector<ChunkWrite> non_empty;
-      for (auto& w : batch)
-        if (!w.blob.empty()) non_empty.push_back(std::move(w));
       done += batch.size();
-      stored_chunks += non_empty.size();
-      batch.clear();
-      if (save_error.empty() && !non_empty.empty()) {
+      if (save_error.empty()) {
         // Never overwrite: a server may have stored an edit of the chunk meanwhile.
-        if (auto s = world->store().save_chunks(non_empty, /*overwrite=*/false); !s) save_error = s.error().message;
+        if (auto s = world->store().save_chunks(batch, /*overwrite=*/false); !s) save_error = s.error().message;
       }
+      batch.clear();
       progress.update(done);
     }
     if (last && batch.empty()) break;
@@ -466,8 +464,8 @@ int cmd_generate(int argc, char** argv) {
   if (!save_error.empty()) return failure(save_error);
   if (todo.empty()) progress.update(0);
   opened.leases.release();
-  std::printf("generated %llu chunks (%llu stored, the rest all Air) in box %d,%d,%d..%d,%d,%d of world %s\n",
-              static_cast<unsigned long long>(done), static_cast<unsigned long long>(stored_chunks), clipped.min.x,
+  std::printf("generated and stored %llu chunks (%llu of them all Air) in box %d,%d,%d..%d,%d,%d of world %s\n",
+              static_cast<unsigned long long>(done), static_cast<unsigned long long>(air_chunks.load()), clipped.min.x,
               clipped.min.y, clipped.min.z, clipped.max.x, clipped.max.y, clipped.max.z, where.c_str());
   return 0;
 }

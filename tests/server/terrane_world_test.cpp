@@ -68,6 +68,34 @@ TEST_F(WorldToolTest, GenerateThenStatsJsonReportsEveryCodec) {
   EXPECT_NE(table.output.find("non-empty voxels"), std::string::npos);
 }
 
+// A pre-generated box leaves nothing to the generator: the sky above the
+// terrain is stored too, so a server reading the region's coarse image
+// knows every chunk of it (none estimated, none generated when looked at).
+TEST_F(WorldToolTest, GenerateStoresEveryChunkOfTheBoxAllAirOnesToo) {
+  const std::string w = path("gen");
+  // 2 x 8 x 2 chunks of region (0, 0, 0), from the ground up to y 256: the
+  // top row lies above the highest terrain the default parameters make.
+  auto g = run("generate --world " + w + " --box 0,0,0,64,256,64");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  EXPECT_NE(g.output.find("stored 32 chunks"), std::string::npos) << g.output;
+  auto store = SqliteStore::open(w);
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  int air = 0;
+  for (int y = 0; y < 8; ++y)
+    for (int z = 0; z < 2; ++z)
+      for (int x = 0; x < 2; ++x) {
+        auto c = (*store)->load_chunk({x, y, z});
+        ASSERT_TRUE(c.ok()) << c.error().message;
+        ASSERT_TRUE(c->has_value()) << "chunk " << x << "," << y << "," << z << " has no row";
+        air += (*c)->chunk.empty() ? 1 : 0;
+      }
+  EXPECT_GE(air, 4) << "the top row of chunks is sky";
+  EXPECT_NE(g.output.find("(" + std::to_string(air) + " of them all Air)"), std::string::npos) << g.output;
+  auto coarse = (*store)->load_coarse({0, 0, 0});
+  ASSERT_TRUE(coarse.ok()) << coarse.error().message;
+  EXPECT_EQ(coarse->size(), 32u) << "every chunk of the box has its coarse entry";
+}
+
 TEST_F(WorldToolTest, ExportImportExportRoundTrips) {
   const std::string w = path("src");
   ASSERT_EQ(run("generate --world " + w + " --box -40,0,-8,8,48,40").exit_code, 0);
