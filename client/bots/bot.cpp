@@ -501,6 +501,7 @@ void Bot::finish() {
 }
 
 bool Bot::closed() const { return client_->closed(); }
+bool Bot::join_settled() const { return !result_.connect_error.empty() || closed() || joined(); }
 ClientCounters Bot::counters() const { return client_->counters(); }
 
 }  // namespace terrane::bots

@@ -81,6 +81,9 @@ class Bot {
   bool checks_pending(Clock::time_point now);
   void finish();  // disconnect (expected) and take the final counters
   bool closed() const;
+  // Nothing more to wait for in its join: joined, closed, or its connect
+  // failed (counted as a connect failure; it never tries again).
+  bool join_settled() const;
   ClientCounters counters() const;
   const BotResult& result() const { return result_; }
   bool connected() const { return result_.connected; }

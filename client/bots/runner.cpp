@@ -260,7 +260,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     phase = (phase + 1) % static_cast<std::size_t>(kStepPhases);
     once_a_second(now);
     if (!joins_done && next_bot == bots.size() && phase == 0) {
-      const bool all = std::all_of(bots.begin(), bots.end(), [](const auto& b) { return b->closed() || b->joined(); });
+      // A bot whose connect failed is settled too: waiting for it held a
+      // run up for the whole --wait-joined.
+      const bool all = std::all_of(bots.begin(), bots.end(), [](const auto& b) { return b->join_settled(); });
       if (all || now >= join_deadline) {
         joins_done = true;
         r.joined_s = std::chrono::duration<double>(now - t0).count();

@@ -9,7 +9,9 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 
+#include "client/bots/bot.h"
 #include "client/bots/options.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
@@ -244,6 +246,37 @@ TEST_F(BotsRunTest, UnreachableServerIsAnError) {
   std::string err;
   EXPECT_FALSE(run_bots(o, nullptr, &r, &err));
   EXPECT_NE(err.find("cannot connect to 127.0.0.1:" + std::to_string(o.port)), std::string::npos) << err;
+}
+
+// A run waits for every bot's join (--wait-joined) until each has settled:
+// joined, closed, or unable to connect. A bot whose connect failed (a
+// server too busy to complete it within the connect timeout) once held a
+// world 1,000 run up for the whole wait, 600 s.
+TEST(BotJoin, ABotWhoseConnectFailedHasSettledItsJoin) {
+  asio::io_context io;
+  auto work = asio::make_work_guard(io);
+  std::thread runner([&] { io.run(); });
+  BotsOptions o;
+  {
+    asio::ip::tcp::acceptor a(io, {asio::ip::make_address("127.0.0.1"), 0});
+    o.port = a.local_endpoint().port();
+  }  // closed: nothing listens there
+  RunContext ctx;
+  ctx.options = &o;
+  ctx.io = &io;
+  ctx.view_distance = 64;
+  ctx.full_res_radius = 32;
+  {
+    Bot b(0, ctx, Vec3f{0, 0, 0}, Movement::kIdle, EditMode::kNone, 1);
+    EXPECT_FALSE(b.join_settled()) << "not tried yet";
+    ASSERT_FALSE(b.connect());
+    EXPECT_FALSE(b.result().connect_error.empty());
+    EXPECT_FALSE(b.joined());
+    EXPECT_FALSE(b.closed());
+    EXPECT_TRUE(b.join_settled());
+  }
+  work.reset();
+  runner.join();
 }
 
 // --- options -------------------------------------------------------------------
