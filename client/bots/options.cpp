@@ -6,6 +6,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include "common/cli/cli.h"
 
@@ -59,7 +60,7 @@ const char* const kBotsHelp =
     "                            full-resolution region), waiting at most S seconds after the\n"
     "                            ramp-up; latencies count from then (default 0: the duration\n"
     "                            counts from the first connection)\n"
-    "  --threads N               io threads shared by all bots (default: one per core)\n"
+    "  --threads N               io threads shared by all bots (default: two per core)\n"
     "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
     "                            equal bytes are packed once in this process (default 4096;\n"
     "                            0: each bot packs its own)\n"
@@ -243,6 +244,10 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
   if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
     return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
+}
+
+int io_threads(const BotsOptions& o) {
+  return o.threads > 0 ? o.threads : 2 * std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
 double hash_check_span_s(const BotsOptions& o) {

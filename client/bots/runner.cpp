@@ -68,8 +68,7 @@ class IoPool {
 bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& progress, BotsReport* report,
               std::string* error) {
   raise_open_file_limit(o.bots);
-  const int threads = o.threads > 0 ? o.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  IoPool pool(threads);
+  IoPool pool(io_threads(o));
 
   // A probe learns the spawn, the bounds and the server's caps.
   WelcomeMsg welcome;

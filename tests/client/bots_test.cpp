@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -394,6 +395,14 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
 // not many more: a ramp-up longer than the duration (which --wait-joined
 // allows: the duration starts after the joins) once made the span negative,
 // so every bot asked for a hash every 0.2 s instead of every 10 s.
+TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
+  BotsOptions o;
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  EXPECT_EQ(io_threads(o), 2 * cores);
+  ASSERT_EQ(parse({"--connect", "127.0.0.1:7777", "--threads", "3"}, &o), "");
+  EXPECT_EQ(io_threads(o), 3);
+}
+
 TEST(BotsOptions, HashChecksAreSpreadOverTheMeasuredRun) {
   BotsOptions crowd;
   crowd.duration_s = 60;
