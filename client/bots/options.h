@@ -68,7 +68,7 @@ double hash_check_span_s(const BotsOptions& o);
 // can run for milliseconds (a stream batch of hundreds of records); with
 // one thread per core every bot behind it on that thread waited, and the
 // bots' own lag was most of the tail they measured (world 1,000: the
-// bots' io lag p95 62-95 ms with one per core, 24-31 ms with two).
+// bots' io lag p95 62-100 ms with one per core, 22-25 ms with two).
 int io_threads(const BotsOptions& o);
 
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
