@@ -391,10 +391,6 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   fs::remove(file);
 }
 
-// Every bot makes at least --hash-checks checks in the measured run, and
-// not many more: a ramp-up longer than the duration (which --wait-joined
-// allows: the duration starts after the joins) once made the span negative,
-// so every bot asked for a hash every 0.2 s instead of every 10 s.
 TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
   BotsOptions o;
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
@@ -403,6 +399,10 @@ TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
   EXPECT_EQ(io_threads(o), 3);
 }
 
+// Every bot makes at least --hash-checks checks in the measured run, and
+// not many more: a ramp-up longer than the duration (which --wait-joined
+// allows: the duration starts after the joins) once made the span negative,
+// so every bot asked for a hash every 0.2 s instead of every 10 s.
 TEST(BotsOptions, HashChecksAreSpreadOverTheMeasuredRun) {
   BotsOptions crowd;
   crowd.duration_s = 60;
