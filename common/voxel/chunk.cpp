@@ -195,7 +195,7 @@ void Chunk::update_mips(const Region& changed) {
       [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l[0], changed);
   const Region r2 = downsample_box(l[0], l[1], r1);
   downsample_box(l[1], l[2], r2);
-  empty_ = std::all_of(l[2].voxels().begin(), l[2].voxels().end(), [](Voxel v) { return v.material == kAir; });
+  empty_ = all_air(l[2].voxels());
   if (level0_.is_uniform()) mip_fill_ = level0_.uniform_material();
 }
 

@@ -8,8 +8,10 @@
 // never enter a grid.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string_view>
 #include <type_traits>
 
@@ -40,6 +42,11 @@ static_assert(std::is_trivial_v<Voxel>, "voxel buffers are copied with memcpy");
 constexpr Voxel make_voxel(Material material, std::uint8_t occupancy) {
   const auto mask = static_cast<std::uint8_t>(-static_cast<int>(material) >> 31);
   return Voxel{material, static_cast<std::uint8_t>(occupancy & mask)};
+}
+
+// Whether every voxel is Air (an empty chunk, mip or box).
+inline bool all_air(std::span<const Voxel> voxels) {
+  return std::all_of(voxels.begin(), voxels.end(), [](Voxel v) { return v.material == kAir; });
 }
 
 // The occupancy a material has when nothing says otherwise: full for solids,

@@ -139,7 +139,7 @@ Chunk World::generate_chunk(Vec3i chunk_pos) const {
   Box box;
   generate_chunk_box(chunk_pos, box);
   // Sky (most chunks of a generated world): no rows to pack, no mips to build.
-  if (std::all_of(box.voxels().begin(), box.voxels().end(), [](Voxel v) { return v.material == kAir; }))
+  if (all_air(box.voxels()))
     return Chunk(kAir);
   return Chunk::from_box(box);
 }

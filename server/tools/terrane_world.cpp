@@ -422,8 +422,7 @@ int cmd_generate(int argc, char** argv) {
       // and a server would estimate it and generate it again whenever a
       // client looks at it (the sky above the terrain, most of a view).
       ChunkWrite w{todo[i], todo_revision[i], encode_chunk_blob(box32), coarse_voxels(box32)};
-      if (std::all_of(box32.voxels().begin(), box32.voxels().end(), [](Voxel v) { return v.material == kAir; }))
-        air_chunks.fetch_add(1, std::memory_order_relaxed);
+      if (all_air(box32.voxels())) air_chunks.fetch_add(1, std::memory_order_relaxed);
       std::lock_guard lock(mu);
       ready.push_back(std::move(w));
       cv.notify_one();

@@ -55,7 +55,7 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::coarse_only(Vec3i pos, std::ui
   auto v = level3_only(pos, revision, voxels);
   // The coarsest mip is Air only when every voxel is (one non-Air child
   // makes its parent non-Air), so an all-Air image entry is an empty chunk.
-  v->empty_ = std::all_of(voxels.begin(), voxels.end(), [](Voxel x) { return x.material == kAir; });
+  v->empty_ = all_air(voxels);
   return v;
 }
 

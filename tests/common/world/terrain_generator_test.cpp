@@ -148,7 +148,7 @@ TEST(TerrainGenerator, AllAirIsNeverWrongAndKnowsTheSky) {
       const Region r = Region::from_min_size(Vec3i{c.x * 32, cy * 32, c.z * 32}, {32, 32, 32});
       const Box b = generate(gen, r);
       const bool is_air =
-          std::all_of(b.voxels().begin(), b.voxels().end(), [](Voxel v) { return v.material == kAir; });
+          all_air(b.voxels());
       air += is_air;
       if (gen.all_air(r)) {
         ++said_air;
