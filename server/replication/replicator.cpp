@@ -72,6 +72,12 @@ void Replicator::committed(std::uint64_t tick, std::vector<VersionPtr> changed) 
   });
 }
 
+void Replicator::mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) {
+  asio::post(executor_, [self = shared_from_this(), tick, c = std::move(changed)]() mutable {
+    self->on_committed(tick, std::move(c), true);
+  });
+}
+
 void Replicator::send(SharedFrame frame, SendClass cls) {
   if (auto s = weak_session_.lock()) s->send(std::move(frame), cls);
 }
@@ -481,8 +487,12 @@ void Replicator::replan() {
   entering_.clear();
   release_outside_view();
   refine_.clear();
-  for (const auto& [cp, h] : held_)
+  std::vector<Vec3i> now_full;  // held Empty, within full resolution
+  for (const auto& [cp, h] : held_) {
     if (h.level != kHeldEmpty && desired(cp) < h.level) refine_.emplace_back(offset_center_dist2(cp - center_), cp);
+    if (h.level == kHeldEmpty && desired(cp) == 0) now_full.push_back(cp);
+  }
+  if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
   refine_stale_ = false;
   plan_horizon();
@@ -549,11 +559,15 @@ void Replicator::move_by(Vec3i d) {
   if (!released.empty()) world_.release(id_, std::move(released));
   for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
   refine_stale_ = true;  // keys are distances to the old centre: recomputed when next read
+  std::vector<Vec3i> now_full;  // held Empty, now within full resolution
   for (const Vec3i o : table_->finer(d)) {
     const Vec3i cp = center_ + o;
-    if (auto it = held_.find(cp); it != held_.end() && it->second.level != kHeldEmpty && table_->level(o) < it->second.level)
-      push_refine(cp);
+    auto it = held_.find(cp);
+    if (it == held_.end()) continue;
+    if (it->second.level != kHeldEmpty && table_->level(o) < it->second.level) push_refine(cp);
+    if (it->second.level == kHeldEmpty && table_->level(o) == 0) now_full.push_back(cp);
   }
+  if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   flush_stream();
 }
 
@@ -591,7 +605,9 @@ void Replicator::request_more() {
   std::vector<ChunkWant> wants;
   auto want = [&](Vec3i cp, Intent intent, int level, bool exact = false) {
     requested_.emplace(cp, Request{intent, level});
-    wants.push_back(ChunkWant{cp, level == 0, level, exact});
+    // Held at full resolution: sent so, or (all Air) sent Empty where the
+    // plan wants full resolution.
+    wants.push_back(ChunkWant{cp, level == 0 || desired(cp) == 0, level, exact});
   };
   auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
   // Pass 1: the whole view at its coarsest, nearest first. With horizon
@@ -743,20 +759,37 @@ void Replicator::hold(Vec3i cp, Held h, const VersionPtr& v) {
   }
 }
 
-void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> changed) {
+void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> changed, bool mips_due) {
   if (closed_) return;
   std::vector<const UpdatePiece*> pieces;
   std::vector<ChunkRevisionMsg> revisions;
   std::vector<VersionPtr> keep;  // the pieces' owners, alive until the frame is built
+  const bool mips_were_dirty = !mip_dirty_.empty();
+  if (mips_due) {
+    // Gathered over several ticks: a chunk may come more than once; its
+    // newest version is all that counts (and one piece per chunk goes in
+    // an UpdateBatch).
+    std::sort(changed.begin(), changed.end(), [](const VersionPtr& a, const VersionPtr& b) {
+      const Vec3i u = a->pos(), w = b->pos();
+      return std::make_tuple(u.x, u.y, u.z, b->revision()) < std::make_tuple(w.x, w.y, w.z, a->revision());
+    });
+    changed.erase(std::unique(changed.begin(), changed.end(),
+                              [](const VersionPtr& a, const VersionPtr& b) { return a->pos() == b->pos(); }),
+                  changed.end());
+  }
   for (VersionPtr& v : changed) {
     const Vec3i cp = v->pos();
     if (auto r = ready_versions_.find(cp); r != ready_versions_.end()) {
-      r->second = v;  // granted, not sent yet: send the newest
+      // Granted, not sent yet: send the newest.
+      if (r->second->revision() < v->revision()) r->second = v;
       continue;
     }
     auto it = held_.find(cp);
     if (it == held_.end()) continue;
     Held& h = it->second;
+    // Gathered news may be older than a grant since (refresh_mip checks
+    // the levels it refreshes).
+    if (mips_due && v->revision() <= h.revision && (h.level == 0 || h.level == kHeldEmpty)) continue;
     const bool near = desired(cp) == 0;
     // A tick's units change the version before it (revision - 1): they are
     // sent only to a client holding exactly that. Anything else is sent
@@ -790,8 +823,16 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       if (mip_dirty_.empty())
         mip_due_ = next_mip_flush_ =
             std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms);
-      mip_dirty_.insert_or_assign(cp, std::move(v));
+      if (auto d = mip_dirty_.find(cp); d == mip_dirty_.end() || d->second->revision() < v->revision())
+        mip_dirty_.insert_or_assign(cp, std::move(v));
     }
+  }
+  if (mips_due && !mip_dirty_.empty()) {
+    // Due now (the world waited for them): the oldest change's time kept.
+    const auto now = std::chrono::steady_clock::now();
+    if (!mips_were_dirty) mip_due_ = now;
+    next_mip_flush_ = std::min(next_mip_flush_, now);
+    flush_mips_when_due(now);
   }
   // Records first, so an update never overtakes the data it applies to.
   flush_stream();
@@ -880,6 +921,18 @@ void Replicator::flush_mips() {
   flush_stream();
 }
 
+void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) {
+  if (mip_dirty_.empty() || now < next_mip_flush_) return;
+  // Refreshes of mips are streaming too: while the gate is closed they
+  // wait (and coalesce), kYieldAtMost past their time at most.
+  if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
+    next_mip_flush_ = now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs);
+    counters_.mip_refresh_yields.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    flush_mips();
+  }
+}
+
 void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload) {
   batch_.add(kind, cp, revision, payload);
   if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
@@ -951,16 +1004,7 @@ void Replicator::on_timer() {
         std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count());
     session_->send(build_ping(ping_nonce_), SendClass::kControl);
   }
-  if (!mip_dirty_.empty() && now >= next_mip_flush_) {
-    // Refreshes of mips are streaming too: while the gate is closed they
-    // wait (and coalesce), kYieldAtMost past their time at most.
-    if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
-      next_mip_flush_ = now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs);
-      counters_.mip_refresh_yields.fetch_add(1, std::memory_order_relaxed);
-    } else {
-      flush_mips();
-    }
-  }
+  flush_mips_when_due(now);
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
     next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);
     // The next chunk this client holds at full resolution.

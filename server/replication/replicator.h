@@ -21,11 +21,14 @@
 // budget allow. Chunks more than kKeepMargin beyond the view are released
 // on both sides.
 //
-// Ticks. The world hands each committed tick's changes of held chunks in one
-// call; the replicator answers with one UpdateBatch: the changed 4^3 units
-// of every chunk held at full resolution, joined from per-version pieces.
-// Chunks held as mips are refreshed together every mip_refresh_ms (changes
-// in between coalesce), and only when the bytes of the level held changed.
+// Ticks. The world hands each committed tick's changes of chunks held at
+// full resolution in one call; the replicator answers with one
+// UpdateBatch: the changed 4^3 units of every such chunk, joined from
+// per-version pieces. Changes of chunks held as mips the world gathers and
+// hands over every mip_refresh_ms (mips_changed); they are refreshed
+// together (changes in between coalesce), and only when the bytes of the
+// level held changed. A chunk held Empty that a move brings within full
+// resolution is told to the world as held at full resolution (holds_full).
 //
 // Threading: every member runs on the session's strand. The WorldClient
 // methods are called on the world strand and post here. Lifetime: shared;
@@ -134,6 +137,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void granted(std::vector<VersionPtr> versions) override;
   void horizons(std::vector<HorizonPtr> images) override;
   void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
+  void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
   void send(SharedFrame frame, SendClass cls) override;
   void close(CloseReason why, const std::string& text) override;
 
@@ -190,7 +194,11 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void rebuild_refine();
 
   void on_granted(std::vector<VersionPtr> versions);
-  void on_committed(std::uint64_t tick, std::vector<VersionPtr> changed);
+  // mips_due: the world's news of chunks held coarser than full
+  // resolution, gathered for mip_refresh_ms (WorldClient::mips_changed):
+  // refreshed now, and not newer than what is held, possibly (a chunk
+  // granted again meanwhile), when it is dropped.
+  void on_committed(std::uint64_t tick, std::vector<VersionPtr> changed, bool mips_due = false);
   void pump();
   void request_more();
   void send_ready();
@@ -198,6 +206,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void hold(Vec3i chunk_pos, Held h, const VersionPtr& v);
   void refresh_mip(Vec3i chunk_pos, const VersionPtr& v);
   void flush_mips();
+  // Flushes the refreshes of mips once due, unless streaming yields (then
+  // they wait, and coalesce, kYieldAtMost past their time at most).
+  void flush_mips_when_due(std::chrono::steady_clock::time_point now);
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
               std::span<const std::uint8_t> payload = {});
   void flush_stream();

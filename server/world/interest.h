@@ -60,6 +60,10 @@ class InterestIndex {
     return it == map_.end() ? none_ : it->second.holders;
   }
   bool watched(Vec3i chunk_pos) const { return map_.count(chunk_pos) != 0; }
+  bool holds(Vec3i chunk_pos, ClientId id) const {
+    const auto& hs = holders(chunk_pos);
+    return std::any_of(hs.begin(), hs.end(), [id](const Holder& h) { return h.id == id; });
+  }
   bool held_full(Vec3i chunk_pos) const {
     auto it = map_.find(chunk_pos);
     return it != map_.end() && it->second.full > 0;

@@ -86,7 +86,8 @@ void WorldOwner::moved(ClientId id, Vec3f position, std::int32_t view_distance, 
 }
 
 void WorldOwner::do_join(ClientId id, Join j) {
-  Client c{std::move(j.name), std::move(j.link), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}};
+  Client c{std::move(j.name), std::move(j.link), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}, {},
+           0, {}};
   clients_.emplace(id, std::move(c));
 }
 
@@ -119,6 +120,10 @@ void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
 
 void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
   queue_request(Request{id, {}, std::move(wants)});
+}
+
+void WorldOwner::holds_full(ClientId id, std::vector<Vec3i> chunks) {
+  queue_request(Request{id, {}, HoldsFull{std::move(chunks)}});
 }
 
 void WorldOwner::queue_request(Request r) {
@@ -158,6 +163,8 @@ void WorldOwner::drain_requests() {
             do_join(r.id, std::move(what));
           else if constexpr (std::is_same_v<T, Leave>)
             do_leave(r.id);
+          else if constexpr (std::is_same_v<T, HoldsFull>)
+            do_holds_full(r.id, what);
           else
             do_moved(r.id, what);
         },
@@ -191,6 +198,34 @@ void WorldOwner::do_want(ClientId id, const std::vector<ChunkWant>& chunks) {
 
 void WorldOwner::do_release(ClientId id, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks) interest_.release(cp, id);
+}
+
+void WorldOwner::do_holds_full(ClientId id, const HoldsFull& h) {
+  auto client = clients_.find(id);
+  if (client == clients_.end()) return;
+  Client& c = client->second;
+  bool news = false;
+  for (const Vec3i cp : h.chunks) {
+    if (!interest_.holds(cp, id)) continue;  // released since
+    interest_.hold(cp, id, true);
+    news = news || std::any_of(c.mip_news.begin(), c.mip_news.end(), [cp](const VersionPtr& v) { return v->pos() == cp; });
+  }
+  if (!news) return;
+  // A change of one of them gathered for later goes now, with the rest.
+  c.link->mips_changed(c.mip_news_tick, std::move(c.mip_news));
+  c.mip_news.clear();
+}
+
+void WorldOwner::deliver_mip_news() {
+  const auto now = std::chrono::steady_clock::now();
+  while (!mip_news_due_.empty() && mip_news_due_.front().first <= now) {
+    const ClientId id = mip_news_due_.front().second;
+    mip_news_due_.pop_front();
+    auto it = clients_.find(id);
+    if (it == clients_.end() || it->second.mip_news.empty() || it->second.mip_due > now) continue;
+    it->second.link->mips_changed(it->second.mip_news_tick, std::move(it->second.mip_news));
+    it->second.mip_news.clear();
+  }
 }
 
 void WorldOwner::do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants) {
@@ -1243,15 +1278,30 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     // then acknowledge: on a client's strand the news is handled before the
     // ack is queued, so whatever the client asks after reading its ack (a
     // region hash, a read) is answered from the new versions.
+    // Holders at full resolution hear of every tick; the others' news is
+    // gathered and handed over every mip_refresh_ms (deliver_mip_news).
     std::unordered_map<ClientId, std::vector<VersionPtr>> news;
     std::uint64_t deliveries = 0;
+    const bool gather = options_.mip_refresh_ms > 0;
+    const auto due = t0 + std::chrono::milliseconds(options_.mip_refresh_ms);
     for (const VersionPtr& v : versions) {
       if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
         it->second.published = v;
       horizon_changed(v->pos());
       for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
-        news[h.id].push_back(v);
         ++deliveries;
+        if (h.full || !gather) {
+          news[h.id].push_back(v);
+          continue;
+        }
+        auto c = clients_.find(h.id);
+        if (c == clients_.end()) continue;
+        if (c->second.mip_news.empty()) {
+          c->second.mip_due = due;
+          mip_news_due_.emplace_back(due, h.id);
+        }
+        c->second.mip_news.push_back(v);
+        c->second.mip_news_tick = tick;
       }
     }
     counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
@@ -1402,6 +1452,7 @@ void WorldOwner::on_tick() {
       static_cast<std::uint64_t>(std::max<std::int64_t>(0, std::chrono::nanoseconds(t0 - next_tick_).count())),
       std::memory_order_relaxed);
   lighten_some();
+  deliver_mip_news();
   const auto t_edits = Clock::now();
   apply_edits();
   if (!forwarded_.empty()) settle_forwarded();

@@ -15,9 +15,12 @@
 //      goes on with the next tick;
 //   3. when that commit is reported: acknowledge the tick's edits, publish
 //      its versions (what new readers are handed from then on) and tell each
-//      holder of a changed chunk, once per tick, which of its chunks changed
-//      (InterestIndex). A failed commit rejects the edits, closes every
-//      client with "server storage failure", after calling on_fatal.
+//      holder of a changed chunk at full resolution, once per tick, which of
+//      its chunks changed (InterestIndex); holders of changed chunks held
+//      coarser are told every mip_refresh_ms, of all the ticks since
+//      (WorldClient::mips_changed). A failed commit rejects the edits,
+//      closes every client with "server storage failure", after calling
+//      on_fatal.
 //
 // Chunks: a client asks for chunks (want); loaded ones are granted at once,
 // the others when Storage has loaded or generated them. A chunk wanted only
@@ -87,8 +90,14 @@ class WorldClient {
   // were made. An image with no unit could not be made (its region's
   // coarse image is unreadable): the chunks come as usual.
   virtual void horizons(std::vector<HorizonPtr> images) = 0;
-  // A committed tick's new versions of chunks the client holds.
+  // A committed tick's new versions of chunks the client holds at full
+  // resolution (with mip_refresh_ms 0: of every chunk it holds).
   virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
+  // New versions of chunks the client holds coarser than full resolution,
+  // gathered for mip_refresh_ms since the first of them (oldest first; a
+  // chunk may come more than once), the newest committed at tick: to be
+  // refreshed now.
+  virtual void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
   // Frames the world answers with (acks, rejects, read results, presence).
   virtual void send(SharedFrame frame, SendClass cls) = 0;
   virtual void close(CloseReason why, const std::string& text) = 0;
@@ -140,6 +149,11 @@ class WorldOwner : private WorldView {
   // Streaming's requests (queued after the join, with it).
   void want(ClientId id, std::vector<ChunkWant> chunks);
   void release(ClientId id, std::vector<Vec3i> chunks);
+  // The client now holds these chunks at full resolution without asking
+  // for them again (held Empty, brought within full resolution by a move):
+  // their changes reach it every tick from now on, and any gathered for
+  // its next mips_changed are handed over at once.
+  void holds_full(ClientId id, std::vector<Vec3i> chunks);
   // Horizon images of these regions at these levels (nearest first),
   // handed over through WorldClient::horizons as each is made; each is made
   // once and kept until a chunk of its region changes.
@@ -219,6 +233,13 @@ class WorldOwner : private WorldView {
     std::size_t edits_queued = 0;
     History history;
     std::vector<PresenceEntryMsg> presence;  // last sent
+    // Changes of chunks it holds coarser than full resolution, handed over
+    // together (mips_changed) at mip_due: told of every tick, a thousand
+    // clients each holding some of the world's edits afar cost a thousand
+    // posts a tick, for refreshes their replicators hold back anyway.
+    std::vector<VersionPtr> mip_news;
+    std::uint64_t mip_news_tick = 0;  // the newest news' tick
+    std::chrono::steady_clock::time_point mip_due;
   };
   struct Rollback {
     std::string actor;
@@ -353,10 +374,14 @@ class WorldOwner : private WorldView {
     Vec3f position;
     std::int32_t view_distance, full_res_radius;
   };
+  struct HoldsFull {
+    std::vector<Vec3i> chunks;
+  };
   struct Request {
     ClientId id;
     std::chrono::steady_clock::time_point queued;
-    std::variant<std::vector<ChunkWant>, std::vector<Vec3i>, std::vector<HorizonWant>, Join, Leave, Moved> what;
+    std::variant<std::vector<ChunkWant>, std::vector<Vec3i>, std::vector<HorizonWant>, Join, Leave, Moved, HoldsFull>
+        what;
   };
   void queue_request(Request r);
   void drain_requests();
@@ -366,6 +391,10 @@ class WorldOwner : private WorldView {
   void do_want(ClientId id, const std::vector<ChunkWant>& chunks);
   void do_release(ClientId id, const std::vector<Vec3i>& chunks);
   void do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants);
+  void do_holds_full(ClientId id, const HoldsFull& h);
+  // Hands each client whose mip news is due its news (mips_changed); every
+  // tick.
+  void deliver_mip_news();
   std::mutex requests_m_;
   std::deque<Request> requests_;  // guarded by requests_m_
   bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue
@@ -376,6 +405,10 @@ class WorldOwner : private WorldView {
   std::chrono::steady_clock::time_point next_slow_tick_report_{};
 
   std::unordered_map<ClientId, Client> clients_;
+  // Clients with mip news, by when it is due, earliest first (one period
+  // for all: a queue). An entry is stale when its client's news went out
+  // sooner (holds_full) or it left: skipped.
+  std::deque<std::pair<std::chrono::steady_clock::time_point, ClientId>> mip_news_due_;
   // Chunks with their voxels, and chunks kept as mips only.
   Vec3iMap<Loaded> loaded_;
   std::size_t mips_only_ = 0;

@@ -1,6 +1,7 @@
 // WorldOwner on its own (real Storage, no sockets): edits become versions
 // that are committed before anyone hears of them, changes reach holders
-// only, once per holder per tick, history steps apply on the strand, and
+// only, once per holder per tick (holders coarser than full resolution
+// every mip_refresh_ms), history steps apply on the strand, and
 // streaming's requests, in their own queue, neither hold up a tick nor
 // pass each other.
 #include "server/world/world_owner.h"
@@ -41,6 +42,11 @@ class Recorder : public WorldClient {
     ticks_.emplace_back(tick, std::move(changed));
     cv_.notify_all();
   }
+  void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) override {
+    std::lock_guard lock(m_);
+    mip_news_.emplace_back(tick, std::move(changed));
+    cv_.notify_all();
+  }
   void send(SharedFrame frame, SendClass) override {
     std::lock_guard lock(m_);
     if (grants_at_first_ack_ < 0 &&
@@ -71,6 +77,7 @@ class Recorder : public WorldClient {
   std::vector<VersionPtr> grants_;
   std::vector<HorizonPtr> horizons_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
+  std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> mip_news_;
   std::vector<SharedFrame> frames_;
   std::int64_t grants_at_first_ack_ = -1;  // grants received when the first EditAck came
   std::string closed_;
@@ -78,6 +85,9 @@ class Recorder : public WorldClient {
 
 class WorldOwnerTest : public ::testing::Test {
  protected:
+  explicit WorldOwnerTest(std::uint32_t mip_refresh_ms = ServerOptions{}.mip_refresh_ms) {
+    options_.mip_refresh_ms = mip_refresh_ms;
+  }
   void SetUp() override {
     dir_ = testing_support::scratch_dir("terrane-world-owner");
     auto w = World::create(dir_.string(), default_world_meta());
@@ -267,6 +277,102 @@ TEST_F(WorldOwnerTest, AClientsRequestsNeverPassItsJoin) {
   go.set_value();
   EXPECT_TRUE(second->wait([](Recorder& r) { return r.grants_.size() == 1; }));
   EXPECT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+}
+
+// Changes of chunks held coarser than full resolution are gathered and
+// handed over every mip_refresh_ms, not posted every tick.
+class WorldOwnerMipNewsTest : public WorldOwnerTest {
+ protected:
+  WorldOwnerMipNewsTest() : WorldOwnerTest(2000) {}
+};
+// The same, with news gathered for longer than any test runs: whatever
+// reaches a holder afar came another way.
+class WorldOwnerMipNewsHeldTest : public WorldOwnerTest {
+ protected:
+  WorldOwnerMipNewsHeldTest() : WorldOwnerTest(600'000) {}
+};
+
+TEST_F(WorldOwnerMipNewsTest, AHolderAfarHearsOfSeveralTicksAtOnce) {
+  const Vec3i a{31, 0, 31};
+  auto near = client(1, {1000, 10, 1000});
+  auto afar = client(2, {1000, 10, 1000});
+  owner_->want(1, {{a, true, 0}});
+  owner_->want(2, {{a, false, kMipLevels - 1}});
+  ASSERT_TRUE(near->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(afar->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  const std::uint64_t rev = near->grants_[0]->revision();
+  // Three edits, each in a tick of its own (each waits for the last's ack).
+  for (std::uint32_t i = 1; i <= 3; ++i) {
+    owner_->edit(1, fill(i, Region{{1000, 0, 1000}, {1002, static_cast<std::int32_t>(i), 1002}}, materials::kBrick));
+    ASSERT_TRUE(near->wait([i](Recorder& r) { return r.count_frames(wire::Body::EditAck) == i; }));
+  }
+  {
+    std::lock_guard lock(near->m_);
+    EXPECT_EQ(near->ticks_.size(), 3u) << "a holder at full resolution hears of every tick";
+    EXPECT_TRUE(near->mip_news_.empty());
+  }
+  ASSERT_TRUE(afar->wait([rev](Recorder& r) {
+    return !r.mip_news_.empty() && r.mip_news_.back().second.back()->revision() == rev + 3;
+  }));
+  std::lock_guard lock(afar->m_);
+  EXPECT_TRUE(afar->ticks_.empty()) << "a holder afar is not told every tick";
+  EXPECT_LT(afar->mip_news_.size(), 3u) << "the ticks' news gathered";
+  std::size_t versions = 0;
+  for (const auto& [tick, changed] : afar->mip_news_) {
+    for (const VersionPtr& v : changed) EXPECT_EQ(v->pos(), a);
+    versions += changed.size();
+  }
+  EXPECT_EQ(versions, 3u);
+  EXPECT_EQ(counters_.deliveries.load(), 6u);
+}
+
+TEST_F(WorldOwnerMipNewsHeldTest, AChunkNowHeldAtFullResolutionIsToldEveryTickAndItsGatheredNewsAtOnce) {
+  const Vec3i a{31, 0, 31}, b{31, 0, 30};
+  auto editor = client(1, {1000, 10, 1000});
+  auto mover = client(2, {1000, 10, 1000});
+  owner_->want(1, {{a, true, 0}, {b, true, 0}});
+  owner_->want(2, {{a, false, kMipLevels - 1}, {b, false, kMipLevels - 1}});
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  // A change of b, gathered for the mover (not due for ten minutes).
+  owner_->edit(1, fill(1, Region{{1000, 0, 990}, {1002, 2, 992}}, materials::kBrick));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }));
+  owner_->inspect([](const WorldView&) {});  // the commit's news handed out
+  {
+    std::lock_guard lock(mover->m_);
+    EXPECT_TRUE(mover->ticks_.empty());
+    EXPECT_TRUE(mover->mip_news_.empty());
+  }
+  // The mover now holds b at full resolution: its gathered news of b comes
+  // at once, and a's, not changed yet, stays gathered until a is too.
+  owner_->holds_full(2, {b});
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.mip_news_.size() == 1; }));
+  {
+    std::lock_guard lock(mover->m_);
+    ASSERT_EQ(mover->mip_news_[0].second.size(), 1u);
+    EXPECT_EQ(mover->mip_news_[0].second[0]->pos(), b);
+  }
+  // b's next change reaches it in its tick.
+  owner_->edit(1, fill(2, Region{{1000, 0, 990}, {1002, 3, 992}}, materials::kSnow));
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.ticks_.size() == 1; }));
+  std::lock_guard lock(mover->m_);
+  ASSERT_EQ(mover->ticks_[0].second.size(), 1u);
+  EXPECT_EQ(mover->ticks_[0].second[0]->pos(), b);
+}
+
+TEST_F(WorldOwnerMipNewsHeldTest, HoldsFullOfAChunkNotHeldChangesNothing) {
+  const Vec3i a{31, 0, 31};
+  auto editor = client(1, {1000, 10, 1000});
+  auto other = client(2, {1000, 10, 1000});
+  owner_->want(1, {{a, true, 0}});
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  owner_->holds_full(2, {a});  // never asked for, or released: no holder made
+  owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kBrick));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1 && !r.ticks_.empty(); }));
+  owner_->inspect([](const WorldView&) {});
+  std::lock_guard lock(other->m_);
+  EXPECT_TRUE(other->ticks_.empty());
+  EXPECT_TRUE(other->mip_news_.empty());
 }
 
 }  // namespace
