@@ -193,8 +193,12 @@ std::string render_metrics(const MetricsSources& s) {
             "Of those, the chunks whose exact coarsest mip differed from the estimate (holders were sent it).",
             load(c.estimates_corrected));
   m.counter("terrane_chunks_changed_elsewhere_total",
-            "Chunks held here that another server of a shared world stored newer, read again from the database.",
+            "Chunks held here that another server of a shared world stored newer: read again from the database, "
+            "or forgotten when no client here holds them.",
             load(c.chunks_changed_elsewhere));
+  m.counter("terrane_chunks_forgotten_elsewhere_total",
+            "Of those, the chunks no client here held: forgotten, read from the database when next wanted.",
+            load(c.chunks_forgotten_elsewhere));
   m.counter("terrane_edits_forwarded_total", "Edits in regions another server holds, sent to its inbox.",
             load(c.edits_forwarded));
   m.counter("terrane_forwarded_edits_received_total", "Edits other servers forwarded to this one.",

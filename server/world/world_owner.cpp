@@ -826,8 +826,24 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
         if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
         continue;
       }
-      if (!older_than(*it->second.current, c.revision)) continue;
+      const Loaded& l = it->second;
+      if (!older_than(*l.current, c.revision)) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
+      if (!interest_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
+          loading_.count(c.pos) == 0 && l.current == l.published) {
+        // No client here holds it and nothing here waits for it: forgotten,
+        // not read again (a server beside a busy one would otherwise read
+        // every chunk the other writes that it once served); read from the
+        // store when next wanted. Its region's coarse image too, which
+        // would otherwise say the chunk was never stored.
+        horizon_changed(c.pos);
+        regions_read_.erase(coarse_region_of(c.pos));
+        if (!l.current->has_voxels()) --mips_only_;
+        loaded_.erase(it);
+        counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+        counters_.chunks_forgotten_elsewhere.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
       // As urgent as an edit of this server's: its holders wait to see it.
       read_again(c.pos, c.revision, Storage::Priority::kUrgent);
     }

@@ -18,7 +18,9 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <httplib.h>
 
+#include "client/bots/server_watch.h"
 #include "client/client.h"
 #include "common/world/coarse_image.h"
 #include "tests/support/eventually.h"
@@ -216,6 +218,19 @@ class ClusterTest : public testing_support::PostgresTest {
     return n;
   }
 
+  // One sample of a server's metrics (started with --metrics 127.0.0.1:0),
+  // or -1 when it cannot be read or is not there.
+  static double metric(ServerProcess& s, const std::string& name) {
+    httplib::Client http("127.0.0.1", s.metrics_port());
+    http.set_connection_timeout(10, 0);
+    http.set_read_timeout(30, 0);
+    auto res = http.Get("/metrics");
+    if (!res || res->status != 200) return -1;
+    const bots::Scrape scrape = bots::parse_exposition(res->body);
+    auto it = scrape.find(name);
+    return it == scrape.end() ? -1 : it->second;
+  }
+
   std::vector<std::unique_ptr<ServerProcess>> servers_;
 };
 
@@ -360,6 +375,38 @@ TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
   expect_agrees_with_its_server(bob, near);
   ann.disconnect();
   bob.disconnect();
+}
+
+TEST_F(ClusterTest, ChunksAnotherServerChangedThatNoClientHereHoldsAreForgottenNotReadAgain) {
+  ServerProcess& one = start(1);
+  ServerProcess& two = start(2, 5000, 100000, {"--metrics", "127.0.0.1:0"});
+  ASSERT_NE(two.metrics_port(), 0) << two.output();
+  Client ann(options(one, "ann"));
+  join(ann);
+  {
+    // Server 2 loads the chunks around the spawn for bob, who leaves.
+    Client bob(options(two, "bob"));
+    join(bob);
+    bob.disconnect();
+  }
+  ASSERT_TRUE(testing_support::eventually([&] { return metric(two, "terrane_clients") == 0; }));
+  const Region box = box_near(ann, 0);
+  const auto anns = pattern(box, materials::kBrick);
+  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  // Server 1's commit notifies server 2, which holds the chunks for nobody:
+  // forgotten, not read again.
+  ASSERT_TRUE(testing_support::eventually(
+      [&] { return metric(two, "terrane_chunks_forgotten_elsewhere_total") >= 1; }))
+      << "server 2 forgot none of the chunks server 1 changed";
+  EXPECT_EQ(metric(two, "terrane_chunks_forgotten_elsewhere_total"),
+            metric(two, "terrane_chunks_changed_elsewhere_total"));
+  // And read from the store when next wanted: a new client there sees the edit.
+  Client carl(options(two, "carl"));
+  const auto near = join(carl);
+  EXPECT_TRUE(replica_shows(carl, box, anns)) << "carl never saw ann's edit";
+  expect_agrees_with_its_server(carl, near);
+  ann.disconnect();
+  carl.disconnect();
 }
 
 TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEdit) {

@@ -28,6 +28,12 @@ class ServerProcess {
   }
 
   std::uint16_t port() const { return port_; }
+  // The metrics endpoint's port, when started with --metrics 127.0.0.1:0
+  // (0 if it said none).
+  std::uint16_t metrics_port() {
+    const std::string rest = child_.wait_for_line("metrics on http://127.0.0.1:", kServerStartDeadline);
+    return rest.empty() ? 0 : static_cast<std::uint16_t>(std::stoi(rest));
+  }
   // SIGTERM, then the exit status (the server saves on the way out).
   int stop() { return child_.stop(std::chrono::seconds(120)); }
   // SIGKILL: a crash, nothing runs on the way out. True if the signal is
