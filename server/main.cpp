@@ -60,7 +60,7 @@ constexpr const char* kHelp =
     "                              'none' removes it (default: the world's, if any); a world in\n"
     "                              PostgreSQL takes a new border only while no other server runs\n"
     "  --tick-hz N                 simulation ticks per second; an edit waits for the next one\n"
-    "                              (default 30)\n"
+    "                              (default 60)\n"
     "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
     "  --max-view-distance N       cap on client view distances (default 1024)\n"

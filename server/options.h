@@ -41,9 +41,11 @@ struct ServerOptions {
   // streamed or editable beyond it. border_set with !bounded_xz removes one.
   bool border_set = false;
   WorldBounds border;
-  // An edit waits for the next tick, up to one period: at 30 Hz a third of
-  // the 100 ms an edit may take to reach every holder, at 20 Hz half.
-  std::uint32_t tick_hz = 30;
+  // An edit waits for the next tick, up to one period: at 60 Hz a sixth of
+  // the 100 ms an edit may take to reach every holder, at 30 Hz a third.
+  // (World 1,000 on 2 cores, median of 3: fan-out p50 47.5 -> 24.2 ms,
+  // p99 175.8 -> 140.0 ms from 30 to 60 Hz, the server's CPU unchanged.)
+  std::uint32_t tick_hz = 60;
   std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
   std::int32_t max_full_res_radius = 256;  // voxels
   std::int32_t default_view_distance = 1024;   // until the client sends ClientState

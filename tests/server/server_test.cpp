@@ -55,7 +55,7 @@ TEST_F(ServerTest, WelcomeDescribesTheWorld) {
   auto w = parse_welcome(*msg(*f).body_as_Welcome());
   ASSERT_TRUE(w.ok()) << w.error().describe();
   EXPECT_EQ(w->protocol_version, kProtocolVersion);
-  EXPECT_EQ(w->tick_hz, 30u);
+  EXPECT_EQ(w->tick_hz, 60u);
   EXPECT_EQ(w->materials.size(), default_material_names().size());
   EXPECT_GE(w->server_epoch, 2u);  // bumped by the start
 }
