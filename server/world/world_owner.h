@@ -45,6 +45,9 @@
 // How long each request waited is reported (on_request_wait: the stream
 // gate, which then holds streaming back).
 //
+// In a world shared by several servers (PostgreSQL), leases, forwarded
+// edits and other servers' changes are in world_owner_shared.cpp.
+//
 // Threading: the public methods may be called from any thread and post to
 // the strand (or queue a request for it); WorldClient callbacks are made on
 // the strand.

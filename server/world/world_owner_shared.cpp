@@ -1,0 +1,372 @@
+// WorldOwner in a world shared by several servers (PostgreSQL): which
+// regions this server may write (leases, claimed as edits need them), edits
+// forwarded to a region's writer and those forwarded here (the inbox), and
+// chunks another server changed (read again, or forgotten when no client
+// here holds them). The rest of the world strand is world_owner.cpp; on
+// SQLite none of this runs (every region is writable).
+#include <algorithm>
+
+#include <fmt/format.h>
+
+#include "server/log.h"
+#include "server/world/world_owner.h"
+
+namespace terrane {
+
+namespace {
+
+// How long a forwarded edit waits at least for its owner's answer (at least
+// a lease time) before its client is told there was none.
+constexpr auto kForwardAnswerWait = std::chrono::milliseconds(2000);
+constexpr std::size_t kInboxPage = 256;
+
+}  // namespace
+
+WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder,
+                                          ClaimRule rule) {
+  if (!storage_.leased() || r.empty()) return Writable::kYes;
+  const auto now = std::chrono::steady_clock::now();
+  Writable out = Writable::kYes;
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    const Vec3i region = lease_region_of(cp);
+    auto [it, unknown] = leases_.try_emplace(region);
+    RegionLeaseState& l = it->second;
+    if (unknown ||
+        ((l.state == RegionLeaseState::kRefused || l.state == RegionLeaseState::kUnreachable) &&
+         now >= l.ask_again) ||
+        (l.state == RegionLeaseState::kRefused && l.left && rule == ClaimRule::kAny)) {
+      // Another server's lease may have run out since (it died): ask again.
+      // A region left to a neighbour's server by preference is taken for
+      // what cannot be forwarded (a forwarded edit, undo, a rollback).
+      l.state = RegionLeaseState::kClaiming;
+      storage_.claim(region, rule, [this, region](Storage::Claimed claimed) {
+        asio::post(strand_, [this, region, claimed = std::move(claimed)]() mutable {
+          on_claimed(region, std::move(claimed));
+        });
+      });
+    }
+    if (l.state == RegionLeaseState::kRefused) {
+      out = Writable::kNo;
+      *why = l.why;
+      if (holder != nullptr) *holder = l.holder;
+    } else if (l.state != RegionLeaseState::kHeld && out == Writable::kYes) {
+      out = Writable::kWaiting;
+    }
+  });
+  return out;
+}
+
+void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
+  RegionLeaseState& l = leases_[region];
+  if (!claimed.held) {
+    l.state = claimed.unreachable ? RegionLeaseState::kUnreachable : RegionLeaseState::kRefused;
+    l.left = claimed.left;
+    l.holder = claimed.holder;
+    l.why = std::move(claimed.why);
+    l.ask_again = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+    return;
+  }
+  // What this server holds of the region older than stored was written by
+  // the region's earlier owner: read again before anything is written over
+  // it (its holders are sent the newer chunks as they land).
+  // (A chunk not held is read from the store when wanted, but a load of it
+  // under way may have read it before the previous owner's last write.)
+  for (const auto& [cp, revision] : claimed.stored)
+    if (auto it = loaded_.find(cp); it == loaded_.end() ? loading_.count(cp) != 0
+                                                        : older_than(*it->second.current, revision))
+      read_again(cp, revision, Storage::Priority::kUrgent);
+  l.state = stale_in(region) ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
+}
+
+bool WorldOwner::older_than(const ChunkVersion& held, std::uint64_t revision) {
+  return held.estimate() || held.revision() < revision;
+}
+
+bool WorldOwner::stale_in(Vec3i region) const {
+  return std::any_of(stale_.begin(), stale_.end(), [&](const auto& s) { return lease_region_of(s.first) == region; });
+}
+
+void WorldOwner::load_unless_loading(Vec3i cp, Storage::Priority priority) {
+  if (!loading_.try_emplace(cp).second) return;
+  load(cp, priority);
+}
+
+bool WorldOwner::writes_region(Vec3i region) const {
+  auto it = leases_.find(region);
+  return it != leases_.end() &&
+         (it->second.state == RegionLeaseState::kHeld || it->second.state == RegionLeaseState::kRefreshing);
+}
+
+void WorldOwner::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority) {
+  auto [it, fresh] = stale_.try_emplace(cp, revision);
+  if (!fresh) it->second = std::max(it->second, revision);
+  // A load already under way may have read the store before this revision:
+  // refreshed() reads again when it lands.
+  load_unless_loading(cp, priority);
+}
+
+void WorldOwner::refreshed(Vec3i cp) {
+  auto s = stale_.find(cp);
+  if (s == stale_.end()) return;
+  if (auto held = loaded_.find(cp); held != loaded_.end() && older_than(*held->second.current, s->second)) {
+    // The load that landed read the store before the newer revision.
+    load_unless_loading(cp, Storage::Priority::kUrgent);
+    return;
+  }
+  // Held at the stored revision, or no longer held (read from the store when wanted).
+  const Vec3i region = lease_region_of(cp);
+  stale_.erase(s);
+  if (auto l = leases_.find(region);
+      l != leases_.end() && l->second.state == RegionLeaseState::kRefreshing && !stale_in(region))
+    l->second.state = RegionLeaseState::kHeld;
+}
+
+void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
+  asio::post(strand_, [this, changes = std::move(changes)] {
+    for (const ChunkChange& c : changes) {
+      if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
+      auto it = loaded_.find(c.pos);
+      if (it == loaded_.end()) {
+        // Not held; but a load under way may have read the store before
+        // this commit: read again if it did.
+        if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
+        continue;
+      }
+      const Loaded& l = it->second;
+      if (!older_than(*l.current, c.revision)) continue;
+      counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
+      if (!interest_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
+          loading_.count(c.pos) == 0 && l.current == l.published) {
+        // No client here holds it and nothing here waits for it: forgotten,
+        // not read again (a server beside a busy one would otherwise read
+        // every chunk the other writes that it once served); read from the
+        // store when next wanted. Its region's coarse image too, which
+        // would otherwise say the chunk was never stored.
+        horizon_changed(c.pos);
+        regions_read_.erase(coarse_region_of(c.pos));
+        if (!l.current->has_voxels()) --mips_only_;
+        loaded_.erase(it);
+        counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+        counters_.chunks_forgotten_elsewhere.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      // As urgent as an edit of this server's: its holders wait to see it.
+      read_again(c.pos, c.revision, Storage::Priority::kUrgent);
+    }
+  });
+}
+
+void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
+  asio::post(strand_, [this, regions = std::move(regions)] {
+    if (regions.empty()) return;
+    Vec3iMap<bool> in;
+    for (const Vec3i r : regions) in[r] = true;
+    for (const auto& [cp, l] : loaded_) {
+      const Vec3i region = lease_region_of(cp);
+      // Estimates are replaced by the chunks as they are (their loads read the store).
+      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) continue;
+      load_unless_loading(cp, Storage::Priority::kBackground);
+    }
+  });
+}
+
+void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
+  const Frame frame = build_edit_request(pe.edit);
+  counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
+  std::vector<Vec3i> hand_over;
+  for_each_chunk_in(box, [&](Vec3i cp) {
+    const Vec3i region = lease_region_of(cp);
+    if (!writes_region(region)) return;
+    // Being released: edits there wait until the forward is done (a claim
+    // now could run before the release).
+    RegionLeaseState& l = leases_[region];
+    l.state = RegionLeaseState::kHandingOver;
+    l.left = false;
+    l.holder = to;
+    l.why = fmt::format("handed over to server {}", to);
+    hand_over.push_back(region);
+  });
+  if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
+  storage_.forward(to, pe.player, frame, hand_over,
+                   [this, id = pe.id, edit = pe.edit, box, to, hand_over](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, hand_over, row = std::move(row)] {
+      // The regions handed over are the recipient's now: this server's next
+      // edits there are forwarded to it too, until asked again a second on,
+      // so a region does not bounce back before the recipient has claimed
+      // it. Not forwarded: they are asked for again at once.
+      const auto now = std::chrono::steady_clock::now();
+      for (const Vec3i region : hand_over)
+        if (auto l = leases_.find(region); l != leases_.end() && l->second.state == RegionLeaseState::kHandingOver) {
+          l->second.state = RegionLeaseState::kRefused;
+          l->second.ask_again = row ? now + std::chrono::seconds(1) : now;
+        }
+      if (!row) {
+        if (clients_.count(id) != 0)
+          reject(id, edit, RejectReason::kNotOwner,
+                 fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
+        return;
+      }
+      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt};
+      if (auto early = early_answers_.find(*row); early != early_answers_.end()) {
+        o.answer = early->second.first;
+        early_answers_.erase(early);
+      }
+      forwarded_.emplace(*row, std::move(o));
+      settle_forwarded();
+    });
+  });
+}
+
+void WorldOwner::inbox_has_edits() {
+  asio::post(strand_, [this] { take_inbox(); });
+}
+
+void WorldOwner::take_inbox() {
+  if (inbox_reading_) {
+    inbox_again_ = true;
+    return;
+  }
+  inbox_reading_ = true;
+  inbox_seen_.clear();
+  read_inbox_page(0);
+}
+
+void WorldOwner::read_inbox_page(std::int64_t after) {
+  // Row ids are given at insert, not in commit order: every read lists all
+  // rows waiting (a page at a time) and takes those not taken yet.
+  storage_.read_inbox(after, kInboxPage, [this](StoreResult<std::vector<InboxEdit>> got) {
+    asio::post(strand_, [this, got = std::move(got)] {
+      if (!got) {
+        server_log().warn("forwarded edits: cannot read the inbox: {}", got.error().message);
+        inbox_reading_ = false;
+        if (std::exchange(inbox_again_, false)) take_inbox();
+        return;
+      }
+      std::vector<ForwardAnswer> refused;
+      for (const InboxEdit& in : *got) {
+        inbox_seen_.insert(in.id);
+        if (!inbox_taken_.insert(in.id).second) continue;  // queued or answered already
+        // Another server's bytes, checked as a client's are.
+        auto edit = decode_forwarded_edit(in.edit);
+        const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
+        const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait();
+        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
+          // Too old: its sender has told its client there was no answer.
+          const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
+                                  : in.player.empty() ? std::string("the player's name is missing or too long")
+                                  : stopping_ ? std::string("the region's server is shutting down")
+                                  : too_old   ? std::string("it waited too long; its sender has given up on it")
+                                  : r.empty() ? std::string("edit outside the world")
+                                              : std::string("undo and redo are not forwarded");
+          refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
+          continue;
+        }
+        if (!take_forwarded_rate(in.player)) {
+          counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+          refused.push_back(ForwardAnswer{
+              in.id, in.from, false, 0,
+              fmt::format("edit rate limit: '{}' sent more than {} edits a second through the servers of this world",
+                          in.player, options_.edits_per_second)});
+          continue;
+        }
+        counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
+        reserve(r);
+        // What this server knew of the edit's regions held elsewhere may be
+        // out of date (the sender may have handed them over): asked again
+        // when the edit's turn comes.
+        for_each_chunk_in(r, [&](Vec3i cp) {
+          if (auto l = leases_.find(lease_region_of(cp));
+              l != leases_.end() && l->second.state == RegionLeaseState::kRefused)
+            leases_.erase(l);
+        });
+        edits_.push_back(PendingEdit{0, std::move(*edit), in.player, nullptr, Forwarded{in.id, in.from}});
+      }
+      if (!refused.empty()) storage_.answer(std::move(refused));
+      if (got->size() == kInboxPage) {
+        read_inbox_page(got->back().id);
+        return;
+      }
+      // The whole inbox listed: ids no longer there were answered and deleted.
+      std::erase_if(inbox_taken_, [&](std::int64_t id) { return inbox_seen_.count(id) == 0; });
+      inbox_reading_ = false;
+      if (std::exchange(inbox_again_, false)) take_inbox();
+    });
+  });
+}
+
+bool WorldOwner::take_forwarded_rate(const std::string& player) {
+  if (options_.edits_per_second <= 0) return true;
+  // Twice a session's burst: forwarded edits arrive in batches (an inbox
+  // read after a reconnect), not as their player sent them.
+  const double burst = options_.edits_per_second * 4;
+  // Bounded: players idle long enough to have a full bucket are forgotten,
+  // and if that is not enough, all are (they start full again).
+  if (forwarded_rate_.size() >= kMaxForwardedRates) {
+    for (auto it = forwarded_rate_.begin(); it != forwarded_rate_.end();)
+      it = it->second.available() >= burst ? forwarded_rate_.erase(it) : std::next(it);
+    if (forwarded_rate_.size() >= kMaxForwardedRates / 2) forwarded_rate_.clear();
+  }
+  auto [it, fresh] = forwarded_rate_.try_emplace(player, options_.edits_per_second, burst);
+  return it->second.take(1);
+}
+
+std::chrono::milliseconds WorldOwner::forward_wait() const {
+  // An owner silent for a lease time has lost its regions anyway.
+  return std::max<std::chrono::milliseconds>(kForwardAnswerWait, options_.lease);
+}
+
+void WorldOwner::answered(ForwardAnswer answer) {
+  asio::post(strand_, [this, answer = std::move(answer)] {
+    auto it = forwarded_.find(answer.id);
+    if (it != forwarded_.end())
+      it->second.answer = answer;
+    else  // before the forward's own callback: kept for it
+      early_answers_.emplace(answer.id, std::make_pair(answer, std::chrono::steady_clock::now()));
+    settle_forwarded();
+  });
+}
+
+void WorldOwner::settle_forwarded() {
+  const auto now = std::chrono::steady_clock::now();
+  const auto wait = forward_wait();
+  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
+  for (auto it = forwarded_.begin(); it != forwarded_.end();) {
+    Outgoing& o = it->second;
+    const auto client = clients_.find(o.id);
+    bool done = client == clients_.end();
+    if (!done && o.answer && !o.answer->accepted) {
+      reject(o.id, o.edit, RejectReason::kNotOwner,
+             fmt::format("server {} refused the forwarded edit: {}", o.to, o.answer->reason));
+      done = true;
+    } else if (!done && o.answer) {
+      // Acknowledged once this server shows the edit: its chunks are read
+      // again here (the owner's notice came with the answer) and sent to
+      // the client before the ack.
+      bool current = true;
+      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
+      if (current) {
+        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, tick_)), SendClass::kControl);
+        done = true;
+      }
+    } else if (!done && now - o.sent > wait) {
+      reject(o.id, o.edit, RejectReason::kNotOwner,
+             fmt::format("forwarded to server {}, no answer within {} ms (it may still be applied)", o.to,
+                         wait.count()));
+      done = true;
+    }
+    it = done ? forwarded_.erase(it) : std::next(it);
+  }
+}
+
+void WorldOwner::lease_lost(Vec3i region, std::string why) {
+  asio::post(strand_, [this, region, why = std::move(why)] {
+    // Another server may have written the region since: what this one holds
+    // of it may be stale, so it must not write there again. Stopping is the
+    // safe answer (a restart reads the region afresh); writes in flight are
+    // fenced by the database whatever happens here.
+    server_log().critical("region ({},{},{}): lease lost ({}); stopping", region.x, region.y, region.z, why);
+    fatal_storage("lease lost");
+  });
+}
+
+}  // namespace terrane
