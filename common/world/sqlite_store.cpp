@@ -637,6 +637,7 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
   sqlite3_stmt* save_stmt = stmt;
   if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
     return error("cannot begin transaction");
+  std::uint64_t logged_bytes = 0;
   if (!log.empty()) {
     if (!log_stmt_) {
       if (sqlite3_exec(db_, kEditLogSchema, nullptr, nullptr, nullptr) != SQLITE_OK ||
@@ -650,6 +651,7 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
       }
     }
     for (const EditLogEntry& l : log) {
+      logged_bytes += l.before.size() + l.after.size();
       StmtReset reset{log_stmt_};
       sqlite3_bind_int64(log_stmt_, 1, static_cast<sqlite3_int64>(l.tick));
       sqlite3_bind_int64(log_stmt_, 2, l.time_ms);
@@ -710,6 +712,10 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
     FileError e = error("cannot commit chunks");
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     return e;
+  }
+  if (log_size_) {
+    log_size_->first += static_cast<std::int64_t>(log.size());
+    log_size_->second += logged_bytes;
   }
   if (coarse_behind_) {
     const auto now = std::chrono::steady_clock::now();
@@ -823,21 +829,34 @@ FileResult<std::int64_t> SqliteStore::prune_edit_log(std::int64_t before_ms, std
                                                     std::int64_t max_rows) {
   if (!table_exists(db_, "edit_log")) return std::int64_t{0};
   std::int64_t deleted = 0;
-  sqlite3_stmt* st = nullptr;
-  if (sqlite3_prepare_v2(db_,
-                         "DELETE FROM edit_log WHERE id IN (SELECT id FROM edit_log WHERE time < ? ORDER BY id LIMIT ?)",
-                         -1, &st, nullptr) != SQLITE_OK)
-    return error("cannot prune the edit log");
-  sqlite3_bind_int64(st, 1, before_ms);
-  sqlite3_bind_int64(st, 2, max_rows);
-  const int rc = sqlite3_step(st);
-  sqlite3_finalize(st);
-  if (rc != SQLITE_DONE) return error("cannot prune the edit log");
+  // The size known, less what the prune by age takes (counted through the
+  // time index first: only the rows it deletes are read).
+  auto known = log_size_;
+  log_size_.reset();  // known again below once every delete went through
+  constexpr const char* kOld = " FROM edit_log WHERE id IN (SELECT id FROM edit_log WHERE time < ? ORDER BY id LIMIT ?)";
+  std::pair<std::int64_t, std::uint64_t> old{0, 0};
+  for (const bool count : {true, false}) {
+    if (count && !known) continue;
+    sqlite3_stmt* st = nullptr;
+    const std::string sql = count ? std::string("SELECT count(*), coalesce(sum(length(before) + length(after)), 0)") + kOld
+                                  : std::string("DELETE") + kOld;
+    if (sqlite3_prepare_v2(db_, sql.c_str(), -1, &st, nullptr) != SQLITE_OK) return error("cannot prune the edit log");
+    sqlite3_bind_int64(st, 1, before_ms);
+    sqlite3_bind_int64(st, 2, max_rows);
+    const int rc = sqlite3_step(st);
+    if (count && rc == SQLITE_ROW)
+      old = {sqlite3_column_int64(st, 0), static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
+    sqlite3_finalize(st);
+    if (rc != (count ? SQLITE_ROW : SQLITE_DONE)) return error("cannot prune the edit log");
+  }
   deleted += sqlite3_changes(db_);
+  if (known && deleted == old.first)
+    log_size_ = std::pair<std::int64_t, std::uint64_t>{known->first - old.first, known->second - std::min(known->second, old.second)};
   if (max_bytes == 0 || deleted >= max_rows) return deleted;
   auto size = edit_log_size();
   if (!size) return size.error();
   std::uint64_t bytes = size->second;
+  std::int64_t rows_left = size->first;
   // The oldest go first, until under the bound: read up to a thousand
   // sizes at a time, delete through the last one needed.
   while (bytes > max_bytes && deleted < max_rows) {
@@ -860,22 +879,30 @@ FileResult<std::int64_t> SqliteStore::prune_edit_log(std::int64_t before_ms, std
     sqlite3_bind_int64(del, 1, last);
     const int d = sqlite3_step(del);
     sqlite3_finalize(del);
-    if (d != SQLITE_DONE) return error("cannot prune the edit log");
+    if (d != SQLITE_DONE) {
+      log_size_.reset();
+      return error("cannot prune the edit log");
+    }
     deleted += rows;
+    rows_left -= rows;
+    log_size_ = std::pair<std::int64_t, std::uint64_t>{rows_left, bytes};
   }
   return deleted;
 }
 
 FileResult<std::pair<std::int64_t, std::uint64_t>> SqliteStore::edit_log_size() {
   if (!table_exists(db_, "edit_log")) return std::pair<std::int64_t, std::uint64_t>{0, 0};
+  if (log_size_) return *log_size_;
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "SELECT count(*), coalesce(sum(length(before) + length(after)), 0) FROM edit_log", -1,
                          &st, nullptr) != SQLITE_OK)
     return error("cannot measure the edit log");
   std::pair<std::int64_t, std::uint64_t> out{0, 0};
-  if (sqlite3_step(st) == SQLITE_ROW)
+  const int rc = sqlite3_step(st);
+  if (rc == SQLITE_ROW)
     out = {sqlite3_column_int64(st, 0), static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
   sqlite3_finalize(st);
+  if (rc == SQLITE_ROW) log_size_ = out;
   return out;
 }
 

@@ -98,7 +98,8 @@ class SqliteStore final : public WorldStore {
   FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) override;
   FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
                                           std::int64_t max_rows = 10000) override;
-  // Entries and the bytes of their before/after voxels.
+  // Entries and the bytes of their before/after voxels. Counted once (a
+  // scan of the whole log), then kept by this store's own writes and prunes.
   FileResult<std::pair<std::int64_t, std::uint64_t>> edit_log_size();
   FileStatus erase_chunk(Vec3i pos);
 
@@ -155,6 +156,11 @@ class SqliteStore final : public WorldStore {
   sqlite3_stmt* load_stmt_ = nullptr;
   sqlite3_stmt* save_stmt_ = nullptr;
   sqlite3_stmt* log_stmt_ = nullptr;
+  // edit_log_size once counted: a prune by size once a minute scanned every
+  // row, tens of milliseconds on the writer thread with a busy log, and
+  // every acknowledgement waited behind it. Unknown again after a failure
+  // or a prune by age.
+  std::optional<std::pair<std::int64_t, std::uint64_t>> log_size_;
   sqlite3_stmt* insert_stmt_ = nullptr;
   sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
   sqlite3_stmt* coarse_load_stmt_ = nullptr;
