@@ -206,8 +206,11 @@ void WorldOwner::do_holds_full(ClientId id, const HoldsFull& h) {
     interest_.hold(cp, id, true);
     news = news || std::any_of(c.mip_news.begin(), c.mip_news.end(), [cp](const VersionPtr& v) { return v->pos() == cp; });
   }
-  if (!news) return;
   // A change of one of them gathered for later goes now, with the rest.
+  if (news) hand_mip_news(c);
+}
+
+void WorldOwner::hand_mip_news(Client& c) {
   c.link->mips_changed(c.mip_news_tick, std::move(c.mip_news));
   c.mip_news.clear();
 }
@@ -219,8 +222,7 @@ void WorldOwner::deliver_mip_news() {
     mip_news_due_.pop_front();
     auto it = clients_.find(id);
     if (it == clients_.end() || it->second.mip_news.empty() || it->second.mip_due > now) continue;
-    it->second.link->mips_changed(it->second.mip_news_tick, std::move(it->second.mip_news));
-    it->second.mip_news.clear();
+    hand_mip_news(it->second);
   }
 }
 

@@ -398,6 +398,8 @@ class WorldOwner : private WorldView {
   // Hands each client whose mip news is due its news (mips_changed); every
   // tick.
   void deliver_mip_news();
+  // Hands c its mip news now, whenever it was due.
+  void hand_mip_news(Client& c);
   std::mutex requests_m_;
   std::deque<Request> requests_;  // guarded by requests_m_
   bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue
