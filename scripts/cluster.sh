@@ -127,10 +127,11 @@ for i in $(seq 1 "$servers"); do
   awk -v i="$i" -v h="$hwm" -v c0="${cpu0[$((i - 1))]}" -v c1="$cpu1" -v s="$start" -v e="$end" \
     -v f="$(metric terrane_edits_forwarded_total)" -v r="$(metric terrane_forwarded_edits_received_total)" \
     -v x="$(metric terrane_chunks_changed_elsewhere_total)" -v fg="$(metric terrane_chunks_forgotten_elsewhere_total)" \
+    -v up="$(metric terrane_chunks_updated_elsewhere_total)" \
     -v rs="$(metric terrane_redirects_sent_total)" \
     -v rr="$(metric terrane_redirects_received_total)" 'BEGIN {
-    printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks the others changed %d (forgotten, held by no client here: %d); clients redirected away %d, in %d\n",
-           i, h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s), f, r, x, fg, rs, rr }'
+    printf "server %d: peak RSS %.0f MiB; CPU %.1f s over %.1f s wall (%.0f%% of one core); edits forwarded %d, received %d; chunks the others changed %d (updated from their units: %d; forgotten, held by no client here: %d; the rest read again); clients redirected away %d, in %d\n",
+           i, h / 1024, c1 - c0, e - s, 100 * (c1 - c0) / (e - s), f, r, x, up, fg, rs, rr }'
 done
 awk -v c0="$commits0" -v c1="$commits1" -v b0="$bytes0" -v b1="$bytes1" -v s="$start" -v e="$end" -v a="${acked:-0}" \
   -v w="$writes" 'BEGIN {

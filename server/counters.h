@@ -137,9 +137,11 @@ struct ServerCounters {
   std::atomic<std::uint64_t> estimates_corrected{0};
   // A shared world: chunks held here that another server's notice said were
   // stored newer, so they were read again, or, when no client here held
-  // them, forgotten (world strand).
+  // them, forgotten, or brought up to date from the notice's units (world
+  // strand).
   std::atomic<std::uint64_t> chunks_changed_elsewhere{0};
   std::atomic<std::uint64_t> chunks_forgotten_elsewhere{0};
+  std::atomic<std::uint64_t> chunks_updated_elsewhere{0};
   // Edits in regions another server holds sent to its inbox, and edits
   // other servers sent to this one's.
   std::atomic<std::uint64_t> edits_forwarded{0};

@@ -87,6 +87,11 @@ struct ChunkWrite {
   std::vector<std::uint8_t> blob;  // encode_chunk_blob output
   // The chunk's coarse_voxels; decoded from the blob when not given.
   std::optional<CoarseVoxels> coarse = std::nullopt;
+  // The 4^3 units that changed from revision - 1 to revision, as one update
+  // batch (common/codec/update_batch.h); empty when not known. A shared
+  // world's store passes them on to the other servers (PostgreSQL's change
+  // notices); SQLite has no readers to tell and ignores them.
+  std::vector<std::uint8_t> units = {};
 };
 
 // One applied edit in the edit log (table edit_log): who, when, the box

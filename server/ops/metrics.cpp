@@ -199,6 +199,10 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_forgotten_elsewhere_total",
             "Of those, the chunks no client here held: forgotten, read from the database when next wanted.",
             load(c.chunks_forgotten_elsewhere));
+  m.counter("terrane_chunks_updated_elsewhere_total",
+            "Of those, the chunks brought up to date from the units in the other server's notice, not read again "
+            "(their holders are sent the units).",
+            load(c.chunks_updated_elsewhere));
   m.counter("terrane_edits_forwarded_total", "Edits in regions another server holds, sent to its inbox.",
             load(c.edits_forwarded));
   m.counter("terrane_forwarded_edits_received_total", "Edits other servers forwarded to this one.",

@@ -112,6 +112,9 @@ void ChangeListener::hand_on(const PostgresStore::Notice& n, std::vector<std::in
         if (r.seq > known + 1) skipped.push_back(r.region);
         known = std::max(known, r.seq);
       }
+      if (notice->units_unread != 0)
+        server_log().warn("notices from the other servers: the units of {} chunks do not read; reading them again",
+                          notice->units_unread);
       if (!notice->chunks.empty()) on_.changes(std::move(notice->chunks));
       if (!skipped.empty()) {
         server_log().warn("notices from the other servers: {} regions skipped a write; reading them again",

@@ -191,6 +191,53 @@ struct PostgresStore::Connection {
 
 Vec3i lease_region_of(Vec3i chunk_pos) { return coarse_region_of(chunk_pos); }
 
+namespace {
+
+constexpr char kBase64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+
+std::string base64(std::span<const std::uint8_t> bytes) {
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    const std::size_t n = std::min<std::size_t>(3, bytes.size() - i);
+    std::uint32_t v = static_cast<std::uint32_t>(bytes[i]) << 16;
+    if (n > 1) v |= static_cast<std::uint32_t>(bytes[i + 1]) << 8;
+    if (n > 2) v |= bytes[i + 2];
+    for (std::size_t k = 0; k < 4; ++k) out += k <= n ? kBase64[(v >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
+
+// nullopt unless text is padded base64 of at least one byte.
+std::optional<std::vector<std::uint8_t>> from_base64(std::string_view text) {
+  if (text.empty() || text.size() % 4 != 0) return std::nullopt;
+  std::vector<std::uint8_t> out;
+  out.reserve(text.size() / 4 * 3);
+  for (std::size_t i = 0; i < text.size(); i += 4) {
+    const bool last = i + 4 == text.size();
+    std::uint32_t v = 0;
+    int pad = 0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      const char c = text[i + k];
+      int d = -1;
+      if (c >= 'A' && c <= 'Z') d = c - 'A';
+      else if (c >= 'a' && c <= 'z') d = c - 'a' + 26;
+      else if (c >= '0' && c <= '9') d = c - '0' + 52;
+      else if (c == '+') d = 62;
+      else if (c == '/') d = 63;
+      else if (c == '=' && last && k >= 2) d = 0, ++pad;
+      if (d < 0 || (pad > 0 && c != '=')) return std::nullopt;
+      v = (v << 6) | static_cast<std::uint32_t>(d);
+    }
+    out.push_back(static_cast<std::uint8_t>(v >> 16));
+    if (pad < 2) out.push_back(static_cast<std::uint8_t>(v >> 8));
+    if (pad < 1) out.push_back(static_cast<std::uint8_t>(v));
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std::span<const RegionSeq> regions) {
   std::vector<std::string> out;
   std::string payload;
@@ -203,7 +250,11 @@ std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std:
     payload += entry;
   };
   for (const RegionSeq& r : regions) add(fmt::format("r,{},{},{},{}", r.region.x, r.region.y, r.region.z, r.seq));
-  for (const ChunkWrite& w : chunks) add(fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision));
+  for (const ChunkWrite& w : chunks) {
+    std::string entry = fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision);
+    if (!w.units.empty() && (w.units.size() + 2) / 3 * 4 <= kMaxNoticeUnitsBytes) entry += "," + base64(w.units);
+    add(entry);
+  }
   if (!payload.empty()) out.push_back(std::move(payload));
   return out;
 }
@@ -217,8 +268,25 @@ std::optional<ChangeNotice> parse_change_notice(std::string_view payload) {
     const bool region = entry.substr(0, 2) == "r,";
     if (region) entry.remove_prefix(2);
     std::int64_t v[4];
+    std::optional<std::vector<std::uint8_t>> units;
     for (int i = 0; i < 4; ++i) {
-      const std::size_t comma = i < 3 ? entry.find(',') : entry.size();
+      std::size_t comma = i < 3 ? entry.find(',') : entry.size();
+      if (i == 3 && !region) {
+        // A chunk's revision may be followed by its units.
+        comma = entry.find(',');
+        if (comma != std::string_view::npos) {
+          // Units that do not read leave the chunk to be read again, like
+          // a notice without them; the rest of the notice stands.
+          const std::string_view tail = entry.substr(comma + 1);
+          units = tail.size() <= kMaxNoticeUnitsBytes ? from_base64(tail) : std::nullopt;
+          if (!units) {
+            units.emplace();
+            ++out.units_unread;
+          }
+        } else {
+          comma = entry.size();
+        }
+      }
       if (comma == std::string_view::npos) return std::nullopt;
       const auto [at, ec] = std::from_chars(entry.data(), entry.data() + comma, v[i]);
       if (ec != std::errc{} || at != entry.data() + comma) return std::nullopt;
@@ -231,7 +299,7 @@ std::optional<ChangeNotice> parse_change_notice(std::string_view payload) {
     if (region)
       out.regions.push_back(RegionSeq{p, static_cast<std::uint64_t>(v[3])});
     else
-      out.chunks.push_back(ChunkChange{p, static_cast<std::uint64_t>(v[3])});
+      out.chunks.push_back(ChunkChange{p, static_cast<std::uint64_t>(v[3]), units ? std::move(*units) : std::vector<std::uint8_t>{}});
   }
   return out;
 }
@@ -322,18 +390,20 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     auto put = c->exec("write schema version", "INSERT INTO terrane_schema (version) VALUES ($1)",
                        {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
-  } else if (version->integer(0, 0) == 1) {
-    // Servers of version 1 still running would write without moving the
-    // write sequences or keeping answers: the upgrade waits for them.
+  } else if (const auto v = version->integer(0, 0); v == 1 || v == 2) {
+    // Servers of an older version still running would write without moving
+    // the write sequences or keeping answers (1), or refuse this build's
+    // notices (2): the upgrade waits for them.
     auto running = c->exec("count current leases", "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
     if (!running) return c->abort(running.error());
     if (running->integer(0, 0).value_or(0) > 0)
       return c->abort(StoreError{StoreError::Kind::kQuery,
-                                 fmt::format("postgresql: {} holds a Terrane schema of version 1 with {} regions leased "
-                                             "now: stop its servers, then start this build to bring it to version {}",
-                                             shown, running->get(0, 0), kSchemaVersion)});
+                                 fmt::format("postgresql: {} holds a Terrane schema of version {} with {} regions "
+                                             "leased now: stop its servers, then start this build to bring it to "
+                                             "version {}",
+                                             shown, *v, running->get(0, 0), kSchemaVersion)});
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
-    // seq only, made above.
+    // seq only, made above; version 2 differs in its notices only.
     auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) != kSchemaVersion) {

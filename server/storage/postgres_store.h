@@ -126,7 +126,10 @@ class PostgresStore final : public WorldStore {
   ~PostgresStore() override;
 
   // The schema version this build reads and writes.
-  static constexpr int kSchemaVersion = 2;  // 1 is upgraded on open (terrane_servers added)
+  // 1 and 2 are upgraded on open once none of their regions is leased (1:
+  // terrane_servers and the rest added; 2: notices carry changed units,
+  // which a server of version 2 refuses, so the two must not run together).
+  static constexpr int kSchemaVersion = 3;
   // Whether url names a PostgreSQL database ("postgresql://..." or
   // "postgres://...") rather than a world directory.
   static bool is_url(const std::string& url);
@@ -304,22 +307,32 @@ class PostgresStore final : public WorldStore {
 // write notifies channel terrane_changes, in its transaction, of each chunk
 // it wrote and the chunk's new revision, and of each region it wrote and
 // the region's new sequence number (+1 per write of it). Payloads are
-// text: entries "x,y,z,revision" (a chunk) and "r,x,y,z,seq" (a region)
-// separated by one space, at most kMaxChangeNoticeBytes each (more
-// entries: more notices).
+// text: entries "x,y,z,revision" or "x,y,z,revision,UNITS" (a chunk) and
+// "r,x,y,z,seq" (a region) separated by one space, at most
+// kMaxChangeNoticeBytes each (more entries: more notices). UNITS is the
+// base64 (RFC 4648, padded) of the update batch of the 4^3 units that
+// changed from revision - 1 to revision (ChunkWrite::units), when the write
+// knows them and they take at most kMaxNoticeUnitsBytes of base64; a reader
+// holding revision - 1 applies them instead of reading the chunk.
 inline constexpr const char* kChangesChannel = "terrane_changes";
 inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
+inline constexpr std::size_t kMaxNoticeUnitsBytes = 4000;
 struct ChunkChange {
   Vec3i pos;
   std::uint64_t revision = 0;
+  std::vector<std::uint8_t> units = {};  // decoded from UNITS; empty without
   friend bool operator==(const ChunkChange&, const ChunkChange&) = default;
 };
 struct ChangeNotice {
   std::vector<ChunkChange> chunks;
   std::vector<RegionSeq> regions;
+  // Chunks whose UNITS did not read (not base64, or over the cap): kept
+  // without units, so they are read again.
+  std::size_t units_unread = 0;
 };
 std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std::span<const RegionSeq> regions = {});
-// nullopt if the payload is not one (another program's notice, damage).
+// nullopt if the payload is not one (another program's notice, damage);
+// a chunk's UNITS that do not read only lose the chunk its units.
 std::optional<ChangeNotice> parse_change_notice(std::string_view payload);
 
 // The region (8 x 8 x 8 chunks) a chunk belongs to.

@@ -407,6 +407,10 @@ void Storage::writer_loop() {
       std::vector<ChunkWrite> writes;
       std::vector<EditLogEntry> log;
       std::vector<ForwardAnswer> answers;
+      // A shared world tells the other servers each chunk's changed units
+      // (they apply them to the revision before instead of reading the
+      // chunk); a later version of a chunk in the batch carries its own.
+      const bool tells_units = dynamic_cast<PostgresStore*>(writer_store_.get()) != nullptr;
       for (CommitJob& job : batch) {
         for (EditLogEntry& e : job.log) log.push_back(std::move(e));
         for (ForwardAnswer& a : job.answers) answers.push_back(std::move(a));
@@ -414,6 +418,10 @@ void Storage::writer_loop() {
           const auto blob = v->blob();
           ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end()),
                        coarse_voxels(v->chunk())};
+          if (tells_units && v->changed_units().any() && v->has_voxels()) {
+            const UpdatePiece* piece = &v->update_piece();
+            net_codec_join_update_pieces(std::span(&piece, 1), w.units);
+          }
           auto [it, fresh] = index.emplace(v->pos(), writes.size());
           if (fresh)
             writes.push_back(std::move(w));

@@ -947,33 +947,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     // region hash, a read) is answered from the new versions.
     // Holders at full resolution hear of every tick; the others' news is
     // gathered and handed over every mip_refresh_ms (deliver_mip_news).
-    std::unordered_map<ClientId, std::vector<VersionPtr>> news;
-    std::uint64_t deliveries = 0;
-    const bool gather = options_.mip_refresh_ms > 0;
-    const auto due = t0 + std::chrono::milliseconds(options_.mip_refresh_ms);
-    for (const VersionPtr& v : versions) {
-      if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
-        it->second.published = v;
-      horizon_changed(v->pos());
-      for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
-        ++deliveries;
-        if (h.full || !gather) {
-          news[h.id].push_back(v);
-          continue;
-        }
-        auto c = clients_.find(h.id);
-        if (c == clients_.end()) continue;
-        if (c->second.mip_news.empty()) {
-          c->second.mip_due = due;
-          mip_news_due_.emplace_back(due, h.id);
-        }
-        c->second.mip_news.push_back(v);
-        c->second.mip_news_tick = tick;
-      }
-    }
-    counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
-    for (auto& [id, changed] : news)
-      if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
+    publish(tick, versions, t0);
     const auto acked_at = std::chrono::steady_clock::now();
     for (const Ack& a : acks) {
       auto it = clients_.find(a.id);
@@ -997,6 +971,42 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     drain_wanted_ = false;
     drained_.set_value();
   }
+}
+
+std::uint64_t WorldOwner::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions,
+                                  std::chrono::steady_clock::time_point now) {
+  // Grants not yet handed over go first: a holder hears of a version after
+  // it was granted the one before (a replicator drops news of a chunk it
+  // was not granted yet).
+  flush_grants();
+  std::unordered_map<ClientId, std::vector<VersionPtr>> news;
+  std::uint64_t deliveries = 0;
+  const bool gather = options_.mip_refresh_ms > 0;
+  const auto due = now + std::chrono::milliseconds(options_.mip_refresh_ms);
+  for (const VersionPtr& v : versions) {
+    if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
+      it->second.published = v;
+    horizon_changed(v->pos());
+    for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
+      ++deliveries;
+      if (h.full || !gather) {
+        news[h.id].push_back(v);
+        continue;
+      }
+      auto c = clients_.find(h.id);
+      if (c == clients_.end()) continue;
+      if (c->second.mip_news.empty()) {
+        c->second.mip_due = due;
+        mip_news_due_.emplace_back(due, h.id);
+      }
+      c->second.mip_news.push_back(v);
+      c->second.mip_news_tick = tick;
+    }
+  }
+  counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
+  for (auto& [id, changed] : news)
+    if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
+  return deliveries;
 }
 
 void WorldOwner::fail_rollbacks(const std::string& why) {

@@ -170,8 +170,12 @@ class WorldOwner : private WorldView {
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
   // Chunks another server of a shared world stored, at these revisions
-  // (its notices): what this server holds of them older than that is read
-  // again, and its holders are sent the newer chunks.
+  // (its notices): what this server holds of them older than that is
+  // brought up to date, and its holders are sent the change. A chunk held
+  // with its voxels at the revision before, whose notice carries the
+  // changed units, has them applied (its holders get the units, as for an
+  // edit here); any other is read again (its holders get the new chunk),
+  // or forgotten when nothing here holds or waits for it.
   void changed_elsewhere(std::vector<ChunkChange> changes);
   // Notices of these regions may have been missed (their write sequences
   // moved while the listener reconnected): every chunk held there, outside
@@ -324,6 +328,14 @@ class WorldOwner : private WorldView {
   void apply_edits();
   void on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
                     const FileStatus& status);
+  // Publishes committed versions (each its chunk's newest) and tells their
+  // holders: those at full resolution at once (WorldClient::committed),
+  // the others gathered for deliver_mip_news. Returns the deliveries.
+  std::uint64_t publish(std::uint64_t tick, const std::vector<VersionPtr>& versions,
+                        std::chrono::steady_clock::time_point now);
+  // The version of l's chunk (held with its voxels at c.revision - 1) that
+  // c's units make, or null when they do not decode as units of that chunk.
+  VersionPtr apply_units(const Loaded& l, const ChunkChange& c);
   void fatal_storage(const std::string& why);
   // Starts loading chunk_pos unless loaded or loading; true if loaded with
   // the given level (0: its voxels), and not as an estimate when exact.
@@ -400,6 +412,7 @@ class WorldOwner : private WorldView {
   void deliver_mip_news();
   // Hands c its mip news now, whenever it was due.
   void hand_mip_news(Client& c);
+  std::vector<UnitUpdate> units_scratch_;  // apply_units'
   std::mutex requests_m_;
   std::deque<Request> requests_;  // guarded by requests_m_
   bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue

@@ -123,6 +123,7 @@ void WorldOwner::refreshed(Vec3i cp) {
 
 void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
   asio::post(strand_, [this, changes = std::move(changes)] {
+    std::vector<VersionPtr> updated;
     for (const ChunkChange& c : changes) {
       if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
       auto it = loaded_.find(c.pos);
@@ -150,10 +151,72 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
         counters_.chunks_forgotten_elsewhere.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
+      if (!c.units.empty() && l.current->has_voxels() && !l.current->estimate() &&
+          l.current->revision() + 1 == c.revision && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
+          loading_.count(c.pos) == 0 && l.current == l.published) {
+        // The notice's units take what is held to the new revision: applied
+        // here, and sent to the holders as units, as an edit here would be.
+        if (VersionPtr v = apply_units(l, c)) {
+          it->second.current = v;
+          it->second.used_tick = tick_;
+          updated.push_back(std::move(v));
+          continue;
+        }
+        server_log().warn("chunk ({},{},{}): the units of revision {} in another server's notice do not apply; "
+                          "reading it again",
+                          c.pos.x, c.pos.y, c.pos.z, c.revision);
+      }
       // As urgent as an edit of this server's: its holders wait to see it.
       read_again(c.pos, c.revision, Storage::Priority::kUrgent);
     }
+    if (!updated.empty()) {
+      counters_.chunks_updated_elsewhere.fetch_add(updated.size(), std::memory_order_relaxed);
+      publish(tick_, updated, std::chrono::steady_clock::now());
+    }
   });
+}
+
+VersionPtr WorldOwner::apply_units(const Loaded& l, const ChunkChange& c) {
+  units_scratch_.resize(kUpdateUnitsPerChunk);
+  auto n = net_codec_decode_update_batch(c.units, units_scratch_);
+  if (!n || *n == 0) return nullptr;
+  UnitBits bits;
+  std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index{};
+  for (std::size_t i = 0; i < *n; ++i) {
+    const UnitUpdate& u = units_scratch_[i];
+    if (u.chunk_pos != c.pos || bits.test(u.unit_index)) return nullptr;
+    bits.set(u.unit_index);
+    by_index[u.unit_index] = &u;
+  }
+  const VersionPtr& prev = l.current;
+  auto chunk = std::make_unique<Chunk>(prev->chunk() != nullptr ? prev->chunk()->clone() : Chunk(kAir));
+  // One pass over the box of the changed units: rows repacked and mips
+  // updated once.
+  Vec3i lo{kChunkSize, kChunkSize, kChunkSize}, hi{0, 0, 0};
+  for (std::size_t i = 0; i < *n; ++i) {
+    const int idx = units_scratch_[i].unit_index;
+    const Vec3i base = Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
+    lo = min3(lo, base);
+    hi = max3(hi, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
+  }
+  chunk->modify(Region{lo, hi}, [&](Vec3i p, Voxel old) {
+    const Vec3i uc{p.x / kUpdateUnitSize, p.y / kUpdateUnitSize, p.z / kUpdateUnitSize};
+    const UnitUpdate* u = by_index[static_cast<std::size_t>((uc.y * 8 + uc.z) * 8 + uc.x)];
+    if (u == nullptr) return old;
+    const Vec3i w = p - uc * kUpdateUnitSize;
+    return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
+  });
+  std::shared_ptr<const Chunk> next;
+  if (!chunk->empty()) {
+    if (chunk->level0().unpacked()) chunk->compact();
+    chunk->pack_mips();
+    next = std::move(chunk);
+  }
+  const auto differs = levels_changed(prev->chunk(), next.get());
+  std::array<std::uint64_t, kMipLevels> since{};
+  for (int level = 0; level < kMipLevels; ++level)
+    since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? c.revision : prev->level_since(level);
+  return std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(next), bits, since);
 }
 
 void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {

@@ -377,6 +377,51 @@ TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
   bob.disconnect();
 }
 
+TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnitsNotReadAgain) {
+  ServerProcess& one = start(1);
+  ServerProcess& two = start(2, 5000, 100000, {"--metrics", "127.0.0.1:0"});
+  ASSERT_NE(two.metrics_port(), 0) << two.output();
+  Client ann(options(one, "ann"));
+  join(ann);
+  Client bob(options(two, "bob"));
+  const auto near = join(bob);
+  auto units_updated = [&] {
+    std::uint64_t n = 0;
+    bob.wait_until([&](const ClientView& v) {
+      n = v.counters.units_updated;
+      return true;
+    }, 0ms);
+    return n;
+  };
+  const std::uint64_t units_before = units_updated();
+  // Server 1's notices carry each chunk's changed units; server 2 holds the
+  // chunks at the revision before, applies them and sends bob the units.
+  const Region box = box_near(ann, 0);
+  for (const Material m : {materials::kBrick, materials::kSnow}) {
+    const auto v = pattern(box, m);
+    ASSERT_EQ(outcome(ann, ann.write_box(box, v)), "");
+    ASSERT_TRUE(bob.wait_until([&](const ClientView& view) { return view.closed || shows(view.replica, box, v); },
+                               kDeadline))
+        << "bob never saw ann's edit";
+    ASSERT_TRUE(replica_shows(ann, box, v));
+  }
+  // What server 2 made of the units is what server 1 wrote: the chunks
+  // around the box agree voxel for voxel in the two clients' replicas.
+  const Vec3i k{kChunkSize, kChunkSize, kChunkSize};
+  const Region chunks{chunk_origin(chunk_of(box.min)), chunk_origin(chunk_of(box.max - Vec3i{1, 1, 1})) + k};
+  Box anns(chunks.size()), bobs(chunks.size());
+  ann.with_replica([&](const Replica& r) { r.read_box(chunks.min, anns); });
+  bob.with_replica([&](const Replica& r) { r.read_box(chunks.min, bobs); });
+  EXPECT_TRUE(std::equal(anns.voxels().begin(), anns.voxels().end(), bobs.voxels().begin()));
+  const double changed = metric(two, "terrane_chunks_changed_elsewhere_total");
+  EXPECT_GE(changed, 2);  // the box's chunks, twice
+  EXPECT_EQ(metric(two, "terrane_chunks_updated_elsewhere_total"), changed) << "some were read again";
+  EXPECT_GE(units_updated() - units_before, 2u);
+  expect_agrees_with_its_server(bob, near);
+  ann.disconnect();
+  bob.disconnect();
+}
+
 TEST_F(ClusterTest, ChunksAnotherServerChangedThatNoClientHereHoldsAreForgottenNotReadAgain) {
   ServerProcess& one = start(1);
   ServerProcess& two = start(2, 5000, 100000, {"--metrics", "127.0.0.1:0"});

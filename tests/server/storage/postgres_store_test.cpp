@@ -142,8 +142,58 @@ TEST(ChangeNoticeTest, ChunksAndRegionSequencesRoundTripAndBadPayloadsAreRefused
   ASSERT_EQ(got_chunks.size(), chunks.size());
   for (std::size_t i = 0; i < chunks.size(); ++i)
     EXPECT_EQ(got_chunks[i], (ChunkChange{chunks[i].pos, chunks[i].revision}));
-  for (const char* bad : {"1,2,3", "1,2,3,-4", "r,1,2,3", "x,1,2,3,4", "1,2,3,4,5", "1,2,99999999999,4", "r,1,2,3,-1"})
+  for (const char* bad : {"1,2,3", "1,2,3,-4", "r,1,2,3", "x,1,2,3,4", "1,2,99999999999,4", "r,1,2,3,-1"})
     EXPECT_FALSE(parse_change_notice(bad)) << bad;
+}
+
+TEST(ChangeNoticeTest, AChunksChangedUnitsTravelWithItsRevisionUnlessTooLarge) {
+  // Bytes of every value, so each base64 tail (none, one and two '=') is met.
+  std::vector<ChunkWrite> chunks;
+  for (int n = 1; n <= 300; ++n) {
+    ChunkWrite w{{n, 2, -3}, static_cast<std::uint64_t>(n), {}};
+    for (int i = 0; i < n; ++i) w.units.push_back(static_cast<std::uint8_t>(i * 37 + n));
+    chunks.push_back(std::move(w));
+  }
+  chunks.push_back(ChunkWrite{{0, 0, 0}, 7, {}});  // units not known
+  ChunkWrite large{{1, 1, 1}, 9, {}};
+  large.units.assign(kMaxNoticeUnitsBytes / 4 * 3 + 1, 0xAB);  // base64 over the cap: left out
+  chunks.push_back(large);
+  std::vector<ChunkChange> got;
+  for (const std::string& n : change_notices(chunks)) {
+    EXPECT_LE(n.size(), kMaxChangeNoticeBytes);
+    auto p = parse_change_notice(n);
+    ASSERT_TRUE(p) << n.substr(0, 80);
+    got.insert(got.end(), p->chunks.begin(), p->chunks.end());
+  }
+  ASSERT_EQ(got.size(), chunks.size());
+  for (std::size_t i = 0; i + 1 < chunks.size(); ++i)
+    EXPECT_EQ(got[i], (ChunkChange{chunks[i].pos, chunks[i].revision, chunks[i].units})) << i;
+  EXPECT_EQ(got.back(), (ChunkChange{large.pos, large.revision, {}}));
+  auto ok = parse_change_notice("1,2,3,4,QUJD 5,6,7,8,QUI= 9,10,11,12,QQ==");
+  ASSERT_TRUE(ok);
+  ASSERT_EQ(ok->chunks.size(), 3u);
+  EXPECT_EQ(ok->chunks[0].units, (std::vector<std::uint8_t>{'A', 'B', 'C'}));
+  EXPECT_EQ(ok->chunks[1].units, (std::vector<std::uint8_t>{'A', 'B'}));
+  EXPECT_EQ(ok->chunks[2].units, (std::vector<std::uint8_t>{'A'}));
+  EXPECT_EQ(ok->units_unread, 0u);
+  // Units that are not padded base64 (or run over the cap) cost the chunk
+  // its units only: it is read again, and the rest of the notice stands.
+  const std::string at_cap(kMaxNoticeUnitsBytes, 'A'), over_cap(kMaxNoticeUnitsBytes + 4, 'A');
+  for (const std::string& units : {std::string("QUJD="), std::string("QU=D"), std::string("Q==="), std::string("QQ==QUJD"),
+                                   std::string("QUJD,QUJD"), std::string(""), std::string("QU*D"), std::string("5"), over_cap}) {
+    auto p = parse_change_notice("r,0,0,0,7 1,2,3,4," + units + " 5,6,7,8,QUJD");
+    ASSERT_TRUE(p) << units;
+    ASSERT_EQ(p->chunks.size(), 2u) << units;
+    EXPECT_EQ(p->chunks[0], (ChunkChange{{1, 2, 3}, 4, {}})) << units;
+    EXPECT_EQ(p->chunks[1].units.size(), 3u) << units;
+    EXPECT_EQ(p->units_unread, 1u) << units;
+    EXPECT_EQ(p->regions.size(), 1u) << units;
+  }
+  auto cap = parse_change_notice("1,2,3,4," + at_cap);
+  ASSERT_TRUE(cap);
+  EXPECT_EQ(cap->chunks[0].units.size(), kMaxNoticeUnitsBytes / 4 * 3);
+  // A region's sequence takes no units.
+  EXPECT_FALSE(parse_change_notice("r,1,2,3,4,QUJD"));
 }
 
 TEST_F(PostgresStoreTest, EachWriteMovesItsRegionsSequenceOnAcrossChangesOfHands) {
@@ -395,7 +445,7 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
             "");
   auto running = PostgresStore::open(url_);
   ASSERT_FALSE(running.ok());
-  EXPECT_NE(running.error().message.find("with 1 regions leased now: stop its servers"), std::string::npos)
+  EXPECT_NE(running.error().message.find("version 1 with 1 regions leased now: stop its servers"), std::string::npos)
       << running.error().message;
   ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
   {
@@ -412,7 +462,20 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
     EXPECT_EQ(*upgraded->take_answers(1), std::vector<ForwardAnswer>{a});
     ASSERT_TRUE(upgraded->release(std::span(&*lease, 1)).ok());
   }
-  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 2 THEN RAISE 'not 2'; END IF; END $$"),
+  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 3 THEN RAISE 'not 3'; END IF; END $$"),
+            "");
+  // A database of version 2 (whose servers refuse notices with units) is
+  // brought to version 3 the same way, once its servers are stopped.
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 2;"
+                          " UPDATE terrane_leases SET expires_at = clock_timestamp() + interval '1 hour'"),
+            "");
+  auto v2_running = PostgresStore::open(url_);
+  ASSERT_FALSE(v2_running.ok());
+  EXPECT_NE(v2_running.error().message.find("schema of version 2 with 1 regions leased now"), std::string::npos)
+      << v2_running.error().message;
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
+  ASSERT_TRUE(open());
+  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 3 THEN RAISE 'not 3'; END IF; END $$"),
             "");
   // A damaged blob is a decode error naming the chunk.
   ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
