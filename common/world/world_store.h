@@ -88,10 +88,12 @@ struct ChunkWrite {
   // The chunk's coarse_voxels; decoded from the blob when not given.
   std::optional<CoarseVoxels> coarse = std::nullopt;
   // The 4^3 units that changed from revision - 1 to revision, as one update
-  // batch (common/codec/update_batch.h); empty when not known. A shared
-  // world's store passes them on to the other servers (PostgreSQL's change
-  // notices); SQLite has no readers to tell and ignores them.
+  // batch (common/codec/update_batch.h), and the world tick that changed
+  // them; empty when not known. A shared world's store passes them on to
+  // the other servers (PostgreSQL's change notices); SQLite has no readers
+  // to tell and ignores them.
   std::vector<std::uint8_t> units = {};
+  std::uint64_t tick = 0;
 };
 
 // One applied edit in the edit log (table edit_log): who, when, the box

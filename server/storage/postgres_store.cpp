@@ -252,7 +252,8 @@ std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std:
   for (const RegionSeq& r : regions) add(fmt::format("r,{},{},{},{}", r.region.x, r.region.y, r.region.z, r.seq));
   for (const ChunkWrite& w : chunks) {
     std::string entry = fmt::format("{},{},{},{}", w.pos.x, w.pos.y, w.pos.z, w.revision);
-    if (!w.units.empty() && (w.units.size() + 2) / 3 * 4 <= kMaxNoticeUnitsBytes) entry += "," + base64(w.units);
+    if (!w.units.empty() && (w.units.size() + 2) / 3 * 4 <= kMaxNoticeUnitsBytes)
+      entry += fmt::format(",{},{}", w.tick, base64(w.units));
     add(entry);
   }
   if (!payload.empty()) out.push_back(std::move(payload));
@@ -267,30 +268,28 @@ std::optional<ChangeNotice> parse_change_notice(std::string_view payload) {
     payload.remove_prefix(std::min(end + 1, payload.size()));
     const bool region = entry.substr(0, 2) == "r,";
     if (region) entry.remove_prefix(2);
-    std::int64_t v[4];
-    std::optional<std::vector<std::uint8_t>> units;
-    for (int i = 0; i < 4; ++i) {
-      std::size_t comma = i < 3 ? entry.find(',') : entry.size();
-      if (i == 3 && !region) {
-        // A chunk's revision may be followed by its units.
-        comma = entry.find(',');
-        if (comma != std::string_view::npos) {
-          // Units that do not read leave the chunk to be read again, like
-          // a notice without them; the rest of the notice stands.
-          const std::string_view tail = entry.substr(comma + 1);
-          units = tail.size() <= kMaxNoticeUnitsBytes ? from_base64(tail) : std::nullopt;
-          if (!units) {
-            units.emplace();
-            ++out.units_unread;
-          }
-        } else {
-          comma = entry.size();
-        }
-      }
+    // x, y, z, revision (or seq); a chunk's may be followed by a tick and
+    // its units.
+    const bool with_units = !region && std::count(entry.begin(), entry.end(), ',') >= 5;
+    const int numbers = with_units ? 5 : 4;
+    std::int64_t v[5] = {};
+    for (int i = 0; i < numbers; ++i) {
+      const std::size_t comma = i < numbers - 1 || with_units ? entry.find(',') : entry.size();
       if (comma == std::string_view::npos) return std::nullopt;
       const auto [at, ec] = std::from_chars(entry.data(), entry.data() + comma, v[i]);
       if (ec != std::errc{} || at != entry.data() + comma) return std::nullopt;
       entry.remove_prefix(std::min(comma + 1, entry.size()));
+    }
+    if (v[4] < 0) return std::nullopt;
+    std::vector<std::uint8_t> units;
+    if (with_units) {
+      // Units that do not read leave the chunk to be read again, like a
+      // notice without them; the rest of the notice stands.
+      auto read = entry.size() <= kMaxNoticeUnitsBytes ? from_base64(entry) : std::nullopt;
+      if (read)
+        units = std::move(*read);
+      else
+        ++out.units_unread;
     }
     const auto fits = [](std::int64_t c) { return c >= std::numeric_limits<std::int32_t>::min() &&
                                                   c <= std::numeric_limits<std::int32_t>::max(); };
@@ -299,7 +298,8 @@ std::optional<ChangeNotice> parse_change_notice(std::string_view payload) {
     if (region)
       out.regions.push_back(RegionSeq{p, static_cast<std::uint64_t>(v[3])});
     else
-      out.chunks.push_back(ChunkChange{p, static_cast<std::uint64_t>(v[3]), units ? std::move(*units) : std::vector<std::uint8_t>{}});
+      out.chunks.push_back(ChunkChange{p, static_cast<std::uint64_t>(v[3]), std::move(units),
+                                       static_cast<std::uint64_t>(v[4])});
   }
   return out;
 }

@@ -307,13 +307,14 @@ class PostgresStore final : public WorldStore {
 // write notifies channel terrane_changes, in its transaction, of each chunk
 // it wrote and the chunk's new revision, and of each region it wrote and
 // the region's new sequence number (+1 per write of it). Payloads are
-// text: entries "x,y,z,revision" or "x,y,z,revision,UNITS" (a chunk) and
-// "r,x,y,z,seq" (a region) separated by one space, at most
+// text: entries "x,y,z,revision" or "x,y,z,revision,tick,UNITS" (a chunk)
+// and "r,x,y,z,seq" (a region) separated by one space, at most
 // kMaxChangeNoticeBytes each (more entries: more notices). UNITS is the
 // base64 (RFC 4648, padded) of the update batch of the 4^3 units that
-// changed from revision - 1 to revision (ChunkWrite::units), when the write
-// knows them and they take at most kMaxNoticeUnitsBytes of base64; a reader
-// holding revision - 1 applies them instead of reading the chunk.
+// changed from revision - 1 to revision in the writer's world tick `tick`
+// (ChunkWrite::units and tick), when the write knows them and they take at
+// most kMaxNoticeUnitsBytes of base64; a reader holding revision - 1
+// applies them instead of reading the chunk.
 inline constexpr const char* kChangesChannel = "terrane_changes";
 inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
 inline constexpr std::size_t kMaxNoticeUnitsBytes = 4000;
@@ -321,6 +322,7 @@ struct ChunkChange {
   Vec3i pos;
   std::uint64_t revision = 0;
   std::vector<std::uint8_t> units = {};  // decoded from UNITS; empty without
+  std::uint64_t tick = 0;                // the writer's tick that made them
   friend bool operator==(const ChunkChange&, const ChunkChange&) = default;
 };
 struct ChangeNotice {

@@ -365,11 +365,11 @@ void Storage::prune_log() {
 }
 
 void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done,
-                     std::vector<ForwardAnswer> answers) {
+                     std::vector<ForwardAnswer> answers, std::uint64_t tick) {
   in_flight_.fetch_add(1, std::memory_order_relaxed);
   {
     std::lock_guard lock(jobs_mutex_);
-    jobs_.push_back(CommitJob{std::move(versions), std::move(log), std::move(done), std::move(answers)});
+    jobs_.push_back(CommitJob{std::move(versions), std::move(log), std::move(done), std::move(answers), tick});
   }
   jobs_cv_.notify_one();
 }
@@ -421,6 +421,7 @@ void Storage::writer_loop() {
           if (tells_units && v->changed_units().any() && v->has_voxels()) {
             const UpdatePiece* piece = &v->update_piece();
             net_codec_join_update_pieces(std::span(&piece, 1), w.units);
+            w.tick = job.tick;
           }
           auto [it, fresh] = index.emplace(v->pos(), writes.size());
           if (fresh)

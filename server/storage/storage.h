@@ -170,8 +170,10 @@ class Storage {
   void answer(std::vector<ForwardAnswer> answers);
   // log: the tick's edits for the edit log, and answers: the forwarded
   // edits it applied, stored in the same transaction.
+  // tick: the world tick that made the versions (a shared world's notices
+  // name it with their units).
   void commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done,
-              std::vector<ForwardAnswer> answers = {});
+              std::vector<ForwardAnswer> answers = {}, std::uint64_t tick = 0);
   void stop();
 
   const StorageCounters& counters() const { return counters_; }
@@ -204,6 +206,7 @@ class Storage {
     std::vector<EditLogEntry> log;
     CommitDone done;
     std::vector<ForwardAnswer> answers;
+    std::uint64_t tick = 0;
   };
   // Runs fn(store) on a loader thread with a reader connection of a
   // PostgreSQL world (only a shared world's callers ask).

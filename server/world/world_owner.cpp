@@ -921,7 +921,7 @@ void WorldOwner::apply_edits() {
                          : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
         });
       },
-      std::move(answers));
+      std::move(answers), tick);
 }
 
 void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,

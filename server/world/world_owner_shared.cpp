@@ -5,6 +5,7 @@
 // here holds them). The rest of the world strand is world_owner.cpp; on
 // SQLite none of this runs (every region is writable).
 #include <algorithm>
+#include <map>
 
 #include <fmt/format.h>
 
@@ -123,7 +124,7 @@ void WorldOwner::refreshed(Vec3i cp) {
 
 void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
   asio::post(strand_, [this, changes = std::move(changes)] {
-    std::vector<VersionPtr> updated;
+    std::map<std::uint64_t, std::vector<VersionPtr>> updated;  // by the writer's tick
     for (const ChunkChange& c : changes) {
       if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
       auto it = loaded_.find(c.pos);
@@ -159,7 +160,7 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
         if (VersionPtr v = apply_units(l, c)) {
           it->second.current = v;
           it->second.used_tick = tick_;
-          updated.push_back(std::move(v));
+          updated[c.tick].push_back(std::move(v));
           continue;
         }
         server_log().warn("chunk ({},{},{}): the units of revision {} in another server's notice do not apply; "
@@ -169,9 +170,12 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
       // As urgent as an edit of this server's: its holders wait to see it.
       read_again(c.pos, c.revision, Storage::Priority::kUrgent);
     }
-    if (!updated.empty()) {
-      counters_.chunks_updated_elsewhere.fetch_add(updated.size(), std::memory_order_relaxed);
-      publish(tick_, updated, std::chrono::steady_clock::now());
+    // Sent with the tick of the commit that made them (the tick an edit
+    // forwarded there is acknowledged with).
+    const auto now = std::chrono::steady_clock::now();
+    for (const auto& [tick, versions] : updated) {
+      counters_.chunks_updated_elsewhere.fetch_add(versions.size(), std::memory_order_relaxed);
+      publish(tick, versions, now);
     }
   });
 }

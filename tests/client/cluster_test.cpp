@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <mutex>
+#include <set>
 #include <unordered_map>
 #include <chrono>
 #include <cmath>
@@ -383,7 +384,15 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
   ASSERT_NE(two.metrics_port(), 0) << two.output();
   Client ann(options(one, "ann"));
   join(ann);
-  Client bob(options(two, "bob"));
+  // The ticks of the UpdateBatches bob receives.
+  std::mutex ticks_m;
+  std::set<std::uint64_t> bobs_ticks;
+  ClientCallbacks callbacks;
+  callbacks.on_update_batch = [&](std::uint64_t tick, const std::vector<ChunkRevisionMsg>&) {
+    std::lock_guard lock(ticks_m);
+    bobs_ticks.insert(tick);
+  };
+  Client bob(options(two, "bob"), callbacks);
   const auto near = join(bob);
   auto units_updated = [&] {
     std::uint64_t n = 0;
@@ -395,14 +404,25 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
   };
   const std::uint64_t units_before = units_updated();
   // Server 1's notices carry each chunk's changed units; server 2 holds the
-  // chunks at the revision before, applies them and sends bob the units.
+  // chunks at the revision before, applies them and sends bob the units,
+  // in an UpdateBatch of the tick server 1 acknowledged ann's edit with.
   const Region box = box_near(ann, 0);
   for (const Material m : {materials::kBrick, materials::kSnow}) {
     const auto v = pattern(box, m);
-    ASSERT_EQ(outcome(ann, ann.write_box(box, v)), "");
+    const std::uint32_t id = ann.write_box(box, v);
+    ASSERT_EQ(outcome(ann, id), "");
+    std::uint64_t tick = 0;
+    ann.wait_until([&](const ClientView& view) {
+      tick = view.edits.at(id).tick;
+      return true;
+    }, 0ms);
     ASSERT_TRUE(bob.wait_until([&](const ClientView& view) { return view.closed || shows(view.replica, box, v); },
                                kDeadline))
         << "bob never saw ann's edit";
+    EXPECT_TRUE(testing_support::eventually([&] {
+      std::lock_guard lock(ticks_m);
+      return bobs_ticks.count(tick) != 0;
+    })) << "no UpdateBatch of tick " << tick << " reached bob";
     ASSERT_TRUE(replica_shows(ann, box, v));
   }
   // What server 2 made of the units is what server 1 wrote: the chunks

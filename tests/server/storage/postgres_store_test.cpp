@@ -151,6 +151,7 @@ TEST(ChangeNoticeTest, AChunksChangedUnitsTravelWithItsRevisionUnlessTooLarge) {
   std::vector<ChunkWrite> chunks;
   for (int n = 1; n <= 300; ++n) {
     ChunkWrite w{{n, 2, -3}, static_cast<std::uint64_t>(n), {}};
+    w.tick = 1000u + static_cast<std::uint64_t>(n);
     for (int i = 0; i < n; ++i) w.units.push_back(static_cast<std::uint8_t>(i * 37 + n));
     chunks.push_back(std::move(w));
   }
@@ -167,33 +168,37 @@ TEST(ChangeNoticeTest, AChunksChangedUnitsTravelWithItsRevisionUnlessTooLarge) {
   }
   ASSERT_EQ(got.size(), chunks.size());
   for (std::size_t i = 0; i + 1 < chunks.size(); ++i)
-    EXPECT_EQ(got[i], (ChunkChange{chunks[i].pos, chunks[i].revision, chunks[i].units})) << i;
+    EXPECT_EQ(got[i], (ChunkChange{chunks[i].pos, chunks[i].revision, chunks[i].units,
+                                   chunks[i].units.empty() ? 0 : chunks[i].tick}))
+        << i;
   EXPECT_EQ(got.back(), (ChunkChange{large.pos, large.revision, {}}));
-  auto ok = parse_change_notice("1,2,3,4,QUJD 5,6,7,8,QUI= 9,10,11,12,QQ==");
+  auto ok = parse_change_notice("1,2,3,4,50,QUJD 5,6,7,8,50,QUI= 9,10,11,12,51,QQ==");
   ASSERT_TRUE(ok);
   ASSERT_EQ(ok->chunks.size(), 3u);
   EXPECT_EQ(ok->chunks[0].units, (std::vector<std::uint8_t>{'A', 'B', 'C'}));
   EXPECT_EQ(ok->chunks[1].units, (std::vector<std::uint8_t>{'A', 'B'}));
   EXPECT_EQ(ok->chunks[2].units, (std::vector<std::uint8_t>{'A'}));
+  EXPECT_EQ(ok->chunks[2].tick, 51u);
   EXPECT_EQ(ok->units_unread, 0u);
   // Units that are not padded base64 (or run over the cap) cost the chunk
   // its units only: it is read again, and the rest of the notice stands.
   const std::string at_cap(kMaxNoticeUnitsBytes, 'A'), over_cap(kMaxNoticeUnitsBytes + 4, 'A');
   for (const std::string& units : {std::string("QUJD="), std::string("QU=D"), std::string("Q==="), std::string("QQ==QUJD"),
                                    std::string("QUJD,QUJD"), std::string(""), std::string("QU*D"), std::string("5"), over_cap}) {
-    auto p = parse_change_notice("r,0,0,0,7 1,2,3,4," + units + " 5,6,7,8,QUJD");
+    auto p = parse_change_notice("r,0,0,0,7 1,2,3,4,50," + units + " 5,6,7,8,50,QUJD");
     ASSERT_TRUE(p) << units;
     ASSERT_EQ(p->chunks.size(), 2u) << units;
-    EXPECT_EQ(p->chunks[0], (ChunkChange{{1, 2, 3}, 4, {}})) << units;
+    EXPECT_EQ(p->chunks[0], (ChunkChange{{1, 2, 3}, 4, {}, 50})) << units;
     EXPECT_EQ(p->chunks[1].units.size(), 3u) << units;
     EXPECT_EQ(p->units_unread, 1u) << units;
     EXPECT_EQ(p->regions.size(), 1u) << units;
   }
-  auto cap = parse_change_notice("1,2,3,4," + at_cap);
+  auto cap = parse_change_notice("1,2,3,4,50," + at_cap);
   ASSERT_TRUE(cap);
   EXPECT_EQ(cap->chunks[0].units.size(), kMaxNoticeUnitsBytes / 4 * 3);
-  // A region's sequence takes no units.
-  EXPECT_FALSE(parse_change_notice("r,1,2,3,4,QUJD"));
+  // A region's sequence takes no units, and a tick is a number.
+  for (const char* bad : {"r,1,2,3,4,50,QUJD", "1,2,3,4,x,QUJD", "1,2,3,4,-1,QUJD", "1,2,3,4,QUJD", "1,2,3,4,5"})
+    EXPECT_FALSE(parse_change_notice(bad)) << bad;
 }
 
 TEST_F(PostgresStoreTest, EachWriteMovesItsRegionsSequenceOnAcrossChangesOfHands) {
