@@ -239,7 +239,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
   // them, so its rows are repacked and its mips updated once per batch, not
   // once per unit. (A batch lists units chunk by chunk.)
   std::size_t applied = 0;
-  std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index{};
+  ChunkUnits units;
   for (std::size_t begin = 0; begin < *n;) {
     const Vec3i cp = update_scratch_[begin].chunk_pos;
     std::size_t end = begin;
@@ -249,28 +249,16 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
       begin = end;
       continue;
     }
-    by_index.fill(nullptr);
-    Vec3i lo{kChunkSize, kChunkSize, kChunkSize}, hi{0, 0, 0};
+    units.clear();
     for (std::size_t i = begin; i < end; ++i) {
-      const UnitUpdate& u = update_scratch_[i];
-      by_index[u.unit_index] = &u;
-      const int idx = u.unit_index;
-      const Vec3i base = Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
-      lo = min3(lo, base);
-      hi = max3(hi, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
+      units.add(update_scratch_[i]);  // (a unit twice: the last one wins)
       ++applied;
     }
     const Vec3i origin = chunk_origin(cp);
-    if (changed != nullptr) changed->push_back(Region{origin + lo, origin + hi});
+    const Region box{origin + units.box().min, origin + units.box().max};
+    if (changed != nullptr) changed->push_back(box);
     entry_changed(cp, it->second);
-    grid_.modify(Region{origin + lo, origin + hi}, [&](Vec3i p, Voxel old) {
-      const Vec3i l = p - origin;
-      const Vec3i uc{l.x / kUpdateUnitSize, l.y / kUpdateUnitSize, l.z / kUpdateUnitSize};
-      const UnitUpdate* u = by_index[static_cast<std::size_t>((uc.y * 8 + uc.z) * 8 + uc.x)];
-      if (u == nullptr) return old;
-      const Vec3i w = l - uc * kUpdateUnitSize;
-      return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
-    });
+    grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
     // the update itself; the replica holds full resolution only near it.

@@ -146,4 +146,23 @@ Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> 
   return std::size_t{count};
 }
 
+bool ChunkUnits::add(const UnitUpdate& u) {
+  const UnitUpdate*& slot = by_index_[u.unit_index];
+  const bool fresh = slot == nullptr;
+  slot = &u;
+  if (!fresh) return false;
+  const int idx = u.unit_index;
+  const Vec3i base = Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
+  lo_ = min3(lo_, base);
+  hi_ = max3(hi_, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
+  return true;
+}
+
+void ChunkUnits::clear() {
+  by_index_.fill(nullptr);
+  constexpr int kSide = kUpdateUnitSize * 8;
+  lo_ = Vec3i{kSide, kSide, kSide};
+  hi_ = Vec3i{0, 0, 0};
+}
+
 }  // namespace terrane

@@ -64,6 +64,33 @@ UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units);
 // Appends one batch of the pieces (distinct chunks), in the order given.
 void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out);
 
+// One chunk's units of a batch, by index, to write into the chunk's voxels
+// in one pass over the box that holds them (a replica's, or a server's copy
+// of a chunk another server changed).
+class ChunkUnits {
+ public:
+  ChunkUnits() { clear(); }
+  // Adds u (kept by reference until clear), in place of a unit of the same
+  // index added before; false if there was one.
+  bool add(const UnitUpdate& u);
+  bool empty() const { return lo_.x >= hi_.x; }
+  // The chunk-local box holding every unit added (empty when none).
+  Region box() const { return empty() ? Region{} : Region{lo_, hi_}; }
+  // The voxel at chunk-local p: the added unit's there, else old.
+  Voxel at(Vec3i local, Voxel old) const {
+    const Vec3i uc{local.x / kUpdateUnitSize, local.y / kUpdateUnitSize, local.z / kUpdateUnitSize};
+    const UnitUpdate* u = by_index_[static_cast<std::size_t>((uc.y * 8 + uc.z) * 8 + uc.x)];
+    if (u == nullptr) return old;
+    const Vec3i w = local - uc * kUpdateUnitSize;
+    return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
+  }
+  void clear();
+
+ private:
+  std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index_{};
+  Vec3i lo_, hi_;
+};
+
 // The coordinate part of one batch entry, exposed so benchmarks can put the
 // same coordinates in front of other unit codecs. prev_* is the previous
 // entry's chunk and unit (start: chunk (0,0,0), unit -1).

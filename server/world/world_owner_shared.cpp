@@ -185,31 +185,17 @@ VersionPtr WorldOwner::apply_units(const Loaded& l, const ChunkChange& c) {
   auto n = net_codec_decode_update_batch(c.units, units_scratch_);
   if (!n || *n == 0) return nullptr;
   UnitBits bits;
-  std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index{};
+  ChunkUnits units;
   for (std::size_t i = 0; i < *n; ++i) {
     const UnitUpdate& u = units_scratch_[i];
-    if (u.chunk_pos != c.pos || bits.test(u.unit_index)) return nullptr;
+    if (u.chunk_pos != c.pos || !units.add(u)) return nullptr;
     bits.set(u.unit_index);
-    by_index[u.unit_index] = &u;
   }
   const VersionPtr& prev = l.current;
   auto chunk = std::make_unique<Chunk>(prev->chunk() != nullptr ? prev->chunk()->clone() : Chunk(kAir));
   // One pass over the box of the changed units: rows repacked and mips
   // updated once.
-  Vec3i lo{kChunkSize, kChunkSize, kChunkSize}, hi{0, 0, 0};
-  for (std::size_t i = 0; i < *n; ++i) {
-    const int idx = units_scratch_[i].unit_index;
-    const Vec3i base = Vec3i{idx % 8, idx / 64, (idx / 8) % 8} * kUpdateUnitSize;
-    lo = min3(lo, base);
-    hi = max3(hi, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
-  }
-  chunk->modify(Region{lo, hi}, [&](Vec3i p, Voxel old) {
-    const Vec3i uc{p.x / kUpdateUnitSize, p.y / kUpdateUnitSize, p.z / kUpdateUnitSize};
-    const UnitUpdate* u = by_index[static_cast<std::size_t>((uc.y * 8 + uc.z) * 8 + uc.x)];
-    if (u == nullptr) return old;
-    const Vec3i w = p - uc * kUpdateUnitSize;
-    return u->voxels[static_cast<std::size_t>((w.y * kUpdateUnitSize + w.z) * kUpdateUnitSize + w.x)];
-  });
+  chunk->modify(units.box(), [&](Vec3i p, Voxel old) { return units.at(p, old); });
   std::shared_ptr<const Chunk> next;
   if (!chunk->empty()) {
     if (chunk->level0().unpacked()) chunk->compact();

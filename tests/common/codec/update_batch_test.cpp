@@ -77,5 +77,35 @@ TEST(NetCodecUpdateBatch, EmptyBatchAndBadIndices) {
   EXPECT_EQ(ver.error().code, DecodeErrorCode::kBadVersion);
 }
 
+TEST(ChunkUnitsTest, EachVoxelOfTheBoxIsItsUnitsOrLeftAsItWas) {
+  ChunkUnits units;
+  EXPECT_TRUE(units.empty());
+  EXPECT_EQ(units.box(), Region{});
+  // Units 1 (x 4..8) and 8 * 8 * 2 + 3 (y 8..12, x 12..16), each voxel
+  // telling its place.
+  UnitUpdate a{{0, 0, 0}, 1, {}}, b{{0, 0, 0}, 8 * 8 * 2 + 3, {}};
+  for (int i = 0; i < kUpdateUnitVoxels; ++i) {
+    a.voxels[static_cast<std::size_t>(i)] = Voxel{static_cast<Material>(1 + i % 60), static_cast<std::uint8_t>(i)};
+    b.voxels[static_cast<std::size_t>(i)] = Voxel{static_cast<Material>(2 + i % 60), static_cast<std::uint8_t>(i)};
+  }
+  EXPECT_TRUE(units.add(a));
+  EXPECT_TRUE(units.add(b));
+  EXPECT_EQ(units.box(), (Region{{4, 0, 0}, {16, 12, 4}}));
+  const Voxel old{3, 7};
+  // Voxel (x, y, z) of a unit is its voxels[(y * 4 + z) * 4 + x].
+  EXPECT_EQ(units.at({4 + 1, 2, 3}, old), a.voxels[(2 * 4 + 3) * 4 + 1]);
+  EXPECT_EQ(units.at({12 + 3, 8 + 1, 2}, old), b.voxels[(1 * 4 + 2) * 4 + 3]);
+  EXPECT_EQ(units.at({0, 0, 0}, old), old);    // unit 0: not added
+  EXPECT_EQ(units.at({8, 8, 0}, old), old);    // inside the box, no unit there
+  // A unit added twice: the last one stands, and add says so.
+  UnitUpdate a2 = a;
+  a2.voxels.fill(Voxel{9, 9});
+  EXPECT_FALSE(units.add(a2));
+  EXPECT_EQ(units.at({4, 0, 0}, old), (Voxel{9, 9}));
+  units.clear();
+  EXPECT_TRUE(units.empty());
+  EXPECT_EQ(units.at({4, 0, 0}, old), old);
+}
+
 }  // namespace
 }  // namespace terrane
