@@ -392,13 +392,15 @@ void WorldOwner::settle_forwarded() {
              fmt::format("server {} refused the forwarded edit: {}", o.to, o.answer->reason));
       done = true;
     } else if (!done && o.answer) {
-      // Acknowledged once this server shows the edit: its chunks are read
-      // again here (the owner's notice came with the answer) and sent to
-      // the client before the ack.
+      // Acknowledged once this server shows the edit: its chunks are
+      // updated or read again here (the owner's notice came with the
+      // answer) and sent to the client before the ack, which names the
+      // owner's tick, as the UpdateBatch of its units does.
       bool current = true;
       for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
       if (current) {
-        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, tick_)), SendClass::kControl);
+        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
+                                  SendClass::kControl);
         done = true;
       }
     } else if (!done && now - o.sent > wait) {
