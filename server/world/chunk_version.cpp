@@ -27,6 +27,23 @@ ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<co
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk)
     : ChunkVersion(pos, revision, std::move(chunk), UnitBits{}, {revision, revision, revision, revision}) {}
 
+std::shared_ptr<const ChunkVersion> ChunkVersion::after(const ChunkVersion& prev, std::unique_ptr<Chunk> chunk,
+                                                      UnitBits changed) {
+  std::shared_ptr<const Chunk> next;
+  if (chunk && !chunk->empty()) {
+    // A level 0 that tiny writes left unpacked is packed again.
+    if (chunk->level0().unpacked()) chunk->compact();
+    chunk->pack_mips();
+    next = std::move(chunk);
+  }
+  const std::uint64_t rev = prev.revision() + 1;
+  const auto differs = levels_changed(prev.chunk(), next.get());
+  std::array<std::uint64_t, kMipLevels> since{};
+  for (int level = 0; level < kMipLevels; ++level)
+    since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? rev : prev.level_since(level);
+  return std::make_shared<const ChunkVersion>(prev.pos(), rev, std::move(next), changed, since);
+}
+
 std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& full) {
   auto v = std::make_shared<ChunkVersion>(full.pos_, full.revision_, nullptr, UnitBits{}, full.level_since_);
   v->empty_ = full.empty_;

@@ -48,6 +48,12 @@ class ChunkVersion {
   // nobody holds at full resolution (a few hundred bytes instead of the
   // chunk). encoded() answers levels 1..3 only; the rest needs the chunk.
   static std::shared_ptr<const ChunkVersion> mips_only(const ChunkVersion& full);
+  // The version after prev (revision + 1, with voxels): chunk's voxels
+  // (null or empty: all Air; packed here, so its mips are encoded once for
+  // every reader), changed the units in changed; each level's level_since
+  // moves on only where its voxels differ from prev's.
+  static std::shared_ptr<const ChunkVersion> after(const ChunkVersion& prev, std::unique_ptr<Chunk> chunk,
+                                                   UnitBits changed);
   // Only the coarsest level (4^3), as a coarse image stored it: what a
   // distant view needs, without reading the chunk. encoded() answers level
   // 3 only.

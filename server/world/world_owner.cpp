@@ -890,21 +890,7 @@ void WorldOwner::apply_edits() {
   for (const auto& [cp, bits] : changed) {
     if (bits.none()) continue;
     Loaded& l = loaded_.at(cp);
-    std::shared_ptr<const Chunk> chunk;
-    if (std::unique_ptr<Chunk> c = scratch.take_chunk(cp); c && !c->empty()) {
-      // One encoding of the mips per tick, shared by every reader of the
-      // version; a level 0 that tiny writes unpacked is packed again.
-      if (c->level0().unpacked()) c->compact();
-      c->pack_mips();
-      chunk = std::move(c);
-    }
-    const VersionPtr& prev = l.current;
-    const std::uint64_t rev = prev->revision() + 1;
-    const auto differs = levels_changed(prev->chunk(), chunk.get());
-    std::array<std::uint64_t, kMipLevels> since{};
-    for (int level = 0; level < kMipLevels; ++level)
-      since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? rev : prev->level_since(level);
-    l.current = std::make_shared<const ChunkVersion>(cp, rev, std::move(chunk), bits, since);
+    l.current = ChunkVersion::after(*l.current, scratch.take_chunk(cp), bits);
     l.used_tick = tick_;
     versions.push_back(l.current);
   }
@@ -973,8 +959,8 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
   }
 }
 
-std::uint64_t WorldOwner::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions,
-                                  std::chrono::steady_clock::time_point now) {
+void WorldOwner::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions,
+                         std::chrono::steady_clock::time_point now) {
   // Grants not yet handed over go first: a holder hears of a version after
   // it was granted the one before (a replicator drops news of a chunk it
   // was not granted yet).
@@ -1006,7 +992,6 @@ std::uint64_t WorldOwner::publish(std::uint64_t tick, const std::vector<VersionP
   counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
   for (auto& [id, changed] : news)
     if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
-  return deliveries;
 }
 
 void WorldOwner::fail_rollbacks(const std::string& why) {

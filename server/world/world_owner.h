@@ -330,12 +330,11 @@ class WorldOwner : private WorldView {
                     const FileStatus& status);
   // Publishes committed versions (each its chunk's newest) and tells their
   // holders: those at full resolution at once (WorldClient::committed),
-  // the others gathered for deliver_mip_news. Returns the deliveries.
-  std::uint64_t publish(std::uint64_t tick, const std::vector<VersionPtr>& versions,
-                        std::chrono::steady_clock::time_point now);
-  // The version of l's chunk (held with its voxels at c.revision - 1) that
-  // c's units make, or null when they do not decode as units of that chunk.
-  VersionPtr apply_units(const Loaded& l, const ChunkChange& c);
+  // the others gathered for deliver_mip_news.
+  void publish(std::uint64_t tick, const std::vector<VersionPtr>& versions, std::chrono::steady_clock::time_point now);
+  // The version after prev (held with its voxels at c.revision - 1) that
+  // c's units make, or null when they do not decode as units of its chunk.
+  VersionPtr apply_units(const ChunkVersion& prev, const ChunkChange& c);
   void fatal_storage(const std::string& why);
   // Starts loading chunk_pos unless loaded or loading; true if loaded with
   // the given level (0: its voxels), and not as an estimate when exact.

@@ -157,7 +157,7 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
           loading_.count(c.pos) == 0 && l.current == l.published) {
         // The notice's units take what is held to the new revision: applied
         // here, and sent to the holders as units, as an edit here would be.
-        if (VersionPtr v = apply_units(l, c)) {
+        if (VersionPtr v = apply_units(*l.current, c)) {
           it->second.current = v;
           it->second.used_tick = tick_;
           updated[c.tick].push_back(std::move(v));
@@ -180,7 +180,7 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
   });
 }
 
-VersionPtr WorldOwner::apply_units(const Loaded& l, const ChunkChange& c) {
+VersionPtr WorldOwner::apply_units(const ChunkVersion& prev, const ChunkChange& c) {
   units_scratch_.resize(kUpdateUnitsPerChunk);
   auto n = net_codec_decode_update_batch(c.units, units_scratch_);
   if (!n || *n == 0) return nullptr;
@@ -191,22 +191,11 @@ VersionPtr WorldOwner::apply_units(const Loaded& l, const ChunkChange& c) {
     if (u.chunk_pos != c.pos || !units.add(u)) return nullptr;
     bits.set(u.unit_index);
   }
-  const VersionPtr& prev = l.current;
-  auto chunk = std::make_unique<Chunk>(prev->chunk() != nullptr ? prev->chunk()->clone() : Chunk(kAir));
+  auto chunk = std::make_unique<Chunk>(prev.chunk() != nullptr ? prev.chunk()->clone() : Chunk(kAir));
   // One pass over the box of the changed units: rows repacked and mips
   // updated once.
   chunk->modify(units.box(), [&](Vec3i p, Voxel old) { return units.at(p, old); });
-  std::shared_ptr<const Chunk> next;
-  if (!chunk->empty()) {
-    if (chunk->level0().unpacked()) chunk->compact();
-    chunk->pack_mips();
-    next = std::move(chunk);
-  }
-  const auto differs = levels_changed(prev->chunk(), next.get());
-  std::array<std::uint64_t, kMipLevels> since{};
-  for (int level = 0; level < kMipLevels; ++level)
-    since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? c.revision : prev->level_since(level);
-  return std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(next), bits, since);
+  return ChunkVersion::after(prev, std::move(chunk), bits);
 }
 
 void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {

@@ -403,6 +403,22 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
     return n;
   };
   const std::uint64_t units_before = units_updated();
+  // The tick an acknowledged edit of c's names, and whether an UpdateBatch
+  // of that tick comes to bob.
+  auto acked_tick = [](Client& c, std::uint32_t id) {
+    std::uint64_t tick = 0;
+    c.wait_until([&](const ClientView& view) {
+      tick = view.edits.at(id).tick;
+      return true;
+    }, 0ms);
+    return tick;
+  };
+  auto bob_hears = [&](std::uint64_t tick) {
+    return testing_support::eventually([&] {
+      std::lock_guard lock(ticks_m);
+      return bobs_ticks.count(tick) != 0;
+    });
+  };
   // Server 1's notices carry each chunk's changed units; server 2 holds the
   // chunks at the revision before, applies them and sends bob the units,
   // in an UpdateBatch of the tick server 1 acknowledged ann's edit with.
@@ -411,18 +427,11 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
     const auto v = pattern(box, m);
     const std::uint32_t id = ann.write_box(box, v);
     ASSERT_EQ(outcome(ann, id), "");
-    std::uint64_t tick = 0;
-    ann.wait_until([&](const ClientView& view) {
-      tick = view.edits.at(id).tick;
-      return true;
-    }, 0ms);
+    const std::uint64_t tick = acked_tick(ann, id);
     ASSERT_TRUE(bob.wait_until([&](const ClientView& view) { return view.closed || shows(view.replica, box, v); },
                                kDeadline))
         << "bob never saw ann's edit";
-    EXPECT_TRUE(testing_support::eventually([&] {
-      std::lock_guard lock(ticks_m);
-      return bobs_ticks.count(tick) != 0;
-    })) << "no UpdateBatch of tick " << tick << " reached bob";
+    EXPECT_TRUE(bob_hears(tick)) << "no UpdateBatch of tick " << tick << " reached bob";
     ASSERT_TRUE(replica_shows(ann, box, v));
   }
   // An edit of bob's there is forwarded to server 1; its ack names server
@@ -431,16 +440,9 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
     const auto v = pattern(box, materials::kSand);
     const std::uint32_t id = bob.write_box(box, v);
     ASSERT_EQ(outcome(bob, id), "");
-    std::uint64_t tick = 0;
-    bob.wait_until([&](const ClientView& view) {
-      tick = view.edits.at(id).tick;
-      return true;
-    }, 0ms);
+    const std::uint64_t tick = acked_tick(bob, id);
     EXPECT_TRUE(replica_shows(bob, box, v));
-    EXPECT_TRUE(testing_support::eventually([&] {
-      std::lock_guard lock(ticks_m);
-      return bobs_ticks.count(tick) != 0;
-    })) << "bob's forwarded edit was acknowledged with tick " << tick << ", which no UpdateBatch named";
+    EXPECT_TRUE(bob_hears(tick)) << "bob's forwarded edit was acknowledged with tick " << tick << ", which no UpdateBatch named";
     ASSERT_TRUE(replica_shows(ann, box, v));
   }
   // What server 2 made of the units is what server 1 wrote: the chunks
