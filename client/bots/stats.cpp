@@ -53,7 +53,12 @@ std::uint32_t FanoutTracker::send_edit(int bot, const Region& bounds, double edi
   Edit e;
   e.bot = bot;
   e.voxels = edited_voxels;
-  for_each_chunk_in(bounds, [&](Vec3i cp) { e.chunks.push_back(cp); });
+  for_each_chunk_in(bounds, [&](Vec3i cp) {
+    e.chunks.push_back(cp);
+    if (servers_ == 1) return;
+    auto h = held_full_.find(cp);
+    e.held_by.push_back(h != held_full_.end() ? std::vector<int>(h->second.begin(), h->second.end()) : std::vector<int>{});
+  });
   e.sent = Clock::now();
   const std::uint32_t id = send();
   if (id == 0) return 0;
@@ -91,17 +96,17 @@ void FanoutTracker::update_received(int bot, std::uint64_t tick, const std::vect
   auto [it, fresh] = ticks_.try_emplace(tick_key(bot, tick));
   if (fresh) it->second.first_seen = t;
   for (const auto& r : revisions) {
-    it->second.updates.push_back(Update{bot, r.chunk_pos, t});
+    it->second.updates.push_back(Update{bot, r.chunk_pos, t, r.revision});
     // Several servers: an edit forwarded to its region's server reaches
     // that server's bots as an update of that server's tick.
-    if (servers_ > 1) arrivals_[r.chunk_pos].emplace_back(bot, t);
+    if (servers_ > 1) arrivals_[r.chunk_pos].push_back(Arrival{bot, t, r.revision});
   }
 }
 
 void FanoutTracker::chunk_arrived(int bot, Vec3i chunk, Clock::time_point t) {
   if (servers_ == 1) return;
   std::lock_guard lock(mutex_);
-  if (!held_full_[chunk].insert(bot).second) arrivals_[chunk].emplace_back(bot, t);
+  if (!held_full_[chunk].insert(bot).second) arrivals_[chunk].push_back(Arrival{bot, t, 0});
 }
 
 void FanoutTracker::bot_on_server(int bot, std::uint32_t server_id) {
@@ -118,18 +123,30 @@ void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
   }
 }
 
-std::vector<Vec3i> FanoutTracker::changed_by(const Edit& e, const Tick& tk) const {
-  std::vector<Vec3i> out;
-  for (const Vec3i cp : e.chunks) {
-    bool changed = std::any_of(tk.updates.begin(), tk.updates.end(), [&](const Update& u) { return u.chunk == cp; });
+std::vector<std::pair<Vec3i, std::uint64_t>> FanoutTracker::changed_by(const Edit& e, const Tick& tk) const {
+  std::vector<std::pair<Vec3i, std::uint64_t>> out;
+  bool editor_held = false;
+  for (std::size_t i = 0; i < e.chunks.size(); ++i) {
+    const Vec3i cp = e.chunks[i];
+    const auto& held = e.held_by[i];
+    editor_held = editor_held || std::find(held.begin(), held.end(), e.bot) != held.end();
+    std::uint64_t revision = 0;
+    bool changed = false;
+    for (const Update& u : tk.updates)
+      if (u.chunk == cp) {
+        changed = true;
+        revision = std::max(revision, u.revision);
+      }
     if (!changed)
       if (auto a = arrivals_.find(cp); a != arrivals_.end())
-        changed = std::any_of(a->second.begin(), a->second.end(), [&](const auto& arrival) {
-          return arrival.first == e.bot && arrival.second >= e.sent && arrival.second <= e.acked;
+        changed = std::any_of(a->second.begin(), a->second.end(), [&](const Arrival& arrival) {
+          return arrival.bot == e.bot && arrival.t >= e.sent && arrival.t <= e.acked;
         });
-    if (changed) out.push_back(cp);
+    if (changed) out.emplace_back(cp, revision);
   }
-  return out.empty() ? e.chunks : out;
+  if (out.empty() && !editor_held)
+    for (const Vec3i cp : e.chunks) out.emplace_back(cp, 0);
+  return out;
 }
 
 void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
@@ -154,17 +171,24 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
       // window (one commit's chunks arrive together). The chunks changed:
       // those of its box in its tick's updates, or (an edit forwarded to
       // another server) arriving again at the editor before its ack (which
-      // waits for them); its whole box if neither says (a chunk the box
-      // reaches but the edit left alone changes next by another edit,
-      // seconds later).
+      // waits for them); its whole box if the editor held none of it (a
+      // chunk the box reaches but the edit left alone changes next by
+      // another edit, seconds later). Measured: receivers that held the
+      // chunk when the edit was sent, by an update at the edit's revision
+      // or later (an earlier one is another edit's) or the chunk whole.
       std::unordered_map<int, Clock::time_point> other;
       if (servers_ > 1)
-        for (const Vec3i cp : changed_by(e, tk)) {
+        for (const auto& [cp, revision] : changed_by(e, tk)) {
           auto a = arrivals_.find(cp);
           if (a == arrivals_.end()) continue;
-          for (const auto& [bot, t] : a->second) {
-            if (server_of(bot) == server_of(e.bot) || t < e.sent || t > e.sent + kArrivalWindow) continue;
-            auto [o, fresh] = other.try_emplace(bot, t);
+          const auto& held = e.held_by[static_cast<std::size_t>(
+              std::find(e.chunks.begin(), e.chunks.end(), cp) - e.chunks.begin())];
+          for (const Arrival& arrival : a->second) {
+            const Clock::time_point t = arrival.t;
+            if (server_of(arrival.bot) == server_of(e.bot) || t < e.sent || t > e.sent + kArrivalWindow) continue;
+            if (revision != 0 && arrival.revision != 0 && arrival.revision < revision) continue;
+            if (std::find(held.begin(), held.end(), arrival.bot) == held.end()) continue;
+            auto [o, fresh] = other.try_emplace(arrival.bot, t);
             if (!fresh && t < o->second) o->second = t;
           }
         }
@@ -188,7 +212,7 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
   if (servers_ > 1 && horizon.count() != 0)
     for (auto a = arrivals_.begin(); a != arrivals_.end();) {
       auto& v = a->second;
-      v.erase(std::remove_if(v.begin(), v.end(), [&](const auto& p) { return p.second + 4 * horizon < now; }), v.end());
+      v.erase(std::remove_if(v.begin(), v.end(), [&](const Arrival& p) { return p.t + 4 * horizon < now; }), v.end());
       a = v.empty() ? arrivals_.erase(a) : std::next(a);
     }
 }

@@ -49,8 +49,10 @@ class FanoutTracker {
   // server than the editor's is measured by the first change of the edited
   // chunks it receives after the edit was sent (within 3 s): a chunk
   // arriving again whole (chunk_arrived: a server resends what another
-  // server changed) or an update (an edit forwarded to the region's
-  // server).
+  // server changed) or an update at the edit's revision or later. Only
+  // receivers holding the chunk at full resolution when the edit was sent
+  // are measured (one that gets it whole later saw the edit in it), and an
+  // edit that changed nothing the editor holds is measured nowhere.
   FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers = 1);
   // Moves the start of measurement (a run that waits for every bot's join
   // measures from then on).
@@ -103,12 +105,23 @@ class FanoutTracker {
     Clock::time_point sent;
     Clock::time_point acked;  // once acknowledged
     std::vector<Vec3i> chunks;
+    // Several servers: per chunk of `chunks`, the bots holding it at full
+    // resolution when the edit was sent.
+    std::vector<std::vector<int>> held_by;
     double voxels = 0;
   };
   struct Update {
     int bot;
     Vec3i chunk;
     Clock::time_point t;
+    std::uint64_t revision;
+  };
+  // A chunk's change reaching a bot: an update (its new revision) or the
+  // chunk arriving again whole (revision 0: not told).
+  struct Arrival {
+    int bot;
+    Clock::time_point t;
+    std::uint64_t revision;
   };
   struct Tick {
     Clock::time_point first_seen;
@@ -128,8 +141,10 @@ class FanoutTracker {
     return ((server_of(bot) & 0xffff) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
   }
   // Under mutex_: the chunks of e's box its tick (or, forwarded, its
-  // owner) changed; all of them when that is not known.
-  std::vector<Vec3i> changed_by(const Edit& e, const Tick& tk) const;
+  // owner) changed, each with the revision it made (0: not told); none when
+  // the editor held a chunk of the box and saw none change (the edit
+  // changed nothing), all of them when the editor held none.
+  std::vector<std::pair<Vec3i, std::uint64_t>> changed_by(const Edit& e, const Tick& tk) const;
 
   mutable std::mutex mutex_;
   Clock::time_point run_start_, measure_from_;
@@ -139,9 +154,9 @@ class FanoutTracker {
   std::vector<float> ack_ms_, fanout_ms_, fanout_other_ms_;
   const int servers_;
   std::unordered_map<int, std::uint64_t> server_of_bot_;
-  // Several servers: whole-chunk arrivals, chunk -> (bot, when), kept a
-  // while past the settle horizon.
-  std::unordered_map<Vec3i, std::vector<std::pair<int, Clock::time_point>>, Vec3iHash> arrivals_;
+  // Several servers: changes reaching the bots, by chunk, kept a while past
+  // the settle horizon.
+  std::unordered_map<Vec3i, std::vector<Arrival>, Vec3iHash> arrivals_;
   std::unordered_map<Vec3i, std::unordered_set<int>, Vec3iHash> held_full_;  // chunk -> bots holding it whole
   std::vector<std::vector<float>> fanout_by_second_, ack_by_second_;
   std::vector<float> recent_;  // fan-out samples of the last settle rounds

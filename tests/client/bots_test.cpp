@@ -358,6 +358,50 @@ TEST_F(FanoutTrackerTest, AForwardedEditIsMeasuredByTheChunksArrivingAtTheEditor
   EXPECT_LT(other[0], 1000.0f);
 }
 
+// An edit that changed nothing (the editor holds its chunks and no update
+// of its tick came) is seen nowhere: the next change of its chunks is
+// another edit's, often seconds later.
+TEST_F(FanoutTrackerTest, AnEditThatChangedNothingIsMeasuredNowhere) {
+  using namespace std::chrono_literals;
+  const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 3u; });
+  const auto sent = std::chrono::steady_clock::now();
+  EditOutcome ok;
+  ok.accepted = true;
+  ok.tick = 4;
+  f_.edit_result(0, id, ok, sent + 8ms);
+  f_.update_received(2, 11, {ChunkRevisionMsg{kChanged, 2}}, sent + 1500ms);
+  f_.chunk_arrived(2, kReached, sent + 1800ms);
+  f_.settle(sent + 10s, 0s);
+  EXPECT_TRUE(f_.fanout_other_server_ms().empty()) << f_.fanout_other_server_ms()[0];
+  EXPECT_EQ(f_.totals().edits_measured, 1u);
+}
+
+// A receiver on another server is measured by the change the edit made:
+// not by an older revision landing after the edit was sent (an earlier
+// edit's), and not at all if it did not hold the chunk when the edit was
+// sent (it got the chunk, edit included, whole; its next update is a later
+// edit's).
+TEST_F(FanoutTrackerTest, AReceiverOnAnotherServerIsMeasuredByTheRevisionTheEditMade) {
+  using namespace std::chrono_literals;
+  f_.bot_on_server(3, 2);
+  const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 5u; });
+  const auto sent = std::chrono::steady_clock::now();
+  f_.update_received(2, 20, {ChunkRevisionMsg{kChanged, 1}}, sent + 10ms);  // an earlier edit
+  EditOutcome ok;
+  ok.accepted = true;
+  ok.tick = 6;
+  f_.edit_result(0, id, ok, sent + 20ms);
+  f_.update_received(0, 6, {ChunkRevisionMsg{kChanged, 2}}, sent + 20ms);
+  f_.update_received(2, 21, {ChunkRevisionMsg{kChanged, 2}}, sent + 60ms);
+  f_.chunk_arrived(3, kChanged, sent + 100ms);  // bot 3's first copy
+  f_.update_received(3, 22, {ChunkRevisionMsg{kChanged, 3}}, sent + 1500ms);
+  f_.settle(sent + 10s, 0s);
+  const auto other = f_.fanout_other_server_ms();
+  ASSERT_EQ(other.size(), 1u) << "bot 3, which got the chunk after the edit was sent, was measured";
+  EXPECT_GE(other[0], 60.0f) << "bot 2 was measured by the earlier revision";
+  EXPECT_LT(other[0], 1000.0f);
+}
+
 TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   const fs::path file = fs::temp_directory_path() / ("terrane-bots-scenario-" + std::to_string(::getpid()));
   {
