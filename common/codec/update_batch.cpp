@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "common/codec/bit_io.h"
+#include "common/voxel/chunk.h"
 
 namespace terrane {
 namespace {
@@ -156,6 +157,24 @@ bool ChunkUnits::add(const UnitUpdate& u) {
   lo_ = min3(lo_, base);
   hi_ = max3(hi_, base + Vec3i{kUpdateUnitSize, kUpdateUnitSize, kUpdateUnitSize});
   return true;
+}
+
+Result<std::bitset<kUpdateUnitsPerChunk>> apply_chunk_update_batch(std::span<const std::uint8_t> batch, Vec3i pos,
+                                                                   Chunk& chunk, std::vector<UnitUpdate>& scratch) {
+  scratch.resize(kUpdateUnitsPerChunk);
+  auto n = net_codec_decode_update_batch(batch, scratch);
+  if (!n) return n.error();
+  if (*n == 0) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "a chunk's units: none"};
+  std::bitset<kUpdateUnitsPerChunk> written;
+  ChunkUnits units;
+  for (std::size_t i = 0; i < *n; ++i) {
+    const UnitUpdate& u = scratch[i];
+    if (u.chunk_pos != pos) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "a chunk's units: a unit of another chunk"};
+    if (!units.add(u)) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "a chunk's units: a unit twice"};
+    written.set(u.unit_index);
+  }
+  chunk.modify(units.box(), [&](Vec3i p, Voxel old) { return units.at(p, old); });
+  return written;
 }
 
 void ChunkUnits::clear() {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <array>
+#include <bitset>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -90,6 +91,16 @@ class ChunkUnits {
   std::array<const UnitUpdate*, kUpdateUnitsPerChunk> by_index_{};
   Vec3i lo_, hi_;
 };
+
+class Chunk;
+
+// Writes one batch holding units of the chunk at pos only into chunk, in one
+// pass over the box of its units (rows repacked and mips updated once), and
+// returns the indices of the units written (bit i: unit i). Checked before
+// anything is written: the batch decodes, holds at least one unit, none of
+// another chunk and none twice. scratch is the caller's buffer.
+Result<std::bitset<kUpdateUnitsPerChunk>> apply_chunk_update_batch(std::span<const std::uint8_t> batch, Vec3i pos,
+                                                                   Chunk& chunk, std::vector<UnitUpdate>& scratch);
 
 // The coordinate part of one batch entry, exposed so benchmarks can put the
 // same coordinates in front of other unit codecs. prev_* is the previous

@@ -16,6 +16,7 @@
 #include <thread>
 #include <tuple>
 
+#include "common/codec/update_batch.h"
 #include "common/world/coarse_image.h"
 #include "protocol/framing.h"
 #include "protocol/messages.h"
@@ -380,7 +381,14 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
            "  id bigint PRIMARY KEY, from_server integer NOT NULL, accepted boolean NOT NULL, tick bigint NOT NULL,"
            "  reason text NOT NULL, answered_at timestamptz NOT NULL)",
            "CREATE INDEX IF NOT EXISTS terrane_answers_from ON terrane_answers (from_server)",
-           "ALTER TABLE terrane_leases ADD COLUMN IF NOT EXISTS seq bigint NOT NULL DEFAULT 0"}) {
+           "ALTER TABLE terrane_leases ADD COLUMN IF NOT EXISTS seq bigint NOT NULL DEFAULT 0",
+           // Version 4: a chunk's blob may be of an older revision
+           // (blob_revision; NULL: the chunk's revision), its units since
+           // then kept beside it.
+           "ALTER TABLE terrane_chunks ADD COLUMN IF NOT EXISTS blob_revision bigint",
+           "CREATE TABLE IF NOT EXISTS terrane_chunk_units ("
+           "  x integer NOT NULL, y integer NOT NULL, z integer NOT NULL,"
+           "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))"}) {
     auto made = c->exec("create schema", table);
     if (!made) return c->abort(made.error());
   }
@@ -390,10 +398,11 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     auto put = c->exec("write schema version", "INSERT INTO terrane_schema (version) VALUES ($1)",
                        {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
-  } else if (const auto v = version->integer(0, 0); v == 1 || v == 2) {
+  } else if (const auto v = version->integer(0, 0); v == 1 || v == 2 || v == 3) {
     // Servers of an older version still running would write without moving
-    // the write sequences or keeping answers (1), or refuse this build's
-    // notices (2): the upgrade waits for them.
+    // the write sequences or keeping answers (1), refuse this build's
+    // notices (2), or read blobs without the units kept after them (3):
+    // the upgrade waits for them.
     auto running = c->exec("count current leases", "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
     if (!running) return c->abort(running.error());
     if (running->integer(0, 0).value_or(0) > 0)
@@ -403,7 +412,9 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
                                              "version {}",
                                              shown, *v, running->get(0, 0), kSchemaVersion)});
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
-    // seq only, made above; version 2 differs in its notices only.
+    // seq only, made above; version 2 differs in its notices only; version
+    // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob
+    // is at its chunk's revision), made above.
     auto put = c->exec("write schema version", "UPDATE terrane_schema SET version = $1", {text(kSchemaVersion)});
     if (!put) return c->abort(put.error());
   } else if (version->integer(0, 0) != kSchemaVersion) {
@@ -683,15 +694,43 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
                                                                             decoded.error().describe())});
       coarse = coarse_voxels(&*decoded);
     }
+    std::vector<Param> params{text(w.pos.x), text(w.pos.y), text(w.pos.z), text(static_cast<std::int64_t>(w.revision)),
+                              blob(w.blob), blob(coarse_bytes(coarse))};
+    if (!overwrite) {
+      auto r = c_->exec("write chunk",
+                        "INSERT INTO terrane_chunks (x, y, z, revision, blob, coarse)"
+                        " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO NOTHING",
+                        params);
+      if (!r) return c_->abort(r.error());
+      continue;
+    }
+    // Units that take the stored revision to this one are kept in place of
+    // the blob while the chunk has fewer than kMaxKeptUnits rows of them
+    // (revision - blob_revision), decided against the stored row.
+    const bool may_keep = w.units_follow_stored && !w.units.empty() && w.units.size() <= kMaxKeptUnitsBytes;
+    params.push_back(text(may_keep ? kMaxKeptUnits : std::int64_t{0}));
     auto r = c_->exec("write chunk",
-                      overwrite ? "INSERT INTO terrane_chunks (x, y, z, revision, blob, coarse)"
-                                  " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO UPDATE SET"
-                                  " revision = EXCLUDED.revision, blob = EXCLUDED.blob, coarse = EXCLUDED.coarse"
-                                : "INSERT INTO terrane_chunks (x, y, z, revision, blob, coarse)"
-                                  " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO NOTHING",
-                      {text(w.pos.x), text(w.pos.y), text(w.pos.z), text(static_cast<std::int64_t>(w.revision)),
-                       blob(w.blob), blob(coarse_bytes(coarse))});
+                      "INSERT INTO terrane_chunks AS c (x, y, z, revision, blob, coarse)"
+                      " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO UPDATE SET"
+                      " revision = EXCLUDED.revision, coarse = EXCLUDED.coarse,"
+                      " blob = CASE WHEN c.revision + 1 = EXCLUDED.revision"
+                      "   AND EXCLUDED.revision - COALESCE(c.blob_revision, c.revision) <= $7 THEN c.blob"
+                      "   ELSE EXCLUDED.blob END,"
+                      " blob_revision = CASE WHEN c.revision + 1 = EXCLUDED.revision"
+                      "   AND EXCLUDED.revision - COALESCE(c.blob_revision, c.revision) <= $7"
+                      "   THEN COALESCE(c.blob_revision, c.revision) END"
+                      " RETURNING blob_revision IS NOT NULL",
+                      params);
     if (!r) return c_->abort(r.error());
+    const bool kept = r->count() == 1 && std::string_view(PQgetvalue(r->res, 0, 0)) == "t";
+    auto u = kept ? c_->exec("write chunk units",
+                             "INSERT INTO terrane_chunk_units (x, y, z, revision, units) VALUES ($1, $2, $3, $4, $5)"
+                             " ON CONFLICT (x, y, z, revision) DO UPDATE SET units = EXCLUDED.units",
+                             {params[0], params[1], params[2], params[3], blob(w.units)})
+                  // The blob is whole at this revision: the units before it go.
+                  : c_->exec("forget chunk units", "DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3",
+                             {params[0], params[1], params[2]});
+    if (!u) return c_->abort(u.error());
   }
   for (const EditLogEntry& e : log) {
     auto r = c_->exec("write edit log",
@@ -759,6 +798,31 @@ Result<CoarseVoxels> coarse_from_bytes(std::span<const std::uint8_t> b) {
     v[i] = x;
   }
   return v;
+}
+
+// Brings chunk from revision `from` (its blob's) to `to` with the units in
+// rows [first, end) of res (revision in column rev_col, units in units_col),
+// which must be revisions from + 1 ... to, in order.
+FileStatus replay_units(Vec3i pos, Chunk& chunk, std::uint64_t from, std::uint64_t to, PGresult* res, int first,
+                        int rev_col, int units_col) {
+  std::vector<UnitUpdate> scratch;
+  std::uint64_t at = from;
+  for (int i = first; i < PQntuples(res); ++i) {
+    const auto rev = be64_at(res, i, rev_col);
+    if (!rev || *rev < 0 || static_cast<std::uint64_t>(*rev) != at + 1 || at + 1 > to) break;
+    auto applied = apply_chunk_update_batch(bytes_at(res, i, units_col), pos, chunk, scratch);
+    if (!applied)
+      return FileError{fmt::format("postgresql: chunk {}: its units of revision {}: {}", region_text(pos), at + 1,
+                                   applied.error().describe()),
+                       applied.error()};
+    ++at;
+  }
+  if (at != to)
+    return FileError{fmt::format("postgresql: chunk {}: its blob is of revision {}, and its units of revision {} "
+                                 "(of {} to {}) are missing",
+                                 region_text(pos), from, at + 1, from + 1, to),
+                     DecodeError{DecodeErrorCode::kTruncated, 0, "a chunk's units missing"}};
+  return Ok{};
 }
 
 // The parameters of a region's chunk range: x0, x1, y0, y1, z0, z1.
@@ -1030,15 +1094,30 @@ FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) {
 }
 
 FileResult<std::optional<StoredChunk>> PostgresStore::load_chunk(Vec3i pos) {
-  auto r = c_->exec("read chunk", "SELECT revision, blob FROM terrane_chunks WHERE x = $1 AND y = $2 AND z = $3",
+  // One statement, so one snapshot: the row (revision, the blob's revision,
+  // blob), then the units kept after the blob, by revision.
+  auto r = c_->exec("read chunk",
+                    "SELECT revision, COALESCE(blob_revision, revision), blob FROM terrane_chunks"
+                    "  WHERE x = $1 AND y = $2 AND z = $3"
+                    " UNION ALL"
+                    " SELECT u.revision, -1, u.units FROM terrane_chunk_units u JOIN terrane_chunks c USING (x, y, z)"
+                    "  WHERE u.x = $1 AND u.y = $2 AND u.z = $3 AND u.revision > c.blob_revision"
+                    "  AND u.revision <= c.revision"
+                    " ORDER BY 2 DESC, 1",
                     {text(pos.x), text(pos.y), text(pos.z)}, /*binary_result=*/true);
   if (!r) return file_error(r.error());
   if (r->count() == 0) return std::optional<StoredChunk>{};
   const auto revision = be64_at(r->res, 0, 0);
-  if (!revision || *revision < 0)
+  const auto blob_revision = be64_at(r->res, 0, 1);
+  if (!revision || *revision < 0 || !blob_revision || *blob_revision < 0 || *blob_revision > *revision)
     return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
-  auto chunk = decode_chunk_blob(bytes_at(r->res, 0, 1));
+  auto chunk = decode_chunk_blob(bytes_at(r->res, 0, 2));
   if (!chunk) return decode_failure(pos, chunk.error());
+  if (*blob_revision < *revision)
+    if (auto replayed = replay_units(pos, *chunk, static_cast<std::uint64_t>(*blob_revision),
+                                     static_cast<std::uint64_t>(*revision), r->res, 1, 0, 2);
+        !replayed)
+      return replayed.error();
   return std::optional<StoredChunk>{StoredChunk{static_cast<std::uint64_t>(*revision), std::move(*chunk)}};
 }
 
@@ -1238,6 +1317,10 @@ FileResult<std::optional<std::uint64_t>> PostgresStore::quarantine_chunk(Vec3i p
                         " RETURNING revision",
                         {text(pos.x), text(pos.y), text(pos.z), Param{reason, false}});
   if (!moved) return file_error(c_->abort(moved.error()));
+  // Units kept after the blob cannot be read without it.
+  auto units = c_->exec("quarantine chunk units", "DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3",
+                        {text(pos.x), text(pos.y), text(pos.z)});
+  if (!units) return file_error(c_->abort(units.error()));
   std::optional<std::uint64_t> revision;
   if (moved->count() == 1) {
     const auto rev = moved->integer(0, 0);
@@ -1279,10 +1362,10 @@ FileStatus PostgresStore::each_chunk_row(const std::function<void(Vec3i, std::ui
   auto begin = c_->exec("begin", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
   if (!begin) return file_error(begin.error());
   auto cursor = c_->exec("read chunks",
-                         with_coarse ? "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob, coarse"
-                                       " FROM terrane_chunks ORDER BY x, y, z"
-                                     : "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob"
-                                       " FROM terrane_chunks ORDER BY x, y, z");
+                         with_coarse ? "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob,"
+                                       " COALESCE(blob_revision, revision), coarse FROM terrane_chunks ORDER BY x, y, z"
+                                     : "DECLARE terrane_each CURSOR FOR SELECT x, y, z, revision, blob,"
+                                       " COALESCE(blob_revision, revision) FROM terrane_chunks ORDER BY x, y, z");
   if (!cursor) return file_error(c_->abort(cursor.error()));
   for (;;) {
     auto r = c_->exec("read chunks", "FETCH 1000 FROM terrane_each", {}, /*binary_result=*/true);
@@ -1295,8 +1378,36 @@ FileStatus PostgresStore::each_chunk_row(const std::function<void(Vec3i, std::ui
         return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
       std::optional<CoarseVoxels> coarse;
       if (with_coarse)
-        if (auto c = coarse_from_bytes(bytes_at(r->res, i, 5)); c) coarse = *c;
-      fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4), coarse);
+        if (auto c = coarse_from_bytes(bytes_at(r->res, i, 6)); c) coarse = *c;
+      const auto blob_revision = be64_at(r->res, i, 5);
+      if (!blob_revision || *blob_revision < 0 || *blob_revision > *revision)
+        return file_error(c_->abort(StoreError{StoreError::Kind::kDecode, "postgresql: read chunks: a row does not read"}));
+      if (*blob_revision == *revision) {
+        fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4), coarse);
+        continue;
+      }
+      // The blob is older than the chunk: its units after it make the chunk,
+      // handed on as a blob of its revision (read in this transaction's
+      // snapshot, as the rows are).
+      auto chunk = decode_chunk_blob(bytes_at(r->res, i, 4));
+      if (!chunk) {  // damaged: handed on as it is, for the caller to find so
+        fn(*pos, static_cast<std::uint64_t>(*revision), bytes_at(r->res, i, 4), coarse);
+        continue;
+      }
+      auto units = c_->exec("read chunk units",
+                            "SELECT revision, units FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3"
+                            " AND revision > $4 AND revision <= $5 ORDER BY revision",
+                            {text(pos->x), text(pos->y), text(pos->z), text(*blob_revision), text(*revision)},
+                            /*binary_result=*/true);
+      if (!units) return file_error(c_->abort(units.error()));
+      if (auto replayed = replay_units(*pos, *chunk, static_cast<std::uint64_t>(*blob_revision),
+                                       static_cast<std::uint64_t>(*revision), units->res, 0, 0, 1);
+          !replayed) {
+        (void)c_->abort(StoreError{StoreError::Kind::kDecode, ""});
+        return replayed.error();
+      }
+      const auto whole = encode_chunk_blob(*chunk);
+      fn(*pos, static_cast<std::uint64_t>(*revision), whole, coarse);
     }
   }
   auto commit = c_->exec("end read", "COMMIT");

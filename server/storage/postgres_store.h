@@ -126,10 +126,12 @@ class PostgresStore final : public WorldStore {
   ~PostgresStore() override;
 
   // The schema version this build reads and writes.
-  // 1 and 2 are upgraded on open once none of their regions is leased (1:
+  // 1 to 3 are upgraded on open once none of their regions is leased (1:
   // terrane_servers and the rest added; 2: notices carry changed units,
-  // which a server of version 2 refuses, so the two must not run together).
-  static constexpr int kSchemaVersion = 3;
+  // which a server of version 2 refuses; 3: a chunk's blob may be older
+  // than its revision, followed by its units in terrane_chunk_units, which
+  // a server of version 3 would not read; so none may run beside this one).
+  static constexpr int kSchemaVersion = 4;
   // Whether url names a PostgreSQL database ("postgresql://..." or
   // "postgres://...") rather than a world directory.
   static bool is_url(const std::string& url);
@@ -316,6 +318,14 @@ class PostgresStore final : public WorldStore {
 // most kMaxNoticeUnitsBytes of base64; a reader holding revision - 1
 // applies them instead of reading the chunk.
 inline constexpr const char* kChangesChannel = "terrane_changes";
+// A chunk written with its changed units (ChunkWrite::units, taking the
+// stored revision to the next) keeps its blob and gains a row of units in
+// terrane_chunk_units while it has at most kMaxKeptUnits such rows, each
+// of at most kMaxKeptUnitsBytes; otherwise the blob is written whole and
+// the chunk's rows of units are deleted (STORE_POSTGRESQL.md, "Chunks and
+// their units").
+inline constexpr std::int64_t kMaxKeptUnits = 32;
+inline constexpr std::size_t kMaxKeptUnitsBytes = 4096;
 inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
 inline constexpr std::size_t kMaxNoticeUnitsBytes = 4000;
 struct ChunkChange {

@@ -181,21 +181,10 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
 }
 
 VersionPtr WorldOwner::apply_units(const ChunkVersion& prev, const ChunkChange& c) {
-  units_scratch_.resize(kUpdateUnitsPerChunk);
-  auto n = net_codec_decode_update_batch(c.units, units_scratch_);
-  if (!n || *n == 0) return nullptr;
-  UnitBits bits;
-  ChunkUnits units;
-  for (std::size_t i = 0; i < *n; ++i) {
-    const UnitUpdate& u = units_scratch_[i];
-    if (u.chunk_pos != c.pos || !units.add(u)) return nullptr;
-    bits.set(u.unit_index);
-  }
   auto chunk = std::make_unique<Chunk>(prev.chunk() != nullptr ? prev.chunk()->clone() : Chunk(kAir));
-  // One pass over the box of the changed units: rows repacked and mips
-  // updated once.
-  chunk->modify(units.box(), [&](Vec3i p, Voxel old) { return units.at(p, old); });
-  return ChunkVersion::after(prev, std::move(chunk), bits);
+  auto bits = apply_chunk_update_batch(c.units, c.pos, *chunk, units_scratch_);
+  if (!bits) return nullptr;
+  return ChunkVersion::after(prev, std::move(chunk), *bits);
 }
 
 void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {

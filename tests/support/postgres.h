@@ -156,6 +156,25 @@ inline std::string run_sql(const std::string& url, const std::string& statement)
   return error;
 }
 
+// Runs one query on a connection of its own: its first row's first value
+// as text ("" for none), or "error: " and the error.
+inline std::string sql_value(const std::string& url, const std::string& query) {
+  PGconn* c = PQconnectdb(url.c_str());
+  std::string out;
+  if (PQstatus(c) != CONNECTION_OK) {
+    out = std::string("error: ") + PQerrorMessage(c);
+  } else {
+    PGresult* r = PQexec(c, query.c_str());
+    if (PQresultStatus(r) != PGRES_TUPLES_OK)
+      out = std::string("error: ") + PQresultErrorMessage(r);
+    else if (PQntuples(r) > 0 && PQnfields(r) > 0)
+      out = PQgetvalue(r, 0, 0);
+    PQclear(r);
+  }
+  PQfinish(c);
+  return out;
+}
+
 // A fixture: one PostgreSQL per test process (started by the suite's first
 // test), and a database of each test's own at url_. Skips where PostgreSQL
 // is not installed.

@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "common/voxel/chunk.h"
 #include "tests/common/codec/test_units.h"
 
 namespace terrane {
@@ -105,6 +106,64 @@ TEST(ChunkUnitsTest, EachVoxelOfTheBoxIsItsUnitsOrLeftAsItWas) {
   units.clear();
   EXPECT_TRUE(units.empty());
   EXPECT_EQ(units.at({4, 0, 0}, old), old);
+}
+
+// A chunk's batch of units is written into the chunk whole, or, when it
+// does not decode, holds no unit, a unit of another chunk or a unit twice,
+// refused before anything is written.
+TEST(ApplyChunkUpdateBatchTest, WritesEveryUnitOfTheBatchOrNothing) {
+  const Vec3i cp{4, -1, 2};
+  UnitUpdate a{cp, 1, {}}, b{cp, 200, {}};
+  a.voxels.fill(Voxel{5, 255});
+  b.voxels.fill(Voxel{7, 100});
+  std::vector<std::uint8_t> batch;
+  net_codec_encode_update_batch(std::vector<UnitUpdate>{a, b}, batch);
+  Chunk chunk(kAir);
+  std::vector<UnitUpdate> scratch;
+  auto written = apply_chunk_update_batch(batch, cp, chunk, scratch);
+  ASSERT_TRUE(written.ok()) << written.error().describe();
+  EXPECT_EQ(written->count(), 2u);
+  EXPECT_TRUE(written->test(1) && written->test(200));
+  EXPECT_EQ(chunk.get({4 + 3, 3, 3}), (Voxel{5, 255}));  // unit 1: x 4..8
+  const Vec3i b_base{200 % 8 * 4, 200 / 64 * 4, 200 / 8 % 8 * 4};
+  EXPECT_EQ(chunk.get(b_base), (Voxel{7, 100}));
+  EXPECT_EQ(chunk.get({0, 0, 0}), Voxel{});
+
+  const Chunk before = chunk.clone();
+  auto unchanged = [&] {
+    for (int y = 0; y < kChunkSize; ++y)
+      for (int z = 0; z < kChunkSize; ++z)
+        for (int x = 0; x < kChunkSize; ++x)
+          if (chunk.get(x, y, z) != before.get(x, y, z)) return false;
+    return true;
+  };
+  UnitUpdate elsewhere{cp + Vec3i{1, 0, 0}, 3, {}};
+  elsewhere.voxels.fill(Voxel{9, 9});
+  UnitUpdate c{cp, 2, {}};
+  c.voxels.fill(Voxel{9, 9});
+  for (const auto& [units, why] : std::vector<std::pair<std::vector<UnitUpdate>, const char*>>{
+           {{c, elsewhere}, "a unit of another chunk"}, {{}, "none"}}) {
+    std::vector<std::uint8_t> bad;
+    net_codec_encode_update_batch(units, bad);
+    auto refused = apply_chunk_update_batch(bad, cp, chunk, scratch);
+    ASSERT_FALSE(refused.ok()) << why;
+    EXPECT_NE(refused.error().describe().find(why), std::string::npos) << refused.error().describe();
+    EXPECT_TRUE(unchanged()) << why;
+  }
+  // A unit twice (a batch is a set; this one is made by hand: both pieces
+  // joined) and bytes that do not decode.
+  const UnitUpdate c2 = c;
+  std::vector<std::uint8_t> twice;
+  std::vector<UpdatePiece> pieces{net_codec_encode_update_piece(std::span(&c, 1)),
+                                  net_codec_encode_update_piece(std::span(&c2, 1))};
+  const UpdatePiece* joined[] = {&pieces[0], &pieces[1]};
+  net_codec_join_update_pieces(joined, twice);
+  auto doubled = apply_chunk_update_batch(twice, cp, chunk, scratch);
+  ASSERT_FALSE(doubled.ok());
+  EXPECT_TRUE(unchanged());
+  std::vector<std::uint8_t> cut(batch.begin(), batch.begin() + static_cast<std::ptrdiff_t>(batch.size() / 2));
+  EXPECT_FALSE(apply_chunk_update_batch(cut, cp, chunk, scratch).ok());
+  EXPECT_TRUE(unchanged());
 }
 
 }  // namespace

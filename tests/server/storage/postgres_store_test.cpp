@@ -12,6 +12,7 @@
 #include <memory>
 #include <string>
 
+#include "common/codec/update_batch.h"
 #include "common/world/world.h"
 #include "server/storage/lease_keeper.h"
 #include "tests/support/eventually.h"
@@ -24,6 +25,7 @@ using namespace std::chrono_literals;
 using testing_support::eventually;
 
 using testing_support::run_sql;
+using testing_support::sql_value;
 
 class PostgresStoreTest : public testing_support::PostgresTest {
  protected:
@@ -64,6 +66,101 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto none = again->load_chunk({3, -2, 18});
   ASSERT_TRUE(none.ok());
   EXPECT_FALSE(none->has_value());
+}
+
+// A chunk written with the units that changed since its stored revision
+// keeps its blob and gains a row of units, up to kMaxKeptUnits rows; the
+// next write, a write without units that follow the stored revision, or
+// one that skips a revision writes the blob whole and drops the rows. Every
+// reader sees the chunk at its revision: load_chunk, the rows a tool walks,
+// and a reader opened after the writer. A missing row of units is an error
+// naming the chunk.
+TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughThem) {
+  auto writer = open();
+  auto reader = open();
+  ASSERT_TRUE(writer && reader);
+  const Vec3i cp{2, 1, -3};
+  auto lease = writer->claim(lease_region_of(cp), 1, 60s);
+  ASSERT_TRUE(lease.ok()) << lease.error().message;
+  Chunk chunk(materials::kRock);
+  std::uint64_t revision = 1;
+  auto save = [&](ChunkWrite w) { return writer->save_fenced(std::span(&*lease, 1), std::span(&w, 1)); };
+  ASSERT_TRUE(save(ChunkWrite{cp, revision, encode_chunk_blob(chunk)}).ok());
+  // The next revision: one voxel of unit `unit` changed, with its units.
+  auto next = [&](int unit, bool follows = true) {
+    const Vec3i base = Vec3i{unit % 8, unit / 64, (unit / 8) % 8} * kUpdateUnitSize;
+    chunk.set(base + Vec3i{1, 2, 3}, make_voxel(materials::kBrick, static_cast<std::uint8_t>(unit)));
+    UnitUpdate u{cp, static_cast<std::uint16_t>(unit), {}};
+    for (int y = 0; y < kUpdateUnitSize; ++y)
+      for (int z = 0; z < kUpdateUnitSize; ++z)
+        for (int x = 0; x < kUpdateUnitSize; ++x)
+          u.voxels[static_cast<std::size_t>((y * kUpdateUnitSize + z) * kUpdateUnitSize + x)] =
+              chunk.get(base + Vec3i{x, y, z});
+    ChunkWrite w{cp, ++revision, encode_chunk_blob(chunk)};
+    net_codec_encode_update_batch(std::span(&u, 1), w.units);
+    w.units_follow_stored = follows;
+    return w;
+  };
+  const std::string where = " FROM terrane_chunks WHERE x = 2 AND y = 1 AND z = -3";
+  auto rows_kept = [&] { return sql_value(url_, "SELECT count(*) FROM terrane_chunk_units"); };
+  auto reads_as_written = [&](const std::string& when) {
+    auto got = reader->load_chunk(cp);
+    ASSERT_TRUE(got.ok()) << when << ": " << got.error().message;
+    ASSERT_TRUE(got->has_value()) << when;
+    EXPECT_EQ((*got)->revision, revision) << when;
+    EXPECT_EQ(encode_chunk_blob((*got)->chunk), encode_chunk_blob(chunk)) << when;
+  };
+  for (int i = 1; i <= kMaxKeptUnits; ++i) {
+    ASSERT_TRUE(save(next(i * 7 % 512)).ok());
+    ASSERT_EQ(rows_kept(), std::to_string(i));
+    ASSERT_EQ(sql_value(url_, "SELECT blob_revision" + where), "1");
+    reads_as_written("after " + std::to_string(i) + " writes with units");
+  }
+  // The rows a tool walks (export, check) hold the chunk at its revision.
+  int walked = 0;
+  ASSERT_TRUE(reader
+                  ->for_each_chunk_row([&](Vec3i pos, std::uint64_t rev, std::span<const std::uint8_t> blob,
+                                           const std::optional<CoarseVoxels>& coarse) {
+                    ++walked;
+                    EXPECT_EQ(pos, cp);
+                    EXPECT_EQ(rev, revision);
+                    EXPECT_EQ(std::vector<std::uint8_t>(blob.begin(), blob.end()), encode_chunk_blob(chunk));
+                    ASSERT_TRUE(coarse.has_value());
+                    EXPECT_EQ(*coarse, coarse_voxels(&chunk));
+                  })
+                  .ok());
+  EXPECT_EQ(walked, 1);
+  // One more row than kept: the blob is written whole, the rows go.
+  ASSERT_TRUE(save(next(300)).ok());
+  EXPECT_EQ(rows_kept(), "0");
+  EXPECT_EQ(sql_value(url_, "SELECT blob_revision IS NULL" + where), "t");
+  reads_as_written("after the blob was written again");
+  ASSERT_TRUE(save(next(301)).ok());
+  EXPECT_EQ(rows_kept(), "1");
+  // Units that do not follow the stored revision (a batch of ticks stored
+  // two at once): the blob.
+  ASSERT_TRUE(save(next(302, /*follows=*/false)).ok());
+  EXPECT_EQ(rows_kept(), "0");
+  reads_as_written("after units that did not follow");
+  // A revision skipped: the blob.
+  ASSERT_TRUE(save(next(303)).ok());
+  ++revision;
+  ChunkWrite skipped = next(304);
+  ASSERT_TRUE(save(skipped).ok());
+  EXPECT_EQ(rows_kept(), "0");
+  reads_as_written("after a revision skipped");
+  // A row of units gone: the chunk cannot be read at its revision.
+  ASSERT_TRUE(save(next(305)).ok());
+  ASSERT_TRUE(save(next(306)).ok());
+  ASSERT_EQ(rows_kept(), "2");
+  ASSERT_EQ(run_sql(url_, "DELETE FROM terrane_chunk_units WHERE revision = " + std::to_string(revision - 1)), "");
+  auto broken = reader->load_chunk(cp);
+  ASSERT_FALSE(broken.ok());
+  EXPECT_TRUE(broken.error().decode.has_value());
+  EXPECT_NE(broken.error().message.find("chunk (2,1,-3)"), std::string::npos) << broken.error().message;
+  EXPECT_NE(broken.error().message.find("units of revision " + std::to_string(revision - 1)), std::string::npos)
+      << broken.error().message;
+  EXPECT_NE(broken.error().message.find("missing"), std::string::npos) << broken.error().message;
 }
 
 TEST_F(PostgresStoreTest, ManyLeasesRenewInOneStatementAndStaleOnesAreLeftOut) {
@@ -441,6 +538,9 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   EXPECT_NE(newer.error().message.find("reads version " + std::to_string(PostgresStore::kSchemaVersion)),
             std::string::npos)
       << newer.error().message;
+  const std::string current_version = "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> " +
+                                      std::to_string(PostgresStore::kSchemaVersion) +
+                                      " THEN RAISE 'not the current version'; END IF; END $$";
   // A database of version 1 (before terrane_servers, terrane_answers and
   // the leases' seq) is brought up to date once no region is leased: its
   // servers of version 1 would write without the new rules.
@@ -467,10 +567,10 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
     EXPECT_EQ(*upgraded->take_answers(1), std::vector<ForwardAnswer>{a});
     ASSERT_TRUE(upgraded->release(std::span(&*lease, 1)).ok());
   }
-  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 3 THEN RAISE 'not 3'; END IF; END $$"),
+  EXPECT_EQ(run_sql(url_, current_version),
             "");
   // A database of version 2 (whose servers refuse notices with units) is
-  // brought to version 3 the same way, once its servers are stopped.
+  // brought up to date the same way, once its servers are stopped.
   ASSERT_EQ(run_sql(url_, "UPDATE terrane_schema SET version = 2;"
                           " UPDATE terrane_leases SET expires_at = clock_timestamp() + interval '1 hour'"),
             "");
@@ -480,8 +580,29 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
       << v2_running.error().message;
   ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
   ASSERT_TRUE(open());
-  EXPECT_EQ(run_sql(url_, "DO $$ BEGIN IF (SELECT version FROM terrane_schema) <> 3 THEN RAISE 'not 3'; END IF; END $$"),
+  EXPECT_EQ(run_sql(url_, current_version),
             "");
+  // A database of version 3 (whose servers would read a blob without the
+  // units kept after it) too; its chunk rows, each blob at its chunk's
+  // revision, read as they were.
+  ASSERT_EQ(run_sql(url_, "DROP TABLE terrane_chunk_units; ALTER TABLE terrane_chunks DROP COLUMN blob_revision;"
+                          " UPDATE terrane_schema SET version = 3;"
+                          " UPDATE terrane_leases SET expires_at = clock_timestamp() + interval '1 hour'"),
+            "");
+  auto v3_running = PostgresStore::open(url_);
+  ASSERT_FALSE(v3_running.ok());
+  EXPECT_NE(v3_running.error().message.find("schema of version 3 with 1 regions leased now"), std::string::npos)
+      << v3_running.error().message;
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
+  {
+    auto upgraded = open();
+    ASSERT_TRUE(upgraded);
+    auto kept = upgraded->load_chunk({0, 0, 0});
+    ASSERT_TRUE(kept.ok() && kept->has_value()) << (kept.ok() ? "no row" : kept.error().message);
+    EXPECT_EQ((*kept)->revision, 1u);
+    EXPECT_EQ((*kept)->chunk.get({0, 0, 0}).material, materials::kBrick);
+  }
+  EXPECT_EQ(run_sql(url_, current_version), "");
   // A damaged blob is a decode error naming the chunk.
   ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
   auto store = open();
