@@ -94,10 +94,6 @@ struct ChunkWrite {
   // to tell and ignores them.
   std::vector<std::uint8_t> units = {};
   std::uint64_t tick = 0;
-  // False when units do not take the stored revision to this one (a batch
-  // of ticks stored several revisions of the chunk at once): a store that
-  // keeps units in place of blobs (PostgreSQL) writes the blob.
-  bool units_follow_stored = true;
 };
 
 // One applied edit in the edit log (table edit_log): who, when, the box

@@ -411,6 +411,18 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
                                              "leased now: stop its servers, then start this build to bring it to "
                                              "version {}",
                                              shown, *v, running->get(0, 0), kSchemaVersion)});
+    // A server without a lease (its clients only watch) still reads, and
+    // may write later: servers of versions 2 and 3 say they run every
+    // second (terrane_servers; empty in version 1).
+    auto seen = c->exec("count running servers",
+                        "SELECT count(*) FROM terrane_servers WHERE seen_at > clock_timestamp() - interval '10 seconds'");
+    if (!seen) return c->abort(seen.error());
+    if (seen->integer(0, 0).value_or(0) > 0)
+      return c->abort(StoreError{StoreError::Kind::kQuery,
+                                 fmt::format("postgresql: {} holds a Terrane schema of version {} with {} servers "
+                                             "running (seen in the last 10 s): stop them, then start this build to "
+                                             "bring it to version {}",
+                                             shown, *v, seen->get(0, 0), kSchemaVersion)});
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
     // seq only, made above; version 2 differs in its notices only; version
     // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob
@@ -707,7 +719,8 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
     // Units that take the stored revision to this one are kept in place of
     // the blob while the chunk has fewer than kMaxKeptUnits rows of them
     // (revision - blob_revision), decided against the stored row.
-    const bool may_keep = w.units_follow_stored && !w.units.empty() && w.units.size() <= kMaxKeptUnitsBytes;
+    // (Revisions a batch of ticks coalesced skip one: the blob is written.)
+    const bool may_keep = !w.units.empty() && w.units.size() <= kMaxKeptUnitsBytes;
     params.push_back(text(may_keep ? kMaxKeptUnits : std::int64_t{0}));
     auto r = c_->exec("write chunk",
                       "INSERT INTO terrane_chunks AS c (x, y, z, revision, blob, coarse)"
@@ -1113,11 +1126,12 @@ FileResult<std::optional<StoredChunk>> PostgresStore::load_chunk(Vec3i pos) {
     return decode_failure(pos, DecodeError{DecodeErrorCode::kInvalidValue, 0, "chunk revision"});
   auto chunk = decode_chunk_blob(bytes_at(r->res, 0, 2));
   if (!chunk) return decode_failure(pos, chunk.error());
-  if (*blob_revision < *revision)
-    if (auto replayed = replay_units(pos, *chunk, static_cast<std::uint64_t>(*blob_revision),
-                                     static_cast<std::uint64_t>(*revision), r->res, 1, 0, 2);
-        !replayed)
-      return replayed.error();
+  if (*blob_revision < *revision) {
+    auto replayed = replay_units(pos, *chunk, static_cast<std::uint64_t>(*blob_revision),
+                                 static_cast<std::uint64_t>(*revision), r->res, 1, 0, 2);
+    if (!replayed) return replayed.error();
+    chunk->compact();  // packed, as a decoded blob is
+  }
   return std::optional<StoredChunk>{StoredChunk{static_cast<std::uint64_t>(*revision), std::move(*chunk)}};
 }
 
@@ -1308,17 +1322,26 @@ FileResult<std::optional<std::uint64_t>> PostgresStore::quarantine_chunk(Vec3i p
   auto begin = c_->exec("begin", "BEGIN");
   if (!begin) return file_error(begin.error());
   // Copied inside the database: the blob moves byte for byte, however
-  // damaged it is.
+  // damaged it is, under the row's revision (the highest moved: a chunk
+  // served in its place comes above it); a blob older than that says so.
   auto moved = c_->exec("quarantine chunk",
                         "WITH gone AS (DELETE FROM terrane_chunks WHERE x = $1 AND y = $2 AND z = $3"
-                        "  RETURNING x, y, z, revision, blob)"
+                        "  RETURNING x, y, z, revision, blob_revision, blob)"
                         " INSERT INTO terrane_quarantine (x, y, z, revision, blob, reason, time_s)"
-                        " SELECT x, y, z, revision, blob, $4, extract(epoch from clock_timestamp())::bigint FROM gone"
+                        " SELECT x, y, z, revision, blob,"
+                        "  CASE WHEN blob_revision IS NULL THEN $4"
+                        "  ELSE $4 || ' (the blob is of revision ' || blob_revision || ', its units after it beside it)'"
+                        "  END, extract(epoch from clock_timestamp())::bigint FROM gone"
                         " RETURNING revision",
                         {text(pos.x), text(pos.y), text(pos.z), Param{reason, false}});
   if (!moved) return file_error(c_->abort(moved.error()));
-  // Units kept after the blob cannot be read without it.
-  auto units = c_->exec("quarantine chunk units", "DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3",
+  // The units kept after the blob go with it, each a row of its revision.
+  auto units = c_->exec("quarantine chunk units",
+                        "WITH gone AS (DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3"
+                        "  RETURNING x, y, z, revision, units)"
+                        " INSERT INTO terrane_quarantine (x, y, z, revision, blob, reason, time_s)"
+                        " SELECT x, y, z, revision, units, 'the units of revision ' || revision || ' (an update batch)',"
+                        "  extract(epoch from clock_timestamp())::bigint FROM gone",
                         {text(pos.x), text(pos.y), text(pos.z)});
   if (!units) return file_error(c_->abort(units.error()));
   std::optional<std::uint64_t> revision;
@@ -1344,21 +1367,26 @@ FileResult<std::optional<std::uint64_t>> PostgresStore::quarantined_revision(Vec
 
 FileStatus PostgresStore::for_each_chunk(
     const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) {
-  return each_chunk_row(
-      [&](Vec3i pos, std::uint64_t revision, std::span<const std::uint8_t> blob, const std::optional<CoarseVoxels>&) {
-        fn(pos, revision, blob);
+  std::optional<FileError> unreadable;
+  auto walked = each_chunk_row(
+      [&](Vec3i pos, std::uint64_t revision, FileResult<std::span<const std::uint8_t>> blob,
+          const std::optional<CoarseVoxels>&) {
+        if (unreadable) return;
+        if (!blob) {
+          unreadable = blob.error();
+          return;
+        }
+        fn(pos, revision, *blob);
       },
       /*with_coarse=*/false);
+  if (!walked) return walked;
+  if (unreadable) return *unreadable;
+  return Ok{};
 }
 
-FileStatus PostgresStore::for_each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
-                                                                      const std::optional<CoarseVoxels>&)>& fn) {
-  return each_chunk_row(fn, /*with_coarse=*/true);
-}
+FileStatus PostgresStore::for_each_chunk_row(const RowFn& fn) { return each_chunk_row(fn, /*with_coarse=*/true); }
 
-FileStatus PostgresStore::each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
-                                                                  const std::optional<CoarseVoxels>&)>& fn,
-                                         bool with_coarse) {
+FileStatus PostgresStore::each_chunk_row(const RowFn& fn, bool with_coarse) {
   auto begin = c_->exec("begin", "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY");
   if (!begin) return file_error(begin.error());
   auto cursor = c_->exec("read chunks",
@@ -1403,11 +1431,11 @@ FileStatus PostgresStore::each_chunk_row(const std::function<void(Vec3i, std::ui
       if (auto replayed = replay_units(*pos, *chunk, static_cast<std::uint64_t>(*blob_revision),
                                        static_cast<std::uint64_t>(*revision), units->res, 0, 0, 1);
           !replayed) {
-        (void)c_->abort(StoreError{StoreError::Kind::kDecode, ""});
-        return replayed.error();
+        fn(*pos, static_cast<std::uint64_t>(*revision), replayed.error(), coarse);
+        continue;
       }
       const auto whole = encode_chunk_blob(*chunk);
-      fn(*pos, static_cast<std::uint64_t>(*revision), whole, coarse);
+      fn(*pos, static_cast<std::uint64_t>(*revision), std::span<const std::uint8_t>(whole), coarse);
     }
   }
   auto commit = c_->exec("end read", "COMMIT");

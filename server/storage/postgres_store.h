@@ -265,9 +265,13 @@ class PostgresStore final : public WorldStore {
   FileStatus for_each_chunk(
       const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>)>& fn) override;
   // The same, with each row's coarse mip column (nullopt if it does not
-  // decode), in one read-only snapshot: terrane-world check.
-  FileStatus for_each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
-                                                         const std::optional<CoarseVoxels>&)>& fn);
+  // decode), in one read-only snapshot: terrane-world check. A chunk whose
+  // units kept after its blob do not make it (one missing or not
+  // decoding) comes as that error, and the walk goes on. (for_each_chunk
+  // stops there and returns it.)
+  using RowFn = std::function<void(Vec3i, std::uint64_t, FileResult<std::span<const std::uint8_t>>,
+                                   const std::optional<CoarseVoxels>&)>;
+  FileStatus for_each_chunk_row(const RowFn& fn);
   // Every quarantined row, by chunk and revision.
   FileStatus for_each_quarantined(const std::function<void(const QuarantinedChunk&)>& fn);
   FileResult<std::int64_t> stored_chunk_count() override;
@@ -280,9 +284,7 @@ class PostgresStore final : public WorldStore {
   // server, nullopt if owner may claim it.
   StoreResult<std::optional<StoreError>> left_to_neighbour(Vec3i region, std::uint32_t owner);
   // for_each_chunk(_row): the coarse column read and decoded only if asked.
-  FileStatus each_chunk_row(const std::function<void(Vec3i, std::uint64_t, std::span<const std::uint8_t>,
-                                                     const std::optional<CoarseVoxels>&)>& fn,
-                            bool with_coarse);
+  FileStatus each_chunk_row(const RowFn& fn, bool with_coarse);
   struct Connection;
   PostgresStore(std::unique_ptr<Connection> c, std::string url, std::string shown);
   StoreResult<Ok> read_meta();

@@ -426,10 +426,8 @@ void Storage::writer_loop() {
           auto [it, fresh] = index.emplace(v->pos(), writes.size());
           if (fresh)
             writes.push_back(std::move(w));
-          else if (writes[it->second].revision < w.revision) {
+          else if (writes[it->second].revision < w.revision)
             writes[it->second] = std::move(w);
-            writes[it->second].units_follow_stored = false;  // its units follow the revision before, unstored
-          }
         }
       }
       if (!writes.empty() || !log.empty() || !answers.empty()) {

@@ -654,10 +654,15 @@ int check_postgres(const WorldPlace& place) {
   Progress progress("check", static_cast<std::uint64_t>(*total));
   std::uint64_t done = 0, coarse_bad = 0;
   std::vector<std::pair<Vec3i, std::string>> damaged;
-  auto s = store.for_each_chunk_row([&](Vec3i pos, std::uint64_t, std::span<const std::uint8_t> blob,
+  auto s = store.for_each_chunk_row([&](Vec3i pos, std::uint64_t, FileResult<std::span<const std::uint8_t>> blob,
                                         const std::optional<CoarseVoxels>& coarse) {
     progress.update(++done);
-    auto chunk = decode_chunk_blob(blob);
+    if (!blob) {  // its units after its blob do not make it
+      damaged.emplace_back(pos, blob.error().message);
+      std::fprintf(stderr, "chunk (%d, %d, %d): damaged: %s\n", pos.x, pos.y, pos.z, blob.error().message.c_str());
+      return;
+    }
+    auto chunk = decode_chunk_blob(*blob);
     if (!chunk) {
       damaged.emplace_back(pos, chunk.error().describe());
       std::fprintf(stderr, "chunk (%d, %d, %d): damaged: %s\n", pos.x, pos.y, pos.z, chunk.error().describe().c_str());

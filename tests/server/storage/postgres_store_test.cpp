@@ -70,8 +70,8 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
 
 // A chunk written with the units that changed since its stored revision
 // keeps its blob and gains a row of units, up to kMaxKeptUnits rows; the
-// next write, a write without units that follow the stored revision, or
-// one that skips a revision writes the blob whole and drops the rows. Every
+// next write, or one that skips a revision, writes the blob whole and
+// drops the rows. Every
 // reader sees the chunk at its revision: load_chunk, the rows a tool walks,
 // and a reader opened after the writer. A missing row of units is an error
 // naming the chunk.
@@ -87,7 +87,7 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   auto save = [&](ChunkWrite w) { return writer->save_fenced(std::span(&*lease, 1), std::span(&w, 1)); };
   ASSERT_TRUE(save(ChunkWrite{cp, revision, encode_chunk_blob(chunk)}).ok());
   // The next revision: one voxel of unit `unit` changed, with its units.
-  auto next = [&](int unit, bool follows = true) {
+  auto next = [&](int unit) {
     const Vec3i base = Vec3i{unit % 8, unit / 64, (unit / 8) % 8} * kUpdateUnitSize;
     chunk.set(base + Vec3i{1, 2, 3}, make_voxel(materials::kBrick, static_cast<std::uint8_t>(unit)));
     UnitUpdate u{cp, static_cast<std::uint16_t>(unit), {}};
@@ -98,7 +98,6 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
               chunk.get(base + Vec3i{x, y, z});
     ChunkWrite w{cp, ++revision, encode_chunk_blob(chunk)};
     net_codec_encode_update_batch(std::span(&u, 1), w.units);
-    w.units_follow_stored = follows;
     return w;
   };
   const std::string where = " FROM terrane_chunks WHERE x = 2 AND y = 1 AND z = -3";
@@ -119,12 +118,13 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   // The rows a tool walks (export, check) hold the chunk at its revision.
   int walked = 0;
   ASSERT_TRUE(reader
-                  ->for_each_chunk_row([&](Vec3i pos, std::uint64_t rev, std::span<const std::uint8_t> blob,
+                  ->for_each_chunk_row([&](Vec3i pos, std::uint64_t rev, FileResult<std::span<const std::uint8_t>> blob,
                                            const std::optional<CoarseVoxels>& coarse) {
                     ++walked;
                     EXPECT_EQ(pos, cp);
                     EXPECT_EQ(rev, revision);
-                    EXPECT_EQ(std::vector<std::uint8_t>(blob.begin(), blob.end()), encode_chunk_blob(chunk));
+                    ASSERT_TRUE(blob.ok()) << blob.error().message;
+                    EXPECT_EQ(std::vector<std::uint8_t>(blob->begin(), blob->end()), encode_chunk_blob(chunk));
                     ASSERT_TRUE(coarse.has_value());
                     EXPECT_EQ(*coarse, coarse_voxels(&chunk));
                   })
@@ -137,13 +137,8 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   reads_as_written("after the blob was written again");
   ASSERT_TRUE(save(next(301)).ok());
   EXPECT_EQ(rows_kept(), "1");
-  // Units that do not follow the stored revision (a batch of ticks stored
-  // two at once): the blob.
-  ASSERT_TRUE(save(next(302, /*follows=*/false)).ok());
-  EXPECT_EQ(rows_kept(), "0");
-  reads_as_written("after units that did not follow");
-  // A revision skipped: the blob.
-  ASSERT_TRUE(save(next(303)).ok());
+  // A revision skipped (a batch of ticks that changed the chunk twice
+  // stores the second revision only, with its own units): the blob.
   ++revision;
   ChunkWrite skipped = next(304);
   ASSERT_TRUE(save(skipped).ok());
@@ -161,6 +156,31 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   EXPECT_NE(broken.error().message.find("units of revision " + std::to_string(revision - 1)), std::string::npos)
       << broken.error().message;
   EXPECT_NE(broken.error().message.find("missing"), std::string::npos) << broken.error().message;
+  // A tool's walk names the chunk and goes on; for_each_chunk stops there.
+  int unreadable = 0;
+  ASSERT_TRUE(reader
+                  ->for_each_chunk_row([&](Vec3i, std::uint64_t, FileResult<std::span<const std::uint8_t>> blob,
+                                           const std::optional<CoarseVoxels>&) {
+                    if (blob.ok()) return;
+                    ++unreadable;
+                    EXPECT_NE(blob.error().message.find("missing"), std::string::npos) << blob.error().message;
+                  })
+                  .ok());
+  EXPECT_EQ(unreadable, 1);
+  EXPECT_FALSE(reader->for_each_chunk([](Vec3i, std::uint64_t, std::span<const std::uint8_t>) {}).ok());
+  // Quarantined (as the region's server does with a row it cannot read):
+  // the blob and the units left move together, under the chunk's revision,
+  // above which a chunk served in its place comes.
+  auto moved = writer->quarantine_chunk(cp, "units missing");
+  ASSERT_TRUE(moved.ok()) << moved.error().message;
+  EXPECT_EQ(moved->value_or(0), revision);
+  EXPECT_EQ(rows_kept(), "0");
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_quarantine"), "2");
+  EXPECT_EQ(sql_value(url_, "SELECT reason FROM terrane_quarantine WHERE revision = " + std::to_string(revision) +
+                                " ORDER BY id LIMIT 1"),
+            "units missing (the blob is of revision " + std::to_string(revision - 2) +
+                ", its units after it beside it)");
+  EXPECT_EQ(writer->quarantined_revision(cp)->value_or(0), revision);
 }
 
 TEST_F(PostgresStoreTest, ManyLeasesRenewInOneStatementAndStaleOnesAreLeftOut) {
@@ -566,6 +586,7 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
     ASSERT_TRUE(upgraded->answer(std::span(&a, 1)).ok());
     EXPECT_EQ(*upgraded->take_answers(1), std::vector<ForwardAnswer>{a});
     ASSERT_TRUE(upgraded->release(std::span(&*lease, 1)).ok());
+    ASSERT_TRUE(upgraded->withdraw(1).ok());
   }
   EXPECT_EQ(run_sql(url_, current_version),
             "");
@@ -593,7 +614,17 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   ASSERT_FALSE(v3_running.ok());
   EXPECT_NE(v3_running.error().message.find("schema of version 3 with 1 regions leased now"), std::string::npos)
       << v3_running.error().message;
-  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
+  // A server of version 3 running without a lease (its clients only
+  // watch) would read blobs without their units, and may write later.
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp();"
+                          " INSERT INTO terrane_servers VALUES (3, '127.0.0.1:7003', clock_timestamp())"),
+            "");
+  auto v3_watching = PostgresStore::open(url_);
+  ASSERT_FALSE(v3_watching.ok());
+  EXPECT_NE(v3_watching.error().message.find("version 3 with 1 servers running (seen in the last 10 s): stop them"),
+            std::string::npos)
+      << v3_watching.error().message;
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_servers SET seen_at = clock_timestamp() - interval '11 seconds'"), "");
   {
     auto upgraded = open();
     ASSERT_TRUE(upgraded);
