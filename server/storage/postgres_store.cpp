@@ -402,27 +402,23 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
     // Servers of an older version still running would write without moving
     // the write sequences or keeping answers (1), refuse this build's
     // notices (2), or read blobs without the units kept after them (3):
-    // the upgrade waits for them.
-    auto running = c->exec("count current leases", "SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()");
+    // the upgrade waits for them. A server without a lease (its clients
+    // only watch) still reads and may write later: servers of versions 2
+    // and 3 say they run every second (terrane_servers; empty in version 1).
+    auto running = c->exec("count running servers",
+                           "SELECT (SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()),"
+                           " (SELECT count(*) FROM terrane_servers"
+                           "  WHERE seen_at > clock_timestamp() - interval '10 seconds')");
     if (!running) return c->abort(running.error());
-    if (running->integer(0, 0).value_or(0) > 0)
+    std::vector<std::string> still;
+    if (running->integer(0, 0).value_or(0) > 0) still.push_back(running->get(0, 0) + " regions leased now");
+    if (running->integer(0, 1).value_or(0) > 0)
+      still.push_back(running->get(0, 1) + " servers running (seen in the last 10 s)");
+    if (!still.empty())
       return c->abort(StoreError{StoreError::Kind::kQuery,
-                                 fmt::format("postgresql: {} holds a Terrane schema of version {} with {} regions "
-                                             "leased now: stop its servers, then start this build to bring it to "
-                                             "version {}",
-                                             shown, *v, running->get(0, 0), kSchemaVersion)});
-    // A server without a lease (its clients only watch) still reads, and
-    // may write later: servers of versions 2 and 3 say they run every
-    // second (terrane_servers; empty in version 1).
-    auto seen = c->exec("count running servers",
-                        "SELECT count(*) FROM terrane_servers WHERE seen_at > clock_timestamp() - interval '10 seconds'");
-    if (!seen) return c->abort(seen.error());
-    if (seen->integer(0, 0).value_or(0) > 0)
-      return c->abort(StoreError{StoreError::Kind::kQuery,
-                                 fmt::format("postgresql: {} holds a Terrane schema of version {} with {} servers "
-                                             "running (seen in the last 10 s): stop them, then start this build to "
-                                             "bring it to version {}",
-                                             shown, *v, seen->get(0, 0), kSchemaVersion)});
+                                 fmt::format("postgresql: {} holds a Terrane schema of version {} with {}: stop its "
+                                             "servers, then start this build to bring it to version {}",
+                                             shown, *v, fmt::join(still, " and "), kSchemaVersion)});
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
     // seq only, made above; version 2 differs in its notices only; version
     // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob

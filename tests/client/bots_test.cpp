@@ -307,6 +307,13 @@ class FanoutTrackerTest : public ::testing::Test {
     f_.chunk_arrived(2, kChanged, t0);
     f_.chunk_arrived(2, kReached, t0);
   }
+  // Bot 0's edit id acknowledged at t, naming tick.
+  void acked(std::uint32_t id, std::uint64_t tick, std::chrono::steady_clock::time_point t) {
+    EditOutcome ok;
+    ok.accepted = true;
+    ok.tick = tick;
+    f_.edit_result(0, id, ok, t);
+  }
   static constexpr Vec3i kChanged{0, 0, 0}, kReached{1, 0, 0};
   static constexpr Region kBox{{30, 0, 0}, {34, 4, 4}};  // across both chunks
   FanoutTracker f_;
@@ -317,10 +324,7 @@ TEST_F(FanoutTrackerTest, ALocalEditIsMeasuredByTheChunksItsTicksUpdatesChanged)
   const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 7u; });
   ASSERT_EQ(id, 7u);
   const auto sent = std::chrono::steady_clock::now();
-  EditOutcome ok;
-  ok.accepted = true;
-  ok.tick = 5;
-  f_.edit_result(0, id, ok, sent + 20ms);
+  acked(id, 5, sent + 20ms);
   f_.update_received(0, 5, {ChunkRevisionMsg{kChanged, 2}}, sent + 20ms);
   // Bot 2 gets the change from its server 40 ms on; the second chunk
   // changes 1.5 s on, by another edit, and reaches bots 1 and 2.
@@ -343,10 +347,7 @@ TEST_F(FanoutTrackerTest, AForwardedEditIsMeasuredByTheChunksArrivingAtTheEditor
   const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 8u; });
   const auto sent = std::chrono::steady_clock::now();
   f_.chunk_arrived(0, kChanged, sent + 30ms);
-  EditOutcome ok;
-  ok.accepted = true;
-  ok.tick = 9;
-  f_.edit_result(0, id, ok, sent + 35ms);
+  acked(id, 9, sent + 35ms);
   f_.chunk_arrived(2, kChanged, sent + 50ms);
   f_.chunk_arrived(0, kReached, sent + 1500ms);
   f_.chunk_arrived(1, kReached, sent + 1500ms);
@@ -365,10 +366,7 @@ TEST_F(FanoutTrackerTest, AnEditThatChangedNothingIsMeasuredNowhere) {
   using namespace std::chrono_literals;
   const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 3u; });
   const auto sent = std::chrono::steady_clock::now();
-  EditOutcome ok;
-  ok.accepted = true;
-  ok.tick = 4;
-  f_.edit_result(0, id, ok, sent + 8ms);
+  acked(id, 4, sent + 8ms);
   f_.update_received(2, 11, {ChunkRevisionMsg{kChanged, 2}}, sent + 1500ms);
   f_.chunk_arrived(2, kReached, sent + 1800ms);
   f_.settle(sent + 10s, 0s);
@@ -387,10 +385,7 @@ TEST_F(FanoutTrackerTest, AReceiverOnAnotherServerIsMeasuredByTheRevisionTheEdit
   const std::uint32_t id = f_.send_edit(0, kBox, 8, [] { return 5u; });
   const auto sent = std::chrono::steady_clock::now();
   f_.update_received(2, 20, {ChunkRevisionMsg{kChanged, 1}}, sent + 10ms);  // an earlier edit
-  EditOutcome ok;
-  ok.accepted = true;
-  ok.tick = 6;
-  f_.edit_result(0, id, ok, sent + 20ms);
+  acked(id, 6, sent + 20ms);
   f_.update_received(0, 6, {ChunkRevisionMsg{kChanged, 2}}, sent + 20ms);
   f_.update_received(2, 21, {ChunkRevisionMsg{kChanged, 2}}, sent + 60ms);
   f_.chunk_arrived(3, kChanged, sent + 100ms);  // bot 3's first copy

@@ -621,7 +621,7 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
             "");
   auto v3_watching = PostgresStore::open(url_);
   ASSERT_FALSE(v3_watching.ok());
-  EXPECT_NE(v3_watching.error().message.find("version 3 with 1 servers running (seen in the last 10 s): stop them"),
+  EXPECT_NE(v3_watching.error().message.find("version 3 with 1 servers running (seen in the last 10 s): stop its servers"),
             std::string::npos)
       << v3_watching.error().message;
   ASSERT_EQ(run_sql(url_, "UPDATE terrane_servers SET seen_at = clock_timestamp() - interval '11 seconds'"), "");
