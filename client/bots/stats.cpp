@@ -123,8 +123,8 @@ void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
   }
 }
 
-std::vector<std::pair<Vec3i, std::uint64_t>> FanoutTracker::changed_by(const Edit& e, const Tick& tk) const {
-  std::vector<std::pair<Vec3i, std::uint64_t>> out;
+std::vector<std::pair<std::size_t, std::uint64_t>> FanoutTracker::changed_by(const Edit& e, const Tick& tk) const {
+  std::vector<std::pair<std::size_t, std::uint64_t>> out;
   bool editor_held = false;
   for (std::size_t i = 0; i < e.chunks.size(); ++i) {
     const Vec3i cp = e.chunks[i];
@@ -142,10 +142,10 @@ std::vector<std::pair<Vec3i, std::uint64_t>> FanoutTracker::changed_by(const Edi
         changed = std::any_of(a->second.begin(), a->second.end(), [&](const Arrival& arrival) {
           return arrival.bot == e.bot && arrival.t >= e.sent && arrival.t <= e.acked;
         });
-    if (changed) out.emplace_back(cp, revision);
+    if (changed) out.emplace_back(i, revision);
   }
   if (out.empty() && !editor_held)
-    for (const Vec3i cp : e.chunks) out.emplace_back(cp, 0);
+    for (std::size_t i = 0; i < e.chunks.size(); ++i) out.emplace_back(i, 0);
   return out;
 }
 
@@ -178,11 +178,10 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
       // or later (an earlier one is another edit's) or the chunk whole.
       std::unordered_map<int, Clock::time_point> other;
       if (servers_ > 1)
-        for (const auto& [cp, revision] : changed_by(e, tk)) {
-          auto a = arrivals_.find(cp);
+        for (const auto& [i, revision] : changed_by(e, tk)) {
+          auto a = arrivals_.find(e.chunks[i]);
           if (a == arrivals_.end()) continue;
-          const auto& held = e.held_by[static_cast<std::size_t>(
-              std::find(e.chunks.begin(), e.chunks.end(), cp) - e.chunks.begin())];
+          const auto& held = e.held_by[i];
           for (const Arrival& arrival : a->second) {
             const Clock::time_point t = arrival.t;
             if (server_of(arrival.bot) == server_of(e.bot) || t < e.sent || t > e.sent + kArrivalWindow) continue;

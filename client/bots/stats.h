@@ -140,11 +140,11 @@ class FanoutTracker {
   std::uint64_t tick_key(int bot, std::uint64_t tick) const {
     return ((server_of(bot) & 0xffff) << 48) | (tick & ((std::uint64_t{1} << 48) - 1));
   }
-  // Under mutex_: the chunks of e's box its tick (or, forwarded, its
-  // owner) changed, each with the revision it made (0: not told); none when
-  // the editor held a chunk of the box and saw none change (the edit
-  // changed nothing), all of them when the editor held none.
-  std::vector<std::pair<Vec3i, std::uint64_t>> changed_by(const Edit& e, const Tick& tk) const;
+  // Under mutex_: the chunks of e's box (indices into e.chunks) its tick
+  // (or, forwarded, its owner) changed, each with the revision it made (0:
+  // not told); none when the editor held a chunk of the box and saw none
+  // change (the edit changed nothing), all of them when the editor held none.
+  std::vector<std::pair<std::size_t, std::uint64_t>> changed_by(const Edit& e, const Tick& tk) const;
 
   mutable std::mutex mutex_;
   Clock::time_point run_start_, measure_from_;

@@ -655,6 +655,12 @@ StoreResult<PostgresStore::Cluster> PostgresStore::cluster(std::chrono::millisec
   return out;
 }
 
+// The upsert's rule for keeping a chunk's blob (STORE_POSTGRESQL.md,
+// "Chunks and their units"): c the stored row, $7 the most rows of units
+// behind a blob (0: write the blob).
+#define KEEP_UNITS \
+  "(c.revision + 1 = EXCLUDED.revision AND EXCLUDED.revision - COALESCE(c.blob_revision, c.revision) <= $7)"
+
 StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
                                            std::span<const EditLogEntry> log, bool overwrite,
                                            std::span<const ForwardAnswer> answers) {
@@ -716,31 +722,28 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
     // the blob while the chunk has fewer than kMaxKeptUnits rows of them
     // (revision - blob_revision), decided against the stored row.
     // (Revisions a batch of ticks coalesced skip one: the blob is written.)
+    // One statement, one round trip: the row, then its row of units if the
+    // blob was kept, else the chunk's rows of units deleted.
     const bool may_keep = !w.units.empty() && w.units.size() <= kMaxKeptUnitsBytes;
     params.push_back(text(may_keep ? kMaxKeptUnits : std::int64_t{0}));
+    params.push_back(blob(w.units));
     auto r = c_->exec("write chunk",
-                      "INSERT INTO terrane_chunks AS c (x, y, z, revision, blob, coarse)"
-                      " VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO UPDATE SET"
-                      " revision = EXCLUDED.revision, coarse = EXCLUDED.coarse,"
-                      " blob = CASE WHEN c.revision + 1 = EXCLUDED.revision"
-                      "   AND EXCLUDED.revision - COALESCE(c.blob_revision, c.revision) <= $7 THEN c.blob"
-                      "   ELSE EXCLUDED.blob END,"
-                      " blob_revision = CASE WHEN c.revision + 1 = EXCLUDED.revision"
-                      "   AND EXCLUDED.revision - COALESCE(c.blob_revision, c.revision) <= $7"
-                      "   THEN COALESCE(c.blob_revision, c.revision) END"
-                      " RETURNING blob_revision IS NOT NULL",
+                      "WITH up AS (INSERT INTO terrane_chunks AS c (x, y, z, revision, blob, coarse)"
+                      "  VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (x, y, z) DO UPDATE SET"
+                      "  revision = EXCLUDED.revision, coarse = EXCLUDED.coarse,"
+                      "  blob_revision = CASE WHEN " KEEP_UNITS " THEN COALESCE(c.blob_revision, c.revision) END,"
+                      "  blob = CASE WHEN " KEEP_UNITS " THEN c.blob ELSE EXCLUDED.blob END"
+                      "  RETURNING blob_revision),"
+                      " kept AS (INSERT INTO terrane_chunk_units (x, y, z, revision, units)"
+                      "  SELECT $1::integer, $2::integer, $3::integer, $4::bigint, $8::bytea FROM up"
+                      "  WHERE blob_revision IS NOT NULL"
+                      "  ON CONFLICT (x, y, z, revision) DO UPDATE SET units = EXCLUDED.units)"
+                      " DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3"
+                      "  AND NOT EXISTS (SELECT 1 FROM up WHERE blob_revision IS NOT NULL)",
                       params);
     if (!r) return c_->abort(r.error());
-    const bool kept = r->count() == 1 && std::string_view(PQgetvalue(r->res, 0, 0)) == "t";
-    auto u = kept ? c_->exec("write chunk units",
-                             "INSERT INTO terrane_chunk_units (x, y, z, revision, units) VALUES ($1, $2, $3, $4, $5)"
-                             " ON CONFLICT (x, y, z, revision) DO UPDATE SET units = EXCLUDED.units",
-                             {params[0], params[1], params[2], params[3], blob(w.units)})
-                  // The blob is whole at this revision: the units before it go.
-                  : c_->exec("forget chunk units", "DELETE FROM terrane_chunk_units WHERE x = $1 AND y = $2 AND z = $3",
-                             {params[0], params[1], params[2]});
-    if (!u) return c_->abort(u.error());
   }
+#undef KEEP_UNITS
   for (const EditLogEntry& e : log) {
     auto r = c_->exec("write edit log",
                       "INSERT INTO terrane_edit_log (tick, time_ms, player, x0, y0, z0, x1, y1, z1, before, after)"
