@@ -15,6 +15,8 @@ namespace {
 // Edits applied per tick at most: bounds a tick's work on the strand (each
 // edit touches at most kMaxEditVolume voxels).
 constexpr std::size_t kMaxEditsPerTick = 256;
+// Edits set aside to wait, per tick, before the rest wait for the next.
+constexpr std::size_t kMaxEditsWaitingPerTick = 1024;
 
 // Whether two n^3 network codec units hold the same voxels (a unit that
 // does not decode differs from everything).
@@ -745,10 +747,37 @@ void WorldOwner::apply_edits() {
     if (before == after) return;  // nothing changed: nothing to log
     log.push_back(EditLogEntry{0, tick_, now_ms, player, box, std::move(before), std::move(after)});
   };
-  while (!edits_.empty() && acks.size() + rollbacks.size() < kMaxEditsPerTick) {
+  // An edit that must wait (for its chunks, a claim) is set aside and the
+  // edits behind it go on, except those that touch a chunk of a waiting
+  // edit or are a waiting edit's player's: those keep arrival order. The
+  // edits set aside go back to the queue's front after the tick.
+  std::deque<PendingEdit> waiting;
+  std::unordered_set<Vec3i, Vec3iHash> waiting_chunks;
+  std::unordered_set<std::string> waiting_players;
+  const auto behind_waiting = [&](const Region& r) {
+    bool meets = false;
+    for_each_chunk_in(r, [&](Vec3i cp) { meets = meets || waiting_chunks.count(cp) != 0; });
+    return meets;
+  };
+  const auto mark_waiting = [&](const Region& r) {
+    for_each_chunk_in(r, [&](Vec3i cp) { waiting_chunks.insert(cp); });
+  };
+  const auto set_aside = [&] {
+    waiting.push_back(std::move(edits_.front()));
+    edits_.pop_front();
+  };
+  while (!edits_.empty() && acks.size() + rollbacks.size() < kMaxEditsPerTick &&
+         waiting.size() < kMaxEditsWaitingPerTick) {
     PendingEdit& pe = edits_.front();
     if (pe.rollback) {
       Rollback& job = *pe.rollback;
+      bool behind = false;
+      for (const EditLogEntry& e : job.entries) behind = behind || behind_waiting(bounds.clamp(e.box));
+      if (behind) {
+        for (const EditLogEntry& e : job.entries) mark_waiting(bounds.clamp(e.box));
+        set_aside();
+        continue;
+      }
       bool ready = true;
       for (const EditLogEntry& e : job.entries)
         for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) { ready = request(cp) && ready; });
@@ -757,7 +786,11 @@ void WorldOwner::apply_edits() {
       for (const EditLogEntry& e : job.entries)
         if (w != Writable::kNo)
           if (const Writable here = writable(bounds.clamp(e.box), &not_ours); here != Writable::kYes) w = here;
-      if ((!ready || w == Writable::kWaiting) && !stopping_) break;  // wait for its chunks and leases
+      if ((!ready || w == Writable::kWaiting) && !stopping_) {  // wait for its chunks and leases
+        for (const EditLogEntry& e : job.entries) mark_waiting(bounds.clamp(e.box));
+        set_aside();
+        continue;
+      }
       for (const EditLogEntry& e : job.entries) unbusy(bounds.clamp(e.box));
       if (!ready || w != Writable::kYes) {
         job.done(RollbackResult{false, w == Writable::kNo ? not_ours : std::string("the server is stopping"), 0, 0});
@@ -802,10 +835,24 @@ void WorldOwner::apply_edits() {
     } else {
       r = bounds.clamp(pe.edit.reads());
     }
+    const auto wait = [&] {
+      mark_waiting(r);
+      if (!history) mark_waiting(bounds.clamp(pe.edit.bounds()));
+      waiting_players.insert(pe.player);
+      set_aside();
+    };
+    if (waiting_players.count(pe.player) != 0 || behind_waiting(r) ||
+        (!history && behind_waiting(bounds.clamp(pe.edit.bounds())))) {
+      wait();
+      continue;
+    }
     bool ready = true;
     for_each_chunk_in(r, [&](Vec3i cp) { ready = request(cp) && ready; });
     if (!ready) {
-      if (!stopping_) break;  // wait for its chunks (arrival order is kept)
+      if (!stopping_) {  // wait for its chunks
+        wait();
+        continue;
+      }
       // Shutting down: chunks still loading will not be waited for.
       if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
       if (pe.forwarded) refuse(*pe.forwarded, "the region's server is shutting down");
@@ -822,7 +869,10 @@ void WorldOwner::apply_edits() {
     const Writable w =
         writable(writes, &not_ours, &holder,
                  client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
-    if (w == Writable::kWaiting && !stopping_) break;  // wait for the claim (arrival order is kept)
+    if (w == Writable::kWaiting && !stopping_) {  // wait for the claim
+      wait();
+      continue;
+    }
     if (w != Writable::kYes) {
       if (pe.forwarded) {
         refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
@@ -830,11 +880,18 @@ void WorldOwner::apply_edits() {
       } else if (client != nullptr && w == Writable::kNo && holder && !history && !stopping_) {
         // An edit across a border also writes regions of this server's: they
         // are handed over with it, once nothing of them is in flight.
-        bool mine = false;
-        for_each_chunk_in(writes, [&](Vec3i cp) { mine = mine || writes_region(lease_region_of(cp)); });
+        std::unordered_set<Vec3i, Vec3iHash> mine;
+        for_each_chunk_in(writes, [&](Vec3i cp) {
+          if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
+        });
         // Handed over only with nothing of this server's in flight: no commit
-        // under way, nothing applied yet this tick (arrival order is kept).
-        if (mine && (commits_pending_ > 0 || !changed.empty())) break;
+        // under way, nothing applied yet this tick, no edit set aside in the
+        // regions. Nothing behind it is applied meanwhile, so that comes
+        // within a commit's time (or an edit's wait).
+        const bool in_flight = commits_pending_ > 0 || !changed.empty() ||
+                               std::any_of(waiting_chunks.begin(), waiting_chunks.end(),
+                                           [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
+        if (!mine.empty() && in_flight) break;
         forward(pe, writes, *holder);
       } else if (client != nullptr) {
         if (w == Writable::kNo)
@@ -882,6 +939,7 @@ void WorldOwner::apply_edits() {
       acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
     edits_.pop_front();
   }
+  for (; !waiting.empty(); waiting.pop_back()) edits_.push_front(std::move(waiting.back()));
   if (!refused.empty()) storage_.answer(std::move(refused));
   counters_.edits_applied.fetch_add(acks.size() + answers.size(), std::memory_order_relaxed);
 

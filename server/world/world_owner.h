@@ -467,6 +467,8 @@ class WorldOwner : private WorldView {
   };
   std::unordered_map<Vec3i, MakingHorizon, Vec3iHash> horizon_making_[2];
   bool grants_scheduled_ = false;
+  // Edits in arrival order. One that waits (chunks, a claim) holds up only
+  // the edits behind it of its player or on its chunks (apply_edits).
   std::deque<PendingEdit> edits_;
   // Chunks queued edits will touch (never unloaded): chunk -> edits.
   std::unordered_map<Vec3i, int, Vec3iHash> busy_;

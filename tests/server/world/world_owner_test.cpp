@@ -16,7 +16,9 @@
 #include <mutex>
 #include <thread>
 
+#include "common/world/sqlite_store.h"
 #include "tests/support/eventually.h"
+#include "tests/support/gated_store.h"
 #include "tests/support/scratch_dir.h"
 
 namespace terrane {
@@ -66,6 +68,15 @@ class Recorder : public WorldClient {
     std::unique_lock lock(m_);
     return cv_.wait_for(lock, 60s, [&] { return p(*this); });
   }
+  // The edit ids of the EditAcks received, in order.
+  std::vector<std::uint32_t> acked() const {
+    std::vector<std::uint32_t> ids;
+    for (const auto& f : frames_)
+      if (const auto* m = flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes);
+          m->body_type() == wire::Body::EditAck)
+        ids.push_back(m->body_as_EditAck()->edit_id());
+    return ids;
+  }
   std::size_t count_frames(wire::Body type) const {
     std::size_t n = 0;
     for (const auto& f : frames_)
@@ -91,10 +102,15 @@ class WorldOwnerTest : public ::testing::Test {
   }
   void SetUp() override {
     dir_ = testing_support::scratch_dir("terrane-world-owner");
-    auto w = World::create(dir_.string(), default_world_meta());
+    auto store = SqliteStore::create(dir_.string(), default_world_meta());
+    ASSERT_TRUE(store.ok()) << store.error().message;
+    std::unique_ptr<WorldStore> inner = std::move(*store);
+    if (gate_) inner = std::make_unique<testing_support::GatedStore>(std::move(inner), gate_);
+    auto w = World::open(std::move(inner));
     ASSERT_TRUE(w.ok()) << w.error().message;
     world_ = std::move(*w);
-    auto s = Storage::open(*world_, 1);
+    // Gated: loaders to spare for the chunks not waiting at the gate.
+    auto s = Storage::open(*world_, gate_ ? 3 : 1);
     ASSERT_TRUE(s.ok());
     storage_ = std::move(*s);
     owner_ = std::make_unique<WorldOwner>(io_, *world_, *storage_, options_, counters_);
@@ -133,6 +149,7 @@ class WorldOwnerTest : public ::testing::Test {
     return e;
   }
 
+  std::shared_ptr<testing_support::StoreGate> gate_;  // set by a fixture before SetUp: reads of its chunks wait
   fs::path dir_;
   std::unique_ptr<World> world_;
   std::unique_ptr<Storage> storage_;
@@ -280,6 +297,53 @@ TEST_F(WorldOwnerTest, AClientsRequestsNeverPassItsJoin) {
   go.set_value();
   EXPECT_TRUE(second->wait([](Recorder& r) { return r.grants_.size() == 1; }));
   EXPECT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+}
+
+// Reads of chunk (31, 0, 31) wait until the test opens the gate.
+class WorldOwnerWaitingEditTest : public WorldOwnerTest {
+ protected:
+  WorldOwnerWaitingEditTest() {
+    gate_ = std::make_shared<testing_support::StoreGate>(std::unordered_set<Vec3i, Vec3iHash>{{31, 0, 31}});
+  }
+};
+
+TEST_F(WorldOwnerWaitingEditTest, AnEditWaitingForItsChunkHoldsUpOnlyItsPlayersEditsAndEditsOnThatChunk) {
+  auto a = client(1, {1000, 10, 1000});
+  auto b = client(2, {1000, 10, 1000});
+  auto c = client(3, {1000, 10, 1000});
+  // a's first edit needs chunk (31, 0, 31), whose read waits at the gate.
+  owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1008, 4, 1008}}, materials::kBrick));
+  ASSERT_TRUE(testing_support::eventually([&] { return gate_->reached(); }));
+  // Behind it: a's next edit elsewhere, c's edit over a's (its chunk), b's
+  // edit elsewhere.
+  owner_->edit(1, fill(2, Region{{1060, 0, 1060}, {1062, 2, 1062}}, materials::kSnow));
+  owner_->edit(3, fill(3, Region{{1004, 0, 1004}, {1012, 4, 1012}}, materials::kRock));
+  owner_->edit(2, fill(4, Region{{1130, 0, 1130}, {1132, 2, 1132}}, materials::kSand));
+  ASSERT_TRUE(b->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }))
+      << "an edit behind a waiting one, of another player and chunk, is not held up";
+  // Acknowledgements of one tick go out in the order applied: a's and c's,
+  // queued before b's, would have come first.
+  {
+    std::lock_guard lock(a->m_);
+    EXPECT_TRUE(a->acked().empty()) << "a's second edit waits for its first";
+  }
+  {
+    std::lock_guard lock(c->m_);
+    EXPECT_TRUE(c->acked().empty()) << "an edit on the waiting edit's chunk waits for it";
+  }
+  gate_->open();
+  ASSERT_TRUE(a->wait([](Recorder& r) { return r.acked().size() == 2; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.acked().size() == 1; }));
+  {
+    std::lock_guard lock(a->m_);
+    EXPECT_EQ(a->acked(), (std::vector<std::uint32_t>{1, 2}));
+  }
+  // c's edit applied after a's first, over it.
+  owner_->inspect([&](const WorldView& v) {
+    EXPECT_EQ(v.get({1002, 1, 1002}), solid(materials::kBrick));
+    EXPECT_EQ(v.get({1006, 1, 1006}), solid(materials::kRock));
+    EXPECT_EQ(v.get({1061, 1, 1061}), solid(materials::kSnow));
+  });
 }
 
 // Changes of chunks held coarser than full resolution are gathered and
