@@ -35,6 +35,7 @@
 #include "common/world/coarse_image.h"
 #include "common/world/world_store.h"
 #include "server/storage/cluster_map.h"
+#include "server/storage/notices.h"
 
 namespace terrane {
 
@@ -74,13 +75,6 @@ struct RegionLease {
   friend bool operator==(const RegionLease&, const RegionLease&) = default;
 };
 
-// A region's write sequence: +1 with each commit that writes it (kept
-// across changes of hands), so a reader that missed a notice finds out.
-struct RegionSeq {
-  Vec3i region;
-  std::uint64_t seq = 0;
-  friend bool operator==(const RegionSeq&, const RegionSeq&) = default;
-};
 
 // Edits forwarded between servers (STORE_POSTGRESQL.md, "Forwarded
 // edits"): a server sends an edit in a region another server holds to that
@@ -96,18 +90,6 @@ struct InboxEdit {
   std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it
   std::int64_t age_ms = 0;         // since it was forwarded, by the database's clock
 };
-struct ForwardAnswer {
-  std::int64_t id = 0;     // the inbox row
-  std::uint32_t from = 0;  // the server that forwarded it (the notice's addressee)
-  bool accepted = false;
-  std::uint64_t tick = 0;  // the owner's tick that applied it
-  std::string reason;      // why not, if not
-  friend bool operator==(const ForwardAnswer&, const ForwardAnswer&) = default;
-};
-// terrane_answers payload: "from id accepted(0|1) tick reason..." (the
-// reason, up to 256 bytes, last).
-std::string answer_notice(const ForwardAnswer& a);
-std::optional<ForwardAnswer> parse_answer_notice(std::string_view payload);
 
 // Server ids (terrane-server --server-id) are below 2^31: PostgreSQL's integer.
 inline constexpr std::uint32_t kMaxServerId = 2147483647;
@@ -328,26 +310,6 @@ inline constexpr const char* kChangesChannel = "terrane_changes";
 // their units").
 inline constexpr std::int64_t kMaxKeptUnits = 32;
 inline constexpr std::size_t kMaxKeptUnitsBytes = 4096;
-inline constexpr std::size_t kMaxChangeNoticeBytes = 7000;
-inline constexpr std::size_t kMaxNoticeUnitsBytes = 4000;
-struct ChunkChange {
-  Vec3i pos;
-  std::uint64_t revision = 0;
-  std::vector<std::uint8_t> units = {};  // decoded from UNITS; empty without
-  std::uint64_t tick = 0;                // the writer's tick that made them
-  friend bool operator==(const ChunkChange&, const ChunkChange&) = default;
-};
-struct ChangeNotice {
-  std::vector<ChunkChange> chunks;
-  std::vector<RegionSeq> regions;
-  // Chunks whose UNITS did not read (not base64, or over the cap): kept
-  // without units, so they are read again.
-  std::size_t units_unread = 0;
-};
-std::vector<std::string> change_notices(std::span<const ChunkWrite> chunks, std::span<const RegionSeq> regions = {});
-// nullopt if the payload is not one (another program's notice, damage);
-// a chunk's UNITS that do not read only lose the chunk its units.
-std::optional<ChangeNotice> parse_change_notice(std::string_view payload);
 
 // The region (8 x 8 x 8 chunks) a chunk belongs to.
 Vec3i lease_region_of(Vec3i chunk_pos);
