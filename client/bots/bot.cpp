@@ -345,6 +345,13 @@ void Bot::maybe_edit(Clock::time_point now) {
   }
   const Vec3i normal = hit->normal == Vec3i{} ? Vec3i{0, 1, 0} : hit->normal;
   const Material material = kBuildMaterials[std::uniform_int_distribution<std::size_t>(0, std::size(kBuildMaterials) - 1)(rng_)];
+  // Only where this bot holds the world at full resolution, within its
+  // radius (the server refuses the rest; a ray may hit a mip).
+  const auto sees = [&](const Region& r) {
+    bool ok = true;
+    for_each_chunk_in(r, [&](Vec3i cp) { ok = ok && within(pos_, cp, ctx_.full_res_radius) && held_full(cp); });
+    return ok;
+  };
   EditRequestMsg e;
   std::uint32_t id = 0;
   if (sphere) {
@@ -354,6 +361,11 @@ void Bot::maybe_edit(Clock::time_point now) {
     e.center = Vec3f{static_cast<float>(at.x) + 0.5f, static_cast<float>(at.y) + 0.5f, static_cast<float>(at.z) + 0.5f};
     e.radius = std::max(0.5f, r);
     const Region b = e.bounds();
+    if (!sees(b)) {
+      std::lock_guard lock(mutex_);
+      --outstanding_edits_;
+      return;
+    }
     double voxels = 0;
     const float reach_r = e.radius + 0.5f;
     for (int y = b.min.y; y < b.max.y; ++y)
@@ -371,6 +383,11 @@ void Bot::maybe_edit(Clock::time_point now) {
     const Vec3i at = dig ? hit->voxel : hit->voxel + normal;
     const Region box{at - Vec3i{s / 2, s / 2, s / 2}, at - Vec3i{s / 2, s / 2, s / 2} + Vec3i{s, s, s}};
     const Voxel v = dig ? Voxel{} : solid(material);
+    if (!sees(box)) {
+      std::lock_guard lock(mutex_);
+      --outstanding_edits_;
+      return;
+    }
     id = ctx_.fanout->send_edit(index_, box, static_cast<double>(box.volume()),
                                 [&] { return client_->fill_box(box, v); });
   }
