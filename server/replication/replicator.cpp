@@ -334,12 +334,19 @@ void Replicator::on_edit(EditRequestMsg edit) {
   const Region r = welcome_.bounds.clamp(edit.reads());
   if (r.empty()) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideWorld, "edit outside the world");
   // Edits are valid only where the client holds the world at full
-  // resolution: it can see what it changes.
+  // resolution: it can see what it changes. A resuming client's claims
+  // count within its full-resolution radius: the edits it queued while
+  // away come right after its Holdings, before the claims are checked.
+  const auto full_level = [](std::uint8_t level) { return level == 0 || level == kHeldEmpty; };
   bool full = true;
   for_each_chunk_in(r, [&](Vec3i cp) {
     if (!full) return;
-    auto it = held_.find(cp);
-    full = it != held_.end() && (it->second.level == 0 || it->second.level == kHeldEmpty);
+    if (auto it = held_.find(cp); it != held_.end()) {
+      full = full_level(it->second.level);
+    } else {
+      auto c = claims_.find(cp);
+      full = c != claims_.end() && full_level(c->second.level) && plan_valid_ && in_view(cp) && desired(cp) == 0;
+    }
   });
   if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");
   world_.edit(id_, std::move(edit));

@@ -584,6 +584,57 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   EXPECT_EQ(held.at(home).revision, 1u);
 }
 
+// The edits a client queued while away come right after its Holdings and
+// ClientState, before its claims are settled: taken where it claims full
+// resolution within its radius, refused where it claims a mip.
+TEST_F(ServerTest, AResumingClientsEditsAreTakenWhereItClaimsFullResolution) {
+  start();
+  const ClientStateMsg where{{1002.0f, 12.0f, 1002.0f}, 96, 24};
+  const Vec3i home = chunk_of(Vec3i{1002, 12, 1002}), east = home + Vec3i{1, 0, 0};
+  std::vector<HeldChunkMsg> claims;
+  {
+    auto a = join("a");
+    ASSERT_TRUE(a->send(build_client_state(where)));
+    HeldMap held = empty_held();
+    std::size_t records = 0;
+    ASSERT_TRUE(read_stream(*a, held, &records, [&](const HeldMap& h) { return view_complete(h, where); }));
+    for (const auto& [cp, h] : held) claims.push_back(h);
+  }
+  bool home_full = false, east_full = false;
+  for (HeldChunkMsg& h : claims) {
+    if (h.chunk_pos == home) home_full = h.level == 0;
+    if (h.chunk_pos == east) {
+      east_full = h.level == 0;
+      h.level = 2;  // claimed as a mip
+    }
+  }
+  ASSERT_TRUE(home_full && east_full);
+  auto b = join("b");
+  ASSERT_TRUE(b->send(build_holdings(claims)));
+  ASSERT_TRUE(b->send(build_client_state(where)));
+  ASSERT_TRUE(b->send(build_edit_request(
+      testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255))));
+  ASSERT_TRUE(b->send(build_edit_request(
+      testing_support::fill_box_edit(2, Region{{1025, 11, 1001}, {1027, 13, 1003}}, materials::kBrick, 255))));
+  std::optional<std::string> rejected;
+  bool acked = false;
+  while (!acked || !rejected) {
+    auto f = b->next();
+    ASSERT_TRUE(f.has_value()) << "both edits answered";
+    const wire::Message& m = msg(*f);
+    if (m.body_type() == wire::Body::EditAck) {
+      EXPECT_EQ(m.body_as_EditAck()->edit_id(), 1u);
+      acked = true;
+    } else if (m.body_type() == wire::Body::EditReject) {
+      auto r = parse_edit_reject(*m.body_as_EditReject());
+      ASSERT_TRUE(r.ok());
+      EXPECT_EQ(r->edit_id, 2u) << r->reason;
+      rejected = r->reason;
+    }
+  }
+  EXPECT_EQ(*rejected, "edit outside the full-resolution region");
+}
+
 // --- durability ----------------------------------------------------------------
 
 // Moves the peer to pos and reads the stream until every chunk of want has
