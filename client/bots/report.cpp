@@ -255,7 +255,20 @@ std::string report_table(const BotsReport& r) {
     row("bots per server at the end", per);
   }
   row("edits sent / acked / rejected",
-      std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected));
+      std::to_string(r.edits_sent) + " / " + std::to_string(r.edits_acked) + " / " + std::to_string(r.edits_rejected) +
+          (r.edits_sent > 0 ? " (" + fixed(100.0 * static_cast<double>(r.edits_rejected) / static_cast<double>(r.edits_sent), 1) +
+                                  " % rejected)"
+                            : std::string()));
+  // The reasons, most frequent first (the ack percentiles leave them out).
+  {
+    std::vector<std::pair<std::uint64_t, std::string>> reasons;
+    for (const auto& [reason, n] : r.reject_reasons) reasons.emplace_back(n, reason);
+    std::sort(reasons.begin(), reasons.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    constexpr std::size_t kShown = 6;
+    for (std::size_t i = 0; i < reasons.size() && i < kShown; ++i)
+      t << "    " << reasons[i].first << " x " << reasons[i].second << "\n";
+    if (reasons.size() > kShown) t << "    (" << reasons.size() - kShown << " more reasons in the JSON report)\n";
+  }
   row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));
   row("update bytes per edited voxel per receiver", fixed(r.update_bytes_per_edited_voxel_per_receiver, 2));
   row("replica regions checked", std::to_string(r.replica_regions_checked));

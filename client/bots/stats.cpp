@@ -30,6 +30,20 @@ double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
 
+std::string reason_class(std::string_view reason) {
+  if (const std::size_t until = reason.find(" until "); until != std::string_view::npos) reason = reason.substr(0, until);
+  std::string out;
+  out.reserve(reason.size());
+  for (std::size_t i = 0; i < reason.size(); ++i) {
+    const bool digit = reason[i] >= '0' && reason[i] <= '9';
+    if (!digit)
+      out += reason[i];
+    else if (i == 0 || reason[i - 1] < '0' || reason[i - 1] > '9')
+      out += 'N';
+  }
+  return out;
+}
+
 namespace {
 // How long after an edit a change of its chunks at a bot of another server
 // still counts as the edit's (fan-out is measured below this).
@@ -75,7 +89,7 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
   in_flight_.erase(it);
   if (!o.accepted) {
     ++totals_.edits_rejected;
-    ++totals_.reject_reasons[o.reason];
+    ++totals_.reject_reasons[reason_class(o.reason)];
     return;
   }
   ++totals_.edits_acked;

@@ -13,6 +13,7 @@
 #include <map>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
@@ -31,6 +32,10 @@ struct LatencySummary {
 LatencySummary summarize(std::vector<float> samples_ms);
 
 double ms_between(Clock::time_point a, Clock::time_point b);
+// A server's reason for refusing an edit with its particulars taken out
+// (each run of digits is N, a lease's expiry time is cut), so refusals of
+// one kind count together: "region (N,N,-N) is leased to server N (epoch N)".
+std::string reason_class(std::string_view reason);
 
 // Appends a sample to by_second[the whole seconds from run_start to t]
 // (second 0 for t before run_start), growing it as needed.
@@ -86,7 +91,7 @@ class FanoutTracker {
     std::uint64_t edits_measured = 0;        // acked, sent after measure_from, settled
     std::uint64_t receiver_pairs = 0;        // (edit, receiver) over measured edits
     double edited_voxel_receivers = 0;       // sum of edited voxels x receivers, measured edits
-    std::map<std::string, std::uint64_t> reject_reasons;
+    std::map<std::string, std::uint64_t> reject_reasons;  // by reason_class
   };
   Totals totals() const;
   std::vector<float> ack_ms() const;

@@ -294,6 +294,17 @@ std::string parse(std::vector<std::string> args, BotsOptions* o) {
 // the edit changed, not by every chunk its box reaches. Bot 0 edits on
 // server 1; bot 1 (server 2) holds only the box's second chunk, bot 2
 // (server 2) both; the edit changes only the first.
+TEST(ReasonClassTest, RefusalsOfOneKindCountTogether) {
+  EXPECT_EQ(reason_class("server 12 refused the forwarded edit: not held by the server it was sent to: region (1,0,-2) "
+                         "is leased to server 3 (epoch 2) until 2026-11-28 06:19:21.916469+00"),
+            "server N refused the forwarded edit: not held by the server it was sent to: region (N,N,-N) is leased to "
+            "server N (epoch N)");
+  EXPECT_EQ(reason_class("forwarded to server 2, no answer within 5000 ms (it may still be applied)"),
+            reason_class("forwarded to server 3, no answer within 5000 ms (it may still be applied)"));
+  EXPECT_EQ(reason_class("edit outside the full-resolution region"), "edit outside the full-resolution region");
+  EXPECT_EQ(reason_class(""), "");
+}
+
 class FanoutTrackerTest : public ::testing::Test {
  protected:
   FanoutTrackerTest() : f_(std::chrono::steady_clock::now(), std::chrono::steady_clock::now(), 2) {
