@@ -90,7 +90,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
         "cannot listen on " + options.bind_address + ":" + std::to_string(options.port) + ": " + ec.message(), {}};
   s->port_ = s->acceptor_.local_endpoint().port();
 
-  s->storage_->set_leases(s->leases_.get());
+  if (auto st = s->storage_->set_leases(s->leases_.get()); !st) return st.error();
   s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
   // Streaming's requests that wait too long in the world's queue hold
   // streaming back, as late probes do.

@@ -45,6 +45,7 @@ Storage::~Storage() { stop(); }
 void Storage::stop() {
   if (stopped_) return;
   stopped_ = true;
+  if (control_) control_->join();
   loaders_.join();
   {
     std::lock_guard lock(jobs_mutex_);
@@ -115,17 +116,24 @@ void Storage::give_reader(std::unique_ptr<WorldStore> store) {
   readers_.push_back(std::move(store));
 }
 
+FileStatus Storage::set_leases(LeaseKeeper* keeper) {
+  leases_ = keeper;
+  if (keeper == nullptr || control_) return Ok{};
+  auto store = world_.store().reopen();
+  if (!store) return store.error();
+  auto* pg = dynamic_cast<PostgresStore*>(store->get());
+  if (pg == nullptr) return FileError{"region leases need a PostgreSQL world: " + world_.store().where(), {}};
+  store->release();
+  control_store_.reset(pg);
+  control_ = std::make_unique<asio::thread_pool>(1);
+  return Ok{};
+}
+
 void Storage::with_postgres(std::function<void(PostgresStore&)> fn) {
-  asio::post(loaders_, [this, fn = std::move(fn)] {
-    std::unique_ptr<WorldStore> store;
-    {
-      std::lock_guard lock(readers_mutex_);
-      store = take_reader();
-    }
-    // Only a shared world (set_leases) asks: its readers are PostgreSQL's.
-    if (auto* pg = dynamic_cast<PostgresStore*>(store.get())) fn(*pg);
-    give_reader(std::move(store));
-  });
+  if (!control_) return;  // only a shared world (set_leases) asks
+  // Claims, forwards, inbox reads and answers: an edit waits on each, so
+  // none waits behind the loads (thousands may be queued while clients join).
+  asio::post(*control_, [this, fn = std::move(fn)] { fn(*control_store_); });
 }
 
 void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,

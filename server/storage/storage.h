@@ -140,8 +140,10 @@ class Storage {
   // the urgent ones that edits and full resolution wait on).
   void load_horizon(Vec3i region, int level, HorizonDone done);
   // A shared PostgreSQL world's leases (null: SQLite, every region is this
-  // server's). Call before the first load; keeper outlives this.
-  void set_leases(LeaseKeeper* keeper) { leases_ = keeper; }
+  // server's). Call before the first load; keeper outlives this. Opens the
+  // connection that claims, forwarded edits, the inbox and answers use
+  // (its own thread: they never wait behind the loads).
+  FileStatus set_leases(LeaseKeeper* keeper);
   bool leased() const { return leases_ != nullptr; }
   // Claims region's lease for this server if it does not hold it (on a
   // loader thread, queued with the loads). Once held, the region's stored
@@ -208,8 +210,8 @@ class Storage {
     std::vector<ForwardAnswer> answers;
     std::uint64_t tick = 0;
   };
-  // Runs fn(store) on a loader thread with a reader connection of a
-  // PostgreSQL world (only a shared world's callers ask).
+  // Runs fn(store) on the control thread with its connection (only a
+  // shared world's callers ask), in the order asked.
   void with_postgres(std::function<void(PostgresStore&)> fn);
   // A reader connection borrowed (take_reader under readers_mutex_) and
   // given back.
@@ -226,6 +228,10 @@ class Storage {
   StorageCounters counters_;
   const bool thread_priorities_;
   asio::thread_pool loaders_;
+  // A shared world's control thread and its connection (set_leases): only
+  // that thread touches control_store_.
+  std::unique_ptr<asio::thread_pool> control_;
+  std::unique_ptr<PostgresStore> control_store_;
   // Loader connections, borrowed for one load at a time, and the queued
   // loads (urgent first). Guarded by readers_mutex_: loads on the pool's
   // threads share them. Each queued load posts one runner to the pool.
