@@ -874,16 +874,18 @@ void WorldOwner::apply_edits() {
       continue;
     }
     if (w != Writable::kYes) {
-      if (pe.forwarded) {
-        refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
-                                                 : std::string("the region's server is shutting down"));
-      } else if (client != nullptr && w == Writable::kNo && holder && !history && !stopping_) {
-        // An edit across a border also writes regions of this server's: they
-        // are handed over with it, once nothing of them is in flight.
-        std::unordered_set<Vec3i, Vec3iHash> mine;
+      // An edit across a border also writes regions of this server's: they
+      // are handed over with it to the server holding the rest, once nothing
+      // of them is in flight. A forwarded edit goes on so (relayed) only
+      // with regions of this server's to hand over: each hop leaves one
+      // server fewer holding the edit's regions, so it ends.
+      std::unordered_set<Vec3i, Vec3iHash> mine;
+      const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ && (client != nullptr || pe.forwarded);
+      if (may_go_on)
         for_each_chunk_in(writes, [&](Vec3i cp) {
           if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
         });
+      if (may_go_on && (!pe.forwarded || !mine.empty())) {
         // Handed over only with nothing of this server's in flight: no commit
         // under way, nothing applied yet this tick, no edit set aside in the
         // regions. Nothing behind it is applied meanwhile, so that comes
@@ -893,6 +895,9 @@ void WorldOwner::apply_edits() {
                                            [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
         if (!mine.empty() && in_flight) break;
         forward(pe, writes, *holder);
+      } else if (pe.forwarded) {
+        refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
+                                                 : std::string("the region's server is shutting down"));
       } else if (client != nullptr) {
         if (w == Writable::kNo)
           reject(pe.id, pe.edit, RejectReason::kNotOwner,

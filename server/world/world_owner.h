@@ -271,7 +271,8 @@ class WorldOwner : private WorldView {
   };
   // An edit this server forwarded to a region's owner, waiting for its
   // answer; then for the edit's chunks to be read again here, before the
-  // client is told.
+  // client is told. Or an edit forwarded here that went on (relay_of): its
+  // answer is passed back to its sender.
   struct Outgoing {
     ClientId id;
     EditRequestMsg edit;
@@ -279,6 +280,7 @@ class WorldOwner : private WorldView {
     std::uint32_t to;
     std::chrono::steady_clock::time_point sent;
     std::optional<ForwardAnswer> answer;
+    std::optional<Forwarded> relay_of;
   };
   struct Ack {
     ClientId id;
@@ -493,9 +495,10 @@ class WorldOwner : private WorldView {
   // One forwarded edit of player within its rate (forwarded_rate_).
   bool take_forwarded_rate(const std::string& player);
   std::chrono::milliseconds forward_wait() const;
-  // Sends pe (a client's edit of box, in regions server to holds) to that
-  // server's inbox, handing over first the regions of box this server
-  // holds (so one server can write the whole edit).
+  // Sends pe (a client's edit of box, in regions server to holds, or an
+  // edit forwarded here that goes on) to that server's inbox, handing over
+  // first the regions of box this server holds (so one server can write
+  // the whole edit).
   void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
   void take_inbox();
   void read_inbox_page(std::int64_t after);

@@ -219,8 +219,8 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
   });
   if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
   storage_.forward(to, pe.player, frame, hand_over,
-                   [this, id = pe.id, edit = pe.edit, box, to, hand_over](StoreResult<std::int64_t> row) {
-    asio::post(strand_, [this, id, edit, box, to, hand_over, row = std::move(row)] {
+                   [this, id = pe.id, edit = pe.edit, box, to, hand_over, relay_of = pe.forwarded](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, hand_over, relay_of, row = std::move(row)] {
       // The regions handed over are the recipient's now: this server's next
       // edits there are forwarded to it too, until asked again a second on,
       // so a region does not bounce back before the recipient has claimed
@@ -232,12 +232,14 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
           l->second.ask_again = row ? now + std::chrono::seconds(1) : now;
         }
       if (!row) {
-        if (clients_.count(id) != 0)
-          reject(id, edit, RejectReason::kNotOwner,
-                 fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
+        const std::string why = fmt::format("cannot forward the edit to server {}: {}", to, row.error().message);
+        if (relay_of)
+          storage_.answer({ForwardAnswer{relay_of->inbox_id, relay_of->from, false, 0, why}});
+        else if (clients_.count(id) != 0)
+          reject(id, edit, RejectReason::kNotOwner, why);
         return;
       }
-      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt};
+      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt, relay_of};
       if (auto early = early_answers_.find(*row); early != early_answers_.end()) {
         o.answer = early->second.first;
         early_answers_.erase(early);
@@ -361,8 +363,24 @@ void WorldOwner::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
   const auto wait = forward_wait();
   std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
+  std::vector<ForwardAnswer> relayed;
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
+    if (o.relay_of) {
+      // Relayed: its sender hears the answer of the server that had it (in
+      // that server's commit), or that none came in time.
+      if (o.answer)
+        relayed.push_back(ForwardAnswer{o.relay_of->inbox_id, o.relay_of->from, o.answer->accepted, o.answer->tick,
+                                        o.answer->accepted ? std::string()
+                                                           : fmt::format("relayed to server {}, which refused it: {}",
+                                                                         o.to, o.answer->reason)});
+      else if (now - o.sent > wait)
+        relayed.push_back(ForwardAnswer{o.relay_of->inbox_id, o.relay_of->from, false, 0,
+                                        fmt::format("relayed to server {}, no answer within {} ms (it may still be applied)",
+                                                    o.to, wait.count())});
+      it = o.answer || now - o.sent > wait ? forwarded_.erase(it) : std::next(it);
+      continue;
+    }
     const auto client = clients_.find(o.id);
     bool done = client == clients_.end();
     if (!done && o.answer && !o.answer->accepted) {
@@ -389,6 +407,7 @@ void WorldOwner::settle_forwarded() {
     }
     it = done ? forwarded_.erase(it) : std::next(it);
   }
+  if (!relayed.empty()) storage_.answer(std::move(relayed));
 }
 
 void WorldOwner::lease_lost(Vec3i region, std::string why) {

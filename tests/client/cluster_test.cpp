@@ -658,6 +658,40 @@ TEST_F(ClusterTest, ThreeServersAtOnceEachWriteTheirRegionsAndEveryClientSeesEve
   }
 }
 
+// An edit across the corner of three servers' regions (leases set in the
+// table: a server claims a region leased to its own id as its own). Sent
+// to server 1, which holds one of them: it hands that over to the holder
+// of another, which relays the edit, with its own regions, to the third;
+// the third applies it, and the answer comes back the way the edit went.
+TEST_F(ClusterTest, AnEditAcrossTheCornerOfThreeServersRegionsIsRelayedAndApplied) {
+  for (std::uint32_t id = 1; id <= 3; ++id) ASSERT_NE(start(id, 5000, 100000, {"--metrics", "127.0.0.1:0"}).port(), 0);
+  Client ann(options(*servers_[0], "ann"));
+  join(ann);
+  const Vec3f sp = ann.welcome()->spawn;
+  const int y = static_cast<int>(std::floor(sp.y)) - 3;
+  const int ry = y >= 0 ? y / 256 : (y - 255) / 256;
+  // By the spawn lies the corner x = 0, z = 0 of four regions.
+  const std::pair<Vec3i, int> leased[] = {
+      {{-1, ry, 0}, 1}, {{0, ry, 0}, 2}, {{0, ry, -1}, 3}, {{-1, ry, -1}, 3}};
+  for (const auto& [r, owner] : leased)
+    ASSERT_EQ(run_sql(url_, fmt::format("INSERT INTO terrane_leases (rx, ry, rz, owner, epoch, expires_at)"
+                                        " VALUES ({}, {}, {}, {}, 1, clock_timestamp() + interval '1 hour')",
+                                        r.x, r.y, r.z, owner)),
+              "");
+  const Region corner{{-2, y, -2}, {2, y + 3, 2}};
+  const auto v = pattern(corner, materials::kSand);
+  ASSERT_EQ(outcome(ann, ann.write_box(corner, v)), "") << "accepted at the first try";
+  EXPECT_TRUE(replica_shows(ann, corner, v));
+  // One server writes all four regions now, and not server 1.
+  const int writer = lease_owner(leased[0].first);
+  EXPECT_NE(writer, 1);
+  for (const auto& [r, owner] : leased) EXPECT_EQ(lease_owner(r), writer) << r.x << "," << r.z;
+  // Server 1 forwarded it, and one of the others relayed it on.
+  EXPECT_EQ(metric(*servers_[0], "terrane_edits_forwarded_total"), 1);
+  EXPECT_EQ(metric(*servers_[1], "terrane_edits_forwarded_total") + metric(*servers_[2], "terrane_edits_forwarded_total"), 1);
+  ann.disconnect();
+}
+
 // A border is the whole world's: a server is refused a new one while
 // another runs on the world (which would go on without it); once alone it
 // sets it, and every server started after applies it.
