@@ -263,7 +263,8 @@ std::string report_table(const BotsReport& r) {
   {
     std::vector<std::pair<std::uint64_t, std::string>> reasons;
     for (const auto& [reason, n] : r.reject_reasons) reasons.emplace_back(n, reason);
-    std::sort(reasons.begin(), reasons.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    std::sort(reasons.begin(), reasons.end(),
+              [](const auto& a, const auto& b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
     constexpr std::size_t kShown = 6;
     for (std::size_t i = 0; i < reasons.size() && i < kShown; ++i)
       t << "    " << reasons[i].first << " x " << reasons[i].second << "\n";

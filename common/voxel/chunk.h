@@ -56,6 +56,14 @@ void for_each_chunk_in(const Region& r, F&& fn) {
       for (int x = c0.x; x <= c1.x; ++x) fn(Vec3i{x, y, z});
 }
 
+// Whether two non-empty regions overlap a chunk in common.
+inline bool chunks_meet(const Region& a, const Region& b) {
+  const auto cover = [](const Region& r) {
+    return Region{chunk_origin(chunk_of(r.min)), chunk_origin(chunk_of(r.max - Vec3i{1, 1, 1}) + Vec3i{1, 1, 1})};
+  };
+  return !a.empty() && !b.empty() && !intersect(cover(a), cover(b)).empty();
+}
+
 // The downsampling rule above, for the 8 children of one mip voxel.
 Voxel downsample(const Voxel children[8]);
 // A box of even side n downsampled to side n / 2 by that rule (children in

@@ -855,6 +855,21 @@ StoreResult<std::int64_t> PostgresStore::forward(std::uint32_t from, std::uint32
   });
 }
 
+StoreResult<Ok> PostgresStore::relay(std::int64_t id, std::uint32_t from, std::uint32_t to) {
+  return transaction<Ok>("commit relay", [&]() -> StoreResult<Ok> {
+    auto row = c_->exec("relay edit", "UPDATE terrane_inbox SET to_server = $3 WHERE id = $1 AND to_server = $2 RETURNING id",
+                        {text(id), text(from), text(to)});
+    if (!row) return row.error();
+    if (row->count() != 1)
+      return StoreError{StoreError::Kind::kQuery,
+                        fmt::format("postgresql: relay edit: inbox row {} is no longer server {}'s", id, from)};
+    auto n = c_->exec("notify inbox", "SELECT pg_notify($1, $2)",
+                      {Param{kInboxChannel, false}, Param{std::to_string(to), false}});
+    if (!n) return n.error();
+    return Ok{};
+  });
+}
+
 StoreResult<std::vector<InboxEdit>> PostgresStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
   auto r = c_->exec("read inbox",
                     // A row's player and edit are read only up to what a

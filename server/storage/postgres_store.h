@@ -194,6 +194,11 @@ class PostgresStore final : public WorldStore {
   // its notice); the row's id.
   StoreResult<std::int64_t> forward(std::uint32_t from, std::uint32_t to, const std::string& player,
                                     std::span<const std::uint8_t> edit);
+  // Passes the edit of inbox row id, addressed to from, on to server to
+  // (one transaction: the row readdressed, its notice). Its sender and age
+  // stay, so to answers the sender and refuses it once too old. An error
+  // if the row is no longer from's (answered).
+  StoreResult<Ok> relay(std::int64_t id, std::uint32_t from, std::uint32_t to);
   // Edits for server to not answered yet with an id above after, oldest
   // first, at most limit.
   StoreResult<std::vector<InboxEdit>> inbox(std::uint32_t to, std::int64_t after, std::size_t limit);

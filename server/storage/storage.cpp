@@ -146,6 +146,15 @@ void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uin
   });
 }
 
+void Storage::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,
+                    std::function<void(StoreResult<Ok>)> done) {
+  with_postgres([this, row, to, hand_over = std::move(hand_over), done = std::move(done)](PostgresStore& pg) {
+    if (!hand_over.empty())
+      if (auto released = leases_->release(hand_over); !released) return done(released.error());
+    done(pg.relay(row, leases_->owner(), to));
+  });
+}
+
 void Storage::read_inbox(std::int64_t after, std::size_t limit,
                          std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
   with_postgres([this, after, limit, done = std::move(done)](PostgresStore& pg) {

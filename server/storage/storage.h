@@ -145,8 +145,8 @@ class Storage {
   // (its own thread: they never wait behind the loads).
   FileStatus set_leases(LeaseKeeper* keeper);
   bool leased() const { return leases_ != nullptr; }
-  // Claims region's lease for this server if it does not hold it (on a
-  // loader thread, queued with the loads). Once held, the region's stored
+  // Claims region's lease for this server if it does not hold it (on the
+  // control thread). Once held, the region's stored
   // chunks are listed with their revisions, read after the claim: another
   // server may have written them while it held the region, and whatever
   // this server holds of them older than that must be read again before it
@@ -161,13 +161,16 @@ class Storage {
   };
   using ClaimDone = std::function<void(Claimed)>;
   void claim(Vec3i region, ClaimRule rule, ClaimDone done);
-  // Forwarded edits (a shared world; on a loader thread): sends one to
+  // Forwarded edits (a shared world; on the control thread): sends one to
   // server to's inbox (done gets the inbox row's id), reads this server's
   // inbox past after, and answers edits refused without a commit.
   // hand_over: regions of this server's the edit also writes, released
   // first (nothing of them in flight), so that server can take them.
   void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
                std::function<void(StoreResult<std::int64_t>)> done);
+  // Passes a forwarded edit (this server's inbox row) on to server to,
+  // releasing hand_over first as forward does.
+  void relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over, std::function<void(StoreResult<Ok>)> done);
   void read_inbox(std::int64_t after, std::size_t limit, std::function<void(StoreResult<std::vector<InboxEdit>>)> done);
   void answer(std::vector<ForwardAnswer> answers);
   // log: the tick's edits for the edit log, and answers: the forwarded

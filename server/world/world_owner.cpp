@@ -841,8 +841,11 @@ void WorldOwner::apply_edits() {
       waiting_players.insert(pe.player);
       set_aside();
     };
+    // A client's edit also waits while one of its edits whose chunks it
+    // meets is forwarded and not answered: another server may apply that.
     if (waiting_players.count(pe.player) != 0 || behind_waiting(r) ||
-        (!history && behind_waiting(bounds.clamp(pe.edit.bounds())))) {
+        (!history && behind_waiting(bounds.clamp(pe.edit.bounds()))) ||
+        (client != nullptr && !pe.forwarded && forward_pending(pe.id, r))) {
       wait();
       continue;
     }
@@ -869,16 +872,29 @@ void WorldOwner::apply_edits() {
     const Writable w =
         writable(writes, &not_ours, &holder,
                  client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
-    if (w == Writable::kWaiting && !stopping_) {  // wait for the claim
-      wait();
+    // Another server's region in it: which of the others are this server's
+    // decides what goes with the edit, so claims under way are waited for.
+    const auto claiming = [&] {
+      bool any = false;
+      for_each_chunk_in(writes, [&](Vec3i cp) {
+        auto l = leases_.find(lease_region_of(cp));
+        any = any || (l != leases_.end() && (l->second.state == RegionLeaseState::kClaiming ||
+                                             l->second.state == RegionLeaseState::kRefreshing));
+      });
+      return any;
+    };
+    if ((w == Writable::kWaiting || (w == Writable::kNo && !history && claiming())) && !stopping_) {
+      wait();  // for the claims
       continue;
     }
     if (w != Writable::kYes) {
       // An edit across a border also writes regions of this server's: they
       // are handed over with it to the server holding the rest, once nothing
-      // of them is in flight. A forwarded edit goes on so (relayed) only
-      // with regions of this server's to hand over: each hop leaves one
-      // server fewer holding the edit's regions, so it ends.
+      // of them is in flight. A forwarded edit goes on so (relayed: its
+      // inbox row readdressed, its sender and age kept) only with regions
+      // of this server's to hand over, so each hop gathers the edit's
+      // regions on fewer servers; a row older than the forward wait is
+      // refused wherever it is, so no relay goes on longer.
       std::unordered_set<Vec3i, Vec3iHash> mine;
       const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ && (client != nullptr || pe.forwarded);
       if (may_go_on)
@@ -894,7 +910,10 @@ void WorldOwner::apply_edits() {
                                std::any_of(waiting_chunks.begin(), waiting_chunks.end(),
                                            [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
         if (!mine.empty() && in_flight) break;
-        forward(pe, writes, *holder);
+        if (pe.forwarded)
+          relay(pe, writes, *holder);
+        else
+          forward(pe, writes, *holder);
       } else if (pe.forwarded) {
         refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
                                                  : std::string("the region's server is shutting down"));

@@ -271,8 +271,7 @@ class WorldOwner : private WorldView {
   };
   // An edit this server forwarded to a region's owner, waiting for its
   // answer; then for the edit's chunks to be read again here, before the
-  // client is told. Or an edit forwarded here that went on (relay_of): its
-  // answer is passed back to its sender.
+  // client is told.
   struct Outgoing {
     ClientId id;
     EditRequestMsg edit;
@@ -280,7 +279,6 @@ class WorldOwner : private WorldView {
     std::uint32_t to;
     std::chrono::steady_clock::time_point sent;
     std::optional<ForwardAnswer> answer;
-    std::optional<Forwarded> relay_of;
   };
   struct Ack {
     ClientId id;
@@ -495,11 +493,22 @@ class WorldOwner : private WorldView {
   // One forwarded edit of player within its rate (forwarded_rate_).
   bool take_forwarded_rate(const std::string& player);
   std::chrono::milliseconds forward_wait() const;
-  // Sends pe (a client's edit of box, in regions server to holds, or an
-  // edit forwarded here that goes on) to that server's inbox, handing over
-  // first the regions of box this server holds (so one server can write
-  // the whole edit).
+  // Sends pe (a client's edit of box, in regions server to holds) to that
+  // server's inbox, handing over first the regions of box this server
+  // holds (so one server can write the whole edit).
   void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
+  // Passes pe (an edit forwarded here, of box) on to server to, handing
+  // over the regions of box this server holds; to answers its sender.
+  void relay(const PendingEdit& pe, const Region& box, std::uint32_t to);
+  // Marks the regions of box this server holds as being handed over to
+  // server to (edits there wait), and lists them; handed_over settles them
+  // once the release is done (ok) or failed.
+  std::vector<Vec3i> hand_over(const Region& box, std::uint32_t to);
+  void handed_over(const std::vector<Vec3i>& regions, bool ok);
+  // Whether client id has an edit being forwarded, or forwarded and not
+  // answered yet, whose box meets chunks of r: its next edit there waits
+  // (a player's edits keep their order whatever server applies them).
+  bool forward_pending(ClientId id, const Region& r) const;
   void take_inbox();
   void read_inbox_page(std::int64_t after);
   // Tells clients the answers to their forwarded edits once the edits'
@@ -521,6 +530,7 @@ class WorldOwner : private WorldView {
   // inbox of this server (rows taken and rows listed by the read under way;
   // a read under way; another notice came during it).
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
+  std::unordered_multimap<ClientId, Region> forwarding_;  // sent, row not known yet
   std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
   std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
   // Forwarded edits per player, whatever server they came through, at the

@@ -201,10 +201,8 @@ void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
   });
 }
 
-void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
-  const Frame frame = build_edit_request(pe.edit);
-  counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
-  std::vector<Vec3i> hand_over;
+std::vector<Vec3i> WorldOwner::hand_over(const Region& box, std::uint32_t to) {
+  std::vector<Vec3i> regions;
   for_each_chunk_in(box, [&](Vec3i cp) {
     const Vec3i region = lease_region_of(cp);
     if (!writes_region(region)) return;
@@ -215,37 +213,77 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
     l.left = false;
     l.holder = to;
     l.why = fmt::format("handed over to server {}", to);
-    hand_over.push_back(region);
+    regions.push_back(region);
   });
-  if (!hand_over.empty()) counters_.regions_handed_over.fetch_add(hand_over.size(), std::memory_order_relaxed);
-  storage_.forward(to, pe.player, frame, hand_over,
-                   [this, id = pe.id, edit = pe.edit, box, to, hand_over, relay_of = pe.forwarded](StoreResult<std::int64_t> row) {
-    asio::post(strand_, [this, id, edit, box, to, hand_over, relay_of, row = std::move(row)] {
-      // The regions handed over are the recipient's now: this server's next
-      // edits there are forwarded to it too, until asked again a second on,
-      // so a region does not bounce back before the recipient has claimed
-      // it. Not forwarded: they are asked for again at once.
-      const auto now = std::chrono::steady_clock::now();
-      for (const Vec3i region : hand_over)
-        if (auto l = leases_.find(region); l != leases_.end() && l->second.state == RegionLeaseState::kHandingOver) {
-          l->second.state = RegionLeaseState::kRefused;
-          l->second.ask_again = row ? now + std::chrono::seconds(1) : now;
+  if (!regions.empty()) counters_.regions_handed_over.fetch_add(regions.size(), std::memory_order_relaxed);
+  return regions;
+}
+
+void WorldOwner::handed_over(const std::vector<Vec3i>& regions, bool ok) {
+  // The regions handed over are the recipient's now: this server's next
+  // edits there are forwarded to it too, until asked again a second on,
+  // so a region does not bounce back before the recipient has claimed
+  // it. Not forwarded: they are asked for again at once.
+  const auto now = std::chrono::steady_clock::now();
+  for (const Vec3i region : regions)
+    if (auto l = leases_.find(region); l != leases_.end() && l->second.state == RegionLeaseState::kHandingOver) {
+      l->second.state = RegionLeaseState::kRefused;
+      l->second.ask_again = ok ? now + std::chrono::seconds(1) : now;
+    }
+}
+
+bool WorldOwner::forward_pending(ClientId id, const Region& r) const {
+  auto [first, last] = forwarding_.equal_range(id);
+  for (auto it = first; it != last; ++it)
+    if (chunks_meet(it->second, r)) return true;
+  return std::any_of(forwarded_.begin(), forwarded_.end(),
+                     [&](const auto& f) { return f.second.id == id && !f.second.answer && chunks_meet(f.second.box, r); });
+}
+
+void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
+  const Frame frame = build_edit_request(pe.edit);
+  counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
+  std::vector<Vec3i> regions = hand_over(box, to);
+  forwarding_.emplace(pe.id, box);
+  storage_.forward(to, pe.player, frame, regions,
+                   [this, id = pe.id, edit = pe.edit, box, to, regions](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, regions, row = std::move(row)] {
+      handed_over(regions, row.ok());
+      auto [first, last] = forwarding_.equal_range(id);
+      for (auto it = first; it != last; ++it)
+        if (it->second == box) {
+          forwarding_.erase(it);
+          break;
         }
       if (!row) {
-        const std::string why = fmt::format("cannot forward the edit to server {}: {}", to, row.error().message);
-        if (relay_of)
-          storage_.answer({ForwardAnswer{relay_of->inbox_id, relay_of->from, false, 0, why}});
-        else if (clients_.count(id) != 0)
-          reject(id, edit, RejectReason::kNotOwner, why);
+        if (clients_.count(id) != 0)
+          reject(id, edit, RejectReason::kNotOwner,
+                 fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
         return;
       }
-      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt, relay_of};
+      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt};
       if (auto early = early_answers_.find(*row); early != early_answers_.end()) {
         o.answer = early->second.first;
         early_answers_.erase(early);
       }
       forwarded_.emplace(*row, std::move(o));
       settle_forwarded();
+    });
+  });
+}
+
+void WorldOwner::relay(const PendingEdit& pe, const Region& box, std::uint32_t to) {
+  counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
+  std::vector<Vec3i> regions = hand_over(box, to);
+  const Forwarded f = *pe.forwarded;
+  storage_.relay(f.inbox_id, to, regions, [this, f, to, regions](StoreResult<Ok> done) {
+    asio::post(strand_, [this, f, to, regions, done = std::move(done)] {
+      handed_over(regions, done.ok());
+      // Not passed on (the database out of reach): refused here. (A row no
+      // longer this server's was answered already.)
+      if (!done && done.error().kind != StoreError::Kind::kQuery)
+        storage_.answer({ForwardAnswer{f.inbox_id, f.from, false, 0,
+                                       fmt::format("cannot relay the edit to server {}: {}", to, done.error().message)}});
     });
   });
 }
@@ -363,24 +401,8 @@ void WorldOwner::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
   const auto wait = forward_wait();
   std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
-  std::vector<ForwardAnswer> relayed;
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
-    if (o.relay_of) {
-      // Relayed: its sender hears the answer of the server that had it (in
-      // that server's commit), or that none came in time.
-      if (o.answer)
-        relayed.push_back(ForwardAnswer{o.relay_of->inbox_id, o.relay_of->from, o.answer->accepted, o.answer->tick,
-                                        o.answer->accepted ? std::string()
-                                                           : fmt::format("relayed to server {}, which refused it: {}",
-                                                                         o.to, o.answer->reason)});
-      else if (now - o.sent > wait)
-        relayed.push_back(ForwardAnswer{o.relay_of->inbox_id, o.relay_of->from, false, 0,
-                                        fmt::format("relayed to server {}, no answer within {} ms (it may still be applied)",
-                                                    o.to, wait.count())});
-      it = o.answer || now - o.sent > wait ? forwarded_.erase(it) : std::next(it);
-      continue;
-    }
     const auto client = clients_.find(o.id);
     bool done = client == clients_.end();
     if (!done && o.answer && !o.answer->accepted) {
@@ -407,7 +429,6 @@ void WorldOwner::settle_forwarded() {
     }
     it = done ? forwarded_.erase(it) : std::next(it);
   }
-  if (!relayed.empty()) storage_.answer(std::move(relayed));
 }
 
 void WorldOwner::lease_lost(Vec3i region, std::string why) {

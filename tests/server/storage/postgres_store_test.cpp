@@ -3,6 +3,7 @@
 // the region leases that keep one writer per region.
 #include "server/storage/postgres_store.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <libpq-fe.h>
@@ -727,6 +728,35 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
   ASSERT_TRUE(access.ok());
   const std::vector<std::pair<std::string, std::string>> want{{"whitelist", "off"}};
   EXPECT_EQ(*access, want);
+}
+
+// A forwarded edit passed on: its row goes to the next server's inbox with
+// its sender and age, so that server answers the sender directly; the row
+// is no longer the relaying server's (relayed once, never twice).
+TEST_F(PostgresStoreTest, ARelayedEditKeepsItsSenderAndAgeAndLeavesTheRelaysInbox) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  const std::vector<std::uint8_t> edit{1, 2, 3};
+  auto row = s->forward(1, 2, "ann", edit);
+  ASSERT_TRUE(row.ok()) << row.error().message;
+  ASSERT_EQ(run_sql(url_, fmt::format("UPDATE terrane_inbox SET created_at = created_at - interval '3 seconds'"
+                                      " WHERE id = {}", *row)),
+            "");
+  ASSERT_TRUE(s->relay(*row, 2, 3).ok());
+  auto at_relay = s->inbox(2, 0, 10);
+  ASSERT_TRUE(at_relay.ok());
+  EXPECT_TRUE(at_relay->empty());
+  auto at_next = s->inbox(3, 0, 10);
+  ASSERT_TRUE(at_next.ok());
+  ASSERT_EQ(at_next->size(), 1u);
+  EXPECT_EQ(at_next->front().id, *row);
+  EXPECT_EQ(at_next->front().from, 1u);
+  EXPECT_EQ(at_next->front().player, "ann");
+  EXPECT_EQ(at_next->front().edit, edit);
+  EXPECT_GE(at_next->front().age_ms, 3000);
+  auto again = s->relay(*row, 2, 3);
+  ASSERT_FALSE(again.ok());
+  EXPECT_NE(again.error().message.find("no longer server 2's"), std::string::npos) << again.error().message;
 }
 
 TEST_F(PostgresStoreTest, WritesInARegionAnotherServerHoldsAreRefusedWithTheHolder) {
