@@ -861,7 +861,7 @@ StoreResult<Ok> PostgresStore::relay(std::int64_t id, std::uint32_t from, std::u
                         {text(id), text(from), text(to)});
     if (!row) return row.error();
     if (row->count() != 1)
-      return StoreError{StoreError::Kind::kQuery,
+      return StoreError{StoreError::Kind::kFenced,
                         fmt::format("postgresql: relay edit: inbox row {} is no longer server {}'s", id, from)};
     auto n = c_->exec("notify inbox", "SELECT pg_notify($1, $2)",
                       {Param{kInboxChannel, false}, Param{std::to_string(to), false}});

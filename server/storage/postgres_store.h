@@ -196,8 +196,8 @@ class PostgresStore final : public WorldStore {
                                     std::span<const std::uint8_t> edit);
   // Passes the edit of inbox row id, addressed to from, on to server to
   // (one transaction: the row readdressed, its notice). Its sender and age
-  // stay, so to answers the sender and refuses it once too old. An error
-  // if the row is no longer from's (answered).
+  // stay, so to answers the sender and refuses it once too old. kFenced if
+  // the row is no longer from's (answered or passed on already).
   StoreResult<Ok> relay(std::int64_t id, std::uint32_t from, std::uint32_t to);
   // Edits for server to not answered yet with an id above after, oldest
   // first, at most limit.

@@ -279,9 +279,9 @@ void WorldOwner::relay(const PendingEdit& pe, const Region& box, std::uint32_t t
   storage_.relay(f.inbox_id, to, regions, [this, f, to, regions](StoreResult<Ok> done) {
     asio::post(strand_, [this, f, to, regions, done = std::move(done)] {
       handed_over(regions, done.ok());
-      // Not passed on (the database out of reach): refused here. (A row no
-      // longer this server's was answered already.)
-      if (!done && done.error().kind != StoreError::Kind::kQuery)
+      // Not passed on (the database out of reach, say): refused here. A row
+      // no longer this server's (kFenced) is another's to answer.
+      if (!done && done.error().kind != StoreError::Kind::kFenced)
         storage_.answer({ForwardAnswer{f.inbox_id, f.from, false, 0,
                                        fmt::format("cannot relay the edit to server {}: {}", to, done.error().message)}});
     });
