@@ -358,6 +358,19 @@ bool view_complete(const HeldMap& held, const ClientStateMsg& where,
   return true;
 }
 
+// What a client holds once its view at where is complete (what it claims
+// in Holdings when it comes back); empty if the stream ends first.
+std::vector<HeldChunkMsg> holdings_after_view(RawPeer& p, const ClientStateMsg& where) {
+  std::vector<HeldChunkMsg> out;
+  HeldMap held = empty_held();
+  std::size_t records = 0;
+  if (!p.send(build_client_state(where)) ||
+      !read_stream(p, held, &records, [&](const HeldMap& h) { return view_complete(h, where); }))
+    return out;
+  for (const auto& [cp, h] : held) out.push_back(h);
+  return out;
+}
+
 TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) {
   // A stored world around (1000, y, 1000), as terrane-world generate leaves
   // it: every chunk that is not Air has a row (and a coarse entry).
@@ -517,15 +530,7 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
 TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   start();
   const ClientStateMsg where{{1002.0f, 12.0f, 1002.0f}, 96, 24};
-  std::vector<HeldChunkMsg> claims;
-  {
-    auto a = join("a");
-    ASSERT_TRUE(a->send(build_client_state(where)));
-    HeldMap held = empty_held();
-    std::size_t records = 0;
-    ASSERT_TRUE(read_stream(*a, held, &records, [&](const HeldMap& h) { return view_complete(h, where); }));
-    for (const auto& [cp, h] : held) claims.push_back(h);
-  }
+  std::vector<HeldChunkMsg> claims = holdings_after_view(*join("a"), where);
   ASSERT_GT(claims.size(), 50u);
   // Meanwhile another client changes the home chunk: that one is stale.
   auto c = join("c");
@@ -591,15 +596,7 @@ TEST_F(ServerTest, AResumingClientsEditsAreTakenWhereItClaimsFullResolution) {
   start();
   const ClientStateMsg where{{1002.0f, 12.0f, 1002.0f}, 96, 24};
   const Vec3i home = chunk_of(Vec3i{1002, 12, 1002}), east = home + Vec3i{1, 0, 0};
-  std::vector<HeldChunkMsg> claims;
-  {
-    auto a = join("a");
-    ASSERT_TRUE(a->send(build_client_state(where)));
-    HeldMap held = empty_held();
-    std::size_t records = 0;
-    ASSERT_TRUE(read_stream(*a, held, &records, [&](const HeldMap& h) { return view_complete(h, where); }));
-    for (const auto& [cp, h] : held) claims.push_back(h);
-  }
+  std::vector<HeldChunkMsg> claims = holdings_after_view(*join("a"), where);
   bool home_full = false, east_full = false;
   for (HeldChunkMsg& h : claims) {
     if (h.chunk_pos == home) home_full = h.level == 0;
