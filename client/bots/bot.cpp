@@ -361,11 +361,6 @@ void Bot::maybe_edit(Clock::time_point now) {
     e.center = Vec3f{static_cast<float>(at.x) + 0.5f, static_cast<float>(at.y) + 0.5f, static_cast<float>(at.z) + 0.5f};
     e.radius = std::max(0.5f, r);
     const Region b = e.bounds();
-    if (!sees(b)) {
-      std::lock_guard lock(mutex_);
-      --outstanding_edits_;
-      return;
-    }
     double voxels = 0;
     const float reach_r = e.radius + 0.5f;
     for (int y = b.min.y; y < b.max.y; ++y)
@@ -374,22 +369,19 @@ void Bot::maybe_edit(Clock::time_point now) {
           const Vec3f c{static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, static_cast<float>(z) + 0.5f};
           if (length(c - e.center) < reach_r) voxels += 1;
         }
-    id = ctx_.fanout->send_edit(index_, b, voxels, [&] {
-      return client_->fill_sphere(e.center, e.radius, dig ? kAir : material);
-    });
+    if (sees(b))
+      id = ctx_.fanout->send_edit(index_, b, voxels, [&] {
+        return client_->fill_sphere(e.center, e.radius, dig ? kAir : material);
+      });
   } else {
     const int max_side = std::max(2, static_cast<int>(2.0f * o.edit_radius));
     const int s = std::uniform_int_distribution<int>(2, max_side)(rng_);
     const Vec3i at = dig ? hit->voxel : hit->voxel + normal;
     const Region box{at - Vec3i{s / 2, s / 2, s / 2}, at - Vec3i{s / 2, s / 2, s / 2} + Vec3i{s, s, s}};
     const Voxel v = dig ? Voxel{} : solid(material);
-    if (!sees(box)) {
-      std::lock_guard lock(mutex_);
-      --outstanding_edits_;
-      return;
-    }
-    id = ctx_.fanout->send_edit(index_, box, static_cast<double>(box.volume()),
-                                [&] { return client_->fill_box(box, v); });
+    if (sees(box))
+      id = ctx_.fanout->send_edit(index_, box, static_cast<double>(box.volume()),
+                                  [&] { return client_->fill_box(box, v); });
   }
   if (id == 0) {
     std::lock_guard lock(mutex_);

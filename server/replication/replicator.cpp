@@ -345,7 +345,7 @@ void Replicator::on_edit(EditRequestMsg edit) {
       full = full_level(it->second.level);
     } else {
       auto c = claims_.find(cp);
-      full = c != claims_.end() && full_level(c->second.level) && plan_valid_ && in_view(cp) && desired(cp) == 0;
+      full = c != claims_.end() && full_level(c->second.level) && plan_valid_ && desired(cp) == 0;
     }
   });
   if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");

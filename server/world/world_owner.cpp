@@ -835,16 +835,15 @@ void WorldOwner::apply_edits() {
     } else {
       r = bounds.clamp(pe.edit.reads());
     }
+    // (r, what the edit reads, holds what it writes.)
     const auto wait = [&] {
       mark_waiting(r);
-      if (!history) mark_waiting(bounds.clamp(pe.edit.bounds()));
       waiting_players.insert(pe.player);
       set_aside();
     };
     // A client's edit also waits while one of its edits whose chunks it
     // meets is forwarded and not answered: another server may apply that.
     if (waiting_players.count(pe.player) != 0 || behind_waiting(r) ||
-        (!history && behind_waiting(bounds.clamp(pe.edit.bounds()))) ||
         (client != nullptr && !pe.forwarded && forward_pending(pe.id, r))) {
       wait();
       continue;
