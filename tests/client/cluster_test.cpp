@@ -126,6 +126,19 @@ class ClusterTest : public testing_support::PostgresTest {
         kDeadline);
     return reason;
   }
+  // Writes v into r once c holds every chunk of r at full resolution (join
+  // waits for the spawn's chunk and its six neighbours only; a box across a
+  // corner of chunks reaches beyond them), and waits for the answer: "" if
+  // accepted, else the reason.
+  static std::string write(Client& c, const Region& r, const std::vector<Voxel>& v) {
+    if (!wait_full_resolution(c, r)) return "never held at full resolution";
+    return outcome(c, c.write_box(r, v));
+  }
+  static bool wait_full_resolution(Client& c, const Region& r) {
+    std::vector<Vec3i> chunks;
+    for_each_chunk_in(r, [&](Vec3i cp) { chunks.push_back(cp); });
+    return wait_full_resolution(c, chunks);
+  }
   // Tries the edit until it is accepted (a region is taken over once its
   // lease is given up or runs out): "" then, else the last refusal.
   static std::string until_accepted(Client& c, const Region& r, const std::vector<Voxel>& v) {
@@ -136,7 +149,7 @@ class ClusterTest : public testing_support::PostgresTest {
                                                                                    return view.closed;
                                                                                  },
                                                                                  0ms))
-      answer = outcome(c, c.write_box(r, v));
+      answer = write(c, r, v);
     return answer;
   }
   // Every chunk of near the client holds agrees with its server's (region
@@ -245,7 +258,7 @@ TEST_F(ClusterTest, AServerOnPostgresqlKeepsWhatItAcknowledgedAcrossARestart) {
     join(c);
     box = box_near(c, 0);
     want = pattern(box, materials::kBrick);
-    ASSERT_EQ(outcome(c, c.write_box(box, want)), "");
+    ASSERT_EQ(write(c, box, want), "");
     c.disconnect();
   }
   ASSERT_EQ(a.stop(), 0) << a.output();
@@ -267,12 +280,12 @@ TEST_F(ClusterTest, AnEditInAnotherServersRegionIsForwardedAndATakeoverReadsWhat
   const std::vector<Vec3i>& near = p.near;
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  ASSERT_EQ(write(ann, box, anns), "");
   // The region is server 1's now: server 2 forwards bob's edit there to it,
   // and acknowledges it once server 1 stored it and bob's replica shows it.
   const Region beside = box_near(bob, 5);
   const auto bobs = pattern(beside, materials::kSnow);
-  ASSERT_EQ(outcome(bob, bob.write_box(beside, bobs)), "");
+  ASSERT_EQ(write(bob, beside, bobs), "");
   EXPECT_TRUE(replica_shows(bob, beside, bobs));
   EXPECT_TRUE(replica_shows(bob, box, anns));
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, beside, bobs); }, kDeadline))
@@ -312,13 +325,13 @@ TEST_F(ClusterTest, AFreeRegionBesideAnotherServersIsLeftToItAndTheEditForwarded
   const Region anns{corner + Vec3i{4, 0, 4}, corner + Vec3i{7, 3, 7}};
   const Region beside{corner + Vec3i{-8, 0, 4}, corner + Vec3i{-5, 3, 7}};
   // Server 1 writes the region of ann's edit.
-  ASSERT_EQ(outcome(ann, ann.write_box(anns, pattern(anns, materials::kBrick))), "");
+  ASSERT_EQ(write(ann, anns, pattern(anns, materials::kBrick)), "");
   ASSERT_EQ(lease_owner(region_of(anns)), 1);
   // Bob (on server 2, which writes nothing) edits the free region beside
   // it: the region is left to server 1, so the edit is forwarded there,
   // server 1 claims and writes it, and bob's replica comes to show it.
   const auto bobs = pattern(beside, materials::kSnow);
-  ASSERT_EQ(outcome(bob, bob.write_box(beside, bobs)), "");
+  ASSERT_EQ(write(bob, beside, bobs), "");
   EXPECT_EQ(lease_owner(region_of(beside)), 1) << "server 2 took a region beside server 1's";
   EXPECT_TRUE(replica_shows(bob, beside, bobs));
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, beside, bobs); }, kDeadline))
@@ -331,7 +344,7 @@ TEST_F(ClusterTest, AServerPausedPastItsLeaseCannotWriteAgain) {
   ServerProcess &a = *p.a, &b = *p.b;
   Client &ann = *p.ann, &bob = *p.bob;
   const Region box = box_near(ann, 0);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, pattern(box, materials::kBrick))), "");
+  ASSERT_EQ(write(ann, box, pattern(box, materials::kBrick)), "");
   // Server 1 is paused: its lease runs out and server 2 takes the region.
   ASSERT_TRUE(a.pause());
   const Region beside = box_near(bob, 5);
@@ -364,14 +377,14 @@ TEST_F(ClusterTest, AnEditOnOneServerReachesTheClientsOfAnother) {
   const std::vector<Vec3i>& near = p.near;
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  ASSERT_EQ(write(ann, box, anns), "");
   // Server 1's commit notifies server 2, which reads the chunks again and
   // sends them to bob.
   ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, box, anns); }, kDeadline))
       << "bob never saw ann's edit";
   // A second edit of the same chunks follows the first.
   const auto again = pattern(box, materials::kSnow);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, again)), "");
+  ASSERT_EQ(write(ann, box, again), "");
   ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, box, again); }, kDeadline));
   expect_agrees_with_its_server(bob, near);
   ann.disconnect();
@@ -425,6 +438,7 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
   const Region box = box_near(ann, 0);
   for (const Material m : {materials::kBrick, materials::kSnow}) {
     const auto v = pattern(box, m);
+    ASSERT_TRUE(wait_full_resolution(ann, box));
     const std::uint32_t id = ann.write_box(box, v);
     ASSERT_EQ(outcome(ann, id), "");
     const std::uint64_t tick = acked_tick(ann, id);
@@ -438,6 +452,7 @@ TEST_F(ClusterTest, AChunkAnotherServerChangedReachesAClientHereAsItsChangedUnit
   // 1's tick, and so does the UpdateBatch bringing bob its units.
   {
     const auto v = pattern(box, materials::kSand);
+    ASSERT_TRUE(wait_full_resolution(bob, box));
     const std::uint32_t id = bob.write_box(box, v);
     ASSERT_EQ(outcome(bob, id), "");
     const std::uint64_t tick = acked_tick(bob, id);
@@ -477,7 +492,7 @@ TEST_F(ClusterTest, ChunksAnotherServerChangedThatNoClientHereHoldsAreForgottenN
   ASSERT_TRUE(testing_support::eventually([&] { return metric(two, "terrane_clients") == 0; }));
   const Region box = box_near(ann, 0);
   const auto anns = pattern(box, materials::kBrick);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, anns)), "");
+  ASSERT_EQ(write(ann, box, anns), "");
   // Server 1's commit notifies server 2, which holds the chunks for nobody:
   // forgotten, not read again.
   ASSERT_TRUE(testing_support::eventually(
@@ -504,7 +519,7 @@ TEST_F(ClusterTest, ARegionWhoseOwnerWasKilledIsTakenOverWithEveryAcknowledgedEd
   for (int i = 0; i < 4; ++i) {
     const Region r = box_near(ann, -8 + 4 * i);
     auto v = pattern(r, static_cast<Material>(materials::kBrick + i));
-    ASSERT_EQ(outcome(ann, ann.write_box(r, v)), "");
+    ASSERT_EQ(write(ann, r, v), "");
     acknowledged.emplace_back(r, std::move(v));
   }
   std::vector<std::uint32_t> sand;
@@ -556,7 +571,8 @@ TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
   const Region first = box_near(ann, 0), second = box_near(ann, 5), third = box_near(ann, -5);
   const auto v1 = pattern(first, materials::kBrick), v2 = pattern(second, materials::kSnow),
              v3 = pattern(third, materials::kSand);
-  ASSERT_EQ(outcome(ann, ann.write_box(first, v1)), "");
+  ASSERT_EQ(write(ann, first, v1), "");
+  ASSERT_TRUE(wait_full_resolution(ann, second));
   // The database restarts while an edit is under way: it is acknowledged
   // once stored, after the database is back; the server keeps running.
   bool restarted = false;
@@ -565,7 +581,7 @@ TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
   restart.join();
   ASSERT_TRUE(restarted) << pg_->why();
   EXPECT_EQ(outcome(ann, during), "");
-  EXPECT_EQ(outcome(ann, ann.write_box(third, v3)), "");
+  EXPECT_EQ(write(ann, third, v3), "");
   ann.disconnect();
   ASSERT_EQ(a.stop(), 0) << a.output();
   ServerProcess& b = start(2);
@@ -588,13 +604,13 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   ASSERT_LT(west.max.x, 0);
   ASSERT_GE(east.min.x, 0);
   const auto wv = pattern(west, materials::kBrick), ev = pattern(east, materials::kSnow);
-  ASSERT_EQ(outcome(ann, ann.write_box(west, wv)), "");
-  ASSERT_EQ(outcome(bob, bob.write_box(east, ev)), "");
+  ASSERT_EQ(write(ann, west, wv), "");
+  ASSERT_EQ(write(bob, east, ev), "");
   // An edit across the border: bob's server hands its region over with the
   // edit to ann's, which then writes both sides.
   const Region across{{-2, west.min.y, west.min.z}, {2, west.max.y, west.max.z}};
   const auto av = pattern(across, materials::kSand);
-  ASSERT_EQ(outcome(bob, bob.write_box(across, av)), "");
+  ASSERT_EQ(write(bob, across, av), "");
   EXPECT_TRUE(replica_shows(bob, across, av));
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, across, av); }, kDeadline));
   // Bob's next edit east is forwarded there too, or his server takes the
@@ -680,7 +696,7 @@ TEST_F(ClusterTest, AnEditAcrossTheCornerOfThreeServersRegionsIsRelayedAndApplie
               "");
   const Region corner{{-2, y, -2}, {2, y + 3, 2}};
   const auto v = pattern(corner, materials::kSand);
-  ASSERT_EQ(outcome(ann, ann.write_box(corner, v)), "") << "accepted at the first try";
+  ASSERT_EQ(write(ann, corner, v), "") << "accepted at the first try";
   EXPECT_TRUE(replica_shows(ann, corner, v));
   // One server writes all four regions now, and not server 1.
   const int writer = lease_owner(leased[0].first);
@@ -744,12 +760,13 @@ TEST_F(ClusterTest, ForwardedEditsAreHeldToThePlayersEditRateAtTheRegionsServer)
   Client ann(ao);
   join(ann);
   const Region box = box_near(ann, 0);
-  ASSERT_EQ(outcome(ann, ann.write_box(box, pattern(box, materials::kBrick))), "");
+  ASSERT_EQ(write(ann, box, pattern(box, materials::kBrick)), "");
   // Server 1 writes the region now; bob, on server 2, edits there at once
   // ten times: forwarded, the first few applied, the rest refused.
   Client bob(options(b, "bob"));
   join(bob);
   std::vector<std::uint32_t> ids;
+  ASSERT_TRUE(wait_full_resolution(bob, box));
   for (int i = 0; i < 10; ++i) ids.push_back(bob.write_box(box, pattern(box, static_cast<Material>(materials::kBrick + i % 4))));
   int accepted = 0, limited = 0;
   for (const std::uint32_t id : ids) {
@@ -838,9 +855,9 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   const Vec3i at = voxel_of(there);
   const Region east{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
   ASSERT_EQ(coarse_region_of(chunk_of(east.min)), region);
-  ASSERT_EQ(outcome(bob, bob.write_box(east, pattern(east, materials::kSnow))), "");
+  ASSERT_EQ(write(bob, east, pattern(east, materials::kSnow)), "");
   const Region west = box_near(ann, -8);
-  ASSERT_EQ(outcome(ann, ann.write_box(west, pattern(west, materials::kBrick))), "");
+  ASSERT_EQ(write(ann, west, pattern(west, materials::kBrick)), "");
   // Ann's whole view first, each chunk with a record of its own (not only a
   // horizon image or an estimate), so that anything sent again would show.
   auto whole_view = [](const std::vector<Vec3i>& chunks) {
@@ -908,7 +925,7 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   // Ann's edits there are server 2's to write, and bob sees them.
   const Region more{at + Vec3i{3, 4, 3}, at + Vec3i{5, 6, 5}};
   const auto mv = pattern(more, materials::kSand);
-  EXPECT_EQ(outcome(ann, ann.write_box(more, mv)), "");
+  EXPECT_EQ(write(ann, more, mv), "");
   EXPECT_TRUE(replica_shows(ann, more, mv));
   ASSERT_TRUE(bob.wait_until([&](const ClientView& v) { return v.closed || shows(v.replica, more, mv); }, kDeadline));
   ann.disconnect();
@@ -945,7 +962,7 @@ TEST_F(ClusterTest, AClientByABorderBetweenTwoRegionsOfAnotherServerIsRedirected
   for (auto [c, offset] : {std::pair<Client*, Vec3f>{&bob, bobs.spawn_offset}, {&cy, cys.spawn_offset}}) {
     const Vec3i at = voxel_of(spawn + offset);
     const Region box{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
-    ASSERT_EQ(outcome(*c, c->write_box(box, pattern(box, materials::kSnow))), "");
+    ASSERT_EQ(write(*c, box, pattern(box, materials::kSnow)), "");
   }
   const Vec3i north = coarse_region_of(view_chunk(spawn + cys.spawn_offset));
   const Vec3i south = coarse_region_of(view_chunk(spawn + bobs.spawn_offset));
@@ -988,7 +1005,7 @@ TEST_F(ClusterTest, AClientThatCannotReachTheServerItIsRedirectedToGoesBackAndIs
   const Vec3f there = w.spawn + kBeyond;
   const Vec3i at = voxel_of(there);
   const Region east{at + Vec3i{-1, 4, -1}, at + Vec3i{1, 6, 1}};
-  ASSERT_EQ(outcome(bob, bob.write_box(east, pattern(east, materials::kSnow))), "");
+  ASSERT_EQ(write(bob, east, pattern(east, materials::kSnow)), "");
   walk(ann, w.spawn, kBeyond);
   // Sent to 127.0.0.1:1, refused there, back on server 1 in a new session.
   ASSERT_TRUE(ann.wait_until([&](const ClientView& v) { return v.closed || *on == 101; }, kDeadline))
@@ -1008,7 +1025,7 @@ TEST_F(ClusterTest, AClientThatCannotReachTheServerItIsRedirectedToGoesBackAndIs
   expect_agrees_with_its_server(ann, testing_support::chunks_within(there, 20, w));
   const Region more{at + Vec3i{3, 4, 3}, at + Vec3i{5, 6, 5}};
   const auto mv = pattern(more, materials::kSand);
-  EXPECT_EQ(outcome(ann, ann.write_box(more, mv)), "");
+  EXPECT_EQ(write(ann, more, mv), "");
   EXPECT_TRUE(replica_shows(ann, more, mv));
   EXPECT_FALSE(ann.closed()) << ann.disconnect_reason();
   ann.disconnect();
