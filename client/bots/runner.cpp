@@ -117,7 +117,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   ctx.io = &pool.io();
   const auto t0 = Clock::now();
   const auto ramp = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.ramp_up_s));
-  auto measure_from = t0 + ramp;
+  // Figures count from the end of the ramp-up or, with a join wait, from
+  // the moment every bot has joined (set below): until then nothing is
+  // measured, not even an edit sent after the ramp-up and answered before
+  // the last join.
+  auto measure_from = o.join_timeout_s > 0 ? Clock::time_point::max() : t0 + ramp;
   FanoutTracker fanout(t0, measure_from, std::max<int>(1, static_cast<int>(o.servers.size())));
   MismatchLog mismatches;
   LatencyLog round_trips(t0, measure_from);

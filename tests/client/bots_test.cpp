@@ -189,6 +189,34 @@ void expect_failure_naming_region(const BotsReport& r) {
   EXPECT_EQ(j["mismatches.0.chunk.0"], std::to_string(c.x));
 }
 
+// With a join wait, edits are measured from the moment every bot has
+// joined: a bot that joined first edits while others still join (here all
+// connect at once, with no ramp-up), and none of those edits counts. No
+// second wholly before joined_s holds an edit's latency. (Round trips are
+// shown for every second, the joins' too.)
+TEST_F(BotsRunTest, EditsAreMeasuredOnlyOnceEveryBotHasJoined) {
+  start_server();
+  BotsOptions o = small_run(40, Behavior::kMixed);
+  o.ramp_up_s = 0;
+  o.duration_s = 2;
+  o.edit_interval_s = 0.1;
+  // Joins of a few seconds: a wider view, bots farther apart.
+  o.view_distance = 384;
+  o.full_res_radius = 96;
+  o.spread = 384;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  // (About 2 s in a release build alone on this machine.)
+  ASSERT_GT(r.joined_s, 1.0) << "the joins took under a second: nothing was tried";
+  EXPECT_GT(r.edit_ack_ms.count, 0u);
+  for (std::size_t s = 0; s < r.timeline.size() && static_cast<double>(s + 1) <= r.joined_s; ++s) {
+    EXPECT_EQ(r.timeline[s].ack_ms.count, 0u) << "second " << s;
+    EXPECT_EQ(r.timeline[s].fanout_ms.count, 0u) << "second " << s;
+  }
+}
+
 TEST_F(BotsRunTest, CorruptedUpdatesFailTheRunAndNameTheRegion) {
   start_server({"--test-corrupt-updates", "1000000"});
   BotsOptions o = small_run(10, Behavior::kDig);
