@@ -29,6 +29,10 @@ namespace {
 // Serialises schema creation between servers opening one database at once.
 constexpr std::int64_t kSchemaLockKey = 0x7465727261'6e65;  // "terrane"
 
+// A write PostgreSQL rolled back to break a deadlock (or a serialization
+// conflict) is tried again at once this many times before it fails.
+constexpr int kConflictRetries = 3;
+
 std::string region_text(Vec3i r) { return fmt::format("({},{},{})", r.x, r.y, r.z); }
 
 // A lease row whose values are not what the schema allows.
@@ -134,6 +138,9 @@ struct PostgresStore::Connection {
   StoreError error(const char* what, PGresult* res) const {
     StoreError e;
     e.kind = PQstatus(conn) == CONNECTION_OK ? StoreError::Kind::kQuery : StoreError::Kind::kConnection;
+    const char* state = res != nullptr ? PQresultErrorField(res, PG_DIAG_SQLSTATE) : nullptr;
+    if (e.kind == StoreError::Kind::kQuery && state != nullptr && std::strncmp(state, "40", 2) == 0)
+      e.kind = StoreError::Kind::kConflict;
     std::string detail = res != nullptr ? PQresultErrorMessage(res) : PQerrorMessage(conn);
     while (!detail.empty() && (detail.back() == '\n' || detail.back() == ' ')) detail.pop_back();
     e.message = fmt::format("postgresql: {}: {}", what, detail);
@@ -1124,19 +1131,29 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
   // retry_for: the write is tried again on a new connection. Nothing is
   // acknowledged meanwhile, and once the leases have run out the write is
   // fenced anyway. (A commit whose answer was lost may be stored twice: the
-  // chunk rows are the same, its edit log entries appear twice.)
+  // chunk rows are the same, its edit log entries appear twice.) A commit
+  // PostgreSQL rolled back to break a deadlock is tried again at once, a
+  // few times: nothing of it was stored.
   const auto give_up = std::chrono::steady_clock::now() + retry_for_;
+  int conflicts = 0;
   for (int attempt = 0;; ++attempt) {
     auto leases = (*leases_)(regions);
     StoreResult<Ok> saved =
         leases ? save_fenced(*leases, writes, log, overwrite, answers) : StoreResult<Ok>(leases.error());
     if (saved) {
-      if (attempt > 0) server_log().info("world {}: stored after {} tries: the database is back", shown_, attempt + 1);
+      if (attempt > 0)
+        server_log().info("world {}: stored after {} tries{}", shown_, attempt + 1,
+                          conflicts == attempt ? "" : ": the database is back");
       return Ok{};
     }
-    if (saved.error().kind != StoreError::Kind::kConnection || std::chrono::steady_clock::now() >= give_up)
+    const StoreError::Kind kind = saved.error().kind;
+    if (kind == StoreError::Kind::kConflict && ++conflicts <= kConflictRetries) {
+      server_log().warn("world {}: {}; trying again", shown_, saved.error().message);
+      continue;
+    }
+    if (kind != StoreError::Kind::kConnection || std::chrono::steady_clock::now() >= give_up)
       return file_error(saved.error());
-    if (attempt == 0) server_log().warn("world {}: {}; trying again", shown_, saved.error().message);
+    if (attempt == conflicts) server_log().warn("world {}: {}; trying again", shown_, saved.error().message);
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
   }
 }

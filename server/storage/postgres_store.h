@@ -44,6 +44,8 @@ struct StoreError {
   enum class Kind : std::uint8_t {
     kConnection,  // the database cannot be reached, or the connection broke
     kQuery,       // PostgreSQL refused a statement
+    kConflict,    // PostgreSQL rolled the transaction back to break a deadlock or a serialization
+                  // conflict (SQLSTATE class 40): nothing of it was done, trying again is safe
     kOwned,       // a region is leased to another server (claim)
     kLeft,        // a free region is left to the server writing its neighbours (claim, ClaimRule::kPreferNeighbours)
     kFenced,      // a write's lease is no longer current: nothing was written

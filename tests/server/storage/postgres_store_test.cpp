@@ -282,6 +282,67 @@ TEST_F(PostgresStoreTest, ARenewalLocksLeasesInTheOrderACommitDoes) {
   PQfinish(commit);
 }
 
+// A write PostgreSQL rolls back to break a deadlock is tried again, and
+// stored. The deadlock: another session holds the second region's lease
+// row while the write locks the first and waits for the second, then asks
+// for the first. The write's session finds the deadlock first (the other
+// waits 60 s before it looks) and is rolled back; tried again, it waits
+// until the other session gives up its rows, then commits.
+TEST_F(PostgresStoreTest, AWriteRolledBackToBreakADeadlockIsTriedAgainAndStored) {
+  // Sessions of the write's database look after 2 s of waiting (the
+  // default, 1 s, would leave a loaded machine little time to make the
+  // cycle before the write's session looks).
+  const std::string db = sql_value(url_, "SELECT current_database()");
+  ASSERT_EQ(run_sql(url_, "ALTER DATABASE \"" + db + "\" SET deadlock_timeout = '2s'"), "");
+  auto s = open();
+  ASSERT_TRUE(s);
+  const Vec3i first{0, 0, 0}, second{1, 0, 0};
+  auto a = s->claim(first, 1, 60s), b = s->claim(second, 1, 60s);
+  ASSERT_TRUE(a.ok() && b.ok());
+  const std::vector<RegionLease> leases{*a, *b};
+  s->set_lease_source(std::make_shared<const LeaseSource>([&](std::span<const Vec3i> regions) {
+    std::vector<RegionLease> out;
+    for (const Vec3i r : regions)
+      for (const RegionLease& l : leases)
+        if (l.region == r) out.push_back(l);
+    return StoreResult<std::vector<RegionLease>>(out);
+  }));
+  PGconn* other = PQconnectdb(url_.c_str());
+  ASSERT_EQ(PQstatus(other), CONNECTION_OK) << PQerrorMessage(other);
+  const auto exec = [&](const char* sql) {
+    PGresult* r = PQexec(other, sql);
+    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
+    std::string error = ok ? "" : PQresultErrorMessage(r);
+    PQclear(r);
+    return error;
+  };
+  ASSERT_EQ(exec("SET deadlock_timeout = '60s'"), "");
+  ASSERT_EQ(exec("BEGIN"), "");
+  ASSERT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 1 AND ry = 0 AND rz = 0"), "");
+  const std::vector<ChunkWrite> writes{chunk_write({1, 0, 2}, 1, materials::kSlate),
+                                       chunk_write({9, 0, 2}, 1, materials::kBrick)};
+  std::string saved = "not done";
+  std::thread write([&] {
+    auto st = s->save_chunks(writes, true);
+    saved = st.ok() ? "" : st.error().message;
+  });
+  // The write holds the first row and waits for the second.
+  EXPECT_TRUE(eventually([&] {
+    return sql_value(url_, "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'") == "1";
+  }));
+  // Waits until the write is rolled back (the first row is free then).
+  EXPECT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 0 AND ry = 0 AND rz = 0"), "");
+  EXPECT_EQ(exec("ROLLBACK"), "");
+  write.join();
+  PQfinish(other);
+  EXPECT_EQ(saved, "");
+  for (const ChunkWrite& w : writes) {
+    auto got = s->load_chunk(w.pos);
+    ASSERT_TRUE(got.ok() && got->has_value());
+    EXPECT_EQ((*got)->revision, 1u);
+  }
+}
+
 TEST_F(PostgresStoreTest, EachWriteMovesItsRegionsSequenceOnAcrossChangesOfHands) {
   auto a = open(), b = open();
   ASSERT_TRUE(a && b);
