@@ -889,18 +889,18 @@ void WorldOwner::apply_edits() {
     if (w != Writable::kYes) {
       // An edit across a border also writes regions of this server's: they
       // are handed over with it to the server holding the rest, once nothing
-      // of them is in flight. A forwarded edit goes on so (relayed: its
-      // inbox row readdressed, its sender and age kept) only with regions
-      // of this server's to hand over, so each hop gathers the edit's
-      // regions on fewer servers; a row older than the forward wait is
-      // refused wherever it is, so no relay goes on longer.
+      // of them is in flight. A forwarded edit goes on so too (relayed: its
+      // inbox row readdressed, its sender and age kept), with regions of
+      // this server's or none (they moved on since its sender looked); a
+      // row older than the forward wait is refused wherever it is, so no
+      // relay goes on longer.
       std::unordered_set<Vec3i, Vec3iHash> mine;
       const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ && (client != nullptr || pe.forwarded);
       if (may_go_on)
         for_each_chunk_in(writes, [&](Vec3i cp) {
           if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
         });
-      if (may_go_on && (!pe.forwarded || !mine.empty())) {
+      if (may_go_on) {
         // Handed over only with nothing of this server's in flight: no commit
         // under way, nothing applied yet this tick, no edit set aside in the
         // regions. Nothing behind it is applied meanwhile, so that comes

@@ -708,6 +708,55 @@ TEST_F(ClusterTest, AnEditAcrossTheCornerOfThreeServersRegionsIsRelayedAndApplie
   ann.disconnect();
 }
 
+// A forwarded edit whose region moved on before its addressee read it (the
+// addressee holds none of its regions now) is relayed to the region's
+// server, not refused. The region is leased to server 2 in the table;
+// ann's edit on server 1 is forwarded there while server 2 is stopped,
+// the lease passes to server 3, and server 2, resumed, relays the edit.
+TEST_F(ClusterTest, AForwardedEditWhoseRegionMovedOnIsRelayedToItsNewServer) {
+  for (std::uint32_t id = 1; id <= 3; ++id) ASSERT_NE(start(id, 5000, 100000, {"--metrics", "127.0.0.1:0"}).port(), 0);
+  ServerProcess &a = *servers_[0], &b = *servers_[1], &c = *servers_[2];
+  Client ann(options(a, "ann"));
+  join(ann);
+  // East and north of the corner x = 0, z = 0 by the spawn: in one region.
+  const Vec3f sp = ann.welcome()->spawn;
+  const int y = static_cast<int>(std::floor(sp.y)) - 3;
+  const Region box{{4, y, 4}, {7, y + 3, 7}};
+  const Vec3i region = coarse_region_of(chunk_of(box.min));
+  ASSERT_EQ(region, coarse_region_of(chunk_of(box.max - Vec3i{1, 1, 1})));
+  ASSERT_EQ(run_sql(url_, fmt::format("INSERT INTO terrane_leases (rx, ry, rz, owner, epoch, expires_at)"
+                                      " VALUES ({}, {}, {}, 2, 1, clock_timestamp() + interval '1 hour')",
+                                      region.x, region.y, region.z)),
+            "");
+  ASSERT_TRUE(wait_full_resolution(ann, box));
+  ASSERT_TRUE(b.pause());
+  const auto v = pattern(box, materials::kSand);
+  const std::uint32_t id = ann.write_box(box, v);
+  // In server 2's inbox: the lease goes to server 3 before server 2 reads it.
+  const bool in_inbox = testing_support::eventually(
+      [&] {
+        PGconn* conn = PQconnectdb(url_.c_str());
+        PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_inbox WHERE to_server = 2");
+        const bool there = PQresultStatus(r) == PGRES_TUPLES_OK && std::atoi(PQgetvalue(r, 0, 0)) == 1;
+        PQclear(r);
+        PQfinish(conn);
+        return there;
+      },
+      kDeadline);
+  const std::string moved = run_sql(url_, fmt::format("UPDATE terrane_leases SET owner = 3 WHERE rx = {} AND ry = {} AND rz = {}",
+                                                      region.x, region.y, region.z));
+  ASSERT_TRUE(b.resume());
+  ASSERT_TRUE(in_inbox) << "server 1 never forwarded the edit to server 2";
+  ASSERT_EQ(moved, "");
+  EXPECT_EQ(outcome(ann, id), "");
+  EXPECT_TRUE(replica_shows(ann, box, v));
+  EXPECT_EQ(lease_owner(region), 3);
+  EXPECT_EQ(metric(a, "terrane_edits_forwarded_total"), 1);
+  EXPECT_EQ(metric(b, "terrane_edits_forwarded_total"), 1) << "server 2 relayed it";
+  EXPECT_EQ(metric(c, "terrane_forwarded_edits_received_total"), 1);
+  ann.disconnect();
+}
+
 // A border is the whole world's: a server is refused a new one while
 // another runs on the world (which would go on without it); once alone it
 // sets it, and every server started after applies it.
