@@ -14,6 +14,13 @@ constexpr auto kStep = std::chrono::milliseconds(100);
 constexpr float kWalkSpeed = 5.0f;   // voxels per second
 constexpr float kFlySpeed = 40.0f;   // voxels per second
 constexpr float kFlyHeight = 40.0f;  // above the start height
+// A walker starting above or below the ground moves to it at most this far
+// a step: two steps (one ClientState) stay within the server's movement
+// slack (kSpeedSlackVoxels, 48) however soon that state follows the last.
+// After a redirect the new server's first state may be only milliseconds
+// older (the client sends its last one as it links), and a landing in one
+// jump of 73 voxels was dropped as moving too fast.
+constexpr float kLandStep = 16.0f;
 constexpr float kEyeHeight = 1.6f;
 // Highest step a walker climbs per step (0.5 voxel forward) and deepest drop.
 constexpr float kMaxClimb = 1.0f;
@@ -244,8 +251,9 @@ void Bot::walk() {
     const Vec3i v = voxel_at(pos_);
     const auto h = client_->surface_height(v.x, v.z);
     if (!h || client_->resolution_at({v.x, *h - 1, v.z}) != 0) return;
-    pos_.y = static_cast<float>(*h);
-    landed_ = true;
+    const float ground = static_cast<float>(*h);
+    pos_.y += std::clamp(ground - pos_.y, -kLandStep, kLandStep);
+    landed_ = pos_.y == ground;
     state_dirty_ = true;
     return;
   }

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +14,7 @@
 #include <thread>
 
 #include "client/bots/bot.h"
+#include "client/client.h"
 #include "client/bots/options.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
@@ -215,6 +217,41 @@ TEST_F(BotsRunTest, EditsAreMeasuredOnlyOnceEveryBotHasJoined) {
     EXPECT_EQ(r.timeline[s].ack_ms.count, 0u) << "second " << s;
     EXPECT_EQ(r.timeline[s].fanout_ms.count, 0u) << "second " << s;
   }
+}
+
+// A walker starting above the ground comes down to it in steps within the
+// server's movement slack alone, however soon its next state follows the
+// last (after a redirect, the state the new server got first may be
+// milliseconds older). Here the limit is 1 voxel a second and the walkers
+// start 80 voxels above the spawn: a landing in one jump is dropped.
+TEST_F(BotsRunTest, AWalkerStartingAboveTheGroundComesDownWithinTheSpeedLimit) {
+  start_server({"--max-speed", "1"});
+  Vec3f spawn;
+  {
+    ClientOptions co;
+    co.port = server_->port();
+    co.name = "probe";
+    Client probe(co);
+    std::string err;
+    ASSERT_TRUE(probe.connect(&err)) << err;
+    ASSERT_TRUE(probe.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, std::chrono::seconds(60)));
+    ASSERT_TRUE(probe.welcome().has_value()) << probe.disconnect_reason();
+    spawn = probe.welcome()->spawn;
+    probe.disconnect();
+  }
+  BotsOptions o = small_run(4, Behavior::kWalk);
+  o.spawn_set = true;
+  o.spawn = Vec3i{static_cast<int>(std::floor(spawn.x)), static_cast<int>(std::floor(spawn.y)) + 80,
+                  static_cast<int>(std::floor(spawn.z))};
+  o.spread = 8;
+  o.view_distance = 160;
+  o.full_res_radius = 128;  // the ground below at full resolution
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_EQ(r.unexpected_disconnects, 0) << report_table(r);
+  EXPECT_EQ(r.joins_incomplete, 0);
+  EXPECT_GT(r.walk_steps, 0u) << "the walkers landed and walked";
 }
 
 TEST_F(BotsRunTest, CorruptedUpdatesFailTheRunAndNameTheRegion) {
