@@ -35,6 +35,7 @@ namespace {
 using namespace std::chrono_literals;
 using testing_support::run_sql;
 using testing_support::ServerProcess;
+using testing_support::sql_value;
 
 // Generous: sanitizer builds on a shared 2-core machine generate slowly.
 constexpr auto kDeadline = 30s;
@@ -734,15 +735,7 @@ TEST_F(ClusterTest, AForwardedEditWhoseRegionMovedOnIsRelayedToItsNewServer) {
   const std::uint32_t id = ann.write_box(box, v);
   // In server 2's inbox: the lease goes to server 3 before server 2 reads it.
   const bool in_inbox = testing_support::eventually(
-      [&] {
-        PGconn* conn = PQconnectdb(url_.c_str());
-        PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_inbox WHERE to_server = 2");
-        const bool there = PQresultStatus(r) == PGRES_TUPLES_OK && std::atoi(PQgetvalue(r, 0, 0)) == 1;
-        PQclear(r);
-        PQfinish(conn);
-        return there;
-      },
-      kDeadline);
+      [&] { return sql_value(url_, "SELECT count(*) FROM terrane_inbox WHERE to_server = 2") == "1"; }, kDeadline);
   const std::string moved = run_sql(url_, fmt::format("UPDATE terrane_leases SET owner = 3 WHERE rx = {} AND ry = {} AND rz = {}",
                                                       region.x, region.y, region.z));
   ASSERT_TRUE(b.resume());
@@ -765,15 +758,7 @@ TEST_F(ClusterTest, ABorderIsSetOnlyWhileNoOtherServerRunsAndEveryServerAfterApp
   ASSERT_NE(a.port(), 0);
   // Server 1 has said where it runs once its keeper's first round is done.
   ASSERT_TRUE(testing_support::eventually(
-      [&] {
-        PGconn* conn = PQconnectdb(url_.c_str());
-        PGresult* r = PQexec(conn, "SELECT count(*) FROM terrane_servers");
-        const bool seen = PQresultStatus(r) == PGRES_TUPLES_OK && std::atoi(PQgetvalue(r, 0, 0)) == 1;
-        PQclear(r);
-        PQfinish(conn);
-        return seen;
-      },
-      kDeadline));
+      [&] { return sql_value(url_, "SELECT count(*) FROM terrane_servers") == "1"; }, kDeadline));
   const std::vector<std::string> border{"--border", "-512,-512,512,512"};
   ServerProcess& refused = start(2, 5000, 100000, border, false);
   EXPECT_EQ(refused.wait_exit(60s), 1) << refused.output();

@@ -32,6 +32,14 @@ using testing_support::sql_value;
 
 class PostgresStoreTest : public testing_support::PostgresTest {
  protected:
+  // Runs a statement on a session of the test's own: "" or PostgreSQL's error.
+  static std::string command(PGconn* conn, const char* sql) {
+    PGresult* r = PQexec(conn, sql);
+    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
+    std::string error = ok ? "" : PQresultErrorMessage(r);
+    PQclear(r);
+    return error;
+  }
   std::unique_ptr<PostgresStore> open() {
     auto s = PostgresStore::open(url_);
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
@@ -256,13 +264,7 @@ TEST_F(PostgresStoreTest, ARenewalLocksLeasesInTheOrderACommitDoes) {
   ASSERT_TRUE(a.ok() && b.ok());
   PGconn* commit = PQconnectdb(url_.c_str());
   ASSERT_EQ(PQstatus(commit), CONNECTION_OK) << PQerrorMessage(commit);
-  const auto exec = [&](const char* sql) {
-    PGresult* r = PQexec(commit, sql);
-    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
-    std::string error = ok ? "" : PQresultErrorMessage(r);
-    PQclear(r);
-    return error;
-  };
+  const auto exec = [&](const char* sql) { return command(commit, sql); };
   ASSERT_EQ(exec("BEGIN"), "");
   ASSERT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 0 AND ry = 0 AND rz = 0"), "");
   const std::vector<RegionLease> given{*b, *a};  // the second first
@@ -309,13 +311,7 @@ TEST_F(PostgresStoreTest, AWriteRolledBackToBreakADeadlockIsTriedAgainAndStored)
   }));
   PGconn* other = PQconnectdb(url_.c_str());
   ASSERT_EQ(PQstatus(other), CONNECTION_OK) << PQerrorMessage(other);
-  const auto exec = [&](const char* sql) {
-    PGresult* r = PQexec(other, sql);
-    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
-    std::string error = ok ? "" : PQresultErrorMessage(r);
-    PQclear(r);
-    return error;
-  };
+  const auto exec = [&](const char* sql) { return command(other, sql); };
   ASSERT_EQ(exec("SET deadlock_timeout = '60s'"), "");
   ASSERT_EQ(exec("BEGIN"), "");
   ASSERT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 1 AND ry = 0 AND rz = 0"), "");
