@@ -252,8 +252,12 @@ void Bot::walk() {
     const auto h = client_->surface_height(v.x, v.z);
     if (!h || client_->resolution_at({v.x, *h - 1, v.z}) != 0) return;
     const float ground = static_cast<float>(*h);
-    pos_.y += std::clamp(ground - pos_.y, -kLandStep, kLandStep);
-    landed_ = pos_.y == ground;
+    if (std::abs(ground - pos_.y) <= kLandStep) {
+      pos_.y = ground;
+      landed_ = true;
+    } else {
+      pos_.y += ground > pos_.y ? kLandStep : -kLandStep;
+    }
     state_dirty_ = true;
     return;
   }

@@ -893,9 +893,12 @@ void WorldOwner::apply_edits() {
       // inbox row readdressed, its sender and age kept), with regions of
       // this server's or none (they moved on since its sender looked); a
       // row older than the forward wait is refused wherever it is, so no
-      // relay goes on longer.
+      // relay goes on longer. Never back to its sender: there the player's
+      // next edit on those chunks waits for this one's answer, and this one
+      // would wait behind it (refused instead; the player tries again).
       std::unordered_set<Vec3i, Vec3iHash> mine;
-      const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ && (client != nullptr || pe.forwarded);
+      const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ &&
+                             (client != nullptr || (pe.forwarded && *holder != pe.forwarded->from));
       if (may_go_on)
         for_each_chunk_in(writes, [&](Vec3i cp) {
           if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));

@@ -715,7 +715,9 @@ TEST_F(ClusterTest, AnEditAcrossTheCornerOfThreeServersRegionsIsRelayedAndApplie
 // ann's edit on server 1 is forwarded there while server 2 is stopped,
 // the lease passes to server 3, and server 2, resumed, relays the edit.
 TEST_F(ClusterTest, AForwardedEditWhoseRegionMovedOnIsRelayedToItsNewServer) {
-  for (std::uint32_t id = 1; id <= 3; ++id) ASSERT_NE(start(id, 5000, 100000, {"--metrics", "127.0.0.1:0"}).port(), 0);
+  // Long leases: server 1 waits a lease time for the answer, and the relay
+  // (server 2 woken, claims, server 3's chunks made) may be slow here.
+  for (std::uint32_t id = 1; id <= 3; ++id) ASSERT_NE(start(id, 20000, 100000, {"--metrics", "127.0.0.1:0"}).port(), 0);
   ServerProcess &a = *servers_[0], &b = *servers_[1], &c = *servers_[2];
   Client ann(options(a, "ann"));
   join(ann);

@@ -291,11 +291,11 @@ TEST_F(PostgresStoreTest, ARenewalLocksLeasesInTheOrderACommitDoes) {
 // waits 60 s before it looks) and is rolled back; tried again, it waits
 // until the other session gives up its rows, then commits.
 TEST_F(PostgresStoreTest, AWriteRolledBackToBreakADeadlockIsTriedAgainAndStored) {
-  // Sessions of the write's database look after 2 s of waiting (the
+  // Sessions of the write's database look after 5 s of waiting (the
   // default, 1 s, would leave a loaded machine little time to make the
-  // cycle before the write's session looks).
+  // cycle before the write's session looks once; its lock_timeout is 10 s).
   const std::string db = sql_value(url_, "SELECT current_database()");
-  ASSERT_EQ(run_sql(url_, "ALTER DATABASE \"" + db + "\" SET deadlock_timeout = '2s'"), "");
+  ASSERT_EQ(run_sql(url_, "ALTER DATABASE \"" + db + "\" SET deadlock_timeout = '5s'"), "");
   auto s = open();
   ASSERT_TRUE(s);
   const Vec3i first{0, 0, 0}, second{1, 0, 0};
