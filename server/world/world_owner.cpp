@@ -724,29 +724,18 @@ void WorldOwner::copy_into(Grid& scratch, const Region& r, std::unordered_set<Ve
   });
 }
 
-void WorldOwner::apply_edits() {
-  ++tick_;
-  counters_.ticks.fetch_add(1, std::memory_order_relaxed);
-  const WorldBounds& bounds = world_.meta().bounds;
-  // The tick's edits apply to copies of the chunks they touch; each changed
-  // chunk then becomes a new version.
+// One tick's edits as they apply (WorldOwner::apply_edits): copies of the
+// chunks they touch, what they changed, and whom to tell once committed.
+struct WorldOwner::TickEdits {
+  std::uint64_t tick = 0;
+  std::int64_t now_ms = 0;
   Grid scratch;
   std::unordered_set<Vec3i, Vec3iHash> copied;
   ChangedUnits changed;
   std::vector<Ack> acks;
   std::vector<ForwardAnswer> answers, refused;  // to forwarded edits: applied (in the commit), refused (at once)
-  const auto refuse = [&](const Forwarded& f, std::string why) {
-    refused.push_back(ForwardAnswer{f.inbox_id, f.from, false, 0, std::move(why)});
-  };
   std::vector<EditLogEntry> log;
   std::vector<std::shared_ptr<Rollback>> rollbacks;
-  const std::int64_t now_ms =
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
-  auto log_step = [&](const std::string& player, const Region& box, std::vector<std::uint8_t> before,
-                      std::vector<std::uint8_t> after) {
-    if (before == after) return;  // nothing changed: nothing to log
-    log.push_back(EditLogEntry{0, tick_, now_ms, player, box, std::move(before), std::move(after)});
-  };
   // An edit that must wait (for its chunks, a claim) is set aside and the
   // edits behind it go on, except those that touch a chunk of a waiting
   // edit or are a waiting edit's player's: those keep arrival order. The
@@ -754,236 +743,56 @@ void WorldOwner::apply_edits() {
   std::deque<PendingEdit> waiting;
   std::unordered_set<Vec3i, Vec3iHash> waiting_chunks;
   std::unordered_set<std::string> waiting_players;
-  const auto behind_waiting = [&](const Region& r) {
+
+  void refuse(const Forwarded& f, std::string why) {
+    refused.push_back(ForwardAnswer{f.inbox_id, f.from, false, 0, std::move(why)});
+  }
+  void log_step(const std::string& player, const Region& box, std::vector<std::uint8_t> before,
+                std::vector<std::uint8_t> after) {
+    if (before == after) return;  // nothing changed: nothing to log
+    log.push_back(EditLogEntry{0, tick, now_ms, player, box, std::move(before), std::move(after)});
+  }
+  bool behind_waiting(const Region& r) const {
     bool meets = false;
     for_each_chunk_in(r, [&](Vec3i cp) { meets = meets || waiting_chunks.count(cp) != 0; });
     return meets;
-  };
-  const auto mark_waiting = [&](const Region& r) {
-    for_each_chunk_in(r, [&](Vec3i cp) { waiting_chunks.insert(cp); });
-  };
-  const auto set_aside = [&] {
-    waiting.push_back(std::move(edits_.front()));
-    edits_.pop_front();
-  };
-  while (!edits_.empty() && acks.size() + rollbacks.size() < kMaxEditsPerTick &&
-         waiting.size() < kMaxEditsWaitingPerTick) {
-    PendingEdit& pe = edits_.front();
-    if (pe.rollback) {
-      Rollback& job = *pe.rollback;
-      bool behind = false;
-      for (const EditLogEntry& e : job.entries) behind = behind || behind_waiting(bounds.clamp(e.box));
-      if (behind) {
-        for (const EditLogEntry& e : job.entries) mark_waiting(bounds.clamp(e.box));
-        set_aside();
-        continue;
-      }
-      bool ready = true;
-      for (const EditLogEntry& e : job.entries)
-        for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) { ready = request(cp) && ready; });
-      std::string not_ours;
-      Writable w = Writable::kYes;
-      for (const EditLogEntry& e : job.entries)
-        if (w != Writable::kNo)
-          if (const Writable here = writable(bounds.clamp(e.box), &not_ours); here != Writable::kYes) w = here;
-      if ((!ready || w == Writable::kWaiting) && !stopping_) {  // wait for its chunks and leases
-        for (const EditLogEntry& e : job.entries) mark_waiting(bounds.clamp(e.box));
-        set_aside();
-        continue;
-      }
-      for (const EditLogEntry& e : job.entries) unbusy(bounds.clamp(e.box));
-      if (!ready || w != Writable::kYes) {
-        job.done(RollbackResult{false, w == Writable::kNo ? not_ours : std::string("the server is stopping"), 0, 0});
-        edits_.pop_front();
-        continue;
-      }
-      for (const EditLogEntry& e : job.entries) copy_into(scratch, bounds.clamp(e.box), copied);
-      UnitMarker marker(changed);
-      std::unordered_map<Vec3i, Voxel, Vec3iHash> first;  // each restored voxel's value before the rollback
-      for (const EditLogEntry& e : job.entries) {
-        Region b = bounds.clamp(e.box);
-        if (job.within) b = intersect(b, *job.within);
-        if (b.empty()) continue;
-        const auto n = static_cast<std::size_t>(e.box.volume());
-        std::vector<Voxel> before(n), after(n);
-        if (!byte_rle_decode(e.before, before) || !byte_rle_decode(e.after, after)) continue;  // damaged entry
-        auto was = snapshot(scratch, b);
-        const Vec3i size = e.box.size();
-        scratch.modify(b, [&](Vec3i p, Voxel cur) {
-          const Vec3i l = p - e.box.min;
-          const auto i = static_cast<std::size_t>((l.y * size.z + l.z) * size.x + l.x);
-          if (cur != after[i] || before[i] == cur) return cur;
-          marker.mark(p);
-          first.emplace(p, cur);
-          return before[i];
-        });
-        log_step(job.actor, b, std::move(was), snapshot(scratch, b));
-      }
-      for (const auto& [p, v] : first) job.restored += scratch.get(p) != v ? 1 : 0;
-      rollbacks.push_back(std::move(pe.rollback));
-      edits_.pop_front();
-      continue;
-    }
-    auto cit = clients_.find(pe.id);
-    Client* client = cit != clients_.end() ? &cit->second : nullptr;
-    const bool history = is_history_edit(pe.edit.kind);
-    const bool redo = pe.edit.kind == EditKind::kRedo;
-    Region r;
-    if (history) {
-      const HistoryEntry* top = client != nullptr ? client->history.top(redo) : nullptr;
-      if (top != nullptr) r = bounds.clamp(top->box);
-    } else {
-      r = bounds.clamp(pe.edit.reads());
-    }
-    // (r, what the edit reads, holds what it writes.)
-    const auto wait = [&] {
-      mark_waiting(r);
-      waiting_players.insert(pe.player);
-      set_aside();
-    };
-    // A client's edit also waits while one of its edits whose chunks it
-    // meets is forwarded and not answered: another server may apply that.
-    if (waiting_players.count(pe.player) != 0 || behind_waiting(r) ||
-        (client != nullptr && !pe.forwarded && forward_pending(pe.id, r))) {
-      wait();
-      continue;
-    }
-    bool ready = true;
-    for_each_chunk_in(r, [&](Vec3i cp) { ready = request(cp) && ready; });
-    if (!ready) {
-      if (!stopping_) {  // wait for its chunks
-        wait();
-        continue;
-      }
-      // Shutting down: chunks still loading will not be waited for.
-      if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
-      if (pe.forwarded) refuse(*pe.forwarded, "the region's server is shutting down");
-      if (!history) unbusy(r);
-      if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
-      edits_.pop_front();
-      continue;
-    }
-    // In a shared world, only regions this server holds are written; a
-    // client's edit in another server's is forwarded to it.
-    std::string not_ours;
-    std::optional<std::uint32_t> holder;
-    const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
-    const Writable w =
-        writable(writes, &not_ours, &holder,
-                 client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
-    // Another server's region in it: which of the others are this server's
-    // decides what goes with the edit, so claims under way are waited for.
-    const auto claiming = [&] {
-      bool any = false;
-      for_each_chunk_in(writes, [&](Vec3i cp) {
-        auto l = leases_.find(lease_region_of(cp));
-        any = any || (l != leases_.end() && (l->second.state == RegionLeaseState::kClaiming ||
-                                             l->second.state == RegionLeaseState::kRefreshing));
-      });
-      return any;
-    };
-    if ((w == Writable::kWaiting || (w == Writable::kNo && !history && claiming())) && !stopping_) {
-      wait();  // for the claims
-      continue;
-    }
-    if (w != Writable::kYes) {
-      // An edit across a border also writes regions of this server's: they
-      // are handed over with it to the server holding the rest, once nothing
-      // of them is in flight. A forwarded edit goes on so too (relayed: its
-      // inbox row readdressed, its sender and age kept), with regions of
-      // this server's or none (they moved on since its sender looked); a
-      // row older than the forward wait is refused wherever it is, so no
-      // relay goes on longer. Never back to its sender: there the player's
-      // next edit on those chunks waits for this one's answer, and this one
-      // would wait behind it (refused instead; the player tries again).
-      std::unordered_set<Vec3i, Vec3iHash> mine;
-      const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ &&
-                             (client != nullptr || (pe.forwarded && *holder != pe.forwarded->from));
-      if (may_go_on)
-        for_each_chunk_in(writes, [&](Vec3i cp) {
-          if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
-        });
-      if (may_go_on) {
-        // Handed over only with nothing of this server's in flight: no commit
-        // under way, nothing applied yet this tick, no edit set aside in the
-        // regions. Nothing behind it is applied meanwhile, so that comes
-        // within a commit's time (or an edit's wait).
-        const bool in_flight = commits_pending_ > 0 || !changed.empty() ||
-                               std::any_of(waiting_chunks.begin(), waiting_chunks.end(),
-                                           [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
-        if (!mine.empty() && in_flight) break;
-        if (pe.forwarded)
-          relay(pe, writes, *holder);
-        else
-          forward(pe, writes, *holder);
-      } else if (pe.forwarded) {
-        refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
-                                                 : std::string("the region's server is shutting down"));
-      } else if (client != nullptr) {
-        if (w == Writable::kNo)
-          reject(pe.id, pe.edit, RejectReason::kNotOwner,
-                 std::string(history ? "undo and redo only where this server writes; " : "") +
-                     "not this server's region: " + not_ours);
-        else
-          reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
-      }
-      if (!history) unbusy(r);
-      if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
-      edits_.pop_front();
-      continue;
-    }
-    copy_into(scratch, r, copied);
-    if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
-    if (history) {
-      std::string why = "client gone";
-      if (client != nullptr && client->history.top(redo) == nullptr) {
-        why = redo ? "nothing to redo" : "nothing to undo";
-      } else if (client != nullptr && !near_enough(*client, r)) {
-        why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
-        client->history.drop(redo);  // its box may be stale by the time the client is back
-      } else if (auto was = client != nullptr ? snapshot(scratch, r) : std::vector<std::uint8_t>{};
-                 client != nullptr && client->history.apply(scratch, redo, changed, &why)) {
-        log_step(pe.player, r, std::move(was), snapshot(scratch, r));
-        acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
-        edits_.pop_front();
-        continue;
-      }
-      if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kHistory, why);
-      edits_.pop_front();
-      continue;
-    }
-    const Region box = bounds.clamp(pe.edit.bounds());
-    HistoryEntry entry{box, snapshot(scratch, box), {}};
-    apply_edit(scratch, pe.edit, box, changed);
-    entry.after = snapshot(scratch, box);
-    log_step(pe.player, box, entry.before, entry.after);
-    if (client != nullptr) client->history.record(std::move(entry));
-    unbusy(r);
-    if (pe.forwarded)
-      answers.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, true, tick_, ""});
-    else
-      acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
-    edits_.pop_front();
   }
-  for (; !waiting.empty(); waiting.pop_back()) edits_.push_front(std::move(waiting.back()));
-  if (!refused.empty()) storage_.answer(std::move(refused));
-  counters_.edits_applied.fetch_add(acks.size() + answers.size(), std::memory_order_relaxed);
+  void mark_waiting(const Region& r) {
+    for_each_chunk_in(r, [&](Vec3i cp) { waiting_chunks.insert(cp); });
+  }
+};
+
+void WorldOwner::apply_edits() {
+  ++tick_;
+  counters_.ticks.fetch_add(1, std::memory_order_relaxed);
+  // The tick's edits apply to copies of the chunks they touch; each changed
+  // chunk then becomes a new version.
+  TickEdits t;
+  t.tick = tick_;
+  t.now_ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+  while (!edits_.empty() && t.acks.size() + t.rollbacks.size() < kMaxEditsPerTick &&
+         t.waiting.size() < kMaxEditsWaitingPerTick)
+    if ((edits_.front().rollback ? apply_rollback(t) : apply_player_edit(t)) == EditStep::kStop) break;
+  for (; !t.waiting.empty(); t.waiting.pop_back()) edits_.push_front(std::move(t.waiting.back()));
+  if (!t.refused.empty()) storage_.answer(std::move(t.refused));
+  counters_.edits_applied.fetch_add(t.acks.size() + t.answers.size(), std::memory_order_relaxed);
 
   std::vector<VersionPtr> versions;
-  versions.reserve(changed.size());
-  for (const auto& [cp, bits] : changed) {
+  versions.reserve(t.changed.size());
+  for (const auto& [cp, bits] : t.changed) {
     if (bits.none()) continue;
     Loaded& l = loaded_.at(cp);
-    l.current = ChunkVersion::after(*l.current, scratch.take_chunk(cp), bits);
+    l.current = ChunkVersion::after(*l.current, t.scratch.take_chunk(cp), bits);
     l.used_tick = tick_;
     versions.push_back(l.current);
   }
-  if (versions.empty() && acks.empty() && rollbacks.empty() && answers.empty()) return;
+  if (versions.empty() && t.acks.empty() && t.rollbacks.empty() && t.answers.empty()) return;
   ++commits_pending_;
   const std::uint64_t tick = tick_;
   storage_.commit(
-      versions, std::move(log),
-      [this, tick, versions, acks = std::move(acks), rollbacks = std::move(rollbacks)](const FileStatus& st) {
+      versions, std::move(t.log),
+      [this, tick, versions, acks = std::move(t.acks), rollbacks = std::move(t.rollbacks)](const FileStatus& st) {
         asio::post(strand_, [this, tick, versions, acks, rollbacks, st] {
           on_committed(tick, versions, acks, st);
           for (const auto& job : rollbacks)
@@ -991,7 +800,218 @@ void WorldOwner::apply_edits() {
                          : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
         });
       },
-      std::move(answers), tick);
+      std::move(t.answers), tick);
+}
+
+void WorldOwner::set_aside(TickEdits& t) {
+  t.waiting.push_back(std::move(edits_.front()));
+  edits_.pop_front();
+}
+
+WorldOwner::EditStep WorldOwner::apply_rollback(TickEdits& t) {
+  const WorldBounds& bounds = world_.meta().bounds;
+  PendingEdit& pe = edits_.front();
+  Rollback& job = *pe.rollback;
+  bool behind = false;
+  for (const EditLogEntry& e : job.entries) behind = behind || t.behind_waiting(bounds.clamp(e.box));
+  if (behind) {
+    for (const EditLogEntry& e : job.entries) t.mark_waiting(bounds.clamp(e.box));
+    set_aside(t);
+    return EditStep::kNext;
+  }
+  bool ready = true;
+  for (const EditLogEntry& e : job.entries)
+    for_each_chunk_in(bounds.clamp(e.box), [&](Vec3i cp) { ready = request(cp) && ready; });
+  std::string not_ours;
+  Writable w = Writable::kYes;
+  for (const EditLogEntry& e : job.entries)
+    if (w != Writable::kNo)
+      if (const Writable here = writable(bounds.clamp(e.box), &not_ours); here != Writable::kYes) w = here;
+  if ((!ready || w == Writable::kWaiting) && !stopping_) {  // wait for its chunks and leases
+    for (const EditLogEntry& e : job.entries) t.mark_waiting(bounds.clamp(e.box));
+    set_aside(t);
+    return EditStep::kNext;
+  }
+  for (const EditLogEntry& e : job.entries) unbusy(bounds.clamp(e.box));
+  if (!ready || w != Writable::kYes) {
+    job.done(RollbackResult{false, w == Writable::kNo ? not_ours : std::string("the server is stopping"), 0, 0});
+    edits_.pop_front();
+    return EditStep::kNext;
+  }
+  for (const EditLogEntry& e : job.entries) copy_into(t.scratch, bounds.clamp(e.box), t.copied);
+  UnitMarker marker(t.changed);
+  std::unordered_map<Vec3i, Voxel, Vec3iHash> first;  // each restored voxel's value before the rollback
+  for (const EditLogEntry& e : job.entries) {
+    Region b = bounds.clamp(e.box);
+    if (job.within) b = intersect(b, *job.within);
+    if (b.empty()) continue;
+    const auto n = static_cast<std::size_t>(e.box.volume());
+    std::vector<Voxel> before(n), after(n);
+    if (!byte_rle_decode(e.before, before) || !byte_rle_decode(e.after, after)) continue;  // damaged entry
+    auto was = snapshot(t.scratch, b);
+    const Vec3i size = e.box.size();
+    t.scratch.modify(b, [&](Vec3i p, Voxel cur) {
+      const Vec3i l = p - e.box.min;
+      const auto i = static_cast<std::size_t>((l.y * size.z + l.z) * size.x + l.x);
+      if (cur != after[i] || before[i] == cur) return cur;
+      marker.mark(p);
+      first.emplace(p, cur);
+      return before[i];
+    });
+    t.log_step(job.actor, b, std::move(was), snapshot(t.scratch, b));
+  }
+  for (const auto& [p, v] : first) job.restored += t.scratch.get(p) != v ? 1 : 0;
+  t.rollbacks.push_back(std::move(pe.rollback));
+  edits_.pop_front();
+  return EditStep::kNext;
+}
+
+// A client's edit (an undo or redo too) or one forwarded from another
+// server's inbox.
+WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
+  const WorldBounds& bounds = world_.meta().bounds;
+  PendingEdit& pe = edits_.front();
+  auto cit = clients_.find(pe.id);
+  Client* client = cit != clients_.end() ? &cit->second : nullptr;
+  const bool history = is_history_edit(pe.edit.kind);
+  const bool redo = pe.edit.kind == EditKind::kRedo;
+  Region r;
+  if (history) {
+    const HistoryEntry* top = client != nullptr ? client->history.top(redo) : nullptr;
+    if (top != nullptr) r = bounds.clamp(top->box);
+  } else {
+    r = bounds.clamp(pe.edit.reads());
+  }
+  // (r, what the edit reads, holds what it writes.)
+  const auto wait = [&] {
+    t.mark_waiting(r);
+    t.waiting_players.insert(pe.player);
+    set_aside(t);
+  };
+  // A client's edit also waits while one of its edits whose chunks it
+  // meets is forwarded and not answered: another server may apply that.
+  if (t.waiting_players.count(pe.player) != 0 || t.behind_waiting(r) ||
+      (client != nullptr && !pe.forwarded && forward_pending(pe.id, r))) {
+    wait();
+    return EditStep::kNext;
+  }
+  bool ready = true;
+  for_each_chunk_in(r, [&](Vec3i cp) { ready = request(cp) && ready; });
+  if (!ready) {
+    if (!stopping_) {  // wait for its chunks
+      wait();
+      return EditStep::kNext;
+    }
+    // Shutting down: chunks still loading will not be waited for.
+    if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
+    if (pe.forwarded) t.refuse(*pe.forwarded, "the region's server is shutting down");
+    if (!history) unbusy(r);
+    if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+    edits_.pop_front();
+    return EditStep::kNext;
+  }
+  // In a shared world, only regions this server holds are written; a
+  // client's edit in another server's is forwarded to it.
+  std::string not_ours;
+  std::optional<std::uint32_t> holder;
+  const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
+  const Writable w =
+      writable(writes, &not_ours, &holder,
+               client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
+  // Another server's region in it: which of the others are this server's
+  // decides what goes with the edit, so claims under way are waited for.
+  const auto claiming = [&] {
+    bool any = false;
+    for_each_chunk_in(writes, [&](Vec3i cp) {
+      auto l = leases_.find(lease_region_of(cp));
+      any = any || (l != leases_.end() && (l->second.state == RegionLeaseState::kClaiming ||
+                                           l->second.state == RegionLeaseState::kRefreshing));
+    });
+    return any;
+  };
+  if ((w == Writable::kWaiting || (w == Writable::kNo && !history && claiming())) && !stopping_) {
+    wait();  // for the claims
+    return EditStep::kNext;
+  }
+  if (w != Writable::kYes) {
+    // An edit across a border also writes regions of this server's: they
+    // are handed over with it to the server holding the rest, once nothing
+    // of them is in flight. A forwarded edit goes on so too (relayed: its
+    // inbox row readdressed, its sender and age kept), with regions of
+    // this server's or none (they moved on since its sender looked); a
+    // row older than the forward wait is t.refused wherever it is, so no
+    // relay goes on longer. Never back to its sender: there the player's
+    // next edit on those chunks waits for this one's answer, and this one
+    // would wait behind it (t.refused instead; the player tries again).
+    std::unordered_set<Vec3i, Vec3iHash> mine;
+    const bool may_go_on = w == Writable::kNo && holder && !history && !stopping_ &&
+                           (client != nullptr || (pe.forwarded && *holder != pe.forwarded->from));
+    if (may_go_on)
+      for_each_chunk_in(writes, [&](Vec3i cp) {
+        if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
+      });
+    if (may_go_on) {
+      // Handed over only with nothing of this server's in flight: no commit
+      // under way, nothing applied yet this tick, no edit set aside in the
+      // regions. Nothing behind it is applied meanwhile, so that comes
+      // within a commit's time (or an edit's wait).
+      const bool in_flight = commits_pending_ > 0 || !t.changed.empty() ||
+                             std::any_of(t.waiting_chunks.begin(), t.waiting_chunks.end(),
+                                         [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
+      if (!mine.empty() && in_flight) return EditStep::kStop;
+      if (pe.forwarded)
+        relay(pe, writes, *holder);
+      else
+        forward(pe, writes, *holder);
+    } else if (pe.forwarded) {
+      t.refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
+                                               : std::string("the region's server is shutting down"));
+    } else if (client != nullptr) {
+      if (w == Writable::kNo)
+        reject(pe.id, pe.edit, RejectReason::kNotOwner,
+               std::string(history ? "undo and redo only where this server writes; " : "") +
+                   "not this server's region: " + not_ours);
+      else
+        reject(pe.id, pe.edit, RejectReason::kShutdown, "server shutting down");
+    }
+    if (!history) unbusy(r);
+    if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+    edits_.pop_front();
+    return EditStep::kNext;
+  }
+  copy_into(t.scratch, r, t.copied);
+  if (client != nullptr && client->edits_queued > 0) --client->edits_queued;
+  if (history) {
+    std::string why = "client gone";
+    if (client != nullptr && client->history.top(redo) == nullptr) {
+      why = redo ? "nothing to redo" : "nothing to undo";
+    } else if (client != nullptr && !near_enough(*client, r)) {
+      why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
+      client->history.drop(redo);  // its box may be stale by the time the client is back
+    } else if (auto was = client != nullptr ? snapshot(t.scratch, r) : std::vector<std::uint8_t>{};
+               client != nullptr && client->history.apply(t.scratch, redo, t.changed, &why)) {
+      t.log_step(pe.player, r, std::move(was), snapshot(t.scratch, r));
+      t.acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
+      edits_.pop_front();
+      return EditStep::kNext;
+    }
+    if (client != nullptr) reject(pe.id, pe.edit, RejectReason::kHistory, why);
+    edits_.pop_front();
+    return EditStep::kNext;
+  }
+  const Region box = bounds.clamp(pe.edit.bounds());
+  HistoryEntry entry{box, snapshot(t.scratch, box), {}};
+  apply_edit(t.scratch, pe.edit, box, t.changed);
+  entry.after = snapshot(t.scratch, box);
+  t.log_step(pe.player, box, entry.before, entry.after);
+  if (client != nullptr) client->history.record(std::move(entry));
+  unbusy(r);
+  if (pe.forwarded)
+    t.answers.push_back(ForwardAnswer{pe.forwarded->inbox_id, pe.forwarded->from, true, tick_, ""});
+  else
+    t.acks.push_back(Ack{pe.id, pe.edit.edit_id, pe.received});
+  edits_.pop_front();
+  return EditStep::kNext;
 }
 
 void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,

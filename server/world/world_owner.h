@@ -325,7 +325,16 @@ class WorldOwner : private WorldView {
 
   void arm_tick();
   void on_tick();
+  // One tick: the queued edits applied, as many as may be, then committed.
   void apply_edits();
+  struct TickEdits;
+  enum class EditStep : std::uint8_t {
+    kNext,  // the edit was applied, refused, passed on or set aside: on to the next
+    kStop,  // the edit waits at the queue's head (a hand-over): nothing more this tick
+  };
+  EditStep apply_rollback(TickEdits& t);
+  EditStep apply_player_edit(TickEdits& t);
+  void set_aside(TickEdits& t);  // the queue's head waits until after the tick
   void on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
                     const FileStatus& status);
   // Publishes committed versions (each its chunk's newest) and tells their
