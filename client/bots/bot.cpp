@@ -373,18 +373,19 @@ void Bot::maybe_edit(Clock::time_point now) {
     e.center = Vec3f{static_cast<float>(at.x) + 0.5f, static_cast<float>(at.y) + 0.5f, static_cast<float>(at.z) + 0.5f};
     e.radius = std::max(0.5f, r);
     const Region b = e.bounds();
-    double voxels = 0;
-    const float reach_r = e.radius + 0.5f;
-    for (int y = b.min.y; y < b.max.y; ++y)
-      for (int z = b.min.z; z < b.max.z; ++z)
-        for (int x = b.min.x; x < b.max.x; ++x) {
-          const Vec3f c{static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, static_cast<float>(z) + 0.5f};
-          if (length(c - e.center) < reach_r) voxels += 1;
-        }
-    if (sees(b))
+    if (sees(b)) {
+      double voxels = 0;
+      const float reach_r = e.radius + 0.5f;
+      for (int y = b.min.y; y < b.max.y; ++y)
+        for (int z = b.min.z; z < b.max.z; ++z)
+          for (int x = b.min.x; x < b.max.x; ++x) {
+            const Vec3f c{static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, static_cast<float>(z) + 0.5f};
+            if (length(c - e.center) < reach_r) voxels += 1;
+          }
       id = ctx_.fanout->send_edit(index_, b, voxels, [&] {
         return client_->fill_sphere(e.center, e.radius, dig ? kAir : material);
       });
+    }
   } else {
     const int max_side = std::max(2, static_cast<int>(2.0f * o.edit_radius));
     const int s = std::uniform_int_distribution<int>(2, max_side)(rng_);
