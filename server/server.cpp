@@ -1,5 +1,6 @@
 #include "server/server.h"
 
+#include <filesystem>
 #include <future>
 
 #include "common/world/sqlite_store.h"
@@ -10,9 +11,19 @@
 namespace terrane {
 
 FileResult<std::unique_ptr<World>> Server::open_world() {
-  if (options_.store_url.empty())
+  if (options_.store_url.empty()) {
+    // The lock comes before the first read: a second server (or a tool
+    // writing the directory) must not even load chunks it could write back.
+    std::error_code ec;
+    std::filesystem::create_directories(options_.world_dir, ec);
+    if (ec) return FileError{"world " + options_.world_dir + ": cannot create directory: " + ec.message(), {}};
+    auto lock = WorldLock::take(options_.world_dir, fmt::format("terrane-server on {}:{}", options_.bind_address,
+                                                                options_.port));
+    if (!lock) return lock.error();
+    world_lock_ = std::move(*lock);
     return SqliteStore::exists(options_.world_dir) ? World::open(options_.world_dir)
                                                    : World::create(options_.world_dir, default_world_meta());
+  }
   auto store = PostgresStore::open(options_.store_url);
   if (!store) return FileError{store.error().message, {}};
   if (!(*store)->has_world()) {

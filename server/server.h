@@ -54,6 +54,7 @@
 #include <vector>
 
 #include "common/world/world.h"
+#include "common/world/world_lock.h"
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"
@@ -122,6 +123,10 @@ class Server {
   // A PostgreSQL world's leases (null for SQLite): the writer's lease
   // source, so it outlives the world and storage below.
   std::unique_ptr<LeaseKeeper> leases_;
+  // A world directory's one-writer lock (common/world/world_lock.h), held
+  // for the server's life; declared before the world so it outlives every
+  // write. Not held for a PostgreSQL world (leases fence its writers).
+  WorldLock world_lock_;
   std::unique_ptr<World> world_;
   std::unique_ptr<Storage> storage_;
   asio::io_context io_;

@@ -26,6 +26,7 @@
 #include <cstdio>
 #include <ctime>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
@@ -41,6 +42,7 @@
 #include "common/vxraw/vxraw.h"
 #include "common/world/sqlite_store.h"
 #include "common/world/world.h"
+#include "common/world/world_lock.h"
 #include "server/storage/lease_keeper.h"
 #include "server/storage/postgres_store.h"
 #include "server/tools/enhance_command.h"
@@ -56,6 +58,9 @@ constexpr const char* kUsage =
     "servers (--store postgresql://[USER@]HOST:PORT/DB; server/storage/STORE_POSTGRESQL.md).\n"
     "--world and --store each take either. Commands that write a PostgreSQL world take the\n"
     "leases of the regions they write for a server id of their own (--server-id N).\n"
+    "A world directory has one writer at a time: generate, import, migrate and check\n"
+    "--quarantine take its lock (world.lock) and are refused, naming the holder, while a\n"
+    "server serves it; check, stats, export and backup only read and may run beside one.\n"
     "\n"
     "Commands:\n"
     "  generate   create a generated world (if there is none) and pre-generate a box of it\n"
@@ -146,7 +151,9 @@ constexpr const char* kCheckHelp =
     "\n"
     "  --quarantine   move each damaged row to the quarantine table (one transaction per chunk;\n"
     "                 its blob is kept byte for byte) so a server serves the chunk as generated\n"
-    "                 instead of failing to read it (world directories only)\n";
+    "                 instead of failing to read it (world directories only). This writes the\n"
+    "                 world, so it takes the directory's lock: refused while a server serves it\n"
+    "                 (which quarantines damaged rows itself as it loads them)\n";
 
 constexpr const char* kBackupHelp =
     "usage: terrane-world backup --world DIR --to DEST\n"
@@ -172,8 +179,8 @@ constexpr const char* kMigrateHelp =
     "A chunk that does not decode stops the copy, named: run 'terrane-world check --world DIR\n"
     "--quarantine' first. The world's metadata is written last, so a copy that stopped leaves\n"
     "the database without a world and can be run again. A database that holds a world is\n"
-    "refused. Stop the servers of DIR first: what they write after the copy starts is not\n"
-    "copied.\n"
+    "refused. The directory's lock is held for the copy: a server serving DIR refuses it\n"
+    "(stop the server first), and no server can start on DIR until the copy ends.\n"
     "\n"
     "  --world DIR    the world directory to copy\n"
     "  --to URL       the PostgreSQL database (libpq URL)\n"
@@ -313,10 +320,11 @@ class ToolLeases {
   bool released_ = false;
 };
 
-// A world a command works on. The leases are declared first, so the
-// world's store (whose writes ask them) goes before them.
+// A world a command works on. The leases and the lock are declared first,
+// so the world's store (whose writes ask them) goes before them.
 struct ToolWorld {
   ToolLeases leases;
+  WorldLock lock;  // a world directory the command writes
   std::unique_ptr<World> world;
   bool created = false;  // made by this command
 };
@@ -325,10 +333,24 @@ struct ToolWorld {
 // holds none (World::create for a directory, create_world for a database);
 // without it, no world there is an error. writer: for a PostgreSQL world
 // that the command writes, the server id whose leases the writes take
-// (nullopt: read only).
+// (nullopt: read only). writing: for a world directory the command writes,
+// the command's name: its one-writer lock is taken (WorldLock), so a
+// server serving it, or another tool writing it, refuses the command.
 FileStatus open_tool_world(const WorldPlace& place, std::optional<std::uint32_t> writer,
-                           const std::function<WorldMeta()>& make, ToolWorld& out) {
+                           const std::function<WorldMeta()>& make, ToolWorld& out, const char* writing = nullptr) {
   if (!place.postgres) {
+    if (writing) {
+      if (make) {
+        std::error_code ec;
+        std::filesystem::create_directories(place.where, ec);
+        if (ec) return FileError{"world " + place.where + ": cannot create directory: " + ec.message(), {}};
+      } else if (!SqliteStore::exists(place.where)) {
+        return FileError{"world " + place.where + ": no world here (" + kWorldDatabaseName + " missing)", {}};
+      }
+      auto lock = WorldLock::take(place.where, writing);
+      if (!lock) return lock.error();
+      out.lock = std::move(*lock);
+    }
     const bool create = make && !SqliteStore::exists(place.where);
     auto w = create ? World::create(place.where, make()) : World::open(place.where);
     if (!w) return w.error();
@@ -372,7 +394,7 @@ int cmd_generate(int argc, char** argv) {
 
   ToolWorld opened;
   if (auto s = open_tool_world(place, writer, [&] { return default_world_meta(static_cast<std::uint64_t>(seed)); },
-                               opened);
+                               opened, "terrane-world generate");
       !s)
     return failure(s.error().message);
   std::unique_ptr<World>& world = opened.world;
@@ -506,7 +528,8 @@ int cmd_import(int argc, char** argv) {
     return meta;
   };
   ToolWorld opened;
-  if (auto s = open_tool_world(place, writer, new_meta, opened); !s) return failure(s.error().message);
+  if (auto s = open_tool_world(place, writer, new_meta, opened, "terrane-world import"); !s)
+    return failure(s.error().message);
   std::unique_ptr<World>& world = opened.world;
   const std::string where = world->store().where();
   if (opened.created) std::fprintf(stderr, "created world %s (no generator)\n", where.c_str());
@@ -701,6 +724,15 @@ int cmd_check(int argc, char** argv) {
     return check_postgres(place);
   }
   const std::string& dir = place.where;
+  // Moving rows aside writes the world: not beside its server (which
+  // quarantines damaged rows itself as it loads them). Checking only reads.
+  WorldLock lock;
+  if (cl.flag("quarantine")) {
+    if (!SqliteStore::exists(dir)) return failure("world " + dir + ": no world here (" + kWorldDatabaseName + " missing)");
+    auto taken = WorldLock::take(dir, "terrane-world check --quarantine");
+    if (!taken) return failure(taken.error().message);
+    lock = std::move(*taken);
+  }
   auto opened = SqliteStore::open(dir);
   if (!opened) return failure(opened.error().message);
   SqliteStore& store = **opened;
@@ -838,6 +870,11 @@ int cmd_migrate(int argc, char** argv) {
   const auto id = writer_id(cl, to, kMaxServerId, &err);
   if (!err.empty()) return usage_error(err, kMigrateHelp);
 
+  // The directory is locked for the copy: a server still writing it would
+  // acknowledge edits the copy never sees.
+  if (!SqliteStore::exists(dir)) return failure("world " + dir + ": no world here (" + kWorldDatabaseName + " missing)");
+  auto lock = WorldLock::take(dir, "terrane-world migrate");
+  if (!lock) return failure(lock.error().message);
   auto opened_src = SqliteStore::open(dir);
   if (!opened_src) return failure(opened_src.error().message);
   SqliteStore& src = **opened_src;

@@ -12,6 +12,8 @@
 
 #include "common/vxraw/vxraw.h"
 #include "common/world/sqlite_store.h"
+#include "common/world/world_lock.h"
+#include "tests/support/server_process.h"
 
 namespace terrane {
 namespace {
@@ -349,6 +351,63 @@ TEST_F(WorldToolTest, HeavyImportsRealRegionAndReportsIt) {
   auto s = run("stats --world " + w + " --box -384,0,-512,0,256,-304 --json");
   ASSERT_EQ(s.exit_code, 0) << s.output;
   EXPECT_NE(s.output.find("\"non_empty_voxels\": 4941334"), std::string::npos) << s.output;
+}
+
+// One world, one writer: a served world directory (the data-losing case: a
+// second server wrote its stale chunks back over the first's acknowledged
+// edits) refuses a second server, through a symlink too, and every
+// command that writes; its readers run beside the server; the lock dies
+// with a server killed with SIGKILL.
+TEST_F(WorldToolTest, AServedWorldRefusesASecondServerAndEveryWriterButNotItsReaders) {
+  const std::string w = path("w");
+  ASSERT_EQ(run("generate --world " + w + " --box 0,0,0,64,64,64").exit_code, 0);
+  fs::create_directory_symlink(w, path("link"));
+  ASSERT_EQ(run("export --world " + w + " --box 0,0,0,32,32,32 " + path("box.vxraw")).exit_code, 0);
+
+  testing_support::ServerProcess server(w, {});
+  ASSERT_NE(server.port(), 0) << server.output();
+  const std::string held_by = "in use by pid ";
+  const std::string names_server = "(terrane-server on 127.0.0.1:0), since 20";
+
+  for (const std::string& where : {w, path("link")}) {
+    testing_support::ServerProcess second(where, {});
+    EXPECT_EQ(second.port(), 0) << "a second server started on " << where;
+    EXPECT_EQ(second.wait_exit(std::chrono::seconds(60)), 1) << second.output();
+    const std::string out = second.output();
+    EXPECT_NE(out.find(held_by), std::string::npos) << out;
+    EXPECT_NE(out.find(names_server), std::string::npos) << out;
+  }
+  const std::pair<const char*, std::string> writers[] = {
+      {"generate", "generate --world " + path("link") + " --box 0,0,0,96,64,64"},
+      {"import", "import --world " + w + " " + path("box.vxraw")},
+      {"check --quarantine", "check --world " + w + " --quarantine"},
+      {"migrate", "migrate --world " + w + " --to postgresql://127.0.0.1:1/none"},
+  };
+  for (const auto& [name, args] : writers) {
+    auto r = run(args);
+    EXPECT_EQ(r.exit_code, 1) << name << ": " << r.output;
+    EXPECT_NE(r.output.find("world " + (args.find("link") != std::string::npos ? path("link") : w) + ": " + held_by),
+              std::string::npos)
+        << name << ": " << r.output;
+    EXPECT_NE(r.output.find(names_server), std::string::npos) << name << ": " << r.output;
+  }
+  const std::pair<const char*, std::string> readers[] = {
+      {"check", "check --world " + w},
+      {"stats", "stats --world " + w + " --box 0,0,0,64,64,64 --json"},
+      {"export", "export --world " + path("link") + " --box 0,0,0,64,64,64 " + path("out.vxraw")},
+      {"backup", "backup --world " + w + " --to " + path("copy")},
+  };
+  for (const auto& [name, args] : readers) {
+    auto r = run(args);
+    EXPECT_EQ(r.exit_code, 0) << name << ": " << r.output;
+  }
+
+  ASSERT_TRUE(server.kill_hard());
+  EXPECT_EQ(WorldLock::holder(w), "");
+  auto after = run("import --world " + path("link") + " " + path("box.vxraw"));
+  EXPECT_EQ(after.exit_code, 0) << after.output;
+  testing_support::ServerProcess next(w, {});
+  EXPECT_NE(next.port(), 0) << next.output();
 }
 
 }  // namespace
