@@ -161,13 +161,9 @@ void Client::start_session() {
     if (resumed_) {
       // What the replica still holds, so current chunks are not resent.
       std::vector<HeldChunkMsg> held;
-      replica_.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-        // Not the chunk's mip (an estimate, a horizon image): streamed again.
-        if (c.estimate || c.level > kMipLevels - 1) return;
-        held.push_back(HeldChunkMsg{cp, c.revision,
-                                    c.state == CoverageState::kEmpty ? kHeldEmpty
-                                    : c.state == CoverageState::kFull ? 0
-                                                                       : c.level});
+      replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
+        // Not the chunk's own voxels (an estimate, a horizon image): streamed again.
+        if (claimable(h.form)) held.push_back(HeldChunkMsg{cp, h});
       });
       for (std::size_t i = 0; i < held.size(); i += kMaxHoldingsPerMessage)
         frames.push_back({build_holdings(std::span<const HeldChunkMsg>(held).subspan(
@@ -602,50 +598,32 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       connection_lost(reason, true);
       return;
     }
-    case wire::Body::ChunkData: {
-      auto c = parse_chunk_data(*m.body_as_ChunkData());
-      if (!c) return fail(c.error());
-      if (auto st = replica_.apply_chunk_data(*c); !st) return fail(st.error());
-      ++counters_.chunk_units;
-      break;
-    }
-    case wire::Body::MipData: {
-      auto d = parse_mip_data(*m.body_as_MipData());
-      if (!d) return fail(d.error());
-      if (auto st = replica_.apply_mip_data(*d); !st) return fail(st.error());
-      ++counters_.mips;
-      if (callbacks_.on_coverage)
-        after = [this, p = d->chunk_pos, l = d->level] { callbacks_.on_coverage(p, wire::CoverageKind::Mip, l); };
-      break;
-    }
     case wire::Body::StreamBatch: {
       auto records = parse_stream_batch(*m.body_as_StreamBatch());
       if (!records) return fail(records.error());
-      std::vector<std::tuple<Vec3i, wire::CoverageKind, int>> changes;
+      // (chunk, its holding now; nullopt: released), for on_holding.
+      std::vector<std::pair<Vec3i, std::optional<Holding>>> changes;
+      const bool tell = static_cast<bool>(callbacks_.on_holding);
       const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
         if (r.kind == StreamRecordKind::kHorizon) {
-          // A whole region: each chunk it newly covers is a coverage change.
+          // A whole region: each chunk it newly covers is a change.
           horizon_covered_.clear();
           replica_.apply_horizon(r, horizon_covered_);
           counters_.horizon_chunks += horizon_covered_.size();
-          if (callbacks_.on_coverage)
-            for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, wire::CoverageKind::Mip, r.level);
+          if (tell)
+            for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, Holding{horizon_form(r.level), 0});
           return Ok{};
         }
         replica_.apply_stream_record(r);
-        wire::CoverageKind kind = wire::CoverageKind::Mip;
         switch (r.kind) {
           case StreamRecordKind::kEmpty:
-            kind = wire::CoverageKind::Empty;
-            ++counters_.coverage_empty;
+            ++counters_.empty_records;
             break;
           case StreamRecordKind::kReleased:
-            kind = wire::CoverageKind::Released;
             ++counters_.released;
             break;
           case StreamRecordKind::kFull:
-            kind = wire::CoverageKind::Full;
-            ++counters_.coverage_full;
+            ++counters_.full_records;
             counters_.chunk_units += 8;
             break;
           case StreamRecordKind::kEstimate:
@@ -656,25 +634,17 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
             ++counters_.mips;
             break;
         }
-        if (callbacks_.on_coverage) changes.emplace_back(r.chunk_pos, kind, r.level);
+        if (tell)
+          changes.emplace_back(r.chunk_pos, gives_form(r.kind) ? std::optional<Holding>(Holding{r.form(), r.revision})
+                                                               : std::nullopt);
         return Ok{};
       });
       // Records before a bad one were applied: the replica stays consistent.
       if (!st) return fail(st.error());
       if (!changes.empty())
         after = [this, ch = std::move(changes)] {
-          for (const auto& [p, k, l] : ch) callbacks_.on_coverage(p, k, l);
+          for (const auto& [p, h] : ch) callbacks_.on_holding(p, h ? &*h : nullptr);
         };
-      break;
-    }
-    case wire::Body::Coverage: {
-      auto c = parse_coverage(*m.body_as_Coverage());
-      if (!c) return fail(c.error());
-      replica_.apply_coverage(*c);
-      if (c->kind == wire::CoverageKind::Empty) ++counters_.coverage_empty;
-      if (c->kind == wire::CoverageKind::Full) ++counters_.coverage_full;
-      if (c->kind == wire::CoverageKind::Released) ++counters_.released;
-      if (callbacks_.on_coverage) after = [this, c = *c] { callbacks_.on_coverage(c.chunk_pos, c.kind, c.level); };
       break;
     }
     case wire::Body::UpdateBatch: {
@@ -730,20 +700,20 @@ void Client::handle_frame(std::span<const std::uint8_t> body) {
       if (callbacks_.on_presence) after = [this, p = presence_] { callbacks_.on_presence(p); };
       break;
     }
-    case wire::Body::RegionHash: {
-      auto h = parse_region_hash(*m.body_as_RegionHash());
+    case wire::Body::ChunkHash: {
+      auto h = parse_chunk_hash(*m.body_as_ChunkHash());
       if (!h) return fail(h.error());
       const auto mine = replica_.hash(h->chunk_pos);
       const auto rev = replica_.revision(h->chunk_pos);
       const bool match = mine && rev && *rev == h->revision && *mine == h->hash;
       hash_checks_[h->chunk_pos] = match;
       ++(match ? counters_.hash_matches : counters_.hash_mismatches);
-      const ChunkCoverage* cov = replica_.coverage(h->chunk_pos);
-      const HashCheck check{h->chunk_pos, h->revision, rev, cov != nullptr && cov->state != CoverageState::kMip, match};
-      if (callbacks_.on_hash_checked || callbacks_.on_region_hash)
+      const Holding* held = replica_.holding(h->chunk_pos);
+      const HashCheck check{h->chunk_pos, h->revision, rev, held != nullptr && held->full_resolution(), match};
+      if (callbacks_.on_hash_checked || callbacks_.on_chunk_hash)
         after = [this, check] {
           if (callbacks_.on_hash_checked) callbacks_.on_hash_checked(check.chunk_pos, check.match);
-          if (callbacks_.on_region_hash) callbacks_.on_region_hash(check);
+          if (callbacks_.on_chunk_hash) callbacks_.on_chunk_hash(check);
         };
       break;
     }
@@ -941,8 +911,8 @@ std::vector<ServerNoticeMsg> Client::notices() const {
   return {notices_.begin(), notices_.end()};
 }
 
-bool Client::request_region_hash(Vec3i chunk_pos) {
-  return send(build_region_hash_request(chunk_pos), wire::Body::RegionHashRequest);
+bool Client::request_chunk_hash(Vec3i chunk_pos) {
+  return send(build_chunk_hash_request(chunk_pos), wire::Body::ChunkHashRequest);
 }
 bool Client::ping(std::uint64_t nonce) { return send(build_ping(nonce), wire::Body::Ping); }
 bool Client::send_raw(Frame bytes) { return send(std::move(bytes), wire::Body::NONE); }

@@ -1,6 +1,6 @@
 // Client: connects to a terrane-server, handshakes, keeps a Replica of what
 // the server streams, sends client state and edits, and verifies chunks
-// against the server's region hashes.
+// against the server's chunk hashes.
 //
 // Threading: by default the Client owns one io thread (started by
 // connect()). With ClientOptions::io_context set, it owns no thread: its
@@ -137,19 +137,19 @@ struct MessageTypeCounters {
   std::uint64_t bytes_out = 0;
 };
 inline constexpr std::size_t kMessageTypeCount = static_cast<std::size_t>(wire::Body::MAX) + 1;
-// The message type's name ("ChunkData"); "NONE" counts frames that did not
+// The message type's name ("StreamBatch"); "NONE" counts frames that did not
 // verify (inbound) or raw bytes (send_raw).
 const char* message_type_name(std::size_t type);
 
 struct ClientCounters {
   std::uint64_t frames_in = 0;  // frames handled (by_message_type counts them by type, length header included)
   std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
-  std::uint64_t chunk_units = 0;  // 16^3 ChunkData units applied
+  std::uint64_t chunk_units = 0;  // 16^3 units of Full records applied (8 a record)
   std::uint64_t mips = 0;
   std::uint64_t estimates = 0;  // of mips: Estimate records (a chunk's coarsest mip estimated)
   std::uint64_t horizon_chunks = 0;  // chunks first seen through a region's horizon image (not in mips)
-  std::uint64_t coverage_empty = 0;
-  std::uint64_t coverage_full = 0;
+  std::uint64_t empty_records = 0;
+  std::uint64_t full_records = 0;
   std::uint64_t released = 0;
   std::uint64_t update_batches = 0;
   std::uint64_t units_updated = 0;
@@ -173,7 +173,7 @@ struct ClientCounters {
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
 };
 
-// The outcome of one RegionHash, with what the comparison saw: a client
+// The outcome of one ChunkHash, with what the comparison saw: a client
 // that only wants the verdict can use on_hash_checked instead.
 struct HashCheck {
   Vec3i chunk_pos;
@@ -204,14 +204,14 @@ struct UpdateInfo {
 
 struct ClientCallbacks {
   std::function<void(const WelcomeMsg&)> on_welcome;
-  // A chunk's coverage changed: Empty, Mip (level 1..3, from MipData), Full
-  // or Released.
-  std::function<void(Vec3i chunk_pos, wire::CoverageKind kind, int level)> on_coverage;
+  // What the replica holds of a chunk changed: its holding now (a record
+  // of its own, or a horizon image's), or null when released.
+  std::function<void(Vec3i chunk_pos, const Holding* now)> on_holding;
   std::function<void(std::uint32_t edit_id, const EditOutcome&)> on_edit_result;
-  // A RegionHash arrived and was compared with the replica's chunk.
+  // A ChunkHash arrived and was compared with the replica's chunk.
   std::function<void(Vec3i chunk_pos, bool match)> on_hash_checked;
   // The same event with the revisions compared (runs after on_hash_checked).
-  std::function<void(const HashCheck&)> on_region_hash;
+  std::function<void(const HashCheck&)> on_chunk_hash;
   // An UpdateBatch was applied to the replica: the tick it belongs to and
   // the chunks it touched with their new revisions.
   std::function<void(std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions)> on_update_batch;
@@ -288,7 +288,7 @@ class Client {
   // them; a voxel another client changed since keeps that change.
   std::uint32_t undo();
   std::uint32_t redo();
-  bool request_region_hash(Vec3i chunk_pos);
+  bool request_chunk_hash(Vec3i chunk_pos);
   // An operator's command (the session's token must have the admin role);
   // the answer arrives as ClientView::admin_results[id] and on_admin_result.
   // 0 if it could not be sent.

@@ -11,65 +11,23 @@ namespace {
 constexpr std::size_t kMaxBatchUnits = 16 * kUpdateUnitsPerChunk;
 }  // namespace
 
-Replica::Replica() : unit_scratch_({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit}) {}
-
-Status Replica::apply_chunk_data(const ChunkDataMsg& m) {
-  unit_scratch_.resize({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
-  if (auto st = net_codec_decode(kChunkDataUnit, m.data, unit_scratch_.voxels()); !st) return st;
-  write_unit(m.unit_pos, unit_scratch_);
-  return Ok{};
-}
-
-void Replica::write_unit(Vec3i unit_pos, const Box& unit) {
-  const Vec3i cp = floor_div(unit_pos, kChunkSize / kChunkDataUnit);
-  const ChunkCoverage* c = coverage(cp);
-  auto it = pending_.find(cp);
-  const bool direct = (c != nullptr && c->state == CoverageState::kFull) ||
-                      (it == pending_.end() && pending_.size() >= kMaxPendingChunks);
-  if (direct) {
-    grid_.write_box(unit_pos * kChunkDataUnit, unit);
-    voxels_changed(cp);
-    return;
-  }
-  if (it == pending_.end()) it = pending_.emplace(cp, Pending{Box({kChunkSize, kChunkSize, kChunkSize}), 0}).first;
-  const Vec3i u = floor_mod(unit_pos, kChunkSize / kChunkDataUnit);
-  const Vec3i off = u * kChunkDataUnit;
-  for (int y = 0; y < kChunkDataUnit; ++y)
-    for (int z = 0; z < kChunkDataUnit; ++z)
-      std::copy_n(unit.read_row(y, z), kChunkDataUnit, it->second.voxels.write_row(off.y + y, off.z + z) + off.x);
-  it->second.received |= static_cast<std::uint8_t>(1u << ((u.z * 2 + u.y) * 2 + u.x));
-}
-
-void Replica::flush_pending(Vec3i cp) {
-  auto it = pending_.find(cp);
-  if (it == pending_.end()) return;
-  Pending& p = it->second;
-  if (p.received == 0xff) {
-    grid_.put_chunk(cp, Chunk::from_box(p.voxels));
-  } else {
-    // Not every unit came: keep what the grid had for the others.
-    Box unit({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
-    for (int i = 0; i < 8; ++i) {
-      if ((p.received & (1u << i)) == 0) continue;
-      const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * kChunkDataUnit;
-      for (int y = 0; y < kChunkDataUnit; ++y)
-        for (int z = 0; z < kChunkDataUnit; ++z)
-          std::copy_n(p.voxels.read_row(off.y + y, off.z + z) + off.x, kChunkDataUnit, unit.write_row(y, z));
-      grid_.write_box(chunk_origin(cp) + off, unit);
-    }
-  }
-  pending_.erase(it);
-  voxels_changed(cp);
-}
+Replica::Replica() = default;
 
 void Replica::apply_stream_record(const StreamRecord& r) {
   const Vec3i cp = r.chunk_pos;
   switch (r.kind) {
-    case StreamRecordKind::kEmpty:
-      apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, r.revision});
+    case StreamRecordKind::kEmpty: {
+      grid_.erase_chunk(cp);
+      Entry& e = chunks_[cp];
+      e.mip.reset();
+      e.holding = Holding{HoldingForm::kEmpty, r.revision};
+      entry_changed(cp, e);
       return;
+    }
     case StreamRecordKind::kReleased:
-      apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, r.revision});
+      grid_.erase_chunk(cp);
+      chunks_.erase(cp);
+      if (!horizons_.empty()) forget_horizon(cp);
       return;
     case StreamRecordKind::kHorizon: {
       std::vector<Vec3i> covered;
@@ -77,7 +35,6 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       return;
     }
     case StreamRecordKind::kFull: {
-      pending_.erase(cp);
       Chunk chunk;
       if (!shared_) {
         chunk = Chunk::from_box(*r.voxels);
@@ -93,7 +50,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         grid_.put_chunk(cp, std::move(chunk));
       Entry& e = chunks_[cp];
       e.mip.reset();
-      e.coverage = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+      e.holding = Holding{HoldingForm::kFull, r.revision};
       entry_changed(cp, e);
       return;
     }
@@ -103,15 +60,12 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kEstimate: {
       // A refresh of a mip held overwrites it in place (no new allocation).
       Entry& e = chunks_[cp];
-      if (e.coverage.state == CoverageState::kMip && e.coverage.level == r.level && e.mip &&
-          *e.mip == *r.voxels)
-        ++redundant_mips_;
+      if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels) ++redundant_mips_;
       if (e.mip)
         *e.mip = *r.voxels;
       else
         e.mip = std::make_unique<Box>(*r.voxels);
-      pending_.erase(cp);
-      e.coverage = ChunkCoverage{CoverageState::kMip, r.level, r.revision, r.kind == StreamRecordKind::kEstimate};
+      e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       entry_changed(cp, e);
       return;
@@ -124,7 +78,7 @@ void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) 
   auto [it, fresh] = horizons_.try_emplace(region);
   Horizon& h = it->second;
   // A newer image of the region (another plan's) serves every chunk it covers.
-  h.coverage = ChunkCoverage{CoverageState::kMip, r.level, 0};
+  h.holding = Holding{horizon_form(r.level), 0};
   h.image = *r.voxels;
   for_each_region_chunk(region, [&](Vec3i cp) {
     const int i = coarse_index(cp);
@@ -157,11 +111,12 @@ void Replica::forget_horizon(Vec3i cp) {
 
 Replica::MipView Replica::mip_view(Vec3i cp) const {
   if (auto it = chunks_.find(cp); it != chunks_.end())
-    return it->second.coverage.state == CoverageState::kMip
-               ? MipView{it->second.mip.get(), {0, 0, 0}, it->second.coverage.level}
-               : MipView{};
+    return it->second.holding.full_resolution()
+               ? MipView{}
+               : MipView{it->second.mip.get(), {0, 0, 0}, it->second.holding.level()};
   if (const Horizon* h = horizon_of(cp))
-    return MipView{&h->image, floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->coverage.level), h->coverage.level};
+    return MipView{&h->image, floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->holding.level()),
+                   h->holding.level()};
   return {};
 }
 
@@ -174,53 +129,6 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
     for (int z = 0; z < n; ++z)
       for (int x = 0; x < n; ++x) out.set(x, y, z, m.box->get(m.origin + Vec3i{x, y, z}));
   return true;
-}
-
-Status Replica::apply_mip_data(const MipDataMsg& m) {
-  const int n = kChunkSize >> m.level;
-  Box mip({n, n, n});
-  if (auto st = net_codec_decode(n, m.data, mip.voxels()); !st) return st;
-  Entry& e = chunks_[m.chunk_pos];
-  e.mip = std::make_unique<Box>(std::move(mip));
-  pending_.erase(m.chunk_pos);
-  e.coverage = ChunkCoverage{CoverageState::kMip, m.level, m.revision};
-  grid_.erase_chunk(m.chunk_pos);
-  entry_changed(m.chunk_pos, e);
-  return Ok{};
-}
-
-void Replica::apply_coverage(const CoverageMsg& m) {
-  const Vec3i cp = m.chunk_pos;
-  switch (m.kind) {
-    case wire::CoverageKind::Empty: {
-      if (!pending_.empty()) pending_.erase(cp);
-      grid_.erase_chunk(cp);
-      Entry& e = chunks_[cp];
-      e.mip.reset();
-      e.coverage = ChunkCoverage{CoverageState::kEmpty, 0, m.revision};
-      entry_changed(cp, e);
-      break;
-    }
-    case wire::CoverageKind::Full: {
-      flush_pending(cp);
-      Entry& e = chunks_[cp];
-      e.mip.reset();
-      e.coverage = ChunkCoverage{CoverageState::kFull, 0, m.revision};
-      entry_changed(cp, e);
-      break;
-    }
-    case wire::CoverageKind::Mip:
-      // Only MipData carries a mip; a bare Mip coverage changes nothing
-      // but what the chunk's cached hash and horizon image claimed.
-      voxels_changed(cp);
-      break;
-    case wire::CoverageKind::Released:
-      if (!pending_.empty()) pending_.erase(cp);
-      grid_.erase_chunk(cp);
-      chunks_.erase(cp);
-      if (!horizons_.empty()) forget_horizon(cp);
-      break;
-  }
 }
 
 Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed) {
@@ -245,7 +153,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     std::size_t end = begin;
     while (end < *n && update_scratch_[end].chunk_pos == cp) ++end;
     auto it = chunks_.find(cp);
-    if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) {
+    if (it == chunks_.end() || !it->second.holding.full_resolution()) {
       begin = end;
       continue;
     }
@@ -266,31 +174,31 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
   }
   for (const auto& r : m.revisions) {
     auto it = chunks_.find(r.chunk_pos);
-    if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) continue;
-    it->second.coverage = ChunkCoverage{CoverageState::kFull, 0, r.revision};
+    if (it == chunks_.end() || !it->second.holding.full_resolution()) continue;
+    it->second.holding = Holding{HoldingForm::kFull, r.revision};
     entry_changed(r.chunk_pos, it->second);
   }
   return applied;
 }
 
-const ChunkCoverage* Replica::coverage(Vec3i cp) const {
+const Holding* Replica::holding(Vec3i cp) const {
   auto it = chunks_.find(cp);
-  if (it != chunks_.end()) return &it->second.coverage;
+  if (it != chunks_.end()) return &it->second.holding;
   const Horizon* h = horizon_of(cp);
-  return h == nullptr ? nullptr : &h->coverage;
+  return h == nullptr ? nullptr : &h->holding;
 }
 
 int Replica::resolution_at(Vec3i voxel) const {
-  const ChunkCoverage* c = coverage(chunk_of(voxel));
+  const Holding* c = holding(chunk_of(voxel));
   if (c == nullptr) return kNoResolution;
-  return c->state == CoverageState::kMip ? c->level : 0;
+  return c->level();
 }
 
 Voxel Replica::get(Vec3i voxel) const {
   const Vec3i cp = chunk_of(voxel);
-  const ChunkCoverage* c = coverage(cp);
-  if (c == nullptr || c->state == CoverageState::kEmpty) return Voxel{};
-  if (c->state == CoverageState::kFull) return grid_.get(voxel);
+  const Holding* c = holding(cp);
+  if (c == nullptr || c->form == HoldingForm::kEmpty) return Voxel{};
+  if (c->form == HoldingForm::kFull) return grid_.get(voxel);
   const MipView m = mip_view(cp);
   if (m.box == nullptr) return Voxel{};
   const Vec3i l = local_of(voxel);
@@ -305,18 +213,18 @@ std::optional<RayHit> Replica::raycast(Vec3f origin, Vec3f direction, float max_
 
 std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t z, std::int32_t min_y,
                                                     std::int32_t max_y) const {
-  // A chunk at a time: one lookup of its coverage and of its voxels (full
+  // A chunk at a time: one lookup of its holding and of its voxels (full
   // or mip), then its part of the column from the top.
   for (std::int32_t y = max_y - 1; y >= min_y;) {
     const Vec3i cp = chunk_of(Vec3i{x, y, z});
     const std::int32_t bottom = std::max(min_y, cp.y * kChunkSize);
-    const ChunkCoverage* c = coverage(cp);
+    const Holding* c = holding(cp);
     const Vec3i l = local_of(Vec3i{x, y, z});
-    if (c != nullptr && c->state == CoverageState::kFull) {
+    if (c != nullptr && c->form == HoldingForm::kFull) {
       if (const Chunk* chunk = grid_.find_chunk(cp); chunk != nullptr)
         for (std::int32_t v = y; v >= bottom; --v)
           if (chunk->get(l.x, v - cp.y * kChunkSize, l.z).material != kAir) return v + 1;
-    } else if (c != nullptr && c->state == CoverageState::kMip) {
+    } else if (c != nullptr && !c->full_resolution()) {
       if (const MipView m = mip_view(cp); m.box != nullptr) {
         const int s = m.level;
         for (std::int32_t v = y; v >= bottom; --v)
@@ -331,31 +239,36 @@ std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t
 }
 
 std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
-  // Only a chunk's own coverage can be Full or Empty (a horizon's is a mip).
+  // Only a chunk's own record can make it Full or Empty.
   auto it = chunks_.find(cp);
-  if (it == chunks_.end() || it->second.coverage.state == CoverageState::kMip) return std::nullopt;
+  if (it == chunks_.end() || !it->second.holding.full_resolution()) return std::nullopt;
   const Entry& e = it->second;
   if (!e.hash)
-    e.hash = region_hash(e.coverage.state == CoverageState::kFull ? grid_.find_chunk(cp) : nullptr, e.coverage.revision);
+    e.hash = chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr, e.holding.revision);
   return e.hash;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
-  const ChunkCoverage* c = coverage(cp);
+  const Holding* c = holding(cp);
   if (c == nullptr) return std::nullopt;
   return c->revision;
 }
 
 std::size_t Replica::estimate_count() const {
   return static_cast<std::size_t>(
-      std::count_if(chunks_.begin(), chunks_.end(), [](const auto& kv) { return kv.second.coverage.estimate; }));
+      std::count_if(chunks_.begin(), chunks_.end(),
+                    [](const auto& kv) { return kv.second.holding.form == HoldingForm::kEstimate; }));
 }
 
-std::size_t Replica::chunk_count(CoverageState state) const {
+std::size_t Replica::chunk_count(HoldingForm form) const {
+  if (form == HoldingForm::kHorizon4 || form == HoldingForm::kHorizon5) {
+    std::size_t n = 0;
+    for (const auto& [region, h] : horizons_)
+      if (h.holding.form == form) n += h.covers.count();
+    return n;
+  }
   return static_cast<std::size_t>(
-             std::count_if(chunks_.begin(), chunks_.end(),
-                           [&](const auto& kv) { return kv.second.coverage.state == state; })) +
-         (state == CoverageState::kMip ? horizon_chunks_ : 0);
+      std::count_if(chunks_.begin(), chunks_.end(), [&](const auto& kv) { return kv.second.holding.form == form; }));
 }
 
 }  // namespace terrane

@@ -19,7 +19,7 @@ struct Message;
 
 namespace terrane {
 
-inline constexpr std::uint32_t kProtocolVersion = 1;
+inline constexpr std::uint32_t kProtocolVersion = 2;
 inline constexpr std::size_t kFrameHeaderBytes = 4;
 // Largest frame a peer may send unless the handshake agrees on less: a
 // worst-case 16³ unit (NET_CODEC.md) plus message overhead fits many times.

@@ -158,26 +158,6 @@ Frame build_client_state(const ClientStateMsg& m) {
   return finish(fbb, wire::CreateClientState(fbb, &pos, m.view_distance, m.full_res_radius));
 }
 
-Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data) {
-  FlatBufferBuilder fbb(data.size() + 64);
-  const auto p = to_wire(unit_pos);
-  const auto d = fbb.CreateVector(data.data(), data.size());
-  return finish(fbb, wire::CreateChunkData(fbb, &p, revision, d));
-}
-
-Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data) {
-  FlatBufferBuilder fbb(data.size() + 64);
-  const auto p = to_wire(chunk_pos);
-  const auto d = fbb.CreateVector(data.data(), data.size());
-  return finish(fbb, wire::CreateMipData(fbb, &p, static_cast<std::uint8_t>(level), revision, d));
-}
-
-Frame build_coverage(const CoverageMsg& m) {
-  FlatBufferBuilder fbb(64);
-  const auto p = to_wire(m.chunk_pos);
-  return finish(fbb, wire::CreateCoverage(fbb, &p, m.kind, static_cast<std::uint8_t>(m.level), m.revision));
-}
-
 Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
                          std::span<const ChunkRevisionMsg> revisions) {
   FlatBufferBuilder fbb(data.size() + revisions.size() * 24 + 64);
@@ -272,22 +252,23 @@ Frame build_holdings(std::span<const HeldChunkMsg> chunks) {
   std::vector<wire::HeldChunk> v;
   v.reserve(n);
   for (std::size_t i = 0; i < n; ++i)
-    v.emplace_back(to_wire(chunks[i].chunk_pos), chunks[i].revision, static_cast<std::uint8_t>(chunks[i].level));
+    v.emplace_back(to_wire(chunks[i].chunk_pos), chunks[i].holding.revision,
+                   static_cast<std::uint8_t>(chunks[i].holding.form));
   FlatBufferBuilder fbb(64 + n * sizeof(wire::HeldChunk));
   const auto vec = fbb.CreateVectorOfStructs(v);
   return finish(fbb, wire::CreateHoldings(fbb, vec));
 }
 
-Frame build_region_hash(const RegionHashMsg& m) {
+Frame build_chunk_hash(const ChunkHashMsg& m) {
   FlatBufferBuilder fbb(64);
   const auto p = to_wire(m.chunk_pos);
-  return finish(fbb, wire::CreateRegionHash(fbb, &p, m.revision, m.hash));
+  return finish(fbb, wire::CreateChunkHash(fbb, &p, m.revision, m.hash));
 }
 
-Frame build_region_hash_request(Vec3i chunk_pos) {
+Frame build_chunk_hash_request(Vec3i chunk_pos) {
   FlatBufferBuilder fbb(64);
   const auto p = to_wire(chunk_pos);
-  return finish(fbb, wire::CreateRegionHashRequest(fbb, &p));
+  return finish(fbb, wire::CreateChunkHashRequest(fbb, &p));
 }
 
 Frame build_ping(std::uint64_t nonce) {
@@ -511,48 +492,6 @@ Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m) {
   return out;
 }
 
-Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m) {
-  ChunkDataMsg out;
-  if (m.unit_pos() == nullptr) return invalid("chunk data: missing unit position");
-  out.unit_pos = from_wire(*m.unit_pos());
-  if (!wire_chunk_ok(floor_div(out.unit_pos, kChunkSize / kChunkDataUnit)))
-    return invalid("chunk data: unit position out of range");
-  out.revision = m.revision();
-  out.data = bytes_of(m.data());
-  if (out.data.empty()) return invalid("chunk data: no data");
-  if (out.data.size() > net_codec_max_encoded_size(kChunkDataUnit)) return over("chunk data: unit larger than its worst case");
-  return out;
-}
-
-Result<MipDataMsg> parse_mip_data(const wire::MipData& m) {
-  MipDataMsg out;
-  if (m.chunk_pos() == nullptr) return invalid("mip data: missing chunk position");
-  out.chunk_pos = from_wire(*m.chunk_pos());
-  if (!wire_chunk_ok(out.chunk_pos)) return invalid("mip data: chunk position out of range");
-  out.level = m.level();
-  if (out.level < 1 || out.level > kMipLevels - 1) return invalid("mip data: level not 1..3");
-  out.revision = m.revision();
-  out.data = bytes_of(m.data());
-  if (out.data.empty()) return invalid("mip data: no data");
-  if (out.data.size() > net_codec_max_encoded_size(kChunkDataUnit)) return over("mip data: unit larger than its worst case");
-  return out;
-}
-
-Result<CoverageMsg> parse_coverage(const wire::Coverage& m) {
-  CoverageMsg out;
-  if (m.chunk_pos() == nullptr) return invalid("coverage: missing chunk position");
-  out.chunk_pos = from_wire(*m.chunk_pos());
-  if (!wire_chunk_ok(out.chunk_pos)) return invalid("coverage: chunk position out of range");
-  if (m.kind() > wire::CoverageKind::MAX) return invalid("coverage: unknown kind");
-  out.kind = m.kind();
-  out.level = m.level();
-  if (out.kind == wire::CoverageKind::Mip && (out.level < 1 || out.level > kMipLevels - 1))
-    return invalid("coverage: mip level not 1..3");
-  if (out.kind != wire::CoverageKind::Mip && out.level != 0) return invalid("coverage: level on a non-mip kind");
-  out.revision = m.revision();
-  return out;
-}
-
 Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m) {
   UpdateBatchMsg out;
   out.tick = m.tick();
@@ -574,20 +513,20 @@ Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m) {
   return out;
 }
 
-Result<RegionHashMsg> parse_region_hash(const wire::RegionHash& m) {
-  RegionHashMsg out;
-  if (m.chunk_pos() == nullptr) return invalid("region hash: missing chunk position");
+Result<ChunkHashMsg> parse_chunk_hash(const wire::ChunkHash& m) {
+  ChunkHashMsg out;
+  if (m.chunk_pos() == nullptr) return invalid("chunk hash: missing chunk position");
   out.chunk_pos = from_wire(*m.chunk_pos());
-  if (!wire_chunk_ok(out.chunk_pos)) return invalid("region hash: chunk position out of range");
+  if (!wire_chunk_ok(out.chunk_pos)) return invalid("chunk hash: chunk position out of range");
   out.revision = m.revision();
   out.hash = m.hash();
   return out;
 }
 
-Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m) {
-  if (m.chunk_pos() == nullptr) return invalid("region hash request: missing chunk position");
+Result<Vec3i> parse_chunk_hash_request(const wire::ChunkHashRequest& m) {
+  if (m.chunk_pos() == nullptr) return invalid("chunk hash request: missing chunk position");
   const Vec3i p = from_wire(*m.chunk_pos());
-  if (!wire_chunk_ok(p)) return invalid("region hash request: chunk position out of range");
+  if (!wire_chunk_ok(p)) return invalid("chunk hash request: chunk position out of range");
   return p;
 }
 
@@ -663,15 +602,16 @@ Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
   for (flatbuffers::uoffset_t i = 0; i < m.chunks()->size(); ++i) {
     const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::HeldChunk);
     const ChunkRevisionMsg cr = read_chunk_and_revision(e);
-    HeldChunkMsg h{cr.chunk_pos, cr.revision, e[24]};
-    if (!wire_chunk_ok(h.chunk_pos)) return invalid("holdings: chunk position out of range");
-    if (h.level > kHeldEmpty) return invalid("holdings: level not 0..4");
+    if (!wire_chunk_ok(cr.chunk_pos)) return invalid("holdings: chunk position out of range");
+    if (e[24] >= kHoldingForms || !claimable(static_cast<HoldingForm>(e[24])))
+      return invalid("holdings: form not 0..4 (Full, Mip 1..3, Empty)");
+    HeldChunkMsg h{cr.chunk_pos, Holding{static_cast<HoldingForm>(e[24]), cr.revision}};
     out.push_back(h);
   }
   return out;
 }
 
-// --- region hash ------------------------------------------------------------------
+// --- chunk hash ------------------------------------------------------------------
 
 namespace {
 constexpr std::uint64_t kFnvOffset = 0xcbf29ce484222325ull, kFnvPrime = 0x100000001b3ull;
@@ -686,7 +626,7 @@ static_assert(2 * kChunkSize == 1 << 6 && 2 * kChunkSize * kChunkSize * kChunkSi
 constexpr std::uint64_t kAirRowFactor = fnv_zeros_factor(6), kAirChunkFactor = fnv_zeros_factor(16);
 }  // namespace
 
-std::uint64_t region_hash(const Chunk* chunk, std::uint64_t revision) {
+std::uint64_t chunk_hash(const Chunk* chunk, std::uint64_t revision) {
   std::uint64_t h = kFnvOffset;
   for (int i = 0; i < 8; ++i) {
     h ^= (revision >> (8 * i)) & 0xff;

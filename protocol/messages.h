@@ -6,7 +6,7 @@
 // verify_message) only proves the bytes are a well-formed buffer; these
 // parsers are the second gate and treat every field as hostile.
 //
-// Also the region hash, which both sides must compute identically.
+// Also the chunk hash, which both sides must compute identically.
 // Thread-safety: every function is pure.
 #pragma once
 
@@ -22,6 +22,7 @@
 #include "common/voxel/voxel.h"
 #include "common/world/world_bounds.h"
 #include "protocol/framing.h"
+#include "protocol/holding.h"
 #include "protocol/terrane_generated.h"
 
 namespace terrane {
@@ -53,8 +54,8 @@ inline constexpr std::size_t kMaxPresenceEntries = 64;
 inline constexpr std::int32_t kMaxWireViewDistance = 1 << 16;
 // Chunk revisions in one UpdateBatch (one batch covers at most one tick).
 inline constexpr std::size_t kMaxBatchRevisions = 4096;
-// 16^3 units of a 32^3 chunk.
-inline constexpr int kChunkDataUnit = 16;
+// A Full stream record's units: eight 16^3 units of its 32^3 chunk.
+inline constexpr int kFullRecordUnit = 16;
 
 using Frame = std::vector<std::uint8_t>;
 
@@ -175,23 +176,6 @@ struct PresenceEntryMsg {
 };
 
 // Data messages point into the frame they were parsed from.
-struct ChunkDataMsg {
-  Vec3i unit_pos;  // in 16-voxel units
-  std::uint64_t revision = 0;
-  std::span<const std::uint8_t> data;
-};
-struct MipDataMsg {
-  Vec3i chunk_pos;
-  int level = 0;  // 1..3
-  std::uint64_t revision = 0;
-  std::span<const std::uint8_t> data;
-};
-struct CoverageMsg {
-  Vec3i chunk_pos;
-  wire::CoverageKind kind = wire::CoverageKind::Empty;
-  int level = 0;
-  std::uint64_t revision = 0;
-};
 struct ChunkRevisionMsg {
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
@@ -201,19 +185,18 @@ struct UpdateBatchMsg {
   std::span<const std::uint8_t> data;
   std::vector<ChunkRevisionMsg> revisions;
 };
-struct RegionHashMsg {
+struct ChunkHashMsg {
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
   std::uint64_t hash = 0;
 };
 
-// One entry of Holdings. level: 0 full, 1..3 mip, kHeldEmpty known empty.
-inline constexpr int kHeldEmpty = 4;
+// One entry of Holdings: a chunk and what the client holds of it (a
+// claimable form: Full, Mip 1..3 or Empty).
 inline constexpr std::size_t kMaxHoldingsPerMessage = 16384;
 struct HeldChunkMsg {
   Vec3i chunk_pos;
-  std::uint64_t revision = 0;
-  int level = 0;
+  Holding holding;
 };
 
 // --- builders: each returns one complete frame --------------------------------
@@ -227,9 +210,6 @@ Frame build_admin_result(const AdminResultMsg& m);
 Frame build_server_notice(const ServerNoticeMsg& m);
 Frame build_redirect(const RedirectMsg& m);
 Frame build_client_state(const ClientStateMsg& m);
-Frame build_chunk_data(Vec3i unit_pos, std::uint64_t revision, std::span<const std::uint8_t> data);
-Frame build_mip_data(Vec3i chunk_pos, int level, std::uint64_t revision, std::span<const std::uint8_t> data);
-Frame build_coverage(const CoverageMsg& m);
 Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
                          std::span<const ChunkRevisionMsg> revisions);
 Frame build_edit_request(const EditRequestMsg& m);
@@ -246,8 +226,8 @@ Frame build_stream_batch(std::span<const std::uint8_t> records);
 // At most kMaxHoldingsPerMessage entries (the rest are dropped: split larger
 // holdings over several messages).
 Frame build_holdings(std::span<const HeldChunkMsg> chunks);
-Frame build_region_hash(const RegionHashMsg& m);
-Frame build_region_hash_request(Vec3i chunk_pos);
+Frame build_chunk_hash(const ChunkHashMsg& m);
+Frame build_chunk_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);
 Frame build_pong(std::uint64_t nonce);
 
@@ -262,12 +242,9 @@ Result<ServerNoticeMsg> parse_server_notice(const wire::ServerNotice& m);
 Result<RedirectMsg> parse_redirect(const wire::Redirect& m);
 Result<ClientStateMsg> parse_client_state(const wire::ClientState& m);
 Result<EditRequestMsg> parse_edit_request(const wire::EditRequest& m);
-Result<ChunkDataMsg> parse_chunk_data(const wire::ChunkData& m);
-Result<MipDataMsg> parse_mip_data(const wire::MipData& m);
-Result<CoverageMsg> parse_coverage(const wire::Coverage& m);
 Result<UpdateBatchMsg> parse_update_batch(const wire::UpdateBatch& m);
-Result<RegionHashMsg> parse_region_hash(const wire::RegionHash& m);
-Result<Vec3i> parse_region_hash_request(const wire::RegionHashRequest& m);
+Result<ChunkHashMsg> parse_chunk_hash(const wire::ChunkHash& m);
+Result<Vec3i> parse_chunk_hash_request(const wire::ChunkHashRequest& m);
 Result<ReadBoxMsg> parse_read_box(const wire::ReadBox& m);
 Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m);
 Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m);
@@ -281,11 +258,11 @@ bool wire_coordinate_ok(Vec3i voxel);
 // Same for chunk coordinates (voxel range / 32).
 bool wire_chunk_ok(Vec3i chunk_pos);
 
-// --- region hash ------------------------------------------------------------
+// --- chunk hash ------------------------------------------------------------
 // 64-bit FNV-1a over the revision (8 bytes little-endian) then the 32^3
 // voxels of the chunk in Box order, two bytes each (material, occupancy).
 // A null chunk is all Air. Both sides hash decoded voxels, so the value does
 // not depend on how the chunk travelled.
-std::uint64_t region_hash(const Chunk* chunk, std::uint64_t revision);
+std::uint64_t chunk_hash(const Chunk* chunk, std::uint64_t revision);
 
 }  // namespace terrane

@@ -75,7 +75,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       return DecodeError{DecodeErrorCode::kOverLimit, r.pos(), "stream batch: more than 4096 records"};
     auto kind = r.byte();
     if (!kind) return kind.error();
-    if (*kind > static_cast<std::uint8_t>(StreamRecordKind::kHorizon))
+    if (!known_record_kind(*kind))
       return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: unknown record kind"};
     // A delta is bounded before it is added: the previous position is within
     // +-lim, so any delta beyond 2*lim lands out of range (and an unchecked

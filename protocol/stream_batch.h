@@ -1,20 +1,24 @@
-// Stream batches: the server's streaming of coverage and voxels, many chunks
-// per frame (PROTOCOL.md, "Stream batches"). One FlatBuffers frame costs
+// Stream batches: the server's streaming of what a client holds
+// (protocol/holding.h) and the voxels of it, many chunks per frame (PROTOCOL.md, "Stream batches"). One FlatBuffers frame costs
 // about 40 bytes of header, table and vector bookkeeping, which is as much
 // as a typical 16^3 unit of terrain encodes to; a batch carries the records
 // of many chunks in one frame, each record costing a few bytes beyond the
 // network codec's own.
 //
 //   record := kind:u8  dx dy dz:zigzag varint  revision:varint  payload
-//     kind 0 Empty     the chunk is all Air (full resolution); no payload
-//     kind 1..3 Mip L  one network codec unit of (32 >> L)^3 voxels
-//     kind 4 Full      eight 16^3 network codec units, unit i at offset
+//     kinds 0..5 give the chunk the holding form of that number
+//     (protocol/holding.h):
+//     kind 0 Full      eight 16^3 network codec units, unit i at offset
 //                      (i & 1, (i >> 1) & 1, (i >> 2) & 1) * 16
-//     kind 5 Released  the chunk left the view; no payload
-//     kind 6 Estimate  one 4^3 unit, as Mip 3, estimated from the world's
+//     kind 1..3 Mip L  one network codec unit of (32 >> L)^3 voxels
+//     kind 4 Empty     the chunk is all Air (full resolution); no payload
+//     kind 5 Estimate  one 4^3 unit, as Mip 3, estimated from the world's
 //                      generator for a chunk never generated; replaced by
 //                      a Mip or Empty record when the exact mip differs
-//     kind 7 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk)
+//     kinds 6, 7       never a record (the horizon forms come only from a
+//                      Horizon record): a decode error
+//     kind 8 Released  the chunk left the view; no payload
+//     kind 9 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk)
 //                      or 5 (1 voxel per chunk); position: the region's
 //                      first chunk (multiples of 8); revision 0; payload:
 //                      level:u8, masked:u8 (0: every chunk of the region;
@@ -22,7 +26,8 @@
 //                      chunk (y * 8 + z) * 8 + x), then one network codec
 //                      unit of (8 * (32 >> level))^3 voxels
 //                      (common/world/horizon.h). Decoded as one record:
-//                      the region's image and mask.
+//                      the region's image and mask; the chunks it covers
+//                      are held in form Horizon4 or Horizon5.
 //   (dx, dy, dz) is the chunk position minus the previous record's (the
 //   first record's is relative to (0, 0, 0)).
 //
@@ -39,20 +44,32 @@
 #include "common/codec/decode_error.h"
 #include "common/voxel/box.h"
 #include "common/voxel/vec3.h"
+#include "protocol/holding.h"
 #include "protocol/messages.h"
 
 namespace terrane {
 
 enum class StreamRecordKind : std::uint8_t {
-  kEmpty = 0,
+  kFull = 0,
   kMip1 = 1,
   kMip2 = 2,
   kMip3 = 3,
-  kFull = 4,
-  kReleased = 5,
-  kEstimate = 6,
-  kHorizon = 7,
+  kEmpty = 4,
+  kEstimate = 5,
+  kReleased = 8,
+  kHorizon = 9,
 };
+
+constexpr bool known_record_kind(std::uint8_t kind) {
+  return kind <= static_cast<std::uint8_t>(StreamRecordKind::kEstimate) ||
+         kind == static_cast<std::uint8_t>(StreamRecordKind::kReleased) ||
+         kind == static_cast<std::uint8_t>(StreamRecordKind::kHorizon);
+}
+// Whether a record of this kind gives its chunk a holding form (kinds 0..5).
+constexpr bool gives_form(StreamRecordKind kind) { return kind <= StreamRecordKind::kEstimate; }
+// The record kind that sends a chunk in form f (precondition: f is not a
+// horizon form).
+constexpr StreamRecordKind record_kind_of(HoldingForm f) { return static_cast<StreamRecordKind>(f); }
 
 // A Horizon record's mask of the region's chunks it covers (bit i: chunk
 // (y * 8 + z) * 8 + x).
@@ -76,6 +93,8 @@ struct StreamRecord {
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
   int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..5 for Horizon
+  // The form the record gives its chunk (precondition: gives_form(kind)).
+  HoldingForm form() const { return static_cast<HoldingForm>(kind); }
   // Full: 32^3; Mip: (32 >> level)^3; Horizon: the region's image,
   // (8 * (32 >> level))^3; else null.
   const Box* voxels = nullptr;

@@ -60,7 +60,7 @@ enum class CloseReason : std::uint8_t {
   kAuthFailed,
   kMovingTooFast,
   kEditRate,
-  kRequestRate,       // region hash requests beyond their budget
+  kRequestRate,       // chunk hash requests beyond their budget
   kServerFull,
   kShutdown,
   kStorageFailure,

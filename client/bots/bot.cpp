@@ -61,12 +61,12 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
   co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;
   ClientCallbacks cb;
-  cb.on_coverage = [this](Vec3i cp, wire::CoverageKind kind, int level) {
-    if ((kind == wire::CoverageKind::Full && level == 0) || kind == wire::CoverageKind::Empty)
+  cb.on_holding = [this](Vec3i cp, const Holding* now) {
+    if (now != nullptr && now->full_resolution())
       ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
     else
       ctx_.fanout->chunk_released(index_, cp);  // released, or held coarser now
-    on_coverage(cp, kind);
+    if (now != nullptr) on_holding(cp, *now);
   };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
     ctx_.fanout->edit_result(index_, id, outcome, Clock::now());
@@ -79,7 +79,7 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   cb.on_update_batch = [this](std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions) {
     ctx_.fanout->update_received(index_, tick, revisions, Clock::now());
   };
-  cb.on_region_hash = [this](const HashCheck& check) { on_region_hash(check); };
+  cb.on_chunk_hash = [this](const HashCheck& check) { on_chunk_hash(check); };
   cb.on_disconnected = [this](const std::string& reason) { on_disconnected(reason); };
   // Several servers: ticks and fan-out are told apart by the server the bot
   // is on now (redirects move it).
@@ -135,8 +135,7 @@ bool Bot::connect() {
   return true;
 }
 
-void Bot::on_coverage(Vec3i cp, wire::CoverageKind kind) {
-  if (kind == wire::CoverageKind::Released) return;
+void Bot::on_holding(Vec3i cp, const Holding& held) {
   std::lock_guard lock(mutex_);
   if (joined_ && result_.join_coarse_ms) return;
   const Vec3i l = cp - box_min_;
@@ -153,8 +152,7 @@ void Bot::on_coverage(Vec3i cp, wire::CoverageKind kind) {
       for (const auto& t : k.by_message_type) result_.join_coarse_bytes += t.bytes_in;
     }
   }
-  const bool full = kind == wire::CoverageKind::Empty || kind == wire::CoverageKind::Full;
-  if ((b & 2) != 0 && full) {
+  if ((b & 2) != 0 && held.full_resolution()) {
     b &= std::uint8_t(~2u);
     if (--need_full_ == 0) {
       result_.join_full_ms = ms_between(connect_at_, now);
@@ -183,8 +181,8 @@ void Bot::count_join_voxels() {
   std::uint64_t n = 0;
   client_->with_replica([&](const Replica& r) {
     Chunk::Level0::Row scratch;
-    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-      if (c.state != CoverageState::kFull || !within(pos_, cp, full)) return;
+    r.for_each_holding([&](Vec3i cp, const Holding& h) {
+      if (h.form != HoldingForm::kFull || !within(pos_, cp, full)) return;
       const Chunk* chunk = r.grid().find_chunk(cp);
       if (chunk == nullptr || chunk->empty()) return;
       for (int y = 0; y < kChunkSize; ++y)
@@ -209,8 +207,8 @@ bool Bot::in_area(float x, float z, float half) const {
 
 bool Bot::held_full(Vec3i cp) const {
   return client_->with_replica([&](const Replica& r) {
-    const ChunkCoverage* c = r.coverage(cp);
-    return c != nullptr && c->state != CoverageState::kMip;
+    const Holding* h = r.holding(cp);
+    return h != nullptr && h->full_resolution();
   });
 }
 
@@ -431,10 +429,10 @@ void Bot::request_hash(Vec3i cp, bool final_check) {
     p.retry_at.reset();
     p.final_check = p.final_check || final_check;
   }
-  client_->request_region_hash(cp);
+  client_->request_chunk_hash(cp);
 }
 
-void Bot::on_region_hash(const HashCheck& check) {
+void Bot::on_chunk_hash(const HashCheck& check) {
   std::lock_guard lock(mutex_);
   auto it = pending_hash_.find(check.chunk_pos);
   if (it == pending_hash_.end() || it->second.retry_at) return;
@@ -486,7 +484,7 @@ bool Bot::checks_pending(Clock::time_point now) {
     pending = !pending_hash_.empty();
   }
   if (!client_->closed())
-    for (const Vec3i cp : resend) client_->request_region_hash(cp);
+    for (const Vec3i cp : resend) client_->request_chunk_hash(cp);
   return pending;
 }
 
@@ -495,8 +493,8 @@ void Bot::start_final_check() {
   const std::int32_t full = ctx_.full_res_radius;
   std::vector<Vec3i> chunks;
   client_->with_replica([&](const Replica& r) {
-    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) {
-      if (c.state != CoverageState::kMip && within(pos_, cp, full)) chunks.push_back(cp);
+    r.for_each_holding([&](Vec3i cp, const Holding& h) {
+      if (h.full_resolution() && within(pos_, cp, full)) chunks.push_back(cp);
     });
     return 0;
   });

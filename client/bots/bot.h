@@ -96,8 +96,9 @@ class Bot {
     bool final_check = false;
   };
 
-  void on_coverage(Vec3i cp, wire::CoverageKind kind);
-  void on_region_hash(const HashCheck& check);
+  // What the bot holds of a chunk changed (not a release): join progress.
+  void on_holding(Vec3i cp, const Holding& held);
+  void on_chunk_hash(const HashCheck& check);
   void on_disconnected(const std::string& reason);
   void init_join_tracking();
   void count_join_voxels();
@@ -130,7 +131,7 @@ class Bot {
 
   mutable std::mutex mutex_;
   // Join tracking over the chunk box [box_min_, box_min_ + box_size_):
-  // bit 0 = in view, no coverage yet; bit 1 = in the full-resolution
+  // bit 0 = in view, nothing held yet; bit 1 = in the full-resolution
   // region, not yet at full resolution.
   Vec3i box_min_, box_size_;
   std::vector<std::uint8_t> need_;

@@ -87,7 +87,7 @@ to its client keeps it alive until then).)")
            "full resolution. Returns only when that is true.")
       .def_property_readonly("loaded", &PyClient::loaded, "The whole full-resolution region is held now.")
       .def("verify", &PyClient::verify, py::arg("timeout") = 60.0,
-           "Ask the server for the region hash of every full-resolution chunk and compare each with the replica; "
+           "Ask the server for the chunk hash of every full-resolution chunk and compare each with the replica; "
            "returns how many differ (0: the replica is exact).")
       .def("next_event", &PyClient::next_event, py::arg("kind") = py::none(), py::arg("timeout") = 30.0,
            "The oldest queued event (of kind 'update', 'presence', 'message' or 'disconnect', or any), removed from "

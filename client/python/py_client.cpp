@@ -82,8 +82,8 @@ py::array_t<std::uint8_t> planes(Vec3i s, const auto& voxel_at) {
 bool held_full(const ClientView& v, const std::vector<Vec3i>& chunks) {
   if (!v.welcomed) return false;
   for (const Vec3i cp : chunks) {
-    const ChunkCoverage* c = v.replica.coverage(cp);
-    if (c == nullptr || c->state == CoverageState::kMip) return false;
+    const Holding* c = v.replica.holding(cp);
+    if (c == nullptr || !c->full_resolution()) return false;
   }
   return true;
 }
@@ -286,7 +286,7 @@ int PyClient::verify(double timeout) {
   const WelcomeMsg w = *c_->welcome();
   const auto chunks = chunks_in_view(state().position, full_radius(w), w.bounds());
   for (const Vec3i cp : chunks)
-    if (!c_->request_region_hash(cp)) raise(PyExc_ConnectionError, "connection closed");
+    if (!c_->request_chunk_hash(cp)) raise(PyExc_ConnectionError, "connection closed");
   // The answers come in order with the world's data: once the barrier's
   // does, every chunk asked about has its answer (a chunk the client does
   // not hold is not answered, and counts as differing).
@@ -297,9 +297,9 @@ int PyClient::verify(double timeout) {
       [&](const ClientView& v) {
     bad = 0;
     for (const Vec3i cp : chunks) {
-      const ChunkCoverage* cov = v.replica.coverage(cp);
+      const Holding* cov = v.replica.holding(cp);
       const auto it = v.hash_checks.find(cp);
-          if (cov == nullptr || cov->state == CoverageState::kMip || it == v.hash_checks.end() || !it->second) ++bad;
+          if (cov == nullptr || !cov->full_resolution() || it == v.hash_checks.end() || !it->second) ++bad;
         }
         return true;
       },
@@ -355,8 +355,8 @@ bool PyClient::holds(const IVec3& lo, const IVec3& hi) const {
     for (int y = c0.y; y <= c1.y; ++y)
       for (int z = c0.z; z <= c1.z; ++z)
         for (int x = c0.x; x <= c1.x; ++x) {
-          const ChunkCoverage* c = rep.coverage({x, y, z});
-          if (c == nullptr || c->state == CoverageState::kMip) return false;
+          const Holding* c = rep.holding({x, y, z});
+          if (c == nullptr || !c->full_resolution()) return false;
         }
     return true;
   });

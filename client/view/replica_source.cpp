@@ -7,26 +7,26 @@
 namespace terrane::view {
 
 int ReplicaSource::level(Vec3i chunk_pos) const {
-  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  const Holding* c = replica_.holding(chunk_pos);
   if (c == nullptr) return -1;
-  return c->state == CoverageState::kMip ? c->level : 0;
+  return c->level();
 }
 
 std::uint64_t ReplicaSource::revision(Vec3i chunk_pos) const {
-  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  const Holding* c = replica_.holding(chunk_pos);
   return c == nullptr ? 0 : c->revision;
 }
 
 int ReplicaSource::read(Vec3i chunk_pos, int want, Box& out) const {
-  const ChunkCoverage* c = replica_.coverage(chunk_pos);
+  const Holding* c = replica_.holding(chunk_pos);
   const int level = std::clamp(want, 0, kMipLevels - 1);
   const int n = kChunkSize >> level;
-  if (c == nullptr || c->state == CoverageState::kEmpty) {
+  if (c == nullptr || c->form == HoldingForm::kEmpty) {
     out.resize({n, n, n});
     return level;
   }
-  if (c->state == CoverageState::kMip) {
-    if (replica_.read_mip(chunk_pos, out)) return c->level;
+  if (!c->full_resolution()) {
+    if (replica_.read_mip(chunk_pos, out)) return c->level();
     out.resize({n, n, n});
     return level;
   }

@@ -10,10 +10,10 @@ StreamProgress stream_progress(const Replica& replica, Vec3f p, std::int32_t vd,
   StreamProgress out;
   for (const Vec3i cp : chunks_in_view(p, vd, bounds)) {
     ++out.in_view;
-    const ChunkCoverage* c = replica.coverage(cp);
+    const Holding* c = replica.holding(cp);
     if (c == nullptr) continue;
     ++out.covered;
-    const int level = c->state == CoverageState::kMip ? c->level : 0;
+    const int level = c->level();
     if (level <= desired_level(p, cp, full)) ++out.settled;
   }
   return out;

@@ -199,10 +199,10 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       on_message_(id_, *e);
       return;
     }
-    case wire::Body::RegionHashRequest: {
-      auto p = parse_region_hash_request(*m.body_as_RegionHashRequest());
+    case wire::Body::ChunkHashRequest: {
+      auto p = parse_chunk_hash_request(*m.body_as_ChunkHashRequest());
       if (!p) return fail(p.error());
-      on_message_(id_, RegionHashRequestMsg{*p});
+      on_message_(id_, ChunkHashRequestMsg{*p});
       return;
     }
     case wire::Body::Holdings: {

@@ -63,7 +63,7 @@ struct SessionLimits {
   ServerCounters* counters = nullptr;  // not owned; may be null
 };
 
-struct RegionHashRequestMsg {
+struct ChunkHashRequestMsg {
   Vec3i chunk_pos;
 };
 
@@ -77,14 +77,14 @@ struct PongMsg {
   std::uint64_t nonce = 0;
 };
 
-using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, RegionHashRequestMsg, ReadBoxMsg,
+using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, ChunkHashRequestMsg, ReadBoxMsg,
                                     HoldingsMsg, AdminRequestMsg, PongMsg>;
 
 using SharedFrame = std::shared_ptr<const Frame>;
 
 // Priority classes of outbound frames. Control frames (EditAck, EditReject,
 // Pong) go out before queued data; data frames (everything about the world:
-// coverage, chunk and mip data, updates, region hashes) keep their order,
+// stream records, updates, chunk hashes) keep their order,
 // so an update never overtakes the chunk data it applies to and a region
 // hash reflects every update queued before it. Between near chunks and far
 // mips the replicator decides (server/replication/replicator.h).

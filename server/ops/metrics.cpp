@@ -220,7 +220,7 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_update_batches_total", "UpdateBatch frames sent.", load(c.update_batches_sent));
   m.counter("terrane_update_units_total", "4x4x4 update units sent in them.", load(c.update_units_sent));
   m.counter("terrane_presence_sent_total", "Presence frames sent.", load(c.presence_sent));
-  m.counter("terrane_hashes_pushed_total", "Region hashes pushed to clients unasked.", load(c.hashes_pushed));
+  m.counter("terrane_hashes_pushed_total", "Chunk hashes pushed to clients unasked.", load(c.hashes_pushed));
   m.counter("terrane_chunks_asked_total", "Chunks the replicators asked the world for (streaming; each view's churn).",
             load(c.chunks_asked));
   m.counter("terrane_stream_yields_total",

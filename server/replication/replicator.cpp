@@ -23,7 +23,14 @@ constexpr std::uint64_t kYieldJitterMs = 50;
 constexpr auto kYieldAtMost = std::chrono::seconds(2);
 
 StreamRecordKind record_kind(int level) {
-  return level == 0 ? StreamRecordKind::kFull : static_cast<StreamRecordKind>(level);
+  return level == 0 ? StreamRecordKind::kFull : record_kind_of(mip_form(level));
+}
+
+// The form a version sent at level (0 full, 1..3 a mip) gives its chunk.
+HoldingForm form_sent(const ChunkVersion& v, int level) {
+  if (v.empty()) return HoldingForm::kEmpty;
+  if (v.estimate()) return HoldingForm::kEstimate;
+  return level == 0 ? HoldingForm::kFull : mip_form(level);
 }
 
 }  // namespace
@@ -96,7 +103,7 @@ void Replicator::on_message(InboundMessage msg) {
   if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(std::move(*edit));
   if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(*read);
   if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
-  if (auto* req = std::get_if<RegionHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
+  if (auto* req = std::get_if<ChunkHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
   if (auto* admin = std::get_if<AdminRequestMsg>(&msg)) return on_admin(std::move(*admin));
   if (auto* pong = std::get_if<PongMsg>(&msg)) return on_pong(pong->nonce);
 }
@@ -120,7 +127,8 @@ Replicator::Info Replicator::info() const {
 
 void Replicator::on_admin(AdminRequestMsg req) {
   if (!admin_) {
-    AdminResultMsg r{req.request_id, false, "not an admin: this session's token does not have the admin role", "{}"};
+    const std::string why = "not an admin: this session's token does not have the admin role";
+    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": \"" + why + "\"}"};
     session_->send(build_admin_result(r), SendClass::kControl);
     return;
   }
@@ -132,8 +140,10 @@ void Replicator::on_admin(AdminRequestMsg req) {
 void Replicator::on_hello(const HelloMsg& hello) {
   if (hello.protocol_version != kProtocolVersion) {
     server_log().warn("session {}: protocol version {} rejected", id_, hello.protocol_version);
-    session_->close(CloseReason::kVersionMismatch, "protocol version mismatch: server speaks " + std::to_string(kProtocolVersion) + ", client " +
-                    std::to_string(hello.protocol_version));
+    session_->close(CloseReason::kVersionMismatch,
+                    "protocol version " + std::to_string(hello.protocol_version) +
+                        " is not supported: this server speaks version " + std::to_string(kProtocolVersion) +
+                        " (protocol/PROTOCOL.md); update the client");
     return;
   }
   const auto now_unix =
@@ -292,7 +302,7 @@ void Replicator::send_parked_near() {
   std::vector<Vec3i> near;
   for (const auto& [cp, v] : mip_dirty_) {
     auto it = held_.find(cp);
-    if (it != held_.end() && it->second.level == kHeldEmpty && desired(cp) == 0) near.push_back(cp);
+    if (it != held_.end() && it->second.form == HoldingForm::kEmpty && desired(cp) == 0) near.push_back(cp);
   }
   // A copy of the pointer: send_whole erases the entry it comes from.
   for (const Vec3i cp : near) send_whole(cp, VersionPtr(mip_dirty_.at(cp)));
@@ -300,7 +310,7 @@ void Replicator::send_parked_near() {
 
 void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
   send_chunk(*v, 0);
-  hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : 0), v->revision()}, v);
+  hold(cp, Holding{form_sent(*v, 0), v->revision()}, v);
   mip_dirty_.erase(cp);  // older than v: nothing left to refresh
 }
 
@@ -337,15 +347,14 @@ void Replicator::on_edit(EditRequestMsg edit) {
   // resolution: it can see what it changes. A resuming client's claims
   // count within its full-resolution radius: the edits it queued while
   // away come right after its Holdings, before the claims are checked.
-  const auto full_level = [](std::uint8_t level) { return level == 0 || level == kHeldEmpty; };
   bool full = true;
   for_each_chunk_in(r, [&](Vec3i cp) {
     if (!full) return;
     if (auto it = held_.find(cp); it != held_.end()) {
-      full = full_level(it->second.level);
+      full = it->second.full_resolution();
     } else {
       auto c = claims_.find(cp);
-      full = c != claims_.end() && full_level(c->second.level) && plan_valid_ && desired(cp) == 0;
+      full = c != claims_.end() && c->second.full_resolution() && plan_valid_ && desired(cp) == 0;
     }
   });
   if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");
@@ -369,7 +378,7 @@ void Replicator::on_holdings(const HoldingsMsg& h) {
   for (const HeldChunkMsg& c : h.chunks) {
     if (claims_.size() >= options_.max_claims_per_client) break;
     if (held_.count(c.chunk_pos) != 0) continue;  // already streamed this session
-    claims_[c.chunk_pos] = Held{static_cast<std::uint8_t>(c.level), c.revision};
+    claims_[c.chunk_pos] = c.holding;
   }
   // Claims outside the view are released at the next plan.
   if (plan_valid_) {
@@ -386,7 +395,7 @@ void Replicator::on_hash_request(Vec3i cp) {
     // Claimed by a resuming client but not yet adopted or resent: answered
     // once it is, so the hash follows the data it describes.
     if (hash_requests_.size() >= 1024) {
-      session_->close(CloseReason::kRequestRate, "too many region hash requests");
+      session_->close(CloseReason::kRequestRate, "too many chunk hash requests");
       return;
     }
     hash_requests_.push_back(cp);
@@ -396,13 +405,13 @@ void Replicator::on_hash_request(Vec3i cp) {
 }
 
 void Replicator::answer_hash(Vec3i cp) {
-  const Held h = held_.at(cp);
-  if (h.level == kHeldEmpty) {
+  const Holding h = held_.at(cp);
+  if (h.form == HoldingForm::kEmpty) {
     flush_stream();
-    session_->send(build_region_hash(RegionHashMsg{cp, h.revision, region_hash(nullptr, h.revision)}));
+    session_->send(build_chunk_hash(ChunkHashMsg{cp, h.revision, chunk_hash(nullptr, h.revision)}));
   } else if (auto it = full_.find(cp); it != full_.end()) {
     flush_stream();
-    session_->send(build_region_hash(RegionHashMsg{cp, it->second->revision(), it->second->hash()}));
+    session_->send(build_chunk_hash(ChunkHashMsg{cp, it->second->revision(), it->second->hash()}));
   } else {
     flush_stream();
     world_.hash(id_, cp);  // a mip holder: the world has the chunk
@@ -412,7 +421,9 @@ void Replicator::answer_hash(Vec3i cp) {
 // --- the plan ------------------------------------------------------------------
 
 bool Replicator::in_view(Vec3i cp) const {
-  return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp);
+  // A chunk beyond the wire's range (+-2^19 chunks) is never in view: a
+  // client near x = +-2^24 would take its record for a protocol error.
+  return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp) && wire_chunk_ok(cp);
 }
 
 int Replicator::desired(Vec3i cp) const {
@@ -428,7 +439,7 @@ void Replicator::push_refine(Vec3i cp) {
 bool Replicator::needs_refining(Vec3i cp) const {
   auto it = held_.find(cp);
   // (Beyond the view desired() is kMipLevels: nothing is finer.)
-  return it != held_.end() && it->second.level != kHeldEmpty && desired(cp) < it->second.level;
+  return it != held_.end() && it->second.form != HoldingForm::kEmpty && desired(cp) < it->second.level();
 }
 
 void Replicator::rebuild_refine() {
@@ -496,8 +507,9 @@ void Replicator::replan() {
   refine_.clear();
   std::vector<Vec3i> now_full;  // held Empty, within full resolution
   for (const auto& [cp, h] : held_) {
-    if (h.level != kHeldEmpty && desired(cp) < h.level) refine_.emplace_back(offset_center_dist2(cp - center_), cp);
-    if (h.level == kHeldEmpty && desired(cp) == 0) now_full.push_back(cp);
+    if (h.form != HoldingForm::kEmpty && desired(cp) < h.level())
+      refine_.emplace_back(offset_center_dist2(cp - center_), cp);
+    if (h.form == HoldingForm::kEmpty && desired(cp) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
@@ -508,6 +520,8 @@ void Replicator::replan() {
 
 void Replicator::plan_horizon() {
   horizon_wanted_.clear();
+  horizon_order_.clear();
+  horizon_early_.clear();
   if (!options_.horizon_images) return;
   // Each region with a chunk in view that the client has nothing of, nearest
   // first (the table's order: a region's first chunk met is about its
@@ -517,13 +531,14 @@ void Replicator::plan_horizon() {
   std::vector<HorizonWant> wants;
   for (const Vec3i o : table_->offsets()) {
     const Vec3i cp = center_ + o;
-    if (!welcome_.bounds.touches_chunk(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 ||
-        horizon_.count(cp) != 0)
-      continue;
+    if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) continue;
     const Vec3i region = coarse_region_of(cp);
+    // A Horizon record's region lies within the wire's range whole.
+    if (!wire_chunk_ok(region * kHorizonRegionChunks + Vec3i{7, 7, 7})) continue;
     if (horizon_wanted_.count(region) != 0) continue;
     const int level = offset_dist2(o) <= near * near ? kHorizonNearLevel : kHorizonFarLevel;
     horizon_wanted_.emplace(region, static_cast<std::uint8_t>(level));
+    horizon_order_.push_back(region);
     wants.push_back(HorizonWant{region, level});
   }
   if (!wants.empty()) world_.want_horizon(id_, std::move(wants));
@@ -531,28 +546,43 @@ void Replicator::plan_horizon() {
 
 void Replicator::on_horizons(std::vector<HorizonPtr> images) {
   if (closed_) return;
-  for (const HorizonPtr& image : images) {
+  // The world hands images over as they are made (in parallel, some kept
+  // from before): they wait here for their turn, so the client gets them
+  // nearest region first.
+  for (HorizonPtr& image : images) {
     auto w = horizon_wanted_.find(image->region);
     if (w == horizon_wanted_.end() || w->second != image->level) continue;  // asked for by an earlier plan
-    const int level = image->level;
-    horizon_wanted_.erase(w);
-    if (image->unit.empty()) continue;  // not made: the chunks' own records follow
-    // The region's chunks in view that the client has nothing of yet.
-    HorizonMask mask{};
-    std::size_t covered = 0;
-    for_each_region_chunk(image->region, [&](Vec3i cp) {
-      if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) return;
-      horizon_mask_set(mask, coarse_index(cp));
-      horizon_.emplace(cp, static_cast<std::uint8_t>(level));
-      ++covered;
-    });
-    if (covered == 0) continue;
-    batch_.add_horizon(image->region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image->unit);
-    counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
-    if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+    horizon_early_.insert_or_assign(image->region, std::move(image));
+  }
+  while (!horizon_order_.empty()) {
+    auto ready = horizon_early_.find(horizon_order_.front());
+    if (ready == horizon_early_.end()) break;
+    const HorizonPtr image = std::move(ready->second);
+    horizon_early_.erase(ready);
+    horizon_order_.pop_front();
+    horizon_wanted_.erase(image->region);
+    send_horizon(*image);
   }
   if (horizon_wanted_.empty()) flush_stream();
   pump();
+}
+
+void Replicator::send_horizon(const HorizonImage& image) {
+  if (image.unit.empty()) return;  // not made: the chunks' own records follow
+  const int level = image.level;
+  // The region's chunks in view that the client has nothing of yet.
+  HorizonMask mask{};
+  std::size_t covered = 0;
+  for_each_region_chunk(image.region, [&](Vec3i cp) {
+    if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) return;
+    horizon_mask_set(mask, coarse_index(cp));
+    horizon_.emplace(cp, static_cast<std::uint8_t>(level));
+    ++covered;
+  });
+  if (covered == 0) return;
+  batch_.add_horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit);
+  counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
+  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
 }
 
 void Replicator::move_by(Vec3i d) {
@@ -571,8 +601,8 @@ void Replicator::move_by(Vec3i d) {
     const Vec3i cp = center_ + o;
     auto it = held_.find(cp);
     if (it == held_.end()) continue;
-    if (it->second.level != kHeldEmpty && table_->level(o) < it->second.level) push_refine(cp);
-    if (it->second.level == kHeldEmpty && table_->level(o) == 0) now_full.push_back(cp);
+    if (it->second.form != HoldingForm::kEmpty && table_->level(o) < it->second.level()) push_refine(cp);
+    if (it->second.form == HoldingForm::kEmpty && table_->level(o) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   flush_stream();
@@ -624,12 +654,12 @@ void Replicator::request_more() {
   auto coarse = [&](Vec3i cp) {
     if (!in_view(cp) || held_.count(cp) != 0 || requested_.count(cp) != 0) return;
     if (auto c = claims_.find(cp); c != claims_.end()) {
-      const std::uint8_t l = c->second.level;
+      const bool empty = c->second.form == HoldingForm::kEmpty;
       // A claim of Empty is checked against the chunk's own emptiness (an
       // estimate is never Empty; without estimates the coarse image says);
       // a claimed mip's revision says enough.
-      return want(cp, Intent::kClaim, l == kHeldEmpty ? kMipLevels - 1 : l,
-                  l == kHeldEmpty && options_.horizon_estimates);
+      return want(cp, Intent::kClaim, empty ? kMipLevels - 1 : c->second.level(),
+                  empty && options_.horizon_estimates);
     }
     want(cp, Intent::kCoarse, options_.horizon_images && desired(cp) == 0 ? 0 : kMipLevels - 1);
   };
@@ -709,24 +739,23 @@ void Replicator::send_ready() {
     if (req.intent == Intent::kClaim) {
       auto c = claims_.find(cp);
       if (c != claims_.end()) {
-        const Held claim = c->second;
+        const Holding claim = c->second;
         claims_.erase(c);
         // Same revision means same voxels: revisions of a stored chunk only
         // grow, and a never-stored chunk (revision 0) is what the generator
         // makes.
-        if (claim.revision == v->revision() && (claim.level == kHeldEmpty) == v->empty()) {
+        if (claim.revision == v->revision() && (claim.form == HoldingForm::kEmpty) == v->empty()) {
           hold(cp, claim, v);
           counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
           continue;
         }
       }
       send_chunk(*v, kMipLevels - 1);
-      hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : kMipLevels - 1), v->revision(), v->estimate()},
-           v);
+      hold(cp, Holding{form_sent(*v, kMipLevels - 1), v->revision()}, v);
       continue;
     }
     send_chunk(*v, req.level);
-    hold(cp, Held{static_cast<std::uint8_t>(v->empty() ? kHeldEmpty : req.level), v->revision(), v->estimate()}, v);
+    hold(cp, Holding{form_sent(*v, req.level), v->revision()}, v);
   }
   if (!ready_.empty()) arm_timer();
 }
@@ -747,14 +776,14 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
   (level == 0 ? counters_.chunks_sent : counters_.mips_sent).fetch_add(1, std::memory_order_relaxed);
 }
 
-void Replicator::hold(Vec3i cp, Held h, const VersionPtr& v) {
+void Replicator::hold(Vec3i cp, Holding h, const VersionPtr& v) {
   held_[cp] = h;
   horizon_.erase(cp);
-  if (h.level == 0) {
+  if (h.form == HoldingForm::kFull) {
     if (full_.insert_or_assign(cp, v).second) hash_order_.push_back(cp);
   } else {
     full_.erase(cp);
-    if (h.level != kHeldEmpty && desired(cp) < h.level) push_refine(cp);
+    if (h.form != HoldingForm::kEmpty && desired(cp) < h.level()) push_refine(cp);
   }
   // Hash requests waiting for this chunk.
   if (!hash_requests_.empty()) {
@@ -793,10 +822,10 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     }
     auto it = held_.find(cp);
     if (it == held_.end()) continue;
-    Held& h = it->second;
+    Holding& h = it->second;
     // Gathered news may be older than a grant since (refresh_mip checks
     // the levels it refreshes).
-    if (mips_due && v->revision() <= h.revision && (h.level == 0 || h.level == kHeldEmpty)) continue;
+    if (mips_due && v->revision() <= h.revision && h.full_resolution()) continue;
     const bool near = desired(cp) == 0;
     // A tick's units change the version before it (revision - 1): they are
     // sent only to a client holding exactly that. Anything else is sent
@@ -805,13 +834,14 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     // chunk held Empty with a change parked in mip_dirty_ was one, before
     // moves sent those whole: send_parked_near).
     const bool holds_base = v->changed_units().any() && h.revision + 1 == v->revision();
-    if ((h.level == 0 || (h.level == kHeldEmpty && near)) && !holds_base) {
+    const bool full = h.form == HoldingForm::kFull || (h.form == HoldingForm::kEmpty && near);
+    if (full && !holds_base) {
       flush_stream();
       send_whole(cp, v);
       continue;
     }
-    if (h.level == 0 || (h.level == kHeldEmpty && near)) {
-      h = Held{0, v->revision()};
+    if (full) {
+      h = Holding{HoldingForm::kFull, v->revision()};
       if (v->empty()) {
         full_.erase(cp);
       } else if (full_.insert_or_assign(cp, v).second) {
@@ -897,28 +927,28 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
 void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
   auto it = held_.find(cp);
   if (it == held_.end()) return;
-  Held& h = it->second;
-  if (h.level == 0 || v->estimate()) return;
+  Holding& h = it->second;
+  if (h.form == HoldingForm::kFull || v->estimate()) return;
   // Refined since, with newer data (an estimate is replaced by the chunk's
   // mip at the same revision: the world tells only when the two differ).
-  if (h.revision >= v->revision() && !h.estimate) return;
+  if (h.revision >= v->revision() && h.form != HoldingForm::kEstimate) return;
   if (v->empty()) {
     // Sent even to a holder of Empty: its revision must move on too (a
     // chunk changed and emptied again between two flushes of mips looks
     // unchanged to it, and its hash would never match again).
     stream(StreamRecordKind::kEmpty, cp, v->revision());
-    h = Held{kHeldEmpty, v->revision()};
+    h = Holding{HoldingForm::kEmpty, v->revision()};
     return;
   }
-  const int level = h.level == kHeldEmpty ? kMipLevels - 1 : h.level;
-  if (h.level != kHeldEmpty && !h.estimate && v->level_since(level) <= h.revision) {
+  const int level = h.form == HoldingForm::kEmpty ? kMipLevels - 1 : h.level();
+  if (h.mip() && v->level_since(level) <= h.revision) {
     // The level held did not change: nothing to tell the client.
     counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
     return;
   }
   stream(record_kind(level), cp, v->revision(), v->encoded(level));
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
-  h = Held{static_cast<std::uint8_t>(level), v->revision()};
+  h = Holding{mip_form(level), v->revision()};
   if (desired(cp) < level) push_refine(cp);
 }
 
@@ -1026,7 +1056,7 @@ void Replicator::on_timer() {
       }
       ++hash_cursor_;
       flush_stream();
-      session_->send(build_region_hash(RegionHashMsg{cp, it->second->revision(), it->second->hash()}));
+      session_->send(build_chunk_hash(ChunkHashMsg{cp, it->second->revision(), it->second->hash()}));
       counters_.hashes_pushed.fetch_add(1, std::memory_order_relaxed);
       break;
     }

@@ -3,7 +3,7 @@
 // ViewTable moved to the client's chunk, updated by the shells a move
 // changes), the chunks held and the level and revision of each, the queue
 // of chunks to refine, outstanding requests to the world, claims of a
-// resuming client, the outbound budget and pushed region hashes.
+// resuming client, the outbound budget and pushed chunk hashes.
 //
 // Streaming. First, for a new plan, every region of the view that has
 // chunks the client knows nothing of, as one horizon image each (2^3 per
@@ -73,15 +73,6 @@ struct WelcomeTemplate {
 
 class Replicator : public WorldClient, public std::enable_shared_from_this<Replicator> {
  public:
-  // What one chunk held by the client is: its level in Holdings' terms
-  // (0 full, 1..3 mip, kHeldEmpty all Air) and the revision sent.
-  struct Held {
-    std::uint8_t level = kHeldEmpty;
-    std::uint64_t revision = 0;
-    // Level 3 sent as an Estimate record (ChunkVersion::estimate): the
-    // chunk's exact mip replaces it, whatever the revisions say.
-    bool estimate = false;
-  };
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;
   // A chunk held is released when it is more than this beyond the view
@@ -165,6 +156,9 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // Asks the world for the horizon images of the new plan's regions.
   void plan_horizon();
   void on_horizons(std::vector<HorizonPtr> images);
+  // One image as a Horizon record, for the chunks of its region in view
+  // that the client has nothing of.
+  void send_horizon(const HorizonImage& image);
   void move_by(Vec3i d);
   void release_outside_view();
   // A chunk leaving the view: released on both sides (its claim, what is
@@ -203,7 +197,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void request_more();
   void send_ready();
   void send_chunk(const ChunkVersion& v, int level);
-  void hold(Vec3i chunk_pos, Held h, const VersionPtr& v);
+  void hold(Vec3i chunk_pos, Holding h, const VersionPtr& v);
   void refresh_mip(Vec3i chunk_pos, const VersionPtr& v);
   void flush_mips();
   // Flushes the refreshes of mips once due, unless streaming yields (then
@@ -278,16 +272,23 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   std::vector<RefineEntry> refine_;
   bool refine_stale_ = false;
 
-  Vec3iMap<Held> held_;
+  // What the client holds of each chunk sent to it (its own record: an
+  // Estimate's is replaced by the chunk's exact mip whatever the revisions
+  // say).
+  Vec3iMap<Holding> held_;
   // Regions of this plan whose horizon images were asked for, with the
   // level of each (an image of a region not listed, or at another level,
   // answers an earlier plan: dropped); streaming's first pass waits until
   // none is.
   Vec3iMap<std::uint8_t> horizon_wanted_;
+  // The same regions in the order they are sent (nearest first), and the
+  // images that came before their turn.
+  std::deque<Vec3i> horizon_order_;
+  Vec3iMap<HorizonPtr> horizon_early_;
   // Chunks the client has only from a horizon image (not held: no record
   // of their own sent yet), with its level. Released when they leave the view.
   Vec3iMap<std::uint8_t> horizon_;
-  // Versions of chunks held at full resolution (region hashes, pushed and
+  // Versions of chunks held at full resolution (chunk hashes, pushed and
   // answered here).
   Vec3iMap<VersionPtr> full_;
   std::vector<Vec3i> hash_order_;
@@ -296,7 +297,7 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // Granted, not yet sent (the window or budget was full), oldest first.
   std::deque<Vec3i> ready_;
   Vec3iMap<VersionPtr> ready_versions_;
-  Vec3iMap<Held> claims_;
+  Vec3iMap<Holding> claims_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
   StreamBatchWriter batch_;
   // Changed chunks held coarser than full resolution, newest version each,

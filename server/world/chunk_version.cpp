@@ -142,7 +142,7 @@ const UpdatePiece& ChunkVersion::update_piece() const {
 }
 
 std::uint64_t ChunkVersion::hash() const {
-  std::call_once(hash_once_, [&] { hash_ = region_hash(chunk_.get(), revision_); });
+  std::call_once(hash_once_, [&] { hash_ = chunk_hash(chunk_.get(), revision_); });
   return hash_;
 }
 

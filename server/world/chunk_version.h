@@ -1,7 +1,7 @@
 // ChunkVersion: one revision of one chunk, immutable once published, shared
 // by every reader (replicators on their session strands, the storage writer,
 // the world). What readers derive from it — the encoding of each level, the
-// tick's 4^3 update units, the region hash, the stored blob — is computed
+// tick's 4^3 update units, the chunk hash, the stored blob — is computed
 // once, lazily, by whichever thread asks first, and then shared.
 //
 // A null chunk is all Air. changed_units names the 4^3 units the tick that
@@ -86,7 +86,7 @@ class ChunkVersion {
   // The changed units as one update piece (precondition: changed_units()
   // is not empty).
   const UpdatePiece& update_piece() const;
-  // protocol/messages.h region_hash of this chunk and revision.
+  // protocol/messages.h chunk_hash of this chunk and revision.
   std::uint64_t hash() const;
   // The world store's blob (byte RLE + LZ4).
   std::span<const std::uint8_t> blob() const;

@@ -521,7 +521,7 @@ void WorldOwner::retry_pending() {
       continue;
     }
     const VersionPtr& v = loaded_.at(cp).published;
-    it->second.link->send(std::make_shared<const Frame>(build_region_hash(RegionHashMsg{cp, v->revision(), v->hash()})),
+    it->second.link->send(std::make_shared<const Frame>(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()})),
                           SendClass::kData);
   }
   hashes_.resize(kept);
@@ -1034,7 +1034,7 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     // Publish, then tell each holder once about all of its changed chunks,
     // then acknowledge: on a client's strand the news is handled before the
     // ack is queued, so whatever the client asks after reading its ack (a
-    // region hash, a read) is answered from the new versions.
+    // chunk hash, a read) is answered from the new versions.
     // Holders at full resolution hear of every tick; the others' news is
     // gathered and handed over every mip_refresh_ms (deliver_mip_news).
     publish(tick, versions, t0);

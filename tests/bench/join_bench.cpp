@@ -72,7 +72,7 @@ JoinResult join_once(std::uint16_t port, int view, int full) {
   const bool coarse = c.wait_until(
       [&](const ClientView& v) {
         for (const Vec3i cp : in_view)
-          if (v.replica.coverage(cp) == nullptr) return v.closed;
+          if (v.replica.holding(cp) == nullptr) return v.closed;
         r.coarse_bytes = v.counters.bytes_in;
         return true;
       },
@@ -81,8 +81,8 @@ JoinResult join_once(std::uint16_t port, int view, int full) {
   const bool done = c.wait_until(
       [&](const ClientView& v) {
         for (const Vec3i cp : near) {
-          const ChunkCoverage* cov = v.replica.coverage(cp);
-          if (cov == nullptr || cov->state == CoverageState::kMip) return v.closed;
+          const Holding* cov = v.replica.holding(cp);
+          if (cov == nullptr || !cov->full_resolution()) return v.closed;
         }
         r.full_bytes = v.counters.bytes_in;
         return true;
@@ -183,18 +183,18 @@ RegionCost region_cost(const fs::path& world_dir, const std::vector<Vec3i>& chun
   RegionCost c;
   auto world = World::open(world_dir.string());
   if (!world) return c;
-  Box box({kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+  Box box({kFullRecordUnit, kFullRecordUnit, kFullRecordUnit});
   std::vector<std::uint8_t> bytes, section, z;
   for (const Vec3i cp : chunks) {
     auto stored = (*world)->load_chunk(cp);
     if (!stored || stored->chunk.empty()) continue;
     for (int i = 0; i < 8; ++i) {
       const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-      stored->chunk.read_box(u * kChunkDataUnit, box, Vec3i{0, 0, 0},
-                             Vec3i{kChunkDataUnit, kChunkDataUnit, kChunkDataUnit});
+      stored->chunk.read_box(u * kFullRecordUnit, box, Vec3i{0, 0, 0},
+                             Vec3i{kFullRecordUnit, kFullRecordUnit, kFullRecordUnit});
       for (const Voxel v : box.voxels()) c.non_empty += v.material != kAir;
       bytes.clear();
-      net_codec_encode(kChunkDataUnit, box.voxels(), bytes);
+      net_codec_encode(kFullRecordUnit, box.voxels(), bytes);
       c.codec_bytes += bytes.size();
       paletted_section(box.voxels(), section);
       uLongf n = compressBound(static_cast<uLong>(section.size()));

@@ -154,7 +154,7 @@ TEST_F(AdminToolTest, ShutdownWithoutRestartEndsTheLibrarysSession) {
 // A griefer's 200 edits among a builder's, some before and some after his:
 // the rollback restores exactly the voxels the griefer changed and nobody
 // changed since, and a third client's replica agrees with the server's
-// region hashes afterwards.
+// chunk hashes afterwards.
 TEST_F(AdminToolTest, RollbackRestoresExactlyTheGriefersVoxels) {
   start_server(0, {"--edits-per-second", "1000"});
   auto join = [&](const std::string& name) {
@@ -170,8 +170,8 @@ TEST_F(AdminToolTest, RollbackRestoresExactlyTheGriefersVoxels) {
     EXPECT_TRUE(c->wait_until(
         [&](const ClientView& v) {
           for (const Vec3i cp : near) {
-            const ChunkCoverage* cov = v.replica.coverage(cp);
-            if (cov == nullptr || cov->state == CoverageState::kMip) return v.closed;
+            const Holding* cov = v.replica.holding(cp);
+            if (cov == nullptr || !cov->full_resolution()) return v.closed;
           }
           return true;
         },
@@ -257,10 +257,10 @@ TEST_F(AdminToolTest, RollbackRestoresExactlyTheGriefersVoxels) {
     return true;
   };
   ASSERT_TRUE(watcher->wait_until([&](const ClientView& v) { return v.closed || replica_matches(v); }, kDeadline));
-  // And the server agrees: every chunk of the area, by region hash.
+  // And the server agrees: every chunk of the area, by chunk hash.
   std::vector<Vec3i> chunks;
   for_each_chunk_in(area, [&](Vec3i cp) { chunks.push_back(cp); });
-  for (const Vec3i cp : chunks) ASSERT_TRUE(watcher->request_region_hash(cp));
+  for (const Vec3i cp : chunks) ASSERT_TRUE(watcher->request_chunk_hash(cp));
   ASSERT_TRUE(watcher->wait_until(
       [&](const ClientView& v) {
         for (const Vec3i cp : chunks)

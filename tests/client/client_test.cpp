@@ -80,8 +80,8 @@ using testing_support::chunks_within;
 
 bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks) {
-    const ChunkCoverage* c = r.coverage(cp);
-    if (c == nullptr || c->state == CoverageState::kMip) return false;
+    const Holding* c = r.holding(cp);
+    if (c == nullptr || !c->full_resolution()) return false;
   }
   return true;
 }
@@ -92,7 +92,7 @@ bool checked_all(const ClientView& v, const std::vector<Vec3i>& chunks) {
 
 bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks)
-    if (r.coverage(cp) == nullptr) return false;
+    if (r.holding(cp) == nullptr) return false;
   return true;
 }
 
@@ -100,9 +100,9 @@ bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
 // (Empty counts as full resolution anywhere).
 bool all_at_desired_level(const Replica& r, const std::vector<Vec3i>& chunks, Vec3f p, std::int32_t full_radius) {
   for (const Vec3i cp : chunks) {
-    const ChunkCoverage* c = r.coverage(cp);
+    const Holding* c = r.holding(cp);
     if (c == nullptr) return false;
-    if (c->state == CoverageState::kMip && c->level != desired_level(p, cp, full_radius)) return false;
+    if (!c->full_resolution() && c->level() != desired_level(p, cp, full_radius)) return false;
   }
   return true;
 }
@@ -193,8 +193,8 @@ TEST_F(ClientServerTest, FullResolutionReplicaEqualsServerWorld) {
   const auto near = wait_full_res(c, 32);
   ASSERT_FALSE(near.empty());
   ASSERT_FALSE(c.closed()) << c.disconnect_reason();
-  // Region hashes agree too.
-  for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+  // Chunk hashes agree too.
+  for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
   ASSERT_TRUE(c.wait_until(
       [&](const ClientView& v) { return v.closed || v.hash_checks.size() == near.size(); }, kDeadline));
   EXPECT_EQ(c.counters().hash_matches, near.size());
@@ -229,9 +229,9 @@ TEST_F(ClientServerTest, EstimatedMipsAreReplacedByTheChunksOwnOnlyWhereTheyDiff
   }
   const auto replaced = [&](const Replica& r) {
     for (const Vec3i cp : view) {
-      const ChunkCoverage* cov = r.coverage(cp);
+      const Holding* cov = r.holding(cp);
       if (cov == nullptr) return false;
-      if (cov->state != CoverageState::kMip || cov->level != kMipLevels - 1) continue;
+      if (cov->full_resolution() || cov->level() != kMipLevels - 1) continue;
       Box held;
       if (!r.read_mip(cp, held) ||
           !std::equal(held.voxels().begin(), held.voxels().end(), exact[cp].begin(), exact[cp].end()))
@@ -252,14 +252,14 @@ TEST_F(ClientServerTest, EstimatedMipsAreReplacedByTheChunksOwnOnlyWhereTheyDiff
     EXPECT_EQ(r.redundant_mips(), 0u);
   });
   // Full resolution, where the client is and where it moves, passes the
-  // region hashes (estimates never reach full resolution).
+  // chunk hashes (estimates never reach full resolution).
   const Vec3f far{w->spawn.x + 150.0f, w->spawn.y, w->spawn.z};
   ASSERT_TRUE(c.set_state(ClientStateMsg{far, 192, 32}));
   const auto there = chunks_within(far, 32, *w);
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, there); }, 60s));
   std::vector<Vec3i> checked = near;
   checked.insert(checked.end(), there.begin(), there.end());
-  for (const Vec3i cp : checked) ASSERT_TRUE(c.request_region_hash(cp));
+  for (const Vec3i cp : checked) ASSERT_TRUE(c.request_chunk_hash(cp));
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, checked); }, kDeadline));
   EXPECT_EQ(c.counters().hash_mismatches, 0u);
   c.disconnect();
@@ -271,15 +271,14 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   start_server({"--no-horizon-images"});
   struct Event {
     Vec3i chunk;
-    wire::CoverageKind kind;
-    int level;
+    std::optional<Holding> now;
   };
   std::mutex mu;
   std::vector<Event> events;
   ClientCallbacks cb;
-  cb.on_coverage = [&](Vec3i p, wire::CoverageKind k, int l) {
+  cb.on_holding = [&](Vec3i p, const Holding* now) {
     std::lock_guard lock(mu);
-    events.push_back({p, k, l});
+    events.push_back({p, now ? std::optional<Holding>(*now) : std::nullopt});
   };
   Client c(options("mips", 96, 32), cb);
   std::string err;
@@ -297,11 +296,12 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   std::size_t first_full = events.size();
   for (std::size_t i = 0; i < events.size(); ++i) {
     const Event& e = events[i];
-    if (e.kind == wire::CoverageKind::Full) {
+    if (!e.now) continue;  // released
+    if (e.now->form == HoldingForm::kFull) {
       first_full = std::min(first_full, i);
       continue;
     }
-    const bool is_coarse = e.kind == wire::CoverageKind::Empty || (e.kind == wire::CoverageKind::Mip && e.level == 3);
+    const bool is_coarse = e.now->form == HoldingForm::kEmpty || e.now->level() == 3;
     // (A later coarse record is a refresh: an estimate corrected.)
     if (is_coarse && coarse.insert({e.chunk.x, e.chunk.y, e.chunk.z}).second) {
       EXPECT_LT(i, first_full) << "coarse coverage after the first full chunk";
@@ -314,8 +314,8 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   c.with_replica([&](const Replica& r) {
     for (const Vec3i cp : view) {
       if (within(w->spawn, cp, 64)) continue;
-      const ChunkCoverage* cov = r.coverage(cp);
-      EXPECT_TRUE(cov != nullptr && cov->state != CoverageState::kFull);
+      const Holding* cov = r.holding(cp);
+      EXPECT_TRUE(cov != nullptr && cov->form != HoldingForm::kFull);
     }
     return 0;
   });
@@ -361,7 +361,7 @@ TEST_F(ClientServerTest, EveryEditKindReplicatesExactly) {
   std::vector<Vec3i> touched;
   for_each_chunk_in(Region{bc - Vec3i{12, 12, 12}, bc + Vec3i{12, 12, 12}}, [&](Vec3i cp) { touched.push_back(cp); });
   for (Client* cl : {&a, &b}) {
-    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_region_hash(cp));
+    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_chunk_hash(cp));
     ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return checked_all(v, touched); }, kDeadline));
     EXPECT_EQ(cl->counters().hash_mismatches, 0u);
   }
@@ -422,13 +422,13 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
   EXPECT_EQ(b.wait_until([&](const ClientView& v) { return v.replica.get(c).material == materials::kBrick; }, kDeadline),
             true);
   EXPECT_TRUE(b.wait_until([&](const ClientView& v) { return v.replica.get(corner).material == kAir; }, kDeadline));
-  // Region hashes are answered after every update queued before them: once
+  // Chunk hashes are answered after every update queued before them: once
   // both clients verified the touched chunks, both replicas are current.
   const Region area{c - Vec3i{8, 8, 8}, corner + Vec3i{8, 8, 8}};
   std::vector<Vec3i> touched;
   for_each_chunk_in(area, [&](Vec3i cp) { touched.push_back(cp); });
   for (Client* cl : {&a, &b}) {
-    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_region_hash(cp));
+    for (const Vec3i cp : touched) ASSERT_TRUE(cl->request_chunk_hash(cp));
     ASSERT_TRUE(cl->wait_until([&](const ClientView& v) { return checked_all(v, touched); }, kDeadline));
     EXPECT_EQ(cl->counters().hash_mismatches, 0u);
   }
@@ -443,7 +443,7 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
   expect_replica_matches_world(b, near_b, dir_.string());
 }
 
-TEST_F(ClientServerTest, DroppedUpdateIsDetectedByRegionHash) {
+TEST_F(ClientServerTest, DroppedUpdateIsDetectedByChunkHash) {
   start_server({"--test-drop-updates", "1", "--hash-push-ms", "0"});
   Client a(options("a"));
   std::string err;
@@ -456,7 +456,7 @@ TEST_F(ClientServerTest, DroppedUpdateIsDetectedByRegionHash) {
   const std::uint32_t id = a.fill_box(Region{p, p + Vec3i{2, 2, 2}}, solid(materials::kSnow));
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
   const Vec3i cp = chunk_of(p);
-  ASSERT_TRUE(a.request_region_hash(cp));
+  ASSERT_TRUE(a.request_chunk_hash(cp));
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.hash_checks.count(cp) != 0; }, kDeadline));
   EXPECT_EQ(a.counters().hash_mismatches, 1u);
   EXPECT_EQ(a.counters().update_batches, 0u);
@@ -483,7 +483,7 @@ TEST_F(ClientServerTest, MalformedFramesDisconnectOnlyTheirSender) {
     ASSERT_TRUE(c->wait_until([](const ClientView& v) { return v.closed; }, kDeadline));
   EXPECT_NE(garbage.disconnect_reason().find("protocol error"), std::string::npos) << garbage.disconnect_reason();
   EXPECT_NE(huge.disconnect_reason().find("protocol error"), std::string::npos) << huge.disconnect_reason();
-  EXPECT_NE(wrong_version.disconnect_reason().find("protocol version mismatch"), std::string::npos)
+  EXPECT_NE(wrong_version.disconnect_reason().find("is not supported: this server speaks version 2"), std::string::npos)
       << wrong_version.disconnect_reason();
   // The good client is still served.
   ASSERT_TRUE(good.ping(7));
@@ -534,7 +534,7 @@ TEST_F(ClientServerTest, ClientThatStopsReadingIsDroppedWithoutStallingOthers) {
   EXPECT_FALSE(good.closed());
 }
 
-TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByRegionHash) {
+TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByChunkHash) {
   start_server({"--test-corrupt-updates", "1", "--hash-push-ms", "0"});
   Client a(options("a"));
   std::string err;
@@ -547,13 +547,13 @@ TEST_F(ClientServerTest, CorruptedUpdateIsDetectedByRegionHash) {
   const std::uint32_t id = a.fill_box(Region{p, p + Vec3i{2, 2, 2}}, solid(materials::kSnow));
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
   const Vec3i cp = chunk_of(p);
-  ASSERT_TRUE(a.request_region_hash(cp));
+  ASSERT_TRUE(a.request_chunk_hash(cp));
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.hash_checks.count(cp) != 0; }, kDeadline));
   EXPECT_EQ(a.counters().update_batches, 1u);  // the batch arrived and decoded fine
   EXPECT_EQ(a.counters().hash_mismatches, 1u);
 }
 
-TEST_F(ClientServerTest, PushedRegionHashesCatchACorruptedUpdateUnasked) {
+TEST_F(ClientServerTest, PushedChunkHashesCatchACorruptedUpdateUnasked) {
   start_server({"--test-corrupt-updates", "1", "--hash-push-ms", "50"});
   std::vector<Vec3i> bad;
   std::mutex m;
@@ -617,7 +617,7 @@ TEST_F(ClientServerTest, ClientReconnectsAfterARestartAndResumesItsReplica) {
   ASSERT_FALSE(c.closed()) << c.disconnect_reason();
   // Verified after the restart: every full-resolution chunk matches.
   ASSERT_TRUE(c.wait_until([&](const ClientView&) { return back.load() == 1; }, kDeadline));
-  for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+  for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, near); }, kDeadline));
   EXPECT_EQ(c.counters().hash_mismatches, 0u);
   // Nothing was streamed again: the second connection cost a small
@@ -646,7 +646,7 @@ TEST_F(ClientServerTest, MovingReleasesOldChunksAndStreamsNewOnes) {
   ASSERT_TRUE(c.wait_until(
       [&](const ClientView& v) {
         for (const Vec3i cp : old_near)
-          if (v.replica.coverage(cp) != nullptr) return v.closed;
+          if (v.replica.holding(cp) != nullptr) return v.closed;
         return v.closed || all_full(v.replica, new_near);
       },
       kDeadline));
@@ -665,8 +665,8 @@ std::optional<Vec3i> sky_above_spawn(Client& c) {
   const Vec3i target = view_chunk(w->spawn) + Vec3i{0, 2, 0};
   const bool sky = c.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return v.closed || (cov != nullptr && cov->state == CoverageState::kEmpty);
+        const Holding* cov = v.replica.holding(target);
+        return v.closed || (cov != nullptr && cov->form == HoldingForm::kEmpty);
       },
       kDeadline);
   if (!sky || c.closed()) return std::nullopt;
@@ -679,8 +679,8 @@ std::optional<std::uint64_t> held_empty_revision(Client& c, Vec3i chunk_pos) {
   std::uint64_t revision = 0;
   const bool held = c.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(chunk_pos);
-        if (cov == nullptr || cov->state != CoverageState::kEmpty || cov->estimate) return v.closed;
+        const Holding* cov = v.replica.holding(chunk_pos);
+        if (cov == nullptr || cov->form != HoldingForm::kEmpty) return v.closed;
         revision = cov->revision;
         return true;
       },
@@ -715,7 +715,7 @@ TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreSt
   ASSERT_TRUE(w.has_value());
   // Refinement under way: some chunk is at full resolution already.
   ASSERT_TRUE(c.wait_until(
-      [](const ClientView& v) { return v.closed || v.replica.chunk_count(CoverageState::kFull) > 0; }, kDeadline));
+      [](const ClientView& v) { return v.closed || v.replica.chunk_count(HoldingForm::kFull) > 0; }, kDeadline));
   const Vec3f away{w->spawn.x + 1024.0f, w->spawn.y, w->spawn.z};
   ASSERT_TRUE(c.set_state(ClientStateMsg{away, 48, 16}));
   ASSERT_TRUE(c.set_state(ClientStateMsg{w->spawn, 48, 16}));
@@ -725,7 +725,7 @@ TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreSt
   EXPECT_FALSE(c.closed()) << c.disconnect_reason();
   std::size_t missing = 0;
   c.with_replica([&](const Replica& r) {
-    for (const Vec3i cp : view) missing += r.coverage(cp) == nullptr ? 1 : 0;
+    for (const Vec3i cp : view) missing += r.holding(cp) == nullptr ? 1 : 0;
   });
   EXPECT_EQ(missing, 0u) << "chunks of the view never sent";
 }
@@ -733,7 +733,7 @@ TEST_F(ClientServerTest, ChunksThatLeaveTheViewAndComeBackBeforeTheyAreSentAreSt
 // Chunks the replica has only from a horizon image.
 std::size_t horizon_only(const Replica& r) {
   std::size_t n = 0;
-  r.for_each_coverage([&](Vec3i, const ChunkCoverage& c) { n += c.state == CoverageState::kMip && c.level > 3; });
+  r.for_each_holding([&](Vec3i, const Holding& c) { n += c.horizon(); });
   return n;
 }
 
@@ -742,10 +742,10 @@ TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOw
   std::mutex mu;
   std::vector<std::pair<Vec3i, int>> events;  // (chunk, level: 0 Full or Empty, 1..5 a mip)
   ClientCallbacks cb;
-  cb.on_coverage = [&](Vec3i p, wire::CoverageKind k, int l) {
-    if (k == wire::CoverageKind::Released) return;
+  cb.on_holding = [&](Vec3i p, const Holding* now) {
+    if (now == nullptr) return;  // released
     std::lock_guard lock(mu);
-    events.emplace_back(p, k == wire::CoverageKind::Mip ? l : 0);
+    events.emplace_back(p, now->level());
   };
   // View 320 / 32: regions at 2^3 per chunk within 80 voxels, 1 voxel per
   // chunk beyond.
@@ -803,7 +803,7 @@ TEST_F(ClientServerTest, ChunksSeenOnlyThroughAHorizonImageAreReleasedWhenTheyLe
   ASSERT_TRUE(c.set_state(ClientStateMsg{away, 320, 32}));
   const auto outside = [&](const Replica& r) {
     std::size_t n = 0;
-    r.for_each_coverage([&](Vec3i cp, const ChunkCoverage&) { n += within(away, cp, 320) ? 0 : 1; });
+    r.for_each_holding([&](Vec3i cp, const Holding&) { n += within(away, cp, 320) ? 0 : 1; });
     return n;
   };
   EXPECT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || outside(v.replica) == 0; }, kDeadline))
@@ -838,14 +838,14 @@ TEST_F(ClientServerTest, AFarHolderOfAnEmptyChunkLearnsItsNewRevisionWhenItIsEmp
   const std::uint64_t server_revision = before + 2;
   ASSERT_TRUE(a.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(*target);
+        const Holding* cov = v.replica.holding(*target);
         return cov != nullptr && cov->revision == server_revision;
       },
       kDeadline));
   EXPECT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(*target);
-        return cov != nullptr && cov->state == CoverageState::kEmpty && cov->revision == server_revision;
+        const Holding* cov = v.replica.holding(*target);
+        return cov != nullptr && cov->form == HoldingForm::kEmpty && cov->revision == server_revision;
       },
       kDeadline))
       << "the far client's revision stays behind the server's " << server_revision;
@@ -886,8 +886,8 @@ TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItComesNe
   ASSERT_FALSE(b.closed()) << b.disconnect_reason();
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return v.closed || (cov != nullptr && cov->state == CoverageState::kFull && cov->revision == before + 1);
+        const Holding* cov = v.replica.holding(target);
+        return v.closed || (cov != nullptr && cov->form == HoldingForm::kFull && cov->revision == before + 1);
       },
       kDeadline))
       << "the first fill did not reach the client that came near before the next flush of mips";
@@ -895,15 +895,15 @@ TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItComesNe
   ASSERT_TRUE(edit(second, solid(materials::kBrick)));
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return v.closed || (cov != nullptr && cov->state == CoverageState::kFull && cov->revision == before + 2);
+        const Holding* cov = v.replica.holding(target);
+        return v.closed || (cov != nullptr && cov->form == HoldingForm::kFull && cov->revision == before + 2);
       },
       kDeadline));
   ASSERT_FALSE(b.closed()) << b.disconnect_reason();
   EXPECT_EQ(b.with_replica([&](const Replica& r) { return r.get(o + Vec3i{3, 3, 3}); }).material, materials::kBasalt)
       << "the first fill is missing from the far client's replica";
   EXPECT_EQ(b.with_replica([&](const Replica& r) { return r.get(o + Vec3i{21, 21, 21}); }).material, materials::kBrick);
-  ASSERT_TRUE(b.request_region_hash(target));
+  ASSERT_TRUE(b.request_chunk_hash(target));
   ASSERT_TRUE(b.wait_until([&](const ClientView& v) { return checked_all(v, {target}); }, kDeadline));
   EXPECT_EQ(b.counters().hash_mismatches, 0u);
 }
@@ -928,8 +928,8 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   std::uint64_t before = 0;
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        if (cov == nullptr || cov->state != CoverageState::kMip) return false;
+        const Holding* cov = v.replica.holding(target);
+        if (cov == nullptr || cov->full_resolution()) return false;
         before = cov->revision;
         return true;
       },
@@ -938,8 +938,8 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
-        const ChunkCoverage* cov = v.replica.coverage(target);
-        return cov != nullptr && cov->state == CoverageState::kMip && cov->revision > before;
+        const Holding* cov = v.replica.holding(target);
+        return cov != nullptr && !cov->full_resolution() && cov->revision > before;
       },
       kDeadline));
   EXPECT_EQ(b.counters().update_batches, 0u);  // a mip holder gets mips, not units
@@ -1013,7 +1013,7 @@ TEST_F(ClientServerTest, SharedIoContextServesManyClientsAndReportsUpdateBatches
     // Chunks stream in StreamBatch frames, eight 16^3 units per full chunk.
     const auto& stream = k.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)];
     EXPECT_GT(stream.frames_in, 0u);
-    EXPECT_EQ(k.chunk_units, 8 * k.coverage_full);
+    EXPECT_EQ(k.chunk_units, 8 * k.full_records);
     EXPECT_EQ(k.by_message_type[static_cast<std::size_t>(wire::Body::Hello)].frames_out, 1u);
     std::uint64_t in = 0, out = 0;
     for (const auto& t : k.by_message_type) in += t.bytes_in, out += t.bytes_out;

@@ -107,8 +107,8 @@ class ClusterTest : public testing_support::PostgresTest {
     return c.wait_until(
         [&](const ClientView& v) {
           return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) {
-                   const ChunkCoverage* cov = v.replica.coverage(cp);
-                   return cov != nullptr && cov->state != CoverageState::kMip;
+                   const Holding* cov = v.replica.holding(cp);
+                   return cov != nullptr && cov->full_resolution();
                  });
         },
         kDeadline);
@@ -160,7 +160,7 @@ class ClusterTest : public testing_support::PostgresTest {
     // answer (these servers push no hashes, so every answer was asked for).
     const ClientCounters before = c.counters();
     const std::uint64_t want = before.hash_matches + before.hash_mismatches + near.size();
-    for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+    for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
     ASSERT_TRUE(c.wait_until(
         [&](const ClientView& v) { return v.closed || v.counters.hash_matches + v.counters.hash_mismatches >= want; },
         kDeadline));
@@ -834,7 +834,7 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   // What ann holds when it leaves server 1, and the records it gets after.
   struct Seen {
     std::mutex m;
-    std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> held;
+    std::unordered_map<Vec3i, Holding, Vec3iHash> held;
     bool redirected = false;
     std::vector<std::string> resent;
     std::size_t records = 0;
@@ -846,9 +846,9 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   ClientCallbacks cb;
   cb.on_welcome = [seen](const WelcomeMsg& w) { seen->now_on = w.server_id; };
   cb.on_redirected = [&ann_ptr, seen](const RedirectMsg&) {
-    std::unordered_map<Vec3i, ChunkCoverage, Vec3iHash> held;
+    std::unordered_map<Vec3i, Holding, Vec3iHash> held;
     ann_ptr->with_replica([&](const Replica& r) {
-      r.for_each_coverage([&](Vec3i cp, const ChunkCoverage& c) { held[cp] = c; });
+      r.for_each_holding([&](Vec3i cp, const Holding& c) { held[cp] = c; });
     });
     const auto before = ann_ptr->counters().by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in;
     std::lock_guard lock(seen->m);
@@ -857,18 +857,18 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
     seen->redirected = true;
   };
   cb.on_reconnected = [&ann_ptr, seen] { seen->now_on = ann_ptr->welcome()->server_id; };
-  cb.on_coverage = [seen](Vec3i cp, wire::CoverageKind kind, int level) {
+  cb.on_holding = [seen](Vec3i cp, const Holding* now) {
     std::lock_guard lock(seen->m);
-    if (!seen->redirected || kind == wire::CoverageKind::Released) return;
+    if (!seen->redirected || now == nullptr) return;
     ++seen->records;
     auto it = seen->held.find(cp);
-    if (it == seen->held.end() || it->second.estimate || it->second.level >= kMipLevels) return;
-    const ChunkCoverage& had = it->second;
-    const bool again = (kind == wire::CoverageKind::Full && had.state == CoverageState::kFull) ||
-                       (kind == wire::CoverageKind::Empty && had.state == CoverageState::kEmpty) ||
-                       (kind == wire::CoverageKind::Mip && (had.state != CoverageState::kMip || had.level <= level));
+    if (it == seen->held.end() || !claimable(it->second.form)) return;
+    const Holding& had = it->second;
+    const bool again = (now->form == HoldingForm::kFull && had.form == HoldingForm::kFull) ||
+                       (now->form == HoldingForm::kEmpty && had.form == HoldingForm::kEmpty) ||
+                       (!now->full_resolution() && (had.full_resolution() || had.level() <= now->level()));
     if (again)
-      seen->resent.push_back(fmt::format("({},{},{}) kind {} level {}", cp.x, cp.y, cp.z, static_cast<int>(kind), level));
+      seen->resent.push_back(fmt::format("({},{},{}) {}", cp.x, cp.y, cp.z, form_name(now->form)));
   };
   Client ann(options(a, "ann"), cb);
   ann_ptr = &ann;
@@ -899,8 +899,8 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   auto whole_view = [](const std::vector<Vec3i>& chunks) {
     return [&chunks](const ClientView& v) {
       return v.closed || std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) {
-               const ChunkCoverage* c = v.replica.coverage(cp);
-               return c != nullptr && !c->estimate && c->level < kMipLevels;
+               const Holding* c = v.replica.holding(cp);
+               return c != nullptr && claimable(c->form);
              });
     };
   };
@@ -919,11 +919,11 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
   {
     std::lock_guard lock(seen->m);
     for (const Vec3i cp : testing_support::chunks_within(there, 64, w))
-      if (auto it = seen->held.find(cp); it != seen->held.end() && !it->second.estimate && it->second.level < kMipLevels)
+      if (auto it = seen->held.find(cp); it != seen->held.end() && claimable(it->second.form))
         kept.push_back(cp);
   }
   ASSERT_FALSE(kept.empty());
-  for (const Vec3i cp : kept) ASSERT_TRUE(ann.request_region_hash(cp));
+  for (const Vec3i cp : kept) ASSERT_TRUE(ann.request_chunk_hash(cp));
   ASSERT_TRUE(ann.wait_until(
       [&](const ClientView& v) {
         return v.closed || std::all_of(kept.begin(), kept.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
@@ -936,7 +936,7 @@ TEST_F(ClusterTest, AClientWalkingIntoAnotherServersRegionIsRedirectedAndNoChunk
     // mip holder's check never matches: it has no voxels to hash).
     std::size_t full = 0;
     for (const Vec3i cp : kept)
-      if (seen->held.at(cp).state != CoverageState::kMip) {
+      if (seen->held.at(cp).full_resolution()) {
         ++full;
         EXPECT_TRUE(ann.wait_until([&](const ClientView& v) { return v.hash_checks.at(cp); }, 0ms))
             << "chunk (" << cp.x << "," << cp.y << "," << cp.z << ") differs from server 2's";
@@ -1053,8 +1053,8 @@ TEST_F(ClusterTest, AClientThatCannotReachTheServerItIsRedirectedToGoesBackAndIs
       [&](const ClientView& v) {
         const auto view = testing_support::chunks_within(there, 20, w);
         return v.closed || std::all_of(view.begin(), view.end(), [&](Vec3i cp) {
-                 const ChunkCoverage* c = v.replica.coverage(cp);
-                 return c != nullptr && c->state != CoverageState::kMip;
+                 const Holding* c = v.replica.holding(cp);
+                 return c != nullptr && c->full_resolution();
                });
       },
       kDeadline));

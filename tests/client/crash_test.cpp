@@ -2,7 +2,7 @@
 // SIGKILL at seeded random moments while a client's edits are in flight, and
 // restarted on the same world, several times. Every edit the server
 // acknowledged must be there afterwards, on disk and in a fresh client's
-// replica, and that replica must agree with the server's region hashes.
+// replica, and that replica must agree with the server's chunk hashes.
 //
 // Each edit fills one voxel never edited before with a value that differs
 // from what the voxel held, so a lost edit cannot hide behind another edit
@@ -70,8 +70,8 @@ using testing_support::chunks_within;
 
 bool all_full(const Replica& r, const std::vector<Vec3i>& chunks) {
   return std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) {
-    const ChunkCoverage* c = r.coverage(cp);
-    return c != nullptr && c->state != CoverageState::kMip;
+    const Holding* c = r.holding(cp);
+    return c != nullptr && c->full_resolution();
   });
 }
 
@@ -186,7 +186,7 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
   }
 
   // The last restart: a fresh client sees every acknowledged edit, and its
-  // replica matches the server's region hashes.
+  // replica matches the server's chunk hashes.
   ServerProcess server(dir_.string(), {"--hash-push-ms", "0"});
   ASSERT_NE(server.port(), 0) << server.output();
   Client c(options(server.port()));
@@ -195,7 +195,7 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
   ASSERT_FALSE(near.empty()) << error << "\n" << server.output();
   std::size_t lost_replica = 0;
   for (const Edit& e : acked) lost_replica += c.get(e.voxel) != e.value;
-  for (const Vec3i cp : near) ASSERT_TRUE(c.request_region_hash(cp));
+  for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
   ASSERT_TRUE(c.wait_until(
       [&](const ClientView& v) {
         return v.closed || std::all_of(near.begin(), near.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
@@ -249,7 +249,7 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   std::printf(
       "crash test (seed %u): %d SIGKILLs, %zu edits sent, %zu acknowledged, %zu unanswered at the kills, %zu "
-      "rejected; lost: %zu on disk, %zu in the restarted replica; region hashes after the last restart: %llu "
+      "rejected; lost: %zu on disk, %zu in the restarted replica; chunk hashes after the last restart: %llu "
       "match, %llu mismatch (%zu chunks); %.1f s\n",
       kSeed, kills, sent_total, acked.size(), unanswered_total, rejected_total, lost_disk, lost_replica,
       static_cast<unsigned long long>(counters.hash_matches), static_cast<unsigned long long>(counters.hash_mismatches),

@@ -61,7 +61,7 @@ TEST(DecodedChunks, ASecondReplicaTakesTheChunkTheFirstPackedAndHoldsTheSameVoxe
   expect_holds(a, {2, 0, 3}, voxels);
   expect_holds(b, {2, 0, 3}, voxels);
   EXPECT_EQ(a.hash({2, 0, 3}), b.hash({2, 0, 3}));
-  EXPECT_EQ(b.hash({2, 0, 3}), region_hash(b.grid().find_chunk({2, 0, 3}), 5));
+  EXPECT_EQ(b.hash({2, 0, 3}), chunk_hash(b.grid().find_chunk({2, 0, 3}), 5));
   // Each holds its own copy: an edit of one is not seen by the other.
   b.apply_stream_record(StreamRecord{StreamRecordKind::kEmpty, {2, 0, 3}, 6, 0, nullptr, nullptr, {}});
   expect_holds(a, {2, 0, 3}, voxels);

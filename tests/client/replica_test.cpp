@@ -7,47 +7,57 @@
 namespace terrane {
 namespace {
 
-std::vector<std::uint8_t> encode_unit(int n, Voxel fill) {
-  std::vector<Voxel> v(static_cast<std::size_t>(n) * n * n, fill);
-  std::vector<std::uint8_t> out;
-  net_codec_encode(n, v, out);
-  return out;
+// A record without voxels (Empty, Released) of chunk cp.
+StreamRecord bare(StreamRecordKind kind, Vec3i cp, std::uint64_t revision) {
+  return StreamRecord{kind, cp, revision, 0, nullptr, nullptr, {}};
+}
+// A Full record of a chunk filled with one voxel value (box kept alive by
+// the caller).
+StreamRecord full_record(Vec3i cp, std::uint64_t revision, Box& box, Voxel fill) {
+  box.resize({kChunkSize, kChunkSize, kChunkSize});
+  box.fill(fill);
+  return StreamRecord{StreamRecordKind::kFull, cp, revision, 0, &box, nullptr, {}};
+}
+// A Mip record of a chunk at level (1..3) filled with one value.
+StreamRecord mip_record(Vec3i cp, std::uint64_t revision, int level, Box& box, Voxel fill) {
+  const int n = kChunkSize >> level;
+  box.resize({n, n, n});
+  box.fill(fill);
+  return StreamRecord{record_kind_of(mip_form(level)), cp, revision, level, &box, nullptr, {}};
 }
 
 TEST(Replica, UnknownIsNotAir) {
   Replica r;
   EXPECT_EQ(r.resolution_at({5, 5, 5}), kNoResolution);
-  EXPECT_EQ(r.coverage({0, 0, 0}), nullptr);
+  EXPECT_EQ(r.holding({0, 0, 0}), nullptr);
   EXPECT_FALSE(r.hash({0, 0, 0}).has_value());
-  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Empty, 0, 3});
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, {0, 0, 0}, 3));
+  EXPECT_EQ(*r.holding({0, 0, 0}), (Holding{HoldingForm::kEmpty, 3}));
   EXPECT_EQ(r.resolution_at({5, 5, 5}), 0);
-  EXPECT_EQ(r.hash({0, 0, 0}), region_hash(nullptr, 3));
+  EXPECT_EQ(r.hash({0, 0, 0}), chunk_hash(nullptr, 3));
 }
 
 TEST(Replica, MipThenFullThenReleased) {
   Replica r;
   const Vec3i cp{1, 0, -1};
-  const auto mip = encode_unit(4, solid(materials::kRock));
-  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 2, mip}).ok());
+  Box mip, whole;
+  r.apply_stream_record(mip_record(cp, 2, 3, mip, solid(materials::kRock)));
   const Vec3i inside = chunk_origin(cp) + Vec3i{9, 9, 9};
   EXPECT_EQ(r.resolution_at(inside), 3);
+  EXPECT_EQ(*r.holding(cp), (Holding{HoldingForm::kMip3, 2}));
   EXPECT_EQ(r.get(inside), solid(materials::kRock));
   EXPECT_FALSE(r.hash(cp).has_value());  // a mip cannot be verified
 
-  const auto unit = encode_unit(16, solid(materials::kSand));
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-    ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{cp * 2 + u, 2, unit}).ok());
-  }
-  EXPECT_EQ(r.resolution_at(inside), 3);  // still a mip until Full arrives
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, 2});
+  r.apply_stream_record(full_record(cp, 2, whole, solid(materials::kSand)));
   EXPECT_EQ(r.resolution_at(inside), 0);
+  EXPECT_EQ(*r.holding(cp), (Holding{HoldingForm::kFull, 2}));
   EXPECT_EQ(r.get(inside), solid(materials::kSand));
   Chunk expect(materials::kSand);
-  EXPECT_EQ(r.hash(cp), region_hash(&expect, 2));
+  EXPECT_EQ(r.hash(cp), chunk_hash(&expect, 2));
 
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, 2});
+  r.apply_stream_record(bare(StreamRecordKind::kReleased, cp, 2));
   EXPECT_EQ(r.resolution_at(inside), kNoResolution);
+  EXPECT_EQ(r.holding(cp), nullptr);
   EXPECT_EQ(r.grid().chunk_count(), 0u);
 }
 
@@ -60,16 +70,18 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
     for (int z = 0; z < 16; ++z)
       for (int x = 0; x < 16; ++x) image.set(x, y, z, solid(static_cast<Material>(1 + x)));
   const Vec3i held{1, 0, 0};
-  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{held, 3, 7, encode_unit(4, solid(materials::kSand))}).ok());
+  Box mip3;
+  r.apply_stream_record(mip_record(held, 7, 3, mip3, solid(materials::kSand)));
   HorizonMask mask{};
   mask[0] = 0b111;  // chunks x = 0, 1, 2 of y = z = 0
   std::vector<Vec3i> covered;
   r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &mask, {}}, covered);
   EXPECT_EQ(covered, (std::vector<Vec3i>{{0, 0, 0}, {2, 0, 0}})) << "the chunk held already is not covered";
-  EXPECT_EQ(r.coverage(held)->level, 3);
-  ASSERT_NE(r.coverage({2, 0, 0}), nullptr);
-  EXPECT_EQ(r.coverage({2, 0, 0})->level, kHorizonNearLevel);
-  EXPECT_EQ(r.coverage({3, 0, 0}), nullptr) << "outside the mask";
+  EXPECT_EQ(r.holding(held)->form, HoldingForm::kMip3);
+  ASSERT_NE(r.holding({2, 0, 0}), nullptr);
+  EXPECT_EQ(*r.holding({2, 0, 0}), (Holding{HoldingForm::kHorizon4, 0}));
+  EXPECT_EQ(r.holding({2, 0, 0})->level(), kHorizonNearLevel);
+  EXPECT_EQ(r.holding({3, 0, 0}), nullptr) << "outside the mask";
   EXPECT_EQ(r.get({70, 5, 5}), solid(5)) << "chunk 2's voxels are the image's columns 4 and 5";
   EXPECT_EQ(r.resolution_at({70, 5, 5}), kHorizonNearLevel);
   EXPECT_FALSE(r.hash({2, 0, 0}).has_value());
@@ -78,16 +90,17 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
   EXPECT_EQ(mip.size(), (Vec3i{2, 2, 2}));
   EXPECT_EQ(mip.get(1, 1, 1), solid(6));
   EXPECT_EQ(r.chunk_count(), 3u);
-  EXPECT_EQ(r.chunk_count(CoverageState::kMip), 3u);
+  EXPECT_EQ(r.chunk_count(HoldingForm::kHorizon4), 2u);
+  EXPECT_EQ(r.chunk_count(HoldingForm::kMip3), 1u);
   std::size_t seen = 0;
-  r.for_each_coverage([&](Vec3i, const ChunkCoverage&) { ++seen; });
+  r.for_each_holding([&](Vec3i, const Holding&) { ++seen; });
   EXPECT_EQ(seen, 3u);
   // A chunk's own record replaces the image; a release forgets it.
-  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Empty, 0, 4});
-  EXPECT_EQ(r.coverage({0, 0, 0})->state, CoverageState::kEmpty);
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, {0, 0, 0}, 4));
+  EXPECT_EQ(r.holding({0, 0, 0})->form, HoldingForm::kEmpty);
   EXPECT_EQ(r.get({5, 5, 5}), Voxel{});
-  r.apply_coverage(CoverageMsg{{2, 0, 0}, wire::CoverageKind::Released, 0, 0});
-  EXPECT_EQ(r.coverage({2, 0, 0}), nullptr);
+  r.apply_stream_record(bare(StreamRecordKind::kReleased, {2, 0, 0}, 0));
+  EXPECT_EQ(r.holding({2, 0, 0}), nullptr);
   EXPECT_EQ(r.chunk_count(), 2u);
   // A second image covers again only what has nothing.
   covered.clear();
@@ -95,20 +108,12 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
   EXPECT_EQ(covered, (std::vector<Vec3i>{{2, 0, 0}}));
 }
 
-TEST(Replica, BadUnitBytesAreAnErrorAndChangeNothing) {
-  Replica r;
-  const std::vector<std::uint8_t> junk = {0xff, 0x00, 0x12};
-  EXPECT_FALSE(r.apply_chunk_data(ChunkDataMsg{{0, 0, 0}, 1, junk}).ok());
-  EXPECT_FALSE(r.apply_mip_data(MipDataMsg{{0, 0, 0}, 2, 1, junk}).ok());
-  EXPECT_EQ(r.chunk_count(), 0u);
-  EXPECT_EQ(r.grid().chunk_count(), 0u);
-}
-
 TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
   Replica r;
   const Vec3i full{0, 0, 0}, mip{1, 0, 0};
-  r.apply_coverage(CoverageMsg{full, wire::CoverageKind::Empty, 0, 1});
-  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{mip, 3, 1, encode_unit(4, Voxel{})}).ok());
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, full, 1));
+  Box mip_box;
+  r.apply_stream_record(mip_record(mip, 1, 3, mip_box, Voxel{}));
   std::vector<UnitUpdate> ups(2);
   ups[0].chunk_pos = full;
   ups[0].unit_index = 9;  // ux 1, uz 1, uy 0
@@ -124,9 +129,8 @@ TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
   EXPECT_EQ(*n, 1u);
   EXPECT_EQ(r.get({4, 0, 4}), solid(materials::kGrass));
   EXPECT_EQ(r.get({3, 0, 4}), Voxel{});
-  EXPECT_EQ(r.coverage(full)->state, CoverageState::kFull);
-  EXPECT_EQ(r.coverage(full)->revision, 2u);
-  EXPECT_EQ(r.coverage(mip)->revision, 1u);  // the mip holder waits for a refreshed mip
+  EXPECT_EQ(*r.holding(full), (Holding{HoldingForm::kFull, 2}));
+  EXPECT_EQ(*r.holding(mip), (Holding{HoldingForm::kMip3, 1}));  // the mip holder waits for a refreshed mip
 
   // A unit of a chunk the batch gives no revision for is invalid.
   auto bad = r.apply_update_batch(UpdateBatchMsg{6, data, {revs[0]}});
@@ -135,13 +139,9 @@ TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
 
 TEST(Replica, SurfaceHeightReadsTheBestResolutionHeld) {
   Replica r;
-  r.apply_coverage(CoverageMsg{{0, 1, 0}, wire::CoverageKind::Empty, 0, 0});
-  const auto unit = encode_unit(16, solid(materials::kRock));
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i u{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-    ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{u, 0, unit}).ok());
-  }
-  r.apply_coverage(CoverageMsg{{0, 0, 0}, wire::CoverageKind::Full, 0, 0});
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, {0, 1, 0}, 0));
+  Box rock;
+  r.apply_stream_record(full_record({0, 0, 0}, 0, rock, solid(materials::kRock)));
   EXPECT_EQ(r.surface_height(3, 3, -64, 64), 32);
   EXPECT_EQ(r.surface_height(40, 3, -64, 64), std::nullopt);  // chunk column unknown
   const auto hit = r.raycast({3.5f, 60.0f, 3.5f}, {0, -1, 0}, 100);
@@ -149,32 +149,16 @@ TEST(Replica, SurfaceHeightReadsTheBestResolutionHeld) {
   EXPECT_EQ(hit->voxel, (Vec3i{3, 31, 3}));
 }
 
-TEST(Replica, UnitsOfAFullChunkAndIncompleteChunksAreWrittenAsTheyCome) {
-  Replica r;
-  const Vec3i cp{0, 0, 0};
-  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 1, encode_unit(4, solid(materials::kRock))}).ok());
-  // Only unit (1, 0, 0) arrives before Full: the rest stays Air.
-  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{{1, 0, 0}, 1, encode_unit(16, solid(materials::kMud))}).ok());
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Full, 0, 1});
-  EXPECT_EQ(r.get({20, 3, 3}), solid(materials::kMud));
-  EXPECT_EQ(r.get({3, 3, 3}), Voxel{});
-  // A unit for a chunk already Full goes straight into the grid.
-  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{{0, 1, 0}, 1, encode_unit(16, solid(materials::kIce))}).ok());
-  EXPECT_EQ(r.get({3, 20, 3}), solid(materials::kIce));
-  EXPECT_EQ(r.get({20, 3, 3}), solid(materials::kMud));
-}
-
-
 // The replica keeps each chunk's hash until the chunk changes: whatever
-// changes it (a unit, an update, a whole chunk again, a new coverage), the
+// changes it (an update, a whole chunk again, another form), the
 // hash asked next is the hash of the voxels held then, at the same revision
 // too.
 TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
   Replica r;
   const Vec3i cp{2, -1, 3};
-  auto fresh = [&] { return region_hash(r.grid().find_chunk(cp), r.coverage(cp)->revision); };
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, 4});
-  EXPECT_EQ(r.hash(cp), region_hash(nullptr, 4));
+  auto fresh = [&] { return chunk_hash(r.grid().find_chunk(cp), r.holding(cp)->revision); };
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, cp, 4));
+  EXPECT_EQ(r.hash(cp), chunk_hash(nullptr, 4));
 
   // An update at the same revision.
   std::vector<UnitUpdate> ups(1);
@@ -185,13 +169,8 @@ TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
   net_codec_encode_update_batch(ups, data);
   ASSERT_TRUE(r.apply_update_batch(UpdateBatchMsg{1, data, {ChunkRevisionMsg{cp, 4}}}).ok());
   const auto after_update = r.hash(cp);
-  EXPECT_NE(after_update, region_hash(nullptr, 4));
+  EXPECT_NE(after_update, chunk_hash(nullptr, 4));
   EXPECT_EQ(after_update, fresh());
-
-  // A unit written straight into the full chunk, same revision again.
-  ASSERT_TRUE(r.apply_chunk_data(ChunkDataMsg{cp * 2, 4, encode_unit(16, solid(materials::kIce))}).ok());
-  EXPECT_NE(r.hash(cp), after_update);
-  EXPECT_EQ(r.hash(cp), fresh());
 
   // The whole chunk again, same revision, other voxels.
   Box whole({kChunkSize, kChunkSize, kChunkSize});
@@ -200,19 +179,20 @@ TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
   r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 4, 0, &whole, nullptr, {}});
   Chunk mud(materials::kMud);
   EXPECT_NE(r.hash(cp), before_full);
-  EXPECT_EQ(r.hash(cp), region_hash(&mud, 4));
+  EXPECT_EQ(r.hash(cp), chunk_hash(&mud, 4));
 
   // A new revision alone changes the hash; a mip has none; Empty again.
   ups[0].voxels.fill(solid(materials::kMud));
   data.clear();
   net_codec_encode_update_batch(ups, data);
   ASSERT_TRUE(r.apply_update_batch(UpdateBatchMsg{2, data, {ChunkRevisionMsg{cp, 5}}}).ok());
-  EXPECT_EQ(r.hash(cp), region_hash(&mud, 5));
-  ASSERT_TRUE(r.apply_mip_data(MipDataMsg{cp, 3, 6, encode_unit(4, solid(materials::kRock))}).ok());
+  EXPECT_EQ(r.hash(cp), chunk_hash(&mud, 5));
+  Box rock_mip;
+  r.apply_stream_record(mip_record(cp, 6, 3, rock_mip, solid(materials::kRock)));
   EXPECT_FALSE(r.hash(cp).has_value());
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Empty, 0, 6});
-  EXPECT_EQ(r.hash(cp), region_hash(nullptr, 6));
-  r.apply_coverage(CoverageMsg{cp, wire::CoverageKind::Released, 0, 6});
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, cp, 6));
+  EXPECT_EQ(r.hash(cp), chunk_hash(nullptr, 6));
+  r.apply_stream_record(bare(StreamRecordKind::kReleased, cp, 6));
   EXPECT_FALSE(r.hash(cp).has_value());
 }
 
@@ -233,7 +213,7 @@ TEST(Replica, SurfaceHeightAgreesWithTheVoxelsOfTheColumn) {
     for (int z = 0; z < 8; ++z)
       for (int x = 0; x < 8; ++x) mip.set(x, y, z, y < x ? solid(materials::kSand) : Voxel{});
   r.apply_stream_record(StreamRecord{StreamRecordKind::kMip2, {0, 0, 0}, 1, 2, &mip, nullptr, {}});
-  r.apply_coverage(CoverageMsg{{0, 1, 0}, wire::CoverageKind::Empty, 0, 1});
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, {0, 1, 0}, 1));
   r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, {0, 3, 0}, 1, 0, &slope, nullptr, {}});
   auto by_voxel = [&](std::int32_t x, std::int32_t z, std::int32_t lo, std::int32_t hi) -> std::optional<std::int32_t> {
     for (std::int32_t y = hi - 1; y >= lo; --y)

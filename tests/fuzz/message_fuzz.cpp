@@ -16,18 +16,7 @@ namespace {
 using namespace terrane;
 
 void decode_payloads(const wire::Message& m) {
-  std::vector<Voxel> out(16 * 16 * 16);
   switch (m.body_type()) {
-    case wire::Body::ChunkData:
-      if (auto c = parse_chunk_data(*m.body_as_ChunkData())) (void)net_codec_decode(16, c->data, out);
-      break;
-    case wire::Body::MipData:
-      if (auto d = parse_mip_data(*m.body_as_MipData())) {
-        const int n = kChunkSize >> d->level;
-        out.resize(static_cast<std::size_t>(n * n * n));
-        (void)net_codec_decode(n, d->data, out);
-      }
-      break;
     case wire::Body::UpdateBatch:
       if (auto b = parse_update_batch(*m.body_as_UpdateBatch())) {
         std::vector<UnitUpdate> units(64);
@@ -51,13 +40,13 @@ void parse_any(const wire::Message& m) {
     case wire::Body::Welcome: (void)parse_welcome(*m.body_as_Welcome()); break;
     case wire::Body::Disconnect: (void)parse_disconnect(*m.body_as_Disconnect()); break;
     case wire::Body::ClientState: (void)parse_client_state(*m.body_as_ClientState()); break;
-    case wire::Body::Coverage: (void)parse_coverage(*m.body_as_Coverage()); break;
+    case wire::Body::Holdings: (void)parse_holdings(*m.body_as_Holdings()); break;
     case wire::Body::EditRequest: (void)parse_edit_request(*m.body_as_EditRequest()); break;
     case wire::Body::ReadBox: (void)parse_read_box(*m.body_as_ReadBox()); break;
     case wire::Body::ReadBoxResult: (void)parse_read_box_result(*m.body_as_ReadBoxResult()); break;
     case wire::Body::EditReject: (void)parse_edit_reject(*m.body_as_EditReject()); break;
-    case wire::Body::RegionHash: (void)parse_region_hash(*m.body_as_RegionHash()); break;
-    case wire::Body::RegionHashRequest: (void)parse_region_hash_request(*m.body_as_RegionHashRequest()); break;
+    case wire::Body::ChunkHash: (void)parse_chunk_hash(*m.body_as_ChunkHash()); break;
+    case wire::Body::ChunkHashRequest: (void)parse_chunk_hash_request(*m.body_as_ChunkHashRequest()); break;
     case wire::Body::Presence: (void)parse_presence(*m.body_as_Presence()); break;
     case wire::Body::AdminRequest: (void)parse_admin_request(*m.body_as_AdminRequest()); break;
     case wire::Body::AdminResult: (void)parse_admin_result(*m.body_as_AdminResult()); break;

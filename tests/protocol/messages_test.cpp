@@ -336,34 +336,29 @@ TEST(Messages, PresenceIsBoundedAndChecked) {
   EXPECT_FALSE(parse_presence(*flatbuffers::GetRoot<wire::Presence>(fbb.GetBufferPointer())).ok());
 }
 
-TEST(Messages, CoverageChecksKindAndLevel) {
-  auto parse = [](CoverageMsg c) { return parse_coverage(*message_of(build_coverage(c))->body_as_Coverage()); };
-  EXPECT_TRUE(parse({{1, -2, 3}, wire::CoverageKind::Full, 0, 5}).ok());
-  EXPECT_TRUE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 2, 5}).ok());
-  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 0, 5}).ok());
-  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Mip, 4, 5}).ok());
-  EXPECT_FALSE(parse({{1, -2, 3}, wire::CoverageKind::Empty, 1, 5}).ok());
-  EXPECT_FALSE(parse({{1, -2, 3}, static_cast<wire::CoverageKind>(9), 0, 5}).ok());
-  EXPECT_FALSE(parse({{kMaxWireCoordinate, 0, 0}, wire::CoverageKind::Full, 0, 5}).ok());
-}
-
-TEST(Messages, MipAndChunkDataRejectBadLevelsAndSizes) {
-  const std::vector<std::uint8_t> data(10, 1);
-  auto mip = [&](int level) { return parse_mip_data(*message_of(build_mip_data({0, 0, 0}, level, 1, data))->body_as_MipData()); };
-  EXPECT_TRUE(mip(1).ok());
-  EXPECT_TRUE(mip(3).ok());
-  EXPECT_FALSE(mip(0).ok());
-  EXPECT_FALSE(mip(4).ok());
-  const std::vector<std::uint8_t> too_big(net_codec_max_encoded_size(16) + 1, 0);
-  auto cd = parse_chunk_data(*message_of(build_chunk_data({2, 3, 4}, 1, too_big))->body_as_ChunkData());
-  EXPECT_EQ(cd.error().code, DecodeErrorCode::kOverLimit);
-  const Frame okf = build_chunk_data({2, -3, 4}, 8, data);
-  auto ok = parse_chunk_data(*message_of(okf)->body_as_ChunkData());
-  ASSERT_TRUE(ok.ok());
-  EXPECT_EQ(ok->unit_pos, (Vec3i{2, -3, 4}));
-  EXPECT_EQ(ok->revision, 8u);
-  EXPECT_EQ(ok->data.size(), data.size());
-  EXPECT_FALSE(parse_chunk_data(*message_of(build_chunk_data({2, 3, 4}, 1, {}))->body_as_ChunkData()).ok());
+// Holdings carry a claimable form per chunk: Full, Mip 1..3 or Empty
+// (protocol/holding.h); an approximate form (Estimate, a horizon's) or an
+// unknown number is a protocol error.
+TEST(Messages, HoldingsCarryClaimableFormsOnly) {
+  auto round_trip = [](std::vector<HeldChunkMsg> v) {
+    return parse_holdings(*message_of(build_holdings(v))->body_as_Holdings());
+  };
+  const std::vector<HeldChunkMsg> good = {{{1, -2, 3}, {HoldingForm::kFull, 5}},
+                                          {{4, 5, 6}, {HoldingForm::kMip2, 7}},
+                                          {{-7, 0, 9}, {HoldingForm::kEmpty, 0}}};
+  auto r = round_trip(good);
+  ASSERT_TRUE(r.ok()) << r.error().describe();
+  ASSERT_EQ(r->size(), 3u);
+  for (std::size_t i = 0; i < good.size(); ++i) {
+    EXPECT_EQ((*r)[i].chunk_pos, good[i].chunk_pos);
+    EXPECT_EQ((*r)[i].holding, good[i].holding);
+  }
+  for (const int form : {5, 6, 7, 8, 255}) {
+    auto bad = round_trip({{{0, 0, 0}, {static_cast<HoldingForm>(form), 1}}});
+    ASSERT_FALSE(bad.ok()) << "form " << form;
+    EXPECT_NE(bad.error().describe().find("form not 0..4"), std::string::npos) << bad.error().describe();
+  }
+  EXPECT_FALSE(round_trip({{{kMaxWireCoordinate, 0, 0}, {HoldingForm::kFull, 1}}}).ok());
 }
 
 TEST(Messages, UpdateBatchCarriesRevisions) {
@@ -384,10 +379,10 @@ TEST(Messages, SmallMessagesRoundTrip) {
   EXPECT_EQ(message_of(build_edit_ack(3, 99))->body_as_EditAck()->tick(), 99u);
   EXPECT_EQ(message_of(build_edit_reject(3, "no"))->body_as_EditReject()->reason()->str(), "no");
   EXPECT_EQ(parse_disconnect(*message_of(build_disconnect("bye"))->body_as_Disconnect()).value(), "bye");
-  auto h = parse_region_hash(*message_of(build_region_hash({{1, 2, 3}, 4, 5}))->body_as_RegionHash());
+  auto h = parse_chunk_hash(*message_of(build_chunk_hash({{1, 2, 3}, 4, 5}))->body_as_ChunkHash());
   ASSERT_TRUE(h.ok());
   EXPECT_EQ(h->hash, 5u);
-  auto r = parse_region_hash_request(*message_of(build_region_hash_request({7, 8, 9}))->body_as_RegionHashRequest());
+  auto r = parse_chunk_hash_request(*message_of(build_chunk_hash_request({7, 8, 9}))->body_as_ChunkHashRequest());
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(*r, (Vec3i{7, 8, 9}));
 }
@@ -414,7 +409,7 @@ TEST(Messages, EveryTruncatedFrameBodyFailsVerification) {
 // little-endian, then every voxel's material and occupancy bytes, x fastest,
 // then z, then y. The implementation takes Air rows and chunks in one step;
 // it must give this value.
-std::uint64_t region_hash_by_the_book(const Chunk& c, std::uint64_t revision) {
+std::uint64_t chunk_hash_by_the_book(const Chunk& c, std::uint64_t revision) {
   std::uint64_t h = 0xcbf29ce484222325ull;
   auto byte = [&](std::uint8_t b) {
     h ^= b;
@@ -431,38 +426,38 @@ std::uint64_t region_hash_by_the_book(const Chunk& c, std::uint64_t revision) {
   return h;
 }
 
-TEST(RegionHash, EqualsTheDefinitionByteByByte) {
+TEST(ChunkHash, EqualsTheDefinitionByteByByte) {
   Chunk c;
-  EXPECT_EQ(region_hash(&c, 9), region_hash_by_the_book(c, 9));
+  EXPECT_EQ(chunk_hash(&c, 9), chunk_hash_by_the_book(c, 9));
   // Solid rows, Air rows and scattered voxels.
   c.modify(Region{{0, 0, 0}, {32, 5, 32}}, [](Vec3i, Voxel) { return make_voxel(materials::kRock, 255); });
   for (int i = 0; i < 300; ++i) c.set({(i * 7) % 32, 5 + (i * 13) % 27, (i * 11) % 32}, make_voxel(materials::kSand, static_cast<std::uint8_t>(i)));
   for (const std::uint64_t rev : {std::uint64_t{0}, std::uint64_t{12345}, ~std::uint64_t{0}})
-    EXPECT_EQ(region_hash(&c, rev), region_hash_by_the_book(c, rev)) << rev;
+    EXPECT_EQ(chunk_hash(&c, rev), chunk_hash_by_the_book(c, rev)) << rev;
 }
 
-TEST(RegionHash, DependsOnVoxelsAndRevision) {
+TEST(ChunkHash, DependsOnVoxelsAndRevision) {
   Chunk a;
-  EXPECT_EQ(region_hash(&a, 3), region_hash(nullptr, 3));
+  EXPECT_EQ(chunk_hash(&a, 3), chunk_hash(nullptr, 3));
   // Nothing (all Air) is hashed in one multiplication: the same value as
   // hashing the Air voxel by voxel, at any revision.
   for (const std::uint64_t rev : {std::uint64_t{0}, std::uint64_t{1}, std::uint64_t{255}, std::uint64_t{1} << 40, ~std::uint64_t{0}})
-    EXPECT_EQ(region_hash(&a, rev), region_hash(nullptr, rev)) << rev;
-  EXPECT_NE(region_hash(nullptr, 3), region_hash(nullptr, 4));
+    EXPECT_EQ(chunk_hash(&a, rev), chunk_hash(nullptr, rev)) << rev;
+  EXPECT_NE(chunk_hash(nullptr, 3), chunk_hash(nullptr, 4));
   Chunk b;
   b.set({1, 2, 3}, make_voxel(materials::kRock, 200));
-  EXPECT_NE(region_hash(&b, 3), region_hash(nullptr, 3));
+  EXPECT_NE(chunk_hash(&b, 3), chunk_hash(nullptr, 3));
   Chunk c;
   c.set({1, 2, 3}, make_voxel(materials::kRock, 201));
-  EXPECT_NE(region_hash(&b, 3), region_hash(&c, 3));
+  EXPECT_NE(chunk_hash(&b, 3), chunk_hash(&c, 3));
   c.set({1, 2, 3}, make_voxel(materials::kRock, 200));
-  EXPECT_EQ(region_hash(&b, 3), region_hash(&c, 3));
+  EXPECT_EQ(chunk_hash(&b, 3), chunk_hash(&c, 3));
 }
 
-TEST(RegionHash, GoldenValueOfAnEmptyChunk) {
+TEST(ChunkHash, GoldenValueOfAnEmptyChunk) {
   // Pinned so both sides (and future versions) agree on the definition.
-  EXPECT_EQ(region_hash(nullptr, 0), region_hash(nullptr, 0));
-  const std::uint64_t empty0 = region_hash(nullptr, 0);
+  EXPECT_EQ(chunk_hash(nullptr, 0), chunk_hash(nullptr, 0));
+  const std::uint64_t empty0 = chunk_hash(nullptr, 0);
   // FNV-1a of 8 zero bytes then 65536 zero bytes.
   std::uint64_t h = 0xcbf29ce484222325ull;
   for (int i = 0; i < 8 + 2 * 32768; ++i) h *= 0x100000001b3ull;

@@ -118,21 +118,24 @@ TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
       EXPECT_EQ(n, 1) << "cut " << cut;
     }
   }
-  std::vector<std::uint8_t> bad = bytes;
-  bad[0] = 9;  // unknown kind
-  EXPECT_EQ(count(bad, &n).error().code, DecodeErrorCode::kInvalidValue);
+  // Unknown kinds; 6 and 7 are the horizon forms, never a record's kind.
+  for (const int kind : {6, 7, 10, 255}) {
+    std::vector<std::uint8_t> bad = bytes;
+    bad[0] = static_cast<std::uint8_t>(kind);
+    EXPECT_EQ(count(bad, &n).error().code, DecodeErrorCode::kInvalidValue) << "kind " << kind;
+  }
   // A position beyond the wire range.
-  std::vector<std::uint8_t> far = {0, 0xFF, 0xFF, 0xFF, 0x7F, 0, 0, 0};
+  std::vector<std::uint8_t> far = {4, 0xFF, 0xFF, 0xFF, 0x7F, 0, 0, 0};
   EXPECT_EQ(count(far, &n).error().code, DecodeErrorCode::kInvalidValue);
   // A record in range followed by a delta near INT64_MIN: out of range, and
   // no overflow computing it (UBSan runs this).
-  std::vector<std::uint8_t> huge = {5, 1, 0, 0, 0};  // a released record at x = -1
-  huge.insert(huge.end(), {5, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x01, 0, 0, 0});
+  std::vector<std::uint8_t> huge = {8, 1, 0, 0, 0};  // a released record at x = -1
+  huge.insert(huge.end(), {8, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x01, 0, 0, 0});
   EXPECT_EQ(count(huge, &n).error().code, DecodeErrorCode::kInvalidValue);
   EXPECT_EQ(n, 1);
   // An endless varint.
   std::vector<std::uint8_t> endless(20, 0xFF);
-  endless[0] = 0;
+  endless[0] = 4;
   EXPECT_FALSE(count(endless, &n).ok());
 }
 
@@ -185,8 +188,8 @@ TEST(StreamBatch, BadHorizonRecordsAreErrors) {
   const auto decode = [&](const std::vector<std::uint8_t>& b) {
     return decode_stream_batch(b, s, [](const StreamRecord&) -> Status { return Ok{}; });
   };
-  // kind 7, position (16, 0, 8) as zigzag varints (32, 0, 16), revision 0.
-  const std::vector<std::uint8_t> head = {7, 32, 0, 16, 0};
+  // kind 9, position (16, 0, 8) as zigzag varints (32, 0, 16), revision 0.
+  const std::vector<std::uint8_t> head = {9, 32, 0, 16, 0};
   auto record = [&](std::vector<std::uint8_t> rest) {
     std::vector<std::uint8_t> b = head;
     b.insert(b.end(), rest.begin(), rest.end());
@@ -214,7 +217,7 @@ TEST(StreamBatch, BadHorizonRecordsAreErrors) {
 
 TEST(StreamBatch, TooManyRecordsAreOverLimit) {
   std::vector<std::uint8_t> bytes;
-  for (std::size_t i = 0; i <= kMaxStreamRecords; ++i) bytes.insert(bytes.end(), {0, 0, 0, 0, 0});
+  for (std::size_t i = 0; i <= kMaxStreamRecords; ++i) bytes.insert(bytes.end(), {4, 0, 0, 0, 0});  // Empty
   StreamDecodeScratch s;
   const auto st = decode_stream_batch(bytes, s, [](const StreamRecord&) -> Status { return Ok{}; });
   ASSERT_FALSE(st.ok());

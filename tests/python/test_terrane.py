@@ -39,7 +39,7 @@ def test_every_edit_kind_round_trips_and_a_second_client_sees_it(server):
         assert a.dig((x + 0.5, y + 4.5, z + 0.5), 1.0).result(30)
         assert a.undo().result(30)
         assert a.redo().result(30)
-        # b's replica reaches the server's state, checked by region hash.
+        # b's replica reaches the server's state, checked by chunk hash.
         deadline = time.monotonic() + 60
         while b.verify(60) != 0:
             assert time.monotonic() < deadline, "b never matched the server"

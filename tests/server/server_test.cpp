@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <set>
 #include <sstream>
 #include <tuple>
 #include <numbers>
@@ -60,14 +61,26 @@ TEST_F(ServerTest, WelcomeDescribesTheWorld) {
   EXPECT_GE(w->server_epoch, 2u);  // bumped by the start
 }
 
-TEST_F(ServerTest, VersionMismatchIsToldWhy) {
+// A version-1 client's Hello (the Hello table and its union id are the
+// same in every version) is answered with a Disconnect it can read (union
+// id 3 in every version) naming both versions.
+TEST_F(ServerTest, AnotherVersionsHelloIsToldWhyInADisconnectItCanRead) {
   start();
-  RawPeer p(server_->port());
-  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion + 5, "t", "", {}})));
-  auto f = p.next_of(wire::Body::Disconnect);
-  ASSERT_TRUE(f.has_value());
-  EXPECT_NE(parse_disconnect(*msg(*f).body_as_Disconnect())->find("protocol version mismatch"), std::string::npos);
-  EXPECT_TRUE(p.closed_by_server());
+  for (const std::uint32_t version : {1u, kProtocolVersion + 5}) {
+    RawPeer p(server_->port());
+    const Frame hello = build_hello(HelloMsg{version, "t", "", {}});
+    auto sent = verify_message(std::span<const std::uint8_t>(hello).subspan(kFrameHeaderBytes));
+    ASSERT_TRUE(sent.ok());
+    EXPECT_EQ(static_cast<int>((*sent)->body_type()), 1);
+    ASSERT_TRUE(p.send(hello));
+    auto f = p.next_of(wire::Body::Disconnect);
+    ASSERT_TRUE(f.has_value());
+    EXPECT_EQ(static_cast<int>(msg(*f).body_type()), 3);
+    EXPECT_EQ(*parse_disconnect(*msg(*f).body_as_Disconnect()),
+              "protocol version " + std::to_string(version) + " is not supported: this server speaks version 2 "
+              "(protocol/PROTOCOL.md); update the client");
+    EXPECT_TRUE(p.closed_by_server());
+  }
 }
 
 TEST_F(ServerTest, WrongAuthTokenIsRejected) {
@@ -262,20 +275,20 @@ TEST_F(ServerTest, PresenceListsOtherClientsInView) {
   FAIL() << "no presence entry arrived";
 }
 
-TEST_F(ServerTest, RegionHashesArePushedForFullResolutionChunks) {
+TEST_F(ServerTest, ChunkHashesArePushedForFullResolutionChunks) {
   ServerOptions o;
   o.hash_push_ms = 100;
   start(o);
   auto p = join("verifier");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
   ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
-  auto f = p->next_of(wire::Body::RegionHash);
+  auto f = p->next_of(wire::Body::ChunkHash);
   ASSERT_TRUE(f.has_value());
-  auto h = parse_region_hash(*msg(*f).body_as_RegionHash());
+  auto h = parse_chunk_hash(*msg(*f).body_as_ChunkHash());
   ASSERT_TRUE(h.ok());
   std::uint64_t expected = 0;
   server_->inspect([&](const WorldView& c) {
-    expected = region_hash(c.chunk(h->chunk_pos), c.revision(h->chunk_pos));
+    expected = chunk_hash(c.chunk(h->chunk_pos), c.revision(h->chunk_pos));
   });
   EXPECT_EQ(h->hash, expected);
 }
@@ -336,7 +349,7 @@ bool read_stream(RawPeer& p, HeldMap& held, std::size_t* records, const std::fun
         held.erase(rec.chunk_pos);
       else
         held[rec.chunk_pos] =
-            HeldChunkMsg{rec.chunk_pos, rec.revision, rec.kind == StreamRecordKind::kEmpty ? kHeldEmpty : rec.level};
+            HeldChunkMsg{rec.chunk_pos, Holding{rec.form(), rec.revision}};
       return Ok{};
     });
     if (!st) return false;
@@ -352,7 +365,8 @@ bool view_complete(const HeldMap& held, const ClientStateMsg& where,
   for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, b)) {
     auto it = held.find(cp);
     if (it == held.end()) return false;
-    if (it->second.level != kHeldEmpty && it->second.level != desired_level(where.position, cp, where.full_res_radius))
+    const Holding& h = it->second.holding;
+    if (h.form != HoldingForm::kEmpty && h.level() != desired_level(where.position, cp, where.full_res_radius))
       return false;
   }
   return true;
@@ -367,7 +381,8 @@ std::vector<HeldChunkMsg> holdings_after_view(RawPeer& p, const ClientStateMsg& 
   if (!p.send(build_client_state(where)) ||
       !read_stream(p, held, &records, [&](const HeldMap& h) { return view_complete(h, where); }))
     return out;
-  for (const auto& [cp, h] : held) out.push_back(h);
+  for (const auto& [cp, h] : held)
+    if (claimable(h.holding.form)) out.push_back(h);  // as a client claims: no estimates
   return out;
 }
 
@@ -413,8 +428,7 @@ TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) 
                     held.erase(rec.chunk_pos);
                     return Ok{};
                   }
-                  held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, rec.revision,
-                                                     rec.kind == StreamRecordKind::kEmpty ? kHeldEmpty : rec.level};
+                  held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, Holding{rec.form(), rec.revision}};
                   if (rec.kind == StreamRecordKind::kMip3) {
                     CoarseVoxels v{};
                     std::copy_n(rec.voxels->voxels().begin(), kCoarseVoxels, v.begin());
@@ -527,6 +541,70 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   EXPECT_FALSE(welcome_of(open).bounded_xz);
 }
 
+// A client standing at the wire's edge (x = +-(2^24 - 1)) is sent nothing
+// beyond +-2^19 chunks: each such record is a protocol error at the client
+// (decode_stream_batch refuses it). Its view there is clipped, and what is
+// left of it arrives whole.
+TEST_F(ServerTest, AClientAtTheWiresEdgeIsSentOnlyChunksWithinTheWiresRange) {
+  start();
+  for (const float x : {16777215.0f, -16777216.0f}) {
+    auto p = join("edge");
+    const ClientStateMsg where{{x, 20.0f, 0.0f}, 128, 32};
+    std::vector<Vec3i> expected;
+    for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, default_world_meta().bounds))
+      if (wire_chunk_ok(cp)) expected.push_back(cp);
+    ASSERT_FALSE(expected.empty());
+    HeldMap held = empty_held();
+    std::size_t records = 0;
+    ASSERT_TRUE(p->send(build_client_state(where)));
+    // read_stream fails on a record the client would refuse.
+    ASSERT_TRUE(read_stream(*p, held, &records, [&](const HeldMap& h) {
+      return std::all_of(expected.begin(), expected.end(), [&](Vec3i cp) { return h.count(cp) != 0; });
+    })) << "x " << x << ": " << held.size() << " of " << expected.size() << " chunks before the stream failed";
+    for (const auto& [cp, h] : held) EXPECT_TRUE(wire_chunk_ok(cp)) << cp.x << "," << cp.y << "," << cp.z;
+  }
+}
+
+// Horizon images go out nearest region first (by its nearest chunk in
+// view), whatever order the world makes them in.
+TEST_F(ServerTest, HorizonImagesArriveNearestRegionFirst) {
+  start();
+  auto p = join("far-sighted");
+  const ClientStateMsg where{{3000.0f, 40.0f, -2000.0f}, 640, 32};
+  // The regions in the order of their first chunk in the view rule's order.
+  std::vector<Vec3i> order;
+  {
+    std::set<std::tuple<int, int, int>> seen;
+    for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, default_world_meta().bounds)) {
+      const Vec3i r = coarse_region_of(cp);
+      if (seen.insert({r.x, r.y, r.z}).second) order.push_back(r);
+    }
+  }
+  ASSERT_GT(order.size(), 20u);
+  ASSERT_TRUE(p->send(build_client_state(where)));
+  std::vector<Vec3i> got;
+  StreamDecodeScratch scratch;
+  bool own_record = false;  // horizon images come before any chunk's own record
+  while (!own_record) {
+    auto f = p->next();
+    ASSERT_TRUE(f.has_value()) << got.size() << " images, then the stream ended";
+    const wire::Message& m = msg(*f);
+    if (m.body_type() != wire::Body::StreamBatch) continue;
+    auto r = parse_stream_batch(*m.body_as_StreamBatch());
+    ASSERT_TRUE(r.ok());
+    ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+                  if (rec.kind == StreamRecordKind::kHorizon)
+                    got.push_back(coarse_region_of(rec.chunk_pos));
+                  else
+                    own_record = true;
+                  return Ok{};
+                }).ok());
+  }
+  ASSERT_EQ(got.size(), order.size());
+  for (std::size_t i = 0; i < got.size(); ++i)
+    ASSERT_EQ(got[i], order[i]) << "image " << i << " of " << got.size();
+}
+
 TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   start();
   const ClientStateMsg where{{1002.0f, 12.0f, 1002.0f}, 96, 24};
@@ -548,13 +626,13 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   // The stale home chunk comes again at full resolution ...
   ASSERT_TRUE(read_stream(*b, held, &records, [&](const HeldMap& h) {
     auto it = h.find(home);
-    return it != h.end() && it->second.level == 0 && it->second.revision == 1;
+    return it != h.end() && it->second.holding == Holding{HoldingForm::kFull, 1};
   }));
   // ... and every other claim is adopted: the server answers a hash request
   // for a claimed chunk only once it has adopted or resent it, so when every
   // claim's hash has come, every claim was dealt with (and counted). (A
   // pushed hash names a chunk already held, so chunks are counted once.)
-  for (const HeldChunkMsg& h : claims) ASSERT_TRUE(b->send(build_region_hash_request(h.chunk_pos)));
+  for (const HeldChunkMsg& h : claims) ASSERT_TRUE(b->send(build_chunk_hash_request(h.chunk_pos)));
   HeldMap hashed = empty_held();
   {
     StreamDecodeScratch scratch;
@@ -562,18 +640,17 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
       auto f = b->next();
       ASSERT_TRUE(f.has_value()) << hashed.size() << " of " << claims.size() << " hashes answered";
       const wire::Message& m = msg(*f);
-      if (m.body_type() == wire::Body::RegionHash) {
-        auto h = parse_region_hash(*m.body_as_RegionHash());
+      if (m.body_type() == wire::Body::ChunkHash) {
+        auto h = parse_chunk_hash(*m.body_as_ChunkHash());
         ASSERT_TRUE(h.ok());
-        hashed[h->chunk_pos] = HeldChunkMsg{h->chunk_pos, h->revision, 0};
+        hashed[h->chunk_pos] = HeldChunkMsg{h->chunk_pos, Holding{HoldingForm::kFull, h->revision}};
       }
       if (m.body_type() != wire::Body::StreamBatch) continue;
       auto r = parse_stream_batch(*m.body_as_StreamBatch());
       ASSERT_TRUE(r.ok());
       ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
                     ++records;
-                    held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, rec.revision,
-                                                       rec.kind == StreamRecordKind::kEmpty ? kHeldEmpty : rec.level};
+                    held[rec.chunk_pos] = HeldChunkMsg{rec.chunk_pos, Holding{rec.form(), rec.revision}};
                     return Ok{};
                   }).ok());
     }
@@ -585,8 +662,7 @@ TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {
   ASSERT_TRUE(read_stream(*b, held, &records, [](const HeldMap&) { return false; }, wire::Body::ReadBoxResult));
   EXPECT_LE(records, 3u);
   ASSERT_EQ(held.count(home), 1u);
-  EXPECT_EQ(held.at(home).level, 0);
-  EXPECT_EQ(held.at(home).revision, 1u);
+  EXPECT_EQ(held.at(home).holding, (Holding{HoldingForm::kFull, 1}));
 }
 
 // The edits a client queued while away come right after its Holdings and
@@ -599,10 +675,10 @@ TEST_F(ServerTest, AResumingClientsEditsAreTakenWhereItClaimsFullResolution) {
   std::vector<HeldChunkMsg> claims = holdings_after_view(*join("a"), where);
   bool home_full = false, east_full = false;
   for (HeldChunkMsg& h : claims) {
-    if (h.chunk_pos == home) home_full = h.level == 0;
+    if (h.chunk_pos == home) home_full = h.holding.form == HoldingForm::kFull;
     if (h.chunk_pos == east) {
-      east_full = h.level == 0;
-      h.level = 2;  // claimed as a mip
+      east_full = h.holding.form == HoldingForm::kFull;
+      h.holding.form = HoldingForm::kMip2;  // claimed as a mip
     }
   }
   ASSERT_TRUE(home_full && east_full);

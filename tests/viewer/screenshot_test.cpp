@@ -165,8 +165,8 @@ TEST_F(ScreenshotHeavyTest, DigChangesThePixelsWhereItHappened) {
       [&](const ClientView& v) {
         bool full = true;
         for_each_chunk_in(reads, [&](Vec3i cp) {
-          const ChunkCoverage* cov = v.replica.coverage(cp);
-          full = full && cov != nullptr && cov->state != CoverageState::kMip;
+          const Holding* cov = v.replica.holding(cp);
+          full = full && cov != nullptr && cov->full_resolution();
         });
         return full;
       },

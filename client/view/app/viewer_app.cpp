@@ -246,16 +246,16 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
   std::vector<int> column(static_cast<std::size_t>(side * side), -2);  // -2 none, -1 empty, 0 full, 1..3 mip
   Counts n;
   session.client().with_replica([&](const Replica& rep) {
-    rep.for_each_coverage([&](Vec3i cp, const ChunkCoverage& cov) {
+    rep.for_each_holding([&](Vec3i cp, const Holding& cov) {
       int level = -1;
-      if (cov.state == CoverageState::kEmpty) {
+      if (cov.form == HoldingForm::kEmpty) {
         ++n.empty;
-      } else if (cov.state == CoverageState::kFull) {
+      } else if (cov.form == HoldingForm::kFull) {
         ++n.full;
         level = 0;
       } else {
-        ++n.mip[std::clamp(cov.level, 1, 3)];
-        level = cov.level;
+        ++n.mip[std::clamp(cov.level(), 1, 3)];
+        level = cov.level();
       }
       const int dx = cp.x - cc.x + radius, dz = cp.z - cc.z + radius;
       if (dx < 0 || dz < 0 || dx >= side || dz >= side) return;

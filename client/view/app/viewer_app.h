@@ -63,7 +63,7 @@ class ViewerSession {
 int run_screenshot(const ViewerOptions& options);
 int run_window(const ViewerOptions& options);
 
-// The overlay: FPS, bandwidth, coverage counts, a top-down map of which
+// The overlay: FPS, bandwidth, counts of chunks by form, a top-down map of which
 // chunk columns are held at full resolution and which as mips, and the
 // tool line. Shared by both front ends.
 struct OverlayInfo {

@@ -86,6 +86,8 @@ TEST_F(AdminTest, OnlyAdminsMayRunCommands) {
   const AdminResultMsg r = command(*player.peer, "status");
   EXPECT_FALSE(r.ok);
   EXPECT_NE(r.text.find("not an admin"), std::string::npos) << r.text;
+  // Scripts read the same refusal from json, as every ok: false (PROTOCOL.md).
+  EXPECT_EQ(r.json, "{\"error\": \"not an admin: this session's token does not have the admin role\"}");
   // A wrong admin token is refused outright, not let in as a player.
   auto wrong = connect("admin", "not-the-token");
   EXPECT_FALSE(wrong.welcomed);

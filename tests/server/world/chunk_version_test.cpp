@@ -34,7 +34,7 @@ TEST(ChunkVersion, DerivedBytesAreTheCodecsOwn) {
     net_codec_encode(n, box.voxels(), want);
     EXPECT_TRUE(std::equal(want.begin(), want.end(), v.encoded(level).begin(), v.encoded(level).end())) << level;
   }
-  EXPECT_EQ(v.hash(), region_hash(chunk.get(), 7));
+  EXPECT_EQ(v.hash(), chunk_hash(chunk.get(), 7));
   const auto blob = encode_chunk_blob(*chunk);
   EXPECT_TRUE(std::equal(blob.begin(), blob.end(), v.blob().begin(), v.blob().end()));
   // Full: eight 16^3 units that decode to the chunk.
