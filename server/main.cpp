@@ -19,7 +19,7 @@
 
 #include "common/cli/cli.h"
 #include "server/net/limits.h"
-#include "server/log.h"
+#include "server/base/log.h"
 #include "server/server.h"
 #include "server/storage/postgres_store.h"
 

@@ -4,8 +4,8 @@
 #include <future>
 
 #include "common/world/sqlite_store.h"
-#include "server/log.h"
-#include "server/thread_role.h"
+#include "server/base/log.h"
+#include "server/base/thread_role.h"
 #include "server/storage/postgres_store.h"
 
 namespace terrane {

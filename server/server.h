@@ -1,34 +1,9 @@
 // Server: the authoritative Terrane world server (asio over TCP). It only
-// wires the rooms together; each folder is one owner:
-//
-// | folder              | owner (thread or strand)   | owns                                         |
-// |---------------------|----------------------------|----------------------------------------------|
-// | server/net/         | each session's strand      | socket, framing, parsing, timeouts, limits   |
-// | server/replication/ | the same session strand    | the client's plan, what it holds, requests,  |
-// |                     |                            | budget, pushed hashes, per-tick frames       |
-// |                     | probe timers on the io     | the stream gate: whether streaming yields    |
-// |                     | threads and world strand   | to live traffic (an atomic flag)             |
-// | server/world/       | the world strand (a thread) | chunk versions, edits, undo history, ticks,  |
-// |                     |                            | who holds what (interest), presence          |
-// | server/storage/     | loader pool, writer thread | store reads (SQLite or PostgreSQL),          |
-// |                     |                            | generation and estimates (three priorities); |
-// |                     |                            | group commits                                |
-// |                     | the lease keeper's thread  | a PostgreSQL world's region leases           |
-// |                     | the change listener's      | other servers' notices (changed chunks,      |
-// |                     | thread                     | forwarded edits and their answers)           |
-// | server/ops/         | its own HTTP threads       | /metrics and /health (reads counters only)   |
-// |                     | the admin thread           | operators' commands; bans and whitelist      |
-//
-// The threads carry names (server/thread_role.h, for top -H and perf):
-// terrane-io (sessions and replicators), terrane-world, terrane-loader,
-// terrane-writer; and, unless --no-thread-priorities, a niceness by role:
-// the loaders (streaming's loads) below the rest.
-//
-// Between them only immutable data travels: chunk versions (server/world/
-// chunk_version.h) whose encodings, update units, hash and blob are made
-// once, lazily, by the first thread that needs them; and frames (shared
-// bytes). Each owner posts to another; nothing takes a lock except the
-// storage hand-offs and the session table (each with its reason).
+// wires the rooms together. server/README.md has the rooms (one folder
+// each: base, net, replication, world, storage, ops), the thread or strand
+// that owns each, the locks with their reasons and the allowed includes
+// (checked by tests/server/include_edges_test.cpp), and walks a chunk and
+// an edit through them.
 //
 // A tick (world strand, fixed schedule): apply edits to copies of their
 // chunks and publish new versions; the storage writer commits them (one
@@ -58,7 +33,7 @@
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"
-#include "server/options.h"
+#include "server/base/options.h"
 #include "server/replication/replicator.h"
 #include "server/storage/change_listener.h"
 #include "server/storage/lease_keeper.h"

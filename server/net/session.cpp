@@ -1,6 +1,6 @@
 #include "server/net/session.h"
 
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -36,32 +36,13 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
-#include "server/counters.h"
+#include "server/base/counters.h"
+#include "server/base/options.h"
+#include "server/base/rate_limit.h"
 #include "server/net/limits.h"
 
 namespace terrane {
 
-struct SessionLimits {
-  std::size_t max_frame_bytes = kDefaultMaxFrameBytes;
-  // Hard cap on queued outbound bytes: a client this far behind is dropped.
-  std::size_t max_queue_bytes = 16u << 20;
-  std::chrono::milliseconds handshake_timeout{5000};
-  std::chrono::milliseconds idle_timeout{30000};
-  // A write that makes no progress for this long drops the client.
-  std::chrono::milliseconds write_timeout{10000};
-  std::chrono::milliseconds linger{1000};
-  // A frame whose first byte arrived must be complete within this (a
-  // slowloris trickling one frame forever is dropped).
-  std::chrono::milliseconds frame_timeout{10000};
-  // Inbound bytes per second per client (0 = unlimited) and the burst
-  // allowed above it.
-  double inbound_bytes_per_second = 1 << 20;
-  double inbound_burst_bytes = 4 << 20;
-  // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
-  // makes a stalled reader visible sooner (and bounds kernel memory).
-  int socket_send_buffer_bytes = 0;
-  ServerCounters* counters = nullptr;  // not owned; may be null
-};
 
 struct ChunkHashRequestMsg {
   Vec3i chunk_pos;

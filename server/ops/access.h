@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "common/world/world_store.h"
-#include "server/counters.h"
+#include "server/base/counters.h"
 #include "server/net/limits.h"
 
 namespace terrane {

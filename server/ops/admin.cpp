@@ -9,7 +9,7 @@
 #include "common/cli/cli.h"
 #include "common/cli/json.h"
 #include "common/world/sqlite_store.h"
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

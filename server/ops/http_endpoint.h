@@ -3,7 +3,7 @@
 // "ok" while the server ticks and stores, 503 and the reason otherwise).
 //
 // Threading: its own small pool (cpp-httplib), apart from the game's io
-// threads; the handlers only read atomics (server/counters.h), so a slow or
+// threads; the handlers only read atomics (server/base/counters.h), so a slow or
 // hostile scraper costs the game nothing but those threads. Requests are
 // bounded by cpp-httplib (8 KiB of headers, no body accepted, 5 s timeouts).
 #pragma once

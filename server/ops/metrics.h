@@ -9,9 +9,9 @@
 #include <cstdint>
 #include <string>
 
-#include "server/counters.h"
+#include "server/base/counters.h"
 #include "server/storage/storage.h"
-#include "server/world/chunk_version.h"
+#include "server/base/chunk_version.h"
 
 namespace terrane {
 

@@ -5,7 +5,7 @@
 
 #include "common/codec/update_batch.h"
 #include "common/world/view.h"
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -2,7 +2,7 @@
 
 #include <chrono>
 
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -20,7 +20,7 @@
 #include "common/world/coarse_image.h"
 #include "protocol/framing.h"
 #include "protocol/messages.h"
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -6,8 +6,8 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "server/log.h"
-#include "server/thread_role.h"
+#include "server/base/log.h"
+#include "server/base/thread_role.h"
 
 namespace terrane {
 

@@ -41,9 +41,9 @@
 
 #include "common/world/horizon.h"
 #include "common/world/world.h"
-#include "server/counters.h"
+#include "server/base/counters.h"
 #include "server/storage/lease_keeper.h"
-#include "server/world/chunk_version.h"
+#include "server/base/chunk_version.h"
 
 namespace terrane {
 
@@ -112,7 +112,7 @@ class Storage {
   // is opened again (WorldStore::reopen) once per loader and once for the
   // writer.
   // thread_priorities: the writer and loader threads at their roles'
-  // niceness (server/thread_role.h).
+  // niceness (server/base/thread_role.h).
   static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true);
   // The edit log keeps entries this long (0: for ever) and at most this many
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.

@@ -6,7 +6,7 @@
 #include "common/codec/byte_rle.h"
 #include "common/codec/net_codec.h"
 #include "common/world/view.h"
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -9,7 +9,7 @@
 
 #include <fmt/format.h>
 
-#include "server/log.h"
+#include "server/base/log.h"
 #include "server/world/world_owner.h"
 
 namespace terrane {

@@ -22,7 +22,7 @@
 #include "protocol/messages.h"
 #include "protocol/stream_batch.h"
 #include "server/storage/storage.h"
-#include "server/world/chunk_version.h"
+#include "server/base/chunk_version.h"
 #include "server/world/edits.h"
 #include "server/world/interest.h"
 

@@ -32,7 +32,7 @@
 #include "common/world/sqlite_store.h"
 #include "common/world/view.h"
 #include "server/world/edits.h"
-#include "server/log.h"
+#include "server/base/log.h"
 #include "tests/support/eventually.h"
 #include "tests/support/server_fixture.h"
 

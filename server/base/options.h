@@ -1,5 +1,5 @@
 // The server's options, shared read-only by every room: net, world,
-// storage and replication (their counters: server/counters.h).
+// storage and replication (their counters: server/base/counters.h).
 #pragma once
 
 #include <atomic>
@@ -10,10 +10,38 @@
 #include <unordered_map>
 
 #include "protocol/messages.h"
-#include "server/counters.h"
-#include "server/net/session.h"
+#include "server/base/counters.h"
 
 namespace terrane {
+
+// A player of the tokens file (server/net/limits.h reads it).
+struct PlayerToken {
+  std::string token;
+  bool admin = false;  // may run terrane-admin commands
+};
+
+// One session's limits (server/net/session.h applies them).
+struct SessionLimits {
+  std::size_t max_frame_bytes = kDefaultMaxFrameBytes;
+  // Hard cap on queued outbound bytes: a client this far behind is dropped.
+  std::size_t max_queue_bytes = 16u << 20;
+  std::chrono::milliseconds handshake_timeout{5000};
+  std::chrono::milliseconds idle_timeout{30000};
+  // A write that makes no progress for this long drops the client.
+  std::chrono::milliseconds write_timeout{10000};
+  std::chrono::milliseconds linger{1000};
+  // A frame whose first byte arrived must be complete within this (a
+  // slowloris trickling one frame forever is dropped).
+  std::chrono::milliseconds frame_timeout{10000};
+  // Inbound bytes per second per client (0 = unlimited) and the burst
+  // allowed above it.
+  double inbound_bytes_per_second = 1 << 20;
+  double inbound_burst_bytes = 4 << 20;
+  // SO_SNDBUF for client sockets; 0 keeps the OS default. A small buffer
+  // makes a stalled reader visible sooner (and bounds kernel memory).
+  int socket_send_buffer_bytes = 0;
+  ServerCounters* counters = nullptr;  // not owned; may be null
+};
 
 struct ServerOptions {
   std::string world_dir;                // created with default_world_meta() when missing
@@ -80,7 +108,7 @@ struct ServerOptions {
   bool horizon_images = true;
   SessionLimits session;
   int io_threads = 2;
-  // Niceness by thread role (server/thread_role.h): the loaders below the
+  // Niceness by thread role (server/base/thread_role.h): the loaders below the
   // rest.
   bool thread_priorities = true;
   // Loader threads: reading stored chunks and generating missing ones.

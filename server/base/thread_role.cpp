@@ -1,4 +1,4 @@
-#include "server/thread_role.h"
+#include "server/base/thread_role.h"
 
 #include <pthread.h>
 #include <sys/resource.h>

@@ -1,4 +1,4 @@
-#include "server/world/chunk_version.h"
+#include "server/base/chunk_version.h"
 
 #include <algorithm>
 #include <cstring>
@@ -6,7 +6,7 @@
 #include "common/voxel/box.h"
 #include "common/world/world_store.h"
 #include "protocol/messages.h"
-#include "server/log.h"
+#include "server/base/log.h"
 
 namespace terrane {
 

@@ -1,7 +1,7 @@
 // ChunkVersion: lazily made, shared derived bytes equal what the codecs
 // make directly; level_since; update pieces join into the batch one encoder
 // writes.
-#include "server/world/chunk_version.h"
+#include "server/base/chunk_version.h"
 
 #include <gtest/gtest.h>
 

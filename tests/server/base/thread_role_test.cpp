@@ -1,7 +1,7 @@
 // Thread roles: each names its thread, and sets its niceness relative to
 // the process's (the loaders below, the rest unchanged); with priorities
 // off, nothing but the name changes.
-#include "server/thread_role.h"
+#include "server/base/thread_role.h"
 
 #include <gtest/gtest.h>
 #include <pthread.h>
