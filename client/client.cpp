@@ -1,5 +1,7 @@
 #include "client/client.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <tuple>
@@ -187,6 +189,7 @@ void Client::start_session() {
     send_queue_.push_front(std::move(*it));
   }
   linked_ = true;
+  last_heard_ = std::chrono::steady_clock::now();
   do_write();
   do_read();
   arm_keepalive();
@@ -460,9 +463,16 @@ void Client::arm_keepalive() {
   const std::uint64_t gen = generation_;
   keepalive_.async_wait([this, gen, g = OpGuard(this)](const asio::error_code& ec) {
     if (ec || io_closed_ || gen != generation_) return;
+    const auto now = std::chrono::steady_clock::now();
+    // Bytes waiting in the socket are no silence (this thread was slow to read them).
+    asio::error_code avail_ec;
+    if (options_.silence_timeout.count() > 0 && now - last_heard_ >= options_.silence_timeout &&
+        socket_.available(avail_ec) == 0)
+      return connection_lost(fmt::format("no answer from the server for {:.1f} s",
+                                         std::chrono::duration<double>(now - last_heard_).count()),
+                             false);
     // Its nonce is the steady clock in microseconds: the Pong times the round trip.
-    const auto now_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                            std::chrono::steady_clock::now().time_since_epoch()).count();
+    const auto now_us = std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count();
     send(build_ping(static_cast<std::uint64_t>(std::max<std::int64_t>(1, now_us))), wire::Body::Ping);
     arm_keepalive();
   });
@@ -473,6 +483,7 @@ void Client::do_read() {
   socket_.async_read_some(asio::buffer(read_buf_), [this, gen, g = OpGuard(this)](const asio::error_code& ec, std::size_t n) {
     if (io_closed_ || gen != generation_) return;
     if (ec) return connection_lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), false);
+    last_heard_ = std::chrono::steady_clock::now();
     {
       std::lock_guard lock(mutex_);
       counters_.bytes_in += n;
@@ -788,13 +799,23 @@ void Client::close_locked_io(const std::string& reason) {
   redirect_timer_.cancel();
   redirect_.reset();
   std::string r;
+  // Edits sent and never answered get their outcome now: unknown.
+  std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
   {
     std::lock_guard lock(mutex_);
     closed_ = true;
     if (disconnect_reason_.empty()) disconnect_reason_ = reason;
     r = disconnect_reason_;
+    for (const std::uint32_t id : unanswered_edits_) {
+      EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
+      edits_[id] = o;
+      unknown.emplace_back(id, o);
+    }
+    unanswered_edits_.clear();
   }
   changed_.notify_all();
+  if (callbacks_.on_edit_result)
+    for (const auto& [id, o] : unknown) callbacks_.on_edit_result(id, o);
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 

@@ -91,6 +91,11 @@ struct ClientOptions {
   std::chrono::milliseconds connect_timeout{5000};
   // A Ping goes out this often so an idle client is not timed out.
   std::chrono::milliseconds keepalive{5000};
+  // The connection counts as lost (reconnecting if allowed, as on a drop)
+  // when nothing has come from the server for this long: a paused or
+  // partitioned server is noticed, not waited out. The server pings every
+  // 5 s and answers each Ping. Checked at each keepalive; 0 = never.
+  std::chrono::milliseconds silence_timeout{15000};
   // Outbound bytes queued at most; sends beyond it fail.
   std::size_t max_send_queue_bytes = 4u << 20;
   // Reconnect when the connection drops without a reason, or because the
@@ -369,6 +374,8 @@ class Client {
   asio::strand<asio::io_context::executor_type> strand_;
   asio::ip::tcp::socket socket_;   // on strand_
   asio::steady_timer keepalive_;   // on strand_
+  // When this connection last read a byte (strand_): silence_timeout.
+  std::chrono::steady_clock::time_point last_heard_{};
   asio::steady_timer delivery_;    // on strand_
   std::thread thread_;
   bool started_ = false;           // connect() succeeded (caller's thread)

@@ -462,6 +462,43 @@ TEST_F(ClientServerTest, DroppedUpdateIsDetectedByChunkHash) {
   EXPECT_EQ(a.counters().update_batches, 0u);
 }
 
+// A paused server (SIGSTOP: its socket stays open, nothing comes back) is
+// noticed by the silence timeout, not waited out; an edit sent to it ends
+// with an unknown outcome when the connection closes.
+TEST_F(ClientServerTest, ASilentServerIsNoticedAndItsUnansweredEditsEndUnknown) {
+  start_server();
+  ClientOptions o = options("patient");
+  o.keepalive = 200ms;
+  o.silence_timeout = 1000ms;
+  Client c(o);
+  ASSERT_TRUE(join(c).has_value());
+  const auto near = wait_full_res(c, 32);
+  ASSERT_FALSE(near.empty());
+  ASSERT_FALSE(c.closed()) << c.disconnect_reason();
+  const Vec3f spawn = c.welcome()->spawn;
+  const Vec3i at{static_cast<std::int32_t>(std::floor(spawn.x)), static_cast<std::int32_t>(std::floor(spawn.y)),
+                 static_cast<std::int32_t>(std::floor(spawn.z))};
+  ASSERT_TRUE(server_->pause());
+  const std::uint32_t id = c.fill_box(Region{at, at + Vec3i{1, 1, 1}}, solid(materials::kBrick));
+  ASSERT_NE(id, 0u);
+  const auto paused_at = std::chrono::steady_clock::now();
+  EXPECT_TRUE(c.wait_until([](const ClientView& v) { return v.closed; }, kDeadline));
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - paused_at).count();
+  ASSERT_TRUE(server_->resume());
+  EXPECT_NE(c.disconnect_reason().find("no answer from the server for"), std::string::npos) << c.disconnect_reason();
+  EXPECT_LT(waited, 10.0) << "noticed only after " << waited << " s";
+  std::optional<EditOutcome> outcome;
+  c.wait_until(
+      [&](const ClientView& v) {
+        if (auto it = v.edits.find(id); it != v.edits.end()) outcome = it->second;
+        return true;
+      },
+      0ms);
+  ASSERT_TRUE(outcome.has_value()) << "the edit has no outcome after the close";
+  EXPECT_FALSE(outcome->accepted);
+  EXPECT_EQ(outcome->reason, kEditOutcomeUnknown);
+}
+
 TEST_F(ClientServerTest, MalformedFramesDisconnectOnlyTheirSender) {
   start_server();
   Client good(options("good")), garbage(options("garbage")), huge(options("huge"));
