@@ -3,6 +3,7 @@
 #   scripts/build.sh release   -> build/          (optimised, -Werror in CI)
 #   scripts/build.sh asan      -> build-asan/     (address + undefined sanitizers)
 #   scripts/build.sh fuzz      -> build-fuzz/     (clang, libFuzzer targets)
+#   scripts/build.sh tsan      -> build-tsan/     (thread sanitizer)
 # Extra arguments name targets to build (default: all).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,8 +24,11 @@ case "$flavour" in
     dir=build-fuzz
     args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTERRANE_BUILD_FUZZ=ON
           -DTERRANE_BUILD_BENCH=OFF -DTERRANE_BUILD_TESTS=ON -DTERRANE_SANITIZE=address,undefined) ;;
+  tsan)
+    dir=build-tsan
+    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DTERRANE_SANITIZE=thread -DTERRANE_BUILD_BENCH=OFF) ;;
   *)
-    echo "build.sh: unknown flavour '$flavour' (release, asan or fuzz)" >&2
+    echo "build.sh: unknown flavour '$flavour' (release, asan, fuzz or tsan)" >&2
     exit 2 ;;
 esac
 

@@ -3,8 +3,10 @@
 #   1. install system packages (scripts/install-deps.sh)
 #   2. release build, unit tests
 #   3. ASan + UBSan build, unit tests
-#   4. libFuzzer targets, a bounded run each (TERRANE_FUZZ_SECONDS, default 20)
-#   5. heavy tests (large worlds, scale) on the release build; skip with
+#   4. ThreadSanitizer build of the threaded tests (server, client, bots,
+#      cluster; ctest label tsan) and their run, failing on any report
+#   5. libFuzzer targets, a bounded run each (TERRANE_FUZZ_SECONDS, default 20)
+#   6. heavy tests (large worlds, scale) on the release build; skip with
 #      TERRANE_SKIP_HEAVY=1
 # Prints each stage's wall time. Exits non-zero on the first failure.
 set -euo pipefail
@@ -36,6 +38,29 @@ stage_done
 stage "unit tests (address, undefined)"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
   ctest --test-dir build-asan -L unit -j "$ctest_jobs" --output-on-failure
+stage_done
+
+stage "thread sanitizer build"
+# Only the threaded tests' programs and the programs they start.
+bash scripts/build.sh tsan terrane_server_tests terrane_client_tests \
+  terrane-server terrane-world terrane-bots terrane-admin
+stage_done
+
+stage "threaded tests (thread sanitizer)"
+# Every report fails the stage. Reports go to files, the servers' and tools'
+# that the tests start too (a test may not notice a child's exit code);
+# halt_on_error ends the process at its first.
+tsan_logs=$PWD/build-tsan/tsan-reports
+rm -rf "$tsan_logs" && mkdir -p "$tsan_logs"
+tsan_failed=0
+TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:log_path=$tsan_logs/report" \
+  ctest --test-dir build-tsan -L tsan -j "$ctest_jobs" --output-on-failure || tsan_failed=1
+if compgen -G "$tsan_logs/report.*" >/dev/null; then
+  cat "$tsan_logs"/report.*
+  echo "ThreadSanitizer reports: $(ls "$tsan_logs" | wc -l) processes (above, and in $tsan_logs)" >&2
+  tsan_failed=1
+fi
+[ "$tsan_failed" = 0 ]
 stage_done
 
 stage "fuzz targets"

@@ -361,19 +361,28 @@ LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
 }
 
 void Storage::set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes) {
+  // The writer is already running (it prunes on its own wake-ups, commits or not).
+  std::lock_guard lock(jobs_mutex_);
   log_max_age_ = max_age;
   log_max_bytes_ = max_bytes;
 }
 
 void Storage::prune_log() {
+  std::chrono::seconds max_age;
+  std::uint64_t max_bytes;
+  {
+    std::lock_guard lock(jobs_mutex_);
+    max_age = log_max_age_;
+    max_bytes = log_max_bytes_;
+  }
   const auto now = std::chrono::steady_clock::now();
-  if (now < next_prune_ || (log_max_age_.count() == 0 && log_max_bytes_ == 0)) return;
+  if (now < next_prune_ || (max_age.count() == 0 && max_bytes == 0)) return;
   next_prune_ = now + std::chrono::minutes(1);
   const std::int64_t now_ms =
       std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
   const std::int64_t before =
-      log_max_age_.count() == 0 ? 0 : now_ms - std::chrono::duration_cast<std::chrono::milliseconds>(log_max_age_).count();
-  auto n = writer_store_->prune_edit_log(before, log_max_bytes_);
+      max_age.count() == 0 ? 0 : now_ms - std::chrono::duration_cast<std::chrono::milliseconds>(max_age).count();
+  auto n = writer_store_->prune_edit_log(before, max_bytes);
   if (!n) {
     server_log().warn("edit log: pruning failed: {}", n.error().message);
     return;

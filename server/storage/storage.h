@@ -116,7 +116,7 @@ class Storage {
   static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true);
   // The edit log keeps entries this long (0: for ever) and at most this many
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.
-  // Call before the first commit.
+  // Thread-safe (the writer reads it under jobs_mutex_).
   void set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes);
   // Whether a coarse image's read estimates the region's chunks never
   // stored (LoadedCoarse::estimates). Call before the first load.
@@ -223,6 +223,7 @@ class Storage {
   void prune_log();
   bool estimate_coarse_ = true;
   LeaseKeeper* leases_ = nullptr;
+  // Guarded by jobs_mutex_: set after the writer has started.
   std::chrono::seconds log_max_age_{0};
   std::uint64_t log_max_bytes_ = 0;
   std::chrono::steady_clock::time_point next_prune_{};
