@@ -191,18 +191,14 @@ void Replicator::on_closed(const std::string& reason) {
   if (welcomed_) {
     // Everything held or asked for, so nothing stays registered.
     std::vector<Vec3i> all;
-    all.reserve(held_.size() + requested_.size());
-    for (const auto& [cp, h] : held_) all.push_back(cp);
-    for (const auto& [cp, r] : requested_) all.push_back(cp);
+    for (const auto& [cp, s] : slots_)
+      if (s.held() || s.request()) all.push_back(cp);
     world_.release(id_, std::move(all));
     world_.leave(id_);
     counters_.clients.fetch_sub(1, std::memory_order_relaxed);
   }
   server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : name_, reason);
-  held_.clear();
-  full_.clear();
-  ready_versions_.clear();
-  horizon_.clear();
+  slots_.clear();
   horizon_wanted_.clear();
   session_.reset();  // breaks the cycle with the session's callbacks
 }
@@ -299,19 +295,27 @@ void Replicator::maybe_redirect() {
 }
 
 void Replicator::send_parked_near() {
+  if (slots_.mips_pending() == 0) return;
   std::vector<Vec3i> near;
-  for (const auto& [cp, v] : mip_dirty_) {
-    auto it = held_.find(cp);
-    if (it != held_.end() && it->second.form == HoldingForm::kEmpty && desired(cp) == 0) near.push_back(cp);
+  for (const Vec3i cp : mip_order_) {
+    const ChunkSlot* s = slots_.find(cp);
+    if (s == nullptr || !s->mip_pending()) continue;
+    const auto h = s->held();
+    if (h && h->form == HoldingForm::kEmpty && desired(cp) == 0) near.push_back(cp);
   }
-  // A copy of the pointer: send_whole erases the entry it comes from.
-  for (const Vec3i cp : near) send_whole(cp, VersionPtr(mip_dirty_.at(cp)));
+  for (const Vec3i cp : near) {
+    // A copy of the pointer: send_whole drops the change it comes from.
+    const ChunkSlot* s = slots_.find(cp);
+    if (s == nullptr || !s->mip_pending()) continue;  // listed twice
+    send_whole(cp, VersionPtr(s->mip_pending()));
+  }
 }
 
 void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
   send_chunk(*v, 0);
   hold(cp, Holding{form_sent(*v, 0), v->revision()}, v);
-  mip_dirty_.erase(cp);  // older than v: nothing left to refresh
+  slots_.change_if(cp, [](ChunkSlot& s) { s.take_mip(); });  // older than v: nothing left to refresh
+  if (slots_.mips_pending() == 0) mip_order_.clear();
 }
 
 void Replicator::on_edit(EditRequestMsg edit) {
@@ -350,11 +354,11 @@ void Replicator::on_edit(EditRequestMsg edit) {
   bool full = true;
   for_each_chunk_in(r, [&](Vec3i cp) {
     if (!full) return;
-    if (auto it = held_.find(cp); it != held_.end()) {
-      full = it->second.full_resolution();
+    const ChunkSlot* s = slots_.find(cp);
+    if (s != nullptr && s->held()) {
+      full = s->held()->full_resolution();
     } else {
-      auto c = claims_.find(cp);
-      full = c != claims_.end() && c->second.full_resolution() && plan_valid_ && desired(cp) == 0;
+      full = s != nullptr && s->claim() && s->claim()->full_resolution() && plan_valid_ && desired(cp) == 0;
     }
   });
   if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");
@@ -365,7 +369,7 @@ void Replicator::on_read_box(const ReadBoxMsg& req) {
   // Only chunks the client holds (at any resolution): a read must never make
   // the server load chunks nobody is looking at.
   bool held = true;
-  for_each_chunk_in(req.box, [&](Vec3i cp) { held = held && held_.count(cp) != 0; });
+  for_each_chunk_in(req.box, [&](Vec3i cp) { held = held && slots_.holds(cp); });
   if (!held) {
     session_->send(build_read_box_error(req.request_id, req.box, "box outside the chunks this client holds"));
     return;
@@ -376,9 +380,9 @@ void Replicator::on_read_box(const ReadBoxMsg& req) {
 
 void Replicator::on_holdings(const HoldingsMsg& h) {
   for (const HeldChunkMsg& c : h.chunks) {
-    if (claims_.size() >= options_.max_claims_per_client) break;
-    if (held_.count(c.chunk_pos) != 0) continue;  // already streamed this session
-    claims_[c.chunk_pos] = c.holding;
+    if (slots_.claims() >= options_.max_claims_per_client) break;
+    if (slots_.holds(c.chunk_pos)) continue;  // already streamed this session
+    slots_.change(c.chunk_pos, [&](ChunkSlot& s) { s.set_claim(c.holding); });
   }
   // Claims outside the view are released at the next plan.
   if (plan_valid_) {
@@ -390,8 +394,9 @@ void Replicator::on_holdings(const HoldingsMsg& h) {
 void Replicator::on_hash_request(Vec3i cp) {
   // Only chunks this client holds: a hash request must not make the server
   // load or generate arbitrary chunks.
-  if (held_.count(cp) == 0 && claims_.count(cp) == 0 && requested_.count(cp) == 0) return;
-  if (held_.count(cp) == 0) {
+  const ChunkSlot* s = slots_.find(cp);
+  if (s == nullptr || (!s->held() && !s->claim() && !s->request())) return;
+  if (!s->held()) {
     // Claimed by a resuming client but not yet adopted or resent: answered
     // once it is, so the hash follows the data it describes.
     if (hash_requests_.size() >= 1024) {
@@ -405,13 +410,14 @@ void Replicator::on_hash_request(Vec3i cp) {
 }
 
 void Replicator::answer_hash(Vec3i cp) {
-  const Holding h = held_.at(cp);
+  const ChunkSlot& s = *slots_.find(cp);
+  const Holding h = *s.held();
   if (h.form == HoldingForm::kEmpty) {
     flush_stream();
     session_->send(build_chunk_hash(ChunkHashMsg{cp, h.revision, chunk_hash(nullptr, h.revision)}));
-  } else if (auto it = full_.find(cp); it != full_.end()) {
+  } else if (const VersionPtr& v = s.full()) {
     flush_stream();
-    session_->send(build_chunk_hash(ChunkHashMsg{cp, it->second->revision(), it->second->hash()}));
+    session_->send(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()}));
   } else {
     flush_stream();
     world_.hash(id_, cp);  // a mip holder: the world has the chunk
@@ -437,9 +443,10 @@ void Replicator::push_refine(Vec3i cp) {
 }
 
 bool Replicator::needs_refining(Vec3i cp) const {
-  auto it = held_.find(cp);
+  const ChunkSlot* s = slots_.find(cp);
+  const auto h = s != nullptr ? s->held() : std::nullopt;
   // (Beyond the view desired() is kMipLevels: nothing is finer.)
-  return it != held_.end() && it->second.form != HoldingForm::kEmpty && desired(cp) < it->second.level();
+  return h && h->form != HoldingForm::kEmpty && desired(cp) < h->level();
 }
 
 void Replicator::rebuild_refine() {
@@ -455,14 +462,10 @@ void Replicator::rebuild_refine() {
 }
 
 void Replicator::release_outside_view() {
+  // (A slot with only a change for the refresh of mips has nothing to
+  // leave: leave() leaves it be.)
   std::vector<Vec3i> leaving;
-  for (const auto& [cp, c] : claims_)
-    if (!in_view(cp)) leaving.push_back(cp);
-  for (const auto& [cp, h] : held_)
-    if (!in_view(cp)) leaving.push_back(cp);
-  for (const auto& [cp, r] : requested_)
-    if (!in_view(cp)) leaving.push_back(cp);
-  for (const auto& [cp, level] : horizon_)
+  for (const auto& [cp, s] : slots_)
     if (!in_view(cp)) leaving.push_back(cp);
   std::vector<Vec3i> released;
   for (const Vec3i cp : leaving) leave(cp, released);
@@ -470,29 +473,12 @@ void Replicator::release_outside_view() {
 }
 
 void Replicator::leave(Vec3i cp, std::vector<Vec3i>& released) {
-  if (auto c = claims_.find(cp); c != claims_.end()) {
-    stream(StreamRecordKind::kReleased, cp, c->second.revision);
-    claims_.erase(c);
-  }
-  bool registered = false;  // the world counts this client among the chunk's holders
-  if (auto it = held_.find(cp); it != held_.end()) {
-    stream(StreamRecordKind::kReleased, cp, it->second.revision);
-    full_.erase(cp);
-    held_.erase(it);
-    registered = true;
-  }
-  // (Never both held and seen through a horizon image: hold() forgets the image.)
-  if (horizon_.erase(cp)) stream(StreamRecordKind::kReleased, cp, 0);
-  if (auto rv = ready_versions_.find(cp); rv != ready_versions_.end()) {
-    // Granted (so registered) and not sent: dropped with its request.
-    ready_versions_.erase(rv);
-    requested_.erase(cp);
-    registered = true;
-  } else if (auto rq = requested_.find(cp); rq != requested_.end()) {
-    // Its grant is on its way: it comes to nothing (on_granted).
-    rq->second.cancelled = true;
-  }
-  if (registered) released.push_back(cp);
+  ChunkSlot::Left left;
+  if (!slots_.change_if(cp, [&](ChunkSlot& s) { left = s.leave(); })) return;
+  if (left.claim) stream(StreamRecordKind::kReleased, cp, *left.claim);
+  if (left.had) stream(StreamRecordKind::kReleased, cp, *left.had);
+  // (A request still on its way is cancelled: its grant comes to nothing, on_granted.)
+  if (left.registered) released.push_back(cp);
 }
 
 void Replicator::replan() {
@@ -506,10 +492,12 @@ void Replicator::replan() {
   release_outside_view();
   refine_.clear();
   std::vector<Vec3i> now_full;  // held Empty, within full resolution
-  for (const auto& [cp, h] : held_) {
-    if (h.form != HoldingForm::kEmpty && desired(cp) < h.level())
+  for (const auto& [cp, s] : slots_) {
+    const auto h = s.held();
+    if (!h) continue;
+    if (h->form != HoldingForm::kEmpty && desired(cp) < h->level())
       refine_.emplace_back(offset_center_dist2(cp - center_), cp);
-    if (h.form == HoldingForm::kEmpty && desired(cp) == 0) now_full.push_back(cp);
+    if (h->form == HoldingForm::kEmpty && desired(cp) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
@@ -531,7 +519,7 @@ void Replicator::plan_horizon() {
   std::vector<HorizonWant> wants;
   for (const Vec3i o : table_->offsets()) {
     const Vec3i cp = center_ + o;
-    if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) continue;
+    if (!in_view(cp) || slots_.known(cp)) continue;
     const Vec3i region = coarse_region_of(cp);
     // A Horizon record's region lies within the wire's range whole.
     if (!wire_chunk_ok(region * kHorizonRegionChunks + Vec3i{7, 7, 7})) continue;
@@ -574,9 +562,9 @@ void Replicator::send_horizon(const HorizonImage& image) {
   HorizonMask mask{};
   std::size_t covered = 0;
   for_each_region_chunk(image.region, [&](Vec3i cp) {
-    if (!in_view(cp) || held_.count(cp) != 0 || claims_.count(cp) != 0 || horizon_.count(cp) != 0) return;
+    if (!in_view(cp) || slots_.known(cp)) return;
     horizon_mask_set(mask, coarse_index(cp));
-    horizon_.emplace(cp, static_cast<std::uint8_t>(level));
+    slots_.change(cp, [&](ChunkSlot& s) { s.see_image(level); });
     ++covered;
   });
   if (covered == 0) return;
@@ -599,10 +587,11 @@ void Replicator::move_by(Vec3i d) {
   std::vector<Vec3i> now_full;  // held Empty, now within full resolution
   for (const Vec3i o : table_->finer(d)) {
     const Vec3i cp = center_ + o;
-    auto it = held_.find(cp);
-    if (it == held_.end()) continue;
-    if (it->second.form != HoldingForm::kEmpty && table_->level(o) < it->second.level()) push_refine(cp);
-    if (it->second.form == HoldingForm::kEmpty && table_->level(o) == 0) now_full.push_back(cp);
+    const ChunkSlot* s = slots_.find(cp);
+    const auto h = s != nullptr ? s->held() : std::nullopt;
+    if (!h) continue;
+    if (h->form != HoldingForm::kEmpty && table_->level(o) < h->level()) push_refine(cp);
+    if (h->form == HoldingForm::kEmpty && table_->level(o) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   flush_stream();
@@ -638,30 +627,32 @@ void Replicator::pump() {
 void Replicator::request_more() {
   // The horizon images first: chunks' own records wait until all are sent.
   if (!horizon_wanted_.empty()) return;
-  if (requested_.size() + ready_.size() >= kMaxRequests) return;
+  if (slots_.requests() + ready_.size() >= kMaxRequests) return;
   std::vector<ChunkWant> wants;
-  auto want = [&](Vec3i cp, Intent intent, int level, bool exact = false) {
-    requested_.emplace(cp, Request{intent, level});
+  auto want = [&](Vec3i cp, ChunkIntent intent, int level, bool exact = false) {
+    slots_.change(cp, [&](ChunkSlot& s) { s.ask(ChunkRequest{intent, level}); });
     // Held at full resolution: sent so, or (all Air) sent Empty where the
     // plan wants full resolution.
     wants.push_back(ChunkWant{cp, level == 0 || desired(cp) == 0, level, exact});
   };
-  auto room = [&] { return requested_.size() + ready_.size() < kMaxRequests; };
+  auto room = [&] { return slots_.requests() + ready_.size() < kMaxRequests; };
   // Pass 1: the whole view at its coarsest, nearest first. With horizon
   // images the client sees the whole view already: a chunk within full
   // resolution is sent at full resolution at once instead (its 4^3 mip
   // would be replaced moments later).
   auto coarse = [&](Vec3i cp) {
-    if (!in_view(cp) || held_.count(cp) != 0 || requested_.count(cp) != 0) return;
-    if (auto c = claims_.find(cp); c != claims_.end()) {
-      const bool empty = c->second.form == HoldingForm::kEmpty;
+    if (!in_view(cp)) return;
+    const ChunkSlot* s = slots_.find(cp);
+    if (s != nullptr && (s->held() || s->request())) return;
+    if (s != nullptr && s->claim()) {
+      const Holding c = *s->claim();
+      const bool empty = c.form == HoldingForm::kEmpty;
       // A claim of Empty is checked against the chunk's own emptiness (an
       // estimate is never Empty; without estimates the coarse image says);
       // a claimed mip's revision says enough.
-      return want(cp, Intent::kClaim, empty ? kMipLevels - 1 : c->second.level(),
-                  empty && options_.horizon_estimates);
+      return want(cp, ChunkIntent::kClaim, empty ? kMipLevels - 1 : c.level(), empty && options_.horizon_estimates);
     }
-    want(cp, Intent::kCoarse, options_.horizon_images && desired(cp) == 0 ? 0 : kMipLevels - 1);
+    want(cp, ChunkIntent::kCoarse, options_.horizon_images && desired(cp) == 0 ? 0 : kMipLevels - 1);
   };
   const auto& offsets = table_->offsets();
   while (room() && coarse_pos_ < offsets.size()) coarse(coarse_center_ + offsets[coarse_pos_++]);
@@ -671,16 +662,14 @@ void Replicator::request_more() {
   }
   // Pass 2: refine nearest first, once the coarse view is complete (asked
   // for and sent: a grant waiting for a load would otherwise be overtaken).
-  const bool coarse_done = coarse_pos_ >= offsets.size() && entering_.empty() &&
-                           std::none_of(requested_.begin(), requested_.end(),
-                                        [](const auto& r) { return r.second.intent != Intent::kRefine; });
+  const bool coarse_done = coarse_pos_ >= offsets.size() && entering_.empty() && slots_.coarse_pass_requests() == 0;
   if (coarse_done && room() && refine_stale_) rebuild_refine();
   while (coarse_done && room() && !refine_.empty()) {
     std::pop_heap(refine_.begin(), refine_.end(), RefineOrder{});
     const Vec3i cp = refine_.back().second;
     refine_.pop_back();
-    if (requested_.count(cp) != 0 || !needs_refining(cp)) continue;
-    want(cp, Intent::kRefine, desired(cp));
+    if (const ChunkSlot* s = slots_.find(cp); (s != nullptr && s->request()) || !needs_refining(cp)) continue;
+    want(cp, ChunkIntent::kRefine, desired(cp));
   }
   if (!wants.empty()) {
     counters_.chunks_asked.fetch_add(wants.size(), std::memory_order_relaxed);
@@ -693,22 +682,24 @@ void Replicator::on_granted(std::vector<VersionPtr> versions) {
   std::vector<Vec3i> unwanted;
   for (VersionPtr& v : versions) {
     const Vec3i cp = v->pos();
-    auto rq = requested_.find(cp);
-    if (rq == requested_.end() || rq->second.cancelled || !in_view(cp)) {
+    const ChunkSlot* s = slots_.find(cp);
+    const std::optional<ChunkRequest> rq = s != nullptr ? s->request() : std::nullopt;
+    if (!rq || rq->cancelled || !in_view(cp)) {
       // Not wanted now. The world registered this client as a holder when
       // it granted the chunk, after any release the client had sent for
       // it: it is released again.
-      const bool cancelled = rq != requested_.end() && rq->second.cancelled;
-      if (rq != requested_.end()) requested_.erase(rq);
-      if (held_.count(cp) != 0) continue;
+      if (rq) slots_.change_if(cp, [](ChunkSlot& slot) { slot.take_request(); });
+      if (slots_.holds(cp)) continue;
       unwanted.push_back(cp);
       // It left the view and came back while this grant was on its way
       // (the coarse pass passed it over, as asked for): asked again, after
       // the release.
-      if (cancelled && in_view(cp)) entering_.push_back(cp);
+      if (rq && rq->cancelled && in_view(cp)) entering_.push_back(cp);
       continue;
     }
-    if (ready_versions_.emplace(cp, std::move(v)).second) ready_.push_back(cp);
+    bool kept = false;
+    slots_.change_if(cp, [&](ChunkSlot& slot) { kept = slot.set_ready(std::move(v)); });
+    if (kept) ready_.push_back(cp);
   }
   if (!unwanted.empty()) world_.release(id_, std::move(unwanted));
   pump();
@@ -725,37 +716,33 @@ void Replicator::send_ready() {
   while (!ready_.empty() && room()) {
     const Vec3i cp = ready_.front();
     ready_.pop_front();
-    auto rv = ready_versions_.find(cp);
-    auto rq = requested_.find(cp);
-    if (rv == ready_versions_.end() || rq == requested_.end()) {
-      if (rv != ready_versions_.end()) ready_versions_.erase(rv);
-      if (rq != requested_.end()) requested_.erase(rq);
-      continue;
-    }
-    const VersionPtr v = std::move(rv->second);
-    const Request req = rq->second;
-    ready_versions_.erase(rv);
-    requested_.erase(rq);
-    if (req.intent == Intent::kClaim) {
-      auto c = claims_.find(cp);
-      if (c != claims_.end()) {
-        const Holding claim = c->second;
-        claims_.erase(c);
-        // Same revision means same voxels: revisions of a stored chunk only
-        // grow, and a never-stored chunk (revision 0) is what the generator
-        // makes.
-        if (claim.revision == v->revision() && (claim.form == HoldingForm::kEmpty) == v->empty()) {
-          hold(cp, claim, v);
-          counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
-          continue;
-        }
+    // The grant and its request leave the slot together (an entry left by
+    // a chunk that left the view finds neither, or a request asked since,
+    // dropped with it; its grant is then released as unwanted).
+    VersionPtr v;
+    std::optional<ChunkRequest> req;
+    std::optional<Holding> claim;
+    slots_.change_if(cp, [&](ChunkSlot& s) {
+      v = s.take_ready();
+      req = s.take_request();
+      if (v && req && req->intent == ChunkIntent::kClaim) claim = s.take_claim();
+    });
+    if (!v || !req) continue;
+    if (req->intent == ChunkIntent::kClaim) {
+      // Same revision means same voxels: revisions of a stored chunk only
+      // grow, and a never-stored chunk (revision 0) is what the generator
+      // makes.
+      if (claim && claim->revision == v->revision() && (claim->form == HoldingForm::kEmpty) == v->empty()) {
+        hold(cp, *claim, v);
+        counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
+        continue;
       }
       send_chunk(*v, kMipLevels - 1);
       hold(cp, Holding{form_sent(*v, kMipLevels - 1), v->revision()}, v);
       continue;
     }
-    send_chunk(*v, req.level);
-    hold(cp, Holding{form_sent(*v, req.level), v->revision()}, v);
+    send_chunk(*v, req->level);
+    hold(cp, Holding{form_sent(*v, req->level), v->revision()}, v);
   }
   if (!ready_.empty()) arm_timer();
 }
@@ -777,14 +764,10 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
 }
 
 void Replicator::hold(Vec3i cp, Holding h, const VersionPtr& v) {
-  held_[cp] = h;
-  horizon_.erase(cp);
-  if (h.form == HoldingForm::kFull) {
-    if (full_.insert_or_assign(cp, v).second) hash_order_.push_back(cp);
-  } else {
-    full_.erase(cp);
-    if (h.form != HoldingForm::kEmpty && desired(cp) < h.level()) push_refine(cp);
-  }
+  bool new_full = false;
+  slots_.change(cp, [&](ChunkSlot& s) { new_full = s.hold(h, v); });
+  if (new_full) hash_order_.push_back(cp);
+  if (h.form != HoldingForm::kFull && h.form != HoldingForm::kEmpty && desired(cp) < h.level()) push_refine(cp);
   // Hash requests waiting for this chunk.
   if (!hash_requests_.empty()) {
     auto it = std::find(hash_requests_.begin(), hash_requests_.end(), cp);
@@ -800,7 +783,7 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
   std::vector<const UpdatePiece*> pieces;
   std::vector<ChunkRevisionMsg> revisions;
   std::vector<VersionPtr> keep;  // the pieces' owners, alive until the frame is built
-  const bool mips_were_dirty = !mip_dirty_.empty();
+  const bool mips_were_dirty = slots_.mips_pending() != 0;
   if (mips_due) {
     // Gathered over several ticks: a chunk may come more than once; its
     // newest version is all that counts (and one piece per chunk goes in
@@ -815,14 +798,15 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
   }
   for (VersionPtr& v : changed) {
     const Vec3i cp = v->pos();
-    if (auto r = ready_versions_.find(cp); r != ready_versions_.end()) {
-      // Granted, not sent yet: send the newest.
-      if (r->second->revision() < v->revision()) r->second = v;
+    const ChunkSlot* s = slots_.find(cp);
+    if (s == nullptr) continue;
+    // Granted, not sent yet: the newest is sent.
+    if (s->ready()) {
+      slots_.change_if(cp, [&](ChunkSlot& slot) { slot.refresh_ready(v); });
       continue;
     }
-    auto it = held_.find(cp);
-    if (it == held_.end()) continue;
-    Holding& h = it->second;
+    if (!s->held()) continue;
+    const Holding h = *s->held();
     // Gathered news may be older than a grant since (refresh_mip checks
     // the levels it refreshes).
     if (mips_due && v->revision() <= h.revision && h.full_resolution()) continue;
@@ -831,8 +815,8 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     // sent only to a client holding exactly that. Anything else is sent
     // whole: a chunk loaded again at another revision (a damaged row
     // quarantined; no units), or any holder left behind the units' base (a
-    // chunk held Empty with a change parked in mip_dirty_ was one, before
-    // moves sent those whole: send_parked_near).
+    // chunk held Empty with a change parked for the refresh of mips was
+    // one, before moves sent those whole: send_parked_near).
     const bool holds_base = v->changed_units().any() && h.revision + 1 == v->revision();
     const bool full = h.form == HoldingForm::kFull || (h.form == HoldingForm::kEmpty && near);
     if (full && !holds_base) {
@@ -841,12 +825,11 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       continue;
     }
     if (full) {
-      h = Holding{HoldingForm::kFull, v->revision()};
-      if (v->empty()) {
-        full_.erase(cp);
-      } else if (full_.insert_or_assign(cp, v).second) {
-        hash_order_.push_back(cp);
-      }
+      // (Its version kept for hashes unless all Air.)
+      bool new_full = false;
+      const Holding now_full{HoldingForm::kFull, v->revision()};
+      slots_.change_if(cp, [&](ChunkSlot& slot) { new_full = slot.hold(now_full, v); });
+      if (new_full) hash_order_.push_back(cp);
       pieces.push_back(&v->update_piece());
       revisions.push_back(ChunkRevisionMsg{cp, v->revision()});
       keep.push_back(std::move(v));
@@ -857,14 +840,17 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     if (options_.mip_refresh_ms == 0) {
       refresh_mip(cp, v);
     } else {
-      if (mip_dirty_.empty())
+      if (slots_.mips_pending() == 0) {
         mip_due_ = next_mip_flush_ =
             std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms);
-      if (auto d = mip_dirty_.find(cp); d == mip_dirty_.end() || d->second->revision() < v->revision())
-        mip_dirty_.insert_or_assign(cp, std::move(v));
+        mip_order_.clear();  // nothing left in it is pending
+      }
+      bool first = false;
+      slots_.change_if(cp, [&](ChunkSlot& slot) { first = slot.park_mip(std::move(v)); });
+      if (first) mip_order_.push_back(cp);
     }
   }
-  if (mips_due && !mip_dirty_.empty()) {
+  if (mips_due && slots_.mips_pending() != 0) {
     // Due now (the world waited for them): the oldest change's time kept.
     const auto now = std::chrono::steady_clock::now();
     if (!mips_were_dirty) mip_due_ = now;
@@ -921,13 +907,13 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
   }
   counters_.tick_frames.fetch_add(1, std::memory_order_relaxed);
   pump();
-  if (!mip_dirty_.empty()) arm_timer();
+  if (slots_.mips_pending() != 0) arm_timer();
 }
 
 void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
-  auto it = held_.find(cp);
-  if (it == held_.end()) return;
-  Holding& h = it->second;
+  const ChunkSlot* s = slots_.find(cp);
+  if (s == nullptr || !s->held()) return;
+  const Holding h = *s->held();
   if (h.form == HoldingForm::kFull || v->estimate()) return;
   // Refined since, with newer data (an estimate is replaced by the chunk's
   // mip at the same revision: the world tells only when the two differ).
@@ -937,7 +923,7 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
     // chunk changed and emptied again between two flushes of mips looks
     // unchanged to it, and its hash would never match again).
     stream(StreamRecordKind::kEmpty, cp, v->revision());
-    h = Holding{HoldingForm::kEmpty, v->revision()};
+    slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{HoldingForm::kEmpty, v->revision()}, v); });
     return;
   }
   const int level = h.form == HoldingForm::kEmpty ? kMipLevels - 1 : h.level();
@@ -948,18 +934,23 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
   }
   stream(record_kind(level), cp, v->revision(), v->encoded(level));
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
-  h = Holding{mip_form(level), v->revision()};
+  slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{mip_form(level), v->revision()}, v); });
   if (desired(cp) < level) push_refine(cp);
 }
 
 void Replicator::flush_mips() {
-  for (auto& [cp, v] : mip_dirty_) refresh_mip(cp, v);
-  mip_dirty_.clear();
+  // In the order of their first change; a chunk listed twice (its change
+  // sent whole, then parked again) once.
+  for (const Vec3i cp : std::exchange(mip_order_, {})) {
+    VersionPtr v;
+    slots_.change_if(cp, [&](ChunkSlot& s) { v = s.take_mip(); });
+    if (v) refresh_mip(cp, v);
+  }
   flush_stream();
 }
 
 void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) {
-  if (mip_dirty_.empty() || now < next_mip_flush_) return;
+  if (slots_.mips_pending() == 0 || now < next_mip_flush_) return;
   // Refreshes of mips are streaming too: while the gate is closed they
   // wait (and coalesce), kYieldAtMost past their time at most.
   if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
@@ -998,7 +989,7 @@ void Replicator::arm_timer() {
   auto at = std::chrono::steady_clock::time_point::max();
   if (!ready_.empty()) at = now + kPumpRetry;
   if (stream_yielded_) at = std::min(at, now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs));
-  if (!mip_dirty_.empty()) at = std::min(at, next_mip_flush_);
+  if (slots_.mips_pending() != 0) at = std::min(at, next_mip_flush_);
   // Hashes are pushed only once there is a plan (a first ClientState): a
   // session that never sends one (terrane-admin) must not wake for them.
   if (options_.hash_push_ms > 0 && plan_valid_) at = std::min(at, next_hash_push_);
@@ -1048,15 +1039,16 @@ void Replicator::on_timer() {
     for (std::size_t tries = 0; tries < hash_order_.size(); ++tries) {
       if (hash_cursor_ >= hash_order_.size()) hash_cursor_ = 0;
       const Vec3i cp = hash_order_[hash_cursor_];
-      auto it = full_.find(cp);
-      if (it == full_.end()) {
+      const ChunkSlot* s = slots_.find(cp);
+      const VersionPtr v = s != nullptr ? s->full() : nullptr;
+      if (!v) {
         hash_order_[hash_cursor_] = hash_order_.back();  // no longer full: forget it
         hash_order_.pop_back();
         continue;
       }
       ++hash_cursor_;
       flush_stream();
-      session_->send(build_chunk_hash(ChunkHashMsg{cp, it->second->revision(), it->second->hash()}));
+      session_->send(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()}));
       counters_.hashes_pushed.fetch_add(1, std::memory_order_relaxed);
       break;
     }

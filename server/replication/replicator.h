@@ -53,6 +53,7 @@
 #include "server/net/session.h"
 #include "server/ops/access.h"
 #include "server/base/options.h"
+#include "server/replication/chunk_slot.h"
 #include "server/replication/stream_gate.h"
 #include "server/replication/view_table.h"
 #include "server/storage/cluster_map.h"
@@ -134,16 +135,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void close(CloseReason why, const std::string& text) override;
 
  private:
-  enum class Intent : std::uint8_t { kCoarse, kRefine, kClaim };
-  struct Request {
-    Intent intent;
-    int level;  // the level to send (0 full, 1..3 mip)
-    // The chunk left the view after it was asked for: its grant, still on
-    // its way, is dropped and released (the world registers a holder when
-    // it grants, which may come after the client's release).
-    bool cancelled = false;
-  };
-
   void on_hello(const HelloMsg& hello);
   void on_client_state(const ClientStateMsg& state);
   void on_edit(EditRequestMsg edit);
@@ -273,10 +264,14 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   std::vector<RefineEntry> refine_;
   bool refine_stale_ = false;
 
-  // What the client holds of each chunk sent to it (its own record: an
-  // Estimate's is replaced by the chunk's exact mip whatever the revisions
-  // say).
-  Vec3iMap<Holding> held_;
+  // What is known of each chunk for this client (ChunkSlot): what it holds
+  // of it (its own record: an Estimate's is replaced by the chunk's exact
+  // mip whatever the revisions say) or has from a horizon image (released
+  // when it leaves the view), the version of a chunk held Full (chunk
+  // hashes, pushed and answered here), the outstanding request to the
+  // world, the grant not yet sent, a resuming client's claim and the change
+  // waiting for the next refresh of mips.
+  ChunkSlots slots_;
   // Regions of this plan whose horizon images were asked for, with the
   // level of each (an image of a region not listed, or at another level,
   // answers an earlier plan: dropped); streaming's first pass waits until
@@ -286,24 +281,19 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // images that came before their turn.
   std::deque<Vec3i> horizon_order_;
   Vec3iMap<HorizonPtr> horizon_early_;
-  // Chunks the client has only from a horizon image (not held: no record
-  // of their own sent yet), with its level. Released when they leave the view.
-  Vec3iMap<std::uint8_t> horizon_;
-  // Versions of chunks held at full resolution (chunk hashes, pushed and
-  // answered here).
-  Vec3iMap<VersionPtr> full_;
+  // Chunks held Full with a version, for the pushed hashes in turn (an
+  // entry whose slot has none any more is dropped when reached).
   std::vector<Vec3i> hash_order_;
   std::size_t hash_cursor_ = 0;
-  Vec3iMap<Request> requested_;
-  // Granted, not yet sent (the window or budget was full), oldest first.
+  // Granted, not yet sent (the window or budget was full), oldest first
+  // (an entry left by a grant dropped since is skipped when reached).
   std::deque<Vec3i> ready_;
-  Vec3iMap<VersionPtr> ready_versions_;
-  Vec3iMap<Holding> claims_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
   StreamBatchWriter batch_;
-  // Changed chunks held coarser than full resolution, newest version each,
-  // refreshed together every mip_refresh_ms.
-  Vec3iMap<VersionPtr> mip_dirty_;
+  // Changed chunks held coarser than full resolution (each slot's newest
+  // change), refreshed together every mip_refresh_ms: in the order of their
+  // first change, entries whose slot has none any more skipped.
+  std::vector<Vec3i> mip_order_;
   // When they were due (mip_refresh_ms after the first), and when they are
   // flushed (later while the stream gate is closed).
   std::chrono::steady_clock::time_point mip_due_, next_mip_flush_;

@@ -1,0 +1,136 @@
+#include "server/replication/chunk_slot.h"
+
+namespace terrane {
+
+const VersionPtr& ChunkSlot::null_version() {
+  static const VersionPtr none;
+  return none;
+}
+
+const std::optional<ChunkRequest>& ChunkSlot::no_request() {
+  static const std::optional<ChunkRequest> none;
+  return none;
+}
+
+const std::optional<Holding>& ChunkSlot::no_claim() {
+  static const std::optional<Holding> none;
+  return none;
+}
+
+ChunkSlot::More& ChunkSlot::more() {
+  if (!more_) more_ = std::make_unique<More>();
+  return *more_;
+}
+
+void ChunkSlot::trim() {
+  if (more_ && more_->empty()) more_.reset();
+}
+
+bool ChunkSlot::hold(Holding h, const VersionPtr& v) {
+  has_ = true;
+  form_ = h.form;
+  revision_ = h.revision;
+  if (h.form == HoldingForm::kFull && v && !v->empty()) {
+    const bool fresh = !more().full;
+    more_->full = v;
+    return fresh;
+  }
+  if (more_) {
+    more_->full.reset();
+    trim();
+  }
+  return false;
+}
+
+void ChunkSlot::see_image(int level) {
+  has_ = true;
+  form_ = horizon_form(level);
+  revision_ = 0;
+}
+
+bool ChunkSlot::ask(ChunkRequest r) {
+  if (request()) return false;
+  more().request = r;
+  return true;
+}
+
+std::optional<ChunkRequest> ChunkSlot::take_request() {
+  if (!more_) return std::nullopt;
+  std::optional<ChunkRequest> r = std::exchange(more_->request, std::nullopt);
+  trim();
+  return r;
+}
+
+bool ChunkSlot::set_ready(VersionPtr v) {
+  if (ready()) return false;
+  more().ready = std::move(v);
+  return true;
+}
+
+bool ChunkSlot::refresh_ready(const VersionPtr& v) {
+  if (!ready()) return false;
+  if (more_->ready->revision() < v->revision()) more_->ready = v;
+  return true;
+}
+
+VersionPtr ChunkSlot::take_ready() {
+  if (!more_) return nullptr;
+  VersionPtr v = std::move(more_->ready);
+  more_->ready.reset();
+  trim();
+  return v;
+}
+
+void ChunkSlot::set_claim(Holding h) { more().claim = h; }
+
+std::optional<Holding> ChunkSlot::take_claim() {
+  if (!more_) return std::nullopt;
+  std::optional<Holding> c = std::exchange(more_->claim, std::nullopt);
+  trim();
+  return c;
+}
+
+bool ChunkSlot::park_mip(VersionPtr v) {
+  const VersionPtr& waiting = mip_pending();
+  if (waiting && waiting->revision() >= v->revision()) return false;
+  const bool fresh = !waiting;
+  more().mip = std::move(v);
+  return fresh;
+}
+
+VersionPtr ChunkSlot::take_mip() {
+  if (!more_) return nullptr;
+  VersionPtr v = std::move(more_->mip);
+  more_->mip.reset();
+  trim();
+  return v;
+}
+
+ChunkSlot::Left ChunkSlot::leave() {
+  Left left;
+  if (more_ && more_->claim) {
+    left.claim = more_->claim->revision;
+    more_->claim.reset();
+  }
+  if (has_) {
+    left.had = revision_;  // 0 for an image
+    left.registered = !is_image();
+    has_ = false;
+    form_ = HoldingForm::kEmpty;
+    revision_ = 0;
+    if (more_) more_->full.reset();
+  }
+  if (more_ && more_->ready) {
+    // Granted (so registered) and not sent: dropped with its request.
+    more_->ready.reset();
+    more_->request.reset();
+    left.registered = true;
+  } else if (more_ && more_->request) {
+    // Its grant is on its way: it comes to nothing.
+    more_->request->cancelled = true;
+  }
+  trim();
+  return left;
+}
+
+}  // namespace terrane
