@@ -69,9 +69,14 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
     if (now != nullptr) on_holding(cp, *now);
   };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
+    {
+      // The bot's own leaving ends the edits still in flight as unknown:
+      // the run is over, they are no outcome of the server's.
+      std::lock_guard lock(mutex_);
+      if (outstanding_edits_ > 0) --outstanding_edits_;
+      if (closing_) return;
+    }
     ctx_.fanout->edit_result(index_, id, outcome, Clock::now());
-    std::lock_guard lock(mutex_);
-    if (outstanding_edits_ > 0) --outstanding_edits_;
   };
   cb.on_round_trip = [this](double ms) {
     if (ctx_.round_trips != nullptr) ctx_.round_trips->add(Clock::now(), ms);

@@ -164,7 +164,8 @@ TEST_F(CrashTest, EveryAcknowledgedEditSurvivesSigkillAndReplicasResumeClean) {
         [&](const ClientView& v) {
           for (const auto& [id, e] : sent) {
             auto it = v.edits.find(id);
-            if (it == v.edits.end()) {
+            // Unanswered when the connection went: the client says so (unknown).
+            if (it == v.edits.end() || it->second.reason == kEditOutcomeUnknown) {
               ++unanswered;
             } else if (it->second.accepted) {
               acked.push_back(e);
