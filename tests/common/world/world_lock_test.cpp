@@ -9,6 +9,8 @@
 #include <fstream>
 #include <string>
 
+#include "tests/support/scratch_dir.h"
+
 namespace terrane {
 namespace {
 
@@ -17,9 +19,7 @@ namespace fs = std::filesystem;
 class WorldLockTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("terrane-lock-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
+    dir_ = testing_support::scratch_dir("terrane-lock");
     fs::create_directories(dir_ / "world");
   }
   void TearDown() override { fs::remove_all(dir_); }
