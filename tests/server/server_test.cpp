@@ -683,12 +683,19 @@ TEST_F(ServerTest, AResumingClientsEditsAreTakenWhereItClaimsFullResolution) {
   }
   ASSERT_TRUE(home_full && east_full);
   auto b = join("b");
-  ASSERT_TRUE(b->send(build_holdings(claims)));
-  ASSERT_TRUE(b->send(build_client_state(where)));
-  ASSERT_TRUE(b->send(build_edit_request(
-      testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255))));
-  ASSERT_TRUE(b->send(build_edit_request(
-      testing_support::fill_box_edit(2, Region{{1025, 11, 1001}, {1027, 13, 1003}}, materials::kBrick, 255))));
+  // One write, so the server reads the four frames together and checks the
+  // edits before any claim is settled (sent apart, a slow run could refine
+  // the chunk claimed as a mip to full resolution first, and take edit 2).
+  Frame burst;
+  for (const Frame& f :
+       {build_holdings(claims), build_client_state(where),
+        build_edit_request(
+            testing_support::fill_box_edit(1, Region{{1001, 11, 1001}, {1003, 13, 1003}}, materials::kBrick, 255)),
+        build_edit_request(
+            testing_support::fill_box_edit(2, Region{{1025, 11, 1001}, {1027, 13, 1003}}, materials::kBrick, 255))})
+    burst.insert(burst.end(), f.begin(), f.end());
+  ASSERT_LT(burst.size(), 64u * 1024) << "more than the server reads at once";
+  ASSERT_TRUE(b->send(burst));
   std::optional<std::string> rejected;
   bool acked = false;
   while (!acked || !rejected) {
