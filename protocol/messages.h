@@ -27,7 +27,7 @@
 
 namespace terrane {
 
-// --- limits (PROTOCOL.md, "Limits") ----------------------------------------
+// --- limits (PROTOCOL.md, "Meaning checks") --------------------------------
 inline constexpr std::size_t kMaxClientNameBytes = 64;
 inline constexpr std::size_t kMaxAuthTokenBytes = 256;
 inline constexpr std::size_t kMaxReasonBytes = 256;
