@@ -217,12 +217,7 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
   {
     std::lock_guard lock(mutex_);
-    for (const std::uint32_t id : unanswered_edits_) {
-      EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
-      edits_[id] = o;
-      unknown.emplace_back(id, o);
-    }
-    unanswered_edits_.clear();
+    unknown = settle_unanswered();
   }
   changed_.notify_all();
   client_log().info("'{}': connection lost ({}); reconnecting", options_.name, reason);
@@ -232,6 +227,17 @@ void Client::connection_lost(const std::string& reason, bool server_said) {
   attempts_ = 0;
   backoff_ = options_.reconnect_min;
   schedule_reconnect();
+}
+
+std::vector<std::pair<std::uint32_t, EditOutcome>> Client::settle_unanswered() {
+  std::vector<std::pair<std::uint32_t, EditOutcome>> unknown;
+  for (const std::uint32_t id : unanswered_edits_) {
+    EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
+    edits_[id] = o;
+    unknown.emplace_back(id, o);
+  }
+  unanswered_edits_.clear();
+  return unknown;
 }
 
 void Client::drop_socket() {
@@ -806,12 +812,7 @@ void Client::close_locked_io(const std::string& reason) {
     closed_ = true;
     if (disconnect_reason_.empty()) disconnect_reason_ = reason;
     r = disconnect_reason_;
-    for (const std::uint32_t id : unanswered_edits_) {
-      EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
-      edits_[id] = o;
-      unknown.emplace_back(id, o);
-    }
-    unanswered_edits_.clear();
+    unknown = settle_unanswered();
   }
   changed_.notify_all();
   if (callbacks_.on_edit_result)

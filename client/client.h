@@ -365,6 +365,9 @@ class Client {
   void follow_redirect();
   // io side: ends this connection's socket and timers (a new one follows).
   void drop_socket();
+  // Under mutex_: every edit sent and not answered gets the outcome
+  // unknown (recorded, and returned for on_edit_result).
+  std::vector<std::pair<std::uint32_t, EditOutcome>> settle_unanswered();
   ClientView view() const;
 
   ClientOptions options_;

@@ -1,5 +1,7 @@
 #include "server/replication/chunk_slot.h"
 
+#include <utility>
+
 namespace terrane {
 
 const VersionPtr& ChunkSlot::null_version() {
@@ -73,13 +75,14 @@ bool ChunkSlot::refresh_ready(const VersionPtr& v) {
   return true;
 }
 
-VersionPtr ChunkSlot::take_ready() {
+VersionPtr ChunkSlot::take(VersionPtr More::*field) {
   if (!more_) return nullptr;
-  VersionPtr v = std::move(more_->ready);
-  more_->ready.reset();
+  VersionPtr v = std::exchange((*more_).*field, nullptr);
   trim();
   return v;
 }
+
+VersionPtr ChunkSlot::take_ready() { return take(&More::ready); }
 
 void ChunkSlot::set_claim(Holding h) { more().claim = h; }
 
@@ -98,13 +101,7 @@ bool ChunkSlot::park_mip(VersionPtr v) {
   return fresh;
 }
 
-VersionPtr ChunkSlot::take_mip() {
-  if (!more_) return nullptr;
-  VersionPtr v = std::move(more_->mip);
-  more_->mip.reset();
-  trim();
-  return v;
-}
+VersionPtr ChunkSlot::take_mip() { return take(&More::mip); }
 
 ChunkSlot::Left ChunkSlot::leave() {
   Left left;

@@ -133,6 +133,8 @@ class ChunkSlot {
   bool is_image() const { return form_ == HoldingForm::kHorizon4 || form_ == HoldingForm::kHorizon5; }
   More& more();
   void trim();  // drops an empty More
+  // Takes the version in field (ready or mip), trimming what is left.
+  VersionPtr take(VersionPtr More::*field);
 
   std::uint64_t revision_ = 0;
   HoldingForm form_ = HoldingForm::kEmpty;
