@@ -14,6 +14,7 @@ import re
 import subprocess
 import sys
 
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
 from markdown_pages import flag_tables, pages, read
 
 PROGRAMS = ["terrane-server", "terrane-bots", "terrane-admin", "terrane-view", "terrane-world"]

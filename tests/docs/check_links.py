@@ -9,6 +9,7 @@ import os
 import re
 import sys
 
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
 from markdown_pages import anchors, links, outside_code, pages, read
 
 README_MAX_LINES = 400

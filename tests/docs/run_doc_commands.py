@@ -33,6 +33,7 @@ import time
 import urllib.error
 import urllib.request
 
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
 from markdown_pages import marked_blocks, pages, read
 
 STARTUP_DEADLINE_S = 60
