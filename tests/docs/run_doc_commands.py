@@ -16,7 +16,8 @@ ones' worlds, servers and files.
              (PYTHONPATH=build/python), and must exit 0.
 
 The ports 7777, 7778 (game) and 9464 (metrics) in a page are replaced by
-free ports; ADMIN_TOKEN and TERRANE_TOKEN are set in the environment.
+free ports; ADMIN_TOKEN and TERRANE_TOKEN are set in the environment;
+where curl is not installed, a stand-in fetches 'curl -s[f] URL'.
 
 usage: run_doc_commands.py SOURCE_DIR BIN_DIR PAGE|all [PYTHON PYTHON_MODULE_DIR]
        (PAGE as README.md or docs/NAME.md; without the Python pair, a page
@@ -61,6 +62,16 @@ def commands(body):
     return out
 
 
+CURL_SHIM = """#!PYTHON
+import sys, urllib.error, urllib.request
+url = [a for a in sys.argv[1:] if not a.startswith("-")][-1]
+try:
+    with urllib.request.urlopen(url if "://" in url else "http://" + url, timeout=30) as r:
+        sys.stdout.buffer.write(r.read())
+except urllib.error.HTTPError as e:
+    sys.exit(22)
+"""
+
 BACKGROUND = re.compile(r"^(.*?)\s+&\s*(#.*)?$")
 
 
@@ -77,6 +88,15 @@ class Page:
         self.python = python
         self.ports = {"7777": str(free_port()), "7778": str(free_port()), "9464": str(free_port())}
         self.env = dict(os.environ, ADMIN_TOKEN="docs-admin-token-1", TERRANE_TOKEN="docs-player-token-1")
+        if not shutil.which("curl"):
+            # scripts/install-deps.sh does not install curl; the pages use it
+            # for /health and /metrics, so stand in for 'curl -s[f] URL'.
+            shim = os.path.join(self.dir, "shim")
+            os.makedirs(shim)
+            with open(os.path.join(shim, "curl"), "w") as f:
+                f.write(CURL_SHIM.replace("PYTHON", sys.executable))
+            os.chmod(os.path.join(shim, "curl"), 0o755)
+            self.env["PATH"] = shim + os.pathsep + self.env.get("PATH", "")
         self.background = []  # (pid, Popen, command, log path)
 
     def substitute(self, text):
