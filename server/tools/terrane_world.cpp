@@ -43,7 +43,7 @@
 #include "common/world/sqlite_store.h"
 #include "common/world/world.h"
 #include "common/world/world_lock.h"
-#include "server/storage/lease_keeper.h"
+#include "server/cluster/lease_keeper.h"
 #include "server/storage/postgres_store.h"
 #include "server/tools/enhance_command.h"
 #include "server/tools/world_stats.h"
