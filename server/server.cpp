@@ -41,11 +41,16 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
                                   });
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
+  auto control = ClusterControl::open(options_.store_url, *leases_);
+  if (!control) return FileError{control.error().message, {}};
+  control_ = std::move(*control);
   // A border is the whole world's: every server must apply the same one,
   // and a running server reads it only when it starts. So a new border is
   // set only while no other server runs on the world.
   if (options_.border_set && !(*store)->meta().bounds.same_border(options_.border)) {
-    auto ids = (*store)->running(options_.lease);
+    auto cluster = ClusterStore::open(options_.store_url);
+    if (!cluster) return FileError{"--border: " + cluster.error().message, {}};
+    auto ids = (*cluster)->running(options_.lease);
     if (!ids) return FileError{"--border: " + ids.error().message, {}};
     std::string running;
     int others = 0;
@@ -62,6 +67,7 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   // before it applies anything there, so a write never takes back a region
   // this server lost or handed over.
   (*store)->set_lease_source(leases_->held_source(), options_.lease);
+  shared_store_ = store->get();
   return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
 }
 
@@ -81,7 +87,10 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   }
   const std::uint64_t epoch = s->world_->meta().epoch + 1;
   if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
-  auto storage = Storage::open(*s->world_, s->options_.worker_threads, s->options_.thread_priorities);
+  std::optional<Storage::Shared> shared;
+  if (s->control_) shared.emplace(Storage::Shared{*s->shared_store_, *s->control_});
+  auto storage = Storage::open(*s->world_, s->options_.worker_threads, s->options_.thread_priorities,
+                               shared ? &*shared : nullptr);
   if (!storage) return storage.error();
   s->storage_ = std::move(*storage);
   s->storage_->set_horizon_estimates(options.horizon_estimates);
@@ -101,7 +110,6 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
         "cannot listen on " + options.bind_address + ":" + std::to_string(options.port) + ": " + ec.message(), {}};
   s->port_ = s->acceptor_.local_endpoint().port();
 
-  if (auto st = s->storage_->set_leases(s->leases_.get()); !st) return st.error();
   s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_, *s->world_, *s->storage_, s->options_, s->counters_);
   // Streaming's requests that wait too long in the world's queue hold
   // streaming back, as late probes do.
@@ -153,7 +161,8 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
                                     options.admin_token);
   if (!access) return access.error();
   s->access_ = std::move(*access);
-  s->admin_ = std::make_unique<Admin>(s->world_->store(), *s->access_, s->admin_hooks());
+  s->admin_ = std::make_unique<Admin>(s->world_->store(), s->options_.store_url.empty() ? s->options_.world_dir : "",
+                                      *s->access_, s->admin_hooks());
   s->admin_fn_ = [self = s.get()](const std::string& who, AdminRequestMsg req,
                                   std::function<void(AdminResultMsg)> reply) {
     std::lock_guard lock(self->admin_mutex_);
@@ -228,6 +237,7 @@ Server::~Server() {
   if (shutdown_thread_.joinable()) shutdown_thread_.join();
   changes_.reset();
   world_owner_.reset();
+  if (control_) control_->stop();
   if (storage_) storage_->stop();
 }
 
@@ -325,6 +335,7 @@ void Server::stop() {
     for (auto& [id, peer] : sessions_)
       if (auto s = peer.session.lock()) s->close(CloseReason::kShutdown, "server shutting down");
   }
+  if (control_) control_->stop();  // claims, forwards and answers asked before the world stopped
   storage_->stop();
   // Every commit is done: the regions are given up at once, so another
   // server takes them over without waiting for the leases to run out.

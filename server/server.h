@@ -35,8 +35,9 @@
 #include "server/ops/http_endpoint.h"
 #include "server/base/options.h"
 #include "server/replication/replicator.h"
-#include "server/storage/change_listener.h"
-#include "server/storage/lease_keeper.h"
+#include "server/cluster/change_listener.h"
+#include "server/cluster/cluster_control.h"
+#include "server/cluster/lease_keeper.h"
 #include "server/storage/storage.h"
 #include "server/world/world_owner.h"
 
@@ -98,11 +99,17 @@ class Server {
   // A PostgreSQL world's leases (null for SQLite): the writer's lease
   // source, so it outlives the world and storage below.
   std::unique_ptr<LeaseKeeper> leases_;
+  // A PostgreSQL world's control thread (null for SQLite): the claims,
+  // forwards and inbox reads Storage passes on; outlives storage_.
+  std::unique_ptr<ClusterControl> control_;
   // A world directory's one-writer lock (common/world/world_lock.h), held
   // for the server's life; declared before the world so it outlives every
   // write. Not held for a PostgreSQL world (leases fence its writers).
   WorldLock world_lock_;
   std::unique_ptr<World> world_;
+  // world_'s store as the chunk store it is, for a PostgreSQL world (null
+  // for SQLite): the writer of Storage::Shared.
+  const PostgresStore* shared_store_ = nullptr;
   std::unique_ptr<Storage> storage_;
   asio::io_context io_;
   asio::executor_work_guard<asio::io_context::executor_type> work_;

@@ -133,8 +133,12 @@ std::optional<std::int64_t> parse_duration_s(const std::string& text) {
   return n;
 }
 
-Admin::Admin(const WorldStore& store, AccessControl& access, AdminHooks hooks)
-    : store_(store), access_(access), hooks_(std::move(hooks)), work_(asio::make_work_guard(io_)) {
+Admin::Admin(const WorldStore& store, std::string world_dir, AccessControl& access, AdminHooks hooks)
+    : store_(store),
+      world_dir_(std::move(world_dir)),
+      access_(access),
+      hooks_(std::move(hooks)),
+      work_(asio::make_work_guard(io_)) {
   thread_ = std::thread([this] { io_.run(); });
 }
 
@@ -413,11 +417,10 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
 
   if (cmd == "backup") {
     if (a.size() != 1) return fail("usage: backup PATH");
-    const auto* sqlite = dynamic_cast<const SqliteStore*>(&store_);
-    if (sqlite == nullptr)
+    if (world_dir_.empty())
       return fail("backup: the world is in PostgreSQL (" + store_.where() +
                   "): back it up with PostgreSQL's own tools (pg_dump, or a base backup)");
-    auto store = SqliteStore::open(sqlite->dir());
+    auto store = SqliteStore::open(world_dir_);
     if (!store) return fail("backup: " + store.error().message);
     const auto t0 = std::chrono::steady_clock::now();
     if (auto st = (*store)->backup_to(a[0], [](int, int) {}); !st) return fail("backup: " + st.error().message);

@@ -74,9 +74,11 @@ class Admin {
  public:
   using Reply = std::function<void(AdminResultMsg)>;
 
-  // store: the world's; reopened (WorldStore::reopen) for the log, rollback
-  // and backup, so they never share the world owner's connection.
-  Admin(const WorldStore& store, AccessControl& access, AdminHooks hooks);
+  // store: the world's; reopened (WorldStore::reopen) for the log and
+  // rollback, so they never share the world owner's connection.
+  // world_dir: a SQLite world's directory, which backup copies; "" for a
+  // world in PostgreSQL (backed up with PostgreSQL's own tools).
+  Admin(const WorldStore& store, std::string world_dir, AccessControl& access, AdminHooks hooks);
   ~Admin();  // finishes the command running, drops the rest
   Admin(const Admin&) = delete;
   Admin& operator=(const Admin&) = delete;
@@ -88,6 +90,7 @@ class Admin {
   AdminResultMsg run(const std::string& who, const AdminRequestMsg& req);
 
   const WorldStore& store_;
+  const std::string world_dir_;
   AccessControl& access_;
   AdminHooks hooks_;
   // Waits (on the admin thread) until f is ready, the server stops, or the

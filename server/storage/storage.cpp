@@ -11,9 +11,11 @@
 
 namespace terrane {
 
-FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_threads, bool thread_priorities) {
+FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_threads, bool thread_priorities,
+                                                   const Shared* shared) {
   const int n = std::max(1, loader_threads);
   std::unique_ptr<Storage> s(new Storage(world, n, thread_priorities));
+  if (shared != nullptr) s->cluster_ = &shared->cluster;
   for (int i = 0; i < n; ++i) {
     auto store = world.store().reopen();
     if (!store) return store.error();
@@ -24,9 +26,16 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
     (void)(*store)->load_coarse_as_kept(Vec3i{0, 0, 0});
     s->readers_.push_back(std::move(*store));
   }
-  auto w = world.store().reopen();
-  if (!w) return w.error();
-  s->writer_store_ = std::move(*w);
+  if (shared != nullptr) {
+    auto w = shared->store.reopen_chunks();
+    if (!w) return FileError{w.error().message, {}};
+    s->shared_writer_ = w->get();
+    s->writer_store_ = std::move(*w);
+  } else {
+    auto w = world.store().reopen();
+    if (!w) return w.error();
+    s->writer_store_ = std::move(*w);
+  }
   // A commit stores the chunks and the edit log; the coarse images follow
   // when the writer has nothing else to do (writer_loop).
   s->writer_store_->set_coarse_behind(true);
@@ -45,7 +54,6 @@ Storage::~Storage() { stop(); }
 void Storage::stop() {
   if (stopped_) return;
   stopped_ = true;
-  if (control_) control_->join();
   loaders_.join();
   {
     std::lock_guard lock(jobs_mutex_);
@@ -79,30 +87,7 @@ std::deque<Storage::LoadJob>& Storage::queue(Priority priority) {
 }
 
 void Storage::claim(Vec3i region, ClaimRule rule, ClaimDone done) {
-  with_postgres([this, region, rule, done = std::move(done)](PostgresStore& pg) {
-    Claimed out;
-    auto held = leases_->ensure(std::span(&region, 1), rule);
-    if (!held) {
-      out.why = held.error().message;
-      out.unreachable = held.error().kind == StoreError::Kind::kConnection;
-      out.left = held.error().kind == StoreError::Kind::kLeft;
-      out.holder = held.error().holder;
-      done(std::move(out));
-      return;
-    }
-    // Revisions only (no voxels: nothing there can fail to decode).
-    auto revisions = pg.stored_revisions(region);
-    if (!revisions) {
-      // Held, but what is stored there is not known: not written until it is.
-      out.why = "cannot read what the region holds: " + revisions.error().message;
-      out.unreachable = true;
-      done(std::move(out));
-      return;
-    }
-    out.held = true;
-    out.stored = std::move(*revisions);
-    done(std::move(out));
-  });
+  if (cluster_ != nullptr) cluster_->claim(region, rule, std::move(done));
 }
 
 std::unique_ptr<WorldStore> Storage::take_reader() {
@@ -116,57 +101,26 @@ void Storage::give_reader(std::unique_ptr<WorldStore> store) {
   readers_.push_back(std::move(store));
 }
 
-FileStatus Storage::set_leases(LeaseKeeper* keeper) {
-  leases_ = keeper;
-  if (keeper == nullptr || control_) return Ok{};
-  auto store = world_.store().reopen();
-  if (!store) return store.error();
-  auto* pg = dynamic_cast<PostgresStore*>(store->get());
-  if (pg == nullptr) return FileError{"region leases need a PostgreSQL world: " + world_.store().where(), {}};
-  store->release();
-  control_store_.reset(pg);
-  control_ = std::make_unique<asio::thread_pool>(1);
-  return Ok{};
-}
-
-void Storage::with_postgres(std::function<void(PostgresStore&)> fn) {
-  if (!control_) return;  // only a shared world (set_leases) asks
-  // Claims, forwards, inbox reads and answers: an edit waits on each, so
-  // none waits behind the loads (thousands may be queued while clients join).
-  asio::post(*control_, [this, fn = std::move(fn)] { fn(*control_store_); });
-}
-
+// Only a shared world's world owner asks for these (leased()); the cluster
+// room runs them on its control thread.
 void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
                       std::function<void(StoreResult<std::int64_t>)> done) {
-  with_postgres([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over),
-                 done = std::move(done)](PostgresStore& pg) {
-    if (!hand_over.empty())
-      if (auto released = leases_->release(hand_over); !released) return done(released.error());
-    done(pg.forward(leases_->owner(), to, player, edit));
-  });
+  if (cluster_ != nullptr)
+    cluster_->forward(to, std::move(player), std::move(edit), std::move(hand_over), std::move(done));
 }
 
 void Storage::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,
                     std::function<void(StoreResult<Ok>)> done) {
-  with_postgres([this, row, to, hand_over = std::move(hand_over), done = std::move(done)](PostgresStore& pg) {
-    if (!hand_over.empty())
-      if (auto released = leases_->release(hand_over); !released) return done(released.error());
-    done(pg.relay(row, leases_->owner(), to));
-  });
+  if (cluster_ != nullptr) cluster_->relay(row, to, std::move(hand_over), std::move(done));
 }
 
 void Storage::read_inbox(std::int64_t after, std::size_t limit,
                          std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
-  with_postgres([this, after, limit, done = std::move(done)](PostgresStore& pg) {
-    done(pg.inbox(leases_->owner(), after, limit));
-  });
+  if (cluster_ != nullptr) cluster_->read_inbox(after, limit, std::move(done));
 }
 
 void Storage::answer(std::vector<ForwardAnswer> answers) {
-  with_postgres([answers = std::move(answers)](PostgresStore& pg) {
-    if (auto a = pg.answer(answers); !a)
-      server_log().warn("forwarded edits: {} answers not sent: {}", answers.size(), a.error().message);
-  });
+  if (cluster_ != nullptr) cluster_->answer(std::move(answers));
 }
 
 void Storage::load_coarse(Vec3i region, CoarseDone done) {
@@ -319,7 +273,7 @@ LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
     }
     // In a shared world only the region's writer moves a row: elsewhere
     // it may be a row its writer is replacing.
-    if (leases_ != nullptr && !leases_->holds(lease_region_of(cp))) {
+    if (cluster_ != nullptr && !cluster_->holds(lease_region_of(cp))) {
       out.ok = false;
       out.error = "does not decode (" + stored.error().message +
                   "); in a region this server does not write, so it is left for the region's server";
@@ -436,7 +390,7 @@ void Storage::writer_loop() {
       // A shared world tells the other servers each chunk's changed units
       // (they apply them to the revision before instead of reading the
       // chunk); a later version of a chunk in the batch carries its own.
-      const bool tells_units = dynamic_cast<PostgresStore*>(writer_store_.get()) != nullptr;
+      const bool tells_units = shared_writer_ != nullptr;
       for (CommitJob& job : batch) {
         for (EditLogEntry& e : job.log) log.push_back(std::move(e));
         for (ForwardAnswer& a : job.answers) answers.push_back(std::move(a));
@@ -459,9 +413,8 @@ void Storage::writer_loop() {
       if (!writes.empty() || !log.empty() || !answers.empty()) {
         const auto t0 = std::chrono::steady_clock::now();
         // Answers exist only in a shared world: its writer is PostgreSQL's.
-        auto* shared = answers.empty() ? nullptr : dynamic_cast<PostgresStore*>(writer_store_.get());
-        status = shared != nullptr ? shared->save_answering(writes, log, answers)
-                                   : writer_store_->save_chunks(writes, true, log);
+        status = shared_writer_ != nullptr && !answers.empty() ? shared_writer_->save_answering(writes, log, answers)
+                                                               : writer_store_->save_chunks(writes, true, log);
         if (status) counters_.edits_logged.fetch_add(log.size(), std::memory_order_relaxed);
         counters_.commit_duration.observe(std::chrono::steady_clock::now() - t0);
         counters_.commits.fetch_add(1, std::memory_order_relaxed);

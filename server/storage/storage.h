@@ -20,6 +20,10 @@
 //   fails too: the world in memory is ahead of the disk, and the server
 //   stops rather than serve what it could lose.
 //
+//   In a world shared by several servers (PostgreSQL), the claims,
+//   forwarded edits, inbox reads and answers the world owner asks for are
+//   passed on to the cluster room (ClusterLink: its control thread).
+//
 // Threading: load() and commit() may be called from any thread; their
 // callbacks run on a loader thread and the writer thread: post from there
 // to where the result belongs. stop() waits for queued work (commits are
@@ -42,8 +46,9 @@
 #include "common/world/horizon.h"
 #include "common/world/world.h"
 #include "server/base/counters.h"
-#include "server/storage/lease_keeper.h"
 #include "server/base/chunk_version.h"
+#include "server/storage/cluster_link.h"
+#include "server/storage/postgres_store.h"
 
 namespace terrane {
 
@@ -108,12 +113,24 @@ class Storage {
   using HorizonDone = std::function<void(LoadedHorizon)>;
   using CommitDone = std::function<void(const FileStatus&)>;
 
+  // A world shared by several servers (PostgreSQL): its chunk store, which
+  // the writer opens again as what it is (its commits answer forwarded
+  // edits and tell the other servers each chunk's changed units), and the
+  // cluster room, which claims regions, forwards edits and reads the
+  // inbox. Both outlive the Storage.
+  struct Shared {
+    const PostgresStore& store;
+    ClusterLink& cluster;
+  };
   // world: shared for its metadata and generator (thread-safe); its store
   // is opened again (WorldStore::reopen) once per loader and once for the
   // writer.
   // thread_priorities: the writer and loader threads at their roles'
   // niceness (server/base/thread_role.h).
-  static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true);
+  // shared: set for a shared world (null: SQLite, every region is this
+  // server's).
+  static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true,
+                                                   const Shared* shared = nullptr);
   // The edit log keeps entries this long (0: for ever) and at most this many
   // bytes of voxels (0: no bound); the writer prunes it about once a minute.
   // Thread-safe (the writer reads it under jobs_mutex_).
@@ -139,31 +156,18 @@ class Storage {
   // Makes a region's horizon image (queued with the stream's loads, behind
   // the urgent ones that edits and full resolution wait on).
   void load_horizon(Vec3i region, int level, HorizonDone done);
-  // A shared PostgreSQL world's leases (null: SQLite, every region is this
-  // server's). Call before the first load; keeper outlives this. Opens the
-  // connection that claims, forwarded edits, the inbox and answers use
-  // (its own thread: they never wait behind the loads).
-  FileStatus set_leases(LeaseKeeper* keeper);
-  bool leased() const { return leases_ != nullptr; }
+  // Whether the world is shared by several servers (Shared given).
+  bool leased() const { return cluster_ != nullptr; }
   // Claims region's lease for this server if it does not hold it (on the
-  // control thread). Once held, the region's stored
-  // chunks are listed with their revisions, read after the claim: another
-  // server may have written them while it held the region, and whatever
-  // this server holds of them older than that must be read again before it
-  // writes there. why names the holder when another server has the region.
-  struct Claimed {
-    bool held = false;
-    bool unreachable = false;  // not held because the database could not be reached (try again)
-    bool left = false;         // free, but left to holder, which writes its neighbours (ClaimRule)
-    std::string why;
-    std::optional<std::uint32_t> holder;  // the server holding it instead
-    std::vector<std::pair<Vec3i, std::uint64_t>> stored;  // chunk, revision
-  };
+  // cluster room's control thread), then lists its stored chunks
+  // (RegionClaim says why).
+  using Claimed = RegionClaim;
   using ClaimDone = std::function<void(Claimed)>;
   void claim(Vec3i region, ClaimRule rule, ClaimDone done);
-  // Forwarded edits (a shared world; on the control thread): sends one to
-  // server to's inbox (done gets the inbox row's id), reads this server's
-  // inbox past after, and answers edits refused without a commit.
+  // Forwarded edits (a shared world; on the cluster room's control
+  // thread): sends one to server to's inbox (done gets the inbox row's
+  // id), reads this server's inbox past after, and answers edits refused
+  // without a commit.
   // hand_over: regions of this server's the edit also writes, released
   // first (nothing of them in flight), so that server can take them.
   void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
@@ -213,16 +217,14 @@ class Storage {
     std::vector<ForwardAnswer> answers;
     std::uint64_t tick = 0;
   };
-  // Runs fn(store) on the control thread with its connection (only a
-  // shared world's callers ask), in the order asked.
-  void with_postgres(std::function<void(PostgresStore&)> fn);
   // A reader connection borrowed (take_reader under readers_mutex_) and
   // given back.
   std::unique_ptr<WorldStore> take_reader();
   void give_reader(std::unique_ptr<WorldStore> store);
   void prune_log();
   bool estimate_coarse_ = true;
-  LeaseKeeper* leases_ = nullptr;
+  // A shared world's cluster room (null: SQLite). Set once by open().
+  ClusterLink* cluster_ = nullptr;
   // Guarded by jobs_mutex_: set after the writer has started.
   std::chrono::seconds log_max_age_{0};
   std::uint64_t log_max_bytes_ = 0;
@@ -232,10 +234,6 @@ class Storage {
   StorageCounters counters_;
   const bool thread_priorities_;
   asio::thread_pool loaders_;
-  // A shared world's control thread and its connection (set_leases): only
-  // that thread touches control_store_.
-  std::unique_ptr<asio::thread_pool> control_;
-  std::unique_ptr<PostgresStore> control_store_;
   // Loader connections, borrowed for one load at a time, and the queued
   // loads (urgent first). Guarded by readers_mutex_: loads on the pool's
   // threads share them. Each queued load posts one runner to the pool.
@@ -256,6 +254,9 @@ class Storage {
   std::deque<LoadJob> urgent_loads_, loads_, background_loads_;
 
   std::unique_ptr<WorldStore> writer_store_;
+  // writer_store_ itself, as the chunk store it is, in a shared world (set
+  // once by open(); null for SQLite).
+  PostgresStore* shared_writer_ = nullptr;
   // The hand-off from the world strand to the writer thread. Guarded by
   // jobs_mutex_ (the writer sleeps on jobs_cv_ when there is nothing to do).
   std::mutex jobs_mutex_;

@@ -16,6 +16,7 @@
 #include "common/vxraw/vxraw.h"
 #include "common/world/sqlite_store.h"
 #include "common/world/world.h"
+#include "server/cluster/cluster_store.h"
 #include "server/storage/postgres_store.h"
 #include "tests/support/postgres.h"
 #include "tests/support/run_command.h"
@@ -76,6 +77,12 @@ class TerraneWorldPostgresTest : public testing_support::PostgresTest {
   }
   std::unique_ptr<PostgresStore> open_store() {
     auto s = PostgresStore::open(url_);
+    EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
+    return s.ok() ? std::move(*s) : nullptr;
+  }
+  // The leases and servers of the test's database.
+  std::unique_ptr<ClusterStore> open_cluster() {
+    auto s = ClusterStore::open(url_);
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
     return s.ok() ? std::move(*s) : nullptr;
   }
@@ -172,7 +179,7 @@ TEST_F(TerraneWorldPostgresTest, MigrateCopiesAWorldDirectoryThatThenExportsTheS
   auto access = dst->access_entries();
   ASSERT_TRUE(access.ok());
   EXPECT_EQ(*access, *(*src)->access_entries());
-  auto holder = dst->holder({0, 0, 0});
+  auto holder = open_cluster()->holder({0, 0, 0});
   ASSERT_TRUE(holder.ok()) << holder.error().message;
   EXPECT_FALSE(holder->has_value()) << "server " << (*holder)->owner << " still holds region (0, 0, 0)";
 }
@@ -259,7 +266,7 @@ TEST_F(TerraneWorldPostgresTest, ImportToADatabaseNeedsAServerIdAndGivesItsLease
 
   // A region another server holds is refused, naming it.
   {
-    auto other = open_store();
+    auto other = open_cluster();
     ASSERT_TRUE(other);
     ASSERT_TRUE(other->claim(lease_region_of({0, 0, 0}), 1, 600s).ok());
     auto held = run("import --store " + url_ + " --server-id 5 " + file);
@@ -278,10 +285,10 @@ TEST_F(TerraneWorldPostgresTest, ImportToADatabaseNeedsAServerIdAndGivesItsLease
   ASSERT_TRUE(in.ok() && out.ok());
   EXPECT_EQ(in->origin, out->origin);
   EXPECT_EQ(in->box, out->box);
-  auto dst = open_store();
-  ASSERT_TRUE(dst);
+  auto leases = open_cluster();
+  ASSERT_TRUE(leases);
   for (const Vec3i region : {Vec3i{-1, 0, 0}, Vec3i{0, 0, 0}}) {
-    auto holder = dst->holder(region);
+    auto holder = leases->holder(region);
     ASSERT_TRUE(holder.ok()) << holder.error().message;
     EXPECT_FALSE(holder->has_value()) << "the import still holds a region";
   }

@@ -1,6 +1,7 @@
 // PostgresStore against a real PostgreSQL started by the test (one per
-// suite, a database per test), on 127.0.0.1: the schema, chunk rows, and
-// the region leases that keep one writer per region.
+// suite, a database per test), on 127.0.0.1: the schema, chunk rows and
+// their units, and writes fenced by the region leases (taken with the
+// cluster store: tests/server/cluster/cluster_store_test.cpp).
 #include "server/storage/postgres_store.h"
 
 #include <fmt/format.h>
@@ -10,6 +11,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <map>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -17,7 +19,8 @@
 
 #include "common/codec/update_batch.h"
 #include "common/world/world.h"
-#include "server/storage/lease_keeper.h"
+#include "server/cluster/cluster_store.h"
+#include "server/cluster/lease_keeper.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 
@@ -45,6 +48,17 @@ class PostgresStoreTest : public testing_support::PostgresTest {
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
     return s.ok() ? std::move(*s) : nullptr;
   }
+  // The cluster store beside chunk store s (one each, opened when first
+  // asked, on a connection of its own): its leases, servers and inbox.
+  ClusterStore* cl(const std::unique_ptr<PostgresStore>& s) {
+    auto& c = beside_[s.get()];
+    if (!c) {
+      auto opened = ClusterStore::open(url_);
+      EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
+      if (opened.ok()) c = std::move(*opened);
+    }
+    return c.get();
+  }
   static ChunkWrite chunk_write(Vec3i cp, std::uint64_t revision, Material m) {
     Box box({kChunkSize, kChunkSize, kChunkSize});
     for (int y = 0; y < 10; ++y)
@@ -53,6 +67,8 @@ class PostgresStoreTest : public testing_support::PostgresTest {
     return ChunkWrite{cp, revision, encode_chunk_blob(box)};
   }
 
+ private:
+  std::map<const PostgresStore*, std::unique_ptr<ClusterStore>> beside_;
 };
 
 TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
@@ -61,7 +77,7 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto again = open();  // finds the schema made by the first
   ASSERT_TRUE(again);
   const Vec3i cp{3, -2, 17};
-  auto lease = a->claim(lease_region_of(cp), 1, 60s);
+  auto lease = cl(a)->claim(lease_region_of(cp), 1, 60s);
   ASSERT_TRUE(lease.ok()) << lease.error().message;
   const ChunkWrite w = chunk_write(cp, 7, materials::kBrick);
   ASSERT_TRUE(a->save_fenced(std::span(&*lease, 1), std::span(&w, 1)).ok());
@@ -91,7 +107,7 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   auto reader = open();
   ASSERT_TRUE(writer && reader);
   const Vec3i cp{2, 1, -3};
-  auto lease = writer->claim(lease_region_of(cp), 1, 60s);
+  auto lease = cl(writer)->claim(lease_region_of(cp), 1, 60s);
   ASSERT_TRUE(lease.ok()) << lease.error().message;
   Chunk chunk(materials::kRock);
   std::uint64_t revision = 1;
@@ -194,96 +210,6 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
   EXPECT_EQ(writer->quarantined_revision(cp)->value_or(0), revision);
 }
 
-TEST_F(PostgresStoreTest, ManyLeasesRenewInOneStatementAndStaleOnesAreLeftOut) {
-  auto a = open();
-  ASSERT_TRUE(a);
-  std::vector<RegionLease> leases;
-  for (int x = -2; x <= 2; ++x) {
-    auto l = a->claim({x, 1, -x}, 1, 60s);
-    ASSERT_TRUE(l.ok()) << l.error().message;
-    leases.push_back(*l);
-  }
-  // Region (0,1,0) changes hands (its epoch moves on), (2,1,-2) runs out.
-  auto newer = a->claim({0, 1, 0}, 1, 60s);
-  ASSERT_TRUE(newer.ok());
-  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp() WHERE rx = 2"), "");
-  auto kept = a->renew(leases, 60s);
-  ASSERT_TRUE(kept.ok()) << kept.error().message;
-  std::vector<RegionLease> want{leases[0], leases[1], leases[3]};
-  std::sort(kept->begin(), kept->end(), [](const RegionLease& p, const RegionLease& q) { return p.region.x < q.region.x; });
-  EXPECT_EQ(*kept, want);
-  auto none = a->renew({}, 60s);
-  ASSERT_TRUE(none.ok());
-  EXPECT_TRUE(none->empty());
-}
-
-TEST_F(PostgresStoreTest, ServersSayWhereClientsReachThemAndTheMapNamesEachRegionsWriter) {
-  auto a = open(), b = open();
-  ASSERT_TRUE(a && b);
-  ASSERT_TRUE(a->claim({0, 0, 0}, 1, 60s).ok());
-  ASSERT_TRUE(b->claim({1, 0, 0}, 2, 60s).ok());
-  ASSERT_TRUE(b->claim({2, 0, 0}, 3, 60s).ok());
-  ASSERT_TRUE(a->advertise(1, "127.0.0.1:7001").ok());
-  ASSERT_TRUE(b->advertise(2, "[::1]:7002").ok());
-  ASSERT_TRUE(b->advertise(2, "127.0.0.1:7002").ok());  // seen again, moved
-  // A row that is not HOST:PORT (another program's, damage) is left out.
-  ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_servers VALUES (3, 'nowhere', clock_timestamp())"), "");
-  auto c = a->cluster(60s);
-  ASSERT_TRUE(c.ok()) << c.error().message;
-  EXPECT_EQ(c->writers.size(), 3u);
-  ASSERT_EQ(c->servers.size(), 2u);
-  const ClusterMap map(c->writers, c->servers, std::chrono::steady_clock::now());
-  ASSERT_NE(map.writer_of({0, 0, 0}), nullptr);
-  EXPECT_EQ(map.writer_of({0, 0, 0})->text(), "127.0.0.1:7001");
-  ASSERT_NE(map.writer_of({1, 0, 0}), nullptr);
-  EXPECT_EQ(*map.writer_of({1, 0, 0}), (ServerAddress{2, "127.0.0.1", 7002}));
-  EXPECT_EQ(map.writer_of({2, 0, 0}), nullptr);  // its writer has no address
-  EXPECT_EQ(map.writer_of({3, 0, 0}), nullptr);  // nobody writes it
-  // A server gone quiet (not seen within fresh) or withdrawn is no
-  // address, nor is a lease that ran out a writer.
-  ASSERT_EQ(run_sql(url_, "UPDATE terrane_servers SET seen_at = clock_timestamp() - interval '10 seconds' WHERE id = 1"),
-            "");
-  ASSERT_TRUE(b->withdraw(2).ok());
-  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp() WHERE rx = 2"), "");
-  auto later = a->cluster(5s);
-  ASSERT_TRUE(later.ok());
-  EXPECT_TRUE(later->servers.empty());
-  EXPECT_EQ(later->writers.size(), 2u);
-}
-
-// A renewal locks its lease rows in the order a commit checks them (y, z,
-// x), whatever order it is given them in: while a commit holds the first,
-// the renewal holds none, so the commit takes the second and ends (a
-// renewal that took the second first would deadlock with it, and
-// PostgreSQL would abort one).
-TEST_F(PostgresStoreTest, ARenewalLocksLeasesInTheOrderACommitDoes) {
-  auto keeper = open();
-  ASSERT_TRUE(keeper);
-  const Vec3i first{0, 0, 0}, second{0, 1, 0};
-  auto a = keeper->claim(first, 1, 60s), b = keeper->claim(second, 1, 60s);
-  ASSERT_TRUE(a.ok() && b.ok());
-  PGconn* commit = PQconnectdb(url_.c_str());
-  ASSERT_EQ(PQstatus(commit), CONNECTION_OK) << PQerrorMessage(commit);
-  const auto exec = [&](const char* sql) { return command(commit, sql); };
-  ASSERT_EQ(exec("BEGIN"), "");
-  ASSERT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 0 AND ry = 0 AND rz = 0"), "");
-  const std::vector<RegionLease> given{*b, *a};  // the second first
-  std::thread renewal([&] {
-    auto kept = keeper->renew(given, 60s);
-    ASSERT_TRUE(kept.ok()) << kept.error().message;
-    EXPECT_EQ(kept->size(), 2u);
-  });
-  // The renewal waits for the first row's lock.
-  EXPECT_TRUE(eventually([&] {
-    return sql_value(url_, "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'") == "1";
-  }));
-  EXPECT_EQ(exec("UPDATE terrane_leases SET seq = seq + 1 WHERE rx = 0 AND ry = 1 AND rz = 0"), "")
-      << "the commit takes the second row";
-  EXPECT_EQ(exec("COMMIT"), "");
-  renewal.join();
-  PQfinish(commit);
-}
-
 // A write PostgreSQL rolls back to break a deadlock is tried again, and
 // stored. The deadlock: another session holds the second region's lease
 // row while the write locks the first and waits for the second, then asks
@@ -299,7 +225,7 @@ TEST_F(PostgresStoreTest, AWriteRolledBackToBreakADeadlockIsTriedAgainAndStored)
   auto s = open();
   ASSERT_TRUE(s);
   const Vec3i first{0, 0, 0}, second{1, 0, 0};
-  auto a = s->claim(first, 1, 60s), b = s->claim(second, 1, 60s);
+  auto a = cl(s)->claim(first, 1, 60s), b = cl(s)->claim(second, 1, 60s);
   ASSERT_TRUE(a.ok() && b.ok());
   const std::vector<RegionLease> leases{*a, *b};
   s->set_lease_source(std::make_shared<const LeaseSource>([&](std::span<const Vec3i> regions) {
@@ -339,195 +265,13 @@ TEST_F(PostgresStoreTest, AWriteRolledBackToBreakADeadlockIsTriedAgainAndStored)
   }
 }
 
-TEST_F(PostgresStoreTest, EachWriteMovesItsRegionsSequenceOnAcrossChangesOfHands) {
-  auto a = open(), b = open();
-  ASSERT_TRUE(a && b);
-  auto first = a->claim({0, 0, 0}, 1, 60s);
-  ASSERT_TRUE(first.ok());
-  const ChunkWrite w = chunk_write({1, 1, 1}, 1, materials::kBrick);
-  ASSERT_TRUE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
-  ASSERT_TRUE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
-  ASSERT_TRUE(a->release(std::span(&*first, 1)).ok());
-  auto second = b->claim({0, 0, 0}, 2, 60s);
-  ASSERT_TRUE(second.ok());
-  ASSERT_TRUE(b->save_fenced(std::span(&*second, 1), std::span(&w, 1)).ok());
-  // A region only claimed has no writes.
-  ASSERT_TRUE(b->claim({5, 0, 0}, 2, 60s).ok());
-  auto seqs = a->region_seqs();
-  ASSERT_TRUE(seqs.ok()) << seqs.error().message;
-  EXPECT_EQ(*seqs, (std::vector<RegionSeq>{{{0, 0, 0}, 3}}));
-  // A fenced write moves nothing.
-  EXPECT_FALSE(a->save_fenced(std::span(&*first, 1), std::span(&w, 1)).ok());
-  EXPECT_EQ(a->region_seqs()->front().seq, 3u);
-}
-
-TEST(ClusterMapTest, ALeaseKeepsTheTimeItWasFirstSeenUntilItChangesHands) {
-  using Clock = ClusterMap::Clock;
-  const Clock::time_point t0{}, t1 = t0 + 1s, t2 = t0 + 2s;
-  const std::vector<ServerAddress> servers{{1, "a", 1}, {2, "b", 2}};
-  const ClusterMap first({{{0, 0, 0}, 1, 5}, {{1, 0, 0}, 1, 3}}, servers, t0);
-  // (1,0,0) is handed to server 2, (0,0,0) claimed again by its writer (a
-  // new epoch: a restart), (2,0,0) new.
-  const ClusterMap second({{{0, 0, 0}, 1, 5}, {{1, 0, 0}, 2, 4}, {{2, 0, 0}, 2, 1}}, servers, t1, &first);
-  EXPECT_EQ(second.written_since({0, 0, 0}), t0);
-  EXPECT_EQ(second.written_since({1, 0, 0}), t1);
-  EXPECT_EQ(second.written_since({2, 0, 0}), t1);
-  EXPECT_EQ(second.writer_of({1, 0, 0})->id, 2u);
-  const ClusterMap third({{{0, 0, 0}, 1, 6}, {{1, 0, 0}, 2, 4}}, servers, t2, &second);
-  EXPECT_EQ(third.written_since({0, 0, 0}), t2);
-  EXPECT_EQ(third.written_since({1, 0, 0}), t1);
-  EXPECT_EQ(third.written_since({2, 0, 0}), std::nullopt);
-  EXPECT_EQ(third.writer_of({2, 0, 0}), nullptr);
-}
-
-TEST(ServerAddressTest, ParsesHostAndPortAndSaysWhatIsWrong) {
-  std::string why;
-  auto a = parse_server_address("game.example:7777", &why);
-  ASSERT_TRUE(a) << why;
-  EXPECT_EQ(a->host, "game.example");
-  EXPECT_EQ(a->port, 7777);
-  auto v6 = parse_server_address("[::1]:7778", &why);
-  ASSERT_TRUE(v6) << why;
-  EXPECT_EQ(v6->host, "::1");
-  EXPECT_EQ(v6->text(), "[::1]:7778");
-  for (const char* bad : {"7777", "host:", "host:0", "host:65536", "host:x", "bad host:1", ":7777"}) {
-    why.clear();
-    EXPECT_FALSE(parse_server_address(bad, &why)) << bad;
-    EXPECT_NE(why.find(bad), std::string::npos) << why;
-  }
-}
-
-TEST_F(PostgresStoreTest, ARegionHasOneWriterAtATime) {
-  auto a = open(), b = open();
-  ASSERT_TRUE(a && b);
-  const Vec3i region{0, 0, 0};
-  auto first = a->claim(region, 1, 60s);
-  ASSERT_TRUE(first.ok()) << first.error().message;
-  EXPECT_EQ(first->epoch, 1u);
-  // Another server is refused, told who holds it.
-  auto refused = b->claim(region, 2, 60s);
-  ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.error().kind, StoreError::Kind::kOwned);
-  EXPECT_NE(refused.error().message.find("server 1"), std::string::npos) << refused.error().message;
-  // Renewing keeps the epoch; claiming again (a restarted server) starts
-  // the next one, which fences whatever the earlier incarnation writes.
-  auto renewed = a->renew(std::span(&*first, 1), 60s);
-  ASSERT_TRUE(renewed.ok());
-  ASSERT_EQ(renewed->size(), 1u);
-  EXPECT_EQ(renewed->front(), *first);
-  auto again = a->claim(region, 1, 60s);
-  ASSERT_TRUE(again.ok());
-  EXPECT_EQ(again->epoch, 2u);
-  const ChunkWrite w = chunk_write(region * 8, 1, materials::kBrick);
-  auto stale = a->save_fenced(std::span(&*first, 1), std::span(&w, 1));
-  ASSERT_FALSE(stale.ok());
-  EXPECT_EQ(stale.error().kind, StoreError::Kind::kFenced);
-  auto who = b->holder(region);
-  ASSERT_TRUE(who.ok());
-  ASSERT_TRUE(who->has_value());
-  EXPECT_EQ(**who, *again);
-  // Other regions are free.
-  auto other = b->claim({1, 0, 0}, 2, 60s);
-  ASSERT_TRUE(other.ok());
-  EXPECT_EQ(other->owner, 2u);
-  // A stale lease gives nothing up; the current one, given up, goes to the
-  // next claim, at a higher epoch.
-  ASSERT_TRUE(a->release(std::span(&*first, 1)).ok());
-  EXPECT_FALSE(b->claim(region, 2, 60s).ok());
-  ASSERT_TRUE(a->release(std::span(&*again, 1)).ok());
-  auto taken = b->claim(region, 2, 60s);
-  ASSERT_TRUE(taken.ok()) << taken.error().message;
-  EXPECT_EQ(taken->epoch, 3u);
-  // Server ids are below 2^31 (the table's integer).
-  auto too_big = b->claim({5, 5, 5}, 0x80000000u, 60s);
-  ASSERT_FALSE(too_big.ok());
-  EXPECT_NE(too_big.error().message.find("not below 2^31"), std::string::npos) << too_big.error().message;
-}
-
-TEST_F(PostgresStoreTest, AFreeRegionIsLeftToTheServerWritingItsNeighboursUnlessTheClaimantWritesOneToo) {
-  auto a = open(), b = open();
-  ASSERT_TRUE(a && b);
-  const auto prefer = ClaimRule::kPreferNeighbours;
-  // Nobody writes near: each server takes a region of its own.
-  ASSERT_TRUE(a->claim({0, 0, 0}, 1, 60s, prefer).ok());
-  ASSERT_TRUE(b->claim({10, 0, 10}, 2, 60s, prefer).ok());
-  // A free region touching only server 1's (here by a corner) is left to
-  // server 1, named; no lease changes.
-  auto left = b->claim({1, 1, 1}, 2, 60s, prefer);
-  ASSERT_FALSE(left.ok());
-  EXPECT_EQ(left.error().kind, StoreError::Kind::kLeft);
-  EXPECT_EQ(left.error().holder, std::optional<std::uint32_t>(1));
-  EXPECT_NE(left.error().message.find("left to server 1"), std::string::npos) << left.error().message;
-  auto free = b->holder({1, 1, 1});
-  ASSERT_TRUE(free.ok());
-  EXPECT_FALSE(free->has_value()) << "a preference changes no lease";
-  // Without the rule (a tool, a forwarded edit) the claim takes it.
-  ASSERT_TRUE(b->claim({1, 1, 1}, 2, 60s).ok());
-  // Next to its own, a server takes a region whatever else touches it.
-  ASSERT_TRUE(b->claim({1, 0, 0}, 2, 60s, prefer).ok());
-  // Several neighbours' servers: the one writing most of them (server 2:
-  // (1,1,1) and (1,0,0), against server 1's (0,0,0)).
-  auto most = a->claim({1, 0, 1}, 3, 60s, prefer);
-  ASSERT_FALSE(most.ok());
-  EXPECT_EQ(most.error().holder, std::optional<std::uint32_t>(2)) << most.error().message;
-  // A held region is refused as ever, naming its holder.
-  auto held = b->claim({0, 0, 0}, 2, 60s, prefer);
-  ASSERT_FALSE(held.ok());
-  EXPECT_EQ(held.error().kind, StoreError::Kind::kOwned);
-  // An expired lease counts for nothing: once server 3's region (at
-  // 300 ms) has run out, a region next to it alone is server 4's to take
-  // (were it counted, it would be left to server 3 for good).
-  ASSERT_TRUE(a->claim({30, 0, 30}, 3, 300ms, prefer).ok());
-  StoreResult<RegionLease> after = StoreError{};
-  ASSERT_TRUE(eventually([&] { return (after = b->claim({31, 0, 30}, 4, 60s, prefer)).ok(); }, 30s))
-      << after.error().message;
-}
-
-TEST_F(PostgresStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
-  auto a = open(), b = open();
-  ASSERT_TRUE(a && b);
-  const Vec3i cp{5, 1, 5};
-  const Vec3i region = lease_region_of(cp);
-  auto mine = a->claim(region, 1, 300ms);
-  ASSERT_TRUE(mine.ok());
-  const ChunkWrite v1 = chunk_write(cp, 1, materials::kBrick);
-  ASSERT_TRUE(a->save_fenced(std::span(&*mine, 1), std::span(&v1, 1)).ok());
-  // Server 1 stops renewing (paused, say): once its lease has run out by
-  // the database's clock, server 2's claim succeeds, one epoch up.
-  StoreResult<RegionLease> theirs = StoreError{};
-  ASSERT_TRUE(eventually([&] { return (theirs = b->claim(region, 2, 60s)).ok(); }, 30s))
-      << theirs.error().message;
-  EXPECT_EQ(theirs->epoch, mine->epoch + 1);
-  // Server 1 comes back: its renewal finds the lease gone ...
-  auto kept = a->renew(std::span(&*mine, 1), 300ms);
-  ASSERT_TRUE(kept.ok());
-  EXPECT_TRUE(kept->empty());
-  // ... and its next write is fenced: nothing is written.
-  const ChunkWrite stale = chunk_write(cp, 2, materials::kSand);
-  auto fenced = a->save_fenced(std::span(&*mine, 1), std::span(&stale, 1));
-  ASSERT_FALSE(fenced.ok());
-  EXPECT_EQ(fenced.error().kind, StoreError::Kind::kFenced);
-  EXPECT_NE(fenced.error().message.find("no longer current"), std::string::npos) << fenced.error().message;
-  auto got = b->load_chunk(cp);
-  ASSERT_TRUE(got.ok() && got->has_value());
-  EXPECT_EQ((*got)->revision, 1u);
-  EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kBrick);
-  // The new holder writes.
-  const ChunkWrite v2 = chunk_write(cp, 2, materials::kSnow);
-  ASSERT_TRUE(b->save_fenced(std::span(&*theirs, 1), std::span(&v2, 1)).ok());
-  got = a->load_chunk(cp);
-  ASSERT_TRUE(got.ok() && got->has_value());
-  EXPECT_EQ((*got)->revision, 2u);
-  EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kSnow);
-}
-
 TEST_F(PostgresStoreTest, AWriteSpanningRegionsIsAllOrNothing) {
   auto a = open(), b = open();
   ASSERT_TRUE(a && b);
   const Vec3i here{7, 0, 0}, there{8, 0, 0};  // two regions side by side
   ASSERT_NE(lease_region_of(here), lease_region_of(there));
-  auto mine = a->claim(lease_region_of(here), 1, 60s);
-  auto theirs = b->claim(lease_region_of(there), 2, 60s);
+  auto mine = cl(a)->claim(lease_region_of(here), 1, 60s);
+  auto theirs = cl(b)->claim(lease_region_of(there), 2, 60s);
   ASSERT_TRUE(mine.ok() && theirs.ok());
   const ChunkWrite both[] = {chunk_write(here, 1, materials::kBrick), chunk_write(there, 1, materials::kBrick)};
   // Without a lease for one of them: refused before anything is written.
@@ -597,17 +341,17 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   {
     auto upgraded = open();
     ASSERT_TRUE(upgraded);
-    ASSERT_TRUE(upgraded->advertise(1, "127.0.0.1:7001").ok());
-    auto lease = upgraded->claim({0, 0, 0}, 1, 60s);
+    ASSERT_TRUE(cl(upgraded)->advertise(1, "127.0.0.1:7001").ok());
+    auto lease = cl(upgraded)->claim({0, 0, 0}, 1, 60s);
     ASSERT_TRUE(lease.ok()) << lease.error().message;
     const ChunkWrite w = chunk_write({0, 0, 0}, 1, materials::kBrick);
     ASSERT_TRUE(upgraded->save_fenced(std::span(&*lease, 1), std::span(&w, 1)).ok());
-    EXPECT_EQ(*upgraded->region_seqs(), (std::vector<RegionSeq>{{{0, 0, 0}, 1}}));
+    EXPECT_EQ(*cl(upgraded)->region_seqs(), (std::vector<RegionSeq>{{{0, 0, 0}, 1}}));
     const ForwardAnswer a{5, 1, true, 1, ""};
-    ASSERT_TRUE(upgraded->answer(std::span(&a, 1)).ok());
-    EXPECT_EQ(*upgraded->take_answers(1), std::vector<ForwardAnswer>{a});
-    ASSERT_TRUE(upgraded->release(std::span(&*lease, 1)).ok());
-    ASSERT_TRUE(upgraded->withdraw(1).ok());
+    ASSERT_TRUE(cl(upgraded)->answer(std::span(&a, 1)).ok());
+    EXPECT_EQ(*cl(upgraded)->take_answers(1), std::vector<ForwardAnswer>{a});
+    ASSERT_TRUE(cl(upgraded)->release(std::span(&*lease, 1)).ok());
+    ASSERT_TRUE(cl(upgraded)->withdraw(1).ok());
   }
   EXPECT_EQ(run_sql(url_, current_version),
             "");
@@ -703,7 +447,7 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
     std::vector<RegionLease> out;
     for (Vec3i r : regions) {
       asked.push_back(r);
-      auto l = s->claim(r, 4, 60s);
+      auto l = cl(s)->claim(r, 4, 60s);
       if (!l) return StoreResult<std::vector<RegionLease>>(l.error());
       out.push_back(*l);
     }
@@ -787,40 +531,11 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
   EXPECT_EQ(*access, want);
 }
 
-// A forwarded edit passed on: its row goes to the next server's inbox with
-// its sender and age, so that server answers the sender directly; the row
-// is no longer the relaying server's (relayed once, never twice).
-TEST_F(PostgresStoreTest, ARelayedEditKeepsItsSenderAndAgeAndLeavesTheRelaysInbox) {
-  auto s = open();
-  ASSERT_TRUE(s);
-  const std::vector<std::uint8_t> edit{1, 2, 3};
-  auto row = s->forward(1, 2, "ann", edit);
-  ASSERT_TRUE(row.ok()) << row.error().message;
-  ASSERT_EQ(run_sql(url_, fmt::format("UPDATE terrane_inbox SET created_at = created_at - interval '3 seconds'"
-                                      " WHERE id = {}", *row)),
-            "");
-  ASSERT_TRUE(s->relay(*row, 2, 3).ok());
-  auto at_relay = s->inbox(2, 0, 10);
-  ASSERT_TRUE(at_relay.ok());
-  EXPECT_TRUE(at_relay->empty());
-  auto at_next = s->inbox(3, 0, 10);
-  ASSERT_TRUE(at_next.ok());
-  ASSERT_EQ(at_next->size(), 1u);
-  EXPECT_EQ(at_next->front().id, *row);
-  EXPECT_EQ(at_next->front().from, 1u);
-  EXPECT_EQ(at_next->front().player, "ann");
-  EXPECT_EQ(at_next->front().edit, edit);
-  EXPECT_GE(at_next->front().age_ms, 3000);
-  auto again = s->relay(*row, 2, 3);
-  ASSERT_FALSE(again.ok());
-  EXPECT_NE(again.error().message.find("no longer server 2's"), std::string::npos) << again.error().message;
-}
-
 TEST_F(PostgresStoreTest, WritesInARegionAnotherServerHoldsAreRefusedWithTheHolder) {
   auto mine = open(), theirs = open();
   ASSERT_TRUE(mine && theirs);
   ASSERT_TRUE(mine->create_world(default_world_meta()).ok());
-  ASSERT_TRUE(theirs->claim({0, 0, 0}, 2, 60s).ok());
+  ASSERT_TRUE(cl(theirs)->claim({0, 0, 0}, 2, 60s).ok());
   auto keeper = LeaseKeeper::open(url_, 1, LeaseTimes{}, nullptr);
   ASSERT_TRUE(keeper.ok()) << keeper.error().message;
   mine->set_lease_source(std::make_shared<const LeaseSource>(

@@ -1,6 +1,8 @@
 // LeaseKeeper against a real PostgreSQL started by the test: leases kept
 // alive past many lease times, lost leases reported, released on shutdown.
-#include "server/storage/lease_keeper.h"
+#include "server/cluster/lease_keeper.h"
+
+#include "server/storage/postgres_store.h"
 
 #include <gtest/gtest.h>
 
@@ -36,7 +38,13 @@ class LeaseKeeperTest : public testing_support::PostgresTest {
     EXPECT_TRUE(k.ok()) << (k.ok() ? "" : k.error().message);
     return k.ok() ? std::move(*k) : nullptr;
   }
-  std::unique_ptr<PostgresStore> store() {
+  // Another server's leases, and a chunk store to write with.
+  std::unique_ptr<ClusterStore> store() {
+    auto s = ClusterStore::open(url_);
+    EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
+    return s.ok() ? std::move(*s) : nullptr;
+  }
+  std::unique_ptr<PostgresStore> chunks() {
     auto s = PostgresStore::open(url_);
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
     return s.ok() ? std::move(*s) : nullptr;
@@ -132,7 +140,7 @@ TEST_F(LeaseKeeperTest, ALeaseTakenWhileItsKeeperWasLateIsReportedLost) {
   }
   EXPECT_TRUE(a->held().empty());
   // Its writes are fenced by the database whatever the keeper believed.
-  auto writer = store();
+  auto writer = chunks();
   ASSERT_TRUE(writer);
   const ChunkWrite w{Vec3i{16, 0, 16}, 1, encode_chunk_blob(Chunk(kAir))};
   auto fenced = writer->save_fenced(*leases, std::span(&w, 1));

@@ -1,4 +1,4 @@
-#include "server/storage/lease_keeper.h"
+#include "server/cluster/lease_keeper.h"
 
 #include <algorithm>
 
@@ -11,16 +11,16 @@ StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& u
   if (times.renew >= times.lease)
     return StoreError{StoreError::Kind::kQuery, fmt::format("lease renewal every {} ms cannot keep a {} ms lease",
                                                             times.renew.count(), times.lease.count())};
-  auto claims = PostgresStore::open(url);
+  auto claims = ClusterStore::open(url);
   if (!claims) return claims.error();
-  auto renewer = PostgresStore::open(url);
+  auto renewer = ClusterStore::open(url);
   if (!renewer) return renewer.error();
   return std::unique_ptr<LeaseKeeper>(
       new LeaseKeeper(owner, times, std::move(on_lost), std::move(*claims), std::move(*renewer)));
 }
 
-LeaseKeeper::LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<PostgresStore> claims,
-                         std::unique_ptr<PostgresStore> renewer)
+LeaseKeeper::LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<ClusterStore> claims,
+                         std::unique_ptr<ClusterStore> renewer)
     : owner_(owner),
       times_(times),
       on_lost_(std::move(on_lost)),

@@ -3,7 +3,8 @@
 // the client library: what one server acknowledges survives it, a region has
 // one writer, and a server that takes a region over reads what the previous
 // owner wrote before writing there. Every wait is on an event with a
-// deadline; nothing sleeps.
+// deadline; nothing sleeps. (Built into the client library's test binary,
+// which links the client: tests/CMakeLists.txt.)
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -27,7 +27,7 @@
 #include <tuple>
 #include <vector>
 
-#include "server/storage/postgres_store.h"
+#include "server/cluster/cluster_store.h"
 
 namespace terrane {
 
@@ -83,8 +83,8 @@ class LeaseKeeper {
   void advertise(std::string address, ClusterDirectory* directory);
 
  private:
-  LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<PostgresStore> claims,
-              std::unique_ptr<PostgresStore> renewals);
+  LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<ClusterStore> claims,
+              std::unique_ptr<ClusterStore> renewals);
   void renew_loop();
   using Key = std::tuple<int, int, int>;  // (y, z, x): the claiming order
   static Key key_of(Vec3i region) { return {region.y, region.z, region.x}; }
@@ -93,8 +93,8 @@ class LeaseKeeper {
   const LeaseTimes times_;
   const LostFn on_lost_;
   std::mutex claims_mutex_;               // one claim at a time on claims_
-  std::unique_ptr<PostgresStore> claims_;
-  std::unique_ptr<PostgresStore> renewer_;  // the keeper thread's own
+  std::unique_ptr<ClusterStore> claims_;
+  std::unique_ptr<ClusterStore> renewer_;  // the keeper thread's own
 
   // A renewal round's news of the cluster: this server's address seen now,
   // and the map of writers published (renewer_'s connection, keeper thread).

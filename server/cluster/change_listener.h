@@ -13,7 +13,7 @@
 // again (every second until it can), subscribes, reads the sequences again
 // and calls missed with the regions whose sequence moved meanwhile, so the
 // owner reads again what it holds of those, and its inbox; then hands on
-// the answers kept for it in the database (PostgresStore::take_answers),
+// the answers kept for it in the database (ClusterStore::take_answers),
 // whose notices it may have missed. A notice whose sequence skips one (a
 // notice lost, which PostgreSQL does not do while connected) calls missed
 // with its region too.
@@ -33,7 +33,7 @@
 #include <thread>
 #include <vector>
 
-#include "server/storage/postgres_store.h"
+#include "server/cluster/cluster_store.h"
 
 namespace terrane {
 
@@ -57,10 +57,10 @@ class ChangeListener {
   ChangeListener& operator=(const ChangeListener&) = delete;
 
  private:
-  ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<PostgresStore> conn);
+  ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<ClusterStore> conn);
   void run();
   // answered: the ids of answers to this server handed on.
-  void hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered);
+  void hand_on(const ClusterStore::Notice& n, std::vector<std::int64_t>& answered);
   // Reads every region's sequence; returns those that moved since known
   // (all of them the first time: nothing is held yet then).
   StoreResult<std::vector<Vec3i>> read_seqs();
@@ -69,7 +69,7 @@ class ChangeListener {
   const std::uint32_t server_;
   const std::string server_text_;  // as inbox notices name it
   const Handlers on_;
-  std::unique_ptr<PostgresStore> conn_;  // the thread's
+  std::unique_ptr<ClusterStore> conn_;  // the thread's
   std::map<std::tuple<int, int, int>, std::uint64_t> seqs_;  // the thread's: region -> write sequence seen
   std::mutex mutex_;  // guards stopping_
   std::condition_variable wake_;

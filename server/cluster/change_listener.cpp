@@ -1,4 +1,4 @@
-#include "server/storage/change_listener.h"
+#include "server/cluster/change_listener.h"
 
 #include <chrono>
 
@@ -12,7 +12,7 @@ std::string ChangeListener::name_of(std::uint32_t server) {
 
 StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, std::uint32_t server,
                                                                   Handlers handlers) {
-  auto conn = PostgresStore::open(url);
+  auto conn = ClusterStore::open(url);
   if (!conn) return conn.error();
   if (auto n = (*conn)->set_name(name_of(server)); !n) return n.error();
   if (auto l = (*conn)->listen(); !l) return l.error();
@@ -24,7 +24,7 @@ StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::str
 }
 
 ChangeListener::ChangeListener(std::string url, std::uint32_t server, Handlers handlers,
-                               std::unique_ptr<PostgresStore> conn)
+                               std::unique_ptr<ClusterStore> conn)
     : url_(std::move(url)), server_(server), server_text_(std::to_string(server)), on_(std::move(handlers)), conn_(std::move(conn)) {}
 
 ChangeListener::~ChangeListener() {
@@ -45,7 +45,7 @@ void ChangeListener::run() {
     if (!conn_) {
       // Connected again and subscribed before anything is read again, so
       // nothing committed after the read can be missed.
-      auto again = PostgresStore::open(url_);
+      auto again = ClusterStore::open(url_);
       if (again && (*again)->set_name(name_of(server_)) && (*again)->listen()) {
         conn_ = std::move(*again);
         auto moved = read_seqs();
@@ -79,7 +79,7 @@ void ChangeListener::run() {
       continue;
     }
     std::vector<std::int64_t> answered;
-    for (const PostgresStore::Notice& n : *got) hand_on(n, answered);
+    for (const ClusterStore::Notice& n : *got) hand_on(n, answered);
     // Their rows are not needed once the notices came (a failure leaves
     // them to the ten-minute sweep).
     if (!answered.empty()) (void)conn_->forget_answers(answered);
@@ -100,7 +100,7 @@ StoreResult<std::vector<Vec3i>> ChangeListener::read_seqs() {
   return moved;
 }
 
-void ChangeListener::hand_on(const PostgresStore::Notice& n, std::vector<std::int64_t>& answered) {
+void ChangeListener::hand_on(const ClusterStore::Notice& n, std::vector<std::int64_t>& answered) {
   bool read = true;
   if (n.channel == kChangesChannel) {
     auto notice = parse_change_notice(n.payload);

@@ -2,7 +2,7 @@
 // forwarded edits reach their sender by notice, and one whose notice went
 // out while the sender's listener was reconnecting is read from the
 // database once it is back (STORE_POSTGRESQL.md, "Forwarded edits").
-#include "server/storage/change_listener.h"
+#include "server/cluster/change_listener.h"
 
 #include <gtest/gtest.h>
 #include <libpq-fe.h>
@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "common/world/world.h"
+#include "server/storage/postgres_store.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 
@@ -39,8 +40,10 @@ class ChangeListenerTest : public testing_support::PostgresTest {
 };
 
 TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDatabase) {
-  auto store = PostgresStore::open(url_);
+  auto store = PostgresStore::open(url_);  // another server's chunk writes
   ASSERT_TRUE(store.ok()) << store.error().message;
+  auto cluster = ClusterStore::open(url_);  // its leases and answers
+  ASSERT_TRUE(cluster.ok()) << cluster.error().message;
   std::mutex m;
   std::vector<ForwardAnswer> got;
   int missed = 0;
@@ -59,7 +62,7 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
   };
   // Two regions of another server, written once before the listener
   // starts: none is read again unless written while it is away.
-  auto lease_a = (*store)->claim({0, 0, 0}, 9, 60s), lease_b = (*store)->claim({1, 0, 0}, 9, 60s);
+  auto lease_a = (*cluster)->claim({0, 0, 0}, 9, 60s), lease_b = (*cluster)->claim({1, 0, 0}, 9, 60s);
   ASSERT_TRUE(lease_a.ok() && lease_b.ok());
   const ChunkWrite write_a{{0, 0, 0}, 1, encode_chunk_blob(Box({kChunkSize, kChunkSize, kChunkSize}))},
       write_b{{8, 0, 0}, 1, encode_chunk_blob(Box({kChunkSize, kChunkSize, kChunkSize}))};
@@ -75,7 +78,7 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
   };
   // Listening: the answer comes by its notice, and its row is forgotten.
   const ForwardAnswer first{11, 7, true, 5, ""};
-  ASSERT_TRUE((*store)->answer(std::span(&first, 1)).ok());
+  ASSERT_TRUE((*cluster)->answer(std::span(&first, 1)).ok());
   ASSERT_TRUE(eventually([&] { return has(11); }, 30s));
   ASSERT_TRUE(eventually([&] { return value("SELECT count(*) FROM terrane_answers") == "0"; }, 30s));
   // The listener's connection is cut, and its new one waits for a lock the
@@ -83,7 +86,8 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
   PGconn* holder = PQconnectdb(url_.c_str());
   ASSERT_EQ(PQstatus(holder), CONNECTION_OK);
   PQclear(PQexec(holder, "BEGIN"));
-  PGresult* locked = PQexec(holder, "LOCK TABLE terrane_meta IN ACCESS EXCLUSIVE MODE");
+  // (A new connection reads the schema's version first.)
+  PGresult* locked = PQexec(holder, "LOCK TABLE terrane_schema IN ACCESS EXCLUSIVE MODE");
   ASSERT_EQ(PQresultStatus(locked), PGRES_COMMAND_OK) << PQresultErrorMessage(locked);
   PQclear(locked);
   ASSERT_EQ(value("SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity WHERE application_name = '" +
@@ -96,7 +100,7 @@ TEST_F(ChangeListenerTest, AnAnswerSentWhileTheListenerReconnectsIsReadFromTheDa
       },
       30s));
   const ForwardAnswer answers[] = {{12, 7, false, 0, "refused: a region held by server 9"}, {13, 8, true, 4, ""}};
-  ASSERT_TRUE((*store)->answer(answers).ok());
+  ASSERT_TRUE((*cluster)->answer(answers).ok());
   // A region written meanwhile (its sequence moves on; its notice is lost).
   ASSERT_TRUE((*store)->save_fenced(std::span(&*lease_a, 1), std::span(&write_a, 1)).ok());
   PQclear(PQexec(holder, "COMMIT"));

@@ -1,0 +1,86 @@
+#include "server/cluster/cluster_control.h"
+
+#include <span>
+
+#include "server/base/log.h"
+
+namespace terrane {
+
+StoreResult<std::unique_ptr<ClusterControl>> ClusterControl::open(const std::string& url, LeaseKeeper& keeper) {
+  auto store = ClusterStore::open(url);
+  if (!store) return store.error();
+  return std::unique_ptr<ClusterControl>(new ClusterControl(keeper, std::move(*store)));
+}
+
+ClusterControl::ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store)
+    : keeper_(keeper), store_(std::move(store)) {}
+
+ClusterControl::~ClusterControl() { stop(); }
+
+void ClusterControl::stop() { thread_.join(); }
+
+void ClusterControl::post(std::function<void(ClusterStore&)> fn) {
+  asio::post(thread_, [this, fn = std::move(fn)] { fn(*store_); });
+}
+
+void ClusterControl::claim(Vec3i region, ClaimRule rule, std::function<void(RegionClaim)> done) {
+  post([this, region, rule, done = std::move(done)](ClusterStore& cs) {
+    RegionClaim out;
+    auto held = keeper_.ensure(std::span(&region, 1), rule);
+    if (!held) {
+      out.why = held.error().message;
+      out.unreachable = held.error().kind == StoreError::Kind::kConnection;
+      out.left = held.error().kind == StoreError::Kind::kLeft;
+      out.holder = held.error().holder;
+      done(std::move(out));
+      return;
+    }
+    // Revisions only (no voxels: nothing there can fail to decode).
+    auto revisions = cs.stored_revisions(region);
+    if (!revisions) {
+      // Held, but what is stored there is not known: not written until it is.
+      out.why = "cannot read what the region holds: " + revisions.error().message;
+      out.unreachable = true;
+      done(std::move(out));
+      return;
+    }
+    out.held = true;
+    out.stored = std::move(*revisions);
+    done(std::move(out));
+  });
+}
+
+void ClusterControl::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
+                             std::vector<Vec3i> hand_over, std::function<void(StoreResult<std::int64_t>)> done) {
+  post([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over),
+        done = std::move(done)](ClusterStore& cs) {
+    if (!hand_over.empty())
+      if (auto released = keeper_.release(hand_over); !released) return done(released.error());
+    done(cs.forward(keeper_.owner(), to, player, edit));
+  });
+}
+
+void ClusterControl::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,
+                           std::function<void(StoreResult<Ok>)> done) {
+  post([this, row, to, hand_over = std::move(hand_over), done = std::move(done)](ClusterStore& cs) {
+    if (!hand_over.empty())
+      if (auto released = keeper_.release(hand_over); !released) return done(released.error());
+    done(cs.relay(row, keeper_.owner(), to));
+  });
+}
+
+void ClusterControl::read_inbox(std::int64_t after, std::size_t limit,
+                                std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
+  post([this, after, limit, done = std::move(done)](ClusterStore& cs) {
+    done(cs.inbox(keeper_.owner(), after, limit));
+  });
+}
+
+void ClusterControl::answer(std::vector<ForwardAnswer> answers) {
+  post([answers = std::move(answers)](ClusterStore& cs) {
+    if (auto a = cs.answer(answers); !a)
+      server_log().warn("forwarded edits: {} answers not sent: {}", answers.size(), a.error().message);
+  });
+}
+
+}  // namespace terrane
