@@ -36,16 +36,14 @@ HoldingForm form_sent(const ChunkVersion& v, int level) {
 }  // namespace
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-                       const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-                       const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster)
+                       const WelcomeTemplate& welcome, ReplicationFaults& faults, const StreamGate& gate,
+                       const ClusterDirectory* cluster)
     : id_(id),
       world_(world),
       options_(options),
       counters_(counters),
       welcome_(welcome),
       faults_(faults),
-      access_(access),
-      admin_fn_(admin),
       gate_(gate),
       cluster_(cluster) {
   state_.view_distance = options_.default_view_distance;
@@ -95,115 +93,36 @@ void Replicator::close(CloseReason why, const std::string& text) {
 
 // --- messages ------------------------------------------------------------------
 
-void Replicator::on_message(InboundMessage msg) {
-  if (closed_) return;
-  if (auto* hello = std::get_if<HelloMsg>(&msg)) return on_hello(*hello);
-  if (!welcomed_) return;
-  if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(*state);
-  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(std::move(*edit));
-  if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(*read);
-  if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
-  if (auto* req = std::get_if<ChunkHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
-  if (auto* admin = std::get_if<AdminRequestMsg>(&msg)) return on_admin(std::move(*admin));
-  if (auto* pong = std::get_if<PongMsg>(&msg)) return on_pong(pong->nonce);
-}
-
-void Replicator::on_pong(std::uint64_t nonce) {
-  // Only the answer to the last Ping sent counts (its nonce is the steady
-  // clock in microseconds when it went out), once.
-  if (nonce == 0 || nonce != ping_nonce_) return;
-  ping_nonce_ = 0;
-  const auto now = std::chrono::duration_cast<std::chrono::microseconds>(
-                       std::chrono::steady_clock::now().time_since_epoch())
-                       .count();
-  std::lock_guard lock(info_m_);
-  info_.ping_ms = static_cast<double>(now - static_cast<std::int64_t>(nonce)) / 1000.0;
-}
-
-Replicator::Info Replicator::info() const {
-  std::lock_guard lock(info_m_);
-  return info_;
-}
-
-void Replicator::on_admin(AdminRequestMsg req) {
-  if (!admin_) {
-    const std::string why = "not an admin: this session's token does not have the admin role";
-    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": \"" + why + "\"}"};
-    session_->send(build_admin_result(r), SendClass::kControl);
-    return;
-  }
-  admin_fn_(name_, std::move(req), [weak = weak_session_](AdminResultMsg r) {
-    if (auto s = weak.lock()) s->send(build_admin_result(r), SendClass::kControl);
-  });
-}
-
-void Replicator::on_hello(const HelloMsg& hello) {
-  if (hello.protocol_version != kProtocolVersion) {
-    server_log().warn("session {}: protocol version {} rejected", id_, hello.protocol_version);
-    session_->close(CloseReason::kVersionMismatch,
-                    "protocol version " + std::to_string(hello.protocol_version) +
-                        " is not supported: this server speaks version " + std::to_string(kProtocolVersion) +
-                        " (protocol/PROTOCOL.md); update the client");
-    return;
-  }
-  const auto now_unix =
-      std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
-  const Admission admission = access_.admit(hello.client_name, hello.auth_token, session_->address(), now_unix);
-  if (!admission.ok) {
-    if (admission.why == CloseReason::kAuthFailed) {
-      counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
-      violations().warn("session " + std::to_string(id_) + " (" + session_->remote() +
-                        "): authentication failed for '" + hello.client_name + "'");
-    } else {
-      server_log().info("session {} ({}): '{}' refused: {}", id_, session_->remote(), hello.client_name,
-                        admission.reason);
-    }
-    session_->close(admission.why, admission.reason);
-    return;
-  }
-  admin_ = admission.admin;
+void Replicator::join(const std::string& name) {
   edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
-  name_ = hello.client_name;
-  welcomed_ = true;
+  name_ = name;
+  joined_ = true;
+  joined_at_ = std::chrono::steady_clock::now();
   state_.position = welcome_.welcome.spawn;
-  {
-    std::lock_guard lock(info_m_);
-    info_ = Info{name_, state_.position, admin_, true, std::chrono::steady_clock::now()};
-  }
   world_.join(id_, name_, shared_from_this());
-  counters_.clients.fetch_add(1, std::memory_order_relaxed);
-  counters_.joins.fetch_add(1, std::memory_order_relaxed);
-  session_->send(build_welcome(welcome_.welcome));
-  // A Redirect's token says where the client comes from (it grants nothing).
-  if (!hello.resume_token.empty()) counters_.redirects_received.fetch_add(1, std::memory_order_relaxed);
-  server_log().info("session {} ({}) joined as '{}'{}{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "",
-                    hello.resume_token.empty() ? std::string() : " (redirected: " + hello.resume_token + ")");
   next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
   arm_timer();
-  // Streaming starts with the client's first ClientState.
 }
 
-void Replicator::on_closed(const std::string& reason) {
+void Replicator::closed() {
   if (closed_) return;
   closed_ = true;
   if (timer_) timer_->cancel();
-  if (welcomed_) {
+  if (joined_) {
     // Everything held or asked for, so nothing stays registered.
     std::vector<Vec3i> all;
     for (const auto& [cp, s] : slots_)
       if (s.held() || s.request()) all.push_back(cp);
     world_.release(id_, std::move(all));
     world_.leave(id_);
-    counters_.clients.fetch_sub(1, std::memory_order_relaxed);
   }
-  server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : name_, reason);
   slots_.clear();
   horizon_wanted_.clear();
   session_.reset();  // breaks the cycle with the session's callbacks
 }
 
-void Replicator::on_client_state(const ClientStateMsg& state) {
+bool Replicator::move(const ClientStateMsg& state) {
   // The first position is where the client joins; after that it moves at
   // most max_speed (with some slack for jitter).
   const auto now = std::chrono::steady_clock::now();
@@ -219,17 +138,13 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
                         std::to_string(static_cast<long long>(d)) + " voxels at once; dropping");
       session_->close(CloseReason::kMovingTooFast, "moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
                       std::to_string(static_cast<long long>(options_.max_speed)) + " voxels/s)");
-      return;
+      return false;
     }
   }
   moved_ = true;
   moved_at_ = now;
   // 0 asks for the server's default; everything is capped.
   state_ = state;
-  {
-    std::lock_guard lock(info_m_);
-    info_.position = state.position;
-  }
   const std::int32_t view = state.view_distance == 0 ? options_.default_view_distance : state.view_distance;
   const std::int32_t full = state.full_res_radius == 0 ? options_.default_full_res_radius : state.full_res_radius;
   state_.view_distance = std::min(view, options_.max_view_distance);
@@ -252,12 +167,13 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
   if (new_plan || c != center_before) send_parked_near();
   maybe_redirect();
   pump();
+  return true;
 }
 
 void Replicator::maybe_redirect() {
   if (cluster_ == nullptr || redirected_ || options_.redirect_margin <= 0) return;
   const auto now = std::chrono::steady_clock::now();
-  if (now - info().joined < kRedirectSettle || now < no_redirect_until_) return;
+  if (now - joined_at_ < kRedirectSettle || now < no_redirect_until_) return;
   const auto map = cluster_->current();
   // A map older than a lease may name a writer that is gone.
   if (!map || now - map->read_at() > options_.lease) return;
@@ -318,7 +234,7 @@ void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
   if (slots_.mips_pending() == 0) mip_order_.clear();
 }
 
-void Replicator::on_edit(EditRequestMsg edit) {
+void Replicator::edit(EditRequestMsg edit) {
   if (!edit_rate_.take(1)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + name_ + "): edit flood; dropping");
@@ -365,7 +281,7 @@ void Replicator::on_edit(EditRequestMsg edit) {
   world_.edit(id_, std::move(edit));
 }
 
-void Replicator::on_read_box(const ReadBoxMsg& req) {
+void Replicator::read_box(const ReadBoxMsg& req) {
   // Only chunks the client holds (at any resolution): a read must never make
   // the server load chunks nobody is looking at.
   bool held = true;
@@ -378,8 +294,8 @@ void Replicator::on_read_box(const ReadBoxMsg& req) {
   world_.read_box(id_, req);
 }
 
-void Replicator::on_holdings(const HoldingsMsg& h) {
-  for (const HeldChunkMsg& c : h.chunks) {
+void Replicator::holdings(const HoldingsMsg& held) {
+  for (const HeldChunkMsg& c : held.chunks) {
     if (slots_.claims() >= options_.max_claims_per_client) break;
     if (slots_.holds(c.chunk_pos)) continue;  // already streamed this session
     slots_.change(c.chunk_pos, [&](ChunkSlot& s) { s.set_claim(c.holding); });
@@ -391,7 +307,7 @@ void Replicator::on_holdings(const HoldingsMsg& h) {
   }
 }
 
-void Replicator::on_hash_request(Vec3i cp) {
+void Replicator::hash_request(Vec3i cp) {
   // Only chunks this client holds: a hash request must not make the server
   // load or generate arbitrary chunks.
   const ChunkSlot* s = slots_.find(cp);
@@ -600,7 +516,7 @@ void Replicator::move_by(Vec3i d) {
 // --- streaming -----------------------------------------------------------------
 
 void Replicator::pump() {
-  if (!welcomed_ || !plan_valid_ || closed_) return;
+  if (!joined_ || !plan_valid_ || closed_) return;
   if (redirected_) return flush_stream();  // the client goes on elsewhere: nothing more to stream
   if (!gate_.open()) {
     // The server is behind: live traffic first; the timer pumps again.
@@ -974,7 +890,7 @@ void Replicator::flush_stream() {
   session_->send(std::move(f));
 }
 
-void Replicator::on_drained() {
+void Replicator::drained() {
   if (closed_) return;
   pump();
 }
@@ -993,7 +909,6 @@ void Replicator::arm_timer() {
   // Hashes are pushed only once there is a plan (a first ClientState): a
   // session that never sends one (terrane-admin) must not wake for them.
   if (options_.hash_push_ms > 0 && plan_valid_) at = std::min(at, next_hash_push_);
-  if (welcomed_) at = std::min(at, next_ping_);
   // In a shared world: whether the client stands in another server's
   // region is checked again each second (the map of writers changes), and
   // a redirected client that has not gone is served again after its grace.
@@ -1026,12 +941,6 @@ void Replicator::on_timer() {
     no_redirect_until_ = now + kRedirectBackoff;
   }
   if (plan_valid_) maybe_redirect();
-  if (welcomed_ && now >= next_ping_) {
-    next_ping_ = now + kPingPeriod;
-    ping_nonce_ = static_cast<std::uint64_t>(
-        std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count());
-    session_->send(build_ping(ping_nonce_), SendClass::kControl);
-  }
   flush_mips_when_due(now);
   if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
     next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);

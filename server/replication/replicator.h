@@ -30,9 +30,13 @@
 // level held changed. A chunk held Empty that a move brings within full
 // resolution is told to the world as held at full resolution (holds_full).
 //
+// The client's session (net/client_session.h) does the handshake, pings
+// and operators' commands; it hands the replicator the messages about the
+// world (ClientReplica) once the client is admitted.
+//
 // Threading: every member runs on the session's strand. The WorldClient
 // methods are called on the world strand and post here. Lifetime: shared;
-// kept by the world (until leave) and by the session's callbacks.
+// kept by the world (until leave) and by the client session.
 #pragma once
 
 #include <asio.hpp>
@@ -50,8 +54,8 @@
 #include "protocol/stream_batch.h"
 #include "server/base/rate_limit.h"
 #include "server/net/limits.h"
+#include "server/net/client_session.h"
 #include "server/net/session.h"
-#include "server/ops/access.h"
 #include "server/base/options.h"
 #include "server/replication/chunk_slot.h"
 #include "server/replication/stream_gate.h"
@@ -73,7 +77,7 @@ struct WelcomeTemplate {
   WorldBounds bounds;
 };
 
-class Replicator : public WorldClient, public std::enable_shared_from_this<Replicator> {
+class Replicator : public WorldClient, public ClientReplica, public std::enable_shared_from_this<Replicator> {
  public:
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;
@@ -83,21 +87,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // would otherwise have the view's shell released and streamed again at
   // each crossing. Chunks are asked for only in view.
   static constexpr std::int32_t kKeepMargin = kChunkSize;
-
-  // An admin command from this client (name), answered through reply.
-  using AdminFn = std::function<void(const std::string& who, AdminRequestMsg req,
-                                     std::function<void(AdminResultMsg)> reply)>;
-  // Who this client is, for operators (any thread).
-  struct Info {
-    std::string name;
-    Vec3f position;
-    bool admin = false;
-    bool welcomed = false;
-    std::chrono::steady_clock::time_point joined;
-    double ping_ms = -1;  // the last round trip measured; -1 before the first
-  };
-  // The server pings each client this often (its round trip, for operators).
-  static constexpr std::chrono::seconds kPingPeriod{5};
 
   // A redirected client that is still here this long after is served again
   // (streaming goes on) and not redirected for kRedirectBackoff.
@@ -115,16 +104,20 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // cluster: who writes which region, in a world shared by several
   // servers (null: one server, no redirects).
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-             const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-             const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster = nullptr);
+             const WelcomeTemplate& welcome, ReplicationFaults& faults, const StreamGate& gate,
+             const ClusterDirectory* cluster = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
-  // Session strand.
-  void on_message(InboundMessage msg);
-  void on_drained();
-  void on_closed(const std::string& reason);
-  Info info() const;
+  // ClientReplica (session strand).
+  void join(const std::string& name) override;
+  bool move(const ClientStateMsg& state) override;
+  void edit(EditRequestMsg edit) override;
+  void read_box(const ReadBoxMsg& req) override;
+  void holdings(const HoldingsMsg& held) override;
+  void hash_request(Vec3i chunk_pos) override;
+  void drained() override;
+  void closed() override;
 
   // WorldClient (world strand; each posts to the session strand).
   void granted(std::vector<VersionPtr> versions) override;
@@ -135,15 +128,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void close(CloseReason why, const std::string& text) override;
 
  private:
-  void on_hello(const HelloMsg& hello);
-  void on_client_state(const ClientStateMsg& state);
-  void on_edit(EditRequestMsg edit);
-  void on_read_box(const ReadBoxMsg& req);
-  void on_holdings(const HoldingsMsg& h);
-  void on_hash_request(Vec3i chunk_pos);
-  void on_admin(AdminRequestMsg req);
-  void on_pong(std::uint64_t nonce);
-
   void replan();
   // Asks the world for the horizon images of the new plan's regions.
   void plan_horizon();
@@ -208,8 +192,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   ServerCounters& counters_;
   const WelcomeTemplate& welcome_;
   ReplicationFaults& faults_;
-  const AccessControl& access_;
-  const AdminFn& admin_fn_;
   const StreamGate& gate_;
   const ClusterDirectory* const cluster_;
   // The gate was closed at the last pump: streaming waits for the timer
@@ -222,11 +204,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   std::chrono::steady_clock::time_point redirected_at_;
   std::chrono::steady_clock::time_point no_redirect_until_{};
   std::string redirected_to_;
-  bool admin_ = false;
-  mutable std::mutex info_m_;
-  Info info_;  // a copy of name, position and role for other threads
-  std::chrono::steady_clock::time_point next_ping_{};
-  std::uint64_t ping_nonce_ = 0;  // of the Ping awaiting its Pong
   // session_ is used on the session strand only and dropped when the
   // session closes (it and the session's callbacks keep each other alive);
   // the world strand reaches the session through weak_session_ and posts to
@@ -236,7 +213,8 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   asio::any_io_executor executor_;
   std::unique_ptr<asio::steady_timer> timer_;
 
-  bool welcomed_ = false;
+  bool joined_ = false;
+  std::chrono::steady_clock::time_point joined_at_;
   bool closed_ = false;
   std::string name_;
   ClientStateMsg state_;
