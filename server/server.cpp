@@ -224,8 +224,9 @@ Server::Server(const ServerOptions& options)
   options_.default_view_distance = std::min(options_.default_view_distance, options_.max_view_distance);
   options_.default_full_res_radius = std::min(options_.default_full_res_radius, options_.max_full_res_radius);
   options_.session.counters = &counters_;
-  faults_.drop_updates = options_.fault_drop_updates;
-  faults_.corrupt_updates = options_.fault_corrupt_updates;
+  if (options_.fault_drop_updates > 0 || options_.fault_corrupt_updates > 0)
+    faults_ = std::make_unique<BudgetedUpdateFaults>(options_.fault_drop_updates, options_.fault_corrupt_updates,
+                                                     counters_);
 }
 
 Server::~Server() {
@@ -386,8 +387,8 @@ void Server::do_accept() {
     }
     if (stopping_) return;
     const ClientId id = next_id_.fetch_add(1);
-    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_,
-                                            *stream_gate_, leases_ ? &cluster_ : nullptr);
+    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, *stream_gate_,
+                                            leases_ ? &cluster_ : nullptr, faults_.get());
     auto client = ClientSession::open(std::move(socket), id, options_.session, *session_context_, rep);
     const std::shared_ptr<Session> session = client->session();
     rep->attach(session);

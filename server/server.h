@@ -93,7 +93,9 @@ class Server {
 
   ServerOptions options_;
   ServerCounters counters_;
-  ReplicationFaults faults_;
+  // The test seam of UpdateBatches: set only by the --test-*-updates
+  // options (null when serving for real).
+  std::unique_ptr<UpdateFaults> faults_;
   // Who writes which region of a PostgreSQL world, published by the lease
   // keeper's thread (so it outlives it) and read by the replicators.
   ClusterDirectory cluster_;

@@ -36,16 +36,16 @@ HoldingForm form_sent(const ChunkVersion& v, int level) {
 }  // namespace
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-                       const WelcomeTemplate& welcome, ReplicationFaults& faults, const StreamGate& gate,
-                       const ClusterDirectory* cluster)
+                       const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster,
+                       UpdateFaults* faults)
     : id_(id),
       world_(world),
       options_(options),
       counters_(counters),
       welcome_(welcome),
-      faults_(faults),
       gate_(gate),
-      cluster_(cluster) {
+      cluster_(cluster),
+      faults_(faults) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;
 }
@@ -789,31 +789,10 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       sorted.push_back(pieces[i]);
       revs.push_back(revisions[i]);
     }
-    if (faults_.drop_updates.load(std::memory_order_relaxed) > 0 &&
-        faults_.drop_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
-      counters_.updates_dropped_by_fault.fetch_add(1, std::memory_order_relaxed);
-    } else {
+    UpdatePiece tampered;  // outlives sorted, which may point at it
+    if (faults_ == nullptr || faults_->tamper(sorted, tampered)) {
       std::vector<std::uint8_t> data;
-      UpdatePiece bad;  // outlives sorted, which may point at it
-      if (faults_.corrupt_updates.load(std::memory_order_relaxed) > 0 &&
-          faults_.corrupt_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
-        // One voxel of the first unit made wrong.
-        counters_.updates_corrupted_by_fault.fetch_add(1, std::memory_order_relaxed);
-        bad = *sorted.front();
-        std::array<Voxel, kUpdateUnitVoxels> unit{};
-        if (auto n = net_codec_decode_prefix(kUpdateUnitSize, bad.rest, unit); n) {
-          Voxel& v0 = unit[0];
-          v0 = v0.material == kAir ? solid(materials::kRock) : Voxel{};
-          std::vector<std::uint8_t> rest;
-          net_codec_encode(kUpdateUnitSize, unit, rest);
-          rest.insert(rest.end(), bad.rest.begin() + static_cast<std::ptrdiff_t>(*n), bad.rest.end());
-          bad.rest = std::move(rest);
-        }
-        sorted.front() = &bad;
-        net_codec_join_update_pieces(sorted, data);
-      } else {
-        net_codec_join_update_pieces(sorted, data);
-      }
+      net_codec_join_update_pieces(sorted, data);
       std::size_t units = 0;
       for (const UpdatePiece* p : sorted) units += p->count;
       session_->send(build_update_batch(tick, data, revs));

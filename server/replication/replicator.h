@@ -59,17 +59,12 @@
 #include "server/base/options.h"
 #include "server/replication/chunk_slot.h"
 #include "server/replication/stream_gate.h"
+#include "server/replication/update_faults.h"
 #include "server/replication/view_table.h"
 #include "server/storage/cluster_map.h"
 #include "server/world/world_owner.h"
 
 namespace terrane {
-
-// Test-only faults shared by every replicator of a server.
-struct ReplicationFaults {
-  std::atomic<int> drop_updates{0};
-  std::atomic<int> corrupt_updates{0};
-};
 
 // What every client is told at the handshake (the parts that do not vary).
 struct WelcomeTemplate {
@@ -102,10 +97,11 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   static constexpr std::chrono::seconds kRedirectStable{10};
 
   // cluster: who writes which region, in a world shared by several
-  // servers (null: one server, no redirects).
+  // servers (null: one server, no redirects). faults: the test seam of
+  // UpdateBatches (null but in tests).
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-             const WelcomeTemplate& welcome, ReplicationFaults& faults, const StreamGate& gate,
-             const ClusterDirectory* cluster = nullptr);
+             const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster = nullptr,
+             UpdateFaults* faults = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
@@ -191,9 +187,9 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   const ServerOptions& options_;
   ServerCounters& counters_;
   const WelcomeTemplate& welcome_;
-  ReplicationFaults& faults_;
   const StreamGate& gate_;
   const ClusterDirectory* const cluster_;
+  UpdateFaults* const faults_;
   // The gate was closed at the last pump: streaming waits for the timer
   // (since yielded_since_, or the last pump it let through).
   bool stream_yielded_ = false;
