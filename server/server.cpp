@@ -169,6 +169,11 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
     if (self->admin_) return self->admin_->handle(who, std::move(req), std::move(reply));
     reply(AdminResultMsg{req.request_id, false, "the server is stopping", "{}"});
   };
+  s->session_context_.emplace(ClientSession::Context{
+      s->welcome_.welcome, *s->access_, s->admin_fn_, s->counters_, [self = s.get()](std::uint64_t id) {
+        std::lock_guard lock(self->sessions_mutex_);
+        self->sessions_.erase(id);
+      }});
   if (!options.metrics_address.empty()) {
     auto hp = parse_host_port(options.metrics_address);
     if (!hp) return FileError{"--metrics: " + hp.error().message, {}};
@@ -228,8 +233,9 @@ Server::Server(const ServerOptions& options)
   options_.default_view_distance = std::min(options_.default_view_distance, options_.max_view_distance);
   options_.default_full_res_radius = std::min(options_.default_full_res_radius, options_.max_full_res_radius);
   options_.session.counters = &counters_;
-  faults_.drop_updates = options_.fault_drop_updates;
-  faults_.corrupt_updates = options_.fault_corrupt_updates;
+  if (options_.fault_drop_updates > 0 || options_.fault_corrupt_updates > 0)
+    faults_ = std::make_unique<BudgetedUpdateFaults>(options_.fault_drop_updates, options_.fault_corrupt_updates,
+                                                     counters_);
 }
 
 Server::~Server() {
@@ -392,25 +398,16 @@ void Server::do_accept() {
     }
     if (stopping_) return;
     const ClientId id = next_id_.fetch_add(1);
-    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, faults_, *access_,
-                                            admin_fn_, *stream_gate_, leases_ ? &cluster_ : nullptr);
-    auto session = std::make_shared<Session>(
-        std::move(socket), id, options_.session,
-        [rep](std::uint64_t, InboundMessage msg) { rep->on_message(std::move(msg)); },
-        [this, rep](std::uint64_t sid, const std::string& reason) {
-          {
-            std::lock_guard lock(sessions_mutex_);
-            sessions_.erase(sid);
-          }
-          rep->on_closed(reason);
-        },
-        [rep](std::uint64_t) { rep->on_drained(); });
+    auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, *stream_gate_,
+                                            leases_ ? &cluster_ : nullptr, faults_.get());
+    auto client = ClientSession::open(std::move(socket), id, options_.session, *session_context_, rep);
+    const std::shared_ptr<Session> session = client->session();
     rep->attach(session);
     counters_.sessions_accepted.fetch_add(1, std::memory_order_relaxed);
     bool full = false;
     {
       std::lock_guard lock(sessions_mutex_);
-      sessions_[id] = Peer{session, rep};
+      sessions_[id] = Peer{session, client};
       full = sessions_.size() > options_.max_clients;
     }
     session->start();
@@ -424,8 +421,8 @@ void Server::notify_all(const ServerNoticeMsg& notice) {
   std::lock_guard lock(sessions_mutex_);
   for (auto& [id, peer] : sessions_) {
     auto s = peer.session.lock();
-    auto r = peer.replicator.lock();
-    if (s && r && r->info().welcomed) s->send(frame, SendClass::kControl);
+    auto c = peer.client.lock();
+    if (s && c && c->info().welcomed) s->send(frame, SendClass::kControl);
   }
 }
 
@@ -475,9 +472,9 @@ AdminHooks Server::admin_hooks() {
     const auto now = std::chrono::steady_clock::now();
     for (auto& [id, peer] : sessions_) {
       auto s = peer.session.lock();
-      auto r = peer.replicator.lock();
-      if (!s || !r) continue;
-      const Replicator::Info info = r->info();
+      auto c = peer.client.lock();
+      if (!s || !c) continue;
+      const ClientSession::Info info = c->info();
       if (!info.welcomed) continue;
       PlayerInfo p;
       p.id = id;

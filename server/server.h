@@ -23,6 +23,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <unordered_map>
@@ -30,6 +31,7 @@
 
 #include "common/world/world.h"
 #include "common/world/world_lock.h"
+#include "server/net/client_session.h"
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"
@@ -92,7 +94,9 @@ class Server {
 
   ServerOptions options_;
   ServerCounters counters_;
-  ReplicationFaults faults_;
+  // The test seam of UpdateBatches: set only by the --test-*-updates
+  // options (null when serving for real).
+  std::unique_ptr<UpdateFaults> faults_;
   // Who writes which region of a PostgreSQL world, published by the lease
   // keeper's thread (so it outlives it) and read by the replicators.
   ClusterDirectory cluster_;
@@ -131,7 +135,7 @@ class Server {
   std::unique_ptr<AccessControl> access_;
   std::mutex admin_mutex_;  // admin_ is dropped in stop() while sessions may still ask
   std::unique_ptr<Admin> admin_;
-  Replicator::AdminFn admin_fn_;
+  ClientSession::AdminFn admin_fn_;
   asio::steady_timer shutdown_timer_;
   // What the last notice tells clients when the server stops: to reconnect
   // (a SIGTERM is usually a restart) unless an operator's shutdown said
@@ -140,6 +144,9 @@ class Server {
   std::thread shutdown_thread_;  // stops the server when no owner does (options.on_shutdown unset)
   const std::chrono::steady_clock::time_point started_at_ = std::chrono::steady_clock::now();
   WelcomeTemplate welcome_;
+  // What every client session shares (the Welcome, admission, admin
+  // commands, counters); set once access_ exists.
+  std::optional<ClientSession::Context> session_context_;
   std::shared_ptr<const ViewTable> default_view_;  // kept made (ViewTable::get's cache may drop unused tables)
   std::vector<std::thread> threads_;
   std::uint16_t port_ = 0;
@@ -153,7 +160,7 @@ class Server {
   std::mutex sessions_mutex_;
   struct Peer {
     std::weak_ptr<Session> session;
-    std::weak_ptr<Replicator> replicator;
+    std::weak_ptr<ClientSession> client;
   };
   std::unordered_map<ClientId, Peer> sessions_;
 

@@ -20,16 +20,10 @@
 
 #include "common/world/world_store.h"
 #include "server/base/counters.h"
+#include "server/net/admission.h"
 #include "server/net/limits.h"
 
 namespace terrane {
-
-struct Admission {
-  bool ok = false;
-  bool admin = false;
-  CloseReason why = CloseReason::kAuthFailed;
-  std::string reason;  // sent to a refused client
-};
 
 struct Ban {
   std::string target;   // a name, or an address
@@ -38,7 +32,7 @@ struct Ban {
   std::string reason;
 };
 
-class AccessControl {
+class AccessControl final : public Admitter {
  public:
   static FileResult<std::unique_ptr<AccessControl>> open(std::unique_ptr<WorldStore> store, std::string shared_token,
                                                           std::unordered_map<std::string, PlayerToken> players,
@@ -46,7 +40,7 @@ class AccessControl {
 
   // now: Unix seconds (bans that ended are ignored).
   Admission admit(const std::string& name, const std::string& token, const std::string& address,
-                  std::int64_t now) const;
+                  std::int64_t now) const override;
   bool open_to_all() const { return shared_token_.empty() && players_.empty(); }
 
   FileStatus ban(const Ban& b);

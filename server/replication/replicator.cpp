@@ -1,9 +1,9 @@
 #include "server/replication/replicator.h"
 
 #include <algorithm>
-#include <cmath>
+#include <cstdlib>
+#include <tuple>
 
-#include "common/codec/update_batch.h"
 #include "common/world/view.h"
 #include "server/base/log.h"
 
@@ -11,16 +11,9 @@ namespace terrane {
 
 namespace {
 
+// Granted chunks waiting for room in the window or budget are tried again
+// this soon.
 constexpr auto kPumpRetry = std::chrono::milliseconds(20);
-// While the stream gate is closed: a client's streaming is tried again
-// after this, plus up to kYieldJitterMs by client (a thousand clients do not
-// all wake at once, and each costs a timer wake, not 50 a second).
-constexpr auto kYieldRetry = std::chrono::milliseconds(100);
-constexpr std::uint64_t kYieldJitterMs = 50;
-// A client's streaming yields this long at most: then it goes on once
-// (one pump) and yields again, so under a load that never lets up a view
-// still fills, slowly.
-constexpr auto kYieldAtMost = std::chrono::seconds(2);
 
 StreamRecordKind record_kind(int level) {
   return level == 0 ? StreamRecordKind::kFull : record_kind_of(mip_form(level));
@@ -36,18 +29,19 @@ HoldingForm form_sent(const ChunkVersion& v, int level) {
 }  // namespace
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-                       const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-                       const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster)
+                       const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster,
+                       UpdateFaults* faults)
     : id_(id),
       world_(world),
       options_(options),
       counters_(counters),
       welcome_(welcome),
       faults_(faults),
-      access_(access),
-      admin_fn_(admin),
-      gate_(gate),
-      cluster_(cluster) {
+      yield_(gate, id, counters),
+      redirect_(cluster, options),
+      move_limit_(options.max_speed),
+      plan_(welcome.bounds),
+      hashes_(std::chrono::milliseconds(options.hash_push_ms)) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;
 }
@@ -95,154 +89,61 @@ void Replicator::close(CloseReason why, const std::string& text) {
 
 // --- messages ------------------------------------------------------------------
 
-void Replicator::on_message(InboundMessage msg) {
-  if (closed_) return;
-  if (auto* hello = std::get_if<HelloMsg>(&msg)) return on_hello(*hello);
-  if (!welcomed_) return;
-  if (auto* state = std::get_if<ClientStateMsg>(&msg)) return on_client_state(*state);
-  if (auto* edit = std::get_if<EditRequestMsg>(&msg)) return on_edit(std::move(*edit));
-  if (auto* read = std::get_if<ReadBoxMsg>(&msg)) return on_read_box(*read);
-  if (auto* h = std::get_if<HoldingsMsg>(&msg)) return on_holdings(*h);
-  if (auto* req = std::get_if<ChunkHashRequestMsg>(&msg)) return on_hash_request(req->chunk_pos);
-  if (auto* admin = std::get_if<AdminRequestMsg>(&msg)) return on_admin(std::move(*admin));
-  if (auto* pong = std::get_if<PongMsg>(&msg)) return on_pong(pong->nonce);
-}
-
-void Replicator::on_pong(std::uint64_t nonce) {
-  // Only the answer to the last Ping sent counts (its nonce is the steady
-  // clock in microseconds when it went out), once.
-  if (nonce == 0 || nonce != ping_nonce_) return;
-  ping_nonce_ = 0;
-  const auto now = std::chrono::duration_cast<std::chrono::microseconds>(
-                       std::chrono::steady_clock::now().time_since_epoch())
-                       .count();
-  std::lock_guard lock(info_m_);
-  info_.ping_ms = static_cast<double>(now - static_cast<std::int64_t>(nonce)) / 1000.0;
-}
-
-Replicator::Info Replicator::info() const {
-  std::lock_guard lock(info_m_);
-  return info_;
-}
-
-void Replicator::on_admin(AdminRequestMsg req) {
-  if (!admin_) {
-    const std::string why = "not an admin: this session's token does not have the admin role";
-    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": \"" + why + "\"}"};
-    session_->send(build_admin_result(r), SendClass::kControl);
-    return;
-  }
-  admin_fn_(name_, std::move(req), [weak = weak_session_](AdminResultMsg r) {
-    if (auto s = weak.lock()) s->send(build_admin_result(r), SendClass::kControl);
-  });
-}
-
-void Replicator::on_hello(const HelloMsg& hello) {
-  if (hello.protocol_version != kProtocolVersion) {
-    server_log().warn("session {}: protocol version {} rejected", id_, hello.protocol_version);
-    session_->close(CloseReason::kVersionMismatch,
-                    "protocol version " + std::to_string(hello.protocol_version) +
-                        " is not supported: this server speaks version " + std::to_string(kProtocolVersion) +
-                        " (protocol/PROTOCOL.md); update the client");
-    return;
-  }
-  const auto now_unix =
-      std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
-  const Admission admission = access_.admit(hello.client_name, hello.auth_token, session_->address(), now_unix);
-  if (!admission.ok) {
-    if (admission.why == CloseReason::kAuthFailed) {
-      counters_.auth_failures.fetch_add(1, std::memory_order_relaxed);
-      violations().warn("session " + std::to_string(id_) + " (" + session_->remote() +
-                        "): authentication failed for '" + hello.client_name + "'");
-    } else {
-      server_log().info("session {} ({}): '{}' refused: {}", id_, session_->remote(), hello.client_name,
-                        admission.reason);
-    }
-    session_->close(admission.why, admission.reason);
-    return;
-  }
-  admin_ = admission.admin;
+void Replicator::join(const std::string& name) {
   edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
-  name_ = hello.client_name;
-  welcomed_ = true;
+  name_ = name;
+  joined_ = true;
+  redirect_.joined(std::chrono::steady_clock::now());
   state_.position = welcome_.welcome.spawn;
-  {
-    std::lock_guard lock(info_m_);
-    info_ = Info{name_, state_.position, admin_, true, std::chrono::steady_clock::now()};
-  }
   world_.join(id_, name_, shared_from_this());
-  counters_.clients.fetch_add(1, std::memory_order_relaxed);
-  counters_.joins.fetch_add(1, std::memory_order_relaxed);
-  session_->send(build_welcome(welcome_.welcome));
-  // A Redirect's token says where the client comes from (it grants nothing).
-  if (!hello.resume_token.empty()) counters_.redirects_received.fetch_add(1, std::memory_order_relaxed);
-  server_log().info("session {} ({}) joined as '{}'{}{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "",
-                    hello.resume_token.empty() ? std::string() : " (redirected: " + hello.resume_token + ")");
-  next_hash_push_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.hash_push_ms);
+  hashes_.start(std::chrono::steady_clock::now());
   arm_timer();
-  // Streaming starts with the client's first ClientState.
 }
 
-void Replicator::on_closed(const std::string& reason) {
+void Replicator::closed() {
   if (closed_) return;
   closed_ = true;
   if (timer_) timer_->cancel();
-  if (welcomed_) {
+  if (joined_) {
     // Everything held or asked for, so nothing stays registered.
     std::vector<Vec3i> all;
     for (const auto& [cp, s] : slots_)
       if (s.held() || s.request()) all.push_back(cp);
     world_.release(id_, std::move(all));
     world_.leave(id_);
-    counters_.clients.fetch_sub(1, std::memory_order_relaxed);
   }
-  server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : name_, reason);
   slots_.clear();
-  horizon_wanted_.clear();
+  horizon_.clear();
   session_.reset();  // breaks the cycle with the session's callbacks
 }
 
-void Replicator::on_client_state(const ClientStateMsg& state) {
-  // The first position is where the client joins; after that it moves at
-  // most max_speed (with some slack for jitter).
-  const auto now = std::chrono::steady_clock::now();
-  if (moved_ && options_.max_speed > 0) {
-    const Vec3f a = state_.position, b = state.position;
-    const double d = std::sqrt(double{b.x - a.x} * (b.x - a.x) + double{b.y - a.y} * (b.y - a.y) +
-                               double{b.z - a.z} * (b.z - a.z));
-    const double allowed =
-        options_.max_speed * std::chrono::duration<double>(now - moved_at_).count() + kSpeedSlackVoxels;
-    if (d > allowed) {
-      counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
-      violations().warn("session " + std::to_string(id_) + " (" + name_ + "): moved " +
-                        std::to_string(static_cast<long long>(d)) + " voxels at once; dropping");
-      session_->close(CloseReason::kMovingTooFast, "moving too fast: " + std::to_string(static_cast<long long>(d)) + " voxels (limit " +
-                      std::to_string(static_cast<long long>(options_.max_speed)) + " voxels/s)");
-      return;
-    }
+bool Replicator::move(const ClientStateMsg& state) {
+  if (const auto d = move_limit_.too_far(state_.position, state.position, std::chrono::steady_clock::now())) {
+    counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
+    violations().warn("session " + std::to_string(id_) + " (" + name_ + "): moved " +
+                      std::to_string(static_cast<long long>(*d)) + " voxels at once; dropping");
+    session_->close(CloseReason::kMovingTooFast, "moving too fast: " + std::to_string(static_cast<long long>(*d)) +
+                                                     " voxels (limit " +
+                                                     std::to_string(static_cast<long long>(options_.max_speed)) +
+                                                     " voxels/s)");
+    return false;
   }
-  moved_ = true;
-  moved_at_ = now;
   // 0 asks for the server's default; everything is capped.
   state_ = state;
-  {
-    std::lock_guard lock(info_m_);
-    info_.position = state.position;
-  }
   const std::int32_t view = state.view_distance == 0 ? options_.default_view_distance : state.view_distance;
   const std::int32_t full = state.full_res_radius == 0 ? options_.default_full_res_radius : state.full_res_radius;
   state_.view_distance = std::min(view, options_.max_view_distance);
   state_.full_res_radius = std::min({full, options_.max_full_res_radius, state_.view_distance});
   world_.moved(id_, state_.position, state_.view_distance, state_.full_res_radius);
   const Vec3i c = view_chunk(state_.position);
-  const Vec3i center_before = center_;
-  const bool new_plan = !plan_valid_ || table_->view_distance() != state_.view_distance ||
-                        table_->full_res_radius() != state_.full_res_radius;
+  const Vec3i center_before = plan_.center();
+  const bool new_plan = !plan_.valid() || plan_.table().view_distance() != state_.view_distance ||
+                        plan_.table().full_res_radius() != state_.full_res_radius;
   if (new_plan) {
     replan();
-  } else if (c != center_) {
-    const Vec3i d = c - center_;
+  } else if (c != plan_.center()) {
+    const Vec3i d = c - plan_.center();
     if (std::abs(d.x) <= 1 && std::abs(d.y) <= 1 && std::abs(d.z) <= 1)
       move_by(d);
     else
@@ -252,56 +153,29 @@ void Replicator::on_client_state(const ClientStateMsg& state) {
   if (new_plan || c != center_before) send_parked_near();
   maybe_redirect();
   pump();
+  return true;
 }
 
 void Replicator::maybe_redirect() {
-  if (cluster_ == nullptr || redirected_ || options_.redirect_margin <= 0) return;
-  const auto now = std::chrono::steady_clock::now();
-  if (now - info().joined < kRedirectSettle || now < no_redirect_until_) return;
-  const auto map = cluster_->current();
-  // A map older than a lease may name a writer that is gone.
-  if (!map || now - map->read_at() > options_.lease) return;
-  const Vec3f p = state_.position;
-  const Vec3i region = coarse_region_of(view_chunk(p));
-  const ServerAddress* to = map->writer_of(region);
-  if (to == nullptr || to->id == options_.server_id) return;
-  // Well inside that server's territory: every region within the margin
-  // of the client (the cube of that half-width around it; at most 2 x 2 x 2
-  // regions, the margin being at most 128) written by it, each lease seen
-  // for a while. A client by a border with another server's region, or a
-  // free one, stays, so it does not go back and forth; one by a border
-  // between two of that server's regions goes.
-  constexpr double kRegionVoxels = kCoarseRegionChunks * kChunkSize;
-  const double m = options_.redirect_margin;
-  const auto region_at = [&](double v) { return static_cast<int>(std::floor(v / kRegionVoxels)); };
-  for (int y = region_at(p.y - m); y <= region_at(p.y + m); ++y)
-    for (int z = region_at(p.z - m); z <= region_at(p.z + m); ++z)
-      for (int x = region_at(p.x - m); x <= region_at(p.x + m); ++x) {
-        const Vec3i r{x, y, z};
-        const ServerAddress* w = map->writer_of(r);
-        if (w == nullptr || w->id != to->id) return;
-        if (now - map->written_since(r).value_or(now) < kRedirectStable) return;
-      }
-  redirected_ = true;
-  redirected_at_ = now;
-  redirected_to_ = "server " + std::to_string(to->id) + " at " + to->text();
+  const auto move = redirect_.check(state_.position, std::chrono::steady_clock::now());
+  if (!move) return;
   counters_.redirects_sent.fetch_add(1, std::memory_order_relaxed);
-  server_log().info("session {} ({}): redirected to {}, which writes region ({},{},{})", id_, name_, redirected_to_,
-                    region.x, region.y, region.z);
+  server_log().info("session {} ({}): redirected to {}, which writes region ({},{},{})", id_, name_,
+                    redirect_.target(), move->region.x, move->region.y, move->region.z);
   flush_stream();
   // In order with the data: everything sent before it is the client's to keep.
-  session_->send(build_redirect(RedirectMsg{to->id, to->host, to->port,
+  session_->send(build_redirect(RedirectMsg{move->to.id, move->to.host, move->to.port,
                                             std::to_string(options_.server_id) + "/" + std::to_string(id_)}));
 }
 
 void Replicator::send_parked_near() {
   if (slots_.mips_pending() == 0) return;
   std::vector<Vec3i> near;
-  for (const Vec3i cp : mip_order_) {
+  for (const Vec3i cp : mips_.order()) {
     const ChunkSlot* s = slots_.find(cp);
     if (s == nullptr || !s->mip_pending()) continue;
     const auto h = s->held();
-    if (h && h->form == HoldingForm::kEmpty && desired(cp) == 0) near.push_back(cp);
+    if (h && h->form == HoldingForm::kEmpty && plan_.desired(cp) == 0) near.push_back(cp);
   }
   for (const Vec3i cp : near) {
     // A copy of the pointer: send_whole drops the change it comes from.
@@ -315,10 +189,10 @@ void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
   send_chunk(*v, 0);
   hold(cp, Holding{form_sent(*v, 0), v->revision()}, v);
   slots_.change_if(cp, [](ChunkSlot& s) { s.take_mip(); });  // older than v: nothing left to refresh
-  if (slots_.mips_pending() == 0) mip_order_.clear();
+  if (slots_.mips_pending() == 0) mips_.forget();
 }
 
-void Replicator::on_edit(EditRequestMsg edit) {
+void Replicator::edit(EditRequestMsg edit) {
   if (!edit_rate_.take(1)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + name_ + "): edit flood; dropping");
@@ -358,14 +232,14 @@ void Replicator::on_edit(EditRequestMsg edit) {
     if (s != nullptr && s->held()) {
       full = s->held()->full_resolution();
     } else {
-      full = s != nullptr && s->claim() && s->claim()->full_resolution() && plan_valid_ && desired(cp) == 0;
+      full = s != nullptr && s->claim() && s->claim()->full_resolution() && plan_.valid() && plan_.desired(cp) == 0;
     }
   });
   if (!full) return world_.refuse(id_, std::move(edit), RejectReason::kOutsideFullRes, "edit outside the full-resolution region");
   world_.edit(id_, std::move(edit));
 }
 
-void Replicator::on_read_box(const ReadBoxMsg& req) {
+void Replicator::read_box(const ReadBoxMsg& req) {
   // Only chunks the client holds (at any resolution): a read must never make
   // the server load chunks nobody is looking at.
   bool held = true;
@@ -378,20 +252,20 @@ void Replicator::on_read_box(const ReadBoxMsg& req) {
   world_.read_box(id_, req);
 }
 
-void Replicator::on_holdings(const HoldingsMsg& h) {
-  for (const HeldChunkMsg& c : h.chunks) {
+void Replicator::holdings(const HoldingsMsg& held) {
+  for (const HeldChunkMsg& c : held.chunks) {
     if (slots_.claims() >= options_.max_claims_per_client) break;
     if (slots_.holds(c.chunk_pos)) continue;  // already streamed this session
     slots_.change(c.chunk_pos, [&](ChunkSlot& s) { s.set_claim(c.holding); });
   }
   // Claims outside the view are released at the next plan.
-  if (plan_valid_) {
+  if (plan_.valid()) {
     replan();
     pump();
   }
 }
 
-void Replicator::on_hash_request(Vec3i cp) {
+void Replicator::hash_request(Vec3i cp) {
   // Only chunks this client holds: a hash request must not make the server
   // load or generate arbitrary chunks.
   const ChunkSlot* s = slots_.find(cp);
@@ -426,39 +300,11 @@ void Replicator::answer_hash(Vec3i cp) {
 
 // --- the plan ------------------------------------------------------------------
 
-bool Replicator::in_view(Vec3i cp) const {
-  // A chunk beyond the wire's range (+-2^19 chunks) is never in view: a
-  // client near x = +-2^24 would take its record for a protocol error.
-  return table_->contains(cp - center_) && welcome_.bounds.touches_chunk(cp) && wire_chunk_ok(cp);
-}
-
-int Replicator::desired(Vec3i cp) const {
-  const int level = table_->level(cp - center_);
-  return level < 0 ? kMipLevels : level;  // kept beyond the view: wants nothing finer
-}
-
-void Replicator::push_refine(Vec3i cp) {
-  refine_.emplace_back(offset_center_dist2(cp - center_), cp);
-  if (!refine_stale_) std::push_heap(refine_.begin(), refine_.end(), RefineOrder{});
-}
-
 bool Replicator::needs_refining(Vec3i cp) const {
   const ChunkSlot* s = slots_.find(cp);
   const auto h = s != nullptr ? s->held() : std::nullopt;
-  // (Beyond the view desired() is kMipLevels: nothing is finer.)
-  return h && h->form != HoldingForm::kEmpty && desired(cp) < h->level();
-}
-
-void Replicator::rebuild_refine() {
-  std::erase_if(refine_, [&](const RefineEntry& e) { return !needs_refining(e.second); });
-  for (RefineEntry& e : refine_) e.first = offset_center_dist2(e.second - center_);
-  // Nearest first, ties by position; repeats (pushed again by later moves) once.
-  std::sort(refine_.begin(), refine_.end(), [](const RefineEntry& a, const RefineEntry& b) {
-    return std::tie(a.first, a.second.y, a.second.z, a.second.x) < std::tie(b.first, b.second.y, b.second.z, b.second.x);
-  });
-  refine_.erase(std::unique(refine_.begin(), refine_.end()), refine_.end());
-  std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
-  refine_stale_ = false;
+  // (Beyond the view plan_.desired() is kMipLevels: nothing is finer.)
+  return h && h->form != HoldingForm::kEmpty && plan_.desired(cp) < h->level();
 }
 
 void Replicator::release_outside_view() {
@@ -466,7 +312,7 @@ void Replicator::release_outside_view() {
   // leave: leave() leaves it be.)
   std::vector<Vec3i> leaving;
   for (const auto& [cp, s] : slots_)
-    if (!in_view(cp)) leaving.push_back(cp);
+    if (!plan_.in_view(cp)) leaving.push_back(cp);
   std::vector<Vec3i> released;
   for (const Vec3i cp : leaving) leave(cp, released);
   if (!released.empty()) world_.release(id_, std::move(released));
@@ -482,34 +328,25 @@ void Replicator::leave(Vec3i cp, std::vector<Vec3i>& released) {
 }
 
 void Replicator::replan() {
-  table_ = ViewTable::get(state_.view_distance, state_.full_res_radius);
-  keep_table_ = ViewTable::get(state_.view_distance + kKeepMargin, state_.full_res_radius);
-  center_ = view_chunk(state_.position);
-  plan_valid_ = true;
-  coarse_center_ = center_;
-  coarse_pos_ = 0;
-  entering_.clear();
+  plan_.reset(state_.view_distance, state_.full_res_radius, kKeepMargin, view_chunk(state_.position));
   release_outside_view();
-  refine_.clear();
+  std::vector<Vec3i> refine;
   std::vector<Vec3i> now_full;  // held Empty, within full resolution
   for (const auto& [cp, s] : slots_) {
     const auto h = s.held();
     if (!h) continue;
-    if (h->form != HoldingForm::kEmpty && desired(cp) < h->level())
-      refine_.emplace_back(offset_center_dist2(cp - center_), cp);
-    if (h->form == HoldingForm::kEmpty && desired(cp) == 0) now_full.push_back(cp);
+    if (h->form != HoldingForm::kEmpty && plan_.desired(cp) < h->level())
+      refine.push_back(cp);
+    if (h->form == HoldingForm::kEmpty && plan_.desired(cp) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
-  std::make_heap(refine_.begin(), refine_.end(), RefineOrder{});
-  refine_stale_ = false;
+  plan_.refill_refine(refine);
   plan_horizon();
   flush_stream();
 }
 
 void Replicator::plan_horizon() {
-  horizon_wanted_.clear();
-  horizon_order_.clear();
-  horizon_early_.clear();
+  horizon_.clear();
   if (!options_.horizon_images) return;
   // Each region with a chunk in view that the client has nothing of, nearest
   // first (the table's order: a region's first chunk met is about its
@@ -517,17 +354,14 @@ void Replicator::plan_horizon() {
   // view distance, else 1 voxel per chunk.
   const std::int64_t near = state_.view_distance / 4;
   std::vector<HorizonWant> wants;
-  for (const Vec3i o : table_->offsets()) {
-    const Vec3i cp = center_ + o;
-    if (!in_view(cp) || slots_.known(cp)) continue;
+  for (const Vec3i o : plan_.table().offsets()) {
+    const Vec3i cp = plan_.center() + o;
+    if (!plan_.in_view(cp) || slots_.known(cp)) continue;
     const Vec3i region = coarse_region_of(cp);
     // A Horizon record's region lies within the wire's range whole.
     if (!wire_chunk_ok(region * kHorizonRegionChunks + Vec3i{7, 7, 7})) continue;
-    if (horizon_wanted_.count(region) != 0) continue;
     const int level = offset_dist2(o) <= near * near ? kHorizonNearLevel : kHorizonFarLevel;
-    horizon_wanted_.emplace(region, static_cast<std::uint8_t>(level));
-    horizon_order_.push_back(region);
-    wants.push_back(HorizonWant{region, level});
+    if (horizon_.want(region, level)) wants.push_back(HorizonWant{region, level});
   }
   if (!wants.empty()) world_.want_horizon(id_, std::move(wants));
 }
@@ -537,21 +371,8 @@ void Replicator::on_horizons(std::vector<HorizonPtr> images) {
   // The world hands images over as they are made (in parallel, some kept
   // from before): they wait here for their turn, so the client gets them
   // nearest region first.
-  for (HorizonPtr& image : images) {
-    auto w = horizon_wanted_.find(image->region);
-    if (w == horizon_wanted_.end() || w->second != image->level) continue;  // asked for by an earlier plan
-    horizon_early_.insert_or_assign(image->region, std::move(image));
-  }
-  while (!horizon_order_.empty()) {
-    auto ready = horizon_early_.find(horizon_order_.front());
-    if (ready == horizon_early_.end()) break;
-    const HorizonPtr image = std::move(ready->second);
-    horizon_early_.erase(ready);
-    horizon_order_.pop_front();
-    horizon_wanted_.erase(image->region);
-    send_horizon(*image);
-  }
-  if (horizon_wanted_.empty()) flush_stream();
+  horizon_.arrive(std::move(images), [this](const HorizonImage& image) { send_horizon(image); });
+  if (!horizon_.waiting()) flush_stream();
   pump();
 }
 
@@ -562,7 +383,7 @@ void Replicator::send_horizon(const HorizonImage& image) {
   HorizonMask mask{};
   std::size_t covered = 0;
   for_each_region_chunk(image.region, [&](Vec3i cp) {
-    if (!in_view(cp) || slots_.known(cp)) return;
+    if (!plan_.in_view(cp) || slots_.known(cp)) return;
     horizon_mask_set(mask, coarse_index(cp));
     slots_.change(cp, [&](ChunkSlot& s) { s.see_image(level); });
     ++covered;
@@ -574,24 +395,23 @@ void Replicator::send_horizon(const HorizonImage& image) {
 }
 
 void Replicator::move_by(Vec3i d) {
-  const Vec3i old = center_;
-  center_ = center_ + d;
+  const Vec3i old = plan_.center();
+  plan_.shift(d);
   std::vector<Vec3i> released;
   // Released only beyond the view and its margin: a client stepping back
   // and forth across a chunk's edge does not release and ask again the
   // shell of the view each time.
-  for (const Vec3i o : keep_table_->leaving(d)) leave(old + o, released);
+  for (const Vec3i o : plan_.keep_table().leaving(d)) leave(old + o, released);
   if (!released.empty()) world_.release(id_, std::move(released));
-  for (const Vec3i o : table_->entering(d)) entering_.push_back(center_ + o);
-  refine_stale_ = true;  // keys are distances to the old centre: recomputed when next read
   std::vector<Vec3i> now_full;  // held Empty, now within full resolution
-  for (const Vec3i o : table_->finer(d)) {
-    const Vec3i cp = center_ + o;
+  const ViewTable& table = plan_.table();
+  for (const Vec3i o : table.finer(d)) {
+    const Vec3i cp = plan_.center() + o;
     const ChunkSlot* s = slots_.find(cp);
     const auto h = s != nullptr ? s->held() : std::nullopt;
     if (!h) continue;
-    if (h->form != HoldingForm::kEmpty && table_->level(o) < h->level()) push_refine(cp);
-    if (h->form == HoldingForm::kEmpty && table_->level(o) == 0) now_full.push_back(cp);
+    if (h->form != HoldingForm::kEmpty && table.level(o) < h->level()) plan_.push_refine(cp);
+    if (h->form == HoldingForm::kEmpty && table.level(o) == 0) now_full.push_back(cp);
   }
   if (!now_full.empty()) world_.holds_full(id_, std::move(now_full));
   flush_stream();
@@ -600,24 +420,13 @@ void Replicator::move_by(Vec3i d) {
 // --- streaming -----------------------------------------------------------------
 
 void Replicator::pump() {
-  if (!welcomed_ || !plan_valid_ || closed_) return;
-  if (redirected_) return flush_stream();  // the client goes on elsewhere: nothing more to stream
-  if (!gate_.open()) {
+  if (!joined_ || !plan_.valid() || closed_) return;
+  if (redirect_.redirected()) return flush_stream();  // the client goes on elsewhere: nothing more to stream
+  if (yield_.streaming_waits(std::chrono::steady_clock::now())) {
     // The server is behind: live traffic first; the timer pumps again.
-    const auto now = std::chrono::steady_clock::now();
-    if (!stream_yielded_) {
-      counters_.stream_yields.fetch_add(1, std::memory_order_relaxed);
-      stream_yielded_ = true;
-      yielded_since_ = now;
-    }
-    if (gate_.held() || now - yielded_since_ < kYieldAtMost) {
-      flush_stream();
-      arm_timer();
-      return;
-    }
-    yielded_since_ = now;  // waited long enough: one pump, then yield again
-  } else {
-    stream_yielded_ = false;
+    flush_stream();
+    arm_timer();
+    return;
   }
   send_ready();
   request_more();
@@ -626,14 +435,14 @@ void Replicator::pump() {
 
 void Replicator::request_more() {
   // The horizon images first: chunks' own records wait until all are sent.
-  if (!horizon_wanted_.empty()) return;
+  if (horizon_.waiting()) return;
   if (slots_.requests() + ready_.size() >= kMaxRequests) return;
   std::vector<ChunkWant> wants;
   auto want = [&](Vec3i cp, ChunkIntent intent, int level, bool exact = false) {
     slots_.change(cp, [&](ChunkSlot& s) { s.ask(ChunkRequest{intent, level}); });
     // Held at full resolution: sent so, or (all Air) sent Empty where the
     // plan wants full resolution.
-    wants.push_back(ChunkWant{cp, level == 0 || desired(cp) == 0, level, exact});
+    wants.push_back(ChunkWant{cp, level == 0 || plan_.desired(cp) == 0, level, exact});
   };
   auto room = [&] { return slots_.requests() + ready_.size() < kMaxRequests; };
   // Pass 1: the whole view at its coarsest, nearest first. With horizon
@@ -641,7 +450,7 @@ void Replicator::request_more() {
   // resolution is sent at full resolution at once instead (its 4^3 mip
   // would be replaced moments later).
   auto coarse = [&](Vec3i cp) {
-    if (!in_view(cp)) return;
+    if (!plan_.in_view(cp)) return;
     const ChunkSlot* s = slots_.find(cp);
     if (s != nullptr && (s->held() || s->request())) return;
     if (s != nullptr && s->claim()) {
@@ -652,24 +461,23 @@ void Replicator::request_more() {
       // a claimed mip's revision says enough.
       return want(cp, ChunkIntent::kClaim, empty ? kMipLevels - 1 : c.level(), empty && options_.horizon_estimates);
     }
-    want(cp, ChunkIntent::kCoarse, options_.horizon_images && desired(cp) == 0 ? 0 : kMipLevels - 1);
+    want(cp, ChunkIntent::kCoarse, options_.horizon_images && plan_.desired(cp) == 0 ? 0 : kMipLevels - 1);
   };
-  const auto& offsets = table_->offsets();
-  while (room() && coarse_pos_ < offsets.size()) coarse(coarse_center_ + offsets[coarse_pos_++]);
-  while (room() && !entering_.empty()) {
-    coarse(entering_.front());
-    entering_.pop_front();
+  while (room()) {
+    const auto cp = plan_.next_coarse();
+    if (!cp) break;
+    coarse(*cp);
   }
   // Pass 2: refine nearest first, once the coarse view is complete (asked
   // for and sent: a grant waiting for a load would otherwise be overtaken).
-  const bool coarse_done = coarse_pos_ >= offsets.size() && entering_.empty() && slots_.coarse_pass_requests() == 0;
-  if (coarse_done && room() && refine_stale_) rebuild_refine();
-  while (coarse_done && room() && !refine_.empty()) {
-    std::pop_heap(refine_.begin(), refine_.end(), RefineOrder{});
-    const Vec3i cp = refine_.back().second;
-    refine_.pop_back();
+  const bool coarse_done = plan_.coarse_walked() && slots_.coarse_pass_requests() == 0;
+  const auto needs = [this](Vec3i cp) { return needs_refining(cp); };
+  while (coarse_done && room()) {
+    const auto next = plan_.pop_refine(needs);
+    if (!next) break;
+    const Vec3i cp = *next;
     if (const ChunkSlot* s = slots_.find(cp); (s != nullptr && s->request()) || !needs_refining(cp)) continue;
-    want(cp, ChunkIntent::kRefine, desired(cp));
+    want(cp, ChunkIntent::kRefine, plan_.desired(cp));
   }
   if (!wants.empty()) {
     counters_.chunks_asked.fetch_add(wants.size(), std::memory_order_relaxed);
@@ -684,7 +492,7 @@ void Replicator::on_granted(std::vector<VersionPtr> versions) {
     const Vec3i cp = v->pos();
     const ChunkSlot* s = slots_.find(cp);
     const std::optional<ChunkRequest> rq = s != nullptr ? s->request() : std::nullopt;
-    if (!rq || rq->cancelled || !in_view(cp)) {
+    if (!rq || rq->cancelled || !plan_.in_view(cp)) {
       // Not wanted now. The world registered this client as a holder when
       // it granted the chunk, after any release the client had sent for
       // it: it is released again.
@@ -694,7 +502,7 @@ void Replicator::on_granted(std::vector<VersionPtr> versions) {
       // It left the view and came back while this grant was on its way
       // (the coarse pass passed it over, as asked for): asked again, after
       // the release.
-      if (rq && rq->cancelled && in_view(cp)) entering_.push_back(cp);
+      if (rq && rq->cancelled && plan_.in_view(cp)) plan_.enter_again(cp);
       continue;
     }
     bool kept = false;
@@ -766,8 +574,8 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
 void Replicator::hold(Vec3i cp, Holding h, const VersionPtr& v) {
   bool new_full = false;
   slots_.change(cp, [&](ChunkSlot& s) { new_full = s.hold(h, v); });
-  if (new_full) hash_order_.push_back(cp);
-  if (h.form != HoldingForm::kFull && h.form != HoldingForm::kEmpty && desired(cp) < h.level()) push_refine(cp);
+  if (new_full) hashes_.add(cp);
+  if (h.form != HoldingForm::kFull && h.form != HoldingForm::kEmpty && plan_.desired(cp) < h.level()) plan_.push_refine(cp);
   // Hash requests waiting for this chunk.
   if (!hash_requests_.empty()) {
     auto it = std::find(hash_requests_.begin(), hash_requests_.end(), cp);
@@ -780,9 +588,7 @@ void Replicator::hold(Vec3i cp, Holding h, const VersionPtr& v) {
 
 void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> changed, bool mips_due) {
   if (closed_) return;
-  std::vector<const UpdatePiece*> pieces;
-  std::vector<ChunkRevisionMsg> revisions;
-  std::vector<VersionPtr> keep;  // the pieces' owners, alive until the frame is built
+  TickUpdate update;  // the units of chunks held at full resolution
   const bool mips_were_dirty = slots_.mips_pending() != 0;
   if (mips_due) {
     // Gathered over several ticks: a chunk may come more than once; its
@@ -810,7 +616,7 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     // Gathered news may be older than a grant since (refresh_mip checks
     // the levels it refreshes).
     if (mips_due && v->revision() <= h.revision && h.full_resolution()) continue;
-    const bool near = desired(cp) == 0;
+    const bool near = plan_.desired(cp) == 0;
     // A tick's units change the version before it (revision - 1): they are
     // sent only to a client holding exactly that. Anything else is sent
     // whole: a chunk loaded again at another revision (a damaged row
@@ -829,10 +635,8 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       bool new_full = false;
       const Holding now_full{HoldingForm::kFull, v->revision()};
       slots_.change_if(cp, [&](ChunkSlot& slot) { new_full = slot.hold(now_full, v); });
-      if (new_full) hash_order_.push_back(cp);
-      pieces.push_back(&v->update_piece());
-      revisions.push_back(ChunkRevisionMsg{cp, v->revision()});
-      keep.push_back(std::move(v));
+      if (new_full) hashes_.add(cp);
+      update.add(std::move(v));
       continue;
     }
     // A chunk held coarser than full resolution: refreshed with the next
@@ -841,69 +645,26 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
       refresh_mip(cp, v);
     } else {
       if (slots_.mips_pending() == 0) {
-        mip_due_ = next_mip_flush_ =
-            std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms);
-        mip_order_.clear();  // nothing left in it is pending
+        mips_.first_change(std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms));
       }
       bool first = false;
       slots_.change_if(cp, [&](ChunkSlot& slot) { first = slot.park_mip(std::move(v)); });
-      if (first) mip_order_.push_back(cp);
+      if (first) mips_.add(cp);
     }
   }
   if (mips_due && slots_.mips_pending() != 0) {
     // Due now (the world waited for them): the oldest change's time kept.
     const auto now = std::chrono::steady_clock::now();
-    if (!mips_were_dirty) mip_due_ = now;
-    next_mip_flush_ = std::min(next_mip_flush_, now);
+    mips_.due_now(now, !mips_were_dirty);
     flush_mips_when_due(now);
   }
   // Records first, so an update never overtakes the data it applies to.
   flush_stream();
-  if (!pieces.empty()) {
-    // Chunk order, so the joined batch is what one encoder would write.
-    std::vector<std::size_t> order(pieces.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-      const Vec3i u = pieces[a]->chunk_pos, w = pieces[b]->chunk_pos;
-      return std::tie(u.y, u.z, u.x) < std::tie(w.y, w.z, w.x);
-    });
-    std::vector<const UpdatePiece*> sorted;
-    std::vector<ChunkRevisionMsg> revs;
-    for (const std::size_t i : order) {
-      sorted.push_back(pieces[i]);
-      revs.push_back(revisions[i]);
-    }
-    if (faults_.drop_updates.load(std::memory_order_relaxed) > 0 &&
-        faults_.drop_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
-      counters_.updates_dropped_by_fault.fetch_add(1, std::memory_order_relaxed);
-    } else {
-      std::vector<std::uint8_t> data;
-      UpdatePiece bad;  // outlives sorted, which may point at it
-      if (faults_.corrupt_updates.load(std::memory_order_relaxed) > 0 &&
-          faults_.corrupt_updates.fetch_sub(1, std::memory_order_relaxed) > 0) {
-        // One voxel of the first unit made wrong.
-        counters_.updates_corrupted_by_fault.fetch_add(1, std::memory_order_relaxed);
-        bad = *sorted.front();
-        std::array<Voxel, kUpdateUnitVoxels> unit{};
-        if (auto n = net_codec_decode_prefix(kUpdateUnitSize, bad.rest, unit); n) {
-          Voxel& v0 = unit[0];
-          v0 = v0.material == kAir ? solid(materials::kRock) : Voxel{};
-          std::vector<std::uint8_t> rest;
-          net_codec_encode(kUpdateUnitSize, unit, rest);
-          rest.insert(rest.end(), bad.rest.begin() + static_cast<std::ptrdiff_t>(*n), bad.rest.end());
-          bad.rest = std::move(rest);
-        }
-        sorted.front() = &bad;
-        net_codec_join_update_pieces(sorted, data);
-      } else {
-        net_codec_join_update_pieces(sorted, data);
-      }
-      std::size_t units = 0;
-      for (const UpdatePiece* p : sorted) units += p->count;
-      session_->send(build_update_batch(tick, data, revs));
-      counters_.update_batches_sent.fetch_add(1, std::memory_order_relaxed);
-      counters_.update_units_sent.fetch_add(units, std::memory_order_relaxed);
-    }
+  std::size_t units = 0;
+  if (auto frame = update.empty() ? std::nullopt : update.finish(tick, faults_, units)) {
+    session_->send(std::move(*frame));
+    counters_.update_batches_sent.fetch_add(1, std::memory_order_relaxed);
+    counters_.update_units_sent.fetch_add(units, std::memory_order_relaxed);
   }
   counters_.tick_frames.fetch_add(1, std::memory_order_relaxed);
   pump();
@@ -935,13 +696,13 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
   stream(record_kind(level), cp, v->revision(), v->encoded(level));
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
   slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{mip_form(level), v->revision()}, v); });
-  if (desired(cp) < level) push_refine(cp);
+  if (plan_.desired(cp) < level) plan_.push_refine(cp);
 }
 
 void Replicator::flush_mips() {
   // In the order of their first change; a chunk listed twice (its change
   // sent whole, then parked again) once.
-  for (const Vec3i cp : std::exchange(mip_order_, {})) {
+  for (const Vec3i cp : mips_.take()) {
     VersionPtr v;
     slots_.change_if(cp, [&](ChunkSlot& s) { v = s.take_mip(); });
     if (v) refresh_mip(cp, v);
@@ -950,15 +711,13 @@ void Replicator::flush_mips() {
 }
 
 void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) {
-  if (slots_.mips_pending() == 0 || now < next_mip_flush_) return;
+  if (slots_.mips_pending() == 0 || now < mips_.next_flush()) return;
   // Refreshes of mips are streaming too: while the gate is closed they
   // wait (and coalesce), kYieldAtMost past their time at most.
-  if (!gate_.open() && (gate_.held() || now - mip_due_ < kYieldAtMost)) {
-    next_mip_flush_ = now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs);
-    counters_.mip_refresh_yields.fetch_add(1, std::memory_order_relaxed);
-  } else {
+  if (yield_.mips_wait(now, mips_.due()))
+    mips_.put_off(yield_.retry_at(now));
+  else
     flush_mips();
-  }
 }
 
 void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload) {
@@ -974,7 +733,7 @@ void Replicator::flush_stream() {
   session_->send(std::move(f));
 }
 
-void Replicator::on_drained() {
+void Replicator::drained() {
   if (closed_) return;
   pump();
 }
@@ -988,19 +747,15 @@ void Replicator::arm_timer() {
   const auto now = std::chrono::steady_clock::now();
   auto at = std::chrono::steady_clock::time_point::max();
   if (!ready_.empty()) at = now + kPumpRetry;
-  if (stream_yielded_) at = std::min(at, now + kYieldRetry + std::chrono::milliseconds(id_ % kYieldJitterMs));
-  if (slots_.mips_pending() != 0) at = std::min(at, next_mip_flush_);
+  if (yield_.yielding()) at = std::min(at, yield_.retry_at(now));
+  if (slots_.mips_pending() != 0) at = std::min(at, mips_.next_flush());
   // Hashes are pushed only once there is a plan (a first ClientState): a
   // session that never sends one (terrane-admin) must not wake for them.
-  if (options_.hash_push_ms > 0 && plan_valid_) at = std::min(at, next_hash_push_);
-  if (welcomed_) at = std::min(at, next_ping_);
+  if (plan_.valid()) at = std::min(at, hashes_.next_push());
   // In a shared world: whether the client stands in another server's
   // region is checked again each second (the map of writers changes), and
   // a redirected client that has not gone is served again after its grace.
-  if (redirected_)
-    at = std::min(at, redirected_at_ + kRedirectGrace);
-  else if (cluster_ != nullptr && options_.redirect_margin > 0 && plan_valid_)
-    at = std::min(at, now + kRedirectCheck);
+  at = std::min(at, redirect_.next_wake(now, plan_.valid()));
   if (at == std::chrono::steady_clock::time_point::max()) return;
   if (timer_armed_) {
     if (timer_->expiry() <= at) return;
@@ -1018,40 +773,21 @@ void Replicator::arm_timer() {
 
 void Replicator::on_timer() {
   const auto now = std::chrono::steady_clock::now();
-  if (redirected_ && now - redirected_at_ >= kRedirectGrace) {
-    // It did not go (it cannot reach the other server, or does not follow
-    // redirects): served here again, and not redirected for a while.
-    server_log().info("session {} ({}): did not go to {}; served here again", id_, name_, redirected_to_);
-    redirected_ = false;
-    no_redirect_until_ = now + kRedirectBackoff;
-  }
-  if (plan_valid_) maybe_redirect();
-  if (welcomed_ && now >= next_ping_) {
-    next_ping_ = now + kPingPeriod;
-    ping_nonce_ = static_cast<std::uint64_t>(
-        std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count());
-    session_->send(build_ping(ping_nonce_), SendClass::kControl);
-  }
+  if (redirect_.expire(now))
+    server_log().info("session {} ({}): did not go to {}; served here again", id_, name_, redirect_.target());
+  if (plan_.valid()) maybe_redirect();
   flush_mips_when_due(now);
-  if (options_.hash_push_ms > 0 && now >= next_hash_push_ && plan_valid_) {
-    next_hash_push_ = now + std::chrono::milliseconds(options_.hash_push_ms);
-    // The next chunk this client holds at full resolution.
-    for (std::size_t tries = 0; tries < hash_order_.size(); ++tries) {
-      if (hash_cursor_ >= hash_order_.size()) hash_cursor_ = 0;
-      const Vec3i cp = hash_order_[hash_cursor_];
-      const ChunkSlot* s = slots_.find(cp);
-      const VersionPtr v = s != nullptr ? s->full() : nullptr;
-      if (!v) {
-        hash_order_[hash_cursor_] = hash_order_.back();  // no longer full: forget it
-        hash_order_.pop_back();
-        continue;
-      }
-      ++hash_cursor_;
-      flush_stream();
-      session_->send(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()}));
-      counters_.hashes_pushed.fetch_add(1, std::memory_order_relaxed);
-      break;
-    }
+  // The next chunk this client holds at full resolution.
+  const auto full = [this](Vec3i cp) {
+    const ChunkSlot* s = slots_.find(cp);
+    return s != nullptr ? s->full() : nullptr;
+  };
+  const auto next = plan_.valid() && hashes_.due(now) ? hashes_.next(full) : std::nullopt;
+  if (next) {
+    const auto& [cp, v] = *next;
+    flush_stream();
+    session_->send(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()}));
+    counters_.hashes_pushed.fetch_add(1, std::memory_order_relaxed);
   }
   pump();
   arm_timer();

@@ -30,42 +30,51 @@
 // level held changed. A chunk held Empty that a move brings within full
 // resolution is told to the world as held at full resolution (holds_full).
 //
+// The client's session (net/client_session.h) does the handshake, pings
+// and operators' commands; it hands the replicator the messages about the
+// world (ClientReplica) once the client is admitted. The replicator's
+// parts each own their state: ViewPlan (the plan, the coarse pass, the
+// refine queue), ChunkSlots (what is known of each chunk), HorizonQueue,
+// HashRotation (pushed hashes), MipSchedule (refreshes of mips),
+// TickUpdate (a tick's UpdateBatch), StreamYield (the stream gate),
+// Redirector (shared worlds) and MoveLimit (the speed limit).
+//
 // Threading: every member runs on the session's strand. The WorldClient
 // methods are called on the world strand and post here. Lifetime: shared;
-// kept by the world (until leave) and by the session's callbacks.
+// kept by the world (until leave) and by the client session.
 #pragma once
 
 #include <asio.hpp>
 #include <chrono>
 #include <cstdint>
 #include <deque>
-#include <functional>
-#include <mutex>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include "common/voxel/vec3_map.h"
 #include "common/world/world_store.h"
 #include "protocol/stream_batch.h"
 #include "server/base/rate_limit.h"
 #include "server/net/limits.h"
+#include "server/net/client_session.h"
 #include "server/net/session.h"
-#include "server/ops/access.h"
 #include "server/base/options.h"
 #include "server/replication/chunk_slot.h"
+#include "server/replication/hash_rotation.h"
+#include "server/replication/horizon_queue.h"
+#include "server/replication/mip_schedule.h"
+#include "server/replication/move_limit.h"
+#include "server/replication/redirector.h"
 #include "server/replication/stream_gate.h"
+#include "server/replication/stream_yield.h"
+#include "server/replication/tick_update.h"
+#include "server/replication/update_faults.h"
+#include "server/replication/view_plan.h"
 #include "server/replication/view_table.h"
 #include "server/storage/cluster_map.h"
 #include "server/world/world_owner.h"
 
 namespace terrane {
-
-// Test-only faults shared by every replicator of a server.
-struct ReplicationFaults {
-  std::atomic<int> drop_updates{0};
-  std::atomic<int> corrupt_updates{0};
-};
 
 // What every client is told at the handshake (the parts that do not vary).
 struct WelcomeTemplate {
@@ -73,7 +82,7 @@ struct WelcomeTemplate {
   WorldBounds bounds;
 };
 
-class Replicator : public WorldClient, public std::enable_shared_from_this<Replicator> {
+class Replicator : public WorldClient, public ClientReplica, public std::enable_shared_from_this<Replicator> {
  public:
   // Outstanding requests to the world at most.
   static constexpr std::size_t kMaxRequests = 96;
@@ -84,47 +93,24 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // each crossing. Chunks are asked for only in view.
   static constexpr std::int32_t kKeepMargin = kChunkSize;
 
-  // An admin command from this client (name), answered through reply.
-  using AdminFn = std::function<void(const std::string& who, AdminRequestMsg req,
-                                     std::function<void(AdminResultMsg)> reply)>;
-  // Who this client is, for operators (any thread).
-  struct Info {
-    std::string name;
-    Vec3f position;
-    bool admin = false;
-    bool welcomed = false;
-    std::chrono::steady_clock::time_point joined;
-    double ping_ms = -1;  // the last round trip measured; -1 before the first
-  };
-  // The server pings each client this often (its round trip, for operators).
-  static constexpr std::chrono::seconds kPingPeriod{5};
-
-  // A redirected client that is still here this long after is served again
-  // (streaming goes on) and not redirected for kRedirectBackoff.
-  static constexpr std::chrono::seconds kRedirectGrace{10};
-  static constexpr std::chrono::seconds kRedirectBackoff{60};
-  // A client is not redirected in its first seconds on a server: the map
-  // of writers it is judged by may be a renewal round old.
-  static constexpr std::chrono::seconds kRedirectSettle{3};
-  static constexpr std::chrono::seconds kRedirectCheck{1};
-  // Nor to a server that has written the region for less than this (a
-  // region handed back and forth across a busy border would send its
-  // clients back and forth).
-  static constexpr std::chrono::seconds kRedirectStable{10};
-
   // cluster: who writes which region, in a world shared by several
-  // servers (null: one server, no redirects).
+  // servers (null: one server, no redirects). faults: the test seam of
+  // UpdateBatches (null but in tests).
   Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-             const WelcomeTemplate& welcome, ReplicationFaults& faults, const AccessControl& access,
-             const AdminFn& admin, const StreamGate& gate, const ClusterDirectory* cluster = nullptr);
+             const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster = nullptr,
+             UpdateFaults* faults = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
-  // Session strand.
-  void on_message(InboundMessage msg);
-  void on_drained();
-  void on_closed(const std::string& reason);
-  Info info() const;
+  // ClientReplica (session strand).
+  void join(const std::string& name) override;
+  bool move(const ClientStateMsg& state) override;
+  void edit(EditRequestMsg edit) override;
+  void read_box(const ReadBoxMsg& req) override;
+  void holdings(const HoldingsMsg& held) override;
+  void hash_request(Vec3i chunk_pos) override;
+  void drained() override;
+  void closed() override;
 
   // WorldClient (world strand; each posts to the session strand).
   void granted(std::vector<VersionPtr> versions) override;
@@ -135,15 +121,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   void close(CloseReason why, const std::string& text) override;
 
  private:
-  void on_hello(const HelloMsg& hello);
-  void on_client_state(const ClientStateMsg& state);
-  void on_edit(EditRequestMsg edit);
-  void on_read_box(const ReadBoxMsg& req);
-  void on_holdings(const HoldingsMsg& h);
-  void on_hash_request(Vec3i chunk_pos);
-  void on_admin(AdminRequestMsg req);
-  void on_pong(std::uint64_t nonce);
-
   void replan();
   // Asks the world for the horizon images of the new plan's regions.
   void plan_horizon();
@@ -157,10 +134,6 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // held, a grant waiting to be sent), its request cancelled; appends it
   // to released when the world must be told.
   void leave(Vec3i chunk_pos, std::vector<Vec3i>& released);
-  bool in_view(Vec3i chunk_pos) const;
-  // The level the plan wants: 0..3 in view, kMipLevels (none finer) beyond.
-  int desired(Vec3i chunk_pos) const;
-  void push_refine(Vec3i chunk_pos);
   // Whether chunk_pos, held, is coarser than the plan wants it.
   bool needs_refining(Vec3i chunk_pos) const;
   // Chunks held as Empty whose change waits for the next flush of mips and
@@ -168,16 +141,12 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // the client may now edit there and the next tick's units change the
   // revision it has not seen.
   void send_parked_near();
-  // A client whose every region within options_.redirect_margin voxels
-  // one other server writes is sent a Redirect there; its streaming stops
-  // (updates go on until it leaves).
+  // A client the Redirector sends to another server is sent a Redirect
+  // there; its streaming stops (updates go on until it leaves).
   void maybe_redirect();
   // Sends v whole (Full, or Empty) and holds it at full resolution; a
   // refresh parked for the chunk is dropped.
   void send_whole(Vec3i chunk_pos, const VersionPtr& v);
-  // Recomputes the refine queue's keys for center_, drops what needs no
-  // refining any more (and repeats), and heaps it again.
-  void rebuild_refine();
 
   void on_granted(std::vector<VersionPtr> versions);
   // mips_due: the world's news of chunks held coarser than full
@@ -207,26 +176,12 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   const ServerOptions& options_;
   ServerCounters& counters_;
   const WelcomeTemplate& welcome_;
-  ReplicationFaults& faults_;
-  const AccessControl& access_;
-  const AdminFn& admin_fn_;
-  const StreamGate& gate_;
-  const ClusterDirectory* const cluster_;
-  // The gate was closed at the last pump: streaming waits for the timer
-  // (since yielded_since_, or the last pump it let through).
-  bool stream_yielded_ = false;
-  std::chrono::steady_clock::time_point yielded_since_;
-  // Sent a Redirect (when): nothing more is streamed until the client
-  // leaves, or kRedirectGrace passes.
-  bool redirected_ = false;
-  std::chrono::steady_clock::time_point redirected_at_;
-  std::chrono::steady_clock::time_point no_redirect_until_{};
-  std::string redirected_to_;
-  bool admin_ = false;
-  mutable std::mutex info_m_;
-  Info info_;  // a copy of name, position and role for other threads
-  std::chrono::steady_clock::time_point next_ping_{};
-  std::uint64_t ping_nonce_ = 0;  // of the Ping awaiting its Pong
+  UpdateFaults* const faults_;
+  // Whether streaming waits for the stream gate.
+  StreamYield yield_;
+  // Whether the client was sent a Redirect: nothing more is streamed until
+  // it leaves, or Redirector::kRedirectGrace passes.
+  Redirector redirect_;
   // session_ is used on the session strand only and dropped when the
   // session closes (it and the session's callbacks keep each other alive);
   // the world strand reaches the session through weak_session_ and posts to
@@ -236,33 +191,16 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   asio::any_io_executor executor_;
   std::unique_ptr<asio::steady_timer> timer_;
 
-  bool welcomed_ = false;
+  bool joined_ = false;
   bool closed_ = false;
   std::string name_;
   ClientStateMsg state_;
-  bool moved_ = false;
-  std::chrono::steady_clock::time_point moved_at_;
+  MoveLimit move_limit_;
   TokenBucket edit_rate_, outbound_;
 
-  // The plan.
-  std::shared_ptr<const ViewTable> table_;
-  std::shared_ptr<const ViewTable> keep_table_;  // the view and its margin: what is released beyond
-  Vec3i center_;
-  bool plan_valid_ = false;
-  Vec3i coarse_center_;        // the centre the coarse cursor walks the table from
-  std::size_t coarse_pos_ = 0;
-  std::deque<Vec3i> entering_;  // chunks that came into view by moves, to send coarse
-  // Chunks that may need refining, nearest first: a heap keyed by the
-  // distance to center_ when pushed. A move only marks the keys stale; they
-  // are recomputed (and entries no longer needing refinement dropped) when
-  // the queue is next read, so a client moving chunk after chunk while its
-  // coarse view fills pays for one reordering, not one per move.
-  using RefineEntry = std::pair<std::int64_t, Vec3i>;
-  struct RefineOrder {
-    bool operator()(const RefineEntry& a, const RefineEntry& b) const { return a.first > b.first; }
-  };
-  std::vector<RefineEntry> refine_;
-  bool refine_stale_ = false;
+  // The plan: the view around the client's chunk, the coarse pass's
+  // cursor and the refine queue.
+  ViewPlan plan_;
 
   // What is known of each chunk for this client (ChunkSlot): what it holds
   // of it (its own record: an Estimate's is replaced by the chunk's exact
@@ -272,33 +210,20 @@ class Replicator : public WorldClient, public std::enable_shared_from_this<Repli
   // world, the grant not yet sent, a resuming client's claim and the change
   // waiting for the next refresh of mips.
   ChunkSlots slots_;
-  // Regions of this plan whose horizon images were asked for, with the
-  // level of each (an image of a region not listed, or at another level,
-  // answers an earlier plan: dropped); streaming's first pass waits until
-  // none is.
-  Vec3iMap<std::uint8_t> horizon_wanted_;
-  // The same regions in the order they are sent (nearest first), and the
-  // images that came before their turn.
-  std::deque<Vec3i> horizon_order_;
-  Vec3iMap<HorizonPtr> horizon_early_;
-  // Chunks held Full with a version, for the pushed hashes in turn (an
-  // entry whose slot has none any more is dropped when reached).
-  std::vector<Vec3i> hash_order_;
-  std::size_t hash_cursor_ = 0;
+  // The horizon images this plan asked for, sent nearest region first;
+  // streaming's first pass waits until none is to come.
+  HorizonQueue horizon_;
+  // Chunks held Full with a version, for the pushed hashes in turn.
+  HashRotation hashes_;
   // Granted, not yet sent (the window or budget was full), oldest first
   // (an entry left by a grant dropped since is skipped when reached).
   std::deque<Vec3i> ready_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
   StreamBatchWriter batch_;
-  // Changed chunks held coarser than full resolution (each slot's newest
-  // change), refreshed together every mip_refresh_ms: in the order of their
-  // first change, entries whose slot has none any more skipped.
-  std::vector<Vec3i> mip_order_;
-  // When they were due (mip_refresh_ms after the first), and when they are
-  // flushed (later while the stream gate is closed).
-  std::chrono::steady_clock::time_point mip_due_, next_mip_flush_;
+  // When and in which order the changes parked for the refresh of mips
+  // (each slot's newest) go out.
+  MipSchedule mips_;
   bool timer_armed_ = false;
-  std::chrono::steady_clock::time_point next_hash_push_;
 };
 
 }  // namespace terrane

@@ -19,7 +19,7 @@
 // held at full resolution keep being updated, and edits, hashes and pings
 // go on; they retry shortly. Streaming then runs at the rate the
 // machine can carry beside the live traffic. It slows, never stops: a
-// client's streaming that has waited kYieldAtMost (replicator.cpp) goes
+// client's streaming that has waited StreamYield::kYieldAtMost (stream_yield.h) goes
 // on once, closed or not, unless the gate is held closed by hand.
 //
 // Threading: open() from any thread; observe() from the probes (or a

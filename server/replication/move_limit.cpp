@@ -1,0 +1,21 @@
+#include "server/replication/move_limit.h"
+
+#include <cmath>
+
+#include "server/base/options.h"
+
+namespace terrane {
+
+std::optional<double> MoveLimit::too_far(Vec3f a, Vec3f b, Clock::time_point now) {
+  if (moved_ && max_speed_ > 0) {
+    const double d = std::sqrt(double{b.x - a.x} * (b.x - a.x) + double{b.y - a.y} * (b.y - a.y) +
+                               double{b.z - a.z} * (b.z - a.z));
+    const double allowed = max_speed_ * std::chrono::duration<double>(now - moved_at_).count() + kSpeedSlackVoxels;
+    if (d > allowed) return d;
+  }
+  moved_ = true;
+  moved_at_ = now;
+  return std::nullopt;
+}
+
+}  // namespace terrane

@@ -1,0 +1,32 @@
+#include "server/replication/tick_update.h"
+
+#include <algorithm>
+#include <tuple>
+
+#include "common/codec/update_batch.h"
+#include "protocol/messages.h"
+
+namespace terrane {
+
+std::optional<Frame> TickUpdate::finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units) {
+  // Chunk order, so the joined batch is what one encoder would write.
+  std::sort(versions_.begin(), versions_.end(), [](const VersionPtr& a, const VersionPtr& b) {
+    const Vec3i u = a->pos(), w = b->pos();
+    return std::tie(u.y, u.z, u.x) < std::tie(w.y, w.z, w.x);
+  });
+  std::vector<const UpdatePiece*> pieces;
+  std::vector<ChunkRevisionMsg> revisions;
+  for (const VersionPtr& v : versions_) {
+    pieces.push_back(&v->update_piece());
+    revisions.push_back(ChunkRevisionMsg{v->pos(), v->revision()});
+  }
+  UpdatePiece tampered;  // outlives pieces, which may point at it
+  if (faults != nullptr && !faults->tamper(pieces, tampered)) return std::nullopt;
+  std::vector<std::uint8_t> data;
+  net_codec_join_update_pieces(pieces, data);
+  units = 0;
+  for (const UpdatePiece* p : pieces) units += p->count;
+  return build_update_batch(tick, data, revisions);
+}
+
+}  // namespace terrane

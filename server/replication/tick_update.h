@@ -1,0 +1,35 @@
+// TickUpdate: one client's UpdateBatch for one committed tick: the changed
+// 4^3 units of every chunk it holds at full resolution, joined from each
+// version's update piece (encoded once per version, shared by every
+// holder), in chunk order (y, z, x), so the joined batch is what one
+// encoder would write; with each chunk's new revision. It keeps the
+// versions, and so their pieces, alive until the frame is built.
+//
+// Threading: the client's session strand (made and finished in one call).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "protocol/messages.h"
+#include "server/base/chunk_version.h"
+#include "server/replication/update_faults.h"
+
+namespace terrane {
+
+class TickUpdate {
+ public:
+  // v's units go in the batch (one version per chunk).
+  void add(VersionPtr v) { versions_.push_back(std::move(v)); }
+  bool empty() const { return versions_.empty(); }
+  // The UpdateBatch frame of tick, or nullopt when faults (the test seam;
+  // null when serving for real) drop it. units: set to the units it holds.
+  std::optional<Frame> finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units);
+
+ private:
+  std::vector<VersionPtr> versions_;
+};
+
+}  // namespace terrane
