@@ -36,7 +36,9 @@ WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, con
       options_(options),
       counters_(counters),
       strand_(asio::make_strand(io)),
-      tick_timer_(strand_) {}
+      tick_timer_(strand_),
+      fan_out_(options, counters),
+      requests_(strand_, [this](WorldRequest& r) { handle(r); }) {}
 
 void WorldOwner::start() {
   asio::post(strand_, [this] {
@@ -74,110 +76,62 @@ void WorldOwner::stop() {
 // --- clients -------------------------------------------------------------------
 
 void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client) {
-  queue_request(Request{id, {}, Join{std::move(name), std::move(client)}});
+  requests_.push(WorldRequest{id, {}, JoinRequest{std::move(name), std::move(client)}});
 }
 
-void WorldOwner::leave(ClientId id) { queue_request(Request{id, {}, Leave{}}); }
+void WorldOwner::leave(ClientId id) { requests_.push(WorldRequest{id, {}, LeaveRequest{}}); }
 
 void WorldOwner::moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius) {
-  queue_request(Request{id, {}, Moved{position, view_distance, full_res_radius}});
-}
-
-void WorldOwner::do_join(ClientId id, Join j) {
-  Client c{std::move(j.name), std::move(j.link), {}, 0, 0, false, 0, History(options_.history_bytes_per_client), {}, {},
-           0, {}};
-  clients_.emplace(id, std::move(c));
-}
-
-void WorldOwner::do_leave(ClientId id) {
-  // The replicator released what it held or had asked for just before;
-  // after this nothing more is granted to id. Its queued edits stay
-  // queued (their acks go nowhere).
-  clients_.erase(id);
-  presence_.remove(id);
-  grants_.erase(id);
-}
-
-void WorldOwner::do_moved(ClientId id, const Moved& m) {
-  auto it = clients_.find(id);
-  if (it == clients_.end()) return;
-  it->second.position = m.position;
-  it->second.view_distance = m.view_distance;
-  it->second.full_res_radius = m.full_res_radius;
-  it->second.placed = true;
-  presence_.place(id, m.position);
+  requests_.push(WorldRequest{id, {}, MovedRequest{position, view_distance, full_res_radius}});
 }
 
 void WorldOwner::want(ClientId id, std::vector<ChunkWant> chunks) {
-  queue_request(Request{id, {}, std::move(chunks)});
+  requests_.push(WorldRequest{id, {}, std::move(chunks)});
 }
 
 void WorldOwner::release(ClientId id, std::vector<Vec3i> chunks) {
-  queue_request(Request{id, {}, std::move(chunks)});
+  requests_.push(WorldRequest{id, {}, std::move(chunks)});
 }
 
 void WorldOwner::want_horizon(ClientId id, std::vector<HorizonWant> wants) {
-  queue_request(Request{id, {}, std::move(wants)});
+  requests_.push(WorldRequest{id, {}, std::move(wants)});
 }
 
 void WorldOwner::holds_full(ClientId id, std::vector<Vec3i> chunks) {
-  queue_request(Request{id, {}, HoldsFull{std::move(chunks)}});
+  requests_.push(WorldRequest{id, {}, HoldsFullRequest{std::move(chunks)}});
 }
 
-void WorldOwner::queue_request(Request r) {
-  r.queued = std::chrono::steady_clock::now();
-  std::lock_guard lock(requests_m_);
-  requests_.push_back(std::move(r));
-  if (drain_posted_) return;
-  drain_posted_ = true;
-  asio::post(strand_, [this] { drain_requests(); });
-}
-
-void WorldOwner::drain_requests() {
-  const auto until = std::chrono::steady_clock::now() + kRequestSlice;
-  for (;;) {
-    Request r;
-    {
-      std::lock_guard lock(requests_m_);
-      if (requests_.empty()) {
-        drain_posted_ = false;
-        break;
-      }
-      r = std::move(requests_.front());
-      requests_.pop_front();
-    }
-    const auto now = std::chrono::steady_clock::now();
-    if (request_wait_) request_wait_(now - r.queued);
-    std::visit(
-        [&](auto& what) {
-          using T = std::decay_t<decltype(what)>;
-          if constexpr (std::is_same_v<T, std::vector<ChunkWant>>)
-            do_want(r.id, what);
-          else if constexpr (std::is_same_v<T, std::vector<Vec3i>>)
-            do_release(r.id, what);
-          else if constexpr (std::is_same_v<T, std::vector<HorizonWant>>)
-            do_want_horizon(r.id, what);
-          else if constexpr (std::is_same_v<T, Join>)
-            do_join(r.id, std::move(what));
-          else if constexpr (std::is_same_v<T, Leave>)
-            do_leave(r.id);
-          else if constexpr (std::is_same_v<T, HoldsFull>)
-            do_holds_full(r.id, what);
-          else
-            do_moved(r.id, what);
-        },
-        r.what);
-    if (std::chrono::steady_clock::now() >= until) {
-      // The slice is spent: whatever was posted meanwhile goes first.
-      asio::post(strand_, [this] { drain_requests(); });
-      return;
-    }
-  }
-  if (request_wait_) request_wait_(std::chrono::nanoseconds{0});  // nothing waits now
+void WorldOwner::handle(WorldRequest& r) {
+  std::visit(
+      [&](auto& what) {
+        using T = std::decay_t<decltype(what)>;
+        if constexpr (std::is_same_v<T, std::vector<ChunkWant>>) {
+          do_want(r.id, what);
+        } else if constexpr (std::is_same_v<T, std::vector<Vec3i>>) {
+          fan_out_.release(r.id, what);
+        } else if constexpr (std::is_same_v<T, std::vector<HorizonWant>>) {
+          do_want_horizon(r.id, what);
+        } else if constexpr (std::is_same_v<T, JoinRequest>) {
+          editors_.emplace(r.id, Editor{std::move(what.name), 0, History(options_.history_bytes_per_client)});
+          fan_out_.join(r.id, std::move(what.link));
+        } else if constexpr (std::is_same_v<T, LeaveRequest>) {
+          // The replicator released what it held or had asked for just
+          // before; after this nothing more is granted to id. Its queued
+          // edits stay queued (their acks go nowhere).
+          editors_.erase(r.id);
+          fan_out_.leave(r.id);
+          grants_.erase(r.id);
+        } else if constexpr (std::is_same_v<T, HoldsFullRequest>) {
+          fan_out_.holds_full(r.id, what.chunks);
+        } else {
+          fan_out_.moved(r.id, what.position, what.view_distance, what.full_res_radius);
+        }
+      },
+      r.what);
 }
 
 void WorldOwner::do_want(ClientId id, const std::vector<ChunkWant>& chunks) {
-  if (clients_.count(id) == 0) return;
+  if (!fan_out_.present(id)) return;
   // Room for the whole batch at once: grown one grant at a time, the list
   // was reallocated again and again (with a thousand clients moving, a
   // few percent of this strand's time, with the consolidation it set off).
@@ -194,43 +148,8 @@ void WorldOwner::do_want(ClientId id, const std::vector<ChunkWant>& chunks) {
   flush_grants();
 }
 
-void WorldOwner::do_release(ClientId id, const std::vector<Vec3i>& chunks) {
-  for (const Vec3i cp : chunks) interest_.release(cp, id);
-}
-
-void WorldOwner::do_holds_full(ClientId id, const HoldsFull& h) {
-  auto client = clients_.find(id);
-  if (client == clients_.end()) return;
-  Client& c = client->second;
-  bool news = false;
-  for (const Vec3i cp : h.chunks) {
-    if (!interest_.holds(cp, id)) continue;  // released since
-    interest_.hold(cp, id, true);
-    news = news || std::any_of(c.mip_news.begin(), c.mip_news.end(), [cp](const VersionPtr& v) { return v->pos() == cp; });
-  }
-  // A change of one of them gathered for later goes now, with the rest.
-  if (news) hand_mip_news(c);
-}
-
-void WorldOwner::hand_mip_news(Client& c) {
-  c.link->mips_changed(c.mip_news_tick, std::move(c.mip_news));
-  c.mip_news.clear();
-}
-
-void WorldOwner::deliver_mip_news() {
-  const auto now = std::chrono::steady_clock::now();
-  while (!mip_news_due_.empty() && mip_news_due_.front().first <= now) {
-    const ClientId id = mip_news_due_.front().second;
-    mip_news_due_.pop_front();
-    auto it = clients_.find(id);
-    if (it == clients_.end() || it->second.mip_news.empty() || it->second.mip_due > now) continue;
-    hand_mip_news(it->second);
-  }
-}
-
 void WorldOwner::do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants) {
-  auto client = clients_.find(id);
-  if (client == clients_.end()) return;
+  if (!fan_out_.present(id)) return;
   std::vector<HorizonPtr> ready;
   const auto now = std::chrono::steady_clock::now();
   for (const HorizonWant& w : wants) {
@@ -247,7 +166,7 @@ void WorldOwner::do_want_horizon(ClientId id, const std::vector<HorizonWant>& wa
         asio::post(strand_, [this, h = std::move(h)]() mutable { on_horizon_loaded(std::move(h)); });
       });
   }
-  if (!ready.empty()) client->second.link->horizons(std::move(ready));
+  if (!ready.empty()) fan_out_.horizons(id, std::move(ready));
 }
 
 void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
@@ -267,7 +186,7 @@ void WorldOwner::on_horizon_loaded(LoadedHorizon h) {
   }
   if (node.empty()) return;
   for (const ClientId id : node.mapped().waiting)
-    if (auto it = clients_.find(id); it != clients_.end()) it->second.link->horizons({image});
+    fan_out_.horizons(id, {image});
 }
 
 void WorldOwner::horizon_changed(Vec3i cp) {
@@ -285,15 +204,13 @@ void WorldOwner::grant(ClientId id, Vec3i cp, bool full) {
     l.replace = Loaded::Replace::kQueued;
     estimates_.push_back(cp);
   }
-  interest_.hold(cp, id, full);
+  fan_out_.hold(cp, id, full);
   grants_[id].push_back(l.published);
 }
 
 void WorldOwner::flush_grants() {
   for (auto& [id, versions] : grants_) {
-    auto it = clients_.find(id);
-    if (it == clients_.end() || versions.empty()) continue;
-    it->second.link->granted(std::move(versions));
+    if (!versions.empty()) fan_out_.granted(id, std::move(versions));
   }
   grants_.clear();
 }
@@ -373,7 +290,7 @@ void WorldOwner::on_coarse_loaded(LoadedCoarse c) {
   }
   if (node.empty()) return;
   for (const auto& [cp, w] : node.mapped()) {
-    if (clients_.count(w.id) == 0) continue;
+    if (!fan_out_.present(w.id)) continue;
     if (request(cp, kMipLevels - 1))
       grant(w.id, cp, w.full);
     else
@@ -390,7 +307,7 @@ void WorldOwner::replace_estimates() {
     auto it = loaded_.find(cp);
     if (it == loaded_.end() || it->second.replace != Loaded::Replace::kQueued) continue;
     Loaded& l = it->second;
-    if (!l.current->estimate() || loading_.count(cp) != 0 || !interest_.watched(cp)) {
+    if (!l.current->estimate() || loading_.count(cp) != 0 || !fan_out_.watched(cp)) {
       l.replace = Loaded::Replace::kNo;  // loaded, being loaded for a client, or no longer held by anyone
       continue;
     }
@@ -470,15 +387,14 @@ void WorldOwner::apply_loaded(LoadedChunk c) {
     horizon_changed(c.pos);
     // As a commit would: every holder (all hold it coarser than full
     // resolution, since it had no voxels) refreshes from the new version.
-    for (const InterestIndex::Holder& h : interest_.holders(c.pos))
-      if (auto holder = clients_.find(h.id); holder != clients_.end()) holder->second.link->committed(tick_, {v});
+    fan_out_.changed(tick_, v);
   }
   l.used_tick = tick_;
   counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
   const std::vector<Waiter> waiters = std::move(waiting->second);
   loading_.erase(waiting);
   for (const Waiter& w : waiters)
-    if (clients_.count(w.id) != 0) grant(w.id, c.pos, w.full);
+    if (fan_out_.present(w.id)) grant(w.id, c.pos, w.full);
   if (!grants_scheduled_) {
     // Loads finish one by one; hand them over in one go per strand turn.
     grants_scheduled_ = true;
@@ -499,8 +415,7 @@ void WorldOwner::retry_pending() {
   // Reads and hashes whose chunks have arrived.
   std::size_t kept = 0;
   for (auto& [id, req] : reads_) {
-    auto it = clients_.find(id);
-    if (it == clients_.end()) continue;
+    if (!fan_out_.present(id)) continue;
     Box box(req.box.size());
     if (!read_current(req.box, box)) {
       // Asked again: a chunk of the box may have been lightened meanwhile.
@@ -508,21 +423,20 @@ void WorldOwner::retry_pending() {
       reads_[kept++] = {id, req};
       continue;
     }
-    it->second.link->send(std::make_shared<const Frame>(build_read_box_result(req.request_id, req.box, box.voxels())),
-                          SendClass::kData);
+    fan_out_.send(id, std::make_shared<const Frame>(build_read_box_result(req.request_id, req.box, box.voxels())),
+                  SendClass::kData);
   }
   reads_.resize(kept);
   kept = 0;
   for (auto& [id, cp] : hashes_) {
-    auto it = clients_.find(id);
-    if (it == clients_.end()) continue;
+    if (!fan_out_.present(id)) continue;
     if (!request(cp)) {
       hashes_[kept++] = {id, cp};
       continue;
     }
     const VersionPtr& v = loaded_.at(cp).published;
-    it->second.link->send(std::make_shared<const Frame>(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()})),
-                          SendClass::kData);
+    fan_out_.send(id, std::make_shared<const Frame>(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()})),
+                  SendClass::kData);
   }
   hashes_.resize(kept);
 }
@@ -579,12 +493,12 @@ void WorldOwner::unload_unwatched() {
     if (!l.current->has_voxels()) {
       // (An all-Air chunk has no voxels to drop, but as its mips it can
       // be forgotten.)
-      if (pass.forget && forget.size() + kMaxMipsOnly / 2 < mips_only_ && !interest_.watched(cp) &&
+      if (pass.forget && forget.size() + kMaxMipsOnly / 2 < mips_only_ && !fan_out_.watched(cp) &&
           loading_.count(cp) == 0)
         forget.push_back(cp);
       return;
     }
-    if (!pass.lighten || busy_.count(cp) != 0 || l.current != l.published || interest_.held_full(cp) ||
+    if (!pass.lighten || busy_.count(cp) != 0 || l.current != l.published || fan_out_.held_full(cp) ||
         loading_.count(cp) != 0)
       return;
     pass.drop.emplace_back(l.used_tick, cp);
@@ -636,8 +550,7 @@ void WorldOwner::unload_unwatched() {
 
 void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason) {
   counters_.rejected(why);
-  auto it = clients_.find(id);
-  if (it == clients_.end()) return;
+  if (!fan_out_.present(id)) return;
   // The true state of what the edit would have touched, when it is at hand:
   // on the data queue, after every change already sent, so it is the state
   // the client's replica reaches once it has read that far.
@@ -645,19 +558,19 @@ void WorldOwner::reject(ClientId id, const EditRequestMsg& edit, RejectReason wh
   if (!r.empty() && r.volume() <= kMaxEditVolume) {
     Box box(r.size());
     if (read_current(r, box)) {
-      it->second.link->send(std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels())),
-                            SendClass::kData);
+      fan_out_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels())),
+                    SendClass::kData);
       return;
     }
   }
-  it->second.link->send(std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason)), SendClass::kControl);
+  fan_out_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason)), SendClass::kControl);
 }
 
 void WorldOwner::edit(ClientId id, EditRequestMsg e) {
   asio::post(strand_, [this, id, e = std::move(e), received = std::chrono::steady_clock::now()]() mutable {
-    auto it = clients_.find(id);
-    if (it == clients_.end() || stopping_) return;
-    Client& c = it->second;
+    auto it = editors_.find(id);
+    if (it == editors_.end() || stopping_) return;
+    Editor& c = it->second;
     if (c.edits_queued >= options_.max_edits_queued_per_client) return reject(id, e, RejectReason::kQueueFull, "too many edits queued");
     if (!is_history_edit(e.kind)) {
       const Region r = world_.meta().bounds.clamp(e.reads());
@@ -705,15 +618,6 @@ void WorldOwner::unbusy(const Region& r) {
 
 void WorldOwner::refuse(ClientId id, EditRequestMsg e, RejectReason why, std::string reason) {
   asio::post(strand_, [this, id, e = std::move(e), why, reason = std::move(reason)] { reject(id, e, why, reason); });
-}
-
-bool WorldOwner::near_enough(const Client& c, const Region& r) const {
-  // History steps are checked where they apply: the client's replicator
-  // checked the original edit, and the step's box must still lie in the
-  // full-resolution region of where the client is now.
-  bool ok = c.placed;
-  for_each_chunk_in(r, [&](Vec3i cp) { ok = ok && within(c.position, cp, c.full_res_radius); });
-  return ok;
 }
 
 void WorldOwner::copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied) {
@@ -871,8 +775,8 @@ WorldOwner::EditStep WorldOwner::apply_rollback(TickEdits& t) {
 WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
   const WorldBounds& bounds = world_.meta().bounds;
   PendingEdit& pe = edits_.front();
-  auto cit = clients_.find(pe.id);
-  Client* client = cit != clients_.end() ? &cit->second : nullptr;
+  auto cit = editors_.find(pe.id);
+  Editor* client = cit != editors_.end() ? &cit->second : nullptr;
   const bool history = is_history_edit(pe.edit.kind);
   const bool redo = pe.edit.kind == EditKind::kRedo;
   Region r;
@@ -985,7 +889,7 @@ WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
     std::string why = "client gone";
     if (client != nullptr && client->history.top(redo) == nullptr) {
       why = redo ? "nothing to redo" : "nothing to undo";
-    } else if (client != nullptr && !near_enough(*client, r)) {
+    } else if (client != nullptr && !fan_out_.within_full_res(pe.id, r)) {
       why = std::string(redo ? "redo" : "undo") + " outside the full-resolution region";
       client->history.drop(redo);  // its box may be stale by the time the client is back
     } else if (auto was = client != nullptr ? snapshot(t.scratch, r) : std::vector<std::uint8_t>{};
@@ -1024,9 +928,8 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     }
     // Nothing of this tick may be acknowledged or shown: it is not on disk.
     for (const Ack& a : acks)
-      if (auto it = clients_.find(a.id); it != clients_.end())
-        it->second.link->send(std::make_shared<const Frame>(build_edit_reject(a.edit_id, "storage failure: edit not saved")),
-                              SendClass::kControl);
+      fan_out_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, "storage failure: edit not saved")),
+                    SendClass::kControl);
     counters_.rejected(RejectReason::kStorageFailure, acks.size());
     fatal_storage(status.error().message);
   } else {
@@ -1040,11 +943,10 @@ void WorldOwner::on_committed(std::uint64_t tick, const std::vector<VersionPtr>&
     publish(tick, versions, t0);
     const auto acked_at = std::chrono::steady_clock::now();
     for (const Ack& a : acks) {
-      auto it = clients_.find(a.id);
-      if (it == clients_.end()) continue;  // gone: nothing acknowledged
+      if (!fan_out_.present(a.id)) continue;  // gone: nothing acknowledged
       // Counted before the ack leaves, so a client that read it sees it counted.
       counters_.edit_ack_duration.observe(acked_at - a.received);
-      it->second.link->send(std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
+      fan_out_.send(a.id, std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
     }
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }
@@ -1069,33 +971,12 @@ void WorldOwner::publish(std::uint64_t tick, const std::vector<VersionPtr>& vers
   // it was granted the one before (a replicator drops news of a chunk it
   // was not granted yet).
   flush_grants();
-  std::unordered_map<ClientId, std::vector<VersionPtr>> news;
-  std::uint64_t deliveries = 0;
-  const bool gather = options_.mip_refresh_ms > 0;
-  const auto due = now + std::chrono::milliseconds(options_.mip_refresh_ms);
   for (const VersionPtr& v : versions) {
     if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
       it->second.published = v;
     horizon_changed(v->pos());
-    for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
-      ++deliveries;
-      if (h.full || !gather) {
-        news[h.id].push_back(v);
-        continue;
-      }
-      auto c = clients_.find(h.id);
-      if (c == clients_.end()) continue;
-      if (c->second.mip_news.empty()) {
-        c->second.mip_due = due;
-        mip_news_due_.emplace_back(due, h.id);
-      }
-      c->second.mip_news.push_back(v);
-      c->second.mip_news_tick = tick;
-    }
   }
-  counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
-  for (auto& [id, changed] : news)
-    if (auto it = clients_.find(id); it != clients_.end()) it->second.link->committed(tick, std::move(changed));
+  fan_out_.publish(tick, versions, now);
 }
 
 void WorldOwner::fail_rollbacks(const std::string& why) {
@@ -1118,7 +999,7 @@ void WorldOwner::fatal_storage(const std::string& why) {
   // The owner hears of the failure before any client does: a client that reads
   // "server storage failure" may ask the server, and finds it failed.
   if (options_.on_fatal) options_.on_fatal();
-  for (auto& [id, c] : clients_) c.link->close(CloseReason::kStorageFailure, "server storage failure");
+  fan_out_.close_all(CloseReason::kStorageFailure, "server storage failure");
   stopping_ = true;
   tick_timer_.cancel();
 }
@@ -1127,8 +1008,7 @@ void WorldOwner::fatal_storage(const std::string& why) {
 
 void WorldOwner::read_box(ClientId id, ReadBoxMsg req) {
   asio::post(strand_, [this, id, req] {
-    auto it = clients_.find(id);
-    if (it == clients_.end()) return;
+    if (!fan_out_.present(id)) return;
     for_each_chunk_in(req.box, [&](Vec3i cp) { request(cp); });
     reads_.emplace_back(id, req);
     retry_pending();
@@ -1140,29 +1020,6 @@ void WorldOwner::hash(ClientId id, Vec3i cp) {
     hashes_.emplace_back(id, cp);
     retry_pending();
   });
-}
-
-void WorldOwner::send_presence() {
-  // Each client every `every` ticks, at a phase of its own (its id): a
-  // thousand nearest-neighbour queries and frames spread over the ticks
-  // instead of lengthening one.
-  const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
-  const std::uint64_t every = std::max<std::uint64_t>(1, hz / options_.presence_hz);
-  for (auto& [id, c] : clients_) {
-    if (!c.placed || (id + tick_) % every != 0) continue;
-    auto entries =
-        presence_.nearest(id, c.position, static_cast<float>(c.view_distance), options_.presence_max_entries);
-    // Only when something changed: idle crowds cost nothing.
-    auto same = [](const PresenceEntryMsg& a, const PresenceEntryMsg& b) {
-      return a.client_id == b.client_id && a.position.x == b.position.x && a.position.y == b.position.y &&
-             a.position.z == b.position.z;
-    };
-    if (entries.size() == c.presence.size() && std::equal(entries.begin(), entries.end(), c.presence.begin(), same))
-      continue;
-    c.link->send(std::make_shared<const Frame>(build_presence(entries)), SendClass::kData);
-    c.presence = std::move(entries);
-    counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);
-  }
 }
 
 // --- tick ----------------------------------------------------------------------
@@ -1198,7 +1055,7 @@ void WorldOwner::lighten_some() {
     // Checked again: it may have been asked for at full resolution or
     // edited since the list was made.
     if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
-        interest_.held_full(cp) || loading_.count(cp) != 0)
+        fan_out_.held_full(cp) || loading_.count(cp) != 0)
       continue;
     l.published = l.current = ChunkVersion::mips_only(*l.current);
     ++mips_only_;
@@ -1218,13 +1075,13 @@ void WorldOwner::on_tick() {
       static_cast<std::uint64_t>(std::max<std::int64_t>(0, std::chrono::nanoseconds(t0 - next_tick_).count())),
       std::memory_order_relaxed);
   lighten_some();
-  deliver_mip_news();
+  fan_out_.deliver_mip_news(std::chrono::steady_clock::now());
   const auto t_edits = Clock::now();
   apply_edits();
   if (!forwarded_.empty()) settle_forwarded();
   const auto t_presence = Clock::now();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
-  if (options_.presence_hz > 0) send_presence();
+  if (options_.presence_hz > 0) fan_out_.send_presence(tick_);
   const auto t_unload = Clock::now();
   unload_unwatched();
   if (tick_ % hz == 0) retry_pending();

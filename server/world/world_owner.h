@@ -80,44 +80,11 @@
 #include "server/world/history.h"
 #include "server/world/interest.h"
 #include "server/world/presence.h"
+#include "server/world/fan_out.h"
+#include "server/world/request_queue.h"
+#include "server/world/world_client.h"
 
 namespace terrane {
-
-// What the world needs of a connected client. Each call is made on the
-// world strand; implementations post to the client's own strand.
-class WorldClient {
- public:
-  virtual ~WorldClient() = default;
-  // Versions of chunks the client asked for (in want), nearest asked first.
-  virtual void granted(std::vector<VersionPtr> versions) = 0;
-  // Horizon images the client asked for (want_horizon), in the order they
-  // were made. An image with no unit could not be made (its region's
-  // coarse image is unreadable): the chunks come as usual.
-  virtual void horizons(std::vector<HorizonPtr> images) = 0;
-  // A committed tick's new versions of chunks the client holds at full
-  // resolution (with mip_refresh_ms 0: of every chunk it holds).
-  virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
-  // New versions of chunks the client holds coarser than full resolution,
-  // gathered for mip_refresh_ms since the first of them (oldest first; a
-  // chunk may come more than once), the newest committed at tick: to be
-  // refreshed now.
-  virtual void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
-  // Frames the world answers with (acks, rejects, read results, presence).
-  virtual void send(SharedFrame frame, SendClass cls) = 0;
-  virtual void close(CloseReason why, const std::string& text) = 0;
-};
-
-struct HorizonWant {
-  Vec3i region;
-  int level = kHorizonFarLevel;
-};
-
-struct ChunkWant {
-  Vec3i chunk_pos;
-  bool full = false;  // the client will hold it at full resolution
-  int level = 0;      // the level it will be sent at: 0 full, 1..3 a mip (3: served from coarse images)
-  bool exact = false; // never an estimate (ChunkVersion::estimate), even at level 3
-};
 
 // Read access for tests and tools (Server::inspect).
 class WorldView {
@@ -164,9 +131,9 @@ class WorldOwner : private WorldView {
   void want_horizon(ClientId id, std::vector<HorizonWant> wants);
   // How long each streaming request waited in its queue (0 once it is
   // empty), called on the strand. Before start().
-  void on_request_wait(std::function<void(std::chrono::nanoseconds)> fn) { request_wait_ = std::move(fn); }
+  void on_request_wait(std::function<void(std::chrono::nanoseconds)> fn) { requests_.on_wait(std::move(fn)); }
   // The longest the strand spends on streaming requests at a time.
-  static constexpr std::chrono::microseconds kRequestSlice{2000};
+  static constexpr std::chrono::microseconds kRequestSlice = RequestQueue::kSlice;
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
@@ -232,22 +199,12 @@ class WorldOwner : private WorldView {
     // be generated for real in the background (estimates_), then loaded.
     enum class Replace : std::uint8_t { kNo, kQueued, kLoading } replace = Replace::kNo;
   };
-  struct Client {
+  // A client as its edits know it: its name (the edit log's player), its
+  // edits queued, its undo history.
+  struct Editor {
     std::string name;
-    std::shared_ptr<WorldClient> link;
-    Vec3f position;
-    std::int32_t view_distance = 0, full_res_radius = 0;
-    bool placed = false;
     std::size_t edits_queued = 0;
     History history;
-    std::vector<PresenceEntryMsg> presence;  // last sent
-    // Changes of chunks it holds coarser than full resolution, handed over
-    // together (mips_changed) at mip_due: told of every tick, a thousand
-    // clients each holding some of the world's edits afar cost a thousand
-    // posts a tick, for refreshes their replicators hold back anyway.
-    std::vector<VersionPtr> mip_news;
-    std::uint64_t mip_news_tick = 0;  // the newest news' tick
-    std::chrono::steady_clock::time_point mip_due;
   };
   struct Rollback {
     std::string actor;
@@ -375,12 +332,10 @@ class WorldOwner : private WorldView {
   // leaves one to the server writing its neighbours (ClaimRule).
   Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr,
                     ClaimRule rule = ClaimRule::kAny);
-  bool near_enough(const Client& c, const Region& r) const;
   // The chunks of r asked for and kept loaded for a queued edit (unbusy
   // releases them).
   void reserve(const Region& r);
   void unbusy(const Region& r);
-  void send_presence();
   void unload_unwatched();  // every tick: a tick's part of a pass over loaded_
   void lighten_some();
 
@@ -389,53 +344,16 @@ class WorldOwner : private WorldView {
   const ServerOptions& options_;
   ServerCounters& counters_;
   Strand strand_;
-  struct Join {
-    std::string name;
-    std::shared_ptr<WorldClient> link;
-  };
-  struct Leave {};
-  struct Moved {
-    Vec3f position;
-    std::int32_t view_distance, full_res_radius;
-  };
-  struct HoldsFull {
-    std::vector<Vec3i> chunks;
-  };
-  struct Request {
-    ClientId id;
-    std::chrono::steady_clock::time_point queued;
-    std::variant<std::vector<ChunkWant>, std::vector<Vec3i>, std::vector<HorizonWant>, Join, Leave, Moved, HoldsFull>
-        what;
-  };
-  void queue_request(Request r);
-  void drain_requests();
-  void do_join(ClientId id, Join j);
-  void do_leave(ClientId id);
-  void do_moved(ClientId id, const Moved& m);
+  void handle(WorldRequest& r);
   void do_want(ClientId id, const std::vector<ChunkWant>& chunks);
-  void do_release(ClientId id, const std::vector<Vec3i>& chunks);
   void do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants);
-  void do_holds_full(ClientId id, const HoldsFull& h);
-  // Hands each client whose mip news is due its news (mips_changed); every
-  // tick.
-  void deliver_mip_news();
-  // Hands c its mip news now, whenever it was due.
-  void hand_mip_news(Client& c);
   std::vector<UnitUpdate> units_scratch_;  // apply_units'
-  std::mutex requests_m_;
-  std::deque<Request> requests_;  // guarded by requests_m_
-  bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue
-  std::function<void(std::chrono::nanoseconds)> request_wait_;
   asio::steady_timer tick_timer_;
   std::chrono::steady_clock::time_point next_tick_;
   std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report
   std::chrono::steady_clock::time_point next_slow_tick_report_{};
 
-  std::unordered_map<ClientId, Client> clients_;
-  // Clients with mip news, by when it is due, earliest first (one period
-  // for all: a queue). An entry is stale when its client's news went out
-  // sooner (holds_full) or it left: skipped.
-  std::deque<std::pair<std::chrono::steady_clock::time_point, ClientId>> mip_news_due_;
+  std::unordered_map<ClientId, Editor> editors_;
   // Chunks with their voxels, and chunks kept as mips only.
   Vec3iMap<Loaded> loaded_;
   std::size_t mips_only_ = 0;
@@ -553,8 +471,7 @@ class WorldOwner : private WorldView {
   std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
-  InterestIndex interest_;
-  PresenceGrid presence_;
+  FanOut fan_out_;
   std::uint64_t tick_ = 0;
   std::uint64_t commits_pending_ = 0;
   std::uint64_t last_committed_tick_ = 0;
@@ -564,6 +481,7 @@ class WorldOwner : private WorldView {
   std::atomic<bool> storage_failed_flag_{false};
   std::promise<void> drained_;
   bool drain_wanted_ = false;
+  RequestQueue requests_;  // last: its drains run on the strand until the owner goes
 };
 
 }  // namespace terrane

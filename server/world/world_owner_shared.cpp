@@ -137,7 +137,7 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
       const Loaded& l = it->second;
       if (!older_than(*l.current, c.revision)) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
-      if (!interest_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
+      if (!fan_out_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
           loading_.count(c.pos) == 0 && l.current == l.published) {
         // No client here holds it and nothing here waits for it: forgotten,
         // not read again (a server beside a busy one would otherwise read
@@ -256,7 +256,7 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
           break;
         }
       if (!row) {
-        if (clients_.count(id) != 0)
+        if (fan_out_.present(id))
           reject(id, edit, RejectReason::kNotOwner,
                  fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
         return;
@@ -403,8 +403,7 @@ void WorldOwner::settle_forwarded() {
   std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
-    const auto client = clients_.find(o.id);
-    bool done = client == clients_.end();
+    bool done = !fan_out_.present(o.id);
     if (!done && o.answer && !o.answer->accepted) {
       reject(o.id, o.edit, RejectReason::kNotOwner,
              fmt::format("server {} refused the forwarded edit: {}", o.to, o.answer->reason));
@@ -417,8 +416,8 @@ void WorldOwner::settle_forwarded() {
       bool current = true;
       for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
       if (current) {
-        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
-                                  SendClass::kControl);
+        fan_out_.send(o.id, std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
+                      SendClass::kControl);
         done = true;
       }
     } else if (!done && now - o.sent > wait) {
