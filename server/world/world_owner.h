@@ -81,28 +81,15 @@
 #include "server/world/interest.h"
 #include "server/world/presence.h"
 #include "server/world/fan_out.h"
+#include "server/world/horizon_cache.h"
+#include "server/world/residency.h"
+#include "server/world/world_clock.h"
 #include "server/world/request_queue.h"
 #include "server/world/world_client.h"
 
 namespace terrane {
 
-// Read access for tests and tools (Server::inspect).
-class WorldView {
- public:
-  virtual ~WorldView() = default;
-  virtual bool loaded(Vec3i chunk_pos) const = 0;
-  // Revision of a loaded chunk as applied (committed or about to be).
-  virtual std::uint64_t revision(Vec3i chunk_pos) const = 0;
-  virtual Voxel get(Vec3i voxel) const = 0;
-  // The chunk as applied, or null when it is all Air (precondition: loaded).
-  virtual const Chunk* chunk(Vec3i chunk_pos) const = 0;
-  virtual std::size_t loaded_count() const = 0;
-  // Estimates granted and not yet replaced: queued, or being generated (in
-  // the background or for a client).
-  virtual std::size_t estimates_waiting() const = 0;
-};
-
-class WorldOwner : private WorldView {
+class WorldOwner : private LoadWatcher {
  public:
   using Strand = asio::strand<asio::io_context::executor_type>;
 
@@ -191,14 +178,6 @@ class WorldOwner : private WorldView {
   bool storage_failed() const { return storage_failed_flag_.load(); }
 
  private:
-  struct Loaded {
-    VersionPtr published;  // what clients are handed
-    VersionPtr current;    // what the next edit builds on (newer while a commit is in flight)
-    std::uint64_t used_tick = 0;
-    // An estimate (ChunkVersion::estimate) granted to a client is queued to
-    // be generated for real in the background (estimates_), then loaded.
-    enum class Replace : std::uint8_t { kNo, kQueued, kLoading } replace = Replace::kNo;
-  };
   // A client as its edits know it: its name (the edit log's player), its
   // edits queued, its undo history.
   struct Editor {
@@ -243,43 +222,9 @@ class WorldOwner : private WorldView {
     std::uint32_t edit_id;
     std::chrono::steady_clock::time_point received;
   };
-  struct Waiter {
-    ClientId id;
-    bool full;
-  };
-  // The chunks kept only as mips (ChunkVersion::mips_only) at most, beyond
-  // which those nobody holds are forgotten.
-  static constexpr std::size_t kMaxMipsOnly = 1 << 20;
-  // Chunks reduced to their mips per tick at most (each costs encoding its
-  // three mip levels, tens of microseconds).
-  static constexpr std::size_t kLightenPerTick = 128;
-  // Background loads replacing estimates at a time (per loader thread: a
-  // stream or urgent load waits for at most one generation).
-  static constexpr std::size_t kReplacingLoadsPerWorker = 1;
-  // Horizon images kept at most (a few kilobytes each); beyond, all are
-  // dropped and made again when wanted.
-  static constexpr std::size_t kMaxHorizons = 4096;
-  // A kept image whose region changed is served until it is this old, then
-  // made again when next wanted: images are approximate, and remaking one
-  // after every tick that edits its region would cost a busy world a
-  // region's read per joining client.
-  static constexpr std::chrono::seconds kHorizonRefresh{10};
-
-  // WorldView
-  bool loaded(Vec3i chunk_pos) const override {
-    auto it = loaded_.find(chunk_pos);
-    return it != loaded_.end() && it->second.current->has_voxels();
-  }
-  std::uint64_t revision(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->revision(); }
-  Voxel get(Vec3i voxel) const override;
-  const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
-  std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
-  std::size_t estimates_waiting() const override {
-    return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [this](const auto& kv) {
-      return kv.second.current->estimate() &&
-             (kv.second.replace != Loaded::Replace::kNo || loading_.count(kv.first) != 0);
-    }));
-  }
+  // LoadWatcher (a shared world's chunks read again)
+  bool stale(Vec3i chunk_pos) const override { return stale_.count(chunk_pos) != 0; }
+  void landed(Vec3i chunk_pos) override { refreshed(chunk_pos); }
 
   void arm_tick();
   void on_tick();
@@ -303,25 +248,8 @@ class WorldOwner : private WorldView {
   // c's units make, or null when they do not decode as units of its chunk.
   VersionPtr apply_units(const ChunkVersion& prev, const ChunkChange& c);
   void fatal_storage(const std::string& why);
-  // Starts loading chunk_pos unless loaded or loading; true if loaded with
-  // the given level (0: its voxels), and not as an estimate when exact.
-  bool request(Vec3i chunk_pos, int level = 0, bool exact = false);
-  // Hands chunk_pos to Storage; the result comes back to on_loaded.
-  void load(Vec3i chunk_pos, Storage::Priority priority);
-  void on_loaded(LoadedChunk c);
-  // A want of the coarsest level of a chunk not loaded: taken (true) when
-  // its region's coarse image can serve it (read now or being read).
-  bool want_coarse(Vec3i chunk_pos, Waiter w);
-  void on_coarse_loaded(LoadedCoarse c);
-  // Starts background loads of queued estimates (estimates_), at most
-  // kReplacingLoadsPerWorker per loader thread at a time.
-  void replace_estimates();
-  void grant(ClientId id, Vec3i chunk_pos, bool full);
-  void flush_grants();
   void retry_pending();
   void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason);
-  bool read_current(const Region& r, Box& out) const;
-  void copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied);
   // Whether this server may write every chunk of r now: always on SQLite;
   // in a shared PostgreSQL world, once it holds the leases of their regions
   // (a claim is started for each region not known). kNo sets why (the
@@ -332,21 +260,12 @@ class WorldOwner : private WorldView {
   // leaves one to the server writing its neighbours (ClaimRule).
   Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr,
                     ClaimRule rule = ClaimRule::kAny);
-  // The chunks of r asked for and kept loaded for a queued edit (unbusy
-  // releases them).
-  void reserve(const Region& r);
-  void unbusy(const Region& r);
-  void unload_unwatched();  // every tick: a tick's part of a pass over loaded_
-  void lighten_some();
-
   World& world_;
   Storage& storage_;
   const ServerOptions& options_;
   ServerCounters& counters_;
   Strand strand_;
   void handle(WorldRequest& r);
-  void do_want(ClientId id, const std::vector<ChunkWant>& chunks);
-  void do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants);
   std::vector<UnitUpdate> units_scratch_;  // apply_units'
   asio::steady_timer tick_timer_;
   std::chrono::steady_clock::time_point next_tick_;
@@ -354,52 +273,9 @@ class WorldOwner : private WorldView {
   std::chrono::steady_clock::time_point next_slow_tick_report_{};
 
   std::unordered_map<ClientId, Editor> editors_;
-  // Chunks with their voxels, and chunks kept as mips only.
-  Vec3iMap<Loaded> loaded_;
-  std::size_t mips_only_ = 0;
-  std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
-  // unload_unwatched's pass over loaded_, a tick's share of its slots at a time.
-  struct UnloadPass {
-    std::size_t next_slot = 0;  // 0: a pass begins at the next tick
-    bool lighten = false;       // over resident_chunks when the pass began
-    bool forget = false;        // over kMaxMipsOnly when the pass began
-    std::vector<std::pair<std::uint64_t, Vec3i>> drop;  // (used tick, chunk) that may be lightened
-  } unload_pass_;
-  std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
-  // Regions whose coarse image was read (a chunk of one without an entry
-  // was never stored), and the wants waiting for an image being read.
-  std::unordered_set<Vec3i, Vec3iHash> regions_read_;
-  std::unordered_map<Vec3i, std::vector<std::pair<Vec3i, Waiter>>, Vec3iHash> coarse_waiting_;
-  std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
-  // Estimates granted, to be generated for real, in the order first granted
-  // (a client asks nearest first), and how many of them are loading.
-  std::deque<Vec3i> estimates_;
-  std::size_t replacing_ = 0;
-  std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
-  // Horizon images made and kept (made again once a chunk of the region
-  // changed and kHorizonRefresh passed), and images being made: the clients
-  // waiting for each, and whether its region changed meanwhile (then it is
-  // kept as changed).
-  void on_horizon_loaded(LoadedHorizon h);
-  void horizon_changed(Vec3i chunk_pos);
-  // Each indexed by level - kHorizonNearLevel.
-  struct KeptHorizon {
-    HorizonPtr image;
-    std::chrono::steady_clock::time_point made;
-    bool changed = false;  // a chunk of the region changed since
-  };
-  std::unordered_map<Vec3i, KeptHorizon, Vec3iHash> horizons_[2];
-  struct MakingHorizon {
-    std::vector<ClientId> waiting;
-    bool changed = false;
-  };
-  std::unordered_map<Vec3i, MakingHorizon, Vec3iHash> horizon_making_[2];
-  bool grants_scheduled_ = false;
   // Edits in arrival order. One that waits (chunks, a claim) holds up only
   // the edits behind it of its player or on its chunks (apply_edits).
   std::deque<PendingEdit> edits_;
-  // Chunks queued edits will touch (never unloaded): chunk -> edits.
-  std::unordered_map<Vec3i, int, Vec3iHash> busy_;
   // A shared world's regions as far as this server's edits know them:
   // claiming; held, with stale chunks of it still being read again; held;
   // held by another server; or not known, the database out of reach (both
@@ -415,8 +291,6 @@ class WorldOwner : private WorldView {
   // Whether held is older than revision (an estimate is older than anything stored).
   static bool older_than(const ChunkVersion& held, std::uint64_t revision);
   bool stale_in(Vec3i region) const;
-  // Loads cp unless a load of it is under way.
-  void load_unless_loading(Vec3i cp, Storage::Priority priority);
   // How long a forwarded edit waits for its owner's answer.
   // One forwarded edit of player within its rate (forwarded_rate_).
   bool take_forwarded_rate(const std::string& player);
@@ -449,7 +323,6 @@ class WorldOwner : private WorldView {
   // After a load of cp landed: a stale chunk is done once held at its
   // stored revision (or no longer held), else read again.
   void refreshed(Vec3i cp);
-  void apply_loaded(LoadedChunk c);
   std::unordered_map<Vec3i, RegionLeaseState, Vec3iHash> leases_;
   // Chunks held older than stored (another server wrote them): chunk ->
   // the revision stored.
@@ -471,12 +344,13 @@ class WorldOwner : private WorldView {
   std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
+  WorldClock clock_;
   FanOut fan_out_;
-  std::uint64_t tick_ = 0;
+  HorizonCache horizons_;
+  Residency residency_;
   std::uint64_t commits_pending_ = 0;
   std::uint64_t last_committed_tick_ = 0;
   std::vector<std::pair<std::uint64_t, std::function<void(std::uint64_t, bool)>>> flush_waiters_;
-  bool stopping_ = false;
   bool storage_failed_ = false;
   std::atomic<bool> storage_failed_flag_{false};
   std::promise<void> drained_;

@@ -73,8 +73,8 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   // (A chunk not held is read from the store when wanted, but a load of it
   // under way may have read it before the previous owner's last write.)
   for (const auto& [cp, revision] : claimed.stored)
-    if (auto it = loaded_.find(cp); it == loaded_.end() ? loading_.count(cp) != 0
-                                                        : older_than(*it->second.current, revision))
+    if (const auto* held = residency_.find(cp); held == nullptr ? residency_.loading(cp)
+                                                                : older_than(*held->current, revision))
       read_again(cp, revision, Storage::Priority::kUrgent);
   l.state = stale_in(region) ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
 }
@@ -85,11 +85,6 @@ bool WorldOwner::older_than(const ChunkVersion& held, std::uint64_t revision) {
 
 bool WorldOwner::stale_in(Vec3i region) const {
   return std::any_of(stale_.begin(), stale_.end(), [&](const auto& s) { return lease_region_of(s.first) == region; });
-}
-
-void WorldOwner::load_unless_loading(Vec3i cp, Storage::Priority priority) {
-  if (!loading_.try_emplace(cp).second) return;
-  load(cp, priority);
 }
 
 bool WorldOwner::writes_region(Vec3i region) const {
@@ -103,15 +98,15 @@ void WorldOwner::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority 
   if (!fresh) it->second = std::max(it->second, revision);
   // A load already under way may have read the store before this revision:
   // refreshed() reads again when it lands.
-  load_unless_loading(cp, priority);
+  residency_.load_unless_loading(cp, priority);
 }
 
 void WorldOwner::refreshed(Vec3i cp) {
   auto s = stale_.find(cp);
   if (s == stale_.end()) return;
-  if (auto held = loaded_.find(cp); held != loaded_.end() && older_than(*held->second.current, s->second)) {
+  if (const auto* held = residency_.find(cp); held != nullptr && older_than(*held->current, s->second)) {
     // The load that landed read the store before the newer revision.
-    load_unless_loading(cp, Storage::Priority::kUrgent);
+    residency_.load_unless_loading(cp, Storage::Priority::kUrgent);
     return;
   }
   // Held at the stored revision, or no longer held (read from the store when wanted).
@@ -127,40 +122,34 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
     std::map<std::uint64_t, std::vector<VersionPtr>> updated;  // by the writer's tick
     for (const ChunkChange& c : changes) {
       if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
-      auto it = loaded_.find(c.pos);
-      if (it == loaded_.end()) {
+      const Residency::Loaded* held = residency_.find(c.pos);
+      if (held == nullptr) {
         // Not held; but a load under way may have read the store before
         // this commit: read again if it did.
-        if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
+        if (residency_.loading(c.pos)) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
         continue;
       }
-      const Loaded& l = it->second;
+      const Residency::Loaded& l = *held;
       if (!older_than(*l.current, c.revision)) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
-      if (!fan_out_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
-          loading_.count(c.pos) == 0 && l.current == l.published) {
+      if (!fan_out_.watched(c.pos) && !residency_.busy(c.pos) && stale_.count(c.pos) == 0 &&
+          !residency_.loading(c.pos) && l.current == l.published) {
         // No client here holds it and nothing here waits for it: forgotten,
         // not read again (a server beside a busy one would otherwise read
         // every chunk the other writes that it once served); read from the
         // store when next wanted. Its region's coarse image too, which
         // would otherwise say the chunk was never stored.
-        horizon_changed(c.pos);
-        regions_read_.erase(coarse_region_of(c.pos));
-        if (!l.current->has_voxels()) --mips_only_;
-        loaded_.erase(it);
-        counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+        residency_.forget(c.pos);
         counters_.chunks_forgotten_elsewhere.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
       if (!c.units.empty() && l.current->has_voxels() && !l.current->estimate() &&
-          l.current->revision() + 1 == c.revision && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
-          loading_.count(c.pos) == 0 && l.current == l.published) {
+          l.current->revision() + 1 == c.revision && !residency_.busy(c.pos) && stale_.count(c.pos) == 0 &&
+          !residency_.loading(c.pos) && l.current == l.published) {
         // The notice's units take what is held to the new revision: applied
         // here, and sent to the holders as units, as an edit here would be.
         if (VersionPtr v = apply_units(*l.current, c)) {
-          it->second.current = v;
-          it->second.used_tick = tick_;
-          updated[c.tick].push_back(std::move(v));
+          updated[c.tick].push_back(residency_.advance(std::move(v)));
           continue;
         }
         server_log().warn("chunk ({},{},{}): the units of revision {} in another server's notice do not apply; "
@@ -192,12 +181,12 @@ void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
     if (regions.empty()) return;
     Vec3iMap<bool> in;
     for (const Vec3i r : regions) in[r] = true;
-    for (const auto& [cp, l] : loaded_) {
+    residency_.for_each([&](Vec3i cp, const Residency::Loaded& l) {
       const Vec3i region = lease_region_of(cp);
       // Estimates are replaced by the chunks as they are (their loads read the store).
-      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) continue;
-      load_unless_loading(cp, Storage::Priority::kBackground);
-    }
+      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) return;
+      residency_.load_unless_loading(cp, Storage::Priority::kBackground);
+    });
   });
 }
 
@@ -321,11 +310,11 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
         auto edit = decode_forwarded_edit(in.edit);
         const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
         const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait();
-        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
+        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || clock_.stopping || too_old) {
           // Too old: its sender has told its client there was no answer.
           const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
                                   : in.player.empty() ? std::string("the player's name is missing or too long")
-                                  : stopping_ ? std::string("the region's server is shutting down")
+                                  : clock_.stopping ? std::string("the region's server is shutting down")
                                   : too_old   ? std::string("it waited too long; its sender has given up on it")
                                   : r.empty() ? std::string("edit outside the world")
                                               : std::string("undo and redo are not forwarded");
@@ -341,7 +330,7 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
           continue;
         }
         counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
-        reserve(r);
+        residency_.reserve(r);
         // What this server knew of the edit's regions held elsewhere may be
         // out of date (the sender may have handed them over): asked again
         // when the edit's turn comes.
@@ -414,7 +403,7 @@ void WorldOwner::settle_forwarded() {
       // answer) and sent to the client before the ack, which names the
       // owner's tick, as the UpdateBatch of its units does.
       bool current = true;
-      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
+      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && !residency_.loading(cp); });
       if (current) {
         fan_out_.send(o.id, std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
                       SendClass::kControl);
