@@ -7,6 +7,7 @@
 #include "common/codec/net_codec.h"
 #include "common/world/view.h"
 #include "server/base/log.h"
+#include "server/world/shared_authority.h"
 
 namespace terrane {
 
@@ -31,16 +32,18 @@ WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, con
       fan_out_(options, counters),
       horizons_(strand_, storage, fan_out_),
       residency_(strand_, storage, options, counters, clock_, fan_out_, horizons_),
+      authority_(storage.leased() ? std::unique_ptr<Authority>(std::make_unique<SharedAuthority>(
+                                        strand_, world, storage, options, counters, clock_, residency_, fan_out_, *static_cast<EditQueue*>(this)))
+                                  : std::make_unique<LocalAuthority>()),
       requests_(strand_, [this](WorldRequest& r) { handle(r); }) {
-  residency_.watch_loads(*this);
+  residency_.watch_loads(*authority_);
 }
 
 void WorldOwner::start() {
   asio::post(strand_, [this] {
     next_tick_ = std::chrono::steady_clock::now();
     arm_tick();
-    // Edits forwarded while this server was away.
-    if (storage_.leased()) take_inbox();
+    authority_->start();
   });
 }
 
@@ -211,6 +214,37 @@ void WorldOwner::rollback(std::string actor, std::vector<EditLogEntry> entries, 
   });
 }
 
+void WorldOwner::queue_forwarded(EditRequestMsg edit, std::string player, Forwarded from) {
+  edits_.push_back(PendingEdit{0, std::move(edit), std::move(player), nullptr, from});
+}
+
+void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
+  asio::post(strand_, [this, changes = std::move(changes)]() mutable { authority_->changed_elsewhere(std::move(changes)); });
+}
+
+void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
+  asio::post(strand_, [this, regions = std::move(regions)]() mutable { authority_->read_again_elsewhere(std::move(regions)); });
+}
+
+void WorldOwner::inbox_has_edits() {
+  asio::post(strand_, [this] { authority_->inbox_has_edits(); });
+}
+
+void WorldOwner::answered(ForwardAnswer answer) {
+  asio::post(strand_, [this, answer = std::move(answer)]() mutable { authority_->answered(std::move(answer)); });
+}
+
+void WorldOwner::lease_lost(Vec3i region, std::string why) {
+  asio::post(strand_, [this, region, why = std::move(why)] {
+    // Another server may have written the region since: what this one holds
+    // of it may be stale, so it must not write there again. Stopping is the
+    // safe answer (a restart reads the region afresh); writes in flight are
+    // fenced by the database whatever happens here.
+    server_log().critical("region ({},{},{}): lease lost ({}); stopping", region.x, region.y, region.z, why);
+    fatal_storage("lease lost");
+  });
+}
+
 void WorldOwner::refuse(ClientId id, EditRequestMsg e, RejectReason why, std::string reason) {
   asio::post(strand_, [this, id, e = std::move(e), why, reason = std::move(reason)] { reject(id, e, why, reason); });
 }
@@ -314,7 +348,9 @@ WorldOwner::EditStep WorldOwner::apply_rollback(TickEdits& t) {
   Writable w = Writable::kYes;
   for (const EditLogEntry& e : job.entries)
     if (w != Writable::kNo)
-      if (const Writable here = writable(bounds.clamp(e.box), &not_ours); here != Writable::kYes) w = here;
+      if (const Writable here = authority_->writable(bounds.clamp(e.box), &not_ours, nullptr, ClaimRule::kAny);
+          here != Writable::kYes)
+        w = here;
   if ((!ready || w == Writable::kWaiting) && !clock_.stopping) {  // wait for its chunks and leases
     for (const EditLogEntry& e : job.entries) t.mark_waiting(bounds.clamp(e.box));
     set_aside(t);
@@ -379,7 +415,7 @@ WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
   // A client's edit also waits while one of its edits whose chunks it
   // meets is forwarded and not answered: another server may apply that.
   if (t.waiting_players.count(pe.player) != 0 || t.behind_waiting(r) ||
-      (client != nullptr && !pe.forwarded && forward_pending(pe.id, r))) {
+      (client != nullptr && !pe.forwarded && authority_->forward_pending(pe.id, r))) {
     wait();
     return EditStep::kNext;
   }
@@ -404,20 +440,11 @@ WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
   std::optional<std::uint32_t> holder;
   const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
   const Writable w =
-      writable(writes, &not_ours, &holder,
+      authority_->writable(writes, &not_ours, &holder,
                client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
   // Another server's region in it: which of the others are this server's
   // decides what goes with the edit, so claims under way are waited for.
-  const auto claiming = [&] {
-    bool any = false;
-    for_each_chunk_in(writes, [&](Vec3i cp) {
-      auto l = leases_.find(lease_region_of(cp));
-      any = any || (l != leases_.end() && (l->second.state == RegionLeaseState::kClaiming ||
-                                           l->second.state == RegionLeaseState::kRefreshing));
-    });
-    return any;
-  };
-  if ((w == Writable::kWaiting || (w == Writable::kNo && !history && claiming())) && !clock_.stopping) {
+  if ((w == Writable::kWaiting || (w == Writable::kNo && !history && authority_->claiming(writes))) && !clock_.stopping) {
     wait();  // for the claims
     return EditStep::kNext;
   }
@@ -436,7 +463,7 @@ WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
                            (client != nullptr || (pe.forwarded && *holder != pe.forwarded->from));
     if (may_go_on)
       for_each_chunk_in(writes, [&](Vec3i cp) {
-        if (writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
+        if (authority_->writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));
       });
     if (may_go_on) {
       // Handed over only with nothing of this server's in flight: no commit
@@ -448,9 +475,9 @@ WorldOwner::EditStep WorldOwner::apply_player_edit(TickEdits& t) {
                                          [&](Vec3i cp) { return mine.count(lease_region_of(cp)) != 0; });
       if (!mine.empty() && in_flight) return EditStep::kStop;
       if (pe.forwarded)
-        relay(pe, writes, *holder);
+        authority_->relay(*pe.forwarded, writes, *holder);
       else
-        forward(pe, writes, *holder);
+        authority_->forward(pe.id, pe.edit, pe.player, writes, *holder);
     } else if (pe.forwarded) {
       t.refuse(*pe.forwarded, w == Writable::kNo ? "not held by the server it was sent to: " + not_ours
                                                : std::string("the region's server is shutting down"));
@@ -634,7 +661,7 @@ void WorldOwner::on_tick() {
   fan_out_.deliver_mip_news(std::chrono::steady_clock::now());
   const auto t_edits = Clock::now();
   apply_edits();
-  if (!forwarded_.empty()) settle_forwarded();
+  authority_->settle();
   const auto t_presence = Clock::now();
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
   if (options_.presence_hz > 0) fan_out_.send_presence(clock_.tick);

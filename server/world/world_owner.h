@@ -80,6 +80,7 @@
 #include "server/world/history.h"
 #include "server/world/interest.h"
 #include "server/world/presence.h"
+#include "server/world/authority.h"
 #include "server/world/fan_out.h"
 #include "server/world/horizon_cache.h"
 #include "server/world/residency.h"
@@ -89,7 +90,7 @@
 
 namespace terrane {
 
-class WorldOwner : private LoadWatcher {
+class WorldOwner : private EditQueue {
  public:
   using Strand = asio::strand<asio::io_context::executor_type>;
 
@@ -192,10 +193,6 @@ class WorldOwner : private LoadWatcher {
     std::function<void(RollbackResult)> done;
     std::uint64_t restored = 0;
   };
-  struct Forwarded {
-    std::int64_t inbox_id = 0;
-    std::uint32_t from = 0;  // the server that forwarded it
-  };
   struct PendingEdit {
     ClientId id;
     EditRequestMsg edit;
@@ -206,25 +203,15 @@ class WorldOwner : private LoadWatcher {
     // unset for rollbacks and forwarded edits, which are not acknowledged to a client).
     std::chrono::steady_clock::time_point received{};
   };
-  // An edit this server forwarded to a region's owner, waiting for its
-  // answer; then for the edit's chunks to be read again here, before the
-  // client is told.
-  struct Outgoing {
-    ClientId id;
-    EditRequestMsg edit;
-    Region box;
-    std::uint32_t to;
-    std::chrono::steady_clock::time_point sent;
-    std::optional<ForwardAnswer> answer;
-  };
   struct Ack {
     ClientId id;
     std::uint32_t edit_id;
     std::chrono::steady_clock::time_point received;
   };
-  // LoadWatcher (a shared world's chunks read again)
-  bool stale(Vec3i chunk_pos) const override { return stale_.count(chunk_pos) != 0; }
-  void landed(Vec3i chunk_pos) override { refreshed(chunk_pos); }
+  using Writable = Authority::Writable;
+  // EditQueue (a shared world's forwarded edits)
+  void queue_forwarded(EditRequestMsg edit, std::string player, Forwarded from) override;
+  void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason) override;
 
   void arm_tick();
   void on_tick();
@@ -244,29 +231,14 @@ class WorldOwner : private LoadWatcher {
   // holders: those at full resolution at once (WorldClient::committed),
   // the others gathered for deliver_mip_news.
   void publish(std::uint64_t tick, const std::vector<VersionPtr>& versions, std::chrono::steady_clock::time_point now);
-  // The version after prev (held with its voxels at c.revision - 1) that
-  // c's units make, or null when they do not decode as units of its chunk.
-  VersionPtr apply_units(const ChunkVersion& prev, const ChunkChange& c);
   void fatal_storage(const std::string& why);
   void retry_pending();
-  void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason);
-  // Whether this server may write every chunk of r now: always on SQLite;
-  // in a shared PostgreSQL world, once it holds the leases of their regions
-  // (a claim is started for each region not known). kNo sets why (the
-  // holder).
-  enum class Writable : std::uint8_t { kYes, kWaiting, kNo };
-  // kNo also sets holder when the holding server is known. rule: how a
-  // free region is claimed; a client's own edit (which can be forwarded)
-  // leaves one to the server writing its neighbours (ClaimRule).
-  Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr,
-                    ClaimRule rule = ClaimRule::kAny);
   World& world_;
   Storage& storage_;
   const ServerOptions& options_;
   ServerCounters& counters_;
   Strand strand_;
   void handle(WorldRequest& r);
-  std::vector<UnitUpdate> units_scratch_;  // apply_units'
   asio::steady_timer tick_timer_;
   std::chrono::steady_clock::time_point next_tick_;
   std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report
@@ -276,78 +248,13 @@ class WorldOwner : private LoadWatcher {
   // Edits in arrival order. One that waits (chunks, a claim) holds up only
   // the edits behind it of its player or on its chunks (apply_edits).
   std::deque<PendingEdit> edits_;
-  // A shared world's regions as far as this server's edits know them:
-  // claiming; held, with stale chunks of it still being read again; held;
-  // held by another server; or not known, the database out of reach (both
-  // asked again after a second; edits wait in the second case).
-  struct RegionLeaseState {
-    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable, kHandingOver } state = kClaiming;
-    bool left = false;  // kRefused: free, left to holder by ClaimRule::kPreferNeighbours
-    std::string why;
-    std::optional<std::uint32_t> holder;
-    std::chrono::steady_clock::time_point ask_again{};
-  };
-  void on_claimed(Vec3i region, Storage::Claimed claimed);
-  // Whether held is older than revision (an estimate is older than anything stored).
-  static bool older_than(const ChunkVersion& held, std::uint64_t revision);
-  bool stale_in(Vec3i region) const;
-  // How long a forwarded edit waits for its owner's answer.
-  // One forwarded edit of player within its rate (forwarded_rate_).
-  bool take_forwarded_rate(const std::string& player);
-  std::chrono::milliseconds forward_wait() const;
-  // Sends pe (a client's edit of box, in regions server to holds) to that
-  // server's inbox, handing over first the regions of box this server
-  // holds (so one server can write the whole edit).
-  void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
-  // Passes pe (an edit forwarded here, of box) on to server to, handing
-  // over the regions of box this server holds; to answers its sender.
-  void relay(const PendingEdit& pe, const Region& box, std::uint32_t to);
-  // Marks the regions of box this server holds as being handed over to
-  // server to (edits there wait), and lists them; handed_over settles them
-  // once the release is done (ok) or failed.
-  std::vector<Vec3i> hand_over(const Region& box, std::uint32_t to);
-  void handed_over(const std::vector<Vec3i>& regions, bool ok);
-  // Whether client id has an edit being forwarded, or forwarded and not
-  // answered yet, whose box meets chunks of r: its next edit there waits
-  // (a player's edits keep their order whatever server applies them).
-  bool forward_pending(ClientId id, const Region& r) const;
-  void take_inbox();
-  void read_inbox_page(std::int64_t after);
-  // Tells clients the answers to their forwarded edits once the edits'
-  // chunks are current here; gives up on those unanswered for too long.
-  void settle_forwarded();
-  bool writes_region(Vec3i region) const;
-  // cp is stored at revision, newer than held here (another server wrote
-  // it): read again until held at least at revision.
-  void read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority);
-  // After a load of cp landed: a stale chunk is done once held at its
-  // stored revision (or no longer held), else read again.
-  void refreshed(Vec3i cp);
-  std::unordered_map<Vec3i, RegionLeaseState, Vec3iHash> leases_;
-  // Chunks held older than stored (another server wrote them): chunk ->
-  // the revision stored.
-  std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
-  // Forwarded edits: this server's clients' (inbox row -> edit), and the
-  // inbox of this server (rows taken and rows listed by the read under way;
-  // a read under way; another notice came during it).
-  std::unordered_map<std::int64_t, Outgoing> forwarded_;
-  std::unordered_multimap<ClientId, Region> forwarding_;  // sent, row not known yet
-  std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
-  std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
-  // Forwarded edits per player, whatever server they came through, at the
-  // rate a session may keep up: a player cannot pass it by editing here
-  // through several servers at once.
-  std::unordered_map<std::string, TokenBucket> forwarded_rate_;
-  static constexpr std::size_t kMaxForwardedRates = 4096;
-  bool inbox_reading_ = false, inbox_again_ = false;
-  // Answers that came before their forward's own callback.
-  std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
   std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
   std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
   WorldClock clock_;
   FanOut fan_out_;
   HorizonCache horizons_;
   Residency residency_;
+  std::unique_ptr<Authority> authority_;  // SharedAuthority when the store has leases, else LocalAuthority
   std::uint64_t commits_pending_ = 0;
   std::uint64_t last_committed_tick_ = 0;
   std::vector<std::pair<std::uint64_t, std::function<void(std::uint64_t, bool)>>> flush_waiters_;
