@@ -1,5 +1,6 @@
 // What the world strand says to a connected client (WorldClient, made by
-// its replicator) and what streaming asks of it (ChunkWant, HorizonWant).
+// its replicator), what streaming asks of it (ChunkWant, HorizonWant), and
+// what a rollback comes to (RollbackResult).
 // Plain interface and data; every WorldClient call is made on the world
 // strand, and implementations post to the client's own strand.
 #pragma once
@@ -39,6 +40,14 @@ class WorldClient {
   // Frames the world answers with (acks, rejects, read results, presence).
   virtual void send(SharedFrame frame, SendClass cls) = 0;
   virtual void close(CloseReason why, const std::string& text) = 0;
+};
+
+// A rollback's outcome (WorldOwner::rollback).
+struct RollbackResult {
+  bool ok = false;
+  std::string error;
+  std::uint64_t tick = 0;
+  std::uint64_t voxels_restored = 0;
 };
 
 struct HorizonWant {
