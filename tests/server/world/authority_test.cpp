@@ -1,7 +1,7 @@
 // LocalAuthority, a world this server alone writes: every box is writable
 // now, whatever the rule, nothing is claimed, forwarded or stale. (The
-// shared world's authority, SharedAuthority, is tested with PostgreSQL and
-// several servers in tests/client/cluster_test.cpp.)
+// shared world's authority is tested in shared_authority_test.cpp, and
+// with several servers in tests/client/cluster_test.cpp.)
 #include "server/world/authority.h"
 
 #include <gtest/gtest.h>
