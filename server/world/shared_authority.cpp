@@ -116,7 +116,7 @@ void SharedAuthority::read_again(Vec3i cp, std::uint64_t revision, Storage::Prio
   auto [it, fresh] = stale_.try_emplace(cp, revision);
   if (!fresh) it->second = std::max(it->second, revision);
   // A load already under way may have read the store before this revision:
-  // refreshed() reads again when it lands.
+  // landed() reads again when it lands.
   residency_.load_unless_loading(cp, priority);
 }
 
