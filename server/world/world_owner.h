@@ -1,144 +1,74 @@
-// WorldOwner: the one strand that owns the world's state — the loaded
-// chunk versions, the queued edits, every client's undo history, the
-// interest index (who holds what) and the presence grid.
+// WorldOwner: the world strand and the API to it. It owns no world state
+// itself: it makes the strand's owners, picks the authority once, and
+// hands each call to the owner it concerns, on the strand.
 //
-// It applies edits and publishes versions; it does no per-client streaming
-// and no encoding (replicators do both on their own strands, from the
-// versions they are handed).
+//   RequestQueue  clients' comings and goings and streaming's requests
+//                 (join, leave, moved, want, release, want_horizon,
+//                 holds_full), drained in slices of kRequestSlice
+//   FanOut        the clients as the world knows them, who holds what,
+//                 presence; tells holders of new versions
+//   HorizonCache  horizon images made and kept
+//   Residency     the chunk versions held: wants, grants, loads, coarse
+//                 images, estimates, lightening and unloading
+//   Authority     whether this server may write a box now: LocalAuthority
+//                 (SQLite), or SharedAuthority (a PostgreSQL world several
+//                 servers share: leases, forwarded edits, other servers'
+//                 changes)
+//   Tick          the tick: the edit queue, undo histories, commits,
+//                 acknowledgements, reads and hashes
 //
-// Tick (a fixed schedule of tick_hz, not re-armed after the work):
-//   1. apply the queued edits whose chunks are loaded, in arrival order, to
-//      copies of those chunks; each changed chunk becomes a new version
-//      (revision + 1) that the next tick builds on;
-//   2. hand the tick's versions to Storage, whose writer commits them (with
-//      any other tick queued by then) in one transaction while the world
-//      goes on with the next tick;
-//   3. when that commit is reported: acknowledge the tick's edits, publish
-//      its versions (what new readers are handed from then on) and tell each
-//      holder of a changed chunk at full resolution, once per tick, which of
-//      its chunks changed (InterestIndex); holders of changed chunks held
-//      coarser are told every mip_refresh_ms, of all the ticks since
-//      (WorldClient::mips_changed). A failed commit rejects the edits,
-//      closes every client with "server storage failure", after calling
-//      on_fatal.
+// The world applies edits and publishes versions; it does no per-client
+// streaming and no encoding (replicators do both on their own strands,
+// from the versions they are handed).
 //
-// Chunks: a client asks for chunks (want); loaded ones are granted at once,
-// the others when Storage has loaded or generated them. A chunk wanted only
-// at its coarsest level (4^3) comes from its region's coarse image when it
-// was stored (one read serves the region's 512 chunks, none decoded), as a
-// version with that level only; the chunk itself is read when a finer
-// level, an edit or a hash needs it. A grant registers
-// the client as a holder, so every later change reaches it, in order after
-// the grant. Chunks nobody holds at full resolution, with nothing pending,
-// are unloaded beyond resident_chunks, least recently used first.
-//
-// Clients' comings and goings and streaming's requests (join, leave,
-// moved, want, release, want_horizon) wait in one queue of their own, in
-// the order called, which the strand drains in slices of kRequestSlice: a
-// tick, a commit's acknowledgements or an edit posted meanwhile runs
-// between two slices instead of behind every request a thousand moving
-// clients queued. (One queue, so a client's requests never pass its join.)
-// The world's copy of a client's position so trails a directly posted edit
-// by that queue's wait (the stream gate keeps it near 20 ms): only undo and
-// redo are checked against it, and a step at the very edge of the
-// full-resolution region during a move may be refused, with its reason.
-// How long each request waited is reported (on_request_wait: the stream
-// gate, which then holds streaming back).
-//
-// In a world shared by several servers (PostgreSQL), leases, forwarded
-// edits and other servers' changes are in world_owner_shared.cpp.
+// Streaming's requests wait in one queue of their own, in the order
+// called: a tick, a commit's acknowledgements or an edit posted meanwhile
+// runs between two slices instead of behind every request a thousand
+// moving clients queued (one queue, so a client's requests never pass its
+// join). The world's copy of a client's position so trails a directly
+// posted edit by that queue's wait (the stream gate keeps it near 20 ms):
+// only undo and redo are checked against it, and a step at the very edge
+// of the full-resolution region during a move may be refused, with its
+// reason. How long each request waited is reported (on_request_wait: the
+// stream gate, which then holds streaming back).
 //
 // Threading: the public methods may be called from any thread and post to
 // the strand (or queue a request for it); WorldClient callbacks are made on
 // the strand.
 #pragma once
 
-#include <algorithm>
 #include <asio.hpp>
 #include <chrono>
 #include <cstdint>
-#include <deque>
 #include <functional>
-#include <future>
 #include <memory>
 #include <optional>
 #include <string>
-#include <unordered_map>
-#include <unordered_set>
-#include <variant>
 #include <vector>
 
-#include "common/voxel/grid.h"
-#include "common/voxel/vec3_map.h"
 #include "common/world/world.h"
+#include "server/base/chunk_version.h"
 #include "server/base/options.h"
-#include "server/base/rate_limit.h"
 #include "server/net/session.h"  // SharedFrame, SendClass: the world still builds frames
 #include "server/storage/postgres_store.h"
 #include "server/storage/storage.h"
-#include "server/base/chunk_version.h"
-#include "server/world/history.h"
-#include "server/world/interest.h"
-#include "server/world/presence.h"
+#include "server/world/authority.h"
+#include "server/world/fan_out.h"
+#include "server/world/horizon_cache.h"
+#include "server/world/request_queue.h"
+#include "server/world/residency.h"
+#include "server/world/tick.h"
+#include "server/world/world_client.h"
+#include "server/world/world_clock.h"
 
 namespace terrane {
 
-// What the world needs of a connected client. Each call is made on the
-// world strand; implementations post to the client's own strand.
-class WorldClient {
- public:
-  virtual ~WorldClient() = default;
-  // Versions of chunks the client asked for (in want), nearest asked first.
-  virtual void granted(std::vector<VersionPtr> versions) = 0;
-  // Horizon images the client asked for (want_horizon), in the order they
-  // were made. An image with no unit could not be made (its region's
-  // coarse image is unreadable): the chunks come as usual.
-  virtual void horizons(std::vector<HorizonPtr> images) = 0;
-  // A committed tick's new versions of chunks the client holds at full
-  // resolution (with mip_refresh_ms 0: of every chunk it holds).
-  virtual void committed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
-  // New versions of chunks the client holds coarser than full resolution,
-  // gathered for mip_refresh_ms since the first of them (oldest first; a
-  // chunk may come more than once), the newest committed at tick: to be
-  // refreshed now.
-  virtual void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
-  // Frames the world answers with (acks, rejects, read results, presence).
-  virtual void send(SharedFrame frame, SendClass cls) = 0;
-  virtual void close(CloseReason why, const std::string& text) = 0;
-};
-
-struct HorizonWant {
-  Vec3i region;
-  int level = kHorizonFarLevel;
-};
-
-struct ChunkWant {
-  Vec3i chunk_pos;
-  bool full = false;  // the client will hold it at full resolution
-  int level = 0;      // the level it will be sent at: 0 full, 1..3 a mip (3: served from coarse images)
-  bool exact = false; // never an estimate (ChunkVersion::estimate), even at level 3
-};
-
-// Read access for tests and tools (Server::inspect).
-class WorldView {
- public:
-  virtual ~WorldView() = default;
-  virtual bool loaded(Vec3i chunk_pos) const = 0;
-  // Revision of a loaded chunk as applied (committed or about to be).
-  virtual std::uint64_t revision(Vec3i chunk_pos) const = 0;
-  virtual Voxel get(Vec3i voxel) const = 0;
-  // The chunk as applied, or null when it is all Air (precondition: loaded).
-  virtual const Chunk* chunk(Vec3i chunk_pos) const = 0;
-  virtual std::size_t loaded_count() const = 0;
-  // Estimates granted and not yet replaced: queued, or being generated (in
-  // the background or for a client).
-  virtual std::size_t estimates_waiting() const = 0;
-};
-
-class WorldOwner : private WorldView {
+class WorldOwner {
  public:
   using Strand = asio::strand<asio::io_context::executor_type>;
+  using RollbackResult = terrane::RollbackResult;
 
+  // storage.leased() (set before) picks the shared world's authority.
   WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
              ServerCounters& counters);
 
@@ -164,9 +94,9 @@ class WorldOwner : private WorldView {
   void want_horizon(ClientId id, std::vector<HorizonWant> wants);
   // How long each streaming request waited in its queue (0 once it is
   // empty), called on the strand. Before start().
-  void on_request_wait(std::function<void(std::chrono::nanoseconds)> fn) { request_wait_ = std::move(fn); }
+  void on_request_wait(std::function<void(std::chrono::nanoseconds)> fn) { requests_.on_wait(std::move(fn)); }
   // The longest the strand spends on streaming requests at a time.
-  static constexpr std::chrono::microseconds kRequestSlice{2000};
+  static constexpr std::chrono::microseconds kRequestSlice = RequestQueue::kSlice;
   // Already checked by the client's replicator: rate, size, and that the
   // client holds the edit's chunks at full resolution.
   void edit(ClientId id, EditRequestMsg edit);
@@ -200,15 +130,10 @@ class WorldOwner : private WorldView {
   // given. Applied as one edit in a tick, stored and logged (as actor's),
   // fanned out like any edit; done runs on the world strand after the
   // commit.
-  struct RollbackResult {
-    bool ok = false;
-    std::string error;
-    std::uint64_t tick = 0;
-    std::uint64_t voxels_restored = 0;
-  };
   void rollback(std::string actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
                 std::function<void(RollbackResult)> done);
-  // Answers every queued rollback with why (stopping, storage failed).
+  // Answers every queued rollback with why (stopping, storage failed). On
+  // the strand.
   void fail_rollbacks(const std::string& why);
   void read_box(ClientId id, ReadBoxMsg request);
   void hash(ClientId id, Vec3i chunk_pos);
@@ -221,349 +146,22 @@ class WorldOwner : private WorldView {
 
   // Runs fn on the strand and waits (tests, tools).
   void inspect(const std::function<void(const WorldView&)>& fn);
-  bool storage_failed() const { return storage_failed_flag_.load(); }
+  bool storage_failed() const { return tick_.storage_failed(); }
 
  private:
-  struct Loaded {
-    VersionPtr published;  // what clients are handed
-    VersionPtr current;    // what the next edit builds on (newer while a commit is in flight)
-    std::uint64_t used_tick = 0;
-    // An estimate (ChunkVersion::estimate) granted to a client is queued to
-    // be generated for real in the background (estimates_), then loaded.
-    enum class Replace : std::uint8_t { kNo, kQueued, kLoading } replace = Replace::kNo;
-  };
-  struct Client {
-    std::string name;
-    std::shared_ptr<WorldClient> link;
-    Vec3f position;
-    std::int32_t view_distance = 0, full_res_radius = 0;
-    bool placed = false;
-    std::size_t edits_queued = 0;
-    History history;
-    std::vector<PresenceEntryMsg> presence;  // last sent
-    // Changes of chunks it holds coarser than full resolution, handed over
-    // together (mips_changed) at mip_due: told of every tick, a thousand
-    // clients each holding some of the world's edits afar cost a thousand
-    // posts a tick, for refreshes their replicators hold back anyway.
-    std::vector<VersionPtr> mip_news;
-    std::uint64_t mip_news_tick = 0;  // the newest news' tick
-    std::chrono::steady_clock::time_point mip_due;
-  };
-  struct Rollback {
-    std::string actor;
-    std::vector<EditLogEntry> entries;  // newest first
-    std::optional<Region> within;
-    std::function<void(RollbackResult)> done;
-    std::uint64_t restored = 0;
-  };
-  struct Forwarded {
-    std::int64_t inbox_id = 0;
-    std::uint32_t from = 0;  // the server that forwarded it
-  };
-  struct PendingEdit {
-    ClientId id;
-    EditRequestMsg edit;
-    std::string player;                  // for the edit log
-    std::shared_ptr<Rollback> rollback;  // set: this is a rollback, not edit
-    std::optional<Forwarded> forwarded;  // set: another server's client's edit, from this server's inbox
-    // When the client's session handed it over (terrane_edit_ack_duration_seconds;
-    // unset for rollbacks and forwarded edits, which are not acknowledged to a client).
-    std::chrono::steady_clock::time_point received{};
-  };
-  // An edit this server forwarded to a region's owner, waiting for its
-  // answer; then for the edit's chunks to be read again here, before the
-  // client is told.
-  struct Outgoing {
-    ClientId id;
-    EditRequestMsg edit;
-    Region box;
-    std::uint32_t to;
-    std::chrono::steady_clock::time_point sent;
-    std::optional<ForwardAnswer> answer;
-  };
-  struct Ack {
-    ClientId id;
-    std::uint32_t edit_id;
-    std::chrono::steady_clock::time_point received;
-  };
-  struct Waiter {
-    ClientId id;
-    bool full;
-  };
-  // The chunks kept only as mips (ChunkVersion::mips_only) at most, beyond
-  // which those nobody holds are forgotten.
-  static constexpr std::size_t kMaxMipsOnly = 1 << 20;
-  // Chunks reduced to their mips per tick at most (each costs encoding its
-  // three mip levels, tens of microseconds).
-  static constexpr std::size_t kLightenPerTick = 128;
-  // Background loads replacing estimates at a time (per loader thread: a
-  // stream or urgent load waits for at most one generation).
-  static constexpr std::size_t kReplacingLoadsPerWorker = 1;
-  // Horizon images kept at most (a few kilobytes each); beyond, all are
-  // dropped and made again when wanted.
-  static constexpr std::size_t kMaxHorizons = 4096;
-  // A kept image whose region changed is served until it is this old, then
-  // made again when next wanted: images are approximate, and remaking one
-  // after every tick that edits its region would cost a busy world a
-  // region's read per joining client.
-  static constexpr std::chrono::seconds kHorizonRefresh{10};
+  // A request from the queue, on the strand.
+  void handle(WorldRequest& r);
 
-  // WorldView
-  bool loaded(Vec3i chunk_pos) const override {
-    auto it = loaded_.find(chunk_pos);
-    return it != loaded_.end() && it->second.current->has_voxels();
-  }
-  std::uint64_t revision(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->revision(); }
-  Voxel get(Vec3i voxel) const override;
-  const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
-  std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
-  std::size_t estimates_waiting() const override {
-    return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [this](const auto& kv) {
-      return kv.second.current->estimate() &&
-             (kv.second.replace != Loaded::Replace::kNo || loading_.count(kv.first) != 0);
-    }));
-  }
-
-  void arm_tick();
-  void on_tick();
-  // One tick: the queued edits applied, as many as may be, then committed.
-  void apply_edits();
-  struct TickEdits;
-  enum class EditStep : std::uint8_t {
-    kNext,  // the edit was applied, refused, passed on or set aside: on to the next
-    kStop,  // the edit waits at the queue's head (a hand-over): nothing more this tick
-  };
-  EditStep apply_rollback(TickEdits& t);
-  EditStep apply_player_edit(TickEdits& t);
-  void set_aside(TickEdits& t);  // the queue's head waits until after the tick
-  void on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versions, const std::vector<Ack>& acks,
-                    const FileStatus& status);
-  // Publishes committed versions (each its chunk's newest) and tells their
-  // holders: those at full resolution at once (WorldClient::committed),
-  // the others gathered for deliver_mip_news.
-  void publish(std::uint64_t tick, const std::vector<VersionPtr>& versions, std::chrono::steady_clock::time_point now);
-  // The version after prev (held with its voxels at c.revision - 1) that
-  // c's units make, or null when they do not decode as units of its chunk.
-  VersionPtr apply_units(const ChunkVersion& prev, const ChunkChange& c);
-  void fatal_storage(const std::string& why);
-  // Starts loading chunk_pos unless loaded or loading; true if loaded with
-  // the given level (0: its voxels), and not as an estimate when exact.
-  bool request(Vec3i chunk_pos, int level = 0, bool exact = false);
-  // Hands chunk_pos to Storage; the result comes back to on_loaded.
-  void load(Vec3i chunk_pos, Storage::Priority priority);
-  void on_loaded(LoadedChunk c);
-  // A want of the coarsest level of a chunk not loaded: taken (true) when
-  // its region's coarse image can serve it (read now or being read).
-  bool want_coarse(Vec3i chunk_pos, Waiter w);
-  void on_coarse_loaded(LoadedCoarse c);
-  // Starts background loads of queued estimates (estimates_), at most
-  // kReplacingLoadsPerWorker per loader thread at a time.
-  void replace_estimates();
-  void grant(ClientId id, Vec3i chunk_pos, bool full);
-  void flush_grants();
-  void retry_pending();
-  void reject(ClientId id, const EditRequestMsg& edit, RejectReason why, const std::string& reason);
-  bool read_current(const Region& r, Box& out) const;
-  void copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied);
-  // Whether this server may write every chunk of r now: always on SQLite;
-  // in a shared PostgreSQL world, once it holds the leases of their regions
-  // (a claim is started for each region not known). kNo sets why (the
-  // holder).
-  enum class Writable : std::uint8_t { kYes, kWaiting, kNo };
-  // kNo also sets holder when the holding server is known. rule: how a
-  // free region is claimed; a client's own edit (which can be forwarded)
-  // leaves one to the server writing its neighbours (ClaimRule).
-  Writable writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder = nullptr,
-                    ClaimRule rule = ClaimRule::kAny);
-  bool near_enough(const Client& c, const Region& r) const;
-  // The chunks of r asked for and kept loaded for a queued edit (unbusy
-  // releases them).
-  void reserve(const Region& r);
-  void unbusy(const Region& r);
-  void send_presence();
-  void unload_unwatched();  // every tick: a tick's part of a pass over loaded_
-  void lighten_some();
-
-  World& world_;
-  Storage& storage_;
-  const ServerOptions& options_;
-  ServerCounters& counters_;
   Strand strand_;
-  struct Join {
-    std::string name;
-    std::shared_ptr<WorldClient> link;
-  };
-  struct Leave {};
-  struct Moved {
-    Vec3f position;
-    std::int32_t view_distance, full_res_radius;
-  };
-  struct HoldsFull {
-    std::vector<Vec3i> chunks;
-  };
-  struct Request {
-    ClientId id;
-    std::chrono::steady_clock::time_point queued;
-    std::variant<std::vector<ChunkWant>, std::vector<Vec3i>, std::vector<HorizonWant>, Join, Leave, Moved, HoldsFull>
-        what;
-  };
-  void queue_request(Request r);
-  void drain_requests();
-  void do_join(ClientId id, Join j);
-  void do_leave(ClientId id);
-  void do_moved(ClientId id, const Moved& m);
-  void do_want(ClientId id, const std::vector<ChunkWant>& chunks);
-  void do_release(ClientId id, const std::vector<Vec3i>& chunks);
-  void do_want_horizon(ClientId id, const std::vector<HorizonWant>& wants);
-  void do_holds_full(ClientId id, const HoldsFull& h);
-  // Hands each client whose mip news is due its news (mips_changed); every
-  // tick.
-  void deliver_mip_news();
-  // Hands c its mip news now, whenever it was due.
-  void hand_mip_news(Client& c);
-  std::vector<UnitUpdate> units_scratch_;  // apply_units'
-  std::mutex requests_m_;
-  std::deque<Request> requests_;  // guarded by requests_m_
-  bool drain_posted_ = false;     // guarded by requests_m_: a drain_requests is on the strand's queue
-  std::function<void(std::chrono::nanoseconds)> request_wait_;
-  asio::steady_timer tick_timer_;
-  std::chrono::steady_clock::time_point next_tick_;
-  std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report
-  std::chrono::steady_clock::time_point next_slow_tick_report_{};
-
-  std::unordered_map<ClientId, Client> clients_;
-  // Clients with mip news, by when it is due, earliest first (one period
-  // for all: a queue). An entry is stale when its client's news went out
-  // sooner (holds_full) or it left: skipped.
-  std::deque<std::pair<std::chrono::steady_clock::time_point, ClientId>> mip_news_due_;
-  // Chunks with their voxels, and chunks kept as mips only.
-  Vec3iMap<Loaded> loaded_;
-  std::size_t mips_only_ = 0;
-  std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
-  // unload_unwatched's pass over loaded_, a tick's share of its slots at a time.
-  struct UnloadPass {
-    std::size_t next_slot = 0;  // 0: a pass begins at the next tick
-    bool lighten = false;       // over resident_chunks when the pass began
-    bool forget = false;        // over kMaxMipsOnly when the pass began
-    std::vector<std::pair<std::uint64_t, Vec3i>> drop;  // (used tick, chunk) that may be lightened
-  } unload_pass_;
-  std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
-  // Regions whose coarse image was read (a chunk of one without an entry
-  // was never stored), and the wants waiting for an image being read.
-  std::unordered_set<Vec3i, Vec3iHash> regions_read_;
-  std::unordered_map<Vec3i, std::vector<std::pair<Vec3i, Waiter>>, Vec3iHash> coarse_waiting_;
-  std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
-  // Estimates granted, to be generated for real, in the order first granted
-  // (a client asks nearest first), and how many of them are loading.
-  std::deque<Vec3i> estimates_;
-  std::size_t replacing_ = 0;
-  std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;   // not yet handed over
-  // Horizon images made and kept (made again once a chunk of the region
-  // changed and kHorizonRefresh passed), and images being made: the clients
-  // waiting for each, and whether its region changed meanwhile (then it is
-  // kept as changed).
-  void on_horizon_loaded(LoadedHorizon h);
-  void horizon_changed(Vec3i chunk_pos);
-  // Each indexed by level - kHorizonNearLevel.
-  struct KeptHorizon {
-    HorizonPtr image;
-    std::chrono::steady_clock::time_point made;
-    bool changed = false;  // a chunk of the region changed since
-  };
-  std::unordered_map<Vec3i, KeptHorizon, Vec3iHash> horizons_[2];
-  struct MakingHorizon {
-    std::vector<ClientId> waiting;
-    bool changed = false;
-  };
-  std::unordered_map<Vec3i, MakingHorizon, Vec3iHash> horizon_making_[2];
-  bool grants_scheduled_ = false;
-  // Edits in arrival order. One that waits (chunks, a claim) holds up only
-  // the edits behind it of its player or on its chunks (apply_edits).
-  std::deque<PendingEdit> edits_;
-  // Chunks queued edits will touch (never unloaded): chunk -> edits.
-  std::unordered_map<Vec3i, int, Vec3iHash> busy_;
-  // A shared world's regions as far as this server's edits know them:
-  // claiming; held, with stale chunks of it still being read again; held;
-  // held by another server; or not known, the database out of reach (both
-  // asked again after a second; edits wait in the second case).
-  struct RegionLeaseState {
-    enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable, kHandingOver } state = kClaiming;
-    bool left = false;  // kRefused: free, left to holder by ClaimRule::kPreferNeighbours
-    std::string why;
-    std::optional<std::uint32_t> holder;
-    std::chrono::steady_clock::time_point ask_again{};
-  };
-  void on_claimed(Vec3i region, Storage::Claimed claimed);
-  // Whether held is older than revision (an estimate is older than anything stored).
-  static bool older_than(const ChunkVersion& held, std::uint64_t revision);
-  bool stale_in(Vec3i region) const;
-  // Loads cp unless a load of it is under way.
-  void load_unless_loading(Vec3i cp, Storage::Priority priority);
-  // How long a forwarded edit waits for its owner's answer.
-  // One forwarded edit of player within its rate (forwarded_rate_).
-  bool take_forwarded_rate(const std::string& player);
-  std::chrono::milliseconds forward_wait() const;
-  // Sends pe (a client's edit of box, in regions server to holds) to that
-  // server's inbox, handing over first the regions of box this server
-  // holds (so one server can write the whole edit).
-  void forward(const PendingEdit& pe, const Region& box, std::uint32_t to);
-  // Passes pe (an edit forwarded here, of box) on to server to, handing
-  // over the regions of box this server holds; to answers its sender.
-  void relay(const PendingEdit& pe, const Region& box, std::uint32_t to);
-  // Marks the regions of box this server holds as being handed over to
-  // server to (edits there wait), and lists them; handed_over settles them
-  // once the release is done (ok) or failed.
-  std::vector<Vec3i> hand_over(const Region& box, std::uint32_t to);
-  void handed_over(const std::vector<Vec3i>& regions, bool ok);
-  // Whether client id has an edit being forwarded, or forwarded and not
-  // answered yet, whose box meets chunks of r: its next edit there waits
-  // (a player's edits keep their order whatever server applies them).
-  bool forward_pending(ClientId id, const Region& r) const;
-  void take_inbox();
-  void read_inbox_page(std::int64_t after);
-  // Tells clients the answers to their forwarded edits once the edits'
-  // chunks are current here; gives up on those unanswered for too long.
-  void settle_forwarded();
-  bool writes_region(Vec3i region) const;
-  // cp is stored at revision, newer than held here (another server wrote
-  // it): read again until held at least at revision.
-  void read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority);
-  // After a load of cp landed: a stale chunk is done once held at its
-  // stored revision (or no longer held), else read again.
-  void refreshed(Vec3i cp);
-  void apply_loaded(LoadedChunk c);
-  std::unordered_map<Vec3i, RegionLeaseState, Vec3iHash> leases_;
-  // Chunks held older than stored (another server wrote them): chunk ->
-  // the revision stored.
-  std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
-  // Forwarded edits: this server's clients' (inbox row -> edit), and the
-  // inbox of this server (rows taken and rows listed by the read under way;
-  // a read under way; another notice came during it).
-  std::unordered_map<std::int64_t, Outgoing> forwarded_;
-  std::unordered_multimap<ClientId, Region> forwarding_;  // sent, row not known yet
-  std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
-  std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
-  // Forwarded edits per player, whatever server they came through, at the
-  // rate a session may keep up: a player cannot pass it by editing here
-  // through several servers at once.
-  std::unordered_map<std::string, TokenBucket> forwarded_rate_;
-  static constexpr std::size_t kMaxForwardedRates = 4096;
-  bool inbox_reading_ = false, inbox_again_ = false;
-  // Answers that came before their forward's own callback.
-  std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
-  std::vector<std::pair<ClientId, ReadBoxMsg>> reads_;  // waiting for chunks
-  std::vector<std::pair<ClientId, Vec3i>> hashes_;      // waiting for chunks
-  InterestIndex interest_;
-  PresenceGrid presence_;
-  std::uint64_t tick_ = 0;
-  std::uint64_t commits_pending_ = 0;
-  std::uint64_t last_committed_tick_ = 0;
-  std::vector<std::pair<std::uint64_t, std::function<void(std::uint64_t, bool)>>> flush_waiters_;
-  bool stopping_ = false;
-  bool storage_failed_ = false;
-  std::atomic<bool> storage_failed_flag_{false};
-  std::promise<void> drained_;
-  bool drain_wanted_ = false;
+  WorldClock clock_;
+  FanOut fan_out_;
+  HorizonCache horizons_;
+  Residency residency_;
+  // Picked once: SharedAuthority when the store has leases, else
+  // LocalAuthority. (Made with a reference to tick_, used only later.)
+  std::unique_ptr<Authority> authority_;
+  Tick tick_;
+  RequestQueue requests_;  // last: its drains run on the strand until the owner goes
 };
 
 }  // namespace terrane

@@ -1,16 +1,12 @@
-// WorldOwner in a world shared by several servers (PostgreSQL): which
-// regions this server may write (leases, claimed as edits need them), edits
-// forwarded to a region's writer and those forwarded here (the inbox), and
-// chunks another server changed (read again, or forgotten when no client
-// here holds them). The rest of the world strand is world_owner.cpp; on
-// SQLite none of this runs (every region is writable).
+#include "server/world/shared_authority.h"
+
 #include <algorithm>
 #include <map>
 
 #include <fmt/format.h>
 
 #include "server/base/log.h"
-#include "server/world/world_owner.h"
+#include "server/world/edits.h"
 
 namespace terrane {
 
@@ -23,9 +19,22 @@ constexpr std::size_t kInboxPage = 256;
 
 }  // namespace
 
-WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder,
-                                          ClaimRule rule) {
-  if (!storage_.leased() || r.empty()) return Writable::kYes;
+SharedAuthority::SharedAuthority(Strand& strand, World& world, Storage& storage, const ServerOptions& options,
+                                 ServerCounters& counters, const WorldClock& clock, Residency& residency,
+                                 FanOut& clients, EditQueue& queue)
+    : strand_(strand),
+      world_(world),
+      storage_(storage),
+      options_(options),
+      counters_(counters),
+      clock_(clock),
+      residency_(residency),
+      clients_(clients),
+      queue_(queue) {}
+
+Authority::Writable SharedAuthority::writable(const Region& r, std::string* why, std::optional<std::uint32_t>* holder,
+                                              ClaimRule rule) {
+  if (r.empty()) return Writable::kYes;
   const auto now = std::chrono::steady_clock::now();
   Writable out = Writable::kYes;
   for_each_chunk_in(r, [&](Vec3i cp) {
@@ -57,7 +66,7 @@ WorldOwner::Writable WorldOwner::writable(const Region& r, std::string* why, std
   return out;
 }
 
-void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
+void SharedAuthority::on_claimed(Vec3i region, Storage::Claimed claimed) {
   RegionLeaseState& l = leases_[region];
   if (!claimed.held) {
     l.state = claimed.unreachable ? RegionLeaseState::kUnreachable : RegionLeaseState::kRefused;
@@ -73,45 +82,50 @@ void WorldOwner::on_claimed(Vec3i region, Storage::Claimed claimed) {
   // (A chunk not held is read from the store when wanted, but a load of it
   // under way may have read it before the previous owner's last write.)
   for (const auto& [cp, revision] : claimed.stored)
-    if (auto it = loaded_.find(cp); it == loaded_.end() ? loading_.count(cp) != 0
-                                                        : older_than(*it->second.current, revision))
+    if (const auto* held = residency_.find(cp); held == nullptr ? residency_.loading(cp)
+                                                                : older_than(*held->current, revision))
       read_again(cp, revision, Storage::Priority::kUrgent);
   l.state = stale_in(region) ? RegionLeaseState::kRefreshing : RegionLeaseState::kHeld;
 }
 
-bool WorldOwner::older_than(const ChunkVersion& held, std::uint64_t revision) {
+bool SharedAuthority::claiming(const Region& r) const {
+  bool any = false;
+  for_each_chunk_in(r, [&](Vec3i cp) {
+    auto l = leases_.find(lease_region_of(cp));
+    any = any || (l != leases_.end() && (l->second.state == RegionLeaseState::kClaiming ||
+                                         l->second.state == RegionLeaseState::kRefreshing));
+  });
+  return any;
+}
+
+bool SharedAuthority::older_than(const ChunkVersion& held, std::uint64_t revision) {
   return held.estimate() || held.revision() < revision;
 }
 
-bool WorldOwner::stale_in(Vec3i region) const {
+bool SharedAuthority::stale_in(Vec3i region) const {
   return std::any_of(stale_.begin(), stale_.end(), [&](const auto& s) { return lease_region_of(s.first) == region; });
 }
 
-void WorldOwner::load_unless_loading(Vec3i cp, Storage::Priority priority) {
-  if (!loading_.try_emplace(cp).second) return;
-  load(cp, priority);
-}
-
-bool WorldOwner::writes_region(Vec3i region) const {
+bool SharedAuthority::writes_region(Vec3i region) const {
   auto it = leases_.find(region);
   return it != leases_.end() &&
          (it->second.state == RegionLeaseState::kHeld || it->second.state == RegionLeaseState::kRefreshing);
 }
 
-void WorldOwner::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority) {
+void SharedAuthority::read_again(Vec3i cp, std::uint64_t revision, Storage::Priority priority) {
   auto [it, fresh] = stale_.try_emplace(cp, revision);
   if (!fresh) it->second = std::max(it->second, revision);
   // A load already under way may have read the store before this revision:
-  // refreshed() reads again when it lands.
-  load_unless_loading(cp, priority);
+  // landed() reads again when it lands.
+  residency_.load_unless_loading(cp, priority);
 }
 
-void WorldOwner::refreshed(Vec3i cp) {
+void SharedAuthority::landed(Vec3i cp) {
   auto s = stale_.find(cp);
   if (s == stale_.end()) return;
-  if (auto held = loaded_.find(cp); held != loaded_.end() && older_than(*held->second.current, s->second)) {
+  if (const auto* held = residency_.find(cp); held != nullptr && older_than(*held->current, s->second)) {
     // The load that landed read the store before the newer revision.
-    load_unless_loading(cp, Storage::Priority::kUrgent);
+    residency_.load_unless_loading(cp, Storage::Priority::kUrgent);
     return;
   }
   // Held at the stored revision, or no longer held (read from the store when wanted).
@@ -122,45 +136,39 @@ void WorldOwner::refreshed(Vec3i cp) {
     l->second.state = RegionLeaseState::kHeld;
 }
 
-void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
-  asio::post(strand_, [this, changes = std::move(changes)] {
+void SharedAuthority::changed_elsewhere(std::vector<ChunkChange> changes) {
+  {
     std::map<std::uint64_t, std::vector<VersionPtr>> updated;  // by the writer's tick
     for (const ChunkChange& c : changes) {
       if (writes_region(lease_region_of(c.pos))) continue;  // this server's own commit
-      auto it = loaded_.find(c.pos);
-      if (it == loaded_.end()) {
+      const Residency::Loaded* held = residency_.find(c.pos);
+      if (held == nullptr) {
         // Not held; but a load under way may have read the store before
         // this commit: read again if it did.
-        if (loading_.count(c.pos) != 0) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
+        if (residency_.loading(c.pos)) read_again(c.pos, c.revision, Storage::Priority::kUrgent);
         continue;
       }
-      const Loaded& l = it->second;
+      const Residency::Loaded& l = *held;
       if (!older_than(*l.current, c.revision)) continue;
       counters_.chunks_changed_elsewhere.fetch_add(1, std::memory_order_relaxed);
-      if (!interest_.watched(c.pos) && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
-          loading_.count(c.pos) == 0 && l.current == l.published) {
+      if (!clients_.watched(c.pos) && !residency_.busy(c.pos) && stale_.count(c.pos) == 0 &&
+          !residency_.loading(c.pos) && l.current == l.published) {
         // No client here holds it and nothing here waits for it: forgotten,
         // not read again (a server beside a busy one would otherwise read
         // every chunk the other writes that it once served); read from the
         // store when next wanted. Its region's coarse image too, which
         // would otherwise say the chunk was never stored.
-        horizon_changed(c.pos);
-        regions_read_.erase(coarse_region_of(c.pos));
-        if (!l.current->has_voxels()) --mips_only_;
-        loaded_.erase(it);
-        counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+        residency_.forget(c.pos);
         counters_.chunks_forgotten_elsewhere.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
       if (!c.units.empty() && l.current->has_voxels() && !l.current->estimate() &&
-          l.current->revision() + 1 == c.revision && busy_.count(c.pos) == 0 && stale_.count(c.pos) == 0 &&
-          loading_.count(c.pos) == 0 && l.current == l.published) {
+          l.current->revision() + 1 == c.revision && !residency_.busy(c.pos) && stale_.count(c.pos) == 0 &&
+          !residency_.loading(c.pos) && l.current == l.published) {
         // The notice's units take what is held to the new revision: applied
         // here, and sent to the holders as units, as an edit here would be.
         if (VersionPtr v = apply_units(*l.current, c)) {
-          it->second.current = v;
-          it->second.used_tick = tick_;
-          updated[c.tick].push_back(std::move(v));
+          updated[c.tick].push_back(residency_.advance(std::move(v)));
           continue;
         }
         server_log().warn("chunk ({},{},{}): the units of revision {} in another server's notice do not apply; "
@@ -175,33 +183,34 @@ void WorldOwner::changed_elsewhere(std::vector<ChunkChange> changes) {
     const auto now = std::chrono::steady_clock::now();
     for (const auto& [tick, versions] : updated) {
       counters_.chunks_updated_elsewhere.fetch_add(versions.size(), std::memory_order_relaxed);
-      publish(tick, versions, now);
+      residency_.publish(versions);
+      clients_.publish(tick, versions, now);
     }
-  });
+  }
 }
 
-VersionPtr WorldOwner::apply_units(const ChunkVersion& prev, const ChunkChange& c) {
+VersionPtr SharedAuthority::apply_units(const ChunkVersion& prev, const ChunkChange& c) {
   auto chunk = std::make_unique<Chunk>(prev.chunk() != nullptr ? prev.chunk()->clone() : Chunk(kAir));
   auto bits = apply_chunk_update_batch(c.units, c.pos, *chunk, units_scratch_);
   if (!bits) return nullptr;
   return ChunkVersion::after(prev, std::move(chunk), *bits);
 }
 
-void WorldOwner::read_again_elsewhere(std::vector<Vec3i> regions) {
-  asio::post(strand_, [this, regions = std::move(regions)] {
+void SharedAuthority::read_again_elsewhere(std::vector<Vec3i> regions) {
+  {
     if (regions.empty()) return;
     Vec3iMap<bool> in;
     for (const Vec3i r : regions) in[r] = true;
-    for (const auto& [cp, l] : loaded_) {
+    residency_.for_each([&](Vec3i cp, const Residency::Loaded& l) {
       const Vec3i region = lease_region_of(cp);
       // Estimates are replaced by the chunks as they are (their loads read the store).
-      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) continue;
-      load_unless_loading(cp, Storage::Priority::kBackground);
-    }
-  });
+      if (in.count(region) == 0 || writes_region(region) || l.current->estimate()) return;
+      residency_.load_unless_loading(cp, Storage::Priority::kBackground);
+    });
+  }
 }
 
-std::vector<Vec3i> WorldOwner::hand_over(const Region& box, std::uint32_t to) {
+std::vector<Vec3i> SharedAuthority::hand_over(const Region& box, std::uint32_t to) {
   std::vector<Vec3i> regions;
   for_each_chunk_in(box, [&](Vec3i cp) {
     const Vec3i region = lease_region_of(cp);
@@ -219,7 +228,7 @@ std::vector<Vec3i> WorldOwner::hand_over(const Region& box, std::uint32_t to) {
   return regions;
 }
 
-void WorldOwner::handed_over(const std::vector<Vec3i>& regions, bool ok) {
+void SharedAuthority::handed_over(const std::vector<Vec3i>& regions, bool ok) {
   // The regions handed over are the recipient's now: this server's next
   // edits there are forwarded to it too, until asked again a second on,
   // so a region does not bounce back before the recipient has claimed
@@ -232,7 +241,7 @@ void WorldOwner::handed_over(const std::vector<Vec3i>& regions, bool ok) {
     }
 }
 
-bool WorldOwner::forward_pending(ClientId id, const Region& r) const {
+bool SharedAuthority::forward_pending(ClientId id, const Region& r) const {
   auto [first, last] = forwarding_.equal_range(id);
   for (auto it = first; it != last; ++it)
     if (chunks_meet(it->second, r)) return true;
@@ -240,13 +249,14 @@ bool WorldOwner::forward_pending(ClientId id, const Region& r) const {
                      [&](const auto& f) { return f.second.id == id && !f.second.answer && chunks_meet(f.second.box, r); });
 }
 
-void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t to) {
-  const Frame frame = build_edit_request(pe.edit);
+void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std::string& player, const Region& box,
+                              std::uint32_t to) {
+  const Frame frame = build_edit_request(edit);
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
-  forwarding_.emplace(pe.id, box);
-  storage_.forward(to, pe.player, frame, regions,
-                   [this, id = pe.id, edit = pe.edit, box, to, regions](StoreResult<std::int64_t> row) {
+  forwarding_.emplace(id, box);
+  storage_.forward(to, player, frame, regions,
+                   [this, id, edit, box, to, regions](StoreResult<std::int64_t> row) {
     asio::post(strand_, [this, id, edit, box, to, regions, row = std::move(row)] {
       handed_over(regions, row.ok());
       auto [first, last] = forwarding_.equal_range(id);
@@ -256,8 +266,8 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
           break;
         }
       if (!row) {
-        if (clients_.count(id) != 0)
-          reject(id, edit, RejectReason::kNotOwner,
+        if (clients_.present(id))
+          queue_.reject(id, edit, RejectReason::kNotOwner,
                  fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
         return;
       }
@@ -272,10 +282,9 @@ void WorldOwner::forward(const PendingEdit& pe, const Region& box, std::uint32_t
   });
 }
 
-void WorldOwner::relay(const PendingEdit& pe, const Region& box, std::uint32_t to) {
+void SharedAuthority::relay(Forwarded f, const Region& box, std::uint32_t to) {
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
-  const Forwarded f = *pe.forwarded;
   storage_.relay(f.inbox_id, to, regions, [this, f, to, regions](StoreResult<Ok> done) {
     asio::post(strand_, [this, f, to, regions, done = std::move(done)] {
       handed_over(regions, done.ok());
@@ -288,11 +297,7 @@ void WorldOwner::relay(const PendingEdit& pe, const Region& box, std::uint32_t t
   });
 }
 
-void WorldOwner::inbox_has_edits() {
-  asio::post(strand_, [this] { take_inbox(); });
-}
-
-void WorldOwner::take_inbox() {
+void SharedAuthority::take_inbox() {
   if (inbox_reading_) {
     inbox_again_ = true;
     return;
@@ -302,7 +307,7 @@ void WorldOwner::take_inbox() {
   read_inbox_page(0);
 }
 
-void WorldOwner::read_inbox_page(std::int64_t after) {
+void SharedAuthority::read_inbox_page(std::int64_t after) {
   // Row ids are given at insert, not in commit order: every read lists all
   // rows waiting (a page at a time) and takes those not taken yet.
   storage_.read_inbox(after, kInboxPage, [this](StoreResult<std::vector<InboxEdit>> got) {
@@ -321,11 +326,11 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
         auto edit = decode_forwarded_edit(in.edit);
         const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
         const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait();
-        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || stopping_ || too_old) {
+        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || clock_.stopping || too_old) {
           // Too old: its sender has told its client there was no answer.
           const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
                                   : in.player.empty() ? std::string("the player's name is missing or too long")
-                                  : stopping_ ? std::string("the region's server is shutting down")
+                                  : clock_.stopping ? std::string("the region's server is shutting down")
                                   : too_old   ? std::string("it waited too long; its sender has given up on it")
                                   : r.empty() ? std::string("edit outside the world")
                                               : std::string("undo and redo are not forwarded");
@@ -341,7 +346,7 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
           continue;
         }
         counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
-        reserve(r);
+        residency_.reserve(r);
         // What this server knew of the edit's regions held elsewhere may be
         // out of date (the sender may have handed them over): asked again
         // when the edit's turn comes.
@@ -350,7 +355,7 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
               l != leases_.end() && l->second.state == RegionLeaseState::kRefused)
             leases_.erase(l);
         });
-        edits_.push_back(PendingEdit{0, std::move(*edit), in.player, nullptr, Forwarded{in.id, in.from}});
+        queue_.queue_forwarded(std::move(*edit), in.player, Forwarded{in.id, in.from});
       }
       if (!refused.empty()) storage_.answer(std::move(refused));
       if (got->size() == kInboxPage) {
@@ -365,7 +370,7 @@ void WorldOwner::read_inbox_page(std::int64_t after) {
   });
 }
 
-bool WorldOwner::take_forwarded_rate(const std::string& player) {
+bool SharedAuthority::take_forwarded_rate(const std::string& player) {
   if (options_.edits_per_second <= 0) return true;
   // Twice a session's burst: forwarded edits arrive in batches (an inbox
   // read after a reconnect), not as their player sent them.
@@ -381,32 +386,31 @@ bool WorldOwner::take_forwarded_rate(const std::string& player) {
   return it->second.take(1);
 }
 
-std::chrono::milliseconds WorldOwner::forward_wait() const {
+std::chrono::milliseconds SharedAuthority::forward_wait() const {
   // An owner silent for a lease time has lost its regions anyway.
   return std::max<std::chrono::milliseconds>(kForwardAnswerWait, options_.lease);
 }
 
-void WorldOwner::answered(ForwardAnswer answer) {
-  asio::post(strand_, [this, answer = std::move(answer)] {
+void SharedAuthority::answered(ForwardAnswer answer) {
+  {
     auto it = forwarded_.find(answer.id);
     if (it != forwarded_.end())
       it->second.answer = answer;
     else  // before the forward's own callback: kept for it
       early_answers_.emplace(answer.id, std::make_pair(answer, std::chrono::steady_clock::now()));
     settle_forwarded();
-  });
+  }
 }
 
-void WorldOwner::settle_forwarded() {
+void SharedAuthority::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
   const auto wait = forward_wait();
   std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
     Outgoing& o = it->second;
-    const auto client = clients_.find(o.id);
-    bool done = client == clients_.end();
+    bool done = !clients_.present(o.id);
     if (!done && o.answer && !o.answer->accepted) {
-      reject(o.id, o.edit, RejectReason::kNotOwner,
+      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
              fmt::format("server {} refused the forwarded edit: {}", o.to, o.answer->reason));
       done = true;
     } else if (!done && o.answer) {
@@ -415,31 +419,20 @@ void WorldOwner::settle_forwarded() {
       // answer) and sent to the client before the ack, which names the
       // owner's tick, as the UpdateBatch of its units does.
       bool current = true;
-      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && loading_.count(cp) == 0; });
+      for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && !residency_.loading(cp); });
       if (current) {
-        client->second.link->send(std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
-                                  SendClass::kControl);
+        clients_.send(o.id, std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
+                      SendClass::kControl);
         done = true;
       }
     } else if (!done && now - o.sent > wait) {
-      reject(o.id, o.edit, RejectReason::kNotOwner,
+      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
              fmt::format("forwarded to server {}, no answer within {} ms (it may still be applied)", o.to,
                          wait.count()));
       done = true;
     }
     it = done ? forwarded_.erase(it) : std::next(it);
   }
-}
-
-void WorldOwner::lease_lost(Vec3i region, std::string why) {
-  asio::post(strand_, [this, region, why = std::move(why)] {
-    // Another server may have written the region since: what this one holds
-    // of it may be stale, so it must not write there again. Stopping is the
-    // safe answer (a restart reads the region afresh); writes in flight are
-    // fenced by the database whatever happens here.
-    server_log().critical("region ({},{},{}): lease lost ({}); stopping", region.x, region.y, region.z, why);
-    fatal_storage("lease lost");
-  });
 }
 
 }  // namespace terrane

@@ -1,0 +1,148 @@
+// FanOut on its own (no strand, no storage): a committed version reaches
+// the holders at full resolution at once and the coarser holders only when
+// their mip news is due (or at once when they come to hold it at full
+// resolution); clients that left hear nothing; presence goes out only when
+// it changed.
+#include "server/world/fan_out.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+
+#include "tests/support/world_strand.h"
+
+namespace terrane {
+namespace {
+
+using namespace std::chrono_literals;
+using testing_support::RecordingClient;
+
+VersionPtr version(Vec3i cp, std::uint64_t revision) {
+  return std::make_shared<const ChunkVersion>(cp, revision, std::shared_ptr<const Chunk>{});
+}
+
+class FanOutTest : public ::testing::Test {
+ protected:
+  FanOutTest() { options_.mip_refresh_ms = 250; }
+  std::shared_ptr<RecordingClient> join(ClientId id) {
+    auto c = std::make_shared<RecordingClient>();
+    fan_out_.join(id, c);
+    return c;
+  }
+
+  ServerOptions options_;
+  ServerCounters counters_;
+  FanOut fan_out_{options_, counters_};
+  const Vec3i cp_{3, 0, 4};
+  const std::chrono::steady_clock::time_point t0_ = std::chrono::steady_clock::now();
+};
+
+TEST_F(FanOutTest, ACommittedVersionReachesFullHoldersAtOnceAndCoarseHoldersOnlyAtMipDue) {
+  auto near = join(1), far = join(2), other = join(3);
+  fan_out_.hold(cp_, 1, true);
+  fan_out_.hold(cp_, 2, false);
+  const VersionPtr v1 = version(cp_, 1), v2 = version(cp_, 2);
+  fan_out_.publish(7, {v1}, t0_);
+  fan_out_.publish(8, {v2}, t0_ + 100ms);
+  ASSERT_EQ(near->ticks.size(), 2u);
+  EXPECT_EQ(near->ticks[0].first, 7u);
+  EXPECT_EQ(near->ticks[0].second, std::vector<VersionPtr>{v1});
+  EXPECT_EQ(near->ticks[1].first, 8u);
+  EXPECT_TRUE(far->ticks.empty());
+  EXPECT_TRUE(far->mip_news.empty());
+  EXPECT_TRUE(other->ticks.empty());  // holds nothing
+
+  fan_out_.deliver_mip_news(t0_ + 249ms);
+  EXPECT_TRUE(far->mip_news.empty());
+  // Due mip_refresh_ms after the first news: both ticks' versions at once,
+  // oldest first, named by the newest tick.
+  fan_out_.deliver_mip_news(t0_ + 250ms);
+  ASSERT_EQ(far->mip_news.size(), 1u);
+  EXPECT_EQ(far->mip_news[0].first, 8u);
+  EXPECT_EQ(far->mip_news[0].second, (std::vector<VersionPtr>{v1, v2}));
+  fan_out_.deliver_mip_news(t0_ + 10s);
+  EXPECT_EQ(far->mip_news.size(), 1u);
+  EXPECT_EQ(counters_.deliveries.load(), 4u);
+}
+
+TEST_F(FanOutTest, WithoutAMipRefreshEveryHolderHearsAtOnce) {
+  options_.mip_refresh_ms = 0;
+  auto far = join(2);
+  fan_out_.hold(cp_, 2, false);
+  fan_out_.publish(3, {version(cp_, 1)}, t0_);
+  ASSERT_EQ(far->ticks.size(), 1u);
+  EXPECT_TRUE(far->mip_news.empty());
+}
+
+TEST_F(FanOutTest, NewsGatheredForAChunkNowHeldAtFullResolutionGoesAtOnce) {
+  auto c = join(2);
+  const Vec3i other{9, 0, 9};
+  fan_out_.hold(cp_, 2, false);
+  fan_out_.hold(other, 2, false);
+  fan_out_.publish(5, {version(cp_, 1), version(other, 1)}, t0_);
+  EXPECT_TRUE(c->mip_news.empty());
+  fan_out_.holds_full(2, {Vec3i{50, 0, 50}});  // not held: changes nothing
+  EXPECT_TRUE(c->mip_news.empty());
+  fan_out_.holds_full(2, {cp_});
+  ASSERT_EQ(c->mip_news.size(), 1u);
+  EXPECT_EQ(c->mip_news[0].second.size(), 2u);  // the rest with it
+  EXPECT_TRUE(fan_out_.held_full(cp_));
+  EXPECT_FALSE(fan_out_.held_full(other));
+  // Its due entry is stale now: nothing more.
+  fan_out_.deliver_mip_news(t0_ + 10s);
+  EXPECT_EQ(c->mip_news.size(), 1u);
+  // From now on it hears of cp_ every tick.
+  fan_out_.publish(6, {version(cp_, 2)}, t0_ + 1s);
+  EXPECT_EQ(c->ticks.size(), 1u);
+}
+
+TEST_F(FanOutTest, AClientThatLeftOrReleasedHearsNothing) {
+  auto gone = join(1), released = join(2);
+  fan_out_.hold(cp_, 1, true);
+  fan_out_.hold(cp_, 2, true);
+  fan_out_.release(2, {cp_});
+  fan_out_.leave(1);
+  EXPECT_FALSE(fan_out_.present(1));
+  EXPECT_TRUE(fan_out_.present(2));
+  // (The replicator releases before it leaves; a holder that did not is
+  // skipped.)
+  fan_out_.publish(4, {version(cp_, 1)}, t0_);
+  EXPECT_TRUE(gone->ticks.empty());
+  EXPECT_TRUE(released->ticks.empty());
+  EXPECT_FALSE(fan_out_.send(1, std::make_shared<const Frame>(build_edit_ack(1, 1)), SendClass::kControl));
+  EXPECT_TRUE(fan_out_.send(2, std::make_shared<const Frame>(build_edit_ack(1, 1)), SendClass::kControl));
+  EXPECT_EQ(released->frames.size(), 1u);
+}
+
+TEST_F(FanOutTest, TheFullResolutionRegionIsWhereTheClientLastMoved) {
+  join(1);
+  const Region box{{8, 0, 8}, {12, 4, 12}};
+  EXPECT_FALSE(fan_out_.within_full_res(1, box));  // not placed yet
+  fan_out_.moved(1, Vec3f{10, 10, 10}, 96, 32);
+  EXPECT_TRUE(fan_out_.within_full_res(1, box));
+  fan_out_.moved(1, Vec3f{5000, 10, 5000}, 96, 32);
+  EXPECT_FALSE(fan_out_.within_full_res(1, box));
+  EXPECT_FALSE(fan_out_.within_full_res(2, box));  // never joined
+}
+
+TEST_F(FanOutTest, PresenceIsSentOnlyWhenItChanged) {
+  options_.tick_hz = 1;
+  options_.presence_hz = 1;  // every client every tick
+  auto a = join(1), b = join(2);
+  fan_out_.moved(1, Vec3f{0, 10, 0}, 96, 32);
+  fan_out_.moved(2, Vec3f{20, 10, 0}, 96, 32);
+  fan_out_.send_presence(1);
+  EXPECT_EQ(a->frames.size(), 1u);
+  EXPECT_EQ(b->frames.size(), 1u);
+  fan_out_.send_presence(2);  // nobody moved
+  EXPECT_EQ(a->frames.size(), 1u);
+  fan_out_.moved(2, Vec3f{30, 10, 0}, 96, 32);
+  fan_out_.send_presence(3);
+  EXPECT_EQ(a->frames.size(), 2u);  // b moved
+  EXPECT_EQ(b->frames.size(), 1u);  // a did not
+  EXPECT_EQ(counters_.presence_sent.load(), 3u);
+}
+
+}  // namespace
+}  // namespace terrane
