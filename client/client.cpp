@@ -35,10 +35,11 @@ void Client::disconnect() { connection_.disconnect(); }
 
 // --- the connection's calls (io side) ------------------------------------------
 
-std::vector<Outbound> Client::session_frames(bool resumed) {
+std::vector<Outbound> Client::session_frames(SessionStart start) {
   std::vector<Outbound> frames;
   std::lock_guard lock(mutex_);
-  if (resumed) {
+  if (start == SessionStart::kReconnect) ++counters_.reconnects;
+  if (start != SessionStart::kFirst) {
     // What the replica still holds, so current chunks are not resent.
     std::vector<HeldChunkMsg> held;
     replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
@@ -80,11 +81,6 @@ bool Client::awaiting_answers() {
   return edits_.awaiting_written();
 }
 
-bool Client::server_not_returning() {
-  std::lock_guard lock(mutex_);
-  return server_not_returning_;
-}
-
 void Client::report(const SettledEdits& settled) {
   if (callbacks_.on_edit_result)
     for (const auto& [id, o] : settled) callbacks_.on_edit_result(id, o);
@@ -99,11 +95,6 @@ void Client::on_reconnecting(const std::string& reason) {
   changed_.notify_all();
   if (callbacks_.on_connection_lost) callbacks_.on_connection_lost(reason);
   report(unknown);
-}
-
-void Client::on_relinked() {
-  std::lock_guard lock(mutex_);
-  ++counters_.reconnects;
 }
 
 void Client::on_redirected(const RedirectMsg& to, std::uint32_t cut_edit) {
@@ -214,7 +205,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
       server_not_returning_ = false;
-      if (connection_.resumed()) {
+      if (connection_.session() != SessionStart::kFirst) {
         if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
         break;
       }
@@ -229,8 +220,10 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Disconnect: {
       auto r = parse_disconnect(*m.body_as_Disconnect());
       const std::string reason = r ? *r : std::string("(bad reason)");
+      // Only a server going away (and saying it comes back) is waited for.
+      const bool may_return = reason == "server shutting down" && !server_not_returning_;
       lock.unlock();
-      connection_.lost(reason, true);
+      connection_.lost(reason, may_return);
       return;
     }
     case wire::Body::StreamBatch: {

@@ -243,15 +243,13 @@ class Client : private ConnectionHandler {
 
  private:
   // ConnectionHandler (io side).
-  std::vector<Outbound> session_frames(bool resumed) override;
+  std::vector<Outbound> session_frames(SessionStart start) override;
   void on_bytes_read(std::size_t n) override;
   void on_frame(std::span<const std::uint8_t> body) override;
   void on_framing_error() override;
   void on_written(const Outbound& sent) override;
   bool awaiting_answers() override;
-  bool server_not_returning() override;
   void on_reconnecting(const std::string& reason) override;
-  void on_relinked() override;
   void on_redirected(const RedirectMsg& to, std::uint32_t cut_edit) override;
   void on_closed(const std::string& reason) override;
 

@@ -98,7 +98,7 @@ void Connection::start_session() {
   hello.resume_token = redirects_.take_token();
   std::vector<Outbound> frames;
   frames.push_back({build_hello(hello), wire::Body::Hello});
-  for (Outbound& o : handler_.session_frames(resumed_)) frames.push_back(std::move(o));
+  for (Outbound& o : handler_.session_frames(session_)) frames.push_back(std::move(o));
   // Positions queued while the link was down (or a Redirect held the
   // queue) are older than the one just put first: sent after it, they
   // would move the client back in a burst, faster than a server allows.
@@ -113,14 +113,10 @@ void Connection::start_session() {
   arm_keepalive();
 }
 
-void Connection::lost(const std::string& reason, bool server_said) {
+void Connection::lost(const std::string& reason, bool may_return) {
   // A Redirect waiting for answers is followed now: this server is gone.
   if (redirects_.pending() && !leaving_ && !closed_) return follow_redirect();
-  // Reconnect only when nobody meant to end it: a drop without a reason, or
-  // the server going away. A reason like "authentication failed" or a
-  // limit would only repeat.
-  const bool retry = options_.reconnect && !leaving_ && !closed_ &&
-                     (!server_said || (reason == "server shutting down" && !handler_.server_not_returning()));
+  const bool retry = options_.reconnect && !leaving_ && !closed_ && may_return;
   if (!retry) return close(reason);
   drop_socket();
   queue_.clear();
@@ -142,7 +138,6 @@ void Connection::drop_socket() {
   // Bytes of the old connection still on the emulated link go with it.
   delivery_.cancel();
   link_.clear();
-  read_paused_ = false;
   redirects_.cancel();
   redirect_timer_.cancel();
   redirect_timer_armed_ = false;
@@ -187,7 +182,7 @@ void Connection::follow_redirect() {
   client_log().info("'{}': redirected to server {} at {}", options_.name, to.server_id, target);
   handler_.on_redirected(to, cut_edit);
   if (closed_ || leaving_) return;
-  resumed_ = true;
+  session_ = SessionStart::kRedirect;
   const std::uint64_t gen = generation_;
   auto resolver = std::make_shared<asio::ip::tcp::resolver>(strand_);
   resolver->async_resolve(
@@ -257,8 +252,7 @@ void Connection::schedule_reconnect() {
         backoff_ = std::min(backoff_ * 2, options_.reconnect_max);
         return schedule_reconnect();
       }
-      resumed_ = true;
-      handler_.on_relinked();
+      session_ = SessionStart::kReconnect;
       start_session();
     });
   });
@@ -323,7 +317,7 @@ void Connection::do_write() {
     if (gen != generation_) return;  // a connection that is gone (its queue was dropped)
     if (ec) {
       queue_.finish_write();
-      return lost("write failed: " + ec.message(), false);
+      return lost("write failed: " + ec.message(), true);
     }
     // Before the frame leaves the queue: on_written reads it.
     handler_.on_written(queue_.in_flight());
@@ -345,7 +339,7 @@ void Connection::arm_keepalive() {
         socket_.available(avail_ec) == 0)
       return lost(fmt::format("no answer from the server for {:.1f} s",
                               std::chrono::duration<double>(now - last_heard_).count()),
-                  false);
+                  true);
     // Its nonce is the steady clock in microseconds: the Pong times the round trip.
     const auto now_us = std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count();
     send(build_ping(static_cast<std::uint64_t>(std::max<std::int64_t>(1, now_us))), wire::Body::Ping);
@@ -357,16 +351,12 @@ void Connection::do_read() {
   const std::uint64_t gen = generation_;
   socket_.async_read_some(asio::buffer(read_buf_), [this, gen, g = guard()](const asio::error_code& ec, std::size_t n) {
     if (closed_ || gen != generation_) return;
-    if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), false);
+    if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
     last_heard_ = std::chrono::steady_clock::now();
     handler_.on_bytes_read(n);
     const std::span<const std::uint8_t> bytes(read_buf_.data(), n);
     if (link_.active()) {
-      link_.carry(bytes, std::chrono::steady_clock::now());
-      if (!link_.full())
-        do_read();
-      else
-        read_paused_ = true;
+      if (link_.carry(bytes, std::chrono::steady_clock::now())) do_read();
       return arm_delivery();
     }
     if (feed(bytes) && gen == generation_) do_read();
@@ -402,10 +392,7 @@ void Connection::arm_delivery() {
     const auto now = std::chrono::steady_clock::now();
     while (auto bytes = link_.take_due(now))
       if (!feed(*bytes)) return;
-    if (read_paused_ && !link_.full()) {
-      read_paused_ = false;
-      do_read();
-    }
+    if (link_.resume()) do_read();
     arm_delivery();
   });
 }

@@ -50,13 +50,16 @@
 
 namespace terrane {
 
+// Why a connection's session starts: connect(), a reconnect after a drop,
+// or a Redirect followed (the last two resume: Holdings may go first).
+enum class SessionStart : std::uint8_t { kFirst, kReconnect, kRedirect };
+
 // What a Connection tells its owner. Every call is made on the io side.
 class ConnectionHandler {
  public:
   virtual ~ConnectionHandler() = default;
-  // The frames that follow Hello on a new connection (resumed: a
-  // reconnect or a Redirect, so Holdings may go first), in order.
-  virtual std::vector<Outbound> session_frames(bool resumed) = 0;
+  // The frames that follow Hello on a new connection, in order.
+  virtual std::vector<Outbound> session_frames(SessionStart start) = 0;
   // n bytes were read from the socket (before any emulated link).
   virtual void on_bytes_read(std::size_t n) = 0;
   // One whole frame's body, unverified. The handler may call send(),
@@ -69,13 +72,9 @@ class ConnectionHandler {
   // Whether an edit written to this server still waits for its answer (a
   // Redirect is followed only once none does).
   virtual bool awaiting_answers() = 0;
-  // Whether the server said it stops for good (no reconnect then).
-  virtual bool server_not_returning() = 0;
   // The connection dropped and a reconnect is being tried: whatever was
   // queued is gone.
   virtual void on_reconnecting(const std::string& reason) = 0;
-  // A reconnect attempt made a new socket (its Hello goes out next).
-  virtual void on_relinked() = 0;
   // A Redirect is being followed. cut_edit: an edit whose request was cut
   // off mid-write (0 if none): it may or may not have gone.
   virtual void on_redirected(const RedirectMsg& to, std::uint32_t cut_edit) = 0;
@@ -104,16 +103,17 @@ class Connection {
   bool closed() const { return closed_; }
 
   // --- io side ---------------------------------------------------------------
-  // The connection ended: reconnects (with options.reconnect, when nobody
-  // meant to end it) or closes for good. server_said: the server's
-  // Disconnect gave the reason.
-  void lost(const std::string& reason, bool server_said);
+  // The connection ended: reconnects (with options.reconnect, when the
+  // server may come back: a drop without a reason, or a server that said
+  // it restarts; a reason like "authentication failed" or a limit would
+  // only repeat) or closes for good.
+  void lost(const std::string& reason, bool may_return);
   // Closes for good (a protocol error).
   void close(const std::string& reason);
   // A Redirect arrived: true when it will be followed.
   bool offer_redirect(RedirectMsg r);
-  // This connection is a reconnect or a Redirect's (not the first).
-  bool resumed() const { return resumed_; }
+  // Why this connection's session started.
+  SessionStart session() const { return session_; }
 
  private:
   bool connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error);
@@ -161,9 +161,8 @@ class Connection {
   std::uint64_t generation_ = 0;      // bumps per connection; stale handlers return
   std::chrono::milliseconds backoff_{0};
   int attempts_ = 0;
-  bool resumed_ = false;
+  SessionStart session_ = SessionStart::kFirst;
   bool linked_ = false;               // a connected socket to write to
-  bool read_paused_ = false;          // the emulated link is full
   bool delivery_armed_ = false;
   bool redirect_timer_armed_ = false;
 };

@@ -10,7 +10,7 @@ std::size_t EmulatedLink::cap() const {
   return std::max<std::size_t>(kReadChunkBytes, static_cast<std::size_t>(bdp));
 }
 
-void EmulatedLink::carry(std::span<const std::uint8_t> bytes, Clock::time_point now) {
+bool EmulatedLink::carry(std::span<const std::uint8_t> bytes, Clock::time_point now) {
   auto sent_at = now;
   if (e_.bandwidth_bytes_per_s > 0) {
     const auto on_wire = std::chrono::nanoseconds(static_cast<std::int64_t>(
@@ -20,6 +20,14 @@ void EmulatedLink::carry(std::span<const std::uint8_t> bytes, Clock::time_point 
   }
   delayed_.push_back(Delayed{sent_at + e_.latency, std::vector<std::uint8_t>(bytes.begin(), bytes.end())});
   waiting_bytes_ += bytes.size();
+  paused_ = full();
+  return !paused_;
+}
+
+bool EmulatedLink::resume() {
+  if (!paused_ || full()) return false;
+  paused_ = false;
+  return true;
 }
 
 std::optional<EmulatedLink::Clock::time_point> EmulatedLink::next_at() const {
@@ -38,6 +46,7 @@ std::optional<std::vector<std::uint8_t>> EmulatedLink::take_due(Clock::time_poin
 void EmulatedLink::clear() {
   delayed_.clear();
   waiting_bytes_ = 0;
+  paused_ = false;
 }
 
 }  // namespace terrane

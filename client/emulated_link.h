@@ -5,9 +5,9 @@
 // A single bottleneck queue, first in first out: a read of n bytes leaves
 // the link once the link has carried it at bandwidth_bytes_per_s after
 // everything before it, plus the fixed one-way latency. The connection
-// stops reading while full(): about one bandwidth-delay product (at least
-// one socket read) waits, so a capped link pushes back on the server
-// through TCP as a real one would.
+// stops reading while about one bandwidth-delay product (at least one
+// socket read) waits, so a capped link pushes back on the server through
+// TCP as a real one would.
 // Owned by the connection's io side (the owned thread or the strand); no
 // timers here, the connection arms one for next_at().
 #pragma once
@@ -33,16 +33,19 @@ class EmulatedLink {
   explicit EmulatedLink(NetworkEmulation e) : e_(e) {}
 
   bool active() const { return e_.active(); }
-  // Bytes read at now enter the link.
-  void carry(std::span<const std::uint8_t> bytes, Clock::time_point now);
-  // Too much waits: stop reading the socket until deliveries drain it.
-  bool full() const { return waiting_bytes_ >= cap(); }
+  // Bytes read at now enter the link. Returns whether to read on; false:
+  // too much waits, reading pauses until resume() says otherwise.
+  bool carry(std::span<const std::uint8_t> bytes, Clock::time_point now);
+  // Reading was paused and deliveries have drained the link below its cap:
+  // true (once), reading goes on.
+  bool resume();
   // When the oldest bytes arrive (nullopt: nothing waits).
   std::optional<Clock::time_point> next_at() const;
   // The oldest read if it has arrived by now.
   std::optional<std::vector<std::uint8_t>> take_due(Clock::time_point now);
   std::size_t waiting_bytes() const { return waiting_bytes_; }
-  // The connection went: what was on its link goes with it.
+  // The connection went: what was on its link goes with it (reading is
+  // not paused).
   void clear();
 
  private:
@@ -51,11 +54,13 @@ class EmulatedLink {
     std::vector<std::uint8_t> bytes;
   };
   std::size_t cap() const;
+  bool full() const { return waiting_bytes_ >= cap(); }
 
   NetworkEmulation e_;
   std::deque<Delayed> delayed_;
   std::size_t waiting_bytes_ = 0;
   Clock::time_point link_free_{};  // when the link has carried everything queued
+  bool paused_ = false;            // the connection stopped reading
 };
 
 }  // namespace terrane

@@ -15,9 +15,9 @@ using namespace std::chrono_literals;
 // Records what the Connection tells it; the test waits on it.
 class RecordingHandler : public ConnectionHandler {
  public:
-  std::vector<Outbound> session_frames(bool resumed) override {
+  std::vector<Outbound> session_frames(SessionStart start) override {
     std::lock_guard lock(m_);
-    sessions_.push_back(resumed);
+    sessions_.push_back(start);
     std::vector<Outbound> out;
     out.push_back({build_client_state(ClientStateMsg{{1, 2, 3}, 64, 32}), wire::Body::ClientState});
     cv_.notify_all();
@@ -31,9 +31,7 @@ class RecordingHandler : public ConnectionHandler {
   void on_framing_error() override { add([&] { ++framing_errors_; }); }
   void on_written(const Outbound& sent) override { add([&] { written_.push_back(sent.type); }); }
   bool awaiting_answers() override { return false; }
-  bool server_not_returning() override { return false; }
   void on_reconnecting(const std::string& reason) override { add([&] { lost_.push_back(reason); }); }
-  void on_relinked() override { add([&] { ++relinked_; }); }
   void on_redirected(const RedirectMsg&, std::uint32_t) override {}
   void on_closed(const std::string& reason) override { add([&] { closed_ = reason; }); }
 
@@ -46,13 +44,12 @@ class RecordingHandler : public ConnectionHandler {
 
   std::mutex m_;
   std::condition_variable cv_;
-  std::vector<bool> sessions_;
+  std::vector<SessionStart> sessions_;
   std::size_t bytes_read_ = 0;
   std::vector<wire::Body> frames_;
   int framing_errors_ = 0;
   std::vector<wire::Body> written_;
   std::vector<std::string> lost_;
-  int relinked_ = 0;
   std::optional<std::string> closed_;
 
  private:
@@ -129,7 +126,7 @@ TEST(ConnectionTest, OpensWithHelloAndTheSessionFramesAndDeliversWholeFrames) {
   EXPECT_EQ(server.read_frame(), wire::Body::Ping);
   ASSERT_TRUE(h.wait([&] { return h.written_.size() == 3; }));
   EXPECT_EQ(h.written_, (std::vector<wire::Body>{wire::Body::Hello, wire::Body::ClientState, wire::Body::Ping}));
-  EXPECT_EQ(h.sessions_, std::vector<bool>{false});
+  EXPECT_EQ(h.sessions_, std::vector<SessionStart>{SessionStart::kFirst});
   // A frame split across two writes arrives once, whole.
   const Frame pong = build_pong(9);
   server.write(std::span<const std::uint8_t>(pong).first(3));
@@ -161,8 +158,7 @@ TEST(ConnectionTest, ReconnectsAfterADropAndOpensAResumedSession) {
   EXPECT_EQ(server.read_frame(), wire::Body::Hello);
   EXPECT_EQ(server.read_frame(), wire::Body::ClientState);
   ASSERT_TRUE(h.wait([&] { return h.sessions_.size() == 2; }));
-  EXPECT_EQ(h.sessions_, (std::vector<bool>{false, true}));
-  EXPECT_EQ(h.relinked_, 1);
+  EXPECT_EQ(h.sessions_, (std::vector<SessionStart>{SessionStart::kFirst, SessionStart::kReconnect}));
   EXPECT_EQ(h.lost_.size(), 1u);
   EXPECT_FALSE(h.closed_.has_value());
   c.disconnect();

@@ -36,21 +36,22 @@ TEST(EmulatedLink, BandwidthQueuesReadsBehindEachOther) {
   EXPECT_EQ(link.next_at(), t0 + 200ms);
 }
 
-TEST(EmulatedLink, FullAtOneBandwidthDelayProductButAtLeastOneRead) {
+TEST(EmulatedLink, ReadingPausesAtOneBandwidthDelayProductButAtLeastOneRead) {
   // 1 MB/s and 1 s: about 1 MB may wait.
   EmulatedLink slow(NetworkEmulation{1000ms, 1'000'000});
   const auto t0 = Clock::time_point{} + 1s;
   const std::vector<std::uint8_t> read(EmulatedLink::kReadChunkBytes, 1);
-  for (int i = 0; i < 15; ++i) slow.carry(read, t0);
-  EXPECT_FALSE(slow.full());
-  slow.carry(read, t0);
-  EXPECT_TRUE(slow.full());
+  for (int i = 0; i < 15; ++i) EXPECT_TRUE(slow.carry(read, t0));
+  EXPECT_FALSE(slow.carry(read, t0));
+  EXPECT_FALSE(slow.resume()) << "nothing delivered yet";
+  ASSERT_TRUE(slow.take_due(t0 + 2s).has_value());
+  EXPECT_TRUE(slow.resume());
+  EXPECT_FALSE(slow.resume()) << "once";
   // A tiny product: one read fills it.
   EmulatedLink tiny(NetworkEmulation{1ms, 1000});
-  tiny.carry(read, t0);
-  EXPECT_TRUE(tiny.full());
+  EXPECT_FALSE(tiny.carry(read, t0));
   tiny.clear();
-  EXPECT_FALSE(tiny.full());
+  EXPECT_FALSE(tiny.resume()) << "a new connection reads anyway";
   EXPECT_FALSE(tiny.next_at().has_value());
 }
 

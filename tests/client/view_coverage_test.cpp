@@ -96,6 +96,21 @@ TEST(ViewCoverage, ChunksBeyondTheWorldsBoundsAreNotInView) {
       << "nothing in view: nothing missing";
 }
 
+TEST(ViewCoverage, TheChunksInViewAreTheViewRulesAndTheirLevelsToo) {
+  Replica r;
+  const WorldBounds bounds{-64, 100, true, -200, 150, -90, 300};
+  for (const StreamedView v : {StreamedView{{-70.5f, 3, 12}, 200, 60}, StreamedView{{100, -40, 5}, 96, 96},
+                               StreamedView{{0, 0, 0}, 1, 1}}) {
+    const auto chunks = chunks_in_view(v.position, v.view_distance, bounds);
+    const ViewCoverage c = coverage(r, v, bounds);
+    EXPECT_EQ(c.in_view, chunks.size());
+    EXPECT_EQ(c.not_held, chunks.size());
+    std::size_t full = 0;
+    for (const Vec3i cp : chunks) full += desired_level(v.position, cp, v.full_res_radius) == 0 ? 1 : 0;
+    EXPECT_EQ(c.want_full, full);
+  }
+}
+
 TEST(ViewCoverage, TheStreamedViewTakesDefaultsAndCaps) {
   WelcomeMsg w;
   w.max_view_distance = 300;
