@@ -14,14 +14,12 @@ namespace terrane {
 Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
     : options_(options),
       handler_(handler),
-      own_io_(options_.io_context != nullptr ? nullptr : std::make_unique<asio::io_context>()),
-      io_(options_.io_context != nullptr ? *options_.io_context : *own_io_),
-      strand_(asio::make_strand(io_)),
-      socket_(strand_),
-      keepalive_(strand_),
-      delivery_(strand_),
-      reconnect_timer_(strand_),
-      redirect_timer_(strand_),
+      io_(options_.io_context),
+      socket_(io_.strand()),
+      keepalive_(io_.strand()),
+      delivery_(io_.strand()),
+      reconnect_timer_(io_.strand()),
+      redirect_timer_(io_.strand()),
       read_buf_(EmulatedLink::kReadChunkBytes),
       queue_(options_.max_send_queue_bytes),
       link_(options_.emulation),
@@ -31,17 +29,17 @@ Connection::~Connection() { disconnect(); }
 
 bool Connection::connect(std::string* error) {
   asio::error_code ec;
-  asio::ip::tcp::resolver resolver(io_);
+  asio::ip::tcp::resolver resolver(io_.context());
   const auto endpoints = resolver.resolve(options_.host, std::to_string(options_.port), ec);
   if (ec || endpoints.empty()) {
     if (error) *error = "cannot resolve " + options_.host + ": " + ec.message();
     return false;
   }
   endpoints_ = endpoints;
-  if (own_io_ == nullptr) {
+  if (!io_.owned()) {
     if (!connect_shared(endpoints, error)) return false;
     started_ = true;
-    asio::post(strand_, [this, g = guard()] { start_session(); });
+    asio::post(io_.strand(), [this, g = guard()] { start_session(); });
     return true;
   }
   asio::error_code result = asio::error::would_block;
@@ -54,17 +52,16 @@ bool Connection::connect(std::string* error) {
     socket_.close(ec);
     return false;
   }
-  io_.restart();
   started_ = true;
   start_session();
-  thread_ = std::thread([this] { io_.run(); });
+  io_.start_thread();
   return true;
 }
 
 bool Connection::connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error) {
   auto done = std::make_shared<std::promise<asio::error_code>>();
   auto result = done->get_future();
-  asio::post(strand_, [this, endpoints, done, g = guard()] {
+  asio::post(io_.strand(), [this, endpoints, done, g = guard()] {
     asio::async_connect(socket_, endpoints, [done, g2 = guard()](const asio::error_code& e, const asio::ip::tcp::endpoint&) {
       done->set_value(e);
     });
@@ -72,7 +69,7 @@ bool Connection::connect_shared(const asio::ip::tcp::resolver::results_type& end
   bool timed_out = false;
   if (result.wait_for(options_.connect_timeout) != std::future_status::ready) {
     timed_out = true;
-    asio::post(strand_, [this, g = guard()] {
+    asio::post(io_.strand(), [this, g = guard()] {
       asio::error_code ignored;
       socket_.close(ignored);
     });
@@ -83,7 +80,7 @@ bool Connection::connect_shared(const asio::ip::tcp::resolver::results_type& end
     *error = "cannot connect to " + options_.host + ":" + std::to_string(options_.port) + ": " +
              (timed_out ? std::string("timed out") : ec.message());
   // Let the close (if any) finish before the caller may destroy us.
-  ops_.wait_idle();
+  io_.finish();
   return false;
 }
 
@@ -133,7 +130,7 @@ void Connection::drop_socket() {
   asio::error_code ec;
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ec);
   socket_.close(ec);
-  socket_ = asio::ip::tcp::socket(strand_);
+  socket_ = asio::ip::tcp::socket(io_.strand());
   keepalive_.cancel();
   // Bytes of the old connection still on the emulated link go with it.
   delivery_.cancel();
@@ -184,7 +181,7 @@ void Connection::follow_redirect() {
   if (closed_ || leaving_) return;
   session_ = SessionStart::kRedirect;
   const std::uint64_t gen = generation_;
-  auto resolver = std::make_shared<asio::ip::tcp::resolver>(strand_);
+  auto resolver = std::make_shared<asio::ip::tcp::resolver>(io_.strand());
   resolver->async_resolve(
       to.host, std::to_string(to.port),
       [this, gen, resolver, target, g = guard()](const asio::error_code& ec,
@@ -221,7 +218,7 @@ void Connection::redirect_failed(std::uint64_t gen, const std::string& target, c
   redirects_.unreachable(target, std::chrono::steady_clock::now());
   asio::error_code ignored;
   socket_.close(ignored);
-  socket_ = asio::ip::tcp::socket(strand_);
+  socket_ = asio::ip::tcp::socket(io_.strand());
   if (options_.reconnect) {
     attempts_ = 0;
     backoff_ = options_.reconnect_min;
@@ -264,7 +261,7 @@ void Connection::disconnect() {
   // returns with the connection closed and its last calls made.
   std::call_once(disconnect_once_, [this] {
     leaving_ = true;
-    asio::post(strand_, [this, g = guard()] {
+    asio::post(io_.strand(), [this, g = guard()] {
       reconnect_timer_.cancel();
       if (closed_) return;
       asio::error_code ec;
@@ -272,11 +269,7 @@ void Connection::disconnect() {
       asio::write(socket_, asio::buffer(bye), ec);
       close("disconnected by client");
     });
-    if (thread_.joinable()) {
-      thread_.join();
-      return;
-    }
-    ops_.wait_idle();
+    io_.finish();
   });
 }
 
@@ -296,7 +289,7 @@ void Connection::close(const std::string& reason) {
 bool Connection::send(Frame frame, wire::Body type, std::uint32_t edit_id) {
   if (closed_) return false;
   if (!queue_.reserve(frame.size())) return false;
-  asio::post(strand_, [this, f = std::move(frame), type, edit_id, g = guard()]() mutable {
+  asio::post(io_.strand(), [this, f = std::move(frame), type, edit_id, g = guard()]() mutable {
     if (closed_) {
       queue_.unreserve(f.size());
       return;

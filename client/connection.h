@@ -4,11 +4,10 @@
 // and following Redirects (resuming with the replica's Holdings, which the
 // handler supplies). What the frames mean is the handler's (the Client).
 //
-// Threading: by default the Connection owns one io thread (started by
-// connect()). With ClientOptions::io_context set it owns no thread: its
-// handlers run on a strand of that shared io_context. Either way that io
-// side does all socket I/O and calls the ConnectionHandler, one call at a
-// time, never with a lock of the Connection held. send() may be called
+// Threading: its handlers run on its IoSide (client/io_side.h): a thread of
+// its own (started by connect()), or, with ClientOptions::io_context set, a
+// strand of that shared io_context. That io side does all socket I/O and
+// calls the ConnectionHandler, one call at a time. send() may be called
 // from any thread; connect() and disconnect() from the application's
 // (they block: in shared mode never from the io_context's threads). The
 // methods marked "io side" only from the handler's calls.
@@ -37,11 +36,11 @@
 #include <mutex>
 #include <span>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "client/client_options.h"
 #include "client/emulated_link.h"
+#include "client/io_side.h"
 #include "client/pending_ops.h"
 #include "client/redirects.h"
 #include "client/send_queue.h"
@@ -132,22 +131,18 @@ class Connection {
   void redirect_failed(std::uint64_t gen, const std::string& target, const std::string& why);
   // Ends this connection's socket and timers (a new one follows).
   void drop_socket();
-  PendingOps::Guard guard() { return ops_.guard(); }
+  PendingOps::Guard guard() { return io_.guard(); }
 
   ClientOptions options_;
   ConnectionHandler& handler_;
-  std::unique_ptr<asio::io_context> own_io_;  // null in shared mode
-  asio::io_context& io_;
-  asio::strand<asio::io_context::executor_type> strand_;
+  IoSide io_;
   asio::ip::tcp::socket socket_;      // the rest: io side unless marked
   asio::steady_timer keepalive_;
   asio::steady_timer delivery_;       // the emulated link's
   asio::steady_timer reconnect_timer_;
   asio::steady_timer redirect_timer_;
-  std::thread thread_;                // owned mode
   bool started_ = false;              // connect() succeeded (caller's thread)
   std::once_flag disconnect_once_;
-  PendingOps ops_;
   FrameReader reader_;
   std::vector<std::uint8_t> read_buf_;
   SendQueue queue_;
