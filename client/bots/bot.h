@@ -5,8 +5,9 @@
 // Threading: the driver thread calls every public method; the client's
 // callbacks run on the io pool. State both touch (join progress, pending
 // hash checks, outstanding edits, disconnects) sits behind mutex_, which is
-// never held while calling into the Client except counters() from a
-// callback (order: Bot::mutex_, then the Client's lock).
+// never held while calling into the Client except counters() and
+// with_replica() from a callback, for the join (order: Bot::mutex_, then the
+// Client's lock).
 #pragma once
 
 #include <array>
