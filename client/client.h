@@ -1,138 +1,57 @@
-// Client: connects to a terrane-server, handshakes, keeps a Replica of what
-// the server streams, sends client state and edits, and verifies chunks
-// against the server's chunk hashes.
+// Client: the facade an application uses to talk to a terrane-server: it
+// wires the owners together and answers queries. It owns what the server's
+// messages leave behind (the Welcome, counters, notices, presence, hash
+// checks, read and admin results) and guards its owners' state:
+//   Connection   (client/connection.h): socket, handshake, framing,
+//                keepalive, reconnect and Redirects; the io side.
+//   Replica      (client/replica.h): the holdings and voxels received.
+//   EditTracker  (client/edit_tracker.h): edit ids, outstanding edits and
+//                their outcomes.
+//   Movement     (client/movement.h): position, view distance,
+//                full-resolution radius; the ClientState frames.
 //
-// Threading: by default the Client owns one io thread (started by
-// connect()). With ClientOptions::io_context set, it owns no thread: its
-// handlers run on a strand of that shared io_context, which the application
-// runs on a pool of its own (many clients, few threads: the bots). Either
-// way the io side — the owned thread or the strand — does all socket I/O,
-// verifies and parses every frame (bytes from the server are treated as
-// hostile: any bad frame closes the connection) and applies it to the
-// Replica; one client's handlers never run concurrently. The Replica and
-// the other shared state sit behind one mutex because the application
-// queries them from its own threads; the io side holds it only while
-// applying one frame. Callbacks run on the io side without the lock held:
-// they may call any Client method except disconnect() and wait_until().
-// Every public method is thread-safe. In shared mode connect(),
-// disconnect() and wait_until() block, so they must not be called from the
-// shared io_context's threads, and the io_context must be running while
-// they wait and must outlive the Client.
-//
-// Connection states (io thread):
-//
-//   connect() --> [linked] --drop, or Disconnect "server shutting down"-->
-//                    ^        (reconnect on)                             |
-//                    |                                                   v
-//                    +---- Welcome again <-- Hello, Holdings, state <-- [waiting: backoff]
-//   [linked] --Disconnect with another reason, protocol error,
-//              disconnect(), or reconnect attempts used up--> [closed]
-//   [linked] --Redirect--> [leaving: sends held until every edit written is
-//              answered, at most redirect_wait] --> Hello (resume token),
-//              Holdings, state at the server named --> [linked]
-//              (a connection that fails there: as a drop)
-//
-// While waiting, sends are queued (up to max_send_queue_bytes) and go out
-// after the new handshake; the replica stays as it was.
+// Threading: the Connection's io side (its own thread, or a strand of
+// ClientOptions::io_context: many clients, few threads, the bots) verifies
+// and parses every frame (bytes from the server are treated as hostile: any
+// bad frame closes the connection) and applies it; one client's handlers
+// never run concurrently. The Replica, the EditTracker, the Movement and
+// the results sit behind one mutex because the application queries them
+// from its own threads; the io side holds it only while applying one
+// frame. Callbacks run on the io side without the lock held: they may call
+// any Client method except disconnect() and wait_until(). Every public
+// method is thread-safe. In shared mode connect(), disconnect() and
+// wait_until() block, so they must not be called from the shared
+// io_context's threads, and the io_context must be running while they wait
+// and must outlive the Client. The connection's states are drawn in
+// client/connection.h; while it waits to reconnect the replica stays as it
+// was.
 #pragma once
 
-#include <asio.hpp>
 #include <array>
-#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
 #include <string>
-#include <thread>
 #include <unordered_map>
-#include <unordered_set>
 
+#include "client/client_options.h"
+#include "client/connection.h"
+#include "client/edit_tracker.h"
+#include "client/movement.h"
 #include "client/replica.h"
+#include "client/view_coverage.h"
 #include "protocol/framing.h"
 #include "protocol/messages.h"
 
 namespace terrane {
 
-// Optional emulation of a slow downstream link (server -> client), applied
-// where bytes leave the socket: each read is delivered to the frame parser
-// after the link has carried it at bandwidth_bytes_per_s (a single
-// bottleneck queue, first in first out) plus a fixed one-way latency. The
-// client stops reading the socket while more than about one
-// bandwidth-delay product (at least 64 KiB) waits, so a capped link pushes
-// back on the server through TCP as a real one would. Upstream (client ->
-// server) bytes are not delayed. Zero fields disable each part.
-struct NetworkEmulation {
-  std::chrono::milliseconds latency{0};
-  std::uint64_t bandwidth_bytes_per_s = 0;
-  bool active() const { return latency.count() > 0 || bandwidth_bytes_per_s > 0; }
-};
-
-struct ClientOptions {
-  std::string host = "127.0.0.1";
-  std::uint16_t port = 0;
-  std::string name = "client";
-  std::string auth_token;
-  // Sent right after Hello. With start_at_spawn the position is replaced by
-  // the Welcome's spawn point when it arrives (and sent again).
-  ClientStateMsg state{{0, 0, 0}, 256, 64};
-  bool start_at_spawn = true;
-  // False: never send a ClientState, so the server streams nothing (tools
-  // such as terrane-admin that only speak to the server).
-  bool stream = true;
-  // With start_at_spawn: the first position is the spawn plus this (the
-  // server limits movement speed after the first position).
-  Vec3f spawn_offset{0, 0, 0};
-  std::uint32_t protocol_version = kProtocolVersion;  // tests: speak another version
-  std::chrono::milliseconds connect_timeout{5000};
-  // A Ping goes out this often so an idle client is not timed out.
-  std::chrono::milliseconds keepalive{5000};
-  // The connection counts as lost (reconnecting if allowed, as on a drop)
-  // when nothing has come from the server for this long: a paused or
-  // partitioned server is noticed, not waited out. The server pings every
-  // 5 s and answers each Ping. Checked at each keepalive; 0 = never.
-  std::chrono::milliseconds silence_timeout{15000};
-  // Outbound bytes queued at most; sends beyond it fail.
-  std::size_t max_send_queue_bytes = 4u << 20;
-  // Reconnect when the connection drops without a reason, or because the
-  // server shut down: with backoff from reconnect_min doubling to
-  // reconnect_max, up to reconnect_attempts tries in a row (0 = forever).
-  // The replica is kept and offered to the server (Holdings), so chunks
-  // still current are not downloaded again. Edits sent but not answered
-  // when the connection dropped are reported rejected with reason
-  // kEditOutcomeUnknown: they may or may not have been applied.
-  bool reconnect = false;
-  std::chrono::milliseconds reconnect_min{100};
-  std::chrono::milliseconds reconnect_max{5000};
-  int reconnect_attempts = 0;
-  // Follow a Redirect (a world shared by several servers): go on at the
-  // server named, keeping the replica (Holdings), once every edit written
-  // to this one is answered or redirect_wait has passed (edits then
-  // unanswered are reported with kEditOutcomeUnknown; reads and hash
-  // requests unanswered are dropped: ask again). Edits made meanwhile wait
-  // and go to the new server. If the new server cannot be resolved or
-  // reached within connect_timeout, the client goes back to the old one
-  // (resuming likewise; with reconnect on, with its backoff) and follows
-  // no Redirect there for a minute. false: stay (the server serves the
-  // session on after a grace).
-  bool follow_redirects = true;
-  std::chrono::milliseconds redirect_wait{5000};
-  // Shared mode (see the threading note): run on this io_context instead of
-  // an owned thread. Not owned.
-  asio::io_context* io_context = nullptr;
-  // Chunks packed from Full records, shared with the process's other
-  // clients (null: each packs its own). Many clients in one process
-  // receive the same records (client/decoded_chunks.h).
-  std::shared_ptr<DecodedChunks> shared_chunks;
-  NetworkEmulation emulation;
-};
-
 inline constexpr std::size_t kMaxNotices = 32;
-inline constexpr const char* kEditOutcomeUnknown = "connection lost before the answer; outcome unknown";
 
 // Frames and bytes (length header included) of one message type.
 struct MessageTypeCounters {
@@ -186,16 +105,6 @@ struct HashCheck {
   std::optional<std::uint64_t> replica_revision;  // nullopt: chunk not held
   bool replica_full = false;  // held at full resolution (Full or Empty)
   bool match = false;         // full, same revision, same hash
-};
-
-struct EditOutcome {
-  bool accepted = false;
-  std::uint64_t tick = 0;
-  std::string reason;  // rejections
-  // Rejections decided against the world also carry its true state over the
-  // edit's box (empty box otherwise), for clients that predicted the edit.
-  Region state_box;
-  std::vector<Voxel> state;
 };
 
 // One UpdateBatch as applied to the replica: its tick, the chunks it
@@ -255,17 +164,17 @@ struct ClientView {
   const std::unordered_map<std::uint32_t, AdminResultMsg>& admin_results;  // by request id
 };
 
-class Client {
+class Client : private ConnectionHandler {
  public:
   explicit Client(ClientOptions options, ClientCallbacks callbacks = {});
-  ~Client();
+  ~Client() override;
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;
 
   // Connects (blocking up to connect_timeout), queues Hello and the initial
-  // ClientState and starts the io thread (shared mode: starts reading on
-  // the strand). Returns false with *error set if the connection cannot be
-  // made. Call once.
+  // ClientState and starts the io side (the owned thread, or reading on the
+  // strand in shared mode). Returns false with *error set if the
+  // connection cannot be made. Call once.
   bool connect(std::string* error);
   // Sends Disconnect, closes the socket and joins the io thread (shared
   // mode: waits until none of the client's handlers is pending). Idempotent;
@@ -301,6 +210,10 @@ class Client {
   std::vector<ServerNoticeMsg> notices() const;
   // The state last sent (position, view), once there is one.
   std::optional<ClientStateMsg> last_state() const;
+  // The view the server streams for it (nullopt before the Welcome or a
+  // state), and how much of that view the replica holds.
+  std::optional<StreamedView> streamed_view() const;
+  std::optional<ViewCoverage> coverage() const;
   bool ping(std::uint64_t nonce);
   // Sends raw bytes as they are (tests: malformed frames).
   bool send_raw(Frame bytes);
@@ -329,115 +242,52 @@ class Client {
   }
 
  private:
-  struct Outbound {
-    Frame frame;
-    wire::Body type;
-    std::uint32_t edit_id = 0;  // an EditRequest's
-    bool skip = false;          // cut off mid-write by a Redirect: not sent again
-  };
-  // Bytes read from the socket, waiting for the emulated link.
-  struct Delayed {
-    std::chrono::steady_clock::time_point deliver_at;
-    std::vector<std::uint8_t> bytes;
-  };
-  // Counts one pending handler of this client (shared mode waits for none).
-  class OpGuard;
+  // ConnectionHandler (io side).
+  std::vector<Outbound> session_frames(SessionStart start) override;
+  void on_bytes_read(std::size_t n) override;
+  void on_frame(std::span<const std::uint8_t> body) override;
+  void on_framing_error() override;
+  void on_written(const Outbound& sent) override;
+  bool awaiting_answers() override;
+  void on_reconnecting(const std::string& reason) override;
+  void on_redirected(const RedirectMsg& to, std::uint32_t cut_edit) override;
+  void on_closed(const std::string& reason) override;
 
-  bool connect_shared(const asio::ip::tcp::resolver::results_type& endpoints, std::string* error);
-  void start_io();  // io side: first writes, reads and timers
-  void do_read();
-  bool feed(std::span<const std::uint8_t> bytes);  // io side; false once closed
-  void delay_bytes(std::size_t n);
-  void arm_delivery();
-  void arm_keepalive();
-  void handle_frame(std::span<const std::uint8_t> body);
-  bool send(Frame frame, wire::Body type, std::uint32_t edit_id = 0);
+  // io side, under the lock: a StreamBatch's records into the replica
+  // (those before a bad one stay applied); *after reports the holdings
+  // changed, to run without the lock.
+  Status apply_stream_batch(const wire::StreamBatch& batch, std::function<void()>* after);
   std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
-  void do_write();
-  void close_locked_io(const std::string& reason);  // io side
-  // io side: the connection ended; reconnects or closes for good.
-  void connection_lost(const std::string& reason, bool server_said);
-  void schedule_reconnect();
-  void start_session();  // io side: Hello (+ Holdings, state) and the read loop
-  // io side: a Redirect is pending; follows it once nothing written waits
-  // for an answer (or at redirect_wait).
-  void follow_when_ready();
-  void follow_redirect();
-  // io side: ends this connection's socket and timers (a new one follows).
-  void drop_socket();
-  // Under mutex_: every edit sent and not answered gets the outcome
-  // unknown (recorded, and returned for on_edit_result).
-  std::vector<std::pair<std::uint32_t, EditOutcome>> settle_unanswered();
-  ClientView view() const;
+  // Edits given an outcome at once: reported (io side, without the lock).
+  void report(const SettledEdits& settled);
+  ClientView client_view() const;
 
   ClientOptions options_;
   ClientCallbacks callbacks_;
-  std::unique_ptr<asio::io_context> own_io_;  // null in shared mode
-  asio::io_context& io_;
-  asio::strand<asio::io_context::executor_type> strand_;
-  asio::ip::tcp::socket socket_;   // on strand_
-  asio::steady_timer keepalive_;   // on strand_
-  // When this connection last read a byte (strand_): silence_timeout.
-  std::chrono::steady_clock::time_point last_heard_{};
-  asio::steady_timer delivery_;    // on strand_
-  std::thread thread_;
-  bool started_ = false;           // connect() succeeded (caller's thread)
-  std::once_flag disconnect_once_;
-  std::atomic<int> pending_ops_{0};
-  std::mutex ops_mutex_;           // only to wait for pending_ops_ == 0
-  std::condition_variable ops_done_;
-  FrameReader reader_;
-  std::vector<std::uint8_t> read_buf_;
-  std::deque<Outbound> send_queue_;  // io side
-  bool writing_ = false;             // io side
-  std::deque<Delayed> delayed_;      // io side (emulation)
-  std::size_t delayed_bytes_ = 0;    // io side
-  bool read_paused_ = false;         // io side
-  bool delivery_armed_ = false;      // io side
-  std::chrono::steady_clock::time_point link_free_{};  // io side
-  std::atomic<std::size_t> queued_bytes_{0};
-  std::atomic<std::uint32_t> next_edit_id_{1};
-  std::atomic<bool> io_closed_{false};
-  std::atomic<bool> leaving_{false};      // disconnect() was called
-  std::uint64_t generation_ = 0;          // io thread: bumps per connection; stale handlers return
-  asio::ip::tcp::resolver::results_type endpoints_;  // io thread
-  asio::steady_timer reconnect_timer_;
-  std::chrono::milliseconds backoff_{0};  // io thread
-  int attempts_ = 0;                      // io thread
-  bool resumed_ = false;                  // io thread: this connection is a reconnect
-  bool linked_ = false;                   // io thread: a connected socket to write to
-  std::optional<RedirectMsg> redirect_;   // io thread: to follow
-  asio::steady_timer redirect_timer_;     // on strand_
-  bool redirect_timer_armed_ = false;     // io thread
-  std::string resume_token_;              // io thread: for the next Hello
-  std::unordered_set<std::uint32_t> edits_on_wire_;  // io thread: written, not answered
-  // io thread: a Redirect target that could not be reached, not followed
-  // again until then.
-  static constexpr std::chrono::seconds kUnreachableFor{60};
-  std::string unreachable_;
-  std::chrono::steady_clock::time_point unreachable_until_{};
 
   // Guarded by mutex_ (shared with the application's threads).
   mutable std::mutex mutex_;
   std::condition_variable changed_;
   Replica replica_;
+  EditTracker edits_;
+  Movement movement_;
   ClientCounters counters_;
   std::optional<WelcomeMsg> welcome_;
   bool closed_ = false;
   std::string disconnect_reason_;
-  std::unordered_map<std::uint32_t, EditOutcome> edits_;
   std::unordered_map<Vec3i, bool, Vec3iHash> hash_checks_;
   std::unordered_map<std::uint32_t, ReadBoxResultMsg> read_results_;
   std::unordered_map<std::uint32_t, AdminResultMsg> admin_results_;
+  std::uint32_t next_request_id_ = 1;
   std::deque<ServerNoticeMsg> notices_;
   // The server said it stops without coming back: do not reconnect.
   bool server_not_returning_ = false;
-  std::unordered_set<std::uint32_t> unanswered_edits_;
-  std::optional<ClientStateMsg> last_state_;
   std::vector<PresenceEntryMsg> presence_;
-  StreamDecodeScratch stream_scratch_;  // io thread
-  std::vector<Vec3i> horizon_covered_;  // io thread: a Horizon record's chunks newly covered
-  std::atomic<std::uint32_t> next_request_id_{1};
+
+  StreamDecodeScratch stream_scratch_;  // io side
+  std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered
+  // Last: goes first, so no handler runs on the rest once it is gone.
+  Connection connection_;
 };
 
 }  // namespace terrane

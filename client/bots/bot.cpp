@@ -46,7 +46,13 @@ float length(Vec3f v) { return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 }  // namespace
 
 Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditMode edits, std::uint64_t seed)
-    : index_(index), ctx_(ctx), movement_(movement), edits_mode_(edits), rng_(seed), pos_(start) {
+    : index_(index),
+      ctx_(ctx),
+      movement_(movement),
+      edits_mode_(edits),
+      rng_(seed),
+      pos_(start),
+      join_view_{start, ctx.view_distance, ctx.full_res_radius} {
   const BotsOptions& o = *ctx_.options;
   ClientOptions co;
   // Several servers of one world: bot i on the (i mod n)-th.
@@ -66,7 +72,7 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
       ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
     else
       ctx_.fanout->chunk_released(index_, cp);  // released, or held coarser now
-    if (now != nullptr) on_holding(cp, *now);
+    if (now != nullptr) on_holding();
   };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
     {
@@ -95,33 +101,10 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditM
   client_ = std::make_unique<Client>(co, cb);
   std::uniform_real_distribution<float> angle(0.0f, 2.0f * std::numbers::pi_v<float>);
   heading_ = angle(rng_);
-  init_join_tracking();
 }
 
 // The Client's handlers capture this Bot: it goes first.
 Bot::~Bot() { client_.reset(); }
-
-void Bot::init_join_tracking() {
-  const std::int32_t view = ctx_.view_distance, full = ctx_.full_res_radius;
-  const std::int32_t n = (view + kChunkSize / 2) / kChunkSize;
-  Vec3i c0 = view_chunk(pos_) - Vec3i{n, n, n}, c1 = view_chunk(pos_) + Vec3i{n, n, n};
-  c0.y = std::max(c0.y, floor_div(ctx_.welcome.bounds_min_y, kChunkSize));
-  c1.y = std::min(c1.y, floor_div(ctx_.welcome.bounds_max_y - 1, kChunkSize));
-  box_min_ = c0;
-  box_size_ = Vec3i{c1.x - c0.x + 1, std::max(0, c1.y - c0.y + 1), c1.z - c0.z + 1};
-  need_.assign(static_cast<std::size_t>(box_size_.x) * static_cast<std::size_t>(box_size_.y) *
-                   static_cast<std::size_t>(box_size_.z),
-               0);
-  const WorldBounds bounds = ctx_.welcome.bounds();  // chunks beyond a border are never sent
-  std::size_t i = 0;
-  for (int y = c0.y; y <= c1.y; ++y)
-    for (int z = c0.z; z <= c1.z; ++z)
-      for (int x = c0.x; x <= c1.x; ++x, ++i) {
-        if (!bounds.touches_chunk({x, y, z})) continue;
-        if (within(pos_, {x, y, z}, view)) need_[i] |= 1, ++need_coarse_;
-        if (within(pos_, {x, y, z}, full)) need_[i] |= 2, ++need_full_;
-      }
-}
 
 bool Bot::connect() {
   connect_at_ = Clock::now();
@@ -134,40 +117,45 @@ bool Bot::connect() {
   }
   result_.connected = true;
   std::lock_guard lock(mutex_);
-  if (need_full_ == 0) joined_ = true;
-  if (need_coarse_ == 0) result_.join_coarse_ms = 0;
-  if (need_full_ == 0) result_.join_full_ms = 0;
+  // A view with nothing to hold (beyond the world's bounds) is joined at once.
+  const ViewCoverage v = coverage(Replica(), join_view_, ctx_.welcome.bounds());
+  if (v.want_full == 0) {
+    joined_ = true;
+    if (!result_.join_full_ms) result_.join_full_ms = 0;
+  }
+  if (v.in_view == 0 && !result_.join_coarse_ms) result_.join_coarse_ms = 0;
   return true;
 }
 
-void Bot::on_holding(Vec3i cp, const Holding& held) {
+void Bot::on_holding() {
   std::lock_guard lock(mutex_);
   if (joined_ && result_.join_coarse_ms) return;
-  const Vec3i l = cp - box_min_;
-  if (l.x < 0 || l.y < 0 || l.z < 0 || l.x >= box_size_.x || l.y >= box_size_.y || l.z >= box_size_.z) return;
-  std::uint8_t& b = need_[(static_cast<std::size_t>(l.y) * static_cast<std::size_t>(box_size_.z) +
-                           static_cast<std::size_t>(l.z)) * static_cast<std::size_t>(box_size_.x) +
-                          static_cast<std::size_t>(l.x)];
-  const auto now = Clock::now();
-  if ((b & 1) != 0) {
-    b &= std::uint8_t(~1u);
-    if (--need_coarse_ == 0) {
-      result_.join_coarse_ms = ms_between(connect_at_, now);
-      const ClientCounters k = client_->counters();
-      for (const auto& t : k.by_message_type) result_.join_coarse_bytes += t.bytes_in;
-    }
+  if (join_check_in_ > 1) {
+    --join_check_in_;
+    return;
   }
-  if ((b & 2) != 0 && held.full_resolution()) {
-    b &= std::uint8_t(~2u);
-    if (--need_full_ == 0) {
-      result_.join_full_ms = ms_between(connect_at_, now);
-      const ClientCounters k = client_->counters();
-      std::uint64_t delivered = 0;
-      for (const auto& t : k.by_message_type) delivered += t.bytes_in;
-      result_.join_bytes = delivered;
-      joined_ = true;
-    }
+  check_join(Clock::now());
+}
+
+void Bot::check_join(Clock::time_point now) {
+  const ViewCoverage v =
+      client_->with_replica([&](const Replica& r) { return coverage(r, join_view_, ctx_.welcome.bounds()); });
+  if (!result_.join_coarse_ms && v.not_held == 0) {
+    result_.join_coarse_ms = ms_between(connect_at_, now);
+    const ClientCounters k = client_->counters();
+    for (const auto& t : k.by_message_type) result_.join_coarse_bytes += t.bytes_in;
   }
+  if (!joined_ && v.full_region_held()) {
+    result_.join_full_ms = ms_between(connect_at_, now);
+    const ClientCounters k = client_->counters();
+    std::uint64_t delivered = 0;
+    for (const auto& t : k.by_message_type) delivered += t.bytes_in;
+    result_.join_bytes = delivered;
+    joined_ = true;
+  }
+  const std::size_t coarse_left = result_.join_coarse_ms ? SIZE_MAX : v.not_held;
+  const std::size_t full_left = joined_ ? SIZE_MAX : v.want_full - v.held_full;
+  join_check_in_ = std::min(coarse_left, full_left);
 }
 
 bool Bot::joined() const {

@@ -5,8 +5,9 @@
 // Threading: the driver thread calls every public method; the client's
 // callbacks run on the io pool. State both touch (join progress, pending
 // hash checks, outstanding edits, disconnects) sits behind mutex_, which is
-// never held while calling into the Client except counters() from a
-// callback (order: Bot::mutex_, then the Client's lock).
+// never held while calling into the Client except counters() and
+// with_replica() from a callback, for the join (order: Bot::mutex_, then the
+// Client's lock).
 #pragma once
 
 #include <array>
@@ -97,10 +98,11 @@ class Bot {
   };
 
   // What the bot holds of a chunk changed (not a release): join progress.
-  void on_holding(Vec3i cp, const Holding& held);
+  void on_holding();
   void on_chunk_hash(const HashCheck& check);
   void on_disconnected(const std::string& reason);
-  void init_join_tracking();
+  // Under mutex_: compares the join view with what the replica holds now.
+  void check_join(Clock::time_point now);
   void count_join_voxels();
   void move(Clock::time_point now);
   void walk();
@@ -130,12 +132,14 @@ class Bot {
   BotResult result_;
 
   mutable std::mutex mutex_;
-  // Join tracking over the chunk box [box_min_, box_min_ + box_size_):
-  // bit 0 = in view, nothing held yet; bit 1 = in the full-resolution
-  // region, not yet at full resolution.
-  Vec3i box_min_, box_size_;
-  std::vector<std::uint8_t> need_;
-  std::size_t need_coarse_ = 0, need_full_ = 0;
+  // Join tracking: the view at the start (the bot does not move before it
+  // joined), and how many holding changes may pass before the replica is
+  // compared with it again. Each change is one chunk's, so neither the
+  // coarse view nor the full-resolution region can be complete before as
+  // many changes as it misses chunks: counting down to that keeps the
+  // join's time exact without a pass over the view per chunk received.
+  StreamedView join_view_;
+  std::size_t join_check_in_ = 0;
   bool joined_ = false;
   bool voxels_counted_ = false;
   std::unordered_map<Vec3i, PendingHash, Vec3iHash> pending_hash_;

@@ -109,8 +109,10 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   RunContext ctx;
   ctx.options = &o;
   ctx.welcome = welcome;
-  ctx.view_distance = std::min(o.view_distance, welcome.max_view_distance);
-  ctx.full_res_radius = std::min({o.full_res_radius, welcome.max_full_res_radius, ctx.view_distance});
+  // The distances the server applies (client/view_coverage.h).
+  const StreamedView asked = streamed_view(ClientStateMsg{{}, o.view_distance, o.full_res_radius}, welcome);
+  ctx.view_distance = asked.view_distance;
+  ctx.full_res_radius = asked.full_res_radius;
   ctx.spawn = o.spawn_set ? Vec3f{static_cast<float>(o.spawn.x) + 0.5f, static_cast<float>(o.spawn.y),
                                   static_cast<float>(o.spawn.z) + 0.5f}
                           : welcome.spawn;

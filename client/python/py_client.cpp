@@ -78,14 +78,11 @@ py::array_t<std::uint8_t> planes(Vec3i s, const auto& voxel_at) {
   return out;
 }
 
-// Under the client's lock (a wait_until predicate): touches only v.
-bool held_full(const ClientView& v, const std::vector<Vec3i>& chunks) {
-  if (!v.welcomed) return false;
-  for (const Vec3i cp : chunks) {
-    const Holding* c = v.replica.holding(cp);
-    if (c == nullptr || !c->full_resolution()) return false;
-  }
-  return true;
+// Under the client's lock (a wait_until predicate): touches only v. Every
+// chunk of region held at full resolution (region: a view whose
+// full-resolution radius is its view distance).
+bool held_full(const ClientView& v, const StreamedView& region, const WorldBounds& bounds) {
+  return v.welcomed && coverage(v.replica, region, bounds).complete;
 }
 
 std::mutex g_clients_mutex;
@@ -241,30 +238,25 @@ void PyClient::wait_ready(double timeout) {
 
 void PyClient::sync(double timeout) { python::sync(*c_, timeout_of(timeout)); }
 
-std::int32_t PyClient::full_radius(const WelcomeMsg& w) const {
-  const ClientStateMsg s = state();
-  return std::min({s.full_res_radius == 0 ? w.default_full_res_radius : s.full_res_radius, w.max_full_res_radius,
-                   s.view_distance == 0 ? w.default_view_distance : s.view_distance, w.max_view_distance});
-}
-
 void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
   const auto t = timeout_of(timeout);
   wait_ready(timeout);
   const WelcomeMsg w = *c_->welcome();
-  const std::int32_t full = full_radius(w);
+  const StreamedView view = streamed_view(state(), w);
+  const std::int32_t full = view.full_res_radius;
   std::int32_t r = full;
   if (radius) {
     if (!(*radius > 0) || *radius > full)
       raise(PyExc_ValueError, "radius must be in (0, " + std::to_string(full) + "], the full-resolution radius");
     r = static_cast<std::int32_t>(std::ceil(*radius));
   }
-  // The chunks first: the predicate runs under the client's lock.
-  const auto chunks = chunks_in_view(state().position, r, w.bounds());
+  const StreamedView region{view.position, r, r};
+  const WorldBounds bounds = w.bounds();
   bool loaded = false, closed = false;
   wait_for(*c_, t,
         [&](const ClientView& v) {
           closed = v.closed;
-          loaded = held_full(v, chunks);
+          loaded = held_full(v, region, bounds);
           return loaded || closed;
         });
   if (!loaded) fail_or_timeout(closed, "the full-resolution region was not loaded within the timeout");
@@ -273,9 +265,11 @@ void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
 bool PyClient::loaded() const {
   const auto w = c_->welcome();
   if (!w) return false;
-  const auto chunks = chunks_in_view(state().position, full_radius(*w), w->bounds());
+  const StreamedView view = streamed_view(state(), *w);
+  const StreamedView region{view.position, view.full_res_radius, view.full_res_radius};
+  const WorldBounds bounds = w->bounds();
   bool l = false;
-  c_->wait_until([&](const ClientView& v) { return l = held_full(v, chunks); }, std::chrono::milliseconds(0));
+  c_->wait_until([&](const ClientView& v) { return l = held_full(v, region, bounds); }, std::chrono::milliseconds(0));
   return l;
 }
 
@@ -284,7 +278,7 @@ int PyClient::verify(double timeout) {
   const auto start = Clock::now();
   wait_ready(timeout);
   const WelcomeMsg w = *c_->welcome();
-  const auto chunks = chunks_in_view(state().position, full_radius(w), w.bounds());
+  const auto chunks = chunks_in_view(state().position, streamed_view(state(), w).full_res_radius, w.bounds());
   for (const Vec3i cp : chunks)
     if (!c_->request_chunk_hash(cp)) raise(PyExc_ConnectionError, "connection closed");
   // The answers come in order with the world's data: once the barrier's

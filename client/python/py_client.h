@@ -137,7 +137,6 @@ class PyClient {
 
  private:
   ClientStateMsg state() const;
-  std::int32_t full_radius(const WelcomeMsg& w) const;
   [[noreturn]] void fail_or_timeout(bool closed, const std::string& what) const;
   std::string material_name(Material m) const;
   Material material_of(const py::object& m) const;

@@ -321,6 +321,34 @@ TEST_F(ClientServerTest, MipsArriveBeforeFullResolution) {
   });
 }
 
+// Client::coverage() answers for the view the client asked for: nothing
+// before the Welcome, then the view rule's chunks, complete once each is
+// held at its distance's level.
+TEST_F(ClientServerTest, CoverageOfTheViewIsCompleteOnceStreamingHasSettled) {
+  start_server();
+  Client c(options("coverage", 96, 32));
+  EXPECT_FALSE(c.coverage().has_value());
+  const auto w = join(c);
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 96, *w);
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, view, w->spawn, 32); }, kDeadline));
+  const std::optional<StreamedView> asked = c.streamed_view();
+  ASSERT_TRUE(asked.has_value());
+  EXPECT_EQ(asked->view_distance, 96);
+  EXPECT_EQ(asked->full_res_radius, 32);
+  const std::optional<ViewCoverage> cov = c.coverage();
+  ASSERT_TRUE(cov.has_value());
+  EXPECT_EQ(cov->in_view, view.size());
+  EXPECT_EQ(cov->not_held, 0u);
+  EXPECT_TRUE(cov->complete);
+  EXPECT_TRUE(cov->full_region_held());
+  EXPECT_EQ(cov->want_full, chunks_within(w->spawn, 32, *w).size());
+  EXPECT_EQ(cov->full + cov->empty + cov->mip1 + cov->mip2 + cov->mip3 + cov->estimate + cov->horizon, view.size());
+  EXPECT_EQ(cov->horizon, 0u) << "a settled view holds no horizon image";
+  c.disconnect();
+}
+
 TEST_F(ClientServerTest, EveryEditKindReplicatesExactly) {
   start_server({"--hash-push-ms", "0"});  // only the hashes asked for below
   Client a(options("a")), b(options("b"));

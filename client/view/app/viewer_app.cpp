@@ -10,7 +10,6 @@
 #include "client/view/app/headless.h"
 #include "client/view/png.h"
 #include "client/view/replica_source.h"
-#include "client/view/stream_progress.h"
 #include "common/cli/cli.h"
 #include "common/voxel/chunk.h"
 
@@ -234,29 +233,17 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
   static constexpr float kText[4] = {1, 1, 1, 1};
   static constexpr float kPanel[4] = {0, 0, 0, 0.45f};
   const ClientCounters c = session.client().counters();
-  struct Counts {
-    std::size_t full = 0, mip[4] = {0, 0, 0, 0}, empty = 0;
-  };
   // Finest level per chunk column near the camera, for the map.
   const Vec3f cam = session.camera().pos;
   const int radius = std::min(32, session.view_distance() / kChunkSize + 1);
   const Vec3i cc = chunk_of(Vec3i{static_cast<std::int32_t>(std::floor(cam.x)), 0,
                                   static_cast<std::int32_t>(std::floor(cam.z))});
   const int side = 2 * radius + 1;
-  std::vector<int> column(static_cast<std::size_t>(side * side), -2);  // -2 none, -1 empty, 0 full, 1..3 mip
-  Counts n;
+  std::vector<int> column(static_cast<std::size_t>(side * side), -2);  // -2 none, -1 empty, 0 full, 1.. coarser
+  const ViewCoverage n = session.client().coverage().value_or(ViewCoverage{});
   session.client().with_replica([&](const Replica& rep) {
     rep.for_each_holding([&](Vec3i cp, const Holding& cov) {
-      int level = -1;
-      if (cov.form == HoldingForm::kEmpty) {
-        ++n.empty;
-      } else if (cov.form == HoldingForm::kFull) {
-        ++n.full;
-        level = 0;
-      } else {
-        ++n.mip[std::clamp(cov.level(), 1, 3)];
-        level = cov.level();
-      }
+      const int level = cov.form == HoldingForm::kEmpty ? -1 : cov.level();
       const int dx = cp.x - cc.x + radius, dz = cp.z - cc.z + radius;
       if (dx < 0 || dz < 0 || dx >= side || dz >= side) return;
       int& col = column[static_cast<std::size_t>(dz * side + dx)];
@@ -278,8 +265,14 @@ void draw_overlay(Renderer& r, ViewerSession& session, const OverlayInfo& info, 
   std::snprintf(line, sizeof line, "IN %.1f KB/S  TOTAL %.2f MB", info.bytes_in_per_s / 1024.0,
                 static_cast<double>(c.bytes_in) / (1024.0 * 1024.0));
   lines.emplace_back(line);
-  std::snprintf(line, sizeof line, "CHUNKS FULL %zu  MIP1 %zu  MIP2 %zu  MIP3 %zu  EMPTY %zu", n.full, n.mip[1], n.mip[2],
-                n.mip[3], n.empty);
+  // The chunks in view, by what is held of them.
+  std::snprintf(line, sizeof line, "VIEW %zu CHUNKS  HELD %zu  SETTLED %zu  NONE %zu", n.in_view, n.held(), n.settled,
+                n.not_held);
+  lines.emplace_back(line);
+  std::snprintf(line, sizeof line, "FULL %zu  EMPTY %zu  MIP1 %zu  MIP2 %zu  MIP3 %zu", n.full, n.empty, n.mip1, n.mip2,
+                n.mip3);
+  lines.emplace_back(line);
+  std::snprintf(line, sizeof line, "ESTIMATE %zu  HORIZON %zu", n.estimate, n.horizon);
   lines.emplace_back(line);
   std::snprintf(line, sizeof line, "RENDER CHUNKS %zu  DRAWN %zu  TRIS %.2fM  MESHED %llu", rs.meshes, rs.drawn,
                 static_cast<double>(rs.triangles) / 1e6, static_cast<unsigned long long>(ms.chunks_meshed));
@@ -339,11 +332,10 @@ int run_screenshot(const ViewerOptions& options) {
     std::fprintf(stderr, "terrane-view: %s\n", error.c_str());
     return 1;
   }
-  const WelcomeMsg& w = session.welcome();
   std::uint64_t frames_seen = 0;
   auto last_change = clock::now();
   bool data_ready = false;
-  StreamProgress progress;
+  ViewCoverage progress;
   // Without news from the server for this long, streaming is taken as done
   // (a world with horizontal bounds never sends the chunks beyond them).
   constexpr auto kQuiet = std::chrono::seconds(3);
@@ -360,13 +352,10 @@ int run_screenshot(const ViewerOptions& options) {
       if (!data_ready) session.scheduler().mark_dirty();
     }
     if (!data_ready) {
-      progress = session.client().with_replica([&](const Replica& r) {
-        return stream_progress(r, session.camera().pos, session.view_distance(), session.full_res_radius(),
-                               w.bounds());
-      });
-      const bool waited = options.wait_full_res || options.mips_only ? progress.settled == progress.in_view
-                                                                     : progress.covered == progress.in_view;
-      if (waited || (progress.covered > 0 && clock::now() - last_change > kQuiet)) {
+      // The view the camera's last ClientState asked for.
+      progress = session.client().coverage().value_or(ViewCoverage{});
+      const bool waited = options.wait_full_res || options.mips_only ? progress.complete : progress.not_held == 0;
+      if (waited || (progress.held() > 0 && clock::now() - last_change > kQuiet)) {
         data_ready = true;
         session.scheduler().mark_dirty();
       }
@@ -380,7 +369,7 @@ int run_screenshot(const ViewerOptions& options) {
       std::fprintf(stderr,
                    "terrane-view: timed out after %.0f s: %zu of %zu chunks in view received, %zu at their final level "
                    "(%s), %llu render chunks meshed\n",
-                   options.timeout_s, progress.covered, progress.in_view, progress.settled,
+                   options.timeout_s, progress.held(), progress.in_view, progress.settled,
                    data_ready ? "data complete, meshing unfinished" : "waiting for data",
                    static_cast<unsigned long long>(ms.chunks_meshed));
       return 1;
@@ -416,7 +405,7 @@ int run_screenshot(const ViewerOptions& options) {
   std::printf(
       "terrane-view: wrote %s (%dx%d, %s) after %.1f s: %zu/%zu chunks in view (%zu settled), %.2f MB received, "
       "%zu render chunks (%llu meshed in %.2f s), %.2fM triangles\n",
-      options.screenshot.c_str(), options.width, options.height, gl.renderer_name().c_str(), wait_s, progress.covered,
+      options.screenshot.c_str(), options.width, options.height, gl.renderer_name().c_str(), wait_s, progress.held(),
       progress.in_view, progress.settled, static_cast<double>(c.bytes_in) / (1024.0 * 1024.0), rs.meshes,
       static_cast<unsigned long long>(ms.chunks_meshed), ms.mesh_seconds, static_cast<double>(rs.triangles) / 1e6);
   session.client().disconnect();
