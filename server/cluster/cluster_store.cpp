@@ -129,6 +129,8 @@ StoreResult<std::optional<StoreError>> ClusterStore::left_to_neighbour(Vec3i reg
       static_cast<std::uint32_t>(best->id)}};
 }
 
+void ClusterStore::set_call_timeout(std::chrono::milliseconds t) { c_->set_call_timeout(t); }
+
 StoreResult<std::vector<RegionLease>> ClusterStore::renew(std::span<const RegionLease> leases,
                                                            std::chrono::milliseconds lease) {
   std::vector<RegionLease> kept;

@@ -34,6 +34,8 @@ namespace terrane {
 class ClusterStore {
  public:
   static StoreResult<std::unique_ptr<ClusterStore>> open(const std::string& url);
+  // The deadline of each of its statements (PgConnection::set_call_timeout).
+  void set_call_timeout(std::chrono::milliseconds t);
   ~ClusterStore();
   ClusterStore(const ClusterStore&) = delete;
   ClusterStore& operator=(const ClusterStore&) = delete;

@@ -13,6 +13,9 @@ StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& u
                                                             times.renew.count(), times.lease.count())};
   auto claims = ClusterStore::open(url);
   if (!claims) return claims.error();
+  // A claim no database answers within a lease is given up: the edit
+  // waiting for it asks again (a claim answered late is a lease running).
+  (*claims)->set_call_timeout(std::max(times.lease, std::chrono::milliseconds(1)));
   auto renewer = ClusterStore::open(url);
   if (!renewer) return renewer.error();
   return std::unique_ptr<LeaseKeeper>(
@@ -176,10 +179,18 @@ void LeaseKeeper::renew_loop() {
     for (const auto& [key, l] : held_) all.push_back(l);
     lock.unlock();
     std::vector<std::pair<RegionLease, std::string>> lost;
+    // A renewal lasts from when the database ran it, which is after this
+    // started: counted from here, a lease is never believed held past its
+    // end. The call may take what is left of the lease at most (half a
+    // lease, at most): a database cut off fails it in time for the leases
+    // to be given up here as they run out there.
+    const auto started = std::chrono::steady_clock::now();
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(last_ok + times_.lease - started);
+    renewer_->set_call_timeout(std::clamp(left, std::chrono::milliseconds(1), std::max(times_.lease / 2, std::chrono::milliseconds(1))));
     auto kept = renewer_->renew(all, times_.lease);
     const auto now = std::chrono::steady_clock::now();
     if (kept) {
-      last_ok = now;
+      last_ok = started;
       for (const RegionLease& l : all)
         if (std::find(kept->begin(), kept->end(), l) == kept->end())
           lost.emplace_back(l, "the database no longer extends its lease (it ran out, or another server took it)");

@@ -4,6 +4,9 @@
 #include <fmt/ranges.h>
 #include <libpq-fe.h>
 
+#include <poll.h>
+
+#include <cerrno>
 #include <charconv>
 #include <cstring>
 #include <utility>
@@ -131,7 +134,7 @@ StoreResult<std::unique_ptr<PgConnection>> PgConnection::open(const std::string&
   // hold a lease row's lock for ever: the database ends its session, which
   // rolls it back, and a takeover goes on. No statement waits long for a
   // lock either.
-  if (auto e = c->set_limits()) return *e;
+  if (auto e = c->set_limits(std::chrono::steady_clock::now() + c->call_timeout_)) return *e;
   if (auto made = c->make_schema(); !made) return made.error();
   return c;
 }
@@ -249,21 +252,24 @@ StoreError PgConnection::error(const char* what, PGresult* res) const {
 
 StoreResult<PgConnection::Rows> PgConnection::exec(const char* what, const char* sql,
                                                    const std::vector<pg::Param>& params, bool binary_result) {
-  // A connection that broke (the database restarted, say) is opened again
-  // before the next statement; the statement fails if that fails too.
-  if (PQstatus(conn_) != CONNECTION_OK) {
-    PQreset(conn_);
-    if (PQstatus(conn_) == CONNECTION_OK) set_limits();
+  // A connection that broke (the database restarted, say) or was given up
+  // is opened again before the next statement; the statement fails if that
+  // fails too.
+  // One deadline covers both.
+  const auto deadline = std::chrono::steady_clock::now() + call_timeout_;
+  if (broken_ || PQstatus(conn_) != CONNECTION_OK) {
+    broken_ = false;
+    if (!reset_by(deadline) || set_limits(deadline))
+      return StoreError{StoreError::Kind::kConnection,
+                        fmt::format("postgresql: {}: cannot reach the database again within {} ms", what,
+                                    call_timeout_.count())};
   }
-  std::vector<const char*> values;
-  std::vector<int> lengths, formats;
-  for (const pg::Param& p : params) {
-    values.push_back(p.bytes.data());
-    lengths.push_back(static_cast<int>(p.bytes.size()));
-    formats.push_back(p.binary ? 1 : 0);
-  }
-  PGresult* res = PQexecParams(conn_, sql, static_cast<int>(params.size()), nullptr, values.data(), lengths.data(),
-                               formats.data(), binary_result ? 1 : 0);
+  bool timed_out = false;
+  PGresult* res = run(sql, params, binary_result, deadline, &timed_out);
+  if (timed_out)
+    return StoreError{StoreError::Kind::kConnection,
+                      fmt::format("postgresql: {}: no answer within {} ms (the connection is given up)", what,
+                                  call_timeout_.count())};
   const ExecStatusType st = res != nullptr ? PQresultStatus(res) : PGRES_FATAL_ERROR;
   if (st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK) {
     StoreError e = error(what, res);
@@ -273,9 +279,93 @@ StoreResult<PgConnection::Rows> PgConnection::exec(const char* what, const char*
   return Rows(res);
 }
 
-std::optional<StoreError> PgConnection::set_limits() {
+bool PgConnection::reset_by(std::chrono::steady_clock::time_point deadline) {
+  // libpq's non-blocking reconnect, so that a database the network cut off
+  // costs the deadline, not the connect timeout.
+  if (PQresetStart(conn_) == 0) return false;
+  PostgresPollingStatusType st = PGRES_POLLING_WRITING;
+  for (;;) {
+    if (st == PGRES_POLLING_OK) return true;
+    if (st == PGRES_POLLING_FAILED) return false;
+    if (!wait_socket(st == PGRES_POLLING_READING ? POLLIN : POLLOUT, deadline)) {
+      broken_ = true;  // half open: start again next time
+      return false;
+    }
+    st = PQresetPoll(conn_);
+  }
+}
+
+bool PgConnection::wait_socket(short events, std::chrono::steady_clock::time_point deadline) const {
+  for (;;) {
+    const auto left = std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return false;
+    pollfd p{PQsocket(conn_), events, 0};
+    if (p.fd < 0) return true;  // no socket: the libpq call that follows reports it
+    const int n = ::poll(&p, 1, static_cast<int>(std::min<std::int64_t>(left.count(), 1 << 30)));
+    if (n > 0) return true;
+    if (n < 0 && errno != EINTR) return true;  // reported by the libpq call that follows
+  }
+}
+
+PGresult* PgConnection::run(const char* sql, const std::vector<pg::Param>& params, bool binary_result,
+                            std::chrono::steady_clock::time_point deadline, bool* timed_out) {
+  std::vector<const char*> values;
+  std::vector<int> lengths, formats;
+  for (const pg::Param& p : params) {
+    values.push_back(p.bytes.data());
+    lengths.push_back(static_cast<int>(p.bytes.size()));
+    formats.push_back(p.binary ? 1 : 0);
+  }
+  // Non-blocking, so that neither sending a large statement nor waiting for
+  // its answer can outlast the deadline.
+  PQsetnonblocking(conn_, 1);
+  if (PQsendQueryParams(conn_, sql, static_cast<int>(params.size()), nullptr, values.data(), lengths.data(),
+                        formats.data(), binary_result ? 1 : 0) == 0)
+    return nullptr;  // the connection's error
+  auto give_up = [&]() -> PGresult* {
+    broken_ = true;
+    *timed_out = true;
+    return nullptr;
+  };
+  for (;;) {
+    const int f = PQflush(conn_);
+    if (f == 0) break;
+    if (f < 0) return nullptr;
+    if (!wait_socket(POLLIN | POLLOUT, deadline)) return give_up();
+    if (PQconsumeInput(conn_) == 0) return nullptr;
+  }
+  // As PQexec: the last result, or the first error.
+  PGresult* out = nullptr;
+  for (;;) {
+    while (PQisBusy(conn_) != 0) {
+      if (!wait_socket(POLLIN, deadline)) {
+        if (out != nullptr) PQclear(out);
+        return give_up();
+      }
+      if (PQconsumeInput(conn_) == 0) {
+        if (out != nullptr) PQclear(out);
+        return nullptr;
+      }
+    }
+    PGresult* r = PQgetResult(conn_);
+    if (r == nullptr) break;
+    if (out != nullptr && PQresultStatus(out) != PGRES_COMMAND_OK && PQresultStatus(out) != PGRES_TUPLES_OK) {
+      PQclear(r);  // keep the first error
+      continue;
+    }
+    if (out != nullptr) PQclear(out);
+    out = r;
+  }
+  return out;
+}
+
+std::optional<StoreError> PgConnection::set_limits(std::chrono::steady_clock::time_point deadline) {
   for (const char* limit : {"SET idle_in_transaction_session_timeout = '10s'", "SET lock_timeout = '10s'"}) {
-    PGresult* r = PQexec(conn_, limit);
+    bool timed_out = false;
+    PGresult* r = run(limit, {}, false, deadline, &timed_out);
+    if (timed_out)
+      return StoreError{StoreError::Kind::kConnection,
+                        fmt::format("postgresql: session limits: no answer within {} ms", call_timeout_.count())};
     const bool ok = r != nullptr && PQresultStatus(r) == PGRES_COMMAND_OK;
     std::optional<StoreError> e;
     if (!ok) e = error("session limits", r);
@@ -286,7 +376,11 @@ std::optional<StoreError> PgConnection::set_limits() {
 }
 
 StoreError PgConnection::abort(StoreError e) {
-  if (PQstatus(conn_) == CONNECTION_OK) PQclear(PQexec(conn_, "ROLLBACK"));
+  if (!broken_ && PQstatus(conn_) == CONNECTION_OK) {
+    bool timed_out = false;
+    if (PGresult* r = run("ROLLBACK", {}, false, std::chrono::steady_clock::now() + call_timeout_, &timed_out))
+      PQclear(r);
+  }
   return e;
 }
 

@@ -11,11 +11,15 @@
 // failed and PostgreSQL's own message; a password never appears in them.
 // A session that stays inside a transaction for 10 s is ended by the
 // database (rolling it back), and no statement waits over 10 s for a lock.
+// Every statement has a deadline of its own (call_timeout, 10 s unless
+// set): a database the network cut off (no reset, no answer) fails the
+// statement with kConnection within it, whatever TCP does meanwhile.
 //
 // Threading: one object is one connection; use it from one thread at a
 // time.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -122,7 +126,10 @@ class PgConnection {
   };
 
   // Runs one statement; binary_result asks for binary columns. A
-  // connection that broke is opened again first.
+  // connection that broke is opened again first. A statement not answered
+  // within call_timeout fails with kConnection and gives the connection up
+  // (the next statement opens it again; the database rolls back whatever
+  // the session had open when it notices).
   StoreResult<Rows> exec(const char* what, const char* sql, const std::vector<pg::Param>& params = {},
                          bool binary_result = false);
   // The error of a statement (res may be null: the connection's).
@@ -142,6 +149,9 @@ class PgConnection {
     if (!commit) return abort(commit.error());
     return out;
   }
+  // The deadline of each statement, its answer included (10 s unless set).
+  void set_call_timeout(std::chrono::milliseconds t) { call_timeout_ = t; }
+  std::chrono::milliseconds call_timeout() const { return call_timeout_; }
   // The raw connection (notices: PQnotifies, PQsocket).
   PGconn* raw() const { return conn_; }
   // The url as given, and as messages name it (the password left out).
@@ -153,11 +163,24 @@ class PgConnection {
   // The session's limits (STORE_POSTGRESQL.md): a transaction left idle is
   // ended, no statement waits long for a lock. Per session: set again
   // after a reset.
-  std::optional<StoreError> set_limits();
+  std::optional<StoreError> set_limits(std::chrono::steady_clock::time_point deadline);
+  // Opens the connection again (libpq's reset) by deadline; false if not.
+  bool reset_by(std::chrono::steady_clock::time_point deadline);
   // Makes or upgrades the schema (open).
   StoreResult<Ok> make_schema();
 
+  // Sends one statement and waits for its answer until deadline; null with
+  // *timed_out set when the deadline passed (the connection is then broken_).
+  PGresult* run(const char* sql, const std::vector<pg::Param>& params, bool binary_result,
+                std::chrono::steady_clock::time_point deadline, bool* timed_out);
+  // Waits until the socket is ready for events (poll's) or deadline.
+  bool wait_socket(short events, std::chrono::steady_clock::time_point deadline) const;
+
   PGconn* conn_ = nullptr;
+  std::chrono::milliseconds call_timeout_{10000};
+  // A statement timed out: its answer may still come, so the connection is
+  // reopened before the next one, and no ROLLBACK is sent on it.
+  bool broken_ = false;
   std::string url_;
   std::string shown_;
 };

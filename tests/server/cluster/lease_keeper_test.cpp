@@ -1,13 +1,19 @@
 // LeaseKeeper against a real PostgreSQL started by the test: leases kept
-// alive past many lease times, lost leases reported, released on shutdown.
+// alive past many lease times, lost leases reported, released on shutdown;
+// a database that stops answering (its backends stopped, as a partition
+// looks from here) costs the leases as they run out, not a renewal blocked
+// for ever.
 #include "server/cluster/lease_keeper.h"
 
 #include "server/storage/postgres_store.h"
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
+
 #include <atomic>
 #include <mutex>
+#include <sstream>
 #include <vector>
 
 #include "tests/support/eventually.h"
@@ -168,6 +174,43 @@ TEST_F(LeaseKeeperTest, ARegionHandedOverIsFreeAtOnceAndNeverReportedLost) {
   EXPECT_EQ(lost.size(), 0u);
   ASSERT_EQ(a->held().size(), 1u);
   EXPECT_EQ(a->held()[0].region, (Vec3i{0, 0, 0}));
+}
+
+TEST_F(LeaseKeeperTest, ADatabaseThatStopsAnsweringCostsTheLeasesAsTheyRunOut) {
+  Lost lost;
+  auto a = keeper(1, {400ms, 80ms}, &lost);
+  ASSERT_TRUE(a);
+  const Vec3i regions[] = {{0, 0, 0}};
+  ASSERT_TRUE(a->ensure(regions).ok());
+  const std::uint64_t rounds = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() > rounds + 2; }));
+  // No new session may connect, and every other session's backend stops:
+  // the keeper's statements are sent and never answered, and a connection
+  // opened again is refused.
+  ASSERT_EQ(testing_support::run_sql(pg_->url(), "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS false"), "");
+  std::vector<pid_t> stopped;
+  std::stringstream pids(testing_support::sql_value(
+      pg_->url(), "SELECT string_agg(pid::text, ' ') FROM pg_stat_activity WHERE backend_type = 'client backend'"
+                  " AND datname = '" + db_ + "'"));
+  for (long pid = 0; pids >> pid;)
+    if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGSTOP) == 0) stopped.push_back(static_cast<pid_t>(pid));
+  ASSERT_FALSE(stopped.empty());
+  struct Resume {
+    std::vector<pid_t>& pids;
+    ~Resume() {
+      for (const pid_t p : pids) ::kill(p, SIGCONT);
+    }
+  } resume{stopped};
+  // Without a deadline on its calls the keeper waits in a renewal for as
+  // long as the database is stopped and never reports the lease lost.
+  ASSERT_TRUE(eventually([&] { return lost.size() == 1; }, 30s)) << "the lease was never given up";
+  {
+    std::lock_guard lock(lost.mutex);
+    EXPECT_EQ(lost.leases[0].first.region, (Vec3i{0, 0, 0}));
+    EXPECT_NE(lost.leases[0].second.find("not renewed for 400 ms"), std::string::npos) << lost.leases[0].second;
+  }
+  EXPECT_FALSE(a->holds(Vec3i{0, 0, 0}));
+  a.reset();  // (before the backends run again: its release finds no lease to give up)
 }
 
 }  // namespace

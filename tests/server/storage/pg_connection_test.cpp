@@ -2,12 +2,18 @@
 // is made once and left alone when current, a transaction is all or
 // nothing, a statement's error names it, binary columns are read with
 // their lengths checked, and a connection string is shown without its
-// password.
+// password. A statement the database never answers (its backend stopped,
+// as a partition looks from here) fails at its deadline with kConnection,
+// inside a transaction too, and the next statement reopens the connection.
 #include "server/storage/pg_connection.h"
 
 #include <gtest/gtest.h>
 #include <libpq-fe.h>
 
+#include <signal.h>
+
+#include <chrono>
+#include <future>
 #include <string>
 #include <vector>
 
@@ -92,6 +98,76 @@ TEST(PgRedacted, APasswordIsNeverShown) {
   EXPECT_EQ(keywords.find("sesame"), std::string::npos) << keywords;
   EXPECT_NE(keywords.find("password=***"), std::string::npos) << keywords;
   EXPECT_EQ(pg::region_text({1, -2, 3}), "(1,-2,3)");
+}
+
+// The backend serving c, stopped until the guard is gone.
+class StoppedBackend {
+ public:
+  explicit StoppedBackend(PgConnection& c) {
+    auto r = c.exec("backend pid", "SELECT pg_backend_pid()");
+    if (r && r->count() == 1) pid_ = static_cast<pid_t>(r->integer(0, 0).value_or(0));
+    if (pid_ > 0) ::kill(pid_, SIGSTOP);
+  }
+  ~StoppedBackend() {
+    if (pid_ > 0) ::kill(pid_, SIGCONT);
+  }
+  bool stopped() const { return pid_ > 0; }
+
+ private:
+  pid_t pid_ = 0;
+};
+
+TEST_F(PgConnectionTest, AStatementNeverAnsweredFailsAtItsDeadlineAndTheNextOneReopens) {
+  auto c = open();
+  ASSERT_TRUE(c);
+  c->set_call_timeout(std::chrono::milliseconds(300));
+  ASSERT_TRUE(c->exec("make table", "CREATE TABLE t (v integer PRIMARY KEY)").ok());
+  {
+    // (The futures outlive the stopped backend: a failed assertion lets it
+    // run again before they wait for their calls.)
+    std::future<StoreResult<PgConnection::Rows>> call;
+    StoppedBackend stopped(*c);
+    ASSERT_TRUE(stopped.stopped());
+    // Without a deadline this waits for as long as the backend is stopped:
+    // the bound below is only how long the test lets it try.
+    call = std::async(std::launch::async, [&] { return c->exec("insert one", "INSERT INTO t VALUES (1)"); });
+    ASSERT_EQ(call.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "no deadline";
+    auto r = call.get();
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().kind, StoreError::Kind::kConnection);
+    EXPECT_NE(r.error().message.find("postgresql: insert one: no answer within 300 ms"), std::string::npos)
+        << r.error().message;
+  }
+  // The connection was given up: the next statement opens a new one.
+  ASSERT_TRUE(c->exec("insert two", "INSERT INTO t VALUES (2)").ok());
+  {
+    // A transaction's statements have the deadline too, and its failure
+    // sends no ROLLBACK on the connection given up (which would wait as
+    // long again).
+    std::future<StoreResult<Ok>> t;
+    StoppedBackend stopped(*c);
+    ASSERT_TRUE(stopped.stopped());
+    t = std::async(std::launch::async, [&] {
+      return c->transaction<Ok>("commit t", [&]() -> StoreResult<Ok> {
+        if (auto x = c->exec("insert four", "INSERT INTO t VALUES (4)"); !x) return x.error();
+        return Ok{};
+      });
+    });
+    ASSERT_EQ(t.wait_for(std::chrono::seconds(60)), std::future_status::ready) << "no deadline in a transaction";
+    auto r = t.get();
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().kind, StoreError::Kind::kConnection);
+  }
+  c->set_call_timeout(std::chrono::seconds(10));
+  auto again = c->exec("insert three", "INSERT INTO t VALUES (3) RETURNING v");
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_EQ(again->integer(0, 0), 3);
+  // A statement given up may still be applied (it was sent: the backend,
+  // running again, reads it) — a caller treats its outcome as unknown. One
+  // inside a transaction given up never is: the backend finds its client
+  // gone before any COMMIT.
+  const std::string rows = sql_value(url_, "SELECT string_agg(v::text, ',' ORDER BY v) FROM t WHERE v > 1");
+  EXPECT_EQ(rows, "2,3");
 }
 
 }  // namespace
