@@ -8,9 +8,11 @@ terrane-servers sharing one PostgreSQL world (tests/system/README.md).
 Runs as root (network namespaces). Prints one row per drill; exits 1 when
 an acknowledged write was lost, a write was applied twice, or the audit
 found a chunk written outside its writer's lease or a revision written by
-two servers; 2 on a usage or setup error."""
+two servers (or a run failed); 2 on a usage error; 77 where it cannot run
+(not root, no PostgreSQL)."""
 import argparse
 import fcntl
+import glob
 import json
 import os
 import statistics
@@ -20,6 +22,8 @@ import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+sys.dont_write_bytecode = True
+CANNOT_RUN = 77  # not root, or no PostgreSQL: CTest counts it as skipped
 
 
 def pct(xs, p):
@@ -80,7 +84,10 @@ def main():
     a = ap.parse_args()
     if os.geteuid() != 0:
         print("fault suite: needs root (network namespaces, blackhole routes)", file=sys.stderr)
-        return 2
+        return CANNOT_RUN
+    if not glob.glob("/usr/lib/postgresql/*/bin/postgres"):
+        print("fault suite: PostgreSQL is not installed (scripts/install-deps.sh installs it)", file=sys.stderr)
+        return CANNOT_RUN
     names = list(drills.DRILLS) if a.drill == "all" else [drills.QUICK] if a.drill == "quick" else [a.drill]
     for n in names:
         if n not in drills.DRILLS:
@@ -134,7 +141,7 @@ def summary(name, r, verbose):
              len(r["audit"]["double_servers"]), fmt_s(r["takeover"]), fmt_s(max(r["downtime"] or [0])),
              r["health_mismatch"], r["health_200_cannot"], r["db_text"], r["exits"] or "none"),
           file=sys.stderr)
-    detail = r["lost_writes"] + r["double_writes"] + r["ooo"] + r["rows_vs_log"]
+    detail = r["lost_writes"] + r["double_writes"] + r["refused_logged"] + r["ooo"] + r["rows_vs_log"]
     for line in detail[: (50 if verbose else 5)]:
         print("    " + line, file=sys.stderr)
     if verbose:

@@ -96,7 +96,7 @@ def check(writes, log, final, registers):
         per_reg[e["reg"]].append((pos, w))
 
     out = dict(acked=0, refused=0, unknown=0, lost=0, double=0, out_of_order=0, refused_applied=0,
-               lost_writes=[], double_writes=[], ooo=[], rows_vs_log=[], unrecorded=len(unrecorded))
+               lost_writes=[], double_writes=[], refused_logged=[], ooo=[], rows_vs_log=[], unrecorded=len(unrecorded))
     for w in writes:
         if w.outcome is None:
             continue
@@ -110,6 +110,7 @@ def check(writes, log, final, registers):
             out["double_writes"].append(describe(w) + " logged %d times" % n)
         if w.outcome == "refused" and n > 0:
             out["refused_applied"] += 1
+            out["refused_logged"].append(describe(w) + " refused, yet logged")
 
     bad = set()
     for reg, entries in per_reg.items():

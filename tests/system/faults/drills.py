@@ -40,8 +40,10 @@ class Drill:
 
     def wait_sql(self, sql, timeout):
         """Polls a count query inside the database (every 2 ms) until it is positive; True if it was."""
+        # pg_stat_activity is read once per transaction unless its snapshot is cleared.
         q = ("DO $$ DECLARE t timestamptz := clock_timestamp(); BEGIN "
-             "LOOP EXIT WHEN (%s) > 0; IF clock_timestamp() - t > interval '%f seconds' THEN "
+             "LOOP PERFORM pg_stat_clear_snapshot(); EXIT WHEN (%s) > 0; "
+             "IF clock_timestamp() - t > interval '%f seconds' THEN "
              "RAISE EXCEPTION 'timeout'; END IF; PERFORM pg_sleep(0.002); END LOOP; END $$" % (sql, timeout))
         try:
             self.c.psql(q, timeout=timeout + 10)
@@ -150,22 +152,26 @@ def pg_kill9(d):
 
 
 def _pg_outage(d, lo, hi):
+    """PostgreSQL down for a drawn fraction of the lease: a fast shutdown (its
+    sessions ended, no crash recovery after), started again so that it
+    accepts connections when the time is up (a start takes about 0.5 s here)."""
     target = d.lease * d.rng.uniform(lo, hi)
     d.fault_start = time.time()
-    d.c.pg_stop("immediate")
-    d.sleep(target - 0.7)  # starting takes about 0.7 s
+    d.c.pg_stop("fast")
+    d.sleep(target - (time.time() - d.fault_start) - 0.5)
     d.c.pg_start()
     d.fault_end = time.time()
-    d.notes.append("PostgreSQL down %.1f s (lease %.1f s)" % (d.fault_end - d.fault_start, d.lease))
+    d.notes.append("PostgreSQL down %.1f s (drawn %.1f s, lease %.1f s)" % (d.fault_end - d.fault_start, target,
+                                                                           d.lease))
 
 
 def pg_outage_under(d):
-    """PostgreSQL stopped (immediate) for 0.6-0.85 of a lease time: the servers should ride it out."""
+    """PostgreSQL down for 0.6-0.85 of a lease time: the servers should ride it out."""
     _pg_outage(d, 0.6, 0.85)
 
 
 def pg_outage_over(d):
-    """PostgreSQL stopped (immediate) for 1.2-1.5 lease times."""
+    """PostgreSQL down for 1.2-1.5 lease times."""
     _pg_outage(d, 1.2, 1.5)
 
 

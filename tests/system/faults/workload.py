@@ -25,7 +25,7 @@ import terrane
 Y = 100          # registers' height (air above the default world's ground, region y 0)
 REGION = 256     # voxels per region side (8 chunks of 32: STORE_POSTGRESQL.md)
 
-AMBIGUOUS = ("may still be applied",)
+AMBIGUOUS = ("may still be applied", "outcome unknown")  # rejections that do not say no
 DB_TEXT = ("libpq", "server closed the connection", "could not connect", "connection to server", "SSL",
            "FATAL", "ERROR:", "terminating connection", "PQ", "SQLSTATE", "could not receive", "could not send")
 
