@@ -261,12 +261,15 @@ def exit_lines(s):
 
 def measure(d, w, c, t0, t1):
     acked = [x for x in w.writes if x.outcome == "acked"]
-    # takeover: from the fault to the first ack of a write started after it,
-    # in the victim's regions (PostgreSQL faults: anywhere)
+    # takeover: from the fault to the first ack of a write started after it
+    # in the victim's regions; PostgreSQL faults: to the first ack anywhere
+    # once PostgreSQL is back (writes resumed)
     takeover = None
     if d.fault_start is not None:
-        cand = [x.end for x in acked if x.start >= d.fault_start and
-                (d.victim is None or region_of(x.reg) in d.victim_regions)]
+        if d.victim is None:
+            cand = [x.end for x in acked if x.end >= (d.fault_end or d.fault_start)]
+        else:
+            cand = [x.end for x in acked if x.start >= d.fault_start and region_of(x.reg) in d.victim_regions]
         takeover = (min(cand) - d.fault_start) if cand else float("inf")
     # client downtime: per player, the longest gap without an acknowledged write
     downtime = []
