@@ -26,33 +26,51 @@ import struct
 import subprocess
 import tempfile
 
-from faults.workload import REGION
+
+class Write:
+    """One register's part of an edit (a spanning edit writes two registers: two Writes, one edit id)."""
+    __slots__ = ("id", "edit", "player", "worker", "reg", "value", "server", "start", "end", "outcome", "reason")
+
+    def __init__(self, **kw):
+        for k in self.__slots__:
+            setattr(self, k, kw.get(k))
 
 
-def decode_rle1(hexblob):
-    """One voxel of byte RLE (common/codec/BYTE_RLE.md): (material, occupancy)."""
+def decode_rle(hexblob, n):
+    """n voxels of byte RLE (common/codec/BYTE_RLE.md): [(material, occupancy)]."""
     b = bytes.fromhex(hexblob)
-    if not b:
-        return None
-    lead = b[0]
-    m = lead & 0x3F
-    i = 1
-    occ = 255 if m else 0
-    if lead & 0x40:
-        occ = b[i]
+    out, i = [], 0
+    while i < len(b) and len(out) < n:
+        lead = b[i]
         i += 1
-    return (m, occ)
+        m = lead & 0x3F
+        occ = 255 if m else 0
+        if lead & 0x40:
+            occ = b[i]
+            i += 1
+        count = 1
+        if lead & 0x80:
+            count = b[i] + 1
+            i += 1
+        out.extend([(m, occ)] * count)
+    return out[:n]
 
 
-def read_log(cluster):
+def read_log(cluster, registers):
+    """The log rows that wrote a register: (id, player, register, value), in id order."""
+    regs = set(registers)
     rows = cluster.psql("SELECT id, player, x0, y0, z0, x1, y1, z1, encode(after, 'hex'), tick "
-                        "FROM terrane_edit_log ORDER BY id")
+                        "FROM terrane_edit_log WHERE (x1 - x0) * (y1 - y0) * (z1 - z0) <= 64 ORDER BY id")
     log = []
     for (i, player, x0, y0, z0, x1, y1, z1, after, tick) in rows:
-        p0 = (int(x0), int(y0), int(z0))
-        if (int(x1) - p0[0], int(y1) - p0[1], int(z1) - p0[2]) != (1, 1, 1):
-            continue
-        log.append(dict(id=int(i), player=player, reg=p0, value=decode_rle1(after), tick=int(tick)))
+        x0, y0, z0, x1, y1, z1 = map(int, (x0, y0, z0, x1, y1, z1))
+        sx, sz = x1 - x0, z1 - z0
+        n = sx * (y1 - y0) * sz
+        voxels = decode_rle(after, n)
+        for k, v in enumerate(voxels):  # Box order: x fastest, then z, then y
+            p = (x0 + k % sx, y0 + k // (sx * sz), z0 + (k // sx) % sz)
+            if p in regs:
+                log.append(dict(id=int(i), player=player, reg=p, value=v, tick=int(tick)))
     return log
 
 
@@ -97,10 +115,13 @@ def check(writes, log, final, registers):
 
     out = dict(acked=0, refused=0, unknown=0, lost=0, double=0, out_of_order=0, refused_applied=0,
                lost_writes=[], double_writes=[], refused_logged=[], ooo=[], rows_vs_log=[], unrecorded=len(unrecorded))
+    counted = set()
     for w in writes:
         if w.outcome is None:
             continue
-        out[w.outcome] += 1
+        if w.edit not in counted:  # outcomes per edit; the rest per register written
+            counted.add(w.edit)
+            out[w.outcome] += 1
         n = len(in_log.get(w.id, []))
         if w.outcome == "acked" and n == 0:
             out["lost"] += 1
@@ -119,6 +140,8 @@ def check(writes, log, final, registers):
             for j in range(i + 1, len(entries)):
                 pj, wj = entries[j]
                 # wj is placed after wi:
+                if wj.edit == wi.edit:
+                    continue
                 if wj.worker == wi.worker and wj.start < wi.start:
                     why = "player %s's write %s (started %.2f) applied after its later write %s (%s)" % (
                         wj.player, wj.value, wj.start, wi.value, wi.outcome)

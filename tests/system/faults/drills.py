@@ -15,6 +15,10 @@ from faults.cluster import Cluster
 from faults.workload import Workload, region_of
 
 GRACE = 2.0  # seconds /health may lag a change of reality
+# How long a drill holds a chunk row waiting for its moment: under the
+# servers' lock_timeout (10 s), past which the held write would fail and
+# stop its server for a reason of the drill's making.
+AIM_S = 8
 
 
 class Drill:
@@ -99,7 +103,7 @@ def pause_in_write_tx(d):
     reg = d.victim_reg()
     blocker = d.block_chunk(reg)
     aimed = d.wait_sql("SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' "
-                       "AND wait_event_type = 'Lock' AND backend_xid IS NOT NULL" % s.host, 10)
+                       "AND wait_event_type = 'Lock' AND backend_xid IS NOT NULL" % s.host, AIM_S)
     d.fault_start = time.time()
     s.signal(signal.SIGSTOP)
     d.release(blocker)
@@ -120,7 +124,7 @@ def kill9_forwarded(d):
     blocker = d.block_chunk(reg)
     aimed = d.wait_sql("SELECT (SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' "
                        "AND wait_event_type = 'Lock') * (SELECT count(*) FROM terrane_inbox WHERE to_server = %d)"
-                       % (s.host, s.id), 10)
+                       % (s.host, s.id), AIM_S)
     inbox = d.c.psql("SELECT count(*) FROM terrane_inbox WHERE to_server = %d" % s.id)[0][0]
     d.fault_start = time.time()
     s.kill()
@@ -128,6 +132,37 @@ def kill9_forwarded(d):
     d.release(blocker)
     d.notes.append("server %d killed %s, %s forwarded edits in its inbox" % (
         d.victim, "inside a write transaction" if aimed else "(not caught inside a write)", inbox))
+    d.sleep(d.lease * d.rng.uniform(1.5, 2.5))
+    s.start()
+    d.fault_end = time.time()
+
+
+def kill9_in_handover(d):
+    """kill -9 of a server taking a region over: the workload's edits span the
+    border of servers 1 and 2 one time in five, so the sender hands its
+    region over and forwards the edit. The victim's write is held at a chunk
+    row of ours (as above) until it holds the other's border region and a
+    forwarded edit waits in its inbox; then it is killed, and started again
+    1.5-2.5 lease times later."""
+    victim = d.rng.randint(1, 2)
+    d.victim = victim
+    s = d.c.servers[victim - 1]
+    other = 3 - victim
+    reg = d.w.span_pair[victim - 1]          # the victim's register of the pair
+    taken = region_of(d.w.span_pair[other - 1])
+    blocker = d.block_chunk(reg)
+    aimed = d.wait_sql(
+        "SELECT (SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' AND wait_event_type = 'Lock')"
+        " * (SELECT count(*) FROM terrane_inbox WHERE to_server = %d AND from_server = %d)"
+        " * (SELECT count(*) FROM terrane_leases WHERE (rx, ry, rz) = (%d, %d, %d) AND owner = %d"
+        "    AND expires_at > clock_timestamp())" % ((s.host, victim, other) + taken + (victim,)), AIM_S)
+    d.victim_regions = {r for r, sid in d.w.holder_map().items() if sid == victim}
+    d.fault_start = time.time()
+    s.kill()
+    d.c.mark(s.id)
+    d.release(blocker)
+    d.notes.append("server %d killed %s" % (victim, "taking region %s over, a forwarded edit in its inbox" % (taken,)
+                                            if aimed else "(not caught in a handover)"))
     d.sleep(d.lease * d.rng.uniform(1.5, 2.5))
     s.start()
     d.fault_end = time.time()
@@ -190,6 +225,7 @@ DRILLS = {
     "sigstop-past-lease": sigstop_past_lease,
     "pause-in-write-tx": pause_in_write_tx,
     "kill9-forwarded": kill9_forwarded,
+    "kill9-in-handover": kill9_in_handover,
     "pg-restart": pg_restart,
     "pg-kill9": pg_kill9,
     "pg-outage-under": pg_outage_under,
@@ -197,6 +233,7 @@ DRILLS = {
     "partition-19s": partition,
 }
 QUICK = "pg-restart"
+SPAN = {"kill9-in-handover": 0.2}  # drills whose edits also span the border (handovers)
 
 
 # --- one run ----------------------------------------------------------------
@@ -205,7 +242,7 @@ def run(name, build, seed, servers, lease_ms, log, players=2, keep_logs=None):
     c = Cluster(build, servers=servers, lease_ms=lease_ms)
     try:
         c.start()
-        w = Workload(c, seed, players_per_server=players)
+        w = Workload(c, seed, players_per_server=players, span=SPAN.get(name, 0.0))
         w.setup()
         d = Drill(c, w, rng, log)
         w.start()
@@ -234,7 +271,7 @@ def run(name, build, seed, servers, lease_ms, log, players=2, keep_logs=None):
                 exits[s.id] = s.proc.returncode
         for s in c.servers:
             s.terminate()
-        log_rows = checker.read_log(c)
+        log_rows = checker.read_log(c, w.registers)
         final = checker.read_final(c, w.registers)
         result = checker.check(w.writes, log_rows, final, w.registers)
         result["audit"] = audit.check(c)

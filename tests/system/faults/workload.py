@@ -22,6 +22,8 @@ import numpy as np
 
 import terrane
 
+from faults.checker import Write
+
 Y = 100          # registers' height (air above the default world's ground, region y 0)
 REGION = 256     # voxels per region side (8 chunks of 32: STORE_POSTGRESQL.md)
 
@@ -45,14 +47,6 @@ def region_of(p):
     return tuple(c // REGION for c in p)
 
 
-class Write:
-    __slots__ = ("id", "player", "worker", "reg", "value", "server", "start", "end", "outcome", "reason")
-
-    def __init__(self, **kw):
-        for k in self.__slots__:
-            setattr(self, k, kw.get(k))
-
-
 def voxel(m, o):
     a = np.zeros((2, 1, 1, 1), dtype=np.uint8)
     a[0, 0, 0, 0] = m
@@ -61,7 +55,7 @@ def voxel(m, o):
 
 
 class Workload:
-    def __init__(self, cluster, seed, players_per_server=2, op_timeout=None, pace=0.02):
+    def __init__(self, cluster, seed, players_per_server=2, op_timeout=None, pace=0.02, span=0.0):
         self.c = cluster
         self.rng = random.Random(seed)
         self.seed = seed
@@ -79,6 +73,12 @@ class Workload:
         self.stop_ev = threading.Event()
         self.threads = []
         self.materials = 22
+        # span: the share of edits that write the two registers beside the
+        # border of servers 1 and 2 at once: the server that sends one hands
+        # its region over to the other (STORE_POSTGRESQL.md, Forwarded edits)
+        self.span = span
+        self.span_pair = ((-1, Y, 1), (0, Y, 1))
+        self.edits = 0
 
     # --- the territories ----------------------------------------------------
     def _write_once(self, client, pos, m, o, timeout=30):
@@ -141,17 +141,26 @@ class Workload:
                     sid = sid % self.c.n + 1  # fail over round the ring
                     self.stop_ev.wait(0.5)
                     continue
-            reg = rng.choice(self.registers)
+            if self.span and rng.random() < self.span:
+                regs = list(self.span_pair)
+            else:
+                regs = [rng.choice(self.registers)]
+            cells = []
             with self.lock:
-                seq = self.next_seq[reg]
-                self.next_seq[reg] += 1
-            m, o = self.value_of(seq)
-            w = Write(id=len(self.writes), player=name, worker=widx, reg=reg, value=(m, o), server=sid,
-                      start=time.time())
-            with self.lock:
-                self.writes.append(w)
+                self.edits += 1
+                edit = self.edits
+                for reg in regs:
+                    seq = self.next_seq[reg]
+                    self.next_seq[reg] += 1
+                    cells.append(Write(id=len(self.writes), edit=edit, player=name, worker=widx, reg=reg,
+                                       value=self.value_of(seq), server=sid, start=time.time()))
+                    self.writes.append(cells[-1])
+            arr = np.zeros((2, 1, 1, len(cells)), dtype=np.uint8)
+            for k, c in enumerate(cells):
+                arr[0, 0, 0, k], arr[1, 0, 0, k] = c.value
+            w = Write()
             try:
-                client.write_box(reg, voxel(m, o)).result(timeout=self.op_timeout, visible=False)
+                client.write_box(regs[0], arr).result(timeout=self.op_timeout, visible=False)
                 w.outcome = "acked"
             except terrane.EditRejected as e:
                 w.reason = str(e)
@@ -170,6 +179,8 @@ class Workload:
                 w.reason = "%s: %s" % (type(e).__name__, e)
                 w.outcome = "unknown"
             w.end = time.time()
+            for c in cells:
+                c.outcome, c.reason, c.end = w.outcome, w.reason, w.end
             if w.outcome == "refused":
                 self.stop_ev.wait(0.2)
             elif self.pace:
