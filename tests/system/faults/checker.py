@@ -133,7 +133,7 @@ def check(writes, log, final, registers):
             out["refused_applied"] += 1
             out["refused_logged"].append(describe(w) + " refused, yet logged")
 
-    bad = set()
+    bad = {}  # misplaced write id -> (register, the write, [(why, the write it went over)])
     for reg, entries in per_reg.items():
         for i in range(len(entries)):
             pi, wi = entries[i]
@@ -143,17 +143,17 @@ def check(writes, log, final, registers):
                 if wj.edit == wi.edit:
                     continue
                 if wj.worker == wi.worker and wj.start < wi.start:
-                    why = "player %s's write %s (started %.2f) applied after its later write %s (%s)" % (
-                        wj.player, wj.value, wj.start, wi.value, wi.outcome)
+                    why = "its player's later write"
                 elif wj.outcome == "acked" and wj.end is not None and wi.start > wj.end:
-                    why = "acked write %s of %s applied after %s of %s, which started after the ack" % (
-                        wj.value, wj.player, wi.value, wi.player)
+                    why = "a write started after its ack"
                 else:
                     continue
-                if (wj.id, wi.id) not in bad:
-                    bad.add((wj.id, wi.id))
-                    out["ooo"].append("register %s: %s" % (reg, why))
-        # the rows against the log
+                bad.setdefault(wj.id, (reg, wj, []))[2].append((why, wi))
+    for reg, wj, over in bad.values():
+        why, last = over[-1]
+        out["ooo"].append("register %s: %s applied after %d writes placed before it, the last %s (%s) %s %s" % (
+            reg, describe(wj), len(over), why, last.player, last.value, last.outcome))
+    for reg, entries in per_reg.items():  # the rows against the log
         last = entries[-1][1] if entries else None
         got = final.get(reg)
         want = last.value if last else None
@@ -162,7 +162,7 @@ def check(writes, log, final, registers):
             out["lost"] += 1
         elif last is not None and last.outcome == "refused":
             out["rows_vs_log"].append("register %s holds %s, written by a refused write" % (reg, got))
-    out["out_of_order"] = len({a for a, _ in bad})
+    out["out_of_order"] = len(bad)
     return out
 
 
