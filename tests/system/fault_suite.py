@@ -15,6 +15,7 @@ import fcntl
 import glob
 import json
 import os
+import signal
 import statistics
 import sys
 import time
@@ -82,6 +83,8 @@ def main():
     ap.add_argument("--logs", help="keep each run's server and PostgreSQL logs under this directory")
     ap.add_argument("-v", "--verbose", action="store_true", help="print each run's findings")
     a = ap.parse_args()
+    # SIGTERM (a timeout, say) ends the run as Ctrl-C does: the cluster is taken down.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     if os.geteuid() != 0:
         print("fault suite: needs root (network namespaces, blackhole routes)", file=sys.stderr)
         return CANNOT_RUN

@@ -15,10 +15,11 @@ from faults.cluster import Cluster
 from faults.workload import Workload, region_of
 
 GRACE = 2.0  # seconds /health may lag a change of reality
-# How long a drill holds a chunk row waiting for its moment: under the
-# servers' lock_timeout (10 s), past which the held write would fail and
-# stop its server for a reason of the drill's making.
-AIM_S = 8
+# How long a drill holds a chunk row waiting for its moment: well under
+# the lease (5 s) and the servers' lock_timeout (10 s). A write held longer
+# makes its server's lease renewal wait on the lease rows that write locked,
+# and the server loses its leases for a reason of the drill's making.
+AIM_S = 3.0
 
 
 class Drill:
@@ -33,6 +34,7 @@ class Drill:
         self.victim = None           # a server id, or None (PostgreSQL)
         self.victim_regions = set()
         self.notes = []
+        self.aim = min(AIM_S, 0.6 * self.lease)
 
     def sleep(self, s):
         time.sleep(max(0.0, s))
@@ -103,7 +105,7 @@ def pause_in_write_tx(d):
     reg = d.victim_reg()
     blocker = d.block_chunk(reg)
     aimed = d.wait_sql("SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' "
-                       "AND wait_event_type = 'Lock' AND backend_xid IS NOT NULL" % s.host, AIM_S)
+                       "AND wait_event_type = 'Lock' AND backend_xid IS NOT NULL" % s.host, d.aim)
     d.fault_start = time.time()
     s.signal(signal.SIGSTOP)
     d.release(blocker)
@@ -124,7 +126,7 @@ def kill9_forwarded(d):
     blocker = d.block_chunk(reg)
     aimed = d.wait_sql("SELECT (SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' "
                        "AND wait_event_type = 'Lock') * (SELECT count(*) FROM terrane_inbox WHERE to_server = %d)"
-                       % (s.host, s.id), AIM_S)
+                       % (s.host, s.id), d.aim)
     inbox = d.c.psql("SELECT count(*) FROM terrane_inbox WHERE to_server = %d" % s.id)[0][0]
     d.fault_start = time.time()
     s.kill()
@@ -138,31 +140,33 @@ def kill9_forwarded(d):
 
 
 def kill9_in_handover(d):
-    """kill -9 of a server taking a region over: the workload's edits span the
-    border of servers 1 and 2 one time in five, so the sender hands its
-    region over and forwards the edit. The victim's write is held at a chunk
-    row of ours (as above) until it holds the other's border region and a
-    forwarded edit waits in its inbox; then it is killed, and started again
-    1.5-2.5 lease times later."""
+    """kill -9 of a server in the middle of a handover: at the drill's moment
+    the other server's players start to send one edit in two across the
+    border of servers 1 and 2, so that server hands its border region over
+    (releases it) and forwards the edit to the victim (once: the victim
+    then holds both). The victim is killed as soon as such an edit waits in
+    its inbox while the sender no longer holds its region (released, or
+    taken by the victim); started again 1.5-2.5 lease times later."""
     victim = d.rng.randint(1, 2)
     d.victim = victim
     s = d.c.servers[victim - 1]
     other = 3 - victim
-    reg = d.w.span_pair[victim - 1]          # the victim's register of the pair
-    taken = region_of(d.w.span_pair[other - 1])
-    blocker = d.block_chunk(reg)
+    d.w.span_from = other
+    d.w.span = 0.5
+    given = region_of(d.w.span_pair[other - 1])  # the sender's border region
     aimed = d.wait_sql(
-        "SELECT (SELECT count(*) FROM pg_stat_activity WHERE host(client_addr) = '%s' AND wait_event_type = 'Lock')"
-        " * (SELECT count(*) FROM terrane_inbox WHERE to_server = %d AND from_server = %d)"
-        " * (SELECT count(*) FROM terrane_leases WHERE (rx, ry, rz) = (%d, %d, %d) AND owner = %d"
-        "    AND expires_at > clock_timestamp())" % ((s.host, victim, other) + taken + (victim,)), AIM_S)
-    d.victim_regions = {r for r, sid in d.w.holder_map().items() if sid == victim}
+        "SELECT (SELECT count(*) FROM terrane_inbox WHERE to_server = %d AND from_server = %d)"
+        " * (SELECT count(*) FROM terrane_leases WHERE (rx, ry, rz) = (%d, %d, %d)"
+        "    AND NOT (owner = %d AND expires_at > clock_timestamp()))" % ((victim, other) + given + (other,)),
+        15)  # no row held here: it may wait
+    d.victim_regions = {r for r, sid in d.w.holder_map().items() if sid == victim} | {given}
     d.fault_start = time.time()
     s.kill()
     d.c.mark(s.id)
-    d.release(blocker)
-    d.notes.append("server %d killed %s" % (victim, "taking region %s over, a forwarded edit in its inbox" % (taken,)
-                                            if aimed else "(not caught in a handover)"))
+    left = d.c.psql("SELECT count(*) FROM terrane_inbox WHERE to_server = %d AND from_server = %d"
+                    % (victim, other))[0][0]
+    d.notes.append("server %d killed %s; %s of server %d's forwarded edits left in its inbox" % (
+        victim, "in a handover of region %s" % (given,) if aimed else "(no handover seen)", left, other))
     d.sleep(d.lease * d.rng.uniform(1.5, 2.5))
     s.start()
     d.fault_end = time.time()
@@ -233,7 +237,6 @@ DRILLS = {
     "partition-19s": partition,
 }
 QUICK = "pg-restart"
-SPAN = {"kill9-in-handover": 0.2}  # drills whose edits also span the border (handovers)
 
 
 # --- one run ----------------------------------------------------------------
@@ -242,7 +245,7 @@ def run(name, build, seed, servers, lease_ms, log, players=2, keep_logs=None):
     c = Cluster(build, servers=servers, lease_ms=lease_ms)
     try:
         c.start()
-        w = Workload(c, seed, players_per_server=players, span=SPAN.get(name, 0.0))
+        w = Workload(c, seed, players_per_server=players)
         w.setup()
         d = Drill(c, w, rng, log)
         w.start()

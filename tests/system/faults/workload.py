@@ -77,6 +77,7 @@ class Workload:
         # border of servers 1 and 2 at once: the server that sends one hands
         # its region over to the other (STORE_POSTGRESQL.md, Forwarded edits)
         self.span = span
+        self.span_from = None  # only the players of this server send them (None: all)
         self.span_pair = ((-1, Y, 1), (0, Y, 1))
         self.edits = 0
 
@@ -141,7 +142,7 @@ class Workload:
                     sid = sid % self.c.n + 1  # fail over round the ring
                     self.stop_ev.wait(0.5)
                     continue
-            if self.span and rng.random() < self.span:
+            if self.span and self.span_from in (None, home) and rng.random() < self.span:
                 regs = list(self.span_pair)
             else:
                 regs = [rng.choice(self.registers)]
