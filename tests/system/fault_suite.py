@@ -69,10 +69,9 @@ def table(rows):
 
 
 def main():
-    from faults import drills
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("drill", nargs="?", default="all", help="one of: %s; all; quick (%s, one run)" % (
-        ", ".join(drills.DRILLS), drills.QUICK))
+    ap.add_argument("drill", nargs="?", default="all", help="a drill (tests/system/README.md), all, or quick "
+                    "(pg-restart, one run)")
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--servers", type=int, default=2, choices=(2, 3))
@@ -91,6 +90,7 @@ def main():
     if not glob.glob("/usr/lib/postgresql/*/bin/postgres"):
         print("fault suite: PostgreSQL is not installed (scripts/install-deps.sh installs it)", file=sys.stderr)
         return CANNOT_RUN
+    from faults import drills
     names = list(drills.DRILLS) if a.drill == "all" else [drills.QUICK] if a.drill == "quick" else [a.drill]
     for n in names:
         if n not in drills.DRILLS:
