@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# One run of a scale scenario (README "Scale"). Server and bots share this
+# One run of a scale scenario (docs/load-testing.md; figures in docs/results.md). Server and bots share this
 # machine; the server starts cold on a copy of a pre-generated world. Both:
 # mixed bots, full-resolution radius 64, view distance 512, a sphere edit of
 # radius <= 3 every 2 s per bot, 60 s measured.

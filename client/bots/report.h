@@ -1,6 +1,6 @@
 // The bots report in three forms — JSON (the record), a human table and a
 // self-contained HTML page with inline SVG charts — and `compare`, which
-// puts two JSON reports side by side. README "Bots" lists every field.
+// puts two JSON reports side by side. docs/load-testing.md lists every field.
 // Thread-safety: pure functions.
 #pragma once
 

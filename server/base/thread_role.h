@@ -15,7 +15,7 @@
 // writer are not raised above the rest: the world strand also answers
 // streaming's requests, and at 1,000 clients with the bots on the same
 // machine a world thread at -5 (with the writer) took the cores from the
-// clients' side in bursts until every queue grew (README, scale section).
+// clients' side in bursts until every queue grew (docs/results.md, "Replication scale").
 // A role at a niceness above the process's would need CAP_SYS_NICE: set
 // best effort, reported.
 #pragma once

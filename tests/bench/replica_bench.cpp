@@ -1,6 +1,6 @@
 // A client's replica taking stream records, as a moving client does: the
 // cost a bot pays per record (decode and apply), the largest part of the
-// bots' CPU in the README's world scenario.
+// bots' CPU in the world scenario (docs/results.md).
 //   MipChurn/N N replicas, each holding a view of 4^3 mips (radius 16
 //              chunks, 12 high: ~9,600 chunks), take turns to move one
 //              chunk along x: the slice behind is Released, the slice
