@@ -57,12 +57,16 @@ StoreResult<RegionLease> ClusterStore::claim(Vec3i region, std::uint32_t owner, 
   // Free, expired or the claimant's own: taken at the next epoch (a server
   // that claims again is a new incarnation: whatever its earlier self still
   // has in flight is fenced). Held by another: no row changes, and the
-  // answer is empty.
+  // answer is empty. The lease counts from when the row is taken: the
+  // update's own clock_timestamp(), read after any wait for the row's lock
+  // (EXCLUDED's is read before it, and a claim that waited for a stalled
+  // commit would get a lease already run out).
   auto r = c_->exec("claim region",
                     "INSERT INTO terrane_leases AS l (rx, ry, rz, owner, epoch, expires_at)"
                     " VALUES ($1, $2, $3, $4, 1, clock_timestamp() + $5::bigint * interval '1 millisecond')"
                     " ON CONFLICT (rx, ry, rz) DO UPDATE SET"
-                    "  epoch = l.epoch + 1, owner = EXCLUDED.owner, expires_at = EXCLUDED.expires_at"
+                    "  epoch = l.epoch + 1, owner = EXCLUDED.owner,"
+                    "  expires_at = clock_timestamp() + $5::bigint * interval '1 millisecond'"
                     "  WHERE l.owner = EXCLUDED.owner OR l.expires_at <= clock_timestamp()"
                     " RETURNING epoch",
                     {text(region.x), text(region.y), text(region.z), text(owner), text(lease.count())});

@@ -15,6 +15,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <future>
 #include <thread>
 
 #include "common/world/world.h"
@@ -303,6 +304,42 @@ TEST_F(ClusterStoreTest, ALeaseThatRanOutIsTakenOverAndItsHolderIsFenced) {
   ASSERT_TRUE(got.ok() && got->has_value());
   EXPECT_EQ((*got)->revision, 2u);
   EXPECT_EQ((*got)->chunk.get({0, 0, 0}).material, materials::kSnow);
+}
+
+// A claim that waits for the lease row (locked by a transaction the
+// previous holder left open: paused inside a commit) gets a whole lease
+// from when it took the row, not from when it asked: a claim that waited a
+// lease time would otherwise hold a lease already run out.
+TEST_F(ClusterStoreTest, AClaimThatWaitedForTheLeaseRowGetsAWholeLease) {
+  auto a = open(), b = open();
+  ASSERT_TRUE(a && b);
+  const Vec3i region{0, 0, 0};
+  auto old = cl(a)->claim(region, 1, 1ms);  // runs out at once
+  ASSERT_TRUE(old.ok());
+  PGconn* stalled = PQconnectdb(url_.c_str());
+  ASSERT_EQ(PQstatus(stalled), CONNECTION_OK);
+  ASSERT_EQ(command(stalled, "BEGIN"), "");
+  PGresult* locked = PQexec(stalled, "SELECT 1 FROM terrane_leases WHERE rx = 0 AND ry = 0 AND rz = 0 FOR UPDATE");
+  ASSERT_EQ(PQresultStatus(locked), PGRES_TUPLES_OK);
+  PQclear(locked);
+  auto claim = std::async(std::launch::async, [&] { return cl(b)->claim(region, 2, 2000ms); });
+  // The claim waits for the row ...
+  ASSERT_TRUE(eventually([&] {
+    return testing_support::sql_value(url_, "SELECT count(*) FROM pg_locks WHERE NOT granted") != "0";
+  }));
+  // ... for most of its lease, then the row is let go.
+  const auto waited_from = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - waited_from < 1500ms) std::this_thread::sleep_for(50ms);
+  ASSERT_EQ(command(stalled, "COMMIT"), "");
+  PQfinish(stalled);
+  auto theirs = claim.get();
+  ASSERT_TRUE(theirs.ok()) << theirs.error().message;
+  // Still held well past when it was asked for plus a lease's length less
+  // the wait: the lease counts from when the claim took the row.
+  EXPECT_EQ(testing_support::sql_value(url_,
+                                       "SELECT expires_at > clock_timestamp() + interval '1 second' FROM terrane_leases"
+                                       " WHERE rx = 0 AND ry = 0 AND rz = 0"),
+            "t");
 }
 
 // A forwarded edit passed on: its row goes to the next server's inbox with
