@@ -327,18 +327,20 @@ TEST_F(ClusterStoreTest, AClaimThatWaitedForTheLeaseRowGetsAWholeLease) {
   ASSERT_TRUE(eventually([&] {
     return testing_support::sql_value(url_, "SELECT count(*) FROM pg_locks WHERE NOT granted") != "0";
   }));
-  // ... for most of its lease, then the row is let go.
-  const auto waited_from = std::chrono::steady_clock::now();
-  while (std::chrono::steady_clock::now() - waited_from < 1500ms) std::this_thread::sleep_for(50ms);
+  // ... and is let go at a time the database notes: the claim asked
+  // before it, so a lease counted from the asking ends before this time
+  // plus a lease, and one counted from taking the row ends after it.
+  PGresult* at = PQexec(stalled, "SELECT clock_timestamp()::text");
+  ASSERT_EQ(PQresultStatus(at), PGRES_TUPLES_OK);
+  const std::string released = PQgetvalue(at, 0, 0);
+  PQclear(at);
   ASSERT_EQ(command(stalled, "COMMIT"), "");
   PQfinish(stalled);
   auto theirs = claim.get();
   ASSERT_TRUE(theirs.ok()) << theirs.error().message;
-  // Still held well past when it was asked for plus a lease's length less
-  // the wait: the lease counts from when the claim took the row.
-  EXPECT_EQ(testing_support::sql_value(url_,
-                                       "SELECT expires_at > clock_timestamp() + interval '1 second' FROM terrane_leases"
-                                       " WHERE rx = 0 AND ry = 0 AND rz = 0"),
+  EXPECT_EQ(testing_support::sql_value(url_, "SELECT expires_at >= '" + released +
+                                                 "'::timestamptz + interval '2000 milliseconds' FROM terrane_leases"
+                                                 " WHERE rx = 0 AND ry = 0 AND rz = 0"),
             "t");
 }
 
