@@ -23,6 +23,7 @@
 #include "server/cluster/lease_keeper.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
+#include "tests/support/postgres_stores.h"
 
 namespace terrane {
 namespace {
@@ -33,43 +34,7 @@ using testing_support::eventually;
 using testing_support::run_sql;
 using testing_support::sql_value;
 
-class PostgresStoreTest : public testing_support::PostgresTest {
- protected:
-  // Runs a statement on a session of the test's own: "" or PostgreSQL's error.
-  static std::string command(PGconn* conn, const char* sql) {
-    PGresult* r = PQexec(conn, sql);
-    const bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
-    std::string error = ok ? "" : PQresultErrorMessage(r);
-    PQclear(r);
-    return error;
-  }
-  std::unique_ptr<PostgresStore> open() {
-    auto s = PostgresStore::open(url_);
-    EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
-    return s.ok() ? std::move(*s) : nullptr;
-  }
-  // The cluster store beside chunk store s (one each, opened when first
-  // asked, on a connection of its own): its leases, servers and inbox.
-  ClusterStore* cl(const std::unique_ptr<PostgresStore>& s) {
-    auto& c = beside_[s.get()];
-    if (!c) {
-      auto opened = ClusterStore::open(url_);
-      EXPECT_TRUE(opened.ok()) << (opened.ok() ? "" : opened.error().message);
-      if (opened.ok()) c = std::move(*opened);
-    }
-    return c.get();
-  }
-  static ChunkWrite chunk_write(Vec3i cp, std::uint64_t revision, Material m) {
-    Box box({kChunkSize, kChunkSize, kChunkSize});
-    for (int y = 0; y < 10; ++y)
-      for (int z = 0; z < kChunkSize; ++z)
-        for (int x = 0; x < kChunkSize; ++x) box.set(x, y, z, make_voxel(m, static_cast<std::uint8_t>(x * 8)));
-    return ChunkWrite{cp, revision, encode_chunk_blob(box)};
-  }
-
- private:
-  std::map<const PostgresStore*, std::unique_ptr<ClusterStore>> beside_;
-};
+class PostgresStoreTest : public testing_support::PostgresStoresTest {};
 
 TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
   auto a = open();
