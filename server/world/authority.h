@@ -28,6 +28,13 @@ namespace terrane {
 struct Forwarded {
   std::int64_t inbox_id = 0;
   std::uint32_t from = 0;
+  // Passed back to its sender, nothing claimed for it: the two servers
+  // asked each other for their regions at once, and the sender, with the
+  // lower id, wins (SharedAuthority, "Two servers asking each other").
+  bool back = false;
+  // This server's own client's edit, passed back to it: queued ahead of
+  // the edits waiting, as its player's later edits wait for its answer.
+  bool own = false;
 };
 
 // What an authority needs of the edit queue (the tick implements it).
@@ -70,6 +77,10 @@ class Authority : public LoadWatcher {
   // Passes an edit forwarded here (of box) on to server to, handing over
   // the regions of box this server holds; to answers its sender.
   virtual void relay(Forwarded f, const Region& box, std::uint32_t to) = 0;
+  // Whether an edit forwarded here by server from, which holds regions of
+  // it now, goes back to it rather than being refused: from has the lower
+  // id, so it wins when both want the regions (no edit goes back and forth).
+  virtual bool passes_back_to(std::uint32_t from) const = 0;
   // Every tick: tells clients the answers to their forwarded edits.
   virtual void settle() = 0;
 
@@ -93,6 +104,7 @@ class LocalAuthority final : public Authority {
   bool forward_pending(ClientId, const Region&) const override { return false; }
   void forward(ClientId, const EditRequestMsg&, const std::string&, const Region&, std::uint32_t) override {}
   void relay(Forwarded, const Region&, std::uint32_t) override {}
+  bool passes_back_to(std::uint32_t) const override { return false; }
   void settle() override {}
   void changed_elsewhere(std::vector<ChunkChange>) override {}
   void read_again_elsewhere(std::vector<Vec3i>) override {}

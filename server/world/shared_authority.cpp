@@ -220,6 +220,7 @@ std::vector<Vec3i> SharedAuthority::hand_over(const Region& box, std::uint32_t t
     RegionLeaseState& l = leases_[region];
     l.state = RegionLeaseState::kHandingOver;
     l.left = false;
+    l.wanted_back = false;
     l.holder = to;
     l.why = fmt::format("handed over to server {}", to);
     regions.push_back(region);
@@ -232,19 +233,39 @@ void SharedAuthority::handed_over(const std::vector<Vec3i>& regions, bool ok) {
   // The regions handed over are the recipient's now: this server's next
   // edits there are forwarded to it too, until asked again a second on,
   // so a region does not bounce back before the recipient has claimed
-  // it. Not forwarded: they are asked for again at once.
+  // it. Not forwarded: they are asked for again at once. Wanted back by an
+  // edit from the recipient that this server wins: asked for again when
+  // that edit's turn comes.
   const auto now = std::chrono::steady_clock::now();
   for (const Vec3i region : regions)
     if (auto l = leases_.find(region); l != leases_.end() && l->second.state == RegionLeaseState::kHandingOver) {
+      if (l->second.wanted_back) {
+        leases_.erase(l);
+        continue;
+      }
       l->second.state = RegionLeaseState::kRefused;
       l->second.ask_again = ok ? now + std::chrono::seconds(1) : now;
     }
 }
 
+bool SharedAuthority::asked_each_other(std::uint32_t from, const Region& box) const {
+  std::unordered_set<Vec3i, Vec3iHash> regions;
+  for_each_chunk_in(box, [&](Vec3i cp) { regions.insert(lease_region_of(cp)); });
+  const auto shares = [&](const Region& sent) {
+    bool any = false;
+    for_each_chunk_in(sent, [&](Vec3i cp) { any = any || regions.count(lease_region_of(cp)) != 0; });
+    return any;
+  };
+  return std::any_of(forwarding_.begin(), forwarding_.end(),
+                     [&](const auto& f) { return f.second.to == from && shares(f.second.box); }) ||
+         std::any_of(forwarded_.begin(), forwarded_.end(),
+                     [&](const auto& f) { return f.second.to == from && shares(f.second.box); });
+}
+
 bool SharedAuthority::forward_pending(ClientId id, const Region& r) const {
   auto [first, last] = forwarding_.equal_range(id);
   for (auto it = first; it != last; ++it)
-    if (chunks_meet(it->second, r)) return true;
+    if (chunks_meet(it->second.box, r)) return true;
   return std::any_of(forwarded_.begin(), forwarded_.end(),
                      [&](const auto& f) { return f.second.id == id && !f.second.answer && chunks_meet(f.second.box, r); });
 }
@@ -254,14 +275,14 @@ void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std
   const Frame frame = build_edit_request(edit);
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
-  forwarding_.emplace(id, box);
+  forwarding_.emplace(id, Forwarding{box, to});
   storage_.forward(to, player, frame, regions,
                    [this, id, edit, box, to, regions](StoreResult<std::int64_t> row) {
     asio::post(strand_, [this, id, edit, box, to, regions, row = std::move(row)] {
       handed_over(regions, row.ok());
       auto [first, last] = forwarding_.equal_range(id);
       for (auto it = first; it != last; ++it)
-        if (it->second == box) {
+        if (it->second.box == box && it->second.to == to) {
           forwarding_.erase(it);
           break;
         }
@@ -347,15 +368,29 @@ void SharedAuthority::read_inbox_page(std::int64_t after) {
         }
         counters_.forwarded_edits_received.fetch_add(1, std::memory_order_relaxed);
         residency_.reserve(r);
+        // Two servers asking each other for their regions at once (each
+        // handed its own over with its client's edit, or is handing them
+        // over) would each claim what the other gave up, and refuse the
+        // other's edit when they got part of it: the lower id wins. The
+        // other claims nothing for the edit and passes it back, with what
+        // it holds of it; the winner claims every region of both edits,
+        // those it is handing over too, once released.
+        const bool duel = in.from != options_.server_id && asked_each_other(in.from, r);
+        const bool back = duel && in.from < options_.server_id;
         // What this server knew of the edit's regions held elsewhere may be
         // out of date (the sender may have handed them over): asked again
         // when the edit's turn comes.
-        for_each_chunk_in(r, [&](Vec3i cp) {
-          if (auto l = leases_.find(lease_region_of(cp));
-              l != leases_.end() && l->second.state == RegionLeaseState::kRefused)
-            leases_.erase(l);
-        });
-        queue_.queue_forwarded(std::move(*edit), in.player, Forwarded{in.id, in.from});
+        if (!back)
+          for_each_chunk_in(r, [&](Vec3i cp) {
+            auto l = leases_.find(lease_region_of(cp));
+            if (l == leases_.end()) return;
+            if (l->second.state == RegionLeaseState::kRefused)
+              leases_.erase(l);
+            else if (duel && l->second.state == RegionLeaseState::kHandingOver && l->second.holder == in.from)
+              l->second.wanted_back = true;
+          });
+        queue_.queue_forwarded(std::move(*edit), in.player,
+                               Forwarded{in.id, in.from, back, in.from == options_.server_id});
       }
       if (!refused.empty()) storage_.answer(std::move(refused));
       if (got->size() == kInboxPage) {

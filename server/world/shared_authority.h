@@ -51,6 +51,7 @@ class SharedAuthority final : public Authority {
   void forward(ClientId id, const EditRequestMsg& edit, const std::string& player, const Region& box,
                std::uint32_t to) override;
   void relay(Forwarded f, const Region& box, std::uint32_t to) override;
+  bool passes_back_to(std::uint32_t from) const override { return from < options_.server_id; }
   void settle() override {
     if (!forwarded_.empty()) settle_forwarded();
   }
@@ -72,9 +73,17 @@ class SharedAuthority final : public Authority {
   struct RegionLeaseState {
     enum : std::uint8_t { kClaiming, kRefreshing, kHeld, kRefused, kUnreachable, kHandingOver } state = kClaiming;
     bool left = false;  // kRefused: free, left to holder by ClaimRule::kPreferNeighbours
+    // kHandingOver: an edit from the server it goes to wants it, and this
+    // server wins it (a lower id): asked again once released.
+    bool wanted_back = false;
     std::string why;
     std::optional<std::uint32_t> holder;
     std::chrono::steady_clock::time_point ask_again{};
+  };
+  // An edit of box being forwarded to server to, its inbox row not known yet.
+  struct Forwarding {
+    Region box;
+    std::uint32_t to;
   };
   // An edit this server forwarded to a region's owner, waiting for its
   // answer; then for the edit's chunks to be read again here, before the
@@ -103,6 +112,10 @@ class SharedAuthority final : public Authority {
   // once the release is done (ok) or failed.
   std::vector<Vec3i> hand_over(const Region& box, std::uint32_t to);
   void handed_over(const std::vector<Vec3i>& regions, bool ok);
+  // Whether an edit of box that server from forwarded here shares a region
+  // with an edit this server forwarded to from and has not settled yet:
+  // the two servers asked each other for regions at once.
+  bool asked_each_other(std::uint32_t from, const Region& box) const;
   void take_inbox();
   void read_inbox_page(std::int64_t after);
   // One forwarded edit of player within its rate (forwarded_rate_).
@@ -130,7 +143,7 @@ class SharedAuthority final : public Authority {
   // inbox of this server (rows taken and rows listed by the read under way;
   // a read under way; another notice came during it).
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
-  std::unordered_multimap<ClientId, Region> forwarding_;  // sent, row not known yet
+  std::unordered_multimap<ClientId, Forwarding> forwarding_;  // sent, row not known yet
   std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
   std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
   // Forwarded edits per player, whatever server they came through, at the

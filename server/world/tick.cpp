@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include <fmt/format.h>
+
 #include "common/codec/byte_rle.h"
 #include "common/world/view.h"
 #include "server/base/log.h"
@@ -146,7 +148,15 @@ void Tick::rollback(std::string actor, std::vector<EditLogEntry> entries, std::o
 }
 
 void Tick::queue_forwarded(EditRequestMsg edit, std::string player, Forwarded from) {
-  edits_.push_back(PendingEdit{0, std::move(edit), std::move(player), nullptr, from});
+  if (!from.own) {
+    edits_.push_back(PendingEdit{0, std::move(edit), std::move(player), nullptr, from});
+    return;
+  }
+  // This server's own edit, back: ahead of the edits waiting (its player's
+  // later edits on its chunks wait for its answer), behind those back before.
+  const auto at = std::find_if(edits_.begin(), edits_.end(),
+                               [](const PendingEdit& e) { return !e.forwarded || !e.forwarded->own; });
+  edits_.insert(at, PendingEdit{0, std::move(edit), std::move(player), nullptr, from});
 }
 
 // One tick's edits as they apply (Tick::apply_edits): copies of the
@@ -335,13 +345,22 @@ Tick::EditStep Tick::apply_player_edit(TickEdits& t) {
     return EditStep::kNext;
   }
   // In a shared world, only regions this server holds are written; a
-  // client's edit in another server's is forwarded to it.
+  // client's edit in another server's is forwarded to it. A forwarded edit
+  // whose sender wins (the two asked each other for their regions at once)
+  // goes back to it, and nothing is claimed for it here.
   std::string not_ours;
   std::optional<std::uint32_t> holder;
   const Region writes = history ? r : bounds.clamp(pe.edit.bounds());
+  const bool back = pe.forwarded && pe.forwarded->back;
+  if (back) {
+    holder = pe.forwarded->from;
+    not_ours = fmt::format("server {}, which sent it, takes its regions", *holder);
+  }
   const Writable w =
-      authority_.writable(writes, &not_ours, &holder,
-               client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours : ClaimRule::kAny);
+      back ? Writable::kNo
+           : authority_.writable(writes, &not_ours, &holder,
+                                 client != nullptr && !history && !pe.forwarded ? ClaimRule::kPreferNeighbours
+                                                                                : ClaimRule::kAny);
   // Another server's region in it: which of the others are this server's
   // decides what goes with the edit, so claims under way are waited for.
   if ((w == Writable::kWaiting || (w == Writable::kNo && !history && authority_.claiming(writes))) && !clock_.stopping) {
@@ -355,12 +374,15 @@ Tick::EditStep Tick::apply_player_edit(TickEdits& t) {
     // inbox row readdressed, its sender and age kept), with regions of
     // this server's or none (they moved on since its sender looked); a
     // row older than the forward wait is t.refused wherever it is, so no
-    // relay goes on longer. Never back to its sender: there the player's
-    // next edit on those chunks waits for this one's answer, and this one
-    // would wait behind it (t.refused instead; the player tries again).
+    // relay goes on longer. Back to its sender only when the sender wins
+    // (a lower id: back), where it goes ahead of its player's next edits
+    // (which wait for its answer); otherwise t.refused (the player tries
+    // again), so no edit goes back and forth.
     std::unordered_set<Vec3i, Vec3iHash> mine;
-    const bool may_go_on = w == Writable::kNo && holder && !history && !clock_.stopping &&
-                           (client != nullptr || (pe.forwarded && *holder != pe.forwarded->from));
+    const bool may_go_on =
+        w == Writable::kNo && holder && !history && !clock_.stopping &&
+        (client != nullptr || (pe.forwarded && (*holder != pe.forwarded->from || back ||
+                                                authority_.passes_back_to(pe.forwarded->from))));
     if (may_go_on)
       for_each_chunk_in(writes, [&](Vec3i cp) {
         if (authority_.writes_region(lease_region_of(cp))) mine.insert(lease_region_of(cp));

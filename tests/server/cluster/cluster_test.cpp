@@ -20,6 +20,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <httplib.h>
 
 #include "client/bots/server_watch.h"
@@ -630,6 +631,100 @@ TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   EXPECT_TRUE(replica_shows(cy, east, ev));
   EXPECT_TRUE(replica_shows(cy, across, av));
   EXPECT_TRUE(replica_shows(cy, east2, ev2));
+  cy.disconnect();
+}
+
+// Edits across the border of two servers' regions sent through both servers
+// at the same moment: each server asks the other for its region (hands its
+// own over with its client's edit), and each gets the other's edit. The
+// server with the lower id wins: the other claims nothing for that edit
+// and passes it back with what it holds of it, so both edits are applied
+// (by server 1) and none is refused. Each round then puts the border back
+// (an edit of each player across a border with a region its server keeps
+// hands the region it won over), so every round is such a duel.
+TEST_F(ClusterTest, EditsAcrossABorderSentThroughBothServersAtOnceAreAllApplied) {
+  for (std::uint32_t id = 1; id <= 2; ++id) ASSERT_NE(start(id).port(), 0);
+  Client ann(options(*servers_[0], "ann")), bob(options(*servers_[1], "bob"));
+  join(ann);
+  join(bob);
+  const Vec3f sp = ann.welcome()->spawn;
+  const int y = static_cast<int>(std::floor(sp.y)) - 3;
+  const auto region_y = [](int v) { return v >= 0 ? v / 256 : (v - 255) / 256; };
+  const int ry = region_y(y);
+  ASSERT_EQ(ry, region_y(y + 3)) << "the boxes cross a region border in y";
+  // The four regions by the corner x = 0, z = 0 near the spawn: server 1
+  // the two west of x = 0, server 2 the two east (set in the table: a
+  // server claims a region leased to its own id as its own; a free region
+  // beside server 1's would be left to server 1).
+  const Vec3i nw{-1, ry, 0}, ne{0, ry, 0}, sw{-1, ry, -1}, se{0, ry, -1};
+  for (const auto& [r, owner] : {std::pair{nw, 1}, std::pair{sw, 1}, std::pair{ne, 2}, std::pair{se, 2}})
+    ASSERT_EQ(run_sql(url_, fmt::format("INSERT INTO terrane_leases (rx, ry, rz, owner, epoch, expires_at)"
+                                        " VALUES ({}, {}, {}, {}, 1, clock_timestamp() + interval '1 hour')",
+                                        r.x, r.y, r.z, owner)),
+              "");
+  const Region in_nw{{-8, y, 2}, {-5, y + 3, 5}}, in_sw{{-8, y, -6}, {-5, y + 3, -3}};
+  const Region in_ne{{4, y, 2}, {7, y + 3, 5}}, in_se{{4, y, -6}, {7, y + 3, -3}};
+  ASSERT_EQ(write(ann, in_nw, pattern(in_nw, materials::kBrick)), "");
+  ASSERT_EQ(write(ann, in_sw, pattern(in_sw, materials::kBrick)), "");
+  ASSERT_EQ(write(bob, in_ne, pattern(in_ne, materials::kSnow)), "");
+  ASSERT_EQ(write(bob, in_se, pattern(in_se, materials::kSnow)), "");
+  for (const auto& [r, owner] : {std::pair{nw, 1}, std::pair{sw, 1}, std::pair{ne, 2}, std::pair{se, 2}})
+    ASSERT_EQ(lease_owner(r), owner);
+  // The duel: one edit of each across x = 0 (north of z = 0) at once, each
+  // player waiting for its answer. Then the border is put back: ann's edit
+  // across z = 0 east of x = 0 hands north-east to server 2 if server 1
+  // holds it, bob's west of x = 0 hands north-west to server 1.
+  const Region anns{{-2, y, 6}, {2, y + 3, 9}}, bobs{{-2, y, 10}, {2, y + 3, 13}};
+  const Region ann_back{{8, y, -2}, {11, y + 3, 2}}, bob_back{{-11, y, -2}, {-8, y + 3, 2}};
+  for (const Region& r : {anns, bobs, ann_back, bob_back}) {
+    ASSERT_TRUE(wait_full_resolution(ann, r));
+    ASSERT_TRUE(wait_full_resolution(bob, r));
+  }
+  constexpr int kRounds = 20;
+  std::vector<std::string> refused;
+  std::vector<Voxel> last_ann, last_bob;
+  for (int round = 0; round < kRounds; ++round) {
+    const auto av = pattern(anns, static_cast<Material>(materials::kGrass + round % 8));
+    const auto bv = pattern(bobs, static_cast<Material>(materials::kSnow + round % 4));
+    const std::uint32_t a = ann.write_box(anns, av);
+    const std::uint32_t b = bob.write_box(bobs, bv);
+    if (const std::string o = outcome(ann, a); o.empty())
+      last_ann = av;
+    else
+      refused.push_back(fmt::format("round {}, ann: {}", round, o));
+    if (const std::string o = outcome(bob, b); o.empty())
+      last_bob = bv;
+    else
+      refused.push_back(fmt::format("round {}, bob: {}", round, o));
+    const auto back = pattern(ann_back, static_cast<Material>(materials::kSand + round % 2));
+    if (const std::string o = write(ann, ann_back, back); !o.empty())
+      refused.push_back(fmt::format("round {}, ann putting the border back: {}", round, o));
+    if (const std::string o = write(bob, bob_back, back); !o.empty())
+      refused.push_back(fmt::format("round {}, bob putting the border back: {}", round, o));
+  }
+  EXPECT_TRUE(refused.empty()) << refused.size() << " of " << 4 * kRounds << " refused:\n"
+                               << fmt::format("{}", fmt::join(refused, "\n"));
+  ASSERT_FALSE(last_ann.empty());
+  ASSERT_FALSE(last_bob.empty());
+  for (const auto& [r, owner] : {std::pair{nw, 1}, std::pair{sw, 1}, std::pair{ne, 2}, std::pair{se, 2}})
+    EXPECT_EQ(lease_owner(r), owner) << "the border was not put back";
+  // Both replicas show the last edits and agree with their servers.
+  for (Client* c : {&ann, &bob}) {
+    EXPECT_TRUE(replica_shows(*c, anns, last_ann));
+    EXPECT_TRUE(replica_shows(*c, bobs, last_bob));
+    std::vector<Vec3i> chunks;
+    for_each_chunk_in(Region{{-11, y, -6}, {11, y + 3, 13}}, [&](Vec3i cp) { chunks.push_back(cp); });
+    expect_agrees_with_its_server(*c, chunks);
+  }
+  ann.disconnect();
+  bob.disconnect();
+  // And the database holds them: a third server shows them.
+  ServerProcess& c = start(3);
+  ASSERT_NE(c.port(), 0);
+  Client cy(options(c, "cy"));
+  join(cy);
+  EXPECT_TRUE(replica_shows(cy, anns, last_ann));
+  EXPECT_TRUE(replica_shows(cy, bobs, last_bob));
   cy.disconnect();
 }
 

@@ -3,7 +3,9 @@
 // keeper, a real Residency and FanOut, and a fake edit queue: a free
 // region is claimed as an edit asks (waiting until held, then writable);
 // a region another server holds is not writable and names its holder; a
-// chunk another server changed that nobody here holds is forgotten.
+// chunk another server changed that nobody here holds is forgotten; an
+// edit from a server this one asked for the same region at once goes back
+// to it, unclaimed, if that server's id is the lower.
 #include "server/world/shared_authority.h"
 
 #include <gtest/gtest.h>
@@ -13,9 +15,11 @@
 #include <thread>
 
 #include "server/cluster/cluster_control.h"
+#include "server/cluster/cluster_store.h"
 #include "server/cluster/lease_keeper.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
+#include "tests/support/world_strand.h"
 
 namespace terrane {
 namespace {
@@ -24,10 +28,24 @@ using namespace std::chrono_literals;
 
 class NoEdits final : public EditQueue {
  public:
-  void queue_forwarded(EditRequestMsg, std::string, Forwarded) override { ++queued; }
+  void queue_forwarded(EditRequestMsg, std::string, Forwarded f) override {
+    ++queued;
+    forwarded.push_back(f);
+  }
   void reject(ClientId, const EditRequestMsg&, RejectReason, const std::string&) override { ++rejected; }
   int queued = 0, rejected = 0;
+  std::vector<Forwarded> forwarded;
 };
+
+EditRequestMsg fill(Region box) {
+  EditRequestMsg e;
+  e.edit_id = 1;
+  e.kind = EditKind::kFillBox;
+  e.box = box;
+  e.material = materials::kBrick;
+  e.occupancy = 255;
+  return e;
+}
 
 class SharedAuthorityTest : public testing_support::PostgresTest {
  protected:
@@ -37,7 +55,8 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     auto store = PostgresStore::open(url_);
     ASSERT_TRUE(store.ok()) << store.error().message;
     ASSERT_TRUE((*store)->create_world(default_world_meta()).ok());
-    auto keeper = LeaseKeeper::open(url_, 1, LeaseTimes{}, nullptr);
+    options_.server_id = kThisServer;
+    auto keeper = LeaseKeeper::open(url_, kThisServer, LeaseTimes{}, nullptr);
     ASSERT_TRUE(keeper.ok()) << keeper.error().message;
     keeper_ = std::move(*keeper);
     auto control = ClusterControl::open(url_, *keeper_);
@@ -94,6 +113,37 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     return w;
   }
 
+  // Forwards edit as client 7 of this server to server to.
+  void forward(const Region& box, std::uint32_t to) {
+    on_strand([&] {
+      fan_out_->join(7, client_);
+      authority_->forward(7, fill(box), "bob", box, to);
+    });
+  }
+  // Puts an edit of box from server from in this server's inbox and has it
+  // read; what the authority queued for it.
+  std::optional<Forwarded> from_inbox(std::uint32_t from, const Region& box) {
+    auto other = ClusterStore::open(url_);
+    EXPECT_TRUE(other.ok()) << other.error().message;
+    if (!other.ok()) return std::nullopt;
+    const Frame frame = build_edit_request(fill(box));
+    EXPECT_TRUE((*other)->forward(from, kThisServer, "ann", frame).ok());
+    std::size_t before = 0;
+    on_strand([&] {
+      before = edits_.forwarded.size();
+      authority_->inbox_has_edits();
+    });
+    std::optional<Forwarded> got;
+    testing_support::eventually([&] {
+      on_strand([&] {
+        if (edits_.forwarded.size() > before) got = edits_.forwarded.back();
+      });
+      return got.has_value();
+    });
+    return got;
+  }
+
+  static constexpr std::uint32_t kThisServer = 2;
   ServerOptions options_;
   ServerCounters counters_;
   WorldClock clock_;
@@ -109,6 +159,7 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
   std::unique_ptr<HorizonCache> horizons_;
   std::unique_ptr<Residency> residency_;
   std::unique_ptr<SharedAuthority> authority_;
+  std::shared_ptr<testing_support::RecordingClient> client_ = std::make_shared<testing_support::RecordingClient>();
   std::thread thread_;
 };
 
@@ -127,7 +178,7 @@ TEST_F(SharedAuthorityTest, AFreeRegionIsClaimedAsAnEditAsksAndThenWritable) {
 
 TEST_F(SharedAuthorityTest, ARegionAnotherServerHoldsIsNotWritableAndNamesItsHolder) {
   const Vec3i region = lease_region_of(Vec3i{0, 0, 0});
-  auto other = LeaseKeeper::open(url_, 2, LeaseTimes{}, nullptr);
+  auto other = LeaseKeeper::open(url_, 3, LeaseTimes{}, nullptr);
   ASSERT_TRUE(other.ok()) << other.error().message;
   ASSERT_TRUE((*other)->ensure(std::span(&region, 1)).ok());
   const Region box{{4, 1, 4}, {6, 3, 6}};
@@ -135,7 +186,7 @@ TEST_F(SharedAuthorityTest, ARegionAnotherServerHoldsIsNotWritableAndNamesItsHol
   std::optional<std::uint32_t> holder;
   ASSERT_TRUE(testing_support::eventually(
       [&] { return writable(box, &why, &holder) == Authority::Writable::kNo; }));
-  EXPECT_EQ(holder, std::optional<std::uint32_t>(2));
+  EXPECT_EQ(holder, std::optional<std::uint32_t>(3));
   EXPECT_FALSE(why.empty());
   on_strand([&] { EXPECT_FALSE(authority_->writes_region(region)); });
   EXPECT_FALSE(keeper_->holds(region));
@@ -159,6 +210,47 @@ TEST_F(SharedAuthorityTest, AChunkAnotherServerChangedThatNobodyHereHoldsIsForgo
   });
   EXPECT_EQ(counters_.chunks_forgotten_elsewhere.load(), 1u);
   EXPECT_EQ(edits_.queued + edits_.rejected, 0);
+}
+
+// Two servers asking each other for one region at once: this server (2)
+// forwarded an edit there to server 1 and gets one of server 1's there.
+// Server 1 wins: the edit goes back to it, and nothing is claimed for it.
+TEST_F(SharedAuthorityTest, AnEditFromALowerIdAskedForTheSameRegionAtOnceGoesBackUnclaimed) {
+  const Region mine{{4, 1, 4}, {6, 3, 6}}, theirs{{8, 1, 4}, {10, 3, 6}};
+  const Vec3i region = lease_region_of(Vec3i{0, 0, 0});
+  ASSERT_EQ(lease_region_of(chunk_of(theirs.min)), region);
+  forward(mine, 1);
+  const auto got = from_inbox(1, theirs);
+  ASSERT_TRUE(got.has_value());
+  EXPECT_TRUE(got->back);
+  EXPECT_FALSE(got->own);
+  EXPECT_EQ(got->from, 1u);
+  on_strand([&] {
+    EXPECT_FALSE(authority_->claiming(theirs));
+    EXPECT_FALSE(authority_->writes_region(region));
+    EXPECT_TRUE(authority_->passes_back_to(1));
+    EXPECT_FALSE(authority_->passes_back_to(3));
+  });
+  EXPECT_FALSE(keeper_->holds(region));
+}
+
+// Not passed back: an edit from a lower id that this server did not ask for
+// the region, or from a higher id that it did (this server wins and takes
+// it); this server's own edit back is marked as such.
+TEST_F(SharedAuthorityTest, AnEditIsPassedBackOnlyToALowerIdAskedForTheSameRegion) {
+  const Region mine{{4, 1, 4}, {6, 3, 6}}, theirs{{8, 1, 4}, {10, 3, 6}};
+  auto got = from_inbox(1, theirs);
+  ASSERT_TRUE(got.has_value());
+  EXPECT_FALSE(got->back);
+  forward(mine, 3);
+  got = from_inbox(3, theirs);
+  ASSERT_TRUE(got.has_value());
+  EXPECT_FALSE(got->back);
+  EXPECT_FALSE(got->own);
+  got = from_inbox(kThisServer, theirs);
+  ASSERT_TRUE(got.has_value());
+  EXPECT_FALSE(got->back);
+  EXPECT_TRUE(got->own);
 }
 
 }  // namespace

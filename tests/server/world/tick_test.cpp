@@ -3,7 +3,8 @@
 // SQLite Storage: a player's edits keep their order while an earlier one
 // waits, another player's edits go on meanwhile; an edit is acknowledged
 // once committed, after its holders heard of it; a flush waits for the
-// commit in flight.
+// commit in flight; a forwarded edit its sender wins goes back to it
+// unasked, and this server's own edit back goes ahead of those waiting.
 #include "server/world/tick.h"
 
 #include <gtest/gtest.h>
@@ -36,7 +37,8 @@ class FakeAuthority final : public Authority {
   bool writes_region(Vec3i) const override { return true; }
   bool forward_pending(ClientId, const Region&) const override { return false; }
   void forward(ClientId, const EditRequestMsg&, const std::string&, const Region&, std::uint32_t) override {}
-  void relay(Forwarded, const Region&, std::uint32_t) override {}
+  void relay(Forwarded f, const Region&, std::uint32_t to) override { relays.emplace_back(f, to); }
+  bool passes_back_to(std::uint32_t) const override { return false; }
   void settle() override { ++settled; }
   void changed_elsewhere(std::vector<ChunkChange>) override {}
   void read_again_elsewhere(std::vector<Vec3i>) override {}
@@ -48,6 +50,7 @@ class FakeAuthority final : public Authority {
   std::unordered_set<Vec3i, Vec3iHash> waiting;
   int asked = 0;
   int settled = 0;
+  std::vector<std::pair<Forwarded, std::uint32_t>> relays;  // and where to
 };
 
 EditRequestMsg fill(std::uint32_t id, Region box, Material m) {
@@ -159,6 +162,50 @@ TEST_F(TickTest, AFlushWaitsForTheTickAppliedAndAnUndoRestores) {
   edit(1, undo);
   ASSERT_TRUE(c->wait([](RecordingClient& r) { return r.acked().size() == 2; }));
   w_.on_strand([&] { EXPECT_NE(residency_.get(Vec3i{5, 2, 5}), solid(materials::kBrick)); });
+}
+
+// Two servers asked each other for regions at once and the sender wins:
+// its edit goes back to it, and nothing is asked of the authority for it.
+TEST_F(TickTest, AForwardedEditItsSenderWinsGoesBackToItUnasked) {
+  const Region box{{4, 1, 4}, {6, 3, 6}};
+  w_.on_strand([&] {
+    residency_.reserve(box);  // as the inbox read does
+    tick_.queue_forwarded(fill(1, box, materials::kBrick), "ann", Forwarded{5, 1, /*back=*/true, /*own=*/false});
+  });
+  ASSERT_TRUE(testing_support::eventually([&] {
+    std::size_t n = 0;
+    w_.on_strand([&] { n = authority_.relays.size(); });
+    return n == 1;
+  }));
+  w_.on_strand([&] {
+    EXPECT_EQ(authority_.relays[0].first.inbox_id, 5);
+    EXPECT_EQ(authority_.relays[0].second, 1u);
+    EXPECT_EQ(authority_.asked, 0);
+    EXPECT_NE(residency_.get(Vec3i{5, 2, 5}), solid(materials::kBrick));
+  });
+}
+
+// This server's own client's edit, passed back to it, goes ahead of the
+// edits waiting (its player's later edits wait for its answer): the later
+// edit, queued first, is applied after it.
+TEST_F(TickTest, ThisServersOwnEditPassedBackGoesAheadOfTheEditsWaiting) {
+  const Region box{{4, 1, 4}, {6, 3, 6}};
+  auto c = join(1, {10, 10, 10});
+  w_.on_strand([&] { authority_.waiting.insert(Vec3i{0, 0, 0}); });
+  edit(1, fill(12, box, materials::kBrick));  // later, and waiting
+  ASSERT_TRUE(testing_support::eventually([&] {
+    int asked = 0;
+    w_.on_strand([&] { asked = authority_.asked; });
+    return asked > 0;
+  }));
+  w_.on_strand([&] {
+    residency_.reserve(box);
+    tick_.queue_forwarded(fill(11, box, materials::kSand), "player 1", Forwarded{6, 9, /*back=*/false, /*own=*/true});
+    authority_.waiting.clear();
+  });
+  ASSERT_TRUE(testing_support::eventually([&] { return counters_.edits_applied.load() == 2; }));
+  ASSERT_TRUE(c->wait([](RecordingClient& r) { return r.acked().size() == 1; }));
+  w_.on_strand([&] { EXPECT_EQ(residency_.get(Vec3i{5, 2, 5}), solid(materials::kBrick)); });
 }
 
 }  // namespace
