@@ -6,14 +6,15 @@
 
 namespace terrane {
 
-StoreResult<std::unique_ptr<ClusterControl>> ClusterControl::open(const std::string& url, LeaseKeeper& keeper) {
+StoreResult<std::unique_ptr<ClusterControl>> ClusterControl::open(const std::string& url, LeaseKeeper& keeper,
+                                                                  DatabaseCounters* counters) {
   auto store = ClusterStore::open(url);
   if (!store) return store.error();
-  return std::unique_ptr<ClusterControl>(new ClusterControl(keeper, std::move(*store)));
+  return std::unique_ptr<ClusterControl>(new ClusterControl(keeper, std::move(*store), counters));
 }
 
-ClusterControl::ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store)
-    : keeper_(keeper), store_(std::move(store)) {}
+ClusterControl::ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store, DatabaseCounters* counters)
+    : keeper_(keeper), counters_(counters), store_(std::move(store)) {}
 
 ClusterControl::~ClusterControl() { stop(); }
 
@@ -72,7 +73,9 @@ void ClusterControl::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i
 void ClusterControl::read_inbox(std::int64_t after, std::size_t limit,
                                 std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
   post([this, after, limit, done = std::move(done)](ClusterStore& cs) {
-    done(cs.inbox(keeper_.owner(), after, limit));
+    auto got = cs.inbox(keeper_.owner(), after, limit);
+    if (counters_ != nullptr) counters_->inbox_failing.store(got ? 0 : 1, std::memory_order_relaxed);
+    done(std::move(got));
   });
 }
 
