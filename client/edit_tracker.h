@@ -33,6 +33,17 @@ struct EditOutcome {
   std::vector<Voxel> state;
 };
 
+// Whether a refusal leaves the edit's fate open: the connection went before
+// the answer (kEditOutcomeUnknown), or the server could not learn it (an
+// edit forwarded to another server of a shared world and not answered in
+// time: its reason ends "(it may still be applied)"). Such an edit may or
+// may not have been applied; any other refusal was not applied.
+inline bool edit_outcome_unknown(const EditOutcome& o) {
+  return !o.accepted && (o.reason == kEditOutcomeUnknown ||
+                         o.reason.find("may still be applied") != std::string::npos ||
+                         o.reason.find("outcome unknown") != std::string::npos);
+}
+
 // Edits given an outcome at once, for on_edit_result.
 using SettledEdits = std::vector<std::pair<std::uint32_t, EditOutcome>>;
 

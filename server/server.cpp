@@ -38,10 +38,11 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
                                   [this](const RegionLease& lost, const std::string& why) {
                                     // Leases are held only once edits run, so the world owner exists.
                                     if (world_owner_) world_owner_->lease_lost(lost.region, why);
-                                  });
+                                  },
+                                  &counters_.database);
   if (!keeper) return FileError{keeper.error().message, {}};
   leases_ = std::move(*keeper);
-  auto control = ClusterControl::open(options_.store_url, *leases_);
+  auto control = ClusterControl::open(options_.store_url, *leases_, &counters_.database);
   if (!control) return FileError{control.error().message, {}};
   control_ = std::move(*control);
   // A border is the whole world's: every server must apply the same one,
@@ -67,6 +68,7 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
   // before it applies anything there, so a write never takes back a region
   // this server lost or handed over.
   (*store)->set_lease_source(leases_->held_source(), options_.lease);
+  (*store)->count_retries_in(&counters_.database);
   shared_store_ = store->get();
   return World::open(std::unique_ptr<WorldStore>(std::move(*store)));
 }
@@ -128,7 +130,7 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
       owner->read_again_elsewhere(std::move(regions));
       owner->inbox_has_edits();
     };
-    auto listener = ChangeListener::open(options.store_url, options.server_id, std::move(on));
+    auto listener = ChangeListener::open(options.store_url, options.server_id, std::move(on), &s->counters_.database);
     if (!listener) return FileError{listener.error().message, {}};
     s->changes_ = std::move(*listener);
   }
@@ -385,7 +387,8 @@ std::string Server::metrics_text() const {
 
 Health Server::health() const {
   if (stopping_) return {false, "shutting down"};
-  return check_health(counters_, storage_failed(), options_.tick_hz, std::chrono::steady_clock::now());
+  return check_health(counters_, storage_failed(), options_.tick_hz, std::chrono::steady_clock::now(),
+                      leases_ ? LeaseTimes::of(options_.lease).renew : std::chrono::milliseconds(0));
 }
 
 void Server::inspect(const std::function<void(const WorldView&)>& fn) { world_owner_->inspect(fn); }

@@ -23,6 +23,7 @@ PYBIND11_MODULE(_native, m) {
   namespace py = pybind11;
   m.doc() = "Terrane's client library for scripts: connect to a terrane-server, query its world, edit it, walk it.";
   py::register_exception<EditRejected>(m, "EditRejected", PyExc_RuntimeError);
+  py::register_exception<EditOutcomeUnknown>(m, "EditOutcomeUnknown", PyExc_RuntimeError);
   py::register_exception<Unreachable>(m, "Unreachable", PyExc_RuntimeError);
 
   py::class_<UpdateEvent>(m, "Update", "Voxels changed by other clients' (or this one's) edits in one server tick.")
@@ -58,11 +59,17 @@ PYBIND11_MODULE(_native, m) {
 
   py::class_<EditFuture>(m, "EditFuture", "The outcome of one edit, answered by the server.")
       .def_property_readonly("id", &EditFuture::id, "The edit's id on this connection.")
-      .def("done", &EditFuture::done, "True once the server answered (acknowledged or rejected).")
+      .def("done", &EditFuture::done,
+           "True once the edit has an outcome (acknowledged, rejected, or unknown: the connection went first).")
+      .def_property_readonly("outcome", &EditFuture::outcome,
+                             "'pending', 'applied' (acknowledged: applied and stored), 'rejected' (not applied) or "
+                             "'unknown' (may or may not have been applied: the connection closed before the answer, "
+                             "or the server could not learn it). Does not wait.")
       .def("result", &EditFuture::result, py::arg("timeout") = 30.0, py::arg("visible") = true,
            "Wait for the answer: True once the edit is applied and stored (durable) and, with visible, shown by "
            "this client's replica (one more round trip; visible=False for throughput). Raises "
-           "EditRejected(reason), TimeoutError or ConnectionError.");
+           "EditRejected(reason) when it was not applied, EditOutcomeUnknown(reason) when it may or may not have "
+           "been (never an EditRejected: check the world before trying again), TimeoutError or ConnectionError.");
 
   py::class_<PyClient, std::shared_ptr<PyClient>>(m, "Client",
                                                    R"(A connection to a terrane-server and a replica of what it streams.

@@ -113,6 +113,18 @@ bool EditFuture::done() const {
   return d;
 }
 
+std::string EditFuture::outcome() const {
+  std::string out = "pending";
+  c_->wait_until(
+      [&](const ClientView& v) {
+        if (auto it = v.edits.find(id_); it != v.edits.end())
+          out = it->second.accepted ? "applied" : edit_outcome_unknown(it->second) ? "unknown" : "rejected";
+        return true;
+      },
+      std::chrono::milliseconds(0));
+  return out;
+}
+
 void sync(Client& c, std::chrono::milliseconds timeout) {
   const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
   const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
@@ -147,6 +159,7 @@ bool EditFuture::result(double timeout, bool visible) {
     if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
     return true;
   }
+  if (o && edit_outcome_unknown(*o)) throw EditOutcomeUnknown(utf8(o->reason));
   if (o) throw EditRejected(utf8(o->reason));
   if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
   raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");

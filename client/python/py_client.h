@@ -22,7 +22,15 @@
 
 namespace terrane::python {
 
+// A refusal: the edit was not applied.
 class EditRejected : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+// No answer that says: the edit may or may not have been applied (the
+// connection went first, or the server could not learn it). Not an
+// EditRejected, so a script that retries refusals does not apply twice.
+class EditOutcomeUnknown : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
@@ -44,9 +52,12 @@ class EditFuture {
   EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
   std::uint32_t id() const { return id_; }
   bool done() const;
+  // "pending", "applied" (acknowledged: applied and stored), "rejected"
+  // (not applied) or "unknown" (edit_outcome_unknown: may have been).
+  std::string outcome() const;
   // True when acknowledged (applied and stored) and, with visible, once
   // the replica shows it (sync); raises EditRejected with the server's
-  // reason, TimeoutError, or ConnectionError.
+  // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
   bool result(double timeout, bool visible);
 
  private:

@@ -102,6 +102,25 @@ struct NetCounters {
   }
 };
 
+// A shared PostgreSQL world's links to its database, as the threads using
+// them last found them; /health and /metrics read them (SQLite worlds leave
+// them at zero). Each is written by one thread, named beside it.
+struct DatabaseCounters {
+  // Writer thread: commits being tried again now (the database went away)
+  // and the attempts that failed and were tried again.
+  std::atomic<std::uint64_t> commits_retrying{0};
+  std::atomic<std::uint64_t> commit_retries{0};
+  // Lease keeper's thread (steady clock, ns): when the last renewal round
+  // that reached the database started (its leases renewed, its address
+  // told); the keeper's opening counts as one. 0: not a shared world.
+  std::atomic<std::int64_t> lease_renewed_at_ns{0};
+  // Listener's thread: 1 while its connection is broken (the other
+  // servers' notices and the inbox's news are not heard).
+  std::atomic<std::uint64_t> listener_down{0};
+  // Control thread: 1 while the last read of the inbox failed.
+  std::atomic<std::uint64_t> inbox_failing{0};
+};
+
 struct ServerCounters {
   std::atomic<std::uint64_t> sessions_accepted{0};
   std::atomic<std::uint64_t> joins{0};           // handshakes accepted (Welcome sent)
@@ -164,6 +183,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> tick_frames{0};     // frames the replicators sent for ticks' news
   std::atomic<std::uint64_t> ticks_late{0};      // ticks that started more than a period late
   NetCounters net;
+  DatabaseCounters database;
 
   void rejected(RejectReason r, std::uint64_t n = 1) {
     edits_rejected_by[static_cast<std::size_t>(r)].fetch_add(n, std::memory_order_relaxed);

@@ -11,12 +11,13 @@ std::string ChangeListener::name_of(std::uint32_t server) {
 }
 
 StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::string& url, std::uint32_t server,
-                                                                  Handlers handlers) {
+                                                                  Handlers handlers, DatabaseCounters* counters) {
   auto conn = ClusterStore::open(url);
   if (!conn) return conn.error();
   if (auto n = (*conn)->set_name(name_of(server)); !n) return n.error();
   if (auto l = (*conn)->listen(); !l) return l.error();
-  std::unique_ptr<ChangeListener> out(new ChangeListener(url, server, std::move(handlers), std::move(*conn)));
+  std::unique_ptr<ChangeListener> out(
+      new ChangeListener(url, server, std::move(handlers), std::move(*conn), counters));
   // Subscribed first: every write after this read is in a notice.
   if (auto seqs = out->read_seqs(); !seqs) return seqs.error();
   out->thread_ = std::thread([p = out.get()] { p->run(); });
@@ -24,8 +25,18 @@ StoreResult<std::unique_ptr<ChangeListener>> ChangeListener::open(const std::str
 }
 
 ChangeListener::ChangeListener(std::string url, std::uint32_t server, Handlers handlers,
-                               std::unique_ptr<ClusterStore> conn)
-    : url_(std::move(url)), server_(server), server_text_(std::to_string(server)), on_(std::move(handlers)), conn_(std::move(conn)) {}
+                               std::unique_ptr<ClusterStore> conn, DatabaseCounters* counters)
+    : url_(std::move(url)),
+      server_(server),
+      server_text_(std::to_string(server)),
+      on_(std::move(handlers)),
+      counters_(counters),
+      conn_(std::move(conn)) {}
+
+void ChangeListener::lose_connection() {
+  conn_.reset();
+  if (counters_ != nullptr) counters_->listener_down.store(1, std::memory_order_relaxed);
+}
 
 ChangeListener::~ChangeListener() {
   {
@@ -51,7 +62,7 @@ void ChangeListener::run() {
         auto moved = read_seqs();
         if (!moved) {
           server_log().warn("notices from the other servers: {}; connecting again", moved.error().message);
-          conn_.reset();
+          lose_connection();
           continue;
         }
         server_log().info("notices from the other servers: listening again; {} regions written meanwhile are read again",
@@ -61,9 +72,10 @@ void ChangeListener::run() {
         // acknowledge were marked for reading again.
         if (auto answers = conn_->take_answers(server_); answers) {
           for (ForwardAnswer& a : *answers) on_.answer(std::move(a));
+          if (counters_ != nullptr) counters_->listener_down.store(0, std::memory_order_relaxed);
         } else {
           server_log().warn("notices from the other servers: {}; connecting again", answers.error().message);
-          conn_.reset();
+          lose_connection();
         }
         continue;
       }
@@ -75,7 +87,7 @@ void ChangeListener::run() {
     auto got = conn_->wait_notices(std::chrono::milliseconds(200));
     if (!got) {
       server_log().warn("notices from the other servers: {}; connecting again", got.error().message);
-      conn_.reset();
+      lose_connection();
       continue;
     }
     std::vector<std::int64_t> answered;

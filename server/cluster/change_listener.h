@@ -33,6 +33,7 @@
 #include <thread>
 #include <vector>
 
+#include "server/base/counters.h"
 #include "server/cluster/cluster_store.h"
 
 namespace terrane {
@@ -48,8 +49,10 @@ class ChangeListener {
 
   // Connects and subscribes before returning, so no commit after open() is
   // missed. server: this server's id (whose inbox and answers are its own).
+  // counters (may be null; must outlive the listener): listener_down is 1
+  // from a broken connection until it listens again.
   static StoreResult<std::unique_ptr<ChangeListener>> open(const std::string& url, std::uint32_t server,
-                                                           Handlers handlers);
+                                                           Handlers handlers, DatabaseCounters* counters = nullptr);
   ~ChangeListener();
   // Its connection's application_name in pg_stat_activity.
   static std::string name_of(std::uint32_t server);
@@ -57,7 +60,10 @@ class ChangeListener {
   ChangeListener& operator=(const ChangeListener&) = delete;
 
  private:
-  ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<ClusterStore> conn);
+  ChangeListener(std::string url, std::uint32_t server, Handlers handlers, std::unique_ptr<ClusterStore> conn,
+                 DatabaseCounters* counters);
+  // The connection given up (it broke): down until listening again.
+  void lose_connection();
   void run();
   // answered: the ids of answers to this server handed on.
   void hand_on(const ClusterStore::Notice& n, std::vector<std::int64_t>& answered);
@@ -69,6 +75,7 @@ class ChangeListener {
   const std::uint32_t server_;
   const std::string server_text_;  // as inbox notices name it
   const Handlers on_;
+  DatabaseCounters* const counters_;  // may be null
   std::unique_ptr<ClusterStore> conn_;  // the thread's
   std::map<std::tuple<int, int, int>, std::uint64_t> seqs_;  // the thread's: region -> write sequence seen
   std::mutex mutex_;  // guards stopping_

@@ -1,19 +1,27 @@
 #include "server/cluster/cluster_control.h"
 
+#include <chrono>
 #include <span>
 
 #include "server/base/log.h"
 
 namespace terrane {
 
-StoreResult<std::unique_ptr<ClusterControl>> ClusterControl::open(const std::string& url, LeaseKeeper& keeper) {
+namespace {
+// A failure this quick found the connection closed; a database out of
+// reach takes a statement's deadline (seconds) to fail.
+constexpr auto kAtOnce = std::chrono::milliseconds(500);
+}  // namespace
+
+StoreResult<std::unique_ptr<ClusterControl>> ClusterControl::open(const std::string& url, LeaseKeeper& keeper,
+                                                                  DatabaseCounters* counters) {
   auto store = ClusterStore::open(url);
   if (!store) return store.error();
-  return std::unique_ptr<ClusterControl>(new ClusterControl(keeper, std::move(*store)));
+  return std::unique_ptr<ClusterControl>(new ClusterControl(keeper, std::move(*store), counters));
 }
 
-ClusterControl::ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store)
-    : keeper_(keeper), store_(std::move(store)) {}
+ClusterControl::ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store, DatabaseCounters* counters)
+    : keeper_(keeper), counters_(counters), store_(std::move(store)) {}
 
 ClusterControl::~ClusterControl() { stop(); }
 
@@ -72,7 +80,17 @@ void ClusterControl::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i
 void ClusterControl::read_inbox(std::int64_t after, std::size_t limit,
                                 std::function<void(StoreResult<std::vector<InboxEdit>>)> done) {
   post([this, after, limit, done = std::move(done)](ClusterStore& cs) {
-    done(cs.inbox(keeper_.owner(), after, limit));
+    const auto started = std::chrono::steady_clock::now();
+    auto got = cs.inbox(keeper_.owner(), after, limit);
+    // A connection the database ended while it was idle (it restarted)
+    // fails its next statement at once: the read is tried once more on the
+    // connection opened again, or the inbox would wait for the next notice.
+    // Not after a deadline (a database cut off costs one, not two).
+    if (!got && got.error().kind == StoreError::Kind::kConnection &&
+        std::chrono::steady_clock::now() - started < kAtOnce)
+      got = cs.inbox(keeper_.owner(), after, limit);
+    if (counters_ != nullptr) counters_->inbox_failing.store(got ? 0 : 1, std::memory_order_relaxed);
+    done(std::move(got));
   });
 }
 

@@ -25,8 +25,10 @@ namespace terrane {
 class ClusterControl final : public ClusterLink {
  public:
   // url: the world's database; keeper: this server's leases (claims and
-  // hand-overs go through it), which must outlive this.
-  static StoreResult<std::unique_ptr<ClusterControl>> open(const std::string& url, LeaseKeeper& keeper);
+  // hand-overs go through it), which must outlive this. counters (may be
+  // null; must outlive this): inbox_failing follows each inbox read.
+  static StoreResult<std::unique_ptr<ClusterControl>> open(const std::string& url, LeaseKeeper& keeper,
+                                                           DatabaseCounters* counters = nullptr);
   ~ClusterControl() override;
   ClusterControl(const ClusterControl&) = delete;
   ClusterControl& operator=(const ClusterControl&) = delete;
@@ -45,11 +47,12 @@ class ClusterControl final : public ClusterLink {
   void answer(std::vector<ForwardAnswer> answers) override;
 
  private:
-  ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store);
+  ClusterControl(LeaseKeeper& keeper, std::unique_ptr<ClusterStore> store, DatabaseCounters* counters);
   // Runs fn(store_) on the control thread.
   void post(std::function<void(ClusterStore&)> fn);
 
   LeaseKeeper& keeper_;
+  DatabaseCounters* const counters_;  // may be null
   std::unique_ptr<ClusterStore> store_;  // the control thread's
   asio::thread_pool thread_{1};
 };

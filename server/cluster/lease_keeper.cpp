@@ -7,7 +7,8 @@
 namespace terrane {
 
 StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& url, std::uint32_t owner,
-                                                            LeaseTimes times, LostFn on_lost) {
+                                                            LeaseTimes times, LostFn on_lost,
+                                                            DatabaseCounters* counters) {
   if (times.renew >= times.lease)
     return StoreError{StoreError::Kind::kQuery, fmt::format("lease renewal every {} ms cannot keep a {} ms lease",
                                                             times.renew.count(), times.lease.count())};
@@ -18,15 +19,22 @@ StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& u
   (*claims)->set_call_timeout(std::max(times.lease, std::chrono::milliseconds(1)));
   auto renewer = ClusterStore::open(url);
   if (!renewer) return renewer.error();
+  // Connected: the database is reached (the first round comes a period on).
+  if (counters != nullptr)
+    counters->lease_renewed_at_ns.store(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+            .count(),
+        std::memory_order_relaxed);
   return std::unique_ptr<LeaseKeeper>(
-      new LeaseKeeper(owner, times, std::move(on_lost), std::move(*claims), std::move(*renewer)));
+      new LeaseKeeper(owner, times, std::move(on_lost), std::move(*claims), std::move(*renewer), counters));
 }
 
 LeaseKeeper::LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<ClusterStore> claims,
-                         std::unique_ptr<ClusterStore> renewer)
+                         std::unique_ptr<ClusterStore> renewer, DatabaseCounters* counters)
     : owner_(owner),
       times_(times),
       on_lost_(std::move(on_lost)),
+      counters_(counters),
       claims_(std::move(claims)),
       renewer_(std::move(renewer)),
       thread_([this] { renew_loop(); }) {}
@@ -155,18 +163,26 @@ void LeaseKeeper::advertise(std::string address, ClusterDirectory* directory) {
   wake_.notify_all();
 }
 
-void LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirectory* directory) {
+bool LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirectory* directory) {
   // Failures leave the last map in place: it carries the time it was read,
   // and its readers stop trusting it after a lease time.
-  if (auto seen = renewer_->advertise(owner_, address); !seen || directory == nullptr) return;
+  auto seen = renewer_->advertise(owner_, address);
+  if (!seen || directory == nullptr) return seen.ok();
   auto c = renewer_->cluster(times_.lease);
-  if (!c) return;
+  if (!c) return true;
   last_map_ = std::make_shared<const ClusterMap>(c->writers, c->servers, std::chrono::steady_clock::now(), last_map_.get());
   directory->publish(last_map_);
+  return true;
 }
 
 void LeaseKeeper::renew_loop() {
   auto last_ok = std::chrono::steady_clock::now();
+  const auto note_reached = [this](std::chrono::steady_clock::time_point at) {
+    if (counters_ != nullptr)
+      counters_->lease_renewed_at_ns.store(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(at.time_since_epoch()).count(),
+          std::memory_order_relaxed);
+  };
   std::unique_lock lock(mutex_);
   for (;;) {
     wake_.wait_for(lock, times_.renew, [&] { return stopping_ || round_now_; });
@@ -209,11 +225,13 @@ void LeaseKeeper::renew_loop() {
       return false;
     });
     ++rounds_;
+    bool reached = kept.ok();
     if (advertising) {
       lock.unlock();
-      exchange_addresses(address, directory);
+      reached = exchange_addresses(address, directory) && reached;
       lock.lock();
     }
+    if (reached) note_reached(started);
     if (!lost.empty() && on_lost_) {
       lock.unlock();
       for (const auto& [l, why] : lost) on_lost_(l, why);

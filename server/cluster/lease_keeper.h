@@ -27,6 +27,7 @@
 #include <tuple>
 #include <vector>
 
+#include "server/base/counters.h"
 #include "server/cluster/cluster_store.h"
 
 namespace terrane {
@@ -45,8 +46,11 @@ class LeaseKeeper {
   using LostFn = std::function<void(const RegionLease& lost, const std::string& why)>;
 
   // url: the world's database; owner: this server's id (below 2^31).
+  // counters (may be null; must outlive the keeper): where the keeper
+  // notes when its last renewal round reached the database.
   static StoreResult<std::unique_ptr<LeaseKeeper>> open(const std::string& url, std::uint32_t owner,
-                                                        LeaseTimes times, LostFn on_lost);
+                                                        LeaseTimes times, LostFn on_lost,
+                                                        DatabaseCounters* counters = nullptr);
   ~LeaseKeeper();  // stops renewing; the leases then run out
   LeaseKeeper(const LeaseKeeper&) = delete;
   LeaseKeeper& operator=(const LeaseKeeper&) = delete;
@@ -84,7 +88,7 @@ class LeaseKeeper {
 
  private:
   LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<ClusterStore> claims,
-              std::unique_ptr<ClusterStore> renewals);
+              std::unique_ptr<ClusterStore> renewals, DatabaseCounters* counters);
   void renew_loop();
   using Key = std::tuple<int, int, int>;  // (y, z, x): the claiming order
   static Key key_of(Vec3i region) { return {region.y, region.z, region.x}; }
@@ -92,13 +96,15 @@ class LeaseKeeper {
   const std::uint32_t owner_;
   const LeaseTimes times_;
   const LostFn on_lost_;
+  DatabaseCounters* const counters_;  // lease_renewed_at_ns (keeper thread); may be null
   std::mutex claims_mutex_;               // one claim at a time on claims_
   std::unique_ptr<ClusterStore> claims_;
   std::unique_ptr<ClusterStore> renewer_;  // the keeper thread's own
 
   // A renewal round's news of the cluster: this server's address seen now,
   // and the map of writers published (renewer_'s connection, keeper thread).
-  void exchange_addresses(const std::string& address, ClusterDirectory* directory);
+  // False when the database did not take the address.
+  bool exchange_addresses(const std::string& address, ClusterDirectory* directory);
 
   mutable std::mutex mutex_;  // guards held_, rounds_, stopping_, address_, directory_, round_now_
   std::condition_variable wake_;

@@ -160,6 +160,23 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));
   m.gauge("terrane_storage_failed", "1 once a tick's changes could not be stored (the server stops serving).",
           s.storage_failed ? 1 : 0);
+  const DatabaseCounters& db = c.database;
+  m.gauge("terrane_storage_retrying",
+          "Commits being tried again now because the database went away (a shared PostgreSQL world).",
+          load(db.commits_retrying));
+  m.counter("terrane_storage_retries_total", "Commit attempts that failed for want of the database and were tried again.",
+            load(db.commit_retries));
+  const std::int64_t renewed = db.lease_renewed_at_ns.load(std::memory_order_relaxed);
+  const std::int64_t now_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(s.now.time_since_epoch()).count();
+  m.gauge("terrane_lease_renewal_age_seconds",
+          "Seconds since the last lease renewal round that reached the database started (0 for a world directory).",
+          renewed == 0 ? 0.0 : static_cast<double>(std::max<std::int64_t>(0, now_ns - renewed)) * 1e-9);
+  m.gauge("terrane_database_listener_down",
+          "1 while the connection hearing the other servers' notices is broken (a shared PostgreSQL world).",
+          load(db.listener_down));
+  m.gauge("terrane_inbox_read_failing", "1 while the last read of the inbox of forwarded edits failed.",
+          load(db.inbox_failing));
 
   m.gauge("terrane_chunks_resident", "Chunks loaded in memory now.", load(c.chunks_loaded));
   m.counter("terrane_chunks_loaded_total", "Chunks read from the store.", load(st.loaded_from_store));
@@ -269,17 +286,35 @@ std::string render_metrics(const MetricsSources& s) {
 }
 
 Health check_health(const ServerCounters& c, bool storage_failed, std::uint32_t tick_hz,
-                    std::chrono::steady_clock::time_point now) {
+                    std::chrono::steady_clock::time_point now, std::chrono::milliseconds lease_renewal) {
+  using std::chrono::milliseconds;
+  const auto ms_text = [](std::chrono::nanoseconds d) {
+    return std::to_string(std::chrono::duration_cast<milliseconds>(d).count()) + " ms";
+  };
   if (storage_failed) return {false, "storage failed: the world's changes can no longer be saved"};
+  const DatabaseCounters& db = c.database;
+  if (load(db.commits_retrying) > 0)
+    return {false, "storage retrying: a commit waits for the database (" + std::to_string(load(db.commit_retries)) +
+                       " failed attempts tried again so far)"};
   const std::int64_t last = c.last_tick_at_ns.load(std::memory_order_relaxed);
   const auto period = std::chrono::nanoseconds(1'000'000'000LL / std::max<std::uint32_t>(1, tick_hz));
   const auto limit = std::max<std::chrono::nanoseconds>(std::chrono::seconds(1), period * 10);
   if (last == 0) return {false, "not ticking yet"};
   const auto since = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()) -
                      std::chrono::nanoseconds(last);
-  if (since > limit)
-    return {false, "no tick for " + std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(since).count()) +
-                       " ms"};
+  if (since > limit) return {false, "no tick for " + ms_text(since)};
+  if (lease_renewal.count() > 0) {
+    const std::int64_t renewed = db.lease_renewed_at_ns.load(std::memory_order_relaxed);
+    const auto age = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()) -
+                     std::chrono::nanoseconds(renewed);
+    // Two periods: one round may be slow; none for two means the database
+    // is out of reach (a lease lasts five).
+    if (renewed != 0 && age > 2 * lease_renewal)
+      return {false, "database out of reach: leases not renewed for " + ms_text(age)};
+  }
+  if (load(db.listener_down) != 0)
+    return {false, "database connection broken: the other servers' notices are not heard"};
+  if (load(db.inbox_failing) != 0) return {false, "database: the inbox of forwarded edits cannot be read"};
   return {true, "ok"};
 }
 

@@ -13,6 +13,7 @@
 #include <string_view>
 #include <thread>
 #include <tuple>
+#include <utility>
 
 #include "common/codec/update_batch.h"
 #include "common/world/coarse_image.h"
@@ -303,6 +304,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::reopen_chunks() const
   auto again = open(c_->url());
   if (!again) return again.error();
   (*again)->set_lease_source(leases_, retry_for_);
+  (*again)->count_retries_in(database_counters_);
   return std::move(*again);
 }
 
@@ -461,6 +463,20 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
   // few times: nothing of it was stored.
   const auto give_up = std::chrono::steady_clock::now() + retry_for_;
   int conflicts = 0;
+  // Counted as retrying from the first failed attempt to the end (stored
+  // or failed): /health says the world's changes are not being stored.
+  struct Retrying {
+    DatabaseCounters* counters;
+    bool on = false;
+    void start() {
+      if (counters == nullptr) return;
+      counters->commit_retries.fetch_add(1, std::memory_order_relaxed);
+      if (!std::exchange(on, true)) counters->commits_retrying.fetch_add(1, std::memory_order_relaxed);
+    }
+    ~Retrying() {
+      if (on) counters->commits_retrying.fetch_sub(1, std::memory_order_relaxed);
+    }
+  } retrying{database_counters_};
   for (int attempt = 0;; ++attempt) {
     auto leases = (*leases_)(regions);
     StoreResult<Ok> saved =
@@ -478,6 +494,7 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
     }
     if (kind != StoreError::Kind::kConnection || std::chrono::steady_clock::now() >= give_up)
       return file_error(saved.error());
+    retrying.start();
     if (attempt == conflicts) server_log().warn("world {}: {}; trying again", c_->shown(), saved.error().message);
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
   }

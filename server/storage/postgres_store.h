@@ -34,6 +34,7 @@
 #include "common/voxel/vec3.h"
 #include "common/world/coarse_image.h"
 #include "common/world/world_store.h"
+#include "server/base/counters.h"
 #include "server/storage/cluster_link.h"
 #include "server/storage/cluster_map.h"  // ServerAddress, parse_server_address: terrane-server's options
 #include "server/storage/notices.h"
@@ -71,6 +72,10 @@ class PostgresStore final : public WorldStore {
     leases_ = std::move(source);
     retry_for_ = retry_for;
   }
+  // Where writes count the commits being tried again (the database out of
+  // reach): counters must outlive this store and the stores reopen() makes,
+  // which share it. Null: not counted.
+  void count_retries_in(DatabaseCounters* counters) { database_counters_ = counters; }
 
   // Another connection to the same world, as the chunk store it is (the
   // lease source shared): a shared world's writer (server/storage/
@@ -146,6 +151,7 @@ class PostgresStore final : public WorldStore {
   WorldMeta meta_;
   std::shared_ptr<const LeaseSource> leases_;
   std::chrono::milliseconds retry_for_{0};
+  DatabaseCounters* database_counters_ = nullptr;
 };
 
 // A chunk written with its changed units (ChunkWrite::units, taking the

@@ -18,6 +18,20 @@ std::vector<std::uint32_t> ids(const SettledEdits& s) {
   return out;
 }
 
+TEST(EditTracker, AnOutcomeIsUnknownOnlyWhereTheEditMayHaveBeenApplied) {
+  EXPECT_FALSE(edit_outcome_unknown(EditOutcome{true, 7, {}, {}, {}}));
+  EXPECT_FALSE(edit_outcome_unknown(EditOutcome{false, 0, "edit outside the world", {}, {}}));
+  EXPECT_FALSE(edit_outcome_unknown(EditOutcome{false, 0, "storage failure: edit not saved", {}, {}}));
+  EXPECT_TRUE(edit_outcome_unknown(EditOutcome{false, 0, kEditOutcomeUnknown, {}, {}}));
+  EXPECT_TRUE(edit_outcome_unknown(
+      EditOutcome{false, 0, "forwarded to server 2, no answer within 5000 ms (it may still be applied)", {}, {}}));
+  EditTracker t;
+  const std::uint32_t id = t.begin();
+  t.written(id);
+  (void)t.settle_unanswered();
+  EXPECT_TRUE(edit_outcome_unknown(t.outcomes().at(id)));
+}
+
 TEST(EditTracker, IdsAreDistinctAndNeverZero) {
   EditTracker t;
   const std::uint32_t a = t.begin(), b = t.begin();

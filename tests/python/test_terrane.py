@@ -4,6 +4,7 @@ Run by CTest (label unit) as: python3 -m pytest tests/python, with
 PYTHONPATH at the built module and TERRANE_BIN_DIR at the server binary.
 Every wait has a deadline and waits for a condition.
 """
+import signal
 import socket
 import time
 
@@ -90,8 +91,33 @@ def test_rejections_surface_their_reason(server):
         far = c.fill_box((x + 5000, y, z), (x + 5001, y + 1, z + 1), "Brick")
         with pytest.raises(terrane.EditRejected, match="outside the full-resolution region"):
             far.result(30)
+        assert far.done() and far.outcome == "rejected"
         with pytest.raises(terrane.EditRejected, match="nothing to redo"):
             c.redo().result(30)
+
+
+def test_an_edit_a_silent_server_never_answered_has_an_unknown_outcome_not_a_rejection(server):
+    # The server is stopped (SIGSTOP) before it reads the edit: the client
+    # notices the silence (its keepalives go unanswered, 15 s) and closes,
+    # and the edit may or may not have been applied.
+    with terrane.connect(server.address, name="patient", view_distance=64, full_res_radius=32) as c:
+        c.wait_loaded(timeout=60)
+        x, _, z = (int(v) for v in c.position)
+        y = c.ground(x, z) + 2
+        stored = c.fill_box((x, y, z), (x + 1, y + 1, z + 1), "Brick")
+        assert stored.result(30) and stored.outcome == "applied"
+        server.proc.send_signal(signal.SIGSTOP)
+        try:
+            f = c.fill_box((x, y + 1, z), (x + 1, y + 2, z + 1), "Snow")
+            assert f.outcome == "pending" and not f.done()
+            with pytest.raises(terrane.EditOutcomeUnknown, match="outcome unknown") as raised:
+                f.result(60)
+            assert not isinstance(raised.value, terrane.EditRejected)
+            assert isinstance(raised.value, RuntimeError)
+            assert f.done() and f.outcome == "unknown"
+            assert "no answer from the server" in c.disconnect_reason
+        finally:
+            server.proc.send_signal(signal.SIGCONT)
 
 
 def test_a_burst_of_edits_is_paced_below_the_servers_rate_not_disconnected(server):

@@ -85,7 +85,11 @@ class ScratchPostgres {
 
   // Stops the database (a fast shutdown: sessions are cut) and starts it
   // again on the same port and data; true once it accepts connections.
-  bool restart() {
+  bool restart() { return stop() && start_again(); }
+  // The two halves of restart(), for tests of a database that stays away:
+  // stop() returns once it has stopped, start_again() once it accepts
+  // connections again.
+  bool stop() {
     if (!server_) return false;
     // To the postmaster itself (its pid is the first line of
     // postmaster.pid): as root, the child is runuser, which passes no signal on.
@@ -100,8 +104,9 @@ class ScratchPostgres {
       return false;
     }
     server_.reset();
-    return run_server();
+    return true;
   }
+  bool start_again() { return !server_ && !argv_.empty() && run_server(); }
 
   // The test database (created by the first call).
   std::string url() const { return "postgresql://terrane@127.0.0.1:" + std::to_string(port_) + "/postgres"; }

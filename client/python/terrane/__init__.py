@@ -20,6 +20,7 @@ from terrane._native import (  # noqa: F401
     Client,
     Disconnect,
     EditFuture,
+    EditOutcomeUnknown,
     EditRejected,
     Message,
     Player,
@@ -31,8 +32,8 @@ from terrane._native import (  # noqa: F401
 )
 
 __all__ = [
-    "Client", "Disconnect", "EditFuture", "EditRejected", "Message", "Player", "Presence", "Swarm",
-    "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "AIR",
+    "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
+    "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "AIR",
 ]
 
 AIR = "Air"

@@ -14,7 +14,11 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 AIR: str
 
-class EditRejected(RuntimeError): ...
+class EditRejected(RuntimeError):
+    """The edit was refused: not applied."""
+class EditOutcomeUnknown(RuntimeError):
+    """The edit may or may not have been applied (the connection closed before the answer, or the server could
+    not learn it). Not an EditRejected: read the world before trying again."""
 class Unreachable(RuntimeError): ...
 
 class Update:
@@ -48,6 +52,8 @@ class EditFuture:
     @property
     def id(self) -> int: ...
     def done(self) -> bool: ...
+    @property
+    def outcome(self) -> str: ...  # "pending", "applied", "rejected" or "unknown"
     def result(self, timeout: float = 30.0, visible: bool = True) -> bool: ...
     def __await__(self) -> Generator[Any, None, bool]: ...
 

@@ -143,5 +143,35 @@ TEST_F(ClusterControlTest, ForwardedEditsReachTheInboxInOrderAndARefusalReachesT
   EXPECT_EQ(*answers, (std::vector<ForwardAnswer>{{ids[1], 1, false, 0, "refused here"}}));
 }
 
+// The database restarted while the control thread's connection was idle:
+// the next inbox read still succeeds (the connection opened again), and
+// inbox_failing says whether the last read failed.
+TEST_F(ClusterControlTest, AnInboxReadAfterTheDatabaseRestartedSucceeds) {
+  DatabaseCounters counters;
+  auto k = LeaseKeeper::open(url_, 2, LeaseTimes{}, nullptr);
+  ASSERT_TRUE(k.ok()) << k.error().message;
+  auto c = ClusterControl::open(url_, **k, &counters);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  ClusterControl& control = **c;
+  EXPECT_TRUE(inbox(control).empty());
+  ASSERT_TRUE(pg_->restart()) << pg_->why();
+  EXPECT_TRUE(inbox(control).empty());
+  EXPECT_EQ(counters.inbox_failing.load(), 0u);
+  // Down: the read fails, and says so until a read succeeds.
+  ASSERT_TRUE(pg_->stop()) << pg_->why();
+  auto done = std::make_shared<std::promise<StoreResult<std::vector<InboxEdit>>>>();
+  auto f = done->get_future();
+  control.read_inbox(0, 10, [done](StoreResult<std::vector<InboxEdit>> got) { done->set_value(std::move(got)); });
+  const auto failed = wait(f);
+  const bool started_again = pg_->start_again();
+  ASSERT_TRUE(started_again) << pg_->why();
+  ASSERT_TRUE(failed) << "never answered";
+  EXPECT_FALSE(failed->ok());
+  EXPECT_EQ(counters.inbox_failing.load(), 1u);
+  EXPECT_TRUE(inbox(control).empty());
+  EXPECT_EQ(counters.inbox_failing.load(), 0u);
+  control.stop();
+}
+
 }  // namespace
 }  // namespace terrane

@@ -597,6 +597,62 @@ TEST_F(ClusterTest, APostgresqlRestartPausesAcknowledgementsAndLosesNone) {
   cy.disconnect();
 }
 
+// /health says whether the server can store: 503 with the reason while its
+// database is down (a commit tried again meanwhile shows as retrying), 200
+// again once the database is back and the commit stored.
+TEST_F(ClusterTest, HealthIsUnavailableWhileTheDatabaseIsDownAndOkOnceItIsBack) {
+  // A lease far longer than the outage: the server keeps its region.
+  ServerProcess& a = start(1, 30000, 100000, {"--metrics", "127.0.0.1:0"});
+  ASSERT_NE(a.port(), 0);
+  ASSERT_NE(a.metrics_port(), 0) << a.output();
+  const auto health = [&a](std::string* body = nullptr) {
+    httplib::Client http("127.0.0.1", a.metrics_port());
+    http.set_connection_timeout(10, 0);
+    http.set_read_timeout(30, 0);
+    auto res = http.Get("/health");
+    if (body != nullptr) *body = res ? res->body : "";
+    return res ? res->status : -1;
+  };
+  Client ann(options(a, "ann"));
+  join(ann);
+  const Region first = box_near(ann, 0), second = box_near(ann, 5);
+  const auto v1 = pattern(first, materials::kBrick), v2 = pattern(second, materials::kSnow);
+  ASSERT_EQ(write(ann, first, v1), "");  // the region claimed
+  ASSERT_TRUE(wait_full_resolution(ann, second));
+  std::string body;
+  ASSERT_TRUE(testing_support::eventually([&] { return health(&body) == 200; }, kDeadline)) << body;
+  EXPECT_EQ(body, "ok\n");
+  // Started again however the test ends: the suite's later tests use it.
+  struct Again {
+    testing_support::ScratchPostgres& pg;
+    bool down = false;
+    ~Again() {
+      if (down) (void)pg.start_again();
+    }
+  } again{*pg_};
+  ASSERT_TRUE(pg_->stop()) << pg_->why();
+  again.down = true;
+  EXPECT_TRUE(testing_support::eventually([&] { return health(&body) == 503; }, 10s))
+      << "/health still says " << body << " with the database down";
+  EXPECT_NE(body.find("database"), std::string::npos) << body;
+  // An edit now is applied, and its commit waits for the database.
+  const std::uint32_t during = ann.write_box(second, v2);
+  ASSERT_NE(during, 0u);
+  EXPECT_TRUE(testing_support::eventually([&] { return metric(a, "terrane_storage_retrying") == 1; }, 10s))
+      << "the commit is not being tried again";
+  EXPECT_EQ(health(&body), 503);
+  EXPECT_NE(body.find("storage retrying"), std::string::npos) << body;
+  ASSERT_TRUE(pg_->start_again()) << pg_->why();
+  again.down = false;
+  EXPECT_EQ(outcome(ann, during), "");
+  EXPECT_TRUE(testing_support::eventually([&] { return health(&body) == 200; }, 10s))
+      << "/health still says " << body << " with the database back";
+  EXPECT_EQ(metric(a, "terrane_storage_retrying"), 0);
+  EXPECT_GE(metric(a, "terrane_storage_retries_total"), 1);
+  EXPECT_EQ(metric(a, "terrane_database_listener_down"), 0);
+  ann.disconnect();
+}
+
 TEST_F(ClusterTest, AnEditAcrossTwoServersRegionsIsAppliedByOneOfThem) {
   Pair p;
   ASSERT_NO_FATAL_FAILURE(start_pair(5000, &p));

@@ -14,6 +14,7 @@
 #include <atomic>
 #include <mutex>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "tests/support/eventually.h"
@@ -35,12 +36,16 @@ class LeaseKeeperTest : public testing_support::PostgresTest {
       return leases.size();
     }
   };
-  std::unique_ptr<LeaseKeeper> keeper(std::uint32_t owner, LeaseTimes times, Lost* lost = nullptr) {
-    auto k = LeaseKeeper::open(url_, owner, times, [lost](const RegionLease& l, const std::string& why) {
-      if (lost == nullptr) return;
-      std::lock_guard lock(lost->mutex);
-      lost->leases.emplace_back(l, why);
-    });
+  std::unique_ptr<LeaseKeeper> keeper(std::uint32_t owner, LeaseTimes times, Lost* lost = nullptr,
+                                      DatabaseCounters* counters = nullptr) {
+    auto k = LeaseKeeper::open(
+        url_, owner, times,
+        [lost](const RegionLease& l, const std::string& why) {
+          if (lost == nullptr) return;
+          std::lock_guard lock(lost->mutex);
+          lost->leases.emplace_back(l, why);
+        },
+        counters);
     EXPECT_TRUE(k.ok()) << (k.ok() ? "" : k.error().message);
     return k.ok() ? std::move(*k) : nullptr;
   }
@@ -174,6 +179,58 @@ TEST_F(LeaseKeeperTest, ARegionHandedOverIsFreeAtOnceAndNeverReportedLost) {
   EXPECT_EQ(lost.size(), 0u);
   ASSERT_EQ(a->held().size(), 1u);
   EXPECT_EQ(a->held()[0].region, (Vec3i{0, 0, 0}));
+}
+
+// Stops every backend of this test's database and refuses new sessions:
+// the statements sent are never answered, as across a partition. Undone
+// (backends resumed, sessions allowed) by resume() or at the end.
+struct Unanswering {
+  std::string admin_url, db;
+  std::vector<pid_t> stopped;
+  bool start() {
+    if (testing_support::run_sql(admin_url, "ALTER DATABASE " + db + " WITH ALLOW_CONNECTIONS false") != "")
+      return false;
+    std::stringstream pids(testing_support::sql_value(
+        admin_url, "SELECT string_agg(pid::text, ' ') FROM pg_stat_activity WHERE backend_type = 'client backend'"
+                   " AND datname = '" + db + "'"));
+    for (long pid = 0; pids >> pid;)
+      if (pid > 0 && ::kill(static_cast<pid_t>(pid), SIGSTOP) == 0) stopped.push_back(static_cast<pid_t>(pid));
+    return !stopped.empty();
+  }
+  void resume() {
+    for (const pid_t p : std::exchange(stopped, {})) ::kill(p, SIGCONT);
+    (void)testing_support::run_sql(admin_url, "ALTER DATABASE " + db + " WITH ALLOW_CONNECTIONS true");
+  }
+  ~Unanswering() { resume(); }
+};
+
+TEST_F(LeaseKeeperTest, TheLastRenewalThatReachedTheDatabaseIsNotedForHealth) {
+  DatabaseCounters counters;
+  const auto renewed_at = [&] {
+    return std::chrono::steady_clock::time_point(
+        std::chrono::nanoseconds(counters.lease_renewed_at_ns.load(std::memory_order_relaxed)));
+  };
+  const auto opened = std::chrono::steady_clock::now();
+  auto a = keeper(1, {3000ms, 100ms}, nullptr, &counters);
+  ASSERT_TRUE(a);
+  EXPECT_GE(renewed_at(), opened - 1s);  // the keeper's opening reached it
+  // As a server's keeper: each round also says the server runs, so a round
+  // reaches the database even once no lease is left to renew.
+  a->advertise("", nullptr);
+  const Vec3i regions[] = {{0, 0, 0}};
+  ASSERT_TRUE(a->ensure(regions).ok());
+  const auto claimed = std::chrono::steady_clock::now();
+  ASSERT_TRUE(eventually([&] { return renewed_at() > claimed; }, 30s)) << "no renewal noted";
+  Unanswering cut{pg_->url(), db_, {}};
+  ASSERT_TRUE(cut.start());
+  const auto cut_at = std::chrono::steady_clock::now();
+  // Rounds go on (they fail), and none is noted as reaching the database.
+  const std::uint64_t rounds = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() >= rounds + 2; }, 30s)) << "the renewals are stuck";
+  EXPECT_LE(renewed_at(), cut_at);
+  cut.resume();
+  const auto back = std::chrono::steady_clock::now();
+  ASSERT_TRUE(eventually([&] { return renewed_at() > back; }, 30s)) << "no renewal noted once the database is back";
 }
 
 TEST_F(LeaseKeeperTest, ADatabaseThatStopsAnsweringCostsTheLeasesAsTheyRunOut) {

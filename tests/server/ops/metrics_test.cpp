@@ -123,6 +123,81 @@ TEST(Metrics, HealthWantsRecentTicksAndAWorkingStore) {
   EXPECT_NE(failed.text.find("storage failed"), std::string::npos);
 }
 
+TEST(Metrics, HealthWantsASharedWorldsDatabaseWithinReach) {
+  ServerCounters c;
+  const auto now = std::chrono::steady_clock::now();
+  const auto ns = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
+  };
+  c.last_tick_at_ns = ns(now);
+  DatabaseCounters& db = c.database;
+  db.lease_renewed_at_ns = ns(now);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  // Renewals: two periods may pass, not more.
+  EXPECT_TRUE(check_health(c, false, 20, now + 900ms, 1000ms).ok) << check_health(c, false, 20, now + 900ms, 1000ms).text;
+  db.lease_renewed_at_ns = ns(now - 1900ms);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  db.lease_renewed_at_ns = ns(now - 2100ms);
+  const Health lagging = check_health(c, false, 20, now, 1000ms);
+  EXPECT_FALSE(lagging.ok);
+  EXPECT_NE(lagging.text.find("leases not renewed for 2100 ms"), std::string::npos) << lagging.text;
+  // A world directory has no leases: the same counters mean nothing there.
+  EXPECT_TRUE(check_health(c, false, 20, now).ok);
+  db.lease_renewed_at_ns = ns(now);
+  // A commit tried again: the world's changes wait (SQLite's commits are
+  // never tried again; the counter stays 0 there).
+  db.commits_retrying = 1;
+  db.commit_retries = 3;
+  for (const auto renewal : {1000ms, 0ms}) {
+    const Health retrying = check_health(c, false, 20, now, renewal);
+    EXPECT_FALSE(retrying.ok);
+    EXPECT_NE(retrying.text.find("storage retrying"), std::string::npos) << retrying.text;
+    EXPECT_NE(retrying.text.find("3 failed attempts"), std::string::npos) << retrying.text;
+  }
+  db.commits_retrying = 0;
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  db.listener_down = 1;
+  const Health deaf = check_health(c, false, 20, now, 1000ms);
+  EXPECT_FALSE(deaf.ok);
+  EXPECT_NE(deaf.text.find("database connection broken"), std::string::npos) << deaf.text;
+  db.listener_down = 0;
+  db.inbox_failing = 1;
+  const Health inbox = check_health(c, false, 20, now, 1000ms);
+  EXPECT_FALSE(inbox.ok);
+  EXPECT_NE(inbox.text.find("inbox"), std::string::npos) << inbox.text;
+  db.inbox_failing = 0;
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  // A failed commit says so, whatever else is wrong; every reason is one line.
+  db.listener_down = 1;
+  const Health failed = check_health(c, true, 20, now, 1000ms);
+  EXPECT_FALSE(failed.ok);
+  EXPECT_NE(failed.text.find("storage failed"), std::string::npos) << failed.text;
+  for (const Health& h : {lagging, deaf, inbox, failed}) EXPECT_EQ(h.text.find('\n'), std::string::npos) << h.text;
+}
+
+TEST(Metrics, TheDatabaseLinksAreGauges) {
+  ServerCounters c;
+  StorageCounters st;
+  EncodeCounters enc;
+  MetricsSources s{c, st, enc, false, read_process_stats()};
+  const std::string directory = render_metrics(s);
+  EXPECT_EQ(sample(directory, "terrane_storage_retrying"), 0);
+  EXPECT_EQ(sample(directory, "terrane_lease_renewal_age_seconds"), 0);
+  c.database.commits_retrying = 1;
+  c.database.commit_retries = 4;
+  c.database.listener_down = 1;
+  c.database.inbox_failing = 1;
+  c.database.lease_renewed_at_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>((s.now - 2500ms).time_since_epoch()).count();
+  const std::string text = render_metrics(s);
+  EXPECT_EQ(sample(text, "terrane_storage_retrying"), 1);
+  EXPECT_EQ(sample(text, "terrane_storage_retries_total"), 4);
+  EXPECT_NEAR(*sample(text, "terrane_lease_renewal_age_seconds"), 2.5, 1e-6);
+  EXPECT_EQ(sample(text, "terrane_database_listener_down"), 1);
+  EXPECT_EQ(sample(text, "terrane_inbox_read_failing"), 1);
+  expect_promtool_accepts(text);
+}
+
 TEST(Metrics, HostPortIsParsedOrNamedWrong) {
   EXPECT_EQ(parse_host_port("127.0.0.1:9464").value(), std::make_pair(std::string("127.0.0.1"), std::uint16_t{9464}));
   EXPECT_EQ(parse_host_port("[::1]:0").value(), std::make_pair(std::string("::1"), std::uint16_t{0}));

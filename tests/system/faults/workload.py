@@ -163,9 +163,10 @@ class Workload:
             try:
                 client.write_box(regs[0], arr).result(timeout=self.op_timeout, visible=False)
                 w.outcome = "acked"
-            except terrane.EditRejected as e:
+            except (terrane.EditRejected, terrane.EditOutcomeUnknown) as e:
                 w.reason = str(e)
-                w.outcome = "unknown" if any(a in w.reason for a in AMBIGUOUS) else "refused"
+                unknown = isinstance(e, terrane.EditOutcomeUnknown) or any(a in w.reason for a in AMBIGUOUS)
+                w.outcome = "unknown" if unknown else "refused"
                 if w.outcome == "unknown":  # the server timed the edit out: fail over as on a timeout
                     client.close()
                     client = None
