@@ -152,9 +152,14 @@ void Residency::flush_grants() {
 }
 
 bool Residency::request(Vec3i cp, int level, bool exact) {
-  ChunkState& s = chunks_[cp];
-  if (const VersionPtr& v = s.held.current; v != nullptr && v->has_level(level) && !(exact && v->estimate()))
-    return true;
+  auto it = chunks_.find(cp);
+  if (it != chunks_.end()) {
+    if (const VersionPtr& v = it->second.held.current; v != nullptr && v->has_level(level) && !(exact && v->estimate()))
+      return true;
+  } else {
+    it = chunks_.try_emplace(cp).first;
+  }
+  ChunkState& s = it->second;
   const auto priority = level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream;
   if (s.load != Load::kNone) {
     // A background replacement waits behind every other load: whoever
