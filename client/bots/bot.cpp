@@ -45,10 +45,10 @@ float length(Vec3f v) { return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z); }
 
 }  // namespace
 
-Bot::Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditMode edits, std::uint64_t seed)
+Bot::Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edits, std::uint64_t seed)
     : index_(index),
       ctx_(ctx),
-      movement_(movement),
+      gait_(gait),
       edits_mode_(edits),
       rng_(seed),
       pos_(start),
@@ -226,8 +226,8 @@ void Bot::step(Clock::time_point now, bool active) {
 
 void Bot::move(Clock::time_point) {
   ++steps_;
-  if (movement_ == Movement::kWalk) walk();
-  if (movement_ == Movement::kFly) fly();
+  if (gait_ == Gait::kWalk) walk();
+  if (gait_ == Gait::kFly) fly();
   // ClientState at most every other step (5 Hz) while moving.
   if (state_dirty_ && steps_ % 2 == 0) {
     client_->set_state(ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius});
@@ -338,7 +338,7 @@ void Bot::maybe_edit(Clock::time_point now) {
   const float pitch = -(25.0f + 50.0f * unit(rng_)) * std::numbers::pi_v<float> / 180.0f;
   const Vec3f eye{pos_.x, pos_.y + kEyeHeight, pos_.z};
   const Vec3f dir{std::cos(pitch) * std::cos(yaw), std::sin(pitch), std::cos(pitch) * std::sin(yaw)};
-  const float reach = movement_ == Movement::kFly ? 96.0f : 48.0f;
+  const float reach = gait_ == Gait::kFly ? 96.0f : 48.0f;
   const auto hit = client_->raycast(eye, dir, reach);
   if (!hit) return;
   {

@@ -41,7 +41,9 @@ struct RunContext {
   Clock::time_point run_start;
 };
 
-enum class Movement : std::uint8_t { kIdle, kWalk, kFly };
+// A bot's way of moving about (the client's own position and view are
+// client/movement.h's Movement).
+enum class Gait : std::uint8_t { kIdle, kWalk, kFly };
 enum class EditMode : std::uint8_t { kNone, kDig, kBuild, kBoth };
 
 struct BotResult {
@@ -66,7 +68,7 @@ struct BotResult {
 
 class Bot {
  public:
-  Bot(int index, const RunContext& ctx, Vec3f start, Movement movement, EditMode edits, std::uint64_t seed);
+  Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edits, std::uint64_t seed);
   ~Bot();
   Bot(const Bot&) = delete;
   Bot& operator=(const Bot&) = delete;
@@ -116,7 +118,7 @@ class Bot {
 
   const int index_;
   const RunContext& ctx_;
-  Movement movement_;
+  Gait gait_;
   EditMode edits_mode_;
   std::mt19937_64 rng_;
   std::unique_ptr<Client> client_;

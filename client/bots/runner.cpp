@@ -175,22 +175,22 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   for (int i = 0; i < o.bots; ++i) {
     const Vec3f start{ctx.spawn.x + (unit(rng) * 2.0f - 1.0f) * half, ctx.spawn.y,
                       ctx.spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
-    Movement m = Movement::kIdle;
+    Gait g = Gait::kIdle;
     EditMode e = EditMode::kNone;
     switch (o.behavior) {
       case Behavior::kIdle: break;
-      case Behavior::kWalk: m = Movement::kWalk; break;
-      case Behavior::kFly: m = Movement::kFly; break;
+      case Behavior::kWalk: g = Gait::kWalk; break;
+      case Behavior::kFly: g = Gait::kFly; break;
       case Behavior::kDig: e = EditMode::kDig; break;
       case Behavior::kBuild: e = EditMode::kBuild; break;
       case Behavior::kMixed: {
         const float u = unit(rng);
-        m = u < 0.6f ? Movement::kWalk : (u < 0.9f ? Movement::kIdle : Movement::kFly);
+        g = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
         e = EditMode::kBoth;
         break;
       }
     }
-    bots.push_back(std::make_unique<Bot>(i, ctx, start, m, e, splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i))));
+    bots.push_back(std::make_unique<Bot>(i, ctx, start, g, e, splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i))));
   }
 
   BotsReport& r = *report;

@@ -1,6 +1,7 @@
 #include "server/world/residency.h"
 
 #include <algorithm>
+#include <stdexcept>
 #include <tuple>
 
 #include "common/codec/net_codec.h"
@@ -32,31 +33,56 @@ Residency::Residency(Strand& strand, Storage& storage, const ServerOptions& opti
       clients_(clients),
       horizons_(horizons) {}
 
-void Residency::count_loaded() {
-  counters_.chunks_loaded.store(loaded_.size() - mips_only_, std::memory_order_relaxed);
+void Residency::count_loaded() { counters_.chunks_loaded.store(with_voxels_, std::memory_order_relaxed); }
+
+const Residency::Loaded& Residency::held(Vec3i cp) const {
+  const Loaded* l = find(cp);
+  if (l == nullptr) throw std::out_of_range("Residency: chunk not held");
+  return *l;
+}
+
+void Residency::hold(ChunkState& s, VersionPtr v) {
+  if (s.held.current != nullptr) --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+  ++(v->has_voxels() ? with_voxels_ : mips_only_);
+  s.held.published = v;
+  s.held.current = std::move(v);
+}
+
+void Residency::drop(Chunks::iterator it) {
+  ChunkState& s = it->second;
+  if (s.held.current != nullptr) --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+  s.held = Loaded{};
+  s.replace_queued = false;
+  if (s.vacant()) chunks_.erase(it);
 }
 
 std::size_t Residency::estimates_waiting() const {
-  return static_cast<std::size_t>(std::count_if(loaded_.begin(), loaded_.end(), [this](const auto& kv) {
-    return kv.second.current->estimate() &&
-           (kv.second.replace != Loaded::Replace::kNo || loading_.count(kv.first) != 0);
+  return static_cast<std::size_t>(std::count_if(chunks_.begin(), chunks_.end(), [](const auto& kv) {
+    const ChunkState& s = kv.second;
+    return s.held.current != nullptr && s.held.current->estimate() && (s.replace_queued || s.load != Load::kNone);
   }));
 }
 
 void Residency::retry_unreadable() {
-  for (auto it = unreadable_.begin(); it != unreadable_.end(); ++it) {
-    const Vec3i cp = it->first;
-    if (loading_.count(cp) == 0) continue;
-    load(cp, Storage::Priority::kStream);
-  }
+  // Each once, those read (or gone) since left out.
+  std::erase_if(retry_, [&](Vec3i cp) {
+    auto it = chunks_.find(cp);
+    return it == chunks_.end() || it->second.load != Load::kUnreadable;
+  });
+  std::sort(retry_.begin(), retry_.end(),
+            [](Vec3i a, Vec3i b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
+  retry_.erase(std::unique(retry_.begin(), retry_.end()), retry_.end());
+  for (const Vec3i cp : retry_) load(cp, Storage::Priority::kStream);
 }
 
 void Residency::for_each(const std::function<void(Vec3i, const Loaded&)>& fn) const {
-  for (const auto& [cp, l] : loaded_) fn(cp, l);
+  for (const auto& [cp, s] : chunks_)
+    if (s.held.current != nullptr) fn(cp, s.held);
 }
 
 const VersionPtr& Residency::advance(VersionPtr v) {
-  Loaded& l = loaded_.at(v->pos());
+  Loaded& l = chunks_.at(v->pos()).held;
+  if (l.current == nullptr) throw std::out_of_range("Residency: chunk not held");
   l.current = std::move(v);
   l.used_tick = clock_.tick;
   return l.current;
@@ -65,19 +91,19 @@ const VersionPtr& Residency::advance(VersionPtr v) {
 void Residency::publish(const std::vector<VersionPtr>& versions) {
   flush_grants();
   for (const VersionPtr& v : versions) {
-    if (auto it = loaded_.find(v->pos()); it != loaded_.end() && it->second.published->revision() < v->revision())
-      it->second.published = v;
+    if (auto it = chunks_.find(v->pos()); it != chunks_.end() && it->second.held.published != nullptr &&
+                                          it->second.held.published->revision() < v->revision())
+      it->second.held.published = v;
     horizons_.changed(v->pos());
   }
 }
 
 void Residency::forget(Vec3i cp) {
-  auto it = loaded_.find(cp);
-  if (it == loaded_.end()) return;
+  auto it = chunks_.find(cp);
+  if (it == chunks_.end() || it->second.held.current == nullptr) return;
   horizons_.changed(cp);
   regions_read_.erase(coarse_region_of(cp));
-  if (!it->second.current->has_voxels()) --mips_only_;
-  loaded_.erase(it);
+  drop(it);
   count_loaded();
 }
 
@@ -93,17 +119,25 @@ void Residency::want(ClientId id, const std::vector<ChunkWant>& chunks) {
     if (request(w.chunk_pos, w.level, w.exact)) {
       grant(id, w.chunk_pos, w.full);
     } else {
-      loading_[w.chunk_pos].push_back(Waiter{id, w.full});
+      wait_for(w.chunk_pos, Waiter{id, w.full});
     }
   }
   flush_grants();
 }
 
+void Residency::wait_for(Vec3i cp, Waiter w) {
+  // (request made its load under way.)
+  auto& waiters = chunks_.at(cp).waiters;
+  if (waiters == nullptr) waiters = std::make_unique<std::vector<Waiter>>();
+  waiters->push_back(w);
+}
+
 void Residency::grant(ClientId id, Vec3i cp, bool full) {
-  Loaded& l = loaded_.at(cp);
+  ChunkState& s = chunks_.at(cp);
+  Loaded& l = s.held;
   l.used_tick = clock_.tick;
-  if (l.published->estimate() && l.replace == Loaded::Replace::kNo) {
-    l.replace = Loaded::Replace::kQueued;
+  if (l.published->estimate() && !s.replace_queued && s.load != Load::kReplacing) {
+    s.replace_queued = true;
     estimates_.push_back(cp);
   }
   clients_.hold(cp, id, full);
@@ -118,23 +152,28 @@ void Residency::flush_grants() {
 }
 
 bool Residency::request(Vec3i cp, int level, bool exact) {
-  if (auto it = loaded_.find(cp);
-      it != loaded_.end() && it->second.current->has_level(level) && !(exact && it->second.current->estimate()))
-    return true;
+  auto it = chunks_.find(cp);
+  if (it != chunks_.end()) {
+    if (const VersionPtr& v = it->second.held.current; v != nullptr && v->has_level(level) && !(exact && v->estimate()))
+      return true;
+  } else {
+    it = chunks_.try_emplace(cp).first;
+  }
+  ChunkState& s = it->second;
   const auto priority = level == 0 ? Storage::Priority::kUrgent : Storage::Priority::kStream;
-  if (loading_.count(cp) != 0) {
+  if (s.load != Load::kNone) {
     // A background replacement waits behind every other load: whoever
     // needs the chunk now moves it to its own priority, or, if it is being
     // generated already, asks again (the first of the two loads to come
     // back serves the waiters; the other is dropped).
-    if (auto it = loaded_.find(cp); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
-      it->second.replace = Loaded::Replace::kNo;
+    if (s.load == Load::kReplacing) {
+      s.load = Load::kLoading;
       --replacing_;
       if (!storage_.promote(cp, priority)) load(cp, priority);
     }
     return false;
   }
-  loading_.emplace(cp, std::vector<Waiter>{});
+  s.load = Load::kLoading;
   load(cp, priority);
   return false;
 }
@@ -147,7 +186,9 @@ void Residency::load(Vec3i cp, Storage::Priority priority) {
 
 bool Residency::want_coarse(Vec3i cp, Waiter w) {
   // Loaded in any form, or being loaded: the usual way serves it.
-  if (loaded_.count(cp) != 0 || loading_.count(cp) != 0) return false;
+  if (auto it = chunks_.find(cp);
+      it != chunks_.end() && (it->second.held.current != nullptr || it->second.load != Load::kNone))
+    return false;
   const Vec3i region = coarse_region_of(cp);
   // Read, and the chunk had no entry: it was never stored (generated).
   if (regions_read_.count(region) != 0) return false;
@@ -165,22 +206,17 @@ void Residency::on_coarse_loaded(LoadedCoarse c) {
   if (c.ok) {
     regions_read_.insert(c.region);
     // What is loaded is as new or newer: the image never overrides it.
-    const auto know = [&](Vec3i cp, std::uint64_t revision, const CoarseVoxels& voxels) {
-      auto [it, fresh] = loaded_.try_emplace(cp);
-      if (!fresh) return;
-      const VersionPtr v = ChunkVersion::coarse_only(cp, revision, voxels);
-      it->second = Loaded{v, v, clock_.tick};
-      ++mips_only_;
+    const auto know = [&](Vec3i cp, auto make) {
+      ChunkState& s = chunks_[cp];
+      if (s.held.current != nullptr) return;
+      hold(s, make());
+      s.held.used_tick = clock_.tick;
     };
-    for (const CoarseEntry& e : c.entries) know(e.chunk_pos, e.revision, e.voxels);
-    for (const Vec3i cp : c.air) know(cp, 0, CoarseVoxels{});
-    for (const CoarseEntry& e : c.estimates) {
-      auto [it, fresh] = loaded_.try_emplace(e.chunk_pos);
-      if (!fresh) continue;
-      const VersionPtr v = ChunkVersion::estimated(e.chunk_pos, e.voxels);
-      it->second = Loaded{v, v, clock_.tick};
-      ++mips_only_;
-    }
+    for (const CoarseEntry& e : c.entries)
+      know(e.chunk_pos, [&] { return ChunkVersion::coarse_only(e.chunk_pos, e.revision, e.voxels); });
+    for (const Vec3i cp : c.air) know(cp, [&] { return ChunkVersion::coarse_only(cp, 0, CoarseVoxels{}); });
+    for (const CoarseEntry& e : c.estimates)
+      know(e.chunk_pos, [&] { return ChunkVersion::estimated(e.chunk_pos, e.voxels); });
   } else {
     // Served by reading the chunks instead (a damaged image is found by
     // terrane-world check).
@@ -194,7 +230,7 @@ void Residency::on_coarse_loaded(LoadedCoarse c) {
     if (request(cp, kMipLevels - 1))
       grant(w.id, cp, w.full);
     else
-      loading_[cp].push_back(w);
+      wait_for(cp, w);
   }
   flush_grants();
 }
@@ -204,16 +240,14 @@ void Residency::replace_estimates() {
   while (replacing_ < cap && !estimates_.empty() && !clock_.stopping) {
     const Vec3i cp = estimates_.front();
     estimates_.pop_front();
-    auto it = loaded_.find(cp);
-    if (it == loaded_.end() || it->second.replace != Loaded::Replace::kQueued) continue;
-    Loaded& l = it->second;
-    if (!l.current->estimate() || loading_.count(cp) != 0 || !clients_.watched(cp)) {
-      l.replace = Loaded::Replace::kNo;  // loaded, being loaded for a client, or no longer held by anyone
-      continue;
-    }
-    l.replace = Loaded::Replace::kLoading;
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end() || !it->second.replace_queued) continue;
+    ChunkState& s = it->second;
+    s.replace_queued = false;
+    // Loaded, being loaded for a client, or no longer held by anyone: left.
+    if (!s.held.current->estimate() || s.load != Load::kNone || !clients_.watched(cp)) continue;
+    s.load = Load::kReplacing;
     ++replacing_;
-    loading_.emplace(cp, std::vector<Waiter>{});
     load(cp, Storage::Priority::kBackground);
   }
 }
@@ -225,76 +259,74 @@ void Residency::on_loaded(LoadedChunk c) {
 }
 
 void Residency::apply_loaded(LoadedChunk c) {
-  bool background = false;  // a replacement nobody else asked for (yet)
-  if (auto it = loaded_.find(c.pos); it != loaded_.end() && it->second.replace == Loaded::Replace::kLoading) {
-    it->second.replace = Loaded::Replace::kNo;
+  auto it = chunks_.find(c.pos);
+  // Not loading: a second load of it, dropped (the first served the waiters).
+  if (it == chunks_.end() || it->second.load == Load::kNone) return;
+  const bool background = it->second.load == Load::kReplacing;  // a replacement nobody else asked for (yet)
+  if (background) {
+    it->second.load = Load::kLoading;
     --replacing_;
-    background = true;
     replace_estimates();
   }
-  auto waiting = loading_.find(c.pos);
-  if (waiting == loading_.end()) return;
+  ChunkState& s = it->second;  // (replace_estimates adds no entry: nothing moved)
   if (!c.ok) {
     // Not served until a later request can read it: the waiters wait, and
     // the load is tried again next second.
-    if (unreadable_.emplace(c.pos, c.error).second)
+    if (s.load != Load::kUnreadable) {
       server_log().error("chunk ({},{},{}): {}; not served until it can be read", c.pos.x, c.pos.y, c.pos.z, c.error);
+      retry_.push_back(c.pos);
+    }
+    s.load = Load::kUnreadable;
     return;
   }
-  if (auto it = loaded_.find(c.pos);
-      it != loaded_.end() && !it->second.current->estimate() && c.revision < it->second.current->revision()) {
+  if (s.held.current != nullptr && !s.held.current->estimate() && c.revision < s.held.current->revision()) {
     // A load that read the store before a later commit (one overtaken by
     // a more urgent load of the same chunk, answering a newer request):
     // never older than what is held. Read again.
     load(c.pos, Storage::Priority::kUrgent);
     return;
   }
-  unreadable_.erase(c.pos);
   VersionPtr v = std::make_shared<const ChunkVersion>(c.pos, c.revision, std::move(c.chunk));
   // Sky that replaced an estimate, wanted at full resolution by nobody: kept
   // as its mips (all Air, a few bytes; levels 1..3 answer refinements
   // without generating it again), forgotten when unwatched.
-  if (background && v->empty() && waiting->second.empty()) v = ChunkVersion::mips_only(*v);
-  auto [it, fresh] = loaded_.try_emplace(c.pos);
-  Loaded& l = it->second;
+  if (background && v->empty() && (s.waiters == nullptr || s.waiters->empty())) v = ChunkVersion::mips_only(*v);
   bool differs = false;
-  if (!fresh) {
+  if (const ChunkVersion* was = s.held.current.get(); was != nullptr) {
     // It was kept as mips only, or known from a coarse image (so committed:
     // the store has this revision) — unless the row turned out damaged and
     // was quarantined, when the chunk comes back generated at a higher one.
-    if (!l.current->has_voxels()) --mips_only_;
-    if (l.current->estimate()) {
+    if (was->estimate()) {
       // Its holders are told only when the exact mip differs from the
       // estimate they hold (an all-Air chunk's mip is all Air: a holder
       // within full resolution is sent Empty when it refines it).
       counters_.estimates_replaced.fetch_add(1, std::memory_order_relaxed);
       // (An all-Air version's level 3 is an all-Air unit.)
-      differs = !same_voxels(kCoarseSide, l.current->encoded(kMipLevels - 1), v->encoded(kMipLevels - 1));
+      differs = !same_voxels(kCoarseSide, was->encoded(kMipLevels - 1), v->encoded(kMipLevels - 1));
       if (differs) counters_.estimates_corrected.fetch_add(1, std::memory_order_relaxed);
-    } else if (l.current->revision() != c.revision) {
+    } else if (was->revision() != c.revision) {
       // Expected where another server of a shared world wrote it (read again
       // for that); otherwise a quarantined row came back generated.
       if (watcher_ == nullptr || !watcher_->stale(c.pos))
         server_log().warn("chunk ({},{},{}): loaded at revision {}, held at {}; its holders are sent the new one",
-                          c.pos.x, c.pos.y, c.pos.z, c.revision, l.current->revision());
+                          c.pos.x, c.pos.y, c.pos.z, c.revision, was->revision());
       differs = true;
     }
   }
-  l.published = v;
-  l.current = v;
-  if (!v->has_voxels()) ++mips_only_;
+  hold(s, v);
   if (differs) {
     horizons_.changed(c.pos);
     // As a commit would: every holder (all hold it coarser than full
     // resolution, since it had no voxels) refreshes from the new version.
     clients_.changed(clock_.tick, v);
   }
-  l.used_tick = clock_.tick;
+  s.held.used_tick = clock_.tick;
   count_loaded();
-  const std::vector<Waiter> waiters = std::move(waiting->second);
-  loading_.erase(waiting);
-  for (const Waiter& w : waiters)
-    if (clients_.present(w.id)) grant(w.id, c.pos, w.full);
+  s.load = Load::kNone;
+  const std::unique_ptr<std::vector<Waiter>> waiters = std::move(s.waiters);
+  if (waiters != nullptr)
+    for (const Waiter& w : *waiters)
+      if (clients_.present(w.id)) grant(w.id, c.pos, w.full);
   if (!grants_scheduled_) {
     // Loads finish one by one; hand them over in one go per strand turn.
     grants_scheduled_ = true;
@@ -306,9 +338,9 @@ void Residency::apply_loaded(LoadedChunk c) {
 }
 
 Voxel Residency::get(Vec3i p) const {
-  auto it = loaded_.find(chunk_of(p));
-  if (it == loaded_.end() || it->second.current->empty() || !it->second.current->has_voxels()) return Voxel{};
-  return it->second.current->chunk()->get(local_of(p));
+  const Loaded* l = find(chunk_of(p));
+  if (l == nullptr || l->current->empty() || !l->current->has_voxels()) return Voxel{};
+  return l->current->chunk()->get(local_of(p));
 }
 
 bool Residency::read_current(const Region& r, Box& out) const {
@@ -317,7 +349,7 @@ bool Residency::read_current(const Region& r, Box& out) const {
   if (!all) return false;
   for_each_chunk_in(r, [&](Vec3i cp) {
     const Region c = intersect(r, chunk_region(cp));
-    const ChunkVersion& v = *loaded_.at(cp).current;
+    const ChunkVersion& v = *held(cp).current;
     const Vec3i size = c.size();
     if (v.empty()) {
       for (int y = 0; y < size.y; ++y)
@@ -344,39 +376,39 @@ void Residency::unload_unwatched() {
   // meanwhile waited for it.
   UnloadPass& pass = unload_pass_;
   if (pass.next_slot == 0) {
-    pass.lighten = loaded_.size() - mips_only_ > options_.resident_chunks;
+    pass.lighten = with_voxels_ > options_.resident_chunks;
     pass.forget = mips_only_ > kMaxMipsOnly;
     pass.drop.clear();
     if (!pass.lighten && !pass.forget) return;  // nothing to do: asked again next tick
   }
-  const std::size_t slots = loaded_.slot_count();
+  const std::size_t slots = chunks_.slot_count();
   const std::size_t part = slots / std::max<std::uint32_t>(1, options_.tick_hz) + 1;
   const std::size_t from = pass.next_slot, to = std::min(slots, from + part);
   std::vector<Vec3i> forget;
-  loaded_.for_each_in_slots(from, to, [&](Vec3i cp, const Loaded& l) {
+  chunks_.for_each_in_slots(from, to, [&](Vec3i cp, const ChunkState& s) {
+    const Loaded& l = s.held;
+    if (l.current == nullptr) return;
     if (!l.current->has_voxels()) {
       // (An all-Air chunk has no voxels to drop, but as its mips it can
       // be forgotten.)
       if (pass.forget && forget.size() + kMaxMipsOnly / 2 < mips_only_ && !clients_.watched(cp) &&
-          loading_.count(cp) == 0)
+          s.load == Load::kNone && s.busy == 0)
         forget.push_back(cp);
       return;
     }
-    if (!pass.lighten || busy_.count(cp) != 0 || l.current != l.published || clients_.held_full(cp) ||
-        loading_.count(cp) != 0)
+    if (!pass.lighten || s.busy != 0 || l.current != l.published || clients_.held_full(cp) || s.load != Load::kNone)
       return;
     pass.drop.emplace_back(l.used_tick, cp);
   });
   for (const Vec3i cp : forget) {
     // Its region's image is read again when next wanted.
     regions_read_.erase(coarse_region_of(cp));
-    loaded_.erase(cp);
-    --mips_only_;
+    drop(chunks_.find(cp));
   }
   pass.next_slot = to;
   if (to < slots) return;
   pass.next_slot = 0;  // the pass is over
-  const std::size_t full = loaded_.size() - mips_only_;
+  const std::size_t full = with_voxels_;
   if (pass.lighten && full > options_.resident_chunks) {
     std::vector<std::pair<std::uint64_t, Vec3i>>& drop = pass.drop;
     // Seen over the last second: those lightened or gone since are left
@@ -384,9 +416,9 @@ void Residency::unload_unwatched() {
     // a table rebuilt meanwhile may have shown one twice), the others taken
     // at their latest use.
     std::erase_if(drop, [&](std::pair<std::uint64_t, Vec3i>& d) {
-      auto it = loaded_.find(d.second);
-      if (it == loaded_.end() || !it->second.current->has_voxels()) return true;
-      d.first = it->second.used_tick;
+      const Loaded* l = find(d.second);
+      if (l == nullptr || !l->current->has_voxels()) return true;
+      d.first = l->used_tick;
       return false;
     });
     std::sort(drop.begin(), drop.end(), [](const auto& x, const auto& y) {
@@ -415,16 +447,16 @@ void Residency::lighten_some() {
   while (!lighten_.empty() && n < kLightenPerTick) {
     const Vec3i cp = lighten_.back();
     lighten_.pop_back();
-    auto it = loaded_.find(cp);
-    if (it == loaded_.end()) continue;
-    Loaded& l = it->second;
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end() || it->second.held.current == nullptr) continue;
+    ChunkState& s = it->second;
+    const Loaded& l = s.held;
     // Checked again: it may have been asked for at full resolution or
     // edited since the list was made.
-    if (!l.current->has_voxels() || busy_.count(cp) != 0 || l.current != l.published ||
-        clients_.held_full(cp) || loading_.count(cp) != 0)
+    if (!l.current->has_voxels() || s.busy != 0 || l.current != l.published || clients_.held_full(cp) ||
+        s.load != Load::kNone)
       continue;
-    l.published = l.current = ChunkVersion::mips_only(*l.current);
-    ++mips_only_;
+    hold(s, ChunkVersion::mips_only(*l.current));
     ++n;
   }
   if (n > 0) {
@@ -436,27 +468,30 @@ void Residency::lighten_some() {
 void Residency::reserve(const Region& r) {
   for_each_chunk_in(r, [&](Vec3i cp) {
     request(cp);
-    ++busy_[cp];
+    ++chunks_.at(cp).busy;  // (request made its entry)
   });
 }
 
 void Residency::unbusy(const Region& r) {
   for_each_chunk_in(r, [&](Vec3i cp) {
-    auto it = busy_.find(cp);
-    if (it != busy_.end() && --it->second <= 0) busy_.erase(it);
+    auto it = chunks_.find(cp);
+    if (it == chunks_.end() || it->second.busy == 0) return;
+    if (--it->second.busy == 0 && it->second.vacant()) chunks_.erase(it);
   });
 }
 
 void Residency::copy_into(Grid& scratch, const Region& r, std::unordered_set<Vec3i, Vec3iHash>& copied) const {
   for_each_chunk_in(r, [&](Vec3i cp) {
     if (!copied.insert(cp).second) return;
-    const ChunkVersion& v = *loaded_.at(cp).current;
+    const ChunkVersion& v = *held(cp).current;
     if (!v.empty()) scratch.put_chunk(cp, v.chunk()->clone());
   });
 }
 
 void Residency::load_unless_loading(Vec3i cp, Storage::Priority priority) {
-  if (!loading_.try_emplace(cp).second) return;
+  ChunkState& s = chunks_[cp];
+  if (s.load != Load::kNone) return;
+  s.load = Load::kLoading;
   load(cp, priority);
 }
 

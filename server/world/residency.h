@@ -16,6 +16,15 @@
 // change reaches it, in order after the grant. Chunks nobody holds at full
 // resolution, with nothing pending, are reduced to their mips beyond
 // resident_chunks, least recently used first.
+//
+// Each chunk has one entry (ChunkState) holding its whole residency: the
+// version held (none, mips only, or with voxels), the load under way
+// (wanted, replacing an estimate, or unreadable until a retry reads it)
+// with its waiters, whether its estimate's replacement is queued, and the
+// queued edits pinning it. An entry goes when nothing is held, loading or
+// pinned. The lists beside (to lighten, estimates to replace, loads to
+// retry) only order work: each chunk taken from them is checked against
+// its entry.
 #pragma once
 
 #include <asio.hpp>
@@ -23,6 +32,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <memory>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
@@ -72,13 +82,11 @@ class LoadWatcher {
 class Residency : public WorldView {
  public:
   using Strand = asio::strand<asio::io_context::executor_type>;
+  // The version of a chunk held.
   struct Loaded {
     VersionPtr published;  // what clients are handed
     VersionPtr current;    // what the next edit builds on (newer while a commit is in flight)
     std::uint64_t used_tick = 0;
-    // An estimate (ChunkVersion::estimate) granted to a client is queued to
-    // be generated for real in the background (estimates_), then loaded.
-    enum class Replace : std::uint8_t { kNo, kQueued, kLoading } replace = Replace::kNo;
   };
   // The chunks kept only as mips (ChunkVersion::mips_only) at most, beyond
   // which those nobody holds are forgotten.
@@ -107,7 +115,10 @@ class Residency : public WorldView {
   bool request(Vec3i chunk_pos, int level = 0, bool exact = false);
   // Loads chunk_pos unless a load of it is under way.
   void load_unless_loading(Vec3i chunk_pos, Storage::Priority priority);
-  bool loading(Vec3i chunk_pos) const { return loading_.count(chunk_pos) != 0; }
+  bool loading(Vec3i chunk_pos) const {
+    auto it = chunks_.find(chunk_pos);
+    return it != chunks_.end() && it->second.load != Load::kNone;
+  }
   // Loads that failed to read are tried again.
   void retry_unreadable();
 
@@ -115,11 +126,15 @@ class Residency : public WorldView {
   // releases them).
   void reserve(const Region& r);
   void unbusy(const Region& r);
-  bool busy(Vec3i chunk_pos) const { return busy_.count(chunk_pos) != 0; }
+  bool busy(Vec3i chunk_pos) const {
+    auto it = chunks_.find(chunk_pos);
+    return it != chunks_.end() && it->second.busy != 0;
+  }
 
+  // The chunk's version held, or null.
   const Loaded* find(Vec3i chunk_pos) const {
-    auto it = loaded_.find(chunk_pos);
-    return it == loaded_.end() ? nullptr : &it->second;
+    auto it = chunks_.find(chunk_pos);
+    return it == chunks_.end() || it->second.held.current == nullptr ? nullptr : &it->second.held;
   }
   // Every held chunk (fn must not change what is held).
   void for_each(const std::function<void(Vec3i, const Loaded&)>& fn) const;
@@ -146,13 +161,13 @@ class Residency : public WorldView {
 
   // WorldView
   bool loaded(Vec3i chunk_pos) const override {
-    auto it = loaded_.find(chunk_pos);
-    return it != loaded_.end() && it->second.current->has_voxels();
+    const Loaded* l = find(chunk_pos);
+    return l != nullptr && l->current->has_voxels();
   }
-  std::uint64_t revision(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->revision(); }
+  std::uint64_t revision(Vec3i chunk_pos) const override { return held(chunk_pos).current->revision(); }
   Voxel get(Vec3i voxel) const override;
-  const Chunk* chunk(Vec3i chunk_pos) const override { return loaded_.at(chunk_pos).current->chunk(); }
-  std::size_t loaded_count() const override { return loaded_.size() - mips_only_; }
+  const Chunk* chunk(Vec3i chunk_pos) const override { return held(chunk_pos).current->chunk(); }
+  std::size_t loaded_count() const override { return with_voxels_; }
   std::size_t estimates_waiting() const override;
 
  private:
@@ -160,6 +175,35 @@ class Residency : public WorldView {
     ClientId id;
     bool full;
   };
+  // The load of a chunk under way, if any.
+  enum class Load : std::uint8_t {
+    kNone,
+    kLoading,    // for the waiters, an edit, or to read a newer revision
+    kReplacing,  // an estimate held to be replaced, in the background: nobody waits
+    kUnreadable  // failed (logged once): the waiters wait, retried every second
+  };
+  // One chunk's residency (see the opening comment).
+  struct ChunkState {
+    Loaded held;  // held.current null: nothing held
+    Load load = Load::kNone;
+    // Its estimate, granted to a client, is in estimates_ to be generated
+    // for real in the background (ChunkVersion::estimate).
+    bool replace_queued = false;
+    std::uint32_t busy = 0;  // queued edits touching it (never unloaded while pinned)
+    // Granted once the load lands (null: none), apart so that a held
+    // chunk's entry stays small: the table is scanned every second.
+    std::unique_ptr<std::vector<Waiter>> waiters;
+
+    bool vacant() const { return held.current == nullptr && load == Load::kNone && busy == 0; }
+  };
+  using Chunks = Vec3iMap<ChunkState>;
+
+  const Loaded& held(Vec3i chunk_pos) const;
+  // Every change of a held version's form goes through these (they keep
+  // the counts of chunks held with voxels and as mips only).
+  void hold(ChunkState& s, VersionPtr v);
+  void drop(Chunks::iterator it);  // the version held, and the entry if nothing else is left
+  void wait_for(Vec3i chunk_pos, Waiter w);
   // Hands chunk_pos to Storage; the result comes back to on_loaded.
   void load(Vec3i chunk_pos, Storage::Priority priority);
   void on_loaded(LoadedChunk c);
@@ -179,31 +223,28 @@ class Residency : public WorldView {
   FanOut& clients_;
   HorizonCache& horizons_;
   LoadWatcher* watcher_ = nullptr;
-  // Chunks with their voxels, and chunks kept as mips only.
-  Vec3iMap<Loaded> loaded_;
-  std::size_t mips_only_ = 0;
-  std::vector<Vec3i> lighten_;  // to reduce to mips, least recently used last
-  // unload_unwatched's pass over loaded_, a tick's share of its slots at a time.
+  Chunks chunks_;
+  std::size_t with_voxels_ = 0;  // chunks held with their voxels
+  std::size_t mips_only_ = 0;    // chunks held as mips only
+  std::vector<Vec3i> lighten_;   // to reduce to mips, least recently used last
+  // unload_unwatched's pass over chunks_, a tick's share of its slots at a time.
   struct UnloadPass {
     std::size_t next_slot = 0;  // 0: a pass begins at the next tick
     bool lighten = false;       // over resident_chunks when the pass began
     bool forget = false;        // over kMaxMipsOnly when the pass began
     std::vector<std::pair<std::uint64_t, Vec3i>> drop;  // (used tick, chunk) that may be lightened
   } unload_pass_;
-  std::unordered_map<Vec3i, std::vector<Waiter>, Vec3iHash> loading_;
   // Regions whose coarse image was read (a chunk of one without an entry
   // was never stored), and the wants waiting for an image being read.
   std::unordered_set<Vec3i, Vec3iHash> regions_read_;
   std::unordered_map<Vec3i, std::vector<std::pair<Vec3i, Waiter>>, Vec3iHash> coarse_waiting_;
-  std::unordered_map<Vec3i, std::string, Vec3iHash> unreadable_;  // logged once each
+  std::vector<Vec3i> retry_;  // chunks that became unreadable
   // Estimates granted, to be generated for real, in the order first granted
   // (a client asks nearest first), and how many of them are loading.
   std::deque<Vec3i> estimates_;
   std::size_t replacing_ = 0;
   std::unordered_map<ClientId, std::vector<VersionPtr>> grants_;  // not yet handed over
   bool grants_scheduled_ = false;
-  // Chunks queued edits will touch (never unloaded): chunk -> edits.
-  std::unordered_map<Vec3i, int, Vec3iHash> busy_;
 };
 
 }  // namespace terrane

@@ -334,7 +334,7 @@ TEST(BotJoin, ABotWhoseConnectFailedHasSettledItsJoin) {
   ctx.view_distance = 64;
   ctx.full_res_radius = 32;
   {
-    Bot b(0, ctx, Vec3f{0, 0, 0}, Movement::kIdle, EditMode::kNone, 1);
+    Bot b(0, ctx, Vec3f{0, 0, 0}, Gait::kIdle, EditMode::kNone, 1);
     EXPECT_FALSE(b.join_settled()) << "not tried yet";
     ASSERT_FALSE(b.connect());
     EXPECT_FALSE(b.result().connect_error.empty());

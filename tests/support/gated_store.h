@@ -1,6 +1,8 @@
 // A WorldStore that passes everything to another one, except that reading a
 // chunk named in its gate waits until the gate opens (on every connection
-// reopened from it): a load that takes as long as a test wants.
+// reopened from it): a load that takes as long as a test wants. The gate
+// can also make reads of a chunk fail (as a disk that cannot be read, not
+// a damaged row) until it is healed.
 #pragma once
 
 #include <condition_variable>
@@ -35,11 +37,33 @@ class StoreGate {
     return waited_ > 0;
   }
 
+  // Reads of pos fail until heal(pos).
+  void fail(Vec3i pos) {
+    std::lock_guard lock(m_);
+    failing_.insert(pos);
+  }
+  void heal(Vec3i pos) {
+    std::lock_guard lock(m_);
+    failing_.erase(pos);
+  }
+  // Whether a read of pos fails now (counted).
+  bool fails(Vec3i pos) {
+    std::lock_guard lock(m_);
+    if (failing_.count(pos) == 0) return false;
+    ++failed_;
+    return true;
+  }
+  int failed_reads() {
+    std::lock_guard lock(m_);
+    return failed_;
+  }
+
  private:
   std::mutex m_;
   std::condition_variable cv_;
-  std::unordered_set<Vec3i, Vec3iHash> closed_;
+  std::unordered_set<Vec3i, Vec3iHash> closed_, failing_;
   int waited_ = 0;
+  int failed_ = 0;
 };
 
 class GatedStore final : public WorldStore {
@@ -58,6 +82,7 @@ class GatedStore final : public WorldStore {
   FileStatus set_bounds(const WorldBounds& bounds) override { return inner_->set_bounds(bounds); }
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override {
     gate_->pass(pos);
+    if (gate_->fails(pos)) return FileError{"the test's disk cannot be read", std::nullopt};
     return inner_->load_chunk(pos);
   }
   FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) override { return inner_->load_coarse(region); }
