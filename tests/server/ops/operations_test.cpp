@@ -154,7 +154,6 @@ TEST_F(OperationsTest, AScheduledShutdownWarnsTheClientsThenStopsTheServer) {
   EXPECT_FALSE(warned.reconnect);
   EXPECT_EQ(warned.text, "server stopping in 1 s: maintenance");
   ASSERT_TRUE(eventually([&] { return stops_.load() == 1; }));
-  ops_->join_stopping();
   // The server's stop tells the clients, as the operator said: no restart.
   ops_->notify_stopping();
   const ServerNoticeMsg bye = notice(*alice);
