@@ -15,31 +15,39 @@
 // Counters are atomics, readable from any thread. stop() (any thread but an
 // io thread) closes the acceptor, applies what is queued, waits for every
 // commit, closes every session and joins the threads: the world is saved.
+//
+// The Server owns the order its parts start and stop in, and wires them:
+//
+//   create  world (its directory's lock, or a PostgreSQL world's
+//           ClusterNode), Storage, the listening socket, the WorldOwner,
+//           the node's listener, Operations (access, admin, /metrics)
+//   start   the node advertises; the world thread, the world owner, the
+//           stream gate's probes, /metrics and the stats line, accepts,
+//           the io threads
+//   stop    stream gate; accepts and timers; the admin room; the node's
+//           listener; the world owner (what is queued is applied and
+//           committed); the notice to all and every session closed; the
+//           node's control thread; storage; the node's leases released;
+//           /metrics; the io threads, then the world thread
 #pragma once
 
-#include <asio.hpp>
 #include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
-#include <thread>
-#include <unordered_map>
-#include <vector>
 
 #include "common/world/world.h"
 #include "common/world/world_lock.h"
-#include "server/net/client_session.h"
-#include "server/ops/access.h"
-#include "server/ops/admin.h"
-#include "server/ops/http_endpoint.h"
+#include "server/base/context_threads.h"
 #include "server/base/options.h"
+#include "server/cluster/cluster_node.h"
+#include "server/net/client_session.h"
+#include "server/net/listener.h"
+#include "server/net/session_table.h"
+#include "server/ops/operations.h"
 #include "server/replication/replicator.h"
-#include "server/cluster/change_listener.h"
-#include "server/cluster/cluster_control.h"
-#include "server/cluster/lease_keeper.h"
 #include "server/storage/storage.h"
 #include "server/world/world_owner.h"
 
@@ -58,9 +66,9 @@ class Server {
   // Idempotent; see the note above.
   void stop();
 
-  std::uint16_t port() const { return port_; }
+  std::uint16_t port() const { return listener_.port(); }
   // The metrics endpoint's port (0 without --metrics).
-  std::uint16_t metrics_port() const { return metrics_ ? metrics_->port() : 0; }
+  std::uint16_t metrics_port() const { return ops_->metrics_port(); }
   // Prometheus text (what /metrics serves) and the health rule (/health).
   std::string metrics_text() const;
   // Whether streaming yields now (and holding it paused: tests, operators).
@@ -82,90 +90,59 @@ class Server {
   // Where clients start: above the generated surface at the origin, or for
   // worlds without a generator above the centre of the stored chunks.
   static Vec3f find_spawn(World& world);
-  void do_accept();
-  AdminHooks admin_hooks();
-  void schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason);
+  // The Welcome every client is sent, as options_ and the world make it.
+  void make_welcome();
+  // A connection accepted (its strand): its session and replicator, in the
+  // table; false once stopping (the socket is dropped, none accepted after).
+  bool accept(asio::ip::tcp::socket socket);
+  // The world's part of the operators' commands: status, flush, rollback.
+  AdminHooks world_hooks();
   // The world of options_: a directory (made when missing) or a PostgreSQL
-  // database (made when it holds none; leases_ set up for its writes).
+  // database (made when it holds none; cluster_ opened for its writes).
   FileResult<std::unique_ptr<World>> open_world();
-  void notify_all(const ServerNoticeMsg& notice);
-  void log_stats();
-  void arm_stats();
+  // --border on a PostgreSQL world: refused while other servers run on it.
+  FileStatus check_border_alone(const WorldMeta& meta);
+  void log_totals() const;
 
   ServerOptions options_;
   ServerCounters counters_;
   // The test seam of UpdateBatches: set only by the --test-*-updates
   // options (null when serving for real).
   std::unique_ptr<UpdateFaults> faults_;
-  // Who writes which region of a PostgreSQL world, published by the lease
-  // keeper's thread (so it outlives it) and read by the replicators.
-  ClusterDirectory cluster_;
-  // A PostgreSQL world's leases (null for SQLite): the writer's lease
-  // source, so it outlives the world and storage below.
-  std::unique_ptr<LeaseKeeper> leases_;
-  // A PostgreSQL world's control thread (null for SQLite): the claims,
-  // forwards and inbox reads Storage passes on; outlives storage_.
-  std::unique_ptr<ClusterControl> control_;
+  // A PostgreSQL world's leases, control thread, notices and map of
+  // writers (null for SQLite): the writer's lease source and Storage's
+  // link, so it outlives the world and storage below.
+  std::unique_ptr<ClusterNode> cluster_;
   // A world directory's one-writer lock (common/world/world_lock.h), held
   // for the server's life; declared before the world so it outlives every
   // write. Not held for a PostgreSQL world (leases fence its writers).
   WorldLock world_lock_;
   std::unique_ptr<World> world_;
-  // world_'s store as the chunk store it is, for a PostgreSQL world (null
-  // for SQLite): the writer of Storage::Shared.
-  const PostgresStore* shared_store_ = nullptr;
   std::unique_ptr<Storage> storage_;
-  asio::io_context io_;
-  asio::executor_work_guard<asio::io_context::executor_type> work_;
+  // The sessions' and replicators' threads (terrane-io).
+  ContextThreads io_;
   // The world strand runs on a thread of its own, so ticks keep their
   // schedule however many session handlers wait for the io threads.
-  asio::io_context world_io_;
-  asio::executor_work_guard<asio::io_context::executor_type> world_work_;
-  std::thread world_thread_;
-  asio::ip::tcp::acceptor acceptor_;
-  asio::steady_timer stats_timer_;
+  ContextThreads world_io_;
+  Listener listener_;
   std::unique_ptr<WorldOwner> world_owner_;
   // Streaming yields to live traffic while the io threads or the world
   // strand fall behind (probes on both; stopped first in stop()).
   std::unique_ptr<StreamGate> stream_gate_;
-  // A shared world's notices from the other servers, handed to the world
-  // owner (stopped before it).
-  std::unique_ptr<ChangeListener> changes_;
-  std::unique_ptr<HttpEndpoint> metrics_;
-  std::unique_ptr<AccessControl> access_;
-  std::mutex admin_mutex_;  // admin_ is dropped in stop() while sessions may still ask
-  std::unique_ptr<Admin> admin_;
-  ClientSession::AdminFn admin_fn_;
-  asio::steady_timer shutdown_timer_;
-  // What the last notice tells clients when the server stops: to reconnect
-  // (a SIGTERM is usually a restart) unless an operator's shutdown said
-  // otherwise.
-  std::atomic<bool> clients_reconnect_{true};
-  std::thread shutdown_thread_;  // stops the server when no owner does (options.on_shutdown unset)
-  const std::chrono::steady_clock::time_point started_at_ = std::chrono::steady_clock::now();
   WelcomeTemplate welcome_;
+  // The live sessions (the client cap; closed by stop()).
+  SessionTable sessions_;
+  // Operators' commands, access rules, /metrics, the stats line, a
+  // scheduled shutdown and the notices to all (made once the world is).
+  std::unique_ptr<Operations> ops_;
   // What every client session shares (the Welcome, admission, admin
-  // commands, counters); set once access_ exists.
+  // commands, counters); set once ops_ exists.
   std::optional<ClientSession::Context> session_context_;
   std::shared_ptr<const ViewTable> default_view_;  // kept made (ViewTable::get's cache may drop unused tables)
-  std::vector<std::thread> threads_;
-  std::uint16_t port_ = 0;
-  std::atomic<bool> stopped_{false};
+  // stop() runs once, and only after start(); stopping_ is read by the
+  // acceptor and health() on other threads.
   std::atomic<bool> stopping_{false};
   bool started_ = false;
-  std::atomic<std::uint64_t> next_id_{1};
-
-  // Live sessions, for stop() and the client cap. Guarded by sessions_mutex_:
-  // sessions are added by the acceptor and removed on their own strands.
-  std::mutex sessions_mutex_;
-  struct Peer {
-    std::weak_ptr<Session> session;
-    std::weak_ptr<ClientSession> client;
-  };
-  std::unordered_map<ClientId, Peer> sessions_;
-
-  std::chrono::steady_clock::time_point stats_at_ = std::chrono::steady_clock::now();
-  std::uint64_t stats_edits_ = 0, stats_sent_ = 0, stats_received_ = 0;
 };
 
 }  // namespace terrane
