@@ -3,6 +3,8 @@
 #include <chrono>
 #include <span>
 
+#include <fmt/format.h>
+
 #include "server/base/log.h"
 
 namespace terrane {
@@ -36,10 +38,18 @@ void ClusterControl::claim(Vec3i region, ClaimRule rule, std::function<void(Regi
     RegionClaim out;
     auto held = keeper_.ensure(std::span(&region, 1), rule);
     if (!held) {
-      out.why = held.error().message;
-      out.unreachable = held.error().kind == StoreError::Kind::kConnection;
-      out.left = held.error().kind == StoreError::Kind::kLeft;
-      out.holder = held.error().holder;
+      const StoreError& e = held.error();
+      out.unreachable = e.kind == StoreError::Kind::kConnection;
+      out.left = e.kind == StoreError::Kind::kLeft;
+      out.holder = e.holder;
+      // Players may be shown why (an edit refused): the holder in Terrane's
+      // words, or what became of the database; its own text goes to the log.
+      if (e.kind == StoreError::Kind::kOwned || e.kind == StoreError::Kind::kLeft) {
+        out.why = e.message;
+      } else {
+        out.why = out.unreachable ? "the world's database cannot be reached" : "the world's database refused the claim";
+        claim_log_.warn(fmt::format("region ({},{},{}): claim failed: {}", region.x, region.y, region.z, e.message));
+      }
       done(std::move(out));
       return;
     }
@@ -47,7 +57,9 @@ void ClusterControl::claim(Vec3i region, ClaimRule rule, std::function<void(Regi
     auto revisions = cs.stored_revisions(region);
     if (!revisions) {
       // Held, but what is stored there is not known: not written until it is.
-      out.why = "cannot read what the region holds: " + revisions.error().message;
+      out.why = "cannot read what the region holds from the world's database";
+      claim_log_.warn(fmt::format("region ({},{},{}): cannot read what it holds: {}", region.x, region.y, region.z,
+                                  revisions.error().message));
       out.unreachable = true;
       done(std::move(out));
       return;
@@ -59,13 +71,29 @@ void ClusterControl::claim(Vec3i region, ClaimRule rule, std::function<void(Regi
 }
 
 void ClusterControl::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
-                             std::vector<Vec3i> hand_over, std::function<void(StoreResult<std::int64_t>)> done) {
-  post([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over),
+                             std::vector<Vec3i> hand_over, std::chrono::steady_clock::time_point deadline,
+                             std::function<void(StoreResult<std::int64_t>)> done) {
+  post([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over), deadline,
         done = std::move(done)](ClusterStore& cs) {
     if (!hand_over.empty())
       if (auto released = keeper_.release(hand_over); !released) return done(released.error());
-    done(cs.forward(keeper_.owner(), to, player, edit));
+    // The row's deadline: where the database's clock is at least when the
+    // sender's wait runs out here. Nothing is sent once that has passed
+    // (this thread was held up) or without a recent reading of the clock.
+    const auto expires_us = keeper_.database_time_at(deadline);
+    if (!expires_us)
+      return done(StoreError{StoreError::Kind::kConnection,
+                             "forward edit: the database's clock has not been read within a lease (no lease renewal "
+                             "answered); nothing was sent"});
+    if (std::chrono::steady_clock::now() >= deadline)
+      return done(StoreError{StoreError::Kind::kConnection,
+                             "forward edit: its wait ran out before it could be sent; nothing was sent"});
+    done(cs.forward(keeper_.owner(), to, player, edit, *expires_us));
   });
+}
+
+void ClusterControl::take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done) {
+  post([row, done = std::move(done)](ClusterStore& cs) { done(cs.take_back(row)); });
 }
 
 void ClusterControl::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,

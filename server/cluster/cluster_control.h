@@ -1,7 +1,8 @@
 // ClusterControl: the cluster room's control thread and its connection
 // (a ClusterStore), which carry out what the world owner asks of the other
 // servers through Storage (ClusterLink): claims, forwarded and relayed
-// edits, inbox reads and refusals. An edit waits on each of them, so they
+// edits (a forward's deadline written by the database's clock as the
+// lease keeper last read it), edits taken back, inbox reads and refusals. An edit waits on each of them, so they
 // run on a thread of their own, never behind the loads (thousands may be
 // queued while clients join), in the order asked.
 //
@@ -12,10 +13,12 @@
 #pragma once
 
 #include <asio.hpp>
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <string>
 
+#include "server/base/rate_limit.h"
 #include "server/cluster/cluster_store.h"
 #include "server/cluster/lease_keeper.h"
 #include "server/storage/cluster_link.h"
@@ -39,7 +42,9 @@ class ClusterControl final : public ClusterLink {
   bool holds(Vec3i region) const override { return keeper_.holds(region); }
   void claim(Vec3i region, ClaimRule rule, std::function<void(RegionClaim)> done) override;
   void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
+               std::chrono::steady_clock::time_point deadline,
                std::function<void(StoreResult<std::int64_t>)> done) override;
+  void take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done) override;
   void relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,
              std::function<void(StoreResult<Ok>)> done) override;
   void read_inbox(std::int64_t after, std::size_t limit,
@@ -54,6 +59,7 @@ class ClusterControl final : public ClusterLink {
   LeaseKeeper& keeper_;
   DatabaseCounters* const counters_;  // may be null
   std::unique_ptr<ClusterStore> store_;  // the control thread's
+  RateLimitedLog claim_log_{1};          // claims the database failed (its own words), once a second at most
   asio::thread_pool thread_{1};
 };
 

@@ -34,9 +34,27 @@ StoreError bad_row(const char* what, Vec3i region) {
                     fmt::format("postgresql: {}: region {} has a lease row out of range", what, region_text(region))};
 }
 
+// The database's clock in microseconds since 1970, as a statement's column.
+constexpr const char* kClockMicros = "(extract(epoch FROM clock_timestamp()) * 1000000)::bigint";
+
 }  // namespace
 
 ClusterStore::ClusterStore(std::unique_ptr<PgConnection> c) : c_(std::move(c)) {}
+
+template <class T>
+StoreResult<T> ClusterStore::transaction(const char* what, const std::function<StoreResult<T>()>& body) {
+  auto begin = c_->exec("begin", "BEGIN");
+  if (!begin) return begin.error();
+  auto out = body();
+  if (!out) return c_->abort(out.error());
+  auto commit = c_->exec(what, "COMMIT");
+  if (commit) return out;
+  StoreError e = c_->abort(commit.error());
+  // The COMMIT was sent: the database may have committed before the
+  // connection broke (or before the answer's deadline).
+  if (e.kind == StoreError::Kind::kConnection) e.kind = StoreError::Kind::kUnknown;
+  return e;
+}
 ClusterStore::~ClusterStore() = default;
 
 StoreResult<std::unique_ptr<ClusterStore>> ClusterStore::open(const std::string& url) {
@@ -136,9 +154,17 @@ StoreResult<std::optional<StoreError>> ClusterStore::left_to_neighbour(Vec3i reg
 void ClusterStore::set_call_timeout(std::chrono::milliseconds t) { c_->set_call_timeout(t); }
 
 StoreResult<std::vector<RegionLease>> ClusterStore::renew(std::span<const RegionLease> leases,
-                                                           std::chrono::milliseconds lease) {
+                                                           std::chrono::milliseconds lease, DatabaseClock* clock) {
   std::vector<RegionLease> kept;
-  if (leases.empty()) return kept;
+  if (leases.empty()) {
+    if (clock == nullptr) return kept;
+    auto r = c_->exec("read clock", (std::string("SELECT ") + kClockMicros).c_str());
+    if (!r) return r.error();
+    const auto at = r->count() == 1 ? r->integer(0, 0) : std::nullopt;
+    if (!at) return StoreError{StoreError::Kind::kDecode, "postgresql: read clock: not a time"};
+    *clock = DatabaseClock{*at, std::chrono::steady_clock::now()};
+    return kept;
+  }
   // One statement for every lease of one owner (a server holds thousands
   // of regions in a big world): arrays of the regions and their epochs.
   std::map<std::uint32_t, std::vector<const RegionLease*>> by_owner;
@@ -154,18 +180,27 @@ StoreResult<std::vector<RegionLease>> ClusterStore::renew(std::span<const Region
     auto array = [](const std::vector<std::int64_t>& v) { return Param{fmt::format("{{{}}}", fmt::join(v, ",")), false}; };
     // The rows are locked first, in the order a commit checks its leases
     // (save_fenced: y, z, x), so a renewal and a commit of the same server
-    // never wait for each other in a cycle (a deadlock aborts one).
-    auto r = c_->exec("renew leases",
-                      "WITH locked AS MATERIALIZED (SELECT l.rx, l.ry, l.rz FROM terrane_leases AS l"
-                      "  JOIN unnest($1::integer[], $2::integer[], $3::integer[], $4::bigint[]) AS k(rx, ry, rz, epoch)"
-                      "  ON l.rx = k.rx AND l.ry = k.ry AND l.rz = k.rz AND l.epoch = k.epoch"
-                      "  WHERE l.owner = $5 AND l.expires_at > clock_timestamp()"
-                      "  ORDER BY l.ry, l.rz, l.rx FOR UPDATE OF l)"
-                      " UPDATE terrane_leases AS l SET expires_at = clock_timestamp() + $6::bigint * interval '1 millisecond'"
-                      " FROM locked WHERE l.rx = locked.rx AND l.ry = locked.ry AND l.rz = locked.rz AND l.owner = $5"
-                      " AND l.expires_at > clock_timestamp() RETURNING l.rx, l.ry, l.rz, l.epoch",
+    // never wait for each other in a cycle (a deadlock aborts one). One
+    // more row, its lease columns NULL, carries the database's clock.
+    static const std::string sql =
+        std::string("WITH locked AS MATERIALIZED (SELECT l.rx, l.ry, l.rz FROM terrane_leases AS l"
+                    "  JOIN unnest($1::integer[], $2::integer[], $3::integer[], $4::bigint[]) AS k(rx, ry, rz, epoch)"
+                    "  ON l.rx = k.rx AND l.ry = k.ry AND l.rz = k.rz AND l.epoch = k.epoch"
+                    "  WHERE l.owner = $5 AND l.expires_at > clock_timestamp()"
+                    "  ORDER BY l.ry, l.rz, l.rx FOR UPDATE OF l),"
+                    " renewed AS (UPDATE terrane_leases AS l"
+                    "  SET expires_at = clock_timestamp() + $6::bigint * interval '1 millisecond'"
+                    "  FROM locked WHERE l.rx = locked.rx AND l.ry = locked.ry AND l.rz = locked.rz AND l.owner = $5"
+                    "  AND l.expires_at > clock_timestamp() RETURNING l.rx, l.ry, l.rz, l.epoch)"
+                    " SELECT rx, ry, rz, epoch, NULL::bigint FROM renewed"
+                    " UNION ALL SELECT NULL, NULL, NULL, NULL, ") +
+        kClockMicros;
+    auto r = c_->exec("renew leases", sql.c_str(),
                       {array(xs), array(ys), array(zs), array(epochs), text(owner), text(lease.count())});
     if (!r) return r.error();
+    if (clock != nullptr)
+      for (int row = 0; row < r->count(); ++row)
+        if (const auto at = r->integer(row, 4)) *clock = DatabaseClock{*at, std::chrono::steady_clock::now()};
     for (int row = 0; row < r->count(); ++row) {
       const auto x = r->integer(row, 0), y = r->integer(row, 1), z = r->integer(row, 2), e = r->integer(row, 3);
       if (!x || !y || !z || !e) continue;
@@ -342,12 +377,13 @@ StoreResult<Ok> ClusterStore::answer(std::span<const ForwardAnswer> answers) {
 }
 
 StoreResult<std::int64_t> ClusterStore::forward(std::uint32_t from, std::uint32_t to, const std::string& player,
-                                                 std::span<const std::uint8_t> edit) {
-  return c_->transaction<std::int64_t>("commit forward", [&]() -> StoreResult<std::int64_t> {
+                                                 std::span<const std::uint8_t> edit, std::int64_t expires_us) {
+  return transaction<std::int64_t>("commit forward", [&]() -> StoreResult<std::int64_t> {
     auto row = c_->exec("forward edit",
-                        "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
-                        " VALUES ($1, $2, $3, $4, clock_timestamp()) RETURNING id",
-                        {text(to), text(from), Param{player, false}, blob(edit)});
+                        "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at, expires_at)"
+                        " VALUES ($1, $2, $3, $4, clock_timestamp(),"
+                        "  timestamptz 'epoch' + $5::bigint * interval '1 microsecond') RETURNING id",
+                        {text(to), text(from), Param{player, false}, blob(edit), text(expires_us)});
     if (!row) return row.error();
     const auto id = row->count() == 1 ? row->integer(0, 0) : std::nullopt;
     if (!id) return StoreError{StoreError::Kind::kDecode, "postgresql: forward edit: no row id"};
@@ -359,8 +395,10 @@ StoreResult<std::int64_t> ClusterStore::forward(std::uint32_t from, std::uint32_
 }
 
 StoreResult<Ok> ClusterStore::relay(std::int64_t id, std::uint32_t from, std::uint32_t to) {
-  return c_->transaction<Ok>("commit relay", [&]() -> StoreResult<Ok> {
-    auto row = c_->exec("relay edit", "UPDATE terrane_inbox SET to_server = $3 WHERE id = $1 AND to_server = $2 RETURNING id",
+  return transaction<Ok>("commit relay", [&]() -> StoreResult<Ok> {
+    auto row = c_->exec("relay edit",
+                        "UPDATE terrane_inbox SET to_server = $3, taken = false"
+                        " WHERE id = $1 AND to_server = $2 AND taken RETURNING id",
                         {text(id), text(from), text(to)});
     if (!row) return row.error();
     if (row->count() != 1)
@@ -374,14 +412,28 @@ StoreResult<Ok> ClusterStore::relay(std::int64_t id, std::uint32_t from, std::ui
 }
 
 StoreResult<std::vector<InboxEdit>> ClusterStore::inbox(std::uint32_t to, std::int64_t after, std::size_t limit) {
-  auto r = c_->exec("read inbox",
-                    // A row's player and edit are read only up to what a
-                    // client may send (longer: empty, so refused).
-                    "SELECT id, from_server,"
+  if (after == 0) {
+    auto swept = c_->exec("sweep inbox",
+                          "DELETE FROM terrane_inbox WHERE to_server = $1"
+                          " AND expires_at < clock_timestamp() - interval '10 minutes'",
+                          {text(to)});
+    if (!swept) return swept.error();
+  }
+  // Sent now: the database reads its clock after this, so what it says is
+  // left of a row's time is left from here at least.
+  const auto asked = std::chrono::steady_clock::now();
+  auto r = c_->exec("take inbox",
+                    // Rows a sender is taking back (locked) are skipped:
+                    // they go. A row's player and edit are read only up to
+                    // what a client may send (longer: empty, so refused).
+                    "UPDATE terrane_inbox SET taken = true WHERE id IN ("
+                    "  SELECT id FROM terrane_inbox WHERE to_server = $1 AND id > $2 AND NOT taken"
+                    "   AND expires_at > clock_timestamp() ORDER BY id LIMIT $3 FOR UPDATE SKIP LOCKED)"
+                    " AND to_server = $1 AND NOT taken AND expires_at > clock_timestamp()"
+                    " RETURNING id, from_server,"
                     " CASE WHEN octet_length(player) <= $4 THEN player ELSE '' END,"
                     " CASE WHEN octet_length(edit) <= $5 THEN edit ELSE ''::bytea END,"
-                    " (extract(epoch from clock_timestamp() - created_at) * 1000)::bigint FROM terrane_inbox"
-                    " WHERE to_server = $1 AND id > $2 ORDER BY id LIMIT $3",
+                    " (extract(epoch FROM expires_at - clock_timestamp()) * 1000000)::bigint",
                     {text(to), text(after), text(static_cast<std::int64_t>(limit)),
                      text(static_cast<std::int64_t>(kMaxClientNameBytes)),
                      text(static_cast<std::int64_t>(kDefaultMaxFrameBytes + kFrameHeaderBytes))},
@@ -391,18 +443,28 @@ StoreResult<std::vector<InboxEdit>> ClusterStore::inbox(std::uint32_t to, std::i
   for (int i = 0; i < r->count(); ++i) {
     const auto id = be64_at(r->res, i, 0);
     const auto from = be32_at(r->res, i, 1);
-    if (!id || !from || *from < 0)
-      return StoreError{StoreError::Kind::kDecode, "postgresql: read inbox: a row does not read"};
+    const auto left_us = be64_at(r->res, i, 4);
+    if (!id || !from || *from < 0 || !left_us)
+      return StoreError{StoreError::Kind::kDecode, "postgresql: take inbox: a row does not read"};
     InboxEdit e;
     e.id = *id;
     e.from = static_cast<std::uint32_t>(*from);
     const auto name = bytes_at(r->res, i, 2), edit = bytes_at(r->res, i, 3);
-    e.age_ms = std::max<std::int64_t>(0, be64_at(r->res, i, 4).value_or(0));
     e.player.assign(name.begin(), name.end());
     e.edit.assign(edit.begin(), edit.end());
+    e.current_until = asked + std::chrono::microseconds(std::max<std::int64_t>(0, *left_us));
     out.push_back(std::move(e));
   }
+  // RETURNING keeps no order.
+  std::sort(out.begin(), out.end(), [](const InboxEdit& a, const InboxEdit& b) { return a.id < b.id; });
   return out;
+}
+
+StoreResult<bool> ClusterStore::take_back(std::int64_t id) {
+  auto r = c_->exec("take back forwarded edit", "DELETE FROM terrane_inbox WHERE id = $1 AND NOT taken RETURNING id",
+                    {text(id)});
+  if (!r) return r.error();
+  return r->count() == 1;
 }
 
 StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> ClusterStore::stored_revisions(Vec3i region) {

@@ -17,6 +17,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -30,6 +31,21 @@
 #include "server/storage/pg_connection.h"
 
 namespace terrane {
+
+// The database's clock as one statement read it (clock_timestamp(), in
+// microseconds since 1970), and when this server had the answer (its
+// steady clock). The database read its clock before the answer came, so at
+// any later local time t the database's clock is at least
+// at_us + (t - received): a lower bound that needs no agreement between the
+// machines' clocks, only that both run at the same rate (they drift by
+// parts per million; a database clock stepped back breaks it).
+struct DatabaseClock {
+  std::int64_t at_us = 0;
+  std::chrono::steady_clock::time_point received{};
+  std::int64_t at_least_at(std::chrono::steady_clock::time_point t) const {
+    return at_us + std::chrono::duration_cast<std::chrono::microseconds>(t - received).count();
+  }
+};
 
 class ClusterStore {
  public:
@@ -54,8 +70,11 @@ class ClusterStore {
                                  ClaimRule rule = ClaimRule::kAny);
   // Extends each lease still current (same owner and epoch, not expired) by
   // lease from now; returns those it extended. A lease missing from the
-  // answer is lost: its holder must stop writing the region.
-  StoreResult<std::vector<RegionLease>> renew(std::span<const RegionLease> leases, std::chrono::milliseconds lease);
+  // answer is lost: its holder must stop writing the region. With clock,
+  // the same statement also reads the database's clock into it (one
+  // statement even without leases).
+  StoreResult<std::vector<RegionLease>> renew(std::span<const RegionLease> leases, std::chrono::milliseconds lease,
+                                              DatabaseClock* clock = nullptr);
   // Gives the leases up (they expire at once); other servers may claim them.
   StoreResult<Ok> release(std::span<const RegionLease> leases);
   // Who holds region now (a current lease), if anyone.
@@ -83,17 +102,30 @@ class ClusterStore {
   StoreResult<std::vector<std::pair<Vec3i, std::uint64_t>>> stored_revisions(Vec3i region);
 
   // Forwards an edit to server to's inbox (one transaction: the row and
-  // its notice); the row's id.
+  // its notice); the row's id. expires_us: its deadline by the database's
+  // clock (microseconds since 1970), after which nobody takes it. kUnknown
+  // if the COMMIT's answer was lost (the row may be there).
   StoreResult<std::int64_t> forward(std::uint32_t from, std::uint32_t to, const std::string& player,
-                                    std::span<const std::uint8_t> edit);
-  // Passes the edit of inbox row id, addressed to from, on to server to
-  // (one transaction: the row readdressed, its notice). Its sender and age
-  // stay, so to answers the sender and refuses it once too old. kFenced if
-  // the row is no longer from's (answered or passed on already).
+                                    std::span<const std::uint8_t> edit, std::int64_t expires_us);
+  // Passes the edit of inbox row id, which from took, on to server to (one
+  // transaction: the row readdressed and no longer taken, its notice). Its
+  // sender and deadline stay, so to answers the sender and takes it only
+  // in time. kFenced if the row is no longer from's (answered or passed on
+  // already); kUnknown if the COMMIT's answer was lost.
   StoreResult<Ok> relay(std::int64_t id, std::uint32_t from, std::uint32_t to);
-  // Edits for server to not answered yet with an id above after, oldest
-  // first, at most limit.
+  // Takes the edits for server to not taken yet, with an id above after and
+  // their deadline not passed, oldest first, at most limit: each is marked
+  // taken in the same statement, so "taken" and "too late" are decided
+  // once, by the database's clock, and a row is taken once. (The first page,
+  // after = 0, also deletes to's rows whose deadline passed ten minutes
+  // ago: never taken, or taken by an earlier run of to that never
+  // answered.)
   StoreResult<std::vector<InboxEdit>> inbox(std::uint32_t to, std::int64_t after, std::size_t limit);
+  // The sender of inbox row id takes it back (its wait ran out): true if
+  // the row was there and not taken (deleted: the edit is never applied),
+  // false if it was taken (its addressee has it: an answer comes, or none
+  // if that server stopped) or is gone (answered).
+  StoreResult<bool> take_back(std::int64_t id);
   // Answers without writing chunks (edits refused). (Edits a tick applied
   // are answered in its fenced commit: PostgresStore::save_answering.)
   StoreResult<Ok> answer(std::span<const ForwardAnswer> answers);
@@ -124,6 +156,11 @@ class ClusterStore {
   // kPreferNeighbours' rule: the kLeft error if region is left to another
   // server, nullopt if owner may claim it.
   StoreResult<std::optional<StoreError>> left_to_neighbour(Vec3i region, std::uint32_t owner);
+  // BEGIN, body, COMMIT (named what), as PgConnection::transaction, except
+  // that a COMMIT whose answer was lost is kUnknown (it may have been
+  // committed) where a failure before it is as reported (nothing done).
+  template <class T>
+  StoreResult<T> transaction(const char* what, const std::function<StoreResult<T>()>& body);
 
   std::unique_ptr<PgConnection> c_;
 };

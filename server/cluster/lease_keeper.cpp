@@ -25,8 +25,17 @@ StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& u
         std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
             .count(),
         std::memory_order_relaxed);
-  return std::unique_ptr<LeaseKeeper>(
+  // A first reading of the database's clock, so that edits can be
+  // forwarded before the first renewal round (without one they wait for it).
+  DatabaseClock clock;
+  const bool read = (*renewer)->renew({}, times.lease, &clock).ok();
+  std::unique_ptr<LeaseKeeper> keeper(
       new LeaseKeeper(owner, times, std::move(on_lost), std::move(*claims), std::move(*renewer), counters));
+  if (read) {
+    std::lock_guard lock(keeper->mutex_);
+    keeper->clock_ = clock;
+  }
+  return keeper;
 }
 
 LeaseKeeper::LeaseKeeper(std::uint32_t owner, LeaseTimes times, LostFn on_lost, std::unique_ptr<ClusterStore> claims,
@@ -112,6 +121,12 @@ std::vector<RegionLease> LeaseKeeper::held() const {
 std::uint64_t LeaseKeeper::renewals() const {
   std::lock_guard lock(mutex_);
   return rounds_;
+}
+
+std::optional<std::int64_t> LeaseKeeper::database_time_at(std::chrono::steady_clock::time_point t) const {
+  std::lock_guard lock(mutex_);
+  if (!clock_ || std::chrono::steady_clock::now() - clock_->received > times_.lease) return std::nullopt;
+  return clock_->at_least_at(t);
 }
 
 StoreResult<Ok> LeaseKeeper::release(std::span<const Vec3i> regions) {
@@ -203,7 +218,8 @@ void LeaseKeeper::renew_loop() {
     const auto started = std::chrono::steady_clock::now();
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(last_ok + times_.lease - started);
     renewer_->set_call_timeout(std::clamp(left, std::chrono::milliseconds(1), std::max(times_.lease / 2, std::chrono::milliseconds(1))));
-    auto kept = renewer_->renew(all, times_.lease);
+    DatabaseClock clock;
+    auto kept = renewer_->renew(all, times_.lease, &clock);
     const auto now = std::chrono::steady_clock::now();
     if (kept) {
       last_ok = started;
@@ -216,6 +232,7 @@ void LeaseKeeper::renew_loop() {
         lost.emplace_back(l, fmt::format("not renewed for {} ms: {}", times_.lease.count(), kept.error().message));
     }
     lock.lock();
+    if (kept && clock.received != std::chrono::steady_clock::time_point{}) clock_ = clock;
     // Only leases still held as they were: not released meanwhile (handed
     // over) nor claimed again (a newer epoch).
     std::erase_if(lost, [&](const auto& entry) {

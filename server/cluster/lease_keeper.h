@@ -9,8 +9,8 @@
 // themselves are fenced by PostgreSQL whatever the keeper believes: the
 // keeper is how a server learns early, not what keeps the data safe.
 //
-// Threading: ensure(), held() and stop() may be called from any thread;
-// on_lost runs on the keeper's thread.
+// Threading: ensure(), held(), database_time_at() and stop() may be called
+// from any thread; on_lost runs on the keeper's thread.
 #pragma once
 
 #include <algorithm>
@@ -21,6 +21,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <string>
 #include <thread>
@@ -78,6 +79,12 @@ class LeaseKeeper {
   StoreResult<Ok> release_all();
   // Renewal rounds done so far (tests wait on it).
   std::uint64_t renewals() const;
+  // A lower bound of the database's clock (microseconds since 1970) at
+  // local time t, from the last reading (DatabaseClock: every renewal
+  // round reads it, and open() once): what a forwarded edit's deadline is
+  // written in. nullopt without a reading within a lease (the database out
+  // of reach: then no deadline is guessed).
+  std::optional<std::int64_t> database_time_at(std::chrono::steady_clock::time_point t) const;
   // From now on, every renewal round (the first at once) also tells the
   // database that this server runs and where it takes clients (address
   // "HOST:PORT", or "" for nowhere: it is then never a redirect's target)
@@ -106,7 +113,7 @@ class LeaseKeeper {
   // False when the database did not take the address.
   bool exchange_addresses(const std::string& address, ClusterDirectory* directory);
 
-  mutable std::mutex mutex_;  // guards held_, rounds_, stopping_, address_, directory_, round_now_
+  mutable std::mutex mutex_;  // guards held_, rounds_, stopping_, address_, directory_, round_now_, clock_
   std::condition_variable wake_;
   std::map<Key, RegionLease> held_;
   std::uint64_t rounds_ = 0;
@@ -115,6 +122,7 @@ class LeaseKeeper {
   ClusterDirectory* directory_ = nullptr;
   bool round_now_ = false;
   bool advertising_ = false;
+  std::optional<DatabaseClock> clock_;  // the last reading of the database's clock
   std::shared_ptr<const ClusterMap> last_map_;  // keeper thread: the map published last
   std::thread thread_;
 };

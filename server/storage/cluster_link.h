@@ -8,6 +8,7 @@
 // thread (see each).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -41,9 +42,11 @@ struct RegionLease {
 
 // Edits forwarded between servers (STORE_POSTGRESQL.md, "Forwarded
 // edits"): a server sends an edit in a region another server holds to that
-// server's inbox (a row, and a notice on terrane_inbox naming the server);
-// the owner applies it in a tick and answers in the tick's commit (the row
-// deleted, and a notice on terrane_answers naming the sender).
+// server's inbox (a row with a deadline by the database's clock, and a
+// notice on terrane_inbox naming the server); the owner takes it (only
+// before its deadline), applies it in a tick and answers in the tick's
+// commit (the row deleted, and a notice on terrane_answers naming the
+// sender). A sender whose wait ran out takes back the row not taken.
 inline constexpr const char* kInboxChannel = "terrane_inbox";
 inline constexpr const char* kAnswersChannel = "terrane_answers";
 struct InboxEdit {
@@ -51,7 +54,11 @@ struct InboxEdit {
   std::uint32_t from = 0;  // the server that forwarded it
   std::string player;
   std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it
-  std::int64_t age_ms = 0;         // since it was forwarded, by the database's clock
+  // Until then (this server's steady clock) the row's deadline has surely
+  // not passed by the database's clock: the time the take was sent plus
+  // what the database said was left (its clock read after the take left
+  // here). The taker applies the edit only before it.
+  std::chrono::steady_clock::time_point current_until{};
 };
 
 // The news between servers (STORE_POSTGRESQL.md, "Notices"): every fenced
@@ -110,13 +117,25 @@ class ClusterLink {
   // Sends an edit to server to's inbox (done gets the inbox row's id),
   // releasing hand_over first (regions of this server's the edit also
   // writes: nothing of them in flight), so that server can take them.
+  // deadline (this server's steady clock): when the sender's wait runs
+  // out; the row's deadline is a lower bound of the database's clock at
+  // that time, so it has passed there once it has here. Not sent (an
+  // error: nothing written) without a recent reading of the database's
+  // clock or once deadline has passed; kUnknown: the commit's answer was
+  // lost (the row may be there).
   virtual void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
-                       std::vector<Vec3i> hand_over, std::function<void(StoreResult<std::int64_t>)> done) = 0;
+                       std::vector<Vec3i> hand_over, std::chrono::steady_clock::time_point deadline,
+                       std::function<void(StoreResult<std::int64_t>)> done) = 0;
+  // Takes back this server's forwarded edit (inbox row): done gets true if
+  // it was deleted untaken (never applied), false if its addressee took it
+  // (or answered it).
+  virtual void take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done) = 0;
   // Passes this server's inbox row on to server to, releasing hand_over
   // first as forward does.
   virtual void relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,
                      std::function<void(StoreResult<Ok>)> done) = 0;
-  // This server's inbox past after, at most limit, oldest first.
+  // Takes this server's inbox past after (rows not taken, before their
+  // deadline), at most limit, oldest first.
   virtual void read_inbox(std::int64_t after, std::size_t limit,
                           std::function<void(StoreResult<std::vector<InboxEdit>>)> done) = 0;
   // Answers edits refused without a commit (a failure is logged).

@@ -169,7 +169,8 @@ StoreResult<Ok> PgConnection::make_schema() {
            "CREATE TABLE IF NOT EXISTS terrane_access (key text PRIMARY KEY, value text NOT NULL)",
            "CREATE TABLE IF NOT EXISTS terrane_inbox ("
            "  id bigserial PRIMARY KEY, to_server integer NOT NULL, from_server integer NOT NULL,"
-           "  player text NOT NULL, edit bytea NOT NULL, created_at timestamptz NOT NULL)",
+           "  player text NOT NULL, edit bytea NOT NULL, created_at timestamptz NOT NULL,"
+           "  expires_at timestamptz NOT NULL DEFAULT '-infinity', taken boolean NOT NULL DEFAULT false)",
            "CREATE INDEX IF NOT EXISTS terrane_inbox_to ON terrane_inbox (to_server, id)",
            "CREATE TABLE IF NOT EXISTS terrane_leases ("
            "  rx integer NOT NULL, ry integer NOT NULL, rz integer NOT NULL,"
@@ -190,7 +191,12 @@ StoreResult<Ok> PgConnection::make_schema() {
            "ALTER TABLE terrane_chunks ADD COLUMN IF NOT EXISTS blob_revision bigint",
            "CREATE TABLE IF NOT EXISTS terrane_chunk_units ("
            "  x integer NOT NULL, y integer NOT NULL, z integer NOT NULL,"
-           "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))"}) {
+           "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))",
+           // Version 5: a forwarded edit's deadline, by the database's
+           // clock, and whether its addressee took it (rows of version 4
+           // get a deadline long past: never taken, swept).
+           "ALTER TABLE terrane_inbox ADD COLUMN IF NOT EXISTS expires_at timestamptz NOT NULL DEFAULT '-infinity'",
+           "ALTER TABLE terrane_inbox ADD COLUMN IF NOT EXISTS taken boolean NOT NULL DEFAULT false"}) {
     auto made = exec("create schema", table);
     if (!made) return abort(made.error());
   }
@@ -200,13 +206,14 @@ StoreResult<Ok> PgConnection::make_schema() {
     auto put = exec("write schema version", "INSERT INTO terrane_schema (version) VALUES ($1)",
                     {pg::text(kPgSchemaVersion)});
     if (!put) return abort(put.error());
-  } else if (const auto v = version->integer(0, 0); v == 1 || v == 2 || v == 3) {
+  } else if (const auto v = version->integer(0, 0); v == 1 || v == 2 || v == 3 || v == 4) {
     // Servers of an older version still running would write without moving
     // the write sequences or keeping answers (1), refuse this build's
-    // notices (2), or read blobs without the units kept after them (3):
+    // notices (2), read blobs without the units kept after them (3), or
+    // forward edits without a deadline and apply them however late (4):
     // the upgrade waits for them. A server without a lease (its clients
     // only watch) still reads and may write later: servers of versions 2
-    // and 3 say they run every second (terrane_servers; empty in version 1).
+    // to 4 say they run every second (terrane_servers; empty in version 1).
     auto running = exec("count running servers",
                         "SELECT (SELECT count(*) FROM terrane_leases WHERE expires_at > clock_timestamp()),"
                         " (SELECT count(*) FROM terrane_servers"
@@ -224,7 +231,8 @@ StoreResult<Ok> PgConnection::make_schema() {
     // Version 1 lacks terrane_servers, terrane_answers and the leases'
     // seq only, made above; version 2 differs in its notices only; version
     // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob
-    // is at its chunk's revision), made above.
+    // is at its chunk's revision); version 4 lacks the inbox's expires_at
+    // and taken only; all made above.
     auto put = exec("write schema version", "UPDATE terrane_schema SET version = $1", {pg::text(kPgSchemaVersion)});
     if (!put) return abort(put.error());
   } else if (version->integer(0, 0) != kPgSchemaVersion) {

@@ -49,6 +49,8 @@ struct StoreError {
     kLeft,        // a free region is left to the server writing its neighbours (claim, ClaimRule::kPreferNeighbours)
     kFenced,      // a write's lease is no longer current: nothing was written
     kDecode,      // a stored row does not decode
+    kUnknown,     // the connection broke after a COMMIT was sent: whether it took effect is not known
+                  // (the cluster store's forwards and relays say so; other writes report kConnection)
   };
   StoreError() = default;
   StoreError(Kind k, std::string m, std::optional<std::uint32_t> h = std::nullopt)
@@ -61,12 +63,14 @@ template <class T>
 using StoreResult = BasicResult<T, StoreError>;
 
 // The schema version this build reads and writes.
-// 1 to 3 are upgraded on open once none of their regions is leased (1:
+// 1 to 4 are upgraded on open once none of their regions is leased (1:
 // terrane_servers and the rest added; 2: notices carry changed units,
 // which a server of version 2 refuses; 3: a chunk's blob may be older
 // than its revision, followed by its units in terrane_chunk_units, which
-// a server of version 3 would not read; so none may run beside this one).
-inline constexpr int kPgSchemaVersion = 4;
+// a server of version 3 would not read; 4: forwarded edits carry a
+// deadline and are taken once, which a server of version 4 would neither
+// write nor respect; so none may run beside this one).
+inline constexpr int kPgSchemaVersion = 5;
 // Serialises schema creation (and a world's first metadata) between
 // servers opening one database at once: a transaction's advisory lock.
 inline constexpr std::int64_t kPgSchemaLockKey = 0x7465727261'6e65;  // "terrane"

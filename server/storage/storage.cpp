@@ -104,9 +104,14 @@ void Storage::give_reader(std::unique_ptr<WorldStore> store) {
 // Only a shared world's world owner asks for these (leased()); the cluster
 // room runs them on its control thread.
 void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
+                      std::chrono::steady_clock::time_point deadline,
                       std::function<void(StoreResult<std::int64_t>)> done) {
   if (cluster_ != nullptr)
-    cluster_->forward(to, std::move(player), std::move(edit), std::move(hand_over), std::move(done));
+    cluster_->forward(to, std::move(player), std::move(edit), std::move(hand_over), deadline, std::move(done));
+}
+
+void Storage::take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done) {
+  if (cluster_ != nullptr) cluster_->take_back(row, std::move(done));
 }
 
 void Storage::relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over,

@@ -32,6 +32,7 @@
 
 #include <asio.hpp>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -166,12 +167,15 @@ class Storage {
   void claim(Vec3i region, ClaimRule rule, ClaimDone done);
   // Forwarded edits (a shared world; on the cluster room's control
   // thread): sends one to server to's inbox (done gets the inbox row's
-  // id), reads this server's inbox past after, and answers edits refused
-  // without a commit.
+  // id; ClusterLink::forward), takes one back whose wait ran out, takes
+  // this server's inbox past after, and answers edits refused without a
+  // commit.
   // hand_over: regions of this server's the edit also writes, released
   // first (nothing of them in flight), so that server can take them.
+  // deadline: when the sender's wait for the answer runs out.
   void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
-               std::function<void(StoreResult<std::int64_t>)> done);
+               std::chrono::steady_clock::time_point deadline, std::function<void(StoreResult<std::int64_t>)> done);
+  void take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done);
   // Passes a forwarded edit (this server's inbox row) on to server to,
   // releasing hand_over first as forward does.
   void relay(std::int64_t row, std::uint32_t to, std::vector<Vec3i> hand_over, std::function<void(StoreResult<Ok>)> done);

@@ -8,6 +8,7 @@
 // PostgreSQL world with leases.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -24,7 +25,10 @@
 namespace terrane {
 
 // An edit another server forwarded here: its row in this server's inbox,
-// and the server that forwarded it (the answer goes there).
+// the server that forwarded it (the answer goes there), and until when it
+// may be applied (InboxEdit::current_until: its deadline has surely not
+// passed by the database's clock; later it is refused, for its sender has
+// given up on it or is about to).
 struct Forwarded {
   std::int64_t inbox_id = 0;
   std::uint32_t from = 0;
@@ -35,6 +39,7 @@ struct Forwarded {
   // This server's own client's edit, passed back to it: queued ahead of
   // the edits waiting, as its player's later edits wait for its answer.
   bool own = false;
+  std::chrono::steady_clock::time_point current_until = std::chrono::steady_clock::time_point::max();
 };
 
 // What an authority needs of the edit queue (the tick implements it).

@@ -12,10 +12,19 @@ namespace terrane {
 
 namespace {
 
-// How long a forwarded edit waits at least for its owner's answer (at least
-// a lease time) before its client is told there was none.
+// How long a forwarded edit waits at least for its owner to take it (at
+// least a lease time) before it is taken back.
 constexpr auto kForwardAnswerWait = std::chrono::milliseconds(2000);
 constexpr std::size_t kInboxPage = 256;
+
+// How players are told of forwarded edits the database failed: what became
+// of the edit, in Terrane's words. A rejection whose outcome is not known
+// ends in "outcome unknown" (as the client library's own,
+// client/edit_tracker.h), so a player knows it may still have been applied.
+// All are counted as RejectReason::kNotOwner (no reason is closer: the
+// region is another server's), told apart by their text.
+constexpr const char* kNotApplied = "the edit was not applied";
+constexpr const char* kOutcomeUnknown = "outcome unknown";
 
 }  // namespace
 
@@ -266,6 +275,8 @@ bool SharedAuthority::forward_pending(ClientId id, const Region& r) const {
   auto [first, last] = forwarding_.equal_range(id);
   for (auto it = first; it != last; ++it)
     if (chunks_meet(it->second.box, r)) return true;
+  if (std::any_of(unsure_.begin(), unsure_.end(), [&](const Unsure& u) { return u.id == id && chunks_meet(u.box, r); }))
+    return true;
   return std::any_of(forwarded_.begin(), forwarded_.end(),
                      [&](const auto& f) { return f.second.id == id && !f.second.answer && chunks_meet(f.second.box, r); });
 }
@@ -276,9 +287,11 @@ void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
   forwarding_.emplace(id, Forwarding{box, to});
-  storage_.forward(to, player, frame, regions,
-                   [this, id, edit, box, to, regions](StoreResult<std::int64_t> row) {
-    asio::post(strand_, [this, id, edit, box, to, regions, row = std::move(row)] {
+  // The wait counts from now, before the row is sent: its player's does.
+  const auto deadline = std::chrono::steady_clock::now() + forward_wait();
+  storage_.forward(to, player, frame, regions, deadline,
+                   [this, id, edit, box, to, regions, deadline](StoreResult<std::int64_t> row) {
+    asio::post(strand_, [this, id, edit, box, to, regions, deadline, row = std::move(row)] {
       handed_over(regions, row.ok());
       auto [first, last] = forwarding_.equal_range(id);
       for (auto it = first; it != last; ++it)
@@ -287,12 +300,10 @@ void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std
           break;
         }
       if (!row) {
-        if (clients_.present(id))
-          queue_.reject(id, edit, RejectReason::kNotOwner,
-                 fmt::format("cannot forward the edit to server {}: {}", to, row.error().message));
+        forward_failed(id, edit, box, to, deadline, row.error());
         return;
       }
-      Outgoing o{id, edit, box, to, std::chrono::steady_clock::now(), std::nullopt};
+      Outgoing o{Outgoing::kWaiting, id, edit, box, to, deadline, std::nullopt};
       if (auto early = early_answers_.find(*row); early != early_answers_.end()) {
         o.answer = early->second.first;
         early_answers_.erase(early);
@@ -303,17 +314,37 @@ void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std
   });
 }
 
+void SharedAuthority::forward_failed(ClientId id, const EditRequestMsg& edit, const Region& box, std::uint32_t to,
+                                     std::chrono::steady_clock::time_point deadline, const StoreError& e) {
+  database_log_.warn(fmt::format("forwarded edits: an edit for server {} not sent: {}", to, e.message));
+  if (e.kind == StoreError::Kind::kUnknown) {
+    // Committed or not: if its row is there, an owner may take it until
+    // its deadline and apply it within a commit's time.
+    unsure_.push_back(Unsure{id, edit, box, deadline + answer_wait()});
+    return;
+  }
+  if (clients_.present(id))
+    queue_.reject(id, edit, RejectReason::kNotOwner,
+                  e.kind == StoreError::Kind::kConnection
+                      ? fmt::format("the world's database cannot be reached; {}", kNotApplied)
+                      : fmt::format("the edit could not be forwarded to server {}; {}", to, kNotApplied));
+}
+
 void SharedAuthority::relay(Forwarded f, const Region& box, std::uint32_t to) {
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
   storage_.relay(f.inbox_id, to, regions, [this, f, to, regions](StoreResult<Ok> done) {
     asio::post(strand_, [this, f, to, regions, done = std::move(done)] {
       handed_over(regions, done.ok());
+      if (done) return;
       // Not passed on (the database out of reach, say): refused here. A row
-      // no longer this server's (kFenced) is another's to answer.
-      if (!done && done.error().kind != StoreError::Kind::kFenced)
+      // no longer this server's (kFenced) is another's to answer; one that
+      // may have been passed on (kUnknown) too: unanswered, its sender
+      // calls its outcome unknown.
+      database_log_.warn(fmt::format("forwarded edits: an edit not relayed to server {}: {}", to, done.error().message));
+      if (done.error().kind != StoreError::Kind::kFenced && done.error().kind != StoreError::Kind::kUnknown)
         storage_.answer({ForwardAnswer{f.inbox_id, f.from, false, 0,
-                                       fmt::format("cannot relay the edit to server {}: {}", to, done.error().message)}});
+                                       fmt::format("it could not be passed on to server {}; {}", to, kNotApplied)}});
     });
   });
 }
@@ -324,35 +355,29 @@ void SharedAuthority::take_inbox() {
     return;
   }
   inbox_reading_ = true;
-  inbox_seen_.clear();
   read_inbox_page(0);
 }
 
 void SharedAuthority::read_inbox_page(std::int64_t after) {
-  // Row ids are given at insert, not in commit order: every read lists all
-  // rows waiting (a page at a time) and takes those not taken yet.
+  // Each read takes the rows not taken yet and still before their deadline
+  // (the database decides both, once), a page at a time.
   storage_.read_inbox(after, kInboxPage, [this](StoreResult<std::vector<InboxEdit>> got) {
     asio::post(strand_, [this, got = std::move(got)] {
       if (!got) {
-        server_log().warn("forwarded edits: cannot read the inbox: {}", got.error().message);
+        database_log_.warn(fmt::format("forwarded edits: cannot read the inbox: {}", got.error().message));
         inbox_reading_ = false;
         if (std::exchange(inbox_again_, false)) take_inbox();
         return;
       }
       std::vector<ForwardAnswer> refused;
       for (const InboxEdit& in : *got) {
-        inbox_seen_.insert(in.id);
-        if (!inbox_taken_.insert(in.id).second) continue;  // queued or answered already
         // Another server's bytes, checked as a client's are.
         auto edit = decode_forwarded_edit(in.edit);
         const Region r = edit ? world_.meta().bounds.clamp(edit->reads()) : Region{};
-        const bool too_old = std::chrono::milliseconds(in.age_ms) > forward_wait();
-        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || clock_.stopping || too_old) {
-          // Too old: its sender has told its client there was no answer.
+        if (!edit || in.player.empty() || r.empty() || is_history_edit(edit->kind) || clock_.stopping) {
           const std::string why = !edit      ? fmt::format("the forwarded edit does not decode: {}", edit.error().detail)
                                   : in.player.empty() ? std::string("the player's name is missing or too long")
                                   : clock_.stopping ? std::string("the region's server is shutting down")
-                                  : too_old   ? std::string("it waited too long; its sender has given up on it")
                                   : r.empty() ? std::string("edit outside the world")
                                               : std::string("undo and redo are not forwarded");
           refused.push_back(ForwardAnswer{in.id, in.from, false, 0, why});
@@ -389,16 +414,15 @@ void SharedAuthority::read_inbox_page(std::int64_t after) {
             else if (duel && l->second.state == RegionLeaseState::kHandingOver && l->second.holder == in.from)
               l->second.wanted_back = true;
           });
+        // Refused by the tick if its turn comes after current_until.
         queue_.queue_forwarded(std::move(*edit), in.player,
-                               Forwarded{in.id, in.from, back, in.from == options_.server_id});
+                               Forwarded{in.id, in.from, back, in.from == options_.server_id, in.current_until});
       }
       if (!refused.empty()) storage_.answer(std::move(refused));
       if (got->size() == kInboxPage) {
         read_inbox_page(got->back().id);
         return;
       }
-      // The whole inbox listed: ids no longer there were answered and deleted.
-      std::erase_if(inbox_taken_, [&](std::int64_t id) { return inbox_seen_.count(id) == 0; });
       inbox_reading_ = false;
       if (std::exchange(inbox_again_, false)) take_inbox();
     });
@@ -440,8 +464,16 @@ void SharedAuthority::answered(ForwardAnswer answer) {
 void SharedAuthority::settle_forwarded() {
   const auto now = std::chrono::steady_clock::now();
   const auto wait = forward_wait();
-  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait; });
+  std::erase_if(early_answers_, [&](const auto& e) { return now - e.second.second > wait + answer_wait(); });
+  std::erase_if(unsure_, [&](const Unsure& u) {
+    if (clients_.present(u.id) && now < u.tell_at) return false;
+    if (clients_.present(u.id))
+      queue_.reject(u.id, u.edit, RejectReason::kNotOwner,
+                    fmt::format("the world's database did not confirm the forwarded edit; {}", kOutcomeUnknown));
+    return true;
+  });
   for (auto it = forwarded_.begin(); it != forwarded_.end();) {
+    const std::int64_t row = it->first;
     Outgoing& o = it->second;
     bool done = !clients_.present(o.id);
     if (!done && o.answer && !o.answer->accepted) {
@@ -460,14 +492,46 @@ void SharedAuthority::settle_forwarded() {
                       SendClass::kControl);
         done = true;
       }
-    } else if (!done && now - o.sent > wait) {
+    } else if (!done && o.state == Outgoing::kWaiting && now >= o.deadline) {
+      // Its deadline has passed by the database's clock too: nobody takes
+      // it from now on. Not taken: taken back, never applied.
+      o.state = Outgoing::kTakingBack;
+      storage_.take_back(row, [this, row](StoreResult<bool> deleted) {
+        asio::post(strand_, [this, row, deleted = std::move(deleted)]() mutable { taken_back(row, std::move(deleted)); });
+      });
+    } else if (!done && o.state == Outgoing::kTaken && now >= o.deadline + answer_wait()) {
       queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
-             fmt::format("forwarded to server {}, no answer within {} ms (it may still be applied)", o.to,
-                         wait.count()));
+                    fmt::format("server {} took the forwarded edit but did not answer within {} ms; {}", o.to,
+                                (wait + answer_wait()).count(), kOutcomeUnknown));
       done = true;
     }
     it = done ? forwarded_.erase(it) : std::next(it);
   }
+}
+
+void SharedAuthority::taken_back(std::int64_t row, StoreResult<bool> deleted) {
+  auto it = forwarded_.find(row);
+  if (it == forwarded_.end() || it->second.answer) {
+    settle_forwarded();  // answered meanwhile (or its client left)
+    return;
+  }
+  Outgoing& o = it->second;
+  if (deleted && !*deleted) {
+    o.state = Outgoing::kTaken;  // its owner has it: its answer is waited for
+    return;
+  }
+  if (clients_.present(o.id)) {
+    if (deleted) {
+      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
+                    fmt::format("server {} did not take the forwarded edit within {} ms; {}", o.to,
+                                forward_wait().count(), kNotApplied));
+    } else {
+      database_log_.warn(fmt::format("forwarded edits: cannot take back inbox row {}: {}", row, deleted.error().message));
+      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
+                    fmt::format("the world's database cannot be reached; {}", kOutcomeUnknown));
+    }
+  }
+  forwarded_.erase(it);
 }
 
 }  // namespace terrane

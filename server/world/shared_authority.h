@@ -3,9 +3,10 @@
 // leases as this server's edits know them (claimed as edits need them,
 // handed over with edits forwarded across a border), the chunks held
 // older than stored (another server wrote them: read again), the edits
-// this server forwarded and is waiting to hear of, this server's inbox of
-// edits forwarded to it (with each player's forwarded rate), and answers
-// that came early. Runs on the world strand; Storage's callbacks are
+// this server forwarded and is waiting to hear of (each with a deadline
+// its owner takes it by, or it is taken back: STORE_POSTGRESQL.md,
+// "Forwarded edits"), this server's inbox of edits forwarded to it (with
+// each player's forwarded rate), and answers that came early. Runs on the world strand; Storage's callbacks are
 // posted back to it.
 #pragma once
 
@@ -53,7 +54,7 @@ class SharedAuthority final : public Authority {
   void relay(Forwarded f, const Region& box, std::uint32_t to) override;
   bool passes_back_to(std::uint32_t from) const override { return from < options_.server_id; }
   void settle() override {
-    if (!forwarded_.empty()) settle_forwarded();
+    if (!forwarded_.empty() || !unsure_.empty()) settle_forwarded();
   }
   void changed_elsewhere(std::vector<ChunkChange> changes) override;
   void read_again_elsewhere(std::vector<Vec3i> regions) override;
@@ -87,14 +88,32 @@ class SharedAuthority final : public Authority {
   };
   // An edit this server forwarded to a region's owner, waiting for its
   // answer; then for the edit's chunks to be read again here, before the
-  // client is told.
+  // client is told. Its wait runs out at deadline (the row's deadline has
+  // then passed by the database's clock too): the row is taken back if
+  // nobody took it (the edit was not applied); taken, its owner's answer is
+  // waited for another answer_wait() before its outcome is called unknown.
+  //
+  //   kWaiting --deadline--> kTakingBack --deleted--> refused: not applied
+  //      |                        |------taken-----> kTaken --answer_wait--> outcome unknown
+  //      +--answer (any state)--> told                |-----database out of reach---> outcome unknown
   struct Outgoing {
+    enum : std::uint8_t { kWaiting, kTakingBack, kTaken } state = kWaiting;
     ClientId id;
     EditRequestMsg edit;
     Region box;
     std::uint32_t to;
-    std::chrono::steady_clock::time_point sent;
+    std::chrono::steady_clock::time_point deadline;
     std::optional<ForwardAnswer> answer;
+  };
+  // A forward whose commit's answer was lost: its row may be there (its id
+  // is not known), and may be taken until its deadline. Its player's next
+  // edits there wait (forward_pending) until its outcome is called unknown,
+  // once no owner can apply it any more.
+  struct Unsure {
+    ClientId id;
+    EditRequestMsg edit;
+    Region box;
+    std::chrono::steady_clock::time_point tell_at;
   };
 
   void on_claimed(Vec3i region, Storage::Claimed claimed);
@@ -120,11 +139,19 @@ class SharedAuthority final : public Authority {
   void read_inbox_page(std::int64_t after);
   // One forwarded edit of player within its rate (forwarded_rate_).
   bool take_forwarded_rate(const std::string& player);
-  // How long a forwarded edit waits for its owner's answer.
+  // How long a forwarded edit waits for its owner to take it (its deadline).
   std::chrono::milliseconds forward_wait() const;
+  // How long, after that, the answer of an owner that took it is waited for.
+  std::chrono::milliseconds answer_wait() const { return options_.lease; }
   // Tells clients the answers to their forwarded edits once the edits'
-  // chunks are current here; gives up on those unanswered for too long.
+  // chunks are current here; takes back those not taken by their
+  // deadline; gives up on those taken and unanswered for too long.
   void settle_forwarded();
+  void taken_back(std::int64_t row, StoreResult<bool> deleted);
+  // A forward that failed: its player is told in Terrane's words (the
+  // database's own go to the log).
+  void forward_failed(ClientId id, const EditRequestMsg& edit, const Region& box, std::uint32_t to,
+                      std::chrono::steady_clock::time_point deadline, const StoreError& e);
 
   Strand& strand_;
   World& world_;
@@ -139,13 +166,12 @@ class SharedAuthority final : public Authority {
   // Chunks held older than stored (another server wrote them): chunk ->
   // the revision stored.
   std::unordered_map<Vec3i, std::uint64_t, Vec3iHash> stale_;
-  // Forwarded edits: this server's clients' (inbox row -> edit), and the
-  // inbox of this server (rows taken and rows listed by the read under way;
-  // a read under way; another notice came during it).
+  // Forwarded edits: this server's clients' (inbox row -> edit; being
+  // sent; sent with their outcome unsure), and the inbox of this server
+  // (a read under way; another notice came during it).
   std::unordered_map<std::int64_t, Outgoing> forwarded_;
   std::unordered_multimap<ClientId, Forwarding> forwarding_;  // sent, row not known yet
-  std::unordered_set<std::int64_t> inbox_taken_;  // rows queued or answered, until gone from the inbox
-  std::unordered_set<std::int64_t> inbox_seen_;   // rows listed by the read under way
+  std::vector<Unsure> unsure_;
   // Forwarded edits per player, whatever server they came through, at the
   // rate a session may keep up: a player cannot pass it by editing here
   // through several servers at once.
@@ -154,6 +180,9 @@ class SharedAuthority final : public Authority {
   // Answers that came before their forward's own callback.
   std::unordered_map<std::int64_t, std::pair<ForwardAnswer, std::chrono::steady_clock::time_point>> early_answers_;
   std::vector<UnitUpdate> units_scratch_;  // apply_units'
+  // The database's own words of failures, for the log (players are told in
+  // Terrane's): at most one line a second.
+  RateLimitedLog database_log_{1};
 };
 
 }  // namespace terrane

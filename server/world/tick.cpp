@@ -317,6 +317,15 @@ Tick::EditStep Tick::apply_player_edit(TickEdits& t) {
     r = bounds.clamp(pe.edit.reads());
   }
   // (r, what the edit reads, holds what it writes.)
+  if (pe.forwarded && std::chrono::steady_clock::now() >= pe.forwarded->current_until) {
+    // Its deadline may have passed by the database's clock: its sender
+    // tells its player it was not applied, or that its outcome is unknown;
+    // applied now, it could land after the player's next edit.
+    t.refuse(*pe.forwarded, "it came too late (its deadline passed); it was not applied");
+    residency_.unbusy(r);
+    edits_.pop_front();
+    return EditStep::kNext;
+  }
   const auto wait = [&] {
     t.mark_waiting(r);
     t.waiting_players.insert(pe.player);
@@ -371,13 +380,13 @@ Tick::EditStep Tick::apply_player_edit(TickEdits& t) {
     // An edit across a border also writes regions of this server's: they
     // are handed over with it to the server holding the rest, once nothing
     // of them is in flight. A forwarded edit goes on so too (relayed: its
-    // inbox row readdressed, its sender and age kept), with regions of
-    // this server's or none (they moved on since its sender looked); a
-    // row older than the forward wait is t.refused wherever it is, so no
-    // relay goes on longer. Back to its sender only when the sender wins
-    // (a lower id: back), where it goes ahead of its player's next edits
-    // (which wait for its answer); otherwise t.refused (the player tries
-    // again), so no edit goes back and forth.
+    // inbox row readdressed, its sender and deadline kept), with regions
+    // of this server's or none (they moved on since its sender looked); a
+    // row past its deadline is taken nowhere, so no relay goes on longer.
+    // Back to its sender only when the sender wins (a lower id: back),
+    // where it goes ahead of its player's next edits (which wait for its
+    // answer); otherwise t.refused (the player tries again), so no edit
+    // goes back and forth.
     std::unordered_set<Vec3i, Vec3iHash> mine;
     const bool may_go_on =
         w == Writable::kNo && holder && !history && !clock_.stopping &&

@@ -106,6 +106,7 @@ TEST_F(ClusterControlTest, ForwardedEditsReachTheInboxInOrderAndARefusalReachesT
     auto done = std::make_shared<std::promise<StoreResult<std::int64_t>>>();
     rows.push_back(done->get_future());
     one.control->forward(2, "ann", {b, b}, b == 1 ? std::vector<Vec3i>{{5, 0, 0}} : std::vector<Vec3i>{},
+                         std::chrono::steady_clock::now() + kDeadline,
                          [done](StoreResult<std::int64_t> id) { done->set_value(std::move(id)); });
   }
   std::vector<std::int64_t> ids;

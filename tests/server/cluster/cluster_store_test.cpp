@@ -2,7 +2,8 @@
 // suite, a database per test), on 127.0.0.1: the region leases that keep
 // one writer per region (claims, renewals, takeovers, the neighbours'
 // rule), the servers' addresses and the map of writers, the regions'
-// write sequences, and forwarded edits relayed between inboxes. Chunks are
+// write sequences, forwarded edits taken once and only before their
+// deadline, taken back, and relayed between inboxes. Chunks are
 // written through the chunk store (PostgresStore) beside it.
 #include "server/cluster/cluster_store.h"
 
@@ -12,8 +13,10 @@
 #include <libpq-fe.h>
 
 #include <algorithm>
+#include <chrono>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <future>
 #include <thread>
@@ -309,22 +312,30 @@ TEST_F(ClusterStoreTest, AClaimThatWaitedForTheLeaseRowGetsAWholeLease) {
             "t");
 }
 
+// The database's clock now, in microseconds since 1970 (a forwarded
+// edit's deadline is written in it).
+std::int64_t database_now_us(const std::string& url) {
+  return std::stoll(sql_value(url, "SELECT (extract(epoch FROM clock_timestamp()) * 1000000)::bigint"));
+}
+
 // A forwarded edit passed on: its row goes to the next server's inbox with
-// its sender and age, so that server answers the sender directly; the row
-// is no longer the relaying server's (relayed once, never twice).
-TEST_F(ClusterStoreTest, ARelayedEditKeepsItsSenderAndAgeAndLeavesTheRelaysInbox) {
+// its sender and deadline, so that server answers the sender directly and
+// takes it only in time; the row is no longer the relaying server's
+// (relayed once, never twice).
+TEST_F(ClusterStoreTest, ARelayedEditKeepsItsSenderAndDeadlineAndLeavesTheRelaysInbox) {
   auto s = open();
   ASSERT_TRUE(s);
   const std::vector<std::uint8_t> edit{1, 2, 3};
-  auto row = cl(s)->forward(1, 2, "ann", edit);
+  auto row = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
   ASSERT_TRUE(row.ok()) << row.error().message;
-  ASSERT_EQ(run_sql(url_, fmt::format("UPDATE terrane_inbox SET created_at = created_at - interval '3 seconds'"
-                                      " WHERE id = {}", *row)),
-            "");
+  auto taken = cl(s)->inbox(2, 0, 10);
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+  ASSERT_EQ(taken->size(), 1u);
   ASSERT_TRUE(cl(s)->relay(*row, 2, 3).ok());
   auto at_relay = cl(s)->inbox(2, 0, 10);
   ASSERT_TRUE(at_relay.ok());
   EXPECT_TRUE(at_relay->empty());
+  const auto asked = std::chrono::steady_clock::now();
   auto at_next = cl(s)->inbox(3, 0, 10);
   ASSERT_TRUE(at_next.ok());
   ASSERT_EQ(at_next->size(), 1u);
@@ -332,10 +343,84 @@ TEST_F(ClusterStoreTest, ARelayedEditKeepsItsSenderAndAgeAndLeavesTheRelaysInbox
   EXPECT_EQ(at_next->front().from, 1u);
   EXPECT_EQ(at_next->front().player, "ann");
   EXPECT_EQ(at_next->front().edit, edit);
-  EXPECT_GE(at_next->front().age_ms, 3000);
+  // The deadline kept: at most 20 s from when it was first sent.
+  EXPECT_LE(at_next->front().current_until, asked + 20s);
+  EXPECT_GT(at_next->front().current_until, asked + 10s);
   auto again = cl(s)->relay(*row, 2, 3);
   ASSERT_FALSE(again.ok());
   EXPECT_NE(again.error().message.find("no longer server 2's"), std::string::npos) << again.error().message;
+}
+
+// A forwarded edit whose deadline has passed by the database's clock when
+// its row lands (held up on the way) is never taken: its sender has told
+// its player it was not applied. One in time is taken once.
+TEST_F(ClusterStoreTest, AForwardedEditPastItsDeadlineIsNeverTakenAndOneInTimeIsTakenOnce) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  const std::vector<std::uint8_t> edit{4, 5, 6};
+  auto late = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) - 1000);
+  ASSERT_TRUE(late.ok()) << late.error().message;
+  auto in_time = cl(s)->forward(1, 2, "bob", edit, database_now_us(url_) + 20'000'000);
+  ASSERT_TRUE(in_time.ok()) << in_time.error().message;
+  auto taken = cl(s)->inbox(2, 0, 10);
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+  ASSERT_EQ(taken->size(), 1u);
+  EXPECT_EQ(taken->front().id, *in_time);
+  EXPECT_EQ(taken->front().player, "bob");
+  auto again = cl(s)->inbox(2, 0, 10);
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_TRUE(again->empty()) << "taken twice";
+  // The late one is still there, untaken: its sender takes it back.
+  auto back = cl(s)->take_back(*late);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_TRUE(*back);
+}
+
+// Taken and taken back exclude each other: a row its addressee took stays
+// (its sender waits for the answer), and a row taken back is never taken.
+TEST_F(ClusterStoreTest, ATakenEditCannotBeTakenBackAndOneTakenBackIsNeverTaken) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  const std::vector<std::uint8_t> edit{7, 8, 9};
+  auto first = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  auto taken = cl(s)->inbox(2, 0, 10);
+  ASSERT_TRUE(taken.ok() && taken->size() == 1u);
+  auto back = cl(s)->take_back(*first);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_FALSE(*back) << "taken back after its addressee took it";
+  EXPECT_EQ(sql_value(url_, fmt::format("SELECT count(*) FROM terrane_inbox WHERE id = {}", *first)), "1");
+  auto second = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  back = cl(s)->take_back(*second);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_TRUE(*back);
+  auto after = cl(s)->inbox(2, 0, 10);
+  ASSERT_TRUE(after.ok()) << after.error().message;
+  EXPECT_TRUE(after->empty()) << "a row taken back was taken";
+  back = cl(s)->take_back(*second);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_FALSE(*back) << "taken back twice";
+}
+
+// Every renewal round reads the database's clock: a lower bound of it at
+// any later local time.
+TEST_F(ClusterStoreTest, ARenewalReadsALowerBoundOfTheDatabasesClock) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  auto lease = cl(s)->claim({0, 0, 0}, 1, 60s);
+  ASSERT_TRUE(lease.ok()) << lease.error().message;
+  for (const bool with_leases : {true, false}) {
+    DatabaseClock clock;
+    const std::int64_t before = database_now_us(url_);
+    auto kept = with_leases ? cl(s)->renew(std::span(&*lease, 1), 60s, &clock)
+                            : cl(s)->renew(std::span<const RegionLease>{}, 60s, &clock);
+    ASSERT_TRUE(kept.ok()) << kept.error().message;
+    EXPECT_EQ(kept->size(), with_leases ? 1u : 0u);
+    EXPECT_GE(clock.at_us, before);
+    const auto local = std::chrono::steady_clock::now();  // then the database's clock, read later
+    EXPECT_LE(clock.at_least_at(local), database_now_us(url_));
+  }
 }
 
 }  // namespace

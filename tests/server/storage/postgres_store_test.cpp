@@ -364,6 +364,28 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
     EXPECT_EQ((*kept)->chunk.get({0, 0, 0}).material, materials::kBrick);
   }
   EXPECT_EQ(run_sql(url_, current_version), "");
+  // A database of version 4 (whose servers forward edits without a
+  // deadline and apply them however late) too; its inbox rows get a
+  // deadline long past: never taken.
+  ASSERT_EQ(run_sql(url_, "ALTER TABLE terrane_inbox DROP COLUMN expires_at, DROP COLUMN taken;"
+                          " INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
+                          "  VALUES (2, 1, 'ann', '\\x01', clock_timestamp());"
+                          " UPDATE terrane_schema SET version = 4;"
+                          " UPDATE terrane_leases SET expires_at = clock_timestamp() + interval '1 hour'"),
+            "");
+  auto v4_running = PostgresStore::open(url_);
+  ASSERT_FALSE(v4_running.ok());
+  EXPECT_NE(v4_running.error().message.find("schema of version 4 with 1 regions leased now"), std::string::npos)
+      << v4_running.error().message;
+  ASSERT_EQ(run_sql(url_, "UPDATE terrane_leases SET expires_at = clock_timestamp()"), "");
+  {
+    auto upgraded = open();
+    ASSERT_TRUE(upgraded);
+    auto taken = cl(upgraded)->inbox(2, 0, 10);
+    ASSERT_TRUE(taken.ok()) << taken.error().message;
+    EXPECT_TRUE(taken->empty()) << "a row of version 4 was taken";
+  }
+  EXPECT_EQ(run_sql(url_, current_version), "");
   // A damaged blob is a decode error naming the chunk.
   ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
   auto store = open();

@@ -5,7 +5,10 @@
 // a region another server holds is not writable and names its holder; a
 // chunk another server changed that nobody here holds is forgotten; an
 // edit from a server this one asked for the same region at once goes back
-// to it, unclaimed, if that server's id is the lower.
+// to it, unclaimed, if that server's id is the lower; a forwarded edit is
+// refused once its wait ran out untaken (never taken after), called
+// unknown once taken and not answered, and rejected in Terrane's words
+// when the database fails it.
 #include "server/world/shared_authority.h"
 
 #include <gtest/gtest.h>
@@ -25,6 +28,7 @@ namespace terrane {
 namespace {
 
 using namespace std::chrono_literals;
+using testing_support::run_sql;
 
 class NoEdits final : public EditQueue {
  public:
@@ -32,9 +36,13 @@ class NoEdits final : public EditQueue {
     ++queued;
     forwarded.push_back(f);
   }
-  void reject(ClientId, const EditRequestMsg&, RejectReason, const std::string&) override { ++rejected; }
+  void reject(ClientId, const EditRequestMsg&, RejectReason, const std::string& reason) override {
+    ++rejected;
+    reasons.push_back(reason);
+  }
   int queued = 0, rejected = 0;
   std::vector<Forwarded> forwarded;
+  std::vector<std::string> reasons;  // the world strand's
 };
 
 EditRequestMsg fill(Region box) {
@@ -105,6 +113,48 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     });
     done.get_future().wait();
   }
+  // A client of this server's (its forwarded edits' rejections reach
+  // edits_), and an edit of it for server 3, whose region this is.
+  static constexpr ClientId kAnn = 7;
+  static constexpr std::uint32_t kOwner = 3;
+  static const Region& box() {
+    static const Region b{{4, 1, 4}, {6, 3, 6}};
+    return b;
+  }
+  void forward_anns_edit() {
+    on_strand([&] { fan_out_->join(kAnn, std::make_shared<testing_support::RecordingClient>()); });
+    EditRequestMsg e;
+    e.edit_id = 1;
+    e.kind = EditKind::kFillBox;
+    e.box = box();
+    e.material = 3;
+    e.occupancy = 255;
+    on_strand([&] { authority_->forward(kAnn, e, "ann", box(), kOwner); });
+  }
+  // What ann was told of her forwarded edit, waited for (the tick settles
+  // forwarded edits every tick: here the test does).
+  std::string anns_rejection() {
+    std::string reason = "no rejection";
+    testing_support::eventually([&] {
+      bool told = false;
+      on_strand([&] {
+        authority_->settle();
+        if (!edits_.reasons.empty()) reason = edits_.reasons.front(), told = true;
+      });
+      return told;
+    });
+    return reason;
+  }
+  // What server 2 takes of its inbox now.
+  std::vector<InboxEdit> owners_inbox() {
+    auto cs = ClusterStore::open(url_);
+    EXPECT_TRUE(cs.ok()) << (cs.ok() ? "" : cs.error().message);
+    if (!cs.ok()) return {};
+    auto got = (*cs)->inbox(kOwner, 0, 10);
+    EXPECT_TRUE(got.ok()) << (got.ok() ? "" : got.error().message);
+    return got.ok() ? *got : std::vector<InboxEdit>{};
+  }
+
   Authority::Writable writable(const Region& r, std::string* why = nullptr,
                                std::optional<std::uint32_t>* holder = nullptr) {
     Authority::Writable w{};
@@ -127,7 +177,11 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     EXPECT_TRUE(other.ok()) << other.error().message;
     if (!other.ok()) return std::nullopt;
     const Frame frame = build_edit_request(fill(box));
-    EXPECT_TRUE((*other)->forward(from, kThisServer, "ann", frame).ok());
+    // Its deadline a minute on by the database's clock.
+    const std::int64_t expires_us =
+        std::stoll(testing_support::sql_value(url_, "SELECT (extract(epoch FROM clock_timestamp()) * 1000000)::bigint")) +
+        60'000'000;
+    EXPECT_TRUE((*other)->forward(from, kThisServer, "ann", frame, expires_us).ok());
     std::size_t before = 0;
     on_strand([&] {
       before = edits_.forwarded.size();
@@ -251,6 +305,70 @@ TEST_F(SharedAuthorityTest, AnEditIsPassedBackOnlyToALowerIdAskedForTheSameRegio
   ASSERT_TRUE(got.has_value());
   EXPECT_FALSE(got->back);
   EXPECT_TRUE(got->own);
+}
+
+// A forward held up on its way (here: the inbox locked; in the fault
+// suite, a partition between its sender and the database) until its wait
+// has run out lands with its deadline passed: its owner never takes it,
+// and its player is told it was not applied.
+TEST_F(SharedAuthorityTest, AForwardHeldUpPastItsWaitIsRefusedAndNeverTaken) {
+  options_.lease = 1000ms;  // a forward waits 2 s
+  PGconn* lock = PQconnectdb(url_.c_str());
+  ASSERT_EQ(PQstatus(lock), CONNECTION_OK) << PQerrorMessage(lock);
+  auto command = [&](const char* sql) {
+    PGresult* r = PQexec(lock, sql);
+    std::string error = PQresultStatus(r) == PGRES_COMMAND_OK ? "" : PQresultErrorMessage(r);
+    PQclear(r);
+    return error;
+  };
+  ASSERT_EQ(command("BEGIN"), "");
+  ASSERT_EQ(command("LOCK TABLE terrane_inbox IN SHARE MODE"), "");
+  forward_anns_edit();
+  // The lock goes once the row has waited on it for longer than the
+  // forward's wait, by the database's clock.
+  EXPECT_TRUE(testing_support::eventually([&] {
+    return testing_support::sql_value(
+               url_, "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'"
+                     " AND query LIKE 'INSERT INTO terrane_inbox%'"
+                     " AND clock_timestamp() > query_start + interval '2000 milliseconds'") == "1";
+  }));
+  ASSERT_EQ(command("COMMIT"), "");
+  PQfinish(lock);
+  const std::string told = anns_rejection();
+  EXPECT_NE(told.find("not applied"), std::string::npos) << told;
+  EXPECT_TRUE(owners_inbox().empty()) << "the owner took an edit its sender gave up on";
+  EXPECT_EQ(testing_support::sql_value(url_, "SELECT count(*) FROM terrane_inbox"), "0") << "not taken back";
+}
+
+// The owner took the edit and never answered (it stopped, say): its
+// sender cannot take it back, waits a while longer, then says its outcome
+// is unknown (it may still have been applied).
+TEST_F(SharedAuthorityTest, AForwardTakenAndNeverAnsweredEndsWithItsOutcomeUnknown) {
+  options_.lease = 1000ms;
+  forward_anns_edit();
+  std::vector<InboxEdit> taken;
+  ASSERT_TRUE(testing_support::eventually([&] {
+    taken = owners_inbox();
+    return !taken.empty();
+  }));
+  EXPECT_EQ(taken.front().player, "ann");
+  const std::string told = anns_rejection();
+  EXPECT_NE(told.find("outcome unknown"), std::string::npos) << told;
+  EXPECT_EQ(testing_support::sql_value(url_, "SELECT count(*) FROM terrane_inbox"), "1") << "a taken row went";
+}
+
+// A player is told what became of the edit in Terrane's words, never the
+// database's (here every session of the world's database is ended as the
+// edit goes: its forward fails before it is sent).
+TEST_F(SharedAuthorityTest, AForwardTheDatabaseFailedIsRejectedInTerranesWords) {
+  ASSERT_EQ(run_sql(url_, "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                          " WHERE datname = current_database() AND pid <> pg_backend_pid()"),
+            "");
+  forward_anns_edit();
+  const std::string told = anns_rejection();
+  EXPECT_EQ(told.find("postgresql"), std::string::npos) << told;
+  EXPECT_EQ(told.find("connection"), std::string::npos) << told;
+  EXPECT_NE(told.find("the world's database cannot be reached; the edit was not applied"), std::string::npos) << told;
 }
 
 }  // namespace

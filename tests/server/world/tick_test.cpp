@@ -4,7 +4,8 @@
 // waits, another player's edits go on meanwhile; an edit is acknowledged
 // once committed, after its holders heard of it; a flush waits for the
 // commit in flight; a forwarded edit its sender wins goes back to it
-// unasked, and this server's own edit back goes ahead of those waiting.
+// unasked, and this server's own edit back goes ahead of those waiting; a
+// forwarded edit past its time is refused.
 #include "server/world/tick.h"
 
 #include <gtest/gtest.h>
@@ -18,6 +19,8 @@
 
 namespace terrane {
 namespace {
+
+using namespace std::chrono_literals;
 
 using testing_support::RecordingClient;
 using testing_support::WorldStrand;
@@ -124,6 +127,29 @@ TEST_F(TickTest, APlayersEditsKeepTheirOrderWhileAnEarlierOneWaitsAndOthersGoOn)
     EXPECT_EQ(residency_.get(Vec3i{41, 2, 5}), solid(materials::kBrick));
     EXPECT_GT(authority_.settled, 0);
   });
+}
+
+// An edit another server forwarded is applied only while its deadline has
+// surely not passed by the database's clock (Forwarded::current_until):
+// later, its sender may have told its player it was not applied, or that
+// its outcome is unknown, and the player gone on to edit there elsewhere.
+TEST_F(TickTest, AForwardedEditWhoseDeadlineMayHavePassedIsRefusedNotApplied) {
+  const Region late{{4, 1, 4}, {6, 3, 6}};       // chunk (0,0,0)
+  const Region in_time{{4, 1, 40}, {6, 3, 42}};  // chunk (0,0,1)
+  const auto now = std::chrono::steady_clock::now();
+  w_.on_strand([&] {
+    residency_.reserve(late);
+    residency_.reserve(in_time);
+    tick_.queue_forwarded(fill(1, late, materials::kBrick), "bob", Forwarded{1, 2, false, false, now - 1ms});
+    tick_.queue_forwarded(fill(2, in_time, materials::kSand), "cy", Forwarded{2, 2, false, false, now + 600s});
+  });
+  ASSERT_TRUE(testing_support::eventually([&] {
+    bool applied = false;
+    w_.on_strand([&] { applied = residency_.get(Vec3i{5, 2, 41}) == solid(materials::kSand); });
+    return applied;
+  }));
+  // The late one came first in the queue: refused by now, never applied.
+  w_.on_strand([&] { EXPECT_NE(residency_.get(Vec3i{5, 2, 5}), solid(materials::kBrick)); });
 }
 
 TEST_F(TickTest, AnEditIsAcknowledgedAfterItsCommitAndAfterItsHoldersHeard) {
