@@ -58,4 +58,10 @@ class PostgresStoresTest : public PostgresTest {
   std::map<const PostgresStore*, std::unique_ptr<ClusterStore>> beside_;
 };
 
+// The database's clock now, in microseconds since 1970 (a forwarded
+// edit's deadline is written in it).
+inline std::int64_t database_now_us(const std::string& url) {
+  return std::stoll(sql_value(url, "SELECT (extract(epoch FROM clock_timestamp()) * 1000000)::bigint"));
+}
+
 }  // namespace terrane::testing_support

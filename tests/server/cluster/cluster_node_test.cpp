@@ -75,7 +75,7 @@ TEST_F(ClusterNodeTest, StartsAndStopsItsPartsInOrder) {
   ASSERT_TRUE(node->listen(std::move(on)).ok());
   EXPECT_EQ(listeners(), "1");
   const std::uint8_t edit[] = {1, 2, 3};
-  ASSERT_TRUE(other->forward(2, 1, "alice", edit).ok());
+  ASSERT_TRUE(other->forward(2, 1, "alice", edit, testing_support::database_now_us(url_) + 20'000'000).ok());
   EXPECT_TRUE(eventually([&] { return inbox.load() >= 1; }));
 
   // Started: it is seen running at its address, and publishes who writes what.

@@ -312,12 +312,6 @@ TEST_F(ClusterStoreTest, AClaimThatWaitedForTheLeaseRowGetsAWholeLease) {
             "t");
 }
 
-// The database's clock now, in microseconds since 1970 (a forwarded
-// edit's deadline is written in it).
-std::int64_t database_now_us(const std::string& url) {
-  return std::stoll(sql_value(url, "SELECT (extract(epoch FROM clock_timestamp()) * 1000000)::bigint"));
-}
-
 // A forwarded edit passed on: its row goes to the next server's inbox with
 // its sender and deadline, so that server answers the sender directly and
 // takes it only in time; the row is no longer the relaying server's
@@ -326,7 +320,7 @@ TEST_F(ClusterStoreTest, ARelayedEditKeepsItsSenderAndDeadlineAndLeavesTheRelays
   auto s = open();
   ASSERT_TRUE(s);
   const std::vector<std::uint8_t> edit{1, 2, 3};
-  auto row = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
+  auto row = cl(s)->forward(1, 2, "ann", edit, testing_support::database_now_us(url_) + 20'000'000);
   ASSERT_TRUE(row.ok()) << row.error().message;
   auto taken = cl(s)->inbox(2, 0, 10);
   ASSERT_TRUE(taken.ok()) << taken.error().message;
@@ -358,9 +352,9 @@ TEST_F(ClusterStoreTest, AForwardedEditPastItsDeadlineIsNeverTakenAndOneInTimeIs
   auto s = open();
   ASSERT_TRUE(s);
   const std::vector<std::uint8_t> edit{4, 5, 6};
-  auto late = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) - 1000);
+  auto late = cl(s)->forward(1, 2, "ann", edit, testing_support::database_now_us(url_) - 1000);
   ASSERT_TRUE(late.ok()) << late.error().message;
-  auto in_time = cl(s)->forward(1, 2, "bob", edit, database_now_us(url_) + 20'000'000);
+  auto in_time = cl(s)->forward(1, 2, "bob", edit, testing_support::database_now_us(url_) + 20'000'000);
   ASSERT_TRUE(in_time.ok()) << in_time.error().message;
   auto taken = cl(s)->inbox(2, 0, 10);
   ASSERT_TRUE(taken.ok()) << taken.error().message;
@@ -382,7 +376,7 @@ TEST_F(ClusterStoreTest, ATakenEditCannotBeTakenBackAndOneTakenBackIsNeverTaken)
   auto s = open();
   ASSERT_TRUE(s);
   const std::vector<std::uint8_t> edit{7, 8, 9};
-  auto first = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
+  auto first = cl(s)->forward(1, 2, "ann", edit, testing_support::database_now_us(url_) + 20'000'000);
   ASSERT_TRUE(first.ok()) << first.error().message;
   auto taken = cl(s)->inbox(2, 0, 10);
   ASSERT_TRUE(taken.ok() && taken->size() == 1u);
@@ -390,7 +384,7 @@ TEST_F(ClusterStoreTest, ATakenEditCannotBeTakenBackAndOneTakenBackIsNeverTaken)
   ASSERT_TRUE(back.ok()) << back.error().message;
   EXPECT_FALSE(*back) << "taken back after its addressee took it";
   EXPECT_EQ(sql_value(url_, fmt::format("SELECT count(*) FROM terrane_inbox WHERE id = {}", *first)), "1");
-  auto second = cl(s)->forward(1, 2, "ann", edit, database_now_us(url_) + 20'000'000);
+  auto second = cl(s)->forward(1, 2, "ann", edit, testing_support::database_now_us(url_) + 20'000'000);
   ASSERT_TRUE(second.ok()) << second.error().message;
   back = cl(s)->take_back(*second);
   ASSERT_TRUE(back.ok()) << back.error().message;
@@ -412,14 +406,14 @@ TEST_F(ClusterStoreTest, ARenewalReadsALowerBoundOfTheDatabasesClock) {
   ASSERT_TRUE(lease.ok()) << lease.error().message;
   for (const bool with_leases : {true, false}) {
     DatabaseClock clock;
-    const std::int64_t before = database_now_us(url_);
+    const std::int64_t before = testing_support::database_now_us(url_);
     auto kept = with_leases ? cl(s)->renew(std::span(&*lease, 1), 60s, &clock)
                             : cl(s)->renew(std::span<const RegionLease>{}, 60s, &clock);
     ASSERT_TRUE(kept.ok()) << kept.error().message;
     EXPECT_EQ(kept->size(), with_leases ? 1u : 0u);
     EXPECT_GE(clock.at_us, before);
     const auto local = std::chrono::steady_clock::now();  // then the database's clock, read later
-    EXPECT_LE(clock.at_least_at(local), database_now_us(url_));
+    EXPECT_LE(clock.at_least_at(local), testing_support::database_now_us(url_));
   }
 }
 
