@@ -167,9 +167,11 @@ void LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirector
 
 void LeaseKeeper::renew_loop() {
   auto last_ok = std::chrono::steady_clock::now();
+  bool failed = false;  // the last round could not renew: the next one comes after the retry pause
   std::unique_lock lock(mutex_);
   for (;;) {
-    wake_.wait_for(lock, times_.renew, [&] { return stopping_ || round_now_; });
+    wake_.wait_for(lock, failed ? std::min(times_.retry, times_.renew) : times_.renew,
+                   [&] { return stopping_ || round_now_; });
     if (stopping_) break;
     round_now_ = false;
     const std::string address = address_;
@@ -189,6 +191,7 @@ void LeaseKeeper::renew_loop() {
     renewer_->set_call_timeout(std::clamp(left, std::chrono::milliseconds(1), std::max(times_.lease / 2, std::chrono::milliseconds(1))));
     auto kept = renewer_->renew(all, times_.lease);
     const auto now = std::chrono::steady_clock::now();
+    failed = !kept;
     if (kept) {
       last_ok = started;
       for (const RegionLease& l : all)
