@@ -190,7 +190,11 @@ StoreResult<Ok> PgConnection::make_schema() {
            "ALTER TABLE terrane_chunks ADD COLUMN IF NOT EXISTS blob_revision bigint",
            "CREATE TABLE IF NOT EXISTS terrane_chunk_units ("
            "  x integer NOT NULL, y integer NOT NULL, z integer NOT NULL,"
-           "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))"}) {
+           "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))",
+           // Version 5: each writing connection's last commit, so that a
+           // commit tried again after its answer was lost is not stored twice.
+           "CREATE TABLE IF NOT EXISTS terrane_commits ("
+           "  writer bigint PRIMARY KEY, seq bigint NOT NULL, committed_at timestamptz NOT NULL)"}) {
     auto made = exec("create schema", table);
     if (!made) return abort(made.error());
   }
@@ -225,6 +229,11 @@ StoreResult<Ok> PgConnection::make_schema() {
     // seq only, made above; version 2 differs in its notices only; version
     // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob
     // is at its chunk's revision), made above.
+    auto put = exec("write schema version", "UPDATE terrane_schema SET version = $1", {pg::text(kPgSchemaVersion)});
+    if (!put) return abort(put.error());
+  } else if (v == 4) {
+    // Version 4 lacks terrane_commits only, made above, which its servers
+    // never read or write: they may go on running beside this one.
     auto put = exec("write schema version", "UPDATE terrane_schema SET version = $1", {pg::text(kPgSchemaVersion)});
     if (!put) return abort(put.error());
   } else if (version->integer(0, 0) != kPgSchemaVersion) {
@@ -270,6 +279,12 @@ StoreResult<PgConnection::Rows> PgConnection::exec(const char* what, const char*
     return StoreError{StoreError::Kind::kConnection,
                       fmt::format("postgresql: {}: no answer within {} ms (the connection is given up)", what,
                                   call_timeout_.count())};
+  if (lose_answer_ && lose_answer_(sql)) {
+    if (res != nullptr) PQclear(res);
+    broken_ = true;
+    return StoreError{StoreError::Kind::kConnection,
+                      fmt::format("postgresql: {}: the connection was lost before the answer (a test's)", what)};
+  }
   const ExecStatusType st = res != nullptr ? PQresultStatus(res) : PGRES_FATAL_ERROR;
   if (st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK) {
     StoreError e = error(what, res);

@@ -56,6 +56,9 @@ struct StoreError {
   Kind kind = Kind::kQuery;
   std::string message;
   std::optional<std::uint32_t> holder;  // kOwned: the server holding the region; kLeft: the one it is left to
+  // kConnection on a COMMIT that was sent: its answer was lost, and the
+  // transaction may have been stored.
+  bool maybe_committed = false;
 };
 template <class T>
 using StoreResult = BasicResult<T, StoreError>;
@@ -66,7 +69,9 @@ using StoreResult = BasicResult<T, StoreError>;
 // which a server of version 2 refuses; 3: a chunk's blob may be older
 // than its revision, followed by its units in terrane_chunk_units, which
 // a server of version 3 would not read; so none may run beside this one).
-inline constexpr int kPgSchemaVersion = 4;
+// 4 is upgraded at once: it lacks terrane_commits only, which its servers
+// never use.
+inline constexpr int kPgSchemaVersion = 5;
 // Serialises schema creation (and a world's first metadata) between
 // servers opening one database at once: a transaction's advisory lock.
 inline constexpr std::int64_t kPgSchemaLockKey = 0x7465727261'6e65;  // "terrane"
@@ -146,14 +151,24 @@ class PgConnection {
     auto out = body();
     if (!out) return abort(out.error());
     auto commit = exec(what, "COMMIT");
-    if (!commit) return abort(commit.error());
+    if (!commit) return abort(unanswered_commit(commit.error()));
     return out;
+  }
+  // The error of a COMMIT: on a lost connection, maybe_committed is set.
+  static StoreError unanswered_commit(StoreError e) {
+    e.maybe_committed = e.kind == StoreError::Kind::kConnection;
+    return e;
   }
   // The deadline of each statement, its answer included (10 s unless set).
   void set_call_timeout(std::chrono::milliseconds t) { call_timeout_ = t; }
   std::chrono::milliseconds call_timeout() const { return call_timeout_; }
   // The raw connection (notices: PQnotifies, PQsocket).
   PGconn* raw() const { return conn_; }
+  // Test seam: asked with each statement once it has been answered; true
+  // loses the answer: the statement is done in the database, and here it
+  // fails with kConnection and the connection is given up, as when the
+  // network fails just after the database answered.
+  void set_lose_answer(std::function<bool(const char* sql)> lose) { lose_answer_ = std::move(lose); }
   // The url as given, and as messages name it (the password left out).
   const std::string& url() const { return url_; }
   const std::string& shown() const { return shown_; }
@@ -183,6 +198,7 @@ class PgConnection {
   bool broken_ = false;
   std::string url_;
   std::string shown_;
+  std::function<bool(const char* sql)> lose_answer_;  // test seam (set_lose_answer)
 };
 
 }  // namespace terrane
