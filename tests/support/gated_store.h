@@ -1,11 +1,13 @@
 // A WorldStore that passes everything to another one, except that reading a
 // chunk named in its gate waits until the gate opens (on every connection
-// reopened from it): a load that takes as long as a test wants.
+// reopened from it): a load that takes as long as a test wants. Its gate
+// can also make every save fail with an error of the test's.
 #pragma once
 
 #include <condition_variable>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <unordered_set>
 
 #include "common/world/world_store.h"
@@ -34,12 +36,22 @@ class StoreGate {
     std::lock_guard lock(m_);
     return waited_ > 0;
   }
+  // From now on every save fails with e (nullopt: saves pass).
+  void fail_saves(std::optional<FileError> e) {
+    std::lock_guard lock(m_);
+    save_failure_ = std::move(e);
+  }
+  std::optional<FileError> save_failure() {
+    std::lock_guard lock(m_);
+    return save_failure_;
+  }
 
  private:
   std::mutex m_;
   std::condition_variable cv_;
   std::unordered_set<Vec3i, Vec3iHash> closed_;
   int waited_ = 0;
+  std::optional<FileError> save_failure_;
 };
 
 class GatedStore final : public WorldStore {
@@ -70,6 +82,7 @@ class GatedStore final : public WorldStore {
   void end_read() override { inner_->end_read(); }
   FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
                          std::span<const EditLogEntry> log = {}) override {
+    if (auto e = gate_->save_failure()) return *e;
     return inner_->save_chunks(writes, overwrite, log);
   }
   void set_coarse_behind(bool on) override { inner_->set_coarse_behind(on); }
