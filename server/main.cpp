@@ -42,7 +42,7 @@ constexpr const char* kHelp =
     "  --server-id N               this server's id in a PostgreSQL world, 0 to 2147483647, one\n"
     "                              per running server (required with a postgresql:// store)\n"
     "  --lease-ms N                how long a region lease lasts without renewal; renewed every\n"
-    "                              fifth of it (default 5000)\n"
+    "                              tenth of it (default 5000)\n"
     "  --advertise HOST:PORT       where clients reach this server, told to the others so they can\n"
     "                              redirect clients here (default: --bind and the port listened on;\n"
     "                              with --bind 0.0.0.0 or :: and no --advertise, none is)\n"
@@ -277,7 +277,8 @@ int run(int argc, char** argv) {
   server_log().info("signal {}: shutting down", caught);
   (*server)->stop();
   if ((*server)->storage_failed()) {
-    server_log().critical("stopped after a storage failure: the edits of the failed tick were not saved or acknowledged");
+    server_log().critical("stopped after a storage failure: the edits of the failed tick were not acknowledged (and "
+                          "not saved, unless their rejections said the outcome is unknown)");
     return 1;
   }
   return 0;

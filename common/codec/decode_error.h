@@ -62,6 +62,10 @@ using Result = BasicResult<T, DecodeError>;
 struct FileError {
   std::string message;
   std::optional<DecodeError> decode;
+  // A write whose commit was sent and never answered, and that could not be
+  // asked about since (a lost connection): it may have been stored. Its
+  // edits are neither acknowledged nor refused, their outcome is unknown.
+  bool outcome_unknown = false;
 };
 template <class T>
 using FileResult = BasicResult<T, FileError>;

@@ -51,7 +51,7 @@ struct ServerOptions {
   // database holds none.
   std::string store_url;
   std::uint32_t server_id = 0;          // this server in a PostgreSQL world (below 2^31)
-  std::chrono::milliseconds lease{5000};  // a region lease's length; renewed every fifth of it
+  std::chrono::milliseconds lease{5000};  // a region lease's length; renewed every tenth of it
   // Where clients reach this server ("HOST:PORT"), told to the other
   // servers of a PostgreSQL world; empty: the bind address and the port
   // listened on (none when bound to every address).

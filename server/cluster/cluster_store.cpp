@@ -41,20 +41,6 @@ constexpr const char* kClockMicros = "(extract(epoch FROM clock_timestamp()) * 1
 
 ClusterStore::ClusterStore(std::unique_ptr<PgConnection> c) : c_(std::move(c)) {}
 
-template <class T>
-StoreResult<T> ClusterStore::transaction(const char* what, const std::function<StoreResult<T>()>& body) {
-  auto begin = c_->exec("begin", "BEGIN");
-  if (!begin) return begin.error();
-  auto out = body();
-  if (!out) return c_->abort(out.error());
-  auto commit = c_->exec(what, "COMMIT");
-  if (commit) return out;
-  StoreError e = c_->abort(commit.error());
-  // The COMMIT was sent: the database may have committed before the
-  // connection broke (or before the answer's deadline).
-  if (e.kind == StoreError::Kind::kConnection) e.kind = StoreError::Kind::kUnknown;
-  return e;
-}
 ClusterStore::~ClusterStore() = default;
 
 StoreResult<std::unique_ptr<ClusterStore>> ClusterStore::open(const std::string& url) {
@@ -378,7 +364,7 @@ StoreResult<Ok> ClusterStore::answer(std::span<const ForwardAnswer> answers) {
 
 StoreResult<std::int64_t> ClusterStore::forward(std::uint32_t from, std::uint32_t to, const std::string& player,
                                                  std::span<const std::uint8_t> edit, std::int64_t expires_us) {
-  return transaction<std::int64_t>("commit forward", [&]() -> StoreResult<std::int64_t> {
+  return c_->transaction<std::int64_t>("commit forward", [&]() -> StoreResult<std::int64_t> {
     auto row = c_->exec("forward edit",
                         "INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at, expires_at)"
                         " VALUES ($1, $2, $3, $4, clock_timestamp(),"
@@ -395,7 +381,7 @@ StoreResult<std::int64_t> ClusterStore::forward(std::uint32_t from, std::uint32_
 }
 
 StoreResult<Ok> ClusterStore::relay(std::int64_t id, std::uint32_t from, std::uint32_t to) {
-  return transaction<Ok>("commit relay", [&]() -> StoreResult<Ok> {
+  return c_->transaction<Ok>("commit relay", [&]() -> StoreResult<Ok> {
     auto row = c_->exec("relay edit",
                         "UPDATE terrane_inbox SET to_server = $3, taken = false"
                         " WHERE id = $1 AND to_server = $2 AND taken RETURNING id",

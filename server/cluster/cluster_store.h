@@ -156,11 +156,6 @@ class ClusterStore {
   // kPreferNeighbours' rule: the kLeft error if region is left to another
   // server, nullopt if owner may claim it.
   StoreResult<std::optional<StoreError>> left_to_neighbour(Vec3i region, std::uint32_t owner);
-  // BEGIN, body, COMMIT (named what), as PgConnection::transaction, except
-  // that a COMMIT whose answer was lost is kUnknown (it may have been
-  // committed) where a failure before it is as reported (nothing done).
-  template <class T>
-  StoreResult<T> transaction(const char* what, const std::function<StoreResult<T>()>& body);
 
   std::unique_ptr<PgConnection> c_;
 };

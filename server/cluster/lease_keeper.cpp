@@ -198,9 +198,11 @@ void LeaseKeeper::renew_loop() {
           std::chrono::duration_cast<std::chrono::nanoseconds>(at.time_since_epoch()).count(),
           std::memory_order_relaxed);
   };
+  bool failed = false;  // the last round could not renew: the next one comes after the retry pause
   std::unique_lock lock(mutex_);
   for (;;) {
-    wake_.wait_for(lock, times_.renew, [&] { return stopping_ || round_now_; });
+    wake_.wait_for(lock, failed ? std::min(times_.retry, times_.renew) : times_.renew,
+                   [&] { return stopping_ || round_now_; });
     if (stopping_) break;
     round_now_ = false;
     const std::string address = address_;
@@ -221,6 +223,7 @@ void LeaseKeeper::renew_loop() {
     DatabaseClock clock;
     auto kept = renewer_->renew(all, times_.lease, &clock);
     const auto now = std::chrono::steady_clock::now();
+    failed = !kept;
     if (kept) {
       last_ok = started;
       for (const RegionLease& l : all)

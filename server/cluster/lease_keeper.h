@@ -3,7 +3,9 @@
 //
 // ensure() claims the regions a write needs, and renews none of them itself.
 // A thread of the keeper's own renews every held lease each renew period,
-// on a connection of its own, so a slow write never delays a renewal. A
+// on a connection of its own, so a slow write never delays a renewal; a
+// round that failed (the database restarting, say) is tried again after
+// the retry pause, not a whole period later. A
 // lease the database no longer extends is lost: the keeper drops it and
 // calls on_lost, and the owner must stop writing that region. The writes
 // themselves are fenced by PostgreSQL whatever the keeper believes: the
@@ -33,12 +35,22 @@
 
 namespace terrane {
 
+// A database out of reach for less than lease - renew - retry - a reconnect
+// costs no lease (STORE_POSTGRESQL.md, "Regions and leases"): the last
+// renewal before it went away was at most a renew period earlier, and the
+// first after it is back comes within a retry pause.
 struct LeaseTimes {
   std::chrono::milliseconds lease{5000};  // how long a claim or renewal lasts
-  std::chrono::milliseconds renew{1000};  // how often every held lease is renewed
-  // A lease of this length, renewed every fifth of it.
+  std::chrono::milliseconds renew{500};   // how often every held lease is renewed
+  // After a round that failed, the next is tried this soon (at most renew),
+  // so that the leases are renewed as soon as the database is back. A
+  // refused connection costs little; one that is not answered takes its
+  // deadline, so a partition does not make this a busy loop.
+  std::chrono::milliseconds retry{50};
+  // A lease of this length, renewed every tenth of it.
   static LeaseTimes of(std::chrono::milliseconds lease) {
-    return {lease, std::max(std::chrono::milliseconds(1), lease / 5)};
+    const auto renew = std::max(std::chrono::milliseconds(1), lease / 10);
+    return {lease, renew, std::min(renew, std::chrono::milliseconds(50))};
   }
 };
 

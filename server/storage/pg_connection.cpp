@@ -194,9 +194,13 @@ StoreResult<Ok> PgConnection::make_schema() {
            "  revision bigint NOT NULL, units bytea NOT NULL, PRIMARY KEY (x, y, z, revision))",
            // Version 5: a forwarded edit's deadline, by the database's
            // clock, and whether its addressee took it (rows of version 4
-           // get a deadline long past: never taken, swept).
+           // get a deadline long past: never taken, swept); each writing
+           // connection's last commit, so that a commit tried again after
+           // its answer was lost is not stored twice.
            "ALTER TABLE terrane_inbox ADD COLUMN IF NOT EXISTS expires_at timestamptz NOT NULL DEFAULT '-infinity'",
-           "ALTER TABLE terrane_inbox ADD COLUMN IF NOT EXISTS taken boolean NOT NULL DEFAULT false"}) {
+           "ALTER TABLE terrane_inbox ADD COLUMN IF NOT EXISTS taken boolean NOT NULL DEFAULT false",
+           "CREATE TABLE IF NOT EXISTS terrane_commits ("
+           "  writer bigint PRIMARY KEY, seq bigint NOT NULL, committed_at timestamptz NOT NULL)"}) {
     auto made = exec("create schema", table);
     if (!made) return abort(made.error());
   }
@@ -232,7 +236,7 @@ StoreResult<Ok> PgConnection::make_schema() {
     // seq only, made above; version 2 differs in its notices only; version
     // 3 lacks terrane_chunk_units and blob_revision only (NULL: every blob
     // is at its chunk's revision); version 4 lacks the inbox's expires_at
-    // and taken only; all made above.
+    // and taken and terrane_commits only; all made above.
     auto put = exec("write schema version", "UPDATE terrane_schema SET version = $1", {pg::text(kPgSchemaVersion)});
     if (!put) return abort(put.error());
   } else if (version->integer(0, 0) != kPgSchemaVersion) {
@@ -278,6 +282,12 @@ StoreResult<PgConnection::Rows> PgConnection::exec(const char* what, const char*
     return StoreError{StoreError::Kind::kConnection,
                       fmt::format("postgresql: {}: no answer within {} ms (the connection is given up)", what,
                                   call_timeout_.count())};
+  if (lose_answer_ && lose_answer_(sql)) {
+    if (res != nullptr) PQclear(res);
+    broken_ = true;
+    return StoreError{StoreError::Kind::kConnection,
+                      fmt::format("postgresql: {}: the connection was lost before the answer (a test's)", what)};
+  }
   const ExecStatusType st = res != nullptr ? PQresultStatus(res) : PGRES_FATAL_ERROR;
   if (st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK) {
     StoreError e = error(what, res);

@@ -49,8 +49,8 @@ struct StoreError {
     kLeft,        // a free region is left to the server writing its neighbours (claim, ClaimRule::kPreferNeighbours)
     kFenced,      // a write's lease is no longer current: nothing was written
     kDecode,      // a stored row does not decode
-    kUnknown,     // the connection broke after a COMMIT was sent: whether it took effect is not known
-                  // (the cluster store's forwards and relays say so; other writes report kConnection)
+    kUnknown,     // the connection broke after a COMMIT was sent (or its answer's deadline passed):
+                  // whether it took effect is not known
   };
   StoreError() = default;
   StoreError(Kind k, std::string m, std::optional<std::uint32_t> h = std::nullopt)
@@ -69,7 +69,9 @@ using StoreResult = BasicResult<T, StoreError>;
 // than its revision, followed by its units in terrane_chunk_units, which
 // a server of version 3 would not read; 4: forwarded edits carry a
 // deadline and are taken once, which a server of version 4 would neither
-// write nor respect; so none may run beside this one).
+// write nor respect, and each writer's last commit is recorded in
+// terrane_commits so that a commit tried again after its answer was lost
+// is not stored twice; so none may run beside this one).
 inline constexpr int kPgSchemaVersion = 5;
 // Serialises schema creation (and a world's first metadata) between
 // servers opening one database at once: a transaction's advisory lock.
@@ -142,7 +144,8 @@ class PgConnection {
   // the error on.
   StoreError abort(StoreError e);
   // BEGIN, body, COMMIT (named what); on any failure the transaction is
-  // rolled back.
+  // rolled back. A COMMIT whose answer was lost is kUnknown (it may have
+  // been committed); a failure before it is as reported (nothing done).
   template <class T>
   StoreResult<T> transaction(const char* what, const std::function<StoreResult<T>()>& body) {
     auto begin = exec("begin", "BEGIN");
@@ -150,14 +153,25 @@ class PgConnection {
     auto out = body();
     if (!out) return abort(out.error());
     auto commit = exec(what, "COMMIT");
-    if (!commit) return abort(commit.error());
+    if (!commit) return abort(unanswered_commit(commit.error()));
     return out;
+  }
+  // The error of a COMMIT that was sent: a lost connection is kUnknown
+  // (the database may have committed before it broke).
+  static StoreError unanswered_commit(StoreError e) {
+    if (e.kind == StoreError::Kind::kConnection) e.kind = StoreError::Kind::kUnknown;
+    return e;
   }
   // The deadline of each statement, its answer included (10 s unless set).
   void set_call_timeout(std::chrono::milliseconds t) { call_timeout_ = t; }
   std::chrono::milliseconds call_timeout() const { return call_timeout_; }
   // The raw connection (notices: PQnotifies, PQsocket).
   PGconn* raw() const { return conn_; }
+  // Test seam: asked with each statement once it has been answered; true
+  // loses the answer: the statement is done in the database, and here it
+  // fails with kConnection and the connection is given up, as when the
+  // network fails just after the database answered.
+  void set_lose_answer(std::function<bool(const char* sql)> lose) { lose_answer_ = std::move(lose); }
   // The url as given, and as messages name it (the password left out).
   const std::string& url() const { return url_; }
   const std::string& shown() const { return shown_; }
@@ -187,6 +201,7 @@ class PgConnection {
   bool broken_ = false;
   std::string url_;
   std::string shown_;
+  std::function<bool(const char* sql)> lose_answer_;  // test seam (set_lose_answer)
 };
 
 }  // namespace terrane

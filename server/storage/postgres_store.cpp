@@ -36,6 +36,10 @@ namespace {
 // A write PostgreSQL rolled back to break a deadlock (or a serialization
 // conflict) is tried again at once this many times before it fails.
 constexpr int kConflictRetries = 3;
+// A write that found the database gone is tried again this often (a
+// refused connection costs little): it is acknowledged this soon at most
+// after the database is back.
+constexpr auto kConnectionRetry = std::chrono::milliseconds(100);
 
 // A chunk's coarse mip as stored in terrane_chunks.coarse: 64 voxels,
 // material then occupancy, Box order (the coarse image's entry voxels).
@@ -77,6 +81,13 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
 StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
                                            std::span<const EditLogEntry> log, bool overwrite,
                                            std::span<const ForwardAnswer> answers) {
+  return write_fenced(leases, chunks, log, overwrite, answers, 0, nullptr);
+}
+
+StoreResult<Ok> PostgresStore::write_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
+                                            std::span<const EditLogEntry> log, bool overwrite,
+                                            std::span<const ForwardAnswer> answers, std::int64_t commit,
+                                            CommitCheck* check) {
   // The leases the chunks need, in one order for every server (lease rows
   // are locked in that order, so two writers never deadlock).
   std::map<std::tuple<int, int, int>, RegionLease> used;
@@ -90,6 +101,18 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
   }
   auto begin = c_->exec("begin", "BEGIN");
   if (!begin) return begin.error();
+  if (commit != 0) {
+    // An earlier try of this commit whose answer was lost may have been
+    // stored: if so, it is not written again.
+    auto fresh = commits_.record(*c_, commit);
+    if (!fresh) return c_->abort(fresh.error());
+    check->asked = true;
+    if (!*fresh) {
+      check->stored = true;
+      (void)c_->abort(StoreError{});
+      return Ok{};
+    }
+  }
   // Checking a lease locks its row (as a takeover's update would) and
   // moves the region's write sequence on.
   std::vector<RegionSeq> seqs;
@@ -175,8 +198,8 @@ StoreResult<Ok> PostgresStore::save_fenced(std::span<const RegionLease> leases, 
   // After the changes: the sender reads its edit's chunks again before it
   // acknowledges.
   if (auto a = answer_forwarded(*c_, answers); !a) return c_->abort(a.error());
-  auto commit = c_->exec("commit chunks", "COMMIT");
-  if (!commit) return c_->abort(commit.error());
+  auto done = c_->exec("commit chunks", "COMMIT");
+  if (!done) return c_->abort(PgConnection::unanswered_commit(done.error()));
   return Ok{};
 }
 
@@ -457,10 +480,15 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
   // A database that went away (restarted, say) is waited for, up to
   // retry_for: the write is tried again on a new connection. Nothing is
   // acknowledged meanwhile, and once the leases have run out the write is
-  // fenced anyway. (A commit whose answer was lost may be stored twice: the
-  // chunk rows are the same, its edit log entries appear twice.) A commit
-  // PostgreSQL rolled back to break a deadlock is tried again at once, a
-  // few times: nothing of it was stored.
+  // fenced anyway. A commit PostgreSQL rolled back to break a deadlock is
+  // tried again at once, a few times: nothing of it was stored.
+  // Every try records the commit's number (terrane_commits) in its
+  // transaction, and first asks whether an earlier try recorded it: a try
+  // whose COMMIT was sent and never answered may have been stored, and is
+  // then not stored again. A commit that fails with that question open
+  // has an unknown outcome, and says so.
+  commits_.forget_old(*c_);
+  const std::int64_t commit = commits_.next();
   const auto give_up = std::chrono::steady_clock::now() + retry_for_;
   int conflicts = 0;
   // Counted as retrying from the first failed attempt to the end (stored
@@ -477,26 +505,58 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
       if (on) counters->commits_retrying.fetch_sub(1, std::memory_order_relaxed);
     }
   } retrying{database_counters_};
+  bool unanswered = false;  // a try's COMMIT went unanswered, and no later try has found out since
+  const auto failed = [&](const StoreError& e) {
+    if (!unanswered) return file_error(e);
+    FileError out{fmt::format("{}; the commit may have been stored (a try's COMMIT was sent and not answered, and "
+                              "the database could not be asked since)",
+                              e.message),
+                  std::nullopt};
+    out.outcome_unknown = true;
+    return out;
+  };
   for (int attempt = 0;; ++attempt) {
     auto leases = (*leases_)(regions);
-    StoreResult<Ok> saved =
-        leases ? save_fenced(*leases, writes, log, overwrite, answers) : StoreResult<Ok>(leases.error());
+    CommitCheck check;
+    StoreResult<Ok> saved = leases ? write_fenced(*leases, writes, log, overwrite, answers, commit, &check)
+                                   : StoreResult<Ok>(leases.error());
+    if (!leases && unanswered) {
+      // No lease to try again with (lost meanwhile): whether the earlier try
+      // was stored can still be asked.
+      auto stored = commits_.stored(*c_, commit);
+      if (!stored && stored.error().kind == StoreError::Kind::kConnection) {
+        saved = stored.error();  // asked again while the time lasts
+      } else if (stored) {
+        unanswered = false;
+        if (*stored) {
+          saved = Ok{};
+          check.stored = true;
+        }
+      }
+    }
     if (saved) {
-      if (attempt > 0)
+      if (check.stored)
+        server_log().info("world {}: commit {} was stored by an earlier try whose answer was lost; not stored again",
+                          c_->shown(), commit);
+      else if (attempt > 0)
         server_log().info("world {}: stored after {} tries{}", c_->shown(), attempt + 1,
                           conflicts == attempt ? "" : ": the database is back");
       return Ok{};
     }
+    // A try that asked knows that no earlier try was stored (and none can
+    // be any more: it waited for their transactions to end).
+    if (check.asked) unanswered = false;
+    if (saved.error().kind == StoreError::Kind::kUnknown) unanswered = true;
     const StoreError::Kind kind = saved.error().kind;
     if (kind == StoreError::Kind::kConflict && ++conflicts <= kConflictRetries) {
       server_log().warn("world {}: {}; trying again", c_->shown(), saved.error().message);
       continue;
     }
-    if (kind != StoreError::Kind::kConnection || std::chrono::steady_clock::now() >= give_up)
-      return file_error(saved.error());
+    const bool unreachable = kind == StoreError::Kind::kConnection || kind == StoreError::Kind::kUnknown;
+    if (!unreachable || std::chrono::steady_clock::now() >= give_up) return failed(saved.error());
     retrying.start();
     if (attempt == conflicts) server_log().warn("world {}: {}; trying again", c_->shown(), saved.error().message);
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    std::this_thread::sleep_for(kConnectionRetry);
   }
 }
 

@@ -36,6 +36,7 @@
 #include "common/world/world_store.h"
 #include "server/base/counters.h"
 #include "server/storage/cluster_link.h"
+#include "server/storage/commit_marks.h"
 #include "server/storage/cluster_map.h"  // ServerAddress, parse_server_address: terrane-server's options
 #include "server/storage/notices.h"
 #include "server/storage/pg_connection.h"
@@ -66,7 +67,12 @@ class PostgresStore final : public WorldStore {
   // leases of the regions it writes and is fenced by them. Connections
   // made by reopen() share it. Without one, writes are refused.
   // retry_for: how long a write waits for a database that cannot be
-  // reached (tried again on a new connection) before it fails.
+  // reached (tried again on a new connection) before it fails. A write
+  // tried again after its commit's answer was lost finds out whether that
+  // commit was stored, and is not stored twice; one that cannot find out
+  // fails with FileError::outcome_unknown (STORE_POSTGRESQL.md, "Fencing").
+  // Only the commits of save_chunks and save_answering are marked so
+  // (save_fenced is one try).
   void set_lease_source(std::shared_ptr<const LeaseSource> source,
                         std::chrono::milliseconds retry_for = std::chrono::milliseconds(0)) {
     leases_ = std::move(source);
@@ -76,6 +82,9 @@ class PostgresStore final : public WorldStore {
   // reach): counters must outlive this store and the stores reopen() makes,
   // which share it. Null: not counted.
   void count_retries_in(DatabaseCounters* counters) { database_counters_ = counters; }
+
+  // The connection (tests: its seams).
+  PgConnection& connection() { return *c_; }
 
   // Another connection to the same world, as the chunk store it is (the
   // lease source shared): a shared world's writer (server/storage/
@@ -143,6 +152,20 @@ class PostgresStore final : public WorldStore {
   StoreResult<Ok> read_meta();
   FileStatus save(std::span<const ChunkWrite> writes, bool overwrite, std::span<const EditLogEntry> log,
                   std::span<const ForwardAnswer> answers);
+  // What one try of a marked commit learnt: whether the database answered
+  // the question "was this commit stored?" (asked), and its answer.
+  struct CommitCheck {
+    bool asked = false;
+    bool stored = false;
+  };
+  // save_fenced's transaction. commit != 0: this connection's commit
+  // number, recorded in the same transaction (commits_); if it is
+  // recorded already (an earlier try was stored) nothing is written and
+  // check->stored is set.
+  StoreResult<Ok> write_fenced(std::span<const RegionLease> leases, std::span<const ChunkWrite> chunks,
+                               std::span<const EditLogEntry> log, bool overwrite,
+                               std::span<const ForwardAnswer> answers, std::int64_t commit, CommitCheck* check);
+
   // Writes these metadata keys (others are left as they are).
   FileStatus put_meta(const std::vector<std::pair<std::string, std::string>>& keys);
 
@@ -152,6 +175,7 @@ class PostgresStore final : public WorldStore {
   std::shared_ptr<const LeaseSource> leases_;
   std::chrono::milliseconds retry_for_{0};
   DatabaseCounters* database_counters_ = nullptr;
+  CommitMarks commits_;  // save's commits, recorded so that a try after a lost answer is not stored twice
 };
 
 // A chunk written with its changed units (ChunkWrite::units, taking the

@@ -385,7 +385,15 @@ void Storage::writer_loop() {
       }
       continue;
     }
-    if (status) {  // after a failure, every later tick fails too
+    // After a failure, every later tick fails too, untried: not stored,
+    // whatever the outcome of the failed commit.
+    FileStatus told = status;
+    if (!status && status.error().outcome_unknown) {
+      FileError untried = status.error();
+      untried.outcome_unknown = false;
+      told = untried;
+    }
+    if (status) {
       // One transaction for every tick queued: the latest version of each
       // chunk is what is stored.
       std::unordered_map<Vec3i, std::size_t, Vec3iHash> index;
@@ -427,10 +435,11 @@ void Storage::writer_loop() {
       }
       if (status) counters_.ticks_committed.fetch_add(batch.size(), std::memory_order_relaxed);
       counters_.coarse_regions_pending.store(writer_store_->coarse_pending(), std::memory_order_relaxed);
+      told = status;
     }
     for (CommitJob& job : batch) {
       in_flight_.fetch_sub(1, std::memory_order_relaxed);
-      job.done(status);
+      job.done(told);
     }
     // After the acks went out: a prune (at most once a minute, a bounded
     // number of rows) and the coarse images due delay only the next batch.

@@ -229,7 +229,11 @@ void Tick::apply_edits() {
           on_committed(tick, versions, acks, st);
           for (const auto& job : rollbacks)
             job->done(st ? RollbackResult{true, "", tick, job->restored}
-                         : RollbackResult{false, "storage failure: rollback not saved", tick, 0});
+                         : RollbackResult{false,
+                                          st.error().outcome_unknown
+                                              ? "storage failure: outcome unknown (the rollback may have been saved)"
+                                              : "storage failure: rollback not saved",
+                                          tick, 0});
         });
       },
       std::move(t.answers), tick);
@@ -468,10 +472,14 @@ void Tick::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versi
       server_log().critical("tick {}: saving {} chunks failed: {}; rejecting the tick's edits and stopping", tick,
                             versions.size(), status.error().message);
     }
-    // Nothing of this tick may be acknowledged or shown: it is not on disk.
+    // Nothing of this tick may be acknowledged or shown: it is not known to
+    // be on disk. A commit whose answer was lost may be stored all the same:
+    // its editors are told that the outcome is unknown, not a refusal.
+    const char* why = status.error().outcome_unknown
+                          ? "storage failure: outcome unknown (the edit may have been saved)"
+                          : "storage failure: edit not saved";
     for (const Ack& a : acks)
-      clients_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, "storage failure: edit not saved")),
-                    SendClass::kControl);
+      clients_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, why)), SendClass::kControl);
     counters_.rejected(RejectReason::kStorageFailure, acks.size());
     fatal_storage(status.error().message);
   } else {

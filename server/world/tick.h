@@ -15,8 +15,10 @@
 //      goes on with the next tick;
 //   3. when that commit is reported: publish its versions (Residency) and
 //      tell their holders (FanOut), then acknowledge the tick's edits. A
-//      failed commit rejects the edits and closes every client with
-//      "server storage failure", after calling on_fatal.
+//      failed commit rejects the edits (saying the outcome is unknown
+//      where the commit may have been stored: FileError::outcome_unknown)
+//      and closes every client with "server storage failure", after
+//      calling on_fatal.
 // Around the edits each tick: estimates replaced, chunks lightened and
 // unloaded (Residency), mip news delivered and presence sent (FanOut),
 // forwarded edits settled (Authority).

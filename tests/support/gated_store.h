@@ -2,12 +2,14 @@
 // chunk named in its gate waits until the gate opens (on every connection
 // reopened from it): a load that takes as long as a test wants. The gate
 // can also make reads of a chunk fail (as a disk that cannot be read, not
-// a damaged row) until it is healed.
+// a damaged row) until it is healed, and make every save fail with an
+// error of the test's.
 #pragma once
 
 #include <condition_variable>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <unordered_set>
 
 #include "common/world/world_store.h"
@@ -35,6 +37,15 @@ class StoreGate {
   bool reached() {
     std::lock_guard lock(m_);
     return waited_ > 0;
+  }
+  // From now on every save fails with e (nullopt: saves pass).
+  void fail_saves(std::optional<FileError> e) {
+    std::lock_guard lock(m_);
+    save_failure_ = std::move(e);
+  }
+  std::optional<FileError> save_failure() {
+    std::lock_guard lock(m_);
+    return save_failure_;
   }
 
   // Reads of pos fail until heal(pos).
@@ -64,6 +75,7 @@ class StoreGate {
   std::unordered_set<Vec3i, Vec3iHash> closed_, failing_;
   int waited_ = 0;
   int failed_ = 0;
+  std::optional<FileError> save_failure_;
 };
 
 class GatedStore final : public WorldStore {
@@ -95,6 +107,7 @@ class GatedStore final : public WorldStore {
   void end_read() override { inner_->end_read(); }
   FileStatus save_chunks(std::span<const ChunkWrite> writes, bool overwrite = true,
                          std::span<const EditLogEntry> log = {}) override {
+    if (auto e = gate_->save_failure()) return *e;
     return inner_->save_chunks(writes, overwrite, log);
   }
   void set_coarse_behind(bool on) override { inner_->set_coarse_behind(on); }

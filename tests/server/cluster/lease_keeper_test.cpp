@@ -14,6 +14,8 @@
 #include <atomic>
 #include <mutex>
 #include <sstream>
+#include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -268,6 +270,62 @@ TEST_F(LeaseKeeperTest, ADatabaseThatStopsAnsweringCostsTheLeasesAsTheyRunOut) {
   }
   EXPECT_FALSE(a->holds(Vec3i{0, 0, 0}));
   a.reset();  // (before the backends run again: its release finds no lease to give up)
+}
+
+// The tolerance (lease_keeper.h, LeaseTimes): PostgreSQL restarted, and
+// the test's database out of reach for less than lease - renew from a
+// moment just before a renewal round was due, so that the last renewal
+// was almost a period old when it went away. The keeper renews as soon as
+// the database is back, before the leases run out by its clock; a write
+// made meanwhile waits, and is stored once, when it is back.
+TEST_F(LeaseKeeperTest, ADatabaseOutOfReachForLessThanTheLeaseLessARenewalCostsNoLeaseAndAWriteWaitsForIt) {
+  Lost lost;
+  const LeaseTimes times{4000ms, 800ms, 50ms};
+  auto a = keeper(1, times, &lost);
+  ASSERT_TRUE(a);
+  const Vec3i region[] = {{0, 0, 0}};
+  ASSERT_TRUE(a->ensure(region).ok());
+  auto writer = chunks();
+  ASSERT_TRUE(writer);
+  writer->set_lease_source(a->held_source(), times.lease);
+  // When the lease runs out by the database's clock, seen right after a
+  // renewal round (so the next one is a period away).
+  const std::uint64_t before = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() > before; }));
+  const std::string left_ms = testing_support::sql_value(
+      url_, "SELECT floor(extract(epoch FROM expires_at - clock_timestamp()) * 1000)::bigint FROM terrane_leases");
+  const auto expires = std::chrono::steady_clock::now() + std::chrono::milliseconds(std::stoll(left_ms));
+  // The outage: from 100 ms before the next round was due until 400 ms
+  // before the lease runs out, 2,900 ms: less than lease - renew (3,200
+  // ms). A keeper that waits a whole period after a failed round would try
+  // next as the lease runs out, and lose it. (These waits are the fault's
+  // schedule.)
+  const auto down_at = expires - times.lease + times.renew - 100ms, back_at = expires - 400ms;
+  std::this_thread::sleep_until(down_at);
+  const std::string refuse = "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS false";
+  ASSERT_EQ(testing_support::run_sql(pg_->url(), refuse), "");
+  ASSERT_TRUE(pg_->restart()) << pg_->why();  // every session cut; the test's database refuses connections
+  ASSERT_LT(std::chrono::steady_clock::now(), back_at - 300ms) << "PostgreSQL restarted too slowly for this test";
+  // A write while the database is away waits for it.
+  std::string saved = "not done";
+  const ChunkWrite w{Vec3i{1, 0, 1}, 1, encode_chunk_blob(Chunk(kAir))};
+  const EditLogEntry e{0, 7, 1000, "ann", Region{{32, 0, 32}, {33, 1, 33}}, {1}, {2}};
+  std::thread write([&] {
+    auto st = writer->save_chunks(std::span(&w, 1), true, std::span(&e, 1));
+    saved = st.ok() ? "" : st.error().message;
+  });
+  std::this_thread::sleep_until(back_at);
+  ASSERT_EQ(testing_support::run_sql(pg_->url(), "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS true"), "");
+  write.join();
+  EXPECT_EQ(saved, "");
+  EXPECT_EQ(testing_support::sql_value(url_, "SELECT count(*) FROM terrane_edit_log"), "1");
+  // Renewed in time: no lease lost, a few rounds on.
+  const std::uint64_t after = a->renewals();
+  ASSERT_TRUE(eventually([&] { return a->renewals() >= after + 3; }));
+  EXPECT_EQ(lost.size(), 0u);
+  EXPECT_TRUE(a->holds(Vec3i{0, 0, 0}));
+  const ChunkWrite next{Vec3i{1, 0, 1}, 2, encode_chunk_blob(Chunk(kAir))};
+  EXPECT_TRUE(writer->save_chunks(std::span(&next, 1)).ok());
 }
 
 }  // namespace

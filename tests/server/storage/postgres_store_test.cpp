@@ -365,9 +365,10 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
   }
   EXPECT_EQ(run_sql(url_, current_version), "");
   // A database of version 4 (whose servers forward edits without a
-  // deadline and apply them however late) too; its inbox rows get a
-  // deadline long past: never taken.
-  ASSERT_EQ(run_sql(url_, "ALTER TABLE terrane_inbox DROP COLUMN expires_at, DROP COLUMN taken;"
+  // deadline and apply them however late; no terrane_commits) too; its
+  // inbox rows get a deadline long past: never taken.
+  ASSERT_EQ(run_sql(url_, "DROP TABLE terrane_commits;"
+                          " ALTER TABLE terrane_inbox DROP COLUMN expires_at, DROP COLUMN taken;"
                           " INSERT INTO terrane_inbox (to_server, from_server, player, edit, created_at)"
                           "  VALUES (2, 1, 'ann', '\\x01', clock_timestamp());"
                           " UPDATE terrane_schema SET version = 4;"
@@ -386,6 +387,7 @@ TEST_F(PostgresStoreTest, BadDatabasesAreClearErrors) {
     EXPECT_TRUE(taken->empty()) << "a row of version 4 was taken";
   }
   EXPECT_EQ(run_sql(url_, current_version), "");
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_commits"), "0");
   // A damaged blob is a decode error naming the chunk.
   ASSERT_EQ(run_sql(url_, "INSERT INTO terrane_chunks VALUES (1, 2, 3, 4, '\\x0102', '\\x')"), "");
   auto store = open();
@@ -532,6 +534,91 @@ TEST_F(PostgresStoreTest, WritesInARegionAnotherServerHoldsAreRefusedWithTheHold
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.error().message.find("leased to server 2"), std::string::npos) << refused.error().message;
   EXPECT_FALSE(mine->load_chunk({1, 1, 1})->has_value());
+}
+
+// A lease source of fixed leases (those of regions found among them).
+std::shared_ptr<const LeaseSource> fixed_leases(std::vector<RegionLease> leases) {
+  return std::make_shared<const LeaseSource>([leases = std::move(leases)](std::span<const Vec3i> regions) {
+    std::vector<RegionLease> out;
+    for (const Vec3i r : regions)
+      for (const RegionLease& l : leases)
+        if (l.region == r) out.push_back(l);
+    return StoreResult<std::vector<RegionLease>>(out);
+  });
+}
+
+// One edit log entry of player at tick.
+EditLogEntry log_entry(std::uint64_t tick, const std::string& player) {
+  return EditLogEntry{0, tick, 1000, player, Region{{32, 0, 64}, {33, 1, 65}}, {1, 2}, {3, 4}};
+}
+
+TEST_F(PostgresStoreTest, ACommitTriedAgainAfterItsAnswerWasLostIsStoredOnce) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  auto lease = cl(s)->claim({0, 0, 0}, 1, 60s);
+  ASSERT_TRUE(lease.ok()) << lease.error().message;
+  s->set_lease_source(fixed_leases({*lease}), 10s);
+  // The first COMMIT is done in the database and its answer lost (the
+  // connection given up), as when the network or the database fails just
+  // then: the write is tried again on a new connection.
+  int lost = 0;
+  s->connection().set_lose_answer([&](const char* sql) { return std::string_view(sql) == "COMMIT" && lost++ == 0; });
+  const ChunkWrite w = chunk_write({1, 0, 2}, 1, materials::kBrick);
+  const EditLogEntry e = log_entry(7, "ann");
+  auto saved = s->save_chunks(std::span(&w, 1), true, std::span(&e, 1));
+  ASSERT_TRUE(saved.ok()) << saved.error().message;
+  EXPECT_EQ(lost, 1) << "the try after the lost answer sent a COMMIT again";
+  // Stored once: its edit log entry once, the region's write sequence
+  // moved once, the chunk at its revision.
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_edit_log"), "1");
+  EXPECT_EQ(sql_value(url_, "SELECT seq FROM terrane_leases"), "1");
+  auto got = s->load_chunk({1, 0, 2});
+  ASSERT_TRUE(got.ok() && got->has_value());
+  EXPECT_EQ((*got)->revision, 1u);
+  // The next commit is stored as usual.
+  const ChunkWrite w2 = chunk_write({1, 0, 2}, 2, materials::kSand);
+  const EditLogEntry e2 = log_entry(8, "ann");
+  ASSERT_TRUE(s->save_chunks(std::span(&w2, 1), true, std::span(&e2, 1)).ok());
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_edit_log"), "2");
+  EXPECT_EQ(sql_value(url_, "SELECT string_agg(tick::text, ',' ORDER BY id) FROM terrane_edit_log"), "7,8");
+}
+
+TEST_F(PostgresStoreTest, ACommitThatCannotFindOutWhetherItWasStoredSaysItsOutcomeIsUnknown) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  auto lease = cl(s)->claim({0, 0, 0}, 1, 60s);
+  ASSERT_TRUE(lease.ok()) << lease.error().message;
+  s->set_lease_source(fixed_leases({*lease}), 300ms);
+  const std::string refuse = "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS false";
+  const std::string allow = "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS true";
+  // A statement before the COMMIT loses its answer, and the database takes
+  // no connection until the write gives up: nothing was stored, and the
+  // write fails as a refusal.
+  s->connection().set_lose_answer([&](const char* sql) {
+    if (std::string_view(sql).find("INSERT INTO terrane_edit_log") == std::string_view::npos) return false;
+    EXPECT_EQ(run_sql(pg_->url(), refuse), "");
+    return true;
+  });
+  const ChunkWrite w = chunk_write({1, 0, 2}, 1, materials::kBrick);
+  const EditLogEntry e = log_entry(7, "ann");
+  auto refused = s->save_chunks(std::span(&w, 1), true, std::span(&e, 1));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_FALSE(refused.error().outcome_unknown) << refused.error().message;
+  ASSERT_EQ(run_sql(pg_->url(), allow), "");
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_edit_log"), "0");
+  // The COMMIT's answer is lost, and then the database cannot be asked:
+  // the outcome is unknown, and the error says so (it was stored here).
+  s->connection().set_lose_answer([&](const char* sql) {
+    if (std::string_view(sql) != "COMMIT") return false;
+    EXPECT_EQ(run_sql(pg_->url(), refuse), "");
+    return true;
+  });
+  auto unknown = s->save_chunks(std::span(&w, 1), true, std::span(&e, 1));
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_TRUE(unknown.error().outcome_unknown) << unknown.error().message;
+  EXPECT_NE(unknown.error().message.find("may have been stored"), std::string::npos) << unknown.error().message;
+  ASSERT_EQ(run_sql(pg_->url(), allow), "");
+  EXPECT_EQ(sql_value(url_, "SELECT count(*) FROM terrane_edit_log"), "1");
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <tuple>
 
 #include "common/world/sqlite_store.h"
+#include "tests/support/gated_store.h"
 #include "tests/support/scratch_dir.h"
 
 namespace terrane {
@@ -198,6 +199,35 @@ TEST_F(StorageTest, ADamagedRowIsQuarantinedAndServedAsGeneratedAboveItsRevision
   auto n = dynamic_cast<SqliteStore&>(world_->store()).quarantined_count();
   ASSERT_TRUE(n.ok());
   EXPECT_EQ(*n, 1);
+}
+
+TEST_F(StorageTest, TicksBehindACommitOfUnknownOutcomeAreToldTheyWereNotStored) {
+  // A store whose commit lost its answer and could not find out since:
+  // that tick's outcome is unknown, but the ticks behind it are never
+  // tried, so they are not stored (a refusal, not "unknown").
+  storage_.reset();
+  world_.reset();
+  auto gate = std::make_shared<testing_support::StoreGate>(std::unordered_set<Vec3i, Vec3iHash>{});
+  auto store = SqliteStore::open(dir_.string());
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  auto w = World::open(std::make_unique<testing_support::GatedStore>(std::move(*store), gate));
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  world_ = std::move(*w);
+  auto s = Storage::open(*world_, 1);
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  storage_ = std::move(*s);
+  FileError unanswered{"commit chunks: the connection was lost; the commit may have been stored", std::nullopt};
+  unanswered.outcome_unknown = true;
+  gate->fail_saves(unanswered);
+  std::promise<FileStatus> first, later;
+  storage_->commit({version({1, 0, 0}, 1, materials::kRock)}, {}, [&](const FileStatus& st) { first.set_value(st); });
+  const FileStatus unknown = first.get_future().get();
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_TRUE(unknown.error().outcome_unknown);
+  storage_->commit({version({2, 0, 0}, 1, materials::kRock)}, {}, [&](const FileStatus& st) { later.set_value(st); });
+  const FileStatus untried = later.get_future().get();
+  ASSERT_FALSE(untried.ok());
+  EXPECT_FALSE(untried.error().outcome_unknown) << untried.error().message;
 }
 
 }  // namespace

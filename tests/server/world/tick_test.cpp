@@ -89,7 +89,10 @@ class TickTest : public ::testing::Test {
     w_.on_strand([&] { tick_.edit(id, std::move(e), std::chrono::steady_clock::now()); });
   }
 
-  WorldStrand w_;
+  // Open: nothing waits; a test may make the saves fail.
+  std::shared_ptr<testing_support::StoreGate> gate_ =
+      std::make_shared<testing_support::StoreGate>(std::unordered_set<Vec3i, Vec3iHash>{});
+  WorldStrand w_{gate_};
   ServerOptions options_;
   ServerCounters counters_;
   WorldClock clock_;
@@ -232,6 +235,30 @@ TEST_F(TickTest, ThisServersOwnEditPassedBackGoesAheadOfTheEditsWaiting) {
   ASSERT_TRUE(testing_support::eventually([&] { return counters_.edits_applied.load() == 2; }));
   ASSERT_TRUE(c->wait([](RecordingClient& r) { return r.acked().size() == 1; }));
   w_.on_strand([&] { EXPECT_EQ(residency_.get(Vec3i{5, 2, 5}), solid(materials::kBrick)); });
+}
+
+TEST_F(TickTest, ACommitThatMayHaveBeenStoredIsNeitherAcknowledgedNorRefused) {
+  // A commit whose answer was lost and that could not find out since
+  // whether it was stored: its edits are rejected saying the outcome is
+  // unknown (the edit may be in the world), and the server stops.
+  FileError unknown{"postgresql: commit chunks: server closed the connection unexpectedly; the commit may have been "
+                    "stored",
+                    std::nullopt};
+  unknown.outcome_unknown = true;
+  gate_->fail_saves(unknown);
+  auto editor = join(1, {10, 10, 10});
+  edit(1, fill(5, Region{{4, 1, 4}, {6, 3, 6}}, materials::kBrick));
+  ASSERT_TRUE(editor->wait([](RecordingClient& r) { return !r.closed.empty(); }));
+  std::lock_guard lock(editor->m);
+  EXPECT_TRUE(editor->acked().empty());
+  std::vector<std::string> rejected;
+  for (const auto& f : editor->frames)
+    if (const auto* msg = flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes);
+        msg->body_type() == wire::Body::EditReject)
+      if (auto r = parse_edit_reject(*msg->body_as_EditReject()))
+        rejected.push_back(std::to_string(r->edit_id) + ": " + r->reason);
+  EXPECT_EQ(rejected, (std::vector<std::string>{"5: storage failure: outcome unknown (the edit may have been saved)"}));
+  EXPECT_EQ(editor->closed, "server storage failure");
 }
 
 }  // namespace
