@@ -305,7 +305,12 @@ TEST_F(LeaseKeeperTest, ADatabaseOutOfReachForLessThanTheLeaseLessARenewalCostsN
   const std::string refuse = "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS false";
   ASSERT_EQ(testing_support::run_sql(pg_->url(), refuse), "");
   ASSERT_TRUE(pg_->restart()) << pg_->why();  // every session cut; the test's database refuses connections
-  ASSERT_LT(std::chrono::steady_clock::now(), back_at - 300ms) << "PostgreSQL restarted too slowly for this test";
+  // The outage's schedule needs PostgreSQL back within 2.6 s: a machine
+  // too loaded for that cannot stage this fault (skipped, not failed).
+  if (std::chrono::steady_clock::now() >= back_at - 300ms) {
+    ASSERT_EQ(testing_support::run_sql(pg_->url(), "ALTER DATABASE " + db_ + " WITH ALLOW_CONNECTIONS true"), "");
+    GTEST_SKIP() << "PostgreSQL took over 2.6 s to restart: the outage cannot be placed";
+  }
   // A write while the database is away waits for it.
   std::string saved = "not done";
   const ChunkWrite w{Vec3i{1, 0, 1}, 1, encode_chunk_blob(Chunk(kAir))};
