@@ -11,12 +11,14 @@
 #include <thread>
 
 #include "tests/support/eventually.h"
+#include "tests/support/null_replica.h"
 #include "tests/support/server_fixture.h"
 
 namespace terrane {
 namespace {
 
 using testing_support::eventually;
+using testing_support::NullReplica;
 using testing_support::msg;
 using testing_support::RawPeer;
 
@@ -25,18 +27,6 @@ class AdmitAll final : public Admitter {
   Admission admit(const std::string&, const std::string&, const std::string&, std::int64_t) const override {
     return Admission{true, false, CloseReason::kAuthFailed, ""};
   }
-};
-
-class NullReplica final : public ClientReplica {
- public:
-  void join(const std::string&) override {}
-  bool move(const ClientStateMsg&) override { return true; }
-  void edit(EditRequestMsg) override {}
-  void read_box(const ReadBoxMsg&) override {}
-  void holdings(const HoldingsMsg&) override {}
-  void hash_request(Vec3i) override {}
-  void drained() override {}
-  void closed() override {}
 };
 
 class SessionTableTest : public ::testing::Test {

@@ -16,6 +16,7 @@
 
 #include "common/world/world.h"
 #include "tests/support/eventually.h"
+#include "tests/support/null_replica.h"
 #include "tests/support/scratch_dir.h"
 #include "tests/support/server_fixture.h"
 
@@ -23,20 +24,9 @@ namespace terrane {
 namespace {
 
 using testing_support::eventually;
+using testing_support::NullReplica;
 using testing_support::msg;
 using testing_support::RawPeer;
-
-class NullReplica final : public ClientReplica {
- public:
-  void join(const std::string&) override {}
-  bool move(const ClientStateMsg&) override { return true; }
-  void edit(EditRequestMsg) override {}
-  void read_box(const ReadBoxMsg&) override {}
-  void holdings(const HoldingsMsg&) override {}
-  void hash_request(Vec3i) override {}
-  void drained() override {}
-  void closed() override {}
-};
 
 class OperationsTest : public ::testing::Test {
  protected:
