@@ -257,7 +257,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
     case wire::Body::EditReject: {
       auto r = parse_edit_reject(*m.body_as_EditReject());
       if (!r) return fail(r.error());
-      EditOutcome o{false, 0, std::move(r->reason), r->box, std::move(r->voxels)};
+      EditOutcome o{false, 0, std::move(r->reason), r->box, std::move(r->voxels), r->outcome_unknown};
       ++counters_.edits_rejected;
       if (callbacks_.on_edit_result) after = [this, id = r->edit_id, o] { callbacks_.on_edit_result(id, o); };
       edits_.answered(r->edit_id, std::move(o));

@@ -35,7 +35,7 @@ SettledEdits EditTracker::settle(bool written_only) {
       ++it;
       continue;
     }
-    EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}};
+    EditOutcome o{false, 0, kEditOutcomeUnknown, {}, {}, true};
     outcomes_[it->first] = o;
     unknown.emplace_back(it->first, std::move(o));
     it = unanswered_.erase(it);

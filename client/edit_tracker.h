@@ -31,18 +31,17 @@ struct EditOutcome {
   // edit's box (empty box otherwise), for clients that predicted the edit.
   Region state_box;
   std::vector<Voxel> state;
+  // A rejection whose edit may have been applied: the connection went before
+  // the answer (reason kEditOutcomeUnknown), or the server could not learn
+  // it (EditReject.outcome_unknown: a commit or a forward to another server
+  // of a shared world whose answer was lost).
+  bool unknown = false;
 };
 
-// Whether a refusal leaves the edit's fate open: the connection went before
-// the answer (kEditOutcomeUnknown), or the server could not learn it (an
-// edit forwarded to another server of a shared world and not answered in
-// time: its reason ends "(it may still be applied)"). Such an edit may or
-// may not have been applied; any other refusal was not applied.
-inline bool edit_outcome_unknown(const EditOutcome& o) {
-  return !o.accepted && (o.reason == kEditOutcomeUnknown ||
-                         o.reason.find("may still be applied") != std::string::npos ||
-                         o.reason.find("outcome unknown") != std::string::npos);
-}
+// Whether a refusal leaves the edit's fate open (EditOutcome::unknown).
+// Such an edit may or may not have been applied; any other refusal was not
+// applied.
+inline bool edit_outcome_unknown(const EditOutcome& o) { return !o.accepted && o.unknown; }
 
 // Edits given an outcome at once, for on_edit_result.
 using SettledEdits = std::vector<std::pair<std::uint32_t, EditOutcome>>;

@@ -187,14 +187,14 @@ Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick) {
   return finish(fbb, wire::CreateEditAck(fbb, edit_id, tick));
 }
 
-Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason) {
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, bool outcome_unknown) {
   FlatBufferBuilder fbb(128);
   const auto r = fbb.CreateString(clip(reason, kMaxReasonBytes));
-  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r));
+  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r, nullptr, nullptr, 0, outcome_unknown));
 }
 
 Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Region& box,
-                        std::span<const Voxel> voxels) {
+                        std::span<const Voxel> voxels, bool outcome_unknown) {
   std::vector<std::uint8_t> rle;
   byte_rle_encode(voxels, rle);
   FlatBufferBuilder fbb(128 + rle.size());
@@ -202,7 +202,7 @@ Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Re
   const auto mn = to_wire(box.min);
   const auto mx = to_wire(box.max);
   const auto d = fbb.CreateVector(rle.data(), rle.size());
-  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r, &mn, &mx, d));
+  return finish(fbb, wire::CreateEditReject(fbb, edit_id, r, &mn, &mx, d, outcome_unknown));
 }
 
 Frame build_read_box(std::uint32_t request_id, const Region& box) {
@@ -559,6 +559,7 @@ Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m) {
 Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m) {
   EditRejectMsg out;
   out.edit_id = m.edit_id();
+  out.outcome_unknown = m.outcome_unknown();
   if (m.reason() != nullptr) {
     if (m.reason()->size() > kMaxReasonBytes) return over("edit reject: reason longer than 256 bytes");
     out.reason = m.reason()->str();

@@ -169,6 +169,7 @@ struct EditRejectMsg {
   std::string reason;
   Region box;                 // empty when no state is attached
   std::vector<Voxel> voxels;  // the true state of box (Box order)
+  bool outcome_unknown = false;  // the edit may have been applied (false: it was not)
 };
 struct PresenceEntryMsg {
   std::uint32_t client_id = 0;
@@ -214,9 +215,10 @@ Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
                          std::span<const ChunkRevisionMsg> revisions);
 Frame build_edit_request(const EditRequestMsg& m);
 Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick);
-Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason);
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, bool outcome_unknown = false);
 // A rejection with the true state of box (voxels in Box order).
-Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Region& box, std::span<const Voxel> voxels);
+Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, const Region& box, std::span<const Voxel> voxels,
+                        bool outcome_unknown = false);
 Frame build_read_box(std::uint32_t request_id, const Region& box);
 Frame build_read_box_result(std::uint32_t request_id, const Region& box, std::span<const Voxel> voxels);
 Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::string_view error);

@@ -42,6 +42,7 @@ const char* reject_reason_label(RejectReason r) {
     case RejectReason::kShutdown: return "shutdown";
     case RejectReason::kStorageFailure: return "storage_failure";
     case RejectReason::kNotOwner: return "not_owner";
+    case RejectReason::kOutcomeUnknown: return "outcome_unknown";
     case RejectReason::kCount: break;
   }
   return "unknown";

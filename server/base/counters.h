@@ -83,6 +83,7 @@ enum class RejectReason : std::uint8_t {
   kShutdown,
   kStorageFailure,
   kNotOwner,           // a region another server of a shared world holds
+  kOutcomeUnknown,     // the server cannot tell whether it was applied (a forward or commit whose answer was lost)
   kCount
 };
 const char* reject_reason_label(RejectReason r);

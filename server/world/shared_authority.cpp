@@ -19,10 +19,10 @@ constexpr std::size_t kInboxPage = 256;
 
 // How players are told of forwarded edits the database failed: what became
 // of the edit, in Terrane's words. A rejection whose outcome is not known
-// ends in "outcome unknown" (as the client library's own,
-// client/edit_tracker.h), so a player knows it may still have been applied.
-// All are counted as RejectReason::kNotOwner (no reason is closer: the
-// region is another server's), told apart by their text.
+// is RejectReason::kOutcomeUnknown (its EditReject says outcome_unknown)
+// and its text ends in "outcome unknown", as the client library's own
+// (client/edit_tracker.h); the others are kNotOwner (no reason is closer:
+// the region is another server's): the edit was not applied.
 constexpr const char* kNotApplied = "the edit was not applied";
 constexpr const char* kOutcomeUnknown = "outcome unknown";
 
@@ -468,7 +468,7 @@ void SharedAuthority::settle_forwarded() {
   std::erase_if(unsure_, [&](const Unsure& u) {
     if (clients_.present(u.id) && now < u.tell_at) return false;
     if (clients_.present(u.id))
-      queue_.reject(u.id, u.edit, RejectReason::kNotOwner,
+      queue_.reject(u.id, u.edit, RejectReason::kOutcomeUnknown,
                     fmt::format("the world's database did not confirm the forwarded edit; {}", kOutcomeUnknown));
     return true;
   });
@@ -500,7 +500,7 @@ void SharedAuthority::settle_forwarded() {
         asio::post(strand_, [this, row, deleted = std::move(deleted)]() mutable { taken_back(row, std::move(deleted)); });
       });
     } else if (!done && o.state == Outgoing::kTaken && now >= o.deadline + answer_wait()) {
-      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
+      queue_.reject(o.id, o.edit, RejectReason::kOutcomeUnknown,
                     fmt::format("server {} took the forwarded edit but did not answer within {} ms; {}", o.to,
                                 (wait + answer_wait()).count(), kOutcomeUnknown));
       done = true;
@@ -527,7 +527,7 @@ void SharedAuthority::taken_back(std::int64_t row, StoreResult<bool> deleted) {
                                 forward_wait().count(), kNotApplied));
     } else {
       database_log_.warn(fmt::format("forwarded edits: cannot take back inbox row {}: {}", row, deleted.error().message));
-      queue_.reject(o.id, o.edit, RejectReason::kNotOwner,
+      queue_.reject(o.id, o.edit, RejectReason::kOutcomeUnknown,
                     fmt::format("the world's database cannot be reached; {}", kOutcomeUnknown));
     }
   }

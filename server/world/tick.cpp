@@ -103,16 +103,19 @@ void Tick::reject(ClientId id, const EditRequestMsg& edit, RejectReason why, con
   // The true state of what the edit would have touched, when it is at hand:
   // on the data queue, after every change already sent, so it is the state
   // the client's replica reaches once it has read that far.
+  const bool unknown = why == RejectReason::kOutcomeUnknown;
   const Region r = world_.meta().bounds.clamp(edit.bounds());
   if (!r.empty() && r.volume() <= kMaxEditVolume) {
     Box box(r.size());
     if (residency_.read_current(r, box)) {
-      clients_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels())),
+      clients_.send(id,
+                    std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels(), unknown)),
                     SendClass::kData);
       return;
     }
   }
-  clients_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason)), SendClass::kControl);
+  clients_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, unknown)),
+                SendClass::kControl);
 }
 
 void Tick::edit(ClientId id, EditRequestMsg e, std::chrono::steady_clock::time_point received) {
@@ -475,12 +478,13 @@ void Tick::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versi
     // Nothing of this tick may be acknowledged or shown: it is not known to
     // be on disk. A commit whose answer was lost may be stored all the same:
     // its editors are told that the outcome is unknown, not a refusal.
-    const char* why = status.error().outcome_unknown
-                          ? "storage failure: outcome unknown (the edit may have been saved)"
-                          : "storage failure: edit not saved";
+    const bool unknown = status.error().outcome_unknown;
+    const char* why = unknown ? "storage failure: outcome unknown (the edit may have been saved)"
+                              : "storage failure: edit not saved";
     for (const Ack& a : acks)
-      clients_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, why)), SendClass::kControl);
-    counters_.rejected(RejectReason::kStorageFailure, acks.size());
+      clients_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, why, unknown)),
+                    SendClass::kControl);
+    counters_.rejected(unknown ? RejectReason::kOutcomeUnknown : RejectReason::kStorageFailure, acks.size());
     fatal_storage(status.error().message);
   } else {
     const auto t0 = std::chrono::steady_clock::now();

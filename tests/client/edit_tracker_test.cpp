@@ -22,9 +22,10 @@ TEST(EditTracker, AnOutcomeIsUnknownOnlyWhereTheEditMayHaveBeenApplied) {
   EXPECT_FALSE(edit_outcome_unknown(EditOutcome{true, 7, {}, {}, {}}));
   EXPECT_FALSE(edit_outcome_unknown(EditOutcome{false, 0, "edit outside the world", {}, {}}));
   EXPECT_FALSE(edit_outcome_unknown(EditOutcome{false, 0, "storage failure: edit not saved", {}, {}}));
-  EXPECT_TRUE(edit_outcome_unknown(EditOutcome{false, 0, kEditOutcomeUnknown, {}, {}}));
+  // The server's word (EditReject.outcome_unknown), not its text.
+  EXPECT_FALSE(edit_outcome_unknown(EditOutcome{false, 0, "a text saying outcome unknown", {}, {}, false}));
   EXPECT_TRUE(edit_outcome_unknown(
-      EditOutcome{false, 0, "forwarded to server 2, no answer within 5000 ms (it may still be applied)", {}, {}}));
+      EditOutcome{false, 0, "the world's database cannot be reached; outcome unknown", {}, {}, true}));
   EditTracker t;
   const std::uint32_t id = t.begin();
   t.written(id);

@@ -319,6 +319,23 @@ TEST(Messages, EditRejectCarriesTheTrueState) {
   ASSERT_TRUE(full.ok());
   EXPECT_EQ(full->box, box);
   EXPECT_EQ(full->voxels, voxels);
+  EXPECT_FALSE(full->outcome_unknown);
+}
+
+// A rejection says whether the edit was not applied (the default) or may
+// have been (outcome_unknown), with or without the true state.
+TEST(Messages, EditRejectSaysWhetherItsOutcomeIsUnknown) {
+  EXPECT_FALSE(parse_edit_reject(*message_of(build_edit_reject(3, "no"))->body_as_EditReject())->outcome_unknown);
+  auto plain = parse_edit_reject(*message_of(build_edit_reject(4, "lost", true))->body_as_EditReject());
+  ASSERT_TRUE(plain.ok());
+  EXPECT_TRUE(plain->outcome_unknown);
+  EXPECT_EQ(plain->reason, "lost");
+  const Region box{{0, 0, 0}, {1, 1, 2}};
+  std::vector<Voxel> voxels(2, make_voxel(materials::kRock, 99));
+  auto full = parse_edit_reject(*message_of(build_edit_reject(5, "lost", box, voxels, true))->body_as_EditReject());
+  ASSERT_TRUE(full.ok());
+  EXPECT_TRUE(full->outcome_unknown);
+  EXPECT_EQ(full->voxels, voxels);
 }
 
 TEST(Messages, PresenceIsBoundedAndChecked) {

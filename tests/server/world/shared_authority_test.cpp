@@ -36,13 +36,15 @@ class NoEdits final : public EditQueue {
     ++queued;
     forwarded.push_back(f);
   }
-  void reject(ClientId, const EditRequestMsg&, RejectReason, const std::string& reason) override {
+  void reject(ClientId, const EditRequestMsg&, RejectReason why, const std::string& reason) override {
     ++rejected;
     reasons.push_back(reason);
+    whys.push_back(why);
   }
   int queued = 0, rejected = 0;
   std::vector<Forwarded> forwarded;
   std::vector<std::string> reasons;  // the world strand's
+  std::vector<RejectReason> whys;    // the same rejections' reasons (the world strand's)
 };
 
 EditRequestMsg fill(Region box) {
@@ -336,6 +338,7 @@ TEST_F(SharedAuthorityTest, AForwardHeldUpPastItsWaitIsRefusedAndNeverTaken) {
   PQfinish(lock);
   const std::string told = anns_rejection();
   EXPECT_NE(told.find("not applied"), std::string::npos) << told;
+  on_strand([&] { EXPECT_EQ(edits_.whys.front(), RejectReason::kNotOwner); });
   EXPECT_TRUE(owners_inbox().empty()) << "the owner took an edit its sender gave up on";
   EXPECT_EQ(testing_support::sql_value(url_, "SELECT count(*) FROM terrane_inbox"), "0") << "not taken back";
 }
@@ -354,6 +357,7 @@ TEST_F(SharedAuthorityTest, AForwardTakenAndNeverAnsweredEndsWithItsOutcomeUnkno
   EXPECT_EQ(taken.front().player, "ann");
   const std::string told = anns_rejection();
   EXPECT_NE(told.find("outcome unknown"), std::string::npos) << told;
+  on_strand([&] { EXPECT_EQ(edits_.whys.front(), RejectReason::kOutcomeUnknown); });
   EXPECT_EQ(testing_support::sql_value(url_, "SELECT count(*) FROM terrane_inbox"), "1") << "a taken row went";
 }
 

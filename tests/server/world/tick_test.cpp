@@ -256,8 +256,9 @@ TEST_F(TickTest, ACommitThatMayHaveBeenStoredIsNeitherAcknowledgedNorRefused) {
     if (const auto* msg = flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes);
         msg->body_type() == wire::Body::EditReject)
       if (auto r = parse_edit_reject(*msg->body_as_EditReject()))
-        rejected.push_back(std::to_string(r->edit_id) + ": " + r->reason);
-  EXPECT_EQ(rejected, (std::vector<std::string>{"5: storage failure: outcome unknown (the edit may have been saved)"}));
+        rejected.push_back(std::to_string(r->edit_id) + ": " + r->reason + (r->outcome_unknown ? " [unknown]" : ""));
+  EXPECT_EQ(rejected,
+            (std::vector<std::string>{"5: storage failure: outcome unknown (the edit may have been saved) [unknown]"}));
   EXPECT_EQ(editor->closed, "server storage failure");
 }
 

@@ -27,7 +27,6 @@ from faults.checker import Write
 Y = 100          # registers' height (air above the default world's ground, region y 0)
 REGION = 256     # voxels per region side (8 chunks of 32: STORE_POSTGRESQL.md)
 
-AMBIGUOUS = ("may still be applied", "outcome unknown")  # rejections that do not say no
 DB_TEXT = ("libpq", "server closed the connection", "could not connect", "connection to server", "SSL",
            "FATAL", "ERROR:", "terminating connection", "PQ", "SQLSTATE", "could not receive", "could not send")
 
@@ -165,7 +164,7 @@ class Workload:
                 w.outcome = "acked"
             except (terrane.EditRejected, terrane.EditOutcomeUnknown) as e:
                 w.reason = str(e)
-                unknown = isinstance(e, terrane.EditOutcomeUnknown) or any(a in w.reason for a in AMBIGUOUS)
+                unknown = isinstance(e, terrane.EditOutcomeUnknown)
                 w.outcome = "unknown" if unknown else "refused"
                 if w.outcome == "unknown":  # the server timed the edit out: fail over as on a timeout
                     client.close()
