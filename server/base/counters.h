@@ -122,6 +122,29 @@ struct DatabaseCounters {
   std::atomic<std::uint64_t> inbox_failing{0};
 };
 
+// One commit's retries as DatabaseCounters count them: in commits_retrying
+// from its first failed attempt (start()) until it ends (stored or failed),
+// every failed attempt in commit_retries. counters may be null.
+class CommitRetries {
+ public:
+  explicit CommitRetries(DatabaseCounters* counters) : counters_(counters) {}
+  CommitRetries(const CommitRetries&) = delete;
+  CommitRetries& operator=(const CommitRetries&) = delete;
+  ~CommitRetries() {
+    if (on_) counters_->commits_retrying.fetch_sub(1, std::memory_order_relaxed);
+  }
+  void start() {
+    if (counters_ == nullptr) return;
+    counters_->commit_retries.fetch_add(1, std::memory_order_relaxed);
+    if (!on_) counters_->commits_retrying.fetch_add(1, std::memory_order_relaxed);
+    on_ = true;
+  }
+
+ private:
+  DatabaseCounters* const counters_;
+  bool on_ = false;
+};
+
 struct ServerCounters {
   std::atomic<std::uint64_t> sessions_accepted{0};
   std::atomic<std::uint64_t> joins{0};           // handshakes accepted (Welcome sent)

@@ -493,18 +493,7 @@ FileStatus PostgresStore::save(std::span<const ChunkWrite> writes, bool overwrit
   int conflicts = 0;
   // Counted as retrying from the first failed attempt to the end (stored
   // or failed): /health says the world's changes are not being stored.
-  struct Retrying {
-    DatabaseCounters* counters;
-    bool on = false;
-    void start() {
-      if (counters == nullptr) return;
-      counters->commit_retries.fetch_add(1, std::memory_order_relaxed);
-      if (!std::exchange(on, true)) counters->commits_retrying.fetch_add(1, std::memory_order_relaxed);
-    }
-    ~Retrying() {
-      if (on) counters->commits_retrying.fetch_sub(1, std::memory_order_relaxed);
-    }
-  } retrying{database_counters_};
+  CommitRetries retrying(database_counters_);
   bool unanswered = false;  // a try's COMMIT went unanswered, and no later try has found out since
   const auto failed = [&](const StoreError& e) {
     if (!unanswered) return file_error(e);
