@@ -15,6 +15,11 @@
 // Chunks never stored are generated on demand from the metadata (see World).
 // The finer mips are not stored: they are rebuilt from level 0 on load.
 //
+// SqliteStore owns the connection, the metadata and the chunk rows; the
+// other tables have owners of their own over its connection, which it
+// holds and delegates to: SqliteEditLog, SqliteQuarantine,
+// SqliteCoarseImages, SqliteAccess.
+//
 // Errors are returned as FileError naming the world and, for chunk data,
 // the chunk's coordinates; a damaged blob never crashes the reader.
 // Thread-safety: one owner thread per object (one SQLite connection).
@@ -23,15 +28,16 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
-#include <map>
 #include <memory>
 #include <optional>
-#include <set>
 #include <span>
 #include <string>
-#include <tuple>
 #include <vector>
 
+#include "common/world/sqlite_access.h"
+#include "common/world/sqlite_coarse_images.h"
+#include "common/world/sqlite_edit_log.h"
+#include "common/world/sqlite_quarantine.h"
 #include "common/world/world_store.h"
 
 struct sqlite3;
@@ -66,7 +72,9 @@ class SqliteStore final : public WorldStore {
 
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override;
   FileResult<std::vector<CoarseEntry>> load_coarse(Vec3i region) override;
-  FileResult<std::vector<CoarseEntry>> load_coarse_as_kept(Vec3i region) override { return read_image(region); }
+  FileResult<std::vector<CoarseEntry>> load_coarse_as_kept(Vec3i region) override {
+    return coarse_.load_as_kept(region);
+  }
   FileResult<std::vector<Vec3i>> quarantined_in(Vec3i region) override;
   FileResult<std::vector<Vec3i>> stored_in(Vec3i region) override;
   // Coarse images behind the chunks: save_chunks leaves the images' changes
@@ -76,18 +84,18 @@ class SqliteStore final : public WorldStore {
   // changes while they wait. Writes pending when the process dies are
   // caught up by the next write into their region (until then, loads
   // decode them).
-  void set_coarse_behind(bool on) override { coarse_behind_ = on; }
+  void set_coarse_behind(bool on) override { coarse_.set_behind(on); }
   // In one transaction, the images of up to max_regions regions whose
   // oldest pending change is at least min_age old (oldest first); how many
   // regions still have pending changes.
   FileResult<std::size_t> catch_up_coarse(std::size_t max_regions, std::chrono::steady_clock::duration min_age) override;
-  std::size_t coarse_pending() const override { return pending_coarse_.size(); }
+  std::size_t coarse_pending() const override { return coarse_.pending(); }
   // The region's image is rewritten from its rows at the next catch-up (a
   // load found it behind: maybe left by a writer that stopped before
   // catching up, which nothing else would repair until the next write
   // there).
   void repair_coarse(Vec3i region) override;
-  bool coarse_read_behind() const override { return coarse_read_behind_; }
+  bool coarse_read_behind() const override { return coarse_.read_behind(); }
   FileStatus begin_read() override;
   void end_read() override;
   // Calls fn(region, entries) for every coarse image as stored, which may
@@ -128,57 +136,28 @@ class SqliteStore final : public WorldStore {
   SqliteStore(std::string dir, sqlite3* db);
   static FileResult<std::unique_ptr<SqliteStore>> create_in(const std::string& dir, const WorldMeta& meta);
   FileStatus load_meta();
-  FileStatus ensure_quarantine_table();
   FileStatus upgrade_to_coarse(const Progress& progress);
-  // Inside a transaction: the images of the regions of entries, changed.
-  // set: entries to put; erase: chunks whose entries go.
-  // repair: regions rewritten even if nothing of them changes; heal_all,
-  // or a region in repair: made to match its rows (read_past) as well.
-  using RegionKey = std::tuple<int, int, int>;
-  FileStatus change_coarse(const std::vector<CoarseEntry>& set, const std::vector<Vec3i>& erase,
-                           const std::set<RegionKey>& repair, bool heal_all);
-  // entries (an image's) made to match the region's rows: entries whose row
-  // has another revision or none are made from the row or dropped, rows
-  // without one decoded; in index order (with no entries: the region made
-  // from its rows alone, a damaged image's repair). behind, if given: set
-  // to whether entries did not match the rows.
-  FileResult<std::vector<CoarseEntry>> read_past(Vec3i region, std::vector<CoarseEntry> entries,
-                                                 bool* behind = nullptr);
-  // The image as stored (no entries if there is none).
-  FileResult<std::vector<CoarseEntry>> read_image(Vec3i region);
-  // The region's chunk rows and their revisions (an index range scan).
-  FileResult<std::vector<std::pair<Vec3i, std::uint64_t>>> revisions_in(Vec3i region);
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
+  sqlite3* db() const { return db_.get(); }
 
+  struct CloseDatabase {
+    void operator()(sqlite3* db) const;
+  };
   std::string dir_;
-  sqlite3* db_ = nullptr;
+  // Declared before the owners below: closed after they finalized their
+  // statements (a connection with statements left does not close).
+  std::unique_ptr<sqlite3, CloseDatabase> db_;
+  // The chunk rows (table "chunks"): read, written over, written if absent.
   sqlite3_stmt* load_stmt_ = nullptr;
   sqlite3_stmt* save_stmt_ = nullptr;
-  sqlite3_stmt* log_stmt_ = nullptr;
-  // edit_log_size once counted: a prune by size once a minute scanned every
-  // row, tens of milliseconds on the writer thread with a busy log, and
-  // every acknowledgement waited behind it. Unknown again after a failure
-  // or a prune by age.
-  std::optional<std::pair<std::int64_t, std::uint64_t>> log_size_;
   sqlite3_stmt* insert_stmt_ = nullptr;
-  sqlite3_stmt* quarantined_rev_stmt_ = nullptr;
-  sqlite3_stmt* coarse_load_stmt_ = nullptr;
-  sqlite3_stmt* coarse_save_stmt_ = nullptr;
   WorldMeta meta_;
-  bool coarse_behind_ = false;
-  bool coarse_read_behind_ = false;  // the last load_coarse read past its image
-  // Images' changes not written yet (set_coarse_behind), per region: due
-  // from when, the entries by coarse_index, whether the whole region is to
-  // be made from its rows, and failed attempts.
-  struct PendingImage {
-    std::chrono::steady_clock::time_point since;
-    std::map<int, CoarseEntry> entries;
-    bool repair = false;
-    int failures = 0;
-  };
-  static constexpr int kMaxCoarseFailures = 5;
-  std::map<RegionKey, PendingImage> pending_coarse_;
+  // The other tables, each with its owner over this connection.
+  SqliteEditLog edit_log_;
+  SqliteQuarantine quarantine_;
+  SqliteCoarseImages coarse_;
+  SqliteAccess access_;
 };
 
 }  // namespace terrane

@@ -684,5 +684,27 @@ TEST_F(SqliteStoreTest, CoarseImagesBehindTheChunksAreReadPastThenCaughtUp) {
   expect_coarse_matches_chunks(**reopened);
 }
 
+TEST_F(SqliteStoreTest, ClosingTheStoreClosesItsConnectionAfterEveryOwnerUsedIt) {
+  {
+    auto store = SqliteStore::create(dir_, default_world_meta());
+    ASSERT_TRUE(store.ok());
+    SqliteStore& s = **store;
+    // Every owner prepares its statements: chunks, edit log, coarse images,
+    // quarantine, access.
+    const std::vector<ChunkWrite> writes = {{{0, 0, 0}, 1, encode_chunk_blob(sample_chunk(1))},
+                                            {{1, 0, 0}, 1, {1, 1, 0xff}}};
+    const std::vector<EditLogEntry> log = {EditLogEntry{0, 1, 1000, "ann", {{0, 0, 0}, {1, 1, 1}}, {1}, {2}}};
+    ASSERT_TRUE(s.save_chunks(writes, true, log).ok());
+    ASSERT_TRUE(s.load_coarse({0, 0, 0}).ok());
+    ASSERT_TRUE(s.quarantine_chunk({1, 0, 0}, "bad").ok());
+    ASSERT_TRUE(s.quarantined_revision({1, 0, 0}).ok());
+    ASSERT_TRUE(s.put_access("ban:bob", "1").ok());
+    ASSERT_TRUE(fs::exists(dir_ + "/world.sqlite-wal"));
+  }
+  // The last connection closed checkpoints and removes the WAL: it would
+  // stay if a statement had been left unfinalized (the close refused).
+  EXPECT_FALSE(fs::exists(dir_ + "/world.sqlite-wal"));
+}
+
 }  // namespace
 }  // namespace terrane
