@@ -5,6 +5,13 @@
 // within a voxel; see common/world/GENERATOR.md for the shape, biomes, materials and
 // the versioning rule.
 //
+// It composes three owners: GeneratorParams (the knobs and their metadata
+// text, generator_params.h), TerrainField (the height and density field and
+// its noise state, terrain_field.h) and TerrainShading (materials, biomes,
+// caves and water, terrain_shading.h). What it owns itself is box
+// generation: the columns of a footprint, the 3D lattice a region reads,
+// the voxel loop, coarse samples, and the caches of chunk footprints' columns.
+//
 // Contract:
 //  - Deterministic: a voxel depends only on (params, position), never on how
 //    regions are cut or in which order they are generated.
@@ -27,56 +34,11 @@
 #include "common/voxel/box.h"
 #include "common/voxel/vec3.h"
 #include "common/voxel/voxel.h"
+#include "common/world/generator_params.h"
+#include "common/world/terrain_field.h"
+#include "common/world/terrain_shading.h"
 
 namespace terrane {
-
-inline constexpr std::uint32_t kGeneratorVersion = 1;
-
-// The vertical range a default world is built for (Y is up). The generator
-// is defined everywhere: below kWorldMinY + 4 it is solid Basalt, above the
-// highest peak it is Air.
-inline constexpr std::int32_t kWorldMinY = -128;
-inline constexpr std::int32_t kWorldMaxY = 256;
-
-// All knobs are part of the world's metadata (to_metadata); validate() gives
-// the accepted ranges.
-struct GeneratorParams {
-  std::uint64_t seed = 1;
-  // Water fills open air below this y (oceans, rivers, swamps).
-  std::int32_t sea_level = 32;
-  // Horizontal feature size multiplier: 2 makes continents, mountains and
-  // rivers twice as wide. Range [0.25, 8].
-  float terrain_scale = 1.0f;
-  // Peak height of mountain ranges above the land, in voxels. Range [0, 400].
-  float mountain_height = 160.0f;
-  // Amplitude of rolling hills, in voxels. Range [0, 64].
-  float hill_height = 18.0f;
-  // Amplitude of the 3D surface perturbation (overhangs, arches) in
-  // steep and mountainous terrain, in voxels. Range [0, 16].
-  float overhang_strength = 7.0f;
-  // Tunnels and caverns underground (and lava deep down).
-  bool caves = true;
-
-  friend bool operator==(const GeneratorParams&, const GeneratorParams&) = default;
-};
-
-// Returns an empty string when params are valid, else a message naming the
-// first bad field.
-std::string validate(const GeneratorParams& params);
-
-// Surface classification of a column, used for topsoil and vegetation.
-enum class Biome : std::uint8_t {
-  kOcean,           // below water: sand, mud and gravel-like ground
-  kBeach,           // a thin sand strip at sea level
-  kPlains,          // Grass over Ground
-  kMeadow,          // wet temperate: LeafyGrass over Ground
-  kDesert,          // Sand over Sandstone, stepped canyons
-  kSwamp,           // Mud at sea level with pools
-  kHighlands,       // terraced rock: Slate, Limestone, thin Grass on flats
-  kSnowyMountains,  // Snow above the snow line, Ice on cold water
-};
-inline constexpr int kBiomeCount = 8;
-const char* to_string(Biome biome);
 
 class TerrainGenerator {
  public:
@@ -84,7 +46,7 @@ class TerrainGenerator {
   // invalid params are clamped into range so a bad caller cannot crash us).
   explicit TerrainGenerator(GeneratorParams params);
 
-  const GeneratorParams& params() const { return params_; }
+  const GeneratorParams& params() const { return field_.params(); }
 
   // Fills out (resized to region.size()) with the voxels of the half-open
   // region, in Box order. An empty region yields an empty box.
@@ -127,20 +89,10 @@ class TerrainGenerator {
   static Result<TerrainGenerator> from_metadata(std::string_view text, std::string* message = nullptr);
 
  private:
-  struct Surface;  // 2D fields of a column
-  struct Column;   // what the voxel loop needs about a column
-  Surface surface(std::int32_t x, std::int32_t z) const;
-  float raw_height(double px, double pz, Surface* s) const;
-  Column column(const Surface& c, float h_xm, float h_xp, float h_zm, float h_zp) const;
-  void lattice_sample(std::int32_t lx, std::int32_t ly, std::int32_t lz, float out[4]) const;
-  // The 3D fields (overhang, two worms, cavern) at a point; without
-  // overhang, out[0] is 0 (for points where shade() does not read it).
-  void fields_at(double x, double y, double z, float out[4], bool overhang = true) const;
-  // sharpness scales the density before it is clamped: 1 for voxels, 2 /
-  // cell for a coarse_sample cell.
-  Voxel shade(const Column& col, std::int32_t x, std::int32_t y, std::int32_t z, const float* corners,
-              float sharpness = 1.0f) const;
+  using Column = TerrainShading::Column;
 
+  // The column at (x, z), from its surface and its neighbours' heights.
+  Column column_at(std::int32_t x, std::int32_t z) const;
   // The per-column part of generate() for a footprint: 2D noise fields
   // (with a one-voxel margin for the slope) turned into Columns.
   std::vector<Column> columns(std::int32_t x0, std::int32_t z0, int sx, int sz) const;
@@ -154,9 +106,8 @@ class TerrainGenerator {
   static constexpr std::size_t kColumnCacheSize = 256;  // ~20 MB of Columns
   static constexpr std::size_t kCoarseColumnCacheSize = 1024;  // 16 Columns each, ~2 MB
 
-  GeneratorParams params_;
-  double inv_scale_;          // 1 / terrain_scale
-  std::uint32_t seeds_[16];   // one per noise field
+  TerrainField field_;
+  TerrainShading shading_;  // built from field_
   std::shared_ptr<ColumnCache> cache_;  // shared by copies (same params, same columns)
   std::shared_ptr<ColumnCache> coarse_cache_;  // coarse_sample's chunk stacks (4 x 4 columns at cell 8)
 };

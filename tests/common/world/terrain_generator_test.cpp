@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <iterator>
 #include <set>
 #include <string>
 
@@ -265,6 +267,68 @@ TEST(TerrainGenerator, GoldenChunkHashes) {
     EXPECT_GT(values.size(), 100u);
     EXPECT_EQ(fnv1a(b), g.hash) << "chunk " << g.chunk.x << "," << g.chunk.y << "," << g.chunk.z << " hash 0x"
                                 << std::hex << fnv1a(b);
+  }
+}
+
+// Hashes of generated boxes for several seeds and parameter sets over chunk
+// footprints, odd-sized regions (their own columns, not the cache),
+// coarse_sample cells and the 2D queries: recorded from the generator before
+// its field, shading and parameters became separate owners, so the same
+// (params, position) still gives the same bits.
+TEST(TerrainGenerator, SeedsAndRegionsKeepTheirHashes) {
+  static_assert(kGeneratorVersion == 1, "update the recorded hashes with the version");
+  GeneratorParams wide;
+  wide.seed = 0x9E3779B97F4A7C15ull;
+  wide.sea_level = -20;
+  wide.terrain_scale = 2.5f;
+  wide.mountain_height = 300.0f;
+  wide.hill_height = 40.0f;
+  wide.overhang_strength = 14.0f;
+  GeneratorParams dry;
+  dry.seed = 7;
+  dry.caves = false;
+  dry.terrain_scale = 0.5f;
+  GeneratorParams seed42;
+  seed42.seed = 42;
+  const GeneratorParams sets[] = {GeneratorParams{}, seed42, wide, dry};
+  const Region regions[] = {
+      Region::from_min_size({0, 32, 0}, {32, 32, 32}),         // a chunk near the surface
+      Region::from_min_size({-96, -64, 160}, {32, 32, 32}),    // a chunk underground
+      Region::from_min_size({-37, -5, 11}, {45, 70, 23}),      // odd sizes, unaligned
+      Region::from_min_size({1000, -128, -700}, {17, 40, 9}),  // bedrock and lava
+  };
+  const std::uint64_t expected[4] = {0xf3992e74f8190806ull, 0x23fd8b31d1f813d4ull, 0x6ffc5c7ef8ded09eull,
+                                     0x6a895456de041264ull};
+  for (std::size_t i = 0; i < std::size(sets); ++i) {
+    const TerrainGenerator gen(sets[i]);
+    std::uint64_t h = 0xCBF29CE484222325ull;
+    auto mix = [&](std::uint64_t v) {
+      for (int b = 0; b < 8; ++b) {
+        h ^= (v >> (8 * b)) & 0xFF;
+        h *= 0x100000001B3ull;
+      }
+    };
+    for (const Region& r : regions) {
+      mix(fnv1a(generate(gen, r)));
+      mix(gen.all_air(r) ? 1 : 0);
+    }
+    Box coarse;
+    gen.coarse_sample({0, -64, 0}, 8, {4, 16, 4}, coarse);
+    mix(fnv1a(coarse));
+    gen.coarse_sample({-50, 0, 70}, 5, {7, 9, 3}, coarse);
+    mix(fnv1a(coarse));
+    for (std::int32_t k = 0; k < 64; ++k) {
+      const std::int32_t x = k * 97 - 3000, z = k * 61 - 1500;
+      float sh = gen.surface_height(x, z);
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, &sh, sizeof bits);
+      mix(bits);
+      mix(static_cast<std::uint64_t>(static_cast<std::uint8_t>(gen.biome_at(x, z))));
+      mix(static_cast<std::uint32_t>(gen.water_level(x, z)));
+      const Voxel v = gen.voxel_at({x, static_cast<std::int32_t>(std::floor(sh)) - 3 + k % 7, z});
+      mix(static_cast<std::uint64_t>(v.material) << 8 | v.occupancy);
+    }
+    EXPECT_EQ(h, expected[i]) << "parameter set " << i << " hash 0x" << std::hex << h;
   }
 }
 
