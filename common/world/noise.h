@@ -56,12 +56,15 @@ constexpr std::uint32_t hash3(std::int32_t x, std::int32_t y, std::int32_t z, st
 // A hash mapped to [0, 1) with 24 bits (exact in a float).
 constexpr float hash_unit(std::uint32_t h) { return static_cast<float>(h >> 8) * (1.0f / 16777216.0f); }
 
+// Linear interpolation from a (t = 0) to b (t = 1), as the noise and the
+// terrain built on it compute it.
+constexpr float lerp(float a, float b, float t) { return a + (b - a) * t; }
+
 namespace noise_detail {
 
 // Quintic fade 6t^5 - 15t^4 + 10t^3: C2-continuous, so interpolated noise has
 // no visible creases.
 constexpr float fade(float t) { return t * t * t * (t * (t * 6.0f - 15.0f) + 10.0f); }
-constexpr float lerp(float a, float b, float t) { return a + (b - a) * t; }
 
 // Splits a coordinate into a wrapped 32-bit cell index and the fraction in it.
 inline void split(double v, std::int32_t& cell, float& frac) {

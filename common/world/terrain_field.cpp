@@ -28,8 +28,6 @@ enum Stream : std::uint32_t {
   kCavern,
 };
 
-constexpr float lerpf(float a, float b, float t) { return a + (b - a) * t; }
-
 // Steps h into plateaus `step` high joined by cliffs; `sharp` is the half
 // width of the cliff as a fraction of a step (smaller = steeper).
 float terrace(float h, float step, float sharp) {
@@ -69,13 +67,13 @@ float TerrainField::raw_height(double px, double pz, Surface* s) const {
       (1.0f - mountain);
   if (highland > 0.0f) {
     h += 38.0f * highland;
-    h = lerpf(h, terrace(h, 9.0f, 0.08f), highland);
+    h = lerp(h, terrace(h, 9.0f, 0.08f), highland);
   }
 
   const float temperature = 2.0f * fbm2(px / 800.0, pz / 800.0, seeds_[kTemperature], 2);
   const float humidity = 2.0f * fbm2(px / 650.0, pz / 650.0, seeds_[kHumidity], 2);
   const float desert = smoothstep(0.0f, 0.25f, temperature) * smoothstep(0.05f, -0.15f, humidity) * land;
-  if (desert > 0.0f) h = lerpf(h, terrace(h, 14.0f, 0.04f), desert * 0.85f);
+  if (desert > 0.0f) h = lerp(h, terrace(h, 14.0f, 0.04f), desert * 0.85f);
 
   // Rivers and canyons follow the zero lines of a noise: |n| small is the
   // valley. The bed sits below sea level so rivers fill with sea water; in
@@ -88,14 +86,14 @@ float TerrainField::raw_height(double px, double pz, Surface* s) const {
     if (h > bed) {
       const float smooth = valley * valley * (3.0f - 2.0f * valley);
       const float stepped = terrace(valley * 3.0f, 1.0f, 0.1f) * (1.0f / 3.0f);
-      h = lerpf(h, bed, lerpf(smooth, stepped, desert));
+      h = lerp(h, bed, lerp(smooth, stepped, desert));
     }
   }
 
   const float swamp = smoothstep(0.1f, 0.3f, humidity) * (1.0f - smoothstep(sea + 6.0f, sea + 22.0f, h)) * land *
                       (1.0f - desert);
   if (swamp > 0.0f) {
-    h = lerpf(h, sea + 0.4f + 6.0f * fbm2(px / 30.0, pz / 30.0, seeds_[kSwampDetail], 2), swamp);
+    h = lerp(h, sea + 0.4f + 6.0f * fbm2(px / 30.0, pz / 30.0, seeds_[kSwampDetail], 2), swamp);
   }
 
   if (s != nullptr) {
@@ -141,7 +139,7 @@ TerrainField::Surface TerrainField::surface(std::int32_t x, std::int32_t z) cons
       if (hc > sea + 3.0f && hc < sea + 60.0f && c.mountain < 0.2f && c.desert < 0.5f && c.swamp < 0.3f) {
         const float level = std::floor(hc) - 1.0f;
         const float ring = 1.0f - smoothstep(radius, radius * 1.8f, dist);
-        h = lerpf(h, level + 2.0f, ring);
+        h = lerp(h, level + 2.0f, ring);
         if (dist < radius) {
           const float r = dist / radius;
           h -= 10.0f * (1.0f - r * r);

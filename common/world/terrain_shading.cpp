@@ -19,14 +19,12 @@ constexpr std::int32_t kCaveMinY = TerrainShading::kCaveMinY;
 constexpr std::int32_t kBedrockY = TerrainShading::kBedrockY;
 constexpr std::int32_t kLavaY = TerrainShading::kLavaY;
 
-constexpr float lerpf(float a, float b, float t) { return a + (b - a) * t; }
-
 // Trilinear interpolation of the 8 lattice corners c[(dy * 2 + dz) * 2 + dx].
 // The single formula both generate() and voxel_at() use, so their bits agree.
 float trilerp(const float* c, float fx, float fy, float fz) {
-  const float a = lerpf(lerpf(c[0], c[1], fx), lerpf(c[2], c[3], fx), fz);
-  const float b = lerpf(lerpf(c[4], c[5], fx), lerpf(c[6], c[7], fx), fz);
-  return lerpf(a, b, fy);
+  const float a = lerp(lerp(c[0], c[1], fx), lerp(c[2], c[3], fx), fz);
+  const float b = lerp(lerp(c[4], c[5], fx), lerp(c[6], c[7], fx), fz);
+  return lerp(a, b, fy);
 }
 
 std::int32_t floor_to_int(float v) {
@@ -98,7 +96,7 @@ TerrainShading::Column TerrainShading::column(const TerrainField::Surface& s, fl
   c.strata_warp = s.strata_warp;
   c.worm_radius = 0.03f + 0.08f * s.cave_amount;
   const bool near_water = h < static_cast<float>(s.water_level) + 4.0f;
-  c.cave_guard = near_water ? 18.0f : lerpf(7.0f, -8.0f, s.entrance);
+  c.cave_guard = near_water ? 18.0f : lerp(7.0f, -8.0f, s.entrance);
   c.soil_factor = clampf(1.6f - 0.6f * c.slope, 0.0f, 1.0f);
 
   // Biome.
