@@ -55,7 +55,6 @@ inline void copy8_voxels(Voxel* dst, const Voxel* src) {
   std::memcpy(dst, t, 16);
 }
 
-
 // Builds the error for a failure inside a bit stream: anything noticed after
 // the reader fed zeros past the end is truncation. The reader comes by value
 // so that the decoder's own reader never has its address taken and stays in

@@ -54,7 +54,9 @@ DecodeError decode_error(int n, const std::vector<std::uint8_t>& bytes) {
 // A unit written bit by bit as NET_CODEC.md lays it out.
 class UnitWriter {
  public:
-  explicit UnitWriter(std::uint8_t kind) : w_(buf_.data() + 1) { buf_[0] = static_cast<std::uint8_t>(kNetCodecVersion | (kind << 4)); }
+  explicit UnitWriter(std::uint8_t kind) : w_(buf_.data() + 1) {
+    buf_[0] = static_cast<std::uint8_t>(kNetCodecVersion | (kind << 4));
+  }
   UnitWriter(const UnitWriter&) = delete;
   UnitWriter& operator=(const UnitWriter&) = delete;
 
@@ -106,7 +108,8 @@ UnitWriter& one_material_tokens(UnitWriter& u, bool partial) {
 TEST(NetCodecDecoder, ReturnsTheUnitsSizeAndLeavesLaterBytesUnread) {
   for (int n : kSizes) {
     std::mt19937 rng(1);
-    for (const auto& v : {make_unit(n), make_unit(n, solid(4)), terrain_unit(n, 1.5f, 0.4f), random_unit(n, rng, 6, false)}) {
+    for (const auto& v :
+         {make_unit(n), make_unit(n, solid(4)), terrain_unit(n, 1.5f, 0.4f), random_unit(n, rng, 6, false)}) {
       std::vector<std::uint8_t> bytes;
       net_codec_encode(n, v, bytes);
       const std::size_t size = bytes.size();

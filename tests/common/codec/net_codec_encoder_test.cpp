@@ -91,7 +91,8 @@ TEST(NetCodecEncoder, AppendsAfterWhatTheBufferHolds) {
 // One solid voxel in Air is a short token stream of two palette entries.
 TEST(NetCodecEncoder, OneVoxelDifferenceIsATokenStream) {
   for (int n : kSizes) {
-    for (std::size_t at : {std::size_t{0}, static_cast<std::size_t>(n * n * n / 2), static_cast<std::size_t>(n * n * n - 1)}) {
+    const auto volume = static_cast<std::size_t>(n * n * n);
+    for (std::size_t at : {std::size_t{0}, volume / 2, volume - 1}) {
       auto v = make_unit(n);
       v[at] = solid(9);
       const auto bytes = expect_round_trip(n, v);
