@@ -13,6 +13,12 @@
 
 namespace terrane {
 
+// A steady-clock time as the counters keep it (last_tick_at_ns,
+// lease_renewed_at_ns): nanoseconds since the clock's epoch, 0 for never.
+inline std::int64_t steady_ns(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
+}
+
 // A fixed-bucket histogram of durations, lock-free (Prometheus' histogram
 // type: cumulative buckets "le", a _sum and a _count, made when rendered).
 class DurationHistogram {

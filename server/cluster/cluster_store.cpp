@@ -37,6 +37,13 @@ StoreError bad_row(const char* what, Vec3i region) {
 // The database's clock in microseconds since 1970, as a statement's column.
 constexpr const char* kClockMicros = "(extract(epoch FROM clock_timestamp()) * 1000000)::bigint";
 
+// What an inbox row may say is left before its deadline at most: a sender
+// waits max(2 s, a lease), and terrane-server's --lease-ms is at most 10
+// minutes. A row saying more (written by hand, or by a broken server; its
+// deadline 'infinity' even) is taken as saying this, so that its time
+// stays in the steady clock's range.
+constexpr std::int64_t kMaxInboxLeftUs = std::int64_t{10} * 60 * 1'000'000;
+
 }  // namespace
 
 ClusterStore::ClusterStore(std::unique_ptr<PgConnection> c) : c_(std::move(c)) {}
@@ -419,10 +426,13 @@ StoreResult<std::vector<InboxEdit>> ClusterStore::inbox(std::uint32_t to, std::i
                     " RETURNING id, from_server,"
                     " CASE WHEN octet_length(player) <= $4 THEN player ELSE '' END,"
                     " CASE WHEN octet_length(edit) <= $5 THEN edit ELSE ''::bytea END,"
-                    " (extract(epoch FROM expires_at - clock_timestamp()) * 1000000)::bigint",
+                    // What is left of its time, at most kMaxInboxLeftUs
+                    // (an infinite deadline would not subtract).
+                    " (extract(epoch FROM LEAST(expires_at, clock_timestamp() + $6::bigint * interval '1 microsecond')"
+                    "  - clock_timestamp()) * 1000000)::bigint",
                     {text(to), text(after), text(static_cast<std::int64_t>(limit)),
                      text(static_cast<std::int64_t>(kMaxClientNameBytes)),
-                     text(static_cast<std::int64_t>(kDefaultMaxFrameBytes + kFrameHeaderBytes))},
+                     text(static_cast<std::int64_t>(kDefaultMaxFrameBytes + kFrameHeaderBytes)), text(kMaxInboxLeftUs)},
                     /*binary_result=*/true);
   if (!r) return r.error();
   std::vector<InboxEdit> out;
@@ -438,7 +448,7 @@ StoreResult<std::vector<InboxEdit>> ClusterStore::inbox(std::uint32_t to, std::i
     const auto name = bytes_at(r->res, i, 2), edit = bytes_at(r->res, i, 3);
     e.player.assign(name.begin(), name.end());
     e.edit.assign(edit.begin(), edit.end());
-    e.current_until = asked + std::chrono::microseconds(std::max<std::int64_t>(0, *left_us));
+    e.current_until = asked + std::chrono::microseconds(std::clamp<std::int64_t>(*left_us, 0, kMaxInboxLeftUs));
     out.push_back(std::move(e));
   }
   // RETURNING keeps no order.

@@ -21,10 +21,7 @@ StoreResult<std::unique_ptr<LeaseKeeper>> LeaseKeeper::open(const std::string& u
   if (!renewer) return renewer.error();
   // Connected: the database is reached (the first round comes a period on).
   if (counters != nullptr)
-    counters->lease_renewed_at_ns.store(
-        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-            .count(),
-        std::memory_order_relaxed);
+    counters->lease_renewed_at_ns.store(steady_ns(std::chrono::steady_clock::now()), std::memory_order_relaxed);
   // A first reading of the database's clock, so that edits can be
   // forwarded before the first renewal round (without one they wait for it).
   DatabaseClock clock;
@@ -192,12 +189,6 @@ bool LeaseKeeper::exchange_addresses(const std::string& address, ClusterDirector
 
 void LeaseKeeper::renew_loop() {
   auto last_ok = std::chrono::steady_clock::now();
-  const auto note_reached = [this](std::chrono::steady_clock::time_point at) {
-    if (counters_ != nullptr)
-      counters_->lease_renewed_at_ns.store(
-          std::chrono::duration_cast<std::chrono::nanoseconds>(at.time_since_epoch()).count(),
-          std::memory_order_relaxed);
-  };
   bool failed = false;  // the last round could not renew: the next one comes after the retry pause
   std::unique_lock lock(mutex_);
   for (;;) {
@@ -251,7 +242,8 @@ void LeaseKeeper::renew_loop() {
       reached = exchange_addresses(address, directory) && reached;
       lock.lock();
     }
-    if (reached) note_reached(started);
+    if (reached && counters_ != nullptr)
+      counters_->lease_renewed_at_ns.store(steady_ns(started), std::memory_order_relaxed);
     if (!lost.empty() && on_lost_) {
       lock.unlock();
       for (const auto& [l, why] : lost) on_lost_(l, why);

@@ -167,11 +167,9 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_storage_retries_total", "Commit attempts that failed for want of the database and were tried again.",
             load(db.commit_retries));
   const std::int64_t renewed = db.lease_renewed_at_ns.load(std::memory_order_relaxed);
-  const std::int64_t now_ns =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(s.now.time_since_epoch()).count();
   m.gauge("terrane_lease_renewal_age_seconds",
           "Seconds since the last lease renewal round that reached the database started (0 for a world directory).",
-          renewed == 0 ? 0.0 : static_cast<double>(std::max<std::int64_t>(0, now_ns - renewed)) * 1e-9);
+          renewed == 0 ? 0.0 : static_cast<double>(std::max<std::int64_t>(0, steady_ns(s.now) - renewed)) * 1e-9);
   m.gauge("terrane_database_listener_down",
           "1 while the connection hearing the other servers' notices is broken (a shared PostgreSQL world).",
           load(db.listener_down));
@@ -300,15 +298,13 @@ Health check_health(const ServerCounters& c, bool storage_failed, std::uint32_t 
   const auto period = std::chrono::nanoseconds(1'000'000'000LL / std::max<std::uint32_t>(1, tick_hz));
   const auto limit = std::max<std::chrono::nanoseconds>(std::chrono::seconds(1), period * 10);
   if (last == 0) return {false, "not ticking yet"};
-  const auto since = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()) -
-                     std::chrono::nanoseconds(last);
+  const auto since = std::chrono::nanoseconds(steady_ns(now) - last);
   if (since > limit) return {false, "no tick for " + ms_text(since)};
   if (lease_renewal.count() > 0) {
     const std::int64_t renewed = db.lease_renewed_at_ns.load(std::memory_order_relaxed);
-    const auto age = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()) -
-                     std::chrono::nanoseconds(renewed);
+    const auto age = std::chrono::nanoseconds(steady_ns(now) - renewed);
     // Two periods: one round may be slow; none for two means the database
-    // is out of reach (a lease lasts five).
+    // is out of reach (a lease lasts ten: LeaseTimes::of).
     if (renewed != 0 && age > 2 * lease_renewal)
       return {false, "database out of reach: leases not renewed for " + ms_text(age)};
   }

@@ -85,6 +85,15 @@ using LeaseSource = std::function<StoreResult<std::vector<RegionLease>>(std::spa
 // The region (8 x 8 x 8 chunks, the coarse images' regions) a chunk
 // belongs to: the unit of a lease.
 inline Vec3i lease_region_of(Vec3i chunk_pos) { return coarse_region_of(chunk_pos); }
+// Whether two non-empty regions have chunks in a lease region in common.
+// (The regions a box's chunks fall in form a box of region coordinates:
+// two of those meet where the boxes share one.)
+inline bool lease_regions_meet(const Region& a, const Region& b) {
+  const auto regions = [](const Region& r) {
+    return Region{lease_region_of(chunk_of(r.min)), lease_region_of(chunk_of(r.max - Vec3i{1, 1, 1})) + Vec3i{1, 1, 1}};
+  };
+  return !a.empty() && !b.empty() && !intersect(regions(a), regions(b)).empty();
+}
 
 // A claim's outcome (ClusterLink::claim). Once held, the region's stored
 // chunks are listed with their revisions, read after the claim: another

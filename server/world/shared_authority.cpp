@@ -258,17 +258,9 @@ void SharedAuthority::handed_over(const std::vector<Vec3i>& regions, bool ok) {
 }
 
 bool SharedAuthority::asked_each_other(std::uint32_t from, const Region& box) const {
-  std::unordered_set<Vec3i, Vec3iHash> regions;
-  for_each_chunk_in(box, [&](Vec3i cp) { regions.insert(lease_region_of(cp)); });
-  const auto shares = [&](const Region& sent) {
-    bool any = false;
-    for_each_chunk_in(sent, [&](Vec3i cp) { any = any || regions.count(lease_region_of(cp)) != 0; });
-    return any;
-  };
-  return std::any_of(forwarding_.begin(), forwarding_.end(),
-                     [&](const auto& f) { return f.second.to == from && shares(f.second.box); }) ||
-         std::any_of(forwarded_.begin(), forwarded_.end(),
-                     [&](const auto& f) { return f.second.to == from && shares(f.second.box); });
+  const auto shares = [&](const auto& f) { return f.second.to == from && lease_regions_meet(f.second.box, box); };
+  return std::any_of(forwarding_.begin(), forwarding_.end(), shares) ||
+         std::any_of(forwarded_.begin(), forwarded_.end(), shares);
 }
 
 bool SharedAuthority::forward_pending(ClientId id, const Region& r) const {

@@ -597,7 +597,7 @@ void Tick::on_tick() {
   if (clock_.tick % hz == 0) retry_pending();
   const auto t1 = Clock::now();
   counters_.tick_duration.observe(t1 - t0);
-  counters_.last_tick_at_ns.store(std::chrono::nanoseconds(t1.time_since_epoch()).count(), std::memory_order_relaxed);
+  counters_.last_tick_at_ns.store(steady_ns(t1), std::memory_order_relaxed);
   // A tick longer than half its period delays every edit that arrives
   // meanwhile: said, with its parts, at most once every 10 s.
   const auto period = std::chrono::microseconds(1'000'000 / hz);

@@ -370,6 +370,28 @@ TEST_F(ClusterStoreTest, AForwardedEditPastItsDeadlineIsNeverTakenAndOneInTimeIs
   EXPECT_TRUE(*back);
 }
 
+// A row's deadline is another server's word: one far off (years, or
+// 'infinity') is taken as at most ten minutes away, and spoils no read.
+TEST_F(ClusterStoreTest, AForwardedEditsDeadlineFarOffIsTakenAsTenMinutesAtMost) {
+  auto s = open();
+  ASSERT_TRUE(s);
+  const std::vector<std::uint8_t> edit{1, 2, 3};
+  auto years = cl(s)->forward(1, 2, "ann", edit, testing_support::database_now_us(url_) + 100 * 365 * 86'400'000'000LL);
+  ASSERT_TRUE(years.ok()) << years.error().message;
+  auto endless = cl(s)->forward(1, 2, "bob", edit, testing_support::database_now_us(url_) + 20'000'000);
+  ASSERT_TRUE(endless.ok()) << endless.error().message;
+  ASSERT_EQ(run_sql(url_, fmt::format("UPDATE terrane_inbox SET expires_at = 'infinity' WHERE id = {}", *endless)), "");
+  const auto asked = std::chrono::steady_clock::now();
+  auto taken = cl(s)->inbox(2, 0, 10);
+  const auto answered = std::chrono::steady_clock::now();
+  ASSERT_TRUE(taken.ok()) << taken.error().message;
+  ASSERT_EQ(taken->size(), 2u);
+  for (const InboxEdit& e : *taken) {
+    EXPECT_GT(e.current_until, asked + 9min) << e.player;
+    EXPECT_LE(e.current_until, answered + 10min) << e.player;
+  }
+}
+
 // Taken and taken back exclude each other: a row its addressee took stays
 // (its sender waits for the answer), and a row taken back is never taken.
 TEST_F(ClusterStoreTest, ATakenEditCannotBeTakenBackAndOneTakenBackIsNeverTaken) {

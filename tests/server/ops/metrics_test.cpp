@@ -112,7 +112,7 @@ TEST(Metrics, HealthWantsRecentTicksAndAWorkingStore) {
   ServerCounters c;
   const auto now = std::chrono::steady_clock::now();
   EXPECT_FALSE(check_health(c, false, 20, now).ok);  // not ticking yet
-  c.last_tick_at_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
+  c.last_tick_at_ns = steady_ns(now);
   EXPECT_TRUE(check_health(c, false, 20, now + 900ms).ok);
   const Health late = check_health(c, false, 20, now + 1500ms);
   EXPECT_FALSE(late.ok);
@@ -126,24 +126,21 @@ TEST(Metrics, HealthWantsRecentTicksAndAWorkingStore) {
 TEST(Metrics, HealthWantsASharedWorldsDatabaseWithinReach) {
   ServerCounters c;
   const auto now = std::chrono::steady_clock::now();
-  const auto ns = [](std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
-  };
-  c.last_tick_at_ns = ns(now);
+  c.last_tick_at_ns = steady_ns(now);
   DatabaseCounters& db = c.database;
-  db.lease_renewed_at_ns = ns(now);
+  db.lease_renewed_at_ns = steady_ns(now);
   EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
   // Renewals: two periods may pass, not more.
   EXPECT_TRUE(check_health(c, false, 20, now + 900ms, 1000ms).ok) << check_health(c, false, 20, now + 900ms, 1000ms).text;
-  db.lease_renewed_at_ns = ns(now - 1900ms);
+  db.lease_renewed_at_ns = steady_ns(now - 1900ms);
   EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
-  db.lease_renewed_at_ns = ns(now - 2100ms);
+  db.lease_renewed_at_ns = steady_ns(now - 2100ms);
   const Health lagging = check_health(c, false, 20, now, 1000ms);
   EXPECT_FALSE(lagging.ok);
   EXPECT_NE(lagging.text.find("leases not renewed for 2100 ms"), std::string::npos) << lagging.text;
   // A world directory has no leases: the same counters mean nothing there.
   EXPECT_TRUE(check_health(c, false, 20, now).ok);
-  db.lease_renewed_at_ns = ns(now);
+  db.lease_renewed_at_ns = steady_ns(now);
   // A commit tried again: the world's changes wait (SQLite's commits are
   // never tried again; the counter stays 0 there).
   db.commits_retrying = 1;
@@ -187,8 +184,7 @@ TEST(Metrics, TheDatabaseLinksAreGauges) {
   c.database.commit_retries = 4;
   c.database.listener_down = 1;
   c.database.inbox_failing = 1;
-  c.database.lease_renewed_at_ns =
-      std::chrono::duration_cast<std::chrono::nanoseconds>((s.now - 2500ms).time_since_epoch()).count();
+  c.database.lease_renewed_at_ns = steady_ns(s.now - 2500ms);
   const std::string text = render_metrics(s);
   EXPECT_EQ(sample(text, "terrane_storage_retrying"), 1);
   EXPECT_EQ(sample(text, "terrane_storage_retries_total"), 4);
