@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include <asio/ip/address.hpp>
 
@@ -10,7 +11,6 @@
 #include "server/base/log.h"
 
 namespace terrane {
-
 
 FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path) {
   std::ifstream in(path);
@@ -21,13 +21,19 @@ FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const 
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
-    std::istringstream words(line);
-    std::string name, token, role, extra;
-    if (!(words >> name) || name[0] == '#') continue;
-    if (!(words >> token)) return FileError{where + "player '" + name + "' has no token", {}};
-    if ((words >> role) && role != "player" && role != "admin")
+    // Words up to a comment: a word that opens with '#' ends the line (a
+    // '#' inside a token is part of it).
+    std::istringstream in_line(line);
+    std::vector<std::string> words;
+    for (std::string w; in_line >> w && w[0] != '#';) words.push_back(std::move(w));
+    if (words.empty()) continue;
+    const std::string& name = words[0];
+    if (words.size() < 2) return FileError{where + "player '" + name + "' has no token", {}};
+    const std::string& token = words[1];
+    const std::string role = words.size() > 2 ? words[2] : "player";
+    if (role != "player" && role != "admin")
       return FileError{where + "role '" + role + "' is neither player nor admin", {}};
-    if (words >> extra) return FileError{where + "expected 'NAME TOKEN [player|admin]', found more", {}};
+    if (words.size() > 3) return FileError{where + "expected 'NAME TOKEN [player|admin]', found more", {}};
     if (name.size() > kMaxClientNameBytes) return FileError{where + "name longer than 64 bytes", {}};
     if (token.size() > kMaxAuthTokenBytes) return FileError{where + "token longer than 256 bytes", {}};
     if (!tokens.emplace(name, PlayerToken{token, role == "admin"}).second) return FileError{where + "player '" + name + "' listed twice", {}};

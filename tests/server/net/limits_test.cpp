@@ -114,6 +114,23 @@ TEST_F(LimitsTest, TokensFileErrorsNameFileAndLine) {
     std::ofstream(f) << "alice a\nalice b\n";
   }
   EXPECT_FALSE(load_tokens_file(f.string()).ok());
+  // A comment may end any line ('#' opening a word); a '#' inside a token
+  // is part of it.
+  {
+    std::ofstream(f) << "alice s3cret admin  # the operator\nbob hunt#er2 # a player\n  # indented\ncarol c #\n";
+  }
+  r = load_tokens_file(f.string());
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_TRUE(r->at("alice").admin);
+  EXPECT_EQ(r->at("bob").token, "hunt#er2");
+  EXPECT_EQ(r->at("carol").token, "c");
+  EXPECT_EQ(r->size(), 3u);
+  {
+    std::ofstream(f) << "dave # no token\n";
+  }
+  r = load_tokens_file(f.string());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find(":1: player 'dave' has no token"), std::string::npos) << r.error().message;
   fs::remove(f);
 }
 
