@@ -54,7 +54,22 @@ std::string CommandLine::load_file(const std::string& path) {
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
-    line = trim(line.substr(0, line.find('#')));
+    // A '#' outside quotes starts a comment.
+    {
+      char quote = 0;
+      std::size_t i = 0;
+      for (; i < line.size(); ++i) {
+        const char c = line[i];
+        if (quote != 0) {
+          if (c == quote) quote = 0;
+        } else if (c == '"' || c == '\'') {
+          quote = c;
+        } else if (c == '#') {
+          break;
+        }
+      }
+      line = trim(line.substr(0, i));
+    }
     if (line.empty()) continue;
     std::string name, value;
     if (const auto eq = line.find('='); eq != std::string::npos) {
@@ -67,6 +82,13 @@ std::string CommandLine::load_file(const std::string& path) {
       name = line;
     }
     if (name.rfind("--", 0) == 0) name = name.substr(2);
+    // A value in quotes ("..." or '...') is what is between them.
+    if (!value.empty() && (value[0] == '"' || value[0] == '\'')) {
+      const auto close = value.find(value[0], 1);
+      if (close == std::string::npos) return where + name + ": a quote opened and not closed";
+      if (close + 1 != value.size()) return where + name + ": text after the closing quote";
+      value = value.substr(1, close - 1);
+    }
     if (flag_options_.count(name)) {
       if (value.empty() || value == "true") {
         flags_.insert(name);

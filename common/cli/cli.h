@@ -27,7 +27,9 @@ class CommandLine {
   std::string parse(int argc, char** argv, int first);
 
   // Reads options from a file: one "name = value" (or "name value") per
-  // line, a flag as "name" or "name = true|false", '#' comments. Options
+  // line, a flag as "name" or "name = true|false", '#' comments; a value
+  // in quotes ("..." or '...') is what is between them (a '#' inside is
+  // kept). Options
   // already given on the command line win. Returns an error naming the file
   // and line, or empty on success.
   std::string load_file(const std::string& path);

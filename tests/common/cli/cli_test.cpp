@@ -33,6 +33,22 @@ TEST_F(CliFileTest, FileOptionsFillInAndTheCommandLineWins) {
   EXPECT_TRUE(err.empty());
 }
 
+TEST_F(CliFileTest, QuotedValuesLoseTheirQuotesAndMayHoldAHash) {
+  write("world = \"/srv/my world\"  # restored\nbind = '0.0.0.0'\nauth-token = \"a#b\" # comment\nname = plain # c\n");
+  CommandLine cl({"world", "bind", "auth-token", "name"}, {});
+  ASSERT_EQ(cl.load_file(path_.string()), "");
+  EXPECT_EQ(cl.get("world"), "/srv/my world");
+  EXPECT_EQ(cl.get("bind"), "0.0.0.0");
+  EXPECT_EQ(cl.get("auth-token"), "a#b");
+  EXPECT_EQ(cl.get("name"), "plain");
+  write("world = \"/srv/unclosed\n");
+  CommandLine c2({"world"}, {});
+  EXPECT_EQ(c2.load_file(path_.string()), path_.string() + ":1: world: a quote opened and not closed");
+  write("world = \"/a\" trailing\n");
+  CommandLine c3({"world"}, {});
+  EXPECT_EQ(c3.load_file(path_.string()), path_.string() + ":1: world: text after the closing quote");
+}
+
 TEST_F(CliFileTest, ErrorsNameTheFileAndLine) {
   write("port = 1\nbogus = 2\n");
   CommandLine cl({"port"}, {"open"});
