@@ -6,6 +6,8 @@
 #include <vector>
 
 #include <asio/ip/address.hpp>
+#include <asio/ip/network_v4.hpp>
+#include <asio/ip/network_v6.hpp>
 
 #include "protocol/messages.h"
 #include "server/base/log.h"
@@ -48,6 +50,28 @@ std::string canonical_address(const std::string& text) {
   if (ec) return text;
   if (a.is_v6() && a.to_v6().is_v4_mapped()) a = asio::ip::make_address_v4(asio::ip::v4_mapped, a.to_v6());
   return a.to_string();
+}
+
+std::optional<std::string> canonical_network(const std::string& text) {
+  if (text.find('/') == std::string::npos) return std::nullopt;
+  asio::error_code ec;
+  const auto v4 = asio::ip::make_network_v4(text, ec);
+  if (!ec) return v4.canonical().to_string();
+  const auto v6 = asio::ip::make_network_v6(text, ec);
+  if (!ec) return v6.canonical().to_string();
+  return std::nullopt;
+}
+
+bool address_in_network(const std::string& address, const std::string& network) {
+  asio::error_code ec;
+  const auto a = asio::ip::make_address(address, ec);
+  if (ec) return false;
+  if (a.is_v4()) {
+    const auto n = asio::ip::make_network_v4(network, ec);
+    return !ec && asio::ip::make_network_v4(a.to_v4(), n.prefix_length()).canonical() == n.canonical();
+  }
+  const auto n = asio::ip::make_network_v6(network, ec);
+  return !ec && asio::ip::make_network_v6(a.to_v6(), n.prefix_length()).canonical() == n.canonical();
 }
 
 bool is_loopback_address(const std::string& address) {

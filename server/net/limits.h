@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <unordered_map>
 
@@ -24,6 +25,14 @@ FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const 
 // for v4-mapped IPv6, so "::FFFF:1.2.3.4" is "1.2.3.4"); text that is not
 // an address comes back as it is.
 std::string canonical_address(const std::string& text);
+
+// An IP network "ADDRESS/PREFIX" (IPv4 or IPv6) as the server prints and
+// compares it: the network's own address, host bits cleared, so
+// "10.1.2.3/8" is "10.0.0.0/8"; nullopt for text that is not one.
+std::optional<std::string> canonical_network(const std::string& text);
+// Whether an address (canonical_address's form) lies in a network
+// (canonical_network's form).
+bool address_in_network(const std::string& address, const std::string& network);
 
 // True for 127.0.0.0/8, ::1 and localhost.
 bool is_loopback_address(const std::string& address);

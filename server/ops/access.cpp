@@ -69,13 +69,25 @@ Admission AccessControl::admit(const std::string& name, const std::string& token
   }
   std::lock_guard lock(m_);
   if (!a.admin) {
+    const auto in_force = [&](const Ban& b) { return b.until == 0 || b.until > now; };
+    const Ban* found = nullptr;
     for (const auto& [target, address_ban] : {std::pair{name, false}, std::pair{address, true}}) {
       auto it = bans_.find(ban_key(target, address_ban));
-      if (it == bans_.end() || (it->second.until != 0 && it->second.until <= now)) continue;
+      if (it != bans_.end() && in_force(it->second)) {
+        found = &it->second;
+        break;
+      }
+    }
+    // Network bans ("10.0.0.0/8"): few, and joins are rare next to ticks.
+    for (auto it = bans_.begin(); found == nullptr && it != bans_.end(); ++it)
+      if (it->second.address && it->second.target.find('/') != std::string::npos && in_force(it->second) &&
+          address_in_network(address, it->second.target))
+        found = &it->second;
+    if (found != nullptr) {
       a.why = CloseReason::kBanned;
       a.reason = "banned";
-      if (it->second.until != 0) a.reason += " for " + std::to_string(it->second.until - now) + " s more";
-      if (!it->second.reason.empty()) a.reason += ": " + it->second.reason;
+      if (found->until != 0) a.reason += " for " + std::to_string(found->until - now) + " s more";
+      if (!found->reason.empty()) a.reason += ": " + found->reason;
       return a;
     }
     if (whitelist_on_ && whitelist_.count(name) == 0) {

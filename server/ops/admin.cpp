@@ -17,10 +17,11 @@ const char* const kAdminHelp =
     "status                          the server at a glance\n"
     "players                         who is connected: name, address, position, bytes in/out\n"
     "kick NAME [REASON...]           end NAME's session (they may join again)\n"
-    "ban NAME|ADDRESS [--for DURATION] [REASON...]\n"
-    "                                refuse NAME or ADDRESS at the handshake (DURATION: 90s, 15m,\n"
-    "                                2h, 7d; default: until unbanned) and end their sessions\n"
-    "unban NAME|ADDRESS              lift a ban\n"
+    "ban NAME|ADDRESS|NETWORK [--for DURATION] [REASON...]\n"
+    "                                refuse NAME, ADDRESS or every address of NETWORK (10.0.0.0/8)\n"
+    "                                at the handshake (DURATION: 90s, 15m, 2h, 7d; default: until\n"
+    "                                unbanned) and end their sessions\n"
+    "unban NAME|ADDRESS|NETWORK      lift a ban\n"
     "bans                            the bans in force\n"
     "whitelist on|off|add NAME|remove NAME|list\n"
     "                                while on, only listed players may join (admins always may)\n"
@@ -61,6 +62,17 @@ bool is_address(const std::string& s) {
   asio::error_code ec;
   (void)asio::ip::make_address(s, ec);
   return !ec;
+}
+
+// What a ban names, as stored: an address or a network (canonical; address
+// set), else a player's name.
+std::string ban_target(const std::string& text, bool& address) {
+  if (auto network = canonical_network(text)) {
+    address = true;
+    return *network;
+  }
+  address = is_address(text);
+  return address ? canonical_address(text) : text;
 }
 
 std::string utc(std::int64_t ms) {
@@ -240,10 +252,12 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
   }
 
   if (cmd == "ban") {
-    if (a.empty()) return fail("usage: ban NAME|ADDRESS [--for DURATION] [REASON...]");
+    if (a.empty()) return fail("usage: ban NAME|ADDRESS|NETWORK [--for DURATION] [REASON...]");
+    if (const auto slash = a[0].find('/');
+        slash != std::string::npos && is_address(a[0].substr(0, slash)) && !canonical_network(a[0]))
+      return fail("ban '" + a[0] + "': not a network (ADDRESS/PREFIX, a prefix of at most 32 bits for IPv4, 128 for IPv6)");
     Ban b;
-    b.address = is_address(a[0]);
-    b.target = b.address ? canonical_address(a[0]) : a[0];
+    b.target = ban_target(a[0], b.address);
     std::size_t rest = 1;
     if (a.size() > 2 && a[1] == "--for") {
       const auto d = parse_duration_s(a[2]);
@@ -256,18 +270,24 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     b.reason = join(a, rest);
     if (auto st = access_.ban(b); !st) return fail("ban: " + st.error().message);
     const int n = hooks_.close_matching(
-        [&](const PlayerInfo& p) { return !p.admin && (b.address ? p.address == b.target : p.name == b.target); },
+        [&](const PlayerInfo& p) {
+          if (p.admin) return false;
+          if (!b.address) return p.name == b.target;
+          return p.address == b.target || address_in_network(p.address, b.target);
+        },
         CloseReason::kBanned, "banned" + (b.reason.empty() ? std::string() : ": " + b.reason));
     const std::string how = b.until == 0 ? "until unbanned" : "for " + std::to_string(b.until - unix_now()) + " s";
-    return ok("banned " + std::string(b.address ? "address " : "") + b.target + " " + how + " (" + std::to_string(n) +
+    const char* what = !b.address ? "" : b.target.find('/') != std::string::npos ? "network " : "address ";
+    return ok("banned " + std::string(what) + b.target + " " + how + " (" + std::to_string(n) +
                   " session" + (n == 1 ? "" : "s") + " ended)\n",
               "{\"banned\": " + json_string(b.target) + ", \"address\": " + (b.address ? "true" : "false") +
                   ", \"until\": " + std::to_string(b.until) + ", \"sessions_ended\": " + std::to_string(n) + "}");
   }
 
   if (cmd == "unban") {
-    if (a.size() != 1) return fail("usage: unban NAME|ADDRESS");
-    auto r = access_.unban(is_address(a[0]) ? canonical_address(a[0]) : a[0]);
+    if (a.size() != 1) return fail("usage: unban NAME|ADDRESS|NETWORK");
+    bool address = false;
+    auto r = access_.unban(ban_target(a[0], address));
     if (!r) return fail("unban: " + r.error().message);
     if (!*r) return fail("'" + a[0] + "' is not banned");
     return ok("unbanned " + a[0] + "\n", "{\"unbanned\": " + json_string(a[0]) + "}");

@@ -134,6 +134,22 @@ TEST_F(LimitsTest, TokensFileErrorsNameFileAndLine) {
   fs::remove(f);
 }
 
+TEST(Networks, CanonicalFormsAndMembership) {
+  EXPECT_EQ(canonical_network("10.1.2.3/8"), "10.0.0.0/8");
+  EXPECT_EQ(canonical_network("2001:DB8::1/32"), "2001:db8::/32");
+  EXPECT_EQ(canonical_network("0.0.0.0/0"), "0.0.0.0/0");
+  EXPECT_EQ(canonical_network("10.0.0.1"), std::nullopt) << "an address is not a network";
+  EXPECT_EQ(canonical_network("10.0.0.0/33"), std::nullopt);
+  EXPECT_EQ(canonical_network("alice/8"), std::nullopt);
+  EXPECT_TRUE(address_in_network("10.200.3.4", "10.0.0.0/8"));
+  EXPECT_FALSE(address_in_network("11.0.0.1", "10.0.0.0/8"));
+  EXPECT_TRUE(address_in_network("1.2.3.4", "0.0.0.0/0"));
+  EXPECT_TRUE(address_in_network("2001:db8:ffff::9", "2001:db8::/32"));
+  EXPECT_FALSE(address_in_network("2001:db9::1", "2001:db8::/32"));
+  EXPECT_FALSE(address_in_network("10.0.0.1", "2001:db8::/32")) << "families never mix";
+  EXPECT_FALSE(address_in_network("not an address", "10.0.0.0/8"));
+}
+
 TEST_F(LimitsTest, SlowlorisFramesAreDropped) {
   ServerOptions o;
   o.session.frame_timeout = 300ms;

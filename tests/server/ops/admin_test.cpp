@@ -223,6 +223,30 @@ TEST_F(AdminTest, ABanRefusesWithItsReasonSurvivesARestartAndUnbanLiftsIt) {
   EXPECT_TRUE(connect("admin2", kAdminToken).welcomed);
 }
 
+TEST_F(AdminTest, ANetworkBanRefusesEveryAddressInItAndEndsTheirSessions) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  auto player = connect("player");
+  ASSERT_TRUE(admin.welcomed && player.welcomed);
+  // A network outside ours bans nobody here; it is an address ban, not a name.
+  const AdminResultMsg far = command(*admin.peer, "ban", {"10.0.0.0/8"});
+  ASSERT_TRUE(far.ok) << far.text;
+  EXPECT_NE(far.text.find("banned network 10.0.0.0/8"), std::string::npos) << far.text;
+  EXPECT_NE(far.text.find("0 sessions ended"), std::string::npos) << far.text;
+  EXPECT_TRUE(connect("10.0.0.0/8").welcomed) << "the network is not a player's name";
+  // Host bits are cleared: 127.1.2.3/8 is 127.0.0.0/8, which holds us.
+  const AdminResultMsg ours = command(*admin.peer, "ban", {"127.1.2.3/8", "whole", "subnet"});
+  ASSERT_TRUE(ours.ok) << ours.text;
+  EXPECT_NE(ours.text.find("banned network 127.0.0.0/8"), std::string::npos) << ours.text;
+  EXPECT_NE(ours.text.find("1 session ended"), std::string::npos) << ours.text;
+  EXPECT_EQ(disconnect_reason(*player.peer), "banned: whole subnet");
+  EXPECT_EQ(connect("anyone").refused, "banned: whole subnet");
+  EXPECT_TRUE(connect("admin2", kAdminToken).welcomed) << "admins still come in";
+  EXPECT_FALSE(command(*admin.peer, "ban", {"127.0.0.0/33"}).ok) << "a prefix longer than the address";
+  EXPECT_TRUE(command(*admin.peer, "unban", {"127.9.9.9/8"}).ok) << "unban names the network the same way";
+  EXPECT_TRUE(connect("anyone").welcomed);
+}
+
 TEST_F(AdminTest, TheWhitelistRefusesWhoIsNotListedAndIsKeptAcrossRestarts) {
   start_admin();
   {
