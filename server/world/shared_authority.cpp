@@ -488,8 +488,7 @@ void SharedAuthority::settle_forwarded() {
       bool current = true;
       for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && !residency_.loading(cp); });
       if (current) {
-        clients_.send(o.id, std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
-                      SendClass::kControl);
+        clients_.answer(o.id, EditAcked{o.edit.edit_id, o.answer->tick});
         done = true;
       }
     } else if (!done && o.state == Outgoing::kWaiting && now >= o.deadline) {
