@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "server/base/log.h"
+#include "server/storage/forwarded_edit.h"
 
 namespace terrane {
 
@@ -70,8 +71,8 @@ void ClusterControl::claim(Vec3i region, ClaimRule rule, std::function<void(Regi
   });
 }
 
-void ClusterControl::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
-                             std::vector<Vec3i> hand_over, std::chrono::steady_clock::time_point deadline,
+void ClusterControl::forward(std::uint32_t to, std::string player, EditRequestMsg edit, std::vector<Vec3i> hand_over,
+                             std::chrono::steady_clock::time_point deadline,
                              std::function<void(StoreResult<std::int64_t>)> done) {
   post([this, to, player = std::move(player), edit = std::move(edit), hand_over = std::move(hand_over), deadline,
         done = std::move(done)](ClusterStore& cs) {
@@ -88,7 +89,7 @@ void ClusterControl::forward(std::uint32_t to, std::string player, std::vector<s
     if (std::chrono::steady_clock::now() >= deadline)
       return done(StoreError{StoreError::Kind::kConnection,
                              "forward edit: its wait ran out before it could be sent; nothing was sent"});
-    done(cs.forward(keeper_.owner(), to, player, edit, *expires_us));
+    done(cs.forward(keeper_.owner(), to, player, encode_forwarded_edit(edit), *expires_us));
   });
 }
 

@@ -41,7 +41,7 @@ class ClusterControl final : public ClusterLink {
   std::uint32_t server_id() const override { return keeper_.owner(); }
   bool holds(Vec3i region) const override { return keeper_.holds(region); }
   void claim(Vec3i region, ClaimRule rule, std::function<void(RegionClaim)> done) override;
-  void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
+  void forward(std::uint32_t to, std::string player, EditRequestMsg edit, std::vector<Vec3i> hand_over,
                std::chrono::steady_clock::time_point deadline,
                std::function<void(StoreResult<std::int64_t>)> done) override;
   void take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done) override;

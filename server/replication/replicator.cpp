@@ -6,6 +6,7 @@
 
 #include "common/world/view.h"
 #include "server/base/log.h"
+#include "server/replication/world_answers.h"
 
 namespace terrane {
 
@@ -79,8 +80,12 @@ void Replicator::mips_changed(std::uint64_t tick, std::vector<VersionPtr> change
   });
 }
 
-void Replicator::send(SharedFrame frame, SendClass cls) {
-  if (auto s = weak_session_.lock()) s->send(std::move(frame), cls);
+void Replicator::answer(WorldAnswer answer) {
+  // The frame is made here, on the client's strand, after what the world
+  // posted before (a tick's changes before its ack).
+  asio::post(executor_, [self = shared_from_this(), a = std::move(answer)] {
+    if (self->session_) self->session_->send(answer_frame(a), answer_send_class(a));
+  });
 }
 
 void Replicator::close(CloseReason why, const std::string& text) {

@@ -117,7 +117,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void horizons(std::vector<HorizonPtr> images) override;
   void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
   void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) override;
-  void send(SharedFrame frame, SendClass cls) override;
+  void answer(WorldAnswer answer) override;
   void close(CloseReason why, const std::string& text) override;
 
  private:

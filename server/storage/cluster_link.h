@@ -19,6 +19,7 @@
 
 #include "common/voxel/vec3.h"
 #include "common/world/coarse_image.h"
+#include "protocol/messages.h"
 #include "server/storage/notices.h"
 #include "server/storage/pg_connection.h"
 
@@ -53,7 +54,7 @@ struct InboxEdit {
   std::int64_t id = 0;
   std::uint32_t from = 0;  // the server that forwarded it
   std::string player;
-  std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it
+  std::vector<std::uint8_t> edit;  // an EditRequest frame, as a client sent it (forwarded_edit.h)
   // Until then (this server's steady clock) the row's deadline has surely
   // not passed by the database's clock: the time the take was sent plus
   // what the database said was left (its clock read after the take left
@@ -123,17 +124,18 @@ class ClusterLink {
   // Claims region for this server if it does not hold it, then lists its
   // stored chunks (RegionClaim).
   virtual void claim(Vec3i region, ClaimRule rule, std::function<void(RegionClaim)> done) = 0;
-  // Sends an edit to server to's inbox (done gets the inbox row's id),
-  // releasing hand_over first (regions of this server's the edit also
-  // writes: nothing of them in flight), so that server can take them.
+  // Sends an edit to server to's inbox (done gets the inbox row's id; the
+  // row holds encode_forwarded_edit(edit)), releasing hand_over first
+  // (regions of this server's the edit also writes: nothing of them in
+  // flight), so that server can take them.
   // deadline (this server's steady clock): when the sender's wait runs
   // out; the row's deadline is a lower bound of the database's clock at
   // that time, so it has passed there once it has here. Not sent (an
   // error: nothing written) without a recent reading of the database's
   // clock or once deadline has passed; kUnknown: the commit's answer was
   // lost (the row may be there).
-  virtual void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit,
-                       std::vector<Vec3i> hand_over, std::chrono::steady_clock::time_point deadline,
+  virtual void forward(std::uint32_t to, std::string player, EditRequestMsg edit, std::vector<Vec3i> hand_over,
+                       std::chrono::steady_clock::time_point deadline,
                        std::function<void(StoreResult<std::int64_t>)> done) = 0;
   // Takes back this server's forwarded edit (inbox row): done gets true if
   // it was deleted untaken (never applied), false if its addressee took it

@@ -103,7 +103,7 @@ void Storage::give_reader(std::unique_ptr<WorldStore> store) {
 
 // Only a shared world's world owner asks for these (leased()); the cluster
 // room runs them on its control thread.
-void Storage::forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
+void Storage::forward(std::uint32_t to, std::string player, EditRequestMsg edit, std::vector<Vec3i> hand_over,
                       std::chrono::steady_clock::time_point deadline,
                       std::function<void(StoreResult<std::int64_t>)> done) {
   if (cluster_ != nullptr)

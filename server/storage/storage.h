@@ -173,7 +173,7 @@ class Storage {
   // hand_over: regions of this server's the edit also writes, released
   // first (nothing of them in flight), so that server can take them.
   // deadline: when the sender's wait for the answer runs out.
-  void forward(std::uint32_t to, std::string player, std::vector<std::uint8_t> edit, std::vector<Vec3i> hand_over,
+  void forward(std::uint32_t to, std::string player, EditRequestMsg edit, std::vector<Vec3i> hand_over,
                std::chrono::steady_clock::time_point deadline, std::function<void(StoreResult<std::int64_t>)> done);
   void take_back(std::int64_t row, std::function<void(StoreResult<bool>)> done);
   // Passes a forwarded edit (this server's inbox row) on to server to,

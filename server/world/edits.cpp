@@ -5,8 +5,6 @@
 #include <cmath>
 
 #include "common/codec/byte_rle.h"
-#include "protocol/framing.h"
-
 
 namespace terrane {
 
@@ -130,18 +128,6 @@ double total_occupancy(const Grid& grid, const Region& region) {
     for (int z = region.min.z; z < region.max.z; ++z)
       for (int x = region.min.x; x < region.max.x; ++x) sum += occupancy_fraction(grid.get({x, y, z}));
   return sum;
-}
-
-Result<EditRequestMsg> decode_forwarded_edit(std::span<const std::uint8_t> frame) {
-  if (frame.size() < kFrameHeaderBytes || frame.size() > kDefaultMaxFrameBytes + kFrameHeaderBytes)
-    return DecodeError{DecodeErrorCode::kTruncated, frame.size(), "forwarded edit frame length"};
-  // A copy, so the body starts allocator-aligned as the verifier expects.
-  const std::vector<std::uint8_t> body(frame.begin() + kFrameHeaderBytes, frame.end());
-  auto msg = verify_message(body);
-  if (!msg) return msg.error();
-  if ((*msg)->body_type() != wire::Body::EditRequest)
-    return DecodeError{DecodeErrorCode::kInvalidValue, 0, "forwarded frame is not an EditRequest"};
-  return parse_edit_request(*(*msg)->body_as_EditRequest());
 }
 
 }  // namespace terrane

@@ -63,9 +63,4 @@ std::size_t apply_edit(Grid& grid, const EditRequestMsg& edit, const Region& cli
 // Sum of occupancy fractions over region (tests and tools).
 double total_occupancy(const Grid& grid, const Region& region);
 
-// An edit forwarded between servers of a shared world is the EditRequest
-// frame its client sent (build_edit_request); decoding checks it as a
-// client's frame is checked.
-Result<EditRequestMsg> decode_forwarded_edit(std::span<const std::uint8_t> frame);
-
 }  // namespace terrane

@@ -47,10 +47,10 @@ void FanOut::holds_full(ClientId id, const std::vector<Vec3i>& chunks) {
   if (news) hand_mip_news(c);
 }
 
-bool FanOut::send(ClientId id, SharedFrame frame, SendClass cls) {
+bool FanOut::answer(ClientId id, WorldAnswer answer) {
   auto it = clients_.find(id);
   if (it == clients_.end()) return false;
-  it->second.link->send(std::move(frame), cls);
+  it->second.link->answer(std::move(answer));
   return true;
 }
 
@@ -146,7 +146,7 @@ void FanOut::send_presence(std::uint64_t tick) {
     };
     if (entries.size() == c.presence.size() && std::equal(entries.begin(), entries.end(), c.presence.begin(), same))
       continue;
-    c.link->send(std::make_shared<const Frame>(build_presence(entries)), SendClass::kData);
+    c.link->answer(PresenceNearby{entries});
     c.presence = std::move(entries);
     counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);
   }

@@ -2,8 +2,9 @@
 // and view, the presence it was last sent, and the changes of chunks it
 // holds coarser than full resolution gathered for it (mip news, handed
 // over when due) — with the interest index (who holds what) and the
-// presence grid. It tells holders of new versions (publish) and sends
-// presence. Runs on the world strand; no locks.
+// presence grid. It tells holders of new versions (publish), answers
+// clients (answer) and tells them of presence. Runs on the world strand;
+// no locks.
 //
 // Holders at full resolution hear of every tick at once
 // (WorldClient::committed); the others' news is gathered and handed over
@@ -54,7 +55,7 @@ class FanOut {
   bool held_full(Vec3i chunk_pos) const { return interest_.held_full(chunk_pos); }
 
   // To one client, if it is still here (false when it left).
-  bool send(ClientId id, SharedFrame frame, SendClass cls);
+  bool answer(ClientId id, WorldAnswer answer);
   bool granted(ClientId id, std::vector<VersionPtr> versions);
   bool horizons(ClientId id, std::vector<HorizonPtr> images);
   void close_all(CloseReason why, const std::string& text);

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "server/base/log.h"
+#include "server/storage/forwarded_edit.h"
 #include "server/world/edits.h"
 
 namespace terrane {
@@ -275,13 +276,12 @@ bool SharedAuthority::forward_pending(ClientId id, const Region& r) const {
 
 void SharedAuthority::forward(ClientId id, const EditRequestMsg& edit, const std::string& player, const Region& box,
                               std::uint32_t to) {
-  const Frame frame = build_edit_request(edit);
   counters_.edits_forwarded.fetch_add(1, std::memory_order_relaxed);
   std::vector<Vec3i> regions = hand_over(box, to);
   forwarding_.emplace(id, Forwarding{box, to});
   // The wait counts from now, before the row is sent: its player's does.
   const auto deadline = std::chrono::steady_clock::now() + forward_wait();
-  storage_.forward(to, player, frame, regions, deadline,
+  storage_.forward(to, player, edit, regions, deadline,
                    [this, id, edit, box, to, regions, deadline](StoreResult<std::int64_t> row) {
     asio::post(strand_, [this, id, edit, box, to, regions, deadline, row = std::move(row)] {
       handed_over(regions, row.ok());
@@ -480,8 +480,7 @@ void SharedAuthority::settle_forwarded() {
       bool current = true;
       for_each_chunk_in(o.box, [&](Vec3i cp) { current = current && stale_.count(cp) == 0 && !residency_.loading(cp); });
       if (current) {
-        clients_.send(o.id, std::make_shared<const Frame>(build_edit_ack(o.edit.edit_id, o.answer->tick)),
-                      SendClass::kControl);
+        clients_.answer(o.id, EditAcked{o.edit.edit_id, o.answer->tick});
         done = true;
       }
     } else if (!done && o.state == Outgoing::kWaiting && now >= o.deadline) {

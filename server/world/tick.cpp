@@ -79,8 +79,8 @@ void Tick::retry_pending() {
       reads_[kept++] = {id, req};
       continue;
     }
-    clients_.send(id, std::make_shared<const Frame>(build_read_box_result(req.request_id, req.box, box.voxels())),
-                  SendClass::kData);
+    const auto voxels = box.voxels();
+    clients_.answer(id, ReadBoxResultMsg{req.request_id, req.box, {}, {voxels.begin(), voxels.end()}});
   }
   reads_.resize(kept);
   kept = 0;
@@ -91,8 +91,7 @@ void Tick::retry_pending() {
       continue;
     }
     const VersionPtr& v = residency_.find(cp)->published;
-    clients_.send(id, std::make_shared<const Frame>(build_chunk_hash(ChunkHashMsg{cp, v->revision(), v->hash()})),
-                  SendClass::kData);
+    clients_.answer(id, ChunkHashMsg{cp, v->revision(), v->hash()});
   }
   hashes_.resize(kept);
 }
@@ -108,14 +107,12 @@ void Tick::reject(ClientId id, const EditRequestMsg& edit, RejectReason why, con
   if (!r.empty() && r.volume() <= kMaxEditVolume) {
     Box box(r.size());
     if (residency_.read_current(r, box)) {
-      clients_.send(id,
-                    std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, r, box.voxels(), unknown)),
-                    SendClass::kData);
+      const auto voxels = box.voxels();
+      clients_.answer(id, EditRejectMsg{edit.edit_id, reason, r, {voxels.begin(), voxels.end()}, unknown});
       return;
     }
   }
-  clients_.send(id, std::make_shared<const Frame>(build_edit_reject(edit.edit_id, reason, unknown)),
-                SendClass::kControl);
+  clients_.answer(id, EditRejectMsg{edit.edit_id, reason, {}, {}, unknown});
 }
 
 void Tick::edit(ClientId id, EditRequestMsg e, std::chrono::steady_clock::time_point received) {
@@ -482,8 +479,7 @@ void Tick::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versi
     const char* why = unknown ? "storage failure: outcome unknown (the edit may have been saved)"
                               : "storage failure: edit not saved";
     for (const Ack& a : acks)
-      clients_.send(a.id, std::make_shared<const Frame>(build_edit_reject(a.edit_id, why, unknown)),
-                    SendClass::kControl);
+      clients_.answer(a.id, EditRejectMsg{a.edit_id, why, {}, {}, unknown});
     counters_.rejected(unknown ? RejectReason::kOutcomeUnknown : RejectReason::kStorageFailure, acks.size());
     fatal_storage(status.error().message);
   } else {
@@ -501,7 +497,7 @@ void Tick::on_committed(std::uint64_t tick, const std::vector<VersionPtr>& versi
       if (!clients_.present(a.id)) continue;  // gone: nothing acknowledged
       // Counted before the ack leaves, so a client that read it sees it counted.
       counters_.edit_ack_duration.observe(acked_at - a.received);
-      clients_.send(a.id, std::make_shared<const Frame>(build_edit_ack(a.edit_id, tick)), SendClass::kControl);
+      clients_.answer(a.id, EditAcked{a.edit_id, tick});
     }
     counters_.fanout_duration.observe(std::chrono::steady_clock::now() - t0);
   }

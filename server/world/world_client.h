@@ -1,22 +1,45 @@
 // What the world strand says to a connected client (WorldClient, made by
-// its replicator), what streaming asks of it (ChunkWant, HorizonWant), and
-// what a rollback comes to (RollbackResult).
+// its replicator) and answers it with (WorldAnswer), what streaming asks of
+// it (ChunkWant, HorizonWant), and what a rollback comes to
+// (RollbackResult).
 // Plain interface and data; every WorldClient call is made on the world
 // strand, and implementations post to the client's own strand.
 #pragma once
 
 #include <cstdint>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "common/voxel/vec3.h"
 #include "common/world/horizon.h"
 #include "server/base/chunk_version.h"
 #include "server/base/counters.h"
-#include "server/net/session.h"  // SharedFrame, SendClass: the world still builds frames
+#include "protocol/messages.h"
 #include "server/world/interest.h"
 
 namespace terrane {
+
+// An edit applied: its tick is committed (the EditAck message).
+struct EditAcked {
+  std::uint32_t edit_id = 0;
+  std::uint64_t tick = 0;
+  friend bool operator==(const EditAcked&, const EditAcked&) = default;
+};
+
+// The placed clients nearest a client, sent when they changed (the
+// Presence message).
+struct PresenceNearby {
+  std::vector<PresenceEntryMsg> entries;
+};
+
+// What the world answers one client with: an edit applied (EditAcked) or
+// refused (EditRejectMsg; with a box, the true state of what the edit would
+// have touched, read after every change already told), a read of a box
+// (ReadBoxResultMsg), a chunk's hash (ChunkHashMsg), presence. The world
+// only says what; the client's replicator makes the frame and picks its
+// send class (server/replication/world_answers.h).
+using WorldAnswer = std::variant<EditAcked, EditRejectMsg, ReadBoxResultMsg, ChunkHashMsg, PresenceNearby>;
 
 // What the world needs of a connected client. Each call is made on the
 // world strand; implementations post to the client's own strand.
@@ -37,8 +60,9 @@ class WorldClient {
   // chunk may come more than once), the newest committed at tick: to be
   // refreshed now.
   virtual void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) = 0;
-  // Frames the world answers with (acks, rejects, read results, presence).
-  virtual void send(SharedFrame frame, SendClass cls) = 0;
+  // An answer to the client (WorldAnswer), in the order the world gives
+  // them, after what the world told the client before.
+  virtual void answer(WorldAnswer answer) = 0;
   virtual void close(CloseReason why, const std::string& text) = 0;
 };
 

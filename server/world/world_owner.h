@@ -49,7 +49,6 @@
 #include "common/world/world.h"
 #include "server/base/chunk_version.h"
 #include "server/base/options.h"
-#include "server/net/session.h"  // SharedFrame, SendClass: the world still builds frames
 #include "server/storage/postgres_store.h"
 #include "server/storage/storage.h"
 #include "server/world/authority.h"

@@ -18,6 +18,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "common/world/sqlite_store.h"
@@ -53,9 +54,9 @@ class RecordingClient : public WorldClient {
     mip_news.emplace_back(tick, std::move(changed));
     cv.notify_all();
   }
-  void send(SharedFrame frame, SendClass) override {
+  void answer(WorldAnswer a) override {
     std::lock_guard lock(m);
-    frames.push_back(std::move(frame));
+    answers.push_back(std::move(a));
     cv.notify_all();
   }
   void close(CloseReason, const std::string& reason) override {
@@ -69,13 +70,18 @@ class RecordingClient : public WorldClient {
     std::unique_lock lock(m);
     return cv.wait_for(lock, std::chrono::seconds(60), [&] { return p(*this); });
   }
-  // The edit ids of the EditAcks received, in order (under the lock).
+  // The answers of type T received, in order (under the lock).
+  template <class T>
+  std::vector<T> answered() const {
+    std::vector<T> out;
+    for (const WorldAnswer& a : answers)
+      if (const T* t = std::get_if<T>(&a)) out.push_back(*t);
+    return out;
+  }
+  // The edit ids of the edits acknowledged, in order (under the lock).
   std::vector<std::uint32_t> acked() const {
     std::vector<std::uint32_t> ids;
-    for (const auto& f : frames)
-      if (const auto* msg = flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes);
-          msg->body_type() == wire::Body::EditAck)
-        ids.push_back(msg->body_as_EditAck()->edit_id());
+    for (const EditAcked& a : answered<EditAcked>()) ids.push_back(a.edit_id);
     return ids;
   }
 
@@ -84,7 +90,7 @@ class RecordingClient : public WorldClient {
   std::vector<VersionPtr> grants;
   std::vector<HorizonPtr> images_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks, mip_news;
-  std::vector<SharedFrame> frames;
+  std::vector<WorldAnswer> answers;
   std::string closed;
 };
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "common/world/world.h"
+#include "server/storage/forwarded_edit.h"
 #include "server/storage/postgres_store.h"
 #include "tests/support/postgres.h"
 
@@ -102,10 +103,18 @@ TEST_F(ClusterControlTest, ForwardedEditsReachTheInboxInOrderAndARefusalReachesT
   // Server 1 holds region (5,0,0) and hands it over with its first forward.
   ASSERT_TRUE(claim(*one.control, {5, 0, 0}).held);
   std::vector<std::future<StoreResult<std::int64_t>>> rows;
-  for (const std::uint8_t b : {std::uint8_t{1}, std::uint8_t{2}}) {
+  std::vector<EditRequestMsg> sent;
+  for (const std::uint32_t b : {1u, 2u}) {
+    EditRequestMsg e;
+    e.edit_id = b;
+    e.kind = EditKind::kFillBox;
+    e.box = Region{{0, 0, 0}, {2, 2, 2}};
+    e.material = materials::kBrick;
+    e.occupancy = 255;
+    sent.push_back(e);
     auto done = std::make_shared<std::promise<StoreResult<std::int64_t>>>();
     rows.push_back(done->get_future());
-    one.control->forward(2, "ann", {b, b}, b == 1 ? std::vector<Vec3i>{{5, 0, 0}} : std::vector<Vec3i>{},
+    one.control->forward(2, "ann", e, b == 1 ? std::vector<Vec3i>{{5, 0, 0}} : std::vector<Vec3i>{},
                          std::chrono::steady_clock::now() + kDeadline,
                          [done](StoreResult<std::int64_t> id) { done->set_value(std::move(id)); });
   }
@@ -122,8 +131,12 @@ TEST_F(ClusterControlTest, ForwardedEditsReachTheInboxInOrderAndARefusalReachesT
   EXPECT_EQ(edits[0].id, ids[0]);
   EXPECT_EQ(edits[0].from, 1u);
   EXPECT_EQ(edits[0].player, "ann");
-  EXPECT_EQ(edits[0].edit, (std::vector<std::uint8_t>{1, 1}));
-  EXPECT_EQ(edits[1].edit, (std::vector<std::uint8_t>{2, 2}));
+  // Each row holds its edit's EditRequest frame (the inbox's format).
+  EXPECT_EQ(edits[0].edit, build_edit_request(sent[0]));
+  EXPECT_EQ(edits[1].edit, build_edit_request(sent[1]));
+  auto first = decode_forwarded_edit(edits[0].edit);
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(first->edit_id, 1u);
   // Server 2 passes the first on to server 3 and refuses the second.
   auto relayed = std::make_shared<std::promise<StoreResult<Ok>>>();
   auto relay_done = relayed->get_future();

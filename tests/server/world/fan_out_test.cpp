@@ -110,9 +110,10 @@ TEST_F(FanOutTest, AClientThatLeftOrReleasedHearsNothing) {
   fan_out_.publish(4, {version(cp_, 1)}, t0_);
   EXPECT_TRUE(gone->ticks.empty());
   EXPECT_TRUE(released->ticks.empty());
-  EXPECT_FALSE(fan_out_.send(1, std::make_shared<const Frame>(build_edit_ack(1, 1)), SendClass::kControl));
-  EXPECT_TRUE(fan_out_.send(2, std::make_shared<const Frame>(build_edit_ack(1, 1)), SendClass::kControl));
-  EXPECT_EQ(released->frames.size(), 1u);
+  EXPECT_FALSE(fan_out_.answer(1, EditAcked{1, 1}));
+  EXPECT_TRUE(fan_out_.answer(2, EditAcked{1, 1}));
+  EXPECT_EQ(released->answered<EditAcked>(), (std::vector<EditAcked>{EditAcked{1, 1}}));
+  EXPECT_TRUE(gone->answers.empty());
 }
 
 TEST_F(FanOutTest, TheFullResolutionRegionIsWhereTheClientLastMoved) {
@@ -133,14 +134,21 @@ TEST_F(FanOutTest, PresenceIsSentOnlyWhenItChanged) {
   fan_out_.moved(1, Vec3f{0, 10, 0}, 96, 32);
   fan_out_.moved(2, Vec3f{20, 10, 0}, 96, 32);
   fan_out_.send_presence(1);
-  EXPECT_EQ(a->frames.size(), 1u);
-  EXPECT_EQ(b->frames.size(), 1u);
+  ASSERT_EQ(a->answers.size(), 1u);
+  EXPECT_EQ(b->answers.size(), 1u);
+  // Each hears of the other, where it is.
+  const auto seen = a->answered<PresenceNearby>();
+  ASSERT_EQ(seen.size(), 1u);
+  ASSERT_EQ(seen[0].entries.size(), 1u);
+  EXPECT_EQ(seen[0].entries[0].client_id, 2u);
+  EXPECT_EQ(seen[0].entries[0].position.x, 20.0f);
   fan_out_.send_presence(2);  // nobody moved
-  EXPECT_EQ(a->frames.size(), 1u);
+  EXPECT_EQ(a->answers.size(), 1u);
   fan_out_.moved(2, Vec3f{30, 10, 0}, 96, 32);
   fan_out_.send_presence(3);
-  EXPECT_EQ(a->frames.size(), 2u);  // b moved
-  EXPECT_EQ(b->frames.size(), 1u);  // a did not
+  ASSERT_EQ(a->answers.size(), 2u);  // b moved
+  EXPECT_EQ(a->answered<PresenceNearby>()[1].entries[0].position.x, 30.0f);
+  EXPECT_EQ(b->answers.size(), 1u);  // a did not
   EXPECT_EQ(counters_.presence_sent.load(), 3u);
 }
 

@@ -20,6 +20,7 @@
 #include "server/cluster/cluster_control.h"
 #include "server/cluster/cluster_store.h"
 #include "server/cluster/lease_keeper.h"
+#include "server/storage/forwarded_edit.h"
 #include "tests/support/eventually.h"
 #include "tests/support/postgres.h"
 #include "tests/support/world_strand.h"
@@ -178,12 +179,12 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     auto other = ClusterStore::open(url_);
     EXPECT_TRUE(other.ok()) << other.error().message;
     if (!other.ok()) return std::nullopt;
-    const Frame frame = build_edit_request(fill(box));
+    const auto edit = encode_forwarded_edit(fill(box));
     // Its deadline a minute on by the database's clock.
     const std::int64_t expires_us =
         std::stoll(testing_support::sql_value(url_, "SELECT (extract(epoch FROM clock_timestamp()) * 1000000)::bigint")) +
         60'000'000;
-    EXPECT_TRUE((*other)->forward(from, kThisServer, "ann", frame, expires_us).ok());
+    EXPECT_TRUE((*other)->forward(from, kThisServer, "ann", edit, expires_us).ok());
     std::size_t before = 0;
     on_strand([&] {
       before = edits_.forwarded.size();

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <filesystem>
@@ -16,6 +17,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <variant>
 
 #include "common/world/sqlite_store.h"
 #include "tests/support/eventually.h"
@@ -51,12 +53,11 @@ class Recorder : public WorldClient {
     mip_news_.emplace_back(tick, std::move(changed));
     cv_.notify_all();
   }
-  void send(SharedFrame frame, SendClass) override {
+  void answer(WorldAnswer a) override {
     std::lock_guard lock(m_);
-    if (grants_at_first_ack_ < 0 &&
-        flatbuffers::GetRoot<wire::Message>(frame->data() + kFrameHeaderBytes)->body_type() == wire::Body::EditAck)
+    if (grants_at_first_ack_ < 0 && std::holds_alternative<EditAcked>(a))
       grants_at_first_ack_ = static_cast<std::int64_t>(grants_.size());
-    frames_.push_back(std::move(frame));
+    answers_.push_back(std::move(a));
     cv_.notify_all();
   }
   void close(CloseReason, const std::string& reason) override {
@@ -69,20 +70,18 @@ class Recorder : public WorldClient {
     std::unique_lock lock(m_);
     return cv_.wait_for(lock, 60s, [&] { return p(*this); });
   }
-  // The edit ids of the EditAcks received, in order.
+  // The edit ids of the edits acknowledged, in order.
   std::vector<std::uint32_t> acked() const {
     std::vector<std::uint32_t> ids;
-    for (const auto& f : frames_)
-      if (const auto* m = flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes);
-          m->body_type() == wire::Body::EditAck)
-        ids.push_back(m->body_as_EditAck()->edit_id());
+    for (const WorldAnswer& a : answers_)
+      if (const auto* ack = std::get_if<EditAcked>(&a)) ids.push_back(ack->edit_id);
     return ids;
   }
-  std::size_t count_frames(wire::Body type) const {
-    std::size_t n = 0;
-    for (const auto& f : frames_)
-      if (flatbuffers::GetRoot<wire::Message>(f->data() + kFrameHeaderBytes)->body_type() == type) ++n;
-    return n;
+  // The answers of type T received.
+  template <class T>
+  std::size_t count() const {
+    return static_cast<std::size_t>(
+        std::count_if(answers_.begin(), answers_.end(), [](const WorldAnswer& a) { return std::holds_alternative<T>(a); }));
   }
 
   std::mutex m_;
@@ -91,7 +90,7 @@ class Recorder : public WorldClient {
   std::vector<HorizonPtr> horizons_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
   std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> mip_news_;
-  std::vector<SharedFrame> frames_;
+  std::vector<WorldAnswer> answers_;
   std::int64_t grants_at_first_ack_ = -1;  // grants received when the first EditAck came
   std::string closed_;
 };
@@ -175,7 +174,7 @@ TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
   const std::uint64_t rev_a = holder->grants_[0]->pos() == a ? holder->grants_[0]->revision() : holder->grants_[1]->revision();
   // One edit spanning both chunks: one tick, one call with both versions.
   owner_->edit(1, fill(5, Region{{1020, 0, 1020}, {1030, 4, 1030}}, materials::kBrick));
-  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty() && r.count_frames(wire::Body::EditAck) == 1; }));
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty() && r.count<EditAcked>() == 1; }));
   {
     std::lock_guard lock(holder->m_);
     ASSERT_EQ(holder->ticks_.size(), 1u);
@@ -188,7 +187,7 @@ TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
         EXPECT_EQ(v->revision(), rev_a + 1);
       }
     }
-    EXPECT_EQ(holder->count_frames(wire::Body::EditAck), 1u);
+    EXPECT_EQ(holder->count<EditAcked>(), 1u);
   }
   // Committed before anyone heard: the store has it.
   auto stored = world_->store().load_chunk(a);
@@ -210,7 +209,7 @@ TEST_F(WorldOwnerTest, AReleasedChunkIsNoLongerTold) {
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
   owner_->release(1, {a});
   owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kRock));
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 1; }));
   std::lock_guard lock(c->m_);
   EXPECT_TRUE(c->ticks_.empty());
 }
@@ -228,16 +227,16 @@ TEST_F(WorldOwnerTest, UndoAndRedoApplyOnTheStrand) {
   undo.edit_id = 2;
   undo.kind = EditKind::kUndo;
   owner_->edit(1, undo);
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 2; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 2; }));
   owner_->inspect([&](const WorldView& v) { EXPECT_EQ(v.get(p), before); });
   EditRequestMsg redo = undo;
   redo.edit_id = 3;
   redo.kind = EditKind::kRedo;
   owner_->edit(1, redo);
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 3; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 3; }));
   owner_->inspect([&](const WorldView& v) { EXPECT_EQ(v.get(p), solid(materials::kSnow)); });
   owner_->edit(1, redo);  // nothing left to redo
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditReject) == 1; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditRejectMsg>() == 1; }));
 }
 
 TEST_F(WorldOwnerTest, ATickRunsBetweenSlicesOfQueuedRequestsNotBehindThemAll) {
@@ -286,10 +285,10 @@ TEST_F(WorldOwnerTest, RequestsAreServedInTheOrderMade) {
   owner_->want(1, {{a, true}});
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 2; }));
   owner_->edit(1, fill(1, Region{{1001, 1, 1001}, {1002, 2, 1002}}, materials::kBrick));
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1 && !r.ticks_.empty(); }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks_.empty(); }));
   owner_->release(1, {a});
   owner_->edit(1, fill(2, Region{{1003, 1, 1003}, {1004, 2, 1004}}, materials::kSnow));
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 2; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 2; }));
   std::lock_guard lock(c->m_);
   EXPECT_EQ(c->ticks_.size(), 1u);
 }
@@ -333,7 +332,7 @@ TEST_F(WorldOwnerWaitingEditTest, AnEditWaitingForItsChunkHoldsUpOnlyItsPlayersE
   owner_->edit(1, fill(2, Region{{1060, 0, 1060}, {1062, 2, 1062}}, materials::kSnow));
   owner_->edit(3, fill(3, Region{{1004, 0, 1004}, {1012, 4, 1012}}, materials::kRock));
   owner_->edit(2, fill(4, Region{{1130, 0, 1130}, {1132, 2, 1132}}, materials::kSand));
-  ASSERT_TRUE(b->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }))
+  ASSERT_TRUE(b->wait([](Recorder& r) { return r.count<EditAcked>() == 1; }))
       << "an edit behind a waiting one, of another player and chunk, is not held up";
   // Acknowledgements of one tick go out in the order applied: a's and c's,
   // queued before b's, would have come first.
@@ -385,7 +384,7 @@ TEST_F(WorldOwnerMipNewsTest, AHolderAfarHearsOfSeveralTicksAtOnce) {
   // Three edits, each in a tick of its own (each waits for the last's ack).
   for (std::uint32_t i = 1; i <= 3; ++i) {
     owner_->edit(1, fill(i, Region{{1000, 0, 1000}, {1002, static_cast<std::int32_t>(i), 1002}}, materials::kBrick));
-    ASSERT_TRUE(near->wait([i](Recorder& r) { return r.count_frames(wire::Body::EditAck) == i; }));
+    ASSERT_TRUE(near->wait([i](Recorder& r) { return r.count<EditAcked>() == i; }));
   }
   {
     std::lock_guard lock(near->m_);
@@ -417,7 +416,7 @@ TEST_F(WorldOwnerMipNewsHeldTest, AChunkNowHeldAtFullResolutionIsToldEveryTickAn
   ASSERT_TRUE(mover->wait([](Recorder& r) { return r.grants_.size() == 2; }));
   // A change of b, gathered for the mover (not due for ten minutes).
   owner_->edit(1, fill(1, Region{{1000, 0, 990}, {1002, 2, 992}}, materials::kBrick));
-  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1; }));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count<EditAcked>() == 1; }));
   owner_->inspect([](const WorldView&) {});  // the commit's news handed out
   {
     std::lock_guard lock(mover->m_);
@@ -449,7 +448,7 @@ TEST_F(WorldOwnerMipNewsHeldTest, HoldsFullOfAChunkNotHeldChangesNothing) {
   ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants_.size() == 1; }));
   owner_->holds_full(2, {a});  // never asked for, or released: no holder made
   owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kBrick));
-  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count_frames(wire::Body::EditAck) == 1 && !r.ticks_.empty(); }));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks_.empty(); }));
   owner_->inspect([](const WorldView&) {});
   std::lock_guard lock(other->m_);
   EXPECT_TRUE(other->ticks_.empty());
