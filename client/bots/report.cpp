@@ -65,9 +65,12 @@ std::string server_json(const ServerFigures& f) {
   return j.str();
 }
 
+// A distribution: its percentiles and, when it counted anything, the
+// histogram they came from (what `merge` adds up).
 std::string lat(const LatencySummary& l) {
   return "{\"p50\": " + num(l.p50) + ", \"p95\": " + num(l.p95) + ", \"p99\": " + num(l.p99) +
-         ", \"count\": " + std::to_string(l.count) + "}";
+         ", \"max\": " + num(l.max) + ", \"count\": " + std::to_string(l.count) +
+         (l.histogram.empty() ? std::string() : ", \"histogram\": " + histogram_json(l.histogram)) + "}";
 }
 
 std::string html_esc(const std::string& s) {

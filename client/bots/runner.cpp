@@ -327,7 +327,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   for (auto& b : bots) b->finish();
 
   // --- the report ----------------------------------------------------------
-  std::vector<float> coarse, full;
+  LatencyHistogram coarse, full;
   double bpv_sum = 0;
   int bpv_n = 0;
   r.min_checks_during_run = std::numeric_limits<std::uint64_t>::max();
@@ -346,11 +346,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
       r.by_message_type[t].bytes_out += k.by_message_type[t].bytes_out;
     }
     if (br.join_coarse_ms) {
-      coarse.push_back(static_cast<float>(*br.join_coarse_ms));
+      coarse.record(*br.join_coarse_ms);
       r.join_coarse_bytes += br.join_coarse_bytes;
     }
     if (br.join_full_ms) {
-      full.push_back(static_cast<float>(*br.join_full_ms));
+      full.record(*br.join_full_ms);
       r.join_bytes_received += br.join_bytes;
       if (br.join_non_empty_voxels > 0) {
         bpv_sum += static_cast<double>(br.join_bytes) / static_cast<double>(br.join_non_empty_voxels);
