@@ -15,7 +15,7 @@ namespace {
 
 int usage_error(const std::string& message) {
   std::fprintf(stderr, "terrane-bots: %s\n(terrane-bots --help lists the options)\n", message.c_str());
-  return 2;
+  return kExitUsage;
 }
 
 bool read_file(const std::string& path, std::string* out) {
@@ -77,7 +77,7 @@ int run(int argc, char** argv) {
     return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.report_path.c_str()), 1;
   if (!o.html_path.empty() && !write_file(o.html_path, report_html(report)))
     return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.html_path.c_str()), 1;
-  return report.passed() ? 0 : 1;
+  return report.exit_status();
 }
 
 }  // namespace

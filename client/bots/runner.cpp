@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <future>
 #include <limits>
 #include <random>
@@ -403,7 +404,58 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
     if (s < rtt_s.size()) r.timeline[s].round_trip_ms = summarize(rtt_s[s]);
   }
+  r.thresholds = evaluate_thresholds(o.thresholds, r.threshold_values());
   return true;
+}
+
+std::vector<std::string> BotsReport::broken_thresholds() const {
+  std::vector<std::string> out;
+  for (const ThresholdResult& t : thresholds) {
+    if (t.passed) continue;
+    char value[64];
+    std::snprintf(value, sizeof value, "%.6g", t.value);
+    out.push_back("threshold " + t.threshold.expression + " broken: " + t.threshold.metric + " = " + value);
+  }
+  return out;
+}
+
+int BotsReport::exit_status() const {
+  if (!failures().empty()) return kExitFailed;
+  return broken_thresholds().empty() ? kExitPassed : kExitThresholds;
+}
+
+std::map<std::string, double> BotsReport::threshold_values() const {
+  const auto pct = [](std::uint64_t part, std::uint64_t whole) {
+    return whole > 0 ? 100.0 * static_cast<double>(part) / static_cast<double>(whole) : 0.0;
+  };
+  const double bot_seconds = static_cast<double>(bots) * duration_s;
+  return {
+      {"fanout_p50", edit_fanout_ms.p50},
+      {"fanout_p95", edit_fanout_ms.p95},
+      {"fanout_p99", edit_fanout_ms.p99},
+      {"fanout_max", edit_fanout_ms.max},
+      {"fanout_other_server_p99", edit_fanout_other_server_ms.p99},
+      {"ack_p50", edit_ack_ms.p50},
+      {"ack_p95", edit_ack_ms.p95},
+      {"ack_p99", edit_ack_ms.p99},
+      {"ack_max", edit_ack_ms.max},
+      {"join_coarse_p50", join_coarse_ms.p50},
+      {"join_coarse_p95", join_coarse_ms.p95},
+      {"join_coarse_p99", join_coarse_ms.p99},
+      {"join_full_p50", join_full_ms.p50},
+      {"join_full_p95", join_full_ms.p95},
+      {"join_full_p99", join_full_ms.p99},
+      {"round_trip_p99", round_trip_ms.p99},
+      {"io_lag_p99", bots_io_lag_ms.p99},
+      {"mismatches", static_cast<double>(mismatches.size())},
+      {"disconnects", static_cast<double>(unexpected_disconnects)},
+      {"connect_failures", static_cast<double>(connect_failures)},
+      {"joins_incomplete", static_cast<double>(joins_incomplete)},
+      {"edits_acked", static_cast<double>(edits_acked)},
+      {"rejected_pct", pct(edits_rejected, edits_sent)},
+      {"bytes_per_bot_s", bot_seconds > 0 ? static_cast<double>(bytes_received) / bot_seconds : 0.0},
+      {"hash_unanswered", static_cast<double>(hash_unanswered)},
+  };
 }
 
 std::vector<std::string> BotsReport::failures() const {

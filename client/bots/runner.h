@@ -80,12 +80,23 @@ struct BotsReport {
   double joined_s = 0;
   bool edits_expected = false;  // the behaviour edits
 
-  // Why the run failed, one line each; empty when it passed. A run fails on
-  // a replica mismatch, an unexpected disconnect, a failed connection, a bot
-  // that never completed its join, and a run whose bots were to edit but
-  // none of whose edits was acknowledged.
+  // The run's thresholds (options.thresholds) against its figures.
+  std::vector<ThresholdResult> thresholds;
+
+  // Why the run failed, one line each; empty when it ran soundly. A run
+  // fails on a replica mismatch, an unexpected disconnect, a failed
+  // connection, a bot that never completed its join, and a run whose bots
+  // were to edit but none of whose edits was acknowledged.
   std::vector<std::string> failures() const;
-  bool passed() const { return failures().empty(); }
+  // Each broken threshold with its value: "fanout_p99<100 broken: 153.2".
+  std::vector<std::string> broken_thresholds() const;
+  bool passed() const { return failures().empty() && broken_thresholds().empty(); }
+  // kExitFailed when the run failed, else kExitThresholds when a threshold
+  // broke, else kExitPassed (thresholds.h).
+  int exit_status() const;
+  // Every metric a threshold can name (threshold_metrics()) -> its value
+  // in this report.
+  std::map<std::string, double> threshold_values() const;
 };
 
 struct Progress {

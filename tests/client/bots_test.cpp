@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -499,7 +500,7 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   EXPECT_EQ(o.latency_ms, 40);
   EXPECT_EQ(o.bandwidth_kbps, 2000);
   // The saved scenario reproduces the options.
-  std::map<std::string, std::pair<std::string, std::string>> kv;
+  OptionValues kv;
   ASSERT_EQ(parse_scenario_text(scenario_text(o), "saved", &kv), "");
   BotsOptions again;
   ASSERT_EQ(apply_option_values(kv, &again), "");
@@ -553,7 +554,7 @@ TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
             std::string::npos);
   EXPECT_NE(parse({"--connect", "h:1", "--scenario", "/nonexistent/x"}, &o).find("--scenario: cannot read"),
             std::string::npos);
-  std::map<std::string, std::pair<std::string, std::string>> kv;
+  OptionValues kv;
   EXPECT_EQ(parse_scenario_text("bots = 2\nwings = 2\n", "s.txt", &kv), "s.txt:2: unknown key 'wings'");
   EXPECT_EQ(parse_scenario_text("bots 2\n", "s.txt", &kv), "s.txt:1: expected key=value, got 'bots 2'");
   kv.clear();
@@ -590,6 +591,11 @@ TEST(BotsReport, JsonFlattenerRejectsMalformedInput) {
   EXPECT_EQ(j["a.b.0"], "1");
   EXPECT_EQ(j["a.b.1"], "x");
   EXPECT_EQ(j["c"], "true");
+  // \u escapes read back as what json_escape wrote them for.
+  j.clear();
+  ASSERT_EQ(flatten_json("{\"e\": \"a\\u003cb \\u00e9 \\ud800\"}", &j), "");
+  EXPECT_EQ(j["e"], "a<b \xc3\xa9 ?");
+  EXPECT_NE(flatten_json("{\"e\": \"\\u00g0\"}", &j), "");
 }
 
 // --- the binary ------------------------------------------------------------------
@@ -615,6 +621,42 @@ TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
   out.clear();
   EXPECT_EQ(run_binary("compare only-one.json", &out), 2);
   EXPECT_NE(out.find("compare takes two JSON reports"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --threshold 'fanout_p99<<100'", &out), 2);
+  EXPECT_NE(out.find("--threshold: 'fanout_p99<<100': '<100' is not a number"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --threshold 'latency<1'", &out), 2);
+  EXPECT_NE(out.find("unknown metric 'latency' (known: fanout_p50"), std::string::npos) << out;
+}
+
+// A real short run against a local server: a threshold it cannot meet
+// exits 3 and is named with its value in the table and the JSON report;
+// the same run with thresholds it meets exits 0.
+TEST_F(BotsRunTest, ABrokenThresholdExitsThreeNamingItsValue) {
+  start_server();
+  const fs::path report = dir_ / "thresholds.json";
+  const std::string run = "--connect 127.0.0.1:" + std::to_string(server_->port()) +
+                          " --bots 3 --behavior idle --duration 1 --view-distance 64 --full-res-radius 32"
+                          " --hash-checks 1 --quiet 0 --wait-joined 120 --threads 2 --progress off";
+  std::string out;
+  EXPECT_EQ(run_binary(run + " --threshold mismatches==0 --threshold 'join_full_p99 < 0' --report " + report.string(),
+                       &out),
+            3)
+      << out;
+  EXPECT_NE(out.find("FAILED: threshold join_full_p99 < 0 broken: join_full_p99 = "), std::string::npos) << out;
+  EXPECT_NE(out.find("ok   mismatches==0"), std::string::npos) << out;
+  std::ifstream f(report);
+  std::stringstream text;
+  text << f.rdbuf();
+  std::map<std::string, std::string> json;
+  ASSERT_EQ(flatten_json(text.str(), &json), "");
+  EXPECT_EQ(json["exit_status"], "3");
+  EXPECT_EQ(json["thresholds.1.metric"], "join_full_p99");
+  EXPECT_EQ(json["thresholds.1.passed"], "false");
+  EXPECT_GT(std::stod(json["thresholds.1.value"]), 0);
+  EXPECT_EQ(json["thresholds.1.value"], json["join_full_ms.p99"]);
+  out.clear();
+  EXPECT_EQ(run_binary(run + " --threshold mismatches==0 --threshold 'join_full_p99>0'", &out), 0) << out;
 }
 
 }  // namespace
