@@ -15,6 +15,7 @@ namespace terrane::bots {
 const char* const kBotsHelp =
     "usage: terrane-bots --connect HOST:PORT [options]\n"
     "       terrane-bots compare A.json B.json\n"
+    "       terrane-bots merge PART.json... --report ALL.json [--html ALL.html]\n"
     "\n"
     "Runs N headless bots in one process against a terrane-server, each with its own replica,\n"
     "and reports what replication cost and whether every replica stayed right.\n"
@@ -87,7 +88,16 @@ const char* const kBotsHelp =
     "                            mismatches disconnects connect_failures joins_incomplete\n"
     "                            edits_acked hash_unanswered; rejected_pct (edits rejected, %\n"
     "                            of sent); bytes_per_bot_s (bytes received per bot per second)\n"
-    "  --help                    this text\n";
+    "  --shard I/N               run part I (from 0) of N of the scenario: the bots i with\n"
+    "                            i mod N == I, each with the start, role and seed it has when\n"
+    "                            one process runs all --bots (N processes, on as many machines,\n"
+    "                            run the whole scenario; merge their reports with\n"
+    "                            terrane-bots merge)\n"
+    "  --help                    this text\n"
+    "\n"
+    "terrane-bots merge PART.json... --report ALL.json [--html ALL.html] combines the reports of\n"
+    "the parts of one sharded run: counts add up, latency histograms merge (percentiles of the\n"
+    "whole run, not averages), per second too; thresholds are evaluated again on the whole.\n";
 
 namespace {
 
@@ -98,7 +108,8 @@ const std::set<std::string>& value_keys() {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",     "shared-chunks",
-      "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold"};
+      "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
+      "shard"};
   return k;
 }
 
@@ -259,12 +270,23 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       Threshold t;
       if (auto e = parse_threshold(v, &t); !e.empty()) return where + ": " + e;
       o->thresholds.push_back(t);
+    } else if (key == "shard") {
+      const auto slash = v.find('/');
+      std::int64_t index = -1, count = 0;
+      if (slash == std::string::npos || !parse_i64(v.substr(0, slash), &index) ||
+          !parse_i64(v.substr(slash + 1), &count) || count < 1 || count > 100000 || index < 0 || index >= count)
+        return bad(where, v, "is not I/N with 0 <= I < N (the I-th of N parts, counted from 0)");
+      o->shard_index = static_cast<int>(index);
+      o->shard_count = static_cast<int>(count);
     } else if (key == "progress") {
       if (v != "auto" && v != "on" && v != "off") return bad(where, v, "is not auto, on or off");
       o->progress = v;
     }
     if (!err.empty()) return err;
   }
+  if (o->shard_count > o->bots)
+    return "--shard: " + std::to_string(o->shard_count) + " parts of " + std::to_string(o->bots) +
+           " bots leave a part without bots";
   if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
     return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
@@ -347,6 +369,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "threads = " << o.threads << "\n";
   s << "shared-chunks = " << o.shared_chunks << "\n";
   for (const Threshold& t : o.thresholds) s << "threshold = " << t.expression << "\n";
+  if (o.shard_count > 1) s << "shard = " << o.shard_index << "/" << o.shard_count << "\n";
   return s.str();
 }
 

@@ -59,7 +59,14 @@ struct BotsOptions {
   // Goals evaluated on the whole run (--threshold, repeatable); the command
   // line's replace a scenario file's.
   std::vector<Threshold> thresholds;
+  // --shard I/N: this process runs part I (0 <= I < N) of the scenario,
+  // the bots i with i mod N == I, each as it starts when one process runs
+  // all `bots` (plan_bots, runner.h); N = 1: every bot.
+  int shard_index = 0, shard_count = 1;
 };
+
+// Whether bot i (of all o.bots) is in o's shard.
+inline bool in_shard(const BotsOptions& o, int i) { return i % o.shard_count == o.shard_index; }
 
 // Seconds between a bot's region-hash checks, so that every bot makes at
 // least hash_checks of them in the measured run: the duration after the

@@ -113,7 +113,8 @@ std::string report_json(const BotsReport& r) {
     << ", \"seed\": " << o.seed << ", \"edit_interval\": " << num(o.edit_interval_s)
     << ", \"edit_radius\": " << num(o.edit_radius) << ", \"latency_ms\": " << o.latency_ms
     << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
-    << ", \"threads\": " << o.threads << "},\n";
+    << ", \"threads\": " << o.threads << ", \"wait_joined\": " << num(o.join_timeout_s)
+    << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\"},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
   j << "  \"failures\": [";
   {
@@ -193,6 +194,7 @@ std::string report_json(const BotsReport& r) {
       << "\"}";
   j << "],\n";
   j << "  \"connect_failures\": " << r.connect_failures << ",\n";
+  j << "  \"first_connect_error\": \"" << esc(r.first_connect_error) << "\",\n";
   j << "  \"walk_steps\": " << r.walk_steps << ",\n";
   j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
     << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";

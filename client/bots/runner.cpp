@@ -66,6 +66,34 @@ class IoPool {
 
 }  // namespace
 
+std::vector<BotPlan> plan_bots(const BotsOptions& o, Vec3f spawn) {
+  std::mt19937_64 rng(o.seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<BotPlan> out;
+  const float half = static_cast<float>(o.spread) / 2.0f;
+  for (int i = 0; i < o.bots; ++i) {
+    BotPlan p;
+    p.id = i;
+    p.start = Vec3f{spawn.x + (unit(rng) * 2.0f - 1.0f) * half, spawn.y, spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
+    switch (o.behavior) {
+      case Behavior::kIdle: break;
+      case Behavior::kWalk: p.gait = Gait::kWalk; break;
+      case Behavior::kFly: p.gait = Gait::kFly; break;
+      case Behavior::kDig: p.edits = EditMode::kDig; break;
+      case Behavior::kBuild: p.edits = EditMode::kBuild; break;
+      case Behavior::kMixed: {
+        const float u = unit(rng);
+        p.gait = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
+        p.edits = EditMode::kBoth;
+        break;
+      }
+    }
+    p.seed = splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i));
+    if (in_shard(o, i)) out.push_back(p);
+  }
+  return out;
+}
+
 bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& progress, BotsReport* report,
               std::string* error) {
   raise_open_file_limit(o.bots);
@@ -168,37 +196,23 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
   ctx.run_start = t0;
 
-  std::mt19937_64 rng(o.seed);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
   std::vector<std::unique_ptr<Bot>> bots;
-  bots.reserve(static_cast<std::size_t>(o.bots));
-  const float half = static_cast<float>(o.spread) / 2.0f;
-  for (int i = 0; i < o.bots; ++i) {
-    const Vec3f start{ctx.spawn.x + (unit(rng) * 2.0f - 1.0f) * half, ctx.spawn.y,
-                      ctx.spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
-    Gait g = Gait::kIdle;
-    EditMode e = EditMode::kNone;
-    switch (o.behavior) {
-      case Behavior::kIdle: break;
-      case Behavior::kWalk: g = Gait::kWalk; break;
-      case Behavior::kFly: g = Gait::kFly; break;
-      case Behavior::kDig: e = EditMode::kDig; break;
-      case Behavior::kBuild: e = EditMode::kBuild; break;
-      case Behavior::kMixed: {
-        const float u = unit(rng);
-        g = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
-        e = EditMode::kBoth;
-        break;
-      }
-    }
-    bots.push_back(std::make_unique<Bot>(i, ctx, start, g, e, splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i))));
+  for (const BotPlan& p : plan_bots(o, ctx.spawn))
+    bots.push_back(std::make_unique<Bot>(p.id, ctx, p.start, p.gait, p.edits, p.seed));
+  // Bot i connects at i / bots of the ramp-up and steps in phase i mod
+  // kStepPhases, whichever shard runs it.
+  std::vector<int> ids;
+  std::vector<std::vector<Bot*>> by_phase(kStepPhases);
+  for (auto& b : bots) {
+    ids.push_back(b->index());
+    by_phase[static_cast<std::size_t>(b->index() % kStepPhases)].push_back(b.get());
   }
 
   BotsReport& r = *report;
   r = BotsReport{};
   r.options = o;
   r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
-  r.bots = o.bots;
+  r.bots = static_cast<int>(bots.size());
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
   bool measured_snapshot = ramp.count() == 0;
@@ -239,7 +253,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     prev_acked = totals.edits_acked;
     r.timeline.push_back(p);
     if (progress)
-      progress(Progress{p.t_s, live, o.bots, p.mb_per_s_in, p.mb_per_s_out, p.edits_acked_per_s,
+      progress(Progress{p.t_s, live, static_cast<int>(bots.size()), p.mb_per_s_in, p.mb_per_s_out, p.edits_acked_per_s,
                         fanout.recent_fanout_p99(), mismatches.count()});
   };
 
@@ -255,14 +269,14 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   std::size_t phase = 0;
   for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
-           now >= t0 + ramp * static_cast<Clock::rep>(next_bot) / static_cast<Clock::rep>(bots.size())) {
+           now >= t0 + ramp * static_cast<Clock::rep>(ids[next_bot]) / static_cast<Clock::rep>(o.bots)) {
       Bot& b = *bots[next_bot++];
       if (!b.connect()) {
         ++r.connect_failures;
         if (r.first_connect_error.empty()) r.first_connect_error = b.result().connect_error;
       }
     }
-    for (std::size_t i = phase; i < bots.size(); i += kStepPhases) bots[i]->step(now, true);
+    for (Bot* b : by_phase[phase]) b->step(now, true);
     phase = (phase + 1) % static_cast<std::size_t>(kStepPhases);
     once_a_second(now);
     if (!joins_done && next_bot == bots.size() && phase == 0) {
@@ -367,7 +381,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));
     if (br.unexpected_disconnect) {
       ++r.unexpected_disconnects;
-      r.disconnects.emplace_back(static_cast<int>(i), br.disconnect_reason);
+      r.disconnects.emplace_back(bots[i]->index(), br.disconnect_reason);
     }
   }
   if (r.min_checks_during_run == std::numeric_limits<std::uint64_t>::max()) r.min_checks_during_run = 0;

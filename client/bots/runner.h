@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "client/bots/bot.h"
 #include "client/bots/options.h"
 #include "client/bots/server_watch.h"
 #include "client/bots/stats.h"
@@ -98,6 +99,19 @@ struct BotsReport {
   // in this report.
   std::map<std::string, double> threshold_values() const;
 };
+
+// How a bot starts: where, walking or flying, editing or not, its seed.
+struct BotPlan {
+  int id = 0;  // of all o.bots, whatever the shard
+  Vec3f start;
+  Gait gait = Gait::kIdle;
+  EditMode edits = EditMode::kNone;
+  std::uint64_t seed = 0;
+};
+// The bots of o's shard (in_shard), in id order, each planned as when one
+// process runs every bot: one random stream (o.seed) draws every bot's
+// start and role in id order, and shards keep their own.
+std::vector<BotPlan> plan_bots(const BotsOptions& o, Vec3f spawn);
 
 struct Progress {
   double t_s = 0;

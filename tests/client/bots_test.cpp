@@ -508,6 +508,50 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   fs::remove(file);
 }
 
+// --shard I/N runs the bots i with i mod N == I, each placed, cast and
+// seeded as when one process runs them all.
+TEST(BotsOptions, ShardsSplitTheBotsAsOneProcessPlansThem) {
+  BotsOptions o;
+  o.bots = 11;
+  o.spread = 200;
+  o.seed = 5;
+  o.behavior = Behavior::kMixed;
+  const Vec3f spawn{10, 70, -20};
+  const std::vector<BotPlan> all = plan_bots(o, spawn);
+  ASSERT_EQ(all.size(), 11u);
+  std::vector<BotPlan> joined;
+  for (int i = 0; i < 3; ++i) {
+    BotsOptions part = o;
+    part.shard_index = i;
+    part.shard_count = 3;
+    for (const BotPlan& p : plan_bots(part, spawn)) {
+      EXPECT_EQ(p.id % 3, i);
+      joined.push_back(p);
+    }
+  }
+  std::sort(joined.begin(), joined.end(), [](const BotPlan& a, const BotPlan& b) { return a.id < b.id; });
+  ASSERT_EQ(joined.size(), all.size());
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    EXPECT_EQ(joined[i].id, all[i].id);
+    EXPECT_EQ(joined[i].start, all[i].start) << i;
+    EXPECT_EQ(joined[i].gait, all[i].gait) << i;
+    EXPECT_EQ(joined[i].edits, all[i].edits) << i;
+    EXPECT_EQ(joined[i].seed, all[i].seed) << i;
+  }
+  // The flag, in a scenario file and its errors.
+  ASSERT_EQ(parse({"--connect", "h:1", "--bots", "11", "--shard", "2/3"}, &o), "");
+  EXPECT_EQ(o.shard_index, 2);
+  EXPECT_EQ(o.shard_count, 3);
+  EXPECT_NE(scenario_text(o).find("shard = 2/3\n"), std::string::npos);
+  BotsOptions bad_shard;
+  for (const char* v : {"3/3", "-1/3", "1", "1/0", "a/b"})
+    EXPECT_NE(parse({"--connect", "h:1", "--shard", v}, &bad_shard).find(std::string("--shard: '") + v + "'"),
+              std::string::npos)
+        << v;
+  EXPECT_NE(parse({"--connect", "h:1", "--bots", "2", "--shard", "0/3"}, &bad_shard).find("leave a part without bots"),
+            std::string::npos);
+}
+
 TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
   BotsOptions o;
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
@@ -627,6 +671,57 @@ TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
   out.clear();
   EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --threshold 'latency<1'", &out), 2);
   EXPECT_NE(out.find("unknown metric 'latency' (known: fanout_p50"), std::string::npos) << out;
+}
+
+// Two local shards of one scenario, merged, against one process running it
+// all on the same server: what the scenario determines (bots, their joins
+// and connections, no edit, no mismatch, each bot's Hello and Welcome)
+// matches exactly. Latencies and bytes differ from run to run by more than
+// the histograms' precision whatever the sharding (streaming depends on
+// timing); that parts merge into the whole within that precision is
+// tests/client/bots/merge_test.cpp's.
+TEST_F(BotsRunTest, TwoMergedShardsCountWhatOneProcessCounts) {
+  start_server();
+  const std::string run = "--connect 127.0.0.1:" + std::to_string(server_->port()) +
+                          " --bots 6 --behavior idle --duration 1 --spread 64 --view-distance 64"
+                          " --full-res-radius 32 --hash-checks 1 --quiet 0 --wait-joined 120 --threads 2"
+                          " --progress off --threshold joins_incomplete==0";
+  const auto path = [&](const char* name) { return (dir_ / name).string(); };
+  std::string out;
+  ASSERT_EQ(run_binary(run + " --report " + path("one.json"), &out), 0) << out;
+  // The shards run at once, as on two machines.
+  std::string out1;
+  std::thread second([&] { run_binary(run + " --shard 1/2 --report " + path("p1.json"), &out1); });
+  out.clear();
+  EXPECT_EQ(run_binary(run + " --shard 0/2 --report " + path("p0.json"), &out), 0) << out;
+  second.join();
+  out.clear();
+  ASSERT_EQ(run_binary("merge " + path("p0.json") + " " + path("p1.json") + " --report " + path("all.json") +
+                           " --html " + path("all.html"),
+                       &out),
+            0)
+      << out << out1;
+  EXPECT_NE(out.find("terrane-bots: 6 bots, idle"), std::string::npos) << out;
+  auto read = [&](const char* name) {
+    std::ifstream f(path(name));
+    std::stringstream text;
+    text << f.rdbuf();
+    std::map<std::string, std::string> flat;
+    EXPECT_EQ(flatten_json(text.str(), &flat), "") << name;
+    return flat;
+  };
+  auto one = read("one.json"), all = read("all.json"), p0 = read("p0.json"), p1 = read("p1.json");
+  EXPECT_EQ(p0["bots"], "3");
+  EXPECT_EQ(p1["bots"], "3");
+  EXPECT_EQ(p1["scenario.shard"], "1/2");
+  EXPECT_EQ(all["scenario.shard"], "0/1");
+  for (const char* key :
+       {"bots", "scenario.bots", "join_coarse_ms.count", "join_full_ms.count", "joins_incomplete", "connect_failures",
+        "unexpected_disconnects", "replica_mismatches", "edits_sent", "edits_acked", "hash_unanswered", "passed",
+        "exit_status", "thresholds.0.value", "by_message_type.Hello.frames_out", "by_message_type.Welcome.frames_in"})
+    EXPECT_EQ(all[key], one[key]) << key;
+  EXPECT_EQ(one["join_full_ms.count"], "6");
+  EXPECT_TRUE(fs::exists(path("all.html")));
 }
 
 // A real short run against a local server: a threshold it cannot meet
