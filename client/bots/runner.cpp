@@ -201,12 +201,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     bots.push_back(std::make_unique<Bot>(p.id, ctx, p.start, p.gait, p.edits, p.seed));
   // Bot i connects at i / bots of the ramp-up and steps in phase i mod
   // kStepPhases, whichever shard runs it.
-  std::vector<int> ids;
   std::vector<std::vector<Bot*>> by_phase(kStepPhases);
-  for (auto& b : bots) {
-    ids.push_back(b->index());
-    by_phase[static_cast<std::size_t>(b->index() % kStepPhases)].push_back(b.get());
-  }
+  for (auto& b : bots) by_phase[static_cast<std::size_t>(b->index() % kStepPhases)].push_back(b.get());
 
   BotsReport& r = *report;
   r = BotsReport{};
@@ -269,7 +265,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   std::size_t phase = 0;
   for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
-           now >= t0 + ramp * static_cast<Clock::rep>(ids[next_bot]) / static_cast<Clock::rep>(o.bots)) {
+           now >= t0 + ramp * static_cast<Clock::rep>(bots[next_bot]->index()) / static_cast<Clock::rep>(o.bots)) {
       Bot& b = *bots[next_bot++];
       if (!b.connect()) {
         ++r.connect_failures;
