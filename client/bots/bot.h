@@ -73,6 +73,8 @@ class Bot {
   Bot(const Bot&) = delete;
   Bot& operator=(const Bot&) = delete;
 
+  // The bot's id: its number among all the scenario's bots.
+  int index() const { return index_; }
   bool connect();
   // One behaviour step (every 100 ms): movement, edits, scheduled checks,
   // hash retries. active: moving and editing allowed.

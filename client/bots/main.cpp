@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
+#include "client/bots/merge.h"
 #include "client/bots/options.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
@@ -15,7 +17,7 @@ namespace {
 
 int usage_error(const std::string& message) {
   std::fprintf(stderr, "terrane-bots: %s\n(terrane-bots --help lists the options)\n", message.c_str());
-  return 2;
+  return kExitUsage;
 }
 
 bool read_file(const std::string& path, std::string* out) {
@@ -44,8 +46,45 @@ int compare(int argc, char** argv) {
   return 0;
 }
 
+// terrane-bots merge PART.json... --report ALL.json [--html ALL.html]
+int merge(int argc, char** argv) {
+  std::vector<std::string> paths;
+  std::string report_path, html_path;
+  for (int a = 2; a < argc; ++a) {
+    const std::string arg = argv[a];
+    if (arg == "--report" || arg == "--html") {
+      if (a + 1 >= argc) return usage_error("merge " + arg + ": missing value");
+      (arg == "--report" ? report_path : html_path) = argv[++a];
+    } else if (arg.rfind("--", 0) == 0) {
+      return usage_error("merge: unknown option " + arg + " (merge takes --report and --html)");
+    } else {
+      paths.push_back(arg);
+    }
+  }
+  if (paths.empty() || report_path.empty())
+    return usage_error("merge takes the parts' JSON reports and --report: terrane-bots merge PART.json... --report "
+                       "ALL.json [--html ALL.html]");
+  std::vector<BotsReport> parts(paths.size());
+  for (std::size_t i = 0; i < paths.size(); ++i) {
+    std::string text;
+    if (!read_file(paths[i], &text)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", paths[i].c_str()), 1;
+    if (auto err = report_from_json(text, &parts[i]); !err.empty())
+      return std::fprintf(stderr, "terrane-bots: %s: %s\n", paths[i].c_str(), err.c_str()), 1;
+  }
+  BotsReport merged;
+  if (auto err = merge_reports(parts, &merged); !err.empty())
+    return std::fprintf(stderr, "terrane-bots: merge: %s\n", err.c_str()), 1;
+  std::fputs(report_table(merged).c_str(), stdout);
+  if (!write_file(report_path, report_json(merged)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", report_path.c_str()), 1;
+  if (!html_path.empty() && !write_file(html_path, report_html(merged)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", html_path.c_str()), 1;
+  return merged.exit_status();
+}
+
 int run(int argc, char** argv) {
   if (argc >= 2 && std::string(argv[1]) == "compare") return compare(argc, argv);
+  if (argc >= 2 && std::string(argv[1]) == "merge") return merge(argc, argv);
   BotsOptions o;
   bool help = false;
   if (auto err = parse_bots_options(argc, argv, 1, &o, &help); !err.empty()) return usage_error(err);
@@ -77,7 +116,7 @@ int run(int argc, char** argv) {
     return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.report_path.c_str()), 1;
   if (!o.html_path.empty() && !write_file(o.html_path, report_html(report)))
     return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.html_path.c_str()), 1;
-  return report.passed() ? 0 : 1;
+  return report.exit_status();
 }
 
 }  // namespace

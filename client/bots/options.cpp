@@ -15,11 +15,18 @@ namespace terrane::bots {
 const char* const kBotsHelp =
     "usage: terrane-bots --connect HOST:PORT [options]\n"
     "       terrane-bots compare A.json B.json\n"
+    "       terrane-bots merge PART.json... --report ALL.json [--html ALL.html]\n"
     "\n"
     "Runs N headless bots in one process against a terrane-server, each with its own replica,\n"
-    "and reports what replication cost and whether every replica stayed right. Exit status:\n"
-    "0 clean run, 1 replica mismatches or unexpected disconnects (or the server unreachable),\n"
-    "2 bad usage.\n"
+    "and reports what replication cost and whether every replica stayed right.\n"
+    "\n"
+    "Exit status:\n"
+    "  0  the run passed, and every threshold held\n"
+    "  1  the run failed: replica mismatches, unexpected disconnects, failed connections or\n"
+    "     joins, no edit acknowledged, the server unreachable, or a file that could not be\n"
+    "     read or written (whatever the thresholds)\n"
+    "  2  bad usage: an unknown or malformed flag, scenario line or threshold expression\n"
+    "  3  the run was sound but a threshold was broken (each is named with its value)\n"
     "\n"
     "  --connect HOST:PORT       server address (required); several, comma-separated, for the\n"
     "                            servers of one shared world (terrane-server --store\n"
@@ -70,18 +77,39 @@ const char* const kBotsHelp =
     "                            flags given on the command line override it\n"
     "  --save-scenario FILE      write the effective options as a scenario file\n"
     "  --progress auto|on|off    live progress line (default auto: only on a terminal)\n"
-    "  --help                    this text\n";
+    "  --threshold EXPR          a goal for the whole run, METRIC OP NUMBER with OP one of\n"
+    "                            < <= > >= == != (e.g. fanout_p99<100, mismatches==0,\n"
+    "                            rejected_pct<=1); repeatable; the report lists each with its\n"
+    "                            value, and a broken one exits 3. Metrics: latencies in ms\n"
+    "                            fanout_p50 fanout_p95 fanout_p99 fanout_max\n"
+    "                            fanout_other_server_p99 ack_p50 ack_p95 ack_p99 ack_max\n"
+    "                            join_coarse_p50 join_coarse_p95 join_coarse_p99 join_full_p50\n"
+    "                            join_full_p95 join_full_p99 round_trip_p99 io_lag_p99; counts\n"
+    "                            mismatches disconnects connect_failures joins_incomplete\n"
+    "                            edits_acked hash_unanswered; rejected_pct (edits rejected, %\n"
+    "                            of sent); bytes_per_bot_s (bytes received per bot per second)\n"
+    "  --shard I/N               run part I (from 0) of N of the scenario: the bots i with\n"
+    "                            i mod N == I, each with the start, role and seed it has when\n"
+    "                            one process runs all --bots (N processes, on as many machines,\n"
+    "                            run the whole scenario; merge their reports with\n"
+    "                            terrane-bots merge)\n"
+    "  --help                    this text\n"
+    "\n"
+    "terrane-bots merge PART.json... --report ALL.json [--html ALL.html] combines the reports of\n"
+    "the parts of one sharded run: counts add up, latency histograms merge (percentiles of the\n"
+    "whole run, not averages), per second too; thresholds are evaluated again on the whole.\n";
 
 namespace {
 
-using Values = std::map<std::string, std::pair<std::string, std::string>>;
+using Values = OptionValues;
 
 const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",     "shared-chunks",
-      "report",         "html",         "save-scenario", "progress",   "scenario"};
+      "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
+      "shard"};
   return k;
 }
 
@@ -135,12 +163,13 @@ std::string parse_scenario_text(const std::string& text, const std::string& sour
     const std::string value = trim(line.substr(eq + 1));
     if (key.rfind("--", 0) == 0) key = key.substr(2);
     if (value_keys().count(key) == 0 || key == "scenario") return where + ": unknown key '" + key + "'";
-    (*out)[key] = {value, where + ": " + key};
+    out->emplace(key, std::make_pair(value, where + ": " + key));
   }
   return "";
 }
 
 std::string apply_option_values(const Values& values, BotsOptions* o) {
+  bool thresholds_given = false;
   for (const auto& [key, vw] : values) {
     const std::string& v = vw.first;
     const std::string& where = vw.second;
@@ -235,12 +264,29 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       o->html_path = v;
     } else if (key == "save-scenario") {
       o->save_scenario_path = v;
+    } else if (key == "threshold") {
+      if (!thresholds_given) o->thresholds.clear();
+      thresholds_given = true;
+      Threshold t;
+      if (auto e = parse_threshold(v, &t); !e.empty()) return where + ": " + e;
+      o->thresholds.push_back(t);
+    } else if (key == "shard") {
+      const auto slash = v.find('/');
+      std::int64_t index = -1, count = 0;
+      if (slash == std::string::npos || !parse_i64(v.substr(0, slash), &index) ||
+          !parse_i64(v.substr(slash + 1), &count) || count < 1 || count > 100000 || index < 0 || index >= count)
+        return bad(where, v, "is not I/N with 0 <= I < N (the I-th of N parts, counted from 0)");
+      o->shard_index = static_cast<int>(index);
+      o->shard_count = static_cast<int>(count);
     } else if (key == "progress") {
       if (v != "auto" && v != "on" && v != "off") return bad(where, v, "is not auto, on or off");
       o->progress = v;
     }
     if (!err.empty()) return err;
   }
+  if (o->shard_count > o->bots)
+    return "--shard: " + std::to_string(o->shard_count) + " parts of " + std::to_string(o->bots) +
+           " bots leave a part without bots";
   if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
     return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
@@ -279,7 +325,7 @@ std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* ou
     if (key == "scenario")
       scenario = value;
     else
-      flags[key] = {value, "--" + key};
+      flags.emplace(key, std::make_pair(value, "--" + key));
   }
   Values values;
   if (!scenario.empty()) {
@@ -289,7 +335,8 @@ std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* ou
     text << f.rdbuf();
     if (auto err = parse_scenario_text(text.str(), scenario, &values); !err.empty()) return err;
   }
-  for (const auto& [k, v] : flags) values[k] = v;  // the command line wins
+  for (const auto& [k, v] : flags) values.erase(k);  // the command line wins
+  values.insert(flags.begin(), flags.end());
   if (values.count("connect") == 0) return "--connect HOST:PORT is required";
   return apply_option_values(values, out);
 }
@@ -321,6 +368,8 @@ std::string scenario_text(const BotsOptions& o) {
   s << "wait-joined = " << o.join_timeout_s << "\n";
   s << "threads = " << o.threads << "\n";
   s << "shared-chunks = " << o.shared_chunks << "\n";
+  for (const Threshold& t : o.thresholds) s << "threshold = " << t.expression << "\n";
+  if (o.shard_count > 1) s << "shard = " << o.shard_index << "/" << o.shard_count << "\n";
   return s.str();
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "client/bots/thresholds.h"
 #include "common/voxel/vec3.h"
 
 namespace terrane::bots {
@@ -55,7 +56,17 @@ struct BotsOptions {
   std::string html_path;
   std::string save_scenario_path;
   std::string progress = "auto";  // auto (terminal only), on, off
+  // Goals evaluated on the whole run (--threshold, repeatable); the command
+  // line's replace a scenario file's.
+  std::vector<Threshold> thresholds;
+  // --shard I/N: this process runs part I (0 <= I < N) of the scenario,
+  // the bots i with i mod N == I, each as it starts when one process runs
+  // all `bots` (plan_bots, runner.h); N = 1: every bot.
+  int shard_index = 0, shard_count = 1;
 };
+
+// Whether bot i (of all o.bots) is in o's shard.
+inline bool in_shard(const BotsOptions& o, int i) { return i % o.shard_count == o.shard_index; }
 
 // Seconds between a bot's region-hash checks, so that every bot makes at
 // least hash_checks of them in the measured run: the duration after the
@@ -75,14 +86,18 @@ int io_threads(const BotsOptions& o);
 // else the error (for exit status 2). Sets *help when --help was given.
 std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help);
 
+// Option values by key: (value, where it was given: "--flag" or
+// "FILE:LINE: key"), in the order given. A key given twice keeps both:
+// the last wins, except `threshold`, whose values all apply.
+using OptionValues = std::multimap<std::string, std::pair<std::string, std::string>>;
+
 // Parses scenario text into key -> (value, "FILE:LINE"). '#' starts a
 // comment; blank lines are skipped; "key = value" with optional spaces.
-std::string parse_scenario_text(const std::string& text, const std::string& source,
-                                std::map<std::string, std::pair<std::string, std::string>>* out);
+std::string parse_scenario_text(const std::string& text, const std::string& source, OptionValues* out);
 
-// Applies key -> (value, where) pairs to *o; returns the first error.
-std::string apply_option_values(const std::map<std::string, std::pair<std::string, std::string>>& values,
-                                BotsOptions* o);
+// Applies the values to *o; returns the first error. Thresholds given
+// replace those *o had.
+std::string apply_option_values(const OptionValues& values, BotsOptions* o);
 
 // The scenario file text that reproduces *o (every key, flags' names).
 std::string scenario_text(const BotsOptions& o);

@@ -65,9 +65,12 @@ std::string server_json(const ServerFigures& f) {
   return j.str();
 }
 
+// A distribution: its percentiles and, when it counted anything, the
+// histogram they came from (what `merge` adds up).
 std::string lat(const LatencySummary& l) {
   return "{\"p50\": " + num(l.p50) + ", \"p95\": " + num(l.p95) + ", \"p99\": " + num(l.p99) +
-         ", \"count\": " + std::to_string(l.count) + "}";
+         ", \"max\": " + num(l.max) + ", \"count\": " + std::to_string(l.count) +
+         (l.histogram.empty() ? std::string() : ", \"histogram\": " + histogram_json(l.histogram)) + "}";
 }
 
 std::string html_esc(const std::string& s) {
@@ -110,14 +113,26 @@ std::string report_json(const BotsReport& r) {
     << ", \"seed\": " << o.seed << ", \"edit_interval\": " << num(o.edit_interval_s)
     << ", \"edit_radius\": " << num(o.edit_radius) << ", \"latency_ms\": " << o.latency_ms
     << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
-    << ", \"threads\": " << o.threads << "},\n";
+    << ", \"threads\": " << o.threads << ", \"wait_joined\": " << num(o.join_timeout_s)
+    << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\"},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
   j << "  \"failures\": [";
   {
-    const auto why = r.failures();
+    auto why = r.failures();
+    for (std::string& broken : r.broken_thresholds()) why.push_back(std::move(broken));
     for (std::size_t i = 0; i < why.size(); ++i) j << (i ? ", " : "") << "\"" << esc(why[i]) << "\"";
   }
   j << "],\n";
+  j << "  \"exit_status\": " << r.exit_status() << ",\n";
+  j << "  \"thresholds\": [";
+  for (std::size_t i = 0; i < r.thresholds.size(); ++i) {
+    const ThresholdResult& t = r.thresholds[i];
+    j << (i ? ",\n    " : "\n    ") << "{\"expression\": \"" << esc(t.threshold.expression) << "\", \"metric\": \""
+      << esc(t.threshold.metric) << "\", \"op\": \"" << threshold_op_text(t.threshold.op)
+      << "\", \"limit\": " << num(t.threshold.limit) << ", \"value\": " << (std::isfinite(t.value) ? num(t.value) : "null")
+      << ", \"passed\": " << (t.passed ? "true" : "false") << "}";
+  }
+  j << (r.thresholds.empty() ? "],\n" : "\n  ],\n");
   j << "  \"joined_s\": " << num(r.joined_s) << ",\n";
   j << "  \"bots\": " << r.bots << ",\n";
   j << "  \"duration_s\": " << num(r.duration_s) << ",\n";
@@ -179,6 +194,7 @@ std::string report_json(const BotsReport& r) {
       << "\"}";
   j << "],\n";
   j << "  \"connect_failures\": " << r.connect_failures << ",\n";
+  j << "  \"first_connect_error\": \"" << esc(r.first_connect_error) << "\",\n";
   j << "  \"walk_steps\": " << r.walk_steps << ",\n";
   j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
     << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
@@ -233,6 +249,15 @@ std::string report_table(const BotsReport& r) {
   t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
     << fixed(r.duration_s, 1) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
   for (const std::string& why : r.failures()) t << "  FAILED: " << why << "\n";
+  for (const std::string& why : r.broken_thresholds()) t << "  FAILED: " << why << "\n";
+  if (!r.thresholds.empty()) {
+    t << "  thresholds:\n";
+    for (const ThresholdResult& th : r.thresholds) {
+      std::snprintf(line, sizeof line, "    %-4s %-40s %s\n", th.passed ? "ok" : "FAIL", th.threshold.expression.c_str(),
+                    (th.threshold.metric + " = " + num(th.value)).c_str());
+      t << line;
+    }
+  }
   if (r.joined_s > 0) row("all bots joined after", fixed(r.joined_s, 1) + " s");
   row("bytes received (all / join / steady)",
       mb(r.bytes_received) + " / " + mb(r.join_bytes_received) + " / " + mb(r.steady_bytes_received));
@@ -400,9 +425,17 @@ std::string report_html(const BotsReport& r) {
   std::ostringstream h;
   h << "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>terrane-bots report</title>\n"
        "<style>body{font-family:sans-serif;margin:2em;max-width:60em}pre{background:#f4f4f4;padding:1em;"
-       "overflow-x:auto}</style></head><body>\n";
+       "overflow-x:auto}td,th{padding:0.2em 1em;text-align:left}.pass{color:#2ca02c}.fail{color:#d62728;"
+       "font-weight:bold}</style></head><body>\n";
   h << "<h1>terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << " — "
     << (r.passed() ? "passed" : "FAILED") << "</h1>\n";
+  if (!r.thresholds.empty()) {
+    h << "<h2>Thresholds</h2>\n<table><tr><th>threshold</th><th>value</th><th></th></tr>\n";
+    for (const ThresholdResult& t : r.thresholds)
+      h << "<tr><td><code>" << html_esc(t.threshold.expression) << "</code></td><td>" << html_esc(num(t.value))
+        << "</td><td class=\"" << (t.passed ? "pass\">passed" : "fail\">BROKEN") << "</td></tr>\n";
+    h << "</table>\n";
+  }
   h << "<pre>" << html_esc(report_table(r)) << "</pre>\n";
   h << svg_chart("Bandwidth, all bots (MB/s)", "MB/s", x, {in, out});
   h << svg_chart("Edit latency by send time (ms): fan-out p50, p99; ack p99", "ms", x, {f50, f99, a99});
@@ -441,8 +474,31 @@ class JsonFlattener {
         if (++i_ >= s_.size()) break;
         const char c = s_[i_];
         if (c == 'u') {
+          // \uXXXX as UTF-8 (json_escape writes '<', '>', '&' and control
+          // characters so); a surrogate half reads as '?'.
+          unsigned code = 0;
           if (s_.size() - i_ < 5) return fail("bad escape");
-          v->push_back('?');
+          for (std::size_t k = 1; k <= 4; ++k) {
+            const char h = s_[i_ + k];
+            const int d = h >= '0' && h <= '9'   ? h - '0'
+                          : h >= 'a' && h <= 'f' ? h - 'a' + 10
+                          : h >= 'A' && h <= 'F' ? h - 'A' + 10
+                                                 : -1;
+            if (d < 0) return fail("bad escape");
+            code = code * 16 + static_cast<unsigned>(d);
+          }
+          if (code >= 0xD800 && code <= 0xDFFF) {
+            v->push_back('?');
+          } else if (code < 0x80) {
+            v->push_back(static_cast<char>(code));
+          } else if (code < 0x800) {
+            v->push_back(static_cast<char>(0xC0 | (code >> 6)));
+            v->push_back(static_cast<char>(0x80 | (code & 0x3F)));
+          } else {
+            v->push_back(static_cast<char>(0xE0 | (code >> 12)));
+            v->push_back(static_cast<char>(0x80 | ((code >> 6) & 0x3F)));
+            v->push_back(static_cast<char>(0x80 | (code & 0x3F)));
+          }
           i_ += 5;
           continue;
         }

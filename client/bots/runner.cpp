@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <future>
 #include <limits>
 #include <random>
@@ -64,6 +65,34 @@ class IoPool {
 };
 
 }  // namespace
+
+std::vector<BotPlan> plan_bots(const BotsOptions& o, Vec3f spawn) {
+  std::mt19937_64 rng(o.seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::vector<BotPlan> out;
+  const float half = static_cast<float>(o.spread) / 2.0f;
+  for (int i = 0; i < o.bots; ++i) {
+    BotPlan p;
+    p.id = i;
+    p.start = Vec3f{spawn.x + (unit(rng) * 2.0f - 1.0f) * half, spawn.y, spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
+    switch (o.behavior) {
+      case Behavior::kIdle: break;
+      case Behavior::kWalk: p.gait = Gait::kWalk; break;
+      case Behavior::kFly: p.gait = Gait::kFly; break;
+      case Behavior::kDig: p.edits = EditMode::kDig; break;
+      case Behavior::kBuild: p.edits = EditMode::kBuild; break;
+      case Behavior::kMixed: {
+        const float u = unit(rng);
+        p.gait = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
+        p.edits = EditMode::kBoth;
+        break;
+      }
+    }
+    p.seed = splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i));
+    if (in_shard(o, i)) out.push_back(p);
+  }
+  return out;
+}
 
 bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& progress, BotsReport* report,
               std::string* error) {
@@ -167,37 +196,19 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
   ctx.run_start = t0;
 
-  std::mt19937_64 rng(o.seed);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
   std::vector<std::unique_ptr<Bot>> bots;
-  bots.reserve(static_cast<std::size_t>(o.bots));
-  const float half = static_cast<float>(o.spread) / 2.0f;
-  for (int i = 0; i < o.bots; ++i) {
-    const Vec3f start{ctx.spawn.x + (unit(rng) * 2.0f - 1.0f) * half, ctx.spawn.y,
-                      ctx.spawn.z + (unit(rng) * 2.0f - 1.0f) * half};
-    Gait g = Gait::kIdle;
-    EditMode e = EditMode::kNone;
-    switch (o.behavior) {
-      case Behavior::kIdle: break;
-      case Behavior::kWalk: g = Gait::kWalk; break;
-      case Behavior::kFly: g = Gait::kFly; break;
-      case Behavior::kDig: e = EditMode::kDig; break;
-      case Behavior::kBuild: e = EditMode::kBuild; break;
-      case Behavior::kMixed: {
-        const float u = unit(rng);
-        g = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
-        e = EditMode::kBoth;
-        break;
-      }
-    }
-    bots.push_back(std::make_unique<Bot>(i, ctx, start, g, e, splitmix(o.seed * 1000003u + static_cast<std::uint64_t>(i))));
-  }
+  for (const BotPlan& p : plan_bots(o, ctx.spawn))
+    bots.push_back(std::make_unique<Bot>(p.id, ctx, p.start, p.gait, p.edits, p.seed));
+  // Bot i connects at i / bots of the ramp-up and steps in phase i mod
+  // kStepPhases, whichever shard runs it.
+  std::vector<std::vector<Bot*>> by_phase(kStepPhases);
+  for (auto& b : bots) by_phase[static_cast<std::size_t>(b->index() % kStepPhases)].push_back(b.get());
 
   BotsReport& r = *report;
   r = BotsReport{};
   r.options = o;
   r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
-  r.bots = o.bots;
+  r.bots = static_cast<int>(bots.size());
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
   bool measured_snapshot = ramp.count() == 0;
@@ -238,7 +249,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     prev_acked = totals.edits_acked;
     r.timeline.push_back(p);
     if (progress)
-      progress(Progress{p.t_s, live, o.bots, p.mb_per_s_in, p.mb_per_s_out, p.edits_acked_per_s,
+      progress(Progress{p.t_s, live, static_cast<int>(bots.size()), p.mb_per_s_in, p.mb_per_s_out, p.edits_acked_per_s,
                         fanout.recent_fanout_p99(), mismatches.count()});
   };
 
@@ -254,14 +265,14 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   std::size_t phase = 0;
   for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
-           now >= t0 + ramp * static_cast<Clock::rep>(next_bot) / static_cast<Clock::rep>(bots.size())) {
+           now >= t0 + ramp * static_cast<Clock::rep>(bots[next_bot]->index()) / static_cast<Clock::rep>(o.bots)) {
       Bot& b = *bots[next_bot++];
       if (!b.connect()) {
         ++r.connect_failures;
         if (r.first_connect_error.empty()) r.first_connect_error = b.result().connect_error;
       }
     }
-    for (std::size_t i = phase; i < bots.size(); i += kStepPhases) bots[i]->step(now, true);
+    for (Bot* b : by_phase[phase]) b->step(now, true);
     phase = (phase + 1) % static_cast<std::size_t>(kStepPhases);
     once_a_second(now);
     if (!joins_done && next_bot == bots.size() && phase == 0) {
@@ -327,7 +338,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   for (auto& b : bots) b->finish();
 
   // --- the report ----------------------------------------------------------
-  std::vector<float> coarse, full;
+  LatencyHistogram coarse, full;
   double bpv_sum = 0;
   int bpv_n = 0;
   r.min_checks_during_run = std::numeric_limits<std::uint64_t>::max();
@@ -346,11 +357,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
       r.by_message_type[t].bytes_out += k.by_message_type[t].bytes_out;
     }
     if (br.join_coarse_ms) {
-      coarse.push_back(static_cast<float>(*br.join_coarse_ms));
+      coarse.record(*br.join_coarse_ms);
       r.join_coarse_bytes += br.join_coarse_bytes;
     }
     if (br.join_full_ms) {
-      full.push_back(static_cast<float>(*br.join_full_ms));
+      full.record(*br.join_full_ms);
       r.join_bytes_received += br.join_bytes;
       if (br.join_non_empty_voxels > 0) {
         bpv_sum += static_cast<double>(br.join_bytes) / static_cast<double>(br.join_non_empty_voxels);
@@ -366,7 +377,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));
     if (br.unexpected_disconnect) {
       ++r.unexpected_disconnects;
-      r.disconnects.emplace_back(static_cast<int>(i), br.disconnect_reason);
+      r.disconnects.emplace_back(bots[i]->index(), br.disconnect_reason);
     }
   }
   if (r.min_checks_during_run == std::numeric_limits<std::uint64_t>::max()) r.min_checks_during_run = 0;
@@ -403,7 +414,58 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
     if (s < rtt_s.size()) r.timeline[s].round_trip_ms = summarize(rtt_s[s]);
   }
+  r.thresholds = evaluate_thresholds(o.thresholds, r.threshold_values());
   return true;
+}
+
+std::vector<std::string> BotsReport::broken_thresholds() const {
+  std::vector<std::string> out;
+  for (const ThresholdResult& t : thresholds) {
+    if (t.passed) continue;
+    char value[64];
+    std::snprintf(value, sizeof value, "%.6g", t.value);
+    out.push_back("threshold " + t.threshold.expression + " broken: " + t.threshold.metric + " = " + value);
+  }
+  return out;
+}
+
+int BotsReport::exit_status() const {
+  if (!failures().empty()) return kExitFailed;
+  return broken_thresholds().empty() ? kExitPassed : kExitThresholds;
+}
+
+std::map<std::string, double> BotsReport::threshold_values() const {
+  const auto pct = [](std::uint64_t part, std::uint64_t whole) {
+    return whole > 0 ? 100.0 * static_cast<double>(part) / static_cast<double>(whole) : 0.0;
+  };
+  const double bot_seconds = static_cast<double>(bots) * duration_s;
+  return {
+      {"fanout_p50", edit_fanout_ms.p50},
+      {"fanout_p95", edit_fanout_ms.p95},
+      {"fanout_p99", edit_fanout_ms.p99},
+      {"fanout_max", edit_fanout_ms.max},
+      {"fanout_other_server_p99", edit_fanout_other_server_ms.p99},
+      {"ack_p50", edit_ack_ms.p50},
+      {"ack_p95", edit_ack_ms.p95},
+      {"ack_p99", edit_ack_ms.p99},
+      {"ack_max", edit_ack_ms.max},
+      {"join_coarse_p50", join_coarse_ms.p50},
+      {"join_coarse_p95", join_coarse_ms.p95},
+      {"join_coarse_p99", join_coarse_ms.p99},
+      {"join_full_p50", join_full_ms.p50},
+      {"join_full_p95", join_full_ms.p95},
+      {"join_full_p99", join_full_ms.p99},
+      {"round_trip_p99", round_trip_ms.p99},
+      {"io_lag_p99", bots_io_lag_ms.p99},
+      {"mismatches", static_cast<double>(mismatches.size())},
+      {"disconnects", static_cast<double>(unexpected_disconnects)},
+      {"connect_failures", static_cast<double>(connect_failures)},
+      {"joins_incomplete", static_cast<double>(joins_incomplete)},
+      {"edits_acked", static_cast<double>(edits_acked)},
+      {"rejected_pct", pct(edits_rejected, edits_sent)},
+      {"bytes_per_bot_s", bot_seconds > 0 ? static_cast<double>(bytes_received) / bot_seconds : 0.0},
+      {"hash_unanswered", static_cast<double>(hash_unanswered)},
+  };
 }
 
 std::vector<std::string> BotsReport::failures() const {

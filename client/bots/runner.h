@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "client/bots/bot.h"
 #include "client/bots/options.h"
 #include "client/bots/server_watch.h"
 #include "client/bots/stats.h"
@@ -80,13 +81,37 @@ struct BotsReport {
   double joined_s = 0;
   bool edits_expected = false;  // the behaviour edits
 
-  // Why the run failed, one line each; empty when it passed. A run fails on
-  // a replica mismatch, an unexpected disconnect, a failed connection, a bot
-  // that never completed its join, and a run whose bots were to edit but
-  // none of whose edits was acknowledged.
+  // The run's thresholds (options.thresholds) against its figures.
+  std::vector<ThresholdResult> thresholds;
+
+  // Why the run failed, one line each; empty when it ran soundly. A run
+  // fails on a replica mismatch, an unexpected disconnect, a failed
+  // connection, a bot that never completed its join, and a run whose bots
+  // were to edit but none of whose edits was acknowledged.
   std::vector<std::string> failures() const;
-  bool passed() const { return failures().empty(); }
+  // Each broken threshold with its value: "fanout_p99<100 broken: 153.2".
+  std::vector<std::string> broken_thresholds() const;
+  bool passed() const { return failures().empty() && broken_thresholds().empty(); }
+  // kExitFailed when the run failed, else kExitThresholds when a threshold
+  // broke, else kExitPassed (thresholds.h).
+  int exit_status() const;
+  // Every metric a threshold can name (threshold_metrics()) -> its value
+  // in this report.
+  std::map<std::string, double> threshold_values() const;
 };
+
+// How a bot starts: where, walking or flying, editing or not, its seed.
+struct BotPlan {
+  int id = 0;  // of all o.bots, whatever the shard
+  Vec3f start;
+  Gait gait = Gait::kIdle;
+  EditMode edits = EditMode::kNone;
+  std::uint64_t seed = 0;
+};
+// The bots of o's shard (in_shard), in id order, each planned as when one
+// process runs every bot: one random stream (o.seed) draws every bot's
+// start and role in id order, and shards keep their own.
+std::vector<BotPlan> plan_bots(const BotsOptions& o, Vec3f spawn);
 
 struct Progress {
   double t_s = 0;

@@ -11,6 +11,17 @@ namespace {
 constexpr std::size_t kRecentSamples = 20000;
 }  // namespace
 
+LatencySummary summarize(const LatencyHistogram& h) {
+  LatencySummary r;
+  r.count = h.count();
+  r.p50 = h.percentile(0.50);
+  r.p95 = h.percentile(0.95);
+  r.p99 = h.percentile(0.99);
+  r.max = h.max_ms();
+  r.histogram = h;
+  return r;
+}
+
 LatencySummary summarize(std::vector<float> s) {
   LatencySummary r;
   r.count = s.size();
@@ -23,6 +34,7 @@ LatencySummary summarize(std::vector<float> s) {
   r.p50 = rank(0.50);
   r.p95 = rank(0.95);
   r.p99 = rank(0.99);
+  r.max = static_cast<double>(s.back());
   return r;
 }
 
@@ -53,12 +65,12 @@ constexpr auto kArrivalWindow = std::chrono::seconds(3);
 FanoutTracker::FanoutTracker(Clock::time_point run_start, Clock::time_point measure_from, int servers)
     : run_start_(run_start), measure_from_(measure_from), servers_(std::max(1, servers)) {}
 
-void add_per_second(std::vector<std::vector<float>>& by_second, Clock::time_point run_start, Clock::time_point t,
-                    float ms) {
+void add_per_second(std::vector<LatencyHistogram>& by_second, Clock::time_point run_start, Clock::time_point t,
+                    double ms) {
   const std::size_t s =
       t <= run_start ? 0 : static_cast<std::size_t>(std::chrono::duration_cast<std::chrono::seconds>(t - run_start).count());
   if (by_second.size() <= s) by_second.resize(s + 1);
-  by_second[s].push_back(ms);
+  by_second[s].record(ms);
 }
 
 std::uint32_t FanoutTracker::send_edit(int bot, const Region& bounds, double edited_voxels,
@@ -95,8 +107,8 @@ void FanoutTracker::edit_result(int bot, std::uint32_t edit_id, const EditOutcom
   ++totals_.edits_acked;
   e.acked = t;
   if (e.sent >= measure_from_) {
-    const float ms = static_cast<float>(ms_between(e.sent, t));
-    ack_ms_.push_back(ms);
+    const double ms = ms_between(e.sent, t);
+    ack_ms_.record(ms);
     add_per_second(ack_by_second_, run_start_, e.sent, ms);
   }
   auto [tick, fresh] = ticks_.try_emplace(tick_key(bot, o.tick));
@@ -206,16 +218,16 @@ void FanoutTracker::settle(Clock::time_point now, Clock::duration horizon) {
           }
         }
       if (e.sent < measure_from_) continue;
-      for (const auto& [bot, t] : other) fanout_other_ms_.push_back(static_cast<float>(ms_between(e.sent, t)));
+      for (const auto& [bot, t] : other) fanout_other_ms_.record(ms_between(e.sent, t));
       totals_.receiver_pairs += other.size();
       ++totals_.edits_measured;
       totals_.receiver_pairs += last.size();
       totals_.edited_voxel_receivers += e.voxels * static_cast<double>(last.size());
       for (const auto& [bot, t] : last) {
-        const float ms = static_cast<float>(ms_between(e.sent, t));
-        fanout_ms_.push_back(ms);
+        const double ms = ms_between(e.sent, t);
+        fanout_ms_.record(ms);
         add_per_second(fanout_by_second_, run_start_, e.sent, ms);
-        recent_.push_back(ms);
+        recent_.push_back(static_cast<float>(ms));
       }
     }
     it = ticks_.erase(it);
@@ -234,23 +246,23 @@ FanoutTracker::Totals FanoutTracker::totals() const {
   std::lock_guard lock(mutex_);
   return totals_;
 }
-std::vector<float> FanoutTracker::ack_ms() const {
+LatencyHistogram FanoutTracker::ack_ms() const {
   std::lock_guard lock(mutex_);
   return ack_ms_;
 }
-std::vector<float> FanoutTracker::fanout_ms() const {
+LatencyHistogram FanoutTracker::fanout_ms() const {
   std::lock_guard lock(mutex_);
   return fanout_ms_;
 }
-std::vector<float> FanoutTracker::fanout_other_server_ms() const {
+LatencyHistogram FanoutTracker::fanout_other_server_ms() const {
   std::lock_guard lock(mutex_);
   return fanout_other_ms_;
 }
-std::vector<std::vector<float>> FanoutTracker::fanout_by_second() const {
+std::vector<LatencyHistogram> FanoutTracker::fanout_by_second() const {
   std::lock_guard lock(mutex_);
   return fanout_by_second_;
 }
-std::vector<std::vector<float>> FanoutTracker::ack_by_second() const {
+std::vector<LatencyHistogram> FanoutTracker::ack_by_second() const {
   std::lock_guard lock(mutex_);
   return ack_by_second_;
 }
@@ -274,17 +286,16 @@ std::size_t MismatchLog::count() const {
 
 void LatencyLog::add(Clock::time_point t, double ms) {
   std::lock_guard lock(mutex_);
-  const auto f = static_cast<float>(ms);
-  if (t >= measure_from_) all_.push_back(f);
-  add_per_second(by_second_, run_start_, t, f);
+  if (t >= measure_from_) all_.record(ms);
+  add_per_second(by_second_, run_start_, t, ms);
 }
 
-std::vector<float> LatencyLog::all() const {
+LatencyHistogram LatencyLog::all() const {
   std::lock_guard lock(mutex_);
   return all_;
 }
 
-std::vector<std::vector<float>> LatencyLog::by_second() const {
+std::vector<LatencyHistogram> LatencyLog::by_second() const {
   std::lock_guard lock(mutex_);
   return by_second_;
 }

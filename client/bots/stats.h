@@ -18,17 +18,26 @@
 #include <unordered_set>
 #include <vector>
 
+#include "client/bots/histogram.h"
 #include "client/client.h"
 
 namespace terrane::bots {
 
 using Clock = std::chrono::steady_clock;
 
+// A latency distribution as the report gives it: the percentiles people
+// read, and the histogram they were read from (which the JSON report keeps
+// so that the reports of several processes merge).
 struct LatencySummary {
   double p50 = 0, p95 = 0, p99 = 0;
   std::size_t count = 0;
+  double max = 0;
+  LatencyHistogram histogram;
 };
-// Nearest-rank percentiles (sorts a copy).
+// The percentiles of h (within LatencyHistogram::kRelativePrecision).
+LatencySummary summarize(const LatencyHistogram& h);
+// Exact nearest-rank percentiles of a few samples (sorts a copy): the live
+// progress line's.
 LatencySummary summarize(std::vector<float> samples_ms);
 
 double ms_between(Clock::time_point a, Clock::time_point b);
@@ -37,10 +46,10 @@ double ms_between(Clock::time_point a, Clock::time_point b);
 // one kind count together: "region (N,N,-N) is leased to server N (epoch N)".
 std::string reason_class(std::string_view reason);
 
-// Appends a sample to by_second[the whole seconds from run_start to t]
+// Records a sample in by_second[the whole seconds from run_start to t]
 // (second 0 for t before run_start), growing it as needed.
-void add_per_second(std::vector<std::vector<float>>& by_second, Clock::time_point run_start, Clock::time_point t,
-                    float ms);
+void add_per_second(std::vector<LatencyHistogram>& by_second, Clock::time_point run_start, Clock::time_point t,
+                    double ms);
 
 // Fan-out of an edit to one receiver: from the author calling fill_* to the
 // receiver's UpdateBatch of the edit's tick that covers one of the edit's
@@ -94,13 +103,13 @@ class FanoutTracker {
     std::map<std::string, std::uint64_t> reject_reasons;  // by reason_class
   };
   Totals totals() const;
-  std::vector<float> ack_ms() const;
-  std::vector<float> fanout_ms() const;
+  LatencyHistogram ack_ms() const;
+  LatencyHistogram fanout_ms() const;
   // Receivers on another server than the editor's (several servers only).
-  std::vector<float> fanout_other_server_ms() const;
+  LatencyHistogram fanout_other_server_ms() const;
   // Per second of the run (by send time): samples for the timeline.
-  std::vector<std::vector<float>> fanout_by_second() const;
-  std::vector<std::vector<float>> ack_by_second() const;
+  std::vector<LatencyHistogram> fanout_by_second() const;
+  std::vector<LatencyHistogram> ack_by_second() const;
   // Live: p99 of fan-out samples settled in the last few seconds.
   double recent_fanout_p99() const;
 
@@ -156,14 +165,14 @@ class FanoutTracker {
   std::unordered_map<std::uint64_t, Edit> in_flight_;
   std::map<std::uint64_t, Tick> ticks_;
   Totals totals_;
-  std::vector<float> ack_ms_, fanout_ms_, fanout_other_ms_;
+  LatencyHistogram ack_ms_, fanout_ms_, fanout_other_ms_;
   const int servers_;
   std::unordered_map<int, std::uint64_t> server_of_bot_;
   // Several servers: changes reaching the bots, by chunk, kept a while past
   // the settle horizon.
   std::unordered_map<Vec3i, std::vector<Arrival>, Vec3iHash> arrivals_;
   std::unordered_map<Vec3i, std::unordered_set<int>, Vec3iHash> held_full_;  // chunk -> bots holding it whole
-  std::vector<std::vector<float>> fanout_by_second_, ack_by_second_;
+  std::vector<LatencyHistogram> fanout_by_second_, ack_by_second_;
   std::vector<float> recent_;  // fan-out samples of the last settle rounds
 };
 
@@ -190,14 +199,14 @@ class LatencyLog {
     measure_from_ = t;
   }
   void add(Clock::time_point t, double ms);
-  std::vector<float> all() const;
-  std::vector<std::vector<float>> by_second() const;
+  LatencyHistogram all() const;
+  std::vector<LatencyHistogram> by_second() const;
 
  private:
   mutable std::mutex mutex_;
   Clock::time_point run_start_, measure_from_;
-  std::vector<float> all_;
-  std::vector<std::vector<float>> by_second_;
+  LatencyHistogram all_;
+  std::vector<LatencyHistogram> by_second_;
 };
 
 class MismatchLog {

@@ -1,0 +1,129 @@
+#include "client/bots/thresholds.h"
+
+#include <charconv>
+#include <cmath>
+#include <limits>
+
+namespace terrane::bots {
+
+const char* threshold_op_text(ThresholdOp op) {
+  switch (op) {
+    case ThresholdOp::kLess: return "<";
+    case ThresholdOp::kLessEqual: return "<=";
+    case ThresholdOp::kGreater: return ">";
+    case ThresholdOp::kGreaterEqual: return ">=";
+    case ThresholdOp::kEqual: return "==";
+    case ThresholdOp::kNotEqual: return "!=";
+  }
+  return "?";
+}
+
+bool Threshold::holds(double value) const {
+  switch (op) {
+    case ThresholdOp::kLess: return value < limit;
+    case ThresholdOp::kLessEqual: return value <= limit;
+    case ThresholdOp::kGreater: return value > limit;
+    case ThresholdOp::kGreaterEqual: return value >= limit;
+    case ThresholdOp::kEqual: return value == limit;
+    case ThresholdOp::kNotEqual: return value != limit;
+  }
+  return false;
+}
+
+const std::vector<ThresholdMetric>& threshold_metrics() {
+  // Latencies in ms over the measured run (the report's distributions, from
+  // their histograms); the rest are the report's counts.
+  static const std::vector<ThresholdMetric> k = {
+      {"fanout_p50", "edit fan-out ms, p50"},
+      {"fanout_p95", "edit fan-out ms, p95"},
+      {"fanout_p99", "edit fan-out ms, p99"},
+      {"fanout_max", "edit fan-out ms, largest"},
+      {"fanout_other_server_p99", "edit fan-out ms to receivers on another server, p99"},
+      {"ack_p50", "edit ack ms, p50"},
+      {"ack_p95", "edit ack ms, p95"},
+      {"ack_p99", "edit ack ms, p99"},
+      {"ack_max", "edit ack ms, largest"},
+      {"join_coarse_p50", "join ms until the coarse view, p50"},
+      {"join_coarse_p95", "join ms until the coarse view, p95"},
+      {"join_coarse_p99", "join ms until the coarse view, p99"},
+      {"join_full_p50", "join ms until the full-resolution region, p50"},
+      {"join_full_p95", "join ms until the full-resolution region, p95"},
+      {"join_full_p99", "join ms until the full-resolution region, p99"},
+      {"round_trip_p99", "keepalive round trip ms, p99"},
+      {"io_lag_p99", "the bots' own io lag ms, p99"},
+      {"mismatches", "replica mismatches"},
+      {"disconnects", "unexpected disconnects"},
+      {"connect_failures", "bots that could not connect"},
+      {"joins_incomplete", "bots that never completed their join"},
+      {"edits_acked", "edits acknowledged"},
+      {"rejected_pct", "edits rejected, % of those sent (0 when none was sent)"},
+      {"bytes_per_bot_s", "bytes received per bot per second of the run"},
+      {"hash_unanswered", "chunk-hash requests the server never answered"},
+  };
+  return k;
+}
+
+namespace {
+
+std::string trim(const std::string& s) {
+  const auto a = s.find_first_not_of(" \t");
+  if (a == std::string::npos) return "";
+  return s.substr(a, s.find_last_not_of(" \t") - a + 1);
+}
+
+std::string known_metrics() {
+  std::string out;
+  for (const ThresholdMetric& m : threshold_metrics()) out += (out.empty() ? "" : ", ") + std::string(m.name);
+  return out;
+}
+
+}  // namespace
+
+std::string parse_threshold(const std::string& expression, Threshold* out) {
+  const std::string e = trim(expression);
+  const std::string named = "'" + e + "': ";
+  const std::size_t at = e.find_first_of("<>=!");
+  if (at == std::string::npos) return named + "no operator (one of < <= > >= == !=), as in fanout_p99<100";
+  // The operator: two characters where the second is '=', else one; a lone
+  // '=' or '!' is none.
+  std::size_t len = at + 1 < e.size() && e[at + 1] == '=' ? 2 : 1;
+  const std::string op = e.substr(at, len);
+  Threshold t;
+  if (op == "<") t.op = ThresholdOp::kLess;
+  else if (op == "<=") t.op = ThresholdOp::kLessEqual;
+  else if (op == ">") t.op = ThresholdOp::kGreater;
+  else if (op == ">=") t.op = ThresholdOp::kGreaterEqual;
+  else if (op == "==") t.op = ThresholdOp::kEqual;
+  else if (op == "!=") t.op = ThresholdOp::kNotEqual;
+  else return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
+  t.metric = trim(e.substr(0, at));
+  const std::string limit = trim(e.substr(at + len));
+  if (t.metric.empty()) return named + "no metric before '" + op + "'";
+  bool known = false;
+  for (const ThresholdMetric& m : threshold_metrics()) known = known || t.metric == m.name;
+  if (!known) return named + "unknown metric '" + t.metric + "' (known: " + known_metrics() + ")";
+  if (limit.empty()) return named + "no number after '" + op + "'";
+  auto [p, ec] = std::from_chars(limit.data(), limit.data() + limit.size(), t.limit);
+  if (ec != std::errc() || p != limit.data() + limit.size() || !std::isfinite(t.limit))
+    return named + "'" + limit + "' is not a number";
+  t.expression = e;
+  *out = t;
+  return "";
+}
+
+std::vector<ThresholdResult> evaluate_thresholds(const std::vector<Threshold>& thresholds,
+                                                 const std::map<std::string, double>& values) {
+  std::vector<ThresholdResult> out;
+  out.reserve(thresholds.size());
+  for (const Threshold& t : thresholds) {
+    ThresholdResult r;
+    r.threshold = t;
+    const auto it = values.find(t.metric);
+    r.value = it != values.end() ? it->second : std::numeric_limits<double>::quiet_NaN();
+    r.passed = it != values.end() && t.holds(r.value);
+    out.push_back(r);
+  }
+  return out;
+}
+
+}  // namespace terrane::bots
