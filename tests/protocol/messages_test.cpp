@@ -51,7 +51,7 @@ TEST(Messages, HelloRoundTrips) {
     const auto bad = parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb4.GetBufferPointer()));
     ASSERT_FALSE(bad.ok()) << name;
     EXPECT_EQ(bad.error().code, DecodeErrorCode::kInvalidValue);
-    EXPECT_NE(bad.error().detail.find("control character"), std::string::npos);
+    EXPECT_NE(std::string(bad.error().detail).find("control character"), std::string::npos);
   }
   EXPECT_TRUE(parse_hello(*message_of(build_hello(HelloMsg{kProtocolVersion, "Zoë ☃", "", {}}))->body_as_Hello()).ok());
 }
