@@ -317,8 +317,13 @@ std::uint64_t PyClient::settle(Clock::time_point deadline) {
         },
         std::chrono::milliseconds(0));
     if (asked.empty()) return session;
-    for (const Vec3i cp : asked)
-      if (!c_->request_chunk_hash(cp)) break;  // closed, or dropped: seen below
+    // Once a session: a request stays pending on the server until it is
+    // answered (a wait that timed out and is tried again asks nothing twice).
+    if (confirmations_asked_ != session) {
+      confirmations_asked_ = session;
+      for (const Vec3i cp : asked)
+        if (!c_->request_chunk_hash(cp)) break;  // closed, or dropped: seen below
+    }
     bool done = false, moved_on = false;
     wait_for(*c_, left(), [&](const ClientView& v) {
       closed = v.closed;

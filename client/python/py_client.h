@@ -185,6 +185,7 @@ class PyClient {
   Vec3f facing_{0, 0, 1};
   mutable std::vector<std::string> names_;  // the world's materials, once welcomed
   std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side)
+  std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
 };
 
 // Every live client, so Python's exit can close them (registry of weak
