@@ -352,8 +352,8 @@ void Connection::arm_keepalive() {
     asio::error_code avail_ec;
     if (options_.silence_timeout.count() > 0 && now - last_heard_ >= options_.silence_timeout &&
         socket_.available(avail_ec) == 0) {
-      const std::string silent =
-          fmt::format("no answer from the server for {:.1f} s", std::chrono::duration<double>(now - last_heard_).count());
+      const double silent_s = std::chrono::duration<double>(now - last_heard_).count();
+      const std::string silent = fmt::format("no answer from the server for {:.1f} s", silent_s);
       // Reconnected to a socket that accepts but never answers: a hung
       // server (stopped, or its process wedged), which retrying would
       // wait on for ever.

@@ -9,25 +9,14 @@
 
 namespace terrane::python {
 
-[[noreturn]] void raise(PyObject* type, const std::string& what) {
-  PyErr_SetString(type, utf8(what).c_str());
-  throw py::error_already_set();
-}
-
-std::chrono::milliseconds timeout_of(double seconds) {
-  if (!(seconds >= 0) || seconds > 86400) raise(PyExc_ValueError, "timeout must be 0..86400 seconds");
-  return std::chrono::milliseconds(static_cast<std::int64_t>(seconds * 1000));
-}
-
 namespace {
 
 constexpr float kEyeHeight = 1.6f;
 
-// Waits until pred holds on the client's view (checked after every frame)
-// or the timeout passes; Ctrl-C interrupts it. pred runs under the
-// client's lock.
-bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred) {
-  return wait_interruptibly(timeout, [&](std::chrono::milliseconds slice) { return c.wait_until(pred, slice); });
+// What is left of a deadline.
+std::chrono::milliseconds until(Clock::time_point deadline) {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::max(Clock::duration::zero(), deadline - Clock::now()));
 }
 
 std::string str(Vec3i v) {
@@ -52,7 +41,8 @@ Vec3f point_of(const Vec3& p, const char* what) {
 
 float radius_of(double r) {
   if (!(r > 0) || r > kMaxSphereRadius)
-    raise(PyExc_ValueError, "radius must be in (0, 32] (and the edit's box, centre +- (radius + 1), within 64^3 voxels)");
+    raise(PyExc_ValueError,
+          "radius must be in (0, 32] (and the edit's box, centre +- (radius + 1), within 64^3 voxels)");
   return static_cast<float>(r);
 }
 
@@ -104,65 +94,6 @@ void close_all_clients() {
   for (const auto& c : live) c->close();
 }
 
-// --- EditFuture -----------------------------------------------------------------
-bool EditFuture::done() const {
-  bool d = false;
-  c_->wait_until([&](const ClientView& v) { return d = v.edits.count(id_) != 0; }, std::chrono::milliseconds(0));
-  return d;
-}
-
-std::string EditFuture::outcome() const {
-  std::string out = "pending";
-  c_->wait_until(
-      [&](const ClientView& v) {
-        if (auto it = v.edits.find(id_); it != v.edits.end())
-          out = it->second.accepted ? "applied" : edit_outcome_unknown(it->second) ? "unknown" : "rejected";
-        return true;
-      },
-      std::chrono::milliseconds(0));
-  return out;
-}
-
-void sync(Client& c, std::chrono::milliseconds timeout) {
-  const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
-  const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
-                static_cast<std::int32_t>(std::floor(p.z))};
-  const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
-  if (id == 0) raise(PyExc_ConnectionError, "connection closed");
-  bool answered = false, closed = false;
-  wait_for(c, timeout,
-        [&](const ClientView& view) {
-          answered = view.read_results.count(id) != 0;
-          closed = view.closed;
-          return answered || closed;
-        });
-  if (answered) return;
-  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
-  raise(PyExc_TimeoutError, "the server did not answer within the timeout");
-}
-
-bool EditFuture::result(double timeout, bool visible) {
-  const auto t = timeout_of(timeout);
-  const auto start = Clock::now();
-  std::optional<EditOutcome> o;
-  bool closed = false;
-  wait_for(*c_, t,
-        [&](const ClientView& v) {
-          if (auto it = v.edits.find(id_); it != v.edits.end()) o = it->second;
-          closed = v.closed;
-          return o.has_value() || closed;
-        });
-  if (o && o->accepted) {
-    const auto spent = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start);
-    if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
-    return true;
-  }
-  if (o && edit_outcome_unknown(*o)) throw EditOutcomeUnknown(utf8(o->reason));
-  if (o) throw EditRejected(utf8(o->reason));
-  if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
-  raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
-}
-
 // --- IoPool -----------------------------------------------------------------------
 IoPool::IoPool(int threads) : guard_(asio::make_work_guard(io_)) {
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { io_.run(); });
@@ -187,7 +118,8 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   // At least half a second: the keepalive then pings four times a second.
   if (!(a.silence_timeout == 0 || (a.silence_timeout >= 0.5 && a.silence_timeout <= 3600)))
     raise(PyExc_ValueError, "silence_timeout must be 0 (never) or 0.5..3600 seconds");
-  if (!(a.max_speed >= 0) || a.max_speed > 1e6) raise(PyExc_ValueError, "max_speed must be 0 (not paced) or up to 10^6");
+  if (!(a.max_speed >= 0) || a.max_speed > 1e6)
+    raise(PyExc_ValueError, "max_speed must be 0 (not paced) or up to 10^6");
   ClientOptions o;
   o.host = hp->first;
   o.port = hp->second;
@@ -276,7 +208,7 @@ void PyClient::sync(double timeout) {
     const std::uint32_t id = c_->request_read_box(Region{v, v + Vec3i{1, 1, 1}});
     if (id == 0) raise(PyExc_ConnectionError, "connection closed");
     bool answered = false, closed = false, moved_on = false;
-    wait_for(*c_, std::chrono::duration_cast<std::chrono::milliseconds>(std::max(Clock::duration::zero(), deadline - Clock::now())),
+    wait_for(*c_, until(deadline),
              [&](const ClientView& view) {
                answered = view.read_results.count(id) != 0;
                closed = view.closed;
@@ -289,12 +221,9 @@ void PyClient::sync(double timeout) {
 }
 
 std::uint64_t PyClient::settle(Clock::time_point deadline) {
-  const auto left = [&] {
-    return std::chrono::duration_cast<std::chrono::milliseconds>(std::max(Clock::duration::zero(), deadline - Clock::now()));
-  };
   for (;;) {
     bool linked = false, closed = false;
-    wait_for(*c_, left(), [&](const ClientView& v) {
+    wait_for(*c_, until(deadline), [&](const ClientView& v) {
       linked = v.linked;
       closed = v.closed;
       return linked || closed;
@@ -325,7 +254,7 @@ std::uint64_t PyClient::settle(Clock::time_point deadline) {
         if (!c_->request_chunk_hash(cp)) break;  // closed, or dropped: seen below
     }
     bool done = false, moved_on = false;
-    wait_for(*c_, left(), [&](const ClientView& v) {
+    wait_for(*c_, until(deadline), [&](const ClientView& v) {
       closed = v.closed;
       moved_on = !v.linked || v.sessions != session;
       done = std::none_of(asked.begin(), asked.end(), [&](Vec3i cp) { return v.unconfirmed.count(cp) != 0; });
@@ -353,7 +282,7 @@ void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
   const StreamedView region{view.position, r, r};
   const WorldBounds bounds = w.bounds();
   bool loaded = false, closed = false, moved_on = false;
-  wait_for(*c_, std::chrono::duration_cast<std::chrono::milliseconds>(std::max(Clock::duration::zero(), deadline - Clock::now())),
+  wait_for(*c_, until(deadline),
         [&](const ClientView& v) {
           closed = v.closed;
           moved_on = !v.linked || v.sessions != session;
@@ -371,8 +300,16 @@ bool PyClient::loaded() const {
   const StreamedView view = streamed_view(state(), *w);
   const StreamedView region{view.position, view.full_res_radius, view.full_res_radius};
   const WorldBounds bounds = w->bounds();
+  const auto chunks = chunks_in_view(view.position, view.full_res_radius, bounds);
   bool l = false;
-  c_->wait_until([&](const ClientView& v) { return l = held_full(v, region, bounds); }, std::chrono::milliseconds(0));
+  c_->wait_until(
+      [&](const ClientView& v) {
+        // After a reconnect, also resumed and with nothing kept unconfirmed.
+        l = v.linked && held_full(v, region, bounds) &&
+            std::none_of(chunks.begin(), chunks.end(), [&](Vec3i cp) { return v.unconfirmed.count(cp) != 0; });
+        return true;
+      },
+      std::chrono::milliseconds(0));
   return l;
 }
 
@@ -782,7 +719,8 @@ void PyClient::pause(std::chrono::milliseconds wait, const char* what) {
   if (wait.count() == 0) return;
   bool closed = false;
   wait_for(*c_, wait, [&](const ClientView& v) { return closed = v.closed; });
-  if (closed) raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
+  if (closed)
+    raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
 }
 
 EditFuture PyClient::sent(std::uint32_t id) {

@@ -1,7 +1,8 @@
 // The Python face of the client library: Client (one connection and its
-// replica), EditFuture (one edit's outcome) and IoPool (io threads a
-// Swarm's clients share, client/python/swarm.h). Every wait releases the
-// GIL; the library's io side never takes it (client/python/events.h).
+// replica) and IoPool (io threads a Swarm's clients share,
+// client/python/swarm.h); EditFuture is in client/python/edit_future.h.
+// Every wait releases the GIL; the library's io side never takes it
+// (client/python/events.h).
 #pragma once
 
 #include <pybind11/numpy.h>
@@ -17,6 +18,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "client/python/edit_future.h"
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
@@ -24,49 +26,6 @@
 namespace terrane::python {
 
 using Clock = std::chrono::steady_clock;
-
-// A refusal: the edit was not applied.
-class EditRejected : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-// No answer that says: the edit may or may not have been applied (the
-// connection went first, or the server could not learn it). Not an
-// EditRejected, so a script that retries refusals does not apply twice.
-class EditOutcomeUnknown : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-class Unreachable : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-[[noreturn]] void raise(PyObject* type, const std::string& what);
-// Waits (GIL released) until everything the server sent before it reads
-// this request is in the replica: a one-voxel ReadBox, answered in order
-// with the world's data. Raises TimeoutError or ConnectionError.
-void sync(Client& c, std::chrono::milliseconds timeout);
-std::chrono::milliseconds timeout_of(double seconds);
-
-// The outcome of one edit: result() waits for the server's answer.
-class EditFuture {
- public:
-  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
-  std::uint32_t id() const { return id_; }
-  bool done() const;
-  // "pending", "applied" (acknowledged: applied and stored), "rejected"
-  // (not applied) or "unknown" (edit_outcome_unknown: may have been).
-  std::string outcome() const;
-  // True when acknowledged (applied and stored) and, with visible, once
-  // the replica shows it (sync); raises EditRejected with the server's
-  // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
-  bool result(double timeout, bool visible);
-
- private:
-  std::shared_ptr<Client> c_;
-  std::uint32_t id_;
-};
 
 // An io_context run by a few threads, shared by a Swarm's clients. It
 // outlives every client on it (each client's deleter holds it).
