@@ -39,6 +39,7 @@ std::vector<Outbound> Client::session_frames(SessionStart start) {
   std::vector<Outbound> frames;
   std::lock_guard lock(mutex_);
   if (start == SessionStart::kReconnect) ++counters_.reconnects;
+  unconfirmed_.clear();
   if (start != SessionStart::kFirst) {
     // What the replica still holds, so current chunks are not resent.
     std::vector<HeldChunkMsg> held;
@@ -46,6 +47,7 @@ std::vector<Outbound> Client::session_frames(SessionStart start) {
       // Not the chunk's own voxels (an estimate, a horizon image): streamed again.
       if (claimable(h.form)) held.push_back(HeldChunkMsg{cp, h});
     });
+    for (const HeldChunkMsg& c : held) unconfirmed_.insert(c.chunk_pos);
     for (std::size_t i = 0; i < held.size(); i += kMaxHoldingsPerMessage)
       frames.push_back({build_holdings(std::span<const HeldChunkMsg>(held).subspan(
                             i, std::min(kMaxHoldingsPerMessage, held.size() - i))),
@@ -90,6 +92,7 @@ void Client::on_reconnecting(const std::string& reason) {
   SettledEdits unknown;
   {
     std::lock_guard lock(mutex_);
+    linked_ = false;
     unknown = edits_.settle_unanswered();
   }
   changed_.notify_all();
@@ -102,6 +105,7 @@ void Client::on_redirected(const RedirectMsg& to, std::uint32_t cut_edit) {
   SettledEdits unknown;
   {
     std::lock_guard lock(mutex_);
+    linked_ = false;
     if (cut_edit != 0) edits_.written(cut_edit);
     unknown = edits_.settle_written();
     ++counters_.redirects;
@@ -144,6 +148,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
       return Ok{};
     }
     replica_.apply_stream_record(r);
+    unconfirmed_.erase(r.chunk_pos);  // streamed again (or released): current
     switch (r.kind) {
       case StreamRecordKind::kEmpty:
         ++counters_.empty_records;
@@ -204,6 +209,8 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
+      linked_ = true;
+      ++sessions_;
       server_not_returning_ = false;
       if (connection_.session() != SessionStart::kFirst) {
         if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
@@ -287,6 +294,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       const auto rev = replica_.revision(h->chunk_pos);
       const bool match = mine && rev && *rev == h->revision && *mine == h->hash;
       hash_checks_[h->chunk_pos] = match;
+      unconfirmed_.erase(h->chunk_pos);  // the server holds the replica's copy as current
       ++(match ? counters_.hash_matches : counters_.hash_mismatches);
       const Holding* held = replica_.holding(h->chunk_pos);
       const HashCheck check{h->chunk_pos, h->revision, rev, held != nullptr && held->full_resolution(), match};
@@ -497,7 +505,7 @@ bool Client::send_raw(Frame bytes) { return connection_.send(std::move(bytes), w
 ClientView Client::client_view() const {
   return ClientView{replica_,          counters_,    welcome_.has_value(), closed_,   disconnect_reason_,
                     edits_.outcomes(), hash_checks_, read_results_,        presence_, notices_,
-                    admin_results_};
+                    admin_results_,     linked_,      sessions_,            unconfirmed_};
 }
 
 bool Client::wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout) {

@@ -39,6 +39,7 @@
 #include <span>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "client/client_options.h"
 #include "client/connection.h"
@@ -162,6 +163,17 @@ struct ClientView {
   const std::vector<PresenceEntryMsg>& presence;                            // latest
   const std::deque<ServerNoticeMsg>& notices;  // the latest kMaxNotices, oldest first
   const std::unordered_map<std::uint32_t, AdminResultMsg>& admin_results;  // by request id
+  // The current connection's Welcome has come: false from a drop or a
+  // Redirect until the next Welcome (welcomed stays true: the replica and
+  // the old Welcome are kept meanwhile).
+  bool linked;
+  // Welcomes received over the client's life (each resumed session adds one).
+  std::uint64_t sessions;
+  // Chunks claimed in this session's Holdings (a resumed session) that the
+  // server has neither streamed again nor hashed since: each may be stale
+  // until it does. A ChunkHashRequest for one is answered once the server
+  // has confirmed or replaced it (PROTOCOL.md "Resuming after a reconnect").
+  const std::unordered_set<Vec3i, Vec3iHash>& unconfirmed;
 };
 
 class Client : private ConnectionHandler {
@@ -283,6 +295,9 @@ class Client : private ConnectionHandler {
   // The server said it stops without coming back: do not reconnect.
   bool server_not_returning_ = false;
   std::vector<PresenceEntryMsg> presence_;
+  bool linked_ = false;                               // ClientView::linked
+  std::uint64_t sessions_ = 0;                        // ClientView::sessions
+  std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
 
   StreamDecodeScratch stream_scratch_;  // io side
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered

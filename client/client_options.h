@@ -50,8 +50,11 @@ struct ClientOptions {
   std::chrono::milliseconds keepalive{5000};
   // The connection counts as lost (reconnecting if allowed, as on a drop)
   // when nothing has come from the server for this long: a paused or
-  // partitioned server is noticed, not waited out. The server pings every
-  // 5 s and answers each Ping. Checked at each keepalive; 0 = never.
+  // partitioned server is noticed, not waited out. A reconnect's
+  // connection that stays silent this long before its first frame closes
+  // for good (the server accepts connections but does not answer: hung).
+  // The server pings every 5 s and answers each Ping. Checked at each
+  // keepalive, which goes at least twice per silence_timeout; 0 = never.
   std::chrono::milliseconds silence_timeout{15000};
   // Outbound bytes queued at most; sends beyond it fail.
   std::size_t max_send_queue_bytes = 4u << 20;

@@ -11,6 +11,22 @@
 
 namespace terrane {
 
+namespace {
+
+// The start of what a peer sent, up to its first line end, printable (at
+// most 60 characters; other bytes as \xNN).
+std::string first_line(std::span<const std::uint8_t> bytes) {
+  std::string out;
+  for (const std::uint8_t b : bytes) {
+    if (b == '\r' || b == '\n' || out.size() >= 60) break;
+    if (b >= 0x20 && b < 0x7f) out += static_cast<char>(b);
+    else out += fmt::format("\\x{:02x}", b);
+  }
+  return out;
+}
+
+}  // namespace
+
 Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
     : options_(options),
       handler_(handler),
@@ -104,6 +120,7 @@ void Connection::start_session() {
   // Ahead of anything the application queued while the link was down.
   queue_.push_front(std::move(frames));
   linked_ = true;
+  framed_ = false;
   last_heard_ = std::chrono::steady_clock::now();
   do_write();
   do_read();
@@ -321,7 +338,12 @@ void Connection::do_write() {
 }
 
 void Connection::arm_keepalive() {
-  keepalive_.expires_after(options_.keepalive);
+  // Often enough that the Pongs keep a short silence_timeout from firing
+  // on a server that answers.
+  auto every = options_.keepalive;
+  if (options_.silence_timeout.count() > 0)
+    every = std::min(every, std::max(std::chrono::milliseconds(100), options_.silence_timeout / 2));
+  keepalive_.expires_after(every);
   const std::uint64_t gen = generation_;
   keepalive_.async_wait([this, gen, g = guard()](const asio::error_code& ec) {
     if (ec || closed_ || gen != generation_) return;
@@ -329,10 +351,16 @@ void Connection::arm_keepalive() {
     // Bytes waiting in the socket are no silence (this thread was slow to read them).
     asio::error_code avail_ec;
     if (options_.silence_timeout.count() > 0 && now - last_heard_ >= options_.silence_timeout &&
-        socket_.available(avail_ec) == 0)
-      return lost(fmt::format("no answer from the server for {:.1f} s",
-                              std::chrono::duration<double>(now - last_heard_).count()),
-                  true);
+        socket_.available(avail_ec) == 0) {
+      const double silent_s = std::chrono::duration<double>(now - last_heard_).count();
+      const std::string silent = fmt::format("no answer from the server for {:.1f} s", silent_s);
+      // Reconnected to a socket that accepts but never answers: a hung
+      // server (stopped, or its process wedged), which retrying would
+      // wait on for ever.
+      if (session_ == SessionStart::kReconnect && !framed_)
+        return close(silent + " since reconnecting: it accepts connections but does not answer");
+      return lost(silent, true);
+    }
     // Its nonce is the steady clock in microseconds: the Pong times the round trip.
     const auto now_us = std::chrono::duration_cast<std::chrono::microseconds>(now.time_since_epoch()).count();
     send(build_ping(static_cast<std::uint64_t>(std::max<std::int64_t>(1, now_us))), wire::Body::Ping);
@@ -362,13 +390,17 @@ bool Connection::feed(std::span<const std::uint8_t> bytes) {
   const std::uint64_t gen = generation_;
   const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
     if (closed_ || gen != generation_) return;
+    framed_ = true;
     handler_.on_frame(body);
     if (!closed_ && gen == generation_ && redirects_.pending()) follow_when_ready();
   });
   if (gen != generation_) return false;
   if (!st) {
     handler_.on_framing_error();
-    close(std::string("protocol error: ") + st.error().detail);
+    // Bytes that never made one frame: something else listens there (an
+    // HTTP port, say); its first line says what.
+    if (!framed_) close("not a terrane-server (it sent '" + first_line(bytes) + "', which is no frame)");
+    else close(std::string("protocol error: ") + st.error().detail);
     return false;
   }
   return !closed_;

@@ -20,6 +20,9 @@
 //                    +---- Welcome again <-- Hello, Holdings, state <-- [waiting: backoff]
 //   [linked] --Disconnect with another reason, protocol error,
 //              disconnect(), or reconnect attempts used up--> [closed]
+//   [linked] --silence_timeout with nothing read--> as a drop, except on a
+//              reconnect's connection that has not sent one frame (the
+//              server accepts connections but does not answer) --> [closed]
 //   [linked] --Redirect--> [leaving: sends held until every edit written is
 //              answered, at most redirect_wait] --> Hello (resume token),
 //              Holdings, state at the server named --> [linked]
@@ -151,6 +154,10 @@ class Connection {
   asio::ip::tcp::resolver::results_type endpoints_;
   // When this connection last read a byte: silence_timeout.
   std::chrono::steady_clock::time_point last_heard_{};
+  // A whole frame has come on this connection: a server that never sends
+  // one is hung (silence on a reconnect) or not a terrane-server (bytes
+  // that are no frame).
+  bool framed_ = false;
   std::atomic<bool> closed_{false};   // any thread reads
   std::atomic<bool> leaving_{false};  // disconnect() was called
   std::uint64_t generation_ = 0;      // bumps per connection; stale handlers return

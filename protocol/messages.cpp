@@ -288,6 +288,10 @@ Result<HelloMsg> parse_hello(const wire::Hello& m) {
   out.protocol_version = m.protocol_version();
   if (m.client_name() == nullptr || m.client_name()->size() == 0) return invalid("hello: missing client name");
   if (m.client_name()->size() > kMaxClientNameBytes) return over("hello: client name longer than 64 bytes");
+  // Printable (servers log it; a line end in a name would forge a log line).
+  for (const char ch : m.client_name()->string_view())
+    if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f)
+      return invalid("hello: client name has a control character (names must be printable)");
   if (m.auth_token() != nullptr && m.auth_token()->size() > kMaxAuthTokenBytes)
     return over("hello: auth token longer than 256 bytes");
   if (m.resume_token() != nullptr) {

@@ -62,10 +62,12 @@ struct MessageEvent {
 struct DisconnectEvent {
   std::string reason;
 };
-using Event = std::variant<UpdateEvent, PresenceEvent, MessageEvent, DisconnectEvent>;
+// A reconnect (reconnect=True) or a Redirect resumed: the new Welcome came.
+struct ReconnectedEvent {};
+using Event = std::variant<UpdateEvent, PresenceEvent, MessageEvent, DisconnectEvent, ReconnectedEvent>;
 
 inline const char* event_kind(const Event& e) {
-  static constexpr const char* kNames[] = {"update", "presence", "message", "disconnect"};
+  static constexpr const char* kNames[] = {"update", "presence", "message", "disconnect", "reconnected"};
   return kNames[e.index()];
 }
 
@@ -125,13 +127,15 @@ class DispatcherSlot {
 
 // The Python callbacks of one client (touched only under the GIL).
 struct Handlers {
-  std::vector<py::object> update, presence, message, disconnect;
+  static constexpr std::size_t kKinds = 5;  // the Event alternatives, in their order
+  std::vector<py::object> update, presence, message, disconnect, reconnected;
   std::vector<py::object>& of(std::size_t kind) {
     switch (kind) {
       case 0: return update;
       case 1: return presence;
       case 2: return message;
-      default: return disconnect;
+      case 3: return disconnect;
+      default: return reconnected;
     }
   }
 };

@@ -8,6 +8,7 @@
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/py_client.h"
+#include "client/python/swarm.h"
 
 namespace {
 
@@ -56,6 +57,12 @@ PYBIND11_MODULE(_native, m) {
       .def_property_readonly_static("kind", [](const py::object&) { return "disconnect"; })
       .def_readonly("reason", &DisconnectEvent::reason)
       .def("__repr__", [](const DisconnectEvent& e) { return "<Disconnect: " + e.reason + ">"; });
+  py::class_<ReconnectedEvent>(m, "Reconnected",
+                               "The connection dropped and was resumed (reconnect=True, or a Redirect followed): the "
+                               "new server's Welcome came. sync() and wait_loaded() wait until the replica is "
+                               "confirmed again.")
+      .def_property_readonly_static("kind", [](const py::object&) { return "reconnected"; })
+      .def("__repr__", [](const ReconnectedEvent&) { return std::string("<Reconnected>"); });
 
   py::class_<EditFuture>(m, "EditFuture", "The outcome of one edit, answered by the server.")
       .def_property_readonly("id", &EditFuture::id, "The edit's id on this connection.")
@@ -88,16 +95,20 @@ to its client keeps it alive until then).)")
       .def("wait_ready", &PyClient::wait_ready, py::arg("timeout") = 30.0,
            "Wait for the server's Welcome (the handshake is done; materials and bounds are known).")
       .def("sync", &PyClient::sync, py::arg("timeout") = 30.0,
-           "Wait until everything the server sent before it reads this request is in the replica (one round trip).")
+           "Wait until everything the server sent before it reads this request is in the replica (one round trip). "
+           "After a reconnect, first until it is resumed and the full-resolution region it kept is confirmed by the "
+           "server. Raises ConnectionError once closed.")
       .def("wait_loaded", &PyClient::wait_loaded, py::arg("radius") = py::none(), py::arg("timeout") = 60.0,
            "Wait until every chunk within radius (default: the full-resolution radius) of the client is held at "
-           "full resolution. Returns only when that is true.")
+           "full resolution. Returns only when that is true: after a reconnect, only once it is resumed and every "
+           "chunk kept there is confirmed or replaced by the server. Raises ConnectionError once closed.")
       .def_property_readonly("loaded", &PyClient::loaded, "The whole full-resolution region is held now.")
       .def("verify", &PyClient::verify, py::arg("timeout") = 60.0,
            "Ask the server for the chunk hash of every full-resolution chunk and compare each with the replica; "
            "returns how many differ (0: the replica is exact).")
       .def("next_event", &PyClient::next_event, py::arg("kind") = py::none(), py::arg("timeout") = 30.0,
-           "The oldest queued event (of kind 'update', 'presence', 'message' or 'disconnect', or any), removed from "
+           "The oldest queued event (of kind 'update', 'presence', 'message', 'disconnect' or 'reconnected', or any), "
+           "removed from "
            "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
            "ConnectionError once closed with nothing left.")
       .def(
@@ -112,6 +123,9 @@ to its client keeps it alive until then).)")
       .def(
           "on_disconnect", [](PyClient& c, py::object fn) { return c.on(3, std::move(fn)); }, py::arg("fn"),
           "Call fn(Disconnect) when the connection closes for good.")
+      .def(
+          "on_reconnect", [](PyClient& c, py::object fn) { return c.on(4, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Reconnected) when a dropped connection is resumed.")
       .def_property_readonly("events_dropped", &PyClient::events_dropped,
                              "Events dropped from the queue because nobody took them (the oldest go first).")
       .def_property_readonly("callbacks_dropped", &PyClient::callbacks_dropped,
@@ -135,23 +149,30 @@ to its client keeps it alive until then).)")
       .def_property_readonly("materials", &PyClient::materials, "The world's material names, by id.")
       // edits
       .def("fill_box", &PyClient::fill_box, py::arg("min"), py::arg("max"), py::arg("material"),
-           py::arg("occupancy") = 255, "Fill [min, max) with a material (name or id; 'Air' clears).")
+           py::arg("occupancy") = 255,
+           "Fill [min, max) (at most 64^3 voxels, else ValueError) with a material (name, or an id: any integer "
+           "such as numpy's; 'Air' clears).")
       .def("fill_sphere", &PyClient::fill_sphere, py::arg("center"), py::arg("radius"), py::arg("material"),
-           "Fill a sphere (radius up to 32) with a material, with a smooth surface.")
-      .def("dig", &PyClient::dig, py::arg("center"), py::arg("radius"), "Clear a sphere (radius up to 32).")
+           "Fill a sphere with a material, with a smooth surface. Radius up to 30.5 (31 on some centres): the edit's "
+           "box, centre +- (radius + 1), must be at most 64^3 voxels; larger raises ValueError.")
+      .def("dig", &PyClient::dig, py::arg("center"), py::arg("radius"),
+           "Clear a sphere (radius up to 30.5, as fill_sphere).")
       .def("paint", &PyClient::paint, py::arg("center"), py::arg("radius"), py::arg("material"),
            "Change the material of the solid voxels in a sphere, keeping their shape.")
       .def("smooth", &PyClient::smooth, py::arg("center"), py::arg("radius"), py::arg("strength") = 0.5,
            "Move each voxel's occupancy toward its neighbourhood's mean by strength (0, 1].")
       .def("write_box", &PyClient::write_box, py::arg("min"), py::arg("voxels"),
-           "Write a uint8 array of shape (2, y, z, x) (materials, occupancies) at min; at most 32^3 voxels.")
+           "Write an array of integers of shape (2, y, z, x) (materials, occupancies) at min: a numpy array (any "
+           "integer dtype) or anything numpy.asarray takes, such as nested lists; at most 32^3 voxels.")
       .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
       .def("redo", &PyClient::redo, "Redo the last undone edit.")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
            "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")
       // movement
       .def("move_to", &PyClient::move_to, py::arg("position"),
-           "Move to (x, y, z) (feet); the server streams around the new place.")
+           "Move to (x, y, z) (feet); the server streams around the new place. Paced within the server's speed "
+           "budget (max_speed voxels a second since the last move, plus 48): a far move waits until it is allowed; "
+           "one farther than ten seconds of it raises ValueError naming the distance allowed.")
       .def("walk_to", &PyClient::walk_to, py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
            py::arg("max_nodes") = 200000,
            "Walk to the place to stand nearest target over the voxel surface (A*: steps up to 1 voxel, drops up to "
@@ -181,17 +202,21 @@ The clients share one small pool of io threads (as terrane-bots does) and
 one thread for their callbacks, so a hundred scripted bots cost a few
 threads, not a hundred. A Swarm is a sequence of Clients.)")
       .def(py::init([](int n, const std::string& address, const std::string& name, const std::string& token,
-                       double spread, int view_distance, int full_res_radius, int threads) {
+                       double spread, int view_distance, int full_res_radius, int threads, double silence_timeout,
+                       double max_speed) {
              ConnectArgs a;
              a.address = address;
              a.name = name;
              a.token = token;
              a.view_distance = view_distance;
              a.full_res_radius = full_res_radius;
+             a.silence_timeout = silence_timeout;
+             a.max_speed = max_speed;
              return std::make_shared<Swarm>(n, std::move(a), spread, threads);
            }),
            py::arg("n"), py::arg("address"), py::arg("name") = "bot", py::arg("token") = "", py::arg("spread") = 0.0,
            py::arg("view_distance") = 64, py::arg("full_res_radius") = 32, py::arg("threads") = 2,
+           py::arg("silence_timeout") = 15.0, py::arg("max_speed") = 256.0,
            "Connect n clients named name-0 .. name-(n-1), spread evenly over a disc of radius spread around the "
            "server's spawn.")
       .def("__len__", &Swarm::size)
@@ -210,8 +235,10 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
   m.def(
       "connect",
       [](const std::string& address, const std::string& name, const std::string& token, std::optional<Vec3> position,
-         int view_distance, int full_res_radius, bool reconnect) {
+         int view_distance, int full_res_radius, bool reconnect, double silence_timeout, double max_speed) {
         ConnectArgs a;
+        a.silence_timeout = silence_timeout;
+        a.max_speed = max_speed;
         a.address = address;
         a.name = name;
         a.token = token;
@@ -225,9 +252,14 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
       },
       py::arg("address"), py::arg("name") = "python", py::arg("token") = "", py::arg("position") = py::none(),
       py::arg("view_distance") = 128, py::arg("full_res_radius") = 48, py::arg("reconnect") = false,
+      py::arg("silence_timeout") = 15.0, py::arg("max_speed") = 256.0,
       "Connect to a terrane-server at 'HOST:PORT'. position None starts at the server's spawn. With reconnect, a "
-      "dropped connection is retried with backoff and the replica kept. Raises ConnectionError if the server "
-      "cannot be reached, ValueError for bad arguments.");
+      "dropped connection is retried with backoff and the replica kept (a Reconnected event when resumed). "
+      "silence_timeout: seconds without a byte from the server (it pings every 5 s) after which the connection "
+      "counts as lost (0.5..3600, 0 never); a reconnect that reaches a server which then stays silent as long "
+      "closes for good (a hung server), so closed and on_disconnect tell. max_speed: the server's --max-speed, by "
+      "which move_to paces (0: not paced). Raises ConnectionError if the server cannot be reached, ValueError for "
+      "bad arguments.");
 
   // Before the interpreter finalizes: close every client and stop every
   // callbacks thread, so none waits for a GIL that will not come back.

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 
 #include "client/path.h"
 #include "common/cli/cli.h"
@@ -10,27 +9,14 @@
 
 namespace terrane::python {
 
-using Clock = std::chrono::steady_clock;
-
-[[noreturn]] void raise(PyObject* type, const std::string& what) {
-  PyErr_SetString(type, utf8(what).c_str());
-  throw py::error_already_set();
-}
-
-std::chrono::milliseconds timeout_of(double seconds) {
-  if (!(seconds >= 0) || seconds > 86400) raise(PyExc_ValueError, "timeout must be 0..86400 seconds");
-  return std::chrono::milliseconds(static_cast<std::int64_t>(seconds * 1000));
-}
-
 namespace {
 
 constexpr float kEyeHeight = 1.6f;
 
-// Waits until pred holds on the client's view (checked after every frame)
-// or the timeout passes; Ctrl-C interrupts it. pred runs under the
-// client's lock.
-bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred) {
-  return wait_interruptibly(timeout, [&](std::chrono::milliseconds slice) { return c.wait_until(pred, slice); });
+// What is left of a deadline.
+std::chrono::milliseconds until(Clock::time_point deadline) {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::max(Clock::duration::zero(), deadline - Clock::now()));
 }
 
 std::string str(Vec3i v) {
@@ -54,7 +40,9 @@ Vec3f point_of(const Vec3& p, const char* what) {
 }
 
 float radius_of(double r) {
-  if (!(r > 0) || r > kMaxSphereRadius) raise(PyExc_ValueError, "radius must be in (0, 32]");
+  if (!(r > 0) || r > kMaxSphereRadius)
+    raise(PyExc_ValueError,
+          "radius must be in (0, 32] (and the edit's box, centre +- (radius + 1), within 64^3 voxels)");
   return static_cast<float>(r);
 }
 
@@ -106,65 +94,6 @@ void close_all_clients() {
   for (const auto& c : live) c->close();
 }
 
-// --- EditFuture -----------------------------------------------------------------
-bool EditFuture::done() const {
-  bool d = false;
-  c_->wait_until([&](const ClientView& v) { return d = v.edits.count(id_) != 0; }, std::chrono::milliseconds(0));
-  return d;
-}
-
-std::string EditFuture::outcome() const {
-  std::string out = "pending";
-  c_->wait_until(
-      [&](const ClientView& v) {
-        if (auto it = v.edits.find(id_); it != v.edits.end())
-          out = it->second.accepted ? "applied" : edit_outcome_unknown(it->second) ? "unknown" : "rejected";
-        return true;
-      },
-      std::chrono::milliseconds(0));
-  return out;
-}
-
-void sync(Client& c, std::chrono::milliseconds timeout) {
-  const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
-  const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
-                static_cast<std::int32_t>(std::floor(p.z))};
-  const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
-  if (id == 0) raise(PyExc_ConnectionError, "connection closed");
-  bool answered = false, closed = false;
-  wait_for(c, timeout,
-        [&](const ClientView& view) {
-          answered = view.read_results.count(id) != 0;
-          closed = view.closed;
-          return answered || closed;
-        });
-  if (answered) return;
-  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
-  raise(PyExc_TimeoutError, "the server did not answer within the timeout");
-}
-
-bool EditFuture::result(double timeout, bool visible) {
-  const auto t = timeout_of(timeout);
-  const auto start = Clock::now();
-  std::optional<EditOutcome> o;
-  bool closed = false;
-  wait_for(*c_, t,
-        [&](const ClientView& v) {
-          if (auto it = v.edits.find(id_); it != v.edits.end()) o = it->second;
-          closed = v.closed;
-          return o.has_value() || closed;
-        });
-  if (o && o->accepted) {
-    const auto spent = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start);
-    if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
-    return true;
-  }
-  if (o && edit_outcome_unknown(*o)) throw EditOutcomeUnknown(utf8(o->reason));
-  if (o) throw EditRejected(utf8(o->reason));
-  if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
-  raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
-}
-
 // --- IoPool -----------------------------------------------------------------------
 IoPool::IoPool(int threads) : guard_(asio::make_work_guard(io_)) {
   for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { io_.run(); });
@@ -186,12 +115,18 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   if (a.name.empty() || a.name.size() > kMaxClientNameBytes) raise(PyExc_ValueError, "name must be 1..64 bytes");
   if (a.view_distance < 1 || a.view_distance > 16384 || a.full_res_radius < 1 || a.full_res_radius > a.view_distance)
     raise(PyExc_ValueError, "view_distance must be 1..16384 and full_res_radius 1..view_distance");
+  // At least half a second: the keepalive then pings four times a second.
+  if (!(a.silence_timeout == 0 || (a.silence_timeout >= 0.5 && a.silence_timeout <= 3600)))
+    raise(PyExc_ValueError, "silence_timeout must be 0 (never) or 0.5..3600 seconds");
+  if (!(a.max_speed >= 0) || a.max_speed > 1e6)
+    raise(PyExc_ValueError, "max_speed must be 0 (not paced) or up to 10^6");
   ClientOptions o;
   o.host = hp->first;
   o.port = hp->second;
   o.name = a.name;
   o.auth_token = a.token;
   o.reconnect = a.reconnect;
+  o.silence_timeout = std::chrono::milliseconds(static_cast<std::int64_t>(a.silence_timeout * 1000));
   o.state.view_distance = a.view_distance;
   o.state.full_res_radius = a.full_res_radius;
   o.spawn_offset = a.spawn_offset;
@@ -209,12 +144,18 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   cb.on_presence = [sink = sink_](const std::vector<PresenceEntryMsg>& p) { sink->push(to_event(p)); };
   cb.on_notice = [sink = sink_](const ServerNoticeMsg& n) { sink->push(to_event(n)); };
   cb.on_disconnected = [sink = sink_](const std::string& reason) { sink->push(DisconnectEvent{reason}); };
+  pacing_ = std::make_shared<Pacing>(a.max_speed);
+  cb.on_reconnected = [sink = sink_, pacing = pacing_] {
+    pacing->rejoined();  // the server counts the next position as joining
+    sink->push(ReconnectedEvent{});
+  };
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
   std::string err;
   bool ok = false;
   ok = without_gil([&] { return c_->connect(&err); });
-  if (!ok) raise(PyExc_ConnectionError, "cannot connect to " + a.address + ": " + err);
+  // The library's reason names the address ("cannot connect to H:P: ...").
+  if (!ok) raise(PyExc_ConnectionError, err);
 }
 
 PyClient::~PyClient() {
@@ -234,11 +175,16 @@ void PyClient::close() {
 }
 
 void PyClient::clear_handlers() {
-  for (std::size_t k = 0; k < 4; ++k) handlers_->of(k).clear();
+  for (std::size_t k = 0; k < Handlers::kKinds; ++k) handlers_->of(k).clear();
+}
+
+void PyClient::check_open() const {
+  if (c_->closed()) raise(PyExc_ConnectionError, "connection closed: " + c_->disconnect_reason());
 }
 
 void PyClient::wait_ready(double timeout) {
   const auto t = timeout_of(timeout);
+  check_open();
   bool ready = false, closed = false;
   wait_for(*c_, t,
         [&](const ClientView& v) {
@@ -249,11 +195,81 @@ void PyClient::wait_ready(double timeout) {
   if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
 }
 
-void PyClient::sync(double timeout) { python::sync(*c_, timeout_of(timeout)); }
+void PyClient::sync(double timeout) {
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  check_open();
+  for (;;) {
+    const std::uint64_t session = settle(deadline);
+    // The barrier (as python::sync); a reconnect during its round trip
+    // loses the answer: then again on the new session.
+    const Vec3f p = state().position;
+    const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
+                  static_cast<std::int32_t>(std::floor(p.z))};
+    const std::uint32_t id = c_->request_read_box(Region{v, v + Vec3i{1, 1, 1}});
+    if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+    bool answered = false, closed = false, moved_on = false;
+    wait_for(*c_, until(deadline),
+             [&](const ClientView& view) {
+               answered = view.read_results.count(id) != 0;
+               closed = view.closed;
+               moved_on = !view.linked || view.sessions != session;
+               return answered || closed || moved_on;
+             });
+    if (answered && !moved_on) return;
+    if (!moved_on) fail_or_timeout(closed, "the server did not answer within the timeout");
+  }
+}
+
+std::uint64_t PyClient::settle(Clock::time_point deadline) {
+  for (;;) {
+    bool linked = false, closed = false;
+    wait_for(*c_, until(deadline), [&](const ClientView& v) {
+      linked = v.linked;
+      closed = v.closed;
+      return linked || closed;
+    });
+    if (!linked) fail_or_timeout(closed, "not reconnected within the timeout");
+    // The claims within the full-resolution region not yet confirmed: a
+    // hash request for each is answered once the server has confirmed or
+    // replaced it (answers arrive in order with the data they describe).
+    const WelcomeMsg w = *c_->welcome();
+    const StreamedView view = streamed_view(state(), w);
+    std::vector<Vec3i> asked;
+    std::uint64_t session = 0;
+    c_->wait_until(
+        [&](const ClientView& v) {
+          session = v.sessions;
+          if (!v.unconfirmed.empty())
+            for (const Vec3i cp : chunks_in_view(view.position, view.full_res_radius, w.bounds()))
+              if (v.unconfirmed.count(cp) != 0) asked.push_back(cp);
+          return true;
+        },
+        std::chrono::milliseconds(0));
+    if (asked.empty()) return session;
+    // Once a session: a request stays pending on the server until it is
+    // answered (a wait that timed out and is tried again asks nothing twice).
+    if (confirmations_asked_ != session) {
+      confirmations_asked_ = session;
+      for (const Vec3i cp : asked)
+        if (!c_->request_chunk_hash(cp)) break;  // closed, or dropped: seen below
+    }
+    bool done = false, moved_on = false;
+    wait_for(*c_, until(deadline), [&](const ClientView& v) {
+      closed = v.closed;
+      moved_on = !v.linked || v.sessions != session;
+      done = std::none_of(asked.begin(), asked.end(), [&](Vec3i cp) { return v.unconfirmed.count(cp) != 0; });
+      return done || closed || moved_on;
+    });
+    if (done) return session;
+    if (!moved_on) fail_or_timeout(closed, "the resumed chunks were not confirmed within the timeout");
+  }
+}
 
 void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
   const auto t = timeout_of(timeout);
+  const auto deadline = Clock::now() + t;
   wait_ready(timeout);
+  const std::uint64_t session = settle(deadline);
   const WelcomeMsg w = *c_->welcome();
   const StreamedView view = streamed_view(state(), w);
   const std::int32_t full = view.full_res_radius;
@@ -265,13 +281,16 @@ void PyClient::wait_loaded(std::optional<double> radius, double timeout) {
   }
   const StreamedView region{view.position, r, r};
   const WorldBounds bounds = w.bounds();
-  bool loaded = false, closed = false;
-  wait_for(*c_, t,
+  bool loaded = false, closed = false, moved_on = false;
+  wait_for(*c_, until(deadline),
         [&](const ClientView& v) {
           closed = v.closed;
-          loaded = held_full(v, region, bounds);
-          return loaded || closed;
+          moved_on = !v.linked || v.sessions != session;
+          loaded = !moved_on && held_full(v, region, bounds);
+          return loaded || closed || moved_on;
         });
+  // Dropped again meanwhile: wait for that session instead.
+  if (moved_on && !closed) return wait_loaded(radius, std::chrono::duration<double>(deadline - Clock::now()).count());
   if (!loaded) fail_or_timeout(closed, "the full-resolution region was not loaded within the timeout");
 }
 
@@ -281,8 +300,16 @@ bool PyClient::loaded() const {
   const StreamedView view = streamed_view(state(), *w);
   const StreamedView region{view.position, view.full_res_radius, view.full_res_radius};
   const WorldBounds bounds = w->bounds();
+  const auto chunks = chunks_in_view(view.position, view.full_res_radius, bounds);
   bool l = false;
-  c_->wait_until([&](const ClientView& v) { return l = held_full(v, region, bounds); }, std::chrono::milliseconds(0));
+  c_->wait_until(
+      [&](const ClientView& v) {
+        // After a reconnect, also resumed and with nothing kept unconfirmed.
+        l = v.linked && held_full(v, region, bounds) &&
+            std::none_of(chunks.begin(), chunks.end(), [&](Vec3i cp) { return v.unconfirmed.count(cp) != 0; });
+        return true;
+      },
+      std::chrono::milliseconds(0));
   return l;
 }
 
@@ -316,8 +343,10 @@ int PyClient::verify(double timeout) {
 
 py::object PyClient::next_event(const std::optional<std::string>& kind_or_none, double timeout) {
   const std::string kind = kind_or_none.value_or("");
-  if (!kind.empty() && kind != "update" && kind != "presence" && kind != "message" && kind != "disconnect")
-    raise(PyExc_ValueError, "kind must be None, 'update', 'presence', 'message' or 'disconnect', not '" + kind + "'");
+  if (!kind.empty() && kind != "update" && kind != "presence" && kind != "message" && kind != "disconnect" &&
+      kind != "reconnected")
+    raise(PyExc_ValueError,
+          "kind must be None, 'update', 'presence', 'message', 'disconnect' or 'reconnected', not '" + kind + "'");
   const auto t = timeout_of(timeout);
   std::optional<Event> e;
   bool closed = false;
@@ -400,28 +429,63 @@ EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object
   const Region r = box_of(lo, hi, "fill_box");
   if (occupancy < 0 || occupancy > 255) raise(PyExc_ValueError, "occupancy must be 0..255");
   const Material m = material_of(material);
+  if (r.volume() > kMaxEditVolume)
+    raise(PyExc_ValueError, "fill_box: " + std::to_string(r.volume()) + " voxels; one edit touches at most " +
+                                std::to_string(kMaxEditVolume) + " voxels (64^3): fill it in pieces");
   pace();
   return sent(c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))));
 }
+namespace {
+EditRequestMsg sphere_edit(EditKind kind, Vec3f center, float radius) {
+  EditRequestMsg e;
+  e.kind = kind;
+  e.center = center;
+  e.radius = radius;
+  return e;
+}
+}  // namespace
+
+void PyClient::check_edit_size(const EditRequestMsg& e, const char* what) const {
+  const std::int64_t v = e.bounds().volume();
+  if (v <= kMaxEditVolume) return;
+  raise(PyExc_ValueError, std::string(what) + ": the sphere's box (centre +- (radius + 1)) is " + std::to_string(v) +
+                              " voxels; one edit touches at most " + std::to_string(kMaxEditVolume) +
+                              " voxels (64^3): a radius up to 30.5 always fits, 31 only on some centres");
+}
+
 EditFuture PyClient::fill_sphere(const Vec3& center, double radius, const py::object& material) {
+  const Vec3f c = point_of(center, "center");
+  const float r = radius_of(radius);
+  check_edit_size(sphere_edit(EditKind::kFillSphere, c, r), "fill_sphere");
+  const Material m = material_of(material);
   pace();
-  return sent(c_->fill_sphere(point_of(center, "center"), radius_of(radius), material_of(material)));
+  return sent(c_->fill_sphere(c, r, m));
 }
 EditFuture PyClient::dig(const Vec3& center, double radius) {
+  const Vec3f c = point_of(center, "center");
+  const float r = radius_of(radius);
+  check_edit_size(sphere_edit(EditKind::kDig, c, r), "dig");
   pace();
-  return sent(c_->dig(point_of(center, "center"), radius_of(radius)));
+  return sent(c_->dig(c, r));
 }
 EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& material) {
+  const Vec3f c = point_of(center, "center");
+  const float r = radius_of(radius);
+  check_edit_size(sphere_edit(EditKind::kPaint, c, r), "paint");
+  const Material m = material_of(material);
   pace();
-  return sent(c_->paint(point_of(center, "center"), radius_of(radius), material_of(material)));
+  return sent(c_->paint(c, r, m));
 }
 EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) {
   if (!(strength > 0) || strength > 1) raise(PyExc_ValueError, "smooth: strength must be in (0, 1]");
+  check_edit_size(sphere_edit(EditKind::kSmooth, point_of(center, "center"), radius_of(radius)), "smooth");
   pace();
   return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
 }
 
-EditFuture PyClient::write_box(const IVec3& lo, const py::array& in) {
+EditFuture PyClient::write_box(const IVec3& lo, const py::object& array_like) {
+  // Any array-like (nested lists too), as numpy.asarray takes it.
+  const py::array in = py::module_::import("numpy").attr("asarray")(array_like);
   // Integers 0..255 of any integer type (as read_box returns, or numpy's
   // default int64); floats would be truncated without a word, so they are refused.
   const char kind = in.dtype().kind();
@@ -490,7 +554,17 @@ py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3
 
 void PyClient::move_to(const Vec3& position) {
   ClientStateMsg s = state();
+  const Vec3f from = s.position;
   s.position = point_of(position, "position");
+  const Vec3f d = s.position - from;
+  const double distance = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
+  // The server's speed budget: a far move waits until it is allowed.
+  if (distance > pacing_->max_move())
+    raise(PyExc_ValueError, "move_to: " + std::to_string(std::lround(distance)) + " voxels at once; at most " +
+                                std::to_string(std::lround(pacing_->max_move())) +
+                                " (ten seconds of the server's speed budget, max_speed voxels a second plus 48): "
+                                "walk_to, or move in steps");
+  pause(pacing_->move(distance), "moving");
   if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
 }
 
@@ -611,10 +685,14 @@ std::string PyClient::material_name(Material m) const {
 
 Material PyClient::material_of(const py::object& m) const {
   const auto& names = materials();
-  if (py::isinstance<py::bool_>(m)) raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
-  if (py::isinstance<py::int_>(m)) {
+  if (py::isinstance<py::bool_>(m) || py::isinstance(m, py::module_::import("numpy").attr("bool_")))
+    raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
+  // Any integer: int, numpy's integers, whatever has __index__.
+  if (!py::isinstance<py::str>(m) && PyIndex_Check(m.ptr())) {
+    const py::int_ as_int = py::reinterpret_steal<py::int_>(PyNumber_Index(m.ptr()));
+    if (!as_int) throw py::error_already_set();
     int overflow = 0;
-    const long long id = PyLong_AsLongLongAndOverflow(m.ptr(), &overflow);
+    const long long id = PyLong_AsLongLongAndOverflow(as_int.ptr(), &overflow);
     if (overflow != 0) raise(PyExc_ValueError, "unknown material: an id too large for any world (0..63)");
     if (id < 0 || static_cast<std::size_t>(id) >= std::max<std::size_t>(names.size(), 1))
       raise(PyExc_ValueError, "unknown material " + std::to_string(id) + ": this world defines 0.." +
@@ -634,100 +712,20 @@ Material PyClient::material_of(const py::object& m) const {
 
 void PyClient::pace() {
   const auto w = c_->welcome();
-  if (!w || !(w->edits_per_second > 0)) return;
-  // Below the server's bucket, with room for jitter on the way.
-  const double rate = w->edits_per_second * 0.9, burst = std::max(1.0, w->edit_burst / 2.0);
-  std::chrono::milliseconds wait{0};
-  {
-    std::lock_guard lock(pace_mutex_);
-    const auto now = Clock::now();
-    if (!paced_) {
-      tokens_ = burst;
-      paced_ = true;
-    } else {
-      tokens_ = std::min(burst, tokens_ + std::chrono::duration<double>(now - refilled_).count() * rate);
-    }
-    refilled_ = now;
-    tokens_ -= 1;  // taken now; a debt is waited off below
-    if (tokens_ < 0) wait = std::chrono::milliseconds(static_cast<std::int64_t>(std::ceil(-tokens_ / rate * 1000)));
-  }
+  if (w) pause(pacing_->edit(*w), "pacing edits");
+}
+
+void PyClient::pause(std::chrono::milliseconds wait, const char* what) {
   if (wait.count() == 0) return;
-  // Pacing: ends early only if the connection closes.
-  wait_for(*c_, wait, [](const ClientView& v) { return v.closed; });
+  bool closed = false;
+  wait_for(*c_, wait, [&](const ClientView& v) { return closed = v.closed; });
+  if (closed)
+    raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
 }
 
 EditFuture PyClient::sent(std::uint32_t id) {
   if (id == 0) raise(PyExc_ConnectionError, "the edit could not be sent (connection closed or queue full)");
   return EditFuture(c_, id);
-}
-
-// --- Swarm --------------------------------------------------------------------------
-Swarm::Swarm(int n, ConnectArgs base, double spread, int threads) {
-  if (n < 1 || n > 10000) raise(PyExc_ValueError, "Swarm: n must be 1..10000");
-  if (threads < 1 || threads > 64) raise(PyExc_ValueError, "Swarm: threads must be 1..64");
-  if (!(spread >= 0) || spread > 1e6) raise(PyExc_ValueError, "Swarm: spread must be 0..10^6 voxels");
-  if (base.position) raise(PyExc_ValueError, "Swarm: clients start around the spawn (use spread), not at a position");
-  const std::string last = base.name + "-" + std::to_string(n - 1);
-  if (base.name.empty() || last.size() > kMaxClientNameBytes)
-    raise(PyExc_ValueError, "Swarm: names (up to '" + last + "') must be 1..64 bytes");
-  pool_ = std::make_shared<IoPool>(threads);
-  slot_ = std::make_shared<DispatcherSlot>();
-  clients_.reserve(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) {
-    ConnectArgs a = base;
-    a.name = base.name + "-" + std::to_string(i);
-    // A sunflower spiral: even density over a disc of radius spread.
-    const double r = spread * std::sqrt((i + 0.5) / n);
-    const double angle = i * std::numbers::pi * (3 - std::sqrt(5.0));
-    a.spawn_offset = Vec3f{static_cast<float>(r * std::cos(angle)), 0, static_cast<float>(r * std::sin(angle))};
-    a.pool = pool_;
-    a.slot = slot_;
-    auto c = std::make_shared<PyClient>(std::move(a));
-    remember_client(c);
-    clients_.push_back(std::move(c));
-  }
-}
-
-Swarm::~Swarm() { close(); }
-
-std::shared_ptr<PyClient> Swarm::at(std::ptrdiff_t i) const {
-  const auto n = static_cast<std::ptrdiff_t>(clients_.size());
-  if (i < 0) i += n;
-  if (i < 0 || i >= n) throw py::index_error("Swarm index out of range");
-  return clients_[static_cast<std::size_t>(i)];
-}
-
-namespace {
-// What is left of a timeout shared by several waits.
-double left(Clock::time_point deadline) {
-  return std::max(0.0, std::chrono::duration<double>(deadline - Clock::now()).count());
-}
-}  // namespace
-
-void Swarm::wait_ready(double timeout) {
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  for (const auto& c : clients_) c->wait_ready(left(deadline));
-}
-
-void Swarm::wait_loaded(double timeout) {
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  for (const auto& c : clients_) c->wait_loaded(std::nullopt, left(deadline));
-}
-
-int Swarm::verify(double timeout) {
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  int bad = 0;
-  for (const auto& c : clients_) bad += c->verify(left(deadline));
-  return bad;
-}
-
-void Swarm::close() {
-  for (const auto& c : clients_) c->close();
-  if (auto d = slot_ ? slot_->peek() : nullptr) {
-    d->stop();  // runs the clients' last callbacks (their disconnects)
-    if (!d->finished()) return;  // called from a callback: they have not run yet
-  }
-  for (const auto& c : clients_) c->clear_handlers();
 }
 
 }  // namespace terrane::python

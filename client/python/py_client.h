@@ -1,7 +1,8 @@
 // The Python face of the client library: Client (one connection and its
-// replica), EditFuture (one edit's outcome) and Swarm (many clients on one
-// shared io pool and one callbacks thread). Every wait releases the GIL;
-// the library's io side never takes it (client/python/events.h).
+// replica) and IoPool (io threads a Swarm's clients share,
+// client/python/swarm.h); EditFuture is in client/python/edit_future.h.
+// Every wait releases the GIL; the library's io side never takes it
+// (client/python/events.h).
 #pragma once
 
 #include <pybind11/numpy.h>
@@ -17,53 +18,14 @@
 #include <vector>
 
 #include "client/client.h"
+#include "client/python/edit_future.h"
 #include "client/python/events.h"
 #include "client/python/gil.h"
+#include "client/python/pacing.h"
 
 namespace terrane::python {
 
-// A refusal: the edit was not applied.
-class EditRejected : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-// No answer that says: the edit may or may not have been applied (the
-// connection went first, or the server could not learn it). Not an
-// EditRejected, so a script that retries refusals does not apply twice.
-class EditOutcomeUnknown : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-class Unreachable : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-[[noreturn]] void raise(PyObject* type, const std::string& what);
-// Waits (GIL released) until everything the server sent before it reads
-// this request is in the replica: a one-voxel ReadBox, answered in order
-// with the world's data. Raises TimeoutError or ConnectionError.
-void sync(Client& c, std::chrono::milliseconds timeout);
-std::chrono::milliseconds timeout_of(double seconds);
-
-// The outcome of one edit: result() waits for the server's answer.
-class EditFuture {
- public:
-  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
-  std::uint32_t id() const { return id_; }
-  bool done() const;
-  // "pending", "applied" (acknowledged: applied and stored), "rejected"
-  // (not applied) or "unknown" (edit_outcome_unknown: may have been).
-  std::string outcome() const;
-  // True when acknowledged (applied and stored) and, with visible, once
-  // the replica shows it (sync); raises EditRejected with the server's
-  // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
-  bool result(double timeout, bool visible);
-
- private:
-  std::shared_ptr<Client> c_;
-  std::uint32_t id_;
-};
+using Clock = std::chrono::steady_clock;
 
 // An io_context run by a few threads, shared by a Swarm's clients. It
 // outlives every client on it (each client's deleter holds it).
@@ -88,6 +50,8 @@ struct ConnectArgs {
   int view_distance = 128;
   int full_res_radius = 48;
   bool reconnect = false;
+  double silence_timeout = 15;  // seconds; 0 = never
+  double max_speed = 256;       // the server's --max-speed; 0 = moves not paced
   std::shared_ptr<IoPool> pool;           // null: the client owns its io thread
   std::shared_ptr<DispatcherSlot> slot;   // null: a slot of its own
 };
@@ -104,7 +68,8 @@ class PyClient {
   bool loaded() const;
   int verify(double timeout);
   py::object next_event(const std::optional<std::string>& kind, double timeout);
-  // Registers fn for events of kind (update, presence, message, disconnect).
+  // Registers fn for events of kind (update, presence, message, disconnect,
+  // reconnected: the index in Event).
   py::object on(std::size_t kind, py::object fn);
   std::uint64_t events_dropped() const;
   std::uint64_t callbacks_dropped() const;
@@ -127,7 +92,8 @@ class PyClient {
   EditFuture dig(const Vec3& center, double radius);
   EditFuture paint(const Vec3& center, double radius, const py::object& material);
   EditFuture smooth(const Vec3& center, double radius, double strength);
-  EditFuture write_box(const IVec3& lo, const py::array& a);
+  // voxels: any array-like of integers (numpy.asarray takes it).
+  EditFuture write_box(const IVec3& lo, const py::object& voxels);
   EditFuture undo();
   EditFuture redo();
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
@@ -149,12 +115,25 @@ class PyClient {
  private:
   ClientStateMsg state() const;
   [[noreturn]] void fail_or_timeout(bool closed, const std::string& what) const;
+  // Raises ConnectionError once the client is closed (close() or the end).
+  void check_open() const;
+  // After a resumed session (a reconnect or a Redirect): waits until the
+  // new Welcome has come and every chunk of the full-resolution region
+  // claimed in the resume is confirmed or replaced by the server, so the
+  // replica holds nothing stale there. Returns the session it settled.
+  std::uint64_t settle(Clock::time_point deadline);
+  // Raises ValueError naming the limit when an edit's box is over what
+  // one edit may touch (kMaxEditVolume).
+  void check_edit_size(const EditRequestMsg& e, const char* what) const;
   std::string material_name(Material m) const;
   Material material_of(const py::object& m) const;
   EditFuture sent(std::uint32_t id);
   // Keeps this client's edits within the rate the server's Welcome states
   // (waiting, GIL released, when a script edits faster).
   void pace();
+  // Waits until the pause is over; ends early (ConnectionError) only if
+  // the connection closes.
+  void pause(std::chrono::milliseconds wait, const char* what);
 
   std::string name_;
   std::shared_ptr<DispatcherSlot> slot_;
@@ -164,35 +143,13 @@ class PyClient {
   std::shared_ptr<Client> c_;
   Vec3f facing_{0, 0, 1};
   mutable std::vector<std::string> names_;  // the world's materials, once welcomed
-  std::mutex pace_mutex_;
-  bool paced_ = false;
-  double tokens_ = 0;
-  std::chrono::steady_clock::time_point refilled_;
+  std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side)
+  std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
 };
 
 // Every live client, so Python's exit can close them (registry of weak
 // pointers; the module's atexit hook calls close_all_clients).
 void remember_client(const std::shared_ptr<PyClient>& c);
 void close_all_clients();
-
-// n clients on one io pool of `threads` threads and one callbacks thread.
-class Swarm {
- public:
-  Swarm(int n, ConnectArgs base, double spread, int threads);
-  ~Swarm();
-  std::size_t size() const { return clients_.size(); }
-  std::shared_ptr<PyClient> at(std::ptrdiff_t i) const;
-  const std::vector<std::shared_ptr<PyClient>>& clients() const { return clients_; }
-  void wait_ready(double timeout);
-  void sync(double timeout);
-  void wait_loaded(double timeout);
-  int verify(double timeout);
-  void close();
-
- private:
-  std::shared_ptr<IoPool> pool_;
-  std::shared_ptr<DispatcherSlot> slot_;
-  std::vector<std::shared_ptr<PyClient>> clients_;
-};
 
 }  // namespace terrane::python

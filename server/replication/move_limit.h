@@ -23,6 +23,11 @@ class MoveLimit {
   // A move from `from` to `to` at now: nullopt if allowed (it then counts
   // as the last move), else the distance, in voxels, that was too far.
   std::optional<double> too_far(Vec3f from, Vec3f to, Clock::time_point now);
+  // How far a move at now may go: the budget (max_speed voxels a second
+  // since the last accepted move, plus the slack); infinity before the
+  // first move or with max_speed 0.
+  double allowed(Clock::time_point now) const;
+  double max_speed() const { return max_speed_; }
 
  private:
   const double max_speed_;

@@ -1,5 +1,7 @@
 #include "server/replication/replicator.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cstdlib>
 #include <tuple>
@@ -124,14 +126,17 @@ void Replicator::closed() {
 }
 
 bool Replicator::move(const ClientStateMsg& state) {
-  if (const auto d = move_limit_.too_far(state_.position, state.position, std::chrono::steady_clock::now())) {
+  const auto now = std::chrono::steady_clock::now();
+  const double allowed = move_limit_.allowed(now);
+  if (const auto d = move_limit_.too_far(state_.position, state.position, now)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + name_ + "): moved " +
                       std::to_string(static_cast<long long>(*d)) + " voxels at once; dropping");
-    session_->close(CloseReason::kMovingTooFast, "moving too fast: " + std::to_string(static_cast<long long>(*d)) +
-                                                     " voxels (limit " +
-                                                     std::to_string(static_cast<long long>(options_.max_speed)) +
-                                                     " voxels/s)");
+    // A budget, not a speed: what this move was allowed, and why.
+    session_->close(CloseReason::kMovingTooFast,
+                    fmt::format("moving too fast: moved {:.0f} voxels at once, over the {:.0f} allowed then (the "
+                                "budget: {:.0f} voxels a second since the last move, plus {:.0f})",
+                                *d, allowed, move_limit_.max_speed(), kSpeedSlackVoxels));
     return false;
   }
   // 0 asks for the server's default; everything is capped.

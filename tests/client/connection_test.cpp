@@ -186,11 +186,50 @@ TEST(ConnectionTest, BytesThatBreakTheFramingCloseTheConnection) {
   std::string error;
   ASSERT_TRUE(c.connect(&error)) << error;
   server.accept();
+  server.write(build_pong(1));  // a server that has spoken frames
   const std::uint8_t too_long[4] = {0xff, 0xff, 0xff, 0x7f};  // a length over any limit
   server.write(too_long);
   ASSERT_TRUE(h.wait([&] { return h.closed_.has_value(); }));
   EXPECT_EQ(h.framing_errors_, 1);
   EXPECT_EQ(h.closed_->rfind("protocol error", 0), 0u) << *h.closed_;
+}
+
+TEST(ConnectionTest, APeerWhoseFirstBytesAreNoFrameIsNotATerraneServer) {
+  // An HTTP server answering the Hello: its status line is no frame length.
+  FakeServer server;
+  RecordingHandler h;
+  Connection c(options_for(server), h);
+  std::string error;
+  ASSERT_TRUE(c.connect(&error)) << error;
+  server.accept();
+  const std::string http = "HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n";
+  server.write(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(http.data()), http.size()));
+  ASSERT_TRUE(h.wait([&] { return h.closed_.has_value(); }));
+  EXPECT_EQ(*h.closed_, "not a terrane-server (it sent 'HTTP/1.1 400 Bad Request', which is no frame)");
+}
+
+TEST(ConnectionTest, AServerThatAcceptsAReconnectButNeverAnswersClosesForGood) {
+  // A stopped server's socket still accepts (the kernel's backlog): with
+  // reconnect on, the silence after the reconnect ends it, not a retry.
+  FakeServer server;
+  RecordingHandler h;
+  ClientOptions o = options_for(server);
+  o.reconnect = true;
+  o.reconnect_min = 10ms;
+  o.silence_timeout = 200ms;
+  Connection c(o, h);
+  std::string error;
+  ASSERT_TRUE(c.connect(&error)) << error;
+  server.accept();
+  server.write(build_pong(1));
+  ASSERT_TRUE(h.wait([&] { return h.lost_.size() == 1; }));  // silent: a drop, reconnecting
+  EXPECT_NE(h.lost_[0].find("no answer from the server"), std::string::npos) << h.lost_[0];
+  server.accept();
+  ASSERT_TRUE(h.wait([&] { return h.closed_.has_value(); }));
+  EXPECT_NE(h.closed_->find("since reconnecting: it accepts connections but does not answer"), std::string::npos)
+      << *h.closed_;
+  EXPECT_EQ(h.lost_.size(), 1u);
+  EXPECT_TRUE(c.closed());
 }
 
 TEST(ConnectionTest, AnUnreachableServerIsReported) {

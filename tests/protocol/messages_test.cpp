@@ -44,6 +44,16 @@ TEST(Messages, HelloRoundTrips) {
   fbb3.Finish(wire::CreateHelloDirect(fbb3, 1, "alice", "", "1/17\n[forged log line]"));
   EXPECT_EQ(parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb3.GetBufferPointer())).error().code,
             DecodeErrorCode::kInvalidValue);
+  // A name must be printable too (servers log it); UTF-8 beyond ASCII is fine.
+  for (const char* name : {"alice\nsession 9 joined", "tab\tbed", "del\x7f"}) {
+    flatbuffers::FlatBufferBuilder fbb4;
+    fbb4.Finish(wire::CreateHelloDirect(fbb4, 1, name, "", ""));
+    const auto bad = parse_hello(*flatbuffers::GetRoot<wire::Hello>(fbb4.GetBufferPointer()));
+    ASSERT_FALSE(bad.ok()) << name;
+    EXPECT_EQ(bad.error().code, DecodeErrorCode::kInvalidValue);
+    EXPECT_NE(std::string(bad.error().detail).find("control character"), std::string::npos);
+  }
+  EXPECT_TRUE(parse_hello(*message_of(build_hello(HelloMsg{kProtocolVersion, "Zoë ☃", "", {}}))->body_as_Hello()).ok());
 }
 
 TEST(Messages, RedirectRoundTripsAndBadOnesAreErrors) {

@@ -16,8 +16,15 @@ SOURCE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__f
 class Server:
     def __init__(self, *extra):
         self.dir = tempfile.mkdtemp(prefix="terrane-py-")
+        self.extra = extra
+        self.port = None
+        self.start(0)
+
+    def start(self, port):
+        """Starts terrane-server on port (0: any free one) with this world."""
         self.proc = subprocess.Popen(
-            [os.path.join(BIN, "terrane-server"), "--world", os.path.join(self.dir, "world"), "--port", "0", *extra],
+            [os.path.join(BIN, "terrane-server"), "--world", os.path.join(self.dir, "world"), "--port", str(port),
+             *self.extra],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.output = []
         self.port = None
@@ -36,6 +43,14 @@ class Server:
         self.reader.start()
         assert ready.wait(60) and self.port, "".join(self.output)
         self.address = "127.0.0.1:%d" % self.port
+
+    def restart_after_kill(self):
+        """kill -9, then a new process on the same port and world."""
+        port = self.port
+        self.proc.kill()
+        self.proc.wait(60)
+        self.reader.join(10)
+        self.start(port)
 
     def stop(self):
         if self.proc.poll() is None:

@@ -25,6 +25,7 @@ from terrane._native import (  # noqa: F401
     Message,
     Player,
     Presence,
+    Reconnected,
     Swarm,
     Unreachable,
     Update,
@@ -33,7 +34,7 @@ from terrane._native import (  # noqa: F401
 
 __all__ = [
     "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
-    "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "AIR",
+    "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "AIR",
 ]
 
 AIR = "Air"

@@ -24,6 +24,9 @@ TEST(MoveLimit, AClientMovesAtMostItsSpeedPlusTheSlackSinceItsLastAcceptedMove) 
   const auto refused = limit.too_far(there, {there.x, there.y + 60, there.z}, t + 1s);
   ASSERT_TRUE(refused);
   EXPECT_DOUBLE_EQ(*refused, 60);
+  // What it was allowed then (the budget the server's reason names).
+  EXPECT_DOUBLE_EQ(limit.allowed(t + 1s), kSpeedSlackVoxels);
+  EXPECT_DOUBLE_EQ(limit.allowed(t + 1500ms), 50 + kSpeedSlackVoxels);
   // The refused move did not count: half a second after the last accepted one.
   EXPECT_EQ(limit.too_far(there, {there.x, there.y + 90, there.z}, t + 1500ms), std::nullopt);
 }

@@ -1,0 +1,83 @@
+#include "client/python/edit_future.h"
+
+#include <algorithm>
+
+#include "client/python/gil.h"
+
+namespace terrane::python {
+
+using Clock = std::chrono::steady_clock;
+
+[[noreturn]] void raise(PyObject* type, const std::string& what) {
+  PyErr_SetString(type, utf8(what).c_str());
+  throw py::error_already_set();
+}
+
+std::chrono::milliseconds timeout_of(double seconds) {
+  if (!(seconds >= 0) || seconds > 86400) raise(PyExc_ValueError, "timeout must be 0..86400 seconds");
+  return std::chrono::milliseconds(static_cast<std::int64_t>(seconds * 1000));
+}
+
+bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred) {
+  return wait_interruptibly(timeout, [&](std::chrono::milliseconds slice) { return c.wait_until(pred, slice); });
+}
+
+bool EditFuture::done() const {
+  bool d = false;
+  c_->wait_until([&](const ClientView& v) { return d = v.edits.count(id_) != 0; }, std::chrono::milliseconds(0));
+  return d;
+}
+
+std::string EditFuture::outcome() const {
+  std::string out = "pending";
+  c_->wait_until(
+      [&](const ClientView& v) {
+        if (auto it = v.edits.find(id_); it != v.edits.end())
+          out = it->second.accepted ? "applied" : edit_outcome_unknown(it->second) ? "unknown" : "rejected";
+        return true;
+      },
+      std::chrono::milliseconds(0));
+  return out;
+}
+
+void sync(Client& c, std::chrono::milliseconds timeout) {
+  const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
+  const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
+                static_cast<std::int32_t>(std::floor(p.z))};
+  const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
+  if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+  bool answered = false, closed = false;
+  wait_for(c, timeout,
+        [&](const ClientView& view) {
+          answered = view.read_results.count(id) != 0;
+          closed = view.closed;
+          return answered || closed;
+        });
+  if (answered) return;
+  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
+  raise(PyExc_TimeoutError, "the server did not answer within the timeout");
+}
+
+bool EditFuture::result(double timeout, bool visible) {
+  const auto t = timeout_of(timeout);
+  const auto start = Clock::now();
+  std::optional<EditOutcome> o;
+  bool closed = false;
+  wait_for(*c_, t,
+        [&](const ClientView& v) {
+          if (auto it = v.edits.find(id_); it != v.edits.end()) o = it->second;
+          closed = v.closed;
+          return o.has_value() || closed;
+        });
+  if (o && o->accepted) {
+    const auto spent = std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - start);
+    if (visible) sync(*c_, std::max(std::chrono::milliseconds(0), t - spent));
+    return true;
+  }
+  if (o && edit_outcome_unknown(*o)) throw EditOutcomeUnknown(utf8(o->reason));
+  if (o) throw EditRejected(utf8(o->reason));
+  if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
+  raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
+}
+
+}  // namespace terrane::python

@@ -1,0 +1,67 @@
+// EditFuture (one edit's outcome, waited for by result()) and what every
+// binding shares: its exceptions, raise(), timeouts, the interruptible
+// wait on a Client's view and the sync barrier. Called with the GIL held;
+// each wait releases it.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "client/client.h"
+
+namespace terrane::python {
+
+// A refusal: the edit was not applied.
+class EditRejected : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+// No answer that says: the edit may or may not have been applied (the
+// connection went first, or the server could not learn it). Not an
+// EditRejected, so a script that retries refusals does not apply twice.
+class EditOutcomeUnknown : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+class Unreachable : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] void raise(PyObject* type, const std::string& what);
+// Waits (GIL released) until everything the server sent before it reads
+// this request is in the replica: a one-voxel ReadBox, answered in order
+// with the world's data. Raises TimeoutError or ConnectionError.
+void sync(Client& c, std::chrono::milliseconds timeout);
+std::chrono::milliseconds timeout_of(double seconds);
+// Waits until pred holds on the client's view (checked after every frame)
+// or the timeout passes; Ctrl-C interrupts it. pred runs under the
+// client's lock.
+bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred);
+
+// The outcome of one edit: result() waits for the server's answer.
+class EditFuture {
+ public:
+  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
+  std::uint32_t id() const { return id_; }
+  bool done() const;
+  // "pending", "applied" (acknowledged: applied and stored), "rejected"
+  // (not applied) or "unknown" (edit_outcome_unknown: may have been).
+  std::string outcome() const;
+  // True when acknowledged (applied and stored) and, with visible, once
+  // the replica shows it (sync); raises EditRejected with the server's
+  // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
+  bool result(double timeout, bool visible);
+
+ private:
+  std::shared_ptr<Client> c_;
+  std::uint32_t id_;
+};
+
+}  // namespace terrane::python
