@@ -58,6 +58,18 @@ TEST(ForwardedEdit, EveryTruncatedPrefixIsAnError) {
     EXPECT_FALSE(decode_forwarded_edit(std::span<const std::uint8_t>(bytes.data(), n)).ok()) << n << " bytes";
 }
 
+TEST(ForwardedEdit, AHeaderThatDisagreesWithTheRowIsAnError) {
+  auto bytes = encode_forwarded_edit(write_box());
+  ASSERT_TRUE(decode_forwarded_edit(bytes).ok());
+  auto longer = bytes;
+  longer.push_back(0);  // a byte after the message
+  EXPECT_FALSE(decode_forwarded_edit(longer).ok());
+  auto lying = bytes;
+  lying[0] = static_cast<std::uint8_t>(lying[0] - 1);  // the header says one byte less
+  lying.back() = 0;
+  EXPECT_FALSE(decode_forwarded_edit(lying).ok());
+}
+
 TEST(ForwardedEdit, AnotherMessageIsAnError) {
   EXPECT_FALSE(decode_forwarded_edit(build_edit_ack(1, 2)).ok());
   EXPECT_FALSE(decode_forwarded_edit(std::vector<std::uint8_t>{1, 1}).ok());
