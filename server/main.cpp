@@ -150,17 +150,17 @@ int run(int argc, char** argv) {
   std::string err;
   const std::string where = cl.has("world") ? cl.get("world") : cl.get("store");
   if (PostgresStore::is_url(where)) {
-    o.store_url = where;
+    o.cluster.store_url = where;
     if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
-    o.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
-    o.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
+    o.cluster.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
+    o.cluster.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
     if (cl.has("advertise")) {
       std::string why;
       auto a = parse_server_address(cl.get("advertise"), &why);
       if (!a) return usage_error("--advertise: " + why);
-      o.advertise = a->text();
+      o.cluster.advertise = a->text();
     }
-    o.redirect_margin = static_cast<std::int32_t>(cl.get_int("redirect-margin", 32, 0, 128, &err));
+    o.cluster.redirect_margin = static_cast<std::int32_t>(cl.get_int("redirect-margin", 32, 0, 128, &err));
   } else {
     if (where.find("://") != std::string::npos)
       return usage_error("--store: '" + where + "' is neither a postgresql:// URL nor a world directory");
@@ -169,9 +169,9 @@ int run(int argc, char** argv) {
         return usage_error(std::string("--") + cluster_only + " is for a PostgreSQL store (--store postgresql://...)");
     o.world_dir = where;
   }
-  o.bind_address = cl.get("bind", o.bind_address);
-  o.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
-  o.metrics_address = cl.get("metrics");
+  o.net.bind_address = cl.get("bind", o.net.bind_address);
+  o.net.port = static_cast<std::uint16_t>(cl.get_int("port", 0, 0, 65535, &err));
+  o.ops.metrics_address = cl.get("metrics");
   if (cl.has("border")) {
     o.border_set = true;
     if (cl.get("border") != "none") {
@@ -183,56 +183,59 @@ int run(int argc, char** argv) {
     }
   }
   if (cl.has("metrics"))
-    if (auto hp = parse_host_port(o.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
-  o.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", o.tick_hz, 1, 1000, &err));
-  o.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
-  o.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
-  o.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
-  o.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
-  o.default_view_distance = std::min(o.default_view_distance, o.max_view_distance);
-  o.default_full_res_radius = std::min(o.default_full_res_radius, o.max_full_res_radius);
-  o.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 1024, 1, 100000, &err));
-  o.session.max_queue_bytes =
+    if (auto hp = parse_host_port(o.ops.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
+  o.world.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", o.world.tick_hz, 1, 1000, &err));
+  o.replication.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
+  o.replication.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
+  o.replication.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
+  o.replication.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
+  o.replication.default_view_distance =
+      std::min(o.replication.default_view_distance, o.replication.max_view_distance);
+  o.replication.default_full_res_radius =
+      std::min(o.replication.default_full_res_radius, o.replication.max_full_res_radius);
+  o.net.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 1024, 1, 100000, &err));
+  o.net.session.max_queue_bytes =
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));
-  o.stream_window_bytes =
+  o.replication.stream_window_bytes =
       static_cast<std::size_t>(cl.get_int("stream-window-bytes", 512 << 10, 1 << 12, std::int64_t{1} << 32, &err));
-  o.stream_yield = std::chrono::milliseconds(cl.get_int("stream-yield-ms", 20, 0, 60000, &err));
-  o.io_threads = static_cast<int>(cl.get_int("io-threads", 2, 1, 64, &err));
-  o.worker_threads = static_cast<int>(cl.get_int("worker-threads", 2, 1, 256, &err));
-  o.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
-  o.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
-  o.auth_token = cl.get("auth-token");
-  o.admin_token = cl.get("admin-token");
-  if (cl.has("admin-token") && o.admin_token.size() < 8)
+  o.replication.stream_yield = std::chrono::milliseconds(cl.get_int("stream-yield-ms", 20, 0, 60000, &err));
+  o.net.io_threads = static_cast<int>(cl.get_int("io-threads", 2, 1, 64, &err));
+  o.storage.worker_threads = static_cast<int>(cl.get_int("worker-threads", 2, 1, 256, &err));
+  o.net.session.write_timeout = std::chrono::milliseconds(cl.get_int("write-timeout-ms", 10000, 100, 3600000, &err));
+  o.net.session.socket_send_buffer_bytes = static_cast<int>(cl.get_int("socket-send-buffer", 0, 0, 1 << 30, &err));
+  o.ops.auth_token = cl.get("auth-token");
+  o.ops.admin_token = cl.get("admin-token");
+  if (cl.has("admin-token") && o.ops.admin_token.size() < 8)
     return usage_error("--admin-token: at least 8 characters (it lets its holder kick, ban and stop the server)");
-  o.allow_open = cl.flag("open");
-  o.horizon_estimates = !cl.flag("exact-horizon");
-  o.horizon_images = !cl.flag("no-horizon-images");
+  o.ops.allow_open = cl.flag("open");
+  o.replication.horizon_estimates = !cl.flag("exact-horizon");
+  o.replication.horizon_images = !cl.flag("no-horizon-images");
   o.thread_priorities = !cl.flag("no-thread-priorities");
-  o.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
-  o.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
-  o.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));
-  o.session.inbound_bytes_per_second =
+  o.world.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
+  o.replication.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);
+  o.replication.max_speed = static_cast<double>(cl.get_int("max-speed", 256, 0, 1 << 20, &err));
+  o.net.session.inbound_bytes_per_second =
       static_cast<double>(cl.get_int("inbound-bytes-per-second", 1 << 20, 0, std::int64_t{1} << 40, &err));
-  o.session.inbound_burst_bytes = std::max(o.session.inbound_bytes_per_second * 4, 1.0 * (1 << 20));
-  o.outbound_bytes_per_second =
+  o.net.session.inbound_burst_bytes = std::max(o.net.session.inbound_bytes_per_second * 4, 1.0 * (1 << 20));
+  o.replication.outbound_bytes_per_second =
       static_cast<double>(cl.get_int("outbound-bytes-per-second", 32 << 20, 0, std::int64_t{1} << 40, &err));
-  o.session.handshake_timeout = std::chrono::milliseconds(cl.get_int("handshake-timeout-ms", 5000, 100, 3600000, &err));
-  o.session.idle_timeout = std::chrono::milliseconds(cl.get_int("idle-timeout-ms", 30000, 100, 86400000, &err));
-  o.session.frame_timeout = std::chrono::milliseconds(cl.get_int("frame-timeout-ms", 10000, 100, 3600000, &err));
-  o.session.max_frame_bytes =
+  o.net.session.handshake_timeout =
+      std::chrono::milliseconds(cl.get_int("handshake-timeout-ms", 5000, 100, 3600000, &err));
+  o.net.session.idle_timeout = std::chrono::milliseconds(cl.get_int("idle-timeout-ms", 30000, 100, 86400000, &err));
+  o.net.session.frame_timeout = std::chrono::milliseconds(cl.get_int("frame-timeout-ms", 10000, 100, 3600000, &err));
+  o.net.session.max_frame_bytes =
       static_cast<std::size_t>(cl.get_int("max-frame-bytes", kDefaultMaxFrameBytes, 64 << 10, kDefaultMaxFrameBytes, &err));
-  o.history_bytes_per_client =
+  o.world.history_bytes_per_client =
       static_cast<std::size_t>(cl.get_int("history-bytes", 4 << 20, 0, std::int64_t{1} << 34, &err));
-  o.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
-  o.edit_log_days = static_cast<std::uint32_t>(cl.get_int("edit-log-days", 30, 0, 36500, &err));
-  o.edit_log_mb = static_cast<std::uint32_t>(cl.get_int("edit-log-mb", 1024, 0, 1 << 22, &err));
-  o.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
-  o.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
-  o.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));
-  o.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 32768, 0, 1 << 24, &err));
-  o.fault_drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
-  o.fault_corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
+  o.world.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
+  o.storage.edit_log_days = static_cast<std::uint32_t>(cl.get_int("edit-log-days", 30, 0, 36500, &err));
+  o.storage.edit_log_mb = static_cast<std::uint32_t>(cl.get_int("edit-log-mb", 1024, 0, 1 << 22, &err));
+  o.world.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
+  o.replication.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
+  o.world.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));
+  o.world.resident_chunks = static_cast<std::size_t>(cl.get_int("resident-chunks", 32768, 0, 1 << 24, &err));
+  o.faults.drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
+  o.faults.corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);
   if (cl.has("tokens-file")) {
     auto tokens = load_tokens_file(cl.get("tokens-file"));
@@ -241,24 +244,24 @@ int run(int argc, char** argv) {
       return 1;
     }
     if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
-    o.player_tokens = std::move(*tokens);
+    o.ops.player_tokens = std::move(*tokens);
   }
 
   // One descriptor per client plus the store, the listener and a margin.
   rlimit nofile{};
   if (getrlimit(RLIMIT_NOFILE, &nofile) == 0) {
-    const rlim_t want = static_cast<rlim_t>(o.max_clients) + 64;
+    const rlim_t want = static_cast<rlim_t>(o.net.max_clients) + 64;
     if (nofile.rlim_cur < want) {
       nofile.rlim_cur = std::min(want, nofile.rlim_max);
       setrlimit(RLIMIT_NOFILE, &nofile);
     }
     if (nofile.rlim_cur < want)
       server_log().warn("open-file limit {} is below --max-clients {} + 64; connections beyond it will fail",
-                        nofile.rlim_cur, o.max_clients);
+                        nofile.rlim_cur, o.net.max_clients);
   }
 
-  o.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
-  o.on_shutdown = [] { std::raise(SIGTERM); };  // terrane-admin shutdown, once its warning time is up
+  o.world.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
+  o.ops.on_shutdown = [] { std::raise(SIGTERM); };  // terrane-admin shutdown, once its warning time is up
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);

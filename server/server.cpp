@@ -11,26 +11,26 @@
 namespace terrane {
 
 FileResult<std::unique_ptr<World>> Server::open_world() {
-  if (options_.store_url.empty()) {
+  if (options_.cluster.store_url.empty()) {
     // The lock comes before the first read: a second server (or a tool
     // writing the directory) must not even load chunks it could write back.
     std::error_code ec;
     std::filesystem::create_directories(options_.world_dir, ec);
     if (ec) return FileError{"world " + options_.world_dir + ": cannot create directory: " + ec.message(), {}};
-    auto lock = WorldLock::take(options_.world_dir, fmt::format("terrane-server on {}:{}", options_.bind_address,
-                                                                options_.port));
+    auto lock = WorldLock::take(options_.world_dir, fmt::format("terrane-server on {}:{}", options_.net.bind_address,
+                                                                options_.net.port));
     if (!lock) return lock.error();
     world_lock_ = std::move(*lock);
     return SqliteStore::exists(options_.world_dir) ? World::open(options_.world_dir)
                                                    : World::create(options_.world_dir, default_world_meta());
   }
-  auto store = PostgresStore::open(options_.store_url);
+  auto store = PostgresStore::open(options_.cluster.store_url);
   if (!store) return FileError{store.error().message, {}};
   if (!(*store)->has_world()) {
     if (auto made = (*store)->create_world(default_world_meta()); !made) return FileError{made.error().message, {}};
     server_log().info("world {}: created the default generated world", (*store)->where());
   }
-  auto node = ClusterNode::open(options_, **store, [this](const RegionLease& lost, const std::string& why) {
+  auto node = ClusterNode::open(options_.cluster, **store, [this](const RegionLease& lost, const std::string& why) {
     // Leases are held only once edits run, so the world owner exists.
     if (world_owner_) world_owner_->lease_lost(lost.region, why);
   }, &counters_.database);
@@ -59,9 +59,9 @@ FileStatus Server::check_border_alone(const WorldMeta& meta) {
 }
 
 FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options) {
-  if (options.auth_token.empty() && options.player_tokens.empty() && !options.allow_open &&
-      !is_loopback_address(options.bind_address))
-    return FileError{"refusing to serve " + options.bind_address +
+  if (options.ops.auth_token.empty() && options.ops.player_tokens.empty() && !options.ops.allow_open &&
+      !is_loopback_address(options.net.bind_address))
+    return FileError{"refusing to serve " + options.net.bind_address +
                          " without authentication: give --auth-token or --tokens-file, or --open to allow anyone",
                      {}};
   std::unique_ptr<Server> s(new Server(options));
@@ -76,17 +76,17 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
   std::optional<Storage::Shared> shared;
   if (s->cluster_) shared.emplace(s->cluster_->shared());
-  auto storage = Storage::open(*s->world_, s->options_.worker_threads, s->options_.thread_priorities,
+  auto storage = Storage::open(*s->world_, s->options_.storage.worker_threads, s->options_.thread_priorities,
                                shared ? &*shared : nullptr);
   if (!storage) return storage.error();
   s->storage_ = std::move(*storage);
-  s->storage_->set_horizon_estimates(options.horizon_estimates);
-  s->storage_->set_edit_log_retention(std::chrono::hours(24) * options.edit_log_days,
-                                      static_cast<std::uint64_t>(options.edit_log_mb) << 20);
-  if (auto bound = s->listener_.bind(options.bind_address, options.port); !bound) return bound.error();
+  s->storage_->set_horizon_estimates(options.replication.horizon_estimates);
+  s->storage_->set_edit_log_retention(std::chrono::hours(24) * options.storage.edit_log_days,
+                                      static_cast<std::uint64_t>(options.storage.edit_log_mb) << 20);
+  if (auto bound = s->listener_.bind(options.net.bind_address, options.net.port); !bound) return bound.error();
 
-  s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_.context(), *s->world_, *s->storage_, s->options_,
-                                                 s->counters_);
+  s->world_owner_ = std::make_unique<WorldOwner>(s->world_io_.context(), *s->world_, *s->storage_, s->options_.world,
+                                                 s->counters_, s->options_.cluster);
   // Streaming's requests that wait too long in the world's queue hold
   // streaming back, as late probes do.
   s->world_owner_->on_request_wait([gate = s->stream_gate_.get()](std::chrono::nanoseconds waited) {
@@ -111,8 +111,10 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   Server* self = s.get();
   Operations::Wiring wiring{s->world_hooks(), [self] { return self->metrics_text(); },
                             [self] { return self->health(); }, [self] { self->stop(); }};
-  auto ops = Operations::open(s->options_, s->world_->store(), s->io_.context(), s->sessions_, s->counters_,
-                              std::move(wiring));
+  // The admin room's backups copy a SQLite world's directory.
+  const std::string backup_dir = s->options_.cluster.store_url.empty() ? s->options_.world_dir : "";
+  auto ops = Operations::open(s->options_.ops, s->world_->store(), backup_dir, s->io_.context(), s->sessions_,
+                              s->counters_, std::move(wiring));
   if (!ops) return ops.error();
   s->ops_ = std::move(*ops);
   s->session_context_.emplace(ClientSession::Context{s->welcome_.welcome, s->ops_->admitter(), s->ops_->admin(),
@@ -129,21 +131,21 @@ void Server::make_welcome() {
   w.materials = meta.materials;
   w.bounds_min_y = meta.bounds.min_y;
   w.bounds_max_y = meta.bounds.max_y;
-  w.max_view_distance = options_.max_view_distance;
-  w.max_full_res_radius = options_.max_full_res_radius;
-  w.max_frame_bytes = static_cast<std::uint32_t>(options_.session.max_frame_bytes);
-  w.tick_hz = options_.tick_hz;
+  w.max_view_distance = options_.replication.max_view_distance;
+  w.max_full_res_radius = options_.replication.max_full_res_radius;
+  w.max_frame_bytes = static_cast<std::uint32_t>(options_.net.session.max_frame_bytes);
+  w.tick_hz = options_.world.tick_hz;
   w.bounded_xz = meta.bounds.bounded_xz;
   w.bounds_min_x = meta.bounds.min_x;
   w.bounds_min_z = meta.bounds.min_z;
   w.bounds_max_x = meta.bounds.max_x;
   w.bounds_max_z = meta.bounds.max_z;
-  w.default_view_distance = options_.default_view_distance;
-  w.default_full_res_radius = options_.default_full_res_radius;
+  w.default_view_distance = options_.replication.default_view_distance;
+  w.default_full_res_radius = options_.replication.default_full_res_radius;
   // As the sessions' edit-rate buckets (replication/replicator.cpp) take them.
-  w.edits_per_second = static_cast<float>(options_.edits_per_second);
-  w.edit_burst = static_cast<std::uint32_t>(options_.edits_per_second * 2);
-  w.server_id = options_.server_id;
+  w.edits_per_second = static_cast<float>(options_.world.edits_per_second);
+  w.edit_burst = static_cast<std::uint32_t>(options_.world.edits_per_second * 2);
+  w.server_id = options_.cluster.server_id;
   welcome_.bounds = meta.bounds;
 }
 
@@ -184,15 +186,16 @@ Vec3f Server::find_spawn(World& world) {
 Server::Server(const ServerOptions& options)
     : options_(options),
       listener_(io_.context()),
-      stream_gate_(std::make_unique<StreamGate>(options.stream_yield)),
-      sessions_(options.max_clients) {
-  options_.tick_hz = std::clamp<std::uint32_t>(options_.tick_hz, 1, 1000);
-  options_.session.max_frame_bytes = std::min(options_.session.max_frame_bytes, kDefaultMaxFrameBytes);
-  options_.default_view_distance = std::min(options_.default_view_distance, options_.max_view_distance);
-  options_.default_full_res_radius = std::min(options_.default_full_res_radius, options_.max_full_res_radius);
-  options_.session.counters = &counters_;
-  if (options_.fault_drop_updates > 0 || options_.fault_corrupt_updates > 0)
-    faults_ = std::make_unique<BudgetedUpdateFaults>(options_.fault_drop_updates, options_.fault_corrupt_updates,
+      stream_gate_(std::make_unique<StreamGate>(options.replication.stream_yield)),
+      sessions_(options.net.max_clients) {
+  options_.world.tick_hz = std::clamp<std::uint32_t>(options_.world.tick_hz, 1, 1000);
+  options_.net.session.max_frame_bytes = std::min(options_.net.session.max_frame_bytes, kDefaultMaxFrameBytes);
+  ReplicationOptions& r = options_.replication;
+  r.default_view_distance = std::min(r.default_view_distance, r.max_view_distance);
+  r.default_full_res_radius = std::min(r.default_full_res_radius, r.max_full_res_radius);
+  options_.net.session.counters = &counters_;
+  if (options_.faults.drop_updates > 0 || options_.faults.corrupt_updates > 0)
+    faults_ = std::make_unique<BudgetedUpdateFaults>(options_.faults.drop_updates, options_.faults.corrupt_updates,
                                                      counters_);
 }
 
@@ -208,44 +211,47 @@ Server::~Server() {
 void Server::start() {
   if (started_) return;
   started_ = true;
-  server_log().info("world {} (epoch {}), tick {} Hz", world_->store().where(), world_->meta().epoch, options_.tick_hz);
+  server_log().info("world {} (epoch {}), tick {} Hz", world_->store().where(), world_->meta().epoch,
+                    options_.world.tick_hz);
   if (cluster_) {
-    server_log().info("server id {} in a shared PostgreSQL world: regions leased for {} ms", options_.server_id,
-                      options_.lease.count());
+    server_log().info("server id {} in a shared PostgreSQL world: regions leased for {} ms", options_.cluster.server_id,
+                      options_.cluster.lease.count());
     // Where the other servers send clients that stand in regions this one
     // writes (and where this one learns who writes what).
-    std::string advertised = options_.advertise;
-    if (advertised.empty() && !is_any_address(options_.bind_address))
-      advertised = ServerAddress{options_.server_id, options_.bind_address, port()}.text();
+    std::string advertised = options_.cluster.advertise;
+    if (advertised.empty() && !is_any_address(options_.net.bind_address))
+      advertised = ServerAddress{options_.cluster.server_id, options_.net.bind_address, port()}.text();
     // (Without an address it is still known to run: a --border elsewhere
     // waits for it.)
     if (advertised.empty())
       server_log().warn("no --advertise address (bound to {}): other servers redirect no client here",
-                        options_.bind_address);
+                        options_.net.bind_address);
     else
-      server_log().info("clients are redirected here as {}{}", advertised,
-                        options_.redirect_margin > 0 ? "" : " (this server redirects none: --redirect-margin 0)");
+      server_log().info(
+          "clients are redirected here as {}{}", advertised,
+          options_.cluster.redirect_margin > 0 ? "" : " (this server redirects none: --redirect-margin 0)");
     cluster_->start(advertised);
   }
-  if (!options_.player_tokens.empty())
-    server_log().info("authentication: per-player tokens ({} players)", options_.player_tokens.size());
-  else if (!options_.auth_token.empty())
+  if (!options_.ops.player_tokens.empty())
+    server_log().info("authentication: per-player tokens ({} players)", options_.ops.player_tokens.size());
+  else if (!options_.ops.auth_token.empty())
     server_log().info("authentication: shared token");
   else
     server_log().warn("authentication: none, anyone who can connect may play ({})",
-                      is_loopback_address(options_.bind_address) ? "loopback only" : "--open");
+                      is_loopback_address(options_.net.bind_address) ? "loopback only" : "--open");
   // The default view's table (its offsets nearest first), made before the
   // first client instead of on its strand (tens of milliseconds at 1,024).
   // (Capped as a replicator caps a client's radii.)
-  const std::int32_t view = std::min(options_.default_view_distance, options_.max_view_distance);
-  default_view_ = ViewTable::get(view, std::min({options_.default_full_res_radius, options_.max_full_res_radius, view}));
-  server_log().info("listening on {}:{}", options_.bind_address, port());
+  const ReplicationOptions& r = options_.replication;
+  const std::int32_t view = std::min(r.default_view_distance, r.max_view_distance);
+  default_view_ = ViewTable::get(view, std::min({r.default_full_res_radius, r.max_full_res_radius, view}));
+  server_log().info("listening on {}:{}", options_.net.bind_address, port());
   world_io_.run(1, ThreadRole::kWorld, options_.thread_priorities);
   world_owner_->start();
   stream_gate_->start(io_.context(), world_io_.context());
   ops_->start();
   listener_.start([this](asio::ip::tcp::socket socket) { return accept(std::move(socket)); });
-  io_.run(options_.io_threads, ThreadRole::kIo, options_.thread_priorities);
+  io_.run(options_.net.io_threads, ThreadRole::kIo, options_.thread_priorities);
 }
 
 void Server::stop() {
@@ -311,8 +317,8 @@ std::string Server::metrics_text() const {
 
 Health Server::health() const {
   if (stopping_) return {false, "shutting down"};
-  return check_health(counters_, storage_failed(), options_.tick_hz, std::chrono::steady_clock::now(),
-                      cluster_ ? LeaseTimes::of(options_.lease).renew : std::chrono::milliseconds(0));
+  return check_health(counters_, storage_failed(), options_.world.tick_hz, std::chrono::steady_clock::now(),
+                      cluster_ ? LeaseTimes::of(options_.cluster.lease).renew : std::chrono::milliseconds(0));
 }
 
 void Server::inspect(const std::function<void(const WorldView&)>& fn) { world_owner_->inspect(fn); }
@@ -320,9 +326,10 @@ void Server::inspect(const std::function<void(const WorldView&)>& fn) { world_ow
 bool Server::accept(asio::ip::tcp::socket socket) {
   if (stopping_) return false;
   const ClientId id = sessions_.next_id();
-  auto rep = std::make_shared<Replicator>(id, *world_owner_, options_, counters_, welcome_, *stream_gate_,
-                                          cluster_ ? &cluster_->directory() : nullptr, faults_.get());
-  auto client = ClientSession::open(std::move(socket), id, options_.session, *session_context_, rep);
+  auto rep = std::make_shared<Replicator>(id, *world_owner_, options_.replication, options_.cluster, counters_,
+                                          welcome_, *stream_gate_, cluster_ ? &cluster_->directory() : nullptr,
+                                          faults_.get());
+  auto client = ClientSession::open(std::move(socket), id, options_.net.session, *session_context_, rep);
   const std::shared_ptr<Session> session = client->session();
   rep->attach(session);
   counters_.sessions_accepted.fetch_add(1, std::memory_order_relaxed);
@@ -340,7 +347,7 @@ AdminHooks Server::world_hooks() {
     s.epoch = world_->meta().epoch;
     s.clients = counters_.clients.load();
     s.ticks = counters_.ticks.load();
-    s.tick_hz = options_.tick_hz;
+    s.tick_hz = options_.world.tick_hz;
     s.edits_applied = counters_.edits_applied.load();
     s.edits_rejected = counters_.edits_rejected();
     s.chunks_resident = counters_.chunks_loaded.load();

@@ -41,13 +41,13 @@
 #include "common/world/world.h"
 #include "common/world/world_lock.h"
 #include "server/base/context_threads.h"
-#include "server/base/options.h"
 #include "server/cluster/cluster_node.h"
 #include "server/net/client_session.h"
 #include "server/net/listener.h"
 #include "server/net/session_table.h"
 #include "server/ops/operations.h"
 #include "server/replication/replicator.h"
+#include "server/server_options.h"
 #include "server/storage/storage.h"
 #include "server/world/world_owner.h"
 
@@ -74,7 +74,7 @@ class Server {
   // Whether streaming yields now (and holding it paused: tests, operators).
   StreamGate& stream_gate() { return *stream_gate_; }
   Health health() const;
-  const std::string& address() const { return options_.bind_address; }
+  const std::string& address() const { return options_.net.bind_address; }
   const ServerCounters& counters() const { return counters_; }
   const StorageCounters& storage_counters() const { return storage_->counters(); }
   const ServerOptions& options() const { return options_; }

@@ -4,10 +4,10 @@
 
 namespace terrane {
 
-ClusterNode::ClusterNode(const ServerOptions& options, PostgresStore& store)
+ClusterNode::ClusterNode(const ClusterOptions& options, PostgresStore& store)
     : url_(options.store_url), server_id_(options.server_id), lease_(options.lease), store_(store) {}
 
-StoreResult<std::unique_ptr<ClusterNode>> ClusterNode::open(const ServerOptions& options, PostgresStore& store,
+StoreResult<std::unique_ptr<ClusterNode>> ClusterNode::open(const ClusterOptions& options, PostgresStore& store,
                                                             LeaseKeeper::LostFn on_lost, DatabaseCounters* database) {
   std::unique_ptr<ClusterNode> node(new ClusterNode(options, store));
   node->database_ = database;

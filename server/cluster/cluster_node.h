@@ -35,7 +35,7 @@
 #include <vector>
 
 #include "common/world/world_store.h"
-#include "server/base/options.h"
+#include "server/base/cluster_options.h"
 #include "server/cluster/change_listener.h"
 #include "server/cluster/cluster_control.h"
 #include "server/cluster/lease_keeper.h"
@@ -52,7 +52,7 @@ class ClusterNode {
   // shared(); on_lost runs on the keeper's thread when a held lease is
   // lost; database (may be null) is where the keeper, the control thread,
   // the listener and the store note their links' state for /health.
-  static StoreResult<std::unique_ptr<ClusterNode>> open(const ServerOptions& options, PostgresStore& store,
+  static StoreResult<std::unique_ptr<ClusterNode>> open(const ClusterOptions& options, PostgresStore& store,
                                                         LeaseKeeper::LostFn on_lost,
                                                         DatabaseCounters* database = nullptr);
   ~ClusterNode();  // the steps not taken yet, in order (release() aside: the leases then run out)
@@ -77,7 +77,7 @@ class ClusterNode {
   LeaseKeeper& leases() { return *leases_; }
 
  private:
-  ClusterNode(const ServerOptions& options, PostgresStore& store);
+  ClusterNode(const ClusterOptions& options, PostgresStore& store);
 
   const std::string url_;
   const std::uint32_t server_id_;

@@ -32,7 +32,7 @@
 
 #include "protocol/messages.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
+#include "server/net/net_options.h"
 #include "server/net/admission.h"
 #include "server/net/session.h"
 

@@ -10,7 +10,7 @@
 #include <unordered_map>
 
 #include "common/world/world_store.h"
-#include "server/base/options.h"
+#include "server/net/net_options.h"
 
 namespace terrane {
 

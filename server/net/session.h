@@ -37,7 +37,7 @@
 #include "protocol/framing.h"
 #include "protocol/messages.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
+#include "server/net/net_options.h"
 #include "server/base/rate_limit.h"
 #include "server/net/limits.h"
 

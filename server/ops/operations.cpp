@@ -8,7 +8,7 @@
 
 namespace terrane {
 
-Operations::Operations(const ServerOptions& options, std::string metrics_host, asio::io_context& io,
+Operations::Operations(const OpsOptions& options, std::string metrics_host, asio::io_context& io,
                        SessionTable& sessions, const ServerCounters& counters, Wiring wiring)
     : metrics_host_(std::move(metrics_host)),
       on_shutdown_(options.on_shutdown),
@@ -18,7 +18,8 @@ Operations::Operations(const ServerOptions& options, std::string metrics_host, a
       strand_(asio::make_strand(io)),
       shutdown_timer_(strand_) {}
 
-FileResult<std::unique_ptr<Operations>> Operations::open(const ServerOptions& options, const WorldStore& store,
+FileResult<std::unique_ptr<Operations>> Operations::open(const OpsOptions& options, const WorldStore& store,
+                                                         const std::string& world_dir,
                                                          asio::io_context& io, SessionTable& sessions,
                                                          const ServerCounters& counters, Wiring wiring) {
   std::optional<std::pair<std::string, std::uint16_t>> metrics_at;
@@ -35,8 +36,7 @@ FileResult<std::unique_ptr<Operations>> Operations::open(const ServerOptions& op
                                     options.admin_token);
   if (!access) return access.error();
   ops->access_ = std::move(*access);
-  ops->admin_ = std::make_unique<Admin>(store, options.store_url.empty() ? options.world_dir : "", *ops->access_,
-                                        ops->hooks());
+  ops->admin_ = std::make_unique<Admin>(store, world_dir, *ops->access_, ops->hooks());
   ops->admin_fn_ = [self = ops.get()](const std::string& who, AdminRequestMsg req,
                                       std::function<void(AdminResultMsg)> reply) {
     std::lock_guard lock(self->admin_m_);

@@ -27,13 +27,13 @@
 
 #include "common/world/world_store.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
 #include "server/net/client_session.h"
 #include "server/net/session_table.h"
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
 #include "server/ops/http_endpoint.h"
 #include "server/ops/metrics.h"
+#include "server/ops/ops_options.h"
 #include "server/ops/stats_log.h"
 
 namespace terrane {
@@ -53,10 +53,13 @@ class Operations {
   };
 
   // store: the world's (reopened for the access rules; the admin room's).
-  // io: the io threads' context (the timers); sessions and counters
-  // outlive the operations. Fails on a store that does not reopen, bad
-  // tokens, or a --metrics address that does not parse or bind.
-  static FileResult<std::unique_ptr<Operations>> open(const ServerOptions& options, const WorldStore& store,
+  // world_dir: a SQLite world's directory, which the admin room's backup
+  // copies ("" for a PostgreSQL world). io: the io threads' context (the
+  // timers); sessions and counters outlive the operations. Fails on a
+  // store that does not reopen, bad tokens, or a --metrics address that
+  // does not parse or bind.
+  static FileResult<std::unique_ptr<Operations>> open(const OpsOptions& options, const WorldStore& store,
+                                                      const std::string& world_dir,
                                                       asio::io_context& io, SessionTable& sessions,
                                                       const ServerCounters& counters, Wiring wiring);
   ~Operations();
@@ -90,7 +93,7 @@ class Operations {
   void join_stopping();
 
  private:
-  Operations(const ServerOptions& options, std::string metrics_host, asio::io_context& io, SessionTable& sessions,
+  Operations(const OpsOptions& options, std::string metrics_host, asio::io_context& io, SessionTable& sessions,
              const ServerCounters& counters, Wiring wiring);
   AdminHooks hooks();
 

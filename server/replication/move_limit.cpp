@@ -3,8 +3,6 @@
 #include <cmath>
 #include <limits>
 
-#include "server/base/options.h"
-
 namespace terrane {
 
 double MoveLimit::allowed(Clock::time_point now) const {

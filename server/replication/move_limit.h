@@ -1,7 +1,7 @@
 // MoveLimit: how far one client may move between two ClientStates. The
 // first position it sends is where it joins; after that it moves at most
 // max_speed voxels a second since its last accepted move, plus
-// kSpeedSlackVoxels for jitter (server/base/options.h). max_speed 0: any
+// kSpeedSlackVoxels for jitter (below). max_speed 0: any
 // move is accepted.
 //
 // Threading: the client's session strand (one replicator's).
@@ -13,6 +13,10 @@
 #include "common/voxel/vec3.h"
 
 namespace terrane {
+
+// Movement allowed beyond max_speed * elapsed time between two positions
+// (network jitter bunches ClientState messages together).
+inline constexpr double kSpeedSlackVoxels = 48;
 
 class MoveLimit {
  public:

@@ -7,7 +7,7 @@
 
 namespace terrane {
 
-Redirector::Redirector(const ClusterDirectory* cluster, const ServerOptions& options)
+Redirector::Redirector(const ClusterDirectory* cluster, const ClusterOptions& options)
     : cluster_(cluster), options_(options) {}
 
 std::optional<Redirector::Move> Redirector::check(Vec3f p, Clock::time_point now) {

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "common/voxel/vec3.h"
-#include "server/base/options.h"
+#include "server/base/cluster_options.h"
 #include "server/storage/cluster_map.h"
 
 namespace terrane {
@@ -49,7 +49,7 @@ class Redirector {
 
   // cluster: null in a world of one server (nothing is ever redirected).
   // options: server_id, redirect_margin, lease. Both outlive this.
-  Redirector(const ClusterDirectory* cluster, const ServerOptions& options);
+  Redirector(const ClusterDirectory* cluster, const ClusterOptions& options);
 
   // The client joined (now): the settling time starts.
   void joined(Clock::time_point now) { joined_at_ = now; }
@@ -71,7 +71,7 @@ class Redirector {
   bool enabled() const { return cluster_ != nullptr && options_.redirect_margin > 0; }
 
   const ClusterDirectory* const cluster_;
-  const ServerOptions& options_;
+  const ClusterOptions& options_;
   Clock::time_point joined_at_;
   bool redirected_ = false;
   Clock::time_point redirected_at_;

@@ -31,9 +31,9 @@ HoldingForm form_sent(const ChunkVersion& v, int level) {
 
 }  // namespace
 
-Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-                       const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster,
-                       UpdateFaults* faults)
+Replicator::Replicator(ClientId id, WorldOwner& world, const ReplicationOptions& options,
+                       const ClusterOptions& cluster_options, ServerCounters& counters, const WelcomeTemplate& welcome,
+                       const StreamGate& gate, const ClusterDirectory* cluster, UpdateFaults* faults)
     : id_(id),
       world_(world),
       options_(options),
@@ -41,7 +41,7 @@ Replicator::Replicator(ClientId id, WorldOwner& world, const ServerOptions& opti
       welcome_(welcome),
       faults_(faults),
       yield_(gate, id, counters),
-      redirect_(cluster, options),
+      redirect_(cluster, cluster_options),
       move_limit_(options.max_speed),
       plan_(welcome.bounds),
       hashes_(std::chrono::milliseconds(options.hash_push_ms)) {
@@ -97,7 +97,7 @@ void Replicator::close(CloseReason why, const std::string& text) {
 // --- messages ------------------------------------------------------------------
 
 void Replicator::join(const std::string& name) {
-  edit_rate_ = TokenBucket(options_.edits_per_second, options_.edits_per_second * 2);
+  edit_rate_ = TokenBucket(world_.options().edits_per_second, world_.options().edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = name;
   joined_ = true;
@@ -175,7 +175,7 @@ void Replicator::maybe_redirect() {
   flush_stream();
   // In order with the data: everything sent before it is the client's to keep.
   session_->send(build_redirect(RedirectMsg{move->to.id, move->to.host, move->to.port,
-                                            std::to_string(options_.server_id) + "/" + std::to_string(id_)}));
+                                            std::to_string(welcome_.welcome.server_id) + "/" + std::to_string(id_)}));
 }
 
 void Replicator::send_parked_near() {
@@ -206,7 +206,7 @@ void Replicator::edit(EditRequestMsg edit) {
   if (!edit_rate_.take(1)) {
     counters_.limit_violations.fetch_add(1, std::memory_order_relaxed);
     violations().warn("session " + std::to_string(id_) + " (" + name_ + "): edit flood; dropping");
-    session_->close(CloseReason::kEditRate, "edit rate limit: more than " + std::to_string(static_cast<long long>(options_.edits_per_second)) +
+    session_->close(CloseReason::kEditRate, "edit rate limit: more than " + std::to_string(static_cast<long long>(world_.options().edits_per_second)) +
                     " edits/s");
     return;
   }
@@ -651,11 +651,12 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
     }
     // A chunk held coarser than full resolution: refreshed with the next
     // flush of mips, the newest version by then (changes coalesce).
-    if (options_.mip_refresh_ms == 0) {
+    const std::chrono::milliseconds refresh_after(world_.options().mip_refresh_ms);
+    if (refresh_after.count() == 0) {
       refresh_mip(cp, v);
     } else {
       if (slots_.mips_pending() == 0) {
-        mips_.first_change(std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.mip_refresh_ms));
+        mips_.first_change(std::chrono::steady_clock::now() + refresh_after);
       }
       bool first = false;
       slots_.change_if(cp, [&](ChunkSlot& slot) { first = slot.park_mip(std::move(v)); });

@@ -58,13 +58,13 @@
 #include "server/net/limits.h"
 #include "server/net/client_session.h"
 #include "server/net/session.h"
-#include "server/base/options.h"
 #include "server/replication/chunk_slot.h"
 #include "server/replication/hash_rotation.h"
 #include "server/replication/horizon_queue.h"
 #include "server/replication/mip_schedule.h"
 #include "server/replication/move_limit.h"
 #include "server/replication/redirector.h"
+#include "server/replication/replication_options.h"
 #include "server/replication/stream_gate.h"
 #include "server/replication/stream_yield.h"
 #include "server/replication/tick_update.h"
@@ -93,12 +93,15 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   // each crossing. Chunks are asked for only in view.
   static constexpr std::int32_t kKeepMargin = kChunkSize;
 
+  // options: the replication room's (the edit rate and the mips' refresh
+  // period are the world's: world.options()). cluster_options: this
+  // server's id, the lease and the redirect margin, read by redirects.
   // cluster: who writes which region, in a world shared by several
   // servers (null: one server, no redirects). faults: the test seam of
-  // UpdateBatches (null but in tests).
-  Replicator(ClientId id, WorldOwner& world, const ServerOptions& options, ServerCounters& counters,
-             const WelcomeTemplate& welcome, const StreamGate& gate, const ClusterDirectory* cluster = nullptr,
-             UpdateFaults* faults = nullptr);
+  // UpdateBatches (null but in tests). The references outlive this.
+  Replicator(ClientId id, WorldOwner& world, const ReplicationOptions& options,
+             const ClusterOptions& cluster_options, ServerCounters& counters, const WelcomeTemplate& welcome,
+             const StreamGate& gate, const ClusterDirectory* cluster = nullptr, UpdateFaults* faults = nullptr);
   // Before any message: the session this replicator speaks through.
   void attach(std::shared_ptr<Session> session);
 
@@ -173,7 +176,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
 
   const ClientId id_;
   WorldOwner& world_;
-  const ServerOptions& options_;
+  const ReplicationOptions& options_;
   ServerCounters& counters_;
   const WelcomeTemplate& welcome_;
   UpdateFaults* const faults_;

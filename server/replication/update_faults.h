@@ -1,9 +1,9 @@
 // UpdateFaults: the test seam of the replicators' UpdateBatches. A server
 // started with --test-drop-updates N or --test-corrupt-updates N
-// (ServerOptions::fault_drop_updates, fault_corrupt_updates: the bots'
-// tests, whose runs must then fail and name the region) gives every
-// replicator one BudgetedUpdateFaults; otherwise replicators get none, and
-// a replicator's only trace of the seam is one call before it joins a batch.
+// (UpdateFaultOptions, below: the bots' tests, whose runs must then fail
+// and name the region) gives every replicator one BudgetedUpdateFaults;
+// otherwise replicators get none, and a replicator's only trace of the
+// seam is one call before it joins a batch.
 //
 // Threading: tamper() is called on every session strand at once
 // (BudgetedUpdateFaults's budgets are atomics, shared by the server's
@@ -17,6 +17,15 @@
 #include "server/base/counters.h"
 
 namespace terrane {
+
+// The seam's options (ServerOptions::faults), test-only: silently skip
+// sending drop_updates UpdateBatch frames (the client's revision still
+// advances on the server's books), then send corrupt_updates of them with
+// one voxel wrong.
+struct UpdateFaultOptions {
+  int drop_updates = 0;
+  int corrupt_updates = 0;
+};
 
 class UpdateFaults {
  public:

@@ -47,7 +47,10 @@ FileResult<std::unique_ptr<Storage>> Storage::open(World& world, int loader_thre
 }
 
 Storage::Storage(World& world, int loader_threads, bool thread_priorities)
-    : world_(world), thread_priorities_(thread_priorities), loaders_(static_cast<std::size_t>(loader_threads)) {}
+    : world_(world),
+      thread_priorities_(thread_priorities),
+      loader_threads_(loader_threads),
+      loaders_(static_cast<std::size_t>(loader_threads)) {}
 
 Storage::~Storage() { stop(); }
 

@@ -157,6 +157,9 @@ class Storage {
   // Makes a region's horizon image (queued with the stream's loads, behind
   // the urgent ones that edits and full resolution wait on).
   void load_horizon(Vec3i region, int level, HorizonDone done);
+  // The loader threads (Residency keeps as many estimates' replacements
+  // under way).
+  int loader_threads() const { return loader_threads_; }
   // Whether the world is shared by several servers (Shared given).
   bool leased() const { return cluster_ != nullptr; }
   // Claims region's lease for this server if it does not hold it (on the
@@ -237,6 +240,7 @@ class Storage {
   World& world_;
   StorageCounters counters_;
   const bool thread_priorities_;
+  const int loader_threads_;
   asio::thread_pool loaders_;
   // Loader connections, borrowed for one load at a time, and the queued
   // loads (urgent first). Guarded by readers_mutex_: loads on the pool's

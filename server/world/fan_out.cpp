@@ -6,7 +6,7 @@
 
 namespace terrane {
 
-FanOut::FanOut(const ServerOptions& options, ServerCounters& counters) : options_(options), counters_(counters) {}
+FanOut::FanOut(const WorldOptions& options, ServerCounters& counters) : options_(options), counters_(counters) {}
 
 void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link) {
   Client c;

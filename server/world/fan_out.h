@@ -25,16 +25,16 @@
 
 #include "common/voxel/chunk.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
 #include "server/world/interest.h"
 #include "server/world/presence.h"
 #include "server/world/world_client.h"
+#include "server/world/world_options.h"
 
 namespace terrane {
 
 class FanOut {
  public:
-  FanOut(const ServerOptions& options, ServerCounters& counters);
+  FanOut(const WorldOptions& options, ServerCounters& counters);
 
   void join(ClientId id, std::shared_ptr<WorldClient> link);
   // After this nothing more reaches id (the replicator released what it
@@ -91,7 +91,7 @@ class FanOut {
   // Hands c its mip news now, whenever it was due.
   static void hand_mip_news(Client& c);
 
-  const ServerOptions& options_;
+  const WorldOptions& options_;
   ServerCounters& counters_;
   std::unordered_map<ClientId, Client> clients_;
   // Clients with mip news, by when it is due, earliest first (one period

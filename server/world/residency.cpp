@@ -23,7 +23,7 @@ bool same_voxels(int n, std::span<const std::uint8_t> a, std::span<const std::ui
 
 }  // namespace
 
-Residency::Residency(Strand& strand, Storage& storage, const ServerOptions& options, ServerCounters& counters,
+Residency::Residency(Strand& strand, Storage& storage, const WorldOptions& options, ServerCounters& counters,
                      const WorldClock& clock, FanOut& clients, HorizonCache& horizons)
     : strand_(strand),
       storage_(storage),
@@ -236,7 +236,7 @@ void Residency::on_coarse_loaded(LoadedCoarse c) {
 }
 
 void Residency::replace_estimates() {
-  const std::size_t cap = kReplacingLoadsPerWorker * static_cast<std::size_t>(std::max(1, options_.worker_threads));
+  const std::size_t cap = kReplacingLoadsPerWorker * static_cast<std::size_t>(storage_.loader_threads());
   while (replacing_ < cap && !estimates_.empty() && !clock_.stopping) {
     const Vec3i cp = estimates_.front();
     estimates_.pop_front();

@@ -43,12 +43,12 @@
 #include "common/voxel/vec3_map.h"
 #include "server/base/chunk_version.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
 #include "server/storage/storage.h"
 #include "server/world/fan_out.h"
 #include "server/world/horizon_cache.h"
 #include "server/world/world_client.h"
 #include "server/world/world_clock.h"
+#include "server/world/world_options.h"
 
 namespace terrane {
 
@@ -98,7 +98,7 @@ class Residency : public WorldView {
   // stream or urgent load waits for at most one generation).
   static constexpr std::size_t kReplacingLoadsPerWorker = 1;
 
-  Residency(Strand& strand, Storage& storage, const ServerOptions& options, ServerCounters& counters,
+  Residency(Strand& strand, Storage& storage, const WorldOptions& options, ServerCounters& counters,
             const WorldClock& clock, FanOut& clients, HorizonCache& horizons);
   // Before the first load.
   void watch_loads(LoadWatcher& watcher) { watcher_ = &watcher; }
@@ -217,7 +217,7 @@ class Residency : public WorldView {
 
   Strand& strand_;
   Storage& storage_;
-  const ServerOptions& options_;
+  const WorldOptions& options_;
   ServerCounters& counters_;
   const WorldClock& clock_;
   FanOut& clients_;

@@ -29,13 +29,15 @@ constexpr const char* kOutcomeUnknown = "outcome unknown";
 
 }  // namespace
 
-SharedAuthority::SharedAuthority(Strand& strand, World& world, Storage& storage, const ServerOptions& options,
-                                 ServerCounters& counters, const WorldClock& clock, Residency& residency,
-                                 FanOut& clients, EditQueue& queue)
+SharedAuthority::SharedAuthority(Strand& strand, World& world, Storage& storage, const WorldOptions& options,
+                                 const ClusterOptions& cluster, ServerCounters& counters, const WorldClock& clock,
+                                 Residency& residency, FanOut& clients, EditQueue& queue)
     : strand_(strand),
       world_(world),
       storage_(storage),
       options_(options),
+      server_id_(cluster.server_id),
+      lease_(cluster.lease),
       counters_(counters),
       clock_(clock),
       residency_(residency),
@@ -392,8 +394,8 @@ void SharedAuthority::read_inbox_page(std::int64_t after) {
         // other claims nothing for the edit and passes it back, with what
         // it holds of it; the winner claims every region of both edits,
         // those it is handing over too, once released.
-        const bool duel = in.from != options_.server_id && asked_each_other(in.from, r);
-        const bool back = duel && in.from < options_.server_id;
+        const bool duel = in.from != server_id_ && asked_each_other(in.from, r);
+        const bool back = duel && in.from < server_id_;
         // What this server knew of the edit's regions held elsewhere may be
         // out of date (the sender may have handed them over): asked again
         // when the edit's turn comes.
@@ -408,7 +410,7 @@ void SharedAuthority::read_inbox_page(std::int64_t after) {
           });
         // Refused by the tick if its turn comes after current_until.
         queue_.queue_forwarded(std::move(*edit), in.player,
-                               Forwarded{in.id, in.from, back, in.from == options_.server_id, in.current_until});
+                               Forwarded{in.id, in.from, back, in.from == server_id_, in.current_until});
       }
       if (!refused.empty()) storage_.answer(std::move(refused));
       if (got->size() == kInboxPage) {
@@ -439,7 +441,7 @@ bool SharedAuthority::take_forwarded_rate(const std::string& player) {
 
 std::chrono::milliseconds SharedAuthority::forward_wait() const {
   // An owner silent for a lease time has lost its regions anyway.
-  return std::max<std::chrono::milliseconds>(kForwardAnswerWait, options_.lease);
+  return std::max<std::chrono::milliseconds>(kForwardAnswerWait, lease_);
 }
 
 void SharedAuthority::answered(ForwardAnswer answer) {

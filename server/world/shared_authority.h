@@ -20,13 +20,14 @@
 #include <vector>
 
 #include "common/world/world.h"
-#include "server/base/options.h"
+#include "server/base/cluster_options.h"
 #include "server/base/rate_limit.h"
 #include "server/storage/storage.h"
 #include "server/world/authority.h"
 #include "server/world/fan_out.h"
 #include "server/world/residency.h"
 #include "server/world/world_clock.h"
+#include "server/world/world_options.h"
 
 namespace terrane {
 
@@ -37,9 +38,11 @@ class SharedAuthority final : public Authority {
   // forgotten).
   static constexpr std::size_t kMaxForwardedRates = 4096;
 
-  SharedAuthority(Strand& strand, World& world, Storage& storage, const ServerOptions& options,
-                  ServerCounters& counters, const WorldClock& clock, Residency& residency, FanOut& clients,
-                  EditQueue& queue);
+  // options: the edit rate (forwarded edits are held to it); cluster: this
+  // server's id and the lease's length.
+  SharedAuthority(Strand& strand, World& world, Storage& storage, const WorldOptions& options,
+                  const ClusterOptions& cluster, ServerCounters& counters, const WorldClock& clock,
+                  Residency& residency, FanOut& clients, EditQueue& queue);
 
   // Takes the edits forwarded while this server was away.
   void start() override { take_inbox(); }
@@ -51,7 +54,7 @@ class SharedAuthority final : public Authority {
   void forward(ClientId id, const EditRequestMsg& edit, const std::string& player, const Region& box,
                std::uint32_t to) override;
   void relay(Forwarded f, const Region& box, std::uint32_t to) override;
-  bool passes_back_to(std::uint32_t from) const override { return from < options_.server_id; }
+  bool passes_back_to(std::uint32_t from) const override { return from < server_id_; }
   void settle() override {
     if (!forwarded_.empty() || !unsure_.empty()) settle_forwarded();
   }
@@ -141,7 +144,7 @@ class SharedAuthority final : public Authority {
   // How long a forwarded edit waits for its owner to take it (its deadline).
   std::chrono::milliseconds forward_wait() const;
   // How long, after that, the answer of an owner that took it is waited for.
-  std::chrono::milliseconds answer_wait() const { return options_.lease; }
+  std::chrono::milliseconds answer_wait() const { return lease_; }
   // Tells clients the answers to their forwarded edits once the edits'
   // chunks are current here; takes back those not taken by their
   // deadline; gives up on those taken and unanswered for too long.
@@ -155,7 +158,9 @@ class SharedAuthority final : public Authority {
   Strand& strand_;
   World& world_;
   Storage& storage_;
-  const ServerOptions& options_;
+  const WorldOptions& options_;
+  const std::uint32_t server_id_;
+  const std::chrono::milliseconds lease_;
   ServerCounters& counters_;
   const WorldClock& clock_;
   Residency& residency_;

@@ -20,7 +20,7 @@ constexpr std::size_t kMaxEditsWaitingPerTick = 1024;
 
 }  // namespace
 
-Tick::Tick(Strand& strand, World& world, Storage& storage, const ServerOptions& options, ServerCounters& counters,
+Tick::Tick(Strand& strand, World& world, Storage& storage, const WorldOptions& options, ServerCounters& counters,
            WorldClock& clock, Residency& residency, FanOut& clients, Authority& authority)
     : strand_(strand),
       world_(world),

@@ -40,7 +40,6 @@
 
 #include "common/world/world.h"
 #include "server/base/counters.h"
-#include "server/base/options.h"
 #include "server/storage/storage.h"
 #include "server/world/authority.h"
 #include "server/world/fan_out.h"
@@ -48,6 +47,7 @@
 #include "server/world/residency.h"
 #include "server/world/world_client.h"
 #include "server/world/world_clock.h"
+#include "server/world/world_options.h"
 
 namespace terrane {
 
@@ -55,7 +55,7 @@ class Tick final : public EditQueue {
  public:
   using Strand = asio::strand<asio::io_context::executor_type>;
 
-  Tick(Strand& strand, World& world, Storage& storage, const ServerOptions& options, ServerCounters& counters,
+  Tick(Strand& strand, World& world, Storage& storage, const WorldOptions& options, ServerCounters& counters,
        WorldClock& clock, Residency& residency, FanOut& clients, Authority& authority);
 
   // On the strand: the schedule starts now.
@@ -139,7 +139,7 @@ class Tick final : public EditQueue {
   Strand& strand_;
   World& world_;
   Storage& storage_;
-  const ServerOptions& options_;
+  const WorldOptions& options_;
   ServerCounters& counters_;
   WorldClock& clock_;
   Residency& residency_;

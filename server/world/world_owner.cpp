@@ -8,23 +8,25 @@ namespace terrane {
 namespace {
 
 std::unique_ptr<Authority> make_authority(WorldOwner::Strand& strand, World& world, Storage& storage,
-                                          const ServerOptions& options, ServerCounters& counters,
-                                          const WorldClock& clock, Residency& residency, FanOut& clients,
-                                          EditQueue& queue) {
+                                          const WorldOptions& options, const ClusterOptions& cluster,
+                                          ServerCounters& counters, const WorldClock& clock, Residency& residency,
+                                          FanOut& clients, EditQueue& queue) {
   if (!storage.leased()) return std::make_unique<LocalAuthority>();
-  return std::make_unique<SharedAuthority>(strand, world, storage, options, counters, clock, residency, clients,
-                                           queue);
+  return std::make_unique<SharedAuthority>(strand, world, storage, options, cluster, counters, clock, residency,
+                                           clients, queue);
 }
 
 }  // namespace
 
-WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
-                       ServerCounters& counters)
-    : strand_(asio::make_strand(io)),
+WorldOwner::WorldOwner(asio::io_context& io, World& world, Storage& storage, const WorldOptions& options,
+                       ServerCounters& counters, const ClusterOptions& cluster)
+    : options_(options),
+      strand_(asio::make_strand(io)),
       fan_out_(options, counters),
       horizons_(strand_, storage, fan_out_),
       residency_(strand_, storage, options, counters, clock_, fan_out_, horizons_),
-      authority_(make_authority(strand_, world, storage, options, counters, clock_, residency_, fan_out_, tick_)),
+      authority_(
+          make_authority(strand_, world, storage, options, cluster, counters, clock_, residency_, fan_out_, tick_)),
       tick_(strand_, world, storage, options, counters, clock_, residency_, fan_out_, *authority_),
       requests_(strand_, [this](WorldRequest& r) { handle(r); }) {
   residency_.watch_loads(*authority_);

@@ -48,7 +48,7 @@
 
 #include "common/world/world.h"
 #include "server/base/chunk_version.h"
-#include "server/base/options.h"
+#include "server/base/cluster_options.h"
 #include "server/storage/postgres_store.h"
 #include "server/storage/storage.h"
 #include "server/world/authority.h"
@@ -59,6 +59,7 @@
 #include "server/world/tick.h"
 #include "server/world/world_client.h"
 #include "server/world/world_clock.h"
+#include "server/world/world_options.h"
 
 namespace terrane {
 
@@ -67,9 +68,11 @@ class WorldOwner {
   using Strand = asio::strand<asio::io_context::executor_type>;
   using RollbackResult = terrane::RollbackResult;
 
-  // storage.leased() (set before) picks the shared world's authority.
-  WorldOwner(asio::io_context& io, World& world, Storage& storage, const ServerOptions& options,
-             ServerCounters& counters);
+  // storage.leased() (set before) picks the shared world's authority, which
+  // reads cluster (this server's id and the lease; unused otherwise).
+  // options outlives the owner.
+  WorldOwner(asio::io_context& io, World& world, Storage& storage, const WorldOptions& options,
+             ServerCounters& counters, const ClusterOptions& cluster = {});
 
   void start();
   // Applies what is queued, stops the tick and waits for every commit.
@@ -146,11 +149,15 @@ class WorldOwner {
   // Runs fn on the strand and waits (tests, tools).
   void inspect(const std::function<void(const WorldView&)>& fn);
   bool storage_failed() const { return tick_.storage_failed(); }
+  // The world's options (any thread: read-only): replicators read the edit
+  // rate and the mips' refresh period here.
+  const WorldOptions& options() const { return options_; }
 
  private:
   // A request from the queue, on the strand.
   void handle(WorldRequest& r);
 
+  const WorldOptions& options_;
   Strand strand_;
   WorldClock clock_;
   FanOut fan_out_;

@@ -214,8 +214,8 @@ void BM_JoinImported(benchmark::State& state) {
   if (dir.empty()) return state.SkipWithError("cannot import the dataset (is terrane-world built?)");
   ServerOptions o;
   o.world_dir = dir.string();
-  o.hash_push_ms = 0;  // only streaming bytes in the figure
-  o.presence_hz = 0;
+  o.replication.hash_push_ms = 0;  // only streaming bytes in the figure
+  o.world.presence_hz = 0;
   auto server = Server::create(o);
   if (!server) return state.SkipWithError("cannot start the server");
   (*server)->start();

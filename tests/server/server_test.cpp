@@ -85,7 +85,7 @@ TEST_F(ServerTest, AnotherVersionsHelloIsToldWhyInADisconnectItCanRead) {
 
 TEST_F(ServerTest, WrongAuthTokenIsRejected) {
   ServerOptions o;
-  o.auth_token = "open sesame";
+  o.ops.auth_token = "open sesame";
   start(o);
   RawPeer p(server_->port());
   ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "t", "guess", {}})));
@@ -118,7 +118,7 @@ TEST_F(ServerTest, ASecondHelloOrAServersMessageAfterTheWelcomeIsAProtocolError)
 
 TEST_F(ServerTest, SilentPeerIsDroppedAtTheHandshakeDeadline) {
   ServerOptions o;
-  o.session.handshake_timeout = 200ms;
+  o.net.session.handshake_timeout = 200ms;
   start(o);
   RawPeer p(server_->port());
   auto f = p.next_of(wire::Body::Disconnect);
@@ -255,7 +255,7 @@ TEST_F(ServerTest, ReadBoxReturnsTheServersVoxelsOnlyForHeldChunks) {
 
 TEST_F(ServerTest, PresenceListsOtherClientsInView) {
   ServerOptions o;
-  o.presence_hz = 10;
+  o.world.presence_hz = 10;
   start(o);
   auto a = join("a");
   auto b = join("b");
@@ -277,7 +277,7 @@ TEST_F(ServerTest, PresenceListsOtherClientsInView) {
 
 TEST_F(ServerTest, ChunkHashesArePushedForFullResolutionChunks) {
   ServerOptions o;
-  o.hash_push_ms = 100;
+  o.replication.hash_push_ms = 100;
   start(o);
   auto p = join("verifier");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
@@ -295,8 +295,8 @@ TEST_F(ServerTest, ChunkHashesArePushedForFullResolutionChunks) {
 
 TEST_F(ServerTest, ChunksNobodyHoldsAreUnloadedAndComeBackWithTheirEdits) {
   ServerOptions o;
-  o.resident_chunks = 0;  // unload everything nobody holds, once a second
-  o.max_speed = 0;        // the walker teleports
+  o.world.resident_chunks = 0;  // unload everything nobody holds, once a second
+  o.replication.max_speed = 0;  // the walker teleports
   start(o);
   auto p = join("walker");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
@@ -408,7 +408,7 @@ TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) 
   // Exact mips only (estimates for the chunks never stored are tested
   // below): the unstored chunks are judged Air or generated when wanted.
   ServerOptions o;
-  o.horizon_estimates = false;
+  o.replication.horizon_estimates = false;
   start(o);
   auto p = join("far-sighted");
   const ClientStateMsg where{{1000.5f, 60.0f, 1000.5f}, 300, 32};
@@ -459,8 +459,8 @@ TEST_F(ServerTest, ADistantViewIsServedFromCoarseImagesWithoutReadingItsChunks) 
 TEST_F(ServerTest, ReplacedEstimatesAreUnloadedOnceNobodyWatchesThem) {
   // Nothing kept beyond what clients hold, on a world never generated.
   ServerOptions o;
-  o.resident_chunks = 0;
-  o.max_speed = 0;
+  o.world.resident_chunks = 0;
+  o.replication.max_speed = 0;
   start(o);
   auto p = join("explorer");
   const Vec3f here{1000.5f, 60.0f, 1000.5f};
@@ -939,7 +939,7 @@ TEST_F(ServerTest, EpochAndRevisionsOnlyGrowAcrossRestarts) {
 TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   std::atomic<bool> fatal{false};  // set on the world thread, read here
   ServerOptions o;
-  o.on_fatal = [&] { fatal = true; };
+  o.world.on_fatal = [&] { fatal = true; };
   start(o);
   auto p = join("editor");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});

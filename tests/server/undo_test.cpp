@@ -113,10 +113,10 @@ TEST_F(UndoTest, UndoKeepsAnotherClientsLaterChanges) {
 
 TEST_F(UndoTest, HistoryIsBoundedInBytes) {
   ServerOptions o;
-  o.history_bytes_per_client = 2000;  // a handful of small steps
+  o.world.history_bytes_per_client = 2000;  // a handful of small steps
   // 80 edits, each sent once the last is acknowledged: at 60 ticks a
   // second that is faster than the default rate limit's burst allows.
-  o.edits_per_second = 1000;
+  o.world.edits_per_second = 1000;
   start(o);
   auto a = editor("a");
   int acked = 0;

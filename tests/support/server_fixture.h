@@ -146,7 +146,7 @@ class ServerTest : public ::testing::Test {
   }
   void start(ServerOptions o = {}) {
     o.world_dir = dir_.string();
-    o.port = 0;
+    o.net.port = 0;
     auto s = Server::create(o);
     ASSERT_TRUE(s.ok()) << s.error().message;
     server_ = std::move(*s);

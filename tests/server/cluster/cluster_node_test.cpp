@@ -45,7 +45,7 @@ TEST_F(ClusterNodeTest, StartsAndStopsItsPartsInOrder) {
   ASSERT_TRUE(store->create_world(default_world_meta()).ok());
   ClusterStore* other = cl(store);  // server 2's leases and inbox
   ASSERT_NE(other, nullptr);
-  ServerOptions o;
+  ClusterOptions o;
   o.store_url = url_;
   o.server_id = 1;
   o.lease = lease_;

@@ -54,7 +54,7 @@ class LimitsTest : public ServerTest {
 
 TEST_F(LimitsTest, PerPlayerTokensAdmitOnlyTheirPlayer) {
   ServerOptions o;
-  o.player_tokens = {{"good", {"g-token", false}}, {"bob", {"b-token", false}}};
+  o.ops.player_tokens = {{"good", {"g-token", false}}, {"bob", {"b-token", false}}};
   start(o);
   RawPeer good(server_->port());
   ASSERT_TRUE(good.send(build_hello(HelloMsg{kProtocolVersion, "good", "g-token", {}})));
@@ -77,7 +77,7 @@ TEST_F(LimitsTest, PerPlayerTokensAdmitOnlyTheirPlayer) {
 TEST_F(LimitsTest, AnOpenServerIsRefusedBeyondLoopback) {
   ServerOptions o;
   o.world_dir = dir_.string();
-  o.bind_address = "0.0.0.0";  // refused before anything is bound
+  o.net.bind_address = "0.0.0.0";  // refused before anything is bound
   auto s = Server::create(o);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("without authentication"), std::string::npos) << s.error().message;
@@ -152,7 +152,7 @@ TEST(Networks, CanonicalFormsAndMembership) {
 
 TEST_F(LimitsTest, SlowlorisFramesAreDropped) {
   ServerOptions o;
-  o.session.frame_timeout = 300ms;
+  o.net.session.frame_timeout = 300ms;
   start(o);
   auto good = good_peer();
   auto slow = join("slow");
@@ -169,7 +169,7 @@ TEST_F(LimitsTest, SlowlorisFramesAreDropped) {
 
 TEST_F(LimitsTest, EditFloodIsDropped) {
   ServerOptions o;
-  o.edits_per_second = 5;
+  o.world.edits_per_second = 5;
   start(o);
   auto good = good_peer();
   auto flood = join("flood");
@@ -190,7 +190,7 @@ TEST_F(LimitsTest, EditFloodIsDropped) {
 
 TEST_F(LimitsTest, TeleportingIsDropped) {
   ServerOptions o;
-  o.max_speed = 100;
+  o.replication.max_speed = 100;
   start(o);
   auto good = good_peer();
   auto jumper = join("jumper");
@@ -203,8 +203,8 @@ TEST_F(LimitsTest, TeleportingIsDropped) {
 
 TEST_F(LimitsTest, InboundByteFloodIsDropped) {
   ServerOptions o;
-  o.session.inbound_bytes_per_second = 64 * 1024;
-  o.session.inbound_burst_bytes = 128 * 1024;
+  o.net.session.inbound_bytes_per_second = 64 * 1024;
+  o.net.session.inbound_burst_bytes = 128 * 1024;
   start(o);
   auto good = good_peer();
   auto hose = join("hose");
@@ -265,8 +265,8 @@ TEST_F(LimitsTest, GarbageAndOutOfRangeValuesAreRefused) {
 
 TEST_F(LimitsTest, OversizedEditsAreRejectedAndExtraClientsTurnedAway) {
   ServerOptions o;
-  o.max_edit_voxels = 100;
-  o.max_clients = 2;
+  o.replication.max_edit_voxels = 100;
+  o.net.max_clients = 2;
   start(o);
   auto good = good_peer();
   EditRequestMsg e;

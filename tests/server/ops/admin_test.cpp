@@ -31,7 +31,7 @@ constexpr const char* kAdminToken = "admin-secret-1";
 class AdminTest : public ServerTest {
  protected:
   void start_admin(ServerOptions o = {}) {
-    o.admin_token = kAdminToken;
+    o.ops.admin_token = kAdminToken;
     start(o);
   }
   // A session that sent Hello: its Welcome, or the Disconnect reason.
@@ -134,7 +134,7 @@ TEST_F(AdminTest, ASessionWithoutAViewCostsNoCpu) {
 
 TEST_F(AdminTest, TokensFileRolesMakeAdmins) {
   ServerOptions o;
-  o.player_tokens = {{"op", {"op-token", true}}, {"pat", {"pat-token", false}}};
+  o.ops.player_tokens = {{"op", {"op-token", true}}, {"pat", {"pat-token", false}}};
   start(o);
   auto op = connect("op", "op-token");
   auto pat = connect("pat", "pat-token");
@@ -317,7 +317,7 @@ TEST_F(AdminTest, ShutdownWarnsEveryClientThenAsksTheOwnerToStop) {
   std::promise<void> asked;
   std::once_flag once;
   ServerOptions o;
-  o.on_shutdown = [&] { std::call_once(once, [&] { asked.set_value(); }); };
+  o.ops.on_shutdown = [&] { std::call_once(once, [&] { asked.set_value(); }); };
   start_admin(o);
   auto admin = connect("admin", kAdminToken);
   auto player = connect("player");

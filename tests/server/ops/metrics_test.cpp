@@ -225,7 +225,7 @@ class MetricsEndpointTest : public ServerTest {
 
 TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenAClientEdits) {
   ServerOptions o;
-  o.metrics_address = "127.0.0.1:0";
+  o.ops.metrics_address = "127.0.0.1:0";
   start(o);
   ASSERT_NE(server_->metrics_port(), 0);
   // Healthy from the first tick on (503 "not ticking yet" before it).
@@ -295,16 +295,16 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
 
 TEST_F(MetricsEndpointTest, ABadOrTakenAddressIsAClearError) {
   ServerOptions o;
-  o.metrics_address = "127.0.0.1:0";
+  o.ops.metrics_address = "127.0.0.1:0";
   start(o);
   ServerOptions again;
   again.world_dir = (dir_ / "second").string();
-  again.metrics_address = "127.0.0.1:" + std::to_string(server_->metrics_port());
+  again.ops.metrics_address = "127.0.0.1:" + std::to_string(server_->metrics_port());
   auto taken = Server::create(again);
   ASSERT_FALSE(taken.ok());
   EXPECT_NE(taken.error().message.find("metrics: cannot listen on 127.0.0.1:"), std::string::npos)
       << taken.error().message;
-  again.metrics_address = "nowhere";
+  again.ops.metrics_address = "nowhere";
   auto bad = Server::create(again);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("--metrics: 'nowhere' is not HOST:PORT"), std::string::npos)

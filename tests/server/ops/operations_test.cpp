@@ -52,8 +52,7 @@ class OperationsTest : public ::testing::Test {
   }
   // The operations on options, their world's status as given, flush and
   // rollback unused; stopping counts the server's stops.
-  void open(ServerOptions options = {}) {
-    options.world_dir = (dir_ / "world").string();
+  void open(const OpsOptions& options = {}) {
     Operations::Wiring w;
     w.world.status = [] {
       ServerStatus s;
@@ -66,7 +65,8 @@ class OperationsTest : public ::testing::Test {
     w.metrics = [] { return std::string("terrane_test_metric 1\n"); };
     w.health = [this] { return healthy_ ? Health{true, "ok"} : Health{false, "storage failed"}; };
     w.stop = [this] { ++stops_; };
-    auto ops = Operations::open(options, world_->store(), io_, sessions_, counters_, std::move(w));
+    auto ops = Operations::open(options, world_->store(), (dir_ / "world").string(), io_, sessions_, counters_,
+                                std::move(w));
     ASSERT_TRUE(ops.ok()) << ops.error().message;
     ops_ = std::move(*ops);
     context_.emplace(ClientSession::Context{welcome_, ops_->admitter(), ops_->admin(), counters_,
@@ -171,7 +171,7 @@ TEST_F(OperationsTest, AShutdownWhoseTimerStoppedNeverStopsTheServer) {
 }
 
 TEST_F(OperationsTest, ServesMetricsAndHealthAsTheServerGivesThem) {
-  ServerOptions o;
+  OpsOptions o;
   o.metrics_address = "127.0.0.1:0";
   open(o);
   ASSERT_NE(ops_->metrics_port(), 0);
@@ -191,10 +191,10 @@ TEST_F(OperationsTest, ServesMetricsAndHealthAsTheServerGivesThem) {
 }
 
 TEST_F(OperationsTest, ABadMetricsAddressIsRefused) {
-  ServerOptions o;
-  o.world_dir = (dir_ / "world").string();
+  OpsOptions o;
   o.metrics_address = "nowhere";
-  auto ops = Operations::open(o, world_->store(), io_, sessions_, counters_, Operations::Wiring{});
+  auto ops = Operations::open(o, world_->store(), (dir_ / "world").string(), io_, sessions_, counters_,
+                              Operations::Wiring{});
   ASSERT_FALSE(ops.ok());
   EXPECT_EQ(ops.error().message.rfind("--metrics: ", 0), 0u) << ops.error().message;
 }

@@ -42,7 +42,7 @@ class PrometheusTest : public ServerTest {};
 TEST_F(PrometheusTest, ARealPrometheusScrapesTheServerAndSeesItsEdits) {
   ASSERT_TRUE(have("prometheus")) << "prometheus is not installed: run scripts/install-deps.sh";
   ServerOptions o;
-  o.metrics_address = "127.0.0.1:0";
+  o.ops.metrics_address = "127.0.0.1:0";
   start(o);
   const fs::path dir = testing_support::scratch_dir("terrane-prometheus");
   fs::create_directories(dir / "data");

@@ -5,8 +5,6 @@
 
 #include <gtest/gtest.h>
 
-#include "server/base/options.h"
-
 namespace terrane {
 namespace {
 

@@ -36,7 +36,7 @@ class RedirectorTest : public ::testing::Test {
   }
   static Vec3f in_region(float x) { return {x * kRegionVoxels + 128, 128, 128}; }
 
-  ServerOptions options_;
+  ClusterOptions options_;
   ClusterDirectory cluster_;
   const Clock::time_point t0_ = Clock::now();
 };

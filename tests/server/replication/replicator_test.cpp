@@ -89,10 +89,10 @@ class ReplicatorTest : public testing_support::ServerTest {
 
 TEST_F(ReplicatorTest, AStepIntoTheNextChunkAndBackReleasesNothingAndAsksForNothingAgain) {
   ServerOptions o;
-  o.max_speed = 0;  // it steps a chunk at a time, at once
+  o.replication.max_speed = 0;  // it steps a chunk at a time, at once
   // Every distant chunk sent as its own mip: no estimate is corrected later
   // by a record of its own.
-  o.horizon_estimates = false;
+  o.replication.horizon_estimates = false;
   start(o);
   auto p = join_keeping_bounds("stepper");
   const Vec3f a{1008.0f, 12.0f, 1008.0f};
@@ -112,8 +112,8 @@ TEST_F(ReplicatorTest, AStepIntoTheNextChunkAndBackReleasesNothingAndAsksForNoth
 
 TEST_F(ReplicatorTest, ChunksAreReleasedOnlyBeyondTheViewAndItsMargin) {
   ServerOptions o;
-  o.max_speed = 0;
-  o.horizon_estimates = false;
+  o.replication.max_speed = 0;
+  o.replication.horizon_estimates = false;
   start(o);
   auto p = join_keeping_bounds("walker");
   Vec3f pos{1008.0f, 12.0f, 1008.0f};

@@ -97,7 +97,7 @@ class StreamGateServerTest : public testing_support::ServerTest {};
 
 TEST_F(StreamGateServerTest, WhileClosedNothingIsStreamedButEditsAndUpdatesGoOn) {
   ServerOptions o;
-  o.horizon_images = false;  // a new view's first pump asks for chunks at once (not after its horizon images)
+  o.replication.horizon_images = false;  // a new view's first pump asks for chunks at once (not after its horizon images)
   start(o);
   StreamGate& gate = server_->stream_gate();
   gate.hold_closed(true);
@@ -133,7 +133,7 @@ TEST_F(StreamGateServerTest, WhileClosedRefreshesOfMipsWaitAndComeOnceItOpens) {
   ServerOptions o;
   // Every distant chunk sent as its own mip: no estimate is corrected by a
   // refresh of its own while the test counts refreshes.
-  o.horizon_estimates = false;
+  o.replication.horizon_estimates = false;
   start(o);
   StreamGate& gate = server_->stream_gate();
   // The editor holds the edited chunk at full resolution; the watcher, 60
@@ -173,7 +173,7 @@ TEST_F(StreamGateServerTest, ClosedByTheProbesStreamingSlowsButNeverStops) {
   // A threshold so long that the probes (every quarter of it) neither close
   // nor reopen the gate during the test: one late observation closes it.
   ServerOptions o;
-  o.stream_yield = std::chrono::minutes(10);
+  o.replication.stream_yield = std::chrono::minutes(10);
   start(o);
   StreamGate& gate = server_->stream_gate();
   gate.observe(Probe::kIo, std::chrono::minutes(11));

@@ -31,7 +31,7 @@ class FanOutTest : public ::testing::Test {
     return c;
   }
 
-  ServerOptions options_;
+  WorldOptions options_;
   ServerCounters counters_;
   FanOut fan_out_{options_, counters_};
   const Vec3i cp_{3, 0, 4};

@@ -26,7 +26,7 @@ class HorizonCacheTest : public ::testing::Test {
   }
 
   WorldStrand w_;
-  ServerOptions options_;
+  WorldOptions options_;
   ServerCounters counters_;
   FanOut fan_out_{options_, counters_};
   HorizonCache cache_{w_.strand, *w_.storage, fan_out_};

@@ -52,7 +52,7 @@ class ResidencyTest : public ::testing::Test {
 
   std::shared_ptr<StoreGate> gate_;  // null: no read waits
   WorldStrand w_;
-  ServerOptions options_;
+  WorldOptions options_;
   ServerCounters counters_;
   WorldClock clock_;
   FanOut fan_out_{options_, counters_};

@@ -66,14 +66,14 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     auto store = PostgresStore::open(url_);
     ASSERT_TRUE(store.ok()) << store.error().message;
     ASSERT_TRUE((*store)->create_world(default_world_meta()).ok());
-    options_.server_id = kThisServer;
+    cluster_.server_id = kThisServer;
     auto keeper = LeaseKeeper::open(url_, kThisServer, LeaseTimes{}, nullptr);
     ASSERT_TRUE(keeper.ok()) << keeper.error().message;
     keeper_ = std::move(*keeper);
     auto control = ClusterControl::open(url_, *keeper_);
     ASSERT_TRUE(control.ok()) << control.error().message;
     control_ = std::move(*control);
-    (*store)->set_lease_source(keeper_->held_source(), options_.lease);
+    (*store)->set_lease_source(keeper_->held_source(), cluster_.lease);
     const PostgresStore& chunks = **store;
     auto w = World::open(std::unique_ptr<WorldStore>(std::move(*store)));
     ASSERT_TRUE(w.ok()) << w.error().message;
@@ -86,7 +86,7 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
     horizons_ = std::make_unique<HorizonCache>(strand_, *storage_, *fan_out_);
     residency_ =
         std::make_unique<Residency>(strand_, *storage_, options_, counters_, clock_, *fan_out_, *horizons_);
-    authority_ = std::make_unique<SharedAuthority>(strand_, *world_, *storage_, options_, counters_, clock_,
+    authority_ = std::make_unique<SharedAuthority>(strand_, *world_, *storage_, options_, cluster_, counters_, clock_,
                                                    *residency_, *fan_out_, edits_);
     residency_->watch_loads(*authority_);
     thread_ = std::thread([this] { io_.run(); });
@@ -201,7 +201,8 @@ class SharedAuthorityTest : public testing_support::PostgresTest {
   }
 
   static constexpr std::uint32_t kThisServer = 2;
-  ServerOptions options_;
+  WorldOptions options_;
+  ClusterOptions cluster_;
   ServerCounters counters_;
   WorldClock clock_;
   NoEdits edits_;
@@ -315,7 +316,7 @@ TEST_F(SharedAuthorityTest, AnEditIsPassedBackOnlyToALowerIdAskedForTheSameRegio
 // has run out lands with its deadline passed: its owner never takes it,
 // and its player is told it was not applied.
 TEST_F(SharedAuthorityTest, AForwardHeldUpPastItsWaitIsRefusedAndNeverTaken) {
-  options_.lease = 1000ms;  // a forward waits 2 s
+  cluster_.lease = 1000ms;  // a forward waits 2 s
   PGconn* lock = PQconnectdb(url_.c_str());
   ASSERT_EQ(PQstatus(lock), CONNECTION_OK) << PQerrorMessage(lock);
   auto command = [&](const char* sql) {
@@ -348,7 +349,7 @@ TEST_F(SharedAuthorityTest, AForwardHeldUpPastItsWaitIsRefusedAndNeverTaken) {
 // sender cannot take it back, waits a while longer, then says its outcome
 // is unknown (it may still have been applied).
 TEST_F(SharedAuthorityTest, AForwardTakenAndNeverAnsweredEndsWithItsOutcomeUnknown) {
-  options_.lease = 1000ms;
+  cluster_.lease = 1000ms;
   forward_anns_edit();
   std::vector<InboxEdit> taken;
   ASSERT_TRUE(testing_support::eventually([&] {

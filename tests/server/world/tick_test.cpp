@@ -93,7 +93,7 @@ class TickTest : public ::testing::Test {
   std::shared_ptr<testing_support::StoreGate> gate_ =
       std::make_shared<testing_support::StoreGate>(std::unordered_set<Vec3i, Vec3iHash>{});
   WorldStrand w_{gate_};
-  ServerOptions options_;
+  WorldOptions options_;
   ServerCounters counters_;
   WorldClock clock_;
   FanOut fan_out_{options_, counters_};

@@ -97,7 +97,7 @@ class Recorder : public WorldClient {
 
 class WorldOwnerTest : public ::testing::Test {
  protected:
-  explicit WorldOwnerTest(std::uint32_t mip_refresh_ms = ServerOptions{}.mip_refresh_ms) {
+  explicit WorldOwnerTest(std::uint32_t mip_refresh_ms = WorldOptions{}.mip_refresh_ms) {
     options_.mip_refresh_ms = mip_refresh_ms;
   }
   void SetUp() override {
@@ -153,7 +153,7 @@ class WorldOwnerTest : public ::testing::Test {
   fs::path dir_;
   std::unique_ptr<World> world_;
   std::unique_ptr<Storage> storage_;
-  ServerOptions options_;
+  WorldOptions options_;
   ServerCounters counters_;
   asio::io_context io_;
   asio::executor_work_guard<asio::io_context::executor_type> work_{asio::make_work_guard(io_)};

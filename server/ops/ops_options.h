@@ -1,0 +1,35 @@
+// The ops room's options: the access rules' tokens, the /metrics endpoint
+// and what a scheduled shutdown calls. Plain data, filled by main.cpp
+// (part of ServerOptions, server/server_options.h) and given to
+// Operations::open.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <unordered_map>
+
+#include "server/net/net_options.h"
+
+namespace terrane {
+
+struct OpsOptions {
+  // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =
+  // none; port 0 picks a free one (see metrics_port()).
+  std::string metrics_address;
+  // Authentication (checked at the handshake, by AccessControl): per-player
+  // tokens (name -> token, from a tokens file) take precedence over one
+  // shared token; with neither the server is open, which it allows only on
+  // a loopback address unless allow_open says otherwise.
+  std::string auth_token;
+  std::unordered_map<std::string, PlayerToken> player_tokens;
+  // Whoever gives this token joins as an admin (terrane-admin), whatever
+  // the name; empty = admins only through the tokens file's roles.
+  std::string admin_token;
+  bool allow_open = false;
+  // Called (any thread) when an operator asked the server to stop
+  // (terrane-admin shutdown) and the warning time is up; the owner of the
+  // Server should stop it, as on SIGTERM.
+  std::function<void()> on_shutdown;
+};
+
+}  // namespace terrane

@@ -1,0 +1,20 @@
+// The storage room's options: the loader threads and the edit log's
+// retention. Plain data, filled by main.cpp (part of ServerOptions,
+// server/server_options.h); the Server gives them to Storage::open and
+// Storage::set_edit_log_retention.
+#pragma once
+
+#include <cstdint>
+
+namespace terrane {
+
+struct StorageOptions {
+  // Loader threads: reading stored chunks and generating missing ones.
+  int worker_threads = 2;
+  // The edit log (who changed what, for terrane-admin log and rollback)
+  // keeps entries this many days and this many MiB of voxels (0: no bound).
+  std::uint32_t edit_log_days = 30;
+  std::uint32_t edit_log_mb = 1024;
+};
+
+}  // namespace terrane
