@@ -346,6 +346,7 @@ AdminHooks Server::world_hooks() {
     s.world_dir = options_.world_dir;
     s.epoch = world_->meta().epoch;
     s.clients = counters_.clients.load();
+    s.admin_sessions = counters_.admin_sessions.load();
     s.ticks = counters_.ticks.load();
     s.tick_hz = options_.world.tick_hz;
     s.edits_applied = counters_.edits_applied.load();

@@ -154,7 +154,8 @@ class CommitRetries {
 struct ServerCounters {
   std::atomic<std::uint64_t> sessions_accepted{0};
   std::atomic<std::uint64_t> joins{0};           // handshakes accepted (Welcome sent)
-  std::atomic<std::uint64_t> clients{0};         // welcomed and connected now
+  std::atomic<std::uint64_t> clients{0};         // players welcomed and connected now
+  std::atomic<std::uint64_t> admin_sessions{0};  // operators' sessions (terrane-admin) connected now
   std::atomic<std::uint64_t> ticks{0};
   std::atomic<std::uint64_t> edits_applied{0};
   std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(RejectReason::kCount)> edits_rejected_by{};

@@ -87,7 +87,7 @@ void ClientSession::on_hello(const HelloMsg& hello) {
     info_ = Info{name_, context_.welcome.spawn, admin_, true, std::chrono::steady_clock::now()};
   }
   replica_->join(name_);
-  context_.counters.clients.fetch_add(1, std::memory_order_relaxed);
+  (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_add(1, std::memory_order_relaxed);
   context_.counters.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(context_.welcome));
   // A Redirect's token says where the client comes from (it grants nothing).
@@ -138,7 +138,8 @@ void ClientSession::on_closed(const std::string& reason) {
   ping_timer_->cancel();
   if (context_.forget) context_.forget(id_);
   replica_->closed();
-  if (joined_) context_.counters.clients.fetch_sub(1, std::memory_order_relaxed);
+  if (joined_)
+    (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_sub(1, std::memory_order_relaxed);
   server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : printable(name_), reason);
   session_.reset();  // breaks the cycle with the session's callbacks
 }

@@ -41,7 +41,7 @@ struct ServerStatus {
   std::string world_dir;
   std::uint64_t epoch = 0;
   double uptime_s = 0;
-  std::uint64_t clients = 0, ticks = 0, edits_applied = 0, edits_rejected = 0, chunks_resident = 0;
+  std::uint64_t clients = 0, admin_sessions = 0, ticks = 0, edits_applied = 0, edits_rejected = 0, chunks_resident = 0;
   std::uint32_t tick_hz = 0;
   bool storage_failed = false;
   double tick_mean_ms = 0;

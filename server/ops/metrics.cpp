@@ -112,7 +112,10 @@ std::string render_metrics(const MetricsSources& s) {
   const ServerCounters& c = s.server;
   Exposition m;
 
-  m.gauge("terrane_clients", "Clients connected and past the handshake.", load(c.clients));
+  m.gauge("terrane_clients", "Players connected and past the handshake (operators' sessions: terrane_admin_sessions).",
+          load(c.clients));
+  m.gauge("terrane_admin_sessions", "Operators' sessions (terrane-admin) connected and past the handshake.",
+          load(c.admin_sessions));
   m.counter("terrane_sessions_accepted_total", "TCP connections accepted.", load(c.sessions_accepted));
   m.counter("terrane_joins_total", "Handshakes accepted (Welcome sent).", load(c.joins));
   m.family("terrane_disconnects_total", "counter", "Sessions ended, by reason.");

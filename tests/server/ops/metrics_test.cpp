@@ -66,6 +66,7 @@ TEST(Metrics, EveryFamilyHasHelpAndTypeAndHistogramsAreCumulative) {
   StorageCounters st;
   EncodeCounters enc;
   c.clients = 3;
+  c.admin_sessions = 1;
   c.edits_applied = 41;
   c.rejected(RejectReason::kOutsideWorld, 2);
   c.net.disconnected(CloseReason::kIdleTimeout);
@@ -77,6 +78,7 @@ TEST(Metrics, EveryFamilyHasHelpAndTypeAndHistogramsAreCumulative) {
   enc.made = 4;
   const std::string text = render_metrics(MetricsSources{c, st, enc, false, read_process_stats()});
   EXPECT_EQ(sample(text, "terrane_clients"), 3);
+  EXPECT_EQ(sample(text, "terrane_admin_sessions"), 1);
   EXPECT_EQ(sample(text, "terrane_edits_applied_total"), 41);
   EXPECT_EQ(sample(text, "terrane_edits_rejected_total{reason=\"outside_world\"}"), 2);
   EXPECT_EQ(sample(text, "terrane_edits_rejected_total{reason=\"queue_full\"}"), 0);
