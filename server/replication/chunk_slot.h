@@ -26,6 +26,7 @@
 
 #include "common/voxel/vec3_map.h"
 #include "protocol/holding.h"
+#include "protocol/stream_batch.h"
 #include "server/base/chunk_version.h"
 
 namespace terrane {
@@ -33,6 +34,18 @@ namespace terrane {
 // Why a chunk was asked of the world: the coarse pass (the whole view at
 // its coarsest), a refinement of a chunk held coarser than the plan wants,
 // or a resuming client's claim, checked against the chunk's revision.
+// The record a chunk sent at level (0 full, 1..3 a mip) goes in.
+inline StreamRecordKind record_kind(int level) {
+  return level == 0 ? StreamRecordKind::kFull : record_kind_of(mip_form(level));
+}
+
+// The form a version sent at level (0 full, 1..3 a mip) gives its chunk.
+inline HoldingForm form_sent(const ChunkVersion& v, int level) {
+  if (v.empty()) return HoldingForm::kEmpty;
+  if (v.estimate()) return HoldingForm::kEstimate;
+  return level == 0 ? HoldingForm::kFull : mip_form(level);
+}
+
 enum class ChunkIntent : std::uint8_t { kCoarse, kRefine, kClaim };
 
 struct ChunkRequest {

@@ -18,17 +18,6 @@ namespace {
 // this soon.
 constexpr auto kPumpRetry = std::chrono::milliseconds(20);
 
-StreamRecordKind record_kind(int level) {
-  return level == 0 ? StreamRecordKind::kFull : record_kind_of(mip_form(level));
-}
-
-// The form a version sent at level (0 full, 1..3 a mip) gives its chunk.
-HoldingForm form_sent(const ChunkVersion& v, int level) {
-  if (v.empty()) return HoldingForm::kEmpty;
-  if (v.estimate()) return HoldingForm::kEstimate;
-  return level == 0 ? HoldingForm::kFull : mip_form(level);
-}
-
 }  // namespace
 
 Replicator::Replicator(ClientId id, WorldOwner& world, const ReplicationOptions& options,
