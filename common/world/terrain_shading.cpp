@@ -15,9 +15,6 @@ namespace m = materials;
 
 constexpr std::int32_t kStep = TerrainField::kLatticeStep;
 constexpr float kInvStep = 1.0f / static_cast<float>(kStep);
-constexpr std::int32_t kCaveMinY = TerrainShading::kCaveMinY;
-constexpr std::int32_t kBedrockY = TerrainShading::kBedrockY;
-constexpr std::int32_t kLavaY = TerrainShading::kLavaY;
 
 // Trilinear interpolation of the 8 lattice corners c[(dy * 2 + dz) * 2 + dx].
 // The single formula both generate() and voxel_at() use, so their bits agree.
