@@ -127,8 +127,7 @@ FileStatus SqliteQuarantine::for_each(const std::function<void(const Quarantined
     const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 4));
     const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 4));
     if (data) q.blob.assign(data, data + size);
-    const auto* reason = reinterpret_cast<const char*>(sqlite3_column_text(st, 5));
-    if (reason) q.reason = reason;
+    q.reason = sqlite_column_string(st, 5);
     q.time_unix_s = sqlite3_column_int64(st, 6);
     fn(q);
   }

@@ -150,7 +150,7 @@ FileStatus SqliteStore::upgrade_to_coarse(const Progress& progress) {
     bool done_already = false;
     if (sqlite3_prepare_v2(db(), "SELECT value FROM meta WHERE key = 'format_version'", -1, &v, nullptr) == SQLITE_OK &&
         sqlite3_step(v) == SQLITE_ROW)
-      done_already = std::string(reinterpret_cast<const char*>(sqlite3_column_text(v, 0))) == "2";
+      done_already = sqlite_column_string(v, 0) == "2";
     sqlite3_finalize(v);
     if (done_already) {
       sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr);
@@ -470,10 +470,7 @@ FileResult<std::string> SqliteStore::pragma(const std::string& name) {
   if (sqlite3_prepare_v2(db(), ("PRAGMA " + name).c_str(), -1, &st, nullptr) != SQLITE_OK)
     return error("cannot run pragma " + name);
   std::string out;
-  if (sqlite3_step(st) == SQLITE_ROW) {
-    const auto* t = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
-    if (t) out = t;
-  }
+  if (sqlite3_step(st) == SQLITE_ROW) out = sqlite_column_string(st, 0);
   sqlite3_finalize(st);
   return out;
 }

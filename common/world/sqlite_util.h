@@ -1,8 +1,8 @@
 // What the owners of a world's SQLite tables share (SqliteStore and the
 // owners it holds: SqliteEditLog, SqliteQuarantine, SqliteCoarseImages,
 // SqliteAccess): error messages naming the world, a prepared statement's
-// reset, whether a table exists, and the chunk rows of a table within a
-// coarse region. Free functions over one connection, no state of their own.
+// reset, a text column read, whether a table exists, and the chunk rows of
+// a table within a coarse region. Free functions over one connection, no state of their own.
 // Thread-safety: that of the connection (one owner thread).
 #pragma once
 
@@ -27,6 +27,10 @@ struct SqliteStmtReset {
   sqlite3_stmt* s;
   ~SqliteStmtReset();
 };
+
+// A text column of the current row; empty when it is NULL, which a damaged
+// or hand-edited world can hold even where the schema says NOT NULL.
+std::string sqlite_column_string(sqlite3_stmt* st, int column);
 
 // Whether the database has a table of that name (false if it cannot tell).
 bool sqlite_table_exists(sqlite3* db, const char* name);

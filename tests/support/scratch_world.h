@@ -42,6 +42,24 @@ class ScratchWorldTest : public ::testing::Test {
     open_db();
   }
   void exec(const char* sql) { ASSERT_EQ(sqlite3_exec(db_, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sql; }
+  // Replaces from with to in table's schema text and reopens the connection
+  // (which must have no statements left): a world as a damaged or
+  // hand-edited file can hold it, e.g. a NOT NULL column that takes NULL.
+  void rewrite_schema(const char* table, const char* from, const char* to) {
+    exec("PRAGMA writable_schema = ON");
+    sqlite3_stmt* st = nullptr;
+    ASSERT_EQ(sqlite3_prepare_v2(db_, "UPDATE sqlite_master SET sql = replace(sql, ?1, ?2) WHERE name = ?3", -1, &st,
+                                 nullptr),
+              SQLITE_OK);
+    sqlite3_bind_text(st, 1, from, -1, SQLITE_STATIC);
+    sqlite3_bind_text(st, 2, to, -1, SQLITE_STATIC);
+    sqlite3_bind_text(st, 3, table, -1, SQLITE_STATIC);
+    EXPECT_EQ(sqlite3_step(st), SQLITE_DONE);
+    EXPECT_EQ(sqlite3_changes(db_), 1);
+    sqlite3_finalize(st);
+    exec("PRAGMA writable_schema = OFF");
+    reopen_db();
+  }
   // Writes a chunks row (over any there), as SqliteStore::save_chunks does.
   void put_row(Vec3i pos, std::uint64_t revision, const std::vector<std::uint8_t>& blob) {
     sqlite3_stmt* st = nullptr;

@@ -55,5 +55,16 @@ TEST_F(SqliteAccessTest, EntriesRoundTripByKeyAndSurviveReopening) {
   EXPECT_EQ(access_->entries()->size(), 2u);
 }
 
+TEST_F(SqliteAccessTest, ANullValueInADamagedWorldReadsAsEmpty) {
+  ASSERT_TRUE(access_->put("ban:ann", "for ever").ok());
+  access_.reset();
+  ASSERT_NO_FATAL_FAILURE(rewrite_schema("access", "value TEXT NOT NULL", "value TEXT"));
+  access_ = std::make_unique<SqliteAccess>(db_, dir_);
+  exec("UPDATE access SET value = NULL");
+  auto read = access_->entries();
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  EXPECT_EQ(*read, (Entries{{"ban:ann", ""}}));
+}
+
 }  // namespace
 }  // namespace terrane

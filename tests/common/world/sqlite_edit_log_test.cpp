@@ -138,5 +138,17 @@ TEST_F(SqliteEditLogTest, TheLogSurvivesReopeningAndIsCountedAgain) {
   EXPECT_EQ(log().query(EditLogQuery{})->front().tick, 2u);
 }
 
+TEST_F(SqliteEditLogTest, ANullPlayerInADamagedWorldReadsAsNoName) {
+  append({entry(1, 1000, "ann", {{0, 0, 0}, {1, 1, 1}}, 5)});
+  log_.reset();
+  ASSERT_NO_FATAL_FAILURE(rewrite_schema("edit_log", "player TEXT NOT NULL", "player TEXT"));
+  exec("UPDATE edit_log SET player = NULL");
+  auto read = log().query(EditLogQuery{});
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  ASSERT_EQ(read->size(), 1u);
+  EXPECT_EQ(read->front().player, "");
+  EXPECT_EQ(read->front().tick, 1u);
+}
+
 }  // namespace
 }  // namespace terrane
