@@ -268,8 +268,8 @@ FileResult<std::size_t> SqliteCoarseImages::catch_up(std::size_t max_regions,
     for (const auto& [i, e] : p.entries) set.push_back(e);
     if (p.repair) remake.insert(key);
   }
+  SqliteTransaction tx(db_);
   const auto failed = [&](FileError e) -> FileResult<std::size_t> {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     // Tried again later, not at once: each failure doubles a region's wait
     // (kept at most a minute); after kMaxFailures its changes are
     // given up (the rows are the truth, and loads read past the image).
@@ -284,11 +284,9 @@ FileResult<std::size_t> SqliteCoarseImages::catch_up(std::size_t max_regions,
     }
     return e;
   };
-  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return failed(error("cannot begin writing coarse images"));
+  if (!tx.began()) return failed(error("cannot begin writing coarse images"));
   if (auto c = change(set, {}, remake, false); !c) return failed(c.error());
-  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return failed(error("cannot commit coarse images"));
+  if (!tx.commit()) return failed(error("cannot commit coarse images"));
   for (const auto& [since, key] : oldest) pending_.erase(key);
   return pending_.size();
 }
