@@ -54,40 +54,32 @@ std::string CommandLine::load_file(const std::string& path) {
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
-    // A '#' outside quotes starts a comment.
-    {
-      char quote = 0;
-      std::size_t i = 0;
-      for (; i < line.size(); ++i) {
-        const char c = line[i];
-        if (quote != 0) {
-          if (c == quote) quote = 0;
-        } else if (c == '"' || c == '\'') {
-          quote = c;
-        } else if (c == '#') {
-          break;
-        }
-      }
-      line = trim(line.substr(0, i));
-    }
-    if (line.empty()) continue;
-    std::string name, value;
-    if (const auto eq = line.find('='); eq != std::string::npos) {
-      name = trim(line.substr(0, eq));
-      value = trim(line.substr(eq + 1));
-    } else if (const auto sp = line.find_first_of(" \t"); sp != std::string::npos) {
-      name = line.substr(0, sp);
-      value = trim(line.substr(sp));
+    // A '#' starts a comment, except inside a value in quotes ("..." or
+    // '...'), which is what is between them.
+    line = trim(line);
+    const std::string head = trim(line.substr(0, line.find('#')));
+    if (head.empty()) continue;
+    std::string name;
+    std::size_t value_at = head.size();  // where the value starts, in head and line alike
+    if (const auto eq = head.find('='); eq != std::string::npos) {
+      name = trim(head.substr(0, eq));
+      value_at = eq + 1;
+    } else if (const auto sp = head.find_first_of(" \t"); sp != std::string::npos) {
+      name = head.substr(0, sp);
+      value_at = sp;
     } else {
-      name = line;
+      name = head;
     }
     if (name.rfind("--", 0) == 0) name = name.substr(2);
-    // A value in quotes ("..." or '...') is what is between them.
+    std::string value = trim(line.substr(value_at));
     if (!value.empty() && (value[0] == '"' || value[0] == '\'')) {
       const auto close = value.find(value[0], 1);
       if (close == std::string::npos) return where + name + ": a quote opened and not closed";
-      if (close + 1 != value.size()) return where + name + ": text after the closing quote";
+      const std::string rest = trim(value.substr(close + 1));
+      if (!rest.empty() && rest[0] != '#') return where + name + ": text after the closing quote";
       value = value.substr(1, close - 1);
+    } else {
+      value = trim(value.substr(0, value.find('#')));
     }
     if (flag_options_.count(name)) {
       if (value.empty() || value == "true") {

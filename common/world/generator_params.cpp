@@ -13,15 +13,37 @@ namespace {
 
 constexpr std::string_view kGeneratorName = "terrane.density";
 
+// A number as the metadata spells it (shortest round-trip text).
 template <class T>
-void append_kv(std::string& s, std::string_view key, T value) {
+std::string number_text(T value) {
   char buf[64];
   const auto r = std::to_chars(buf, buf + sizeof(buf), value);
+  return std::string(buf, static_cast<std::size_t>(r.ptr - buf));
+}
+
+template <class T>
+void append_kv(std::string& s, std::string_view key, T value) {
   s += key;
   s += '=';
-  s += std::string_view(buf, static_cast<std::size_t>(r.ptr - buf));
+  s += number_text(value);
   s += '\n';
 }
+
+// The accepted ranges, written once for validate() and clamped(); the float
+// knobs in the order validate() checks them.
+constexpr std::int32_t kSeaLevelMin = -100;
+constexpr std::int32_t kSeaLevelMax = 400;
+struct FloatRange {
+  float GeneratorParams::*field;
+  const char* name;
+  float lo, hi;
+};
+constexpr std::array<FloatRange, 4> kFloatRanges = {{
+    {&GeneratorParams::terrain_scale, "terrain_scale", 0.25f, 8.0f},
+    {&GeneratorParams::mountain_height, "mountain_height", 0.0f, 400.0f},
+    {&GeneratorParams::hill_height, "hill_height", 0.0f, 64.0f},
+    {&GeneratorParams::overhang_strength, "overhang_strength", 0.0f, 16.0f},
+}};
 
 template <class T>
 bool parse_number(std::string_view v, T& out) {
@@ -33,23 +55,25 @@ bool parse_number(std::string_view v, T& out) {
 }  // namespace
 
 std::string validate(const GeneratorParams& p) {
-  auto in = [](float v, float lo, float hi) { return std::isfinite(v) && v >= lo && v <= hi; };
-  if (p.sea_level < -100 || p.sea_level > 400) return "sea_level out of range [-100, 400]";
-  if (!in(p.terrain_scale, 0.25f, 8.0f)) return "terrain_scale out of range [0.25, 8]";
-  if (!in(p.mountain_height, 0.0f, 400.0f)) return "mountain_height out of range [0, 400]";
-  if (!in(p.hill_height, 0.0f, 64.0f)) return "hill_height out of range [0, 64]";
-  if (!in(p.overhang_strength, 0.0f, 16.0f)) return "overhang_strength out of range [0, 16]";
+  if (p.sea_level < kSeaLevelMin || p.sea_level > kSeaLevelMax) {
+    return "sea_level out of range [" + number_text(kSeaLevelMin) + ", " + number_text(kSeaLevelMax) + "]";
+  }
+  for (const FloatRange& r : kFloatRanges) {
+    const float v = p.*r.field;
+    if (!std::isfinite(v) || v < r.lo || v > r.hi) {
+      return std::string(r.name) + " out of range [" + number_text(r.lo) + ", " + number_text(r.hi) + "]";
+    }
+  }
   return {};
 }
 
 GeneratorParams clamped(GeneratorParams p) {
-  auto fix = [](float v, float lo, float hi, float def) { return std::isfinite(v) ? clampf(v, lo, hi) : def; };
   const GeneratorParams d;
-  p.sea_level = std::clamp(p.sea_level, -100, 400);
-  p.terrain_scale = fix(p.terrain_scale, 0.25f, 8.0f, d.terrain_scale);
-  p.mountain_height = fix(p.mountain_height, 0.0f, 400.0f, d.mountain_height);
-  p.hill_height = fix(p.hill_height, 0.0f, 64.0f, d.hill_height);
-  p.overhang_strength = fix(p.overhang_strength, 0.0f, 16.0f, d.overhang_strength);
+  p.sea_level = std::clamp(p.sea_level, kSeaLevelMin, kSeaLevelMax);
+  for (const FloatRange& r : kFloatRanges) {
+    float& v = p.*r.field;
+    v = std::isfinite(v) ? clampf(v, r.lo, r.hi) : d.*r.field;
+  }
   return p;
 }
 

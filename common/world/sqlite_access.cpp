@@ -20,8 +20,7 @@ FileResult<std::vector<std::pair<std::string, std::string>>> SqliteAccess::entri
   }
   int rc;
   while ((rc = sqlite3_step(st)) == SQLITE_ROW)
-    out.emplace_back(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)),
-                     reinterpret_cast<const char*>(sqlite3_column_text(st, 1)));
+    out.emplace_back(sqlite_column_string(st, 0), sqlite_column_string(st, 1));
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return error("cannot read the access lists");
   return out;

@@ -11,6 +11,22 @@
 
 namespace terrane {
 
+namespace {
+
+// Writes a region's image with st, an INSERT into coarse(rx, ry, rz, image);
+// whether it went through.
+bool write_image(sqlite3_stmt* st, Vec3i region, std::vector<CoarseEntry> entries) {
+  const std::vector<std::uint8_t> image = encode_coarse_image(region, std::move(entries));
+  SqliteStmtReset reset{st};
+  sqlite3_bind_int(st, 1, region.x);
+  sqlite3_bind_int(st, 2, region.y);
+  sqlite3_bind_int(st, 3, region.z);
+  sqlite3_bind_blob(st, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
+  return sqlite3_step(st) == SQLITE_DONE;
+}
+
+}  // namespace
+
 SqliteCoarseImages::SqliteCoarseImages(sqlite3* db, std::string dir, LoadChunk load_chunk)
     : db_(db), dir_(std::move(dir)), load_chunk_(std::move(load_chunk)) {}
 
@@ -36,14 +52,7 @@ FileStatus SqliteCoarseImages::rebuild(const ForEachChunkRow& rows, const std::f
   const auto write_before = [&](int rx_limit) {
     for (auto it = regions.begin(); it != regions.end() && std::get<0>(it->first) < rx_limit;) {
       const Vec3i r{std::get<0>(it->first), std::get<1>(it->first), std::get<2>(it->first)};
-      const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(it->second));
-      sqlite3_bind_int(st, 1, r.x);
-      sqlite3_bind_int(st, 2, r.y);
-      sqlite3_bind_int(st, 3, r.z);
-      sqlite3_bind_blob(st, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
-      write_failed = write_failed || sqlite3_step(st) != SQLITE_DONE;
-      sqlite3_reset(st);
-      sqlite3_clear_bindings(st);
+      write_failed = !write_image(st, r, std::move(it->second)) || write_failed;
       it = regions.erase(it);
     }
   };
@@ -107,13 +116,7 @@ FileStatus SqliteCoarseImages::change(const std::vector<CoarseEntry>& set, const
       if (!whole) return whole.error();
       all = std::move(*whole);
     }
-    const std::vector<std::uint8_t> image = encode_coarse_image(r, std::move(all));
-    SqliteStmtReset reset{save_stmt_};
-    sqlite3_bind_int(save_stmt_, 1, r.x);
-    sqlite3_bind_int(save_stmt_, 2, r.y);
-    sqlite3_bind_int(save_stmt_, 3, r.z);
-    sqlite3_bind_blob(save_stmt_, 4, image.data(), static_cast<int>(image.size()), SQLITE_STATIC);
-    if (sqlite3_step(save_stmt_) != SQLITE_DONE) return error("cannot write coarse image");
+    if (!write_image(save_stmt_, r, std::move(all))) return error("cannot write coarse image");
   }
   return Ok{};
 }
@@ -268,8 +271,8 @@ FileResult<std::size_t> SqliteCoarseImages::catch_up(std::size_t max_regions,
     for (const auto& [i, e] : p.entries) set.push_back(e);
     if (p.repair) remake.insert(key);
   }
+  SqliteTransaction tx(db_);
   const auto failed = [&](FileError e) -> FileResult<std::size_t> {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     // Tried again later, not at once: each failure doubles a region's wait
     // (kept at most a minute); after kMaxFailures its changes are
     // given up (the rows are the truth, and loads read past the image).
@@ -284,11 +287,9 @@ FileResult<std::size_t> SqliteCoarseImages::catch_up(std::size_t max_regions,
     }
     return e;
   };
-  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return failed(error("cannot begin writing coarse images"));
+  if (!tx.began()) return failed(error("cannot begin writing coarse images"));
   if (auto c = change(set, {}, remake, false); !c) return failed(c.error());
-  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return failed(error("cannot commit coarse images"));
+  if (!tx.commit()) return failed(error("cannot commit coarse images"));
   for (const auto& [since, key] : oldest) pending_.erase(key);
   return pending_.size();
 }

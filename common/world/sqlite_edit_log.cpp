@@ -82,7 +82,7 @@ FileResult<std::vector<EditLogEntry>> SqliteEditLog::query(const EditLogQuery& q
     e.id = sqlite3_column_int64(st, 0);
     e.tick = static_cast<std::uint64_t>(sqlite3_column_int64(st, 1));
     e.time_ms = sqlite3_column_int64(st, 2);
-    e.player = reinterpret_cast<const char*>(sqlite3_column_text(st, 3));
+    e.player = sqlite_column_string(st, 3);
     e.box = {{sqlite3_column_int(st, 4), sqlite3_column_int(st, 5), sqlite3_column_int(st, 6)},
              {sqlite3_column_int(st, 7), sqlite3_column_int(st, 8), sqlite3_column_int(st, 9)}};
     if (q.with_voxels) {

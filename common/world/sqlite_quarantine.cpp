@@ -46,13 +46,9 @@ FileResult<std::optional<std::uint64_t>> SqliteQuarantine::move_aside(Vec3i pos,
                                                                       const std::function<FileStatus()>& also) {
   std::ostringstream where;
   where << "chunk (" << pos.x << ", " << pos.y << ", " << pos.z << ")";
-  if (sqlite3_exec(db_, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin quarantine of " + where.str());
-  auto fail = [&](const std::string& what) {
-    FileError e = error(what + " " + where.str());
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    return e;
-  };
+  SqliteTransaction tx(db_);
+  if (!tx.began()) return error("cannot begin quarantine of " + where.str());
+  auto fail = [&](const std::string& what) { return error(what + " " + where.str()); };
   // The row is copied inside SQLite: the blob moves byte for byte, however
   // damaged it is.
   const char* kSteps[2] = {
@@ -74,10 +70,7 @@ FileResult<std::optional<std::uint64_t>> SqliteQuarantine::move_aside(Vec3i pos,
     sqlite3_finalize(st);
     if (rc != SQLITE_ROW && rc != SQLITE_DONE) return fail("cannot read revision of");
   }
-  if (!moved) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    return std::optional<std::uint64_t>{};
-  }
+  if (!moved) return std::optional<std::uint64_t>{};
   for (const char* sql : kSteps) {
     sqlite3_stmt* st = nullptr;
     if (sqlite3_prepare_v2(db_, sql, -1, &st, nullptr) != SQLITE_OK) return fail("cannot prepare quarantine of");
@@ -92,11 +85,8 @@ FileResult<std::optional<std::uint64_t>> SqliteQuarantine::move_aside(Vec3i pos,
     if (changed != 1) return fail("quarantine moved " + std::to_string(changed) + " rows for");
   }
   // What goes with the row (its coarse entry).
-  if (auto c = also(); !c) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    return c.error();
-  }
-  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail("cannot commit quarantine of");
+  if (auto c = also(); !c) return c.error();
+  if (!tx.commit()) return fail("cannot commit quarantine of");
   return moved;
 }
 
@@ -127,8 +117,7 @@ FileStatus SqliteQuarantine::for_each(const std::function<void(const Quarantined
     const auto* data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 4));
     const auto size = static_cast<std::size_t>(sqlite3_column_bytes(st, 4));
     if (data) q.blob.assign(data, data + size);
-    const auto* reason = reinterpret_cast<const char*>(sqlite3_column_text(st, 5));
-    if (reason) q.reason = reason;
+    q.reason = sqlite_column_string(st, 5);
     q.time_unix_s = sqlite3_column_int64(st, 6);
     fn(q);
   }

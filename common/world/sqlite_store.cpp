@@ -138,22 +138,18 @@ FileStatus SqliteStore::upgrade_to_coarse(const Progress& progress) {
     std::fprintf(stderr, "world %s: building coarse images (format 2): %lld/%lld chunks\n", dir_.c_str(),
                  static_cast<long long>(done), static_cast<long long>(*total));
   };
-  if (sqlite3_exec(db(), "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin the upgrade to format 2");
-  const auto fail = [&](FileError e) {
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return e;
-  };
+  SqliteTransaction tx(db());
+  if (!tx.began()) return error("cannot begin the upgrade to format 2");
   // Another process may have upgraded it while this one waited for the lock.
   {
     sqlite3_stmt* v = nullptr;
     bool done_already = false;
     if (sqlite3_prepare_v2(db(), "SELECT value FROM meta WHERE key = 'format_version'", -1, &v, nullptr) == SQLITE_OK &&
         sqlite3_step(v) == SQLITE_ROW)
-      done_already = std::string(reinterpret_cast<const char*>(sqlite3_column_text(v, 0))) == "2";
+      done_already = sqlite_column_string(v, 0) == "2";
     sqlite3_finalize(v);
     if (done_already) {
-      sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr);
+      tx.commit();
       meta_.format_version = kWorldFormatVersion;
       return Ok{};
     }
@@ -161,12 +157,11 @@ FileStatus SqliteStore::upgrade_to_coarse(const Progress& progress) {
   std::int64_t done = 0;
   auto built = coarse_.rebuild([this](const SqliteCoarseImages::ChunkRowFn& fn) { return for_each_chunk(fn); },
                                [&] { report(++done, false); });
-  if (!built) return fail(built.error());
+  if (!built) return built.error();
   if (sqlite3_exec(db(), "INSERT OR REPLACE INTO meta(key, value) VALUES('format_version', '2')", nullptr, nullptr,
                    nullptr) != SQLITE_OK)
-    return fail(error("cannot record format 2"));
-  if (sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return fail(error("cannot commit the upgrade to format 2"));
+    return error("cannot record format 2");
+  if (!tx.commit()) return error("cannot commit the upgrade to format 2");
   meta_.format_version = kWorldFormatVersion;
   report(done, true);
   return Ok{};
@@ -193,29 +188,23 @@ FileStatus SqliteStore::for_each_coarse(const std::function<void(Vec3i, const st
 
 FileStatus SqliteStore::write_meta(const WorldMeta& m) {
   const auto kv = meta_to_keys(m);
-  if (sqlite3_exec(db(), "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin metadata transaction");
+  SqliteTransaction tx(db());
+  if (!tx.began()) return error("cannot begin metadata transaction");
   sqlite3_stmt* st = nullptr;
-  if (sqlite3_prepare_v2(db(), "INSERT OR REPLACE INTO meta(key, value) VALUES(?, ?)", -1, &st, nullptr) != SQLITE_OK) {
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
+  if (sqlite3_prepare_v2(db(), "INSERT OR REPLACE INTO meta(key, value) VALUES(?, ?)", -1, &st, nullptr) != SQLITE_OK)
     return error("cannot write metadata");
-  }
   for (const auto& [k, v] : kv) {
     sqlite3_bind_text(st, 1, k.c_str(), -1, SQLITE_TRANSIENT);
     sqlite3_bind_text(st, 2, v.c_str(), -1, SQLITE_TRANSIENT);
     if (sqlite3_step(st) != SQLITE_DONE) {
+      FileError e = error("cannot write metadata key " + k);
       sqlite3_finalize(st);
-      sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-      return error("cannot write metadata key " + k);
+      return e;
     }
     sqlite3_reset(st);
   }
   sqlite3_finalize(st);
-  if (sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
-    FileError e = error("cannot commit metadata");
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return e;
-  }
+  if (!tx.commit()) return error("cannot commit metadata");
   return Ok{};
 }
 
@@ -299,13 +288,10 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
                                   -1, &stmt, nullptr) != SQLITE_OK)
     return error("cannot prepare chunk write");
   sqlite3_stmt* save_stmt = stmt;
-  if (sqlite3_exec(db(), "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin transaction");
+  SqliteTransaction tx(db());
+  if (!tx.began()) return error("cannot begin transaction");
   auto logged_bytes = edit_log_.append(log);
-  if (!logged_bytes) {
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return logged_bytes.error();
-  }
+  if (!logged_bytes) return logged_bytes.error();
   std::vector<CoarseEntry> coarse;
   std::vector<Vec3i> no_coarse;  // blobs that do not decode: no entry (a load quarantines them)
   for (const ChunkWrite& w : writes) {
@@ -315,11 +301,7 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
     sqlite3_bind_int(save_stmt, 3, w.pos.z);
     sqlite3_bind_int64(save_stmt, 4, static_cast<sqlite3_int64>(w.revision));
     sqlite3_bind_blob(save_stmt, 5, w.blob.data(), static_cast<int>(w.blob.size()), SQLITE_STATIC);
-    if (sqlite3_step(save_stmt) != SQLITE_DONE) {
-      FileError e = error("cannot write chunk");
-      sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-      return e;
-    }
+    if (sqlite3_step(save_stmt) != SQLITE_DONE) return error("cannot write chunk");
     if (sqlite3_changes(db()) == 0) continue;  // kept as it was (overwrite = false)
     CoarseEntry e{w.pos, w.revision, {}};
     if (w.coarse) {
@@ -332,15 +314,8 @@ FileStatus SqliteStore::save_chunks(std::span<const ChunkWrite> writes, bool ove
     }
     coarse.push_back(e);
   }
-  if (auto c = coarse_.written(coarse, no_coarse); !c) {
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return c.error();
-  }
-  if (sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) {
-    FileError e = error("cannot commit chunks");
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return e;
-  }
+  if (auto c = coarse_.written(coarse, no_coarse); !c) return c.error();
+  if (!tx.commit()) return error("cannot commit chunks");
   edit_log_.committed(log.size(), *logged_bytes);
   coarse_.committed(std::move(coarse));
   return Ok{};
@@ -363,23 +338,19 @@ FileResult<std::int64_t> SqliteStore::prune_edit_log(std::int64_t before_ms, std
 FileResult<std::pair<std::int64_t, std::uint64_t>> SqliteStore::edit_log_size() { return edit_log_.size(); }
 
 FileStatus SqliteStore::erase_chunk(Vec3i pos) {
-  if (sqlite3_exec(db(), "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) != SQLITE_OK)
-    return error("cannot begin chunk delete");
-  const auto fail = [&](FileError e) {
-    sqlite3_exec(db(), "ROLLBACK", nullptr, nullptr, nullptr);
-    return e;
-  };
+  SqliteTransaction tx(db());
+  if (!tx.began()) return error("cannot begin chunk delete");
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db(), "DELETE FROM chunks WHERE cx = ? AND cy = ? AND cz = ?", -1, &st, nullptr) != SQLITE_OK)
-    return fail(error("cannot prepare chunk delete"));
+    return error("cannot prepare chunk delete");
   sqlite3_bind_int(st, 1, pos.x);
   sqlite3_bind_int(st, 2, pos.y);
   sqlite3_bind_int(st, 3, pos.z);
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
-  if (rc != SQLITE_DONE) return fail(error("cannot delete chunk"));
-  if (auto c = coarse_.erased(pos); !c) return fail(c.error());
-  if (sqlite3_exec(db(), "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return fail(error("cannot commit chunk delete"));
+  if (rc != SQLITE_DONE) return error("cannot delete chunk");
+  if (auto c = coarse_.erased(pos); !c) return c.error();
+  if (!tx.commit()) return error("cannot commit chunk delete");
   return Ok{};
 }
 
@@ -470,10 +441,7 @@ FileResult<std::string> SqliteStore::pragma(const std::string& name) {
   if (sqlite3_prepare_v2(db(), ("PRAGMA " + name).c_str(), -1, &st, nullptr) != SQLITE_OK)
     return error("cannot run pragma " + name);
   std::string out;
-  if (sqlite3_step(st) == SQLITE_ROW) {
-    const auto* t = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
-    if (t) out = t;
-  }
+  if (sqlite3_step(st) == SQLITE_ROW) out = sqlite_column_string(st, 0);
   sqlite3_finalize(st);
   return out;
 }

@@ -17,6 +17,24 @@ SqliteStmtReset::~SqliteStmtReset() {
   sqlite3_clear_bindings(s);
 }
 
+SqliteTransaction::SqliteTransaction(sqlite3* db)
+    : db_(db), open_(sqlite3_exec(db, "BEGIN IMMEDIATE", nullptr, nullptr, nullptr) == SQLITE_OK) {}
+
+SqliteTransaction::~SqliteTransaction() {
+  if (open_) sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+}
+
+bool SqliteTransaction::commit() {
+  if (sqlite3_exec(db_, "COMMIT", nullptr, nullptr, nullptr) != SQLITE_OK) return false;
+  open_ = false;
+  return true;
+}
+
+std::string sqlite_column_string(sqlite3_stmt* st, int column) {
+  const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(st, column));
+  return text != nullptr ? std::string(text) : std::string();
+}
+
 bool sqlite_table_exists(sqlite3* db, const char* name) {
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", -1, &st, nullptr) !=

@@ -1,8 +1,9 @@
 // What the owners of a world's SQLite tables share (SqliteStore and the
 // owners it holds: SqliteEditLog, SqliteQuarantine, SqliteCoarseImages,
 // SqliteAccess): error messages naming the world, a prepared statement's
-// reset, whether a table exists, and the chunk rows of a table within a
-// coarse region. Free functions over one connection, no state of their own.
+// reset, a write transaction, a text column read, whether a table exists,
+// and the chunk rows of a table within a coarse region. Free functions and
+// scoped helpers over one connection, no state of their own.
 // Thread-safety: that of the connection (one owner thread).
 #pragma once
 
@@ -26,6 +27,30 @@ FileError sqlite_error(sqlite3* db, const std::string& dir, const std::string& w
 struct SqliteStmtReset {
   sqlite3_stmt* s;
   ~SqliteStmtReset();
+};
+
+// A text column of the current row; empty when it is NULL, which a damaged
+// or hand-edited world can hold even where the schema says NOT NULL.
+std::string sqlite_column_string(sqlite3_stmt* st, int column);
+
+// One write transaction (BEGIN IMMEDIATE), rolled back when it goes out of
+// scope uncommitted: an error return needs no rollback of its own, and the
+// error is built (with SQLite's message) before the rollback runs.
+class SqliteTransaction {
+ public:
+  explicit SqliteTransaction(sqlite3* db);
+  ~SqliteTransaction();
+  SqliteTransaction(const SqliteTransaction&) = delete;
+  SqliteTransaction& operator=(const SqliteTransaction&) = delete;
+
+  // Whether BEGIN went through (if not, there is nothing to commit or roll back).
+  bool began() const { return open_; }
+  // COMMIT; false if it failed (the transaction is then rolled back at scope exit).
+  bool commit();
+
+ private:
+  sqlite3* db_;
+  bool open_;
 };
 
 // Whether the database has a table of that name (false if it cannot tell).

@@ -49,6 +49,14 @@ TEST_F(CliFileTest, QuotedValuesLoseTheirQuotesAndMayHoldAHash) {
   EXPECT_EQ(c3.load_file(path_.string()), path_.string() + ":1: world: text after the closing quote");
 }
 
+TEST_F(CliFileTest, AQuoteInsideAnUnquotedValueLeavesTheCommentAComment) {
+  write("name = it's here # a note\nworld = /srv/a\"b # another\n");
+  CommandLine cl({"name", "world"}, {});
+  ASSERT_EQ(cl.load_file(path_.string()), "");
+  EXPECT_EQ(cl.get("name"), "it's here");
+  EXPECT_EQ(cl.get("world"), "/srv/a\"b");
+}
+
 TEST_F(CliFileTest, ErrorsNameTheFileAndLine) {
   write("port = 1\nbogus = 2\n");
   CommandLine cl({"port"}, {"open"});

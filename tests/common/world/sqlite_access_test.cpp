@@ -2,50 +2,35 @@
 
 #include <gtest/gtest.h>
 
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
-#include <sqlite3.h>
-#include <unistd.h>
-
-#include "common/world/sqlite_store.h"
-#include "common/world/world.h"
+#include "tests/support/scratch_world.h"
 
 namespace terrane {
 namespace {
 
-namespace fs = std::filesystem;
-
 using Entries = std::vector<std::pair<std::string, std::string>>;
 
-// A world made by SqliteStore in a scratch directory, and a connection of
-// the test's own to it: the access lists run over that connection.
-class SqliteAccessTest : public ::testing::Test {
+// The access lists over the scratch world's connection.
+class SqliteAccessTest : public testing_support::ScratchWorldTest {
  protected:
+  SqliteAccessTest() : ScratchWorldTest("terrane-access") {}
   void SetUp() override {
-    dir_ = (fs::temp_directory_path() / ("terrane-access-" + std::to_string(::getpid()) + "-" +
-                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-               .string();
-    fs::remove_all(dir_);
-    ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
-    reopen();
+    ASSERT_NO_FATAL_FAILURE(ScratchWorldTest::SetUp());
+    access_ = std::make_unique<SqliteAccess>(db_, dir_);
   }
   void TearDown() override {
     access_.reset();
-    sqlite3_close(db_);
-    fs::remove_all(dir_);
+    ScratchWorldTest::TearDown();
   }
   void reopen() {
     access_.reset();
-    if (db_) sqlite3_close(db_);
-    ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
+    reopen_db();
     access_ = std::make_unique<SqliteAccess>(db_, dir_);
   }
-  std::string dir_;
-  sqlite3* db_ = nullptr;
   std::unique_ptr<SqliteAccess> access_;
 };
 
@@ -68,6 +53,17 @@ TEST_F(SqliteAccessTest, EntriesRoundTripByKeyAndSurviveReopening) {
   reopen();
   EXPECT_EQ(access_->entries()->back(), (std::pair<std::string, std::string>{"whitelist:bob", "1"}));
   EXPECT_EQ(access_->entries()->size(), 2u);
+}
+
+TEST_F(SqliteAccessTest, ANullValueInADamagedWorldReadsAsEmpty) {
+  ASSERT_TRUE(access_->put("ban:ann", "for ever").ok());
+  access_.reset();
+  ASSERT_NO_FATAL_FAILURE(rewrite_schema("access", "value TEXT NOT NULL", "value TEXT"));
+  access_ = std::make_unique<SqliteAccess>(db_, dir_);
+  exec("UPDATE access SET value = NULL");
+  auto read = access_->entries();
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  EXPECT_EQ(*read, (Entries{{"ban:ann", ""}}));
 }
 
 }  // namespace

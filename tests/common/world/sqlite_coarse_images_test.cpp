@@ -4,54 +4,29 @@
 
 #include <algorithm>
 #include <chrono>
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <sqlite3.h>
-#include <unistd.h>
 
-#include "common/world/sqlite_store.h"
-#include "common/world/world.h"
+#include "tests/support/scratch_world.h"
 
 namespace terrane {
 namespace {
 
-namespace fs = std::filesystem;
-
-// A world made by SqliteStore in a scratch directory, and a connection of
-// the test's own to it: the coarse images run over that connection and
-// read the chunk rows through it.
-class SqliteCoarseImagesTest : public ::testing::Test {
+// The coarse images over the scratch world's connection, reading the
+// chunk rows through it.
+class SqliteCoarseImagesTest : public testing_support::ScratchWorldTest {
  protected:
+  SqliteCoarseImagesTest() : ScratchWorldTest("terrane-coarse") {}
   void SetUp() override {
-    dir_ = (fs::temp_directory_path() / ("terrane-coarse-" + std::to_string(::getpid()) + "-" +
-                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-               .string();
-    fs::remove_all(dir_);
-    ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
-    ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
+    ASSERT_NO_FATAL_FAILURE(ScratchWorldTest::SetUp());
     images_ = std::make_unique<SqliteCoarseImages>(db_, dir_, [this](Vec3i p) { return load_row(p); });
   }
   void TearDown() override {
     images_.reset();
-    sqlite3_close(db_);
-    fs::remove_all(dir_);
-  }
-  void exec(const char* sql) { ASSERT_EQ(sqlite3_exec(db_, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sql; }
-  void put_row(Vec3i pos, std::uint64_t revision, const std::vector<std::uint8_t>& blob) {
-    sqlite3_stmt* st = nullptr;
-    ASSERT_EQ(sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)",
-                                 -1, &st, nullptr),
-              SQLITE_OK);
-    sqlite3_bind_int(st, 1, pos.x);
-    sqlite3_bind_int(st, 2, pos.y);
-    sqlite3_bind_int(st, 3, pos.z);
-    sqlite3_bind_int64(st, 4, static_cast<sqlite3_int64>(revision));
-    sqlite3_bind_blob(st, 5, blob.data(), static_cast<int>(blob.size()), SQLITE_TRANSIENT);
-    EXPECT_EQ(sqlite3_step(st), SQLITE_DONE);
-    sqlite3_finalize(st);
+    ScratchWorldTest::TearDown();
   }
   FileResult<std::optional<StoredChunk>> load_row(Vec3i pos) {
     sqlite3_stmt* st = nullptr;
@@ -101,8 +76,6 @@ class SqliteCoarseImagesTest : public ::testing::Test {
               [](const CoarseEntry& a, const CoarseEntry& b) { return coarse_index(a.chunk_pos) < coarse_index(b.chunk_pos); });
     return v;
   }
-  std::string dir_;
-  sqlite3* db_ = nullptr;
   std::unique_ptr<SqliteCoarseImages> images_;
 };
 

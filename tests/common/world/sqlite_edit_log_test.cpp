@@ -2,43 +2,28 @@
 
 #include <gtest/gtest.h>
 
-#include <filesystem>
 #include <string>
 #include <vector>
 
 #include <sqlite3.h>
-#include <unistd.h>
 
-#include "common/world/sqlite_store.h"
-#include "common/world/world.h"
+#include "tests/support/scratch_world.h"
 
 namespace terrane {
 namespace {
 
-namespace fs = std::filesystem;
-
-// A world made by SqliteStore in a scratch directory, and a connection of
-// the test's own to it: the edit log runs over that connection.
-class SqliteEditLogTest : public ::testing::Test {
+// The edit log over the scratch world's connection.
+class SqliteEditLogTest : public testing_support::ScratchWorldTest {
  protected:
-  void SetUp() override {
-    dir_ = (fs::temp_directory_path() / ("terrane-edit-log-" + std::to_string(::getpid()) + "-" +
-                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-               .string();
-    fs::remove_all(dir_);
-    ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
-    ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
-  }
+  SqliteEditLogTest() : ScratchWorldTest("terrane-edit-log") {}
   void TearDown() override {
     log_.reset();
-    sqlite3_close(db_);
-    fs::remove_all(dir_);
+    ScratchWorldTest::TearDown();
   }
   SqliteEditLog& log() {
     if (!log_) log_ = std::make_unique<SqliteEditLog>(db_, dir_);
     return *log_;
   }
-  void exec(const char* sql) { ASSERT_EQ(sqlite3_exec(db_, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sql; }
   // Appends in a transaction of its own, as SqliteStore::save_chunks does.
   void append(const std::vector<EditLogEntry>& entries) {
     exec("BEGIN IMMEDIATE");
@@ -59,8 +44,6 @@ class SqliteEditLogTest : public ::testing::Test {
     sqlite3_finalize(st);
     return out;
   }
-  std::string dir_;
-  sqlite3* db_ = nullptr;
   std::unique_ptr<SqliteEditLog> log_;
 };
 
@@ -150,10 +133,21 @@ TEST_F(SqliteEditLogTest, PruningTakesTheOldFirstAndStopsAtEachBound) {
 TEST_F(SqliteEditLogTest, TheLogSurvivesReopeningAndIsCountedAgain) {
   append({entry(1, 1000, "ann", {{0, 0, 0}, {1, 1, 1}}, 5), entry(2, 2000, "ann", {{0, 0, 0}, {1, 1, 1}}, 6)});
   log_.reset();
-  sqlite3_close(db_);
-  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
+  ASSERT_NO_FATAL_FAILURE(reopen_db());
   EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{2, 22}));
   EXPECT_EQ(log().query(EditLogQuery{})->front().tick, 2u);
+}
+
+TEST_F(SqliteEditLogTest, ANullPlayerInADamagedWorldReadsAsNoName) {
+  append({entry(1, 1000, "ann", {{0, 0, 0}, {1, 1, 1}}, 5)});
+  log_.reset();
+  ASSERT_NO_FATAL_FAILURE(rewrite_schema("edit_log", "player TEXT NOT NULL", "player TEXT"));
+  exec("UPDATE edit_log SET player = NULL");
+  auto read = log().query(EditLogQuery{});
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  ASSERT_EQ(read->size(), 1u);
+  EXPECT_EQ(read->front().player, "");
+  EXPECT_EQ(read->front().tick, 1u);
 }
 
 }  // namespace

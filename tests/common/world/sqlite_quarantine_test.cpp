@@ -2,53 +2,29 @@
 
 #include <gtest/gtest.h>
 
-#include <filesystem>
 #include <memory>
 #include <random>
 #include <string>
 #include <vector>
 
 #include <sqlite3.h>
-#include <unistd.h>
 
-#include "common/world/sqlite_store.h"
-#include "common/world/world.h"
+#include "tests/support/scratch_world.h"
 
 namespace terrane {
 namespace {
 
-namespace fs = std::filesystem;
-
-// A world made by SqliteStore in a scratch directory, and a connection of
-// the test's own to it: the quarantine runs over that connection.
-class SqliteQuarantineTest : public ::testing::Test {
+// The quarantine over the scratch world's connection.
+class SqliteQuarantineTest : public testing_support::ScratchWorldTest {
  protected:
+  SqliteQuarantineTest() : ScratchWorldTest("terrane-quarantine") {}
   void SetUp() override {
-    dir_ = (fs::temp_directory_path() / ("terrane-quarantine-" + std::to_string(::getpid()) + "-" +
-                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-               .string();
-    fs::remove_all(dir_);
-    ASSERT_TRUE(SqliteStore::create(dir_, default_world_meta()).ok());
-    ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
+    ASSERT_NO_FATAL_FAILURE(ScratchWorldTest::SetUp());
     quarantine_ = std::make_unique<SqliteQuarantine>(db_, dir_);
   }
   void TearDown() override {
     quarantine_.reset();
-    sqlite3_close(db_);
-    fs::remove_all(dir_);
-  }
-  void put_row(Vec3i pos, std::uint64_t revision, const std::vector<std::uint8_t>& blob) {
-    sqlite3_stmt* st = nullptr;
-    ASSERT_EQ(sqlite3_prepare_v2(db_, "INSERT OR REPLACE INTO chunks(cx, cy, cz, revision, data) VALUES(?, ?, ?, ?, ?)",
-                                 -1, &st, nullptr),
-              SQLITE_OK);
-    sqlite3_bind_int(st, 1, pos.x);
-    sqlite3_bind_int(st, 2, pos.y);
-    sqlite3_bind_int(st, 3, pos.z);
-    sqlite3_bind_int64(st, 4, static_cast<sqlite3_int64>(revision));
-    sqlite3_bind_blob(st, 5, blob.data(), static_cast<int>(blob.size()), SQLITE_TRANSIENT);
-    EXPECT_EQ(sqlite3_step(st), SQLITE_DONE);
-    sqlite3_finalize(st);
+    ScratchWorldTest::TearDown();
   }
   // The chunks row's revision, if there is one.
   std::optional<std::uint64_t> row_revision(Vec3i pos) {
@@ -69,8 +45,6 @@ class SqliteQuarantineTest : public ::testing::Test {
     return out;
   }
   static FileStatus nothing_else() { return Ok{}; }
-  std::string dir_;
-  sqlite3* db_ = nullptr;
   std::unique_ptr<SqliteQuarantine> quarantine_;
 };
 
@@ -170,8 +144,7 @@ TEST_F(SqliteQuarantineTest, RowsSurviveReopening) {
   put_row({-1, 0, 0}, 2, {7, 7});
   ASSERT_TRUE(quarantine_->move_aside({-1, 0, 0}, "bad", nothing_else).ok());
   quarantine_.reset();
-  sqlite3_close(db_);
-  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db_), SQLITE_OK);
+  ASSERT_NO_FATAL_FAILURE(reopen_db());
   quarantine_ = std::make_unique<SqliteQuarantine>(db_, dir_);
   EXPECT_EQ(*quarantine_->revision({-1, 0, 0}), std::optional<std::uint64_t>{2});
   EXPECT_EQ(listed().at(0).blob, (std::vector<std::uint8_t>{7, 7}));

@@ -10,10 +10,10 @@
 #include <tuple>
 
 #include <sqlite3.h>
-#include <unistd.h>
 
 #include "common/codec/lz4_block.h"
 #include "common/world/world.h"
+#include "tests/support/scratch_dir.h"
 
 namespace terrane {
 namespace {
@@ -23,10 +23,7 @@ namespace fs = std::filesystem;
 class SqliteStoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = (fs::temp_directory_path() / ("terrane-store-" + std::to_string(::getpid()) + "-" +
-                                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-               .string();
-    fs::remove_all(dir_);
+    dir_ = testing_support::scratch_dir("terrane-store").string();
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string dir_;
