@@ -153,7 +153,7 @@ int run(int argc, char** argv) {
     o.cluster.store_url = where;
     if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
     o.cluster.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
-    o.cluster.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
+    o.cluster.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, kMaxLease.count(), &err));
     if (cl.has("advertise")) {
       std::string why;
       auto a = parse_server_address(cl.get("advertise"), &why);
