@@ -33,6 +33,13 @@ std::string_view clip(std::string_view s, std::size_t limit) { return s.substr(0
 DecodeError invalid(const char* what) { return DecodeError{DecodeErrorCode::kInvalidValue, 0, what}; }
 DecodeError over(const char* what) { return DecodeError{DecodeErrorCode::kOverLimit, 0, what}; }
 
+// A byte below 0x20 or DEL: what text a server logs (a client's name, a
+// resume token) may not hold, since a line end in it would forge a log line.
+bool has_control_character(std::string_view text) {
+  return std::any_of(text.begin(), text.end(),
+                     [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; });
+}
+
 bool finite(Vec3f v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 bool position_ok(Vec3f v) {
   const auto lim = static_cast<float>(kMaxWireCoordinate);
@@ -288,17 +295,14 @@ Result<HelloMsg> parse_hello(const wire::Hello& m) {
   out.protocol_version = m.protocol_version();
   if (m.client_name() == nullptr || m.client_name()->size() == 0) return invalid("hello: missing client name");
   if (m.client_name()->size() > kMaxClientNameBytes) return over("hello: client name longer than 64 bytes");
-  // Printable (servers log it; a line end in a name would forge a log line).
-  for (const char ch : m.client_name()->string_view())
-    if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f)
-      return invalid("hello: client name has a control character (names must be printable)");
+  if (has_control_character(m.client_name()->string_view()))
+    return invalid("hello: client name has a control character (names must be printable)");
   if (m.auth_token() != nullptr && m.auth_token()->size() > kMaxAuthTokenBytes)
     return over("hello: auth token longer than 256 bytes");
   if (m.resume_token() != nullptr) {
     if (m.resume_token()->size() > kMaxResumeTokenBytes) return over("hello: resume token longer than 64 bytes");
-    // Printable (servers log it).
-    for (const char ch : m.resume_token()->string_view())
-      if (static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f) return invalid("hello: resume token has a control character");
+    if (has_control_character(m.resume_token()->string_view()))
+      return invalid("hello: resume token has a control character");
   }
   out.client_name = m.client_name()->str();
   if (m.auth_token() != nullptr) out.auth_token = m.auth_token()->str();

@@ -153,7 +153,7 @@ int run(int argc, char** argv) {
     o.cluster.store_url = where;
     if (!cl.has("server-id")) return usage_error("--server-id N is required with a PostgreSQL store");
     o.cluster.server_id = static_cast<std::uint32_t>(cl.get_int("server-id", 0, 0, kMaxServerId, &err));
-    o.cluster.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, 600000, &err));
+    o.cluster.lease = std::chrono::milliseconds(cl.get_int("lease-ms", 5000, 500, kMaxLease.count(), &err));
     if (cl.has("advertise")) {
       std::string why;
       auto a = parse_server_address(cl.get("advertise"), &why);
@@ -189,10 +189,6 @@ int run(int argc, char** argv) {
   o.replication.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
   o.replication.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
   o.replication.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
-  o.replication.default_view_distance =
-      std::min(o.replication.default_view_distance, o.replication.max_view_distance);
-  o.replication.default_full_res_radius =
-      std::min(o.replication.default_full_res_radius, o.replication.max_full_res_radius);
   o.net.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 1024, 1, 100000, &err));
   o.net.session.max_queue_bytes =
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));

@@ -190,6 +190,7 @@ Server::Server(const ServerOptions& options)
       sessions_(options.net.max_clients) {
   options_.world.tick_hz = std::clamp<std::uint32_t>(options_.world.tick_hz, 1, 1000);
   options_.net.session.max_frame_bytes = std::min(options_.net.session.max_frame_bytes, kDefaultMaxFrameBytes);
+  // The defaults within the caps (the Welcome states them).
   ReplicationOptions& r = options_.replication;
   r.default_view_distance = std::min(r.default_view_distance, r.max_view_distance);
   r.default_full_res_radius = std::min(r.default_full_res_radius, r.max_full_res_radius);

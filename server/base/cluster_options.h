@@ -14,6 +14,11 @@
 
 namespace terrane {
 
+// The longest lease terrane-server takes (--lease-ms): a forwarded edit's
+// sender waits max(2 s, a lease), so no inbox row is meant to live longer
+// (ClusterStore::inbox takes one saying more as saying this).
+inline constexpr std::chrono::milliseconds kMaxLease{10 * 60 * 1000};
+
 struct ClusterOptions {
   // The world in PostgreSQL ("postgresql://HOST:PORT/DB", with the world
   // directory empty), shared with other servers. Created with

@@ -1,6 +1,5 @@
 #include "server/base/log.h"
 
-#include <fmt/format.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 
 namespace terrane {
@@ -13,17 +12,6 @@ spdlog::logger& server_log() {
     return l;
   }();
   return *log;
-}
-
-std::string printable(std::string_view text) {
-  std::string out;
-  out.reserve(text.size());
-  for (const char ch : text) {
-    const auto b = static_cast<unsigned char>(ch);
-    if (b < 0x20 || b == 0x7f) out += fmt::format("\\x{:02x}", b);
-    else out += ch;
-  }
-  return out;
 }
 
 }  // namespace terrane

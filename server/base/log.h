@@ -5,15 +5,8 @@
 
 #include <spdlog/spdlog.h>
 
-#include <string>
-#include <string_view>
-
 namespace terrane {
 
 spdlog::logger& server_log();
-
-// Text from a client (a name, a token) as a log line may hold it: control
-// characters as \xNN, so no client can end a line or forge the next one.
-std::string printable(std::string_view text);
 
 }  // namespace terrane

@@ -12,6 +12,7 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
+#include "server/base/cluster_options.h"
 #include "server/storage/postgres_store.h"
 
 namespace terrane {
@@ -38,11 +39,11 @@ StoreError bad_row(const char* what, Vec3i region) {
 constexpr const char* kClockMicros = "(extract(epoch FROM clock_timestamp()) * 1000000)::bigint";
 
 // What an inbox row may say is left before its deadline at most: a sender
-// waits max(2 s, a lease), and terrane-server's --lease-ms is at most 10
-// minutes. A row saying more (written by hand, or by a broken server; its
-// deadline 'infinity' even) is taken as saying this, so that its time
-// stays in the steady clock's range.
-constexpr std::int64_t kMaxInboxLeftUs = std::int64_t{10} * 60 * 1'000'000;
+// waits max(2 s, a lease), and a lease is at most kMaxLease. A row saying
+// more (written by hand, or by a broken server; its deadline 'infinity'
+// even) is taken as saying this, so that its time stays in the steady
+// clock's range.
+constexpr std::int64_t kMaxInboxLeftUs = std::chrono::microseconds(kMaxLease).count();
 
 }  // namespace
 

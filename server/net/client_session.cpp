@@ -71,9 +71,9 @@ void ClientSession::on_hello(const HelloMsg& hello) {
     if (admission.why == CloseReason::kAuthFailed) {
       context_.counters.auth_failures.fetch_add(1, std::memory_order_relaxed);
       violations().warn("session " + std::to_string(id_) + " (" + session_->remote() +
-                        "): authentication failed for '" + printable(hello.client_name) + "'");
+                        "): authentication failed for '" + hello.client_name + "'");
     } else {
-      server_log().info("session {} ({}): '{}' refused: {}", id_, session_->remote(), printable(hello.client_name),
+      server_log().info("session {} ({}): '{}' refused: {}", id_, session_->remote(), hello.client_name,
                         admission.reason);
     }
     session_->close(admission.why, admission.reason);
@@ -92,9 +92,10 @@ void ClientSession::on_hello(const HelloMsg& hello) {
   session_->send(build_welcome(context_.welcome));
   // A Redirect's token says where the client comes from (it grants nothing).
   if (!hello.resume_token.empty()) context_.counters.redirects_received.fetch_add(1, std::memory_order_relaxed);
-  server_log().info("session {} ({}) joined as '{}'{}{}", id_, session_->remote(), printable(name_),
-                    admin_ ? " (admin)" : "",
-                    hello.resume_token.empty() ? std::string() : " (redirected: " + printable(hello.resume_token) + ")");
+  // Names and resume tokens are printable (parse_hello refuses control
+  // characters): they cannot end a log line.
+  server_log().info("session {} ({}) joined as '{}'{}{}", id_, session_->remote(), name_, admin_ ? " (admin)" : "",
+                    hello.resume_token.empty() ? std::string() : " (redirected: " + hello.resume_token + ")");
   ping();
   // Streaming starts with the client's first ClientState.
 }
@@ -140,7 +141,7 @@ void ClientSession::on_closed(const std::string& reason) {
   replica_->closed();
   if (joined_)
     (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_sub(1, std::memory_order_relaxed);
-  server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : printable(name_), reason);
+  server_log().info("session {} ({}) closed: {}", id_, name_.empty() ? session_->remote() : name_, reason);
   session_.reset();  // breaks the cycle with the session's callbacks
 }
 

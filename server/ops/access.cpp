@@ -1,5 +1,6 @@
 #include "server/ops/access.h"
 
+#include <algorithm>
 #include <sstream>
 
 namespace terrane {
@@ -11,6 +12,11 @@ std::string ban_key(const std::string& target, bool address) {
 }
 
 }  // namespace
+
+AccessControl::BanKind AccessControl::kind_of(const std::string& target, bool address) {
+  if (!address) return BanKind::kName;
+  return target.find('/') == std::string::npos ? BanKind::kAddress : BanKind::kNetwork;
+}
 
 FileResult<std::unique_ptr<AccessControl>> AccessControl::open(std::unique_ptr<WorldStore> store, std::string shared_token,
                                                                 std::unordered_map<std::string, PlayerToken> players,
@@ -39,7 +45,7 @@ FileStatus AccessControl::load() {
       std::istringstream v(value);
       v >> b.until;
       std::getline(v >> std::ws, b.reason);
-      bans_[key] = b;
+      bans_[{kind_of(b.target, b.address), b.target}] = b;
     }
   }
   return Ok{};
@@ -71,18 +77,17 @@ Admission AccessControl::admit(const std::string& name, const std::string& token
   if (!a.admin) {
     const auto in_force = [&](const Ban& b) { return b.until == 0 || b.until > now; };
     const Ban* found = nullptr;
-    for (const auto& [target, address_ban] : {std::pair{name, false}, std::pair{address, true}}) {
-      auto it = bans_.find(ban_key(target, address_ban));
+    for (const auto& key : {std::pair{BanKind::kName, name}, std::pair{BanKind::kAddress, address}}) {
+      auto it = bans_.find(key);
       if (it != bans_.end() && in_force(it->second)) {
         found = &it->second;
         break;
       }
     }
-    // Network bans ("10.0.0.0/8"): few, and joins are rare next to ticks.
-    for (auto it = bans_.begin(); found == nullptr && it != bans_.end(); ++it)
-      if (it->second.address && it->second.target.find('/') != std::string::npos && in_force(it->second) &&
-          address_in_network(address, it->second.target))
-        found = &it->second;
+    // Network bans ("10.0.0.0/8"), the only ones walked: few.
+    for (auto it = bans_.lower_bound({BanKind::kNetwork, ""});
+         found == nullptr && it != bans_.end() && it->first.first == BanKind::kNetwork; ++it)
+      if (in_force(it->second) && address_in_network(address, it->second.target)) found = &it->second;
     if (found != nullptr) {
       a.why = CloseReason::kBanned;
       a.reason = "banned";
@@ -105,7 +110,7 @@ FileStatus AccessControl::ban(const Ban& b) {
   const std::string key = ban_key(b.target, b.address);
   if (auto st = store_->put_access(key, std::to_string(b.until) + " " + b.reason); !st) return st;
   std::lock_guard lock(m_);
-  bans_[key] = b;
+  bans_[{kind_of(b.target, b.address), b.target}] = b;
   return Ok{};
 }
 
@@ -113,12 +118,12 @@ FileResult<bool> AccessControl::unban(const std::string& target) {
   std::lock_guard store_lock(store_m_);
   bool any = false;
   for (const bool address : {false, true}) {
-    const std::string key = ban_key(target, address);
+    const std::pair key{kind_of(target, address), target};
     {
       std::lock_guard lock(m_);
       if (bans_.count(key) == 0) continue;
     }
-    if (auto st = store_->erase_access(key); !st) return st.error();
+    if (auto st = store_->erase_access(ban_key(target, address)); !st) return st.error();
     std::lock_guard lock(m_);
     bans_.erase(key);
     any = true;
@@ -131,6 +136,10 @@ std::vector<Ban> AccessControl::bans(std::int64_t now) const {
   std::vector<Ban> out;
   for (const auto& [key, b] : bans_)
     if (b.until == 0 || b.until > now) out.push_back(b);
+  // In the store keys' order: addresses and networks by their text, then names.
+  std::sort(out.begin(), out.end(), [](const Ban& a, const Ban& b) {
+    return std::pair{!a.address, a.target} < std::pair{!b.address, b.target};
+  });
   return out;
 }
 

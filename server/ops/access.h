@@ -1,6 +1,6 @@
 // AccessControl: who may join and who is an admin. Tokens (the shared
 // token, per-player tokens with a role, the admin token) come from the
-// options; bans (by name or address, for a while or for ever) and the
+// options; bans (by name, address or network, for a while or for ever) and the
 // whitelist are the operators' (terrane-admin) and live in the world's
 // store (table "access", common/world/WORLD_FORMAT.md), so they survive restarts.
 //
@@ -16,6 +16,7 @@
 #include <set>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "common/world/world_store.h"
@@ -26,7 +27,7 @@
 namespace terrane {
 
 struct Ban {
-  std::string target;   // a name, or an address
+  std::string target;   // a name, an address or a network ("10.0.0.0/8"; canonical_network)
   bool address = false;
   std::int64_t until = 0;  // Unix seconds; 0 = never ends
   std::string reason;
@@ -44,7 +45,7 @@ class AccessControl final : public Admitter {
   bool open_to_all() const { return shared_token_.empty() && players_.empty(); }
 
   FileStatus ban(const Ban& b);
-  // True if something was banned under target (a name or an address).
+  // True if something was banned under target (a name, an address or a network).
   FileResult<bool> unban(const std::string& target);
   std::vector<Ban> bans(std::int64_t now) const;
 
@@ -57,6 +58,10 @@ class AccessControl final : public Admitter {
  private:
   AccessControl() = default;
   FileStatus load();
+  // How admit() finds a ban: a name's and an address's by their key, a
+  // network's by walking the networks only (bans_ keeps them together).
+  enum class BanKind : std::uint8_t { kAddress, kNetwork, kName };
+  static BanKind kind_of(const std::string& target, bool address);
 
   std::string shared_token_, admin_token_;
   std::unordered_map<std::string, PlayerToken> players_;
@@ -65,7 +70,7 @@ class AccessControl final : public Admitter {
   mutable std::mutex m_;
   std::mutex store_m_;
   std::unique_ptr<WorldStore> store_;
-  std::map<std::string, Ban> bans_;  // by store key
+  std::map<std::pair<BanKind, std::string>, Ban> bans_;  // by kind_of and target
   std::set<std::string> whitelist_;
   bool whitelist_on_ = false;
 };

@@ -23,6 +23,7 @@
 #include "tests/support/eventually.h"
 #include "tests/support/gated_store.h"
 #include "tests/support/scratch_dir.h"
+#include "tests/support/world_strand.h"
 
 namespace terrane {
 namespace {
@@ -30,69 +31,31 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-// A client that records what the world tells it.
-class Recorder : public WorldClient {
+// A client that records what the world tells it (RecordingClient), and
+// how many grants it had when the first EditAck came.
+class Recorder : public testing_support::RecordingClient {
  public:
-  void granted(std::vector<VersionPtr> versions) override {
-    std::lock_guard lock(m_);
-    for (auto& v : versions) grants_.push_back(std::move(v));
-    cv_.notify_all();
-  }
-  void horizons(std::vector<HorizonPtr> images) override {
-    std::lock_guard lock(m_);
-    for (auto& i : images) horizons_.push_back(std::move(i));
-    cv_.notify_all();
-  }
-  void committed(std::uint64_t tick, std::vector<VersionPtr> changed) override {
-    std::lock_guard lock(m_);
-    ticks_.emplace_back(tick, std::move(changed));
-    cv_.notify_all();
-  }
-  void mips_changed(std::uint64_t tick, std::vector<VersionPtr> changed) override {
-    std::lock_guard lock(m_);
-    mip_news_.emplace_back(tick, std::move(changed));
-    cv_.notify_all();
-  }
   void answer(WorldAnswer a) override {
-    std::lock_guard lock(m_);
-    if (grants_at_first_ack_ < 0 && std::holds_alternative<EditAcked>(a))
-      grants_at_first_ack_ = static_cast<std::int64_t>(grants_.size());
-    answers_.push_back(std::move(a));
-    cv_.notify_all();
+    {
+      std::lock_guard lock(m);
+      if (grants_at_first_ack < 0 && std::holds_alternative<EditAcked>(a))
+        grants_at_first_ack = static_cast<std::int64_t>(grants.size());
+    }
+    RecordingClient::answer(std::move(a));
   }
-  void close(CloseReason, const std::string& reason) override {
-    std::lock_guard lock(m_);
-    closed_ = reason;
-    cv_.notify_all();
-  }
+  // Waits (up to a minute) until p(*this) holds, under the lock.
   template <class Pred>
   bool wait(Pred p) {
-    std::unique_lock lock(m_);
-    return cv_.wait_for(lock, 60s, [&] { return p(*this); });
-  }
-  // The edit ids of the edits acknowledged, in order.
-  std::vector<std::uint32_t> acked() const {
-    std::vector<std::uint32_t> ids;
-    for (const WorldAnswer& a : answers_)
-      if (const auto* ack = std::get_if<EditAcked>(&a)) ids.push_back(ack->edit_id);
-    return ids;
+    return RecordingClient::wait([&](RecordingClient&) { return p(*this); });
   }
   // The answers of type T received.
   template <class T>
   std::size_t count() const {
     return static_cast<std::size_t>(
-        std::count_if(answers_.begin(), answers_.end(), [](const WorldAnswer& a) { return std::holds_alternative<T>(a); }));
+        std::count_if(answers.begin(), answers.end(), [](const WorldAnswer& a) { return std::holds_alternative<T>(a); }));
   }
 
-  std::mutex m_;
-  std::condition_variable cv_;
-  std::vector<VersionPtr> grants_;
-  std::vector<HorizonPtr> horizons_;
-  std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> ticks_;
-  std::vector<std::pair<std::uint64_t, std::vector<VersionPtr>>> mip_news_;
-  std::vector<WorldAnswer> answers_;
-  std::int64_t grants_at_first_ack_ = -1;  // grants received when the first EditAck came
-  std::string closed_;
+  std::int64_t grants_at_first_ack = -1;  // grants received when the first EditAck came
 };
 
 class WorldOwnerTest : public ::testing::Test {
@@ -169,16 +132,16 @@ TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
   auto other = client(2, {-1280, 10, 160});
   owner_->want(1, {{a, true}, {b, true}});
   owner_->want(2, {{far, false}});
-  ASSERT_TRUE(holder->wait([](Recorder& r) { return r.grants_.size() == 2; }));
-  ASSERT_TRUE(other->wait([](Recorder& r) { return r.grants_.size() == 1; }));
-  const std::uint64_t rev_a = holder->grants_[0]->pos() == a ? holder->grants_[0]->revision() : holder->grants_[1]->revision();
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return r.grants.size() == 2; }));
+  ASSERT_TRUE(other->wait([](Recorder& r) { return r.grants.size() == 1; }));
+  const std::uint64_t rev_a = holder->grants[0]->pos() == a ? holder->grants[0]->revision() : holder->grants[1]->revision();
   // One edit spanning both chunks: one tick, one call with both versions.
   owner_->edit(1, fill(5, Region{{1020, 0, 1020}, {1030, 4, 1030}}, materials::kBrick));
-  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks_.empty() && r.count<EditAcked>() == 1; }));
+  ASSERT_TRUE(holder->wait([](Recorder& r) { return !r.ticks.empty() && r.count<EditAcked>() == 1; }));
   {
-    std::lock_guard lock(holder->m_);
-    ASSERT_EQ(holder->ticks_.size(), 1u);
-    const auto& changed = holder->ticks_.front().second;
+    std::lock_guard lock(holder->m);
+    ASSERT_EQ(holder->ticks.size(), 1u);
+    const auto& changed = holder->ticks.front().second;
     ASSERT_EQ(changed.size(), 2u);
     for (const VersionPtr& v : changed) {
       EXPECT_TRUE(v->pos() == a || v->pos() == b);
@@ -196,8 +159,8 @@ TEST_F(WorldOwnerTest, AnEditBecomesACommittedVersionThatReachesHoldersOnly) {
   EXPECT_EQ((*stored)->revision, rev_a + 1);
   EXPECT_EQ((*stored)->chunk.get({28, 1, 28}), solid(materials::kBrick));
   {
-    std::lock_guard lock(other->m_);
-    EXPECT_TRUE(other->ticks_.empty()) << "not a holder of the changed chunks";
+    std::lock_guard lock(other->m);
+    EXPECT_TRUE(other->ticks.empty()) << "not a holder of the changed chunks";
   }
   EXPECT_EQ(counters_.deliveries.load(), 2u);
 }
@@ -206,19 +169,19 @@ TEST_F(WorldOwnerTest, AReleasedChunkIsNoLongerTold) {
   const Vec3i a{31, 0, 31};
   auto c = client(1, {1000, 10, 1000});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == 1; }));
   owner_->release(1, {a});
   owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kRock));
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 1; }));
-  std::lock_guard lock(c->m_);
-  EXPECT_TRUE(c->ticks_.empty());
+  std::lock_guard lock(c->m);
+  EXPECT_TRUE(c->ticks.empty());
 }
 
 TEST_F(WorldOwnerTest, UndoAndRedoApplyOnTheStrand) {
   const Vec3i a{31, 0, 31};
   auto c = client(1, {1000, 10, 1000});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == 1; }));
   const Vec3i p{1001, 1, 1001};
   Voxel before{};
   owner_->inspect([&](const WorldView& v) { before = v.get(p); });
@@ -243,7 +206,7 @@ TEST_F(WorldOwnerTest, ATickRunsBetweenSlicesOfQueuedRequestsNotBehindThemAll) {
   const Vec3i a{31, 0, 31};
   auto c = client(1, {1000, 10, 1000});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == 1; }));
   std::uint64_t before = 0;
   owner_->inspect([&](const WorldView& v) { before = v.revision(a); });
   // Far more streaming work queued than one slice (each request is granted
@@ -261,12 +224,12 @@ TEST_F(WorldOwnerTest, ATickRunsBetweenSlicesOfQueuedRequestsNotBehindThemAll) {
   while (!grants_when_applied && std::chrono::steady_clock::now() < deadline)
     owner_->inspect([&](const WorldView& v) {
       if (v.revision(a) == before) return;
-      std::lock_guard lock(c->m_);
-      grants_when_applied = c->grants_.size();
+      std::lock_guard lock(c->m);
+      grants_when_applied = c->grants.size();
     });
   ASSERT_TRUE(grants_when_applied.has_value()) << "the edit was never applied";
   EXPECT_LT(*grants_when_applied, kRequests + 1);
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == kRequests + 1 && r.grants_at_first_ack_ >= 0; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == kRequests + 1 && r.grants_at_first_ack >= 0; }));
   // Their waits were reported, and a queue drained says nothing waits (the
   // strand says so after the last grant left, which the client may read
   // first).
@@ -278,26 +241,26 @@ TEST_F(WorldOwnerTest, RequestsAreServedInTheOrderMade) {
   const Vec3i a{31, 0, 31};
   auto c = client(1, {1000, 10, 1000});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 1; }));  // loaded
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == 1; }));  // loaded
   // Release, want: the client ends a holder (a change reaches it);
   // release last: it does not.
   owner_->release(1, {a});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.grants.size() == 2; }));
   owner_->edit(1, fill(1, Region{{1001, 1, 1001}, {1002, 2, 1002}}, materials::kBrick));
-  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks_.empty(); }));
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks.empty(); }));
   owner_->release(1, {a});
   owner_->edit(1, fill(2, Region{{1003, 1, 1003}, {1004, 2, 1004}}, materials::kSnow));
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.count<EditAcked>() == 2; }));
-  std::lock_guard lock(c->m_);
-  EXPECT_EQ(c->ticks_.size(), 1u);
+  std::lock_guard lock(c->m);
+  EXPECT_EQ(c->ticks.size(), 1u);
 }
 
 TEST_F(WorldOwnerTest, AClientsRequestsNeverPassItsJoin) {
   const Vec3i a{31, 0, 31};
   auto first = client(1, {1000, 10, 1000});
   owner_->want(1, {{a, true}});
-  ASSERT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(first->wait([](Recorder& r) { return r.grants.size() == 1; }));
   // The strand held busy while one client's request is queued (its drain
   // posted), a second client joins and asks at once: its request must not
   // be served before its join, or it would be dropped as a stranger's.
@@ -308,8 +271,8 @@ TEST_F(WorldOwnerTest, AClientsRequestsNeverPassItsJoin) {
   auto second = client(2, {1000, 10, 1000});
   owner_->want(2, {{a, true}});
   go.set_value();
-  EXPECT_TRUE(second->wait([](Recorder& r) { return r.grants_.size() == 1; }));
-  EXPECT_TRUE(first->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  EXPECT_TRUE(second->wait([](Recorder& r) { return r.grants.size() == 1; }));
+  EXPECT_TRUE(first->wait([](Recorder& r) { return r.grants.size() == 2; }));
 }
 
 // Reads of chunk (31, 0, 31) wait until the test opens the gate.
@@ -337,18 +300,18 @@ TEST_F(WorldOwnerWaitingEditTest, AnEditWaitingForItsChunkHoldsUpOnlyItsPlayersE
   // Acknowledgements of one tick go out in the order applied: a's and c's,
   // queued before b's, would have come first.
   {
-    std::lock_guard lock(a->m_);
+    std::lock_guard lock(a->m);
     EXPECT_TRUE(a->acked().empty()) << "a's second edit waits for its first";
   }
   {
-    std::lock_guard lock(c->m_);
+    std::lock_guard lock(c->m);
     EXPECT_TRUE(c->acked().empty()) << "an edit on the waiting edit's chunk waits for it";
   }
   gate_->open();
   ASSERT_TRUE(a->wait([](Recorder& r) { return r.acked().size() == 2; }));
   ASSERT_TRUE(c->wait([](Recorder& r) { return r.acked().size() == 1; }));
   {
-    std::lock_guard lock(a->m_);
+    std::lock_guard lock(a->m);
     EXPECT_EQ(a->acked(), (std::vector<std::uint32_t>{1, 2}));
   }
   // c's edit applied after a's first, over it.
@@ -378,27 +341,27 @@ TEST_F(WorldOwnerMipNewsTest, AHolderAfarHearsOfSeveralTicksAtOnce) {
   auto afar = client(2, {1000, 10, 1000});
   owner_->want(1, {{a, true, 0}});
   owner_->want(2, {{a, false, kMipLevels - 1}});
-  ASSERT_TRUE(near->wait([](Recorder& r) { return r.grants_.size() == 1; }));
-  ASSERT_TRUE(afar->wait([](Recorder& r) { return r.grants_.size() == 1; }));
-  const std::uint64_t rev = near->grants_[0]->revision();
+  ASSERT_TRUE(near->wait([](Recorder& r) { return r.grants.size() == 1; }));
+  ASSERT_TRUE(afar->wait([](Recorder& r) { return r.grants.size() == 1; }));
+  const std::uint64_t rev = near->grants[0]->revision();
   // Three edits, each in a tick of its own (each waits for the last's ack).
   for (std::uint32_t i = 1; i <= 3; ++i) {
     owner_->edit(1, fill(i, Region{{1000, 0, 1000}, {1002, static_cast<std::int32_t>(i), 1002}}, materials::kBrick));
     ASSERT_TRUE(near->wait([i](Recorder& r) { return r.count<EditAcked>() == i; }));
   }
   {
-    std::lock_guard lock(near->m_);
-    EXPECT_EQ(near->ticks_.size(), 3u) << "a holder at full resolution hears of every tick";
-    EXPECT_TRUE(near->mip_news_.empty());
+    std::lock_guard lock(near->m);
+    EXPECT_EQ(near->ticks.size(), 3u) << "a holder at full resolution hears of every tick";
+    EXPECT_TRUE(near->mip_news.empty());
   }
   ASSERT_TRUE(afar->wait([rev](Recorder& r) {
-    return !r.mip_news_.empty() && r.mip_news_.back().second.back()->revision() == rev + 3;
+    return !r.mip_news.empty() && r.mip_news.back().second.back()->revision() == rev + 3;
   }));
-  std::lock_guard lock(afar->m_);
-  EXPECT_TRUE(afar->ticks_.empty()) << "a holder afar is not told every tick";
-  EXPECT_LT(afar->mip_news_.size(), 3u) << "the ticks' news gathered";
+  std::lock_guard lock(afar->m);
+  EXPECT_TRUE(afar->ticks.empty()) << "a holder afar is not told every tick";
+  EXPECT_LT(afar->mip_news.size(), 3u) << "the ticks' news gathered";
   std::size_t versions = 0;
-  for (const auto& [tick, changed] : afar->mip_news_) {
+  for (const auto& [tick, changed] : afar->mip_news) {
     for (const VersionPtr& v : changed) EXPECT_EQ(v->pos(), a);
     versions += changed.size();
   }
@@ -412,32 +375,32 @@ TEST_F(WorldOwnerMipNewsHeldTest, AChunkNowHeldAtFullResolutionIsToldEveryTickAn
   auto mover = client(2, {1000, 10, 1000});
   owner_->want(1, {{a, true, 0}, {b, true, 0}});
   owner_->want(2, {{a, false, kMipLevels - 1}, {b, false, kMipLevels - 1}});
-  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants_.size() == 2; }));
-  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.grants_.size() == 2; }));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants.size() == 2; }));
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.grants.size() == 2; }));
   // A change of b, gathered for the mover (not due for ten minutes).
   owner_->edit(1, fill(1, Region{{1000, 0, 990}, {1002, 2, 992}}, materials::kBrick));
   ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count<EditAcked>() == 1; }));
   owner_->inspect([](const WorldView&) {});  // the commit's news handed out
   {
-    std::lock_guard lock(mover->m_);
-    EXPECT_TRUE(mover->ticks_.empty());
-    EXPECT_TRUE(mover->mip_news_.empty());
+    std::lock_guard lock(mover->m);
+    EXPECT_TRUE(mover->ticks.empty());
+    EXPECT_TRUE(mover->mip_news.empty());
   }
   // The mover now holds b at full resolution: its gathered news of b comes
   // at once, and a's, not changed yet, stays gathered until a is too.
   owner_->holds_full(2, {b});
-  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.mip_news_.size() == 1; }));
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.mip_news.size() == 1; }));
   {
-    std::lock_guard lock(mover->m_);
-    ASSERT_EQ(mover->mip_news_[0].second.size(), 1u);
-    EXPECT_EQ(mover->mip_news_[0].second[0]->pos(), b);
+    std::lock_guard lock(mover->m);
+    ASSERT_EQ(mover->mip_news[0].second.size(), 1u);
+    EXPECT_EQ(mover->mip_news[0].second[0]->pos(), b);
   }
   // b's next change reaches it in its tick.
   owner_->edit(1, fill(2, Region{{1000, 0, 990}, {1002, 3, 992}}, materials::kSnow));
-  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.ticks_.size() == 1; }));
-  std::lock_guard lock(mover->m_);
-  ASSERT_EQ(mover->ticks_[0].second.size(), 1u);
-  EXPECT_EQ(mover->ticks_[0].second[0]->pos(), b);
+  ASSERT_TRUE(mover->wait([](Recorder& r) { return r.ticks.size() == 1; }));
+  std::lock_guard lock(mover->m);
+  ASSERT_EQ(mover->ticks[0].second.size(), 1u);
+  EXPECT_EQ(mover->ticks[0].second[0]->pos(), b);
 }
 
 TEST_F(WorldOwnerMipNewsHeldTest, HoldsFullOfAChunkNotHeldChangesNothing) {
@@ -445,14 +408,14 @@ TEST_F(WorldOwnerMipNewsHeldTest, HoldsFullOfAChunkNotHeldChangesNothing) {
   auto editor = client(1, {1000, 10, 1000});
   auto other = client(2, {1000, 10, 1000});
   owner_->want(1, {{a, true, 0}});
-  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants_.size() == 1; }));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.grants.size() == 1; }));
   owner_->holds_full(2, {a});  // never asked for, or released: no holder made
   owner_->edit(1, fill(1, Region{{1000, 0, 1000}, {1002, 2, 1002}}, materials::kBrick));
-  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks_.empty(); }));
+  ASSERT_TRUE(editor->wait([](Recorder& r) { return r.count<EditAcked>() == 1 && !r.ticks.empty(); }));
   owner_->inspect([](const WorldView&) {});
-  std::lock_guard lock(other->m_);
-  EXPECT_TRUE(other->ticks_.empty());
-  EXPECT_TRUE(other->mip_news_.empty());
+  std::lock_guard lock(other->m);
+  EXPECT_TRUE(other->ticks.empty());
+  EXPECT_TRUE(other->mip_news.empty());
 }
 
 }  // namespace
