@@ -23,33 +23,9 @@ class FlatReader {
   const std::string& error() const { return err_; }
   bool has(const std::string& key) const { return f_.count(key) != 0; }
 
-  double number(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0.0;
-    double v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not a number"), 0.0;
-    return v;
-  }
-  std::uint64_t whole(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0;
-    std::uint64_t v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not a whole number"), 0;
-    return v;
-  }
-  int integer(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0;
-    int v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not an integer"), 0;
-    return v;
-  }
+  double number(const std::string& key) { return parsed<double>(key, "a number"); }
+  std::uint64_t whole(const std::string& key) { return parsed<std::uint64_t>(key, "a whole number"); }
+  int integer(const std::string& key) { return parsed<int>(key, "an integer"); }
   std::string text(const std::string& key, const std::string& otherwise = "") {
     const auto it = f_.find(key);
     return it == f_.end() ? otherwise : it->second;
@@ -96,6 +72,19 @@ class FlatReader {
   }
 
  private:
+  // The value at key as a T (the whole text, std::from_chars); 0 and the
+  // error when it is missing or not one.
+  template <typename T>
+  T parsed(const std::string& key, const char* what) {
+    const auto it = f_.find(key);
+    if (it == f_.end()) return fail(key, "missing"), T{};
+    T v{};
+    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
+    if (ec != std::errc() || p != it->second.data() + it->second.size())
+      return fail(key, "'" + it->second + "' is not " + what), T{};
+    return v;
+  }
+
   const Flat& f_;
   std::string err_;
 };
