@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/cli/cli.h"
+
 namespace terrane::bots {
 
 const char* threshold_op_text(ThresholdOp op) {
@@ -65,12 +67,6 @@ const std::vector<ThresholdMetric>& threshold_metrics() {
 
 namespace {
 
-std::string trim(const std::string& s) {
-  const auto a = s.find_first_not_of(" \t");
-  if (a == std::string::npos) return "";
-  return s.substr(a, s.find_last_not_of(" \t") - a + 1);
-}
-
 std::string known_metrics() {
   std::string out;
   for (const ThresholdMetric& m : threshold_metrics()) out += (out.empty() ? "" : ", ") + std::string(m.name);
@@ -80,7 +76,7 @@ std::string known_metrics() {
 }  // namespace
 
 std::string parse_threshold(const std::string& expression, Threshold* out) {
-  const std::string e = trim(expression);
+  const std::string e = trim_blanks(expression);
   const std::string named = "'" + e + "': ";
   const std::size_t at = e.find_first_of("<>=!");
   if (at == std::string::npos) return named + "no operator (one of < <= > >= == !=), as in fanout_p99<100";
@@ -96,8 +92,8 @@ std::string parse_threshold(const std::string& expression, Threshold* out) {
   else if (op == "==") t.op = ThresholdOp::kEqual;
   else if (op == "!=") t.op = ThresholdOp::kNotEqual;
   else return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
-  t.metric = trim(e.substr(0, at));
-  const std::string limit = trim(e.substr(at + len));
+  t.metric = trim_blanks(e.substr(0, at));
+  const std::string limit = trim_blanks(e.substr(at + len));
   if (t.metric.empty()) return named + "no metric before '" + op + "'";
   bool known = false;
   for (const ThresholdMetric& m : threshold_metrics()) known = known || t.metric == m.name;

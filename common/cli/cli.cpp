@@ -7,6 +7,12 @@
 
 namespace terrane {
 
+std::string trim_blanks(std::string_view text) {
+  const auto a = text.find_first_not_of(" \t\r");
+  if (a == std::string_view::npos) return std::string();
+  return std::string(text.substr(a, text.find_last_not_of(" \t\r") - a + 1));
+}
+
 CommandLine::CommandLine(std::set<std::string> value_options, std::set<std::string> flag_options)
     : value_options_(std::move(value_options)), flag_options_(std::move(flag_options)) {}
 
@@ -45,12 +51,6 @@ std::string CommandLine::load_file(const std::string& path) {
   if (!in) return "cannot read " + path;
   std::string line;
   int number = 0;
-  auto trim = [](std::string t) {
-    const auto a = t.find_first_not_of(" \t\r");
-    if (a == std::string::npos) return std::string();
-    const auto b = t.find_last_not_of(" \t\r");
-    return t.substr(a, b - a + 1);
-  };
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
@@ -68,16 +68,16 @@ std::string CommandLine::load_file(const std::string& path) {
           break;
         }
       }
-      line = trim(line.substr(0, i));
+      line = trim_blanks(line.substr(0, i));
     }
     if (line.empty()) continue;
     std::string name, value;
     if (const auto eq = line.find('='); eq != std::string::npos) {
-      name = trim(line.substr(0, eq));
-      value = trim(line.substr(eq + 1));
+      name = trim_blanks(line.substr(0, eq));
+      value = trim_blanks(line.substr(eq + 1));
     } else if (const auto sp = line.find_first_of(" \t"); sp != std::string::npos) {
       name = line.substr(0, sp);
-      value = trim(line.substr(sp));
+      value = trim_blanks(line.substr(sp));
     } else {
       name = line;
     }
