@@ -1,7 +1,9 @@
 #include "client/bots/thresholds.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <iterator>
 #include <limits>
 
 #include "common/cli/cli.h"
@@ -67,6 +69,10 @@ const std::vector<ThresholdMetric>& threshold_metrics() {
 
 namespace {
 
+// Every operator, each spelt by threshold_op_text.
+constexpr ThresholdOp kOps[] = {ThresholdOp::kLess,         ThresholdOp::kLessEqual, ThresholdOp::kGreater,
+                                ThresholdOp::kGreaterEqual, ThresholdOp::kEqual,     ThresholdOp::kNotEqual};
+
 std::string known_metrics() {
   std::string out;
   for (const ThresholdMetric& m : threshold_metrics()) out += (out.empty() ? "" : ", ") + std::string(m.name);
@@ -85,13 +91,10 @@ std::string parse_threshold(const std::string& expression, Threshold* out) {
   std::size_t len = at + 1 < e.size() && e[at + 1] == '=' ? 2 : 1;
   const std::string op = e.substr(at, len);
   Threshold t;
-  if (op == "<") t.op = ThresholdOp::kLess;
-  else if (op == "<=") t.op = ThresholdOp::kLessEqual;
-  else if (op == ">") t.op = ThresholdOp::kGreater;
-  else if (op == ">=") t.op = ThresholdOp::kGreaterEqual;
-  else if (op == "==") t.op = ThresholdOp::kEqual;
-  else if (op == "!=") t.op = ThresholdOp::kNotEqual;
-  else return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
+  const auto known_op = std::find_if(std::begin(kOps), std::end(kOps),
+                                     [&](ThresholdOp o) { return op == threshold_op_text(o); });
+  if (known_op == std::end(kOps)) return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
+  t.op = *known_op;
   t.metric = trim_blanks(e.substr(0, at));
   const std::string limit = trim_blanks(e.substr(at + len));
   if (t.metric.empty()) return named + "no metric before '" + op + "'";
