@@ -146,10 +146,25 @@ std::string histogram_from_flat(const std::map<std::string, std::string>& flat, 
     std::uint64_t lowest = 0, n = 0;
     if (auto e = field(b + ".0", &lowest); !e.empty()) return e;
     if (auto e = field(b + ".1", &n); !e.empty()) return e;
-    if (!out->add_bucket(lowest, n))
+    if (lowest > LatencyHistogram::kMaxMicros ||
+        LatencyHistogram::lowest_of(LatencyHistogram::index_of(lowest)) != lowest)
       return prefix + "." + b + ": " + std::to_string(lowest) + " us is not the lowest value of a bucket";
+    if (!out->add_bucket(lowest, n)) return prefix + "." + b + ": a count of " + std::to_string(n) + " overflows the total";
   }
-  if (!out->empty()) out->set_range(min_us, max_us);
+  if (out->empty()) return "";
+  // The smallest and largest values recorded lie in the lowest and highest
+  // buckets counted (percentile() reads them as the range of every bucket).
+  const auto counted = out->buckets();
+  const auto in_bucket = [](std::uint64_t us, std::uint64_t lowest) {
+    return LatencyHistogram::index_of(us) == LatencyHistogram::index_of(lowest);
+  };
+  if (!in_bucket(min_us, counted.front().first))
+    return prefix + ".min_us: " + std::to_string(min_us) + " is not in the lowest bucket counted (from " +
+           std::to_string(counted.front().first) + " us)";
+  if (!in_bucket(max_us, counted.back().first) || max_us < min_us)
+    return prefix + ".max_us: " + std::to_string(max_us) + " is not in the highest bucket counted (from " +
+           std::to_string(counted.back().first) + " us) at or above min_us";
+  out->set_range(min_us, max_us);
   return "";
 }
 

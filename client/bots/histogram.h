@@ -85,7 +85,9 @@ std::string histogram_json(const LatencyHistogram& h);
 
 // Reads back what histogram_json wrote, from a report flattened by
 // flatten_json (report.h) under prefix (e.g. "edit_fanout_ms.histogram").
-// Returns "" or what is wrong, naming the key.
+// A file is input: each bucket must be one of the layout's, the counts
+// must not overflow, and min_us and max_us must lie in the lowest and
+// highest buckets counted. Returns "" or what is wrong, naming the key.
 std::string histogram_from_flat(const std::map<std::string, std::string>& flat, const std::string& prefix,
                                 LatencyHistogram* out);
 

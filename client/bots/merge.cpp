@@ -23,31 +23,15 @@ class FlatReader {
   const std::string& error() const { return err_; }
   bool has(const std::string& key) const { return f_.count(key) != 0; }
 
-  double number(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0.0;
-    double v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not a number"), 0.0;
-    return v;
-  }
-  std::uint64_t whole(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0;
-    std::uint64_t v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not a whole number"), 0;
-    return v;
-  }
-  int integer(const std::string& key) {
-    const auto it = f_.find(key);
-    if (it == f_.end()) return fail(key, "missing"), 0;
-    int v = 0;
-    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
-    if (ec != std::errc() || p != it->second.data() + it->second.size())
-      return fail(key, "'" + it->second + "' is not an integer"), 0;
+  double number(const std::string& key) { return parsed<double>(key, "a number"); }
+  std::uint64_t whole(const std::string& key) { return parsed<std::uint64_t>(key, "a whole number"); }
+  int integer(const std::string& key) { return parsed<int>(key, "an integer"); }
+  // An integer in [lo, hi]: a count of bots or a bot's id, which the
+  // merge adds up or lists (a file is input).
+  int integer(const std::string& key, int lo, int hi) {
+    const int v = integer(key);
+    if (v < lo || v > hi)
+      return fail(key, std::to_string(v) + " is not in " + std::to_string(lo) + ".." + std::to_string(hi)), 0;
     return v;
   }
   std::string text(const std::string& key, const std::string& otherwise = "") {
@@ -96,6 +80,19 @@ class FlatReader {
   }
 
  private:
+  // The value at key as a T (the whole text, std::from_chars); 0 and the
+  // error when it is missing or not one.
+  template <typename T>
+  T parsed(const std::string& key, const char* what) {
+    const auto it = f_.find(key);
+    if (it == f_.end()) return fail(key, "missing"), T{};
+    T v{};
+    auto [p, ec] = std::from_chars(it->second.data(), it->second.data() + it->second.size(), v);
+    if (ec != std::errc() || p != it->second.data() + it->second.size())
+      return fail(key, "'" + it->second + "' is not " + what), T{};
+    return v;
+  }
+
   const Flat& f_;
   std::string err_;
 };
@@ -186,7 +183,8 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   const BotsOptions& o = r.options;
   r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
   r.joined_s = in.number("joined_s");
-  r.bots = in.integer("bots");
+  // Every count of bots within the part's own: their sums stay within o.bots.
+  r.bots = in.integer("bots", 0, shard_bots(o));
   r.duration_s = in.number("duration_s");
   r.bytes_received = in.whole("bytes_received");
   r.bytes_sent = in.whole("bytes_sent");
@@ -196,7 +194,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.bytes_per_non_empty_voxel = in.number("bytes_per_non_empty_voxel");
   r.join_coarse_ms = in.latency("join_coarse_ms");
   r.join_full_ms = in.latency("join_full_ms");
-  r.joins_incomplete = in.integer("joins_incomplete");
+  r.joins_incomplete = in.integer("joins_incomplete", 0, r.bots);
   r.edit_ack_ms = in.latency("edit_ack_ms");
   r.edit_fanout_ms = in.latency("edit_fanout_ms");
   r.edit_fanout_other_server_ms = in.latency("edit_fanout_other_server_ms");
@@ -209,7 +207,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
     std::uint32_t server = 0;
     auto [p, ec] = std::from_chars(id.data(), id.data() + id.size(), server);
     if (ec != std::errc() || p != id.data() + id.size()) in.fail("bots_per_server." + id, "not a server id");
-    r.bots_per_server[server] = in.integer("bots_per_server." + id);
+    r.bots_per_server[server] = in.integer("bots_per_server." + id, 0, r.bots);
   }
   r.edits_sent = in.whole("edits_sent");
   r.edits_acked = in.whole("edits_acked");
@@ -224,7 +222,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   for (std::size_t i = 0; i < in.length("mismatches", "bot"); ++i) {
     const std::string k = "mismatches." + std::to_string(i);
     Mismatch m;
-    m.bot = in.integer(k + ".bot");
+    m.bot = in.integer(k + ".bot", 0, o.bots - 1);
     m.chunk = {in.integer(k + ".chunk.0"), in.integer(k + ".chunk.1"), in.integer(k + ".chunk.2")};
     m.replica_revision = in.whole(k + ".replica_revision");
     m.server_revision = in.whole(k + ".server_revision");
@@ -236,12 +234,12 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
     in.fail("replica_mismatches", "differs from the mismatches listed");
   r.hash_unanswered = in.whole("hash_unanswered");
   r.min_checks_during_run = in.whole("min_hash_checks_during_run");
-  r.unexpected_disconnects = in.integer("unexpected_disconnects");
+  r.unexpected_disconnects = in.integer("unexpected_disconnects", 0, r.bots);
   for (std::size_t i = 0; i < in.length("disconnects", "bot"); ++i) {
     const std::string k = "disconnects." + std::to_string(i);
-    r.disconnects.emplace_back(in.integer(k + ".bot"), in.text(k + ".reason"));
+    r.disconnects.emplace_back(in.integer(k + ".bot", 0, o.bots - 1), in.text(k + ".reason"));
   }
-  r.connect_failures = in.integer("connect_failures");
+  r.connect_failures = in.integer("connect_failures", 0, r.bots);
   r.first_connect_error = in.text("first_connect_error");
   r.walk_steps = in.whole("walk_steps");
   const char* const refused[] = {"outside_area", "not_full_resolution", "too_steep", "obstacle"};
@@ -258,7 +256,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
     const std::string k = "timeline." + std::to_string(i);
     TimelinePoint p;
     p.t_s = in.number(k + ".t_s");
-    p.bots_connected = in.integer(k + ".bots");
+    p.bots_connected = in.integer(k + ".bots", 0, r.bots);
     p.mb_per_s_in = in.number(k + ".mb_per_s_in");
     p.mb_per_s_out = in.number(k + ".mb_per_s_out");
     p.edits_acked_per_s = in.number(k + ".edits_acked_per_s");

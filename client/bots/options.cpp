@@ -145,22 +145,16 @@ std::string parse_scenario_text(const std::string& text, const std::string& sour
   std::istringstream in(text);
   std::string line;
   int n = 0;
-  auto trim = [](std::string s) {
-    const auto a = s.find_first_not_of(" \t\r");
-    if (a == std::string::npos) return std::string();
-    const auto b = s.find_last_not_of(" \t\r");
-    return s.substr(a, b - a + 1);
-  };
   while (std::getline(in, line)) {
     ++n;
     const std::string where = source + ":" + std::to_string(n);
     if (auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
-    line = trim(line);
+    line = trim_blanks(line);
     if (line.empty()) continue;
     const auto eq = line.find('=');
     if (eq == std::string::npos) return where + ": expected key=value, got '" + line + "'";
-    std::string key = trim(line.substr(0, eq));
-    const std::string value = trim(line.substr(eq + 1));
+    std::string key = trim_blanks(line.substr(0, eq));
+    const std::string value = trim_blanks(line.substr(eq + 1));
     if (key.rfind("--", 0) == 0) key = key.substr(2);
     if (value_keys().count(key) == 0 || key == "scenario") return where + ": unknown key '" + key + "'";
     out->emplace(key, std::make_pair(value, where + ": " + key));

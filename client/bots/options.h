@@ -67,6 +67,10 @@ struct BotsOptions {
 
 // Whether bot i (of all o.bots) is in o's shard.
 inline bool in_shard(const BotsOptions& o, int i) { return i % o.shard_count == o.shard_index; }
+// How many of o.bots are in o's shard.
+inline int shard_bots(const BotsOptions& o) {
+  return (o.bots - o.shard_index + o.shard_count - 1) / o.shard_count;
+}
 
 // Seconds between a bot's region-hash checks, so that every bot makes at
 // least hash_checks of them in the measured run: the duration after the

@@ -1,8 +1,12 @@
 #include "client/bots/thresholds.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <iterator>
 #include <limits>
+
+#include "common/cli/cli.h"
 
 namespace terrane::bots {
 
@@ -65,11 +69,9 @@ const std::vector<ThresholdMetric>& threshold_metrics() {
 
 namespace {
 
-std::string trim(const std::string& s) {
-  const auto a = s.find_first_not_of(" \t");
-  if (a == std::string::npos) return "";
-  return s.substr(a, s.find_last_not_of(" \t") - a + 1);
-}
+// Every operator, each spelt by threshold_op_text.
+constexpr ThresholdOp kOps[] = {ThresholdOp::kLess,         ThresholdOp::kLessEqual, ThresholdOp::kGreater,
+                                ThresholdOp::kGreaterEqual, ThresholdOp::kEqual,     ThresholdOp::kNotEqual};
 
 std::string known_metrics() {
   std::string out;
@@ -80,7 +82,7 @@ std::string known_metrics() {
 }  // namespace
 
 std::string parse_threshold(const std::string& expression, Threshold* out) {
-  const std::string e = trim(expression);
+  const std::string e = trim_blanks(expression);
   const std::string named = "'" + e + "': ";
   const std::size_t at = e.find_first_of("<>=!");
   if (at == std::string::npos) return named + "no operator (one of < <= > >= == !=), as in fanout_p99<100";
@@ -89,15 +91,12 @@ std::string parse_threshold(const std::string& expression, Threshold* out) {
   std::size_t len = at + 1 < e.size() && e[at + 1] == '=' ? 2 : 1;
   const std::string op = e.substr(at, len);
   Threshold t;
-  if (op == "<") t.op = ThresholdOp::kLess;
-  else if (op == "<=") t.op = ThresholdOp::kLessEqual;
-  else if (op == ">") t.op = ThresholdOp::kGreater;
-  else if (op == ">=") t.op = ThresholdOp::kGreaterEqual;
-  else if (op == "==") t.op = ThresholdOp::kEqual;
-  else if (op == "!=") t.op = ThresholdOp::kNotEqual;
-  else return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
-  t.metric = trim(e.substr(0, at));
-  const std::string limit = trim(e.substr(at + len));
+  const auto known_op = std::find_if(std::begin(kOps), std::end(kOps),
+                                     [&](ThresholdOp o) { return op == threshold_op_text(o); });
+  if (known_op == std::end(kOps)) return named + "'" + op + "' is not an operator (one of < <= > >= == !=)";
+  t.op = *known_op;
+  t.metric = trim_blanks(e.substr(0, at));
+  const std::string limit = trim_blanks(e.substr(at + len));
   if (t.metric.empty()) return named + "no metric before '" + op + "'";
   bool known = false;
   for (const ThresholdMetric& m : threshold_metrics()) known = known || t.metric == m.name;

@@ -1,6 +1,7 @@
 #include "client/python/edit_future.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "client/python/gil.h"
 
@@ -40,12 +41,17 @@ std::string EditFuture::outcome() const {
   return out;
 }
 
-void sync(Client& c, std::chrono::milliseconds timeout) {
+std::uint32_t request_sync(Client& c) {
   const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
   const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
                 static_cast<std::int32_t>(std::floor(p.z))};
   const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
   if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+  return id;
+}
+
+void sync(Client& c, std::chrono::milliseconds timeout) {
+  const std::uint32_t id = request_sync(c);
   bool answered = false, closed = false;
   wait_for(c, timeout,
         [&](const ClientView& view) {

@@ -39,6 +39,10 @@ class Unreachable : public std::runtime_error {
 // this request is in the replica: a one-voxel ReadBox, answered in order
 // with the world's data. Raises TimeoutError or ConnectionError.
 void sync(Client& c, std::chrono::milliseconds timeout);
+// Sends sync's barrier, a one-voxel ReadBox at the client's position, and
+// returns its request id (its answer is in ClientView::read_results);
+// raises ConnectionError when the client is closed.
+std::uint32_t request_sync(Client& c);
 std::chrono::milliseconds timeout_of(double seconds);
 // Waits until pred holds on the client's view (checked after every frame)
 // or the timeout passes; Ctrl-C interrupts it. pred runs under the

@@ -200,13 +200,9 @@ void PyClient::sync(double timeout) {
   check_open();
   for (;;) {
     const std::uint64_t session = settle(deadline);
-    // The barrier (as python::sync); a reconnect during its round trip
-    // loses the answer: then again on the new session.
-    const Vec3f p = state().position;
-    const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
-                  static_cast<std::int32_t>(std::floor(p.z))};
-    const std::uint32_t id = c_->request_read_box(Region{v, v + Vec3i{1, 1, 1}});
-    if (id == 0) raise(PyExc_ConnectionError, "connection closed");
+    // python::sync's barrier; a reconnect during its round trip loses the
+    // answer: then again on the new session.
+    const std::uint32_t id = request_sync(*c_);
     bool answered = false, closed = false, moved_on = false;
     wait_for(*c_, until(deadline),
              [&](const ClientView& view) {

@@ -7,6 +7,12 @@
 
 namespace terrane {
 
+std::string trim_blanks(std::string_view text) {
+  const auto a = text.find_first_not_of(" \t\r");
+  if (a == std::string_view::npos) return std::string();
+  return std::string(text.substr(a, text.find_last_not_of(" \t\r") - a + 1));
+}
+
 CommandLine::CommandLine(std::set<std::string> value_options, std::set<std::string> flag_options)
     : value_options_(std::move(value_options)), flag_options_(std::move(flag_options)) {}
 
@@ -45,24 +51,18 @@ std::string CommandLine::load_file(const std::string& path) {
   if (!in) return "cannot read " + path;
   std::string line;
   int number = 0;
-  auto trim = [](std::string t) {
-    const auto a = t.find_first_not_of(" \t\r");
-    if (a == std::string::npos) return std::string();
-    const auto b = t.find_last_not_of(" \t\r");
-    return t.substr(a, b - a + 1);
-  };
   while (std::getline(in, line)) {
     ++number;
     const std::string where = path + ":" + std::to_string(number) + ": ";
     // A '#' starts a comment, except inside a value in quotes ("..." or
     // '...'), which is what is between them.
-    line = trim(line);
-    const std::string head = trim(line.substr(0, line.find('#')));
+    line = trim_blanks(line);
+    const std::string head = trim_blanks(line.substr(0, line.find('#')));
     if (head.empty()) continue;
     std::string name;
     std::size_t value_at = head.size();  // where the value starts, in head and line alike
     if (const auto eq = head.find('='); eq != std::string::npos) {
-      name = trim(head.substr(0, eq));
+      name = trim_blanks(head.substr(0, eq));
       value_at = eq + 1;
     } else if (const auto sp = head.find_first_of(" \t"); sp != std::string::npos) {
       name = head.substr(0, sp);
@@ -71,15 +71,15 @@ std::string CommandLine::load_file(const std::string& path) {
       name = head;
     }
     if (name.rfind("--", 0) == 0) name = name.substr(2);
-    std::string value = trim(line.substr(value_at));
+    std::string value = trim_blanks(line.substr(value_at));
     if (!value.empty() && (value[0] == '"' || value[0] == '\'')) {
       const auto close = value.find(value[0], 1);
       if (close == std::string::npos) return where + name + ": a quote opened and not closed";
-      const std::string rest = trim(value.substr(close + 1));
+      const std::string rest = trim_blanks(value.substr(close + 1));
       if (!rest.empty() && rest[0] != '#') return where + name + ": text after the closing quote";
       value = value.substr(1, close - 1);
     } else {
-      value = trim(value.substr(0, value.find('#')));
+      value = trim_blanks(value.substr(0, value.find('#')));
     }
     if (flag_options_.count(name)) {
       if (value.empty() || value == "true") {

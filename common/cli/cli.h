@@ -74,6 +74,10 @@ bool parse_int_list(std::string_view text, Int* out, int n) {
   return p == end;
 }
 
+// text without the spaces, tabs and carriage returns around it (option
+// files' and scenario files' lines, their names and values).
+std::string trim_blanks(std::string_view text);
+
 // "HOST:PORT" or "[V6]:PORT" (port 0..65535) into its parts; the error
 // names what is wrong. Every tool's address flags go through it.
 FileResult<std::pair<std::string, std::uint16_t>> parse_host_port(const std::string& text);

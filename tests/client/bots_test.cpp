@@ -2,7 +2,6 @@
 // terrane-server on 127.0.0.1 (port 0), the fault flags that must fail a
 // run, option and scenario parsing, reports, and the binary's usage errors.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -20,6 +19,8 @@
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
 #include "client/bots/stats.h"
+#include "tests/client/bots/parse_flags.h"
+#include "tests/support/run_command.h"
 #include "tests/support/server_process.h"
 
 namespace terrane::bots {
@@ -349,14 +350,6 @@ TEST(BotJoin, ABotWhoseConnectFailedHasSettledItsJoin) {
 
 // --- options -------------------------------------------------------------------
 
-std::string parse(std::vector<std::string> args, BotsOptions* o) {
-  args.insert(args.begin(), "terrane-bots");
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  bool help = false;
-  return parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, o, &help);
-}
-
 // Several servers: a receiver on another server is measured by the chunks
 // the edit changed, not by every chunk its box reaches. Bot 0 edits on
 // server 1; bot 1 (server 2) holds only the box's second chunk, bot 2
@@ -484,7 +477,7 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
          "seed = 9\nedit-interval = 2\nedit-radius = 3\nlatency-ms = 40\nbandwidth-kbps = 2000\n";
   }
   BotsOptions o;
-  ASSERT_EQ(parse({"--scenario", file.string(), "--bots", "300", "--behavior=mixed"}, &o), "");
+  ASSERT_EQ(parse_flags({"--scenario", file.string(), "--bots", "300", "--behavior=mixed"}, &o), "");
   EXPECT_EQ(o.host, "10.0.0.2");
   EXPECT_EQ(o.port, 7000);
   EXPECT_EQ(o.bots, 300);  // the flag wins
@@ -539,16 +532,16 @@ TEST(BotsOptions, ShardsSplitTheBotsAsOneProcessPlansThem) {
     EXPECT_EQ(joined[i].seed, all[i].seed) << i;
   }
   // The flag, in a scenario file and its errors.
-  ASSERT_EQ(parse({"--connect", "h:1", "--bots", "11", "--shard", "2/3"}, &o), "");
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--bots", "11", "--shard", "2/3"}, &o), "");
   EXPECT_EQ(o.shard_index, 2);
   EXPECT_EQ(o.shard_count, 3);
   EXPECT_NE(scenario_text(o).find("shard = 2/3\n"), std::string::npos);
   BotsOptions bad_shard;
   for (const char* v : {"3/3", "-1/3", "1", "1/0", "a/b"})
-    EXPECT_NE(parse({"--connect", "h:1", "--shard", v}, &bad_shard).find(std::string("--shard: '") + v + "'"),
+    EXPECT_NE(parse_flags({"--connect", "h:1", "--shard", v}, &bad_shard).find(std::string("--shard: '") + v + "'"),
               std::string::npos)
         << v;
-  EXPECT_NE(parse({"--connect", "h:1", "--bots", "2", "--shard", "0/3"}, &bad_shard).find("leave a part without bots"),
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--bots", "2", "--shard", "0/3"}, &bad_shard).find("leave a part without bots"),
             std::string::npos);
 }
 
@@ -556,7 +549,7 @@ TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
   BotsOptions o;
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   EXPECT_EQ(io_threads(o), 2 * cores);
-  ASSERT_EQ(parse({"--connect", "127.0.0.1:7777", "--threads", "3"}, &o), "");
+  ASSERT_EQ(parse_flags({"--connect", "127.0.0.1:7777", "--threads", "3"}, &o), "");
   EXPECT_EQ(io_threads(o), 3);
 }
 
@@ -584,19 +577,19 @@ TEST(BotsOptions, HashChecksAreSpreadOverTheMeasuredRun) {
 
 TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
   BotsOptions o;
-  EXPECT_NE(parse({"--bots", "3"}, &o).find("--connect"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "127.0.0.1:1", "--bots", "0"}, &o).find("--bots: '0'"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "127.0.0.1:1", "--behavior", "swim"}, &o).find("--behavior: 'swim'"),
+  EXPECT_NE(parse_flags({"--bots", "3"}, &o).find("--connect"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "127.0.0.1:1", "--bots", "0"}, &o).find("--bots: '0'"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "127.0.0.1:1", "--behavior", "swim"}, &o).find("--behavior: 'swim'"),
             std::string::npos);
-  EXPECT_NE(parse({"--connect", "nohost"}, &o).find("--connect: 'nohost'"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--spawn", "1,2"}, &o).find("--spawn"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--edit-radius", "40"}, &o).find("--edit-radius"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--frobnicate", "1"}, &o).find("unknown option --frobnicate"),
+  EXPECT_NE(parse_flags({"--connect", "nohost"}, &o).find("--connect: 'nohost'"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--spawn", "1,2"}, &o).find("--spawn"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--edit-radius", "40"}, &o).find("--edit-radius"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--frobnicate", "1"}, &o).find("unknown option --frobnicate"),
             std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--duration"}, &o).find("--duration: missing value"), std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--duration", "5", "--ramp-up", "5"}, &o).find("--ramp-up"),
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--duration"}, &o).find("--duration: missing value"), std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--duration", "5", "--ramp-up", "5"}, &o).find("--ramp-up"),
             std::string::npos);
-  EXPECT_NE(parse({"--connect", "h:1", "--scenario", "/nonexistent/x"}, &o).find("--scenario: cannot read"),
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--scenario", "/nonexistent/x"}, &o).find("--scenario: cannot read"),
             std::string::npos);
   OptionValues kv;
   EXPECT_EQ(parse_scenario_text("bots = 2\nwings = 2\n", "s.txt", &kv), "s.txt:2: unknown key 'wings'");
@@ -644,31 +637,22 @@ TEST(BotsReport, JsonFlattenerRejectsMalformedInput) {
 
 // --- the binary ------------------------------------------------------------------
 
+// terrane-bots with args: its exit status; *output is what it printed.
 int run_binary(const std::string& args, std::string* output) {
-  const std::string cmd = std::string(TERRANE_BIN_DIR) + "/terrane-bots " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return -1;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) output->append(buf, n);
-  const int status = pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  output->clear();
+  return testing_support::run_command(std::string(TERRANE_BIN_DIR) + "/terrane-bots " + args, output);
 }
 
 TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
   std::string out;
   EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --bots lots", &out), 2);
   EXPECT_NE(out.find("--bots: 'lots'"), std::string::npos) << out;
-  out.clear();
   EXPECT_EQ(run_binary("--help", &out), 0);
   EXPECT_NE(out.find("--behavior"), std::string::npos) << out;
-  out.clear();
   EXPECT_EQ(run_binary("compare only-one.json", &out), 2);
   EXPECT_NE(out.find("compare takes two JSON reports"), std::string::npos) << out;
-  out.clear();
   EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --threshold 'fanout_p99<<100'", &out), 2);
   EXPECT_NE(out.find("--threshold: 'fanout_p99<<100': '<100' is not a number"), std::string::npos) << out;
-  out.clear();
   EXPECT_EQ(run_binary("--connect 127.0.0.1:1 --threshold 'latency<1'", &out), 2);
   EXPECT_NE(out.find("unknown metric 'latency' (known: fanout_p50"), std::string::npos) << out;
 }
@@ -692,10 +676,8 @@ TEST_F(BotsRunTest, TwoMergedShardsCountWhatOneProcessCounts) {
   // The shards run at once, as on two machines.
   std::string out1;
   std::thread second([&] { run_binary(run + " --shard 1/2 --report " + path("p1.json"), &out1); });
-  out.clear();
   EXPECT_EQ(run_binary(run + " --shard 0/2 --report " + path("p0.json"), &out), 0) << out;
   second.join();
-  out.clear();
   ASSERT_EQ(run_binary("merge " + path("p0.json") + " " + path("p1.json") + " --report " + path("all.json") +
                            " --html " + path("all.html"),
                        &out),
@@ -750,7 +732,6 @@ TEST_F(BotsRunTest, ABrokenThresholdExitsThreeNamingItsValue) {
   EXPECT_EQ(json["thresholds.1.passed"], "false");
   EXPECT_GT(std::stod(json["thresholds.1.value"]), 0);
   EXPECT_EQ(json["thresholds.1.value"], json["join_full_ms.p99"]);
-  out.clear();
   EXPECT_EQ(run_binary(run + " --threshold mismatches==0 --threshold 'join_full_p99>0'", &out), 0) << out;
 }
 

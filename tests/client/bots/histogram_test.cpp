@@ -165,5 +165,36 @@ TEST(LatencyHistogram, JsonRoundTripGivesTheSameHistogram) {
   EXPECT_NE(histogram_from_flat(flat, "x.histogram", &back).find("sub_buckets"), std::string::npos);
 }
 
+TEST(LatencyHistogram, AReadBackRangeOutsideItsBucketsOrCountsThatOverflowAreRefused) {
+  LatencyHistogram h;
+  for (const double ms : {1.0, 5.0, 100.0}) h.record(ms);
+  std::map<std::string, std::string> flat;
+  ASSERT_EQ(flatten_json("{\"x\": {\"histogram\": " + histogram_json(h) + "}}", &flat), "");
+  LatencyHistogram back;
+  ASSERT_EQ(histogram_from_flat(flat, "x.histogram", &back), "");
+  const auto refused = [&](const std::string& key, const std::string& value, const std::string& named) {
+    auto changed = flat;
+    changed["x.histogram." + key] = value;
+    const std::string e = histogram_from_flat(changed, "x.histogram", &back);
+    EXPECT_EQ(e.rfind(named, 0), 0u) << key << " = " << value << ": '" << e << "'";
+  };
+  // The smallest and largest values in the lowest and highest buckets, in order.
+  refused("min_us", "0", "x.histogram.min_us: 0 is not in the lowest bucket");
+  refused("min_us", "5000", "x.histogram.min_us: 5000 is not in the lowest bucket");
+  refused("max_us", "5000", "x.histogram.max_us: 5000 is not in the highest bucket");
+  refused("max_us", "99999999", "x.histogram.max_us: 99999999 is not in the highest bucket");
+  auto narrow = flat;  // every count in one bucket of width 2 (128..129 us): max below min within it
+  for (const char* b : {"0", "1", "2"}) narrow["x.histogram.buckets." + std::string(b) + ".0"] = "128";
+  narrow["x.histogram.min_us"] = "129";
+  narrow["x.histogram.max_us"] = "128";
+  EXPECT_EQ(histogram_from_flat(narrow, "x.histogram", &back).rfind("x.histogram.max_us: 128", 0), 0u)
+      << histogram_from_flat(narrow, "x.histogram", &back);
+  // Counts whose total overflows.
+  auto huge = flat;
+  huge["x.histogram.buckets.0.1"] = huge["x.histogram.buckets.1.1"] = std::to_string(std::uint64_t{1} << 63);
+  EXPECT_EQ(histogram_from_flat(huge, "x.histogram", &back),
+            "x.histogram.buckets.1: a count of 9223372036854775808 overflows the total");
+}
+
 }  // namespace
 }  // namespace terrane::bots

@@ -144,6 +144,28 @@ TEST(BotsMerge, AReportReadBackFromItsJsonIsTheReport) {
       << report_from_json(old, &back);
 }
 
+TEST(BotsMerge, CountsOfBotsBeyondThePartsShardAreRefused) {
+  // Part 1 of 3 of 12 bots runs 4; its sums then stay within the scenario's.
+  const std::string json = report_json(make_split().parts[1]);
+  BotsReport back;
+  ASSERT_EQ(report_from_json(json, &back), "");
+  const auto with = [&](const std::string& field, const std::string& value) {
+    std::string changed = json;
+    const auto at = changed.find(field);
+    EXPECT_NE(at, std::string::npos) << field;
+    const auto from = at + field.size(), to = changed.find_first_of(",}\n", from);
+    return changed.replace(from, to - from, value);
+  };
+  EXPECT_EQ(report_from_json(with("\n  \"bots\": ", "2147483647"), &back), "bots: 2147483647 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("\n  \"bots\": ", "-1"), &back), "bots: -1 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("\"connect_failures\": ", "5"), &back), "connect_failures: 5 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("\"unexpected_disconnects\": ", "2147483647"), &back),
+            "unexpected_disconnects: 2147483647 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("\"joins_incomplete\": ", "-3"), &back), "joins_incomplete: -3 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("\"bots_per_server\": {\"1\": ", "9"), &back), "bots_per_server.1: 9 is not in 0..4");
+  EXPECT_EQ(report_from_json(with("{\"t_s\": 1, \"bots\": ", "400"), &back), "timeline.0.bots: 400 is not in 0..4");
+}
+
 TEST(BotsMerge, PartsMergeIntoTheWholeCountsExactlyAndPercentilesWithinPrecision) {
   Split s = make_split();
   std::vector<BotsReport> parts;

@@ -12,6 +12,7 @@
 #include "client/bots/options.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
+#include "tests/client/bots/parse_flags.h"
 
 namespace terrane::bots {
 namespace {
@@ -177,13 +178,8 @@ TEST(Thresholds, FlagsAndScenarioLinesGiveThemAndTheCommandLineReplacesTheFile) 
   kv.clear();
   ASSERT_EQ(parse_scenario_text("threshold = fanout_p99<\n", "s.txt", &kv), "");
   EXPECT_EQ(apply_option_values(kv, &o), "s.txt:1: threshold: 'fanout_p99<': no number after '<'");
-  std::vector<std::string> args = {"terrane-bots", "--connect", "h:1", "--threshold", "ack_p95<50",
-                                   "--threshold=rejected_pct<=1"};
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
   BotsOptions flags;
-  bool help = false;
-  ASSERT_EQ(parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, &flags, &help), "");
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--threshold", "ack_p95<50", "--threshold=rejected_pct<=1"}, &flags), "");
   ASSERT_EQ(flags.thresholds.size(), 2u);
   EXPECT_EQ(flags.thresholds[0].expression, "ack_p95<50");
   EXPECT_EQ(flags.thresholds[1].expression, "rejected_pct<=1");
@@ -195,24 +191,15 @@ TEST(Thresholds, FlagsAndScenarioLinesGiveThemAndTheCommandLineReplacesTheFile) 
     std::fputs("connect = h:1\nthreshold = fanout_p99<100\nthreshold = mismatches==0\n", f);
     std::fclose(f);
   }
-  args = {"terrane-bots", "--scenario", file, "--threshold", "ack_p99<20"};
-  argv.clear();
-  for (auto& a : args) argv.push_back(a.data());
   BotsOptions both;
-  ASSERT_EQ(parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, &both, &help), "");
+  ASSERT_EQ(parse_flags({"--scenario", file, "--threshold", "ack_p99<20"}, &both), "");
   ASSERT_EQ(both.thresholds.size(), 1u);
   EXPECT_EQ(both.thresholds[0].expression, "ack_p99<20");
-  args = {"terrane-bots", "--scenario", file};
-  argv.clear();
-  for (auto& a : args) argv.push_back(a.data());
   BotsOptions file_only;
-  ASSERT_EQ(parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, &file_only, &help), "");
+  ASSERT_EQ(parse_flags({"--scenario", file}, &file_only), "");
   EXPECT_EQ(file_only.thresholds.size(), 2u);
   std::remove(file.c_str());
-  args = {"terrane-bots", "--connect", "h:1", "--threshold", "p99<1"};
-  argv.clear();
-  for (auto& a : args) argv.push_back(a.data());
-  EXPECT_EQ(parse_bots_options(static_cast<int>(argv.size()), argv.data(), 1, &flags, &help)
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--threshold", "p99<1"}, &flags)
                 .rfind("--threshold: 'p99<1': unknown metric 'p99' (known: ", 0),
             0u);
 }

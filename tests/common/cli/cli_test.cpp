@@ -71,5 +71,12 @@ TEST_F(CliFileTest, ErrorsNameTheFileAndLine) {
   EXPECT_EQ(c4.load_file("/nonexistent/terrane.conf"), "cannot read /nonexistent/terrane.conf");
 }
 
+TEST(TrimBlanks, DropsSpacesTabsAndCarriageReturnsAroundOnly) {
+  EXPECT_EQ(trim_blanks(" \t key = a b \r"), "key = a b");
+  EXPECT_EQ(trim_blanks("fanout_p99<100"), "fanout_p99<100");
+  EXPECT_EQ(trim_blanks(" \t\r "), "");
+  EXPECT_EQ(trim_blanks(""), "");
+}
+
 }  // namespace
 }  // namespace terrane
