@@ -10,6 +10,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "client/replica.h"
 #include "common/voxel/vec3.h"
@@ -55,5 +56,34 @@ struct ViewCoverage {
 };
 
 ViewCoverage coverage(const Replica& replica, const StreamedView& view, const WorldBounds& bounds);
+
+// coverage() for one view that does not move, kept up to date holding
+// change by holding change: O(1) per change where coverage() is a pass over
+// the view (33^3 chunks at view 512). A bot's join reads it after every
+// chunk it receives. It keeps each chunk's form as last told (a byte per
+// chunk of the view's cube), so telling a chunk's holding twice, or a
+// change it has already seen, changes nothing.
+class ViewCoverageCounter {
+ public:
+  // Counts what `replica` holds now (one pass, as coverage()).
+  ViewCoverageCounter(const StreamedView& view, const WorldBounds& bounds, const Replica& replica);
+
+  // What the replica holds of chunk cp is now `now` (nullptr: nothing).
+  // Chunks outside the view are ignored.
+  void update(Vec3i chunk_pos, const Holding* now);
+  const ViewCoverage& coverage() const { return coverage_; }
+
+ private:
+  static constexpr std::uint8_t kOutside = 0xFF;  // not in view
+  static constexpr std::uint8_t kNotHeld = 0xFE;
+  // The index of cp in the cube, or -1 outside it.
+  std::ptrdiff_t index(Vec3i chunk_pos) const;
+
+  Vec3i center_;
+  std::int32_t n_ = 0;  // the cube spans offsets -n..n on each axis
+  std::int32_t full_res_radius_ = 0;
+  std::vector<std::uint8_t> form_;  // per chunk of the cube: a HoldingForm, kNotHeld or kOutside
+  ViewCoverage coverage_;
+};
 
 }  // namespace terrane

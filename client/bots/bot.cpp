@@ -72,7 +72,7 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edit
       ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
     else
       ctx_.fanout->chunk_released(index_, cp);  // released, or held coarser now
-    if (now != nullptr) on_holding();
+    on_holding(cp, now);
   };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
     {
@@ -118,28 +118,21 @@ bool Bot::connect() {
   result_.connected = true;
   std::lock_guard lock(mutex_);
   // A view with nothing to hold (beyond the world's bounds) is joined at once.
-  const ViewCoverage v = coverage(Replica(), join_view_, ctx_.welcome.bounds());
-  if (v.want_full == 0) {
-    joined_ = true;
-    if (!result_.join_full_ms) result_.join_full_ms = 0;
-  }
-  if (v.in_view == 0 && !result_.join_coarse_ms) result_.join_coarse_ms = 0;
+  // From the replica as it is: chunks may have arrived since the Welcome.
+  client_->with_replica([&](const Replica& r) { join_count_.emplace(join_view_, ctx_.welcome.bounds(), r); });
+  check_join(Clock::now());
   return true;
 }
 
-void Bot::on_holding() {
+void Bot::on_holding(Vec3i cp, const Holding* now) {
   std::lock_guard lock(mutex_);
-  if (joined_ && result_.join_coarse_ms) return;
-  if (join_check_in_ > 1) {
-    --join_check_in_;
-    return;
-  }
+  if (!join_count_) return;
+  join_count_->update(cp, now);
   check_join(Clock::now());
 }
 
 void Bot::check_join(Clock::time_point now) {
-  const ViewCoverage v =
-      client_->with_replica([&](const Replica& r) { return coverage(r, join_view_, ctx_.welcome.bounds()); });
+  const ViewCoverage& v = join_count_->coverage();
   if (!result_.join_coarse_ms && v.not_held == 0) {
     result_.join_coarse_ms = ms_between(connect_at_, now);
     const ClientCounters k = client_->counters();
@@ -153,9 +146,7 @@ void Bot::check_join(Clock::time_point now) {
     result_.join_bytes = delivered;
     joined_ = true;
   }
-  const std::size_t coarse_left = result_.join_coarse_ms ? SIZE_MAX : v.not_held;
-  const std::size_t full_left = joined_ ? SIZE_MAX : v.want_full - v.held_full;
-  join_check_in_ = std::min(coarse_left, full_left);
+  if (joined_ && result_.join_coarse_ms) join_count_.reset();
 }
 
 bool Bot::joined() const {

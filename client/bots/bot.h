@@ -23,6 +23,7 @@
 #include "client/bots/stats.h"
 #include "client/decoded_chunks.h"
 #include "client/client.h"
+#include "client/view_coverage.h"
 
 namespace terrane::bots {
 
@@ -101,11 +102,11 @@ class Bot {
     bool final_check = false;
   };
 
-  // What the bot holds of a chunk changed (not a release): join progress.
-  void on_holding();
+  // What the bot holds of a chunk changed (or was released): join progress.
+  void on_holding(Vec3i chunk_pos, const Holding* now);
   void on_chunk_hash(const HashCheck& check);
   void on_disconnected(const std::string& reason);
-  // Under mutex_: compares the join view with what the replica holds now.
+  // Under mutex_: reads the join count; drops it once both join times are known.
   void check_join(Clock::time_point now);
   void count_join_voxels();
   void move(Clock::time_point now);
@@ -137,13 +138,10 @@ class Bot {
 
   mutable std::mutex mutex_;
   // Join tracking: the view at the start (the bot does not move before it
-  // joined), and how many holding changes may pass before the replica is
-  // compared with it again. Each change is one chunk's, so neither the
-  // coarse view nor the full-resolution region can be complete before as
-  // many changes as it misses chunks: counting down to that keeps the
-  // join's time exact without a pass over the view per chunk received.
+  // joined), counted holding change by holding change until the bot has
+  // joined and holds its whole view coarsely; then dropped.
   StreamedView join_view_;
-  std::size_t join_check_in_ = 0;
+  std::optional<ViewCoverageCounter> join_count_;
   bool joined_ = false;
   bool voxels_counted_ = false;
   std::unordered_map<Vec3i, PendingHash, Vec3iHash> pending_hash_;

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+#include <vector>
+
 #include "common/world/view.h"
 
 namespace terrane {
@@ -126,6 +129,58 @@ TEST(ViewCoverage, TheStreamedViewTakesDefaultsAndCaps) {
   EXPECT_EQ(v.full_res_radius, 100);
   v = streamed_view(ClientStateMsg{{0, 0, 0}, 30, 0}, w);
   EXPECT_EQ(v.full_res_radius, 30);
+}
+
+void expect_same(const ViewCoverage& a, const ViewCoverage& b, int step) {
+  EXPECT_EQ(a.in_view, b.in_view) << "step " << step;
+  EXPECT_EQ(a.full, b.full) << "step " << step;
+  EXPECT_EQ(a.empty, b.empty) << "step " << step;
+  EXPECT_EQ(a.mip1, b.mip1) << "step " << step;
+  EXPECT_EQ(a.mip2, b.mip2) << "step " << step;
+  EXPECT_EQ(a.mip3, b.mip3) << "step " << step;
+  EXPECT_EQ(a.estimate, b.estimate) << "step " << step;
+  EXPECT_EQ(a.horizon, b.horizon) << "step " << step;
+  EXPECT_EQ(a.not_held, b.not_held) << "step " << step;
+  EXPECT_EQ(a.settled, b.settled) << "step " << step;
+  EXPECT_EQ(a.want_full, b.want_full) << "step " << step;
+  EXPECT_EQ(a.held_full, b.held_full) << "step " << step;
+  EXPECT_EQ(a.complete, b.complete) << "step " << step;
+}
+
+TEST(ViewCoverageCounter, AgreesWithAPassOverTheViewAfterEveryHoldingChange) {
+  // A view cut by the world's bounds on every side, and chunks streamed,
+  // refined, coarsened and released at random, some outside the view and
+  // some told twice.
+  const WorldBounds bounds{-40, 70, true, -100, 90, -75, 120};
+  const StreamedView view{{10.5f, 5, -3}, 96, 40};
+  Replica r;
+  Box full({kChunkSize, kChunkSize, kChunkSize});
+  full.fill(solid(materials::kRock));
+  std::vector<Box> boxes(400);
+  // Two chunks held before the count starts.
+  r.apply_stream_record(bare(StreamRecordKind::kEmpty, {0, 0, 0}));
+  r.apply_stream_record(coarse(StreamRecordKind::kMip2, {1, 0, 0}, 2, boxes[0]));
+  ViewCoverageCounter counter(view, bounds, r);
+  expect_same(counter.coverage(), coverage(r, view, bounds), -1);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> axis(-5, 5), kind(0, 6);
+  for (int step = 0; step < 400; ++step) {
+    const Vec3i cp{axis(rng), axis(rng), axis(rng)};
+    switch (kind(rng)) {
+      case 0: r.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 1, 0, &full, nullptr, {}}); break;
+      case 1: r.apply_stream_record(bare(StreamRecordKind::kEmpty, cp)); break;
+      case 2: r.apply_stream_record(coarse(StreamRecordKind::kMip1, cp, 1, boxes[step])); break;
+      case 3: r.apply_stream_record(coarse(StreamRecordKind::kMip2, cp, 2, boxes[step])); break;
+      case 4: r.apply_stream_record(coarse(StreamRecordKind::kMip3, cp, 3, boxes[step])); break;
+      case 5: r.apply_stream_record(coarse(StreamRecordKind::kEstimate, cp, 3, boxes[step])); break;
+      default: r.apply_stream_record(bare(StreamRecordKind::kReleased, cp)); break;
+    }
+    counter.update(cp, r.holding(cp));
+    if (step % 3 == 0) counter.update(cp, r.holding(cp));  // told twice: no change
+    expect_same(counter.coverage(), coverage(r, view, bounds), step);
+  }
+  EXPECT_GT(counter.coverage().in_view, 0u);
+  EXPECT_LT(counter.coverage().not_held, counter.coverage().in_view);
 }
 
 }  // namespace
