@@ -41,7 +41,7 @@ OutFrame finish_around(FlatBufferBuilder& fbb, flatbuffers::Offset<T> body, flat
                 static_cast<std::uint8_t>(n >> 24)};
   head.insert(head.end(), buf.begin(), buf.begin() + static_cast<std::ptrdiff_t>(at));
   data.append(buf.subspan(at + data.size()));
-  data.prepend(head);
+  data.prepend(std::move(head));
   return data;
 }
 
@@ -192,7 +192,8 @@ Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
 }
 
 OutFrame gather_update_batch(std::uint64_t tick, OutFrame data, std::span<const ChunkRevisionMsg> revisions) {
-  FlatBufferBuilder fbb(revisions.size() * 24 + 128);
+  // Room for the vector left uninitialised too (one allocation, untouched).
+  FlatBufferBuilder fbb(data.size() + revisions.size() * 24 + 64);
   std::vector<wire::ChunkRevision> revs;
   revs.reserve(revisions.size());
   for (const auto& r : revisions) revs.emplace_back(to_wire(r.chunk_pos), r.revision);
@@ -281,7 +282,7 @@ Frame build_stream_batch(std::span<const std::uint8_t> records) {
 }
 
 OutFrame gather_stream_batch(OutFrame records) {
-  FlatBufferBuilder fbb(128);
+  FlatBufferBuilder fbb(records.size() + 64);
   std::uint8_t* unused = nullptr;
   const auto r = fbb.CreateUninitializedVector(records.size(), &unused);
   return finish_around(fbb, wire::CreateStreamBatch(fbb, r), r.o, std::move(records));

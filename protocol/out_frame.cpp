@@ -9,10 +9,15 @@ OutFrame::OutFrame(std::shared_ptr<const Frame> bytes) {
   shared_.push_back(Shared{0, span, std::move(bytes)});
 }
 
-void OutFrame::prepend(std::span<const std::uint8_t> bytes) { head_.insert(head_.begin(), bytes.begin(), bytes.end()); }
+void OutFrame::prepend(Frame bytes) {
+  if (head_.empty()) {
+    head_ = std::move(bytes);
+  } else {
+    head_.insert(head_.begin(), bytes.begin(), bytes.end());
+  }
+}
 
-void OutFrame::append_shared(std::span<const std::uint8_t> bytes, std::shared_ptr<const void> owner) {
-  if (bytes.size() < kMinSharedBytes || !owner) return append(bytes);
+void OutFrame::add_shared(std::span<const std::uint8_t> bytes, std::shared_ptr<const void> owner) {
   shared_bytes_ += bytes.size();
   shared_.push_back(Shared{owned_.size(), bytes, std::move(owner)});
 }

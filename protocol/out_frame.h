@@ -53,17 +53,21 @@ class OutFrame {
   std::size_t shared_bytes() const { return shared_bytes_; }
   bool empty() const { return size() == 0; }
 
-  // Puts a copy of bytes before every byte of the frame.
-  void prepend(std::span<const std::uint8_t> bytes);
+  // Puts bytes before every byte of the frame.
+  void prepend(Frame bytes);
   // Appends a copy of bytes.
   void append(std::span<const std::uint8_t> bytes) { owned_.insert(owned_.end(), bytes.begin(), bytes.end()); }
   // The owned bytes at the frame's end: what is pushed here follows every
   // byte before it (for put_varint and the codecs, which append to a vector).
   std::vector<std::uint8_t>& owned_tail() { return owned_; }
-  // Appends bytes without copying them (shorter than kMinSharedBytes: a
-  // copy). Precondition: they stay unchanged while owner lives; the frame
-  // holds owner.
-  void append_shared(std::span<const std::uint8_t> bytes, std::shared_ptr<const void> owner);
+  // Appends bytes without copying them (shorter than kMinSharedBytes, or
+  // without an owner: a copy). Precondition: they stay unchanged while
+  // owner lives; the frame holds owner (a reference taken only when shared).
+  template <class T>
+  void append_shared(std::span<const std::uint8_t> bytes, const std::shared_ptr<T>& owner) {
+    if (bytes.size() < kMinSharedBytes || !owner) return append(bytes);
+    add_shared(bytes, owner);
+  }
 
   // Calls fn(std::span<const std::uint8_t>) for each non-empty segment, in
   // order. The spans are valid while the frame lives and is not changed.
@@ -76,6 +80,8 @@ class OutFrame {
   Frame flatten() const;
 
  private:
+  void add_shared(std::span<const std::uint8_t> bytes, std::shared_ptr<const void> owner);
+
   struct Shared {
     std::size_t owned_before = 0;  // the bytes of owned_ that come before it
     std::span<const std::uint8_t> bytes;

@@ -38,25 +38,22 @@ class Reader {
 
 }  // namespace
 
-void StreamBatchWriter::add(StreamRecordKind kind, Vec3i cp, std::uint64_t revision,
-                            std::span<const std::uint8_t> payload, std::shared_ptr<const void> owner) {
+void StreamBatchWriter::put_head(StreamRecordKind kind, Vec3i cp, std::uint64_t revision) {
   std::vector<std::uint8_t>& head = bytes_.owned_tail();
   head.push_back(static_cast<std::uint8_t>(kind));
   put_varint(zigzag(std::int64_t{cp.x} - prev_.x), head);
   put_varint(zigzag(std::int64_t{cp.y} - prev_.y), head);
   put_varint(zigzag(std::int64_t{cp.z} - prev_.z), head);
   put_varint(revision, head);
-  bytes_.append_shared(payload, std::move(owner));
   prev_ = cp;
   ++records_;
 }
 
-void StreamBatchWriter::add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit,
-                                    std::shared_ptr<const void> owner) {
+void StreamBatchWriter::put_horizon_head(Vec3i region, int level, const HorizonMask* mask) {
+  put_head(StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0);
   const std::uint8_t head[2] = {static_cast<std::uint8_t>(level), static_cast<std::uint8_t>(mask != nullptr ? 1 : 0)};
-  add(StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0, head);
+  bytes_.append(head);
   if (mask != nullptr) bytes_.append(*mask);
-  bytes_.append_shared(unit, std::move(owner));
 }
 
 OutFrame StreamBatchWriter::finish() {

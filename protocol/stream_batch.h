@@ -114,14 +114,31 @@ struct StreamRecord {
 // buffer in all their frames.
 class StreamBatchWriter {
  public:
-  // payload: the record's encoded units (empty for Empty and Released).
+  // payload: the record's encoded units (empty for Empty and Released),
+  // copied.
+  void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload) {
+    put_head(kind, chunk_pos, revision);
+    bytes_.append(payload);
+  }
   // owner: what keeps payload alive and unchanged (null: it is copied).
+  template <class T>
   void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload,
-           std::shared_ptr<const void> owner = nullptr);
+           const std::shared_ptr<T>& owner) {
+    put_head(kind, chunk_pos, revision);
+    bytes_.append_shared(payload, owner);
+  }
   // A Horizon record: region's image at level (4 or 5), for the chunks of
   // mask (null: every chunk of the region); unit and owner as payload's.
+  template <class T>
   void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit,
-                   std::shared_ptr<const void> owner = nullptr);
+                   const std::shared_ptr<T>& owner) {
+    put_horizon_head(region, level, mask);
+    bytes_.append_shared(unit, owner);
+  }
+  void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit) {
+    put_horizon_head(region, level, mask);
+    bytes_.append(unit);
+  }
   bool empty() const { return records_ == 0; }
   std::size_t records() const { return records_; }
   // The records' bytes so far.
@@ -131,6 +148,11 @@ class StreamBatchWriter {
   OutFrame finish();
 
  private:
+  // A record's kind, position and revision.
+  void put_head(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision);
+  // A Horizon record up to its unit.
+  void put_horizon_head(Vec3i region, int level, const HorizonMask* mask);
+
   OutFrame bytes_;
   Vec3i prev_{0, 0, 0};
   std::size_t records_ = 0;

@@ -728,8 +728,8 @@ void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) 
 }
 
 void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload,
-                        std::shared_ptr<const void> owner) {
-  batch_.add(kind, cp, revision, payload, std::move(owner));
+                        const VersionPtr& owner) {
+  batch_.add(kind, cp, revision, payload, owner);
   if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
 }
 

@@ -168,7 +168,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   // owner: what keeps payload alive (the version whose encoding it is),
   // so the record shares it (StreamBatchWriter).
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
-              std::span<const std::uint8_t> payload = {}, std::shared_ptr<const void> owner = nullptr);
+              std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr);
   void flush_stream();
   void answer_hash(Vec3i chunk_pos);
   void arm_timer();

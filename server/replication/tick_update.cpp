@@ -25,8 +25,11 @@ std::optional<OutFrame> TickUpdate::finish(std::uint64_t tick, UpdateFaults* fau
   // A piece still its version's is shared; one the faults made is copied.
   OutFrame data;
   net_codec_join_update_pieces(pieces, data.owned_tail(), [&](std::size_t i, std::span<const std::uint8_t> rest) {
-    const bool own = i < versions_.size() && pieces[i] == &versions_[i]->update_piece();
-    data.append_shared(rest, own ? std::shared_ptr<const void>(versions_[i]) : nullptr);
+    if (i < versions_.size() && pieces[i] == &versions_[i]->update_piece()) {
+      data.append_shared(rest, versions_[i]);
+    } else {
+      data.append(rest);
+    }
   });
   units = 0;
   for (const UpdatePiece* p : pieces) units += p->count;

@@ -37,7 +37,7 @@ TEST(OutFrame, SegmentsInOrderAreTheFramesBytesAndSharedSpansAreNotCopied) {
   f.owned_tail().push_back(4);
   f.append_shared(*small, small);  // copied: owned bytes run on
   f.append_shared(*other, other);
-  f.append_shared(std::span(*other).first(600), nullptr);  // no owner: copied
+  f.append_shared(std::span(*other).first(600), std::shared_ptr<const Frame>());  // no owner: copied
   f.prepend(std::vector<std::uint8_t>{9, 9});
 
   Frame expected{9, 9, 1, 2, 3};
