@@ -23,6 +23,28 @@ Frame finish(FlatBufferBuilder& fbb, flatbuffers::Offset<T> body) {
   return out;
 }
 
+// Finishes a message whose byte vector vec was made first and left
+// uninitialised: FlatBuffers builds back to front, so the vector's bytes
+// are the buffer's last but its padding, after every table. The frame is
+// then the bytes before them (frame header, tables, the vector's length),
+// data's segments, and the padding: the bytes finish() would make had data
+// been copied into vec.
+template <class T>
+OutFrame finish_around(FlatBufferBuilder& fbb, flatbuffers::Offset<T> body, flatbuffers::uoffset_t vec, OutFrame data) {
+  auto msg = wire::CreateMessage(fbb, wire::BodyTraits<T>::enum_value, body.Union());
+  fbb.Finish(msg);
+  const std::span<const std::uint8_t> buf(fbb.GetBufferPointer(), fbb.GetSize());
+  // An offset counts from the buffer's end and points at the length.
+  const std::size_t at = buf.size() - vec + sizeof(flatbuffers::uoffset_t);
+  const auto n = static_cast<std::uint32_t>(buf.size());  // the frame header: the whole body's length
+  Frame head = {static_cast<std::uint8_t>(n), static_cast<std::uint8_t>(n >> 8), static_cast<std::uint8_t>(n >> 16),
+                static_cast<std::uint8_t>(n >> 24)};
+  head.insert(head.end(), buf.begin(), buf.begin() + static_cast<std::ptrdiff_t>(at));
+  data.append(buf.subspan(at + data.size()));
+  data.prepend(std::move(head));
+  return data;
+}
+
 wire::Vec3i to_wire(Vec3i v) { return wire::Vec3i(v.x, v.y, v.z); }
 wire::Vec3f to_wire(Vec3f v) { return wire::Vec3f(v.x, v.y, v.z); }
 Vec3i from_wire(const wire::Vec3i& v) { return {v.x(), v.y(), v.z()}; }
@@ -176,6 +198,18 @@ Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
   return finish(fbb, wire::CreateUpdateBatch(fbb, tick, d, rv));
 }
 
+OutFrame gather_update_batch(std::uint64_t tick, OutFrame data, std::span<const ChunkRevisionMsg> revisions) {
+  // Room for the vector left uninitialised too (one allocation, untouched).
+  FlatBufferBuilder fbb(data.size() + revisions.size() * 24 + 64);
+  std::vector<wire::ChunkRevision> revs;
+  revs.reserve(revisions.size());
+  for (const auto& r : revisions) revs.emplace_back(to_wire(r.chunk_pos), r.revision);
+  std::uint8_t* unused = nullptr;
+  const auto d = fbb.CreateUninitializedVector(data.size(), &unused);
+  const auto rv = fbb.CreateVectorOfStructs(revs);
+  return finish_around(fbb, wire::CreateUpdateBatch(fbb, tick, d, rv), d.o, std::move(data));
+}
+
 Frame build_edit_request(const EditRequestMsg& m) {
   std::vector<std::uint8_t> rle;
   if (m.kind == EditKind::kWriteBox) byte_rle_encode(m.voxels, rle);
@@ -252,6 +286,13 @@ Frame build_stream_batch(std::span<const std::uint8_t> records) {
   FlatBufferBuilder fbb(records.size() + 64);
   const auto r = fbb.CreateVector(records.data(), records.size());
   return finish(fbb, wire::CreateStreamBatch(fbb, r));
+}
+
+OutFrame gather_stream_batch(OutFrame records) {
+  FlatBufferBuilder fbb(records.size() + 64);
+  std::uint8_t* unused = nullptr;
+  const auto r = fbb.CreateUninitializedVector(records.size(), &unused);
+  return finish_around(fbb, wire::CreateStreamBatch(fbb, r), r.o, std::move(records));
 }
 
 Frame build_holdings(std::span<const HeldChunkMsg> chunks) {

@@ -23,6 +23,7 @@
 #include "common/world/world_bounds.h"
 #include "protocol/framing.h"
 #include "protocol/holding.h"
+#include "protocol/out_frame.h"
 #include "protocol/terrane_generated.h"
 
 namespace terrane {
@@ -56,8 +57,6 @@ inline constexpr std::int32_t kMaxWireViewDistance = 1 << 16;
 inline constexpr std::size_t kMaxBatchRevisions = 4096;
 // A Full stream record's units: eight 16^3 units of its 32^3 chunk.
 inline constexpr int kFullRecordUnit = 16;
-
-using Frame = std::vector<std::uint8_t>;
 
 // --- message structs ---------------------------------------------------------
 struct HelloMsg {
@@ -213,6 +212,9 @@ Frame build_redirect(const RedirectMsg& m);
 Frame build_client_state(const ClientStateMsg& m);
 Frame build_update_batch(std::uint64_t tick, std::span<const std::uint8_t> data,
                          std::span<const ChunkRevisionMsg> revisions);
+// The same frame as build_update_batch(tick, data's bytes, revisions), with
+// data's segments kept as they are: its shared spans are not copied.
+OutFrame gather_update_batch(std::uint64_t tick, OutFrame data, std::span<const ChunkRevisionMsg> revisions);
 Frame build_edit_request(const EditRequestMsg& m);
 Frame build_edit_ack(std::uint32_t edit_id, std::uint64_t tick);
 Frame build_edit_reject(std::uint32_t edit_id, std::string_view reason, bool outcome_unknown = false);
@@ -225,6 +227,9 @@ Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::str
 Frame build_presence(std::span<const PresenceEntryMsg> entries);
 // records: protocol/stream_batch.h (StreamBatchWriter builds them).
 Frame build_stream_batch(std::span<const std::uint8_t> records);
+// The same frame as build_stream_batch(records' bytes), with records'
+// segments kept as they are (StreamBatchWriter::finish).
+OutFrame gather_stream_batch(OutFrame records);
 // At most kMaxHoldingsPerMessage entries (the rest are dropped: split larger
 // holdings over several messages).
 Frame build_holdings(std::span<const HeldChunkMsg> chunks);

@@ -38,28 +38,27 @@ class Reader {
 
 }  // namespace
 
-void StreamBatchWriter::add(StreamRecordKind kind, Vec3i cp, std::uint64_t revision,
-                            std::span<const std::uint8_t> payload) {
-  bytes_.push_back(static_cast<std::uint8_t>(kind));
-  put_varint(zigzag(std::int64_t{cp.x} - prev_.x), bytes_);
-  put_varint(zigzag(std::int64_t{cp.y} - prev_.y), bytes_);
-  put_varint(zigzag(std::int64_t{cp.z} - prev_.z), bytes_);
-  put_varint(revision, bytes_);
-  bytes_.insert(bytes_.end(), payload.begin(), payload.end());
+void StreamBatchWriter::put_head(StreamRecordKind kind, Vec3i cp, std::uint64_t revision) {
+  std::vector<std::uint8_t>& head = bytes_.owned_tail();
+  head.push_back(static_cast<std::uint8_t>(kind));
+  put_varint(zigzag(std::int64_t{cp.x} - prev_.x), head);
+  put_varint(zigzag(std::int64_t{cp.y} - prev_.y), head);
+  put_varint(zigzag(std::int64_t{cp.z} - prev_.z), head);
+  put_varint(revision, head);
   prev_ = cp;
   ++records_;
 }
 
-void StreamBatchWriter::add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit) {
+void StreamBatchWriter::put_horizon_head(Vec3i region, int level, const HorizonMask* mask) {
+  put_head(StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0);
   const std::uint8_t head[2] = {static_cast<std::uint8_t>(level), static_cast<std::uint8_t>(mask != nullptr ? 1 : 0)};
-  add(StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0, head);
-  if (mask != nullptr) bytes_.insert(bytes_.end(), mask->begin(), mask->end());
-  bytes_.insert(bytes_.end(), unit.begin(), unit.end());
+  bytes_.append(head);
+  if (mask != nullptr) bytes_.append(*mask);
 }
 
-Frame StreamBatchWriter::finish() {
-  Frame f = build_stream_batch(bytes_);
-  bytes_.clear();
+OutFrame StreamBatchWriter::finish() {
+  OutFrame f = gather_stream_batch(std::move(bytes_));
+  bytes_ = OutFrame{};
   prev_ = {0, 0, 0};
   records_ = 0;
   return f;

@@ -38,6 +38,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -46,6 +47,7 @@
 #include "common/voxel/vec3.h"
 #include "protocol/holding.h"
 #include "protocol/messages.h"
+#include "protocol/out_frame.h"
 
 namespace terrane {
 
@@ -105,21 +107,53 @@ struct StreamRecord {
   std::span<const std::uint8_t> payload;
 };
 
+// Writes a batch's records as the segments of its frame (protocol/out_frame.h):
+// each record's header is the writer's own bytes, and a payload given with
+// its owner (the chunk version or horizon image whose immutable encoding it
+// is) is shared, not copied, so a chunk streamed to many clients is one
+// buffer in all their frames.
 class StreamBatchWriter {
  public:
-  // payload: the record's encoded units (empty for Empty and Released).
-  void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload);
+  // payload: the record's encoded units (empty for Empty and Released),
+  // copied.
+  void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload) {
+    put_head(kind, chunk_pos, revision);
+    bytes_.append(payload);
+  }
+  // owner: what keeps payload alive and unchanged (null: it is copied).
+  template <class T>
+  void add(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, std::span<const std::uint8_t> payload,
+           const std::shared_ptr<T>& owner) {
+    put_head(kind, chunk_pos, revision);
+    bytes_.append_shared(payload, owner);
+  }
   // A Horizon record: region's image at level (4 or 5), for the chunks of
-  // mask (null: every chunk of the region).
-  void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit);
+  // mask (null: every chunk of the region); unit and owner as payload's.
+  template <class T>
+  void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit,
+                   const std::shared_ptr<T>& owner) {
+    put_horizon_head(region, level, mask);
+    bytes_.append_shared(unit, owner);
+  }
+  void add_horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit) {
+    put_horizon_head(region, level, mask);
+    bytes_.append(unit);
+  }
   bool empty() const { return records_ == 0; }
   std::size_t records() const { return records_; }
+  // The records' bytes so far.
   std::size_t size_bytes() const { return bytes_.size(); }
-  // The StreamBatch frame of the records so far; the writer starts over.
-  Frame finish();
+  // The StreamBatch frame of the records so far (the bytes
+  // build_stream_batch makes of them); the writer starts over.
+  OutFrame finish();
 
  private:
-  std::vector<std::uint8_t> bytes_;
+  // A record's kind, position and revision.
+  void put_head(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision);
+  // A Horizon record up to its unit.
+  void put_horizon_head(Vec3i region, int level, const HorizonMask* mask);
+
+  OutFrame bytes_;
   Vec3i prev_{0, 0, 0};
   std::size_t records_ = 0;
 };

@@ -85,18 +85,9 @@ UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units) {
 }
 
 void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out) {
-  std::uint32_t count = 0;
-  for (const UpdatePiece* p : pieces) count += p->count;
-  out.push_back(kUpdateBatchVersion);
-  put_varint(count, out);
-  Vec3i prev_chunk{};
-  int prev_unit = -1;
-  for (const UpdatePiece* p : pieces) {
-    net_codec_put_update_coords(p->chunk_pos, p->first_unit, prev_chunk, prev_unit, out);
-    out.insert(out.end(), p->rest.begin(), p->rest.end());
-    prev_chunk = p->chunk_pos;
-    prev_unit = kUpdateUnitsPerChunk;  // pieces are distinct chunks
-  }
+  net_codec_join_update_pieces(pieces, out, [&](std::size_t, std::span<const std::uint8_t> rest) {
+    out.insert(out.end(), rest.begin(), rest.end());
+  });
 }
 
 Result<std::size_t> net_codec_decode_update_batch(std::span<const std::uint8_t> bytes, std::span<UnitUpdate> out) {

@@ -14,6 +14,7 @@
 #include <span>
 #include <vector>
 
+#include "common/codec/bit_io.h"
 #include "common/codec/decode_error.h"
 #include "common/codec/net_codec.h"
 #include "common/voxel/vec3.h"
@@ -64,6 +65,13 @@ struct UpdatePiece {
 UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units);
 // Appends one batch of the pieces (distinct chunks), in the order given.
 void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out);
+// The same batch, but each piece's rest is handed to put_rest(i, rest) (i
+// its index in pieces) instead of copied into out: a writer that sends
+// the batch as segments keeps the pieces' bytes shared. put_rest must
+// append rest where out's next byte would go.
+template <class PutRest>
+void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out,
+                                  PutRest&& put_rest);
 
 // One chunk's units of a batch, by index, to write into the chunk's voxels
 // in one pass over the box that holds them (a replica's, or a server's copy
@@ -107,5 +115,23 @@ Result<std::bitset<kUpdateUnitsPerChunk>> apply_chunk_update_batch(std::span<con
 // entry's chunk and unit (start: chunk (0,0,0), unit -1).
 void net_codec_put_update_coords(Vec3i chunk_pos, int unit_index, Vec3i prev_chunk, int prev_unit,
                                  std::vector<std::uint8_t>& out);
+
+template <class PutRest>
+void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out,
+                                  PutRest&& put_rest) {
+  std::uint32_t count = 0;
+  for (const UpdatePiece* p : pieces) count += p->count;
+  out.push_back(kUpdateBatchVersion);
+  put_varint(count, out);
+  Vec3i prev_chunk{};
+  int prev_unit = -1;
+  for (std::size_t i = 0; i < pieces.size(); ++i) {
+    const UpdatePiece* p = pieces[i];
+    net_codec_put_update_coords(p->chunk_pos, p->first_unit, prev_chunk, prev_unit, out);
+    put_rest(i, std::span<const std::uint8_t>(p->rest));
+    prev_chunk = p->chunk_pos;
+    prev_unit = kUpdateUnitsPerChunk;  // pieces are distinct chunks
+  }
+}
 
 }  // namespace terrane

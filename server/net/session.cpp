@@ -53,7 +53,7 @@ void Session::start() {
   });
 }
 
-void Session::send(SharedFrame frame, SendClass cls) {
+void Session::send(OutFrame frame, SendClass cls) {
   asio::dispatch(socket_.get_executor(), [self = shared_from_this(), f = std::move(frame), cls]() mutable {
     if (self->state_ != State::kReading) return;
     self->enqueue(std::move(f), cls);
@@ -193,8 +193,7 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       // A meaningless edit is rejected, not a reason to disconnect.
       if (!e) {
         if (limits_.counters != nullptr) limits_.counters->rejected(RejectReason::kInvalid);
-        return enqueue(std::make_shared<const Frame>(build_edit_reject(req->edit_id(), e.error().detail)),
-                       SendClass::kControl);
+        return enqueue(build_edit_reject(req->edit_id(), e.error().detail), SendClass::kControl);
       }
       on_message_(id_, *e);
       return;
@@ -224,7 +223,7 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
       return;
     }
     case wire::Body::Ping:
-      return enqueue(std::make_shared<const Frame>(build_pong(m.body_as_Ping()->nonce())), SendClass::kControl);
+      return enqueue(build_pong(m.body_as_Ping()->nonce()), SendClass::kControl);
     case wire::Body::Pong:
       on_message_(id_, PongMsg{m.body_as_Pong()->nonce()});
       return;
@@ -238,20 +237,22 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
   }
 }
 
-void Session::enqueue(SharedFrame frame, SendClass cls) {
+void Session::enqueue(OutFrame frame, SendClass cls) {
   const std::size_t now = queued_bytes_.load(std::memory_order_relaxed);
-  if (now + frame->size() > limits_.max_queue_bytes) {
+  if (now + frame.size() > limits_.max_queue_bytes) {
     server_log().warn("session {} ({}): {} bytes queued, dropping", id_, remote_, now);
     begin_close(CloseReason::kTooFarBehind, "too far behind");
     return;
   }
-  add_queued(static_cast<std::int64_t>(frame->size()));
-  if (limits_.counters != nullptr && frame->size() > kFrameHeaderBytes) {
-    // Our own frame: its type is read without verification.
+  add_queued(static_cast<std::int64_t>(frame.size()));
+  const std::span<const std::uint8_t> first = frame.first_segment();
+  if (limits_.counters != nullptr && first.size() > kFrameHeaderBytes) {
+    // Our own frame: its type is read without verification, from its first
+    // segment, which holds the Message table (protocol/out_frame.h).
     const auto type = static_cast<std::size_t>(
-        flatbuffers::GetRoot<wire::Message>(frame->data() + kFrameHeaderBytes)->body_type());
+        flatbuffers::GetRoot<wire::Message>(first.data() + kFrameHeaderBytes)->body_type());
     if (type < NetCounters::kTypes) {
-      limits_.counters->net.sent_bytes[type].fetch_add(frame->size(), std::memory_order_relaxed);
+      limits_.counters->net.sent_bytes[type].fetch_add(frame.size(), std::memory_order_relaxed);
       limits_.counters->net.sent_frames[type].fetch_add(1, std::memory_order_relaxed);
     }
   }
@@ -263,12 +264,14 @@ void Session::do_write() {
   if (writing_ || (queue_.empty() && control_queue_.empty())) return;
   writing_ = true;
   write_started_ = Clock::now();
+  // Every segment of the frames gathered, in one write: shared bytes go
+  // from their owners' buffers to the socket.
   std::vector<asio::const_buffer> bufs;
   std::size_t gathered = 0;
   for (auto* q : {&control_queue_, &queue_}) {
-    while (!q->empty() && (gathered == 0 || gathered + q->front()->size() <= kWriteGatherBytes)) {
-      gathered += q->front()->size();
-      bufs.emplace_back(asio::buffer(*q->front()));
+    while (!q->empty() && (gathered == 0 || gathered + q->front().size() <= kWriteGatherBytes)) {
+      gathered += q->front().size();
+      q->front().for_each_segment([&](std::span<const std::uint8_t> s) { bufs.emplace_back(s.data(), s.size()); });
       inflight_.push_back(std::move(q->front()));
       q->pop_front();
     }
@@ -317,10 +320,10 @@ void Session::begin_close(CloseReason why, const std::string& reason) {
   // Drop the world data queued but not in flight; control frames (acks,
   // rejections, notices, admin answers: small, and what the peer most needs
   // to know) still go out, ahead of the reason.
-  for (const auto& f : queue_) add_queued(-static_cast<std::int64_t>(f->size()));
+  for (const auto& f : queue_) add_queued(-static_cast<std::int64_t>(f.size()));
   queue_.clear();
-  auto bye = std::make_shared<const Frame>(build_disconnect(reason));
-  add_queued(static_cast<std::int64_t>(bye->size()));
+  OutFrame bye = build_disconnect(reason);
+  add_queued(static_cast<std::int64_t>(bye.size()));
   queue_.push_back(std::move(bye));
   do_write();
 }
@@ -333,7 +336,7 @@ void Session::finish_close() {
   socket_.shutdown(asio::ip::tcp::socket::shutdown_both, ignored);
   socket_.close(ignored);
   for (auto* q : {&control_queue_, &queue_}) {
-    for (const auto& f : *q) add_queued(-static_cast<std::int64_t>(f->size()));
+    for (const auto& f : *q) add_queued(-static_cast<std::int64_t>(f.size()));
     q->clear();
   }
   if (on_closed_) on_closed_(id_, close_reason_.empty() ? std::string("closed") : close_reason_);

@@ -1,6 +1,8 @@
 // Session: one client connection on the server. Owns the socket, reads
 // frames, verifies and parses them (protocol/messages.h) and hands the
-// parsed messages to the server; writes frames from a bounded queue.
+// parsed messages to the server; writes frames from a bounded queue, each
+// frame's segments (protocol/out_frame.h) and several frames in one
+// gathered write.
 //
 // Threading: every member runs on the session's own strand (the socket's
 // executor). send() and close() may be called from any thread: they post to
@@ -36,6 +38,7 @@
 
 #include "protocol/framing.h"
 #include "protocol/messages.h"
+#include "protocol/out_frame.h"
 #include "server/base/counters.h"
 #include "server/net/net_options.h"
 #include "server/base/rate_limit.h"
@@ -86,12 +89,12 @@ class Session : public std::enable_shared_from_this<Session> {
           ClosedFn on_closed, DrainedFn on_drained = nullptr);
 
   void start();
-  // Queues a frame (any thread). Over the byte cap the session is closed
-  // as too far behind.
-  void send(SharedFrame frame, SendClass cls = SendClass::kData);
-  void send(Frame frame, SendClass cls = SendClass::kData) {
-    send(std::make_shared<const Frame>(std::move(frame)), cls);
-  }
+  // Queues a frame (any thread): its segments go out in one gathered
+  // write, its shared bytes uncopied (protocol/out_frame.h). Over the byte
+  // cap the session is closed as too far behind.
+  void send(OutFrame frame, SendClass cls = SendClass::kData);
+  // A frame built once for many sessions: sent as one shared segment.
+  void send(SharedFrame frame, SendClass cls = SendClass::kData) { send(OutFrame(std::move(frame)), cls); }
   // Sends Disconnect(text) after nothing else, then closes (any thread);
   // why is counted (NetCounters::disconnects).
   void close(CloseReason why, std::string text);
@@ -112,7 +115,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   void do_read();
   void on_frame(std::span<const std::uint8_t> body);
-  void enqueue(SharedFrame frame, SendClass cls);
+  void enqueue(OutFrame frame, SendClass cls);
   void do_write();
   void begin_close(CloseReason why, const std::string& text);
   void finish_close();
@@ -136,9 +139,9 @@ class Session : public std::enable_shared_from_this<Session> {
   CloseReason close_why_ = CloseReason::kPeerClosed;
   FrameReader reader_;
   std::vector<std::uint8_t> read_buf_;
-  std::deque<SharedFrame> queue_;          // data
-  std::deque<SharedFrame> control_queue_;  // sent first
-  std::vector<SharedFrame> inflight_;
+  std::deque<OutFrame> queue_;          // data
+  std::deque<OutFrame> control_queue_;  // sent first
+  std::vector<OutFrame> inflight_;
   bool writing_ = false;
   Clock::time_point last_read_;
   Clock::time_point write_started_;

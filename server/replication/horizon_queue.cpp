@@ -14,7 +14,7 @@ bool HorizonQueue::want(Vec3i region, int level) {
   return true;
 }
 
-void HorizonQueue::arrive(std::vector<HorizonPtr> images, const std::function<void(const HorizonImage&)>& send) {
+void HorizonQueue::arrive(std::vector<HorizonPtr> images, const std::function<void(const HorizonPtr&)>& send) {
   for (HorizonPtr& image : images) {
     auto w = wanted_.find(image->region);
     if (w == wanted_.end() || w->second != image->level) continue;  // asked for by an earlier plan
@@ -27,7 +27,7 @@ void HorizonQueue::arrive(std::vector<HorizonPtr> images, const std::function<vo
     early_.erase(ready);
     order_.pop_front();
     wanted_.erase(image->region);
-    send(*image);
+    send(image);
   }
 }
 

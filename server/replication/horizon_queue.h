@@ -31,7 +31,7 @@ class HorizonQueue {
   bool waiting() const { return !wanted_.empty(); }
   // Images as the world made them: each kept until its turn; send is
   // called for each image whose turn came, in the plan's order.
-  void arrive(std::vector<HorizonPtr> images, const std::function<void(const HorizonImage&)>& send);
+  void arrive(std::vector<HorizonPtr> images, const std::function<void(const HorizonPtr&)>& send);
 
  private:
   Vec3iMap<std::uint8_t> wanted_;  // region -> level, until sent

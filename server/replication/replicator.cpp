@@ -185,7 +185,7 @@ void Replicator::send_parked_near() {
 }
 
 void Replicator::send_whole(Vec3i cp, const VersionPtr& v) {
-  send_chunk(*v, 0);
+  send_chunk(v, 0);
   hold(cp, Holding{form_sent(*v, 0), v->revision()}, v);
   slots_.change_if(cp, [](ChunkSlot& s) { s.take_mip(); });  // older than v: nothing left to refresh
   if (slots_.mips_pending() == 0) mips_.forget();
@@ -370,12 +370,13 @@ void Replicator::on_horizons(std::vector<HorizonPtr> images) {
   // The world hands images over as they are made (in parallel, some kept
   // from before): they wait here for their turn, so the client gets them
   // nearest region first.
-  horizon_.arrive(std::move(images), [this](const HorizonImage& image) { send_horizon(image); });
+  horizon_.arrive(std::move(images), [this](const HorizonPtr& image) { send_horizon(image); });
   if (!horizon_.waiting()) flush_stream();
   pump();
 }
 
-void Replicator::send_horizon(const HorizonImage& image) {
+void Replicator::send_horizon(const HorizonPtr& shared) {
+  const HorizonImage& image = *shared;
   if (image.unit.empty()) return;  // not made: the chunks' own records follow
   const int level = image.level;
   // The region's chunks in view that the client has nothing of yet.
@@ -388,7 +389,7 @@ void Replicator::send_horizon(const HorizonImage& image) {
     ++covered;
   });
   if (covered == 0) return;
-  batch_.add_horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit);
+  batch_.add_horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit, shared);
   counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
   if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
 }
@@ -544,17 +545,18 @@ void Replicator::send_ready() {
         counters_.chunks_resumed.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
-      send_chunk(*v, kMipLevels - 1);
+      send_chunk(v, kMipLevels - 1);
       hold(cp, Holding{form_sent(*v, kMipLevels - 1), v->revision()}, v);
       continue;
     }
-    send_chunk(*v, req->level);
+    send_chunk(v, req->level);
     hold(cp, Holding{form_sent(*v, req->level), v->revision()}, v);
   }
   if (!ready_.empty()) arm_timer();
 }
 
-void Replicator::send_chunk(const ChunkVersion& v, int level) {
+void Replicator::send_chunk(const VersionPtr& version, int level) {
+  const ChunkVersion& v = *version;
   if (v.empty()) {
     stream(StreamRecordKind::kEmpty, v.pos(), v.revision());
     counters_.empties_sent.fetch_add(1, std::memory_order_relaxed);
@@ -562,11 +564,11 @@ void Replicator::send_chunk(const ChunkVersion& v, int level) {
   }
   if (v.estimate()) {
     // Only level 3 exists of an estimate (the world grants it for no finer).
-    stream(StreamRecordKind::kEstimate, v.pos(), v.revision(), v.encoded(kMipLevels - 1));
+    stream(StreamRecordKind::kEstimate, v.pos(), v.revision(), v.encoded(kMipLevels - 1), version);
     counters_.estimates_sent.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  stream(record_kind(level), v.pos(), v.revision(), v.encoded(level));
+  stream(record_kind(level), v.pos(), v.revision(), v.encoded(level), version);
   (level == 0 ? counters_.chunks_sent : counters_.mips_sent).fetch_add(1, std::memory_order_relaxed);
 }
 
@@ -693,7 +695,7 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
     counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  stream(record_kind(level), cp, v->revision(), v->encoded(level));
+  stream(record_kind(level), cp, v->revision(), v->encoded(level), v);
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
   slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{mip_form(level), v->revision()}, v); });
   if (plan_.desired(cp) < level) plan_.push_refine(cp);
@@ -720,14 +722,15 @@ void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) 
     flush_mips();
 }
 
-void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload) {
-  batch_.add(kind, cp, revision, payload);
+void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload,
+                        const VersionPtr& owner) {
+  batch_.add(kind, cp, revision, payload, owner);
   if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
 }
 
 void Replicator::flush_stream() {
   if (batch_.empty() || !session_) return;
-  Frame f = batch_.finish();
+  OutFrame f = batch_.finish();
   outbound_.spend(static_cast<double>(f.size()));
   counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
   session_->send(std::move(f));

@@ -130,7 +130,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void on_horizons(std::vector<HorizonPtr> images);
   // One image as a Horizon record, for the chunks of its region in view
   // that the client has nothing of.
-  void send_horizon(const HorizonImage& image);
+  void send_horizon(const HorizonPtr& image);
   void move_by(Vec3i d);
   void release_outside_view();
   // A chunk leaving the view: released on both sides (its claim, what is
@@ -160,15 +160,18 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void pump();
   void request_more();
   void send_ready();
-  void send_chunk(const ChunkVersion& v, int level);
+  // v's encoding at level (a record that shares it, not a copy).
+  void send_chunk(const VersionPtr& v, int level);
   void hold(Vec3i chunk_pos, Holding h, const VersionPtr& v);
   void refresh_mip(Vec3i chunk_pos, const VersionPtr& v);
   void flush_mips();
   // Flushes the refreshes of mips once due, unless streaming yields (then
   // they wait, and coalesce, kYieldAtMost past their time at most).
   void flush_mips_when_due(std::chrono::steady_clock::time_point now);
+  // owner: what keeps payload alive (the version whose encoding it is),
+  // so the record shares it (StreamBatchWriter).
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
-              std::span<const std::uint8_t> payload = {});
+              std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr);
   void flush_stream();
   void answer_hash(Vec3i chunk_pos);
   void arm_timer();

@@ -8,7 +8,7 @@
 
 namespace terrane {
 
-std::optional<Frame> TickUpdate::finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units) {
+std::optional<OutFrame> TickUpdate::finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units) {
   // Chunk order, so the joined batch is what one encoder would write.
   std::sort(versions_.begin(), versions_.end(), [](const VersionPtr& a, const VersionPtr& b) {
     const Vec3i u = a->pos(), w = b->pos();
@@ -22,11 +22,18 @@ std::optional<Frame> TickUpdate::finish(std::uint64_t tick, UpdateFaults* faults
   }
   UpdatePiece tampered;  // outlives pieces, which may point at it
   if (faults != nullptr && !faults->tamper(pieces, tampered)) return std::nullopt;
-  std::vector<std::uint8_t> data;
-  net_codec_join_update_pieces(pieces, data);
+  // A piece still its version's is shared; one the faults made is copied.
+  OutFrame data;
+  net_codec_join_update_pieces(pieces, data.owned_tail(), [&](std::size_t i, std::span<const std::uint8_t> rest) {
+    if (i < versions_.size() && pieces[i] == &versions_[i]->update_piece()) {
+      data.append_shared(rest, versions_[i]);
+    } else {
+      data.append(rest);
+    }
+  });
   units = 0;
   for (const UpdatePiece* p : pieces) units += p->count;
-  return build_update_batch(tick, data, revisions);
+  return gather_update_batch(tick, std::move(data), revisions);
 }
 
 }  // namespace terrane

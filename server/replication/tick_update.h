@@ -2,8 +2,9 @@
 // 4^3 units of every chunk it holds at full resolution, joined from each
 // version's update piece (encoded once per version, shared by every
 // holder), in chunk order (y, z, x), so the joined batch is what one
-// encoder would write; with each chunk's new revision. It keeps the
-// versions, and so their pieces, alive until the frame is built.
+// encoder would write; with each chunk's new revision. The frame's
+// segments share the pieces' bytes (protocol/out_frame.h): it keeps their
+// versions alive until it is written.
 //
 // Threading: the client's session strand (made and finished in one call).
 #pragma once
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "protocol/messages.h"
+#include "protocol/out_frame.h"
 #include "server/base/chunk_version.h"
 #include "server/replication/update_faults.h"
 
@@ -26,7 +28,7 @@ class TickUpdate {
   bool empty() const { return versions_.empty(); }
   // The UpdateBatch frame of tick, or nullopt when faults (the test seam;
   // null when serving for real) drop it. units: set to the units it holds.
-  std::optional<Frame> finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units);
+  std::optional<OutFrame> finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units);
 
  private:
   std::vector<VersionPtr> versions_;

@@ -107,9 +107,9 @@ void BM_MipChurn(benchmark::State& state) {
     std::vector<Frame> view;
     for_each_view_chunk(0, [&](Vec3i cp) {
       mip(w, cp);
-      if (w.records() >= kMaxStreamRecords) view.push_back(w.finish());
+      if (w.records() >= kMaxStreamRecords) view.push_back(w.finish().flatten());
     });
-    if (!w.empty()) view.push_back(w.finish());
+    if (!w.empty()) view.push_back(w.finish().flatten());
     for (auto& a : appliers)
       for (const Frame& f : view) a->apply(f);
   }
@@ -131,8 +131,8 @@ void BM_MipChurn(benchmark::State& state) {
       }
     }
     records += leave.records() + enter.records();
-    frames.push_back(leave.finish());
-    frames.push_back(enter.finish());
+    frames.push_back(leave.finish().flatten());
+    frames.push_back(enter.finish().flatten());
   };
   for (int c = 0; c < kMoves; ++c) move(c, c + 1);
   for (int c = kMoves; c > 0; --c) move(c, c - 1);
@@ -177,8 +177,8 @@ const FullFrames& full_frames() {
           r.add(StreamRecordKind::kReleased, cp, 0, {});
         }
     out.records = w.records() + r.records();
-    out.full = w.finish();
-    out.released = r.finish();
+    out.full = w.finish().flatten();
+    out.released = r.finish().flatten();
     return out;
   }();
   return f;

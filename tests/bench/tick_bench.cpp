@@ -3,8 +3,10 @@
 // crowd scenario): apply (edits on copies of their chunks, new versions),
 // encode (each version's update piece and mips, once, shared), commit (one
 // SQLite transaction, synchronous=FULL), world fan-out (interest lookups,
-// one list per holder) and delivery (per client: join the pieces into one
-// UpdateBatch frame plus a mip refresh record).
+// one list per holder) and delivery (per client: one UpdateBatch frame of
+// the pieces, TickUpdate, or a StreamBatch of mip refresh records, each a
+// frame whose segments share the versions' bytes; owned_per_tick counts
+// the bytes the frames hold copies of).
 //   ./build/bin/terrane-bench-tick
 // Times are per tick; "per_delivery" is the time per (changed chunk,
 // holder) pair, in seconds with an SI suffix.
@@ -23,6 +25,7 @@
 #include "protocol/stream_batch.h"
 #include "server/storage/storage.h"
 #include "server/base/chunk_version.h"
+#include "server/replication/tick_update.h"
 #include "server/world/edits.h"
 #include "server/world/interest.h"
 
@@ -173,25 +176,22 @@ void BM_TickDelivery(benchmark::State& state) {
     (void)v->update_piece();
     (void)v->encoded(2);
   }
-  std::uint64_t deliveries = 0, bytes = 0;
+  std::uint64_t deliveries = 0, bytes = 0, copied = 0;
   for (auto _ : state) {
     for (int c = 0; c < kClients; ++c) {
       if (c < 20) {
-        std::vector<const UpdatePiece*> pieces;
-        std::vector<ChunkRevisionMsg> revs;
-        for (const auto& v : vs) {
-          pieces.push_back(&v->update_piece());
-          revs.push_back({v->pos(), v->revision()});
-        }
-        std::vector<std::uint8_t> data;
-        net_codec_join_update_pieces(pieces, data);
-        Frame f = build_update_batch(2, data, revs);
-        bytes += f.size();
+        TickUpdate update;
+        for (const auto& v : vs) update.add(v);
+        std::size_t units = 0;
+        const auto f = update.finish(2, nullptr, units);
+        bytes += f->size();
+        copied += f->size() - f->shared_bytes();
       } else {
         StreamBatchWriter w;
-        for (const auto& v : vs) w.add(StreamRecordKind::kMip2, v->pos(), v->revision(), v->encoded(2));
-        Frame f = w.finish();
+        for (const auto& v : vs) w.add(StreamRecordKind::kMip2, v->pos(), v->revision(), v->encoded(2), v);
+        const OutFrame f = w.finish();
         bytes += f.size();
+        copied += f.size() - f.shared_bytes();
       }
       deliveries += vs.size();
     }
@@ -199,6 +199,9 @@ void BM_TickDelivery(benchmark::State& state) {
   state.counters["per_delivery"] = benchmark::Counter(static_cast<double>(deliveries),
                                                           benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
   state.counters["bytes_per_tick"] = static_cast<double>(bytes) / static_cast<double>(state.iterations());
+  // The frames' own bytes (written by the frame builders; the rest are
+  // the versions' shared bytes).
+  state.counters["owned_per_tick"] = static_cast<double>(copied) / static_cast<double>(state.iterations());
 }
 BENCHMARK(BM_TickDelivery)->Unit(benchmark::kMicrosecond);
 

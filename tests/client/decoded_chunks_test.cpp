@@ -27,7 +27,7 @@ using testing_support::full_payload;
 void take_full(Replica& r, Vec3i cp, std::uint64_t revision, const std::vector<std::uint8_t>& payload) {
   StreamBatchWriter w;
   w.add(StreamRecordKind::kFull, cp, revision, payload);
-  const Frame f = w.finish();
+  const Frame f = w.finish().flatten();
   auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
   ASSERT_TRUE(m.ok());
   auto records = parse_stream_batch(*(*m)->body_as_StreamBatch());

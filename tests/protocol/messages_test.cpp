@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <limits>
 
 #include "common/codec/byte_rle.h"
@@ -398,6 +399,46 @@ TEST(Messages, UpdateBatchCarriesRevisions) {
   EXPECT_EQ(b->revisions[1].chunk_pos, (Vec3i{-1, 0, 7}));
   EXPECT_EQ(b->revisions[1].revision, 9u);
   EXPECT_FALSE(parse_update_batch(*message_of(build_update_batch(12, data, {}))->body_as_UpdateBatch()).ok());
+}
+
+// The gathered builders make the bytes of the copying ones whatever the
+// data's length (the padding after it varies with it) and however it is
+// split into owned and shared segments.
+TEST(Messages, GatheredBatchesAreTheCopiedOnesByteForByte) {
+  auto shared = std::make_shared<std::vector<std::uint8_t>>(OutFrame::kMinSharedBytes + 3);
+  for (std::size_t i = 0; i < shared->size(); ++i) (*shared)[i] = static_cast<std::uint8_t>(i * 7);
+  const ChunkRevisionMsg revs[3] = {{{1, 2, 3}, 4}, {{-1, 0, 7}, 9}, {{5, 5, 5}, 1ull << 50}};
+  for (std::size_t owned = 0; owned < 9; ++owned) {
+    for (const bool with_shared : {false, true}) {
+      OutFrame data;
+      std::vector<std::uint8_t> flat;
+      for (std::size_t i = 0; i < owned; ++i) data.owned_tail().push_back(static_cast<std::uint8_t>(i + 1));
+      flat = data.owned_tail();
+      if (with_shared) {
+        data.append_shared(*shared, shared);
+        data.append(std::vector<std::uint8_t>(owned, 0xAB));
+        flat.insert(flat.end(), shared->begin(), shared->end());
+        flat.insert(flat.end(), owned, 0xAB);
+      }
+      OutFrame records;
+      records.append(flat);
+      if (with_shared) records.append_shared(*shared, shared);
+      std::vector<std::uint8_t> records_flat = flat;
+      if (with_shared) records_flat.insert(records_flat.end(), shared->begin(), shared->end());
+
+      const OutFrame update = gather_update_batch(77, std::move(data), revs);
+      EXPECT_EQ(update.flatten(), build_update_batch(77, flat, revs)) << owned << " " << with_shared;
+      EXPECT_EQ(update.shared_bytes(), with_shared ? shared->size() : 0u);
+      const OutFrame stream = gather_stream_batch(std::move(records));
+      EXPECT_EQ(stream.flatten(), build_stream_batch(records_flat)) << owned << " " << with_shared;
+      // The message type is read from the first segment alone.
+      const auto first = stream.first_segment();
+      EXPECT_EQ(flatbuffers::GetRoot<wire::Message>(first.data() + kFrameHeaderBytes)->body_type(),
+                wire::Body::StreamBatch);
+      EXPECT_EQ(flatbuffers::GetRoot<wire::Message>(update.first_segment().data() + kFrameHeaderBytes)->body_type(),
+                wire::Body::UpdateBatch);
+    }
+  }
 }
 
 TEST(Messages, SmallMessagesRoundTrip) {

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <memory>
+#include <random>
+
 #include "common/codec/net_codec.h"
 #include "common/world/horizon.h"
 #include "tests/support/stream_records.h"
@@ -43,7 +47,7 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
   net_codec_encode(4, estimate.voxels(), estimate_bytes);
   w.add(StreamRecordKind::kEstimate, {6, -1, 8}, 0, estimate_bytes);
   EXPECT_EQ(w.records(), 5u);
-  const Frame f = w.finish();
+  const Frame f = w.finish().flatten();
   EXPECT_TRUE(w.empty());
   StreamDecodeScratch s;
   std::vector<StreamRecord> got;
@@ -82,12 +86,110 @@ TEST(StreamBatch, EveryRecordKindRoundTrips) {
   EXPECT_TRUE(same(got[4].payload, estimate_bytes));
 }
 
+// Voxels that encode to many bytes (random materials and occupancies).
+Box noise(int n, unsigned seed) {
+  Box b({n, n, n});
+  std::mt19937 rng(seed);
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x)
+        b.set(x, y, z, make_voxel(static_cast<Material>(1 + rng() % 8), static_cast<std::uint8_t>(rng())));
+  return b;
+}
+
+std::shared_ptr<const std::vector<std::uint8_t>> encoded(const Box& b) {
+  auto out = std::make_shared<std::vector<std::uint8_t>>();
+  if (b.size().x == 32) {
+    *out = full_payload(b);
+  } else {
+    net_codec_encode(b.size().x, b.voxels(), *out);
+  }
+  return out;
+}
+
+TEST(StreamBatch, AGatheredBatchIsTheCopiedBatchByteForByte) {
+  // Every record kind, payloads above and below OutFrame::kMinSharedBytes,
+  // horizon records with and without a mask; 0..3 Released records more
+  // change the padding after the records.
+  const auto full = encoded(noise(32, 1)), mip1 = encoded(noise(16, 2)), mip2 = encoded(terrain(8, 3));
+  const auto mip3 = encoded(noise(4, 4)), estimate = encoded(terrain(4, 5));
+  const auto near = encoded(noise(16, 6)), far = encoded(terrain(8, 7)), far_big = encoded(noise(8, 8));
+  ASSERT_GE(full->size(), OutFrame::kMinSharedBytes);
+  ASSERT_GE(mip1->size(), OutFrame::kMinSharedBytes);
+  ASSERT_GE(near->size(), OutFrame::kMinSharedBytes);
+  ASSERT_LT(mip3->size(), OutFrame::kMinSharedBytes);
+  HorizonMask mask{};
+  mask[3] = 0x81;
+  for (int extra = 0; extra < 4; ++extra) {
+    auto write = [&](bool share) {
+      auto owner = [&](const std::shared_ptr<const std::vector<std::uint8_t>>& p) {
+        return share ? std::shared_ptr<const void>(p) : nullptr;
+      };
+      StreamBatchWriter w;
+      w.add_horizon({-1, 0, 2}, kHorizonNearLevel, &mask, *near, owner(near));
+      w.add_horizon({3, -1, 0}, kHorizonFarLevel, nullptr, *far, owner(far));
+      w.add_horizon({3, 0, 0}, kHorizonFarLevel, &mask, *far_big, owner(far_big));
+      w.add(StreamRecordKind::kFull, {1, 2, 3}, 9, *full, owner(full));
+      w.add(StreamRecordKind::kMip1, {-5, 2, 3}, 1ull << 40, *mip1, owner(mip1));
+      w.add(StreamRecordKind::kMip2, {-5, 3, 3}, 2, *mip2, owner(mip2));
+      w.add(StreamRecordKind::kMip3, {-5, 3, 4}, 3, *mip3, owner(mip3));
+      w.add(StreamRecordKind::kEstimate, {300000, 3, 4}, 0, *estimate, owner(estimate));
+      w.add(StreamRecordKind::kEmpty, {0, 0, 0}, 4, {});
+      for (int i = 0; i < extra; ++i) w.add(StreamRecordKind::kReleased, {i, 1, 1}, 5, {});
+      return w.finish();
+    };
+    const OutFrame gathered = write(true), copied = write(false);
+    const Frame bytes = gathered.flatten();
+    EXPECT_EQ(bytes, copied.flatten()) << extra;
+    // The records' vector built whole, as FlatBuffers copies it in.
+    EXPECT_EQ(bytes, build_stream_batch(records_of(copied.flatten()))) << extra;
+    EXPECT_EQ(gathered.size(), bytes.size());
+    EXPECT_EQ(gathered.shared_bytes(), full->size() + mip1->size() + near->size() + far_big->size() +
+                                           (mip2->size() >= OutFrame::kMinSharedBytes ? mip2->size() : 0) +
+                                           (far->size() >= OutFrame::kMinSharedBytes ? far->size() : 0));
+    EXPECT_EQ(copied.shared_bytes(), 0u);
+    // The shared payloads are the owners' own bytes, not copies.
+    std::vector<const std::uint8_t*> starts;
+    gathered.for_each_segment([&](std::span<const std::uint8_t> s) { starts.push_back(s.data()); });
+    for (const auto& p : {full, mip1, near, far_big})
+      EXPECT_NE(std::find(starts.begin(), starts.end(), p->data()), starts.end());
+    // And it decodes as the records written.
+    StreamDecodeScratch s;
+    std::vector<StreamRecordKind> kinds;
+    ASSERT_TRUE(decode_stream_batch(records_of(bytes), s, [&](const StreamRecord& r) -> Status {
+                  kinds.push_back(r.kind);
+                  return Ok{};
+                }).ok());
+    EXPECT_EQ(kinds.size(), 9u + static_cast<std::size_t>(extra));
+  }
+}
+
+TEST(StreamBatch, AGatheredBatchKeepsItsPayloadsOwnersAlive) {
+  auto full = encoded(noise(32, 9));
+  const std::weak_ptr<const std::vector<std::uint8_t>> watch = full;
+  StreamBatchWriter w;
+  w.add(StreamRecordKind::kFull, {1, 2, 3}, 9, *full, full);
+  const auto expected = *full;
+  full.reset();
+  EXPECT_FALSE(watch.expired()) << "the writer holds it";
+  OutFrame f = w.finish();
+  EXPECT_FALSE(watch.expired()) << "the frame holds it";
+  StreamDecodeScratch s;
+  const Frame bytes = f.flatten();
+  ASSERT_TRUE(decode_stream_batch(records_of(bytes), s, [&](const StreamRecord& r) -> Status {
+                EXPECT_TRUE(std::equal(r.payload.begin(), r.payload.end(), expected.begin(), expected.end()));
+                return Ok{};
+              }).ok());
+  f = OutFrame{};
+  EXPECT_TRUE(watch.expired());
+}
+
 TEST(StreamBatch, RecordsCostAFewBytesBeyondTheCodec) {
   const Box chunk = terrain(32, 7);
   const auto payload = full_payload(chunk);
   StreamBatchWriter w;
   for (int i = 0; i < 10; ++i) w.add(StreamRecordKind::kFull, {i, 0, 0}, 1, payload);
-  const Frame f = w.finish();
+  const Frame f = w.finish().flatten();
   // Ten chunks, one frame: the overhead over the codec is tiny.
   EXPECT_LT(f.size(), 10 * payload.size() + 10 * 6 + 64);
 }
@@ -97,7 +199,7 @@ TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
   StreamBatchWriter w;
   w.add(StreamRecordKind::kFull, {1, 2, 3}, 4, full_payload(chunk));
   w.add(StreamRecordKind::kEmpty, {1, 3, 3}, 0, {});
-  const Frame f = w.finish();
+  const Frame f = w.finish().flatten();
   const auto records = records_of(f);
   const std::vector<std::uint8_t> bytes(records.begin(), records.end());
   StreamDecodeScratch s;
@@ -152,7 +254,7 @@ TEST(StreamBatch, HorizonRecordsCarryARegionImageAndTheChunksItCovers) {
   w.add_horizon({-3, 0, 2}, kHorizonNearLevel, &mask, near_bytes);
   w.add(StreamRecordKind::kEmpty, {-24, 1, 17}, 2, {});  // relative to the region's first chunk
   w.add_horizon({4, -1, -7}, kHorizonFarLevel, nullptr, far_bytes);
-  const Frame f = w.finish();
+  const Frame f = w.finish().flatten();
   StreamDecodeScratch s;
   std::vector<StreamRecord> got;
   std::vector<Box> images;

@@ -21,8 +21,8 @@ HorizonPtr image(Vec3i region, int level) {
 
 struct Sent {
   std::vector<Vec3i> regions;
-  std::function<void(const HorizonImage&)> fn() {
-    return [this](const HorizonImage& i) { regions.push_back(i.region); };
+  std::function<void(const HorizonPtr&)> fn() {
+    return [this](const HorizonPtr& i) { regions.push_back(i->region); };
   }
 };
 
