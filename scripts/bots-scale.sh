@@ -13,6 +13,10 @@
 #          start once every bot has joined (--wait-joined); world:
 #          worlds/world4k (terrane-world generate --world worlds/world4k
 #          --box -2048,-128,-2048,2048,256,2048).
+#   wave   the world scenario measured from the first connection
+#          (--measure-from start): edits and their fan-out while the bots
+#          join at 5 a second, then the 60 s after the last join; world:
+#          worlds/world4k.
 # Prints the bots' report (with the server's tick, commit and fan-out times
 # from its metrics endpoint), the bots' and the server's peak memory and CPU
 # time (/proc of the server just before it is stopped; GNU time for the
@@ -26,18 +30,25 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scenario=crowd
 case "${1:-}" in
-  crowd|world) scenario=$1; shift ;;
+  crowd|world|wave) scenario=$1; shift ;;
 esac
-bots=${1:?usage: scripts/bots-scale.sh [crowd|world] N [REPORT.json] [flags...]}
+bots=${1:?usage: scripts/bots-scale.sh [crowd|world|wave] N [REPORT.json] [flags...]}
 report=${2:-reports/$scenario-$bots.json}
 shift $(( $# >= 2 ? 2 : 1 ))
+duration=60
 if [ "$scenario" = crowd ]; then
   world=${TERRANE_WORLD:-worlds/scale}
   scenario_flags=(--spread 512 --ramp-up 20)
 else
   world=${TERRANE_WORLD:-worlds/world4k}
   spread=$(awk -v n="$bots" 'BEGIN { printf "%d", 3072 * sqrt(n / 1000) }')
-  scenario_flags=(--spread "$spread" --ramp-up $(( (bots + 4) / 5 )) --wait-joined 600)
+  ramp=$(( (bots + 4) / 5 ))
+  if [ "$scenario" = world ]; then
+    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --wait-joined 600)
+  else
+    duration=$(( ramp + 60 ))
+    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --measure-from start)
+  fi
 fi
 [ -d "$world" ] || { echo "bots-scale.sh: no world at $world (see the comment at the top for how to make it)" >&2; exit 2; }
 
@@ -72,7 +83,7 @@ status=0
 # The bots' own peak memory and CPU, when GNU time is installed.
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
-"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration 60 --behavior mixed \
+"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration "$duration" --behavior mixed \
   "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
   --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 

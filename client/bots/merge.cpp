@@ -122,6 +122,7 @@ std::string read_options(FlatReader& in, BotsOptions* o) {
   put("hash-checks", "hash_checks");
   put("threads", "threads");
   put("wait-joined", "wait_joined");
+  put("measure-from", "measure_from");
   put("shard", "shard");
   for (std::size_t i = 0; i < in.length("thresholds", "expression"); ++i) {
     const std::string key = "thresholds." + std::to_string(i) + ".expression";

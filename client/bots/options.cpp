@@ -67,6 +67,9 @@ const char* const kBotsHelp =
     "                            full-resolution region), waiting at most S seconds after the\n"
     "                            ramp-up; latencies count from then (default 0: the duration\n"
     "                            counts from the first connection)\n"
+    "  --measure-from WHEN       ramp-up (default): latencies count from the end of the ramp-up;\n"
+    "                            start: from the first connection, so edits and their fan-out\n"
+    "                            are measured while the bots join (a join wave)\n"
     "  --threads N               io threads shared by all bots (default: two per core)\n"
     "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
     "                            equal bytes are packed once in this process (default 4096;\n"
@@ -107,7 +110,7 @@ const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
-      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "threads",     "shared-chunks",
+      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks",
       "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
       "shard"};
   return k;
@@ -248,6 +251,9 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       err = num_in(0, 600, &o->quiet_s);
     } else if (key == "wait-joined") {
       err = num_in(0, 86400, &o->join_timeout_s);
+    } else if (key == "measure-from") {
+      if (v != "ramp-up" && v != "start") return bad(where, v, "is not ramp-up or start");
+      o->measure_from_start = v == "start";
     } else if (key == "threads") {
       err = int_in(0, 256, &o->threads);
     } else if (key == "shared-chunks") {
@@ -281,6 +287,8 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
   if (o->shard_count > o->bots)
     return "--shard: " + std::to_string(o->shard_count) + " parts of " + std::to_string(o->bots) +
            " bots leave a part without bots";
+  if (o->measure_from_start && o->join_timeout_s > 0)
+    return "--measure-from start: measures while the bots join, --wait-joined after; give one of them";
   if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
     return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
@@ -291,7 +299,8 @@ int io_threads(const BotsOptions& o) {
 }
 
 double hash_check_span_s(const BotsOptions& o) {
-  const double window = o.join_timeout_s > 0 ? o.duration_s : o.duration_s - o.ramp_up_s;
+  const double window =
+      o.join_timeout_s > 0 || o.measure_from_start ? o.duration_s : o.duration_s - o.ramp_up_s;
   return std::clamp(window / (o.hash_checks + 1), 0.2, 10.0);
 }
 
@@ -360,6 +369,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "hash-checks = " << o.hash_checks << "\n";
   s << "quiet = " << o.quiet_s << "\n";
   s << "wait-joined = " << o.join_timeout_s << "\n";
+  s << "measure-from = " << (o.measure_from_start ? "start" : "ramp-up") << "\n";
   s << "threads = " << o.threads << "\n";
   s << "shared-chunks = " << o.shared_chunks << "\n";
   for (const Threshold& t : o.thresholds) s << "threshold = " << t.expression << "\n";

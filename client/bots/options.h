@@ -32,6 +32,9 @@ struct BotsOptions {
   int view_distance = 256;
   int full_res_radius = 64;
   double ramp_up_s = 0;   // connections spread over this; latency samples before it end are not counted
+  // ... unless measure_from_start: every sample counts from the first
+  // connection (a join wave: edits and their fan-out while bots join).
+  bool measure_from_start = false;
   std::uint64_t seed = 1;
   std::string token;
   // The server's metrics endpoint (terrane-server --metrics): "" = none.
@@ -75,7 +78,8 @@ inline int shard_bots(const BotsOptions& o) {
 // Seconds between a bot's region-hash checks, so that every bot makes at
 // least hash_checks of them in the measured run: the duration after the
 // last connection (the ramp-up is part of the duration), or the whole
-// duration when it starts once every bot has joined (join_timeout_s > 0).
+// duration when it starts once every bot has joined (join_timeout_s > 0)
+// or when every sample counts from the first connection (measure_from_start).
 // Between 0.2 and 10 s.
 double hash_check_span_s(const BotsOptions& o);
 

@@ -114,6 +114,7 @@ std::string report_json(const BotsReport& r) {
     << ", \"edit_radius\": " << num(o.edit_radius) << ", \"latency_ms\": " << o.latency_ms
     << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
     << ", \"threads\": " << o.threads << ", \"wait_joined\": " << num(o.join_timeout_s)
+    << ", \"measure_from\": \"" << (o.measure_from_start ? "start" : "ramp-up") << "\""
     << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\"},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
   j << "  \"failures\": [";

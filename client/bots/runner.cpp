@@ -148,11 +148,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   ctx.io = &pool.io();
   const auto t0 = Clock::now();
   const auto ramp = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.ramp_up_s));
-  // Figures count from the end of the ramp-up or, with a join wait, from
-  // the moment every bot has joined (set below): until then nothing is
-  // measured, not even an edit sent after the ramp-up and answered before
-  // the last join.
-  auto measure_from = o.join_timeout_s > 0 ? Clock::time_point::max() : t0 + ramp;
+  // Figures count from the end of the ramp-up, from the first connection
+  // (--measure-from start) or, with a join wait, from the moment every bot
+  // has joined (set below): until then nothing is measured, not even an
+  // edit sent after the ramp-up and answered before the last join.
+  auto measure_from = o.join_timeout_s > 0 ? Clock::time_point::max() : o.measure_from_start ? t0 : t0 + ramp;
   FanoutTracker fanout(t0, measure_from, std::max<int>(1, static_cast<int>(o.servers.size())));
   MismatchLog mismatches;
   LatencyLog round_trips(t0, measure_from);
@@ -211,7 +211,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.bots = static_cast<int>(bots.size());
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
-  bool measured_snapshot = ramp.count() == 0;
+  bool measured_snapshot = ramp.count() == 0 || o.measure_from_start;
   auto next_second = t0 + std::chrono::seconds(1);
   auto sum_counters = [&](std::uint64_t* in, std::uint64_t* out, std::uint64_t* updates, int* live) {
     *in = *out = *updates = 0;

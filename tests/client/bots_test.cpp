@@ -222,6 +222,26 @@ TEST_F(BotsRunTest, EditsAreMeasuredOnlyOnceEveryBotHasJoined) {
   }
 }
 
+// --measure-from start (a join wave): edits count from the first
+// connection, so the bots that joined early are measured while the rest of
+// the ramp-up still connects (by default nothing sent before its end counts).
+TEST_F(BotsRunTest, AJoinWaveMeasuresEditsSentDuringTheRampUp) {
+  start_server();
+  BotsOptions o = small_run(8, Behavior::kDig);
+  o.join_timeout_s = 0;
+  o.ramp_up_s = 8;  // bot 0 joins in well under a second even under a sanitizer
+  o.duration_s = 10;
+  o.edit_interval_s = 0.2;
+  o.measure_from_start = true;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  std::uint64_t during_ramp_up = 0;
+  for (std::size_t s = 0; s + 1 < r.timeline.size() && s + 1 <= 8; ++s) during_ramp_up += r.timeline[s].ack_ms.count;
+  EXPECT_GT(during_ramp_up, 0u) << report_table(r);
+}
+
 // A walker starting above the ground comes down to it in steps within the
 // server's movement slack alone, however soon its next state follows the
 // last (after a redirect, the state the new server got first may be
@@ -474,7 +494,8 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
     std::ofstream f(file);
     f << "# a scenario\nconnect = 10.0.0.2:7000\nbots=250\nduration = 60\nbehavior = walk\n"
          "spawn = 10,70,-20\nspread = 512\nview-distance = 512\nfull-res-radius = 64\nramp-up = 20\n"
-         "seed = 9\nedit-interval = 2\nedit-radius = 3\nlatency-ms = 40\nbandwidth-kbps = 2000\n";
+         "seed = 9\nedit-interval = 2\nedit-radius = 3\nlatency-ms = 40\nbandwidth-kbps = 2000\n"
+         "measure-from = start\n";
   }
   BotsOptions o;
   ASSERT_EQ(parse_flags({"--scenario", file.string(), "--bots", "300", "--behavior=mixed"}, &o), "");
@@ -492,6 +513,7 @@ TEST(BotsOptions, ScenarioFileHoldsEverythingAndFlagsOverrideIt) {
   EXPECT_EQ(o.seed, 9u);
   EXPECT_EQ(o.latency_ms, 40);
   EXPECT_EQ(o.bandwidth_kbps, 2000);
+  EXPECT_TRUE(o.measure_from_start);
   // The saved scenario reproduces the options.
   OptionValues kv;
   ASSERT_EQ(parse_scenario_text(scenario_text(o), "saved", &kv), "");
@@ -573,6 +595,9 @@ TEST(BotsOptions, HashChecksAreSpreadOverTheMeasuredRun) {
   EXPECT_DOUBLE_EQ(hash_check_span_s(world), 0.3);
   world.hash_checks = 100000;
   EXPECT_DOUBLE_EQ(hash_check_span_s(world), 0.2);   // at least 0.2 s apart
+  BotsOptions wave = crowd;
+  wave.measure_from_start = true;
+  EXPECT_DOUBLE_EQ(hash_check_span_s(wave), 10.0);  // 60 s measured from the first connection
 }
 
 TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
@@ -590,6 +615,10 @@ TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
   EXPECT_NE(parse_flags({"--connect", "h:1", "--duration", "5", "--ramp-up", "5"}, &o).find("--ramp-up"),
             std::string::npos);
   EXPECT_NE(parse_flags({"--connect", "h:1", "--scenario", "/nonexistent/x"}, &o).find("--scenario: cannot read"),
+            std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--measure-from", "noon"}, &o).find("--measure-from: 'noon'"),
+            std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--measure-from", "start", "--wait-joined", "60"}, &o).find("give one"),
             std::string::npos);
   OptionValues kv;
   EXPECT_EQ(parse_scenario_text("bots = 2\nwings = 2\n", "s.txt", &kv), "s.txt:2: unknown key 'wings'");
