@@ -37,7 +37,7 @@ TEST(OutFrame, SegmentsInOrderAreTheFramesBytesAndSharedSpansAreNotCopied) {
   f.owned_tail().push_back(4);
   f.append_shared(*small, small);  // copied: owned bytes run on
   f.append_shared(*other, other);
-  f.append_shared(std::span(*other).first(600), std::shared_ptr<const Frame>());  // no owner: copied
+  f.append_shared(std::span(*big).first(600), std::shared_ptr<const Frame>());  // no owner: copied
   f.prepend(std::vector<std::uint8_t>{9, 9});
 
   Frame expected{9, 9, 1, 2, 3};
@@ -45,7 +45,7 @@ TEST(OutFrame, SegmentsInOrderAreTheFramesBytesAndSharedSpansAreNotCopied) {
   expected.push_back(4);
   expected.insert(expected.end(), small->begin(), small->end());
   expected.insert(expected.end(), other->begin(), other->end());
-  expected.insert(expected.end(), other->begin(), other->begin() + 600);
+  expected.insert(expected.end(), big->begin(), big->begin() + 600);
   EXPECT_EQ(f.flatten(), expected);
   EXPECT_EQ(f.size(), expected.size());
   EXPECT_EQ(f.shared_bytes(), big->size() + other->size());
