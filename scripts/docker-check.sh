@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Terrane's Docker images built and run on this machine, offline:
-#   scripts/docker-check.sh [--build DIR] [--keep-images]
+#   scripts/docker-check.sh [--build DIR | --from-source]
 # 1. installs Debian's engine (docker.io) and docker-compose when missing;
 # 2. starts its own dockerd on a private socket in a scratch directory
 #    (no iptables, no default bridge: nothing of the host's network changes);
@@ -9,7 +9,10 @@
 #    $TERRANE_DOCKER_CACHE (default /var/cache/terrane-docker) with the
 #    engine's images, so a second run is quick;
 # 4. builds the server, bots and Prometheus images from docker/Dockerfile,
-#    the binaries prebuilt by scripts/build.sh release (DIR, default build);
+#    the binaries prebuilt by scripts/build.sh release (DIR, default build),
+#    or with --from-source compiled in the image's build stage (the
+#    repository as context, scripts/install-deps.sh and scripts/build.sh
+#    inside; TERRANE_JOBS jobs, default 2; long: no compiler cache);
 # 5. checks the compose file fails closed (no tokens file: refused, naming
 #    TERRANE_TOKENS_FILE) and the server image too (no tokens: it stops);
 # 6. runs the compose load test (server + 50 bots; the bots' report is
@@ -27,11 +30,13 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
 build=build
+from_source=
 while [ $# -gt 0 ]; do
   case "$1" in
     --build) build=${2:?--build DIR}; shift 2 ;;
     --build=*) build=${1#--build=}; shift ;;
-    *) echo "usage: scripts/docker-check.sh [--build DIR]" >&2; exit 2 ;;
+    --from-source) from_source=1; shift ;;
+    *) echo "usage: scripts/docker-check.sh [--build DIR | --from-source]" >&2; exit 2 ;;
   esac
 done
 build=$(cd "$build" 2>/dev/null && pwd) || { echo "docker-check: no build directory $build" >&2; exit 2; }
@@ -40,7 +45,7 @@ say() { printf 'docker-check: %s\n' "$*"; }
 skip() { printf 'docker-check: SKIPPED: %s\n' "$*" >&2; exit 77; }
 fail() { printf 'docker-check: FAILED: %s\n' "$*" >&2; exit 1; }
 
-for b in terrane-server terrane-bots terrane-world terrane-admin; do
+[ -n "$from_source" ] || for b in terrane-server terrane-bots terrane-world terrane-admin; do
   [ -x "$build/bin/$b" ] || fail "no $build/bin/$b: build it first (scripts/build.sh release $b)"
 done
 [ "$(id -u)" = 0 ] || skip "dockerd needs root here (running as uid $(id -u))"
@@ -108,7 +113,7 @@ for _ in $(seq 1 600); do
   sleep 0.1
 done
 "$docker" version >/dev/null 2>&1 || { tail -n 20 "$scratch/dockerd.log" >&2; skip "dockerd did not answer within 60 s (its log above)"; }
-say "engine: $("$docker" version --format 'dockerd {{.Server.Version}}, storage {{json .Server}}' 2>/dev/null | sed 's/, storage.*//'), $("$docker" info --format '{{.Driver}}') storage, $(docker-compose version --short 2>/dev/null | sed 's/^/docker-compose /')"
+say "engine: dockerd $("$docker" version --format '{{.Server.Version}}'), $("$docker" info --format '{{.Driver}}') storage, docker-compose $(docker-compose version --short 2>/dev/null)"
 
 # 3. The base image: a debootstrapped bookworm (minbase) root, imported.
 base=terrane-base:bookworm
@@ -134,15 +139,23 @@ fi
   { cat "$scratch/run.log" >&2; skip "a container cannot run here (the error above)"; }
 
 # 4. The images. The context holds the docker/ directory and the prebuilt
-# binaries only (BuildKit builds only the stages the target needs).
+# binaries only (BuildKit builds only the stages the target needs), or with
+# --from-source the repository (.dockerignore leaves out build directories).
 context=$scratch/context
-mkdir -p "$context/build/bin"
-cp -r "$root/docker" "$context/docker"
-cp "$build"/bin/terrane-{server,bots,world,admin} "$context/build/bin/"
+binaries=prebuilt
+if [ -n "$from_source" ]; then
+  context=$root
+  binaries=build
+else
+  mkdir -p "$context/build/bin"
+  cp -r "$root/docker" "$context/docker"
+  cp "$build"/bin/terrane-{server,bots,world,admin} "$context/build/bin/"
+fi
 for target in server bots prometheus; do
-  say "building terrane-$target (docker/Dockerfile, target $target)"
+  say "building terrane-$target (docker/Dockerfile, target $target, binaries: $binaries)"
   DOCKER_BUILDKIT=1 "$docker" build --network=host -f "$context/docker/Dockerfile" --target "$target" \
-    --build-arg DEBIAN=$base --build-arg BINARIES=prebuilt -t "terrane-$target" "$context" \
+    --build-arg DEBIAN=$base --build-arg BINARIES=$binaries --build-arg TERRANE_JOBS="${TERRANE_JOBS:-2}" \
+    -t "terrane-$target" "$context" \
     >"$scratch/build-$target.log" 2>&1 || { tail -n 30 "$scratch/build-$target.log" >&2; fail "docker build --target $target"; }
 done
 "$docker" images --format '  {{.Repository}}:{{.Tag}} {{.Size}}' | grep -E 'terrane-(server|bots|prometheus|base)' || true
