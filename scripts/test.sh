@@ -6,8 +6,8 @@
 #   4. ThreadSanitizer build of the threaded tests (server, client, bots,
 #      cluster; ctest label tsan) and their run, failing on any report
 #   5. libFuzzer targets, a bounded run each (TERRANE_FUZZ_SECONDS, default 20)
-#   6. heavy tests (large worlds, scale) on the release build; skip with
-#      TERRANE_SKIP_HEAVY=1
+#   6. heavy tests (large worlds, scale) on the release build, but not the
+#      Docker images (scripts/docker-check.sh); skip with TERRANE_SKIP_HEAVY=1
 # Prints each stage's wall time. Exits non-zero on the first failure.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -76,7 +76,9 @@ stage_done
 
 if [ "${TERRANE_SKIP_HEAVY:-0}" != 1 ]; then
   stage "heavy tests (release)"
-  ctest --test-dir build -L heavy -j 1 --output-on-failure --no-tests=ignore
+  # Not the Docker images (label docker): scripts/docker-check.sh builds
+  # and runs them on its own, minutes and gigabytes.
+  ctest --test-dir build -L heavy -LE docker -j 1 --output-on-failure --no-tests=ignore
   stage_done
 fi
 

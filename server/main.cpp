@@ -5,12 +5,15 @@
 //
 // Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
-// 0 after a clean stop, 1 when the world cannot be opened, the port bound,
-// or a tick's changes could not be saved (the server then stops itself),
-// 2 on bad usage.
+// 0 after a clean stop, 75 after `terrane-admin shutdown --restart` (so a
+// supervisor restarting on failure, e.g. Docker's `restart: on-failure`,
+// brings it back), 1 when the world cannot be opened, the port bound, or a
+// tick's changes could not be saved (the server then stops itself), 2 on
+// bad usage.
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <atomic>
 #include <csignal>
 #include <cstdio>
 #include <string>
@@ -25,6 +28,12 @@
 
 namespace terrane {
 namespace {
+
+// The exit status after `terrane-admin shutdown --restart`: not 0, so a
+// supervisor that restarts on failure (Docker's `restart: on-failure`,
+// systemd's `Restart=on-failure`) restarts it; 75 is EX_TEMPFAIL ("try
+// again").
+constexpr int kExitRestart = 75;
 
 constexpr const char* kHelp =
     "usage: terrane-server --world DIR [options]\n"
@@ -123,7 +132,12 @@ constexpr const char* kHelp =
     "  --config FILE               read options from FILE: 'name = value' per line (names as\n"
     "                              above without --, flags as 'name = true'); the command line\n"
     "                              wins\n"
-    "  --help                      this text\n";
+    "  --help                      this text\n"
+    "\n"
+    "Exit status: 0 after a clean stop (SIGINT, SIGTERM, terrane-admin shutdown), 75 after\n"
+    "terrane-admin shutdown --restart (so a supervisor restarting on failure restarts it:\n"
+    "Docker's restart: on-failure, systemd's Restart=on-failure), 1 when the world cannot be\n"
+    "opened or stored or the port bound, 2 on bad usage.\n";
 
 int usage_error(const std::string& message) {
   std::fprintf(stderr, "terrane-server: %s\n\n%s", message.c_str(), kHelp);
@@ -257,7 +271,13 @@ int run(int argc, char** argv) {
   }
 
   o.world.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
-  o.ops.on_shutdown = [] { std::raise(SIGTERM); };  // terrane-admin shutdown, once its warning time is up
+  // terrane-admin shutdown, once its warning time is up; --restart makes the
+  // exit status kExitRestart.
+  static std::atomic<bool> restart_asked{false};
+  o.ops.on_shutdown = [](bool restart) {
+    if (restart) restart_asked = true;
+    std::raise(SIGTERM);
+  };
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);
@@ -280,7 +300,7 @@ int run(int argc, char** argv) {
                           "not saved, unless their rejections said the outcome is unknown)");
     return 1;
   }
-  return 0;
+  return restart_asked ? kExitRestart : 0;
 }
 
 }  // namespace

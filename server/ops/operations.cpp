@@ -80,12 +80,12 @@ void Operations::schedule_shutdown(std::uint32_t seconds, bool restart, const st
            (reason.empty() ? std::string() : ": " + reason);
   server_log().warn("{} (asked by an operator)", n.text);
   notify_all(n);
-  asio::post(strand_, [this, seconds] {
+  asio::post(strand_, [this, seconds, restart] {
     if (stopping_) return;
     shutdown_timer_.expires_after(std::chrono::seconds(seconds));
-    shutdown_timer_.async_wait([this](const asio::error_code& ec) {
+    shutdown_timer_.async_wait([this, restart](const asio::error_code& ec) {
       if (ec || stopping_) return;
-      if (on_shutdown_) return on_shutdown_();
+      if (on_shutdown_) return on_shutdown_(restart);
       // No owner to ask: stop from a thread of our own (the server's stop
       // joins the io threads, this one among them).
       if (!stopping_thread_.joinable()) stopping_thread_ = std::thread([this] { wiring_.stop(); });

@@ -98,7 +98,7 @@ class Operations {
   AdminHooks hooks();
 
   const std::string metrics_host_;
-  const std::function<void()> on_shutdown_;  // options.on_shutdown
+  const std::function<void(bool restart)> on_shutdown_;  // options.on_shutdown
   SessionTable& sessions_;
   Wiring wiring_;
   const std::chrono::steady_clock::time_point started_at_ = std::chrono::steady_clock::now();

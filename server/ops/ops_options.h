@@ -28,8 +28,9 @@ struct OpsOptions {
   bool allow_open = false;
   // Called (any thread) when an operator asked the server to stop
   // (terrane-admin shutdown) and the warning time is up; the owner of the
-  // Server should stop it, as on SIGTERM.
-  std::function<void()> on_shutdown;
+  // Server should stop it, as on SIGTERM. restart: the operator said
+  // --restart (terrane-server then exits 75 so a supervisor restarts it).
+  std::function<void(bool restart)> on_shutdown;
 };
 
 }  // namespace terrane

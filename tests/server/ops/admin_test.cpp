@@ -320,7 +320,7 @@ TEST_F(AdminTest, ShutdownWarnsEveryClientThenAsksTheOwnerToStop) {
   std::promise<void> asked;
   std::once_flag once;
   ServerOptions o;
-  o.ops.on_shutdown = [&] { std::call_once(once, [&] { asked.set_value(); }); };
+  o.ops.on_shutdown = [&](bool) { std::call_once(once, [&] { asked.set_value(); }); };
   start_admin(o);
   auto admin = connect("admin", kAdminToken);
   auto player = connect("player");
