@@ -92,36 +92,29 @@ ViewCoverage coverage(const Replica& replica, const StreamedView& v, const World
 }
 
 ViewCoverageCounter::ViewCoverageCounter(const StreamedView& view, const WorldBounds& bounds, const Replica& replica)
-    : center_(view_chunk(view.position)), n_(cube_radius(view)), full_res_radius_(view.full_res_radius) {
-  const std::size_t side = static_cast<std::size_t>(2 * n_ + 1);
-  form_.assign(side * side * side, kOutside);
+    : view_(view), bounds_(bounds), center_(view_chunk(view.position)) {
   for_each_in_view(view, bounds, [&](Vec3i cp, Vec3i o) {
     const std::optional<HoldingForm> f = form_of(replica.holding(cp));
-    form_[static_cast<std::size_t>(index(cp))] = f ? static_cast<std::uint8_t>(*f) : kNotHeld;
-    tally(coverage_, f, offset_level(o, full_res_radius_), 1);
+    if (f) held_.insert_or_assign(cp, *f);
+    tally(coverage_, f, offset_level(o, view_.full_res_radius), 1);
   });
   coverage_.complete = coverage_.settled == coverage_.in_view;
 }
 
-std::ptrdiff_t ViewCoverageCounter::index(Vec3i cp) const {
-  const Vec3i o = cp - center_;
-  if (o.x < -n_ || o.x > n_ || o.y < -n_ || o.y > n_ || o.z < -n_ || o.z > n_) return -1;
-  const std::ptrdiff_t side = 2 * n_ + 1;
-  return ((o.y + n_) * side + (o.z + n_)) * side + (o.x + n_);
-}
-
 void ViewCoverageCounter::update(Vec3i cp, const Holding* now) {
-  const std::ptrdiff_t i = index(cp);
-  if (i < 0) return;
-  std::uint8_t& was = form_[static_cast<std::size_t>(i)];
-  if (was == kOutside) return;
-  const std::optional<HoldingForm> f = form_of(now);
-  const std::uint8_t is = f ? static_cast<std::uint8_t>(*f) : kNotHeld;
+  const Vec3i o = cp - center_;
+  if (!offset_within(o, view_.view_distance) || !bounds_.touches_chunk(cp)) return;
+  const auto it = held_.find(cp);
+  const std::optional<HoldingForm> was = it == held_.end() ? std::nullopt : std::optional(it->second);
+  const std::optional<HoldingForm> is = form_of(now);
   if (is == was) return;
-  const int wanted = offset_level(cp - center_, full_res_radius_);
-  tally(coverage_, was == kNotHeld ? std::nullopt : std::optional(static_cast<HoldingForm>(was)), wanted, -1);
-  tally(coverage_, f, wanted, 1);
-  was = is;
+  const int wanted = offset_level(o, view_.full_res_radius);
+  tally(coverage_, was, wanted, -1);
+  tally(coverage_, is, wanted, 1);
+  if (is)
+    held_.insert_or_assign(cp, *is);
+  else
+    held_.erase(cp);
   coverage_.complete = coverage_.settled == coverage_.in_view;
 }
 

@@ -10,10 +10,10 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <vector>
 
 #include "client/replica.h"
 #include "common/voxel/vec3.h"
+#include "common/voxel/vec3_map.h"
 #include "common/world/world_bounds.h"
 #include "protocol/messages.h"
 
@@ -60,9 +60,10 @@ ViewCoverage coverage(const Replica& replica, const StreamedView& view, const Wo
 // coverage() for one view that does not move, kept up to date holding
 // change by holding change: O(1) per change where coverage() is a pass over
 // the view (33^3 chunks at view 512). A bot's join reads it after every
-// chunk it receives. It keeps each chunk's form as last told (a byte per
-// chunk of the view's cube), so telling a chunk's holding twice, or a
-// change it has already seen, changes nothing.
+// chunk it receives. It keeps the form it last counted of each chunk in
+// view the replica holds (nothing for the rest, so its size follows the
+// replica's, whatever view distance a flag or a server allows), so telling
+// a chunk's holding twice, or a change it has already seen, changes nothing.
 class ViewCoverageCounter {
  public:
   // Counts what `replica` holds now (one pass, as coverage()).
@@ -74,15 +75,10 @@ class ViewCoverageCounter {
   const ViewCoverage& coverage() const { return coverage_; }
 
  private:
-  static constexpr std::uint8_t kOutside = 0xFF;  // not in view
-  static constexpr std::uint8_t kNotHeld = 0xFE;
-  // The index of cp in the cube, or -1 outside it.
-  std::ptrdiff_t index(Vec3i chunk_pos) const;
-
+  StreamedView view_;
+  WorldBounds bounds_;
   Vec3i center_;
-  std::int32_t n_ = 0;  // the cube spans offsets -n..n on each axis
-  std::int32_t full_res_radius_ = 0;
-  std::vector<std::uint8_t> form_;  // per chunk of the cube: a HoldingForm, kNotHeld or kOutside
+  Vec3iMap<HoldingForm> held_;  // chunks in view the replica holds, by their form
   ViewCoverage coverage_;
 };
 
