@@ -283,7 +283,6 @@ ReplicaMemory& ReplicaMemory::operator+=(const ReplicaMemory& o) {
   full.level0_rows += o.full.level0_rows;
   entry_table_bytes += o.entry_table_bytes;
   mips += o.mips;
-  uniform_mips += o.uniform_mips;
   mip_bytes += o.mip_bytes;
   horizon_table_bytes += o.horizon_table_bytes;
   horizon_image_bytes += o.horizon_image_bytes;
@@ -305,8 +304,6 @@ ReplicaMemory Replica::memory() const {
   chunks_.for_each([&](Vec3i, const Entry& e) {
     if (!e.mip) return;
     ++m.mips;
-    const auto v = e.mip->voxels();
-    if (std::all_of(v.begin(), v.end(), [&](Voxel x) { return x == v.front(); })) ++m.uniform_mips;
     m.mip_bytes += shared_bytes(*e.mip, e.mip.use_count());
   });
   m.horizon_table_bytes = horizons_.table_bytes();

@@ -5,8 +5,10 @@
 // released), Empty, Mip 1..3, an Estimate, Full, or a horizon image's 2^3
 // or 1 voxel (approximate, kept once per 8^3-chunk region, replaced by the
 // chunk's own record; never claimed, hashed or edited).
-// Full-resolution voxels live in a Grid; per chunk, one entry holds its
-// holding, its mip voxels and its cached chunk hash. Mips and horizon
+// Full-resolution voxels live in a Grid (a chunk taken from the process's
+// DecodedChunks is held shared until an update changes it here); per
+// chunk, one entry (in a ChunkTable) holds its holding, its mip voxels and
+// its cached chunk hash. Mips and horizon
 // images are immutable boxes, replaced whole by the next record, so the
 // replicas of one process that hold equal ones share one copy
 // (DecodedMips, through share_decoded); a replica on its own keeps its own.
@@ -45,7 +47,6 @@ struct ReplicaMemory {
   GridMemory full;                     // full-resolution chunks (the Grid)
   std::size_t entry_table_bytes = 0;   // per chunk held: holding, mip handle, hash (ChunkTable)
   std::size_t mips = 0;                // mips and estimates held
-  std::size_t uniform_mips = 0;        // of them, one voxel repeated
   std::size_t mip_bytes = 0;           // their voxels
   std::size_t horizon_table_bytes = 0; // per region: holding, image handle, mask
   std::size_t horizon_image_bytes = 0;

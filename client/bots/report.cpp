@@ -310,8 +310,7 @@ std::string report_table(const BotsReport& r) {
         kib(m.full.map_bytes) + " / " + kib(m.full.object_bytes) + " / " + kib(m.full.level0_bytes) + " / " +
             kib(m.full.mip_bytes));
     row("  mips: table / voxels", kib(m.entry_table_bytes) + " / " + kib(m.mip_bytes));
-    row("  mips held (uniform) per bot", fixed(static_cast<double>(m.mips) / r.bots, 0) + " (" +
-                                             fixed(static_cast<double>(m.uniform_mips) / r.bots, 0) + ")");
+    row("  mips held per bot", fixed(static_cast<double>(m.mips) / r.bots, 0));
     row("  horizons: table / images", kib(m.horizon_table_bytes) + " / " + kib(m.horizon_image_bytes));
     row("  shared full chunks (process / bots)", kib(r.shared_chunk_bytes));
   }
