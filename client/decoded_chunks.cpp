@@ -49,6 +49,7 @@ DecodedChunks::Stats DecodedChunks::stats() const {
   std::lock_guard lock(m_);
   Stats s = stats_;
   s.entries = entries_.size();
+  for (const auto& [key, e] : entries_) s.bytes += sizeof(Entry) + e.bytes.capacity() + e.chunk->memory().total();
   return s;
 }
 

@@ -4,14 +4,19 @@
 // A server sends every client the same encoding of a chunk version (one
 // per version, made once), and a process running many clients (the
 // terrane-bots load test) receives the same Full record once per client
-// that comes near the chunk. A Full record taken from here costs a client
-// about a ninth of one it packs itself (rows and mips, Chunk::from_box):
-// terrane-bench-replica, BM_Full against BM_FullShared.
+// that comes near the chunk. A replica holds the chunk taken from here
+// itself, shared (Grid::put_shared_chunk), until an update changes it in
+// that replica (the replica's grid then copies it): a Full record taken
+// from here costs a client neither the packing of rows and mips
+// (Chunk::from_box) nor their bytes (terrane-bench-replica, BM_Full
+// against BM_FullShared).
 // Keyed by the record's bytes, compared whole: equal bytes decode to
 // equal voxels, so a replica that takes a chunk from here holds exactly
 // what its own bytes say; nothing is trusted across clients but the codec.
 //
 // Bounded: the least recently used entries go first (capacity entries).
+// Beside them, the replicas' mips and horizon images (mips(),
+// client/decoded_mips.h), which live as long as some replica holds them.
 // Thread-safety: every member may be called from any thread.
 #pragma once
 
@@ -25,6 +30,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "client/decoded_mips.h"
 #include "common/voxel/chunk.h"
 
 namespace terrane {
@@ -43,8 +49,13 @@ class DecodedChunks {
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
     std::size_t entries = 0;
+    std::size_t bytes = 0;  // the entries' bytes and chunks (heap)
   };
   Stats stats() const;
+
+  // The mips and horizon images the replicas sharing this hold.
+  DecodedMips& mips() { return mips_; }
+  const DecodedMips& mips() const { return mips_; }
 
  private:
   struct Entry {
@@ -61,6 +72,7 @@ class DecodedChunks {
   std::unordered_map<std::size_t, Entry> entries_;
   std::list<std::size_t> lru_;  // keys, most recently used first
   Stats stats_;
+  DecodedMips mips_;
 };
 
 }  // namespace terrane

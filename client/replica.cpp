@@ -9,6 +9,10 @@ namespace {
 // Units decoded from one UpdateBatch at most: 16 chunks' worth. The server
 // sends one chunk per batch; the cap bounds the scratch buffer (~1 MiB).
 constexpr std::size_t kMaxBatchUnits = 16 * kUpdateUnitsPerChunk;
+// The units of the batch being applied: one buffer per thread, not per
+// replica (a process of many clients applies batches on a few threads,
+// and a buffer grown by one large batch stayed with its replica).
+thread_local std::vector<UnitUpdate> update_scratch;
 }  // namespace
 
 Replica::Replica() = default;
@@ -35,19 +39,18 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       return;
     }
     case StreamRecordKind::kFull: {
-      Chunk chunk;
       if (!shared_) {
-        chunk = Chunk::from_box(*r.voxels);
-      } else if (auto known = shared_->find(r.payload)) {
-        chunk = known->clone();
+        grid_.put_chunk(cp, Chunk::from_box(*r.voxels));  // (an empty chunk is erased)
       } else {
-        chunk = Chunk::from_box(*r.voxels);
-        shared_->add(r.payload, std::make_shared<const Chunk>(chunk.clone()));
+        // The process's chunk of these bytes, held as it is until an update
+        // changes it here (the grid then writes a copy of its own).
+        std::shared_ptr<const Chunk> chunk = shared_->find(r.payload);
+        if (!chunk) {
+          chunk = std::make_shared<const Chunk>(Chunk::from_box(*r.voxels));
+          shared_->add(r.payload, chunk);
+        }
+        grid_.put_shared_chunk(cp, std::move(chunk));
       }
-      if (chunk.empty())
-        grid_.erase_chunk(cp);
-      else
-        grid_.put_chunk(cp, std::move(chunk));
       Entry& e = chunks_[cp];
       e.mip.reset();
       e.holding = Holding{HoldingForm::kFull, r.revision};
@@ -58,13 +61,11 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip2:
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
-      // A refresh of a mip held overwrites it in place (no new allocation).
       Entry& e = chunks_[cp];
-      if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels) ++redundant_mips_;
-      if (e.mip)
-        *e.mip = *r.voxels;
+      if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels)
+        ++redundant_mips_;  // (the box held stays)
       else
-        e.mip = std::make_unique<Box>(*r.voxels);
+        e.mip = keep(DecodedMips::key_of(r.payload, r.level), *r.voxels);
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       entry_changed(cp, e);
@@ -79,11 +80,11 @@ void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) 
   Horizon& h = it->second;
   // A newer image of the region (another plan's) serves every chunk it covers.
   h.holding = Holding{horizon_form(r.level), 0};
-  h.image = *r.voxels;
+  h.image = keep(DecodedMips::key_of(*r.voxels), *r.voxels);
   for_each_region_chunk(region, [&](Vec3i cp) {
     const int i = coarse_index(cp);
     if (!horizon_mask_has(*r.mask, i) || h.covers.test(static_cast<std::size_t>(i)) ||
-        chunks_.find(cp) != chunks_.end())
+        chunks_.find(cp) != nullptr)
       return;
     h.covers.set(static_cast<std::size_t>(i));
     ++horizon_chunks_;
@@ -109,13 +110,16 @@ void Replica::forget_horizon(Vec3i cp) {
   if (it->second.covers.none()) horizons_.erase(it);
 }
 
+std::shared_ptr<const Box> Replica::keep(std::size_t key, const Box& voxels) {
+  if (shared_) return shared_->mips().intern(key, voxels);
+  return std::make_shared<const Box>(voxels);
+}
+
 Replica::MipView Replica::mip_view(Vec3i cp) const {
-  if (auto it = chunks_.find(cp); it != chunks_.end())
-    return it->second.holding.full_resolution()
-               ? MipView{}
-               : MipView{it->second.mip.get(), {0, 0, 0}, it->second.holding.level()};
+  if (const Entry* e = chunks_.find(cp))
+    return e->holding.full_resolution() ? MipView{} : MipView{e->mip.get(), {0, 0, 0}, e->holding.level()};
   if (const Horizon* h = horizon_of(cp))
-    return MipView{&h->image, floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->holding.level()),
+    return MipView{h->image.get(), floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->holding.level()),
                    h->holding.level()};
   return {};
 }
@@ -133,12 +137,13 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
 
 Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed) {
   const std::size_t cap = std::min(kMaxBatchUnits, m.revisions.size() * kUpdateUnitsPerChunk);
-  update_scratch_.resize(cap);
-  auto n = net_codec_decode_update_batch(m.data, update_scratch_);
+  std::vector<UnitUpdate>& units_in = update_scratch;
+  units_in.resize(cap);
+  auto n = net_codec_decode_update_batch(m.data, units_in);
   if (!n) return n.error();
   // Check every unit belongs to a listed chunk before changing anything.
   for (std::size_t i = 0; i < *n; ++i) {
-    const Vec3i cp = update_scratch_[i].chunk_pos;
+    const Vec3i cp = units_in[i].chunk_pos;
     const bool listed = std::any_of(m.revisions.begin(), m.revisions.end(),
                                     [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
     if (!listed) return DecodeError{DecodeErrorCode::kInvalidValue, 0, "update for a chunk without a revision"};
@@ -149,23 +154,23 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
   std::size_t applied = 0;
   ChunkUnits units;
   for (std::size_t begin = 0; begin < *n;) {
-    const Vec3i cp = update_scratch_[begin].chunk_pos;
+    const Vec3i cp = units_in[begin].chunk_pos;
     std::size_t end = begin;
-    while (end < *n && update_scratch_[end].chunk_pos == cp) ++end;
-    auto it = chunks_.find(cp);
-    if (it == chunks_.end() || !it->second.holding.full_resolution()) {
+    while (end < *n && units_in[end].chunk_pos == cp) ++end;
+    Entry* e = chunks_.find(cp);
+    if (e == nullptr || !e->holding.full_resolution()) {
       begin = end;
       continue;
     }
     units.clear();
     for (std::size_t i = begin; i < end; ++i) {
-      units.add(update_scratch_[i]);  // (a unit twice: the last one wins)
+      units.add(units_in[i]);  // (a unit twice: the last one wins)
       ++applied;
     }
     const Vec3i origin = chunk_origin(cp);
     const Region box{origin + units.box().min, origin + units.box().max};
     if (changed != nullptr) changed->push_back(box);
-    entry_changed(cp, it->second);
+    entry_changed(cp, *e);
     grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
@@ -173,17 +178,16 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     begin = end;
   }
   for (const auto& r : m.revisions) {
-    auto it = chunks_.find(r.chunk_pos);
-    if (it == chunks_.end() || !it->second.holding.full_resolution()) continue;
-    it->second.holding = Holding{HoldingForm::kFull, r.revision};
-    entry_changed(r.chunk_pos, it->second);
+    Entry* e = chunks_.find(r.chunk_pos);
+    if (e == nullptr || !e->holding.full_resolution()) continue;
+    e->holding = Holding{HoldingForm::kFull, r.revision};
+    entry_changed(r.chunk_pos, *e);
   }
   return applied;
 }
 
 const Holding* Replica::holding(Vec3i cp) const {
-  auto it = chunks_.find(cp);
-  if (it != chunks_.end()) return &it->second.holding;
+  if (const Entry* e = chunks_.find(cp)) return &e->holding;
   const Horizon* h = horizon_of(cp);
   return h == nullptr ? nullptr : &h->holding;
 }
@@ -240,10 +244,10 @@ std::optional<std::int32_t> Replica::surface_height(std::int32_t x, std::int32_t
 
 std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   // Only a chunk's own record can make it Full or Empty.
-  auto it = chunks_.find(cp);
-  if (it == chunks_.end() || !it->second.holding.full_resolution()) return std::nullopt;
-  const Entry& e = it->second;
-  if (!e.hash)
+  const Entry* found = chunks_.find(cp);
+  if (found == nullptr || !found->holding.full_resolution()) return std::nullopt;
+  const Entry& e = *found;
+  if (e.hash == 0)
     e.hash = chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr, e.holding.revision);
   return e.hash;
 }
@@ -255,9 +259,7 @@ std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
 }
 
 std::size_t Replica::estimate_count() const {
-  return static_cast<std::size_t>(
-      std::count_if(chunks_.begin(), chunks_.end(),
-                    [](const auto& kv) { return kv.second.holding.form == HoldingForm::kEstimate; }));
+  return chunk_count(HoldingForm::kEstimate);
 }
 
 std::size_t Replica::chunk_count(HoldingForm form) const {
@@ -267,8 +269,46 @@ std::size_t Replica::chunk_count(HoldingForm form) const {
       if (h.holding.form == form) n += h.covers.count();
     return n;
   }
-  return static_cast<std::size_t>(
-      std::count_if(chunks_.begin(), chunks_.end(), [&](const auto& kv) { return kv.second.holding.form == form; }));
+  std::size_t n = 0;
+  chunks_.for_each([&](Vec3i, const Entry& e) { n += e.holding.form == form ? 1 : 0; });
+  return n;
+}
+
+ReplicaMemory& ReplicaMemory::operator+=(const ReplicaMemory& o) {
+  full.chunks += o.full.chunks;
+  full.map_bytes += o.full.map_bytes;
+  full.object_bytes += o.full.object_bytes;
+  full.level0_bytes += o.full.level0_bytes;
+  full.mip_bytes += o.full.mip_bytes;
+  full.level0_rows += o.full.level0_rows;
+  entry_table_bytes += o.entry_table_bytes;
+  mips += o.mips;
+  mip_bytes += o.mip_bytes;
+  horizon_table_bytes += o.horizon_table_bytes;
+  horizon_image_bytes += o.horizon_image_bytes;
+  return *this;
+}
+
+namespace {
+// A box's heap bytes (with its control block) over its holders.
+std::size_t shared_bytes(const Box& box, long holders) {
+  return (sizeof(Box) + 2 * sizeof(long) + box.voxel_count() * sizeof(Voxel)) /
+         static_cast<std::size_t>(std::max(1L, holders));
+}
+}  // namespace
+
+ReplicaMemory Replica::memory() const {
+  ReplicaMemory m;
+  m.full = grid_.memory();
+  m.entry_table_bytes = chunks_.heap_bytes();
+  chunks_.for_each([&](Vec3i, const Entry& e) {
+    if (!e.mip) return;
+    ++m.mips;
+    m.mip_bytes += shared_bytes(*e.mip, e.mip.use_count());
+  });
+  m.horizon_table_bytes = horizons_.table_bytes();
+  for (const auto& [region, h] : horizons_) m.horizon_image_bytes += shared_bytes(*h.image, h.image.use_count());
+  return m;
 }
 
 }  // namespace terrane

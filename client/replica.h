@@ -5,8 +5,13 @@
 // released), Empty, Mip 1..3, an Estimate, Full, or a horizon image's 2^3
 // or 1 voxel (approximate, kept once per 8^3-chunk region, replaced by the
 // chunk's own record; never claimed, hashed or edited).
-// Full-resolution voxels live in a Grid; per chunk, one entry holds its
-// holding, its mip voxels (a Box) and its cached chunk hash.
+// Full-resolution voxels live in a Grid (a chunk taken from the process's
+// DecodedChunks is held shared until an update changes it here); per
+// chunk, one entry (in a ChunkTable) holds its holding, its mip voxels and
+// its cached chunk hash. Mips and horizon
+// images are immutable boxes, replaced whole by the next record, so the
+// replicas of one process that hold equal ones share one copy
+// (DecodedMips, through share_decoded); a replica on its own keeps its own.
 //
 // Apply functions take parsed messages (protocol/messages.h) whose voxel
 // payloads are still untrusted: every decode error is returned and leaves
@@ -21,6 +26,7 @@
 #include <vector>
 
 #include "client/decoded_chunks.h"
+#include "client/chunk_table.h"
 #include "common/codec/update_batch.h"
 #include "common/voxel/box.h"
 #include "common/voxel/grid.h"
@@ -35,12 +41,28 @@ namespace terrane {
 // 1..5 the mip level held.
 inline constexpr int kNoResolution = -1;
 
+// A replica's heap bytes by part (Replica::memory()). Voxels shared with
+// other replicas count as their share: bytes / holders.
+struct ReplicaMemory {
+  GridMemory full;                     // full-resolution chunks (the Grid)
+  std::size_t entry_table_bytes = 0;   // per chunk held: holding, mip handle, hash (ChunkTable)
+  std::size_t mips = 0;                // mips and estimates held
+  std::size_t mip_bytes = 0;           // their voxels
+  std::size_t horizon_table_bytes = 0; // per region: holding, image handle, mask
+  std::size_t horizon_image_bytes = 0;
+  std::size_t total() const {
+    return full.total() + entry_table_bytes + mip_bytes + horizon_table_bytes + horizon_image_bytes;
+  }
+  ReplicaMemory& operator+=(const ReplicaMemory& o);
+};
+
 class Replica {
  public:
   Replica();
 
   // Full records' chunks are looked up in, and added to, shared (a cache
-  // shared with the process's other replicas; null: none).
+  // shared with the process's other replicas; null: none), and mips and
+  // horizon images are kept in its mips().
   void share_decoded(std::shared_ptr<DecodedChunks> shared) { shared_ = std::move(shared); }
 
   // A decoded StreamBatch record (protocol/stream_batch.h): the chunk is
@@ -91,9 +113,10 @@ class Replica {
   std::uint64_t redundant_mips() const { return redundant_mips_; }
   std::size_t chunk_count() const { return chunks_.size() + horizon_chunks_; }
   const Grid& grid() const { return grid_; }
+  ReplicaMemory memory() const;
   template <class F>
   void for_each_holding(F&& f) const {
-    for (const auto& [pos, e] : chunks_) f(pos, e.holding);
+    chunks_.for_each([&](Vec3i pos, const Entry& e) { f(pos, e.holding); });
     for (const auto& [region, h] : horizons_)
       for_each_region_chunk(region, [&](Vec3i cp) {
         if (h.covers.test(static_cast<std::size_t>(coarse_index(cp)))) f(cp, h.holding);
@@ -105,20 +128,22 @@ class Replica {
   // Full): one entry, so a record costs one lookup.
   struct Entry {
     Holding holding;
-    // A mip or an Estimate: the (32 >> level)^3 voxels of the chunk's own record
-    // (apart, so the table's slots stay small: a replica's tables are
-    // read far more than its mips).
-    std::unique_ptr<Box> mip;
-    // Its chunk hash, computed since the chunk last changed (a hash is a
-    // pass over 32^3 voxels; a client checks the same unchanged chunks
-    // again and again).
-    mutable std::optional<std::uint64_t> hash;
+    // A mip or an Estimate: the (32 >> level)^3 voxels of the chunk's own
+    // record, immutable and perhaps shared with other replicas (apart, so
+    // the table's slots stay small: a replica's tables are read far more
+    // than its mips).
+    std::shared_ptr<const Box> mip;
+    // Full or Empty: its chunk hash, computed since the chunk last changed
+    // (a hash is a pass over 32^3 voxels; a client checks the same
+    // unchanged chunks again and again); 0: not computed (a hash that is 0
+    // is computed each time).
+    mutable std::uint64_t hash = 0;
   };
   // A region's horizon image and the chunks it still covers (those not held
   // by a record of their own), which share one holding (Horizon4 or 5).
   struct Horizon {
     Holding holding;
-    Box image;
+    std::shared_ptr<const Box> image;  // immutable, perhaps shared
     std::bitset<kHorizonRegionSlots> covers;
   };
   // The voxels a chunk's mip is read from: a box, the chunk's corner in it
@@ -129,6 +154,9 @@ class Replica {
     int level = 0;
   };
   MipView mip_view(Vec3i chunk_pos) const;
+  // The immutable box equal to voxels: the one the process's replicas
+  // share under key, or a box of this replica's own.
+  std::shared_ptr<const Box> keep(std::size_t key, const Box& voxels);
   const Horizon* horizon_of(Vec3i chunk_pos) const;
   // The chunk is no longer covered by its region's image (it is held by a
   // record of its own now, or not at all).
@@ -137,19 +165,18 @@ class Replica {
   // gone, and its region's horizon image no longer covers it. Every write
   // of grid_ or of an entry calls it (or, holding the entry, entry_changed()).
   void voxels_changed(Vec3i chunk_pos) {
-    if (auto it = chunks_.find(chunk_pos); it != chunks_.end()) it->second.hash.reset();
+    if (Entry* e = chunks_.find(chunk_pos)) e->hash = 0;
     if (!horizons_.empty()) forget_horizon(chunk_pos);
   }
   void entry_changed(Vec3i chunk_pos, Entry& e) {
-    e.hash.reset();
+    e.hash = 0;
     if (!horizons_.empty()) forget_horizon(chunk_pos);
   }
 
   Grid grid_;
-  Vec3iMap<Entry> chunks_;  // every chunk held by a record of its own
+  ChunkTable<Entry> chunks_;  // every chunk held by a record of its own
   Vec3iMap<Horizon> horizons_;     // by region
   std::size_t horizon_chunks_ = 0;  // chunks covered by horizons_
-  std::vector<UnitUpdate> update_scratch_;
   std::uint64_t redundant_mips_ = 0;
   std::shared_ptr<DecodedChunks> shared_;
 };

@@ -508,4 +508,8 @@ bool Bot::closed() const { return client_->closed(); }
 bool Bot::join_settled() const { return !result_.connect_error.empty() || closed() || joined(); }
 ClientCounters Bot::counters() const { return client_->counters(); }
 
+ReplicaMemory Bot::replica_memory() const {
+  return client_->with_replica([](const Replica& r) { return r.memory(); });
+}
+
 }  // namespace terrane::bots

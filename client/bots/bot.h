@@ -91,6 +91,7 @@ class Bot {
   // failed (counted as a connect failure; it never tries again).
   bool join_settled() const;
   ClientCounters counters() const;
+  ReplicaMemory replica_memory() const;
   const BotResult& result() const { return result_; }
   bool connected() const { return result_.connected; }
 

@@ -302,6 +302,18 @@ std::string report_table(const BotsReport& r) {
   if (r.shared_chunk_hits + r.shared_chunk_misses > 0)
     row("full chunks shared / packed by a bot",
         std::to_string(r.shared_chunk_hits) + " / " + std::to_string(r.shared_chunk_misses));
+  if (r.bots > 0 && r.replica_memory.total() > 0) {
+    const ReplicaMemory& m = r.replica_memory;
+    const auto kib = [&](std::size_t bytes) { return fixed(static_cast<double>(bytes) / 1024.0 / r.bots, 1) + " KiB"; };
+    row("replica memory per bot (at the end)", kib(m.total() + r.shared_chunk_bytes));
+    row("  full chunks: table / objects / rows / mips",
+        kib(m.full.map_bytes) + " / " + kib(m.full.object_bytes) + " / " + kib(m.full.level0_bytes) + " / " +
+            kib(m.full.mip_bytes));
+    row("  mips: table / voxels", kib(m.entry_table_bytes) + " / " + kib(m.mip_bytes));
+    row("  mips held per bot", fixed(static_cast<double>(m.mips) / r.bots, 0));
+    row("  horizons: table / images", kib(m.horizon_table_bytes) + " / " + kib(m.horizon_image_bytes));
+    row("  shared full chunks (process / bots)", kib(r.shared_chunk_bytes));
+  }
   row("replica mismatches", std::to_string(r.mismatches.size()));
   row("hash requests unanswered", std::to_string(r.hash_unanswered));
   row("unexpected disconnects", std::to_string(r.unexpected_disconnects));

@@ -335,6 +335,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     watch->stop();
     r.server = watch->figures();
   }
+  for (auto& b : bots)
+    if (b->connected()) r.replica_memory += b->replica_memory();
   for (auto& b : bots) b->finish();
 
   // --- the report ----------------------------------------------------------
@@ -394,6 +396,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     const DecodedChunks::Stats s = ctx.shared_chunks->stats();
     r.shared_chunk_hits = s.hits;
     r.shared_chunk_misses = s.misses;
+    r.shared_chunk_bytes += s.bytes;
   }
   const auto totals = fanout.totals();
   r.edits_sent = totals.edits_sent;

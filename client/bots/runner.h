@@ -64,6 +64,11 @@ struct BotsReport {
   // Full records' chunks taken from the bots' shared cache / packed anew
   // (--shared-chunks; both 0 when off).
   std::uint64_t shared_chunk_hits = 0, shared_chunk_misses = 0;
+  // The bots' replicas by part, summed over the bots at the end of the run
+  // (before they leave; shared voxels count once in all), and the heap
+  // bytes of the process's shared caches then.
+  ReplicaMemory replica_memory;
+  std::size_t shared_chunk_bytes = 0;
   std::map<std::uint32_t, int> bots_per_server;
   std::vector<std::pair<int, std::string>> disconnects;  // bot, reason
   int connect_failures = 0;

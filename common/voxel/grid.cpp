@@ -25,12 +25,23 @@ void Grid::put_chunk(Vec3i chunk_pos, Chunk chunk) {
     chunks_.erase(chunk_pos);
     return;
   }
-  auto& slot = chunks_[chunk_pos];
-  if (slot) {
-    *slot = std::move(chunk);
+  Slot& slot = chunks_[chunk_pos];
+  slot.shared.reset();
+  if (slot.own) {
+    *slot.own = std::move(chunk);
   } else {
-    slot = std::make_unique<Chunk>(std::move(chunk));
+    slot.own = std::make_unique<Chunk>(std::move(chunk));
   }
+}
+
+void Grid::put_shared_chunk(Vec3i chunk_pos, std::shared_ptr<const Chunk> chunk) {
+  if (chunk->empty()) {
+    chunks_.erase(chunk_pos);
+    return;
+  }
+  Slot& slot = chunks_[chunk_pos];
+  slot.own.reset();
+  slot.shared = std::move(chunk);
 }
 
 void Grid::read_box(Vec3i min, Box& out) const {
@@ -54,23 +65,27 @@ void Grid::write_box(Vec3i min, const Box& src) {
 }
 
 void Grid::pack_mips(Vec3i chunk_pos) {
-  if (auto it = chunks_.find(chunk_pos); it != chunks_.end()) it->second->pack_mips();
+  auto it = chunks_.find(chunk_pos);
+  if (it != chunks_.end() && !it->second.get()->mips_packed()) it->second.writable().pack_mips();
 }
 
 void Grid::compact() {
-  for (auto& [pos, chunk] : chunks_) chunk->compact();
+  for (auto& [pos, slot] : chunks_) slot.writable().compact();
 }
 
 GridMemory Grid::memory() const {
   GridMemory m;
   m.chunks = chunks_.size();
   m.map_bytes = chunks_.table_bytes();
-  for (const auto& [pos, chunk] : chunks_) {
-    const ChunkMemory cm = chunk->memory();
-    m.object_bytes += cm.object_bytes;
-    m.level0_bytes += cm.level0_bytes;
-    m.mip_bytes += cm.mip_bytes;
-    m.level0_rows += chunk->level0_stats();
+  for (const auto& [pos, slot] : chunks_) {
+    const ChunkMemory cm = slot.get()->memory();
+    // A shared chunk: its share (with its control block).
+    const std::size_t holders = slot.shared ? static_cast<std::size_t>(std::max(1L, slot.shared.use_count())) : 1;
+    if (slot.shared) ++m.shared_chunks;
+    m.object_bytes += (cm.object_bytes + (slot.shared ? 2 * sizeof(long) : 0)) / holders;
+    m.level0_bytes += cm.level0_bytes / holders;
+    m.mip_bytes += cm.mip_bytes / holders;
+    m.level0_rows += slot.get()->level0_stats();
   }
   return m;
 }

@@ -4,8 +4,13 @@
 // division, so negative coordinates work. A chunk absent from the map is all
 // Air; a chunk that becomes all Air is freed.
 //
+// A chunk is the grid's own, or shared with other grids and caches
+// (put_shared_chunk: the replicas of one process holding equal chunks);
+// a shared chunk is never changed in place: the first write to it in a
+// grid gives that grid a copy of its own (copy on write).
 // Memory is counted exactly: the map's table (a flat Vec3iMap) and the
-// chunks' own heap bytes (see memory()).
+// chunks' own heap bytes (see memory(); a shared chunk counts as its
+// share, bytes / holders).
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
@@ -27,6 +32,7 @@ struct GridMemory {
   std::size_t object_bytes = 0;   // Chunk objects
   std::size_t level0_bytes = 0;   // 32³ headers and row data
   std::size_t mip_bytes = 0;      // mip headers and row data
+  std::size_t shared_chunks = 0;  // of chunks, held shared (put_shared_chunk)
   RowPackedStats level0_rows;     // row classes over all chunks
   std::size_t total() const { return map_bytes + object_bytes + level0_bytes + mip_bytes; }
 };
@@ -73,19 +79,25 @@ class Grid {
   // Inserts or replaces a whole chunk (mips must be current). An empty chunk
   // erases the entry.
   void put_chunk(Vec3i chunk_pos, Chunk chunk);
+  // Inserts or replaces a whole chunk shared with its other holders: read
+  // as it is, copied by the first write. Precondition: not null, mips
+  // current. An empty chunk erases the entry.
+  void put_shared_chunk(Vec3i chunk_pos, std::shared_ptr<const Chunk> chunk);
   void erase_chunk(Vec3i chunk_pos) { chunks_.erase(chunk_pos); }
-  // Removes the chunk from the grid and returns it (null if absent).
+  // Removes the chunk from the grid and returns it (null if absent; a
+  // copy if it was shared).
   std::unique_ptr<Chunk> take_chunk(Vec3i chunk_pos) {
     auto it = chunks_.find(chunk_pos);
     if (it == chunks_.end()) return nullptr;
-    std::unique_ptr<Chunk> c = std::move(it->second);
+    it->second.writable();
+    std::unique_ptr<Chunk> c = std::move(it->second.own);
     chunks_.erase(it);
     return c;
   }
   std::size_t chunk_count() const { return chunks_.size(); }
   template <class F>
   void for_each_chunk(F&& f) const {
-    for (const auto& [pos, chunk] : chunks_) f(pos, *chunk);
+    for (const auto& [pos, slot] : chunks_) f(pos, *slot.get());
   }
   void clear() { chunks_.clear(); }
 
@@ -104,7 +116,21 @@ class Grid {
   bool collides(const Aabb& box, std::uint8_t min_occupancy = 0) const;
 
  private:
-  Vec3iMap<std::unique_ptr<Chunk>> chunks_;
+  // A chunk of the grid's own, or a shared one (exactly one is set).
+  struct Slot {
+    std::unique_ptr<Chunk> own;
+    std::shared_ptr<const Chunk> shared;
+    const Chunk* get() const { return own ? own.get() : shared.get(); }
+    // The chunk to write: the grid's own, copied from the shared one first.
+    Chunk& writable() {
+      if (!own) {
+        own = std::make_unique<Chunk>(shared->clone());
+        shared.reset();
+      }
+      return *own;
+    }
+  };
+  Vec3iMap<Slot> chunks_;
 };
 
 template <class VoxelFn>
@@ -118,11 +144,12 @@ void Grid::modify(const Region& region, VoxelFn&& fn) {
       // Only materialise a chunk if the edit puts something in it.
       auto chunk = std::make_unique<Chunk>();
       chunk->modify(local, shifted);
-      if (!chunk->empty()) chunks_.emplace(cp, std::move(chunk));
+      if (!chunk->empty()) chunks_.emplace(cp, Slot{std::move(chunk), nullptr});
       return;
     }
-    it->second->modify(local, shifted);
-    if (it->second->empty()) chunks_.erase(it);
+    Chunk& chunk = it->second.writable();
+    chunk.modify(local, shifted);
+    if (chunk.empty()) chunks_.erase(it);
   });
 }
 

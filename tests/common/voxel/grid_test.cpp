@@ -79,6 +79,36 @@ TEST(Grid, MemoryCountsEveryPart) {
   EXPECT_EQ(m.level0_rows.occupancy_rows, 1u);  // the sand voxel's row
 }
 
+TEST(Grid, ASharedChunkIsReadAsItIsAndCopiedByTheFirstWrite) {
+  Chunk made;
+  made.modify(Region{{0, 0, 0}, {32, 9, 32}}, [](Vec3i p, Voxel) { return make_voxel(p.x % 2 ? kRock : kSand, 200); });
+  made.pack_mips();
+  auto shared = std::make_shared<const Chunk>(std::move(made));
+  Grid a, b;
+  a.put_shared_chunk({1, 0, 0}, shared);
+  b.put_shared_chunk({1, 0, 0}, shared);
+  EXPECT_EQ(a.find_chunk({1, 0, 0}), shared.get());
+  EXPECT_EQ(a.get({33, 3, 3}), make_voxel(kRock, 200));
+  EXPECT_EQ(a.memory().shared_chunks, 1u);
+  // Three holders: each grid counts a third of the chunk.
+  EXPECT_LT(3 * a.memory().level0_bytes, shared->memory().level0_bytes + 3);
+  // A write in one grid changes its own copy: the other grid and the
+  // shared chunk keep their voxels.
+  a.set({33, 3, 3}, solid(materials::kBrick));
+  EXPECT_EQ(a.get({33, 3, 3}), solid(materials::kBrick));
+  EXPECT_NE(a.find_chunk({1, 0, 0}), shared.get());
+  EXPECT_EQ(a.memory().shared_chunks, 0u);
+  EXPECT_EQ(b.get({33, 3, 3}), make_voxel(kRock, 200));
+  EXPECT_EQ(shared->get(1, 3, 3), make_voxel(kRock, 200));
+  // Taken out, a shared chunk is a copy; an empty one is never held.
+  auto taken = b.take_chunk({1, 0, 0});
+  ASSERT_NE(taken, nullptr);
+  EXPECT_NE(taken.get(), shared.get());
+  EXPECT_EQ(taken->get(1, 3, 3), make_voxel(kRock, 200));
+  b.put_shared_chunk({0, 0, 0}, std::make_shared<const Chunk>());
+  EXPECT_EQ(b.chunk_count(), 0u);
+}
+
 class RaycastTest : public ::testing::Test {
  protected:
   void SetUp() override {

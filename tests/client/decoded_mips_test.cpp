@@ -1,0 +1,204 @@
+#include "client/decoded_mips.h"
+
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <vector>
+
+#include "client/decoded_chunks.h"
+#include "client/replica.h"
+#include "common/codec/net_codec.h"
+#include "common/world/horizon.h"
+#include "protocol/stream_batch.h"
+
+namespace terrane {
+namespace {
+
+// A box of side n with some structure (seed varies it): a slope of two
+// materials with partial occupancy at its surface.
+Box terrain(int n, int seed) {
+  Box b({n, n, n});
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x) {
+        const int h = n / 4 + (x + seed) % n / 3 + z / 5;
+        if (y < h) b.set(x, y, z, make_voxel((y + seed) % 3 == 0 ? materials::kSand : materials::kRock, 255));
+        else if (y == h) b.set(x, y, z, make_voxel(materials::kGrass, static_cast<std::uint8_t>(40 + 7 * seed)));
+      }
+  return b;
+}
+
+// The record's encoded bytes, as a server sends them.
+std::vector<std::uint8_t> encoded(const Box& voxels) {
+  std::vector<std::uint8_t> out;
+  net_codec_encode(voxels.size().x, voxels.voxels(), out);
+  return out;
+}
+
+// A Mip or Estimate record (kind) of chunk cp with these voxels and bytes.
+StreamRecord mip_record(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, const Box& voxels,
+                        const std::vector<std::uint8_t>& bytes) {
+  const int level = kind == StreamRecordKind::kEstimate ? kMipLevels - 1 : static_cast<int>(kind);
+  return StreamRecord{kind, cp, revision, level, &voxels, nullptr, bytes};
+}
+
+TEST(DecodedMips, EqualVoxelsUnderOneKeyAreOneBox) {
+  DecodedMips mips;
+  const Box voxels = terrain(16, 1);
+  const auto key = DecodedMips::key_of(encoded(voxels), 1);
+  const auto a = mips.intern(key, voxels);
+  const auto b = mips.intern(key, terrain(16, 1));
+  EXPECT_EQ(a.get(), b.get());
+  EXPECT_EQ(*a, voxels);
+  EXPECT_EQ(mips.stats().hits, 1u);
+  EXPECT_EQ(mips.stats().misses, 1u);
+  EXPECT_EQ(mips.stats().entries, 1u);
+}
+
+TEST(DecodedMips, AKeyWithOtherVoxelsGivesABoxOfThoseVoxels) {
+  // Keys alike, voxels not (a hash collision, or a hostile server's bytes):
+  // each caller gets exactly its own voxels.
+  DecodedMips mips;
+  const Box first = terrain(8, 1), second = terrain(8, 2);
+  ASSERT_NE(first, second);
+  const auto a = mips.intern(7, first);
+  const auto b = mips.intern(7, second);
+  EXPECT_NE(a.get(), b.get());
+  EXPECT_EQ(*a, first);
+  EXPECT_EQ(*b, second);
+  EXPECT_EQ(mips.stats().hits, 0u);
+}
+
+TEST(DecodedMips, KeysTellLevelsAndSidesApart) {
+  const std::vector<std::uint8_t> bytes = encoded(terrain(8, 3));
+  EXPECT_NE(DecodedMips::key_of(bytes, 2), DecodedMips::key_of(bytes, 3));
+  // Equal bytes: a 4^3 box of one value and a 2^3 box of it.
+  EXPECT_NE(DecodedMips::key_of(Box({4, 4, 4}, solid(materials::kRock))),
+            DecodedMips::key_of(Box({2, 2, 2}, solid(materials::kRock))));
+}
+
+TEST(DecodedMips, BoxesNoReplicaHoldsAreForgotten) {
+  DecodedMips mips;
+  {
+    std::vector<std::shared_ptr<const Box>> held;
+    for (int i = 0; i < 3000; ++i) held.push_back(mips.intern(static_cast<std::size_t>(i), terrain(4, i)));
+    EXPECT_EQ(mips.stats().entries, 3000u);
+  }
+  EXPECT_EQ(mips.stats().entries, 0u);
+  const std::size_t bytes_dead = mips.stats().bytes;
+  // The table is swept as it grows: 3,000 more boxes, each dropped at once,
+  // leave it no larger than the first 3,000 held did.
+  for (int i = 0; i < 3000; ++i) mips.intern(static_cast<std::size_t>(10000 + i), terrain(4, i));
+  EXPECT_EQ(mips.stats().entries, 0u);
+  EXPECT_LE(mips.stats().bytes, bytes_dead * 2);
+}
+
+// Every form a chunk's voxels take short of full resolution reads back as
+// what its record said, with and without a shared cache.
+TEST(ReplicaMips, EveryCoarseFormReadsBackAsApplied) {
+  for (const bool shared : {false, true}) {
+    Replica r;
+    if (shared) r.share_decoded(std::make_shared<DecodedChunks>());
+    int seed = 0;
+    for (const StreamRecordKind kind :
+         {StreamRecordKind::kMip1, StreamRecordKind::kMip2, StreamRecordKind::kMip3, StreamRecordKind::kEstimate}) {
+      const int level = kind == StreamRecordKind::kEstimate ? 3 : static_cast<int>(kind);
+      const Vec3i cp{seed, 0, 0};
+      const Box voxels = terrain(kChunkSize >> level, ++seed);
+      r.apply_stream_record(mip_record(kind, cp, 3, voxels, encoded(voxels)));
+      Box back;
+      ASSERT_TRUE(r.read_mip(cp, back));
+      EXPECT_EQ(back, voxels) << "level " << level << (shared ? " shared" : "");
+      const Vec3i p{5, 17, 30};
+      EXPECT_EQ(r.get(chunk_origin(cp) + p), voxels.get(p.x >> level, p.y >> level, p.z >> level));
+    }
+    for (const int level : {kHorizonNearLevel, kHorizonFarLevel}) {
+      const Vec3i region{0, 2 * level, 0};
+      const Box image = terrain(kHorizonRegionChunks * (kChunkSize >> level), level);
+      std::vector<Vec3i> covered;
+      const HorizonMask all = [] {
+        HorizonMask m;
+        m.fill(0xFF);
+        return m;
+      }();
+      r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, region * kHorizonRegionChunks, 0, level, &image, &all, {}},
+                      covered);
+      ASSERT_EQ(covered.size(), static_cast<std::size_t>(kHorizonRegionSlots));
+      const int n = kChunkSize >> level;
+      for (const Vec3i cp : covered) {
+        Box back;
+        ASSERT_TRUE(r.read_mip(cp, back));
+        const Vec3i at = floor_mod(cp, kHorizonRegionChunks) * n;
+        for (int y = 0; y < n; ++y)
+          for (int z = 0; z < n; ++z)
+            for (int x = 0; x < n; ++x) ASSERT_EQ(back.get(x, y, z), image.get(at + Vec3i{x, y, z}));
+      }
+    }
+  }
+}
+
+TEST(ReplicaMips, ReplicasThatAppliedEqualRecordsShareOneCopy) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b, alone;
+  a.share_decoded(shared);
+  b.share_decoded(shared);
+  const Vec3i cp{4, 1, -2};
+  const Box voxels = terrain(16, 5);
+  const auto bytes = encoded(voxels);
+  a.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 9, voxels, bytes));
+  b.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 9, voxels, bytes));
+  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 9, voxels, bytes));
+  EXPECT_EQ(shared->mips().stats().entries, 1u);
+  EXPECT_EQ(shared->mips().stats().hits, 1u);
+  // Each of the two counts half the box; the replica on its own, all of it.
+  EXPECT_EQ(a.memory().mip_bytes, b.memory().mip_bytes);
+  EXPECT_LT(2 * a.memory().mip_bytes, alone.memory().mip_bytes + 2);
+  EXPECT_GE(2 * a.memory().mip_bytes + 2, alone.memory().mip_bytes);
+
+  // A new record for the chunk in one replica never shows in the other.
+  const Box newer = terrain(16, 6);
+  b.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 10, newer, encoded(newer)));
+  Box back;
+  ASSERT_TRUE(a.read_mip(cp, back));
+  EXPECT_EQ(back, voxels);
+  EXPECT_EQ(a.revision(cp), 9u);
+  ASSERT_TRUE(b.read_mip(cp, back));
+  EXPECT_EQ(back, newer);
+  // Neither does one replica's release, nor its chunk's Full record.
+  Box whole({kChunkSize, kChunkSize, kChunkSize}, solid(materials::kRock));
+  b.apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 11, 0, &whole, nullptr, {}});
+  b.apply_stream_record(StreamRecord{StreamRecordKind::kReleased, cp, 11, 0, nullptr, nullptr, {}});
+  ASSERT_TRUE(a.read_mip(cp, back));
+  EXPECT_EQ(back, voxels);
+  // The box lives while a holds it, and not after.
+  EXPECT_EQ(shared->mips().stats().entries, 1u);
+  a.apply_stream_record(StreamRecord{StreamRecordKind::kReleased, cp, 9, 0, nullptr, nullptr, {}});
+  EXPECT_EQ(shared->mips().stats().entries, 0u);
+}
+
+TEST(ReplicaMips, EqualHorizonImagesAreSharedAndAChunksOwnRecordReplacesItsPartInOneReplicaOnly) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b;
+  a.share_decoded(shared);
+  b.share_decoded(shared);
+  const Box image = terrain(kHorizonRegionChunks * (kChunkSize >> kHorizonNearLevel), 2);
+  HorizonMask all;
+  all.fill(0xFF);
+  std::vector<Vec3i> covered;
+  const StreamRecord h{StreamRecordKind::kHorizon, {0, 0, 0}, 0, kHorizonNearLevel, &image, &all, {}};
+  a.apply_horizon(h, covered);
+  b.apply_horizon(h, covered);
+  EXPECT_EQ(shared->mips().stats().entries, 1u);
+  const Box own = terrain(4, 9);
+  b.apply_stream_record(mip_record(StreamRecordKind::kMip3, {1, 1, 1}, 4, own, encoded(own)));
+  Box back;
+  ASSERT_TRUE(b.read_mip({1, 1, 1}, back));
+  EXPECT_EQ(back, own);
+  ASSERT_TRUE(a.read_mip({1, 1, 1}, back));
+  EXPECT_EQ(back.size(), (Vec3i{2, 2, 2}));
+  EXPECT_EQ(back.get(0, 0, 0), image.get(2, 2, 2));
+  EXPECT_EQ(a.holding({1, 1, 1})->form, HoldingForm::kHorizon4);
+}
+
+}  // namespace
+}  // namespace terrane
