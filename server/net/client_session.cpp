@@ -1,5 +1,7 @@
 #include "server/net/client_session.h"
 
+#include "common/cli/json.h"
+
 #include "server/base/log.h"
 
 namespace terrane {
@@ -124,7 +126,7 @@ void ClientSession::on_pong(std::uint64_t nonce) {
 void ClientSession::on_admin(AdminRequestMsg req) {
   if (!admin_) {
     const std::string why = "not an admin: this session's token does not have the admin role";
-    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": \"" + why + "\"}"};
+    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": " + json_string(why) + "}"};
     session_->send(build_admin_result(r), SendClass::kControl);
     return;
   }
