@@ -53,8 +53,9 @@ constexpr const char* kHelp =
     "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
     "                              'listening on ADDR:PORT'\n"
     "  --metrics ADDR:PORT         serve GET /metrics (Prometheus text format) and GET /health\n"
-    "                              (200 while ticking and storing, else 503) over HTTP here;\n"
-    "                              port 0 picks a free one (default: off)\n"
+    "                              over HTTP here: 200 'ready' while ticking and storing, 503\n"
+    "                              'starting', 'draining' (a shutdown pending) or 'failing' and\n"
+    "                              why; port 0 picks a free one (default: off)\n"
     "  --border X0,Z0,X1,Z1        set the world border (kept in the world): nothing is generated,\n"
     "                              streamed or editable outside x0 <= x < x1, z0 <= z < z1;\n"
     "                              'none' removes it (default: the world's, if any); a world in\n"
@@ -117,6 +118,9 @@ constexpr const char* kHelp =
     "                              0 = for ever (default 30)\n"
     "  --edit-log-mb N             and at most this many MiB of logged voxels, the oldest going\n"
     "                              first; 0 = no bound (default 1024)\n"
+    "  --min-free-mb N             refuse to start when the world directory's file system has\n"
+    "                              less than N MiB free (default 64; 0: no check); see the gauge\n"
+    "                              terrane_disk_free_bytes\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
@@ -136,7 +140,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -226,6 +230,7 @@ int run(int argc, char** argv) {
   o.world.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.storage.edit_log_days = static_cast<std::uint32_t>(cl.get_int("edit-log-days", 30, 0, 36500, &err));
   o.storage.edit_log_mb = static_cast<std::uint32_t>(cl.get_int("edit-log-mb", 1024, 0, 1 << 22, &err));
+  o.storage.min_free_mb = static_cast<std::uint64_t>(cl.get_int("min-free-mb", 64, 0, std::int64_t{1} << 40, &err));
   o.world.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.replication.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
   o.world.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));

@@ -4,6 +4,7 @@
 #include <future>
 
 #include "common/world/sqlite_store.h"
+#include "server/base/disk_space.h"
 #include "server/base/log.h"
 #include "server/base/thread_role.h"
 #include "server/storage/postgres_store.h"
@@ -17,6 +18,14 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
     std::error_code ec;
     std::filesystem::create_directories(options_.world_dir, ec);
     if (ec) return FileError{"world " + options_.world_dir + ": cannot create directory: " + ec.message(), {}};
+    if (const std::uint64_t need = options_.storage.min_free_mb << 20; need > 0) {
+      const auto free = free_bytes(options_.world_dir);
+      if (free && *free < need)
+        return FileError{fmt::format("world {}: only {} MiB free on its file system, below --min-free-mb {}: free "
+                                     "some space (or lower --min-free-mb; 0 skips the check)",
+                                     options_.world_dir, *free >> 20, options_.storage.min_free_mb),
+                         {}};
+    }
     auto lock = WorldLock::take(options_.world_dir, fmt::format("terrane-server on {}:{}", options_.net.bind_address,
                                                                 options_.net.port));
     if (!lock) return lock.error();
@@ -311,13 +320,14 @@ void Server::log_totals() const {
 }
 
 std::string Server::metrics_text() const {
-  return render_metrics(MetricsSources{counters_, storage_->counters(), encode_counters(), storage_failed(),
-                                       read_process_stats(), stream_gate_->closed_count(),
-                                       stream_gate_->closed_seconds()});
+  MetricsSources m{counters_, storage_->counters(), encode_counters(), storage_failed(),
+                   read_process_stats(), stream_gate_->closed_count(), stream_gate_->closed_seconds()};
+  if (options_.cluster.store_url.empty()) m.disk_free_bytes = free_bytes(options_.world_dir);
+  return render_metrics(m);
 }
 
 Health Server::health() const {
-  if (stopping_) return {false, "shutting down"};
+  if (stopping_) return {HealthState::kDraining, "shutting down"};
   return check_health(counters_, storage_failed(), options_.world.tick_hz, std::chrono::steady_clock::now(),
                       cluster_ ? LeaseTimes::of(options_.cluster.lease).renew : std::chrono::milliseconds(0));
 }

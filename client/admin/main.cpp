@@ -60,9 +60,9 @@ constexpr const char* kHelp =
     "                                  directory PATH, on the server's machine\n"
     "  shutdown [--in SECONDS] [--restart] [--reason TEXT...]\n"
     "                                  warn every client (and again 10 min, 5 min, 2 min, 60 s,\n"
-    "                                  30 s, 10 s and 5 s before), then stop (saving);\n"
-    "                                  --restart tells clients the server comes back, so they\n"
-    "                                  reconnect; /health says draining meanwhile\n"
+    "                                  30 s, 10 s and 5 s before), then stop (saving); with --restart\n"
+    "                                  clients are told the server comes back, so they reconnect;\n"
+    "                                  /health says draining meanwhile\n"
     "  shutdown --cancel               cancel a pending shutdown (also: cancel-shutdown)\n"
     "  help                            the server's own list of commands\n";
 

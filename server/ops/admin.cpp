@@ -35,8 +35,11 @@ const char* const kAdminHelp =
     "backup PATH                     a consistent copy of the world, made while it runs, in the\n"
     "                                new directory PATH (on the server's machine)\n"
     "shutdown [--in SECONDS] [--restart] [--reason TEXT...]\n"
-    "                                warn every client, then stop (saving); --restart tells them\n"
-    "                                the server comes back, so they reconnect by themselves\n"
+    "                                warn every client (again 10 min, 5 min, 2 min, 60 s, 30 s,\n"
+    "                                10 s and 5 s before), then stop (saving); --restart tells\n"
+    "                                them the server comes back, so they reconnect by themselves\n"
+    "shutdown --cancel (or cancel-shutdown)\n"
+    "                                cancel a pending shutdown and tell every client\n"
     "help                            this text\n";
 
 namespace {
@@ -447,6 +450,12 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return ok("backed up the world to " + a[0] + " in " + num(s) + " s\n",
               "{\"backup\": " + json_string(a[0]) + ", \"seconds\": " + num(s) + "}");
+  }
+
+  if (cmd == "cancel-shutdown" || (cmd == "shutdown" && a.size() == 1 && a[0] == "--cancel")) {
+    if (cmd == "cancel-shutdown" && !a.empty()) return fail("usage: cancel-shutdown");
+    if (!hooks_.cancel_shutdown || !hooks_.cancel_shutdown()) return fail("no shutdown is pending");
+    return ok("the scheduled shutdown is cancelled\n", "{\"cancelled\": true}");
   }
 
   if (cmd == "shutdown") {

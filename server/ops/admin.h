@@ -6,7 +6,7 @@
 // Server wires) and AccessControl (bans, whitelist).
 //
 // Commands: status, players, kick, ban, unban, whitelist, say, save,
-// backup, shutdown, help (kAdminHelp). Every answer has text for people
+// backup, shutdown (and its --cancel, or cancel-shutdown), help (kAdminHelp). Every answer has text for people
 // and a JSON object for scripts.
 #pragma once
 
@@ -58,6 +58,8 @@ struct AdminHooks {
   // stored (stored false: the store failed).
   std::function<void(std::function<void(std::uint64_t tick, bool stored)> done)> flush;
   std::function<void(std::uint32_t seconds, bool restart, const std::string& reason)> shutdown;
+  // Cancels a pending shutdown; false if none was.
+  std::function<bool()> cancel_shutdown;
   // Undoes entries (newest first) as one edit by actor; done after the commit.
   std::function<void(const std::string& actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
                      std::function<void(bool ok, std::string error, std::uint64_t tick, std::uint64_t voxels)> done)>

@@ -980,7 +980,7 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   EXPECT_EQ(reason, "server storage failure");
   EXPECT_TRUE(fatal.load());  // called before any client is told
   EXPECT_TRUE(server_->storage_failed());
-  EXPECT_FALSE(server_->health().ok);  // /health answers 503
+  EXPECT_FALSE(server_->health().ok());  // /health answers 503
   EXPECT_NE(server_->health().text.find("storage failed"), std::string::npos) << server_->health().text;
   server_->stop();
   auto world = World::open(dir_.string());
