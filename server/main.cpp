@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <csignal>
 #include <cstdio>
+#include <functional>
 #include <string>
 
 #include <asio.hpp>
@@ -96,7 +97,9 @@ constexpr const char* kHelp =
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
     "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN [player|admin]' ('#'\n"
-    "                              comments); admins may run terrane-admin commands\n"
+    "                              comments); admins may run terrane-admin commands; read\n"
+    "                              again on SIGHUP (with the bans and whitelist; a bad file\n"
+    "                              keeps the previous tokens and the log says why)\n"
     "  --admin-token T             whoever gives this token joins as an admin (terrane-admin);\n"
     "                              at least 8 characters\n"
     "  --open                      serve without authentication on a non-loopback address\n"
@@ -246,6 +249,7 @@ int run(int argc, char** argv) {
     }
     if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
     o.ops.player_tokens = std::move(*tokens);
+    o.ops.tokens_file = cl.get("tokens-file");
   }
 
   // One descriptor per client plus the store, the listener and a margin.
@@ -269,13 +273,22 @@ int run(int argc, char** argv) {
     return 1;
   }
   // Signals are caught on a private io_context so the server's own threads
-  // never block on them.
+  // never block on them. SIGHUP reloads the tokens file, bans and
+  // whitelist and the server goes on; SIGINT and SIGTERM stop it.
   asio::io_context signals_io;
   asio::signal_set signals(signals_io, SIGINT, SIGTERM);
+  signals.add(SIGHUP);
   int caught = 0;
-  signals.async_wait([&](const asio::error_code& ec, int sig) {
-    if (!ec) caught = sig;
-  });
+  std::function<void(const asio::error_code&, int)> on_signal = [&](const asio::error_code& ec, int sig) {
+    if (ec) return;
+    if (sig == SIGHUP) {
+      server_log().info("signal {} (SIGHUP): reloading the tokens file, bans and whitelist", sig);
+      (*server)->reload();
+      return signals.async_wait(on_signal);
+    }
+    caught = sig;
+  };
+  signals.async_wait(on_signal);
   (*server)->start();
   signals_io.run();
   server_log().info("signal {}: shutting down", caught);

@@ -65,6 +65,9 @@ class Server {
   void start();
   // Idempotent; see the note above.
   void stop();
+  // SIGHUP: the tokens file, bans and whitelist read again
+  // (Operations::reload). Any thread.
+  void reload() { ops_->reload(); }
 
   std::uint16_t port() const { return listener_.port(); }
   // The metrics endpoint's port (0 without --metrics).

@@ -5,12 +5,14 @@
 
 #include "common/cli/cli.h"
 #include "server/base/log.h"
+#include "server/net/limits.h"
 
 namespace terrane {
 
 Operations::Operations(const OpsOptions& options, std::string metrics_host, asio::io_context& io,
                        SessionTable& sessions, const ServerCounters& counters, Wiring wiring)
     : metrics_host_(std::move(metrics_host)),
+      tokens_file_(options.tokens_file),
       on_shutdown_(options.on_shutdown),
       sessions_(sessions),
       wiring_(std::move(wiring)),
@@ -142,6 +144,26 @@ bool Operations::cancel_shutdown() {
   server_log().warn("{} (asked by an operator)", n.text);
   notify_all(n);
   return true;
+}
+
+void Operations::reload() {
+  std::optional<std::unordered_map<std::string, PlayerToken>> players;
+  if (!tokens_file_.empty()) {
+    auto tokens = load_tokens_file(tokens_file_);
+    if (!tokens)
+      server_log().error("reload: keeping the previous tokens: {}", tokens.error().message);
+    else if (tokens->empty())
+      server_log().error("reload: keeping the previous tokens: tokens file {} lists no players", tokens_file_);
+    else
+      players = std::move(*tokens);
+  }
+  auto changed = access_->reload(std::move(players));
+  if (!changed) {
+    server_log().error("reload: keeping the previous bans and whitelist: {}", changed.error().message);
+    return;
+  }
+  if (changed->empty()) server_log().info("reload: nothing changed");
+  for (const std::string& line : *changed) server_log().info("reload: {}", line);
 }
 
 std::optional<std::uint32_t> Operations::shutdown_in() const {

@@ -88,6 +88,11 @@ class Operations {
   void schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason);
   // Cancels a pending shutdown and tells every client; false if none was.
   bool cancel_shutdown();
+  // SIGHUP: reads the tokens file again (a bad one keeps the previous
+  // tokens and the log says why, naming file and line) and the bans and
+  // whitelist from the store; logs what changed. Sessions already joined
+  // stay. Any thread.
+  void reload();
   // Seconds until a pending shutdown (nullopt: none). Any thread.
   std::optional<std::uint32_t> shutdown_in() const;
   // /health: the server's (wiring.health), draining while a shutdown is
@@ -116,6 +121,7 @@ class Operations {
   void arm_shutdown(std::uint64_t generation);
 
   const std::string metrics_host_;
+  const std::string tokens_file_;  // options.tokens_file
   const std::function<void()> on_shutdown_;  // options.on_shutdown
   SessionTable& sessions_;
   Wiring wiring_;

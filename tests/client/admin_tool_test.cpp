@@ -195,6 +195,52 @@ TEST_F(AdminToolTest, JsonOutputIsOneDocumentForEveryCommand) {
   listener.disconnect();
 }
 
+// SIGHUP reads the tokens file again and the server goes on: a new player
+// may join, a removed one may not; a bad file keeps the previous tokens and
+// the log names its file and line.
+TEST_F(AdminToolTest, SighupReloadsTheTokensFileAndABadOneKeepsThePrevious) {
+  fs::create_directories(dir_);
+  const fs::path tokens = dir_.parent_path() / (dir_.filename().string() + ".tokens");
+  auto write = [&](const std::string& text) {
+    std::FILE* f = std::fopen(tokens.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+  };
+  write("alice alice-token-1\nbob bob-token-1\n");
+  start_server(0, {"--tokens-file", tokens.string()});
+  auto joins = [&](const std::string& name, const std::string& token) {
+    ClientOptions o = player(name);
+    o.auth_token = token;
+    o.stream = false;
+    Client c(o);
+    std::string err;
+    if (!c.connect(&err)) return false;
+    c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline);
+    const bool welcomed = c.welcome().has_value();
+    c.disconnect();
+    return welcomed;
+  };
+  EXPECT_TRUE(joins("bob", "bob-token-1"));
+  EXPECT_FALSE(joins("carol", "carol-token-1"));
+
+  write("alice alice-token-1\ncarol carol-token-1  # joined in May\n");
+  ASSERT_TRUE(server_->hangup());
+  ASSERT_TRUE(server_->wait_for_output("reload: tokens: +carol -bob", kDeadline)) << server_->output();
+  EXPECT_TRUE(joins("carol", "carol-token-1"));
+  EXPECT_FALSE(joins("bob", "bob-token-1"));
+
+  write("alice alice-token-1\ncarol carol-token-1 superuser\n");
+  ASSERT_TRUE(server_->hangup());
+  ASSERT_TRUE(server_->wait_for_output("reload: keeping the previous tokens: " + tokens.string() + ":2:", kDeadline))
+      << server_->output();
+  EXPECT_TRUE(joins("carol", "carol-token-1"));
+  EXPECT_TRUE(joins("alice", "alice-token-1"));
+  EXPECT_EQ(server_->stop(), 0);  // SIGHUP did not stop it; SIGTERM does, cleanly
+  server_.reset();
+  fs::remove(tokens);
+}
+
 TEST_F(AdminToolTest, ShutdownWithRestartBringsTheLibraryBackByItself) {
   start_server();
   const std::uint16_t port = server_->port();
