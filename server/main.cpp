@@ -3,11 +3,13 @@
 //   terrane-server --world DIR [--bind ADDR] [--port N] [options]
 //   terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]
 //
-// Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
+// Logs `listening on ADDR:PORT` once it accepts connections (and
+// "creating a new world at DIR" first when DIR holds none); SIGINT or
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
-// 0 after a clean stop, 1 when the world cannot be opened, the port bound,
+// 0 after a clean stop, 1 when the world cannot be opened (or is missing
+// with --no-create, or its disk is short of --min-free-mb), the port bound,
 // or a tick's changes could not be saved (the server then stops itself),
-// 2 on bad usage.
+// 2 on bad usage (flags, --config file, tokens file).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -32,9 +34,13 @@ constexpr const char* kHelp =
     "       terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]\n"
     "\n"
     "Serves a Terrane world over TCP (protocol/PROTOCOL.md). DIR is created with the default\n"
-    "generated world when it holds none.\n"
+    "generated world when it holds none (the log says 'creating a new world at DIR'), unless\n"
+    "--no-create. Exit status: 0 after a clean stop (SIGINT, SIGTERM, terrane-admin shutdown),\n"
+    "1 when the world cannot be opened or stored or the port bound, 2 on bad usage.\n"
     "\n"
     "  --world DIR                 world directory (SQLite; this or --store is required)\n"
+    "  --no-create                 refuse to start (exit 1) when DIR holds no world, rather than\n"
+    "                              create one (a restored backup's path mistyped)\n"
     "  --store URL                 the world in PostgreSQL (libpq URL; the database must exist,\n"
     "                              Terrane's tables are made in it), shared with other servers:\n"
     "                              each writes only regions it holds by lease\n"
@@ -144,7 +150,7 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
+                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -241,12 +247,17 @@ int run(int argc, char** argv) {
   o.faults.drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.faults.corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);
+  o.create_world = !cl.flag("no-create");
+  if (o.ops.auth_token.empty() && !cl.has("tokens-file") && !o.ops.allow_open &&
+      !is_loopback_address(o.net.bind_address))
+    return usage_error("refusing to serve " + o.net.bind_address +
+                       " without authentication: give --auth-token or --tokens-file, or --open to allow anyone");
+  if (cl.has("tokens-file") && cl.has("auth-token"))
+    return usage_error("give --auth-token or --tokens-file, not both: with a tokens file each player has a token "
+                       "of their own (add a line 'NAME TOKEN' per player)");
   if (cl.has("tokens-file")) {
     auto tokens = load_tokens_file(cl.get("tokens-file"));
-    if (!tokens) {
-      server_log().error("{}", tokens.error().message);
-      return 1;
-    }
+    if (!tokens) return usage_error(tokens.error().message);
     if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
     o.ops.player_tokens = std::move(*tokens);
     o.ops.tokens_file = cl.get("tokens-file");

@@ -16,6 +16,11 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
     // The lock comes before the first read: a second server (or a tool
     // writing the directory) must not even load chunks it could write back.
     std::error_code ec;
+    const bool exists = SqliteStore::exists(options_.world_dir);
+    if (!exists && !options_.create_world)
+      return FileError{"no world at " + options_.world_dir +
+                           " (--no-create: nothing is created; check the path, or drop --no-create for a new world)",
+                       {}};
     std::filesystem::create_directories(options_.world_dir, ec);
     if (ec) return FileError{"world " + options_.world_dir + ": cannot create directory: " + ec.message(), {}};
     if (const std::uint64_t need = options_.storage.min_free_mb << 20; need > 0) {
@@ -30,8 +35,9 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
                                                                 options_.net.port));
     if (!lock) return lock.error();
     world_lock_ = std::move(*lock);
-    return SqliteStore::exists(options_.world_dir) ? World::open(options_.world_dir)
-                                                   : World::create(options_.world_dir, default_world_meta());
+    if (exists) return World::open(options_.world_dir);
+    server_log().warn("creating a new world at {} (none there; --no-create refuses instead)", options_.world_dir);
+    return World::create(options_.world_dir, default_world_meta());
   }
   auto store = PostgresStore::open(options_.cluster.store_url);
   if (!store) return FileError{store.error().message, {}};
