@@ -276,20 +276,28 @@ int run(int argc, char** argv) {
                         nofile.rlim_cur, o.net.max_clients);
   }
 
-  o.world.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
-  o.ops.on_shutdown = [] { std::raise(SIGTERM); };  // terrane-admin shutdown, once its warning time is up
+  // Signals are caught on a private io_context so the server's own threads
+  // never block on them; the loop below ends on SIGINT or SIGTERM, or when
+  // the server asks (a storage failure, terrane-admin shutdown), saying
+  // why. SIGHUP reloads the tokens file, bans and whitelist and the server
+  // goes on.
+  asio::io_context signals_io;
+  std::string why;  // written on signals_io's thread only
+  auto stop_because = [&signals_io, &why](std::string reason) {
+    asio::post(signals_io, [&signals_io, &why, reason = std::move(reason)] {
+      if (why.empty()) why = reason;
+      signals_io.stop();
+    });
+  };
+  o.world.on_fatal = [stop_because] { stop_because("a storage failure"); };
+  o.ops.on_shutdown = [stop_because] { stop_because("an operator's shutdown (terrane-admin), its warning time up"); };
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);
     return 1;
   }
-  // Signals are caught on a private io_context so the server's own threads
-  // never block on them. SIGHUP reloads the tokens file, bans and
-  // whitelist and the server goes on; SIGINT and SIGTERM stop it.
-  asio::io_context signals_io;
   asio::signal_set signals(signals_io, SIGINT, SIGTERM);
   signals.add(SIGHUP);
-  int caught = 0;
   std::function<void(const asio::error_code&, int)> on_signal = [&](const asio::error_code& ec, int sig) {
     if (ec) return;
     if (sig == SIGHUP) {
@@ -297,12 +305,13 @@ int run(int argc, char** argv) {
       (*server)->reload();
       return signals.async_wait(on_signal);
     }
-    caught = sig;
+    if (why.empty()) why = "signal " + std::to_string(sig) + (sig == SIGINT ? " (SIGINT)" : " (SIGTERM)");
+    signals_io.stop();
   };
   signals.async_wait(on_signal);
   (*server)->start();
   signals_io.run();
-  server_log().info("signal {}: shutting down", caught);
+  server_log().info("shutting down: {}", why);
   (*server)->stop();
   if ((*server)->storage_failed()) {
     server_log().critical("stopped after a storage failure: the edits of the failed tick were not acknowledged (and "

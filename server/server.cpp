@@ -134,7 +134,10 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   s->ops_ = std::move(*ops);
   s->session_context_.emplace(ClientSession::Context{s->welcome_.welcome, s->ops_->admitter(), s->ops_->admin(),
                                                      s->counters_,
-                                                     [self](std::uint64_t id) { self->sessions_.remove(id); }});
+                                                     [self](std::uint64_t id) { self->sessions_.remove(id); },
+                                                     [self](std::uint64_t id, const std::string& name) {
+                                                       self->replace_older_sessions(id, name);
+                                                     }});
   return s;
 }
 
@@ -261,6 +264,7 @@ void Server::start() {
   const ReplicationOptions& r = options_.replication;
   const std::int32_t view = std::min(r.default_view_distance, r.max_view_distance);
   default_view_ = ViewTable::get(view, std::min({r.default_full_res_radius, r.max_full_res_radius, view}));
+  server_log().info("world {}: {}", where(), border_text());
   server_log().info("listening on {}:{}", options_.net.bind_address, port());
   world_io_.run(1, ThreadRole::kWorld, options_.thread_priorities);
   world_owner_->start();
@@ -307,11 +311,12 @@ void Server::log_totals() const {
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
       "chunks, {} mips, {} estimates, {} empty, {} horizon images ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} "
-      "skipped: bytes unchanged); world saved",
+      "skipped: bytes unchanged); {}",
       c.ticks.load(), c.sessions_accepted.load(), c.net.sessions_closed(), c.edits_applied.load(),
       c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.estimates_sent.load(), c.empties_sent.load(),
       c.horizons_sent.load(), c.stream_bytes.load(),
-      c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
+      c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load(),
+      storage_failed() ? "world NOT saved: the storage failed (the failed tick's edits were rejected)" : "world saved");
   bool header = false;
   for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {
     const std::uint64_t f = c.net.sent_frames[t].load(), r = c.net.received_frames[t].load();
@@ -356,11 +361,37 @@ bool Server::accept(asio::ip::tcp::socket socket) {
   return true;
 }
 
+std::string Server::where() const {
+  return options_.cluster.store_url.empty() ? options_.world_dir : options_.cluster.store_url;
+}
+
+std::string Server::border_text() const {
+  const WorldBounds& b = world_->meta().bounds;
+  if (!b.bounded_xz) return "no border";
+  return fmt::format("border x {}..{}, z {}..{}", b.min_x, b.max_x, b.min_z, b.max_z);
+}
+
+void Server::replace_older_sessions(std::uint64_t id, const std::string& name) {
+  // As Minecraft does: the player's newer connection wins (the older one
+  // is often a dead link not yet timed out).
+  std::vector<std::uint64_t> older;
+  sessions_.for_each_welcomed([&](std::uint64_t other, Session& s, const ClientSession::Info& info) {
+    if (other == id || info.admin || info.name != name) return;
+    s.close(CloseReason::kReplaced, "logged in from another location: the same player joined again");
+    older.push_back(other);
+  });
+  for (const std::uint64_t other : older)
+    server_log().info("session {} ('{}') replaced by session {}: the same player joined again", other, name, id);
+}
+
 AdminHooks Server::world_hooks() {
   AdminHooks h;
   h.status = [this] {
     ServerStatus s;
-    s.world_dir = options_.world_dir;
+    s.world_dir = where();
+    s.version = TERRANE_VERSION_STRING;
+    s.address = fmt::format("{}:{}", options_.net.bind_address, port());
+    s.border = border_text();
     s.epoch = world_->meta().epoch;
     s.clients = counters_.clients.load();
     s.admin_sessions = counters_.admin_sessions.load();

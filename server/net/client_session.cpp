@@ -92,6 +92,7 @@ void ClientSession::on_hello(const HelloMsg& hello) {
   (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_add(1, std::memory_order_relaxed);
   context_.counters.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(context_.welcome));
+  if (!admin_ && context_.joined) context_.joined(id_, name_);
   // A Redirect's token says where the client comes from (it grants nothing).
   if (!hello.resume_token.empty()) context_.counters.redirects_received.fetch_add(1, std::memory_order_relaxed);
   // Names and resume tokens are printable (parse_hello refuses control

@@ -196,13 +196,19 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
   if (cmd == "status") {
     const ServerStatus s = hooks_.status();
     std::ostringstream t;
-    t << "world " << s.world_dir << " (epoch " << s.epoch << "), up " << static_cast<long long>(s.uptime_s) << " s\n"
+    t << "terrane-server " << s.version << " on " << s.address << "\n"
+      << "world " << s.world_dir << " (epoch " << s.epoch << ")" << (s.border.empty() ? "" : ", " + s.border) << ", up "
+      << static_cast<long long>(s.uptime_s) << " s\n"
+      << (s.shutdown_in_s ? "shutdown pending: stopping in " + std::to_string(*s.shutdown_in_s) + " s\n" : "")
       << s.clients << " players, " << s.admin_sessions << " admin sessions; " << s.ticks << " ticks at " << s.tick_hz << " Hz (mean " << num(s.tick_mean_ms)
       << " ms); edits " << s.edits_applied << " applied, " << s.edits_rejected << " rejected; " << s.chunks_resident
       << " chunks resident; storage " << (s.storage_failed ? "FAILED" : "ok") << "; whitelist "
       << (access_.whitelist_on() ? "on" : "off") << "\n";
     std::ostringstream j;
-    j << "{\"world\": " << json_string(s.world_dir) << ", \"epoch\": " << s.epoch << ", \"uptime_s\": " << num(s.uptime_s)
+    j << "{\"version\": " << json_string(s.version) << ", \"address\": " << json_string(s.address)
+      << ", \"border\": " << json_string(s.border) << ", \"shutdown_in_s\": "
+      << (s.shutdown_in_s ? std::to_string(*s.shutdown_in_s) : std::string("null"))
+      << ", \"world\": " << json_string(s.world_dir) << ", \"epoch\": " << s.epoch << ", \"uptime_s\": " << num(s.uptime_s)
       << ", \"clients\": " << s.clients << ", \"admin_sessions\": " << s.admin_sessions << ", \"ticks\": " << s.ticks << ", \"tick_hz\": " << s.tick_hz
       << ", \"tick_mean_ms\": " << num(s.tick_mean_ms) << ", \"edits_applied\": " << s.edits_applied
       << ", \"edits_rejected\": " << s.edits_rejected << ", \"chunks_resident\": " << s.chunks_resident

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -38,7 +39,9 @@ struct PlayerInfo {
 };
 
 struct ServerStatus {
-  std::string world_dir;
+  std::string world_dir;  // or the PostgreSQL URL
+  std::string version, address, border;
+  std::optional<std::uint32_t> shutdown_in_s;  // a pending shutdown's seconds left
   std::uint64_t epoch = 0;
   double uptime_s = 0;
   std::uint64_t clients = 0, admin_sessions = 0, ticks = 0, edits_applied = 0, edits_rejected = 0, chunks_resident = 0;

@@ -217,6 +217,7 @@ AdminHooks Operations::hooks() {
   h.status = [this] {
     ServerStatus s = wiring_.world.status();
     s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_at_).count();
+    s.shutdown_in_s = shutdown_in();
     return s;
   };
   auto each = [this](const std::function<void(Session&, const PlayerInfo&)>& fn) {

@@ -12,6 +12,7 @@
 
 #include <map>
 #include <random>
+#include <regex>
 
 #include "tests/support/json_doc.h"
 #include "tests/support/run_command.h"
@@ -148,6 +149,17 @@ TEST_F(AdminToolTest, JsonOutputIsOneDocumentForEveryCommand) {
   JsonDoc d;
   EXPECT_EQ(admin_json("status", &d), 0);
   EXPECT_EQ(d["clients"].number, 1);
+  EXPECT_FALSE(d["version"].string.empty());
+  EXPECT_EQ(d["address"].string, "127.0.0.1:" + std::to_string(server_->port()));
+  EXPECT_EQ(d["border"].string, "no border");
+  EXPECT_EQ(d["world"].string, dir_.string());
+  EXPECT_EQ(d["shutdown_in_s"].kind, JsonDoc::Kind::kNull);
+  EXPECT_EQ(admin_json("shutdown --in 10m", &d), 0);
+  EXPECT_EQ(admin_json("status", &d), 0);
+  EXPECT_GT(d["shutdown_in_s"].number, 590);
+  EXPECT_EQ(admin_json("shutdown --cancel", &d), 0);
+  EXPECT_TRUE(d["cancelled"].boolean);
+  EXPECT_EQ(admin_json("cancel-shutdown", &d), 1);
   EXPECT_EQ(admin_json("help", &d), 0);
   EXPECT_EQ(d["help"].kind, JsonDoc::Kind::kString);
   EXPECT_EQ(admin_json("players", &d), 0);
@@ -256,6 +268,12 @@ TEST_F(AdminToolTest, ShutdownWithRestartBringsTheLibraryBackByItself) {
   // The server stops by itself (terrane-admin asked; nothing signalled it).
   ASSERT_EQ(server_->wait_exit(kDeadline), 0) << server_->output();
   EXPECT_NE(server_->output().find("world saved"), std::string::npos) << server_->output();
+  // Its lines carry the time zone (the offset from UTC).
+  EXPECT_TRUE(std::regex_search(server_->output(), std::regex(R"(\[\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3} [+-]\d\d:\d\d\] \[server\])")))
+      << server_->output();
+  // It says why it stopped: no signal came.
+  EXPECT_NE(server_->output().find("shutting down: an operator's shutdown"), std::string::npos) << server_->output();
+  EXPECT_EQ(server_->output().find("signal 15"), std::string::npos) << server_->output();
   ASSERT_TRUE(c.wait_until(
       [](const ClientView& v) {
         return v.closed || (!v.notices.empty() && v.notices.back().kind == wire::NoticeKind::Shutdown);
