@@ -3,19 +3,21 @@
 //   terrane-server --world DIR [--bind ADDR] [--port N] [options]
 //   terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]
 //
-// Logs `listening on ADDR:PORT` once it accepts connections; SIGINT or
+// Logs `listening on ADDR:PORT` once it accepts connections (and
+// "creating a new world at DIR" first when DIR holds none); SIGINT or
 // SIGTERM stops it cleanly (sessions told why, world saved). Exit status:
 // 0 after a clean stop, 75 after `terrane-admin shutdown --restart` (so a
 // supervisor restarting on failure, e.g. Docker's `restart: on-failure`,
-// brings it back), 1 when the world cannot be opened, the port bound, or a
+// brings it back), 1 when the world cannot be opened (or is missing with
+// --no-create, or its disk is short of --min-free-mb), the port bound, or a
 // tick's changes could not be saved (the server then stops itself), 2 on
-// bad usage.
+// bad usage (flags, --config file, tokens file).
 #include <sys/resource.h>
 
 #include <algorithm>
-#include <atomic>
 #include <csignal>
 #include <cstdio>
+#include <functional>
 #include <string>
 
 #include <asio.hpp>
@@ -40,9 +42,13 @@ constexpr const char* kHelp =
     "       terrane-server --store postgresql://HOST:PORT/DB --server-id N [options]\n"
     "\n"
     "Serves a Terrane world over TCP (protocol/PROTOCOL.md). DIR is created with the default\n"
-    "generated world when it holds none.\n"
+    "generated world when it holds none (the log says 'creating a new world at DIR'), unless\n"
+    "--no-create. Exit status: 0 after a clean stop (SIGINT, SIGTERM, terrane-admin shutdown),\n"
+    "1 when the world cannot be opened or stored or the port bound, 2 on bad usage.\n"
     "\n"
     "  --world DIR                 world directory (SQLite; this or --store is required)\n"
+    "  --no-create                 refuse to start (exit 1) when DIR holds no world, rather than\n"
+    "                              create one (a restored backup's path mistyped)\n"
     "  --store URL                 the world in PostgreSQL (libpq URL; the database must exist,\n"
     "                              Terrane's tables are made in it), shared with other servers:\n"
     "                              each writes only regions it holds by lease\n"
@@ -62,8 +68,9 @@ constexpr const char* kHelp =
     "  --port N                    TCP port; 0 picks a free one (default 0); see the log line\n"
     "                              'listening on ADDR:PORT'\n"
     "  --metrics ADDR:PORT         serve GET /metrics (Prometheus text format) and GET /health\n"
-    "                              (200 while ticking and storing, else 503) over HTTP here;\n"
-    "                              port 0 picks a free one (default: off)\n"
+    "                              over HTTP here: 200 'ready' while ticking and storing, 503\n"
+    "                              'starting', 'draining' (a shutdown pending) or 'failing' and\n"
+    "                              why; port 0 picks a free one (default: off)\n"
     "  --border X0,Z0,X1,Z1        set the world border (kept in the world): nothing is generated,\n"
     "                              streamed or editable outside x0 <= x < x1, z0 <= z < z1;\n"
     "                              'none' removes it (default: the world's, if any); a world in\n"
@@ -104,7 +111,9 @@ constexpr const char* kHelp =
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
     "  --tokens-file FILE          per-player tokens, lines 'NAME TOKEN [player|admin]' ('#'\n"
-    "                              comments); admins may run terrane-admin commands\n"
+    "                              comments); admins may run terrane-admin commands; read\n"
+    "                              again on SIGHUP (with the bans and whitelist; a bad file\n"
+    "                              keeps the previous tokens and the log says why)\n"
     "  --admin-token T             whoever gives this token joins as an admin (terrane-admin);\n"
     "                              at least 8 characters\n"
     "  --open                      serve without authentication on a non-loopback address\n"
@@ -126,6 +135,9 @@ constexpr const char* kHelp =
     "                              0 = for ever (default 30)\n"
     "  --edit-log-mb N             and at most this many MiB of logged voxels, the oldest going\n"
     "                              first; 0 = no bound (default 1024)\n"
+    "  --min-free-mb N             refuse to start when the world directory's file system has\n"
+    "                              less than N MiB free (default 64; 0: no check); see the gauge\n"
+    "                              terrane_disk_free_bytes\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
@@ -150,8 +162,8 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "config", "test-drop-updates", "test-corrupt-updates"},
+                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -240,6 +252,7 @@ int run(int argc, char** argv) {
   o.world.presence_hz = static_cast<std::uint32_t>(cl.get_int("presence-hz", 2, 0, 100, &err));
   o.storage.edit_log_days = static_cast<std::uint32_t>(cl.get_int("edit-log-days", 30, 0, 36500, &err));
   o.storage.edit_log_mb = static_cast<std::uint32_t>(cl.get_int("edit-log-mb", 1024, 0, 1 << 22, &err));
+  o.storage.min_free_mb = static_cast<std::uint64_t>(cl.get_int("min-free-mb", 64, 0, std::int64_t{1} << 40, &err));
   o.world.presence_max_entries = static_cast<std::size_t>(cl.get_int("presence-max", 32, 1, 64, &err));
   o.replication.hash_push_ms = static_cast<std::uint32_t>(cl.get_int("hash-push-ms", 1000, 0, 3600000, &err));
   o.world.mip_refresh_ms = static_cast<std::uint32_t>(cl.get_int("mip-refresh-ms", 500, 0, 60000, &err));
@@ -247,14 +260,20 @@ int run(int argc, char** argv) {
   o.faults.drop_updates = static_cast<int>(cl.get_int("test-drop-updates", 0, 0, 1000000, &err));
   o.faults.corrupt_updates = static_cast<int>(cl.get_int("test-corrupt-updates", 0, 0, 1000000, &err));
   if (!err.empty()) return usage_error(err);
+  o.create_world = !cl.flag("no-create");
+  if (o.ops.auth_token.empty() && !cl.has("tokens-file") && !o.ops.allow_open &&
+      !is_loopback_address(o.net.bind_address))
+    return usage_error("refusing to serve " + o.net.bind_address +
+                       " without authentication: give --auth-token or --tokens-file, or --open to allow anyone");
+  if (cl.has("tokens-file") && cl.has("auth-token"))
+    return usage_error("give --auth-token or --tokens-file, not both: with a tokens file each player has a token "
+                       "of their own (add a line 'NAME TOKEN' per player)");
   if (cl.has("tokens-file")) {
     auto tokens = load_tokens_file(cl.get("tokens-file"));
-    if (!tokens) {
-      server_log().error("{}", tokens.error().message);
-      return 1;
-    }
+    if (!tokens) return usage_error(tokens.error().message);
     if (tokens->empty()) return usage_error("tokens file " + cl.get("tokens-file") + " lists no players");
     o.ops.player_tokens = std::move(*tokens);
+    o.ops.tokens_file = cl.get("tokens-file");
   }
 
   // One descriptor per client plus the store, the listener and a margin.
@@ -270,30 +289,54 @@ int run(int argc, char** argv) {
                         nofile.rlim_cur, o.net.max_clients);
   }
 
-  o.world.on_fatal = [] { std::raise(SIGTERM); };  // the signal loop below stops the server
+  // Signals are caught on a private io_context so the server's own threads
+  // never block on them; the loop below ends on SIGINT or SIGTERM, or when
+  // the server asks (a storage failure, terrane-admin shutdown), saying
+  // why. SIGHUP reloads the tokens file, bans and whitelist and the server
+  // goes on.
+  asio::io_context signals_io;
+  std::string why;  // written on signals_io's thread only
+  auto stop_because = [&signals_io, &why](std::string reason) {
+    asio::post(signals_io, [&signals_io, &why, reason = std::move(reason)] {
+      if (why.empty()) why = reason;
+      signals_io.stop();
+    });
+  };
+  o.world.on_fatal = [stop_because] { stop_because("a storage failure"); };
   // terrane-admin shutdown, once its warning time is up; --restart makes the
   // exit status kExitRestart.
-  static std::atomic<bool> restart_asked{false};
-  o.ops.on_shutdown = [](bool restart) {
-    if (restart) restart_asked = true;
-    std::raise(SIGTERM);
+  bool restart_asked = false;  // written on signals_io's thread only
+  o.ops.on_shutdown = [&signals_io, &why, &restart_asked](bool restart) {
+    asio::post(signals_io, [&signals_io, &why, &restart_asked, restart] {
+      if (why.empty()) {
+        why = restart ? "an operator's shutdown with --restart (terrane-admin), its warning time up"
+                      : "an operator's shutdown (terrane-admin), its warning time up";
+        restart_asked = restart;
+      }
+      signals_io.stop();
+    });
   };
   auto server = Server::create(o);
   if (!server) {
     server_log().error("{}", server.error().message);
     return 1;
   }
-  // Signals are caught on a private io_context so the server's own threads
-  // never block on them.
-  asio::io_context signals_io;
   asio::signal_set signals(signals_io, SIGINT, SIGTERM);
-  int caught = 0;
-  signals.async_wait([&](const asio::error_code& ec, int sig) {
-    if (!ec) caught = sig;
-  });
+  signals.add(SIGHUP);
+  std::function<void(const asio::error_code&, int)> on_signal = [&](const asio::error_code& ec, int sig) {
+    if (ec) return;
+    if (sig == SIGHUP) {
+      server_log().info("signal {} (SIGHUP): reloading the tokens file, bans and whitelist", sig);
+      (*server)->reload();
+      return signals.async_wait(on_signal);
+    }
+    if (why.empty()) why = "signal " + std::to_string(sig) + (sig == SIGINT ? " (SIGINT)" : " (SIGTERM)");
+    signals_io.stop();
+  };
+  signals.async_wait(on_signal);
   (*server)->start();
   signals_io.run();
-  server_log().info("signal {}: shutting down", caught);
+  server_log().info("shutting down: {}", why);
   (*server)->stop();
   if ((*server)->storage_failed()) {
     server_log().critical("stopped after a storage failure: the edits of the failed tick were not acknowledged (and "

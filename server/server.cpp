@@ -4,6 +4,7 @@
 #include <future>
 
 #include "common/world/sqlite_store.h"
+#include "server/base/disk_space.h"
 #include "server/base/log.h"
 #include "server/base/thread_role.h"
 #include "server/storage/postgres_store.h"
@@ -15,14 +16,28 @@ FileResult<std::unique_ptr<World>> Server::open_world() {
     // The lock comes before the first read: a second server (or a tool
     // writing the directory) must not even load chunks it could write back.
     std::error_code ec;
+    const bool exists = SqliteStore::exists(options_.world_dir);
+    if (!exists && !options_.create_world)
+      return FileError{"no world at " + options_.world_dir +
+                           " (--no-create: nothing is created; check the path, or drop --no-create for a new world)",
+                       {}};
     std::filesystem::create_directories(options_.world_dir, ec);
     if (ec) return FileError{"world " + options_.world_dir + ": cannot create directory: " + ec.message(), {}};
+    if (const std::uint64_t need = options_.storage.min_free_mb << 20; need > 0) {
+      const auto free = free_bytes(options_.world_dir);
+      if (free && *free < need)
+        return FileError{fmt::format("world {}: only {} MiB free on its file system, below --min-free-mb {}: free "
+                                     "some space (or lower --min-free-mb; 0 skips the check)",
+                                     options_.world_dir, *free >> 20, options_.storage.min_free_mb),
+                         {}};
+    }
     auto lock = WorldLock::take(options_.world_dir, fmt::format("terrane-server on {}:{}", options_.net.bind_address,
                                                                 options_.net.port));
     if (!lock) return lock.error();
     world_lock_ = std::move(*lock);
-    return SqliteStore::exists(options_.world_dir) ? World::open(options_.world_dir)
-                                                   : World::create(options_.world_dir, default_world_meta());
+    if (exists) return World::open(options_.world_dir);
+    server_log().warn("creating a new world at {} (none there; --no-create refuses instead)", options_.world_dir);
+    return World::create(options_.world_dir, default_world_meta());
   }
   auto store = PostgresStore::open(options_.cluster.store_url);
   if (!store) return FileError{store.error().message, {}};
@@ -119,7 +134,10 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   s->ops_ = std::move(*ops);
   s->session_context_.emplace(ClientSession::Context{s->welcome_.welcome, s->ops_->admitter(), s->ops_->admin(),
                                                      s->counters_,
-                                                     [self](std::uint64_t id) { self->sessions_.remove(id); }});
+                                                     [self](std::uint64_t id) { self->sessions_.remove(id); },
+                                                     [self](std::uint64_t id, const std::string& name) {
+                                                       self->replace_older_sessions(id, name);
+                                                     }});
   return s;
 }
 
@@ -246,6 +264,7 @@ void Server::start() {
   const ReplicationOptions& r = options_.replication;
   const std::int32_t view = std::min(r.default_view_distance, r.max_view_distance);
   default_view_ = ViewTable::get(view, std::min({r.default_full_res_radius, r.max_full_res_radius, view}));
+  server_log().info("world {}: {}", where(), border_text());
   server_log().info("listening on {}:{}", options_.net.bind_address, port());
   world_io_.run(1, ThreadRole::kWorld, options_.thread_priorities);
   world_owner_->start();
@@ -292,11 +311,12 @@ void Server::log_totals() const {
   server_log().info(
       "stopped after {} ticks; sessions {} accepted, {} closed; edits {} applied, {} rejected; streamed {} full "
       "chunks, {} mips, {} estimates, {} empty, {} horizon images ({} bytes), {} resumed; {} update batches, {} mip refreshes ({} "
-      "skipped: bytes unchanged); world saved",
+      "skipped: bytes unchanged); {}",
       c.ticks.load(), c.sessions_accepted.load(), c.net.sessions_closed(), c.edits_applied.load(),
       c.edits_rejected(), c.chunks_sent.load(), c.mips_sent.load(), c.estimates_sent.load(), c.empties_sent.load(),
       c.horizons_sent.load(), c.stream_bytes.load(),
-      c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load());
+      c.chunks_resumed.load(), c.update_batches_sent.load(), c.mip_refreshes.load(), c.refreshes_skipped.load(),
+      storage_failed() ? "world NOT saved: the storage failed (the failed tick's edits were rejected)" : "world saved");
   bool header = false;
   for (std::size_t t = 1; t < NetCounters::kTypes; ++t) {
     const std::uint64_t f = c.net.sent_frames[t].load(), r = c.net.received_frames[t].load();
@@ -311,13 +331,14 @@ void Server::log_totals() const {
 }
 
 std::string Server::metrics_text() const {
-  return render_metrics(MetricsSources{counters_, storage_->counters(), encode_counters(), storage_failed(),
-                                       read_process_stats(), stream_gate_->closed_count(),
-                                       stream_gate_->closed_seconds()});
+  MetricsSources m{counters_, storage_->counters(), encode_counters(), storage_failed(),
+                   read_process_stats(), stream_gate_->closed_count(), stream_gate_->closed_seconds()};
+  if (options_.cluster.store_url.empty()) m.disk_free_bytes = free_bytes(options_.world_dir);
+  return render_metrics(m);
 }
 
 Health Server::health() const {
-  if (stopping_) return {false, "shutting down"};
+  if (stopping_) return {HealthState::kDraining, "shutting down"};
   return check_health(counters_, storage_failed(), options_.world.tick_hz, std::chrono::steady_clock::now(),
                       cluster_ ? LeaseTimes::of(options_.cluster.lease).renew : std::chrono::milliseconds(0));
 }
@@ -340,11 +361,37 @@ bool Server::accept(asio::ip::tcp::socket socket) {
   return true;
 }
 
+std::string Server::where() const {
+  return options_.cluster.store_url.empty() ? options_.world_dir : options_.cluster.store_url;
+}
+
+std::string Server::border_text() const {
+  const WorldBounds& b = world_->meta().bounds;
+  if (!b.bounded_xz) return "no border";
+  return fmt::format("border x {}..{}, z {}..{}", b.min_x, b.max_x, b.min_z, b.max_z);
+}
+
+void Server::replace_older_sessions(std::uint64_t id, const std::string& name) {
+  // As Minecraft does: the player's newer connection wins (the older one
+  // is often a dead link not yet timed out).
+  std::vector<std::uint64_t> older;
+  sessions_.for_each_welcomed([&](std::uint64_t other, Session& s, const ClientSession::Info& info) {
+    if (other == id || info.admin || info.name != name) return;
+    s.close(CloseReason::kReplaced, "logged in from another location: the same player joined again");
+    older.push_back(other);
+  });
+  for (const std::uint64_t other : older)
+    server_log().info("session {} ('{}') replaced by session {}: the same player joined again", other, name, id);
+}
+
 AdminHooks Server::world_hooks() {
   AdminHooks h;
   h.status = [this] {
     ServerStatus s;
-    s.world_dir = options_.world_dir;
+    s.world_dir = where();
+    s.version = TERRANE_VERSION_STRING;
+    s.address = fmt::format("{}:{}", options_.net.bind_address, port());
+    s.border = border_text();
     s.epoch = world_->meta().epoch;
     s.clients = counters_.clients.load();
     s.admin_sessions = counters_.admin_sessions.load();

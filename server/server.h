@@ -65,6 +65,9 @@ class Server {
   void start();
   // Idempotent; see the note above.
   void stop();
+  // SIGHUP: the tokens file, bans and whitelist read again
+  // (Operations::reload). Any thread.
+  void reload() { ops_->reload(); }
 
   std::uint16_t port() const { return listener_.port(); }
   // The metrics endpoint's port (0 without --metrics).
@@ -96,6 +99,12 @@ class Server {
   // table; false once stopping (the socket is dropped, none accepted after).
   bool accept(asio::ip::tcp::socket socket);
   // The world's part of the operators' commands: status, flush, rollback.
+  // The world's directory or PostgreSQL URL; its border ("no border", or
+  // "border x X0..X1, z Z0..Z1").
+  std::string where() const;
+  std::string border_text() const;
+  // A player welcomed as name in session id: ends name's older sessions.
+  void replace_older_sessions(std::uint64_t id, const std::string& name);
   AdminHooks world_hooks();
   // The world of options_: a directory (made when missing) or a PostgreSQL
   // database (made when it holds none; cluster_ opened for its writes).

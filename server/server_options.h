@@ -20,6 +20,7 @@ namespace terrane {
 
 struct ServerOptions {
   std::string world_dir;                // created with default_world_meta() when missing
+  bool create_world = true;             // false: a missing world_dir is an error (--no-create)
   // A world border to set (persisted in the world): nothing is generated,
   // streamed or editable beyond it. border_set with !bounded_xz removes one.
   bool border_set = false;

@@ -4,14 +4,21 @@
 //   terrane-admin --connect HOST:PORT --token T [--json] COMMAND [ARGS...]
 //
 // Exit status: 0 the command succeeded, 1 the server refused it or could
-// not be reached, 2 bad usage.
+// not be reached, 2 bad usage. With --json, stdout is exactly one JSON
+// document whatever happens (a failure: {"error": "..."}); the client
+// library's log lines always go to stderr.
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
 
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
 #include "client/client.h"
+#include "client/client_log.h"
 #include "common/cli/cli.h"
+#include "common/cli/json.h"
 
 namespace terrane {
 namespace {
@@ -25,7 +32,8 @@ constexpr const char* kHelp =
     "  --connect HOST:PORT   the server (required)\n"
     "  --token T             an admin token (required; or the TERRANE_ADMIN_TOKEN variable)\n"
     "  --name NAME           the name to join as (default admin)\n"
-    "  --json                print the answer as JSON (for scripts)\n"
+    "  --json                print the answer as one JSON document on stdout (for scripts);\n"
+    "                        a failure prints {\"error\": \"...\"} and exits non-zero\n"
     "  --timeout S           seconds to wait for the answer (default 120)\n"
     "  --help                this text\n"
     "\n"
@@ -51,18 +59,47 @@ constexpr const char* kHelp =
     "  backup PATH                     a consistent copy of the running world in the new\n"
     "                                  directory PATH, on the server's machine\n"
     "  shutdown [--in SECONDS] [--restart] [--reason TEXT...]\n"
-    "                                  warn every client, then stop (saving); --restart tells\n"
-    "                                  clients the server comes back, so they reconnect\n"
+    "                                  warn every client (and again 10 min, 5 min, 2 min, 60 s,\n"
+    "                                  30 s, 10 s and 5 s before), then stop (saving); with --restart\n"
+    "                                  clients are told the server comes back, so they reconnect;\n"
+    "                                  /health says draining meanwhile\n"
+    "  shutdown --cancel               cancel a pending shutdown (also: cancel-shutdown)\n"
     "  help                            the server's own list of commands\n";
 
+// Set once the command line asks for --json: every failure is then also
+// a JSON object on stdout.
+bool g_json = false;
+
+void json_error(const std::string& message) {
+  if (g_json) std::printf("{\"error\": %s}\n", json_string(message).c_str());
+}
+
 int usage_error(const std::string& message) {
+  json_error(message);
   std::fprintf(stderr, "terrane-admin: %s\n\n%s", message.c_str(), kHelp);
   return 2;
 }
 
+// A failure to reach the server or have the command run: exit status 1.
+int failure(const std::string& message) {
+  json_error(message);
+  std::fprintf(stderr, "terrane-admin: %s\n", message.c_str());
+  return 1;
+}
+
 int run(int argc, char** argv) {
+  // The library's log goes to stderr: stdout holds the answer alone.
+  // (The logger may exist already: its sinks are replaced, not the logger.)
+  auto& sinks = client_log().sinks();
+  sinks.clear();
+  sinks.push_back(std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
   std::string connect, token, name = "admin";
-  bool json = false;
+  bool& json = g_json;
+  for (int k = 1; k < argc && std::string(argv[k]).rfind("--", 0) == 0; ++k) {
+    const std::string a = argv[k];
+    if (a == "--json") json = true;
+    if (a == "--connect" || a == "--token" || a == "--name" || a == "--timeout") ++k;
+  }
   double timeout_s = 120;
   if (const char* t = std::getenv("TERRANE_ADMIN_TOKEN")) token = t;
   int i = 1;
@@ -110,17 +147,12 @@ int run(int argc, char** argv) {
   o.reconnect = false;
   Client client(o);
   std::string err;
-  if (!client.connect(&err)) {
-    std::fprintf(stderr, "terrane-admin: cannot reach %s: %s\n", connect.c_str(), err.c_str());
-    return 1;
-  }
+  if (!client.connect(&err)) return failure("cannot reach " + connect + ": " + err);
   const auto limit = std::chrono::milliseconds(static_cast<long long>(timeout_s * 1000));
   client.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, limit);
-  if (!client.welcome()) {
-    std::fprintf(stderr, "terrane-admin: %s refused the connection: %s\n", connect.c_str(),
-                 client.closed() ? client.disconnect_reason().c_str() : "no answer");
-    return 1;
-  }
+  if (!client.welcome())
+    return failure(connect + " refused the connection: " +
+                   (client.closed() ? client.disconnect_reason() : std::string("no answer")));
   const std::uint32_t id = client.admin(command, args);
   if (id == 0) return usage_error("command or arguments too long (command 32 bytes, 16 arguments of 1024)");
   std::optional<AdminResultMsg> result;
@@ -131,13 +163,17 @@ int run(int argc, char** argv) {
       },
       limit);
   client.disconnect();
-  if (!result) {
-    std::fprintf(stderr, "terrane-admin: no answer from %s%s\n", connect.c_str(),
-                 client.closed() && !client.disconnect_reason().empty() ? (": " + client.disconnect_reason()).c_str() : "");
-    return 1;
-  }
-  if (json) {
+  if (!result)
+    return failure("no answer from " + connect +
+                   (client.closed() && !client.disconnect_reason().empty() ? ": " + client.disconnect_reason() : ""));
+  std::string text = result->text;
+  while (!text.empty() && text.back() == '\n') text.pop_back();
+  if (json && !result->ok && result->json.find("\"error\"") == std::string::npos) {
+    // A refusal whose JSON was cut (too long for a frame): the text says why.
+    return failure(text);
+  } else if (json) {
     std::printf("%s\n", result->json.c_str());
+    if (!result->ok) std::fprintf(stderr, "terrane-admin: %s\n", text.c_str());
   } else {
     std::fputs(result->text.c_str(), result->ok ? stdout : stderr);
     if (!result->text.empty() && result->text.back() != '\n') std::fputc('\n', result->ok ? stdout : stderr);

@@ -25,6 +25,7 @@ const char* close_reason_label(CloseReason r) {
     case CloseReason::kKicked: return "kicked";
     case CloseReason::kBanned: return "banned";
     case CloseReason::kNotWhitelisted: return "not_whitelisted";
+    case CloseReason::kReplaced: return "replaced";
     case CloseReason::kCount: break;
   }
   return "unknown";

@@ -73,6 +73,7 @@ enum class CloseReason : std::uint8_t {
   kKicked,            // by an operator (terrane-admin kick)
   kBanned,            // refused at the handshake, or ended by a ban
   kNotWhitelisted,    // refused at the handshake
+  kReplaced,          // the same player joined again: the newer session wins
   kCount
 };
 const char* close_reason_label(CloseReason r);

@@ -1,5 +1,7 @@
 #include "server/net/client_session.h"
 
+#include "common/cli/json.h"
+
 #include "server/base/log.h"
 
 namespace terrane {
@@ -90,6 +92,7 @@ void ClientSession::on_hello(const HelloMsg& hello) {
   (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_add(1, std::memory_order_relaxed);
   context_.counters.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(context_.welcome));
+  if (!admin_ && context_.joined) context_.joined(id_, name_);
   // A Redirect's token says where the client comes from (it grants nothing).
   if (!hello.resume_token.empty()) context_.counters.redirects_received.fetch_add(1, std::memory_order_relaxed);
   // Names and resume tokens are printable (parse_hello refuses control
@@ -124,7 +127,7 @@ void ClientSession::on_pong(std::uint64_t nonce) {
 void ClientSession::on_admin(AdminRequestMsg req) {
   if (!admin_) {
     const std::string why = "not an admin: this session's token does not have the admin role";
-    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": \"" + why + "\"}"};
+    AdminResultMsg r{req.request_id, false, why + "\n", "{\"error\": " + json_string(why) + "}"};
     session_->send(build_admin_result(r), SendClass::kControl);
     return;
   }

@@ -71,6 +71,9 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
     // A session's socket closed (its id), before the replica is told:
     // the server drops it from its table.
     std::function<void(std::uint64_t id)> forget;
+    // A player (not an admin) was welcomed as name: the server ends that
+    // name's older sessions (the newer one wins). Unset: nothing is done.
+    std::function<void(std::uint64_t id, const std::string& name)> joined = nullptr;
   };
   // Who the client is, for operators (any thread).
   struct Info {

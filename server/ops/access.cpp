@@ -1,6 +1,7 @@
 #include "server/ops/access.h"
 
 #include <algorithm>
+#include <map>
 #include <sstream>
 
 namespace terrane {
@@ -18,6 +19,12 @@ AccessControl::BanKind AccessControl::kind_of(const std::string& target, bool ad
   return target.find('/') == std::string::npos ? BanKind::kAddress : BanKind::kNetwork;
 }
 
+struct AccessControl::Lists {
+  std::map<std::pair<BanKind, std::string>, Ban> bans;
+  std::set<std::string> whitelist;
+  bool whitelist_on = false;
+};
+
 FileResult<std::unique_ptr<AccessControl>> AccessControl::open(std::unique_ptr<WorldStore> store, std::string shared_token,
                                                                 std::unordered_map<std::string, PlayerToken> players,
                                                                 std::string admin_token) {
@@ -26,18 +33,24 @@ FileResult<std::unique_ptr<AccessControl>> AccessControl::open(std::unique_ptr<W
   a->players_ = std::move(players);
   a->admin_token_ = std::move(admin_token);
   a->store_ = std::move(store);
-  if (auto st = a->load(); !st) return st.error();
+  auto lists = a->read_lists();
+  if (!lists) return lists.error();
+  a->bans_ = std::move(lists->bans);
+  a->whitelist_ = std::move(lists->whitelist);
+  a->whitelist_on_ = lists->whitelist_on;
   return a;
 }
 
-FileStatus AccessControl::load() {
+FileResult<AccessControl::Lists> AccessControl::read_lists() {
+  std::lock_guard store_lock(store_m_);
   auto entries = store_->access_entries();
   if (!entries) return entries.error();
+  Lists l;
   for (const auto& [key, value] : *entries) {
     if (key == "whitelist") {
-      whitelist_on_ = value == "on";
+      l.whitelist_on = value == "on";
     } else if (key.rfind("whitelist:", 0) == 0) {
-      whitelist_.insert(key.substr(10));
+      l.whitelist.insert(key.substr(10));
     } else if (key.rfind("ban:name:", 0) == 0 || key.rfind("ban:addr:", 0) == 0) {
       Ban b;
       b.address = key[4] == 'a';
@@ -45,16 +58,78 @@ FileStatus AccessControl::load() {
       std::istringstream v(value);
       v >> b.until;
       std::getline(v >> std::ws, b.reason);
-      bans_[{kind_of(b.target, b.address), b.target}] = b;
+      l.bans[{kind_of(b.target, b.address), b.target}] = b;
     }
   }
-  return Ok{};
+  return l;
+}
+
+namespace {
+
+// "what: +a +b -c ~d" for the keys added, removed and changed, or "".
+template <class Map, class Same>
+std::string changes(const std::string& what, const Map& before, const Map& after, Same same,
+                    std::string (*name)(const typename Map::key_type&)) {
+  std::string added, removed, changed;
+  for (const auto& [k, v] : after) {
+    const auto it = before.find(k);
+    if (it == before.end())
+      added += " +" + name(k);
+    else if (!same(it->second, v))
+      changed += " ~" + name(k);
+  }
+  for (const auto& [k, v] : before)
+    if (after.find(k) == after.end()) removed += " -" + name(k);
+  if (added.empty() && removed.empty() && changed.empty()) return "";
+  return what + ":" + added + removed + changed;
+}
+
+}  // namespace
+
+FileResult<std::vector<std::string>> AccessControl::reload(
+    std::optional<std::unordered_map<std::string, PlayerToken>> players) {
+  auto lists = read_lists();
+  if (!lists) return lists.error();
+  std::vector<std::string> out;
+  auto keep = [&](std::string line) {
+    if (!line.empty()) out.push_back(std::move(line));
+  };
+  std::lock_guard lock(m_);
+  if (players) {
+    // In name order, for a stable line.
+    const std::map<std::string, PlayerToken> was(players_.begin(), players_.end()), now(players->begin(), players->end());
+    keep(changes(
+        "tokens", was, now,
+        [](const PlayerToken& a, const PlayerToken& b) { return a.token == b.token && a.admin == b.admin; },
+        +[](const std::string& k) { return k; }));
+    players_ = std::move(*players);
+  }
+  keep(changes(
+      "bans", bans_, lists->bans,
+      [](const Ban& a, const Ban& b) { return a.until == b.until && a.reason == b.reason; },
+      +[](const std::pair<BanKind, std::string>& k) { return k.second; }));
+  std::map<std::string, bool> was_listed, now_listed;
+  for (const auto& n : whitelist_) was_listed[n] = true;
+  for (const auto& n : lists->whitelist) now_listed[n] = true;
+  keep(changes(
+      "whitelist", was_listed, now_listed, [](bool, bool) { return true; }, +[](const std::string& k) { return k; }));
+  if (whitelist_on_ != lists->whitelist_on) keep(std::string("whitelist turned ") + (lists->whitelist_on ? "on" : "off"));
+  bans_ = std::move(lists->bans);
+  whitelist_ = std::move(lists->whitelist);
+  whitelist_on_ = lists->whitelist_on;
+  return out;
+}
+
+bool AccessControl::open_to_all() const {
+  std::lock_guard lock(m_);
+  return shared_token_.empty() && players_.empty();
 }
 
 Admission AccessControl::admit(const std::string& name, const std::string& token, const std::string& address,
                                std::int64_t now) const {
   Admission a;
   const bool is_admin = !admin_token_.empty() && token == admin_token_;
+  std::lock_guard lock(m_);
   if (is_admin) {
     a.admin = true;
   } else if (!players_.empty()) {
@@ -73,7 +148,6 @@ Admission AccessControl::admit(const std::string& name, const std::string& token
     a.reason = "authentication failed";
     return a;
   }
-  std::lock_guard lock(m_);
   if (!a.admin) {
     const auto in_force = [&](const Ban& b) { return b.until == 0 || b.until > now; };
     const Ban* found = nullptr;

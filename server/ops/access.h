@@ -4,6 +4,10 @@
 // whitelist are the operators' (terrane-admin) and live in the world's
 // store (table "access", common/world/WORLD_FORMAT.md), so they survive restarts.
 //
+// Both are reloaded on SIGHUP (reload(): the tokens file read again, the
+// bans and whitelist from the store, which another process may have
+// changed).
+//
 // Threading: every method may be called from any thread (one mutex; the
 // store is its own SQLite connection, written only by admin commands).
 #pragma once
@@ -13,6 +17,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <string>
 #include <unordered_map>
@@ -42,7 +47,12 @@ class AccessControl final : public Admitter {
   // now: Unix seconds (bans that ended are ignored).
   Admission admit(const std::string& name, const std::string& token, const std::string& address,
                   std::int64_t now) const override;
-  bool open_to_all() const { return shared_token_.empty() && players_.empty(); }
+  bool open_to_all() const;
+
+  // Takes players (a tokens file read again) unless nullopt, and reads the
+  // bans and the whitelist again from the store. Returns what changed, a
+  // line per kind (empty: nothing did); on a store error nothing changes.
+  FileResult<std::vector<std::string>> reload(std::optional<std::unordered_map<std::string, PlayerToken>> players);
 
   FileStatus ban(const Ban& b);
   // True if something was banned under target (a name, an address or a network).
@@ -57,16 +67,19 @@ class AccessControl final : public Admitter {
 
  private:
   AccessControl() = default;
-  FileStatus load();
+  // The bans and the whitelist as the store has them.
+  struct Lists;
+  FileResult<Lists> read_lists();
   // How admit() finds a ban: a name's and an address's by their key, a
   // network's by walking the networks only (bans_ keeps them together).
   enum class BanKind : std::uint8_t { kAddress, kNetwork, kName };
   static BanKind kind_of(const std::string& target, bool address);
 
   std::string shared_token_, admin_token_;
+  // m_ guards the players and the lists (admit() reads them on io
+  // threads); store_m_ the store's connection, so a write waiting on
+  // SQLite never holds up admit().
   std::unordered_map<std::string, PlayerToken> players_;
-  // m_ guards the lists (admit() reads them on io threads); store_m_ the
-  // store's connection, so a write waiting on SQLite never holds up admit().
   mutable std::mutex m_;
   std::mutex store_m_;
   std::unique_ptr<WorldStore> store_;

@@ -35,8 +35,11 @@ const char* const kAdminHelp =
     "backup PATH                     a consistent copy of the world, made while it runs, in the\n"
     "                                new directory PATH (on the server's machine)\n"
     "shutdown [--in SECONDS] [--restart] [--reason TEXT...]\n"
-    "                                warn every client, then stop (saving); --restart tells them\n"
-    "                                the server comes back, so they reconnect by themselves\n"
+    "                                warn every client (again 10 min, 5 min, 2 min, 60 s, 30 s,\n"
+    "                                10 s and 5 s before), then stop (saving); --restart tells\n"
+    "                                them the server comes back, so they reconnect by themselves\n"
+    "shutdown --cancel (or cancel-shutdown)\n"
+    "                                cancel a pending shutdown and tell every client\n"
     "help                            this text\n";
 
 namespace {
@@ -193,13 +196,19 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
   if (cmd == "status") {
     const ServerStatus s = hooks_.status();
     std::ostringstream t;
-    t << "world " << s.world_dir << " (epoch " << s.epoch << "), up " << static_cast<long long>(s.uptime_s) << " s\n"
+    t << "terrane-server " << s.version << " on " << s.address << "\n"
+      << "world " << s.world_dir << " (epoch " << s.epoch << ")" << (s.border.empty() ? "" : ", " + s.border) << ", up "
+      << static_cast<long long>(s.uptime_s) << " s\n"
+      << (s.shutdown_in_s ? "shutdown pending: stopping in " + std::to_string(*s.shutdown_in_s) + " s\n" : "")
       << s.clients << " players, " << s.admin_sessions << " admin sessions; " << s.ticks << " ticks at " << s.tick_hz << " Hz (mean " << num(s.tick_mean_ms)
       << " ms); edits " << s.edits_applied << " applied, " << s.edits_rejected << " rejected; " << s.chunks_resident
       << " chunks resident; storage " << (s.storage_failed ? "FAILED" : "ok") << "; whitelist "
       << (access_.whitelist_on() ? "on" : "off") << "\n";
     std::ostringstream j;
-    j << "{\"world\": " << json_string(s.world_dir) << ", \"epoch\": " << s.epoch << ", \"uptime_s\": " << num(s.uptime_s)
+    j << "{\"version\": " << json_string(s.version) << ", \"address\": " << json_string(s.address)
+      << ", \"border\": " << json_string(s.border) << ", \"shutdown_in_s\": "
+      << (s.shutdown_in_s ? std::to_string(*s.shutdown_in_s) : std::string("null"))
+      << ", \"world\": " << json_string(s.world_dir) << ", \"epoch\": " << s.epoch << ", \"uptime_s\": " << num(s.uptime_s)
       << ", \"clients\": " << s.clients << ", \"admin_sessions\": " << s.admin_sessions << ", \"ticks\": " << s.ticks << ", \"tick_hz\": " << s.tick_hz
       << ", \"tick_mean_ms\": " << num(s.tick_mean_ms) << ", \"edits_applied\": " << s.edits_applied
       << ", \"edits_rejected\": " << s.edits_rejected << ", \"chunks_resident\": " << s.chunks_resident
@@ -447,6 +456,12 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return ok("backed up the world to " + a[0] + " in " + num(s) + " s\n",
               "{\"backup\": " + json_string(a[0]) + ", \"seconds\": " + num(s) + "}");
+  }
+
+  if (cmd == "cancel-shutdown" || (cmd == "shutdown" && a.size() == 1 && a[0] == "--cancel")) {
+    if (cmd == "cancel-shutdown" && !a.empty()) return fail("usage: cancel-shutdown");
+    if (!hooks_.cancel_shutdown || !hooks_.cancel_shutdown()) return fail("no shutdown is pending");
+    return ok("the scheduled shutdown is cancelled\n", "{\"cancelled\": true}");
   }
 
   if (cmd == "shutdown") {

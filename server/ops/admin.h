@@ -6,7 +6,7 @@
 // Server wires) and AccessControl (bans, whitelist).
 //
 // Commands: status, players, kick, ban, unban, whitelist, say, save,
-// backup, shutdown, help (kAdminHelp). Every answer has text for people
+// backup, shutdown (and its --cancel, or cancel-shutdown), help (kAdminHelp). Every answer has text for people
 // and a JSON object for scripts.
 #pragma once
 
@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -38,7 +39,9 @@ struct PlayerInfo {
 };
 
 struct ServerStatus {
-  std::string world_dir;
+  std::string world_dir;  // or the PostgreSQL URL
+  std::string version, address, border;
+  std::optional<std::uint32_t> shutdown_in_s;  // a pending shutdown's seconds left
   std::uint64_t epoch = 0;
   double uptime_s = 0;
   std::uint64_t clients = 0, admin_sessions = 0, ticks = 0, edits_applied = 0, edits_rejected = 0, chunks_resident = 0;
@@ -58,6 +61,8 @@ struct AdminHooks {
   // stored (stored false: the store failed).
   std::function<void(std::function<void(std::uint64_t tick, bool stored)> done)> flush;
   std::function<void(std::uint32_t seconds, bool restart, const std::string& reason)> shutdown;
+  // Cancels a pending shutdown; false if none was.
+  std::function<bool()> cancel_shutdown;
   // Undoes entries (newest first) as one edit by actor; done after the commit.
   std::function<void(const std::string& actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
                      std::function<void(bool ok, std::string error, std::uint64_t tick, std::uint64_t voxels)> done)>

@@ -1,5 +1,7 @@
 #include "server/ops/http_endpoint.h"
 
+#include "common/cli/json.h"
+
 #include <httplib.h>
 
 
@@ -26,10 +28,16 @@ FileResult<std::unique_ptr<HttpEndpoint>> HttpEndpoint::bind(const std::string& 
   s.Get("/metrics", [metrics](const httplib::Request&, httplib::Response& res) {
     res.set_content(metrics(), "text/plain; version=0.0.4; charset=utf-8");
   });
-  s.Get("/health", [health](const httplib::Request&, httplib::Response& res) {
+  s.Get("/health", [health](const httplib::Request& req, httplib::Response& res) {
     const Health h = health();
-    res.status = h.ok ? 200 : 503;
-    res.set_content(h.text + "\n", "text/plain; charset=utf-8");
+    res.status = h.ok() ? 200 : 503;
+    const std::string state = health_state_name(h.state);
+    if (req.get_param_value("format") == "json" ||
+        req.get_header_value("Accept").find("application/json") != std::string::npos)
+      res.set_content("{\"state\": \"" + state + "\", \"reason\": " + json_string(h.text) + "}\n",
+                      "application/json");
+    else
+      res.set_content(h.ok() ? state + "\n" : state + ": " + h.text + "\n", "text/plain; charset=utf-8");
   });
   s.Get("/", [](const httplib::Request&, httplib::Response& res) {
     res.set_content("terrane-server: GET /metrics (Prometheus text format), GET /health\n", "text/plain");

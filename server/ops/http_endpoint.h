@@ -1,6 +1,8 @@
 // HttpEndpoint: the operator's HTTP port (`terrane-server --metrics
 // ADDR:PORT`): GET /metrics (Prometheus text format) and GET /health (200
-// "ok" while the server ticks and stores, 503 and the reason otherwise).
+// "ready" while the server ticks and stores; 503 "STATE: reason" when it is
+// starting, draining or failing, server/ops/metrics.h; with ?format=json or
+// "Accept: application/json", {"state": ..., "reason": ...}).
 //
 // Threading: its own small pool (cpp-httplib), apart from the game's io
 // threads; the handlers only read atomics (server/base/counters.h), so a slow or

@@ -163,6 +163,10 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));
   m.gauge("terrane_storage_failed", "1 once a tick's changes could not be stored (the server stops serving).",
           s.storage_failed ? 1 : 0);
+  if (s.disk_free_bytes)
+    m.gauge("terrane_disk_free_bytes",
+            "Bytes still free on the file system of the world directory (the server stops when a commit fails).",
+            *s.disk_free_bytes);
   const DatabaseCounters& db = c.database;
   m.gauge("terrane_storage_retrying",
           "Commits being tried again now because the database went away (a shared PostgreSQL world).",
@@ -292,29 +296,50 @@ Health check_health(const ServerCounters& c, bool storage_failed, std::uint32_t 
   const auto ms_text = [](std::chrono::nanoseconds d) {
     return std::to_string(std::chrono::duration_cast<milliseconds>(d).count()) + " ms";
   };
-  if (storage_failed) return {false, "storage failed: the world's changes can no longer be saved"};
+  constexpr HealthState kFailing = HealthState::kFailing;
+  if (storage_failed) return {kFailing, "storage failed: the world's changes can no longer be saved"};
   const DatabaseCounters& db = c.database;
   if (load(db.commits_retrying) > 0)
-    return {false, "storage retrying: a commit waits for the database (" + std::to_string(load(db.commit_retries)) +
+    return {kFailing, "storage retrying: a commit waits for the database (" + std::to_string(load(db.commit_retries)) +
                        " failed attempts tried again so far)"};
   const std::int64_t last = c.last_tick_at_ns.load(std::memory_order_relaxed);
   const auto period = std::chrono::nanoseconds(1'000'000'000LL / std::max<std::uint32_t>(1, tick_hz));
   const auto limit = std::max<std::chrono::nanoseconds>(std::chrono::seconds(1), period * 10);
-  if (last == 0) return {false, "not ticking yet"};
+  if (last == 0) return {HealthState::kStarting, "not ticking yet"};
   const auto since = std::chrono::nanoseconds(steady_ns(now) - last);
-  if (since > limit) return {false, "no tick for " + ms_text(since)};
+  if (since > limit) return {kFailing, "no tick for " + ms_text(since)};
   if (lease_renewal.count() > 0) {
     const std::int64_t renewed = db.lease_renewed_at_ns.load(std::memory_order_relaxed);
     const auto age = std::chrono::nanoseconds(steady_ns(now) - renewed);
     // Two periods: one round may be slow; none for two means the database
     // is out of reach (a lease lasts ten: LeaseTimes::of).
     if (renewed != 0 && age > 2 * lease_renewal)
-      return {false, "database out of reach: leases not renewed for " + ms_text(age)};
+      return {kFailing, "database out of reach: leases not renewed for " + ms_text(age)};
   }
   if (load(db.listener_down) != 0)
-    return {false, "database connection broken: the other servers' notices are not heard"};
-  if (load(db.inbox_failing) != 0) return {false, "database: the inbox of forwarded edits cannot be read"};
-  return {true, "ok"};
+    return {kFailing, "database connection broken: the other servers' notices are not heard"};
+  if (load(db.inbox_failing) != 0) return {kFailing, "database: the inbox of forwarded edits cannot be read"};
+  return {HealthState::kReady, "ok"};
+}
+
+const char* health_state_name(HealthState s) {
+  switch (s) {
+    case HealthState::kStarting: return "starting";
+    case HealthState::kReady: return "ready";
+    case HealthState::kDraining: return "draining";
+    case HealthState::kFailing: return "failing";
+  }
+  return "failing";
+}
+
+std::string render_health_gauge(const Health& h) {
+  std::string out =
+      "# HELP terrane_health_state The state /health answers: 1 for the current one (starting, ready, draining, "
+      "failing), 0 for the others.\n# TYPE terrane_health_state gauge\n";
+  for (const HealthState s : kHealthStates)
+    out += std::string("terrane_health_state{state=\"") + health_state_name(s) + "\"} " + (s == h.state ? "1" : "0") +
+           "\n";
+  return out;
 }
 
 }  // namespace terrane

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "server/base/counters.h"
@@ -34,6 +35,9 @@ struct MetricsSources {
   // Streaming yielding to live traffic (replication/stream_gate.h).
   std::uint64_t stream_gate_closings = 0;
   double stream_gate_closed_seconds = 0;
+  // Free bytes on the world directory's file system (none: a PostgreSQL
+  // world, or not readable).
+  std::optional<std::uint64_t> disk_free_bytes = std::nullopt;
   // When the sample is taken (the lease renewal's age is counted to it).
   std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now();
 };
@@ -42,20 +46,37 @@ struct MetricsSources {
 // TYPE lines; counters end in _total, durations are _seconds histograms.
 std::string render_metrics(const MetricsSources& s);
 
-// /health: healthy while the world ticks and its changes can be stored. A
-// tick is overdue after max(1 s, 10 tick periods) without one. A shared
+// /health: the server's state, for orchestrators (Docker, Kubernetes,
+// Agones) to act on:
+//   starting  not ticking yet (503)
+//   ready     ticking and storing (200)
+//   draining  a shutdown is pending or under way (503): take it out of
+//             rotation, send no new players (Operations::health())
+//   failing   its changes cannot be stored, or it stopped ticking (503)
+// check_health() gives starting, ready or failing. Failing: a tick is
+// overdue after max(1 s, 10 tick periods) without one. A shared
 // PostgreSQL world (lease_renewal: its leases' renewal period; 0 for a
-// world directory) is also unhealthy while a commit is tried again, while
+// world directory) is also failing while a commit is tried again, while
 // the last renewal round that reached the database is older than two
 // renewal periods, while the connection listening for the other servers'
 // notices is broken, and while the inbox cannot be read
 // (ServerCounters::database).
+enum class HealthState { kStarting, kReady, kDraining, kFailing };
+inline constexpr HealthState kHealthStates[] = {HealthState::kStarting, HealthState::kReady, HealthState::kDraining,
+                                                HealthState::kFailing};
+const char* health_state_name(HealthState s);  // "starting", "ready", "draining", "failing"
+
 struct Health {
-  bool ok = false;
-  std::string text;  // "ok", or what is wrong (one line)
+  HealthState state = HealthState::kFailing;
+  std::string text;  // "ok", or why not ready (one line)
+  bool ok() const { return state == HealthState::kReady; }
 };
 Health check_health(const ServerCounters& c, bool storage_failed, std::uint32_t tick_hz,
                     std::chrono::steady_clock::time_point now,
                     std::chrono::milliseconds lease_renewal = std::chrono::milliseconds(0));
+
+// The state as a gauge: terrane_health_state{state="..."}, 1 for the
+// current state and 0 for the others (appended to /metrics by Operations).
+std::string render_health_gauge(const Health& h);
 
 }  // namespace terrane

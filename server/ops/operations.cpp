@@ -5,12 +5,14 @@
 
 #include "common/cli/cli.h"
 #include "server/base/log.h"
+#include "server/net/limits.h"
 
 namespace terrane {
 
 Operations::Operations(const OpsOptions& options, std::string metrics_host, asio::io_context& io,
                        SessionTable& sessions, const ServerCounters& counters, Wiring wiring)
     : metrics_host_(std::move(metrics_host)),
+      tokens_file_(options.tokens_file),
       on_shutdown_(options.on_shutdown),
       sessions_(sessions),
       wiring_(std::move(wiring)),
@@ -41,13 +43,14 @@ FileResult<std::unique_ptr<Operations>> Operations::open(const OpsOptions& optio
                                       std::function<void(AdminResultMsg)> reply) {
     std::lock_guard lock(self->admin_m_);
     if (self->admin_) return self->admin_->handle(who, std::move(req), std::move(reply));
-    reply(AdminResultMsg{req.request_id, false, "the server is stopping", "{}"});
+    reply(AdminResultMsg{req.request_id, false, "the server is stopping", "{\"error\": \"the server is stopping\"}"});
   };
   if (metrics_at) {
     Operations* self = ops.get();
     auto http = HttpEndpoint::bind(
-        metrics_at->first, metrics_at->second, [self] { return self->wiring_.metrics(); },
-        [self] { return self->wiring_.health(); });
+        metrics_at->first, metrics_at->second,
+        [self] { return self->wiring_.metrics() + render_health_gauge(self->health()); },
+        [self] { return self->health(); });
     if (!http) return http.error();
     ops->metrics_ = std::move(*http);
   }
@@ -70,27 +73,112 @@ void Operations::notify_all(const ServerNoticeMsg& notice) {
       [&](std::uint64_t, Session& s, const ClientSession::Info&) { s.send(frame, SendClass::kControl); });
 }
 
+namespace {
+
+std::string shutdown_text(std::uint32_t seconds, bool restart, const std::string& reason) {
+  return "server stopping in " + std::to_string(seconds) + " s" + (restart ? " and restarting" : "") +
+         (reason.empty() ? std::string() : ": " + reason);
+}
+
+}  // namespace
+
 void Operations::schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason) {
   clients_reconnect_ = restart;
+  const auto due = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+  shutdown_due_ns_ = std::max<std::int64_t>(1, steady_ns(due));
   ServerNoticeMsg n;
   n.kind = wire::NoticeKind::Shutdown;
   n.seconds_left = seconds;
   n.reconnect = restart;
-  n.text = "server stopping in " + std::to_string(seconds) + " s" + (restart ? " and restarting" : "") +
-           (reason.empty() ? std::string() : ": " + reason);
+  n.text = shutdown_text(seconds, restart, reason);
   server_log().warn("{} (asked by an operator)", n.text);
   notify_all(n);
-  asio::post(strand_, [this, seconds, restart] {
+  asio::post(strand_, [this, due, reason] {
     if (stopping_) return;
-    shutdown_timer_.expires_after(std::chrono::seconds(seconds));
-    shutdown_timer_.async_wait([this, restart](const asio::error_code& ec) {
-      if (ec || stopping_) return;
-      if (on_shutdown_) return on_shutdown_(restart);
-      // No owner to ask: stop from a thread of our own (the server's stop
-      // joins the io threads, this one among them).
-      if (!stopping_thread_.joinable()) stopping_thread_ = std::thread([this] { wiring_.stop(); });
-    });
+    shutdown_due_ = due;
+    shutdown_reason_ = reason;
+    shutdown_timer_.cancel();
+    arm_shutdown(++shutdown_generation_);
   });
+}
+
+void Operations::arm_shutdown(std::uint64_t generation) {
+  const auto now = std::chrono::steady_clock::now();
+  const auto left = std::chrono::ceil<std::chrono::seconds>(shutdown_due_ - now).count();
+  std::uint32_t mark = 0;  // the next warning, 0: none before the due time
+  for (const std::uint32_t w : kShutdownWarnings)
+    if (static_cast<std::int64_t>(w) < left) {
+      mark = w;
+      break;
+    }
+  shutdown_timer_.expires_at(shutdown_due_ - std::chrono::seconds(mark));
+  shutdown_timer_.async_wait([this, generation, mark](const asio::error_code& ec) {
+    if (ec || stopping_ || generation != shutdown_generation_) return;
+    if (mark > 0) {
+      ServerNoticeMsg n;
+      n.kind = wire::NoticeKind::Shutdown;
+      n.seconds_left = mark;
+      n.reconnect = clients_reconnect_;
+      n.text = shutdown_text(mark, n.reconnect, shutdown_reason_);
+      server_log().warn("{}", n.text);
+      notify_all(n);
+      return arm_shutdown(generation);
+    }
+    if (on_shutdown_) return on_shutdown_(clients_reconnect_.load());
+    // No owner to ask: stop from a thread of our own (the server's stop
+    // joins the io threads, this one among them).
+    if (!stopping_thread_.joinable()) stopping_thread_ = std::thread([this] { wiring_.stop(); });
+  });
+}
+
+bool Operations::cancel_shutdown() {
+  if (stopping_ || shutdown_due_ns_.exchange(0) == 0) return false;
+  clients_reconnect_ = true;
+  asio::post(strand_, [this] {
+    ++shutdown_generation_;
+    shutdown_timer_.cancel();
+  });
+  ServerNoticeMsg n;
+  n.kind = wire::NoticeKind::Say;
+  n.text = "the scheduled shutdown is cancelled";
+  server_log().warn("{} (asked by an operator)", n.text);
+  notify_all(n);
+  return true;
+}
+
+void Operations::reload() {
+  std::optional<std::unordered_map<std::string, PlayerToken>> players;
+  if (!tokens_file_.empty()) {
+    auto tokens = load_tokens_file(tokens_file_);
+    if (!tokens)
+      server_log().error("reload: keeping the previous tokens: {}", tokens.error().message);
+    else if (tokens->empty())
+      server_log().error("reload: keeping the previous tokens: tokens file {} lists no players", tokens_file_);
+    else
+      players = std::move(*tokens);
+  }
+  auto changed = access_->reload(std::move(players));
+  if (!changed) {
+    server_log().error("reload: keeping the previous bans and whitelist: {}", changed.error().message);
+    return;
+  }
+  if (changed->empty()) server_log().info("reload: nothing changed");
+  for (const std::string& line : *changed) server_log().info("reload: {}", line);
+}
+
+std::optional<std::uint32_t> Operations::shutdown_in() const {
+  const std::int64_t due = shutdown_due_ns_.load();
+  if (due == 0) return std::nullopt;
+  const std::int64_t left = due - steady_ns(std::chrono::steady_clock::now());
+  return static_cast<std::uint32_t>(std::max<std::int64_t>(0, (left + 999'999'999) / 1'000'000'000));
+}
+
+Health Operations::health() const {
+  Health h = wiring_.health();
+  if (h.state == HealthState::kFailing) return h;
+  if (const auto left = shutdown_in())
+    return {HealthState::kDraining, "shutdown pending: stopping in " + std::to_string(*left) + " s"};
+  return h;
 }
 
 void Operations::stop_timers() {
@@ -129,6 +217,7 @@ AdminHooks Operations::hooks() {
   h.status = [this] {
     ServerStatus s = wiring_.world.status();
     s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_at_).count();
+    s.shutdown_in_s = shutdown_in();
     return s;
   };
   auto each = [this](const std::function<void(Session&, const PlayerInfo&)>& fn) {
@@ -168,6 +257,7 @@ AdminHooks Operations::hooks() {
   h.shutdown = [this](std::uint32_t seconds, bool restart, const std::string& reason) {
     schedule_shutdown(seconds, restart, reason);
   };
+  h.cancel_shutdown = [this] { return cancel_shutdown(); };
   h.rollback = wiring_.world.rollback;
   return h;
 }

@@ -2,9 +2,10 @@
 // rules (AccessControl: tokens, bans, whitelist), the admin room (Admin,
 // its thread) and the function sessions hand operators' commands to, the
 // /metrics and /health endpoint (HttpEndpoint, its threads), the periodic
-// stats line (StatsLog), a scheduled shutdown (its timer, whether clients
-// are told to reconnect, the thread that stops a server nobody else stops)
-// and the notices to every client. The world's part of the admin commands
+// stats line (StatsLog), a scheduled shutdown (its timer, its warnings at
+// intervals, its cancellation, whether clients are told to reconnect, the
+// thread that stops a server nobody else stops), the health it reports
+// (draining while a shutdown is pending) and the notices to every client. The world's part of the admin commands
 // (status, flush, rollback) and the metrics' text come from the Server.
 //
 // Threading: the admin function and notify_all() run on any thread (the
@@ -22,6 +23,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -37,6 +39,10 @@
 #include "server/ops/stats_log.h"
 
 namespace terrane {
+
+// Seconds before a scheduled shutdown at which every client is warned
+// again (besides when it is scheduled).
+inline constexpr std::uint32_t kShutdownWarnings[] = {600, 300, 120, 60, 30, 10, 5};
 
 class Operations {
  public:
@@ -76,8 +82,22 @@ class Operations {
   void start();
   // Sends notice to every welcomed client (control class).
   void notify_all(const ServerNoticeMsg& notice);
-  // Tells every client the server stops in seconds and stops it then.
+  // Tells every client the server stops in seconds, warns them again at
+  // kShutdownWarnings seconds before, and stops it then. A later call
+  // replaces a pending one.
   void schedule_shutdown(std::uint32_t seconds, bool restart, const std::string& reason);
+  // Cancels a pending shutdown and tells every client; false if none was.
+  bool cancel_shutdown();
+  // SIGHUP: reads the tokens file again (a bad one keeps the previous
+  // tokens and the log says why, naming file and line) and the bans and
+  // whitelist from the store; logs what changed. Sessions already joined
+  // stay. Any thread.
+  void reload();
+  // Seconds until a pending shutdown (nullopt: none). Any thread.
+  std::optional<std::uint32_t> shutdown_in() const;
+  // /health: the server's (wiring.health), draining while a shutdown is
+  // pending unless it is failing. Any thread.
+  Health health() const;
 
   // The steps of the server's stop(), in order:
   // no shutdown scheduled or due, and no stats line, from now on;
@@ -96,8 +116,12 @@ class Operations {
   Operations(const OpsOptions& options, std::string metrics_host, asio::io_context& io, SessionTable& sessions,
              const ServerCounters& counters, Wiring wiring);
   AdminHooks hooks();
+  // On strand_: waits for the next warning or the due time of the
+  // shutdown numbered generation.
+  void arm_shutdown(std::uint64_t generation);
 
   const std::string metrics_host_;
+  const std::string tokens_file_;  // options.tokens_file
   const std::function<void(bool restart)> on_shutdown_;  // options.on_shutdown
   SessionTable& sessions_;
   Wiring wiring_;
@@ -110,6 +134,14 @@ class Operations {
   StatsLog stats_;
   asio::strand<asio::io_context::executor_type> strand_;  // the shutdown timer's
   asio::steady_timer shutdown_timer_;
+  // The pending shutdown, on strand_: when it is due, whether it restarts,
+  // why, and its number (a timer's wake-up for an older one is ignored).
+  std::chrono::steady_clock::time_point shutdown_due_;
+  std::string shutdown_reason_;
+  std::uint64_t shutdown_generation_ = 0;
+  // Its due time for other threads (health, status): steady-clock
+  // nanoseconds, 0 = none pending.
+  std::atomic<std::int64_t> shutdown_due_ns_{0};
   std::atomic<bool> stopping_{false};
   // What the last notice tells clients when the server stops: to reconnect
   // (a SIGTERM is usually a restart) unless an operator's shutdown said

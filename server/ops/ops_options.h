@@ -22,6 +22,8 @@ struct OpsOptions {
   // a loopback address unless allow_open says otherwise.
   std::string auth_token;
   std::unordered_map<std::string, PlayerToken> player_tokens;
+  // Where player_tokens came from (read again on SIGHUP); "" = none.
+  std::string tokens_file;
   // Whoever gives this token joins as an admin (terrane-admin), whatever
   // the name; empty = admins only through the tokens file's roles.
   std::string admin_token;

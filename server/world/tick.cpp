@@ -211,7 +211,6 @@ void Tick::apply_edits() {
     if ((edits_.front().rollback ? apply_rollback(t) : apply_player_edit(t)) == EditStep::kStop) break;
   for (; !t.waiting.empty(); t.waiting.pop_back()) edits_.push_front(std::move(t.waiting.back()));
   if (!t.refused.empty()) storage_.answer(std::move(t.refused));
-  counters_.edits_applied.fetch_add(t.acks.size() + t.answers.size(), std::memory_order_relaxed);
 
   std::vector<VersionPtr> versions;
   versions.reserve(t.changed.size());
@@ -222,10 +221,13 @@ void Tick::apply_edits() {
   if (versions.empty() && t.acks.empty() && t.rollbacks.empty() && t.answers.empty()) return;
   ++commits_pending_;
   const std::uint64_t tick = clock_.tick;
+  // Counted once stored: a failed tick's edits are rejected, not applied.
+  const std::uint64_t applied = t.acks.size() + t.answers.size();
   storage_.commit(
       versions, std::move(t.log),
-      [this, tick, versions, acks = std::move(t.acks), rollbacks = std::move(t.rollbacks)](const FileStatus& st) {
-        asio::post(strand_, [this, tick, versions, acks, rollbacks, st] {
+      [this, tick, applied, versions, acks = std::move(t.acks), rollbacks = std::move(t.rollbacks)](const FileStatus& st) {
+        asio::post(strand_, [this, tick, applied, versions, acks, rollbacks, st] {
+          if (st) counters_.edits_applied.fetch_add(applied, std::memory_order_relaxed);
           on_committed(tick, versions, acks, st);
           for (const auto& job : rollbacks)
             job->done(st ? RollbackResult{true, "", tick, job->restored}

@@ -12,7 +12,9 @@
 
 #include <map>
 #include <random>
+#include <regex>
 
+#include "tests/support/json_doc.h"
 #include "tests/support/run_command.h"
 #include "client/client.h"
 #include "tests/support/view_chunks.h"
@@ -54,6 +56,24 @@ class AdminToolTest : public ::testing::Test {
                    " --token '" + token + "' " + args,
                out);
   }
+  // terrane-admin --json ARGS: its exit status; stdout must be exactly one
+  // JSON document (parsed into *doc), whatever the command or its outcome.
+  int admin_json(const std::string& args, testing_support::JsonDoc* doc, const std::string& token = kToken) {
+    std::string out, err;
+    const int status = testing_support::run_command_split(
+        std::string(TERRANE_BIN_DIR) + "/terrane-admin --json --connect 127.0.0.1:" +
+            std::to_string(server_->port()) + " --token '" + token + "' " + args,
+        &out, &err);
+    std::string why;
+    auto parsed = testing_support::parse_json(out, &why);
+    EXPECT_TRUE(parsed.has_value()) << "terrane-admin --json " << args << ": stdout is not one JSON document (" << why
+                                    << "):\n" << out << "\nstderr:\n" << err;
+    if (status != 0 && parsed) {
+      EXPECT_EQ((*parsed)["error"].kind, testing_support::JsonDoc::Kind::kString) << out;
+    }
+    *doc = parsed ? std::move(*parsed) : testing_support::JsonDoc{};
+    return status;
+  }
   ClientOptions player(const std::string& name) const {
     ClientOptions o;
     o.port = server_->port();
@@ -74,12 +94,12 @@ TEST_F(AdminToolTest, CommandsAnswerInTextOrJsonAndSayReachesTheLibrary) {
   ASSERT_TRUE(listener.connect(&err)) << err;
   ASSERT_TRUE(listener.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
 
-  std::string out;
-  ASSERT_EQ(admin("--json status", &out), 0) << out;
-  EXPECT_EQ(out.front(), '{') << out;
+  testing_support::JsonDoc status;
+  ASSERT_EQ(admin_json("status", &status), 0);
   // The listener is a player; the tool is an admin session, not a player.
-  EXPECT_NE(out.find("\"clients\": 1, \"admin_sessions\": 1"), std::string::npos) << out;
-  out.clear();
+  EXPECT_EQ(status["clients"].number, 1);
+  EXPECT_EQ(status["admin_sessions"].number, 1);
+  std::string out;
   ASSERT_EQ(admin("players", &out), 0) << out;
   EXPECT_NE(out.find("listener"), std::string::npos) << out;
   out.clear();
@@ -105,6 +125,134 @@ TEST_F(AdminToolTest, CommandsAnswerInTextOrJsonAndSayReachesTheLibrary) {
   listener.disconnect();
 }
 
+// Every command's --json answer, success or refusal, is one JSON document
+// on stdout (the client library's log lines go to stderr); a refusal is an
+// object with "error" and a non-zero exit status.
+TEST_F(AdminToolTest, JsonOutputIsOneDocumentForEveryCommand) {
+  using testing_support::JsonDoc;
+  fs::create_directories(dir_);
+  const fs::path tokens = dir_.parent_path() / (dir_.filename().string() + ".tokens");
+  {
+    std::FILE* f = std::fopen(tokens.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs("alice alice-token-1 player\nlistener listener-token-1 player\n", f);
+    std::fclose(f);
+  }
+  start_server(0, {"--tokens-file", tokens.string()});
+  ClientOptions lo = player("listener");
+  lo.auth_token = "listener-token-1";
+  Client listener(lo);
+  std::string err;
+  ASSERT_TRUE(listener.connect(&err)) << err;
+  ASSERT_TRUE(listener.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline));
+
+  JsonDoc d;
+  EXPECT_EQ(admin_json("status", &d), 0);
+  EXPECT_EQ(d["clients"].number, 1);
+  EXPECT_FALSE(d["version"].string.empty());
+  EXPECT_EQ(d["address"].string, "127.0.0.1:" + std::to_string(server_->port()));
+  EXPECT_EQ(d["border"].string, "no border");
+  EXPECT_EQ(d["world"].string, dir_.string());
+  EXPECT_EQ(d["shutdown_in_s"].kind, JsonDoc::Kind::kNull);
+  EXPECT_EQ(admin_json("shutdown --in 10m", &d), 0);
+  EXPECT_EQ(admin_json("status", &d), 0);
+  EXPECT_GT(d["shutdown_in_s"].number, 590);
+  EXPECT_EQ(admin_json("shutdown --cancel", &d), 0);
+  EXPECT_TRUE(d["cancelled"].boolean);
+  EXPECT_EQ(admin_json("cancel-shutdown", &d), 1);
+  EXPECT_EQ(admin_json("help", &d), 0);
+  EXPECT_EQ(d["help"].kind, JsonDoc::Kind::kString);
+  EXPECT_EQ(admin_json("players", &d), 0);
+  ASSERT_EQ(d["players"].array.size(), 2u);
+  EXPECT_EQ(admin_json("say hello", &d), 0);
+  EXPECT_EQ(d["said"].string, "hello");
+  EXPECT_EQ(admin_json("kick nobody", &d), 1);
+  EXPECT_NE(d["error"].string.find("no player named 'nobody'"), std::string::npos);
+  EXPECT_EQ(admin_json("ban griefer --for 1h being rude", &d), 0);
+  EXPECT_EQ(d["banned"].string, "griefer");
+  EXPECT_EQ(admin_json("bans", &d), 0);
+  EXPECT_EQ(d["bans"].array.size(), 1u);
+  EXPECT_EQ(admin_json("unban griefer", &d), 0);
+  EXPECT_EQ(admin_json("unban griefer", &d), 1);
+  EXPECT_EQ(admin_json("whitelist add alice", &d), 0);
+  EXPECT_EQ(admin_json("whitelist on", &d), 0);
+  EXPECT_EQ(admin_json("whitelist list", &d), 0);
+  EXPECT_TRUE(d["on"].boolean);
+  EXPECT_EQ(admin_json("whitelist remove alice", &d), 0);
+  EXPECT_EQ(admin_json("whitelist off", &d), 0);
+  EXPECT_EQ(admin_json("whitelist bogus", &d), 1);
+  EXPECT_EQ(admin_json("log --limit 5", &d), 0);
+  EXPECT_EQ(d["edits"].kind, JsonDoc::Kind::kArray);
+  EXPECT_EQ(admin_json("rollback", &d), 1);
+  EXPECT_EQ(admin_json("save", &d), 0);
+  EXPECT_EQ(d["saved_through_tick"].kind, JsonDoc::Kind::kNumber);
+  const fs::path backup = dir_.parent_path() / (dir_.filename().string() + ".backup");
+  fs::remove_all(backup);
+  EXPECT_EQ(admin_json("backup " + backup.string(), &d), 0);
+  EXPECT_EQ(d["backup"].string, backup.string());
+  fs::remove_all(backup);
+  EXPECT_EQ(admin_json("no-such-command", &d), 1);
+  // Refused before any command: a player's token, a wrong token, no server.
+  EXPECT_EQ(admin_json("--name alice status", &d, "alice-token-1"), 1);
+  EXPECT_NE(d["error"].string.find("not an admin"), std::string::npos) << d["error"].string;
+  EXPECT_EQ(admin_json("status", &d, "wrong-token"), 1);
+  EXPECT_NE(d["error"].string.find("authentication failed"), std::string::npos) << d["error"].string;
+  EXPECT_EQ(admin_json("shutdown --in 0", &d), 0);
+  EXPECT_EQ(d["seconds"].number, 0);
+  EXPECT_EQ(server_->wait_exit(kDeadline), 0) << server_->output();
+  EXPECT_EQ(admin_json("status", &d), 1);
+  EXPECT_NE(d["error"].string.find("cannot reach"), std::string::npos) << d["error"].string;
+  server_.reset();
+  fs::remove(tokens);
+  listener.disconnect();
+}
+
+// SIGHUP reads the tokens file again and the server goes on: a new player
+// may join, a removed one may not; a bad file keeps the previous tokens and
+// the log names its file and line.
+TEST_F(AdminToolTest, SighupReloadsTheTokensFileAndABadOneKeepsThePrevious) {
+  fs::create_directories(dir_);
+  const fs::path tokens = dir_.parent_path() / (dir_.filename().string() + ".tokens");
+  auto write = [&](const std::string& text) {
+    std::FILE* f = std::fopen(tokens.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+  };
+  write("alice alice-token-1\nbob bob-token-1\n");
+  start_server(0, {"--tokens-file", tokens.string()});
+  auto joins = [&](const std::string& name, const std::string& token) {
+    ClientOptions o = player(name);
+    o.auth_token = token;
+    o.stream = false;
+    Client c(o);
+    std::string err;
+    if (!c.connect(&err)) return false;
+    c.wait_until([](const ClientView& v) { return v.welcomed || v.closed; }, kDeadline);
+    const bool welcomed = c.welcome().has_value();
+    c.disconnect();
+    return welcomed;
+  };
+  EXPECT_TRUE(joins("bob", "bob-token-1"));
+  EXPECT_FALSE(joins("carol", "carol-token-1"));
+
+  write("alice alice-token-1\ncarol carol-token-1  # joined in May\n");
+  ASSERT_TRUE(server_->hangup());
+  ASSERT_TRUE(server_->wait_for_output("reload: tokens: +carol -bob", kDeadline)) << server_->output();
+  EXPECT_TRUE(joins("carol", "carol-token-1"));
+  EXPECT_FALSE(joins("bob", "bob-token-1"));
+
+  write("alice alice-token-1\ncarol carol-token-1 superuser\n");
+  ASSERT_TRUE(server_->hangup());
+  ASSERT_TRUE(server_->wait_for_output("reload: keeping the previous tokens: " + tokens.string() + ":2:", kDeadline))
+      << server_->output();
+  EXPECT_TRUE(joins("carol", "carol-token-1"));
+  EXPECT_TRUE(joins("alice", "alice-token-1"));
+  EXPECT_EQ(server_->stop(), 0);  // SIGHUP did not stop it; SIGTERM does, cleanly
+  server_.reset();
+  fs::remove(tokens);
+}
+
 TEST_F(AdminToolTest, ShutdownWithRestartBringsTheLibraryBackByItself) {
   start_server();
   const std::uint16_t port = server_->port();
@@ -123,6 +271,12 @@ TEST_F(AdminToolTest, ShutdownWithRestartBringsTheLibraryBackByItself) {
   // exits 0 (below).
   ASSERT_EQ(server_->wait_exit(kDeadline), 75) << server_->output();
   EXPECT_NE(server_->output().find("world saved"), std::string::npos) << server_->output();
+  // Its lines carry the time zone (the offset from UTC).
+  EXPECT_TRUE(std::regex_search(server_->output(), std::regex(R"(\[\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3} [+-]\d\d:\d\d\] \[server\])")))
+      << server_->output();
+  // It says why it stopped: no signal came.
+  EXPECT_NE(server_->output().find("shutting down: an operator's shutdown"), std::string::npos) << server_->output();
+  EXPECT_EQ(server_->output().find("signal 15"), std::string::npos) << server_->output();
   ASSERT_TRUE(c.wait_until(
       [](const ClientView& v) {
         return v.closed || (!v.notices.empty() && v.notices.back().kind == wire::NoticeKind::Shutdown);
@@ -225,15 +379,16 @@ TEST_F(AdminToolTest, RollbackRestoresExactlyTheGriefersVoxels) {
     ASSERT_NO_FATAL_FAILURE(edit(*griefer, true, solid(i % 2 ? materials::kSnow : materials::kSand), 3));
   for (int i = 0; i < 20; ++i) ASSERT_NO_FATAL_FAILURE(edit(*builder, false, rock, 4));
 
-  std::string out;
-  ASSERT_EQ(admin("--json log --player griefer --limit 5", &out), 0) << out;
-  EXPECT_NE(out.find("\"player\": \"griefer\""), std::string::npos) << out;
-  EXPECT_EQ(out.find("\"player\": \"builder\""), std::string::npos) << out;
+  testing_support::JsonDoc log;
+  ASSERT_EQ(admin_json("log --player griefer --limit 5", &log), 0);
+  ASSERT_EQ(log["edits"].array.size(), 5u);
+  for (const auto& e : log["edits"].array) EXPECT_EQ(e["player"].string, "griefer");
   // Edits that changed nothing are not logged: the log holds the rest.
-  out.clear();
-  ASSERT_EQ(admin("--json log --player griefer --limit 1000", &out), 0) << out;
+  ASSERT_EQ(admin_json("log --player griefer --limit 1000", &log), 0);
   std::size_t logged = 0;
-  for (std::size_t at = 0; (at = out.find("\"player\": \"griefer\"", at)) != std::string::npos; ++at) ++logged;
+  for (const auto& e : log["edits"].array) logged += e["player"].string == "griefer" ? 1 : 0;
+  EXPECT_EQ(logged, log["edits"].array.size());
+  std::string out;
   EXPECT_GT(logged, 150u);
   EXPECT_LE(logged, 200u);
   out.clear();

@@ -94,6 +94,24 @@ TEST_F(ServerTest, WrongAuthTokenIsRejected) {
   EXPECT_EQ(*parse_disconnect(*msg(*f).body_as_Disconnect()), "authentication failed");
 }
 
+// The same player joining twice: the newer session wins, the older one is
+// told why and closed (as Minecraft does); another player is untouched.
+TEST_F(ServerTest, TheSamePlayerJoiningAgainEndsTheOlderSession) {
+  start();
+  auto older = join("alice");
+  auto bob = join("bob");
+  auto newer = join("alice");
+  auto f = older->next_of(wire::Body::Disconnect);
+  ASSERT_TRUE(f.has_value());
+  EXPECT_EQ(*parse_disconnect(*msg(*f).body_as_Disconnect()),
+            "logged in from another location: the same player joined again");
+  EXPECT_TRUE(testing_support::eventually([&] { return server_->metrics_text().find(
+      "terrane_disconnects_total{reason=\"replaced\"} 1") != std::string::npos; }));
+  // The newer session and bob still work: each is streamed a chunk.
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  for (RawPeer* p : {newer.get(), bob.get()}) EXPECT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+}
+
 TEST_F(ServerTest, MessageBeforeHelloIsAProtocolError) {
   start();
   RawPeer p(server_->port());
@@ -940,6 +958,9 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   std::atomic<bool> fatal{false};  // set on the world thread, read here
   ServerOptions o;
   o.world.on_fatal = [&] { fatal = true; };
+  std::ostringstream log;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  server_log().sinks().push_back(sink);
   start(o);
   auto p = join("editor");
   const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
@@ -980,9 +1001,15 @@ TEST_F(ServerTest, ATickThatCannotBeSavedIsNeitherAcknowledgedNorShown) {
   EXPECT_EQ(reason, "server storage failure");
   EXPECT_TRUE(fatal.load());  // called before any client is told
   EXPECT_TRUE(server_->storage_failed());
-  EXPECT_FALSE(server_->health().ok);  // /health answers 503
+  // The rejected edit is not counted as applied.
+  EXPECT_EQ(server_->counters().edits_applied.load(), 0u);
+  EXPECT_FALSE(server_->health().ok());  // /health answers 503
   EXPECT_NE(server_->health().text.find("storage failed"), std::string::npos) << server_->health().text;
   server_->stop();
+  server_log().sinks().pop_back();
+  // The last line says the world was not saved, never that it was.
+  EXPECT_EQ(log.str().find("world saved"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("world NOT saved"), std::string::npos) << log.str();
   auto world = World::open(dir_.string());
   ASSERT_TRUE(world.ok());
   auto stored = (*world)->load_chunk(cp);

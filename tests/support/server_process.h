@@ -42,6 +42,8 @@ class ServerProcess {
   // SIGSTOP / SIGCONT: the server paused and resumed (nothing runs between).
   bool pause() { return child_.signal(SIGSTOP); }
   bool resume() { return child_.signal(SIGCONT); }
+  // SIGHUP: the server reads its tokens file, bans and whitelist again.
+  bool hangup() { return child_.signal(SIGHUP); }
   // Waits for it to exit by itself: its exit status, or -1 if it had not
   // within timeout (it is then stopped).
   int wait_exit(std::chrono::seconds timeout) { return child_.wait(timeout); }

@@ -621,7 +621,7 @@ TEST_F(ClusterTest, HealthIsUnavailableWhileTheDatabaseIsDownAndOkOnceItIsBack) 
   ASSERT_TRUE(wait_full_resolution(ann, second));
   std::string body;
   ASSERT_TRUE(testing_support::eventually([&] { return health(&body) == 200; }, kDeadline)) << body;
-  EXPECT_EQ(body, "ok\n");
+  EXPECT_EQ(body, "ready\n");
   // Started again however the test ends: the suite's later tests use it.
   struct Again {
     testing_support::ScratchPostgres& pg;

@@ -113,5 +113,41 @@ TEST_F(AccessTest, BansSurviveAReopenAndUnbanLiftsANetwork) {
   EXPECT_EQ(refused("griefer", "127.0.0.1"), "banned");
 }
 
+// reload(): new tokens taken, the bans and whitelist another connection
+// wrote to the store read again, and what changed said, a line per kind.
+TEST_F(AccessTest, AReloadTakesNewTokensAndTheStoresListsAndSaysWhatChanged) {
+  auto store = SqliteStore::open(dir_.string());
+  ASSERT_TRUE(store.ok()) << store.error().message;
+  auto a = AccessControl::open(std::move(*store), "", {{"alice", {"alice-token", false}}, {"bob", {"bob-token", false}}},
+                               "");
+  ASSERT_TRUE(a.ok()) << a.error().message;
+  std::unique_ptr<AccessControl> tokens = std::move(*a);
+  EXPECT_TRUE(tokens->admit("bob", "bob-token", "127.0.0.1", kNow).ok);
+  EXPECT_FALSE(tokens->admit("carol", "carol-token", "127.0.0.1", kNow).ok);
+  // Another process (here: the fixture's AccessControl) bans and lists.
+  ban("griefer", false, 0, "tunnelling");
+  ASSERT_TRUE(access_->whitelist_add("alice").ok());
+  ASSERT_TRUE(access_->set_whitelist(true).ok());
+  EXPECT_TRUE(tokens->admit("griefer", "", "127.0.0.1", kNow).reason == "authentication failed");
+
+  auto changed = tokens->reload(std::unordered_map<std::string, PlayerToken>{
+      {"alice", {"alice-token-2", true}}, {"carol", {"carol-token", false}}, {"griefer", {"g", false}}});
+  ASSERT_TRUE(changed.ok()) << changed.error().message;
+  EXPECT_EQ(*changed, (std::vector<std::string>{"tokens: +carol +griefer -bob ~alice", "bans: +griefer",
+                                                "whitelist: +alice", "whitelist turned on"}));
+  EXPECT_FALSE(tokens->admit("bob", "bob-token", "127.0.0.1", kNow).ok);
+  EXPECT_FALSE(tokens->admit("alice", "alice-token", "127.0.0.1", kNow).ok);
+  const Admission alice = tokens->admit("alice", "alice-token-2", "127.0.0.1", kNow);
+  EXPECT_TRUE(alice.ok && alice.admin);
+  EXPECT_EQ(tokens->admit("carol", "carol-token", "127.0.0.1", kNow).reason,
+            "not on the whitelist: the server admits listed players only (ask an operator)");
+  EXPECT_EQ(tokens->admit("griefer", "g", "127.0.0.1", kNow).reason, "banned: tunnelling");
+  // Nothing new: nothing said; no tokens given: the tokens stay.
+  changed = tokens->reload(std::nullopt);
+  ASSERT_TRUE(changed.ok());
+  EXPECT_TRUE(changed->empty());
+  EXPECT_TRUE(tokens->admit("alice", "alice-token-2", "127.0.0.1", kNow).ok);
+}
+
 }  // namespace
 }  // namespace terrane

@@ -113,15 +113,17 @@ TEST(Metrics, EveryFamilyHasHelpAndTypeAndHistogramsAreCumulative) {
 TEST(Metrics, HealthWantsRecentTicksAndAWorkingStore) {
   ServerCounters c;
   const auto now = std::chrono::steady_clock::now();
-  EXPECT_FALSE(check_health(c, false, 20, now).ok);  // not ticking yet
+  EXPECT_FALSE(check_health(c, false, 20, now).ok());  // not ticking yet
+  EXPECT_EQ(check_health(c, false, 20, now).state, HealthState::kStarting);
   c.last_tick_at_ns = steady_ns(now);
-  EXPECT_TRUE(check_health(c, false, 20, now + 900ms).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now + 900ms).ok());
   const Health late = check_health(c, false, 20, now + 1500ms);
-  EXPECT_FALSE(late.ok);
+  EXPECT_FALSE(late.ok());
+  EXPECT_EQ(late.state, HealthState::kFailing);
   EXPECT_NE(late.text.find("no tick for 1500 ms"), std::string::npos) << late.text;
-  EXPECT_TRUE(check_health(c, false, 1, now + 9s).ok);  // 1 Hz: ten periods allowed
+  EXPECT_TRUE(check_health(c, false, 1, now + 9s).ok());  // 1 Hz: ten periods allowed
   const Health failed = check_health(c, true, 20, now);
-  EXPECT_FALSE(failed.ok);
+  EXPECT_FALSE(failed.ok());
   EXPECT_NE(failed.text.find("storage failed"), std::string::npos);
 }
 
@@ -131,17 +133,17 @@ TEST(Metrics, HealthWantsASharedWorldsDatabaseWithinReach) {
   c.last_tick_at_ns = steady_ns(now);
   DatabaseCounters& db = c.database;
   db.lease_renewed_at_ns = steady_ns(now);
-  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok());
   // Renewals: two periods may pass, not more.
-  EXPECT_TRUE(check_health(c, false, 20, now + 900ms, 1000ms).ok) << check_health(c, false, 20, now + 900ms, 1000ms).text;
+  EXPECT_TRUE(check_health(c, false, 20, now + 900ms, 1000ms).ok()) << check_health(c, false, 20, now + 900ms, 1000ms).text;
   db.lease_renewed_at_ns = steady_ns(now - 1900ms);
-  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok());
   db.lease_renewed_at_ns = steady_ns(now - 2100ms);
   const Health lagging = check_health(c, false, 20, now, 1000ms);
-  EXPECT_FALSE(lagging.ok);
+  EXPECT_FALSE(lagging.ok());
   EXPECT_NE(lagging.text.find("leases not renewed for 2100 ms"), std::string::npos) << lagging.text;
   // A world directory has no leases: the same counters mean nothing there.
-  EXPECT_TRUE(check_health(c, false, 20, now).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now).ok());
   db.lease_renewed_at_ns = steady_ns(now);
   // A commit tried again: the world's changes wait (SQLite's commits are
   // never tried again; the counter stays 0 there).
@@ -149,27 +151,27 @@ TEST(Metrics, HealthWantsASharedWorldsDatabaseWithinReach) {
   db.commit_retries = 3;
   for (const auto renewal : {1000ms, 0ms}) {
     const Health retrying = check_health(c, false, 20, now, renewal);
-    EXPECT_FALSE(retrying.ok);
+    EXPECT_FALSE(retrying.ok());
     EXPECT_NE(retrying.text.find("storage retrying"), std::string::npos) << retrying.text;
     EXPECT_NE(retrying.text.find("3 failed attempts"), std::string::npos) << retrying.text;
   }
   db.commits_retrying = 0;
-  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok());
   db.listener_down = 1;
   const Health deaf = check_health(c, false, 20, now, 1000ms);
-  EXPECT_FALSE(deaf.ok);
+  EXPECT_FALSE(deaf.ok());
   EXPECT_NE(deaf.text.find("database connection broken"), std::string::npos) << deaf.text;
   db.listener_down = 0;
   db.inbox_failing = 1;
   const Health inbox = check_health(c, false, 20, now, 1000ms);
-  EXPECT_FALSE(inbox.ok);
+  EXPECT_FALSE(inbox.ok());
   EXPECT_NE(inbox.text.find("inbox"), std::string::npos) << inbox.text;
   db.inbox_failing = 0;
-  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok);
+  EXPECT_TRUE(check_health(c, false, 20, now, 1000ms).ok());
   // A failed commit says so, whatever else is wrong; every reason is one line.
   db.listener_down = 1;
   const Health failed = check_health(c, true, 20, now, 1000ms);
-  EXPECT_FALSE(failed.ok);
+  EXPECT_FALSE(failed.ok());
   EXPECT_NE(failed.text.find("storage failed"), std::string::npos) << failed.text;
   for (const Health& h : {lagging, deaf, inbox, failed}) EXPECT_EQ(h.text.find('\n'), std::string::npos) << h.text;
 }
@@ -204,6 +206,25 @@ TEST(Metrics, HostPortIsParsedOrNamedWrong) {
   EXPECT_NE(parse_host_port("localhost:70000").error().message.find("port must be a number"), std::string::npos);
 }
 
+// A world directory on a file system with less free space than
+// --min-free-mb: the server refuses to start and says why.
+TEST(Metrics, TooLittleFreeSpaceRefusesTheStart) {
+  const auto dir = testing_support::scratch_dir("terrane-free-space");
+  ServerOptions o;
+  o.world_dir = (dir / "world").string();
+  o.storage.min_free_mb = std::uint64_t{1} << 40;  // a million TiB: more than any disk here
+  auto server = Server::create(o);
+  ASSERT_FALSE(server.ok());
+  EXPECT_NE(server.error().message.find("MiB free on its file system, below --min-free-mb 1099511627776"),
+            std::string::npos)
+      << server.error().message;
+  o.storage.min_free_mb = 0;  // no check
+  auto started = Server::create(o);
+  ASSERT_TRUE(started.ok()) << started.error().message;
+  started->reset();
+  std::filesystem::remove_all(dir);
+}
+
 class MetricsEndpointTest : public ServerTest {
  protected:
   std::string get(const std::string& path, int* status = nullptr) {
@@ -236,14 +257,18 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   testing_support::eventually([&] {
     health = get("/health", &status);
     if (status != 200) {
-      EXPECT_EQ(health, "not ticking yet\n");
+      EXPECT_EQ(health, "starting: not ticking yet\n");
     }
     return status == 200;
   });
   EXPECT_EQ(status, 200);
-  EXPECT_EQ(health, "ok\n");
+  EXPECT_EQ(health, "ready\n");
   const std::string before = get("/metrics");
   expect_promtool_accepts(before);
+  // The state as a gauge, and the world directory's free space.
+  EXPECT_EQ(sample(before, "terrane_health_state{state=\"ready\"}"), 1);
+  EXPECT_EQ(sample(before, "terrane_health_state{state=\"starting\"}"), 0);
+  EXPECT_GT(sample(before, "terrane_disk_free_bytes").value_or(0), 0);
   EXPECT_EQ(sample(before, "terrane_joins_total"), 0);
   EXPECT_EQ(sample(before, "terrane_edits_applied_total"), 0);
 

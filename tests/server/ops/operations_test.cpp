@@ -63,7 +63,7 @@ class OperationsTest : public ::testing::Test {
       return s;
     };
     w.metrics = [] { return std::string("terrane_test_metric 1\n"); };
-    w.health = [this] { return healthy_ ? Health{true, "ok"} : Health{false, "storage failed"}; };
+    w.health = [this] { return healthy_ ? Health{HealthState::kReady, "ok"} : Health{HealthState::kFailing, "storage failed"}; };
     w.stop = [this] { ++stops_; };
     auto ops = Operations::open(options, world_->store(), (dir_ / "world").string(), io_, sessions_, counters_,
                                 std::move(w));
@@ -179,7 +179,7 @@ TEST_F(OperationsTest, ServesMetricsAndHealthAsTheServerGivesThem) {
   httplib::Client http("127.0.0.1", ops_->metrics_port());
   auto metrics = http.Get("/metrics");
   ASSERT_TRUE(metrics) << httplib::to_string(metrics.error());
-  EXPECT_EQ(metrics->body, "terrane_test_metric 1\n");
+  EXPECT_EQ(metrics->body.rfind("terrane_test_metric 1\n", 0), 0u) << metrics->body;
   auto health = http.Get("/health");
   ASSERT_TRUE(health);
   EXPECT_EQ(health->status, 200);
@@ -188,6 +188,84 @@ TEST_F(OperationsTest, ServesMetricsAndHealthAsTheServerGivesThem) {
   ASSERT_TRUE(health);
   EXPECT_EQ(health->status, 503);
   EXPECT_NE(health->body.find("storage failed"), std::string::npos);
+}
+
+// /health names its state: ready (200), draining while a shutdown is
+// pending (503), ready again once it is cancelled, failing (503) whatever
+// is pending; as text, as JSON, and as the terrane_health_state gauge.
+TEST_F(OperationsTest, HealthSaysReadyDrainingOrFailingAndTheGaugeAgrees) {
+  OpsOptions o;
+  o.metrics_address = "127.0.0.1:0";
+  open(o);
+  ops_->start();
+  auto alice = join("alice");
+  httplib::Client http("127.0.0.1", ops_->metrics_port());
+  auto get = [&](const std::string& path, int* status) {
+    auto r = http.Get(path);
+    EXPECT_TRUE(r) << httplib::to_string(r.error());
+    if (!r) return std::string();
+    *status = r->status;
+    return r->body;
+  };
+  int status = 0;
+  EXPECT_EQ(get("/health", &status), "ready\n");
+  EXPECT_EQ(status, 200);
+  EXPECT_EQ(get("/health?format=json", &status), "{\"state\": \"ready\", \"reason\": \"ok\"}\n");
+  EXPECT_NE(get("/metrics", &status).find("terrane_health_state{state=\"ready\"} 1\n"), std::string::npos);
+
+  ops_->schedule_shutdown(3600, false, "maintenance");
+  EXPECT_EQ(notice(*alice).seconds_left, 3600u);
+  std::string body = get("/health", &status);
+  EXPECT_EQ(status, 503);
+  EXPECT_EQ(body.rfind("draining: shutdown pending: stopping in 36", 0), 0u) << body;
+  EXPECT_EQ(get("/health?format=json", &status).rfind("{\"state\": \"draining\", \"reason\": \"shutdown pending", 0), 0u);
+  body = get("/metrics", &status);
+  EXPECT_NE(body.find("terrane_health_state{state=\"draining\"} 1\n"), std::string::npos) << body;
+  EXPECT_NE(body.find("terrane_health_state{state=\"ready\"} 0\n"), std::string::npos) << body;
+  healthy_ = false;  // failing beats draining
+  EXPECT_EQ(get("/health", &status), "failing: storage failed\n");
+  EXPECT_EQ(status, 503);
+  healthy_ = true;
+
+  const AdminResultMsg cancelled = command("cancel-shutdown");
+  EXPECT_TRUE(cancelled.ok) << cancelled.text;
+  const ServerNoticeMsg told = notice(*alice);
+  EXPECT_EQ(told.kind, wire::NoticeKind::Say);
+  EXPECT_EQ(told.text, "the scheduled shutdown is cancelled");
+  EXPECT_EQ(get("/health", &status), "ready\n");
+  EXPECT_EQ(status, 200);
+  const AdminResultMsg none = command("cancel-shutdown");
+  EXPECT_FALSE(none.ok);
+  EXPECT_EQ(none.text, "no shutdown is pending");
+}
+
+// A cancelled shutdown never stops the server: the io thread ends once no
+// timer waits, and none fired.
+TEST_F(OperationsTest, ACancelledShutdownNeverStopsTheServer) {
+  open();
+  ops_->schedule_shutdown(1, false, "");
+  EXPECT_TRUE(ops_->shutdown_in().has_value());
+  ASSERT_TRUE(ops_->cancel_shutdown());
+  EXPECT_FALSE(ops_->shutdown_in().has_value());
+  EXPECT_FALSE(ops_->cancel_shutdown());
+  work_.reset();
+  thread_.join();
+  EXPECT_EQ(stops_.load(), 0);
+}
+
+// A scheduled shutdown warns again at the marks before it is due (here 5 s
+// before: scheduled in 6 s), then stops the server.
+TEST_F(OperationsTest, AShutdownWarnsAgainAtIntervals) {
+  open();
+  auto alice = join("alice");
+  ops_->schedule_shutdown(6, true, "upgrade");
+  EXPECT_EQ(notice(*alice).seconds_left, 6u);
+  const ServerNoticeMsg again = notice(*alice);  // 5 s before
+  EXPECT_EQ(again.kind, wire::NoticeKind::Shutdown);
+  EXPECT_EQ(again.seconds_left, 5u);
+  EXPECT_TRUE(again.reconnect);
+  EXPECT_EQ(again.text, "server stopping in 5 s and restarting: upgrade");
+  ASSERT_TRUE(eventually([&] { return stops_.load() == 1; }));
 }
 
 TEST_F(OperationsTest, ABadMetricsAddressIsRefused) {
