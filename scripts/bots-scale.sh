@@ -13,6 +13,11 @@
 #          start once every bot has joined (--wait-joined); world:
 #          worlds/world4k (terrane-world generate --world worlds/world4k
 #          --box -2048,-128,-2048,2048,256,2048).
+#   join   the world scenario's joins alone: idle bots (no edits, no
+#          walking) join at 5 a second, then 10 s; the report's "per join"
+#          row is the server's CPU, records and stream bytes per joining
+#          bot, from the first connection until every bot joined at full
+#          resolution; world: worlds/world4k.
 #   wave   the world scenario measured from the first connection
 #          (--measure-from start): edits and their fan-out while the bots
 #          join at 5 a second, then the 60 s after the last join; world:
@@ -21,7 +26,7 @@
 # from its metrics endpoint), the bots' and the server's peak memory and CPU
 # time (/proc of the server just before it is stopped; GNU time for the
 # bots). The server's log is kept beside the report (REPORT.server.log).
-#   scripts/bots-scale.sh [crowd|world] N [REPORT.json] [extra terrane-bots flags...]
+#   scripts/bots-scale.sh [crowd|world|join|wave] N [REPORT.json] [extra terrane-bots flags...]
 # (A first argument that is a number means crowd.) Expects a release build.
 # TERRANE_SCALE_TOKEN=T runs the server with --auth-token T and every bot
 # with --token T (authentication on; limits are always on at their
@@ -30,12 +35,13 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scenario=crowd
 case "${1:-}" in
-  crowd|world|wave) scenario=$1; shift ;;
+  crowd|world|join|wave) scenario=$1; shift ;;
 esac
-bots=${1:?usage: scripts/bots-scale.sh [crowd|world|wave] N [REPORT.json] [flags...]}
+bots=${1:?usage: scripts/bots-scale.sh [crowd|world|join|wave] N [REPORT.json] [flags...]}
 report=${2:-reports/$scenario-$bots.json}
 shift $(( $# >= 2 ? 2 : 1 ))
 duration=60
+behavior=mixed
 if [ "$scenario" = crowd ]; then
   world=${TERRANE_WORLD:-worlds/scale}
   scenario_flags=(--spread 512 --ramp-up 20)
@@ -44,6 +50,10 @@ else
   spread=$(awk -v n="$bots" 'BEGIN { printf "%d", 3072 * sqrt(n / 1000) }')
   ramp=$(( (bots + 4) / 5 ))
   if [ "$scenario" = world ]; then
+    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --wait-joined 600)
+  elif [ "$scenario" = join ]; then
+    duration=10
+    behavior=idle
     scenario_flags=(--spread "$spread" --ramp-up "$ramp" --wait-joined 600)
   else
     duration=$(( ramp + 60 ))
@@ -83,7 +93,7 @@ status=0
 # The bots' own peak memory and CPU, when GNU time is installed.
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
-"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration "$duration" --behavior mixed \
+"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration "$duration" --behavior "$behavior" \
   "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
   --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 

@@ -166,6 +166,14 @@ ServerFigures read_server(FlatReader& in) {
   f.stream_gate_closed_s = in.number(k + ".stream_gate_closed_s");
   f.scrapes = in.integer(k + ".scrapes");
   f.scrape_errors = in.integer(k + ".scrape_errors");
+  if (in.has(k + ".joins.cpu_s")) {
+    JoinCost c;
+    c.wall_s = in.number(k + ".joins.wall_s");
+    c.cpu_s = in.number(k + ".joins.cpu_s");
+    c.records = in.whole(k + ".joins.records");
+    c.stream_bytes = in.whole(k + ".joins.stream_bytes");
+    f.joins = c;
+  }
   for (const std::string& type : in.children(k + ".sent_by_type"))
     f.sent_by_type[type] = {in.whole(k + ".sent_by_type." + type + ".frames"),
                             in.whole(k + ".sent_by_type." + type + ".bytes")};

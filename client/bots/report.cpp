@@ -55,7 +55,13 @@ std::string server_json(const ServerFigures& f) {
     << ", \"edit_ack_p99_ms_bound\": " << json_opt(f.edit_ack_p99_ms)
     << ", \"stream_gate_closings\": " << f.stream_gate_closings
     << ", \"stream_gate_closed_s\": " << num(f.stream_gate_closed_s) << ", \"scrapes\": " << f.scrapes
-    << ", \"scrape_errors\": " << f.scrape_errors << ", \"sent_by_type\": {";
+    << ", \"scrape_errors\": " << f.scrape_errors << ", \"joins\": ";
+  if (f.joins)
+    j << "{\"wall_s\": " << num(f.joins->wall_s) << ", \"cpu_s\": " << num(f.joins->cpu_s)
+      << ", \"records\": " << f.joins->records << ", \"stream_bytes\": " << f.joins->stream_bytes << "}";
+  else
+    j << "null";
+  j << ", \"sent_by_type\": {";
   bool first = true;
   for (const auto& [type, fb] : f.sent_by_type) {
     j << (first ? "" : ", ") << "\"" << esc(type) << "\": {\"frames\": " << fb.first << ", \"bytes\": " << fb.second << "}";
@@ -350,6 +356,18 @@ std::string report_table(const BotsReport& r) {
     row("  streaming paused (server behind)",
         std::to_string(f.stream_gate_closings) + " times, " + fixed(f.stream_gate_closed_s, 1) + " s in all");
     row("  sessions ended", std::to_string(f.disconnects));
+    if (f.joins) {
+      // Per join: over the bots that joined (walking and editing ones
+      // included, so an idle run gives the join alone).
+      const double joined = std::max(1, r.bots - r.joins_incomplete);
+      row("  until every bot joined: CPU / records",
+          fixed(f.joins->cpu_s, 1) + " s over " + fixed(f.joins->wall_s, 1) + " s / " + std::to_string(f.joins->records) +
+              " (" + std::to_string(f.joins->stream_bytes / 1000000) + " MB streamed)");
+      row("  per join: server CPU / records / bytes", fixed(1000 * f.joins->cpu_s / joined, 1) + " ms / " +
+                                                          fixed(static_cast<double>(f.joins->records) / joined, 0) + " / " +
+                                                          fixed(static_cast<double>(f.joins->stream_bytes) / joined / 1000, 0) +
+                                                          " kB");
+    }
     std::snprintf(line, sizeof line, "    %-20s %12s %14s\n", "sent by type", "frames", "bytes");
     t << line;
     for (const auto& [type, fb] : f.sent_by_type) {

@@ -263,6 +263,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
       t0 + ramp + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.join_timeout_s));
   auto next_step = t0;
   std::size_t phase = 0;
+  bool joins_marked = false;
   for (auto now = Clock::now(); !joins_done || now < end_active; now = Clock::now()) {
     while (next_bot < bots.size() &&
            now >= t0 + ramp * static_cast<Clock::rep>(bots[next_bot]->index()) / static_cast<Clock::rep>(o.bots)) {
@@ -275,6 +276,11 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     for (Bot* b : by_phase[phase]) b->step(now, true);
     phase = (phase + 1) % static_cast<std::size_t>(kStepPhases);
     once_a_second(now);
+    if (watch && !joins_marked && next_bot == bots.size() && phase == 0 &&
+        std::all_of(bots.begin(), bots.end(), [](const auto& b) { return b->join_settled(); })) {
+      joins_marked = true;  // the server's cost of the joins ends here (JoinCost)
+      watch->mark_joined();
+    }
     if (!joins_done && next_bot == bots.size() && phase == 0) {
       // A bot whose connect failed is settled too: waiting for it held a
       // run up for the whole --wait-joined.

@@ -186,6 +186,29 @@ void ServerWatch::stop() {
   scrape(nullptr);
 }
 
+void ServerWatch::mark_joined() {
+  {
+    std::lock_guard lock(m_);
+    if (joined_ || stopping_) return;
+  }
+  if (!scrape(nullptr)) return;
+  std::lock_guard lock(m_);
+  if (!joined_) {
+    joined_ = last_;
+    joined_at_s_ = last_at_s_;
+  }
+}
+
+JoinCost join_cost(const Scrape& first, double first_at_s, const Scrape& joined, double joined_at_s) {
+  JoinCost c;
+  c.wall_s = std::max(0.0, joined_at_s - first_at_s);
+  c.cpu_s = cpu_seconds(first, joined);
+  c.records = family_growth(first, joined, "terrane_streamed_chunks_total") +
+              growth(first, joined, "terrane_horizon_images_sent_total");
+  c.stream_bytes = growth(first, joined, "terrane_sent_bytes_total{type=\"StreamBatch\"}");
+  return c;
+}
+
 ServerFigures ServerWatch::figures() const {
   std::lock_guard lock(m_);
   ServerFigures f;
@@ -193,6 +216,7 @@ ServerFigures ServerWatch::figures() const {
   f.scrape_errors = errors_;
   f.first_error = first_error_;
   if (scrapes_ == 0) return f;
+  if (joined_) f.joins = join_cost(first_, first_at_s_, *joined_, joined_at_s_);
   f.wall_s = last_at_s_ - first_at_s_;
   f.cpu_s = cpu_seconds(first_, last_);
   f.rss_peak = rss_peak_;

@@ -45,6 +45,15 @@ struct ServerInterval {
 };
 ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s);
 
+// The server from the first scrape to the one taken once every bot had
+// joined at full resolution (ServerWatch::mark_joined): what the joins cost
+// it. Records: chunk records streamed (full, mip, empty, estimate) and
+// region horizon images.
+struct JoinCost {
+  double wall_s = 0, cpu_s = 0;
+  std::uint64_t records = 0, stream_bytes = 0;
+};
+
 struct ServerFigures {
   double wall_s = 0;             // between the first and last scrape
   double cpu_s = 0;              // process_cpu_seconds_total growth
@@ -59,9 +68,12 @@ struct ServerFigures {
   std::uint64_t stream_gate_closings = 0;
   double stream_gate_closed_s = 0;
   std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> sent_by_type;  // frames, bytes
+  std::optional<JoinCost> joins;  // once mark_joined() was called
   int scrapes = 0, scrape_errors = 0;
   std::string first_error;
 };
+
+JoinCost join_cost(const Scrape& first, double first_at_s, const Scrape& joined, double joined_at_s);
 
 class ServerWatch {
  public:
@@ -75,6 +87,9 @@ class ServerWatch {
   bool start(std::string* error);
   // Scrapes a last time and stops the thread.
   void stop();
+  // Scrapes now and keeps it as the end of the joins (JoinCost); the first
+  // call counts.
+  void mark_joined();
   ServerFigures figures() const;
   // The server from the scrape the previous call ended at (the first
   // scrape, at the first call) to the newest; nullopt when no scrape came
@@ -94,6 +109,8 @@ class ServerWatch {
   // mark_: where the next interval starts (the first scrape, then the
   // newest at each next_interval()).
   Scrape first_, last_, mark_;
+  std::optional<Scrape> joined_;
+  double joined_at_s_ = 0;
   double first_at_s_ = 0, last_at_s_ = 0, mark_at_s_ = 0;
   std::uint64_t rss_peak_ = 0;
   int scrapes_ = 0, errors_ = 0;

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "client/bots/bot.h"
+#include "client/bots/merge.h"
 #include "client/client.h"
 #include "client/bots/options.h"
 #include "client/bots/report.h"
@@ -128,6 +129,24 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_GT(r.server->rss_peak, 0u);
   EXPECT_GT(r.server->ticks, 0u);
   EXPECT_TRUE(r.server->tick_p99_ms.has_value());
+  // What the joins cost the server: scraped once every bot joined, within
+  // the run, with at least one record streamed to each of the 20 bots.
+  ASSERT_TRUE(r.server->joins.has_value());
+  EXPECT_GT(r.server->joins->cpu_s, 0);
+  EXPECT_LE(r.server->joins->cpu_s, r.server->cpu_s);
+  EXPECT_LE(r.server->joins->wall_s, r.server->wall_s);
+  EXPECT_GE(r.server->joins->records, 20u);
+  EXPECT_GT(r.server->joins->stream_bytes, 0u);
+  EXPECT_LE(r.server->joins->stream_bytes, r.server->sent_by_type.at("StreamBatch").second);
+  {  // and the JSON report carries it through merge's reader
+    BotsReport back;
+    ASSERT_EQ(report_from_json(report_json(r), &back), "");
+    ASSERT_TRUE(back.server && back.server->joins);
+    EXPECT_EQ(back.server->joins->records, r.server->joins->records);
+    EXPECT_EQ(back.server->joins->stream_bytes, r.server->joins->stream_bytes);
+    EXPECT_NEAR(back.server->joins->cpu_s, r.server->joins->cpu_s, 1e-3);
+  }
+  EXPECT_NE(report_table(r).find("per join: server CPU / records / bytes"), std::string::npos);
   EXPECT_TRUE(r.server->commit_p99_ms.has_value());
   // The server's share of an edit's round trip: it waits for a tick, so
   // more than nothing.
@@ -788,6 +807,23 @@ TEST(ServerWatch, ReadsTheExpositionAndAHistogramsQuantileBetweenTwoScrapes) {
   const Scrape c = parse_exposition("t_seconds_bucket{le=\"0.001\"} 10\nt_seconds_bucket{le=\"0.01\"} 10\n"
                                     "t_seconds_bucket{le=\"+Inf\"} 20\n");
   EXPECT_TRUE(std::isinf(*histogram_quantile_ms(a, c, "t_seconds", 0.99)));
+}
+
+TEST(ServerWatch, AJoinsCostIsTheGrowthOfCpuRecordsAndStreamBytesUntilEveryBotJoined) {
+  const Scrape a = parse_exposition(
+      "process_cpu_seconds_total 10\nterrane_streamed_chunks_total{kind=\"full\"} 5\n"
+      "terrane_streamed_chunks_total{kind=\"mip\"} 100\nterrane_horizon_images_sent_total 2\n"
+      "terrane_sent_bytes_total{type=\"StreamBatch\"} 1000\nterrane_sent_bytes_total{type=\"Presence\"} 50\n");
+  const Scrape b = parse_exposition(
+      "process_cpu_seconds_total 12.5\nterrane_streamed_chunks_total{kind=\"full\"} 25\n"
+      "terrane_streamed_chunks_total{kind=\"mip\"} 400\nterrane_streamed_chunks_total{kind=\"empty\"} 7\n"
+      "terrane_horizon_images_sent_total 12\n"
+      "terrane_sent_bytes_total{type=\"StreamBatch\"} 91000\nterrane_sent_bytes_total{type=\"Presence\"} 9050\n");
+  const JoinCost c = join_cost(a, 100.0, b, 104.0);
+  EXPECT_DOUBLE_EQ(c.wall_s, 4.0);
+  EXPECT_DOUBLE_EQ(c.cpu_s, 2.5);
+  EXPECT_EQ(c.records, 20u + 300u + 7u + 10u);  // every kind of chunk record, and the horizon images
+  EXPECT_EQ(c.stream_bytes, 90000u);            // StreamBatch only
 }
 
 TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
