@@ -139,6 +139,10 @@ constexpr const char* kHelp =
     "                              less than N MiB free (default 64; 0: no check); see the gauge\n"
     "                              terrane_disk_free_bytes\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
+    "  --log-format text|json      log lines as text (default) or one JSON object a line:\n"
+    "                              time (local, with its offset), level, logger, message\n"
+    "  --log-file PATH             append the log to PATH instead of stdout; SIGHUP reopens it\n"
+    "                              at PATH (after logrotate moved it away: no copytruncate)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
     "  --config FILE               read options from FILE: 'name = value' per line (names as\n"
@@ -162,7 +166,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "config", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -276,6 +280,14 @@ int run(int argc, char** argv) {
     o.ops.tokens_file = cl.get("tokens-file");
   }
 
+  const std::string log_format = cl.get("log-format", "text");
+  if (log_format != "text" && log_format != "json")
+    return usage_error("--log-format: '" + log_format + "' is neither text nor json");
+  if (cl.has("log-format") || cl.has("log-file"))
+    if (auto e = configure_server_log(log_format == "json" ? LogFormat::kJson : LogFormat::kText, cl.get("log-file"));
+        !e.empty())
+      return usage_error("--log-file: " + e);
+
   // One descriptor per client plus the store, the listener and a margin.
   rlimit nofile{};
   if (getrlimit(RLIMIT_NOFILE, &nofile) == 0) {
@@ -292,8 +304,8 @@ int run(int argc, char** argv) {
   // Signals are caught on a private io_context so the server's own threads
   // never block on them; the loop below ends on SIGINT or SIGTERM, or when
   // the server asks (a storage failure, terrane-admin shutdown), saying
-  // why. SIGHUP reloads the tokens file, bans and whitelist and the server
-  // goes on.
+  // why. SIGHUP reopens the log file (--log-file) and reloads the tokens
+  // file, bans and whitelist, and the server goes on.
   asio::io_context signals_io;
   std::string why;  // written on signals_io's thread only
   auto stop_because = [&signals_io, &why](std::string reason) {
@@ -326,6 +338,7 @@ int run(int argc, char** argv) {
   std::function<void(const asio::error_code&, int)> on_signal = [&](const asio::error_code& ec, int sig) {
     if (ec) return;
     if (sig == SIGHUP) {
+      if (auto e = reopen_server_log(); !e.empty()) server_log().error("SIGHUP: {}; logging on to the old file", e);
       server_log().info("signal {} (SIGHUP): reloading the tokens file, bans and whitelist", sig);
       (*server)->reload();
       return signals.async_wait(on_signal);

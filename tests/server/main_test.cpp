@@ -9,6 +9,13 @@
 #include <filesystem>
 #include <string>
 
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "tests/support/child_process.h"
+#include "tests/support/eventually.h"
+#include "tests/support/json_doc.h"
 #include "tests/support/run_command.h"
 #include "tests/support/server_process.h"
 
@@ -89,6 +96,76 @@ TEST_F(ServerMainTest, NoCreateRefusesAMissingWorldAndOtherwiseTheLogSaysItCreat
   ASSERT_NE(s.port(), 0) << s.output();
   EXPECT_EQ(s.output().find("creating a new world"), std::string::npos) << s.output();
   EXPECT_EQ(s.stop(), 0) << s.output();
+}
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// --log-format json --log-file PATH: every line of the file is one JSON
+// object (time with its offset, level, logger, message), nothing goes to
+// stdout, and SIGHUP reopens PATH after the file was moved away (as
+// logrotate does), the old file keeping what was written before.
+TEST_F(ServerMainTest, AJsonLogFileHasOneObjectALineAndIsReopenedOnSighup) {
+  const fs::path log = dir_ / "server.log", rotated = dir_ / "server.log.1";
+  testing_support::ChildProcess s({std::string(TERRANE_BIN_DIR) + "/terrane-server", "--world",
+                                   (dir_ / "world").string(), "--port", "0", "--worker-threads", "2", "--log-format",
+                                   "json", "--log-file", log.string()});
+  ASSERT_TRUE(testing_support::eventually([&] { return read_text(log).find("listening on") != std::string::npos; }))
+      << read_text(log) << s.output();
+  const auto lines = [](const std::string& text) {
+    std::vector<testing_support::JsonDoc> docs;
+    std::istringstream in(text);
+    for (std::string line; std::getline(in, line);) {
+      std::string why;
+      auto doc = testing_support::parse_json(line, &why);
+      EXPECT_TRUE(doc.has_value()) << why << ": " << line;
+      if (doc) docs.push_back(*doc);
+    }
+    return docs;
+  };
+  const auto first = lines(read_text(log));
+  ASSERT_FALSE(first.empty());
+  bool listening = false;
+  for (const auto& d : first) {
+    EXPECT_EQ(d["logger"].string, "server");
+    EXPECT_FALSE(d["level"].string.empty());
+    // 2026-11-29T09:50:18.123+00:00
+    EXPECT_EQ(d["time"].string.size(), 29u) << d["time"].string;
+    EXPECT_EQ(d["time"].string[10], 'T') << d["time"].string;
+    EXPECT_EQ(d["time"].string[26], ':') << d["time"].string;
+    if (d["message"].string.rfind("listening on 127.0.0.1:", 0) == 0) {
+      listening = true;
+      EXPECT_EQ(d["level"].string, "info");
+    }
+  }
+  EXPECT_TRUE(listening) << read_text(log);
+  EXPECT_EQ(s.output().find("listening on"), std::string::npos) << "the log went to stdout too: " << s.output();
+
+  fs::rename(log, rotated);
+  ASSERT_TRUE(s.signal(SIGHUP));
+  ASSERT_TRUE(testing_support::eventually([&] { return read_text(log).find("SIGHUP") != std::string::npos; }))
+      << read_text(rotated) << s.output();
+  EXPECT_EQ(read_text(rotated).find("SIGHUP"), std::string::npos);
+  EXPECT_EQ(s.stop(), 0) << s.output();
+  const auto after = lines(read_text(log));
+  ASSERT_FALSE(after.empty());
+  bool stopped = false;
+  for (const auto& d : after) stopped = stopped || d["message"].string.rfind("stopped after", 0) == 0;
+  EXPECT_TRUE(stopped) << read_text(log);
+}
+
+TEST_F(ServerMainTest, ABadLogFormatOrAnUnwritableLogFileIsAUsageError) {
+  std::string out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --log-format xml", &out), 2) << out;
+  EXPECT_NE(out.find("--log-format: 'xml' is neither text nor json"), std::string::npos) << out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --log-file " + (dir_ / "no/such/dir/log").string(), &out),
+            2)
+      << out;
+  EXPECT_NE(out.find("--log-file: cannot open log file"), std::string::npos) << out;
 }
 
 }  // namespace
