@@ -3,6 +3,7 @@
 // 1 when the world cannot be opened), the tokens flags, and what it says
 // about a world it creates.
 #include <gtest/gtest.h>
+#include <httplib.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -156,6 +157,52 @@ TEST_F(ServerMainTest, AJsonLogFileHasOneObjectALineAndIsReopenedOnSighup) {
   bool stopped = false;
   for (const auto& d : after) stopped = stopped || d["message"].string.rfind("stopped after", 0) == 0;
   EXPECT_TRUE(stopped) << read_text(log);
+}
+
+// --backup-every with a short period: the server makes N + 1 backups (as
+// /metrics counts them, with the last success's time) and keeps the newest
+// N in --backup-dir, each a world a server opens.
+TEST_F(ServerMainTest, ScheduledBackupsKeepTheNewestAndShowInTheMetrics) {
+  const fs::path backups = dir_ / "backups";
+  testing_support::ServerProcess s((dir_ / "world").string(), {"--metrics", "127.0.0.1:0", "--backup-every", "200ms",
+                                                              "--backup-keep", "2", "--backup-dir", backups.string()});
+  ASSERT_NE(s.port(), 0) << s.output();
+  const std::uint16_t metrics_port = s.metrics_port();
+  ASSERT_NE(metrics_port, 0) << s.output();
+  httplib::Client http("127.0.0.1", metrics_port);
+  std::string text;
+  const auto value = [&](const std::string& name) {
+    const auto at = text.find("\n" + name + " ");
+    return at == std::string::npos ? -1.0 : std::stod(text.substr(at + name.size() + 2));
+  };
+  ASSERT_TRUE(testing_support::eventually([&] {
+    auto r = http.Get("/metrics");
+    if (r && r->status == 200) text = r->body;
+    return value("terrane_backups_total") >= 3;
+  })) << text << s.output();
+  EXPECT_EQ(value("terrane_backup_failures_total"), 0) << text;
+  const double now_s = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  EXPECT_GT(value("terrane_backup_last_success_timestamp_seconds"), now_s - 120) << text;
+  EXPECT_NE(text.find("# TYPE terrane_backup_last_success_timestamp_seconds gauge"), std::string::npos) << text;
+  EXPECT_EQ(s.stop(), 0) << s.output();
+  EXPECT_NE(s.output().find("scheduled backup: the world copied to " + backups.string()), std::string::npos)
+      << s.output();
+  std::vector<fs::path> kept;
+  for (const auto& e : fs::directory_iterator(backups)) kept.push_back(e.path());
+  ASSERT_EQ(kept.size(), 2u) << s.output();
+  for (const auto& k : kept) {
+    EXPECT_EQ(k.filename().string().rfind("world-", 0), 0u) << k;
+    testing_support::ServerProcess restored(k.string(), {"--no-create"});
+    EXPECT_NE(restored.port(), 0) << restored.output();
+    EXPECT_EQ(restored.stop(), 0) << restored.output();
+  }
+  std::string out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --backup-every 6h", &out), 2) << out;
+  EXPECT_NE(out.find("--backup-every: give --backup-dir DIR"), std::string::npos) << out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --backup-every soon --backup-dir x", &out), 2) << out;
+  EXPECT_NE(out.find("--backup-every: 'soon' is not a duration"), std::string::npos) << out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --backup-keep 3", &out), 2) << out;
+  EXPECT_NE(out.find("--backup-keep: scheduled backups need --backup-every"), std::string::npos) << out;
 }
 
 TEST_F(ServerMainTest, ABadLogFormatOrAnUnwritableLogFileIsAUsageError) {
