@@ -182,7 +182,6 @@ bots_token=$(head -c 18 /dev/urandom | base64 | tr '+/' '-_')
 {
   echo "# docker-check's tokens: an operator and the load test's bots"
   echo "operator $admin_token admin"
-  echo "bots-probe $bots_token"
   for i in $(seq 0 49); do echo "bot-$i $bots_token"; done
 } >"$scratch/secrets/tokens"
 printf '%s\n' "$bots_token" >"$scratch/secrets/bots-token"

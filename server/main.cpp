@@ -18,6 +18,7 @@
 #include <csignal>
 #include <cstdio>
 #include <functional>
+#include <optional>
 #include <string>
 
 #include <asio.hpp>
@@ -139,6 +140,17 @@ constexpr const char* kHelp =
     "                              less than N MiB free (default 64; 0: no check); see the gauge\n"
     "                              terrane_disk_free_bytes\n"
     "  --max-frame-bytes N         largest frame accepted (default 1048576)\n"
+    "  --backup-every DURATION     back the world up this often (e.g. 30m, 6h, 1d; a number\n"
+    "                              alone is seconds; at least 100ms) with the online backup\n"
+    "                              (consistent while the server runs) into --backup-dir, as\n"
+    "                              world-YYYYMMDDTHHMMSS.mmmZ (UTC); a world directory only\n"
+    "  --backup-dir DIR            where scheduled backups go (required with --backup-every)\n"
+    "  --backup-keep N             keep the newest N scheduled backups in DIR, removing older\n"
+    "                              ones (default 7); see terrane_backup_last_success_timestamp_seconds\n"
+    "  --log-format text|json      log lines as text (default) or one JSON object a line:\n"
+    "                              time (local, with its offset), level, logger, message\n"
+    "  --log-file PATH             append the log to PATH instead of stdout; SIGHUP reopens it\n"
+    "                              at PATH (after logrotate moved it away: no copytruncate)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
     "  --config FILE               read options from FILE: 'name = value' per line (names as\n"
@@ -151,6 +163,21 @@ constexpr const char* kHelp =
     "Docker's restart: on-failure, systemd's Restart=on-failure), 1 when the world cannot be\n"
     "opened or stored or the port bound, 2 on bad usage.\n";
 
+// "90", "90s", "500ms", "15m", "6h", "1d" as milliseconds; nullopt if not one.
+std::optional<std::int64_t> parse_duration_ms(const std::string& text) {
+  std::size_t digits = 0;
+  while (digits < text.size() && text[digits] >= '0' && text[digits] <= '9') ++digits;
+  if (digits == 0 || digits > 9) return std::nullopt;
+  const std::int64_t n = std::stoll(text.substr(0, digits));
+  const std::string unit = text.substr(digits);
+  if (unit.empty() || unit == "s") return n * 1000;
+  if (unit == "ms") return n;
+  if (unit == "m") return n * 60'000;
+  if (unit == "h") return n * 3'600'000;
+  if (unit == "d") return n * 86'400'000;
+  return std::nullopt;
+}
+
 int usage_error(const std::string& message) {
   std::fprintf(stderr, "terrane-server: %s\n\n%s", message.c_str(), kHelp);
   return 2;
@@ -162,7 +189,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "config", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "backup-every", "backup-keep", "backup-dir", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -276,6 +303,30 @@ int run(int argc, char** argv) {
     o.ops.tokens_file = cl.get("tokens-file");
   }
 
+  if (cl.has("backup-every")) {
+    const auto ms = parse_duration_ms(cl.get("backup-every"));
+    if (!ms || *ms < 100 || *ms > 366LL * 86'400'000)
+      return usage_error("--backup-every: '" + cl.get("backup-every") +
+                         "' is not a duration from 100ms to 366d (e.g. 30m, 6h, 1d)");
+    if (!cl.has("backup-dir")) return usage_error("--backup-every: give --backup-dir DIR, where the backups go");
+    if (o.world_dir.empty())
+      return usage_error("--backup-every: the world is in PostgreSQL; back it up with PostgreSQL's own tools");
+    o.ops.backups.every = std::chrono::milliseconds(*ms);
+    o.ops.backups.dir = cl.get("backup-dir");
+    o.ops.backups.keep = static_cast<int>(cl.get_int("backup-keep", 7, 1, 100000, &err));
+    if (!err.empty()) return usage_error(err);
+  } else if (cl.has("backup-dir") || cl.has("backup-keep")) {
+    return usage_error(std::string("--") + (cl.has("backup-dir") ? "backup-dir" : "backup-keep") +
+                       ": scheduled backups need --backup-every DURATION");
+  }
+  const std::string log_format = cl.get("log-format", "text");
+  if (log_format != "text" && log_format != "json")
+    return usage_error("--log-format: '" + log_format + "' is neither text nor json");
+  if (cl.has("log-format") || cl.has("log-file"))
+    if (auto e = configure_server_log(log_format == "json" ? LogFormat::kJson : LogFormat::kText, cl.get("log-file"));
+        !e.empty())
+      return usage_error("--log-file: " + e);
+
   // One descriptor per client plus the store, the listener and a margin.
   rlimit nofile{};
   if (getrlimit(RLIMIT_NOFILE, &nofile) == 0) {
@@ -292,8 +343,8 @@ int run(int argc, char** argv) {
   // Signals are caught on a private io_context so the server's own threads
   // never block on them; the loop below ends on SIGINT or SIGTERM, or when
   // the server asks (a storage failure, terrane-admin shutdown), saying
-  // why. SIGHUP reloads the tokens file, bans and whitelist and the server
-  // goes on.
+  // why. SIGHUP reopens the log file (--log-file) and reloads the tokens
+  // file, bans and whitelist, and the server goes on.
   asio::io_context signals_io;
   std::string why;  // written on signals_io's thread only
   auto stop_because = [&signals_io, &why](std::string reason) {
@@ -326,6 +377,7 @@ int run(int argc, char** argv) {
   std::function<void(const asio::error_code&, int)> on_signal = [&](const asio::error_code& ec, int sig) {
     if (ec) return;
     if (sig == SIGHUP) {
+      if (auto e = reopen_server_log(); !e.empty()) server_log().error("SIGHUP: {}; logging on to the old file", e);
       server_log().info("signal {} (SIGHUP): reloading the tokens file, bans and whitelist", sig);
       (*server)->reload();
       return signals.async_wait(on_signal);

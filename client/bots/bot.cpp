@@ -58,8 +58,9 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edit
   // Several servers of one world: bot i on the (i mod n)-th.
   co.host = o.servers.empty() ? o.host : o.servers[static_cast<std::size_t>(index) % o.servers.size()].first;
   co.port = o.servers.empty() ? o.port : o.servers[static_cast<std::size_t>(index) % o.servers.size()].second;
-  co.name = "bot-" + std::to_string(index);
-  co.auth_token = o.token;
+  BotLogin login = bot_login(o, index);
+  co.name = std::move(login.name);
+  co.auth_token = std::move(login.token);
   co.start_at_spawn = false;
   co.state = ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius};
   co.io_context = ctx_.io;

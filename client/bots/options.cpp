@@ -9,6 +9,8 @@
 #include <thread>
 
 #include "common/cli/cli.h"
+#include "protocol/messages.h"
+#include "protocol/tokens_file.h"
 
 namespace terrane::bots {
 
@@ -50,7 +52,16 @@ const char* const kBotsHelp =
     "  --ramp-up S               connections spread over S seconds; latency samples of edits sent\n"
     "                            before S are not counted (default 0)\n"
     "  --seed N                  random seed: positions, roles, edits (default 1)\n"
-    "  --token T                 auth token for the server\n"
+    "  --token T                 auth token for the server, the same for every bot\n"
+    "  --token-file FILE         read that token from FILE (its first line), so it is on no\n"
+    "                            command line\n"
+    "  --name-prefix P           bot i joins as P followed by i (default bot-: bot-0, bot-1, ...);\n"
+    "                            a server with a tokens file needs a line 'bot-I TOKEN' for each\n"
+    "  --tokens-file FILE        bot i joins as the i-th player line of FILE, a tokens file as\n"
+    "                            terrane-server reads it ('NAME TOKEN [player|admin]', admin\n"
+    "                            lines skipped): each bot its own name and token; FILE needs a\n"
+    "                            player line for every bot (not with --token, --token-file or\n"
+    "                            --name-prefix)\n"
     "  --server-metrics HOST:PORT\n"
     "                            the server's metrics endpoint (terrane-server --metrics): the\n"
     "                            report adds the server's CPU, peak RSS, tick and commit times,\n"
@@ -109,7 +120,7 @@ using Values = OptionValues;
 const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
-      "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",         "server-metrics", "edit-interval",
+      "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",   "token-file", "tokens-file", "name-prefix",       "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks",
       "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
       "shard"};
@@ -166,7 +177,7 @@ std::string parse_scenario_text(const std::string& text, const std::string& sour
 }
 
 std::string apply_option_values(const Values& values, BotsOptions* o) {
-  bool thresholds_given = false;
+  bool thresholds_given = false, token_given = false, prefix_given = false;
   for (const auto& [key, vw] : values) {
     const std::string& v = vw.first;
     const std::string& where = vw.second;
@@ -235,8 +246,31 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
       if (!parse_i64(v, &i) || i < 0) return bad(where, v, "is not a non-negative integer");
       o->seed = static_cast<std::uint64_t>(i);
     } else if (key == "token") {
-      if (v.size() > 256) return bad(where, v.substr(0, 16) + "...", "is longer than 256 bytes");
+      if (v.size() > kMaxAuthTokenBytes) return bad(where, v.substr(0, 16) + "...", "is longer than 256 bytes");
       o->token = v;
+      token_given = true;
+    } else if (key == "token-file") {
+      std::ifstream f(v);
+      std::string first;
+      if (!f || !std::getline(f, first)) return bad(where, v, "cannot be read");
+      first = trim_blanks(first);
+      if (first.empty()) return bad(where, v, "has no token on its first line");
+      if (first.size() > kMaxAuthTokenBytes) return bad(where, v, "holds a token longer than 256 bytes");
+      o->token = first;
+      o->token_file = v;
+    } else if (key == "name-prefix") {
+      // Room for the largest index's digits within a Hello's name.
+      if (v.empty() || v.size() > kMaxClientNameBytes - 6 || v.find_first_of(" \t") != std::string::npos)
+        return bad(where, v, "is not a name prefix (1 to 58 bytes, no blanks)");
+      o->name_prefix = v;
+      prefix_given = true;
+    } else if (key == "tokens-file") {
+      auto entries = read_tokens_file(v);
+      if (!entries) return where + ": " + entries.error().message;
+      o->players.clear();
+      for (const TokensFileEntry& e : *entries)
+        if (!e.admin) o->players.emplace_back(e.name, e.token);
+      o->tokens_file = v;
     } else if (key == "edit-interval") {
       err = num_in(0.01, 86400, &o->edit_interval_s);
     } else if (key == "edit-radius") {
@@ -284,6 +318,14 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
     }
     if (!err.empty()) return err;
   }
+  if (token_given && !o->token_file.empty()) return "--token and --token-file: give one of them";
+  if (!o->tokens_file.empty()) {
+    if (token_given || !o->token_file.empty() || prefix_given)
+      return "--tokens-file: gives each bot its name and token; not with --token, --token-file or --name-prefix";
+    if (static_cast<int>(o->players.size()) < o->bots)
+      return "--tokens-file: " + o->tokens_file + " has " + std::to_string(o->players.size()) +
+             " player lines for " + std::to_string(o->bots) + " bots (bot i joins as the i-th)";
+  }
   if (o->shard_count > o->bots)
     return "--shard: " + std::to_string(o->shard_count) + " parts of " + std::to_string(o->bots) +
            " bots leave a part without bots";
@@ -292,6 +334,14 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
   if (o->ramp_up_s >= o->duration_s && o->join_timeout_s <= 0)
     return "--ramp-up: must be shorter than --duration (or give --wait-joined, which starts the duration after the joins)";
   return "";
+}
+
+BotLogin bot_login(const BotsOptions& o, int i) {
+  if (!o.players.empty()) {
+    const auto& p = o.players[static_cast<std::size_t>(i) % o.players.size()];
+    return {p.first, p.second};
+  }
+  return {o.name_prefix + std::to_string(i), o.token};
 }
 
 int io_threads(const BotsOptions& o) {
@@ -360,7 +410,13 @@ std::string scenario_text(const BotsOptions& o) {
   s << "full-res-radius = " << o.full_res_radius << "\n";
   s << "ramp-up = " << o.ramp_up_s << "\n";
   s << "seed = " << o.seed << "\n";
-  if (!o.token.empty()) s << "token = " << o.token << "\n";
+  if (!o.tokens_file.empty())
+    s << "tokens-file = " << o.tokens_file << "\n";
+  else if (!o.token_file.empty())
+    s << "token-file = " << o.token_file << "\n";
+  else if (!o.token.empty())
+    s << "token = " << o.token << "\n";
+  if (o.tokens_file.empty()) s << "name-prefix = " << o.name_prefix << "\n";
   if (o.metrics_port != 0) s << "server-metrics = " << o.metrics_host << ":" << o.metrics_port << "\n";
   s << "edit-interval = " << o.edit_interval_s << "\n";
   s << "edit-radius = " << o.edit_radius << "\n";

@@ -36,7 +36,15 @@ struct BotsOptions {
   // connection (a join wave: edits and their fan-out while bots join).
   bool measure_from_start = false;
   std::uint64_t seed = 1;
+  // Who the bots join as (bot_login): bot i is name_prefix + i with the one
+  // token (--token, or --token-file: read from a file, so that it is on no
+  // command line), or the i-th player line of a tokens file (--tokens-file,
+  // the server's format: each bot its own name and token).
   std::string token;
+  std::string token_file;
+  std::string name_prefix = "bot-";
+  std::string tokens_file;
+  std::vector<std::pair<std::string, std::string>> players;  // tokens_file's player lines: name, token
   // The server's metrics endpoint (terrane-server --metrics): "" = none.
   std::string metrics_host;
   std::uint16_t metrics_port = 0;
@@ -67,6 +75,15 @@ struct BotsOptions {
   // all `bots` (plan_bots, runner.h); N = 1: every bot.
   int shard_index = 0, shard_count = 1;
 };
+
+// The name and token bot i joins with. The probe that reads the server's
+// Welcome before the run joins as the shard's first bot (o.shard_index),
+// so a server admitting by name needs no line for it.
+struct BotLogin {
+  std::string name;
+  std::string token;
+};
+BotLogin bot_login(const BotsOptions& o, int i);
 
 // Whether bot i (of all o.bots) is in o's shard.
 inline bool in_shard(const BotsOptions& o, int i) { return i % o.shard_count == o.shard_index; }

@@ -99,14 +99,16 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   raise_open_file_limit(o.bots);
   IoPool pool(io_threads(o));
 
-  // A probe learns the spawn, the bounds and the server's caps.
+  // A probe learns the spawn, the bounds and the server's caps. It joins
+  // as the shard's first bot, before that bot does (bot_login).
   WelcomeMsg welcome;
   {
     ClientOptions po;
     po.host = o.host;
     po.port = o.port;
-    po.name = "bots-probe";
-    po.auth_token = o.token;
+    BotLogin login = bot_login(o, o.shard_index);
+    po.name = std::move(login.name);
+    po.auth_token = std::move(login.token);
     po.io_context = &pool.io();
     po.state = ClientStateMsg{{0, 0, 0}, 32, 32};
     Client probe(po);

@@ -400,23 +400,40 @@ FileResult<std::int64_t> SqliteStore::stored_chunk_count() {
 }
 
 FileStatus SqliteStore::backup_to(const std::string& dest_dir, const std::function<void(int, int)>& progress) {
+  namespace fs = std::filesystem;
   std::error_code ec;
-  std::filesystem::create_directories(dest_dir, ec);
-  if (ec) return FileError{"backup " + dest_dir + ": cannot create directory: " + ec.message(), {}};
   if (exists(dest_dir)) return FileError{"backup " + dest_dir + ": already holds a world", {}};
-  const std::string path = (std::filesystem::path(dest_dir) / kWorldDatabaseName).string();
-  sqlite3* dest = nullptr;
-  if (sqlite3_open_v2(path.c_str(), &dest, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
-    std::string msg = "backup " + path + ": cannot create: " + (dest ? sqlite3_errmsg(dest) : "out of memory");
-    sqlite3_close(dest);
-    return FileError{msg, {}};
+  // The copy is made in DEST.partial and renamed to DEST once whole: a
+  // failed backup (a full disk, an I/O error) leaves neither DEST nor
+  // DEST.partial, and DEST is never a half-written world. A DEST.partial
+  // left by a backup that was killed is replaced.
+  fs::path dest = fs::path(dest_dir).lexically_normal();
+  if (!dest.has_filename()) dest = dest.parent_path();
+  const fs::path partial = fs::path(dest.string() + ".partial");
+  if (dest.has_parent_path()) {
+    fs::create_directories(dest.parent_path(), ec);
+    if (ec) return FileError{"backup " + dest_dir + ": cannot create directory: " + ec.message(), {}};
   }
-  sqlite3_backup* b = sqlite3_backup_init(dest, "main", db(), "main");
+  fs::remove_all(partial, ec);
+  fs::create_directory(partial, ec);
+  if (ec) return FileError{"backup " + dest_dir + ": cannot create " + partial.string() + ": " + ec.message(), {}};
+  const auto failed = [&](std::string msg) -> FileStatus {
+    std::error_code ignored;
+    fs::remove_all(partial, ignored);
+    return FileError{std::move(msg), {}};
+  };
+  const std::string path = (partial / kWorldDatabaseName).string();
+  sqlite3* dest_db = nullptr;
+  if (sqlite3_open_v2(path.c_str(), &dest_db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
+    std::string msg = "backup " + path + ": cannot create: " + (dest_db ? sqlite3_errmsg(dest_db) : "out of memory");
+    sqlite3_close(dest_db);
+    return failed(std::move(msg));
+  }
+  sqlite3_backup* b = sqlite3_backup_init(dest_db, "main", db(), "main");
   if (b == nullptr) {
-    std::string msg = "backup " + path + ": " + sqlite3_errmsg(dest);
-    sqlite3_close(dest);
-    std::filesystem::remove(path, ec);
-    return FileError{msg, {}};
+    std::string msg = "backup " + path + ": " + sqlite3_errmsg(dest_db);
+    sqlite3_close(dest_db);
+    return failed(std::move(msg));
   }
   // 256 pages per step (1 MiB at 4 KiB pages): short steps let the writer in.
   int rc;
@@ -426,13 +443,18 @@ FileStatus SqliteStore::backup_to(const std::string& dest_dir, const std::functi
     if (rc == SQLITE_BUSY || rc == SQLITE_LOCKED) sqlite3_sleep(20);
   } while (rc == SQLITE_OK || rc == SQLITE_BUSY || rc == SQLITE_LOCKED);
   sqlite3_backup_finish(b);
-  std::string msg = rc == SQLITE_DONE ? "" : std::string(sqlite3_errmsg(dest));
-  if (rc == SQLITE_DONE) sqlite3_exec(dest, "PRAGMA journal_mode=WAL;", nullptr, nullptr, nullptr);
-  sqlite3_close(dest);
-  if (rc != SQLITE_DONE) {
-    std::filesystem::remove(path, ec);
-    return FileError{"backup " + path + ": " + msg, {}};
+  std::string msg = rc == SQLITE_DONE ? "" : std::string(sqlite3_errmsg(dest_db));
+  if (rc == SQLITE_DONE && sqlite3_exec(dest_db, "PRAGMA journal_mode=WAL;", nullptr, nullptr, nullptr) != SQLITE_OK) {
+    rc = SQLITE_ERROR;
+    msg = sqlite3_errmsg(dest_db);
   }
+  if (sqlite3_close(dest_db) != SQLITE_OK && rc == SQLITE_DONE) {
+    rc = SQLITE_ERROR;
+    msg = "cannot close the copy";
+  }
+  if (rc != SQLITE_DONE) return failed("backup " + dest.string() + ": " + msg);
+  fs::rename(partial, dest, ec);
+  if (ec) return failed("backup " + dest.string() + ": cannot rename " + partial.string() + " to it: " + ec.message());
   return Ok{};
 }
 

@@ -123,7 +123,9 @@ class SqliteStore final : public WorldStore {
   // Copies the whole database to dest_dir/world.sqlite with SQLite's online
   // backup, a few hundred pages at a time, so a running server keeps
   // writing; the copy is a consistent snapshot. dest_dir must not hold a
-  // world already. progress(done_pages, total_pages) is called as it goes.
+  // world already (an empty directory is replaced). The copy is made in
+  // dest_dir.partial and renamed to dest_dir when whole: on failure neither
+  // is left. progress(done_pages, total_pages) is called as it goes.
   FileStatus backup_to(const std::string& dest_dir, const std::function<void(int, int)>& progress);
   // The access lists are the table "access", made on the first write.
   FileResult<std::vector<std::pair<std::string, std::string>>> access_entries() override;

@@ -1,46 +1,21 @@
 #include "server/net/limits.h"
 
 #include <algorithm>
-#include <fstream>
-#include <sstream>
-#include <vector>
 
 #include <asio/ip/address.hpp>
 #include <asio/ip/network_v4.hpp>
 #include <asio/ip/network_v6.hpp>
 
-#include "protocol/messages.h"
+#include "protocol/tokens_file.h"
 #include "server/base/log.h"
 
 namespace terrane {
 
 FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return FileError{"cannot read tokens file " + path, {}};
+  auto entries = read_tokens_file(path);
+  if (!entries) return entries.error();
   std::unordered_map<std::string, PlayerToken> tokens;
-  std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
-    const std::string where = path + ":" + std::to_string(number) + ": ";
-    // Words up to a comment: a word that opens with '#' ends the line (a
-    // '#' inside a token is part of it).
-    std::istringstream in_line(line);
-    std::vector<std::string> words;
-    for (std::string w; in_line >> w && w[0] != '#';) words.push_back(std::move(w));
-    if (words.empty()) continue;
-    const std::string& name = words[0];
-    if (words.size() < 2) return FileError{where + "player '" + name + "' has no token", {}};
-    const std::string& token = words[1];
-    const std::string role = words.size() > 2 ? words[2] : "player";
-    if (role != "player" && role != "admin")
-      return FileError{where + "role '" + role + "' is neither player nor admin", {}};
-    if (words.size() > 3) return FileError{where + "expected 'NAME TOKEN [player|admin]', found more", {}};
-    if (name.size() > kMaxClientNameBytes) return FileError{where + "name longer than 64 bytes", {}};
-    if (token.size() > kMaxAuthTokenBytes) return FileError{where + "token longer than 256 bytes", {}};
-    if (!tokens.emplace(name, PlayerToken{token, role == "admin"}).second) return FileError{where + "player '" + name + "' listed twice", {}};
-  }
-  if (in.bad()) return FileError{"error reading tokens file " + path, {}};
+  for (TokensFileEntry& e : *entries) tokens.emplace(std::move(e.name), PlayerToken{std::move(e.token), e.admin});
   return tokens;
 }
 

@@ -14,11 +14,8 @@
 
 namespace terrane {
 
-// A tokens file: one player per line, "NAME TOKEN [ROLE]" separated by
-// whitespace, ROLE being player (the default) or admin; blank lines and
-// lines starting with '#' are ignored. Errors name the file and line (a
-// line without a token, an unknown role, a duplicate name, a name or token
-// over the protocol's limits).
+// A tokens file (protocol/tokens_file.h: "NAME TOKEN [player|admin]" a
+// line, '#' comments) by name. Errors name the file and line.
 FileResult<std::unordered_map<std::string, PlayerToken>> load_tokens_file(const std::string& path);
 
 // An IP address as the server prints and compares it (lower case, IPv4

@@ -45,11 +45,19 @@ FileResult<std::unique_ptr<Operations>> Operations::open(const OpsOptions& optio
     if (self->admin_) return self->admin_->handle(who, std::move(req), std::move(reply));
     reply(AdminResultMsg{req.request_id, false, "the server is stopping", "{\"error\": \"the server is stopping\"}"});
   };
+  if (options.backups.every.count() > 0) {
+    if (world_dir.empty())
+      return FileError{"--backup-every: the world is in PostgreSQL; back it up with PostgreSQL's own tools", {}};
+    ops->backups_ = std::make_unique<BackupSchedule>(options.backups, world_dir);
+  }
   if (metrics_at) {
     Operations* self = ops.get();
     auto http = HttpEndpoint::bind(
         metrics_at->first, metrics_at->second,
-        [self] { return self->wiring_.metrics() + render_health_gauge(self->health()); },
+        [self] {
+          return self->wiring_.metrics() + render_health_gauge(self->health()) +
+                 (self->backups_ ? render_backup_metrics(self->backups_->counters()) : std::string());
+        },
         [self] { return self->health(); });
     if (!http) return http.error();
     ops->metrics_ = std::move(*http);
@@ -65,6 +73,7 @@ void Operations::start() {
     server_log().info("metrics on http://{}:{}/metrics", metrics_host_, metrics_->port());
   }
   stats_.start();
+  if (backups_) backups_->start();
 }
 
 void Operations::notify_all(const ServerNoticeMsg& notice) {
@@ -184,6 +193,7 @@ Health Operations::health() const {
 void Operations::stop_timers() {
   stopping_ = true;
   stats_.stop();
+  if (backups_) backups_->stop();
   asio::dispatch(strand_, [this] { shutdown_timer_.cancel(); });
 }
 

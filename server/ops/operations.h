@@ -2,7 +2,7 @@
 // rules (AccessControl: tokens, bans, whitelist), the admin room (Admin,
 // its thread) and the function sessions hand operators' commands to, the
 // /metrics and /health endpoint (HttpEndpoint, its threads), the periodic
-// stats line (StatsLog), a scheduled shutdown (its timer, its warnings at
+// stats line (StatsLog), scheduled backups (BackupSchedule, its thread), a scheduled shutdown (its timer, its warnings at
 // intervals, its cancellation, whether clients are told to reconnect, the
 // thread that stops a server nobody else stops), the health it reports
 // (draining while a shutdown is pending) and the notices to every client. The world's part of the admin commands
@@ -33,6 +33,7 @@
 #include "server/net/session_table.h"
 #include "server/ops/access.h"
 #include "server/ops/admin.h"
+#include "server/ops/backup_schedule.h"
 #include "server/ops/http_endpoint.h"
 #include "server/ops/metrics.h"
 #include "server/ops/ops_options.h"
@@ -62,8 +63,8 @@ class Operations {
   // world_dir: a SQLite world's directory, which the admin room's backup
   // copies ("" for a PostgreSQL world). io: the io threads' context (the
   // timers); sessions and counters outlive the operations. Fails on a
-  // store that does not reopen, bad tokens, or a --metrics address that
-  // does not parse or bind.
+  // store that does not reopen, bad tokens, a --metrics address that
+  // does not parse or bind, or scheduled backups of a PostgreSQL world.
   static FileResult<std::unique_ptr<Operations>> open(const OpsOptions& options, const WorldStore& store,
                                                       const std::string& world_dir,
                                                       asio::io_context& io, SessionTable& sessions,
@@ -78,7 +79,8 @@ class Operations {
   // The metrics endpoint's port (0 without --metrics).
   std::uint16_t metrics_port() const { return metrics_ ? metrics_->port() : 0; }
 
-  // Serves /metrics (with --metrics) and starts the stats line.
+  // Serves /metrics (with --metrics), starts the stats line and the
+  // scheduled backups.
   void start();
   // Sends notice to every welcomed client (control class).
   void notify_all(const ServerNoticeMsg& notice);
@@ -100,7 +102,8 @@ class Operations {
   Health health() const;
 
   // The steps of the server's stop(), in order:
-  // no shutdown scheduled or due, and no stats line, from now on;
+  // no shutdown scheduled or due, no stats line and no scheduled backup
+  // from now on (one under way finishes);
   void stop_timers();
   // the command running finishes (the world still runs, so a save can);
   // the rest, and any asked later, are refused;
@@ -132,6 +135,7 @@ class Operations {
   ClientSession::AdminFn admin_fn_;
   std::unique_ptr<HttpEndpoint> metrics_;
   StatsLog stats_;
+  std::unique_ptr<BackupSchedule> backups_;  // with --backup-every, a SQLite world
   asio::strand<asio::io_context::executor_type> strand_;  // the shutdown timer's
   asio::steady_timer shutdown_timer_;
   // The pending shutdown, on strand_: when it is due, whether it restarts,

@@ -1,9 +1,10 @@
-// The ops room's options: the access rules' tokens, the /metrics endpoint
-// and what a scheduled shutdown calls. Plain data, filled by main.cpp
+// The ops room's options: the access rules' tokens, the /metrics endpoint,
+// what a scheduled shutdown calls and the scheduled backups. Plain data, filled by main.cpp
 // (part of ServerOptions, server/server_options.h) and given to
 // Operations::open.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <string>
 #include <unordered_map>
@@ -11,6 +12,13 @@
 #include "server/net/net_options.h"
 
 namespace terrane {
+
+// Scheduled backups of a SQLite world (BackupSchedule, backup_schedule.h).
+struct BackupOptions {
+  std::chrono::milliseconds every{0};  // 0: none
+  int keep = 7;                        // the newest kept in dir, at least 1
+  std::string dir;                     // where they go (made when missing)
+};
 
 struct OpsOptions {
   // The operator's HTTP endpoint (/metrics, /health): "HOST:PORT", empty =
@@ -33,6 +41,8 @@ struct OpsOptions {
   // Server should stop it, as on SIGTERM. restart: the operator said
   // --restart (terrane-server then exits 75 so a supervisor restarts it).
   std::function<void(bool restart)> on_shutdown;
+  // --backup-every, --backup-keep, --backup-dir.
+  BackupOptions backups;
 };
 
 }  // namespace terrane

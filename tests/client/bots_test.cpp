@@ -647,6 +647,63 @@ TEST(BotsOptions, BadFlagsAndScenarioLinesAreNamed) {
   EXPECT_NE(apply_option_values(kv, &o).find("s.txt:3: bots: 'many'"), std::string::npos);
 }
 
+// Who the bots join as: name prefix and one token (from the command line or
+// a file), or a tokens file's player lines in order; the forms exclude each
+// other, and a tokens file must have a player line for every bot.
+TEST(BotsOptions, BotsJoinAsTheirPrefixOrTheirTokensFilesPlayers) {
+  const fs::path dir = fs::temp_directory_path() / ("terrane-bots-logins-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string token_file = (dir / "token").string(), tokens_file = (dir / "tokens").string(),
+                    empty_file = (dir / "empty").string();
+  std::ofstream(token_file) << "  secret-1  \nignored\n";
+  std::ofstream(tokens_file) << "# players\nops t0 admin\nann t1\nben t2 player # the second\n";
+  std::ofstream(empty_file) << "\n";
+  BotsOptions o;
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--bots", "2"}, &o), "");
+  EXPECT_EQ(bot_login(o, 0).name, "bot-0");
+  EXPECT_EQ(bot_login(o, 1).name, "bot-1");
+  EXPECT_EQ(bot_login(o, 1).token, "");
+  o = {};
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--token-file", token_file, "--name-prefix", "load-"}, &o), "");
+  EXPECT_EQ(bot_login(o, 7).name, "load-7");
+  EXPECT_EQ(bot_login(o, 7).token, "secret-1");
+  // The saved scenario names the file, never the token in it.
+  EXPECT_NE(scenario_text(o).find("token-file = " + token_file), std::string::npos) << scenario_text(o);
+  EXPECT_EQ(scenario_text(o).find("secret-1"), std::string::npos) << scenario_text(o);
+  o = {};
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--bots", "2", "--tokens-file", tokens_file}, &o), "");
+  EXPECT_EQ(bot_login(o, 0).name, "ann");
+  EXPECT_EQ(bot_login(o, 0).token, "t1");
+  EXPECT_EQ(bot_login(o, 1).name, "ben");
+  EXPECT_EQ(bot_login(o, 1).token, "t2");
+  OptionValues kv;
+  ASSERT_EQ(parse_scenario_text(scenario_text(o), "saved", &kv), "");
+  BotsOptions again;
+  ASSERT_EQ(apply_option_values(kv, &again), "");
+  EXPECT_EQ(bot_login(again, 1).name, "ben");
+
+  o = {};
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--bots", "3", "--tokens-file", tokens_file}, &o),
+            "--tokens-file: " + tokens_file + " has 2 player lines for 3 bots (bot i joins as the i-th)");
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--bots", "2", "--tokens-file", tokens_file, "--token", "x"}, &o)
+                .find("not with --token"),
+            std::string::npos);
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--bots", "2", "--tokens-file", tokens_file, "--name-prefix", "p"}, &o)
+                .find("not with --token, --token-file or --name-prefix"),
+            std::string::npos);
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--token", "x", "--token-file", token_file}, &o),
+            "--token and --token-file: give one of them");
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--token-file", (dir / "none").string()}, &o),
+            "--token-file: '" + (dir / "none").string() + "' cannot be read");
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--token-file", empty_file}, &o),
+            "--token-file: '" + empty_file + "' has no token on its first line");
+  EXPECT_EQ(parse_flags({"--connect", "h:1", "--tokens-file", (dir / "none").string()}, &o),
+            "--tokens-file: cannot read tokens file " + (dir / "none").string());
+  EXPECT_NE(parse_flags({"--connect", "h:1", "--name-prefix", "a b"}, &o).find("--name-prefix: 'a b'"),
+            std::string::npos);
+  fs::remove_all(dir);
+}
+
 // --- reports -------------------------------------------------------------------
 
 TEST(BotsReport, CompareShowsBothReportsSideBySide) {
@@ -752,6 +809,37 @@ TEST_F(BotsRunTest, TwoMergedShardsCountWhatOneProcessCounts) {
     EXPECT_EQ(all[key], one[key]) << key;
   EXPECT_EQ(one["join_full_ms.count"], "6");
   EXPECT_TRUE(fs::exists(path("all.html")));
+}
+
+// A server that admits by a tokens file: the bots join with a tokens file
+// of their own (bot i as its i-th player line, admin lines skipped), or
+// with one token read from a file and a name prefix. The server's file
+// lists only those players: the probe that reads the Welcome joins as the
+// shard's first bot, so no other name is needed.
+TEST_F(BotsRunTest, BotsJoinATokensFileServerAsItsPlayers) {
+  fs::create_directories(dir_);
+  const auto path = [&](const char* name) { return (dir_ / name).string(); };
+  std::ofstream(path("server-tokens")) << "# the server's players\nops ops-token admin\nalice alice-token\n"
+                                          "bob bob-token player  # a comment\ncarol carol-token\n"
+                                          "load-0 shared-token\nload-1 shared-token\n";
+  std::ofstream(path("bots-tokens")) << "ops ops-token admin\nalice alice-token\nbob bob-token player\n"
+                                        "carol carol-token\n";
+  std::ofstream(path("bot-token")) << "shared-token\n";
+  start_server({"--tokens-file", path("server-tokens")});
+  const std::string run = "--connect 127.0.0.1:" + std::to_string(server_->port()) +
+                          " --behavior idle --duration 1 --spread 64 --view-distance 64"
+                          " --full-res-radius 32 --hash-checks 1 --quiet 0 --wait-joined 120 --threads 2"
+                          " --progress off --threshold joins_incomplete==0 --threshold connect_failures==0";
+  std::string out;
+  ASSERT_EQ(run_binary(run + " --bots 3 --tokens-file " + path("bots-tokens"), &out), 0) << out;
+  for (const char* name : {"alice", "bob", "carol"})
+    EXPECT_TRUE(server_->wait_for_output(std::string("joined as '") + name + "'", std::chrono::seconds(10))) << name;
+  ASSERT_EQ(run_binary(run + " --bots 2 --token-file " + path("bot-token") + " --name-prefix load-", &out), 0) << out;
+  for (const char* name : {"load-0", "load-1"})
+    EXPECT_TRUE(server_->wait_for_output(std::string("joined as '") + name + "'", std::chrono::seconds(10))) << name;
+  const std::string log = server_->output();
+  EXPECT_EQ(log.find("refused"), std::string::npos) << log;
+  EXPECT_EQ(log.find("ops"), std::string::npos) << "a bot joined as the admin line";
 }
 
 // A real short run against a local server: a threshold it cannot meet

@@ -93,8 +93,16 @@ TEST_F(DockerCompose, KeepsSecretsInFilesOnly) {
   }
   for (const auto& arg : list(c, "services.server.command"))
     EXPECT_EQ(arg.find("token"), std::string::npos) << "a token flag on the server's command line: " << arg;
-  // The bots read theirs from a secret too.
+  // The bots read theirs from a secret too, as a file (--token-file): no
+  // entry point puts it on their command line.
   EXPECT_EQ(c.at("services.bots.secrets.0.source"), "terrane_bots_token");
+  EXPECT_EQ(c.count("services.bots.entrypoint.0"), 0u) << c.at("services.bots.entrypoint.0");
+  const auto bots = list(c, "services.bots.command");
+  const auto token_file = std::find(bots.begin(), bots.end(), "--token-file");
+  ASSERT_NE(token_file, bots.end());
+  ASSERT_NE(token_file + 1, bots.end());
+  EXPECT_EQ(*(token_file + 1), "/run/secrets/terrane_bots_token");
+  EXPECT_EQ(std::find(bots.begin(), bots.end(), "--token"), bots.end());
   const std::string text = read(docker_dir() / "docker-compose.yml");
   EXPECT_EQ(text.find("POSTGRES_PASSWORD:"), std::string::npos);
   EXPECT_EQ(text.find("TERRANE_TOKEN:"), std::string::npos);

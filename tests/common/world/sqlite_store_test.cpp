@@ -4,12 +4,15 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <random>
 #include <set>
 #include <tuple>
 
+#include <signal.h>
 #include <sqlite3.h>
+#include <sys/resource.h>
 
 #include "common/codec/lz4_block.h"
 #include "common/world/world.h"
@@ -87,6 +90,46 @@ TEST_F(SqliteStoreTest, DurabilitySettingsAreWalAndSynchronousFull) {
   ASSERT_TRUE(store.ok());
   EXPECT_EQ(*(*store)->pragma("journal_mode"), "wal");
   EXPECT_EQ(*(*store)->pragma("synchronous"), "2");  // FULL
+}
+
+// A backup is a whole world or nothing: one that fails part-way (here a
+// file-size limit, as a full disk would) leaves neither DEST nor
+// DEST.partial; the next one succeeds, and DEST opens with every chunk.
+TEST_F(SqliteStoreTest, AFailedBackupLeavesNoPartialDirectory) {
+  auto store = SqliteStore::create(dir_, default_world_meta());
+  ASSERT_TRUE(store.ok());
+  std::vector<ChunkWrite> writes;
+  for (unsigned i = 0; i < 40; ++i) writes.push_back({{static_cast<int>(i), 0, 0}, 1, encode_chunk_blob(sample_chunk(i))});
+  ASSERT_TRUE((*store)->save_chunks(writes).ok());
+  const std::string dest = dir_ + "-backups/b1";
+  {
+    // Writes past 64 KiB fail with EFBIG (SIGXFSZ ignored) until restored.
+    struct sigaction ignore {}, old {};
+    ignore.sa_handler = SIG_IGN;
+    ASSERT_EQ(sigaction(SIGXFSZ, &ignore, &old), 0);
+    rlimit before{};
+    ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &before), 0);
+    rlimit small = before;
+    small.rlim_cur = 64 << 10;
+    ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+    const auto st = (*store)->backup_to(dest, nullptr);
+    setrlimit(RLIMIT_FSIZE, &before);
+    sigaction(SIGXFSZ, &old, nullptr);
+    ASSERT_FALSE(st.ok());
+    EXPECT_NE(st.error().message.find("backup " + dest), std::string::npos) << st.error().message;
+  }
+  EXPECT_FALSE(fs::exists(dest));
+  EXPECT_FALSE(fs::exists(dest + ".partial"));
+  // One killed part-way leaves DEST.partial: the next backup replaces it.
+  fs::create_directories(dest + ".partial");
+  std::ofstream(dest + ".partial/world.sqlite") << "half a world";
+  ASSERT_TRUE((*store)->backup_to(dest + "/", nullptr).ok());
+  EXPECT_FALSE(fs::exists(dest + ".partial"));
+  auto copy = SqliteStore::open(dest);
+  ASSERT_TRUE(copy.ok()) << copy.error().message;
+  EXPECT_EQ(*(*copy)->stored_chunk_count(), 40);
+  EXPECT_FALSE((*store)->backup_to(dest, nullptr).ok()) << "a second backup over a world";
+  fs::remove_all(dir_ + "-backups");
 }
 
 TEST_F(SqliteStoreTest, ChunksRoundTripWithRevisions) {
