@@ -13,6 +13,8 @@ the GIL. For asyncio, every blocking wait has an awaitable twin here:
 ``await terrane.walk(c, target)``; each runs the wait on the loop's default
 executor, so the event loop never blocks.
 """
+__version__ = "0.1.0"  # the project's version (CMakeLists.txt), read by pip from here
+
 import asyncio as _asyncio
 import functools as _functools
 

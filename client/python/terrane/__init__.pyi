@@ -14,6 +14,7 @@ Hit = Tuple[IVec3, IVec3, float, str]  # voxel, normal, distance, material
 F = TypeVar("F", bound=Callable[..., Any])
 
 AIR: str
+__version__: str
 
 class EditRejected(RuntimeError):
     """The edit was refused: not applied."""
