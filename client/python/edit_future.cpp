@@ -41,11 +41,19 @@ std::string EditFuture::outcome() const {
   return out;
 }
 
-std::uint32_t request_sync(Client& c) {
+namespace {
+// sync's barrier: a one-voxel ReadBox at the client's position; 0 when it
+// could not be sent.
+std::uint32_t send_barrier(Client& c) {
   const Vec3f p = c.last_state().value_or(ClientStateMsg{}).position;
   const Vec3i v{static_cast<std::int32_t>(std::floor(p.x)), static_cast<std::int32_t>(std::floor(p.y)),
                 static_cast<std::int32_t>(std::floor(p.z))};
-  const std::uint32_t id = c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
+  return c.request_read_box(Region{v, v + Vec3i{1, 1, 1}});
+}
+}  // namespace
+
+std::uint32_t request_sync(Client& c) {
+  const std::uint32_t id = send_barrier(c);
   if (id == 0) raise(PyExc_ConnectionError, "connection closed");
   return id;
 }
@@ -84,6 +92,34 @@ bool EditFuture::result(double timeout, bool visible) {
   if (o) throw EditRejected(utf8(o->reason));
   if (closed) raise(PyExc_ConnectionError, "connection closed before the edit was answered: " + c_->disconnect_reason());
   raise(PyExc_TimeoutError, "edit " + std::to_string(id_) + " not answered within the timeout");
+}
+
+void EditFuture::when_done(py::object fn, bool visible) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "when_done: fn must be callable");
+  // Weak: the continuation is kept by the Watches it would point to.
+  std::weak_ptr<Watches> weak = watches_;
+  watches_->on_edit(*c_, id_, [c = c_, weak, id = id_, fn, visible] {
+    // The client's lock is taken with the GIL released (the io side may
+    // hold it for a while).
+    bool applied = false;
+    without_gil([&] {
+      c->wait_until(
+          [&](const ClientView& v) {
+            const auto it = v.edits.find(id);
+            applied = it != v.edits.end() && it->second.accepted && !v.closed;
+            return true;
+          },
+          std::chrono::milliseconds(0));
+    });
+    if (applied && visible)
+      if (auto w = weak.lock()) {
+        if (const std::uint32_t read = without_gil([&] { return send_barrier(*c); }); read != 0) {
+          w->on_read(*c, read, [fn] { fn(); });
+          return;
+        }
+      }
+    fn();
+  });
 }
 
 }  // namespace terrane::python

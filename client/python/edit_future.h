@@ -14,6 +14,7 @@
 #include <string>
 
 #include "client/client.h"
+#include "client/python/watches.h"
 
 namespace terrane::python {
 
@@ -52,7 +53,8 @@ bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<
 // The outcome of one edit: result() waits for the server's answer.
 class EditFuture {
  public:
-  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
+  EditFuture(std::shared_ptr<Client> c, std::shared_ptr<Watches> watches, std::uint32_t id)
+      : c_(std::move(c)), watches_(std::move(watches)), id_(id) {}
   std::uint32_t id() const { return id_; }
   bool done() const;
   // "pending", "applied" (acknowledged: applied and stored), "rejected"
@@ -62,9 +64,15 @@ class EditFuture {
   // the replica shows it (sync); raises EditRejected with the server's
   // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
   bool result(double timeout, bool visible);
+  // Calls fn() on the client's callbacks thread (GIL held) once result
+  // would return or raise at once: the edit answered and, with visible and
+  // applied, sync's barrier answered after it (or the connection lost or
+  // closed). No thread waits meanwhile (asyncio's await, __init__.py).
+  void when_done(py::object fn, bool visible);
 
  private:
   std::shared_ptr<Client> c_;
+  std::shared_ptr<Watches> watches_;
   std::uint32_t id_;
 };
 

@@ -72,6 +72,8 @@ PYBIND11_MODULE(_native, m) {
                              "'pending', 'applied' (acknowledged: applied and stored), 'rejected' (not applied) or "
                              "'unknown' (may or may not have been applied: the connection closed before the answer, "
                              "or the server could not learn it). Does not wait.")
+      .def("_when_done", &EditFuture::when_done, py::arg("fn"), py::arg("visible") = true,
+           "Call fn() on the callbacks thread once result() would return or raise at once (await future).")
       .def("result", &EditFuture::result, py::arg("timeout") = 30.0, py::arg("visible") = true,
            "Wait for the answer: True once the edit is applied and stored (durable) and, with visible, shown by "
            "this client's replica (one more round trip; visible=False for throughput). Raises "
@@ -164,6 +166,10 @@ to its client keeps it alive until then).)")
       .def("write_box", &PyClient::write_box, py::arg("min"), py::arg("voxels"),
            "Write an array of integers of shape (2, y, z, x) (materials, occupancies) at min: a numpy array (any "
            "integer dtype) or anything numpy.asarray takes, such as nested lists; at most 32^3 voxels.")
+      .def("_reserve_edit", &PyClient::reserve_edit,
+           "asyncio's pacing (terrane.pace): takes the next edit's turn and returns the seconds to wait before it.")
+      .def("_when_synced", &PyClient::when_synced, py::arg("fn"),
+           "Call fn() on the callbacks thread once everything the server sent so far is applied (terrane.synced).")
       .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
       .def("redo", &PyClient::redo, "Redo the last undone edit.")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,

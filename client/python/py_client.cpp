@@ -139,11 +139,18 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   slot_ = a.slot ? a.slot : std::make_shared<DispatcherSlot>();
   handlers_ = std::make_shared<Handlers>();
   sink_ = std::make_shared<EventSink>(slot_, handlers_);
+  watches_ = std::make_shared<Watches>(slot_);
   ClientCallbacks cb;
   cb.on_update = [sink = sink_](const UpdateInfo& u) { sink->push(to_event(u)); };
   cb.on_presence = [sink = sink_](const std::vector<PresenceEntryMsg>& p) { sink->push(to_event(p)); };
   cb.on_notice = [sink = sink_](const ServerNoticeMsg& n) { sink->push(to_event(n)); };
-  cb.on_disconnected = [sink = sink_](const std::string& reason) { sink->push(DisconnectEvent{reason}); };
+  cb.on_edit_result = [ids = watches_->ids()](std::uint32_t id, const EditOutcome&) { ids->edit_answered(id); };
+  cb.on_read_result = [ids = watches_->ids()](std::uint32_t id) { ids->read_answered(id); };
+  cb.on_connection_lost = [ids = watches_->ids()](const std::string&) { ids->connection_lost(); };
+  cb.on_disconnected = [sink = sink_, ids = watches_->ids()](const std::string& reason) {
+    ids->closed();
+    sink->push(DisconnectEvent{reason});
+  };
   pacing_ = std::make_shared<Pacing>(a.max_speed);
   cb.on_reconnected = [sink = sink_, pacing = pacing_] {
     pacing->rejoined();  // the server counts the next position as joining
@@ -429,7 +436,7 @@ EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object
     raise(PyExc_ValueError, "fill_box: " + std::to_string(r.volume()) + " voxels; one edit touches at most " +
                                 std::to_string(kMaxEditVolume) + " voxels (64^3): fill it in pieces");
   pace();
-  return sent(c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))));
+  return sent([&] { return c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))); });
 }
 namespace {
 EditRequestMsg sphere_edit(EditKind kind, Vec3f center, float radius) {
@@ -455,14 +462,14 @@ EditFuture PyClient::fill_sphere(const Vec3& center, double radius, const py::ob
   check_edit_size(sphere_edit(EditKind::kFillSphere, c, r), "fill_sphere");
   const Material m = material_of(material);
   pace();
-  return sent(c_->fill_sphere(c, r, m));
+  return sent([&] { return c_->fill_sphere(c, r, m); });
 }
 EditFuture PyClient::dig(const Vec3& center, double radius) {
   const Vec3f c = point_of(center, "center");
   const float r = radius_of(radius);
   check_edit_size(sphere_edit(EditKind::kDig, c, r), "dig");
   pace();
-  return sent(c_->dig(c, r));
+  return sent([&] { return c_->dig(c, r); });
 }
 EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& material) {
   const Vec3f c = point_of(center, "center");
@@ -470,13 +477,13 @@ EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& 
   check_edit_size(sphere_edit(EditKind::kPaint, c, r), "paint");
   const Material m = material_of(material);
   pace();
-  return sent(c_->paint(c, r, m));
+  return sent([&] { return c_->paint(c, r, m); });
 }
 EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) {
   if (!(strength > 0) || strength > 1) raise(PyExc_ValueError, "smooth: strength must be in (0, 1]");
   check_edit_size(sphere_edit(EditKind::kSmooth, point_of(center, "center"), radius_of(radius)), "smooth");
   pace();
-  return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
+  return sent([&] { return c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)); });
 }
 
 EditFuture PyClient::write_box(const IVec3& lo, const py::object& array_like) {
@@ -512,16 +519,16 @@ EditFuture PyClient::write_box(const IVec3& lo, const py::object& array_like) {
         voxels.push_back(mat == kAir ? Voxel{} : make_voxel(static_cast<Material>(mat), static_cast<std::uint8_t>(occ)));
       }
   pace();
-  return sent(c_->write_box(r, voxels));
+  return sent([&] { return c_->write_box(r, voxels); });
 }
 
 EditFuture PyClient::undo() {
   pace();
-  return sent(c_->undo());
+  return sent([&] { return c_->undo(); });
 }
 EditFuture PyClient::redo() {
   pace();
-  return sent(c_->redo());
+  return sent([&] { return c_->redo(); });
 }
 
 py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3& hi, double timeout) {
@@ -679,9 +686,22 @@ std::string PyClient::material_name(Material m) const {
   return m < names.size() ? names[m] : std::to_string(m);
 }
 
+namespace {
+// numpy.bool_, without importing numpy (an import on a script's first edit
+// stalled its event loop for tens of ms): if numpy is not imported, m is not one.
+bool is_numpy_bool(const py::object& m) {
+  PyObject* numpy = PyImport_GetModule(py::str("numpy").ptr());
+  if (numpy == nullptr) {
+    if (PyErr_Occurred()) throw py::error_already_set();
+    return false;
+  }
+  return py::isinstance(m, py::reinterpret_steal<py::object>(numpy).attr("bool_"));
+}
+}  // namespace
+
 Material PyClient::material_of(const py::object& m) const {
   const auto& names = materials();
-  if (py::isinstance<py::bool_>(m) || py::isinstance(m, py::module_::import("numpy").attr("bool_")))
+  if (py::isinstance<py::bool_>(m) || is_numpy_bool(m))
     raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
   // Any integer: int, numpy's integers, whatever has __index__.
   if (!py::isinstance<py::str>(m) && PyIndex_Check(m.ptr())) {
@@ -706,8 +726,19 @@ Material PyClient::material_of(const py::object& m) const {
   raise(PyExc_TypeError, "material must be a name (str) or an id (int)");
 }
 
+double PyClient::reserve_edit() {
+  check_open();
+  const auto w = without_gil([&] { return c_->welcome(); });
+  return w ? std::chrono::duration<double>(pacing_->reserve_edit(*w)).count() : 0.0;
+}
+
+void PyClient::when_synced(py::object fn) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "when_synced: fn must be callable");
+  watches_->on_read(*c_, request_sync(*c_), [fn] { fn(); });
+}
+
 void PyClient::pace() {
-  const auto w = c_->welcome();
+  const auto w = without_gil([&] { return c_->welcome(); });
   if (w) pause(pacing_->edit(*w), "pacing edits");
 }
 
@@ -719,9 +750,12 @@ void PyClient::pause(std::chrono::milliseconds wait, const char* what) {
     raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
 }
 
-EditFuture PyClient::sent(std::uint32_t id) {
+EditFuture PyClient::sent(const std::function<std::uint32_t()>& send) {
+  // The GIL released: sending takes the client's lock, which the io side
+  // may hold for a while (applying a large update).
+  const std::uint32_t id = without_gil(send);
   if (id == 0) raise(PyExc_ConnectionError, "the edit could not be sent (connection closed or queue full)");
-  return EditFuture(c_, id);
+  return EditFuture(c_, watches_, id);
 }
 
 }  // namespace terrane::python

@@ -22,6 +22,7 @@
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
+#include "client/python/watches.h"
 
 namespace terrane::python {
 
@@ -96,6 +97,13 @@ class PyClient {
   EditFuture write_box(const IVec3& lo, const py::object& voxels);
   EditFuture undo();
   EditFuture redo();
+  // asyncio's pacing: takes the next edit's turn now and returns how many
+  // seconds to wait (on the event loop) before sending it; the next edit
+  // then goes at once.
+  double reserve_edit();
+  // Calls fn() on the callbacks thread once everything the server sent so
+  // far is applied (sync's barrier answered), or the connection is lost.
+  void when_synced(py::object fn);
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
 
   // --- movement --------------------------------------------------------------------
@@ -127,7 +135,8 @@ class PyClient {
   void check_edit_size(const EditRequestMsg& e, const char* what) const;
   std::string material_name(Material m) const;
   Material material_of(const py::object& m) const;
-  EditFuture sent(std::uint32_t id);
+  // Sends an edit (send returns its id, 0 if it could not be sent).
+  EditFuture sent(const std::function<std::uint32_t()>& send);
   // Keeps this client's edits within the rate the server's Welcome states
   // (waiting, GIL released, when a script edits faster).
   void pace();
@@ -140,6 +149,7 @@ class PyClient {
   bool own_slot_ = false;               // not a Swarm's
   std::shared_ptr<Handlers> handlers_;  // GIL
   std::shared_ptr<EventSink> sink_;
+  std::shared_ptr<Watches> watches_;  // what awaits wait for (GIL; the io side holds its Ids)
   std::shared_ptr<Client> c_;
   Vec3f facing_{0, 0, 1};
   mutable std::vector<std::string> names_;  // the world's materials, once welcomed

@@ -7,16 +7,22 @@
         c.dig((x, c.ground(x, z), z), 3).result()
 
 The classes come from the C++ client library (terrane._native); waits release
-the GIL. For asyncio, every blocking wait has an awaitable twin here:
-``await terrane.ready(c)``, ``await terrane.loaded(c)``,
-``await terrane.event(c, "update")``, ``await future`` (an EditFuture) and
-``await terrane.walk(c, target)``; each runs the wait on the loop's default
-executor, so the event loop never blocks.
+the GIL.
+
+asyncio, natively: ``await future`` (an EditFuture), ``await
+terrane.pace(c)`` (the edit rate's wait, as an asyncio sleep),
+``await terrane.paced(c.fill_box, lo, hi, "Brick")`` (both) and
+``await terrane.synced(c)`` hold no thread: the library's callbacks thread
+completes them through ``loop.call_soon_threadsafe``, and cancelling one
+cancels it. An edit sent without ``pace`` may wait for the rate (blocking
+the loop): in a coroutine, send edits through ``paced``.
+``await terrane.ready(c)``, ``loaded``, ``event`` and ``walk`` run the
+blocking wait on a thread of their own (not the loop's default executor).
 """
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt), read by pip from here
 
 import asyncio as _asyncio
-import functools as _functools
+import threading as _threading
 
 from terrane._native import (  # noqa: F401
     Client,
@@ -36,39 +42,110 @@ from terrane._native import (  # noqa: F401
 
 __all__ = [
     "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
-    "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "AIR",
+    "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "pace", "paced",
+    "synced", "in_thread", "AIR",
 ]
 
 AIR = "Air"
 
 
-async def _in_executor(fn, *args, **kwargs):
+def _wake(loop, waiter):
+    """From the callbacks thread: completes waiter on its loop."""
+    def resolve():
+        if not waiter.done():
+            waiter.set_result(None)
+    try:
+        loop.call_soon_threadsafe(resolve)
+    except RuntimeError:  # the loop is closed: nobody waits
+        pass
+
+
+async def _woken(register):
+    """Waits on the loop until register(fn)'s fn is called (from any thread)."""
     loop = _asyncio.get_running_loop()
-    return await loop.run_in_executor(None, _functools.partial(fn, *args, **kwargs))
+    waiter = loop.create_future()
+    register(lambda: _wake(loop, waiter))
+    await waiter
+
+
+async def in_thread(fn, *args):
+    """Runs a blocking wait on a thread of its own; the loop stays free.
+    Cancelling the await leaves the wait to end at its timeout."""
+    loop = _asyncio.get_running_loop()
+    waiter = loop.create_future()
+
+    def run():
+        try:
+            value, error = fn(*args), None
+        except BaseException as e:  # noqa: B902 - handed to the awaiting task
+            value, error = None, e
+
+        def resolve():
+            if waiter.done():
+                return
+            if error is not None:
+                waiter.set_exception(error)
+            else:
+                waiter.set_result(value)
+        try:
+            loop.call_soon_threadsafe(resolve)
+        except RuntimeError:
+            pass
+
+    _threading.Thread(target=run, name="terrane-await", daemon=True).start()
+    return await waiter
+
+
+async def pace(client):
+    """Waits, as an asyncio sleep, until client may send its next edit within
+    the server's edit rate; that edit then goes at once."""
+    delay = client._reserve_edit()
+    if delay > 0:
+        await _asyncio.sleep(delay)
+
+
+async def paced(edit, *args, **kwargs):
+    """``await terrane.paced(c.fill_box, lo, hi, "Brick")``: paces the edit
+    (terrane.pace), sends it and awaits its EditFuture. True once applied and
+    in the replica; raises as EditFuture.result does."""
+    await pace(edit.__self__)
+    return await edit(*args, **kwargs)
+
+
+async def synced(client):
+    """Awaitable Client.sync: everything the server sent so far is applied."""
+    await _woken(client._when_synced)
+    if client.closed:
+        client.sync(0)  # raises ConnectionError with the reason
 
 
 async def ready(client, timeout=30.0):
     """Awaitable Client.wait_ready."""
-    return await _in_executor(client.wait_ready, timeout)
+    return await in_thread(client.wait_ready, timeout)
 
 
 async def loaded(client, radius=None, timeout=60.0):
     """Awaitable Client.wait_loaded."""
-    return await _in_executor(client.wait_loaded, radius, timeout)
+    return await in_thread(client.wait_loaded, radius, timeout)
 
 
 async def event(client, kind=None, timeout=30.0):
     """Awaitable Client.next_event."""
-    return await _in_executor(client.next_event, kind, timeout)
+    return await in_thread(client.next_event, kind, timeout)
 
 
 async def walk(client, target, speed=8.0, timeout=120.0):
     """Awaitable Client.walk_to."""
-    return await _in_executor(client.walk_to, target, speed, timeout)
+    return await in_thread(client.walk_to, target, speed, timeout)
+
+
+async def _edit_outcome(future):
+    await _woken(future._when_done)
+    return future.result(0, False)  # answered (and shown, or the connection went): at once
 
 
 def _future_await(self):
-    return _in_executor(self.result).__await__()
+    return _edit_outcome(self).__await__()
 
 
 EditFuture.__await__ = _future_await

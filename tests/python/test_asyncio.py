@@ -1,0 +1,135 @@
+"""asyncio without an executor: awaits completed from the library's callbacks
+thread through loop.call_soon_threadsafe, pacing as an asyncio sleep,
+cancellation that cancels. Against a real terrane-server on 127.0.0.1."""
+import asyncio
+import concurrent.futures
+import threading
+import time
+
+import terrane
+
+
+class NoExecutor(concurrent.futures.ThreadPoolExecutor):
+    """A default executor that refuses work: an await that needs a thread fails."""
+
+    def submit(self, fn, *args, **kwargs):
+        raise AssertionError("an await took an executor thread")
+
+
+def _spot(c):
+    x, _, z = (int(v) for v in c.position)
+    return x, c.ground(x, z), z
+
+
+def test_edits_paced_on_the_loop_never_block_it(server):
+    # 60 edits: past the burst, the server's rate (20 a second) paces them
+    # for about two seconds. A ticker on the same loop keeps running.
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="async-pacer", view_distance=64, full_res_radius=32) as c:
+            c.wait_loaded(timeout=60)
+            x, g, z = _spot(c)
+            stop, gaps = asyncio.Event(), []
+
+            async def ticker():
+                last = time.monotonic()
+                while not stop.is_set():
+                    await asyncio.sleep(0.01)
+                    gaps.append(time.monotonic() - last)
+                    last = time.monotonic()
+
+            tick = asyncio.create_task(ticker())
+            start = time.monotonic()
+            results = [await terrane.paced(c.fill_box, (x + i % 8, g + 1 + i // 8, z), (x + i % 8 + 1, g + 2 + i // 8,
+                                           z + 1), "Brick") for i in range(60)]
+            took = time.monotonic() - start
+            stop.set()
+            await tick
+            assert results == [True] * 60
+            assert c.voxel((x + 3, g + 1 + 59 // 8, z)) == ("Brick", 255)
+            assert not c.closed, c.disconnect_reason
+            # Paced: it took the rate's time, and the loop ran meanwhile.
+            assert took > 1.0, took
+            print("60 paced edits in %.2f s; longest ticker gap %.1f ms" % (took, max(gaps) * 1000))
+            assert max(gaps) < 0.5, max(gaps)
+
+    asyncio.run(main())
+
+
+def test_many_awaits_hold_no_thread(server):
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="async-many", view_distance=64, full_res_radius=32) as c:
+            await terrane.loaded(c, timeout=60)
+            x, g, z = _spot(c)
+            threads = threading.active_count()
+            futures = []
+            for i in range(16):
+                await terrane.pace(c)
+                futures.append(c.fill_box((x + i, g + 1, z + 2), (x + i + 1, g + 2, z + 3), "Snow"))
+            waits = [asyncio.ensure_future(f) for f in futures] + [asyncio.ensure_future(terrane.synced(c))]
+            await asyncio.sleep(0)
+            assert threading.active_count() <= threads, "awaits took threads"
+            done = await asyncio.gather(*waits)
+            assert done[:16] == [True] * 16
+            assert all(c.voxel((x + i, g + 1, z + 2)) == ("Snow", 255) for i in range(16))
+
+    asyncio.run(main())
+
+
+def test_a_cancelled_await_is_cancelled_and_sends_nothing(server):
+    async def main():
+        with terrane.connect(server.address, name="async-cancel", view_distance=64, full_res_radius=32) as c:
+            c.wait_loaded(timeout=60)
+            x, g, z = _spot(c)
+            # Spend the burst, so the next paced edit waits for the rate.
+            for i in range(30):
+                await terrane.pace(c)
+                c.fill_box((x + i % 6, g + 1, z + 4 + i // 6), (x + i % 6 + 1, g + 2, z + 5 + i // 6), "Sand")
+            await terrane.synced(c)
+            target = (x, g + 3, z + 4)
+            before = c.voxel(target)
+            task = asyncio.ensure_future(terrane.paced(c.fill_box, target, (x + 1, g + 4, z + 5), "Brick"))
+            await asyncio.sleep(0)
+            task.cancel()
+            try:
+                await task
+                raise AssertionError("not cancelled")
+            except asyncio.CancelledError:
+                pass
+            # The edit was never sent: after a round trip the voxel is as it was.
+            await terrane.synced(c)
+            assert c.voxel(target) == before
+            # An await of an edit in flight, cancelled, ends at once; the edit
+            # is still answered (the library's future), and nothing waits for it.
+            f = c.fill_box(target, (x + 1, g + 4, z + 5), "Brick")
+            waiting = asyncio.ensure_future(f)
+            await asyncio.sleep(0)
+            waiting.cancel()
+            try:
+                await waiting
+            except asyncio.CancelledError:
+                pass
+            assert waiting.cancelled()
+            assert f.result(30)
+            assert c.voxel(target) == ("Brick", 255)
+
+    asyncio.run(main())
+
+
+def test_an_await_after_the_connection_closes_raises(server):
+    async def main():
+        c = terrane.connect(server.address, name="async-closed", view_distance=64, full_res_radius=32)
+        c.wait_loaded(timeout=60)
+        x, g, z = _spot(c)
+        f = c.fill_box((x, g + 1, z + 7), (x + 1, g + 2, z + 8), "Brick")
+        assert await f
+        c.close()
+        assert await f  # answered before: still True
+        try:
+            await terrane.synced(c)
+            raise AssertionError("synced after close returned")
+        except ConnectionError:
+            pass
+
+    asyncio.run(main())
