@@ -168,6 +168,8 @@ to its client keeps it alive until then).)")
            "integer dtype) or anything numpy.asarray takes, such as nested lists; at most 32^3 voxels.")
       .def("_reserve_edit", &PyClient::reserve_edit,
            "asyncio's pacing (terrane.pace): takes the next edit's turn and returns the seconds to wait before it.")
+      .def("_when_event", &PyClient::when_event, py::arg("fn"),
+           "Call fn() on the callbacks thread once the next event is queued or the client closed (terrane.event).")
       .def("_when_synced", &PyClient::when_synced, py::arg("fn"),
            "Call fn() on the callbacks thread once everything the server sent so far is applied (terrane.synced).")
       .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")

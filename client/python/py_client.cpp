@@ -141,20 +141,25 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   sink_ = std::make_shared<EventSink>(slot_, handlers_);
   watches_ = std::make_shared<Watches>(slot_);
   ClientCallbacks cb;
-  cb.on_update = [sink = sink_](const UpdateInfo& u) { sink->push(to_event(u)); };
-  cb.on_presence = [sink = sink_](const std::vector<PresenceEntryMsg>& p) { sink->push(to_event(p)); };
-  cb.on_notice = [sink = sink_](const ServerNoticeMsg& n) { sink->push(to_event(n)); };
+  // Each event queued wakes the awaits of terrane.event (Watches).
+  const auto push = [sink = sink_, ids = watches_->ids()](Event e) {
+    sink->push(std::move(e));
+    ids->event_queued();
+  };
+  cb.on_update = [push](const UpdateInfo& u) { push(to_event(u)); };
+  cb.on_presence = [push](const std::vector<PresenceEntryMsg>& p) { push(to_event(p)); };
+  cb.on_notice = [push](const ServerNoticeMsg& n) { push(to_event(n)); };
   cb.on_edit_result = [ids = watches_->ids()](std::uint32_t id, const EditOutcome&) { ids->edit_answered(id); };
   cb.on_read_result = [ids = watches_->ids()](std::uint32_t id) { ids->read_answered(id); };
   cb.on_connection_lost = [ids = watches_->ids()](const std::string&) { ids->connection_lost(); };
   cb.on_disconnected = [sink = sink_, ids = watches_->ids()](const std::string& reason) {
-    ids->closed();
     sink->push(DisconnectEvent{reason});
+    ids->closed();
   };
   pacing_ = std::make_shared<Pacing>(a.max_speed);
-  cb.on_reconnected = [sink = sink_, pacing = pacing_] {
+  cb.on_reconnected = [push, pacing = pacing_] {
     pacing->rejoined();  // the server counts the next position as joining
-    sink->push(ReconnectedEvent{});
+    push(ReconnectedEvent{});
   };
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
@@ -730,6 +735,12 @@ double PyClient::reserve_edit() {
   check_open();
   const auto w = without_gil([&] { return c_->welcome(); });
   return w ? std::chrono::duration<double>(pacing_->reserve_edit(*w)).count() : 0.0;
+}
+
+void PyClient::when_event(py::object fn) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "when_event: fn must be callable");
+  watches_->on_event([fn] { fn(); });
+  if (c_->closed()) watches_->ids()->closed();
 }
 
 void PyClient::when_synced(py::object fn) {

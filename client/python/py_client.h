@@ -104,6 +104,9 @@ class PyClient {
   // Calls fn() on the callbacks thread once everything the server sent so
   // far is applied (sync's barrier answered), or the connection is lost.
   void when_synced(py::object fn);
+  // Calls fn() on the callbacks thread once the next event is queued (or
+  // the client closed): terrane.event then takes it with next_event.
+  void when_event(py::object fn);
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
 
   // --- movement --------------------------------------------------------------------

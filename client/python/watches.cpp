@@ -49,13 +49,24 @@ void Watches::on_read(Client& c, std::uint32_t id, Continuation then) {
   if (now) watch(Kind::kRead, id, true, nullptr);
 }
 
+std::uint64_t Watches::keep(Continuation then) {
+  // The callbacks thread must exist before the io side posts to it.
+  ids_->slot_->get();
+  const std::uint64_t token = pending_->next_token++;
+  pending_->by_token.emplace(token, std::move(then));
+  return token;
+}
+
+void Watches::on_event(Continuation then) {
+  const std::uint64_t token = keep(std::move(then));
+  std::lock_guard lock(ids_->mutex_);
+  ids_->events_.push_back(token);
+}
+
 void Watches::watch(Kind kind, std::uint32_t id, bool answered_now, Continuation then) {
   auto& ids = kind == Kind::kEdit ? ids_->edits_ : ids_->reads_;
   if (!answered_now) {
-    // The callbacks thread must exist before the io side posts to it.
-    ids_->slot_->get();
-    const std::uint64_t token = pending_->next_token++;
-    pending_->by_token.emplace(token, std::move(then));
+    const std::uint64_t token = keep(std::move(then));
     std::lock_guard lock(ids_->mutex_);
     ids[id] = token;
     return;
@@ -111,8 +122,19 @@ void Watches::Ids::closed() {
     std::lock_guard lock(mutex_);
     for (const auto& [id, token] : edits_) tokens.push_back(token);
     for (const auto& [id, token] : reads_) tokens.push_back(token);
+    tokens.insert(tokens.end(), events_.begin(), events_.end());
     edits_.clear();
     reads_.clear();
+    events_.clear();
+  }
+  post(tokens);
+}
+
+void Watches::Ids::event_queued() {
+  std::vector<std::uint64_t> tokens;
+  {
+    std::lock_guard lock(mutex_);
+    tokens.swap(events_);
   }
   post(tokens);
 }

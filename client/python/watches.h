@@ -35,6 +35,10 @@ class Watches {
   // run when the connection is lost (a read sent before is never answered).
   void on_read(Client& c, std::uint32_t id, Continuation then);
 
+  // GIL held. Runs then() on the callbacks thread once the next event of
+  // any kind is queued for next_event (or the client closed).
+  void on_event(Continuation then);
+
   // What the io side holds (no Python object): which ids are watched.
   class Ids {
    public:
@@ -44,6 +48,8 @@ class Watches {
     void read_answered(std::uint32_t id);
     void connection_lost();
     void closed();
+    // io side: an event was queued (after EventSink::push).
+    void event_queued();
 
    private:
     friend class Watches;
@@ -53,14 +59,17 @@ class Watches {
 
     std::shared_ptr<DispatcherSlot> slot_;
     std::weak_ptr<Pending> pending_;  // the continuations, alive while the Watches is
-    std::mutex mutex_;  // edits_, reads_
+    std::mutex mutex_;  // edits_, reads_, events_
     std::unordered_map<std::uint32_t, std::uint64_t> edits_, reads_;  // id -> token
+    std::vector<std::uint64_t> events_;  // tokens waiting for the next event
   };
   // For the client's io callbacks.
   const std::shared_ptr<Ids>& ids() const { return ids_; }
 
  private:
   enum class Kind { kEdit, kRead };
+  // Keeps then (GIL held) and returns its token.
+  std::uint64_t keep(Continuation then);
   void watch(Kind kind, std::uint32_t id, bool answered_now, Continuation then);
 
   std::shared_ptr<Ids> ids_;

@@ -133,3 +133,47 @@ def test_an_await_after_the_connection_closes_raises(server):
             pass
 
     asyncio.run(main())
+
+
+def test_awaiting_events_holds_no_thread_and_a_cancelled_one_takes_none(server):
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="async-listener", view_distance=64, full_res_radius=32) as w, \
+             terrane.connect(server.address, name="async-sayer", view_distance=64, full_res_radius=32) as e:
+            w.wait_loaded(timeout=60)
+            e.wait_loaded(timeout=60)
+            while True:  # drain what joining queued
+                try:
+                    w.next_event(None, 0)
+                except TimeoutError:
+                    break
+            threads = threading.active_count()
+            listening = asyncio.ensure_future(terrane.event(w, "update", 30))
+            cancelled = asyncio.ensure_future(terrane.event(w, "update", 30))
+            await asyncio.sleep(0)
+            assert threading.active_count() <= threads, "an await took a thread"
+            cancelled.cancel()
+            x, g, z = _spot(e)
+            assert await terrane.paced(e.fill_box, (x, g + 1, z + 9), (x + 1, g + 2, z + 10), "Brick")
+            first = await listening
+            assert first.kind == "update"
+            # Had the cancelled await gone on waiting in a thread, it would
+            # have taken the next update; a second edit's update is there.
+            assert await terrane.paced(e.fill_box, (x + 1, g + 1, z + 9), (x + 2, g + 2, z + 10), "Brick")
+            await terrane.synced(w)
+            seen = []
+            while True:
+                try:
+                    seen.append(w.next_event("update", 0))
+                except TimeoutError:
+                    break
+            assert cancelled.cancelled()
+            assert any(any(lo[0] <= x + 1 < hi[0] and lo[2] <= z + 9 < hi[2] for lo, hi in u.regions) for u in seen), \
+                [u.regions for u in seen]
+            try:
+                await terrane.event(w, "message", 0.05)
+                raise AssertionError("no message was sent")
+            except TimeoutError:
+                pass
+
+    asyncio.run(main())

@@ -10,14 +10,15 @@ The classes come from the C++ client library (terrane._native); waits release
 the GIL.
 
 asyncio, natively: ``await future`` (an EditFuture), ``await
-terrane.pace(c)`` (the edit rate's wait, as an asyncio sleep),
-``await terrane.paced(c.fill_box, lo, hi, "Brick")`` (both) and
-``await terrane.synced(c)`` hold no thread: the library's callbacks thread
-completes them through ``loop.call_soon_threadsafe``, and cancelling one
-cancels it. An edit sent without ``pace`` may wait for the rate (blocking
-the loop): in a coroutine, send edits through ``paced``.
-``await terrane.ready(c)``, ``loaded``, ``event`` and ``walk`` run the
-blocking wait on a thread of their own (not the loop's default executor).
+terrane.paced(c.fill_box, lo, hi, "Brick")`` (the edit rate's wait as an
+asyncio sleep, then the edit, awaited), ``await terrane.pace(c)`` (the
+wait alone), ``await terrane.synced(c)`` and ``await terrane.event(c,
+kind)`` hold no thread: the library's callbacks thread completes them
+through ``loop.call_soon_threadsafe``, and cancelling one cancels it. An
+edit sent without ``pace`` may wait for the rate (blocking the loop): in a
+coroutine, send edits through ``paced``. ``await terrane.ready(c)``,
+``loaded``, ``walk`` and ``in_thread(fn, *args)`` run the blocking wait on
+a thread of their own (not the loop's default executor).
 """
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt), read by pip from here
 
@@ -130,8 +131,24 @@ async def loaded(client, radius=None, timeout=60.0):
 
 
 async def event(client, kind=None, timeout=30.0):
-    """Awaitable Client.next_event."""
-    return await in_thread(client.next_event, kind, timeout)
+    """Awaitable Client.next_event, holding no thread; a cancelled await takes
+    no event from the queue."""
+    loop = _asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        waiter = loop.create_future()
+        client._when_event(lambda: _wake(loop, waiter))
+        try:
+            return client.next_event(kind, 0)  # queued already (or raises ConnectionError once closed)
+        except TimeoutError:
+            pass
+        left = deadline - loop.time()
+        if left <= 0:
+            raise TimeoutError("no %s within the timeout" % ("event" if kind is None else kind + " event"))
+        try:
+            await _asyncio.wait_for(waiter, left)
+        except _asyncio.TimeoutError:
+            pass  # the loop's next turn raises, unless one came meanwhile
 
 
 async def walk(client, target, speed=8.0, timeout=120.0):
