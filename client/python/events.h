@@ -39,6 +39,10 @@ using IVec3 = std::tuple<std::int64_t, std::int64_t, std::int64_t>;
 
 inline IVec3 ivec(Vec3i v) { return {v.x, v.y, v.z}; }
 inline Vec3 vec(Vec3f v) { return {v.x, v.y, v.z}; }
+// A voxel position in messages: "(x, y, z)".
+inline std::string str(Vec3i v) {
+  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
+}
 
 // --- what Python sees ---------------------------------------------------------
 struct UpdateEvent {

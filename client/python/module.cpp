@@ -186,6 +186,13 @@ to its client keeps it alive until then).)")
            "Walk to the place to stand nearest target over the voxel surface (A*: steps up to 1 voxel, drops up to "
            "3, 2 voxels of head room, never through what is not held at full resolution), at speed voxels per "
            "second. Returns the places walked. Raises Unreachable with the reason when there is no way.")
+      .def("find_path", &PyClient::find_path, py::arg("target"), py::arg("timeout") = 30.0,
+           py::arg("max_nodes") = 200000,
+           "The places walk_to would walk through now, from where the client stands to the place to stand nearest "
+           "target, without moving. Raises Unreachable with the reason when there is no way.")
+      .def("can_stand", &PyClient::can_stand_at, py::arg("place"),
+           "True if a walker can stand at place now (feet in Air with head room, ground below, all held at full "
+           "resolution).")
       .def("look_at", &PyClient::look_at, py::arg("point"),
            "Face a point (from the eye, 1.6 above the feet); returns the unit direction. Facing is the script's: "
            "the protocol carries no orientation.")

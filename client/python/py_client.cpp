@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "client/path.h"
+#include "client/python/walking.h"
 #include "common/cli/cli.h"
 #include "common/world/view.h"
 
@@ -17,10 +18,6 @@ constexpr float kEyeHeight = 1.6f;
 std::chrono::milliseconds until(Clock::time_point deadline) {
   return std::chrono::duration_cast<std::chrono::milliseconds>(
       std::max(Clock::duration::zero(), deadline - Clock::now()));
-}
-
-std::string str(Vec3i v) {
-  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
 }
 
 Vec3i voxel_of(const IVec3& p, const char* what) {
@@ -576,29 +573,12 @@ void PyClient::move_to(const Vec3& position) {
   if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
 }
 
-namespace {
-// The replica as the path search reads it: each query takes the client's
-// lock on its own, so the io thread goes on applying frames during a long
-// search.
-struct LiveReplica {
-  const Client& c;
-  Voxel get(Vec3i p) const { return c.get(p); }
-  int resolution_at(Vec3i p) const { return c.resolution_at(p); }
-};
-}  // namespace
-
 std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
   if (!(speed > 0) || speed > 64) raise(PyExc_ValueError, "walk_to: speed must be in (0, 64] voxels per second");
-  if (max_nodes < 1 || max_nodes > 2'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..2000000");
   const Vec3f goal_point = point_of(target, "target");
   const auto deadline = Clock::now() + timeout_of(timeout);
+  const PathOptions o = path_options(max_nodes, deadline);
   wait_ready(timeout);
-  PathOptions o;
-  o.max_nodes = max_nodes;
-  o.deadline = deadline;
-  const LiveReplica world{*c_};
-  const auto floor_of = [](float v) { return static_cast<std::int32_t>(std::floor(v)); };
-  const Vec3i goal_voxel{floor_of(goal_point.x), floor_of(goal_point.y), floor_of(goal_point.z)};
   const auto out_of_time = [&] { raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout"); };
   std::vector<IVec3> walked;
   // The world may change under the walker: each step is checked before it
@@ -607,30 +587,11 @@ std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double ti
   for (int attempt = 0;; ++attempt) {
     if (Clock::now() >= deadline) out_of_time();
     const Vec3f here = state().position;
-    std::optional<Vec3i> start, goal;
-    PathResult path;
-    int goal_resolution = 0;
-    without_gil([&] {
-      start = place_near(world, floor_of(here.x), floor_of(here.z), floor_of(here.y + 0.01f), 32, o);
-      goal = place_near(world, goal_voxel.x, goal_voxel.z, goal_voxel.y, 8, o);
-      goal_resolution = world.resolution_at(goal_voxel);
-      if (start && goal) path = find_path(world, *start, *goal, o);
-    });
-    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-    if (!start)
-      throw Unreachable("walk_to: no ground held at full resolution under the client at " +
-                        str({floor_of(here.x), floor_of(here.y), floor_of(here.z)}));
-    if (!goal)
-      throw Unreachable(goal_resolution != 0
-                            ? "walk_to: the target " + str(goal_voxel) +
-                                  " is not held at full resolution (beyond the full-resolution radius, or not loaded yet)"
-                            : "walk_to: no place to stand within 8 voxels of the target " + str(goal_voxel));
-    if (path.timed_out) out_of_time();
-    if (!path.found) throw Unreachable("walk_to: " + path.error);
+    const std::vector<Vec3i> steps = plan_walk(*c_, here, goal_point, o);
     bool blocked = false;
     Vec3f at = here;
-    for (const Vec3i s : path.steps) {
-      if (!is_place(world, s, o)) {
+    for (const Vec3i s : steps) {
+      if (!can_stand(*c_, s, o)) {
         blocked = true;
         break;
       }
@@ -650,6 +611,26 @@ std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double ti
     if (!blocked) return walked;
     if (attempt == kReplans) throw Unreachable("walk_to: the way kept changing under the walker");
   }
+}
+
+std::vector<IVec3> PyClient::find_path(const Vec3& target, double timeout, std::size_t max_nodes) {
+  const Vec3f goal_point = point_of(target, "target");
+  const auto deadline = Clock::now() + timeout_of(timeout);
+  const PathOptions o = path_options(max_nodes, deadline);
+  wait_ready(timeout);
+  std::vector<IVec3> out;
+  for (const Vec3i s : plan_walk(*c_, state().position, goal_point, o)) out.push_back(ivec(s));
+  return out;
+}
+
+bool PyClient::can_stand_at(const IVec3& p) const { return can_stand(*c_, voxel_of(p, "can_stand"), PathOptions{}); }
+
+PathOptions PyClient::path_options(std::size_t max_nodes, Clock::time_point deadline) {
+  if (max_nodes < 1 || max_nodes > 2'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..2000000");
+  PathOptions o;
+  o.max_nodes = max_nodes;
+  o.deadline = deadline;
+  return o;
 }
 
 Vec3 PyClient::look_at(const Vec3& point) {

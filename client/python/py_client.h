@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "client/path.h"
 #include "client/python/edit_future.h"
 #include "client/python/events.h"
 #include "client/python/gil.h"
@@ -112,6 +113,10 @@ class PyClient {
   // --- movement --------------------------------------------------------------------
   void move_to(const Vec3& position);
   std::vector<IVec3> walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes);
+  // The way walk_to would take now (raises as walk_to does), and whether a
+  // walker can stand at a place: terrane.walk steps them on the event loop.
+  std::vector<IVec3> find_path(const Vec3& target, double timeout, std::size_t max_nodes);
+  bool can_stand_at(const IVec3& p) const;
   Vec3 look_at(const Vec3& point);
   Vec3 position() const;
   Vec3 facing() const { return vec(facing_); }
@@ -137,6 +142,8 @@ class PyClient {
   // one edit may touch (kMaxEditVolume).
   void check_edit_size(const EditRequestMsg& e, const char* what) const;
   std::string material_name(Material m) const;
+  // The search's options (max_nodes checked: 1..2,000,000).
+  static PathOptions path_options(std::size_t max_nodes, Clock::time_point deadline);
   Material material_of(const py::object& m) const;
   // Sends an edit (send returns its id, 0 if it could not be sent).
   EditFuture sent(const std::function<std::uint32_t()>& send);

@@ -177,3 +177,46 @@ def test_awaiting_events_holds_no_thread_and_a_cancelled_one_takes_none(server):
                 pass
 
     asyncio.run(main())
+
+
+def test_a_walk_steps_on_the_loop_and_a_cancelled_one_stops_where_it_stands(server):
+    from test_walk import flat_ground
+
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="async-walker", view_distance=64, full_res_radius=32) as c:
+            c.wait_loaded(timeout=60)
+            x, g, z = flat_ground(c)
+            assert c.can_stand((x + 8, g, z)) and not c.can_stand((x + 8, g - 1, z))
+            way = c.find_path((x + 8, g, z))
+            assert way[-1] == (x + 8, g, z) and tuple(int(v) for v in c.position) == (x, g, z)  # not moved
+            # Walked on the loop: a ticker runs meanwhile.
+            ticks = 0
+
+            async def ticker():
+                nonlocal ticks
+                while True:
+                    await asyncio.sleep(0.01)
+                    ticks += 1
+
+            tick = asyncio.create_task(ticker())
+            steps = await terrane.walk(c, (x + 8, g, z), speed=32)
+            assert steps[-1] == (x + 8, g, z) and ticks > 0
+            # Cancelled after its first step: it stops there.
+            walking = asyncio.ensure_future(terrane.walk(c, (x - 8, g, z), speed=4))
+            while tuple(int(v) for v in c.position) == (x + 8, g, z):
+                await asyncio.sleep(0.01)
+            walking.cancel()
+            try:
+                await walking
+                raise AssertionError("the walk was not cancelled")
+            except asyncio.CancelledError:
+                pass
+            stopped = c.position
+            assert int(stopped[0]) > x - 8
+            # No thread walks on: the walk is a task of this loop, and it ended.
+            tick.cancel()
+            await terrane.synced(c)
+            assert c.position == stopped and not c.closed, c.disconnect_reason
+
+    asyncio.run(main())

@@ -12,17 +12,19 @@ the GIL.
 asyncio, natively: ``await future`` (an EditFuture), ``await
 terrane.paced(c.fill_box, lo, hi, "Brick")`` (the edit rate's wait as an
 asyncio sleep, then the edit, awaited), ``await terrane.pace(c)`` (the
-wait alone), ``await terrane.synced(c)`` and ``await terrane.event(c,
-kind)`` hold no thread: the library's callbacks thread completes them
-through ``loop.call_soon_threadsafe``, and cancelling one cancels it. An
-edit sent without ``pace`` may wait for the rate (blocking the loop): in a
+wait alone), ``await terrane.synced(c)``, ``await terrane.event(c, kind)``
+and ``await terrane.walk(c, target)`` (its search aside) hold no thread:
+the library's callbacks thread completes them through
+``loop.call_soon_threadsafe``, and cancelling one cancels it. An edit sent
+without ``pace`` may wait for the rate (blocking the loop): in a
 coroutine, send edits through ``paced``. ``await terrane.ready(c)``,
-``loaded``, ``walk`` and ``in_thread(fn, *args)`` run the blocking wait on
-a thread of their own (not the loop's default executor).
+``loaded`` and ``in_thread(fn, *args)`` run the blocking wait on a thread
+of their own (not the loop's default executor).
 """
 __version__ = "0.1.0"  # the project's version (CMakeLists.txt), read by pip from here
 
 import asyncio as _asyncio
+import math as _math
 import threading as _threading
 
 from terrane._native import (  # noqa: F401
@@ -152,8 +154,37 @@ async def event(client, kind=None, timeout=30.0):
 
 
 async def walk(client, target, speed=8.0, timeout=120.0):
-    """Awaitable Client.walk_to."""
-    return await in_thread(client.walk_to, target, speed, timeout)
+    """Client.walk_to on the event loop: the way is searched (Client.find_path,
+    on a thread of its own) and each step waits as an asyncio sleep, so
+    cancelling the await stops the walker where it stands. Returns the places
+    walked; raises Unreachable, TimeoutError or ConnectionError as walk_to."""
+    if not 0 < speed <= 64:
+        raise ValueError("walk: speed must be in (0, 64] voxels per second")
+    loop = _asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    walked = []
+    for _ in range(4):  # the way may change under the walker: searched again a few times
+        left = deadline - loop.time()
+        if left <= 0:
+            break
+        steps = await in_thread(client.find_path, target, left)
+        at = client.position
+        for s in steps:
+            if not client.can_stand(s):
+                break
+            step = (s[0] + 0.5, s[1], s[2] + 0.5)
+            pause = _math.dist(at, step) / speed
+            if loop.time() + pause > deadline:
+                raise TimeoutError("walk: the target was not reached within the timeout")
+            await _asyncio.sleep(pause)
+            client.move_to(step)
+            at = step
+            walked.append(s)
+        else:
+            return walked
+    if deadline - loop.time() <= 0:
+        raise TimeoutError("walk: the target was not reached within the timeout")
+    raise Unreachable("walk: the way kept changing under the walker")
 
 
 async def _edit_outcome(future):
