@@ -147,6 +147,11 @@ to its client keeps it alive until then).)")
            "The first solid voxel along a ray: ((x, y, z), normal, distance, material) or None.")
       .def("ground", &PyClient::ground, py::arg("x"), py::arg("z"),
            "The y just above the highest solid voxel of column (x, z) as held, or None.")
+      .def("find", &PyClient::find, py::arg("material"), py::arg("near") = py::none(), py::arg("within") = 16.0,
+           py::arg("max") = 1,
+           "The voxels of material (a name or an id) whose centres lie within `within` voxels (at most 64) of near "
+           "(default: the client's position), nearest first, at most max of them: a list of (x, y, z). Searches "
+           "what the replica holds at full resolution.")
       .def_property_readonly("presence", &PyClient::presence, "The other clients in view, nearest first.")
       .def_property_readonly("materials", &PyClient::materials, "The world's material names, by id.")
       // edits

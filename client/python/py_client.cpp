@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "client/path.h"
+#include "client/python/find.h"
 #include "client/python/walking.h"
 #include "common/cli/cli.h"
 #include "common/world/view.h"
@@ -426,6 +427,21 @@ py::object PyClient::ground(std::int64_t x, std::int64_t z) const {
   const Vec3i p = voxel_of({x, 0, z}, "ground");
   const auto h = c_->surface_height(p.x, p.z);
   return h ? py::object(py::int_(*h)) : py::none();
+}
+
+std::vector<IVec3> PyClient::find(const py::object& material, const std::optional<Vec3>& near, double within,
+                                   std::int64_t max) const {
+  const Material m = material_of(material);
+  if (!(within > 0) || within > kMaxFindRadius)
+    raise(PyExc_ValueError, "find: within must be in (0, " + std::to_string(static_cast<int>(kMaxFindRadius)) + "] voxels");
+  if (max < 1 || max > 1'000'000) raise(PyExc_ValueError, "find: max must be 1..1000000");
+  const Vec3f p = near ? point_of(*near, "near") : state().position;
+  const auto found =
+      without_gil([&] { return find_voxels(*c_, m, p, within, static_cast<std::size_t>(max)); });
+  std::vector<IVec3> out;
+  out.reserve(found.size());
+  for (const Vec3i v : found) out.push_back(ivec(v));
+  return out;
 }
 
 std::vector<Player> PyClient::presence() const { return to_event(c_->presence()).players; }

@@ -86,6 +86,11 @@ class PyClient {
   py::array_t<std::uint8_t> read_box(const IVec3& lo, const IVec3& hi) const;
   py::object raycast(const Vec3& origin, const Vec3& direction, double max_distance) const;
   py::object ground(std::int64_t x, std::int64_t z) const;
+  // The voxels of a material nearest near (default: the client's
+  // position) within `within` voxels, nearest first, at most max
+  // (client/python/find.h).
+  std::vector<IVec3> find(const py::object& material, const std::optional<Vec3>& near, double within,
+                          std::int64_t max) const;
   std::vector<Player> presence() const;
 
   // --- edits ---------------------------------------------------------------------
