@@ -23,6 +23,42 @@ bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<
   return wait_interruptibly(timeout, [&](std::chrono::milliseconds slice) { return c.wait_until(pred, slice); });
 }
 
+void wait_ready(Client& c, std::chrono::milliseconds timeout) {
+  bool ready = false, closed = false;
+  wait_for(c, timeout, [&](const ClientView& v) {
+    ready = v.welcomed;
+    closed = v.closed;
+    return ready || closed;
+  });
+  if (ready) return;
+  if (closed) raise(PyExc_ConnectionError, "connection closed: " + c.disconnect_reason());
+  raise(PyExc_TimeoutError, "no Welcome within the timeout");
+}
+
+void pause(Client& c, std::chrono::milliseconds wait, const char* what) {
+  if (wait.count() == 0) return;
+  bool closed = false;
+  wait_for(c, wait, [&](const ClientView& v) { return closed = v.closed; });
+  if (closed)
+    raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c.disconnect_reason());
+}
+
+Vec3i voxel_of(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& p, const char* what) {
+  const auto [x, y, z] = p;
+  for (const std::int64_t v : {x, y, z})
+    if (v < -kMaxWireCoordinate || v > kMaxWireCoordinate)
+      raise(PyExc_ValueError, std::string(what) + ": coordinates must lie within +-2^24");
+  return {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
+}
+
+Vec3f point_of(const std::tuple<double, double, double>& p, const char* what) {
+  const auto [x, y, z] = p;
+  for (const double v : {x, y, z})
+    if (!std::isfinite(v) || std::abs(v) > kMaxWireCoordinate)
+      raise(PyExc_ValueError, std::string(what) + ": coordinates must be finite, within +-2^24");
+  return {static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
+}
+
 bool EditFuture::done() const {
   bool d = false;
   c_->wait_until([&](const ClientView& v) { return d = v.edits.count(id_) != 0; }, std::chrono::milliseconds(0));

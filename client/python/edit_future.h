@@ -1,6 +1,7 @@
 // EditFuture (one edit's outcome, waited for by result()) and what every
 // binding shares: its exceptions, raise(), timeouts, the interruptible
-// wait on a Client's view and the sync barrier. Called with the GIL held;
+// wait on a Client's view (readiness, pauses) and the sync barrier, and
+// the checks of a script's coordinates. Called with the GIL held;
 // each wait releases it.
 #pragma once
 
@@ -12,6 +13,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 #include "client/client.h"
 #include "client/python/watches.h"
@@ -49,6 +51,16 @@ std::chrono::milliseconds timeout_of(double seconds);
 // or the timeout passes; Ctrl-C interrupts it. pred runs under the
 // client's lock.
 bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred);
+// Waits for the Welcome; raises ConnectionError once closed (or closed
+// before it came), TimeoutError at the timeout.
+void wait_ready(Client& c, std::chrono::milliseconds timeout);
+// Waits out a pause (pacing); ends early, raising ConnectionError, only if
+// the connection closes. what: "moving", "pacing edits".
+void pause(Client& c, std::chrono::milliseconds wait, const char* what);
+// A script's coordinates, checked (ValueError naming what): a voxel within
+// the wire's +-2^24, a point finite and within it.
+Vec3i voxel_of(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& p, const char* what);
+Vec3f point_of(const std::tuple<double, double, double>& p, const char* what);
 
 // The outcome of one edit: result() waits for the server's answer.
 class EditFuture {

@@ -182,26 +182,38 @@ to its client keeps it alive until then).)")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
            "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")
       // movement
-      .def("move_to", &PyClient::move_to, py::arg("position"),
+      .def("move_to", [](PyClient& c, const Vec3& p) { c.walker().move_to(point_of(p, "position")); },
+           py::arg("position"),
            "Move to (x, y, z) (feet); the server streams around the new place. Paced within the server's speed "
            "budget (max_speed voxels a second since the last move, plus 48): a far move waits until it is allowed; "
            "one farther than ten seconds of it raises ValueError naming the distance allowed.")
-      .def("walk_to", &PyClient::walk_to, py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
+      .def("walk_to",
+           [](PyClient& c, const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
+             return c.walker().walk_to(point_of(target, "target"), speed, timeout, max_nodes);
+           },
+           py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
            py::arg("max_nodes") = 200000,
            "Walk to the place to stand nearest target over the voxel surface (A*: steps up to 1 voxel, drops up to "
            "3, 2 voxels of head room, never through what is not held at full resolution), at speed voxels per "
            "second. Returns the places walked. Raises Unreachable with the reason when there is no way.")
-      .def("find_path", &PyClient::find_path, py::arg("target"), py::arg("timeout") = 30.0,
+      .def("find_path",
+           [](PyClient& c, const Vec3& target, double timeout, std::size_t max_nodes) {
+             return c.walker().find_path(point_of(target, "target"), timeout, max_nodes);
+           },
+           py::arg("target"), py::arg("timeout") = 30.0,
            py::arg("max_nodes") = 200000,
            "The places walk_to would walk through now, from where the client stands to the place to stand nearest "
            "target, without moving. Raises Unreachable with the reason when there is no way.")
-      .def("can_stand", &PyClient::can_stand_at, py::arg("place"),
+      .def("can_stand", [](PyClient& c, const IVec3& p) { return c.walker().can_stand(voxel_of(p, "can_stand")); },
+           py::arg("place"),
            "True if a walker can stand at place now (feet in Air with head room, ground below, all held at full "
            "resolution).")
-      .def("look_at", &PyClient::look_at, py::arg("point"),
+      .def("look_at", [](PyClient& c, const Vec3& p) { return vec(c.walker().look_at(point_of(p, "point"))); },
+           py::arg("point"),
            "Face a point (from the eye, 1.6 above the feet); returns the unit direction. Facing is the script's: "
            "the protocol carries no orientation.")
-      .def_property_readonly("facing", &PyClient::facing, "The unit direction the client faces.")
+      .def_property_readonly("facing", [](PyClient& c) { return vec(c.walker().facing()); },
+                             "The unit direction the client faces.")
       .def("target", &PyClient::target, py::arg("max_distance") = 64.0,
            "What the client looks at: raycast from the eye along facing.")
       .def_property_readonly("position", &PyClient::position, "(x, y, z) of the client's feet, as last sent.")

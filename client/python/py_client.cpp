@@ -5,7 +5,6 @@
 
 #include "client/path.h"
 #include "client/python/find.h"
-#include "client/python/walking.h"
 #include "common/cli/cli.h"
 #include "common/world/view.h"
 
@@ -13,28 +12,10 @@ namespace terrane::python {
 
 namespace {
 
-constexpr float kEyeHeight = 1.6f;
-
 // What is left of a deadline.
 std::chrono::milliseconds until(Clock::time_point deadline) {
   return std::chrono::duration_cast<std::chrono::milliseconds>(
       std::max(Clock::duration::zero(), deadline - Clock::now()));
-}
-
-Vec3i voxel_of(const IVec3& p, const char* what) {
-  const auto [x, y, z] = p;
-  for (const std::int64_t v : {x, y, z})
-    if (v < -kMaxWireCoordinate || v > kMaxWireCoordinate)
-      raise(PyExc_ValueError, std::string(what) + ": coordinates must lie within +-2^24");
-  return {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
-}
-
-Vec3f point_of(const Vec3& p, const char* what) {
-  const auto [x, y, z] = p;
-  for (const double v : {x, y, z})
-    if (!std::isfinite(v) || std::abs(v) > kMaxWireCoordinate)
-      raise(PyExc_ValueError, std::string(what) + ": coordinates must be finite, within +-2^24");
-  return {static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
 }
 
 float radius_of(double r) {
@@ -161,6 +142,7 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   };
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
+  walker_ = Walker(c_, pacing_);
   std::string err;
   bool ok = false;
   ok = without_gil([&] { return c_->connect(&err); });
@@ -195,14 +177,7 @@ void PyClient::check_open() const {
 void PyClient::wait_ready(double timeout) {
   const auto t = timeout_of(timeout);
   check_open();
-  bool ready = false, closed = false;
-  wait_for(*c_, t,
-        [&](const ClientView& v) {
-          ready = v.welcomed;
-          closed = v.closed;
-          return ready || closed;
-        });
-  if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
+  python::wait_ready(*c_, t);
 }
 
 void PyClient::sync(double timeout) {
@@ -573,98 +548,11 @@ py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3
   return planes(s, [&](int x, int y, int z) { return res->voxels[static_cast<std::size_t>((y * s.z + z) * s.x + x)]; });
 }
 
-void PyClient::move_to(const Vec3& position) {
-  ClientStateMsg s = state();
-  const Vec3f from = s.position;
-  s.position = point_of(position, "position");
-  const Vec3f d = s.position - from;
-  const double distance = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
-  // The server's speed budget: a far move waits until it is allowed.
-  if (distance > pacing_->max_move())
-    raise(PyExc_ValueError, "move_to: " + std::to_string(std::lround(distance)) + " voxels at once; at most " +
-                                std::to_string(std::lround(pacing_->max_move())) +
-                                " (ten seconds of the server's speed budget, max_speed voxels a second plus 48): "
-                                "walk_to, or move in steps");
-  pause(pacing_->move(distance), "moving");
-  if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
-}
-
-std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
-  if (!(speed > 0) || speed > 64) raise(PyExc_ValueError, "walk_to: speed must be in (0, 64] voxels per second");
-  const Vec3f goal_point = point_of(target, "target");
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  const PathOptions o = path_options(max_nodes, deadline);
-  wait_ready(timeout);
-  const auto out_of_time = [&] { raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout"); };
-  std::vector<IVec3> walked;
-  // The world may change under the walker: each step is checked before it
-  // is taken, and a blocked way is searched again (a few times).
-  constexpr int kReplans = 3;
-  for (int attempt = 0;; ++attempt) {
-    if (Clock::now() >= deadline) out_of_time();
-    const Vec3f here = state().position;
-    const std::vector<Vec3i> steps = plan_walk(*c_, here, goal_point, o);
-    bool blocked = false;
-    Vec3f at = here;
-    for (const Vec3i s : steps) {
-      if (!can_stand(*c_, s, o)) {
-        blocked = true;
-        break;
-      }
-      const Vec3f next{static_cast<float>(s.x) + 0.5f, static_cast<float>(s.y), static_cast<float>(s.z) + 0.5f};
-      const Vec3f d = next - at;
-      const double dist = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
-      const auto pace = std::chrono::milliseconds(static_cast<std::int64_t>(dist / speed * 1000));
-      if (Clock::now() + pace > deadline) out_of_time();
-      bool closed = false;
-      // Walking pace: the wait ends early only if the connection closes.
-      wait_for(*c_, pace, [&](const ClientView& v) { return closed = v.closed; });
-      if (closed) raise(PyExc_ConnectionError, "connection closed while walking: " + c_->disconnect_reason());
-      move_to(vec(next));
-      at = next;
-      walked.push_back(ivec(s));
-    }
-    if (!blocked) return walked;
-    if (attempt == kReplans) throw Unreachable("walk_to: the way kept changing under the walker");
-  }
-}
-
-std::vector<IVec3> PyClient::find_path(const Vec3& target, double timeout, std::size_t max_nodes) {
-  const Vec3f goal_point = point_of(target, "target");
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  const PathOptions o = path_options(max_nodes, deadline);
-  wait_ready(timeout);
-  std::vector<IVec3> out;
-  for (const Vec3i s : plan_walk(*c_, state().position, goal_point, o)) out.push_back(ivec(s));
-  return out;
-}
-
-bool PyClient::can_stand_at(const IVec3& p) const { return can_stand(*c_, voxel_of(p, "can_stand"), PathOptions{}); }
-
-PathOptions PyClient::path_options(std::size_t max_nodes, Clock::time_point deadline) {
-  if (max_nodes < 1 || max_nodes > 2'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..2000000");
-  PathOptions o;
-  o.max_nodes = max_nodes;
-  o.deadline = deadline;
-  return o;
-}
-
-Vec3 PyClient::look_at(const Vec3& point) {
-  const Vec3f p = point_of(point, "point");
-  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
-  const Vec3f d = p - eye;
-  const float len = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-  if (!(len > 1e-6f)) raise(PyExc_ValueError, "look_at: the point is at the client's eye");
-  facing_ = d * (1.0f / len);
-  return vec(facing_);
-}
-
 py::object PyClient::target(double max_distance) const {
-  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
-  return raycast(vec(eye), vec(facing_), max_distance);
+  return raycast(vec(walker_.eye()), vec(walker_.facing()), max_distance);
 }
 
-Vec3 PyClient::position() const { return vec(state().position); }
+Vec3 PyClient::position() const { return vec(walker_.position()); }
 
 const std::vector<std::string>& PyClient::materials() const {
   // Read once from the Welcome (every query names materials; copying the
@@ -747,15 +635,7 @@ void PyClient::when_synced(py::object fn) {
 
 void PyClient::pace() {
   const auto w = without_gil([&] { return c_->welcome(); });
-  if (w) pause(pacing_->edit(*w), "pacing edits");
-}
-
-void PyClient::pause(std::chrono::milliseconds wait, const char* what) {
-  if (wait.count() == 0) return;
-  bool closed = false;
-  wait_for(*c_, wait, [&](const ClientView& v) { return closed = v.closed; });
-  if (closed)
-    raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
+  if (w) python::pause(*c_, pacing_->edit(*w), "pacing edits");
 }
 
 EditFuture PyClient::sent(const std::function<std::uint32_t()>& send) {

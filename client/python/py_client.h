@@ -18,11 +18,11 @@
 #include <vector>
 
 #include "client/client.h"
-#include "client/path.h"
 #include "client/python/edit_future.h"
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
+#include "client/python/walker.h"
 #include "client/python/watches.h"
 
 namespace terrane::python {
@@ -115,16 +115,10 @@ class PyClient {
   void when_event(py::object fn);
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
 
-  // --- movement --------------------------------------------------------------------
-  void move_to(const Vec3& position);
-  std::vector<IVec3> walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes);
-  // The way walk_to would take now (raises as walk_to does), and whether a
-  // walker can stand at a place: terrane.walk steps them on the event loop.
-  std::vector<IVec3> find_path(const Vec3& target, double timeout, std::size_t max_nodes);
-  bool can_stand_at(const IVec3& p) const;
-  Vec3 look_at(const Vec3& point);
+  // --- movement: the Walker (client/python/walker.h) ----------------------------------
+  Walker& walker() { return walker_; }
   Vec3 position() const;
-  Vec3 facing() const { return vec(facing_); }
+  // What the eye looks at along the Walker's facing.
   py::object target(double max_distance) const;
 
   const std::vector<std::string>& materials() const;
@@ -147,17 +141,12 @@ class PyClient {
   // one edit may touch (kMaxEditVolume).
   void check_edit_size(const EditRequestMsg& e, const char* what) const;
   std::string material_name(Material m) const;
-  // The search's options (max_nodes checked: 1..2,000,000).
-  static PathOptions path_options(std::size_t max_nodes, Clock::time_point deadline);
   Material material_of(const py::object& m) const;
   // Sends an edit (send returns its id, 0 if it could not be sent).
   EditFuture sent(const std::function<std::uint32_t()>& send);
   // Keeps this client's edits within the rate the server's Welcome states
   // (waiting, GIL released, when a script edits faster).
   void pace();
-  // Waits until the pause is over; ends early (ConnectionError) only if
-  // the connection closes.
-  void pause(std::chrono::milliseconds wait, const char* what);
 
   std::string name_;
   std::shared_ptr<DispatcherSlot> slot_;
@@ -166,9 +155,9 @@ class PyClient {
   std::shared_ptr<EventSink> sink_;
   std::shared_ptr<Watches> watches_;  // what awaits wait for (GIL; the io side holds its Ids)
   std::shared_ptr<Client> c_;
-  Vec3f facing_{0, 0, 1};
   mutable std::vector<std::string> names_;  // the world's materials, once welcomed
-  std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side)
+  std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side) and walker_
+  Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
 };
 
