@@ -20,6 +20,20 @@ PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p) {
   return e;
 }
 
+PresenceEvent PresenceChanges::next(const std::vector<PresenceEntryMsg>& p) {
+  PresenceEvent e = to_event(p);
+  std::vector<std::uint32_t> ids;
+  for (const auto& x : p) ids.push_back(x.client_id);
+  std::sort(ids.begin(), ids.end());
+  std::lock_guard lock(mutex_);
+  for (const auto& player : e.players)
+    if (!std::binary_search(ids_.begin(), ids_.end(), player.id)) e.joined.push_back(player);
+  for (const std::uint32_t id : ids_)
+    if (!std::binary_search(ids.begin(), ids.end(), id)) e.left.push_back(id);
+  ids_ = std::move(ids);
+  return e;
+}
+
 MessageEvent to_event(const ServerNoticeMsg& n) {
   return MessageEvent{n.kind == wire::NoticeKind::Shutdown ? "shutdown" : "say", utf8(n.text), n.seconds_left,
                       n.reconnect};

@@ -56,6 +56,8 @@ struct Player {
 };
 struct PresenceEvent {
   std::vector<Player> players;
+  std::vector<Player> joined;       // in players, not in the previous Presence
+  std::vector<std::uint32_t> left;  // ids in the previous Presence, not in players
 };
 struct MessageEvent {
   std::string kind;  // "say" or "shutdown"
@@ -77,6 +79,17 @@ inline const char* event_kind(const Event& e) {
 
 UpdateEvent to_event(const UpdateInfo& u);
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p);
+// Who came into view and who went since the previous Presence: the ids of
+// the last one a client received (io side, one per client).
+class PresenceChanges {
+ public:
+  // The event for p, with joined and left against the previous call's p.
+  PresenceEvent next(const std::vector<PresenceEntryMsg>& p);
+
+ private:
+  std::mutex mutex_;  // a Swarm's io threads may take turns with one client
+  std::vector<std::uint32_t> ids_;  // sorted
+};
 MessageEvent to_event(const ServerNoticeMsg& n);
 
 // --- the callbacks' thread ----------------------------------------------------

@@ -41,9 +41,15 @@ PYBIND11_MODULE(_native, m) {
       .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
       .def("__repr__",
            [](const Player& p) { return "<Player id=" + std::to_string(p.id) + " at " + repr(p.position) + ">"; });
-  py::class_<PresenceEvent>(m, "Presence", "The other clients in view, nearest first (sent about once a second).")
+  py::class_<PresenceEvent>(m, "Presence",
+                            "The other clients in view, nearest first. The server sends it when the list changes (who "
+                            "is in view, or where), at most twice a second (its --presence-hz); never while nothing "
+                            "moves.")
       .def_property_readonly_static("kind", [](const py::object&) { return "presence"; })
-      .def_readonly("players", &PresenceEvent::players)
+      .def_readonly("players", &PresenceEvent::players, "[Player]: the clients in view now, nearest first.")
+      .def_readonly("joined", &PresenceEvent::joined, "[Player]: those in view now and not in the previous Presence.")
+      .def_readonly("left", &PresenceEvent::left,
+                    "[id]: those in the previous Presence and not now (gone out of view, or disconnected).")
       .def("__repr__",
            [](const PresenceEvent& e) { return "<Presence players=" + std::to_string(e.players.size()) + ">"; });
   py::class_<MessageEvent>(m, "Message", "A notice from the server's operators.")

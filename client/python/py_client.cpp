@@ -126,7 +126,9 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
     ids->event_queued();
   };
   cb.on_update = [push](const UpdateInfo& u) { push(to_event(u)); };
-  cb.on_presence = [push](const std::vector<PresenceEntryMsg>& p) { push(to_event(p)); };
+  cb.on_presence = [push, seen = std::make_shared<PresenceChanges>()](const std::vector<PresenceEntryMsg>& p) {
+    push(seen->next(p));
+  };
   cb.on_notice = [push](const ServerNoticeMsg& n) { push(to_event(n)); };
   cb.on_edit_result = [ids = watches_->ids()](std::uint32_t id, const EditOutcome&) { ids->edit_answered(id); };
   cb.on_read_result = [ids = watches_->ids()](std::uint32_t id) { ids->read_answered(id); };

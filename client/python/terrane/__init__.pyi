@@ -36,6 +36,8 @@ class Player:
 class Presence:
     kind: str  # "presence"
     players: List[Player]
+    joined: List[Player]
+    left: List[int]
 
 class Message:
     kind: str  # "message"
