@@ -55,13 +55,13 @@ PYBIND11_MODULE(_native, m) {
   py::class_<MessageEvent>(m, "Message", "A notice from the server's operators.")
       .def_property_readonly_static("kind", [](const py::object&) { return "message"; })
       .def_readonly("type", &MessageEvent::kind, "'say' (a message) or 'shutdown' (the server is stopping).")
-      .def_readonly("text", &MessageEvent::text)
+      .def_readonly("text", &MessageEvent::text, "What the operator said, or the shutdown's notice.")
       .def_readonly("seconds_left", &MessageEvent::seconds_left, "shutdown: seconds until the server stops.")
       .def_readonly("reconnect", &MessageEvent::reconnect, "shutdown: whether the server says it comes back.")
       .def("__repr__", [](const MessageEvent& e) { return "<Message " + e.kind + ": " + e.text + ">"; });
   py::class_<DisconnectEvent>(m, "Disconnect", "The connection closed for good.")
       .def_property_readonly_static("kind", [](const py::object&) { return "disconnect"; })
-      .def_readonly("reason", &DisconnectEvent::reason)
+      .def_readonly("reason", &DisconnectEvent::reason, "Why (the server's reason, or the library's).")
       .def("__repr__", [](const DisconnectEvent& e) { return "<Disconnect: " + e.reason + ">"; });
   py::class_<ReconnectedEvent>(m, "Reconnected",
                                "The connection dropped and was resumed (reconnect=True, or a Redirect followed): the "
@@ -224,9 +224,12 @@ to its client keeps it alive until then).)")
            "What the client looks at: raycast from the eye along facing.")
       .def_property_readonly("position", &PyClient::position, "(x, y, z) of the client's feet, as last sent.")
       // the connection
-      .def_property_readonly("name", &PyClient::name)
-      .def_property_readonly("closed", &PyClient::closed)
-      .def_property_readonly("disconnect_reason", &PyClient::disconnect_reason)
+      .def_property_readonly("name", &PyClient::name, "The name the client joined with.")
+      .def_property_readonly("closed", &PyClient::closed,
+                             "True once the connection closed for good (close(), the server, or a lost server with "
+                             "reconnect off or given up).")
+      .def_property_readonly("disconnect_reason", &PyClient::disconnect_reason,
+                             "Why the connection closed ('' while open).")
       .def("close", &PyClient::close, "Say goodbye and close the connection (idempotent).")
       .def("__enter__", [](const std::shared_ptr<PyClient>& c) { return c; })
       .def("__exit__", [](PyClient& c, const py::object&, const py::object&, const py::object&) { c.close(); })
@@ -260,7 +263,7 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
       .def("__len__", &Swarm::size)
       .def("__getitem__", &Swarm::at)
       .def("__iter__", [](const Swarm& s) { return py::iter(py::cast(s.clients())); })
-      .def_property_readonly("clients", &Swarm::clients)
+      .def_property_readonly("clients", &Swarm::clients, "The clients, as a list (the Swarm is a sequence of them too).")
       .def("wait_ready", &Swarm::wait_ready, py::arg("timeout") = 60.0, "Wait until every client is welcomed.")
       .def("wait_loaded", &Swarm::wait_loaded, py::arg("timeout") = 120.0,
            "Wait until every client holds its full-resolution region.")

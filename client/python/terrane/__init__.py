@@ -193,6 +193,8 @@ async def _edit_outcome(future):
 
 
 def _future_await(self):
+    """``await future``: EditFuture.result() without a thread (True once
+    applied and in the replica; raises as result does)."""
     return _edit_outcome(self).__await__()
 
 
