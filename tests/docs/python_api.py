@@ -19,7 +19,7 @@ import terrane  # noqa: E402
 
 BEGIN, END = "<!-- api:begin -->", "<!-- api:end -->"
 
-FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread"]
+FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread", "follow"]
 CLASSES = ["Client", "EditFuture", "Swarm", "Update", "Presence", "Player", "Message", "Disconnect", "Reconnected",
            "EditRejected", "EditOutcomeUnknown", "Unreachable"]
 

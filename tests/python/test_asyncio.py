@@ -220,3 +220,50 @@ def test_a_walk_steps_on_the_loop_and_a_cancelled_one_stops_where_it_stands(serv
             assert c.position == stopped and not c.closed, c.disconnect_reason
 
     asyncio.run(main())
+
+
+def test_walk_within_a_distance_and_follow_a_player(server):
+    from test_walk import flat_ground
+
+    async def main():
+        with terrane.connect(server.address, name="follower", view_distance=64, full_res_radius=32) as a:
+            a.wait_loaded(timeout=60)
+            x, g, z = flat_ground(a)
+            # Come within 3 of a point: the walk stops short of it.
+            steps = []
+            walked = await terrane.walk(a, (x + 8.5, g, z + 0.5), speed=32, within=3, on_step=steps.append)
+            assert walked == steps and walked
+            assert 1.5 <= _dist(a.position, (x + 8.5, g, z + 0.5)) <= 3
+            with terrane.connect(server.address, name="leader", position=(x - 6.5, g, z + 0.5), view_distance=64,
+                                 full_res_radius=32) as b:
+                b.wait_ready(30)
+
+                async def seen():
+                    while True:
+                        near_b = [p for p in a.presence if _dist(p.position, b.position) < 1]
+                        if near_b:
+                            return near_b[0].id
+                        await terrane.event(a, "presence", 30)
+
+                bid = await asyncio.wait_for(seen(), 30)
+                following = asyncio.ensure_future(terrane.follow(a, bid, distance=2, speed=32))
+
+                async def within(d):
+                    while _dist(a.position, b.position) > d:
+                        await asyncio.sleep(0.02)
+
+                await asyncio.wait_for(within(2.6), 30)
+                b.move_to((x - 2.5, g, z + 7.5))   # the leader moves on; the follower comes after
+                await asyncio.wait_for(within(2.6), 30)
+                following.cancel()
+                try:
+                    await following
+                except asyncio.CancelledError:
+                    pass
+                assert not a.closed, a.disconnect_reason
+
+    asyncio.run(main())
+
+
+def _dist(p, q):
+    return sum((a - b) ** 2 for a, b in zip(p, q)) ** 0.5

@@ -46,7 +46,7 @@ from terrane._native import (  # noqa: F401
 __all__ = [
     "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
     "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "pace", "paced",
-    "synced", "in_thread", "AIR",
+    "synced", "in_thread", "follow", "AIR",
 ]
 
 AIR = "Air"
@@ -153,38 +153,86 @@ async def event(client, kind=None, timeout=30.0):
             pass  # the loop's next turn raises, unless one came meanwhile
 
 
-async def walk(client, target, speed=8.0, timeout=120.0):
+async def walk(client, target, speed=8.0, timeout=120.0, within=0.0, on_step=None):
     """Client.walk_to on the event loop: the way is searched (Client.find_path,
     on a thread of its own) and each step waits as an asyncio sleep, so
-    cancelling the await stops the walker where it stands. Returns the places
+    cancelling the await stops the walker where it stands. within: stop once
+    the feet are within that many voxels of target (0: at the place to stand
+    nearest it). on_step(place) is called after each step. Returns the places
     walked; raises Unreachable, TimeoutError or ConnectionError as walk_to."""
     if not 0 < speed <= 64:
         raise ValueError("walk: speed must be in (0, 64] voxels per second")
+    if not within >= 0:
+        raise ValueError("walk: within must be >= 0 voxels")
     loop = _asyncio.get_running_loop()
     deadline = loop.time() + timeout
     walked = []
     for _ in range(4):  # the way may change under the walker: searched again a few times
+        if within and _math.dist(client.position, target) <= within:
+            return walked
         left = deadline - loop.time()
         if left <= 0:
             break
         steps = await in_thread(client.find_path, target, left)
-        at = client.position
-        for s in steps:
-            if not client.can_stand(s):
-                break
-            step = (s[0] + 0.5, s[1], s[2] + 0.5)
-            pause = _math.dist(at, step) / speed
-            if loop.time() + pause > deadline:
-                raise TimeoutError("walk: the target was not reached within the timeout")
-            await _asyncio.sleep(pause)
-            client.move_to(step)
-            at = step
-            walked.append(s)
-        else:
-            return walked
+        if not await _steps(client, steps, speed, deadline, walked, on_step,
+                            lambda at: within and _math.dist(at, target) <= within):
+            continue  # blocked: search again
+        return walked
     if deadline - loop.time() <= 0:
         raise TimeoutError("walk: the target was not reached within the timeout")
     raise Unreachable("walk: the way kept changing under the walker")
+
+
+async def _steps(client, steps, speed, deadline, walked, on_step, arrived):
+    """Takes steps on the loop until arrived(position); False if one is blocked."""
+    loop = _asyncio.get_running_loop()
+    at = client.position
+    for s in steps:
+        if arrived(at):
+            return True
+        if not client.can_stand(s):
+            return False
+        step = (s[0] + 0.5, s[1], s[2] + 0.5)
+        pause = _math.dist(at, step) / speed
+        if deadline is not None and loop.time() + pause > deadline:
+            raise TimeoutError("walk: the target was not reached within the timeout")
+        await _asyncio.sleep(pause)
+        client.move_to(step)
+        at = step
+        walked.append(s)
+        if on_step is not None:
+            on_step(s)
+    return True
+
+
+async def follow(client, player_id, distance=3.0, speed=8.0, on_step=None):
+    """Follows another client (a Player id from presence) until cancelled:
+    walks toward it whenever it is farther than distance, a few steps at a
+    time, searching again as it moves, and waits for the next change (an
+    event) while it is near or out of reach. Raises Unreachable once the
+    player is no longer in view (presence)."""
+    if not 0 < speed <= 64 or not distance >= 0:
+        raise ValueError("follow: speed must be in (0, 64] and distance >= 0")
+
+    def where():
+        for p in client.presence:
+            if p.id == player_id:
+                return p.position
+        raise Unreachable("follow: player %d is not in view" % player_id)
+
+    while True:
+        target = where()
+        near = _math.dist(client.position, target) <= distance + 0.5
+        if not near:
+            try:
+                steps = await in_thread(client.find_path, target, 10.0)
+            except Unreachable:
+                steps = []
+            if steps:
+                await _steps(client, steps[:4], speed, None, [], on_step,
+                             lambda at: _math.dist(at, where()) <= distance + 0.5)
+                continue
+        await _woken(client._when_event)  # something changed: a move, an edit, a presence
 
 
 async def _edit_outcome(future):
