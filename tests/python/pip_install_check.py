@@ -8,7 +8,8 @@ The venv sees the system's packages (Debian's numpy, setuptools, wheel):
 --no-build-isolation --no-index installs without a download. BUILD_DIR is
 the test command's build folder, passed as TERRANE_BUILD_DIR so the install
 reuses its objects. The version printed is the project's (CMakeLists.txt),
-pip records numpy as a requirement, and the stub and py.typed are installed.
+pip records numpy as a requirement, and the stub and py.typed are installed;
+a wheel built the same way (as scripts/build.sh does) carries them too.
 """
 import os
 import re
@@ -16,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import zipfile
 
 
 def main(source, build, python):
@@ -42,6 +44,17 @@ def main(source, build, python):
         show = subprocess.run([os.path.join(bin_dir, "pip"), "show", "terrane"], check=True, env=env,
                               capture_output=True, text=True).stdout
         assert re.search(r"^Requires: .*numpy", show, re.M), show
+        # The wheel scripts/build.sh makes the same way carries the same files.
+        wheels = os.path.join(scratch, "wheels")
+        subprocess.run([os.path.join(bin_dir, "pip"), "wheel", "--no-build-isolation", "--no-index", "--no-deps",
+                        "-w", wheels, os.path.join(source, "client", "python")], check=True, env=env, cwd=scratch)
+        [wheel] = os.listdir(wheels)
+        assert wheel.startswith("terrane-%s-" % version), wheel
+        with zipfile.ZipFile(os.path.join(wheels, wheel)) as z:
+            names = z.namelist()
+        for f in ("terrane/__init__.py", "terrane/__init__.pyi", "terrane/py.typed"):
+            assert f in names, (f, names)
+        assert any(n.startswith("terrane/_native") and n.endswith(".so") for n in names), names
         print("terrane", out, "installed in a fresh venv and imported")
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
