@@ -16,7 +16,7 @@ UpdateEvent to_event(const UpdateInfo& u) {
 
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p) {
   PresenceEvent e;
-  for (const auto& x : p) e.players.push_back(Player{x.client_id, vec(x.position)});
+  for (const auto& x : p) e.players.push_back(Player{x.client_id, vec(x.position), utf8(x.name)});
   return e;
 }
 

@@ -53,6 +53,7 @@ struct UpdateEvent {
 struct Player {
   std::uint32_t id = 0;
   Vec3 position;
+  std::string name;  // its Hello's name ('' from a server that sends none)
 };
 struct PresenceEvent {
   std::vector<Player> players;

@@ -39,8 +39,10 @@ PYBIND11_MODULE(_native, m) {
   py::class_<Player>(m, "Player", "Another client in view.")
       .def_readonly("id", &Player::id, "The server's id of the client (stable for its connection).")
       .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
-      .def("__repr__",
-           [](const Player& p) { return "<Player id=" + std::to_string(p.id) + " at " + repr(p.position) + ">"; });
+      .def_readonly("name", &Player::name, "The name it joined with ('' from a server that does not say).")
+      .def("__repr__", [](const Player& p) {
+        return "<Player id=" + std::to_string(p.id) + " '" + p.name + "' at " + repr(p.position) + ">";
+      });
   py::class_<PresenceEvent>(m, "Presence",
                             "The other clients in view, nearest first. The server sends it when the list changes (who "
                             "is in view, or where), at most twice a second (its --presence-hz); never while nothing "

@@ -86,6 +86,7 @@ def test_presence_says_who_came_into_view_and_who_left(server):
         assert visitor and came.left == [], came.joined
         vid = visitor[0].id
         assert vid in [pl.id for pl in came.players]
+        assert visitor[0].name == "visitor" and [pl.name for pl in a.presence if pl.id == vid] == ["visitor"]
         b.close()
         went = next_presence(lambda p: p.left)
         assert went.left == [vid] and vid not in [pl.id for pl in went.players] and went.joined == []

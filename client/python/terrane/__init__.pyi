@@ -32,6 +32,7 @@ class Update:
 class Player:
     id: int
     position: Vec3
+    name: str
 
 class Presence:
     kind: str  # "presence"
