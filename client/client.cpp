@@ -276,6 +276,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       ++counters_.read_results;
       // Bounded: a server cannot grow this past the ids we asked for.
       if (r->request_id == 0 || r->request_id >= next_request_id_) break;
+      if (callbacks_.on_read_result) after = [this, id = r->request_id] { callbacks_.on_read_result(id); };
       read_results_[r->request_id] = std::move(*r);
       break;
     }

@@ -123,6 +123,8 @@ struct ClientCallbacks {
   // of its own, or a horizon image's), or null when released.
   std::function<void(Vec3i chunk_pos, const Holding* now)> on_holding;
   std::function<void(std::uint32_t edit_id, const EditOutcome&)> on_edit_result;
+  // A ReadBoxResult was stored (ClientView::read_results[request_id]).
+  std::function<void(std::uint32_t request_id)> on_read_result;
   // A ChunkHash arrived and was compared with the replica's chunk.
   std::function<void(Vec3i chunk_pos, bool match)> on_hash_checked;
   // The same event with the revisions compared (runs after on_hash_checked).

@@ -277,7 +277,8 @@ Frame build_presence(std::span<const PresenceEntryMsg> entries) {
   out.reserve(std::min(entries.size(), kMaxPresenceEntries));
   for (std::size_t i = 0; i < entries.size() && i < kMaxPresenceEntries; ++i) {
     const auto p = to_wire(entries[i].position);
-    out.push_back(wire::CreatePresenceEntry(fbb, entries[i].client_id, &p));
+    const auto name = entries[i].name.empty() ? 0 : fbb.CreateString(entries[i].name);
+    out.push_back(wire::CreatePresenceEntry(fbb, entries[i].client_id, &p, name));
   }
   return finish(fbb, wire::CreatePresenceDirect(fbb, &out));
 }
@@ -628,8 +629,14 @@ Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m) {
   if (m.entries()->size() > kMaxPresenceEntries) return over("presence: more than 64 entries");
   for (const auto* e : *m.entries()) {
     if (e == nullptr || e->position() == nullptr) return invalid("presence: entry without position");
-    PresenceEntryMsg p{e->client_id(), from_wire(*e->position())};
+    PresenceEntryMsg p{e->client_id(), from_wire(*e->position()), {}};
     if (!position_ok(p.position)) return invalid("presence: position out of range");
+    if (e->name() != nullptr) {
+      // A client name as Hello allows it (clients show and log it).
+      if (e->name()->size() > kMaxClientNameBytes || has_control_character(e->name()->string_view()))
+        return invalid("presence: name longer than 64 bytes or with a control character");
+      p.name = e->name()->str();
+    }
     out.push_back(p);
   }
   return out;

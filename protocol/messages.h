@@ -173,6 +173,7 @@ struct EditRejectMsg {
 struct PresenceEntryMsg {
   std::uint32_t client_id = 0;
   Vec3f position;
+  std::string name = {};  // its Hello's client_name; empty from a server that sends none
 };
 
 // Data messages point into the frame they were parsed from.

@@ -4,7 +4,8 @@
 #   scripts/build.sh asan      -> build-asan/     (address + undefined sanitizers)
 #   scripts/build.sh fuzz      -> build-fuzz/     (clang, libFuzzer targets)
 #   scripts/build.sh tsan      -> build-tsan/     (thread sanitizer)
-# Extra arguments name targets to build (default: all).
+# Extra arguments name targets to build (default: all, and for release the
+# Python package's wheel in build/dist/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -37,4 +38,12 @@ if [ $# -gt 0 ]; then
   cmake --build "$dir" -j "$jobs" --target "$@"
 else
   cmake --build "$dir" -j "$jobs"
+  # The Python package as a wheel (build/dist/terrane-*.whl), from the module
+  # just built, offline: where the module and Debian's pip are there.
+  if [ "$flavour" = release ] && ls "$dir"/python/terrane/_native*.so >/dev/null 2>&1 &&
+     /usr/bin/python3 -m pip --version >/dev/null 2>&1; then
+    TERRANE_BUILD_DIR="$PWD/$dir" /usr/bin/python3 -m pip wheel --quiet --no-build-isolation --no-index --no-deps \
+      --disable-pip-version-check -w "$dir/dist" ./client/python ||
+      echo "build.sh: the Python wheel was not made (above why); the module in $dir/python is built" >&2
+  fi
 fi

@@ -21,6 +21,8 @@ packages=(
   sqlite3 python3
   # the terrane Python module (client/python) and its tests
   python3-dev pybind11-dev python3-numpy python3-pytest
+  # pip install ./client/python offline, in a venv that sees these
+  python3-pip python3-venv python3-setuptools python3-wheel
   # terrane-view: GLFW windows, libepoxy (GL function loader for GLX and
   # EGL alike), EGL + Mesa's software rasteriser for headless screenshots
   libglfw3-dev libepoxy-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri

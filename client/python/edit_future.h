@@ -1,6 +1,7 @@
 // EditFuture (one edit's outcome, waited for by result()) and what every
 // binding shares: its exceptions, raise(), timeouts, the interruptible
-// wait on a Client's view and the sync barrier. Called with the GIL held;
+// wait on a Client's view (readiness, pauses) and the sync barrier, and
+// the checks of a script's coordinates. Called with the GIL held;
 // each wait releases it.
 #pragma once
 
@@ -12,8 +13,10 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 #include "client/client.h"
+#include "client/python/watches.h"
 
 namespace terrane::python {
 
@@ -48,11 +51,22 @@ std::chrono::milliseconds timeout_of(double seconds);
 // or the timeout passes; Ctrl-C interrupts it. pred runs under the
 // client's lock.
 bool wait_for(Client& c, std::chrono::milliseconds timeout, const std::function<bool(const ClientView&)>& pred);
+// Waits for the Welcome; raises ConnectionError once closed (or closed
+// before it came), TimeoutError at the timeout.
+void wait_ready(Client& c, std::chrono::milliseconds timeout);
+// Waits out a pause (pacing); ends early, raising ConnectionError, only if
+// the connection closes. what: "moving", "pacing edits".
+void pause(Client& c, std::chrono::milliseconds wait, const char* what);
+// A script's coordinates, checked (ValueError naming what): a voxel within
+// the wire's +-2^24, a point finite and within it.
+Vec3i voxel_of(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& p, const char* what);
+Vec3f point_of(const std::tuple<double, double, double>& p, const char* what);
 
 // The outcome of one edit: result() waits for the server's answer.
 class EditFuture {
  public:
-  EditFuture(std::shared_ptr<Client> c, std::uint32_t id) : c_(std::move(c)), id_(id) {}
+  EditFuture(std::shared_ptr<Client> c, std::shared_ptr<Watches> watches, std::uint32_t id)
+      : c_(std::move(c)), watches_(std::move(watches)), id_(id) {}
   std::uint32_t id() const { return id_; }
   bool done() const;
   // "pending", "applied" (acknowledged: applied and stored), "rejected"
@@ -62,9 +76,15 @@ class EditFuture {
   // the replica shows it (sync); raises EditRejected with the server's
   // reason, EditOutcomeUnknown, TimeoutError, or ConnectionError.
   bool result(double timeout, bool visible);
+  // Calls fn() on the client's callbacks thread (GIL held) once result
+  // would return or raise at once: the edit answered and, with visible and
+  // applied, sync's barrier answered after it (or the connection lost or
+  // closed). No thread waits meanwhile (asyncio's await, __init__.py).
+  void when_done(py::object fn, bool visible);
 
  private:
   std::shared_ptr<Client> c_;
+  std::shared_ptr<Watches> watches_;
   std::uint32_t id_;
 };
 

@@ -16,7 +16,21 @@ UpdateEvent to_event(const UpdateInfo& u) {
 
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p) {
   PresenceEvent e;
-  for (const auto& x : p) e.players.push_back(Player{x.client_id, vec(x.position)});
+  for (const auto& x : p) e.players.push_back(Player{x.client_id, vec(x.position), utf8(x.name)});
+  return e;
+}
+
+PresenceEvent PresenceChanges::next(const std::vector<PresenceEntryMsg>& p) {
+  PresenceEvent e = to_event(p);
+  std::vector<std::uint32_t> ids;
+  for (const auto& x : p) ids.push_back(x.client_id);
+  std::sort(ids.begin(), ids.end());
+  std::lock_guard lock(mutex_);
+  for (const auto& player : e.players)
+    if (!std::binary_search(ids_.begin(), ids_.end(), player.id)) e.joined.push_back(player);
+  for (const std::uint32_t id : ids_)
+    if (!std::binary_search(ids.begin(), ids.end(), id)) e.left.push_back(id);
+  ids_ = std::move(ids);
   return e;
 }
 

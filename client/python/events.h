@@ -39,6 +39,10 @@ using IVec3 = std::tuple<std::int64_t, std::int64_t, std::int64_t>;
 
 inline IVec3 ivec(Vec3i v) { return {v.x, v.y, v.z}; }
 inline Vec3 vec(Vec3f v) { return {v.x, v.y, v.z}; }
+// A voxel position in messages: "(x, y, z)".
+inline std::string str(Vec3i v) {
+  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
+}
 
 // --- what Python sees ---------------------------------------------------------
 struct UpdateEvent {
@@ -49,9 +53,12 @@ struct UpdateEvent {
 struct Player {
   std::uint32_t id = 0;
   Vec3 position;
+  std::string name;  // its Hello's name ('' from a server that sends none)
 };
 struct PresenceEvent {
   std::vector<Player> players;
+  std::vector<Player> joined;       // in players, not in the previous Presence
+  std::vector<std::uint32_t> left;  // ids in the previous Presence, not in players
 };
 struct MessageEvent {
   std::string kind;  // "say" or "shutdown"
@@ -73,6 +80,17 @@ inline const char* event_kind(const Event& e) {
 
 UpdateEvent to_event(const UpdateInfo& u);
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p);
+// Who came into view and who went since the previous Presence: the ids of
+// the last one a client received (io side, one per client).
+class PresenceChanges {
+ public:
+  // The event for p, with joined and left against the previous call's p.
+  PresenceEvent next(const std::vector<PresenceEntryMsg>& p);
+
+ private:
+  std::mutex mutex_;  // a Swarm's io threads may take turns with one client
+  std::vector<std::uint32_t> ids_;  // sorted
+};
 MessageEvent to_event(const ServerNoticeMsg& n);
 
 // --- the callbacks' thread ----------------------------------------------------

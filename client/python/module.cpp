@@ -39,23 +39,31 @@ PYBIND11_MODULE(_native, m) {
   py::class_<Player>(m, "Player", "Another client in view.")
       .def_readonly("id", &Player::id, "The server's id of the client (stable for its connection).")
       .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
-      .def("__repr__",
-           [](const Player& p) { return "<Player id=" + std::to_string(p.id) + " at " + repr(p.position) + ">"; });
-  py::class_<PresenceEvent>(m, "Presence", "The other clients in view, nearest first (sent about once a second).")
+      .def_readonly("name", &Player::name, "The name it joined with ('' from a server that does not say).")
+      .def("__repr__", [](const Player& p) {
+        return "<Player id=" + std::to_string(p.id) + " '" + p.name + "' at " + repr(p.position) + ">";
+      });
+  py::class_<PresenceEvent>(m, "Presence",
+                            "The other clients in view, nearest first. The server sends it when the list changes (who "
+                            "is in view, or where), at most twice a second (its --presence-hz); never while nothing "
+                            "moves.")
       .def_property_readonly_static("kind", [](const py::object&) { return "presence"; })
-      .def_readonly("players", &PresenceEvent::players)
+      .def_readonly("players", &PresenceEvent::players, "[Player]: the clients in view now, nearest first.")
+      .def_readonly("joined", &PresenceEvent::joined, "[Player]: those in view now and not in the previous Presence.")
+      .def_readonly("left", &PresenceEvent::left,
+                    "[id]: those in the previous Presence and not now (gone out of view, or disconnected).")
       .def("__repr__",
            [](const PresenceEvent& e) { return "<Presence players=" + std::to_string(e.players.size()) + ">"; });
   py::class_<MessageEvent>(m, "Message", "A notice from the server's operators.")
       .def_property_readonly_static("kind", [](const py::object&) { return "message"; })
       .def_readonly("type", &MessageEvent::kind, "'say' (a message) or 'shutdown' (the server is stopping).")
-      .def_readonly("text", &MessageEvent::text)
+      .def_readonly("text", &MessageEvent::text, "What the operator said, or the shutdown's notice.")
       .def_readonly("seconds_left", &MessageEvent::seconds_left, "shutdown: seconds until the server stops.")
       .def_readonly("reconnect", &MessageEvent::reconnect, "shutdown: whether the server says it comes back.")
       .def("__repr__", [](const MessageEvent& e) { return "<Message " + e.kind + ": " + e.text + ">"; });
   py::class_<DisconnectEvent>(m, "Disconnect", "The connection closed for good.")
       .def_property_readonly_static("kind", [](const py::object&) { return "disconnect"; })
-      .def_readonly("reason", &DisconnectEvent::reason)
+      .def_readonly("reason", &DisconnectEvent::reason, "Why (the server's reason, or the library's).")
       .def("__repr__", [](const DisconnectEvent& e) { return "<Disconnect: " + e.reason + ">"; });
   py::class_<ReconnectedEvent>(m, "Reconnected",
                                "The connection dropped and was resumed (reconnect=True, or a Redirect followed): the "
@@ -72,6 +80,8 @@ PYBIND11_MODULE(_native, m) {
                              "'pending', 'applied' (acknowledged: applied and stored), 'rejected' (not applied) or "
                              "'unknown' (may or may not have been applied: the connection closed before the answer, "
                              "or the server could not learn it). Does not wait.")
+      .def("_when_done", &EditFuture::when_done, py::arg("fn"), py::arg("visible") = true,
+           "Call fn() on the callbacks thread once result() would return or raise at once (await future).")
       .def("result", &EditFuture::result, py::arg("timeout") = 30.0, py::arg("visible") = true,
            "Wait for the answer: True once the edit is applied and stored (durable) and, with visible, shown by "
            "this client's replica (one more round trip; visible=False for throughput). Raises "
@@ -145,6 +155,11 @@ to its client keeps it alive until then).)")
            "The first solid voxel along a ray: ((x, y, z), normal, distance, material) or None.")
       .def("ground", &PyClient::ground, py::arg("x"), py::arg("z"),
            "The y just above the highest solid voxel of column (x, z) as held, or None.")
+      .def("find", &PyClient::find, py::arg("material"), py::arg("near") = py::none(), py::arg("within") = 16.0,
+           py::arg("max") = 1,
+           "The voxels of material (a name or an id) whose centres lie within `within` voxels (at most 64) of near "
+           "(default: the client's position), nearest first, at most max of them: a list of (x, y, z). Searches "
+           "what the replica holds at full resolution.")
       .def_property_readonly("presence", &PyClient::presence, "The other clients in view, nearest first.")
       .def_property_readonly("materials", &PyClient::materials, "The world's material names, by id.")
       // edits
@@ -164,31 +179,59 @@ to its client keeps it alive until then).)")
       .def("write_box", &PyClient::write_box, py::arg("min"), py::arg("voxels"),
            "Write an array of integers of shape (2, y, z, x) (materials, occupancies) at min: a numpy array (any "
            "integer dtype) or anything numpy.asarray takes, such as nested lists; at most 32^3 voxels.")
+      .def("_reserve_edit", &PyClient::reserve_edit,
+           "asyncio's pacing (terrane.pace): takes the next edit's turn and returns the seconds to wait before it.")
+      .def("_when_event", &PyClient::when_event, py::arg("fn"),
+           "Call fn() on the callbacks thread once the next event is queued or the client closed (terrane.event).")
+      .def("_when_synced", &PyClient::when_synced, py::arg("fn"),
+           "Call fn() on the callbacks thread once everything the server sent so far is applied (terrane.synced).")
       .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
       .def("redo", &PyClient::redo, "Redo the last undone edit.")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
            "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")
       // movement
-      .def("move_to", &PyClient::move_to, py::arg("position"),
+      .def("move_to", [](PyClient& c, const Vec3& p) { c.walker().move_to(point_of(p, "position")); },
+           py::arg("position"),
            "Move to (x, y, z) (feet); the server streams around the new place. Paced within the server's speed "
            "budget (max_speed voxels a second since the last move, plus 48): a far move waits until it is allowed; "
            "one farther than ten seconds of it raises ValueError naming the distance allowed.")
-      .def("walk_to", &PyClient::walk_to, py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
+      .def("walk_to",
+           [](PyClient& c, const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
+             return c.walker().walk_to(point_of(target, "target"), speed, timeout, max_nodes);
+           },
+           py::arg("target"), py::arg("speed") = 8.0, py::arg("timeout") = 120.0,
            py::arg("max_nodes") = 200000,
            "Walk to the place to stand nearest target over the voxel surface (A*: steps up to 1 voxel, drops up to "
            "3, 2 voxels of head room, never through what is not held at full resolution), at speed voxels per "
            "second. Returns the places walked. Raises Unreachable with the reason when there is no way.")
-      .def("look_at", &PyClient::look_at, py::arg("point"),
+      .def("find_path",
+           [](PyClient& c, const Vec3& target, double timeout, std::size_t max_nodes) {
+             return c.walker().find_path(point_of(target, "target"), timeout, max_nodes);
+           },
+           py::arg("target"), py::arg("timeout") = 30.0,
+           py::arg("max_nodes") = 200000,
+           "The places walk_to would walk through now, from where the client stands to the place to stand nearest "
+           "target, without moving. Raises Unreachable with the reason when there is no way.")
+      .def("can_stand", [](PyClient& c, const IVec3& p) { return c.walker().can_stand(voxel_of(p, "can_stand")); },
+           py::arg("place"),
+           "True if a walker can stand at place now (feet in Air with head room, ground below, all held at full "
+           "resolution).")
+      .def("look_at", [](PyClient& c, const Vec3& p) { return vec(c.walker().look_at(point_of(p, "point"))); },
+           py::arg("point"),
            "Face a point (from the eye, 1.6 above the feet); returns the unit direction. Facing is the script's: "
            "the protocol carries no orientation.")
-      .def_property_readonly("facing", &PyClient::facing, "The unit direction the client faces.")
+      .def_property_readonly("facing", [](PyClient& c) { return vec(c.walker().facing()); },
+                             "The unit direction the client faces.")
       .def("target", &PyClient::target, py::arg("max_distance") = 64.0,
            "What the client looks at: raycast from the eye along facing.")
       .def_property_readonly("position", &PyClient::position, "(x, y, z) of the client's feet, as last sent.")
       // the connection
-      .def_property_readonly("name", &PyClient::name)
-      .def_property_readonly("closed", &PyClient::closed)
-      .def_property_readonly("disconnect_reason", &PyClient::disconnect_reason)
+      .def_property_readonly("name", &PyClient::name, "The name the client joined with.")
+      .def_property_readonly("closed", &PyClient::closed,
+                             "True once the connection closed for good (close(), the server, or a lost server with "
+                             "reconnect off or given up).")
+      .def_property_readonly("disconnect_reason", &PyClient::disconnect_reason,
+                             "Why the connection closed ('' while open).")
       .def("close", &PyClient::close, "Say goodbye and close the connection (idempotent).")
       .def("__enter__", [](const std::shared_ptr<PyClient>& c) { return c; })
       .def("__exit__", [](PyClient& c, const py::object&, const py::object&, const py::object&) { c.close(); })
@@ -222,7 +265,7 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
       .def("__len__", &Swarm::size)
       .def("__getitem__", &Swarm::at)
       .def("__iter__", [](const Swarm& s) { return py::iter(py::cast(s.clients())); })
-      .def_property_readonly("clients", &Swarm::clients)
+      .def_property_readonly("clients", &Swarm::clients, "The clients, as a list (the Swarm is a sequence of them too).")
       .def("wait_ready", &Swarm::wait_ready, py::arg("timeout") = 60.0, "Wait until every client is welcomed.")
       .def("wait_loaded", &Swarm::wait_loaded, py::arg("timeout") = 120.0,
            "Wait until every client holds its full-resolution region.")

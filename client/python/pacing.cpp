@@ -13,10 +13,25 @@ std::chrono::milliseconds ms_of(double seconds) {
 }  // namespace
 
 std::chrono::milliseconds Pacing::edit(const WelcomeMsg& w) {
+  std::lock_guard lock(mutex_);
+  if (reserved_ > 0) {
+    --reserved_;
+    return std::chrono::milliseconds(0);
+  }
+  return take(w);
+}
+
+std::chrono::milliseconds Pacing::reserve_edit(const WelcomeMsg& w) {
+  std::lock_guard lock(mutex_);
+  if (!(w.edits_per_second > 0)) return std::chrono::milliseconds(0);
+  ++reserved_;
+  return take(w);
+}
+
+std::chrono::milliseconds Pacing::take(const WelcomeMsg& w) {
   if (!(w.edits_per_second > 0)) return std::chrono::milliseconds(0);
   // Below the server's bucket, with room for jitter on the way.
   const double rate = w.edits_per_second * 0.9, burst = std::max(1.0, w.edit_burst / 2.0);
-  std::lock_guard lock(mutex_);
   const auto now = Clock::now();
   if (!edited_) {
     tokens_ = burst;

@@ -30,7 +30,11 @@ class Pacing {
 
   // Takes an edit's token now; returns how long to wait before sending it
   // (0 when the bucket had one, or the server states no rate).
+  // A turn taken by reserve_edit is used instead, without a wait.
   std::chrono::milliseconds edit(const WelcomeMsg& w);
+  // Takes an edit's token for an edit sent later (asyncio waits the time
+  // returned on its event loop, then sends): the next edit() uses it.
+  std::chrono::milliseconds reserve_edit(const WelcomeMsg& w);
   // The farthest one move may go: kMaxMoveWaitSeconds of the budget plus
   // the slack (as the server counts it); infinity when not paced.
   double max_move() const;
@@ -46,8 +50,12 @@ class Pacing {
  private:
   const double max_speed_;
   std::mutex mutex_;
+  // Takes a token now (the lock held); returns the wait its debt means.
+  std::chrono::milliseconds take(const WelcomeMsg& w);
+
   bool edited_ = false;
   double tokens_ = 0;
+  int reserved_ = 0;  // tokens taken by reserve_edit, not used yet
   Clock::time_point refilled_;
   bool moved_ = false;
   Clock::time_point moved_at_;

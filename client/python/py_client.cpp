@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "client/path.h"
+#include "client/python/find.h"
 #include "common/cli/cli.h"
 #include "common/world/view.h"
 
@@ -11,32 +12,10 @@ namespace terrane::python {
 
 namespace {
 
-constexpr float kEyeHeight = 1.6f;
-
 // What is left of a deadline.
 std::chrono::milliseconds until(Clock::time_point deadline) {
   return std::chrono::duration_cast<std::chrono::milliseconds>(
       std::max(Clock::duration::zero(), deadline - Clock::now()));
-}
-
-std::string str(Vec3i v) {
-  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
-}
-
-Vec3i voxel_of(const IVec3& p, const char* what) {
-  const auto [x, y, z] = p;
-  for (const std::int64_t v : {x, y, z})
-    if (v < -kMaxWireCoordinate || v > kMaxWireCoordinate)
-      raise(PyExc_ValueError, std::string(what) + ": coordinates must lie within +-2^24");
-  return {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
-}
-
-Vec3f point_of(const Vec3& p, const char* what) {
-  const auto [x, y, z] = p;
-  for (const double v : {x, y, z})
-    if (!std::isfinite(v) || std::abs(v) > kMaxWireCoordinate)
-      raise(PyExc_ValueError, std::string(what) + ": coordinates must be finite, within +-2^24");
-  return {static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
 }
 
 float radius_of(double r) {
@@ -139,18 +118,33 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   slot_ = a.slot ? a.slot : std::make_shared<DispatcherSlot>();
   handlers_ = std::make_shared<Handlers>();
   sink_ = std::make_shared<EventSink>(slot_, handlers_);
+  watches_ = std::make_shared<Watches>(slot_);
   ClientCallbacks cb;
-  cb.on_update = [sink = sink_](const UpdateInfo& u) { sink->push(to_event(u)); };
-  cb.on_presence = [sink = sink_](const std::vector<PresenceEntryMsg>& p) { sink->push(to_event(p)); };
-  cb.on_notice = [sink = sink_](const ServerNoticeMsg& n) { sink->push(to_event(n)); };
-  cb.on_disconnected = [sink = sink_](const std::string& reason) { sink->push(DisconnectEvent{reason}); };
+  // Each event queued wakes the awaits of terrane.event (Watches).
+  const auto push = [sink = sink_, ids = watches_->ids()](Event e) {
+    sink->push(std::move(e));
+    ids->event_queued();
+  };
+  cb.on_update = [push](const UpdateInfo& u) { push(to_event(u)); };
+  cb.on_presence = [push, seen = std::make_shared<PresenceChanges>()](const std::vector<PresenceEntryMsg>& p) {
+    push(seen->next(p));
+  };
+  cb.on_notice = [push](const ServerNoticeMsg& n) { push(to_event(n)); };
+  cb.on_edit_result = [ids = watches_->ids()](std::uint32_t id, const EditOutcome&) { ids->edit_answered(id); };
+  cb.on_read_result = [ids = watches_->ids()](std::uint32_t id) { ids->read_answered(id); };
+  cb.on_connection_lost = [ids = watches_->ids()](const std::string&) { ids->connection_lost(); };
+  cb.on_disconnected = [sink = sink_, ids = watches_->ids()](const std::string& reason) {
+    sink->push(DisconnectEvent{reason});
+    ids->closed();
+  };
   pacing_ = std::make_shared<Pacing>(a.max_speed);
-  cb.on_reconnected = [sink = sink_, pacing = pacing_] {
+  cb.on_reconnected = [push, pacing = pacing_] {
     pacing->rejoined();  // the server counts the next position as joining
-    sink->push(ReconnectedEvent{});
+    push(ReconnectedEvent{});
   };
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
+  walker_ = Walker(c_, pacing_);
   std::string err;
   bool ok = false;
   ok = without_gil([&] { return c_->connect(&err); });
@@ -185,14 +179,7 @@ void PyClient::check_open() const {
 void PyClient::wait_ready(double timeout) {
   const auto t = timeout_of(timeout);
   check_open();
-  bool ready = false, closed = false;
-  wait_for(*c_, t,
-        [&](const ClientView& v) {
-          ready = v.welcomed;
-          closed = v.closed;
-          return ready || closed;
-        });
-  if (!ready) fail_or_timeout(closed, "no Welcome within the timeout");
+  python::wait_ready(*c_, t);
 }
 
 void PyClient::sync(double timeout) {
@@ -419,6 +406,21 @@ py::object PyClient::ground(std::int64_t x, std::int64_t z) const {
   return h ? py::object(py::int_(*h)) : py::none();
 }
 
+std::vector<IVec3> PyClient::find(const py::object& material, const std::optional<Vec3>& near, double within,
+                                   std::int64_t max) const {
+  const Material m = material_of(material);
+  if (!(within > 0) || within > kMaxFindRadius)
+    raise(PyExc_ValueError, "find: within must be in (0, " + std::to_string(static_cast<int>(kMaxFindRadius)) + "] voxels");
+  if (max < 1 || max > 1'000'000) raise(PyExc_ValueError, "find: max must be 1..1000000");
+  const Vec3f p = near ? point_of(*near, "near") : state().position;
+  const auto found =
+      without_gil([&] { return find_voxels(*c_, m, p, within, static_cast<std::size_t>(max)); });
+  std::vector<IVec3> out;
+  out.reserve(found.size());
+  for (const Vec3i v : found) out.push_back(ivec(v));
+  return out;
+}
+
 std::vector<Player> PyClient::presence() const { return to_event(c_->presence()).players; }
 
 EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object& material, int occupancy) {
@@ -429,7 +431,7 @@ EditFuture PyClient::fill_box(const IVec3& lo, const IVec3& hi, const py::object
     raise(PyExc_ValueError, "fill_box: " + std::to_string(r.volume()) + " voxels; one edit touches at most " +
                                 std::to_string(kMaxEditVolume) + " voxels (64^3): fill it in pieces");
   pace();
-  return sent(c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))));
+  return sent([&] { return c_->fill_box(r, m == kAir ? Voxel{} : make_voxel(m, static_cast<std::uint8_t>(occupancy))); });
 }
 namespace {
 EditRequestMsg sphere_edit(EditKind kind, Vec3f center, float radius) {
@@ -455,14 +457,14 @@ EditFuture PyClient::fill_sphere(const Vec3& center, double radius, const py::ob
   check_edit_size(sphere_edit(EditKind::kFillSphere, c, r), "fill_sphere");
   const Material m = material_of(material);
   pace();
-  return sent(c_->fill_sphere(c, r, m));
+  return sent([&] { return c_->fill_sphere(c, r, m); });
 }
 EditFuture PyClient::dig(const Vec3& center, double radius) {
   const Vec3f c = point_of(center, "center");
   const float r = radius_of(radius);
   check_edit_size(sphere_edit(EditKind::kDig, c, r), "dig");
   pace();
-  return sent(c_->dig(c, r));
+  return sent([&] { return c_->dig(c, r); });
 }
 EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& material) {
   const Vec3f c = point_of(center, "center");
@@ -470,13 +472,13 @@ EditFuture PyClient::paint(const Vec3& center, double radius, const py::object& 
   check_edit_size(sphere_edit(EditKind::kPaint, c, r), "paint");
   const Material m = material_of(material);
   pace();
-  return sent(c_->paint(c, r, m));
+  return sent([&] { return c_->paint(c, r, m); });
 }
 EditFuture PyClient::smooth(const Vec3& center, double radius, double strength) {
   if (!(strength > 0) || strength > 1) raise(PyExc_ValueError, "smooth: strength must be in (0, 1]");
   check_edit_size(sphere_edit(EditKind::kSmooth, point_of(center, "center"), radius_of(radius)), "smooth");
   pace();
-  return sent(c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)));
+  return sent([&] { return c_->smooth(point_of(center, "center"), radius_of(radius), static_cast<float>(strength)); });
 }
 
 EditFuture PyClient::write_box(const IVec3& lo, const py::object& array_like) {
@@ -512,16 +514,16 @@ EditFuture PyClient::write_box(const IVec3& lo, const py::object& array_like) {
         voxels.push_back(mat == kAir ? Voxel{} : make_voxel(static_cast<Material>(mat), static_cast<std::uint8_t>(occ)));
       }
   pace();
-  return sent(c_->write_box(r, voxels));
+  return sent([&] { return c_->write_box(r, voxels); });
 }
 
 EditFuture PyClient::undo() {
   pace();
-  return sent(c_->undo());
+  return sent([&] { return c_->undo(); });
 }
 EditFuture PyClient::redo() {
   pace();
-  return sent(c_->redo());
+  return sent([&] { return c_->redo(); });
 }
 
 py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3& hi, double timeout) {
@@ -548,114 +550,11 @@ py::array_t<std::uint8_t> PyClient::read_server_box(const IVec3& lo, const IVec3
   return planes(s, [&](int x, int y, int z) { return res->voxels[static_cast<std::size_t>((y * s.z + z) * s.x + x)]; });
 }
 
-void PyClient::move_to(const Vec3& position) {
-  ClientStateMsg s = state();
-  const Vec3f from = s.position;
-  s.position = point_of(position, "position");
-  const Vec3f d = s.position - from;
-  const double distance = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
-  // The server's speed budget: a far move waits until it is allowed.
-  if (distance > pacing_->max_move())
-    raise(PyExc_ValueError, "move_to: " + std::to_string(std::lround(distance)) + " voxels at once; at most " +
-                                std::to_string(std::lround(pacing_->max_move())) +
-                                " (ten seconds of the server's speed budget, max_speed voxels a second plus 48): "
-                                "walk_to, or move in steps");
-  pause(pacing_->move(distance), "moving");
-  if (!c_->set_state(s)) raise(PyExc_ConnectionError, "connection closed");
-}
-
-namespace {
-// The replica as the path search reads it: each query takes the client's
-// lock on its own, so the io thread goes on applying frames during a long
-// search.
-struct LiveReplica {
-  const Client& c;
-  Voxel get(Vec3i p) const { return c.get(p); }
-  int resolution_at(Vec3i p) const { return c.resolution_at(p); }
-};
-}  // namespace
-
-std::vector<IVec3> PyClient::walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes) {
-  if (!(speed > 0) || speed > 64) raise(PyExc_ValueError, "walk_to: speed must be in (0, 64] voxels per second");
-  if (max_nodes < 1 || max_nodes > 2'000'000) raise(PyExc_ValueError, "walk_to: max_nodes must be 1..2000000");
-  const Vec3f goal_point = point_of(target, "target");
-  const auto deadline = Clock::now() + timeout_of(timeout);
-  wait_ready(timeout);
-  PathOptions o;
-  o.max_nodes = max_nodes;
-  o.deadline = deadline;
-  const LiveReplica world{*c_};
-  const auto floor_of = [](float v) { return static_cast<std::int32_t>(std::floor(v)); };
-  const Vec3i goal_voxel{floor_of(goal_point.x), floor_of(goal_point.y), floor_of(goal_point.z)};
-  const auto out_of_time = [&] { raise(PyExc_TimeoutError, "walk_to: the target was not reached within the timeout"); };
-  std::vector<IVec3> walked;
-  // The world may change under the walker: each step is checked before it
-  // is taken, and a blocked way is searched again (a few times).
-  constexpr int kReplans = 3;
-  for (int attempt = 0;; ++attempt) {
-    if (Clock::now() >= deadline) out_of_time();
-    const Vec3f here = state().position;
-    std::optional<Vec3i> start, goal;
-    PathResult path;
-    int goal_resolution = 0;
-    without_gil([&] {
-      start = place_near(world, floor_of(here.x), floor_of(here.z), floor_of(here.y + 0.01f), 32, o);
-      goal = place_near(world, goal_voxel.x, goal_voxel.z, goal_voxel.y, 8, o);
-      goal_resolution = world.resolution_at(goal_voxel);
-      if (start && goal) path = find_path(world, *start, *goal, o);
-    });
-    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
-    if (!start)
-      throw Unreachable("walk_to: no ground held at full resolution under the client at " +
-                        str({floor_of(here.x), floor_of(here.y), floor_of(here.z)}));
-    if (!goal)
-      throw Unreachable(goal_resolution != 0
-                            ? "walk_to: the target " + str(goal_voxel) +
-                                  " is not held at full resolution (beyond the full-resolution radius, or not loaded yet)"
-                            : "walk_to: no place to stand within 8 voxels of the target " + str(goal_voxel));
-    if (path.timed_out) out_of_time();
-    if (!path.found) throw Unreachable("walk_to: " + path.error);
-    bool blocked = false;
-    Vec3f at = here;
-    for (const Vec3i s : path.steps) {
-      if (!is_place(world, s, o)) {
-        blocked = true;
-        break;
-      }
-      const Vec3f next{static_cast<float>(s.x) + 0.5f, static_cast<float>(s.y), static_cast<float>(s.z) + 0.5f};
-      const Vec3f d = next - at;
-      const double dist = std::sqrt(double{d.x} * d.x + double{d.y} * d.y + double{d.z} * d.z);
-      const auto pace = std::chrono::milliseconds(static_cast<std::int64_t>(dist / speed * 1000));
-      if (Clock::now() + pace > deadline) out_of_time();
-      bool closed = false;
-      // Walking pace: the wait ends early only if the connection closes.
-      wait_for(*c_, pace, [&](const ClientView& v) { return closed = v.closed; });
-      if (closed) raise(PyExc_ConnectionError, "connection closed while walking: " + c_->disconnect_reason());
-      move_to(vec(next));
-      at = next;
-      walked.push_back(ivec(s));
-    }
-    if (!blocked) return walked;
-    if (attempt == kReplans) throw Unreachable("walk_to: the way kept changing under the walker");
-  }
-}
-
-Vec3 PyClient::look_at(const Vec3& point) {
-  const Vec3f p = point_of(point, "point");
-  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
-  const Vec3f d = p - eye;
-  const float len = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-  if (!(len > 1e-6f)) raise(PyExc_ValueError, "look_at: the point is at the client's eye");
-  facing_ = d * (1.0f / len);
-  return vec(facing_);
-}
-
 py::object PyClient::target(double max_distance) const {
-  const Vec3f eye = state().position + Vec3f{0, kEyeHeight, 0};
-  return raycast(vec(eye), vec(facing_), max_distance);
+  return raycast(vec(walker_.eye()), vec(walker_.facing()), max_distance);
 }
 
-Vec3 PyClient::position() const { return vec(state().position); }
+Vec3 PyClient::position() const { return vec(walker_.position()); }
 
 const std::vector<std::string>& PyClient::materials() const {
   // Read once from the Welcome (every query names materials; copying the
@@ -679,9 +578,22 @@ std::string PyClient::material_name(Material m) const {
   return m < names.size() ? names[m] : std::to_string(m);
 }
 
+namespace {
+// numpy.bool_, without importing numpy (an import on a script's first edit
+// stalled its event loop for tens of ms): if numpy is not imported, m is not one.
+bool is_numpy_bool(const py::object& m) {
+  PyObject* numpy = PyImport_GetModule(py::str("numpy").ptr());
+  if (numpy == nullptr) {
+    if (PyErr_Occurred()) throw py::error_already_set();
+    return false;
+  }
+  return py::isinstance(m, py::reinterpret_steal<py::object>(numpy).attr("bool_"));
+}
+}  // namespace
+
 Material PyClient::material_of(const py::object& m) const {
   const auto& names = materials();
-  if (py::isinstance<py::bool_>(m) || py::isinstance(m, py::module_::import("numpy").attr("bool_")))
+  if (py::isinstance<py::bool_>(m) || is_numpy_bool(m))
     raise(PyExc_TypeError, "material must be a name (str) or an id (int), not bool");
   // Any integer: int, numpy's integers, whatever has __index__.
   if (!py::isinstance<py::str>(m) && PyIndex_Check(m.ptr())) {
@@ -706,22 +618,34 @@ Material PyClient::material_of(const py::object& m) const {
   raise(PyExc_TypeError, "material must be a name (str) or an id (int)");
 }
 
+double PyClient::reserve_edit() {
+  check_open();
+  const auto w = without_gil([&] { return c_->welcome(); });
+  return w ? std::chrono::duration<double>(pacing_->reserve_edit(*w)).count() : 0.0;
+}
+
+void PyClient::when_event(py::object fn) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "when_event: fn must be callable");
+  watches_->on_event([fn] { fn(); });
+  if (c_->closed()) watches_->ids()->closed();
+}
+
+void PyClient::when_synced(py::object fn) {
+  if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "when_synced: fn must be callable");
+  watches_->on_read(*c_, request_sync(*c_), [fn] { fn(); });
+}
+
 void PyClient::pace() {
-  const auto w = c_->welcome();
-  if (w) pause(pacing_->edit(*w), "pacing edits");
+  const auto w = without_gil([&] { return c_->welcome(); });
+  if (w) python::pause(*c_, pacing_->edit(*w), "pacing edits");
 }
 
-void PyClient::pause(std::chrono::milliseconds wait, const char* what) {
-  if (wait.count() == 0) return;
-  bool closed = false;
-  wait_for(*c_, wait, [&](const ClientView& v) { return closed = v.closed; });
-  if (closed)
-    raise(PyExc_ConnectionError, std::string("connection closed while ") + what + ": " + c_->disconnect_reason());
-}
-
-EditFuture PyClient::sent(std::uint32_t id) {
+EditFuture PyClient::sent(const std::function<std::uint32_t()>& send) {
+  // The GIL released: sending takes the client's lock, which the io side
+  // may hold for a while (applying a large update).
+  const std::uint32_t id = without_gil(send);
   if (id == 0) raise(PyExc_ConnectionError, "the edit could not be sent (connection closed or queue full)");
-  return EditFuture(c_, id);
+  return EditFuture(c_, watches_, id);
 }
 
 }  // namespace terrane::python

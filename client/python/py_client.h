@@ -22,6 +22,8 @@
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
+#include "client/python/walker.h"
+#include "client/python/watches.h"
 
 namespace terrane::python {
 
@@ -84,6 +86,11 @@ class PyClient {
   py::array_t<std::uint8_t> read_box(const IVec3& lo, const IVec3& hi) const;
   py::object raycast(const Vec3& origin, const Vec3& direction, double max_distance) const;
   py::object ground(std::int64_t x, std::int64_t z) const;
+  // The voxels of a material nearest near (default: the client's
+  // position) within `within` voxels, nearest first, at most max
+  // (client/python/find.h).
+  std::vector<IVec3> find(const py::object& material, const std::optional<Vec3>& near, double within,
+                          std::int64_t max) const;
   std::vector<Player> presence() const;
 
   // --- edits ---------------------------------------------------------------------
@@ -96,14 +103,22 @@ class PyClient {
   EditFuture write_box(const IVec3& lo, const py::object& voxels);
   EditFuture undo();
   EditFuture redo();
+  // asyncio's pacing: takes the next edit's turn now and returns how many
+  // seconds to wait (on the event loop) before sending it; the next edit
+  // then goes at once.
+  double reserve_edit();
+  // Calls fn() on the callbacks thread once everything the server sent so
+  // far is applied (sync's barrier answered), or the connection is lost.
+  void when_synced(py::object fn);
+  // Calls fn() on the callbacks thread once the next event is queued (or
+  // the client closed): terrane.event then takes it with next_event.
+  void when_event(py::object fn);
   py::array_t<std::uint8_t> read_server_box(const IVec3& lo, const IVec3& hi, double timeout);
 
-  // --- movement --------------------------------------------------------------------
-  void move_to(const Vec3& position);
-  std::vector<IVec3> walk_to(const Vec3& target, double speed, double timeout, std::size_t max_nodes);
-  Vec3 look_at(const Vec3& point);
+  // --- movement: the Walker (client/python/walker.h) ----------------------------------
+  Walker& walker() { return walker_; }
   Vec3 position() const;
-  Vec3 facing() const { return vec(facing_); }
+  // What the eye looks at along the Walker's facing.
   py::object target(double max_distance) const;
 
   const std::vector<std::string>& materials() const;
@@ -127,23 +142,22 @@ class PyClient {
   void check_edit_size(const EditRequestMsg& e, const char* what) const;
   std::string material_name(Material m) const;
   Material material_of(const py::object& m) const;
-  EditFuture sent(std::uint32_t id);
+  // Sends an edit (send returns its id, 0 if it could not be sent).
+  EditFuture sent(const std::function<std::uint32_t()>& send);
   // Keeps this client's edits within the rate the server's Welcome states
   // (waiting, GIL released, when a script edits faster).
   void pace();
-  // Waits until the pause is over; ends early (ConnectionError) only if
-  // the connection closes.
-  void pause(std::chrono::milliseconds wait, const char* what);
 
   std::string name_;
   std::shared_ptr<DispatcherSlot> slot_;
   bool own_slot_ = false;               // not a Swarm's
   std::shared_ptr<Handlers> handlers_;  // GIL
   std::shared_ptr<EventSink> sink_;
+  std::shared_ptr<Watches> watches_;  // what awaits wait for (GIL; the io side holds its Ids)
   std::shared_ptr<Client> c_;
-  Vec3f facing_{0, 0, 1};
   mutable std::vector<std::string> names_;  // the world's materials, once welcomed
-  std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side)
+  std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side) and walker_
+  Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
 };
 

@@ -8,9 +8,10 @@ namespace terrane {
 
 FanOut::FanOut(const WorldOptions& options, ServerCounters& counters) : options_(options), counters_(counters) {}
 
-void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link) {
+void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link, std::string name) {
   Client c;
   c.link = std::move(link);
+  c.name = std::move(name);
   clients_.emplace(id, std::move(c));
 }
 
@@ -146,6 +147,9 @@ void FanOut::send_presence(std::uint64_t tick) {
     };
     if (entries.size() == c.presence.size() && std::equal(entries.begin(), entries.end(), c.presence.begin(), same))
       continue;
+    // Names are fixed per client: told with each entry, not compared.
+    for (auto& e : entries)
+      if (auto other = clients_.find(e.client_id); other != clients_.end()) e.name = other->second.name;
     c.link->answer(PresenceNearby{entries});
     c.presence = std::move(entries);
     counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);

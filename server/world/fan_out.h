@@ -1,5 +1,5 @@
-// FanOut: the clients as the world knows them — each one's link, position
-// and view, the presence it was last sent, and the changes of chunks it
+// FanOut: the clients as the world knows them — each one's link, name,
+// position and view, the presence it was last sent, and the changes of chunks it
 // holds coarser than full resolution gathered for it (mip news, handed
 // over when due) — with the interest index (who holds what) and the
 // presence grid. It tells holders of new versions (publish), answers
@@ -36,7 +36,8 @@ class FanOut {
  public:
   FanOut(const WorldOptions& options, ServerCounters& counters);
 
-  void join(ClientId id, std::shared_ptr<WorldClient> link);
+  // name: its Hello's, told to the others with its presence.
+  void join(ClientId id, std::shared_ptr<WorldClient> link, std::string name = {});
   // After this nothing more reaches id (the replicator released what it
   // held just before).
   void leave(ClientId id);
@@ -80,6 +81,7 @@ class FanOut {
  private:
   struct Client {
     std::shared_ptr<WorldClient> link;
+    std::string name;
     Vec3f position;
     std::int32_t view_distance = 0, full_res_radius = 0;
     bool placed = false;

@@ -81,8 +81,8 @@ void WorldOwner::handle(WorldRequest& r) {
         } else if constexpr (std::is_same_v<T, std::vector<HorizonWant>>) {
           horizons_.want(r.id, what);
         } else if constexpr (std::is_same_v<T, JoinRequest>) {
-          tick_.join(r.id, std::move(what.name));
-          fan_out_.join(r.id, std::move(what.link));
+          tick_.join(r.id, what.name);
+          fan_out_.join(r.id, std::move(what.link), std::move(what.name));
         } else if constexpr (std::is_same_v<T, LeaveRequest>) {
           // The replicator released what it held or had asked for just
           // before; after this nothing more is granted to id. Its queued

@@ -356,6 +356,23 @@ TEST(Messages, PresenceIsBoundedAndChecked) {
   ASSERT_TRUE(p.ok());
   ASSERT_EQ(p->size(), kMaxPresenceEntries);  // the builder keeps the first 64
   EXPECT_EQ((*p)[63].client_id, 63u);
+  // Names round-trip (and an entry without one reads as empty).
+  entries = {{7, {1, 2, 3}, "digger"}, {8, {4, 5, 6}, ""}};
+  p = parse_presence(*message_of(build_presence(entries))->body_as_Presence());
+  ASSERT_TRUE(p.ok());
+  ASSERT_EQ(p->size(), 2u);
+  EXPECT_EQ((*p)[0].name, "digger");
+  EXPECT_EQ((*p)[1].name, "");
+  // A name a Hello could not carry is refused: a control character, or
+  // longer than 64 bytes.
+  for (const std::string& name : {std::string("two\nlines"), std::string(65, 'n')}) {
+    flatbuffers::FlatBufferBuilder named;
+    const wire::Vec3f at(1, 2, 3);
+    std::vector<flatbuffers::Offset<wire::PresenceEntry>> one{
+        wire::CreatePresenceEntry(named, 1, &at, named.CreateString(name))};
+    named.Finish(wire::CreatePresenceDirect(named, &one));
+    EXPECT_FALSE(parse_presence(*flatbuffers::GetRoot<wire::Presence>(named.GetBufferPointer())).ok()) << name;
+  }
   flatbuffers::FlatBufferBuilder fbb;
   std::vector<flatbuffers::Offset<wire::PresenceEntry>> bad;
   const wire::Vec3f inf(std::numeric_limits<float>::infinity(), 0, 0);

@@ -68,6 +68,30 @@ def test_presence_names_the_other_clients_in_view(server):
         assert isinstance(a.presence[0].id, int)
 
 
+def test_presence_says_who_came_into_view_and_who_left(server):
+    with terrane.connect(server.address, name="watcher", view_distance=64, full_res_radius=32) as a:
+        a.wait_ready(30)
+        b = terrane.connect(server.address, name="visitor", view_distance=64, full_res_radius=32)
+        b.wait_ready(30)
+        bx, _, bz = b.position
+
+        def next_presence(pred):
+            while True:
+                p = a.next_event("presence", timeout=30)
+                if pred(p):
+                    return p
+
+        came = next_presence(lambda p: p.joined)
+        visitor = [pl for pl in came.joined if abs(pl.position[0] - bx) < 1 and abs(pl.position[2] - bz) < 1]
+        assert visitor and came.left == [], came.joined
+        vid = visitor[0].id
+        assert vid in [pl.id for pl in came.players]
+        assert visitor[0].name == "visitor" and [pl.name for pl in a.presence if pl.id == vid] == ["visitor"]
+        b.close()
+        went = next_presence(lambda p: p.left)
+        assert went.left == [vid] and vid not in [pl.id for pl in went.players] and went.joined == []
+
+
 def test_operator_messages_and_the_disconnect_reach_callbacks_and_waits():
     srv = Server("--admin-token", "secret-token")
     try:

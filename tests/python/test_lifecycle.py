@@ -107,6 +107,37 @@ def test_ctrl_c_interrupts_a_long_wait(server):
             p.wait()
 
 
+def test_ctrl_c_ends_an_asyncio_script_at_once_outside_a_with_block(server):
+    # Awaits hold no executor thread that Python's exit would wait for
+    # (outside a with block, 60 s waits kept the process alive 39 s).
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (env.get("PYTHONPATH"), os.path.dirname(terrane.__path__[0])) if p)
+    code = textwrap.dedent("""
+        import asyncio, sys, terrane
+        c = terrane.connect(sys.argv[1], name="async-sleeper")
+        async def main():
+            await terrane.ready(c)
+            waits = [asyncio.ensure_future(terrane.event(c, "message", 60)) for _ in range(8)]
+            await asyncio.sleep(0)
+            print("waiting", flush=True)
+            await asyncio.gather(*waits)
+        try:
+            asyncio.run(main())
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+    """)
+    p = subprocess.Popen([sys.executable, "-c", code, server.address], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert p.stdout.readline().strip() == "waiting"
+        p.send_signal(signal.SIGINT)
+        out, _ = p.communicate(timeout=20)  # well under the waits' 60 s
+        assert "interrupted" in out and p.returncode == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 def test_exit_with_daemon_threads_still_waiting_is_clean(server):
     r = run_script("""
         import os, threading, terrane

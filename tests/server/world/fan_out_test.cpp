@@ -152,5 +152,26 @@ TEST_F(FanOutTest, PresenceIsSentOnlyWhenItChanged) {
   EXPECT_EQ(counters_.presence_sent.load(), 3u);
 }
 
+// Each entry names the client (its Hello's name), so a client can say who
+// it sees; a client joined without a name is told without one.
+TEST_F(FanOutTest, PresenceNamesTheClients) {
+  options_.tick_hz = 1;
+  options_.presence_hz = 1;
+  auto a = join(1);
+  auto b = std::make_shared<RecordingClient>();
+  fan_out_.join(2, b, "builder");
+  fan_out_.moved(1, Vec3f{0, 10, 0}, 96, 32);
+  fan_out_.moved(2, Vec3f{20, 10, 0}, 96, 32);
+  fan_out_.send_presence(1);
+  const auto a_sees = a->answered<PresenceNearby>();
+  ASSERT_EQ(a_sees.size(), 1u);
+  ASSERT_EQ(a_sees[0].entries.size(), 1u);
+  EXPECT_EQ(a_sees[0].entries[0].name, "builder");
+  const auto b_sees = b->answered<PresenceNearby>();
+  ASSERT_EQ(b_sees.size(), 1u);
+  EXPECT_EQ(b_sees[0].entries[0].client_id, 1u);
+  EXPECT_EQ(b_sees[0].entries[0].name, "");
+}
+
 }  // namespace
 }  // namespace terrane
