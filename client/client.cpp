@@ -283,6 +283,15 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Presence: {
       auto p = parse_presence(*m.body_as_Presence());
       if (!p) return fail(p.error());
+      // A name comes with an entry only when it enters the list
+      // (PROTOCOL.md, "Presence"): the others keep the one told before.
+      for (PresenceEntryMsg& e : *p)
+        if (e.name.empty())
+          for (const PresenceEntryMsg& before : presence_)
+            if (before.client_id == e.client_id) {
+              e.name = before.name;
+              break;
+            }
       presence_ = std::move(*p);
       ++counters_.presence_updates;
       if (callbacks_.on_presence) after = [this, p = presence_] { callbacks_.on_presence(p); };

@@ -147,9 +147,14 @@ void FanOut::send_presence(std::uint64_t tick) {
     };
     if (entries.size() == c.presence.size() && std::equal(entries.begin(), entries.end(), c.presence.begin(), same))
       continue;
-    // Names are fixed per client: told with each entry, not compared.
-    for (auto& e : entries)
+    // Names are fixed per client: told once, with an entry new to the
+    // list (the client keeps it while the entry stays), and not compared.
+    for (auto& e : entries) {
+      const bool listed = std::any_of(c.presence.begin(), c.presence.end(),
+                                      [&](const PresenceEntryMsg& before) { return before.client_id == e.client_id; });
+      if (listed) continue;
       if (auto other = clients_.find(e.client_id); other != clients_.end()) e.name = other->second.name;
+    }
     c.link->answer(PresenceNearby{entries});
     c.presence = std::move(entries);
     counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);

@@ -426,6 +426,16 @@ TEST_F(ClientServerTest, PresenceShowsTheOtherClient) {
   const auto w = b.welcome();
   ASSERT_TRUE(w.has_value());
   EXPECT_EQ(a.presence().at(0).position, w->spawn);
+  EXPECT_EQ(a.presence().at(0).name, "b");
+  // b moves: its entry comes again without its name (told once, when it
+  // entered a's list), and a's presence keeps the name.
+  ClientStateMsg st = *b.last_state();
+  st.position.x += 3;
+  ASSERT_TRUE(b.set_state(st));
+  ASSERT_TRUE(a.wait_until(
+      [&](const ClientView& v) { return (v.presence.size() == 1 && v.presence[0].position == st.position) || v.closed; },
+      kDeadline));
+  EXPECT_EQ(a.presence().at(0).name, "b");
 }
 
 TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {

@@ -171,6 +171,26 @@ TEST_F(FanOutTest, PresenceNamesTheClients) {
   ASSERT_EQ(b_sees.size(), 1u);
   EXPECT_EQ(b_sees[0].entries[0].client_id, 1u);
   EXPECT_EQ(b_sees[0].entries[0].name, "");
+
+  // The builder moves and stays in a's list: its entry comes again without
+  // its name (a keeps the one told); once gone from the list and back, it
+  // is named again.
+  fan_out_.moved(2, Vec3f{24, 10, 0}, 96, 32);
+  fan_out_.send_presence(2);
+  auto later = a->answered<PresenceNearby>();
+  ASSERT_EQ(later.size(), 2u);
+  ASSERT_EQ(later[1].entries.size(), 1u);
+  EXPECT_EQ(later[1].entries[0].client_id, 2u);
+  EXPECT_EQ(later[1].entries[0].name, "") << "a name is told once, when its entry enters the list";
+  fan_out_.moved(2, Vec3f{2000, 10, 0}, 96, 32);  // out of a's view
+  fan_out_.send_presence(3);
+  fan_out_.moved(2, Vec3f{30, 10, 0}, 96, 32);
+  fan_out_.send_presence(4);
+  later = a->answered<PresenceNearby>();
+  ASSERT_EQ(later.size(), 4u);
+  EXPECT_TRUE(later[2].entries.empty());
+  ASSERT_EQ(later[3].entries.size(), 1u);
+  EXPECT_EQ(later[3].entries[0].name, "builder");
 }
 
 }  // namespace
