@@ -4,6 +4,9 @@
 
 namespace terrane {
 
+// The allocator's header (glibc: 8 bytes, rounded to 16) beside the bytes.
+const std::size_t ChunkSlot::kMoreBytes = sizeof(ChunkSlot::More) + 16;
+
 const VersionPtr& ChunkSlot::null_version() {
   static const VersionPtr none;
   return none;

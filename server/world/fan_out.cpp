@@ -31,6 +31,7 @@ void FanOut::moved(ClientId id, Vec3f position, std::int32_t view_distance, std:
 
 void FanOut::release(ClientId id, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks) interest_.release(cp, id);
+  count_memory();
 }
 
 void FanOut::holds_full(ClientId id, const std::vector<Vec3i>& chunks) {

@@ -39,10 +39,14 @@ class InterestIndex {
     auto it = map_.find(chunk_pos);
     if (it == map_.end()) return;
     HolderSet& s = it->second;
-    const std::size_t before = s.heap_bytes();
+    heap_bytes_ -= s.heap_bytes();
     if (s.release(id, probes_)) --entries_;
-    heap_bytes_ -= before - s.heap_bytes();
-    if (s.empty()) map_.erase(it);
+    if (s.empty())
+      map_.erase(it);
+    else
+      heap_bytes_ += s.heap_bytes();
+    // Nobody holds anything (the last client left): the table goes too.
+    if (map_.empty()) Vec3iMap<HolderSet>().swap(map_);
   }
   // The holders of a chunk (empty if none); valid until the next change.
   std::span<const Holder> holders(Vec3i chunk_pos) const {
