@@ -7,8 +7,10 @@ namespace terrane {
 
 std::size_t HolderSet::index_size_for(std::size_t n) {
   if (n <= kScanAtMost) return 0;
-  // A quarter full after a rebuild: it grows to half full before the next.
-  return std::bit_ceil(n * 4);
+  // Between 3/8 and 3/4 full after a rebuild; rebuilt again past 3/4
+  // (linear probing stays a few probes a lookup up to there, and the
+  // index costs about 7 bytes a holder, less than the holder).
+  return std::bit_ceil(n * 4 / 3 + 1);
 }
 
 std::uint32_t HolderSet::find(ClientId id, std::uint64_t& probes) const {
@@ -76,10 +78,12 @@ HolderSet::Held HolderSet::hold(ClientId id, bool full, std::uint64_t& probes) {
     h.set_full(full);
     return Held::kChanged;
   }
+  // Grown by a quarter, not doubled: a crowd's chunk keeps thousands.
+  if (holders_.size() == holders_.capacity()) holders_.reserve(holders_.size() + holders_.size() / 4 + 2);
   holders_.emplace_back(id, full);
   if (full) ++full_;
   const std::size_t n = holders_.size();
-  if (n > kScanAtMost && (index_size_ == 0 || n * 2 > index_size_))
+  if (n > kScanAtMost && (index_size_ == 0 || n * 4 > index_size_ * 3))
     rebuild(index_size_for(n));
   else if (index_size_ != 0)
     index_insert(static_cast<std::uint32_t>(n - 1));

@@ -6,11 +6,11 @@
 // them in; a removal moves the last into the gap). A chunk with more than
 // kScanAtMost holders (a crowd: every bot near the spawn holds its chunks)
 // also has an index beside them: an open-addressing table, by client id,
-// of each holder's position in the vector, at most half full, linear
+// of each holder's position in the vector, at most 3/4 full, linear
 // probing, erased by shifting back (no tombstones). So finding, adding and
 // removing a holder cost a bounded number of probes whatever the count,
-// not a scan; the table is rebuilt when the count doubles or falls to an
-// eighth of its size (amortized O(1)). Both are this one structure's
+// not a scan; the table is rebuilt when it passes 3/4 full or falls to a
+// sixteenth (amortized O(1)). Both are this one structure's
 // state, changed together by its own methods.
 //
 // A holder is 8 bytes: the client id shifted left by one with the full
@@ -84,7 +84,7 @@ class HolderSet {
   // An index of size slots (0: none) for the holders there are.
   void rebuild(std::size_t size);
   // The index's size for n holders: 0 up to kScanAtMost, else a power of
-  // two at least 2n.
+  // two above 4n/3.
   static std::size_t index_size_for(std::size_t n);
 
   std::vector<ChunkHolder> holders_;
