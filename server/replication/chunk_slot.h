@@ -20,6 +20,7 @@
 #pragma once
 
 #include <array>
+#include <cassert>
 #include <atomic>
 #include <bit>
 #include <cstddef>
@@ -71,13 +72,13 @@ class ChunkSlot {
   // A record of the chunk's own sent to the client (Full .. Estimate);
   // none for a chunk seen only through a horizon image.
   std::optional<Holding> held() const {
-    if (!has_ || is_image()) return std::nullopt;
-    return Holding{form_, revision_};
+    if (!has() || is_image()) return std::nullopt;
+    return Holding{form(), revision()};
   }
   // Seen only through its region's horizon image (no record of its own).
-  bool image() const { return has_ && is_image(); }
+  bool image() const { return has() && is_image(); }
   // Held, seen through an image, or claimed: a horizon image leaves it be.
-  bool known() const { return has_ || claim().has_value(); }
+  bool known() const { return has() || claim().has_value(); }
 
   // The client now holds h of the chunk (forgetting an image). v is the
   // version h was made from: kept while h is Full (and v not all Air) for
@@ -135,7 +136,7 @@ class ChunkSlot {
   Left leave();
 
   // Nothing left: the slot goes.
-  bool empty() const { return !has_ && !more_; }
+  bool empty() const { return !has() && !more_; }
   // Something kept out of line (a version, a request or a claim).
   bool has_more() const { return more_ != nullptr; }
   // What that costs: its bytes and the allocator's header.
@@ -152,25 +153,35 @@ class ChunkSlot {
   static const VersionPtr& null_version();
   static const std::optional<ChunkRequest>& no_request();
   static const std::optional<Holding>& no_claim();
-  bool is_image() const { return form_ == HoldingForm::kHorizon4 || form_ == HoldingForm::kHorizon5; }
+  bool is_image() const { return form() == HoldingForm::kHorizon4 || form() == HoldingForm::kHorizon5; }
+  // What the client has, in one word: the revision above bit 8, whether
+  // it has anything in bit 7, the form below (revisions are the world's
+  // own, counted per chunk from 0: far below 2^56).
+  static constexpr int kRevisionShift = 8;
+  static constexpr std::uint64_t kHasBit = 1u << 7, kFormMask = kHasBit - 1;
+  bool has() const { return (bits_ & kHasBit) != 0; }
+  HoldingForm form() const { return static_cast<HoldingForm>(bits_ & kFormMask); }
+  std::uint64_t revision() const { return bits_ >> kRevisionShift; }
+  void set(HoldingForm form, std::uint64_t revision) {
+    assert(revision >> (64 - kRevisionShift) == 0);
+    bits_ = revision << kRevisionShift | kHasBit | static_cast<std::uint64_t>(form);
+  }
   More& more();
   void trim();  // drops an empty More
   // Takes the version in field (ready or mip), trimming what is left.
   VersionPtr take(VersionPtr More::*field);
 
-  std::uint64_t revision_ = 0;
-  HoldingForm form_ = HoldingForm::kEmpty;
-  bool has_ = false;
+  std::uint64_t bits_ = 0;  // nothing: has() false
   std::unique_ptr<More> more_;
 };
 
 // One per chunk in view: what is inline costs every chunk of every client.
-static_assert(sizeof(ChunkSlot) <= 24);
+static_assert(sizeof(ChunkSlot) <= 16);
 
 class ChunkSlots {
   // Chunks are kept in blocks of kSide^3 = 64: per block a word of bits
   // (which of its chunks have a slot) and their slots side by side in
-  // chunk order. A slot costs its own 24 bytes and a block's key, word and
+  // chunk order. A slot costs its own 16 bytes and a block's key, word and
   // vector (about 50 bytes) are shared by the block's slots, where a flat
   // map of slots cost each a key and a table's slack (about 65 bytes a
   // chunk in all). A lookup is a block lookup and a count of bits; making
