@@ -2,6 +2,16 @@
 
 namespace terrane {
 
+const char* memory_part_label(MemoryPart p) {
+  switch (p) {
+    case MemoryPart::kChunkSlots: return "chunk_slots";
+    case MemoryPart::kInterest: return "interest";
+    case MemoryPart::kResidency: return "residency";
+    case MemoryPart::kCount: break;
+  }
+  return "unknown";
+}
+
 const char* close_reason_label(CloseReason r) {
   switch (r) {
     case CloseReason::kPeerClosed: return "peer_closed";

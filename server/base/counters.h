@@ -95,6 +95,24 @@ enum class RejectReason : std::uint8_t {
 };
 const char* reject_reason_label(RejectReason r);
 
+// The server's memory by part, as each part's owner estimates it from
+// its sizes and counts (terrane_memory_bytes{part=...}): the parts that
+// grow with the clients, to tell what a client costs. Each owner adds the
+// change of its own estimate (any thread; readers see a sum).
+enum class MemoryPart : std::uint8_t {
+  kChunkSlots,  // every replicator's ChunkSlots (session strands)
+  kInterest,    // the interest index: who holds which chunk (world strand)
+  kResidency,   // the chunk versions the world holds and its entry per chunk (world strand)
+  kCount
+};
+const char* memory_part_label(MemoryPart p);
+
+struct MemoryCounters {
+  std::array<std::atomic<std::int64_t>, static_cast<std::size_t>(MemoryPart::kCount)> bytes{};
+  std::atomic<std::int64_t>& operator[](MemoryPart p) { return bytes[static_cast<std::size_t>(p)]; }
+  std::int64_t load(MemoryPart p) const { return bytes[static_cast<std::size_t>(p)].load(std::memory_order_relaxed); }
+};
+
 // Per message type (the Body union's index), shared by every session; plus
 // what the sessions hold queued in all and why they ended.
 struct NetCounters {
@@ -216,6 +234,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> ticks_late{0};      // ticks that started more than a period late
   NetCounters net;
   DatabaseCounters database;
+  MemoryCounters memory;
 
   void rejected(RejectReason r, std::uint64_t n = 1) {
     edits_rejected_by[static_cast<std::size_t>(r)].fetch_add(n, std::memory_order_relaxed);

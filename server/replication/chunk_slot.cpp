@@ -4,6 +4,9 @@
 
 namespace terrane {
 
+// The allocator's header (glibc: 8 bytes, rounded to 16) beside the bytes.
+const std::size_t ChunkSlot::kMoreBytes = sizeof(ChunkSlot::More) + 16;
+
 const VersionPtr& ChunkSlot::null_version() {
   static const VersionPtr none;
   return none;
@@ -29,9 +32,7 @@ void ChunkSlot::trim() {
 }
 
 bool ChunkSlot::hold(Holding h, const VersionPtr& v) {
-  has_ = true;
-  form_ = h.form;
-  revision_ = h.revision;
+  set(h.form, h.revision);
   if (h.form == HoldingForm::kFull && v && !v->empty()) {
     const bool fresh = !more().full;
     more_->full = v;
@@ -45,9 +46,7 @@ bool ChunkSlot::hold(Holding h, const VersionPtr& v) {
 }
 
 void ChunkSlot::see_image(int level) {
-  has_ = true;
-  form_ = horizon_form(level);
-  revision_ = 0;
+  set(horizon_form(level), 0);
 }
 
 bool ChunkSlot::ask(ChunkRequest r) {
@@ -109,12 +108,10 @@ ChunkSlot::Left ChunkSlot::leave() {
     left.claim = more_->claim->revision;
     more_->claim.reset();
   }
-  if (has_) {
-    left.had = revision_;  // 0 for an image
+  if (has()) {
+    left.had = revision();  // 0 for an image
     left.registered = !is_image();
-    has_ = false;
-    form_ = HoldingForm::kEmpty;
-    revision_ = 0;
+    bits_ = 0;
     if (more_) more_->full.reset();
   }
   if (more_ && more_->ready) {

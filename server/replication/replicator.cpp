@@ -33,6 +33,7 @@ Replicator::Replicator(ClientId id, WorldOwner& world, const ReplicationOptions&
       redirect_(cluster, cluster_options),
       move_limit_(options.max_speed),
       plan_(welcome.bounds),
+      slots_(&counters.memory[MemoryPart::kChunkSlots]),
       hashes_(std::chrono::milliseconds(options.hash_push_ms)) {
   state_.view_distance = options_.default_view_distance;
   state_.full_res_radius = options_.default_full_res_radius;

@@ -63,6 +63,9 @@ std::optional<Vec3i> ViewPlan::pop_refine(const std::function<bool(Vec3i)>& need
   std::pop_heap(refine_.begin(), refine_.end(), RefineOrder{});
   const Vec3i cp = refine_.back().second;
   refine_.pop_back();
+  // A joining client queues most of its view once: the room goes when
+  // the queue drains (shrinking keeps the heap's order).
+  if (refine_.capacity() > kRefineRoomKept && refine_.size() * 4 < refine_.capacity()) refine_.shrink_to_fit();
   return cp;
 }
 

@@ -73,6 +73,9 @@ class ViewPlan {
 
  private:
   using RefineEntry = std::pair<std::int64_t, Vec3i>;
+  // The refine queue's room kept however short it gets (entries): a
+  // move's shell, without a reallocation each time.
+  static constexpr std::size_t kRefineRoomKept = 1024;
   struct RefineOrder {
     bool operator()(const RefineEntry& a, const RefineEntry& b) const { return a.first > b.first; }
   };

@@ -32,6 +32,7 @@ void FanOut::moved(ClientId id, Vec3f position, std::int32_t view_distance, std:
 
 void FanOut::release(ClientId id, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks) interest_.release(cp, id);
+  count_memory();
 }
 
 void FanOut::holds_full(ClientId id, const std::vector<Vec3i>& chunks) {
@@ -106,15 +107,15 @@ void FanOut::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions
   for (const VersionPtr& v : versions) {
     for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
       ++deliveries;
-      if (h.full || !gather) {
-        news[h.id].push_back(v);
+      if (h.full() || !gather) {
+        news[h.id()].push_back(v);
         continue;
       }
-      auto c = clients_.find(h.id);
+      auto c = clients_.find(h.id());
       if (c == clients_.end()) continue;
       if (c->second.mip_news.empty()) {
         c->second.mip_due = due;
-        mip_news_due_.emplace_back(due, h.id);
+        mip_news_due_.emplace_back(due, h.id());
       }
       c->second.mip_news.push_back(v);
       c->second.mip_news_tick = tick;
@@ -127,7 +128,7 @@ void FanOut::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions
 
 void FanOut::changed(std::uint64_t tick, const VersionPtr& v) {
   for (const InterestIndex::Holder& h : interest_.holders(v->pos()))
-    if (auto holder = clients_.find(h.id); holder != clients_.end()) holder->second.link->committed(tick, {v});
+    if (auto holder = clients_.find(h.id()); holder != clients_.end()) holder->second.link->committed(tick, {v});
 }
 
 void FanOut::send_presence(std::uint64_t tick) {

@@ -51,7 +51,10 @@ class FanOut {
   void holds_full(ClientId id, const std::vector<Vec3i>& chunks);
   // Registers id as a holder of chunk_pos (a grant): every later change
   // reaches it.
-  void hold(Vec3i chunk_pos, ClientId id, bool full) { interest_.hold(chunk_pos, id, full); }
+  void hold(Vec3i chunk_pos, ClientId id, bool full) {
+    interest_.hold(chunk_pos, id, full);
+    count_memory();
+  }
   bool watched(Vec3i chunk_pos) const { return interest_.watched(chunk_pos); }
   bool held_full(Vec3i chunk_pos) const { return interest_.held_full(chunk_pos); }
 
@@ -90,6 +93,11 @@ class FanOut {
     std::uint64_t mip_news_tick = 0;         // the newest news' tick
     std::chrono::steady_clock::time_point mip_due;
   };
+  // The interest index's memory, to its part of the server's (MemoryPart).
+  void count_memory() {
+    counters_.memory[MemoryPart::kInterest].store(static_cast<std::int64_t>(interest_.memory_bytes()),
+                                                  std::memory_order_relaxed);
+  }
   // Hands c its mip news now, whenever it was due.
   static void hand_mip_news(Client& c);
 

@@ -41,19 +41,46 @@ const Residency::Loaded& Residency::held(Vec3i cp) const {
   return *l;
 }
 
+std::size_t Residency::version_bytes(const ChunkVersion& v) {
+  std::size_t n = sizeof(ChunkVersion) + 16;  // and its control block
+  if (const Chunk* c = v.chunk()) {
+    n += sizeof(Chunk) + c->level0().heap_bytes();
+    for (int level = 1; level < kMipLevels; ++level) n += c->mip_unit(level).size();
+  } else if (!v.has_voxels()) {
+    // Mips only, or the coarsest level only: made with the version.
+    for (int level = 1; level < kMipLevels; ++level)
+      if (v.has_level(level)) n += v.encoded(level).size();
+  }
+  return n;
+}
+
+void Residency::count_memory() {
+  counters_.memory[MemoryPart::kResidency].store(static_cast<std::int64_t>(chunks_.table_bytes() + versions_bytes_),
+                                                 std::memory_order_relaxed);
+}
+
 void Residency::hold(ChunkState& s, VersionPtr v) {
-  if (s.held.current != nullptr) --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+  if (s.held.current != nullptr) {
+    --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+    versions_bytes_ -= version_bytes(*s.held.current);
+  }
   ++(v->has_voxels() ? with_voxels_ : mips_only_);
+  versions_bytes_ += version_bytes(*v);
   s.held.published = v;
   s.held.current = std::move(v);
+  count_memory();
 }
 
 void Residency::drop(Chunks::iterator it) {
   ChunkState& s = it->second;
-  if (s.held.current != nullptr) --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+  if (s.held.current != nullptr) {
+    --(s.held.current->has_voxels() ? with_voxels_ : mips_only_);
+    versions_bytes_ -= version_bytes(*s.held.current);
+  }
   s.held = Loaded{};
   s.replace_queued = false;
   if (s.vacant()) chunks_.erase(it);
+  count_memory();
 }
 
 std::size_t Residency::estimates_waiting() const {
@@ -83,6 +110,7 @@ void Residency::for_each(const std::function<void(Vec3i, const Loaded&)>& fn) co
 const VersionPtr& Residency::advance(VersionPtr v) {
   Loaded& l = chunks_.at(v->pos()).held;
   if (l.current == nullptr) throw std::out_of_range("Residency: chunk not held");
+  versions_bytes_ = versions_bytes_ - version_bytes(*l.current) + version_bytes(*v);
   l.current = std::move(v);
   l.used_tick = clock_.tick;
   return l.current;

@@ -200,7 +200,8 @@ class Residency : public WorldView {
 
   const Loaded& held(Vec3i chunk_pos) const;
   // Every change of a held version's form goes through these (they keep
-  // the counts of chunks held with voxels and as mips only).
+  // the counts of chunks held with voxels and as mips only, and the bytes
+  // of the versions held).
   void hold(ChunkState& s, VersionPtr v);
   void drop(Chunks::iterator it);  // the version held, and the entry if nothing else is left
   void wait_for(Vec3i chunk_pos, Waiter w);
@@ -214,6 +215,14 @@ class Residency : public WorldView {
   void on_coarse_loaded(LoadedCoarse c);
   void grant(ClientId id, Vec3i chunk_pos, bool full);
   void count_loaded();
+  // A held version's memory as estimated here: the version, and its
+  // chunk's voxels and mips, or the mips' encodings it was made with (the
+  // encodings readers ask of a version with voxels are theirs, made
+  // lazily, not counted).
+  static std::size_t version_bytes(const ChunkVersion& v);
+  // The table of chunks and the versions held, to the server's memory by
+  // part (MemoryPart::kResidency).
+  void count_memory();
 
   Strand& strand_;
   Storage& storage_;
@@ -226,6 +235,7 @@ class Residency : public WorldView {
   Chunks chunks_;
   std::size_t with_voxels_ = 0;  // chunks held with their voxels
   std::size_t mips_only_ = 0;    // chunks held as mips only
+  std::size_t versions_bytes_ = 0;  // version_bytes of the versions held
   std::vector<Vec3i> lighten_;   // to reduce to mips, least recently used last
   // unload_unwatched's pass over chunks_, a tick's share of its slots at a time.
   struct UnloadPass {

@@ -308,16 +308,27 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   EXPECT_GT(sample(during, "terrane_chunks_generated_total"), 0);
   EXPECT_GT(sample(during, "terrane_streamed_chunks_total{kind=\"full\"}"), 0);
   EXPECT_GT(sample(during, "terrane_ticks_total"), sample(before, "terrane_ticks_total"));
+  // The memory the client costs, by part: its replicator's slots, the
+  // world's record of what it holds, the chunks held for it.
+  for (const char* part : {"chunk_slots", "interest", "residency"}) {
+    EXPECT_EQ(sample(before, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
+    EXPECT_GT(sample(during, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
+  }
 
   // The client leaves with a reset, as one that quits with stream data
   // unread does: still the client closing, counted once the server sees it.
   p->reset();
-  const std::string after = scrape_until([](const std::string& t) {
-    return sample(t, "terrane_disconnects_total{reason=\"peer_closed\"}") == 1;
+  // Once it left, its slots are gone and the interest index holds nothing.
+  const std::string after = scrape_until([&](const std::string& t) {
+    return sample(t, "terrane_disconnects_total{reason=\"peer_closed\"}") == 1 &&
+           sample(t, "terrane_memory_bytes{part=\"chunk_slots\"}") == 0 &&
+           sample(t, "terrane_memory_bytes{part=\"interest\"}") == 0;
   });
   EXPECT_EQ(sample(after, "terrane_disconnects_total{reason=\"peer_closed\"}"), 1) << after;
   EXPECT_EQ(sample(after, "terrane_clients"), 0);
   EXPECT_EQ(sample(after, "terrane_send_queue_bytes"), 0);
+  EXPECT_EQ(sample(after, "terrane_memory_bytes{part=\"chunk_slots\"}"), 0) << after;
+  EXPECT_EQ(sample(after, "terrane_memory_bytes{part=\"interest\"}"), 0) << after;
 }
 
 TEST_F(MetricsEndpointTest, ABadOrTakenAddressIsAClearError) {

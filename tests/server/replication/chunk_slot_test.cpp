@@ -6,7 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
 #include <memory>
+#include <random>
+#include <tuple>
 
 #include "common/world/horizon.h"
 
@@ -287,6 +290,68 @@ TEST(ChunkSlots, CountsFollowRequestsClaimsAndPendingMipsThroughEveryChange) {
   EXPECT_EQ(slots.size(), 0u);
   EXPECT_EQ(slots.requests(), 0u);
   EXPECT_EQ(slots.coarse_pass_requests(), 0u);
+}
+
+// Slots are kept in blocks of 4^3 chunks: every chunk (negative
+// coordinates too) keeps its own slot however they are made and erased,
+// and iteration visits each once with its coordinates.
+TEST(ChunkSlots, EveryChunkKeepsItsOwnSlotAcrossBlocks) {
+  ChunkSlots slots;
+  auto less = [](const Vec3i& a, const Vec3i& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); };
+  std::map<Vec3i, std::uint64_t, decltype(less)> ref(less);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> coord(-9, 9), coin(0, 2);
+  for (int step = 0; step < 20'000; ++step) {
+    const Vec3i cp{coord(rng), coord(rng) / 3, coord(rng)};
+    if (coin(rng) != 0) {
+      const auto revision = static_cast<std::uint64_t>(step + 1);
+      slots.change(cp, [&](ChunkSlot& s) { s.hold(Holding{HoldingForm::kMip3, revision}, nullptr); });
+      ref[cp] = revision;
+    } else {
+      slots.change_if(cp, [](ChunkSlot& s) { s.leave(); });
+      ref.erase(cp);
+    }
+  }
+  ASSERT_EQ(slots.size(), ref.size());
+  std::size_t seen = 0;
+  for (const auto& [cp, s] : slots) {
+    ++seen;
+    auto it = ref.find(cp);
+    ASSERT_NE(it, ref.end()) << cp.x << "," << cp.y << "," << cp.z;
+    ASSERT_TRUE(s.held());
+    EXPECT_EQ(s.held()->revision, it->second);
+  }
+  EXPECT_EQ(seen, ref.size());
+  for (const auto& [cp, revision] : ref) {
+    ASSERT_TRUE(slots.holds(cp));
+    EXPECT_EQ(slots.find(cp)->held()->revision, revision);
+  }
+}
+
+// The slots' memory is counted where the replicator says (the server's
+// memory by part): it grows with the slots and all of it is taken back
+// when they go.
+TEST(ChunkSlots, MemoryIsCountedAndTakenBack) {
+  std::atomic<std::int64_t> counted{0};
+  {
+    ChunkSlots slots(&counted);
+    for (int x = 0; x < 40; ++x)
+      for (int z = 0; z < 40; ++z)
+        slots.change({x, 0, z}, [](ChunkSlot& s) { s.hold(Holding{HoldingForm::kMip3, 1}, nullptr); });
+    EXPECT_EQ(counted.load(), static_cast<std::int64_t>(slots.memory_bytes()));
+    // Each slot's own bytes, and less than a flat map's 65 or so a chunk.
+    EXPECT_GE(slots.memory_bytes(), 1'600 * sizeof(ChunkSlot));
+    EXPECT_LT(slots.memory_bytes(), 1'600 * 40);
+    const std::size_t before = slots.memory_bytes();
+    slots.change({0, 0, 0}, [](ChunkSlot& s) { s.ask(ChunkRequest{ChunkIntent::kRefine, 0}); });
+    EXPECT_EQ(slots.memory_bytes(), before + ChunkSlot::kMoreBytes);  // out of line
+    EXPECT_EQ(counted.load(), static_cast<std::int64_t>(slots.memory_bytes()));
+    slots.clear();
+    EXPECT_EQ(counted.load(), 0);
+    slots.change({1, 2, 3}, [](ChunkSlot& s) { s.see_image(kHorizonNearLevel); });
+    EXPECT_GT(counted.load(), 0);
+  }
+  EXPECT_EQ(counted.load(), 0);
 }
 
 }  // namespace

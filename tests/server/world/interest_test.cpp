@@ -3,6 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <map>
+#include <random>
+#include <tuple>
+#include <vector>
+
 #include "server/world/presence.h"
 
 namespace terrane {
@@ -24,13 +30,112 @@ TEST(InterestIndex, HoldersAreExactlyThoseThatHoldAndNotReleased) {
   idx.release(a, 8);
   EXPECT_FALSE(idx.held_full(a));
   ASSERT_EQ(idx.holders(a).size(), 1u);
-  EXPECT_EQ(idx.holders(a).front().id, 7u);
+  EXPECT_EQ(idx.holders(a).front().id(), 7u);
   idx.release(a, 7);
   idx.release(a, 7);  // twice: harmless
   EXPECT_FALSE(idx.watched(a));
   EXPECT_TRUE(idx.holders(a).empty());
   EXPECT_EQ(idx.chunks(), 1u);
   EXPECT_EQ(idx.entries(), 1u);
+}
+
+// The cost bound: with 10,000 holders on one chunk, holding, asking about
+// and releasing one costs a few probes each, not a scan of the holders.
+TEST(InterestIndex, OneHolderChangedCostsBoundedProbesWhateverTheCount) {
+  InterestIndex idx;
+  const Vec3i c{0, 0, 0};
+  constexpr ClientId kHolders = 10'000;
+  std::uint64_t before = idx.probes();
+  for (ClientId id = 1; id <= kHolders; ++id) idx.hold(c, id, id % 3 == 0);
+  // Adding: amortized a few probes each (rebuilds of the chunk's index
+  // compare no ids).
+  EXPECT_LT(idx.probes() - before, 4 * kHolders);
+  ASSERT_EQ(idx.holders(c).size(), kHolders);
+  std::uint64_t worst = 0, total = 0;
+  std::mt19937 rng(5);
+  std::vector<ClientId> order;
+  for (ClientId id = 1; id <= kHolders; ++id) order.push_back(id);
+  std::shuffle(order.begin(), order.end(), rng);
+  for (std::size_t i = 0; i < kHolders / 2; ++i) {
+    before = idx.probes();
+    EXPECT_TRUE(idx.holds(c, order[i]));
+    idx.hold(c, order[i], true);   // refined: found, not added
+    idx.release(c, order[i]);
+    const std::uint64_t cost = idx.probes() - before;
+    worst = std::max(worst, cost);
+    total += cost;
+  }
+  // A scan would compare thousands of ids per call; the index a few.
+  EXPECT_LE(worst, 64u);
+  EXPECT_LT(total, 12 * (kHolders / 2));
+  EXPECT_EQ(idx.holders(c).size(), kHolders / 2);
+  EXPECT_EQ(idx.entries(), kHolders / 2);
+  // Asking about one that left costs no more.
+  before = idx.probes();
+  EXPECT_FALSE(idx.holds(c, order[0]));
+  EXPECT_LE(idx.probes() - before, 64u);
+}
+
+// Invariants under a random sequence of holds and releases, checked
+// against a plain reference: holders(), holds, held_full, watched,
+// entries, chunks.
+TEST(InterestIndex, MatchesAReferenceUnderRandomHoldsAndReleases) {
+  InterestIndex idx;
+  std::map<Vec3i, std::map<ClientId, bool>, bool (*)(const Vec3i&, const Vec3i&)> ref(
+      [](const Vec3i& a, const Vec3i& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); });
+  std::mt19937 rng(11);
+  // Few chunks and many clients, so some chunks' holders grow past the
+  // scanned size and shrink back below it, again and again.
+  std::uniform_int_distribution<int> chunk(0, 5), client(1, 60), op(0, 9);
+  for (int step = 0; step < 40'000; ++step) {
+    const Vec3i cp{chunk(rng), 0, 0};
+    const ClientId id = static_cast<ClientId>(client(rng));
+    // Phases that favour holding, then releasing, so the counts swing.
+    const bool holding = (step / 4'000) % 2 == 0 ? op(rng) < 7 : op(rng) < 3;
+    if (holding) {
+      const bool full = op(rng) < 4;
+      idx.hold(cp, id, full);
+      ref[cp][id] = full;
+    } else {
+      idx.release(cp, id);
+      if (auto it = ref.find(cp); it != ref.end()) {
+        it->second.erase(id);
+        if (it->second.empty()) ref.erase(it);
+      }
+    }
+    if (step % 97 != 0) continue;
+    std::size_t entries = 0;
+    for (const auto& [pos, holders] : ref) {
+      entries += holders.size();
+      std::map<ClientId, bool> got;
+      for (const InterestIndex::Holder& h : idx.holders(pos)) EXPECT_TRUE(got.emplace(h.id(), h.full()).second);
+      ASSERT_EQ(got, holders) << "step " << step;
+      bool any_full = false;
+      for (const auto& [id2, full] : holders) any_full = any_full || full;
+      EXPECT_EQ(idx.held_full(pos), any_full);
+      EXPECT_TRUE(idx.watched(pos));
+      EXPECT_TRUE(idx.holds(pos, holders.begin()->first));
+    }
+    EXPECT_EQ(idx.entries(), entries);
+    EXPECT_EQ(idx.chunks(), ref.size());
+  }
+  for (int x = 0; x <= 5; ++x)
+    if (!ref.count(Vec3i{x, 0, 0})) {
+      EXPECT_FALSE(idx.watched(Vec3i{x, 0, 0}));
+    }
+}
+
+// The index's memory follows its holders: it grows as they come and
+// falls back to the table's alone when they leave.
+TEST(InterestIndex, MemoryFollowsTheHolders) {
+  InterestIndex idx;
+  const std::size_t empty = idx.memory_bytes();
+  for (ClientId id = 1; id <= 1'000; ++id) idx.hold({1, 1, 1}, id, false);
+  const std::size_t many = idx.memory_bytes();
+  EXPECT_GE(many, empty + 1'000 * sizeof(InterestIndex::Holder));
+  for (ClientId id = 1; id <= 1'000; ++id) idx.release({1, 1, 1}, id);
+  EXPECT_EQ(idx.chunks(), 0u);
+  EXPECT_EQ(idx.memory_bytes(), 0u);  // nothing held: the table went too
 }
 
 TEST(PresenceGrid, NearestFirstWithinTheRadiusAcrossCells) {
