@@ -156,7 +156,7 @@ void BM_TickFanoutWorld(benchmark::State& state) {
     std::unordered_map<ClientId, std::vector<VersionPtr>> news;
     for (const auto& v : vs)
       for (const auto& h : idx.holders(v->pos())) {
-        news[h.id].push_back(v);
+        news[h.id()].push_back(v);
         ++deliveries;
       }
     benchmark::DoNotOptimize(news);
