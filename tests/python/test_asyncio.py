@@ -204,8 +204,12 @@ def test_a_walk_steps_on_the_loop_and_a_cancelled_one_stops_where_it_stands(serv
             assert steps[-1] == (x + 8, g, z) and ticks > 0
             # Cancelled after its first step: it stops there.
             walking = asyncio.ensure_future(terrane.walk(c, (x - 8, g, z), speed=4))
-            while tuple(int(v) for v in c.position) == (x + 8, g, z):
-                await asyncio.sleep(0.01)
+
+            async def first_step():  # the condition, polled on the loop
+                while tuple(int(v) for v in c.position) == (x + 8, g, z):
+                    await asyncio.sleep(0.01)
+
+            await asyncio.wait_for(first_step(), 30)
             walking.cancel()
             try:
                 await walking
