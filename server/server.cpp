@@ -135,8 +135,9 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   s->session_context_.emplace(ClientSession::Context{s->welcome_.welcome, s->ops_->admitter(), s->ops_->admin(),
                                                      s->counters_,
                                                      [self](std::uint64_t id) { self->sessions_.remove(id); },
-                                                     [self](std::uint64_t id, const std::string& name) {
-                                                       self->replace_older_sessions(id, name);
+                                                     [self](std::uint64_t id, const std::string& name,
+                                                            std::uint64_t join_order) {
+                                                       return self->replace_older_sessions(id, name, join_order);
                                                      }});
   return s;
 }
@@ -371,17 +372,16 @@ std::string Server::border_text() const {
   return fmt::format("border x {}..{}, z {}..{}", b.min_x, b.max_x, b.min_z, b.max_z);
 }
 
-void Server::replace_older_sessions(std::uint64_t id, const std::string& name) {
-  // As Minecraft does: the player's newer connection wins (the older one
-  // is often a dead link not yet timed out).
-  std::vector<std::uint64_t> older;
-  sessions_.for_each_welcomed([&](std::uint64_t other, Session& s, const ClientSession::Info& info) {
-    if (other == id || info.admin || info.name != name) return;
-    s.close(CloseReason::kReplaced, "logged in from another location: the same player joined again");
-    older.push_back(other);
-  });
-  for (const std::uint64_t other : older)
+bool Server::replace_older_sessions(std::uint64_t id, const std::string& name, std::uint64_t join_order) {
+  // As Minecraft does: the player's later join wins (the older session is
+  // often a dead link not yet timed out).
+  const SessionTable::Replacement r = sessions_.replace_earlier_joins(
+      id, name, join_order, CloseReason::kReplaced, "logged in from another location: the same player joined again");
+  for (const std::uint64_t other : r.ended)
     server_log().info("session {} ('{}') replaced by session {}: the same player joined again", other, name, id);
+  if (r.newer)
+    server_log().info("session {} ('{}') replaced by session {}: the same player joined again", id, name, *r.newer);
+  return !r.newer.has_value();
 }
 
 AdminHooks Server::world_hooks() {

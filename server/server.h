@@ -103,8 +103,10 @@ class Server {
   // "border x X0..X1, z Z0..Z1").
   std::string where() const;
   std::string border_text() const;
-  // A player welcomed as name in session id: ends name's older sessions.
-  void replace_older_sessions(std::uint64_t id, const std::string& name);
+  // A player welcomed as name in session id, the join_order-th join: ends
+  // name's sessions that joined before; false when name joined again since
+  // (the caller's session is the older one and ends).
+  bool replace_older_sessions(std::uint64_t id, const std::string& name, std::uint64_t join_order);
   AdminHooks world_hooks();
   // The world of options_: a directory (made when missing) or a PostgreSQL
   // database (made when it holds none; cluster_ opened for its writes).

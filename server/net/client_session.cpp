@@ -84,15 +84,21 @@ void ClientSession::on_hello(const HelloMsg& hello) {
   admin_ = admission.admin;
   name_ = hello.client_name;
   joined_ = true;
+  // The join's place in the server's order of joins (1, 2, ...): of two
+  // sessions of one player, the later join wins, whichever thread gets
+  // there first.
+  const std::uint64_t join_order = context_.counters.joins.fetch_add(1, std::memory_order_relaxed) + 1;
   {
     std::lock_guard lock(info_m_);
-    info_ = Info{name_, context_.welcome.spawn, admin_, true, std::chrono::steady_clock::now()};
+    info_ = Info{name_, context_.welcome.spawn, admin_, true, std::chrono::steady_clock::now(), -1, join_order};
   }
   replica_->join(name_);
   (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_add(1, std::memory_order_relaxed);
-  context_.counters.joins.fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(context_.welcome));
-  if (!admin_ && context_.joined) context_.joined(id_, name_);
+  if (!admin_ && context_.joined && !context_.joined(id_, name_, join_order)) {
+    session_->close(CloseReason::kReplaced, "logged in from another location: the same player joined again");
+    return;
+  }
   // A Redirect's token says where the client comes from (it grants nothing).
   if (!hello.resume_token.empty()) context_.counters.redirects_received.fetch_add(1, std::memory_order_relaxed);
   // Names and resume tokens are printable (parse_hello refuses control

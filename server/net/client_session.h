@@ -71,9 +71,11 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
     // A session's socket closed (its id), before the replica is told:
     // the server drops it from its table.
     std::function<void(std::uint64_t id)> forget;
-    // A player (not an admin) was welcomed as name: the server ends that
-    // name's older sessions (the newer one wins). Unset: nothing is done.
-    std::function<void(std::uint64_t id, const std::string& name)> joined = nullptr;
+    // A player (not an admin) was welcomed as name, the server's
+    // join_order-th join: the server ends that name's sessions that joined
+    // before it, and answers false if that name joined again since (the
+    // later join wins: the session ends). Unset: nothing is done.
+    std::function<bool(std::uint64_t id, const std::string& name, std::uint64_t join_order)> joined = nullptr;
   };
   // Who the client is, for operators (any thread).
   struct Info {
@@ -83,6 +85,7 @@ class ClientSession : public std::enable_shared_from_this<ClientSession> {
     bool welcomed = false;
     std::chrono::steady_clock::time_point joined;
     double ping_ms = -1;  // the last round trip measured; -1 before the first
+    std::uint64_t join_order = 0;  // the server's n-th join (1, 2, ...); 0 before the Welcome
   };
   // The server pings each client this often (its round trip, for operators;
   // the answers keep a quiet client within its idle timeout).

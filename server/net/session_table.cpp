@@ -30,6 +30,22 @@ void SessionTable::for_each_welcomed(
   }
 }
 
+SessionTable::Replacement SessionTable::replace_earlier_joins(std::uint64_t id, const std::string& name,
+                                                              std::uint64_t join_order, CloseReason why,
+                                                              const std::string& text) const {
+  Replacement r;
+  for_each_welcomed([&](std::uint64_t other, Session& s, const ClientSession::Info& info) {
+    if (other == id || info.admin || info.name != name) return;
+    if (info.join_order < join_order) {
+      s.close(why, text);
+      r.ended.push_back(other);
+    } else {
+      r.newer = other;
+    }
+  });
+  return r;
+}
+
 std::vector<std::shared_ptr<Session>> SessionTable::live() const {
   std::vector<std::shared_ptr<Session>> out;
   std::lock_guard lock(m_);

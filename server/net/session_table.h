@@ -16,6 +16,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -46,6 +47,18 @@ class SessionTable {
   // under m_: fn must not use the table (Session::send and close only post).
   void for_each_welcomed(
       const std::function<void(std::uint64_t id, Session& session, const ClientSession::Info& info)>& fn) const;
+  // What a player's join did to that player's other sessions.
+  struct Replacement {
+    std::vector<std::uint64_t> ended;    // sessions of the name that joined earlier: closed
+    std::optional<std::uint64_t> newer;  // one that joined later: the caller's session is the older
+  };
+  // The player name was welcomed in session id as the server's
+  // join_order-th join: closes (why, text) name's welcomed player sessions
+  // that joined earlier, and names one that joined later if there is one.
+  // Two joins of one name handled at once on two threads, each seeing the
+  // other, pick the same loser: the earlier join.
+  Replacement replace_earlier_joins(std::uint64_t id, const std::string& name, std::uint64_t join_order,
+                                    CloseReason why, const std::string& text) const;
   // The live sessions now, taken under m_ and used outside it.
   std::vector<std::shared_ptr<Session>> live() const;
   // Closes every live session (why, text: its Disconnect).

@@ -180,5 +180,47 @@ TEST_F(SessionTableTest, WalksWelcomedClientsOnlyAndClosesEveryLiveSession) {
   EXPECT_TRUE(eventually([&] { return table_.size() == 0; }));
 }
 
+// Two sessions of one player whose joins are handled out of order (the
+// earlier join's thread reaches the table last): both calls pick the
+// earlier join as the loser, so exactly one session of the name is left.
+TEST_F(SessionTableTest, OfTwoJoinsOfOnePlayerTheLaterWinsWhicheverIsHandledFirst) {
+  run_io();
+  std::unique_ptr<RawPeer> first, second, other;
+  std::uint64_t first_id = 0, second_id = 0, other_id = 0;
+  auto a = connect(first, first_id);
+  auto b = connect(second, second_id);
+  auto c = connect(other, other_id);
+  ASSERT_TRUE(table_.add(first_id, a));
+  ASSERT_TRUE(table_.add(second_id, b));
+  ASSERT_TRUE(table_.add(other_id, c));
+  for (auto* p : {first.get(), second.get()}) {
+    ASSERT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, "alice", "token", {}})));
+    ASSERT_TRUE(p->next_of(wire::Body::Welcome).has_value());
+  }
+  ASSERT_TRUE(other->send(build_hello(HelloMsg{kProtocolVersion, "bob", "token", {}})));
+  ASSERT_TRUE(other->next_of(wire::Body::Welcome).has_value());
+  ASSERT_TRUE(eventually([&] { return b->info().welcomed && c->info().welcomed; }));
+  const std::uint64_t first_join = a->info().join_order, second_join = b->info().join_order;
+  ASSERT_LT(first_join, second_join) << "join orders follow the Welcomes";
+
+  // The later join is handled first: it ends the earlier session.
+  const SessionTable::Replacement later = table_.replace_earlier_joins(second_id, "alice", second_join,
+                                                                      CloseReason::kReplaced, "replaced");
+  EXPECT_EQ(later.ended, std::vector<std::uint64_t>{first_id});
+  EXPECT_FALSE(later.newer.has_value());
+  // The earlier join, handled last, ends nobody and is told it lost.
+  const SessionTable::Replacement earlier = table_.replace_earlier_joins(first_id, "alice", first_join,
+                                                                        CloseReason::kReplaced, "replaced");
+  EXPECT_TRUE(earlier.ended.empty());
+  ASSERT_TRUE(earlier.newer.has_value());
+  EXPECT_EQ(*earlier.newer, second_id);
+  EXPECT_EQ(disconnect_text(*first), "replaced");
+  // Another player's join ends no session of alice's.
+  const SessionTable::Replacement bobs = table_.replace_earlier_joins(other_id, "bob", c->info().join_order,
+                                                                     CloseReason::kReplaced, "replaced");
+  EXPECT_TRUE(bobs.ended.empty());
+  EXPECT_FALSE(bobs.newer.has_value());
+}
+
 }  // namespace
 }  // namespace terrane
