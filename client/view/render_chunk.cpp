@@ -35,6 +35,27 @@ int GridSource::read(Vec3i chunk_pos, int want, Box& out) const {
   return level;
 }
 
+int GridSource::read_part(Vec3i chunk_pos, const Region& part, Box& out) const {
+  out.resize(part.size());
+  if (const Chunk* c = grid_.find_chunk(chunk_pos)) c->read_box(part.min, out, Vec3i{0, 0, 0}, part.size());
+  return 0;
+}
+
+int VoxelSource::read_part(Vec3i chunk_pos, const Region& part, Box& out) const {
+  Box whole;
+  const int level = read(chunk_pos, 0, whole);
+  if (level != 0) {
+    out = std::move(whole);
+    return level;
+  }
+  out.resize(part.size());
+  const Vec3i size = part.size();
+  for (int y = 0; y < size.y; ++y)
+    for (int z = 0; z < size.z; ++z)
+      std::copy_n(whole.read_row(part.min.y + y, part.min.z + z) + part.min.x, size.x, out.write_row(y, z));
+  return 0;
+}
+
 float distance_to(Vec3f p, const Region& r) {
   auto axis = [](float v, std::int32_t lo, std::int32_t hi) {
     const float a = static_cast<float>(lo), b = static_cast<float>(hi);
@@ -104,18 +125,27 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
   SampleGrid grid({n + 2, n + 2, n + 2}, origin, static_cast<float>(s));
 
   // Each source chunk read once, brought to sample_level (or left at a
-  // coarser level when that is all there is: nearest sampling then).
+  // coarser level when that is all there is: nearest sampling then). At
+  // full resolution only the part the samples reach is read.
   struct Level {
     int level = -1;
     Box voxels;
+    Vec3i origin;  // chunk-local coordinates of voxels' (0, 0, 0) at level 0 (a part)
   };
+  const Region reach{key.origin - Vec3i{s, s, s}, key.origin + Vec3i{n * s + s, n * s + s, n * s + s}};
   std::unordered_map<Vec3i, Level, Vec3iHash> cache;
   const auto level_of = [&](Vec3i cp) -> const Level& {
     auto [it, fresh] = cache.try_emplace(cp);
     if (!fresh) return it->second;
     Level& l = it->second;
     if (source.level(cp) < 0) return l;
-    l.level = source.read(cp, std::min(sample_level, kMipLevels - 1), l.voxels);
+    if (sample_level == 0) {
+      const Region part = intersect(reach, chunk_region(cp));
+      l.level = source.read_part(cp, Region{part.min - chunk_origin(cp), part.max - chunk_origin(cp)}, l.voxels);
+      if (l.level == 0) l.origin = part.min - chunk_origin(cp);
+    } else {
+      l.level = source.read(cp, std::min(sample_level, kMipLevels - 1), l.voxels);
+    }
     while (l.level < sample_level && l.voxels.size().x > 1) {
       l.voxels = downsample_box(l.voxels);
       ++l.level;
@@ -132,8 +162,9 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
         if (l.level < 0) continue;  // unknown: Air
         const Vec3i local = cube - chunk_origin(cp);
         const int side = l.voxels.size().x;
-        const Vec3i at{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
-                       std::min(local.z >> l.level, side - 1)};
+        const Vec3i at = l.level == 0 ? local - l.origin
+                                      : Vec3i{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
+                                              std::min(local.z >> l.level, side - 1)};
         const Voxel v = l.voxels.get(at);
         grid.set(i, j, k, occupancy_fraction(v), v.material);
       }

@@ -54,6 +54,14 @@ class VoxelSource {
   // returns L (callers downsample further if L < want). want is in 0..3.
   // Precondition: level(chunk_pos) >= 0.
   virtual int read(Vec3i chunk_pos, int want, Box& out) const = 0;
+  // A part of the chunk at full resolution: when the chunk is held at level
+  // 0 (or known Air), writes the voxels of the chunk-local region `part`
+  // into out, resized to part.size(), and returns 0; otherwise does
+  // read(chunk_pos, 0, out) and returns what it returns. A render chunk's
+  // sample ring needs one layer of its neighbours, not all of them. By
+  // default: read() whole, then the part copied. Precondition:
+  // level(chunk_pos) >= 0, part non-empty and inside the chunk.
+  virtual int read_part(Vec3i chunk_pos, const Region& part, Box& out) const;
 };
 
 // A Grid held wholly at full resolution; chunks outside `known` (chunk
@@ -64,6 +72,7 @@ class GridSource final : public VoxelSource {
   int level(Vec3i chunk_pos) const override { return known_.contains(chunk_pos) ? 0 : -1; }
   std::uint64_t revision(Vec3i) const override { return 0; }
   int read(Vec3i chunk_pos, int want, Box& out) const override;
+  int read_part(Vec3i chunk_pos, const Region& part, Box& out) const override;
 
  private:
   const Grid& grid_;

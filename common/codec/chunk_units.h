@@ -39,15 +39,32 @@ void encode_full_units(const C* chunk, std::vector<std::uint8_t>& out) {
   }
 }
 
-// The voxels of 4^3 unit unit_index (0..511, (uy*8+uz)*8+ux) in Box order.
+// Fills each update's voxels with its 4^3 unit (unit_index 0..511,
+// (uy*8+uz)*8+ux, in Box order). Units in the same row of units (equal uy and
+// uz) that follow each other share their 16 row reads: a packed row is
+// decoded once for all of them, not voxel by voxel.
 template <class C>
-void read_update_unit(const C* chunk, std::uint16_t unit_index, std::array<Voxel, kUpdateUnitVoxels>& out) {
-  const int i = unit_index;
-  const Vec3i base{(i % 8) * 4, (i / 64) * 4, ((i / 8) % 8) * 4};
-  for (int y = 0; y < 4; ++y)
-    for (int z = 0; z < 4; ++z)
-      for (int x = 0; x < 4; ++x)
-        out[static_cast<std::size_t>((y * 4 + z) * 4 + x)] = chunk ? chunk->get(base + Vec3i{x, y, z}) : Voxel{};
+void read_update_units(const C* chunk, std::span<UnitUpdate> units) {
+  std::array<Voxel, kChunkSize> scratch;
+  for (std::size_t first = 0; first < units.size();) {
+    const int row_of_units = units[first].unit_index / 8;  // uy*8+uz
+    std::size_t last = first + 1;
+    while (last < units.size() && units[last].unit_index / 8 == row_of_units) ++last;
+    const int y0 = (row_of_units / 8) * 4, z0 = (row_of_units % 8) * 4;
+    for (int y = 0; y < 4; ++y)
+      for (int z = 0; z < 4; ++z) {
+        const Voxel* row = chunk ? chunk->read_row(y0 + y, z0 + z, scratch) : nullptr;
+        for (std::size_t i = first; i < last; ++i) {
+          Voxel* out = units[i].voxels.data() + (y * 4 + z) * 4;
+          if (row == nullptr) {
+            std::fill_n(out, 4, Voxel{});
+          } else {
+            std::copy_n(row + (units[i].unit_index % 8) * 4, 4, out);
+          }
+        }
+      }
+    first = last;
+  }
 }
 
 }  // namespace terrane

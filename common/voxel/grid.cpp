@@ -8,11 +8,6 @@ Voxel Grid::get(Vec3i p) const { return grid_get(*this, p); }
 
 void Grid::set(Vec3i p, Voxel v) { fill(Region{p, p + Vec3i{1, 1, 1}}, v); }
 
-const Chunk* Grid::find_chunk(Vec3i chunk_pos) const {
-  auto it = chunks_.find(chunk_pos);
-  return it == chunks_.end() ? nullptr : it->second.get();
-}
-
 void Grid::put_chunk(Vec3i chunk_pos, Chunk chunk) {
   if (chunk.empty()) {
     chunks_.erase(chunk_pos);

@@ -61,7 +61,11 @@ class Grid {
     modify(region, [v](Vec3i, Voxel) { return v; });
   }
 
-  const Chunk* find_chunk(Vec3i chunk_pos) const;
+  // Inline: every voxel read of grid_reads.h starts here.
+  const Chunk* find_chunk(Vec3i chunk_pos) const {
+    auto it = chunks_.find(chunk_pos);
+    return it == chunks_.end() ? nullptr : it->second.get();
+  }
   // Encodes the mips writes left unpacked in that chunk, if it is held.
   void pack_mips(Vec3i chunk_pos);
   // Inserts or replaces a whole chunk (mips must be current). An empty chunk

@@ -4,12 +4,14 @@
 // arrays, so both run exactly this code.
 //
 // A chunk map G has `const C* find_chunk(Vec3i chunk_pos) const` (null: all
-// Air), and its chunks C have `Voxel get(Vec3i local) const` and
-// `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
+// Air), and its chunks C have `Voxel get(Vec3i local) const`,
+// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`
+// and `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
 // (chunk.h). Stateless: thread-safety is the map's.
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -118,7 +120,8 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
 }
 
 // True if any non-Air voxel with occupancy >= min_occupancy overlaps the box
-// (touching faces do not count).
+// (touching faces do not count). Reads the rows the box crosses in place,
+// chunk by chunk, without a copy, and stops at the first such voxel.
 template <class G>
 bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
   // Cells overlapping the open box: floor(min) .. ceil(max) - 1.
@@ -127,10 +130,34 @@ bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
   const Vec3i hi{static_cast<int>(std::ceil(box.max.x)), static_cast<int>(std::ceil(box.max.y)),
                  static_cast<int>(std::ceil(box.max.z))};
   if (hi.x <= lo.x || hi.y <= lo.y || hi.z <= lo.z) return false;
-  Box cells(hi - lo);
-  grid_read_box(grid, lo, cells);
-  for (const Voxel v : cells.voxels())
-    if (v.material != kAir && v.occupancy >= min_occupancy) return true;
+  const Region cells{lo, hi};
+  const auto solid_enough = [&](Voxel v) { return v.material != kAir && v.occupancy >= min_occupancy; };
+  // A few voxels of a row are read one by one (a packed row is not decoded
+  // for them); from this many on, the whole row.
+  constexpr int kWholeRowFrom = 8;
+  const Vec3i c0 = chunk_of(lo), c1 = chunk_of(hi - Vec3i{1, 1, 1});
+  std::array<Voxel, kChunkSize> scratch;
+  for (int cy = c0.y; cy <= c1.y; ++cy)
+    for (int cz = c0.z; cz <= c1.z; ++cz)
+      for (int cx = c0.x; cx <= c1.x; ++cx) {
+        const Vec3i cp{cx, cy, cz};
+        const auto* c = grid.find_chunk(cp);
+        if (c == nullptr) continue;  // all Air
+        const Vec3i origin = chunk_origin(cp);
+        const Region part = intersect(cells, chunk_region(cp));
+        const Vec3i min = part.min - origin, max = part.max - origin;
+        for (int y = min.y; y < max.y; ++y)
+          for (int z = min.z; z < max.z; ++z) {
+            if (max.x - min.x < kWholeRowFrom) {
+              for (int x = min.x; x < max.x; ++x)
+                if (solid_enough(c->get(Vec3i{x, y, z}))) return true;
+              continue;
+            }
+            const Voxel* row = c->read_row(y, z, scratch);
+            for (int x = min.x; x < max.x; ++x)
+              if (solid_enough(row[x])) return true;
+          }
+      }
   return false;
 }
 

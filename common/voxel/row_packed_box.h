@@ -69,6 +69,7 @@
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -252,12 +253,55 @@ class RowPackedBox {
     return scratch.data();
   }
 
+  // Copies voxels [x0, x0 + n) of row (y, z) to out: a uniform row is
+  // filled, a raw row copied, a record decoded into scratch and copied.
+  // Precondition: 0 <= x0, n >= 0, x0 + n <= N.
+  void read_row_part(int y, int z, int x0, int n, Voxel* out, Row& scratch) const {
+    const std::uint16_t h = headers_[y * N + z];
+    if (!(h & kAllocated)) {
+      std::fill_n(out, n, solid(static_cast<Material>(h & 63)));
+      return;
+    }
+    const std::uint8_t* rec = record(h);
+    if (rec[0] < row_packed_detail::kKindIndex) {
+      std::copy_n(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      return;
+    }
+    decode(rec, data_.get(), scratch.data());
+    std::copy_n(scratch.data() + x0, n, out);
+  }
+
+  // One voxel, in place: records without occupancy are read here (a ray
+  // cast or an overlap test reads voxel by voxel), the rest by record_voxel.
   Voxel get(int x, int y, int z) const {
+    using namespace row_packed_detail;
     const std::uint16_t h = headers_[y * N + z];
     if (!(h & kAllocated)) return solid(static_cast<Material>(h & 63));
     const std::uint8_t* rec = data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
-    if (rec[0] < row_packed_detail::kKindIndex) return reinterpret_cast<const Voxel*>(rec)[x];
-    return row_packed_detail::record_voxel(rec, data_.get(), N, x);
+    const unsigned tag = rec[0];
+    if (tag < kKindIndex) return reinterpret_cast<const Voxel*>(rec)[x];
+    if (tag & kTagOccupancy) return record_voxel(rec, data_.get(), N, x);
+    const std::uint8_t* pal = record_palette(rec, data_.get());
+    const std::uint8_t* body = (tag & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
+    if ((tag & kKindMask) == kKindRuns) {
+      const int runs = body[0];
+      int r = 0;
+      while (r + 1 < runs && (body[2 + r] & 31) <= x) ++r;
+      return solid(pal[1 + (body[1 + r] >> 5)]);
+    }
+    // Index records (layout in the header comment): G = N * bits / 8 bytes.
+    const unsigned p1 = pal[0];
+    unsigned index;
+    if (p1 < 2) {
+      index = (body[x / 8] >> (x % 8)) & 1;
+    } else if (p1 < 4) {
+      constexpr int g = N * 2 / 8;
+      index = (body[x % g] >> (2 * (x / g))) & 3;
+    } else {
+      constexpr int g = N * 4 / 8;
+      index = (body[x % g] >> (4 * (x / g))) & 15;
+    }
+    return solid(pal[1 + index]);
   }
 
   // Rewrites rows y in [y0, y1), z in [z0, z1): for each, fn(y, z, row)

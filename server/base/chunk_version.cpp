@@ -121,9 +121,9 @@ const UpdatePiece& ChunkVersion::update_piece() const {
       UnitUpdate u;
       u.chunk_pos = pos_;
       u.unit_index = static_cast<std::uint16_t>(i);
-      read_update_unit(chunk_.get(), u.unit_index, u.voxels);
       units.push_back(u);
     }
+    read_update_units(chunk_.get(), std::span<UnitUpdate>(units));
     if (!units.empty()) piece_ = net_codec_encode_update_piece(units);
   });
   return piece_;

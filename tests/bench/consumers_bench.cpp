@@ -13,7 +13,7 @@
 // Both sides run the product's own code, written once over a voxel source:
 //   encode 16^3   encode_full_units (common/codec/chunk_units.h), what
 //                 ChunkVersion::encoded(0) sends as a Full record
-//   update 4^3    read_update_unit + net_codec_encode_update_piece, what
+//   update 4^3    read_update_units + net_codec_encode_update_piece, what
 //                 ChunkVersion::update_piece makes of a tick's changed units
 //                 (here the 27 units of a 3^3 block of units in each chunk)
 //   chunk hash    chunk_hash_of (protocol/chunk_hash.h), the replica checks'
@@ -87,7 +87,7 @@ class UnpackedGrid {
 };
 
 // The viewer's source over either grid, every chunk known at full resolution
-// (GridSource's read, generic).
+// (GridSource's read and read_part, generic).
 template <class G>
 class Source final : public view::VoxelSource {
  public:
@@ -103,6 +103,11 @@ class Source final : public view::VoxelSource {
       out.resize({n, n, n});
     }
     return level;
+  }
+  int read_part(Vec3i chunk_pos, const Region& part, Box& out) const override {
+    out.resize(part.size());
+    if (const auto* c = grid_.find_chunk(chunk_pos)) c->read_box(part.min, out, Vec3i{0, 0, 0}, part.size());
+    return 0;
   }
 
  private:
@@ -221,9 +226,9 @@ std::size_t update_units(const G& g, const Dataset& d) {
       UnitUpdate u;
       u.chunk_pos = d.sample[i];
       u.unit_index = index;
-      read_update_unit(c, index, u.voxels);
       units.push_back(u);
     }
+    read_update_units(c, std::span<UnitUpdate>(units));
     const UpdatePiece piece = net_codec_encode_update_piece(units);
     bytes += piece.rest.size();
   }
