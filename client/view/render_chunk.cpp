@@ -35,16 +35,19 @@ int GridSource::read(Vec3i chunk_pos, int want, Box& out) const {
   return level;
 }
 
-int GridSource::read_part(Vec3i chunk_pos, const Region& part, Box& out) const {
-  out.resize(part.size());
-  if (const Chunk* c = grid_.find_chunk(chunk_pos)) c->read_box(part.min, out, Vec3i{0, 0, 0}, part.size());
-  return 0;
+int GridSource::read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const {
+  if (const Chunk* c = grid_.find_chunk(chunk_pos)) {
+    read_chunk_part(*c, want, part, out);
+  } else {
+    out.resize(part.size());
+  }
+  return want;
 }
 
-int VoxelSource::read_part(Vec3i chunk_pos, const Region& part, Box& out) const {
+int VoxelSource::read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const {
   Box whole;
-  const int level = read(chunk_pos, 0, whole);
-  if (level != 0) {
+  const int level = read(chunk_pos, want, whole);
+  if (level != want) {
     out = std::move(whole);
     return level;
   }
@@ -53,7 +56,7 @@ int VoxelSource::read_part(Vec3i chunk_pos, const Region& part, Box& out) const 
   for (int y = 0; y < size.y; ++y)
     for (int z = 0; z < size.z; ++z)
       std::copy_n(whole.read_row(part.min.y + y, part.min.z + z) + part.min.x, size.x, out.write_row(y, z));
-  return 0;
+  return want;
 }
 
 float distance_to(Vec3f p, const Region& r) {
@@ -125,13 +128,16 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
   SampleGrid grid({n + 2, n + 2, n + 2}, origin, static_cast<float>(s));
 
   // Each source chunk read once, brought to sample_level (or left at a
-  // coarser level when that is all there is: nearest sampling then). At
-  // full resolution only the part the samples reach is read.
+  // coarser level when that is all there is: nearest sampling then). Up to
+  // the finest mip, only the part of the chunk the samples reach is read.
   struct Level {
     int level = -1;
     Box voxels;
-    Vec3i origin;  // chunk-local coordinates of voxels' (0, 0, 0) at level 0 (a part)
+    bool part = false;  // voxels hold the part from origin (at level), else the whole level
+    Vec3i origin;
   };
+  const int want = std::min(sample_level, kMipLevels - 1);
+  // The voxels the samples reach: the render chunk and its ring (aligned to s).
   const Region reach{key.origin - Vec3i{s, s, s}, key.origin + Vec3i{n * s + s, n * s + s, n * s + s}};
   std::unordered_map<Vec3i, Level, Vec3iHash> cache;
   const auto level_of = [&](Vec3i cp) -> const Level& {
@@ -139,12 +145,14 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
     if (!fresh) return it->second;
     Level& l = it->second;
     if (source.level(cp) < 0) return l;
-    if (sample_level == 0) {
-      const Region part = intersect(reach, chunk_region(cp));
-      l.level = source.read_part(cp, Region{part.min - chunk_origin(cp), part.max - chunk_origin(cp)}, l.voxels);
-      if (l.level == 0) l.origin = part.min - chunk_origin(cp);
+    if (want == sample_level) {
+      const Region r = intersect(reach, chunk_region(cp));
+      const Region part{floor_div(r.min - chunk_origin(cp), s), floor_div(r.max - chunk_origin(cp), s)};
+      l.level = source.read_part(cp, want, part, l.voxels);
+      l.part = l.level == want;
+      if (l.part) l.origin = part.min;
     } else {
-      l.level = source.read(cp, std::min(sample_level, kMipLevels - 1), l.voxels);
+      l.level = source.read(cp, want, l.voxels);
     }
     while (l.level < sample_level && l.voxels.size().x > 1) {
       l.voxels = downsample_box(l.voxels);
@@ -162,9 +170,9 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
         if (l.level < 0) continue;  // unknown: Air
         const Vec3i local = cube - chunk_origin(cp);
         const int side = l.voxels.size().x;
-        const Vec3i at = l.level == 0 ? local - l.origin
-                                      : Vec3i{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
-                                              std::min(local.z >> l.level, side - 1)};
+        const Vec3i at = l.part ? Vec3i{local.x >> l.level, local.y >> l.level, local.z >> l.level} - l.origin
+                                : Vec3i{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
+                                        std::min(local.z >> l.level, side - 1)};
         const Voxel v = l.voxels.get(at);
         grid.set(i, j, k, occupancy_fraction(v), v.material);
       }

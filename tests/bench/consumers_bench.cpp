@@ -104,10 +104,13 @@ class Source final : public view::VoxelSource {
     }
     return level;
   }
-  int read_part(Vec3i chunk_pos, const Region& part, Box& out) const override {
-    out.resize(part.size());
-    if (const auto* c = grid_.find_chunk(chunk_pos)) c->read_box(part.min, out, Vec3i{0, 0, 0}, part.size());
-    return 0;
+  int read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const override {
+    if (const auto* c = grid_.find_chunk(chunk_pos)) {
+      view::read_chunk_part(*c, want, part, out);
+    } else {
+      out.resize(part.size());
+    }
+    return want;
   }
 
  private:
