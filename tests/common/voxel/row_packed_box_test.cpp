@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cstring>
 #include <random>
 
@@ -20,6 +21,13 @@ void expect_equal(const RowPackedBox<N>& packed, const Box& ref, const char* whe
         ASSERT_EQ(row[x], ref.get(x, y, z)) << when << " at " << x << "," << y << "," << z;
         ASSERT_EQ(packed.get(x, y, z), ref.get(x, y, z)) << when;
       }
+      // A part of the row, as Chunk::read_box copies it.
+      const int x0 = (y * 7 + z) % N, n = (y + 3 * z) % (N - x0 + 1);
+      std::array<Voxel, N + 1> part;
+      part[static_cast<std::size_t>(n)] = make_voxel(63, 7);  // must stay
+      packed.read_row_part(y, z, x0, n, part.data(), scratch);
+      for (int x = 0; x < n; ++x) ASSERT_EQ(part[static_cast<std::size_t>(x)], ref.get(x0 + x, y, z)) << when;
+      ASSERT_EQ(part[static_cast<std::size_t>(n)], make_voxel(63, 7)) << when << ": read past the part";
     }
   }
 }
