@@ -6,6 +6,7 @@
 
 #include "common/codec/byte_rle.h"
 #include "common/codec/net_codec.h"
+#include "protocol/chunk_hash.h"
 
 namespace terrane {
 
@@ -670,44 +671,6 @@ Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
 
 // --- chunk hash ------------------------------------------------------------------
 
-namespace {
-constexpr std::uint64_t kFnvOffset = 0xcbf29ce484222325ull, kFnvPrime = 0x100000001b3ull;
-// FNV-1a over 2^k zero bytes: x ^ 0 = x, so each only multiplies by the
-// prime; the product is the prime squared k times (mod 2^64).
-constexpr std::uint64_t fnv_zeros_factor(int k) {
-  std::uint64_t p = kFnvPrime;
-  for (int i = 0; i < k; ++i) p *= p;
-  return p;
-}
-static_assert(2 * kChunkSize == 1 << 6 && 2 * kChunkSize * kChunkSize * kChunkSize == 1 << 16);
-constexpr std::uint64_t kAirRowFactor = fnv_zeros_factor(6), kAirChunkFactor = fnv_zeros_factor(16);
-}  // namespace
-
-std::uint64_t chunk_hash(const Chunk* chunk, std::uint64_t revision) {
-  std::uint64_t h = kFnvOffset;
-  for (int i = 0; i < 8; ++i) {
-    h ^= (revision >> (8 * i)) & 0xff;
-    h *= kFnvPrime;
-  }
-  // Air (both bytes zero) is hashed a row or a chunk at a time: the same
-  // value as byte by byte, without the pass.
-  if (chunk == nullptr) return h * kAirChunkFactor;
-  Chunk::Level0::Row scratch;
-  for (int y = 0; y < kChunkSize; ++y)
-    for (int z = 0; z < kChunkSize; ++z) {
-      const Voxel* row = chunk->read_row(y, z, scratch);
-      if (row == nullptr || std::all_of(row, row + kChunkSize, [](Voxel v) { return v.material == 0 && v.occupancy == 0; })) {
-        h *= kAirRowFactor;
-        continue;
-      }
-      for (int x = 0; x < kChunkSize; ++x) {
-        h ^= row[x].material;
-        h *= kFnvPrime;
-        h ^= row[x].occupancy;
-        h *= kFnvPrime;
-      }
-    }
-  return h;
-}
+std::uint64_t chunk_hash(const Chunk* chunk, std::uint64_t revision) { return chunk_hash_of(chunk, revision); }
 
 }  // namespace terrane

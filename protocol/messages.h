@@ -270,7 +270,7 @@ bool wire_chunk_ok(Vec3i chunk_pos);
 // 64-bit FNV-1a over the revision (8 bytes little-endian) then the 32^3
 // voxels of the chunk in Box order, two bytes each (material, occupancy).
 // A null chunk is all Air. Both sides hash decoded voxels, so the value does
-// not depend on how the chunk travelled.
+// not depend on how the chunk travelled. (The loop is chunk_hash.h's.)
 std::uint64_t chunk_hash(const Chunk* chunk, std::uint64_t revision);
 
 }  // namespace terrane

@@ -35,6 +35,30 @@ int GridSource::read(Vec3i chunk_pos, int want, Box& out) const {
   return level;
 }
 
+int GridSource::read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const {
+  if (const Chunk* c = grid_.find_chunk(chunk_pos)) {
+    read_chunk_part(*c, want, part, out);
+  } else {
+    out.resize(part.size());
+  }
+  return want;
+}
+
+int VoxelSource::read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const {
+  Box whole;
+  const int level = read(chunk_pos, want, whole);
+  if (level != want) {
+    out = std::move(whole);
+    return level;
+  }
+  out.resize(part.size());
+  const Vec3i size = part.size();
+  for (int y = 0; y < size.y; ++y)
+    for (int z = 0; z < size.z; ++z)
+      std::copy_n(whole.read_row(part.min.y + y, part.min.z + z) + part.min.x, size.x, out.write_row(y, z));
+  return want;
+}
+
 float distance_to(Vec3f p, const Region& r) {
   auto axis = [](float v, std::int32_t lo, std::int32_t hi) {
     const float a = static_cast<float>(lo), b = static_cast<float>(hi);
@@ -104,18 +128,32 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
   SampleGrid grid({n + 2, n + 2, n + 2}, origin, static_cast<float>(s));
 
   // Each source chunk read once, brought to sample_level (or left at a
-  // coarser level when that is all there is: nearest sampling then).
+  // coarser level when that is all there is: nearest sampling then). Up to
+  // the finest mip, only the part of the chunk the samples reach is read.
   struct Level {
     int level = -1;
     Box voxels;
+    bool part = false;  // voxels hold the part from origin (at level), else the whole level
+    Vec3i origin;
   };
+  const int want = std::min(sample_level, kMipLevels - 1);
+  // The voxels the samples reach: the render chunk and its ring (aligned to s).
+  const Region reach{key.origin - Vec3i{s, s, s}, key.origin + Vec3i{n * s + s, n * s + s, n * s + s}};
   std::unordered_map<Vec3i, Level, Vec3iHash> cache;
   const auto level_of = [&](Vec3i cp) -> const Level& {
     auto [it, fresh] = cache.try_emplace(cp);
     if (!fresh) return it->second;
     Level& l = it->second;
     if (source.level(cp) < 0) return l;
-    l.level = source.read(cp, std::min(sample_level, kMipLevels - 1), l.voxels);
+    if (want == sample_level) {
+      const Region r = intersect(reach, chunk_region(cp));
+      const Region part{floor_div(r.min - chunk_origin(cp), s), floor_div(r.max - chunk_origin(cp), s)};
+      l.level = source.read_part(cp, want, part, l.voxels);
+      l.part = l.level == want;
+      if (l.part) l.origin = part.min;
+    } else {
+      l.level = source.read(cp, want, l.voxels);
+    }
     while (l.level < sample_level && l.voxels.size().x > 1) {
       l.voxels = downsample_box(l.voxels);
       ++l.level;
@@ -132,8 +170,9 @@ SampleGrid sample_render_chunk(const VoxelSource& source, const NodeKey& key, in
         if (l.level < 0) continue;  // unknown: Air
         const Vec3i local = cube - chunk_origin(cp);
         const int side = l.voxels.size().x;
-        const Vec3i at{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
-                       std::min(local.z >> l.level, side - 1)};
+        const Vec3i at = l.part ? Vec3i{local.x >> l.level, local.y >> l.level, local.z >> l.level} - l.origin
+                                : Vec3i{std::min(local.x >> l.level, side - 1), std::min(local.y >> l.level, side - 1),
+                                        std::min(local.z >> l.level, side - 1)};
         const Voxel v = l.voxels.get(at);
         grid.set(i, j, k, occupancy_fraction(v), v.material);
       }

@@ -12,11 +12,13 @@
 // (client/view/mesher.h, client/view/VIEWER.md).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
 #include "client/view/mesher.h"
 #include "common/voxel/box.h"
+#include "common/voxel/chunk.h"
 #include "common/voxel/grid.h"
 #include "common/voxel/vec3.h"
 
@@ -54,6 +56,14 @@ class VoxelSource {
   // returns L (callers downsample further if L < want). want is in 0..3.
   // Precondition: level(chunk_pos) >= 0.
   virtual int read(Vec3i chunk_pos, int want, Box& out) const = 0;
+  // A part of the chunk at level `want` (0..3): when the chunk is held at
+  // level 0 (or known Air), writes the voxels of `part` (coordinates at
+  // that level) into out, resized to part.size(), and returns want;
+  // otherwise does read(chunk_pos, want, out) and returns what it returns.
+  // A render chunk's sample ring needs one layer of its neighbours, not all
+  // of them. By default: read() whole, then the part copied. Precondition:
+  // level(chunk_pos) >= 0, part non-empty and inside the chunk at want.
+  virtual int read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const;
 };
 
 // A Grid held wholly at full resolution; chunks outside `known` (chunk
@@ -64,11 +74,58 @@ class GridSource final : public VoxelSource {
   int level(Vec3i chunk_pos) const override { return known_.contains(chunk_pos) ? 0 : -1; }
   std::uint64_t revision(Vec3i) const override { return 0; }
   int read(Vec3i chunk_pos, int want, Box& out) const override;
+  int read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const override;
 
  private:
   const Grid& grid_;
   Region known_;
 };
+
+// Writes the part (coordinates at `level`, 0..3) of a chunk held at full
+// resolution into out, resized to part.size(). A part of level 1 short of
+// the whole chunk is made from level 0 (read_box, then downsampled: the
+// mip's own rule, so the same voxels) for less than decoding the whole mip
+// unit; other levels read the mip. C is a Chunk or has its read_box and
+// read_level.
+template <class C>
+void read_chunk_part(const C& chunk, int level, const Region& part, Box& out) {
+  const Vec3i size = part.size();
+  if (level == 0) {
+    out.resize(size);
+    chunk.read_box(part.min, out, Vec3i{0, 0, 0}, size);
+    return;
+  }
+  const int n = kChunkSize >> level;
+  if (part == Region{{0, 0, 0}, {n, n, n}}) {
+    chunk.read_level(level, out);
+    return;
+  }
+  out.resize(size);
+  if (level == 1) {
+    Box fine(size * 2);
+    chunk.read_box(part.min * 2, fine, Vec3i{0, 0, 0}, size * 2);
+    for (int y = 0; y < size.y; ++y)
+      for (int z = 0; z < size.z; ++z) {
+        const Voxel* r00 = fine.read_row(2 * y, 2 * z);
+        const Voxel* r01 = fine.read_row(2 * y, 2 * z + 1);
+        const Voxel* r10 = fine.read_row(2 * y + 1, 2 * z);
+        const Voxel* r11 = fine.read_row(2 * y + 1, 2 * z + 1);
+        Voxel* row = out.write_row(y, z);
+        for (int x = 0; x < size.x; ++x) {
+          const int fx = 2 * x;
+          const Voxel children[8] = {r00[fx], r00[fx + 1], r01[fx], r01[fx + 1],
+                                     r10[fx], r10[fx + 1], r11[fx], r11[fx + 1]};
+          row[x] = downsample(children);
+        }
+      }
+    return;
+  }
+  Box whole;
+  chunk.read_level(level, whole);
+  for (int y = 0; y < size.y; ++y)
+    for (int z = 0; z < size.z; ++z)
+      std::copy_n(whole.read_row(part.min.y + y, part.min.z + z) + part.min.x, size.x, out.write_row(y, z));
+}
 
 struct LodParams {
   float view_distance = 384;  // voxels; render chunks beyond are not drawn

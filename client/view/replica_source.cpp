@@ -38,4 +38,16 @@ int ReplicaSource::read(Vec3i chunk_pos, int want, Box& out) const {
   return level;
 }
 
+int ReplicaSource::read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const {
+  const Holding* c = replica_.holding(chunk_pos);
+  if (c != nullptr && c->form != HoldingForm::kEmpty && !c->full_resolution()) return read(chunk_pos, want, out);
+  const Chunk* chunk = c == nullptr || c->form == HoldingForm::kEmpty ? nullptr : replica_.grid().find_chunk(chunk_pos);
+  if (chunk != nullptr) {
+    read_chunk_part(*chunk, want, part, out);
+  } else {
+    out.resize(part.size());
+  }
+  return want;
+}
+
 }  // namespace terrane::view

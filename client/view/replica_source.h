@@ -15,6 +15,7 @@ class ReplicaSource final : public VoxelSource {
   int level(Vec3i chunk_pos) const override;
   std::uint64_t revision(Vec3i chunk_pos) const override;
   int read(Vec3i chunk_pos, int want, Box& out) const override;
+  int read_part(Vec3i chunk_pos, int want, const Region& part, Box& out) const override;
 
  private:
   const Replica& replica_;

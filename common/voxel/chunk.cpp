@@ -152,8 +152,8 @@ void Chunk::read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
   Level0::Row scratch;
   for (int y = 0; y < size.y; ++y) {
     for (int z = 0; z < size.z; ++z) {
-      const Voxel* row = level0_.read_row(min.y + y, min.z + z, scratch);
-      std::copy_n(row + min.x, size.x, out.write_row(out_offset.y + y, out_offset.z + z) + out_offset.x);
+      level0_.read_row_part(min.y + y, min.z + z, min.x, size.x,
+                            out.write_row(out_offset.y + y, out_offset.z + z) + out_offset.x, scratch);
     }
   }
 }

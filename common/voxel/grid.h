@@ -21,6 +21,7 @@
 
 #include "common/voxel/box.h"
 #include "common/voxel/chunk.h"
+#include "common/voxel/grid_reads.h"
 #include "common/voxel/vec3.h"
 #include "common/voxel/vec3_map.h"
 
@@ -35,19 +36,6 @@ struct GridMemory {
   std::size_t shared_chunks = 0;  // of chunks, held shared (put_shared_chunk)
   RowPackedStats level0_rows;     // row classes over all chunks
   std::size_t total() const { return map_bytes + object_bytes + level0_bytes + mip_bytes; }
-};
-
-struct RayHit {
-  Vec3i voxel;      // the voxel hit
-  Vec3i normal;     // outward normal of the face entered (zero if the ray starts inside)
-  float distance;   // along the normalised direction, from the origin to the entry point
-  Voxel value;
-};
-
-// An axis-aligned box in world units; voxel (x, y, z) spans [x, x+1) etc.
-struct Aabb {
-  Vec3f min;
-  Vec3f max;
 };
 
 class Grid {
@@ -73,7 +61,11 @@ class Grid {
     modify(region, [v](Vec3i, Voxel) { return v; });
   }
 
-  const Chunk* find_chunk(Vec3i chunk_pos) const;
+  // Inline: every voxel read of grid_reads.h starts here.
+  const Chunk* find_chunk(Vec3i chunk_pos) const {
+    auto it = chunks_.find(chunk_pos);
+    return it == chunks_.end() ? nullptr : it->second.get();
+  }
   // Encodes the mips writes left unpacked in that chunk, if it is held.
   void pack_mips(Vec3i chunk_pos);
   // Inserts or replaces a whole chunk (mips must be current). An empty chunk
@@ -105,9 +97,8 @@ class Grid {
   void compact();
   GridMemory memory() const;
 
-  // Rays are capped at this length (voxels); each step is a grid lookup.
-  static constexpr float kMaxRayDistance = 1 << 16;
-  // First voxel along the ray whose occupancy byte is >= min_occupancy (non-Air),
+  // (The reads are grid_reads.h's, over this grid's chunks.)
+  // First voxel along the ray (capped at kMaxRayDistance) whose occupancy byte is >= min_occupancy (non-Air),
   // within max_distance. direction need not be normalised (must be non-zero).
   std::optional<RayHit> raycast(Vec3f origin, Vec3f direction, float max_distance,
                                 std::uint8_t min_occupancy = 0) const;

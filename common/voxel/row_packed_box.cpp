@@ -16,11 +16,13 @@ constexpr auto make_uniform_rows() {
   return rows;
 }
 
+// A uniform box's layer map: every layer uniform with material m (the byte
+// 0x80 | m, twice per word).
 template <int N>
 constexpr auto make_uniform_headers() {
-  std::array<std::array<std::uint16_t, N * N>, kMaterialCount> headers{};
+  std::array<std::array<std::uint16_t, N / 2>, kMaterialCount> headers{};
   for (int m = 0; m < kMaterialCount; ++m)
-    for (auto& h : headers[m]) h = static_cast<std::uint16_t>(m);
+    for (auto& h : headers[m]) h = static_cast<std::uint16_t>((0x80 | m) * 0x0101);
   return headers;
 }
 

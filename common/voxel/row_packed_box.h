@@ -3,7 +3,11 @@
 // resolution (N = 32; a chunk's mips are kept as network-codec units, see
 // chunk.h).
 //
-// Each of the N² rows along x, addressed by (y, z), has a 2-byte header:
+// Each of the N² rows along x, addressed by (y, z), has a 2-byte header,
+// kept per layer (one y, its N rows): a layer map of N bytes says for each
+// layer either "all its rows uniform with material m" (0x80 | m: the layer
+// stores no headers) or the slot k < 0x80 of its N headers, stored after the
+// map (slot k's headers at words N/2 + k·N). A header:
 //
 //   bit 15 14 ........... 0
 //        0  -  . material      uniform row: N voxels of `material`, default occupancy
@@ -61,7 +65,9 @@
 // raw record of its own, writes in place, no repacking) until compact() is
 // called.
 //
-// Invariants: headers_ points at N² headers; every allocated header's offset
+// Invariants: headers_ points at a layer map and its slots' headers; a layer
+// has a slot only if some row of it is allocated or differs from the first;
+// every allocated header's offset
 // starts a valid record inside data_; records name only palettes of the
 // table; data_ holds data_bytes_ bytes of which the last kPadBytes are
 // padding; records are shared only outside unpacked mode; no stored voxel is
@@ -69,6 +75,7 @@
 // Thread-safety: const methods may run concurrently; writes need exclusion.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -84,7 +91,7 @@ namespace row_packed_detail {
 // largest box (32), shared read-only by every box.
 extern const std::array<std::array<Voxel, 32>, kMaterialCount> kUniformRows;
 inline const Voxel* uniform_row(Material material) { return kUniformRows[material & 63].data(); }
-// Per-size tables of all-uniform headers, for boxes that own none.
+// Per-size layer maps of all-uniform boxes, for boxes that own no headers.
 const std::uint16_t* uniform_headers(int size, Material material);
 
 inline constexpr std::uint8_t kKindMask = 0xC0;
@@ -244,7 +251,7 @@ class RowPackedBox {
   // the box, into the shared uniform rows, or (for index and run records)
   // into scratch. Valid until the next write or until scratch is reused.
   const Voxel* read_row(int y, int z, Row& scratch) const {
-    const std::uint16_t h = headers_[y * N + z];
+    const std::uint16_t h = header(y, z);
     if (!(h & kAllocated)) return row_packed_detail::uniform_row(static_cast<Material>(h & 63));
     const std::uint8_t* rec = data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
     if (rec[0] < row_packed_detail::kKindIndex) return reinterpret_cast<const Voxel*>(rec);
@@ -252,12 +259,55 @@ class RowPackedBox {
     return scratch.data();
   }
 
+  // Copies voxels [x0, x0 + n) of row (y, z) to out: a uniform row is
+  // filled, a raw row copied, a record decoded into scratch and copied.
+  // Precondition: 0 <= x0, n >= 0, x0 + n <= N.
+  void read_row_part(int y, int z, int x0, int n, Voxel* out, Row& scratch) const {
+    const std::uint16_t h = header(y, z);
+    if (!(h & kAllocated)) {
+      std::fill_n(out, n, solid(static_cast<Material>(h & 63)));
+      return;
+    }
+    const std::uint8_t* rec = record(h);
+    if (rec[0] < row_packed_detail::kKindIndex) {
+      std::copy_n(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      return;
+    }
+    decode(rec, data_.get(), scratch.data());
+    std::copy_n(scratch.data() + x0, n, out);
+  }
+
+  // One voxel, in place: records without occupancy are read here (a ray
+  // cast or an overlap test reads voxel by voxel), the rest by record_voxel.
   Voxel get(int x, int y, int z) const {
-    const std::uint16_t h = headers_[y * N + z];
+    using namespace row_packed_detail;
+    const std::uint16_t h = header(y, z);
     if (!(h & kAllocated)) return solid(static_cast<Material>(h & 63));
     const std::uint8_t* rec = data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
-    if (rec[0] < row_packed_detail::kKindIndex) return reinterpret_cast<const Voxel*>(rec)[x];
-    return row_packed_detail::record_voxel(rec, data_.get(), N, x);
+    const unsigned tag = rec[0];
+    if (tag < kKindIndex) return reinterpret_cast<const Voxel*>(rec)[x];
+    if (tag & kTagOccupancy) return record_voxel(rec, data_.get(), N, x);
+    const std::uint8_t* pal = record_palette(rec, data_.get());
+    const std::uint8_t* body = (tag & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
+    if ((tag & kKindMask) == kKindRuns) {
+      const int runs = body[0];
+      int r = 0;
+      while (r + 1 < runs && (body[2 + r] & 31) <= x) ++r;
+      return solid(pal[1 + (body[1 + r] >> 5)]);
+    }
+    // Index records (layout in the header comment): G = N * bits / 8 bytes.
+    const unsigned p1 = pal[0];
+    unsigned index;
+    if (p1 < 2) {
+      index = (body[x / 8] >> (x % 8)) & 1;
+    } else if (p1 < 4) {
+      constexpr int g = N * 2 / 8;
+      index = (body[x % g] >> (2 * (x / g))) & 3;
+    } else {
+      constexpr int g = N * 4 / 8;
+      index = (body[x % g] >> (4 * (x / g))) & 15;
+    }
+    return solid(pal[1 + index]);
   }
 
   // Rewrites rows y in [y0, y1), z in [z0, z1): for each, fn(y, z, row)
@@ -274,7 +324,7 @@ class RowPackedBox {
 
   // Uniform box: every voxel the same material at default occupancy.
   bool is_uniform() const { return !owns_headers_; }
-  Material uniform_material() const { return static_cast<Material>(headers_[0] & 63); }
+  Material uniform_material() const { return static_cast<Material>(header(0, 0) & 63); }
   bool unpacked() const { return shift_ != 0; }
 
   // Pessimistic full unpack: every row its own raw record, so writes never repack.
@@ -288,7 +338,7 @@ class RowPackedBox {
   // The first byte of row (y, z)'s record (its kind and palette), or -1 for
   // a uniform row.
   int record_tag(int y, int z) const {
-    const std::uint16_t h = headers_[y * N + z];
+    const std::uint16_t h = header(y, z);
     return (h & kAllocated) ? record(h)[0] : -1;
   }
 
@@ -313,6 +363,16 @@ class RowPackedBox {
 #endif
     row_packed_detail::decode_record_scalar(rec, table, out, N);
   }
+  // Row (y, z)'s header, through the layer map.
+  std::uint16_t header(int y, int z) const {
+    const std::uint8_t layer = reinterpret_cast<const std::uint8_t*>(headers_)[y];
+    return (layer & 0x80) ? static_cast<std::uint16_t>(layer & 63) : headers_[N / 2 + layer * N + z];
+  }
+  std::uint16_t header(int r) const { return header(r / N, r % N); }
+  // Words of the owned headers (map and slots).
+  std::size_t header_words() const;
+  // Takes N² headers (row order) as the box's, kept per layer as above.
+  void adopt_headers(const std::uint16_t* all);
   const std::uint8_t* record(std::uint16_t h) const {
     return data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
   }
@@ -334,9 +394,8 @@ class RowPackedBox {
   // compact() of the given content (N² rows of N voxels, Air normalised).
   void compact_from(const Voxel* content);
   void become_uniform(Material m);
-  std::uint16_t* mutable_headers();
 
-  const std::uint16_t* headers_ = row_packed_detail::uniform_headers(N, kAir);  // N² headers: owned_headers_ or a shared table
+  const std::uint16_t* headers_ = row_packed_detail::uniform_headers(N, kAir);  // layer map and slots: owned_headers_ or a shared map
   std::unique_ptr<std::uint16_t[]> owned_headers_;
   std::unique_ptr<std::uint8_t[]> data_;  // palette table, records, then kPadBytes of padding
   std::uint32_t data_bytes_ = 0;          // bytes allocated in data_ (0 when none)

@@ -19,8 +19,8 @@ RowPackedBox<N> RowPackedBox<N>::clone() const {
   copy.repacks_ = 0;
   copy.data_bytes_ = data_bytes_;
   if (owns_headers_) {
-    copy.owned_headers_ = std::make_unique<std::uint16_t[]>(kRows);
-    std::memcpy(copy.owned_headers_.get(), headers_, sizeof(std::uint16_t) * kRows);
+    copy.owned_headers_ = std::make_unique<std::uint16_t[]>(header_words());
+    std::memcpy(copy.owned_headers_.get(), headers_, sizeof(std::uint16_t) * header_words());
     copy.headers_ = copy.owned_headers_.get();
     copy.owns_headers_ = true;
   } else {
@@ -40,14 +40,30 @@ void RowPackedBox<N>::read_row_into(int y, int z, Voxel* out) const {
 }
 
 template <int N>
-std::uint16_t* RowPackedBox<N>::mutable_headers() {
-  if (!owns_headers_) {
-    owned_headers_ = std::make_unique<std::uint16_t[]>(kRows);
-    std::memcpy(owned_headers_.get(), headers_, sizeof(std::uint16_t) * kRows);
-    headers_ = owned_headers_.get();
-    owns_headers_ = true;
+std::size_t RowPackedBox<N>::header_words() const {
+  const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
+  std::size_t slots = 0;
+  for (int y = 0; y < N; ++y) slots += (map[y] & 0x80) == 0;
+  return N / 2 + slots * N;
+}
+
+template <int N>
+void RowPackedBox<N>::adopt_headers(const std::uint16_t* all) {
+  std::uint8_t map[N];
+  int slots = 0;
+  for (int y = 0; y < N; ++y) {
+    const std::uint16_t first = all[y * N];
+    const bool alike = !(first & kAllocated) && std::all_of(all + y * N, all + (y + 1) * N,
+                                                             [&](std::uint16_t h) { return h == first; });
+    map[y] = alike ? static_cast<std::uint8_t>(0x80 | (first & 63)) : static_cast<std::uint8_t>(slots++);
   }
-  return owned_headers_.get();
+  auto owned = std::make_unique<std::uint16_t[]>(std::size_t{N / 2} + std::size_t(slots) * N);
+  std::memcpy(owned.get(), map, N);
+  for (int y = 0; y < N; ++y)
+    if (!(map[y] & 0x80)) std::memcpy(owned.get() + N / 2 + map[y] * N, all + y * N, sizeof(std::uint16_t) * N);
+  owned_headers_ = std::move(owned);
+  headers_ = owned_headers_.get();
+  owns_headers_ = true;
 }
 
 template <int N>
@@ -90,7 +106,7 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
   if (unpacked()) {
     // Every row is a raw record of its own: write in place, never repack.
     for (int i = 0; i < count; ++i)
-      std::memcpy(data_.get() + (static_cast<std::uint32_t>(headers_[row_of(i)] & kOffsetMask) << shift_),
+      std::memcpy(data_.get() + (static_cast<std::uint32_t>(header(row_of(i)) & kOffsetMask) << shift_),
                   content.data() + static_cast<std::size_t>(i) * N, sizeof(Voxel) * N);
     return;
   }
@@ -115,7 +131,7 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     const Voxel* row = content.data() + static_cast<std::size_t>(i) * N;
     std::uint8_t* rec = records.data() + static_cast<std::size_t>(i) * 2 * N;
     sizes[i] = static_cast<std::uint16_t>(row_packed_detail::encode_row(row, N, table, rec));
-    const std::uint16_t h = headers_[row_of(i)];
+    const std::uint16_t h = header(row_of(i));
     if (sizes[i] == 0) {
       if (h & kAllocated) in_place = false;
       else if ((h & 63) != row[0].material) headers_change = true;
@@ -134,9 +150,9 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     thread_local std::vector<std::uint8_t> refs;
     refs.assign(data_bytes_, 0);
     for (int r = 0; r < kRows; ++r)
-      if (headers_[r] & kAllocated) refs[headers_[r] & kOffsetMask] += refs[headers_[r] & kOffsetMask] < 2;
+      if (const std::uint16_t h = header(r); h & kAllocated) refs[h & kOffsetMask] += refs[h & kOffsetMask] < 2;
     for (int i = 0; i < count && in_place; ++i) {
-      const std::uint16_t h = headers_[row_of(i)];
+      const std::uint16_t h = header(row_of(i));
       if (sizes[i] > 0 && refs[h & kOffsetMask] > 1) in_place = false;
     }
   }
@@ -150,21 +166,21 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
 
   // Stage 3b: no record grows, nothing shared: write in place (a shorter
   // record leaves its tail unused until the next rebuild).
-  std::uint16_t* headers = headers_change ? mutable_headers() : nullptr;
-  for (int i = 0; i < count; ++i) {
-    const int r = row_of(i);
-    if (sizes[i] == 0) {
-      if (headers != nullptr) headers[r] = content[static_cast<std::size_t>(i) * N].material;
-    } else {
-      std::memcpy(data_.get() + (headers_[r] & kOffsetMask), records.data() + static_cast<std::size_t>(i) * 2 * N,
+  for (int i = 0; i < count; ++i)
+    if (sizes[i] > 0)
+      std::memcpy(data_.get() + (header(row_of(i)) & kOffsetMask), records.data() + static_cast<std::size_t>(i) * 2 * N,
                   std::size_t{sizes[i]});
-    }
+  if (!headers_change) return;
+  // Uniform rows changed material: the headers are laid out again.
+  std::uint16_t all[kRows];
+  for (int r = 0; r < kRows; ++r) all[r] = header(r);
+  for (int i = 0; i < count; ++i)
+    if (sizes[i] == 0) all[row_of(i)] = content[static_cast<std::size_t>(i) * N].material;
+  if (data_bytes_ == 0 && std::all_of(all, all + kRows, [&](std::uint16_t h) { return h == all[0]; })) {
+    become_uniform(static_cast<Material>(all[0] & 63));
+    return;
   }
-  if (headers_change && data_bytes_ == 0) {
-    const std::uint16_t first = headers_[0];
-    if (std::all_of(headers_, headers_ + kRows, [&](std::uint16_t h) { return h == first; }))
-      become_uniform(static_cast<Material>(first & 63));
-  }
+  adopt_headers(all);
 }
 
 template <int N>
@@ -213,7 +229,7 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
         size = row_packed_detail::encode_row(row, N, summaries[i], table, encoded);
         if (size == 0) headers[r] = row[0].material;
         src = encoded;
-      } else if (const std::uint16_t h = headers_[r]; !(h & kAllocated)) {
+      } else if (const std::uint16_t h = header(r); !(h & kAllocated)) {
         headers[r] = h;
       } else {
         src = record(h);
@@ -251,9 +267,7 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
     become_uniform(static_cast<Material>(headers[0] & 63));
     return;
   }
-  owned_headers_ = std::move(headers);
-  headers_ = owned_headers_.get();
-  owns_headers_ = true;
+  adopt_headers(headers.get());
   shift_ = 0;
   if (used == table_bytes) {
     data_.reset();
@@ -282,9 +296,7 @@ void RowPackedBox<N>::unpack_from(int y0, int y1, int z0, int z1, const Voxel* c
       headers[r] = static_cast<std::uint16_t>(kAllocated | (r * N));  // in 2-byte units: shift_ = 1
     }
   }
-  owned_headers_ = std::move(headers);
-  headers_ = owned_headers_.get();
-  owns_headers_ = true;
+  adopt_headers(headers.get());
   data_ = std::move(data);
   data_bytes_ = bytes;
   shift_ = 1;
@@ -341,7 +353,7 @@ void RowPackedBox<N>::compact() {
 
 template <int N>
 std::size_t RowPackedBox<N>::heap_bytes() const {
-  return (owns_headers_ ? sizeof(std::uint16_t) * kRows : 0) + std::size_t{data_bytes_};
+  return (owns_headers_ ? sizeof(std::uint16_t) * header_words() : 0) + std::size_t{data_bytes_};
 }
 
 template <int N>
@@ -351,7 +363,7 @@ RowPackedStats RowPackedBox<N>::stats() const {
   if (data_ && !unpacked()) s.table_bytes = static_cast<std::size_t>(row_packed_detail::PaletteTable(data_.get()).bytes());
   std::vector<bool> seen(data_bytes_, false);
   for (int r = 0; r < kRows; ++r) {
-    const std::uint16_t h = headers_[r];
+    const std::uint16_t h = header(r);
     if (!(h & kAllocated)) {
       ++s.uniform_rows;
       continue;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "common/codec/chunk_units.h"
 #include "common/voxel/box.h"
 #include "common/world/world_store.h"
 #include "protocol/messages.h"
@@ -106,16 +107,7 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
       net_codec_encode(n, box.voxels(), out);
       return;
     }
-    constexpr int u = kChunkSize / 2;
-    Box box({u, u, u});
-    for (int i = 0; i < 8; ++i) {
-      const Vec3i o{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-      if (chunk_)
-        chunk_->read_box(o * u, box, Vec3i{0, 0, 0}, Vec3i{u, u, u});
-      else
-        box.fill(Voxel{});
-      net_codec_encode(u, box.voxels(), out);
-    }
+    encode_full_units(chunk_.get(), out);
   });
   return encoded_[l];
 }
@@ -129,13 +121,9 @@ const UpdatePiece& ChunkVersion::update_piece() const {
       UnitUpdate u;
       u.chunk_pos = pos_;
       u.unit_index = static_cast<std::uint16_t>(i);
-      const Vec3i base{static_cast<int>(i % 8) * 4, static_cast<int>(i / 64) * 4, static_cast<int>((i / 8) % 8) * 4};
-      for (int y = 0; y < 4; ++y)
-        for (int z = 0; z < 4; ++z)
-          for (int x = 0; x < 4; ++x)
-            u.voxels[static_cast<std::size_t>((y * 4 + z) * 4 + x)] = chunk_ ? chunk_->get(base + Vec3i{x, y, z}) : Voxel{};
       units.push_back(u);
     }
+    read_update_units(chunk_.get(), std::span<UnitUpdate>(units));
     if (!units.empty()) piece_ = net_codec_encode_update_piece(units);
   });
   return piece_;

@@ -1,12 +1,13 @@
 // Render chunks: selection by distance, plans that change only with the
-// data read, crack-freedom across resolutions, and the worker remeshing
-// only what changed.
+// data read, parts of chunks read as their levels, crack-freedom across
+// resolutions, and the worker remeshing only what changed.
 #include "client/view/render_chunk.h"
 
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
+#include <random>
 #include <thread>
 #include <unordered_map>
 
@@ -115,6 +116,66 @@ TEST(RenderChunks, PlanFollowsTheDataRead) {
   Mesh m;
   build_render_chunk(src, k, c.sample_level, m);
   EXPECT_FALSE(m.empty());
+}
+
+// A source that only reads whole chunks: VoxelSource's own read_part.
+class WholeChunkSource final : public VoxelSource {
+ public:
+  explicit WholeChunkSource(const Grid& g) : inner_(g, {{-100, -100, -100}, {100, 100, 100}}) {}
+  int level(Vec3i cp) const override { return inner_.level(cp); }
+  std::uint64_t revision(Vec3i) const override { return 0; }
+  int read(Vec3i cp, int want, Box& out) const override { return inner_.read(cp, want, out); }
+
+ private:
+  GridSource inner_;
+};
+
+TEST(RenderChunks, PartsOfAChunkAreTheVoxelsOfItsLevels) {
+  Grid g;
+  std::mt19937 rng(8);
+  std::uniform_int_distribution<int> m(1, 5), occ(1, 255), coin(0, 5);
+  g.modify(Region{{0, 0, 0}, {32, 32, 32}}, [&](Vec3i p, Voxel) {
+    if (p.y > 20 + p.x % 5) return Voxel{};
+    if (coin(rng) == 0) return make_voxel(static_cast<Material>(m(rng)), static_cast<std::uint8_t>(occ(rng)));
+    return solid(p.y < 8 ? materials::kRock : static_cast<Material>(m(rng)));
+  });
+  g.compact();
+  const Chunk& c = *g.find_chunk({0, 0, 0});
+  const GridSource grid_source(g, {{-1, -1, -1}, {2, 2, 2}});
+  const WholeChunkSource whole_source(g);
+  std::uniform_int_distribution<int> any(0, 31);
+  for (int level = 0; level < kMipLevels; ++level) {
+    const int n = kChunkSize >> level;
+    Box whole;
+    c.read_level(level, whole);
+    for (int i = 0; i < 40; ++i) {
+      Vec3i a{any(rng) % n, any(rng) % n, any(rng) % n}, b{any(rng) % n, any(rng) % n, any(rng) % n};
+      Region part{min3(a, b), max3(a, b) + Vec3i{1, 1, 1}};
+      if (i == 0) part = Region{{0, 0, 0}, {n, n, n}};
+      if (i == 1) part = Region{{0, 0, 0}, {1, n, n}};  // a face, as the sample ring reads
+      Box got, by_grid, by_default;
+      read_chunk_part(c, level, part, got);
+      ASSERT_EQ(got.size(), part.size());
+      for (int y = 0; y < part.size().y; ++y)
+        for (int z = 0; z < part.size().z; ++z)
+          for (int x = 0; x < part.size().x; ++x)
+            ASSERT_EQ(got.get(x, y, z), whole.get(part.min + Vec3i{x, y, z})) << "level " << level;
+      EXPECT_EQ(grid_source.read_part({0, 0, 0}, level, part, by_grid), level);
+      EXPECT_EQ(whole_source.read_part({0, 0, 0}, level, part, by_default), level);
+      EXPECT_EQ(by_grid, got);
+      EXPECT_EQ(by_default, got);
+    }
+  }
+  // Meshes from parts equal meshes from whole chunks, at every sample level.
+  for (int level = 0; level <= 2; ++level) {
+    Mesh a, b;
+    const NodeKey k{{0, 0, 0}, level};
+    build_render_chunk(grid_source, k, level, a);
+    build_render_chunk(whole_source, k, level, b);
+    EXPECT_FALSE(a.empty());
+    EXPECT_EQ(a.indices, b.indices);
+    EXPECT_EQ(a.triangle_count(), b.triangle_count());
+  }
 }
 
 // Möller–Trumbore; the distance along the ray or a negative value.

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cstring>
 #include <random>
 
@@ -20,6 +21,13 @@ void expect_equal(const RowPackedBox<N>& packed, const Box& ref, const char* whe
         ASSERT_EQ(row[x], ref.get(x, y, z)) << when << " at " << x << "," << y << "," << z;
         ASSERT_EQ(packed.get(x, y, z), ref.get(x, y, z)) << when;
       }
+      // A part of the row, as Chunk::read_box copies it.
+      const int x0 = (y * 7 + z) % N, n = (y + 3 * z) % (N - x0 + 1);
+      std::array<Voxel, N + 1> part;
+      part[static_cast<std::size_t>(n)] = make_voxel(63, 7);  // must stay
+      packed.read_row_part(y, z, x0, n, part.data(), scratch);
+      for (int x = 0; x < n; ++x) ASSERT_EQ(part[static_cast<std::size_t>(x)], ref.get(x0 + x, y, z)) << when;
+      ASSERT_EQ(part[static_cast<std::size_t>(n)], make_voxel(63, 7)) << when << ": read past the part";
     }
   }
 }
@@ -104,18 +112,40 @@ TEST(RowPackedBox, UniformBoxOwnsNoMemory) {
   EXPECT_EQ(box.get(3, 4, 5), solid(materials::kRock));
 }
 
-TEST(RowPackedBox, UniformRowsCostOnlyHeaders) {
+// Headers of a 32³ box that owns them: the layer map, then 32 headers for
+// each layer whose rows are not all uniform with one material.
+constexpr std::size_t headers32(std::size_t layers) { return 32 + layers * 32 * 2; }
+
+TEST(RowPackedBox, UniformLayersCostOnlyTheLayerMap) {
   RowPackedBox<32> box(materials::kRock);
-  // A layer of grass on top: every row still uniform.
+  // A layer of grass on top: every layer still uniform with one material.
   box.modify_rows(31, 32, 0, 32, [](int, int, Voxel* row) {
     for (int x = 0; x < 32; ++x) row[x] = solid(materials::kGrass);
   });
   EXPECT_FALSE(box.is_uniform());
-  EXPECT_EQ(box.heap_bytes(), 32u * 32u * 2u);
+  EXPECT_EQ(box.heap_bytes(), headers32(0));
   EXPECT_EQ(box.stats().uniform_rows, 1024u);
+  EXPECT_EQ(box.get(5, 31, 7), solid(materials::kGrass));
+  EXPECT_EQ(box.get(5, 30, 7), solid(materials::kRock));
+  // Half of a layer of sand: that layer's rows are uniform but not alike,
+  // so it keeps its 32 headers.
+  box.modify_rows(10, 11, 0, 16, [](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(materials::kSand);
+  });
+  EXPECT_EQ(box.heap_bytes(), headers32(1));
+  EXPECT_EQ(box.get(0, 10, 15), solid(materials::kSand));
+  EXPECT_EQ(box.get(0, 10, 16), solid(materials::kRock));
+  // The other half too: alike again.
+  box.modify_rows(10, 11, 16, 32, [](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(materials::kSand);
+  });
+  EXPECT_EQ(box.heap_bytes(), headers32(0));
+  EXPECT_EQ(box.get(0, 10, 16), solid(materials::kSand));
+  RowPackedBox<32> copy = box.clone();
+  EXPECT_EQ(copy.heap_bytes(), headers32(0));
+  EXPECT_EQ(copy.get(0, 31, 0), solid(materials::kGrass));
 }
 
-constexpr std::size_t kHeaders32 = 32 * 32 * 2;
 constexpr std::size_t kPad32 = RowPackedBox<32>::kPadBytes;
 // A palette table of palettes with these sizes: count, offsets, palettes.
 std::size_t table_bytes(std::initializer_list<int> sizes) {
@@ -132,11 +162,11 @@ TEST(RowPackedBox, OreRowUsesAnIndexRecordOverTheTable) {
   // The palette {rock, basalt} joins the table; the record is its tag and
   // 4 bytes of 1-bit indices (three runs would cost as much).
   EXPECT_EQ(box.stats().table_bytes, table_bytes({2}));
-  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 5u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 5u + kPad32);
   box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: an occupancy section
   EXPECT_EQ(box.stats().occupancy_rows, 1u);
   // + 4 bytes of bitmap and the one occupancy byte.
-  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 10u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 10u + kPad32);
   EXPECT_EQ(box.get(7, 3, 4), solid(materials::kBasalt));
   EXPECT_EQ(box.get(8, 3, 4), make_voxel(materials::kBasalt, 100));
   EXPECT_EQ(box.get(9, 3, 4), solid(materials::kRock));
@@ -161,7 +191,7 @@ TEST(RowPackedBox, IndexWidthFollowsDistinctMaterials) {
     EXPECT_EQ(box.stats().raw_rows, c.raw ? 1u : 0u) << c.distinct;
     EXPECT_EQ(box.stats().index_rows, c.raw ? 0u : 1u) << c.distinct;
     const std::size_t table = c.raw ? 1u : table_bytes({c.distinct});
-    EXPECT_EQ(box.heap_bytes(), kHeaders32 + table + c.record_bytes + kPad32) << c.distinct;
+    EXPECT_EQ(box.heap_bytes(), headers32(1) + table + c.record_bytes + kPad32) << c.distinct;
     expect_equal(box, ref, "index width");
   }
 }
@@ -176,7 +206,7 @@ TEST(RowPackedBox, FewRunsUseARunRecord) {
   for (int x = 0; x < 32; ++x) ref.set(x, 0, 0, solid(material(x)));
   EXPECT_EQ(box.stats().run_rows, 1u);
   // tag, run count, three runs (2-bit indices would take 1 + 8).
-  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({3}) + 5u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3}) + 5u + kPad32);
   expect_equal(box, ref, "runs");
   // Occupancy on top of runs: the section follows the runs.
   box.set(15, 0, 0, make_voxel(materials::kSand, 3));
@@ -227,7 +257,7 @@ TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
   });
   EXPECT_EQ(box.stats().index_rows, 128u);
   EXPECT_EQ(box.stats().shared_rows, 127u);
-  EXPECT_EQ(box.heap_bytes(), kHeaders32 + table_bytes({2}) + 5u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(4) + table_bytes({2}) + 5u + kPad32);
   // Writing one of the sharing rows must not change the others.
   box.set(1, 2, 3, solid(materials::kSand));
   ref.set(1, 2, 3, solid(materials::kSand));
@@ -301,7 +331,7 @@ TEST(RowPackedBox, RepeatedTinyWritesUnpackInsteadOfRepackingForever) {
   }
   EXPECT_TRUE(box.unpacked());
   EXPECT_EQ(box.stats().raw_rows, 1024u);
-  EXPECT_EQ(box.heap_bytes(), kHeaders32 + 32u * 32u * 64u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(32) + 32u * 32u * 64u + kPad32);
   expect_equal(box, ref, "unpacked");
   box.compact();
   EXPECT_FALSE(box.unpacked());
