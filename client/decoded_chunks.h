@@ -16,7 +16,9 @@
 //
 // Bounded: the least recently used entries go first (capacity entries).
 // Beside them, the replicas' mips and horizon images (mips(),
-// client/decoded_mips.h), which live as long as some replica holds them.
+// client/decoded_mips.h), which live as long as some replica holds them,
+// and the chunks updates made of shared chunks (updates(),
+// client/shared_updates.h).
 // Thread-safety: every member may be called from any thread.
 #pragma once
 
@@ -31,6 +33,7 @@
 #include <vector>
 
 #include "client/decoded_mips.h"
+#include "client/shared_updates.h"
 #include "common/voxel/chunk.h"
 
 namespace terrane {
@@ -56,6 +59,9 @@ class DecodedChunks {
   // The mips and horizon images the replicas sharing this hold.
   DecodedMips& mips() { return mips_; }
   const DecodedMips& mips() const { return mips_; }
+  // What updates made of the chunks the replicas sharing this hold.
+  SharedUpdates& updates() { return updates_; }
+  const SharedUpdates& updates() const { return updates_; }
 
  private:
   struct Entry {
@@ -73,6 +79,7 @@ class DecodedChunks {
   std::list<std::size_t> lru_;  // keys, most recently used first
   Stats stats_;
   DecodedMips mips_;
+  SharedUpdates updates_;
 };
 
 }  // namespace terrane

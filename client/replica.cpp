@@ -171,7 +171,20 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const Region box{origin + units.box().min, origin + units.box().max};
     if (changed != nullptr) changed->push_back(box);
     entry_changed(cp, *e);
+    // A chunk held shared: the process's other replicas that held this very
+    // chunk and were sent these units may have made the result already
+    // (client/shared_updates.h); else it is made here and offered to them.
+    const std::span<const UnitUpdate> chunk_units(units_in.data() + begin, end - begin);
+    std::shared_ptr<const Chunk> base = shared_ ? grid_.shared_chunk(cp) : nullptr;
+    if (base) {
+      if (std::shared_ptr<const Chunk> made = shared_->updates().find(base, chunk_units)) {
+        grid_.put_shared_chunk(cp, std::move(made));
+        begin = end;
+        continue;
+      }
+    }
     grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
+    if (base) shared_->updates().add(base, chunk_units, grid_.share_chunk(cp));
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
     // the update itself; the replica holds full resolution only near it.

@@ -212,6 +212,8 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.redirects = in.whole("redirects");
   r.shared_chunk_hits = in.whole("shared_chunk_hits");
   r.shared_chunk_misses = in.whole("shared_chunk_misses");
+  r.shared_update_hits = in.whole("shared_update_hits");
+  r.shared_update_misses = in.whole("shared_update_misses");
   for (const std::string& id : in.children("bots_per_server")) {
     std::uint32_t server = 0;
     auto [p, ec] = std::from_chars(id.data(), id.data() + id.size(), server);
@@ -363,6 +365,8 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     r.redirects += p.redirects;
     r.shared_chunk_hits += p.shared_chunk_hits;
     r.shared_chunk_misses += p.shared_chunk_misses;
+    r.shared_update_hits += p.shared_update_hits;
+    r.shared_update_misses += p.shared_update_misses;
     for (const auto& [server, count] : p.bots_per_server) r.bots_per_server[server] += count;
     r.walk_steps += p.walk_steps;
     for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += p.walk_blocked[w];

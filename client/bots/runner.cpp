@@ -405,6 +405,10 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.shared_chunk_hits = s.hits;
     r.shared_chunk_misses = s.misses;
     r.shared_chunk_bytes += s.bytes;
+    const SharedUpdates::Stats u = ctx.shared_chunks->updates().stats();
+    r.shared_update_hits = u.hits;
+    r.shared_update_misses = u.misses;
+    r.shared_chunk_bytes += u.bytes;
   }
   const auto totals = fanout.totals();
   r.edits_sent = totals.edits_sent;

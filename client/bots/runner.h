@@ -64,6 +64,9 @@ struct BotsReport {
   // Full records' chunks taken from the bots' shared cache / packed anew
   // (--shared-chunks; both 0 when off).
   std::uint64_t shared_chunk_hits = 0, shared_chunk_misses = 0;
+  // Updates of shared chunks taken made by another bot / made by a bot
+  // (client/shared_updates.h).
+  std::uint64_t shared_update_hits = 0, shared_update_misses = 0;
   // The bots' replicas by part, summed over the bots at the end of the run
   // (before they leave; shared voxels count once in all), and the heap
   // bytes of the process's shared caches then.

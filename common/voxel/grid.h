@@ -75,6 +75,21 @@ class Grid {
   // as it is, copied by the first write. Precondition: not null, mips
   // current. An empty chunk erases the entry.
   void put_shared_chunk(Vec3i chunk_pos, std::shared_ptr<const Chunk> chunk);
+  // The chunk if it is held shared (as put_shared_chunk left it), else
+  // null (absent, or the grid's own).
+  std::shared_ptr<const Chunk> shared_chunk(Vec3i chunk_pos) const {
+    auto it = chunks_.find(chunk_pos);
+    return it == chunks_.end() ? nullptr : it->second.shared;
+  }
+  // Makes the grid's own chunk a shared one (moved, not copied) and
+  // returns it; a shared one is returned as it is; null if absent.
+  std::shared_ptr<const Chunk> share_chunk(Vec3i chunk_pos) {
+    auto it = chunks_.find(chunk_pos);
+    if (it == chunks_.end()) return nullptr;
+    Slot& s = it->second;
+    if (s.own) s.shared = std::shared_ptr<const Chunk>(std::move(s.own));
+    return s.shared;
+  }
   void erase_chunk(Vec3i chunk_pos) { chunks_.erase(chunk_pos); }
   // Removes the chunk from the grid and returns it (null if absent; a
   // copy if it was shared).

@@ -119,6 +119,10 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   // packed once for several (20 bots over a small area).
   EXPECT_GT(r.shared_chunk_misses, 0u);
   EXPECT_GT(r.shared_chunk_hits, 0u);
+  // Bots holding one shared chunk were sent the same units: the update was
+  // applied once for several.
+  EXPECT_GT(r.shared_update_misses, 0u);
+  EXPECT_GT(r.shared_update_hits, 0u);
   // The server's own books agree with the bots': only they edit.
   ASSERT_TRUE(r.server.has_value());
   EXPECT_EQ(r.server->scrape_errors, 0) << r.server->first_error;
@@ -181,7 +185,7 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
         "unexpected_disconnects", "by_message_type.StreamBatch.bytes_in", "join_bytes_received",
         "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in",
         "server_counters.cpu_s", "server_counters.rss_peak_bytes", "server_counters.tick_p99_ms_bound",
-        "server_counters.sent_by_type.StreamBatch.bytes", "bots_io_lag_ms.p99", "shared_chunk_hits",
+        "server_counters.sent_by_type.StreamBatch.bytes", "bots_io_lag_ms.p99", "shared_chunk_hits", "shared_update_hits",
         "server_counters.stream_gate_closed_s"})
     EXPECT_EQ(j.count(key), 1u) << key;
   EXPECT_EQ(j["bots"], "20");

@@ -5,6 +5,7 @@
 #include "client/replica.h"
 #include "common/codec/net_codec.h"
 #include "protocol/stream_batch.h"
+#include "tests/support/replica_records.h"
 #include "tests/support/stream_records.h"
 
 namespace terrane {
@@ -22,23 +23,9 @@ Box slope(int seed) {
 }
 
 using testing_support::full_payload;
+using testing_support::take_full;
 
 // The replica takes a Full record of these bytes, as the client does.
-void take_full(Replica& r, Vec3i cp, std::uint64_t revision, const std::vector<std::uint8_t>& payload) {
-  StreamBatchWriter w;
-  w.add(StreamRecordKind::kFull, cp, revision, payload);
-  const Frame f = w.finish().flatten();
-  auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
-  ASSERT_TRUE(m.ok());
-  auto records = parse_stream_batch(*(*m)->body_as_StreamBatch());
-  ASSERT_TRUE(records.ok());
-  StreamDecodeScratch s;
-  ASSERT_TRUE(decode_stream_batch(*records, s, [&](const StreamRecord& rec) -> Status {
-                EXPECT_TRUE(std::equal(rec.payload.begin(), rec.payload.end(), payload.begin(), payload.end()));
-                r.apply_stream_record(rec);
-                return Ok{};
-              }).ok());
-}
 
 void expect_holds(const Replica& r, Vec3i cp, const Box& voxels) {
   Box got({kChunkSize, kChunkSize, kChunkSize});

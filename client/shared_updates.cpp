@@ -1,0 +1,67 @@
+#include "client/shared_updates.h"
+
+#include <algorithm>
+#include <functional>
+#include <string_view>
+
+namespace terrane {
+
+std::size_t SharedUpdates::key_of(const Chunk* base, std::span<const UnitUpdate> units) {
+  // Field by field (a UnitUpdate has padding); a voxel is two plain bytes.
+  std::size_t h = std::hash<const void*>{}(base);
+  auto mix = [&h](std::size_t v) { h ^= v + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2); };
+  for (const UnitUpdate& u : units) {
+    mix(static_cast<std::size_t>(u.unit_index));
+    mix(std::hash<std::string_view>{}(
+        std::string_view(reinterpret_cast<const char*>(u.voxels.data()), u.voxels.size() * sizeof(Voxel))));
+  }
+  return h;
+}
+
+std::shared_ptr<const Chunk> SharedUpdates::find(const std::shared_ptr<const Chunk>& base,
+                                                 std::span<const UnitUpdate> units) {
+  const std::size_t key = key_of(base.get(), units);
+  std::lock_guard lock(m_);
+  auto it = entries_.find(key);
+  if (it != entries_.end()) {
+    const Entry& e = it->second;
+    // The very base object, alive (a dead one's address may be reused),
+    // and the same units.
+    if (e.base.lock() == base && std::equal(units.begin(), units.end(), e.units.begin(), e.units.end())) {
+      if (std::shared_ptr<const Chunk> result = e.result.lock()) {
+        ++stats_.hits;
+        return result;
+      }
+    }
+  }
+  ++stats_.misses;
+  return nullptr;
+}
+
+void SharedUpdates::add(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
+                        const std::shared_ptr<const Chunk>& result) {
+  // An emptied chunk is not kept: the replica erases it (nothing to share).
+  if (!result) return;
+  const std::size_t key = key_of(base.get(), units);
+  std::lock_guard lock(m_);
+  if (entries_.size() >= kCapacity) drop_dead();
+  if (entries_.size() >= kCapacity) entries_.clear();
+  Entry& e = entries_[key];
+  e.base = base;
+  e.units.assign(units.begin(), units.end());
+  e.result = result;
+}
+
+void SharedUpdates::drop_dead() {
+  std::erase_if(entries_, [](const auto& kv) { return kv.second.base.expired() || kv.second.result.expired(); });
+}
+
+SharedUpdates::Stats SharedUpdates::stats() const {
+  std::lock_guard lock(m_);
+  Stats s = stats_;
+  s.entries = entries_.size();
+  for (const auto& [key, e] : entries_) s.bytes += sizeof(Entry) + 32 + e.units.capacity() * sizeof(UnitUpdate);
+  return s;
+}
+
+}  // namespace terrane

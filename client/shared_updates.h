@@ -1,0 +1,72 @@
+// SharedUpdates: the chunks that updates made of shared chunks, so the
+// replicas of one process that hold one chunk apply each update to it once.
+//
+// A server sends every client holding a chunk at full resolution the same
+// units for each of the chunk's ticks, and a process running many clients
+// (the terrane-bots load test) holds that chunk once, shared
+// (DecodedChunks, Grid::put_shared_chunk), until an update changes it; a
+// replica that applied the update on its own copy paid the copy, the rows'
+// repacking and the mips' update once per client: in a crowd, most of a
+// bot's CPU. Here the first replica to apply an update to a shared chunk
+// keeps the result under (that chunk, those units); every replica holding
+// the same chunk object that is sent the same units takes the result as
+// it is, shared again.
+// Nothing is trusted across clients but equality: an entry is taken only
+// when its base is the very chunk object the replica holds (shared chunks
+// are immutable) and its units equal the replica's own, voxel by voxel,
+// so the result is what the replica's own apply would make.
+// Weak: a result lives as long as some replica holds it, and an entry
+// whose base or result died is dropped when the table is rebuilt (at
+// kCapacity entries); so the table is bounded, and holds no chunk.
+// Thread-safety: every member may be called from any thread.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+#include "common/codec/update_batch.h"
+#include "common/voxel/chunk.h"
+
+namespace terrane {
+
+class SharedUpdates {
+ public:
+  static constexpr std::size_t kCapacity = 16384;
+
+  // What units (one chunk's, in the batch's order) made of base, if a
+  // replica applied them to this same base; else null.
+  std::shared_ptr<const Chunk> find(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units);
+  // Keeps result as what units made of base. result may be null: the chunk
+  // became all Air.
+  void add(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
+           const std::shared_ptr<const Chunk>& result);
+
+  struct Stats {
+    std::uint64_t hits = 0, misses = 0;
+    std::size_t entries = 0;
+    std::size_t bytes = 0;  // the entries and their units (heap; the chunks are the replicas')
+  };
+  Stats stats() const;
+
+ private:
+  struct Entry {
+    std::weak_ptr<const Chunk> base;
+    std::vector<UnitUpdate> units;
+    std::weak_ptr<const Chunk> result;
+  };
+  static std::size_t key_of(const Chunk* base, std::span<const UnitUpdate> units);
+  // Drops the entries whose base or result died (under m_).
+  void drop_dead();
+
+  mutable std::mutex m_;
+  // By key (one entry per key: of two whose keys are equal, the newer is kept).
+  std::unordered_map<std::size_t, Entry> entries_;
+  Stats stats_;
+};
+
+}  // namespace terrane

@@ -1,0 +1,131 @@
+// SharedUpdates through the replicas of one process: replicas holding one
+// shared chunk and sent the same units hold one result, made once, with
+// the voxels each would have made alone; other units, another base or a
+// replica on its own are never given another's result.
+#include "client/shared_updates.h"
+
+#include <gtest/gtest.h>
+
+#include "client/decoded_chunks.h"
+#include "client/replica.h"
+#include "common/codec/net_codec.h"
+#include "protocol/stream_batch.h"
+#include "tests/support/replica_records.h"
+#include "tests/support/stream_records.h"
+
+namespace terrane {
+namespace {
+
+using testing_support::full_payload;
+using testing_support::take_full;
+
+Box slope() {
+  Box b({kChunkSize, kChunkSize, kChunkSize});
+  for (int y = 0; y < kChunkSize; ++y)
+    for (int z = 0; z < kChunkSize; ++z)
+      for (int x = 0; x < kChunkSize; ++x)
+        if (y < 8 + x / 3 + z / 5) b.set(x, y, z, make_voxel(y % 5 == 0 ? materials::kSand : materials::kRock, 200));
+  return b;
+}
+
+
+// One unit (index) of chunk cp filled with v, and the batch that carries it.
+UpdateBatchMsg one_unit(Vec3i cp, std::uint16_t index, Voxel v, std::uint64_t revision,
+                        std::vector<std::uint8_t>& data) {
+  std::vector<UnitUpdate> ups(1);
+  ups[0].chunk_pos = cp;
+  ups[0].unit_index = index;
+  ups[0].voxels.fill(v);
+  data.clear();
+  net_codec_encode_update_batch(ups, data);
+  return UpdateBatchMsg{revision, data, {ChunkRevisionMsg{cp, revision}}};
+}
+
+Box held(const Replica& r, Vec3i cp) {
+  Box got({kChunkSize, kChunkSize, kChunkSize});
+  r.read_box(chunk_origin(cp), got);
+  return got;
+}
+
+constexpr Vec3i kAt{1, 0, 2};
+
+TEST(SharedUpdates, ReplicasHoldingOneChunkSentTheSameUnitsHoldOneResultMadeOnce) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b, alone;
+  a.share_decoded(shared);
+  b.share_decoded(shared);
+  const auto payload = full_payload(slope());
+  for (Replica* r : {&a, &b, &alone}) take_full(*r, kAt, 5, payload);
+  ASSERT_EQ(a.grid().find_chunk(kAt), b.grid().find_chunk(kAt)) << "the Full record's chunk is shared";
+
+  std::vector<std::uint8_t> data;
+  const UpdateBatchMsg dig = one_unit(kAt, 9 + 64 * 2, Voxel{}, 6, data);
+  ASSERT_TRUE(a.apply_update_batch(dig).ok());
+  EXPECT_EQ(shared->updates().stats().misses, 1u);
+  ASSERT_TRUE(b.apply_update_batch(dig).ok());
+  ASSERT_TRUE(alone.apply_update_batch(dig).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 1u);
+  EXPECT_EQ(a.grid().find_chunk(kAt), b.grid().find_chunk(kAt)) << "b took a's result";
+  EXPECT_NE(a.grid().find_chunk(kAt), alone.grid().find_chunk(kAt));
+  EXPECT_TRUE(held(a, kAt) == held(alone, kAt)) << "the result is what a replica's own apply makes";
+  EXPECT_TRUE(held(b, kAt) == held(alone, kAt));
+  EXPECT_EQ(b.hash(kAt), alone.hash(kAt));
+  EXPECT_EQ(a.get(chunk_origin(kAt) + Vec3i{4, 8, 4}), Voxel{});
+
+  // The next tick's units go on from the shared result, again made once.
+  const UpdateBatchMsg fill = one_unit(kAt, 0, make_voxel(materials::kGrass, 255), 7, data);
+  for (Replica* r : {&a, &b, &alone}) ASSERT_TRUE(r->apply_update_batch(fill).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 2u);
+  EXPECT_TRUE(held(a, kAt) == held(alone, kAt));
+  EXPECT_TRUE(held(b, kAt) == held(alone, kAt));
+  EXPECT_EQ(*b.holding(kAt), (Holding{HoldingForm::kFull, 7}));
+}
+
+TEST(SharedUpdates, OtherUnitsOrAnotherBaseAreNeverGivenAnothersResult) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b, c;
+  for (Replica* r : {&a, &b, &c}) r->share_decoded(shared);
+  const auto payload = full_payload(slope());
+  for (Replica* r : {&a, &b, &c}) take_full(*r, kAt, 5, payload);
+  std::vector<std::uint8_t> da, db;
+  const UpdateBatchMsg to_sand = one_unit(kAt, 3, make_voxel(materials::kSand, 255), 6, da);
+  const UpdateBatchMsg to_air = one_unit(kAt, 3, Voxel{}, 6, db);
+  ASSERT_TRUE(a.apply_update_batch(to_sand).ok());
+  ASSERT_TRUE(b.apply_update_batch(to_air).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 0u) << "other units: made anew";
+  EXPECT_EQ(b.get(chunk_origin(kAt) + Vec3i{12, 0, 0}), Voxel{});
+  EXPECT_EQ(a.get(chunk_origin(kAt) + Vec3i{12, 0, 0}).material, materials::kSand);
+  // c's chunk is the Full record's, not a's result: a's units on another
+  // base are applied by c itself.
+  ASSERT_TRUE(c.apply_update_batch(to_sand).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 1u) << "c holds the same base as a did and is sent a's units";
+  EXPECT_TRUE(held(a, kAt) == held(c, kAt));
+  // b (holding its own result) sent a's units of the next tick: another base.
+  ASSERT_TRUE(b.apply_update_batch(one_unit(kAt, 3, make_voxel(materials::kSand, 255), 7, db)).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 1u);
+  EXPECT_TRUE(held(b, kAt) == held(a, kAt));
+}
+
+TEST(SharedUpdates, AUnitThatEmptiesTheChunkLeavesNothingToShareAndNothingHeld) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b;
+  a.share_decoded(shared);
+  b.share_decoded(shared);
+  // A chunk whose only matter is in unit 0.
+  Box one({kChunkSize, kChunkSize, kChunkSize});
+  one.set(1, 1, 1, make_voxel(materials::kRock, 255));
+  const auto payload = full_payload(one);
+  take_full(a, kAt, 5, payload);
+  take_full(b, kAt, 5, payload);
+  std::vector<std::uint8_t> data;
+  const UpdateBatchMsg clear = one_unit(kAt, 0, Voxel{}, 6, data);
+  ASSERT_TRUE(a.apply_update_batch(clear).ok());
+  ASSERT_TRUE(b.apply_update_batch(clear).ok());
+  EXPECT_EQ(a.grid().find_chunk(kAt), nullptr);
+  EXPECT_EQ(b.grid().find_chunk(kAt), nullptr);
+  EXPECT_EQ(a.get(chunk_origin(kAt) + Vec3i{1, 1, 1}), Voxel{});
+  EXPECT_EQ(shared->updates().stats().entries, 0u);
+}
+
+}  // namespace
+}  // namespace terrane
