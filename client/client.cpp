@@ -242,12 +242,15 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       auto b = parse_update_batch(*m.body_as_UpdateBatch());
       if (!b) return fail(b.error());
       std::vector<Region> changed;
-      auto n = replica_.apply_update_batch(*b, callbacks_.on_update ? &changed : nullptr);
+      VoxelChanges voxels{voxel_change_cap_, {}, false};
+      const bool record = callbacks_.on_update && voxel_change_cap_ > 0;
+      auto n = replica_.apply_update_batch(*b, callbacks_.on_update ? &changed : nullptr, record ? &voxels : nullptr);
       if (!n) return fail(n.error());
       ++counters_.update_batches;
       counters_.units_updated += *n;
       if (callbacks_.on_update_batch || callbacks_.on_update)
-        after = [this, info = UpdateInfo{b->tick, std::move(b->revisions), std::move(changed)}] {
+        after = [this, info = UpdateInfo{b->tick, std::move(b->revisions), std::move(changed), record,
+                                         std::move(voxels.changes), voxels.truncated}] {
           if (callbacks_.on_update_batch) callbacks_.on_update_batch(info.tick, info.revisions);
           if (callbacks_.on_update) callbacks_.on_update(info);
         };
@@ -509,6 +512,11 @@ std::vector<ServerNoticeMsg> Client::notices() const {
 bool Client::request_chunk_hash(Vec3i chunk_pos) {
   return connection_.send(build_chunk_hash_request(chunk_pos), wire::Body::ChunkHashRequest);
 }
+void Client::capture_voxel_changes(std::size_t max_per_batch) {
+  std::lock_guard lock(mutex_);
+  voxel_change_cap_ = max_per_batch;
+}
+
 bool Client::ping(std::uint64_t nonce) { return connection_.send(build_ping(nonce), wire::Body::Ping); }
 bool Client::send_raw(Frame bytes) { return connection_.send(std::move(bytes), wire::Body::NONE); }
 

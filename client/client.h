@@ -110,11 +110,16 @@ struct HashCheck {
 
 // One UpdateBatch as applied to the replica: its tick, the chunks it
 // touched with their new revisions, and per chunk held at full resolution
-// the voxel box its changed units cover.
+// the voxel box its changed units cover. With capture_voxel_changes on,
+// also the voxels it changed with their values before and after (bounded
+// per batch; truncated says some were left out).
 struct UpdateInfo {
   std::uint64_t tick = 0;
   std::vector<ChunkRevisionMsg> revisions;
   std::vector<Region> changed;
+  bool voxels_recorded = false;  // capture_voxel_changes was on for this batch
+  std::vector<VoxelChange> voxels;
+  bool voxels_truncated = false;
 };
 
 struct ClientCallbacks {
@@ -217,6 +222,10 @@ class Client : private ConnectionHandler {
   std::uint32_t undo();
   std::uint32_t redo();
   bool request_chunk_hash(Vec3i chunk_pos);
+  // From now on each on_update's UpdateInfo carries the voxels its batch
+  // changed, before and after, at most max_per_batch of them (0: none,
+  // the default; recording costs a comparison per voxel written).
+  void capture_voxel_changes(std::size_t max_per_batch);
   // An operator's command (the session's token must have the admin role);
   // the answer arrives as ClientView::admin_results[id] and on_admin_result.
   // 0 if it could not be sent.
@@ -300,6 +309,7 @@ class Client : private ConnectionHandler {
   bool linked_ = false;                               // ClientView::linked
   std::uint64_t sessions_ = 0;                        // ClientView::sessions
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
+  std::size_t voxel_change_cap_ = 0;                  // capture_voxel_changes
 
   StreamDecodeScratch stream_scratch_;  // io side
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered

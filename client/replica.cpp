@@ -135,7 +135,8 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
   return true;
 }
 
-Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed) {
+Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed,
+                                                VoxelChanges* voxels) {
   const std::size_t cap = std::min(kMaxBatchUnits, m.revisions.size() * kUpdateUnitsPerChunk);
   std::vector<UnitUpdate>& units_in = update_scratch;
   units_in.resize(cap);
@@ -171,7 +172,20 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const Region box{origin + units.box().min, origin + units.box().max};
     if (changed != nullptr) changed->push_back(box);
     entry_changed(cp, *e);
-    grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
+    if (voxels == nullptr) {
+      grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
+    } else {
+      grid_.modify(box, [&](Vec3i p, Voxel old) {
+        const Voxel now = units.at(p - origin, old);
+        if (now != old) {
+          if (voxels->changes.size() < voxels->max)
+            voxels->changes.push_back(VoxelChange{p, old, now});
+          else
+            voxels->truncated = true;
+        }
+        return now;
+      });
+    }
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
     // the update itself; the replica holds full resolution only near it.

@@ -49,7 +49,13 @@ struct UpdateEvent {
   std::uint64_t tick = 0;
   std::vector<std::pair<IVec3, std::uint64_t>> chunks;  // (chunk position, new revision)
   std::vector<std::pair<IVec3, IVec3>> regions;        // changed voxels [min, max), per chunk held in full
+  // The voxels changed, before and after, when the client records them
+  // (Client::capture_voxel_changes; Python builds its list only when read).
+  bool voxels_recorded = false;
+  std::vector<VoxelChange> voxels;
+  bool voxels_truncated = false;
 };
+
 struct Player {
   std::uint32_t id = 0;
   Vec3 position;

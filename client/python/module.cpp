@@ -33,6 +33,24 @@ PYBIND11_MODULE(_native, m) {
       .def_readonly("chunks", &UpdateEvent::chunks, "[((cx, cy, cz), revision)]: the 32^3 chunks touched.")
       .def_readonly("regions", &UpdateEvent::regions,
                     "[((x0, y0, z0), (x1, y1, z1))]: per chunk held at full resolution, the changed voxels [min, max).")
+      .def_property_readonly(
+          "voxels",
+          [](const UpdateEvent& e) -> py::object {
+            if (!e.voxels_recorded) return py::none();
+            py::list out(e.voxels.size());
+            std::size_t i = 0;
+            for (const terrane::VoxelChange& v : e.voxels)
+              out[i++] = py::make_tuple(py::make_tuple(v.voxel_pos.x, v.voxel_pos.y, v.voxel_pos.z),
+                                        py::make_tuple(int{v.before.material}, int{v.before.occupancy}),
+                                        py::make_tuple(int{v.after.material}, int{v.after.occupancy}));
+            return out;
+          },
+          "[((x, y, z), (old material id, old occupancy), (new material id, new occupancy))]: each voxel the batch "
+          "changed, in the replica before and after it applied, when the client records them "
+          "(record_voxel_changes, or on_update(fn, voxels=True)); None otherwise. At most the recording's max_voxels "
+          "(default 4096) per event: voxels_truncated tells when more changed. Client.materials names the ids.")
+      .def_readonly("voxels_truncated", &UpdateEvent::voxels_truncated,
+                    "True when the batch changed more voxels than were recorded (regions still covers them all).")
       .def("__repr__", [](const UpdateEvent& e) {
         return "<Update tick=" + std::to_string(e.tick) + " chunks=" + std::to_string(e.chunks.size()) + ">";
       });
@@ -122,8 +140,22 @@ to its client keeps it alive until then).)")
            "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
            "ConnectionError once closed with nothing left.")
       .def(
-          "on_update", [](PyClient& c, py::object fn) { return c.on(0, std::move(fn)); }, py::arg("fn"),
-          "Call fn(Update) for every update batch applied to the replica (usable as a decorator).")
+          "on_update",
+          [](const std::shared_ptr<PyClient>& c, py::object fn, bool voxels) -> py::object {
+            if (voxels && c->recorded_voxels() == 0) c->record_voxel_changes(PyClient::kDefaultRecordedVoxels);
+            // @c.on_update(voxels=True): the decorator that registers.
+            if (fn.is_none()) return py::cpp_function([c](py::object f) { return c->on(0, std::move(f)); });
+            return c->on(0, std::move(fn));
+          },
+          py::arg("fn") = py::none(), py::kw_only(), py::arg("voxels") = false,
+          "Call fn(Update) for every update batch applied to the replica (usable as a decorator, and as "
+          "@on_update(voxels=True)). voxels=True starts record_voxel_changes() (unless it is on) so each Update's "
+          "voxels holds the changed voxels' old and new values.")
+      .def("record_voxel_changes", &PyClient::record_voxel_changes,
+           py::arg("max_voxels") = PyClient::kDefaultRecordedVoxels,
+           "From now on every Update (queued or passed to callbacks) carries in voxels each voxel its batch changed, "
+           "as the replica held it before the batch and after, at most max_voxels (0..524288; 0 stops) per event, "
+           "voxels_truncated set when more changed. Off by default: then applying an update costs nothing more.")
       .def(
           "on_presence", [](PyClient& c, py::object fn) { return c.on(1, std::move(fn)); }, py::arg("fn"),
           "Call fn(Presence) when the server says who is in view.")

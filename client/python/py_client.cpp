@@ -351,6 +351,13 @@ py::object PyClient::on(std::size_t kind, py::object fn) {
   return fn;
 }
 
+void PyClient::record_voxel_changes(std::int64_t max_voxels) {
+  if (max_voxels < 0 || max_voxels > kMaxRecordedVoxels)
+    raise(PyExc_ValueError, "record_voxel_changes: max_voxels must be 0..524288 (0: stop recording)");
+  recorded_voxels_ = max_voxels;
+  c_->capture_voxel_changes(static_cast<std::size_t>(max_voxels));
+}
+
 std::uint64_t PyClient::events_dropped() const { return sink_->dropped(); }
 
 std::uint64_t PyClient::callbacks_dropped() const {

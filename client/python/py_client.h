@@ -73,6 +73,14 @@ class PyClient {
   // Registers fn for events of kind (update, presence, message, disconnect,
   // reconnected: the index in Event).
   py::object on(std::size_t kind, py::object fn);
+  // Update events carry the voxels each batch changed, before and after, at
+  // most max_voxels per event (0: no longer; ValueError beyond
+  // kMaxRecordedVoxels). The old values are read by the io side as it
+  // applies the batch to the replica.
+  static constexpr std::int64_t kMaxRecordedVoxels = 16 * 32768;  // a batch's most: 16 chunks of 32^3
+  static constexpr std::int64_t kDefaultRecordedVoxels = 4096;
+  void record_voxel_changes(std::int64_t max_voxels);
+  std::int64_t recorded_voxels() const { return recorded_voxels_; }
   std::uint64_t events_dropped() const;
   std::uint64_t callbacks_dropped() const;
   // Forgets every callback (GIL held): after the last has run, so a
@@ -159,6 +167,7 @@ class PyClient {
   std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side) and walker_
   Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
+  std::int64_t recorded_voxels_ = 0;       // record_voxel_changes (GIL)
 };
 
 // Every live client, so Python's exit can close them (registry of weak

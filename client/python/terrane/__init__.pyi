@@ -1,7 +1,7 @@
 # Type hints for the terrane package (the C++ bindings in terrane._native and
 # the asyncio helpers in terrane/__init__.py).
 from typing import (Any, Awaitable, Callable, Generator, Iterator, List, Optional, Sequence, SupportsIndex, Tuple,
-                    TypeVar, Union)
+                    TypeVar, Union, overload)
 
 import numpy
 import numpy.typing
@@ -23,11 +23,18 @@ class EditOutcomeUnknown(RuntimeError):
     not learn it). Not an EditRejected: read the world before trying again."""
 class Unreachable(RuntimeError): ...
 
+VoxelValue = Tuple[int, int]  # material id (Client.materials names it), occupancy 0..255
+
 class Update:
     kind: str  # "update"
     tick: int
     chunks: List[Tuple[IVec3, int]]
     regions: List[Tuple[IVec3, IVec3]]
+    # Each voxel the batch changed, (position, old, new), old as the replica held it before the batch: only
+    # while the client records them (record_voxel_changes, on_update(fn, voxels=True)), else None; at most the
+    # recording's max_voxels (default 4096) per event, voxels_truncated then True.
+    voxels: Optional[List[Tuple[IVec3, VoxelValue, VoxelValue]]]
+    voxels_truncated: bool
 
 class Player:
     id: int
@@ -74,7 +81,11 @@ class Client:
     def loaded(self) -> bool: ...
     def verify(self, timeout: float = 60.0) -> int: ...
     def next_event(self, kind: Optional[str] = None, timeout: float = 30.0) -> Event: ...
-    def on_update(self, fn: F) -> F: ...
+    @overload
+    def on_update(self, fn: F, *, voxels: bool = False) -> F: ...
+    @overload
+    def on_update(self, fn: None = None, *, voxels: bool = False) -> Callable[[F], F]: ...
+    def record_voxel_changes(self, max_voxels: int = 4096) -> None: ...  # 0..524288; 0 stops
     def on_presence(self, fn: F) -> F: ...
     def on_message(self, fn: F) -> F: ...
     def on_disconnect(self, fn: F) -> F: ...
