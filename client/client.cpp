@@ -137,6 +137,8 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
   // (chunk, its holding now; nullopt: released), for on_holding.
   std::vector<std::pair<Vec3i, std::optional<Holding>>> changes;
   const bool tell = static_cast<bool>(callbacks_.on_holding);
+  std::vector<Vec3i> loaded;  // for on_chunks_loaded
+  const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
   const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
     if (r.kind == StreamRecordKind::kHorizon) {
       // A whole region: each chunk it newly covers is a change.
@@ -146,6 +148,10 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
       if (tell)
         for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, Holding{horizon_form(r.level), 0});
       return Ok{};
+    }
+    if (tell_loaded && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty)) {
+      const Holding* before = replica_.holding(r.chunk_pos);
+      if (before == nullptr || !before->full_resolution()) loaded.push_back(r.chunk_pos);
     }
     replica_.apply_stream_record(r);
     unconfirmed_.erase(r.chunk_pos);  // streamed again (or released): current
@@ -176,9 +182,10 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
   // Records before a bad one were applied: the replica stays consistent;
   // their changes are not reported (the connection closes).
   if (!st) return st.error();
-  if (!changes.empty())
-    *after = [this, ch = std::move(changes)] {
+  if (!changes.empty() || !loaded.empty())
+    *after = [this, ch = std::move(changes), loaded = std::move(loaded)] {
       for (const auto& [p, h] : ch) callbacks_.on_holding(p, h ? &*h : nullptr);
+      if (!loaded.empty()) callbacks_.on_chunks_loaded(loaded);
     };
   return Ok{};
 }

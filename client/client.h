@@ -139,6 +139,11 @@ struct ClientCallbacks {
   std::function<void(std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions)> on_update_batch;
   // The same event with the changed voxel boxes (runs after on_update_batch).
   std::function<void(const UpdateInfo&)> on_update;
+  // A StreamBatch made chunks held at full resolution (Full or Empty) that
+  // were not before (nothing, a mip, an estimate or a horizon image): their
+  // positions, once per batch. A chunk sent again while held in full is not
+  // in it.
+  std::function<void(const std::vector<Vec3i>& chunk_positions)> on_chunks_loaded;
   // A Presence arrived: the other clients in view, nearest first.
   std::function<void(const std::vector<PresenceEntryMsg>&)> on_presence;
   std::function<void(const std::string& reason)> on_disconnected;

@@ -17,6 +17,13 @@ UpdateEvent to_event(const UpdateInfo& u) {
   return e;
 }
 
+LoadedEvent to_event(const std::vector<Vec3i>& chunk_positions) {
+  LoadedEvent e;
+  e.chunks.reserve(chunk_positions.size());
+  for (const Vec3i cp : chunk_positions) e.chunks.push_back(ivec(cp));
+  return e;
+}
+
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p) {
   PresenceEvent e;
   for (const auto& x : p) e.players.push_back(Player{x.client_id, vec(x.position), utf8(x.name)});

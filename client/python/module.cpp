@@ -54,6 +54,15 @@ PYBIND11_MODULE(_native, m) {
       .def("__repr__", [](const UpdateEvent& e) {
         return "<Update tick=" + std::to_string(e.tick) + " chunks=" + std::to_string(e.chunks.size()) + ">";
       });
+  py::class_<LoadedEvent>(m, "Loaded",
+                          "Chunks held at full resolution that were not before (not held, or only coarser), from one "
+                          "batch the server streamed; reported once report_loaded is on (or an on_loaded callback is "
+                          "registered).")
+      .def_property_readonly_static("kind", [](const py::object&) { return "loaded"; })
+      .def_readonly("chunks", &LoadedEvent::chunks,
+                    "[(cx, cy, cz)]: the 32^3 chunks, each covering voxels [32 c, 32 c + 32) on every axis.")
+      .def("__repr__",
+           [](const LoadedEvent& e) { return "<Loaded chunks=" + std::to_string(e.chunks.size()) + ">"; });
   py::class_<Player>(m, "Player", "Another client in view.")
       .def_readonly("id", &Player::id, "The server's id of the client (stable for its connection).")
       .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
@@ -135,7 +144,8 @@ to its client keeps it alive until then).)")
            "Ask the server for the chunk hash of every full-resolution chunk and compare each with the replica; "
            "returns how many differ (0: the replica is exact).")
       .def("next_event", &PyClient::next_event, py::arg("kind") = py::none(), py::arg("timeout") = 30.0,
-           "The oldest queued event (of kind 'update', 'presence', 'message', 'disconnect' or 'reconnected', or any), "
+           "The oldest queued event (of kind 'update', 'presence', 'message', 'disconnect', 'reconnected' or 'loaded', "
+           "or any), "
            "removed from "
            "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
            "ConnectionError once closed with nothing left.")
@@ -156,6 +166,13 @@ to its client keeps it alive until then).)")
            "From now on every Update (queued or passed to callbacks) carries in voxels each voxel its batch changed, "
            "as the replica held it before the batch and after, at most max_voxels (0..524288; 0 stops) per event, "
            "voxels_truncated set when more changed. Off by default: then applying an update costs nothing more.")
+      .def(
+          "on_loaded", [](PyClient& c, py::object fn) { return c.on(5, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Loaded) when chunks become held at full resolution (turns report_loaded on).")
+      .def_property("report_loaded", &PyClient::reporting_loaded, &PyClient::report_loaded,
+                    "Whether Loaded events (chunks newly held at full resolution) are queued for next_event and "
+                    "passed to callbacks. Off by default, so existing waits on any event are not flooded while the "
+                    "view loads; on_loaded turns it on.")
       .def(
           "on_presence", [](PyClient& c, py::object fn) { return c.on(1, std::move(fn)); }, py::arg("fn"),
           "Call fn(Presence) when the server says who is in view.")

@@ -10,6 +10,7 @@
 #include <pybind11/stl.h>
 
 #include <asio.hpp>
+#include <atomic>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -71,7 +72,8 @@ class PyClient {
   int verify(double timeout);
   py::object next_event(const std::optional<std::string>& kind, double timeout);
   // Registers fn for events of kind (update, presence, message, disconnect,
-  // reconnected: the index in Event).
+  // reconnected, loaded: the index in Event). A loaded callback turns
+  // report_loaded on.
   py::object on(std::size_t kind, py::object fn);
   // Update events carry the voxels each batch changed, before and after, at
   // most max_voxels per event (0: no longer; ValueError beyond
@@ -81,6 +83,10 @@ class PyClient {
   static constexpr std::int64_t kDefaultRecordedVoxels = 4096;
   void record_voxel_changes(std::int64_t max_voxels);
   std::int64_t recorded_voxels() const { return recorded_voxels_; }
+  // Loaded events (chunks newly held at full resolution) are queued and
+  // passed to callbacks from now on (or no longer).
+  void report_loaded(bool on) { report_loaded_->store(on); }
+  bool reporting_loaded() const { return report_loaded_->load(); }
   std::uint64_t events_dropped() const;
   std::uint64_t callbacks_dropped() const;
   // Forgets every callback (GIL held): after the last has run, so a
@@ -168,6 +174,8 @@ class PyClient {
   Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
   std::int64_t recorded_voxels_ = 0;       // record_voxel_changes (GIL)
+  // report_loaded: read by the io side's on_chunks_loaded.
+  std::shared_ptr<std::atomic<bool>> report_loaded_ = std::make_shared<std::atomic<bool>>(false);
 };
 
 // Every live client, so Python's exit can close them (registry of weak

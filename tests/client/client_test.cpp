@@ -486,6 +486,36 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
 
 bool fill_acknowledged(Client& c, const Region& box, Voxel v);
 
+// on_chunks_loaded names each chunk as it first becomes held at full
+// resolution: every chunk of the full-resolution region, once.
+TEST_F(ClientServerTest, ChunksLoadedNamesEachChunkOnceAsItReachesFullResolution) {
+  start_server();
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<Vec3i> loaded;
+  ClientCallbacks cb;
+  cb.on_chunks_loaded = [&](const std::vector<Vec3i>& chunks) {
+    EXPECT_FALSE(chunks.empty());
+    std::lock_guard lock(mu);
+    loaded.insert(loaded.end(), chunks.begin(), chunks.end());
+    cv.notify_all();
+  };
+  Client c(options("loaded"), cb);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto near = wait_full_res(c, 32);
+  ASSERT_FALSE(near.empty());
+  std::unique_lock lock(mu);
+  const auto has = [&](Vec3i cp) { return std::find(loaded.begin(), loaded.end(), cp) != loaded.end(); };
+  ASSERT_TRUE(cv.wait_for(lock, kDeadline, [&] { return std::all_of(near.begin(), near.end(), has); }));
+  std::set<std::tuple<int, int, int>> once;
+  for (const Vec3i cp : loaded) EXPECT_TRUE(once.insert({cp.x, cp.y, cp.z}).second) << "a chunk loaded twice";
+  const std::vector<Vec3i> all = loaded;
+  lock.unlock();
+  EXPECT_TRUE(c.with_replica([&](const Replica& r) { return all_full(r, all); }));
+  c.disconnect();
+}
+
 // With capture_voxel_changes on, on_update carries each voxel an edit
 // changed as the replica held it before and after; off, none.
 TEST_F(ClientServerTest, UpdatesCarryTheVoxelsTheyChangedOnceAsked) {

@@ -33,6 +33,7 @@ from terrane._native import (  # noqa: F401
     EditFuture,
     EditOutcomeUnknown,
     EditRejected,
+    Loaded,
     Message,
     Player,
     Presence,
@@ -44,7 +45,7 @@ from terrane._native import (  # noqa: F401
 )
 
 __all__ = [
-    "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
+    "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Loaded", "Message", "Player", "Presence",
     "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "pace", "paced",
     "synced", "in_thread", "follow", "AIR",
 ]

@@ -36,6 +36,10 @@ class Update:
     voxels: Optional[List[Tuple[IVec3, VoxelValue, VoxelValue]]]
     voxels_truncated: bool
 
+class Loaded:
+    kind: str  # "loaded"
+    chunks: List[IVec3]  # 32^3 chunks newly held at full resolution, from one streamed batch
+
 class Player:
     id: int
     position: Vec3
@@ -61,7 +65,7 @@ class Disconnect:
 class Reconnected:
     kind: str  # "reconnected"
 
-Event = Union[Update, Presence, Message, Disconnect, Reconnected]
+Event = Union[Update, Presence, Message, Disconnect, Reconnected, Loaded]
 
 class EditFuture:
     @property
@@ -86,6 +90,8 @@ class Client:
     @overload
     def on_update(self, fn: None = None, *, voxels: bool = False) -> Callable[[F], F]: ...
     def record_voxel_changes(self, max_voxels: int = 4096) -> None: ...  # 0..524288; 0 stops
+    def on_loaded(self, fn: F) -> F: ...
+    report_loaded: bool  # Loaded events queued and passed to callbacks (off by default; on_loaded turns it on)
     def on_presence(self, fn: F) -> F: ...
     def on_message(self, fn: F) -> F: ...
     def on_disconnect(self, fn: F) -> F: ...
