@@ -19,7 +19,8 @@ import terrane  # noqa: E402
 
 BEGIN, END = "<!-- api:begin -->", "<!-- api:end -->"
 
-FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread", "follow"]
+FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread", "follow",
+             "keep_away"]
 CLASSES = ["Client", "EditFuture", "Swarm", "Update", "Loaded", "Presence", "Player", "Message", "Disconnect",
            "Reconnected", "EditRejected", "EditOutcomeUnknown", "Unreachable"]
 
