@@ -234,7 +234,9 @@ to its client keeps it alive until then).)")
            "Call fn() on the callbacks thread once the next event is queued or the client closed (terrane.event).")
       .def("_when_synced", &PyClient::when_synced, py::arg("fn"),
            "Call fn() on the callbacks thread once everything the server sent so far is applied (terrane.synced).")
-      .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
+      .def("undo", &PyClient::undo, "Undo this player's last edit (voxels others changed since keep their change): this connection's, and, "
+           "when the server's tokens file gives the player its own token (which proves it is the same player), "
+           "those of its earlier connections since the server started.")
       .def("redo", &PyClient::redo, "Redo the last undone edit.")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
            "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")
