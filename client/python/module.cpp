@@ -152,7 +152,8 @@ to its client keeps it alive until then).)")
       .def(
           "on_update",
           [](const std::shared_ptr<PyClient>& c, py::object fn, bool voxels) -> py::object {
-            if (voxels && c->recorded_voxels() == 0) c->record_voxel_changes(PyClient::kDefaultRecordedVoxels);
+            Reporting& r = c->reporting();
+            if (voxels && r.recorded_voxels() == 0) r.record_voxel_changes(Reporting::kDefaultRecordedVoxels);
             // @c.on_update(voxels=True): the decorator that registers.
             if (fn.is_none()) return py::cpp_function([c](py::object f) { return c->on(0, std::move(f)); });
             return c->on(0, std::move(fn));
@@ -161,18 +162,21 @@ to its client keeps it alive until then).)")
           "Call fn(Update) for every update batch applied to the replica (usable as a decorator, and as "
           "@on_update(voxels=True)). voxels=True starts record_voxel_changes() (unless it is on) so each Update's "
           "voxels holds the changed voxels' old and new values.")
-      .def("record_voxel_changes", &PyClient::record_voxel_changes,
-           py::arg("max_voxels") = PyClient::kDefaultRecordedVoxels,
+      .def("record_voxel_changes",
+           [](PyClient& c, std::int64_t max_voxels) { c.reporting().record_voxel_changes(max_voxels); },
+           py::arg("max_voxels") = Reporting::kDefaultRecordedVoxels,
            "From now on every Update (queued or passed to callbacks) carries in voxels each voxel its batch changed, "
            "as the replica held it before the batch and after, at most max_voxels (0..524288; 0 stops) per event, "
            "voxels_truncated set when more changed. Off by default: then applying an update costs nothing more.")
       .def(
           "on_loaded", [](PyClient& c, py::object fn) { return c.on(5, std::move(fn)); }, py::arg("fn"),
           "Call fn(Loaded) when chunks become held at full resolution (turns report_loaded on).")
-      .def_property("report_loaded", &PyClient::reporting_loaded, &PyClient::report_loaded,
-                    "Whether Loaded events (chunks newly held at full resolution) are queued for next_event and "
-                    "passed to callbacks. Off by default, so existing waits on any event are not flooded while the "
-                    "view loads; on_loaded turns it on.")
+      .def_property(
+          "report_loaded", [](PyClient& c) { return c.reporting().reporting_loaded(); },
+          [](PyClient& c, bool on) { c.reporting().report_loaded(on); },
+          "Whether Loaded events (chunks newly held at full resolution) are queued for next_event and passed to "
+          "callbacks. Off by default, so existing waits on any event are not flooded while the view loads; on_loaded "
+          "turns it on.")
       .def(
           "on_presence", [](PyClient& c, py::object fn) { return c.on(1, std::move(fn)); }, py::arg("fn"),
           "Call fn(Presence) when the server says who is in view.")

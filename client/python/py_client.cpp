@@ -126,7 +126,7 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
     ids->event_queued();
   };
   cb.on_update = [push](const UpdateInfo& u) { push(to_event(u)); };
-  cb.on_chunks_loaded = [push, on = report_loaded_](const std::vector<Vec3i>& chunks) {
+  cb.on_chunks_loaded = [push, on = reporting_.loaded_flag()](const std::vector<Vec3i>& chunks) {
     if (on->load()) push(to_event(chunks));
   };
   cb.on_presence = [push, seen = std::make_shared<PresenceChanges>()](const std::vector<PresenceEntryMsg>& p) {
@@ -148,6 +148,7 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
   walker_ = Walker(c_, pacing_);
+  reporting_.bind(c_);
   std::string err;
   bool ok = false;
   ok = without_gil([&] { return c_->connect(&err); });
@@ -348,19 +349,12 @@ py::object PyClient::next_event(const std::optional<std::string>& kind_or_none, 
 py::object PyClient::on(std::size_t kind, py::object fn) {
   if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "the callback must be callable");
   handlers_->of(kind).push_back(fn);
-  if (kind == 5) report_loaded(true);
+  if (kind == 5) reporting_.report_loaded(true);
   slot_->get();
   sink_->enable_callbacks();
   // Registered after the end: it still hears of it.
   if (kind == 3 && c_->closed()) sink_->post_one(kind, handlers_->of(kind).size() - 1, DisconnectEvent{utf8(c_->disconnect_reason())});
   return fn;
-}
-
-void PyClient::record_voxel_changes(std::int64_t max_voxels) {
-  if (max_voxels < 0 || max_voxels > kMaxRecordedVoxels)
-    raise(PyExc_ValueError, "record_voxel_changes: max_voxels must be 0..524288 (0: stop recording)");
-  recorded_voxels_ = max_voxels;
-  c_->capture_voxel_changes(static_cast<std::size_t>(max_voxels));
 }
 
 std::uint64_t PyClient::events_dropped() const { return sink_->dropped(); }

@@ -10,7 +10,6 @@
 #include <pybind11/stl.h>
 
 #include <asio.hpp>
-#include <atomic>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -23,6 +22,7 @@
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
+#include "client/python/reporting.h"
 #include "client/python/walker.h"
 #include "client/python/watches.h"
 
@@ -73,20 +73,11 @@ class PyClient {
   py::object next_event(const std::optional<std::string>& kind, double timeout);
   // Registers fn for events of kind (update, presence, message, disconnect,
   // reconnected, loaded: the index in Event). A loaded callback turns
-  // report_loaded on.
+  // Loaded events on (Reporting).
   py::object on(std::size_t kind, py::object fn);
-  // Update events carry the voxels each batch changed, before and after, at
-  // most max_voxels per event (0: no longer; ValueError beyond
-  // kMaxRecordedVoxels). The old values are read by the io side as it
-  // applies the batch to the replica.
-  static constexpr std::int64_t kMaxRecordedVoxels = 16 * 32768;  // a batch's most: 16 chunks of 32^3
-  static constexpr std::int64_t kDefaultRecordedVoxels = 4096;
-  void record_voxel_changes(std::int64_t max_voxels);
-  std::int64_t recorded_voxels() const { return recorded_voxels_; }
-  // Loaded events (chunks newly held at full resolution) are queued and
-  // passed to callbacks from now on (or no longer).
-  void report_loaded(bool on) { report_loaded_->store(on); }
-  bool reporting_loaded() const { return report_loaded_->load(); }
+  // What the io side reports beyond the default events: changed voxels,
+  // Loaded events (client/python/reporting.h).
+  Reporting& reporting() { return reporting_; }
   std::uint64_t events_dropped() const;
   std::uint64_t callbacks_dropped() const;
   // Forgets every callback (GIL held): after the last has run, so a
@@ -173,9 +164,7 @@ class PyClient {
   std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side) and walker_
   Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
-  std::int64_t recorded_voxels_ = 0;       // record_voxel_changes (GIL)
-  // report_loaded: read by the io side's on_chunks_loaded.
-  std::shared_ptr<std::atomic<bool>> report_loaded_ = std::make_shared<std::atomic<bool>>(false);
+  Reporting reporting_;  // bound to c_ once it is made
 };
 
 // Every live client, so Python's exit can close them (registry of weak
