@@ -137,6 +137,8 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
   // (chunk, its holding now; nullopt: released), for on_holding.
   std::vector<std::pair<Vec3i, std::optional<Holding>>> changes;
   const bool tell = static_cast<bool>(callbacks_.on_holding);
+  std::vector<Vec3i> loaded;  // for on_chunks_loaded
+  const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
   const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
     if (r.kind == StreamRecordKind::kHorizon) {
       // A whole region: each chunk it newly covers is a change.
@@ -146,6 +148,10 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
       if (tell)
         for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, Holding{horizon_form(r.level), 0});
       return Ok{};
+    }
+    if (tell_loaded && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty)) {
+      const Holding* before = replica_.holding(r.chunk_pos);
+      if (before == nullptr || !before->full_resolution()) loaded.push_back(r.chunk_pos);
     }
     replica_.apply_stream_record(r);
     unconfirmed_.erase(r.chunk_pos);  // streamed again (or released): current
@@ -176,9 +182,10 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
   // Records before a bad one were applied: the replica stays consistent;
   // their changes are not reported (the connection closes).
   if (!st) return st.error();
-  if (!changes.empty())
-    *after = [this, ch = std::move(changes)] {
+  if (!changes.empty() || !loaded.empty())
+    *after = [this, ch = std::move(changes), loaded = std::move(loaded)] {
       for (const auto& [p, h] : ch) callbacks_.on_holding(p, h ? &*h : nullptr);
+      if (!loaded.empty()) callbacks_.on_chunks_loaded(loaded);
     };
   return Ok{};
 }
@@ -242,12 +249,15 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       auto b = parse_update_batch(*m.body_as_UpdateBatch());
       if (!b) return fail(b.error());
       std::vector<Region> changed;
-      auto n = replica_.apply_update_batch(*b, callbacks_.on_update ? &changed : nullptr);
+      VoxelChanges voxels{voxel_change_cap_, {}, false};
+      const bool record = callbacks_.on_update && voxel_change_cap_ > 0;
+      auto n = replica_.apply_update_batch(*b, callbacks_.on_update ? &changed : nullptr, record ? &voxels : nullptr);
       if (!n) return fail(n.error());
       ++counters_.update_batches;
       counters_.units_updated += *n;
       if (callbacks_.on_update_batch || callbacks_.on_update)
-        after = [this, info = UpdateInfo{b->tick, std::move(b->revisions), std::move(changed)}] {
+        after = [this, info = UpdateInfo{b->tick, std::move(b->revisions), std::move(changed), record,
+                                         std::move(voxels.changes), voxels.truncated}] {
           if (callbacks_.on_update_batch) callbacks_.on_update_batch(info.tick, info.revisions);
           if (callbacks_.on_update) callbacks_.on_update(info);
         };
@@ -509,6 +519,11 @@ std::vector<ServerNoticeMsg> Client::notices() const {
 bool Client::request_chunk_hash(Vec3i chunk_pos) {
   return connection_.send(build_chunk_hash_request(chunk_pos), wire::Body::ChunkHashRequest);
 }
+void Client::capture_voxel_changes(std::size_t max_per_batch) {
+  std::lock_guard lock(mutex_);
+  voxel_change_cap_ = max_per_batch;
+}
+
 bool Client::ping(std::uint64_t nonce) { return connection_.send(build_ping(nonce), wire::Body::Ping); }
 bool Client::send_raw(Frame bytes) { return connection_.send(std::move(bytes), wire::Body::NONE); }
 

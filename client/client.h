@@ -110,11 +110,16 @@ struct HashCheck {
 
 // One UpdateBatch as applied to the replica: its tick, the chunks it
 // touched with their new revisions, and per chunk held at full resolution
-// the voxel box its changed units cover.
+// the voxel box its changed units cover. With capture_voxel_changes on,
+// also the voxels it changed with their values before and after (bounded
+// per batch; truncated says some were left out).
 struct UpdateInfo {
   std::uint64_t tick = 0;
   std::vector<ChunkRevisionMsg> revisions;
   std::vector<Region> changed;
+  bool voxels_recorded = false;  // capture_voxel_changes was on for this batch
+  std::vector<VoxelChange> voxels;
+  bool voxels_truncated = false;
 };
 
 struct ClientCallbacks {
@@ -134,6 +139,11 @@ struct ClientCallbacks {
   std::function<void(std::uint64_t tick, const std::vector<ChunkRevisionMsg>& revisions)> on_update_batch;
   // The same event with the changed voxel boxes (runs after on_update_batch).
   std::function<void(const UpdateInfo&)> on_update;
+  // A StreamBatch made chunks held at full resolution (Full or Empty) that
+  // were not before (nothing, a mip, an estimate or a horizon image): their
+  // positions, once per batch. A chunk sent again while held in full is not
+  // in it.
+  std::function<void(const std::vector<Vec3i>& chunk_positions)> on_chunks_loaded;
   // A Presence arrived: the other clients in view, nearest first.
   std::function<void(const std::vector<PresenceEntryMsg>&)> on_presence;
   std::function<void(const std::string& reason)> on_disconnected;
@@ -217,6 +227,10 @@ class Client : private ConnectionHandler {
   std::uint32_t undo();
   std::uint32_t redo();
   bool request_chunk_hash(Vec3i chunk_pos);
+  // From now on each on_update's UpdateInfo carries the voxels its batch
+  // changed, before and after, at most max_per_batch of them (0: none,
+  // the default; recording costs a comparison per voxel written).
+  void capture_voxel_changes(std::size_t max_per_batch);
   // An operator's command (the session's token must have the admin role);
   // the answer arrives as ClientView::admin_results[id] and on_admin_result.
   // 0 if it could not be sent.
@@ -300,6 +314,7 @@ class Client : private ConnectionHandler {
   bool linked_ = false;                               // ClientView::linked
   std::uint64_t sessions_ = 0;                        // ClientView::sessions
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
+  std::size_t voxel_change_cap_ = 0;                  // capture_voxel_changes
 
   StreamDecodeScratch stream_scratch_;  // io side
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered

@@ -135,7 +135,8 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
   return true;
 }
 
-Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed) {
+Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed,
+                                                VoxelChanges* voxels) {
   const std::size_t cap = std::min(kMaxBatchUnits, m.revisions.size() * kUpdateUnitsPerChunk);
   std::vector<UnitUpdate>& units_in = update_scratch;
   units_in.resize(cap);
@@ -174,8 +175,9 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     // A chunk held shared: the process's other replicas that held this very
     // chunk and were sent these units may have made the result already
     // (client/shared_updates.h); else it is made here and offered to them.
+    // Not while voxels are recorded: their old values are read as written.
     const std::span<const UnitUpdate> chunk_units(units_in.data() + begin, end - begin);
-    std::shared_ptr<const Chunk> base = shared_ ? grid_.shared_chunk(cp) : nullptr;
+    std::shared_ptr<const Chunk> base = shared_ && voxels == nullptr ? grid_.shared_chunk(cp) : nullptr;
     if (base) {
       if (std::shared_ptr<const Chunk> made = shared_->updates().find(base, chunk_units)) {
         grid_.put_shared_chunk(cp, std::move(made));
@@ -183,7 +185,20 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
         continue;
       }
     }
-    grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
+    if (voxels == nullptr) {
+      grid_.modify(box, [&](Vec3i p, Voxel old) { return units.at(p - origin, old); });
+    } else {
+      grid_.modify(box, [&](Vec3i p, Voxel old) {
+        const Voxel now = units.at(p - origin, old);
+        if (now != old) {
+          if (voxels->changes.size() < voxels->max)
+            voxels->changes.push_back(VoxelChange{p, old, now});
+          else
+            voxels->truncated = true;
+        }
+        return now;
+      });
+    }
     if (base) shared_->updates().add(base, chunk_units, grid_.share_chunk(cp));
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than

@@ -56,6 +56,22 @@ struct ReplicaMemory {
   ReplicaMemory& operator+=(const ReplicaMemory& o);
 };
 
+// One voxel an UpdateBatch changed, with its value before and after.
+struct VoxelChange {
+  Vec3i voxel_pos;
+  Voxel before;
+  Voxel after;
+};
+// What apply_update_batch records of the voxels it changes: those whose
+// value differs after the batch, in the order applied, at most max (a
+// batch may change a whole chunk: the record is bounded); truncated once
+// more changed than were recorded.
+struct VoxelChanges {
+  std::size_t max = 0;
+  std::vector<VoxelChange> changes;
+  bool truncated = false;
+};
+
 class Replica {
  public:
   Replica();
@@ -76,8 +92,11 @@ class Replica {
   // ignored) and takes the batch's revisions. Returns the units applied.
   // Errors: the codec's, or kInvalidValue for a unit of a chunk the batch
   // lists no revision for. With changed set, appends per chunk applied the
-  // voxel box its units cover.
-  Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed = nullptr);
+  // voxel box its units cover. With voxels set, records each voxel whose
+  // value the batch changed as it was before and is now (read in the same
+  // pass that writes it; nothing recorded costs nothing).
+  Result<std::size_t> apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed = nullptr,
+                                         VoxelChanges* voxels = nullptr);
 
   // --- queries ---------------------------------------------------------------
   // Valid until the replica changes.

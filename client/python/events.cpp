@@ -11,6 +11,16 @@ UpdateEvent to_event(const UpdateInfo& u) {
   e.tick = u.tick;
   for (const auto& r : u.revisions) e.chunks.emplace_back(ivec(r.chunk_pos), r.revision);
   for (const auto& r : u.changed) e.regions.emplace_back(ivec(r.min), ivec(r.max));
+  e.voxels_recorded = u.voxels_recorded;
+  e.voxels = u.voxels;
+  e.voxels_truncated = u.voxels_truncated;
+  return e;
+}
+
+LoadedEvent to_event(const std::vector<Vec3i>& chunk_positions) {
+  LoadedEvent e;
+  e.chunks.reserve(chunk_positions.size());
+  for (const Vec3i cp : chunk_positions) e.chunks.push_back(ivec(cp));
   return e;
 }
 

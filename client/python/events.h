@@ -49,6 +49,15 @@ struct UpdateEvent {
   std::uint64_t tick = 0;
   std::vector<std::pair<IVec3, std::uint64_t>> chunks;  // (chunk position, new revision)
   std::vector<std::pair<IVec3, IVec3>> regions;        // changed voxels [min, max), per chunk held in full
+  // The voxels changed, before and after, when the client records them
+  // (Client::capture_voxel_changes; Python builds its list only when read).
+  bool voxels_recorded = false;
+  std::vector<VoxelChange> voxels;
+  bool voxels_truncated = false;
+};
+// Chunks held at full resolution that were not before, from one StreamBatch.
+struct LoadedEvent {
+  std::vector<IVec3> chunks;
 };
 struct Player {
   std::uint32_t id = 0;
@@ -71,14 +80,15 @@ struct DisconnectEvent {
 };
 // A reconnect (reconnect=True) or a Redirect resumed: the new Welcome came.
 struct ReconnectedEvent {};
-using Event = std::variant<UpdateEvent, PresenceEvent, MessageEvent, DisconnectEvent, ReconnectedEvent>;
+using Event = std::variant<UpdateEvent, PresenceEvent, MessageEvent, DisconnectEvent, ReconnectedEvent, LoadedEvent>;
 
 inline const char* event_kind(const Event& e) {
-  static constexpr const char* kNames[] = {"update", "presence", "message", "disconnect", "reconnected"};
+  static constexpr const char* kNames[] = {"update", "presence", "message", "disconnect", "reconnected", "loaded"};
   return kNames[e.index()];
 }
 
 UpdateEvent to_event(const UpdateInfo& u);
+LoadedEvent to_event(const std::vector<Vec3i>& chunk_positions);
 PresenceEvent to_event(const std::vector<PresenceEntryMsg>& p);
 // Who came into view and who went since the previous Presence: the ids of
 // the last one a client received (io side, one per client).
@@ -145,15 +155,16 @@ class DispatcherSlot {
 
 // The Python callbacks of one client (touched only under the GIL).
 struct Handlers {
-  static constexpr std::size_t kKinds = 5;  // the Event alternatives, in their order
-  std::vector<py::object> update, presence, message, disconnect, reconnected;
+  static constexpr std::size_t kKinds = 6;  // the Event alternatives, in their order
+  std::vector<py::object> update, presence, message, disconnect, reconnected, loaded;
   std::vector<py::object>& of(std::size_t kind) {
     switch (kind) {
       case 0: return update;
       case 1: return presence;
       case 2: return message;
       case 3: return disconnect;
-      default: return reconnected;
+      case 4: return reconnected;
+      default: return loaded;
     }
   }
 };

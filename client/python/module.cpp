@@ -33,9 +33,36 @@ PYBIND11_MODULE(_native, m) {
       .def_readonly("chunks", &UpdateEvent::chunks, "[((cx, cy, cz), revision)]: the 32^3 chunks touched.")
       .def_readonly("regions", &UpdateEvent::regions,
                     "[((x0, y0, z0), (x1, y1, z1))]: per chunk held at full resolution, the changed voxels [min, max).")
+      .def_property_readonly(
+          "voxels",
+          [](const UpdateEvent& e) -> py::object {
+            if (!e.voxels_recorded) return py::none();
+            py::list out(e.voxels.size());
+            std::size_t i = 0;
+            for (const terrane::VoxelChange& v : e.voxels)
+              out[i++] = py::make_tuple(py::make_tuple(v.voxel_pos.x, v.voxel_pos.y, v.voxel_pos.z),
+                                        py::make_tuple(int{v.before.material}, int{v.before.occupancy}),
+                                        py::make_tuple(int{v.after.material}, int{v.after.occupancy}));
+            return out;
+          },
+          "[((x, y, z), (old material id, old occupancy), (new material id, new occupancy))]: each voxel the batch "
+          "changed, in the replica before and after it applied, when the client records them "
+          "(record_voxel_changes, or on_update(fn, voxels=True)); None otherwise. At most the recording's max_voxels "
+          "(default 4096) per event: voxels_truncated tells when more changed. Client.materials names the ids.")
+      .def_readonly("voxels_truncated", &UpdateEvent::voxels_truncated,
+                    "True when the batch changed more voxels than were recorded (regions still covers them all).")
       .def("__repr__", [](const UpdateEvent& e) {
         return "<Update tick=" + std::to_string(e.tick) + " chunks=" + std::to_string(e.chunks.size()) + ">";
       });
+  py::class_<LoadedEvent>(m, "Loaded",
+                          "Chunks held at full resolution that were not before (not held, or only coarser), from one "
+                          "batch the server streamed; reported once report_loaded is on (or an on_loaded callback is "
+                          "registered).")
+      .def_property_readonly_static("kind", [](const py::object&) { return "loaded"; })
+      .def_readonly("chunks", &LoadedEvent::chunks,
+                    "[(cx, cy, cz)]: the 32^3 chunks, each covering voxels [32 c, 32 c + 32) on every axis.")
+      .def("__repr__",
+           [](const LoadedEvent& e) { return "<Loaded chunks=" + std::to_string(e.chunks.size()) + ">"; });
   py::class_<Player>(m, "Player", "Another client in view.")
       .def_readonly("id", &Player::id, "The server's id of the client (stable for its connection).")
       .def_readonly("position", &Player::position, "(x, y, z) of its feet.")
@@ -117,13 +144,39 @@ to its client keeps it alive until then).)")
            "Ask the server for the chunk hash of every full-resolution chunk and compare each with the replica; "
            "returns how many differ (0: the replica is exact).")
       .def("next_event", &PyClient::next_event, py::arg("kind") = py::none(), py::arg("timeout") = 30.0,
-           "The oldest queued event (of kind 'update', 'presence', 'message', 'disconnect' or 'reconnected', or any), "
+           "The oldest queued event (of kind 'update', 'presence', 'message', 'disconnect', 'reconnected' or 'loaded', "
+           "or any), "
            "removed from "
            "the queue. Events queue from the connection on (the latest 4096). Raises TimeoutError, or "
            "ConnectionError once closed with nothing left.")
       .def(
-          "on_update", [](PyClient& c, py::object fn) { return c.on(0, std::move(fn)); }, py::arg("fn"),
-          "Call fn(Update) for every update batch applied to the replica (usable as a decorator).")
+          "on_update",
+          [](const std::shared_ptr<PyClient>& c, py::object fn, bool voxels) -> py::object {
+            Reporting& r = c->reporting();
+            if (voxels && r.recorded_voxels() == 0) r.record_voxel_changes(Reporting::kDefaultRecordedVoxels);
+            // @c.on_update(voxels=True): the decorator that registers.
+            if (fn.is_none()) return py::cpp_function([c](py::object f) { return c->on(0, std::move(f)); });
+            return c->on(0, std::move(fn));
+          },
+          py::arg("fn") = py::none(), py::kw_only(), py::arg("voxels") = false,
+          "Call fn(Update) for every update batch applied to the replica (usable as a decorator, and as "
+          "@on_update(voxels=True)). voxels=True starts record_voxel_changes() (unless it is on) so each Update's "
+          "voxels holds the changed voxels' old and new values.")
+      .def("record_voxel_changes",
+           [](PyClient& c, std::int64_t max_voxels) { c.reporting().record_voxel_changes(max_voxels); },
+           py::arg("max_voxels") = Reporting::kDefaultRecordedVoxels,
+           "From now on every Update (queued or passed to callbacks) carries in voxels each voxel its batch changed, "
+           "as the replica held it before the batch and after, at most max_voxels (0..524288; 0 stops) per event, "
+           "voxels_truncated set when more changed. Off by default: then applying an update costs nothing more.")
+      .def(
+          "on_loaded", [](PyClient& c, py::object fn) { return c.on(5, std::move(fn)); }, py::arg("fn"),
+          "Call fn(Loaded) when chunks become held at full resolution (turns report_loaded on).")
+      .def_property(
+          "report_loaded", [](PyClient& c) { return c.reporting().reporting_loaded(); },
+          [](PyClient& c, bool on) { c.reporting().report_loaded(on); },
+          "Whether Loaded events (chunks newly held at full resolution) are queued for next_event and passed to "
+          "callbacks. Off by default, so existing waits on any event are not flooded while the view loads; on_loaded "
+          "turns it on.")
       .def(
           "on_presence", [](PyClient& c, py::object fn) { return c.on(1, std::move(fn)); }, py::arg("fn"),
           "Call fn(Presence) when the server says who is in view.")
@@ -185,7 +238,9 @@ to its client keeps it alive until then).)")
            "Call fn() on the callbacks thread once the next event is queued or the client closed (terrane.event).")
       .def("_when_synced", &PyClient::when_synced, py::arg("fn"),
            "Call fn() on the callbacks thread once everything the server sent so far is applied (terrane.synced).")
-      .def("undo", &PyClient::undo, "Undo this connection's last edit (voxels others changed since keep their change).")
+      .def("undo", &PyClient::undo, "Undo this player's last edit (voxels others changed since keep their change): this connection's, and, "
+           "when the server's tokens file gives the player its own token (which proves it is the same player), "
+           "those of its earlier connections since the server started.")
       .def("redo", &PyClient::redo, "Redo the last undone edit.")
       .def("read_server_box", &PyClient::read_server_box, py::arg("min"), py::arg("max"), py::arg("timeout") = 30.0,
            "The server's voxels of [min, max) (at most 32^3) as read_box returns the replica's.")

@@ -126,6 +126,9 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
     ids->event_queued();
   };
   cb.on_update = [push](const UpdateInfo& u) { push(to_event(u)); };
+  cb.on_chunks_loaded = [push, on = reporting_.loaded_flag()](const std::vector<Vec3i>& chunks) {
+    if (on->load()) push(to_event(chunks));
+  };
   cb.on_presence = [push, seen = std::make_shared<PresenceChanges>()](const std::vector<PresenceEntryMsg>& p) {
     push(seen->next(p));
   };
@@ -145,6 +148,7 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   // The pool outlives the client: the deleter holds it.
   c_ = std::shared_ptr<Client>(new Client(o, std::move(cb)), [pool = a.pool](Client* c) { delete c; });
   walker_ = Walker(c_, pacing_);
+  reporting_.bind(c_);
   std::string err;
   bool ok = false;
   ok = without_gil([&] { return c_->connect(&err); });
@@ -327,9 +331,10 @@ int PyClient::verify(double timeout) {
 py::object PyClient::next_event(const std::optional<std::string>& kind_or_none, double timeout) {
   const std::string kind = kind_or_none.value_or("");
   if (!kind.empty() && kind != "update" && kind != "presence" && kind != "message" && kind != "disconnect" &&
-      kind != "reconnected")
+      kind != "reconnected" && kind != "loaded")
     raise(PyExc_ValueError,
-          "kind must be None, 'update', 'presence', 'message', 'disconnect' or 'reconnected', not '" + kind + "'");
+          "kind must be None, 'update', 'presence', 'message', 'disconnect', 'reconnected' or 'loaded', not '" +
+              kind + "'");
   const auto t = timeout_of(timeout);
   std::optional<Event> e;
   bool closed = false;
@@ -344,6 +349,7 @@ py::object PyClient::next_event(const std::optional<std::string>& kind_or_none, 
 py::object PyClient::on(std::size_t kind, py::object fn) {
   if (!PyCallable_Check(fn.ptr())) raise(PyExc_TypeError, "the callback must be callable");
   handlers_->of(kind).push_back(fn);
+  if (kind == 5) reporting_.report_loaded(true);
   slot_->get();
   sink_->enable_callbacks();
   // Registered after the end: it still hears of it.

@@ -22,6 +22,7 @@
 #include "client/python/events.h"
 #include "client/python/gil.h"
 #include "client/python/pacing.h"
+#include "client/python/reporting.h"
 #include "client/python/walker.h"
 #include "client/python/watches.h"
 
@@ -71,8 +72,12 @@ class PyClient {
   int verify(double timeout);
   py::object next_event(const std::optional<std::string>& kind, double timeout);
   // Registers fn for events of kind (update, presence, message, disconnect,
-  // reconnected: the index in Event).
+  // reconnected, loaded: the index in Event). A loaded callback turns
+  // Loaded events on (Reporting).
   py::object on(std::size_t kind, py::object fn);
+  // What the io side reports beyond the default events: changed voxels,
+  // Loaded events (client/python/reporting.h).
+  Reporting& reporting() { return reporting_; }
   std::uint64_t events_dropped() const;
   std::uint64_t callbacks_dropped() const;
   // Forgets every callback (GIL held): after the last has run, so a
@@ -159,6 +164,7 @@ class PyClient {
   std::shared_ptr<Pacing> pacing_;  // shared with the reconnected callback (io side) and walker_
   Walker walker_{nullptr, nullptr};  // set once c_ is made
   std::uint64_t confirmations_asked_ = 0;  // the session whose claims settle() asked about
+  Reporting reporting_;  // bound to c_ once it is made
 };
 
 // Every live client, so Python's exit can close them (registry of weak

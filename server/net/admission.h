@@ -20,6 +20,10 @@ struct Admission {
   bool admin = false;
   CloseReason why = CloseReason::kAuthFailed;
   std::string reason;  // sent to a refused client
+  // The name is proven the player's: the token is that player's own (a
+  // tokens file), not a shared one or none. Its undo history then outlives
+  // its sessions (server/world/parked_histories.h).
+  bool identified = false;
 };
 
 class Admitter {

@@ -8,7 +8,7 @@
 //
 //   [connected] --Hello, another version--> Disconnect naming both versions
 //        |      --Hello, refused----------> Disconnect with the Admitter's reason
-//        +------Hello, admitted-----------> replica.join(name), Welcome, Ping
+//        +------Hello, admitted-----------> replica.join(name, identified), Welcome, Ping
 //                                                |
 //   [joined] <-----------------------------------+
 //     ClientState, EditRequest, ReadBox, Holdings, ChunkHashRequest -> the replica
@@ -44,7 +44,8 @@ class ClientReplica {
  public:
   virtual ~ClientReplica() = default;
   // Once, when the client is admitted as name, before its Welcome is sent.
-  virtual void join(const std::string& name) = 0;
+  // identified: the Admission's (the name is proven the player's).
+  virtual void join(const std::string& name, bool identified) = 0;
   // A move; false if it was refused (the session is then closing).
   virtual bool move(const ClientStateMsg& state) = 0;
   virtual void edit(EditRequestMsg edit) = 0;

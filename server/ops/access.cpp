@@ -139,6 +139,7 @@ Admission AccessControl::admit(const std::string& name, const std::string& token
       return a;
     }
     a.admin = it->second.admin;
+    a.identified = true;
   } else if (!shared_token_.empty() && token != shared_token_) {
     a.reason = "authentication failed";
     return a;

@@ -86,14 +86,14 @@ void Replicator::close(CloseReason why, const std::string& text) {
 
 // --- messages ------------------------------------------------------------------
 
-void Replicator::join(const std::string& name) {
+void Replicator::join(const std::string& name, bool identified) {
   edit_rate_ = TokenBucket(world_.options().edits_per_second, world_.options().edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = name;
   joined_ = true;
   redirect_.joined(std::chrono::steady_clock::now());
   state_.position = welcome_.welcome.spawn;
-  world_.join(id_, name_, shared_from_this());
+  world_.join(id_, name_, shared_from_this(), identified);
   hashes_.start(std::chrono::steady_clock::now());
   arm_timer();
 }

@@ -106,7 +106,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void attach(std::shared_ptr<Session> session);
 
   // ClientReplica (session strand).
-  void join(const std::string& name) override;
+  void join(const std::string& name, bool identified) override;
   bool move(const ClientStateMsg& state) override;
   void edit(EditRequestMsg edit) override;
   void read_box(const ReadBoxMsg& req) override;

@@ -28,6 +28,7 @@ namespace terrane {
 struct JoinRequest {
   std::string name;
   std::shared_ptr<WorldClient> link;
+  bool identified = false;  // the name is proven the player's (Admission::identified)
 };
 struct LeaveRequest {};
 struct MovedRequest {

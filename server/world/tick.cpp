@@ -31,15 +31,35 @@ Tick::Tick(Strand& strand, World& world, Storage& storage, const WorldOptions& o
       residency_(residency),
       clients_(clients),
       authority_(authority),
-      timer_(strand) {}
+      timer_(strand),
+      parked_(options.parked_history_bytes) {}
 
 void Tick::start() {
   next_tick_ = std::chrono::steady_clock::now();
   arm_tick();
 }
 
-void Tick::join(ClientId id, std::string name) {
-  editors_.emplace(id, Editor{std::move(name), 0, History(options_.history_bytes_per_client)});
+void Tick::join(ClientId id, std::string name, bool identified) {
+  std::optional<History> kept = identified ? parked_.take(name) : std::nullopt;
+  History history = kept ? std::move(*kept) : History(options_.history_bytes_per_client);
+  editors_.emplace(id, Editor{std::move(name), 0, std::move(history), identified});
+}
+
+void Tick::leave(ClientId id) {
+  auto it = editors_.find(id);
+  if (it == editors_.end()) return;
+  Editor left = std::move(it->second);
+  editors_.erase(it);
+  if (!left.identified) return;
+  // The player's other session, if it joined before this one left (a
+  // reconnect that raced the old connection's end): a scan, once per
+  // identified leave, over the editors.
+  for (auto& [other_id, other] : editors_)
+    if (other.identified && other.name == left.name) {
+      if (other.history.steps(false) == 0 && other.history.steps(true) == 0) other.history = std::move(left.history);
+      return;
+    }
+  parked_.park(left.name, std::move(left.history));
 }
 
 void Tick::stop() {

@@ -44,6 +44,7 @@
 #include "server/world/authority.h"
 #include "server/world/fan_out.h"
 #include "server/world/history.h"
+#include "server/world/parked_histories.h"
 #include "server/world/residency.h"
 #include "server/world/world_client.h"
 #include "server/world/world_clock.h"
@@ -65,8 +66,14 @@ class Tick final : public EditQueue {
   void stop();
 
   // The rest on the strand.
-  void join(ClientId id, std::string name);
-  void leave(ClientId id) { editors_.erase(id); }
+  // An identified player (its name proven by its own token) takes back the
+  // undo history its last session left (ParkedHistories); others start
+  // with none.
+  void join(ClientId id, std::string name, bool identified = false);
+  // An identified player's history is parked for its next session, or
+  // handed to its session that joined meanwhile (the later join wins, and
+  // the earlier may leave after it) if that one has none yet.
+  void leave(ClientId id);
   // A client's edit (checked by its replicator), handed over at received.
   void edit(ClientId id, EditRequestMsg edit, std::chrono::steady_clock::time_point received);
   void rollback(std::string actor, std::vector<EditLogEntry> entries, std::optional<Region> within,
@@ -94,6 +101,7 @@ class Tick final : public EditQueue {
     std::string name;
     std::size_t edits_queued = 0;
     History history;
+    bool identified = false;
   };
   struct Rollback {
     std::string actor;
@@ -150,6 +158,7 @@ class Tick final : public EditQueue {
   std::uint64_t slow_ticks_ = 0;  // longer than half a period, since the last report
   std::chrono::steady_clock::time_point next_slow_tick_report_{};
   std::unordered_map<ClientId, Editor> editors_;
+  ParkedHistories parked_;  // identified players' histories, between their sessions
   // Edits in arrival order. One that waits (chunks, a claim) holds up only
   // the edits behind it of its player or on its chunks (apply_edits).
   std::deque<PendingEdit> edits_;

@@ -34,6 +34,9 @@ struct WorldOptions {
   std::size_t resident_chunks = 32768;
   // Undo and redo history kept per client, in bytes (oldest steps go first).
   std::size_t history_bytes_per_client = 4u << 20;
+  // The histories kept for identified players between their sessions, in
+  // bytes over all of them (the longest parked go first).
+  std::size_t parked_history_bytes = 64u << 20;
   // Called (on the world strand) when the server cannot go on, e.g. the
   // store refused a tick's changes; the owner of the Server should stop it.
   std::function<void()> on_fatal;

@@ -44,8 +44,8 @@ void WorldOwner::stop() { tick_.stop(); }
 
 // --- the request queue ---------------------------------------------------------
 
-void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client) {
-  requests_.push(WorldRequest{id, {}, JoinRequest{std::move(name), std::move(client)}});
+void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified) {
+  requests_.push(WorldRequest{id, {}, JoinRequest{std::move(name), std::move(client), identified}});
 }
 
 void WorldOwner::leave(ClientId id) { requests_.push(WorldRequest{id, {}, LeaveRequest{}}); }
@@ -81,7 +81,7 @@ void WorldOwner::handle(WorldRequest& r) {
         } else if constexpr (std::is_same_v<T, std::vector<HorizonWant>>) {
           horizons_.want(r.id, what);
         } else if constexpr (std::is_same_v<T, JoinRequest>) {
-          tick_.join(r.id, what.name);
+          tick_.join(r.id, what.name, what.identified);
           fan_out_.join(r.id, std::move(what.link), std::move(what.name));
         } else if constexpr (std::is_same_v<T, LeaveRequest>) {
           // The replicator released what it held or had asked for just

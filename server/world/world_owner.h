@@ -79,7 +79,9 @@ class WorldOwner {
   // Blocks; must not be called from an io thread.
   void stop();
 
-  void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client);
+  // identified: the name is proven the player's (its undo history then
+  // outlives the session: Tick, ParkedHistories).
+  void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified = false);
   void leave(ClientId id);
   void moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius);
   // Streaming's requests (queued after the join, with it).

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <condition_variable>
 #include <filesystem>
 #include <future>
 #include <mutex>
@@ -481,6 +482,101 @@ TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {
   ASSERT_EQ(server_->stop(), 0) << server_->output();
   expect_replica_matches_world(a, near_a, dir_.string());
   expect_replica_matches_world(b, near_b, dir_.string());
+}
+
+bool fill_acknowledged(Client& c, const Region& box, Voxel v);
+
+// on_chunks_loaded names each chunk as it first becomes held at full
+// resolution: every chunk of the full-resolution region, once.
+TEST_F(ClientServerTest, ChunksLoadedNamesEachChunkOnceAsItReachesFullResolution) {
+  start_server();
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<Vec3i> loaded;
+  ClientCallbacks cb;
+  cb.on_chunks_loaded = [&](const std::vector<Vec3i>& chunks) {
+    EXPECT_FALSE(chunks.empty());
+    std::lock_guard lock(mu);
+    loaded.insert(loaded.end(), chunks.begin(), chunks.end());
+    cv.notify_all();
+  };
+  Client c(options("loaded"), cb);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  const auto near = wait_full_res(c, 32);
+  ASSERT_FALSE(near.empty());
+  std::unique_lock lock(mu);
+  const auto has = [&](Vec3i cp) { return std::find(loaded.begin(), loaded.end(), cp) != loaded.end(); };
+  ASSERT_TRUE(cv.wait_for(lock, kDeadline, [&] { return std::all_of(near.begin(), near.end(), has); }));
+  std::set<std::tuple<int, int, int>> once;
+  for (const Vec3i cp : loaded) EXPECT_TRUE(once.insert({cp.x, cp.y, cp.z}).second) << "a chunk loaded twice";
+  const std::vector<Vec3i> all = loaded;
+  lock.unlock();
+  EXPECT_TRUE(c.with_replica([&](const Replica& r) { return all_full(r, all); }));
+  c.disconnect();
+}
+
+// With capture_voxel_changes on, on_update carries each voxel an edit
+// changed as the replica held it before and after; off, none.
+TEST_F(ClientServerTest, UpdatesCarryTheVoxelsTheyChangedOnceAsked) {
+  start_server();
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<UpdateInfo> updates;
+  ClientCallbacks cb;
+  cb.on_update = [&](const UpdateInfo& u) {
+    std::lock_guard lock(mu);
+    updates.push_back(u);
+    cv.notify_all();
+  };
+  Client c(options("changes"), cb);
+  std::string err;
+  ASSERT_TRUE(c.connect(&err)) << err;
+  wait_full_res(c, 32);
+  const auto w = c.welcome();
+  ASSERT_TRUE(w.has_value());
+  // 2^3 voxels a little below spawn, inside one chunk.
+  const Vec3i s{static_cast<int>(std::floor(w->spawn.x)), static_cast<int>(std::floor(w->spawn.y)) - 4,
+                static_cast<int>(std::floor(w->spawn.z))};
+  const Vec3i p = chunk_origin(chunk_of(s)) + Vec3i{8, 8, 8};
+  const Region box{p, p + Vec3i{2, 2, 2}};
+  Box before(box.size());
+  c.read_box(box.min, before);
+  const Voxel brick = solid(materials::kBrick);
+  c.capture_voxel_changes(1000);
+  ASSERT_TRUE(fill_acknowledged(c, box, brick));
+  std::unique_lock lock(mu);
+  const auto recorded = [&] {
+    return std::find_if(updates.begin(), updates.end(), [](const UpdateInfo& u) { return !u.voxels.empty(); });
+  };
+  ASSERT_TRUE(cv.wait_for(lock, kDeadline, [&] { return recorded() != updates.end(); }));
+  const UpdateInfo u = *recorded();
+  EXPECT_TRUE(u.voxels_recorded);
+  EXPECT_FALSE(u.voxels_truncated);
+  std::size_t expected = 0;
+  for (int y = 0; y < 2; ++y)
+    for (int z = 0; z < 2; ++z)
+      for (int x = 0; x < 2; ++x) expected += before.get(x, y, z) != brick;
+  EXPECT_EQ(u.voxels.size(), expected);
+  for (const VoxelChange& v : u.voxels) {
+    const Vec3i l = v.voxel_pos - box.min;
+    EXPECT_EQ(v.before, before.get(l.x, l.y, l.z));
+    EXPECT_EQ(v.after, brick);
+  }
+  // Off again: the next update records nothing.
+  lock.unlock();
+  c.capture_voxel_changes(0);
+  const std::size_t seen = [&] {
+    std::lock_guard l(mu);
+    return updates.size();
+  }();
+  ASSERT_TRUE(fill_acknowledged(c, box, solid(materials::kRock)));
+  lock.lock();
+  ASSERT_TRUE(cv.wait_for(lock, kDeadline, [&] { return updates.size() > seen; }));
+  EXPECT_FALSE(updates.back().voxels_recorded);
+  EXPECT_TRUE(updates.back().voxels.empty());
+  lock.unlock();
+  c.disconnect();
 }
 
 TEST_F(ClientServerTest, DroppedUpdateIsDetectedByChunkHash) {

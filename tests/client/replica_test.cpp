@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include "common/codec/update_batch.h"
 
 namespace terrane {
@@ -135,6 +137,47 @@ TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
   // A unit of a chunk the batch gives no revision for is invalid.
   auto bad = r.apply_update_batch(UpdateBatchMsg{6, data, {revs[0]}});
   EXPECT_FALSE(bad.ok());
+}
+
+// Recording an update's voxels: each voxel whose value changed, as held
+// before and after, none that a unit rewrote with its own value; at most
+// max of them, the rest applied all the same.
+TEST(Replica, UpdatesRecordEachChangedVoxelBeforeAndAfter) {
+  const Vec3i cp{1, 0, -1};
+  std::vector<UnitUpdate> ups(1);
+  ups[0].chunk_pos = cp;
+  ups[0].unit_index = 0;
+  ups[0].voxels.fill(solid(materials::kGrass));
+  ups[0].voxels[0] = solid(materials::kRock);  // as held already: not a change
+  std::vector<std::uint8_t> data;
+  net_codec_encode_update_batch(ups, data);
+  const Vec3i origin = chunk_origin(cp);
+  for (const std::size_t max : {std::size_t{1000}, std::size_t{10}}) {
+    Replica r;
+    Box rock;
+    r.apply_stream_record(full_record(cp, 1, rock, solid(materials::kRock)));
+    VoxelChanges changes{max, {}, false};
+    ASSERT_TRUE(r.apply_update_batch(UpdateBatchMsg{3, data, {ChunkRevisionMsg{cp, 2}}}, nullptr, &changes).ok());
+    const std::size_t changed = ups[0].voxels.size() - 1;
+    EXPECT_EQ(changes.changes.size(), std::min(max, changed));
+    EXPECT_EQ(changes.truncated, max < changed);
+    std::vector<Vec3i> seen;
+    for (const VoxelChange& c : changes.changes) {
+      EXPECT_EQ(c.before, solid(materials::kRock));
+      EXPECT_EQ(c.after, solid(materials::kGrass));
+      EXPECT_EQ(r.get(c.voxel_pos), solid(materials::kGrass));
+      const Vec3i local = c.voxel_pos - origin;
+      EXPECT_TRUE(local.x >= 0 && local.x < 4 && local.y >= 0 && local.y < 4 && local.z >= 0 && local.z < 4);
+      EXPECT_EQ(std::count(seen.begin(), seen.end(), c.voxel_pos), 0);
+      seen.push_back(c.voxel_pos);
+    }
+    // The whole unit is applied however many were recorded: one voxel stays Rock.
+    int rock_left = 0;
+    for (int y = 0; y < 4; ++y)
+      for (int z = 0; z < 4; ++z)
+        for (int x = 0; x < 4; ++x) rock_left += r.get(origin + Vec3i{x, y, z}) == solid(materials::kRock);
+    EXPECT_EQ(rock_left, 1);
+  }
 }
 
 TEST(Replica, SurfaceHeightReadsTheBestResolutionHeld) {

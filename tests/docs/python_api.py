@@ -19,9 +19,10 @@ import terrane  # noqa: E402
 
 BEGIN, END = "<!-- api:begin -->", "<!-- api:end -->"
 
-FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread", "follow"]
-CLASSES = ["Client", "EditFuture", "Swarm", "Update", "Presence", "Player", "Message", "Disconnect", "Reconnected",
-           "EditRejected", "EditOutcomeUnknown", "Unreachable"]
+FUNCTIONS = ["connect", "ready", "loaded", "event", "walk", "pace", "paced", "synced", "in_thread", "follow",
+             "keep_away"]
+CLASSES = ["Client", "EditFuture", "Swarm", "Update", "Loaded", "Presence", "Player", "Message", "Disconnect",
+           "Reconnected", "EditRejected", "EditOutcomeUnknown", "Unreachable"]
 
 
 def clean(text):

@@ -269,5 +269,65 @@ def test_walk_within_a_distance_and_follow_a_player(server):
     asyncio.run(main())
 
 
+def test_keep_away_from_a_point_and_from_a_player_and_a_cancelled_one_stops(server):
+    from test_walk import flat_ground
+
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="shy", view_distance=64, full_res_radius=32) as a:
+            a.wait_loaded(timeout=60)
+            x, g, z = flat_ground(a)
+            start = a.position
+            # From a point: walks until at least 6 away, reporting each step.
+            steps = []
+            walked = await terrane.keep_away(a, start, 6, speed=32, on_step=steps.append)
+            assert walked == steps and walked
+            assert _dist(a.position, start) >= 6
+            assert all(a.voxel((s[0], s[1] - 1, s[2]))[0] == "Brick" for s in walked)  # on the platform
+            assert await terrane.keep_away(a, start, 6, speed=32) == []  # that far already: no step
+            try:
+                await terrane.keep_away(a, start, 0)
+                raise AssertionError("distance 0 was accepted")
+            except ValueError:
+                pass
+            # From a player standing next to it.
+            ax, _, az = a.position
+            with terrane.connect(server.address, name="pest", position=(ax + 1, g, az), view_distance=64,
+                                 full_res_radius=32) as b:
+                b.wait_ready(30)
+
+                async def seen():
+                    while True:
+                        near_b = [p for p in a.presence if _dist(p.position, b.position) < 1]
+                        if near_b:
+                            return near_b[0].id
+                        await terrane.event(a, "presence", 30)
+
+                bid = await asyncio.wait_for(seen(), 30)
+                walked = await terrane.keep_away(a, bid, 5, speed=32)
+                assert walked and _dist(a.position, b.position) >= 5
+            # Cancelled after its first step: it stops there.
+            here = a.position
+            going = asyncio.ensure_future(terrane.keep_away(a, here, 9, speed=4))
+
+            async def first_step():  # the condition, polled on the loop
+                while a.position == here:
+                    await asyncio.sleep(0.01)
+
+            await asyncio.wait_for(first_step(), 30)
+            going.cancel()
+            try:
+                await going
+                raise AssertionError("keep_away was not cancelled")
+            except asyncio.CancelledError:
+                pass
+            stopped = a.position
+            assert _dist(stopped, here) < 9
+            await terrane.synced(a)
+            assert a.position == stopped and not a.closed, a.disconnect_reason
+
+    asyncio.run(main())
+
+
 def _dist(p, q):
     return sum((a - b) ** 2 for a, b in zip(p, q)) ** 0.5

@@ -12,9 +12,10 @@ the GIL.
 asyncio, natively: ``await future`` (an EditFuture), ``await
 terrane.paced(c.fill_box, lo, hi, "Brick")`` (the edit rate's wait as an
 asyncio sleep, then the edit, awaited), ``await terrane.pace(c)`` (the
-wait alone), ``await terrane.synced(c)``, ``await terrane.event(c, kind)``
-and ``await terrane.walk(c, target)`` (its search aside) hold no thread:
-the library's callbacks thread completes them through
+wait alone), ``await terrane.synced(c)``, ``await terrane.event(c, kind)``,
+``await terrane.walk(c, target)``, ``follow`` and ``keep_away`` (their
+searches aside) hold no thread: the library's callbacks thread completes
+them through
 ``loop.call_soon_threadsafe``, and cancelling one cancels it. An edit sent
 without ``pace`` may wait for the rate (blocking the loop): in a
 coroutine, send edits through ``paced``. ``await terrane.ready(c)``,
@@ -33,6 +34,7 @@ from terrane._native import (  # noqa: F401
     EditFuture,
     EditOutcomeUnknown,
     EditRejected,
+    Loaded,
     Message,
     Player,
     Presence,
@@ -44,9 +46,9 @@ from terrane._native import (  # noqa: F401
 )
 
 __all__ = [
-    "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Message", "Player", "Presence",
+    "Client", "Disconnect", "EditFuture", "EditOutcomeUnknown", "EditRejected", "Loaded", "Message", "Player", "Presence",
     "Reconnected", "Swarm", "Unreachable", "Update", "connect", "ready", "loaded", "event", "walk", "pace", "paced",
-    "synced", "in_thread", "follow", "AIR",
+    "synced", "in_thread", "follow", "keep_away", "AIR",
 ]
 
 AIR = "Air"
@@ -233,6 +235,69 @@ async def follow(client, player_id, distance=3.0, speed=8.0, on_step=None):
                              lambda at: _math.dist(at, where()) <= distance + 0.5)
                 continue
         await _woken(client._when_event)  # something changed: a move, an edit, a presence
+
+
+async def keep_away(client, target, distance, speed=8.0, timeout=120.0, on_step=None):
+    """Walks until the feet are at least distance voxels from target: a point
+    (x, y, z), or a Player id (an int, from presence; its position is read
+    again at every step, and a player out of view counts as far enough).
+    The place to walk to is searched straight away from the target first,
+    then turning by 45 degrees each side, distance + 2 voxels from it; each
+    step waits as an asyncio sleep, so cancelling the await stops the walker
+    where it stands. on_step(place) is called after each step. Returns the
+    places walked ([] when already that far); raises Unreachable when no
+    place that far can be reached (walls, or beyond the full-resolution
+    radius), TimeoutError or ConnectionError as walk."""
+    if not 0 < speed <= 64:
+        raise ValueError("keep_away: speed must be in (0, 64] voxels per second")
+    if not distance > 0:
+        raise ValueError("keep_away: distance must be > 0 voxels")
+    by_player = isinstance(target, int)
+
+    def where():
+        """The target now; None once a player is out of view."""
+        if not by_player:
+            return target
+        for p in client.presence:
+            if p.id == target:
+                return p.position
+        return None
+
+    def away(at):
+        t = where()
+        return t is None or _math.dist(at, t) >= distance
+
+    loop = _asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    walked = []
+    for _ in range(4):  # the target or the way may change: searched again a few times
+        if away(client.position):
+            return walked
+        here, t = client.position, where()
+        dx, dz = here[0] - t[0], here[2] - t[2]
+        heading = _math.atan2(dz, dx) if dx or dz else 0.0
+        reach = distance + 2
+        steps = None
+        for turn in (0, 1, -1, 2, -2, 3, -3, 4):  # straight away first, then turning each side
+            left = deadline - loop.time()
+            if left <= 0:
+                raise TimeoutError("keep_away: not %g voxels away within the timeout" % distance)
+            angle = heading + turn * _math.pi / 4
+            goal = (t[0] + _math.cos(angle) * reach, here[1], t[2] + _math.sin(angle) * reach)
+            try:
+                steps = await in_thread(client.find_path, goal, left)
+            except Unreachable:
+                continue
+            if steps:
+                break
+        if not steps:
+            raise Unreachable("keep_away: no place %g voxels from the target can be reached" % distance)
+        await _steps(client, steps, speed, deadline, walked, on_step, away)
+        if away(client.position):
+            return walked
+    if deadline - loop.time() <= 0:
+        raise TimeoutError("keep_away: not %g voxels away within the timeout" % distance)
+    raise Unreachable("keep_away: the way kept changing under the walker")
 
 
 async def _edit_outcome(future):

@@ -1,7 +1,7 @@
 # Type hints for the terrane package (the C++ bindings in terrane._native and
 # the asyncio helpers in terrane/__init__.py).
 from typing import (Any, Awaitable, Callable, Generator, Iterator, List, Optional, Sequence, SupportsIndex, Tuple,
-                    TypeVar, Union)
+                    TypeVar, Union, overload)
 
 import numpy
 import numpy.typing
@@ -23,11 +23,22 @@ class EditOutcomeUnknown(RuntimeError):
     not learn it). Not an EditRejected: read the world before trying again."""
 class Unreachable(RuntimeError): ...
 
+VoxelValue = Tuple[int, int]  # material id (Client.materials names it), occupancy 0..255
+
 class Update:
     kind: str  # "update"
     tick: int
     chunks: List[Tuple[IVec3, int]]
     regions: List[Tuple[IVec3, IVec3]]
+    # Each voxel the batch changed, (position, old, new), old as the replica held it before the batch: only
+    # while the client records them (record_voxel_changes, on_update(fn, voxels=True)), else None; at most the
+    # recording's max_voxels (default 4096) per event, voxels_truncated then True.
+    voxels: Optional[List[Tuple[IVec3, VoxelValue, VoxelValue]]]
+    voxels_truncated: bool
+
+class Loaded:
+    kind: str  # "loaded"
+    chunks: List[IVec3]  # 32^3 chunks newly held at full resolution, from one streamed batch
 
 class Player:
     id: int
@@ -54,7 +65,7 @@ class Disconnect:
 class Reconnected:
     kind: str  # "reconnected"
 
-Event = Union[Update, Presence, Message, Disconnect, Reconnected]
+Event = Union[Update, Presence, Message, Disconnect, Reconnected, Loaded]
 
 class EditFuture:
     @property
@@ -74,7 +85,13 @@ class Client:
     def loaded(self) -> bool: ...
     def verify(self, timeout: float = 60.0) -> int: ...
     def next_event(self, kind: Optional[str] = None, timeout: float = 30.0) -> Event: ...
-    def on_update(self, fn: F) -> F: ...
+    @overload
+    def on_update(self, fn: F, *, voxels: bool = False) -> F: ...
+    @overload
+    def on_update(self, fn: None = None, *, voxels: bool = False) -> Callable[[F], F]: ...
+    def record_voxel_changes(self, max_voxels: int = 4096) -> None: ...  # 0..524288; 0 stops
+    def on_loaded(self, fn: F) -> F: ...
+    report_loaded: bool  # Loaded events queued and passed to callbacks (off by default; on_loaded turns it on)
     def on_presence(self, fn: F) -> F: ...
     def on_message(self, fn: F) -> F: ...
     def on_disconnect(self, fn: F) -> F: ...
@@ -160,3 +177,5 @@ async def walk(client: Client, target: Vec3, speed: float = 8.0, timeout: float 
                on_step: Optional[Callable[[IVec3], Any]] = None) -> List[IVec3]: ...
 async def follow(client: Client, player_id: int, distance: float = 3.0, speed: float = 8.0,
                  on_step: Optional[Callable[[IVec3], Any]] = None) -> None: ...
+async def keep_away(client: Client, target: Union[Vec3, int], distance: float, speed: float = 8.0,
+                    timeout: float = 120.0, on_step: Optional[Callable[[IVec3], Any]] = None) -> List[IVec3]: ...

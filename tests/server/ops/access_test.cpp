@@ -122,8 +122,10 @@ TEST_F(AccessTest, AReloadTakesNewTokensAndTheStoresListsAndSaysWhatChanged) {
                                "");
   ASSERT_TRUE(a.ok()) << a.error().message;
   std::unique_ptr<AccessControl> tokens = std::move(*a);
-  EXPECT_TRUE(tokens->admit("bob", "bob-token", "127.0.0.1", kNow).ok);
+  const Admission bob = tokens->admit("bob", "bob-token", "127.0.0.1", kNow);
+  EXPECT_TRUE(bob.ok && bob.identified) << "a player's own token proves the name";
   EXPECT_FALSE(tokens->admit("carol", "carol-token", "127.0.0.1", kNow).ok);
+  EXPECT_FALSE(access_->admit("alice", "", "127.0.0.1", kNow).identified) << "an open server proves no name";
   // Another process (here: the fixture's AccessControl) bans and lists.
   ban("griefer", false, 0, "tunnelling");
   ASSERT_TRUE(access_->whitelist_add("alice").ok());
