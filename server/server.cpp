@@ -335,6 +335,9 @@ std::string Server::metrics_text() const {
   MetricsSources m{counters_, storage_->counters(), encode_counters(), storage_failed(),
                    read_process_stats(), stream_gate_->closed_count(), stream_gate_->closed_seconds()};
   if (options_.cluster.store_url.empty()) m.disk_free_bytes = free_bytes(options_.world_dir);
+  // Read at each scrape: the world's meta is where a border lives (set by
+  // --border in create(), before any thread reads it; fixed while running).
+  m.bounds = world_->meta().bounds;
   return render_metrics(m);
 }
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "protocol/messages.h"
@@ -182,6 +183,20 @@ std::string render_metrics(const MetricsSources& s) {
           load(db.listener_down));
   m.gauge("terrane_inbox_read_failing", "1 while the last read of the inbox of forwarded edits failed.",
           load(db.inbox_failing));
+
+  // The border (terrane-server --border): its edges only while there is one.
+  const WorldBounds& b = s.bounds;
+  m.gauge("terrane_world_bounded", "1 while the world has a horizontal border (terrane-server --border), else 0.",
+          b.bounded_xz ? 1 : 0);
+  if (b.bounded_xz) {
+    m.family("terrane_world_border_voxels", "gauge",
+             "The world border's edges in voxels: x from min_x to max_x, z from min_z to max_z, each max excluded "
+             "(present only while the world has a border).");
+    const std::pair<const char*, std::int32_t> edges[] = {
+        {"min_x", b.min_x}, {"max_x", b.max_x}, {"min_z", b.min_z}, {"max_z", b.max_z}};
+    for (const auto& [edge, at] : edges)
+      m.sample("terrane_world_border_voxels", at, std::string("edge=\"") + edge + "\"");
+  }
 
   m.gauge("terrane_chunks_resident", "Chunks loaded in memory now.", load(c.chunks_loaded));
   m.counter("terrane_chunks_loaded_total", "Chunks read from the store.", load(st.loaded_from_store));
