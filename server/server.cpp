@@ -404,6 +404,7 @@ AdminHooks Server::world_hooks() {
     s.edits_rejected = counters_.edits_rejected();
     s.chunks_resident = counters_.chunks_loaded.load();
     s.storage_failed = storage_failed();
+    s.edit_log = storage_->counters().edit_log.get();  // the writer's figure: no store touched here
     const std::uint64_t n = counters_.tick_duration.count();
     s.tick_mean_ms = n > 0 ? counters_.tick_duration.sum_seconds() * 1000 / static_cast<double>(n) : 0;
     return s;

@@ -164,6 +164,12 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));
   m.gauge("terrane_storage_failed", "1 once a tick's changes could not be stored (the server stops serving).",
           s.storage_failed ? 1 : 0);
+  if (const std::optional<EditLogSize> log = st.edit_log.get()) {
+    m.gauge("terrane_edit_log_entries", "Entries in the edit log (terrane-admin log, rollback), as last counted.",
+            log->entries);
+    m.gauge("terrane_edit_log_bytes",
+            "Bytes of voxels before and after in the edit log's entries (bounded by --edit-log-mb).", log->bytes);
+  }
   if (s.disk_free_bytes)
     m.gauge("terrane_disk_free_bytes",
             "Bytes still free on the file system of the world directory (the server stops when a commit fails).",

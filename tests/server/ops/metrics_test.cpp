@@ -322,6 +322,10 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   EXPECT_EQ(sample(during, "terrane_edit_ack_duration_seconds_count"), 3);
   EXPECT_GT(sample(during, "terrane_edit_ack_duration_seconds_sum"), 0);
   EXPECT_GE(sample(during, "terrane_chunks_written_total"), 1);
+  // The edit log's size, as the writer keeps it (known from its start on,
+  // grown by each commit before its acknowledgements).
+  EXPECT_EQ(sample(during, "terrane_edit_log_entries"), 3);
+  EXPECT_GT(sample(during, "terrane_edit_log_bytes").value_or(0), 0);
   EXPECT_GT(sample(during, "terrane_chunks_resident"), 0);
   EXPECT_GT(sample(during, "terrane_chunks_generated_total"), 0);
   EXPECT_GT(sample(during, "terrane_streamed_chunks_total{kind=\"full\"}"), 0);
