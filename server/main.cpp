@@ -151,6 +151,8 @@ constexpr const char* kHelp =
     "                              time (local, with its offset), level, logger, message\n"
     "  --log-file PATH             append the log to PATH instead of stdout; SIGHUP reopens it\n"
     "                              at PATH (after logrotate moved it away: no copytruncate)\n"
+    "  --log-level LEVEL           the lowest level logged: trace, debug, info, warn, error or off\n"
+    "                              (default info; a release build has no debug or trace lines)\n"
     "  --test-drop-updates N       TEST ONLY: silently drop the first N update batches\n"
     "  --test-corrupt-updates N    TEST ONLY: send the first N update batches with one voxel wrong\n"
     "  --config FILE               read options from FILE: 'name = value' per line (names as\n"
@@ -189,7 +191,7 @@ int run(int argc, char** argv) {
                   "worker-threads", "write-timeout-ms", "socket-send-buffer", "auth-token", "presence-hz", "presence-max", "hash-push-ms", "mip-refresh-ms",
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
-                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "backup-every", "backup-keep", "backup-dir", "config", "test-drop-updates", "test-corrupt-updates"},
+                  "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "log-level", "backup-every", "backup-keep", "backup-dir", "config", "test-drop-updates", "test-corrupt-updates"},
                  {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -322,6 +324,9 @@ int run(int argc, char** argv) {
   const std::string log_format = cl.get("log-format", "text");
   if (log_format != "text" && log_format != "json")
     return usage_error("--log-format: '" + log_format + "' is neither text nor json");
+  const std::string log_level = cl.get("log-level", "info");
+  if (!set_server_log_level(log_level))
+    return usage_error("--log-level: '" + log_level + "' is none of trace, debug, info, warn, error, off");
   if (cl.has("log-format") || cl.has("log-file"))
     if (auto e = configure_server_log(log_format == "json" ? LogFormat::kJson : LogFormat::kText, cl.get("log-file"));
         !e.empty())

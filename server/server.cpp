@@ -335,6 +335,9 @@ std::string Server::metrics_text() const {
   MetricsSources m{counters_, storage_->counters(), encode_counters(), storage_failed(),
                    read_process_stats(), stream_gate_->closed_count(), stream_gate_->closed_seconds()};
   if (options_.cluster.store_url.empty()) m.disk_free_bytes = free_bytes(options_.world_dir);
+  // Read at each scrape: the world's meta is where a border lives (set by
+  // --border in create(), before any thread reads it; fixed while running).
+  m.bounds = world_->meta().bounds;
   return render_metrics(m);
 }
 
@@ -401,6 +404,7 @@ AdminHooks Server::world_hooks() {
     s.edits_rejected = counters_.edits_rejected();
     s.chunks_resident = counters_.chunks_loaded.load();
     s.storage_failed = storage_failed();
+    s.edit_log = storage_->counters().edit_log.get();  // the writer's figure: no store touched here
     const std::uint64_t n = counters_.tick_duration.count();
     s.tick_mean_ms = n > 0 ? counters_.tick_duration.sum_seconds() * 1000 / static_cast<double>(n) : 0;
     return s;

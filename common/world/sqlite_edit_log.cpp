@@ -51,8 +51,8 @@ FileResult<std::uint64_t> SqliteEditLog::append(std::span<const EditLogEntry> lo
 
 void SqliteEditLog::committed(std::size_t entries, std::uint64_t bytes) {
   if (!size_) return;
-  size_->first += static_cast<std::int64_t>(entries);
-  size_->second += bytes;
+  size_->entries += static_cast<std::int64_t>(entries);
+  size_->bytes += bytes;
 }
 
 FileResult<std::vector<EditLogEntry>> SqliteEditLog::query(const EditLogQuery& q) {
@@ -107,7 +107,7 @@ FileResult<std::int64_t> SqliteEditLog::prune(std::int64_t before_ms, std::uint6
   auto known = size_;
   size_.reset();  // known again below once every delete went through
   constexpr const char* kOld = " FROM edit_log WHERE id IN (SELECT id FROM edit_log WHERE time < ? ORDER BY id LIMIT ?)";
-  std::pair<std::int64_t, std::uint64_t> old{0, 0};
+  EditLogSize old;
   for (const bool count : {true, false}) {
     if (count && !known) continue;
     sqlite3_stmt* st = nullptr;
@@ -123,13 +123,13 @@ FileResult<std::int64_t> SqliteEditLog::prune(std::int64_t before_ms, std::uint6
     if (rc != (count ? SQLITE_ROW : SQLITE_DONE)) return error("cannot prune the edit log");
   }
   deleted += sqlite3_changes(db_);
-  if (known && deleted == old.first)
-    size_ = std::pair<std::int64_t, std::uint64_t>{known->first - old.first, known->second - std::min(known->second, old.second)};
+  if (known && deleted == old.entries)
+    size_ = EditLogSize{known->entries - old.entries, known->bytes - std::min(known->bytes, old.bytes)};
   if (max_bytes == 0 || deleted >= max_rows) return deleted;
   auto measured = size();
   if (!measured) return measured.error();
-  std::uint64_t bytes = measured->second;
-  std::int64_t rows_left = measured->first;
+  std::uint64_t bytes = measured->bytes;
+  std::int64_t rows_left = measured->entries;
   // The oldest go first, until under the bound: read up to a thousand
   // sizes at a time, delete through the last one needed.
   while (bytes > max_bytes && deleted < max_rows) {
@@ -158,19 +158,19 @@ FileResult<std::int64_t> SqliteEditLog::prune(std::int64_t before_ms, std::uint6
     }
     deleted += rows;
     rows_left -= rows;
-    size_ = std::pair<std::int64_t, std::uint64_t>{rows_left, bytes};
+    size_ = EditLogSize{rows_left, bytes};
   }
   return deleted;
 }
 
-FileResult<std::pair<std::int64_t, std::uint64_t>> SqliteEditLog::size() {
-  if (!sqlite_table_exists(db_, "edit_log")) return std::pair<std::int64_t, std::uint64_t>{0, 0};
+FileResult<EditLogSize> SqliteEditLog::size() {
+  if (!sqlite_table_exists(db_, "edit_log")) return EditLogSize{};
   if (size_) return *size_;
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "SELECT count(*), coalesce(sum(length(before) + length(after)), 0) FROM edit_log", -1,
                          &st, nullptr) != SQLITE_OK)
     return error("cannot measure the edit log");
-  std::pair<std::int64_t, std::uint64_t> out{0, 0};
+  EditLogSize out;
   const int rc = sqlite3_step(st);
   if (rc == SQLITE_ROW)
     out = {sqlite3_column_int64(st, 0), static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};

@@ -11,7 +11,6 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include "common/world/world_store.h"
@@ -43,7 +42,7 @@ class SqliteEditLog {
   FileResult<std::int64_t> prune(std::int64_t before_ms, std::uint64_t max_bytes, std::int64_t max_rows);
   // Entries and the bytes of their before/after voxels. Counted once (a
   // scan of the whole log), then kept by this owner's appends and prunes.
-  FileResult<std::pair<std::int64_t, std::uint64_t>> size();
+  FileResult<EditLogSize> size();
 
  private:
   FileError error(const std::string& what) const;
@@ -55,7 +54,7 @@ class SqliteEditLog {
   // tens of milliseconds on the writer thread with a busy log, and every
   // acknowledgement waited behind it. Unknown again after a failure or a
   // prune by age that did not go as counted.
-  std::optional<std::pair<std::int64_t, std::uint64_t>> size_;
+  std::optional<EditLogSize> size_;
 };
 
 }  // namespace terrane

@@ -335,7 +335,7 @@ FileResult<std::int64_t> SqliteStore::prune_edit_log(std::int64_t before_ms, std
   return edit_log_.prune(before_ms, max_bytes, max_rows);
 }
 
-FileResult<std::pair<std::int64_t, std::uint64_t>> SqliteStore::edit_log_size() { return edit_log_.size(); }
+FileResult<EditLogSize> SqliteStore::edit_log_size() { return edit_log_.size(); }
 
 FileStatus SqliteStore::erase_chunk(Vec3i pos) {
   SqliteTransaction tx(db());

@@ -106,9 +106,9 @@ class SqliteStore final : public WorldStore {
   FileResult<std::vector<EditLogEntry>> edit_log(const EditLogQuery& q) override;
   FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
                                           std::int64_t max_rows = 10000) override;
-  // Entries and the bytes of their before/after voxels. Counted once (a
-  // scan of the whole log), then kept by this store's own writes and prunes.
-  FileResult<std::pair<std::int64_t, std::uint64_t>> edit_log_size();
+  // Counted once (a scan of the whole log), then kept by this store's own
+  // writes and prunes.
+  FileResult<EditLogSize> edit_log_size() override;
   FileStatus erase_chunk(Vec3i pos);
 
   // The quarantine is the table "quarantine".

@@ -107,6 +107,14 @@ struct EditLogEntry {
   std::vector<std::uint8_t> before, after;
 };
 
+// The edit log's size: its entries and the bytes of their voxels before
+// and after (what terrane-server --edit-log-mb bounds).
+struct EditLogSize {
+  std::int64_t entries = 0;
+  std::uint64_t bytes = 0;
+  bool operator==(const EditLogSize&) const = default;
+};
+
 // Which edits to list, newest first.
 struct EditLogQuery {
   std::string player;              // "" = anyone
@@ -181,6 +189,12 @@ class WorldStore {
   // max_rows in all (a bounded pause; the rest go next time); how many went.
   virtual FileResult<std::int64_t> prune_edit_log(std::int64_t before_ms, std::uint64_t max_bytes,
                                                   std::int64_t max_rows = 10000) = 0;
+  // The edit log's size. SqliteStore counts it once (a scan of the log)
+  // and then keeps it through this connection's own writes and prunes (a
+  // world directory has one writer); PostgresStore counts it at each call
+  // (COUNT and SUM over a table every server of the world writes): call
+  // it where a scan may wait, not per commit.
+  virtual FileResult<EditLogSize> edit_log_size() = 0;
 
   // Quarantine: moves the stored row of pos, blob untouched, into the
   // quarantine, in one transaction with deleting it from the chunks, so a

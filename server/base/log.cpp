@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <mutex>
+#include <utility>
 
 #include <spdlog/pattern_formatter.h>
 #include <spdlog/sinks/base_sink.h>
@@ -106,6 +107,22 @@ std::string configure_server_log(LogFormat format, const std::string& path) {
   l.sinks().assign(1, sink);
   file_sink() = std::move(file);
   return "";
+}
+
+bool set_server_log_level(std::string_view name) {
+  // Named here, not by spdlog::level::from_str, which takes "warning" and
+  // "err" too and reads any other name as off.
+  using spdlog::level::level_enum;
+  constexpr std::pair<std::string_view, level_enum> kLevels[] = {
+      {"trace", level_enum::trace}, {"debug", level_enum::debug}, {"info", level_enum::info},
+      {"warn", level_enum::warn},   {"error", level_enum::err},   {"off", level_enum::off}};
+  for (const auto& [level_name, level] : kLevels)
+    if (name == level_name) {
+      server_log().set_level(level);  // made (and registered) first, so set_level below reaches it too
+      spdlog::set_level(level);       // every registered logger, and the level of those made later
+      return true;
+    }
+  return false;
 }
 
 std::string reopen_server_log() {

@@ -1,11 +1,12 @@
 // The server library's named spdlog logger ("server"). Created on first use
-// on stdout, as text; flushed at info so lifecycle lines (e.g. "listening
-// on") reach a pipe or file at once. configure_server_log chooses JSON
-// lines and a file instead (terrane-server --log-format, --log-file), once,
-// before the server's threads start; reopen_server_log (SIGHUP) reopens the
-// file at its path, so a rotated log (logrotate's move, then kill -HUP)
-// goes on in a new file. Any thread may log; the file's sink has its own
-// lock (spdlog's).
+// on stdout, as text, at level info; flushed at info so lifecycle lines
+// (e.g. "listening on") reach a pipe or file at once. configure_server_log
+// chooses JSON lines and a file instead (terrane-server --log-format,
+// --log-file), and set_server_log_level the lowest level logged
+// (--log-level), once, before the server's threads start;
+// reopen_server_log (SIGHUP) reopens the file at its path, so a rotated log
+// (logrotate's move, then kill -HUP) goes on in a new file. Any thread may
+// log; the file's sink has its own lock (spdlog's).
 #pragma once
 
 #include <chrono>
@@ -27,6 +28,13 @@ enum class LogFormat { kText, kJson };
 // "" or why the file cannot be opened (the log is then unchanged). Call
 // before other threads log.
 std::string configure_server_log(LogFormat format, const std::string& path);
+
+// The lowest level logged by every logger of the process (the "server"
+// logger, and any made later): "trace", "debug", "info", "warn", "error"
+// or "off" (nothing). False, and nothing changed, for any other name. A
+// release build has no debug or trace lines (SPDLOG_ACTIVE_LEVEL). Call
+// before other threads log.
+bool set_server_log_level(std::string_view name);
 
 // Reopens the log file at its path (after it was moved away); nothing when
 // the log is on stdout. Returns "" or why it cannot be opened (the old file

@@ -51,6 +51,13 @@ std::string num(double v) {
   return b;
 }
 
+// Bytes as MiB with two decimals (the unit of --edit-log-mb).
+std::string mib(std::uint64_t bytes) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.2f", static_cast<double>(bytes) / (1 << 20));
+  return b;
+}
+
 std::string join(const std::vector<std::string>& v, std::size_t from) {
   std::string out;
   for (std::size_t i = from; i < v.size(); ++i) out += (i > from ? " " : "") + v[i];
@@ -202,8 +209,10 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
       << (s.shutdown_in_s ? "shutdown pending: stopping in " + std::to_string(*s.shutdown_in_s) + " s\n" : "")
       << s.clients << " players, " << s.admin_sessions << " admin sessions; " << s.ticks << " ticks at " << s.tick_hz << " Hz (mean " << num(s.tick_mean_ms)
       << " ms); edits " << s.edits_applied << " applied, " << s.edits_rejected << " rejected; " << s.chunks_resident
-      << " chunks resident; storage " << (s.storage_failed ? "FAILED" : "ok") << "; whitelist "
-      << (access_.whitelist_on() ? "on" : "off") << "\n";
+      << " chunks resident; storage " << (s.storage_failed ? "FAILED" : "ok") << "; edit log "
+      << (s.edit_log ? std::to_string(s.edit_log->entries) + " entries, " + mib(s.edit_log->bytes) + " MiB"
+                     : std::string("size unknown"))
+      << "; whitelist " << (access_.whitelist_on() ? "on" : "off") << "\n";
     std::ostringstream j;
     j << "{\"version\": " << json_string(s.version) << ", \"address\": " << json_string(s.address)
       << ", \"border\": " << json_string(s.border) << ", \"shutdown_in_s\": "
@@ -212,7 +221,9 @@ AdminResultMsg Admin::run(const std::string& who, const AdminRequestMsg& req) {
       << ", \"clients\": " << s.clients << ", \"admin_sessions\": " << s.admin_sessions << ", \"ticks\": " << s.ticks << ", \"tick_hz\": " << s.tick_hz
       << ", \"tick_mean_ms\": " << num(s.tick_mean_ms) << ", \"edits_applied\": " << s.edits_applied
       << ", \"edits_rejected\": " << s.edits_rejected << ", \"chunks_resident\": " << s.chunks_resident
-      << ", \"storage_failed\": " << (s.storage_failed ? "true" : "false")
+      << ", \"storage_failed\": " << (s.storage_failed ? "true" : "false") << ", \"edit_log_entries\": "
+      << (s.edit_log ? std::to_string(s.edit_log->entries) : std::string("null")) << ", \"edit_log_bytes\": "
+      << (s.edit_log ? std::to_string(s.edit_log->bytes) : std::string("null"))
       << ", \"whitelist\": " << (access_.whitelist_on() ? "true" : "false") << "}";
     return ok(t.str(), j.str());
   }

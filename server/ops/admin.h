@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "common/voxel/vec3.h"
+#include "common/world/world_store.h"
 #include "protocol/messages.h"
 #include "server/ops/access.h"
 
@@ -48,6 +49,9 @@ struct ServerStatus {
   std::uint32_t tick_hz = 0;
   bool storage_failed = false;
   double tick_mean_ms = 0;
+  // The edit log's entries and voxel bytes as the storage writer last
+  // counted them (nullopt: not counted yet, or the count failed).
+  std::optional<EditLogSize> edit_log;
 };
 
 struct AdminHooks {

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "protocol/messages.h"
@@ -163,6 +164,12 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_written_total", "Chunks written to the store.", load(st.chunks_written));
   m.gauge("terrane_storage_failed", "1 once a tick's changes could not be stored (the server stops serving).",
           s.storage_failed ? 1 : 0);
+  if (const std::optional<EditLogSize> log = st.edit_log.get()) {
+    m.gauge("terrane_edit_log_entries", "Entries in the edit log (terrane-admin log, rollback), as last counted.",
+            log->entries);
+    m.gauge("terrane_edit_log_bytes",
+            "Bytes of voxels before and after in the edit log's entries (bounded by --edit-log-mb).", log->bytes);
+  }
   if (s.disk_free_bytes)
     m.gauge("terrane_disk_free_bytes",
             "Bytes still free on the file system of the world directory (the server stops when a commit fails).",
@@ -182,6 +189,20 @@ std::string render_metrics(const MetricsSources& s) {
           load(db.listener_down));
   m.gauge("terrane_inbox_read_failing", "1 while the last read of the inbox of forwarded edits failed.",
           load(db.inbox_failing));
+
+  // The border (terrane-server --border): its edges only while there is one.
+  const WorldBounds& b = s.bounds;
+  m.gauge("terrane_world_bounded", "1 while the world has a horizontal border (terrane-server --border), else 0.",
+          b.bounded_xz ? 1 : 0);
+  if (b.bounded_xz) {
+    m.family("terrane_world_border_voxels", "gauge",
+             "The world border's edges in voxels: x from min_x to max_x, z from min_z to max_z, each max excluded "
+             "(present only while the world has a border).");
+    const std::pair<const char*, std::int32_t> edges[] = {
+        {"min_x", b.min_x}, {"max_x", b.max_x}, {"min_z", b.min_z}, {"max_z", b.max_z}};
+    for (const auto& [edge, at] : edges)
+      m.sample("terrane_world_border_voxels", at, std::string("edge=\"") + edge + "\"");
+  }
 
   m.gauge("terrane_chunks_resident", "Chunks loaded in memory now.", load(c.chunks_loaded));
   m.counter("terrane_chunks_loaded_total", "Chunks read from the store.", load(st.loaded_from_store));

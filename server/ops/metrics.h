@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 
+#include "common/world/world_bounds.h"
 #include "server/base/counters.h"
 #include "server/storage/storage.h"
 #include "server/base/chunk_version.h"
@@ -38,6 +39,9 @@ struct MetricsSources {
   // Free bytes on the world directory's file system (none: a PostgreSQL
   // world, or not readable).
   std::optional<std::uint64_t> disk_free_bytes = std::nullopt;
+  // The world's bounds as they are now (its border: the horizontal limits,
+  // while bounded_xz); default: no border.
+  WorldBounds bounds = {};
   // When the sample is taken (the lease renewal's age is counted to it).
   std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now();
 };

@@ -5,8 +5,7 @@
 #include <libpq-fe.h>
 
 #include <algorithm>
-#include <charconv>
-#include <cstring>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <optional>
@@ -605,10 +604,16 @@ FileResult<std::int64_t> PostgresStore::prune_edit_log(std::int64_t before_ms, s
       {text(before_ms), text(static_cast<std::int64_t>(std::min<std::uint64_t>(max_bytes, std::numeric_limits<std::int64_t>::max()))),
        text(max_rows)});
   if (!r) return file_error(r.error());
-  std::int64_t n = 0;
-  const char* tuples = PQcmdTuples(r->res);
-  std::from_chars(tuples, tuples + std::strlen(tuples), n);
-  return n;
+  return static_cast<std::int64_t>(std::strtoll(PQcmdTuples(r->res), nullptr, 10));  // rows deleted ("" reads as 0)
+}
+
+FileResult<EditLogSize> PostgresStore::edit_log_size() {
+  auto r = c_->exec("measure edit log",
+                    "SELECT count(*), coalesce(sum(octet_length(before) + octet_length(after)), 0) FROM terrane_edit_log");
+  if (!r) return file_error(r.error());
+  const auto entries = r->integer(0, 0), bytes = r->integer(0, 1);
+  if (!entries || !bytes || *entries < 0 || *bytes < 0) return FileError{"postgresql: measure edit log: unreadable", {}};
+  return EditLogSize{*entries, static_cast<std::uint64_t>(*bytes)};
 }
 
 FileResult<std::optional<std::uint64_t>> PostgresStore::quarantine_chunk(Vec3i pos, const std::string& reason) {

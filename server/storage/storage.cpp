@@ -322,36 +322,6 @@ LoadedChunk Storage::load_now(WorldStore& store, Vec3i cp) {
   return out;
 }
 
-void Storage::set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes) {
-  // The writer is already running (it prunes on its own wake-ups, commits or not).
-  std::lock_guard lock(jobs_mutex_);
-  log_max_age_ = max_age;
-  log_max_bytes_ = max_bytes;
-}
-
-void Storage::prune_log() {
-  std::chrono::seconds max_age;
-  std::uint64_t max_bytes;
-  {
-    std::lock_guard lock(jobs_mutex_);
-    max_age = log_max_age_;
-    max_bytes = log_max_bytes_;
-  }
-  const auto now = std::chrono::steady_clock::now();
-  if (now < next_prune_ || (max_age.count() == 0 && max_bytes == 0)) return;
-  next_prune_ = now + std::chrono::minutes(1);
-  const std::int64_t now_ms =
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
-  const std::int64_t before =
-      max_age.count() == 0 ? 0 : now_ms - std::chrono::duration_cast<std::chrono::milliseconds>(max_age).count();
-  auto n = writer_store_->prune_edit_log(before, max_bytes);
-  if (!n) {
-    server_log().warn("edit log: pruning failed: {}", n.error().message);
-    return;
-  }
-  counters_.log_entries_pruned.fetch_add(static_cast<std::uint64_t>(*n), std::memory_order_relaxed);
-}
-
 void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry> log, CommitDone done,
                      std::vector<ForwardAnswer> answers, std::uint64_t tick) {
   in_flight_.fetch_add(1, std::memory_order_relaxed);
@@ -364,6 +334,8 @@ void Storage::commit(std::vector<VersionPtr> versions, std::vector<EditLogEntry>
 
 void Storage::writer_loop() {
   FileStatus status = Ok{};
+  // The edit log's size known from the start (status, /metrics).
+  edit_log_.run(*writer_store_, std::chrono::steady_clock::now());
   for (;;) {
     std::deque<CommitJob> batch;
     bool stop = false;
@@ -383,7 +355,7 @@ void Storage::writer_loop() {
     }
     if (batch.empty()) {
       if (status) {
-        prune_log();
+        edit_log_.run(*writer_store_, std::chrono::steady_clock::now());
         catch_up_coarse(kCoarseDelay, true);
       }
       continue;
@@ -431,7 +403,10 @@ void Storage::writer_loop() {
         // Answers exist only in a shared world: its writer is PostgreSQL's.
         status = shared_writer_ != nullptr && !answers.empty() ? shared_writer_->save_answering(writes, log, answers)
                                                                : writer_store_->save_chunks(writes, true, log);
-        if (status) counters_.edits_logged.fetch_add(log.size(), std::memory_order_relaxed);
+        if (status) {
+          counters_.edits_logged.fetch_add(log.size(), std::memory_order_relaxed);
+          edit_log_.logged(log);
+        }
         counters_.commit_duration.observe(std::chrono::steady_clock::now() - t0);
         counters_.commits.fetch_add(1, std::memory_order_relaxed);
         counters_.chunks_written.fetch_add(writes.size(), std::memory_order_relaxed);
@@ -444,10 +419,11 @@ void Storage::writer_loop() {
       in_flight_.fetch_sub(1, std::memory_order_relaxed);
       job.done(told);
     }
-    // After the acks went out: a prune (at most once a minute, a bounded
-    // number of rows) and the coarse images due delay only the next batch.
+    // After the acks went out: a prune and a count of the edit log (at most
+    // once a minute, a bounded number of rows) and the coarse images due
+    // delay only the next batch.
     if (status) {
-      prune_log();
+      edit_log_.run(*writer_store_, std::chrono::steady_clock::now());
       catch_up_coarse(kCoarseDelay, true);
     }
   }

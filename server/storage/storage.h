@@ -49,6 +49,7 @@
 #include "server/base/counters.h"
 #include "server/base/chunk_version.h"
 #include "server/storage/cluster_link.h"
+#include "server/storage/edit_log_upkeep.h"
 #include "server/storage/postgres_store.h"
 
 namespace terrane {
@@ -100,6 +101,8 @@ struct StorageCounters {
   std::atomic<std::uint64_t> chunks_written{0};
   std::atomic<std::uint64_t> edits_logged{0};
   std::atomic<std::uint64_t> log_entries_pruned{0};
+  // The edit log's size (entries, bytes of voxels) as the writer knows it.
+  EditLogFigure edit_log;
   DurationHistogram commit_duration;               // wall time inside each transaction
   // Coarse images written after the commits (Storage::catch_up_coarse):
   // each transaction's wall time, and the regions still waiting.
@@ -133,9 +136,11 @@ class Storage {
   static FileResult<std::unique_ptr<Storage>> open(World& world, int loader_threads, bool thread_priorities = true,
                                                    const Shared* shared = nullptr);
   // The edit log keeps entries this long (0: for ever) and at most this many
-  // bytes of voxels (0: no bound); the writer prunes it about once a minute.
-  // Thread-safe (the writer reads it under jobs_mutex_).
-  void set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes);
+  // bytes of voxels (0: no bound); the writer prunes it about once a minute
+  // (EditLogUpkeep). Any thread.
+  void set_edit_log_retention(std::chrono::seconds max_age, std::uint64_t max_bytes) {
+    edit_log_.set_retention(max_age, max_bytes);
+  }
   // Whether a coarse image's read estimates the region's chunks never
   // stored (LoadedCoarse::estimates). Call before the first load.
   void set_horizon_estimates(bool on) { estimate_coarse_ = on; }
@@ -228,17 +233,14 @@ class Storage {
   // given back.
   std::unique_ptr<WorldStore> take_reader();
   void give_reader(std::unique_ptr<WorldStore> store);
-  void prune_log();
   bool estimate_coarse_ = true;
   // A shared world's cluster room (null: SQLite). Set once by open().
   ClusterLink* cluster_ = nullptr;
-  // Guarded by jobs_mutex_: set after the writer has started.
-  std::chrono::seconds log_max_age_{0};
-  std::uint64_t log_max_bytes_ = 0;
-  std::chrono::steady_clock::time_point next_prune_{};
 
   World& world_;
   StorageCounters counters_;
+  // The edit log's pruning and size, on the writer thread.
+  EditLogUpkeep edit_log_{counters_.edit_log, counters_.log_entries_pruned};
   const bool thread_priorities_;
   const int loader_threads_;
   asio::thread_pool loaders_;

@@ -205,9 +205,9 @@ int cmd_migrate(int argc, char** argv) {
   if (!quarantined) return failure(quarantined.error().message);
   auto log = src.edit_log_size();
   if (!log) return failure(log.error().message);
-  if (*quarantined > 0 || log->first > 0)
+  if (*quarantined > 0 || log->entries > 0)
     std::fprintf(stderr, "not copied: %lld edit log entries and %lld quarantined chunk rows of world %s (they stay "
-                 "there)\n", static_cast<long long>(log->first), static_cast<long long>(*quarantined), dir.c_str());
+                 "there)\n", static_cast<long long>(log->entries), static_cast<long long>(*quarantined), dir.c_str());
   std::printf("migrated %llu chunks and %zu access entries of world %s to %s (edit log and quarantine not copied)\n",
               static_cast<unsigned long long>(copied), access->size(), dir.c_str(), shown.c_str());
   return 0;

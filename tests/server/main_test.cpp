@@ -215,5 +215,34 @@ TEST_F(ServerMainTest, ABadLogFormatOrAnUnwritableLogFileIsAUsageError) {
   EXPECT_NE(out.find("--log-file: cannot open log file"), std::string::npos) << out;
 }
 
+// --log-level warn: the info lines (among them "listening on") are
+// dropped, the warnings kept (a new world's "creating a new world", an
+// open server's "authentication: none").
+TEST_F(ServerMainTest, LogLevelWarnDropsInfoLinesAndKeepsWarnings) {
+  testing_support::ChildProcess s({std::string(TERRANE_BIN_DIR) + "/terrane-server", "--world",
+                                   (dir_ / "world").string(), "--port", "0", "--log-level", "warn"});
+  ASSERT_TRUE(s.started());
+  // Logged by start() once the signals are caught, just before "listening on".
+  ASSERT_TRUE(s.wait_for_output("authentication: none", 60s)) << s.output();
+  EXPECT_EQ(s.stop(), 0) << s.output();
+  const std::string out = s.output();
+  EXPECT_NE(out.find("creating a new world at " + (dir_ / "world").string()), std::string::npos) << out;
+  EXPECT_EQ(out.find("listening on"), std::string::npos) << out;
+  EXPECT_EQ(out.find("stopped after"), std::string::npos) << out;
+  EXPECT_EQ(out.find("[info]"), std::string::npos) << out;
+}
+
+TEST_F(ServerMainTest, ABadLogLevelIsAUsageErrorOnTheCommandLineOrInAConfigFile) {
+  std::string out;
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --log-level loud", &out), 2) << out;
+  EXPECT_NE(out.find("--log-level: 'loud' is none of trace, debug, info, warn, error, off"), std::string::npos)
+      << out;
+  out.clear();
+  const std::string config = file("server.conf", "log-level = verbose\n");
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --config " + config, &out), 2) << out;
+  EXPECT_NE(out.find("--log-level: 'verbose'"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir_ / "w")) << "no world is made on bad usage";
+}
+
 }  // namespace
 }  // namespace terrane

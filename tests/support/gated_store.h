@@ -122,6 +122,7 @@ class GatedStore final : public WorldStore {
                                           std::int64_t max_rows = 10000) override {
     return inner_->prune_edit_log(before_ms, max_bytes, max_rows);
   }
+  FileResult<EditLogSize> edit_log_size() override { return inner_->edit_log_size(); }
   FileResult<std::optional<std::uint64_t>> quarantine_chunk(Vec3i pos, const std::string& reason) override {
     return inner_->quarantine_chunk(pos, reason);
   }

@@ -33,14 +33,13 @@ class SqliteEditLogTest : public testing_support::ScratchWorldTest {
     log().committed(entries.size(), *bytes);
   }
   // What a scan of the table finds.
-  std::pair<std::int64_t, std::uint64_t> counted() {
+  EditLogSize counted() {
     sqlite3_stmt* st = nullptr;
     EXPECT_EQ(sqlite3_prepare_v2(db_, "SELECT count(*), coalesce(sum(length(before) + length(after)), 0) FROM edit_log",
                                  -1, &st, nullptr),
               SQLITE_OK);
     EXPECT_EQ(sqlite3_step(st), SQLITE_ROW);
-    const std::pair<std::int64_t, std::uint64_t> out{sqlite3_column_int64(st, 0),
-                                                     static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
+    const EditLogSize out{sqlite3_column_int64(st, 0), static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
     sqlite3_finalize(st);
     return out;
   }
@@ -55,7 +54,7 @@ TEST_F(SqliteEditLogTest, ANewWorldHasAnEmptyLog) {
   auto listed = log().query(EditLogQuery{});
   ASSERT_TRUE(listed.ok());
   EXPECT_TRUE(listed->empty());
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{0, 0}));
+  EXPECT_EQ(*log().size(), (EditLogSize{0, 0}));
   EXPECT_EQ(*log().prune(1'000'000, 1, 100), 0);
   // Appending nothing makes no table either.
   append({});
@@ -91,7 +90,7 @@ TEST_F(SqliteEditLogTest, AppendedEntriesReadBackNewestFirstWithTheirBoxesAndVox
   recent.since_ms = 2000;
   recent.limit = 1;
   EXPECT_EQ(log().query(recent)->at(0).tick, 3u);
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{3, 120}));
+  EXPECT_EQ(*log().size(), (EditLogSize{3, 120}));
   EXPECT_EQ(*log().size(), counted());
 }
 
@@ -101,8 +100,8 @@ TEST_F(SqliteEditLogTest, AnAppendRolledBackLeavesNothingAndTheSizeKeptUnchanged
   exec("BEGIN IMMEDIATE");
   ASSERT_TRUE(log().append(std::vector<EditLogEntry>{entry(2, 2000, "bob", {{0, 0, 0}, {1, 1, 1}}, 9)}).ok());
   exec("ROLLBACK");
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{1, 8}));
-  EXPECT_EQ(counted(), (std::pair<std::int64_t, std::uint64_t>{1, 8}));
+  EXPECT_EQ(*log().size(), (EditLogSize{1, 8}));
+  EXPECT_EQ(counted(), (EditLogSize{1, 8}));
   EXPECT_EQ(log().query(EditLogQuery{})->size(), 1u);
 }
 
@@ -119,22 +118,22 @@ TEST_F(SqliteEditLogTest, PruningTakesTheOldFirstAndStopsAtEachBound) {
   EXPECT_EQ(log().query(EditLogQuery{})->back().tick, 2u);
   // By age, unbounded rows: ticks 2-3.
   EXPECT_EQ(*log().prune(4000, 0, 10000), 2);
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{6, 120}));
+  EXPECT_EQ(*log().size(), (EditLogSize{6, 120}));
   // By size: the oldest go until at most 70 bytes are left (ticks 4-6).
   EXPECT_EQ(*log().prune(0, 70, 10000), 3);
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{3, 60}));
+  EXPECT_EQ(*log().size(), (EditLogSize{3, 60}));
   EXPECT_EQ(*log().size(), counted());
   EXPECT_EQ(log().query(EditLogQuery{})->back().tick, 7u);
   // Under both bounds already: nothing goes.
   EXPECT_EQ(*log().prune(0, 60, 10000), 0);
-  EXPECT_EQ(counted(), (std::pair<std::int64_t, std::uint64_t>{3, 60}));
+  EXPECT_EQ(counted(), (EditLogSize{3, 60}));
 }
 
 TEST_F(SqliteEditLogTest, TheLogSurvivesReopeningAndIsCountedAgain) {
   append({entry(1, 1000, "ann", {{0, 0, 0}, {1, 1, 1}}, 5), entry(2, 2000, "ann", {{0, 0, 0}, {1, 1, 1}}, 6)});
   log_.reset();
   ASSERT_NO_FATAL_FAILURE(reopen_db());
-  EXPECT_EQ(*log().size(), (std::pair<std::int64_t, std::uint64_t>{2, 22}));
+  EXPECT_EQ(*log().size(), (EditLogSize{2, 22}));
   EXPECT_EQ(log().query(EditLogQuery{})->front().tick, 2u);
 }
 

@@ -190,8 +190,8 @@ TEST_F(SqliteStoreTest, TheEditLogIsWrittenWithTheChunksAndQueriedNewestFirst) {
   recent.since_ms = 2000;
   recent.limit = 1;
   EXPECT_EQ((*store)->edit_log(recent)->at(0).tick, 3u);
-  EXPECT_EQ((*store)->edit_log_size()->first, 3);
-  EXPECT_EQ((*store)->edit_log_size()->second, 120u);
+  EXPECT_EQ((*store)->edit_log_size()->entries, 3);
+  EXPECT_EQ((*store)->edit_log_size()->bytes, 120u);
   // Pruning: by age, then the oldest until the bytes fit.
   EXPECT_EQ(*(*store)->prune_edit_log(1500, 0), 1);
   EXPECT_EQ(*(*store)->prune_edit_log(0, 60), 1);  // 100 bytes left > 60: bob's (the older) goes
@@ -212,8 +212,7 @@ TEST_F(SqliteStoreTest, TheEditLogsSizeIsKeptThroughWritesAndPrunesAsACountWould
                                  -1, &st, nullptr),
               SQLITE_OK);
     EXPECT_EQ(sqlite3_step(st), SQLITE_ROW);
-    const std::pair<std::int64_t, std::uint64_t> out{sqlite3_column_int64(st, 0),
-                                                     static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
+    const EditLogSize out{sqlite3_column_int64(st, 0), static_cast<std::uint64_t>(sqlite3_column_int64(st, 1))};
     sqlite3_finalize(st);
     sqlite3_close(db);
     return out;
@@ -242,7 +241,7 @@ TEST_F(SqliteStoreTest, TheEditLogsSizeIsKeptThroughWritesAndPrunesAsACountWould
   // Both: age takes ticks 11 and 12, then bytes 13 and 14 (61 bytes left).
   EXPECT_EQ(*(*store)->prune_edit_log(13000, 100), 4);
   EXPECT_EQ(*(*store)->edit_log_size(), counted());
-  EXPECT_EQ(counted(), (std::pair<std::int64_t, std::uint64_t>{1, 61}));
+  EXPECT_EQ(counted(), (EditLogSize{1, 61}));
   // Kept, not counted again (a prune by size once a minute scanned the
   // whole log): a row written behind the store's back is not seen. A world
   // has one writer, the server holding it.
@@ -254,8 +253,8 @@ TEST_F(SqliteStoreTest, TheEditLogsSizeIsKeptThroughWritesAndPrunesAsACountWould
                          nullptr, nullptr, nullptr),
             SQLITE_OK);
   sqlite3_close(db);
-  EXPECT_EQ(*(*store)->edit_log_size(), (std::pair<std::int64_t, std::uint64_t>{1, 61}));
-  EXPECT_EQ(counted(), (std::pair<std::int64_t, std::uint64_t>{2, 71}));
+  EXPECT_EQ(*(*store)->edit_log_size(), (EditLogSize{1, 61}));
+  EXPECT_EQ(counted(), (EditLogSize{2, 71}));
 }
 
 TEST_F(SqliteStoreTest, DamagedBlobIsReportedWithItsCoordinates) {

@@ -273,6 +273,52 @@ TEST_F(AdminTest, TheWhitelistRefusesWhoIsNotListedAndIsKeptAcrossRestarts) {
   EXPECT_TRUE(connect("bob").welcomed);
 }
 
+// status tells the edit log's size as the storage writer keeps it (the
+// admin thread never touches the store for it): it grows with each edit
+// stored, and a restart counts it again from the world.
+TEST_F(AdminTest, StatusShowsTheEditLogGrowingWithEdits) {
+  start_admin();
+  auto admin = connect("admin", kAdminToken);
+  ASSERT_TRUE(admin.welcomed);
+  AdminResultMsg s;
+  const auto status_until = [&](const std::string& json_part) {
+    return testing_support::eventually([&] {
+      s = command(*admin.peer, "status");
+      return s.json.find(json_part) != std::string::npos;
+    });
+  };
+  ASSERT_TRUE(status_until("\"edit_log_entries\": 0, \"edit_log_bytes\": 0")) << s.json;
+  EXPECT_NE(s.text.find("edit log 0 entries, 0.00 MiB"), std::string::npos) << s.text;
+
+  auto p = join("editor");
+  const Vec3i cp = chunk_of(Vec3i{1002, 12, 1002});
+  ASSERT_TRUE(hold_full(*p, {1002.0f, 12.0f, 1002.0f}, cp));
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    const EditRequestMsg e = testing_support::fill_box_edit(id, Region{{1001, 11, 1001}, {1003, 13, 1003}},
+                                                            materials::kBrick, static_cast<std::uint8_t>(100 + id));
+    ASSERT_TRUE(p->send(build_edit_request(e)));
+    ASSERT_TRUE(p->next_of(wire::Body::EditAck));
+    ASSERT_TRUE(status_until("\"edit_log_entries\": " + std::to_string(id) + ",")) << s.json;
+    EXPECT_NE(s.text.find("edit log " + std::to_string(id) + " entries, "), std::string::npos) << s.text;
+  }
+  // Each entry holds the box's voxels before and after.
+  const auto bytes_at = s.json.find("\"edit_log_bytes\": ");
+  ASSERT_NE(bytes_at, std::string::npos) << s.json;
+  const std::uint64_t bytes = std::stoull(s.json.substr(bytes_at + 18));
+  EXPECT_GT(bytes, 0u) << s.json;
+  p->close();
+  admin.peer->close();
+
+  server_->stop();
+  server_.reset();
+  start_admin();
+  auto again = connect("admin", kAdminToken);
+  ASSERT_TRUE(again.welcomed);
+  admin.peer = std::move(again.peer);
+  ASSERT_TRUE(status_until("\"edit_log_entries\": 3, \"edit_log_bytes\": " + std::to_string(bytes) + ","))
+      << s.json;
+}
+
 TEST_F(AdminTest, SayReachesEveryClient) {
   start_admin();
   auto admin = connect("admin", kAdminToken);

@@ -198,6 +198,24 @@ TEST(Metrics, TheDatabaseLinksAreGauges) {
   expect_promtool_accepts(text);
 }
 
+TEST(Metrics, TheBorderIsFourGaugesOnlyWhileTheWorldHasOne) {
+  ServerCounters c;
+  StorageCounters st;
+  EncodeCounters enc;
+  MetricsSources s{c, st, enc, false, read_process_stats()};
+  const std::string open = render_metrics(s);
+  EXPECT_EQ(sample(open, "terrane_world_bounded"), 0);
+  EXPECT_EQ(open.find("terrane_world_border_voxels"), std::string::npos) << open;
+  s.bounds = WorldBounds{-128, 256, true, -1000, 2000, -30, 40};
+  const std::string bounded = render_metrics(s);
+  EXPECT_EQ(sample(bounded, "terrane_world_bounded"), 1);
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"min_x\"}"), -1000);
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"max_x\"}"), 2000);
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"min_z\"}"), -30);
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"max_z\"}"), 40);
+  expect_promtool_accepts(bounded);
+}
+
 TEST(Metrics, HostPortIsParsedOrNamedWrong) {
   EXPECT_EQ(parse_host_port("127.0.0.1:9464").value(), std::make_pair(std::string("127.0.0.1"), std::uint16_t{9464}));
   EXPECT_EQ(parse_host_port("[::1]:0").value(), std::make_pair(std::string("::1"), std::uint16_t{0}));
@@ -304,6 +322,10 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   EXPECT_EQ(sample(during, "terrane_edit_ack_duration_seconds_count"), 3);
   EXPECT_GT(sample(during, "terrane_edit_ack_duration_seconds_sum"), 0);
   EXPECT_GE(sample(during, "terrane_chunks_written_total"), 1);
+  // The edit log's size, as the writer keeps it (known from its start on,
+  // grown by each commit before its acknowledgements).
+  EXPECT_EQ(sample(during, "terrane_edit_log_entries"), 3);
+  EXPECT_GT(sample(during, "terrane_edit_log_bytes").value_or(0), 0);
   EXPECT_GT(sample(during, "terrane_chunks_resident"), 0);
   EXPECT_GT(sample(during, "terrane_chunks_generated_total"), 0);
   EXPECT_GT(sample(during, "terrane_streamed_chunks_total{kind=\"full\"}"), 0);
@@ -329,6 +351,41 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
   EXPECT_EQ(sample(after, "terrane_send_queue_bytes"), 0);
   EXPECT_EQ(sample(after, "terrane_memory_bytes{part=\"chunk_slots\"}"), 0) << after;
   EXPECT_EQ(sample(after, "terrane_memory_bytes{part=\"interest\"}"), 0) << after;
+}
+
+// The border as the running server has it: the world's, whatever the
+// start's options said (a restart without --border keeps it, --border none
+// removes it).
+TEST_F(MetricsEndpointTest, TheWorldBorderShowsWhileTheWorldHasOne) {
+  ServerOptions o;
+  o.ops.metrics_address = "127.0.0.1:0";
+  o.border_set = true;
+  o.border = WorldBounds{0, 1, true, -64, 96, 0, 32};  // x in [-64, 96), z in [0, 32)
+  start(o);
+  const std::string bounded = get("/metrics");
+  expect_promtool_accepts(bounded);
+  EXPECT_EQ(sample(bounded, "terrane_world_bounded"), 1) << bounded;
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"min_x\"}"), -64) << bounded;
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"max_x\"}"), 96) << bounded;
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"min_z\"}"), 0) << bounded;
+  EXPECT_EQ(sample(bounded, "terrane_world_border_voxels{edge=\"max_z\"}"), 32) << bounded;
+  server_->stop();
+  server_.reset();
+
+  ServerOptions kept;  // no --border: the world's
+  kept.ops.metrics_address = "127.0.0.1:0";
+  start(kept);
+  EXPECT_EQ(sample(get("/metrics"), "terrane_world_border_voxels{edge=\"max_x\"}"), 96);
+  server_->stop();
+  server_.reset();
+
+  ServerOptions none = kept;  // --border none
+  none.border_set = true;
+  start(none);
+  const std::string open = get("/metrics");
+  expect_promtool_accepts(open);
+  EXPECT_EQ(sample(open, "terrane_world_bounded"), 0) << open;
+  EXPECT_EQ(open.find("terrane_world_border_voxels"), std::string::npos) << open;
 }
 
 TEST_F(MetricsEndpointTest, ABadOrTakenAddressIsAClearError) {

@@ -490,10 +490,17 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
   auto in_box = s->edit_log(q);
   ASSERT_TRUE(in_box.ok() && in_box->size() == 1u);
   EXPECT_EQ((*in_box)[0].player, "bob");
+  // Its size: the entries and their voxels' bytes before and after (ann's
+  // 3 + 2, bob's 1 + 1), whichever connection wrote them.
+  auto size = s->edit_log_size();
+  ASSERT_TRUE(size.ok()) << size.error().message;
+  EXPECT_EQ(*size, (EditLogSize{2, 7}));
+  EXPECT_EQ(*(*third)->edit_log_size(), (EditLogSize{2, 7}));  // another connection
   auto pruned = s->prune_edit_log(1500, 0);
   ASSERT_TRUE(pruned.ok());
   EXPECT_EQ(*pruned, 1);
   EXPECT_EQ(s->edit_log(EditLogQuery{})->size(), 1u);
+  EXPECT_EQ(*(*third)->edit_log_size(), (EditLogSize{1, 2}));  // bob's, after ann's went
 
   // Quarantine: the row moves aside, blob untouched, and its revision is
   // the floor of the chunk's next ones.
