@@ -12,7 +12,15 @@
 //   FullShared the same, with the replica's decoded chunks shared through
 //              a DecodedChunks cache warmed by another replica (the bots
 //              process: another bot took the same bytes a moment before).
-// Counters: records_per_s, ns_per_record.
+//   Updates    40 replicas holding the same 64 chunks each apply 64 ticks'
+//              UpdateBatches (two 4^3 units of one chunk a tick, as a
+//              small edit near 40 bots in a crowd), each replica on its
+//              own copies.
+//   UpdatesShared the same replicas sharing their chunks (DecodedChunks):
+//              the first to apply a tick's units makes the result, the
+//              others take it (client/shared_updates.h).
+// Counters: records_per_s, ns_per_record; for Updates, ns_per_apply (one
+// replica applying one batch).
 //   terrane-bench-replica --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
 
@@ -22,6 +30,7 @@
 #include "client/decoded_chunks.h"
 #include "client/replica.h"
 #include "common/codec/net_codec.h"
+#include "common/codec/update_batch.h"
 #include "common/voxel/chunk.h"
 #include "common/world/terrain_generator.h"
 #include "protocol/stream_batch.h"
@@ -204,6 +213,49 @@ void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared) {
 }
 
 void BM_Full(benchmark::State& state) { run_full(state, nullptr); }
+
+void run_updates(benchmark::State& state, bool share) {
+  constexpr std::size_t kReplicas = 40;
+  constexpr int kTicks = 64;
+  const FullFrames& f = full_frames();
+  std::shared_ptr<DecodedChunks> shared = share ? std::make_shared<DecodedChunks>() : nullptr;
+  std::vector<std::unique_ptr<Applier>> appliers;
+  for (std::size_t i = 0; i < kReplicas; ++i) {
+    appliers.push_back(std::make_unique<Applier>());
+    appliers.back()->replica.share_decoded(shared);
+    appliers.back()->apply(f.full);
+  }
+  std::vector<Vec3i> held;
+  appliers[0]->replica.grid().for_each_chunk([&](Vec3i cp, const Chunk&) { held.push_back(cp); });
+  // Each tick digs one unit and fills its neighbour in one chunk, in turn.
+  std::vector<std::vector<std::uint8_t>> data(kTicks);
+  std::vector<UpdateBatchMsg> ticks;
+  for (int t = 0; t < kTicks; ++t) {
+    const Vec3i cp = held[static_cast<std::size_t>(t) % held.size()];
+    std::vector<UnitUpdate> ups(2);
+    for (std::size_t u = 0; u < 2; ++u) {
+      ups[u].chunk_pos = cp;
+      ups[u].unit_index = static_cast<std::uint16_t>((t * 37 + static_cast<int>(u)) % 512);
+      ups[u].voxels.fill(u == 0 ? Voxel{} : make_voxel(materials::kRock, 255));
+    }
+    net_codec_encode_update_batch(ups, data[static_cast<std::size_t>(t)]);
+    ticks.push_back(UpdateBatchMsg{static_cast<std::uint64_t>(t), data[static_cast<std::size_t>(t)],
+                                   {ChunkRevisionMsg{cp, static_cast<std::uint64_t>(t + 2)}}});
+  }
+  for (auto _ : state)
+    for (const UpdateBatchMsg& m : ticks)
+      for (auto& a : appliers)
+        if (!a->replica.apply_update_batch(m).ok()) std::abort();
+  state.counters["ns_per_apply"] =
+      benchmark::Counter(static_cast<double>(kTicks * kReplicas),
+                         benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
+void BM_Updates(benchmark::State& state) { run_updates(state, false); }
+BENCHMARK(BM_Updates)->Unit(benchmark::kMillisecond);
+
+void BM_UpdatesShared(benchmark::State& state) { run_updates(state, true); }
+BENCHMARK(BM_UpdatesShared)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Full)->Unit(benchmark::kMillisecond);
 
 void BM_FullShared(benchmark::State& state) { run_full(state, std::make_shared<DecodedChunks>()); }
