@@ -50,6 +50,12 @@ void SharedUpdates::add(const std::shared_ptr<const Chunk>& base, std::span<cons
   e.base = base;
   e.units.assign(units.begin(), units.end());
   e.result = result;
+  if (kept_.size() < kKept) {
+    kept_.push_back(result);
+  } else {
+    kept_[kept_next_] = result;
+    kept_next_ = (kept_next_ + 1) % kKept;
+  }
 }
 
 void SharedUpdates::drop_dead() {
@@ -61,6 +67,8 @@ SharedUpdates::Stats SharedUpdates::stats() const {
   Stats s = stats_;
   s.entries = entries_.size();
   for (const auto& [key, e] : entries_) s.bytes += sizeof(Entry) + 32 + e.units.capacity() * sizeof(UnitUpdate);
+  // A kept result counts as its share (its other holders are replicas).
+  for (const auto& c : kept_) s.bytes += c->memory().total() / static_cast<std::size_t>(c.use_count());
   return s;
 }
 

@@ -15,9 +15,13 @@
 // when its base is the very chunk object the replica holds (shared chunks
 // are immutable) and its units equal the replica's own, voxel by voxel,
 // so the result is what the replica's own apply would make.
-// Weak: a result lives as long as some replica holds it, and an entry
-// whose base or result died is dropped when the table is rebuilt (at
-// kCapacity entries); so the table is bounded, and holds no chunk.
+// A result lives as long as some replica holds it, or while it is among
+// the kKept newest results: the replicas of a process do not all apply a
+// tick at once, and one that comes late, after the first has gone on to
+// the next tick's, still takes the result instead of starting a lineage
+// of its own. An entry whose base or result died is dropped when the
+// table is rebuilt (at kCapacity entries); so the table is bounded, and
+// holds kKept chunks at most.
 // Thread-safety: every member may be called from any thread.
 #pragma once
 
@@ -37,6 +41,7 @@ namespace terrane {
 class SharedUpdates {
  public:
   static constexpr std::size_t kCapacity = 16384;
+  static constexpr std::size_t kKept = 1024;
 
   // What units (one chunk's, in the batch's order) made of base, if a
   // replica applied them to this same base; else null.
@@ -49,7 +54,7 @@ class SharedUpdates {
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
     std::size_t entries = 0;
-    std::size_t bytes = 0;  // the entries and their units (heap; the chunks are the replicas')
+    std::size_t bytes = 0;  // the entries, their units and the kept results' share (heap)
   };
   Stats stats() const;
 
@@ -66,6 +71,9 @@ class SharedUpdates {
   mutable std::mutex m_;
   // By key (one entry per key: of two whose keys are equal, the newer is kept).
   std::unordered_map<std::size_t, Entry> entries_;
+  // The kKept newest results, oldest first (kept_next_ the slot to fill).
+  std::vector<std::shared_ptr<const Chunk>> kept_;
+  std::size_t kept_next_ = 0;
   Stats stats_;
 };
 

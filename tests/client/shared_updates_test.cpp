@@ -81,6 +81,29 @@ TEST(SharedUpdates, ReplicasHoldingOneChunkSentTheSameUnitsHoldOneResultMadeOnce
   EXPECT_EQ(*b.holding(kAt), (Holding{HoldingForm::kFull, 7}));
 }
 
+// Replicas do not apply a tick at once: one that comes late, after the
+// first went on to the next tick, still takes both ticks' results.
+TEST(SharedUpdates, AReplicaThatComesLateTakesEveryTicksResultMadeBeforeIt) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica first, late, alone;
+  first.share_decoded(shared);
+  late.share_decoded(shared);
+  const auto payload = full_payload(slope());
+  for (Replica* r : {&first, &late, &alone}) take_full(*r, kAt, 5, payload);
+  std::vector<std::uint8_t> d1, d2;
+  const UpdateBatchMsg tick1 = one_unit(kAt, 70, Voxel{}, 6, d1);
+  const UpdateBatchMsg tick2 = one_unit(kAt, 71, make_voxel(materials::kSand, 255), 7, d2);
+  ASSERT_TRUE(first.apply_update_batch(tick1).ok());
+  ASSERT_TRUE(first.apply_update_batch(tick2).ok());  // (first holds tick 1's result no more)
+  EXPECT_EQ(shared->updates().stats().misses, 2u);
+  ASSERT_TRUE(late.apply_update_batch(tick1).ok());
+  ASSERT_TRUE(late.apply_update_batch(tick2).ok());
+  EXPECT_EQ(shared->updates().stats().hits, 2u);
+  EXPECT_EQ(late.grid().find_chunk(kAt), first.grid().find_chunk(kAt));
+  for (const UpdateBatchMsg* m : {&tick1, &tick2}) ASSERT_TRUE(alone.apply_update_batch(*m).ok());
+  EXPECT_TRUE(held(late, kAt) == held(alone, kAt));
+}
+
 TEST(SharedUpdates, OtherUnitsOrAnotherBaseAreNeverGivenAnothersResult) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b, c;
