@@ -77,6 +77,34 @@ def test_many_awaits_hold_no_thread(server):
     asyncio.run(main())
 
 
+def test_waiting_to_be_ready_and_loaded_holds_no_thread_and_a_cancelled_wait_stops(server):
+    def waiting_threads():
+        return [t for t in threading.enumerate() if t.name == "terrane-await"]
+
+    async def main():
+        asyncio.get_running_loop().set_default_executor(NoExecutor())
+        with terrane.connect(server.address, name="async-loading", view_distance=64, full_res_radius=32) as c:
+            waits = [asyncio.ensure_future(terrane.ready(c)), asyncio.ensure_future(terrane.loaded(c, timeout=60))]
+            await asyncio.sleep(0)
+            assert waiting_threads() == [], "waits took threads"
+            await asyncio.gather(*waits)
+            assert c.loaded
+        # A wait cancelled before the client loaded ends at once, and
+        # leaves nothing waiting behind it.
+        with terrane.connect(server.address, name="async-cancelled", view_distance=64, full_res_radius=32) as c:
+            early = asyncio.ensure_future(terrane.loaded(c, timeout=60))
+            await asyncio.sleep(0)
+            early.cancel()
+            try:
+                await early
+            except asyncio.CancelledError:
+                pass
+            assert early.cancelled()
+            assert waiting_threads() == []
+
+    asyncio.run(main())
+
+
 def test_a_cancelled_await_is_cancelled_and_sends_nothing(server):
     async def main():
         with terrane.connect(server.address, name="async-cancel", view_distance=64, full_res_radius=32) as c:

@@ -124,14 +124,28 @@ async def synced(client):
         client.sync(0)  # raises ConnectionError with the reason
 
 
+async def _polled(check, timeout, what):
+    """Awaits check() (which returns or raises TimeoutError at once) on the
+    loop, every 10 ms, holding no thread; a cancelled await stops polling."""
+    loop = _asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        try:
+            return check()
+        except TimeoutError:
+            if loop.time() >= deadline:
+                raise TimeoutError("not %s within the timeout" % what) from None
+        await _asyncio.sleep(0.01)
+
+
 async def ready(client, timeout=30.0):
-    """Awaitable Client.wait_ready."""
-    return await in_thread(client.wait_ready, timeout)
+    """Awaitable Client.wait_ready, holding no thread."""
+    return await _polled(lambda: client.wait_ready(0), timeout, "welcomed")
 
 
 async def loaded(client, radius=None, timeout=60.0):
-    """Awaitable Client.wait_loaded."""
-    return await in_thread(client.wait_loaded, radius, timeout)
+    """Awaitable Client.wait_loaded, holding no thread."""
+    return await _polled(lambda: client.wait_loaded(radius, 0), timeout, "loaded")
 
 
 async def event(client, kind=None, timeout=30.0):
