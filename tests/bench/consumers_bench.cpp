@@ -46,6 +46,7 @@
 #include "common/voxel/grid_reads.h"
 #include "common/voxel/vec3_map.h"
 #include "common/vxraw/vxraw.h"
+#include "tests/bench/bench_datasets.h"
 #include "common/world/terrain_generator.h"
 #include "protocol/chunk_hash.h"
 
@@ -142,20 +143,7 @@ Dataset& dataset(const std::string& name) {
   d->name = name;
   Box box;
   Vec3i origin;
-  if (name == "generated") {
-    const Region r{{-256, -64, -256}, {256, 192, 256}};
-    TerrainGenerator(GeneratorParams{}).generate(r, box);
-    origin = r.min;
-  } else {
-    const std::string path = std::string(TERRANE_TEST_DATA_DIR) + "/" + name + ".vxraw.gz";
-    auto file = vxraw_read_file(path, VxrawLimits{});
-    if (!file) {
-      std::fprintf(stderr, "consumers bench: %s\n", file.error().message.c_str());
-      std::exit(1);
-    }
-    origin = file->origin;
-    box = std::move(file->box);
-  }
+  bench::load_dataset(name, "consumers bench", box, origin);
   d->bounds = Region::from_min_size(origin, box.size());
   d->packed.write_box(origin, box);
   d->packed.compact();

@@ -22,6 +22,7 @@
 #include "common/voxel/grid.h"
 #include "common/world/terrain_generator.h"
 #include "common/vxraw/vxraw.h"
+#include "tests/bench/bench_datasets.h"
 #include "common/world/sqlite_store.h"
 
 namespace terrane {
@@ -45,20 +46,7 @@ Dataset& dataset(const std::string& name) {
   d.grid = std::make_unique<Grid>();
   Vec3i origin;
   Box box;
-  if (name == "generated") {
-    const Region r{{-256, -64, -256}, {256, 192, 256}};
-    TerrainGenerator(GeneratorParams{}).generate(r, box);
-    origin = r.min;
-  } else {
-    const std::string path = std::string(TERRANE_TEST_DATA_DIR) + "/" + name + ".vxraw.gz";
-    auto file = vxraw_read_file(path, VxrawLimits{});
-    if (!file) {
-      std::fprintf(stderr, "storage bench: %s\n", file.error().message.c_str());
-      std::exit(1);
-    }
-    origin = file->origin;
-    box = std::move(file->box);
-  }
+  bench::load_dataset(name, "storage bench", box, origin);
   d.voxels = static_cast<std::int64_t>(box.voxel_count());
   for (const Voxel v : box.voxels()) d.non_empty += v.material != kAir;
   d.grid->write_box(origin, box);

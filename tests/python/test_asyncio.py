@@ -21,6 +21,15 @@ def _spot(c):
     return x, c.ground(x, z), z
 
 
+async def _presence_id(a, b):
+    """The id under which client a's presence lists client b (at b's position)."""
+    while True:
+        near_b = [p for p in a.presence if _dist(p.position, b.position) < 1]
+        if near_b:
+            return near_b[0].id
+        await terrane.event(a, "presence", 30)
+
+
 def test_edits_paced_on_the_loop_never_block_it(server):
     # 60 edits: past the burst, the server's rate (20 a second) paces them
     # for about two seconds. A ticker on the same loop keeps running.
@@ -270,14 +279,7 @@ def test_walk_within_a_distance_and_follow_a_player(server):
                                  full_res_radius=32) as b:
                 b.wait_ready(30)
 
-                async def seen():
-                    while True:
-                        near_b = [p for p in a.presence if _dist(p.position, b.position) < 1]
-                        if near_b:
-                            return near_b[0].id
-                        await terrane.event(a, "presence", 30)
-
-                bid = await asyncio.wait_for(seen(), 30)
+                bid = await asyncio.wait_for(_presence_id(a, b), 30)
                 following = asyncio.ensure_future(terrane.follow(a, bid, distance=2, speed=32))
 
                 async def within(d):
@@ -324,14 +326,7 @@ def test_keep_away_from_a_point_and_from_a_player_and_a_cancelled_one_stops(serv
                                  full_res_radius=32) as b:
                 b.wait_ready(30)
 
-                async def seen():
-                    while True:
-                        near_b = [p for p in a.presence if _dist(p.position, b.position) < 1]
-                        if near_b:
-                            return near_b[0].id
-                        await terrane.event(a, "presence", 30)
-
-                bid = await asyncio.wait_for(seen(), 30)
+                bid = await asyncio.wait_for(_presence_id(a, b), 30)
                 walked = await terrane.keep_away(a, bid, 5, speed=32)
                 assert walked and _dist(a.position, b.position) >= 5
             # Cancelled after its first step: it stops there.
