@@ -3,6 +3,7 @@ thread through loop.call_soon_threadsafe, pacing as an asyncio sleep,
 cancellation that cancels. Against a real terrane-server on 127.0.0.1."""
 import asyncio
 import concurrent.futures
+import socket
 import threading
 import time
 
@@ -98,18 +99,25 @@ def test_waiting_to_be_ready_and_loaded_holds_no_thread_and_a_cancelled_wait_sto
             assert waiting_threads() == [], "waits took threads"
             await asyncio.gather(*waits)
             assert c.loaded
-        # A wait cancelled before the client loaded ends at once, and
-        # leaves nothing waiting behind it.
-        with terrane.connect(server.address, name="async-cancelled", view_distance=64, full_res_radius=32) as c:
-            early = asyncio.ensure_future(terrane.loaded(c, timeout=60))
-            await asyncio.sleep(0)
-            early.cancel()
-            try:
-                await early
-            except asyncio.CancelledError:
-                pass
-            assert early.cancelled()
-            assert waiting_threads() == []
+        # Waits that cannot end (a listener that never says Welcome),
+        # cancelled: they end at once and leave nothing waiting behind them.
+        with socket.socket() as silent:
+            silent.bind(("127.0.0.1", 0))
+            silent.listen()
+            with terrane.connect("127.0.0.1:%d" % silent.getsockname()[1], name="async-cancelled") as c:
+                waits = [asyncio.ensure_future(terrane.ready(c, timeout=60)),
+                         asyncio.ensure_future(terrane.loaded(c, timeout=60))]
+                await asyncio.sleep(0)
+                assert not any(w.done() for w in waits)
+                for w in waits:
+                    w.cancel()
+                for w in waits:
+                    try:
+                        await w
+                    except asyncio.CancelledError:
+                        pass
+                assert all(w.cancelled() for w in waits)
+                assert waiting_threads() == []
 
     asyncio.run(main())
 
