@@ -3,6 +3,7 @@ thread through loop.call_soon_threadsafe, pacing as an asyncio sleep,
 cancellation that cancels. Against a real terrane-server on 127.0.0.1."""
 import asyncio
 import concurrent.futures
+import inspect
 import socket
 import threading
 import time
@@ -20,6 +21,18 @@ class NoExecutor(concurrent.futures.ThreadPoolExecutor):
 def _spot(c):
     x, _, z = (int(v) for v in c.position)
     return x, c.ground(x, z), z
+
+
+async def _started(tasks, timeout=30):
+    """Waits on the loop until each task has run up to its first await (a
+    condition, with a deadline): one pass of the loop at a time."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while any(inspect.getcoroutinestate(t.get_coro()) == inspect.CORO_CREATED for t in tasks):
+        assert loop.time() < deadline, "the tasks never started"
+        turn = loop.create_future()
+        loop.call_soon(turn.set_result, None)
+        await turn
 
 
 async def _presence_id(a, b):
@@ -95,7 +108,7 @@ def test_waiting_to_be_ready_and_loaded_holds_no_thread_and_a_cancelled_wait_sto
         asyncio.get_running_loop().set_default_executor(NoExecutor())
         with terrane.connect(server.address, name="async-loading", view_distance=64, full_res_radius=32) as c:
             waits = [asyncio.ensure_future(terrane.ready(c)), asyncio.ensure_future(terrane.loaded(c, timeout=60))]
-            await asyncio.sleep(0)
+            await _started(waits)
             assert waiting_threads() == [], "waits took threads"
             await asyncio.gather(*waits)
             assert c.loaded
@@ -107,7 +120,7 @@ def test_waiting_to_be_ready_and_loaded_holds_no_thread_and_a_cancelled_wait_sto
             with terrane.connect("127.0.0.1:%d" % silent.getsockname()[1], name="async-cancelled") as c:
                 waits = [asyncio.ensure_future(terrane.ready(c, timeout=60)),
                          asyncio.ensure_future(terrane.loaded(c, timeout=60))]
-                await asyncio.sleep(0)
+                await _started(waits)
                 assert not any(w.done() for w in waits)
                 for w in waits:
                     w.cancel()
@@ -248,13 +261,9 @@ def test_a_walk_steps_on_the_loop_and_a_cancelled_one_stops_where_it_stands(serv
             steps = await terrane.walk(c, (x + 8, g, z), speed=32)
             assert steps[-1] == (x + 8, g, z) and ticks > 0
             # Cancelled after its first step: it stops there.
-            walking = asyncio.ensure_future(terrane.walk(c, (x - 8, g, z), speed=4))
-
-            async def first_step():  # the condition, polled on the loop
-                while tuple(int(v) for v in c.position) == (x + 8, g, z):
-                    await asyncio.sleep(0.01)
-
-            await asyncio.wait_for(first_step(), 30)
+            stepped = asyncio.Event()
+            walking = asyncio.ensure_future(terrane.walk(c, (x - 8, g, z), speed=4, on_step=lambda _: stepped.set()))
+            await asyncio.wait_for(stepped.wait(), 30)
             walking.cancel()
             try:
                 await walking
@@ -339,13 +348,9 @@ def test_keep_away_from_a_point_and_from_a_player_and_a_cancelled_one_stops(serv
                 assert walked and _dist(a.position, b.position) >= 5
             # Cancelled after its first step: it stops there.
             here = a.position
-            going = asyncio.ensure_future(terrane.keep_away(a, here, 9, speed=4))
-
-            async def first_step():  # the condition, polled on the loop
-                while a.position == here:
-                    await asyncio.sleep(0.01)
-
-            await asyncio.wait_for(first_step(), 30)
+            stepped = asyncio.Event()
+            going = asyncio.ensure_future(terrane.keep_away(a, here, 9, speed=4, on_step=lambda _: stepped.set()))
+            await asyncio.wait_for(stepped.wait(), 30)
             going.cancel()
             try:
                 await going
