@@ -178,8 +178,9 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     // Not while voxels are recorded: their old values are read as written.
     const std::span<const UnitUpdate> chunk_units(units_in.data() + begin, end - begin);
     std::shared_ptr<const Chunk> base = shared_ && voxels == nullptr ? grid_.shared_chunk(cp) : nullptr;
+    const std::size_t key = base ? SharedUpdates::key_of(base.get(), chunk_units) : 0;
     if (base) {
-      if (std::shared_ptr<const Chunk> made = shared_->updates().find(base, chunk_units)) {
+      if (std::shared_ptr<const Chunk> made = shared_->updates().find(key, base, chunk_units)) {
         grid_.put_shared_chunk(cp, std::move(made));
         begin = end;
         continue;
@@ -199,7 +200,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
         return now;
       });
     }
-    if (base) shared_->updates().add(base, chunk_units, grid_.share_chunk(cp));
+    if (base) shared_->updates().add(key, base, chunk_units, grid_.share_chunk(cp));
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
     // the update itself; the replica holds full resolution only near it.

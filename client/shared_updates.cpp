@@ -18,9 +18,8 @@ std::size_t SharedUpdates::key_of(const Chunk* base, std::span<const UnitUpdate>
   return h;
 }
 
-std::shared_ptr<const Chunk> SharedUpdates::find(const std::shared_ptr<const Chunk>& base,
+std::shared_ptr<const Chunk> SharedUpdates::find(std::size_t key, const std::shared_ptr<const Chunk>& base,
                                                  std::span<const UnitUpdate> units) {
-  const std::size_t key = key_of(base.get(), units);
   std::lock_guard lock(m_);
   auto it = entries_.find(key);
   if (it != entries_.end()) {
@@ -38,15 +37,20 @@ std::shared_ptr<const Chunk> SharedUpdates::find(const std::shared_ptr<const Chu
   return nullptr;
 }
 
-void SharedUpdates::add(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
+void SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
                         const std::shared_ptr<const Chunk>& result) {
   // An emptied chunk is not kept: the replica erases it (nothing to share).
   if (!result) return;
-  const std::size_t key = key_of(base.get(), units);
   std::lock_guard lock(m_);
-  if (entries_.size() >= kCapacity) drop_dead();
-  if (entries_.size() >= kCapacity) entries_.clear();
+  auto over = [&] { return entries_.size() >= kCapacity || units_held_ + units.size() > kMaxUnits; };
+  if (over()) drop_dead();
+  if (over()) {
+    entries_.clear();
+    units_held_ = 0;
+  }
   Entry& e = entries_[key];
+  units_held_ -= e.units.size();
+  units_held_ += units.size();
   e.base = base;
   e.units.assign(units.begin(), units.end());
   e.result = result;
@@ -59,7 +63,11 @@ void SharedUpdates::add(const std::shared_ptr<const Chunk>& base, std::span<cons
 }
 
 void SharedUpdates::drop_dead() {
-  std::erase_if(entries_, [](const auto& kv) { return kv.second.base.expired() || kv.second.result.expired(); });
+  std::erase_if(entries_, [&](const auto& kv) {
+    const bool dead = kv.second.base.expired() || kv.second.result.expired();
+    if (dead) units_held_ -= kv.second.units.size();
+    return dead;
+  });
 }
 
 SharedUpdates::Stats SharedUpdates::stats() const {

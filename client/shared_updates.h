@@ -20,8 +20,8 @@
 // tick at once, and one that comes late, after the first has gone on to
 // the next tick's, still takes the result instead of starting a lineage
 // of its own. An entry whose base or result died is dropped when the
-// table is rebuilt (at kCapacity entries); so the table is bounded, and
-// holds kKept chunks at most.
+// table is full (kCapacity entries, or kMaxUnits units copied); so the
+// table is bounded, and holds kKept chunks at most.
 // Thread-safety: every member may be called from any thread.
 #pragma once
 
@@ -42,13 +42,20 @@ class SharedUpdates {
  public:
   static constexpr std::size_t kCapacity = 16384;
   static constexpr std::size_t kKept = 1024;
+  // The units the entries copy, at most (a batch's units come from the
+  // server: 512 a chunk at most, so entries are bounded by bytes too).
+  static constexpr std::size_t kMaxUnits = 65536;
 
-  // What units (one chunk's, in the batch's order) made of base, if a
-  // replica applied them to this same base; else null.
-  std::shared_ptr<const Chunk> find(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units);
-  // Keeps result as what units made of base. result may be null: the chunk
-  // became all Air.
-  void add(const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
+  // The key of units (one chunk's, in the batch's order) applied to base,
+  // for find and add (computed once per apply).
+  static std::size_t key_of(const Chunk* base, std::span<const UnitUpdate> units);
+  // What units made of base, if a replica applied them to this same base;
+  // else null. key: key_of(base, units).
+  std::shared_ptr<const Chunk> find(std::size_t key, const std::shared_ptr<const Chunk>& base,
+                                    std::span<const UnitUpdate> units);
+  // Keeps result as what units made of base (key: key_of(base, units)).
+  // result may be null: the chunk became all Air, and nothing is kept.
+  void add(std::size_t key, const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
            const std::shared_ptr<const Chunk>& result);
 
   struct Stats {
@@ -64,13 +71,13 @@ class SharedUpdates {
     std::vector<UnitUpdate> units;
     std::weak_ptr<const Chunk> result;
   };
-  static std::size_t key_of(const Chunk* base, std::span<const UnitUpdate> units);
   // Drops the entries whose base or result died (under m_).
   void drop_dead();
 
   mutable std::mutex m_;
   // By key (one entry per key: of two whose keys are equal, the newer is kept).
   std::unordered_map<std::size_t, Entry> entries_;
+  std::size_t units_held_ = 0;  // the entries' units, in all
   // The kKept newest results, oldest first (kept_next_ the slot to fill).
   std::vector<std::shared_ptr<const Chunk>> kept_;
   std::size_t kept_next_ = 0;

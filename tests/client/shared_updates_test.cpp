@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <initializer_list>
+
 #include "client/decoded_chunks.h"
 #include "client/replica.h"
 #include "common/codec/net_codec.h"
@@ -49,13 +51,22 @@ Box held(const Replica& r, Vec3i cp) {
 
 constexpr Vec3i kAt{1, 0, 2};
 
+// Each replica of sharing takes shared, each of alone keeps its own; all
+// then take the same Full record of the slope at kAt, revision 5.
+void hold_slope(const std::shared_ptr<DecodedChunks>& shared, std::initializer_list<Replica*> sharing,
+                std::initializer_list<Replica*> alone = {}) {
+  const auto payload = full_payload(slope());
+  for (Replica* r : sharing) {
+    r->share_decoded(shared);
+    take_full(*r, kAt, 5, payload);
+  }
+  for (Replica* r : alone) take_full(*r, kAt, 5, payload);
+}
+
 TEST(SharedUpdates, ReplicasHoldingOneChunkSentTheSameUnitsHoldOneResultMadeOnce) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b, alone;
-  a.share_decoded(shared);
-  b.share_decoded(shared);
-  const auto payload = full_payload(slope());
-  for (Replica* r : {&a, &b, &alone}) take_full(*r, kAt, 5, payload);
+  hold_slope(shared, {&a, &b}, {&alone});
   ASSERT_EQ(a.grid().find_chunk(kAt), b.grid().find_chunk(kAt)) << "the Full record's chunk is shared";
 
   std::vector<std::uint8_t> data;
@@ -86,10 +97,7 @@ TEST(SharedUpdates, ReplicasHoldingOneChunkSentTheSameUnitsHoldOneResultMadeOnce
 TEST(SharedUpdates, AReplicaThatComesLateTakesEveryTicksResultMadeBeforeIt) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica first, late, alone;
-  first.share_decoded(shared);
-  late.share_decoded(shared);
-  const auto payload = full_payload(slope());
-  for (Replica* r : {&first, &late, &alone}) take_full(*r, kAt, 5, payload);
+  hold_slope(shared, {&first, &late}, {&alone});
   std::vector<std::uint8_t> d1, d2;
   const UpdateBatchMsg tick1 = one_unit(kAt, 70, Voxel{}, 6, d1);
   const UpdateBatchMsg tick2 = one_unit(kAt, 71, make_voxel(materials::kSand, 255), 7, d2);
@@ -107,9 +115,7 @@ TEST(SharedUpdates, AReplicaThatComesLateTakesEveryTicksResultMadeBeforeIt) {
 TEST(SharedUpdates, OtherUnitsOrAnotherBaseAreNeverGivenAnothersResult) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b, c;
-  for (Replica* r : {&a, &b, &c}) r->share_decoded(shared);
-  const auto payload = full_payload(slope());
-  for (Replica* r : {&a, &b, &c}) take_full(*r, kAt, 5, payload);
+  hold_slope(shared, {&a, &b, &c});
   std::vector<std::uint8_t> da, db;
   const UpdateBatchMsg to_sand = one_unit(kAt, 3, make_voxel(materials::kSand, 255), 6, da);
   const UpdateBatchMsg to_air = one_unit(kAt, 3, Voxel{}, 6, db);
@@ -148,6 +154,26 @@ TEST(SharedUpdates, AUnitThatEmptiesTheChunkLeavesNothingToShareAndNothingHeld) 
   EXPECT_EQ(b.grid().find_chunk(kAt), nullptr);
   EXPECT_EQ(a.get(chunk_origin(kAt) + Vec3i{1, 1, 1}), Voxel{});
   EXPECT_EQ(shared->updates().stats().entries, 0u);
+}
+
+// The units a server sends are copied into the table: bounded by their
+// count too, however many a batch holds (512 units of a chunk each here).
+TEST(SharedUpdates, TheTableHoldsAtMostItsUnitsEvenWhenEveryResultLives) {
+  SharedUpdates table;
+  std::vector<UnitUpdate> whole(kUpdateUnitsPerChunk);
+  for (std::size_t i = 0; i < whole.size(); ++i) whole[i].unit_index = static_cast<std::uint16_t>(i);
+  std::vector<std::shared_ptr<const Chunk>> alive;
+  const std::size_t adds = 2 * SharedUpdates::kMaxUnits / whole.size();
+  for (std::size_t i = 0; i < adds; ++i) {
+    auto base = std::make_shared<const Chunk>(), result = std::make_shared<const Chunk>();
+    alive.push_back(base);
+    alive.push_back(result);
+    table.add(SharedUpdates::key_of(base.get(), whole), base, whole, result);
+    EXPECT_LE(table.stats().entries * whole.size(), SharedUpdates::kMaxUnits);
+  }
+  // The newest is still there to be taken.
+  const auto& base = alive[alive.size() - 2];
+  EXPECT_EQ(table.find(SharedUpdates::key_of(base.get(), whole), base, whole), alive.back());
 }
 
 }  // namespace
