@@ -124,6 +124,7 @@ std::string read_options(FlatReader& in, BotsOptions* o) {
   put("wait-joined", "wait_joined");
   put("measure-from", "measure_from");
   put("shard", "shard");
+  put("preset", "preset");
   put("edit-shape", "edit_shape");
   put("teleport-interval", "teleport_interval");
   put("teleport-distance", "teleport_distance");

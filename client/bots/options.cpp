@@ -8,6 +8,7 @@
 #include <sstream>
 #include <thread>
 
+#include "client/bots/presets.h"
 #include "common/cli/cli.h"
 #include "protocol/messages.h"
 #include "protocol/tokens_file.h"
@@ -15,7 +16,8 @@
 namespace terrane::bots {
 
 const char* const kBotsHelp =
-    "usage: terrane-bots --connect HOST:PORT [options]\n"
+    "usage: terrane-bots --connect HOST:PORT [--preset NAME] [options]\n"
+    "       terrane-bots --list-presets\n"
     "       terrane-bots compare A.json B.json\n"
     "       terrane-bots merge PART.json... --report ALL.json [--html ALL.html]\n"
     "\n"
@@ -37,6 +39,11 @@ const char* const kBotsHelp =
     "                            editor's server\n"
     "  --bots N                  bots (default 10)\n"
     "  --duration S              seconds from the first connection to the end of edits (default 30)\n"
+    "  --preset NAME             start from a named scenario's defaults: join-storm, hotspot,\n"
+    "                            teleport (or flyers), builders, crowd, world (the list below,\n"
+    "                            and terrane-bots --list-presets); flags and scenario lines\n"
+    "                            given besides override them\n"
+    "  --list-presets            describe each preset with its defaults\n"
     "  --behavior B              idle | walk | fly | dig | build | mixed | teleport | hotspot\n"
     "                            (default mixed):\n"
     "                              walk   moves along the surface (5 voxels/s) inside its full-resolution\n"
@@ -140,7 +147,7 @@ const std::set<std::string>& value_keys() {
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",   "token-file", "tokens-file", "name-prefix",       "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks",
       "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
-      "shard",          "edit-shape",  "teleport-interval", "teleport-distance"};
+      "shard",          "preset",       "edit-shape",  "teleport-interval", "teleport-distance"};
   return k;
 }
 
@@ -209,7 +216,9 @@ std::string parse_scenario_text(const std::string& text, const std::string& sour
   return "";
 }
 
-std::string apply_option_values(const Values& values, BotsOptions* o) {
+std::string apply_option_values(const Values& given, BotsOptions* o) {
+  Values values;
+  if (auto err = expand_preset(given, &values); !err.empty()) return err;
   bool thresholds_given = false, token_given = false, prefix_given = false;
   for (const auto& [key, vw] : values) {
     const std::string& v = vw.first;
@@ -260,6 +269,10 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
                          Behavior::kMixed, Behavior::kTeleport, Behavior::kHotspot})
         if (v == behavior_name(b)) o->behavior = b, found = true;
       if (!found) return bad(where, v, "is not one of idle, walk, fly, dig, build, mixed, teleport, hotspot");
+    } else if (key == "preset") {
+      const Preset* p = find_preset(v);
+      if (p == nullptr) return bad(where, v, "is not a preset; known: " + preset_names());
+      o->preset = p->name;
     } else if (key == "edit-shape") {
       bool found = false;
       for (EditShape e : {EditShape::kMixed, EditShape::kSphere, EditShape::kBox, EditShape::kWriteBox})
@@ -396,14 +409,19 @@ double hash_check_span_s(const BotsOptions& o) {
   return std::clamp(window / (o.hash_checks + 1), 0.2, 10.0);
 }
 
-std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help) {
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help, bool* list_presets) {
   Values flags;
   std::string scenario;
   *help = false;
+  if (list_presets != nullptr) *list_presets = false;
   for (int a = first; a < argc; ++a) {
     std::string arg = argv[a];
     if (arg == "--help" || arg == "-h") {
       *help = true;
+      return "";
+    }
+    if (arg == "--list-presets" && list_presets != nullptr) {
+      *list_presets = true;
       return "";
     }
     if (arg.rfind("--", 0) != 0) return "unexpected argument '" + arg + "'";
@@ -439,6 +457,8 @@ std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* ou
 std::string scenario_text(const BotsOptions& o) {
   std::ostringstream s;
   s << "# terrane-bots scenario (terrane-bots --scenario FILE)\n";
+  // The preset's name is kept for the record; every value below wins over it.
+  if (!o.preset.empty()) s << "preset = " << o.preset << "\n";
   s << "connect = ";
   for (std::size_t i = 0; i < o.servers.size(); ++i) s << (i ? "," : "") << o.servers[i].first << ":" << o.servers[i].second;
   if (o.servers.empty()) s << o.host << ":" << o.port;

@@ -67,6 +67,9 @@ struct BotsOptions {
   // (terrane-server --max-speed x the interval, plus 48 voxels).
   double teleport_interval_s = 5;
   int teleport_distance = 1024;
+  // The preset the options started from (presets.h), "" for none: saved
+  // with the resolved values, which win over it when read back.
+  std::string preset;
   int latency_ms = 0;          // per-bot downstream latency (client/client.h NetworkEmulation)
   int bandwidth_kbps = 0;      // per-bot downstream cap, kilobits per second
   int hash_checks = 5;         // region-hash checks per bot during the run, at least
@@ -125,8 +128,10 @@ double hash_check_span_s(const BotsOptions& o);
 int io_threads(const BotsOptions& o);
 
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
-// else the error (for exit status 2). Sets *help when --help was given.
-std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help);
+// else the error (for exit status 2). Sets *help when --help was given
+// (and *list_presets when --list-presets was, if list_presets is given).
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help,
+                               bool* list_presets = nullptr);
 
 // Option values by key: (value, where it was given: "--flag" or
 // "FILE:LINE: key"), in the order given. A key given twice keeps both:
@@ -138,7 +143,8 @@ using OptionValues = std::multimap<std::string, std::pair<std::string, std::stri
 std::string parse_scenario_text(const std::string& text, const std::string& source, OptionValues* out);
 
 // Applies the values to *o; returns the first error. Thresholds given
-// replace those *o had.
+// replace those *o had. A `preset` value (presets.h) first adds the
+// preset's defaults for every key the values do not give: the values win.
 std::string apply_option_values(const OptionValues& values, BotsOptions* o);
 
 // The scenario file text that reproduces *o (every key, flags' names).

@@ -124,6 +124,7 @@ std::string report_json(const BotsReport& r) {
     << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\""
     << ", \"edit_shape\": \"" << edit_shape_name(o.edit_shape) << "\""
     << ", \"teleport_interval\": " << num(o.teleport_interval_s) << ", \"teleport_distance\": " << o.teleport_distance;
+  if (!o.preset.empty()) j << ", \"preset\": \"" << esc(o.preset) << "\"";
   j << "},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
   j << "  \"failures\": [";
@@ -261,6 +262,7 @@ std::string report_table(const BotsReport& r) {
   };
   auto mb = [](std::uint64_t b) { return fixed(static_cast<double>(b) / 1e6, 2) + " MB"; };
   t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
+    << (r.options.preset.empty() ? "" : "preset " + r.options.preset + ", ")
     << fixed(r.duration_s, 1) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
   for (const std::string& why : r.failures()) t << "  FAILED: " << why << "\n";
   for (const std::string& why : r.broken_thresholds()) t << "  FAILED: " << why << "\n";
