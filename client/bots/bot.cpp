@@ -462,7 +462,10 @@ void Bot::maybe_edit(Clock::time_point now) {
   if (!hit) return;
   {
     std::lock_guard lock(mutex_);
-    if (outstanding_edits_ >= kMaxOutstandingEdits) return;
+    if (outstanding_edits_ >= kMaxOutstandingEdits) {
+      ++result_.edits_held_back;
+      return;
+    }
     ++outstanding_edits_;
   }
   const Vec3i normal = hit->normal == Vec3i{} ? Vec3i{0, 1, 0} : hit->normal;

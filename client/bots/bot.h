@@ -63,6 +63,9 @@ struct BotResult {
   int checks_during_run = 0;
   double distance_moved = 0;
   std::uint64_t teleports = 0;     // jumps made (Gait::kTeleport)
+  // Edits that fell due while 8 of the bot's were unanswered, not sent
+  // (the only way replies hold edits back: bot.cpp kMaxOutstandingEdits).
+  std::uint64_t edits_held_back = 0;
   bool at_hotspot = false;         // landed at the hotspot (Gait::kHotspot)
   bool unexpected_disconnect = false;
   std::string disconnect_reason;

@@ -258,6 +258,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.first_connect_error = in.text("first_connect_error");
   r.walk_steps = in.whole("walk_steps");
   r.teleports = in.whole("teleports");
+  r.edits_held_back = in.whole("edits_held_back");
   r.bots_at_hotspot = in.integer("bots_at_hotspot", 0, r.bots);
   const char* const refused[] = {"outside_area", "not_full_resolution", "too_steep", "obstacle"};
   for (std::size_t w = 0; w < r.walk_blocked.size(); ++w)
@@ -376,6 +377,7 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     for (const auto& [server, count] : p.bots_per_server) r.bots_per_server[server] += count;
     r.walk_steps += p.walk_steps;
     r.teleports += p.teleports;
+    r.edits_held_back += p.edits_held_back;
     r.bots_at_hotspot += p.bots_at_hotspot;
     for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += p.walk_blocked[w];
     for (std::size_t t = 0; t < kMessageTypeCount; ++t) {

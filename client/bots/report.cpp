@@ -210,6 +210,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"first_connect_error\": \"" << esc(r.first_connect_error) << "\",\n";
   j << "  \"walk_steps\": " << r.walk_steps << ",\n";
   j << "  \"teleports\": " << r.teleports << ",\n";
+  j << "  \"edits_held_back\": " << r.edits_held_back << ",\n";
   j << "  \"bots_at_hotspot\": " << r.bots_at_hotspot << ",\n";
   j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
     << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
@@ -340,6 +341,7 @@ std::string report_table(const BotsReport& r) {
         std::to_string(r.walk_steps) + " (" + std::to_string(r.walk_blocked[0]) + " / " + std::to_string(r.walk_blocked[1]) +
             " / " + std::to_string(r.walk_blocked[2]) + " / " + std::to_string(r.walk_blocked[3]) + ")");
   if (r.teleports > 0) row("teleports", std::to_string(r.teleports));
+  if (r.edits_held_back > 0) row("edits not sent: 8 of the bot's unanswered", std::to_string(r.edits_held_back));
   if (r.options.behavior == Behavior::kHotspot)
     row("bots landed at the hotspot", std::to_string(r.bots_at_hotspot) + " of " + std::to_string(r.bots));
   if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);

@@ -392,6 +392,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.hash_unanswered += br.hash_unanswered;
     r.walk_steps += br.walk_steps;
     r.teleports += br.teleports;
+    r.edits_held_back += br.edits_held_back;
     r.bots_at_hotspot += br.at_hotspot ? 1 : 0;
     for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += br.walk_blocked[w];
     r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));

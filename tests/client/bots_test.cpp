@@ -292,6 +292,8 @@ TEST_F(BotsRunTest, TeleportingBotsAreStreamedEachNewViewAndStayRight) {
   std::map<std::string, std::string> j;
   ASSERT_EQ(flatten_json(report_json(r), &j), "");
   EXPECT_EQ(j["teleports"], std::to_string(r.teleports));
+  // Open loop: no edit waited for a reply (none fell due with 8 unanswered).
+  EXPECT_EQ(j["edits_held_back"], "0");
 }
 
 // --behavior hotspot: the bots fly from their starts (96 x 96 voxels) to
