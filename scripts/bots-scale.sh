@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # One run of a scale scenario (docs/load-testing.md; figures in docs/results.md). Server and bots share this
-# machine; the server starts cold on a copy of a pre-generated world. Both:
-# mixed bots, full-resolution radius 64, view distance 512, a sphere edit of
-# radius <= 3 every 2 s per bot, 60 s measured.
+# machine; the server starts cold on a copy of a pre-generated world. crowd
+# and world are terrane-bots' presets of those names (client/bots/presets.cpp
+# holds their values; terrane-bots --list-presets shows them); join and wave
+# are world with overrides. Both: mixed bots, full-resolution radius 64,
+# view distance 512, a sphere edit of radius <= 3 every 2 s per bot, 60 s
+# measured.
 #   crowd  N bots spread over 512 x 512 voxels around the spawn (every bot
 #          sees every edit), ramp-up 20 s; world: worlds/scale
 #          (terrane-world generate --world worlds/scale
@@ -40,24 +43,18 @@ esac
 bots=${1:?usage: scripts/bots-scale.sh [crowd|world|join|wave] N [REPORT.json] [flags...]}
 report=${2:-reports/$scenario-$bots.json}
 shift $(( $# >= 2 ? 2 : 1 ))
-duration=60
-behavior=mixed
 if [ "$scenario" = crowd ]; then
   world=${TERRANE_WORLD:-worlds/scale}
-  scenario_flags=(--spread 512 --ramp-up 20)
+  scenario_flags=(--preset crowd)
 else
   world=${TERRANE_WORLD:-worlds/world4k}
-  spread=$(awk -v n="$bots" 'BEGIN { printf "%d", 3072 * sqrt(n / 1000) }')
-  ramp=$(( (bots + 4) / 5 ))
   if [ "$scenario" = world ]; then
-    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --wait-joined 600)
+    scenario_flags=(--preset world)
   elif [ "$scenario" = join ]; then
-    duration=10
-    behavior=idle
-    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --wait-joined 600)
+    scenario_flags=(--preset world --duration 10 --behavior idle)
   else
-    duration=$(( ramp + 60 ))
-    scenario_flags=(--spread "$spread" --ramp-up "$ramp" --measure-from start)
+    # The world preset's ramp-up ((N + 4) / 5 s), then its minute.
+    scenario_flags=(--preset world --duration $(( (bots + 4) / 5 + 60 )) --measure-from start --wait-joined 0)
   fi
 fi
 [ -d "$world" ] || { echo "bots-scale.sh: no world at $world (see the comment at the top for how to make it)" >&2; exit 2; }
@@ -93,9 +90,8 @@ status=0
 # The bots' own peak memory and CPU, when GNU time is installed.
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
-"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" --bots "$bots" --duration "$duration" --behavior "$behavior" \
-  "${scenario_flags[@]}" --view-distance 512 --full-res-radius 64 --edit-interval 2 --edit-radius 3 \
-  --seed 1 --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
+"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" \
+  "${scenario_flags[@]}" --bots "$bots" --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 
 cpu1=$(terrane_cpu_seconds "$server_pid")
 end=$(date +%s.%N)

@@ -14,6 +14,7 @@ constexpr auto kStep = std::chrono::milliseconds(100);
 constexpr float kWalkSpeed = 5.0f;   // voxels per second
 constexpr float kFlySpeed = 40.0f;   // voxels per second
 constexpr float kFlyHeight = 40.0f;  // above the start height
+constexpr float kTeleportHeight = 8.0f;  // a teleporting bot's, above the spawn's
 // A walker starting above or below the ground moves to it at most this far
 // a step: two steps (one ClientState) stay within the server's movement
 // slack (kSpeedSlackVoxels, 48) however soon that state follows the last.
@@ -216,10 +217,12 @@ void Bot::step(Clock::time_point now, bool active) {
   checks_pending(now);
 }
 
-void Bot::move(Clock::time_point) {
+void Bot::move(Clock::time_point now) {
   ++steps_;
   if (gait_ == Gait::kWalk) walk();
   if (gait_ == Gait::kFly) fly();
+  if (gait_ == Gait::kTeleport) teleport(now);
+  if (gait_ == Gait::kHotspot) converge();
   // ClientState at most every other step (5 Hz) while moving.
   if (state_dirty_ && steps_ % 2 == 0) {
     client_->set_state(ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius});
@@ -317,25 +320,152 @@ void Bot::fly() {
   state_dirty_ = true;
 }
 
+void Bot::teleport(Clock::time_point now) {
+  const BotsOptions& o = *ctx_.options;
+  const auto interval =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.teleport_interval_s));
+  const float top = static_cast<float>(ctx_.welcome.bounds_max_y - 2);
+  if (!landed_) {
+    // Just above the spawn's height wherever the jumps go: the ground there
+    // is not known before the jump, and edits need it within the
+    // full-resolution radius.
+    pos_.y = std::min(ctx_.spawn.y + kTeleportHeight, top);
+    landed_ = true;
+    state_dirty_ = true;
+    next_teleport_ = now + interval;
+    return;
+  }
+  if (now < next_teleport_) return;
+  next_teleport_ = now + interval;
+  // A jump of exactly teleport_distance to a point within that distance
+  // of the spawn (x and z), inside the world's bounds. From anywhere in
+  // that square one of the axis directions toward the spawn stays in it.
+  const float d = static_cast<float>(o.teleport_distance);
+  const WelcomeMsg& w = ctx_.welcome;
+  const auto inside = [&](float x, float z) {
+    if (std::abs(x - ctx_.spawn.x) > d || std::abs(z - ctx_.spawn.z) > d) return false;
+    return !w.bounded_xz || (x >= static_cast<float>(w.bounds_min_x) && x < static_cast<float>(w.bounds_max_x) &&
+                             z >= static_cast<float>(w.bounds_min_z) && z < static_cast<float>(w.bounds_max_z));
+  };
+  std::uniform_real_distribution<float> angle(0.0f, 2.0f * std::numbers::pi_v<float>);
+  std::optional<Vec3f> to;
+  for (int attempt = 0; attempt < 16 && !to; ++attempt) {
+    const float a = angle(rng_);
+    const Vec3f p{pos_.x + std::cos(a) * d, pos_.y, pos_.z + std::sin(a) * d};
+    if (inside(p.x, p.z)) to = p;
+  }
+  if (!to) {
+    const float dx = pos_.x - ctx_.spawn.x, dz = pos_.z - ctx_.spawn.z;
+    const Vec3f p = std::abs(dx) >= std::abs(dz) ? Vec3f{pos_.x - std::copysign(d, dx), pos_.y, pos_.z}
+                                                 : Vec3f{pos_.x, pos_.y, pos_.z - std::copysign(d, dz)};
+    if (!inside(p.x, p.z)) return;  // a bounded world narrower than the jump: stay
+    to = p;
+  }
+  pos_ = *to;
+  result_.distance_moved += d;
+  ++result_.teleports;
+  state_dirty_ = true;
+}
+
+void Bot::converge() {
+  const float top = static_cast<float>(ctx_.welcome.bounds_max_y - 2);
+  if (result_.at_hotspot) return;  // it stays
+  if (!landed_) {
+    pos_.y = std::min(pos_.y + kFlyHeight, top);
+    landed_ = true;
+    state_dirty_ = true;
+    return;
+  }
+  if (!over_hotspot_) {
+    // Straight to the spawn at a flyer's speed, climbing over terrain ahead.
+    const float stride = kFlySpeed * std::chrono::duration<float>(kStep).count();
+    const float dx = ctx_.spawn.x - pos_.x, dz = ctx_.spawn.z - pos_.z;
+    const float dist = std::sqrt(dx * dx + dz * dz);
+    if (dist <= stride) {
+      pos_.x = ctx_.spawn.x;
+      pos_.z = ctx_.spawn.z;
+      result_.distance_moved += dist;
+      over_hotspot_ = true;
+    } else {
+      const Vec3f dir{dx / dist, 0.0f, dz / dist};
+      if (client_->raycast(pos_, dir, stride + 1.0f)) {
+        pos_.y = std::min(pos_.y + stride, top);
+      } else {
+        pos_ = pos_ + dir * stride;
+        result_.distance_moved += stride;
+      }
+    }
+    state_dirty_ = true;
+    return;
+  }
+  // Down to the ground there once it is held at full resolution, at most
+  // kLandStep a step (the server's movement budget).
+  const Vec3i v = voxel_at(pos_);
+  const auto h = client_->surface_height(v.x, v.z);
+  if (!h || client_->resolution_at({v.x, *h - 1, v.z}) != 0) {
+    // The ground may lie beyond the full-resolution radius below: down
+    // toward the spawn's height meanwhile, and wait there.
+    const float low = ctx_.spawn.y + 2.0f;
+    if (pos_.y > low) {
+      pos_.y = std::max(low, pos_.y - kLandStep);
+      state_dirty_ = true;
+    }
+    return;
+  }
+  const float ground = static_cast<float>(*h);
+  if (std::abs(ground - pos_.y) <= kLandStep) {
+    pos_.y = ground;
+    result_.at_hotspot = true;
+  } else {
+    pos_.y += ground > pos_.y ? kLandStep : -kLandStep;
+  }
+  state_dirty_ = true;
+}
+
+bool Bot::edits_now() const {
+  if (edits_mode_ == EditMode::kNone) return false;
+  return gait_ != Gait::kHotspot || result_.at_hotspot;
+}
+
+std::vector<Voxel> Bot::hut_voxels(const Region& box, bool dig) {
+  const Vec3i size = box.max - box.min;
+  std::vector<Voxel> out(static_cast<std::size_t>(box.volume()));
+  if (dig) return out;
+  std::size_t i = 0;
+  for (int y = 0; y < size.y; ++y)
+    for (int z = 0; z < size.z; ++z)
+      for (int x = 0; x < size.x; ++x, ++i) {
+        const bool wall = x == 0 || z == 0 || x == size.x - 1 || z == size.z - 1;
+        const bool window = y % 4 == 2 && (x + z) % 4 == 1;
+        if (y == 0 || y == size.y - 1 || (wall && !window))
+          out[i] = solid(kBuildMaterials[static_cast<std::size_t>(y / 2) % std::size(kBuildMaterials)]);
+      }
+  return out;
+}
+
 void Bot::maybe_edit(Clock::time_point now) {
-  if (edits_mode_ == EditMode::kNone || now < next_edit_) return;
+  if (!edits_now() || now < next_edit_) return;
   const BotsOptions& o = *ctx_.options;
   std::exponential_distribution<double> gap(1.0 / o.edit_interval_s);
   next_edit_ = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(gap(rng_)));
   std::uniform_real_distribution<float> unit(0.0f, 1.0f);
   const bool dig = edits_mode_ == EditMode::kDig || (edits_mode_ == EditMode::kBoth && unit(rng_) < 0.5f);
-  const bool sphere = unit(rng_) < 0.8f;
+  const float shape_draw = unit(rng_);  // drawn whatever the shape: the stream of draws stays the same
+  const bool sphere = o.edit_shape == EditShape::kSphere || (o.edit_shape == EditShape::kMixed && shape_draw < 0.8f);
   // Aim down at the ground nearby.
   const float yaw = unit(rng_) * 2.0f * std::numbers::pi_v<float>;
   const float pitch = -(25.0f + 50.0f * unit(rng_)) * std::numbers::pi_v<float> / 180.0f;
   const Vec3f eye{pos_.x, pos_.y + kEyeHeight, pos_.z};
   const Vec3f dir{std::cos(pitch) * std::cos(yaw), std::sin(pitch), std::cos(pitch) * std::sin(yaw)};
-  const float reach = gait_ == Gait::kFly ? 96.0f : 48.0f;
+  const float reach = gait_ == Gait::kFly || gait_ == Gait::kTeleport ? 96.0f : 48.0f;
   const auto hit = client_->raycast(eye, dir, reach);
   if (!hit) return;
   {
     std::lock_guard lock(mutex_);
-    if (outstanding_edits_ >= kMaxOutstandingEdits) return;
+    if (outstanding_edits_ >= kMaxOutstandingEdits) {
+      ++result_.edits_held_back;
+      return;
+    }
     ++outstanding_edits_;
   }
   const Vec3i normal = hit->normal == Vec3i{} ? Vec3i{0, 1, 0} : hit->normal;
@@ -368,6 +498,21 @@ void Bot::maybe_edit(Clock::time_point now) {
       id = ctx_.fanout->send_edit(index_, b, voxels, [&] {
         return client_->fill_sphere(e.center, e.radius, dig ? kAir : material);
       });
+    }
+  } else if (o.edit_shape == EditShape::kWriteBox) {
+    // R to 2R a side (R = edit_radius), within the largest raw box: on the
+    // surface hit when building, around the hit when digging.
+    constexpr int most = 32;  // the side of the largest raw box
+    static_assert(std::int64_t{most} * most * most == kMaxRawBoxVolume);
+    const int hi = std::clamp(static_cast<int>(2.0f * o.edit_radius), 2, most);
+    const int lo = std::clamp(static_cast<int>(o.edit_radius), 2, hi);
+    const int s = std::uniform_int_distribution<int>(lo, hi)(rng_);
+    const Vec3i at = dig ? hit->voxel - Vec3i{0, s / 2, 0} : hit->voxel + normal;
+    const Region box{at - Vec3i{s / 2, 0, s / 2}, at - Vec3i{s / 2, 0, s / 2} + Vec3i{s, s, s}};
+    if (sees(box)) {
+      const std::vector<Voxel> voxels = hut_voxels(box, dig);
+      id = ctx_.fanout->send_edit(index_, box, static_cast<double>(box.volume()),
+                                  [&] { return client_->write_box(box, voxels); });
     }
   } else {
     const int max_side = std::max(2, static_cast<int>(2.0f * o.edit_radius));

@@ -43,8 +43,9 @@ struct RunContext {
 };
 
 // A bot's way of moving about (the client's own position and view are
-// client/movement.h's Movement).
-enum class Gait : std::uint8_t { kIdle, kWalk, kFly };
+// client/movement.h's Movement). kTeleport: jumps (options.h); kHotspot:
+// flies to the spawn, lands there and stays.
+enum class Gait : std::uint8_t { kIdle, kWalk, kFly, kTeleport, kHotspot };
 enum class EditMode : std::uint8_t { kNone, kDig, kBuild, kBoth };
 
 struct BotResult {
@@ -61,6 +62,11 @@ struct BotResult {
   std::array<std::uint64_t, 4> walk_blocked{};
   int checks_during_run = 0;
   double distance_moved = 0;
+  std::uint64_t teleports = 0;     // jumps made (Gait::kTeleport)
+  // Edits that fell due while 8 of the bot's were unanswered, not sent
+  // (the only way replies hold edits back: bot.cpp kMaxOutstandingEdits).
+  std::uint64_t edits_held_back = 0;
+  bool at_hotspot = false;         // landed at the hotspot (Gait::kHotspot)
   bool unexpected_disconnect = false;
   std::string disconnect_reason;
   ClientCounters counters;
@@ -113,7 +119,14 @@ class Bot {
   void move(Clock::time_point now);
   void walk();
   void fly();
+  void teleport(Clock::time_point now);
+  void converge();
+  // Whether the bot edits now: a hotspot bot only once it stands there.
+  bool edits_now() const;
   void maybe_edit(Clock::time_point now);
+  // write_box's voxels for box (Box order): a hut of layered materials
+  // with windows (build), or air (dig).
+  static std::vector<Voxel> hut_voxels(const Region& box, bool dig);
   void schedule_check(Clock::time_point now);
   void request_hash(Vec3i cp, bool final_check);  // takes mutex_
   bool held_full(Vec3i cp) const;
@@ -134,6 +147,8 @@ class Bot {
   bool state_dirty_ = false;
   Clock::time_point connect_at_;
   Clock::time_point next_edit_, next_check_;
+  Clock::time_point next_teleport_;
+  bool over_hotspot_ = false;  // kHotspot: above the spawn, landing
   int checks_done_ = 0;
   BotResult result_;
 

@@ -9,6 +9,7 @@
 
 #include "client/bots/merge.h"
 #include "client/bots/options.h"
+#include "client/bots/presets.h"
 #include "client/bots/report.h"
 #include "client/bots/runner.h"
 
@@ -86,9 +87,10 @@ int run(int argc, char** argv) {
   if (argc >= 2 && std::string(argv[1]) == "compare") return compare(argc, argv);
   if (argc >= 2 && std::string(argv[1]) == "merge") return merge(argc, argv);
   BotsOptions o;
-  bool help = false;
-  if (auto err = parse_bots_options(argc, argv, 1, &o, &help); !err.empty()) return usage_error(err);
-  if (help) return std::fputs(kBotsHelp, stdout), 0;
+  bool help = false, list_presets = false;
+  if (auto err = parse_bots_options(argc, argv, 1, &o, &help, &list_presets); !err.empty()) return usage_error(err);
+  if (help) return std::printf("%s\n%s", kBotsHelp, presets_text().c_str()), 0;
+  if (list_presets) return std::fputs(presets_text().c_str(), stdout), 0;
   if (!o.save_scenario_path.empty() && !write_file(o.save_scenario_path, scenario_text(o)))
     return std::fprintf(stderr, "terrane-bots: cannot write %s\n", o.save_scenario_path.c_str()), 1;
 

@@ -124,6 +124,10 @@ std::string read_options(FlatReader& in, BotsOptions* o) {
   put("wait-joined", "wait_joined");
   put("measure-from", "measure_from");
   put("shard", "shard");
+  put("preset", "preset");
+  put("edit-shape", "edit_shape");
+  put("teleport-interval", "teleport_interval");
+  put("teleport-distance", "teleport_distance");
   for (std::size_t i = 0; i < in.length("thresholds", "expression"); ++i) {
     const std::string key = "thresholds." + std::to_string(i) + ".expression";
     v.emplace("threshold", std::make_pair(in.text(key), key));
@@ -190,7 +194,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   BotsReport r;
   if (auto e = read_options(in, &r.options); !e.empty()) return e;
   const BotsOptions& o = r.options;
-  r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
+  r.edits_expected = behavior_edits(o.behavior);
   r.joined_s = in.number("joined_s");
   // Every count of bots within the part's own: their sums stay within o.bots.
   r.bots = in.integer("bots", 0, shard_bots(o));
@@ -253,6 +257,9 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.connect_failures = in.integer("connect_failures", 0, r.bots);
   r.first_connect_error = in.text("first_connect_error");
   r.walk_steps = in.whole("walk_steps");
+  r.teleports = in.whole("teleports");
+  r.edits_held_back = in.whole("edits_held_back");
+  r.bots_at_hotspot = in.integer("bots_at_hotspot", 0, r.bots);
   const char* const refused[] = {"outside_area", "not_full_resolution", "too_steep", "obstacle"};
   for (std::size_t w = 0; w < r.walk_blocked.size(); ++w)
     r.walk_blocked[w] = in.whole(std::string("walk_refused.") + refused[w]);
@@ -369,6 +376,9 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     r.shared_update_misses += p.shared_update_misses;
     for (const auto& [server, count] : p.bots_per_server) r.bots_per_server[server] += count;
     r.walk_steps += p.walk_steps;
+    r.teleports += p.teleports;
+    r.edits_held_back += p.edits_held_back;
+    r.bots_at_hotspot += p.bots_at_hotspot;
     for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += p.walk_blocked[w];
     for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
       r.by_message_type[t].frames_in += p.by_message_type[t].frames_in;

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <thread>
 
+#include "client/bots/presets.h"
 #include "common/cli/cli.h"
 #include "protocol/messages.h"
 #include "protocol/tokens_file.h"
@@ -15,7 +16,8 @@
 namespace terrane::bots {
 
 const char* const kBotsHelp =
-    "usage: terrane-bots --connect HOST:PORT [options]\n"
+    "usage: terrane-bots --connect HOST:PORT [--preset NAME] [options]\n"
+    "       terrane-bots --list-presets\n"
     "       terrane-bots compare A.json B.json\n"
     "       terrane-bots merge PART.json... --report ALL.json [--html ALL.html]\n"
     "\n"
@@ -37,7 +39,13 @@ const char* const kBotsHelp =
     "                            editor's server\n"
     "  --bots N                  bots (default 10)\n"
     "  --duration S              seconds from the first connection to the end of edits (default 30)\n"
-    "  --behavior B              idle | walk | fly | dig | build | mixed (default mixed):\n"
+    "  --preset NAME             start from a named scenario's defaults: join-storm, hotspot,\n"
+    "                            teleport (or flyers), builders, crowd, world (the list below,\n"
+    "                            and terrane-bots --list-presets); flags and scenario lines\n"
+    "                            given besides override them\n"
+    "  --list-presets            describe each preset with its defaults\n"
+    "  --behavior B              idle | walk | fly | dig | build | mixed | teleport | hotspot\n"
+    "                            (default mixed):\n"
     "                              walk   moves along the surface (5 voxels/s) inside its full-resolution\n"
     "                                     region, never through solid ground\n"
     "                              fly    travels at 40 voxels/s above the terrain (stresses streaming)\n"
@@ -45,6 +53,17 @@ const char* const kBotsHelp =
     "                              build  builds spheres and boxes at ray-cast targets\n"
     "                              mixed  60% walk, 30% idle, 10% fly; every bot edits: dig or build\n"
     "                                     (even odds), sphere 80% / box 20%\n"
+    "                              teleport  every --teleport-interval jumps --teleport-distance\n"
+    "                                     voxels to a random point within that distance of the spawn,\n"
+    "                                     8 voxels above it, so the server streams a whole new view;\n"
+    "                                     edits (dig or build) between jumps\n"
+    "                              hotspot  flies from its start to the spawn (--spawn), lands on\n"
+    "                                     the ground there and stays, editing (dig or build) around it\n"
+    "                            Edits are sent open loop: each editing bot sends at its own rate\n"
+    "                            (--edit-interval, Poisson) whatever the replies, never waiting\n"
+    "                            for an ack; only an edit due while 8 of the bot's edits are\n"
+    "                            unanswered is not sent (the server queues 64 per client;\n"
+    "                            the report counts them: edits_held_back)\n"
     "  --spawn X,Y,Z             centre of the start area (default: the server's spawn)\n"
     "  --spread R                bots start spread over an R x R square around the spawn (default 0)\n"
     "  --view-distance N         voxels (default 256; the server caps it)\n"
@@ -69,6 +88,12 @@ const char* const kBotsHelp =
     "                            in the JSON timeline\n"
     "  --edit-interval S         mean seconds between edits per editing bot (default 2)\n"
     "  --edit-radius R           largest sphere radius, boxes up to 2R on a side (default 3, max 32)\n"
+    "  --edit-shape S            mixed (default: sphere 80%, box 20%) | sphere | box (fill_box,\n"
+    "                            one material) | write-box (write_box: raw voxels of patterned\n"
+    "                            materials, R to 2R a side, at most 32^3 voxels)\n"
+    "  --teleport-interval S     seconds between a teleporting bot's jumps (default 5)\n"
+    "  --teleport-distance N     voxels a jump goes (default 1024); the server drops a bot whose\n"
+    "                            jump is over its budget: --max-speed (256) x the interval + 48\n"
     "  --latency-ms N            emulated downstream latency per bot (default 0)\n"
     "  --bandwidth-kbps N        emulated downstream cap per bot, kilobits/s (default 0: none)\n"
     "  --hash-checks N           region-hash checks per bot during the run, at least (default 5);\n"
@@ -123,7 +148,7 @@ const std::set<std::string>& value_keys() {
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",   "token-file", "tokens-file", "name-prefix",       "server-metrics", "edit-interval",
       "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks",
       "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
-      "shard"};
+      "shard",          "preset",       "edit-shape",  "teleport-interval", "teleport-distance"};
   return k;
 }
 
@@ -151,6 +176,22 @@ const char* behavior_name(Behavior b) {
     case Behavior::kDig: return "dig";
     case Behavior::kBuild: return "build";
     case Behavior::kMixed: return "mixed";
+    case Behavior::kTeleport: return "teleport";
+    case Behavior::kHotspot: return "hotspot";
+  }
+  return "?";
+}
+
+bool behavior_edits(Behavior b) {
+  return b != Behavior::kIdle && b != Behavior::kWalk && b != Behavior::kFly;
+}
+
+const char* edit_shape_name(EditShape s) {
+  switch (s) {
+    case EditShape::kMixed: return "mixed";
+    case EditShape::kSphere: return "sphere";
+    case EditShape::kBox: return "box";
+    case EditShape::kWriteBox: return "write-box";
   }
   return "?";
 }
@@ -176,7 +217,9 @@ std::string parse_scenario_text(const std::string& text, const std::string& sour
   return "";
 }
 
-std::string apply_option_values(const Values& values, BotsOptions* o) {
+std::string apply_option_values(const Values& given, BotsOptions* o) {
+  Values values;
+  if (auto err = expand_preset(given, &values); !err.empty()) return err;
   bool thresholds_given = false, token_given = false, prefix_given = false;
   for (const auto& [key, vw] : values) {
     const std::string& v = vw.first;
@@ -224,9 +267,22 @@ std::string apply_option_values(const Values& values, BotsOptions* o) {
     } else if (key == "behavior") {
       bool found = false;
       for (Behavior b : {Behavior::kIdle, Behavior::kWalk, Behavior::kFly, Behavior::kDig, Behavior::kBuild,
-                         Behavior::kMixed})
+                         Behavior::kMixed, Behavior::kTeleport, Behavior::kHotspot})
         if (v == behavior_name(b)) o->behavior = b, found = true;
-      if (!found) return bad(where, v, "is not one of idle, walk, fly, dig, build, mixed");
+      if (!found) return bad(where, v, "is not one of idle, walk, fly, dig, build, mixed, teleport, hotspot");
+    } else if (key == "preset") {
+      const Preset* p = find_preset(v);
+      if (p == nullptr) return bad(where, v, "is not a preset; known: " + preset_names());
+      o->preset = p->name;
+    } else if (key == "edit-shape") {
+      bool found = false;
+      for (EditShape e : {EditShape::kMixed, EditShape::kSphere, EditShape::kBox, EditShape::kWriteBox})
+        if (v == edit_shape_name(e)) o->edit_shape = e, found = true;
+      if (!found) return bad(where, v, "is not one of mixed, sphere, box, write-box");
+    } else if (key == "teleport-interval") {
+      err = num_in(0.5, 3600, &o->teleport_interval_s);
+    } else if (key == "teleport-distance") {
+      err = int_in(1, 1 << 20, &o->teleport_distance);
     } else if (key == "spawn") {
       std::int32_t xyz[3];
       if (!parse_int_list<std::int32_t>(v, xyz, 3) || std::abs(xyz[0]) > (1 << 24) || std::abs(xyz[1]) > (1 << 24) ||
@@ -354,14 +410,19 @@ double hash_check_span_s(const BotsOptions& o) {
   return std::clamp(window / (o.hash_checks + 1), 0.2, 10.0);
 }
 
-std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help) {
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help, bool* list_presets) {
   Values flags;
   std::string scenario;
   *help = false;
+  if (list_presets != nullptr) *list_presets = false;
   for (int a = first; a < argc; ++a) {
     std::string arg = argv[a];
     if (arg == "--help" || arg == "-h") {
       *help = true;
+      return "";
+    }
+    if (arg == "--list-presets" && list_presets != nullptr) {
+      *list_presets = true;
       return "";
     }
     if (arg.rfind("--", 0) != 0) return "unexpected argument '" + arg + "'";
@@ -397,6 +458,8 @@ std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* ou
 std::string scenario_text(const BotsOptions& o) {
   std::ostringstream s;
   s << "# terrane-bots scenario (terrane-bots --scenario FILE)\n";
+  // The preset's name is kept for the record; every value below wins over it.
+  if (!o.preset.empty()) s << "preset = " << o.preset << "\n";
   s << "connect = ";
   for (std::size_t i = 0; i < o.servers.size(); ++i) s << (i ? "," : "") << o.servers[i].first << ":" << o.servers[i].second;
   if (o.servers.empty()) s << o.host << ":" << o.port;
@@ -420,6 +483,9 @@ std::string scenario_text(const BotsOptions& o) {
   if (o.metrics_port != 0) s << "server-metrics = " << o.metrics_host << ":" << o.metrics_port << "\n";
   s << "edit-interval = " << o.edit_interval_s << "\n";
   s << "edit-radius = " << o.edit_radius << "\n";
+  s << "edit-shape = " << edit_shape_name(o.edit_shape) << "\n";
+  s << "teleport-interval = " << o.teleport_interval_s << "\n";
+  s << "teleport-distance = " << o.teleport_distance << "\n";
   s << "latency-ms = " << o.latency_ms << "\n";
   s << "bandwidth-kbps = " << o.bandwidth_kbps << "\n";
   s << "hash-checks = " << o.hash_checks << "\n";

@@ -14,8 +14,17 @@
 
 namespace terrane::bots {
 
-enum class Behavior : std::uint8_t { kIdle, kWalk, kFly, kDig, kBuild, kMixed };
+enum class Behavior : std::uint8_t { kIdle, kWalk, kFly, kDig, kBuild, kMixed, kTeleport, kHotspot };
 const char* behavior_name(Behavior b);
+// Whether bots of that behaviour edit (a run of them fails with no edit acked).
+bool behavior_edits(Behavior b);
+
+// The shape of the bots' edits (--edit-shape): spheres and uniform boxes
+// (fill_box) at 80 / 20 %, or one of them, or boxes of raw voxels
+// (write_box) of edit_radius to 2 x edit_radius a side, at most
+// kMaxRawBoxVolume.
+enum class EditShape : std::uint8_t { kMixed, kSphere, kBox, kWriteBox };
+const char* edit_shape_name(EditShape s);
 
 struct BotsOptions {
   std::string host = "127.0.0.1";
@@ -50,6 +59,17 @@ struct BotsOptions {
   std::uint16_t metrics_port = 0;
   double edit_interval_s = 2;  // mean seconds between edits per editing bot (Poisson)
   float edit_radius = 3;       // largest sphere radius (boxes up to 2x this on a side)
+  EditShape edit_shape = EditShape::kMixed;
+  // Behavior::kTeleport: every teleport_interval_s each bot jumps
+  // teleport_distance voxels to a random point within teleport_distance
+  // of the spawn (x and z), so the server streams it a whole new view.
+  // The server accepts the jump as one move if it is within its budget
+  // (terrane-server --max-speed x the interval, plus 48 voxels).
+  double teleport_interval_s = 5;
+  int teleport_distance = 1024;
+  // The preset the options started from (presets.h), "" for none: saved
+  // with the resolved values, which win over it when read back.
+  std::string preset;
   int latency_ms = 0;          // per-bot downstream latency (client/client.h NetworkEmulation)
   int bandwidth_kbps = 0;      // per-bot downstream cap, kilobits per second
   int hash_checks = 5;         // region-hash checks per bot during the run, at least
@@ -108,8 +128,10 @@ double hash_check_span_s(const BotsOptions& o);
 int io_threads(const BotsOptions& o);
 
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
-// else the error (for exit status 2). Sets *help when --help was given.
-std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help);
+// else the error (for exit status 2). Sets *help when --help was given
+// (and *list_presets when --list-presets was, if list_presets is given).
+std::string parse_bots_options(int argc, char** argv, int first, BotsOptions* out, bool* help,
+                               bool* list_presets = nullptr);
 
 // Option values by key: (value, where it was given: "--flag" or
 // "FILE:LINE: key"), in the order given. A key given twice keeps both:
@@ -121,7 +143,8 @@ using OptionValues = std::multimap<std::string, std::pair<std::string, std::stri
 std::string parse_scenario_text(const std::string& text, const std::string& source, OptionValues* out);
 
 // Applies the values to *o; returns the first error. Thresholds given
-// replace those *o had.
+// replace those *o had. A `preset` value (presets.h) first adds the
+// preset's defaults for every key the values do not give: the values win.
 std::string apply_option_values(const OptionValues& values, BotsOptions* o);
 
 // The scenario file text that reproduces *o (every key, flags' names).

@@ -121,7 +121,11 @@ std::string report_json(const BotsReport& r) {
     << ", \"bandwidth_kbps\": " << o.bandwidth_kbps << ", \"hash_checks\": " << o.hash_checks
     << ", \"threads\": " << o.threads << ", \"wait_joined\": " << num(o.join_timeout_s)
     << ", \"measure_from\": \"" << (o.measure_from_start ? "start" : "ramp-up") << "\""
-    << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\"},\n";
+    << ", \"shard\": \"" << o.shard_index << "/" << o.shard_count << "\""
+    << ", \"edit_shape\": \"" << edit_shape_name(o.edit_shape) << "\""
+    << ", \"teleport_interval\": " << num(o.teleport_interval_s) << ", \"teleport_distance\": " << o.teleport_distance;
+  if (!o.preset.empty()) j << ", \"preset\": \"" << esc(o.preset) << "\"";
+  j << "},\n";
   j << "  \"passed\": " << (r.passed() ? "true" : "false") << ",\n";
   j << "  \"failures\": [";
   {
@@ -205,6 +209,9 @@ std::string report_json(const BotsReport& r) {
   j << "  \"connect_failures\": " << r.connect_failures << ",\n";
   j << "  \"first_connect_error\": \"" << esc(r.first_connect_error) << "\",\n";
   j << "  \"walk_steps\": " << r.walk_steps << ",\n";
+  j << "  \"teleports\": " << r.teleports << ",\n";
+  j << "  \"edits_held_back\": " << r.edits_held_back << ",\n";
+  j << "  \"bots_at_hotspot\": " << r.bots_at_hotspot << ",\n";
   j << "  \"walk_refused\": {\"outside_area\": " << r.walk_blocked[0] << ", \"not_full_resolution\": " << r.walk_blocked[1]
     << ", \"too_steep\": " << r.walk_blocked[2] << ", \"obstacle\": " << r.walk_blocked[3] << "},\n";
   j << "  \"server_counters\": " << (r.server ? server_json(*r.server) : std::string("null")) << ",\n";
@@ -256,6 +263,7 @@ std::string report_table(const BotsReport& r) {
   };
   auto mb = [](std::uint64_t b) { return fixed(static_cast<double>(b) / 1e6, 2) + " MB"; };
   t << "terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << ", "
+    << (r.options.preset.empty() ? "" : "preset " + r.options.preset + ", ")
     << fixed(r.duration_s, 1) << " s — " << (r.passed() ? "PASSED" : "FAILED") << "\n";
   for (const std::string& why : r.failures()) t << "  FAILED: " << why << "\n";
   for (const std::string& why : r.broken_thresholds()) t << "  FAILED: " << why << "\n";
@@ -332,6 +340,10 @@ std::string report_table(const BotsReport& r) {
     row("walk steps (refused: area/res/steep/block)",
         std::to_string(r.walk_steps) + " (" + std::to_string(r.walk_blocked[0]) + " / " + std::to_string(r.walk_blocked[1]) +
             " / " + std::to_string(r.walk_blocked[2]) + " / " + std::to_string(r.walk_blocked[3]) + ")");
+  if (r.teleports > 0) row("teleports", std::to_string(r.teleports));
+  if (r.edits_held_back > 0) row("edits not sent: 8 of the bot's unanswered", std::to_string(r.edits_held_back));
+  if (r.options.behavior == Behavior::kHotspot)
+    row("bots landed at the hotspot", std::to_string(r.bots_at_hotspot) + " of " + std::to_string(r.bots));
   if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);
   std::snprintf(line, sizeof line, "  %-22s %12s %14s %12s %14s\n", "bots' traffic by type", "frames in",
                 "bytes in", "frames out", "bytes out");

@@ -81,6 +81,14 @@ std::vector<BotPlan> plan_bots(const BotsOptions& o, Vec3f spawn) {
       case Behavior::kFly: p.gait = Gait::kFly; break;
       case Behavior::kDig: p.edits = EditMode::kDig; break;
       case Behavior::kBuild: p.edits = EditMode::kBuild; break;
+      case Behavior::kTeleport:
+        p.gait = Gait::kTeleport;
+        p.edits = EditMode::kBoth;
+        break;
+      case Behavior::kHotspot:
+        p.gait = Gait::kHotspot;
+        p.edits = EditMode::kBoth;
+        break;
       case Behavior::kMixed: {
         const float u = unit(rng);
         p.gait = u < 0.6f ? Gait::kWalk : (u < 0.9f ? Gait::kIdle : Gait::kFly);
@@ -209,7 +217,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   BotsReport& r = *report;
   r = BotsReport{};
   r.options = o;
-  r.edits_expected = o.behavior == Behavior::kDig || o.behavior == Behavior::kBuild || o.behavior == Behavior::kMixed;
+  r.edits_expected = behavior_edits(o.behavior);
   r.bots = static_cast<int>(bots.size());
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
@@ -383,6 +391,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.replica_regions_checked += br.hash_checked;
     r.hash_unanswered += br.hash_unanswered;
     r.walk_steps += br.walk_steps;
+    r.teleports += br.teleports;
+    r.edits_held_back += br.edits_held_back;
+    r.bots_at_hotspot += br.at_hotspot ? 1 : 0;
     for (std::size_t w = 0; w < r.walk_blocked.size(); ++w) r.walk_blocked[w] += br.walk_blocked[w];
     r.min_checks_during_run = std::min<std::uint64_t>(r.min_checks_during_run, static_cast<std::uint64_t>(br.checks_during_run));
     if (br.unexpected_disconnect) {

@@ -79,6 +79,9 @@ struct BotsReport {
   int joins_incomplete = 0;
   std::uint64_t walk_steps = 0;
   std::array<std::uint64_t, 4> walk_blocked{};  // BotResult::walk_blocked, summed
+  std::uint64_t teleports = 0;  // jumps of teleporting bots
+  std::uint64_t edits_held_back = 0;  // due while 8 were unanswered, not sent (BotResult)
+  int bots_at_hotspot = 0;      // hotspot bots that landed there
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
   std::vector<TimelinePoint> timeline;
   // The server's own figures over the run (--server-metrics), else none.

@@ -265,6 +265,81 @@ TEST_F(BotsRunTest, AJoinWaveMeasuresEditsSentDuringTheRampUp) {
   EXPECT_GT(during_ramp_up, 0u) << report_table(r);
 }
 
+// --behavior teleport: every bot jumps --teleport-distance at each
+// --teleport-interval, beyond twice its view distance (96 here), within the
+// server's movement budget (default --max-speed 256: 256 x 2 + 48 voxels):
+// no bot is dropped, each is streamed its whole view again after a jump,
+// and every replica stays right.
+TEST_F(BotsRunTest, TeleportingBotsAreStreamedEachNewViewAndStayRight) {
+  start_server();
+  BotsOptions o = small_run(4, Behavior::kTeleport);
+  o.teleport_interval_s = 2;
+  o.teleport_distance = 256;
+  o.duration_s = 5;  // from the last join: two jumps each, the first 2 s after it rose
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  EXPECT_EQ(r.mismatches.size(), 0u);
+  EXPECT_EQ(r.unexpected_disconnects, 0) << report_table(r);
+  EXPECT_GE(r.teleports, 4u) << report_table(r);
+  EXPECT_GT(r.edits_acked, 0u);
+  // Every bot checks its region at the end, at the place of its last jump.
+  EXPECT_GE(r.replica_regions_checked, 4u);
+  // After the joins the bots were streamed at least another view each.
+  const std::uint64_t streamed = r.by_message_type[static_cast<std::size_t>(wire::Body::StreamBatch)].bytes_in;
+  EXPECT_GT(streamed, r.join_bytes_received) << report_table(r);
+  std::map<std::string, std::string> j;
+  ASSERT_EQ(flatten_json(report_json(r), &j), "");
+  EXPECT_EQ(j["teleports"], std::to_string(r.teleports));
+  // Open loop: no edit waited for a reply (none fell due with 8 unanswered).
+  EXPECT_EQ(j["edits_held_back"], "0");
+}
+
+// --behavior hotspot: the bots fly from their starts (96 x 96 voxels) to
+// the spawn, land there and edit the ground around it; every one gets
+// there and every replica stays right.
+TEST_F(BotsRunTest, HotspotBotsLandAtTheSpawnAndEditAroundIt) {
+  start_server();
+  BotsOptions o = small_run(6, Behavior::kHotspot);
+  o.duration_s = 6;  // 68 voxels at most at 40 a second, then the edits
+  o.edit_interval_s = 0.3;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  EXPECT_EQ(r.mismatches.size(), 0u);
+  EXPECT_EQ(r.unexpected_disconnects, 0);
+  EXPECT_EQ(r.bots_at_hotspot, 6) << report_table(r);
+  EXPECT_GT(r.edits_acked, 0u);
+  // An edit near the spawn reaches most of the other five, standing there
+  // (those still on their way may not hold it at full resolution).
+  EXPECT_GT(r.receivers_per_edit, 3.0) << report_table(r);
+}
+
+// --edit-shape write-box: builders send raw boxes (write_box) of edit-radius
+// to twice that a side, each request carrying its voxels; every replica
+// stays right.
+TEST_F(BotsRunTest, BuildersWriteRawBoxesAndEveryReplicaStaysRight) {
+  start_server();
+  BotsOptions o = small_run(4, Behavior::kBuild);
+  o.edit_shape = EditShape::kWriteBox;
+  o.edit_radius = 8;  // boxes of 8 to 16 a side
+  o.edit_interval_s = 0.3;
+  BotsReport r;
+  std::string err;
+  ASSERT_TRUE(run_bots(o, nullptr, &r, &err)) << err;
+  EXPECT_TRUE(r.passed()) << report_table(r);
+  EXPECT_EQ(r.mismatches.size(), 0u);
+  EXPECT_GT(r.edits_acked, 0u);
+  EXPECT_EQ(r.edits_rejected, 0u) << report_table(r);
+  // A fill_box or sphere request is under 100 bytes; a hut of 8^3 voxels
+  // or more, run-length coded, hundreds.
+  const MessageTypeCounters& req = r.by_message_type[static_cast<std::size_t>(wire::Body::EditRequest)];
+  ASSERT_GT(req.frames_out, 0u);
+  EXPECT_GT(req.bytes_out / req.frames_out, 200u) << report_table(r);
+}
+
 // A walker starting above the ground comes down to it in steps within the
 // server's movement slack alone, however soon its next state follows the
 // last (after a redirect, the state the new server got first may be
