@@ -43,6 +43,8 @@ std::string json_opt(const std::optional<double>& v) {
   return num(*v);
 }
 
+std::string json_whole(const std::optional<std::uint64_t>& v) { return v ? std::to_string(*v) : "null"; }
+
 std::string server_json(const ServerFigures& f) {
   std::ostringstream j;
   j << "{\"wall_s\": " << num(f.wall_s) << ", \"cpu_s\": " << num(f.cpu_s)
@@ -224,7 +226,15 @@ std::string report_json(const BotsReport& r) {
     const TimelinePoint& p = r.timeline[i];
     j << (i ? ",\n    " : "\n    ") << "{\"t_s\": " << num(p.t_s) << ", \"bots\": " << p.bots_connected
       << ", \"mb_per_s_in\": " << num(p.mb_per_s_in) << ", \"mb_per_s_out\": " << num(p.mb_per_s_out)
-      << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"fanout_ms\": " << lat(p.fanout_ms)
+      << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"joins\": " << p.joins
+      << ", \"bytes_in_by_type\": {";
+    bool first_type = true;
+    for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
+      if (p.bytes_in_by_type[t] == 0) continue;
+      j << (first_type ? "" : ", ") << "\"" << message_type_name(t) << "\": " << p.bytes_in_by_type[t];
+      first_type = false;
+    }
+    j << "}, \"fanout_ms\": " << lat(p.fanout_ms)
       << ", \"ack_ms\": " << lat(p.ack_ms) << ", \"round_trip_ms\": " << lat(p.round_trip_ms);
     if (p.server)
       j << ", \"server\": {\"cpu_share\": " << num(p.server->cpu_share)
@@ -235,7 +245,10 @@ std::string report_json(const BotsReport& r) {
         << ", \"tick_ms_max_bound\": " << json_opt(p.server->tick_ms_max)
         << ", \"commit_ms_max_bound\": " << json_opt(p.server->commit_ms_max)
         << ", \"fanout_ms_max_bound\": " << json_opt(p.server->fanout_ms_max)
-        << ", \"ticks_late\": " << p.server->ticks_late << "}";
+        << ", \"ticks_late\": " << p.server->ticks_late
+        << ", \"tick_p99_ms_bound\": " << json_opt(p.server->tick_p99_ms)
+        << ", \"rss_bytes\": " << json_whole(p.server->rss_bytes)
+        << ", \"send_queue_bytes\": " << json_whole(p.server->send_queue_bytes) << "}";
     j << "}";
   }
   j << "\n  ]\n}\n";
