@@ -192,9 +192,18 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_EQ(j["replica_mismatches"], "0");
   EXPECT_EQ(j["passed"], "true");
 
+  EXPECT_EQ(j.count("timeline.0.joins"), 1u);
+  EXPECT_EQ(j.count("timeline.0.bytes_in_by_type.StreamBatch"), 1u);
+
+  // Self-contained: the data, the page's script and the chart library are
+  // in the page, and nothing is fetched (the charts are drawn in a real
+  // browser in report_html_test.cpp).
   const std::string html = report_html(r);
-  EXPECT_NE(html.find("<svg"), std::string::npos);
-  EXPECT_EQ(html.find("<script"), std::string::npos) << "self-contained, no scripts";
+  EXPECT_NE(html.find("<script type=\"application/json\" id=\"report-data\">"), std::string::npos);
+  EXPECT_NE(html.find("var uPlot="), std::string::npos);
+  EXPECT_EQ(html.find(" src="), std::string::npos);
+  EXPECT_EQ(html.find("<pre>terrane-bots:"), std::string::npos) << "tables, not the text table";
+  EXPECT_NE(html.find("<table class=\"latency\">"), std::string::npos);
 }
 
 // The fault flags make the server send wrong or no UpdateBatches: the run
