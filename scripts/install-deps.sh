@@ -34,6 +34,10 @@ packages=(
   # promtool checks the metrics endpoint in the tests; prometheus scrapes it
   # in the operations test (started by the test itself, on loopback)
   prometheus
+  # a real browser, headless, loads terrane-bots' HTML report in the tests
+  # and runs its charts' script (tests/client/bots/report_html_test.cpp);
+  # docs/load-testing.md's screenshot of a report is taken with it
+  chromium
 )
 
 missing=()

@@ -36,14 +36,39 @@ bool write_file(const std::string& path, const std::string& text) {
   return static_cast<bool>(f.flush());
 }
 
+// terrane-bots compare A.json B.json [--html A_VS_B.html]
 int compare(int argc, char** argv) {
-  if (argc != 4) return usage_error("compare takes two JSON reports: terrane-bots compare A.json B.json");
+  std::vector<std::string> paths;
+  std::string html_path;
+  for (int a = 2; a < argc; ++a) {
+    const std::string arg = argv[a];
+    if (arg == "--html") {
+      if (a + 1 >= argc) return usage_error("compare --html: missing value");
+      html_path = argv[++a];
+    } else if (arg.rfind("--", 0) == 0) {
+      return usage_error("compare: unknown option " + arg + " (compare takes --html)");
+    } else {
+      paths.push_back(arg);
+    }
+  }
+  if (paths.size() != 2)
+    return usage_error("compare takes two JSON reports: terrane-bots compare A.json B.json [--html A_VS_B.html]");
   std::string a, b, err;
-  if (!read_file(argv[2], &a)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", argv[2]), 1;
-  if (!read_file(argv[3], &b)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", argv[3]), 1;
-  const std::string table = compare_reports(argv[2], a, argv[3], b, &err);
+  if (!read_file(paths[0], &a)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", paths[0].c_str()), 1;
+  if (!read_file(paths[1], &b)) return std::fprintf(stderr, "terrane-bots: cannot read %s\n", paths[1].c_str()), 1;
+  const std::string table = compare_reports(paths[0], a, paths[1], b, &err);
   if (!err.empty()) return std::fprintf(stderr, "terrane-bots: %s\n", err.c_str()), 1;
   std::fputs(table.c_str(), stdout);
+  if (html_path.empty()) return 0;
+  // The page reads both reports whole (as merge does): one written before
+  // histograms cannot be charted.
+  BotsReport ra, rb;
+  if (auto e = report_from_json(a, &ra); !e.empty())
+    return std::fprintf(stderr, "terrane-bots: %s: %s\n", paths[0].c_str(), e.c_str()), 1;
+  if (auto e = report_from_json(b, &rb); !e.empty())
+    return std::fprintf(stderr, "terrane-bots: %s: %s\n", paths[1].c_str(), e.c_str()), 1;
+  if (!write_file(html_path, compare_html(paths[0], ra, paths[1], rb)))
+    return std::fprintf(stderr, "terrane-bots: cannot write %s\n", html_path.c_str()), 1;
   return 0;
 }
 

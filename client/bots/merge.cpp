@@ -147,6 +147,10 @@ ServerInterval read_interval(FlatReader& in, const std::string& k) {
   s.commit_ms_max = in.optional(k + ".commit_ms_max_bound");
   s.fanout_ms_max = in.optional(k + ".fanout_ms_max_bound");
   s.ticks_late = in.whole(k + ".ticks_late");
+  // Added later: absent from older reports (none).
+  s.tick_p99_ms = in.optional(k + ".tick_p99_ms_bound");
+  if (in.text(k + ".rss_bytes", "null") != "null") s.rss_bytes = in.whole(k + ".rss_bytes");
+  if (in.text(k + ".send_queue_bytes", "null") != "null") s.send_queue_bytes = in.whole(k + ".send_queue_bytes");
   return s;
 }
 
@@ -278,6 +282,17 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
     p.mb_per_s_in = in.number(k + ".mb_per_s_in");
     p.mb_per_s_out = in.number(k + ".mb_per_s_out");
     p.edits_acked_per_s = in.number(k + ".edits_acked_per_s");
+    // joins and bytes_in_by_type were added later: absent from older reports.
+    if (in.has(k + ".joins")) p.joins = in.integer(k + ".joins", 0, r.bots);
+    for (const std::string& type : in.children(k + ".bytes_in_by_type")) {
+      std::size_t t = 0;
+      while (t < kMessageTypeCount && type != message_type_name(t)) ++t;
+      if (t == kMessageTypeCount) {
+        in.fail(k + ".bytes_in_by_type." + type, "not a message type");
+        break;
+      }
+      p.bytes_in_by_type[t] = in.whole(k + ".bytes_in_by_type." + type);
+    }
     p.fanout_ms = in.latency(k + ".fanout_ms");
     p.ack_ms = in.latency(k + ".ack_ms");
     p.round_trip_ms = in.latency(k + ".round_trip_ms");
@@ -397,6 +412,8 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
       into.mb_per_s_in += q.mb_per_s_in;
       into.mb_per_s_out += q.mb_per_s_out;
       into.edits_acked_per_s += q.edits_acked_per_s;
+      into.joins += q.joins;
+      for (std::size_t t = 0; t < kMessageTypeCount; ++t) into.bytes_in_by_type[t] += q.bytes_in_by_type[t];
       add(into.fanout_ms, q.fanout_ms);
       add(into.ack_ms, q.ack_ms);
       add(into.round_trip_ms, q.round_trip_ms);

@@ -18,7 +18,7 @@ namespace terrane::bots {
 const char* const kBotsHelp =
     "usage: terrane-bots --connect HOST:PORT [--preset NAME] [options]\n"
     "       terrane-bots --list-presets\n"
-    "       terrane-bots compare A.json B.json\n"
+    "       terrane-bots compare A.json B.json [--html A_VS_B.html]\n"
     "       terrane-bots merge PART.json... --report ALL.json [--html ALL.html]\n"
     "\n"
     "Runs N headless bots in one process against a terrane-server, each with its own replica,\n"

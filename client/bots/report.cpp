@@ -43,6 +43,8 @@ std::string json_opt(const std::optional<double>& v) {
   return num(*v);
 }
 
+std::string json_whole(const std::optional<std::uint64_t>& v) { return v ? std::to_string(*v) : "null"; }
+
 std::string server_json(const ServerFigures& f) {
   std::ostringstream j;
   j << "{\"wall_s\": " << num(f.wall_s) << ", \"cpu_s\": " << num(f.cpu_s)
@@ -77,18 +79,6 @@ std::string lat(const LatencySummary& l) {
   return "{\"p50\": " + num(l.p50) + ", \"p95\": " + num(l.p95) + ", \"p99\": " + num(l.p99) +
          ", \"max\": " + num(l.max) + ", \"count\": " + std::to_string(l.count) +
          (l.histogram.empty() ? std::string() : ", \"histogram\": " + histogram_json(l.histogram)) + "}";
-}
-
-std::string html_esc(const std::string& s) {
-  std::string o;
-  for (const char c : s) {
-    if (c == '<') o += "&lt;";
-    else if (c == '>') o += "&gt;";
-    else if (c == '&') o += "&amp;";
-    else if (c == '"') o += "&quot;";
-    else o += c;
-  }
-  return o;
 }
 
 std::string region_name(Vec3i cp) {
@@ -231,7 +221,15 @@ std::string report_json(const BotsReport& r) {
     const TimelinePoint& p = r.timeline[i];
     j << (i ? ",\n    " : "\n    ") << "{\"t_s\": " << num(p.t_s) << ", \"bots\": " << p.bots_connected
       << ", \"mb_per_s_in\": " << num(p.mb_per_s_in) << ", \"mb_per_s_out\": " << num(p.mb_per_s_out)
-      << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"fanout_ms\": " << lat(p.fanout_ms)
+      << ", \"edits_acked_per_s\": " << num(p.edits_acked_per_s) << ", \"joins\": " << p.joins
+      << ", \"bytes_in_by_type\": {";
+    bool first_type = true;
+    for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
+      if (p.bytes_in_by_type[t] == 0) continue;
+      j << (first_type ? "" : ", ") << "\"" << message_type_name(t) << "\": " << p.bytes_in_by_type[t];
+      first_type = false;
+    }
+    j << "}, \"fanout_ms\": " << lat(p.fanout_ms)
       << ", \"ack_ms\": " << lat(p.ack_ms) << ", \"round_trip_ms\": " << lat(p.round_trip_ms);
     if (p.server)
       j << ", \"server\": {\"cpu_share\": " << num(p.server->cpu_share)
@@ -242,7 +240,10 @@ std::string report_json(const BotsReport& r) {
         << ", \"tick_ms_max_bound\": " << json_opt(p.server->tick_ms_max)
         << ", \"commit_ms_max_bound\": " << json_opt(p.server->commit_ms_max)
         << ", \"fanout_ms_max_bound\": " << json_opt(p.server->fanout_ms_max)
-        << ", \"ticks_late\": " << p.server->ticks_late << "}";
+        << ", \"ticks_late\": " << p.server->ticks_late
+        << ", \"tick_p99_ms_bound\": " << json_opt(p.server->tick_p99_ms)
+        << ", \"rss_bytes\": " << json_whole(p.server->rss_bytes)
+        << ", \"send_queue_bytes\": " << json_whole(p.server->send_queue_bytes) << "}";
     j << "}";
   }
   j << "\n  ]\n}\n";
@@ -402,94 +403,6 @@ std::string report_table(const BotsReport& r) {
   if (r.mismatches.size() > shown) t << "  ... " << r.mismatches.size() - shown << " more mismatches in the JSON report\n";
   for (const auto& [bot, reason] : r.disconnects) t << "  DISCONNECTED bot " << bot << ": " << reason << "\n";
   return t.str();
-}
-
-namespace {
-
-struct Series {
-  std::string name, colour;
-  std::vector<double> y;
-};
-
-// A line chart as inline SVG: x = seconds, one polyline per series.
-std::string svg_chart(const std::string& title, const std::string& unit, const std::vector<double>& x,
-                      const std::vector<Series>& series) {
-  constexpr double kW = 720, kH = 240, kL = 56, kR = 12, kT = 28, kB = 32;
-  double ymax = 0;
-  for (const auto& s : series)
-    for (const double v : s.y) ymax = std::max(ymax, v);
-  ymax = ymax <= 0 ? 1 : ymax * 1.1;
-  const double xmax = x.empty() ? 1 : std::max(1.0, x.back());
-  auto px = [&](double v) { return kL + (kW - kL - kR) * v / xmax; };
-  auto py = [&](double v) { return kT + (kH - kT - kB) * (1 - v / ymax); };
-  std::ostringstream s;
-  s << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << kW << "\" height=\"" << kH << "\" viewBox=\"0 0 " << kW
-    << " " << kH << "\">\n";
-  s << "<text x=\"" << kL << "\" y=\"18\" font-size=\"14\" font-weight=\"bold\">" << html_esc(title) << "</text>\n";
-  s << "<line x1=\"" << kL << "\" y1=\"" << py(0) << "\" x2=\"" << kW - kR << "\" y2=\"" << py(0)
-    << "\" stroke=\"#888\"/>\n<line x1=\"" << kL << "\" y1=\"" << kT << "\" x2=\"" << kL << "\" y2=\"" << py(0)
-    << "\" stroke=\"#888\"/>\n";
-  for (int i = 0; i <= 4; ++i) {
-    const double v = ymax * i / 4;
-    s << "<text x=\"" << kL - 4 << "\" y=\"" << py(v) + 4 << "\" font-size=\"10\" text-anchor=\"end\">" << num(v)
-      << "</text>\n";
-  }
-  s << "<text x=\"" << kL - 4 << "\" y=\"" << kT - 6 << "\" font-size=\"10\" text-anchor=\"end\">" << html_esc(unit)
-    << "</text>\n";
-  for (int i = 0; i <= 5; ++i) {
-    const double v = xmax * i / 5;
-    s << "<text x=\"" << px(v) << "\" y=\"" << kH - 14 << "\" font-size=\"10\" text-anchor=\"middle\">" << num(v)
-      << " s</text>\n";
-  }
-  double lx = kW - kR - 150;
-  for (const auto& se : series) {
-    s << "<polyline fill=\"none\" stroke=\"" << se.colour << "\" stroke-width=\"1.5\" points=\"";
-    for (std::size_t i = 0; i < x.size() && i < se.y.size(); ++i) s << px(x[i]) << "," << py(se.y[i]) << " ";
-    s << "\"/>\n";
-    s << "<text x=\"" << lx << "\" y=\"18\" font-size=\"11\" fill=\"" << se.colour << "\">" << html_esc(se.name)
-      << "</text>\n";
-    lx += 50;
-  }
-  s << "</svg>\n";
-  return s.str();
-}
-
-}  // namespace
-
-std::string report_html(const BotsReport& r) {
-  std::vector<double> x;
-  Series in{"in", "#1f77b4", {}}, out{"out", "#d62728", {}};
-  Series f50{"p50", "#2ca02c", {}}, f99{"p99", "#d62728", {}}, a99{"ack p99", "#9467bd", {}};
-  Series live{"bots", "#1f77b4", {}};
-  for (const TimelinePoint& p : r.timeline) {
-    x.push_back(p.t_s);
-    in.y.push_back(p.mb_per_s_in);
-    out.y.push_back(p.mb_per_s_out);
-    f50.y.push_back(p.fanout_ms.p50);
-    f99.y.push_back(p.fanout_ms.p99);
-    a99.y.push_back(p.ack_ms.p99);
-    live.y.push_back(p.bots_connected);
-  }
-  std::ostringstream h;
-  h << "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>terrane-bots report</title>\n"
-       "<style>body{font-family:sans-serif;margin:2em;max-width:60em}pre{background:#f4f4f4;padding:1em;"
-       "overflow-x:auto}td,th{padding:0.2em 1em;text-align:left}.pass{color:#2ca02c}.fail{color:#d62728;"
-       "font-weight:bold}</style></head><body>\n";
-  h << "<h1>terrane-bots: " << r.bots << " bots, " << behavior_name(r.options.behavior) << " — "
-    << (r.passed() ? "passed" : "FAILED") << "</h1>\n";
-  if (!r.thresholds.empty()) {
-    h << "<h2>Thresholds</h2>\n<table><tr><th>threshold</th><th>value</th><th></th></tr>\n";
-    for (const ThresholdResult& t : r.thresholds)
-      h << "<tr><td><code>" << html_esc(t.threshold.expression) << "</code></td><td>" << html_esc(num(t.value))
-        << "</td><td class=\"" << (t.passed ? "pass\">passed" : "fail\">BROKEN") << "</td></tr>\n";
-    h << "</table>\n";
-  }
-  h << "<pre>" << html_esc(report_table(r)) << "</pre>\n";
-  h << svg_chart("Bandwidth, all bots (MB/s)", "MB/s", x, {in, out});
-  h << svg_chart("Edit latency by send time (ms): fan-out p50, p99; ack p99", "ms", x, {f50, f99, a99});
-  h << svg_chart("Bots connected", "bots", x, {live});
-  h << "<h2>Scenario</h2><pre>" << html_esc(scenario_text(r.options)) << "</pre>\n</body></html>\n";
-  return h.str();
 }
 
 namespace {

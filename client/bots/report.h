@@ -1,6 +1,8 @@
 // The bots report in three forms — JSON (the record), a human table and a
-// self-contained HTML page with inline SVG charts — and `compare`, which
-// puts two JSON reports side by side. docs/load-testing.md lists every field.
+// self-contained HTML page (tables, and charts drawn in the browser by the
+// uPlot library embedded in the page: report_html.cpp) — and `compare`,
+// which puts two JSON reports side by side, as a table or as one page with
+// both runs on the same charts. docs/load-testing.md lists every field.
 // Thread-safety: pure functions.
 #pragma once
 
@@ -13,7 +15,15 @@ namespace terrane::bots {
 
 std::string report_json(const BotsReport& r);
 std::string report_table(const BotsReport& r);
+// One HTML file that needs nothing else (no network): the figures as
+// tables, the charts drawn by its script from the JSON report it embeds.
+// Its <pre id="report-status"> reads "ok charts=N" once the charts are
+// drawn, else the script's errors or the charts left empty.
 std::string report_html(const BotsReport& r);
+// The same page for two runs: both on every chart (B dashed), the tables
+// side by side with B/A.
+std::string compare_html(const std::string& name_a, const BotsReport& a, const std::string& name_b,
+                         const BotsReport& b);
 
 // A JSON document flattened to "a.b.c" -> scalar text (numbers as written,
 // strings unquoted, arrays indexed "a.0"). Returns "" or the error with

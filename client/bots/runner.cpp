@@ -221,26 +221,37 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.bots = static_cast<int>(bots.size());
   std::size_t next_bot = 0;
   std::uint64_t prev_in = 0, prev_out = 0, prev_acked = 0, update_bytes_at_measure = 0;
+  std::array<std::uint64_t, kMessageTypeCount> prev_in_by_type{};
+  std::vector<char> seen_joined(bots.size(), 0);  // by position in bots: its join was counted in a second
   bool measured_snapshot = ramp.count() == 0 || o.measure_from_start;
   auto next_second = t0 + std::chrono::seconds(1);
-  auto sum_counters = [&](std::uint64_t* in, std::uint64_t* out, std::uint64_t* updates, int* live) {
+  auto sum_counters = [&](std::uint64_t* in, std::uint64_t* out, std::uint64_t* updates, int* live,
+                          std::array<std::uint64_t, kMessageTypeCount>* in_by_type, int* joins) {
     *in = *out = *updates = 0;
-    *live = 0;
-    for (auto& b : bots) {
+    *live = *joins = 0;
+    in_by_type->fill(0);
+    for (std::size_t i = 0; i < bots.size(); ++i) {
+      const auto& b = bots[i];
       if (!b->connected()) continue;
       const ClientCounters k = b->counters();
       *in += k.bytes_in;
       *out += k.bytes_out;
       *updates += k.by_message_type[static_cast<std::size_t>(wire::Body::UpdateBatch)].bytes_in;
+      for (std::size_t t = 0; t < kMessageTypeCount; ++t) (*in_by_type)[t] += k.by_message_type[t].bytes_in;
       if (!b->closed()) ++*live;
+      if (!seen_joined[i] && b->joined()) {
+        seen_joined[i] = 1;
+        ++*joins;
+      }
     }
   };
   auto once_a_second = [&](Clock::time_point now) {
     if (now < next_second) return;
     next_second += std::chrono::seconds(1);
     std::uint64_t in = 0, out = 0, updates = 0;
-    int live = 0;
-    sum_counters(&in, &out, &updates, &live);
+    std::array<std::uint64_t, kMessageTypeCount> in_by_type{};
+    int live = 0, joins = 0;
+    sum_counters(&in, &out, &updates, &live, &in_by_type, &joins);
     if (!measured_snapshot && now >= measure_from) {
       update_bytes_at_measure = updates;
       measured_snapshot = true;
@@ -253,6 +264,12 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     p.mb_per_s_in = static_cast<double>(in - prev_in) / 1e6;
     p.mb_per_s_out = static_cast<double>(out - prev_out) / 1e6;
     p.edits_acked_per_s = static_cast<double>(totals.edits_acked - prev_acked);
+    p.joins = joins;
+    // A bot that left takes its bytes out of the sums: such a second counts
+    // no bytes of a type rather than a negative amount.
+    for (std::size_t t = 0; t < kMessageTypeCount; ++t)
+      p.bytes_in_by_type[t] = in_by_type[t] > prev_in_by_type[t] ? in_by_type[t] - prev_in_by_type[t] : 0;
+    prev_in_by_type = in_by_type;
     if (watch) p.server = watch->next_interval();
     prev_in = in;
     prev_out = out;
@@ -343,8 +360,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   std::uint64_t ub_end = 0;
   {
     std::uint64_t in = 0, out = 0;
-    int live = 0;
-    sum_counters(&in, &out, &ub_end, &live);
+    std::array<std::uint64_t, kMessageTypeCount> in_by_type{};
+    int live = 0, joins = 0;
+    sum_counters(&in, &out, &ub_end, &live, &in_by_type, &joins);
   }
   r.duration_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (watch) {

@@ -24,6 +24,10 @@ struct TimelinePoint {
   int bots_connected = 0;
   double mb_per_s_in = 0, mb_per_s_out = 0;
   double edits_acked_per_s = 0;
+  int joins = 0;  // bots whose full-resolution join completed in that second
+  // Bytes the bots received in that second by message type (wire::Body),
+  // all bots together.
+  std::array<std::uint64_t, kMessageTypeCount> bytes_in_by_type{};
   LatencySummary fanout_ms, ack_ms;  // of edits sent in that second
   LatencySummary round_trip_ms;      // keepalive round trips answered in that second
   // With --server-metrics: the server since the previous point (its

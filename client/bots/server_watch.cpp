@@ -121,6 +121,16 @@ ServerInterval server_interval(const Scrape& first, double first_at_s, const Scr
   i.commit_ms_max = histogram_quantile_ms(first, last, "terrane_commit_duration_seconds", 1.0);
   i.fanout_ms_max = histogram_quantile_ms(first, last, "terrane_fanout_duration_seconds", 1.0);
   i.ticks_late = growth(first, last, "terrane_ticks_late_total");
+  i.tick_p99_ms = histogram_quantile_ms(first, last, "terrane_tick_duration_seconds", 0.99);
+  // A gauge as a whole number of bytes: what the exposition holds is input
+  // (a negative or non-finite value counts as none).
+  const auto gauge = [&](const char* name) -> std::optional<std::uint64_t> {
+    const auto it = last.find(name);
+    if (it == last.end() || !(it->second >= 0 && it->second < 1e19)) return std::nullopt;
+    return static_cast<std::uint64_t>(it->second);
+  };
+  i.rss_bytes = gauge("process_resident_memory_bytes");
+  i.send_queue_bytes = gauge("terrane_send_queue_bytes");
   return i;
 }
 

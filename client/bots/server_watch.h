@@ -42,6 +42,11 @@ struct ServerInterval {
   // p99 would say no more, and one slow commit holds every edit behind it.
   std::optional<double> tick_ms_max, commit_ms_max, fanout_ms_max;
   std::uint64_t ticks_late = 0;  // started more than a period late
+  std::optional<double> tick_p99_ms;  // bucket bound (histogram_quantile_ms)
+  // Gauges at the interval's end (nullopt when the server does not expose
+  // them): resident memory and the bytes queued for sending, every session
+  // together (terrane_send_queue_bytes).
+  std::optional<std::uint64_t> rss_bytes, send_queue_bytes;
 };
 ServerInterval server_interval(const Scrape& first, double first_at_s, const Scrape& last, double last_at_s);
 

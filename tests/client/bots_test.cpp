@@ -192,9 +192,18 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_EQ(j["replica_mismatches"], "0");
   EXPECT_EQ(j["passed"], "true");
 
+  EXPECT_EQ(j.count("timeline.0.joins"), 1u);
+  EXPECT_EQ(j.count("timeline.0.bytes_in_by_type.StreamBatch"), 1u);
+
+  // Self-contained: the data, the page's script and the chart library are
+  // in the page, and nothing is fetched (the charts are drawn in a real
+  // browser in report_html_test.cpp).
   const std::string html = report_html(r);
-  EXPECT_NE(html.find("<svg"), std::string::npos);
-  EXPECT_EQ(html.find("<script"), std::string::npos) << "self-contained, no scripts";
+  EXPECT_NE(html.find("<script type=\"application/json\" id=\"report-data\">"), std::string::npos);
+  EXPECT_NE(html.find("var uPlot="), std::string::npos);
+  EXPECT_EQ(html.find(" src="), std::string::npos);
+  EXPECT_EQ(html.find("<pre>terrane-bots:"), std::string::npos) << "tables, not the text table";
+  EXPECT_NE(html.find("<table class=\"latency\">"), std::string::npos);
 }
 
 // The fault flags make the server send wrong or no UpdateBatches: the run
@@ -1016,7 +1025,8 @@ TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
       "terrane_edit_ack_duration_seconds_bucket{le=\"+Inf\"} 140\n"
       "terrane_tick_duration_seconds_sum 1\nterrane_tick_duration_seconds_count 80\n"
       "terrane_tick_duration_seconds_bucket{le=\"0.005\"} 79\nterrane_tick_duration_seconds_bucket{le=\"0.25\"} 80\n"
-      "terrane_tick_duration_seconds_bucket{le=\"+Inf\"} 80\nterrane_ticks_late_total 4\n");
+      "terrane_tick_duration_seconds_bucket{le=\"+Inf\"} 80\nterrane_ticks_late_total 4\n"
+      "process_resident_memory_bytes 31457280\nterrane_send_queue_bytes 4096\n");
   const ServerInterval i = server_interval(a, 100.0, b, 102.0);
   EXPECT_DOUBLE_EQ(i.cpu_share, 0.75);  // 1.5 s of CPU over 2 s
   EXPECT_EQ(i.edits_applied, 40u);
@@ -1029,6 +1039,11 @@ TEST(ServerWatch, AnIntervalIsTheServersGrowthBetweenTwoScrapes) {
   EXPECT_EQ(i.tick_ms_max, 250.0);  // 29 of the 30 ticks within 5 ms, one within 250
   EXPECT_FALSE(i.commit_ms_max.has_value());
   EXPECT_EQ(i.ticks_late, 1u);
+  EXPECT_EQ(i.tick_p99_ms, 250.0);  // the 30th tick is the p99's
+  // The gauges at the interval's end; absent from a scrape, none.
+  EXPECT_EQ(i.rss_bytes, 31457280u);
+  EXPECT_EQ(i.send_queue_bytes, 4096u);
+  EXPECT_EQ(server_interval(b, 100.0, a, 102.0).rss_bytes, std::nullopt);
   EXPECT_EQ(histogram_mean_ms(b, b, "terrane_edit_ack_duration_seconds"), std::nullopt);
 }
 

@@ -124,6 +124,11 @@ TEST(BotsMerge, AReportReadBackFromItsJsonIsTheReport) {
   r.server->sent_by_type["UpdateBatch"] = {10, 2000};
   r.timeline[0].server = ServerInterval{};
   r.timeline[0].server->tick_ms_mean = 3.5;
+  r.timeline[0].server->tick_p99_ms = 2.5;
+  r.timeline[0].server->rss_bytes = 31457280;
+  r.timeline[0].server->send_queue_bytes = 4096;
+  r.timeline[1].joins = 3;
+  r.timeline[1].bytes_in_by_type[static_cast<std::size_t>(wire::Body::UpdateBatch)] = 1234;
   r.thresholds = evaluate_thresholds(r.options.thresholds, r.threshold_values());
   const std::string json = report_json(r);
   BotsReport back;
@@ -134,6 +139,14 @@ TEST(BotsMerge, AReportReadBackFromItsJsonIsTheReport) {
   EXPECT_EQ(back.options.shard_count, 3);
   ASSERT_EQ(back.options.thresholds.size(), 1u);
   EXPECT_EQ(back.options.thresholds[0].expression, "fanout_p99<80");
+  EXPECT_EQ(back.timeline[1].joins, 3);
+  EXPECT_EQ(back.timeline[1].bytes_in_by_type[static_cast<std::size_t>(wire::Body::UpdateBatch)], 1234u);
+  ASSERT_TRUE(back.timeline[0].server && back.timeline[0].server->rss_bytes);
+  EXPECT_EQ(*back.timeline[0].server->rss_bytes, 31457280u);
+  // A message type that is none is refused, naming it.
+  std::string bogus = json;
+  bogus.replace(bogus.find("\"UpdateBatch\": 1234"), 13, "\"Bogus\"");
+  EXPECT_EQ(report_from_json(bogus, &back), "timeline.1.bytes_in_by_type.Bogus: not a message type");
 
   EXPECT_NE(report_from_json("{\"x\": 1}", &back).find("not a terrane-bots report"), std::string::npos);
   // A latency with samples but no histogram cannot be merged.
