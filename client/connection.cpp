@@ -25,6 +25,16 @@ std::string first_line(std::span<const std::uint8_t> bytes) {
   return out;
 }
 
+// The socket is read into one buffer per thread, not per connection: a
+// process of many clients (terrane-bots) waits for readiness on each
+// socket and reads on a few io threads, and a 64 KiB buffer per
+// connection was a tenth of a bot's memory. The bytes read are consumed
+// (framed, or copied by the emulated link) before the handler returns.
+std::span<std::uint8_t> read_buffer() {
+  thread_local std::vector<std::uint8_t> buf(EmulatedLink::kReadChunkBytes);
+  return buf;
+}
+
 }  // namespace
 
 Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
@@ -36,7 +46,6 @@ Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
       delivery_(io_.strand()),
       reconnect_timer_(io_.strand()),
       redirect_timer_(io_.strand()),
-      read_buf_(EmulatedLink::kReadChunkBytes),
       queue_(options_.max_send_queue_bytes),
       link_(options_.emulation),
       redirects_(options_.follow_redirects) {}
@@ -103,6 +112,9 @@ bool Connection::connect_shared(const asio::ip::tcp::resolver::results_type& end
 void Connection::start_session() {
   asio::error_code ec;
   socket_.set_option(asio::ip::tcp::no_delay(true), ec);
+  // Reads happen once the socket is readable (do_read) and must never block
+  // an io thread shared with other connections.
+  socket_.non_blocking(true, ec);
   reader_ = FrameReader();
   HelloMsg hello;
   hello.protocol_version = options_.protocol_version;
@@ -370,12 +382,16 @@ void Connection::arm_keepalive() {
 
 void Connection::do_read() {
   const std::uint64_t gen = generation_;
-  socket_.async_read_some(asio::buffer(read_buf_), [this, gen, g = guard()](const asio::error_code& ec, std::size_t n) {
+  socket_.async_wait(asio::ip::tcp::socket::wait_read, [this, gen, g = guard()](asio::error_code ec) {
     if (closed_ || gen != generation_) return;
+    const std::span<std::uint8_t> buf = read_buffer();
+    std::size_t n = 0;
+    if (!ec) n = socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);
+    if (ec == asio::error::would_block || ec == asio::error::try_again) return do_read();  // (readable no more)
     if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
     last_heard_ = std::chrono::steady_clock::now();
     handler_.on_bytes_read(n);
-    const std::span<const std::uint8_t> bytes(read_buf_.data(), n);
+    const std::span<const std::uint8_t> bytes(buf.data(), n);
     if (link_.active()) {
       if (link_.carry(bytes, std::chrono::steady_clock::now())) do_read();
       return arm_delivery();
