@@ -30,6 +30,10 @@ std::string first_line(std::span<const std::uint8_t> bytes) {
 // socket and reads on a few io threads, and a 64 KiB buffer per
 // connection was a tenth of a bot's memory. The bytes read are consumed
 // (framed, or copied by the emulated link) before the handler returns.
+// The room a connection's FrameReader keeps between frames; a larger
+// frame's is freed once it is read (Connection::feed).
+constexpr std::size_t kKeptFrameBytes = 16 * 1024;
+
 std::span<std::uint8_t> read_buffer() {
   thread_local std::vector<std::uint8_t> buf(EmulatedLink::kReadChunkBytes);
   return buf;
@@ -382,21 +386,32 @@ void Connection::arm_keepalive() {
 
 void Connection::do_read() {
   const std::uint64_t gen = generation_;
-  socket_.async_wait(asio::ip::tcp::socket::wait_read, [this, gen, g = guard()](asio::error_code ec) {
+  socket_.async_wait(asio::ip::tcp::socket::wait_read, [this, gen, g = guard()](const asio::error_code& wait_ec) {
     if (closed_ || gen != generation_) return;
+    if (wait_ec) return lost(wait_ec.message(), true);
+    // A few reads per wake, as long as bytes are there: bytes that came
+    // while the last were handled are read without another wait (as a
+    // speculative read does), and a busy connection still gives way to
+    // the others.
+    constexpr int kReadsPerWake = 4;
     const std::span<std::uint8_t> buf = read_buffer();
-    std::size_t n = 0;
-    if (!ec) n = socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);
-    if (ec == asio::error::would_block || ec == asio::error::try_again) return do_read();  // (readable no more)
-    if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
-    last_heard_ = std::chrono::steady_clock::now();
-    handler_.on_bytes_read(n);
-    const std::span<const std::uint8_t> bytes(buf.data(), n);
-    if (link_.active()) {
-      if (link_.carry(bytes, std::chrono::steady_clock::now())) do_read();
-      return arm_delivery();
+    for (int i = 0; i < kReadsPerWake; ++i) {
+      asio::error_code ec;
+      const std::size_t n = socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);
+      if (ec == asio::error::would_block || ec == asio::error::try_again) break;  // nothing more for now
+      if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
+      last_heard_ = std::chrono::steady_clock::now();
+      handler_.on_bytes_read(n);
+      const std::span<const std::uint8_t> bytes(buf.data(), n);
+      if (link_.active()) {
+        const bool more = link_.carry(bytes, std::chrono::steady_clock::now());
+        arm_delivery();
+        if (!more) return;  // (the link reads again once it drains)
+        continue;
+      }
+      if (!feed(bytes) || gen != generation_) return;
     }
-    if (feed(bytes) && gen == generation_) do_read();
+    do_read();
   });
 }
 
@@ -404,13 +419,21 @@ bool Connection::feed(std::span<const std::uint8_t> bytes) {
   // A frame that ends the connection (a Disconnect before a reconnect)
   // makes the rest of these bytes belong to a connection that is gone.
   const std::uint64_t gen = generation_;
+  bool large = false;
   const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
+    large = large || body.size() > kKeptFrameBytes;
     if (closed_ || gen != generation_) return;
     framed_ = true;
     handler_.on_frame(body);
     if (!closed_ && gen == generation_ && redirects_.pending()) follow_when_ready();
   });
   if (gen != generation_) return false;
+  // A large frame's room is not kept for the frames after it: most are
+  // small, and a process of many connections (terrane-bots) kept a stream
+  // batch's worth (64 KiB and more) per connection. Between frames the
+  // reader holds nothing else, so it starts afresh (its error offsets then
+  // count from here).
+  if (st && large && reader_.buffered() == 0) reader_ = FrameReader();
   if (!st) {
     handler_.on_framing_error();
     // Bytes that never made one frame: something else listens there (an
