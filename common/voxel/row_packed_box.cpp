@@ -211,7 +211,6 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
 
 int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n) {
   if (rec[0] < kKindIndex) return 2 * n;
-  if (rec[0] >= kKindUniform) return 1;
   const RecordParts p = parts_of(rec, table, n);
   const std::uint8_t* end = p.end + ((rec[0] & kTagOccupancy) ? occupancy_bytes(p.end, n) : 0);
   return static_cast<int>(end - rec);

@@ -11,8 +11,9 @@
 //
 //   0x40 | u   wide layer, one unit and the next: N 2-byte headers
 //   u < 0x40   narrow layer, one unit: two 2-byte base offsets B0 (rows
-//              z < N/2) and B1 (the others), then N bytes, one per row: its
-//              record starts at byte B0 or B1 + that byte of data_
+//              z < N/2) and B1 (the others), then N bytes, one per row:
+//              b < 192, its record starts at byte B0 or B1 + b of data_;
+//              b >= 192, a uniform row of material b - 192
 //
 // A wide layer's header:
 //
@@ -22,12 +23,11 @@
 //                              offset << shift_ of data_ (shift_ is 0, or 1
 //                              in unpacked mode, where rows are 2N bytes apart)
 //
-// A narrow layer's uniform rows point at a one-byte marker record 0xC0 | m
-// (kind 11: uniform row of material m). A layer is narrow when, in each half,
-// every record its rows start (markers included) lies within 255 bytes of
-// the first: in real terrain most layers' records are a few bytes each, so
-// a layer's headers take N + 4 bytes instead of 2N. Unpacked boxes are all
-// wide.
+// A layer is narrow when, in each half, every record its rows start lies
+// within 191 bytes of the first: in real terrain most layers' records are a
+// few bytes each, so a layer's headers take N + 4 bytes instead of 2N, and
+// a row is found with the same loads as through a wide header. Unpacked
+// boxes are all wide.
 //
 // data_ starts with the box's palette table, then holds the records:
 //
@@ -82,8 +82,8 @@
 //
 // Invariants: headers_ points at a layer map and its slots' headers; a layer
 // has a slot only if some row of it is allocated or differs from the first;
-// a narrow layer's rows all start a record or a marker in data_; records are
-// never rewritten in place over a marker;
+// a narrow layer's allocated rows start records within 191 bytes of their
+// half's base;
 // every allocated header's offset
 // starts a valid record inside data_; records name only palettes of the
 // table; data_ holds data_bytes_ bytes of which the last kPadBytes are
@@ -119,7 +119,6 @@ const std::uint16_t* uniform_headers(int size, Material material);
 inline constexpr std::uint8_t kKindMask = 0xC0;
 inline constexpr std::uint8_t kKindIndex = 0x40;  // first record bytes below it are raw
 inline constexpr std::uint8_t kKindRuns = 0x80;
-inline constexpr std::uint8_t kKindUniform = 0xC0;  // a narrow layer's uniform-row marker (one byte)
 inline constexpr std::uint8_t kTagOccupancy = 0x20;
 inline constexpr std::uint8_t kPaletteMask = 0x1F;
 inline constexpr std::uint8_t kInlinePalette = 31;
@@ -238,15 +237,14 @@ struct RowPackedStats {
   std::size_t table_bytes = 0;     // the palette table
   std::size_t data_bytes = 0;      // table, records and padding
   // Bytes of the distinct records by kind, of inline palettes among them
-  // (P - 1 and the materials), and of narrow layers' uniform-row markers.
-  std::size_t index_bytes = 0, run_bytes = 0, raw_bytes = 0, inline_palette_bytes = 0, marker_bytes = 0;
+  // (P - 1 and the materials).
+  std::size_t index_bytes = 0, run_bytes = 0, raw_bytes = 0, inline_palette_bytes = 0;
   std::size_t narrow_layers = 0, wide_layers = 0;  // layers with their own headers
   RowPackedStats& operator+=(const RowPackedStats& o) {
     index_bytes += o.index_bytes;
     run_bytes += o.run_bytes;
     raw_bytes += o.raw_bytes;
     inline_palette_bytes += o.inline_palette_bytes;
-    marker_bytes += o.marker_bytes;
     narrow_layers += o.narrow_layers;
     wide_layers += o.wide_layers;
     uniform_rows += o.uniform_rows;
@@ -418,17 +416,17 @@ class RowPackedBox {
   }
   static constexpr std::uint8_t kWideLayer = 0x40;
   static constexpr int kUnitWords = N / 2 + 2;
+  static constexpr unsigned kNarrowUniform = 192;  // narrow row bytes from here on: uniform material + 192
   // Row (y, z)'s header, through the layer map, in the wide form (a narrow
-  // layer's row is given as kAllocated | its offset, or its marker's material).
+  // layer's row is given as kAllocated | its offset, or its material).
   std::uint16_t header(int y, int z) const {
     const std::uint8_t layer = reinterpret_cast<const std::uint8_t*>(headers_)[y];
     if (layer & 0x80) return static_cast<std::uint16_t>(layer & 63);
     const std::uint16_t* slot = headers_ + N / 2 + (layer & 63) * kUnitWords;
     if (layer & kWideLayer) return slot[z];
-    const std::uint32_t offset = std::uint32_t{slot[z / (N / 2)]} + reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
-    const std::uint8_t tag = data_[offset];
-    return tag >= row_packed_detail::kKindUniform ? static_cast<std::uint16_t>(tag & 63)
-                                                  : static_cast<std::uint16_t>(kAllocated | offset);
+    const unsigned b = reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
+    return b >= kNarrowUniform ? static_cast<std::uint16_t>(b - kNarrowUniform)
+                               : static_cast<std::uint16_t>(kAllocated | (slot[z / (N / 2)] + b));
   }
   std::uint16_t header(int r) const { return header(r / N, r % N); }
   // Words of the owned headers (map and slots).

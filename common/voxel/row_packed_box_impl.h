@@ -183,9 +183,9 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     return;
   }
   if (headers_change) {
-    // Uniform rows changed material: the headers (and a narrow layer's
-    // markers) are laid out again, with the records; records did not grow,
-    // so this is not counted as a repack.
+    // Uniform rows changed material: the headers are laid out again, with
+    // the records (a narrow layer's reach is checked there); records did not
+    // grow, so this is not counted as a repack.
     rebuild_rect(y0, y1, z0, z1, content.data(), table, true);
     return;
   }
@@ -225,8 +225,8 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   constexpr std::size_t kTableSize = 2 * kRows;  // power of two, load <= 1/2
   thread_local std::vector<std::uint8_t> buf;
   thread_local std::vector<std::uint16_t> slots;
-  // (At most one record or copy and one marker per row.)
-  buf.resize(table_bytes + std::size_t{kRows} * (2 * N + 1));
+  // (At most one record or copy per row.)
+  buf.resize(table_bytes + std::size_t{kRows} * 2 * N);
   slots.assign(kTableSize, 0);
   table.write(buf.data());
   auto headers = std::make_unique<std::uint16_t[]>(kRows);
@@ -236,13 +236,11 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   // Narrow layers (see the header comment): a record stored more than
   // kReuseReach bytes before the layer's own records is copied rather than
   // shared, so that the layer's records stay within one byte of its base.
-  // (64: measured on the real regions and the default world, against 0,
-  // 32, 128, 255 and no copies; 2026-11-29.)
+  // (64: the least memory over the real regions and the default world
+  // against 16, 32 and 96, and than no copies at all; 2026-11-29.)
   constexpr std::size_t kReuseReach = 64;
   std::int32_t narrow_base[2 * N];
   std::uint8_t narrow_bytes[kRows];
-  std::int32_t marker_at[kMaterialCount];
-  std::fill_n(marker_at, kMaterialCount, -1);
   for (int y = 0; y < N; ++y) {
     const std::size_t layer_start = used;
     for (int z = 0; z < N; ++z) {
@@ -301,40 +299,27 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
       }
       all_uniform_same &= headers[r] == headers[0];
     }
-    // The layer is narrow if, in each half, its records and its uniform
-    // rows' markers (reused when near, else added) start within 255 bytes.
+    // The layer is narrow if, in each half, its records start within 191
+    // bytes of the first.
     narrow_base[2 * y] = narrow_base[2 * y + 1] = -1;
     const std::uint16_t* layer = headers.get() + y * N;
-    if (std::none_of(layer, layer + N, [](std::uint16_t h) { return (h & kAllocated) != 0; })) continue;
     std::size_t lo[2] = {~std::size_t{0}, ~std::size_t{0}}, hi[2] = {0, 0};
-    bool fits = true;
-    for (int z = 0; z < N && fits; ++z) {
-      std::size_t at;
-      if (layer[z] & kAllocated) {
-        at = layer[z] & kOffsetMask;
-      } else {
-        std::int32_t& marker = marker_at[layer[z] & 63];
-        if (marker < 0 || static_cast<std::size_t>(marker) + kReuseReach < layer_start) {
-          if (used > kOffsetMask) {  // no room within 15-bit offsets: the layer stays wide
-            fits = false;
-            break;
-          }
-          buf[used] = static_cast<std::uint8_t>(row_packed_detail::kKindUniform | (layer[z] & 63));
-          marker = static_cast<std::int32_t>(used++);
-        }
-        at = static_cast<std::size_t>(marker);
-      }
+    for (int z = 0; z < N; ++z) {
+      if (!(layer[z] & kAllocated)) continue;
+      const std::size_t at = layer[z] & kOffsetMask;
       const int half = z / (N / 2);
       lo[half] = std::min(lo[half], at);
       hi[half] = std::max(hi[half], at);
     }
-    if (!fits || hi[0] - lo[0] > 255 || hi[1] - lo[1] > 255) continue;
+    // (A half without records has no base: 0.)
+    for (int half = 0; half < 2; ++half)
+      if (hi[half] < lo[half]) lo[half] = hi[half] = 0;
+    if (hi[0] - lo[0] >= kNarrowUniform || hi[1] - lo[1] >= kNarrowUniform) continue;
     narrow_base[2 * y] = static_cast<std::int32_t>(lo[0]);
     narrow_base[2 * y + 1] = static_cast<std::int32_t>(lo[1]);
     for (int z = 0; z < N; ++z) {
-      const std::size_t at = (layer[z] & kAllocated) ? (layer[z] & kOffsetMask)
-                                                     : static_cast<std::size_t>(marker_at[layer[z] & 63]);
-      narrow_bytes[y * N + z] = static_cast<std::uint8_t>(at - lo[z / (N / 2)]);
+      narrow_bytes[y * N + z] = static_cast<std::uint8_t>(
+          (layer[z] & kAllocated) ? (layer[z] & kOffsetMask) - lo[z / (N / 2)] : kNarrowUniform + (layer[z] & 63));
     }
   }
   if (all_uniform_same && !(headers[0] & kAllocated)) {
@@ -463,22 +448,10 @@ RowPackedStats RowPackedBox<N>::stats() const {
     seen[h & kOffsetMask] = true;
   }
   const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
-  std::vector<bool> marker(data_bytes_, false);
   for (int y = 0; y < N && owns_headers_; ++y) {
     if (map[y] & 0x80) continue;
-    if (map[y] & kWideLayer) {
-      ++s.wide_layers;
-      continue;
-    }
-    ++s.narrow_layers;
-    const std::uint16_t* slot = headers_ + N / 2 + (map[y] & 63) * kUnitWords;
-    for (int z = 0; z < N; ++z) {
-      const std::uint32_t at = std::uint32_t{slot[z / (N / 2)]} + reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
-      if (data_[at] >= row_packed_detail::kKindUniform && !marker[at]) {
-        marker[at] = true;
-        ++s.marker_bytes;
-      }
-    }
+    s.wide_layers += (map[y] & kWideLayer) != 0;
+    s.narrow_layers += (map[y] & kWideLayer) == 0;
   }
   return s;
 }

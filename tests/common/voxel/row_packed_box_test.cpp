@@ -134,8 +134,7 @@ TEST(RowPackedBox, UniformLayersCostOnlyTheLayerMap) {
   box.modify_rows(10, 11, 0, 16, [](int, int, Voxel* row) {
     for (int x = 0; x < 32; ++x) row[x] = solid(materials::kSand);
   });
-  // (No record in the box: the layer keeps 2-byte headers.)
-  EXPECT_EQ(box.heap_bytes(), headers32(0, 1));
+  EXPECT_EQ(box.heap_bytes(), headers32(1));
   EXPECT_EQ(box.get(0, 10, 15), solid(materials::kSand));
   EXPECT_EQ(box.get(0, 10, 16), solid(materials::kRock));
   // The other half too: alike again.
@@ -164,17 +163,15 @@ TEST(RowPackedBox, OreRowUsesARecordOverTheTable) {
   EXPECT_EQ(box.stats().raw_rows, 0u);
   // The palette {rock, basalt} joins the table; the record is its tag and
   // three runs, the first holding the count (1-bit indices would take 4
-  // bytes); the layer is narrow, its uniform rows pointing at one marker
-  // byte (rock).
+  // bytes); the layer is narrow.
   EXPECT_EQ(box.stats().table_bytes, table_bytes({2}));
   EXPECT_EQ(box.stats().narrow_layers, 1u);
-  EXPECT_EQ(box.stats().marker_bytes, 1u);
   EXPECT_EQ(box.stats().run_rows, 1u);
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 4u + 1u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 4u + kPad32);
   box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: an occupancy section
   EXPECT_EQ(box.stats().occupancy_rows, 1u);
   // + 4 bytes of bitmap and the one occupancy byte.
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 9u + 1u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 9u + kPad32);
   EXPECT_EQ(box.get(7, 3, 4), solid(materials::kBasalt));
   EXPECT_EQ(box.get(8, 3, 4), make_voxel(materials::kBasalt, 100));
   EXPECT_EQ(box.get(9, 3, 4), solid(materials::kRock));
@@ -199,7 +196,7 @@ TEST(RowPackedBox, IndexWidthFollowsDistinctMaterials) {
     EXPECT_EQ(box.stats().raw_rows, c.raw ? 1u : 0u) << c.distinct;
     EXPECT_EQ(box.stats().index_rows, c.raw ? 0u : 1u) << c.distinct;
     const std::size_t table = c.raw ? 1u : table_bytes({c.distinct});
-    EXPECT_EQ(box.heap_bytes(), headers32(1) + table + c.record_bytes + 1u + kPad32) << c.distinct;  // + Air's marker
+    EXPECT_EQ(box.heap_bytes(), headers32(1) + table + c.record_bytes + kPad32) << c.distinct;
     expect_equal(box, ref, "index width");
   }
 }
@@ -214,8 +211,8 @@ TEST(RowPackedBox, FewRunsUseARunRecord) {
   for (int x = 0; x < 32; ++x) ref.set(x, 0, 0, solid(material(x)));
   EXPECT_EQ(box.stats().run_rows, 1u);
   // tag and three runs, the first holding the run count (2-bit indices
-  // would take 1 + 8), and Air's marker.
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3}) + 4u + 1u + kPad32);
+  // would take 1 + 8).
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3}) + 4u + kPad32);
   expect_equal(box, ref, "runs");
   // Occupancy on top of runs: the section follows the runs.
   box.set(15, 0, 0, make_voxel(materials::kSand, 3));
@@ -266,7 +263,7 @@ TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
   });
   EXPECT_EQ(box.stats().index_rows, 128u);
   EXPECT_EQ(box.stats().shared_rows, 127u);
-  EXPECT_EQ(box.heap_bytes(), headers32(4) + table_bytes({2}) + 5u + kPad32);  // no uniform row: no marker
+  EXPECT_EQ(box.heap_bytes(), headers32(4) + table_bytes({2}) + 5u + kPad32);
   // Writing one of the sharing rows must not change the others.
   box.set(1, 2, 3, solid(materials::kSand));
   ref.set(1, 2, 3, solid(materials::kSand));
@@ -465,7 +462,7 @@ Voxel form_voxel(int form, int x, int salt) {
 TEST(RowPackedBox, RowsSwitchBetweenFormsInANarrowLayer) {
   RowPackedBox<32> box(materials::kRock);
   Box ref({32, 32, 32}, solid(materials::kRock));
-  // A layer with a few run records: narrow, its uniform rows at a marker.
+  // A layer with a few run records: narrow.
   for (int z = 0; z < 32; z += 4) {
     box.modify_rows(5, 6, z, z + 1, [&](int, int, Voxel* row) {
       for (int x = 0; x < 32; ++x) ref.set(x, 5, z, row[x] = form_voxel(1, x, z));
@@ -488,7 +485,7 @@ TEST(RowPackedBox, RowsSwitchBetweenFormsInANarrowLayer) {
     expect_equal(copy, ref, "form switch, compacted");
   }
   // A uniform row changing material while records stay (the headers are
-  // laid out again): narrow layers keep their markers right.
+  // laid out again): the narrow layer's uniform rows say the new material.
   box.modify_rows(5, 6, 1, 2, [&](int, int, Voxel* row) {
     for (int x = 0; x < 32; ++x) ref.set(x, 5, 1, row[x] = solid(materials::kSand));
   });
