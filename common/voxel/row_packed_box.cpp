@@ -64,7 +64,7 @@ RecordParts parts_of(const std::uint8_t* rec, const std::uint8_t* table, int n) 
   p.runs = (rec[0] & kKindMask) == kKindRuns;
   p.bits = index_bits(p.pal[0] + 1);
   p.groups = (n * p.bits + 7) / 8;
-  p.end = p.runs ? p.body + 1 + p.body[0] : p.body + p.groups;
+  p.end = p.runs ? p.body + run_count(p.body) : p.body + p.groups;
   return p;
 }
 
@@ -167,7 +167,7 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
   const int bits = index_bits(s.p);
   const int groups = (n * bits + 7) / 8;
   const int index_size = head + groups + occ_size;
-  const int run_size = s.p <= kMaxRunPalette ? head + 1 + runs + occ_size : raw + 1;
+  const int run_size = s.p <= kMaxRunPalette ? head + runs + occ_size : raw + 1;
   if (std::min(index_size, run_size) >= raw) {
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return raw;
@@ -182,9 +182,10 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
     p += s.p;
   }
   if (use_runs) {
-    *p++ = static_cast<std::uint8_t>(runs);
-    for (int x = 0; x < n; ++x)
-      if (x == 0 || index[x] != index[x - 1]) *p++ = static_cast<std::uint8_t>(index[x] << 5 | x);
+    // The first run starts at 0: its byte's low bits hold the run count - 1.
+    *p++ = static_cast<std::uint8_t>(index[0] << 5 | (runs - 1));
+    for (int x = 1; x < n; ++x)
+      if (index[x] != index[x - 1]) *p++ = static_cast<std::uint8_t>(index[x] << 5 | x);
   } else {
     for (int i = 0; i < groups; ++i) p[i] = 0;
     for (int x = 0; x < n; ++x) {
@@ -218,11 +219,11 @@ int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n) {
 void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n) {
   const RecordParts p = parts_of(rec, table, n);
   if (p.runs) {
-    const int runs = p.body[0];
+    const int runs = run_count(p.body);
     for (int r = 0; r < runs; ++r) {
-      const int from = p.body[1 + r] & 31;
-      const int to = r + 1 < runs ? p.body[2 + r] & 31 : n;
-      const Voxel v = solid(p.pal[1 + (p.body[1 + r] >> 5)]);
+      const int from = r == 0 ? 0 : p.body[r] & 31;
+      const int to = r + 1 < runs ? p.body[r + 1] & 31 : n;
+      const Voxel v = solid(p.pal[1 + (p.body[r] >> 5)]);
       for (int x = from; x < to; ++x) out[x] = v;
     }
   } else {
@@ -239,10 +240,7 @@ Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, in
   const RecordParts p = parts_of(rec, table, n);
   Material m;
   if (p.runs) {
-    const int runs = p.body[0];
-    int r = 0;
-    while (r + 1 < runs && (p.body[2 + r] & 31) <= x) ++r;
-    m = p.pal[1 + (p.body[1 + r] >> 5)];
+    m = p.pal[1 + run_index_at(p.body, x)];
   } else {
     m = p.pal[1 + index_at(p, x)];
   }

@@ -3,17 +3,31 @@
 // resolution (N = 32; a chunk's mips are kept as network-codec units, see
 // chunk.h).
 //
-// Each of the N² rows along x, addressed by (y, z), has a 2-byte header,
-// kept per layer (one y, its N rows): a layer map of N bytes says for each
-// layer either "all its rows uniform with material m" (0x80 | m: the layer
-// stores no headers) or the slot k < 0x80 of its N headers, stored after the
-// map (slot k's headers at words N/2 + k·N). A header:
+// Each of the N² rows along x, addressed by (y, z), has a header, kept per
+// layer (one y, its N rows): a layer map of N bytes says for each layer
+// either "all its rows uniform with material m" (0x80 | m: the layer stores
+// no headers) or where its headers are, in units of N/2 + 2 words after the
+// map (unit u at words N/2 + u·(N/2 + 2)):
+//
+//   0x40 | u   wide layer, one unit and the next: N 2-byte headers
+//   u < 0x40   narrow layer, one unit: two 2-byte base offsets B0 (rows
+//              z < N/2) and B1 (the others), then N bytes, one per row:
+//              b < 192, its record starts at byte B0 or B1 + b of data_;
+//              b >= 192, a uniform row of material b - 192
+//
+// A wide layer's header:
 //
 //   bit 15 14 ........... 0
 //        0  -  . material      uniform row: N voxels of `material`, default occupancy
 //        1  offset             allocated row: its record starts at byte
 //                              offset << shift_ of data_ (shift_ is 0, or 1
 //                              in unpacked mode, where rows are 2N bytes apart)
+//
+// A layer is narrow when, in each half, every record its rows start lies
+// within 191 bytes of the first: in real terrain most layers' records are a
+// few bytes each, so a layer's headers take N + 4 bytes instead of 2N, and
+// a row is found with the same loads as through a wide header. Unpacked
+// boxes are all wide.
 //
 // data_ starts with the box's palette table, then holds the records:
 //
@@ -27,7 +41,7 @@
 //     m0 occ0 m1 occ1 ...                   read_row returns a pointer to it
 //
 //   index record (tag 01oiiiii):  tag | [palette] | G index bytes | [occupancies]
-//   run record   (tag 10oiiiii):  tag | [palette] | R | R run bytes | [occupancies]
+//   run record   (tag 10oiiiii):  tag | [palette] | R run bytes | [occupancies]
 //     i (bits 4-0): a palette of the table, or 31: the palette follows the tag
 //     o (bit 5): the record ends with an occupancy section (else every voxel
 //        has its material's default occupancy)
@@ -37,7 +51,8 @@
 //        which for N = 32 puts voxels 0..15 and 16..31 in the two halves of an
 //        SSE register after a few shifts.
 //     run record (P <= 8): R runs, each one byte (index << 5 | first x),
-//        first x strictly ascending from 0.
+//        first x strictly ascending from 0; the first run's byte holds
+//        R - 1 in place of its first x (0), so R is not stored apart.
 //     occupancy section: ceil(N / 8) bytes of bitmap (bit x % 8 of byte x / 8:
 //        voxel x has a non-default occupancy), then one occupancy byte per set
 //        bit, in x order.
@@ -67,6 +82,8 @@
 //
 // Invariants: headers_ points at a layer map and its slots' headers; a layer
 // has a slot only if some row of it is allocated or differs from the first;
+// a narrow layer's allocated rows start records within 191 bytes of their
+// half's base;
 // every allocated header's offset
 // starts a valid record inside data_; records name only palettes of the
 // table; data_ holds data_bytes_ bytes of which the last kPadBytes are
@@ -77,12 +94,17 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <utility>
 
 #include "common/voxel/voxel.h"
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace terrane {
 
@@ -112,6 +134,30 @@ inline constexpr int index_bits(int p) { return p <= 2 ? 1 : p <= 4 ? 2 : 4; }
 inline const std::uint8_t* record_palette(const std::uint8_t* rec, const std::uint8_t* table) {
   const unsigned id = rec[0] & kPaletteMask;
   return id == kInlinePalette ? rec + 1 : table + table[1 + id];
+}
+
+// A run record's body: R run bytes (index << 5 | first x), except that the
+// first run's byte holds R - 1 where its first x (always 0) would be.
+inline int run_count(const std::uint8_t* body) { return (body[0] & 31) + 1; }
+
+// The palette index of voxel x in a run body. Runs' first x ascend, so the
+// run holding x is the count of runs 1..R-1 starting at or before x: for up
+// to 16 runs one compare of 16 bytes (the body is followed by at least 16
+// readable bytes: a box's padding), else a scan.
+inline unsigned run_index_at(const std::uint8_t* body, int x) {
+  const int runs = run_count(body);
+#if defined(__SSE2__)
+  if (runs <= 16) {
+    const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(body));
+    const __m128i starts = _mm_and_si128(v, _mm_set1_epi8(31));
+    const __m128i at_or_before = _mm_cmpgt_epi8(_mm_set1_epi8(static_cast<char>(x + 1)), starts);
+    const unsigned mask = static_cast<unsigned>(_mm_movemask_epi8(at_or_before)) & ((1u << runs) - 2u);
+    return static_cast<unsigned>(body[std::popcount(mask)]) >> 5;
+  }
+#endif
+  int r = 0;
+  while (r + 1 < runs && (body[r + 1] & 31) <= x) ++r;
+  return static_cast<unsigned>(body[r]) >> 5;
 }
 
 // Bytes of the record starting at rec. Precondition: a valid record for n
@@ -190,7 +236,17 @@ struct RowPackedStats {
   std::size_t shared_rows = 0;     // allocated rows whose record an earlier row already uses
   std::size_t table_bytes = 0;     // the palette table
   std::size_t data_bytes = 0;      // table, records and padding
+  // Bytes of the distinct records by kind, of inline palettes among them
+  // (P - 1 and the materials).
+  std::size_t index_bytes = 0, run_bytes = 0, raw_bytes = 0, inline_palette_bytes = 0;
+  std::size_t narrow_layers = 0, wide_layers = 0;  // layers with their own headers
   RowPackedStats& operator+=(const RowPackedStats& o) {
+    index_bytes += o.index_bytes;
+    run_bytes += o.run_bytes;
+    raw_bytes += o.raw_bytes;
+    inline_palette_bytes += o.inline_palette_bytes;
+    narrow_layers += o.narrow_layers;
+    wide_layers += o.wide_layers;
     uniform_rows += o.uniform_rows;
     raw_rows += o.raw_rows;
     index_rows += o.index_rows;
@@ -289,12 +345,7 @@ class RowPackedBox {
     if (tag & kTagOccupancy) return record_voxel(rec, data_.get(), N, x);
     const std::uint8_t* pal = record_palette(rec, data_.get());
     const std::uint8_t* body = (tag & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
-    if ((tag & kKindMask) == kKindRuns) {
-      const int runs = body[0];
-      int r = 0;
-      while (r + 1 < runs && (body[2 + r] & 31) <= x) ++r;
-      return solid(pal[1 + (body[1 + r] >> 5)]);
-    }
+    if ((tag & kKindMask) == kKindRuns) return solid(pal[1 + run_index_at(body, x)]);
     // Index records (layout in the header comment): G = N * bits / 8 bytes.
     const unsigned p1 = pal[0];
     unsigned index;
@@ -363,16 +414,29 @@ class RowPackedBox {
 #endif
     row_packed_detail::decode_record_scalar(rec, table, out, N);
   }
-  // Row (y, z)'s header, through the layer map.
+  static constexpr std::uint8_t kWideLayer = 0x40;
+  static constexpr int kUnitWords = N / 2 + 2;
+  static constexpr unsigned kNarrowUniform = 192;  // narrow row bytes from here on: uniform material + 192
+  // Row (y, z)'s header, through the layer map, in the wide form (a narrow
+  // layer's row is given as kAllocated | its offset, or its material).
   std::uint16_t header(int y, int z) const {
     const std::uint8_t layer = reinterpret_cast<const std::uint8_t*>(headers_)[y];
-    return (layer & 0x80) ? static_cast<std::uint16_t>(layer & 63) : headers_[N / 2 + layer * N + z];
+    if (layer & 0x80) return static_cast<std::uint16_t>(layer & 63);
+    const std::uint16_t* slot = headers_ + N / 2 + (layer & 63) * kUnitWords;
+    if (layer & kWideLayer) return slot[z];
+    const unsigned b = reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
+    return b >= kNarrowUniform ? static_cast<std::uint16_t>(b - kNarrowUniform)
+                               : static_cast<std::uint16_t>(kAllocated | (slot[z / (N / 2)] + b));
   }
   std::uint16_t header(int r) const { return header(r / N, r % N); }
   // Words of the owned headers (map and slots).
   std::size_t header_words() const;
-  // Takes N² headers (row order) as the box's, kept per layer as above.
-  void adopt_headers(const std::uint16_t* all);
+  // Takes N² headers (row order, wide form) as the box's, kept per layer as
+  // above. narrow_base (2N entries, or null): a layer's base offsets (its
+  // two halves), or -1 for a wide layer; narrow_bytes (N² entries) then
+  // gives each narrow row's offset from its half's base.
+  void adopt_headers(const std::uint16_t* all, const std::int32_t* narrow_base = nullptr,
+                     const std::uint8_t* narrow_bytes = nullptr);
   const std::uint8_t* record(std::uint16_t h) const {
     return data_.get() + (static_cast<std::uint32_t>(h & kOffsetMask) << shift_);
   }

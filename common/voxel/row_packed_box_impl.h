@@ -42,25 +42,44 @@ void RowPackedBox<N>::read_row_into(int y, int z, Voxel* out) const {
 template <int N>
 std::size_t RowPackedBox<N>::header_words() const {
   const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
-  std::size_t slots = 0;
-  for (int y = 0; y < N; ++y) slots += (map[y] & 0x80) == 0;
-  return N / 2 + slots * N;
+  std::size_t units = 0;
+  for (int y = 0; y < N; ++y)
+    if (!(map[y] & 0x80)) units += (map[y] & kWideLayer) ? 2 : 1;
+  return N / 2 + units * kUnitWords;
 }
 
 template <int N>
-void RowPackedBox<N>::adopt_headers(const std::uint16_t* all) {
+void RowPackedBox<N>::adopt_headers(const std::uint16_t* all, const std::int32_t* narrow_base,
+                                    const std::uint8_t* narrow_bytes) {
   std::uint8_t map[N];
-  int slots = 0;
+  int units = 0;
   for (int y = 0; y < N; ++y) {
     const std::uint16_t first = all[y * N];
     const bool alike = !(first & kAllocated) && std::all_of(all + y * N, all + (y + 1) * N,
                                                              [&](std::uint16_t h) { return h == first; });
-    map[y] = alike ? static_cast<std::uint8_t>(0x80 | (first & 63)) : static_cast<std::uint8_t>(slots++);
+    if (alike) {
+      map[y] = static_cast<std::uint8_t>(0x80 | (first & 63));
+    } else if (narrow_base != nullptr && narrow_base[2 * y] >= 0) {
+      map[y] = static_cast<std::uint8_t>(units);
+      units += 1;
+    } else {
+      map[y] = static_cast<std::uint8_t>(kWideLayer | units);
+      units += 2;
+    }
   }
-  auto owned = std::make_unique<std::uint16_t[]>(std::size_t{N / 2} + std::size_t(slots) * N);
+  auto owned = std::make_unique<std::uint16_t[]>(std::size_t{N / 2} + std::size_t(units) * kUnitWords);
   std::memcpy(owned.get(), map, N);
-  for (int y = 0; y < N; ++y)
-    if (!(map[y] & 0x80)) std::memcpy(owned.get() + N / 2 + map[y] * N, all + y * N, sizeof(std::uint16_t) * N);
+  for (int y = 0; y < N; ++y) {
+    if (map[y] & 0x80) continue;
+    std::uint16_t* slot = owned.get() + N / 2 + (map[y] & 63) * kUnitWords;
+    if (map[y] & kWideLayer) {
+      std::memcpy(slot, all + y * N, sizeof(std::uint16_t) * N);
+    } else {
+      slot[0] = static_cast<std::uint16_t>(narrow_base[2 * y]);
+      slot[1] = static_cast<std::uint16_t>(narrow_base[2 * y + 1]);
+      std::memcpy(slot + 2, narrow_bytes + y * N, N);
+    }
+  }
   owned_headers_ = std::move(owned);
   headers_ = owned_headers_.get();
   owns_headers_ = true;
@@ -163,6 +182,13 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     if (++repacks_ > kRepackBudget) unpack_all();
     return;
   }
+  if (headers_change) {
+    // Uniform rows changed material: the headers are laid out again, with
+    // the records (a narrow layer's reach is checked there); records did not
+    // grow, so this is not counted as a repack.
+    rebuild_rect(y0, y1, z0, z1, content.data(), table, true);
+    return;
+  }
 
   // Stage 3b: no record grows, nothing shared: write in place (a shorter
   // record leaves its tail unused until the next rebuild).
@@ -170,17 +196,6 @@ void RowPackedBox<N>::modify_rows(int y0, int y1, int z0, int z1, RowFn&& fn) {
     if (sizes[i] > 0)
       std::memcpy(data_.get() + (header(row_of(i)) & kOffsetMask), records.data() + static_cast<std::size_t>(i) * 2 * N,
                   std::size_t{sizes[i]});
-  if (!headers_change) return;
-  // Uniform rows changed material: the headers are laid out again.
-  std::uint16_t all[kRows];
-  for (int r = 0; r < kRows; ++r) all[r] = header(r);
-  for (int i = 0; i < count; ++i)
-    if (sizes[i] == 0) all[row_of(i)] = content[static_cast<std::size_t>(i) * N].material;
-  if (data_bytes_ == 0 && std::all_of(all, all + kRows, [&](std::uint16_t h) { return h == all[0]; })) {
-    become_uniform(static_cast<Material>(all[0] & 63));
-    return;
-  }
-  adopt_headers(all);
 }
 
 template <int N>
@@ -210,6 +225,7 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   constexpr std::size_t kTableSize = 2 * kRows;  // power of two, load <= 1/2
   thread_local std::vector<std::uint8_t> buf;
   thread_local std::vector<std::uint16_t> slots;
+  // (At most one record or copy per row.)
   buf.resize(table_bytes + std::size_t{kRows} * 2 * N);
   slots.assign(kTableSize, 0);
   table.write(buf.data());
@@ -217,7 +233,16 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   std::size_t used = table_bytes;
   bool all_uniform_same = true;
   std::uint8_t encoded[2 * N];
+  // Narrow layers (see the header comment): a record stored more than
+  // kReuseReach bytes before the layer's own records is copied rather than
+  // shared, so that the layer's records stay within one byte of its base.
+  // (64: the least memory over the real regions and the default world
+  // against 16, 32 and 96, and than no copies at all; 2026-11-29.)
+  constexpr std::size_t kReuseReach = 64;
+  std::int32_t narrow_base[2 * N];
+  std::uint8_t narrow_bytes[kRows];
   for (int y = 0; y < N; ++y) {
+    const std::size_t layer_start = used;
     for (int z = 0; z < N; ++z) {
       const int r = y * N + z;
       const bool touched = y >= y0 && y < y1 && z >= z0 && z < z1;
@@ -255,6 +280,18 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
           const std::uint8_t* cand = buf.data() + std::size_t{e - 1u};
           if (row_packed_detail::record_bytes(cand, buf.data(), N) == size &&
               std::memcmp(cand, src, static_cast<std::size_t>(size)) == 0) {
+            if (std::size_t{e - 1u} + kReuseReach < layer_start) {
+              // Too far back for this layer: a copy, which later rows share.
+              std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
+              if (used > kOffsetMask) {
+                unpack_from(y0, y1, z0, z1, content);
+                return;
+              }
+              headers[r] = static_cast<std::uint16_t>(kAllocated | used);
+              slots[slot] = static_cast<std::uint16_t>(used + 1);
+              used += static_cast<std::size_t>(size);
+              break;
+            }
             headers[r] = static_cast<std::uint16_t>(kAllocated | (e - 1u));
             break;
           }
@@ -262,12 +299,34 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
       }
       all_uniform_same &= headers[r] == headers[0];
     }
+    // The layer is narrow if, in each half, its records start within 191
+    // bytes of the first.
+    narrow_base[2 * y] = narrow_base[2 * y + 1] = -1;
+    const std::uint16_t* layer = headers.get() + y * N;
+    std::size_t lo[2] = {~std::size_t{0}, ~std::size_t{0}}, hi[2] = {0, 0};
+    for (int z = 0; z < N; ++z) {
+      if (!(layer[z] & kAllocated)) continue;
+      const std::size_t at = layer[z] & kOffsetMask;
+      const int half = z / (N / 2);
+      lo[half] = std::min(lo[half], at);
+      hi[half] = std::max(hi[half], at);
+    }
+    // (A half without records has no base: 0.)
+    for (int half = 0; half < 2; ++half)
+      if (hi[half] < lo[half]) lo[half] = hi[half] = 0;
+    if (hi[0] - lo[0] >= kNarrowUniform || hi[1] - lo[1] >= kNarrowUniform) continue;
+    narrow_base[2 * y] = static_cast<std::int32_t>(lo[0]);
+    narrow_base[2 * y + 1] = static_cast<std::int32_t>(lo[1]);
+    for (int z = 0; z < N; ++z) {
+      narrow_bytes[y * N + z] = static_cast<std::uint8_t>(
+          (layer[z] & kAllocated) ? (layer[z] & kOffsetMask) - lo[z / (N / 2)] : kNarrowUniform + (layer[z] & 63));
+    }
   }
   if (all_uniform_same && !(headers[0] & kAllocated)) {
     become_uniform(static_cast<Material>(headers[0] & 63));
     return;
   }
-  adopt_headers(headers.get());
+  adopt_headers(headers.get(), narrow_base, narrow_bytes);
   shift_ = 0;
   if (used == table_bytes) {
     data_.reset();
@@ -377,8 +436,22 @@ RowPackedStats RowPackedBox<N>::stats() const {
       s.index_rows += (tag & row_packed_detail::kKindMask) == row_packed_detail::kKindIndex;
       s.occupancy_rows += (tag & row_packed_detail::kTagOccupancy) != 0;
     }
+    if (!seen[h & kOffsetMask]) {
+      const int bytes = row_packed_detail::record_bytes(record(h), table(), N);
+      if (tag < row_packed_detail::kKindIndex) s.raw_bytes += static_cast<std::size_t>(bytes);
+      else if ((tag & row_packed_detail::kKindMask) == row_packed_detail::kKindRuns) s.run_bytes += static_cast<std::size_t>(bytes);
+      else s.index_bytes += static_cast<std::size_t>(bytes);
+      if (tag >= row_packed_detail::kKindIndex && (tag & row_packed_detail::kPaletteMask) == row_packed_detail::kInlinePalette)
+        s.inline_palette_bytes += 2u + record(h)[1];
+    }
     s.shared_rows += seen[h & kOffsetMask];
     seen[h & kOffsetMask] = true;
+  }
+  const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
+  for (int y = 0; y < N && owns_headers_; ++y) {
+    if (map[y] & 0x80) continue;
+    s.wide_layers += (map[y] & kWideLayer) != 0;
+    s.narrow_layers += (map[y] & kWideLayer) == 0;
   }
   return s;
 }

@@ -52,13 +52,13 @@ __attribute__((target("ssse3"))) inline void decode_record32_ssse3(const std::ui
   __m128i lo, hi;
   const std::uint8_t* end;
   if ((tag & 0xC0) == 0x80) {
-    const unsigned runs = body[0];
+    const unsigned runs = (body[0] & 31) + 1;  // the first run's byte holds R - 1
     const __m128i iota_lo = _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const __m128i iota_hi = _mm_add_epi8(iota_lo, _mm_set1_epi8(16));
-    lo = _mm_set1_epi8(static_cast<char>(body[1] >> 5));
+    lo = _mm_set1_epi8(static_cast<char>(body[0] >> 5));
     hi = lo;
     for (unsigned r = 1; r < runs; ++r) {
-      const unsigned b = body[1 + r];
+      const unsigned b = body[r];
       const __m128i start = _mm_set1_epi8(static_cast<char>((b & 31) - 1));
       const __m128i idx = _mm_set1_epi8(static_cast<char>(b >> 5));
       const __m128i in_lo = _mm_cmpgt_epi8(iota_lo, start);
@@ -66,7 +66,7 @@ __attribute__((target("ssse3"))) inline void decode_record32_ssse3(const std::ui
       lo = _mm_or_si128(_mm_and_si128(in_lo, idx), _mm_andnot_si128(in_lo, lo));
       hi = _mm_or_si128(_mm_and_si128(in_hi, idx), _mm_andnot_si128(in_hi, hi));
     }
-    end = body + 1 + runs;
+    end = body + runs;
   } else {
     const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(body));
     const __m128i bit = _mm_set1_epi64x(static_cast<long long>(0x8040201008040201ull));

@@ -85,6 +85,11 @@ void print_memory(const std::string& name) {
               headers, static_cast<double>(headers) / ne, s.table_bytes, static_cast<double>(s.table_bytes) / ne,
               s.data_bytes - s.table_bytes, static_cast<double>(s.data_bytes - s.table_bytes) / ne,
               static_cast<double>(m.mip_bytes) / ne);
+  std::printf("  level-0 records by kind: run %.3f, index %.3f, raw %.3f B/nev (inline palettes %.3f of them); "
+              "layers with headers: narrow %zu, wide %zu\n",
+              static_cast<double>(s.run_bytes) / ne, static_cast<double>(s.index_bytes) / ne,
+              static_cast<double>(s.raw_bytes) / ne, static_cast<double>(s.inline_palette_bytes) / ne,
+              s.narrow_layers, s.wide_layers);
   // Where the headers go: layers (one y, all 32 rows) whose rows are all
   // uniform with one material hold 64 bytes of headers that say one value.
   std::size_t owning = 0, alike_layers = 0;

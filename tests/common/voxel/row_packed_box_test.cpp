@@ -112,9 +112,11 @@ TEST(RowPackedBox, UniformBoxOwnsNoMemory) {
   EXPECT_EQ(box.get(3, 4, 5), solid(materials::kRock));
 }
 
-// Headers of a 32³ box that owns them: the layer map, then 32 headers for
-// each layer whose rows are not all uniform with one material.
-constexpr std::size_t headers32(std::size_t layers) { return 32 + layers * 32 * 2; }
+// Headers of a 32³ box that owns them: the layer map, then for each layer
+// whose rows are not all uniform with one material either one unit (narrow:
+// two base offsets and 32 one-byte offsets) or two (wide: 32 two-byte
+// headers, in two units of 36 bytes).
+constexpr std::size_t headers32(std::size_t narrow, std::size_t wide = 0) { return 32 + narrow * 36 + wide * 72; }
 
 TEST(RowPackedBox, UniformLayersCostOnlyTheLayerMap) {
   RowPackedBox<32> box(materials::kRock);
@@ -154,19 +156,22 @@ std::size_t table_bytes(std::initializer_list<int> sizes) {
   return bytes;
 }
 
-TEST(RowPackedBox, OreRowUsesAnIndexRecordOverTheTable) {
+TEST(RowPackedBox, OreRowUsesARecordOverTheTable) {
   RowPackedBox<32> box(materials::kRock);
   box.set(7, 3, 4, solid(materials::kBasalt));  // an ore in one row
   EXPECT_EQ(box.stats().index_rows + box.stats().run_rows, 1u);
   EXPECT_EQ(box.stats().raw_rows, 0u);
   // The palette {rock, basalt} joins the table; the record is its tag and
-  // 4 bytes of 1-bit indices (three runs would cost as much).
+  // three runs, the first holding the count (1-bit indices would take 4
+  // bytes); the layer is narrow.
   EXPECT_EQ(box.stats().table_bytes, table_bytes({2}));
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 5u + kPad32);
+  EXPECT_EQ(box.stats().narrow_layers, 1u);
+  EXPECT_EQ(box.stats().run_rows, 1u);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 4u + kPad32);
   box.set(8, 3, 4, make_voxel(materials::kBasalt, 100));  // partial occupancy: an occupancy section
   EXPECT_EQ(box.stats().occupancy_rows, 1u);
   // + 4 bytes of bitmap and the one occupancy byte.
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 10u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({2}) + 9u + kPad32);
   EXPECT_EQ(box.get(7, 3, 4), solid(materials::kBasalt));
   EXPECT_EQ(box.get(8, 3, 4), make_voxel(materials::kBasalt, 100));
   EXPECT_EQ(box.get(9, 3, 4), solid(materials::kRock));
@@ -205,8 +210,9 @@ TEST(RowPackedBox, FewRunsUseARunRecord) {
   });
   for (int x = 0; x < 32; ++x) ref.set(x, 0, 0, solid(material(x)));
   EXPECT_EQ(box.stats().run_rows, 1u);
-  // tag, run count, three runs (2-bit indices would take 1 + 8).
-  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3}) + 5u + kPad32);
+  // tag and three runs, the first holding the run count (2-bit indices
+  // would take 1 + 8).
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3}) + 4u + kPad32);
   expect_equal(box, ref, "runs");
   // Occupancy on top of runs: the section follows the runs.
   box.set(15, 0, 0, make_voxel(materials::kSand, 3));
@@ -331,7 +337,7 @@ TEST(RowPackedBox, RepeatedTinyWritesUnpackInsteadOfRepackingForever) {
   }
   EXPECT_TRUE(box.unpacked());
   EXPECT_EQ(box.stats().raw_rows, 1024u);
-  EXPECT_EQ(box.heap_bytes(), headers32(32) + 32u * 32u * 64u + kPad32);
+  EXPECT_EQ(box.heap_bytes(), headers32(0, 32) + 32u * 32u * 64u + kPad32);  // unpacked: every layer wide
   expect_equal(box, ref, "unpacked");
   box.compact();
   EXPECT_FALSE(box.unpacked());
@@ -434,5 +440,134 @@ TEST(RowPackedBox, MovedFromBoxIsUniformAirAndUsable) {
   a.set(4, 4, 4, solid(materials::kMud));
   EXPECT_EQ(a.get(4, 4, 4), solid(materials::kMud));
 }
+}  // namespace
+}  // namespace terrane
+
+namespace terrane {
+namespace {
+
+// A row of each form: uniform, runs (first run byte holding the count),
+// index, raw, and any of them with partial occupancy.
+Voxel form_voxel(int form, int x, int salt) {
+  const Material a = static_cast<Material>(1 + salt % 60);
+  switch (form) {
+    case 0: return solid(a);                                                          // uniform
+    case 1: return solid(static_cast<Material>(a + (x < 5 ? 0 : x < 20 ? 1 : 2)));    // 3 runs
+    case 2: return solid(static_cast<Material>(1 + (x * 5 + salt) % 7));              // index, 7 materials
+    case 3: return solid(static_cast<Material>((x * 2 + salt) % 64));                 // raw: > 16 materials, Air among them
+    default: return make_voxel(static_cast<Material>(a + x % 2), static_cast<std::uint8_t>(x * 8 + salt));
+  }
+}
+
+TEST(RowPackedBox, RowsSwitchBetweenFormsInANarrowLayer) {
+  RowPackedBox<32> box(materials::kRock);
+  Box ref({32, 32, 32}, solid(materials::kRock));
+  // A layer with a few run records: narrow.
+  for (int z = 0; z < 32; z += 4) {
+    box.modify_rows(5, 6, z, z + 1, [&](int, int, Voxel* row) {
+      for (int x = 0; x < 32; ++x) ref.set(x, 5, z, row[x] = form_voxel(1, x, z));
+    });
+  }
+  EXPECT_EQ(box.stats().narrow_layers, 1u);
+  expect_equal(box, ref, "runs");
+  // One row through every form and back, the others kept.
+  for (int form : {2, 3, 4, 1, 0, 3, 0, 4, 2, 1}) {
+    box.modify_rows(5, 6, 9, 10, [&](int, int, Voxel* row) {
+      for (int x = 0; x < 32; ++x) row[x] = form_voxel(form, x, 9);
+    });
+    for (int x = 0; x < 32; ++x) {
+      const Voxel v = form_voxel(form, x, 9);
+      ref.set(x, 5, 9, make_voxel(v.material, v.occupancy));
+    }
+    expect_equal(box, ref, "form switch");
+    RowPackedBox<32> copy = box.clone();
+    copy.compact();
+    expect_equal(copy, ref, "form switch, compacted");
+  }
+  // A uniform row changing material while records stay (the headers are
+  // laid out again): the narrow layer's uniform rows say the new material.
+  box.modify_rows(5, 6, 1, 2, [&](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) ref.set(x, 5, 1, row[x] = solid(materials::kSand));
+  });
+  expect_equal(box, ref, "uniform row changed");
+  EXPECT_GE(box.stats().narrow_layers, 1u);
+}
+
+TEST(RowPackedBox, LayerTurnsWideWhenItsRecordsReachPastAByteAndBack) {
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  // Sixteen raw rows of one half-layer: 16 × 64 bytes, beyond one byte.
+  box.modify_rows(7, 8, 0, 16, [&](int, int z, Voxel* row) {
+    for (int x = 0; x < 32; ++x) ref.set(x, 7, z, row[x] = form_voxel(3, x, z));
+  });
+  EXPECT_EQ(box.stats().wide_layers, 1u);
+  EXPECT_EQ(box.stats().narrow_layers, 0u);
+  expect_equal(box, ref, "wide");
+  // Back to small records: narrow again once repacked.
+  box.modify_rows(7, 8, 0, 16, [&](int, int z, Voxel* row) {
+    for (int x = 0; x < 32; ++x) ref.set(x, 7, z, row[x] = form_voxel(1, x, z));
+  });
+  box.compact();
+  EXPECT_EQ(box.stats().wide_layers, 0u);
+  EXPECT_EQ(box.stats().narrow_layers, 1u);
+  expect_equal(box, ref, "narrow again");
+}
+
+// Every N: random rectangles written with rows of every form, every
+// material 0..63 (far more palettes than the table's 31: the rest inline)
+// and every occupancy byte (Air's normalised to 0), against a dense box,
+// through repacks, in-place writes, compact() and clone().
+template <int N>
+void every_material_and_occupancy(unsigned seed) {
+  RowPackedBox<N> box(kAir);
+  Box ref({N, N, N});
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> coord(0, N - 1), form(0, 4), salt(0, 255), small(0, 7);
+  for (int step = 0; step < 300; ++step) {
+    int y0 = coord(rng), y1 = coord(rng), z0 = coord(rng), z1 = coord(rng);
+    if (y0 > y1) std::swap(y0, y1);
+    if (z0 > z1) std::swap(z0, z1);
+    if (small(rng) != 0) y1 = y0, z1 = std::min(z0 + small(rng), N - 1);  // mostly small writes
+    const int f = form(rng), s = salt(rng);
+    box.modify_rows(y0, y1 + 1, z0, z1 + 1, [&](int y, int z, Voxel* row) {
+      for (int x = 0; x < N; ++x) {
+        Voxel v = form_voxel(f, x, s + y * 3 + z);
+        if (f == 4 || (f == 3 && x % 5 == 0)) v.occupancy = static_cast<std::uint8_t>(s + 37 * x + 11 * z);
+        if (f == 3) v.material = static_cast<Material>((s + x + 7 * z) % 64);
+        row[x] = v;
+        const Voxel stored = make_voxel(v.material, v.occupancy);
+        ref.set(x, y, z, stored);
+      }
+    });
+    if (step % 50 == 49) {
+      expect_equal(box, ref, "random writes");
+      RowPackedBox<N> copy = box.clone();
+      copy.compact();
+      expect_equal(copy, ref, "compacted clone");
+    }
+  }
+  // Every occupancy byte with every material (Air's normalised), one voxel
+  // at a time over the random content.
+  for (int v = 0; v < 256; ++v) {
+    const Voxel w = make_voxel(static_cast<Material>(v % 64), static_cast<std::uint8_t>(v));
+    const int x = v % N, y = (v / N) % N, z = (v / N / N + v) % N;
+    box.set(x, y, z, Voxel{w.material, static_cast<std::uint8_t>(v)});  // set() normalises Air
+    ref.set(x, y, z, w);
+    ASSERT_EQ(box.get(x, y, z), w) << N << " value " << v;
+  }
+  expect_equal(box, ref, "every occupancy");
+  box.compact();
+  expect_equal(box, ref, "compacted");
+}
+
+TEST(RowPackedBox, EveryMaterialAndOccupancyRoundTripsAtEverySize) {
+  for (unsigned seed = 1; seed <= 4; ++seed) {
+    every_material_and_occupancy<4>(seed);
+    every_material_and_occupancy<8>(seed);
+    every_material_and_occupancy<16>(seed);
+    every_material_and_occupancy<32>(seed);
+  }
+}
+
 }  // namespace
 }  // namespace terrane
