@@ -300,7 +300,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
     r.timeline.push_back(p);
   }
   if (!in.error().empty()) return in.error();
-  r.thresholds = evaluate_thresholds(r.options.thresholds, r.threshold_values());
+  r.thresholds = r.evaluate_own_thresholds();
   *out = std::move(r);
   return "";
 }
@@ -427,7 +427,7 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
       edited_voxel_receivers > 0 ? static_cast<double>(r.update_batch_bytes_steady) / edited_voxel_receivers : 0;
   std::stable_sort(r.mismatches.begin(), r.mismatches.end(), [](const Mismatch& a, const Mismatch& b) { return a.bot < b.bot; });
   std::sort(r.disconnects.begin(), r.disconnects.end());
-  r.thresholds = evaluate_thresholds(r.options.thresholds, r.threshold_values());
+  r.thresholds = r.evaluate_own_thresholds();
   *out = std::move(r);
   return "";
 }

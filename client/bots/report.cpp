@@ -131,7 +131,11 @@ std::string report_json(const BotsReport& r) {
     j << (i ? ",\n    " : "\n    ") << "{\"expression\": \"" << esc(t.threshold.expression) << "\", \"metric\": \""
       << esc(t.threshold.metric) << "\", \"op\": \"" << threshold_op_text(t.threshold.op)
       << "\", \"limit\": " << num(t.threshold.limit) << ", \"value\": " << (std::isfinite(t.value) ? num(t.value) : "null")
-      << ", \"passed\": " << (t.passed ? "true" : "false") << "}";
+      << ", \"passed\": " << (t.passed ? "true" : "false");
+    if (t.threshold.per_second)
+      j << ", \"per_second\": {\"seconds\": " << t.seconds << ", \"seconds_broken\": " << t.seconds_broken
+        << ", \"worst_t_s\": " << num(t.worst_t_s) << "}";
+    j << "}";
   }
   j << (r.thresholds.empty() ? "],\n" : "\n  ],\n");
   j << "  \"joined_s\": " << num(r.joined_s) << ",\n";
@@ -271,8 +275,12 @@ std::string report_table(const BotsReport& r) {
   if (!r.thresholds.empty()) {
     t << "  thresholds:\n";
     for (const ThresholdResult& th : r.thresholds) {
+      std::string value = th.threshold.metric + " = " + num(th.value);
+      if (th.threshold.per_second)
+        value += " in the worst second (ending at " + fixed(th.worst_t_s, 0) + " s), " +
+                 std::to_string(th.seconds_broken) + " of " + std::to_string(th.seconds) + " seconds broken";
       std::snprintf(line, sizeof line, "    %-4s %-40s %s\n", th.passed ? "ok" : "FAIL", th.threshold.expression.c_str(),
-                    (th.threshold.metric + " = " + num(th.value)).c_str());
+                    value.c_str());
       t << line;
     }
   }

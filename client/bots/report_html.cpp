@@ -289,7 +289,12 @@ std::string thresholds_table(const std::vector<Run>& runs) {
   for (std::size_t i = 0; i < runs.size(); ++i)
     for (const ThresholdResult& t : runs[i].r->thresholds)
       h << "<tr>" << (runs.size() > 1 ? "<td>" + tag(i) + "</td>" : "") << "<td><code>"
-        << html_esc(t.threshold.expression) << "</code></td><td>" << fixed(t.value, 2) << "</td><td class=\""
+        << html_esc(t.threshold.expression) << "</code></td><td>" << fixed(t.value, 2)
+        << (t.threshold.per_second ? " in the worst second (ending at " + fixed(t.worst_t_s, 0) + " s), " +
+                                         std::to_string(t.seconds_broken) + " of " + std::to_string(t.seconds) +
+                                         " seconds broken"
+                                   : std::string())
+        << "</td><td class=\""
         << (t.passed ? "pass\">passed" : "fail\">BROKEN") << "</td></tr>\n";
   h << "</table>\n";
   return h.str();

@@ -458,7 +458,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     if (s < ack_s.size()) r.timeline[s].ack_ms = summarize(ack_s[s]);
     if (s < rtt_s.size()) r.timeline[s].round_trip_ms = summarize(rtt_s[s]);
   }
-  r.thresholds = evaluate_thresholds(o.thresholds, r.threshold_values());
+  r.thresholds = r.evaluate_own_thresholds();
   return true;
 }
 
@@ -468,7 +468,14 @@ std::vector<std::string> BotsReport::broken_thresholds() const {
     if (t.passed) continue;
     char value[64];
     std::snprintf(value, sizeof value, "%.6g", t.value);
-    out.push_back("threshold " + t.threshold.expression + " broken: " + t.threshold.metric + " = " + value);
+    if (!t.threshold.per_second) {
+      out.push_back("threshold " + t.threshold.expression + " broken: " + t.threshold.metric + " = " + value);
+      continue;
+    }
+    char when[96];
+    std::snprintf(when, sizeof when, " in %zu of %zu seconds, the worst ending at %.0f s", t.seconds_broken, t.seconds,
+                  t.worst_t_s);
+    out.push_back("threshold " + t.threshold.expression + " broken: " + t.threshold.metric + " = " + value + when);
   }
   return out;
 }
@@ -510,6 +517,31 @@ std::map<std::string, double> BotsReport::threshold_values() const {
       {"bytes_per_bot_s", bot_seconds > 0 ? static_cast<double>(bytes_received) / bot_seconds : 0.0},
       {"hash_unanswered", static_cast<double>(hash_unanswered)},
   };
+}
+
+std::vector<SecondValues> BotsReport::per_second_threshold_values() const {
+  std::vector<SecondValues> out;
+  for (const TimelinePoint& p : timeline) {
+    if (p.t_s - 1.0 < joined_s) continue;  // (a second that began before the measurement)
+    SecondValues s;
+    s.t_s = p.t_s;
+    if (p.fanout_ms.count > 0) {
+      s.values["fanout_p50"] = p.fanout_ms.p50;
+      s.values["fanout_p95"] = p.fanout_ms.p95;
+      s.values["fanout_p99"] = p.fanout_ms.p99;
+      s.values["fanout_max"] = p.fanout_ms.max;
+    }
+    if (p.ack_ms.count > 0) {
+      s.values["ack_p50"] = p.ack_ms.p50;
+      s.values["ack_p95"] = p.ack_ms.p95;
+      s.values["ack_p99"] = p.ack_ms.p99;
+      s.values["ack_max"] = p.ack_ms.max;
+    }
+    if (p.round_trip_ms.count > 0) s.values["round_trip_p99"] = p.round_trip_ms.p99;
+    if (p.bots_connected > 0) s.values["bytes_per_bot_s"] = p.mb_per_s_in * 1e6 / p.bots_connected;
+    out.push_back(std::move(s));
+  }
+  return out;
 }
 
 std::vector<std::string> BotsReport::failures() const {

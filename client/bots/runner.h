@@ -113,6 +113,16 @@ struct BotsReport {
   // Every metric a threshold can name (threshold_metrics()) -> its value
   // in this report.
   std::map<std::string, double> threshold_values() const;
+  // The per-second metrics (threshold_metrics()'s per_second ones) of each
+  // measured second of the timeline: those that start once the measurement
+  // did (joined_s; every second when the run did not wait for joins), a
+  // latency only in a second that had a sample, bytes per bot only while
+  // bots were connected.
+  std::vector<SecondValues> per_second_threshold_values() const;
+  // The options' thresholds against this report's figures.
+  std::vector<ThresholdResult> evaluate_own_thresholds() const {
+    return evaluate_thresholds(options.thresholds, threshold_values(), per_second_threshold_values());
+  }
 };
 
 // How a bot starts: where, walking or flying, editing or not, its seed.

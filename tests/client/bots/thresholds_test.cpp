@@ -79,6 +79,115 @@ TEST(Thresholds, BadExpressionsAreNamedWithWhatIsWrong) {
     EXPECT_NE(unknown.find(std::string(m.name)), std::string::npos) << m.name;
 }
 
+// "@1s": a window after the goal; the metrics that have a value per second.
+TEST(Thresholds, PerSecondExpressionsNameTheirWindowAndMetric) {
+  const Threshold t = parsed(" fanout_p99 < 100 @ 1s ");
+  EXPECT_TRUE(t.per_second);
+  EXPECT_EQ(t.metric, "fanout_p99");
+  EXPECT_EQ(t.limit, 100);
+  EXPECT_EQ(t.expression, "fanout_p99 < 100 @ 1s");
+  EXPECT_FALSE(parsed("fanout_p99<100").per_second);
+  Threshold u;
+  EXPECT_EQ(parse_threshold("fanout_p99<100@5s", &u),
+            "'fanout_p99<100@5s': '@5s' is not a window (the one there is: @1s, every second)");
+  EXPECT_EQ(parse_threshold("fanout_p99<100@", &u),
+            "'fanout_p99<100@': '@' is not a window (the one there is: @1s, every second)");
+  const std::string count = parse_threshold("mismatches==0@1s", &u);
+  EXPECT_EQ(count.rfind("'mismatches==0@1s': 'mismatches' has no value per second (those that have: fanout_p50, ", 0),
+            0u)
+      << count;
+  for (const ThresholdMetric& m : threshold_metrics()) {
+    EXPECT_EQ(count.find(std::string(" ") + m.name + ",") != std::string::npos ||
+                  count.find(std::string(" ") + m.name + ")") != std::string::npos,
+              m.per_second)
+        << m.name;
+    EXPECT_EQ(parse_threshold(std::string(m.name) + ">=0@1s", &u).empty(), m.per_second) << m.name;
+  }
+  // Every per-second metric has a value in a second that had everything.
+  BotsReport r;
+  TimelinePoint p;
+  p.t_s = 1;
+  p.bots_connected = 2;
+  p.mb_per_s_in = 0.01;
+  LatencyHistogram h;
+  h.record(5);
+  p.fanout_ms = p.ack_ms = p.round_trip_ms = summarize(h);
+  r.timeline = {p};
+  const std::vector<SecondValues> seconds = r.per_second_threshold_values();
+  ASSERT_EQ(seconds.size(), 1u);
+  for (const ThresholdMetric& m : threshold_metrics())
+    EXPECT_EQ(seconds[0].values.count(m.name), m.per_second ? 1u : 0u) << m.name;
+  EXPECT_DOUBLE_EQ(seconds[0].values.at("bytes_per_bot_s"), 5000);  // 10,000 bytes / 2 bots
+}
+
+// A per-second goal holds in every measured second with a value; the report
+// names the worst second, when it ended and how many broke it.
+TEST(Thresholds, APerSecondGoalIsHeldInEverySecondAndTheWorstIsReported) {
+  BotsReport r;
+  r.bots = 2;
+  r.duration_s = 6;
+  r.joined_s = 1.5;  // measured from 1.5 s: the second ending at 2 s began before
+  const auto second = [](double t_s, std::vector<double> fanout_ms, double mb_in) {
+    TimelinePoint p;
+    p.t_s = t_s;
+    p.bots_connected = 2;
+    p.mb_per_s_in = mb_in;
+    LatencyHistogram h;
+    for (double ms : fanout_ms) h.record(ms);
+    p.fanout_ms = summarize(h);
+    return p;
+  };
+  r.timeline = {second(1, {900}, 0.5),  second(2, {800}, 0.5), second(3, {10, 20}, 0.004),
+                second(4, {150}, 0.002), second(5, {}, 0.003),  second(6, {40, 230}, 0.001)};
+  LatencyHistogram whole;
+  for (double ms : {10, 20, 150, 40, 230}) whole.record(ms);
+  r.edit_fanout_ms = summarize(whole);
+  r.options.thresholds = {parsed("fanout_p99<100@1s"), parsed("fanout_p99<1000"), parsed("bytes_per_bot_s>1200@1s"),
+                          parsed("fanout_max<1000@1s")};
+  r.thresholds = r.evaluate_own_thresholds();
+  ASSERT_EQ(r.thresholds.size(), 4u);
+  const ThresholdResult& fanout = r.thresholds[0];
+  EXPECT_FALSE(fanout.passed);
+  EXPECT_EQ(fanout.seconds, 3u);  // 3, 4 and 6: the first two began before the measurement, 5 had no edit
+  EXPECT_EQ(fanout.seconds_broken, 2u);
+  EXPECT_NEAR(fanout.value, 230, 230 * LatencyHistogram::kRelativePrecision);
+  EXPECT_EQ(fanout.worst_t_s, 6);
+  EXPECT_TRUE(r.thresholds[1].passed);  // the whole run's p99 of the same edits
+  // ">": the worst second is the smallest (0.001 MB / 2 bots = 500 B), and
+  // every measured second has bytes.
+  const ThresholdResult& bytes = r.thresholds[2];
+  EXPECT_FALSE(bytes.passed);
+  EXPECT_EQ(bytes.seconds, 4u);
+  EXPECT_EQ(bytes.seconds_broken, 2u);  // 1,000 and 500 B
+  EXPECT_DOUBLE_EQ(bytes.value, 500);
+  EXPECT_EQ(bytes.worst_t_s, 6);
+  EXPECT_TRUE(r.thresholds[3].passed);  // 900 and 800 ms came before the measurement
+  ASSERT_EQ(r.broken_thresholds().size(), 2u);
+  EXPECT_EQ(r.broken_thresholds()[1],
+            "threshold bytes_per_bot_s>1200@1s broken: bytes_per_bot_s = 500 in 2 of 4 seconds, the worst ending at 6 s");
+  EXPECT_EQ(r.exit_status(), kExitThresholds);
+  std::map<std::string, std::string> json;
+  ASSERT_EQ(flatten_json(report_json(r), &json), "");
+  EXPECT_EQ(json["thresholds.2.per_second.seconds"], "4");
+  EXPECT_EQ(json["thresholds.2.per_second.seconds_broken"], "2");
+  EXPECT_EQ(json["thresholds.2.per_second.worst_t_s"], "6");
+  EXPECT_EQ(json.count("thresholds.1.per_second.seconds"), 0u);
+  const std::string table = report_table(r);
+  EXPECT_NE(table.find("bytes_per_bot_s = 500 in the worst second (ending at 6 s), 2 of 4 seconds broken"),
+            std::string::npos)
+      << table;
+  // == and !=: the first broken second is the one reported.
+  const auto eq = evaluate_thresholds({parsed("fanout_max==150@1s")}, {}, r.per_second_threshold_values());
+  EXPECT_FALSE(eq[0].passed);
+  EXPECT_EQ(eq[0].seconds_broken, 2u);
+  EXPECT_EQ(eq[0].worst_t_s, 3);
+  // No second with a value: nothing broke it.
+  const auto none = evaluate_thresholds({parsed("ack_p99<1@1s")}, {}, r.per_second_threshold_values());
+  EXPECT_TRUE(none[0].passed);
+  EXPECT_EQ(none[0].seconds, 0u);
+  EXPECT_TRUE(std::isnan(none[0].value));
+}
+
 TEST(Thresholds, EveryMetricResolvesInAReportAndIsInTheHelp) {
   BotsReport r;
   r.bots = 4;
