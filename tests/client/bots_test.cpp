@@ -855,33 +855,43 @@ TEST(BotsBinary, BadUsageExitsTwoNamingTheFlag) {
   EXPECT_NE(out.find("unknown metric 'latency' (known: fanout_p50"), std::string::npos) << out;
 }
 
-// Two local shards of one scenario, merged, against one process running it
-// all on the same server: what the scenario determines (bots, their joins
-// and connections, no edit, no mismatch, each bot's Hello and Welcome)
-// matches exactly. Latencies and bytes differ from run to run by more than
-// the histograms' precision whatever the sharding (streaming depends on
-// timing); that parts merge into the whole within that precision is
-// tests/client/bots/merge_test.cpp's.
-TEST_F(BotsRunTest, TwoMergedShardsCountWhatOneProcessCounts) {
+// Four local shards of one scenario, run at once and merged, against one
+// process running it all on the same server: what the scenario determines
+// (bots, their joins and connections, no edit, no mismatch, each bot's
+// Hello and Welcome) matches exactly. Latencies and bytes differ from run
+// to run by more than the histograms' precision whatever the sharding
+// (streaming depends on timing); that parts merge into the whole within
+// that precision is tests/client/bots/merge_test.cpp's.
+TEST_F(BotsRunTest, FourMergedShardsCountWhatOneProcessCounts) {
   start_server();
   const std::string run = "--connect 127.0.0.1:" + std::to_string(server_->port()) +
-                          " --bots 6 --behavior idle --duration 1 --spread 64 --view-distance 64"
+                          " --bots 8 --behavior idle --duration 1 --spread 64 --view-distance 64"
                           " --full-res-radius 32 --hash-checks 1 --quiet 0 --wait-joined 120 --threads 2"
                           " --progress off --threshold joins_incomplete==0";
-  const auto path = [&](const char* name) { return (dir_ / name).string(); };
+  const auto path = [&](const std::string& name) { return (dir_ / name).string(); };
   std::string out;
   ASSERT_EQ(run_binary(run + " --report " + path("one.json"), &out), 0) << out;
-  // The shards run at once, as on two machines.
-  std::string out1;
-  std::thread second([&] { run_binary(run + " --shard 1/2 --report " + path("p1.json"), &out1); });
-  EXPECT_EQ(run_binary(run + " --shard 0/2 --report " + path("p0.json"), &out), 0) << out;
-  second.join();
-  ASSERT_EQ(run_binary("merge " + path("p0.json") + " " + path("p1.json") + " --report " + path("all.json") +
-                           " --html " + path("all.html"),
+  // The shards run at once, as on four machines.
+  constexpr int kShards = 4;
+  std::vector<std::string> outs(kShards);
+  std::vector<int> statuses(kShards, -1);
+  {
+    std::vector<std::thread> parts;
+    for (int i = 0; i < kShards; ++i)
+      parts.emplace_back([&, i] {
+        statuses[i] = run_binary(run + " --shard " + std::to_string(i) + "/4 --report " +
+                                     path("p" + std::to_string(i) + ".json"),
+                                 &outs[i]);
+      });
+    for (std::thread& t : parts) t.join();
+  }
+  for (int i = 0; i < kShards; ++i) EXPECT_EQ(statuses[i], 0) << outs[i];
+  ASSERT_EQ(run_binary("merge " + path("p0.json") + " " + path("p1.json") + " " + path("p2.json") + " " +
+                           path("p3.json") + " --report " + path("all.json") + " --html " + path("all.html"),
                        &out),
             0)
-      << out << out1;
-  EXPECT_NE(out.find("terrane-bots: 6 bots, idle"), std::string::npos) << out;
+      << out;
+  EXPECT_NE(out.find("terrane-bots: 8 bots, idle"), std::string::npos) << out;
   auto read = [&](const char* name) {
     std::ifstream f(path(name));
     std::stringstream text;
@@ -890,17 +900,17 @@ TEST_F(BotsRunTest, TwoMergedShardsCountWhatOneProcessCounts) {
     EXPECT_EQ(flatten_json(text.str(), &flat), "") << name;
     return flat;
   };
-  auto one = read("one.json"), all = read("all.json"), p0 = read("p0.json"), p1 = read("p1.json");
-  EXPECT_EQ(p0["bots"], "3");
-  EXPECT_EQ(p1["bots"], "3");
-  EXPECT_EQ(p1["scenario.shard"], "1/2");
+  auto one = read("one.json"), all = read("all.json"), p0 = read("p0.json"), p3 = read("p3.json");
+  EXPECT_EQ(p0["bots"], "2");
+  EXPECT_EQ(p3["bots"], "2");
+  EXPECT_EQ(p3["scenario.shard"], "3/4");
   EXPECT_EQ(all["scenario.shard"], "0/1");
   for (const char* key :
        {"bots", "scenario.bots", "join_coarse_ms.count", "join_full_ms.count", "joins_incomplete", "connect_failures",
         "unexpected_disconnects", "replica_mismatches", "edits_sent", "edits_acked", "hash_unanswered", "passed",
         "exit_status", "thresholds.0.value", "by_message_type.Hello.frames_out", "by_message_type.Welcome.frames_in"})
     EXPECT_EQ(all[key], one[key]) << key;
-  EXPECT_EQ(one["join_full_ms.count"], "6");
+  EXPECT_EQ(one["join_full_ms.count"], "8");
   EXPECT_TRUE(fs::exists(path("all.html")));
 }
 
