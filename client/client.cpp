@@ -131,14 +131,6 @@ void Client::on_closed(const std::string& reason) {
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 
-namespace {
-// The boxes a StreamBatch's records decode into (about 80 KiB): one set per
-// thread, not per client (a process of many clients decodes on a few io
-// threads, and a set per client stayed with each of them). Valid during
-// one record's callback, which never decodes another batch.
-thread_local StreamDecodeScratch stream_scratch;
-}  // namespace
-
 Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<void()>* after) {
   auto records = parse_stream_batch(batch);
   if (!records) return records.error();
@@ -147,7 +139,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
   const bool tell = static_cast<bool>(callbacks_.on_holding);
   std::vector<Vec3i> loaded;  // for on_chunks_loaded
   const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
-  const auto st = decode_stream_batch(*records, stream_scratch, [&](const StreamRecord& r) -> Status {
+  const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
     if (r.kind == StreamRecordKind::kHorizon) {
       // A whole region: each chunk it newly covers is a change.
       horizon_covered_.clear();

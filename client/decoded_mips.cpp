@@ -1,12 +1,9 @@
 #include "client/decoded_mips.h"
 
 #include <algorithm>
-#include <cassert>
 #include <cstring>
 #include <functional>
 #include <string_view>
-
-#include "common/codec/net_codec.h"
 
 namespace terrane {
 
@@ -31,84 +28,54 @@ std::size_t DecodedMips::key_of(const Box& voxels) {
   return hash_bytes(v.data(), v.size_bytes()) ^ (static_cast<std::size_t>(voxels.size().x) * 0xC2B2AE3D27D4EB4Full);
 }
 
-void MipUnit::decode(Box& out) const {
-  out.resize({side, side, side});
-  // The bytes decoded when their record arrived: a failure here is a bug.
-  [[maybe_unused]] const Status st = net_codec_decode(side, bytes, out.voxels());
-  assert(st.ok());
-}
-
-template <class T, class Same, class Make>
-std::shared_ptr<const T> DecodedMips::intern_in(Table<T>& t, std::size_t key, Same&& same, Make&& make) {
-  if (4 * (t.used + 1) > 3 * t.slots.size()) rebuild(t);
-  const std::size_t mask = t.slots.size() - 1;
+std::shared_ptr<const Box> DecodedMips::intern(std::size_t key, const Box& voxels) {
+  std::lock_guard lock(m_);
+  if (4 * (used_ + 1) > 3 * slots_.size()) rebuild();
+  const std::size_t mask = slots_.size() - 1;
   // Keys are hashes already; the multiply spreads keys that differ only
   // in their high bits (the level).
   std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask;
-  for (; t.slots[i].used; i = (i + 1) & mask) {
-    if (t.slots[i].key != key) continue;
-    std::shared_ptr<const T> known = t.slots[i].item.lock();
-    if (known && same(*known)) {
+  for (; slots_[i].used; i = (i + 1) & mask) {
+    if (slots_[i].key != key) continue;
+    std::shared_ptr<const Box> known = slots_[i].box.lock();
+    if (known && same_voxels(*known, voxels)) {
       ++stats_.hits;
       return known;
     }
-    if (!known) break;  // a dead item of this key: its slot takes the new one
+    if (!known) break;  // a dead box of this key: its slot takes the new one
   }
   ++stats_.misses;
-  std::shared_ptr<const T> item = make();
-  if (!t.slots[i].used) ++t.used;
-  t.slots[i] = typename Table<T>::Slot{key, item, true};
-  return item;
+  auto box = std::make_shared<const Box>(voxels);
+  if (!slots_[i].used) ++used_;
+  slots_[i] = Slot{key, box, true};
+  return box;
 }
 
-template <class T>
-void DecodedMips::rebuild(Table<T>& t) {
-  std::vector<typename Table<T>::Slot> old = std::move(t.slots);
+void DecodedMips::rebuild() {
+  std::vector<Slot> old = std::move(slots_);
   std::size_t live = 0;
-  for (const auto& s : old) live += s.used && !s.item.expired() ? 1 : 0;
+  for (const Slot& s : old) live += s.used && !s.box.expired() ? 1 : 0;
   std::size_t n = 1024;
   while (n < 4 * (live + 1)) n *= 2;
-  t.slots.assign(n, typename Table<T>::Slot{});
-  t.used = 0;
-  for (auto& s : old) {
-    if (!s.used || s.item.expired()) continue;
+  slots_.assign(n, Slot{});
+  used_ = 0;
+  for (Slot& s : old) {
+    if (!s.used || s.box.expired()) continue;
     std::size_t i = (s.key * 0x9E3779B97F4A7C15ull >> 20) & (n - 1);
-    while (t.slots[i].used) i = (i + 1) & (n - 1);
-    t.slots[i] = std::move(s);
-    ++t.used;
+    while (slots_[i].used) i = (i + 1) & (n - 1);
+    slots_[i] = std::move(s);
+    ++used_;
   }
-}
-
-std::shared_ptr<const Box> DecodedMips::intern(std::size_t key, const Box& voxels) {
-  std::lock_guard lock(m_);
-  return intern_in(
-      boxes_, key, [&](const Box& known) { return same_voxels(known, voxels); },
-      [&] { return std::make_shared<const Box>(voxels); });
-}
-
-std::shared_ptr<const MipUnit> DecodedMips::intern_unit(std::size_t key, int side, std::span<const std::uint8_t> bytes) {
-  std::lock_guard lock(m_);
-  return intern_in(
-      units_, key,
-      [&](const MipUnit& known) {
-        return known.side == side && std::equal(known.bytes.begin(), known.bytes.end(), bytes.begin(), bytes.end());
-      },
-      [&] { return std::make_shared<const MipUnit>(MipUnit{side, std::vector<std::uint8_t>(bytes.begin(), bytes.end())}); });
 }
 
 DecodedMips::Stats DecodedMips::stats() const {
   std::lock_guard lock(m_);
   Stats s = stats_;
-  s.bytes = boxes_.slots.capacity() * sizeof(Table<Box>::Slot) + units_.slots.capacity() * sizeof(Table<MipUnit>::Slot);
-  for (const auto& slot : boxes_.slots)
-    if (std::shared_ptr<const Box> box = slot.item.lock()) {
+  s.bytes = slots_.capacity() * sizeof(Slot);
+  for (const Slot& slot : slots_)
+    if (std::shared_ptr<const Box> box = slot.box.lock()) {
       ++s.entries;
       s.bytes += sizeof(Box) + box->voxel_count() * sizeof(Voxel);
-    }
-  for (const auto& slot : units_.slots)
-    if (std::shared_ptr<const MipUnit> unit = slot.item.lock()) {
-      ++s.entries;
-      s.bytes += unit->heap_bytes();
     }
   return s;
 }

@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <array>
 
-#include "common/codec/net_codec.h"
-
 namespace terrane {
 
 namespace {
@@ -15,34 +13,6 @@ constexpr std::size_t kMaxBatchUnits = 16 * kUpdateUnitsPerChunk;
 // replica (a process of many clients applies batches on a few threads,
 // and a buffer grown by one large batch stayed with its replica).
 thread_local std::vector<UnitUpdate> update_scratch;
-
-// The last mip unit decoded on this thread and its voxels: a replica's
-// reads of a mip come in runs over one chunk (surface_height, a viewer's
-// or a script's reads). Known by its owner (a weak handle: the unit is
-// not kept alive, and no other unit can take its identity while the
-// handle lives).
-struct LastDecoded {
-  std::weak_ptr<const MipUnit> unit;
-  Box voxels;
-};
-thread_local LastDecoded last_decoded;
-
-const Box& decoded(const std::shared_ptr<const MipUnit>& unit) {
-  const bool same = !last_decoded.unit.owner_before(unit) && !unit.owner_before(last_decoded.unit);
-  if (!same || last_decoded.unit.expired()) {
-    unit->decode(last_decoded.voxels);
-    last_decoded.unit = unit;
-  }
-  return last_decoded.voxels;
-}
-
-// Whether a mip record brings the very voxels of the unit held.
-bool same_mip(const std::shared_ptr<const MipUnit>& held, const StreamRecord& r) {
-  if (held->side != r.voxels->size().x) return false;
-  if (!r.payload.empty() && std::equal(held->bytes.begin(), held->bytes.end(), r.payload.begin(), r.payload.end()))
-    return true;
-  return decoded(held) == *r.voxels;
-}
 }  // namespace
 
 Replica::Replica() = default;
@@ -61,7 +31,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kReleased:
       grid_.erase_chunk(cp);
       chunks_.erase(cp);
-      voxels_changed(cp);
+      if (!horizons_.empty()) forget_horizon(cp);
       return;
     case StreamRecordKind::kHorizon: {
       std::vector<Vec3i> covered;
@@ -92,10 +62,10 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       Entry& e = chunks_[cp];
-      if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r))
-        ++redundant_mips_;  // (the unit held stays)
+      if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels)
+        ++redundant_mips_;  // (the box held stays)
       else
-        e.mip = keep_unit(r);
+        e.mip = keep(DecodedMips::key_of(r.payload, r.level), *r.voxels);
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       entry_changed(cp, e);
@@ -145,24 +115,9 @@ std::shared_ptr<const Box> Replica::keep(std::size_t key, const Box& voxels) {
   return std::make_shared<const Box>(voxels);
 }
 
-std::shared_ptr<const MipUnit> Replica::keep_unit(const StreamRecord& r) {
-  std::span<const std::uint8_t> bytes = r.payload;
-  thread_local std::vector<std::uint8_t> encoded;
-  if (bytes.empty()) {
-    encoded.clear();
-    net_codec_encode(r.voxels->size().x, r.voxels->voxels(), encoded);
-    bytes = encoded;
-  }
-  const int side = r.voxels->size().x;
-  if (shared_) return shared_->mips().intern_unit(DecodedMips::key_of(bytes, r.level), side, bytes);
-  return std::make_shared<const MipUnit>(MipUnit{side, std::vector<std::uint8_t>(bytes.begin(), bytes.end())});
-}
-
 Replica::MipView Replica::mip_view(Vec3i cp) const {
-  if (const Entry* e = chunks_.find(cp)) {
-    if (e->holding.full_resolution() || !e->mip) return MipView{};
-    return MipView{&decoded(e->mip), {0, 0, 0}, e->holding.level()};
-  }
+  if (const Entry* e = chunks_.find(cp))
+    return e->holding.full_resolution() ? MipView{} : MipView{e->mip.get(), {0, 0, 0}, e->holding.level()};
   if (const Horizon* h = horizon_of(cp))
     return MipView{h->image.get(), floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->holding.level()),
                    h->holding.level()};
@@ -321,11 +276,9 @@ std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   const Entry* found = chunks_.find(cp);
   if (found == nullptr || !found->holding.full_resolution()) return std::nullopt;
   const Entry& e = *found;
-  if (e.holding.form != HoldingForm::kFull) return chunk_hash(nullptr, e.holding.revision);
-  if (auto it = hashes_.find(cp); it != hashes_.end()) return it->second;
-  const std::uint64_t h = chunk_hash(grid_.find_chunk(cp), e.holding.revision);
-  hashes_.try_emplace(cp, h);
-  return h;
+  if (e.hash == 0)
+    e.hash = chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr, e.holding.revision);
+  return e.hash;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
@@ -376,11 +329,11 @@ std::size_t shared_bytes(const Box& box, long holders) {
 ReplicaMemory Replica::memory() const {
   ReplicaMemory m;
   m.full = grid_.memory();
-  m.entry_table_bytes = chunks_.heap_bytes() + hashes_.table_bytes();
+  m.entry_table_bytes = chunks_.heap_bytes();
   chunks_.for_each([&](Vec3i, const Entry& e) {
     if (!e.mip) return;
     ++m.mips;
-    m.mip_bytes += (e.mip->heap_bytes() + 2 * sizeof(long)) / static_cast<std::size_t>(std::max(1L, e.mip.use_count()));
+    m.mip_bytes += shared_bytes(*e.mip, e.mip.use_count());
   });
   m.horizon_table_bytes = horizons_.table_bytes();
   for (const auto& [region, h] : horizons_) m.horizon_image_bytes += shared_bytes(*h.image, h.image.use_count());

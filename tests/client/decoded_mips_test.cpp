@@ -176,44 +176,6 @@ TEST(ReplicaMips, ReplicasThatAppliedEqualRecordsShareOneCopy) {
   EXPECT_EQ(shared->mips().stats().entries, 0u);
 }
 
-// A mip is kept as its record's bytes, not its voxels: eight replicas
-// holding one 16^3 mip hold one unit between them, smaller than the 8 KiB
-// of its voxels, and every read decodes the voxels the record had.
-TEST(ReplicaMips, AMipIsKeptOnceAsItsRecordsBytesNotItsVoxels) {
-  auto shared = std::make_shared<DecodedChunks>();
-  std::vector<Replica> replicas(8);
-  const Vec3i cp{-3, 2, 5};
-  const Box voxels = terrain(16, 3);
-  const auto bytes = encoded(voxels);
-  ASSERT_LT(bytes.size(), voxels.voxel_count() * sizeof(Voxel) / 4) << "the test's terrain must encode small";
-  for (Replica& r : replicas) {
-    r.share_decoded(shared);
-    r.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
-  }
-  const DecodedMips::Stats s = shared->mips().stats();
-  EXPECT_EQ(s.entries, 1u);
-  EXPECT_EQ(s.hits, replicas.size() - 1);
-  std::size_t held = 0;
-  for (const Replica& r : replicas) held += r.memory().mip_bytes;
-  EXPECT_LE(held, bytes.size() + 128) << "all replicas together hold one unit";
-  for (const Replica& r : replicas) {
-    Box back;
-    ASSERT_TRUE(r.read_mip(cp, back));
-    EXPECT_EQ(back, voxels);
-    const Vec3i at = chunk_origin(cp) + Vec3i{7, 9, 30};
-    EXPECT_EQ(r.get(at), voxels.get(7 / 2, 9 / 2, 30 / 2));
-  }
-  // A replica on its own keeps the bytes too.
-  Replica alone;
-  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
-  EXPECT_LE(alone.memory().mip_bytes, bytes.size() + 128);
-  // The same bytes again tell nothing new; other bytes of the same voxels
-  // neither (a record without its bytes is encoded by the replica).
-  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
-  alone.apply_stream_record(StreamRecord{StreamRecordKind::kMip1, cp, 4, 1, &voxels, nullptr, {}});
-  EXPECT_EQ(alone.redundant_mips(), 2u);
-}
-
 TEST(ReplicaMips, EqualHorizonImagesAreSharedAndAChunksOwnRecordReplacesItsPartInOneReplicaOnly) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b;
