@@ -22,13 +22,6 @@ std::string num(double v) {
   return b;
 }
 
-// A figure for people: d decimals.
-std::string fixed(double v, int d) {
-  if (!std::isfinite(v)) return "-";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*f", d, v);
-  return b;
-}
 
 // A histogram's bucket bound (server figures): "<= 5 ms", "> 1000 ms".
 std::string bound_ms(const std::optional<double>& ms) {
@@ -90,6 +83,19 @@ std::string region_name(Vec3i cp) {
 }
 
 }  // namespace
+
+std::string fixed(double v, int d) {
+  if (!std::isfinite(v)) return "-";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", d, v);
+  return b;
+}
+
+std::string per_second_detail(const ThresholdResult& t) {
+  if (!t.threshold.per_second) return "";
+  return " in the worst second (ending at " + fixed(t.worst_t_s, 0) + " s), " + std::to_string(t.seconds_broken) +
+         " of " + std::to_string(t.seconds) + " seconds broken";
+}
 
 std::string report_json(const BotsReport& r) {
   std::ostringstream j;
@@ -275,10 +281,7 @@ std::string report_table(const BotsReport& r) {
   if (!r.thresholds.empty()) {
     t << "  thresholds:\n";
     for (const ThresholdResult& th : r.thresholds) {
-      std::string value = th.threshold.metric + " = " + num(th.value);
-      if (th.threshold.per_second)
-        value += " in the worst second (ending at " + fixed(th.worst_t_s, 0) + " s), " +
-                 std::to_string(th.seconds_broken) + " of " + std::to_string(th.seconds) + " seconds broken";
+      const std::string value = th.threshold.metric + " = " + num(th.value) + per_second_detail(th);
       std::snprintf(line, sizeof line, "    %-4s %-40s %s\n", th.passed ? "ok" : "FAIL", th.threshold.expression.c_str(),
                     value.c_str());
       t << line;

@@ -15,6 +15,12 @@ namespace terrane::bots {
 
 std::string report_json(const BotsReport& r);
 std::string report_table(const BotsReport& r);
+// A figure for people: d decimals ("-" when not finite).
+std::string fixed(double v, int d);
+// What a per-second threshold's value is, for the table and the page:
+// " in the worst second (ending at T s), B of S seconds broken"; "" for a
+// threshold on the whole run.
+std::string per_second_detail(const ThresholdResult& t);
 // One HTML file that needs nothing else (no network): the figures as
 // tables, the charts drawn by its script from the JSON report it embeds.
 // Its <pre id="report-status"> reads "ok charts=N" once the charts are

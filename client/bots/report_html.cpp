@@ -49,13 +49,6 @@ std::string script_safe_json(std::string_view json) {
   return o;
 }
 
-std::string fixed(double v, int d) {
-  if (!std::isfinite(v)) return "-";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*f", d, v);
-  return b;
-}
-
 std::string count(std::uint64_t n) {
   std::string digits = std::to_string(n), o;
   for (std::size_t i = 0; i < digits.size(); ++i) {
@@ -289,11 +282,7 @@ std::string thresholds_table(const std::vector<Run>& runs) {
   for (std::size_t i = 0; i < runs.size(); ++i)
     for (const ThresholdResult& t : runs[i].r->thresholds)
       h << "<tr>" << (runs.size() > 1 ? "<td>" + tag(i) + "</td>" : "") << "<td><code>"
-        << html_esc(t.threshold.expression) << "</code></td><td>" << fixed(t.value, 2)
-        << (t.threshold.per_second ? " in the worst second (ending at " + fixed(t.worst_t_s, 0) + " s), " +
-                                         std::to_string(t.seconds_broken) + " of " + std::to_string(t.seconds) +
-                                         " seconds broken"
-                                   : std::string())
+        << html_esc(t.threshold.expression) << "</code></td><td>" << fixed(t.value, 2) << per_second_detail(t)
         << "</td><td class=\""
         << (t.passed ? "pass\">passed" : "fail\">BROKEN") << "</td></tr>\n";
   h << "</table>\n";

@@ -115,19 +115,16 @@ std::string parse_threshold(const std::string& expression, Threshold* out) {
   t.metric = trim_blanks(e.substr(0, at));
   const std::string limit = trim_blanks(e.substr(at + len));
   if (t.metric.empty()) return named + "no metric before '" + op + "'";
-  bool known = false;
-  for (const ThresholdMetric& m : threshold_metrics()) known = known || t.metric == m.name;
-  if (!known) return named + "unknown metric '" + t.metric + "' (known: " + known_metrics() + ")";
+  const auto metric = std::find_if(threshold_metrics().begin(), threshold_metrics().end(),
+                                   [&](const ThresholdMetric& m) { return t.metric == m.name; });
+  if (metric == threshold_metrics().end())
+    return named + "unknown metric '" + t.metric + "' (known: " + known_metrics() + ")";
   if (limit.empty()) return named + "no number after '" + op + "'";
   auto [p, ec] = std::from_chars(limit.data(), limit.data() + limit.size(), t.limit);
   if (ec != std::errc() || p != limit.data() + limit.size() || !std::isfinite(t.limit))
     return named + "'" + limit + "' is not a number";
-  if (per_second) {
-    const auto m = std::find_if(threshold_metrics().begin(), threshold_metrics().end(),
-                                [&](const ThresholdMetric& k) { return t.metric == k.name; });
-    if (!m->per_second)
-      return named + "'" + t.metric + "' has no value per second (those that have: " + known_metrics(true) + ")";
-  }
+  if (per_second && !metric->per_second)
+    return named + "'" + t.metric + "' has no value per second (those that have: " + known_metrics(true) + ")";
   t.per_second = per_second;
   t.expression = whole;
   *out = t;
