@@ -265,36 +265,26 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
         for (int k = 0; k < size; ++k) hash = (hash ^ src[k]) * 16777619u;
         for (std::size_t slot = hash & (kTableSize - 1);; slot = (slot + 1) & (kTableSize - 1)) {
           const std::uint16_t e = slots[slot];
-          if (e == 0) {
-            std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
-            if (used > kOffsetMask) {
-              // Beyond 15-bit byte offsets: this box is better unpacked.
-              unpack_from(y0, y1, z0, z1, content);
-              return;
-            }
-            headers[r] = static_cast<std::uint16_t>(kAllocated | used);
-            slots[slot] = static_cast<std::uint16_t>(used + 1);
-            used += static_cast<std::size_t>(size);
-            break;
-          }
-          const std::uint8_t* cand = buf.data() + std::size_t{e - 1u};
-          if (row_packed_detail::record_bytes(cand, buf.data(), N) == size &&
-              std::memcmp(cand, src, static_cast<std::size_t>(size)) == 0) {
-            if (std::size_t{e - 1u} + kReuseReach < layer_start) {
-              // Too far back for this layer: a copy, which later rows share.
-              std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
-              if (used > kOffsetMask) {
-                unpack_from(y0, y1, z0, z1, content);
-                return;
-              }
-              headers[r] = static_cast<std::uint16_t>(kAllocated | used);
-              slots[slot] = static_cast<std::uint16_t>(used + 1);
-              used += static_cast<std::size_t>(size);
-              break;
-            }
+          const std::uint8_t* cand = e == 0 ? nullptr : buf.data() + std::size_t{e - 1u};
+          const bool same = cand != nullptr && row_packed_detail::record_bytes(cand, buf.data(), N) == size &&
+                            std::memcmp(cand, src, static_cast<std::size_t>(size)) == 0;
+          if (e != 0 && !same) continue;  // another record's slot
+          if (same && std::size_t{e - 1u} + kReuseReach >= layer_start) {
             headers[r] = static_cast<std::uint16_t>(kAllocated | (e - 1u));
             break;
           }
+          // A new record: at a free slot, or a copy of one too far back for
+          // this layer, which later rows share.
+          std::memcpy(buf.data() + used, src, static_cast<std::size_t>(size));
+          if (used > kOffsetMask) {
+            // Beyond 15-bit byte offsets: this box is better unpacked.
+            unpack_from(y0, y1, z0, z1, content);
+            return;
+          }
+          headers[r] = static_cast<std::uint16_t>(kAllocated | used);
+          slots[slot] = static_cast<std::uint16_t>(used + 1);
+          used += static_cast<std::size_t>(size);
+          break;
         }
       }
       all_uniform_same &= headers[r] == headers[0];
