@@ -13,6 +13,27 @@ const char* message_type_name(std::size_t type) {
   return wire::EnumNameBody(static_cast<wire::Body>(type));
 }
 
+const char* byte_cause_name(std::size_t cause) {
+  static constexpr const char* kNames[kByteCauseCount] = {"stream",   "refresh",   "update", "presence",
+                                                          "hash",     "keepalive", "other"};
+  return cause < kByteCauseCount ? kNames[cause] : "unknown";
+}
+
+namespace {
+// The cause of a whole frame of this type (StreamBatch: split by record).
+ByteCause frame_cause(wire::Body type) {
+  switch (type) {
+    case wire::Body::StreamBatch: return ByteCause::kStream;
+    case wire::Body::UpdateBatch: return ByteCause::kUpdate;
+    case wire::Body::Presence: return ByteCause::kPresence;
+    case wire::Body::ChunkHash: return ByteCause::kHash;
+    case wire::Body::Ping:
+    case wire::Body::Pong: return ByteCause::kKeepalive;
+    default: return ByteCause::kOther;
+  }
+}
+}  // namespace
+
 Client::Client(ClientOptions options, ClientCallbacks callbacks)
     : options_(std::move(options)),
       callbacks_(std::move(callbacks)),
@@ -131,15 +152,25 @@ void Client::on_closed(const std::string& reason) {
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 
-Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<void()>* after) {
+Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t frame_bytes,
+                                  std::function<void()>* after) {
   auto records = parse_stream_batch(batch);
   if (!records) return records.error();
+  // Record bytes by cause; the frame's own bytes go with the larger share.
+  std::uint64_t stream_bytes = 0, refresh_bytes = 0;
   // (chunk, its holding now; nullopt: released), for on_holding.
   std::vector<std::pair<Vec3i, std::optional<Holding>>> changes;
   const bool tell = static_cast<bool>(callbacks_.on_holding);
   std::vector<Vec3i> loaded;  // for on_chunks_loaded
   const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
   const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
+    {
+      // A refresh gives the chunk the form it already holds; anything else
+      // (a new chunk, a finer form, an exact mip for an Estimate, a horizon
+      // image, a release) is streaming.
+      const Holding* held = gives_form(r.kind) ? replica_.holding(r.chunk_pos) : nullptr;
+      (held != nullptr && held->form == r.form() ? refresh_bytes : stream_bytes) += r.bytes;
+    }
     if (r.kind == StreamRecordKind::kHorizon) {
       // A whole region: each chunk it newly covers is a change.
       horizon_covered_.clear();
@@ -179,6 +210,10 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::function<
                                                            : std::nullopt);
     return Ok{};
   });
+  const std::uint64_t overhead = frame_bytes - std::min<std::uint64_t>(frame_bytes, stream_bytes + refresh_bytes);
+  (refresh_bytes > stream_bytes ? refresh_bytes : stream_bytes) += overhead;
+  counters_.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kStream)] += stream_bytes;
+  counters_.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kRefresh)] += refresh_bytes;
   // Records before a bad one were applied: the replica stays consistent;
   // their changes are not reported (the connection closes).
   if (!st) return st.error();
@@ -199,6 +234,10 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
     auto& t = counters_.by_message_type[type < kMessageTypeCount ? type : 0];
     ++t.frames_in;
     t.bytes_in += body.size() + kFrameHeaderBytes;
+    // (A StreamBatch's bytes are counted by cause as its records are read.)
+    if (!verified || (*verified)->body_type() != wire::Body::StreamBatch)
+      counters_.bytes_in_by_cause[static_cast<std::size_t>(
+          verified ? frame_cause((*verified)->body_type()) : ByteCause::kOther)] += body.size() + kFrameHeaderBytes;
   }
   auto fail = [&](const DecodeError& e) {
     ++counters_.protocol_errors;
@@ -241,7 +280,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       return;
     }
     case wire::Body::StreamBatch: {
-      const auto st = apply_stream_batch(*m.body_as_StreamBatch(), &after);
+      const auto st = apply_stream_batch(*m.body_as_StreamBatch(), body.size() + kFrameHeaderBytes, &after);
       if (!st) return fail(st.error());
       break;
     }

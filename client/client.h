@@ -66,6 +66,25 @@ inline constexpr std::size_t kMessageTypeCount = static_cast<std::size_t>(wire::
 // verify (inbound) or raw bytes (send_raw).
 const char* message_type_name(std::size_t type);
 
+// What the bytes a client receives are for: its byte budget. A frame's
+// bytes (length header included) go to one cause, a StreamBatch's to the
+// causes of its records, each record its own bytes and the frame's own
+// bytes (header, table) to the cause with most of the batch's record bytes.
+enum class ByteCause : std::uint8_t {
+  kStream,     // StreamBatch records giving a chunk a form it did not hold (the view moved or is
+               // being refined: new chunks, finer forms, horizon images, Released)
+  kRefresh,    // StreamBatch records sending a chunk again in the form it holds (it changed:
+               // a mip at its level, a Full or Empty chunk sent whole)
+  kUpdate,     // UpdateBatch: the 4^3 units of edits to chunks held at full resolution
+  kPresence,   // Presence
+  kHash,       // ChunkHash
+  kKeepalive,  // Ping and Pong
+  kOther,      // the rest: Welcome, EditAck and EditReject, ReadBoxResult, notices, admin
+};
+inline constexpr std::size_t kByteCauseCount = 7;
+// "stream", "refresh", "update", "presence", "hash", "keepalive", "other".
+const char* byte_cause_name(std::size_t cause);
+
 struct ClientCounters {
   std::uint64_t frames_in = 0;  // frames handled (by_message_type counts them by type, length header included)
   std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
@@ -96,6 +115,9 @@ struct ClientCounters {
   std::uint64_t bytes_out = 0;  // written to the socket
   // Indexed by wire::Body (message_type_name()).
   std::array<MessageTypeCounters, kMessageTypeCount> by_message_type{};
+  // Bytes received by what they were for, indexed by ByteCause (they add
+  // up to the bytes of every frame handled).
+  std::array<std::uint64_t, kByteCauseCount> bytes_in_by_cause{};
 };
 
 // The outcome of one ChunkHash, with what the comparison saw: a client
@@ -284,7 +306,9 @@ class Client : private ConnectionHandler {
   // io side, under the lock: a StreamBatch's records into the replica
   // (those before a bad one stay applied); *after reports the holdings
   // changed, to run without the lock.
-  Status apply_stream_batch(const wire::StreamBatch& batch, std::function<void()>* after);
+  // frame_bytes: the frame's bytes (length header included), counted by
+  // cause with its records'.
+  Status apply_stream_batch(const wire::StreamBatch& batch, std::size_t frame_bytes, std::function<void()>* after);
   std::uint32_t send_edit(EditRequestMsg e);  // assigns the edit id
   // Edits given an outcome at once: reported (io side, without the lock).
   void report(const SettledEdits& settled);

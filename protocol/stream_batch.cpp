@@ -70,6 +70,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
   Vec3i prev{0, 0, 0};
   std::size_t count = 0;
   while (!r.done()) {
+    const std::size_t record_start = r.pos();
     if (++count > kMaxStreamRecords)
       return DecodeError{DecodeErrorCode::kOverLimit, r.pos(), "stream batch: more than 4096 records"};
     auto kind = r.byte();
@@ -164,6 +165,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         break;
       }
     }
+    rec.bytes = r.pos() - record_start;
     if (auto st = fn(rec); !st) return st;
     prev = rec.chunk_pos;
   }

@@ -105,6 +105,9 @@ struct StreamRecord {
   // bytes decode to equal voxels: a receiver may share what it made of
   // them); valid during the call, as voxels.
   std::span<const std::uint8_t> payload;
+  // The whole record's bytes as received (kind, position, revision and
+  // payload), for a receiver's accounting of what its bytes were for.
+  std::size_t bytes = 0;
 };
 
 // Writes a batch's records as the segments of its frame (protocol/out_frame.h):

@@ -146,7 +146,9 @@ void Bot::check_join(Clock::time_point now) {
     std::uint64_t delivered = 0;
     for (const auto& t : k.by_message_type) delivered += t.bytes_in;
     result_.join_bytes = delivered;
+    result_.join_bytes_by_cause = k.bytes_in_by_cause;
     joined_ = true;
+    joined_at_ = now;
   }
   if (joined_ && result_.join_coarse_ms) join_count_.reset();
 }
@@ -642,6 +644,7 @@ void Bot::finish() {
   {
     std::lock_guard lock(mutex_);
     closing_ = true;
+    if (joined_) result_.steady_s = std::chrono::duration<double>(Clock::now() - joined_at_).count();
   }
   result_.checks_during_run = checks_done_;
   if (!result_.connected) return;

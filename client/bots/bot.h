@@ -55,6 +55,10 @@ struct BotResult {
   std::uint64_t join_bytes = 0;          // received from connect until the full-resolution region was complete
   std::uint64_t join_coarse_bytes = 0;  // bytes received when the coarse view was complete
   std::uint64_t join_non_empty_voxels = 0;
+  // Bytes received by cause (ByteCause) when the join completed, and the
+  // seconds from then until the bot finished: its steady state.
+  std::array<std::uint64_t, kByteCauseCount> join_bytes_by_cause{};
+  double steady_s = 0;
   std::uint64_t hash_checked = 0, hash_unanswered = 0;
   std::uint64_t walk_steps = 0;
   // Steps refused: [0] outside the area, [1] ground not held at full resolution,
@@ -159,6 +163,7 @@ class Bot {
   StreamedView join_view_;
   std::optional<ViewCoverageCounter> join_count_;
   bool joined_ = false;
+  Clock::time_point joined_at_;  // when joined_ became true
   bool voxels_counted_ = false;
   std::unordered_map<Vec3i, PendingHash, Vec3iHash> pending_hash_;
   std::size_t outstanding_edits_ = 0;

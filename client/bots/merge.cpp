@@ -208,6 +208,13 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.join_bytes_received = in.whole("join_bytes_received");
   r.join_coarse_bytes = in.whole("join_coarse_bytes");
   r.steady_bytes_received = in.whole("steady_bytes_received");
+  // The byte budget was added later: absent from older reports (zeros).
+  if (in.has("steady_bot_s")) {
+    r.steady_bot_s = in.number("steady_bot_s");
+    if (!(r.steady_bot_s >= 0 && r.steady_bot_s < 1e12)) in.fail("steady_bot_s", "is not a count of seconds");
+    for (std::size_t c = 0; c < kByteCauseCount; ++c)
+      r.steady_bytes_by_cause[c] = in.whole(std::string("steady_bytes_by_cause.") + byte_cause_name(c));
+  }
   r.bytes_per_non_empty_voxel = in.number("bytes_per_non_empty_voxel");
   r.join_coarse_ms = in.latency("join_coarse_ms");
   r.join_full_ms = in.latency("join_full_ms");
@@ -353,6 +360,8 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     r.bytes_sent += p.bytes_sent;
     r.join_bytes_received += p.join_bytes_received;
     r.steady_bytes_received += p.steady_bytes_received;
+    r.steady_bot_s += p.steady_bot_s;
+    for (std::size_t c = 0; c < kByteCauseCount; ++c) r.steady_bytes_by_cause[c] += p.steady_bytes_by_cause[c];
     r.join_coarse_bytes += p.join_coarse_bytes;
     // A mean over the bots that completed their join.
     bpv_weighted += p.bytes_per_non_empty_voxel * static_cast<double>(p.join_full_ms.count);

@@ -152,6 +152,12 @@ std::string report_json(const BotsReport& r) {
   j << "  \"join_bytes_received\": " << r.join_bytes_received << ",\n";
   j << "  \"join_coarse_bytes\": " << r.join_coarse_bytes << ",\n";
   j << "  \"steady_bytes_received\": " << r.steady_bytes_received << ",\n";
+  j << "  \"steady_bot_s\": " << num(r.steady_bot_s) << ",\n";
+  j << "  \"steady_bytes_per_bot_s\": " << num(r.steady_bytes_per_bot_s()) << ",\n";
+  j << "  \"steady_bytes_by_cause\": {";
+  for (std::size_t c = 0; c < kByteCauseCount; ++c)
+    j << (c ? ", " : "") << "\"" << byte_cause_name(c) << "\": " << r.steady_bytes_by_cause[c];
+  j << "},\n";
   j << "  \"bytes_per_non_empty_voxel\": " << num(r.bytes_per_non_empty_voxel) << ",\n";
   j << "  \"join_coarse_ms\": " << lat(r.join_coarse_ms) << ",\n";
   j << "  \"join_full_ms\": " << lat(r.join_full_ms) << ",\n";
@@ -357,6 +363,16 @@ std::string report_table(const BotsReport& r) {
   if (r.options.behavior == Behavior::kHotspot)
     row("bots landed at the hotspot", std::to_string(r.bots_at_hotspot) + " of " + std::to_string(r.bots));
   if (r.connect_failures > 0) row("connect failures", std::to_string(r.connect_failures) + ": " + r.first_connect_error);
+  if (r.steady_bot_s > 0) {
+    // The byte budget: each cause's steady bytes per bot per second.
+    std::string causes;
+    for (std::size_t c = 0; c < kByteCauseCount; ++c) {
+      if (r.steady_bytes_by_cause[c] == 0) continue;
+      causes += std::string(causes.empty() ? "" : ", ") + byte_cause_name(c) + " " +
+                fixed(static_cast<double>(r.steady_bytes_by_cause[c]) / r.steady_bot_s / 1e3, 2);
+    }
+    row("steady kB per bot per second", fixed(r.steady_bytes_per_bot_s() / 1e3, 2) + ": " + causes);
+  }
   std::snprintf(line, sizeof line, "  %-22s %12s %14s %12s %14s\n", "bots' traffic by type", "frames in",
                 "bytes in", "frames out", "bytes out");
   t << line;
@@ -552,8 +568,9 @@ std::string compare_reports(const std::string& name_a, const std::string& a, con
       return *error = (f == &fa ? name_a : name_b) + ": not a terrane-bots report (no bots / edit_fanout_ms)", "";
   static const char* const kKeys[] = {
       "passed", "bots", "duration_s", "scenario.behavior", "scenario.view_distance", "scenario.full_res_radius",
-      "bytes_received", "join_bytes_received", "steady_bytes_received", "bytes_sent", "bytes_per_non_empty_voxel",
-      "join_coarse_bytes", "join_coarse_ms.p50", "join_coarse_ms.p99", "join_full_ms.p50", "join_full_ms.p99", "edit_ack_ms.p50",
+      "bytes_received", "join_bytes_received", "steady_bytes_received", "steady_bytes_per_bot_s",
+      "steady_bytes_by_cause.stream", "steady_bytes_by_cause.refresh", "steady_bytes_by_cause.update",
+      "steady_bytes_by_cause.presence", "bytes_sent", "bytes_per_non_empty_voxel", "join_coarse_bytes", "join_coarse_ms.p50", "join_coarse_ms.p99", "join_full_ms.p50", "join_full_ms.p99", "edit_ack_ms.p50",
       "edit_ack_ms.p99", "edit_fanout_ms.p50", "edit_fanout_ms.p95", "edit_fanout_ms.p99", "edit_fanout_ms.count",
       "edits_acked", "edits_rejected", "receivers_per_edit", "update_bytes_per_edited_voxel_per_receiver",
       "replica_regions_checked", "replica_mismatches", "unexpected_disconnects"};

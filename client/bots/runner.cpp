@@ -399,6 +399,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     if (br.join_full_ms) {
       full.record(*br.join_full_ms);
       r.join_bytes_received += br.join_bytes;
+      for (std::size_t c = 0; c < kByteCauseCount; ++c)
+        r.steady_bytes_by_cause[c] += k.bytes_in_by_cause[c] - std::min(k.bytes_in_by_cause[c], br.join_bytes_by_cause[c]);
+      r.steady_bot_s += br.steady_s;
       if (br.join_non_empty_voxels > 0) {
         bpv_sum += static_cast<double>(br.join_bytes) / static_cast<double>(br.join_non_empty_voxels);
         ++bpv_n;
@@ -515,6 +518,7 @@ std::map<std::string, double> BotsReport::threshold_values() const {
       {"edits_acked", static_cast<double>(edits_acked)},
       {"rejected_pct", pct(edits_rejected, edits_sent)},
       {"bytes_per_bot_s", bot_seconds > 0 ? static_cast<double>(bytes_received) / bot_seconds : 0.0},
+      {"steady_bytes_per_bot_s", steady_bytes_per_bot_s()},
       {"hash_unanswered", static_cast<double>(hash_unanswered)},
   };
 }
@@ -542,6 +546,13 @@ std::vector<SecondValues> BotsReport::per_second_threshold_values() const {
     out.push_back(std::move(s));
   }
   return out;
+}
+
+double BotsReport::steady_bytes_per_bot_s() const {
+  if (steady_bot_s <= 0) return 0;
+  std::uint64_t all = 0;
+  for (const std::uint64_t b : steady_bytes_by_cause) all += b;
+  return static_cast<double>(all) / steady_bot_s;
 }
 
 std::vector<std::string> BotsReport::failures() const {

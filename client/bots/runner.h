@@ -42,6 +42,14 @@ struct BotsReport {
   std::uint64_t bytes_received = 0, bytes_sent = 0;
   std::uint64_t join_bytes_received = 0, steady_bytes_received = 0;
   std::uint64_t join_coarse_bytes = 0;  // summed over the bots whose coarse view completed
+  // The byte budget: what the bots that joined received after their join,
+  // by cause (ByteCause), and their seconds connected since (BotResult's
+  // steady_s, summed), so a cause's bytes per bot per second is its bytes
+  // over steady_bot_s.
+  std::array<std::uint64_t, kByteCauseCount> steady_bytes_by_cause{};
+  double steady_bot_s = 0;
+  // Steady bytes per bot per second, all causes (0 when no bot joined).
+  double steady_bytes_per_bot_s() const;
   double bytes_per_non_empty_voxel = 0;  // mean over bots that completed their join
   LatencySummary join_coarse_ms, join_full_ms, edit_ack_ms, edit_fanout_ms;
   // Several servers: receivers on another server than the editor's (each

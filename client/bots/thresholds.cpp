@@ -62,6 +62,7 @@ const std::vector<ThresholdMetric>& threshold_metrics() {
       {"edits_acked", "edits acknowledged"},
       {"rejected_pct", "edits rejected, % of those sent (0 when none was sent)"},
       {"bytes_per_bot_s", "bytes received per bot per second of the run", true},
+      {"steady_bytes_per_bot_s", "bytes received per bot per second after each bot's join (the byte budget)"},
       {"hash_unanswered", "chunk-hash requests the server never answered"},
   };
   return k;

@@ -101,6 +101,19 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   EXPECT_GT(r.bytes_received, 0u);
   EXPECT_GT(r.bytes_sent, 0u);
   EXPECT_EQ(r.join_bytes_received + r.steady_bytes_received, r.bytes_received);
+  // The byte budget: every bot joined, so its causes are the steady bytes;
+  // the editing bots' units went to bots holding the chunks at full
+  // resolution, and the keepalive pings were answered.
+  {
+    std::uint64_t by_cause = 0, handled = 0;
+    for (const std::uint64_t b : r.steady_bytes_by_cause) by_cause += b;
+    for (const MessageTypeCounters& m : r.by_message_type) handled += m.bytes_in;  // (frames read whole)
+    EXPECT_EQ(by_cause, handled - r.join_bytes_received);
+    EXPECT_GT(r.steady_bytes_by_cause[static_cast<std::size_t>(ByteCause::kUpdate)], 0u);
+    EXPECT_GT(r.steady_bot_s, 0);
+    EXPECT_LE(r.steady_bot_s, 20 * r.duration_s);
+    EXPECT_GT(r.steady_bytes_per_bot_s(), 0);
+  }
   // Bytes per non-empty voxel is a fraction of a byte with this codec, far
   // below the 2 bytes of a raw voxel.
   EXPECT_GT(r.bytes_per_non_empty_voxel, 0.01);
@@ -186,7 +199,8 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
         "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in",
         "server_counters.cpu_s", "server_counters.rss_peak_bytes", "server_counters.tick_p99_ms_bound",
         "server_counters.sent_by_type.StreamBatch.bytes", "bots_io_lag_ms.p99", "shared_chunk_hits", "shared_update_hits",
-        "server_counters.stream_gate_closed_s"})
+        "server_counters.stream_gate_closed_s", "steady_bot_s", "steady_bytes_per_bot_s",
+        "steady_bytes_by_cause.refresh", "steady_bytes_by_cause.keepalive"})
     EXPECT_EQ(j.count(key), 1u) << key;
   EXPECT_EQ(j["bots"], "20");
   EXPECT_EQ(j["replica_mismatches"], "0");

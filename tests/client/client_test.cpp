@@ -1102,11 +1102,15 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   ASSERT_TRUE(b.wait_until(
       [&](const ClientView& v) {
         const Holding* cov = v.replica.holding(target);
-        if (cov == nullptr || cov->full_resolution()) return false;
+        // At its level already: the edit's news then come as a refresh,
+        // not with a refinement.
+        if (cov == nullptr || cov->full_resolution() || !all_at_desired_level(v.replica, {target}, ob.state.position, 16))
+          return false;
         before = cov->revision;
         return true;
       },
       kDeadline));
+  const ClientCounters b_before = b.counters();
   const std::uint32_t id = a.fill_sphere(centre, 4.0f, materials::kBasalt);
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
   ASSERT_TRUE(b.wait_until(
@@ -1116,6 +1120,21 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
       },
       kDeadline));
   EXPECT_EQ(b.counters().update_batches, 0u);  // a mip holder gets mips, not units
+  // The byte budget: the refresh is counted as one, the editor's units as
+  // updates, and each client's causes add up to every byte it received.
+  const auto refresh = static_cast<std::size_t>(ByteCause::kRefresh);
+  const auto update = static_cast<std::size_t>(ByteCause::kUpdate);
+  EXPECT_GT(b.counters().bytes_in_by_cause[refresh], b_before.bytes_in_by_cause[refresh]);
+  EXPECT_EQ(b.counters().bytes_in_by_cause[update], 0u);
+  EXPECT_TRUE(a.wait_until([&](const ClientView& v) { return v.counters.bytes_in_by_cause[update] > 0; }, kDeadline));
+  for (Client* c : {&a, &b}) {
+    const ClientCounters k = c->counters();
+    std::uint64_t by_type = 0, by_cause = 0;
+    for (const auto& t : k.by_message_type) by_type += t.bytes_in;
+    for (const std::uint64_t n : k.bytes_in_by_cause) by_cause += n;
+    EXPECT_EQ(by_cause, by_type);
+    EXPECT_GT(k.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kStream)], 0u);
+  }
 }
 
 }  // namespace
