@@ -169,8 +169,11 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
       // (a new chunk, a finer form, an exact mip for an Estimate, a horizon
       // image, a release) is streaming.
       const Holding* held = gives_form(r.kind) ? replica_.holding(r.chunk_pos) : nullptr;
-      (held != nullptr && held->form == r.form() ? refresh_bytes : stream_bytes) += r.bytes;
+      const bool refresh = r.kind == StreamRecordKind::kMipPatch || (held != nullptr && held->form == r.form());
+      (refresh ? refresh_bytes : stream_bytes) += r.bytes;
     }
+    if (r.kind == StreamRecordKind::kMipPatch && !replica_.patchable(r))
+      return DecodeError{DecodeErrorCode::kInvalidValue, 0, "stream batch: mip patch of a chunk not held as that mip"};
     if (r.kind == StreamRecordKind::kHorizon) {
       // A whole region: each chunk it newly covers is a change.
       horizon_covered_.clear();
@@ -201,13 +204,19 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
         ++counters_.mips;
         ++counters_.estimates;
         break;
+      case StreamRecordKind::kMipPatch:
+        ++counters_.mip_patches;
+        break;
       default:
         ++counters_.mips;
         break;
     }
-    if (tell)
-      changes.emplace_back(r.chunk_pos, gives_form(r.kind) ? std::optional<Holding>(Holding{r.form(), r.revision})
-                                                           : std::nullopt);
+    if (tell) {
+      std::optional<Holding> now;
+      if (gives_form(r.kind)) now = Holding{r.form(), r.revision};
+      else if (r.kind == StreamRecordKind::kMipPatch) now = Holding{mip_form(r.level), r.revision};
+      changes.emplace_back(r.chunk_pos, now);
+    }
     return Ok{};
   });
   const std::uint64_t overhead = frame_bytes - std::min<std::uint64_t>(frame_bytes, stream_bytes + refresh_bytes);

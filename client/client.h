@@ -90,6 +90,7 @@ struct ClientCounters {
   std::uint64_t bytes_in = 0;  // read from the socket (with emulation: before the emulated link delivers them)
   std::uint64_t chunk_units = 0;  // 16^3 units of Full records applied (8 a record)
   std::uint64_t mips = 0;
+  std::uint64_t mip_patches = 0;  // Mip patch records: changed sub-units of a mip held
   std::uint64_t estimates = 0;  // of mips: Estimate records (a chunk's coarsest mip estimated)
   std::uint64_t horizon_chunks = 0;  // chunks first seen through a region's horizon image (not in mips)
   std::uint64_t empty_records = 0;

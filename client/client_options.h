@@ -45,6 +45,9 @@ struct ClientOptions {
   // server limits movement speed after the first position).
   Vec3f spawn_offset{0, 0, 0};
   std::uint32_t protocol_version = kProtocolVersion;  // tests: speak another version
+  // Hello.features: what this client takes beyond version 2's messages
+  // (the library applies every feature it knows; tests clear bits).
+  std::uint32_t features = kFeatureMipPatches;
   std::chrono::milliseconds connect_timeout{5000};
   // A Ping goes out this often so an idle client is not timed out.
   std::chrono::milliseconds keepalive{5000};

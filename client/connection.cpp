@@ -109,6 +109,7 @@ void Connection::start_session() {
   hello.client_name = options_.name;
   hello.auth_token = options_.auth_token;
   hello.resume_token = redirects_.take_token();
+  hello.features = options_.features;
   std::vector<Outbound> frames;
   frames.push_back({build_hello(hello), wire::Body::Hello});
   for (Outbound& o : handler_.session_frames(session_)) frames.push_back(std::move(o));

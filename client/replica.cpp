@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 
 namespace terrane {
 
@@ -57,6 +58,24 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       entry_changed(cp, e);
       return;
     }
+    case StreamRecordKind::kMipPatch: {
+      // The held mip with the record's sub-units replaced (a patch of a
+      // chunk not held as that mip is refused before it gets here:
+      // patchable()).
+      Entry* e = chunks_.find(cp);
+      if (e == nullptr || !patchable(r) || !e->mip) return;
+      thread_local Box patched;
+      patched = *e->mip;
+      for (std::uint64_t rest = r.patch_mask; rest != 0; rest &= rest - 1) {
+        const Vec3i o = patch_subunit_origin(r.level, std::countr_zero(rest));
+        for (int y = o.y; y < o.y + 4; ++y)
+          for (int z = o.z; z < o.z + 4; ++z) std::copy_n(r.voxels->read_row(y, z) + o.x, 4, patched.write_row(y, z) + o.x);
+      }
+      e->mip = keep(DecodedMips::key_of(patched), patched);
+      e->holding.revision = r.revision;
+      entry_changed(cp, *e);
+      return;
+    }
     case StreamRecordKind::kMip1:
     case StreamRecordKind::kMip2:
     case StreamRecordKind::kMip3:
@@ -108,6 +127,11 @@ void Replica::forget_horizon(Vec3i cp) {
   it->second.covers.reset(i);
   --horizon_chunks_;
   if (it->second.covers.none()) horizons_.erase(it);
+}
+
+bool Replica::patchable(const StreamRecord& r) const {
+  const Entry* e = chunks_.find(r.chunk_pos);
+  return e != nullptr && e->mip && e->holding.form == mip_form(r.level);
 }
 
 std::shared_ptr<const Box> Replica::keep(std::size_t key, const Box& voxels) {

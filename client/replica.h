@@ -82,8 +82,12 @@ class Replica {
   void share_decoded(std::shared_ptr<DecodedChunks> shared) { shared_ = std::move(shared); }
 
   // A decoded StreamBatch record (protocol/stream_batch.h): the chunk is
-  // held in the record's form from now on (Released: not held).
+  // held in the record's form from now on (Released: not held); a Mip
+  // patch changes the mip held (ignored unless patchable(r)).
   void apply_stream_record(const StreamRecord& r);
+  // Whether a Mip patch record applies: its chunk is held as the mip of
+  // its level (else the server broke the protocol).
+  bool patchable(const StreamRecord& r) const;
   // A Horizon record (precondition: r.kind is kHorizon): the chunks of its
   // mask not held by the client are held as its Horizon form from now on
   // (a horizon image never replaces anything); appends each to covered.

@@ -126,7 +126,7 @@ Frame build_hello(const HelloMsg& m) {
   const auto name = fbb.CreateString(clip(m.client_name, kMaxClientNameBytes));
   const auto token = fbb.CreateString(clip(m.auth_token, kMaxAuthTokenBytes));
   const auto resume = m.resume_token.empty() ? 0 : fbb.CreateString(clip(m.resume_token, kMaxResumeTokenBytes));
-  return finish(fbb, wire::CreateHello(fbb, m.protocol_version, name, token, resume));
+  return finish(fbb, wire::CreateHello(fbb, m.protocol_version, name, token, resume, m.features));
 }
 
 Frame build_welcome(const WelcomeMsg& m) {
@@ -350,6 +350,7 @@ Result<HelloMsg> parse_hello(const wire::Hello& m) {
   out.client_name = m.client_name()->str();
   if (m.auth_token() != nullptr) out.auth_token = m.auth_token()->str();
   if (m.resume_token() != nullptr) out.resume_token = m.resume_token()->str();
+  out.features = m.features();
   return out;
 }
 

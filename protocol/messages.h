@@ -59,11 +59,16 @@ inline constexpr std::size_t kMaxBatchRevisions = 4096;
 inline constexpr int kFullRecordUnit = 16;
 
 // --- message structs ---------------------------------------------------------
+// Hello.features bits. A server sends a feature's messages only to a client
+// that set its bit; bits it does not know are ignored.
+inline constexpr std::uint32_t kFeatureMipPatches = 1u << 0;  // Mip patch stream records (kind 10)
+
 struct HelloMsg {
   std::uint32_t protocol_version = kProtocolVersion;
   std::string client_name;
   std::string auth_token;
   std::string resume_token;  // a Redirect's token, echoed (empty on a first connection)
+  std::uint32_t features = 0;  // kFeature* bits: what the client can take (PROTOCOL.md, "Features")
 };
 
 struct AdminRequestMsg {

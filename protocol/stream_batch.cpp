@@ -1,6 +1,7 @@
 #include "protocol/stream_batch.h"
 
 #include <algorithm>
+#include <bit>
 
 #include "common/codec/bit_io.h"
 #include "common/codec/net_codec.h"
@@ -54,6 +55,16 @@ void StreamBatchWriter::put_horizon_head(Vec3i region, int level, const HorizonM
   const std::uint8_t head[2] = {static_cast<std::uint8_t>(level), static_cast<std::uint8_t>(mask != nullptr ? 1 : 0)};
   bytes_.append(head);
   if (mask != nullptr) bytes_.append(*mask);
+}
+
+void StreamBatchWriter::add_mip_patch(Vec3i cp, std::uint64_t revision, int level, std::uint64_t mask,
+                                      std::span<const std::uint8_t> units) {
+  put_head(StreamRecordKind::kMipPatch, cp, revision);
+  std::uint8_t head[9] = {static_cast<std::uint8_t>(level)};
+  const int mask_bytes = level == 1 ? 8 : 1;
+  for (int i = 0; i < mask_bytes; ++i) head[1 + i] = static_cast<std::uint8_t>(mask >> (8 * i));
+  bytes_.append(std::span<const std::uint8_t>(head, static_cast<std::size_t>(1 + mask_bytes)));
+  bytes_.append(units);
 }
 
 OutFrame StreamBatchWriter::finish() {
@@ -131,6 +142,38 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       case StreamRecordKind::kEmpty:
       case StreamRecordKind::kReleased:
         break;
+      case StreamRecordKind::kMipPatch: {
+        auto level = r.byte();
+        if (!level) return level.error();
+        if (*level != 1 && *level != 2)
+          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: mip patch level not 1 or 2"};
+        const int mask_bytes = *level == 1 ? 8 : 1;
+        std::uint64_t mask = 0;
+        for (int i = 0; i < mask_bytes; ++i) {
+          auto b = r.byte();
+          if (!b) return b.error();
+          mask |= std::uint64_t{*b} << (8 * i);
+        }
+        if (mask == 0) return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: mip patch with no sub-unit"};
+        const int n = kChunkSize >> *level;
+        s.mip.resize({n, n, n});
+        const std::size_t units_start = r.pos();
+        for (std::uint64_t rest = mask; rest != 0; rest &= rest - 1) {
+          const int i = std::countr_zero(rest);
+          auto used = net_codec_decode_prefix(4, r.rest(), s.patch_unit.voxels());
+          if (!used) return DecodeError{used.error().code, r.pos() + used.error().offset, used.error().detail};
+          r.skip(*used);
+          const Vec3i o = patch_subunit_origin(*level, i);
+          for (int uy = 0; uy < 4; ++uy)
+            for (int uz = 0; uz < 4; ++uz)
+              std::copy_n(s.patch_unit.read_row(uy, uz), 4, s.mip.write_row(o.y + uy, o.z + uz) + o.x);
+        }
+        rec.level = *level;
+        rec.patch_mask = mask;
+        rec.voxels = &s.mip;
+        rec.payload = records.subspan(units_start, r.pos() - units_start);
+        break;
+      }
       case StreamRecordKind::kHorizon: {
         // One record per chunk covered, each with its (32 >> level)^3 voxels.
         const Vec3i first = rec.chunk_pos;

@@ -18,6 +18,17 @@
 //     kinds 6, 7       never a record (the horizon forms come only from a
 //                      Horizon record): a decode error
 //     kind 8 Released  the chunk left the view; no payload
+//     kind 10 Mip patch  the mip a client holds at level L (1 or 2), changed:
+//                      level:u8, a mask of its 4^3 sub-units (level 1: 8
+//                      bytes, 64 sub-units; level 2: 1 byte, 8), then one
+//                      4^3 network codec unit per set bit, ascending, each
+//                      replacing that sub-unit; sub-unit i is the cube at
+//                      (i % s, i / (s * s), (i / s) % s) * 4, s = 4 at
+//                      level 1 and 2 at level 2 (x fastest, then z, then
+//                      y). Only to a client whose Hello set
+//                      kFeatureMipPatches, and only for a chunk it holds
+//                      as Mip L; the chunk then holds Mip L at the record's
+//                      revision.
 //     kind 9 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk)
 //                      or 5 (1 voxel per chunk); position: the region's
 //                      first chunk (multiples of 8); revision 0; payload:
@@ -60,12 +71,23 @@ enum class StreamRecordKind : std::uint8_t {
   kEstimate = 5,
   kReleased = 8,
   kHorizon = 9,
+  kMipPatch = 10,
 };
 
 constexpr bool known_record_kind(std::uint8_t kind) {
   return kind <= static_cast<std::uint8_t>(StreamRecordKind::kEstimate) ||
          kind == static_cast<std::uint8_t>(StreamRecordKind::kReleased) ||
-         kind == static_cast<std::uint8_t>(StreamRecordKind::kHorizon);
+         kind == static_cast<std::uint8_t>(StreamRecordKind::kHorizon) ||
+         kind == static_cast<std::uint8_t>(StreamRecordKind::kMipPatch);
+}
+// A Mip patch's sub-units per axis at level (1 or 2): the mip's side / 4.
+constexpr int patch_side(int level) { return (32 >> level) / 4; }
+// The sub-units of a Mip patch at level (1 or 2): 64 or 8.
+constexpr int patch_subunits(int level) { return patch_side(level) * patch_side(level) * patch_side(level); }
+// Sub-unit i's corner in the mip (x fastest, then z, then y).
+constexpr Vec3i patch_subunit_origin(int level, int i) {
+  const int s = patch_side(level);
+  return Vec3i{i % s, i / (s * s), (i / s) % s} * 4;
 }
 // Whether a record of this kind gives its chunk a holding form (kinds 0..5).
 constexpr bool gives_form(StreamRecordKind kind) { return kind <= StreamRecordKind::kEstimate; }
@@ -94,11 +116,12 @@ struct StreamRecord {
   StreamRecordKind kind = StreamRecordKind::kEmpty;
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
-  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..5 for Horizon
+  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..5 for Horizon, 1..2 for Mip patch
   // The form the record gives its chunk (precondition: gives_form(kind)).
   HoldingForm form() const { return static_cast<HoldingForm>(kind); }
   // Full: 32^3; Mip: (32 >> level)^3; Horizon: the region's image,
-  // (8 * (32 >> level))^3; else null.
+  // (8 * (32 >> level))^3; Mip patch: (32 >> level)^3 of which only the
+  // sub-units in patch_mask hold the record's voxels; else null.
   const Box* voxels = nullptr;
   const HorizonMask* mask = nullptr;  // Horizon: the region's chunks it covers
   // Full, Mip, Estimate: the record's encoded units, as received (equal
@@ -108,6 +131,7 @@ struct StreamRecord {
   // The whole record's bytes as received (kind, position, revision and
   // payload), for a receiver's accounting of what its bytes were for.
   std::size_t bytes = 0;
+  std::uint64_t patch_mask = 0;  // Mip patch: its sub-units (bit i: sub-unit i; never 0)
 };
 
 // Writes a batch's records as the segments of its frame (protocol/out_frame.h):
@@ -142,6 +166,11 @@ class StreamBatchWriter {
     put_horizon_head(region, level, mask);
     bytes_.append(unit);
   }
+  // A Mip patch record: the chunk's mip at level (1 or 2) changed in the
+  // sub-units of mask (non-zero, within patch_subunits(level)); units: their
+  // 4^3 network codec units, one per set bit, ascending (copied).
+  void add_mip_patch(Vec3i chunk_pos, std::uint64_t revision, int level, std::uint64_t mask,
+                     std::span<const std::uint8_t> units);
   bool empty() const { return records_ == 0; }
   std::size_t records() const { return records_; }
   // The records' bytes so far.
@@ -167,6 +196,7 @@ struct StreamDecodeScratch {
   Box chunk{Vec3i{32, 32, 32}};
   Box mip;
   Box horizon;
+  Box patch_unit{Vec3i{4, 4, 4}};
   HorizonMask mask{};
 };
 

@@ -1,9 +1,11 @@
 #include "server/base/chunk_version.h"
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 
 #include "common/codec/chunk_units.h"
+#include "common/codec/net_codec.h"
 #include "common/voxel/box.h"
 #include "common/world/world_store.h"
 #include "protocol/messages.h"
@@ -42,7 +44,65 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::after(const ChunkVersion& prev
   std::array<std::uint64_t, kMipLevels> since{};
   for (int level = 0; level < kMipLevels; ++level)
     since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? rev : prev.level_since(level);
-  return std::make_shared<const ChunkVersion>(prev.pos(), rev, std::move(next), changed, since);
+  auto v = std::make_shared<ChunkVersion>(prev.pos(), rev, std::move(next), changed, since);
+  // The level-1 sub-units the changed units reach: unit (ux, uy, uz) of
+  // level 0 covers level-1 voxels 2u..2u+1, in sub-unit u / 2.
+  std::uint64_t own = 0;
+  for (int i = 0; i < kUpdateUnitsPerChunk; ++i)
+    if (changed.test(static_cast<std::size_t>(i))) {
+      const int ux = i % 8, uz = (i / 8) % 8, uy = i / 64;
+      own |= std::uint64_t{1} << (((uy / 2) * 4 + uz / 2) * 4 + ux / 2);
+    }
+  v->level1_changed_[0] = own;
+  for (int k = 1; k < kPatchHistory && k <= prev.patch_history_; ++k)
+    v->level1_changed_[static_cast<std::size_t>(k)] = own | prev.level1_changed_[static_cast<std::size_t>(k - 1)];
+  v->patch_history_ = static_cast<std::uint8_t>(std::min<int>(prev.patch_history_ + 1, kPatchHistory));
+  return v;
+}
+
+std::optional<std::uint64_t> ChunkVersion::changed_since(int level, std::uint64_t held_revision) const {
+  if (held_revision >= revision_ || revision_ - held_revision > patch_history_) return std::nullopt;
+  const std::uint64_t l1 = level1_changed_[static_cast<std::size_t>(revision_ - held_revision - 1)];
+  if (level == 1) return l1;
+  // Level 2: sub-unit (x, y, z) of level 1 lies in (x, y, z) / 2.
+  std::uint64_t l2 = 0;
+  for (std::uint64_t rest = l1; rest != 0; rest &= rest - 1) {
+    const int i = std::countr_zero(rest);
+    const int x = i % 4, z = (i / 4) % 4, y = i / 16;
+    l2 |= std::uint64_t{1} << (((y / 2) * 2 + z / 2) * 2 + x / 2);
+  }
+  return l2;
+}
+
+void ChunkVersion::append_patch_units(int level, std::uint64_t mask, std::vector<std::uint8_t>& out) const {
+  const auto l = static_cast<std::size_t>(level - 1);
+  std::call_once(patch_once_[l], [&] {
+    PatchUnits& p = patch_units_[l];
+    const int n = kChunkSize >> level, side = n / 4;
+    Box mip({n, n, n});
+    if (!empty_) {
+      const auto bytes = encoded(level);
+      if (!net_codec_decode(n, bytes, mip.voxels()))
+        server_log().error("chunk ({},{},{}): its own level {} did not decode", pos_.x, pos_.y, pos_.z, level);
+    }
+    Box unit({4, 4, 4});
+    for (int i = 0; i < side * side * side; ++i) {
+      const Vec3i o = Vec3i{i % side, i / (side * side), (i / side) % side} * 4;
+      for (int y = 0; y < 4; ++y)
+        for (int z = 0; z < 4; ++z) std::copy_n(mip.read_row(o.y + y, o.z + z) + o.x, 4, unit.write_row(y, z));
+      p.starts.push_back(static_cast<std::uint32_t>(p.bytes.size()));
+      std::vector<std::uint8_t> one;
+      net_codec_encode(4, unit.voxels(), one);
+      p.bytes.insert(p.bytes.end(), one.begin(), one.end());
+    }
+    p.starts.push_back(static_cast<std::uint32_t>(p.bytes.size()));
+  });
+  const PatchUnits& p = patch_units_[l];
+  for (std::uint64_t rest = mask; rest != 0; rest &= rest - 1) {
+    const auto i = static_cast<std::size_t>(std::countr_zero(rest));
+    if (i + 1 >= p.starts.size()) break;  // (beyond the level's sub-units: a caller's bug)
+    out.insert(out.end(), p.bytes.begin() + p.starts[i], p.bytes.begin() + p.starts[i + 1]);
+  }
 }
 
 std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& full) {
@@ -50,6 +110,8 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   v->empty_ = full.empty_;
   v->has_voxels_ = false;
   v->finest_level_ = 1;
+  v->level1_changed_ = full.level1_changed_;
+  v->patch_history_ = full.patch_history_;
   for (int level = 1; level < kMipLevels; ++level) {
     const auto bytes = full.encoded(level);
     const auto l = static_cast<std::size_t>(level);

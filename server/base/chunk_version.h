@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -83,6 +84,20 @@ class ChunkVersion {
   // (a Full stream record), levels 1..3 one (32 >> L)^3 unit. The rest of
   // the methods below need has_voxels().
   std::span<const std::uint8_t> encoded(int level) const;
+  // Mip patches (PROTOCOL.md, "Stream batches", kind 10): the sub-units of
+  // level (1 or 2) whose voxels may differ between revision held_revision
+  // and this one (bit i: sub-unit i, patch_subunit_origin), or nullopt when
+  // this version cannot tell: held_revision is not older, or more than
+  // kPatchHistory revisions older, or a version in between was not made by
+  // after() (loaded, generated, from another server). A superset: a
+  // sub-unit any changed 4^3 unit of level 0 reaches (the mips' rule is
+  // local to each 2^L cube).
+  static constexpr int kPatchHistory = 8;
+  std::optional<std::uint64_t> changed_since(int level, std::uint64_t held_revision) const;
+  // The 4^3 network codec units of level's sub-units in mask, ascending,
+  // appended to out (each encoded once per version, by the first asker).
+  // Precondition: has_level(level), level 1 or 2.
+  void append_patch_units(int level, std::uint64_t mask, std::vector<std::uint8_t>& out) const;
   // The changed units as one update piece (precondition: changed_units()
   // is not empty).
   const UpdatePiece& update_piece() const;
@@ -100,6 +115,10 @@ class ChunkVersion {
   std::shared_ptr<const Chunk> chunk_;
   UnitBits changed_units_;
   std::array<std::uint64_t, kMipLevels> level_since_;
+  // level1_changed_[k]: the level-1 sub-units changed from revision - k - 1
+  // to this one, for k < patch_history_ (0: no history).
+  std::array<std::uint64_t, kPatchHistory> level1_changed_{};
+  std::uint8_t patch_history_ = 0;
   bool empty_ = true;
   bool has_voxels_ = true;
   bool estimate_ = false;
@@ -108,6 +127,14 @@ class ChunkVersion {
   mutable std::array<std::once_flag, kMipLevels> encoded_once_;
   mutable std::array<std::vector<std::uint8_t>, kMipLevels> encoded_;
   mutable std::once_flag piece_once_, hash_once_, blob_once_;
+  // Levels 1 and 2's sub-units, encoded: their bytes back to back and where
+  // each starts (the last entry: the end).
+  struct PatchUnits {
+    std::vector<std::uint8_t> bytes;
+    std::vector<std::uint32_t> starts;
+  };
+  mutable std::array<std::once_flag, 2> patch_once_;
+  mutable std::array<PatchUnits, 2> patch_units_;
   mutable UpdatePiece piece_;
   mutable std::uint64_t hash_ = 0;
   mutable std::vector<std::uint8_t> blob_;

@@ -184,6 +184,7 @@ struct ServerCounters {
   std::atomic<std::uint64_t> horizons_sent{0};   // Horizon records (a region's image, to one client)
   std::atomic<std::uint64_t> empties_sent{0};
   std::atomic<std::uint64_t> mip_refreshes{0};   // mips sent again because their bytes changed
+  std::atomic<std::uint64_t> mip_patches{0};     // of them: sent as a Mip patch (the changed sub-units)
   std::atomic<std::uint64_t> refreshes_skipped{0};  // changes whose held level's bytes did not
   std::atomic<std::uint64_t> update_batches_sent{0};
   std::atomic<std::uint64_t> update_units_sent{0};

@@ -92,7 +92,7 @@ void ClientSession::on_hello(const HelloMsg& hello) {
     std::lock_guard lock(info_m_);
     info_ = Info{name_, context_.welcome.spawn, admin_, true, std::chrono::steady_clock::now(), -1, join_order};
   }
-  replica_->join(name_, admission.identified);
+  replica_->join(name_, admission.identified, hello.features);
   (admin_ ? context_.counters.admin_sessions : context_.counters.clients).fetch_add(1, std::memory_order_relaxed);
   session_->send(build_welcome(context_.welcome));
   if (!admin_ && context_.joined && !context_.joined(id_, name_, join_order)) {

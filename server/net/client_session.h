@@ -45,7 +45,8 @@ class ClientReplica {
   virtual ~ClientReplica() = default;
   // Once, when the client is admitted as name, before its Welcome is sent.
   // identified: the Admission's (the name is proven the player's).
-  virtual void join(const std::string& name, bool identified) = 0;
+  // features: its Hello's (kFeature* bits: what it can take).
+  virtual void join(const std::string& name, bool identified, std::uint32_t features) = 0;
   // A move; false if it was refused (the session is then closing).
   virtual bool move(const ClientStateMsg& state) = 0;
   virtual void edit(EditRequestMsg edit) = 0;

@@ -260,6 +260,8 @@ std::string render_metrics(const MetricsSources& s) {
   m.counter("terrane_chunks_resumed_total", "Chunks a resuming client still held, current, and not resent.",
             load(c.chunks_resumed));
   m.counter("terrane_mip_refreshes_total", "Mips sent again because their bytes changed.", load(c.mip_refreshes));
+  m.counter("terrane_mip_patches_total", "Of the mips sent again, those sent as a patch of their changed 4^3 sub-units.",
+            load(c.mip_patches));
   m.counter("terrane_update_batches_total", "UpdateBatch frames sent.", load(c.update_batches_sent));
   m.counter("terrane_update_units_total", "4x4x4 update units sent in them.", load(c.update_units_sent));
   m.counter("terrane_presence_sent_total", "Presence frames sent.", load(c.presence_sent));

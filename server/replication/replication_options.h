@@ -35,6 +35,10 @@ struct ReplicationOptions {
   // A new view's first pass: every region of it as one horizon image (2^3
   // or 1 voxel per chunk), before any chunk's own coarsest mip.
   bool horizon_images = true;
+  // A changed mip of level 1 or 2 is refreshed as a Mip patch (its changed
+  // 4^3 sub-units) to a client that takes them (Hello.features), when the
+  // patch is smaller than the mip; false: always the whole mip.
+  bool mip_patches = true;
   // Per-client limits (0 = unlimited where a rate). A move faster than
   // max_speed (plus kSpeedSlackVoxels, replication/move_limit.h)
   // disconnects the client; an edit over max_edit_voxels is rejected. (The

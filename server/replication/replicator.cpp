@@ -86,7 +86,8 @@ void Replicator::close(CloseReason why, const std::string& text) {
 
 // --- messages ------------------------------------------------------------------
 
-void Replicator::join(const std::string& name, bool identified) {
+void Replicator::join(const std::string& name, bool identified, std::uint32_t features) {
+  mip_patches_ = (features & kFeatureMipPatches) != 0 && options_.mip_patches;
   edit_rate_ = TokenBucket(world_.options().edits_per_second, world_.options().edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = name;
@@ -696,7 +697,11 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
     counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  stream(record_kind(level), cp, v->revision(), v->encoded(level), v);
+  if (mip_patches_ && level < kMipLevels - 1 && h.form == mip_form(level) && send_patch(cp, level, h.revision, v)) {
+    // (sent: the changed sub-units only)
+  } else {
+    stream(record_kind(level), cp, v->revision(), v->encoded(level), v);
+  }
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
   slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{mip_form(level), v->revision()}, v); });
   if (plan_.desired(cp) < level) plan_.push_refine(cp);
@@ -727,6 +732,20 @@ void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision,
                         const VersionPtr& owner) {
   batch_.add(kind, cp, revision, payload, owner);
   if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+}
+
+bool Replicator::send_patch(Vec3i cp, int level, std::uint64_t held, const VersionPtr& v) {
+  const std::optional<std::uint64_t> mask = v->changed_since(level, held);
+  if (!mask || *mask == 0) return false;
+  thread_local std::vector<std::uint8_t> units;
+  units.clear();
+  v->append_patch_units(level, *mask, units);
+  // Level, mask, units against the whole unit.
+  if (1 + (level == 1 ? 8 : 1) + units.size() >= v->encoded(level).size()) return false;
+  batch_.add_mip_patch(cp, v->revision(), level, *mask, units);
+  counters_.mip_patches.fetch_add(1, std::memory_order_relaxed);
+  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+  return true;
 }
 
 void Replicator::flush_stream() {

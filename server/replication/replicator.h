@@ -106,7 +106,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void attach(std::shared_ptr<Session> session);
 
   // ClientReplica (session strand).
-  void join(const std::string& name, bool identified) override;
+  void join(const std::string& name, bool identified, std::uint32_t features) override;
   bool move(const ClientStateMsg& state) override;
   void edit(EditRequestMsg edit) override;
   void read_box(const ReadBoxMsg& req) override;
@@ -173,6 +173,9 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
               std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr);
   void flush_stream();
+  // A Mip patch of level held at revision held, if v can tell what changed
+  // since and the patch is smaller than the whole mip: streamed, true.
+  bool send_patch(Vec3i chunk_pos, int level, std::uint64_t held, const VersionPtr& v);
   void answer_hash(Vec3i chunk_pos);
   void arm_timer();
   void on_timer();
@@ -198,6 +201,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   std::unique_ptr<asio::steady_timer> timer_;
 
   bool joined_ = false;
+  bool mip_patches_ = false;  // refresh mips as patches (the client takes them, the server allows them)
   bool closed_ = false;
   std::string name_;
   ClientStateMsg state_;

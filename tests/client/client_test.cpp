@@ -1081,7 +1081,7 @@ TEST_F(ClientServerTest, AnEmptyChunkThatChangedWhileFarIsSentWholeWhenItComesNe
   EXPECT_EQ(b.counters().hash_mismatches, 0u);
 }
 
-TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
+TEST_F(ClientServerTest, MipHoldersGetTheRefreshedMipWholeOrAsAPatch) {
   start_server();
   Client a(options("near"));
   std::string err;
@@ -1089,37 +1089,67 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   wait_full_res(a, 32);
   const auto w = a.welcome();
   ASSERT_TRUE(w.has_value());
-  // B never stands near the edit: it holds the edited chunk as a mip.
+  // B and C never stand near the edit: they hold the edited chunk as a mip.
+  // B takes Mip patches (the library's default), C does not (Hello.features 0).
   ClientOptions ob = options("far", 192, 16);
   ob.start_at_spawn = false;
   ob.state.position = Vec3f{w->spawn.x + 112.0f, w->spawn.y, w->spawn.z};
-  Client b(ob);
+  ClientOptions oc = ob;
+  oc.name = "far-whole";
+  oc.features = 0;
+  Client b(ob), c(oc);
   ASSERT_TRUE(b.connect(&err)) << err;
+  ASSERT_TRUE(c.connect(&err)) << err;
   const Vec3f centre{w->spawn.x, w->spawn.y - 3.0f, w->spawn.z};
   const Vec3i target = chunk_of(Vec3i{static_cast<int>(std::floor(centre.x)), static_cast<int>(std::floor(centre.y)),
                                       static_cast<int>(std::floor(centre.z))});
   std::uint64_t before = 0;
-  ASSERT_TRUE(b.wait_until(
-      [&](const ClientView& v) {
-        const Holding* cov = v.replica.holding(target);
-        // At its level already: the edit's news then come as a refresh,
-        // not with a refinement.
-        if (cov == nullptr || cov->full_resolution() || !all_at_desired_level(v.replica, {target}, ob.state.position, 16))
-          return false;
-        before = cov->revision;
-        return true;
-      },
-      kDeadline));
+  int level = 0;
+  for (Client* far : {&b, &c})
+    ASSERT_TRUE(far->wait_until(
+        [&](const ClientView& v) {
+          const Holding* cov = v.replica.holding(target);
+          // At its level already: the edit's news then come as a refresh,
+          // not with a refinement.
+          if (cov == nullptr || cov->full_resolution() || !all_at_desired_level(v.replica, {target}, ob.state.position, 16))
+            return false;
+          before = std::max(before, cov->revision);
+          level = cov->level();
+          return true;
+        },
+        kDeadline));
+  ASSERT_TRUE(level == 1 || level == 2) << "a level a patch can refresh";
   const ClientCounters b_before = b.counters();
   const std::uint32_t id = a.fill_sphere(centre, 4.0f, materials::kBasalt);
   ASSERT_TRUE(a.wait_until([&](const ClientView& v) { return v.edits.count(id) != 0; }, kDeadline));
-  ASSERT_TRUE(b.wait_until(
+  std::uint64_t now = 0;
+  ASSERT_TRUE(a.wait_until(
       [&](const ClientView& v) {
-        const Holding* cov = v.replica.holding(target);
-        return cov != nullptr && !cov->full_resolution() && cov->revision > before;
+        const Holding* h = v.replica.holding(target);
+        if (h == nullptr || h->revision <= before) return false;
+        now = h->revision;
+        return true;
       },
       kDeadline));
-  EXPECT_EQ(b.counters().update_batches, 0u);  // a mip holder gets mips, not units
+  for (Client* far : {&b, &c})
+    ASSERT_TRUE(far->wait_until(
+        [&](const ClientView& v) {
+          const Holding* cov = v.replica.holding(target);
+          return cov != nullptr && !cov->full_resolution() && cov->revision >= now;
+        },
+        kDeadline));
+  // The mip each holds is the edited chunk's, made from A's full resolution.
+  const int n = kChunkSize >> level;
+  Box want({n, n, n});
+  a.with_replica([&](const Replica& r) { r.grid().find_chunk(target)->read_level(level, want); });
+  for (Client* far : {&b, &c}) {
+    Box got;
+    ASSERT_TRUE(far->with_replica([&](const Replica& r) { return r.read_mip(target, got); }));
+    EXPECT_EQ(got, want) << (far == &b ? "patched" : "whole");
+    EXPECT_EQ(far->counters().update_batches, 0u);  // a mip holder gets mips, not units
+  }
+  EXPECT_GE(b.counters().mip_patches, 1u);
+  EXPECT_EQ(c.counters().mip_patches, 0u);
   // The byte budget: the refresh is counted as one, the editor's units as
   // updates, and each client's causes add up to every byte it received.
   const auto refresh = static_cast<std::size_t>(ByteCause::kRefresh);
@@ -1127,13 +1157,13 @@ TEST_F(ClientServerTest, MipHolderGetsTheRefreshedMip) {
   EXPECT_GT(b.counters().bytes_in_by_cause[refresh], b_before.bytes_in_by_cause[refresh]);
   EXPECT_EQ(b.counters().bytes_in_by_cause[update], 0u);
   EXPECT_TRUE(a.wait_until([&](const ClientView& v) { return v.counters.bytes_in_by_cause[update] > 0; }, kDeadline));
-  for (Client* c : {&a, &b}) {
-    const ClientCounters k = c->counters();
+  for (Client* k : {&a, &b, &c}) {
+    const ClientCounters got = k->counters();
     std::uint64_t by_type = 0, by_cause = 0;
-    for (const auto& t : k.by_message_type) by_type += t.bytes_in;
-    for (const std::uint64_t n : k.bytes_in_by_cause) by_cause += n;
+    for (const auto& t : got.by_message_type) by_type += t.bytes_in;
+    for (const std::uint64_t x : got.bytes_in_by_cause) by_cause += x;
     EXPECT_EQ(by_cause, by_type);
-    EXPECT_GT(k.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kStream)], 0u);
+    EXPECT_GT(got.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kStream)], 0u);
   }
 }
 

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <memory>
 #include <random>
 
@@ -221,7 +222,7 @@ TEST(StreamBatch, EveryTruncationAndBadByteIsAnErrorNotACrash) {
     }
   }
   // Unknown kinds; 6 and 7 are the horizon forms, never a record's kind.
-  for (const int kind : {6, 7, 10, 255}) {
+  for (const int kind : {6, 7, 11, 255}) {
     std::vector<std::uint8_t> bad = bytes;
     bad[0] = static_cast<std::uint8_t>(kind);
     EXPECT_EQ(count(bad, &n).error().code, DecodeErrorCode::kInvalidValue) << "kind " << kind;
@@ -312,6 +313,96 @@ TEST(StreamBatch, BadHorizonRecordsAreErrors) {
   // A mask promised and cut short.
   EXPECT_EQ(decode(record({5, 1, 0xFF, 0xFF})).error().code, DecodeErrorCode::kTruncated);
   // Every cut inside the record is an error.
+  for (std::size_t cut = 1; cut < good.size(); ++cut)
+    EXPECT_FALSE(decode(std::vector<std::uint8_t>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(cut))).ok())
+        << "cut " << cut;
+}
+
+// The 4^3 units of a mip's sub-units in mask, ascending (what a server
+// sends in a Mip patch).
+std::vector<std::uint8_t> patch_units(const Box& mip, int level, std::uint64_t mask) {
+  std::vector<std::uint8_t> out;
+  for (std::uint64_t rest = mask; rest != 0; rest &= rest - 1) {
+    const Vec3i o = patch_subunit_origin(level, std::countr_zero(rest));
+    Box unit({4, 4, 4});
+    for (int y = 0; y < 4; ++y)
+      for (int z = 0; z < 4; ++z)
+        for (int x = 0; x < 4; ++x) unit.set(x, y, z, mip.get(o.x + x, o.y + y, o.z + z));
+    net_codec_encode(4, unit.voxels(), out);
+  }
+  return out;
+}
+
+TEST(StreamBatch, MipPatchesCarryTheirSubUnitsInPlace) {
+  const Box mip1 = noise(16, 11), mip2 = terrain(8, 12);
+  const std::uint64_t mask1 = (std::uint64_t{1} << 63) | 0x10001, mask2 = 0x81;
+  StreamBatchWriter w;
+  w.add_mip_patch({3, -1, 2}, 9, 1, mask1, patch_units(mip1, 1, mask1));
+  w.add_mip_patch({4, -1, 2}, 1ull << 33, 2, mask2, patch_units(mip2, 2, mask2));
+  const Frame f = w.finish().flatten();
+  StreamDecodeScratch s;
+  std::vector<StreamRecord> got;
+  std::vector<Box> boxes;
+  ASSERT_TRUE(decode_stream_batch(records_of(f), s, [&](const StreamRecord& r) -> Status {
+                got.push_back(r);
+                boxes.push_back(*r.voxels);
+                return Ok{};
+              }).ok());
+  ASSERT_EQ(got.size(), 2u);
+  const std::uint64_t masks[2] = {mask1, mask2};
+  const Box* mips[2] = {&mip1, &mip2};
+  for (int k = 0; k < 2; ++k) {
+    const int level = k + 1;
+    EXPECT_EQ(got[k].kind, StreamRecordKind::kMipPatch);
+    EXPECT_EQ(got[k].level, level);
+    EXPECT_EQ(got[k].patch_mask, masks[k]);
+    ASSERT_EQ(boxes[k].size(), (Vec3i{32 >> level, 32 >> level, 32 >> level}));
+    // Every voxel of a patched sub-unit is the mip's, in its place.
+    int voxels = 0;
+    for (std::uint64_t rest = masks[k]; rest != 0; rest &= rest - 1) {
+      const Vec3i o = patch_subunit_origin(level, std::countr_zero(rest));
+      for (int y = 0; y < 4; ++y)
+        for (int z = 0; z < 4; ++z)
+          for (int x = 0; x < 4; ++x, ++voxels)
+            ASSERT_EQ(boxes[k].get(o.x + x, o.y + y, o.z + z), mips[k]->get(o.x + x, o.y + y, o.z + z));
+    }
+    EXPECT_EQ(voxels, 64 * std::popcount(masks[k]));
+  }
+  EXPECT_EQ(got[1].revision, 1ull << 33);
+  // Sub-unit 63 of level 1 is the cube at (12, 12, 12); 7 of level 2 at (4, 4, 4).
+  EXPECT_EQ(patch_subunit_origin(1, 63), (Vec3i{12, 12, 12}));
+  EXPECT_EQ(patch_subunit_origin(1, 4), (Vec3i{0, 0, 4}));
+  EXPECT_EQ(patch_subunit_origin(1, 16), (Vec3i{0, 4, 0}));
+  EXPECT_EQ(patch_subunit_origin(2, 7), (Vec3i{4, 4, 4}));
+}
+
+TEST(StreamBatch, BadMipPatchesAreErrors) {
+  const Box mip = terrain(16, 13);
+  StreamBatchWriter w;
+  w.add_mip_patch({1, 0, 0}, 5, 1, 0x3, patch_units(mip, 1, 0x3));
+  const Frame f = w.finish().flatten();
+  const auto records = records_of(f);
+  const std::vector<std::uint8_t> good(records.begin(), records.end());
+  StreamDecodeScratch s;
+  const auto decode = [&](const std::vector<std::uint8_t>& b) {
+    return decode_stream_batch(b, s, [](const StreamRecord&) -> Status { return Ok{}; });
+  };
+  ASSERT_TRUE(decode(good).ok());
+  // kind 10, position (1, 0, 0) as (2, 0, 0), revision 5, then the level.
+  ASSERT_EQ(good[0], 10);
+  ASSERT_EQ(good[5], 1);
+  for (const int level : {0, 3, 4, 255}) {
+    auto bad = good;
+    bad[5] = static_cast<std::uint8_t>(level);
+    EXPECT_EQ(decode(bad).error().code, DecodeErrorCode::kInvalidValue) << "level " << level;
+  }
+  // No sub-unit at all.
+  std::vector<std::uint8_t> none = {10, 2, 0, 0, 5, 1, 0, 0, 0, 0, 0, 0, 0, 0};
+  EXPECT_EQ(decode(none).error().code, DecodeErrorCode::kInvalidValue);
+  // A mask promising more units than follow, and every cut inside the record.
+  auto more = good;
+  more[6] = 0x7;
+  EXPECT_FALSE(decode(more).ok());
   for (std::size_t cut = 1; cut < good.size(); ++cut)
     EXPECT_FALSE(decode(std::vector<std::uint8_t>(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(cut))).ok())
         << "cut " << cut;

@@ -11,7 +11,7 @@ namespace terrane::testing_support {
 
 class NullReplica final : public ClientReplica {
  public:
-  void join(const std::string&, bool) override {}
+  void join(const std::string&, bool, std::uint32_t) override {}
   bool move(const ClientStateMsg&) override { return true; }
   void edit(EditRequestMsg) override {}
   void read_box(const ReadBoxMsg&) override {}

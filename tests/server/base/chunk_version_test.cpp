@@ -5,8 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <random>
 #include <thread>
 
+#include "common/codec/net_codec.h"
 #include "common/codec/update_batch.h"
 #include "common/world/sqlite_store.h"
 #include "protocol/messages.h"
@@ -72,6 +75,83 @@ TEST(ChunkVersion, LevelsChangedSeesOnlyLevelsWhoseVoxelsDiffer) {
   EXPECT_FALSE(same[1] || same[2] || same[3]);
   const auto gone = levels_changed(&a, nullptr);
   EXPECT_TRUE(gone[1] && gone[2] && gone[3]);
+}
+
+// Level's mip of a version, decoded from its own bytes.
+Box mip_of(const ChunkVersion& v, int level) {
+  const int n = kChunkSize >> level;
+  Box box({n, n, n});
+  EXPECT_TRUE(net_codec_decode(n, v.encoded(level), box.voxels()).ok());
+  return box;
+}
+
+// What a client holding `held` at level makes of a Mip patch from v.
+Box patched(const Box& held, const ChunkVersion& v, int level, std::uint64_t mask) {
+  std::vector<std::uint8_t> units;
+  v.append_patch_units(level, mask, units);
+  Box out = held;
+  std::span<const std::uint8_t> rest = units;
+  Box unit({4, 4, 4});
+  for (std::uint64_t m = mask; m != 0; m &= m - 1) {
+    auto used = net_codec_decode_prefix(4, rest, unit.voxels());
+    EXPECT_TRUE(used.ok());
+    if (!used.ok()) return out;
+    rest = rest.subspan(*used);
+    const int side = (kChunkSize >> level) / 4, i = std::countr_zero(m);
+    const Vec3i o = Vec3i{i % side, i / (side * side), (i / side) % side} * 4;
+    for (int y = 0; y < 4; ++y)
+      for (int z = 0; z < 4; ++z)
+        for (int x = 0; x < 4; ++x) out.set(o.x + x, o.y + y, o.z + z, unit.get(x, y, z));
+  }
+  EXPECT_TRUE(rest.empty());
+  return out;
+}
+
+TEST(ChunkVersion, AMipPatchFromAnyRevisionInItsHistoryMakesTheNewMip) {
+  std::vector<std::shared_ptr<const ChunkVersion>> versions;
+  versions.push_back(std::make_shared<const ChunkVersion>(Vec3i{1, 0, 2}, 10, std::make_shared<const Chunk>(sample_chunk())));
+  // A version loaded or generated has no history to patch from.
+  EXPECT_FALSE(versions[0]->changed_since(1, 9).has_value());
+  std::mt19937 rng(5);
+  for (int k = 0; k < 12; ++k) {
+    // A small box edit somewhere in the chunk; its changed 4^3 units.
+    auto next = std::make_unique<Chunk>(versions.back()->chunk()->clone());
+    const Vec3i lo{static_cast<int>(rng() % 28), static_cast<int>(rng() % 28), static_cast<int>(rng() % 28)};
+    const Region r{lo, lo + Vec3i{1 + static_cast<int>(rng() % 4), 1 + static_cast<int>(rng() % 4), 3}};
+    const Material m = static_cast<Material>(1 + rng() % 5);
+    next->modify(r, [&](Vec3i, Voxel) { return make_voxel(m, static_cast<std::uint8_t>(60 + rng() % 190)); });
+    UnitBits changed;
+    for (int y = r.min.y / 4; y <= (r.max.y - 1) / 4; ++y)
+      for (int z = r.min.z / 4; z <= (r.max.z - 1) / 4; ++z)
+        for (int x = r.min.x / 4; x <= (r.max.x - 1) / 4; ++x) changed.set(static_cast<std::size_t>((y * 8 + z) * 8 + x));
+    versions.push_back(ChunkVersion::after(*versions.back(), std::move(next), changed));
+  }
+  for (std::size_t now = 1; now < versions.size(); ++now) {
+    const ChunkVersion& v = *versions[now];
+    for (std::size_t held = 0; held < now; ++held) {
+      for (int level = 1; level <= 2; ++level) {
+        const auto mask = v.changed_since(level, versions[held]->revision());
+        if (now - held > static_cast<std::size_t>(ChunkVersion::kPatchHistory)) {
+          EXPECT_FALSE(mask.has_value()) << now << " from " << held;
+          continue;
+        }
+        ASSERT_TRUE(mask.has_value()) << now << " from " << held;
+        EXPECT_NE(*mask, 0u);
+        if (level == 2) {
+          EXPECT_LT(*mask, 256u);
+        }
+        EXPECT_EQ(patched(mip_of(*versions[held], level), v, level, *mask), mip_of(v, level))
+            << "level " << level << ", revision " << v.revision() << " from " << versions[held]->revision();
+      }
+    }
+    EXPECT_FALSE(v.changed_since(1, v.revision()).has_value()) << "nothing is newer than itself";
+  }
+  // A version keeping only its mips keeps its history.
+  const auto mips = ChunkVersion::mips_only(*versions.back());
+  const auto held = versions[versions.size() - 3];
+  const auto mask = mips->changed_since(1, held->revision());
+  ASSERT_TRUE(mask.has_value());
+  EXPECT_EQ(patched(mip_of(*held, 1), *mips, 1, *mask), mip_of(*versions.back(), 1));
 }
 
 TEST(UpdatePieces, JoinedPiecesAreTheBatchOneEncoderWrites) {

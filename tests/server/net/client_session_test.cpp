@@ -35,7 +35,7 @@ class FakeAdmitter final : public Admitter {
 // Records the calls (session strand), read by the test thread under m.
 class FakeReplica final : public ClientReplica {
  public:
-  void join(const std::string& name, bool) override { note("join " + name); }
+  void join(const std::string& name, bool, std::uint32_t) override { note("join " + name); }
   bool move(const ClientStateMsg& state) override {
     note("move " + std::to_string(static_cast<int>(state.position.x)));
     return state.position.x < 1000;  // farther: refused, as too fast
