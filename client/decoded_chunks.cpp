@@ -31,6 +31,7 @@ void DecodedChunks::add(std::span<const std::uint8_t> payload, std::shared_ptr<c
   std::lock_guard lock(m_);
   auto [it, fresh] = entries_.try_emplace(key);
   Entry& e = it->second;
+  if (!fresh) unindex(key, e);
   e.bytes.assign(payload.begin(), payload.end());
   e.chunk = std::move(chunk);
   if (fresh) {
@@ -39,10 +40,93 @@ void DecodedChunks::add(std::span<const std::uint8_t> payload, std::shared_ptr<c
   } else {
     lru_.splice(lru_.begin(), lru_, e.lru);
   }
+  if (e.bytes.size() >= kPrefixBytes) {
+    std::vector<std::size_t>& keys = prefix_[prefix_key(StreamRecordKind::kFull, e.bytes)];
+    if (keys.size() >= 4) keys.erase(keys.begin());
+    keys.push_back(key);
+  }
   while (entries_.size() > capacity_) {
-    entries_.erase(lru_.back());
+    const auto old = entries_.find(lru_.back());
+    unindex(old->first, old->second);
+    entries_.erase(old);
     lru_.pop_back();
   }
+}
+
+std::size_t DecodedChunks::prefix_key(StreamRecordKind kind, std::span<const std::uint8_t> bytes) {
+  return key_of(bytes.first(kPrefixBytes)) ^ (static_cast<std::size_t>(kind) * 0x9E3779B97F4A7C15ull);
+}
+
+void DecodedChunks::unindex(std::size_t key, const Entry& e) {
+  if (e.bytes.size() < kPrefixBytes) return;
+  const auto it = prefix_.find(prefix_key(StreamRecordKind::kFull, e.bytes));
+  if (it == prefix_.end()) return;
+  std::erase(it->second, key);
+  if (it->second.empty()) prefix_.erase(it);
+}
+
+KnownPayload DecodedChunks::known(StreamRecordKind kind, std::span<const std::uint8_t> rest) {
+  if (rest.size() < kPrefixBytes) return {};
+  const auto begins = [&](const std::vector<std::uint8_t>& b) {
+    return b.size() <= rest.size() && std::equal(b.begin(), b.end(), rest.begin());
+  };
+  const std::size_t pk = prefix_key(kind, rest);
+  std::lock_guard lock(m_);
+  if (kind == StreamRecordKind::kFull) {
+    const auto it = prefix_.find(pk);
+    if (it == prefix_.end()) return {};
+    for (const std::size_t key : it->second) {
+      const auto e = entries_.find(key);
+      if (e == entries_.end() || !begins(e->second.bytes)) continue;
+      ++stats_.known_chunks;
+      lru_.splice(lru_.begin(), lru_, e->second.lru);
+      return {e->second.bytes.size(), e->second.chunk};
+    }
+    return {};
+  }
+  const auto it = mip_payloads_.find(pk);
+  if (it == mip_payloads_.end()) return {};
+  for (const MipPayload& m : it->second) {
+    if (!begins(m.bytes)) continue;
+    std::shared_ptr<const Box> box = m.box.lock();
+    if (!box) continue;
+    ++stats_.known_mips;
+    return {m.bytes.size(), std::move(box)};
+  }
+  return {};
+}
+
+void DecodedChunks::remember_mip(StreamRecordKind kind, std::span<const std::uint8_t> payload,
+                                 const std::shared_ptr<const Box>& box) {
+  if (payload.size() < kPrefixBytes) return;
+  const std::size_t pk = prefix_key(kind, payload);
+  std::lock_guard lock(m_);
+  if (mip_payload_count_ >= kMaxMipPayloads) {
+    // Forget the payloads whose boxes no replica holds; all of them if
+    // that is not enough (they are found again as they arrive).
+    mip_payload_count_ = 0;
+    for (auto it = mip_payloads_.begin(); it != mip_payloads_.end();) {
+      std::erase_if(it->second, [](const MipPayload& m) { return m.box.expired(); });
+      mip_payload_count_ += it->second.size();
+      it = it->second.empty() ? mip_payloads_.erase(it) : std::next(it);
+    }
+    if (mip_payload_count_ >= kMaxMipPayloads / 2) {
+      mip_payloads_.clear();
+      mip_payload_count_ = 0;
+    }
+  }
+  std::vector<MipPayload>& list = mip_payloads_[pk];
+  for (MipPayload& m : list)
+    if (std::equal(m.bytes.begin(), m.bytes.end(), payload.begin(), payload.end())) {
+      m.box = box;
+      return;
+    }
+  if (list.size() >= 4) {
+    list.erase(list.begin());
+    --mip_payload_count_;
+  }
+  list.push_back(MipPayload{std::vector<std::uint8_t>(payload.begin(), payload.end()), box});
+  ++mip_payload_count_;
 }
 
 DecodedChunks::Stats DecodedChunks::stats() const {
@@ -50,6 +134,8 @@ DecodedChunks::Stats DecodedChunks::stats() const {
   Stats s = stats_;
   s.entries = entries_.size();
   for (const auto& [key, e] : entries_) s.bytes += sizeof(Entry) + e.bytes.capacity() + e.chunk->memory().total();
+  for (const auto& [key, list] : mip_payloads_)
+    for (const MipPayload& m : list) s.bytes += sizeof(MipPayload) + m.bytes.capacity();
   return s;
 }
 

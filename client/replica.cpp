@@ -41,13 +41,15 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     }
     case StreamRecordKind::kFull: {
       if (!shared_) {
-        grid_.put_chunk(cp, Chunk::from_box(*r.voxels));  // (an empty chunk is erased)
+        grid_.put_chunk(cp, Chunk::from_box(voxels_of(r)));  // (an empty chunk is erased)
       } else {
         // The process's chunk of these bytes, held as it is until an update
-        // changes it here (the grid then writes a copy of its own).
-        std::shared_ptr<const Chunk> chunk = shared_->find(r.payload);
+        // changes it here (the grid then writes a copy of its own); known
+        // before the bytes were decoded, or found by them.
+        std::shared_ptr<const Chunk> chunk = std::static_pointer_cast<const Chunk>(r.known);
+        if (!chunk) chunk = shared_->find(r.payload);
         if (!chunk) {
-          chunk = std::make_shared<const Chunk>(Chunk::from_box(*r.voxels));
+          chunk = std::make_shared<const Chunk>(Chunk::from_box(voxels_of(r)));
           shared_->add(r.payload, chunk);
         }
         grid_.put_shared_chunk(cp, std::move(chunk));
@@ -81,10 +83,17 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       Entry& e = chunks_[cp];
-      if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels)
+      if (r.known) {
+        // The box another replica of this process made of these bytes.
+        auto box = std::static_pointer_cast<const Box>(r.known);
+        if (e.holding.form == r.form() && e.mip == box) ++redundant_mips_;
+        e.mip = std::move(box);
+      } else if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels) {
         ++redundant_mips_;  // (the box held stays)
-      else
+      } else {
         e.mip = keep(DecodedMips::key_of(r.payload, r.level), *r.voxels);
+        if (shared_) shared_->remember_mip(r.kind, r.payload, e.mip);
+      }
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       entry_changed(cp, e);
@@ -127,6 +136,11 @@ void Replica::forget_horizon(Vec3i cp) {
   it->second.covers.reset(i);
   --horizon_chunks_;
   if (it->second.covers.none()) horizons_.erase(it);
+}
+
+const Box& Replica::voxels_of(const StreamRecord& r) {
+  thread_local StreamDecodeScratch scratch;
+  return record_voxels(r, scratch);
 }
 
 bool Replica::patchable(const StreamRecord& r) const {

@@ -180,6 +180,8 @@ class Replica {
   // The immutable box equal to voxels: the one the process's replicas
   // share under key, or a box of this replica's own.
   std::shared_ptr<const Box> keep(std::size_t key, const Box& voxels);
+  // A record's voxels (decoded again when the decoder skipped them).
+  static const Box& voxels_of(const StreamRecord& r);
   const Horizon* horizon_of(Vec3i chunk_pos) const;
   // The chunk is no longer covered by its region's image (it is held by a
   // record of its own now, or not at all).

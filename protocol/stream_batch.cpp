@@ -75,8 +75,29 @@ OutFrame StreamBatchWriter::finish() {
   return f;
 }
 
+const Box& record_voxels(const StreamRecord& r, StreamDecodeScratch& s) {
+  if (r.voxels != nullptr) return *r.voxels;
+  if (r.kind == StreamRecordKind::kFull) {
+    std::span<const std::uint8_t> rest = r.payload;
+    for (int i = 0; i < 8; ++i) {
+      auto n = net_codec_decode_prefix(16, rest, s.unit.voxels());
+      if (!n) break;  // (never: the payload decoded before)
+      rest = rest.subspan(*n);
+      const Vec3i off = Vec3i{i & 1, (i >> 1) & 1, (i >> 2) & 1} * 16;
+      for (int uy = 0; uy < 16; ++uy)
+        for (int uz = 0; uz < 16; ++uz)
+          std::copy_n(s.unit.read_row(uy, uz), 16, s.chunk.write_row(off.y + uy, off.z + uz) + off.x);
+    }
+    return s.chunk;
+  }
+  const int n = kChunkSize >> r.level;
+  s.mip.resize({n, n, n});
+  (void)net_codec_decode(n, r.payload, s.mip.voxels());
+  return s.mip;
+}
+
 Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeScratch& s,
-                           const std::function<Status(const StreamRecord&)>& fn) {
+                           const std::function<Status(const StreamRecord&)>& fn, const KnownPayloadFn& known) {
   Reader r(records);
   Vec3i prev{0, 0, 0};
   std::size_t count = 0;
@@ -109,6 +130,23 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
     rec.kind = static_cast<StreamRecordKind>(*kind);
     rec.chunk_pos = {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
     rec.revision = *rev;
+    if (known && (rec.kind == StreamRecordKind::kFull || rec.kind == StreamRecordKind::kMip1 ||
+                  rec.kind == StreamRecordKind::kMip2 || rec.kind == StreamRecordKind::kMip3 ||
+                  rec.kind == StreamRecordKind::kEstimate)) {
+      KnownPayload k = known(rec.kind, r.rest());
+      if (k.made && k.bytes > 0 && k.bytes <= r.rest().size()) {
+        rec.level = rec.kind == StreamRecordKind::kFull       ? 0
+                    : rec.kind == StreamRecordKind::kEstimate ? kMipLevels - 1
+                                                              : static_cast<int>(rec.kind);
+        rec.payload = r.rest().first(k.bytes);
+        rec.known = std::move(k.made);
+        r.skip(k.bytes);
+        rec.bytes = r.pos() - record_start;
+        if (auto st = fn(rec); !st) return st;
+        prev = rec.chunk_pos;
+        continue;
+      }
+    }
     switch (rec.kind) {
       case StreamRecordKind::kFull: {
         const std::span<const std::uint8_t> start = r.rest();

@@ -132,7 +132,28 @@ struct StreamRecord {
   // payload), for a receiver's accounting of what its bytes were for.
   std::size_t bytes = 0;
   std::uint64_t patch_mask = 0;  // Mip patch: its sub-units (bit i: sub-unit i; never 0)
+  // Full, Mip, Estimate: what the receiver made before of these very bytes
+  // (KnownPayloadFn), when it did; voxels is then null and the record's
+  // voxels are what was made of them (record_voxels decodes them again if
+  // the receiver needs the voxels themselves).
+  std::shared_ptr<const void> known = nullptr;
 };
+
+// A receiver's memory of payloads it decoded before. Given a record's kind
+// and the batch's bytes from its payload on, what it made of a payload those
+// bytes begin with, and that payload's length; {0, null} when none. Equal
+// bytes decode to equal voxels and a payload decoded before was valid, so
+// the decoder takes the length and skips decoding them again.
+struct KnownPayload {
+  std::size_t bytes = 0;
+  std::shared_ptr<const void> made;
+};
+using KnownPayloadFn = std::function<KnownPayload(StreamRecordKind kind, std::span<const std::uint8_t> rest)>;
+
+// The voxels of a Full, Mip or Estimate record, decoded from its payload
+// into scratch when the decoder skipped them (r.known); r.voxels otherwise.
+struct StreamDecodeScratch;
+const Box& record_voxels(const StreamRecord& r, StreamDecodeScratch& scratch);
 
 // Writes a batch's records as the segments of its frame (protocol/out_frame.h):
 // each record's header is the writer's own bytes, and a payload given with
@@ -205,7 +226,10 @@ struct StreamDecodeScratch {
 // kInvalidValue for an unknown kind, an out-of-range position or an
 // over-long varint, kOverLimit beyond kMaxStreamRecords, the codec's errors)
 // or from fn. Records before the error have been delivered.
+// known (optional): payloads of Full, Mip and Estimate records the receiver
+// decoded before are not decoded again (StreamRecord::known).
 Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeScratch& scratch,
-                           const std::function<Status(const StreamRecord&)>& fn);
+                           const std::function<Status(const StreamRecord&)>& fn,
+                           const KnownPayloadFn& known = nullptr);
 
 }  // namespace terrane

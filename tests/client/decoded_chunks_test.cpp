@@ -50,8 +50,90 @@ TEST(DecodedChunks, ASecondReplicaTakesTheChunkTheFirstPackedAndHoldsTheSameVoxe
   EXPECT_EQ(a.hash({2, 0, 3}), b.hash({2, 0, 3}));
   EXPECT_EQ(b.hash({2, 0, 3}), chunk_hash(b.grid().find_chunk({2, 0, 3}), 5));
   // Each holds its own copy: an edit of one is not seen by the other.
-  b.apply_stream_record(StreamRecord{StreamRecordKind::kEmpty, {2, 0, 3}, 6, 0, nullptr, nullptr, {}});
+  StreamRecord empty;
+  empty.kind = StreamRecordKind::kEmpty;
+  empty.chunk_pos = {2, 0, 3};
+  empty.revision = 6;
+  b.apply_stream_record(empty);
   expect_holds(a, {2, 0, 3}, voxels);
+}
+
+// A batch of these records decoded as a client of the process decodes it:
+// bytes the process's replicas decoded before are not decoded again.
+void take_batch(Replica& r, const std::shared_ptr<DecodedChunks>& shared, StreamBatchWriter& w, int* skipped) {
+  const Frame f = w.finish().flatten();
+  auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
+  ASSERT_TRUE(m.ok());
+  auto records = parse_stream_batch(*(*m)->body_as_StreamBatch());
+  ASSERT_TRUE(records.ok());
+  StreamDecodeScratch s;
+  const KnownPayloadFn known = [&](StreamRecordKind kind, std::span<const std::uint8_t> rest) {
+    return shared->known(kind, rest);
+  };
+  ASSERT_TRUE(decode_stream_batch(
+                  *records, s,
+                  [&](const StreamRecord& rec) -> Status {
+                    if (rec.known) {
+                      ++*skipped;
+                      EXPECT_EQ(rec.voxels, nullptr);
+                    }
+                    r.apply_stream_record(rec);
+                    return Ok{};
+                  },
+                  known)
+                  .ok());
+}
+
+TEST(DecodedChunks, BytesDecodedOnceAreNotDecodedAgainAndGiveTheSameVoxels) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b;
+  a.share_decoded(shared);
+  b.share_decoded(shared);
+  const Box chunk = slope(2);
+  Box mip({16, 16, 16});
+  for (int y = 0; y < 6; ++y)
+    for (int z = 0; z < 16; ++z)
+      for (int x = 0; x < 16; ++x) mip.set(x, y, z, make_voxel(static_cast<Material>(1 + (x * z + y) % 5), 255));
+  std::vector<std::uint8_t> mip_bytes;
+  net_codec_encode(16, mip.voxels(), mip_bytes);
+  ASSERT_GE(mip_bytes.size(), DecodedChunks::kPrefixBytes);
+  // The same chunk's payload a second time, and a mip whose bytes differ
+  // from a known one only in their last byte's unit (another mip).
+  Box other = mip;
+  other.set(15, 15, 15, make_voxel(materials::kRock, 255));
+  std::vector<std::uint8_t> other_bytes;
+  net_codec_encode(16, other.voxels(), other_bytes);
+  auto write = [&](StreamBatchWriter& w, bool with_other) {
+    w.add(StreamRecordKind::kFull, {1, 0, 0}, 3, full_payload(chunk));
+    w.add(StreamRecordKind::kMip1, {4, 0, 0}, 2, mip_bytes);
+    if (with_other) w.add(StreamRecordKind::kMip1, {5, 0, 0}, 2, other_bytes);
+    w.add(StreamRecordKind::kEmpty, {6, 0, 0}, 1, {});
+  };
+  int skipped = 0;
+  StreamBatchWriter first;
+  write(first, false);
+  take_batch(a, shared, first, &skipped);
+  EXPECT_EQ(skipped, 0);
+  StreamBatchWriter second;
+  write(second, true);
+  take_batch(b, shared, second, &skipped);
+  EXPECT_EQ(skipped, 2) << "the chunk and the first mip; the other mip's bytes are new";
+  EXPECT_EQ(shared->stats().known_chunks, 1u);
+  EXPECT_EQ(shared->stats().known_mips, 1u);
+  for (const Replica* r : {&a, &b}) {
+    expect_holds(*r, {1, 0, 0}, chunk);
+    Box got;
+    ASSERT_TRUE(r->read_mip({4, 0, 0}, got));
+    EXPECT_TRUE(got == mip);
+    EXPECT_EQ(r->holding({6, 0, 0})->form, HoldingForm::kEmpty) << "the records after a skipped one are read in place";
+  }
+  Box got;
+  ASSERT_TRUE(b.read_mip({5, 0, 0}, got));
+  EXPECT_TRUE(got == other);
+  // A payload cut short is never taken for the one it begins like.
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip1, std::span(mip_bytes).first(mip_bytes.size() - 1)).bytes, 0u);
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip2, mip_bytes).bytes, 0u) << "another kind: other voxels";
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip1, mip_bytes).bytes, mip_bytes.size());
 }
 
 TEST(DecodedChunks, OnlyEqualBytesAreShared) {
