@@ -163,7 +163,8 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
   const bool tell = static_cast<bool>(callbacks_.on_holding);
   std::vector<Vec3i> loaded;  // for on_chunks_loaded
   const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
-  // Bytes this process's replicas decoded before are not decoded again.
+  // A Full record's bytes this process's replicas decoded before are not
+  // decoded again.
   KnownPayloadFn known;
   if (const std::shared_ptr<DecodedChunks>& shared = options_.shared_chunks)
     known = [&shared](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); };

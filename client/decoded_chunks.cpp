@@ -66,67 +66,22 @@ void DecodedChunks::unindex(std::size_t key, const Entry& e) {
 }
 
 KnownPayload DecodedChunks::known(StreamRecordKind kind, std::span<const std::uint8_t> rest) {
-  if (rest.size() < kPrefixBytes) return {};
+  if (kind != StreamRecordKind::kFull || rest.size() < kPrefixBytes) return {};
   const auto begins = [&](const std::vector<std::uint8_t>& b) {
     return b.size() <= rest.size() && std::equal(b.begin(), b.end(), rest.begin());
   };
   const std::size_t pk = prefix_key(kind, rest);
   std::lock_guard lock(m_);
-  if (kind == StreamRecordKind::kFull) {
-    const auto it = prefix_.find(pk);
-    if (it == prefix_.end()) return {};
-    for (const std::size_t key : it->second) {
-      const auto e = entries_.find(key);
-      if (e == entries_.end() || !begins(e->second.bytes)) continue;
-      ++stats_.known_chunks;
-      lru_.splice(lru_.begin(), lru_, e->second.lru);
-      return {e->second.bytes.size(), e->second.chunk};
-    }
-    return {};
-  }
-  const auto it = mip_payloads_.find(pk);
-  if (it == mip_payloads_.end()) return {};
-  for (const MipPayload& m : it->second) {
-    if (!begins(m.bytes)) continue;
-    std::shared_ptr<const Box> box = m.box.lock();
-    if (!box) continue;
-    ++stats_.known_mips;
-    return {m.bytes.size(), std::move(box)};
+  const auto it = prefix_.find(pk);
+  if (it == prefix_.end()) return {};
+  for (const std::size_t key : it->second) {
+    const auto e = entries_.find(key);
+    if (e == entries_.end() || !begins(e->second.bytes)) continue;
+    ++stats_.known_chunks;
+    lru_.splice(lru_.begin(), lru_, e->second.lru);
+    return {e->second.bytes.size(), e->second.chunk};
   }
   return {};
-}
-
-void DecodedChunks::remember_mip(StreamRecordKind kind, std::span<const std::uint8_t> payload,
-                                 const std::shared_ptr<const Box>& box) {
-  if (payload.size() < kPrefixBytes) return;
-  const std::size_t pk = prefix_key(kind, payload);
-  std::lock_guard lock(m_);
-  if (mip_payload_count_ >= kMaxMipPayloads) {
-    // Forget the payloads whose boxes no replica holds; all of them if
-    // that is not enough (they are found again as they arrive).
-    mip_payload_count_ = 0;
-    for (auto it = mip_payloads_.begin(); it != mip_payloads_.end();) {
-      std::erase_if(it->second, [](const MipPayload& m) { return m.box.expired(); });
-      mip_payload_count_ += it->second.size();
-      it = it->second.empty() ? mip_payloads_.erase(it) : std::next(it);
-    }
-    if (mip_payload_count_ >= kMaxMipPayloads / 2) {
-      mip_payloads_.clear();
-      mip_payload_count_ = 0;
-    }
-  }
-  std::vector<MipPayload>& list = mip_payloads_[pk];
-  for (MipPayload& m : list)
-    if (std::equal(m.bytes.begin(), m.bytes.end(), payload.begin(), payload.end())) {
-      m.box = box;
-      return;
-    }
-  if (list.size() >= 4) {
-    list.erase(list.begin());
-    --mip_payload_count_;
-  }
-  list.push_back(MipPayload{std::vector<std::uint8_t>(payload.begin(), payload.end()), box});
-  ++mip_payload_count_;
 }
 
 DecodedChunks::Stats DecodedChunks::stats() const {
@@ -134,8 +89,6 @@ DecodedChunks::Stats DecodedChunks::stats() const {
   Stats s = stats_;
   s.entries = entries_.size();
   for (const auto& [key, e] : entries_) s.bytes += sizeof(Entry) + e.bytes.capacity() + e.chunk->memory().total();
-  for (const auto& [key, list] : mip_payloads_)
-    for (const MipPayload& m : list) s.bytes += sizeof(MipPayload) + m.bytes.capacity();
   return s;
 }
 

@@ -50,24 +50,20 @@ class DecodedChunks {
   // whose bytes hash alike).
   void add(std::span<const std::uint8_t> payload, std::shared_ptr<const Chunk> chunk);
 
-  // Before decoding: what the replicas made of a payload that rest (a
-  // batch's bytes from a record's payload on) begins with, for a Full
-  // record a Chunk kept here, for a Mip or Estimate record the Box
-  // remember_mip was told; with the payload's length. {0, null} when none
-  // (payloads under kPrefixBytes are not looked up: they decode fast).
-  // The bytes are compared whole: a payload found is exactly the record's.
+  // Before decoding a Full record: the chunk kept here of a payload that
+  // rest (a batch's bytes from the record's payload on) begins with, and
+  // that payload's length; {0, null} for other kinds and when none. The
+  // bytes are compared whole: a payload found is exactly the record's.
+  // (Mips decode fast enough that a shared lookup of each cost the bots
+  // more than it saved.)
   static constexpr std::size_t kPrefixBytes = 16;
   KnownPayload known(StreamRecordKind kind, std::span<const std::uint8_t> rest);
-  // A Mip or Estimate record's payload decoded to box (kept as long as
-  // some replica holds box; the oldest forgotten beyond kMaxMipPayloads).
-  static constexpr std::size_t kMaxMipPayloads = 1 << 17;
-  void remember_mip(StreamRecordKind kind, std::span<const std::uint8_t> payload, const std::shared_ptr<const Box>& box);
 
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
-    std::uint64_t known_chunks = 0, known_mips = 0;  // records not decoded again (known())
+    std::uint64_t known_chunks = 0;  // Full records not decoded again (known())
     std::size_t entries = 0;
-    std::size_t bytes = 0;  // the entries' bytes and chunks, the mips' payloads (heap)
+    std::size_t bytes = 0;  // the entries' bytes and chunks (heap)
   };
   Stats stats() const;
 
@@ -87,10 +83,6 @@ class DecodedChunks {
   static std::size_t key_of(std::span<const std::uint8_t> payload);
   // The key of a payload's first kPrefixBytes, by record kind.
   static std::size_t prefix_key(StreamRecordKind kind, std::span<const std::uint8_t> bytes);
-  struct MipPayload {
-    std::vector<std::uint8_t> bytes;
-    std::weak_ptr<const Box> box;
-  };
   // Drops prefix_'s key of an entry leaving (under m_).
   void unindex(std::size_t key, const Entry& e);
 
@@ -103,9 +95,6 @@ class DecodedChunks {
   // Full records' entries by prefix_key: the keys of entries_ whose bytes
   // begin alike (a few: the newest kept).
   std::unordered_map<std::size_t, std::vector<std::size_t>> prefix_;
-  // Mip and Estimate payloads by prefix_key.
-  std::unordered_map<std::size_t, std::vector<MipPayload>> mip_payloads_;
-  std::size_t mip_payload_count_ = 0;
   Stats stats_;
   DecodedMips mips_;
   SharedUpdates updates_;

@@ -92,7 +92,6 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         ++redundant_mips_;  // (the box held stays)
       } else {
         e.mip = keep(DecodedMips::key_of(r.payload, r.level), *r.voxels);
-        if (shared_) shared_->remember_mip(r.kind, r.payload, e.mip);
       }
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);

@@ -80,11 +80,15 @@ std::vector<std::uint8_t> full_payload(const Chunk& c) {
 struct Applier {
   Replica replica;
   StreamDecodeScratch scratch;
+  KnownPayloadFn known;  // as the client passes it: the shared cache's (or none)
   void apply(const Frame& f) {
-    const Status st = decode_stream_batch(records_of(f), scratch, [&](const StreamRecord& r) -> Status {
-      replica.apply_stream_record(r);
-      return Ok{};
-    });
+    const Status st = decode_stream_batch(
+        records_of(f), scratch,
+        [&](const StreamRecord& r) -> Status {
+          replica.apply_stream_record(r);
+          return Ok{};
+        },
+        known);
     if (!st.ok()) std::abort();
   }
 };
@@ -193,10 +197,15 @@ const FullFrames& full_frames() {
   return f;
 }
 
-void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared) {
+// known: the decoder skips the bytes the shared cache knows (the client's
+// way); without, it decodes every record and the replica finds the chunk
+// by its bytes afterwards.
+void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared, bool known = false) {
   const FullFrames& f = full_frames();
   Applier a;
   a.replica.share_decoded(shared);
+  if (known)
+    a.known = [shared](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); };
   if (shared) {
     Applier warm;  // another client took the same bytes first
     warm.replica.share_decoded(shared);
@@ -260,6 +269,8 @@ BENCHMARK(BM_Full)->Unit(benchmark::kMillisecond);
 
 void BM_FullShared(benchmark::State& state) { run_full(state, std::make_shared<DecodedChunks>()); }
 BENCHMARK(BM_FullShared)->Unit(benchmark::kMillisecond);
+void BM_FullKnown(benchmark::State& state) { run_full(state, std::make_shared<DecodedChunks>(), true); }
+BENCHMARK(BM_FullKnown)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace terrane
