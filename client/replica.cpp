@@ -237,7 +237,11 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
         return now;
       });
     }
-    if (base) shared_->updates().add(key, base, chunk_units, grid_.share_chunk(cp));
+    if (base) {
+      std::shared_ptr<const Chunk> made = grid_.share_chunk(cp);
+      std::shared_ptr<const Chunk> hold = shared_->updates().add(key, base, chunk_units, made);
+      if (hold != made) grid_.put_shared_chunk(cp, std::move(hold));  // another replica's, equal: one lineage
+    }
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates
     // keep coming: encoding them for every batch would cost a bot more than
     // the update itself; the replica holds full resolution only near it.

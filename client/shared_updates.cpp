@@ -37,11 +37,20 @@ std::shared_ptr<const Chunk> SharedUpdates::find(std::size_t key, const std::sha
   return nullptr;
 }
 
-void SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
-                        const std::shared_ptr<const Chunk>& result) {
+std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& base,
+                                                std::span<const UnitUpdate> units,
+                                                const std::shared_ptr<const Chunk>& result) {
   // An emptied chunk is not kept: the replica erases it (nothing to share).
-  if (!result) return;
+  if (!result) return result;
   std::lock_guard lock(m_);
+  if (const auto it = entries_.find(key); it != entries_.end()) {
+    const Entry& e = it->second;
+    if (e.base.lock() == base && std::equal(units.begin(), units.end(), e.units.begin(), e.units.end()))
+      if (std::shared_ptr<const Chunk> first = e.result.lock()) {
+        ++stats_.adopted;
+        return first;
+      }
+  }
   auto over = [&] { return entries_.size() >= kCapacity || units_held_ + units.size() > kMaxUnits; };
   if (over()) drop_dead();
   if (over()) {
@@ -60,6 +69,7 @@ void SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& bas
     kept_[kept_next_] = result;
     kept_next_ = (kept_next_ + 1) % kKept;
   }
+  return result;
 }
 
 void SharedUpdates::drop_dead() {

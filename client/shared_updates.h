@@ -53,13 +53,18 @@ class SharedUpdates {
   // else null. key: key_of(base, units).
   std::shared_ptr<const Chunk> find(std::size_t key, const std::shared_ptr<const Chunk>& base,
                                     std::span<const UnitUpdate> units);
-  // Keeps result as what units made of base (key: key_of(base, units)).
+  // Keeps result as what units made of base (key: key_of(base, units)),
+  // and returns the chunk the caller is to hold: result, or the result
+  // another replica kept for this very base and these units meanwhile (two
+  // replicas that applied the same tick at once on two threads then hold
+  // one chunk again, and their next ticks find each other's results).
   // result may be null: the chunk became all Air, and nothing is kept.
-  void add(std::size_t key, const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
-           const std::shared_ptr<const Chunk>& result);
+  std::shared_ptr<const Chunk> add(std::size_t key, const std::shared_ptr<const Chunk>& base,
+                                   std::span<const UnitUpdate> units, const std::shared_ptr<const Chunk>& result);
 
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
+    std::uint64_t adopted = 0;  // of the misses: results made at once by two replicas, one kept for both
     std::size_t entries = 0;
     std::size_t bytes = 0;  // the entries, their units and the kept results' share (heap)
   };

@@ -112,6 +112,40 @@ TEST(SharedUpdates, AReplicaThatComesLateTakesEveryTicksResultMadeBeforeIt) {
   EXPECT_TRUE(held(late, kAt) == held(alone, kAt));
 }
 
+// Two replicas on two threads apply one tick at once: both miss, both make
+// the result. The second to offer its own is handed the first's, so the
+// two hold one chunk again and their next tick is made once.
+TEST(SharedUpdates, TwoResultsOfOneTickMadeAtOnceBecomeOne) {
+  SharedUpdates table;
+  const auto base = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  std::vector<UnitUpdate> units(1);
+  units[0].chunk_pos = kAt;
+  units[0].unit_index = 12;
+  units[0].voxels.fill(make_voxel(materials::kSand, 255));
+  const std::size_t key = SharedUpdates::key_of(base.get(), units);
+  auto make = [&] {
+    Chunk c = base->clone();
+    c.modify(Region{{0, 4, 4}, {4, 8, 8}}, [](Vec3i, Voxel) { return make_voxel(materials::kSand, 255); });
+    return std::make_shared<const Chunk>(std::move(c));
+  };
+  EXPECT_EQ(table.find(key, base, units), nullptr);
+  EXPECT_EQ(table.find(key, base, units), nullptr);
+  const auto first = make(), second = make();
+  EXPECT_EQ(table.add(key, base, units, first), first);
+  EXPECT_EQ(table.add(key, base, units, second), first) << "the second holds the first's result";
+  EXPECT_EQ(table.stats().adopted, 1u);
+  // Other units on the same base are another result: never adopted.
+  std::vector<UnitUpdate> other = units;
+  other[0].voxels.fill(Voxel{});
+  const auto own = make();
+  EXPECT_EQ(table.add(SharedUpdates::key_of(base.get(), other), base, other, own), own);
+  // Nor a result for another base object with equal voxels.
+  const auto twin = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  const auto theirs = make();
+  EXPECT_EQ(table.add(SharedUpdates::key_of(twin.get(), units), twin, units, theirs), theirs);
+  EXPECT_EQ(table.stats().adopted, 1u);
+}
+
 TEST(SharedUpdates, OtherUnitsOrAnotherBaseAreNeverGivenAnothersResult) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b, c;
