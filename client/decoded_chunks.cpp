@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <functional>
 
+#include "protocol/messages.h"
+
 namespace terrane {
 
 DecodedChunks::DecodedChunks(std::size_t capacity) : capacity_(std::max<std::size_t>(capacity, 1)) {}
@@ -82,6 +84,23 @@ KnownPayload DecodedChunks::known(StreamRecordKind kind, std::span<const std::ui
     return {e->second.bytes.size(), e->second.chunk};
   }
   return {};
+}
+
+std::uint64_t DecodedChunks::hash_of(const std::shared_ptr<const Chunk>& chunk, std::uint64_t revision) {
+  {
+    std::lock_guard lock(m_);
+    const auto it = hashes_.find(chunk.get());
+    if (it != hashes_.end() && it->second.revision == revision && it->second.chunk.lock() == chunk) {
+      ++stats_.hashes_shared;
+      return it->second.hash;
+    }
+  }
+  const std::uint64_t h = chunk_hash(chunk.get(), revision);  // (outside the lock: 32^3 voxels)
+  std::lock_guard lock(m_);
+  if (hashes_.size() >= kMaxHashes) hashes_.clear();
+  hashes_[chunk.get()] = KnownHash{chunk, revision, h};
+  ++stats_.hashes_made;
+  return h;
 }
 
 DecodedChunks::Stats DecodedChunks::stats() const {

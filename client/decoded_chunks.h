@@ -59,9 +59,16 @@ class DecodedChunks {
   static constexpr std::size_t kPrefixBytes = 16;
   KnownPayload known(StreamRecordKind kind, std::span<const std::uint8_t> rest);
 
+  // The chunk hash (protocol/messages.h) of a shared chunk at revision,
+  // made once for all the replicas holding that very chunk object (while
+  // it lives; kMaxHashes of them at most, then made again).
+  static constexpr std::size_t kMaxHashes = 1 << 16;
+  std::uint64_t hash_of(const std::shared_ptr<const Chunk>& chunk, std::uint64_t revision);
+
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
     std::uint64_t known_chunks = 0;  // Full records not decoded again (known())
+    std::uint64_t hashes_made = 0, hashes_shared = 0;  // hash_of: made / taken as made by another replica
     std::size_t entries = 0;
     std::size_t bytes = 0;  // the entries' bytes and chunks (heap)
   };
@@ -95,6 +102,11 @@ class DecodedChunks {
   // Full records' entries by prefix_key: the keys of entries_ whose bytes
   // begin alike (a few: the newest kept).
   std::unordered_map<std::size_t, std::vector<std::size_t>> prefix_;
+  struct KnownHash {
+    std::weak_ptr<const Chunk> chunk;  // the very object (a dead one's address may be reused)
+    std::uint64_t revision = 0, hash = 0;
+  };
+  std::unordered_map<const Chunk*, KnownHash> hashes_;
   Stats stats_;
   DecodedMips mips_;
   SharedUpdates updates_;

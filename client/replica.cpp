@@ -317,8 +317,14 @@ std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   const Entry* found = chunks_.find(cp);
   if (found == nullptr || !found->holding.full_resolution()) return std::nullopt;
   const Entry& e = *found;
-  if (e.hash == 0)
-    e.hash = chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr, e.holding.revision);
+  if (e.hash == 0) {
+    // A chunk held shared has its hash made once for the process's replicas.
+    const std::shared_ptr<const Chunk> shared =
+        shared_ && e.holding.form == HoldingForm::kFull ? grid_.shared_chunk(cp) : nullptr;
+    e.hash = shared ? shared_->hash_of(shared, e.holding.revision)
+                    : chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr,
+                                 e.holding.revision);
+  }
   return e.hash;
 }
 

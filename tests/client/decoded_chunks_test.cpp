@@ -49,6 +49,8 @@ TEST(DecodedChunks, ASecondReplicaTakesTheChunkTheFirstPackedAndHoldsTheSameVoxe
   expect_holds(b, {2, 0, 3}, voxels);
   EXPECT_EQ(a.hash({2, 0, 3}), b.hash({2, 0, 3}));
   EXPECT_EQ(b.hash({2, 0, 3}), chunk_hash(b.grid().find_chunk({2, 0, 3}), 5));
+  EXPECT_EQ(shared->stats().hashes_made, 1u) << "the shared chunk's hash is made once for both";
+  EXPECT_EQ(shared->stats().hashes_shared, 1u);
   // Each holds its own copy: an edit of one is not seen by the other.
   StreamRecord empty;
   empty.kind = StreamRecordKind::kEmpty;
