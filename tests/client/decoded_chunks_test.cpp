@@ -63,27 +63,9 @@ TEST(DecodedChunks, ASecondReplicaTakesTheChunkTheFirstPackedAndHoldsTheSameVoxe
 // A batch of these records decoded as a client of the process decodes it:
 // bytes the process's replicas decoded before are not decoded again.
 void take_batch(Replica& r, const std::shared_ptr<DecodedChunks>& shared, StreamBatchWriter& w, int* skipped) {
-  const Frame f = w.finish().flatten();
-  auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
-  ASSERT_TRUE(m.ok());
-  auto records = parse_stream_batch(*(*m)->body_as_StreamBatch());
-  ASSERT_TRUE(records.ok());
-  StreamDecodeScratch s;
-  const KnownPayloadFn known = [&](StreamRecordKind kind, std::span<const std::uint8_t> rest) {
-    return shared->known(kind, rest);
-  };
-  ASSERT_TRUE(decode_stream_batch(
-                  *records, s,
-                  [&](const StreamRecord& rec) -> Status {
-                    if (rec.known) {
-                      ++*skipped;
-                      EXPECT_EQ(rec.voxels, nullptr);
-                    }
-                    r.apply_stream_record(rec);
-                    return Ok{};
-                  },
-                  known)
-                  .ok());
+  testing_support::take_records(
+      r, w, [&](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); },
+      skipped);
 }
 
 TEST(DecodedChunks, BytesDecodedOnceAreNotDecodedAgainAndGiveTheSameVoxels) {
