@@ -391,9 +391,8 @@ void Replicator::send_horizon(const HorizonPtr& shared) {
     ++covered;
   });
   if (covered == 0) return;
-  batch_.add_horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit, shared);
   counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
-  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
+  out_.horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit, shared);
 }
 
 void Replicator::move_by(Vec3i d) {
@@ -520,8 +519,8 @@ void Replicator::send_ready() {
   const double budget = outbound_.unlimited() ? 1e18 : outbound_.available(now);
   const std::size_t queued = session_->queued_bytes();
   auto room = [&] {
-    return budget > 0 && queued + batch_.size_bytes() < options_.stream_window_bytes &&
-           static_cast<double>(batch_.size_bytes()) < budget;
+    return budget > 0 && queued + out_.pending_bytes() < options_.stream_window_bytes &&
+           static_cast<double>(out_.pending_bytes()) < budget;
   };
   while (!ready_.empty() && room()) {
     const Vec3i cp = ready_.front();
@@ -697,11 +696,10 @@ void Replicator::refresh_mip(Vec3i cp, const VersionPtr& v) {
     counters_.refreshes_skipped.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  if (mip_patches_ && level < kMipLevels - 1 && h.form == mip_form(level) && send_patch(cp, level, h.revision, v)) {
-    // (sent: the changed sub-units only)
-  } else {
+  if (mip_patches_ && level < kMipLevels - 1 && h.form == mip_form(level) && out_.mip_patch(cp, level, h.revision, *v))
+    counters_.mip_patches.fetch_add(1, std::memory_order_relaxed);  // (the changed sub-units only)
+  else
     stream(record_kind(level), cp, v->revision(), v->encoded(level), v);
-  }
   counters_.mip_refreshes.fetch_add(1, std::memory_order_relaxed);
   slots_.change_if(cp, [&](ChunkSlot& slot) { slot.hold(Holding{mip_form(level), v->revision()}, v); });
   if (plan_.desired(cp) < level) plan_.push_refine(cp);
@@ -728,33 +726,7 @@ void Replicator::flush_mips_when_due(std::chrono::steady_clock::time_point now) 
     flush_mips();
 }
 
-void Replicator::stream(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, std::span<const std::uint8_t> payload,
-                        const VersionPtr& owner) {
-  batch_.add(kind, cp, revision, payload, owner);
-  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
-}
-
-bool Replicator::send_patch(Vec3i cp, int level, std::uint64_t held, const VersionPtr& v) {
-  const std::optional<std::uint64_t> mask = v->changed_since(level, held);
-  if (!mask || *mask == 0) return false;
-  thread_local std::vector<std::uint8_t> units;
-  units.clear();
-  v->append_patch_units(level, *mask, units);
-  // Level, mask, units against the whole unit.
-  if (1 + (level == 1 ? 8 : 1) + units.size() >= v->encoded(level).size()) return false;
-  batch_.add_mip_patch(cp, v->revision(), level, *mask, units);
-  counters_.mip_patches.fetch_add(1, std::memory_order_relaxed);
-  if (batch_.size_bytes() >= kStreamBatchTargetBytes || batch_.records() >= kMaxStreamRecords) flush_stream();
-  return true;
-}
-
-void Replicator::flush_stream() {
-  if (batch_.empty() || !session_) return;
-  OutFrame f = batch_.finish();
-  outbound_.spend(static_cast<double>(f.size()));
-  counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
-  session_->send(std::move(f));
-}
+void Replicator::flush_stream() { out_.flush(); }
 
 void Replicator::drained() {
   if (closed_) return;

@@ -66,6 +66,7 @@
 #include "server/replication/redirector.h"
 #include "server/replication/replication_options.h"
 #include "server/replication/stream_gate.h"
+#include "server/replication/stream_out.h"
 #include "server/replication/stream_yield.h"
 #include "server/replication/tick_update.h"
 #include "server/replication/update_faults.h"
@@ -171,11 +172,10 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   // owner: what keeps payload alive (the version whose encoding it is),
   // so the record shares it (StreamBatchWriter).
   void stream(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
-              std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr);
+              std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr) {
+    out_.record(kind, chunk_pos, revision, payload, owner);
+  }
   void flush_stream();
-  // A Mip patch of level held at revision held, if v can tell what changed
-  // since and the patch is smaller than the whole mip: streamed, true.
-  bool send_patch(Vec3i chunk_pos, int level, std::uint64_t held, const VersionPtr& v);
   void answer_hash(Vec3i chunk_pos);
   void arm_timer();
   void on_timer();
@@ -229,7 +229,14 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   // (an entry left by a grant dropped since is skipped when reached).
   std::deque<Vec3i> ready_;
   std::vector<Vec3i> hash_requests_;  // for claims not yet adopted or resent
-  StreamBatchWriter batch_;
+  // The stream batch being filled; it sends through the session (counted,
+  // spent from outbound_).
+  StreamOut out_{[this] { return session_ != nullptr; },
+                 [this](OutFrame f) {
+                   outbound_.spend(static_cast<double>(f.size()));
+                   counters_.stream_bytes.fetch_add(f.size(), std::memory_order_relaxed);
+                   session_->send(std::move(f));
+                 }};
   // When and in which order the changes parked for the refresh of mips
   // (each slot's newest) go out.
   MipSchedule mips_;
