@@ -80,6 +80,7 @@ KnownPayload DecodedChunks::known(StreamRecordKind kind, std::span<const std::ui
     const auto e = entries_.find(key);
     if (e == entries_.end() || !begins(e->second.bytes)) continue;
     ++stats_.known_chunks;
+    ++stats_.hits;  // (taken from here, as a find would have)
     lru_.splice(lru_.begin(), lru_, e->second.lru);
     return {e->second.bytes.size(), e->second.chunk};
   }

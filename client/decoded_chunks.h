@@ -67,7 +67,7 @@ class DecodedChunks {
 
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
-    std::uint64_t known_chunks = 0;  // Full records not decoded again (known())
+    std::uint64_t known_chunks = 0;  // of the hits: Full records not decoded at all (known())
     std::uint64_t hashes_made = 0, hashes_shared = 0;  // hash_of: made / taken as made by another replica
     std::size_t entries = 0;
     std::size_t bytes = 0;  // the entries' bytes and chunks (heap)
