@@ -19,15 +19,23 @@ case "$flavour" in
     dir=build
     args=(-DCMAKE_BUILD_TYPE=Release) ;;
   asan)
+    # -O1 and line tables only (-g1): the sanitizers' reports keep function
+    # names, files and lines, and each file compiles in about half the time
+    # of -O2 -g (18.0 s against 9.6 s for server/cluster/cluster_node.cpp).
     dir=build-asan
-    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DTERRANE_SANITIZE=address,undefined -DTERRANE_BUILD_BENCH=OFF) ;;
+    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
+          -DTERRANE_SANITIZE=address,undefined -DTERRANE_BUILD_BENCH=OFF) ;;
   fuzz)
     dir=build-fuzz
     args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DTERRANE_BUILD_FUZZ=ON
           -DTERRANE_BUILD_BENCH=OFF -DTERRANE_BUILD_TESTS=ON -DTERRANE_SANITIZE=address,undefined) ;;
   tsan)
+    # -O2 keeps the threaded tests' timing near the release build's; line
+    # tables only (-g1) are enough for the reports' stacks (7.9 s against
+    # 6.5 s for server/cluster/cluster_node.cpp).
     dir=build-tsan
-    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DTERRANE_SANITIZE=thread -DTERRANE_BUILD_BENCH=OFF) ;;
+    args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG"
+          -DTERRANE_SANITIZE=thread -DTERRANE_BUILD_BENCH=OFF) ;;
   *)
     echo "build.sh: unknown flavour '$flavour' (release, asan, fuzz or tsan)" >&2
     exit 2 ;;
