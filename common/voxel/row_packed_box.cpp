@@ -110,8 +110,20 @@ int PaletteTable::add(const Material* materials, int p) {
   offsets_[static_cast<std::size_t>(count_)] = static_cast<std::uint8_t>(used_);
   pool_[static_cast<std::size_t>(used_)] = static_cast<std::uint8_t>(p - 1);
   std::memcpy(pool_.data() + used_ + 1, materials, static_cast<std::size_t>(p));
+  std::uint64_t set = 0;
+  for (int i = 0; i < p; ++i) set |= std::uint64_t{1} << (materials[i] & 63);
+  masks_[static_cast<std::size_t>(count_)] = set;
   used_ += 1 + p;
   return count_++;
+}
+
+bool PaletteTable::covers(std::uint64_t materials, int p) const {
+  for (int id = 0; id < count_; ++id) {
+    if ((masks_[static_cast<std::size_t>(id)] & materials) != materials) continue;
+    const int size = std::popcount(masks_[static_cast<std::size_t>(id)]);
+    if (size <= kMaxRunPalette || index_bits(size) == index_bits(p)) return true;
+  }
+  return false;
 }
 
 void PaletteTable::write(std::uint8_t* out) const {
@@ -130,8 +142,10 @@ RowSummary summarize_row(const Voxel* row, int n) {
     seen |= std::uint64_t{1} << (row[x].material & 63);
     s.occupancy |= !has_default_occupancy(row[x]);
     same &= row[x] == first;
+    s.runs += x == 0 || row[x].material != row[x - 1].material;
   }
   s.uniform = same && !s.occupancy;
+  s.mask = seen;
   while (seen != 0 && s.p < 17) {
     s.materials[s.p++] = static_cast<Material>(std::countr_zero(seen));
     seen &= seen - 1;
@@ -151,28 +165,45 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return raw;
   }
-  std::uint8_t slot[kMaterialCount] = {};
-  for (int j = 0; j < s.p; ++j) slot[s.materials[j]] = static_cast<std::uint8_t>(j);
-  std::uint8_t index[kMaxRow];
-  int runs = 0;
-  for (int x = 0; x < n; ++x) {
-    index[x] = slot[row[x].material & 63];
-    runs += x == 0 || index[x] != index[x - 1];
-  }
+  const int runs = s.runs;  // the same whatever the palette
   int occupied = 0;
   for (int x = 0; x < n; ++x) occupied += !has_default_occupancy(row[x]);
   const int occ_size = s.occupancy ? bitmap_bytes(n) + occupied : 0;
-  const int id = table.find(s.materials, s.p);
-  const int head = id >= 0 ? 1 : 2 + s.p;  // tag and palette
-  const int bits = index_bits(s.p);
-  const int groups = (n * bits + 7) / 8;
-  const int index_size = head + groups + occ_size;
-  const int run_size = s.p <= kMaxRunPalette ? head + runs + occ_size : raw + 1;
-  if (std::min(index_size, run_size) >= raw) {
+  // Sizes of the index and run records with a palette of `size` materials
+  // behind a head of `head` bytes (tag, and an inline palette).
+  auto index_size = [&](int head, int size) { return head + (n * index_bits(size) + 7) / 8 + occ_size; };
+  auto run_size = [&](int head, int size) { return size <= kMaxRunPalette ? head + runs + occ_size : raw + 1; };
+  // The row's own palette inline, then every table palette holding its
+  // materials (its own among them, if the table has it).
+  int id = -1;
+  int best = std::min(index_size(2 + s.p, s.p), run_size(2 + s.p, s.p));
+  for (int t = 0; t < table.size(); ++t) {
+    if ((table.mask(t) & s.mask) != s.mask) continue;
+    const int size = table.palette(t)[0] + 1;
+    const int cost = std::min(index_size(1, size), run_size(1, size));
+    if (cost < best) {
+      best = cost;
+      id = t;
+    }
+  }
+  if (best >= raw) {
     std::memcpy(out, row, sizeof(Voxel) * static_cast<std::size_t>(n));
     return raw;
   }
-  const bool use_runs = run_size < index_size;
+  const std::uint8_t* palette = id >= 0 ? table.palette(id) : nullptr;
+  const int p_size = id >= 0 ? palette[0] + 1 : s.p;
+  const int head = id >= 0 ? 1 : 2 + s.p;
+  const bool use_runs = run_size(head, p_size) < index_size(head, p_size);
+  const int bits = index_bits(p_size);
+  const int groups = (n * bits + 7) / 8;
+  std::uint8_t slot[kMaterialCount] = {};
+  if (id >= 0) {
+    for (int j = 0; j < p_size; ++j) slot[palette[1 + j] & 63] = static_cast<std::uint8_t>(j);
+  } else {
+    for (int j = 0; j < s.p; ++j) slot[s.materials[j]] = static_cast<std::uint8_t>(j);
+  }
+  std::uint8_t index[kMaxRow];
+  for (int x = 0; x < n; ++x) index[x] = slot[row[x].material & 63];
   out[0] = static_cast<std::uint8_t>((use_runs ? kKindRuns : kKindIndex) | (s.occupancy ? kTagOccupancy : 0) |
                                      (id >= 0 ? id : kInlinePalette));
   std::uint8_t* p = out + 1;

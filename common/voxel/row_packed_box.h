@@ -61,10 +61,19 @@
 // so the SIMD decoder may over-read. Identical records are stored once
 // (several headers share an offset). A box whose rows are all uniform with
 // one material owns no headers at all: it points at a shared header table
-// ("a uniform chunk stores one value"). Each row takes the smallest of its
-// encodings; compact() (and any write covering the whole box) chooses the
-// table's palettes by the bytes they save, partial writes add palettes while
-// the table has room.
+// ("a uniform chunk stores one value").
+//
+// A record's palette holds every material of its row and may hold others: a
+// run record costs the same with any palette of up to 8 materials, an index
+// record with any palette of its index width, so rows over different sets
+// of materials share one table palette holding them all. Each row takes the
+// smallest of its encodings over every palette that can serve it. compact()
+// (and any write covering the whole box) chooses the table: the rows'
+// material sets, most used first, each take a palette already serving them,
+// grow one by their missing materials (while the rows it serves keep their
+// records' sizes), get one of their own, or go inline, whichever costs the
+// fewest bytes. Partial writes add a palette for a row no table palette
+// serves, while the table has room.
 //
 // Uniform rows read in place from a shared read-only table of pre-filled rows
 // per material; raw rows in place; index and run records are decoded into the
@@ -174,6 +183,13 @@ class PaletteTable {
   int bytes() const { return 1 + count_ + used_; }
   // The id of the palette with exactly these materials, or -1.
   int find(const Material* materials, int p) const;
+  // The materials of palette id as a set (bit m for material m).
+  std::uint64_t mask(int id) const { return masks_[static_cast<std::size_t>(id)]; }
+  // Whether some palette holds every material of `materials` (a set) and
+  // serves a row of them as cheaply as their own palette would: of at most
+  // kMaxRunPalette materials (run records cost the same), or of the same
+  // index width as p.
+  bool covers(std::uint64_t materials, int p) const;
   // Whether a palette of p materials would fit.
   bool fits(int p) const { return p <= kMaxPalette && count_ < kMaxTablePalettes && 2 + count_ + used_ + 1 + p <= kMaxTableBytes; }
   // Adds a palette if the table has room; returns its id or -1.
@@ -187,6 +203,7 @@ class PaletteTable {
   int count_ = 0;
   int used_ = 0;  // bytes of palettes
   std::array<std::uint8_t, kMaxTablePalettes> offsets_{};  // into pool_
+  std::array<std::uint64_t, kMaxTablePalettes> masks_{};   // each palette's materials as a set
   std::array<std::uint8_t, kMaxTableBytes> pool_{};
 };
 
@@ -195,6 +212,8 @@ class PaletteTable {
 struct RowSummary {
   int p = 0;                  // distinct materials (17 means more than 16)
   Material materials[17] = {};
+  std::uint64_t mask = 0;     // the same as a set: bit m for material m
+  int runs = 0;               // runs of one material along the row
   bool uniform = false;       // one voxel value at default occupancy
   bool occupancy = false;     // some voxel has a non-default occupancy
 };
@@ -203,7 +222,10 @@ RowSummary summarize_row(const Voxel* row, int n);
 // Encodes row (n voxels, Air already normalised) against table. Returns 0 for
 // a uniform row (the caller stores only a header), else the record's length,
 // written to out (capacity >= 2n bytes). Takes the shortest of the index,
-// run and raw records; a palette not in the table goes inline.
+// run and raw records over every palette that can serve the row: its own
+// (from the table, or inline), or a table palette holding its materials and
+// others (a run record costs the same with any palette of up to 8
+// materials, an index record with any of the same index width).
 int encode_row(const Voxel* row, int n, const PaletteTable& table, std::uint8_t* out);
 // The same with the row's summary already made (summarize_row(row, n)).
 int encode_row(const Voxel* row, int n, const RowSummary& summary, const PaletteTable& table, std::uint8_t* out);

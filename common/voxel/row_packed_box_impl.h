@@ -2,6 +2,7 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <vector>
 
@@ -215,7 +216,7 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   const row_packed_detail::RowSummary* summaries = known != nullptr ? known : made.data();
   for (int i = 0; i < (y1 - y0) * nz; ++i) {
     const row_packed_detail::RowSummary& s = summaries[i];
-    if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette && table.find(s.materials, s.p) < 0)
+    if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette && !table.covers(s.mask, s.p))
       table.add(s.materials, s.p);
   }
   const std::size_t table_bytes = static_cast<std::size_t>(table.bytes());
@@ -358,11 +359,16 @@ void RowPackedBox<N>::unpack_all() {
 
 template <int N>
 void RowPackedBox<N>::compact_from(const Voxel* content) {
-  // Palettes by the bytes they would save inline (1 + P per row using them).
+  using row_packed_detail::index_bits;
+  using row_packed_detail::kMaxRunPalette;
+  // The rows' material sets by the bytes their own palette would save
+  // inline (1 + P per row using it), and whether their rows take run or
+  // index records with it (occupancy sections cost the same in both).
   struct Candidate {
     int saving = 0;
     int p = 0;
-    Material materials[row_packed_detail::kMaxPalette] = {};
+    std::uint64_t mask = 0;
+    bool runs = false, index = false;
   };
   std::vector<Candidate> candidates;
   thread_local std::vector<row_packed_detail::RowSummary> summaries;
@@ -371,23 +377,77 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
     const row_packed_detail::RowSummary& s = summaries[static_cast<std::size_t>(r)] =
         row_packed_detail::summarize_row(content + std::size_t(r) * N, N);
     if (s.uniform || s.p > row_packed_detail::kMaxPalette) continue;
-    auto it = std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) {
-      return c.p == s.p && std::equal(c.materials, c.materials + c.p, s.materials);
-    });
+    auto it = std::find_if(candidates.begin(), candidates.end(), [&](const Candidate& c) { return c.mask == s.mask; });
     if (it == candidates.end()) {
-      Candidate c;
-      c.p = s.p;
-      std::copy_n(s.materials, s.p, c.materials);
-      candidates.push_back(c);
+      candidates.push_back({0, s.p, s.mask});
       it = candidates.end() - 1;
     }
     it->saving += 1 + s.p;
+    const bool runs = s.p <= kMaxRunPalette && s.runs < (N * index_bits(s.p) + 7) / 8;
+    (runs ? it->runs : it->index) = true;
   }
   std::stable_sort(candidates.begin(), candidates.end(),
                    [](const Candidate& a, const Candidate& b) { return a.saving > b.saving; });
+  // The table's palettes. A palette of `size` materials serves a set's rows
+  // at no extra cost if it holds the set and its rows' records keep their
+  // size: at most 8 materials for run records, the same index width for
+  // index records.
+  struct Chosen {
+    std::uint64_t mask = 0;
+    bool runs = false, index = false;  // of the sets it serves
+  };
+  auto keeps = [](bool runs, bool index, int p, int size) {
+    return size <= row_packed_detail::kMaxPalette && (!runs || size <= kMaxRunPalette) &&
+           (!index || index_bits(size) == index_bits(p));
+  };
+  // Each set, most used first, takes the cheapest of: a palette already
+  // serving it (0 bytes), growing a palette by its missing materials (one
+  // byte each, while the sets that palette serves keep their records'
+  // sizes), a palette of its own (2 + P bytes, while the table has room),
+  // or its palette inline in each of its rows.
+  std::vector<Chosen> chosen;
+  int table_bytes = 1;
+  for (const Candidate& c : candidates) {
+    auto serves = [&](const Chosen& t) {
+      return (t.mask & c.mask) == c.mask && keeps(c.runs, c.index, c.p, std::popcount(t.mask));
+    };
+    if (std::any_of(chosen.begin(), chosen.end(), serves)) continue;
+    int grow_cost = c.saving;
+    std::size_t grow = chosen.size();
+    for (std::size_t i = 0; i < chosen.size(); ++i) {
+      const Chosen& t = chosen[i];
+      const int before = std::popcount(t.mask), after = std::popcount(t.mask | c.mask);
+      // The palette's own sets keep their sizes if it keeps its index width
+      // (index records) and at most 8 materials (run records).
+      if (!keeps(c.runs, c.index, c.p, after) || !keeps(t.runs, t.index, before, after) ||
+          table_bytes + after - before > row_packed_detail::kMaxTableBytes)
+        continue;
+      if (after - before < grow_cost) {
+        grow_cost = after - before;
+        grow = i;
+      }
+    }
+    const int own_cost = 2 + c.p;
+    const bool own_fits = static_cast<int>(chosen.size()) < row_packed_detail::kMaxTablePalettes &&
+                          table_bytes + own_cost <= row_packed_detail::kMaxTableBytes;
+    if (own_fits && own_cost <= c.saving && own_cost <= grow_cost) {
+      chosen.push_back({c.mask, c.runs, c.index});
+      table_bytes += own_cost;
+    } else if (grow < chosen.size()) {
+      Chosen& t = chosen[grow];
+      t.mask |= c.mask;
+      t.runs |= c.runs;
+      t.index |= c.index;
+      table_bytes += grow_cost;
+    }
+  }
   row_packed_detail::PaletteTable table;
-  for (const Candidate& c : candidates)
-    if (c.saving > 1 + c.p) table.add(c.materials, c.p);
+  for (const Chosen& t : chosen) {
+    Material materials[row_packed_detail::kMaxPalette];
+    int p = 0;
+    for (std::uint64_t rest = t.mask; rest != 0; rest &= rest - 1) materials[p++] = static_cast<Material>(std::countr_zero(rest));
+    table.add(materials, p);
+  }
   shift_ = 0;
   repacks_ = 0;
   rebuild_rect(0, N, 0, N, content, table, false, summaries.data());

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstring>
 #include <random>
+#include <vector>
 
 #include "common/voxel/box.h"
 
@@ -251,6 +252,62 @@ TEST(RowPackedBox, PalettesBeyondTheTableGoInline) {
   expect_equal(box, ref, "compacted");
   // Each pair is used once, so compact() keeps every palette inline.
   EXPECT_EQ(box.stats().table_bytes, 1u);
+}
+
+// Rows of two runs over every pair of 6 materials, each pair in two rows:
+// compact() gives the table one palette of all 6 (the first pair's, grown a
+// material at a time) rather than 15 palettes of two or 15 inline ones, as a
+// run record costs the same with any palette of up to 8 materials; a later
+// write of another pair of them uses it too.
+TEST(RowPackedBox, RunRowsShareATablePaletteHoldingTheirMaterials) {
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  std::vector<std::pair<Material, Material>> pairs;
+  for (int a = 1; a <= 6; ++a)
+    for (int b = a + 1; b <= 6; ++b) pairs.emplace_back(static_cast<Material>(a), static_cast<Material>(b));
+  ASSERT_EQ(pairs.size(), 15u);
+  box.modify_rows(0, 1, 0, 30, [&](int y, int z, Voxel* row) {
+    const auto [a, b] = pairs[static_cast<std::size_t>(z / 2)];
+    for (int x = 0; x < 32; ++x) {
+      row[x] = solid(x < 13 ? a : b);
+      ref.set(x, y, z, row[x]);
+    }
+  });
+  box.compact();
+  expect_equal(box, ref, "compacted");
+  EXPECT_EQ(box.stats().table_bytes, table_bytes({6}));
+  EXPECT_EQ(box.stats().run_rows, 30u);
+  EXPECT_EQ(box.stats().inline_palette_bytes, 0u);
+  for (int z = 0; z < 30; ++z) EXPECT_EQ(box.record_tag(0, z), row_packed_detail::kKindRuns | 0) << z;
+  // 15 distinct records of a tag and two runs.
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({6}) + 15u * 3u + kPad32);
+  box.modify_rows(3, 4, 7, 8, [&](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(static_cast<Material>(x < 20 ? 5 : 2));
+  });
+  for (int x = 0; x < 32; ++x) ref.set(x, 3, 7, solid(static_cast<Material>(x < 20 ? 5 : 2)));
+  expect_equal(box, ref, "a later row");
+  EXPECT_EQ(box.stats().table_bytes, table_bytes({6}));
+  EXPECT_EQ(box.record_tag(3, 7), row_packed_detail::kKindRuns | 0);
+}
+
+// Rows that take index records keep palettes of their own index width: two
+// materials alternating (1-bit indices, 4 bytes, against 32 runs) are not
+// served by a palette of three (2-bit indices, 8 bytes).
+TEST(RowPackedBox, IndexRowsKeepPalettesOfTheirIndexWidth) {
+  RowPackedBox<32> box(kAir);
+  Box ref({32, 32, 32});
+  box.modify_rows(0, 1, 0, 8, [&](int y, int z, Voxel* row) {
+    for (int x = 0; x < 32; ++x) {
+      // Rows 0-3 over {1, 2, 3}, rows 4-7 over {1, 2}.
+      row[x] = solid(static_cast<Material>(1 + x % (z < 4 ? 3 : 2)));
+      ref.set(x, y, z, row[x]);
+    }
+  });
+  box.compact();
+  expect_equal(box, ref, "compacted");
+  EXPECT_EQ(box.stats().index_rows, 8u);
+  EXPECT_EQ(box.stats().table_bytes, table_bytes({3, 2}));
+  EXPECT_EQ(box.heap_bytes(), headers32(1) + table_bytes({3, 2}) + (1u + 8u) + (1u + 4u) + kPad32);
 }
 
 TEST(RowPackedBox, IdenticalRowsShareOneRecord) {
