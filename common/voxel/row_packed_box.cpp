@@ -96,14 +96,6 @@ PaletteTable::PaletteTable(const std::uint8_t* table) {
   }
 }
 
-int PaletteTable::find(const Material* materials, int p) const {
-  for (int id = 0; id < count_; ++id) {
-    const std::uint8_t* pal = palette(id);
-    if (pal[0] + 1 == p && std::memcmp(pal + 1, materials, static_cast<std::size_t>(p)) == 0) return id;
-  }
-  return -1;
-}
-
 int PaletteTable::add(const Material* materials, int p) {
   // After this palette: 1 (count) + count_ + 1 offsets + used_ + 1 + p bytes.
   if (!fits(p)) return -1;
@@ -117,11 +109,11 @@ int PaletteTable::add(const Material* materials, int p) {
   return count_++;
 }
 
-bool PaletteTable::covers(std::uint64_t materials, int p) const {
+bool PaletteTable::serves(std::uint64_t materials, int p, bool runs) const {
   for (int id = 0; id < count_; ++id) {
     if ((masks_[static_cast<std::size_t>(id)] & materials) != materials) continue;
     const int size = std::popcount(masks_[static_cast<std::size_t>(id)]);
-    if (size <= kMaxRunPalette || index_bits(size) == index_bits(p)) return true;
+    if (runs ? size <= kMaxRunPalette : index_bits(size) == index_bits(p)) return true;
   }
   return false;
 }

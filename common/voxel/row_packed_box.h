@@ -181,15 +181,13 @@ class PaletteTable {
   explicit PaletteTable(const std::uint8_t* table);
   int size() const { return count_; }
   int bytes() const { return 1 + count_ + used_; }
-  // The id of the palette with exactly these materials, or -1.
-  int find(const Material* materials, int p) const;
   // The materials of palette id as a set (bit m for material m).
   std::uint64_t mask(int id) const { return masks_[static_cast<std::size_t>(id)]; }
-  // Whether some palette holds every material of `materials` (a set) and
-  // serves a row of them as cheaply as their own palette would: of at most
-  // kMaxRunPalette materials (run records cost the same), or of the same
-  // index width as p.
-  bool covers(std::uint64_t materials, int p) const;
+  // Whether some palette holds every material of a row (materials: their
+  // set, p of them) and keeps its record as small as the row's own palette
+  // would: of at most kMaxRunPalette materials if the row takes a run record
+  // (runs), of the same index width as p if it takes an index record.
+  bool serves(std::uint64_t materials, int p, bool runs) const;
   // Whether a palette of p materials would fit.
   bool fits(int p) const { return p <= kMaxPalette && count_ < kMaxTablePalettes && 2 + count_ + used_ + 1 + p <= kMaxTableBytes; }
   // Adds a palette if the table has room; returns its id or -1.
@@ -218,6 +216,12 @@ struct RowSummary {
   bool occupancy = false;     // some voxel has a non-default occupancy
 };
 RowSummary summarize_row(const Voxel* row, int n);
+// Whether a row of n voxels (not uniform, at most 16 materials) takes a run
+// record rather than an index record with its own palette (the occupancy
+// section costs the same in both).
+inline bool takes_runs(const RowSummary& s, int n) {
+  return s.p <= kMaxRunPalette && s.runs < (n * index_bits(s.p) + 7) / 8;
+}
 
 // Encodes row (n voxels, Air already normalised) against table. Returns 0 for
 // a uniform row (the caller stores only a header), else the record's length,

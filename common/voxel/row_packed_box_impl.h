@@ -216,7 +216,8 @@ void RowPackedBox<N>::rebuild_rect(int y0, int y1, int z0, int z1, const Voxel* 
   const row_packed_detail::RowSummary* summaries = known != nullptr ? known : made.data();
   for (int i = 0; i < (y1 - y0) * nz; ++i) {
     const row_packed_detail::RowSummary& s = summaries[i];
-    if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette && !table.covers(s.mask, s.p))
+    if (grow_table && !s.uniform && s.p <= row_packed_detail::kMaxPalette &&
+        !table.serves(s.mask, s.p, row_packed_detail::takes_runs(s, N)))
       table.add(s.materials, s.p);
   }
   const std::size_t table_bytes = static_cast<std::size_t>(table.bytes());
@@ -383,7 +384,7 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
       it = candidates.end() - 1;
     }
     it->saving += 1 + s.p;
-    const bool runs = s.p <= kMaxRunPalette && s.runs < (N * index_bits(s.p) + 7) / 8;
+    const bool runs = row_packed_detail::takes_runs(s, N);
     (runs ? it->runs : it->index) = true;
   }
   std::stable_sort(candidates.begin(), candidates.end(),

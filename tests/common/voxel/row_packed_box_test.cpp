@@ -288,6 +288,16 @@ TEST(RowPackedBox, RunRowsShareATablePaletteHoldingTheirMaterials) {
   expect_equal(box, ref, "a later row");
   EXPECT_EQ(box.stats().table_bytes, table_bytes({6}));
   EXPECT_EQ(box.record_tag(3, 7), row_packed_detail::kKindRuns | 0);
+  // A row alternating two of them takes an index record (1-bit indices, 4
+  // bytes, against 32 runs): the palette of 6 (4-bit indices) does not
+  // serve it, so it gets a palette of its own in the table.
+  box.modify_rows(4, 5, 9, 10, [&](int, int, Voxel* row) {
+    for (int x = 0; x < 32; ++x) row[x] = solid(static_cast<Material>(x % 2 ? 2 : 5));
+  });
+  for (int x = 0; x < 32; ++x) ref.set(x, 4, 9, solid(static_cast<Material>(x % 2 ? 2 : 5)));
+  expect_equal(box, ref, "an index row");
+  EXPECT_EQ(box.stats().table_bytes, table_bytes({6, 2}));
+  EXPECT_EQ(box.record_tag(4, 9), row_packed_detail::kKindIndex | 1);
 }
 
 // Rows that take index records keep palettes of their own index width: two
