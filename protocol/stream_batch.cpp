@@ -61,7 +61,7 @@ void StreamBatchWriter::add_mip_patch(Vec3i cp, std::uint64_t revision, int leve
                                       std::span<const std::uint8_t> units) {
   put_head(StreamRecordKind::kMipPatch, cp, revision);
   std::uint8_t head[9] = {static_cast<std::uint8_t>(level)};
-  const int mask_bytes = level == 1 ? 8 : 1;
+  const int mask_bytes = patch_mask_bytes(level);
   for (int i = 0; i < mask_bytes; ++i) head[1 + i] = static_cast<std::uint8_t>(mask >> (8 * i));
   bytes_.append(std::span<const std::uint8_t>(head, static_cast<std::size_t>(1 + mask_bytes)));
   bytes_.append(units);
@@ -185,7 +185,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         if (!level) return level.error();
         if (*level != 1 && *level != 2)
           return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: mip patch level not 1 or 2"};
-        const int mask_bytes = *level == 1 ? 8 : 1;
+        const int mask_bytes = patch_mask_bytes(*level);
         std::uint64_t mask = 0;
         for (int i = 0; i < mask_bytes; ++i) {
           auto b = r.byte();

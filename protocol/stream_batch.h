@@ -84,6 +84,8 @@ constexpr bool known_record_kind(std::uint8_t kind) {
 constexpr int patch_side(int level) { return (32 >> level) / 4; }
 // The sub-units of a Mip patch at level (1 or 2): 64 or 8.
 constexpr int patch_subunits(int level) { return patch_side(level) * patch_side(level) * patch_side(level); }
+// Bytes of a Mip patch's sub-unit mask at level (1 or 2): 8 or 1.
+constexpr int patch_mask_bytes(int level) { return (patch_subunits(level) + 7) / 8; }
 // Sub-unit i's corner in the mip (x fastest, then z, then y).
 constexpr Vec3i patch_subunit_origin(int level, int i) {
   const int s = patch_side(level);

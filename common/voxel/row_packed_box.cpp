@@ -112,8 +112,7 @@ int PaletteTable::add(const Material* materials, int p) {
 bool PaletteTable::serves(std::uint64_t materials, int p, bool runs) const {
   for (int id = 0; id < count_; ++id) {
     if ((masks_[static_cast<std::size_t>(id)] & materials) != materials) continue;
-    const int size = std::popcount(masks_[static_cast<std::size_t>(id)]);
-    if (runs ? size <= kMaxRunPalette : index_bits(size) == index_bits(p)) return true;
+    if (keeps_record_size(p, runs, !runs, std::popcount(masks_[static_cast<std::size_t>(id)]))) return true;
   }
   return false;
 }
@@ -188,12 +187,9 @@ int encode_row(const Voxel* row, int n, const RowSummary& s, const PaletteTable&
   const bool use_runs = run_size(head, p_size) < index_size(head, p_size);
   const int bits = index_bits(p_size);
   const int groups = (n * bits + 7) / 8;
+  const Material* materials = id >= 0 ? palette + 1 : s.materials;
   std::uint8_t slot[kMaterialCount] = {};
-  if (id >= 0) {
-    for (int j = 0; j < p_size; ++j) slot[palette[1 + j] & 63] = static_cast<std::uint8_t>(j);
-  } else {
-    for (int j = 0; j < s.p; ++j) slot[s.materials[j]] = static_cast<std::uint8_t>(j);
-  }
+  for (int j = 0; j < p_size; ++j) slot[materials[j] & 63] = static_cast<std::uint8_t>(j);
   std::uint8_t index[kMaxRow];
   for (int x = 0; x < n; ++x) index[x] = slot[row[x].material & 63];
   out[0] = static_cast<std::uint8_t>((use_runs ? kKindRuns : kKindIndex) | (s.occupancy ? kTagOccupancy : 0) |

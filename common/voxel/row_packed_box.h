@@ -222,6 +222,13 @@ RowSummary summarize_row(const Voxel* row, int n);
 inline bool takes_runs(const RowSummary& s, int n) {
   return s.p <= kMaxRunPalette && s.runs < (n * index_bits(s.p) + 7) / 8;
 }
+// Whether a palette of `size` materials keeps the records of rows over p
+// materials as small as their own palette would, given which records those
+// rows take: at most kMaxRunPalette materials for run records, the index
+// width of p for index records.
+inline bool keeps_record_size(int p, bool runs, bool index, int size) {
+  return size <= kMaxPalette && (!runs || size <= kMaxRunPalette) && (!index || index_bits(size) == index_bits(p));
+}
 
 // Encodes row (n voxels, Air already normalised) against table. Returns 0 for
 // a uniform row (the caller stores only a header), else the record's length,

@@ -360,8 +360,6 @@ void RowPackedBox<N>::unpack_all() {
 
 template <int N>
 void RowPackedBox<N>::compact_from(const Voxel* content) {
-  using row_packed_detail::index_bits;
-  using row_packed_detail::kMaxRunPalette;
   // The rows' material sets by the bytes their own palette would save
   // inline (1 + P per row using it), and whether their rows take run or
   // index records with it (occupancy sections cost the same in both).
@@ -397,10 +395,7 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
     std::uint64_t mask = 0;
     bool runs = false, index = false;  // of the sets it serves
   };
-  auto keeps = [](bool runs, bool index, int p, int size) {
-    return size <= row_packed_detail::kMaxPalette && (!runs || size <= kMaxRunPalette) &&
-           (!index || index_bits(size) == index_bits(p));
-  };
+  using row_packed_detail::keeps_record_size;
   // Each set, most used first, takes the cheapest of: a palette already
   // serving it (0 bytes), growing a palette by its missing materials (one
   // byte each, while the sets that palette serves keep their records'
@@ -410,7 +405,7 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
   int table_bytes = 1;
   for (const Candidate& c : candidates) {
     auto serves = [&](const Chosen& t) {
-      return (t.mask & c.mask) == c.mask && keeps(c.runs, c.index, c.p, std::popcount(t.mask));
+      return (t.mask & c.mask) == c.mask && keeps_record_size(c.p, c.runs, c.index, std::popcount(t.mask));
     };
     if (std::any_of(chosen.begin(), chosen.end(), serves)) continue;
     int grow_cost = c.saving;
@@ -420,7 +415,7 @@ void RowPackedBox<N>::compact_from(const Voxel* content) {
       const int before = std::popcount(t.mask), after = std::popcount(t.mask | c.mask);
       // The palette's own sets keep their sizes if it keeps its index width
       // (index records) and at most 8 materials (run records).
-      if (!keeps(c.runs, c.index, c.p, after) || !keeps(t.runs, t.index, before, after) ||
+      if (!keeps_record_size(c.p, c.runs, c.index, after) || !keeps_record_size(before, t.runs, t.index, after) ||
           table_bytes + after - before > row_packed_detail::kMaxTableBytes)
         continue;
       if (after - before < grow_cost) {

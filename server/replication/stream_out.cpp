@@ -14,7 +14,7 @@ bool StreamOut::mip_patch(Vec3i cp, int level, std::uint64_t held, const ChunkVe
   units_.clear();
   v.append_patch_units(level, *mask, units_);
   // Level, mask and units against the whole unit.
-  if (1 + (level == 1 ? 8 : 1) + units_.size() >= v.encoded(level).size()) return false;
+  if (1 + static_cast<std::size_t>(patch_mask_bytes(level)) + units_.size() >= v.encoded(level).size()) return false;
   batch_.add_mip_patch(cp, v.revision(), level, *mask, units_);
   flush_if_full();
   return true;

@@ -14,6 +14,8 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <utility>
+#include <vector>
 
 #include "protocol/stream_batch.h"
 #include "server/base/chunk_version.h"
