@@ -92,6 +92,11 @@ class Chunk {
   Voxel get(int x, int y, int z) const { return level0_.get(x, y, z); }
   Voxel get(Vec3i p) const { return get(p.x, p.y, p.z); }
   const Voxel* read_row(int y, int z, Level0::Row& scratch) const { return level0_.read_row(y, z, scratch); }
+  // Whether any voxel [x0, x1) of row (y, z) is solid_enough (voxel.h),
+  // read in place (RowPackedBox::row_has_solid).
+  bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
+    return level0_.row_has_solid(y, z, x0, x1, min_occupancy);
+  }
   const Level0& level0() const { return level0_; }
 
   // Voxel of mip level 0..3 at level-local coordinates (0 .. 32 >> level).

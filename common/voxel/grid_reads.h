@@ -5,8 +5,9 @@
 //
 // A chunk map G has `const C* find_chunk(Vec3i chunk_pos) const` (null: all
 // Air), and its chunks C have `Voxel get(Vec3i local) const`,
-// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`
-// and `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
+// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`,
+// `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
+// and `bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const`
 // (chunk.h). Stateless: thread-safety is the map's.
 #pragma once
 
@@ -98,7 +99,6 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
       t_delta[a] = kInf;
     }
   }
-  auto solid_enough = [&](Voxel v) { return v.material != kAir && v.occupancy >= min_occupancy; };
   float t = 0.0f;
   Vec3i normal{0, 0, 0};
   // Bound the walk by the number of cells a segment of this length can cross.
@@ -106,7 +106,7 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
   for (int i = 0; i <= max_steps && t <= max_distance; ++i) {
     const Vec3i p{c[0], c[1], c[2]};
     const Voxel v = grid_get(grid, p);
-    if (solid_enough(v)) return RayHit{p, normal, t, v};
+    if (solid_enough(v, min_occupancy)) return RayHit{p, normal, t, v};
     int a = 0;
     if (t_max[1] < t_max[a]) a = 1;
     if (t_max[2] < t_max[a]) a = 2;
@@ -120,8 +120,9 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
 }
 
 // True if any non-Air voxel with occupancy >= min_occupancy overlaps the box
-// (touching faces do not count). Reads the rows the box crosses in place,
-// chunk by chunk, without a copy, and stops at the first such voxel.
+// (touching faces do not count). Asks each row the box crosses, chunk by
+// chunk, whether its part holds such a voxel (a row-packed row answers from
+// its record, without decoding it), and stops at the first.
 template <class G>
 bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
   // Cells overlapping the open box: floor(min) .. ceil(max) - 1.
@@ -131,12 +132,7 @@ bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
                  static_cast<int>(std::ceil(box.max.z))};
   if (hi.x <= lo.x || hi.y <= lo.y || hi.z <= lo.z) return false;
   const Region cells{lo, hi};
-  const auto solid_enough = [&](Voxel v) { return v.material != kAir && v.occupancy >= min_occupancy; };
-  // A few voxels of a row are read one by one (a packed row is not decoded
-  // for them); from this many on, the whole row.
-  constexpr int kWholeRowFrom = 8;
   const Vec3i c0 = chunk_of(lo), c1 = chunk_of(hi - Vec3i{1, 1, 1});
-  std::array<Voxel, kChunkSize> scratch;
   for (int cy = c0.y; cy <= c1.y; ++cy)
     for (int cz = c0.z; cz <= c1.z; ++cz)
       for (int cx = c0.x; cx <= c1.x; ++cx) {
@@ -147,16 +143,8 @@ bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
         const Region part = intersect(cells, chunk_region(cp));
         const Vec3i min = part.min - origin, max = part.max - origin;
         for (int y = min.y; y < max.y; ++y)
-          for (int z = min.z; z < max.z; ++z) {
-            if (max.x - min.x < kWholeRowFrom) {
-              for (int x = min.x; x < max.x; ++x)
-                if (solid_enough(c->get(Vec3i{x, y, z}))) return true;
-              continue;
-            }
-            const Voxel* row = c->read_row(y, z, scratch);
-            for (int x = min.x; x < max.x; ++x)
-              if (solid_enough(row[x])) return true;
-          }
+          for (int z = min.z; z < max.z; ++z)
+            if (c->row_has_solid(y, z, min.x, max.x, min_occupancy)) return true;
       }
   return false;
 }

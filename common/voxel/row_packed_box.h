@@ -106,6 +106,7 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <utility>
 
@@ -250,6 +251,29 @@ void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Vo
 extern const bool kHaveSsse3;
 #endif
 
+// Copies n voxels, 0 <= n <= 32, with a few fixed-size moves (the last
+// one overlapping), not a call. src and dst do not overlap.
+inline void copy_voxels(const Voxel* src, int n, Voxel* dst) {
+  const auto* s = reinterpret_cast<const unsigned char*>(src);
+  auto* d = reinterpret_cast<unsigned char*>(dst);
+  const std::size_t bytes = sizeof(Voxel) * static_cast<std::size_t>(n);
+  if (bytes > 32) {
+    std::memcpy(d, s, 32);
+    std::memcpy(d + bytes - 32, s + bytes - 32, 32);
+  } else if (bytes >= 16) {
+    std::memcpy(d, s, 16);
+    std::memcpy(d + bytes - 16, s + bytes - 16, 16);
+  } else if (bytes >= 8) {
+    std::memcpy(d, s, 8);
+    std::memcpy(d + bytes - 8, s + bytes - 8, 8);
+  } else if (bytes >= 4) {
+    std::memcpy(d, s, 4);
+    std::memcpy(d + bytes - 4, s + bytes - 4, 4);
+  } else if (bytes == 2) {
+    std::memcpy(d, s, 2);
+  }
+}
+
 // One voxel of an index or run record.
 Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, int x);
 }  // namespace row_packed_detail
@@ -349,7 +373,8 @@ class RowPackedBox {
   }
 
   // Copies voxels [x0, x0 + n) of row (y, z) to out: a uniform row is
-  // filled, a raw row copied, a record decoded into scratch and copied.
+  // filled, a raw row copied, a record decoded (straight into out when the
+  // part is the whole row, else into scratch and copied).
   // Precondition: 0 <= x0, n >= 0, x0 + n <= N.
   void read_row_part(int y, int z, int x0, int n, Voxel* out, Row& scratch) const {
     const std::uint16_t h = header(y, z);
@@ -359,11 +384,79 @@ class RowPackedBox {
     }
     const std::uint8_t* rec = record(h);
     if (rec[0] < row_packed_detail::kKindIndex) {
-      std::copy_n(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      row_packed_detail::copy_voxels(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      return;
+    }
+    if (n == N) {
+      decode(rec, data_.get(), out);
       return;
     }
     decode(rec, data_.get(), scratch.data());
-    std::copy_n(scratch.data() + x0, n, out);
+    row_packed_detail::copy_voxels(scratch.data() + x0, n, out);
+  }
+
+  // Whether any voxel [x0, x1) of row (y, z) is non-Air with an occupancy
+  // of at least min_occupancy (solid_enough), read in place: a uniform row
+  // by its material; a record without occupancies, whose non-Air voxels all
+  // have full occupancy, by its palette (Air, id 0, can only be its first
+  // material, index 0) and then its runs or indices; others voxel by voxel.
+  // Precondition: 0 <= x0 <= x1 <= N.
+  bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
+    using namespace row_packed_detail;
+    if (x0 >= x1) return false;
+    const std::uint16_t h = header(y, z);
+    if (!(h & kAllocated)) return (h & 63) != kAir;
+    const std::uint8_t* rec = record(h);
+    const unsigned tag = rec[0];
+    if (tag < kKindIndex) return any_solid_enough(reinterpret_cast<const Voxel*>(rec), x0, x1, min_occupancy);
+    // (A span of a few voxels, as an overlap test of a player's box asks,
+    // reads them one by one.)
+    constexpr int kFew = 4;
+    if (tag & kTagOccupancy) {
+      if (x1 - x0 <= kFew) {
+        for (int x = x0; x < x1; ++x)
+          if (solid_enough(record_voxel(rec, data_.get(), N, x), min_occupancy)) return true;
+        return false;
+      }
+      Row scratch;
+      decode(rec, data_.get(), scratch.data());
+      return any_solid_enough(scratch.data(), x0, x1, min_occupancy);
+    }
+    const std::uint8_t* pal = record_palette(rec, data_.get());
+    if (pal[1] != kAir) return true;
+    const std::uint8_t* body = (tag & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
+    if ((tag & kKindMask) == kKindRuns) {
+      if (x1 - x0 <= kFew) {
+        for (int x = x0; x < x1; ++x)
+          if (run_index_at(body, x) != 0) return true;
+        return false;
+      }
+      // A run of a non-zero index overlapping [x0, x1).
+      const int runs = run_count(body);
+      for (int r = 0; r < runs; ++r) {
+        const int start = r == 0 ? 0 : body[r] & 31;
+        if (start >= x1) break;
+        const int end = r + 1 < runs ? body[r + 1] & 31 : N;
+        if (end > x0 && (body[r] >> 5) != 0) return true;
+      }
+      return false;
+    }
+    const unsigned p1 = pal[0];
+    if (p1 < 2) {
+      // 1 bit per voxel, voxel x at bit x of the body (little-endian; the
+      // box's padding makes 4 bytes readable).
+      std::uint32_t bits;
+      std::memcpy(&bits, body, 4);
+      const int n = x1 - x0;
+      const std::uint32_t span = n >= 32 ? ~0u : ((1u << n) - 1u) << x0;
+      return (bits & span) != 0;
+    }
+    for (int x = x0; x < x1; ++x) {
+      constexpr int g2 = N * 2 / 8, g4 = N * 4 / 8;
+      const unsigned index = p1 < 4 ? (body[x % g2] >> (2 * (x / g2))) & 3 : (body[x % g4] >> (4 * (x / g4))) & 15;
+      if (index != 0) return true;
+    }
+    return false;
   }
 
   // One voxel, in place: records without occupancy are read here (a ray

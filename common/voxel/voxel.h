@@ -59,6 +59,18 @@ constexpr Voxel solid(Material material) {
   return make_voxel(material, default_occupancy(material));
 }
 
+// Whether a voxel stops a ray cast or an overlap test: non-Air with an
+// occupancy byte of at least min_occupancy.
+constexpr bool solid_enough(Voxel v, std::uint8_t min_occupancy) {
+  return v.material != kAir && v.occupancy >= min_occupancy;
+}
+// Whether any of voxels [x0, x1) of a row does.
+inline bool any_solid_enough(const Voxel* row, int x0, int x1, std::uint8_t min_occupancy) {
+  for (int x = x0; x < x1; ++x)
+    if (solid_enough(row[x], min_occupancy)) return true;
+  return false;
+}
+
 constexpr bool has_default_occupancy(Voxel v) {
   return v.occupancy == default_occupancy(v.material);
 }

@@ -62,6 +62,9 @@ class UnpackedChunk {
   }
   Voxel get(Vec3i p) const { return levels_[0].get(p); }
   const Voxel* read_row(int y, int z, Chunk::Level0::Row&) const { return levels_[0].read_row(y, z); }
+  bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
+    return any_solid_enough(levels_[0].read_row(y, z), x0, x1, min_occupancy);
+  }
   void read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
     for (int y = 0; y < size.y; ++y)
       for (int z = 0; z < size.z; ++z)
