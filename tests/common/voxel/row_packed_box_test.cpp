@@ -445,7 +445,7 @@ namespace {
 TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
   std::mt19937 rng(99);
   std::uniform_int_distribution<int> occ(0, 255), count(1, 16), flip(0, 3), runs(1, 12), coin(0, 1);
-  int records = 0, run_records = 0, occupancy_records = 0, table_records = 0;
+  int records = 0, run_records = 0, occupancy_records = 0, long_occupancy_records = 0, table_records = 0;
   for (int trial = 0; trial < 4000; ++trial) {
     // 1..16 materials; runs or scattered voxels; some partial occupancy.
     const int k = count(rng);
@@ -459,11 +459,19 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
       const int n_runs = runs(rng);
       for (int x = 0; x < 32; ++x) row[x] = solid(mats[(x * n_runs / 32) % k]);
     }
+    // A few voxels of partial occupancy, or from 17 to 32 of them (an
+    // occupancy section longer than one register).
     if (flip(rng) == 0)
       for (int i = 0; i < 1 + flip(rng) * 4; ++i) {
         Voxel& v = row[occ(rng) % 32];
         v = make_voxel(v.material, static_cast<std::uint8_t>(occ(rng)));
       }
+    else if (flip(rng) == 0)
+      for (int x = 0, partial = 0, want = 17 + occ(rng) % 16; x < 32 && partial < want; ++x)
+        if (row[x].material != kAir && (occ(rng) & 3) != 0) {
+          row[x] = make_voxel(row[x].material, static_cast<std::uint8_t>(1 + occ(rng) % 254));
+          ++partial;
+        }
     // A table holding this row's palette half of the time, laid out as in a
     // box: table, then the record, then exactly the decoder's padding.
     row_packed_detail::PaletteTable table;
@@ -481,6 +489,7 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
     ++records;
     run_records += (rec[0] & row_packed_detail::kKindMask) == row_packed_detail::kKindRuns;
     occupancy_records += (rec[0] & row_packed_detail::kTagOccupancy) != 0;
+    long_occupancy_records += std::count_if(row, row + 32, [](Voxel v) { return !has_default_occupancy(v); }) > 16;
     table_records += (rec[0] & row_packed_detail::kPaletteMask) != row_packed_detail::kInlinePalette;
     ASSERT_EQ(row_packed_detail::record_bytes(rec, tbl, 32), size);
     Voxel scalar[32];
@@ -500,6 +509,7 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
   EXPECT_GT(records, 2000);
   EXPECT_GT(run_records, 200);
   EXPECT_GT(occupancy_records, 200);
+  EXPECT_GT(long_occupancy_records, 50);
   EXPECT_GT(table_records, 200);
 }
 }  // namespace
