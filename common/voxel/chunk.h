@@ -92,10 +92,11 @@ class Chunk {
   Voxel get(int x, int y, int z) const { return level0_.get(x, y, z); }
   Voxel get(Vec3i p) const { return get(p.x, p.y, p.z); }
   const Voxel* read_row(int y, int z, Level0::Row& scratch) const { return level0_.read_row(y, z, scratch); }
-  // Whether any voxel [x0, x1) of row (y, z) is solid_enough (voxel.h),
-  // read in place (RowPackedBox::row_has_solid).
-  bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
-    return level0_.row_has_solid(y, z, x0, x1, min_occupancy);
+  // Whether any voxel of the chunk-local box [min, max) is solid_enough
+  // (voxel.h), read in place (RowPackedBox::box_has_solid).
+  // Precondition: the box lies inside the chunk.
+  bool box_has_solid(Vec3i min, Vec3i max, std::uint8_t min_occupancy) const {
+    return level0_.box_has_solid(min.x, max.x, min.y, max.y, min.z, max.z, min_occupancy);
   }
   const Level0& level0() const { return level0_; }
 

@@ -7,7 +7,7 @@
 // Air), and its chunks C have `Voxel get(Vec3i local) const`,
 // `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`,
 // `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
-// and `bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const`
+// and `bool box_has_solid(Vec3i local_min, Vec3i local_max, std::uint8_t min_occupancy) const`
 // (chunk.h). Stateless: thread-safety is the map's.
 #pragma once
 
@@ -120,9 +120,9 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
 }
 
 // True if any non-Air voxel with occupancy >= min_occupancy overlaps the box
-// (touching faces do not count). Asks each row the box crosses, chunk by
-// chunk, whether its part holds such a voxel (a row-packed row answers from
-// its record, without decoding it), and stops at the first.
+// (touching faces do not count). Asks each chunk the box crosses whether its
+// part holds such a voxel (a row-packed chunk answers from its layers and
+// records, without decoding them), and stops at the first.
 template <class G>
 bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
   // Cells overlapping the open box: floor(min) .. ceil(max) - 1.
@@ -141,10 +141,7 @@ bool grid_collides(const G& grid, const Aabb& box, std::uint8_t min_occupancy) {
         if (c == nullptr) continue;  // all Air
         const Vec3i origin = chunk_origin(cp);
         const Region part = intersect(cells, chunk_region(cp));
-        const Vec3i min = part.min - origin, max = part.max - origin;
-        for (int y = min.y; y < max.y; ++y)
-          for (int z = min.z; z < max.z; ++z)
-            if (c->row_has_solid(y, z, min.x, max.x, min_occupancy)) return true;
+        if (c->box_has_solid(part.min - origin, part.max - origin, min_occupancy)) return true;
       }
   return false;
 }

@@ -402,9 +402,29 @@ class RowPackedBox {
   // material, index 0) and then its runs or indices; others voxel by voxel.
   // Precondition: 0 <= x0 <= x1 <= N.
   bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
+    return x0 < x1 && header_has_solid(header(y, z), x0, x1, min_occupancy);
+  }
+  // The same over the box [x0, x1) × [y0, y1) × [z0, z1): a layer of one
+  // uniform material answers for all its rows, others row by row.
+  // Precondition: 0 <= x0 <= x1 <= N, the same for y and z.
+  bool box_has_solid(int x0, int x1, int y0, int y1, int z0, int z1, std::uint8_t min_occupancy) const {
+    if (x0 >= x1 || z0 >= z1) return false;
+    const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
+    for (int y = y0; y < y1; ++y) {
+      if (map[y] & 0x80) {
+        if ((map[y] & 63) != kAir) return true;
+        continue;
+      }
+      for (int z = z0; z < z1; ++z)
+        if (header_has_solid(header(y, z), x0, x1, min_occupancy)) return true;
+    }
+    return false;
+  }
+
+ private:
+  // row_has_solid of the row with header h, for x0 < x1.
+  bool header_has_solid(std::uint16_t h, int x0, int x1, std::uint8_t min_occupancy) const {
     using namespace row_packed_detail;
-    if (x0 >= x1) return false;
-    const std::uint16_t h = header(y, z);
     if (!(h & kAllocated)) return (h & 63) != kAir;
     const std::uint8_t* rec = record(h);
     const unsigned tag = rec[0];
@@ -459,6 +479,7 @@ class RowPackedBox {
     return false;
   }
 
+ public:
   // One voxel, in place: records without occupancy are read here (a ray
   // cast or an overlap test reads voxel by voxel), the rest by record_voxel.
   Voxel get(int x, int y, int z) const {

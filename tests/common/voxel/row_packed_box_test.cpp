@@ -39,6 +39,17 @@ void expect_equal(const RowPackedBox<N>& packed, const Box& ref, const char* whe
         ASSERT_EQ(packed.row_has_solid(y, z, x0, x0 + n, static_cast<std::uint8_t>(min_occupancy)), expected)
             << when << " row " << y << "," << z << " [" << x0 << ", " << x0 + n << ") min " << min_occupancy;
       }
+      // And over a box of up to 3 layers and 4 rows from this row.
+      const int y1 = std::min(N, y + 1 + z % 3), z1 = std::min(N, z + 1 + y % 4);
+      for (const int min_occupancy : {0, 200}) {
+        bool expected = false;
+        for (int by = y; by < y1; ++by)
+          for (int bz = z; bz < z1; ++bz)
+            for (int x = x0; x < x0 + n; ++x)
+              expected |= solid_enough(ref.get(x, by, bz), static_cast<std::uint8_t>(min_occupancy));
+        ASSERT_EQ(packed.box_has_solid(x0, x0 + n, y, y1, z, z1, static_cast<std::uint8_t>(min_occupancy)), expected)
+            << when << " box from row " << y << "," << z;
+      }
     }
   }
 }
