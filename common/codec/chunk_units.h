@@ -4,9 +4,7 @@
 // and, in the consumers' benchmark (tests/bench/consumers_bench.cpp), the
 // same voxels as a plain array, so both run exactly this code.
 //
-// C has `Voxel get(Vec3i local) const`,
-// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`
-// and `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
+// C has `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`
 // (chunk.h). A null chunk is all Air. Stateless: any thread may call.
 #pragma once
 
@@ -25,18 +23,28 @@ namespace terrane {
 
 // Appends the eight 16^3 units of level 0 in unit index order (x, then y,
 // then z halves: unit i covers origin (i & 1, (i >> 1) & 1, (i >> 2) & 1) * 16).
+// The two units side by side along x (i and i + 1) share their rows: each
+// row of the chunk is read once, its halves copied into the two units.
 template <class C>
 void encode_full_units(const C* chunk, std::vector<std::uint8_t>& out) {
   constexpr int u = kChunkSize / 2;
-  Box box({u, u, u});
-  for (int i = 0; i < 8; ++i) {
-    const Vec3i o{i & 1, (i >> 1) & 1, (i >> 2) & 1};
-    if (chunk)
-      chunk->read_box(o * u, box, Vec3i{0, 0, 0}, Vec3i{u, u, u});
-    else
-      box.fill(Voxel{});
-    net_codec_encode(u, box.voxels(), out);
+  Box low({u, u, u}), high({u, u, u});
+  if (chunk == nullptr) {
+    for (int i = 0; i < 8; ++i) net_codec_encode(u, low.voxels(), out);
+    return;
   }
+  std::array<Voxel, kChunkSize> scratch;
+  for (int oz = 0; oz < 2; ++oz)
+    for (int oy = 0; oy < 2; ++oy) {
+      for (int y = 0; y < u; ++y)
+        for (int z = 0; z < u; ++z) {
+          const Voxel* row = chunk->read_row(oy * u + y, oz * u + z, scratch);
+          std::copy_n(row, u, low.write_row(y, z));
+          std::copy_n(row + u, u, high.write_row(y, z));
+        }
+      net_codec_encode(u, low.voxels(), out);
+      net_codec_encode(u, high.voxels(), out);
+    }
 }
 
 // Fills each update's voxels with its 4^3 unit (unit_index 0..511,
