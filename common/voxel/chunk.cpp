@@ -149,13 +149,9 @@ void Chunk::read_level(int level, Box& out) const {
 }
 
 void Chunk::read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
-  Level0::Row scratch;
-  for (int y = 0; y < size.y; ++y) {
-    for (int z = 0; z < size.z; ++z) {
-      level0_.read_row_part(min.y + y, min.z + z, min.x, size.x,
-                            out.write_row(out_offset.y + y, out_offset.z + z) + out_offset.x, scratch);
-    }
-  }
+  const Vec3i shift = out_offset - min;
+  level0_.read_rows_part(min.y, min.y + size.y, min.z, min.z + size.z, min.x, size.x,
+                         [&](int y, int z) { return out.write_row(y + shift.y, z + shift.z) + out_offset.x; });
 }
 
 void Chunk::pack_mips() {

@@ -251,19 +251,29 @@ void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Vo
 extern const bool kHaveSsse3;
 #endif
 
-// Copies n voxels, 0 <= n <= 32, with a few fixed-size moves (the last
-// one overlapping), not a call. src and dst do not overlap.
+// Copies n voxels, 0 <= n <= kMax <= 32, with a few fixed-size moves (the
+// last one overlapping), not a call. src and dst do not overlap.
+template <int kMax>
 inline void copy_voxels(const Voxel* src, int n, Voxel* dst) {
+  static_assert(kMax <= 32);
   const auto* s = reinterpret_cast<const unsigned char*>(src);
   auto* d = reinterpret_cast<unsigned char*>(dst);
   const std::size_t bytes = sizeof(Voxel) * static_cast<std::size_t>(n);
-  if (bytes > 32) {
-    std::memcpy(d, s, 32);
-    std::memcpy(d + bytes - 32, s + bytes - 32, 32);
-  } else if (bytes >= 16) {
-    std::memcpy(d, s, 16);
-    std::memcpy(d + bytes - 16, s + bytes - 16, 16);
-  } else if (bytes >= 8) {
+  if constexpr (2 * kMax > 32) {
+    if (bytes > 32) {
+      std::memcpy(d, s, 32);
+      std::memcpy(d + bytes - 32, s + bytes - 32, 32);
+      return;
+    }
+  }
+  if constexpr (2 * kMax >= 16) {
+    if (bytes >= 16) {
+      std::memcpy(d, s, 16);
+      std::memcpy(d + bytes - 16, s + bytes - 16, 16);
+      return;
+    }
+  }
+  if (bytes >= 8) {
     std::memcpy(d, s, 8);
     std::memcpy(d + bytes - 8, s + bytes - 8, 8);
   } else if (bytes >= 4) {
@@ -377,29 +387,38 @@ class RowPackedBox {
   // part is the whole row, else into scratch and copied).
   // Precondition: 0 <= x0, n >= 0, x0 + n <= N.
   void read_row_part(int y, int z, int x0, int n, Voxel* out, Row& scratch) const {
-    const std::uint16_t h = header(y, z);
-    if (!(h & kAllocated)) {
-      std::fill_n(out, n, solid(static_cast<Material>(h & 63)));
-      return;
+    read_part_of(header(y, z), x0, n, out, scratch);
+  }
+  // read_row_part of rows y in [y0, y1), z in [z0, z1) to dest(y, z) (a
+  // Voxel* per row), except that a row with the same header as the row
+  // before it in its layer (the same record, or the same uniform material)
+  // copies that row's part rather than decoding it again.
+  template <class Dest>
+  void read_rows_part(int y0, int y1, int z0, int z1, int x0, int n, Dest&& dest) const {
+    Row scratch;
+    for (int y = y0; y < y1; ++y) {
+      std::uint16_t last = 0;
+      const Voxel* last_out = nullptr;
+      for (int z = z0; z < z1; ++z) {
+        Voxel* out = dest(y, z);
+        const std::uint16_t h = header(y, z);
+        if (last_out != nullptr && h == last) {
+          row_packed_detail::copy_voxels<N>(last_out, n, out);
+          continue;
+        }
+        read_part_of(h, x0, n, out, scratch);
+        last = h;
+        last_out = out;
+      }
     }
-    const std::uint8_t* rec = record(h);
-    if (rec[0] < row_packed_detail::kKindIndex) {
-      row_packed_detail::copy_voxels(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
-      return;
-    }
-    if (n == N) {
-      decode(rec, data_.get(), out);
-      return;
-    }
-    decode(rec, data_.get(), scratch.data());
-    row_packed_detail::copy_voxels(scratch.data() + x0, n, out);
   }
 
   // Whether any voxel [x0, x1) of row (y, z) is non-Air with an occupancy
   // of at least min_occupancy (solid_enough), read in place: a uniform row
   // by its material; a record without occupancies, whose non-Air voxels all
-  // have full occupancy, by its palette (Air, id 0, can only be its first
-  // material, index 0) and then its runs or indices; others voxel by voxel.
+  // have full occupancy (or any record when min_occupancy is 0), by its
+  // palette (Air, id 0, can only be its first material, index 0) and then
+  // its runs or indices; others voxel by voxel.
   // Precondition: 0 <= x0 <= x1 <= N.
   bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
     return x0 < x1 && header_has_solid(header(y, z), x0, x1, min_occupancy);
@@ -422,6 +441,24 @@ class RowPackedBox {
   }
 
  private:
+  // read_row_part of the row with header h.
+  void read_part_of(std::uint16_t h, int x0, int n, Voxel* out, Row& scratch) const {
+    if (!(h & kAllocated)) {
+      std::fill_n(out, n, solid(static_cast<Material>(h & 63)));
+      return;
+    }
+    const std::uint8_t* rec = record(h);
+    if (rec[0] < row_packed_detail::kKindIndex) {
+      row_packed_detail::copy_voxels<N>(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      return;
+    }
+    if (n == N) {
+      decode(rec, data_.get(), out);
+      return;
+    }
+    decode(rec, data_.get(), scratch.data());
+    row_packed_detail::copy_voxels<N>(scratch.data() + x0, n, out);
+  }
   // row_has_solid of the row with header h, for x0 < x1.
   bool header_has_solid(std::uint16_t h, int x0, int x1, std::uint8_t min_occupancy) const {
     using namespace row_packed_detail;
@@ -432,7 +469,9 @@ class RowPackedBox {
     // (A span of a few voxels, as an overlap test of a player's box asks,
     // reads them one by one.)
     constexpr int kFew = 4;
-    if (tag & kTagOccupancy) {
+    // With min_occupancy 0 every non-Air voxel counts, whatever its
+    // occupancy: the materials answer, as for a record without occupancies.
+    if ((tag & kTagOccupancy) && min_occupancy > 0) {
       if (x1 - x0 <= kFew) {
         for (int x = x0; x < x1; ++x)
           if (solid_enough(record_voxel(rec, data_.get(), N, x), min_occupancy)) return true;
@@ -443,7 +482,7 @@ class RowPackedBox {
       return any_solid_enough(scratch.data(), x0, x1, min_occupancy);
     }
     const std::uint8_t* pal = record_palette(rec, data_.get());
-    if (pal[1] != kAir) return true;
+    if (pal[1] != kAir) return true;  // (a record's voxels are all of its palette's materials)
     const std::uint8_t* body = (tag & kPaletteMask) == kInlinePalette ? rec + 3 + pal[0] : rec + 1;
     if ((tag & kKindMask) == kKindRuns) {
       if (x1 - x0 <= kFew) {

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstring>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "common/voxel/box.h"
@@ -51,6 +52,18 @@ void expect_equal(const RowPackedBox<N>& packed, const Box& ref, const char* whe
             << when << " box from row " << y << "," << z;
       }
     }
+  }
+  // Every row's part read together (rows sharing a header copy the row
+  // before), nothing written past a part.
+  for (const auto& [x0, n] : {std::pair{0, N}, std::pair{1, N - 2}, std::pair{N / 2, N / 2}}) {
+    std::vector<Voxel> all(std::size_t{N} * N * N, make_voxel(63, 7));
+    packed.read_rows_part(0, N, 0, N, x0, n, [&](int y, int z) { return all.data() + (std::size_t(y) * N + z) * N; });
+    for (int y = 0; y < N; ++y)
+      for (int z = 0; z < N; ++z) {
+        const Voxel* row = all.data() + (std::size_t(y) * N + z) * N;
+        for (int x = 0; x < n; ++x) ASSERT_EQ(row[x], ref.get(x0 + x, y, z)) << when << ": rows read together";
+        for (int x = n; x < N; ++x) ASSERT_EQ(row[x], make_voxel(63, 7)) << when << ": rows read together, past the part";
+      }
   }
 }
 
