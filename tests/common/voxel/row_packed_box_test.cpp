@@ -6,6 +6,7 @@
 #include <array>
 #include <cstring>
 #include <random>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -466,6 +467,21 @@ TEST(RowPackedBox, CloneIsIndependent) {
 
 namespace terrane {
 namespace {
+// A 32-wide index or run record (its table palettes in tbl) decodes to
+// `expected` through the scalar reference and, where the CPU has it, SSSE3.
+void expect_decoded(const std::uint8_t* rec, const std::uint8_t* tbl, const Voxel* expected, const std::string& what) {
+  Voxel scalar[32];
+  row_packed_detail::decode_record_scalar(rec, tbl, scalar, 32);
+  for (int x = 0; x < 32; ++x) ASSERT_EQ(scalar[x], expected[x]) << "scalar, " << what << ", x " << x;
+#if defined(__x86_64__) || defined(__i386__)
+  if (row_packed_detail::kHaveSsse3) {
+    Voxel simd[32];
+    row_packed_detail::decode_record32_ssse3(rec, tbl, simd);
+    for (int x = 0; x < 32; ++x) ASSERT_EQ(simd[x], expected[x]) << "ssse3, " << what << ", x " << x;
+  }
+#endif
+}
+
 TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
   std::mt19937 rng(99);
   std::uniform_int_distribution<int> occ(0, 255), count(1, 16), flip(0, 3), runs(1, 12), coin(0, 1);
@@ -516,19 +532,9 @@ TEST(RowPackedBox, SimdDecoderMatchesScalarReference) {
     long_occupancy_records += std::count_if(row, row + 32, [](Voxel v) { return !has_default_occupancy(v); }) > 16;
     table_records += (rec[0] & row_packed_detail::kPaletteMask) != row_packed_detail::kInlinePalette;
     ASSERT_EQ(row_packed_detail::record_bytes(rec, tbl, 32), size);
-    Voxel scalar[32];
-    row_packed_detail::decode_record_scalar(rec, tbl, scalar, 32);
-    for (int x = 0; x < 32; ++x) {
-      ASSERT_EQ(scalar[x], row[x]) << "scalar, trial " << trial << " x " << x;
+    ASSERT_NO_FATAL_FAILURE(expect_decoded(rec, tbl, row, "trial " + std::to_string(trial)));
+    for (int x = 0; x < 32; ++x)
       ASSERT_EQ(row_packed_detail::record_voxel(rec, tbl, 32, x), row[x]) << "voxel, trial " << trial << " x " << x;
-    }
-#if defined(__x86_64__) || defined(__i386__)
-    if (row_packed_detail::kHaveSsse3) {
-      Voxel simd[32];
-      row_packed_detail::decode_record32_ssse3(rec, tbl, simd);
-      for (int x = 0; x < 32; ++x) ASSERT_EQ(simd[x], scalar[x]) << "ssse3, trial " << trial << " x " << x;
-    }
-#endif
   }
   EXPECT_GT(records, 2000);
   EXPECT_GT(run_records, 200);
@@ -712,16 +718,7 @@ TEST(RowPackedBox, SimdDecoderReadsRunRecordsOfUpTo32Runs) {
         const int end = r + 1 < runs ? starts[static_cast<std::size_t>(r) + 1] : 32;
         for (int x = starts[static_cast<std::size_t>(r)]; x < end; ++x) expected[x] = solid(buf[2 + index]);
       }
-      Voxel scalar[32];
-      row_packed_detail::decode_record_scalar(buf, nullptr, scalar, 32);
-      for (int x = 0; x < 32; ++x) ASSERT_EQ(scalar[x], expected[x]) << "scalar, " << runs << " runs, x " << x;
-#if defined(__x86_64__) || defined(__i386__)
-      if (row_packed_detail::kHaveSsse3) {
-        Voxel simd[32];
-        row_packed_detail::decode_record32_ssse3(buf, nullptr, simd);
-        for (int x = 0; x < 32; ++x) ASSERT_EQ(simd[x], expected[x]) << "ssse3, " << runs << " runs, x " << x;
-      }
-#endif
+      ASSERT_NO_FATAL_FAILURE(expect_decoded(buf, nullptr, expected, std::to_string(runs) + " runs"));
     }
   }
 }
