@@ -5,7 +5,6 @@
 //
 // A chunk map G has `const C* find_chunk(Vec3i chunk_pos) const` (null: all
 // Air), and its chunks C have `Voxel get(Vec3i local) const`,
-// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`,
 // `void read_box(Vec3i local_min, Box& out, Vec3i out_offset, Vec3i size) const`
 // and `bool box_has_solid(Vec3i local_min, Vec3i local_max, std::uint8_t min_occupancy) const`
 // (chunk.h). Stateless: thread-safety is the map's.
