@@ -1,5 +1,7 @@
 #include "protocol/chunk_hash.h"
 
+#include <algorithm>
+
 namespace terrane {
 
 std::uint64_t hash_row(std::uint64_t h, const Voxel* row) {

@@ -2,12 +2,12 @@
 // a Chunk on both sides of the protocol and, in the consumers' benchmark
 // (tests/bench/consumers_bench.cpp), the same voxels as a plain array, so
 // both run exactly this code. C has
-// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`.
+// `const Voxel* read_row(int y, int z, std::array<Voxel, 32>& scratch) const`
+// (never null).
 // 64-bit FNV-1a over the revision (8 bytes little-endian) then the 32^3
 // voxels in Box order, two bytes each (material, occupancy). Stateless.
 #pragma once
 
-#include <algorithm>
 #include <array>
 #include <cstdint>
 
@@ -54,7 +54,7 @@ std::uint64_t chunk_hash_of(const C* chunk, std::uint64_t revision) {
   const Voxel* row = chunk->read_row(0, 0, scratch[0]);
   for (int r = 0; r < kRows; ++r) {
     const Voxel* next = r + 1 < kRows ? chunk->read_row((r + 1) / kChunkSize, (r + 1) % kChunkSize, scratch[(r + 1) & 1]) : nullptr;
-    h = row == nullptr ? h * kAirRowFactor : hash_row(h, row);
+    h = hash_row(h, row);
     row = next;
   }
   return h;

@@ -11,7 +11,6 @@
 #pragma once
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -116,6 +115,16 @@ std::optional<RayHit> grid_raycast(const G& grid, Vec3f origin, Vec3f dir, float
     (a == 0 ? normal.x : a == 1 ? normal.y : normal.z) = -step[a];
   }
   return std::nullopt;
+}
+
+// box_has_solid over a plain box: whether any voxel of [min, max) is
+// solid_enough (voxel.h), row by row. (Chunk::box_has_solid is the
+// row-packed one; a map of plain chunks answers with this.)
+inline bool box_has_solid(const Box& box, Vec3i min, Vec3i max, std::uint8_t min_occupancy) {
+  for (int y = min.y; y < max.y; ++y)
+    for (int z = min.z; z < max.z; ++z)
+      if (any_solid_enough(box.read_row(y, z), min.x, max.x, min_occupancy)) return true;
+  return false;
 }
 
 // True if any non-Air voxel with occupancy >= min_occupancy overlaps the box

@@ -251,39 +251,6 @@ void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Vo
 extern const bool kHaveSsse3;
 #endif
 
-// Copies n voxels, 0 <= n <= kMax <= 32, with a few fixed-size moves (the
-// last one overlapping), not a call. src and dst do not overlap.
-template <int kMax>
-inline void copy_voxels(const Voxel* src, int n, Voxel* dst) {
-  static_assert(kMax <= 32);
-  const auto* s = reinterpret_cast<const unsigned char*>(src);
-  auto* d = reinterpret_cast<unsigned char*>(dst);
-  const std::size_t bytes = sizeof(Voxel) * static_cast<std::size_t>(n);
-  if constexpr (2 * kMax > 32) {
-    if (bytes > 32) {
-      std::memcpy(d, s, 32);
-      std::memcpy(d + bytes - 32, s + bytes - 32, 32);
-      return;
-    }
-  }
-  if constexpr (2 * kMax >= 16) {
-    if (bytes >= 16) {
-      std::memcpy(d, s, 16);
-      std::memcpy(d + bytes - 16, s + bytes - 16, 16);
-      return;
-    }
-  }
-  if (bytes >= 8) {
-    std::memcpy(d, s, 8);
-    std::memcpy(d + bytes - 8, s + bytes - 8, 8);
-  } else if (bytes >= 4) {
-    std::memcpy(d, s, 4);
-    std::memcpy(d + bytes - 4, s + bytes - 4, 4);
-  } else if (bytes == 2) {
-    std::memcpy(d, s, 2);
-  }
-}
-
 // One voxel of an index or run record.
 Voxel record_voxel(const std::uint8_t* rec, const std::uint8_t* table, int n, int x);
 }  // namespace row_packed_detail
@@ -403,7 +370,7 @@ class RowPackedBox {
         Voxel* out = dest(y, z);
         const std::uint16_t h = header(y, z);
         if (last_out != nullptr && h == last) {
-          row_packed_detail::copy_voxels<N>(last_out, n, out);
+          std::copy_n(last_out, n, out);
           continue;
         }
         read_part_of(h, x0, n, out, scratch);
@@ -413,18 +380,13 @@ class RowPackedBox {
     }
   }
 
-  // Whether any voxel [x0, x1) of row (y, z) is non-Air with an occupancy
-  // of at least min_occupancy (solid_enough), read in place: a uniform row
-  // by its material; a record without occupancies, whose non-Air voxels all
-  // have full occupancy (or any record when min_occupancy is 0), by its
-  // palette (Air, id 0, can only be its first material, index 0) and then
-  // its runs or indices; others voxel by voxel.
-  // Precondition: 0 <= x0 <= x1 <= N.
-  bool row_has_solid(int y, int z, int x0, int x1, std::uint8_t min_occupancy) const {
-    return x0 < x1 && header_has_solid(header(y, z), x0, x1, min_occupancy);
-  }
-  // The same over the box [x0, x1) × [y0, y1) × [z0, z1): a layer of one
-  // uniform material answers for all its rows, others row by row.
+  // Whether any voxel of the box [x0, x1) × [y0, y1) × [z0, z1) is non-Air
+  // with an occupancy of at least min_occupancy (solid_enough), read in
+  // place: a layer of one uniform material answers for all its rows at once;
+  // a uniform row by its material; a record without occupancies, whose
+  // non-Air voxels all have full occupancy (or any record when
+  // min_occupancy is 0), by its palette (Air, id 0, can only be its first
+  // material, index 0) and then its runs or indices; others voxel by voxel.
   // Precondition: 0 <= x0 <= x1 <= N, the same for y and z.
   bool box_has_solid(int x0, int x1, int y0, int y1, int z0, int z1, std::uint8_t min_occupancy) const {
     if (x0 >= x1 || z0 >= z1) return false;
@@ -449,7 +411,7 @@ class RowPackedBox {
     }
     const std::uint8_t* rec = record(h);
     if (rec[0] < row_packed_detail::kKindIndex) {
-      row_packed_detail::copy_voxels<N>(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
+      std::copy_n(reinterpret_cast<const Voxel*>(rec) + x0, n, out);
       return;
     }
     if (n == N) {
@@ -457,9 +419,9 @@ class RowPackedBox {
       return;
     }
     decode(rec, data_.get(), scratch.data());
-    row_packed_detail::copy_voxels<N>(scratch.data() + x0, n, out);
+    std::copy_n(scratch.data() + x0, n, out);
   }
-  // row_has_solid of the row with header h, for x0 < x1.
+  // box_has_solid of the part [x0, x1) of the row with header h, for x0 < x1.
   bool header_has_solid(std::uint16_t h, int x0, int x1, std::uint8_t min_occupancy) const {
     using namespace row_packed_detail;
     if (!(h & kAllocated)) return (h & 63) != kAir;

@@ -127,9 +127,8 @@ __attribute__((target("ssse3"))) inline void decode_record32_ssse3(const std::ui
     end = body + runs;
   } else {
     const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(body));
-    const __m128i bit = _mm_set1_epi64x(static_cast<long long>(0x8040201008040201ull));
-    const __m128i lo1 = _mm_cmpeq_epi8(_mm_and_si128(_mm_shuffle_epi8(v, _mm_set_epi8(1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0)), bit), bit);
-    const __m128i hi1 = _mm_cmpeq_epi8(_mm_and_si128(_mm_shuffle_epi8(v, _mm_set_epi8(3, 3, 3, 3, 3, 3, 3, 3, 2, 2, 2, 2, 2, 2, 2, 2)), bit), bit);
+    __m128i lo1, hi1;
+    bitmap_lanes(v, lo1, hi1);  // 1 bit: the first 4 bytes as a bitmap
     const __m128i s2 = _mm_srli_epi16(v, 2);
     const __m128i s4 = _mm_srli_epi16(v, 4);
     const __m128i s6 = _mm_srli_epi16(v, 6);

@@ -63,10 +63,7 @@ class UnpackedChunk {
   Voxel get(Vec3i p) const { return levels_[0].get(p); }
   const Voxel* read_row(int y, int z, Chunk::Level0::Row&) const { return levels_[0].read_row(y, z); }
   bool box_has_solid(Vec3i min, Vec3i max, std::uint8_t min_occupancy) const {
-    for (int y = min.y; y < max.y; ++y)
-      for (int z = min.z; z < max.z; ++z)
-        if (any_solid_enough(levels_[0].read_row(y, z), min.x, max.x, min_occupancy)) return true;
-    return false;
+    return terrane::box_has_solid(levels_[0], min, max, min_occupancy);
   }
   void read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
     for (int y = 0; y < size.y; ++y)

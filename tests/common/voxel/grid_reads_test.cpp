@@ -22,10 +22,7 @@ class PlainChunk {
   Voxel get(Vec3i p) const { return box_.get(p); }
   const Voxel* read_row(int y, int z, std::array<Voxel, kChunkSize>&) const { return box_.read_row(y, z); }
   bool box_has_solid(Vec3i min, Vec3i max, std::uint8_t min_occupancy) const {
-    for (int y = min.y; y < max.y; ++y)
-      for (int z = min.z; z < max.z; ++z)
-        if (any_solid_enough(box_.read_row(y, z), min.x, max.x, min_occupancy)) return true;
-    return false;
+    return terrane::box_has_solid(box_, min, max, min_occupancy);
   }
   void read_box(Vec3i min, Box& out, Vec3i out_offset, Vec3i size) const {
     for (int y = 0; y < size.y; ++y)

@@ -38,7 +38,7 @@ void expect_equal(const RowPackedBox<N>& packed, const Box& ref, const char* whe
         bool expected = false;
         for (int x = x0; x < x0 + n; ++x)
           expected |= solid_enough(ref.get(x, y, z), static_cast<std::uint8_t>(min_occupancy));
-        ASSERT_EQ(packed.row_has_solid(y, z, x0, x0 + n, static_cast<std::uint8_t>(min_occupancy)), expected)
+        ASSERT_EQ(packed.box_has_solid(x0, x0 + n, y, y + 1, z, z + 1, static_cast<std::uint8_t>(min_occupancy)), expected)
             << when << " row " << y << "," << z << " [" << x0 << ", " << x0 + n << ") min " << min_occupancy;
       }
       // And over a box of up to 3 layers and 4 rows from this row.
