@@ -216,8 +216,14 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const std::span<const UnitUpdate> chunk_units(units_in.data() + begin, end - begin);
     std::shared_ptr<const Chunk> base = shared_ && voxels == nullptr ? grid_.shared_chunk(cp) : nullptr;
     const std::size_t key = base ? SharedUpdates::key_of(base.get(), chunk_units) : 0;
+    // The chunk's revision now and after this batch: where its twins are
+    // kept (a Full record of it taken later, or another lineage's result).
+    const std::uint64_t revision_now = e->holding.revision;
+    const auto listed = std::find_if(m.revisions.begin(), m.revisions.end(),
+                                     [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
     if (base) {
-      if (std::shared_ptr<const Chunk> made = shared_->updates().find(key, base, chunk_units)) {
+      if (std::shared_ptr<const Chunk> made =
+              shared_->updates().find(key, base, chunk_units, SharedUpdates::At{cp, revision_now})) {
         grid_.put_shared_chunk(cp, std::move(made));
         begin = end;
         continue;
@@ -239,7 +245,8 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     }
     if (base) {
       std::shared_ptr<const Chunk> made = grid_.share_chunk(cp);
-      std::shared_ptr<const Chunk> hold = shared_->updates().add(key, base, chunk_units, made);
+      std::shared_ptr<const Chunk> hold =
+          shared_->updates().add(key, base, chunk_units, made, SharedUpdates::At{cp, listed->revision});
       if (hold != made) grid_.put_shared_chunk(cp, std::move(hold));  // another replica's, equal: one lineage
     }
     // The chunk's mips stay as plain boxes (Chunk::pack_mips) while updates

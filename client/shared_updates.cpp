@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <functional>
+#include <initializer_list>
 #include <string_view>
 
 namespace terrane {
@@ -18,20 +19,68 @@ std::size_t SharedUpdates::key_of(const Chunk* base, std::span<const UnitUpdate>
   return h;
 }
 
+namespace {
+
+// Whether two chunks hold the same voxels, row by row (their packing may
+// differ: each replica's lineage chose its own palettes).
+bool same_voxels(const Chunk& a, const Chunk& b) {
+  Chunk::Level0::Row ra, rb;
+  for (int y = 0; y < kChunkSize; ++y)
+    for (int z = 0; z < kChunkSize; ++z)
+      if (const Voxel* row = a.read_row(y, z, ra); !std::equal(row, row + kChunkSize, b.read_row(y, z, rb)))
+        return false;
+  return true;
+}
+
+}  // namespace
+
+std::size_t SharedUpdates::AtHash::operator()(const At& a) const noexcept {
+  std::size_t h = std::hash<std::uint64_t>{}(a.revision);
+  for (const int c : {a.chunk_pos.x, a.chunk_pos.y, a.chunk_pos.z})
+    h ^= static_cast<std::size_t>(static_cast<std::uint32_t>(c)) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+  return h;
+}
+
+const SharedUpdates::Entry* SharedUpdates::entry_for(std::size_t key, const std::shared_ptr<const Chunk>& base,
+                                                     std::span<const UnitUpdate> units) const {
+  const auto it = entries_.find(key);
+  if (it == entries_.end()) return nullptr;
+  const Entry& e = it->second;
+  // The very base object, alive (a dead one's address may be reused), and
+  // the same units.
+  if (e.base.lock() != base || !std::equal(units.begin(), units.end(), e.units.begin(), e.units.end())) return nullptr;
+  return &e;
+}
+
 std::shared_ptr<const Chunk> SharedUpdates::find(std::size_t key, const std::shared_ptr<const Chunk>& base,
-                                                 std::span<const UnitUpdate> units) {
-  std::lock_guard lock(m_);
-  auto it = entries_.find(key);
-  if (it != entries_.end()) {
-    const Entry& e = it->second;
-    // The very base object, alive (a dead one's address may be reused),
-    // and the same units.
-    if (e.base.lock() == base && std::equal(units.begin(), units.end(), e.units.begin(), e.units.end())) {
-      if (std::shared_ptr<const Chunk> result = e.result.lock()) {
+                                                 std::span<const UnitUpdate> units, std::optional<At> at) {
+  std::shared_ptr<const Chunk> twin, result;
+  {
+    std::lock_guard lock(m_);
+    if (const Entry* e = entry_for(key, base, units))
+      if (std::shared_ptr<const Chunk> r = e->result.lock()) {
         ++stats_.hits;
-        return result;
+        return r;
       }
+    // base's twin, if another lineage made these units' result of it.
+    if (at)
+      if (const auto t = twins_.find(*at); t != twins_.end()) {
+        twin = t->second.lock();
+        if (twin && twin != base)
+          if (const Entry* e = entry_for(key_of(twin.get(), units), twin, units)) result = e->result.lock();
+      }
+    if (!result) {
+      ++stats_.misses;
+      return nullptr;
     }
+  }
+  // (Compared outside the lock: the table serves every io thread.)
+  const bool equal = same_voxels(*base, *twin);
+  std::lock_guard lock(m_);
+  if (equal) {
+    ++stats_.hits;
+    ++stats_.twins;
+    return result;
   }
   ++stats_.misses;
   return nullptr;
@@ -39,22 +88,32 @@ std::shared_ptr<const Chunk> SharedUpdates::find(std::size_t key, const std::sha
 
 std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& base,
                                                 std::span<const UnitUpdate> units,
-                                                const std::shared_ptr<const Chunk>& result) {
+                                                const std::shared_ptr<const Chunk>& result, std::optional<At> at) {
   // An emptied chunk is not kept: the replica erases it (nothing to share).
   if (!result) return result;
-  std::lock_guard lock(m_);
-  if (const auto it = entries_.find(key); it != entries_.end()) {
-    const Entry& e = it->second;
-    if (e.base.lock() == base && std::equal(units.begin(), units.end(), e.units.begin(), e.units.end()))
-      if (std::shared_ptr<const Chunk> first = e.result.lock()) {
+  std::shared_ptr<const Chunk> twin;
+  {
+    std::lock_guard lock(m_);
+    if (const Entry* e = entry_for(key, base, units))
+      if (std::shared_ptr<const Chunk> first = e->result.lock()) {
         ++stats_.adopted;
         return first;
       }
+    if (at)
+      if (const auto t = twins_.find(*at); t != twins_.end()) twin = t->second.lock();
   }
-  auto over = [&] { return entries_.size() >= kCapacity || units_held_ + units.size() > kMaxUnits; };
+  // Another lineage's result at this revision, with equal voxels: held
+  // instead, so the two lineages are one from here on.
+  const bool joined = twin && twin != result && same_voxels(*twin, *result);
+  const std::shared_ptr<const Chunk>& hold = joined ? twin : result;
+  std::lock_guard lock(m_);
+  auto over = [&] {
+    return entries_.size() >= kCapacity || twins_.size() >= kCapacity || units_held_ + units.size() > kMaxUnits;
+  };
   if (over()) drop_dead();
   if (over()) {
     entries_.clear();
+    twins_.clear();
     units_held_ = 0;
   }
   Entry& e = entries_[key];
@@ -62,7 +121,15 @@ std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shar
   units_held_ += units.size();
   e.base = base;
   e.units.assign(units.begin(), units.end());
-  e.result = result;
+  e.result = hold;
+  if (joined) {
+    ++stats_.twins;
+    return hold;
+  }
+  if (at) {
+    std::weak_ptr<const Chunk>& slot = twins_[*at];
+    if (slot.expired()) slot = result;
+  }
   if (kept_.size() < kKept) {
     kept_.push_back(result);
   } else {
@@ -78,6 +145,7 @@ void SharedUpdates::drop_dead() {
     if (dead) units_held_ -= kv.second.units.size();
     return dead;
   });
+  std::erase_if(twins_, [](const auto& kv) { return kv.second.expired(); });
 }
 
 SharedUpdates::Stats SharedUpdates::stats() const {

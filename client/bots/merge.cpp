@@ -229,6 +229,7 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.shared_chunk_misses = in.whole("shared_chunk_misses");
   r.shared_update_hits = in.whole("shared_update_hits");
   r.shared_update_misses = in.whole("shared_update_misses");
+  r.shared_update_twins = in.whole("shared_update_twins");
   for (const std::string& id : in.children("bots_per_server")) {
     std::uint32_t server = 0;
     auto [p, ec] = std::from_chars(id.data(), id.data() + id.size(), server);
@@ -398,6 +399,7 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     r.shared_chunk_misses += p.shared_chunk_misses;
     r.shared_update_hits += p.shared_update_hits;
     r.shared_update_misses += p.shared_update_misses;
+    r.shared_update_twins += p.shared_update_twins;
     for (const auto& [server, count] : p.bots_per_server) r.bots_per_server[server] += count;
     r.walk_steps += p.walk_steps;
     r.teleports += p.teleports;

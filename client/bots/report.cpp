@@ -172,6 +172,7 @@ std::string report_json(const BotsReport& r) {
   j << "  \"shared_chunk_misses\": " << r.shared_chunk_misses << ",\n";
   j << "  \"shared_update_hits\": " << r.shared_update_hits << ",\n";
   j << "  \"shared_update_misses\": " << r.shared_update_misses << ",\n";
+  j << "  \"shared_update_twins\": " << r.shared_update_twins << ",\n";
   j << "  \"bots_per_server\": {";
   for (auto it = r.bots_per_server.begin(); it != r.bots_per_server.end(); ++it)
     j << (it == r.bots_per_server.begin() ? "" : ", ") << "\"" << it->first << "\": " << it->second;
@@ -338,7 +339,8 @@ std::string report_table(const BotsReport& r) {
         std::to_string(r.shared_chunk_hits) + " / " + std::to_string(r.shared_chunk_misses));
   if (r.shared_update_hits + r.shared_update_misses > 0)
     row("updates of shared chunks taken / made by a bot",
-        std::to_string(r.shared_update_hits) + " / " + std::to_string(r.shared_update_misses));
+        std::to_string(r.shared_update_hits) + " / " + std::to_string(r.shared_update_misses) + " (lineages joined " +
+            std::to_string(r.shared_update_twins) + ")");
   if (r.bots > 0 && r.replica_memory.total() > 0) {
     const ReplicaMemory& m = r.replica_memory;
     const auto kib = [&](std::size_t bytes) { return fixed(static_cast<double>(bytes) / 1024.0 / r.bots, 1) + " KiB"; };

@@ -440,6 +440,7 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     const SharedUpdates::Stats u = ctx.shared_chunks->updates().stats();
     r.shared_update_hits = u.hits;
     r.shared_update_misses = u.misses;
+    r.shared_update_twins = u.twins;
     r.shared_chunk_bytes += u.bytes;
   }
   const auto totals = fanout.totals();

@@ -79,6 +79,7 @@ struct BotsReport {
   // Updates of shared chunks taken made by another bot / made by a bot
   // (client/shared_updates.h).
   std::uint64_t shared_update_hits = 0, shared_update_misses = 0;
+  std::uint64_t shared_update_twins = 0;  // of the hits and adoptions: through a twin (SharedUpdates::Stats::twins)
   // The bots' replicas by part, summed over the bots at the end of the run
   // (before they leave; shared voxels count once in all), and the heap
   // bytes of the process's shared caches then.

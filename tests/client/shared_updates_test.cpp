@@ -146,6 +146,91 @@ TEST(SharedUpdates, TwoResultsOfOneTickMadeAtOnceBecomeOne) {
   EXPECT_EQ(table.stats().adopted, 1u);
 }
 
+// A replica that took the chunk's Full record at a revision the others made
+// by updates holds equal voxels in another object. Its next tick takes the
+// others' result (its base equals their twin at that revision), and it
+// holds their chunk from then on: one lineage, not one per way in.
+TEST(SharedUpdates, AReplicaWhoseChunkEqualsAnotherLineagesJoinsIt) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica first, second, newcomer, alone;
+  hold_slope(shared, {&first, &second}, {&alone});
+  std::vector<std::uint8_t> d1, d2, d3;
+  const UpdateBatchMsg tick1 = one_unit(kAt, 70, Voxel{}, 6, d1);
+  const UpdateBatchMsg tick2 = one_unit(kAt, 71, make_voxel(materials::kSand, 255), 7, d2);
+  const UpdateBatchMsg tick3 = one_unit(kAt, 72, Voxel{}, 8, d3);
+  for (Replica* r : {&first, &second, &alone}) ASSERT_TRUE(r->apply_update_batch(tick1).ok());
+  // The newcomer comes into view at revision 6: a Full record of what the
+  // updates made.
+  newcomer.share_decoded(shared);
+  take_full(newcomer, kAt, 6, full_payload(held(alone, kAt)));
+  ASSERT_NE(newcomer.grid().find_chunk(kAt), first.grid().find_chunk(kAt)) << "equal voxels, another object";
+  ASSERT_TRUE(first.apply_update_batch(tick2).ok());
+  const auto before = shared->updates().stats();
+  ASSERT_TRUE(newcomer.apply_update_batch(tick2).ok());
+  EXPECT_EQ(shared->updates().stats().hits, before.hits + 1) << "taken through the twin, not made";
+  EXPECT_EQ(shared->updates().stats().twins, before.twins + 1);
+  EXPECT_EQ(newcomer.grid().find_chunk(kAt), first.grid().find_chunk(kAt));
+  // From here on, one lineage: the next tick is made once for all.
+  ASSERT_TRUE(second.apply_update_batch(tick2).ok());
+  for (Replica* r : {&alone}) ASSERT_TRUE(r->apply_update_batch(tick2).ok());
+  const auto mid = shared->updates().stats();
+  for (Replica* r : {&newcomer, &first, &second, &alone}) ASSERT_TRUE(r->apply_update_batch(tick3).ok());
+  EXPECT_EQ(shared->updates().stats().misses, mid.misses + 1);
+  EXPECT_EQ(newcomer.grid().find_chunk(kAt), second.grid().find_chunk(kAt));
+  EXPECT_TRUE(held(newcomer, kAt) == held(alone, kAt));
+  EXPECT_EQ(newcomer.hash(kAt), alone.hash(kAt));
+}
+
+// Two lineages that made one tick's result each: the second to offer its
+// result holds the first's when their voxels are equal, and keeps its own
+// when they are not (a twin is only ever taken for equal voxels).
+TEST(SharedUpdates, AResultEqualToItsTwinIsHeldAsTheTwinAndAnotherIsNot) {
+  SharedUpdates table;
+  const auto base1 = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  const auto base2 = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  std::vector<UnitUpdate> units(1);
+  units[0].chunk_pos = kAt;
+  units[0].unit_index = 12;
+  units[0].voxels.fill(make_voxel(materials::kSand, 255));
+  auto make = [&](const Chunk& base, Material m) {
+    Chunk c = base.clone();
+    c.modify(Region{{0, 4, 4}, {4, 8, 8}}, [m](Vec3i, Voxel) { return make_voxel(m, 255); });
+    return std::make_shared<const Chunk>(std::move(c));
+  };
+  const SharedUpdates::At at{kAt, 6};
+  const auto r1 = make(*base1, materials::kSand);
+  EXPECT_EQ(table.add(SharedUpdates::key_of(base1.get(), units), base1, units, r1, at), r1);
+  const auto r2 = make(*base2, materials::kSand);
+  EXPECT_EQ(table.add(SharedUpdates::key_of(base2.get(), units), base2, units, r2, at), r1) << "equal voxels";
+  EXPECT_EQ(table.stats().twins, 1u);
+  // base2's next find of these units gives the twin (its entry says so).
+  EXPECT_EQ(table.find(SharedUpdates::key_of(base2.get(), units), base2, units, SharedUpdates::At{kAt, 5}), r1);
+  // Other voxels at the same position and revision: never the twin.
+  const auto base3 = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  const auto r3 = make(*base3, materials::kRock);
+  EXPECT_EQ(table.add(SharedUpdates::key_of(base3.get(), units), base3, units, r3, at), r3);
+  EXPECT_EQ(table.stats().twins, 1u);
+  // base1 kept as the twin at revision 5 (as an earlier tick's result): a
+  // base of equal voxels is given what these units made of base1, a base
+  // of other voxels is not.
+  std::vector<UnitUpdate> earlier = units;
+  earlier[0].unit_index = 13;
+  const auto base0 = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  table.add(SharedUpdates::key_of(base0.get(), earlier), base0, earlier, base1, SharedUpdates::At{kAt, 5});
+  const SharedUpdates::At five{kAt, 5};
+  const auto equal = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  EXPECT_EQ(table.find(SharedUpdates::key_of(equal.get(), units), equal, units, five), r1);
+  EXPECT_EQ(table.stats().twins, 2u);
+  Chunk other = base1->clone();
+  other.modify(Region{{9, 9, 9}, {10, 10, 10}}, [](Vec3i, Voxel) { return Voxel{}; });
+  const auto differs = std::make_shared<const Chunk>(std::move(other));
+  EXPECT_EQ(table.find(SharedUpdates::key_of(differs.get(), units), differs, units, five), nullptr);
+  EXPECT_EQ(table.stats().twins, 2u);
+  // Without a position and revision, no twin is looked for.
+  const auto equal_too = std::make_shared<const Chunk>(Chunk::from_box(slope()));
+  EXPECT_EQ(table.find(SharedUpdates::key_of(equal_too.get(), units), equal_too, units), nullptr);
+}
+
 TEST(SharedUpdates, OtherUnitsOrAnotherBaseAreNeverGivenAnothersResult) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b, c;
