@@ -1,9 +1,12 @@
 #include "client/decoded_mips.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cstring>
 #include <functional>
 #include <string_view>
+
+#include "common/codec/net_codec.h"
 
 namespace terrane {
 
@@ -28,54 +31,116 @@ std::size_t DecodedMips::key_of(const Box& voxels) {
   return hash_bytes(v.data(), v.size_bytes()) ^ (static_cast<std::size_t>(voxels.size().x) * 0xC2B2AE3D27D4EB4Full);
 }
 
-std::shared_ptr<const Box> DecodedMips::intern(std::size_t key, const Box& voxels) {
-  std::lock_guard lock(m_);
-  if (4 * (used_ + 1) > 3 * slots_.size()) rebuild();
-  const std::size_t mask = slots_.size() - 1;
+MipVoxels MipVoxels::of_unit(int side, std::span<const std::uint8_t> bytes) {
+  MipVoxels m;
+  m.side_ = side;
+  m.unit_.assign(bytes.begin(), bytes.end());
+  return m;
+}
+
+MipVoxels MipVoxels::of_box(const Box& voxels) {
+  MipVoxels m;
+  m.side_ = voxels.size().x;
+  m.box_ = voxels;
+  return m;
+}
+
+const Box& MipVoxels::read(Box& scratch) const {
+  if (!encoded()) return box_;
+  scratch.resize({side_, side_, side_});
+  // The bytes decoded when their record arrived: a failure here is a bug.
+  [[maybe_unused]] const Status st = net_codec_decode(side_, unit_, scratch.voxels());
+  assert(st.ok());
+  return scratch;
+}
+
+std::size_t MipVoxels::heap_bytes() const {
+  return sizeof(MipVoxels) + unit_.capacity() + box_.voxel_count() * sizeof(Voxel);
+}
+
+template <class T, class Same, class Make>
+std::shared_ptr<const T> DecodedMips::intern_in(Table<T>& t, std::size_t key, Same&& same, Make&& make) {
+  if (4 * (t.used + 1) > 3 * t.slots.size()) rebuild(t);
+  const std::size_t mask = t.slots.size() - 1;
   // Keys are hashes already; the multiply spreads keys that differ only
   // in their high bits (the level).
   std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask;
-  for (; slots_[i].used; i = (i + 1) & mask) {
-    if (slots_[i].key != key) continue;
-    std::shared_ptr<const Box> known = slots_[i].box.lock();
-    if (known && same_voxels(*known, voxels)) {
+  for (; t.slots[i].used; i = (i + 1) & mask) {
+    if (t.slots[i].key != key) continue;
+    std::shared_ptr<const T> known = t.slots[i].item.lock();
+    if (known && same(*known)) {
       ++stats_.hits;
       return known;
     }
-    if (!known) break;  // a dead box of this key: its slot takes the new one
+    if (!known) break;  // a dead item of this key: its slot takes the new one
   }
   ++stats_.misses;
-  auto box = std::make_shared<const Box>(voxels);
-  if (!slots_[i].used) ++used_;
-  slots_[i] = Slot{key, box, true};
-  return box;
+  std::shared_ptr<const T> item = make();
+  if (!t.slots[i].used) ++t.used;
+  t.slots[i] = typename Table<T>::Slot{key, item, true};
+  return item;
 }
 
-void DecodedMips::rebuild() {
-  std::vector<Slot> old = std::move(slots_);
+template <class T>
+void DecodedMips::rebuild(Table<T>& t) {
+  std::vector<typename Table<T>::Slot> old = std::move(t.slots);
   std::size_t live = 0;
-  for (const Slot& s : old) live += s.used && !s.box.expired() ? 1 : 0;
+  for (const auto& s : old) live += s.used && !s.item.expired() ? 1 : 0;
   std::size_t n = 1024;
   while (n < 4 * (live + 1)) n *= 2;
-  slots_.assign(n, Slot{});
-  used_ = 0;
-  for (Slot& s : old) {
-    if (!s.used || s.box.expired()) continue;
+  t.slots.assign(n, typename Table<T>::Slot{});
+  t.used = 0;
+  for (auto& s : old) {
+    if (!s.used || s.item.expired()) continue;
     std::size_t i = (s.key * 0x9E3779B97F4A7C15ull >> 20) & (n - 1);
-    while (slots_[i].used) i = (i + 1) & (n - 1);
-    slots_[i] = std::move(s);
-    ++used_;
+    while (t.slots[i].used) i = (i + 1) & (n - 1);
+    t.slots[i] = std::move(s);
+    ++t.used;
   }
+}
+
+std::shared_ptr<const Box> DecodedMips::intern(std::size_t key, const Box& voxels) {
+  std::lock_guard lock(m_);
+  return intern_in(
+      boxes_, key, [&](const Box& known) { return same_voxels(known, voxels); },
+      [&] { return std::make_shared<const Box>(voxels); });
+}
+
+std::shared_ptr<const MipVoxels> DecodedMips::intern_unit(std::size_t key, int side,
+                                                          std::span<const std::uint8_t> bytes) {
+  std::lock_guard lock(m_);
+  return intern_in(
+      mips_, key,
+      [&](const MipVoxels& known) {
+        return known.encoded() && known.side() == side && std::ranges::equal(known.unit(), bytes);
+      },
+      [&] { return std::make_shared<const MipVoxels>(MipVoxels::of_unit(side, bytes)); });
+}
+
+std::shared_ptr<const MipVoxels> DecodedMips::intern_mip_box(std::size_t key, const Box& voxels) {
+  std::lock_guard lock(m_);
+  return intern_in(
+      mips_, key,
+      [&](const MipVoxels& known) {
+        Box unused;
+        return !known.encoded() && same_voxels(known.read(unused), voxels);
+      },
+      [&] { return std::make_shared<const MipVoxels>(MipVoxels::of_box(voxels)); });
 }
 
 DecodedMips::Stats DecodedMips::stats() const {
   std::lock_guard lock(m_);
   Stats s = stats_;
-  s.bytes = slots_.capacity() * sizeof(Slot);
-  for (const Slot& slot : slots_)
-    if (std::shared_ptr<const Box> box = slot.box.lock()) {
+  s.bytes = boxes_.slots.capacity() * sizeof(Table<Box>::Slot) + mips_.slots.capacity() * sizeof(Table<MipVoxels>::Slot);
+  for (const auto& slot : boxes_.slots)
+    if (std::shared_ptr<const Box> box = slot.item.lock()) {
       ++s.entries;
       s.bytes += sizeof(Box) + box->voxel_count() * sizeof(Voxel);
+    }
+  for (const auto& slot : mips_.slots)
+    if (std::shared_ptr<const MipVoxels> mip = slot.item.lock()) {
+      ++s.entries;
+      s.bytes += mip->heap_bytes();
     }
   return s;
 }

@@ -1,24 +1,30 @@
-// DecodedMips: the voxels of mip records and horizon images, kept once
-// for all the replicas of one process that hold equal voxels.
+// DecodedMips: the mips and horizon images of the replicas of one
+// process, kept once for all the replicas that hold equal ones.
 //
 // A process running many clients (the terrane-bots load test) receives
 // the same mip of a chunk version once per client whose view holds it at
 // that level, and the same horizon image once per client that sees the
 // region from afar; kept per client, those copies were most of a bot's
 // memory. A replica never changes a mip or an image in place (a record
-// replaces it whole; updates apply to full-resolution chunks only), so
-// replicas can hold them as one immutable box.
+// replaces it whole, a patch makes a new one; updates apply to
+// full-resolution chunks only), so replicas can hold them as one
+// immutable object.
 //
-// Found by a key the caller derives from the record (a hash of its bytes:
-// equal bytes decode to equal voxels), and taken only when the voxels are
+// A mip is kept as its record's bytes (MipVoxels in unit form: the
+// network-codec unit, several times smaller than its voxels: a bot holds
+// thousands of mips and reads few), or as voxels when a patch made it (in
+// box form: encoding it again would cost each patch more than it saves);
+// horizon images as voxels (a Box: one a region, read often). Found by a
+// key the caller derives from the record (a hash of its bytes, or of the
+// voxels), and taken only when the bytes (units) or the voxels (boxes) are
 // equal too: nothing is trusted across clients but that comparison, so a
-// replica holds exactly what its own record says (boxes whose keys are
-// equal but voxels differ are kept side by side).
-// Weak: a box lives as long as some replica holds it; the table forgets
+// replica holds exactly what its own record says (entries whose keys are
+// equal but contents differ are kept side by side).
+// Weak: an entry lives as long as some replica holds it; a table forgets
 // the dead ones when it is rebuilt (at 3/4 full), so it is bounded by what
-// the replicas hold. The table is flat (open addressing, linear probing):
-// a process's bots intern every mip they receive, and a node map's
-// lookups cost as much as the rest of applying them.
+// the replicas hold. The tables are flat (open addressing, linear
+// probing): a process's bots intern every mip they receive, and a node
+// map's lookups cost as much as the rest of applying them.
 // Thread-safety: every member may be called from any thread.
 #pragma once
 
@@ -33,6 +39,28 @@
 
 namespace terrane {
 
+// A held mip's side^3 voxels, immutable: one network-codec unit
+// (NET_CODEC.md), the bytes of the record that brought it, which decoded
+// without error before they were kept; or the voxels themselves.
+class MipVoxels {
+ public:
+  static MipVoxels of_unit(int side, std::span<const std::uint8_t> bytes);
+  static MipVoxels of_box(const Box& voxels);
+
+  int side() const { return side_; }
+  bool encoded() const { return !unit_.empty(); }
+  std::span<const std::uint8_t> unit() const { return unit_; }
+  // The voxels: the box held, or the unit decoded into scratch.
+  const Box& read(Box& scratch) const;
+  // Heap bytes, with the object itself.
+  std::size_t heap_bytes() const;
+
+ private:
+  int side_ = 0;
+  std::vector<std::uint8_t> unit_;
+  Box box_;  // (box form)
+};
+
 class DecodedMips {
  public:
   // The key of a record's bytes (payload) at a level (the same bytes at
@@ -45,26 +73,42 @@ class DecodedMips {
   // An immutable box equal to voxels: one kept under key whose voxels are
   // equal, else a new one, kept under key from now on.
   std::shared_ptr<const Box> intern(std::size_t key, const Box& voxels);
+  // A mip in unit form of these very bytes (side^3 voxels) kept under key,
+  // else a new one. Precondition: bytes are one unit of side^3 voxels that
+  // decoded without error.
+  std::shared_ptr<const MipVoxels> intern_unit(std::size_t key, int side, std::span<const std::uint8_t> bytes);
+  // A mip in box form of equal voxels kept under key, else a new one.
+  std::shared_ptr<const MipVoxels> intern_mip_box(std::size_t key, const Box& voxels);
 
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
-    std::size_t entries = 0;  // live boxes kept
-    std::size_t bytes = 0;    // their voxels and the table (heap)
+    std::size_t entries = 0;  // live boxes and mips kept
+    std::size_t bytes = 0;    // their bytes and the tables (heap)
   };
   Stats stats() const;
 
  private:
-  struct Slot {
-    std::size_t key = 0;
-    std::weak_ptr<const Box> box;
-    bool used = false;  // a box was kept here (alive or dead since)
+  template <class T>
+  struct Table {
+    struct Slot {
+      std::size_t key = 0;
+      std::weak_ptr<const T> item;
+      bool used = false;  // an item was kept here (alive or dead since)
+    };
+    std::vector<Slot> slots;  // a power of two of them, or none
+    std::size_t used = 0;     // slots used
   };
-  // Keeps the live boxes only, in a table of at least twice their number.
-  void rebuild();
+  // The live item under key for which same(item) holds, else make()'s,
+  // kept under key. Under m_.
+  template <class T, class Same, class Make>
+  std::shared_ptr<const T> intern_in(Table<T>& t, std::size_t key, Same&& same, Make&& make);
+  // Keeps the live items only, in a table of at least twice their number.
+  template <class T>
+  static void rebuild(Table<T>& t);
 
   mutable std::mutex m_;
-  std::vector<Slot> slots_;  // a power of two of them, or none
-  std::size_t used_ = 0;     // slots used
+  Table<Box> boxes_;
+  Table<MipVoxels> mips_;
   Stats stats_;
 };
 

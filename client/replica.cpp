@@ -4,6 +4,8 @@
 #include <array>
 #include <bit>
 
+#include "common/codec/net_codec.h"
+
 namespace terrane {
 
 namespace {
@@ -14,6 +16,33 @@ constexpr std::size_t kMaxBatchUnits = 16 * kUpdateUnitsPerChunk;
 // replica (a process of many clients applies batches on a few threads,
 // and a buffer grown by one large batch stayed with its replica).
 thread_local std::vector<UnitUpdate> update_scratch;
+
+// The last mip decoded on this thread and its voxels: a replica's reads
+// of a mip come in runs over one chunk (surface_height, a viewer's or a
+// script's reads). Known by its owner (a weak handle: the mip is not kept
+// alive, and no other can take its identity while the handle lives).
+struct LastDecoded {
+  std::weak_ptr<const MipVoxels> mip;
+  Box voxels;
+};
+thread_local LastDecoded last_decoded;
+
+const Box& voxels_of_mip(const std::shared_ptr<const MipVoxels>& mip) {
+  if (!mip->encoded()) return mip->read(last_decoded.voxels);
+  const bool same = !last_decoded.mip.owner_before(mip) && !mip.owner_before(last_decoded.mip);
+  if (!same || last_decoded.mip.expired()) {
+    mip->read(last_decoded.voxels);
+    last_decoded.mip = mip;
+  }
+  return last_decoded.voxels;
+}
+
+// Whether a mip record brings the very voxels of the mip held.
+bool same_mip(const std::shared_ptr<const MipVoxels>& held, const StreamRecord& r) {
+  if (held->side() != r.voxels->size().x) return false;
+  if (held->encoded() && !r.payload.empty() && std::ranges::equal(held->unit(), r.payload)) return true;
+  return voxels_of_mip(held) == *r.voxels;
+}
 }  // namespace
 
 Replica::Replica() = default;
@@ -67,13 +96,13 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       Entry* e = chunks_.find(cp);
       if (e == nullptr || !patchable(r) || !e->mip) return;
       thread_local Box patched;
-      patched = *e->mip;
+      patched = voxels_of_mip(e->mip);
       for (std::uint64_t rest = r.patch_mask; rest != 0; rest &= rest - 1) {
         const Vec3i o = patch_subunit_origin(r.level, std::countr_zero(rest));
         for (int y = o.y; y < o.y + 4; ++y)
           for (int z = o.z; z < o.z + 4; ++z) std::copy_n(r.voxels->read_row(y, z) + o.x, 4, patched.write_row(y, z) + o.x);
       }
-      e->mip = keep(DecodedMips::key_of(patched), patched);
+      e->mip = keep_mip(patched);
       e->holding.revision = r.revision;
       entry_changed(cp, *e);
       return;
@@ -83,16 +112,10 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       Entry& e = chunks_[cp];
-      if (r.known) {
-        // The box another replica of this process made of these bytes.
-        auto box = std::static_pointer_cast<const Box>(r.known);
-        if (e.holding.form == r.form() && e.mip == box) ++redundant_mips_;
-        e.mip = std::move(box);
-      } else if (e.holding.form == r.form() && e.mip && *e.mip == *r.voxels) {
-        ++redundant_mips_;  // (the box held stays)
-      } else {
-        e.mip = keep(DecodedMips::key_of(r.payload, r.level), *r.voxels);
-      }
+      if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r))
+        ++redundant_mips_;  // (the mip held stays)
+      else
+        e.mip = keep_unit(r);
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       entry_changed(cp, e);
@@ -152,9 +175,29 @@ std::shared_ptr<const Box> Replica::keep(std::size_t key, const Box& voxels) {
   return std::make_shared<const Box>(voxels);
 }
 
+std::shared_ptr<const MipVoxels> Replica::keep_unit(const StreamRecord& r) {
+  std::span<const std::uint8_t> bytes = r.payload;
+  thread_local std::vector<std::uint8_t> encoded;
+  if (bytes.empty()) {
+    encoded.clear();
+    net_codec_encode(r.voxels->size().x, r.voxels->voxels(), encoded);
+    bytes = encoded;
+  }
+  const int side = r.voxels->size().x;
+  if (shared_) return shared_->mips().intern_unit(DecodedMips::key_of(bytes, r.level), side, bytes);
+  return std::make_shared<const MipVoxels>(MipVoxels::of_unit(side, bytes));
+}
+
+std::shared_ptr<const MipVoxels> Replica::keep_mip(const Box& voxels) {
+  if (shared_) return shared_->mips().intern_mip_box(DecodedMips::key_of(voxels), voxels);
+  return std::make_shared<const MipVoxels>(MipVoxels::of_box(voxels));
+}
+
 Replica::MipView Replica::mip_view(Vec3i cp) const {
-  if (const Entry* e = chunks_.find(cp))
-    return e->holding.full_resolution() ? MipView{} : MipView{e->mip.get(), {0, 0, 0}, e->holding.level()};
+  if (const Entry* e = chunks_.find(cp)) {
+    if (e->holding.full_resolution() || !e->mip) return MipView{};
+    return MipView{&voxels_of_mip(e->mip), {0, 0, 0}, e->holding.level()};
+  }
   if (const Horizon* h = horizon_of(cp))
     return MipView{h->image.get(), floor_mod(cp, kHorizonRegionChunks) * (kChunkSize >> h->holding.level()),
                    h->holding.level()};
@@ -387,7 +430,7 @@ ReplicaMemory Replica::memory() const {
   chunks_.for_each([&](Vec3i, const Entry& e) {
     if (!e.mip) return;
     ++m.mips;
-    m.mip_bytes += shared_bytes(*e.mip, e.mip.use_count());
+    m.mip_bytes += (e.mip->heap_bytes() + 2 * sizeof(long)) / static_cast<std::size_t>(std::max(1L, e.mip.use_count()));
   });
   m.horizon_table_bytes = horizons_.table_bytes();
   for (const auto& [region, h] : horizons_) m.horizon_image_bytes += shared_bytes(*h.image, h.image.use_count());

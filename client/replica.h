@@ -152,10 +152,11 @@ class Replica {
   struct Entry {
     Holding holding;
     // A mip or an Estimate: the (32 >> level)^3 voxels of the chunk's own
-    // record, immutable and perhaps shared with other replicas (apart, so
-    // the table's slots stay small: a replica's tables are read far more
-    // than its mips).
-    std::shared_ptr<const Box> mip;
+    // record (kept as its unit: a bot holds thousands of mips and reads
+    // few; as voxels once a patch changed it), immutable and perhaps shared
+    // with other replicas (apart, so the table's slots stay small: a
+    // replica's tables are read far more than its mips).
+    std::shared_ptr<const MipVoxels> mip;
     // Full or Empty: its chunk hash, computed since the chunk last changed
     // (a hash is a pass over 32^3 voxels; a client checks the same
     // unchanged chunks again and again); 0: not computed (a hash that is 0
@@ -170,7 +171,9 @@ class Replica {
     std::bitset<kHorizonRegionSlots> covers;
   };
   // The voxels a chunk's mip is read from: a box, the chunk's corner in it
-  // and the level (box null: no mip held).
+  // and the level (box null: no mip held). A mip kept as its unit is read
+  // from this thread's last decoded mip: the box is valid until the next
+  // mip_view on the thread.
   struct MipView {
     const Box* box = nullptr;
     Vec3i origin;
@@ -180,6 +183,10 @@ class Replica {
   // The immutable box equal to voxels: the one the process's replicas
   // share under key, or a box of this replica's own.
   std::shared_ptr<const Box> keep(std::size_t key, const Box& voxels);
+  // The same for a mip record (its unit: the payload, or its voxels
+  // encoded when it came without one), and for a patched mip's voxels.
+  std::shared_ptr<const MipVoxels> keep_unit(const StreamRecord& r);
+  std::shared_ptr<const MipVoxels> keep_mip(const Box& voxels);
   // A record's voxels (decoded again when the decoder skipped them).
   static const Box& voxels_of(const StreamRecord& r);
   const Horizon* horizon_of(Vec3i chunk_pos) const;

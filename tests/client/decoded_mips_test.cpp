@@ -176,6 +176,93 @@ TEST(ReplicaMips, ReplicasThatAppliedEqualRecordsShareOneCopy) {
   EXPECT_EQ(shared->mips().stats().entries, 0u);
 }
 
+// A mip is kept as its record's bytes, not its voxels: eight replicas
+// holding one 16^3 mip hold one unit between them, smaller than the 8 KiB
+// of its voxels, and every read decodes the voxels the record had.
+TEST(ReplicaMips, AMipIsKeptOnceAsItsRecordsBytesNotItsVoxels) {
+  auto shared = std::make_shared<DecodedChunks>();
+  std::vector<Replica> replicas(8);
+  const Vec3i cp{-3, 2, 5};
+  const Box voxels = terrain(16, 3);
+  const auto bytes = encoded(voxels);
+  ASSERT_LT(bytes.size(), voxels.voxel_count() * sizeof(Voxel) / 4) << "the test's terrain must encode small";
+  for (Replica& r : replicas) {
+    r.share_decoded(shared);
+    r.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
+  }
+  const DecodedMips::Stats s = shared->mips().stats();
+  EXPECT_EQ(s.entries, 1u);
+  EXPECT_EQ(s.hits, replicas.size() - 1);
+  std::size_t held = 0;
+  for (const Replica& r : replicas) held += r.memory().mip_bytes;
+  EXPECT_LE(held, bytes.size() + 128) << "all replicas together hold one unit";
+  for (const Replica& r : replicas) {
+    Box back;
+    ASSERT_TRUE(r.read_mip(cp, back));
+    EXPECT_EQ(back, voxels);
+    const Vec3i at = chunk_origin(cp) + Vec3i{7, 9, 30};
+    EXPECT_EQ(r.get(at), voxels.get(7 / 2, 9 / 2, 30 / 2));
+  }
+  // A replica on its own keeps the bytes too.
+  Replica alone;
+  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
+  EXPECT_LE(alone.memory().mip_bytes, bytes.size() + 128);
+  // The same bytes again tell nothing new; other bytes of the same voxels
+  // neither (a record without its bytes is encoded by the replica).
+  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
+  alone.apply_stream_record(StreamRecord{StreamRecordKind::kMip1, cp, 4, 1, &voxels, nullptr, {}});
+  EXPECT_EQ(alone.redundant_mips(), 2u);
+  // Reads of two mips in turn each give their own voxels (one mip decoded
+  // per thread at a time).
+  const Vec3i other{9, 9, 9};
+  const Box voxels2 = terrain(16, 4);
+  alone.apply_stream_record(mip_record(StreamRecordKind::kMip1, other, 4, voxels2, encoded(voxels2)));
+  for (int round = 0; round < 2; ++round) {
+    EXPECT_EQ(alone.get(chunk_origin(cp) + Vec3i{2, 20, 6}), voxels.get(1, 10, 3));
+    EXPECT_EQ(alone.get(chunk_origin(other) + Vec3i{2, 20, 6}), voxels2.get(1, 10, 3));
+  }
+}
+
+// A patch changes the mip held as a unit into voxels of its own (the
+// patched sub-units from the record, the rest as held); replicas patched
+// alike share that box, and one not patched keeps the unit.
+TEST(ReplicaMips, APatchedMipIsHeldAsItsVoxelsAndSharedByReplicasPatchedAlike) {
+  auto shared = std::make_shared<DecodedChunks>();
+  Replica a, b, c;
+  const Vec3i cp{1, 0, 1};
+  const Box voxels = terrain(16, 2);
+  const auto bytes = encoded(voxels);
+  for (Replica* r : {&a, &b, &c}) {
+    r->share_decoded(shared);
+    r->apply_stream_record(mip_record(StreamRecordKind::kMip1, cp, 4, voxels, bytes));
+  }
+  // Sub-units 0 and 5 become Air.
+  const std::uint64_t mask = (std::uint64_t{1} << 0) | (std::uint64_t{1} << 5);
+  Box patch_voxels({16, 16, 16});
+  Box expected = voxels;
+  for (const int i : {0, 5}) {
+    const Vec3i o = patch_subunit_origin(1, i);
+    for (int y = o.y; y < o.y + 4; ++y)
+      for (int z = o.z; z < o.z + 4; ++z)
+        for (int x = o.x; x < o.x + 4; ++x) expected.set(x, y, z, Voxel{});
+  }
+  StreamRecord patch{StreamRecordKind::kMipPatch, cp, 5, 1, &patch_voxels, nullptr, {}};
+  patch.patch_mask = mask;
+  a.apply_stream_record(patch);
+  b.apply_stream_record(patch);
+  for (Replica* r : {&a, &b}) {
+    Box back;
+    ASSERT_TRUE(r->read_mip(cp, back));
+    EXPECT_EQ(back, expected);
+    EXPECT_EQ(r->revision(cp), 5u);
+  }
+  Box back;
+  ASSERT_TRUE(c.read_mip(cp, back));
+  EXPECT_EQ(back, voxels) << "c was not patched";
+  EXPECT_EQ(shared->mips().stats().entries, 2u) << "the unit (c) and one patched box (a and b)";
+  EXPECT_GT(a.memory().mip_bytes, c.memory().mip_bytes) << "a box of voxels against a share of the unit";
+}
+
 TEST(ReplicaMips, EqualHorizonImagesAreSharedAndAChunksOwnRecordReplacesItsPartInOneReplicaOnly) {
   auto shared = std::make_shared<DecodedChunks>();
   Replica a, b;
