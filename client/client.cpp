@@ -152,6 +152,14 @@ void Client::on_closed(const std::string& reason) {
   if (callbacks_.on_disconnected) callbacks_.on_disconnected(r);
 }
 
+namespace {
+// The boxes a StreamBatch's records decode into (about 90 KiB): one set per
+// thread, not per client (a process of many clients decodes on a few io
+// threads, and a set per client stayed with each of them). Valid during
+// one record's callback, which never decodes another batch.
+thread_local StreamDecodeScratch stream_scratch;
+}  // namespace
+
 Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t frame_bytes,
                                   std::function<void()>* after) {
   auto records = parse_stream_batch(batch);
@@ -168,7 +176,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
   KnownPayloadFn known;
   if (const std::shared_ptr<DecodedChunks>& shared = options_.shared_chunks)
     known = [&shared](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); };
-  const auto st = decode_stream_batch(*records, stream_scratch_, [&](const StreamRecord& r) -> Status {
+  const auto st = decode_stream_batch(*records, stream_scratch, [&](const StreamRecord& r) -> Status {
     {
       // A refresh gives the chunk the form it already holds; anything else
       // (a new chunk, a finer form, an exact mip for an Estimate, a horizon

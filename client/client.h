@@ -341,7 +341,6 @@ class Client : private ConnectionHandler {
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
   std::size_t voxel_change_cap_ = 0;                  // capture_voxel_changes
 
-  StreamDecodeScratch stream_scratch_;  // io side
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered
   // Last: goes first, so no handler runs on the rest once it is gone.
   Connection connection_;

@@ -367,15 +367,14 @@ std::optional<std::uint64_t> Replica::hash(Vec3i cp) const {
   const Entry* found = chunks_.find(cp);
   if (found == nullptr || !found->holding.full_resolution()) return std::nullopt;
   const Entry& e = *found;
-  if (e.hash == 0) {
-    // A chunk held shared has its hash made once for the process's replicas.
-    const std::shared_ptr<const Chunk> shared =
-        shared_ && e.holding.form == HoldingForm::kFull ? grid_.shared_chunk(cp) : nullptr;
-    e.hash = shared ? shared_->hash_of(shared, e.holding.revision)
-                    : chunk_hash(e.holding.form == HoldingForm::kFull ? grid_.find_chunk(cp) : nullptr,
-                                 e.holding.revision);
-  }
-  return e.hash;
+  if (e.holding.form != HoldingForm::kFull) return chunk_hash(nullptr, e.holding.revision);
+  if (const auto it = hashes_.find(cp); it != hashes_.end()) return it->second;
+  // A chunk held shared has its hash made once for the process's replicas.
+  const std::shared_ptr<const Chunk> shared = shared_ ? grid_.shared_chunk(cp) : nullptr;
+  const std::uint64_t h =
+      shared ? shared_->hash_of(shared, e.holding.revision) : chunk_hash(grid_.find_chunk(cp), e.holding.revision);
+  hashes_.try_emplace(cp, h);
+  return h;
 }
 
 std::optional<std::uint64_t> Replica::revision(Vec3i cp) const {
@@ -426,7 +425,7 @@ std::size_t shared_bytes(const Box& box, long holders) {
 ReplicaMemory Replica::memory() const {
   ReplicaMemory m;
   m.full = grid_.memory();
-  m.entry_table_bytes = chunks_.heap_bytes();
+  m.entry_table_bytes = chunks_.heap_bytes() + hashes_.table_bytes();
   chunks_.for_each([&](Vec3i, const Entry& e) {
     if (!e.mip) return;
     ++m.mips;

@@ -7,11 +7,12 @@
 // chunk's own record; never claimed, hashed or edited).
 // Full-resolution voxels live in a Grid (a chunk taken from the process's
 // DecodedChunks is held shared until an update changes it here); per
-// chunk, one entry (in a ChunkTable) holds its holding, its mip voxels and
-// its cached chunk hash. Mips and horizon
-// images are immutable boxes, replaced whole by the next record, so the
-// replicas of one process that hold equal ones share one copy
-// (DecodedMips, through share_decoded); a replica on its own keeps its own.
+// chunk, one entry (in a ChunkTable) holds its holding and its mip (a Full
+// chunk's cached hash is kept apart). Mips (kept as their records' units
+// until a patch changes them) and horizon images (boxes) are immutable,
+// replaced whole by the next record, so the replicas of one process that
+// hold equal ones share one copy (DecodedMips, through share_decoded); a
+// replica on its own keeps its own.
 //
 // Apply functions take parsed messages (protocol/messages.h) whose voxel
 // payloads are still untrusted: every decode error is returned and leaves
@@ -45,7 +46,7 @@ inline constexpr int kNoResolution = -1;
 // other replicas count as their share: bytes / holders.
 struct ReplicaMemory {
   GridMemory full;                     // full-resolution chunks (the Grid)
-  std::size_t entry_table_bytes = 0;   // per chunk held: holding, mip handle, hash (ChunkTable)
+  std::size_t entry_table_bytes = 0;   // per chunk held: holding, mip handle (ChunkTable); Full chunks' hashes
   std::size_t mips = 0;                // mips and estimates held
   std::size_t mip_bytes = 0;           // their voxels
   std::size_t horizon_table_bytes = 0; // per region: holding, image handle, mask
@@ -157,11 +158,6 @@ class Replica {
     // with other replicas (apart, so the table's slots stay small: a
     // replica's tables are read far more than its mips).
     std::shared_ptr<const MipVoxels> mip;
-    // Full or Empty: its chunk hash, computed since the chunk last changed
-    // (a hash is a pass over 32^3 voxels; a client checks the same
-    // unchanged chunks again and again); 0: not computed (a hash that is 0
-    // is computed each time).
-    mutable std::uint64_t hash = 0;
   };
   // A region's horizon image and the chunks it still covers (those not held
   // by a record of their own), which share one holding (Horizon4 or 5).
@@ -197,16 +193,19 @@ class Replica {
   // gone, and its region's horizon image no longer covers it. Every write
   // of grid_ or of an entry calls it (or, holding the entry, entry_changed()).
   void voxels_changed(Vec3i chunk_pos) {
-    if (Entry* e = chunks_.find(chunk_pos)) e->hash = 0;
+    if (!hashes_.empty()) hashes_.erase(chunk_pos);
     if (!horizons_.empty()) forget_horizon(chunk_pos);
   }
-  void entry_changed(Vec3i chunk_pos, Entry& e) {
-    e.hash = 0;
-    if (!horizons_.empty()) forget_horizon(chunk_pos);
-  }
+  void entry_changed(Vec3i chunk_pos, Entry&) { voxels_changed(chunk_pos); }
 
   Grid grid_;
   ChunkTable<Entry> chunks_;  // every chunk held by a record of its own
+  // The chunk hash of Full chunks, computed since the chunk last changed (a
+  // hash is a pass over 32^3 voxels; a client checks the same unchanged
+  // chunks again and again). Apart from the entries: a replica holds a few
+  // hundred Full chunks among thousands of mips and Empty chunks (whose
+  // hash is its revision's, made when asked).
+  mutable Vec3iMap<std::uint64_t> hashes_;
   Vec3iMap<Horizon> horizons_;     // by region
   std::size_t horizon_chunks_ = 0;  // chunks covered by horizons_
   std::uint64_t redundant_mips_ = 0;

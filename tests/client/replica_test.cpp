@@ -274,5 +274,37 @@ TEST(Replica, SurfaceHeightAgreesWithTheVoxelsOfTheColumn) {
   EXPECT_GT(found, 100);
 }
 
+// A replica holds thousands of chunks, most of them mips and Empty chunks:
+// each costs its holding and its mip handle in the table of chunks (no
+// cached hash: only Full chunks keep one, apart), so a block's values stay
+// within 32 bytes a chunk and a quarter of spare capacity.
+TEST(Replica, AChunkHeldCostsItsEntryAloneAndOnlyFullChunksKeepAHash) {
+  Replica r;
+  Box mip;
+  int held = 0;
+  for (int x = 0; x < 16; ++x)
+    for (int z = 0; z < 16; ++z)
+      for (int y = 0; y < 4; ++y, ++held) {
+        const Vec3i cp{x, y, z};
+        if (y < 2) r.apply_stream_record(mip_record(cp, 1, 3, mip, solid(materials::kRock)));
+        else r.apply_stream_record(bare(StreamRecordKind::kEmpty, cp, 1));
+      }
+  const ReplicaMemory empty_and_mips = r.memory();
+  EXPECT_LE(empty_and_mips.entry_table_bytes, static_cast<std::size_t>(held) * 32 * 5 / 4 + 64 * 64)
+      << "per chunk: " << empty_and_mips.entry_table_bytes / held << " bytes";
+  // Hashes asked of Empty chunks are not kept; a Full chunk's is, until it changes.
+  for (int x = 0; x < 16; ++x) EXPECT_EQ(r.hash({x, 3, 0}), chunk_hash(nullptr, 1));
+  EXPECT_EQ(r.memory().entry_table_bytes, empty_and_mips.entry_table_bytes);
+  Box whole;
+  r.apply_stream_record(full_record({0, 0, 0}, 2, whole, solid(materials::kSand)));
+  Chunk sand(materials::kSand);
+  EXPECT_EQ(r.hash({0, 0, 0}), chunk_hash(&sand, 2));
+  EXPECT_GT(r.memory().entry_table_bytes, empty_and_mips.entry_table_bytes);
+  EXPECT_EQ(r.hash({0, 0, 0}), chunk_hash(&sand, 2));
+  r.apply_stream_record(full_record({0, 0, 0}, 3, whole, solid(materials::kMud)));
+  Chunk mud(materials::kMud);
+  EXPECT_EQ(r.hash({0, 0, 0}), chunk_hash(&mud, 3));
+}
+
 }  // namespace
 }  // namespace terrane
