@@ -25,6 +25,20 @@ std::string first_line(std::span<const std::uint8_t> bytes) {
   return out;
 }
 
+// The socket is read into one buffer per thread, not per connection: a
+// process of many clients (terrane-bots) waits for readiness on each
+// socket and reads on a few io threads, and a 64 KiB buffer per
+// connection was a tenth of a bot's memory. The bytes read are consumed
+// (framed, or copied by the emulated link) before the handler returns.
+// The room a connection's FrameReader keeps between frames; a larger
+// frame's is freed once it is read (Connection::feed).
+constexpr std::size_t kKeptFrameBytes = 16 * 1024;
+
+std::span<std::uint8_t> read_buffer() {
+  thread_local std::vector<std::uint8_t> buf(EmulatedLink::kReadChunkBytes);
+  return buf;
+}
+
 }  // namespace
 
 Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
@@ -36,7 +50,6 @@ Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
       delivery_(io_.strand()),
       reconnect_timer_(io_.strand()),
       redirect_timer_(io_.strand()),
-      read_buf_(EmulatedLink::kReadChunkBytes),
       queue_(options_.max_send_queue_bytes),
       link_(options_.emulation),
       redirects_(options_.follow_redirects) {}
@@ -103,6 +116,9 @@ bool Connection::connect_shared(const asio::ip::tcp::resolver::results_type& end
 void Connection::start_session() {
   asio::error_code ec;
   socket_.set_option(asio::ip::tcp::no_delay(true), ec);
+  // Reads happen once the socket is readable (do_read) and must never block
+  // an io thread shared with other connections.
+  socket_.non_blocking(true, ec);
   reader_ = FrameReader();
   HelloMsg hello;
   hello.protocol_version = options_.protocol_version;
@@ -371,17 +387,32 @@ void Connection::arm_keepalive() {
 
 void Connection::do_read() {
   const std::uint64_t gen = generation_;
-  socket_.async_read_some(asio::buffer(read_buf_), [this, gen, g = guard()](const asio::error_code& ec, std::size_t n) {
+  socket_.async_wait(asio::ip::tcp::socket::wait_read, [this, gen, g = guard()](const asio::error_code& wait_ec) {
     if (closed_ || gen != generation_) return;
-    if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
-    last_heard_ = std::chrono::steady_clock::now();
-    handler_.on_bytes_read(n);
-    const std::span<const std::uint8_t> bytes(read_buf_.data(), n);
-    if (link_.active()) {
-      if (link_.carry(bytes, std::chrono::steady_clock::now())) do_read();
-      return arm_delivery();
+    if (wait_ec) return lost(wait_ec.message(), true);
+    // A few reads per wake, as long as bytes are there: bytes that came
+    // while the last were handled are read without another wait (as a
+    // speculative read does), and a busy connection still gives way to
+    // the others.
+    constexpr int kReadsPerWake = 4;
+    const std::span<std::uint8_t> buf = read_buffer();
+    for (int i = 0; i < kReadsPerWake; ++i) {
+      asio::error_code ec;
+      const std::size_t n = socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);
+      if (ec == asio::error::would_block || ec == asio::error::try_again) break;  // nothing more for now
+      if (ec) return lost(ec == asio::error::eof ? "server closed the connection" : ec.message(), true);
+      last_heard_ = std::chrono::steady_clock::now();
+      handler_.on_bytes_read(n);
+      const std::span<const std::uint8_t> bytes(buf.data(), n);
+      if (link_.active()) {
+        const bool more = link_.carry(bytes, std::chrono::steady_clock::now());
+        arm_delivery();
+        if (!more) return;  // (the link reads again once it drains)
+        continue;
+      }
+      if (!feed(bytes) || gen != generation_) return;
     }
-    if (feed(bytes) && gen == generation_) do_read();
+    do_read();
   });
 }
 
@@ -389,13 +420,21 @@ bool Connection::feed(std::span<const std::uint8_t> bytes) {
   // A frame that ends the connection (a Disconnect before a reconnect)
   // makes the rest of these bytes belong to a connection that is gone.
   const std::uint64_t gen = generation_;
+  bool large = false;
   const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
+    large = large || body.size() > kKeptFrameBytes;
     if (closed_ || gen != generation_) return;
     framed_ = true;
     handler_.on_frame(body);
     if (!closed_ && gen == generation_ && redirects_.pending()) follow_when_ready();
   });
   if (gen != generation_) return false;
+  // A large frame's room is not kept for the frames after it: most are
+  // small, and a process of many connections (terrane-bots) kept a stream
+  // batch's worth (64 KiB and more) per connection. Between frames the
+  // reader holds nothing else, so it starts afresh (its error offsets then
+  // count from here).
+  if (st && large && reader_.buffered() == 0) reader_ = FrameReader();
   if (!st) {
     handler_.on_framing_error();
     // Bytes that never made one frame: something else listens there (an

@@ -147,7 +147,6 @@ class Connection {
   bool started_ = false;              // connect() succeeded (caller's thread)
   std::once_flag disconnect_once_;
   FrameReader reader_;
-  std::vector<std::uint8_t> read_buf_;
   SendQueue queue_;
   EmulatedLink link_;
   Redirects redirects_;
