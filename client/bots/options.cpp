@@ -106,7 +106,7 @@ const char* const kBotsHelp =
     "  --measure-from WHEN       ramp-up (default): latencies count from the end of the ramp-up;\n"
     "                            start: from the first connection, so edits and their fan-out\n"
     "                            are measured while the bots join (a join wave)\n"
-    "  --threads N               io threads shared by all bots (default: two per core)\n"
+    "  --threads N               io threads shared by all bots (default: one per core)\n"
     "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
     "                            equal bytes are packed once in this process (default 4096;\n"
     "                            0: each bot packs its own)\n"
@@ -406,7 +406,7 @@ BotLogin bot_login(const BotsOptions& o, int i) {
 }
 
 int io_threads(const BotsOptions& o) {
-  return o.threads > 0 ? o.threads : 2 * std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  return o.threads > 0 ? o.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
 double hash_check_span_s(const BotsOptions& o) {

@@ -78,7 +78,7 @@ struct BotsOptions {
   // full-resolution region), waiting at most this long after the ramp-up;
   // 0: the duration counts from the first connection.
   double join_timeout_s = 0;
-  int threads = 0;             // io threads for all bots; 0: two per core (io_threads)
+  int threads = 0;             // io threads for all bots; 0: one per core (io_threads)
   // Chunks packed from Full records kept for every bot to share (entries;
   // 0: each bot packs its own). Bots near one another receive the same
   // records: packing each once halves what they cost this process.
@@ -120,11 +120,16 @@ inline int shard_bots(const BotsOptions& o) {
 // Between 0.2 and 10 s.
 double hash_check_span_s(const BotsOptions& o);
 
-// The io threads the bots share: threads, or two per core. A bot's handler
-// can run for milliseconds (a stream batch of hundreds of records); with
-// one thread per core every bot behind it on that thread waited, and the
-// bots' own lag was most of the tail they measured (world 1,000: the
-// bots' io lag p95 62-100 ms with one per core, 22-25 ms with two).
+// The io threads the bots share: threads, or one per core. (Two per core
+// were the default while a bot's handler could run for milliseconds: world
+// 1,000's bots' io lag p95 was 62-100 ms with one per core, 22-25 ms with
+// two, 2026-11-26. With bots that decode and pack a record once per
+// process, the extra threads cost more in wake-ups and context switches
+// than they saved: crowd 500, 2026-11-30, two runs each way, bots CPU
+// 36.5-37.2 s and fan-out p99 41-44 ms with one per core against
+// 42.6-44.1 s and 74-110 ms with two; world 1,000 one run each, bots CPU
+// 128.5 against 137.6 s, fan-out p99 33.5 against 28.8 ms, io lag p95
+// 4.5 against 3.9 ms.)
 int io_threads(const BotsOptions& o);
 
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,

@@ -696,10 +696,10 @@ TEST(BotsOptions, ShardsSplitTheBotsAsOneProcessPlansThem) {
             std::string::npos);
 }
 
-TEST(BotsOptions, IoThreadsAreTwoPerCoreUnlessGiven) {
+TEST(BotsOptions, IoThreadsAreOnePerCoreUnlessGiven) {
   BotsOptions o;
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  EXPECT_EQ(io_threads(o), 2 * cores);
+  EXPECT_EQ(io_threads(o), cores);
   ASSERT_EQ(parse_flags({"--connect", "127.0.0.1:7777", "--threads", "3"}, &o), "");
   EXPECT_EQ(io_threads(o), 3);
 }
