@@ -15,7 +15,9 @@
 #          view reaches ungenerated ground; ramp-up N/5 s, and the 60 s
 #          start once every bot has joined (--wait-joined); world:
 #          worlds/world4k (terrane-world generate --world worlds/world4k
-#          --box -2048,-128,-2048,2048,256,2048).
+#          --box -2048,-128,-2048,2048,256,2048). Beyond 1,000 bots
+#          the square and the views outgrow it: world 2000 takes
+#          TERRANE_WORLD=worlds/world6k (--box -3072,-128,-3072,3072,256,3072).
 #   join   the world scenario's joins alone: idle bots (no edits, no
 #          walking) join at 5 a second, then 10 s; the report's "per join"
 #          row is the server's CPU, records and stream bytes per joining
