@@ -25,15 +25,15 @@ std::string first_line(std::span<const std::uint8_t> bytes) {
   return out;
 }
 
+// The room a connection's FrameReader keeps between frames; a larger
+// frame's is freed once it is read (Connection::feed).
+constexpr std::size_t kKeptFrameBytes = 16 * 1024;
+
 // The socket is read into one buffer per thread, not per connection: a
 // process of many clients (terrane-bots) waits for readiness on each
 // socket and reads on a few io threads, and a 64 KiB buffer per
 // connection was a tenth of a bot's memory. The bytes read are consumed
 // (framed, or copied by the emulated link) before the handler returns.
-// The room a connection's FrameReader keeps between frames; a larger
-// frame's is freed once it is read (Connection::feed).
-constexpr std::size_t kKeptFrameBytes = 16 * 1024;
-
 std::span<std::uint8_t> read_buffer() {
   thread_local std::vector<std::uint8_t> buf(EmulatedLink::kReadChunkBytes);
   return buf;

@@ -121,10 +121,7 @@ std::shared_ptr<const MipVoxels> DecodedMips::intern_mip_box(std::size_t key, co
   std::lock_guard lock(m_);
   return intern_in(
       mips_, key,
-      [&](const MipVoxels& known) {
-        Box unused;
-        return !known.encoded() && same_voxels(known.read(unused), voxels);
-      },
+      [&](const MipVoxels& known) { return known.box() != nullptr && same_voxels(*known.box(), voxels); },
       [&] { return std::make_shared<const MipVoxels>(MipVoxels::of_box(voxels)); });
 }
 

@@ -50,6 +50,8 @@ class MipVoxels {
   int side() const { return side_; }
   bool encoded() const { return !unit_.empty(); }
   std::span<const std::uint8_t> unit() const { return unit_; }
+  // The voxels held in box form; null in unit form.
+  const Box* box() const { return encoded() ? nullptr : &box_; }
   // The voxels: the box held, or the unit decoded into scratch.
   const Box& read(Box& scratch) const;
   // Heap bytes, with the object itself.

@@ -28,7 +28,7 @@ struct LastDecoded {
 thread_local LastDecoded last_decoded;
 
 const Box& voxels_of_mip(const std::shared_ptr<const MipVoxels>& mip) {
-  if (!mip->encoded()) return mip->read(last_decoded.voxels);
+  if (const Box* box = mip->box()) return *box;
   const bool same = !last_decoded.mip.owner_before(mip) && !mip.owner_before(last_decoded.mip);
   if (!same || last_decoded.mip.expired()) {
     mip->read(last_decoded.voxels);
@@ -55,7 +55,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       Entry& e = chunks_[cp];
       e.mip.reset();
       e.holding = Holding{HoldingForm::kEmpty, r.revision};
-      entry_changed(cp, e);
+      voxels_changed(cp);
       return;
     }
     case StreamRecordKind::kReleased:
@@ -86,7 +86,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       Entry& e = chunks_[cp];
       e.mip.reset();
       e.holding = Holding{HoldingForm::kFull, r.revision};
-      entry_changed(cp, e);
+      voxels_changed(cp);
       return;
     }
     case StreamRecordKind::kMipPatch: {
@@ -104,7 +104,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       }
       e->mip = keep_mip(patched);
       e->holding.revision = r.revision;
-      entry_changed(cp, *e);
+      voxels_changed(cp);
       return;
     }
     case StreamRecordKind::kMip1:
@@ -118,7 +118,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         e.mip = keep_unit(r);
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
-      entry_changed(cp, e);
+      voxels_changed(cp);
       return;
     }
   }
@@ -251,7 +251,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const Vec3i origin = chunk_origin(cp);
     const Region box{origin + units.box().min, origin + units.box().max};
     if (changed != nullptr) changed->push_back(box);
-    entry_changed(cp, *e);
+    voxels_changed(cp);
     // A chunk held shared: the process's other replicas that held this very
     // chunk and were sent these units may have made the result already
     // (client/shared_updates.h); else it is made here and offered to them.
@@ -259,14 +259,12 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     const std::span<const UnitUpdate> chunk_units(units_in.data() + begin, end - begin);
     std::shared_ptr<const Chunk> base = shared_ && voxels == nullptr ? grid_.shared_chunk(cp) : nullptr;
     const std::size_t key = base ? SharedUpdates::key_of(base.get(), chunk_units) : 0;
-    // The chunk's revision now and after this batch: where its twins are
-    // kept (a Full record of it taken later, or another lineage's result).
-    const std::uint64_t revision_now = e->holding.revision;
-    const auto listed = std::find_if(m.revisions.begin(), m.revisions.end(),
-                                     [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
+    // Twins are kept by position and revision (a Full record of the chunk
+    // taken later, or another lineage's result): base's is the revision
+    // held now, the result's the one this batch lists.
     if (base) {
       if (std::shared_ptr<const Chunk> made =
-              shared_->updates().find(key, base, chunk_units, SharedUpdates::At{cp, revision_now})) {
+              shared_->updates().find(key, base, chunk_units, SharedUpdates::At{cp, e->holding.revision})) {
         grid_.put_shared_chunk(cp, std::move(made));
         begin = end;
         continue;
@@ -287,6 +285,8 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
       });
     }
     if (base) {
+      const auto listed = std::find_if(m.revisions.begin(), m.revisions.end(),
+                                       [&](const ChunkRevisionMsg& r) { return r.chunk_pos == cp; });
       std::shared_ptr<const Chunk> made = grid_.share_chunk(cp);
       std::shared_ptr<const Chunk> hold =
           shared_->updates().add(key, base, chunk_units, made, SharedUpdates::At{cp, listed->revision});
@@ -301,7 +301,7 @@ Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::ve
     Entry* e = chunks_.find(r.chunk_pos);
     if (e == nullptr || !e->holding.full_resolution()) continue;
     e->holding = Holding{HoldingForm::kFull, r.revision};
-    entry_changed(r.chunk_pos, *e);
+    voxels_changed(r.chunk_pos);
   }
   return applied;
 }
@@ -415,10 +415,12 @@ ReplicaMemory& ReplicaMemory::operator+=(const ReplicaMemory& o) {
 }
 
 namespace {
-// A box's heap bytes (with its control block) over its holders.
+// An object's heap bytes (with its shared_ptr control block) over its holders.
+std::size_t shared_bytes(std::size_t bytes, long holders) {
+  return (bytes + 2 * sizeof(long)) / static_cast<std::size_t>(std::max(1L, holders));
+}
 std::size_t shared_bytes(const Box& box, long holders) {
-  return (sizeof(Box) + 2 * sizeof(long) + box.voxel_count() * sizeof(Voxel)) /
-         static_cast<std::size_t>(std::max(1L, holders));
+  return shared_bytes(sizeof(Box) + box.voxel_count() * sizeof(Voxel), holders);
 }
 }  // namespace
 
@@ -429,7 +431,7 @@ ReplicaMemory Replica::memory() const {
   chunks_.for_each([&](Vec3i, const Entry& e) {
     if (!e.mip) return;
     ++m.mips;
-    m.mip_bytes += (e.mip->heap_bytes() + 2 * sizeof(long)) / static_cast<std::size_t>(std::max(1L, e.mip.use_count()));
+    m.mip_bytes += shared_bytes(e.mip->heap_bytes(), e.mip.use_count());
   });
   m.horizon_table_bytes = horizons_.table_bytes();
   for (const auto& [region, h] : horizons_) m.horizon_image_bytes += shared_bytes(*h.image, h.image.use_count());

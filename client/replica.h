@@ -191,12 +191,11 @@ class Replica {
   void forget_horizon(Vec3i chunk_pos);
   // A chunk's voxels, holding or revision changed: its cached hash is
   // gone, and its region's horizon image no longer covers it. Every write
-  // of grid_ or of an entry calls it (or, holding the entry, entry_changed()).
+  // of grid_ or of an entry calls it.
   void voxels_changed(Vec3i chunk_pos) {
     if (!hashes_.empty()) hashes_.erase(chunk_pos);
     if (!horizons_.empty()) forget_horizon(chunk_pos);
   }
-  void entry_changed(Vec3i chunk_pos, Entry&) { voxels_changed(chunk_pos); }
 
   Grid grid_;
   ChunkTable<Entry> chunks_;  // every chunk held by a record of its own

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <functional>
-#include <initializer_list>
 #include <string_view>
 
 namespace terrane {
@@ -35,10 +34,7 @@ bool same_voxels(const Chunk& a, const Chunk& b) {
 }  // namespace
 
 std::size_t SharedUpdates::AtHash::operator()(const At& a) const noexcept {
-  std::size_t h = std::hash<std::uint64_t>{}(a.revision);
-  for (const int c : {a.chunk_pos.x, a.chunk_pos.y, a.chunk_pos.z})
-    h ^= static_cast<std::size_t>(static_cast<std::uint32_t>(c)) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
-  return h;
+  return Vec3iHash{}(a.chunk_pos) ^ std::hash<std::uint64_t>{}(a.revision) * 0x9E3779B97F4A7C15ull;
 }
 
 const SharedUpdates::Entry* SharedUpdates::entry_for(std::size_t key, const std::shared_ptr<const Chunk>& base,
@@ -77,13 +73,16 @@ std::shared_ptr<const Chunk> SharedUpdates::find(std::size_t key, const std::sha
   // (Compared outside the lock: the table serves every io thread.)
   const bool equal = same_voxels(*base, *twin);
   std::lock_guard lock(m_);
-  if (equal) {
-    ++stats_.hits;
-    ++stats_.twins;
-    return result;
+  if (!equal) {
+    ++stats_.misses;
+    return nullptr;
   }
-  ++stats_.misses;
-  return nullptr;
+  ++stats_.hits;
+  ++stats_.twins;
+  // The other replicas holding base find the result by base from here on,
+  // without comparing again.
+  remember(key, base, units, result);
+  return result;
 }
 
 std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shared_ptr<const Chunk>& base,
@@ -105,8 +104,28 @@ std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shar
   // Another lineage's result at this revision, with equal voxels: held
   // instead, so the two lineages are one from here on.
   const bool joined = twin && twin != result && same_voxels(*twin, *result);
-  const std::shared_ptr<const Chunk>& hold = joined ? twin : result;
   std::lock_guard lock(m_);
+  if (joined) {
+    remember(key, base, units, twin);
+    ++stats_.twins;
+    return twin;
+  }
+  remember(key, base, units, result);
+  if (at) {
+    std::weak_ptr<const Chunk>& slot = twins_[*at];
+    if (slot.expired()) slot = result;
+  }
+  if (kept_.size() < kKept) {
+    kept_.push_back(result);
+  } else {
+    kept_[kept_next_] = result;
+    kept_next_ = (kept_next_ + 1) % kKept;
+  }
+  return result;
+}
+
+void SharedUpdates::remember(std::size_t key, const std::shared_ptr<const Chunk>& base,
+                             std::span<const UnitUpdate> units, const std::shared_ptr<const Chunk>& result) {
   auto over = [&] {
     return entries_.size() >= kCapacity || twins_.size() >= kCapacity || units_held_ + units.size() > kMaxUnits;
   };
@@ -121,22 +140,7 @@ std::shared_ptr<const Chunk> SharedUpdates::add(std::size_t key, const std::shar
   units_held_ += units.size();
   e.base = base;
   e.units.assign(units.begin(), units.end());
-  e.result = hold;
-  if (joined) {
-    ++stats_.twins;
-    return hold;
-  }
-  if (at) {
-    std::weak_ptr<const Chunk>& slot = twins_[*at];
-    if (slot.expired()) slot = result;
-  }
-  if (kept_.size() < kKept) {
-    kept_.push_back(result);
-  } else {
-    kept_[kept_next_] = result;
-    kept_next_ = (kept_next_ + 1) % kKept;
-  }
-  return result;
+  e.result = result;
 }
 
 void SharedUpdates::drop_dead() {

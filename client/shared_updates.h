@@ -104,6 +104,10 @@ class SharedUpdates {
   // The entry for key if it is for this very base and these units (under m_).
   const Entry* entry_for(std::size_t key, const std::shared_ptr<const Chunk>& base,
                          std::span<const UnitUpdate> units) const;
+  // Keeps result as what units made of base, under key (under m_; the
+  // table bounded first).
+  void remember(std::size_t key, const std::shared_ptr<const Chunk>& base, std::span<const UnitUpdate> units,
+                const std::shared_ptr<const Chunk>& result);
   // Drops the entries and twins whose chunks died (under m_).
   void drop_dead();
 
