@@ -25,7 +25,8 @@ ByteCause frame_cause(wire::Body type) {
   switch (type) {
     case wire::Body::StreamBatch: return ByteCause::kStream;
     case wire::Body::UpdateBatch: return ByteCause::kUpdate;
-    case wire::Body::Presence: return ByteCause::kPresence;
+    case wire::Body::Presence:
+    case wire::Body::PresenceRecords: return ByteCause::kPresence;
     case wire::Body::ChunkHash: return ByteCause::kHash;
     case wire::Body::Ping:
     case wire::Body::Pong: return ByteCause::kKeepalive;
@@ -277,6 +278,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
+      presence_list_.clear();  // a session's first records name every entry
       linked_ = true;
       ++sessions_;
       server_not_returning_ = false;
@@ -364,6 +366,18 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
               break;
             }
       presence_ = std::move(*p);
+      ++counters_.presence_updates;
+      if (callbacks_.on_presence) after = [this, p = presence_] { callbacks_.on_presence(p); };
+      break;
+    }
+    case wire::Body::PresenceRecords: {
+      auto records = decode_presence_records(parse_presence_records(*m.body_as_PresenceRecords()));
+      if (!records) return fail(records.error());
+      if (auto applied = presence_list_.apply(*records); !applied) return fail(applied.error());
+      // Nearest first, as Presence lists them: from the position last sent
+      // (the server's distances are from the last it received).
+      const Vec3f from = movement_.last() ? movement_.last()->position : Vec3f{};
+      presence_ = presence_list_.nearest_first(from);
       ++counters_.presence_updates;
       if (callbacks_.on_presence) after = [this, p = presence_] { callbacks_.on_presence(p); };
       break;

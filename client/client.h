@@ -49,6 +49,7 @@
 #include "client/view_coverage.h"
 #include "protocol/framing.h"
 #include "protocol/messages.h"
+#include "protocol/presence_records.h"
 
 namespace terrane {
 
@@ -336,6 +337,7 @@ class Client : private ConnectionHandler {
   // The server said it stops without coming back: do not reconnect.
   bool server_not_returning_ = false;
   std::vector<PresenceEntryMsg> presence_;
+  PresenceList presence_list_;  // as the session's PresenceRecords made it
   bool linked_ = false;                               // ClientView::linked
   std::uint64_t sessions_ = 0;                        // ClientView::sessions
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed

@@ -284,6 +284,12 @@ Frame build_presence(std::span<const PresenceEntryMsg> entries) {
   return finish(fbb, wire::CreatePresenceDirect(fbb, &out));
 }
 
+Frame build_presence_records(std::span<const std::uint8_t> records) {
+  FlatBufferBuilder fbb(records.size() + 64);
+  const auto r = fbb.CreateVector(records.data(), records.size());
+  return finish(fbb, wire::CreatePresenceRecords(fbb, r));
+}
+
 Frame build_stream_batch(std::span<const std::uint8_t> records) {
   FlatBufferBuilder fbb(records.size() + 64);
   const auto r = fbb.CreateVector(records.data(), records.size());
@@ -643,6 +649,8 @@ Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m) {
   }
   return out;
 }
+
+std::span<const std::uint8_t> parse_presence_records(const wire::PresenceRecords& m) { return bytes_of(m.records()); }
 
 Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m) {
   const auto records = bytes_of(m.records());

@@ -61,7 +61,8 @@ inline constexpr int kFullRecordUnit = 16;
 // --- message structs ---------------------------------------------------------
 // Hello.features bits. A server sends a feature's messages only to a client
 // that set its bit; bits it does not know are ignored.
-inline constexpr std::uint32_t kFeatureMipPatches = 1u << 0;  // Mip patch stream records (kind 10)
+inline constexpr std::uint32_t kFeatureMipPatches = 1u << 0;       // Mip patch stream records (kind 10)
+inline constexpr std::uint32_t kFeaturePresenceRecords = 1u << 1;  // PresenceRecords instead of Presence
 
 struct HelloMsg {
   std::uint32_t protocol_version = kProtocolVersion;
@@ -179,6 +180,7 @@ struct PresenceEntryMsg {
   std::uint32_t client_id = 0;
   Vec3f position;
   std::string name = {};  // its Hello's client_name; empty from a server that sends none
+  friend bool operator==(const PresenceEntryMsg&, const PresenceEntryMsg&) = default;
 };
 
 // Data messages point into the frame they were parsed from.
@@ -231,6 +233,8 @@ Frame build_read_box(std::uint32_t request_id, const Region& box);
 Frame build_read_box_result(std::uint32_t request_id, const Region& box, std::span<const Voxel> voxels);
 Frame build_read_box_error(std::uint32_t request_id, const Region& box, std::string_view error);
 Frame build_presence(std::span<const PresenceEntryMsg> entries);
+// records: encode_presence_records's bytes (protocol/presence_records.h).
+Frame build_presence_records(std::span<const std::uint8_t> records);
 // records: protocol/stream_batch.h (StreamBatchWriter builds them).
 Frame build_stream_batch(std::span<const std::uint8_t> records);
 // The same frame as build_stream_batch(records' bytes), with records'
@@ -262,6 +266,8 @@ Result<ReadBoxMsg> parse_read_box(const wire::ReadBox& m);
 Result<ReadBoxResultMsg> parse_read_box_result(const wire::ReadBoxResult& m);
 Result<EditRejectMsg> parse_edit_reject(const wire::EditReject& m);
 Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m);
+// The records' bytes (decode_presence_records reads them).
+std::span<const std::uint8_t> parse_presence_records(const wire::PresenceRecords& m);
 // The records of a StreamBatch (non-empty); decode them with decode_stream_batch.
 Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m);
 Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m);

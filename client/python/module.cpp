@@ -73,7 +73,8 @@ PYBIND11_MODULE(_native, m) {
   py::class_<PresenceEvent>(m, "Presence",
                             "The other clients in view, nearest first. The server sends it when the list changes (who "
                             "is in view, or where), at most twice a second (its --presence-hz); never while nothing "
-                            "moves.")
+                            "moves. Places are to an eighth of a voxel; a far client's place is told less often (beyond "
+                            "256 voxels, every 4 s at 2 Hz).")
       .def_property_readonly_static("kind", [](const py::object&) { return "presence"; })
       .def_readonly("players", &PresenceEvent::players, "[Player]: the clients in view now, nearest first.")
       .def_readonly("joined", &PresenceEvent::joined, "[Player]: those in view now and not in the previous Presence.")

@@ -20,9 +20,13 @@ Frame answer_frame(const WorldAnswer& answer) {
           return build_read_box_result(a.request_id, a.box, a.voxels);
         } else if constexpr (std::is_same_v<T, ChunkHashMsg>) {
           return build_chunk_hash(a);
-        } else {
-          static_assert(std::is_same_v<T, PresenceNearby>);
+        } else if constexpr (std::is_same_v<T, PresenceNearby>) {
           return build_presence(a.entries);
+        } else {
+          static_assert(std::is_same_v<T, PresenceChanged>);
+          std::vector<std::uint8_t> records;
+          encode_presence_records(a.records, records);
+          return build_presence_records(records);
         }
       },
       answer);

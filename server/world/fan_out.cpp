@@ -1,6 +1,7 @@
 #include "server/world/fan_out.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "common/world/view.h"
 
@@ -8,10 +9,11 @@ namespace terrane {
 
 FanOut::FanOut(const WorldOptions& options, ServerCounters& counters) : options_(options), counters_(counters) {}
 
-void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link, std::string name) {
+void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link, std::string name, bool presence_records) {
   Client c;
   c.link = std::move(link);
   c.name = std::move(name);
+  c.presence_records = presence_records;
   clients_.emplace(id, std::move(c));
 }
 
@@ -141,6 +143,10 @@ void FanOut::send_presence(std::uint64_t tick) {
     if (!c.placed || (id + tick) % every != 0) continue;
     auto entries =
         presence_.nearest(id, c.position, static_cast<float>(c.view_distance), options_.presence_max_entries);
+    if (c.presence_records) {
+      send_presence_records(c, std::move(entries));
+      continue;
+    }
     // Only when something changed: idle crowds cost nothing.
     auto same = [](const PresenceEntryMsg& a, const PresenceEntryMsg& b) {
       return a.client_id == b.client_id && a.position.x == b.position.x && a.position.y == b.position.y &&
@@ -160,6 +166,49 @@ void FanOut::send_presence(std::uint64_t tick) {
     c.presence = std::move(entries);
     counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);
   }
+}
+
+void FanOut::send_presence_records(Client& c, std::vector<PresenceEntryMsg> entries) {
+  const std::uint64_t turn = c.presence_turns++;
+  std::vector<PresenceRecord> records;
+  std::vector<PresenceKnown> known;
+  known.reserve(entries.size());
+  auto told = [&](std::uint32_t id) {
+    auto it = std::lower_bound(c.known.begin(), c.known.end(), id,
+                               [](const PresenceKnown& k, std::uint32_t v) { return k.client_id < v; });
+    return it != c.known.end() && it->client_id == id ? &*it : nullptr;
+  };
+  for (const PresenceEntryMsg& e : entries) {
+    const Vec3i now = presence_eighths(e.position);
+    const PresenceKnown* before = told(e.client_id);
+    if (before == nullptr) {
+      PresenceRecord r{PresenceRecordKind::kEntered, e.client_id, now, {}};
+      if (auto other = clients_.find(e.client_id); other != clients_.end()) r.name = other->second.name;
+      records.push_back(std::move(r));
+      known.push_back({e.client_id, now});
+      continue;
+    }
+    // A move is told on the entry's turns, fewer the farther it is; one
+    // not told now is told on a later turn (the list keeps the old place).
+    const float dx = e.position.x - c.position.x, dy = e.position.y - c.position.y, dz = e.position.z - c.position.z;
+    const std::uint64_t period = presence_move_period(std::sqrt(dx * dx + dy * dy + dz * dz));
+    if (now != before->eighths && (turn + e.client_id) % period == 0) {
+      records.push_back({PresenceRecordKind::kMoved, e.client_id, now - before->eighths, {}});
+      known.push_back({e.client_id, now});
+    } else {
+      known.push_back(*before);
+    }
+  }
+  std::sort(known.begin(), known.end(), [](const PresenceKnown& a, const PresenceKnown& b) { return a.client_id < b.client_id; });
+  for (const PresenceKnown& k : c.known)
+    if (!std::binary_search(known.begin(), known.end(), k, [](const PresenceKnown& a, const PresenceKnown& b) {
+          return a.client_id < b.client_id;
+        }))
+      records.push_back({PresenceRecordKind::kLeft, k.client_id, {}, {}});
+  c.known = std::move(known);
+  if (records.empty()) return;  // only when something is told: idle crowds cost nothing
+  c.link->answer(PresenceChanged{std::move(records)});
+  counters_.presence_sent.fetch_add(1, std::memory_order_relaxed);
 }
 
 }  // namespace terrane

@@ -37,7 +37,9 @@ class FanOut {
   FanOut(const WorldOptions& options, ServerCounters& counters);
 
   // name: its Hello's, told to the others with its presence.
-  void join(ClientId id, std::shared_ptr<WorldClient> link, std::string name = {});
+  // presence_records: it is told its presence as PresenceRecords (what
+  // changed, a far entry's moves less often) instead of whole lists.
+  void join(ClientId id, std::shared_ptr<WorldClient> link, std::string name = {}, bool presence_records = false);
   // After this nothing more reaches id (the replicator released what it
   // held just before).
   void leave(ClientId id);
@@ -88,7 +90,11 @@ class FanOut {
     Vec3f position;
     std::int32_t view_distance = 0, full_res_radius = 0;
     bool placed = false;
-    std::vector<PresenceEntryMsg> presence;  // last sent
+    std::vector<PresenceEntryMsg> presence;  // last sent (whole lists)
+    bool presence_records = false;
+    // PresenceRecords: the list as the client has it (by id), and its turns.
+    std::vector<PresenceKnown> known;
+    std::uint64_t presence_turns = 0;
     std::vector<VersionPtr> mip_news;        // oldest first
     std::uint64_t mip_news_tick = 0;         // the newest news' tick
     std::chrono::steady_clock::time_point mip_due;
@@ -98,6 +104,8 @@ class FanOut {
     counters_.memory[MemoryPart::kInterest].store(static_cast<std::int64_t>(interest_.memory_bytes()),
                                                   std::memory_order_relaxed);
   }
+  // c's presence turn as PresenceRecords: what changed since it was told.
+  void send_presence_records(Client& c, std::vector<PresenceEntryMsg> entries);
   // Hands c its mip news now, whenever it was due.
   static void hand_mip_news(Client& c);
 

@@ -14,6 +14,20 @@
 
 namespace terrane {
 
+// An entry of a presence list as its client was told it (PresenceRecords):
+// the position in eighths of a voxel (presence_eighths).
+struct PresenceKnown {
+  std::uint32_t client_id = 0;
+  Vec3i eighths;
+};
+
+// Every how many of a client's presence turns an entry this far from it
+// has its move told (PROTOCOL.md, "Presence records"): 1 within 64 voxels,
+// 2 within 128, 4 within 256, 8 beyond.
+inline std::uint64_t presence_move_period(float distance) {
+  return distance < 64 ? 1 : distance < 128 ? 2 : distance < 256 ? 4 : 8;
+}
+
 class PresenceGrid {
  public:
   static constexpr std::int32_t kCell = 128;

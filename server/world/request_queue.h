@@ -29,6 +29,7 @@ struct JoinRequest {
   std::string name;
   std::shared_ptr<WorldClient> link;
   bool identified = false;  // the name is proven the player's (Admission::identified)
+  bool presence_records = false;  // it takes PresenceRecords (Hello.features)
 };
 struct LeaveRequest {};
 struct MovedRequest {

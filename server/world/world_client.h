@@ -16,6 +16,7 @@
 #include "server/base/chunk_version.h"
 #include "server/base/counters.h"
 #include "protocol/messages.h"
+#include "protocol/presence_records.h"
 #include "server/world/interest.h"
 
 namespace terrane {
@@ -32,6 +33,11 @@ struct EditAcked {
 struct PresenceNearby {
   std::vector<PresenceEntryMsg> entries;
 };
+// What changed in that list since the client was last told, for a client
+// that takes PresenceRecords (the PresenceRecords message).
+struct PresenceChanged {
+  std::vector<PresenceRecord> records;
+};
 
 // What the world answers one client with: an edit applied (EditAcked) or
 // refused (EditRejectMsg; with a box, the true state of what the edit would
@@ -39,7 +45,8 @@ struct PresenceNearby {
 // (ReadBoxResultMsg), a chunk's hash (ChunkHashMsg), presence. The world
 // only says what; the client's replicator makes the frame and picks its
 // send class (server/replication/world_answers.h).
-using WorldAnswer = std::variant<EditAcked, EditRejectMsg, ReadBoxResultMsg, ChunkHashMsg, PresenceNearby>;
+using WorldAnswer =
+    std::variant<EditAcked, EditRejectMsg, ReadBoxResultMsg, ChunkHashMsg, PresenceNearby, PresenceChanged>;
 
 // What the world needs of a connected client. Each call is made on the
 // world strand; implementations post to the client's own strand.

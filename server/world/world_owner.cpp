@@ -44,8 +44,9 @@ void WorldOwner::stop() { tick_.stop(); }
 
 // --- the request queue ---------------------------------------------------------
 
-void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified) {
-  requests_.push(WorldRequest{id, {}, JoinRequest{std::move(name), std::move(client), identified}});
+void WorldOwner::join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified,
+                      bool presence_records) {
+  requests_.push(WorldRequest{id, {}, JoinRequest{std::move(name), std::move(client), identified, presence_records}});
 }
 
 void WorldOwner::leave(ClientId id) { requests_.push(WorldRequest{id, {}, LeaveRequest{}}); }
@@ -82,7 +83,7 @@ void WorldOwner::handle(WorldRequest& r) {
           horizons_.want(r.id, what);
         } else if constexpr (std::is_same_v<T, JoinRequest>) {
           tick_.join(r.id, what.name, what.identified);
-          fan_out_.join(r.id, std::move(what.link), std::move(what.name));
+          fan_out_.join(r.id, std::move(what.link), std::move(what.name), what.presence_records);
         } else if constexpr (std::is_same_v<T, LeaveRequest>) {
           // The replicator released what it held or had asked for just
           // before; after this nothing more is granted to id. Its queued

@@ -80,8 +80,10 @@ class WorldOwner {
   void stop();
 
   // identified: the name is proven the player's (its undo history then
-  // outlives the session: Tick, ParkedHistories).
-  void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified = false);
+  // outlives the session: Tick, ParkedHistories). presence_records: it
+  // takes PresenceRecords (kFeaturePresenceRecords) for Presence.
+  void join(ClientId id, std::string name, std::shared_ptr<WorldClient> client, bool identified = false,
+            bool presence_records = false);
   void leave(ClientId id);
   void moved(ClientId id, Vec3f position, std::int32_t view_distance, std::int32_t full_res_radius);
   // Streaming's requests (queued after the join, with it).

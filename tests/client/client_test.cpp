@@ -416,27 +416,42 @@ TEST_F(ClientServerTest, EveryEditKindReplicatesExactly) {
   b.disconnect();
 }
 
+// Both ways a server tells presence: PresenceRecords (the library's
+// default: positions in eighths of a voxel) and whole Presence lists.
 TEST_F(ClientServerTest, PresenceShowsTheOtherClient) {
   start_server({"--presence-hz", "10"});
-  Client a(options("a")), b(options("b"));
-  std::string err;
-  ASSERT_TRUE(a.connect(&err)) << err;
-  ASSERT_TRUE(b.connect(&err)) << err;
-  wait_full_res(b, 32);
-  ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.presence.size() == 1 || v.closed; }, kDeadline));
-  const auto w = b.welcome();
-  ASSERT_TRUE(w.has_value());
-  EXPECT_EQ(a.presence().at(0).position, w->spawn);
-  EXPECT_EQ(a.presence().at(0).name, "b");
-  // b moves: its entry comes again without its name (told once, when it
-  // entered a's list), and a's presence keeps the name.
-  ClientStateMsg st = *b.last_state();
-  st.position.x += 3;
-  ASSERT_TRUE(b.set_state(st));
-  ASSERT_TRUE(a.wait_until(
-      [&](const ClientView& v) { return (v.presence.size() == 1 && v.presence[0].position == st.position) || v.closed; },
-      kDeadline));
-  EXPECT_EQ(a.presence().at(0).name, "b");
+  for (const bool records : {true, false}) {
+    SCOPED_TRACE(records ? "PresenceRecords" : "Presence lists");
+    ClientOptions ao = options("a");
+    if (!records) ao.features &= ~kFeaturePresenceRecords;
+    auto as_told = [&](Vec3f p) { return records ? presence_position(presence_eighths(p)) : p; };
+    Client a(ao), b(options("b"));
+    std::string err;
+    ASSERT_TRUE(a.connect(&err)) << err;
+    ASSERT_TRUE(b.connect(&err)) << err;
+    wait_full_res(b, 32);
+    ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.presence.size() == 1 || v.closed; }, kDeadline));
+    const auto w = b.welcome();
+    ASSERT_TRUE(w.has_value());
+    EXPECT_EQ(a.presence().at(0).position, as_told(w->spawn));
+    EXPECT_EQ(a.presence().at(0).name, "b");
+    // b moves: its entry comes again without its name (told once, when it
+    // entered a's list), and a's presence keeps the name.
+    ClientStateMsg st = *b.last_state();
+    st.position.x += 3.3f;
+    ASSERT_TRUE(b.set_state(st));
+    ASSERT_TRUE(a.wait_until(
+        [&](const ClientView& v) {
+          return (v.presence.size() == 1 && v.presence[0].position == as_told(st.position)) || v.closed;
+        },
+        kDeadline));
+    EXPECT_EQ(a.presence().at(0).name, "b");
+    // b leaves: a's list empties.
+    b.disconnect();
+    ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.presence.empty() || v.closed; }, kDeadline));
+    EXPECT_FALSE(a.closed());
+    a.disconnect();
+  }
 }
 
 TEST_F(ClientServerTest, EditByOneClientReachesTheOther) {

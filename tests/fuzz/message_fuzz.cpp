@@ -9,6 +9,7 @@
 #include "common/codec/net_codec.h"
 #include "common/codec/update_batch.h"
 #include "protocol/messages.h"
+#include "protocol/presence_records.h"
 #include "protocol/stream_batch.h"
 
 namespace {
@@ -27,6 +28,12 @@ void decode_payloads(const wire::Message& m) {
       if (auto r = parse_stream_batch(*m.body_as_StreamBatch())) {
         StreamDecodeScratch scratch;
         (void)decode_stream_batch(*r, scratch, [](const StreamRecord&) -> Status { return Ok{}; });
+      }
+      break;
+    case wire::Body::PresenceRecords:
+      if (auto r = decode_presence_records(parse_presence_records(*m.body_as_PresenceRecords()))) {
+        PresenceList list;
+        (void)list.apply(*r);
       }
       break;
     default:

@@ -193,5 +193,96 @@ TEST_F(FanOutTest, PresenceNamesTheClients) {
   EXPECT_EQ(later[3].entries[0].name, "builder");
 }
 
+// PresenceRecords: a client told what changed keeps, by applying them, the
+// list a whole-list client is sent (positions in eighths); the near
+// entries' moves come every turn, the far ones' on their turns, and an
+// entry that stopped is told where it stopped within 8 turns.
+TEST_F(FanOutTest, PresenceRecordsKeepTheListAWholeListClientIsSent) {
+  options_.tick_hz = 1;
+  options_.presence_hz = 1;  // every client every tick
+  auto told = std::make_shared<RecordingClient>();
+  auto whole = std::make_shared<RecordingClient>();
+  fan_out_.join(1, told, "told", true);
+  fan_out_.join(2, whole, "whole");
+  fan_out_.moved(1, Vec3f{0, 10, 0}, 1000, 32);
+  fan_out_.moved(2, Vec3f{0, 10, 0}, 1000, 32);
+  // Others: near (within 64), middling (128..256) and far (over 256).
+  const ClientId near = 10, mid = 11, far = 12;
+  for (ClientId id : {near, mid, far}) fan_out_.join(id, std::make_shared<RecordingClient>(), "bot" + std::to_string(id));
+  auto place = [&](float step) {
+    fan_out_.moved(near, Vec3f{20 + step, 10, 0}, 64, 32);
+    fan_out_.moved(mid, Vec3f{200 + step, 10, 0}, 64, 32);
+    fan_out_.moved(far, Vec3f{600 + step, 10.3f, 0}, 64, 32);
+  };
+  PresenceList list;
+  std::size_t applied = 0;
+  auto apply = [&] {
+    const auto got = told->answered<PresenceChanged>();
+    for (; applied < got.size(); ++applied) ASSERT_TRUE(list.apply(got[applied].records).ok());
+  };
+  // The two see each other: the others, their ids and places (a whole
+  // list names an entry only when it enters).
+  auto others = [](std::vector<PresenceEntryMsg> e) {
+    std::erase_if(e, [](const PresenceEntryMsg& x) { return x.client_id == 1 || x.client_id == 2; });
+    for (auto& x : e) x.name.clear();
+    return e;
+  };
+  auto expected = [&] {
+    auto e = whole->answered<PresenceNearby>().back().entries;
+    for (auto& x : e) x.position = presence_position(presence_eighths(x.position));
+    return others(e);
+  };
+  std::uint64_t tick = 1;
+  place(0);
+  fan_out_.send_presence(tick++);
+  apply();
+  const auto first = told->answered<PresenceChanged>();
+  ASSERT_EQ(first.size(), 1u);
+  for (const PresenceRecord& r : first[0].records) {
+    EXPECT_EQ(r.kind, PresenceRecordKind::kEntered);
+    EXPECT_EQ(r.name, r.client_id == 2 ? "whole" : "bot" + std::to_string(r.client_id))
+        << "the first records name every entry";
+  }
+  // On the move: the near one is told every turn, the far one on one turn in 8.
+  std::size_t near_moves = 0, far_moves = 0;
+  for (int turn = 0; turn < 16; ++turn) {
+    place(static_cast<float>(turn + 1));
+    const std::size_t before = told->answered<PresenceChanged>().size();
+    fan_out_.send_presence(tick++);
+    apply();
+    const auto got = told->answered<PresenceChanged>();
+    for (std::size_t i = before; i < got.size(); ++i)
+      for (const PresenceRecord& r : got[i].records) {
+        EXPECT_EQ(r.kind, PresenceRecordKind::kMoved);
+        EXPECT_TRUE(r.name.empty());
+        near_moves += r.client_id == near;
+        far_moves += r.client_id == far;
+      }
+  }
+  EXPECT_EQ(near_moves, 16u);
+  EXPECT_EQ(far_moves, 2u);
+  // They stop: within 8 turns the list is the whole list's, exactly.
+  for (int turn = 0; turn < 8; ++turn) {
+    fan_out_.send_presence(tick++);
+    apply();
+  }
+  EXPECT_EQ(others(list.nearest_first(Vec3f{0, 10, 0})), expected());
+  const std::size_t settled = told->answered<PresenceChanged>().size();
+  fan_out_.send_presence(tick++);
+  EXPECT_EQ(told->answered<PresenceChanged>().size(), settled) << "nothing changed, nothing sent";
+  // One leaves the view: it is told at once, without waiting for a turn.
+  fan_out_.moved(far, Vec3f{5000, 10, 0}, 64, 32);
+  fan_out_.send_presence(tick++);
+  apply();
+  ASSERT_EQ(told->answered<PresenceChanged>().size(), settled + 1);
+  const auto last = told->answered<PresenceChanged>().back().records;
+  ASSERT_EQ(last.size(), 1u);
+  EXPECT_EQ(last[0].kind, PresenceRecordKind::kLeft);
+  EXPECT_EQ(last[0].client_id, far);
+  EXPECT_EQ(others(list.nearest_first(Vec3f{0, 10, 0})), expected());
+  EXPECT_TRUE(whole->answered<PresenceChanged>().empty()) << "a client that did not ask for records gets lists";
+}
+
 }  // namespace
 }  // namespace terrane
+
