@@ -55,7 +55,25 @@ class Recorder : public testing_support::RecordingClient {
         std::count_if(answers.begin(), answers.end(), [](const WorldAnswer& a) { return std::holds_alternative<T>(a); }));
   }
 
+  // While held, a grant keeps the world strand until let go (held_now
+  // says one does): requests queue up behind it.
+  void granted(std::vector<VersionPtr> versions) override {
+    RecordingClient::granted(std::move(versions));
+    std::unique_lock lock(m);
+    if (!hold_grants) return;
+    held_now = true;
+    cv.notify_all();
+    cv.wait(lock, [&] { return !hold_grants; });
+    held_now = false;
+  }
+  void let_go() {
+    std::lock_guard lock(m);
+    hold_grants = false;
+    cv.notify_all();
+  }
+
   std::int64_t grants_at_first_ack = -1;  // grants received when the first EditAck came
+  bool hold_grants = false, held_now = false;
 };
 
 class WorldOwnerTest : public ::testing::Test {
@@ -216,9 +234,22 @@ TEST_F(WorldOwnerTest, ATickRunsBetweenSlicesOfQueuedRequestsNotBehindThemAll) {
   // edit is first seen applied. (Its acknowledgement follows the commit on
   // the writer thread, which a loaded machine may delay past the last
   // grant: no measure of the strand.)
+  // The strand is held (in a grant) while they are queued, so none is
+  // served before the edit is queued behind them all.
   constexpr std::size_t kRequests = 200000;
-  for (std::size_t i = 0; i < kRequests; ++i) owner_->want(1, {{a, true}});
+  {
+    std::lock_guard lock(c->m);
+    c->hold_grants = true;
+  }
+  struct LetGo {
+    Recorder& r;
+    ~LetGo() { r.let_go(); }  // also when an assertion ends the test early
+  } let_go{*c};
+  owner_->want(1, {{a, true}});
+  ASSERT_TRUE(c->wait([](Recorder& r) { return r.held_now; }));
+  for (std::size_t i = 1; i < kRequests; ++i) owner_->want(1, {{a, true}});
   owner_->edit(1, fill(1, Region{{1001, 1, 1001}, {1002, 2, 1002}}, materials::kBrick));
+  c->let_go();
   std::optional<std::size_t> grants_when_applied;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (!grants_when_applied && std::chrono::steady_clock::now() < deadline)
