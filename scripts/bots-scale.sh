@@ -35,7 +35,8 @@
 # (A first argument that is a number means crowd.) Expects a release build.
 # TERRANE_SCALE_TOKEN=T runs the server with --auth-token T and every bot
 # with --token T (authentication on; limits are always on at their
-# defaults); TERRANE_SERVER_FLAGS adds server flags.
+# defaults); TERRANE_SERVER_FLAGS adds server flags; TERRANE_BOTS names
+# another terrane-bots binary (another build's, to compare the two).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scenario=crowd
@@ -92,7 +93,7 @@ status=0
 # The bots' own peak memory and CPU, when GNU time is installed.
 timer=()
 [ -x /usr/bin/time ] && timer=(/usr/bin/time -f "bots: peak RSS %M KiB; CPU %U s user + %S s sys over %e s wall")
-"${timer[@]}" ./build/bin/terrane-bots --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" \
+"${timer[@]}" "${TERRANE_BOTS:-./build/bin/terrane-bots}" --connect "127.0.0.1:$port" --server-metrics "127.0.0.1:$metrics_port" \
   "${scenario_flags[@]}" --bots "$bots" --progress off --report "$report" "${token_flags[@]}" "$@" || status=$?
 
 cpu1=$(terrane_cpu_seconds "$server_pid")

@@ -4,7 +4,8 @@
 #   terrane_scratch NAME          a scratch directory in $scratch, removed on exit
 #                                 (with the server, if one is running)
 #   terrane_start_server LOG ARGS...
-#                                 starts build/bin/terrane-server ARGS (add
+#                                 starts build/bin/terrane-server (or
+#                                 $TERRANE_SERVER, another build's) ARGS (add
 #                                 --port 0), waits until it listens, sets
 #                                 $server_pid, $server_port and, with --metrics,
 #                                 $metrics_port; exits 1 with the log if it
@@ -34,7 +35,7 @@ terrane_start_server() {
   shift
   local wants_metrics=0 arg
   for arg in "$@"; do [ "$arg" = --metrics ] && wants_metrics=1; done
-  ./build/bin/terrane-server "$@" >"$log" 2>&1 &
+  "${TERRANE_SERVER:-./build/bin/terrane-server}" "$@" >"$log" 2>&1 &
   server_pid=$!
   server_port=
   metrics_port=
