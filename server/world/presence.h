@@ -51,7 +51,13 @@ class PresenceGrid {
   };
   static Cell cell_of(Vec3f p);
 
-  std::unordered_map<Cell, std::vector<ClientId>, CellHash> cells_;
+  // Each cell's clients with their positions (a query reads them there,
+  // without a lookup each), and where each client is.
+  struct Placed {
+    ClientId id;
+    Vec3f position;
+  };
+  std::unordered_map<Cell, std::vector<Placed>, CellHash> cells_;
   std::unordered_map<ClientId, Vec3f> where_;
 };
 

@@ -161,6 +161,11 @@ TEST(PresenceGrid, NearestFirstWithinTheRadiusAcrossCells) {
   near = g.nearest(1, {0, 0, 0}, 300, 10);
   ASSERT_EQ(near.size(), 2u);
   EXPECT_EQ(near[0].client_id, 2u);
+  // A move within its cell: the entry's position follows.
+  g.place(2, {110, 0, 0});
+  near = g.nearest(1, {0, 0, 0}, 300, 10);
+  ASSERT_EQ(near.size(), 2u);
+  EXPECT_EQ(near[0].position, (Vec3f{110, 0, 0}));
 }
 
 }  // namespace
