@@ -278,7 +278,10 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
       welcome_ = *w;
-      presence_list_.clear();  // a session's first records name every entry
+      // A new session's list starts empty (its first records or list name
+      // every entry): the last session's entries are no longer known.
+      presence_list_.clear();
+      presence_.clear();
       linked_ = true;
       ++sessions_;
       server_not_returning_ = false;

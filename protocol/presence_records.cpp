@@ -15,6 +15,7 @@ constexpr std::int64_t kMaxEighths = std::int64_t{kMaxWireCoordinate} * 8;
 DecodeError cut_short(std::size_t at) { return {DecodeErrorCode::kTruncated, at, "presence records: cut short"}; }
 
 std::int32_t eighths_of(float v) {
+  if (!std::isfinite(v)) return 0;  // (positions are checked finite where they come in)
   const double e = std::round(static_cast<double>(v) * 8.0);  // halves away from zero
   return static_cast<std::int32_t>(std::clamp<double>(e, -static_cast<double>(kMaxEighths),
                                                       static_cast<double>(kMaxEighths)));
@@ -48,9 +49,11 @@ Result<std::vector<PresenceRecord>> decode_presence_records(std::span<const std:
   std::size_t pos = 0;
   auto varint = [&](std::uint64_t& v) -> Status {
     const std::size_t at = pos;
-    const VarintRead r = get_varint(bytes, pos, 10, v);
+    // Five bytes hold every value the format has (a head is under 2^34),
+    // so no bits are dropped unseen.
+    const VarintRead r = get_varint(bytes, pos, 5, v);
     if (r == VarintRead::kTruncated) return cut_short(at);
-    if (r == VarintRead::kTooLong) return DecodeError{DecodeErrorCode::kInvalidValue, at, "presence records: varint longer than 64 bits"};
+    if (r == VarintRead::kTooLong) return DecodeError{DecodeErrorCode::kInvalidValue, at, "presence records: varint longer than 5 bytes"};
     return Ok{};
   };
   std::uint64_t count = 0;
@@ -92,9 +95,11 @@ Result<std::vector<PresenceRecord>> decode_presence_records(std::span<const std:
         return DecodeError{DecodeErrorCode::kOverLimit, pos - 1, "presence records: name longer than 64 bytes"};
       if (bytes.size() - pos < n) return cut_short(pos);
       r.name.assign(reinterpret_cast<const char*>(bytes.data() + pos), n);
-      if (std::any_of(r.name.begin(), r.name.end(),
-                      [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
-        return DecodeError{DecodeErrorCode::kInvalidValue, pos, "presence records: name with a control character"};
+      const auto bad = std::find_if(r.name.begin(), r.name.end(),
+                                    [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; });
+      if (bad != r.name.end())
+        return DecodeError{DecodeErrorCode::kInvalidValue, pos + static_cast<std::size_t>(bad - r.name.begin()),
+                           "presence records: name with a control character"};
       pos += n;
     }
     out.push_back(std::move(r));

@@ -1,7 +1,8 @@
 // Presence records (PROTOCOL.md, "Presence records"): what changed in a
 // client's presence list since the last message, as bytes, for a client
 // that set kFeaturePresenceRecords. Positions are in eighths of a voxel
-// (presence_eighths), so the list a client keeps is exactly the server's.
+// (presence_eighths), so a client's list holds exactly the positions the
+// server told (a far entry's may be up to 8 turns old).
 //
 // encode_presence_records and decode_presence_records are the format;
 // PresenceList is the list a client keeps and applies them to (the checks
@@ -52,8 +53,9 @@ class PresenceList {
     Vec3i eighths;
     std::string name;
   };
-  // Applies one message's records (all or none): a decode error names the
-  // first that does not fit the list.
+  // Applies one message's records (all or none); the list may not exceed
+  // 64 entries once all are applied. An error's offset is the index of the
+  // record that does not fit the list (or the count, for too many).
   Status apply(std::span<const PresenceRecord> records);
   const std::vector<Entry>& entries() const { return entries_; }
   void clear() { entries_.clear(); }

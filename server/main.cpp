@@ -110,6 +110,7 @@ constexpr const char* kHelp =
     "                              whole regions at 2^3 or 1 voxel per chunk (horizon images)\n"
     "  --no-mip-patches            refresh a changed mip whole, never as a patch of its changed\n"
     "                              4^3 sub-units (clients that take patches say so in Hello)\n"
+    "  --no-presence-records       send whole Presence lists, never PresenceRecords (what changed)\n"
     "  --resident-chunks N         chunks kept loaded beyond those held at full resolution or\n"
     "                              being edited; the least recently used go first (default 32768)\n"
     "  --auth-token T              require this shared token in Hello\n"
@@ -194,7 +195,8 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "log-level", "backup-every", "backup-keep", "backup-dir", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-mip-patches", "no-thread-priorities"});
+                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-mip-patches", "no-presence-records",
+                  "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
   if (cl.has("config"))
@@ -264,6 +266,7 @@ int run(int argc, char** argv) {
   o.replication.horizon_estimates = !cl.flag("exact-horizon");
   o.replication.horizon_images = !cl.flag("no-horizon-images");
   o.replication.mip_patches = !cl.flag("no-mip-patches");
+  o.replication.presence_records = !cl.flag("no-presence-records");
   o.thread_priorities = !cl.flag("no-thread-priorities");
   o.world.edits_per_second = static_cast<double>(cl.get_int("edits-per-second", 20, 0, 100000, &err));
   o.replication.max_edit_voxels = cl.get_int("max-edit-voxels", kMaxEditVolume, 1, kMaxEditVolume, &err);

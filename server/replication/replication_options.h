@@ -39,6 +39,9 @@ struct ReplicationOptions {
   // 4^3 sub-units) to a client that takes them (Hello.features), when the
   // patch is smaller than the mip; false: always the whole mip.
   bool mip_patches = true;
+  // Presence goes as PresenceRecords to a client that takes them
+  // (Hello.features); false: whole Presence lists to every client.
+  bool presence_records = true;
   // Per-client limits (0 = unlimited where a rate). A move faster than
   // max_speed (plus kSpeedSlackVoxels, replication/move_limit.h)
   // disconnects the client; an edit over max_edit_voxels is rejected. (The

@@ -94,7 +94,8 @@ void Replicator::join(const std::string& name, bool identified, std::uint32_t fe
   joined_ = true;
   redirect_.joined(std::chrono::steady_clock::now());
   state_.position = welcome_.welcome.spawn;
-  world_.join(id_, name_, shared_from_this(), identified, (features & kFeaturePresenceRecords) != 0);
+  world_.join(id_, name_, shared_from_this(), identified,
+              (features & kFeaturePresenceRecords) != 0 && options_.presence_records);
   hashes_.start(std::chrono::steady_clock::now());
   arm_timer();
 }

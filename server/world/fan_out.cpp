@@ -170,9 +170,18 @@ void FanOut::send_presence(std::uint64_t tick) {
 
 void FanOut::send_presence_records(Client& c, std::vector<PresenceEntryMsg> entries) {
   const std::uint64_t turn = c.presence_turns++;
-  std::vector<PresenceRecord> records;
+  std::vector<PresenceRecord> records;  // those that left first, then in list order
   std::vector<PresenceKnown> known;
   known.reserve(entries.size());
+  {
+    std::vector<std::uint32_t> now;
+    now.reserve(entries.size());
+    for (const PresenceEntryMsg& e : entries) now.push_back(e.client_id);
+    std::sort(now.begin(), now.end());
+    for (const PresenceKnown& k : c.known)
+      if (!std::binary_search(now.begin(), now.end(), k.client_id))
+        records.push_back({PresenceRecordKind::kLeft, k.client_id, {}, {}});
+  }
   auto told = [&](std::uint32_t id) {
     auto it = std::lower_bound(c.known.begin(), c.known.end(), id,
                                [](const PresenceKnown& k, std::uint32_t v) { return k.client_id < v; });
@@ -200,11 +209,6 @@ void FanOut::send_presence_records(Client& c, std::vector<PresenceEntryMsg> entr
     }
   }
   std::sort(known.begin(), known.end(), [](const PresenceKnown& a, const PresenceKnown& b) { return a.client_id < b.client_id; });
-  for (const PresenceKnown& k : c.known)
-    if (!std::binary_search(known.begin(), known.end(), k, [](const PresenceKnown& a, const PresenceKnown& b) {
-          return a.client_id < b.client_id;
-        }))
-      records.push_back({PresenceRecordKind::kLeft, k.client_id, {}, {}});
   c.known = std::move(known);
   if (records.empty()) return;  // only when something is told: idle crowds cost nothing
   c.link->answer(PresenceChanged{std::move(records)});

@@ -417,13 +417,18 @@ TEST_F(ClientServerTest, EveryEditKindReplicatesExactly) {
 }
 
 // Both ways a server tells presence: PresenceRecords (the library's
-// default: positions in eighths of a voxel) and whole Presence lists.
+// default: positions in eighths of a voxel) and whole Presence lists (to a
+// client that does not ask for records, or from a server run with
+// --no-presence-records).
 TEST_F(ClientServerTest, PresenceShowsTheOtherClient) {
-  start_server({"--presence-hz", "10"});
-  for (const bool records : {true, false}) {
-    SCOPED_TRACE(records ? "PresenceRecords" : "Presence lists");
+  for (const char* way : {"records", "lists", "server-off"}) {
+    SCOPED_TRACE(way);
+    const bool records = std::string(way) == "records";
+    std::vector<std::string> flags{"--presence-hz", "10"};
+    if (std::string(way) == "server-off") flags.push_back("--no-presence-records");
+    start_server(flags);
     ClientOptions ao = options("a");
-    if (!records) ao.features &= ~kFeaturePresenceRecords;
+    if (std::string(way) == "lists") ao.features &= ~kFeaturePresenceRecords;
     auto as_told = [&](Vec3f p) { return records ? presence_position(presence_eighths(p)) : p; };
     Client a(ao), b(options("b"));
     std::string err;
@@ -450,7 +455,11 @@ TEST_F(ClientServerTest, PresenceShowsTheOtherClient) {
     b.disconnect();
     ASSERT_TRUE(a.wait_until([](const ClientView& v) { return v.presence.empty() || v.closed; }, kDeadline));
     EXPECT_FALSE(a.closed());
+    const auto& by_type = a.counters().by_message_type;
+    EXPECT_EQ(by_type[static_cast<std::size_t>(wire::Body::PresenceRecords)].frames_in != 0, records);
+    EXPECT_EQ(by_type[static_cast<std::size_t>(wire::Body::Presence)].frames_in != 0, !records);
     a.disconnect();
+    server_.reset();
   }
 }
 

@@ -66,7 +66,7 @@ TEST(PresenceRecords, MalformedRecordsAreRefusedWithWhatAndWhere) {
   refused({1, 4 * 5 + 3}, DecodeErrorCode::kInvalidValue, 1);                  // kind 3
   refused({2, 4 * 5 + 2, 4 * 5 + 2}, DecodeErrorCode::kInvalidValue, 2);       // a client twice
   refused({1, 4 * 5 + 1, 0, 0, 0, 65}, DecodeErrorCode::kOverLimit, 5);        // a name of 65 bytes
-  refused({1, 4 * 5 + 1, 0, 0, 0, 2, 'a', 0x7f}, DecodeErrorCode::kInvalidValue, 6);  // a control character
+  refused({1, 4 * 5 + 1, 0, 0, 0, 2, 'a', 0x7f}, DecodeErrorCode::kInvalidValue, 7);  // a control character
   refused({0xC1, 0x01}, DecodeErrorCode::kOverLimit, 0);                       // 193 records
   // A client id over 32 bits.
   std::vector<std::uint8_t> big;
@@ -78,9 +78,10 @@ TEST(PresenceRecords, MalformedRecordsAreRefusedWithWhatAndWhere) {
   put_varint(zigzag((std::int64_t{1} << 27) + 1), far);
   far.insert(far.end(), {0, 0, 0});
   refused(far, DecodeErrorCode::kInvalidValue, 2);
-  // Ten bytes with the top bit: no varint.
-  std::vector<std::uint8_t> endless(11, 0x80);
+  // A varint of more than 5 bytes (its bits above the 35th would be lost).
+  std::vector<std::uint8_t> endless(7, 0x80);
   endless[0] = 1;
+  endless[6] = 0x02;
   refused(endless, DecodeErrorCode::kInvalidValue, 1);
 }
 

@@ -283,6 +283,35 @@ TEST_F(FanOutTest, PresenceRecordsKeepTheListAWholeListClientIsSent) {
   EXPECT_TRUE(whole->answered<PresenceChanged>().empty()) << "a client that did not ask for records gets lists";
 }
 
+// A full list whose nearest changes: the one that left is told first, so
+// the list never holds more than its maximum, even between two records.
+TEST_F(FanOutTest, PresenceRecordsTellWhoLeftFirst) {
+  options_.tick_hz = 1;
+  options_.presence_hz = 1;
+  options_.presence_max_entries = 1;
+  auto told = std::make_shared<RecordingClient>();
+  fan_out_.join(1, told, "told", true);
+  fan_out_.join(2, std::make_shared<RecordingClient>(), "far");
+  fan_out_.join(3, std::make_shared<RecordingClient>(), "near");
+  fan_out_.moved(1, Vec3f{0, 10, 0}, 500, 32);
+  fan_out_.moved(2, Vec3f{40, 10, 0}, 64, 32);
+  fan_out_.send_presence(1);
+  fan_out_.moved(3, Vec3f{10, 10, 0}, 64, 32);
+  fan_out_.send_presence(2);
+  const auto got = told->answered<PresenceChanged>();
+  ASSERT_EQ(got.size(), 2u);
+  ASSERT_EQ(got[1].records.size(), 2u);
+  EXPECT_EQ(got[1].records[0].kind, PresenceRecordKind::kLeft);
+  EXPECT_EQ(got[1].records[0].client_id, 2u);
+  EXPECT_EQ(got[1].records[1].kind, PresenceRecordKind::kEntered);
+  EXPECT_EQ(got[1].records[1].client_id, 3u);
+  PresenceList list;
+  for (const auto& g : got)
+    for (const PresenceRecord& r : g.records) {
+      ASSERT_TRUE(list.apply(std::span(&r, 1)).ok());
+      EXPECT_LE(list.entries().size(), 1u);
+    }
+}
+
 }  // namespace
 }  // namespace terrane
-

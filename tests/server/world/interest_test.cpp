@@ -141,7 +141,7 @@ TEST(InterestIndex, MemoryFollowsTheHolders) {
 TEST(PresenceGrid, NearestFirstWithinTheRadiusAcrossCells) {
   PresenceGrid g;
   g.place(1, {0, 0, 0});
-  g.place(2, {100, 0, 0});     // another cell
+  g.place(2, {100, 0, 0});     // the same 128-voxel cell
   g.place(3, {-30, 0, 40});    // 50 away
   g.place(4, {400, 0, 0});     // beyond 300
   g.place(5, {0, 200, 0});     // above: distance is 3D
