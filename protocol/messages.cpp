@@ -10,6 +10,12 @@
 
 namespace terrane {
 
+std::size_t control_character_at(std::string_view text) {
+  const auto bad =
+      std::find_if(text.begin(), text.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; });
+  return bad == text.end() ? std::string_view::npos : static_cast<std::size_t>(bad - text.begin());
+}
+
 namespace {
 
 using flatbuffers::FlatBufferBuilder;
@@ -56,12 +62,7 @@ std::string_view clip(std::string_view s, std::size_t limit) { return s.substr(0
 DecodeError invalid(const char* what) { return DecodeError{DecodeErrorCode::kInvalidValue, 0, what}; }
 DecodeError over(const char* what) { return DecodeError{DecodeErrorCode::kOverLimit, 0, what}; }
 
-// A byte below 0x20 or DEL: what text a server logs (a client's name, a
-// resume token) may not hold, since a line end in it would forge a log line.
-bool has_control_character(std::string_view text) {
-  return std::any_of(text.begin(), text.end(),
-                     [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; });
-}
+bool has_control_character(std::string_view text) { return control_character_at(text) != std::string_view::npos; }
 
 bool finite(Vec3f v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 bool position_ok(Vec3f v) {

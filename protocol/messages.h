@@ -30,6 +30,10 @@ namespace terrane {
 
 // --- limits (PROTOCOL.md, "Meaning checks") --------------------------------
 inline constexpr std::size_t kMaxClientNameBytes = 64;
+// The first byte below 0x20 or DEL in text, or npos: what text a server
+// logs (a client's name, a resume token) may not hold, since a line end in
+// it would forge a log line.
+std::size_t control_character_at(std::string_view text);
 inline constexpr std::size_t kMaxAuthTokenBytes = 256;
 inline constexpr std::size_t kMaxReasonBytes = 256;
 inline constexpr std::size_t kMaxAdminCommandBytes = 32;

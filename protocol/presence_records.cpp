@@ -95,11 +95,8 @@ Result<std::vector<PresenceRecord>> decode_presence_records(std::span<const std:
         return DecodeError{DecodeErrorCode::kOverLimit, pos - 1, "presence records: name longer than 64 bytes"};
       if (bytes.size() - pos < n) return cut_short(pos);
       r.name.assign(reinterpret_cast<const char*>(bytes.data() + pos), n);
-      const auto bad = std::find_if(r.name.begin(), r.name.end(),
-                                    [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; });
-      if (bad != r.name.end())
-        return DecodeError{DecodeErrorCode::kInvalidValue, pos + static_cast<std::size_t>(bad - r.name.begin()),
-                           "presence records: name with a control character"};
+      if (const std::size_t bad = control_character_at(r.name); bad != std::string_view::npos)
+        return DecodeError{DecodeErrorCode::kInvalidValue, pos + bad, "presence records: name with a control character"};
       pos += n;
     }
     out.push_back(std::move(r));
@@ -148,6 +145,12 @@ Status PresenceList::apply(std::span<const PresenceRecord> records) {
     return DecodeError{DecodeErrorCode::kOverLimit, records.size(), "presence records: a list of more than 64 entries"};
   entries_ = std::move(next);
   return Ok{};
+}
+
+const PresenceList::Entry* PresenceList::find(std::uint32_t client_id) const {
+  auto it = std::lower_bound(entries_.begin(), entries_.end(), client_id,
+                             [](const Entry& e, std::uint32_t k) { return e.client_id < k; });
+  return it != entries_.end() && it->client_id == client_id ? &*it : nullptr;
 }
 
 std::vector<PresenceEntryMsg> PresenceList::nearest_first(Vec3f from) const {

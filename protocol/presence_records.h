@@ -58,6 +58,8 @@ class PresenceList {
   // record that does not fit the list (or the count, for too many).
   Status apply(std::span<const PresenceRecord> records);
   const std::vector<Entry>& entries() const { return entries_; }
+  // The entry of this client, or null.
+  const Entry* find(std::uint32_t client_id) const;
   void clear() { entries_.clear(); }
   // The entries nearest `from` first (ties by id), as messages carry them.
   std::vector<PresenceEntryMsg> nearest_first(Vec3f from) const;

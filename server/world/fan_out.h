@@ -92,8 +92,9 @@ class FanOut {
     bool placed = false;
     std::vector<PresenceEntryMsg> presence;  // last sent (whole lists)
     bool presence_records = false;
-    // PresenceRecords: the list as the client has it (by id), and its turns.
-    std::vector<PresenceKnown> known;
+    // PresenceRecords: the list as the client made it of the records sent
+    // (the server applies them too), and its turns.
+    PresenceList known;
     std::uint64_t presence_turns = 0;
     std::vector<VersionPtr> mip_news;        // oldest first
     std::uint64_t mip_news_tick = 0;         // the newest news' tick

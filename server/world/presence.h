@@ -14,13 +14,6 @@
 
 namespace terrane {
 
-// An entry of a presence list as its client was told it (PresenceRecords):
-// the position in eighths of a voxel (presence_eighths).
-struct PresenceKnown {
-  std::uint32_t client_id = 0;
-  Vec3i eighths;
-};
-
 // Every how many of a client's presence turns an entry this far from it
 // has its move told (PROTOCOL.md, "Presence records"): 1 within 64 voxels,
 // 2 within 128, 4 within 256, 8 beyond.
