@@ -53,7 +53,34 @@ bool Client::connect(std::string* error) {
   return connection_.connect(error);
 }
 
-void Client::disconnect() { connection_.disconnect(); }
+void Client::disconnect() {
+  connection_.disconnect();
+  save_cache();
+}
+
+bool Client::save_cache() {
+  if (!options_.chunk_cache) return false;
+  std::lock_guard lock(mutex_);
+  if (!welcome_ || welcome_->world_id == 0) return false;
+  const auto saved = save_replica(*options_.chunk_cache, welcome_->world_id, replica_);
+  if (!saved) {
+    client_log().warn("'{}': chunk cache {}: a region could not be written", options_.name,
+                      options_.chunk_cache->dir());
+    return false;
+  }
+  counters_.cache_chunks_saved += *saved;
+  return true;
+}
+
+std::vector<Frame> Client::claim_frames() {
+  std::vector<HeldChunkMsg> held;
+  replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
+    // Not the chunk's own voxels (an estimate, a horizon image): streamed again.
+    if (claimable(h.form)) held.push_back(HeldChunkMsg{cp, h});
+  });
+  for (const HeldChunkMsg& c : held) unconfirmed_.insert(c.chunk_pos);
+  return build_region_holdings(held);
+}
 
 // --- the connection's calls (io side) ------------------------------------------
 
@@ -64,16 +91,11 @@ std::vector<Outbound> Client::session_frames(SessionStart start) {
   unconfirmed_.clear();
   if (start != SessionStart::kFirst) {
     // What the replica still holds, so current chunks are not resent.
-    std::vector<HeldChunkMsg> held;
-    replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
-      // Not the chunk's own voxels (an estimate, a horizon image): streamed again.
-      if (claimable(h.form)) held.push_back(HeldChunkMsg{cp, h});
-    });
-    for (const HeldChunkMsg& c : held) unconfirmed_.insert(c.chunk_pos);
-    for (std::size_t i = 0; i < held.size(); i += kMaxHoldingsPerMessage)
-      frames.push_back({build_holdings(std::span<const HeldChunkMsg>(held).subspan(
-                            i, std::min(kMaxHoldingsPerMessage, held.size() - i))),
-                        wire::Body::Holdings});
+    for (Frame& f : claim_frames()) frames.push_back({std::move(f), wire::Body::Holdings});
+  } else if (options_.chunk_cache && options_.stream) {
+    // The first position waits for the Welcome: the world's id picks the
+    // chunks kept, claimed before it (Welcome below).
+    return frames;
   }
   if (auto state = movement_.session_frame()) frames.push_back({std::move(*state), wire::Body::ClientState});
   return frames;
@@ -289,12 +311,42 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
         if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
         break;
       }
-      if (auto state = movement_.welcomed(*w)) {
+      std::optional<Frame> state = movement_.welcomed(*w);
+      std::vector<Frame> claims;
+      std::function<void()> cache_told;
+      if (options_.chunk_cache && options_.stream) {
+        if (!state) state = movement_.session_frame();  // held back for the claims (session_frames)
+        const auto view = movement_.view(*w);
+        if (w->world_id != 0 && view) {
+          counters_.cache_chunks_loaded += load_view(*options_.chunk_cache, w->world_id, *view, w->bounds(), replica_);
+          claims = claim_frames();
+          // The replica held nothing before: everything it holds came from the cache.
+          if (callbacks_.on_holding || callbacks_.on_chunks_loaded) {
+            std::vector<std::pair<Vec3i, Holding>> changes;
+            std::vector<Vec3i> loaded;
+            replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
+              changes.emplace_back(cp, h);
+              if (h.full_resolution()) loaded.push_back(cp);
+            });
+            cache_told = [this, ch = std::move(changes), loaded = std::move(loaded)] {
+              if (callbacks_.on_holding)
+                for (const auto& [p, h] : ch) callbacks_.on_holding(p, &h);
+              if (callbacks_.on_chunks_loaded && !loaded.empty()) callbacks_.on_chunks_loaded(loaded);
+            };
+          }
+        }
+      }
+      if (state || !claims.empty()) {
         lock.unlock();
-        connection_.send(std::move(*state), wire::Body::ClientState);
+        for (Frame& f : claims) connection_.send(std::move(f), wire::Body::Holdings);
+        if (state) connection_.send(std::move(*state), wire::Body::ClientState);
         lock.lock();
       }
-      if (callbacks_.on_welcome) after = [this, w = *w] { callbacks_.on_welcome(w); };
+      if (callbacks_.on_welcome || cache_told)
+        after = [this, w = *w, told = std::move(cache_told)] {
+          if (callbacks_.on_welcome) callbacks_.on_welcome(w);
+          if (told) told();
+        };
       break;
     }
     case wire::Body::Disconnect: {

@@ -111,6 +111,10 @@ struct ClientCounters {
   double last_round_trip_ms = -1;
   std::uint64_t reconnects = 0;
   std::uint64_t redirects = 0;  // Redirects followed
+  // Chunks the first session took from ClientOptions::chunk_cache (and
+  // claimed), and those disconnect() saved to it.
+  std::uint64_t cache_chunks_loaded = 0;
+  std::uint64_t cache_chunks_saved = 0;
   std::uint64_t presence_updates = 0;
   std::uint64_t read_results = 0;
   std::uint64_t frames_out = 0;
@@ -225,9 +229,15 @@ class Client : private ConnectionHandler {
   // connection cannot be made. Call once.
   bool connect(std::string* error);
   // Sends Disconnect, closes the socket and joins the io thread (shared
-  // mode: waits until none of the client's handlers is pending). Idempotent;
+  // mode: waits until none of the client's handlers is pending), then saves
+  // the replica to ClientOptions::chunk_cache (save_cache). Idempotent;
   // concurrent callers all return once it is done.
   void disconnect();
+  // Saves the replica's chunks held in exact forms to
+  // ClientOptions::chunk_cache under the world's id (client/chunk_cache.h).
+  // False when there is no cache, the world names no id (or no Welcome came)
+  // or a file could not be written.
+  bool save_cache();
 
   bool set_state(const ClientStateMsg& state);
   // Edits return their edit id (the outcome arrives as an ack or reject), or
@@ -315,6 +325,9 @@ class Client : private ConnectionHandler {
   // Edits given an outcome at once: reported (io side, without the lock).
   void report(const SettledEdits& settled);
   ClientView client_view() const;
+  // Under the lock: the replica's claimable holdings as Holdings frames
+  // (region claims), each chunk noted unconfirmed.
+  std::vector<Frame> claim_frames();
 
   ClientOptions options_;
   ClientCallbacks callbacks_;

@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 
+#include "client/chunk_cache.h"
 #include "client/decoded_chunks.h"
 #include "protocol/messages.h"
 
@@ -91,6 +92,13 @@ struct ClientOptions {
   // clients (null: each packs its own). Many clients in one process
   // receive the same records (client/decoded_chunks.h).
   std::shared_ptr<DecodedChunks> shared_chunks;
+  // Chunks kept across sessions and processes (client/chunk_cache.h; null:
+  // none). A world whose Welcome names it (world_id) is joined from what
+  // the cache holds of the first view: the replica is filled from it and
+  // the chunks are claimed (Holdings) before the first ClientState, so only
+  // what changed is sent. disconnect() saves the replica to it. Shared by
+  // the clients of a process.
+  std::shared_ptr<ChunkCache> chunk_cache;
   NetworkEmulation emulation;
 };
 

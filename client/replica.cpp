@@ -1,5 +1,7 @@
 #include "client/replica.h"
 
+#include "common/codec/chunk_units.h"
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -213,6 +215,28 @@ bool Replica::read_mip(Vec3i cp, Box& out) const {
     for (int z = 0; z < n; ++z)
       for (int x = 0; x < n; ++x) out.set(x, y, z, m.box->get(m.origin + Vec3i{x, y, z}));
   return true;
+}
+
+std::optional<Holding> Replica::exact_payload(Vec3i cp, std::vector<std::uint8_t>& out) const {
+  const Entry* e = chunks_.find(cp);
+  if (e == nullptr || !claimable(e->holding.form)) return std::nullopt;
+  switch (e->holding.form) {
+    case HoldingForm::kEmpty: break;
+    case HoldingForm::kFull: {
+      encode_full_units(grid_.find_chunk(cp), out);  // none: all Air
+      break;
+    }
+    default: {
+      if (!e->mip) return std::nullopt;
+      if (e->mip->encoded()) {
+        out.insert(out.end(), e->mip->unit().begin(), e->mip->unit().end());
+      } else {
+        const Box& v = *e->mip->box();
+        net_codec_encode(v.size().x, v.voxels(), out);
+      }
+    }
+  }
+  return e->holding;
 }
 
 Result<std::size_t> Replica::apply_update_batch(const UpdateBatchMsg& m, std::vector<Region>* changed,

@@ -127,6 +127,12 @@ class Replica {
   // (level L of its holding) into out, and true; false (out unchanged)
   // otherwise.
   bool read_mip(Vec3i chunk_pos, Box& out) const;
+  // The payload of the stream record that gives a chunk held in an exact
+  // form (claimable: Full, Mip 1..3, Empty) its voxels, appended to out
+  // (Full: its eight 16^3 units; a mip: its unit; Empty: nothing), and its
+  // holding; nullopt (out unchanged) when the chunk is not held so. What a
+  // client keeps across sessions (client/chunk_cache.h).
+  std::optional<Holding> exact_payload(Vec3i chunk_pos, std::vector<std::uint8_t>& out) const;
 
   // Chunks held in this form.
   std::size_t chunk_count(HoldingForm form) const;

@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <tuple>
 
 #include "common/codec/byte_rle.h"
 #include "common/codec/net_codec.h"
+#include "common/world/coarse_image.h"
 #include "protocol/chunk_hash.h"
+#include "protocol/region_claims.h"
 
 namespace terrane {
 
@@ -141,7 +144,7 @@ Frame build_welcome(const WelcomeMsg& m) {
                                                m.max_frame_bytes, m.tick_hz, m.bounded_xz, m.bounds_min_x,
                                                m.bounds_min_z, m.bounds_max_x, m.bounds_max_z, m.default_view_distance,
                                                m.default_full_res_radius, m.edits_per_second, m.edit_burst,
-                                               m.server_id));
+                                               m.server_id, m.world_id));
 }
 
 Frame build_disconnect(std::string_view reason) {
@@ -304,6 +307,36 @@ OutFrame gather_stream_batch(OutFrame records) {
   return finish_around(fbb, wire::CreateStreamBatch(fbb, r), r.o, std::move(records));
 }
 
+std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims) {
+  // Whole regions to a message, at most kMaxHoldingsPerMessage claims each.
+  std::vector<HeldChunkMsg> sorted(claims.begin(), claims.end());
+  const auto key = [](const HeldChunkMsg& c) {
+    const Vec3i r = coarse_region_of(c.chunk_pos);
+    return std::tuple(r.y, r.z, r.x);
+  };
+  std::stable_sort(sorted.begin(), sorted.end(), [&](const auto& a, const auto& b) { return key(a) < key(b); });
+  std::vector<Frame> frames;
+  std::vector<std::uint8_t> bytes;
+  for (std::size_t i = 0; i < sorted.size();) {
+    std::size_t end = i;
+    while (end < sorted.size()) {
+      std::size_t next = end;
+      while (next < sorted.size() && key(sorted[next]) == key(sorted[end])) ++next;
+      if (next - i > kMaxHoldingsPerMessage) break;
+      end = next;
+    }
+    bytes.clear();
+    encode_region_claims(std::span<const HeldChunkMsg>(sorted).subspan(i, end - i), bytes);
+    FlatBufferBuilder fbb(64 + bytes.size());
+    const auto vec = fbb.CreateVector(bytes);
+    wire::HoldingsBuilder b(fbb);
+    b.add_regions(vec);
+    frames.push_back(finish(fbb, b.Finish()));
+    i = end;
+  }
+  return frames;
+}
+
 Frame build_holdings(std::span<const HeldChunkMsg> chunks) {
   const std::size_t n = std::min(chunks.size(), kMaxHoldingsPerMessage);
   std::vector<wire::HeldChunk> v;
@@ -365,6 +398,7 @@ Result<WelcomeMsg> parse_welcome(const wire::Welcome& m) {
   WelcomeMsg out;
   out.protocol_version = m.protocol_version();
   out.server_epoch = m.server_epoch();
+  out.world_id = m.world_id();
   if (m.spawn() == nullptr) return invalid("welcome: missing spawn");
   out.spawn = from_wire(*m.spawn());
   if (!position_ok(out.spawn)) return invalid("welcome: spawn out of range");
@@ -659,15 +693,16 @@ Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch
   return records;
 }
 
-Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
+namespace {
+
+Result<std::vector<HeldChunkMsg>> parse_held_chunks(const flatbuffers::Vector<const wire::HeldChunk*>& chunks) {
   std::vector<HeldChunkMsg> out;
-  if (m.chunks() == nullptr) return out;
-  if (m.chunks()->size() > kMaxHoldingsPerMessage) return over("holdings: more than 16384 chunks");
+  if (chunks.size() > kMaxHoldingsPerMessage) return over("holdings: more than 16384 chunks");
   // Bytewise, like UpdateBatch revisions (see there).
   static_assert(sizeof(wire::HeldChunk) == 32);
-  const std::uint8_t* raw = m.chunks()->Data();
-  out.reserve(m.chunks()->size());
-  for (flatbuffers::uoffset_t i = 0; i < m.chunks()->size(); ++i) {
+  const std::uint8_t* raw = chunks.Data();
+  out.reserve(chunks.size());
+  for (flatbuffers::uoffset_t i = 0; i < chunks.size(); ++i) {
     const std::uint8_t* e = raw + std::size_t{i} * sizeof(wire::HeldChunk);
     const ChunkRevisionMsg cr = read_chunk_and_revision(e);
     if (!wire_chunk_ok(cr.chunk_pos)) return invalid("holdings: chunk position out of range");
@@ -675,6 +710,22 @@ Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
       return invalid("holdings: form not 0..4 (Full, Mip 1..3, Empty)");
     HeldChunkMsg h{cr.chunk_pos, Holding{static_cast<HoldingForm>(e[24]), cr.revision}};
     out.push_back(h);
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m) {
+  std::vector<HeldChunkMsg> out;
+  if (m.chunks() != nullptr) {
+    auto chunks = parse_held_chunks(*m.chunks());
+    if (!chunks) return chunks.error();
+    out = std::move(*chunks);
+  }
+  if (m.regions() != nullptr) {
+    // At most kMaxHoldingsPerMessage claims in all, the chunks' counted.
+    if (auto s = decode_region_claims(bytes_of(m.regions()), out, kMaxHoldingsPerMessage); !s) return s.error();
   }
   return out;
 }

@@ -122,6 +122,7 @@ struct WelcomeMsg {
   float edits_per_second = 0;  // 0: unlimited (or a server that does not say)
   std::uint32_t edit_burst = 0;
   std::uint32_t server_id = 0;  // in a world of several servers; 0 otherwise
+  std::uint64_t world_id = 0;   // 0: the server names none (nothing kept across sessions)
 
   // The world's bounds as the view rule and edits take them.
   WorldBounds bounds() const {
@@ -247,6 +248,10 @@ OutFrame gather_stream_batch(OutFrame records);
 // At most kMaxHoldingsPerMessage entries (the rest are dropped: split larger
 // holdings over several messages).
 Frame build_holdings(std::span<const HeldChunkMsg> chunks);
+// The same claims (any number, each chunk at most once) as region claims
+// (protocol/region_claims.h): whole regions to a message, at most
+// kMaxHoldingsPerMessage claims each; none for no claims.
+std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims);
 Frame build_chunk_hash(const ChunkHashMsg& m);
 Frame build_chunk_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);
@@ -274,6 +279,8 @@ Result<std::vector<PresenceEntryMsg>> parse_presence(const wire::Presence& m);
 std::span<const std::uint8_t> parse_presence_records(const wire::PresenceRecords& m);
 // The records of a StreamBatch (non-empty); decode them with decode_stream_batch.
 Result<std::span<const std::uint8_t>> parse_stream_batch(const wire::StreamBatch& m);
+// The claims of chunks, then those of regions (decode_region_claims): at
+// most kMaxHoldingsPerMessage in all.
 Result<std::vector<HeldChunkMsg>> parse_holdings(const wire::Holdings& m);
 
 // True if every component lies in [-kMaxWireCoordinate, kMaxWireCoordinate].

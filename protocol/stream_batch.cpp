@@ -39,14 +39,18 @@ class Reader {
 
 }  // namespace
 
+void put_stream_record_head(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, Vec3i& prev,
+                            std::vector<std::uint8_t>& out) {
+  out.push_back(static_cast<std::uint8_t>(kind));
+  put_varint(zigzag(std::int64_t{chunk_pos.x} - prev.x), out);
+  put_varint(zigzag(std::int64_t{chunk_pos.y} - prev.y), out);
+  put_varint(zigzag(std::int64_t{chunk_pos.z} - prev.z), out);
+  put_varint(revision, out);
+  prev = chunk_pos;
+}
+
 void StreamBatchWriter::put_head(StreamRecordKind kind, Vec3i cp, std::uint64_t revision) {
-  std::vector<std::uint8_t>& head = bytes_.owned_tail();
-  head.push_back(static_cast<std::uint8_t>(kind));
-  put_varint(zigzag(std::int64_t{cp.x} - prev_.x), head);
-  put_varint(zigzag(std::int64_t{cp.y} - prev_.y), head);
-  put_varint(zigzag(std::int64_t{cp.z} - prev_.z), head);
-  put_varint(revision, head);
-  prev_ = cp;
+  put_stream_record_head(kind, cp, revision, prev_, bytes_.owned_tail());
   ++records_;
 }
 

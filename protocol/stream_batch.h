@@ -157,6 +157,13 @@ using KnownPayloadFn = std::function<KnownPayload(StreamRecordKind kind, std::sp
 struct StreamDecodeScratch;
 const Box& record_voxels(const StreamRecord& r, StreamDecodeScratch& scratch);
 
+// Appends a record's kind, position (relative to prev, which becomes
+// chunk_pos) and revision to out: the bytes before its payload. What
+// StreamBatchWriter writes, for records kept in one buffer (a client's
+// chunk cache, client/chunk_cache.h).
+void put_stream_record_head(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision, Vec3i& prev,
+                            std::vector<std::uint8_t>& out);
+
 // Writes a batch's records as the segments of its frame (protocol/out_frame.h):
 // each record's header is the writer's own bytes, and a payload given with
 // its owner (the chunk version or horizon image whose immutable encoding it

@@ -1,5 +1,6 @@
 #include "server/server.h"
 
+#include <random>
 #include <filesystem>
 #include <future>
 
@@ -89,6 +90,12 @@ FileResult<std::unique_ptr<Server>> Server::create(const ServerOptions& options)
   }
   const std::uint64_t epoch = s->world_->meta().epoch + 1;
   if (auto st = s->world_->store().set_epoch(epoch); !st) return st.error();
+  if (s->world_->meta().world_id == 0) {
+    std::random_device rd;
+    std::uint64_t id = 0;
+    while (id == 0) id = (std::uint64_t{rd()} << 32) ^ rd();
+    if (auto named = s->world_->store().name_world(id); !named) return named.error();
+  }
   std::optional<Storage::Shared> shared;
   if (s->cluster_) shared.emplace(s->cluster_->shared());
   auto storage = Storage::open(*s->world_, s->options_.storage.worker_threads, s->options_.thread_priorities,
@@ -146,6 +153,7 @@ void Server::make_welcome() {
   WelcomeMsg& w = welcome_.welcome;
   const WorldMeta& meta = world_->meta();
   w.server_epoch = meta.epoch;
+  w.world_id = meta.world_id;
   w.spawn = find_spawn(*world_);
   w.materials = meta.materials;
   w.bounds_min_y = meta.bounds.min_y;

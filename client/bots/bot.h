@@ -39,6 +39,7 @@ struct RunContext {
   LatencyLog* round_trips = nullptr;
   MismatchLog* mismatches = nullptr;
   std::shared_ptr<DecodedChunks> shared_chunks;  // null: --shared-chunks 0
+  std::shared_ptr<ChunkCache> chunk_cache;       // null: no --chunk-cache
   Clock::time_point run_start;
 };
 

@@ -110,6 +110,11 @@ const char* const kBotsHelp =
     "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
     "                            equal bytes are packed once in this process (default 4096;\n"
     "                            0: each bot packs its own)\n"
+    "  --chunk-cache DIR         keep the bots' chunks in DIR across runs: each bot joins from what\n"
+    "                            DIR holds of its view (claimed, so the server sends only what\n"
+    "                            changed) and saves its replica there at the end (default: none)\n"
+    "  --chunk-cache-mb N        the cache's size at most, MiB; the least recently used regions\n"
+    "                            go first (default 1024)\n"
     "  --report FILE.json        write the JSON report\n"
     "  --html FILE.html          write a self-contained HTML report with charts\n"
     "  --scenario FILE           read options from FILE (key=value per line, the flag names);\n"
@@ -151,7 +156,7 @@ const std::set<std::string>& value_keys() {
   static const std::set<std::string> k = {
       "connect",        "bots",         "duration",    "behavior",     "spawn",         "spread",
       "view-distance",  "full-res-radius", "ramp-up",  "seed",         "token",   "token-file", "tokens-file", "name-prefix",       "server-metrics", "edit-interval",
-      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks",
+      "edit-radius",    "latency-ms",   "bandwidth-kbps", "hash-checks", "quiet",        "wait-joined",  "measure-from", "threads",     "shared-chunks", "chunk-cache", "chunk-cache-mb",
       "report",         "html",         "save-scenario", "progress",   "scenario",     "threshold",
       "shard",          "preset",       "edit-shape",  "teleport-interval", "teleport-distance"};
   return k;
@@ -353,6 +358,11 @@ std::string apply_option_values(const Values& given, BotsOptions* o) {
       err = int_in(0, 256, &o->threads);
     } else if (key == "shared-chunks") {
       err = int_in(0, 1000000, &o->shared_chunks);
+    } else if (key == "chunk-cache") {
+      if (v.empty()) return bad(where, v, "is empty (a directory)");
+      o->chunk_cache_dir = v;
+    } else if (key == "chunk-cache-mb") {
+      err = int_in(1, 1 << 20, &o->chunk_cache_mb);
     } else if (key == "report") {
       o->report_path = v;
     } else if (key == "html") {
@@ -499,6 +509,8 @@ std::string scenario_text(const BotsOptions& o) {
   s << "measure-from = " << (o.measure_from_start ? "start" : "ramp-up") << "\n";
   s << "threads = " << o.threads << "\n";
   s << "shared-chunks = " << o.shared_chunks << "\n";
+  if (!o.chunk_cache_dir.empty()) s << "chunk-cache = " << o.chunk_cache_dir << "\n";
+  s << "chunk-cache-mb = " << o.chunk_cache_mb << "\n";
   for (const Threshold& t : o.thresholds) s << "threshold = " << t.expression << "\n";
   if (o.shard_count > 1) s << "shard = " << o.shard_index << "/" << o.shard_count << "\n";
   return s.str();

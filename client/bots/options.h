@@ -83,6 +83,11 @@ struct BotsOptions {
   // 0: each bot packs its own). Bots near one another receive the same
   // records: packing each once halves what they cost this process.
   int shared_chunks = 4096;
+  // Chunks kept across runs (--chunk-cache DIR, client/chunk_cache.h; empty:
+  // none): every bot joins from what it holds of its view and saves its
+  // replica there at the end. At most chunk_cache_mb MiB of files.
+  std::string chunk_cache_dir;
+  int chunk_cache_mb = 1024;
   std::string report_path;     // JSON
   std::string html_path;
   std::string save_scenario_path;

@@ -168,6 +168,11 @@ std::string report_json(const BotsReport& r) {
   j << "  \"round_trip_ms\": " << lat(r.round_trip_ms) << ",\n";
   j << "  \"bots_io_lag_ms\": " << lat(r.bots_io_lag_ms) << ",\n";
   j << "  \"redirects\": " << r.redirects << ",\n";
+  j << "  \"cache_chunks_loaded\": " << r.cache_chunks_loaded << ",\n";
+  j << "  \"cache_chunks_saved\": " << r.cache_chunks_saved << ",\n";
+  j << "  \"cache_regions_loaded\": " << r.cache_regions_loaded << ",\n";
+  j << "  \"cache_regions_damaged\": " << r.cache_regions_damaged << ",\n";
+  j << "  \"cache_regions_saved\": " << r.cache_regions_saved << ",\n";
   j << "  \"shared_chunk_hits\": " << r.shared_chunk_hits << ",\n";
   j << "  \"shared_chunk_misses\": " << r.shared_chunk_misses << ",\n";
   j << "  \"shared_update_hits\": " << r.shared_update_hits << ",\n";
@@ -334,6 +339,10 @@ std::string report_table(const BotsReport& r) {
   row("receivers per edit (mean)", fixed(r.receivers_per_edit, 1));
   row("update bytes per edited voxel per receiver", fixed(r.update_bytes_per_edited_voxel_per_receiver, 2));
   row("replica regions checked", std::to_string(r.replica_regions_checked));
+  if (!r.options.chunk_cache_dir.empty())
+    row("chunk cache: chunks joined from / saved",
+        std::to_string(r.cache_chunks_loaded) + " / " + std::to_string(r.cache_chunks_saved) + " (regions read " +
+            std::to_string(r.cache_regions_loaded) + ", damaged " + std::to_string(r.cache_regions_damaged) + ")");
   if (r.shared_chunk_hits + r.shared_chunk_misses > 0)
     row("full chunks shared / packed by a bot",
         std::to_string(r.shared_chunk_hits) + " / " + std::to_string(r.shared_chunk_misses));

@@ -204,6 +204,14 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   ctx.mismatches = &mismatches;
   if (o.shared_chunks > 0)
     ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
+  if (!o.chunk_cache_dir.empty()) {
+    auto cache = ChunkCache::open(o.chunk_cache_dir, std::uint64_t(o.chunk_cache_mb) << 20);
+    if (!cache) {
+      *error = "--chunk-cache: " + cache.error().message;
+      return false;
+    }
+    ctx.chunk_cache = std::move(*cache);
+  }
   ctx.run_start = t0;
 
   std::vector<std::unique_ptr<Bot>> bots;
@@ -386,6 +394,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     ++r.bots_per_server[br.server_id];
     r.bytes_received += k.bytes_in;
     r.bytes_sent += k.bytes_out;
+    r.cache_chunks_loaded += k.cache_chunks_loaded;
+    r.cache_chunks_saved += k.cache_chunks_saved;
     for (std::size_t t = 0; t < kMessageTypeCount; ++t) {
       r.by_message_type[t].frames_in += k.by_message_type[t].frames_in;
       r.by_message_type[t].bytes_in += k.by_message_type[t].bytes_in;
@@ -432,6 +442,12 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   r.edit_fanout_other_server_ms = summarize(fanout.fanout_other_server_ms());
   r.round_trip_ms = summarize(round_trips.all());
   r.bots_io_lag_ms = summarize(io_lag.all());
+  if (ctx.chunk_cache) {
+    const ChunkCacheCounters c = ctx.chunk_cache->counters();
+    r.cache_regions_loaded = c.regions_loaded;
+    r.cache_regions_damaged = c.regions_damaged;
+    r.cache_regions_saved = c.regions_saved;
+  }
   if (ctx.shared_chunks) {
     const DecodedChunks::Stats s = ctx.shared_chunks->stats();
     r.shared_chunk_hits = s.hits;

@@ -42,6 +42,10 @@ struct BotsReport {
   std::uint64_t bytes_received = 0, bytes_sent = 0;
   std::uint64_t join_bytes_received = 0, steady_bytes_received = 0;
   std::uint64_t join_coarse_bytes = 0;  // summed over the bots whose coarse view completed
+  // --chunk-cache: chunks the bots joined from and saved at the end, and the
+  // cache's region files read back, damaged (removed) and written.
+  std::uint64_t cache_chunks_loaded = 0, cache_chunks_saved = 0;
+  std::uint64_t cache_regions_loaded = 0, cache_regions_damaged = 0, cache_regions_saved = 0;
   // The byte budget: what the bots that joined received after their join,
   // by cause (ByteCause), and their seconds connected since (BotResult's
   // steady_s, summed), so a cause's bytes per bot per second is its bytes

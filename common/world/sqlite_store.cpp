@@ -246,6 +246,16 @@ FileStatus SqliteStore::set_bounds(const WorldBounds& bounds) {
   return Ok{};
 }
 
+FileResult<std::uint64_t> SqliteStore::name_world(std::uint64_t candidate) {
+  // One server at a time writes a SQLite world (its lock), so no race.
+  if (meta_.world_id != 0) return meta_.world_id;
+  WorldMeta m = meta_;
+  m.world_id = candidate;
+  if (auto s = write_meta(m); !s) return s.error();
+  meta_.world_id = candidate;
+  return candidate;
+}
+
 FileStatus SqliteStore::set_epoch(std::uint64_t epoch) {
   WorldMeta m = meta_;
   m.epoch = epoch;
@@ -444,6 +454,14 @@ FileStatus SqliteStore::backup_to(const std::string& dest_dir, const std::functi
   } while (rc == SQLITE_OK || rc == SQLITE_BUSY || rc == SQLITE_LOCKED);
   sqlite3_backup_finish(b);
   std::string msg = rc == SQLITE_DONE ? "" : std::string(sqlite3_errmsg(dest_db));
+  // The copy is a world of its own once served: its first server start names
+  // it (WorldMeta::world_id), so clients never take its chunks for the
+  // original's at an equal revision.
+  if (rc == SQLITE_DONE &&
+      sqlite3_exec(dest_db, "UPDATE meta SET value = '0' WHERE key = 'world_id'", nullptr, nullptr, nullptr) != SQLITE_OK) {
+    rc = SQLITE_ERROR;
+    msg = sqlite3_errmsg(dest_db);
+  }
   if (rc == SQLITE_DONE && sqlite3_exec(dest_db, "PRAGMA journal_mode=WAL;", nullptr, nullptr, nullptr) != SQLITE_OK) {
     rc = SQLITE_ERROR;
     msg = sqlite3_errmsg(dest_db);

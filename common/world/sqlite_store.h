@@ -68,6 +68,7 @@ class SqliteStore final : public WorldStore {
   FileResult<std::unique_ptr<WorldStore>> reopen() const override;
   const WorldMeta& meta() const override { return meta_; }
   FileStatus set_epoch(std::uint64_t epoch) override;
+  FileResult<std::uint64_t> name_world(std::uint64_t candidate) override;
   FileStatus set_bounds(const WorldBounds& bounds) override;
 
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override;

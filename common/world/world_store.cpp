@@ -1,6 +1,9 @@
 #include "common/world/world_store.h"
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstdlib>
 #include <map>
 
 #include "common/cli/cli.h"
@@ -82,6 +85,7 @@ std::vector<std::pair<std::string, std::string>> meta_to_keys(const WorldMeta& m
                                         : ""},
       {"materials", join_lines(m.materials)},
       {"epoch", std::to_string(m.epoch)},
+      {"world_id", std::to_string(m.world_id)},
   };
 }
 
@@ -128,6 +132,15 @@ FileResult<WorldMeta> meta_from_keys(const std::vector<std::pair<std::string, st
   v = need("epoch");
   if (!v || !parse_int_list<std::int64_t>(*v, n, 1) || n[0] < 0) return FileError{where + ": metadata key epoch missing or malformed", {}};
   m.epoch = static_cast<std::uint64_t>(n[0]);
+  // Absent in worlds made before it: none yet.
+  if ((v = need("world_id"))) {
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long id = std::strtoull(v->c_str(), &end, 10);
+    if (v->empty() || *end != '\0' || errno != 0 || !std::isdigit(static_cast<unsigned char>((*v)[0])))
+      return FileError{where + ": metadata key world_id malformed (want a decimal number)", {}};
+    m.world_id = id;
+  }
   return m;
 }
 

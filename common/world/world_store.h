@@ -55,6 +55,12 @@ struct WorldMeta {
   WorldBounds bounds;
   std::vector<std::string> materials;  // index = material id
   std::uint64_t epoch = 1;             // bumped by every server start
+  // The world's identity, which clients key the chunks they keep across
+  // sessions by (PROTOCOL.md, "Resuming after a reconnect"): random, named
+  // by the first server start (WorldStore::name_world); 0 until then. A
+  // copy (a backup, a migration) gets 0, so the first server start on it
+  // names it anew: its revisions may go on from the original's differently.
+  std::uint64_t world_id = 0;
 };
 
 // The default material table, with generic names for ids the table lacks.
@@ -139,6 +145,10 @@ class WorldStore {
 
   virtual const WorldMeta& meta() const = 0;
   virtual FileStatus set_epoch(std::uint64_t epoch) = 0;
+  // The world's id (WorldMeta::world_id): the stored one, or candidate
+  // (non-zero) stored when there is none (one statement: servers starting
+  // at once on one database agree on the first's).
+  virtual FileResult<std::uint64_t> name_world(std::uint64_t candidate) = 0;
   // A new border (or none): bounds.validate() must be empty.
   virtual FileStatus set_bounds(const WorldBounds& bounds) = 0;
 

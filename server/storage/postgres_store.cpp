@@ -351,6 +351,23 @@ FileStatus PostgresStore::set_epoch(std::uint64_t epoch) {
   return Ok{};
 }
 
+FileResult<std::uint64_t> PostgresStore::name_world(std::uint64_t candidate) {
+  // One statement: of servers starting at once, the first's id is kept.
+  auto r = c_->exec("name the world",
+                    "INSERT INTO terrane_meta (key, value) VALUES ('world_id', $1)"
+                    " ON CONFLICT (key) DO UPDATE SET value = CASE WHEN terrane_meta.value = '0'"
+                    " THEN EXCLUDED.value ELSE terrane_meta.value END RETURNING value",
+                    {Param{std::to_string(candidate), false}});
+  if (!r) return file_error(r.error());
+  std::vector<std::pair<std::string, std::string>> keys = meta_to_keys(meta_);
+  for (auto& [k, v] : keys)
+    if (k == "world_id") v = r->count() == 1 ? r->get(0, 0) : std::string("x");
+  auto m = meta_from_keys(keys, "world " + c_->shown());
+  if (!m || m->world_id == 0) return FileError{"world " + c_->shown() + ": metadata key world_id malformed", {}};
+  meta_.world_id = m->world_id;
+  return meta_.world_id;
+}
+
 FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) {
   if (auto why = bounds.validate(); !why.empty()) return FileError{"world " + c_->shown() + ": " + why, {}};
   WorldMeta m = meta_;

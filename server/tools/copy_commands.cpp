@@ -193,8 +193,11 @@ int cmd_migrate(int argc, char** argv) {
 
   // The metadata last: until it is there the database holds no world, so
   // no server serves half a copy, and a copy that stopped can run again.
-  if (auto made = dst.create_world(src.meta()); !made) return failure(made.error().message);
-  if (meta_to_keys(dst.meta()) != meta_to_keys(src.meta()))
+  // The copy is named by its first server start (WorldMeta::world_id).
+  WorldMeta copied_meta = src.meta();
+  copied_meta.world_id = 0;
+  if (auto made = dst.create_world(copied_meta); !made) return failure(made.error().message);
+  if (meta_to_keys(dst.meta()) != meta_to_keys(copied_meta))
     return failure("database " + shown + ": a world was made in it while copying (a server started on it?) and "
                    "its metadata was kept; the copied chunks and access lists are in it. Drop the database's "
                    "terrane_ tables and migrate again");

@@ -91,6 +91,7 @@ class GatedStore final : public WorldStore {
   }
   const WorldMeta& meta() const override { return inner_->meta(); }
   FileStatus set_epoch(std::uint64_t epoch) override { return inner_->set_epoch(epoch); }
+  FileResult<std::uint64_t> name_world(std::uint64_t candidate) override { return inner_->name_world(candidate); }
   FileStatus set_bounds(const WorldBounds& bounds) override { return inner_->set_bounds(bounds); }
   FileResult<std::optional<StoredChunk>> load_chunk(Vec3i pos) override {
     gate_->pass(pos);
