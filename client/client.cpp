@@ -79,7 +79,7 @@ std::vector<Frame> Client::claim_frames() {
     if (claimable(h.form)) held.push_back(HeldChunkMsg{cp, h});
   });
   for (const HeldChunkMsg& c : held) unconfirmed_.insert(c.chunk_pos);
-  return build_region_holdings(held);
+  return build_region_holdings(held, welcome_ ? welcome_->world_id : 0);
 }
 
 // --- the connection's calls (io side) ------------------------------------------
@@ -299,6 +299,14 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       if (!w) return fail(w.error());
       if (w->protocol_version != kProtocolVersion)
         return fail(DecodeError{DecodeErrorCode::kBadVersion, 0, "welcome: protocol version mismatch"});
+      // Another world on this address (a reconnect, a Redirect): the
+      // replica's chunks are of the old one, and the new server ignored
+      // their claims (Holdings.world_id); they are not its voxels.
+      if (welcome_ && welcome_->world_id != 0 && welcome_->world_id != w->world_id) {
+        replica_ = Replica();
+        replica_.share_decoded(options_.shared_chunks);
+        unconfirmed_.clear();
+      }
       welcome_ = *w;
       // A new session's list starts empty (its first records or list name
       // every entry): the last session's entries are no longer known.

@@ -307,7 +307,7 @@ OutFrame gather_stream_batch(OutFrame records) {
   return finish_around(fbb, wire::CreateStreamBatch(fbb, r), r.o, std::move(records));
 }
 
-std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims) {
+std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims, std::uint64_t world_id) {
   // Whole regions to a message, at most kMaxHoldingsPerMessage claims each.
   std::vector<HeldChunkMsg> sorted(claims.begin(), claims.end());
   const auto key = [](const HeldChunkMsg& c) {
@@ -331,6 +331,7 @@ std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims) {
     const auto vec = fbb.CreateVector(bytes);
     wire::HoldingsBuilder b(fbb);
     b.add_regions(vec);
+    if (world_id != 0) b.add_world_id(world_id);
     frames.push_back(finish(fbb, b.Finish()));
     i = end;
   }

@@ -251,7 +251,8 @@ Frame build_holdings(std::span<const HeldChunkMsg> chunks);
 // The same claims (any number, each chunk at most once) as region claims
 // (protocol/region_claims.h): whole regions to a message, at most
 // kMaxHoldingsPerMessage claims each; none for no claims.
-std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims);
+// world_id: the world the chunks came from (Holdings.world_id; 0: unchecked).
+std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims, std::uint64_t world_id);
 Frame build_chunk_hash(const ChunkHashMsg& m);
 Frame build_chunk_hash_request(Vec3i chunk_pos);
 Frame build_ping(std::uint64_t nonce);

@@ -334,8 +334,13 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
   m.def(
       "connect",
       [](const std::string& address, const std::string& name, const std::string& token, std::optional<Vec3> position,
-         int view_distance, int full_res_radius, bool reconnect, double silence_timeout, double max_speed) {
+         int view_distance, int full_res_radius, bool reconnect, double silence_timeout, double max_speed,
+         std::optional<std::string> chunk_cache) {
         ConnectArgs a;
+        if (chunk_cache) {
+          if (chunk_cache->empty()) throw py::value_error("chunk_cache: expected a directory, got ''");
+          a.chunk_cache = *chunk_cache;
+        }
         a.silence_timeout = silence_timeout;
         a.max_speed = max_speed;
         a.address = address;
@@ -351,14 +356,16 @@ threads, not a hundred. A Swarm is a sequence of Clients.)")
       },
       py::arg("address"), py::arg("name") = "python", py::arg("token") = "", py::arg("position") = py::none(),
       py::arg("view_distance") = 128, py::arg("full_res_radius") = 48, py::arg("reconnect") = false,
-      py::arg("silence_timeout") = 15.0, py::arg("max_speed") = 256.0,
+      py::arg("silence_timeout") = 15.0, py::arg("max_speed") = 256.0, py::arg("chunk_cache") = py::none(),
       "Connect to a terrane-server at 'HOST:PORT'. position None starts at the server's spawn. With reconnect, a "
       "dropped connection is retried with backoff and the replica kept (a Reconnected event when resumed). "
       "silence_timeout: seconds without a byte from the server (it pings every 5 s) after which the connection "
       "counts as lost (0.5..3600, 0 never); a reconnect that reaches a server which then stays silent as long "
       "closes for good (a hung server), so closed and on_disconnect tell. max_speed: the server's --max-speed, by "
-      "which move_to paces (0: not paced). Raises ConnectionError if the server cannot be reached, ValueError for "
-      "bad arguments.");
+      "which move_to paces (0: not paced). chunk_cache: a directory where the chunks this client held are kept when "
+      "it closes (at most 1 GiB, shared by the process's clients); a later connect to the same world with it "
+      "joins from them and is sent only what changed (client/CHUNK_CACHE.md). Raises ConnectionError if the "
+      "server cannot be reached, ValueError for bad arguments, OSError if chunk_cache cannot be made.");
 
   // Before the interpreter finalizes: close every client and stop every
   // callbacks thread, so none waits for a GIL that will not come back.

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <mutex>
 
 #include "client/path.h"
 #include "client/python/find.h"
@@ -87,6 +89,23 @@ IoPool::~IoPool() {
 }
 
 // --- PyClient ---------------------------------------------------------------------
+namespace {
+
+// One cache per directory for the process's clients (they share its size
+// and its files' use order).
+std::shared_ptr<ChunkCache> chunk_cache_at(const std::string& dir) {
+  static std::mutex mutex;
+  static std::map<std::string, std::weak_ptr<ChunkCache>> open;
+  std::lock_guard lock(mutex);
+  if (auto c = open[dir].lock()) return c;
+  auto c = ChunkCache::open(dir, std::uint64_t{1} << 30);
+  if (!c) raise(PyExc_OSError, "chunk_cache: " + c.error().message);
+  open[dir] = *c;
+  return *c;
+}
+
+}  // namespace
+
 PyClient::PyClient(ConnectArgs a) : name_(a.name) {
   const auto hp = parse_host_port(a.address);
   if (!hp) raise(PyExc_ValueError, "address: " + hp.error().message);
@@ -114,6 +133,7 @@ PyClient::PyClient(ConnectArgs a) : name_(a.name) {
     o.state.position = point_of(*a.position, "position");
   }
   if (a.pool) o.io_context = &a.pool->io();
+  if (!a.chunk_cache.empty()) o.chunk_cache = chunk_cache_at(a.chunk_cache);
   own_slot_ = !a.slot;
   slot_ = a.slot ? a.slot : std::make_shared<DispatcherSlot>();
   handlers_ = std::make_shared<Handlers>();

@@ -55,6 +55,7 @@ struct ConnectArgs {
   bool reconnect = false;
   double silence_timeout = 15;  // seconds; 0 = never
   double max_speed = 256;       // the server's --max-speed; 0 = moves not paced
+  std::string chunk_cache;      // a directory: chunks kept across sessions (client/chunk_cache.h); empty: none
   std::shared_ptr<IoPool> pool;           // null: the client owns its io thread
   std::shared_ptr<DispatcherSlot> slot;   // null: a slot of its own
 };

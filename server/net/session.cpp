@@ -207,7 +207,7 @@ void Session::on_frame(std::span<const std::uint8_t> body) {
     case wire::Body::Holdings: {
       auto h = parse_holdings(*m.body_as_Holdings());
       if (!h) return fail(h.error());
-      on_message_(id_, HoldingsMsg{std::move(*h)});
+      on_message_(id_, HoldingsMsg{std::move(*h), m.body_as_Holdings()->world_id()});
       return;
     }
     case wire::Body::ReadBox: {

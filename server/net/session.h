@@ -54,6 +54,7 @@ struct ChunkHashRequestMsg {
 // What a session hands to the server (already checked for meaning).
 struct HoldingsMsg {
   std::vector<HeldChunkMsg> chunks;
+  std::uint64_t world_id = 0;  // the world they came from (0: unchecked)
 };
 
 // A Pong answering one of the server's Pings (the round trip it measures).

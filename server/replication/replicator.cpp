@@ -255,6 +255,9 @@ void Replicator::read_box(const ReadBoxMsg& req) {
 }
 
 void Replicator::holdings(const HoldingsMsg& held) {
+  // Another world's chunks (a client kept them from a server of another
+  // world on this address): equal revisions say nothing of their voxels.
+  if (held.world_id != 0 && held.world_id != welcome_.welcome.world_id) return;
   for (const HeldChunkMsg& c : held.chunks) {
     if (slots_.claims() >= options_.max_claims_per_client) break;
     if (slots_.holds(c.chunk_pos)) continue;  // already streamed this session

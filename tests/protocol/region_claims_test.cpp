@@ -156,20 +156,21 @@ TEST(RegionClaims, HoldingsFramesCarryEveryClaim) {
   for (int x = 0; x < 64; ++x)
     for (int z = 0; z < 64; ++z)
       for (int y = 0; y < 12; ++y) claims.push_back({{x, y, z}, {HoldingForm::kMip3, std::uint64_t(x % 3)}});
-  const auto frames = build_region_holdings(claims);
+  const auto frames = build_region_holdings(claims, 0xfeedull);
   ASSERT_GE(frames.size(), 3u);  // 49,152 claims
   std::vector<HeldChunkMsg> back;
   for (const Frame& f : frames) {
     auto m = verify_message(std::span<const std::uint8_t>(f).subspan(kFrameHeaderBytes));
     ASSERT_TRUE(m.ok());
     ASSERT_EQ((*m)->body_type(), wire::Body::Holdings);
+    EXPECT_EQ((*m)->body_as_Holdings()->world_id(), 0xfeedull);
     auto got = parse_holdings(*(*m)->body_as_Holdings());
     ASSERT_TRUE(got.ok()) << got.error().detail;
     EXPECT_LE(got->size(), kMaxHoldingsPerMessage);
     back.insert(back.end(), got->begin(), got->end());
   }
   EXPECT_TRUE(same(back, canonical(claims)));
-  EXPECT_TRUE(build_region_holdings({}).empty());
+  EXPECT_TRUE(build_region_holdings({}, 1).empty());
 }
 
 }  // namespace

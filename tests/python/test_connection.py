@@ -125,3 +125,26 @@ def test_a_name_with_a_control_character_is_refused_and_forges_no_log_line(serve
     with terrane.connect(server.address, name="after") as d:
         d.wait_ready(30)
     assert not any(line.startswith("session 99") for line in server.output), "".join(server.output)
+
+
+def test_a_chunk_cache_is_kept_at_close_and_joined_from(server, tmp_path):
+    cache = str(tmp_path / "cache")
+    a = terrane.connect(server.address, name="keeper", view_distance=96, full_res_radius=32, chunk_cache=cache)
+    a.wait_loaded(timeout=60)
+    x, g, z = _near(a)
+    below = a.voxel((x, g - 1, z))
+    a.close()
+    # One file per region held, under the world's id.
+    assert list((tmp_path / "cache").rglob("*.region"))
+    # A new client joins from them: its replica is the server's.
+    with terrane.connect(server.address, name="returner", view_distance=96, full_res_radius=32,
+                         chunk_cache=cache) as b:
+        b.wait_loaded(timeout=60)
+        assert b.voxel((x, g - 1, z)) == below
+        assert b.verify(60) == 0
+    with pytest.raises(ValueError):
+        terrane.connect(server.address, chunk_cache="")
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    with pytest.raises(OSError):
+        terrane.connect(server.address, chunk_cache=str(blocker / "cache"))

@@ -36,6 +36,9 @@ Renders a Terrane world streamed from a terrane-server.
   --full-res-radius N      voxels (default 128)
   --timeout S              screenshot: give up after S seconds (default 120)
   --msaa N                 screenshot: samples per pixel (default 4, 1 = off)
+  --chunk-cache DIR        keep the chunks seen in DIR (at most 1 GiB) and join
+                           from them next time: the server sends only what
+                           changed since (default: none)
   --overlay                screenshot: draw the overlay into the picture
   --enhance                detail enhancement (2x2x2 fragments per voxel by
                            recursive subdivision) with snowflake lighting for
@@ -84,7 +87,7 @@ int usage_error(const std::string& message) {
 }  // namespace
 
 int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
-  CommandLine cl({"connect", "token", "screenshot", "camera", "size", "view-distance", "full-res-radius", "timeout", "msaa"},
+  CommandLine cl({"connect", "token", "screenshot", "camera", "size", "view-distance", "full-res-radius", "timeout", "msaa", "chunk-cache"},
                  {"help", "wait-full-res", "mips-only", "sky-key", "overlay", "lod-tint", "enhance"});
   if (std::string err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) {
@@ -135,6 +138,10 @@ int parse_viewer_options(int argc, char** argv, ViewerOptions& o) {
   o.overlay = cl.flag("overlay");
   o.lod_tint = cl.flag("lod-tint");
   o.enhance = cl.flag("enhance");
+  if (cl.has("chunk-cache")) {
+    o.chunk_cache = cl.get("chunk-cache");
+    if (o.chunk_cache.empty()) return usage_error("--chunk-cache: expected a directory");
+  }
   if (o.mips_only && o.wait_full_res) return usage_error("--mips-only and --wait-full-res exclude each other");
   if (o.screenshot.empty() && (cl.flag("wait-full-res") || cl.has("timeout") || cl.has("msaa") || cl.flag("overlay")))
     return usage_error("--wait-full-res, --timeout, --msaa and --overlay need --screenshot");
@@ -173,6 +180,14 @@ bool ViewerSession::start(std::string* error, double timeout_s) {
     // The first position the server sees is the default camera's: it
     // limits how fast a client moves after that.
     co.spawn_offset = kDefaultCameraOffset;
+  }
+  if (!options_.chunk_cache.empty()) {
+    auto cache = ChunkCache::open(options_.chunk_cache, std::uint64_t{1} << 30);
+    if (!cache) {
+      *error = "--chunk-cache: " + cache.error().message;
+      return false;
+    }
+    co.chunk_cache = std::move(*cache);
   }
   client_ = std::make_unique<Client>(co);
   if (!client_->connect(error)) {

@@ -28,6 +28,7 @@ struct ViewerOptions {
   bool lod_tint = false;
   bool enhance = false;  // detail enhancement + snowflake lighting near the camera
   int msaa = 4;
+  std::string chunk_cache;  // --chunk-cache DIR: chunks kept across sessions (client/chunk_cache.h)
 };
 
 // Parses argv; returns 0 to go on, -1 after printing --help (exit 0), or 2

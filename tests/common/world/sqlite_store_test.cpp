@@ -132,6 +132,37 @@ TEST_F(SqliteStoreTest, AFailedBackupLeavesNoPartialDirectory) {
   fs::remove_all(dir_ + "-backups");
 }
 
+// A world's id: none until named, then kept (a second name is not taken),
+// across reopening; a backup of it has none, so its first server names it
+// anew.
+TEST_F(SqliteStoreTest, AWorldIsNamedOnceAndABackupIsNamedAnew) {
+  auto store = SqliteStore::create(dir_, default_world_meta(1));
+  ASSERT_TRUE(store.ok());
+  EXPECT_EQ((*store)->meta().world_id, 0u);
+  auto named = (*store)->name_world(0x1122334455667788ull);
+  ASSERT_TRUE(named.ok());
+  EXPECT_EQ(*named, 0x1122334455667788ull);
+  auto again = (*store)->name_world(99);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(*again, 0x1122334455667788ull);
+  ASSERT_TRUE((*store)->set_epoch(5).ok());
+  const std::string dest = dir_ + "-backups/b1";
+  ASSERT_TRUE((*store)->backup_to(dest, nullptr).ok());
+  store->reset();
+  auto reopened = SqliteStore::open(dir_);
+  ASSERT_TRUE(reopened.ok());
+  EXPECT_EQ((*reopened)->meta().world_id, 0x1122334455667788ull);
+  EXPECT_EQ((*reopened)->meta().epoch, 5u);
+  auto copy = SqliteStore::open(dest);
+  ASSERT_TRUE(copy.ok()) << copy.error().message;
+  EXPECT_EQ((*copy)->meta().world_id, 0u);
+  EXPECT_EQ((*copy)->meta().epoch, 5u);
+  auto copy_named = (*copy)->name_world(7);
+  ASSERT_TRUE(copy_named.ok());
+  EXPECT_EQ(*copy_named, 7u);
+  fs::remove_all(dir_ + "-backups");
+}
+
 TEST_F(SqliteStoreTest, ChunksRoundTripWithRevisions) {
   auto store = SqliteStore::create(dir_, default_world_meta());
   ASSERT_TRUE(store.ok());

@@ -428,6 +428,14 @@ TEST_F(PostgresStoreTest, AsAWorldStoreItKeepsMetadataCoarseMipsQuarantineEditLo
   EXPECT_EQ(s->meta().epoch, 10u);
   EXPECT_EQ(second->meta().epoch, 11u);
   EXPECT_EQ((*third)->meta().materials, meta.materials);
+  // The world's id: the first server to name it wins, the rest read it.
+  auto first_name = s->name_world(1111);
+  ASSERT_TRUE(first_name.ok());
+  EXPECT_EQ(*first_name, 1111u);
+  auto second_name = second->name_world(2222);
+  ASSERT_TRUE(second_name.ok());
+  EXPECT_EQ(*second_name, 1111u);
+  EXPECT_EQ(second->meta().world_id, 1111u);
 
   // Chunks with their coarse mips and the edit log in one fenced write,
   // through the lease source (which reopened connections share).
