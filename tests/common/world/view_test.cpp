@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <tuple>
+
+#include <algorithm>
 
 namespace terrane {
 namespace {
@@ -59,6 +62,30 @@ TEST(View, NearestFirstWithTiesByYThenZThenX) {
   EXPECT_EQ(faces, (std::vector<Vec3i>{{0, -1, 0}, {0, 0, -1}, {-1, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}}));
   for (std::size_t i = 1; i < view.size(); ++i)
     EXPECT_LE(offset_center_dist2(view[i - 1]), offset_center_dist2(view[i]));
+}
+
+// The order is the rule's exactly: nearest by the centre-to-centre
+// distance, ties by y, then z, then x (what a comparison sort gives), for
+// every offset in view and for a view cut to a world's layers.
+TEST(View, TheOrderIsTheRulesForEveryRadiusAndAnyLayers) {
+  const auto rule = [](Vec3i a, Vec3i b) {
+    const std::int64_t da = offset_center_dist2(a), db = offset_center_dist2(b);
+    if (da != db) return da < db;
+    return std::tie(a.y, a.z, a.x) < std::tie(b.y, b.z, b.x);
+  };
+  for (const std::int32_t r : {0, 16, 33, 100, 512, 1000}) {
+    const auto offsets = view_offsets(r);
+    auto sorted = offsets;
+    std::sort(sorted.begin(), sorted.end(), rule);
+    EXPECT_EQ(offsets, sorted) << r;
+    for (const Vec3f p : {Vec3f{5, 40, -300}, Vec3f{0, -500, 0}, Vec3f{1e6f, 300, 17}}) {
+      const WorldBounds b{-128, 256};
+      std::vector<Vec3i> expect;
+      for (const Vec3i o : offsets)
+        if (b.touches_chunk(view_chunk(p) + o)) expect.push_back(view_chunk(p) + o);
+      EXPECT_EQ(chunks_in_view(p, r, b), expect) << r << " at y " << p.y;
+    }
+  }
 }
 
 TEST(View, AHorizontalBorderCutsTheView) {
