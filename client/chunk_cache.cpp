@@ -8,6 +8,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <cctype>
+#include <unistd.h>
 #include <map>
 #include <tuple>
 
@@ -48,27 +50,53 @@ DecodeError damaged(std::size_t at, const char* what) { return DecodeError{Decod
 
 }  // namespace
 
+std::string ChunkCache::normal_dir(const std::string& dir) {
+  std::string d = fs::path(dir).lexically_normal().string();
+  while (d.size() > 1 && d.back() == '/') d.pop_back();
+  return d;
+}
+
 FileResult<std::shared_ptr<ChunkCache>> ChunkCache::open(const std::string& dir, std::uint64_t max_bytes) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return FileError{"chunk cache " + dir + ": cannot create: " + ec.message(), {}};
   if (!fs::is_directory(dir, ec)) return FileError{"chunk cache " + dir + ": not a directory", {}};
-  std::shared_ptr<ChunkCache> cache(new ChunkCache(dir, max_bytes));
+  // One spelling of each file's path (a trailing slash would make another).
+  std::shared_ptr<ChunkCache> cache(new ChunkCache(normal_dir(dir), max_bytes));
   cache->scan();
   return cache;
 }
 
+namespace {
+
+// DIR/<16 hex digits>/<int>_<int>_<int>.region: a file of the cache's own.
+bool cache_file_name(const fs::path& world_dir, const fs::path& file) {
+  const std::string w = world_dir.filename().string();
+  if (w.size() != 16 || !std::all_of(w.begin(), w.end(), [](char c) { return std::isxdigit(static_cast<unsigned char>(c)); }))
+    return false;
+  if (file.extension() != ".region") return false;
+  int x, y, z;
+  char tail;
+  return std::sscanf(file.stem().c_str(), "%d_%d_%d%c", &x, &y, &z, &tail) == 3;
+}
+
+}  // namespace
+
 void ChunkCache::scan() {
   // Files by age: the oldest are evicted first. Anything else in the
-  // directory (a file of another name, a saver's temporary) is left alone.
+  // directory (other files, a saver's temporary) is left alone.
   std::error_code ec;
   std::vector<std::pair<fs::file_time_type, std::pair<std::string, std::uint64_t>>> found;
-  for (auto it = fs::recursive_directory_iterator(dir_, ec); !ec && it != fs::recursive_directory_iterator();
-       it.increment(ec)) {
-    if (!it->is_regular_file(ec) || it->path().extension() != ".region") continue;
-    const auto size = it->file_size(ec);
-    if (ec) continue;
-    found.push_back({it->last_write_time(ec), {it->path().string(), size}});
+  for (auto w = fs::directory_iterator(dir_, ec); !ec && w != fs::directory_iterator(); w.increment(ec)) {
+    std::error_code wec;
+    if (!w->is_directory(wec)) continue;
+    for (auto it = fs::directory_iterator(w->path(), wec); !wec && it != fs::directory_iterator(); it.increment(wec)) {
+      std::error_code fec;
+      if (!it->is_regular_file(fec) || !cache_file_name(w->path(), it->path())) continue;
+      const auto size = it->file_size(fec);
+      if (fec) continue;
+      found.push_back({it->last_write_time(fec), {it->path().string(), size}});
+    }
   }
   std::sort(found.begin(), found.end());
   for (const auto& [when, file] : found) touch(file.first, file.second);
@@ -188,6 +216,11 @@ std::optional<std::size_t> ChunkCache::load(std::uint64_t world_id, Vec3i region
                        fn(r);
                        ++n;
                      }).ok();
+  if (whole) {
+    // Its use, for the order of eviction in a later process too.
+    std::error_code ec;
+    fs::last_write_time(path, fs::file_time_type::clock::now(), ec);
+  }
   std::lock_guard lock(mutex_);
   if (!whole) {
     forget(path);
@@ -214,7 +247,7 @@ bool ChunkCache::save(std::uint64_t world_id, Vec3i region, std::span<const std:
   // Written aside and renamed: a reader never sees half a file, and a
   // process killed part-way leaves the file before (or none).
   static std::atomic<std::uint64_t> serial{0};
-  const std::string temp = fmt::format("{}.{}.tmp", path, serial.fetch_add(1));
+  const std::string temp = fmt::format("{}.{}-{}.tmp", path, ::getpid(), serial.fetch_add(1));
   {
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
@@ -277,10 +310,11 @@ std::size_t load_view(ChunkCache& cache, std::uint64_t world_id, const StreamedV
   return n;
 }
 
-std::optional<std::size_t> save_replica(ChunkCache& cache, std::uint64_t world_id, const Replica& replica) {
+std::optional<std::size_t> save_replica(ChunkCache& cache, std::uint64_t world_id, const Replica& replica,
+                                        const std::function<bool(Vec3i)>& skip) {
   std::map<std::tuple<int, int, int>, std::vector<Vec3i>> regions;
   replica.for_each_holding([&](Vec3i cp, const Holding& h) {
-    if (!claimable(h.form)) return;
+    if (!claimable(h.form) || (skip && skip(cp))) return;
     const Vec3i r = coarse_region_of(cp);
     regions[{r.y, r.z, r.x}].push_back(cp);
   });

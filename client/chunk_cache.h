@@ -50,15 +50,19 @@ struct ChunkCacheCounters {
 
 class ChunkCache {
  public:
-  // The header's size, and the format's version (client/CHUNK_CACHE.md).
+  // The header's size, and the format's version (client/CHUNK_CACHE.md):
+  // version 1 holds records of protocol version 2; another protocol's
+  // records get another version, so a cache of an older build is a miss.
   static constexpr std::size_t kHeaderBytes = 48;
   static constexpr std::uint32_t kFormatVersion = 1;
   // A region file holds at most this many payload bytes (512 Full chunks'
   // worst case is far below it; a larger file is damaged).
   static constexpr std::size_t kMaxPayloadBytes = 64u << 20;
 
-  // Opens (creating) dir and counts the files it holds. Error: dir cannot be
-  // made or read (the message names it).
+  // Opens (creating) dir and counts the files it holds (those named as
+  // its own: DIR/<16 hex digits>/<x>_<y>_<z>.region). Error: dir cannot be
+  // made or read (the message names it). The size is kept by this process:
+  // processes sharing a directory each count what they saw and saved.
   static FileResult<std::shared_ptr<ChunkCache>> open(const std::string& dir, std::uint64_t max_bytes);
 
   const std::string& dir() const { return dir_; }
@@ -83,6 +87,8 @@ class ChunkCache {
 
   // The file of a region (tests damage it).
   std::string path_of(std::uint64_t world_id, Vec3i region) const;
+  // dir as the cache names it: lexically normal, no trailing slash.
+  static std::string normal_dir(const std::string& dir);
 
   // A region file's bytes for records (the format; tests write their own).
   static std::vector<std::uint8_t> file_bytes(std::uint64_t world_id, Vec3i region,
@@ -120,10 +126,12 @@ struct WorldBounds;
 // whose chunks are in view; returns the chunks loaded.
 std::size_t load_view(ChunkCache& cache, std::uint64_t world_id, const StreamedView& view, const WorldBounds& bounds,
                       Replica& replica);
-// Saves replica's chunks held in exact forms, region by region (each
-// region's file replaced by what the replica holds of it; regions it holds
-// nothing of are left as they are); returns the chunks saved, or nullopt
-// when a file could not be written.
-std::optional<std::size_t> save_replica(ChunkCache& cache, std::uint64_t world_id, const Replica& replica);
+// Saves replica's chunks held in exact forms but those skip names (a chunk
+// whose hash did not match the server's), region by region (each region's
+// file replaced by what the replica holds of it; regions it holds nothing
+// of are left as they are); returns the chunks saved, or nullopt when a
+// file could not be written.
+std::optional<std::size_t> save_replica(ChunkCache& cache, std::uint64_t world_id, const Replica& replica,
+                                        const std::function<bool(Vec3i)>& skip = nullptr);
 
 }  // namespace terrane

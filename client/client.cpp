@@ -61,8 +61,14 @@ void Client::disconnect() {
 bool Client::save_cache() {
   if (!options_.chunk_cache) return false;
   std::lock_guard lock(mutex_);
-  if (!welcome_ || welcome_->world_id == 0) return false;
-  const auto saved = save_replica(*options_.chunk_cache, welcome_->world_id, replica_);
+  if (!welcome_ || welcome_->world_id == 0 || cache_saved_) return false;
+  cache_saved_ = true;
+  // A chunk whose hash did not match the server's is not kept: the next
+  // session would claim it at the same revision.
+  const auto saved = save_replica(*options_.chunk_cache, welcome_->world_id, replica_, [&](Vec3i cp) {
+    const auto it = hash_checks_.find(cp);
+    return it != hash_checks_.end() && !it->second;
+  });
   if (!saved) {
     client_log().warn("'{}': chunk cache {}: a region could not be written", options_.name,
                       options_.chunk_cache->dir());
@@ -302,12 +308,16 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       // Another world on this address (a reconnect, a Redirect): the
       // replica's chunks are of the old one, and the new server ignored
       // their claims (Holdings.world_id); they are not its voxels.
+      std::vector<Vec3i> dropped;
       if (welcome_ && welcome_->world_id != 0 && welcome_->world_id != w->world_id) {
+        if (callbacks_.on_holding) replica_.for_each_holding([&](Vec3i cp, const Holding&) { dropped.push_back(cp); });
         replica_ = Replica();
         replica_.share_decoded(options_.shared_chunks);
         unconfirmed_.clear();
+        hash_checks_.clear();
       }
       welcome_ = *w;
+      cache_saved_ = false;
       // A new session's list starts empty (its first records or list name
       // every entry): the last session's entries are no longer known.
       presence_list_.clear();
@@ -316,7 +326,11 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       ++sessions_;
       server_not_returning_ = false;
       if (connection_.session() != SessionStart::kFirst) {
-        if (callbacks_.on_reconnected) after = [this] { callbacks_.on_reconnected(); };
+        if (callbacks_.on_reconnected || !dropped.empty())
+          after = [this, dropped = std::move(dropped)] {
+            for (const Vec3i cp : dropped) callbacks_.on_holding(cp, nullptr);
+            if (callbacks_.on_reconnected) callbacks_.on_reconnected();
+          };
         break;
       }
       std::optional<Frame> state = movement_.welcomed(*w);

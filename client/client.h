@@ -233,10 +233,12 @@ class Client : private ConnectionHandler {
   // the replica to ClientOptions::chunk_cache (save_cache). Idempotent;
   // concurrent callers all return once it is done.
   void disconnect();
-  // Saves the replica's chunks held in exact forms to
-  // ClientOptions::chunk_cache under the world's id (client/chunk_cache.h).
-  // False when there is no cache, the world names no id (or no Welcome came)
-  // or a file could not be written.
+  // Saves the replica's chunks held in exact forms (but those whose hash did
+  // not match the server's) to ClientOptions::chunk_cache under the world's
+  // id (client/chunk_cache.h), once a session. False when there is no
+  // cache, the world names no id (or no Welcome came), it was saved already
+  // or a file could not be written. Disk work under the client's lock: call
+  // it once the client is disconnected (disconnect() does).
   bool save_cache();
 
   bool set_state(const ClientStateMsg& state);
@@ -355,6 +357,7 @@ class Client : private ConnectionHandler {
   std::uint64_t sessions_ = 0;                        // ClientView::sessions
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
   std::size_t voxel_change_cap_ = 0;                  // capture_voxel_changes
+  bool cache_saved_ = false;  // this session's replica went to ClientOptions::chunk_cache (save_cache)
 
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered
   // Last: goes first, so no handler runs on the rest once it is gone.

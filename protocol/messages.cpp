@@ -322,7 +322,9 @@ std::vector<Frame> build_region_holdings(std::span<const HeldChunkMsg> claims, s
     while (end < sorted.size()) {
       std::size_t next = end;
       while (next < sorted.size() && key(sorted[next]) == key(sorted[end])) ++next;
-      if (next - i > kMaxHoldingsPerMessage) break;
+      // A region has at most 512 claims (more only with duplicates): at
+      // least one region a message, so the loop always advances.
+      if (next - i > kMaxHoldingsPerMessage && end > i) break;
       end = next;
     }
     bytes.clear();

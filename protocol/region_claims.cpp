@@ -96,8 +96,9 @@ Status decode_region_claims(std::span<const std::uint8_t> bytes, std::vector<Hel
       if (auto s = varint(z, 5); !s) return s.error();
       c = unzigzag(z);
     }
-    // A region's coordinates are chunk coordinates / 8: within ±2^16 (a
-    // wider one holds no chunk in the wire's range; checked per chunk).
+    // A region's coordinates are chunk coordinates / 8: a region beyond
+    // ±2^17 holds no chunk in the wire's range (±2^19); those within are
+    // checked chunk by chunk.
     const std::int64_t x = prev.x + d[0], y = prev.y + d[1], z = prev.z + d[2];
     constexpr std::int64_t kLimit = std::int64_t{1} << 17;
     if (std::max({std::abs(x), std::abs(y), std::abs(z)}) > kLimit) return bad(region_at, "region claims: region out of range");

@@ -97,10 +97,11 @@ std::shared_ptr<ChunkCache> chunk_cache_at(const std::string& dir) {
   static std::mutex mutex;
   static std::map<std::string, std::weak_ptr<ChunkCache>> open;
   std::lock_guard lock(mutex);
-  if (auto c = open[dir].lock()) return c;
+  const std::string key = ChunkCache::normal_dir(dir);
+  if (auto c = open[key].lock()) return c;
   auto c = ChunkCache::open(dir, std::uint64_t{1} << 30);
   if (!c) raise(PyExc_OSError, "chunk_cache: " + c.error().message);
-  open[dir] = *c;
+  open[key] = *c;
   return *c;
 }
 

@@ -19,12 +19,14 @@ std::vector<Vec3i> offsets_nearest_first(std::int32_t radius, std::int32_t y_lo,
   y_lo = std::max(y_lo, -n);
   y_hi = std::min(y_hi, n);
   if (y_lo > y_hi) return {};
-  std::vector<std::uint32_t> first(static_cast<std::size_t>(3 * n * n) + 2, 0);
+  const std::size_t nn = static_cast<std::size_t>(n);
+  std::vector<std::size_t> first(3 * nn * nn + 2, 0);
   auto each = [&](auto&& fn) {
     for (std::int32_t y = y_lo; y <= y_hi; ++y)
       for (std::int32_t z = -n; z <= n; ++z)
         for (std::int32_t x = -n; x <= n; ++x)
-          if (offset_within({x, y, z}, radius)) fn(Vec3i{x, y, z}, static_cast<std::size_t>(x * x + y * y + z * z));
+          if (offset_within({x, y, z}, radius))
+            fn(Vec3i{x, y, z}, static_cast<std::size_t>(std::int64_t{x} * x + std::int64_t{y} * y + std::int64_t{z} * z));
   };
   each([&](Vec3i, std::size_t s) { ++first[s + 1]; });
   for (std::size_t s = 1; s < first.size(); ++s) first[s] += first[s - 1];

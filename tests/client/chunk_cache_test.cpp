@@ -210,6 +210,51 @@ TEST_F(ChunkCacheTest, AFullCacheDropsTheLeastRecentlyUsedRegions) {
   EXPECT_LE(cache->counters().bytes, 3 * file_size);
 }
 
+// Spelled with a trailing slash or not, a directory is one cache: what one
+// process saved, the next finds (and counts once).
+TEST_F(ChunkCacheTest, ADirectoryIsOneCacheHoweverItIsSpelled) {
+  auto slash = ChunkCache::open(dir_.string() + "/", 1u << 30);
+  ASSERT_TRUE(slash.ok());
+  ASSERT_TRUE(save_replica(**slash, kWorld, some_replica()).has_value());
+  const auto bytes = (*slash)->counters().bytes;
+  auto plain = open();
+  EXPECT_EQ(plain->counters().bytes, bytes);
+  Replica b;
+  EXPECT_EQ(load_view(*plain, kWorld, kView, WorldBounds{}, b), 7u);
+  auto again = ChunkCache::open(dir_.string() + "/./", 1u << 30);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ((*again)->path_of(kWorld, {0, 0, 0}), plain->path_of(kWorld, {0, 0, 0}));
+}
+
+// Files the cache did not name are never counted or removed.
+TEST_F(ChunkCacheTest, OtherFilesInTheDirectoryAreLeftAlone) {
+  fs::create_directories(dir_ / "notes");
+  fs::create_directories(dir_ / "0123456789abcdef");
+  { std::ofstream(dir_ / "notes" / "1_2_3.region") << std::string(5000, 'x'); }
+  { std::ofstream(dir_ / "0123456789abcdef" / "mine.region") << std::string(5000, 'x'); }
+  { std::ofstream(dir_ / "0123456789abcdef" / "1_2_3.region.99-0.tmp") << std::string(5000, 'x'); }
+  auto cache = open(1);  // a size nothing fits: every file it counts goes
+  EXPECT_EQ(cache->counters().bytes, 0u);
+  ASSERT_TRUE(save_replica(*cache, kWorld, some_replica()).has_value());
+  EXPECT_TRUE(fs::exists(dir_ / "notes" / "1_2_3.region"));
+  EXPECT_TRUE(fs::exists(dir_ / "0123456789abcdef" / "mine.region"));
+  EXPECT_TRUE(fs::exists(dir_ / "0123456789abcdef" / "1_2_3.region.99-0.tmp"));
+  EXPECT_EQ(cache->counters().bytes, 0u);  // its own files went, over the size
+}
+
+// A chunk the caller names (a hash that did not match) is not kept.
+TEST_F(ChunkCacheTest, ChunksNamedBySkipAreNotSaved) {
+  auto cache = open();
+  const Replica a = some_replica();
+  const auto saved = save_replica(*cache, kWorld, a, [](Vec3i cp) { return cp == Vec3i{1, 0, 0}; });
+  ASSERT_TRUE(saved.has_value());
+  EXPECT_EQ(*saved, 6u);
+  Replica b;
+  EXPECT_EQ(load_view(*cache, kWorld, kView, WorldBounds{}, b), 6u);
+  EXPECT_EQ(b.holding({1, 0, 0}), nullptr);
+  EXPECT_NE(b.holding({0, 0, 0}), nullptr);
+}
+
 TEST_F(ChunkCacheTest, ADirectoryThatCannotBeMadeIsAnErrorNamingIt) {
   const fs::path file = dir_.string() + ".file";
   { std::ofstream(file) << "x"; }

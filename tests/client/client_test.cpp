@@ -94,6 +94,14 @@ bool checked_all(const ClientView& v, const std::vector<Vec3i>& chunks) {
   return v.closed || std::all_of(chunks.begin(), chunks.end(), [&](Vec3i cp) { return v.hash_checks.count(cp) != 0; });
 }
 
+// Asks the server for the hash of each chunk and waits for every answer:
+// the replica matches the server chunk for chunk.
+void expect_verified(Client& c, const std::vector<Vec3i>& chunks) {
+  for (const Vec3i cp : chunks) ASSERT_TRUE(c.request_chunk_hash(cp));
+  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, chunks); }, kDeadline));
+  EXPECT_EQ(c.counters().hash_mismatches, 0u);
+}
+
 bool all_covered(const Replica& r, const std::vector<Vec3i>& chunks) {
   for (const Vec3i cp : chunks)
     if (r.holding(cp) == nullptr) return false;
@@ -815,9 +823,7 @@ TEST_F(ClientServerTest, ClientReconnectsAfterARestartAndResumesItsReplica) {
   ASSERT_FALSE(c.closed()) << c.disconnect_reason();
   // Verified after the restart: every full-resolution chunk matches.
   ASSERT_TRUE(c.wait_until([&](const ClientView&) { return back.load() == 1; }, kDeadline));
-  for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
-  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, near); }, kDeadline));
-  EXPECT_EQ(c.counters().hash_mismatches, 0u);
+  expect_verified(c, near);
   // Nothing was streamed again: the second connection cost a small
   // fraction of the first.
   const std::uint64_t resumed_bytes = c.counters().bytes_in - first_bytes;
@@ -885,9 +891,7 @@ TEST_F(ClientServerTest, ARejoinFromTheChunkCacheIsSentOnlyWhatChanged) {
         kDeadline));
     EXPECT_EQ(*c.with_replica([&](const Replica& r) { return r.revision(edited); }), edited_revision);
     const auto near = chunks_within(w->spawn, 32, *w);
-    for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
-    ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, near); }, kDeadline));
-    EXPECT_EQ(c.counters().hash_mismatches, 0u);
+    expect_verified(c, near);
     // The claims' answer is a small part of a cold join.
     EXPECT_LT(c.counters().bytes_in * 10, cold_bytes) << c.counters().bytes_in << " bytes rejoining vs " << cold_bytes;
     c.disconnect();
@@ -941,9 +945,7 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
     EXPECT_EQ((*cache)->counters().regions_damaged, 1u);
     const auto near = chunks_within(w->spawn, 32, *w);
     ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near); }, kDeadline));
-    for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
-    ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, near); }, kDeadline));
-    EXPECT_EQ(c.counters().hash_mismatches, 0u);
+    expect_verified(c, near);
     c.disconnect();
   }
   // Another world: a new id, nothing loaded.
@@ -1009,9 +1011,7 @@ TEST_F(ClientServerTest, AReconnectToAnotherWorldDropsTheOldWorldsChunks) {
       << "the old world's voxel stayed";
   EXPECT_EQ(c.with_replica([&](const Replica& r) { return r.revision(chunk_of(p)); }), old_revision);
   ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near); }, kDeadline));
-  for (const Vec3i cp : near) ASSERT_TRUE(c.request_chunk_hash(cp));
-  ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || checked_all(v, near); }, kDeadline));
-  EXPECT_EQ(c.counters().hash_mismatches, 0u);
+  expect_verified(c, near);
   c.disconnect();
   ASSERT_EQ(server_->stop(), 0);
   server_.reset();
