@@ -89,6 +89,15 @@ std::vector<std::pair<std::string, std::string>> meta_to_keys(const WorldMeta& m
   };
 }
 
+std::optional<std::uint64_t> parse_world_id(const std::string& text) {
+  if (text.empty() || !std::isdigit(static_cast<unsigned char>(text[0]))) return std::nullopt;
+  char* end = nullptr;
+  errno = 0;
+  const unsigned long long id = std::strtoull(text.c_str(), &end, 10);
+  if (*end != '\0' || errno != 0) return std::nullopt;
+  return id;
+}
+
 FileResult<WorldMeta> meta_from_keys(const std::vector<std::pair<std::string, std::string>>& keys,
                                      const std::string& where) {
   std::map<std::string, std::string> kv(keys.begin(), keys.end());
@@ -134,12 +143,9 @@ FileResult<WorldMeta> meta_from_keys(const std::vector<std::pair<std::string, st
   m.epoch = static_cast<std::uint64_t>(n[0]);
   // Absent in worlds made before it: none yet.
   if ((v = need("world_id"))) {
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long id = std::strtoull(v->c_str(), &end, 10);
-    if (v->empty() || *end != '\0' || errno != 0 || !std::isdigit(static_cast<unsigned char>((*v)[0])))
-      return FileError{where + ": metadata key world_id malformed (want a decimal number)", {}};
-    m.world_id = id;
+    const auto id = parse_world_id(*v);
+    if (!id) return FileError{where + ": metadata key world_id malformed (want a decimal number)", {}};
+    m.world_id = *id;
   }
   return m;
 }

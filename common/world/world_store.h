@@ -228,6 +228,8 @@ class WorldStore {
 // The metadata as key -> value text (both backends store it so), and back;
 // where names the world in errors.
 std::vector<std::pair<std::string, std::string>> meta_to_keys(const WorldMeta& meta);
+// The world_id key's value: a decimal number (nullopt when it is not one).
+std::optional<std::uint64_t> parse_world_id(const std::string& text);
 FileResult<WorldMeta> meta_from_keys(const std::vector<std::pair<std::string, std::string>>& keys,
                                      const std::string& where);
 

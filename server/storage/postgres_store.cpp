@@ -67,7 +67,7 @@ StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::strin
   auto c = PgConnection::open(url);  // with the schema made or upgraded
   if (!c) return c.error();
   std::unique_ptr<PostgresStore> store(new PostgresStore(std::move(*c)));
-  if (auto m = store->read_meta(); !m) return m.error();
+  if (auto m = store->meta_.read(*store->c_); !m) return m.error();
   return store;
 }
 
@@ -268,59 +268,7 @@ StoreResult<Ok> answer_forwarded(PgConnection& c, std::span<const ForwardAnswer>
   return Ok{};
 }
 
-StoreResult<Ok> PostgresStore::read_meta() {
-  auto r = c_->exec("read world metadata", "SELECT key, value FROM terrane_meta");
-  if (!r) return r.error();
-  if (r->count() == 0) {
-    has_world_ = false;
-    return Ok{};
-  }
-  std::vector<std::pair<std::string, std::string>> keys;
-  for (int i = 0; i < r->count(); ++i) keys.emplace_back(r->get(i, 0), r->get(i, 1));
-  auto m = meta_from_keys(keys, "world " + c_->shown());
-  if (!m) return StoreError{StoreError::Kind::kDecode, m.error().message};
-  meta_ = std::move(*m);
-  has_world_ = true;
-  return Ok{};
-}
-
-StoreResult<Ok> PostgresStore::create_world(const WorldMeta& meta) {
-  if (auto why = meta.bounds.validate(); !why.empty())
-    return StoreError{StoreError::Kind::kQuery, fmt::format("world {}: {}", c_->shown(), why)};
-  auto begin = c_->exec("begin", "BEGIN");
-  if (!begin) return begin.error();
-  // The schema lock again: two servers making the world at once agree on
-  // one metadata (the first's).
-  auto lock = c_->exec("lock schema", "SELECT pg_advisory_xact_lock($1)", {text(kPgSchemaLockKey)});
-  if (!lock) return c_->abort(lock.error());
-  auto any = c_->exec("read world metadata", "SELECT 1 FROM terrane_meta LIMIT 1");
-  if (!any) return c_->abort(any.error());
-  if (any->count() == 0) {
-    for (const auto& [k, v] : meta_to_keys(meta)) {
-      auto put = c_->exec("write world metadata", "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)",
-                          {Param{k, false}, Param{v, false}});
-      if (!put) return c_->abort(put.error());
-    }
-  }
-  auto commit = c_->exec("commit world metadata", "COMMIT");
-  if (!commit) return c_->abort(commit.error());
-  return read_meta();
-}
-
-FileStatus PostgresStore::put_meta(const std::vector<std::pair<std::string, std::string>>& keys) {
-  auto done = c_->transaction<Ok>("commit world metadata", [&]() -> StoreResult<Ok> {
-    for (const auto& [k, v] : keys) {
-      auto put = c_->exec("write world metadata",
-                          "INSERT INTO terrane_meta (key, value) VALUES ($1, $2)"
-                          " ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
-                          {Param{k, false}, Param{v, false}});
-      if (!put) return put.error();
-    }
-    return Ok{};
-  });
-  if (!done) return file_error(done.error());
-  return Ok{};
-}
+StoreResult<Ok> PostgresStore::create_world(const WorldMeta& meta) { return meta_.create(*c_, meta); }
 
 StoreResult<std::unique_ptr<PostgresStore>> PostgresStore::reopen_chunks() const {
   auto again = open(c_->url());
@@ -336,50 +284,11 @@ FileResult<std::unique_ptr<WorldStore>> PostgresStore::reopen() const {
   return std::unique_ptr<WorldStore>(std::move(*again));
 }
 
-FileStatus PostgresStore::set_epoch(std::uint64_t epoch) {
-  // One statement, above whatever is stored: servers starting at once each
-  // get an epoch of their own (a client's resume token names one).
-  auto r = c_->exec("write world epoch",
-                    "UPDATE terrane_meta SET value = (GREATEST(value::bigint + 1, $1::bigint))::text"
-                    " WHERE key = 'epoch' RETURNING value",
-                    {text(static_cast<std::int64_t>(std::min<std::uint64_t>(
-                        epoch, static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max()))))});
-  if (!r) return file_error(r.error());
-  const auto got = r->count() == 1 ? r->integer(0, 0) : std::nullopt;
-  if (!got || *got < 0) return FileError{"world " + c_->shown() + ": metadata key epoch missing or malformed", {}};
-  meta_.epoch = static_cast<std::uint64_t>(*got);
-  return Ok{};
-}
+FileStatus PostgresStore::set_epoch(std::uint64_t epoch) { return meta_.set_epoch(*c_, epoch); }
 
-FileResult<std::uint64_t> PostgresStore::name_world(std::uint64_t candidate) {
-  // One statement: of servers starting at once, the first's id is kept.
-  auto r = c_->exec("name the world",
-                    "INSERT INTO terrane_meta (key, value) VALUES ('world_id', $1)"
-                    " ON CONFLICT (key) DO UPDATE SET value = CASE WHEN terrane_meta.value = '0'"
-                    " THEN EXCLUDED.value ELSE terrane_meta.value END RETURNING value",
-                    {Param{std::to_string(candidate), false}});
-  if (!r) return file_error(r.error());
-  std::vector<std::pair<std::string, std::string>> keys = meta_to_keys(meta_);
-  for (auto& [k, v] : keys)
-    if (k == "world_id") v = r->count() == 1 ? r->get(0, 0) : std::string("x");
-  auto m = meta_from_keys(keys, "world " + c_->shown());
-  if (!m || m->world_id == 0) return FileError{"world " + c_->shown() + ": metadata key world_id malformed", {}};
-  meta_.world_id = m->world_id;
-  return meta_.world_id;
-}
+FileResult<std::uint64_t> PostgresStore::name_world(std::uint64_t candidate) { return meta_.name_world(*c_, candidate); }
 
-FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) {
-  if (auto why = bounds.validate(); !why.empty()) return FileError{"world " + c_->shown() + ": " + why, {}};
-  WorldMeta m = meta_;
-  m.bounds = bounds;
-  // Only the bounds' keys: another server's epoch is left as it is.
-  std::vector<std::pair<std::string, std::string>> keys;
-  for (auto& kv : meta_to_keys(m))
-    if (kv.first == "bounds_y" || kv.first == "bounds_xz") keys.push_back(std::move(kv));
-  if (auto st = put_meta(keys); !st) return st;
-  meta_.bounds = bounds;
-  return Ok{};
-}
+FileStatus PostgresStore::set_bounds(const WorldBounds& bounds) { return meta_.set_bounds(*c_, bounds); }
 
 FileResult<std::optional<StoredChunk>> PostgresStore::load_chunk(Vec3i pos) {
   // One statement, so one snapshot: the row (revision, the blob's revision,

@@ -40,6 +40,7 @@
 #include "server/storage/cluster_map.h"  // ServerAddress, parse_server_address: terrane-server's options
 #include "server/storage/notices.h"
 #include "server/storage/pg_connection.h"
+#include "server/storage/pg_world_meta.h"
 
 namespace terrane {
 
@@ -58,7 +59,7 @@ class PostgresStore final : public WorldStore {
   // "postgres://...") rather than a world directory.
   static bool is_url(const std::string& url);
 
-  bool has_world() const { return has_world_; }
+  bool has_world() const { return meta_.has_world(); }
   // Stores meta as the world's unless the database holds a world already
   // (another server may have made it first: its metadata wins), then reads
   // it back.
@@ -110,7 +111,7 @@ class PostgresStore final : public WorldStore {
   // row that does not decode is an error with decode set, naming the chunk.
   const std::string& where() const override { return c_->shown(); }
   FileResult<std::unique_ptr<WorldStore>> reopen() const override;
-  const WorldMeta& meta() const override { return meta_; }
+  const WorldMeta& meta() const override { return meta_.meta(); }
   FileStatus set_epoch(std::uint64_t epoch) override;
   FileResult<std::uint64_t> name_world(std::uint64_t candidate) override;
   FileStatus set_bounds(const WorldBounds& bounds) override;
@@ -153,7 +154,6 @@ class PostgresStore final : public WorldStore {
   // for_each_chunk(_row): the coarse column read and decoded only if asked.
   FileStatus each_chunk_row(const RowFn& fn, bool with_coarse);
   explicit PostgresStore(std::unique_ptr<PgConnection> c);
-  StoreResult<Ok> read_meta();
   FileStatus save(std::span<const ChunkWrite> writes, bool overwrite, std::span<const EditLogEntry> log,
                   std::span<const ForwardAnswer> answers);
   // What one try of a marked commit learnt: whether the database answered
@@ -170,12 +170,8 @@ class PostgresStore final : public WorldStore {
                                std::span<const EditLogEntry> log, bool overwrite,
                                std::span<const ForwardAnswer> answers, std::int64_t commit, CommitCheck* check);
 
-  // Writes these metadata keys (others are left as they are).
-  FileStatus put_meta(const std::vector<std::pair<std::string, std::string>>& keys);
-
   std::unique_ptr<PgConnection> c_;  // with the url as given (reopen connects with it) and as shown
-  bool has_world_ = false;
-  WorldMeta meta_;
+  PgWorldMeta meta_;  // terrane_meta as this connection last read or wrote it
   std::shared_ptr<const LeaseSource> leases_;
   std::chrono::milliseconds retry_for_{0};
   DatabaseCounters* database_counters_ = nullptr;

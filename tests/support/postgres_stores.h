@@ -34,6 +34,12 @@ class PostgresStoresTest : public PostgresTest {
     EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message);
     return s.ok() ? std::move(*s) : nullptr;
   }
+  // A bare connection on the test's database (the schema made).
+  std::unique_ptr<PgConnection> connect() {
+    auto c = PgConnection::open(url_);
+    EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
+    return c.ok() ? std::move(*c) : nullptr;
+  }
   // The cluster store beside chunk store s (one each, opened when first
   // asked, on a connection of its own): its leases, servers and inbox.
   ClusterStore* cl(const std::unique_ptr<PostgresStore>& s) {
