@@ -320,13 +320,12 @@ std::optional<std::size_t> save_replica(ChunkCache& cache, std::uint64_t world_i
   });
   std::size_t saved = 0;
   bool ok = true;
-  std::vector<std::uint8_t> records;
+  std::vector<std::uint8_t> records, payload;
   for (auto& [key, chunks] : regions) {
     std::sort(chunks.begin(), chunks.end(), [](Vec3i a, Vec3i b) { return coarse_index(a) < coarse_index(b); });
     records.clear();
     Vec3i prev{0, 0, 0};
     std::size_t count = 0;
-    std::vector<std::uint8_t> payload;
     for (const Vec3i cp : chunks) {
       payload.clear();
       const auto h = replica.exact_payload(cp, payload);

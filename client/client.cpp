@@ -78,6 +78,26 @@ bool Client::save_cache() {
   return true;
 }
 
+std::function<void()> Client::load_cache(const WelcomeMsg& w, std::vector<Frame>& claims) {
+  const auto view = movement_.view(w);
+  if (w.world_id == 0 || !view) return nullptr;
+  counters_.cache_chunks_loaded += load_view(*options_.chunk_cache, w.world_id, *view, w.bounds(), replica_);
+  claims = claim_frames();
+  if (!callbacks_.on_holding && !callbacks_.on_chunks_loaded) return nullptr;
+  // The replica held nothing before: everything it holds came from the cache.
+  std::vector<std::pair<Vec3i, Holding>> changes;
+  std::vector<Vec3i> loaded;
+  replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
+    changes.emplace_back(cp, h);
+    if (h.full_resolution()) loaded.push_back(cp);
+  });
+  return [this, ch = std::move(changes), loaded = std::move(loaded)] {
+    if (callbacks_.on_holding)
+      for (const auto& [p, h] : ch) callbacks_.on_holding(p, &h);
+    if (callbacks_.on_chunks_loaded && !loaded.empty()) callbacks_.on_chunks_loaded(loaded);
+  };
+}
+
 std::vector<Frame> Client::claim_frames() {
   std::vector<HeldChunkMsg> held;
   replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
@@ -338,25 +358,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       std::function<void()> cache_told;
       if (options_.chunk_cache && options_.stream) {
         if (!state) state = movement_.session_frame();  // held back for the claims (session_frames)
-        const auto view = movement_.view(*w);
-        if (w->world_id != 0 && view) {
-          counters_.cache_chunks_loaded += load_view(*options_.chunk_cache, w->world_id, *view, w->bounds(), replica_);
-          claims = claim_frames();
-          // The replica held nothing before: everything it holds came from the cache.
-          if (callbacks_.on_holding || callbacks_.on_chunks_loaded) {
-            std::vector<std::pair<Vec3i, Holding>> changes;
-            std::vector<Vec3i> loaded;
-            replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
-              changes.emplace_back(cp, h);
-              if (h.full_resolution()) loaded.push_back(cp);
-            });
-            cache_told = [this, ch = std::move(changes), loaded = std::move(loaded)] {
-              if (callbacks_.on_holding)
-                for (const auto& [p, h] : ch) callbacks_.on_holding(p, &h);
-              if (callbacks_.on_chunks_loaded && !loaded.empty()) callbacks_.on_chunks_loaded(loaded);
-            };
-          }
-        }
+        cache_told = load_cache(*w, claims);
       }
       if (state || !claims.empty()) {
         lock.unlock();

@@ -327,6 +327,11 @@ class Client : private ConnectionHandler {
   // Edits given an outcome at once: reported (io side, without the lock).
   void report(const SettledEdits& settled);
   ClientView client_view() const;
+  // Under the lock, on a first session's Welcome: the replica filled from
+  // ClientOptions::chunk_cache (the view's regions of w's world) and its
+  // claims into claims; returns what tells the callbacks (to run without
+  // the lock; null when none are set or nothing was loaded).
+  std::function<void()> load_cache(const WelcomeMsg& w, std::vector<Frame>& claims);
   // Under the lock: the replica's claimable holdings as Holdings frames
   // (region claims), each chunk noted unconfirmed.
   std::vector<Frame> claim_frames();

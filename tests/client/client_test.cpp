@@ -68,6 +68,13 @@ class ClientServerTest : public ::testing::Test {
     return o;
   }
 
+  // A client that keeps its chunks in cache (ClientOptions::chunk_cache).
+  ClientOptions options_cached(const std::string& name, int view, std::shared_ptr<ChunkCache> cache) const {
+    ClientOptions o = options(name, view, 32);
+    o.chunk_cache = std::move(cache);
+    return o;
+  }
+
   // A client that starts at position instead of the spawn.
   ClientOptions options_at(const std::string& name, Vec3f position, int view, int full) const {
     ClientOptions o = options(name, view, full);
@@ -850,9 +857,7 @@ TEST_F(ClientServerTest, ARejoinFromTheChunkCacheIsSentOnlyWhatChanged) {
   std::uint64_t cold_bytes = 0;
   std::vector<Vec3i> in_view;
   {
-    ClientOptions o = options("first", 128, 32);
-    o.chunk_cache = *cache;
-    Client c(o);
+    Client c(options_cached("first", 128, *cache));
     w = join(c);
     ASSERT_TRUE(w.has_value());
     ASSERT_NE(w->world_id, 0u);
@@ -879,9 +884,7 @@ TEST_F(ClientServerTest, ARejoinFromTheChunkCacheIsSentOnlyWhatChanged) {
     e.disconnect();
   }
   {
-    ClientOptions o = options("again", 128, 32);
-    o.chunk_cache = *cache;
-    Client c(o);
+    Client c(options_cached("again", 128, *cache));
     ASSERT_TRUE(join(c).has_value());
     EXPECT_GE(c.counters().cache_chunks_loaded, in_view.size());
     ASSERT_TRUE(c.wait_until(
@@ -910,9 +913,7 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
   ASSERT_TRUE(cache.ok());
   std::uint64_t first_id = 0;
   {
-    ClientOptions o = options("first", 96, 32);
-    o.chunk_cache = *cache;
-    Client c(o);
+    Client c(options_cached("first", 96, *cache));
     const auto w = join(c);
     ASSERT_TRUE(w.has_value());
     first_id = w->world_id;
@@ -935,9 +936,7 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
     f.put('\x5a');
   }
   {
-    ClientOptions o = options("again", 96, 32);
-    o.chunk_cache = *cache;
-    Client c(o);
+    Client c(options_cached("again", 96, *cache));
     const auto w = join(c);
     ASSERT_TRUE(w.has_value());
     EXPECT_EQ(w->world_id, first_id);
@@ -952,9 +951,7 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
   ASSERT_EQ(server_->stop(), 0);
   server_ = std::make_unique<ServerProcess>(dir_.string() + "-other", std::vector<std::string>{});
   {
-    ClientOptions o = options("elsewhere", 96, 32);
-    o.chunk_cache = *cache;
-    Client c(o);
+    Client c(options_cached("elsewhere", 96, *cache));
     const auto w = join(c);
     ASSERT_TRUE(w.has_value());
     EXPECT_NE(w->world_id, first_id);
