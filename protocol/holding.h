@@ -35,8 +35,11 @@ inline constexpr int kHoldingForms = 8;
 
 // The mip level's form (level 1..3).
 constexpr HoldingForm mip_form(int level) { return static_cast<HoldingForm>(level); }
-// The horizon image level's form (level 4..5).
-constexpr HoldingForm horizon_form(int level) { return static_cast<HoldingForm>(level + 2); }
+// The form a horizon image of level 4..6 gives the chunks it covers: level
+// 6 (one voxel per 2^3 chunks) gives each chunk its block's voxel, Horizon 5.
+constexpr HoldingForm horizon_form(int level) {
+  return level <= 4 ? HoldingForm::kHorizon4 : HoldingForm::kHorizon5;
+}
 
 struct Holding {
   HoldingForm form = HoldingForm::kEmpty;

@@ -217,7 +217,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         break;
       }
       case StreamRecordKind::kHorizon: {
-        // One record per chunk covered, each with its (32 >> level)^3 voxels.
+        // One record for the region: its image ((256 >> level)^3 voxels) and mask.
         const Vec3i first = rec.chunk_pos;
         if (floor_mod(first, kHorizonRegionChunks) != Vec3i{0, 0, 0} ||
             std::max({first.x, first.y, first.z}) + kHorizonRegionChunks - 1 > lim)
@@ -225,7 +225,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
         auto level = r.byte();
         if (!level) return level.error();
         if (!is_horizon_level(*level))
-          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: horizon level not 4 or 5"};
+          return DecodeError{DecodeErrorCode::kInvalidValue, r.pos() - 1, "stream batch: horizon level not 4, 5 or 6"};
         auto masked = r.byte();
         if (!masked) return masked.error();
         if (*masked > 1)

@@ -29,16 +29,17 @@
 //                      kFeatureMipPatches, and only for a chunk it holds
 //                      as Mip L; the chunk then holds Mip L at the record's
 //                      revision.
-//     kind 9 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk)
-//                      or 5 (1 voxel per chunk); position: the region's
+//     kind 9 Horizon   a whole 8^3-chunk region at level 4 (2^3 per chunk),
+//                      5 (1 voxel per chunk) or 6 (1 voxel per 2^3 chunks,
+//                      kFeatureOuterHorizon); position: the region's
 //                      first chunk (multiples of 8); revision 0; payload:
 //                      level:u8, masked:u8 (0: every chunk of the region;
 //                      1: a 64-byte mask follows, bit i of byte i / 8 for
 //                      chunk (y * 8 + z) * 8 + x), then one network codec
-//                      unit of (8 * (32 >> level))^3 voxels
+//                      unit of (256 >> level)^3 voxels
 //                      (common/world/horizon.h). Decoded as one record:
 //                      the region's image and mask; the chunks it covers
-//                      are held in form Horizon4 or Horizon5.
+//                      are held in form Horizon4 (level 4) or Horizon5.
 //   (dx, dy, dz) is the chunk position minus the previous record's (the
 //   first record's is relative to (0, 0, 0)).
 //
@@ -106,6 +107,9 @@ inline bool horizon_mask_has(const HorizonMask& m, int i) {
 }
 inline void horizon_mask_set(HorizonMask& m, int i) {
   m[static_cast<std::size_t>(i / 8)] |= static_cast<std::uint8_t>(1u << (i % 8));
+}
+inline void horizon_mask_clear(HorizonMask& m, int i) {
+  m[static_cast<std::size_t>(i / 8)] &= static_cast<std::uint8_t>(~(1u << (i % 8)));
 }
 
 // Records in one batch at most (bounds a receiver's work per frame).

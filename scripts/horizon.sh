@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # How fast a new client sees its whole horizon (issue: "The whole horizon at
 # once"). One idle bot joins a server started cold (a fresh process on a
-# fresh copy of the world) at view 1,024 / full resolution 128 and at
-# 512 / 64, on three worlds:
+# fresh copy of the world) at view 2,048 / full resolution 128, 1,024 / 128
+# and 512 / 64, on three worlds:
 #   generated   the default world right after `terrane-world generate`
 #               (the default box, +-256 around the spawn, stored)
 #   never       a world never generated: every chunk is made on demand
@@ -27,7 +27,7 @@ run() {  # world view full
   local world=$1 view=$2 full=$3 name=$1-$2
   rm -rf "$scratch/run"
   [ "$world" = never ] || cp -r "$scratch/$world" "$scratch/run"
-  terrane_start_server "$scratch/server.log" --world "$scratch/run" --port 0
+  terrane_start_server "$scratch/server.log" --world "$scratch/run" --port 0 --max-view-distance 2048
   local address=127.0.0.1:$server_port
   ./build/bin/terrane-bots --connect "$address" --bots 1 --behavior idle --duration 1 --wait-joined 600 \
     --view-distance "$view" --full-res-radius "$full" --hash-checks 1 --quiet 0 --progress off \
@@ -45,7 +45,7 @@ PY
 
 printf "%-10s %12s %12s %12s %14s %14s %6s\n" world "view / full" "coarse ms" "full ms" "coarse kB" "join kB" ""
 for world in generated never mc-1.16; do
-  for vf in "1024 128" "512 64"; do
+  for vf in "2048 128" "1024 128" "512 64"; do
     run $world $vf
   done
 done

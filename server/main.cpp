@@ -108,6 +108,8 @@ constexpr const char* kHelp =
     "                              first estimated at the mip's resolution, then replaced)\n"
     "  --no-horizon-images         start a new view with each chunk's own 4^3 mip instead of\n"
     "                              whole regions at 2^3 or 1 voxel per chunk (horizon images)\n"
+    "  --no-outer-horizon          send regions beyond 1,024 voxels at 1 voxel per chunk, never at\n"
+    "                              1 voxel per 2^3 chunks (clients that take those say so in Hello)\n"
     "  --no-mip-patches            refresh a changed mip whole, never as a patch of its changed\n"
     "                              4^3 sub-units (clients that take patches say so in Hello)\n"
     "  --no-presence-records       send whole Presence lists, never PresenceRecords (what changed)\n"
@@ -195,7 +197,8 @@ int run(int argc, char** argv) {
                   "resident-chunks", "tokens-file", "admin-token", "edits-per-second", "max-edit-voxels", "max-speed",
                   "inbound-bytes-per-second", "outbound-bytes-per-second", "handshake-timeout-ms", "idle-timeout-ms",
                   "frame-timeout-ms", "max-frame-bytes", "history-bytes", "edit-log-days", "edit-log-mb", "min-free-mb", "log-format", "log-file", "log-level", "backup-every", "backup-keep", "backup-dir", "config", "test-drop-updates", "test-corrupt-updates"},
-                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-mip-patches", "no-presence-records",
+                 {"help", "open", "no-create", "exact-horizon", "no-horizon-images", "no-outer-horizon", "no-mip-patches",
+                  "no-presence-records",
                   "no-thread-priorities"});
   if (auto err = cl.parse(argc, argv, 1); !err.empty()) return usage_error(err);
   if (cl.flag("help")) return std::printf("%s", kHelp), 0;
@@ -265,6 +268,7 @@ int run(int argc, char** argv) {
   o.ops.allow_open = cl.flag("open");
   o.replication.horizon_estimates = !cl.flag("exact-horizon");
   o.replication.horizon_images = !cl.flag("no-horizon-images");
+  o.replication.outer_horizon = !cl.flag("no-outer-horizon");
   o.replication.mip_patches = !cl.flag("no-mip-patches");
   o.replication.presence_records = !cl.flag("no-presence-records");
   o.thread_priorities = !cl.flag("no-thread-priorities");

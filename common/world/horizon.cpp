@@ -7,7 +7,10 @@
 namespace terrane {
 
 HorizonBuilder::HorizonBuilder(Vec3i region, int level)
-    : region_(region), level_(level), image_(Vec3i{horizon_side(level), horizon_side(level), horizon_side(level)}) {}
+    : region_(region),
+      level_(level),
+      image_(Vec3i{horizon_side(horizon_held_level(level)), horizon_side(horizon_held_level(level)),
+                   horizon_side(horizon_held_level(level))}) {}
 
 void HorizonBuilder::put_coarse(Vec3i cp, const CoarseVoxels& voxels) {
   Box b(Vec3i{kCoarseSide, kCoarseSide, kCoarseSide});
@@ -28,8 +31,25 @@ HorizonPtr encode_horizon(const HorizonBuilder& b) {
   auto img = std::make_shared<HorizonImage>();
   img->region = b.region();
   img->level = b.level();
-  net_codec_encode(horizon_side(b.level()), b.image().voxels(), img->unit);
+  if (b.level() == kHorizonOuterLevel) {
+    const Box outer = downsample_box(b.image());
+    net_codec_encode(horizon_side(b.level()), outer.voxels(), img->unit);
+  } else {
+    net_codec_encode(horizon_side(b.level()), b.image().voxels(), img->unit);
+  }
   return img;
+}
+
+Box horizon_upsample(const Box& outer) {
+  const Vec3i n = outer.size();
+  Box out(n * 2);
+  for (int y = 0; y < n.y * 2; ++y)
+    for (int z = 0; z < n.z * 2; ++z) {
+      const Voxel* from = outer.read_row(y / 2, z / 2);
+      Voxel* row = out.write_row(y, z);
+      for (int x = 0; x < n.x * 2; ++x) row[x] = from[x / 2];
+    }
+  return out;
 }
 
 }  // namespace terrane

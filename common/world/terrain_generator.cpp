@@ -234,12 +234,42 @@ void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& o
   // ramp (a cell whose centre is above the band may still reach into it).
   // A chunk's column stack is often sampled in parts (the regions above
   // and below one another): the latest footprints are kept.
+  // From cells of half a chunk up, a column's slope is taken between its
+  // neighbouring cells' centres (the cell's mean slope), so a column costs
+  // one surface evaluation and the ring around them one more each, not five
+  // (column_at's neighbours one voxel away).
+  const bool grid_slopes = cell >= kChunkSize / 2;
   const auto make_columns = [&] {
     std::vector<Column> made(static_cast<std::size_t>(nx) * nz);
+    std::vector<TerrainField::Surface> surfaces;
+    std::vector<float> heights;  // (nx + 2) x (nz + 2), the ring's corners unused
+    const auto hi = [&](int x, int z) -> float& {
+      return heights[static_cast<std::size_t>(z + 1) * static_cast<std::size_t>(nx + 2) + static_cast<std::size_t>(x + 1)];
+    };
+    if (grid_slopes) {
+      surfaces.resize(static_cast<std::size_t>(nx) * nz);
+      heights.assign(static_cast<std::size_t>(nx + 2) * static_cast<std::size_t>(nz + 2), 0.0f);
+      for (int z = -1; z <= nz; ++z)
+        for (int x = -1; x <= nx; ++x) {
+          const bool inner = x >= 0 && x < nx && z >= 0 && z < nz;
+          if (!inner && (x < 0 || x >= nx) && (z < 0 || z >= nz)) continue;  // a corner
+          const TerrainField::Surface sf = field_.surface(at(x, origin.x), at(z, origin.z));
+          hi(x, z) = sf.height;
+          if (inner) surfaces[static_cast<std::size_t>(z) * nx + x] = sf;
+        }
+    }
     for (int z = 0; z < nz; ++z) {
       for (int x = 0; x < nx; ++x) {
         const std::int32_t wx = at(x, origin.x), wz = at(z, origin.z);
-        Column c = column_at(wx, wz);
+        Column c;
+        if (grid_slopes) {
+          // The gradient per voxel, as column_at's neighbours give it.
+          const float h = hi(x, z), step = 2.0f * static_cast<float>(cell);
+          const float gx = (hi(x + 1, z) - hi(x - 1, z)) / step, gz = (hi(x, z + 1) - hi(x, z - 1)) / step;
+          c = shading_.column(surfaces[static_cast<std::size_t>(z) * nx + x], h - gx, h + gx, h - gz, h + gz);
+        } else {
+          c = column_at(wx, wz);
+        }
         // (The ramp is len voxels wide per voxel along y: cell * len here.)
         const auto widen = static_cast<std::int32_t>(std::ceil(static_cast<float>(half) / c.inv_len));
         c.top_y += widen;

@@ -62,7 +62,9 @@ class TerrainGenerator {
   // cell, so it approximates the mean of the cell's voxels (as the mips'
   // downsampling would give) at 1 / cell^3 of generate()'s cost. An
   // estimate, not a mip: it differs where the terrain has detail finer
-  // than a cell. Every output voxel keeps the Air invariant. cell >= 1.
+  // than a cell. From cells of 16 voxels up, a column's slope (which
+  // shades it) is measured between its neighbouring cells' centres: the
+  // cell's mean slope. Every output voxel keeps the Air invariant. cell >= 1.
   void coarse_sample(Vec3i origin, int cell, Vec3i count, Box& out) const;
 
   // The surface height of column (x, z) before 3D overhangs and caves (the

@@ -123,14 +123,44 @@ std::vector<CoarseVoxels> World::estimate_coarse(std::span<const Vec3i> chunks) 
 }
 
 void World::estimate_horizon(std::span<const Vec3i> chunks, HorizonBuilder& out) const {
-  if (!generator_) return;
-  const int n = out.per_chunk();
-  const std::size_t per = static_cast<std::size_t>(n) * n * n;
-  std::vector<Voxel> voxels(chunks.size() * per);
-  estimate_cells(*generator_, meta().bounds, chunks, n,
-                 [&](std::size_t i, std::size_t at, Voxel v) { voxels[i * per + at] = v; });
-  for (std::size_t i = 0; i < chunks.size(); ++i)
-    out.put(chunks[i], std::span<const Voxel>(voxels).subspan(i * per, per));
+  if (!generator_ || chunks.empty()) return;
+  // One coarse_sample over the box of the chunks' cells (a region's columns
+  // share their slopes' neighbours): cells of 16 voxels at level 4, 32 at
+  // level 5, 64 (a block of 2^3 chunks) at level 6. A cell whose centre is
+  // outside the bounds is Air, as in generate_chunk; at level 6 a chunk's
+  // own centre decides, as at level 5.
+  const int cell = 1 << out.level();
+  const int per = kChunkSize / cell;  // cells a side per chunk (0 at level 6: 2 chunks a cell)
+  Vec3i lo = chunks.front(), hi = chunks.front();
+  for (const Vec3i cp : chunks) {
+    lo = Vec3i{std::min(lo.x, cp.x), std::min(lo.y, cp.y), std::min(lo.z, cp.z)};
+    hi = Vec3i{std::max(hi.x, cp.x), std::max(hi.y, cp.y), std::max(hi.z, cp.z)};
+  }
+  const Vec3i origin = per > 0 ? lo * kChunkSize : floor_div(lo, 2) * (2 * kChunkSize);
+  const Vec3i count = per > 0 ? (hi - lo + Vec3i{1, 1, 1}) * per : floor_div(hi, 2) - floor_div(lo, 2) + Vec3i{1, 1, 1};
+  Box cells;
+  generator_->coarse_sample(origin, cell, count, cells);
+  const WorldBounds& bounds = meta().bounds;
+  if (per == 0) {
+    for (const Vec3i cp : chunks) {
+      const Vec3i centre = cp * kChunkSize + Vec3i{kChunkSize / 2, kChunkSize / 2, kChunkSize / 2};
+      const Voxel v = bounds.contains(centre) ? cells.get(floor_div(cp, 2) - floor_div(lo, 2)) : Voxel{};
+      out.put(cp, std::span<const Voxel>(&v, 1));
+    }
+    return;
+  }
+  std::vector<Voxel> voxels(static_cast<std::size_t>(per) * per * per);
+  for (const Vec3i cp : chunks) {
+    const Vec3i at = (cp - lo) * per;
+    for (int y = 0; y < per; ++y)
+      for (int z = 0; z < per; ++z)
+        for (int x = 0; x < per; ++x) {
+          const Vec3i centre = cp * kChunkSize + Vec3i{x, y, z} * cell + Vec3i{cell / 2, cell / 2, cell / 2};
+          voxels[static_cast<std::size_t>((y * per + z) * per + x)] =
+              bounds.contains(centre) ? cells.get(at + Vec3i{x, y, z}) : Voxel{};
+        }
+    out.put(cp, voxels);
+  }
 }
 
 Chunk World::generate_chunk(Vec3i chunk_pos) const {

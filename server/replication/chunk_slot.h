@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "common/voxel/vec3_map.h"
+#include "common/world/coarse_image.h"
 #include "protocol/holding.h"
 #include "protocol/stream_batch.h"
 #include "server/base/chunk_version.h"
@@ -233,6 +234,58 @@ class ChunkSlots {
   bool known(Vec3i cp) const {
     const ChunkSlot* s = find(cp);
     return s != nullptr && s->known();
+  }
+  // Whether a chunk of region (8^3 chunks: 2^3 blocks) may have a slot
+  // (false: none has).
+  bool any_in_region(Vec3i region) const {
+    static_assert(kCoarseRegionChunks == 2 * kSide);
+    for (int i = 0; i < 8; ++i)
+      if (blocks_.find(region * 2 + Vec3i{i & 1, i >> 2, (i >> 1) & 1}) != blocks_.end()) return true;
+    return false;
+  }
+  // Region's chunks in mask (chunk i = (y * 8 + z) * 8 + x of the region,
+  // as in a Horizon record) that are not known(): each seen through the
+  // region's image at level (ChunkSlot::see_image); the known ones are
+  // taken out of mask. Returns the chunks seen so. A block with no slots
+  // yet is made whole at once: a view's first images mark every chunk of
+  // it (157,000 at view 2,048).
+  std::size_t see_images(Vec3i region, HorizonMask& mask, int level) {
+    static_assert(kCoarseRegionChunks == 2 * kSide);
+    std::size_t seen = 0;
+    for (int k = 0; k < 8; ++k) {
+      const Vec3i block = region * 2 + Vec3i{k & 1, k >> 2, (k >> 1) & 1};
+      const Vec3i base = (block - region * 2) * kSide;  // the block's first chunk in the region
+      std::uint64_t bits = 0;
+      for (int i = 0; i < kSide * kSide * kSide; ++i)
+        if (horizon_mask_has(mask, coarse_index(region * kCoarseRegionChunks + base + Vec3i{i % kSide, i / (kSide * kSide), i / kSide % kSide})))
+          bits |= std::uint64_t{1} << i;
+      if (bits == 0) continue;
+      if (blocks_.find(block) == blocks_.end()) {
+        Block& b = blocks_[block];
+        const auto n = static_cast<std::size_t>(std::popcount(bits));
+        b.has = bits;
+        b.slots.resize(n);
+        for (ChunkSlot& slot : b.slots) {
+          slot.see_image(level);
+          assert(tally(slot) == Tally{});  // no count changes
+        }
+        slot_bytes_ += b.slots.capacity() * sizeof(ChunkSlot);
+        size_ += n;
+        seen += n;
+        continue;
+      }
+      for (std::uint64_t rest = bits; rest != 0; rest &= rest - 1) {
+        const Vec3i cp = chunk_at(block, std::countr_zero(rest));
+        if (known(cp)) {
+          horizon_mask_clear(mask, coarse_index(cp));
+          continue;
+        }
+        change(cp, [&](ChunkSlot& s) { s.see_image(level); });
+        ++seen;
+      }
+    }
+    report(memory_bytes());
+    return seen;
   }
   // f(ChunkSlot&) on cp's slot, made if there is none. f must not change
   // these slots otherwise (making a slot may move the others of its block).

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <limits>
 #include <tuple>
 
 #include "common/world/view.h"
@@ -88,6 +89,7 @@ void Replicator::close(CloseReason why, const std::string& text) {
 
 void Replicator::join(const std::string& name, bool identified, std::uint32_t features) {
   mip_patches_ = (features & kFeatureMipPatches) != 0 && options_.mip_patches;
+  outer_horizon_ = (features & kFeatureOuterHorizon) != 0 && options_.outer_horizon;
   edit_rate_ = TokenBucket(world_.options().edits_per_second, world_.options().edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = name;
@@ -356,17 +358,22 @@ void Replicator::plan_horizon() {
   // Each region with a chunk in view that the client has nothing of, nearest
   // first (the table's order: a region's first chunk met is about its
   // nearest), at 2^3 per chunk when that chunk is within a quarter of the
-  // view distance, else 1 voxel per chunk.
-  const std::int64_t near = state_.view_distance / 4;
+  // view distance, else 1 voxel per chunk; to a client that takes level 6,
+  // 2^3 per chunk only within kHorizonNearMax too, and beyond
+  // kHorizonFarMax 1 voxel per 2^3 chunks.
+  std::int64_t near = state_.view_distance / 4;
+  std::int64_t far = std::numeric_limits<std::int32_t>::max();
+  if (outer_horizon_) {
+    near = std::min(near, kHorizonNearMax);
+    far = kHorizonFarMax;
+  }
   std::vector<HorizonWant> wants;
-  for (const Vec3i o : plan_.table().offsets()) {
-    const Vec3i cp = plan_.center() + o;
-    if (!plan_.in_view(cp) || slots_.known(cp)) continue;
-    const Vec3i region = coarse_region_of(cp);
-    // A Horizon record's region lies within the wire's range whole.
-    if (!wire_chunk_ok(region * kHorizonRegionChunks + Vec3i{7, 7, 7})) continue;
-    const int level = offset_dist2(o) <= near * near ? kHorizonNearLevel : kHorizonFarLevel;
-    if (horizon_.want(region, level)) wants.push_back(HorizonWant{region, level});
+  const auto regions = plan_.unknown_regions([this](Vec3i region) { return slots_.any_in_region(region); },
+                                             [this](Vec3i cp) { return slots_.known(cp); });
+  for (const ViewPlan::RegionStart& r : regions) {
+    const std::int64_t d2 = offset_dist2(r.first - plan_.center());
+    const int level = d2 <= near * near ? kHorizonNearLevel : d2 <= far * far ? kHorizonFarLevel : kHorizonOuterLevel;
+    if (horizon_.want(r.region, level)) wants.push_back(HorizonWant{r.region, level});
   }
   if (!wants.empty()) world_.want_horizon(id_, std::move(wants));
 }
@@ -386,14 +393,8 @@ void Replicator::send_horizon(const HorizonPtr& shared) {
   if (image.unit.empty()) return;  // not made: the chunks' own records follow
   const int level = image.level;
   // The region's chunks in view that the client has nothing of yet.
-  HorizonMask mask{};
-  std::size_t covered = 0;
-  for_each_region_chunk(image.region, [&](Vec3i cp) {
-    if (!plan_.in_view(cp) || slots_.known(cp)) return;
-    horizon_mask_set(mask, coarse_index(cp));
-    slots_.change(cp, [&](ChunkSlot& s) { s.see_image(level); });
-    ++covered;
-  });
+  HorizonMask mask = plan_.in_view_mask(image.region);
+  const std::size_t covered = slots_.see_images(image.region, mask, level);
   if (covered == 0) return;
   counters_.horizons_sent.fetch_add(1, std::memory_order_relaxed);
   out_.horizon(image.region, level, covered == kHorizonRegionSlots ? nullptr : &mask, image.unit, shared);

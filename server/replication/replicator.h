@@ -7,8 +7,9 @@
 //
 // Streaming. First, for a new plan, every region of the view that has
 // chunks the client knows nothing of, as one horizon image each (2^3 per
-// chunk within a quarter of the view distance, 1 voxel per chunk beyond; made once
-// by the world and shared), nearest first. Then the whole view at its
+// chunk within a quarter of the view distance up to 256 voxels, 1 voxel per
+// chunk beyond up to 1,024, 1 per 2^3 chunks beyond that for a client that
+// takes it; made once by the world and shared), nearest first. Then the whole view at its
 // coarsest (the 4^3 mip, or Empty for all-Air chunks; with horizon images,
 // chunks within full resolution at full resolution) nearest first, then
 // each chunk refined to the level
@@ -202,6 +203,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
 
   bool joined_ = false;
   bool mip_patches_ = false;  // refresh mips as patches (the client takes them, the server allows them)
+  bool outer_horizon_ = false;  // level-6 horizon images beyond kHorizonOuterDistance (the client takes them)
   bool closed_ = false;
   std::string name_;
   ClientStateMsg state_;

@@ -25,6 +25,7 @@
 
 #include "common/voxel/vec3.h"
 #include "common/world/world_bounds.h"
+#include "protocol/stream_batch.h"
 #include "server/replication/view_table.h"
 
 namespace terrane {
@@ -39,8 +40,9 @@ class ViewPlan {
   // Preconditions below: valid().
   Vec3i center() const { return center_; }
   const ViewTable& table() const { return *table_; }
-  // The view and its keep margin of margin voxels.
-  const ViewTable& keep_table() const { return *keep_table_; }
+  // The view and its keep margin of margin voxels: got when first asked
+  // for (a move), so a new plan does not wait for a second table.
+  const ViewTable& keep_table() const;
 
   // A new plan around center: the coarse pass starts over, the refine
   // queue is emptied.
@@ -54,6 +56,23 @@ class ViewPlan {
   bool in_view(Vec3i chunk_pos) const;
   // The level the plan wants: 0..3 in view, kMipLevels (none finer) beyond.
   int desired(Vec3i chunk_pos) const;
+
+  // A region (8^3 chunks) of the view and its first chunk in the view's
+  // order (nearest first) that the client knows nothing of.
+  struct RegionStart {
+    Vec3i region;
+    Vec3i first;
+  };
+  // Every region lying within the wire's range whole with a chunk in view
+  // for which known() is false, ordered by those first chunks: the order in
+  // which walking the view's offsets meets the regions. A region for which
+  // may_know() is false has no known chunk, and its first chunk is found
+  // without visiting its chunks (at view 2,048, about 600 regions against
+  // 1.1 million offsets); the others' chunks are visited.
+  std::vector<RegionStart> unknown_regions(const std::function<bool(Vec3i)>& may_know,
+                                           const std::function<bool(Vec3i)>& known) const;
+  // The region's chunks in view (in_view), as a Horizon record's mask.
+  HorizonMask in_view_mask(Vec3i region) const;
 
   // The coarse pass's next chunk (it may have left the view since), or
   // nullopt once every one was taken.
@@ -80,10 +99,14 @@ class ViewPlan {
     bool operator()(const RefineEntry& a, const RefineEntry& b) const { return a.first > b.first; }
   };
   void rebuild_refine(const std::function<bool(Vec3i)>& needs);
+  // The region's chunks within the world's bounds and the wire's range, per
+  // axis (empty when a > b on some axis).
+  std::pair<Vec3i, Vec3i> region_span(Vec3i region) const;
 
   const WorldBounds& bounds_;
   std::shared_ptr<const ViewTable> table_;
-  std::shared_ptr<const ViewTable> keep_table_;
+  mutable std::shared_ptr<const ViewTable> keep_table_;  // null until asked for
+  std::int32_t keep_distance_ = 0;
   Vec3i center_;
   Vec3i coarse_center_;  // the centre the coarse pass walks the table from
   std::size_t coarse_pos_ = 0;

@@ -50,7 +50,7 @@ void HorizonCache::on_loaded(LoadedHorizon h) {
 
 void HorizonCache::changed(Vec3i cp) {
   const Vec3i region = coarse_region_of(cp);
-  for (std::size_t k = 0; k < 2; ++k) {
+  for (std::size_t k = 0; k < kHorizonLevels; ++k) {
     if (auto it = kept_[k].find(region); it != kept_[k].end()) it->second.changed = true;
     if (auto it = making_[k].find(region); it != making_[k].end()) it->second.changed = true;
   }

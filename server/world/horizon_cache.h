@@ -55,8 +55,8 @@ class HorizonCache {
   Storage& storage_;
   FanOut& clients_;
   // Each indexed by level - kHorizonNearLevel.
-  std::unordered_map<Vec3i, Kept, Vec3iHash> kept_[2];
-  std::unordered_map<Vec3i, Making, Vec3iHash> making_[2];
+  std::unordered_map<Vec3i, Kept, Vec3iHash> kept_[kHorizonLevels];
+  std::unordered_map<Vec3i, Making, Vec3iHash> making_[kHorizonLevels];
 };
 
 }  // namespace terrane

@@ -110,6 +110,35 @@ TEST(Replica, AHorizonImageCoversOnlyChunksWithNothingAndGivesWayToTheirOwnRecor
   EXPECT_EQ(covered, (std::vector<Vec3i>{{2, 0, 0}}));
 }
 
+TEST(Replica, ALevel6ImageGivesEachChunkItsBlocksVoxelAsHorizon5) {
+  Replica r;
+  // Region (-1, 0, 0) at level 6: one voxel per 2^3 chunks; voxel (x, y, z)
+  // is material 1 + x + 4 * (y * 4 + z).
+  Box image({4, 4, 4});
+  for (int y = 0; y < 4; ++y)
+    for (int z = 0; z < 4; ++z)
+      for (int x = 0; x < 4; ++x) image.set(x, y, z, solid(static_cast<Material>(1 + x + 4 * (y * 4 + z))));
+  HorizonMask mask;
+  mask.fill(0xFF);
+  std::vector<Vec3i> covered;
+  r.apply_horizon(StreamRecord{StreamRecordKind::kHorizon, {-8, 0, 0}, 0, kHorizonOuterLevel, &image, &mask, {}},
+                  covered);
+  EXPECT_EQ(covered.size(), static_cast<std::size_t>(kHorizonRegionSlots));
+  EXPECT_EQ(r.chunk_count(HoldingForm::kHorizon5), static_cast<std::size_t>(kHorizonRegionSlots));
+  for (const Vec3i cp : {Vec3i{-8, 0, 0}, Vec3i{-7, 1, 1}, Vec3i{-3, 5, 2}, Vec3i{-1, 7, 7}}) {
+    ASSERT_NE(r.holding(cp), nullptr);
+    EXPECT_EQ(*r.holding(cp), (Holding{HoldingForm::kHorizon5, 0}));
+    const Vec3i block = floor_div(floor_mod(cp, kHorizonRegionChunks), 2);
+    const Voxel want = image.get(block.x, block.y, block.z);
+    Box mip;
+    ASSERT_TRUE(r.read_mip(cp, mip));
+    EXPECT_EQ(mip.size(), (Vec3i{1, 1, 1}));
+    EXPECT_EQ(mip.get(0, 0, 0), want) << cp.x << "," << cp.y << "," << cp.z;
+    EXPECT_EQ(r.get(cp * kChunkSize + Vec3i{3, 30, 17}), want);
+    EXPECT_EQ(r.resolution_at(cp * kChunkSize), kHorizonFarLevel);
+  }
+}
+
 TEST(Replica, UpdatesApplyToFullResolutionChunksOnly) {
   Replica r;
   const Vec3i full{0, 0, 0}, mip{1, 0, 0};

@@ -255,6 +255,10 @@ TEST(StreamBatch, HorizonRecordsCarryARegionImageAndTheChunksItCovers) {
   w.add_horizon({-3, 0, 2}, kHorizonNearLevel, &mask, near_bytes);
   w.add(StreamRecordKind::kEmpty, {-24, 1, 17}, 2, {});  // relative to the region's first chunk
   w.add_horizon({4, -1, -7}, kHorizonFarLevel, nullptr, far_bytes);
+  const Box outer = terrain(4, 8);
+  std::vector<std::uint8_t> outer_bytes;
+  net_codec_encode(4, outer.voxels(), outer_bytes);
+  w.add_horizon({-1, 0, 0}, kHorizonOuterLevel, &mask, outer_bytes);
   const Frame f = w.finish().flatten();
   StreamDecodeScratch s;
   std::vector<StreamRecord> got;
@@ -266,7 +270,7 @@ TEST(StreamBatch, HorizonRecordsCarryARegionImageAndTheChunksItCovers) {
                 masks.push_back(r.mask != nullptr ? *r.mask : HorizonMask{});
                 return Ok{};
               }).ok());
-  ASSERT_EQ(got.size(), 3u);
+  ASSERT_EQ(got.size(), 4u);
   EXPECT_EQ(got[0].kind, StreamRecordKind::kHorizon);
   EXPECT_EQ(got[0].chunk_pos, (Vec3i{-24, 0, 16}));
   EXPECT_EQ(got[0].level, kHorizonNearLevel);
@@ -279,9 +283,13 @@ TEST(StreamBatch, HorizonRecordsCarryARegionImageAndTheChunksItCovers) {
   HorizonMask all;
   all.fill(0xFF);
   EXPECT_EQ(masks[2], all) << "no mask: every chunk of the region";
+  EXPECT_EQ(got[3].chunk_pos, (Vec3i{-8, 0, 0}));
+  EXPECT_EQ(got[3].level, kHorizonOuterLevel);
+  EXPECT_EQ(images[3], outer) << "level 6: 4^3 voxels for the region";
+  EXPECT_EQ(masks[3], mask);
   // A horizon record costs the codec's bytes, its mask if any and a few
   // bytes (kind, position, revision, level, flag: 8 here at most).
-  EXPECT_LE(records_of(f).size(), near_bytes.size() + far_bytes.size() + 64 + 8 + 8 + 5);
+  EXPECT_LE(records_of(f).size(), near_bytes.size() + far_bytes.size() + outer_bytes.size() + 2 * 64 + 3 * 8 + 5);
 }
 
 TEST(StreamBatch, BadHorizonRecordsAreErrors) {
@@ -304,6 +312,18 @@ TEST(StreamBatch, BadHorizonRecordsAreErrors) {
   auto bad_level = good;
   bad_level[5] = 3;
   EXPECT_EQ(decode(bad_level).error().code, DecodeErrorCode::kInvalidValue);
+  bad_level[5] = 7;
+  EXPECT_EQ(decode(bad_level).error().code, DecodeErrorCode::kInvalidValue);
+  // Level 6 takes a 4^3 unit.
+  std::vector<std::uint8_t> outer_unit;
+  net_codec_encode(4, terrain(4, 3).voxels(), outer_unit);
+  std::vector<std::uint8_t> outer_good = record({6, 0});
+  outer_good.insert(outer_good.end(), outer_unit.begin(), outer_unit.end());
+  EXPECT_TRUE(decode(outer_good).ok());
+  for (std::size_t cut = 1; cut < outer_good.size(); ++cut)
+    EXPECT_FALSE(
+        decode(std::vector<std::uint8_t>(outer_good.begin(), outer_good.begin() + static_cast<std::ptrdiff_t>(cut))).ok())
+        << "level 6, cut " << cut;
   auto bad_flag = good;
   bad_flag[6] = 2;
   EXPECT_EQ(decode(bad_flag).error().code, DecodeErrorCode::kInvalidValue);

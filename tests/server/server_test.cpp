@@ -29,6 +29,7 @@
 #include <thread>
 
 #include "common/world/coarse_image.h"
+#include "common/world/horizon.h"
 #include "common/world/sqlite_store.h"
 #include "common/world/view.h"
 #include "server/world/edits.h"
@@ -621,6 +622,67 @@ TEST_F(ServerTest, HorizonImagesArriveNearestRegionFirst) {
   ASSERT_EQ(got.size(), order.size());
   for (std::size_t i = 0; i < got.size(); ++i)
     ASSERT_EQ(got[i], order[i]) << "image " << i << " of " << got.size();
+}
+
+// A new view's images by distance: to a client that takes level 6
+// (features bit 2), level 4 within a quarter of the view and 256 voxels,
+// level 5 within 1,024, level 6 beyond; to one that does not, level 4
+// within a quarter of the view and level 5 beyond, as before the bit.
+TEST_F(ServerTest, HorizonImagesBeyond1024AreLevel6ForAClientThatTakesThem) {
+  ServerOptions o;
+  o.replication.max_view_distance = 1280;
+  start(o);
+  const ClientStateMsg where{{3000.0f, 40.0f, -2000.0f}, 1280, 32};
+  // Each region's nearest chunk in view (the view rule's order).
+  std::map<std::tuple<int, int, int>, std::int64_t> nearest;  // region -> d^2
+  const Vec3i centre = view_chunk(where.position);
+  for (const Vec3i cp : chunks_in_view(where.position, where.view_distance, default_world_meta().bounds)) {
+    const Vec3i r = coarse_region_of(cp);
+    nearest.try_emplace({r.x, r.y, r.z}, offset_dist2(cp - centre));
+  }
+  for (const std::uint32_t features : {kFeatureOuterHorizon, 0u}) {
+    auto p = join(features != 0 ? "outer" : "plain", features);
+    ASSERT_TRUE(p->send(build_client_state(where)));
+    std::map<int, std::size_t> levels;
+    std::size_t images = 0;
+    StreamDecodeScratch scratch;
+    bool own_record = false;
+    while (!own_record) {
+      auto f = p->next();
+      ASSERT_TRUE(f.has_value()) << images << " images, then the stream ended";
+      const wire::Message& m = msg(*f);
+      if (m.body_type() != wire::Body::StreamBatch) continue;
+      auto r = parse_stream_batch(*m.body_as_StreamBatch());
+      ASSERT_TRUE(r.ok());
+      ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+                    if (rec.kind != StreamRecordKind::kHorizon) {
+                      own_record = true;
+                      return Ok{};
+                    }
+                    ++images;
+                    ++levels[rec.level];
+                    const Vec3i region = coarse_region_of(rec.chunk_pos);
+                    const auto it = nearest.find({region.x, region.y, region.z});
+                    EXPECT_NE(it, nearest.end()) << "an image of a region out of view";
+                    if (it == nearest.end()) return Ok{};
+                    const std::int64_t d2 = it->second;
+                    // Level 4 within V / 4 (320), or 256 with level 6.
+                    const std::int64_t near = features != 0 ? 256 : 320;
+                    const int want = d2 <= near * near                        ? kHorizonNearLevel
+                                     : d2 <= 1024 * 1024 || features == 0 ? kHorizonFarLevel
+                                                                             : kHorizonOuterLevel;
+                    EXPECT_EQ(rec.level, want) << "region " << region.x << "," << region.y << "," << region.z;
+                    return Ok{};
+                  }).ok());
+    }
+    EXPECT_EQ(images, nearest.size()) << "one image per region in view";
+    EXPECT_GT(levels[kHorizonNearLevel], 0u);
+    EXPECT_GT(levels[kHorizonFarLevel], 0u);
+    if (features != 0)
+      EXPECT_GT(levels[kHorizonOuterLevel], 0u);
+    else
+      EXPECT_EQ(levels.count(kHorizonOuterLevel), 0u) << "level 6 only to a client that takes it";
+  }
 }
 
 TEST_F(ServerTest, AResumingClientIsNotSentWhatItStillHolds) {

@@ -152,10 +152,10 @@ class ServerTest : public ::testing::Test {
     server_ = std::move(*s);
     server_->start();
   }
-  std::unique_ptr<RawPeer> join(const std::string& name) {
+  std::unique_ptr<RawPeer> join(const std::string& name, std::uint32_t features = 0) {
     auto p = std::make_unique<RawPeer>(server_->port());
     EXPECT_TRUE(p->connected());
-    EXPECT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, name, "", {}})));
+    EXPECT_TRUE(p->send(build_hello(HelloMsg{kProtocolVersion, name, "", {}, features})));
     auto w = p->next_of(wire::Body::Welcome);
     EXPECT_TRUE(w.has_value());
     return p;

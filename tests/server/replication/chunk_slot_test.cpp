@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <random>
@@ -331,6 +332,59 @@ TEST(ChunkSlots, EveryChunkKeepsItsOwnSlotAcrossBlocks) {
 // The slots' memory is counted where the replicator says (the server's
 // memory by part): it grows with the slots and all of it is taken back
 // when they go.
+// see_images marks a region's chunks in a mask at once: the same slots,
+// counts and memory as marking each chunk by change, known chunks left as
+// they are and taken out of the mask.
+TEST(ChunkSlots, SeeImagesMarksTheMasksUnknownChunksAsChangeWould) {
+  std::mt19937 rng(11);
+  for (int round = 0; round < 20; ++round) {
+    const Vec3i region{round % 3 - 1, round % 2 - 1, 2};
+    std::atomic<std::int64_t> counted_a{0}, counted_b{0};
+    ChunkSlots a(&counted_a), b(&counted_b);
+    // Some chunks of the region (and one outside it) held, claimed or
+    // asked for already, in both.
+    for (int k = 0; k < round * 7; ++k) {
+      const Vec3i cp = region * 8 + Vec3i{static_cast<int>(rng() % 8), static_cast<int>(rng() % 8),
+                                          static_cast<int>(rng() % 8)};
+      const int what = static_cast<int>(rng() % 3);
+      const auto f = [&](ChunkSlot& s) {
+        if (what == 0) s.hold(Holding{HoldingForm::kMip3, 1}, nullptr);
+        if (what == 1) s.set_claim(Holding{HoldingForm::kFull, 2});
+        if (what == 2) s.ask(ChunkRequest{ChunkIntent::kCoarse, 3});
+      };
+      a.change(cp, f);
+      b.change(cp, f);
+    }
+    a.change(region * 8 + Vec3i{8, 0, 0}, [](ChunkSlot& s) { s.hold(Holding{HoldingForm::kEmpty, 1}, nullptr); });
+    b.change(region * 8 + Vec3i{8, 0, 0}, [](ChunkSlot& s) { s.hold(Holding{HoldingForm::kEmpty, 1}, nullptr); });
+    HorizonMask mask{};
+    for (int i = 0; i < kHorizonRegionSlots; ++i)
+      if (rng() % 4 != 0) horizon_mask_set(mask, i);
+    // b: chunk by chunk, as before see_images.
+    HorizonMask want{};
+    std::size_t want_seen = 0;
+    for_each_region_chunk(region, [&](Vec3i cp) {
+      if (!horizon_mask_has(mask, coarse_index(cp)) || b.known(cp)) return;
+      b.change(cp, [](ChunkSlot& s) { s.see_image(kHorizonFarLevel); });
+      horizon_mask_set(want, coarse_index(cp));
+      ++want_seen;
+    });
+    HorizonMask got = mask;
+    EXPECT_EQ(a.see_images(region, got, kHorizonFarLevel), want_seen) << "round " << round;
+    EXPECT_EQ(got, want) << "round " << round;
+    EXPECT_EQ(a.size(), b.size());
+    EXPECT_EQ(a.requests(), b.requests());
+    EXPECT_EQ(a.claims(), b.claims());
+    std::vector<std::tuple<int, int, int, bool, bool, int>> sa, sb;
+    for (const auto& [cp, s] : a) sa.emplace_back(cp.x, cp.y, cp.z, s.image(), s.known(), s.held() ? static_cast<int>(s.held()->form) : (s.claim() ? 100 : -1));
+    for (const auto& [cp, s] : b) sb.emplace_back(cp.x, cp.y, cp.z, s.image(), s.known(), s.held() ? static_cast<int>(s.held()->form) : (s.claim() ? 100 : -1));
+    std::sort(sa.begin(), sa.end());
+    std::sort(sb.begin(), sb.end());
+    EXPECT_EQ(sa, sb) << "round " << round;
+    EXPECT_EQ(counted_a.load(), static_cast<std::int64_t>(a.memory_bytes()));
+  }
+}
+
 TEST(ChunkSlots, MemoryIsCountedAndTakenBack) {
   std::atomic<std::int64_t> counted{0};
   {

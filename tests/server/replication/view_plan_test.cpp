@@ -8,10 +8,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <map>
 #include <set>
 #include <tuple>
 
+#include "common/world/coarse_image.h"
 #include "common/world/view.h"
+#include "protocol/messages.h"
 
 namespace terrane {
 namespace {
@@ -70,6 +73,68 @@ TEST(ViewPlan, InViewAndTheLevelWantedFollowTheTableAroundTheCentreWithinTheWorl
   EXPECT_EQ(plan.desired({20, 0, 0}), kMipLevels);
   EXPECT_GT(plan.desired({12, 0, 0}), 0);  // 2 chunks = 64 voxels: beyond full resolution
   EXPECT_EQ(plan.keep_table().view_distance(), kView + kMargin);
+}
+
+// unknown_regions and in_view_mask against walking the view's offsets
+// chunk by chunk (what the horizon's plan did before them): the same
+// regions in the same order with the same first chunks, and the same
+// chunks in view, with and without known chunks, a border and the wire's
+// edge.
+TEST(ViewPlan, UnknownRegionsAndTheirMasksAreWhatWalkingTheViewFinds) {
+  struct Case {
+    std::int32_t view;
+    Vec3i center;
+    bool border;
+    int known_every;  // every n-th chunk of the view known (0: none)
+  };
+  const std::int32_t lim = kMaxWireCoordinate / kChunkSize;
+  for (const Case& c : {Case{320, {3, 1, -5}, false, 0}, Case{320, {3, 1, -5}, false, 7}, Case{480, {-20, 3, 9}, true, 0},
+                        Case{480, {-20, 3, 9}, true, 3}, Case{256, {lim - 2, 0, 0}, false, 0},
+                        Case{200, {0, 0, -lim + 1}, false, 5}}) {
+    WorldBounds bounds;  // y -128..256
+    if (c.border) {
+      bounds.bounded_xz = true;
+      bounds.min_x = -900;
+      bounds.max_x = -300;
+      bounds.min_z = 100;
+      bounds.max_z = 700;
+    }
+    ViewPlan plan(bounds);
+    plan.reset(c.view, kFull, kMargin, c.center);
+    std::set<Vec3i, Less> known;
+    std::size_t k = 0;
+    for (const Vec3i o : plan.table().offsets())
+      if (c.known_every != 0 && ++k % static_cast<std::size_t>(c.known_every) == 0) known.insert(c.center + o);
+    const auto is_known = [&](Vec3i cp) { return known.count(cp) != 0; };
+    // The walk: each region at its first unknown chunk in view, in order.
+    std::vector<std::pair<Vec3i, Vec3i>> want;
+    std::set<Vec3i, Less> seen;
+    std::map<Vec3i, HorizonMask, Less> masks;
+    for (const Vec3i o : plan.table().offsets()) {
+      const Vec3i cp = c.center + o;
+      if (!plan.in_view(cp)) continue;
+      const Vec3i region = coarse_region_of(cp);
+      horizon_mask_set(masks[region], coarse_index(cp));
+      if (is_known(cp) || !wire_chunk_ok(region * 8) || !wire_chunk_ok(region * 8 + Vec3i{7, 7, 7})) continue;
+      if (seen.insert(region).second) want.emplace_back(region, cp);
+    }
+    ASSERT_GT(want.size(), 3u);
+    // may_know: true only for regions with a known chunk (false elsewhere,
+    // so both paths are taken), then true everywhere.
+    for (const bool always : {false, true}) {
+      const auto may_know = [&](Vec3i region) {
+        return always || std::any_of(known.begin(), known.end(), [&](Vec3i cp) { return coarse_region_of(cp) == region; });
+      };
+      const auto got = plan.unknown_regions(may_know, is_known);
+      ASSERT_EQ(got.size(), want.size()) << "view " << c.view << (always ? ", always walked" : "");
+      for (std::size_t i = 0; i < got.size(); ++i) {
+        EXPECT_EQ(got[i].region, want[i].first) << "view " << c.view << ", region " << i;
+        EXPECT_EQ(got[i].first, want[i].second) << "view " << c.view << ", region " << i;
+      }
+    }
+    for (const auto& [region, mask] : masks) EXPECT_EQ(plan.in_view_mask(region), mask) << "view " << c.view;
+    EXPECT_EQ(plan.in_view_mask(coarse_region_of(c.center + Vec3i{0, 40, 0})), HorizonMask{}) << "above the world";
+  }
 }
 
 TEST(ViewPlan, TheRefineQueueGivesTheNearestFirstAndAfterAMoveRecomputesItsKeysAndDropsWhatNeedsNone) {
