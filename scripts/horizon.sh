@@ -9,7 +9,9 @@
 #   mc-1.16     a real region imported as a world (tests/data/mc-1.16)
 # and prints the time to the whole coarse view, to full resolution, and the
 # bytes received by then (the bots' join_coarse_ms, join_full_ms,
-# join_coarse_bytes, join_bytes_received). Expects a release build.
+# join_coarse_bytes, join_bytes_received). TERRANE_SERVER_FLAGS adds server
+# flags (--no-outer-horizon: images beyond 1,024 voxels at one voxel per
+# chunk, as before level 6). Expects a release build.
 #   scripts/horizon.sh [REPORT_DIR]      (reports kept there; default: a scratch dir)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,7 +29,7 @@ run() {  # world view full
   local world=$1 view=$2 full=$3 name=$1-$2
   rm -rf "$scratch/run"
   [ "$world" = never ] || cp -r "$scratch/$world" "$scratch/run"
-  terrane_start_server "$scratch/server.log" --world "$scratch/run" --port 0 --max-view-distance 2048
+  terrane_start_server "$scratch/server.log" --world "$scratch/run" --port 0 --max-view-distance 2048 ${TERRANE_SERVER_FLAGS:-}
   local address=127.0.0.1:$server_port
   ./build/bin/terrane-bots --connect "$address" --bots 1 --behavior idle --duration 1 --wait-joined 600 \
     --view-distance "$view" --full-res-radius "$full" --hash-checks 1 --quiet 0 --progress off \
