@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <thread>
 #include <atomic>
 #include <cstdio>
 #include <cstring>
@@ -21,6 +22,16 @@
 namespace terrane {
 
 namespace fs = std::filesystem;
+
+void ChunkCache::post(std::function<void()> job) {
+  asio::thread_pool* pool = nullptr;
+  {
+    std::lock_guard lock(mutex_);
+    if (!loaders_) loaders_ = std::make_unique<asio::thread_pool>(std::max(1u, std::thread::hardware_concurrency()));
+    pool = loaders_.get();
+  }
+  asio::post(*pool, std::move(job));
+}
 
 namespace {
 

@@ -21,6 +21,8 @@
 // the replicas of many bots in one process share one cache.
 #pragma once
 
+#include <asio/post.hpp>
+#include <asio/thread_pool.hpp>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -85,6 +87,12 @@ class ChunkCache {
 
   ChunkCacheCounters counters() const;
 
+  // Runs job on the cache's own threads (as many as the machine has cores,
+  // made on the first call): loads a client should not make on its io
+  // side, where they would hold up every client sharing it. Jobs still
+  // queued when the cache goes are dropped unrun.
+  void post(std::function<void()> job);
+
   // The file of a region (tests damage it).
   std::string path_of(std::uint64_t world_id, Vec3i region) const;
   // dir as the cache names it: lexically normal, no trailing slash.
@@ -115,6 +123,7 @@ class ChunkCache {
   std::map<std::string, File> files_;
   std::uint64_t use_clock_ = 0;
   ChunkCacheCounters counters_;
+  std::unique_ptr<asio::thread_pool> loaders_;  // last: joined first (post)
 };
 
 class Replica;

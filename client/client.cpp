@@ -78,24 +78,51 @@ bool Client::save_cache() {
   return true;
 }
 
-std::function<void()> Client::load_cache(const WelcomeMsg& w, std::vector<Frame>& claims) {
+bool Client::start_cache_load(const WelcomeMsg& w) {
   const auto view = movement_.view(w);
-  if (w.world_id == 0 || !view) return nullptr;
-  counters_.cache_chunks_loaded += load_view(*options_.chunk_cache, w.world_id, *view, w.bounds(), replica_);
-  claims = claim_frames();
-  if (!callbacks_.on_holding && !callbacks_.on_chunks_loaded) return nullptr;
-  // The replica held nothing before: everything it holds came from the cache.
-  std::vector<std::pair<Vec3i, Holding>> changes;
-  std::vector<Vec3i> loaded;
-  replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
-    changes.emplace_back(cp, h);
-    if (h.full_resolution()) loaded.push_back(cp);
+  if (w.world_id == 0 || !view) return false;
+  // Reading and decoding the files is the cache's threads' work: on the io
+  // side it would hold up every client sharing it (the bots). The token
+  // keeps the io side from finishing (disconnect() waits) until the answer
+  // is posted back.
+  options_.chunk_cache->post([this, id = w.world_id, view = *view, bounds = w.bounds(), session = sessions_,
+                              work = std::make_shared<Connection::OffsideWork>(connection_.offside_work())] {
+    Replica loaded;
+    loaded.share_decoded(options_.shared_chunks);
+    const std::size_t chunks = load_view(*options_.chunk_cache, id, view, bounds, loaded);
+    auto replica = std::make_shared<Replica>(std::move(loaded));
+    connection_.post([this, replica, chunks, session] { loaded_cache(std::move(*replica), chunks, session); });
   });
-  return [this, ch = std::move(changes), loaded = std::move(loaded)] {
-    if (callbacks_.on_holding)
-      for (const auto& [p, h] : ch) callbacks_.on_holding(p, &h);
-    if (callbacks_.on_chunks_loaded && !loaded.empty()) callbacks_.on_chunks_loaded(loaded);
-  };
+  return true;
+}
+
+void Client::loaded_cache(Replica loaded, std::size_t chunks, std::uint64_t session) {
+  std::unique_lock lock(mutex_);
+  // A reconnect since sent the (empty) replica's claims and the position.
+  if (session != sessions_ || !linked_ || !state_held_) return;
+  state_held_ = false;
+  // Nothing is streamed before the first position: the replica holds
+  // nothing of this session's world yet.
+  replica_ = std::move(loaded);
+  counters_.cache_chunks_loaded += chunks;
+  std::vector<Frame> claims = claim_frames();
+  std::optional<Frame> state = movement_.session_frame();
+  std::vector<std::pair<Vec3i, Holding>> changes;
+  std::vector<Vec3i> full;
+  if (callbacks_.on_holding || callbacks_.on_chunks_loaded)
+    replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
+      changes.emplace_back(cp, h);
+      if (h.full_resolution()) full.push_back(cp);
+    });
+  // Sent under the lock (send only queues): a position the application
+  // sets from now on goes after them.
+  for (Frame& f : claims) connection_.send(std::move(f), wire::Body::Holdings);
+  if (state) connection_.send(std::move(*state), wire::Body::ClientState);
+  lock.unlock();
+  changed_.notify_all();
+  if (callbacks_.on_holding)
+    for (const auto& [p, h] : changes) callbacks_.on_holding(p, &h);
+  if (callbacks_.on_chunks_loaded && !full.empty()) callbacks_.on_chunks_loaded(full);
 }
 
 std::vector<Frame> Client::claim_frames() {
@@ -115,6 +142,7 @@ std::vector<Outbound> Client::session_frames(SessionStart start) {
   std::lock_guard lock(mutex_);
   if (start == SessionStart::kReconnect) ++counters_.reconnects;
   unconfirmed_.clear();
+  state_held_ = false;  // a cache load still under way sends nothing (loaded_cache)
   if (start != SessionStart::kFirst) {
     // What the replica still holds, so current chunks are not resent.
     for (Frame& f : claim_frames()) frames.push_back({std::move(f), wire::Body::Holdings});
@@ -354,23 +382,22 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
         break;
       }
       std::optional<Frame> state = movement_.welcomed(*w);
-      std::vector<Frame> claims;
-      std::function<void()> cache_told;
       if (options_.chunk_cache && options_.stream) {
-        if (!state) state = movement_.session_frame();  // held back for the claims (session_frames)
-        cache_told = load_cache(*w, claims);
+        // The position was held back for the cache's claims (session_frames):
+        // sent with them once loaded (loaded_cache), or now if nothing is.
+        if (start_cache_load(*w)) {
+          state.reset();
+          state_held_ = true;
+        }
+        else if (!state)
+          state = movement_.session_frame();
       }
-      if (state || !claims.empty()) {
+      if (state) {
         lock.unlock();
-        for (Frame& f : claims) connection_.send(std::move(f), wire::Body::Holdings);
-        if (state) connection_.send(std::move(*state), wire::Body::ClientState);
+        connection_.send(std::move(*state), wire::Body::ClientState);
         lock.lock();
       }
-      if (callbacks_.on_welcome || cache_told)
-        after = [this, w = *w, told = std::move(cache_told)] {
-          if (callbacks_.on_welcome) callbacks_.on_welcome(w);
-          if (told) told();
-        };
+      if (callbacks_.on_welcome) after = [this, w = *w] { callbacks_.on_welcome(w); };
       break;
     }
     case wire::Body::Disconnect: {
@@ -540,6 +567,8 @@ bool Client::set_state(const ClientStateMsg& state) {
   {
     std::lock_guard lock(mutex_);
     frame = movement_.move(state);
+    // The latest position goes after the cache's claims (loaded_cache).
+    if (state_held_) return true;
   }
   return connection_.send(std::move(frame), wire::Body::ClientState);
 }

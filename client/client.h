@@ -327,11 +327,16 @@ class Client : private ConnectionHandler {
   // Edits given an outcome at once: reported (io side, without the lock).
   void report(const SettledEdits& settled);
   ClientView client_view() const;
-  // Under the lock, on a first session's Welcome: the replica filled from
-  // ClientOptions::chunk_cache (the view's regions of w's world) and its
-  // claims into claims; returns what tells the callbacks (to run without
-  // the lock; null when none are set or nothing was loaded).
-  std::function<void()> load_cache(const WelcomeMsg& w, std::vector<Frame>& claims);
+  // Under the lock, on a first session's Welcome: starts loading the view's
+  // regions of w's world from ClientOptions::chunk_cache on the cache's
+  // threads, into a replica of its own (loaded_cache below); false when
+  // there is nothing to load (no world id, no position yet).
+  bool start_cache_load(const WelcomeMsg& w);
+  // Io side, once the load is done: unless another session began since
+  // (which sent claims and a position of its own), the replica is the
+  // loaded one; its claims, then the held-back position, are sent and the
+  // callbacks told of every chunk loaded.
+  void loaded_cache(Replica loaded, std::size_t chunks, std::uint64_t session);
   // Under the lock: the replica's claimable holdings as Holdings frames
   // (region claims), each chunk noted unconfirmed.
   std::vector<Frame> claim_frames();
@@ -363,6 +368,7 @@ class Client : private ConnectionHandler {
   std::unordered_set<Vec3i, Vec3iHash> unconfirmed_;  // ClientView::unconfirmed
   std::size_t voxel_change_cap_ = 0;                  // capture_voxel_changes
   bool cache_saved_ = false;  // this session's replica went to ClientOptions::chunk_cache (save_cache)
+  bool state_held_ = false;   // positions wait for the chunk cache's load (start_cache_load)
 
   std::vector<Vec3i> horizon_covered_;  // io side: a Horizon record's chunks newly covered
   // Last: goes first, so no handler runs on the rest once it is gone.

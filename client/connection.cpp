@@ -320,6 +320,12 @@ void Connection::close(const std::string& reason) {
   handler_.on_closed(reason);
 }
 
+void Connection::post(std::function<void()> fn) {
+  asio::post(io_.strand(), [this, fn = std::move(fn), g = guard()] {
+    if (!closed_) fn();
+  });
+}
+
 bool Connection::send(Frame frame, wire::Body type, std::uint32_t edit_id) {
   if (closed_) return false;
   if (!queue_.reserve(frame.size())) return false;

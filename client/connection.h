@@ -36,6 +36,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <span>
 #include <string>
@@ -102,6 +103,17 @@ class Connection {
   void disconnect();
   // Any thread: queues a frame; false when closed or the queue is full.
   bool send(Frame frame, wire::Body type, std::uint32_t edit_id = 0);
+  // Work the handler has done off the io side (a chunk cache's load, on
+  // the cache's threads) that will post() its answer: while the token
+  // lives, the io side does not finish, so disconnect() waits for it.
+  struct OffsideWork {
+    PendingOps::Guard guard;
+    asio::executor_work_guard<asio::io_context::executor_type> work;
+  };
+  OffsideWork offside_work() { return OffsideWork{guard(), asio::make_work_guard(io_.context())}; }
+  // Any thread: fn runs on the io side (one handler call among the
+  // others), unless the connection is closed by then.
+  void post(std::function<void()> fn);
   bool closed() const { return closed_; }
 
   // --- io side ---------------------------------------------------------------

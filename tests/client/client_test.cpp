@@ -886,6 +886,12 @@ TEST_F(ClientServerTest, ARejoinFromTheChunkCacheIsSentOnlyWhatChanged) {
   {
     Client c(options_cached("again", 128, *cache));
     ASSERT_TRUE(join(c).has_value());
+    // A position set while the cache loads waits for its claims: sent
+    // before them, it would have the server stream the whole view (the
+    // bytes below).
+    ASSERT_TRUE(c.set_state(ClientStateMsg{w->spawn, 128, 32}));
+    // Loaded on the cache's threads, then claimed.
+    ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || v.counters.cache_chunks_loaded > 0; }, kDeadline));
     EXPECT_GE(c.counters().cache_chunks_loaded, in_view.size());
     ASSERT_TRUE(c.wait_until(
         [&](const ClientView& v) {
@@ -940,7 +946,7 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
     const auto w = join(c);
     ASSERT_TRUE(w.has_value());
     EXPECT_EQ(w->world_id, first_id);
-    EXPECT_GT(c.counters().cache_chunks_loaded, 0u);
+    ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || v.counters.cache_chunks_loaded > 0; }, kDeadline));
     EXPECT_EQ((*cache)->counters().regions_damaged, 1u);
     const auto near = chunks_within(w->spawn, 32, *w);
     ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near); }, kDeadline));
