@@ -96,8 +96,9 @@ struct ClientOptions {
   // none). A world whose Welcome names it (world_id) is joined from what
   // the cache holds of the first view: the replica is filled from it and
   // the chunks are claimed (Holdings) before the first ClientState, so only
-  // what changed is sent. disconnect() saves the replica to it. Shared by
-  // the clients of a process.
+  // what changed is sent. The files are read and decoded on the cache's
+  // own threads; positions set meanwhile (set_state) go after the claims.
+  // disconnect() saves the replica to it. Shared by the clients of a process.
   std::shared_ptr<ChunkCache> chunk_cache;
   NetworkEmulation emulation;
 };
