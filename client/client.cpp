@@ -98,15 +98,20 @@ bool Client::start_cache_load(const WelcomeMsg& w) {
 
 void Client::loaded_cache(Replica loaded, std::size_t chunks, std::uint64_t session) {
   std::unique_lock lock(mutex_);
-  // A reconnect since sent the (empty) replica's claims and the position.
-  if (session != sessions_ || !linked_ || !state_held_) return;
+  // A reconnect since sent the replica's claims and the position itself.
+  if (session != sessions_ || !state_held_) return;
   state_held_ = false;
   // Nothing is streamed before the first position: the replica holds
-  // nothing of this session's world yet.
+  // nothing of this session's world yet. (Dropped meanwhile: the reconnect
+  // claims what it holds now.)
   replica_ = std::move(loaded);
   counters_.cache_chunks_loaded += chunks;
-  std::vector<Frame> claims = claim_frames();
-  std::optional<Frame> state = movement_.session_frame();
+  std::vector<Frame> claims;
+  std::optional<Frame> state;
+  if (linked_) {
+    claims = claim_frames();
+    state = movement_.session_frame();
+  }
   std::vector<std::pair<Vec3i, Holding>> changes;
   std::vector<Vec3i> full;
   if (callbacks_.on_holding || callbacks_.on_chunks_loaded)
@@ -148,7 +153,9 @@ std::vector<Outbound> Client::session_frames(SessionStart start) {
     for (Frame& f : claim_frames()) frames.push_back({std::move(f), wire::Body::Holdings});
   } else if (options_.chunk_cache && options_.stream) {
     // The first position waits for the Welcome: the world's id picks the
-    // chunks kept, claimed before it (Welcome below).
+    // chunks kept, claimed before it (Welcome below). Positions set
+    // meanwhile wait too.
+    state_held_ = true;
     return frames;
   }
   if (auto state = movement_.session_frame()) frames.push_back({std::move(*state), wire::Body::ClientState});
@@ -387,10 +394,10 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
         // sent with them once loaded (loaded_cache), or now if nothing is.
         if (start_cache_load(*w)) {
           state.reset();
-          state_held_ = true;
+        } else {
+          state_held_ = false;
+          if (!state) state = movement_.session_frame();
         }
-        else if (!state)
-          state = movement_.session_frame();
       }
       if (state) {
         lock.unlock();
@@ -568,7 +575,7 @@ bool Client::set_state(const ClientStateMsg& state) {
     std::lock_guard lock(mutex_);
     frame = movement_.move(state);
     // The latest position goes after the cache's claims (loaded_cache).
-    if (state_held_) return true;
+    if (state_held_) return !connection_.closed();
   }
   return connection_.send(std::move(frame), wire::Body::ClientState);
 }

@@ -122,11 +122,11 @@ struct StreamRecord {
   StreamRecordKind kind = StreamRecordKind::kEmpty;
   Vec3i chunk_pos;
   std::uint64_t revision = 0;
-  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..5 for Horizon, 1..2 for Mip patch
+  int level = 0;               // 0 for Full, 1..3 for Mip, 3 for Estimate, 4..6 for Horizon, 1..2 for Mip patch
   // The form the record gives its chunk (precondition: gives_form(kind)).
   HoldingForm form() const { return static_cast<HoldingForm>(kind); }
   // Full: 32^3; Mip: (32 >> level)^3; Horizon: the region's image,
-  // (8 * (32 >> level))^3; Mip patch: (32 >> level)^3 of which only the
+  // (256 >> level)^3; Mip patch: (32 >> level)^3 of which only the
   // sub-units in patch_mask hold the record's voxels; else null.
   const Box* voxels = nullptr;
   const HorizonMask* mask = nullptr;  // Horizon: the region's chunks it covers

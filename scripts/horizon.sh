@@ -10,8 +10,8 @@
 # and prints the time to the whole coarse view, to full resolution, and the
 # bytes received by then (the bots' join_coarse_ms, join_full_ms,
 # join_coarse_bytes, join_bytes_received). TERRANE_SERVER_FLAGS adds server
-# flags (--no-outer-horizon: images beyond 1,024 voxels at one voxel per
-# chunk, as before level 6). Expects a release build.
+# flags (--no-outer-horizon: the images as before level 6, 2^3 voxels per
+# chunk within a quarter of the view and one voxel per chunk beyond). Expects a release build.
 #   scripts/horizon.sh [REPORT_DIR]      (reports kept there; default: a scratch dir)
 set -euo pipefail
 cd "$(dirname "$0")/.."

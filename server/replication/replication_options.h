@@ -35,8 +35,9 @@ struct ReplicationOptions {
   // A new view's first pass: every region of it as one horizon image (2^3
   // or 1 voxel per chunk), before any chunk's own coarsest mip.
   bool horizon_images = true;
-  // Regions beyond 1,024 voxels at one voxel per 2^3 chunks (level 6) to a
-  // client that takes them (Hello.features); false: one voxel per chunk.
+  // Regions beyond 1,024 voxels at one voxel per 2^3 chunks (level 6), and
+  // 2^3 voxels per chunk only within 256, to a client that takes them
+  // (Hello.features); false: every client as one that does not.
   bool outer_horizon = true;
   // A changed mip of level 1 or 2 is refreshed as a Mip patch (its changed
   // 4^3 sub-units) to a client that takes them (Hello.features), when the

@@ -961,6 +961,9 @@ TEST_F(ClientServerTest, AChunkCacheIsUsedOnlyForItsOwnWorldAndWhole) {
     const auto w = join(c);
     ASSERT_TRUE(w.has_value());
     EXPECT_NE(w->world_id, first_id);
+    // The position goes once the load is done: chunks streamed mean it is.
+    const auto near = chunks_within(w->spawn, 32, *w);
+    ASSERT_TRUE(c.wait_until([&](const ClientView& v) { return v.closed || all_full(v.replica, near); }, kDeadline));
     EXPECT_EQ(c.counters().cache_chunks_loaded, 0u);
     c.disconnect();
   }
