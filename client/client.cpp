@@ -720,7 +720,8 @@ bool Client::send_raw(Frame bytes) { return connection_.send(std::move(bytes), w
 ClientView Client::client_view() const {
   return ClientView{replica_,          counters_,    welcome_.has_value(), closed_,   disconnect_reason_,
                     edits_.outcomes(), hash_checks_, read_results_,        presence_, notices_,
-                    admin_results_,     linked_,      sessions_,            unconfirmed_};
+                    admin_results_,     linked_,      sessions_,            unconfirmed_,
+                    state_held_};
 }
 
 bool Client::wait_until(const std::function<bool(const ClientView&)>& pred, std::chrono::milliseconds timeout) {

@@ -214,6 +214,10 @@ struct ClientView {
   // until it does. A ChunkHashRequest for one is answered once the server
   // has confirmed or replaced it (PROTOCOL.md "Resuming after a reconnect").
   const std::unordered_set<Vec3i, Vec3iHash>& unconfirmed;
+  // A first session's chunk cache is being loaded (ClientOptions::
+  // chunk_cache): the position, and the claims of what it holds, wait for
+  // it; the chunks loaded then join the replica, claimed (unconfirmed).
+  bool cache_loading;
 };
 
 class Client : private ConnectionHandler {

@@ -232,7 +232,8 @@ std::uint64_t PyClient::settle(Clock::time_point deadline) {
   for (;;) {
     bool linked = false, closed = false;
     wait_for(*c_, until(deadline), [&](const ClientView& v) {
-      linked = v.linked;
+      // (A chunk cache still loading claims its chunks once loaded.)
+      linked = v.linked && !v.cache_loading;
       closed = v.closed;
       return linked || closed;
     });
