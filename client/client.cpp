@@ -87,11 +87,10 @@ bool Client::start_cache_load(const WelcomeMsg& w) {
   // is posted back.
   options_.chunk_cache->post([this, id = w.world_id, view = *view, bounds = w.bounds(), session = sessions_,
                               work = std::make_shared<Connection::OffsideWork>(connection_.offside_work())] {
-    Replica loaded;
-    loaded.share_decoded(options_.shared_chunks);
-    const std::size_t chunks = load_view(*options_.chunk_cache, id, view, bounds, loaded);
-    auto replica = std::make_shared<Replica>(std::move(loaded));
-    connection_.post([this, replica, chunks, session] { loaded_cache(std::move(*replica), chunks, session); });
+    auto loaded = std::make_shared<Replica>();
+    loaded->share_decoded(options_.shared_chunks);
+    const std::size_t chunks = load_view(*options_.chunk_cache, id, view, bounds, *loaded);
+    connection_.post([this, loaded, chunks, session] { loaded_cache(std::move(*loaded), chunks, session); });
   });
   return true;
 }

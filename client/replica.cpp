@@ -132,13 +132,10 @@ void Replica::apply_horizon(const StreamRecord& r, std::vector<Vec3i>& covered) 
   Horizon& h = it->second;
   // A newer image of the region (another plan's) serves every chunk it covers.
   h.holding = Holding{horizon_form(r.level), 0};
-  if (r.level == kHorizonOuterLevel) {
-    // Held as Horizon 5: each chunk's voxel its block's.
-    const Box held = horizon_upsample(*r.voxels);
-    h.image = keep(DecodedMips::key_of(held), held);
-  } else {
-    h.image = keep(DecodedMips::key_of(*r.voxels), *r.voxels);
-  }
+  // Level 6 is held as Horizon 5: each chunk's voxel its block's.
+  const Box upsampled = r.level == kHorizonOuterLevel ? horizon_upsample(*r.voxels) : Box{};
+  const Box& held = r.level == kHorizonOuterLevel ? upsampled : *r.voxels;
+  h.image = keep(DecodedMips::key_of(held), held);
   for_each_region_chunk(region, [&](Vec3i cp) {
     const int i = coarse_index(cp);
     if (!horizon_mask_has(*r.mask, i) || h.covers.test(static_cast<std::size_t>(i)) ||

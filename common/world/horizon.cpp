@@ -7,10 +7,10 @@
 namespace terrane {
 
 HorizonBuilder::HorizonBuilder(Vec3i region, int level)
-    : region_(region),
-      level_(level),
-      image_(Vec3i{horizon_side(horizon_held_level(level)), horizon_side(horizon_held_level(level)),
-                   horizon_side(horizon_held_level(level))}) {}
+    : region_(region), level_(level) {
+  const int side = horizon_side(horizon_held_level(level));
+  image_ = Box(Vec3i{side, side, side});
+}
 
 void HorizonBuilder::put_coarse(Vec3i cp, const CoarseVoxels& voxels) {
   Box b(Vec3i{kCoarseSide, kCoarseSide, kCoarseSide});
@@ -31,12 +31,10 @@ HorizonPtr encode_horizon(const HorizonBuilder& b) {
   auto img = std::make_shared<HorizonImage>();
   img->region = b.region();
   img->level = b.level();
-  if (b.level() == kHorizonOuterLevel) {
-    const Box outer = downsample_box(b.image());
-    net_codec_encode(horizon_side(b.level()), outer.voxels(), img->unit);
-  } else {
-    net_codec_encode(horizon_side(b.level()), b.image().voxels(), img->unit);
-  }
+  // Level 6 is built at level 5 (HorizonBuilder::per_chunk).
+  const Box outer = b.level() == kHorizonOuterLevel ? downsample_box(b.image()) : Box{};
+  const Box& image = b.level() == kHorizonOuterLevel ? outer : b.image();
+  net_codec_encode(horizon_side(b.level()), image.voxels(), img->unit);
   return img;
 }
 

@@ -251,8 +251,9 @@ void TerrainGenerator::coarse_sample(Vec3i origin, int cell, Vec3i count, Box& o
       heights.assign(static_cast<std::size_t>(nx + 2) * static_cast<std::size_t>(nz + 2), 0.0f);
       for (int z = -1; z <= nz; ++z)
         for (int x = -1; x <= nx; ++x) {
-          const bool inner = x >= 0 && x < nx && z >= 0 && z < nz;
-          if (!inner && (x < 0 || x >= nx) && (z < 0 || z >= nz)) continue;  // a corner
+          const bool ring_x = x < 0 || x >= nx, ring_z = z < 0 || z >= nz;
+          if (ring_x && ring_z) continue;  // a corner
+          const bool inner = !ring_x && !ring_z;
           const TerrainField::Surface sf = field_.surface(at(x, origin.x), at(z, origin.z));
           hi(x, z) = sf.height;
           if (inner) surfaces[static_cast<std::size_t>(z) * nx + x] = sf;

@@ -204,6 +204,11 @@ class ChunkSlots {
     const Vec3i l = floor_mod(cp, kSide);
     return (l.y * kSide + l.z) * kSide + l.x;
   }
+  // The k-th (0..7) of a region's 2^3 blocks.
+  static Vec3i region_block(Vec3i region, int k) {
+    static_assert(kCoarseRegionChunks == 2 * kSide);
+    return region * 2 + Vec3i{k & 1, k >> 2, (k >> 1) & 1};
+  }
   static Vec3i chunk_at(Vec3i block, int bit) {
     return Vec3i{block.x * kSide + bit % kSide, block.y * kSide + bit / (kSide * kSide),
                  block.z * kSide + bit / kSide % kSide};
@@ -238,9 +243,8 @@ class ChunkSlots {
   // Whether a chunk of region (8^3 chunks: 2^3 blocks) may have a slot
   // (false: none has).
   bool any_in_region(Vec3i region) const {
-    static_assert(kCoarseRegionChunks == 2 * kSide);
-    for (int i = 0; i < 8; ++i)
-      if (blocks_.find(region * 2 + Vec3i{i & 1, i >> 2, (i >> 1) & 1}) != blocks_.end()) return true;
+    for (int k = 0; k < 8; ++k)
+      if (blocks_.find(region_block(region, k)) != blocks_.end()) return true;
     return false;
   }
   // Region's chunks in mask (chunk i = (y * 8 + z) * 8 + x of the region,
@@ -250,18 +254,15 @@ class ChunkSlots {
   // yet is made whole at once: a view's first images mark every chunk of
   // it (157,000 at view 2,048).
   std::size_t see_images(Vec3i region, HorizonMask& mask, int level) {
-    static_assert(kCoarseRegionChunks == 2 * kSide);
     std::size_t seen = 0;
     for (int k = 0; k < 8; ++k) {
-      const Vec3i block = region * 2 + Vec3i{k & 1, k >> 2, (k >> 1) & 1};
-      const Vec3i base = (block - region * 2) * kSide;  // the block's first chunk in the region
+      const Vec3i block = region_block(region, k);
       std::uint64_t bits = 0;
       for (int i = 0; i < kSide * kSide * kSide; ++i)
-        if (horizon_mask_has(mask, coarse_index(region * kCoarseRegionChunks + base + Vec3i{i % kSide, i / (kSide * kSide), i / kSide % kSide})))
-          bits |= std::uint64_t{1} << i;
+        if (horizon_mask_has(mask, coarse_index(chunk_at(block, i)))) bits |= std::uint64_t{1} << i;
       if (bits == 0) continue;
-      if (blocks_.find(block) == blocks_.end()) {
-        Block& b = blocks_[block];
+      if (auto [it, fresh] = blocks_.try_emplace(block); fresh) {
+        Block& b = it->second;
         const auto n = static_cast<std::size_t>(std::popcount(bits));
         b.has = bits;
         b.slots.resize(n);
