@@ -111,11 +111,11 @@ void Client::loaded_cache(Replica loaded, std::size_t chunks, std::uint64_t sess
     claims = claim_frames();
     state = movement_.session_frame();
   }
-  std::vector<std::pair<Vec3i, Holding>> changes;
+  std::vector<HoldingChange> changes;
   std::vector<Vec3i> full;
-  if (callbacks_.on_holding || callbacks_.on_chunks_loaded)
+  if (tells_holdings() || callbacks_.on_chunks_loaded)
     replica_.for_each_holding([&](Vec3i cp, const Holding& h) {
-      changes.emplace_back(cp, h);
+      changes.push_back(HoldingChange{cp, h});
       if (h.full_resolution()) full.push_back(cp);
     });
   // Sent under the lock (send only queues): a position the application
@@ -124,9 +124,15 @@ void Client::loaded_cache(Replica loaded, std::size_t chunks, std::uint64_t sess
   if (state) connection_.send(std::move(*state), wire::Body::ClientState);
   lock.unlock();
   changed_.notify_all();
-  if (callbacks_.on_holding)
-    for (const auto& [p, h] : changes) callbacks_.on_holding(p, &h);
+  tell_holdings(changes);
   if (callbacks_.on_chunks_loaded && !full.empty()) callbacks_.on_chunks_loaded(full);
+}
+
+void Client::tell_holdings(std::span<const HoldingChange> changes) const {
+  if (changes.empty()) return;
+  if (callbacks_.on_holding)
+    for (const HoldingChange& c : changes) callbacks_.on_holding(c.chunk_pos, c.now ? &*c.now : nullptr);
+  if (callbacks_.on_holdings) callbacks_.on_holdings(changes);
 }
 
 std::vector<Frame> Client::claim_frames() {
@@ -249,9 +255,9 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
   if (!records) return records.error();
   // Record bytes by cause; the frame's own bytes go with the larger share.
   std::uint64_t stream_bytes = 0, refresh_bytes = 0;
-  // (chunk, its holding now; nullopt: released), for on_holding.
-  std::vector<std::pair<Vec3i, std::optional<Holding>>> changes;
-  const bool tell = static_cast<bool>(callbacks_.on_holding);
+  // (chunk, its holding now; nullopt: released), for on_holding(s).
+  std::vector<HoldingChange> changes;
+  const bool tell = tells_holdings();
   std::vector<Vec3i> loaded;  // for on_chunks_loaded
   const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
   // A Full record's bytes this process's replicas decoded before are not
@@ -276,7 +282,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
       replica_.apply_horizon(r, horizon_covered_);
       counters_.horizon_chunks += horizon_covered_.size();
       if (tell)
-        for (const Vec3i cp : horizon_covered_) changes.emplace_back(cp, Holding{horizon_form(r.level), 0});
+        for (const Vec3i cp : horizon_covered_) changes.push_back(HoldingChange{cp, Holding{horizon_form(r.level), 0}});
       return Ok{};
     }
     if (tell_loaded && (r.kind == StreamRecordKind::kFull || r.kind == StreamRecordKind::kEmpty)) {
@@ -311,7 +317,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
       std::optional<Holding> now;
       if (gives_form(r.kind)) now = Holding{r.form(), r.revision};
       else if (r.kind == StreamRecordKind::kMipPatch) now = Holding{mip_form(r.level), r.revision};
-      changes.emplace_back(r.chunk_pos, now);
+      changes.push_back(HoldingChange{r.chunk_pos, now});
     }
     return Ok{};
   });
@@ -324,7 +330,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
   if (!st) return st.error();
   if (!changes.empty() || !loaded.empty())
     *after = [this, ch = std::move(changes), loaded = std::move(loaded)] {
-      for (const auto& [p, h] : ch) callbacks_.on_holding(p, h ? &*h : nullptr);
+      tell_holdings(ch);
       if (!loaded.empty()) callbacks_.on_chunks_loaded(loaded);
     };
   return Ok{};
@@ -362,9 +368,10 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       // Another world on this address (a reconnect, a Redirect): the
       // replica's chunks are of the old one, and the new server ignored
       // their claims (Holdings.world_id); they are not its voxels.
-      std::vector<Vec3i> dropped;
+      std::vector<HoldingChange> dropped;
       if (welcome_ && welcome_->world_id != 0 && welcome_->world_id != w->world_id) {
-        if (callbacks_.on_holding) replica_.for_each_holding([&](Vec3i cp, const Holding&) { dropped.push_back(cp); });
+        if (tells_holdings())
+          replica_.for_each_holding([&](Vec3i cp, const Holding&) { dropped.push_back(HoldingChange{cp, std::nullopt}); });
         replica_ = Replica();
         replica_.share_decoded(options_.shared_chunks);
         unconfirmed_.clear();
@@ -382,7 +389,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
       if (connection_.session() != SessionStart::kFirst) {
         if (callbacks_.on_reconnected || !dropped.empty())
           after = [this, dropped = std::move(dropped)] {
-            for (const Vec3i cp : dropped) callbacks_.on_holding(cp, nullptr);
+            tell_holdings(dropped);
             if (callbacks_.on_reconnected) callbacks_.on_reconnected();
           };
         break;

@@ -150,11 +150,24 @@ struct UpdateInfo {
   bool voxels_truncated = false;
 };
 
+// One chunk's holding change (ClientCallbacks::on_holdings): what the
+// replica holds of it now, or nullopt when it was released.
+struct HoldingChange {
+  Vec3i chunk_pos;
+  std::optional<Holding> now;
+};
+
 struct ClientCallbacks {
   std::function<void(const WelcomeMsg&)> on_welcome;
   // What the replica holds of a chunk changed: its holding now (a record
   // of its own, or a horizon image's), or null when released.
   std::function<void(Vec3i chunk_pos, const Holding* now)> on_holding;
+  // The same changes, once per stream batch (a cache load, a replica
+  // dropped for another world's), in on_holding's order and after it when
+  // both are set: a handler with a lock of its own takes it once a batch,
+  // not once a chunk (a horizon image covers up to 512 chunks, a view of
+  // 2,048 about 160,000).
+  std::function<void(std::span<const HoldingChange>)> on_holdings;
   std::function<void(std::uint32_t edit_id, const EditOutcome&)> on_edit_result;
   // A ReadBoxResult was stored (ClientView::read_results[request_id]).
   std::function<void(std::uint32_t request_id)> on_read_result;
@@ -344,6 +357,10 @@ class Client : private ConnectionHandler {
   // Under the lock: the replica's claimable holdings as Holdings frames
   // (region claims), each chunk noted unconfirmed.
   std::vector<Frame> claim_frames();
+  // Whether a holding change is told anyone (on_holding or on_holdings),
+  // and the telling (without the lock).
+  bool tells_holdings() const { return callbacks_.on_holding || callbacks_.on_holdings; }
+  void tell_holdings(std::span<const HoldingChange> changes) const;
 
   ClientOptions options_;
   ClientCallbacks callbacks_;

@@ -150,6 +150,7 @@ class Server {
   // commands, counters); set once ops_ exists.
   std::optional<ClientSession::Context> session_context_;
   std::shared_ptr<const ViewTable> default_view_;  // kept made (ViewTable::get's cache may drop unused tables)
+  std::shared_ptr<const ViewTable> widest_view_;   // --max-view-distance's, the same
   // stop() runs once, and only after start(); stopping_ is read by the
   // acceptor and health() on other threads.
   std::atomic<bool> stopping_{false};

@@ -70,13 +70,8 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edit
   co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
   co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;
   ClientCallbacks cb;
-  cb.on_holding = [this](Vec3i cp, const Holding* now) {
-    if (now != nullptr && now->full_resolution())
-      ctx_.fanout->chunk_arrived(index_, cp, Clock::now());
-    else
-      ctx_.fanout->chunk_released(index_, cp);  // released, or held coarser now
-    on_holding(cp, now);
-  };
+  // Once a batch (a view of 2,048 is about 160,000 chunks of horizon images).
+  cb.on_holdings = [this](std::span<const HoldingChange> changes) { on_holdings(changes); };
   cb.on_edit_result = [this](std::uint32_t id, const EditOutcome& outcome) {
     {
       // The bot's own leaving ends the edits still in flight as unknown:
@@ -127,11 +122,18 @@ bool Bot::connect() {
   return true;
 }
 
-void Bot::on_holding(Vec3i cp, const Holding* now) {
+void Bot::on_holdings(std::span<const HoldingChange> changes) {
+  const Clock::time_point now = Clock::now();  // the batch's, every change's
+  for (const HoldingChange& c : changes) {
+    if (c.now && c.now->full_resolution())
+      ctx_.fanout->chunk_arrived(index_, c.chunk_pos, now);
+    else
+      ctx_.fanout->chunk_released(index_, c.chunk_pos);  // released, or held coarser now
+  }
   std::lock_guard lock(mutex_);
   if (!join_count_) return;
-  join_count_->update(cp, now);
-  check_join(Clock::now());
+  for (const HoldingChange& c : changes) join_count_->update(c.chunk_pos, c.now ? &*c.now : nullptr);
+  check_join(now);
 }
 
 void Bot::check_join(Clock::time_point now) {

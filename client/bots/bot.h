@@ -15,6 +15,7 @@
 #include <mutex>
 #include <optional>
 #include <random>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -114,8 +115,9 @@ class Bot {
     bool final_check = false;
   };
 
-  // What the bot holds of a chunk changed (or was released): join progress.
-  void on_holding(Vec3i chunk_pos, const Holding* now);
+  // What the bot holds of chunks changed (or was released), a batch at once:
+  // the fan-out tracker and join progress.
+  void on_holdings(std::span<const HoldingChange> changes);
   void on_chunk_hash(const HashCheck& check);
   void on_disconnected(const std::string& reason);
   // Under mutex_: reads the join count; drops it once both join times are known.

@@ -1129,6 +1129,50 @@ std::size_t horizon_only(const Replica& r) {
   return n;
 }
 
+TEST_F(ClientServerTest, OnHoldingsTellsOnHoldingsChangesInItsOrderOnceABatch) {
+  start_server();
+  std::mutex mu;
+  std::vector<std::pair<Vec3i, std::optional<Holding>>> each, batched;
+  std::size_t batches = 0, largest = 0;
+  ClientCallbacks cb;
+  cb.on_holding = [&](Vec3i p, const Holding* now) {
+    std::lock_guard lock(mu);
+    each.emplace_back(p, now ? std::optional<Holding>(*now) : std::nullopt);
+  };
+  cb.on_holdings = [&](std::span<const HoldingChange> changes) {
+    std::lock_guard lock(mu);
+    EXPECT_FALSE(changes.empty()) << "told of an empty batch";
+    ++batches;
+    largest = std::max(largest, changes.size());
+    for (const HoldingChange& c : changes) batched.emplace_back(c.chunk_pos, c.now);
+    // on_holding has told these already: its list is at least as long.
+    EXPECT_GE(each.size(), batched.size());
+  };
+  Client c(options("batched", 320, 32), cb);
+  const auto w = join(c);
+  ASSERT_TRUE(w.has_value());
+  const auto view = chunks_within(w->spawn, 320, *w);
+  ASSERT_TRUE(c.wait_until(
+      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, view, w->spawn, 32); }, kDeadline));
+  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
+  c.disconnect();
+  std::lock_guard lock(mu);
+  ASSERT_EQ(batched.size(), each.size());
+  for (std::size_t i = 0; i < each.size(); ++i) {
+    EXPECT_EQ(batched[i].first, each[i].first) << "change " << i;
+    EXPECT_EQ(batched[i].second.has_value(), each[i].second.has_value()) << "change " << i;
+    if (batched[i].second && each[i].second) {
+      EXPECT_EQ(batched[i].second->form, each[i].second->form) << "change " << i;
+      EXPECT_EQ(batched[i].second->revision, each[i].second->revision) << "change " << i;
+    }
+  }
+  // Every chunk in view was told at least once, and a batch told many at
+  // once (a horizon image alone covers up to 512).
+  EXPECT_GE(each.size(), view.size());
+  EXPECT_LT(batches, each.size());
+  EXPECT_GE(largest, 64u) << batches << " batches for " << each.size() << " changes";
+}
+
 TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOwn) {
   start_server();
   std::mutex mu;
