@@ -1129,59 +1129,33 @@ std::size_t horizon_only(const Replica& r) {
   return n;
 }
 
-TEST_F(ClientServerTest, OnHoldingsTellsOnHoldingsChangesInItsOrderOnceABatch) {
-  start_server();
-  std::mutex mu;
-  std::vector<std::pair<Vec3i, std::optional<Holding>>> each, batched;
-  std::size_t batches = 0, largest = 0;
-  ClientCallbacks cb;
-  cb.on_holding = [&](Vec3i p, const Holding* now) {
-    std::lock_guard lock(mu);
-    each.emplace_back(p, now ? std::optional<Holding>(*now) : std::nullopt);
-  };
-  cb.on_holdings = [&](std::span<const HoldingChange> changes) {
-    std::lock_guard lock(mu);
-    EXPECT_FALSE(changes.empty()) << "told of an empty batch";
-    ++batches;
-    largest = std::max(largest, changes.size());
-    for (const HoldingChange& c : changes) batched.emplace_back(c.chunk_pos, c.now);
-    // on_holding has told these already: its list is at least as long.
-    EXPECT_GE(each.size(), batched.size());
-  };
-  Client c(options("batched", 320, 32), cb);
-  const auto w = join(c);
-  ASSERT_TRUE(w.has_value());
-  const auto view = chunks_within(w->spawn, 320, *w);
-  ASSERT_TRUE(c.wait_until(
-      [&](const ClientView& v) { return v.closed || all_at_desired_level(v.replica, view, w->spawn, 32); }, kDeadline));
-  EXPECT_FALSE(c.closed()) << c.disconnect_reason();
-  c.disconnect();
-  std::lock_guard lock(mu);
-  ASSERT_EQ(batched.size(), each.size());
-  for (std::size_t i = 0; i < each.size(); ++i) {
-    EXPECT_EQ(batched[i].first, each[i].first) << "change " << i;
-    EXPECT_EQ(batched[i].second.has_value(), each[i].second.has_value()) << "change " << i;
-    if (batched[i].second && each[i].second) {
-      EXPECT_EQ(batched[i].second->form, each[i].second->form) << "change " << i;
-      EXPECT_EQ(batched[i].second->revision, each[i].second->revision) << "change " << i;
-    }
-  }
-  // Every chunk in view was told at least once, and a batch told many at
-  // once (a horizon image alone covers up to 512).
-  EXPECT_GE(each.size(), view.size());
-  EXPECT_LT(batches, each.size());
-  EXPECT_GE(largest, 64u) << batches << " batches for " << each.size() << " changes";
-}
-
 TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOwn) {
   start_server();
   std::mutex mu;
   std::vector<std::pair<Vec3i, int>> events;  // (chunk, level: 0 Full or Empty, 1..5 a mip)
+  std::size_t released = 0;
   ClientCallbacks cb;
   cb.on_holding = [&](Vec3i p, const Holding* now) {
-    if (now == nullptr) return;  // released
     std::lock_guard lock(mu);
-    events.emplace_back(p, now->level());
+    if (now == nullptr)
+      ++released;
+    else
+      events.emplace_back(p, now->level());
+  };
+  // The same changes told once a batch, after on_holding's.
+  std::vector<std::pair<Vec3i, int>> batched;
+  std::size_t batched_released = 0, batches = 0, largest = 0;
+  cb.on_holdings = [&](std::span<const HoldingChange> changes) {
+    std::lock_guard lock(mu);
+    ++batches;
+    largest = std::max(largest, changes.size());
+    for (const HoldingChange& c : changes) {
+      if (c.now)
+        batched.emplace_back(c.chunk_pos, c.now->level());
+      else
+        ++batched_released;
+    }
+    EXPECT_EQ(batched.size(), events.size()) << "on_holdings before on_holding told the batch";
   };
   // View 320 / 32: regions at 2^3 per chunk within 80 voxels, 1 voxel per
   // chunk beyond.
@@ -1203,6 +1177,12 @@ TEST_F(ClientServerTest, TheWholeViewArrivesAsHorizonImagesBeforeAnyChunkOfItsOw
     EXPECT_TRUE(within(w->spawn, cp, 320)) << "a horizon image covered a chunk outside the view";
   }
   EXPECT_EQ(horizon, view.size()) << "the horizon images cover the whole view";
+  // on_holdings told the same changes in the same order, many at once (a
+  // horizon image alone covers up to 512 chunks).
+  EXPECT_TRUE(batched == events);
+  EXPECT_EQ(batched_released, released);
+  EXPECT_LT(batches, events.size());
+  EXPECT_GE(largest, 64u) << batches << " batches for " << events.size() << " changes";
   for (std::size_t i = horizon; i < events.size(); ++i) EXPECT_LE(events[i].second, 3) << "a horizon image after a chunk's own record";
   // Chunks within full resolution get it at once, not their 4^3 mip first.
   std::set<std::tuple<int, int, int>> first_own;
