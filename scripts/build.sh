@@ -25,7 +25,7 @@ case "$flavour" in
     dir=build-asan
     # The test suites' own code at -O0: under both sanitizers a suite's file
     # compiles in about half the time of -O1 (31.7 s against 60.2 s for
-    # tests/server/server_test.cpp), and the suites are two thirds of it.
+    # tests/server/server_test.cpp), and the suites are more than half of it.
     args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
           -DTERRANE_SANITIZE=address,undefined -DTERRANE_BUILD_BENCH=OFF -DTERRANE_TEST_OPTIMIZE=-O0) ;;
   fuzz)
