@@ -271,14 +271,15 @@ void Server::start() {
   // first client instead of on its strand (tens of milliseconds at 1,024),
   // and up to 2,048 the widest view's with the default full-resolution
   // radius (41 ms and about 15 MB at 2,048; 8 times as much at twice the
-  // distance). (Capped as a replicator caps a client's radii.)
+  // distance). The defaults are within the caps (the constructor); the
+  // radius is capped by the view as a replicator caps a client's.
   const ReplicationOptions& r = options_.replication;
-  const std::int32_t view = std::min(r.default_view_distance, r.max_view_distance);
-  default_view_ = ViewTable::get(view, std::min({r.default_full_res_radius, r.max_full_res_radius, view}));
+  const auto table = [&r](std::int32_t view) {
+    return ViewTable::get(view, std::min(r.default_full_res_radius, view));
+  };
+  default_view_ = table(r.default_view_distance);
   constexpr std::int32_t kWidestViewMade = 2048;
-  if (r.max_view_distance <= kWidestViewMade)
-    widest_view_ = ViewTable::get(r.max_view_distance,
-                                  std::min({r.default_full_res_radius, r.max_full_res_radius, r.max_view_distance}));
+  if (r.max_view_distance <= kWidestViewMade) widest_view_ = table(r.max_view_distance);
   server_log().info("world {}: {}", where(), border_text());
   server_log().info("listening on {}:{}", options_.net.bind_address, port());
   world_io_.run(1, ThreadRole::kWorld, options_.thread_priorities);

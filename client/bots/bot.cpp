@@ -124,12 +124,7 @@ bool Bot::connect() {
 
 void Bot::on_holdings(std::span<const HoldingChange> changes) {
   const Clock::time_point now = Clock::now();  // the batch's, every change's
-  for (const HoldingChange& c : changes) {
-    if (c.now && c.now->full_resolution())
-      ctx_.fanout->chunk_arrived(index_, c.chunk_pos, now);
-    else
-      ctx_.fanout->chunk_released(index_, c.chunk_pos);  // released, or held coarser now
-  }
+  ctx_.fanout->holdings_changed(index_, changes, now);
   std::lock_guard lock(mutex_);
   if (!join_count_) return;
   for (const HoldingChange& c : changes) join_count_->update(c.chunk_pos, c.now ? &*c.now : nullptr);

@@ -132,6 +132,10 @@ void FanoutTracker::update_received(int bot, std::uint64_t tick, const std::vect
 void FanoutTracker::chunk_arrived(int bot, Vec3i chunk, Clock::time_point t) {
   if (servers_ == 1) return;
   std::lock_guard lock(mutex_);
+  arrived_locked(bot, chunk, t);
+}
+
+void FanoutTracker::arrived_locked(int bot, Vec3i chunk, Clock::time_point t) {
   if (!held_full_[chunk].insert(bot).second) arrivals_[chunk].push_back(Arrival{bot, t, 0});
 }
 
@@ -143,9 +147,24 @@ void FanoutTracker::bot_on_server(int bot, std::uint32_t server_id) {
 void FanoutTracker::chunk_released(int bot, Vec3i chunk) {
   if (servers_ == 1) return;
   std::lock_guard lock(mutex_);
+  released_locked(bot, chunk);
+}
+
+void FanoutTracker::released_locked(int bot, Vec3i chunk) {
   if (auto it = held_full_.find(chunk); it != held_full_.end()) {
     it->second.erase(bot);
     if (it->second.empty()) held_full_.erase(it);
+  }
+}
+
+void FanoutTracker::holdings_changed(int bot, std::span<const HoldingChange> changes, Clock::time_point t) {
+  if (servers_ == 1) return;
+  std::lock_guard lock(mutex_);
+  for (const HoldingChange& c : changes) {
+    if (c.now && c.now->full_resolution())
+      arrived_locked(bot, c.chunk_pos, t);
+    else
+      released_locked(bot, c.chunk_pos);
   }
 }
 

@@ -12,6 +12,7 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <span>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -88,6 +89,10 @@ class FanoutTracker {
   // counts: a first arrival is the bot's view reaching it, not an edit.
   void chunk_arrived(int bot, Vec3i chunk, Clock::time_point t);
   void chunk_released(int bot, Vec3i chunk);
+  // A batch of a bot's holding changes at t, under one lock: a chunk now
+  // held at full resolution arrived, any other was released (held coarser
+  // now, or not at all).
+  void holdings_changed(int bot, std::span<const HoldingChange> changes, Clock::time_point t);
   // The bot was welcomed by this server (its Welcome's server_id): a bot
   // not yet welcomed counts as on its entry server.
   void bot_on_server(int bot, std::uint32_t server_id);
@@ -114,6 +119,9 @@ class FanoutTracker {
   double recent_fanout_p99() const;
 
  private:
+  // chunk_arrived and chunk_released under mutex_.
+  void arrived_locked(int bot, Vec3i chunk, Clock::time_point t);
+  void released_locked(int bot, Vec3i chunk);
   struct Edit {
     int bot = 0;
     Clock::time_point sent;

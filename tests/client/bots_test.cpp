@@ -521,11 +521,13 @@ class FanoutTrackerTest : public ::testing::Test {
     f_.bot_on_server(0, 1);
     f_.bot_on_server(1, 2);
     f_.bot_on_server(2, 2);
-    f_.chunk_arrived(0, kChanged, t0);
-    f_.chunk_arrived(0, kReached, t0);
+    // Bots 0 and 2 as a bot tells them, a batch at once (a coarser form
+    // first: a release, then the full one); bot 1 chunk by chunk.
+    const Holding full{HoldingForm::kFull, 1}, mip{HoldingForm::kMip1, 1};
+    const HoldingChange both[] = {{kChanged, mip}, {kChanged, full}, {kReached, full}};
+    f_.holdings_changed(0, both, t0);
     f_.chunk_arrived(1, kReached, t0);
-    f_.chunk_arrived(2, kChanged, t0);
-    f_.chunk_arrived(2, kReached, t0);
+    f_.holdings_changed(2, both, t0);
   }
   // Bot 0's edit id acknowledged at t, naming tick.
   void acked(std::uint32_t id, std::uint64_t tick, std::chrono::steady_clock::time_point t) {
