@@ -78,9 +78,9 @@ constexpr const char* kHelp =
     "                              PostgreSQL takes a new border only while no other server runs\n"
     "  --tick-hz N                 simulation ticks per second; an edit waits for the next one\n"
     "                              (default 60)\n"
-    "  --view-distance N           view distance before a client says (voxels, default 1024)\n"
+    "  --view-distance N           view distance before a client says (voxels, default 2048)\n"
     "  --full-res-radius N         full-resolution radius before a client says (default 128)\n"
-    "  --max-view-distance N       cap on client view distances (default 1024)\n"
+    "  --max-view-distance N       cap on client view distances (default 2048, at most 4096)\n"
     "  --max-full-res-radius N     cap on client full-resolution radii (default 256)\n"
     "  --max-clients N             connections at once (default 1024; the open-file limit is\n"
     "                              raised to fit)\n"
@@ -249,10 +249,12 @@ int run(int argc, char** argv) {
   if (cl.has("metrics"))
     if (auto hp = parse_host_port(o.ops.metrics_address); !hp) return usage_error("--metrics: " + hp.error().message);
   o.world.tick_hz = static_cast<std::uint32_t>(cl.get_int("tick-hz", o.world.tick_hz, 1, 1000, &err));
-  o.replication.max_view_distance = static_cast<std::int32_t>(cl.get_int("max-view-distance", 1024, 0, 16384, &err));
-  o.replication.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", 256, 0, 4096, &err));
-  o.replication.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", 1024, 0, 16384, &err));
-  o.replication.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", 128, 0, 4096, &err));
+  constexpr std::int64_t kViewLimit = ReplicationOptions::kViewDistanceLimit;
+  o.replication.max_view_distance =
+      static_cast<std::int32_t>(cl.get_int("max-view-distance", o.replication.max_view_distance, 0, kViewLimit, &err));
+  o.replication.max_full_res_radius = static_cast<std::int32_t>(cl.get_int("max-full-res-radius", o.replication.max_full_res_radius, 0, 4096, &err));
+  o.replication.default_view_distance = static_cast<std::int32_t>(cl.get_int("view-distance", o.replication.default_view_distance, 0, kViewLimit, &err));
+  o.replication.default_full_res_radius = static_cast<std::int32_t>(cl.get_int("full-res-radius", o.replication.default_full_res_radius, 0, 4096, &err));
   o.net.max_clients = static_cast<std::size_t>(cl.get_int("max-clients", 1024, 1, 100000, &err));
   o.net.session.max_queue_bytes =
       static_cast<std::size_t>(cl.get_int("max-queue-bytes", 16 << 20, 1 << 16, std::int64_t{1} << 34, &err));

@@ -219,6 +219,7 @@ Server::Server(const ServerOptions& options)
   options_.net.session.max_frame_bytes = std::min(options_.net.session.max_frame_bytes, kDefaultMaxFrameBytes);
   // The defaults within the caps (the Welcome states them).
   ReplicationOptions& r = options_.replication;
+  r.max_view_distance = std::clamp(r.max_view_distance, 0, ReplicationOptions::kViewDistanceLimit);
   r.default_view_distance = std::min(r.default_view_distance, r.max_view_distance);
   r.default_full_res_radius = std::min(r.default_full_res_radius, r.max_full_res_radius);
   options_.net.session.counters = &counters_;

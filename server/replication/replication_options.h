@@ -14,9 +14,12 @@
 namespace terrane {
 
 struct ReplicationOptions {
-  std::int32_t max_view_distance = 1024;   // voxels; client requests are capped to this
+  // The largest view a server serves: a view's table of chunk offsets grows
+  // with its cube (about 15 MB at 2,048, 120 MB at 4,096).
+  static constexpr std::int32_t kViewDistanceLimit = 4096;
+  std::int32_t max_view_distance = 2048;   // voxels; client requests are capped to this
   std::int32_t max_full_res_radius = 256;  // voxels
-  std::int32_t default_view_distance = 1024;   // until the client sends ClientState
+  std::int32_t default_view_distance = 2048;   // until the client sends ClientState
   std::int32_t default_full_res_radius = 128;
   std::size_t stream_window_bytes = 512 * 1024;
   // Streaming yields when work waits longer than this on the io threads or

@@ -76,6 +76,10 @@ TEST_F(ServerMainTest, UsageErrorsExitTwo) {
   EXPECT_NE(out.find("without authentication"), std::string::npos) << out;
   out.clear();
   EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --no-such-flag", &out), 2) << out;
+  out.clear();
+  // A view's table grows with its cube: 4,096 is the widest a server serves.
+  EXPECT_EQ(server("--world " + (dir_ / "w").string() + " --max-view-distance 8192", &out), 2) << out;
+  EXPECT_NE(out.find("max-view-distance"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir_ / "w")) << "no world is made on bad usage";
 }
 

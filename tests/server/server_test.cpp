@@ -527,7 +527,8 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   EXPECT_EQ(w.bounds_max_x, 96);
   EXPECT_EQ(w.bounds_min_z, -64);
   EXPECT_EQ(w.bounds_max_z, 32);
-  EXPECT_EQ(w.default_view_distance, 1024);
+  EXPECT_EQ(w.default_view_distance, 2048);  // the defaults: the view a client gets before it says
+  EXPECT_EQ(w.max_view_distance, 2048);
   EXPECT_EQ(w.default_full_res_radius, 128);
   // A client at the border's corner: its view completes with the chunks
   // inside the border, and nothing beyond it is ever sent.
@@ -622,6 +623,22 @@ TEST_F(ServerTest, HorizonImagesArriveNearestRegionFirst) {
   ASSERT_EQ(got.size(), order.size());
   for (std::size_t i = 0; i < got.size(); ++i)
     ASSERT_EQ(got[i], order[i]) << "image " << i << " of " << got.size();
+}
+
+// A server serves views of at most 4,096 voxels, whatever its options ask:
+// a view's table of chunk offsets grows with its cube.
+TEST_F(ServerTest, AViewCapBeyondTheLimitIsServedAsTheLimit) {
+  ServerOptions o;
+  o.replication.max_view_distance = 1 << 20;
+  start(o);
+  RawPeer p(server_->port());
+  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "wide", "", {}})));
+  auto f = p.next_of(wire::Body::Welcome);
+  ASSERT_TRUE(f.has_value());
+  const WelcomeMsg w = *parse_welcome(*msg(*f).body_as_Welcome());
+  EXPECT_EQ(w.max_view_distance, ReplicationOptions::kViewDistanceLimit);
+  EXPECT_EQ(w.max_view_distance, 4096);
+  EXPECT_EQ(w.default_view_distance, 2048);
 }
 
 // A new view's images by distance: to a client that takes level 6

@@ -32,7 +32,7 @@ Renders a Terrane world streamed from a terrane-server.
                            chunk to the level its distance asks for
                            (default: shoot once every chunk has its first mip)
   --mips-only              ask for no full-resolution data and mesh mips only
-  --view-distance N        voxels (default 1024, capped by the server's maximum)
+  --view-distance N        voxels (default 2048, capped by the server's maximum)
   --full-res-radius N      voxels (default 128)
   --timeout S              screenshot: give up after S seconds (default 120)
   --msaa N                 screenshot: samples per pixel (default 4, 1 = off)

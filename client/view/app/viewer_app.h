@@ -20,7 +20,7 @@ struct ViewerOptions {
   bool wait_full_res = false;
   bool mips_only = false;
   int width = 1280, height = 720;
-  int view_distance = 1024;  // the server's default: the whole horizon (estimated where never generated)
+  int view_distance = 2048;  // the server's default: the whole horizon (estimated where never generated)
   int full_res_radius = 128;
   double timeout_s = 120;
   bool sky_key = false;
