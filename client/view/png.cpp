@@ -45,8 +45,12 @@ std::vector<std::uint8_t> encode_png(const Image& image) {
   for (int y = 0; y < image.height; ++y) {
     const std::uint8_t* row = image.pixels.data() + static_cast<std::size_t>(y) * stride;
     raw.push_back(y == 0 ? 0 : 2);
-    for (std::size_t i = 0; i < stride; ++i)
-      raw.push_back(y == 0 ? row[i] : static_cast<std::uint8_t>(row[i] - row[i - stride]));
+    if (y == 0) {
+      raw.insert(raw.end(), row, row + stride);
+      continue;
+    }
+    const std::uint8_t* above = row - stride;
+    for (std::size_t i = 0; i < stride; ++i) raw.push_back(static_cast<std::uint8_t>(row[i] - above[i]));
   }
   uLongf zsize = compressBound(static_cast<uLong>(raw.size()));
   std::vector<std::uint8_t> z(zsize);
