@@ -147,8 +147,8 @@ class Replica {
   template <class F>
   void for_each_holding(F&& f) const {
     chunks_.for_each([&](Vec3i pos, const Entry& e) { f(pos, e.holding); });
-    for (const auto& [region, h] : horizons_)
-      for_each_region_chunk(region, [&](Vec3i cp) {
+    for (const auto& entry : horizons_)
+      for_each_region_chunk(entry.first, [&, &h = entry.second](Vec3i cp) {
         if (h.covers.test(static_cast<std::size_t>(coarse_index(cp)))) f(cp, h.holding);
       });
   }

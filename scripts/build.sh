@@ -26,7 +26,12 @@ case "$flavour" in
     # The test suites' own code at -O0: under both sanitizers a suite's file
     # compiles in about half the time of -O1 (31.7 s against 60.2 s for
     # tests/server/server_test.cpp), and the suites are more than half of it.
+    # Built with clang: under both sanitizers it compiles a file in about
+    # two thirds of GCC's time (replicator.cpp 31.5 s against 47.1 s, a
+    # suite's server_test.cpp at -O0 21.5 s against 34.6 s), and the
+    # release build keeps GCC's warnings and code.
     args=(-DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
+          -DCMAKE_CXX_COMPILER=clang++
           -DTERRANE_SANITIZE=address,undefined -DTERRANE_BUILD_BENCH=OFF -DTERRANE_TEST_OPTIMIZE=-O0) ;;
   fuzz)
     dir=build-fuzz

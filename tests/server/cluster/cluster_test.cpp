@@ -817,9 +817,10 @@ TEST_F(ClusterTest, ThreeServersAtOnceEachWriteTheirRegionsAndEveryClientSeesEve
     edits.emplace_back(r, std::move(v));
   }
   for (int i = 0; i < 3; ++i)
-    for (const auto& [r, v] : edits)
+    for (const auto& edit : edits)
       EXPECT_TRUE(c[static_cast<std::size_t>(i)]->wait_until(
-          [&](const ClientView& view) { return view.closed || shows(view.replica, r, v); }, kDeadline))
+          [&](const ClientView& view) { return view.closed || shows(view.replica, edit.first, edit.second); },
+          kDeadline))
           << "player " << i << " never saw an edit";
   for (int i = 0; i < 3; ++i) {
     expect_agrees_with_its_server(*c[static_cast<std::size_t>(i)], near[static_cast<std::size_t>(i)]);
