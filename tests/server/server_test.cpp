@@ -514,14 +514,8 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   o.border_set = true;
   o.border = WorldBounds{0, 1, true, 0, 96, -64, 32};  // x in [0, 96), z in [-64, 32)
   start(o);
-  auto welcome_of = [&](RawPeer& p) {
-    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "edge", "", {}})));
-    auto f = p.next_of(wire::Body::Welcome);
-    EXPECT_TRUE(f.has_value());
-    return *parse_welcome(*msg(*f).body_as_Welcome());
-  };
   RawPeer p(server_->port());
-  const WelcomeMsg w = welcome_of(p);
+  const WelcomeMsg w = welcome_of(p, "edge");
   ASSERT_TRUE(w.bounded_xz);
   EXPECT_EQ(w.bounds_min_x, 0);
   EXPECT_EQ(w.bounds_max_x, 96);
@@ -550,7 +544,7 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   server_.reset();
   start();
   RawPeer again(server_->port());
-  EXPECT_TRUE(welcome_of(again).bounded_xz);
+  EXPECT_TRUE(welcome_of(again, "edge").bounded_xz);
   again.close();
   server_->stop();
   server_.reset();
@@ -558,7 +552,7 @@ TEST_F(ServerTest, AWorldBorderBoundsStreamingAndEditsReachesClientsAndIsKept) {
   none.border_set = true;
   start(none);
   RawPeer open(server_->port());
-  EXPECT_FALSE(welcome_of(open).bounded_xz);
+  EXPECT_FALSE(welcome_of(open, "edge").bounded_xz);
 }
 
 // A client standing at the wire's edge (x = +-(2^24 - 1)) is sent nothing
@@ -632,10 +626,7 @@ TEST_F(ServerTest, AViewCapBeyondTheLimitIsServedAsTheLimit) {
   o.replication.max_view_distance = 1 << 20;
   start(o);
   RawPeer p(server_->port());
-  ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, "wide", "", {}})));
-  auto f = p.next_of(wire::Body::Welcome);
-  ASSERT_TRUE(f.has_value());
-  const WelcomeMsg w = *parse_welcome(*msg(*f).body_as_Welcome());
+  const WelcomeMsg w = welcome_of(p, "wide");
   EXPECT_EQ(w.max_view_distance, ReplicationOptions::kViewDistanceLimit);
   EXPECT_EQ(w.max_view_distance, 4096);
   EXPECT_EQ(w.default_view_distance, 2048);

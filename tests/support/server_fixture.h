@@ -152,6 +152,17 @@ class ServerTest : public ::testing::Test {
     server_ = std::move(*s);
     server_->start();
   }
+  // Says Hello on p and returns the Welcome (a failed expectation and an
+  // empty message if none comes).
+  static WelcomeMsg welcome_of(RawPeer& p, const std::string& name) {
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, name, "", {}})));
+    auto f = p.next_of(wire::Body::Welcome);
+    EXPECT_TRUE(f.has_value());
+    if (!f) return {};
+    auto w = parse_welcome(*msg(*f).body_as_Welcome());
+    EXPECT_TRUE(w.ok());
+    return w.ok() ? *w : WelcomeMsg{};
+  }
   std::unique_ptr<RawPeer> join(const std::string& name, std::uint32_t features = 0) {
     auto p = std::make_unique<RawPeer>(server_->port());
     EXPECT_TRUE(p->connected());
