@@ -107,21 +107,21 @@ void FanOut::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions
   const bool gather = options_.mip_refresh_ms > 0;
   const auto due = now + std::chrono::milliseconds(options_.mip_refresh_ms);
   for (const VersionPtr& v : versions) {
-    for (const InterestIndex::Holder& h : interest_.holders(v->pos())) {
+    interest_.for_each_holder(v->pos(), [&](InterestIndex::Holder h) {
       ++deliveries;
       if (h.full() || !gather) {
         news[h.id()].push_back(v);
-        continue;
+        return;
       }
       auto c = clients_.find(h.id());
-      if (c == clients_.end()) continue;
+      if (c == clients_.end()) return;
       if (c->second.mip_news.empty()) {
         c->second.mip_due = due;
         mip_news_due_.emplace_back(due, h.id());
       }
       c->second.mip_news.push_back(v);
       c->second.mip_news_tick = tick;
-    }
+    });
   }
   counters_.deliveries.fetch_add(deliveries, std::memory_order_relaxed);
   for (auto& [id, changed] : news)
@@ -129,8 +129,9 @@ void FanOut::publish(std::uint64_t tick, const std::vector<VersionPtr>& versions
 }
 
 void FanOut::changed(std::uint64_t tick, const VersionPtr& v) {
-  for (const InterestIndex::Holder& h : interest_.holders(v->pos()))
+  interest_.for_each_holder(v->pos(), [&](InterestIndex::Holder h) {
     if (auto holder = clients_.find(h.id()); holder != clients_.end()) holder->second.link->committed(tick, {v});
+  });
 }
 
 void FanOut::send_presence(std::uint64_t tick) {

@@ -7,20 +7,25 @@
 // says it released the chunk or leaves. "full" marks holders at full
 // resolution: their chunks stay resident (edits there are expected).
 //
-// Each watched chunk's holders are a HolderSet (holder_set.h): holding,
-// releasing and asking about one holder cost a bounded number of probes
-// however many hold the chunk (a crowd: every client), not a scan of
-// them. probes() counts them all, so the bound is testable.
+// The holders are kept per region of 8^3 chunks (RegionHolders,
+// region_holders.h): per client a mask of the region's chunks it holds,
+// per chunk a count. A view's thousands of chunks, nearly all held coarser
+// than full resolution, cost a few dozen regions' members instead of an
+// entry each. Holding, releasing and asking about one holder cost a
+// bounded number of probes however many hold the chunk (a crowd: every
+// client), not a scan of them; probes() counts them all, so the bound is
+// testable.
 // Thread-safety: none; the world strand owns it.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
-#include <span>
+#include <memory>
 
 #include "common/voxel/vec3.h"
 #include "common/voxel/vec3_map.h"
-#include "server/world/holder_set.h"
+#include "common/world/coarse_image.h"
+#include "server/world/region_holders.h"
 
 namespace terrane {
 
@@ -29,51 +34,50 @@ class InterestIndex {
   using Holder = ChunkHolder;
 
   // Adds the holder, or updates whether it holds at full resolution.
-  void hold(Vec3i chunk_pos, ClientId id, bool full) {
-    HolderSet& s = map_[chunk_pos];
-    const std::size_t before = s.heap_bytes();
-    if (s.hold(id, full, probes_) == HolderSet::Held::kAdded) ++entries_;
-    heap_bytes_ += s.heap_bytes() - before;
+  void hold(Vec3i chunk_pos, ClientId id, bool full);
+  void release(Vec3i chunk_pos, ClientId id);
+  // fn(Holder) for each holder of the chunk, in no set order. fn must not
+  // change the index.
+  template <class Fn>
+  void for_each_holder(Vec3i chunk_pos, Fn&& fn) const {
+    if (const RegionHolders* r = region(chunk_pos)) r->for_each_holder(coarse_index(chunk_pos), fn);
   }
-  void release(Vec3i chunk_pos, ClientId id) {
-    auto it = map_.find(chunk_pos);
-    if (it == map_.end()) return;
-    HolderSet& s = it->second;
-    heap_bytes_ -= s.heap_bytes();
-    if (s.release(id, probes_)) --entries_;
-    if (s.empty())
-      map_.erase(it);
-    else
-      heap_bytes_ += s.heap_bytes();
-    // Nobody holds anything (the last client left): the table goes too.
-    if (map_.empty()) Vec3iMap<HolderSet>().swap(map_);
+  // How many hold the chunk.
+  std::size_t holder_count(Vec3i chunk_pos) const {
+    const RegionHolders* r = region(chunk_pos);
+    return r == nullptr ? 0 : r->holders(coarse_index(chunk_pos));
   }
-  // The holders of a chunk (empty if none); valid until the next change.
-  std::span<const Holder> holders(Vec3i chunk_pos) const {
-    auto it = map_.find(chunk_pos);
-    return it == map_.end() ? std::span<const Holder>{} : it->second.holders();
-  }
-  bool watched(Vec3i chunk_pos) const { return map_.count(chunk_pos) != 0; }
+  bool watched(Vec3i chunk_pos) const { return holder_count(chunk_pos) != 0; }
   bool holds(Vec3i chunk_pos, ClientId id) const {
-    auto it = map_.find(chunk_pos);
-    return it != map_.end() && it->second.contains(id, probes_);
+    const RegionHolders* r = region(chunk_pos);
+    return r != nullptr && r->holds(coarse_index(chunk_pos), id, probes_);
   }
   bool held_full(Vec3i chunk_pos) const {
-    auto it = map_.find(chunk_pos);
-    return it != map_.end() && it->second.full() > 0;
+    const RegionHolders* r = region(chunk_pos);
+    return r != nullptr && r->full(coarse_index(chunk_pos)) > 0;
   }
-  std::size_t chunks() const { return map_.size(); }
+  // Chunks with a holder, and (chunk, holder) pairs.
+  std::size_t chunks() const { return chunks_; }
   std::size_t entries() const { return entries_; }
+  // Regions with a holder, and (region, client) pairs.
+  std::size_t regions() const { return map_.size(); }
+  std::size_t members() const { return members_; }
   // Holders' ids compared so far by hold, release and holds (the cost
   // bound: a few per call, not the chunk's holders).
   std::uint64_t probes() const { return probes_; }
-  // The index's memory: its table of chunks and every chunk's holders.
+  // The index's memory: its table of regions, the regions and their
+  // members.
   std::size_t memory_bytes() const { return map_.table_bytes() + heap_bytes_; }
 
  private:
-  Vec3iMap<HolderSet> map_;
-  std::size_t entries_ = 0;
-  std::size_t heap_bytes_ = 0;  // the HolderSets' own (heap_bytes)
+  const RegionHolders* region(Vec3i chunk_pos) const {
+    auto it = map_.find(coarse_region_of(chunk_pos));
+    return it == map_.end() ? nullptr : it->second.get();
+  }
+
+  Vec3iMap<std::unique_ptr<RegionHolders>> map_;  // by coarse_region_of
+  std::size_t chunks_ = 0, entries_ = 0, members_ = 0;
+  std::size_t heap_bytes_ = 0;  // the regions' own and their heap_bytes
   mutable std::uint64_t probes_ = 0;
 };
 
