@@ -33,7 +33,6 @@ Session::Session(asio::ip::tcp::socket socket, std::uint64_t id, const SessionLi
       on_closed_(std::move(on_closed)),
       on_drained_(std::move(on_drained)),
       reader_(limits.max_frame_bytes),
-      read_buf_(kReadChunkBytes),
       inbound_(limits.inbound_bytes_per_second, limits.inbound_burst_bytes) {
   asio::error_code ec;
   const auto ep = socket_.remote_endpoint(ec);
@@ -47,6 +46,9 @@ void Session::start() {
     self->socket_.set_option(asio::ip::tcp::no_delay(true), ec);
     if (self->limits_.socket_send_buffer_bytes > 0)
       self->socket_.set_option(asio::socket_base::send_buffer_size(self->limits_.socket_send_buffer_bytes), ec);
+    // Reads do not block: do_read waits for the socket to be readable and
+    // reads what is there into its io thread's buffer.
+    self->socket_.non_blocking(true, ec);
     self->last_read_ = Clock::now();
     self->arm_watchdog();
     self->do_read();
@@ -107,50 +109,68 @@ void Session::arm_watchdog() {
   });
 }
 
+// One read buffer per io thread, not per session: a session's bytes are fed
+// to its FrameReader (which keeps only a partial frame) before the handler
+// returns, so a thousand sessions need not hold 64 KiB each.
+std::span<std::uint8_t> Session::read_buffer() {
+  thread_local std::vector<std::uint8_t> buf(kReadChunkBytes);
+  return buf;
+}
+
 void Session::do_read() {
-  socket_.async_read_some(
-      asio::buffer(read_buf_), [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
-        if (self->state_ == State::kClosed) return;
-        if (ec) {
-          if (self->state_ == State::kReading) {
-            self->close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
-            self->close_why_ = close_reason_of(ec);
-          }
-          self->finish_close();
-          return;
-        }
-        if (self->state_ != State::kReading) {
-          self->do_read();  // closing: discard input until EOF or the linger deadline
-          return;
-        }
-        self->last_read_ = Clock::now();
-        self->bytes_received_.fetch_add(n, std::memory_order_relaxed);
-        if (!self->inbound_.take(static_cast<double>(n), self->last_read_)) {
-          violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
-                            "): inbound rate limit; dropping");
-          self->begin_close(CloseReason::kInboundRate, "inbound rate limit: over " +
-                            std::to_string(static_cast<long long>(self->limits_.inbound_bytes_per_second)) +
-                            " bytes/s");
-          self->do_read();
-          return;
-        }
-        const auto st = self->reader_.feed(std::span<const std::uint8_t>(self->read_buf_.data(), n),
-                                           [&](std::span<const std::uint8_t> body) {
-                                             if (self->state_ == State::kReading) self->on_frame(body);
-                                           });
-        if (self->reader_.buffered() == 0) {
-          self->partial_frame_ = false;
-        } else if (!self->partial_frame_) {
-          self->partial_frame_ = true;
-          self->frame_started_ = self->last_read_;
-        }
-        if (!st) {
-          violations().warn("session " + std::to_string(self->id_) + " (" + self->remote_ +
-                            "): bad frame: " + st.error().describe());
-          self->begin_close(CloseReason::kProtocolError, std::string("protocol error: ") + st.error().detail);
-        }
-        self->do_read();
-      });
+  socket_.async_wait(asio::ip::tcp::socket::wait_read, [self = shared_from_this()](const asio::error_code& wait_ec) {
+    if (self->state_ == State::kClosed) return;
+    if (wait_ec) return self->read_failed(wait_ec);
+    // A few reads per wake, as long as bytes are there: what came while the
+    // last were handled is read without another wait, and a busy session
+    // still gives way to the others.
+    constexpr int kReadsPerWake = 4;
+    const std::span<std::uint8_t> buf = read_buffer();
+    for (int i = 0; i < kReadsPerWake; ++i) {
+      asio::error_code ec;
+      const std::size_t n = self->socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);
+      if (ec == asio::error::would_block || ec == asio::error::try_again) break;  // nothing more for now
+      if (ec) return self->read_failed(ec);
+      if (!self->on_bytes(buf.first(n))) break;
+      if (self->state_ == State::kClosed) return;
+    }
+    self->do_read();
+  });
+}
+
+void Session::read_failed(const asio::error_code& ec) {
+  if (state_ == State::kReading) {
+    close_reason_ = ec == asio::error::eof ? "peer closed" : ec.message();
+    close_why_ = close_reason_of(ec);
+  }
+  finish_close();
+}
+
+bool Session::on_bytes(std::span<const std::uint8_t> bytes) {
+  if (state_ != State::kReading) return true;  // closing: discard input until EOF or the linger deadline
+  last_read_ = Clock::now();
+  bytes_received_.fetch_add(bytes.size(), std::memory_order_relaxed);
+  if (!inbound_.take(static_cast<double>(bytes.size()), last_read_)) {
+    violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): inbound rate limit; dropping");
+    begin_close(CloseReason::kInboundRate, "inbound rate limit: over " +
+                std::to_string(static_cast<long long>(limits_.inbound_bytes_per_second)) + " bytes/s");
+    return false;
+  }
+  const auto st = reader_.feed(bytes, [&](std::span<const std::uint8_t> body) {
+    if (state_ == State::kReading) on_frame(body);
+  });
+  if (reader_.buffered() == 0) {
+    partial_frame_ = false;
+  } else if (!partial_frame_) {
+    partial_frame_ = true;
+    frame_started_ = last_read_;
+  }
+  if (!st) {
+    violations().warn("session " + std::to_string(id_) + " (" + remote_ + "): bad frame: " + st.error().describe());
+    begin_close(CloseReason::kProtocolError, std::string("protocol error: ") + st.error().detail);
+    return false;
+  }
+  return true;
 }
 
 void Session::on_frame(std::span<const std::uint8_t> body) {

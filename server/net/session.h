@@ -118,6 +118,10 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_frame(std::span<const std::uint8_t> body);
   void enqueue(OutFrame frame, SendClass cls);
   void do_write();
+  static std::span<std::uint8_t> read_buffer();
+  // Feeds bytes read to the frame reader; false once the session closes over them.
+  bool on_bytes(std::span<const std::uint8_t> bytes);
+  void read_failed(const asio::error_code& ec);
   void begin_close(CloseReason why, const std::string& text);
   void finish_close();
   // Moves this session's queued bytes and the server-wide total together.
@@ -139,7 +143,6 @@ class Session : public std::enable_shared_from_this<Session> {
   std::string close_reason_;
   CloseReason close_why_ = CloseReason::kPeerClosed;
   FrameReader reader_;
-  std::vector<std::uint8_t> read_buf_;
   std::deque<OutFrame> queue_;          // data
   std::deque<OutFrame> control_queue_;  // sent first
   std::vector<OutFrame> inflight_;
