@@ -29,16 +29,6 @@ std::string first_line(std::span<const std::uint8_t> bytes) {
 // frame's is freed once it is read (Connection::feed).
 constexpr std::size_t kKeptFrameBytes = 16 * 1024;
 
-// The socket is read into one buffer per thread, not per connection: a
-// process of many clients (terrane-bots) waits for readiness on each
-// socket and reads on a few io threads, and a 64 KiB buffer per
-// connection was a tenth of a bot's memory. The bytes read are consumed
-// (framed, or copied by the emulated link) before the handler returns.
-std::span<std::uint8_t> read_buffer() {
-  thread_local std::vector<std::uint8_t> buf(EmulatedLink::kReadChunkBytes);
-  return buf;
-}
-
 }  // namespace
 
 Connection::Connection(const ClientOptions& options, ConnectionHandler& handler)
@@ -401,7 +391,9 @@ void Connection::do_read() {
     // speculative read does), and a busy connection still gives way to
     // the others.
     constexpr int kReadsPerWake = 4;
-    const std::span<std::uint8_t> buf = read_buffer();
+    // Its io thread's buffer, not one per connection (a 64 KiB buffer per
+    // connection was a tenth of a bot's memory); the emulated link copies.
+    const std::span<std::uint8_t> buf = thread_read_buffer();
     for (int i = 0; i < kReadsPerWake; ++i) {
       asio::error_code ec;
       const std::size_t n = socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "client/client_options.h"
+#include "protocol/framing.h"
 
 namespace terrane {
 
@@ -28,7 +29,7 @@ class EmulatedLink {
  public:
   using Clock = std::chrono::steady_clock;
   // The socket is read this many bytes at a time.
-  static constexpr std::size_t kReadChunkBytes = 64 * 1024;
+  static constexpr std::size_t kReadChunkBytes = kSocketReadBytes;
 
   explicit EmulatedLink(NetworkEmulation e) : e_(e) {}
 

@@ -4,6 +4,11 @@
 
 namespace terrane {
 
+std::span<std::uint8_t> thread_read_buffer() {
+  thread_local std::vector<std::uint8_t> buf(kSocketReadBytes);
+  return buf;
+}
+
 namespace {
 // Messages are flat: Message -> Body table -> at most a vector of tables
 // (Presence). Depth 8 and 4096 tables leave room and stop pathological nesting.

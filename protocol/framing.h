@@ -25,6 +25,15 @@ inline constexpr std::size_t kFrameHeaderBytes = 4;
 // worst-case 16³ unit (NET_CODEC.md) plus message overhead fits many times.
 inline constexpr std::size_t kDefaultMaxFrameBytes = 1 << 20;
 
+// A socket is read at most this many bytes at a time.
+inline constexpr std::size_t kSocketReadBytes = 64 * 1024;
+// The calling thread's buffer for socket reads (kSocketReadBytes), one per
+// thread, not per connection: a process of many connections (a server, or
+// terrane-bots) waits for readiness on each socket and reads on a few io
+// threads. The bytes read must be consumed (framed by a FrameReader, which
+// keeps only a partial frame, or copied) before the reading handler returns.
+std::span<std::uint8_t> thread_read_buffer();
+
 // Appends header + body to out. Precondition: body.size() <= UINT32_MAX.
 void append_frame(std::span<const std::uint8_t> body, std::vector<std::uint8_t>& out);
 

@@ -5,8 +5,6 @@
 namespace terrane {
 
 namespace {
-// One read fills at most this much; the FrameReader bounds what is kept.
-constexpr std::size_t kReadChunkBytes = 64 * 1024;
 // A write gathers queued frames up to about this many bytes.
 constexpr std::size_t kWriteGatherBytes = 256 * 1024;
 // How often the watchdog checks the read/write deadlines.
@@ -109,14 +107,6 @@ void Session::arm_watchdog() {
   });
 }
 
-// One read buffer per io thread, not per session: a session's bytes are fed
-// to its FrameReader (which keeps only a partial frame) before the handler
-// returns, so a thousand sessions need not hold 64 KiB each.
-std::span<std::uint8_t> Session::read_buffer() {
-  thread_local std::vector<std::uint8_t> buf(kReadChunkBytes);
-  return buf;
-}
-
 void Session::do_read() {
   socket_.async_wait(asio::ip::tcp::socket::wait_read, [self = shared_from_this()](const asio::error_code& wait_ec) {
     if (self->state_ == State::kClosed) return;
@@ -125,7 +115,7 @@ void Session::do_read() {
     // last were handled is read without another wait, and a busy session
     // still gives way to the others.
     constexpr int kReadsPerWake = 4;
-    const std::span<std::uint8_t> buf = read_buffer();
+    const std::span<std::uint8_t> buf = thread_read_buffer();  // its io thread's, not a buffer per session
     for (int i = 0; i < kReadsPerWake; ++i) {
       asio::error_code ec;
       const std::size_t n = self->socket_.read_some(asio::buffer(buf.data(), buf.size()), ec);

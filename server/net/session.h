@@ -118,7 +118,6 @@ class Session : public std::enable_shared_from_this<Session> {
   void on_frame(std::span<const std::uint8_t> body);
   void enqueue(OutFrame frame, SendClass cls);
   void do_write();
-  static std::span<std::uint8_t> read_buffer();
   // Feeds bytes read to the frame reader; false once the session closes over them.
   bool on_bytes(std::span<const std::uint8_t> bytes);
   void read_failed(const asio::error_code& ec);
