@@ -211,6 +211,77 @@ void Chunk::compact() {
   pack_mips();
 }
 
+void Chunk::write_image(std::vector<std::uint8_t>& out) const {
+  if (level0_.unpacked()) {
+    Chunk packed = clone();
+    packed.compact();
+    packed.write_image(out);
+    return;
+  }
+  level0_.write_image(out);
+  if (level0_.is_uniform()) return;
+  const auto unit = [&](std::span<const std::uint8_t> bytes) {
+    out.push_back(static_cast<std::uint8_t>(bytes.size() & 0xFF));
+    out.push_back(static_cast<std::uint8_t>(bytes.size() >> 8));
+    out.insert(out.end(), bytes.begin(), bytes.end());
+  };
+  if (!dense_) {
+    for (int level = 1; level < kMipLevels; ++level) unit(mip_unit(level));
+    return;
+  }
+  thread_local std::vector<std::uint8_t> encoded;
+  for (int level = 1; level < kMipLevels; ++level) {
+    encoded.clear();
+    net_codec_encode(kChunkSize >> level, dense_->levels[level - 1].voxels(), encoded);
+    unit(encoded);
+  }
+}
+
+Result<Chunk> Chunk::read_image(std::span<const std::uint8_t> in, std::size_t& pos) {
+  auto level0 = Level0::read_image(in, pos);
+  if (!level0) return level0.error();
+  Chunk c;
+  c.level0_ = std::move(*level0);
+  if (c.level0_.is_uniform()) {
+    c.mip_fill_ = c.level0_.uniform_material();
+    c.empty_ = c.mip_fill_ == kAir;
+    return c;
+  }
+  std::array<std::size_t, kMipLevels> begin{};
+  std::size_t at = pos;
+  for (int level = 1; level < kMipLevels; ++level) {
+    if (in.size() - at < 2) return DecodeError{DecodeErrorCode::kTruncated, at, "chunk image: mip unit length"};
+    const std::size_t n = in[at] | (std::size_t{in[at + 1]} << 8);
+    at += 2;
+    if (in.size() - at < n) return DecodeError{DecodeErrorCode::kTruncated, at, "chunk image: mip unit"};
+    begin[static_cast<std::size_t>(level)] = at;
+    at += n;
+    const std::size_t total = at - begin[1] - 2 * static_cast<std::size_t>(level - 1);
+    if (total > 0xFFFF) return DecodeError{DecodeErrorCode::kOverLimit, at, "chunk image: mip units"};
+    c.mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(total);
+  }
+  const std::size_t bytes = c.mip_end_[kMipLevels - 1];
+  c.mips_ = std::make_unique<std::uint8_t[]>(bytes);
+  thread_local Box level_box;
+  for (int level = 1; level < kMipLevels; ++level) {
+    const std::size_t from = level == 1 ? 0 : c.mip_end_[static_cast<std::size_t>(level - 1)];
+    const std::size_t n = c.mip_end_[static_cast<std::size_t>(level)] - from;
+    const std::span<const std::uint8_t> unit = in.subspan(begin[static_cast<std::size_t>(level)], n);
+    const int side = kChunkSize >> level;
+    level_box.resize({side, side, side});
+    if (const Status s = net_codec_decode(side, unit, level_box.voxels()); !s) {
+      DecodeError e = s.error();
+      e.offset += begin[static_cast<std::size_t>(level)];
+      return e;
+    }
+    std::memcpy(c.mips_.get() + from, unit.data(), n);
+  }
+  c.empty_ = all_air(level_box.voxels());  // (level 3, the last decoded)
+  c.mip_fill_ = kAir;
+  pos = at;
+  return c;
+}
+
 ChunkMemory Chunk::memory() const {
   ChunkMemory m;
   m.object_bytes = sizeof(Chunk);

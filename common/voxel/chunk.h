@@ -26,6 +26,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "common/voxel/box.h"
 #include "common/voxel/row_packed_box.h"
@@ -143,6 +144,16 @@ class Chunk {
   // Repacks level 0 (leaving unpacked mode) and packs the mips: call after
   // write-heavy phases.
   void compact();
+
+  // The chunk as it is in memory (WORLD_FORMAT.md, "Chunk image"), appended
+  // to out: level 0's image (RowPackedBox::write_image), then, unless level
+  // 0 is uniform, the three mip units, each after its length (u16 LE).
+  // Unpacked storage is packed in a copy first.
+  void write_image(std::vector<std::uint8_t>& out) const;
+  // Reads an image from in at pos and advances pos past it: level 0 checked
+  // as read_image checks it, each mip unit decoded once to check it. A
+  // damaged image is an error, never a chunk that reads out of bounds.
+  static Result<Chunk> read_image(std::span<const std::uint8_t> in, std::size_t& pos);
 
   ChunkMemory memory() const;
   RowPackedStats level0_stats() const { return level0_.stats(); }

@@ -235,6 +235,91 @@ int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n) {
   return static_cast<int>(end - rec);
 }
 
+namespace {
+// Whether the palette at pal (P - 1, then P materials) within avail bytes
+// holds 1..16 materials below 64 in ascending order.
+bool checked_palette(const std::uint8_t* pal, std::size_t avail) {
+  if (avail < 1) return false;
+  const int p = pal[0] + 1;
+  if (p > kMaxPalette || avail < std::size_t(1 + p)) return false;
+  for (int i = 1; i <= p; ++i)
+    if (pal[i] >= kMaterialCount || (i > 1 && pal[i] <= pal[i - 1])) return false;
+  return true;
+}
+}  // namespace
+
+int checked_table_bytes(const std::uint8_t* data, std::size_t d) {
+  if (d < 1) return -1;
+  const int t = data[0];
+  if (t > kMaxTablePalettes || d < std::size_t(1 + t)) return -1;
+  std::size_t end = 1 + static_cast<std::size_t>(t);
+  for (int id = 0; id < t; ++id) {
+    const std::size_t limit = std::min(d, std::size_t{kMaxTableBytes});
+    if (end >= limit || data[1 + id] != end || !checked_palette(data + end, limit - end)) return -1;
+    end += 1 + std::size_t{data[end]} + 1;
+  }
+  // As PaletteTable adopts it: every palette fits at its turn.
+  if (PaletteTable(data).size() != t) return -1;
+  return static_cast<int>(end);
+}
+
+int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::uint8_t* table, int n) {
+  if (avail < 1) return -1;
+  const unsigned tag = rec[0];
+  if (tag < kKindIndex) {
+    if (avail < std::size_t(2 * n)) return -1;
+    for (int x = 0; x < n; ++x)
+      if (rec[2 * x] >= kMaterialCount || (rec[2 * x] == kAir && rec[2 * x + 1] != 0)) return -1;
+    return 2 * n;
+  }
+  if ((tag & kKindMask) == kKindMask) return -1;
+  const bool runs = (tag & kKindMask) == kKindRuns;
+  std::size_t pos = 1;
+  const std::uint8_t* pal;
+  if ((tag & kPaletteMask) == kInlinePalette) {
+    if (!checked_palette(rec + 1, avail - 1)) return -1;
+    pal = rec + 1;
+    pos = 2 + std::size_t{rec[1]} + 1;
+  } else {
+    if (table == nullptr || (tag & kPaletteMask) >= table[0]) return -1;
+    pal = table + table[1 + (tag & kPaletteMask)];
+  }
+  const int p = pal[0] + 1;
+  const std::uint8_t* body = rec + pos;
+  if (runs) {
+    if (p > kMaxRunPalette || avail < pos + 1) return -1;
+    const int r = run_count(body);
+    if (r > n || avail < pos + std::size_t(r)) return -1;
+    int last = 0;
+    for (int i = 0; i < r; ++i) {
+      if ((body[i] >> 5) >= p) return -1;
+      if (i == 0) continue;
+      const int start = body[i] & 31;
+      if (start <= last || start >= n) return -1;
+      last = start;
+    }
+    pos += static_cast<std::size_t>(r);
+  } else {
+    const RecordParts parts = parts_of(rec, table, n);
+    if (avail < pos + std::size_t(parts.groups)) return -1;
+    for (int x = 0; x < n; ++x)
+      if (index_at(parts, x) >= p) return -1;
+    pos += static_cast<std::size_t>(parts.groups);
+  }
+  if (tag & kTagOccupancy) {
+    if (avail < pos + std::size_t(bitmap_bytes(n))) return -1;
+    const int bytes = occupancy_bytes(rec + pos, n);
+    if (avail < pos + std::size_t(bytes)) return -1;
+    pos += static_cast<std::size_t>(bytes);
+  }
+  // Air only at occupancy 0.
+  Voxel row[kMaxRow];
+  decode_record_scalar(rec, table, row, n);
+  for (int x = 0; x < n; ++x)
+    if (row[x].material == kAir && row[x].occupancy != 0) return -1;
+  return static_cast<int>(pos);
+}
+
 void decode_record_scalar(const std::uint8_t* rec, const std::uint8_t* table, Voxel* out, int n) {
   const RecordParts p = parts_of(rec, table, n);
   if (p.runs) {

@@ -108,8 +108,11 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <span>
 #include <utility>
+#include <vector>
 
+#include "common/codec/decode_error.h"
 #include "common/voxel/voxel.h"
 
 #if defined(__SSE2__)
@@ -173,6 +176,18 @@ inline unsigned run_index_at(const std::uint8_t* body, int x) {
 // Bytes of the record starting at rec. Precondition: a valid record for n
 // whose table palettes are in `table`.
 int record_bytes(const std::uint8_t* rec, const std::uint8_t* table, int n);
+
+// For bytes that are not trusted (a stored image, see RowPackedBox::
+// read_image): the bytes of the record at rec if it is a valid record of n
+// voxels within avail bytes, naming only palettes of `table` (a table that
+// passed checked_table_bytes, or null) and holding no Air voxel of non-zero
+// occupancy; else -1. Reads nothing beyond rec + avail.
+int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::uint8_t* table, int n);
+// The bytes of the palette table at the front of d bytes of box data if it
+// is valid and laid out as PaletteTable::write lays it out (palettes back to
+// back, each of 1..16 materials below 64 in ascending order, within 255
+// bytes); else -1.
+int checked_table_bytes(const std::uint8_t* data, std::size_t d);
 
 // A box's palette table while rows are encoded: lookup by material set.
 class PaletteTable {
@@ -533,6 +548,20 @@ class RowPackedBox {
   // the records pass 32 KiB, beyond 15-bit byte offsets: such a box, more
   // than half raw rows, stays unpacked).
   void compact();
+
+  // The box as it is in memory, for a store that loads boxes without
+  // encoding them again (WORLD_FORMAT.md, "Chunk image"), appended to out:
+  //   uniform box:  0 | material
+  //   packed box:   1 | layer map (N bytes) | its slots' words (u16 LE) |
+  //                 D (u16 LE) | D bytes of data (table, records; no padding)
+  // Precondition: !unpacked().
+  void write_image(std::vector<std::uint8_t>& out) const;
+  // Reads an image from in at pos and advances pos past it. Every invariant
+  // above is checked (layer map and slots in order, every row's record valid
+  // and inside the data, the table as PaletteTable writes it, a packed box
+  // not all one material): a damaged image is an error, never a box that
+  // reads out of bounds. Records the image shares stay shared.
+  static Result<RowPackedBox> read_image(std::span<const std::uint8_t> in, std::size_t& pos);
 
   // The first byte of row (y, z)'s record (its kind and palette), or -1 for
   // a uniform row.

@@ -457,6 +457,127 @@ void RowPackedBox<N>::compact() {
 }
 
 template <int N>
+void RowPackedBox<N>::write_image(std::vector<std::uint8_t>& out) const {
+  if (!owns_headers_) {
+    out.push_back(0);
+    out.push_back(static_cast<std::uint8_t>(uniform_material()));
+    return;
+  }
+  out.push_back(1);
+  const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
+  out.insert(out.end(), map, map + N);
+  for (std::size_t i = N / 2; i < header_words(); ++i) {
+    out.push_back(static_cast<std::uint8_t>(headers_[i] & 0xFF));
+    out.push_back(static_cast<std::uint8_t>(headers_[i] >> 8));
+  }
+  const std::uint32_t d = data_bytes_ > 0 ? data_bytes_ - kPadBytes : 0;
+  out.push_back(static_cast<std::uint8_t>(d & 0xFF));
+  out.push_back(static_cast<std::uint8_t>(d >> 8));
+  if (d > 0) out.insert(out.end(), data_.get(), data_.get() + d);
+}
+
+template <int N>
+Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t> in, std::size_t& pos) {
+  using row_packed_detail::checked_record_bytes;
+  using row_packed_detail::checked_table_bytes;
+  constexpr auto kTruncated = DecodeErrorCode::kTruncated;
+  constexpr auto kInvalid = DecodeErrorCode::kInvalidValue;
+  if (pos >= in.size()) return DecodeError{kTruncated, pos, "row-packed image: form"};
+  const std::uint8_t form = in[pos];
+  if (form == 0) {
+    if (pos + 2 > in.size()) return DecodeError{kTruncated, pos + 1, "row-packed image: uniform material"};
+    if (in[pos + 1] >= kMaterialCount) return DecodeError{kInvalid, pos + 1, "row-packed image: material above 63"};
+    const auto m = static_cast<Material>(in[pos + 1]);
+    pos += 2;
+    return RowPackedBox(m);
+  }
+  if (form != 1) return DecodeError{kInvalid, pos, "row-packed image: form not 0 or 1"};
+  std::size_t at = pos + 1;
+  if (in.size() - at < std::size_t{N}) return DecodeError{kTruncated, at, "row-packed image: layer map"};
+  const std::uint8_t* map = in.data() + at;
+  int units = 0;
+  bool one_material = true;
+  for (int y = 0; y < N; ++y) {
+    const std::uint8_t b = map[y];
+    if (b & 0x80) {
+      if (b & 0x40) return DecodeError{kInvalid, at + y, "row-packed image: uniform layer byte above 0xBF"};
+      one_material &= b == map[0];
+      continue;
+    }
+    one_material = false;
+    if ((b & 63) != units) return DecodeError{kInvalid, at + y, "row-packed image: layer slots out of order"};
+    units += (b & kWideLayer) ? 2 : 1;
+  }
+  if (one_material) return DecodeError{kInvalid, at, "row-packed image: a packed box of one material"};
+  at += N;
+  const std::size_t slot_words = static_cast<std::size_t>(units) * kUnitWords;
+  if (in.size() - at < 2 * slot_words) return DecodeError{kTruncated, at, "row-packed image: layer slots"};
+  auto owned = std::make_unique<std::uint16_t[]>(N / 2 + slot_words);
+  std::memcpy(owned.get(), map, N);
+  for (std::size_t i = 0; i < slot_words; ++i)
+    owned[N / 2 + i] = static_cast<std::uint16_t>(in[at + 2 * i] | (in[at + 2 * i + 1] << 8));
+  at += 2 * slot_words;
+  if (in.size() - at < 2) return DecodeError{kTruncated, at, "row-packed image: data length"};
+  const std::size_t d = in[at] | (std::size_t{in[at + 1]} << 8);
+  if (d > std::size_t{kOffsetMask} + 2 * N) return DecodeError{DecodeErrorCode::kOverLimit, at, "row-packed image: data length"};
+  at += 2;
+  if (in.size() - at < d) return DecodeError{kTruncated, at, "row-packed image: data"};
+  const std::uint8_t* data = in.data() + at;
+  int table_bytes = 0;
+  if (d > 0 && (table_bytes = checked_table_bytes(data, d)) < 0)
+    return DecodeError{kInvalid, at, "row-packed image: palette table"};
+
+  RowPackedBox box(kAir);
+  box.owned_headers_ = std::move(owned);
+  box.headers_ = box.owned_headers_.get();
+  box.owns_headers_ = true;
+  if (d > 0) {
+    box.data_bytes_ = static_cast<std::uint32_t>(d) + kPadBytes;
+    box.data_ = std::make_unique<std::uint8_t[]>(box.data_bytes_);  // value-initialised: padding is zero
+    std::memcpy(box.data_.get(), data, d);
+  }
+  // Every row's header, and each record its rows start (once, however many
+  // rows share it).
+  thread_local std::vector<std::uint8_t> checked;
+  checked.assign(d, 0);
+  bool any_record = false;
+  for (int y = 0; y < N; ++y) {
+    if (map[y] & 0x80) continue;
+    const std::uint16_t* slot = box.headers_ + N / 2 + (map[y] & 63) * kUnitWords;
+    const bool wide = map[y] & kWideLayer;
+    const std::size_t slot_at = pos + 1 + N + 2 * static_cast<std::size_t>((map[y] & 63) * kUnitWords);
+    const std::uint16_t first = box.header(y, 0);
+    bool alike = true;
+    for (int z = 0; z < N; ++z) {
+      if (wide) {
+        if (!(slot[z] & kAllocated) && slot[z] >= kMaterialCount)
+          return DecodeError{kInvalid, slot_at + 2 * z, "row-packed image: uniform row above material 63"};
+      } else {
+        const unsigned b = reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
+        if (b < kNarrowUniform && slot[z / (N / 2)] + b > kOffsetMask)
+          return DecodeError{kInvalid, slot_at, "row-packed image: narrow layer offset beyond 15 bits"};
+      }
+      const std::uint16_t h = box.header(y, z);
+      alike &= h == first;
+      if (!(h & kAllocated)) continue;
+      any_record = true;
+      const std::size_t off = h & kOffsetMask;
+      if (off < static_cast<std::size_t>(table_bytes) || off >= d)
+        return DecodeError{kInvalid, slot_at, "row-packed image: row record outside the data"};
+      if (checked[off]) continue;
+      if (checked_record_bytes(data + off, d - off, data, N) < 0)
+        return DecodeError{kInvalid, at + off, "row-packed image: row record"};
+      checked[off] = 1;
+    }
+    if (alike && !(first & kAllocated))
+      return DecodeError{kInvalid, slot_at, "row-packed image: a layer slot whose rows are alike"};
+  }
+  if (d > 0 && !any_record) return DecodeError{kInvalid, at, "row-packed image: data without records"};
+  pos = at + d;
+  return box;
+}
+
+template <int N>
 std::size_t RowPackedBox<N>::heap_bytes() const {
   return (owns_headers_ ? sizeof(std::uint16_t) * header_words() : 0) + std::size_t{data_bytes_};
 }

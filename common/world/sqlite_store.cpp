@@ -121,49 +121,56 @@ FileResult<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& di
   if (auto s = store->load_meta(); !s) return s.error();
   if (auto s = store->quarantine_.ensure_table(); !s) return s.error();
   if (store->meta_.format_version < kWorldFormatVersion)
-    if (auto s = store->upgrade_to_coarse(progress); !s) return s.error();
+    if (auto s = store->upgrade(progress); !s) return s.error();
   return store;
 }
 
-FileStatus SqliteStore::upgrade_to_coarse(const Progress& progress) {
-  auto total = stored_chunk_count();
-  if (!total) return total.error();
-  const auto start = std::chrono::steady_clock::now();
-  auto last = start;
-  const auto report = [&](std::int64_t done, bool final) {
-    if (progress) return progress(done, *total);
-    const auto now = std::chrono::steady_clock::now();
-    if (!final && now - last < std::chrono::seconds(2)) return;
-    last = now;
-    std::fprintf(stderr, "world %s: building coarse images (format 2): %lld/%lld chunks\n", dir_.c_str(),
-                 static_cast<long long>(done), static_cast<long long>(*total));
-  };
+FileStatus SqliteStore::upgrade(const Progress& progress) {
+  const std::string current = std::to_string(kWorldFormatVersion);
   SqliteTransaction tx(db());
-  if (!tx.began()) return error("cannot begin the upgrade to format 2");
+  if (!tx.began()) return error("cannot begin the upgrade to format " + current);
   // Another process may have upgraded it while this one waited for the lock.
+  std::string stored;
   {
     sqlite3_stmt* v = nullptr;
-    bool done_already = false;
     if (sqlite3_prepare_v2(db(), "SELECT value FROM meta WHERE key = 'format_version'", -1, &v, nullptr) == SQLITE_OK &&
         sqlite3_step(v) == SQLITE_ROW)
-      done_already = sqlite_column_string(v, 0) == "2";
+      stored = sqlite_column_string(v, 0);
     sqlite3_finalize(v);
-    if (done_already) {
-      tx.commit();
-      meta_.format_version = kWorldFormatVersion;
-      return Ok{};
-    }
   }
-  std::int64_t done = 0;
-  auto built = coarse_.rebuild([this](const SqliteCoarseImages::ChunkRowFn& fn) { return for_each_chunk(fn); },
-                               [&] { report(++done, false); });
-  if (!built) return built.error();
-  if (sqlite3_exec(db(), "INSERT OR REPLACE INTO meta(key, value) VALUES('format_version', '2')", nullptr, nullptr,
-                   nullptr) != SQLITE_OK)
-    return error("cannot record format 2");
-  if (!tx.commit()) return error("cannot commit the upgrade to format 2");
+  if (stored == current) {
+    tx.commit();
+    meta_.format_version = kWorldFormatVersion;
+    return Ok{};
+  }
+  // Format 1 -> 2: the coarse images, built from every chunk.
+  if (stored == "1") {
+    auto total = stored_chunk_count();
+    if (!total) return total.error();
+    auto last = std::chrono::steady_clock::now();
+    const auto report = [&](std::int64_t done, bool final) {
+      if (progress) return progress(done, *total);
+      const auto now = std::chrono::steady_clock::now();
+      if (!final && now - last < std::chrono::seconds(2)) return;
+      last = now;
+      std::fprintf(stderr, "world %s: building coarse images (format 2): %lld/%lld chunks\n", dir_.c_str(),
+                   static_cast<long long>(done), static_cast<long long>(*total));
+    };
+    std::int64_t done = 0;
+    auto built = coarse_.rebuild([this](const SqliteCoarseImages::ChunkRowFn& fn) { return for_each_chunk(fn); },
+                                 [&] { report(++done, false); });
+    if (!built) return built.error();
+    report(done, true);
+  }
+  // Format 2 -> 3: chunk blobs of codec 2 (chunk images) are written from
+  // now on; the stored codec-1 blobs stay and are read as they are, so this
+  // is the version alone. A reader of format 2 refuses the world from here
+  // on, so it never meets a blob it cannot read.
+  const std::string set = "INSERT OR REPLACE INTO meta(key, value) VALUES('format_version', '" + current + "')";
+  if (sqlite3_exec(db(), set.c_str(), nullptr, nullptr, nullptr) != SQLITE_OK)
+    return error("cannot record format " + current);
+  if (!tx.commit()) return error("cannot commit the upgrade to format " + current);
   meta_.format_version = kWorldFormatVersion;
-  report(done, true);
   return Ok{};
 }
 

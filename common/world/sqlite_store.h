@@ -139,7 +139,9 @@ class SqliteStore final : public WorldStore {
   SqliteStore(std::string dir, sqlite3* db);
   static FileResult<std::unique_ptr<SqliteStore>> create_in(const std::string& dir, const WorldMeta& meta);
   FileStatus load_meta();
-  FileStatus upgrade_to_coarse(const Progress& progress);
+  // Brings an older world to kWorldFormatVersion in one transaction (format 1
+  // gains the coarse images; format 2 only its version: WORLD_FORMAT.md).
+  FileStatus upgrade(const Progress& progress);
   FileStatus write_meta(const WorldMeta& meta);
   FileError error(const std::string& what) const;
   sqlite3* db() const { return db_.get(); }

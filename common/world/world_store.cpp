@@ -9,12 +9,19 @@
 #include "common/cli/cli.h"
 #include "common/codec/lz4_block.h"
 
+#include <zlib.h>
+
 namespace terrane {
 
 namespace {
 
 constexpr std::uint8_t kBlobVersion = 1;
 constexpr std::uint8_t kBlobCodecByteRleLz4 = 1;
+constexpr std::uint8_t kBlobCodecImageLz4 = 2;
+// The largest chunk image: level 0 (form, map, 64 slot units of 18 words,
+// length, at most 0x7FFF + 64 bytes of data) and three mip units of at
+// most 0xFFFF bytes in all, with their lengths.
+constexpr std::size_t kMaxChunkImageBytes = 1 + 32 + 64 * 18 * 2 + 2 + 0x7FFF + 64 + 6 + 0xFFFF;
 constexpr int kChunkVoxels = kChunkSize * kChunkSize * kChunkSize;
 
 std::string join_lines(const std::vector<std::string>& v) {
@@ -46,12 +53,20 @@ std::vector<std::string> default_material_names() {
 }
 
 std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk) {
-  Box box;
-  chunk.read_level(0, box);
-  return encode_chunk_blob(box);
+  thread_local std::vector<std::uint8_t> image;
+  image.clear();
+  chunk.write_image(image);
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(image.size())));
+  std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecImageLz4, static_cast<std::uint8_t>(crc & 0xFF),
+                                static_cast<std::uint8_t>((crc >> 8) & 0xFF), static_cast<std::uint8_t>((crc >> 16) & 0xFF),
+                                static_cast<std::uint8_t>(crc >> 24)};
+  lz4_compress(image, out);
+  return out;
 }
 
-std::vector<std::uint8_t> encode_chunk_blob(const Box& box) {
+std::vector<std::uint8_t> encode_chunk_blob(const Box& box) { return encode_chunk_blob(Chunk::from_box(box)); }
+
+std::vector<std::uint8_t> encode_chunk_blob_byte_rle(const Box& box) {
   std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecByteRleLz4};
   byte_rle_lz4_encode(box.voxels(), out);
   return out;
@@ -60,8 +75,29 @@ std::vector<std::uint8_t> encode_chunk_blob(const Box& box) {
 Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob) {
   if (blob.size() < 2) return DecodeError{DecodeErrorCode::kTruncated, blob.size(), "chunk blob header"};
   if (blob[0] != kBlobVersion) return DecodeError{DecodeErrorCode::kBadVersion, 0, "chunk blob version"};
+  if (blob[1] == kBlobCodecImageLz4) {
+    if (blob.size() < 6) return DecodeError{DecodeErrorCode::kTruncated, blob.size(), "chunk blob checksum"};
+    thread_local std::vector<std::uint8_t> image(kMaxChunkImageBytes);
+    auto n = lz4_decompress_into(blob.subspan(6), image);
+    if (!n) {
+      DecodeError e = n.error();
+      e.offset += 6;
+      return e;
+    }
+    const std::uint32_t want = blob[2] | (std::uint32_t{blob[3]} << 8) | (std::uint32_t{blob[4]} << 16) |
+                               (std::uint32_t{blob[5]} << 24);
+    if (static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(*n))) != want)
+      return DecodeError{DecodeErrorCode::kInvalidValue, 2, "chunk blob checksum does not match its image"};
+    std::size_t pos = 0;
+    const std::span<const std::uint8_t> bytes(image.data(), *n);
+    auto chunk = Chunk::read_image(bytes, pos);
+    // (Offsets inside the image are offsets into the decompressed bytes.)
+    if (!chunk) return chunk.error();
+    if (pos != *n) return DecodeError{DecodeErrorCode::kInvalidValue, pos, "chunk blob: bytes after the image"};
+    return chunk;
+  }
   if (blob[1] != kBlobCodecByteRleLz4) return DecodeError{DecodeErrorCode::kInvalidValue, 1, "chunk blob codec"};
-  Box box({kChunkSize, kChunkSize, kChunkSize});
+  thread_local Box box({kChunkSize, kChunkSize, kChunkSize});
   const Status s = byte_rle_lz4_decode(blob.subspan(2), box.voxels());
   if (!s) {
     DecodeError e = s.error();

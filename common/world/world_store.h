@@ -40,8 +40,11 @@
 namespace terrane {
 
 // Format 2 added the coarse images (SqliteStore: a format-1 world gains
-// them, and becomes format 2, the first time it is opened).
-inline constexpr std::uint32_t kWorldFormatVersion = 2;
+// them the first time it is opened); format 3 added chunk blobs of codec 2
+// (chunk images, below), which a format-2 reader cannot read: an older world
+// becomes format 3 the first time it is opened (PostgreSQL: by the first
+// server or tool that opens it), its codec-1 blobs kept as they are.
+inline constexpr std::uint32_t kWorldFormatVersion = 3;
 
 enum class GeneratorKind : std::uint8_t {
   kNone,     // nothing outside stored chunks (e.g. imported worlds)
@@ -66,11 +69,20 @@ struct WorldMeta {
 // The default material table, with generic names for ids the table lacks.
 std::vector<std::string> default_material_names();
 
-// Chunk blob (version 1): [version u8 = 1][codec u8 = 1: byte RLE + LZ4]
-// [LZ4 block of the byte RLE of the 32³ voxels in Box order].
+// Chunk blob (WORLD_FORMAT.md, "Chunk blobs"), version 1, written as codec 2:
+//   [version u8 = 1][codec u8 = 2][CRC-32 of the image, u32 LE]
+//   [LZ4 block of the chunk's image (Chunk::write_image)]
+// so a load copies the chunk's row-packed level 0 and its mip units as they
+// were in memory, checked, instead of packing 32³ voxels and building the
+// mips again. Codec 1, [version 1][codec 1][LZ4 block of the byte RLE of
+// the 32³ voxels in Box order], is still read (worlds written before
+// format 3 hold it).
 std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk);
 // The same from a 32³ box of voxels (precondition: box is 32³).
 std::vector<std::uint8_t> encode_chunk_blob(const Box& box);
+// Codec 1 of a 32³ box, as worlds before format 3 hold it (for tests and
+// tools that make such worlds).
+std::vector<std::uint8_t> encode_chunk_blob_byte_rle(const Box& box);
 Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob);
 
 struct StoredChunk {

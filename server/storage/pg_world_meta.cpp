@@ -29,6 +29,13 @@ StoreResult<Ok> PgWorldMeta::read(PgConnection& c) {
   if (!m) return StoreError{StoreError::Kind::kDecode, m.error().message};
   meta_ = std::move(*m);
   has_world_ = true;
+  if (meta_.format_version < kWorldFormatVersion) {
+    // Format 3 (world_store.h): this server writes chunk images, which a
+    // format-2 server cannot read, so the world says so before it writes.
+    if (auto st = put(c, {{"format_version", std::to_string(kWorldFormatVersion)}}); !st)
+      return StoreError{StoreError::Kind::kQuery, st.error().message};
+    meta_.format_version = kWorldFormatVersion;
+  }
   return Ok{};
 }
 

@@ -1,7 +1,8 @@
 // Storage benchmark: memory of the row-packed grid against the same content
 // unpacked, read_row and box reads over packed versus unpacked chunks (the
 // ratio is printed), writes (single voxel, box, repeated tiny writes), and
-// making chunks: from their voxels (packing and mips) and from stored blobs.
+// making chunks: from their voxels (packing and mips) and from stored blobs
+// of both codecs (common/world/WORLD_FORMAT.md).
 //
 // Memory counts every byte the grid holds: row headers, row data, mips,
 // Chunk objects and the hash map (nodes and buckets, through a counting
@@ -212,17 +213,24 @@ void BM_ChunkFromBox(benchmark::State& state, const std::string& name) {
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(d.unpacked.size()));
 }
 
-// A stored chunk's load: its blob (byte RLE + LZ4) decoded into a Chunk.
-void BM_DecodeChunkBlob(benchmark::State& state, const std::string& name) {
+// A stored chunk's load: its blob decoded into a Chunk, in codec 1 (byte
+// RLE + LZ4 of the voxels: packed and mips built on load) or codec 2 (the
+// chunk image: copied and checked). bytes_per_chunk: the blobs' mean size.
+void BM_DecodeChunkBlob(benchmark::State& state, const std::string& name, int codec) {
   Dataset& d = dataset(name);
   std::vector<std::vector<std::uint8_t>> blobs;
-  for (const Box& b : d.unpacked) blobs.push_back(encode_chunk_blob(b));
+  std::size_t bytes = 0;
+  for (const Box& b : d.unpacked) {
+    blobs.push_back(codec == 1 ? encode_chunk_blob_byte_rle(b) : encode_chunk_blob(Chunk::from_box(b)));
+    bytes += blobs.back().size();
+  }
   for (auto _ : state)
     for (const auto& blob : blobs) {
       auto c = decode_chunk_blob(blob);
       benchmark::DoNotOptimize(&c);
     }
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(blobs.size()));
+  state.counters["bytes_per_chunk"] = static_cast<double>(bytes) / static_cast<double>(blobs.size());
 }
 
 // Edit throughput: spheres of radius 1..3 (dig, or fill with sand) at random
@@ -286,8 +294,9 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark((std::string("BM_ReadRowUnpacked/") + name).c_str(), BM_ReadRowUnpacked, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ReadBox48/") + name).c_str(), BM_ReadBox, std::string(name));
     benchmark::RegisterBenchmark((std::string("BM_ChunkFromBox/") + name).c_str(), BM_ChunkFromBox, std::string(name));
-    benchmark::RegisterBenchmark((std::string("BM_DecodeChunkBlob/") + name).c_str(), BM_DecodeChunkBlob,
-                                 std::string(name));
+    for (int codec : {1, 2})
+      benchmark::RegisterBenchmark((std::string("BM_DecodeChunkBlob/codec") + std::to_string(codec) + "/" + name).c_str(),
+                                   BM_DecodeChunkBlob, std::string(name), codec);
     benchmark::RegisterBenchmark((std::string("BM_SphereEdits/") + name).c_str(), BM_SphereEdits, std::string(name));
   }
   benchmark::RegisterBenchmark("BM_WriteSingleVoxel", BM_WriteSingleVoxel);

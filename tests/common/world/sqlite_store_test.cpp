@@ -581,6 +581,89 @@ TEST_F(SqliteStoreTest, AFormatOneWorldGainsItsCoarseImagesWhenOpened) {
   EXPECT_FALSE(called);
 }
 
+TEST_F(SqliteStoreTest, AFormatTwoWorldKeepsItsCodecOneBlobsAndBecomesFormatThree) {
+  // A world as format 2 wrote it: codec-1 blobs (byte RLE + LZ4).
+  std::vector<Chunk> chunks;
+  {
+    auto s = SqliteStore::create(dir_, default_world_meta(1));
+    ASSERT_TRUE(s.ok());
+    std::vector<ChunkWrite> writes;
+    for (int i = 0; i < 12; ++i) {
+      chunks.push_back(sample_chunk(static_cast<unsigned>(i)));
+      Box box;
+      chunks.back().read_level(0, box);
+      writes.push_back(ChunkWrite{{i, 0, 0}, 1, encode_chunk_blob_byte_rle(box), coarse_voxels(&chunks.back())});
+      ASSERT_EQ(writes.back().blob[1], 1) << "codec 1";
+    }
+    ASSERT_TRUE((*s)->save_chunks(writes).ok());
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE meta SET value = '2' WHERE key = 'format_version'", nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  bool rebuilt = false;
+  auto s = SqliteStore::open(dir_, [&](std::int64_t, std::int64_t) { rebuilt = true; });
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_FALSE(rebuilt) << "format 2 -> 3 rewrites nothing";
+  EXPECT_EQ((*s)->meta().format_version, 3u);
+  for (int i = 0; i < 12; ++i) {
+    auto got = (*s)->load_chunk({i, 0, 0});
+    ASSERT_TRUE(got.ok() && got->has_value()) << i;
+    expect_same((**got).chunk, chunks[static_cast<std::size_t>(i)]);
+  }
+  // A chunk written now is codec 2; the others keep their codec-1 blobs.
+  ASSERT_TRUE((*s)->save_chunks(std::vector<ChunkWrite>{{{0, 0, 0}, 2, encode_chunk_blob(chunks[5])}}).ok());
+  auto again = (*s)->load_chunk({0, 0, 0});
+  ASSERT_TRUE(again.ok() && again->has_value());
+  expect_same((**again).chunk, chunks[5]);
+  std::map<int, int> codecs;
+  ASSERT_TRUE((*s)->for_each_chunk([&](Vec3i, std::uint64_t, std::span<const std::uint8_t> blob) {
+                    ++codecs[blob[1]];
+                  }).ok());
+  EXPECT_EQ(codecs[2], 1);
+  EXPECT_EQ(codecs[1], 11);
+  s->reset();
+  // A format-3 world is refused by a reader of format 2 (its metadata says 3).
+  db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir_ + "/world.sqlite").c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* v = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "SELECT value FROM meta WHERE key = 'format_version'", -1, &v, nullptr), SQLITE_OK);
+  ASSERT_EQ(sqlite3_step(v), SQLITE_ROW);
+  EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(v, 0)), "3");
+  sqlite3_finalize(v);
+  sqlite3_close(db);
+}
+
+TEST(ChunkBlob, CodecTwoCarriesTheChunkAsItIsAndItsChecksumCatchesDamage) {
+  for (unsigned seed = 0; seed < 6; ++seed) {
+    const Chunk c = sample_chunk(seed);
+    const auto blob = encode_chunk_blob(c);
+    ASSERT_EQ(blob[0], 1);
+    ASSERT_EQ(blob[1], 2);
+    auto back = decode_chunk_blob(blob);
+    ASSERT_TRUE(back.ok()) << back.error().detail;
+    expect_same(*back, c);
+    EXPECT_EQ(back->level0().heap_bytes(), c.level0().heap_bytes()) << "the same packing, not packed again";
+    EXPECT_EQ(encode_chunk_blob(*back), blob);
+    // Codec 1 of the same voxels decodes to the same chunk.
+    Box box;
+    c.read_level(0, box);
+    auto old = decode_chunk_blob(encode_chunk_blob_byte_rle(box));
+    ASSERT_TRUE(old.ok());
+    expect_same(*old, c);
+  }
+  auto blob = encode_chunk_blob(sample_chunk(2));
+  blob[3] ^= 0x10;  // the checksum
+  auto got = decode_chunk_blob(blob);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_EQ(got.error().offset, 2u);
+  blob = encode_chunk_blob(sample_chunk(2));
+  blob[1] = 3;
+  EXPECT_EQ(decode_chunk_blob(blob).error().offset, 1u) << "an unknown codec";
+}
+
 TEST_F(SqliteStoreTest, ADamagedCoarseImageIsMadeAgainFromItsChunksOnTheNextWrite) {
   auto s = SqliteStore::create(dir_, default_world_meta(1));
   ASSERT_TRUE(s.ok());

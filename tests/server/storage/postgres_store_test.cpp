@@ -67,6 +67,14 @@ TEST_F(PostgresStoreTest, TheSchemaIsMadeOnceAndChunksRoundTrip) {
 // reader sees the chunk at its revision: load_chunk, the rows a tool walks,
 // and a reader opened after the writer. A missing row of units is an error
 // naming the chunk.
+// A chunk's voxels (a blob's bytes depend on how its rows were packed, which
+// its history decides: the same voxels may pack differently).
+Box voxels_of(const Chunk& c) {
+  Box b;
+  c.read_level(0, b);
+  return b;
+}
+
 TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughThem) {
   auto writer = open();
   auto reader = open();
@@ -99,7 +107,7 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
     ASSERT_TRUE(got.ok()) << when << ": " << got.error().message;
     ASSERT_TRUE(got->has_value()) << when;
     EXPECT_EQ((*got)->revision, revision) << when;
-    EXPECT_EQ(encode_chunk_blob((*got)->chunk), encode_chunk_blob(chunk)) << when;
+    EXPECT_EQ(voxels_of((*got)->chunk), voxels_of(chunk)) << when;
   };
   for (int i = 1; i <= kMaxKeptUnits; ++i) {
     ASSERT_TRUE(save(next(i * 7 % 512)).ok());
@@ -116,7 +124,9 @@ TEST_F(PostgresStoreTest, AChunksUnitsAreKeptInPlaceOfItsBlobAndReadBackThroughT
                     EXPECT_EQ(pos, cp);
                     EXPECT_EQ(rev, revision);
                     ASSERT_TRUE(blob.ok()) << blob.error().message;
-                    EXPECT_EQ(std::vector<std::uint8_t>(blob->begin(), blob->end()), encode_chunk_blob(chunk));
+                    auto decoded = decode_chunk_blob(*blob);
+                    ASSERT_TRUE(decoded.ok());
+                    EXPECT_EQ(voxels_of(*decoded), voxels_of(chunk));
                     ASSERT_TRUE(coarse.has_value());
                     EXPECT_EQ(*coarse, coarse_voxels(&chunk));
                   })
