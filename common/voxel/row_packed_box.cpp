@@ -302,8 +302,10 @@ int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::
   } else {
     const RecordParts parts = parts_of(rec, table, n);
     if (avail < pos + std::size_t(parts.groups)) return -1;
-    for (int x = 0; x < n; ++x)
-      if (index_at(parts, x) >= p) return -1;
+    // (Indices of b bits are all below P when P is 2^b.)
+    if (p != 1 << parts.bits)
+      for (int x = 0; x < n; ++x)
+        if (index_at(parts, x) >= p) return -1;
     pos += static_cast<std::size_t>(parts.groups);
   }
   if (tag & kTagOccupancy) {
@@ -311,12 +313,32 @@ int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::
     const int bytes = occupancy_bytes(rec + pos, n);
     if (avail < pos + std::size_t(bytes)) return -1;
     pos += static_cast<std::size_t>(bytes);
+    // Air only at occupancy 0: only a palette holding Air (its first
+    // material, palettes being ascending) can break that.
+    // A voxel with an occupancy byte is Air when its index is 0.
+    if (pal[1] == kAir) {
+      const RecordParts parts = parts_of(rec, table, n);
+      const std::uint8_t* bitmap = parts.end;
+      const std::uint8_t* occ = bitmap + bitmap_bytes(n);
+      std::uint32_t set = 0;  // (n <= 32: at most 4 bytes of bitmap)
+      for (int i = 0; i < bitmap_bytes(n); ++i) set |= std::uint32_t{bitmap[i]} << (8 * i);
+      for (; set != 0; set &= set - 1) {
+        const int x = std::countr_zero(set);
+        if (*occ++ == 0 || x >= n) continue;
+        int index;
+        if (runs) {
+          // (Scalar: run_index_at's SIMD load may read past the record,
+          // and these bytes have no padding after them.)
+          int r = 0;
+          while (r + 1 < run_count(parts.body) && (parts.body[r + 1] & 31) <= x) ++r;
+          index = parts.body[r] >> 5;
+        } else {
+          index = index_at(parts, x);
+        }
+        if (index == 0) return -1;
+      }
+    }
   }
-  // Air only at occupancy 0.
-  Voxel row[kMaxRow];
-  decode_record_scalar(rec, table, row, n);
-  for (int x = 0; x < n; ++x)
-    if (row[x].material == kAir && row[x].occupancy != 0) return -1;
   return static_cast<int>(pos);
 }
 
