@@ -211,15 +211,17 @@ void Chunk::compact() {
   pack_mips();
 }
 
-void Chunk::write_image(std::vector<std::uint8_t>& out) const {
+bool Chunk::write_image(std::vector<std::uint8_t>& out) const {
   if (level0_.unpacked()) {
     Chunk packed = clone();
     packed.compact();
-    packed.write_image(out);
-    return;
+    // Records beyond 15-bit offsets stay unpacked (RowPackedBox::compact):
+    // such a chunk has no image.
+    if (packed.level0_.unpacked()) return false;
+    return packed.write_image(out);
   }
   level0_.write_image(out);
-  if (level0_.is_uniform()) return;
+  if (level0_.is_uniform()) return true;
   const auto unit = [&](std::span<const std::uint8_t> bytes) {
     out.push_back(static_cast<std::uint8_t>(bytes.size() & 0xFF));
     out.push_back(static_cast<std::uint8_t>(bytes.size() >> 8));
@@ -227,7 +229,7 @@ void Chunk::write_image(std::vector<std::uint8_t>& out) const {
   };
   if (!dense_) {
     for (int level = 1; level < kMipLevels; ++level) unit(mip_unit(level));
-    return;
+    return true;
   }
   thread_local std::vector<std::uint8_t> encoded;
   for (int level = 1; level < kMipLevels; ++level) {
@@ -235,6 +237,7 @@ void Chunk::write_image(std::vector<std::uint8_t>& out) const {
     net_codec_encode(kChunkSize >> level, dense_->levels[level - 1].voxels(), encoded);
     unit(encoded);
   }
+  return true;
 }
 
 Result<Chunk> Chunk::read_image(std::span<const std::uint8_t> in, std::size_t& pos) {
@@ -257,7 +260,9 @@ Result<Chunk> Chunk::read_image(std::span<const std::uint8_t> in, std::size_t& p
     begin[static_cast<std::size_t>(level)] = at;
     at += n;
     const std::size_t total = at - begin[1] - 2 * static_cast<std::size_t>(level - 1);
-    if (total > 0xFFFF) return DecodeError{DecodeErrorCode::kOverLimit, at, "chunk image: mip units"};
+    if (total > 0xFFFF)
+      return DecodeError{DecodeErrorCode::kOverLimit, begin[static_cast<std::size_t>(level)] - 2,
+                         "chunk image: mip units over 65,535 bytes"};
     c.mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(total);
   }
   const std::size_t bytes = c.mip_end_[kMipLevels - 1];
@@ -276,7 +281,12 @@ Result<Chunk> Chunk::read_image(std::span<const std::uint8_t> in, std::size_t& p
     }
     std::memcpy(c.mips_.get() + from, unit.data(), n);
   }
-  c.empty_ = all_air(level_box.voxels());  // (level 3, the last decoded)
+  // Empty is level 0's (every voxel Air), and level 3 must agree: Air at
+  // any level means Air in everything it covers.
+  c.empty_ = !c.level0_.box_has_solid(0, kChunkSize, 0, kChunkSize, 0, kChunkSize, 0);
+  if (c.empty_ != all_air(level_box.voxels()))  // (level 3, the last decoded)
+    return DecodeError{DecodeErrorCode::kInvalidValue, begin[kMipLevels - 1],
+                       "chunk image: level 3 and level 0 disagree on whether the chunk is empty"};
   c.mip_fill_ = kAir;
   pos = at;
   return c;

@@ -148,11 +148,15 @@ class Chunk {
   // The chunk as it is in memory (WORLD_FORMAT.md, "Chunk image"), appended
   // to out: level 0's image (RowPackedBox::write_image), then, unless level
   // 0 is uniform, the three mip units, each after its length (u16 LE).
-  // Unpacked storage is packed in a copy first.
-  void write_image(std::vector<std::uint8_t>& out) const;
+  // Unpacked storage is packed in a copy first. False (out unchanged) for
+  // the rare chunk whose rows stay unpacked when packed (records beyond
+  // 15-bit offsets, RowPackedBox::compact), which has no image.
+  bool write_image(std::vector<std::uint8_t>& out) const;
   // Reads an image from in at pos and advances pos past it: level 0 checked
-  // as read_image checks it, each mip unit decoded once to check it. A
-  // damaged image is an error, never a chunk that reads out of bounds.
+  // as read_image checks it, each mip unit decoded once to check it, and
+  // level 3 agreeing with level 0 on whether the chunk is empty. A damaged
+  // image is an error, never a chunk that reads out of bounds. (The mips
+  // are otherwise taken as stored: the blob's checksum guards them.)
   static Result<Chunk> read_image(std::span<const std::uint8_t> in, std::size_t& pos);
 
   ChunkMemory memory() const;

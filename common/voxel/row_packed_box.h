@@ -556,11 +556,14 @@ class RowPackedBox {
   //                 D (u16 LE) | D bytes of data (table, records; no padding)
   // Precondition: !unpacked().
   void write_image(std::vector<std::uint8_t>& out) const;
-  // Reads an image from in at pos and advances pos past it. Every invariant
-  // above is checked (layer map and slots in order, every row's record valid
-  // and inside the data, the table as PaletteTable writes it, a packed box
-  // not all one material): a damaged image is an error, never a box that
-  // reads out of bounds. Records the image shares stay shared.
+  // Reads an image from in at pos and advances pos past it. The invariants
+  // above that reads and writes rely on are checked (layer map and slots in
+  // order, every row's record valid, at most 2N bytes and inside the data,
+  // no record inside another, the table as PaletteTable writes it, a layer
+  // map not all one material): a damaged image is an error, never a box
+  // that reads or writes out of bounds. Records the image shares stay
+  // shared. (A packed box whose records all hold one material is accepted:
+  // uniform() is then false, as after a write that made it so.)
   static Result<RowPackedBox> read_image(std::span<const std::uint8_t> in, std::size_t& pos);
 
   // The first byte of row (y, z)'s record (its kind and palette), or -1 for

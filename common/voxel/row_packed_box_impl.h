@@ -458,6 +458,9 @@ void RowPackedBox<N>::compact() {
 
 template <int N>
 void RowPackedBox<N>::write_image(std::vector<std::uint8_t>& out) const {
+  // The slots' narrow bytes are written as the words hold them in memory,
+  // which is the image's byte order on little-endian hosts only.
+  static_assert(std::endian::native == std::endian::little, "chunk images assume a little-endian host");
   if (!owns_headers_) {
     out.push_back(0);
     out.push_back(static_cast<std::uint8_t>(uniform_material()));
@@ -537,9 +540,9 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
     std::memcpy(box.data_.get(), data, d);
   }
   // Every row's header, and each record its rows start (once, however many
-  // rows share it).
-  thread_local std::vector<std::uint8_t> checked;
-  checked.assign(d, 0);
+  // rows share it): length[off] is the length of the record at off.
+  thread_local std::vector<std::uint8_t> length;
+  length.assign(d, 0);
   bool any_record = false;
   for (int y = 0; y < N; ++y) {
     if (map[y] & 0x80) continue;
@@ -549,13 +552,15 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
     const std::uint16_t first = box.header(y, 0);
     bool alike = true;
     for (int z = 0; z < N; ++z) {
+      // Where row z's header is in the image: its word, or its narrow byte.
+      const std::size_t header_at = wide ? slot_at + 2 * z : slot_at + 4 + z;
       if (wide) {
         if (!(slot[z] & kAllocated) && slot[z] >= kMaterialCount)
-          return DecodeError{kInvalid, slot_at + 2 * z, "row-packed image: uniform row above material 63"};
+          return DecodeError{kInvalid, header_at, "row-packed image: uniform row above material 63"};
       } else {
         const unsigned b = reinterpret_cast<const std::uint8_t*>(slot + 2)[z];
         if (b < kNarrowUniform && slot[z / (N / 2)] + b > kOffsetMask)
-          return DecodeError{kInvalid, slot_at, "row-packed image: narrow layer offset beyond 15 bits"};
+          return DecodeError{kInvalid, header_at, "row-packed image: narrow layer offset beyond 15 bits"};
       }
       const std::uint16_t h = box.header(y, z);
       alike &= h == first;
@@ -563,14 +568,22 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
       any_record = true;
       const std::size_t off = h & kOffsetMask;
       if (off < static_cast<std::size_t>(table_bytes) || off >= d)
-        return DecodeError{kInvalid, slot_at, "row-packed image: row record outside the data"};
-      if (checked[off]) continue;
-      if (checked_record_bytes(data + off, d - off, data, N) < 0)
-        return DecodeError{kInvalid, at + off, "row-packed image: row record"};
-      checked[off] = 1;
+        return DecodeError{kInvalid, header_at, "row-packed image: row record outside the data"};
+      if (length[off]) continue;
+      // (No record is longer than a raw one: the writer takes the smallest.)
+      const int bytes = checked_record_bytes(data + off, d - off, data, N);
+      if (bytes < 0 || bytes > 2 * N) return DecodeError{kInvalid, at + off, "row-packed image: row record"};
+      length[off] = static_cast<std::uint8_t>(bytes);
     }
     if (alike && !(first & kAllocated))
       return DecodeError{kInvalid, slot_at, "row-packed image: a layer slot whose rows are alike"};
+  }
+  // Records do not overlap: a write in place (modify_rows) rewrites one
+  // record's bytes, which must be no other record's.
+  for (std::size_t off = 0, end = 0; off < d; ++off) {
+    if (length[off] == 0) continue;
+    if (off < end) return DecodeError{kInvalid, at + off, "row-packed image: a record inside another"};
+    end = off + length[off];
   }
   if (d > 0 && !any_record) return DecodeError{kInvalid, at, "row-packed image: data without records"};
   pos = at + d;

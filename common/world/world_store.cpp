@@ -55,7 +55,12 @@ std::vector<std::string> default_material_names() {
 std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk) {
   thread_local std::vector<std::uint8_t> image;
   image.clear();
-  chunk.write_image(image);
+  if (!chunk.write_image(image)) {
+    // A chunk without an image (rows beyond 15-bit offsets): codec 1.
+    Box box;
+    chunk.read_level(0, box);
+    return encode_chunk_blob_byte_rle(box);
+  }
   const auto crc = static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(image.size())));
   std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecImageLz4, static_cast<std::uint8_t>(crc & 0xFF),
                                 static_cast<std::uint8_t>((crc >> 8) & 0xFF), static_cast<std::uint8_t>((crc >> 16) & 0xFF),
@@ -91,9 +96,10 @@ Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob) {
     std::size_t pos = 0;
     const std::span<const std::uint8_t> bytes(image.data(), *n);
     auto chunk = Chunk::read_image(bytes, pos);
-    // (Offsets inside the image are offsets into the decompressed bytes.)
+    // (Offsets inside the image are offsets into the decompressed bytes,
+    // as the errors' texts say.)
     if (!chunk) return chunk.error();
-    if (pos != *n) return DecodeError{DecodeErrorCode::kInvalidValue, pos, "chunk blob: bytes after the image"};
+    if (pos != *n) return DecodeError{DecodeErrorCode::kInvalidValue, pos, "chunk image: bytes after it"};
     return chunk;
   }
   if (blob[1] != kBlobCodecByteRleLz4) return DecodeError{DecodeErrorCode::kInvalidValue, 1, "chunk blob codec"};

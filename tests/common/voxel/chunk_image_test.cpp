@@ -9,9 +9,11 @@
 #include <string>
 #include <vector>
 
+#include "common/codec/net_codec.h"
 #include "common/voxel/grid.h"
 #include "common/vxraw/vxraw.h"
 #include "common/world/terrain_generator.h"
+#include "common/world/world_store.h"
 #include "tests/common/voxel/mips_check.h"
 
 namespace terrane {
@@ -236,6 +238,91 @@ TEST(ChunkImage, APackedImageOfOneMaterialIsRefused) {
   ASSERT_FALSE(got.ok());
   EXPECT_EQ(got.error().code, DecodeErrorCode::kInvalidValue);
   EXPECT_EQ(got.error().offset, 1u);
+}
+
+TEST(ChunkImage, ARecordInsideAnotherIsRefused) {
+  // Layer 0 wide (slot units 0 and 1), the others Air. Row 0's record is a
+  // 1-bit index record of palette 0 {Air, Rock} at byte 5; row 1's starts
+  // at byte 6, inside it, where 64 bytes read as a valid raw record (Rock
+  // at occupancy 0). Each is valid alone, but a write in place to row 0
+  // would rewrite row 1's first bytes.
+  std::vector<std::uint8_t> image{1, 0x40};
+  for (int y = 1; y < 32; ++y) image.push_back(0x80);
+  const auto word = [&](std::uint16_t w) {
+    image.push_back(static_cast<std::uint8_t>(w & 0xFF));
+    image.push_back(static_cast<std::uint8_t>(w >> 8));
+  };
+  std::vector<std::uint8_t> data{1, 2, 1, kAir, materials::kRock, 0x40};
+  for (int i = 0; i < 32; ++i) {
+    data.push_back(materials::kRock);
+    data.push_back(0);
+  }
+  const auto image_with = [&](std::uint16_t row1) {
+    image.resize(33);
+    word(0x8005);
+    word(row1);
+    for (int z = 2; z < 36; ++z) word(0);
+    word(static_cast<std::uint16_t>(data.size()));
+    image.insert(image.end(), data.begin(), data.end());
+    return image;
+  };
+  std::size_t pos = 0;
+  auto got = RowPackedBox<32>::read_image(image_with(0x8006), pos);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.error().code, DecodeErrorCode::kInvalidValue);
+  EXPECT_STREQ(got.error().detail, "row-packed image: a record inside another");
+  // Row 1 sharing row 0's record instead: valid, and both rows read it.
+  pos = 0;
+  got = RowPackedBox<32>::read_image(image_with(0x8005), pos);
+  ASSERT_TRUE(got.ok()) << got.error().detail;
+  EXPECT_EQ(pos, image.size());
+  EXPECT_EQ(got->get(3, 0, 1), solid(materials::kRock));
+  EXPECT_EQ(got->get(2, 0, 1), Voxel{});
+}
+
+TEST(ChunkImage, AChunkWhoseRowsStayUnpackedIsStoredAsCodecOne) {
+  // 1,024 distinct raw rows (64 KiB of records, beyond 15-bit offsets): the
+  // chunk stays unpacked when packed and has no image.
+  Chunk c;
+  c.modify(Region{{0, 0, 0}, {32, 32, 32}}, [](Vec3i p, Voxel) {
+    const int r = p.y * 32 + p.z;
+    return make_voxel(static_cast<Material>(1 + (p.x + r) % 40), static_cast<std::uint8_t>(p.x < 2 ? r >> (8 * p.x) : 7));
+  });
+  c.compact();
+  ASSERT_TRUE(c.level0().unpacked());
+  std::vector<std::uint8_t> out;
+  EXPECT_FALSE(c.write_image(out));
+  EXPECT_TRUE(out.empty());
+  const auto blob = encode_chunk_blob(c);
+  EXPECT_EQ(blob[1], 1) << "codec 1";
+  auto back = decode_chunk_blob(blob);
+  ASSERT_TRUE(back.ok());
+  expect_same_chunk(*back, c, "unpacked");
+}
+
+TEST(ChunkImage, MipsThatCallAChunkEmptyWhileItHoldsVoxelsAreRefused) {
+  // A one-voxel chunk's image with the mips of an empty chunk (all Air):
+  // the reader would drop the chunk as empty.
+  Chunk one;
+  one.set({3, 4, 5}, make_voxel(materials::kSand, 90));
+  one.compact();
+  auto image = image_of(one);
+  std::size_t level0_end = 0;
+  ASSERT_TRUE(RowPackedBox<32>::read_image(image, level0_end).ok());
+  image.resize(level0_end);
+  std::vector<std::uint8_t> units;
+  for (int level = 1; level < kMipLevels; ++level) {
+    const int n = kChunkSize >> level;
+    std::vector<Voxel> air(static_cast<std::size_t>(n * n * n));
+    units.clear();
+    net_codec_encode(n, air, units);
+    image.push_back(static_cast<std::uint8_t>(units.size() & 0xFF));
+    image.push_back(static_cast<std::uint8_t>(units.size() >> 8));
+    image.insert(image.end(), units.begin(), units.end());
+  }
+  auto got = read_all(image);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.error().code, DecodeErrorCode::kInvalidValue);
 }
 
 }  // namespace
