@@ -540,9 +540,14 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
     std::memcpy(box.data_.get(), data, d);
   }
   // Every row's header, and each record its rows start (once, however many
-  // rows share it): length[off] is the length of the record at off.
-  thread_local std::vector<std::uint8_t> length;
-  length.assign(d, 0);
+  // rows share it). Records may not overlap: a write in place (modify_rows)
+  // rewrites one record's bytes, which must be no other record's. Bit i of
+  // starts: a record starts at byte i; of covered: byte i is a record's.
+  const std::size_t words = (d + 63) / 64;
+  thread_local std::vector<std::uint64_t> starts, covered;
+  starts.assign(words, 0);
+  covered.assign(words, 0);
+  const auto bit = [](const std::vector<std::uint64_t>& v, std::size_t i) { return (v[i / 64] >> (i % 64)) & 1; };
   bool any_record = false;
   for (int y = 0; y < N; ++y) {
     if (map[y] & 0x80) continue;
@@ -569,21 +574,22 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
       const std::size_t off = h & kOffsetMask;
       if (off < static_cast<std::size_t>(table_bytes) || off >= d)
         return DecodeError{kInvalid, header_at, "row-packed image: row record outside the data"};
-      if (length[off]) continue;
+      if (bit(starts, off)) continue;
       // (No record is longer than a raw one: the writer takes the smallest.)
       const int bytes = checked_record_bytes(data + off, d - off, data, N);
       if (bytes < 0 || bytes > 2 * N) return DecodeError{kInvalid, at + off, "row-packed image: row record"};
-      length[off] = static_cast<std::uint8_t>(bytes);
+      starts[off / 64] |= std::uint64_t{1} << (off % 64);
+      // Its bytes [off, off + bytes), at most 64: in one word or two.
+      for (std::size_t from = off, end = off + static_cast<std::size_t>(bytes); from < end;) {
+        const std::size_t w = from / 64, lo = from % 64, n = std::min<std::size_t>(end - from, 64 - lo);
+        const std::uint64_t mask = (n == 64 ? ~std::uint64_t{0} : ((std::uint64_t{1} << n) - 1)) << lo;
+        if (covered[w] & mask) return DecodeError{kInvalid, at + off, "row-packed image: a record inside another"};
+        covered[w] |= mask;
+        from += n;
+      }
     }
     if (alike && !(first & kAllocated))
       return DecodeError{kInvalid, slot_at, "row-packed image: a layer slot whose rows are alike"};
-  }
-  // Records do not overlap: a write in place (modify_rows) rewrites one
-  // record's bytes, which must be no other record's.
-  for (std::size_t off = 0, end = 0; off < d; ++off) {
-    if (length[off] == 0) continue;
-    if (off < end) return DecodeError{kInvalid, at + off, "row-packed image: a record inside another"};
-    end = off + length[off];
   }
   if (d > 0 && !any_record) return DecodeError{kInvalid, at, "row-packed image: data without records"};
   pos = at + d;
