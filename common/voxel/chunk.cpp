@@ -164,13 +164,18 @@ void Chunk::pack_mips() {
     return;
   }
   thread_local std::vector<std::uint8_t> units;
-  units.clear();
-  for (int level = 1; level < kMipLevels; ++level) {
-    net_codec_encode(kChunkSize >> level, dense->levels[level - 1].voxels(), units);
-    mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(units.size());
-  }
+  encode_mip_units(*dense, units, mip_end_);
   mips_ = std::make_unique<std::uint8_t[]>(units.size());
   std::memcpy(mips_.get(), units.data(), units.size());
+}
+
+void Chunk::encode_mip_units(const DenseMips& dense, std::vector<std::uint8_t>& units,
+                             std::array<std::uint16_t, kMipLevels>& end) {
+  units.clear();
+  for (int level = 1; level < kMipLevels; ++level) {
+    net_codec_encode(kChunkSize >> level, dense.levels[level - 1].voxels(), units);
+    end[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(units.size());
+  }
 }
 
 void Chunk::update_mips(const Region& changed) {
@@ -222,20 +227,20 @@ bool Chunk::write_image(std::vector<std::uint8_t>& out) const {
   }
   level0_.write_image(out);
   if (level0_.is_uniform()) return true;
-  const auto unit = [&](std::span<const std::uint8_t> bytes) {
-    out.push_back(static_cast<std::uint8_t>(bytes.size() & 0xFF));
-    out.push_back(static_cast<std::uint8_t>(bytes.size() >> 8));
-    out.insert(out.end(), bytes.begin(), bytes.end());
-  };
-  if (!dense_) {
-    for (int level = 1; level < kMipLevels; ++level) unit(mip_unit(level));
-    return true;
-  }
+  // The units as stored, or as pack_mips() would store them.
   thread_local std::vector<std::uint8_t> encoded;
+  std::span<const std::uint8_t> units;
+  std::array<std::uint16_t, kMipLevels> end = mip_end_;
+  if (dense_) {
+    encode_mip_units(*dense_, encoded, end);
+    units = encoded;
+  } else {
+    units = {mips_.get(), mip_end_[kMipLevels - 1]};
+  }
   for (int level = 1; level < kMipLevels; ++level) {
-    encoded.clear();
-    net_codec_encode(kChunkSize >> level, dense_->levels[level - 1].voxels(), encoded);
-    unit(encoded);
+    const std::size_t from = end[static_cast<std::size_t>(level - 1)], to = end[static_cast<std::size_t>(level)];
+    append_le16(out, static_cast<std::uint16_t>(to - from));
+    out.insert(out.end(), units.begin() + static_cast<std::ptrdiff_t>(from), units.begin() + static_cast<std::ptrdiff_t>(to));
   }
   return true;
 }
@@ -250,44 +255,42 @@ Result<Chunk> Chunk::read_image(std::span<const std::uint8_t> in, std::size_t& p
     c.empty_ = c.mip_fill_ == kAir;
     return c;
   }
-  std::array<std::size_t, kMipLevels> begin{};
-  std::size_t at = pos;
+  // The three units' places in the image, then each decoded once (to check
+  // it) and kept as it is.
+  std::array<std::span<const std::uint8_t>, kMipLevels> unit{};
+  std::size_t at = pos, total = 0;
   for (int level = 1; level < kMipLevels; ++level) {
     if (in.size() - at < 2) return DecodeError{DecodeErrorCode::kTruncated, at, "chunk image: mip unit length"};
-    const std::size_t n = in[at] | (std::size_t{in[at + 1]} << 8);
+    const std::size_t n = load_le16(in.data() + at);
+    total += n;
+    if (total > 0xFFFF)
+      return DecodeError{DecodeErrorCode::kOverLimit, at, "chunk image: mip units over 65,535 bytes"};
     at += 2;
     if (in.size() - at < n) return DecodeError{DecodeErrorCode::kTruncated, at, "chunk image: mip unit"};
-    begin[static_cast<std::size_t>(level)] = at;
+    unit[static_cast<std::size_t>(level)] = in.subspan(at, n);
     at += n;
-    const std::size_t total = at - begin[1] - 2 * static_cast<std::size_t>(level - 1);
-    if (total > 0xFFFF)
-      return DecodeError{DecodeErrorCode::kOverLimit, begin[static_cast<std::size_t>(level)] - 2,
-                         "chunk image: mip units over 65,535 bytes"};
-    c.mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(total);
   }
-  const std::size_t bytes = c.mip_end_[kMipLevels - 1];
-  c.mips_ = std::make_unique<std::uint8_t[]>(bytes);
+  c.mips_ = std::make_unique<std::uint8_t[]>(total);
   thread_local Box level_box;
   for (int level = 1; level < kMipLevels; ++level) {
-    const std::size_t from = level == 1 ? 0 : c.mip_end_[static_cast<std::size_t>(level - 1)];
-    const std::size_t n = c.mip_end_[static_cast<std::size_t>(level)] - from;
-    const std::span<const std::uint8_t> unit = in.subspan(begin[static_cast<std::size_t>(level)], n);
+    const std::span<const std::uint8_t> u = unit[static_cast<std::size_t>(level)];
     const int side = kChunkSize >> level;
     level_box.resize({side, side, side});
-    if (const Status s = net_codec_decode(side, unit, level_box.voxels()); !s) {
+    if (const Status s = net_codec_decode(side, u, level_box.voxels()); !s) {
       DecodeError e = s.error();
-      e.offset += begin[static_cast<std::size_t>(level)];
+      e.offset += static_cast<std::size_t>(u.data() - in.data());
       return e;
     }
-    std::memcpy(c.mips_.get() + from, unit.data(), n);
+    const std::size_t from = c.mip_end_[static_cast<std::size_t>(level - 1)];
+    std::memcpy(c.mips_.get() + from, u.data(), u.size());
+    c.mip_end_[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(from + u.size());
   }
   // Empty is level 0's (every voxel Air), and level 3 must agree: Air at
   // any level means Air in everything it covers.
   c.empty_ = !c.level0_.box_has_solid(0, kChunkSize, 0, kChunkSize, 0, kChunkSize, 0);
   if (c.empty_ != all_air(level_box.voxels()))  // (level 3, the last decoded)
-    return DecodeError{DecodeErrorCode::kInvalidValue, begin[kMipLevels - 1],
+    return DecodeError{DecodeErrorCode::kInvalidValue, static_cast<std::size_t>(unit[kMipLevels - 1].data() - in.data()),
                        "chunk image: level 3 and level 0 disagree on whether the chunk is empty"};
-  c.mip_fill_ = kAir;
   pos = at;
   return c;
 }

@@ -169,6 +169,10 @@ class Chunk {
   };
 
   void update_mips(const Region& changed_level0);
+  // The units of levels 1..3 of dense, back to back in units (cleared
+  // first); end[l] is where level l's ends.
+  static void encode_mip_units(const DenseMips& dense, std::vector<std::uint8_t>& units,
+                               std::array<std::uint16_t, kMipLevels>& end);
 
   Level0 level0_;
   std::unique_ptr<DenseMips> dense_;          // unpacked mips (then mips_ is stale and null)

@@ -274,33 +274,30 @@ int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::
   }
   if ((tag & kKindMask) == kKindMask) return -1;
   const bool runs = (tag & kKindMask) == kKindRuns;
-  std::size_t pos = 1;
-  const std::uint8_t* pal;
+  std::size_t pos = 1;  // the body: after the tag and any inline palette
   if ((tag & kPaletteMask) == kInlinePalette) {
     if (!checked_palette(rec + 1, avail - 1)) return -1;
-    pal = rec + 1;
     pos = 2 + std::size_t{rec[1]} + 1;
-  } else {
-    if (table == nullptr || (tag & kPaletteMask) >= table[0]) return -1;
-    pal = table + table[1 + (tag & kPaletteMask)];
+  } else if (table == nullptr || (tag & kPaletteMask) >= table[0]) {
+    return -1;
   }
-  const int p = pal[0] + 1;
-  const std::uint8_t* body = rec + pos;
+  // Every body has a byte (a run count, or index bytes): parts_of may read it.
+  if (avail < pos + 1) return -1;
+  const RecordParts parts = parts_of(rec, table, n);
+  const int p = parts.pal[0] + 1;
   if (runs) {
-    if (p > kMaxRunPalette || avail < pos + 1) return -1;
-    const int r = run_count(body);
-    if (r > n || avail < pos + std::size_t(r)) return -1;
+    const int r = run_count(parts.body);
+    if (p > kMaxRunPalette || r > n || avail < pos + std::size_t(r)) return -1;
     int last = 0;
     for (int i = 0; i < r; ++i) {
-      if ((body[i] >> 5) >= p) return -1;
+      if ((parts.body[i] >> 5) >= p) return -1;
       if (i == 0) continue;
-      const int start = body[i] & 31;
+      const int start = parts.body[i] & 31;
       if (start <= last || start >= n) return -1;
       last = start;
     }
     pos += static_cast<std::size_t>(r);
   } else {
-    const RecordParts parts = parts_of(rec, table, n);
     if (avail < pos + std::size_t(parts.groups)) return -1;
     // (Indices of b bits are all below P when P is 2^b.)
     if (p != 1 << parts.bits)
@@ -310,31 +307,21 @@ int checked_record_bytes(const std::uint8_t* rec, std::size_t avail, const std::
   }
   if (tag & kTagOccupancy) {
     if (avail < pos + std::size_t(bitmap_bytes(n))) return -1;
-    const int bytes = occupancy_bytes(rec + pos, n);
+    const int bytes = occupancy_bytes(parts.end, n);
     if (avail < pos + std::size_t(bytes)) return -1;
     pos += static_cast<std::size_t>(bytes);
     // Air only at occupancy 0: only a palette holding Air (its first
-    // material, palettes being ascending) can break that.
-    // A voxel with an occupancy byte is Air when its index is 0.
-    if (pal[1] == kAir) {
-      const RecordParts parts = parts_of(rec, table, n);
-      const std::uint8_t* bitmap = parts.end;
-      const std::uint8_t* occ = bitmap + bitmap_bytes(n);
+    // material, palettes being ascending) can break that, and a voxel with
+    // an occupancy byte is Air when its index is 0.
+    if (parts.pal[1] == kAir) {
+      const std::uint8_t* occ = parts.end + bitmap_bytes(n);
       std::uint32_t set = 0;  // (n <= 32: at most 4 bytes of bitmap)
-      for (int i = 0; i < bitmap_bytes(n); ++i) set |= std::uint32_t{bitmap[i]} << (8 * i);
+      for (int i = 0; i < bitmap_bytes(n); ++i) set |= std::uint32_t{parts.end[i]} << (8 * i);
       for (; set != 0; set &= set - 1) {
         const int x = std::countr_zero(set);
         if (*occ++ == 0 || x >= n) continue;
-        int index;
-        if (runs) {
-          // (Scalar: run_index_at's SIMD load may read past the record,
-          // and these bytes have no padding after them.)
-          int r = 0;
-          while (r + 1 < run_count(parts.body) && (parts.body[r + 1] & 31) <= x) ++r;
-          index = parts.body[r] >> 5;
-        } else {
-          index = index_at(parts, x);
-        }
+        // (Scalar runs: run_index_at's SIMD load may read past the record.)
+        const unsigned index = runs ? run_index_at_scalar(parts.body, x) : static_cast<unsigned>(index_at(parts, x));
         if (index == 0) return -1;
       }
     }

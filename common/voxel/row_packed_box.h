@@ -112,6 +112,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/codec/byte_order.h"
 #include "common/codec/decode_error.h"
 #include "common/voxel/voxel.h"
 
@@ -157,9 +158,10 @@ inline int run_count(const std::uint8_t* body) { return (body[0] & 31) + 1; }
 // run holding x is the count of runs 1..R-1 starting at or before x: for up
 // to 16 runs one compare of 16 bytes (the body is followed by at least 16
 // readable bytes: a box's padding), else a scan.
+inline unsigned run_index_at_scalar(const std::uint8_t* body, int x);
 inline unsigned run_index_at(const std::uint8_t* body, int x) {
-  const int runs = run_count(body);
 #if defined(__SSE2__)
+  const int runs = run_count(body);
   if (runs <= 16) {
     const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(body));
     const __m128i starts = _mm_and_si128(v, _mm_set1_epi8(31));
@@ -168,6 +170,13 @@ inline unsigned run_index_at(const std::uint8_t* body, int x) {
     return static_cast<unsigned>(body[std::popcount(mask)]) >> 5;
   }
 #endif
+  return run_index_at_scalar(body, x);
+}
+
+// The scan alone, reading only the R run bytes (for bytes with no padding
+// after them, as an image being checked).
+inline unsigned run_index_at_scalar(const std::uint8_t* body, int x) {
+  const int runs = run_count(body);
   int r = 0;
   while (r + 1 < runs && (body[r + 1] & 31) <= x) ++r;
   return static_cast<unsigned>(body[r]) >> 5;

@@ -469,13 +469,10 @@ void RowPackedBox<N>::write_image(std::vector<std::uint8_t>& out) const {
   out.push_back(1);
   const auto* map = reinterpret_cast<const std::uint8_t*>(headers_);
   out.insert(out.end(), map, map + N);
-  for (std::size_t i = N / 2; i < header_words(); ++i) {
-    out.push_back(static_cast<std::uint8_t>(headers_[i] & 0xFF));
-    out.push_back(static_cast<std::uint8_t>(headers_[i] >> 8));
-  }
+  const std::size_t words = header_words();
+  for (std::size_t i = N / 2; i < words; ++i) append_le16(out, headers_[i]);
   const std::uint32_t d = data_bytes_ > 0 ? data_bytes_ - kPadBytes : 0;
-  out.push_back(static_cast<std::uint8_t>(d & 0xFF));
-  out.push_back(static_cast<std::uint8_t>(d >> 8));
+  append_le16(out, static_cast<std::uint16_t>(d));
   if (d > 0) out.insert(out.end(), data_.get(), data_.get() + d);
 }
 
@@ -517,11 +514,10 @@ Result<RowPackedBox<N>> RowPackedBox<N>::read_image(std::span<const std::uint8_t
   if (in.size() - at < 2 * slot_words) return DecodeError{kTruncated, at, "row-packed image: layer slots"};
   auto owned = std::make_unique<std::uint16_t[]>(N / 2 + slot_words);
   std::memcpy(owned.get(), map, N);
-  for (std::size_t i = 0; i < slot_words; ++i)
-    owned[N / 2 + i] = static_cast<std::uint16_t>(in[at + 2 * i] | (in[at + 2 * i + 1] << 8));
+  for (std::size_t i = 0; i < slot_words; ++i) owned[N / 2 + i] = load_le16(in.data() + at + 2 * i);
   at += 2 * slot_words;
   if (in.size() - at < 2) return DecodeError{kTruncated, at, "row-packed image: data length"};
-  const std::size_t d = in[at] | (std::size_t{in[at + 1]} << 8);
+  const std::size_t d = load_le16(in.data() + at);
   if (d > std::size_t{kOffsetMask} + 2 * N) return DecodeError{DecodeErrorCode::kOverLimit, at, "row-packed image: data length"};
   at += 2;
   if (in.size() - at < d) return DecodeError{kTruncated, at, "row-packed image: data"};

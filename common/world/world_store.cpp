@@ -7,6 +7,7 @@
 #include <map>
 
 #include "common/cli/cli.h"
+#include "common/codec/byte_order.h"
 #include "common/codec/lz4_block.h"
 
 #include <zlib.h>
@@ -18,10 +19,17 @@ namespace {
 constexpr std::uint8_t kBlobVersion = 1;
 constexpr std::uint8_t kBlobCodecByteRleLz4 = 1;
 constexpr std::uint8_t kBlobCodecImageLz4 = 2;
-// The largest chunk image: level 0 (form, map, 64 slot units of 18 words,
-// length, at most 0x7FFF + 64 bytes of data) and three mip units of at
-// most 0xFFFF bytes in all, with their lengths.
-constexpr std::size_t kMaxChunkImageBytes = 1 + 32 + 64 * 18 * 2 + 2 + 0x7FFF + 64 + 6 + 0xFFFF;
+// The largest chunk image: level 0 (form, layer map, every layer wide: 64
+// slot units of 18 words, data length, data up to a 64-byte record at the
+// last 15-bit offset), then three mip unit lengths and at most 0xFFFF bytes
+// of units.
+constexpr std::size_t kMaxChunkImageBytes = 1 + kChunkSize + 2 * kChunkSize * (kChunkSize / 2 + 2) * 2 + 2 +
+                                            RowPackedBox<kChunkSize>::kOffsetMask + 2 * kChunkSize + 3 * 2 + 0xFFFF;
+static_assert(kMaxChunkImageBytes == 100'711);
+
+std::uint32_t image_crc(std::span<const std::uint8_t> image) {
+  return static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(image.size())));
+}
 constexpr int kChunkVoxels = kChunkSize * kChunkSize * kChunkSize;
 
 std::string join_lines(const std::vector<std::string>& v) {
@@ -61,10 +69,8 @@ std::vector<std::uint8_t> encode_chunk_blob(const Chunk& chunk) {
     chunk.read_level(0, box);
     return encode_chunk_blob_byte_rle(box);
   }
-  const auto crc = static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(image.size())));
-  std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecImageLz4, static_cast<std::uint8_t>(crc & 0xFF),
-                                static_cast<std::uint8_t>((crc >> 8) & 0xFF), static_cast<std::uint8_t>((crc >> 16) & 0xFF),
-                                static_cast<std::uint8_t>(crc >> 24)};
+  std::vector<std::uint8_t> out{kBlobVersion, kBlobCodecImageLz4};
+  append_le32(out, image_crc(image));
   lz4_compress(image, out);
   return out;
 }
@@ -89,12 +95,10 @@ Result<Chunk> decode_chunk_blob(std::span<const std::uint8_t> blob) {
       e.offset += 6;
       return e;
     }
-    const std::uint32_t want = blob[2] | (std::uint32_t{blob[3]} << 8) | (std::uint32_t{blob[4]} << 16) |
-                               (std::uint32_t{blob[5]} << 24);
-    if (static_cast<std::uint32_t>(crc32(0L, image.data(), static_cast<uInt>(*n))) != want)
+    const std::span<const std::uint8_t> bytes(image.data(), *n);
+    if (image_crc(bytes) != load_le32(blob.data() + 2))
       return DecodeError{DecodeErrorCode::kInvalidValue, 2, "chunk blob checksum does not match its image"};
     std::size_t pos = 0;
-    const std::span<const std::uint8_t> bytes(image.data(), *n);
     auto chunk = Chunk::read_image(bytes, pos);
     // (Offsets inside the image are offsets into the decompressed bytes,
     // as the errors' texts say.)
