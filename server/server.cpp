@@ -5,6 +5,7 @@
 #include <future>
 
 #include "common/world/sqlite_store.h"
+#include "common/world/sqlite_util.h"
 #include "server/base/disk_space.h"
 #include "server/base/log.h"
 #include "server/base/thread_role.h"
@@ -354,6 +355,7 @@ std::string Server::metrics_text() const {
   // Read at each scrape: the world's meta is where a border lives (set by
   // --border in create(), before any thread reads it; fixed while running).
   m.bounds = world_->meta().bounds;
+  m.store_memory_bytes = sqlite_memory_used();
   return render_metrics(m);
 }
 

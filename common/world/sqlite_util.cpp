@@ -30,6 +30,12 @@ bool SqliteTransaction::commit() {
   return true;
 }
 
+std::int64_t sqlite_memory_used() {
+  sqlite3_int64 now = 0, peak = 0;
+  if (sqlite3_status64(SQLITE_STATUS_MEMORY_USED, &now, &peak, 0) != SQLITE_OK) return 0;
+  return now;
+}
+
 std::string sqlite_column_string(sqlite3_stmt* st, int column) {
   const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(st, column));
   return text != nullptr ? std::string(text) : std::string();

@@ -29,6 +29,11 @@ struct SqliteStmtReset {
   ~SqliteStmtReset();
 };
 
+// Bytes SQLite holds now for every connection of this process: their page
+// caches (up to 32 MiB each, sqlite_store.cpp), prepared statements and
+// scratch. Any thread.
+std::int64_t sqlite_memory_used();
+
 // A text column of the current row; empty when it is NULL, which a damaged
 // or hand-edited world can hold even where the schema says NOT NULL.
 std::string sqlite_column_string(sqlite3_stmt* st, int column);

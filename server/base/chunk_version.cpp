@@ -21,11 +21,27 @@ EncodeCounters& encode_counters() {
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk,
                            UnitBits changed_units, std::array<std::uint64_t, kMipLevels> level_since)
     : pos_(pos),
+      empty_(chunk == nullptr),
       revision_(revision),
       chunk_(std::move(chunk)),
-      changed_units_(changed_units),
-      level_since_(level_since),
-      empty_(chunk_ == nullptr) {}
+      level_since_(level_since) {
+  if (changed_units.any()) {
+    auto h = std::make_shared<EditHistory>();
+    h->changed_units = changed_units;
+    history_ = std::move(h);
+  }
+}
+
+const UnitBits& ChunkVersion::no_units() {
+  static const UnitBits none;
+  return none;
+}
+
+void ChunkVersion::Bytes::assign(std::span<const std::uint8_t> bytes) {
+  data = std::make_unique_for_overwrite<std::uint8_t[]>(bytes.size());
+  if (!bytes.empty()) std::memcpy(data.get(), bytes.data(), bytes.size());
+  size = static_cast<std::uint32_t>(bytes.size());
+}
 
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk)
     : ChunkVersion(pos, revision, std::move(chunk), UnitBits{}, {revision, revision, revision, revision}) {}
@@ -44,7 +60,7 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::after(const ChunkVersion& prev
   std::array<std::uint64_t, kMipLevels> since{};
   for (int level = 0; level < kMipLevels; ++level)
     since[static_cast<std::size_t>(level)] = differs[static_cast<std::size_t>(level)] ? rev : prev.level_since(level);
-  auto v = std::make_shared<ChunkVersion>(prev.pos(), rev, std::move(next), changed, since);
+  auto v = std::make_shared<ChunkVersion>(prev.pos(), rev, std::move(next), UnitBits{}, since);
   // The level-1 sub-units the changed units reach: unit (ux, uy, uz) of
   // level 0 covers level-1 voxels 2u..2u+1, in sub-unit u / 2.
   std::uint64_t own = 0;
@@ -53,16 +69,22 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::after(const ChunkVersion& prev
       const int ux = i % 8, uz = (i / 8) % 8, uy = i / 64;
       own |= std::uint64_t{1} << (((uy / 2) * 4 + uz / 2) * 4 + ux / 2);
     }
-  v->level1_changed_[0] = own;
-  for (int k = 1; k < kPatchHistory && k <= prev.patch_history_; ++k)
-    v->level1_changed_[static_cast<std::size_t>(k)] = own | prev.level1_changed_[static_cast<std::size_t>(k - 1)];
-  v->patch_history_ = static_cast<std::uint8_t>(std::min<int>(prev.patch_history_ + 1, kPatchHistory));
+  auto h = std::make_shared<EditHistory>();
+  h->changed_units = changed;
+  h->level1_changed[0] = own;
+  const int prev_history = prev.history_ ? prev.history_->patch_history : 0;
+  for (int k = 1; k < kPatchHistory && k <= prev_history; ++k)
+    h->level1_changed[static_cast<std::size_t>(k)] =
+        own | prev.history_->level1_changed[static_cast<std::size_t>(k - 1)];
+  h->patch_history = static_cast<std::uint8_t>(std::min<int>(prev_history + 1, kPatchHistory));
+  v->history_ = std::move(h);
   return v;
 }
 
 std::optional<std::uint64_t> ChunkVersion::changed_since(int level, std::uint64_t held_revision) const {
-  if (held_revision >= revision_ || revision_ - held_revision > patch_history_) return std::nullopt;
-  const std::uint64_t l1 = level1_changed_[static_cast<std::size_t>(revision_ - held_revision - 1)];
+  const int history = history_ ? history_->patch_history : 0;
+  if (held_revision >= revision_ || revision_ - held_revision > static_cast<std::uint64_t>(history)) return std::nullopt;
+  const std::uint64_t l1 = history_->level1_changed[static_cast<std::size_t>(revision_ - held_revision - 1)];
   if (level == 1) return l1;
   // Level 2: sub-unit (x, y, z) of level 1 lies in (x, y, z) / 2.
   std::uint64_t l2 = 0;
@@ -77,7 +99,8 @@ std::optional<std::uint64_t> ChunkVersion::changed_since(int level, std::uint64_
 void ChunkVersion::append_patch_units(int level, std::uint64_t mask, std::vector<std::uint8_t>& out) const {
   const auto l = static_cast<std::size_t>(level - 1);
   std::call_once(patch_once_[l], [&] {
-    PatchUnits& p = patch_units_[l];
+    patch_units_[l] = std::make_unique<PatchUnits>();
+    PatchUnits& p = *patch_units_[l];
     const int n = kChunkSize >> level, side = n / 4;
     Box mip({n, n, n});
     if (!empty_) {
@@ -97,7 +120,7 @@ void ChunkVersion::append_patch_units(int level, std::uint64_t mask, std::vector
     }
     p.starts.push_back(static_cast<std::uint32_t>(p.bytes.size()));
   });
-  const PatchUnits& p = patch_units_[l];
+  const PatchUnits& p = *patch_units_[l];
   for (std::uint64_t rest = mask; rest != 0; rest &= rest - 1) {
     const auto i = static_cast<std::size_t>(std::countr_zero(rest));
     if (i + 1 >= p.starts.size()) break;  // (beyond the level's sub-units: a caller's bug)
@@ -110,12 +133,21 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   v->empty_ = full.empty_;
   v->has_voxels_ = false;
   v->finest_level_ = 1;
-  v->level1_changed_ = full.level1_changed_;
-  v->patch_history_ = full.patch_history_;
+  // The patch history goes with the mips (a refresh of them may still
+  // send patches); the changed units do not.
+  if (full.history_ && full.history_->patch_history > 0) {
+    if (full.history_->changed_units.none()) {
+      v->history_ = full.history_;
+    } else {
+      auto h = std::make_shared<EditHistory>(*full.history_);
+      h->changed_units.reset();
+      v->history_ = std::move(h);
+    }
+  }
   for (int level = 1; level < kMipLevels; ++level) {
     const auto bytes = full.encoded(level);
     const auto l = static_cast<std::size_t>(level);
-    std::call_once(v->encoded_once_[l], [&] { v->encoded_[l].assign(bytes.begin(), bytes.end()); });
+    std::call_once(v->encoded_once_[l], [&] { v->encoded_[l].assign(bytes); });
   }
   return v;
 }
@@ -126,7 +158,12 @@ std::shared_ptr<ChunkVersion> ChunkVersion::level3_only(Vec3i pos, std::uint64_t
   v->has_voxels_ = false;
   v->finest_level_ = kMipLevels - 1;
   const auto l = static_cast<std::size_t>(kMipLevels - 1);
-  std::call_once(v->encoded_once_[l], [&] { net_codec_encode(kCoarseSide, voxels, v->encoded_[l]); });
+  std::call_once(v->encoded_once_[l], [&] {
+    thread_local std::vector<std::uint8_t> unit;
+    unit.clear();
+    net_codec_encode(kCoarseSide, voxels, unit);
+    v->encoded_[l].assign(unit);
+  });
   return v;
 }
 
@@ -161,34 +198,38 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   if (level > 0 && chunk_ && !chunk_->mip_unit(level).empty()) return chunk_->mip_unit(level);
   std::call_once(encoded_once_[l], [&] {
     encode_counters().made.fetch_add(1, std::memory_order_relaxed);
-    std::vector<std::uint8_t>& out = encoded_[l];
+    thread_local std::vector<std::uint8_t> out;
+    out.clear();
     if (level > 0) {
       const int n = kChunkSize >> level;
       Box box({n, n, n});
       if (chunk_) chunk_->read_level(level, box);
       net_codec_encode(n, box.voxels(), out);
-      return;
+    } else {
+      encode_full_units(chunk_.get(), out);
     }
-    encode_full_units(chunk_.get(), out);
+    encoded_[l].assign(out);
   });
-  return encoded_[l];
+  return encoded_[l].span();
 }
 
 const UpdatePiece& ChunkVersion::update_piece() const {
   std::call_once(piece_once_, [&] {
     std::vector<UnitUpdate> units;
-    units.reserve(changed_units_.count());
-    for (std::size_t i = 0; i < changed_units_.size(); ++i) {
-      if (!changed_units_.test(i)) continue;
+    const UnitBits& changed = changed_units();
+    units.reserve(changed.count());
+    for (std::size_t i = 0; i < changed.size(); ++i) {
+      if (!changed.test(i)) continue;
       UnitUpdate u;
       u.chunk_pos = pos_;
       u.unit_index = static_cast<std::uint16_t>(i);
       units.push_back(u);
     }
     read_update_units(chunk_.get(), std::span<UnitUpdate>(units));
-    if (!units.empty()) piece_ = net_codec_encode_update_piece(units);
+    piece_ = std::make_unique<UpdatePiece>();
+    if (!units.empty()) *piece_ = net_codec_encode_update_piece(units);
   });
-  return piece_;
+  return *piece_;
 }
 
 std::uint64_t ChunkVersion::hash() const {
@@ -196,9 +237,8 @@ std::uint64_t ChunkVersion::hash() const {
   return hash_;
 }
 
-std::span<const std::uint8_t> ChunkVersion::blob() const {
-  std::call_once(blob_once_, [&] { blob_ = chunk_ ? encode_chunk_blob(*chunk_) : encode_chunk_blob(Chunk()); });
-  return blob_;
+std::vector<std::uint8_t> ChunkVersion::blob() const {
+  return chunk_ ? encode_chunk_blob(*chunk_) : encode_chunk_blob(Chunk());
 }
 
 std::array<bool, kMipLevels> levels_changed(const Chunk* prev, const Chunk* next) {

@@ -1,7 +1,7 @@
 // ChunkVersion: one revision of one chunk, immutable once published, shared
 // by every reader (replicators on their session strands, the storage writer,
 // the world). What readers derive from it — the encoding of each level, the
-// tick's 4^3 update units, the chunk hash, the stored blob — is computed
+// tick's 4^3 update units, the chunk hash — is computed
 // once, lazily, by whichever thread asks first, and then shared.
 //
 // A null chunk is all Air. changed_units names the 4^3 units the tick that
@@ -77,7 +77,7 @@ class ChunkVersion {
   // Whether encoded(level) can answer: every level for a chunk with its
   // voxels, 1..3 for mips_only, 3 for coarse_only.
   bool has_level(int level) const { return level >= finest_level_; }
-  const UnitBits& changed_units() const { return changed_units_; }
+  const UnitBits& changed_units() const { return history_ ? history_->changed_units : no_units(); }
   std::uint64_t level_since(int level) const { return level_since_[static_cast<std::size_t>(level)]; }
 
   // Network codec bytes: level 0 is the eight 16^3 units in unit index order
@@ -103,42 +103,68 @@ class ChunkVersion {
   const UpdatePiece& update_piece() const;
   // protocol/messages.h chunk_hash of this chunk and revision.
   std::uint64_t hash() const;
-  // The world store's blob (byte RLE + LZ4).
-  std::span<const std::uint8_t> blob() const;
+  // The world store's blob (WORLD_FORMAT.md, "Chunk blobs"), made at each
+  // call: the writer asks once per version it stores, and a version held
+  // long after its commit kept a copy it never used again (a few kB for
+  // every chunk edited).
+  std::vector<std::uint8_t> blob() const;
 
  private:
-  // A version holding level 3 only, from its voxels (coarse_only, estimated).
-  static std::shared_ptr<ChunkVersion> level3_only(Vec3i pos, std::uint64_t revision, const CoarseVoxels& voxels);
-
-  Vec3i pos_;
-  std::uint64_t revision_;
-  std::shared_ptr<const Chunk> chunk_;
-  UnitBits changed_units_;
-  std::array<std::uint64_t, kMipLevels> level_since_;
-  // level1_changed_[k]: the level-1 sub-units changed from revision - k - 1
-  // to this one, for k < patch_history_ (0: no history).
-  std::array<std::uint64_t, kPatchHistory> level1_changed_{};
-  std::uint8_t patch_history_ = 0;
-  bool empty_ = true;
-  bool has_voxels_ = true;
-  bool estimate_ = false;
-  int finest_level_ = 0;
-
-  mutable std::array<std::once_flag, kMipLevels> encoded_once_;
-  mutable std::array<std::vector<std::uint8_t>, kMipLevels> encoded_;
-  mutable std::once_flag piece_once_, hash_once_, blob_once_;
+  // What a version made by after() knows of the edits before it: the units
+  // its tick changed and the level-1 sub-units changed since each of the
+  // last patch_history revisions. Out of line, and shared by a version's
+  // mips_only copy: most versions (loaded, generated, coarse or mips only;
+  // hundreds of thousands at a time with a thousand clients) have none.
+  struct EditHistory {
+    UnitBits changed_units;
+    // level1_changed[k]: the level-1 sub-units changed from revision - k -
+    // 1 to this one, for k < patch_history (0: no history).
+    std::array<std::uint64_t, kPatchHistory> level1_changed{};
+    std::uint8_t patch_history = 0;
+  };
+  // Bytes made once on demand and then shared: exactly their size (a
+  // vector kept its growth's spare capacity, and 24 bytes of its own for
+  // every level of every version, used or not).
+  struct Bytes {
+    std::unique_ptr<std::uint8_t[]> data;
+    std::uint32_t size = 0;
+    std::span<const std::uint8_t> span() const { return {data.get(), size}; }
+    void assign(std::span<const std::uint8_t> bytes);
+  };
   // Levels 1 and 2's sub-units, encoded: their bytes back to back and where
   // each starts (the last entry: the end).
   struct PatchUnits {
     std::vector<std::uint8_t> bytes;
     std::vector<std::uint32_t> starts;
   };
+  // A version holding level 3 only, from its voxels (coarse_only, estimated).
+  static std::shared_ptr<ChunkVersion> level3_only(Vec3i pos, std::uint64_t revision, const CoarseVoxels& voxels);
+  static const UnitBits& no_units();
+
+  Vec3i pos_;
+  bool empty_ = true;
+  bool has_voxels_ = true;
+  bool estimate_ = false;
+  std::uint8_t finest_level_ = 0;
+  std::uint64_t revision_;
+  std::shared_ptr<const Chunk> chunk_;
+  std::array<std::uint64_t, kMipLevels> level_since_;
+  std::shared_ptr<const EditHistory> history_;  // null: no changed units, no patch history
+
+  mutable std::array<std::once_flag, kMipLevels> encoded_once_;
+  mutable std::array<Bytes, kMipLevels> encoded_;
+  mutable std::once_flag piece_once_, hash_once_;
   mutable std::array<std::once_flag, 2> patch_once_;
-  mutable std::array<PatchUnits, 2> patch_units_;
-  mutable UpdatePiece piece_;
+  // Made by the first to ask (most versions are never asked).
+  mutable std::array<std::unique_ptr<PatchUnits>, 2> patch_units_;
+  mutable std::unique_ptr<UpdatePiece> piece_;
   mutable std::uint64_t hash_ = 0;
-  mutable std::vector<std::uint8_t> blob_;
 };
+
+// What every chunk held costs the world: a published version of a chunk
+// nobody edited is its pointers, revisions and once-flags (the voxels and
+// encodings beside it).
+static_assert(sizeof(ChunkVersion) <= 256);
 
 using VersionPtr = std::shared_ptr<const ChunkVersion>;
 

@@ -383,9 +383,7 @@ void Storage::writer_loop() {
         for (EditLogEntry& e : job.log) log.push_back(std::move(e));
         for (ForwardAnswer& a : job.answers) answers.push_back(std::move(a));
         for (const VersionPtr& v : job.versions) {
-          const auto blob = v->blob();
-          ChunkWrite w{v->pos(), v->revision(), std::vector<std::uint8_t>(blob.begin(), blob.end()),
-                       coarse_voxels(v->chunk())};
+          ChunkWrite w{v->pos(), v->revision(), v->blob(), coarse_voxels(v->chunk())};
           if (tells_units && v->changed_units().any() && v->has_voxels()) {
             const UpdatePiece* piece = &v->update_piece();
             net_codec_join_update_pieces(std::span(&piece, 1), w.units);

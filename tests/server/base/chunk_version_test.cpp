@@ -39,7 +39,7 @@ TEST(ChunkVersion, DerivedBytesAreTheCodecsOwn) {
   }
   EXPECT_EQ(v.hash(), chunk_hash(chunk.get(), 7));
   const auto blob = encode_chunk_blob(*chunk);
-  EXPECT_TRUE(std::equal(blob.begin(), blob.end(), v.blob().begin(), v.blob().end()));
+  EXPECT_EQ(v.blob(), blob);
   // Full: eight 16^3 units that decode to the chunk.
   std::vector<Voxel> unit(16 * 16 * 16);
   std::span<const std::uint8_t> rest = v.encoded(0);

@@ -336,6 +336,10 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
     EXPECT_EQ(sample(before, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
     EXPECT_GT(sample(during, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
   }
+  // The world store's page caches and statements: the server's SQLite
+  // world is open, and its chunks were read and written.
+  EXPECT_GT(sample(before, "terrane_memory_bytes{part=\"store\"}"), 0);
+  EXPECT_GT(sample(during, "terrane_memory_bytes{part=\"store\"}"), 0);
 
   // The client leaves with a reset, as one that quits with stream data
   // unread does: still the client closing, counted once the server sees it.
