@@ -134,16 +134,9 @@ std::shared_ptr<const ChunkVersion> ChunkVersion::mips_only(const ChunkVersion& 
   v->has_voxels_ = false;
   v->finest_level_ = 1;
   // The patch history goes with the mips (a refresh of them may still
-  // send patches); the changed units do not.
-  if (full.history_ && full.history_->patch_history > 0) {
-    if (full.history_->changed_units.none()) {
-      v->history_ = full.history_;
-    } else {
-      auto h = std::make_shared<EditHistory>(*full.history_);
-      h->changed_units.reset();
-      v->history_ = std::move(h);
-    }
-  }
+  // send patches); the changed units do not (changed_units() answers none
+  // for a version without voxels).
+  v->history_ = full.history_;
   for (int level = 1; level < kMipLevels; ++level) {
     const auto bytes = full.encoded(level);
     const auto l = static_cast<std::size_t>(level);

@@ -77,7 +77,7 @@ class ChunkVersion {
   // Whether encoded(level) can answer: every level for a chunk with its
   // voxels, 1..3 for mips_only, 3 for coarse_only.
   bool has_level(int level) const { return level >= finest_level_; }
-  const UnitBits& changed_units() const { return history_ ? history_->changed_units : no_units(); }
+  const UnitBits& changed_units() const { return history_ && has_voxels_ ? history_->changed_units : no_units(); }
   std::uint64_t level_since(int level) const { return level_since_[static_cast<std::size_t>(level)]; }
 
   // Network codec bytes: level 0 is the eight 16^3 units in unit index order
@@ -113,7 +113,8 @@ class ChunkVersion {
   // What a version made by after() knows of the edits before it: the units
   // its tick changed and the level-1 sub-units changed since each of the
   // last patch_history revisions. Out of line, and shared by a version's
-  // mips_only copy: most versions (loaded, generated, coarse or mips only;
+  // mips_only copy (which has no changed units: changed_units() answers
+  // none without voxels): most versions (loaded, generated or coarse;
   // hundreds of thousands at a time with a thousand clients) have none.
   struct EditHistory {
     UnitBits changed_units;
@@ -142,6 +143,8 @@ class ChunkVersion {
   static const UnitBits& no_units();
 
   Vec3i pos_;
+  // (Declared before chunk_: the constructor sets it from its argument
+  // before moving that into chunk_.)
   bool empty_ = true;
   bool has_voxels_ = true;
   bool estimate_ = false;

@@ -283,8 +283,8 @@ std::string render_metrics(const MetricsSources& s) {
           std::max<std::int64_t>(0, c.net.queued_bytes.load(std::memory_order_relaxed)));
   m.family("terrane_memory_bytes", "gauge",
            "The server's memory by part, estimated by each part's owner from its sizes and counts (the parts "
-           "that grow with the clients; send_queues: terrane_send_queue_bytes; store: the world store's page caches "
-           "and statements).");
+           "that grow with the clients; send_queues: terrane_send_queue_bytes; store: this process's SQLite memory, "
+           "its worlds' page caches and statements).");
   for (std::size_t p = 0; p < static_cast<std::size_t>(MemoryPart::kCount); ++p)
     m.sample("terrane_memory_bytes", std::max<std::int64_t>(0, c.memory.load(static_cast<MemoryPart>(p))),
              std::string("part=\"") + memory_part_label(static_cast<MemoryPart>(p)) + "\"");

@@ -42,9 +42,9 @@ struct MetricsSources {
   // The world's bounds as they are now (its border: the horizontal limits,
   // while bounded_xz); default: no border.
   WorldBounds bounds = {};
-  // What the world store's library holds in memory (SQLite's page caches
-  // and statements, sqlite_memory_used(); a PostgreSQL world's servers
-  // hold their SQLite files' too).
+  // This process's SQLite memory (sqlite_memory_used()): a world
+  // directory's page caches and statements (the loaders', the writer's and
+  // the world's connections); a PostgreSQL world's servers have none.
   std::int64_t store_memory_bytes = 0;
   // When the sample is taken (the lease renewal's age is counted to it).
   std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now();

@@ -146,12 +146,22 @@ TEST(ChunkVersion, AMipPatchFromAnyRevisionInItsHistoryMakesTheNewMip) {
     }
     EXPECT_FALSE(v.changed_since(1, v.revision()).has_value()) << "nothing is newer than itself";
   }
-  // A version keeping only its mips keeps its history.
+  // A version keeping only its mips keeps its history, not its changed
+  // units (it has no voxels to read them from).
+  ASSERT_TRUE(versions.back()->changed_units().any());
   const auto mips = ChunkVersion::mips_only(*versions.back());
+  EXPECT_TRUE(mips->changed_units().none());
   const auto held = versions[versions.size() - 3];
   const auto mask = mips->changed_since(1, held->revision());
   ASSERT_TRUE(mask.has_value());
   EXPECT_EQ(patched(mip_of(*held, 1), *mips, 1, *mask), mip_of(*versions.back(), 1));
+  // Changed units given to the constructor are its own, with no history
+  // to patch from (only after() makes one).
+  UnitBits some;
+  some.set(7);
+  const ChunkVersion given({1, 0, 2}, 30, std::make_shared<const Chunk>(sample_chunk()), some, {30, 30, 30, 30});
+  EXPECT_EQ(given.changed_units(), some);
+  EXPECT_FALSE(given.changed_since(1, 29).has_value());
 }
 
 TEST(UpdatePieces, JoinedPiecesAreTheBatchOneEncoderWrites) {

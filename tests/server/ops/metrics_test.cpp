@@ -336,8 +336,9 @@ TEST_F(MetricsEndpointTest, PromtoolAcceptsTheEndpointAndItsCountersMoveWhenACli
     EXPECT_EQ(sample(before, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
     EXPECT_GT(sample(during, std::string("terrane_memory_bytes{part=\"") + part + "\"}"), 0) << part;
   }
-  // The world store's page caches and statements: the server's SQLite
-  // world is open, and its chunks were read and written.
+  // SQLite's memory: the server's world is open (its schema and
+  // statements) before any client, and its chunks were read and written
+  // since.
   EXPECT_GT(sample(before, "terrane_memory_bytes{part=\"store\"}"), 0);
   EXPECT_GT(sample(during, "terrane_memory_bytes{part=\"store\"}"), 0);
 
