@@ -20,11 +20,8 @@ EncodeCounters& encode_counters() {
 
 ChunkVersion::ChunkVersion(Vec3i pos, std::uint64_t revision, std::shared_ptr<const Chunk> chunk,
                            UnitBits changed_units, std::array<std::uint64_t, kMipLevels> level_since)
-    : pos_(pos),
-      empty_(chunk == nullptr),
-      revision_(revision),
-      chunk_(std::move(chunk)),
-      level_since_(level_since) {
+    : pos_(pos), revision_(revision), chunk_(std::move(chunk)), level_since_(level_since) {
+  empty_ = chunk_ == nullptr;
   if (changed_units.any()) {
     auto h = std::make_shared<EditHistory>();
     h->changed_units = changed_units;
@@ -152,10 +149,7 @@ std::shared_ptr<ChunkVersion> ChunkVersion::level3_only(Vec3i pos, std::uint64_t
   v->finest_level_ = kMipLevels - 1;
   const auto l = static_cast<std::size_t>(kMipLevels - 1);
   std::call_once(v->encoded_once_[l], [&] {
-    thread_local std::vector<std::uint8_t> unit;
-    unit.clear();
-    net_codec_encode(kCoarseSide, voxels, unit);
-    v->encoded_[l].assign(unit);
+    v->encoded_[l].make([&](std::vector<std::uint8_t>& out) { net_codec_encode(kCoarseSide, voxels, out); });
   });
   return v;
 }
@@ -191,17 +185,13 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   if (level > 0 && chunk_ && !chunk_->mip_unit(level).empty()) return chunk_->mip_unit(level);
   std::call_once(encoded_once_[l], [&] {
     encode_counters().made.fetch_add(1, std::memory_order_relaxed);
-    thread_local std::vector<std::uint8_t> out;
-    out.clear();
-    if (level > 0) {
+    encoded_[l].make([&](std::vector<std::uint8_t>& out) {
+      if (level == 0) return encode_full_units(chunk_.get(), out);
       const int n = kChunkSize >> level;
       Box box({n, n, n});
       if (chunk_) chunk_->read_level(level, box);
       net_codec_encode(n, box.voxels(), out);
-    } else {
-      encode_full_units(chunk_.get(), out);
-    }
-    encoded_[l].assign(out);
+    });
   });
   return encoded_[l].span();
 }

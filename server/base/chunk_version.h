@@ -131,6 +131,15 @@ class ChunkVersion {
     std::uint32_t size = 0;
     std::span<const std::uint8_t> span() const { return {data.get(), size}; }
     void assign(std::span<const std::uint8_t> bytes);
+    // Keeps what encode(std::vector<std::uint8_t>&) appends, made in a
+    // scratch vector of the calling thread's.
+    template <class Encode>
+    void make(Encode&& encode) {
+      thread_local std::vector<std::uint8_t> scratch;
+      scratch.clear();
+      encode(scratch);
+      assign(scratch);
+    }
   };
   // Levels 1 and 2's sub-units, encoded: their bytes back to back and where
   // each starts (the last entry: the end).
@@ -143,8 +152,6 @@ class ChunkVersion {
   static const UnitBits& no_units();
 
   Vec3i pos_;
-  // (Declared before chunk_: the constructor sets it from its argument
-  // before moving that into chunk_.)
   bool empty_ = true;
   bool has_voxels_ = true;
   bool estimate_ = false;
