@@ -119,6 +119,7 @@ struct NetCounters {
   static constexpr std::size_t kTypes = 32;
   std::array<std::atomic<std::uint64_t>, kTypes> sent_bytes{}, sent_frames{}, received_bytes{}, received_frames{};
   std::atomic<std::int64_t> queued_bytes{0};  // every session's send queue
+  std::atomic<std::uint64_t> writes{0};       // gathered socket writes started (each one or more system calls)
   std::array<std::atomic<std::uint64_t>, static_cast<std::size_t>(CloseReason::kCount)> disconnects{};
   void disconnected(CloseReason r) { disconnects[static_cast<std::size_t>(r)].fetch_add(1, std::memory_order_relaxed); }
   std::uint64_t sessions_closed() const {

@@ -1,5 +1,8 @@
 #include "server/net/session.h"
 
+#include <algorithm>
+#include <array>
+
 #include "server/base/log.h"
 
 namespace terrane {
@@ -7,6 +10,16 @@ namespace terrane {
 namespace {
 // A write gathers queued frames up to about this many bytes.
 constexpr std::size_t kWriteGatherBytes = 256 * 1024;
+// Buffers handed to one system call (Linux takes up to IOV_MAX, 1,024).
+constexpr std::size_t kMaxWriteBuffers = 64;
+// A run of a session's gathered buffers, as asio takes a buffer sequence
+// (held by value in the write operation, so no copy of the vector).
+struct BufferRange {
+  const asio::const_buffer* first;
+  const asio::const_buffer* last;
+  const asio::const_buffer* begin() const { return first; }
+  const asio::const_buffer* end() const { return last; }
+};
 // How often the watchdog checks the read/write deadlines.
 constexpr std::chrono::milliseconds kWatchdogPeriod{200};
 
@@ -267,48 +280,92 @@ void Session::enqueue(OutFrame frame, SendClass cls) {
     }
   }
   (cls == SendClass::kControl ? control_queue_ : queue_).push_back(std::move(frame));
-  do_write();
+  schedule_write();
+}
+
+void Session::schedule_write() {
+  // A frame sent to an idle session would otherwise be written at once, in
+  // a system call of its own, and the frames queued by the handlers right
+  // behind it (a fan-out's update, the replicator's stream batch, a pong)
+  // in the next: one post, and they share one.
+  if (writing_ || write_scheduled_) return;
+  write_scheduled_ = true;
+  asio::post(socket_.get_executor(), [self = shared_from_this()] {
+    self->write_scheduled_ = false;
+    self->do_write();
+  });
 }
 
 void Session::do_write() {
-  if (writing_ || (queue_.empty() && control_queue_.empty())) return;
+  if (writing_ || state_ == State::kClosed) return;
+  // Before the first data frame (the Welcome, or the Disconnect of a
+  // refused Hello) control frames wait: the protocol lets a server send
+  // nothing else first, and a client may send a Ping before its Welcome.
+  if (queue_.empty() && (control_queue_.empty() || !data_started_)) return;
   writing_ = true;
   write_started_ = Clock::now();
+  if (limits_.counters != nullptr) limits_.counters->net.writes.fetch_add(1, std::memory_order_relaxed);
   // Every segment of the frames gathered, in one write: shared bytes go
   // from their owners' buffers to the socket.
-  std::vector<asio::const_buffer> bufs;
-  std::size_t gathered = 0;
-  for (auto* q : {&control_queue_, &queue_}) {
-    while (!q->empty() && (gathered == 0 || gathered + q->front().size() <= kWriteGatherBytes)) {
-      gathered += q->front().size();
-      q->front().for_each_segment([&](std::span<const std::uint8_t> s) { bufs.emplace_back(s.data(), s.size()); });
+  write_bufs_.clear();
+  write_next_ = 0;
+  write_gathered_ = 0;
+  const bool control_first = data_started_;
+  data_started_ = true;
+  for (auto* q : control_first ? std::array{&control_queue_, &queue_} : std::array{&queue_, &control_queue_}) {
+    while (!q->empty() && (write_gathered_ == 0 || write_gathered_ + q->front().size() <= kWriteGatherBytes)) {
+      write_gathered_ += q->front().size();
+      q->front().for_each_segment([&](std::span<const std::uint8_t> s) {
+        if (!s.empty()) write_bufs_.emplace_back(s.data(), s.size());
+      });
       inflight_.push_back(std::move(q->front()));
       q->pop_front();
     }
   }
-  asio::async_write(socket_, bufs, [self = shared_from_this(), gathered](const asio::error_code& ec, std::size_t n) {
-    self->writing_ = false;
-    self->inflight_.clear();
-    self->add_queued(-static_cast<std::int64_t>(gathered));
-    self->bytes_sent_.fetch_add(n, std::memory_order_relaxed);
-    if (self->state_ == State::kClosed) return;
-    if (ec) {
-      if (self->close_reason_.empty()) {
-        self->close_reason_ = ec.message();
-        self->close_why_ = close_reason_of(ec);
-      }
-      self->finish_close();
-      return;
+  write_some();
+}
+
+void Session::write_some() {
+  // At most kMaxWriteBuffers iovecs a system call: asio's async_write
+  // would hand sendmsg 16 at a time (asio 1.22), and a stream batch is
+  // mostly shared chunk bytes, a segment each.
+  const std::size_t end = std::min(write_bufs_.size(), write_next_ + kMaxWriteBuffers);
+  socket_.async_write_some(BufferRange{write_bufs_.data() + write_next_, write_bufs_.data() + end},
+                           [self = shared_from_this()](const asio::error_code& ec, std::size_t n) {
+                             self->on_written(ec, n);
+                           });
+}
+
+void Session::on_written(const asio::error_code& ec, std::size_t n) {
+  bytes_sent_.fetch_add(n, std::memory_order_relaxed);
+  if (!ec && state_ != State::kClosed) {
+    while (write_next_ < write_bufs_.size() && n >= write_bufs_[write_next_].size())
+      n -= write_bufs_[write_next_++].size();
+    if (write_next_ < write_bufs_.size()) {
+      write_bufs_[write_next_] += n;  // a buffer written in part
+      return write_some();
     }
-    if (!self->queue_.empty() || !self->control_queue_.empty()) return self->do_write();
-    if (self->state_ == State::kReading && self->on_drained_) self->on_drained_(self->id_);
-    if (self->state_ == State::kClosing) {
-      // Reason delivered: stop sending, wait for the peer to close.
-      self->state_ = State::kDraining;
-      asio::error_code ignored;
-      self->socket_.shutdown(asio::ip::tcp::socket::shutdown_send, ignored);
+  }
+  writing_ = false;
+  inflight_.clear();
+  add_queued(-static_cast<std::int64_t>(write_gathered_));
+  if (state_ == State::kClosed) return;
+  if (ec) {
+    if (close_reason_.empty()) {
+      close_reason_ = ec.message();
+      close_why_ = close_reason_of(ec);
     }
-  });
+    finish_close();
+    return;
+  }
+  if (!queue_.empty() || !control_queue_.empty()) return do_write();
+  if (state_ == State::kReading && on_drained_) on_drained_(id_);
+  if (state_ == State::kClosing) {
+    // Reason delivered: stop sending, wait for the peer to close.
+    state_ = State::kDraining;
+    asio::error_code ignored;
+    socket_.shutdown(asio::ip::tcp::socket::shutdown_send, ignored);
+  }
 }
 
 void Session::add_queued(std::int64_t delta) {
@@ -335,7 +392,7 @@ void Session::begin_close(CloseReason why, const std::string& reason) {
   OutFrame bye = build_disconnect(reason);
   add_queued(static_cast<std::int64_t>(bye.size()));
   queue_.push_back(std::move(bye));
-  do_write();
+  schedule_write();
 }
 
 void Session::finish_close() {

@@ -68,7 +68,9 @@ using InboundMessage = std::variant<HelloMsg, ClientStateMsg, EditRequestMsg, Ch
 using SharedFrame = std::shared_ptr<const Frame>;
 
 // Priority classes of outbound frames. Control frames (EditAck, EditReject,
-// Pong) go out before queued data; data frames (everything about the world:
+// Pong) go out before queued data, once the first data frame (the Welcome
+// or the Disconnect) has gone: before it the protocol allows the server to
+// send nothing else. Data frames (everything about the world:
 // stream records, updates, chunk hashes) keep their order,
 // so an update never overtakes the chunk data it applies to and a region
 // hash reflects every update queued before it. Between near chunks and far
@@ -117,7 +119,14 @@ class Session : public std::enable_shared_from_this<Session> {
   void do_read();
   void on_frame(std::span<const std::uint8_t> body);
   void enqueue(OutFrame frame, SendClass cls);
+  // Starts a write after the handlers already waiting on the strand have
+  // run, so the frames they queue go out in the same system call.
+  void schedule_write();
   void do_write();
+  // Writes the next run of the gathered buffers; on_written moves past
+  // what the socket took and writes the rest, then ends the write.
+  void write_some();
+  void on_written(const asio::error_code& ec, std::size_t n);
   // Feeds bytes read to the frame reader; false once the session closes over them.
   bool on_bytes(std::span<const std::uint8_t> bytes);
   void read_failed(const asio::error_code& ec);
@@ -144,8 +153,13 @@ class Session : public std::enable_shared_from_this<Session> {
   FrameReader reader_;
   std::deque<OutFrame> queue_;          // data
   std::deque<OutFrame> control_queue_;  // sent first
-  std::vector<OutFrame> inflight_;
+  std::vector<OutFrame> inflight_;          // the frames of the write under way
+  std::vector<asio::const_buffer> write_bufs_;  // their segments (kept for its capacity)
+  std::size_t write_next_ = 0;               // the first not yet written
+  std::size_t write_gathered_ = 0;           // their bytes
   bool writing_ = false;
+  bool write_scheduled_ = false;  // a do_write is posted to the strand
+  bool data_started_ = false;     // the first data frame has been written
   Clock::time_point last_read_;
   Clock::time_point write_started_;
   Clock::time_point close_started_;

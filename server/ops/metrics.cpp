@@ -303,6 +303,10 @@ std::string render_metrics(const MetricsSources& s) {
        c.net.received_bytes},
       {"terrane_received_frames_total", "Frames received, by message type.", c.net.received_frames},
   };
+  m.counter("terrane_socket_writes_total",
+            "Gathered writes to clients' sockets: each takes every frame queued for its session (up to a bound), "
+            "so terrane_sent_frames_total over this is the frames a write carries.",
+            load(c.net.writes));
   for (const Traffic& t : traffic) {
     m.family(t.name, "counter", t.help);
     for (std::size_t i = 1; i <= static_cast<std::size_t>(wire::Body::MAX) && i < NetCounters::kTypes; ++i)

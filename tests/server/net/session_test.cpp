@@ -3,7 +3,8 @@
 // call's worth of buffers) arrive intact and in order, beside frames of one
 // owned or one shared segment; the queue's bytes and the counters by
 // message type count each frame's whole size; what a frame shares is
-// released once it is written.
+// released once it is written. Frames queued by one handler go out in one
+// write; control frames wait for the first data frame (the Welcome).
 #include "server/net/session.h"
 
 #include <gtest/gtest.h>
@@ -112,6 +113,92 @@ TEST_F(SessionTest, AGatheredFrameArrivesIntact) {
   EXPECT_EQ(counters_.net.sent_frames[type(wire::Body::Pong)].load(), 1u);
   // Written: the session let go of what the frame shared.
   EXPECT_TRUE(eventually([&] { return watch.expired(); }));
+}
+
+TEST_F(SessionTest, WritesLargerThanTheSocketTakesArriveIntact) {
+  auto peer = connect();
+  // 8 frames of about 800 kB, each 100 shared segments and their record
+  // heads: more than a socket's buffers take at once and more than one
+  // system call's buffers, so each write goes on from inside a segment.
+  std::mt19937 rng(7);
+  std::vector<Frame> sent;
+  std::size_t total = 0;
+  for (int f = 0; f < 8; ++f) {
+    StreamBatchWriter w;
+    for (int i = 0; i < 100; ++i) {
+      auto p = std::make_shared<std::vector<std::uint8_t>>(7000 + rng() % 2000);
+      for (auto& b : *p) b = static_cast<std::uint8_t>(rng());
+      w.add(StreamRecordKind::kFull, {i, f, 0}, static_cast<std::uint64_t>(i), *p, p);
+    }
+    OutFrame frame = w.finish();
+    ASSERT_GT(frame.segment_count(), 150u);
+    sent.push_back(frame.flatten());
+    total += frame.size();
+    session_->send(std::move(frame));
+  }
+  ASSERT_GT(total, 6'000'000u);
+  for (const Frame& bytes : sent) {
+    const auto got = peer->next();
+    ASSERT_TRUE(got);
+    EXPECT_EQ(*got, Frame(bytes.begin() + kFrameHeaderBytes, bytes.end()));
+  }
+  EXPECT_TRUE(eventually([&] { return session_->bytes_sent() == total && session_->queued_bytes() == 0; }));
+}
+
+TEST_F(SessionTest, FramesQueuedByOneHandlerShareOneWrite) {
+  auto peer = connect();
+  constexpr int kFrames = 12;
+  // A fan-out's update, a stream batch, a pong: queued on the session's
+  // strand one after another, as the replicator and the world queue them.
+  asio::post(session_->executor(), [this] {
+    for (int i = 0; i < kFrames; ++i) session_->send(OutFrame(build_ping(static_cast<std::uint64_t>(i))));
+  });
+  for (int i = 0; i < kFrames; ++i) {
+    const auto f = peer->next();
+    ASSERT_TRUE(f) << "frame " << i;
+    const Frame ping = build_ping(static_cast<std::uint64_t>(i));
+    EXPECT_EQ(*f, Frame(ping.begin() + kFrameHeaderBytes, ping.end()));
+  }
+  EXPECT_EQ(counters_.net.writes.load(), 1u);
+  EXPECT_EQ(counters_.net.sent_frames[static_cast<std::size_t>(wire::Body::Ping)].load(),
+            static_cast<std::uint64_t>(kFrames));
+}
+
+TEST_F(SessionTest, ControlFramesWaitForTheFirstDataFrame) {
+  auto peer = connect();
+  // A client may send a Ping before its Welcome; the Pong must not
+  // overtake the Welcome (here a data frame standing for it).
+  session_->send(OutFrame(build_pong(1)), SendClass::kControl);
+  EXPECT_TRUE(eventually([&] {
+    return counters_.net.sent_frames[static_cast<std::size_t>(wire::Body::Pong)].load() == 1;
+  }));
+  // The write it scheduled has had its turn on the strand: nothing went.
+  std::atomic<bool> passed{false};
+  asio::post(session_->executor(), [&] { passed = true; });
+  EXPECT_TRUE(eventually([&] { return passed.load(); }));
+  EXPECT_EQ(counters_.net.writes.load(), 0u);
+  session_->send(OutFrame(build_ping(2)));
+  const auto body = [](const Frame& f) { return Frame(f.begin() + kFrameHeaderBytes, f.end()); };
+  const auto first = peer->next();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(*first, body(build_ping(2)));
+  const auto second = peer->next();
+  ASSERT_TRUE(second);
+  EXPECT_EQ(*second, body(build_pong(1)));
+  // After it, control frames go first again: a pong queued with data
+  // frames by one handler leads them.
+  const std::uint64_t writes = counters_.net.writes.load();
+  asio::post(session_->executor(), [this] {
+    session_->send(OutFrame(build_ping(3)));
+    session_->send(OutFrame(build_pong(4)), SendClass::kControl);
+  });
+  const auto third = peer->next();
+  ASSERT_TRUE(third);
+  EXPECT_EQ(*third, body(build_pong(4)));
+  const auto fourth = peer->next();
+  ASSERT_TRUE(fourth);
+  EXPECT_EQ(*fourth, body(build_ping(3)));
+  EXPECT_EQ(counters_.net.writes.load(), writes + 1);
 }
 
 }  // namespace
