@@ -14,11 +14,14 @@ void FanOut::join(ClientId id, std::shared_ptr<WorldClient> link, std::string na
   c.link = std::move(link);
   c.name = std::move(name);
   c.presence_records = presence_records;
-  clients_.emplace(id, std::move(c));
+  if (clients_.emplace(id, std::move(c)).second && !turns_.empty()) turn_of(id).push_back(id);
 }
 
 void FanOut::leave(ClientId id) {
-  clients_.erase(id);
+  if (clients_.erase(id) != 0 && !turns_.empty()) {
+    auto& turn = turn_of(id);
+    turn.erase(std::find(turn.begin(), turn.end(), id));
+  }
   presence_.remove(id);
 }
 
@@ -139,9 +142,16 @@ void FanOut::send_presence(std::uint64_t tick) {
   // thousand nearest-neighbour queries and frames spread over the ticks
   // instead of lengthening one.
   const std::uint32_t hz = std::max<std::uint32_t>(1, options_.tick_hz);
-  const std::uint64_t every = std::max<std::uint64_t>(1, hz / options_.presence_hz);
-  for (auto& [id, c] : clients_) {
-    if (!c.placed || (id + tick) % every != 0) continue;
+  const std::uint64_t every = std::max<std::uint64_t>(1, hz / std::max<std::uint32_t>(1, options_.presence_hz));
+  if (turns_.size() != every) {
+    turns_.assign(every, {});
+    for (const auto& [id, c] : clients_) turn_of(id).push_back(id);
+  }
+  // (id + tick) % every == 0: the clients of phase (every - tick % every) % every.
+  for (const ClientId id : turns_[(every - tick % every) % every]) {
+    const auto it = clients_.find(id);
+    Client& c = it->second;
+    if (!c.placed) continue;
     auto entries =
         presence_.nearest(id, c.position, static_cast<float>(c.view_distance), options_.presence_max_entries);
     if (c.presence_records) {

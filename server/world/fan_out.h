@@ -113,6 +113,11 @@ class FanOut {
   const WorldOptions& options_;
   ServerCounters& counters_;
   std::unordered_map<ClientId, Client> clients_;
+  // The clients by presence phase (id % turns_.size(), the ticks between a
+  // client's turns): a tick visits only the clients whose turn it is, not
+  // every client's entry. Remade when the period changes.
+  std::vector<std::vector<ClientId>> turns_;
+  std::vector<ClientId>& turn_of(ClientId id) { return turns_[id % turns_.size()]; }
   // Clients with mip news, by when it is due, earliest first (one period
   // for all: a queue). An entry is stale when its client's news went out
   // sooner (holds_full) or it left: skipped.

@@ -152,6 +152,40 @@ TEST_F(FanOutTest, PresenceIsSentOnlyWhenItChanged) {
   EXPECT_EQ(counters_.presence_sent.load(), 3u);
 }
 
+// Each client has its turn once every tick_hz / presence_hz ticks, at the
+// phase of its id; clients that join or leave keep the others' turns, and
+// a new period (the options changed) gives every client its turn again.
+TEST_F(FanOutTest, EachClientHasOnePresenceTurnAPeriod) {
+  options_.tick_hz = 6;
+  options_.presence_hz = 2;  // a turn every 3 ticks
+  std::vector<std::shared_ptr<RecordingClient>> clients;
+  for (ClientId id = 1; id <= 20; ++id) {
+    clients.push_back(join(id));
+    fan_out_.moved(id, Vec3f{static_cast<float>(id), 10, 0}, 96, 32);
+  }
+  auto late = join(40);  // joins after the turns are laid out, below
+  fan_out_.send_presence(0);  // the phase-0 clients: ids 3, 6, ... (id + 0) % 3 == 0
+  for (ClientId id = 1; id <= 20; ++id)
+    EXPECT_EQ(clients[id - 1]->answers.size(), id % 3 == 0 ? 1u : 0u) << "client " << id;
+  fan_out_.moved(40, Vec3f{40, 10, 0}, 96, 32);
+  fan_out_.leave(5);
+  auto later = join(41);
+  fan_out_.moved(41, Vec3f{41, 10, 0}, 96, 32);
+  fan_out_.send_presence(1);  // (id + 1) % 3 == 0: 2, 8, 11, ..., 41
+  fan_out_.send_presence(2);  // 1, 4, 7, 10, ..., 40 (5 left)
+  for (ClientId id = 1; id <= 20; ++id)
+    EXPECT_EQ(clients[id - 1]->answers.size(), id == 5 ? 0u : 1u) << "client " << id;
+  EXPECT_EQ(late->answers.size(), 1u);
+  EXPECT_EQ(later->answers.size(), 1u);
+  // Every 2 ticks now: each (but 5) hears within the next 2, moved first.
+  options_.presence_hz = 3;
+  for (ClientId id = 1; id <= 20; ++id) fan_out_.moved(id, Vec3f{static_cast<float>(id), 11, 0}, 96, 32);
+  fan_out_.send_presence(3);
+  fan_out_.send_presence(4);
+  for (ClientId id = 1; id <= 20; ++id)
+    EXPECT_EQ(clients[id - 1]->answers.size(), id == 5 ? 0u : 2u) << "client " << id;
+}
+
 // Each entry names the client (its Hello's name), so a client can say who
 // it sees; a client joined without a name is told without one.
 TEST_F(FanOutTest, PresenceNamesTheClients) {
