@@ -338,6 +338,7 @@ void Session::write_some() {
 
 void Session::on_written(const asio::error_code& ec, std::size_t n) {
   bytes_sent_.fetch_add(n, std::memory_order_relaxed);
+  if (n > 0) write_started_ = Clock::now();  // the watchdog drops writes that make no progress
   if (!ec && state_ != State::kClosed) {
     while (write_next_ < write_bufs_.size() && n >= write_bufs_[write_next_].size())
       n -= write_bufs_[write_next_++].size();
@@ -360,6 +361,9 @@ void Session::on_written(const asio::error_code& ec, std::size_t n) {
   }
   if (!queue_.empty() || !control_queue_.empty()) return do_write();
   if (state_ == State::kReading && on_drained_) on_drained_(id_);
+  // (The owner may have queued more, or closed the session, its Disconnect
+  // now on its way.)
+  if (writing_ || write_scheduled_ || !queue_.empty() || !control_queue_.empty()) return;
   if (state_ == State::kClosing) {
     // Reason delivered: stop sending, wait for the peer to close.
     state_ = State::kDraining;
@@ -389,6 +393,12 @@ void Session::begin_close(CloseReason why, const std::string& reason) {
   // to know) still go out, ahead of the reason.
   for (const auto& f : queue_) add_queued(-static_cast<std::int64_t>(f.size()));
   queue_.clear();
+  if (!data_started_) {
+    // Never welcomed (or its Welcome not yet written, now dropped): the
+    // Disconnect goes alone, as the protocol allows nothing else first.
+    for (const auto& f : control_queue_) add_queued(-static_cast<std::int64_t>(f.size()));
+    control_queue_.clear();
+  }
   OutFrame bye = build_disconnect(reason);
   add_queued(static_cast<std::int64_t>(bye.size()));
   queue_.push_back(std::move(bye));

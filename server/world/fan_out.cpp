@@ -1,6 +1,7 @@
 #include "server/world/fan_out.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 
 #include "common/world/view.h"
@@ -150,6 +151,7 @@ void FanOut::send_presence(std::uint64_t tick) {
   // (id + tick) % every == 0: the clients of phase (every - tick % every) % every.
   for (const ClientId id : turns_[(every - tick % every) % every]) {
     const auto it = clients_.find(id);
+    assert(it != clients_.end());  // turns_ holds the ids of clients_
     Client& c = it->second;
     if (!c.placed) continue;
     auto entries =

@@ -201,5 +201,22 @@ TEST_F(SessionTest, ControlFramesWaitForTheFirstDataFrame) {
   EXPECT_EQ(counters_.net.writes.load(), writes + 1);
 }
 
+TEST_F(SessionTest, ASessionClosedBeforeItsFirstDataFrameSendsTheDisconnectAlone) {
+  auto peer = connect();
+  // A Pong queued for a client never welcomed, then the session closed (a
+  // bad frame in the same read): nothing but the Disconnect may go.
+  asio::post(session_->executor(), [this] {
+    session_->send(OutFrame(build_pong(1)), SendClass::kControl);
+    session_->close(CloseReason::kProtocolError, "protocol error: test");
+  });
+  const auto first = peer->next();
+  ASSERT_TRUE(first);
+  const auto m = verify_message(*first);
+  ASSERT_TRUE(m);
+  EXPECT_EQ((*m)->body_type(), wire::Body::Disconnect);
+  EXPECT_FALSE(peer->next());  // nothing after it: the stream ends
+  EXPECT_TRUE(eventually([&] { return session_->queued_bytes() == 0 && counters_.net.queued_bytes.load() == 0; }));
+}
+
 }  // namespace
 }  // namespace terrane

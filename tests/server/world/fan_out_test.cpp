@@ -163,7 +163,7 @@ TEST_F(FanOutTest, EachClientHasOnePresenceTurnAPeriod) {
     clients.push_back(join(id));
     fan_out_.moved(id, Vec3f{static_cast<float>(id), 10, 0}, 96, 32);
   }
-  auto late = join(40);  // joins after the turns are laid out, below
+  auto late = join(40);  // before the turns are first laid out (the first send_presence); 41 joins after
   fan_out_.send_presence(0);  // the phase-0 clients: ids 3, 6, ... (id + 0) % 3 == 0
   for (ClientId id = 1; id <= 20; ++id)
     EXPECT_EQ(clients[id - 1]->answers.size(), id % 3 == 0 ? 1u : 0u) << "client " << id;
