@@ -41,6 +41,7 @@ Client::Client(ClientOptions options, ClientCallbacks callbacks)
       movement_(options_),
       connection_(options_, *this) {
   replica_.share_decoded(options_.shared_chunks);
+  replica_.set_full_chunk_mips(options_.full_chunk_mips);
 }
 
 Client::~Client() { disconnect(); }
@@ -89,6 +90,7 @@ bool Client::start_cache_load(const WelcomeMsg& w) {
                               work = std::make_shared<Connection::OffsideWork>(connection_.offside_work())] {
     auto loaded = std::make_shared<Replica>();
     loaded->share_decoded(options_.shared_chunks);
+    loaded->set_full_chunk_mips(options_.full_chunk_mips);
     const std::size_t chunks = load_view(*options_.chunk_cache, id, view, bounds, *loaded);
     connection_.post([this, loaded, chunks, session] { loaded_cache(std::move(*loaded), chunks, session); });
   });
@@ -374,6 +376,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
           replica_.for_each_holding([&](Vec3i cp, const Holding&) { dropped.push_back(HoldingChange{cp, std::nullopt}); });
         replica_ = Replica();
         replica_.share_decoded(options_.shared_chunks);
+        replica_.set_full_chunk_mips(options_.full_chunk_mips);
         unconfirmed_.clear();
         hash_checks_.clear();
       }

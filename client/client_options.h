@@ -92,6 +92,10 @@ struct ClientOptions {
   // clients (null: each packs its own). Many clients in one process
   // receive the same records (client/decoded_chunks.h).
   std::shared_ptr<DecodedChunks> shared_chunks;
+  // How the replica's full-resolution chunks hold their mips
+  // (Chunk::Mips): kept (the default; the viewer reads them for its LOD),
+  // or derived when read, for clients that never read them (terrane-bots).
+  Chunk::Mips full_chunk_mips = Chunk::Mips::kKept;
   // Chunks kept across sessions and processes (client/chunk_cache.h; null:
   // none). A world whose Welcome names it (world_id) is joined from what
   // the cache holds of the first view: the replica is filled from it and

@@ -72,7 +72,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     }
     case StreamRecordKind::kFull: {
       if (!shared_) {
-        grid_.put_chunk(cp, Chunk::from_box(voxels_of(r)));  // (an empty chunk is erased)
+        grid_.put_chunk(cp, Chunk::from_box(voxels_of(r), full_mips_));  // (an empty chunk is erased)
       } else {
         // The process's chunk of these bytes, held as it is until an update
         // changes it here (the grid then writes a copy of its own); known
@@ -80,7 +80,7 @@ void Replica::apply_stream_record(const StreamRecord& r) {
         std::shared_ptr<const Chunk> chunk = std::static_pointer_cast<const Chunk>(r.known);
         if (!chunk) chunk = shared_->find(r.payload);
         if (!chunk) {
-          chunk = std::make_shared<const Chunk>(Chunk::from_box(voxels_of(r)));
+          chunk = std::make_shared<const Chunk>(Chunk::from_box(voxels_of(r), full_mips_));
           shared_->add(r.payload, chunk);
         }
         grid_.put_shared_chunk(cp, std::move(chunk));

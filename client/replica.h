@@ -81,6 +81,11 @@ class Replica {
   // shared with the process's other replicas; null: none), and mips and
   // horizon images are kept in its mips().
   void share_decoded(std::shared_ptr<DecodedChunks> shared) { shared_ = std::move(shared); }
+  // How the chunks of Full records hold their mips (Chunk::Mips; kKept
+  // unless set): kDerived for a replica that rarely reads a full chunk's
+  // mips (a load test's bots), which then costs neither their making nor
+  // their bytes.
+  void set_full_chunk_mips(Chunk::Mips mips) { full_mips_ = mips; }
 
   // A decoded StreamBatch record (protocol/stream_batch.h): the chunk is
   // held in the record's form from now on (Released: not held); a Mip
@@ -215,6 +220,7 @@ class Replica {
   std::size_t horizon_chunks_ = 0;  // chunks covered by horizons_
   std::uint64_t redundant_mips_ = 0;
   std::shared_ptr<DecodedChunks> shared_;
+  Chunk::Mips full_mips_ = Chunk::Mips::kKept;
 };
 
 }  // namespace terrane

@@ -66,6 +66,8 @@ Bot::Bot(int index, const RunContext& ctx, Vec3f start, Gait gait, EditMode edit
   co.state = ClientStateMsg{pos_, ctx_.view_distance, ctx_.full_res_radius};
   co.io_context = ctx_.io;
   co.shared_chunks = ctx_.shared_chunks;
+  // A bot reads its full chunks' voxels (walking, hashes), never their mips.
+  co.full_chunk_mips = Chunk::Mips::kDerived;
   co.chunk_cache = ctx_.chunk_cache;
   co.emulation.latency = std::chrono::milliseconds(o.latency_ms);
   co.emulation.bandwidth_bytes_per_s = static_cast<std::uint64_t>(o.bandwidth_kbps) * 1000 / 8;

@@ -43,8 +43,9 @@ Voxel downsample(const Voxel children[8]) {
 
 Chunk::Chunk(Material fill) : level0_(fill), mip_fill_(fill), empty_(fill == kAir) {}
 
-Chunk Chunk::from_box(const Box& box) {
+Chunk Chunk::from_box(const Box& box, Mips mips) {
   Chunk c;
+  c.mips_derived_ = mips == Mips::kDerived;
   c.level0_.modify_rows(0, kChunkSize, 0, kChunkSize, [&](int y, int z, Voxel* row) {
     std::copy_n(box.read_row(y, z), kChunkSize, row);
   });
@@ -61,9 +62,11 @@ Chunk& Chunk::operator=(Chunk&& other) noexcept {
   mip_end_ = other.mip_end_;
   mip_fill_ = other.mip_fill_;
   empty_ = other.empty_;
+  mips_derived_ = other.mips_derived_;
   other.mip_end_ = {};
   other.mip_fill_ = kAir;
   other.empty_ = true;
+  other.mips_derived_ = false;
   return *this;
 }
 
@@ -73,6 +76,7 @@ Chunk Chunk::clone() const {
   c.mip_end_ = mip_end_;
   c.mip_fill_ = mip_fill_;
   c.empty_ = empty_;
+  c.mips_derived_ = mips_derived_;
   if (dense_) c.dense_ = std::make_unique<DenseMips>(*dense_);
   if (mips_) {
     const std::size_t bytes = mip_end_[kMipLevels - 1];
@@ -135,6 +139,22 @@ void Chunk::read_level(int level, Box& out) const {
       for (int z = 0; z < n; ++z) std::copy_n(level0_.read_row(y, z, scratch), n, out.write_row(y, z));
     return;
   }
+  if (mips_derived_) {
+    // Level 1 from level 0's rows, then each level from the one below, the
+    // last into out.
+    thread_local Box finer[2];
+    const Region whole{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}};
+    Box& l1 = level == 1 ? out : finer[0];
+    l1.resize({kChunkSize / 2, kChunkSize / 2, kChunkSize / 2});
+    downsample_region([&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l1, whole);
+    if (level == 1) return;
+    Box& l2 = level == 2 ? out : finer[1];
+    l2.resize({kChunkSize / 4, kChunkSize / 4, kChunkSize / 4});
+    downsample_box(l1, l2, Region{{0, 0, 0}, l1.size()});
+    if (level == 2) return;
+    downsample_box(l2, out, Region{{0, 0, 0}, l2.size()});
+    return;
+  }
   if (dense_) {
     out = dense_->levels[level - 1];
     return;
@@ -179,6 +199,12 @@ void Chunk::encode_mip_units(const DenseMips& dense, std::vector<std::uint8_t>& 
 }
 
 void Chunk::update_mips(const Region& changed) {
+  if (mips_derived_) {
+    // Nothing held: only whether the chunk is empty (Air at any level means
+    // Air in everything it covers, so level 0 answers for level 3).
+    empty_ = !level0_.box_has_solid(0, kChunkSize, 0, kChunkSize, 0, kChunkSize, 0);
+    return;
+  }
   const bool whole = changed.min == Vec3i{0, 0, 0} && changed.max == Vec3i{kChunkSize, kChunkSize, kChunkSize};
   if (!dense_) {
     auto dense = std::make_unique<DenseMips>();
@@ -217,6 +243,14 @@ void Chunk::compact() {
 }
 
 bool Chunk::write_image(std::vector<std::uint8_t>& out) const {
+  if (mips_derived_) {
+    // The image holds the mips: made in a copy that keeps them.
+    Chunk kept = clone();
+    kept.mips_derived_ = false;
+    kept.rebuild_mips();
+    kept.pack_mips();
+    return kept.write_image(out);
+  }
   if (level0_.unpacked()) {
     Chunk packed = clone();
     packed.compact();

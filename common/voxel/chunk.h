@@ -83,8 +83,17 @@ class Chunk {
   using Level0 = RowPackedBox<32>;
 
   explicit Chunk(Material fill = kAir);
-  // A packed chunk with current mips from a 32³ box. Precondition: box is 32³.
-  static Chunk from_box(const Box& box);
+  // How a chunk holds its mips: kKept, as units (or dense boxes between
+  // writes), made when level 0 changes; kDerived, none held: a read of a
+  // mip level downsamples level 0 then (mip_get, read_level), and writes
+  // pay nothing for mips. kDerived is for holders that rarely or never read
+  // a full-resolution chunk's mips, such as a load test's replicas, whose
+  // Full records would otherwise each pay a downsample and three encodings
+  // and keep the units. clone() and moves keep the choice; write_image()
+  // writes the mips either way.
+  enum class Mips : std::uint8_t { kKept, kDerived };
+  // A packed chunk from a 32³ box, its mips as asked. Precondition: box is 32³.
+  static Chunk from_box(const Box& box, Mips mips = Mips::kKept);
   // A moved-from chunk is empty Air, usable as any other.
   Chunk(Chunk&& other) noexcept { *this = std::move(other); }
   Chunk& operator=(Chunk&& other) noexcept;
@@ -107,12 +116,13 @@ class Chunk {
   // Reads a whole level into a (32 >> level)³ box.
   void read_level(int level, Box& out) const;
   // The network-codec unit of mip level 1..3, as stored (empty for a uniform
-  // chunk, whose levels are all its one material, and while writes have left
-  // the mips unpacked).
+  // chunk, whose levels are all its one material, while writes have left
+  // the mips unpacked, and for derived mips).
   std::span<const std::uint8_t> mip_unit(int level) const;
   // Encodes mips left unpacked by writes into units (no-op otherwise).
   void pack_mips();
   bool mips_packed() const { return dense_ == nullptr; }
+  Mips mips() const { return mips_derived_ ? Mips::kDerived : Mips::kKept; }
 
   // Copies the chunk-local region [min, min + out.size()) into out.
   // Precondition: the region lies inside the chunk.
@@ -180,6 +190,7 @@ class Chunk {
   std::array<std::uint16_t, kMipLevels> mip_end_{};  // end of level l's unit in mips_ (l = 1..3)
   Material mip_fill_ = kAir;  // without units: every mip voxel is this material (level 0's, when last uniform)
   bool empty_ = true;
+  bool mips_derived_ = false;  // Mips::kDerived: dense_ and mips_ stay null, mip reads downsample level 0
 };
 
 }  // namespace terrane

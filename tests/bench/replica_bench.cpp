@@ -9,6 +9,8 @@
 //              in the bots process.
 //   Full       Full records of generated terrain chunks, each then
 //              Released (the ring at full resolution a move brings).
+//   FullDerivedMips the same, the replica's full chunks deriving their mips
+//              when read (Chunk::Mips::kDerived, as terrane-bots' are).
 //   FullShared the same, with the replica's decoded chunks shared through
 //              a DecodedChunks cache warmed by another replica (the bots
 //              process: another bot took the same bytes a moment before).
@@ -16,6 +18,7 @@
 //              UpdateBatches (two 4^3 units of one chunk a tick, as a
 //              small edit near 40 bots in a crowd), each replica on its
 //              own copies.
+//   UpdatesDerivedMips Updates, the replicas' chunks deriving their mips.
 //   UpdatesShared the same replicas sharing their chunks (DecodedChunks):
 //              the first to apply a tick's units makes the result, the
 //              others take it (client/shared_updates.h).
@@ -200,10 +203,12 @@ const FullFrames& full_frames() {
 // known: the decoder skips the bytes the shared cache knows (the client's
 // way); without, it decodes every record and the replica finds the chunk
 // by its bytes afterwards.
-void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared, bool known = false) {
+void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared, bool known = false,
+              Chunk::Mips mips = Chunk::Mips::kKept) {
   const FullFrames& f = full_frames();
   Applier a;
   a.replica.share_decoded(shared);
+  a.replica.set_full_chunk_mips(mips);
   if (known)
     a.known = [shared](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); };
   if (shared) {
@@ -222,8 +227,10 @@ void run_full(benchmark::State& state, std::shared_ptr<DecodedChunks> shared, bo
 }
 
 void BM_Full(benchmark::State& state) { run_full(state, nullptr); }
+// The bots' way: chunks whose mips are derived when read (none made).
+void BM_FullDerivedMips(benchmark::State& state) { run_full(state, nullptr, false, Chunk::Mips::kDerived); }
 
-void run_updates(benchmark::State& state, bool share) {
+void run_updates(benchmark::State& state, bool share, Chunk::Mips mips = Chunk::Mips::kKept) {
   constexpr std::size_t kReplicas = 40;
   constexpr int kTicks = 64;
   const FullFrames& f = full_frames();
@@ -232,6 +239,7 @@ void run_updates(benchmark::State& state, bool share) {
   for (std::size_t i = 0; i < kReplicas; ++i) {
     appliers.push_back(std::make_unique<Applier>());
     appliers.back()->replica.share_decoded(shared);
+    appliers.back()->replica.set_full_chunk_mips(mips);
     appliers.back()->apply(f.full);
   }
   std::vector<Vec3i> held;
@@ -265,7 +273,10 @@ BENCHMARK(BM_Updates)->Unit(benchmark::kMillisecond);
 
 void BM_UpdatesShared(benchmark::State& state) { run_updates(state, true); }
 BENCHMARK(BM_UpdatesShared)->Unit(benchmark::kMillisecond);
+void BM_UpdatesDerivedMips(benchmark::State& state) { run_updates(state, false, Chunk::Mips::kDerived); }
+BENCHMARK(BM_UpdatesDerivedMips)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Full)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FullDerivedMips)->Unit(benchmark::kMillisecond);
 
 void BM_FullShared(benchmark::State& state) { run_full(state, std::make_shared<DecodedChunks>()); }
 BENCHMARK(BM_FullShared)->Unit(benchmark::kMillisecond);

@@ -271,6 +271,46 @@ TEST(Replica, HashFollowsEveryChangeOfTheVoxels) {
 // surface_height reads a chunk at a time; it must agree with reading the
 // column voxel by voxel through get(), over full, mip, Empty and unknown
 // chunks and bounds that cut chunks.
+TEST(Replica, FullChunksWithDerivedMipsHoldNoneAndReadHashAndUpdateAlike) {
+  Replica kept, derived;
+  derived.set_full_chunk_mips(Chunk::Mips::kDerived);
+  Box slope({kChunkSize, kChunkSize, kChunkSize});
+  for (int y = 0; y < kChunkSize; ++y)
+    for (int z = 0; z < kChunkSize; ++z)
+      for (int x = 0; x < kChunkSize; ++x)
+        slope.set(x, y, z, y < (x + z) / 2 ? solid(materials::kRock) : Voxel{});
+  const Vec3i cp{2, 0, -3};
+  for (Replica* r : {&kept, &derived})
+    r->apply_stream_record(StreamRecord{StreamRecordKind::kFull, cp, 1, 0, &slope, nullptr, {}});
+  ASSERT_NE(derived.grid().find_chunk(cp), nullptr);
+  EXPECT_EQ(derived.grid().find_chunk(cp)->mips(), Chunk::Mips::kDerived);
+  EXPECT_EQ(kept.grid().find_chunk(cp)->mips(), Chunk::Mips::kKept);
+  EXPECT_EQ(derived.memory().full.mip_bytes, 0u);
+  EXPECT_GT(kept.memory().full.mip_bytes, 0u);
+  EXPECT_EQ(derived.hash(cp), kept.hash(cp));
+  // An update of a unit: the same voxels and hash after it, mips read alike.
+  std::vector<UnitUpdate> ups(1);
+  ups[0].chunk_pos = cp;
+  ups[0].unit_index = 21;
+  ups[0].voxels.fill(make_voxel(materials::kSand, 90));
+  std::vector<std::uint8_t> data;
+  net_codec_encode_update_batch(ups, data);
+  const ChunkRevisionMsg rev{cp, 2};
+  for (Replica* r : {&kept, &derived}) ASSERT_TRUE(r->apply_update_batch(UpdateBatchMsg{1, data, {rev}}).ok());
+  EXPECT_EQ(derived.hash(cp), kept.hash(cp));
+  for (int level = 1; level < kMipLevels; ++level) {
+    Box a, b;
+    kept.grid().find_chunk(cp)->read_level(level, a);
+    derived.grid().find_chunk(cp)->read_level(level, b);
+    EXPECT_TRUE(a == b) << "level " << level;
+  }
+  for (std::int32_t z = 0; z < kChunkSize; z += 5)
+    for (std::int32_t x = 0; x < kChunkSize; x += 5) {
+      const Vec3i v = chunk_origin(cp) + Vec3i{x, 0, z};
+      EXPECT_EQ(derived.surface_height(v.x, v.z, -64, 64), kept.surface_height(v.x, v.z, -64, 64));
+    }
+}
+
 TEST(Replica, SurfaceHeightAgreesWithTheVoxelsOfTheColumn) {
   Replica r;
   // Column chunks y = -1..3: full with a slope, a mip, Empty, unknown, full.

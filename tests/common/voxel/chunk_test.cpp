@@ -8,6 +8,8 @@
 #include <array>
 #include <cmath>
 #include <random>
+#include <string>
+#include <vector>
 
 namespace terrane {
 namespace {
@@ -251,6 +253,98 @@ TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
   Box top;
   chunk.read_level(3, top);
   EXPECT_EQ(top.get(1, 2, 3), solid(materials::kMud));
+}
+
+// Terrain with partial occupancies and several materials: every mip level
+// differs from a plain downsample of one material.
+Box derived_mips_terrain() {
+  Box b({32, 32, 32});
+  for (int y = 0; y < 32; ++y)
+    for (int z = 0; z < 32; ++z)
+      for (int x = 0; x < 32; ++x) {
+        const int ground = 10 + (x * 3 + z * 5) % 9;
+        if (y < ground - 3) b.set(x, y, z, solid(kRock));
+        else if (y < ground) b.set(x, y, z, solid((x + z) % 3 == 0 ? kSand : kGrass));
+        else if (y == ground) b.set(x, y, z, make_voxel(kGrass, static_cast<std::uint8_t>((x * 37 + z * 11) % 256)));
+      }
+  return b;
+}
+
+void expect_same_mips(const Chunk& a, const Chunk& b, const std::string& where) {
+  EXPECT_EQ(a.empty(), b.empty()) << where;
+  for (int level = 1; level < kMipLevels; ++level) {
+    Box la, lb;
+    a.read_level(level, la);
+    b.read_level(level, lb);
+    ASSERT_TRUE(la == lb) << where << " level " << level;
+    const int n = kChunkSize >> level;
+    EXPECT_EQ(a.mip_get(level, n - 1, n / 2, 1), b.mip_get(level, n - 1, n / 2, 1)) << where << " level " << level;
+  }
+}
+
+TEST(ChunkDerivedMips, ReadAsTheKeptMipsAndHoldNone) {
+  const Box content = derived_mips_terrain();
+  const Chunk kept = Chunk::from_box(content);
+  const Chunk derived = Chunk::from_box(content, Chunk::Mips::kDerived);
+  EXPECT_EQ(kept.mips(), Chunk::Mips::kKept);
+  EXPECT_EQ(derived.mips(), Chunk::Mips::kDerived);
+  expect_same_mips(kept, derived, "from the box");
+  EXPECT_GT(kept.memory().mip_bytes, 0u);
+  EXPECT_EQ(derived.memory().mip_bytes, 0u);
+  for (int level = 1; level < kMipLevels; ++level) {
+    EXPECT_FALSE(kept.mip_unit(level).empty());
+    EXPECT_TRUE(derived.mip_unit(level).empty());  // not stored: callers read the level
+  }
+}
+
+TEST(ChunkDerivedMips, WritesKeepThemCurrentAndEmptyFollowsLevel0) {
+  Chunk kept = Chunk::from_box(derived_mips_terrain());
+  Chunk derived = Chunk::from_box(derived_mips_terrain(), Chunk::Mips::kDerived);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> c(0, 31), occ(0, 255);
+  for (int edit = 0; edit < 40; ++edit) {
+    const Vec3i at{c(rng), c(rng), c(rng)};
+    const auto v = make_voxel(edit % 2 == 0 ? kSand : kRock, static_cast<std::uint8_t>(occ(rng)));
+    auto fn = [&](Vec3i, Voxel old) { return old.material == kAir ? v : Voxel{}; };
+    kept.modify(Region{at - Vec3i{2, 2, 2}, at + Vec3i{3, 3, 3}}, fn);
+    derived.modify(Region{at - Vec3i{2, 2, 2}, at + Vec3i{3, 3, 3}}, fn);
+    kept.pack_mips();
+    derived.pack_mips();
+    expect_same_mips(kept, derived, "edit " + std::to_string(edit));
+    ASSERT_EQ(derived.mips(), Chunk::Mips::kDerived);
+  }
+  // A clone and a move keep the choice.
+  Chunk copy = derived.clone();
+  EXPECT_EQ(copy.mips(), Chunk::Mips::kDerived);
+  expect_same_mips(kept, copy, "clone");
+  Chunk moved(std::move(copy));
+  EXPECT_EQ(moved.mips(), Chunk::Mips::kDerived);
+  expect_same_mips(kept, moved, "moved");
+  // Everything Air: empty, as level 0 says.
+  auto air = [](Vec3i, Voxel) { return Voxel{}; };
+  derived.modify(Region{{0, 0, 0}, {32, 32, 32}}, air);
+  kept.modify(Region{{0, 0, 0}, {32, 32, 32}}, air);
+  EXPECT_TRUE(derived.empty());
+  expect_same_mips(kept, derived, "all Air");
+  // One voxel of the smallest occupancy makes it non-empty again.
+  derived.set({5, 6, 7}, make_voxel(kSand, 0));
+  kept.set({5, 6, 7}, make_voxel(kSand, 0));
+  EXPECT_FALSE(derived.empty());
+  expect_same_mips(kept, derived, "one voxel");
+}
+
+TEST(ChunkDerivedMips, ImageHoldsTheMipsAsAKeptChunkWritesThem) {
+  const Chunk kept = Chunk::from_box(derived_mips_terrain());
+  const Chunk derived = Chunk::from_box(derived_mips_terrain(), Chunk::Mips::kDerived);
+  std::vector<std::uint8_t> a, b;
+  ASSERT_TRUE(kept.write_image(a));
+  ASSERT_TRUE(derived.write_image(b));
+  EXPECT_EQ(a, b);
+  std::size_t pos = 0;
+  auto read = Chunk::read_image(b, pos);
+  ASSERT_TRUE(read.ok());
+  EXPECT_EQ(read->mips(), Chunk::Mips::kKept);
+  expect_same_mips(kept, *read, "read back");
 }
 }  // namespace
 }  // namespace terrane
