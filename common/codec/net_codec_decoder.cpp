@@ -70,9 +70,11 @@ inline void copy8_voxels(Voxel* dst, const Voxel* src) {
 // previous voxel's index; the payload is the code's value. Partial units
 // code it over the whole palette, then a solid material has an occupancy
 // flag bit (and 8 bits of occupancy when it is set); the payload is the
-// voxel (at default occupancy, or 0 when an occupancy follows). The table
-// repeats every 2^(code length) entries, so the decoder masks with a
-// constant; fields are whole bytes so the bit count loads on its own.
+// voxel (at default occupancy, or 0 when an occupancy follows). Only the
+// 2^(peek bits) entries the code can reach are filled, and the lookup masks
+// with that size (filling all 128 entries was a large share of decoding a
+// unit of 4³ voxels); fields are whole bytes so the bit count loads on its
+// own.
 constexpr unsigned kLiteralPeekBits = 7;  // 6-bit index + occupancy flag
 struct LiteralEntry {
   std::uint16_t payload;
@@ -80,7 +82,8 @@ struct LiteralEntry {
   std::uint8_t occupancy;  // where the occupancy starts, | 0x80 when there is one
 };
 struct LiteralCode {
-  std::array<LiteralEntry, 1u << kLiteralPeekBits> entries;  // NOLINT: filled by the constructor
+  std::array<LiteralEntry, 1u << kLiteralPeekBits> entries;  // NOLINT: the first mask + 1 filled by the constructor
+  std::uint32_t mask = 0;
 
   LiteralCode(bool partial, const Palette& palette) {
     const int count = partial ? palette.count : std::max(palette.count - 1, 1);
@@ -107,11 +110,9 @@ struct LiteralCode {
       }
       entries[x] = entry;
     }
-    for (std::size_t filled = std::size_t{1} << peek_bits; filled < entries.size(); filled *= 2) {
-      std::memcpy(entries.data() + filled, entries.data(), filled * sizeof(LiteralEntry));
-    }
+    mask = (std::uint32_t{1} << peek_bits) - 1;
   }
-  const LiteralEntry& lookup(std::uint64_t bits) const { return entries[bits & (entries.size() - 1)]; }
+  const LiteralEntry& lookup(std::uint64_t bits) const { return entries[bits & mask]; }
 };
 
 constexpr const char* kLengthCodeTooLong = "run length code too long";
