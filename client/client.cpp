@@ -40,8 +40,12 @@ Client::Client(ClientOptions options, ClientCallbacks callbacks)
       callbacks_(std::move(callbacks)),
       movement_(options_),
       connection_(options_, *this) {
-  replica_.share_decoded(options_.shared_chunks);
-  replica_.set_full_chunk_mips(options_.full_chunk_mips);
+  set_up(replica_);
+}
+
+void Client::set_up(Replica& r) const {
+  r.share_decoded(options_.shared_chunks);
+  r.set_full_chunk_mips(options_.full_chunk_mips);
 }
 
 Client::~Client() { disconnect(); }
@@ -89,8 +93,7 @@ bool Client::start_cache_load(const WelcomeMsg& w) {
   options_.chunk_cache->post([this, id = w.world_id, view = *view, bounds = w.bounds(), session = sessions_,
                               work = std::make_shared<Connection::OffsideWork>(connection_.offside_work())] {
     auto loaded = std::make_shared<Replica>();
-    loaded->share_decoded(options_.shared_chunks);
-    loaded->set_full_chunk_mips(options_.full_chunk_mips);
+    set_up(*loaded);
     const std::size_t chunks = load_view(*options_.chunk_cache, id, view, bounds, *loaded);
     connection_.post([this, loaded, chunks, session] { loaded_cache(std::move(*loaded), chunks, session); });
   });
@@ -375,8 +378,7 @@ void Client::on_frame(std::span<const std::uint8_t> body) {
         if (tells_holdings())
           replica_.for_each_holding([&](Vec3i cp, const Holding&) { dropped.push_back(HoldingChange{cp, std::nullopt}); });
         replica_ = Replica();
-        replica_.share_decoded(options_.shared_chunks);
-        replica_.set_full_chunk_mips(options_.full_chunk_mips);
+        set_up(replica_);
         unconfirmed_.clear();
         hash_checks_.clear();
       }

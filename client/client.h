@@ -361,6 +361,9 @@ class Client : private ConnectionHandler {
   // and the telling (without the lock).
   bool tells_holdings() const { return callbacks_.on_holding || callbacks_.on_holdings; }
   void tell_holdings(std::span<const HoldingChange> changes) const;
+  // A new replica as the options ask: the process's shared decoded chunks,
+  // how full chunks hold their mips.
+  void set_up(Replica& r) const;
 
   ClientOptions options_;
   ClientCallbacks callbacks_;

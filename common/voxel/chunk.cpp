@@ -128,6 +128,16 @@ Region downsample_region(ReadFine&& read, Box& coarse, const Region& r) {
 Region downsample_box(const Box& fine, Box& coarse, const Region& r) {
   return downsample_region([&](int y, int z, RowPackedBox<32>::Row&) { return fine.read_row(y, z); }, coarse, r);
 }
+
+// Recomputes mip levels 1..last (into *levels[0..last-1], sized already)
+// over the level-0 region changed, each from the level below.
+void downsample_levels(const RowPackedBox<32>& level0, const std::array<Box*, kMipLevels - 1>& levels, int last,
+                       const Region& changed) {
+  Region r = downsample_region(
+      [&](int y, int z, RowPackedBox<32>::Row& scratch) { return level0.read_row(y, z, scratch); }, *levels[0],
+      changed);
+  for (int level = 2; level <= last; ++level) r = downsample_box(*levels[level - 2], *levels[level - 1], r);
+}
 }  // namespace
 
 void Chunk::read_level(int level, Box& out) const {
@@ -140,19 +150,12 @@ void Chunk::read_level(int level, Box& out) const {
     return;
   }
   if (mips_derived_) {
-    // Level 1 from level 0's rows, then each level from the one below, the
-    // last into out.
-    thread_local Box finer[2];
-    const Region whole{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}};
-    Box& l1 = level == 1 ? out : finer[0];
-    l1.resize({kChunkSize / 2, kChunkSize / 2, kChunkSize / 2});
-    downsample_region([&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l1, whole);
-    if (level == 1) return;
-    Box& l2 = level == 2 ? out : finer[1];
-    l2.resize({kChunkSize / 4, kChunkSize / 4, kChunkSize / 4});
-    downsample_box(l1, l2, Region{{0, 0, 0}, l1.size()});
-    if (level == 2) return;
-    downsample_box(l2, out, Region{{0, 0, 0}, l2.size()});
+    // The levels below the one asked in per-thread boxes, that one in out.
+    thread_local Box finer[kMipLevels - 2];
+    std::array<Box*, kMipLevels - 1> levels{&finer[0], &finer[1], nullptr};
+    levels[static_cast<std::size_t>(level - 1)] = &out;
+    for (int l = 1; l < level; ++l) levels[static_cast<std::size_t>(l - 1)]->resize({kChunkSize >> l, kChunkSize >> l, kChunkSize >> l});
+    downsample_levels(level0_, levels, level, Region{{0, 0, 0}, {kChunkSize, kChunkSize, kChunkSize}});
     return;
   }
   if (dense_) {
@@ -218,10 +221,7 @@ void Chunk::update_mips(const Region& changed) {
     mip_end_ = {};
   }
   Box* l = dense_->levels;  // levels 1, 2, 3
-  const Region r1 = downsample_region(
-      [&](int y, int z, Level0::Row& scratch) { return level0_.read_row(y, z, scratch); }, l[0], changed);
-  const Region r2 = downsample_box(l[0], l[1], r1);
-  downsample_box(l[1], l[2], r2);
+  downsample_levels(level0_, {&l[0], &l[1], &l[2]}, kMipLevels - 1, changed);
   empty_ = all_air(l[2].voxels());
   if (level0_.is_uniform()) mip_fill_ = level0_.uniform_material();
 }
@@ -244,11 +244,11 @@ void Chunk::compact() {
 
 bool Chunk::write_image(std::vector<std::uint8_t>& out) const {
   if (mips_derived_) {
-    // The image holds the mips: made in a copy that keeps them.
+    // The image holds the mips: made in a copy that keeps them (as dense
+    // boxes, which the image encodes).
     Chunk kept = clone();
     kept.mips_derived_ = false;
     kept.rebuild_mips();
-    kept.pack_mips();
     return kept.write_image(out);
   }
   if (level0_.unpacked()) {
