@@ -15,8 +15,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libsqlite3-dev zlib1g-dev
   # HTTP for the server's /metrics and /health (and the bots' scrape of them)
   libcpp-httplib-dev
-  # the server's and the world tool's allocator (CMake's
-  # TERRANE_ALLOCATOR; docs/results.md, "The allocator")
+  # the server's allocator (CMake's TERRANE_ALLOCATOR; docs/results.md,
+  # "The allocator")
   libjemalloc-dev
   # benchmark-only comparison codec
   libzstd-dev
