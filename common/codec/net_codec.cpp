@@ -1,4 +1,4 @@
-// Network voxel codec units, format version 1 (see common/codec/NET_CODEC.md):
+// Network voxel codec units, format versions 1 and 2 (see common/codec/NET_CODEC.md):
 // the public entry points, which check sizes and pick the unit size's
 // encoder or decoder. The code tables are in net_codec_tables.cpp, the
 // encoder in net_codec_encoder.cpp, the decoder in net_codec_decoder.cpp;
@@ -10,11 +10,11 @@
 
 namespace terrane {
 
-void net_codec_encode(int n, std::span<const Voxel> voxels, std::vector<std::uint8_t>& out) {
+void net_codec_encode(int n, std::span<const Voxel> voxels, std::vector<std::uint8_t>& out, std::uint8_t version) {
   switch (n) {
-    case 4: return net_codec_detail::encode_unit<4>(voxels.data(), out);
-    case 8: return net_codec_detail::encode_unit<8>(voxels.data(), out);
-    default: return net_codec_detail::encode_unit<16>(voxels.data(), out);
+    case 4: return net_codec_detail::encode_unit<4>(voxels.data(), out, version);
+    case 8: return net_codec_detail::encode_unit<8>(voxels.data(), out, version);
+    default: return net_codec_detail::encode_unit<16>(voxels.data(), out, version);
   }
 }
 

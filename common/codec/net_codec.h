@@ -1,7 +1,8 @@
 // Terrane's network voxel codec: a bit-packed RLE for cubic units of N^3
 // voxels, N in {4, 8, 16} (16^3 for the initial load, 4^3 for edit updates,
-// 16^3/8^3/4^3 for the mip levels of a 32^3 chunk). Format version 1 is
-// specified in common/codec/NET_CODEC.md.
+// 16^3/8^3/4^3 for the mip levels of a 32^3 chunk). Format versions 1 and 2
+// are specified in common/codec/NET_CODEC.md: version 2 predicts a literal's
+// occupancy from the voxels decoded before it and codes the difference.
 //
 // A unit is a span of N^3 voxels in Box order (x fastest, then z, then y;
 // index (y*N+z)*N+x). Each unit encodes and decodes on its own: there is no
@@ -28,7 +29,12 @@
 
 namespace terrane {
 
-inline constexpr std::uint8_t kNetCodecVersion = 1;
+// The unit format versions: what a unit's first byte says in its low nibble.
+// Decoders read both; an encoder writes the version it is asked for.
+inline constexpr std::uint8_t kNetCodecVersion1 = 1;
+inline constexpr std::uint8_t kNetCodecVersion2 = 2;
+// The version written unless the caller asks for another.
+inline constexpr std::uint8_t kNetCodecVersion = kNetCodecVersion1;
 
 // True for the unit edge lengths the codec speaks: 4, 8 and 16.
 constexpr bool net_codec_valid_size(int n) { return n == 4 || n == 8 || n == 16; }
@@ -44,17 +50,20 @@ constexpr std::size_t net_codec_max_encoded_size(int n) {
   return 1 + (packed < 2 * volume ? packed : 2 * volume);
 }
 
-// Appends the encoding of one unit to out.
+// Appends the encoding of one unit, in format version `version`, to out.
 // Preconditions: net_codec_valid_size(n), voxels.size() == n^3, every voxel
 // has material < kMaterialCount and Air voxels have occupancy 0 (true for
-// anything read from a Box or built with make_voxel).
-void net_codec_encode(int n, std::span<const Voxel> voxels, std::vector<std::uint8_t>& out);
+// anything read from a Box or built with make_voxel), version is
+// kNetCodecVersion1 or kNetCodecVersion2.
+void net_codec_encode(int n, std::span<const Voxel> voxels, std::vector<std::uint8_t>& out,
+                      std::uint8_t version = kNetCodecVersion);
 
 // Decodes exactly one unit from all of bytes into out (n^3 voxels, the
-// caller's buffer). Errors: kTruncated, kBadVersion, kInvalidValue (unknown
+// caller's buffer), of either format version. Errors: kTruncated,
+// kBadVersion (a version other than 1 or 2), kInvalidValue (unknown
 // unit kind, material >= 64, palette index out of range, duplicate palette
-// entry, a run or copy past the end of the unit or before its start, non-zero
-// padding bits), kTrailingBytes (bytes after the unit), kOverLimit (n not a
+// entry, a run or copy past the end of the unit or before its start, an
+// occupancy residual out of range, non-zero padding bits), kTrailingBytes (bytes after the unit), kOverLimit (n not a
 // valid size or out.size() != n^3). On error out holds unspecified voxels,
 // all of them valid (material < 64, Air with occupancy 0).
 Status net_codec_decode(int n, std::span<const std::uint8_t> bytes, std::span<Voxel> out);

@@ -85,10 +85,14 @@ struct LiteralCode {
   std::array<LiteralEntry, 1u << kLiteralPeekBits> entries;  // NOLINT: the first mask + 1 filled by the constructor
   std::uint32_t mask = 0;
 
-  LiteralCode(bool partial, const Palette& palette) {
+  // flagged: a partial unit of version 1 (a flag bit, then 8 bits of
+  // occupancy when set); a partial unit of version 2 has neither (its
+  // occupancies come as residuals after the entry's bits): entries mark a
+  // solid material with 0x80 in `occupancy` and give it occupancy 0.
+  LiteralCode(bool partial, const Palette& palette, bool flagged = true) {
     const int count = partial ? palette.count : std::max(palette.count - 1, 1);
     const TruncatedBinary code(static_cast<unsigned>(count));
-    const unsigned peek_bits = code.bits + (partial ? 1 : 0);
+    const unsigned peek_bits = code.bits + (partial && flagged ? 1 : 0);
     const unsigned short_bits = code.bits == 0 ? 0 : code.bits - 1;
     for (std::uint32_t x = 0; x < (std::uint32_t{1} << peek_bits); ++x) {
       const std::uint32_t head = x & ((std::uint32_t{1} << short_bits) - 1);
@@ -100,7 +104,11 @@ struct LiteralCode {
         used = is_short ? short_bits : code.bits;
       }
       LiteralEntry entry{static_cast<std::uint16_t>(value), static_cast<std::uint8_t>(used), 0};
-      if (partial) {
+      if (partial && !flagged) {
+        const Material m = palette.materials[value];
+        entry.payload = voxel_bits(Voxel{m, 0});
+        entry.occupancy = m != kAir ? 0x80 : 0;
+      } else if (partial) {
         const Material m = palette.materials[value];
         const std::uint32_t flag = m != kAir ? (x >> used) & 1 : 0;
         const Voxel base{m, flag != 0 ? std::uint8_t{0} : default_occupancy(m)};  // occupancy or-ed in when flagged
@@ -116,6 +124,46 @@ struct LiteralCode {
 };
 
 constexpr const char* kLengthCodeTooLong = "run length code too long";
+constexpr const char* kResidualCodeTooLong = "occupancy residual code too long";
+constexpr const char* kResidualOutOfRange = "occupancy residual over 255";
+
+// Reads a version-2 occupancy residual (an Exp-Golomb code of `order` for
+// the residual + 1). Returns the residual, or kResidualTooLong past 8 zeros.
+constexpr std::uint32_t kResidualTooLong = 0xFFFFFFFFu;
+// Residual codes of up to kResidualPeekBits bits, per order: the bits a
+// code takes (0: longer, read it the slow way) and its residual.
+constexpr unsigned kResidualPeekBits = 10;
+struct ResidualEntry {
+  std::uint8_t bits;
+  std::uint8_t value;
+};
+using ResidualTable = std::array<ResidualEntry, 1u << kResidualPeekBits>;
+const ResidualTable& residual_table(unsigned order) {
+  static const std::array<ResidualTable, kMaxResidualOrder + 1> tables = [] {
+    std::array<ResidualTable, kMaxResidualOrder + 1> t{};
+    for (unsigned k = 0; k <= kMaxResidualOrder; ++k) {
+      for (std::uint32_t x = 0; x < (1u << kResidualPeekBits); ++x) {
+        const auto lg = static_cast<unsigned>(std::countr_zero(x | (1u << kResidualPeekBits)));
+        const unsigned bits = 2 * lg + 1 + k;
+        if (lg > kMaxResidualZeros || bits > kResidualPeekBits) continue;
+        const std::uint32_t w = (1u << lg) | ((x >> (lg + 1)) & ((1u << lg) - 1));
+        const std::uint32_t u = ((w - 1) << k) | ((x >> (2 * lg + 1)) & ((1u << k) - 1));
+        if (u > kMaxResidual) continue;
+        t[k][x] = {static_cast<std::uint8_t>(bits), static_cast<std::uint8_t>(u)};
+      }
+    }
+    return t;
+  }();
+  return tables[order];
+}
+[[gnu::always_inline]] inline std::uint32_t read_residual(BitReader& r, unsigned order) {
+  r.refill();
+  const unsigned lg = r.trailing_zeros();
+  if (lg > kMaxResidualZeros) return kResidualTooLong;
+  r.skip(lg + 1);
+  const std::uint32_t w = (std::uint32_t{1} << lg) | r.get(lg);
+  return ((w - 1) << order) | r.get(order);
+}
 
 // Token streams of kind-3 units, after the header and the first voxel (which
 // is written): decode_tokens_solid for units without partial occupancies,
@@ -262,12 +310,16 @@ const char* decode_tokens_solid(BitReader& r, const Palette& palette, std::uint3
 }
 
 // Units with partial occupancies: mostly literals (smooth surfaces), often
-// several in a row, so literals take a branch of their own.
-template <int n>
-const char* decode_tokens_partial(BitReader& r, const Palette& palette, std::uint32_t ctx_info, Voxel* dst) {
+// several in a row, so literals take a branch of their own. In version 2
+// (predicted) a solid literal's occupancy is its residual, of Exp-Golomb
+// order `order`, from predict_occupancy.
+template <int n, bool predicted>
+const char* decode_tokens_partial(BitReader& r, const Palette& palette, std::uint32_t ctx_info, unsigned order,
+                                  Voxel* dst) {
   constexpr int volume = n * n * n;
   const TokenEntry* const tables = token_tables<n>();
-  const LiteralCode lit(true, palette);
+  const LiteralCode lit(true, palette, !predicted);
+  const ResidualEntry* const residuals = predicted ? residual_table(order).data() : nullptr;
   // Per token type: the context that follows it (table start, Lit code length).
   std::array<std::uint32_t, 4> table_after;
   std::array<std::uint32_t, 4> lit_shift_after;
@@ -303,8 +355,30 @@ const char* decode_tokens_partial(BitReader& r, const Palette& palette, std::uin
     const TokenEntry e = tables[table | static_cast<unsigned>(b & (kTokenTableSize - 1))];
     const LiteralEntry lc = lit.lookup(b >> lit_shift);
     if (e.type() == kLit) {
-      last = literal(b, lc, lit_shift);
-      r.skip(lit_shift + lc.bits);
+      if constexpr (predicted) {
+        const auto left = static_cast<int>(last >> 8);
+        last = lc.payload;
+        r.skip(lit_shift + lc.bits);
+        if (lc.occupancy & 0x80) {
+          r.refill();
+          const ResidualEntry re = residuals[r.bits() & ((1u << kResidualPeekBits) - 1)];
+          std::uint32_t u = re.value;
+          if (re.bits != 0) [[likely]] {
+            r.skip(re.bits);
+          } else {
+            u = read_residual(r, order);
+            if (u == kResidualTooLong) return kResidualCodeTooLong;
+            if (u > kMaxResidual) return kResidualOutOfRange;
+          }
+          last |= std::uint32_t{occupancy_from_residual(predict_occupancy<n>(dst, i, left), u)} << 8;
+          // The refill above left at least 56 bits, the residual took at
+          // most 20 (the slow path refills on its own): two more tokens fit.
+          until_refill = 2;
+        }
+      } else {
+        last = literal(b, lc, lit_shift);
+        r.skip(lit_shift + lc.bits);
+      }
       dst[i++] = bits_voxel(last);
       table = lit_table;
       lit_shift = lit_lit_shift;
@@ -349,7 +423,10 @@ template <int n>
 Result<std::size_t> decode_unit(std::span<const std::uint8_t> bytes, std::span<Voxel> out) {
   constexpr int volume = n * n * n;
   const std::uint8_t head = bytes[0];
-  if ((head & 0x0F) != kNetCodecVersion) return DecodeError{DecodeErrorCode::kBadVersion, 0, "unknown unit format version"};
+  const unsigned version = head & 0x0F;
+  if (version != kNetCodecVersion1 && version != kNetCodecVersion2) {
+    return DecodeError{DecodeErrorCode::kBadVersion, 0, "unknown unit format version"};
+  }
   const int kind = head >> 4;
   Voxel* dst = out.data();
   switch (kind) {
@@ -418,6 +495,8 @@ Result<std::size_t> decode_unit(std::span<const std::uint8_t> bytes, std::span<V
     }
   } else {
     r.refill();
+    const bool predicted = partial && version == kNetCodecVersion2;
+    const unsigned order = predicted ? r.get(2) : 0;
     const bool custom = r.get(1) != 0;
     // Per context, 8 bits in token type order: its table id, and the length
     // of its code for Lit << 5.
@@ -447,15 +526,27 @@ Result<std::size_t> decode_unit(std::span<const std::uint8_t> bytes, std::span<V
     {
       const Material m = palette.materials[first_idx];
       Voxel x{m, default_occupancy(m)};
-      if (partial && m != kAir && r.get(1) != 0) x.occupancy = static_cast<std::uint8_t>(r.get(8));
+      if (predicted && m != kAir) {
+        const std::uint32_t u = read_residual(r, order);
+        if (u == kResidualTooLong) {
+          if (!r.one_bit_ahead()) return DecodeError{DecodeErrorCode::kTruncated, size, "unit cut short"};
+          return stream_error(r, size, DecodeErrorCode::kInvalidValue, kResidualCodeTooLong);
+        }
+        if (u > kMaxResidual) return stream_error(r, size, DecodeErrorCode::kInvalidValue, kResidualOutOfRange);
+        x.occupancy = occupancy_from_residual(predict_occupancy<n>(dst, 0), u);
+      } else if (partial && !predicted && m != kAir && r.get(1) != 0) {
+        x.occupancy = static_cast<std::uint8_t>(r.get(8));
+      }
       dst[0] = x;
     }
-    const char* invalid = partial ? decode_tokens_partial<n>(r, palette, ctx_info, dst)
-                                  : decode_tokens_solid<n>(r, palette, ctx_info, first_idx, dst);
+    const char* invalid = predicted ? decode_tokens_partial<n, true>(r, palette, ctx_info, order, dst)
+                          : partial ? decode_tokens_partial<n, false>(r, palette, ctx_info, 0, dst)
+                                    : decode_tokens_solid<n>(r, palette, ctx_info, first_idx, dst);
     if (invalid != nullptr) {
-      // An over-long length code: the zeros ran past the end when no one
-      // bit follows before it (the reader fed them), else z > 12.
-      if (invalid == kLengthCodeTooLong && !r.one_bit_ahead()) {
+      // An over-long length or residual code: the zeros ran past the end
+      // when no one bit follows before it (the reader fed them), else z > 12
+      // (8 for a residual).
+      if ((invalid == kLengthCodeTooLong || invalid == kResidualCodeTooLong) && !r.one_bit_ahead()) {
         return DecodeError{DecodeErrorCode::kTruncated, size, "unit cut short"};
       }
       return stream_error(r, size, DecodeErrorCode::kInvalidValue, invalid);

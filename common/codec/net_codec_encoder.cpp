@@ -23,6 +23,12 @@ void eg_put(BitWriter& out, std::uint32_t length, unsigned order) {
   out.put(code, 2 * lg + 1 + order);
 }
 
+// The length of eg_put's code.
+unsigned eg_bits(std::uint32_t length, unsigned order) {
+  const std::uint32_t w = ((length - 1) >> order) + 1;
+  return 2 * (static_cast<unsigned>(std::bit_width(w)) - 1) + 1 + order;
+}
+
 // Voxels equal from a and b onward, at most max.
 int match_length(const Voxel* a, const Voxel* b, int max) {
   int l = 0;
@@ -49,6 +55,7 @@ struct Token {
   std::uint16_t length;  // voxels covered (1 for literals)
   Material material;     // literals only
   std::uint8_t occupancy;
+  std::uint8_t residual;  // version 2: the literal's occupancy residual (occupancy_residual)
 };
 
 // The palette header shared by token and packed units, then the partial flag.
@@ -59,9 +66,9 @@ void put_palette(BitWriter& w, const Palette& p, bool partial) {
 }
 
 // Writes a packed unit (kind 4) to dst; returns its size in bytes.
-std::size_t write_packed(int n, const Voxel* v, const Palette& p, bool partial, std::uint8_t* dst) {
+std::size_t write_packed(int n, const Voxel* v, const Palette& p, bool partial, std::uint8_t version, std::uint8_t* dst) {
   const int volume = n * n * n;
-  dst[0] = static_cast<std::uint8_t>(kNetCodecVersion | (kKindPacked << 4));
+  dst[0] = static_cast<std::uint8_t>(version | (kKindPacked << 4));
   BitWriter w(dst + 1);
   put_palette(w, p, partial);
   const unsigned bits = packed_index_bits(p.count);
@@ -84,8 +91,13 @@ std::size_t packed_bits(int n, int palette_count, int solid_count, bool partial)
 
 // Greedy parse, then the smallest of the encodings (see net_codec_encoder.h).
 template <int n>
-void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
+void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t version) {
   constexpr int volume = n * n * n;
+  // Version 2 differs from version 1 only in a token unit with predicted
+  // occupancies: every other unit is written as version 1, which readers of
+  // either version read.
+  const bool may_predict = version == kNetCodecVersion2;
+  version = kNetCodecVersion1;
   constexpr int layer = n * n;
 
   // Greedy parse: at each voxel the longest of run / row copy / layer copy,
@@ -97,7 +109,7 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
   std::array<std::uint32_t, kMaterialCount> literal_freq{};
   std::array<std::array<std::uint32_t, 4>, 4> transitions{};
   const Voxel first = v[0];
-  tokens[0] = {kLit, 1, first.material, first.occupancy};
+  tokens[0] = {kLit, 1, first.material, first.occupancy, 0};
   token_count = 1;
   ++literal_freq[first.material];
   std::uint64_t present = std::uint64_t{1} << first.material;
@@ -117,14 +129,14 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
     }
     if (best == 0) {
       const Voxel x = v[i];
-      tokens[static_cast<std::size_t>(token_count++)] = {kLit, 1, x.material, x.occupancy};
+      tokens[static_cast<std::size_t>(token_count++)] = {kLit, 1, x.material, x.occupancy, 0};
       ++literal_freq[x.material];
       present |= std::uint64_t{1} << x.material;
       partial |= x.material != kAir && x.occupancy != kFullOccupancy;
       type = kLit;
       best = 1;
     } else {
-      tokens[static_cast<std::size_t>(token_count++)] = {static_cast<TokenType>(type), static_cast<std::uint16_t>(best), 0, 0};
+      tokens[static_cast<std::size_t>(token_count++)] = {static_cast<TokenType>(type), static_cast<std::uint16_t>(best), 0, 0, 0};
     }
     ++transitions[static_cast<std::size_t>(prev)][static_cast<std::size_t>(type)];
     prev = type;
@@ -133,12 +145,12 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
 
   if (token_count == 2 && tokens[1].type == kRun) {  // uniform unit
     if (first.material == kAir) {
-      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion | (kKindAir << 4)));
+      out.push_back(static_cast<std::uint8_t>(version | (kKindAir << 4)));
     } else if (first.occupancy == kFullOccupancy) {
-      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion | (kKindUniform << 4)));
+      out.push_back(static_cast<std::uint8_t>(version | (kKindUniform << 4)));
       out.push_back(first.material);
     } else {
-      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion | (kKindUniformOcc << 4)));
+      out.push_back(static_cast<std::uint8_t>(version | (kKindUniformOcc << 4)));
       out.push_back(first.material);
       out.push_back(first.occupancy);
     }
@@ -191,6 +203,35 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
     }
   }
 
+  // Version 2: each solid literal's occupancy as its residual from the
+  // prediction, in the Exp-Golomb order that makes them shortest.
+  bool predicted = may_predict && partial;
+  unsigned residual_order = 0;
+  if (predicted) {
+    std::array<std::size_t, kMaxResidualOrder + 1> order_bits{};
+    int at = 0;
+    for (int t = 0; t < token_count; ++t) {
+      Token& tok = tokens[static_cast<std::size_t>(t)];
+      if (tok.type == kLit && tok.material != kAir) {
+        const std::uint32_t u = occupancy_residual(tok.occupancy, predict_occupancy<n>(v, at));
+        tok.residual = static_cast<std::uint8_t>(u);
+        for (unsigned k = 0; k <= kMaxResidualOrder; ++k) order_bits[k] += eg_bits(u + 1, k);
+      }
+      at += tok.length;
+    }
+    residual_order = static_cast<unsigned>(std::min_element(order_bits.begin(), order_bits.end()) - order_bits.begin());
+    // Where the occupancies are not smooth (a surface one voxel thick, whose
+    // neighbours are Air or full), version 1's flag and byte may be shorter:
+    // then the unit stays version 1.
+    std::size_t flagged_bits = 0;
+    for (int t = 0; t < token_count; ++t) {
+      const Token& tok = tokens[static_cast<std::size_t>(t)];
+      if (tok.type == kLit && tok.material != kAir) flagged_bits += tok.occupancy == kFullOccupancy ? 1 : 9;
+    }
+    if (flagged_bits <= order_bits[residual_order] + 2) predicted = false;
+  }
+  if (predicted) version = kNetCodecVersion2;
+
   std::array<std::uint8_t, net_codec_max_encoded_size(16) + 64> scratch;  // NOLINT: written before read
   // The token stream must beat both fallbacks (packed, and raw for tiny units).
   const std::size_t packed_limit = packed_bits(n, palette.count, solid_count, partial);
@@ -199,9 +240,10 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
   // Token streams never need more than 18 bits per voxel; stop as soon as
   // the packed form would be smaller (it bounds the worst case).
   std::array<std::uint8_t, 3 * kMaxVolume + 64> token_buf;  // NOLINT: written before read
-  token_buf[0] = static_cast<std::uint8_t>(kNetCodecVersion | (kKindTokens << 4));
+  token_buf[0] = static_cast<std::uint8_t>(version | (kKindTokens << 4));
   BitWriter w(token_buf.data() + 1);
   put_palette(w, palette, partial);
+  if (predicted) w.put(residual_order, 2);
   w.put(use_custom ? 1u : 0u, 1);
   if (use_custom) {
     for (int p = 0; p < 4; ++p) {
@@ -227,7 +269,10 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
     }
     if (tok.type == kLit) {
       const auto idx = static_cast<std::uint32_t>(palette.index[tok.material]);
-      if (partial) {
+      if (predicted) {
+        full_code.put(w, idx);
+        if (tok.material != kAir) eg_put(w, std::uint32_t{tok.residual} + 1, residual_order);
+      } else if (partial) {
         full_code.put(w, idx);
         if (tok.material != kAir) {
           if (tok.occupancy == kFullOccupancy) {
@@ -258,19 +303,19 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out) {
     return;
   }
   if ((packed_limit + 7) / 8 > 2 * static_cast<std::size_t>(volume)) {
-    out.push_back(static_cast<std::uint8_t>(kNetCodecVersion | (kKindRaw << 4)));
+    out.push_back(static_cast<std::uint8_t>(kNetCodecVersion1 | (kKindRaw << 4)));
     for (int i = 0; i < volume; ++i) {
       out.push_back(v[i].material);
       out.push_back(v[i].occupancy);
     }
     return;
   }
-  const std::size_t size = write_packed(n, v, palette, partial, scratch.data());
+  const std::size_t size = write_packed(n, v, palette, partial, kNetCodecVersion1, scratch.data());
   out.insert(out.end(), scratch.data(), scratch.data() + size);
 }
 
-template void encode_unit<4>(const Voxel* v, std::vector<std::uint8_t>& out);
-template void encode_unit<8>(const Voxel* v, std::vector<std::uint8_t>& out);
-template void encode_unit<16>(const Voxel* v, std::vector<std::uint8_t>& out);
+template void encode_unit<4>(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t version);
+template void encode_unit<8>(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t version);
+template void encode_unit<16>(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t version);
 
 }  // namespace terrane::net_codec_detail

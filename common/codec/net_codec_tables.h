@@ -12,6 +12,7 @@
 // per token.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cstddef>
@@ -225,6 +226,76 @@ struct Palette {
   std::array<std::int8_t, kMaterialCount> index{};
   int count = 0;
 };
+
+// Format version 2: a literal's occupancy predicted from the voxels of the
+// unit before it (NET_CODEC.md, "Version 2: predicted occupancies"). Voxel
+// i = (y*n + z)*n + x of the unit at `unit`; every voxel below index i is
+// read, none at or after it. A neighbour counts in steps 1 and 2 only when
+// its occupancy is partial (1..254): a plane through partial neighbours
+// (steps 1: the three pairs of axes; 2: a line along each axis) continues
+// smooth terrain, where clamped ones (0, 255) would bend it.
+// `left` is the occupancy of voxel i - 1 (the decoder has it in a register;
+// read from memory it would wait on the store just made).
+template <int n>
+inline int predict_occupancy(const Voxel* unit, int i, int left) {
+  // A neighbour outside the unit reads as a voxel of occupancy 0, which is
+  // never partial, and counts only in step 3's existence flags.
+  static constexpr Voxel kOutside{};
+  constexpr int shift = n == 4 ? 2 : (n == 8 ? 3 : 4);
+  constexpr int X = 1, Z = n, Y = n * n;
+  const int x = i & (n - 1), z = (i >> shift) & (n - 1), y = i >> (2 * shift);
+  const auto at = [&](bool inside, int back) -> int {
+    return (inside ? unit + (i - back) : &kOutside)->occupancy;
+  };
+  const auto partial = [](int o) { return static_cast<int>(static_cast<unsigned>(o - 1) < 254u); };
+  // floor(sum / count) for count 1..3, clamped to 0..255: sums are at least
+  // -756 (three predictions of 1 + 1 - 254), so sum + 256 * count is not
+  // negative, and below 2^15, where t * 21846 >> 16 is t / 3.
+  const auto mean = [](int sum, int count) {
+    static constexpr std::uint32_t kReciprocal[4] = {0, 65536, 32768, 21846};
+    const auto t = static_cast<std::uint32_t>(sum + 256 * count);
+    return std::clamp(static_cast<int>((t * kReciprocal[count]) >> 16) - 256, 0, 255);
+  };
+  const int l = x > 0 ? left : 0, b = at(z > 0, Z), d = at(y > 0, Y);
+  const int pl = partial(l), pb = partial(b), pd = partial(d);
+  // Step 1: a + b - ab over the pairs (x, y), (z, y), (x, z).
+  const int ld = at(x > 0 && y > 0, X + Y), bd = at(z > 0 && y > 0, Z + Y), lb = at(x > 0 && z > 0, X + Z);
+  const int v1 = pl & pd & partial(ld), v2 = pb & pd & partial(bd), v3 = pl & pb & partial(lb);
+  const int plane_count = v1 + v2 + v3;
+  if (plane_count > 0) [[likely]] {
+    return mean((v1 ? l + d - ld : 0) + (v2 ? b + d - bd : 0) + (v3 ? l + b - lb : 0), plane_count);
+  }
+  // Step 2: 2a - aa along x, y, z.
+  const int ll = at(x > 1, 2 * X), dd = at(y > 1, 2 * Y), bb = at(z > 1, 2 * Z);
+  const int w1 = pl & partial(ll), w2 = pd & partial(dd), w3 = pb & partial(bb);
+  const int line_count = w1 + w2 + w3;
+  if (line_count > 0) return mean((w1 ? 2 * l - ll : 0) + (w2 ? 2 * d - dd : 0) + (w3 ? 2 * b - bb : 0), line_count);
+  // Step 3: the mean of the neighbours at x - 1, y - 1, z - 1, whatever
+  // their occupancies; 128 for voxel 0.
+  const int near_count = (x > 0) + (y > 0) + (z > 0);
+  return near_count > 0 ? mean(l + b + d, near_count) : 128;
+}
+
+template <int n>
+inline int predict_occupancy(const Voxel* unit, int i) {
+  return predict_occupancy<n>(unit, i, i > 0 ? unit[i - 1].occupancy : 0);
+}
+
+// The signed difference between an occupancy and its prediction, as the
+// unsigned value version 2 codes: r in -128..127 (occupancy = (prediction +
+// r) mod 256) zigzagged to 0..255 (0, -1, 1, -2, ... become 0, 1, 2, 3, ...).
+inline std::uint32_t occupancy_residual(int occupancy, int prediction) {
+  const int r = ((occupancy - prediction + 128) & 255) - 128;
+  return r >= 0 ? static_cast<std::uint32_t>(2 * r) : static_cast<std::uint32_t>(-2 * r - 1);
+}
+inline std::uint8_t occupancy_from_residual(int prediction, std::uint32_t u) {
+  const int r = (u & 1) != 0 ? -static_cast<int>((u + 1) >> 1) : static_cast<int>(u >> 1);
+  return static_cast<std::uint8_t>((prediction + r) & 255);
+}
+// The largest residual value and Exp-Golomb order a unit may use.
+constexpr std::uint32_t kMaxResidual = 255;
+constexpr unsigned kMaxResidualOrder = 3;
+constexpr unsigned kMaxResidualZeros = 8;
 
 // The width of a palette index in packed units: ceil(log2(count)).
 inline unsigned packed_index_bits(int palette_count) {

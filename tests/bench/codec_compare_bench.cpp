@@ -1,6 +1,7 @@
 // Side-by-side comparison of the voxel unit codecs on the same 16^3 units:
 // byte RLE, byte RLE + LZ4, byte RLE + zstd-3, a Minecraft-style paletted
-// section + zlib-6, and Terrane's network codec (common/codec/net_codec.h); plus
+// section + zlib-6, and Terrane's network codec (common/codec/net_codec.h) in
+// format versions 1 and 2; plus
 // 4^3 update batches for random small sphere edits.
 //
 // Prints tables (sizes are exact, timings are wall clock on this machine).
@@ -158,7 +159,9 @@ std::vector<Codec> make_codecs() {
                [](auto in, auto out) { return byte_rle_lz4_decode(in, out, g_scratch).ok(); }});
   c.push_back({"byte RLE + zstd-3", zstd_encode, zstd_decode});
   c.push_back({"palette + zlib-6", palette_encode, palette_decode});
-  c.push_back({"Terrane net codec", [](auto v, auto& o) { net_codec_encode(kN, v, o); },
+  c.push_back({"Terrane net codec", [](auto v, auto& o) { net_codec_encode(kN, v, o, kNetCodecVersion1); },
+               [](auto in, auto out) { return net_codec_decode(kN, in, out).ok(); }});
+  c.push_back({"Terrane net codec 2", [](auto v, auto& o) { net_codec_encode(kN, v, o, kNetCodecVersion2); },
                [](auto in, auto out) { return net_codec_decode(kN, in, out).ok(); }});
   return c;
 }
@@ -407,6 +410,12 @@ int main(int argc, char** argv) {
       std::printf("%-20s %12.5f %12.5f %10.0f %10.0f %9.2f %9.2f\n", codecs[i].name.c_str(), r.all_bpv, r.nonuni_bpv,
                   r.enc_mbs, r.dec_mbs, r.enc_mbs / lz4.enc_mbs, r.dec_mbs / lz4.dec_mbs);
     }
+    // The best of the reference codecs (the first four) on all units, and
+    // Terrane's versions against it.
+    double best = rows[0].all_bpv;
+    for (std::size_t i = 1; i < 4; ++i) best = std::min(best, rows[i].all_bpv);
+    std::printf("against the best reference (%.5f B/vox): version 1 %.3fx, version 2 %.3fx\n", best,
+                rows[4].all_bpv / best, rows[5].all_bpv / best);
     const UpdateFigures f = measure_updates(d, 2000, 12345);
     std::printf("4^3 updates (%zu sphere edits r 1.5-4, %zu changed units), bytes per changed unit incl. coords:\n",
                 f.edits, f.units);

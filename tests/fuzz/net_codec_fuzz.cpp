@@ -1,6 +1,7 @@
 // Fuzz target for the network voxel codec: arbitrary bytes decoded as a unit
 // of each size into a fixed buffer, and as an update batch. Whatever decodes
-// must hold valid voxels and survive an encode/decode round trip.
+// must hold valid voxels and survive an encode/decode round trip in both
+// format versions.
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -19,14 +20,16 @@ void check_unit(int n, std::span<const Voxel> voxels) {
   for (Voxel v : voxels) {
     if (v.material >= kMaterialCount || (v.material == kAir && v.occupancy != 0)) std::abort();
   }
-  std::vector<std::uint8_t> bytes;
-  net_codec_encode(n, voxels, bytes);
-  if (bytes.size() > net_codec_max_encoded_size(n)) std::abort();
-  std::array<Voxel, 4096> again;
-  std::span<Voxel> out(again.data(), voxels.size());
-  if (!net_codec_decode(n, bytes, out).ok()) std::abort();
-  for (std::size_t i = 0; i < voxels.size(); ++i) {
-    if (!(out[i] == voxels[i])) std::abort();
+  for (std::uint8_t version : {kNetCodecVersion1, kNetCodecVersion2}) {
+    std::vector<std::uint8_t> bytes;
+    net_codec_encode(n, voxels, bytes, version);
+    if (bytes.size() > net_codec_max_encoded_size(n)) std::abort();
+    std::array<Voxel, 4096> again;
+    std::span<Voxel> out(again.data(), voxels.size());
+    if (!net_codec_decode(n, bytes, out).ok()) std::abort();
+    for (std::size_t i = 0; i < voxels.size(); ++i) {
+      if (!(out[i] == voxels[i])) std::abort();
+    }
   }
 }
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """A decoder of Terrane network codec units written from common/codec/NET_CODEC.md
-alone (kinds 0..5), run against the document's own worked examples: every
+alone (kinds 0..5, format versions 1 and 2), run against the document's own worked examples: every
 example's bytes are read out of the document and must decode to the voxels
 the document says. Exit status 0 when they all do.
 
@@ -61,9 +61,62 @@ def exp_golomb(r, m):
     return ((w - 1) << m | r.read(m)) + 1
 
 
+def predict(vox, i, n):
+    """Version 2: the occupancy predicted for voxel i from the voxels before it."""
+    x, z, y = i % n, (i // n) % n, i // (n * n)
+    X, Y, Z = (1, 0, 0), (0, 1, 0), (0, 0, 1)
+
+    def occ(d):
+        dx, dy, dz = d
+        if x - dx < 0 or y - dy < 0 or z - dz < 0:
+            return None
+        return vox[((y - dy) * n + (z - dz)) * n + (x - dx)][1]
+
+    def partial(d):
+        o = occ(d)
+        return o if o is not None and 1 <= o <= 254 else None
+
+    def add(a, b):
+        return tuple(p + q for p, q in zip(a, b))
+
+    def mean(values):
+        return min(max(sum(values) // len(values), 0), 255)
+
+    planes = []
+    for a, b in ((X, Y), (Z, Y), (X, Z)):
+        oa, ob, oab = partial(a), partial(b), partial(add(a, b))
+        if None not in (oa, ob, oab):
+            planes.append(oa + ob - oab)
+    if planes:
+        return mean(planes)
+    lines = []
+    for a in (X, Y, Z):
+        oa, oaa = partial(a), partial(add(a, a))
+        if None not in (oa, oaa):
+            lines.append(2 * oa - oaa)
+    if lines:
+        return mean(lines)
+    near = [occ(a) for a in (X, Y, Z) if occ(a) is not None]
+    return sum(near) // len(near) if near else 128
+
+
+def residual(r, order):
+    z = 0
+    while r.read(1) == 0:
+        z += 1
+        if z > 8:
+            raise DecodeError("residual prefix too long")
+    w = (1 << z) + r.read(z)
+    u = (w - 1) << order | r.read(order)
+    if u > 255:
+        raise DecodeError("residual over 255")
+    return -((u + 1) // 2) if u & 1 else u // 2
+
+
 def decode(unit, n):
-    if not unit or unit[0] & 15 != 1:
+    if not unit or unit[0] & 15 not in (1, 2):
         raise DecodeError("bad version")
+    version = unit[0] & 15
     kind, body = unit[0] >> 4, unit[1:]
     size = n ** 3
     if kind == 0:
@@ -85,24 +138,28 @@ def decode(unit, n):
     if len(set(palette)) != k:
         raise DecodeError("repeated palette material")
     partial = r.read(1)
+    predicted = version == 2 and kind == 3 and partial
+    order = r.read(2) if predicted else 0
+    vox = [None] * size
 
-    def occupancy(m):
+    def occupancy(m, i):
         if m == 0:
             return 0
+        if predicted:
+            return (predict(vox, i, n) + residual(r, order)) % 256
         if partial and kind == 4:
             return r.read(8)
         if partial and r.read(1):
             return r.read(8)
         return 255
 
-    vox = [None] * size
     if kind == 4:
         b = math.ceil(math.log2(k)) if k > 1 else 0
         for i in range(size):
             idx = r.read(b)
             if idx >= k:
                 raise DecodeError("index beyond the palette")
-            vox[i] = (palette[idx], occupancy(palette[idx]))
+            vox[i] = (palette[idx], occupancy(palette[idx], i))
     else:
         if r.read(1):  # custom rankings: after Lit, Run, CopyZ, CopyY
             first = r.read(2)
@@ -138,7 +195,7 @@ def decode(unit, n):
                     idx = j if j < p else j + 1
                 else:
                     idx = truncated_binary(r, k)
-                vox[i] = (palette[idx], occupancy(palette[idx]))
+                vox[i] = (palette[idx], occupancy(palette[idx], i))
                 i += 1
             else:
                 length = exp_golomb(r, orders[t])
@@ -203,6 +260,14 @@ def main():
     if not raw[1:].startswith(head) or not raw.endswith(tail):
         failures.append("kind 5: the bytes shown do not follow the rule")
     check(5, raw, [(1 + i % 63, (4 * i + 3) & 255) for i in range(64)])
+    m = re.search(r"\*\*Version 2, kind 3[^*]*\*\* —\s*`([0-9a-f ]+)`", doc)
+    if not m:
+        raise SystemExit("NET_CODEC.md: no worked example of version 2")
+    plane = [AIR] * 64
+    for z in range(4):
+        for x in range(4):
+            plane[index(x, 0, z)] = (1, 40 + 50 * x + 10 * z)
+    check(3, bytes.fromhex(m.group(1).replace(" ", "")), plane)
     for f in failures:
         print("FAILED:", f)
     sys.exit(1 if failures else 0)

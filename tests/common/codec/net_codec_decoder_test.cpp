@@ -159,7 +159,7 @@ TEST(NetCodecDecoder, EveryStrictPrefixIsTruncated) {
 }
 
 TEST(NetCodecDecoder, RejectsUnknownVersionsAndKinds) {
-  EXPECT_EQ(decode_error(4, {0x02}).code, DecodeErrorCode::kBadVersion);
+  EXPECT_EQ(decode_error(4, {0x03}).code, DecodeErrorCode::kBadVersion);
   EXPECT_EQ(decode_error(4, {0x10}).code, DecodeErrorCode::kBadVersion);
   for (std::uint8_t kind = 6; kind < 16; ++kind) {
     const DecodeError e = decode_error(8, {static_cast<std::uint8_t>(kNetCodecVersion | (kind << 4)), 0, 0, 0});

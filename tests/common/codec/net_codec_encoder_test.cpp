@@ -24,9 +24,9 @@ constexpr int kSizes[] = {4, 8, 16};
 std::vector<std::uint8_t> encode(int n, const std::vector<Voxel>& v) {
   std::vector<std::uint8_t> out;
   switch (n) {
-    case 4: encode_unit<4>(v.data(), out); break;
-    case 8: encode_unit<8>(v.data(), out); break;
-    default: encode_unit<16>(v.data(), out); break;
+    case 4: encode_unit<4>(v.data(), out, kNetCodecVersion1); break;
+    case 8: encode_unit<8>(v.data(), out, kNetCodecVersion1); break;
+    default: encode_unit<16>(v.data(), out, kNetCodecVersion1); break;
   }
   return out;
 }
@@ -84,7 +84,7 @@ TEST(NetCodecEncoder, AllSolidIsTwoBytesAndUniformOccupancyThree) {
 
 TEST(NetCodecEncoder, AppendsAfterWhatTheBufferHolds) {
   std::vector<std::uint8_t> out = {0xAA, 0xBB};
-  encode_unit<4>(make_unit(4, solid(3)).data(), out);
+  encode_unit<4>(make_unit(4, solid(3)).data(), out, kNetCodecVersion1);
   EXPECT_EQ(out, (std::vector<std::uint8_t>{0xAA, 0xBB, 0x11, 3}));
 }
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <random>
 #include <string>
@@ -15,28 +16,40 @@ namespace terrane {
 namespace {
 
 constexpr int kSizes[] = {4, 8, 16};
+constexpr std::uint8_t kVersions[] = {kNetCodecVersion1, kNetCodecVersion2};
 
 using namespace test_units;
 
-std::vector<std::uint8_t> encode(int n, const std::vector<Voxel>& v) {
+std::vector<std::uint8_t> encode(int n, const std::vector<Voxel>& v, std::uint8_t version = kNetCodecVersion) {
   std::vector<std::uint8_t> out;
-  net_codec_encode(n, v, out);
+  net_codec_encode(n, v, out, version);
   return out;
 }
 
+// In both format versions (a version-2 encoder writes version 2 only where
+// it is shorter).
 void expect_round_trip(int n, const std::vector<Voxel>& v) {
-  const auto bytes = encode(n, v);
-  EXPECT_LE(bytes.size(), net_codec_max_encoded_size(n));
-  std::vector<Voxel> back = make_unit(n, solid(5));
-  const Status s = net_codec_decode(n, bytes, back);
-  ASSERT_TRUE(s.ok()) << s.error().describe();
-  EXPECT_EQ(back, v);
-  // Prefix decode with data after it reports the unit's own size.
-  auto longer = bytes;
-  longer.push_back(0xAB);
-  auto used = net_codec_decode_prefix(n, longer, back);
-  ASSERT_TRUE(used.ok());
-  EXPECT_EQ(*used, bytes.size());
+  std::size_t version1_size = 0;
+  for (std::uint8_t version : kVersions) {
+    const auto bytes = encode(n, v, version);
+    if (version == kNetCodecVersion1) {
+      EXPECT_EQ(bytes.at(0) & 0x0F, kNetCodecVersion1);
+      version1_size = bytes.size();
+    } else {
+      EXPECT_LE(bytes.size(), version1_size);
+    }
+    EXPECT_LE(bytes.size(), net_codec_max_encoded_size(n));
+    std::vector<Voxel> back = make_unit(n, solid(5));
+    const Status s = net_codec_decode(n, bytes, back);
+    ASSERT_TRUE(s.ok()) << "version " << int{version} << ": " << s.error().describe();
+    EXPECT_EQ(back, v) << "version " << int{version};
+    // Prefix decode with data after it reports the unit's own size.
+    auto longer = bytes;
+    longer.push_back(0xAB);
+    auto used = net_codec_decode_prefix(n, longer, back);
+    ASSERT_TRUE(used.ok());
+    EXPECT_EQ(*used, bytes.size());
+  }
 }
 
 // The worked examples of common/codec/NET_CODEC.md, one per unit kind: the encoder
@@ -54,6 +67,7 @@ TEST(NetCodec, SpecExamplesAreTheEncodersBytesAndDecodeToTheirVoxels) {
     const char* name;
     std::vector<Voxel> voxels;
     std::string bytes;
+    std::uint8_t version = kNetCodecVersion1;
   };
   std::vector<Example> examples;
   examples.push_back({"kind 0", std::vector<Voxel>(64), "01"});
@@ -80,9 +94,13 @@ TEST(NetCodec, SpecExamplesAreTheEncodersBytesAndDecodeToTheirVoxels) {
     raw_hex += b;
   }
   examples.push_back({"kind 5", raw, raw_hex});
+  std::vector<Voxel> plane(64);
+  for (int z = 0; z < 4; ++z)
+    for (int x = 0; x < 4; ++x) plane[idx(x, 0, z)] = make_voxel(1, static_cast<std::uint8_t>(40 + 50 * x + 10 * z));
+  examples.push_back({"version 2, kind 3", plane, "32 41 00 24 00 00 61 00 4b 12 58 24 49 92 24 0d 7c", kNetCodecVersion2});
   for (const Example& e : examples) {
     std::vector<std::uint8_t> out;
-    net_codec_encode(4, e.voxels, out);
+    net_codec_encode(4, e.voxels, out, e.version);
     EXPECT_EQ(out, hex(e.bytes)) << e.name;
     std::vector<Voxel> back(64);
     const auto used = net_codec_decode_prefix(4, hex(e.bytes), back);
@@ -207,7 +225,8 @@ TEST(NetCodec, GoldenBytesVersion1) {
 
 std::vector<std::vector<Voxel>> sample_units(int n) {
   std::mt19937 rng(3);
-  std::vector<std::vector<Voxel>> units = {terrain_unit(n, 1.5f, 0.4f), random_unit(n, rng, 5, false),
+  std::vector<std::vector<Voxel>> units = {terrain_unit(n, 1.5f, 0.4f), terrain_unit(n, 0.2f, 1.3f),
+                                           random_unit(n, rng, 5, false),
                                            random_unit(n, rng, 64, true), make_unit(n, solid(3)),
                                            make_unit(n, make_voxel(3, 9))};
   auto dot = make_unit(n);
@@ -219,15 +238,17 @@ std::vector<std::vector<Voxel>> sample_units(int n) {
 TEST(NetCodec, RejectsEveryTruncatedPrefix) {
   for (int n : kSizes) {
     for (const auto& v : sample_units(n)) {
-      const auto bytes = encode(n, v);
+     for (std::uint8_t version : kVersions) {
+      const auto bytes = encode(n, v, version);
       std::vector<Voxel> out = make_unit(n);
       for (std::size_t len = 0; len < bytes.size(); ++len) {
         // A copy of exactly len bytes, so ASan sees any read past it.
         std::vector<std::uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(len));
         const Status s = net_codec_decode(n, prefix, out);
-        ASSERT_FALSE(s.ok()) << "n=" << n << " len=" << len;
+        ASSERT_FALSE(s.ok()) << "n=" << n << " len=" << len << " version " << int{version};
         EXPECT_EQ(s.error().code, DecodeErrorCode::kTruncated) << s.error().describe();
       }
+     }
     }
   }
 }
@@ -235,12 +256,14 @@ TEST(NetCodec, RejectsEveryTruncatedPrefix) {
 TEST(NetCodec, RejectsTrailingBytes) {
   for (int n : kSizes) {
     for (const auto& v : sample_units(n)) {
-      auto bytes = encode(n, v);
-      bytes.push_back(0);
-      std::vector<Voxel> out = make_unit(n);
-      const Status s = net_codec_decode(n, bytes, out);
-      ASSERT_FALSE(s.ok());
-      EXPECT_EQ(s.error().code, DecodeErrorCode::kTrailingBytes);
+      for (std::uint8_t version : kVersions) {
+        auto bytes = encode(n, v, version);
+        bytes.push_back(0);
+        std::vector<Voxel> out = make_unit(n);
+        const Status s = net_codec_decode(n, bytes, out);
+        ASSERT_FALSE(s.ok());
+        EXPECT_EQ(s.error().code, DecodeErrorCode::kTrailingBytes);
+      }
     }
   }
 }
@@ -254,7 +277,8 @@ DecodeErrorCode decode_error(int n, const std::vector<std::uint8_t>& bytes) {
 
 TEST(NetCodec, RejectsBadValues) {
   // Version and kind.
-  EXPECT_EQ(decode_error(4, {0x02}), DecodeErrorCode::kBadVersion);
+  EXPECT_EQ(decode_error(4, {0x00}), DecodeErrorCode::kBadVersion);
+  EXPECT_EQ(decode_error(4, {0x03}), DecodeErrorCode::kBadVersion);
   EXPECT_EQ(decode_error(4, {0x61}), DecodeErrorCode::kInvalidValue);
   // Raw kind: Air with occupancy, material 64.
   {
@@ -309,6 +333,81 @@ TEST(NetCodec, RejectsBadValues) {
   EXPECT_FALSE(net_codec_decode(5, std::vector<std::uint8_t>{0x01}, out).ok());
 }
 
+// A version-2 encoder writes version 2 only for a token unit whose
+// occupancies it predicts, and only when that is shorter: every other unit
+// is version 1's bytes, so no unit is ever larger than in version 1.
+TEST(NetCodec, VersionTwoIsUsedOnlyWhereItIsShorter) {
+  std::mt19937 rng(5);
+  for (int n : kSizes) {
+    std::vector<std::vector<Voxel>> units = {make_unit(n), make_unit(n, solid(3)), make_unit(n, make_voxel(3, 9)),
+                                             random_unit(n, rng, 5, false), random_unit(n, rng, 64, true)};
+    for (float slope : {0.25f, 0.7f, 1.9f}) units.push_back(terrain_unit(n, 2.3f, slope));
+    for (const auto& v : units) {
+      const auto one = encode(n, v, kNetCodecVersion1), two = encode(n, v, kNetCodecVersion2);
+      if ((two.at(0) & 0x0F) == kNetCodecVersion2) {
+        EXPECT_EQ(two.at(0) >> 4, 3) << "n=" << n;
+        EXPECT_TRUE(partial_occupancies(v));
+        EXPECT_LT(two.size(), one.size()) << "n=" << n;
+      } else {
+        EXPECT_EQ(two, one) << "n=" << n;
+      }
+    }
+  }
+}
+
+// A unit of a smooth surface two voxels thick, as a density function makes
+// it: occupancy falls from 255 to 0 over two voxels above a tilted plane.
+std::vector<Voxel> ramp_unit(int n, float slope_x, float slope_z) {
+  auto v = make_unit(n);
+  for (int y = 0; y < n; ++y)
+    for (int z = 0; z < n; ++z)
+      for (int x = 0; x < n; ++x) {
+        const float h = static_cast<float>(n) / 2 + slope_x * static_cast<float>(x - n / 2) + slope_z * static_cast<float>(z - n / 2);
+        const float f = std::clamp((h - static_cast<float>(y)) / 2.0f + 0.5f, 0.0f, 1.0f);
+        if (f > 0) v[idx(n, x, y, z)] = make_voxel(materials::kRock, occupancy_byte(f));
+      }
+  return v;
+}
+
+// Smooth surfaces take at most 0.85x the bytes in version 2 (every unit of
+// them here is version 2), and the same voxels come back.
+TEST(NetCodec, VersionTwoCodesSmoothSurfacesInFewerBytes) {
+  for (int n : {8, 16}) {
+    for (float slope : {0.2f, 0.6f, 1.4f}) {
+      const auto v = ramp_unit(n, slope, 0.3f);
+      ASSERT_TRUE(partial_occupancies(v));
+      const auto one = encode(n, v, kNetCodecVersion1), two = encode(n, v, kNetCodecVersion2);
+      EXPECT_EQ(two.at(0), 0x32) << "n=" << n << " slope " << slope;
+      EXPECT_LT(20 * two.size(), 17 * one.size()) << "n=" << n << " slope " << slope << ": " << two.size() << " vs " << one.size();
+      expect_round_trip(n, v);
+    }
+  }
+}
+
+// A residual over 255, and a residual code of more than 8 zeros, are
+// invalid; the same zeros with nothing after them are truncation.
+TEST(NetCodec, VersionTwoRejectsResidualsOutOfRange) {
+  // The spec's version-2 example up to voxel 0's residual (bit 33), which is
+  // then replaced: palette {1, Air}, partial, order 0, custom rankings 0.
+  const auto with_residual = [](std::uint32_t bits, unsigned count) {
+    std::vector<std::uint8_t> b = {0x32, 0x41, 0x00, 0x24, 0x00};  // 33 bits after byte 0: ... index 0
+    std::uint64_t acc = 0;
+    unsigned pos = 33;
+    for (unsigned i = 0; i < count; ++i) {
+      if ((bits >> i) & 1) acc |= std::uint64_t{1} << (pos + i - 32);
+    }
+    pos += count;
+    for (unsigned at = 32; at < pos + 8; at += 8) b.push_back(static_cast<std::uint8_t>(acc >> (at - 32)));
+    return b;
+  };
+  // 8 zeros, a one, then 8 bits of ones: w = 511, u = 510 > 255.
+  EXPECT_EQ(decode_error(4, with_residual(0x100u | (0xFFu << 9), 17)), DecodeErrorCode::kInvalidValue);
+  // 9 zeros then a one: more than 8 zeros.
+  EXPECT_EQ(decode_error(4, with_residual(1u << 9, 10)), DecodeErrorCode::kInvalidValue);
+  // Zeros to the end: truncated.
+  EXPECT_EQ(decode_error(4, std::vector<std::uint8_t>{0x32, 0x41, 0x00, 0x24, 0x00, 0x00, 0x00}), DecodeErrorCode::kTruncated);
+}
+
 // Random byte strings never crash the decoder, and whatever decodes holds
 // valid voxels and re-encodes to the same voxels.
 TEST(NetCodec, GarbageDecodesSafely) {
@@ -318,7 +417,7 @@ TEST(NetCodec, GarbageDecodesSafely) {
     for (int rep = 0; rep < 3000; ++rep) {
       std::vector<std::uint8_t> bytes(rng() % 64);
       for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
-      if (!bytes.empty()) bytes[0] = static_cast<std::uint8_t>((bytes[0] & 0xF0) | 1);
+      if (!bytes.empty()) bytes[0] = static_cast<std::uint8_t>((bytes[0] & 0xF0) | (1 + rep % 2));
       if (net_codec_decode(n, bytes, out).ok()) {
         for (Voxel v : out) {
           ASSERT_LT(v.material, kMaterialCount);

@@ -40,4 +40,11 @@ inline std::vector<Voxel> terrain_unit(int n, float base, float slope) {
   return v;
 }
 
+// Whether any solid voxel has an occupancy other than the default (255).
+inline bool partial_occupancies(const std::vector<Voxel>& v) {
+  for (Voxel x : v)
+    if (x.material != kAir && x.occupancy != kFullOccupancy) return true;
+  return false;
+}
+
 }  // namespace terrane::test_units
