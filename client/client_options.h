@@ -48,7 +48,7 @@ struct ClientOptions {
   std::uint32_t protocol_version = kProtocolVersion;  // tests: speak another version
   // Hello.features: what this client takes beyond version 2's messages
   // (the library applies every feature it knows; tests clear bits).
-  std::uint32_t features = kFeatureMipPatches | kFeaturePresenceRecords | kFeatureOuterHorizon;
+  std::uint32_t features = kFeatureMipPatches | kFeaturePresenceRecords | kFeatureOuterHorizon | kFeatureCodec2;
   std::chrono::milliseconds connect_timeout{5000};
   // A Ping goes out this often so an idle client is not timed out.
   std::chrono::milliseconds keepalive{5000};

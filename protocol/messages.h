@@ -68,6 +68,7 @@ inline constexpr int kFullRecordUnit = 16;
 inline constexpr std::uint32_t kFeatureMipPatches = 1u << 0;       // Mip patch stream records (kind 10)
 inline constexpr std::uint32_t kFeaturePresenceRecords = 1u << 1;  // PresenceRecords instead of Presence
 inline constexpr std::uint32_t kFeatureOuterHorizon = 1u << 2;     // level-6 Horizon records beyond 1,024 voxels
+inline constexpr std::uint32_t kFeatureCodec2 = 1u << 3;           // network codec units of format version 2
 
 struct HelloMsg {
   std::uint32_t protocol_version = kProtocolVersion;

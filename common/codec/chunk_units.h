@@ -25,12 +25,13 @@ namespace terrane {
 // then z halves: unit i covers origin (i & 1, (i >> 1) & 1, (i >> 2) & 1) * 16).
 // The two units side by side along x (i and i + 1) share their rows: each
 // row of the chunk is read once, its halves copied into the two units.
+// Units in network codec format codec_version (net_codec_encode's).
 template <class C>
-void encode_full_units(const C* chunk, std::vector<std::uint8_t>& out) {
+void encode_full_units(const C* chunk, std::vector<std::uint8_t>& out, std::uint8_t codec_version = kNetCodecVersion) {
   constexpr int u = kChunkSize / 2;
   Box low({u, u, u}), high({u, u, u});
   if (chunk == nullptr) {
-    for (int i = 0; i < 8; ++i) net_codec_encode(u, low.voxels(), out);
+    for (int i = 0; i < 8; ++i) net_codec_encode(u, low.voxels(), out, codec_version);
     return;
   }
   std::array<Voxel, kChunkSize> scratch;
@@ -42,8 +43,8 @@ void encode_full_units(const C* chunk, std::vector<std::uint8_t>& out) {
           std::copy_n(row, u, low.write_row(y, z));
           std::copy_n(row + u, u, high.write_row(y, z));
         }
-      net_codec_encode(u, low.voxels(), out);
-      net_codec_encode(u, high.voxels(), out);
+      net_codec_encode(u, low.voxels(), out, codec_version);
+      net_codec_encode(u, high.voxels(), out, codec_version);
     }
 }
 

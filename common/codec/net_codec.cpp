@@ -31,6 +31,30 @@ Result<std::size_t> net_codec_decode_prefix(int n, std::span<const std::uint8_t>
   }
 }
 
+Result<std::size_t> net_codec_append_version1(int n, std::size_t count, std::span<const std::uint8_t> bytes,
+                                              std::vector<std::uint8_t>& out) {
+  if (!net_codec_valid_size(n)) return DecodeError{DecodeErrorCode::kOverLimit, 0, "unit size is not 4, 8 or 16"};
+  thread_local std::vector<Voxel> voxels;
+  voxels.resize(static_cast<std::size_t>(n) * n * n);
+  std::size_t at = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const auto rest = bytes.subspan(at);
+    auto used = net_codec_decode_prefix(n, rest, voxels);
+    if (!used) {
+      DecodeError e = used.error();
+      e.offset += at;
+      return e;
+    }
+    if ((rest[0] & 0x0F) == kNetCodecVersion1) {
+      out.insert(out.end(), rest.begin(), rest.begin() + static_cast<std::ptrdiff_t>(*used));
+    } else {
+      net_codec_encode(n, voxels, out, kNetCodecVersion1);
+    }
+    at += *used;
+  }
+  return at;
+}
+
 Status net_codec_decode(int n, std::span<const std::uint8_t> bytes, std::span<Voxel> out) {
   auto used = net_codec_decode_prefix(n, bytes, out);
   if (!used) return used.error();

@@ -72,4 +72,11 @@ Status net_codec_decode(int n, std::span<const std::uint8_t> bytes, std::span<Vo
 // the number of bytes the unit occupied.
 Result<std::size_t> net_codec_decode_prefix(int n, std::span<const std::uint8_t> bytes, std::span<Voxel> out);
 
+// Appends count units of n^3 voxels, back to back at the start of bytes, to
+// out in format version 1 (for a reader that knows only version 1): a
+// version-1 unit is copied, a version-2 unit decoded and encoded again.
+// Returns the bytes of `bytes` they took, or the first unit's decode error.
+Result<std::size_t> net_codec_append_version1(int n, std::size_t count, std::span<const std::uint8_t> bytes,
+                                              std::vector<std::uint8_t>& out);
+
 }  // namespace terrane

@@ -48,7 +48,8 @@ void net_codec_put_update_coords(Vec3i chunk_pos, int unit_index, Vec3i prev_chu
   put_varint(zigzag(delta(chunk_pos.z, prev_chunk.z)), out);
 }
 
-void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out) {
+void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out,
+                                   std::uint8_t codec_version) {
   std::vector<const UnitUpdate*> sorted;
   sorted.reserve(updates.size());
   for (const UnitUpdate& u : updates) sorted.push_back(&u);
@@ -59,13 +60,13 @@ void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vec
   int prev_unit = -1;
   for (const UnitUpdate* u : sorted) {
     net_codec_put_update_coords(u->chunk_pos, u->unit_index, prev_chunk, prev_unit, out);
-    net_codec_encode(kUpdateUnitSize, u->voxels, out);
+    net_codec_encode(kUpdateUnitSize, u->voxels, out, codec_version);
     prev_chunk = u->chunk_pos;
     prev_unit = u->unit_index;
   }
 }
 
-UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units) {
+UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units, std::uint8_t codec_version) {
   std::vector<const UnitUpdate*> sorted;
   sorted.reserve(units.size());
   for (const UnitUpdate& u : units) sorted.push_back(&u);
@@ -78,7 +79,7 @@ UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units) {
   int prev = -1;
   for (const UnitUpdate* u : sorted) {
     if (prev >= 0) net_codec_put_update_coords(p.chunk_pos, u->unit_index, p.chunk_pos, prev, p.rest);
-    net_codec_encode(kUpdateUnitSize, u->voxels, p.rest);
+    net_codec_encode(kUpdateUnitSize, u->voxels, p.rest, codec_version);
     prev = u->unit_index;
   }
   return p;

@@ -42,7 +42,9 @@ bool update_batch_order(const UnitUpdate& a, const UnitUpdate& b);
 // Appends a batch holding the given updates. The batch is a set: entries are
 // written sorted by update_batch_order (so coordinates delta-code well) and
 // decode in that order. Preconditions: unit_index < 512, voxels valid.
-void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out);
+// Units in network codec format codec_version (net_codec_encode's).
+void net_codec_encode_update_batch(std::span<const UnitUpdate> updates, std::vector<std::uint8_t>& out,
+                                   std::uint8_t codec_version = kNetCodecVersion);
 
 // Decodes a whole batch into out, returning the number of updates. Errors as
 // net_codec_decode, plus kOverLimit when the batch holds more than out.size()
@@ -62,7 +64,8 @@ struct UpdatePiece {
   std::vector<std::uint8_t> rest;  // the first unit, then the other entries
 };
 // Precondition: units is non-empty, every unit of chunk_pos, distinct indices.
-UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units);
+UpdatePiece net_codec_encode_update_piece(std::span<const UnitUpdate> units,
+                                          std::uint8_t codec_version = kNetCodecVersion);
 // Appends one batch of the pieces (distinct chunks), in the order given.
 void net_codec_join_update_pieces(std::span<const UpdatePiece* const> pieces, std::vector<std::uint8_t>& out);
 // The same batch, but each piece's rest is handed to put_rest(i, rest) (i

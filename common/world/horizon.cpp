@@ -27,14 +27,14 @@ void HorizonBuilder::put(Vec3i cp, std::span<const Voxel> voxels) {
       for (int x = 0; x < n; ++x) image_.set(at + Vec3i{x, y, z}, voxels[static_cast<std::size_t>((y * n + z) * n + x)]);
 }
 
-HorizonPtr encode_horizon(const HorizonBuilder& b) {
+HorizonPtr encode_horizon(const HorizonBuilder& b, std::uint8_t codec_version) {
   auto img = std::make_shared<HorizonImage>();
   img->region = b.region();
   img->level = b.level();
   // Level 6 is built at level 5 (HorizonBuilder::per_chunk).
   const Box outer = b.level() == kHorizonOuterLevel ? downsample_box(b.image()) : Box{};
   const Box& image = b.level() == kHorizonOuterLevel ? outer : b.image();
-  net_codec_encode(horizon_side(b.level()), image.voxels(), img->unit);
+  net_codec_encode(horizon_side(b.level()), image.voxels(), img->unit, codec_version);
   return img;
 }
 

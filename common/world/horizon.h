@@ -20,6 +20,7 @@
 #include <span>
 #include <vector>
 
+#include "common/codec/net_codec.h"
 #include "common/voxel/box.h"
 #include "common/world/coarse_image.h"
 
@@ -78,6 +79,7 @@ struct HorizonImage {
 };
 using HorizonPtr = std::shared_ptr<const HorizonImage>;
 
-HorizonPtr encode_horizon(const HorizonBuilder& b);
+// Its unit in network codec format codec_version (net_codec_encode's).
+HorizonPtr encode_horizon(const HorizonBuilder& b, std::uint8_t codec_version = kNetCodecVersion);
 
 }  // namespace terrane

@@ -112,7 +112,7 @@ void ChunkVersion::append_patch_units(int level, std::uint64_t mask, std::vector
         for (int z = 0; z < 4; ++z) std::copy_n(mip.read_row(o.y + y, o.z + z) + o.x, 4, unit.write_row(y, z));
       p.starts.push_back(static_cast<std::uint32_t>(p.bytes.size()));
       std::vector<std::uint8_t> one;
-      net_codec_encode(4, unit.voxels(), one);
+      net_codec_encode(4, unit.voxels(), one, kServedCodecVersion);
       p.bytes.insert(p.bytes.end(), one.begin(), one.end());
     }
     p.starts.push_back(static_cast<std::uint32_t>(p.bytes.size()));
@@ -149,7 +149,7 @@ std::shared_ptr<ChunkVersion> ChunkVersion::level3_only(Vec3i pos, std::uint64_t
   v->finest_level_ = kMipLevels - 1;
   const auto l = static_cast<std::size_t>(kMipLevels - 1);
   std::call_once(v->encoded_once_[l], [&] {
-    v->encoded_[l].make([&](std::vector<std::uint8_t>& out) { net_codec_encode(kCoarseSide, voxels, out); });
+    v->encoded_[l].make([&](std::vector<std::uint8_t>& out) { net_codec_encode(kCoarseSide, voxels, out, kServedCodecVersion); });
   });
   return v;
 }
@@ -186,33 +186,35 @@ std::span<const std::uint8_t> ChunkVersion::encoded(int level) const {
   std::call_once(encoded_once_[l], [&] {
     encode_counters().made.fetch_add(1, std::memory_order_relaxed);
     encoded_[l].make([&](std::vector<std::uint8_t>& out) {
-      if (level == 0) return encode_full_units(chunk_.get(), out);
+      if (level == 0) return encode_full_units(chunk_.get(), out, kServedCodecVersion);
       const int n = kChunkSize >> level;
       Box box({n, n, n});
       if (chunk_) chunk_->read_level(level, box);
-      net_codec_encode(n, box.voxels(), out);
+      net_codec_encode(n, box.voxels(), out, kServedCodecVersion);
     });
   });
   return encoded_[l].span();
 }
 
 const UpdatePiece& ChunkVersion::update_piece() const {
-  std::call_once(piece_once_, [&] {
-    std::vector<UnitUpdate> units;
-    const UnitBits& changed = changed_units();
-    units.reserve(changed.count());
-    for (std::size_t i = 0; i < changed.size(); ++i) {
-      if (!changed.test(i)) continue;
-      UnitUpdate u;
-      u.chunk_pos = pos_;
-      u.unit_index = static_cast<std::uint16_t>(i);
-      units.push_back(u);
-    }
-    read_update_units(chunk_.get(), std::span<UnitUpdate>(units));
-    piece_ = std::make_unique<UpdatePiece>();
-    if (!units.empty()) *piece_ = net_codec_encode_update_piece(units);
-  });
+  std::call_once(piece_once_, [&] { piece_ = std::make_unique<UpdatePiece>(make_update_piece(kServedCodecVersion)); });
   return *piece_;
+}
+
+UpdatePiece ChunkVersion::make_update_piece(std::uint8_t codec_version) const {
+  std::vector<UnitUpdate> units;
+  const UnitBits& changed = changed_units();
+  units.reserve(changed.count());
+  for (std::size_t i = 0; i < changed.size(); ++i) {
+    if (!changed.test(i)) continue;
+    UnitUpdate u;
+    u.chunk_pos = pos_;
+    u.unit_index = static_cast<std::uint16_t>(i);
+    units.push_back(u);
+  }
+  read_update_units(chunk_.get(), std::span<UnitUpdate>(units));
+  if (units.empty()) return {};
+  return net_codec_encode_update_piece(units, codec_version);
 }
 
 std::uint64_t ChunkVersion::hash() const {

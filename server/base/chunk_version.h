@@ -32,6 +32,12 @@ namespace terrane {
 
 using UnitBits = std::bitset<kUpdateUnitsPerChunk>;
 
+// The network codec format of every unit the server makes (chunk levels,
+// patches, update pieces, horizon images): version 2, which a client that
+// set kFeatureCodec2 reads; for one that did not, the units go out
+// transcoded to version 1 (StreamOut, TickUpdate).
+inline constexpr std::uint8_t kServedCodecVersion = kNetCodecVersion2;
+
 // How often a level's encoding was asked for and how often it had to be
 // made (the rest were served from a version's own copy): process-wide.
 struct EncodeCounters {
@@ -99,8 +105,11 @@ class ChunkVersion {
   // Precondition: has_level(level), level 1 or 2.
   void append_patch_units(int level, std::uint64_t mask, std::vector<std::uint8_t>& out) const;
   // The changed units as one update piece (precondition: changed_units()
-  // is not empty).
+  // is not empty), in kServedCodecVersion.
   const UpdatePiece& update_piece() const;
+  // The same piece made again in codec_version (not kept: for a client
+  // that reads only version 1).
+  UpdatePiece make_update_piece(std::uint8_t codec_version) const;
   // protocol/messages.h chunk_hash of this chunk and revision.
   std::uint64_t hash() const;
   // The world store's blob (WORLD_FORMAT.md, "Chunk blobs"), made at each

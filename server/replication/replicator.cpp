@@ -90,6 +90,8 @@ void Replicator::close(CloseReason why, const std::string& text) {
 void Replicator::join(const std::string& name, bool identified, std::uint32_t features) {
   mip_patches_ = (features & kFeatureMipPatches) != 0 && options_.mip_patches;
   outer_horizon_ = (features & kFeatureOuterHorizon) != 0 && options_.outer_horizon;
+  codec1_ = (features & kFeatureCodec2) == 0;
+  out_.set_codec1(codec1_);
   edit_rate_ = TokenBucket(world_.options().edits_per_second, world_.options().edits_per_second * 2);
   outbound_ = TokenBucket(options_.outbound_bytes_per_second, options_.outbound_bytes_per_second / 4);
   name_ = name;
@@ -669,7 +671,7 @@ void Replicator::on_committed(std::uint64_t tick, std::vector<VersionPtr> change
   // Records first, so an update never overtakes the data it applies to.
   flush_stream();
   std::size_t units = 0;
-  if (auto frame = update.empty() ? std::nullopt : update.finish(tick, faults_, units)) {
+  if (auto frame = update.empty() ? std::nullopt : update.finish(tick, faults_, units, codec1_)) {
     session_->send(std::move(*frame));
     counters_.update_batches_sent.fetch_add(1, std::memory_order_relaxed);
     counters_.update_units_sent.fetch_add(units, std::memory_order_relaxed);

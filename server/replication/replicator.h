@@ -204,6 +204,7 @@ class Replicator : public WorldClient, public ClientReplica, public std::enable_
   bool joined_ = false;
   bool mip_patches_ = false;  // refresh mips as patches (the client takes them, the server allows them)
   bool outer_horizon_ = false;  // level-6 horizon images beyond kHorizonFarMax (the client takes them)
+  bool codec1_ = false;         // the client reads only network codec version 1 (no kFeatureCodec2)
   bool closed_ = false;
   std::string name_;
   ClientStateMsg state_;

@@ -8,6 +8,10 @@
 // It sends through the callbacks it is given: can_send (the session is
 // attached; until then a batch waits) and send (the frame, counted and
 // queued by the owner).
+//
+// The units it is given are the server's (kServedCodecVersion). For a
+// client that reads only network codec version 1 (set_codec1), each record's
+// units go in transcoded to version 1 (copied, not shared).
 // Thread-safety: one strand (the replicator's session strand).
 #pragma once
 
@@ -17,6 +21,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/world/horizon.h"
 #include "protocol/stream_batch.h"
 #include "server/base/chunk_version.h"
 
@@ -27,6 +32,9 @@ class StreamOut {
   StreamOut(std::function<bool()> can_send, std::function<void(OutFrame)> send)
       : can_send_(std::move(can_send)), send_(std::move(send)) {}
 
+  // Whether the client reads only version-1 units (it did not set
+  // kFeatureCodec2).
+  void set_codec1(bool codec1) { codec1_ = codec1; }
   // A record (payload: its encoded units, shared with owner when given).
   void record(StreamRecordKind kind, Vec3i chunk_pos, std::uint64_t revision,
               std::span<const std::uint8_t> payload = {}, const VersionPtr& owner = nullptr);
@@ -34,7 +42,11 @@ class StreamOut {
   template <class T>
   void horizon(Vec3i region, int level, const HorizonMask* mask, std::span<const std::uint8_t> unit,
                const std::shared_ptr<T>& owner) {
-    batch_.add_horizon(region, level, mask, unit, owner);
+    if (codec1_) {
+      batch_.add_horizon(region, level, mask, version1(horizon_side(level), 1, unit));
+    } else {
+      batch_.add_horizon(region, level, mask, unit, owner);
+    }
     flush_if_full();
   }
   // The mip of level (1 or 2) held at revision held, changed in v, as a
@@ -48,11 +60,15 @@ class StreamOut {
 
  private:
   void flush_if_full();
+  // count units of n^3 from units, as version 1, in transcoded_.
+  std::span<const std::uint8_t> version1(int n, std::size_t count, std::span<const std::uint8_t> units);
 
   std::function<bool()> can_send_;
   std::function<void(OutFrame)> send_;
   StreamBatchWriter batch_;
   std::vector<std::uint8_t> units_;  // a patch's units, reused
+  bool codec1_ = false;
+  std::vector<std::uint8_t> transcoded_;  // a record's units as version 1, reused
 };
 
 }  // namespace terrane

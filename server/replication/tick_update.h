@@ -28,7 +28,9 @@ class TickUpdate {
   bool empty() const { return versions_.empty(); }
   // The UpdateBatch frame of tick, or nullopt when faults (the test seam;
   // null when serving for real) drop it. units: set to the units it holds.
-  std::optional<OutFrame> finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units);
+  // codec1: the client reads only network codec version 1 (its pieces are
+  // made again in version 1 and copied, not shared).
+  std::optional<OutFrame> finish(std::uint64_t tick, UpdateFaults* faults, std::size_t& units, bool codec1 = false);
 
  private:
   std::vector<VersionPtr> versions_;

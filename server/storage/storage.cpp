@@ -234,7 +234,7 @@ void Storage::run_horizon(WorldStore& store, Vec3i region, const HorizonJob& job
       unknown.push_back(cp);
   });
   world_.estimate_horizon(unknown, b);
-  h.image = encode_horizon(b);
+  h.image = encode_horizon(b, kServedCodecVersion);
   counters_.horizons_made.fetch_add(1, std::memory_order_relaxed);
   job.done(std::move(h));
 }

@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <cstring>
 #include <functional>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -239,6 +240,7 @@ void time_codecs(const std::vector<Codec>& codecs, const Dataset& d, int rounds,
 
 struct UpdateFigures {
   double net_p50 = 0, net_p99 = 0, rle_p50 = 0, rle_p99 = 0, net_mean = 0, rle_mean = 0;
+  double net2_p50 = 0, net2_p99 = 0, net2_mean = 0;  // format version 2
   std::size_t edits = 0, units = 0;
 };
 
@@ -257,7 +259,7 @@ UpdateFigures measure_updates(const Dataset& d, int edits, std::uint32_t seed) {
     if (v.material != kAir && std::find(mats.begin(), mats.end(), v.material) == mats.end()) mats.push_back(v.material);
   }
   UpdateFigures f;
-  std::vector<double> net_sizes, rle_sizes;
+  std::vector<double> net_sizes, net2_sizes, rle_sizes;
   std::vector<std::uint8_t> bytes;
   for (int e = 0; e < edits; ++e) {
     // Centre: a random column's surface (highest non-Air voxel).
@@ -329,11 +331,13 @@ UpdateFigures measure_updates(const Dataset& d, int edits, std::uint32_t seed) {
     Vec3i prev_chunk{};
     int prev_unit = -1;
     for (const UnitUpdate& u : updates) {
-      std::vector<std::uint8_t> coords, net, rle;
+      std::vector<std::uint8_t> coords, net, net2, rle;
       net_codec_put_update_coords(u.chunk_pos, u.unit_index, prev_chunk, prev_unit, coords);
-      net_codec_encode(4, u.voxels, net);
+      net_codec_encode(4, u.voxels, net, kNetCodecVersion1);
+      net_codec_encode(4, u.voxels, net2, kNetCodecVersion2);
       byte_rle_encode(u.voxels, rle);
       net_sizes.push_back(static_cast<double>(coords.size() + net.size()));
+      net2_sizes.push_back(static_cast<double>(coords.size() + net2.size()));
       rle_sizes.push_back(static_cast<double>(coords.size() + rle.size()));
       prev_chunk = u.chunk_pos;
       prev_unit = u.unit_index;
@@ -342,6 +346,9 @@ UpdateFigures measure_updates(const Dataset& d, int edits, std::uint32_t seed) {
   f.units = net_sizes.size();
   f.net_p50 = percentile(net_sizes, 0.5);
   f.net_p99 = percentile(net_sizes, 0.99);
+  f.net2_p50 = percentile(net2_sizes, 0.5);
+  f.net2_p99 = percentile(net2_sizes, 0.99);
+  f.net2_mean = net2_sizes.empty() ? 0 : std::accumulate(net2_sizes.begin(), net2_sizes.end(), 0.0) / static_cast<double>(net2_sizes.size());
   f.rle_p50 = percentile(rle_sizes, 0.5);
   f.rle_p99 = percentile(rle_sizes, 0.99);
   for (double x : net_sizes) f.net_mean += x / static_cast<double>(f.units);
@@ -420,6 +427,7 @@ int main(int argc, char** argv) {
     std::printf("4^3 updates (%zu sphere edits r 1.5-4, %zu changed units), bytes per changed unit incl. coords:\n",
                 f.edits, f.units);
     std::printf("  %-18s p50 %6.1f  p99 %6.1f  mean %6.2f\n", "Terrane net codec", f.net_p50, f.net_p99, f.net_mean);
+    std::printf("  %-18s p50 %6.1f  p99 %6.1f  mean %6.2f\n", "Terrane codec 2", f.net2_p50, f.net2_p99, f.net2_mean);
     std::printf("  %-18s p50 %6.1f  p99 %6.1f  mean %6.2f\n", "byte RLE", f.rle_p50, f.rle_p99, f.rle_mean);
   }
   ZSTD_freeCCtx(g_zc);

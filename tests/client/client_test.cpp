@@ -1526,7 +1526,7 @@ TEST_F(ClientServerTest, EmulatedLatencyDelaysEveryFrame) {
 TEST_F(ClientServerTest, EmulatedBandwidthCapsDeliveryRate) {
   start_server();
   ClientOptions o = options("thin", 96, 32);
-  constexpr std::uint64_t kRate = 40 * 1024;
+  constexpr std::uint64_t kRate = 24 * 1024;
   o.emulation.bandwidth_bytes_per_s = kRate;
   o.emulation.latency = 20ms;
   Client c(o);

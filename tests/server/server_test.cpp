@@ -28,6 +28,8 @@
 #include <tuple>
 #include <thread>
 
+#include "common/codec/net_codec.h"
+#include "common/codec/bit_io.h"
 #include "common/world/coarse_image.h"
 #include "common/world/horizon.h"
 #include "common/world/sqlite_store.h"
@@ -690,6 +692,106 @@ TEST_F(ServerTest, HorizonImagesBeyond1024AreLevel6ForAClientThatTakesThem) {
       EXPECT_GT(levels[kHorizonOuterLevel], 0u);
     else
       EXPECT_EQ(levels.count(kHorizonOuterLevel), 0u) << "level 6 only to a client that takes it";
+  }
+}
+
+// The format versions of a run of count units of n^3 at the start of bytes
+// (versions[v] counts units of version v); false if one does not decode.
+bool count_unit_versions(int n, std::size_t count, std::span<const std::uint8_t> bytes, std::map<int, int>& versions) {
+  std::vector<Voxel> voxels(static_cast<std::size_t>(n) * n * n);
+  for (std::size_t i = 0; i < count; ++i) {
+    auto used = net_codec_decode_prefix(n, bytes, voxels);
+    if (!used) return false;
+    ++versions[bytes[0] & 0x0F];
+    bytes = bytes.subspan(*used);
+  }
+  return bytes.empty();
+}
+
+// The same for an update batch's units (NET_CODEC.md, "Update batches").
+bool count_update_versions(std::span<const std::uint8_t> data, std::map<int, int>& versions) {
+  std::size_t pos = 1;  // the batch's version byte
+  const auto varint = [&](std::uint64_t& v) { return get_varint(data, pos, 10, v) == VarintRead::kOk; };
+  std::uint64_t count = 0;
+  if (data.empty() || !varint(count)) return false;
+  std::vector<Voxel> voxels(64);
+  for (std::uint64_t i = 0; i < count; ++i) {
+    std::uint64_t tag = 0, d = 0;
+    if (!varint(tag)) return false;
+    if ((tag & 1) == 0 && !(varint(d) && varint(d) && varint(d))) return false;
+    auto used = net_codec_decode_prefix(4, data.subspan(pos), voxels);
+    if (!used) return false;
+    ++versions[data[pos] & 0x0F];
+    pos += *used;
+  }
+  return pos == data.size();
+}
+
+// Network codec version 2 (features bit 3): a client that sets the bit gets
+// the server's units in version 2 where that is shorter (the generated
+// world's smooth surfaces); one that does not gets every unit in version 1,
+// stream records and update batches alike, with the same voxels.
+TEST_F(ServerTest, UnitsAreVersion2OnlyForAClientThatTakesThem) {
+  start();
+  std::map<std::tuple<int, int, int>, std::pair<std::uint64_t, Box>> first_full;  // chunk -> revision, voxels
+  for (const std::uint32_t features : {kFeatureCodec2, 0u}) {
+    RawPeer p(server_->port());
+    ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, features != 0 ? "two" : "one", "", {}, features})));
+    auto wf = p.next_of(wire::Body::Welcome);
+    ASSERT_TRUE(wf.has_value());
+    const WelcomeMsg w = *parse_welcome(*msg(*wf).body_as_Welcome());
+    const ClientStateMsg where{w.spawn, 96, 64};
+    ASSERT_TRUE(p.send(build_client_state(where)));
+    std::map<int, int> stream_versions;
+    std::size_t fulls = 0, compared = 0;
+    StreamDecodeScratch scratch;
+    while (fulls < 40) {
+      auto f = p.next();
+      ASSERT_TRUE(f.has_value()) << fulls << " Full records, then the stream ended";
+      const wire::Message& m = msg(*f);
+      if (m.body_type() != wire::Body::StreamBatch) continue;
+      auto r = parse_stream_batch(*m.body_as_StreamBatch());
+      ASSERT_TRUE(r.ok());
+      ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
+                    if (!gives_form(rec.kind) || rec.payload.empty()) return Ok{};
+                    const bool full = rec.kind == StreamRecordKind::kFull;
+                    EXPECT_TRUE(count_unit_versions(full ? 16 : kChunkSize >> rec.level, full ? 8 : 1, rec.payload,
+                                                    stream_versions));
+                    if (!full) return Ok{};
+                    ++fulls;
+                    // Both clients' Full records of a chunk at one revision
+                    // hold the same voxels.
+                    const auto key = std::make_tuple(rec.chunk_pos.x, rec.chunk_pos.y, rec.chunk_pos.z);
+                    auto [it, fresh] = first_full.try_emplace(key, rec.revision, *rec.voxels);
+                    if (!fresh && it->second.first == rec.revision) {
+                      EXPECT_EQ(it->second.second, *rec.voxels);
+                      ++compared;
+                    }
+                    return Ok{};
+                  }).ok());
+    }
+    // An edit where the client stands: its UpdateBatch's units.
+    const Vec3i at{static_cast<int>(std::floor(w.spawn.x)), static_cast<int>(std::floor(w.spawn.y)),
+                   static_cast<int>(std::floor(w.spawn.z))};
+    const EditRequestMsg e = testing_support::fill_box_edit(features + 1, Region{at - Vec3i{3, 3, 3}, at + Vec3i{3, 3, 3}},
+                                                            features != 0 ? materials::kBrick : materials::kSlate, 100);
+    ASSERT_TRUE(p.send(build_edit_request(e)));
+    auto both = p.next_of_both(wire::Body::EditAck, wire::Body::UpdateBatch);
+    ASSERT_TRUE(both.has_value());
+    auto batch = parse_update_batch(*msg(both->second).body_as_UpdateBatch());
+    ASSERT_TRUE(batch.ok());
+    std::map<int, int> update_versions;
+    EXPECT_TRUE(count_update_versions(batch->data, update_versions));
+    const auto of = [](const std::map<int, int>& m, int version) { return m.count(version) ? m.at(version) : 0; };
+    EXPECT_GT(of(update_versions, 1) + of(update_versions, 2), 0);
+    if (features != 0) {
+      EXPECT_GT(of(stream_versions, 2), 0) << "no unit of the generated terrain in version 2";
+    } else {
+      EXPECT_EQ(of(stream_versions, 2), 0) << "version-2 units to a version-1 client";
+      EXPECT_EQ(of(update_versions, 2), 0);
+      EXPECT_GT(compared, 10u) << "chunks both clients got at the same revision";
+    }
+    p.close();
   }
 }
 
