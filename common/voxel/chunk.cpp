@@ -196,7 +196,7 @@ void Chunk::encode_mip_units(const DenseMips& dense, std::vector<std::uint8_t>& 
                              std::array<std::uint16_t, kMipLevels>& end) {
   units.clear();
   for (int level = 1; level < kMipLevels; ++level) {
-    net_codec_encode(kChunkSize >> level, dense.levels[level - 1].voxels(), units);
+    net_codec_encode(kChunkSize >> level, dense.levels[level - 1].voxels(), units, kNetCodecVersion2);
     end[static_cast<std::size_t>(level)] = static_cast<std::uint16_t>(units.size());
   }
 }

@@ -8,6 +8,7 @@
 #include "common/codec/lz4_block.h"
 #include "common/codec/net_codec.h"
 #include "common/voxel/grid.h"
+#include "server/base/chunk_version.h"
 
 namespace terrane {
 
@@ -95,7 +96,8 @@ BoxStats measure_box(const Region& box, const Box& content) {
     const std::vector<Box> units = cut_units(content, n);
     s.codecs.push_back(measure_codec(
         "network_" + std::to_string(n), units,
-        [n](const Box& u, std::vector<std::uint8_t>& e) { net_codec_encode(n, u.voxels(), e); },
+        // What the server sends a client that reads version 2.
+        [n](const Box& u, std::vector<std::uint8_t>& e) { net_codec_encode(n, u.voxels(), e, kServedCodecVersion); },
         [n](const std::vector<std::uint8_t>& e, Box& o) { return net_codec_decode(n, e, o.voxels()).ok(); }));
   }
 

@@ -325,5 +325,41 @@ TEST(ChunkImage, MipsThatCallAChunkEmptyWhileItHoldsVoxelsAreRefused) {
   EXPECT_EQ(got.error().code, DecodeErrorCode::kInvalidValue);
 }
 
+// A chunk encodes its mips in network codec version 2; an image written
+// before, with version-1 units, still reads, keeps its units as stored and
+// gives the same mips.
+TEST(ChunkImage, AnImageWithVersion1MipUnitsReadsTheSameMips) {
+  const Grid grid = grid_of("default world");
+  std::size_t version2 = 0, checked = 0;
+  grid.for_each_chunk([&](Vec3i, const Chunk& chunk) {
+    if (chunk.uniform() || checked >= 200) return;
+    auto image = image_of(chunk);
+    std::size_t level0_end = 0;
+    ASSERT_TRUE(RowPackedBox<32>::read_image(image, level0_end).ok());
+    image.resize(level0_end);
+    for (int level = 1; level < kMipLevels; ++level) {
+      const auto unit = chunk.mip_unit(level);
+      version2 += (unit[0] & 0x0F) == kNetCodecVersion2;
+      std::vector<std::uint8_t> one;
+      ASSERT_TRUE(net_codec_append_version1(kChunkSize >> level, 1, unit, one).ok());
+      image.push_back(static_cast<std::uint8_t>(one.size() & 0xFF));
+      image.push_back(static_cast<std::uint8_t>(one.size() >> 8));
+      image.insert(image.end(), one.begin(), one.end());
+    }
+    auto back = read_all(image);
+    ASSERT_TRUE(back.ok()) << back.error().detail;
+    for (int level = 1; level < kMipLevels; ++level) {
+      EXPECT_EQ(back->mip_unit(level)[0] & 0x0F, kNetCodecVersion1);
+      Box a, b;
+      back->read_level(level, a);
+      chunk.read_level(level, b);
+      EXPECT_EQ(a, b) << "level " << level;
+    }
+    ++checked;
+  });
+  EXPECT_GT(checked, 50u);
+  EXPECT_GT(version2, 0u) << "no mip of the generated terrain in version 2";
+}
+
 }  // namespace
 }  // namespace terrane
