@@ -2,9 +2,9 @@
 //
 // Level 0 is the full-resolution 32³ content, row-packed; levels 1, 2, 3 are
 // the 16³, 8³ and 4³ mips, kept as network-codec units (NET_CODEC.md; a
-// chunk encodes them in format version 2, whose predicted occupancies make
-// smooth terrain's mips a quarter smaller; a chunk loaded from an image
-// keeps the units it was stored with, of either version) back
+// chunk encodes them in format version 1, which decodes fastest; a chunk
+// loaded from an image keeps the units it was stored with, of either
+// version) back
 // to back in one allocation: a bit-packed RLE is several times smaller than
 // row-packed 16-voxel rows, and the mips are read whole (for LOD and
 // replication, where the stored unit is the bytes sent). Writes update the

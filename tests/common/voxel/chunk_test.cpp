@@ -239,8 +239,8 @@ TEST(Chunk, MipUnitsAreTheEncodingsOfTheLevels) {
   for (int level = 1; level < kMipLevels; ++level) {
     Box box;
     chunk.read_level(level, box);
-    std::vector<std::uint8_t> expected;  // a chunk encodes its mips in version 2
-    net_codec_encode(kChunkSize >> level, box.voxels(), expected, kNetCodecVersion2);
+    std::vector<std::uint8_t> expected;  // a chunk encodes its mips in version 1
+    net_codec_encode(kChunkSize >> level, box.voxels(), expected, kNetCodecVersion1);
     const auto unit = chunk.mip_unit(level);
     EXPECT_EQ(std::vector<std::uint8_t>(unit.begin(), unit.end()), expected) << "level " << level;
   }
