@@ -51,11 +51,11 @@ def truncated_binary(r, c):
     return 2 * x + r.read(1) - u
 
 
-def exp_golomb(r, m):
+def exp_golomb(r, m, max_zeros=12):
     z = 0
     while r.read(1) == 0:
         z += 1
-        if z > 12:
+        if z > max_zeros:
             raise DecodeError("Exp-Golomb prefix too long")
     w = (1 << z) + r.read(z)
     return ((w - 1) << m | r.read(m)) + 1
@@ -101,13 +101,7 @@ def predict(vox, i, n):
 
 
 def residual(r, order):
-    z = 0
-    while r.read(1) == 0:
-        z += 1
-        if z > 8:
-            raise DecodeError("residual prefix too long")
-    w = (1 << z) + r.read(z)
-    u = (w - 1) << order | r.read(order)
+    u = exp_golomb(r, order, max_zeros=8) - 1  # the length code carrying u + 1
     if u > 255:
         raise DecodeError("residual over 255")
     return -((u + 1) // 2) if u & 1 else u // 2
