@@ -1,4 +1,4 @@
-// The unit decoder of the network voxel codec (format version 1,
+// The unit decoder of the network voxel codec (format versions 1 and 2,
 // common/codec/NET_CODEC.md): reads one N^3 unit from untrusted bytes into
 // the caller's buffer, or says why it cannot.
 //

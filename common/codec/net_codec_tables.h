@@ -1,4 +1,4 @@
-// The fixed code tables of the network voxel codec (format version 1,
+// The fixed code tables of the network voxel codec (format versions 1 and 2,
 // common/codec/NET_CODEC.md), read by both its unit encoder
 // (net_codec_encoder.h) and its unit decoder (net_codec_decoder.h): unit
 // kinds, token types and their Exp-Golomb orders, the per-context type-code

@@ -22,9 +22,12 @@ void StreamOut::record(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, 
 
 std::span<const std::uint8_t> StreamOut::version1(int n, std::size_t count, std::span<const std::uint8_t> units) {
   transcoded_.clear();
-  if (!net_codec_append_version1(n, count, units, transcoded_)) {
-    // The server's own units: a failure is a bug, and the record goes as is.
-    server_log().error("stream record units do not decode for a version-1 client ({} of {}^3)", count, n);
+  const auto used = net_codec_append_version1(n, count, units, transcoded_);
+  if (!used || *used != units.size()) {
+    // The server's own units: a failure is a bug. The record goes as it
+    // is, so the client refuses it with a decode error (an unknown unit
+    // version) rather than hold a chunk the server thinks it sent.
+    server_log().error("stream record units do not make {} units of {}^3 for a version-1 client", count, n);
     return units;
   }
   return transcoded_;
