@@ -127,9 +127,6 @@ constexpr const char* kLengthCodeTooLong = "run length code too long";
 constexpr const char* kResidualCodeTooLong = "occupancy residual code too long";
 constexpr const char* kResidualOutOfRange = "occupancy residual over 255";
 
-// Reads a version-2 occupancy residual (an Exp-Golomb code of `order` for
-// the residual + 1). Returns the residual, or kResidualTooLong past 8 zeros.
-constexpr std::uint32_t kResidualTooLong = 0xFFFFFFFFu;
 // Residual codes of up to kResidualPeekBits bits, per order: the bits a
 // code takes (0: longer, read it the slow way) and its residual.
 constexpr unsigned kResidualPeekBits = 10;
@@ -156,13 +153,17 @@ const ResidualTable& residual_table(unsigned order) {
   }();
   return tables[order];
 }
-[[gnu::always_inline]] inline std::uint32_t read_residual(BitReader& r, unsigned order) {
+// Reads a version-2 occupancy residual (an Exp-Golomb code of `order` for
+// the residual + 1) into u, refilling first; returns nullptr, or why it is
+// invalid (more than 8 zeros, or over 255).
+inline const char* read_residual(BitReader& r, unsigned order, std::uint32_t& u) {
   r.refill();
   const unsigned lg = r.trailing_zeros();
-  if (lg > kMaxResidualZeros) return kResidualTooLong;
+  if (lg > kMaxResidualZeros) return kResidualCodeTooLong;
   r.skip(lg + 1);
   const std::uint32_t w = (std::uint32_t{1} << lg) | r.get(lg);
-  return ((w - 1) << order) | r.get(order);
+  u = ((w - 1) << order) | r.get(order);
+  return u > kMaxResidual ? kResidualOutOfRange : nullptr;
 }
 
 // Token streams of kind-3 units, after the header and the first voxel (which
@@ -365,10 +366,8 @@ const char* decode_tokens_partial(BitReader& r, const Palette& palette, std::uin
           std::uint32_t u = re.value;
           if (re.bits != 0) [[likely]] {
             r.skip(re.bits);
-          } else {
-            u = read_residual(r, order);
-            if (u == kResidualTooLong) return kResidualCodeTooLong;
-            if (u > kMaxResidual) return kResidualOutOfRange;
+          } else if (const char* invalid = read_residual(r, order, u)) {
+            return invalid;
           }
           last |= std::uint32_t{occupancy_from_residual(predict_occupancy<n>(dst, i, left), u)} << 8;
           // The refill above left at least 56 bits, the residual took at
@@ -523,25 +522,24 @@ Result<std::size_t> decode_unit(std::span<const std::uint8_t> bytes, std::span<V
     if (first_idx >= static_cast<std::uint32_t>(palette.count)) {
       return stream_error(r, size, DecodeErrorCode::kInvalidValue, "palette index out of range");
     }
+    const char* invalid = nullptr;
     {
       const Material m = palette.materials[first_idx];
       Voxel x{m, default_occupancy(m)};
       if (predicted && m != kAir) {
-        const std::uint32_t u = read_residual(r, order);
-        if (u == kResidualTooLong) {
-          if (!r.one_bit_ahead()) return DecodeError{DecodeErrorCode::kTruncated, size, "unit cut short"};
-          return stream_error(r, size, DecodeErrorCode::kInvalidValue, kResidualCodeTooLong);
-        }
-        if (u > kMaxResidual) return stream_error(r, size, DecodeErrorCode::kInvalidValue, kResidualOutOfRange);
+        std::uint32_t u = 0;
+        invalid = read_residual(r, order, u);
         x.occupancy = occupancy_from_residual(predict_occupancy<n>(dst, 0), u);
-      } else if (partial && !predicted && m != kAir && r.get(1) != 0) {
+      } else if (partial && m != kAir && r.get(1) != 0) {  // version 1
         x.occupancy = static_cast<std::uint8_t>(r.get(8));
       }
       dst[0] = x;
     }
-    const char* invalid = predicted ? decode_tokens_partial<n, true>(r, palette, ctx_info, order, dst)
-                          : partial ? decode_tokens_partial<n, false>(r, palette, ctx_info, 0, dst)
-                                    : decode_tokens_solid<n>(r, palette, ctx_info, first_idx, dst);
+    if (invalid == nullptr) {
+      invalid = predicted ? decode_tokens_partial<n, true>(r, palette, ctx_info, order, dst)
+                : partial ? decode_tokens_partial<n, false>(r, palette, ctx_info, 0, dst)
+                          : decode_tokens_solid<n>(r, palette, ctx_info, first_idx, dst);
+    }
     if (invalid != nullptr) {
       // An over-long length or residual code: the zeros ran past the end
       // when no one bit follows before it (the reader fed them), else z > 12

@@ -66,9 +66,9 @@ void put_palette(BitWriter& w, const Palette& p, bool partial) {
 }
 
 // Writes a packed unit (kind 4) to dst; returns its size in bytes.
-std::size_t write_packed(int n, const Voxel* v, const Palette& p, bool partial, std::uint8_t version, std::uint8_t* dst) {
+std::size_t write_packed(int n, const Voxel* v, const Palette& p, bool partial, std::uint8_t* dst) {
   const int volume = n * n * n;
-  dst[0] = static_cast<std::uint8_t>(version | (kKindPacked << 4));
+  dst[0] = static_cast<std::uint8_t>(kNetCodecVersion1 | (kKindPacked << 4));
   BitWriter w(dst + 1);
   put_palette(w, p, partial);
   const unsigned bits = packed_index_bits(p.count);
@@ -97,7 +97,6 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
   // occupancies: every other unit is written as version 1, which readers of
   // either version read.
   const bool may_predict = version == kNetCodecVersion2;
-  version = kNetCodecVersion1;
   constexpr int layer = n * n;
 
   // Greedy parse: at each voxel the longest of run / row copy / layer copy,
@@ -145,12 +144,12 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
 
   if (token_count == 2 && tokens[1].type == kRun) {  // uniform unit
     if (first.material == kAir) {
-      out.push_back(static_cast<std::uint8_t>(version | (kKindAir << 4)));
+      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion1 | (kKindAir << 4)));
     } else if (first.occupancy == kFullOccupancy) {
-      out.push_back(static_cast<std::uint8_t>(version | (kKindUniform << 4)));
+      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion1 | (kKindUniform << 4)));
       out.push_back(first.material);
     } else {
-      out.push_back(static_cast<std::uint8_t>(version | (kKindUniformOcc << 4)));
+      out.push_back(static_cast<std::uint8_t>(kNetCodecVersion1 | (kKindUniformOcc << 4)));
       out.push_back(first.material);
       out.push_back(first.occupancy);
     }
@@ -205,10 +204,14 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
 
   // Version 2: each solid literal's occupancy as its residual from the
   // prediction, in the Exp-Golomb order that makes them shortest.
+  // Where the occupancies are not smooth (a surface one voxel thick, whose
+  // neighbours are Air or full), version 1's flag and byte may be shorter:
+  // then the unit stays version 1.
   bool predicted = may_predict && partial;
   unsigned residual_order = 0;
   if (predicted) {
     std::array<std::size_t, kMaxResidualOrder + 1> order_bits{};
+    std::size_t flagged_bits = 0;  // version 1's flags and bytes
     int at = 0;
     for (int t = 0; t < token_count; ++t) {
       Token& tok = tokens[static_cast<std::size_t>(t)];
@@ -216,21 +219,13 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
         const std::uint32_t u = occupancy_residual(tok.occupancy, predict_occupancy<n>(v, at));
         tok.residual = static_cast<std::uint8_t>(u);
         for (unsigned k = 0; k <= kMaxResidualOrder; ++k) order_bits[k] += eg_bits(u + 1, k);
+        flagged_bits += tok.occupancy == kFullOccupancy ? 1 : 9;
       }
       at += tok.length;
     }
     residual_order = static_cast<unsigned>(std::min_element(order_bits.begin(), order_bits.end()) - order_bits.begin());
-    // Where the occupancies are not smooth (a surface one voxel thick, whose
-    // neighbours are Air or full), version 1's flag and byte may be shorter:
-    // then the unit stays version 1.
-    std::size_t flagged_bits = 0;
-    for (int t = 0; t < token_count; ++t) {
-      const Token& tok = tokens[static_cast<std::size_t>(t)];
-      if (tok.type == kLit && tok.material != kAir) flagged_bits += tok.occupancy == kFullOccupancy ? 1 : 9;
-    }
-    if (flagged_bits <= order_bits[residual_order] + 2) predicted = false;
+    predicted = order_bits[residual_order] + 2 < flagged_bits;
   }
-  if (predicted) version = kNetCodecVersion2;
 
   std::array<std::uint8_t, net_codec_max_encoded_size(16) + 64> scratch;  // NOLINT: written before read
   // The token stream must beat both fallbacks (packed, and raw for tiny units).
@@ -240,7 +235,7 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
   // Token streams never need more than 18 bits per voxel; stop as soon as
   // the packed form would be smaller (it bounds the worst case).
   std::array<std::uint8_t, 3 * kMaxVolume + 64> token_buf;  // NOLINT: written before read
-  token_buf[0] = static_cast<std::uint8_t>(version | (kKindTokens << 4));
+  token_buf[0] = static_cast<std::uint8_t>((predicted ? kNetCodecVersion2 : kNetCodecVersion1) | (kKindTokens << 4));
   BitWriter w(token_buf.data() + 1);
   put_palette(w, palette, partial);
   if (predicted) w.put(residual_order, 2);
@@ -310,7 +305,7 @@ void encode_unit(const Voxel* v, std::vector<std::uint8_t>& out, std::uint8_t ve
     }
     return;
   }
-  const std::size_t size = write_packed(n, v, palette, partial, kNetCodecVersion1, scratch.data());
+  const std::size_t size = write_packed(n, v, palette, partial, scratch.data());
   out.insert(out.end(), scratch.data(), scratch.data() + size);
 }
 

@@ -736,39 +736,29 @@ TEST_F(ServerTest, UnitsAreVersion2OnlyForAClientThatTakesThem) {
   std::map<std::tuple<int, int, int>, std::pair<std::uint64_t, Box>> first_full;  // chunk -> revision, voxels
   for (const std::uint32_t features : {kFeatureCodec2, 0u}) {
     RawPeer p(server_->port());
-    ASSERT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, features != 0 ? "two" : "one", "", {}, features})));
-    auto wf = p.next_of(wire::Body::Welcome);
-    ASSERT_TRUE(wf.has_value());
-    const WelcomeMsg w = *parse_welcome(*msg(*wf).body_as_Welcome());
+    const WelcomeMsg w = welcome_of(p, features != 0 ? "two" : "one", features);
     const ClientStateMsg where{w.spawn, 96, 64};
     ASSERT_TRUE(p.send(build_client_state(where)));
     std::map<int, int> stream_versions;
     std::size_t fulls = 0, compared = 0;
-    StreamDecodeScratch scratch;
     while (fulls < 40) {
-      auto f = p.next();
+      auto f = p.next_of(wire::Body::StreamBatch);
       ASSERT_TRUE(f.has_value()) << fulls << " Full records, then the stream ended";
-      const wire::Message& m = msg(*f);
-      if (m.body_type() != wire::Body::StreamBatch) continue;
-      auto r = parse_stream_batch(*m.body_as_StreamBatch());
-      ASSERT_TRUE(r.ok());
-      ASSERT_TRUE(decode_stream_batch(*r, scratch, [&](const StreamRecord& rec) -> Status {
-                    if (!gives_form(rec.kind) || rec.payload.empty()) return Ok{};
-                    const bool full = rec.kind == StreamRecordKind::kFull;
-                    EXPECT_TRUE(count_unit_versions(full ? 16 : kChunkSize >> rec.level, full ? 8 : 1, rec.payload,
-                                                    stream_versions));
-                    if (!full) return Ok{};
-                    ++fulls;
-                    // Both clients' Full records of a chunk at one revision
-                    // hold the same voxels.
-                    const auto key = std::make_tuple(rec.chunk_pos.x, rec.chunk_pos.y, rec.chunk_pos.z);
-                    auto [it, fresh] = first_full.try_emplace(key, rec.revision, *rec.voxels);
-                    if (!fresh && it->second.first == rec.revision) {
-                      EXPECT_EQ(it->second.second, *rec.voxels);
-                      ++compared;
-                    }
-                    return Ok{};
-                  }).ok());
+      ASSERT_TRUE(for_each_record(msg(*f), [&](const StreamRecord& rec) {
+        if (!gives_form(rec.kind) || rec.payload.empty()) return;
+        const bool full = rec.kind == StreamRecordKind::kFull;
+        EXPECT_TRUE(count_unit_versions(full ? 16 : kChunkSize >> rec.level, full ? 8 : 1, rec.payload, stream_versions));
+        if (!full) return;
+        ++fulls;
+        // Both clients' Full records of a chunk at one revision hold the
+        // same voxels.
+        const auto key = std::make_tuple(rec.chunk_pos.x, rec.chunk_pos.y, rec.chunk_pos.z);
+        auto [it, fresh] = first_full.try_emplace(key, rec.revision, *rec.voxels);
+        if (!fresh && it->second.first == rec.revision) {
+          EXPECT_EQ(it->second.second, *rec.voxels);
+          ++compared;
+        }
+      }));
     }
     // An edit where the client stands: its UpdateBatch's units.
     const Vec3i at{static_cast<int>(std::floor(w.spawn.x)), static_cast<int>(std::floor(w.spawn.y)),

@@ -152,10 +152,10 @@ class ServerTest : public ::testing::Test {
     server_ = std::move(*s);
     server_->start();
   }
-  // Says Hello on p and returns the Welcome (a failed expectation and an
-  // empty message if none comes).
-  static WelcomeMsg welcome_of(RawPeer& p, const std::string& name) {
-    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, name, "", {}})));
+  // Says Hello (with features) on p and returns the Welcome (a failed
+  // expectation and an empty message if none comes).
+  static WelcomeMsg welcome_of(RawPeer& p, const std::string& name, std::uint32_t features = 0) {
+    EXPECT_TRUE(p.send(build_hello(HelloMsg{kProtocolVersion, name, "", {}, features})));
     auto f = p.next_of(wire::Body::Welcome);
     EXPECT_TRUE(f.has_value());
     if (!f) return {};
