@@ -29,9 +29,12 @@ static_assert(2 * kChunkSize == 1 << 6 && 2 * kChunkSize * kChunkSize * kChunkSi
 inline constexpr std::uint64_t kAirRowFactor = fnv_zeros_factor(6), kAirChunkFactor = fnv_zeros_factor(16);
 }  // namespace chunk_hash_detail
 
-// The hash h carried over one row of kChunkSize voxels (an all-Air row, both
-// bytes zero, a row at a time: the same value as byte by byte). One
-// function, not a template: every reader's rows go through the same code.
+// The hash h carried over one row of kChunkSize voxels: the same value as
+// byte by byte, but an all-Air row (both bytes zero) is one multiplication
+// and a row of any one voxel a multiplication and a lookup in a table the
+// calling thread fills as it meets such rows (chunk_hash.cpp says why that
+// is exact). One function, not a template: every reader's rows go through
+// the same code.
 std::uint64_t hash_row(std::uint64_t h, const Voxel* row);
 
 // A null chunk is all Air.
