@@ -52,10 +52,10 @@ class DecodedChunks {
 
   // Before decoding a Full record: the chunk kept here of a payload that
   // rest (a batch's bytes from the record's payload on) begins with, and
-  // that payload's length; {0, null} for other kinds and when none. The
-  // bytes are compared whole: a payload found is exactly the record's.
-  // (Mips decode fast enough that a shared lookup of each cost the bots
-  // more than it saved.)
+  // that payload's length; before decoding a Mip or Estimate record, the
+  // mip in unit form that mips() keeps of it (DecodedMips::known_unit);
+  // {0, null} for other kinds and when none. The bytes are compared whole:
+  // a payload found is exactly the record's.
   static constexpr std::size_t kPrefixBytes = 16;
   KnownPayload known(StreamRecordKind kind, std::span<const std::uint8_t> rest);
 

@@ -7,6 +7,7 @@
 #include <string_view>
 
 #include "common/codec/net_codec.h"
+#include "common/voxel/chunk.h"
 
 namespace terrane {
 
@@ -21,7 +22,8 @@ bool same_voxels(const Box& a, const Box& b) {
 }  // namespace
 
 std::size_t DecodedMips::key_of(std::span<const std::uint8_t> bytes, int level) {
-  return hash_bytes(bytes.data(), bytes.size()) ^ (static_cast<std::size_t>(level) * 0x9E3779B97F4A7C15ull);
+  const std::size_t n = std::min(bytes.size(), kKeyBytes);
+  return hash_bytes(bytes.data(), n) ^ (static_cast<std::size_t>(level) * 0x9E3779B97F4A7C15ull);
 }
 
 std::size_t DecodedMips::key_of(const Box& voxels) {
@@ -115,6 +117,28 @@ std::shared_ptr<const MipVoxels> DecodedMips::intern_unit(std::size_t key, int s
         return known.encoded() && known.side() == side && std::ranges::equal(known.unit(), bytes);
       },
       [&] { return std::make_shared<const MipVoxels>(MipVoxels::of_unit(side, bytes)); });
+}
+
+KnownPayload DecodedMips::known_unit(int level, std::span<const std::uint8_t> rest) {
+  if (rest.size() < kKeyBytes || level < 1 || level >= kMipLevels) return {};
+  const std::size_t key = key_of(rest, level);
+  const int side = kChunkSize >> level;
+  std::lock_guard lock(m_);
+  const Table<MipVoxels>& t = mips_;
+  if (t.slots.empty()) return {};
+  const std::size_t mask = t.slots.size() - 1;
+  for (std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask; t.slots[i].used; i = (i + 1) & mask) {
+    if (t.slots[i].key != key) continue;
+    std::shared_ptr<const MipVoxels> known = t.slots[i].item.lock();
+    if (!known || !known->encoded() || known->side() != side) continue;
+    const std::span<const std::uint8_t> unit = known->unit();
+    if (unit.size() < kKeyBytes || unit.size() > rest.size() || !std::ranges::equal(unit, rest.first(unit.size())))
+      continue;
+    ++stats_.hits;
+    ++stats_.known_units;
+    return {unit.size(), std::move(known)};
+  }
+  return {};
 }
 
 std::shared_ptr<const MipVoxels> DecodedMips::intern_mip_box(std::size_t key, const Box& voxels) {

@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "common/voxel/box.h"
+#include "protocol/stream_batch.h"
 
 namespace terrane {
 
@@ -66,7 +67,10 @@ class MipVoxels {
 class DecodedMips {
  public:
   // The key of a record's bytes (payload) at a level (the same bytes at
-  // another level are other voxels).
+  // another level are other voxels): of its first kKeyBytes only, so a
+  // record's unit is found before it is decoded (known_unit), when its
+  // length is not known yet.
+  static constexpr std::size_t kKeyBytes = 8;
   static std::size_t key_of(std::span<const std::uint8_t> bytes, int level);
   // The key of voxels themselves (for records whose bytes the caller does
   // not have).
@@ -79,11 +83,18 @@ class DecodedMips {
   // else a new one. Precondition: bytes are one unit of side^3 voxels that
   // decoded without error.
   std::shared_ptr<const MipVoxels> intern_unit(std::size_t key, int side, std::span<const std::uint8_t> bytes);
+  // Before decoding a Mip or Estimate record of level: the mip kept here
+  // in unit form whose bytes rest (a batch's bytes from the record's
+  // payload on) begins with, and their length; {0, null} when none (and
+  // always for units shorter than kKeyBytes, which decode at once). The
+  // bytes are compared whole: a unit found is exactly the record's.
+  KnownPayload known_unit(int level, std::span<const std::uint8_t> rest);
   // A mip in box form of equal voxels kept under key, else a new one.
   std::shared_ptr<const MipVoxels> intern_mip_box(std::size_t key, const Box& voxels);
 
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
+    std::uint64_t known_units = 0;  // of the hits: records not decoded at all (known_unit)
     std::size_t entries = 0;  // live boxes and mips kept
     std::size_t bytes = 0;    // their bytes and the tables (heap)
   };

@@ -114,10 +114,16 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       Entry& e = chunks_[cp];
-      if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r))
+      if (r.known) {
+        // The process's mip of these very bytes, found before they were
+        // decoded (DecodedMips::known_unit).
+        if (e.holding.form == r.form() && e.mip.get() == r.known.get()) ++redundant_mips_;
+        e.mip = std::static_pointer_cast<const MipVoxels>(r.known);
+      } else if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r)) {
         ++redundant_mips_;  // (the mip held stays)
-      else
+      } else {
         e.mip = keep_unit(r);
+      }
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       voxels_changed(cp);

@@ -101,8 +101,9 @@ TEST(DecodedChunks, BytesDecodedOnceAreNotDecodedAgainAndGiveTheSameVoxels) {
   StreamBatchWriter second;
   write(second, true);
   take_batch(b, shared, second, &skipped);
-  EXPECT_EQ(skipped, 1) << "the chunk (mips are decoded: they decode fast)";
+  EXPECT_EQ(skipped, 2) << "the chunk and the first mip; the other mip's bytes begin alike but differ";
   EXPECT_EQ(shared->stats().known_chunks, 1u);
+  EXPECT_EQ(shared->mips().stats().known_units, 1u);
   for (const Replica* r : {&a, &b}) {
     expect_holds(*r, {1, 0, 0}, chunk);
     Box got;
@@ -119,6 +120,14 @@ TEST(DecodedChunks, BytesDecodedOnceAreNotDecodedAgainAndGiveTheSameVoxels) {
   EXPECT_EQ(shared->known(StreamRecordKind::kFull, std::span(full).first(full.size() - 1)).bytes, 0u);
   EXPECT_EQ(shared->known(StreamRecordKind::kMip1, full).bytes, 0u);
   EXPECT_EQ(shared->known(StreamRecordKind::kFull, full).bytes, full.size());
+  // Nor a mip's bytes cut short, or at another level (other voxels).
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip1, std::span(mip_bytes).first(mip_bytes.size() - 1)).bytes, 0u);
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip2, mip_bytes).bytes, 0u);
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip1, mip_bytes).bytes, mip_bytes.size());
+  // A mip no replica holds any more is not known.
+  a.apply_stream_record(StreamRecord{StreamRecordKind::kReleased, {4, 0, 0}, 2, 0, nullptr, nullptr, {}});
+  b.apply_stream_record(StreamRecord{StreamRecordKind::kReleased, {4, 0, 0}, 2, 0, nullptr, nullptr, {}});
+  EXPECT_EQ(shared->known(StreamRecordKind::kMip1, mip_bytes).bytes, 0u);
 }
 
 TEST(DecodedChunks, OnlyEqualBytesAreShared) {
