@@ -108,8 +108,8 @@ const char* const kBotsHelp =
     "                            are measured while the bots join (a join wave)\n"
     "  --threads N               io threads shared by all bots (default: one per core)\n"
     "  --shared-chunks N         chunks packed from Full records kept for all bots to share, so\n"
-    "                            equal bytes are packed once in this process (default 4096;\n"
-    "                            0: each bot packs its own)\n"
+    "                            equal bytes are packed once in this process (default 16 a\n"
+    "                            bot, at least 4096; 0: each bot packs its own)\n"
     "  --chunk-cache DIR         keep the bots' chunks in DIR across runs: each bot joins from what\n"
     "                            DIR holds of its view (claimed, so the server sends only what\n"
     "                            changed) and saves its replica there at the end (default: none)\n"
@@ -419,6 +419,11 @@ int io_threads(const BotsOptions& o) {
   return o.threads > 0 ? o.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
+std::size_t shared_chunks_for(const BotsOptions& o) {
+  if (o.shared_chunks >= 0) return static_cast<std::size_t>(o.shared_chunks);
+  return std::max<std::size_t>(4096, 16 * static_cast<std::size_t>(shard_bots(o)));
+}
+
 double hash_check_span_s(const BotsOptions& o) {
   const double window =
       o.join_timeout_s > 0 || o.measure_from_start ? o.duration_s : o.duration_s - o.ramp_up_s;
@@ -508,7 +513,7 @@ std::string scenario_text(const BotsOptions& o) {
   s << "wait-joined = " << o.join_timeout_s << "\n";
   s << "measure-from = " << (o.measure_from_start ? "start" : "ramp-up") << "\n";
   s << "threads = " << o.threads << "\n";
-  s << "shared-chunks = " << o.shared_chunks << "\n";
+  if (o.shared_chunks >= 0) s << "shared-chunks = " << o.shared_chunks << "\n";
   if (!o.chunk_cache_dir.empty()) s << "chunk-cache = " << o.chunk_cache_dir << "\n";
   s << "chunk-cache-mb = " << o.chunk_cache_mb << "\n";
   for (const Threshold& t : o.thresholds) s << "threshold = " << t.expression << "\n";

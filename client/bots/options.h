@@ -80,9 +80,10 @@ struct BotsOptions {
   double join_timeout_s = 0;
   int threads = 0;             // io threads for all bots; 0: one per core (io_threads)
   // Chunks packed from Full records kept for every bot to share (entries;
-  // 0: each bot packs its own). Bots near one another receive the same
-  // records: packing each once halves what they cost this process.
-  int shared_chunks = 4096;
+  // 0: each bot packs its own; -1, the default: shared_chunks_for()). Bots
+  // near one another receive the same records: packing each once halves
+  // what they cost this process.
+  int shared_chunks = -1;
   // Chunks kept across runs (--chunk-cache DIR, client/chunk_cache.h; empty:
   // none): every bot joins from what it holds of its view and saves its
   // replica there at the end. At most chunk_cache_mb MiB of files.
@@ -136,6 +137,13 @@ double hash_check_span_s(const BotsOptions& o);
 // 128.5 against 137.6 s, fan-out p99 33.5 against 28.8 ms, io lag p95
 // 4.5 against 3.9 ms.)
 int io_threads(const BotsOptions& o);
+
+// The shared packed chunks' entries: shared_chunks, or by default 16 per
+// bot of this shard and at least 4,096. (A fixed 4,096 kept a third of
+// the Full records world 300's bots received shared; 16,384 kept two
+// thirds, for 4 % less of the bots' CPU and 3 % more of their peak memory:
+// scripts/bots-scale.sh world 300, two runs each way, 2026-12-03.)
+std::size_t shared_chunks_for(const BotsOptions& o);
 
 // Parses "terrane-bots [flags]" (argv[first..argc)). Returns "" on success,
 // else the error (for exit status 2). Sets *help when --help was given

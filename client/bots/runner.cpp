@@ -202,8 +202,8 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
   LagProbe lag_probe{lag_strand, asio::steady_timer(lag_strand, kLagProbe), io_lag};
   asio::post(lag_strand, [&lag_probe] { lag_probe.arm(); });
   ctx.mismatches = &mismatches;
-  if (o.shared_chunks > 0)
-    ctx.shared_chunks = std::make_shared<DecodedChunks>(static_cast<std::size_t>(o.shared_chunks));
+  if (const std::size_t shared = shared_chunks_for(o); shared > 0)
+    ctx.shared_chunks = std::make_shared<DecodedChunks>(shared);
   if (!o.chunk_cache_dir.empty()) {
     auto cache = ChunkCache::open(o.chunk_cache_dir, std::uint64_t(o.chunk_cache_mb) << 20);
     if (!cache) {

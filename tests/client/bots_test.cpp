@@ -706,6 +706,22 @@ TEST(BotsOptions, IoThreadsAreOnePerCoreUnlessGiven) {
   EXPECT_EQ(io_threads(o), 3);
 }
 
+TEST(BotsOptions, SharedChunksScaleWithTheBotsUnlessGiven) {
+  BotsOptions o;
+  o.bots = 100;
+  EXPECT_EQ(shared_chunks_for(o), 4096u);  // at least 4,096
+  o.bots = 1000;
+  EXPECT_EQ(shared_chunks_for(o), 16000u);  // 16 a bot
+  o.shard_count = 2;
+  EXPECT_EQ(shared_chunks_for(o), 8000u);  // of this process's shard
+  EXPECT_EQ(scenario_text(o).find("shared-chunks"), std::string::npos) << "the default is not written down";
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--bots", "1000", "--shared-chunks", "0"}, &o), "");
+  EXPECT_EQ(shared_chunks_for(o), 0u);
+  ASSERT_EQ(parse_flags({"--connect", "h:1", "--bots", "1000", "--shared-chunks", "500"}, &o), "");
+  EXPECT_EQ(shared_chunks_for(o), 500u);
+  EXPECT_NE(scenario_text(o).find("shared-chunks = 500\n"), std::string::npos);
+}
+
 // Every bot makes at least --hash-checks checks in the measured run, and
 // not many more: a ramp-up longer than the duration (which --wait-joined
 // allows: the duration starts after the joins) once made the span negative,
