@@ -6,7 +6,12 @@
 //              chunk along x: the slice behind is Released, the slice
 //              ahead arrives as Mip 3 records (one StreamBatch each way).
 //              With 64 the replicas' maps are far beyond the caches, as
-//              in the bots process.
+//              in the bots process. The mips are of codec version 2, as a
+//              server sends a coarse image's.
+//   MipChurnShared/64 the same, the replicas sharing a DecodedChunks: each
+//              decodes every record and keeps the mip its bytes are.
+//   MipChurnKnown/64 the same, the decoder skipping a record whose unit a
+//              replica of the process holds (DecodedMips::known_unit).
 //   Full       Full records of generated terrain chunks, each then
 //              Released (the ring at full resolution a move brings).
 //   FullDerivedMips the same, the replica's full chunks deriving their mips
@@ -70,7 +75,7 @@ std::vector<std::uint8_t> mip3_payload(const Chunk& c) {
   Box m;
   c.read_level(3, m);
   std::vector<std::uint8_t> out;
-  net_codec_encode(4, m.voxels(), out);
+  net_codec_encode(4, m.voxels(), out, kNetCodecVersion2);  // as the server sends a coarse image's
   return out;
 }
 
@@ -107,7 +112,9 @@ void for_each_view_chunk(int cx, F&& f) {
 
 // state.range(0) replicas take the same moves in turn, as the bots'
 // replicas do in one process: their maps no longer fit in the caches.
-void BM_MipChurn(benchmark::State& state) {
+// Shared: the replicas share one DecodedChunks (the bots' way), and with
+// known the decoder skips the mips it holds (DecodedMips::known_unit).
+void run_mip_churn(benchmark::State& state, bool shared = false, bool known = false) {
   const auto replicas = static_cast<std::size_t>(state.range(0));
   // Payloads by column height only (x, z vary the terrain little at 4^3 for
   // this purpose; the bytes are real mips of real terrain).
@@ -117,7 +124,15 @@ void BM_MipChurn(benchmark::State& state) {
     w.add(StreamRecordKind::kMip3, cp, 1, by_y[static_cast<std::size_t>(cp.y - kMinY)]);
   };
   std::vector<std::unique_ptr<Applier>> appliers;
-  for (std::size_t i = 0; i < replicas; ++i) appliers.push_back(std::make_unique<Applier>());
+  const auto decoded = shared ? std::make_shared<DecodedChunks>() : nullptr;
+  for (std::size_t i = 0; i < replicas; ++i) {
+    appliers.push_back(std::make_unique<Applier>());
+    appliers.back()->replica.share_decoded(decoded);
+    if (known)
+      appliers.back()->known = [decoded](StreamRecordKind kind, std::span<const std::uint8_t> rest) {
+        return decoded->known(kind, rest);
+      };
+  }
   {
     StreamBatchWriter w;
     std::vector<Frame> view;
@@ -171,7 +186,12 @@ void BM_MipChurn(benchmark::State& state) {
       static_cast<double>(records), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
   state.counters["chunks_held"] = static_cast<double>(appliers[0]->replica.chunk_count());
 }
+void BM_MipChurn(benchmark::State& state) { run_mip_churn(state); }
 BENCHMARK(BM_MipChurn)->Arg(1)->Arg(64)->Unit(benchmark::kMillisecond);
+void BM_MipChurnShared(benchmark::State& state) { run_mip_churn(state, true); }
+BENCHMARK(BM_MipChurnShared)->Arg(64)->Unit(benchmark::kMillisecond);
+void BM_MipChurnKnown(benchmark::State& state) { run_mip_churn(state, true, true); }
+BENCHMARK(BM_MipChurnKnown)->Arg(64)->Unit(benchmark::kMillisecond);
 
 // Full records of 64 terrain chunks (a few columns' worth, as near a
 // moving client), then each Released.
