@@ -64,22 +64,37 @@ template <class T, class Same, class Make>
 std::shared_ptr<const T> DecodedMips::intern_in(Table<T>& t, std::size_t key, Same&& same, Make&& make) {
   if (4 * (t.used + 1) > 3 * t.slots.size()) rebuild(t);
   const std::size_t mask = t.slots.size() - 1;
+  constexpr std::size_t kNone = ~std::size_t{0};
   // Keys are hashes already; the multiply spreads keys that differ only
-  // in their high bits (the level).
+  // in their high bits (the level). Items of one key may differ (a unit's
+  // key is of its first bytes): all of them are looked at, up to
+  // kMaxPerKey live ones, and a dead one's slot is taken only once none
+  // is equal.
   std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask;
+  std::size_t dead = kNone, first_live = kNone;
+  std::size_t live = 0;
   for (; t.slots[i].used; i = (i + 1) & mask) {
     if (t.slots[i].key != key) continue;
     std::shared_ptr<const T> known = t.slots[i].item.lock();
-    if (known && same(*known)) {
+    if (!known) {
+      if (dead == kNone) dead = i;
+      continue;
+    }
+    if (same(*known)) {
       ++stats_.hits;
       return known;
     }
-    if (!known) break;  // a dead item of this key: its slot takes the new one
+    if (first_live == kNone) first_live = i;
+    if (++live == kMaxPerKey) break;
   }
   ++stats_.misses;
   std::shared_ptr<const T> item = make();
-  if (!t.slots[i].used) ++t.used;
-  t.slots[i] = typename Table<T>::Slot{key, item, true};
+  // A dead item's slot, else the first free one; with kMaxPerKey live
+  // items of this key, the first of them is forgotten (it lives on in the
+  // replicas holding it; only its sharing ends).
+  const std::size_t at = dead != kNone ? dead : live == kMaxPerKey ? first_live : i;
+  if (!t.slots[at].used) ++t.used;
+  t.slots[at] = typename Table<T>::Slot{key, item, true};
   return item;
 }
 
@@ -127,10 +142,14 @@ KnownPayload DecodedMips::known_unit(int level, std::span<const std::uint8_t> re
   const Table<MipVoxels>& t = mips_;
   if (t.slots.empty()) return {};
   const std::size_t mask = t.slots.size() - 1;
-  for (std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask; t.slots[i].used; i = (i + 1) & mask) {
+  std::size_t live = 0;
+  for (std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask; t.slots[i].used && live < kMaxPerKey;
+       i = (i + 1) & mask) {
     if (t.slots[i].key != key) continue;
     std::shared_ptr<const MipVoxels> known = t.slots[i].item.lock();
-    if (!known || !known->encoded() || known->side() != side) continue;
+    if (!known) continue;
+    ++live;
+    if (!known->encoded() || known->side() != side) continue;
     const std::span<const std::uint8_t> unit = known->unit();
     if (unit.size() < kKeyBytes || unit.size() > rest.size() || !std::ranges::equal(unit, rest.first(unit.size())))
       continue;

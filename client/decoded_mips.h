@@ -71,6 +71,10 @@ class DecodedMips {
   // record's unit is found before it is decoded (known_unit), when its
   // length is not known yet.
   static constexpr std::size_t kKeyBytes = 8;
+  // Live items kept under one key at most (units that begin alike, or
+  // boxes whose hashes collide): a lookup looks at no more, whatever bytes
+  // a server sends; a new one beyond takes the first one's place.
+  static constexpr std::size_t kMaxPerKey = 4;
   static std::size_t key_of(std::span<const std::uint8_t> bytes, int level);
   // The key of voxels themselves (for records whose bytes the caller does
   // not have).

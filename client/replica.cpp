@@ -117,8 +117,11 @@ void Replica::apply_stream_record(const StreamRecord& r) {
       if (r.known) {
         // The process's mip of these very bytes, found before they were
         // decoded (DecodedMips::known_unit).
-        if (e.holding.form == r.form() && e.mip.get() == r.known.get()) ++redundant_mips_;
-        e.mip = std::static_pointer_cast<const MipVoxels>(r.known);
+        if (e.holding.form == r.form() && e.mip &&
+            (e.mip.get() == r.known.get() || (e.mip->encoded() && std::ranges::equal(e.mip->unit(), r.payload))))
+          ++redundant_mips_;  // (the mip held stays)
+        else
+          e.mip = std::static_pointer_cast<const MipVoxels>(r.known);
       } else if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r)) {
         ++redundant_mips_;  // (the mip held stays)
       } else {

@@ -93,6 +93,73 @@ TEST(DecodedMips, BoxesNoReplicaHoldsAreForgotten) {
   EXPECT_LE(mips.stats().bytes, bytes_dead * 2);
 }
 
+// Units that begin alike: a 16^3 mip and copies of it with one voxel near
+// its end changed, each of other bytes but the same first kKeyBytes (so
+// the same key).
+std::vector<std::vector<std::uint8_t>> units_beginning_alike(std::size_t count) {
+  const Box base = terrain(16, 1);
+  const auto base_bytes = encoded(base);
+  std::vector<std::vector<std::uint8_t>> out{base_bytes};
+  const Material materials[] = {materials::kSand, materials::kRock, materials::kGrass, kAir};
+  for (int i = 0; i < 64 && out.size() < count; ++i) {
+    Box b = base;
+    b.set(15 - i % 8, 15, 15 - i / 8, make_voxel(materials[i % 4], 255));
+    auto bytes = encoded(b);
+    const bool alike = bytes.size() >= DecodedMips::kKeyBytes &&
+                       std::equal(bytes.begin(), bytes.begin() + DecodedMips::kKeyBytes, base_bytes.begin());
+    if (alike && std::find(out.begin(), out.end(), bytes) == out.end()) out.push_back(std::move(bytes));
+  }
+  return out;
+}
+
+// A unit is found before decoding by its first bytes, compared whole: each
+// of several units beginning alike is found as itself, while held, and
+// never one for another; at most kMaxPerKey of them are kept findable.
+TEST(DecodedMips, UnitsThatBeginAlikeAreEachFoundAsThemselves) {
+  const auto units = units_beginning_alike(DecodedMips::kMaxPerKey + 2);
+  ASSERT_EQ(units.size(), DecodedMips::kMaxPerKey + 2) << "the test's units must begin alike";
+  DecodedMips mips;
+  std::vector<std::shared_ptr<const MipVoxels>> held;
+  for (const auto& u : units) held.push_back(mips.intern_unit(DecodedMips::key_of(u, 1), 16, u));
+  std::size_t found = 0;
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    std::vector<std::uint8_t> rest = units[i];
+    rest.insert(rest.end(), {0xAB, 0xCD, 0xEF});  // the next record's bytes
+    const KnownPayload k = mips.known_unit(1, rest);
+    if (k.made == nullptr) continue;
+    ++found;
+    EXPECT_EQ(k.made.get(), held[i].get()) << i;
+    EXPECT_EQ(k.bytes, units[i].size()) << i;
+  }
+  EXPECT_EQ(found, DecodedMips::kMaxPerKey) << "the newest kMaxPerKey of one key";
+  // A unit cut short, or followed by other bytes in place of its end, is
+  // not taken for one it begins like.
+  for (const auto& u : units) {
+    EXPECT_EQ(mips.known_unit(1, std::span(u).first(u.size() - 1)).made, nullptr);
+    EXPECT_EQ(mips.known_unit(2, u).made, nullptr) << "another level";
+  }
+}
+
+// An item no replica holds any more leaves its slot to a new one, but a
+// live equal item further along is still found (no copy made).
+TEST(DecodedMips, AnEqualUnitBehindADeadOneIsShared) {
+  const auto units = units_beginning_alike(2);
+  ASSERT_EQ(units.size(), 2u);
+  DecodedMips mips;
+  const auto key = DecodedMips::key_of(units[0], 1);
+  ASSERT_EQ(key, DecodedMips::key_of(units[1], 1));
+  auto first = mips.intern_unit(key, 16, units[0]);
+  const auto second = mips.intern_unit(key, 16, units[1]);
+  first.reset();  // dead now, ahead of the second in the table
+  const auto again = mips.intern_unit(key, 16, units[1]);
+  EXPECT_EQ(again.get(), second.get());
+  EXPECT_EQ(mips.stats().entries, 1u);
+  // The dead one's slot takes the next new one.
+  const auto back = mips.intern_unit(key, 16, units[0]);
+  EXPECT_EQ(mips.stats().entries, 2u);
+  EXPECT_TRUE(std::ranges::equal(back->unit(), units[0]));
+}
+
 // Every form a chunk's voxels take short of full resolution reads back as
 // what its record said, with and without a shared cache.
 TEST(ReplicaMips, EveryCoarseFormReadsBackAsApplied) {

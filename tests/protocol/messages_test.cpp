@@ -542,20 +542,30 @@ TEST(ChunkHash, RowsOfOneVoxelEqualTheDefinitionForAnyHashBefore) {
   std::array<Voxel, kChunkSize> row;
   for (int round = 0; round < 3; ++round)
     for (int m = 0; m < 24; ++m) {
-      // Materials past the 6 bits (any byte can be hashed), Air with an
-      // occupancy, and Air itself.
-      const Voxel v{static_cast<Material>(m == 23 ? 200 : m), static_cast<std::uint8_t>(m * 37 + round)};
+      // Air itself (m = 0), Air with an occupancy (22), a material past the
+      // 6 bits (23: any byte can be hashed); each met again in the next
+      // round, after 23 others.
+      const Voxel v = m == 22 ? Voxel{kAir, 5}
+                              : Voxel{static_cast<Material>(m == 23 ? 200 : m), static_cast<std::uint8_t>(m * 37)};
       row.fill(v);
       for (int i = 0; i < 600; ++i) {
         const std::uint64_t h = i < 256 ? (next() & ~std::uint64_t{0xff}) | static_cast<std::uint64_t>(i) : next();
         ASSERT_EQ(hash_row(h, row.data()), by_the_book(h, row.data())) << m << " " << i;
       }
-      // One voxel different anywhere: not a row of one voxel.
-      for (int x = 0; x < kChunkSize; ++x) {
+      // One voxel different anywhere, in either byte: not a row of one voxel.
+      for (int x = 0; x < 2 * kChunkSize; ++x) {
         row.fill(v);
-        row[x].occupancy ^= 1;
+        if (x < kChunkSize) row[x].occupancy ^= 1;
+        else row[x - kChunkSize].material ^= 1;
         const std::uint64_t h = next();
         ASSERT_EQ(hash_row(h, row.data()), by_the_book(h, row.data())) << m << " " << x;
+      }
+      // Rows repeating two or four voxels (every 8-byte word alike).
+      for (const int period : {2, 4}) {
+        for (int x = 0; x < kChunkSize; ++x)
+          row[x] = x % period == period - 1 ? Voxel{v.material, static_cast<std::uint8_t>(v.occupancy + 1)} : v;
+        const std::uint64_t h = next();
+        ASSERT_EQ(hash_row(h, row.data()), by_the_book(h, row.data())) << m << " " << period;
       }
     }
 }
