@@ -265,8 +265,8 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
   const bool tell = tells_holdings();
   std::vector<Vec3i> loaded;  // for on_chunks_loaded
   const bool tell_loaded = static_cast<bool>(callbacks_.on_chunks_loaded);
-  // A Full record's bytes this process's replicas decoded before are not
-  // decoded again.
+  // A Full, Mip or Estimate record's bytes this process's replicas decoded
+  // before are not decoded again (passed to decode_stream_batch below).
   KnownPayloadFn known;
   if (const std::shared_ptr<DecodedChunks>& shared = options_.shared_chunks)
     known = [&shared](StreamRecordKind kind, std::span<const std::uint8_t> rest) { return shared->known(kind, rest); };
@@ -325,7 +325,7 @@ Status Client::apply_stream_batch(const wire::StreamBatch& batch, std::size_t fr
       changes.push_back(HoldingChange{r.chunk_pos, now});
     }
     return Ok{};
-  });
+  }, known);
   const std::uint64_t overhead = frame_bytes - std::min<std::uint64_t>(frame_bytes, stream_bytes + refresh_bytes);
   (refresh_bytes > stream_bytes ? refresh_bytes : stream_bytes) += overhead;
   counters_.bytes_in_by_cause[static_cast<std::size_t>(ByteCause::kStream)] += stream_bytes;

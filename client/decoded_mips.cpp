@@ -126,6 +126,7 @@ std::shared_ptr<const Box> DecodedMips::intern(std::size_t key, const Box& voxel
 std::shared_ptr<const MipVoxels> DecodedMips::intern_unit(std::size_t key, int side,
                                                           std::span<const std::uint8_t> bytes) {
   std::lock_guard lock(m_);
+  ++stats_.units_kept;
   return intern_in(
       mips_, key,
       [&](const MipVoxels& known) {

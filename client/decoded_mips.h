@@ -99,6 +99,7 @@ class DecodedMips {
   struct Stats {
     std::uint64_t hits = 0, misses = 0;
     std::uint64_t known_units = 0;  // of the hits: records not decoded at all (known_unit)
+    std::uint64_t units_kept = 0;   // records decoded and kept in unit form (intern_unit calls)
     std::size_t entries = 0;  // live boxes and mips kept
     std::size_t bytes = 0;    // their bytes and the tables (heap)
   };

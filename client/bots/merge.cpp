@@ -227,6 +227,8 @@ std::string report_from_json(const std::string& text, BotsReport* out) {
   r.redirects = in.whole("redirects");
   r.shared_chunk_hits = in.whole("shared_chunk_hits");
   r.shared_chunk_misses = in.whole("shared_chunk_misses");
+  r.shared_mips_known = in.whole("shared_mips_known");
+  r.shared_mips_decoded = in.whole("shared_mips_decoded");
   r.shared_update_hits = in.whole("shared_update_hits");
   r.shared_update_misses = in.whole("shared_update_misses");
   r.shared_update_twins = in.whole("shared_update_twins");
@@ -397,6 +399,8 @@ std::string merge_reports(const std::vector<BotsReport>& parts, BotsReport* out)
     r.redirects += p.redirects;
     r.shared_chunk_hits += p.shared_chunk_hits;
     r.shared_chunk_misses += p.shared_chunk_misses;
+    r.shared_mips_known += p.shared_mips_known;
+    r.shared_mips_decoded += p.shared_mips_decoded;
     r.shared_update_hits += p.shared_update_hits;
     r.shared_update_misses += p.shared_update_misses;
     r.shared_update_twins += p.shared_update_twins;

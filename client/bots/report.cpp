@@ -175,6 +175,8 @@ std::string report_json(const BotsReport& r) {
   j << "  \"cache_regions_saved\": " << r.cache_regions_saved << ",\n";
   j << "  \"shared_chunk_hits\": " << r.shared_chunk_hits << ",\n";
   j << "  \"shared_chunk_misses\": " << r.shared_chunk_misses << ",\n";
+  j << "  \"shared_mips_known\": " << r.shared_mips_known << ",\n";
+  j << "  \"shared_mips_decoded\": " << r.shared_mips_decoded << ",\n";
   j << "  \"shared_update_hits\": " << r.shared_update_hits << ",\n";
   j << "  \"shared_update_misses\": " << r.shared_update_misses << ",\n";
   j << "  \"shared_update_twins\": " << r.shared_update_twins << ",\n";
@@ -346,6 +348,9 @@ std::string report_table(const BotsReport& r) {
   if (r.shared_chunk_hits + r.shared_chunk_misses > 0)
     row("full chunks shared / packed by a bot",
         std::to_string(r.shared_chunk_hits) + " / " + std::to_string(r.shared_chunk_misses));
+  if (r.shared_mips_known + r.shared_mips_decoded > 0)
+    row("mip records known / decoded by a bot",
+        std::to_string(r.shared_mips_known) + " / " + std::to_string(r.shared_mips_decoded));
   if (r.shared_update_hits + r.shared_update_misses > 0)
     row("updates of shared chunks taken / made by a bot",
         std::to_string(r.shared_update_hits) + " / " + std::to_string(r.shared_update_misses) + " (lineages joined " +

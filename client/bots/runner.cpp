@@ -453,6 +453,9 @@ bool run_bots(const BotsOptions& o, const std::function<void(const Progress&)>& 
     r.shared_chunk_hits = s.hits;
     r.shared_chunk_misses = s.misses;
     r.shared_chunk_bytes += s.bytes;
+    const DecodedMips::Stats m = ctx.shared_chunks->mips().stats();
+    r.shared_mips_known = m.known_units;
+    r.shared_mips_decoded = m.units_kept;
     const SharedUpdates::Stats u = ctx.shared_chunks->updates().stats();
     r.shared_update_hits = u.hits;
     r.shared_update_misses = u.misses;

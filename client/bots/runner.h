@@ -80,6 +80,9 @@ struct BotsReport {
   // Full records' chunks taken from the bots' shared cache / packed anew
   // (--shared-chunks; both 0 when off).
   std::uint64_t shared_chunk_hits = 0, shared_chunk_misses = 0;
+  // Mip and Estimate records found in the shared cache before they were
+  // decoded / decoded and kept (DecodedMips::known_unit, intern_unit).
+  std::uint64_t shared_mips_known = 0, shared_mips_decoded = 0;
   // Updates of shared chunks taken made by another bot / made by a bot
   // (client/shared_updates.h).
   std::uint64_t shared_update_hits = 0, shared_update_misses = 0;

@@ -132,6 +132,9 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
   // packed once for several (20 bots over a small area).
   EXPECT_GT(r.shared_chunk_misses, 0u);
   EXPECT_GT(r.shared_chunk_hits, 0u);
+  // And mip records of the same bytes: some were found before decoding.
+  EXPECT_GT(r.shared_mips_decoded, 0u);
+  EXPECT_GT(r.shared_mips_known, 0u);
   // Bots holding one shared chunk were sent the same units: the update was
   // applied once for several.
   EXPECT_GT(r.shared_update_misses, 0u);
@@ -198,7 +201,7 @@ TEST_F(BotsRunTest, ShortMixedRunHasNoMismatchesAndSaneFigures) {
         "unexpected_disconnects", "by_message_type.StreamBatch.bytes_in", "join_bytes_received",
         "steady_bytes_received", "update_bytes_per_edited_voxel_per_receiver", "timeline.0.mb_per_s_in",
         "server_counters.cpu_s", "server_counters.rss_peak_bytes", "server_counters.tick_p99_ms_bound",
-        "server_counters.sent_by_type.StreamBatch.bytes", "bots_io_lag_ms.p99", "shared_chunk_hits", "shared_update_hits",
+        "server_counters.sent_by_type.StreamBatch.bytes", "bots_io_lag_ms.p99", "shared_chunk_hits", "shared_mips_known", "shared_update_hits",
         "server_counters.stream_gate_closed_s", "steady_bot_s", "steady_bytes_per_bot_s",
         "steady_bytes_by_cause.refresh", "steady_bytes_by_cause.keepalive"})
     EXPECT_EQ(j.count(key), 1u) << key;
