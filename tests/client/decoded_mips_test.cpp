@@ -101,9 +101,9 @@ std::vector<std::vector<std::uint8_t>> units_beginning_alike(std::size_t count) 
   const auto base_bytes = encoded(base);
   std::vector<std::vector<std::uint8_t>> out{base_bytes};
   const Material materials[] = {materials::kSand, materials::kRock, materials::kGrass, kAir};
-  for (int i = 0; i < 64 && out.size() < count; ++i) {
+  for (int i = 0; i < 4 * 256 && out.size() < count; ++i) {
     Box b = base;
-    b.set(15 - i % 8, 15, 15 - i / 8, make_voxel(materials[i % 4], 255));
+    b.set(15 - i / 4 % 16, 15, 15 - i / 64, make_voxel(materials[i % 4], 255));
     auto bytes = encoded(b);
     const bool alike = bytes.size() >= DecodedMips::kKeyBytes &&
                        std::equal(bytes.begin(), bytes.begin() + DecodedMips::kKeyBytes, base_bytes.begin());
