@@ -68,17 +68,8 @@ void DecodedChunks::unindex(std::size_t key, const Entry& e) {
 }
 
 KnownPayload DecodedChunks::known(StreamRecordKind kind, std::span<const std::uint8_t> rest) {
-  switch (kind) {
-    case StreamRecordKind::kMip1:
-    case StreamRecordKind::kMip2:
-    case StreamRecordKind::kMip3:
-      return mips_.known_unit(static_cast<int>(kind), rest);
-    case StreamRecordKind::kEstimate:
-      return mips_.known_unit(kMipLevels - 1, rest);
-    default:
-      break;
-  }
-  if (kind != StreamRecordKind::kFull || rest.size() < kPrefixBytes) return {};
+  if (kind != StreamRecordKind::kFull) return carries_units(kind) ? mips_.known_unit(payload_level(kind), rest) : KnownPayload{};
+  if (rest.size() < kPrefixBytes) return {};
   const auto begins = [&](const std::vector<std::uint8_t>& b) {
     return b.size() <= rest.size() && std::equal(b.begin(), b.end(), rest.begin());
   };

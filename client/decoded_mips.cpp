@@ -65,12 +65,11 @@ std::shared_ptr<const T> DecodedMips::intern_in(Table<T>& t, std::size_t key, Sa
   if (4 * (t.used + 1) > 3 * t.slots.size()) rebuild(t);
   const std::size_t mask = t.slots.size() - 1;
   constexpr std::size_t kNone = ~std::size_t{0};
-  // Keys are hashes already; the multiply spreads keys that differ only
-  // in their high bits (the level). Items of one key may differ (a unit's
+  // Items of one key may differ (a unit's
   // key is of its first bytes): all of them are looked at, up to
   // kMaxPerKey live ones, and a dead one's slot is taken only once none
   // is equal.
-  std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask;
+  std::size_t i = home_slot(key, mask);
   std::size_t dead = kNone, first_live = kNone;
   std::size_t live = 0;
   for (; t.slots[i].used; i = (i + 1) & mask) {
@@ -109,7 +108,7 @@ void DecodedMips::rebuild(Table<T>& t) {
   t.used = 0;
   for (auto& s : old) {
     if (!s.used || s.item.expired()) continue;
-    std::size_t i = (s.key * 0x9E3779B97F4A7C15ull >> 20) & (n - 1);
+    std::size_t i = home_slot(s.key, n - 1);
     while (t.slots[i].used) i = (i + 1) & (n - 1);
     t.slots[i] = std::move(s);
     ++t.used;
@@ -144,8 +143,7 @@ KnownPayload DecodedMips::known_unit(int level, std::span<const std::uint8_t> re
   if (t.slots.empty()) return {};
   const std::size_t mask = t.slots.size() - 1;
   std::size_t live = 0;
-  for (std::size_t i = (key * 0x9E3779B97F4A7C15ull >> 20) & mask; t.slots[i].used && live < kMaxPerKey;
-       i = (i + 1) & mask) {
+  for (std::size_t i = home_slot(key, mask); t.slots[i].used && live < kMaxPerKey; i = (i + 1) & mask) {
     if (t.slots[i].key != key) continue;
     std::shared_ptr<const MipVoxels> known = t.slots[i].item.lock();
     if (!known) continue;

@@ -124,6 +124,10 @@ class DecodedMips {
   // kept under key. Under m_.
   template <class T, class Same, class Make>
   std::shared_ptr<const T> intern_in(Table<T>& t, std::size_t key, Same&& same, Make&& make);
+  // Where a key's probe starts in a table of mask + 1 slots. Keys are
+  // hashes already; the multiply spreads keys that differ only in their
+  // high bits (the level).
+  static std::size_t home_slot(std::size_t key, std::size_t mask) { return (key * 0x9E3779B97F4A7C15ull >> 20) & mask; }
   // Keeps the live items only, in a table of at least twice their number.
   template <class T>
   static void rebuild(Table<T>& t);

@@ -39,10 +39,13 @@ const Box& voxels_of_mip(const std::shared_ptr<const MipVoxels>& mip) {
   return last_decoded.voxels;
 }
 
-// Whether a mip record brings the very voxels of the mip held.
+// Whether a mip record brings the very voxels of the mip held: the mip the
+// process found its bytes to be (r.known: no voxels decoded), its bytes, or
+// its voxels.
 bool same_mip(const std::shared_ptr<const MipVoxels>& held, const StreamRecord& r) {
-  if (held->side() != r.voxels->size().x) return false;
+  if (held.get() == r.known.get()) return true;
   if (held->encoded() && !r.payload.empty() && std::ranges::equal(held->unit(), r.payload)) return true;
+  if (r.known || held->side() != r.voxels->size().x) return false;
   return voxels_of_mip(held) == *r.voxels;
 }
 }  // namespace
@@ -114,19 +117,12 @@ void Replica::apply_stream_record(const StreamRecord& r) {
     case StreamRecordKind::kMip3:
     case StreamRecordKind::kEstimate: {
       Entry& e = chunks_[cp];
-      if (r.known) {
-        // The process's mip of these very bytes, found before they were
-        // decoded (DecodedMips::known_unit).
-        if (e.holding.form == r.form() && e.mip &&
-            (e.mip.get() == r.known.get() || (e.mip->encoded() && std::ranges::equal(e.mip->unit(), r.payload))))
-          ++redundant_mips_;  // (the mip held stays)
-        else
-          e.mip = std::static_pointer_cast<const MipVoxels>(r.known);
-      } else if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r)) {
+      if (e.holding.form == r.form() && e.mip && same_mip(e.mip, r))
         ++redundant_mips_;  // (the mip held stays)
-      } else {
+      else if (r.known)  // the process's mip of these very bytes (DecodedMips::known_unit)
+        e.mip = std::static_pointer_cast<const MipVoxels>(r.known);
+      else
         e.mip = keep_unit(r);
-      }
       e.holding = Holding{r.form(), r.revision};
       grid_.erase_chunk(cp);
       voxels_changed(cp);

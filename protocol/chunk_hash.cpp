@@ -51,8 +51,6 @@ struct UniformRows {
   }
 };
 
-constexpr std::uint64_t kRowFactor = kAirRowFactor;  // p^64: one row's 64 bytes
-
 }  // namespace
 
 std::uint64_t hash_row(std::uint64_t h, const Voxel* row) {
@@ -74,7 +72,7 @@ std::uint64_t hash_row(std::uint64_t h, const Voxel* row) {
     t.value[l] = hash_bytes(l, row);
     t.known[l >> 6] |= bit;
   }
-  return (h - l) * kRowFactor + t.value[l];
+  return (h - l) * kAirRowFactor + t.value[l];  // p^64: a row's 64 bytes (zeros only multiply)
 }
 
 }  // namespace terrane

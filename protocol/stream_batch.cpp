@@ -134,14 +134,10 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
     rec.kind = static_cast<StreamRecordKind>(*kind);
     rec.chunk_pos = {static_cast<std::int32_t>(x), static_cast<std::int32_t>(y), static_cast<std::int32_t>(z)};
     rec.revision = *rev;
-    if (known && (rec.kind == StreamRecordKind::kFull || rec.kind == StreamRecordKind::kMip1 ||
-                  rec.kind == StreamRecordKind::kMip2 || rec.kind == StreamRecordKind::kMip3 ||
-                  rec.kind == StreamRecordKind::kEstimate)) {
+    if (known && carries_units(rec.kind)) {
       KnownPayload k = known(rec.kind, r.rest());
       if (k.made && k.bytes > 0 && k.bytes <= r.rest().size()) {
-        rec.level = rec.kind == StreamRecordKind::kFull       ? 0
-                    : rec.kind == StreamRecordKind::kEstimate ? kMipLevels - 1
-                                                              : static_cast<int>(rec.kind);
+        rec.level = payload_level(rec.kind);
         rec.payload = r.rest().first(k.bytes);
         rec.known = std::move(k.made);
         r.skip(k.bytes);
@@ -171,7 +167,7 @@ Status decode_stream_batch(std::span<const std::uint8_t> records, StreamDecodeSc
       case StreamRecordKind::kMip2:
       case StreamRecordKind::kMip3:
       case StreamRecordKind::kEstimate: {
-        rec.level = rec.kind == StreamRecordKind::kEstimate ? kMipLevels - 1 : static_cast<int>(rec.kind);
+        rec.level = payload_level(rec.kind);
         const int n = kChunkSize >> rec.level;
         s.mip.resize({n, n, n});
         auto used = net_codec_decode_prefix(n, r.rest(), s.mip.voxels());

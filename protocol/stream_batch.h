@@ -94,6 +94,13 @@ constexpr Vec3i patch_subunit_origin(int level, int i) {
 }
 // Whether a record of this kind gives its chunk a holding form (kinds 0..5).
 constexpr bool gives_form(StreamRecordKind kind) { return kind <= StreamRecordKind::kEstimate; }
+// Whether a record of this kind carries its chunk's voxels as network codec
+// units (Full, Mip, Estimate), and their level: 0 for Full, L for Mip L,
+// the coarsest for an Estimate.
+constexpr bool carries_units(StreamRecordKind kind) { return gives_form(kind) && kind != StreamRecordKind::kEmpty; }
+constexpr int payload_level(StreamRecordKind kind) {
+  return kind == StreamRecordKind::kEstimate ? kMipLevels - 1 : static_cast<int>(kind);
+}
 // The record kind that sends a chunk in form f (precondition: f is not a
 // horizon form).
 constexpr StreamRecordKind record_kind_of(HoldingForm f) { return static_cast<StreamRecordKind>(f); }

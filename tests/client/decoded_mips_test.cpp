@@ -38,8 +38,7 @@ std::vector<std::uint8_t> encoded(const Box& voxels) {
 // A Mip or Estimate record (kind) of chunk cp with these voxels and bytes.
 StreamRecord mip_record(StreamRecordKind kind, Vec3i cp, std::uint64_t revision, const Box& voxels,
                         const std::vector<std::uint8_t>& bytes) {
-  const int level = kind == StreamRecordKind::kEstimate ? kMipLevels - 1 : static_cast<int>(kind);
-  return StreamRecord{kind, cp, revision, level, &voxels, nullptr, bytes};
+  return StreamRecord{kind, cp, revision, payload_level(kind), &voxels, nullptr, bytes};
 }
 
 TEST(DecodedMips, EqualVoxelsUnderOneKeyAreOneBox) {
